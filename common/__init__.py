@@ -1,0 +1,1 @@
+"""Shared by every process: keys, messages, Zenoh configuration, the service base, auth."""

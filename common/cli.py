@@ -1,0 +1,49 @@
+"""Argument parsing shared by every ``wart`` subcommand."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from common.log import setup_logging
+from common.zconfig import ConfigError, NetworkOptions, add_network_arguments, options_from_args
+
+
+def parser(
+    prog: str, description: str, *, network: bool = True, default_mode: str = "client"
+) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=prog,
+        description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--log-level",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        type=str.upper,
+        help="how much to log (default INFO, or WART_LOG_LEVEL)",
+    )
+    if network:
+        add_network_arguments(p, default_mode=default_mode)
+    return p
+
+
+def parse(
+    p: argparse.ArgumentParser, argv: Sequence[str] | None
+) -> tuple[argparse.Namespace, NetworkOptions | None]:
+    """Parse, set up logging, resolve network options; a bad option exits with a clear message."""
+    args = p.parse_args(argv)
+    setup_logging(args.log_level)
+    if not hasattr(args, "no_multicast"):
+        return args, None
+    try:
+        return args, options_from_args(args)
+    except ConfigError as exc:
+        p.error(str(exc))
+        raise  # unreachable: error() exits
+
+
+def fail(message: str, code: int = 2) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return code

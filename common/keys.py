@@ -1,0 +1,254 @@
+"""Every Zenoh key expression of the system, in one place.
+
+Keys are built from a realm and identifiers by the functions below; no other
+module writes a key string. The shape follows the Zenoh key-expression rules and
+rmw_zenoh's habits: whole chunks (``agent/k1``, never ``agent-k1``), the parts
+that vary most at the end, commands and state on distinct suffixes, presence in
+its own ``alive`` namespace.
+
+    wart/<realm>/registry/{login,logout,directory,admin,revocations}
+    wart/<realm>/alive/<kind>/<id>                         liveliness tokens
+    wart/<realm>/user/<name>/inbox                         private messages
+    wart/<realm>/ctx/<ctx>/{join,leave,state,request}      context queryables
+    wart/<realm>/ctx/<ctx>/{in,events}                     context pub/sub
+    wart/<realm>/world/<world>/{snapshot,edit,map}         world queryables
+    wart/<realm>/world/<world>/frame                       world frame each tick
+    wart/<realm>/world/<world>/agent/<agent>/{sensors,cmd,lease}
+    wart/<realm>/runner/<runner>/run                       runner queryable
+    wart/<realm>/host/<host>/{spawn,load}                  host queryable / load reports
+
+docs/ARCHITECTURE.md carries the full table (who publishes, who subscribes, the
+message type on each key).
+"""
+
+from __future__ import annotations
+
+import re
+from enum import StrEnum
+
+ROOT = "wart"
+
+# An identifier is one key chunk: no '/', and none of Zenoh's wildcard or
+# reserved characters ('*', '$', '?', '#', '@' at the start is the admin space).
+_IDENT = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
+
+
+class BadIdentifier(ValueError):
+    """An identifier cannot be used as a key chunk."""
+
+
+def check_ident(what: str, value: str) -> str:
+    """Return ``value`` if it is a valid identifier, else raise a clear error."""
+    if not isinstance(value, str) or not _IDENT.match(value):
+        raise BadIdentifier(
+            f"{what} {value!r} is not a valid name: use 1 to 64 letters, digits, '_', '-' "
+            "or '.', starting with a letter or digit"
+        )
+    return value
+
+
+def is_ident(value: str) -> bool:
+    return isinstance(value, str) and bool(_IDENT.match(value))
+
+
+class AliveKind(StrEnum):
+    """What a liveliness token announces."""
+
+    ROUTER = "router"
+    REGISTRY = "registry"
+    USER = "user"
+    CONTEXT = "context"
+    WORLD = "world"
+    RUNNER = "runner"
+    VIEWER = "viewer"
+    HOST = "host"
+
+
+def realm_root(realm: str) -> str:
+    return f"{ROOT}/{check_ident('realm', realm)}"
+
+
+def realm_all(realm: str) -> str:
+    """Everything of a realm (for tools such as zenoh-cli and the doctor)."""
+    return f"{realm_root(realm)}/**"
+
+
+# --- registry ---------------------------------------------------------------
+
+
+def registry_login(realm: str) -> str:
+    return f"{realm_root(realm)}/registry/login"
+
+
+def registry_logout(realm: str) -> str:
+    return f"{realm_root(realm)}/registry/logout"
+
+
+def registry_directory(realm: str) -> str:
+    return f"{realm_root(realm)}/registry/directory"
+
+
+def registry_admin(realm: str) -> str:
+    return f"{realm_root(realm)}/registry/admin"
+
+
+def registry_revocations(realm: str) -> str:
+    """Published by the registry whenever a session is revoked (logout, kick)."""
+    return f"{realm_root(realm)}/registry/revocations"
+
+
+# --- presence ---------------------------------------------------------------
+
+
+def alive(realm: str, kind: AliveKind, ident: str) -> str:
+    return f"{realm_root(realm)}/alive/{AliveKind(kind).value}/{check_ident(str(kind), ident)}"
+
+
+def alive_of_kind(realm: str, kind: AliveKind) -> str:
+    return f"{realm_root(realm)}/alive/{AliveKind(kind).value}/*"
+
+
+def alive_all(realm: str) -> str:
+    return f"{realm_root(realm)}/alive/**"
+
+
+def parse_alive(realm: str, key: str) -> tuple[AliveKind, str] | None:
+    """Split a liveliness key of this realm into (kind, id); None if it is not one."""
+    prefix = f"{realm_root(realm)}/alive/"
+    if not key.startswith(prefix):
+        return None
+    parts = key[len(prefix) :].split("/")
+    if len(parts) != 2 or not is_ident(parts[1]):
+        return None
+    try:
+        return AliveKind(parts[0]), parts[1]
+    except ValueError:
+        return None
+
+
+# --- users ------------------------------------------------------------------
+
+
+def user_inbox(realm: str, user: str) -> str:
+    return f"{realm_root(realm)}/user/{check_ident('user', user)}/inbox"
+
+
+def user_inbox_all(realm: str) -> str:
+    return f"{realm_root(realm)}/user/*/inbox"
+
+
+# --- contexts (chat rooms, agent contexts) ----------------------------------
+
+
+def _ctx(realm: str, ctx: str) -> str:
+    return f"{realm_root(realm)}/ctx/{check_ident('context', ctx)}"
+
+
+def ctx_join(realm: str, ctx: str) -> str:
+    return f"{_ctx(realm, ctx)}/join"
+
+
+def ctx_leave(realm: str, ctx: str) -> str:
+    return f"{_ctx(realm, ctx)}/leave"
+
+
+def ctx_state(realm: str, ctx: str) -> str:
+    return f"{_ctx(realm, ctx)}/state"
+
+
+def ctx_request(realm: str, ctx: str) -> str:
+    """Queryable for client requests that need an answer (queue, cancel, kick, settings)."""
+    return f"{_ctx(realm, ctx)}/request"
+
+
+def ctx_in(realm: str, ctx: str) -> str:
+    """Client to context, fire-and-forget (chat lines)."""
+    return f"{_ctx(realm, ctx)}/in"
+
+
+def ctx_events(realm: str, ctx: str) -> str:
+    """Context to its members (chat lines, status changes, queue updates, output)."""
+    return f"{_ctx(realm, ctx)}/events"
+
+
+# --- worlds (Sim2D engines and Khepera bridges) ------------------------------
+
+
+def _world(realm: str, world: str) -> str:
+    return f"{realm_root(realm)}/world/{check_ident('world', world)}"
+
+
+def world_snapshot(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/snapshot"
+
+
+def world_edit(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/edit"
+
+
+def world_map(realm: str, world: str) -> str:
+    """Queryable: save the world to a map file, or load another."""
+    return f"{_world(realm, world)}/map"
+
+
+def world_frame(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/frame"
+
+
+def _agent(realm: str, world: str, agent: str) -> str:
+    return f"{_world(realm, world)}/agent/{check_ident('agent', agent)}"
+
+
+def agent_sensors(realm: str, world: str, agent: str) -> str:
+    return f"{_agent(realm, world, agent)}/sensors"
+
+
+def agent_sensors_all(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/agent/*/sensors"
+
+
+def agent_cmd(realm: str, world: str, agent: str) -> str:
+    return f"{_agent(realm, world, agent)}/cmd"
+
+
+def agent_cmd_all(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/agent/*/cmd"
+
+
+def agent_lease(realm: str, world: str, agent: str) -> str:
+    """The agent's current lease, published by the agent context that owns its queue."""
+    return f"{_agent(realm, world, agent)}/lease"
+
+
+def agent_lease_all(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/agent/*/lease"
+
+
+def parse_agent_key(realm: str, world: str, key: str) -> str | None:
+    """The agent id from any ``.../world/<world>/agent/<agent>/<suffix>`` key."""
+    prefix = f"{_world(realm, world)}/agent/"
+    if not key.startswith(prefix):
+        return None
+    parts = key[len(prefix) :].split("/")
+    if len(parts) != 2 or not is_ident(parts[0]):
+        return None
+    return parts[0]
+
+
+# --- runners and hosts -------------------------------------------------------
+
+
+def runner_run(realm: str, runner: str) -> str:
+    return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/run"
+
+
+def host_spawn(realm: str, host: str) -> str:
+    return f"{realm_root(realm)}/host/{check_ident('host', host)}/spawn"
+
+
+def host_load(realm: str, host: str) -> str:
+    return f"{realm_root(realm)}/host/{check_ident('host', host)}/load"
+
+
+def host_load_all(realm: str) -> str:
+    return f"{realm_root(realm)}/host/*/load"

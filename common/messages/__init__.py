@@ -1,0 +1,45 @@
+"""Every wire type of the system, split by domain, re-exported here.
+
+Import message types from ``common.messages``; each domain module declares
+its own types on the shared :class:`~common.messages.base.Message` base.
+"""
+
+from common.messages.auth import (
+    ALL_PERMISSIONS,
+    AuthEnvelope,
+    Permission,
+    SessionToken,
+    SignedToken,
+)
+from common.messages.base import (
+    MAX_MESSAGE_BYTES,
+    ErrorCode,
+    ErrorReply,
+    Ident,
+    Message,
+    MessageError,
+    OkReply,
+    PackedArray,
+    all_message_types,
+    decode,
+    encode,
+)
+
+__all__ = [
+    "ALL_PERMISSIONS",
+    "MAX_MESSAGE_BYTES",
+    "AuthEnvelope",
+    "ErrorCode",
+    "ErrorReply",
+    "Ident",
+    "Message",
+    "MessageError",
+    "OkReply",
+    "PackedArray",
+    "Permission",
+    "SessionToken",
+    "SignedToken",
+    "all_message_types",
+    "decode",
+    "encode",
+]

@@ -1,0 +1,265 @@
+"""Supervision of a host's child processes (used by ``wart up`` and ``wart host``).
+
+Children start in order; each is "up" when its liveliness token appears (never
+after a fixed sleep). A child that exits is restarted with exponential backoff
+(reset once it has run for a while), and the operator is told why it died. On
+stop, children get SIGTERM in reverse order, then SIGKILL after a deadline;
+each child also asks the kernel to SIGTERM it should the supervisor die
+(``WART_PARENT_PID``, see services/cli.py), so no child outlives the lab.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+log = logging.getLogger("wart.supervisor")
+
+BACKOFF_FIRST = 1.0
+BACKOFF_MAX = 30.0
+STABLE_AFTER = 60.0  # a child that ran this long starts again from the first backoff
+
+
+@dataclass
+class ChildSpec:
+    """One process to keep running."""
+
+    name: str  # what the operator reads: "registry", "engine arena"
+    argv: Sequence[str]  # arguments of ``wart`` (the subcommand first)
+    alive_key: str | None  # the liveliness key that says it is serving
+    detail: str = ""  # shown beside the name once up (an endpoint, a map)
+    ready_timeout: float = 60.0
+    env: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class Child:
+    spec: ChildSpec
+    log_path: Path
+    process: subprocess.Popen[bytes] | None = None
+    started_at: float = 0.0
+    restarts: int = 0
+    backoff: float = BACKOFF_FIRST
+    restart_at: float | None = None
+
+
+def wart_command(args: Sequence[str]) -> list[str]:
+    """The command line that runs ``wart ARGS`` with this interpreter."""
+    return [sys.executable, "-m", "services.cli", *args]
+
+
+def describe_exit(code: int) -> str:
+    if code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        extra = " (killed)" if -code == signal.SIGKILL else ""
+        return f"was stopped by {name}{extra}"
+    return f"exited with code {code}"
+
+
+def tail(path: Path, lines: int = 6) -> str:
+    try:
+        text = path.read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    return "\n".join(f"      | {line}" for line in text[-lines:])
+
+
+class AliveWatch:
+    """The set of liveliness keys currently present under a key expression."""
+
+    def __init__(self, session: zenoh.Session, key_expr: str) -> None:
+        self._present: set[str] = set()
+        self._cond = threading.Condition()
+        self._sub = session.liveliness().declare_subscriber(key_expr, self._on, history=True)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        with self._cond:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._present.add(key)
+            else:
+                self._present.discard(key)
+            self._cond.notify_all()
+
+    def present(self, key: str) -> bool:
+        with self._cond:
+            return key in self._present
+
+    def keys(self) -> set[str]:
+        with self._cond:
+            return set(self._present)
+
+    def wait(self, key: str, timeout: float, abort: Callable[[], bool] = lambda: False) -> bool:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while key not in self._present:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0 or abort():
+                    return False
+                self._cond.wait(min(remaining, 0.2))
+            return True
+
+    def close(self) -> None:
+        try:
+            self._sub.undeclare()
+        except Exception as exc:
+            log.debug("liveliness subscriber: %s", exc)
+
+
+class Supervisor:
+    """Starts, watches, restarts and stops a list of children."""
+
+    def __init__(self, log_dir: Path, *, say: Callable[[str], None] = print) -> None:
+        self.log_dir = log_dir
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.say = say
+        self.children: list[Child] = []
+        self.watch: AliveWatch | None = None
+        self._stopping = threading.Event()
+        self._lock = threading.Lock()
+
+    # -- starting
+
+    def spawn(self, child: Child) -> None:
+        env = dict(os.environ)
+        env.update(child.spec.env)
+        env["WART_PARENT_PID"] = str(os.getpid())
+        env.setdefault("PYTHONUNBUFFERED", "1")
+        with open(child.log_path, "ab") as out:
+            out.write(f"\n--- started {time.strftime('%Y-%m-%d %H:%M:%S')} ---\n".encode())
+            out.flush()
+            child.process = subprocess.Popen(
+                wart_command(child.spec.argv),
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=env,
+                # Ctrl-C reaches the supervisor only; it stops the children in order.
+                start_new_session=True,
+            )
+        child.started_at = time.monotonic()
+        child.restart_at = None
+
+    def add(self, spec: ChildSpec) -> Child:
+        safe = spec.name.replace(" ", "-").replace("/", "-")
+        child = Child(spec=spec, log_path=self.log_dir / f"{safe}.log")
+        with self._lock:
+            self.children.append(child)
+        return child
+
+    def start(self, spec: ChildSpec) -> bool:
+        """Start a child and wait until it is alive; False if it did not come up in time."""
+        child = self.add(spec)
+        self.spawn(child)
+        return self.wait_ready(child)
+
+    def wait_ready(self, child: Child) -> bool:
+        spec = child.spec
+        if spec.alive_key is None or self.watch is None:
+            return True
+        proc = child.process
+
+        def died() -> bool:
+            return self._stopping.is_set() or proc is None or proc.poll() is not None
+
+        ok = self.watch.wait(spec.alive_key, spec.ready_timeout, abort=died)
+        pid = proc.pid if proc else "-"
+        if ok:
+            detail = f"  {spec.detail}" if spec.detail else ""
+            self.say(f"  ✓ {spec.name:<22} up{detail}  (pid {pid})")
+        elif not self._stopping.is_set():
+            why = (
+                describe_exit(proc.returncode)
+                if proc is not None and proc.poll() is not None
+                else f"no liveliness token after {spec.ready_timeout:.0f} s"
+            )
+            self.say(f"  ✗ {spec.name:<22} did not come up: {why}; log {child.log_path}")
+            text = tail(child.log_path)
+            if text:
+                self.say(text)
+        return ok
+
+    # -- watching
+
+    def poll(self) -> None:
+        """Restart children that exited, with backoff; call regularly."""
+        now = time.monotonic()
+        with self._lock:
+            children = list(self.children)
+        for child in children:
+            if self._stopping.is_set():
+                return
+            proc = child.process
+            if child.restart_at is not None:
+                if now >= child.restart_at:
+                    child.restarts += 1
+                    self.say(f"  ↻ restarting {child.spec.name} (restart #{child.restarts})")
+                    self.spawn(child)
+                    threading.Thread(target=self.wait_ready, args=(child,), daemon=True).start()
+                continue
+            if proc is None or proc.poll() is None:
+                continue
+            ran = now - child.started_at
+            if ran >= STABLE_AFTER:
+                child.backoff = BACKOFF_FIRST
+            self.say(
+                f"  ! {child.spec.name} {describe_exit(proc.returncode)} after {ran:.1f} s; "
+                f"restarting in {child.backoff:.0f} s (log {child.log_path})"
+            )
+            text = tail(child.log_path, 4)
+            if text:
+                self.say(text)
+            child.restart_at = now + child.backoff
+            child.backoff = min(child.backoff * 2, BACKOFF_MAX)
+
+    def run_until(self, stop: threading.Event, period: float = 0.2) -> None:
+        while not stop.wait(period):
+            self.poll()
+
+    # -- stopping
+
+    def stop_all(self, timeout: float = 8.0) -> None:
+        """SIGTERM every child in reverse start order, SIGKILL what is left at the deadline."""
+        self._stopping.set()
+        with self._lock:
+            children = list(reversed(self.children))
+        for child in children:
+            proc = child.process
+            if proc is not None and proc.poll() is None:
+                try:
+                    proc.terminate()
+                    proc.wait(timeout=max(0.5, timeout / max(1, len(children))))
+                except subprocess.TimeoutExpired:
+                    pass
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + timeout
+        for child in children:
+            proc = child.process
+            if proc is None:
+                continue
+            try:
+                proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                self.say(f"  {child.spec.name} did not stop in time; killing it")
+                proc.kill()
+                proc.wait(timeout=5)
+        if self.watch is not None:
+            self.watch.close()
+
+    def pids(self) -> list[int]:
+        with self._lock:
+            return [c.process.pid for c in self.children if c.process is not None]

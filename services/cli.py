@@ -1,0 +1,65 @@
+"""``wart``: one console command, a subcommand per process or tool.
+
+Each subcommand lives in its own module with a ``main(argv, prog)``; this file
+only maps names to modules, imported on demand so ``wart --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib
+import os
+import signal
+import sys
+from collections.abc import Sequence
+
+# name: (module, one-line description). Kept in the order of the help text.
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "up": ("services.up", "start a whole lab on this machine under supervision"),
+    "router": ("services.router", "run a Zenoh router (one per host)"),
+}
+
+
+def usage() -> str:
+    width = max(len(name) for name in SUBCOMMANDS)
+    lines = [
+        "usage: wart <command> [options]   (wart <command> --help for each)",
+        "",
+        "A distributed lab for designing, testing and deploying robot controllers.",
+        "",
+        "commands:",
+    ]
+    lines += [f"  {name:<{width}}  {text}" for name, (_, text) in SUBCOMMANDS.items()]
+    return "\n".join(lines)
+
+
+def _die_with_supervisor() -> None:
+    """Under a supervisor (WART_PARENT_PID), ask the kernel for SIGTERM when it dies."""
+    parent = os.environ.get("WART_PARENT_PID")
+    if not parent or not sys.platform.startswith("linux"):
+        return
+    pr_set_pdeathsig = 1
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))
+    except (OSError, AttributeError):
+        return
+    if str(os.getppid()) != parent:  # it died before prctl took effect
+        sys.exit(1)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    _die_with_supervisor()
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help", "help"):
+        print(usage())
+        return 0
+    name, rest = args[0], args[1:]
+    if name not in SUBCOMMANDS:
+        print(f"wart: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(SUBCOMMANDS[name][0])
+    return int(module.main(rest, prog=f"wart {name}") or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

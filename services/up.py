@@ -1,0 +1,187 @@
+"""``wart up``: a whole lab on this machine, under supervision.
+
+Starts a Zenoh router (unless ``--connect`` names an existing lab's router),
+then every service of a lab, each as its own process; waits until each one's
+liveliness token appears; prints one line per service and the web address;
+restarts a child that dies (with backoff, and says so); stops them all in
+order on Ctrl-C. Logs of each child go to STATE_DIR/logs/.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from common import cli, keys
+from common.keys import AliveKind
+from common.service import close_session, open_session
+from common.supervisor import AliveWatch, ChildSpec, Supervisor
+from common.zconfig import DEFAULT_PORT, NetworkOptions
+
+log = logging.getLogger("wart.up")
+
+
+@dataclass(frozen=True)
+class LabSettings:
+    """What ``wart up`` was asked for."""
+
+    realm: str
+    state_dir: Path
+    router_endpoint: str  # where the children connect
+    start_router: bool
+    router_listen: tuple[str, ...]
+    network: NetworkOptions  # what the children get (client mode, the router above)
+    http_port: int
+
+
+def default_state_dir(realm: str) -> Path:
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "wart" / realm
+
+
+def lab_plan(lab: LabSettings) -> list[ChildSpec]:
+    """The processes of a one-machine lab, in start order (the router is separate)."""
+    realm = lab.realm
+    net = lab.network.as_args()
+    plan: list[ChildSpec] = []
+    # Each service of the lab adds its entry here, after the ones it depends on.
+    del realm, net
+    return plan
+
+
+def router_spec(lab: LabSettings) -> ChildSpec:
+    args = ["router", "--realm", lab.realm, "--name", "lab-router"]
+    for endpoint in lab.router_listen:
+        args += ["--listen", endpoint]
+    return ChildSpec(
+        name="router",
+        argv=args,
+        alive_key=keys.alive(lab.realm, AliveKind.ROUTER, "lab-router"),
+        detail=", ".join(lab.router_listen),
+    )
+
+
+def client_endpoint(listen: str) -> str:
+    """Where a local client reaches a router listening on ``listen``."""
+    proto, _, address = listen.partition("/")
+    host, _, port = address.rpartition(":")
+    if host in ("0.0.0.0", "[::]", ""):
+        host = "127.0.0.1"
+    return f"{proto}/{host}:{port}"
+
+
+def settings_from_args(args: argparse.Namespace, options: NetworkOptions) -> LabSettings:
+    state_dir: Path = args.state_dir or default_state_dir(options.realm)
+    if options.connect:
+        start_router = False
+        router_endpoint = options.connect[0]
+        router_listen: tuple[str, ...] = ()
+    else:
+        start_router = True
+        router_listen = options.listen or (f"tcp/127.0.0.1:{args.port}",)
+        router_endpoint = client_endpoint(router_listen[0])
+    network = NetworkOptions(
+        realm=options.realm,
+        mode="client",
+        connect=options.connect or (router_endpoint,),
+        multicast_scouting=False,
+        registry_key=options.registry_key,
+    )
+    return LabSettings(
+        realm=options.realm,
+        state_dir=state_dir,
+        router_endpoint=router_endpoint,
+        start_router=start_router,
+        router_listen=router_listen,
+        network=network,
+        http_port=args.http_port,
+    )
+
+
+def run_lab(
+    lab: LabSettings, stop: threading.Event, *, ready: threading.Event | None = None
+) -> int:
+    """Start the lab, keep it running until ``stop`` is set, then stop it all."""
+    lab.state_dir.mkdir(parents=True, exist_ok=True)
+    supervisor = Supervisor(lab.state_dir / "logs", say=lambda text: print(text, flush=True))
+    print(f"wart lab '{lab.realm}': state and logs in {lab.state_dir}", flush=True)
+    session = None
+    code = 0
+    try:
+        if lab.start_router:
+            supervisor.add(router_spec(lab))
+            supervisor.spawn(supervisor.children[0])
+        try:
+            session = open_session(lab.network, wait=30.0)
+        except ConnectionError as exc:
+            print(f"  ✗ {exc}", flush=True)
+            return 1
+        supervisor.watch = AliveWatch(session, keys.alive_all(lab.realm))
+        if lab.start_router and not supervisor.wait_ready(supervisor.children[0]):
+            return 1
+        if not lab.start_router:
+            print(f"  joined the lab router at {lab.router_endpoint}", flush=True)
+        for spec in lab_plan(lab):
+            if stop.is_set():
+                break
+            if not supervisor.start(spec):
+                code = 1
+        if not stop.is_set():
+            print("The lab is running. Press Ctrl-C to stop it.", flush=True)
+            if ready is not None:
+                ready.set()
+            supervisor.run_until(stop)
+    finally:
+        print("Stopping the lab...", flush=True)
+        supervisor.stop_all()
+        if session is not None:
+            close_session(session)
+        print("Lab stopped.", flush=True)
+    return code
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart up") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument(
+        "--state-dir",
+        type=Path,
+        help="where the lab keeps its database, keys and logs (default ~/.local/state/wart/REALM)",
+    )
+    p.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        help=f"the router's TCP port on 127.0.0.1 (default {DEFAULT_PORT})",
+    )
+    p.add_argument(
+        "--http-port",
+        type=int,
+        default=8080,
+        help="the web viewer's port (default 8080; the next free one if busy)",
+    )
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    for port, what in ((args.port, "--port"), (args.http_port, "--http-port")):
+        if not 0 < port < 65536:
+            p.error(f"{what} {port} is not a TCP port (1 to 65535)")
+    lab = settings_from_args(args, options)
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    return run_lab(lab, stop)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,85 @@
+"""A service on a real router: its token is seen while it serves, and gone once it stops."""
+
+from __future__ import annotations
+
+import zenoh
+
+from common import keys
+from common.keys import AliveKind
+from common.messages import ErrorReply, OkReply, decode
+from common.service import RequestError, Service, close_session, open_session
+from common.supervisor import AliveWatch
+from tests.conftest import Router, wait_for
+
+
+class Echo(Service):
+    kind = AliveKind.CONTEXT
+
+    def on_start(self) -> None:
+        self.serve(keys.ctx_state(self.realm, self.ident), self.answer)
+
+    def answer(self, query: zenoh.Query) -> OkReply:
+        if query.payload is not None and query.payload.to_bytes() == b"fail":
+            raise RequestError("not_found", "no such thing")
+        if query.payload is not None and query.payload.to_bytes() == b"crash":
+            raise RuntimeError("a bug")
+        return OkReply(detail="hello")
+
+
+def ask(session: zenoh.Session, key: str, payload: bytes) -> object:
+    for reply in session.get(key, payload=payload, timeout=5.0):
+        assert reply.ok is not None
+        return decode(reply.ok.payload, (OkReply, ErrorReply))
+    raise AssertionError("no reply")
+
+
+def test_token_seen_while_serving_and_gone_after_stop(
+    router: Router, alive_watch: AliveWatch
+) -> None:
+    session = open_session(router.options(), wait=10.0)
+    key = keys.alive(router.realm, AliveKind.CONTEXT, "echo")
+    try:
+        service = Echo(session, router.realm, "echo").start()
+        assert alive_watch.wait(key, 10.0), "the service's liveliness token never appeared"
+        service.stop()
+        wait_for(lambda: not alive_watch.present(key), 10.0, "the token to disappear")
+    finally:
+        close_session(session)
+
+
+def test_query_errors_become_error_replies_and_service_keeps_serving(
+    router: Router, zsession: zenoh.Session
+) -> None:
+    session = open_session(router.options(), wait=10.0)
+    try:
+        with Echo(session, router.realm, "echo"):
+            key = keys.ctx_state(router.realm, "echo")
+            not_found = ask(zsession, key, b"fail")
+            assert isinstance(not_found, ErrorReply) and not_found.code == "not_found"
+            crashed = ask(zsession, key, b"crash")
+            assert isinstance(crashed, ErrorReply) and crashed.code == "internal"
+            fine = ask(zsession, key, b"ok")
+            assert fine == OkReply(detail="hello")
+    finally:
+        close_session(session)
+
+
+def test_killed_process_token_disappears(router: Router, procs, alive_watch: AliveWatch) -> None:
+    key = keys.alive(router.realm, AliveKind.ROUTER, "second")
+    port = __import__("tests.conftest", fromlist=["free_port"]).free_port()
+    proc = procs.start(
+        "second-router",
+        [
+            "router",
+            "--name",
+            "second",
+            "--listen",
+            f"tcp/127.0.0.1:{port}",
+            *router.net_args()[:2],
+            "--connect",
+            router.endpoint,
+        ],
+    )
+    assert alive_watch.wait(key, 20.0), proc.output()
+    proc.kill9()
+    wait_for(lambda: not alive_watch.present(key), 15.0, "a killed router's token to go")
