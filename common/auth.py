@@ -366,3 +366,35 @@ class Verifier:
 
 def new_session_id() -> bytes:
     return secrets.token_bytes(16)
+
+
+def issue_session(
+    identity: RegistryIdentity,
+    realm: str,
+    user: str,
+    permissions: Iterable[str],
+    *,
+    roles: Iterable[str] = (),
+    ttl: float = 3600.0,
+    keys: SessionKeys | None = None,
+    now: float | None = None,
+) -> Session:
+    """A session signed by ``identity`` without a login round trip.
+
+    The registry's login uses the same signing path; tests and tools that
+    hold the registry key (``wart users``) use this directly.
+    """
+    keys = keys or SessionKeys()
+    issued = time.time() if now is None else now
+    token = SessionToken(
+        realm=realm,
+        user=user,
+        session_id=new_session_id(),
+        session_key=keys.session_public_key,
+        box_key=keys.box_public_key,
+        permissions=sorted(set(permissions)),  # type: ignore[arg-type]
+        roles=sorted(set(roles)),
+        issued_at=issued,
+        expires_at=issued + ttl,
+    )
+    return Session(keys, identity.sign_token(token), token)
