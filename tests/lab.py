@@ -33,11 +33,28 @@ class Lab:
 
     def start(self) -> Lab:
         self.popen = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", "up", "--realm", self.realm,
-             "--state-dir", str(self.state_dir), "--port", str(self.port),
-             "--http-port", str(self.http_port), *self.extra_args],
-            cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, env=wart_env(), start_new_session=True,
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "up",
+                "--realm",
+                self.realm,
+                "--state-dir",
+                str(self.state_dir),
+                "--port",
+                str(self.port),
+                "--http-port",
+                str(self.http_port),
+                *self.extra_args,
+            ],
+            cwd=REPO,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=wart_env(),
+            start_new_session=True,
         )
         threading.Thread(target=self._read, daemon=True).start()
         return self
@@ -63,8 +80,9 @@ class Lab:
                 continue
             if needle in line:
                 return line
-        raise AssertionError(f"no line with {needle!r} within {timeout:.0f} s; output:\n"
-                             + "\n".join(self.lines))
+        raise AssertionError(
+            f"no line with {needle!r} within {timeout:.0f} s; output:\n" + "\n".join(self.lines)
+        )
 
     def wait_new_line(self, needle: str, timeout: float = 60.0) -> str:
         """The next output line from now on containing ``needle``."""
@@ -107,6 +125,7 @@ class Lab:
                     proc.kill()
                 self.popen.kill()
                 self.popen.wait(5)
-                raise AssertionError("wart up did not stop within "
-                                     f"{timeout:.0f} s of Ctrl-C") from None
+                raise AssertionError(
+                    f"wart up did not stop within {timeout:.0f} s of Ctrl-C"
+                ) from None
         return self.popen.returncode

@@ -54,15 +54,20 @@ class HostNet:
     def up(self) -> None:
         _ip("link", "set", self.veth, "up", netns=self.switch)
 
-    def popen(self, args: list[str], log_path: Path, env: dict[str, str] | None = None
-              ) -> subprocess.Popen[bytes]:
+    def popen(
+        self, args: list[str], log_path: Path, env: dict[str, str] | None = None
+    ) -> subprocess.Popen[bytes]:
         """Run ``python ARGS`` inside this host's namespace."""
         out = open(log_path, "wb")  # noqa: SIM115 - handed to the child
         try:
             return subprocess.Popen(
                 ["ip", "netns", "exec", self.name, sys.executable, *args],
-                cwd=REPO, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
-                env=wart_env(env), start_new_session=True,
+                cwd=REPO,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=wart_env(env),
+                start_new_session=True,
             )
         finally:
             out.close()

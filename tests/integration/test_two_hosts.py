@@ -20,12 +20,18 @@ def test_service_on_host_b_answers_a_client_on_host_a_through_a_router(
     with netns.Network(2) as net:
         a, b = net.hosts
         endpoint = f"tcp/{a.address}:7447"
-        router = a.popen(["-m", "services.cli", "router", "--realm", realm, "--listen", endpoint],
-                         tmp_path / "router.log")
-        service = b.popen(["-m", "tests.integration.netns_service", "serve", realm, endpoint],
-                          tmp_path / "service.log")
-        probe = a.popen(["-m", "tests.integration.netns_service", "probe", realm,
-                         f"tcp/{a.address}:7447"], tmp_path / "probe.log")
+        router = a.popen(
+            ["-m", "services.cli", "router", "--realm", realm, "--listen", endpoint],
+            tmp_path / "router.log",
+        )
+        service = b.popen(
+            ["-m", "tests.integration.netns_service", "serve", realm, endpoint],
+            tmp_path / "service.log",
+        )
+        probe = a.popen(
+            ["-m", "tests.integration.netns_service", "probe", realm, f"tcp/{a.address}:7447"],
+            tmp_path / "probe.log",
+        )
         try:
             code = probe.wait(60)
             out = (tmp_path / "probe.log").read_text()

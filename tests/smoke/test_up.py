@@ -26,8 +26,7 @@ def expected_tokens(lab: Lab) -> list[str]:
     return [spec.alive_key for spec in specs if spec.alive_key]
 
 
-def test_lab_comes_up_restarts_a_killed_child_and_stops_cleanly(tmp_path: Path, realm: str
-                                                                ) -> None:
+def test_lab_comes_up_restarts_a_killed_child_and_stops_cleanly(tmp_path: Path, realm: str) -> None:
     lab = Lab(realm=realm, state_dir=tmp_path / "state").start()
     try:
         lab.wait_line("The lab is running", timeout=120)
@@ -57,8 +56,11 @@ def test_lab_comes_up_restarts_a_killed_child_and_stops_cleanly(tmp_path: Path, 
         code = lab.stop()
     assert code == 0, "\n".join(lab.lines)
     assert "Lab stopped." in lab.lines
-    left = [pid for pid in pids if psutil.pid_exists(pid)
-            and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE]
+    left = [
+        pid
+        for pid in pids
+        if psutil.pid_exists(pid) and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    ]
     assert not left, f"children left running after Ctrl-C: {left}"
 
 
