@@ -48,11 +48,13 @@ def test_token_seen_while_serving_and_gone_after_stop(
 
 
 def test_query_errors_become_error_replies_and_service_keeps_serving(
-    router: Router, zsession: zenoh.Session
+    router: Router, zsession: zenoh.Session, alive_watch: AliveWatch
 ) -> None:
     session = open_session(router.options(), wait=10.0)
     try:
-        with Echo(session, router.realm, "echo"):
+        with Echo(session, router.realm, "echo") as echo:
+            # The token is declared after the queryable: once it is seen, queries reach it.
+            assert alive_watch.wait(echo.alive_key, 10.0)
             key = keys.ctx_state(router.realm, "echo")
             not_found = ask(zsession, key, b"fail")
             assert isinstance(not_found, ErrorReply) and not_found.code == "not_found"

@@ -1,0 +1,259 @@
+"""The controller API students write against (the thesis's AgentController and KheperaStudent).
+
+A controller is a class deriving from :class:`Controller`::
+
+    from common.controller import Controller, Khepera
+
+    class Avoid(Controller):
+        period = 0.05                      # seconds between do_work calls
+
+        def initialize(self, robot: Khepera) -> None:
+            robot.set_leds(True, False)
+
+        def do_work(self, robot: Khepera) -> None:
+            left, right = robot.proximity().values[2:4]
+            robot.set_speeds(10 - right // 100, 10 - left // 100)
+
+        def cleanup(self, robot: Khepera) -> None:
+            robot.set_speeds(0, 0)
+
+The same class runs unchanged against a simulated robot or a real one, on the
+student's own machine (``wart control``) or uploaded and run in the lab's
+sandbox (``wart deploy``). Reads return the newest sample the robot sent and
+its time; they never block. Speeds are in the Khepera's units: pulses per
+10 ms (about 8 mm/s each), clamped to ±127.
+
+This module uses only the standard library: it is what the sandbox offers.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Protocol
+
+API_VERSION = 1
+"""Raised only when a change would break existing controllers; old ones keep working."""
+
+MAX_SPEED = 127
+PROXIMITY_SENSORS = 8
+LIGHT_SENSORS = 8
+ARM_UP = 165
+ARM_DOWN = 255
+
+
+@dataclass(frozen=True)
+class Reading:
+    """A sensor reading and the robot-clock time (seconds) it was taken at."""
+
+    values: tuple[int, ...]
+    time: float
+
+
+@dataclass
+class KheperaState:
+    """The newest state a Khepera reported (as the sandbox and remote links deliver it)."""
+
+    time: float = 0.0
+    speeds: tuple[int, int] = (0, 0)
+    counters: tuple[int, int] = (0, 0)
+    proximity: tuple[int, ...] = (0,) * PROXIMITY_SENSORS
+    ambient: tuple[int, ...] = (500,) * LIGHT_SENSORS
+    leds: tuple[bool, bool] = (False, False)
+    arm: int = ARM_UP
+    gripper_closed: bool = False
+    object_present: bool = False
+    resistivity: int = 0
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> KheperaState:
+        """Build from a plain mapping, checking every field (data crosses a process boundary)."""
+
+        def ints(name: str, count: int, low: int, high: int) -> tuple[int, ...]:
+            raw = data.get(name)
+            if not isinstance(raw, list | tuple) or len(raw) != count:
+                raise ValueError(f"{name}: expected {count} integers")
+            out = tuple(int(v) for v in raw)
+            if any(not low <= v <= high for v in out):
+                raise ValueError(f"{name}: values outside {low}..{high}")
+            return out
+
+        t = data.get("time", 0.0)
+        if not isinstance(t, int | float):
+            raise ValueError("time: expected a number")
+        if "arm" in data:
+            data = {**data, "arm": [data["arm"]]}
+        leds = data.get("leds", [False, False])
+        if not isinstance(leds, list | tuple) or len(leds) != 2:
+            raise ValueError("leds: expected two booleans")
+        return cls(
+            time=float(t),
+            speeds=ints("speeds", 2, -MAX_SPEED, MAX_SPEED),  # type: ignore[arg-type]
+            counters=ints("counters", 2, -(2**31), 2**31 - 1),  # type: ignore[arg-type]
+            proximity=ints("proximity", PROXIMITY_SENSORS, 0, 1023),
+            ambient=ints("ambient", LIGHT_SENSORS, 0, 1023),
+            leds=(bool(leds[0]), bool(leds[1])),
+            arm=ints("arm", 1, 0, 255)[0] if "arm" in data else ARM_UP,
+            gripper_closed=bool(data.get("gripper_closed", False)),
+            object_present=bool(data.get("object_present", False)),
+            resistivity=int(data.get("resistivity", 0)),
+        )
+
+
+class RobotLink(Protocol):
+    """What a robot handle needs from its transport (sandbox pipe, Zenoh, a test)."""
+
+    def latest(self) -> KheperaState: ...
+
+    def send(self, command: dict[str, Any]) -> None: ...
+
+
+def _clamp_speed(value: float) -> int:
+    return max(-MAX_SPEED, min(MAX_SPEED, round(value)))
+
+
+class Khepera:
+    """The control interface of a Khepera (the thesis's KheperaStudent), in Python names.
+
+    Effector calls send a command at once; sensor calls return the newest
+    sample and its time.
+    """
+
+    def __init__(self, link: RobotLink) -> None:
+        self._link = link
+
+    # -- motion
+
+    def set_speeds(self, left: float, right: float) -> None:
+        """Wheel speeds in pulses per 10 ms (about 8 mm/s each), clamped to ±127."""
+        self._link.send({"speeds": [_clamp_speed(left), _clamp_speed(right)]})
+
+    def stop(self) -> None:
+        self.set_speeds(0, 0)
+
+    def speeds(self) -> Reading:
+        state = self._link.latest()
+        return Reading(tuple(state.speeds), state.time)
+
+    def position(self) -> Reading:
+        """The wheels' position counters, in pulses (0.08 mm each)."""
+        state = self._link.latest()
+        return Reading(tuple(state.counters), state.time)
+
+    def set_position(self, left: int, right: int) -> None:
+        """Set the position counters (e.g. to zero before measuring a distance)."""
+        self._link.send({"counters": [int(left), int(right)]})
+
+    # -- sensors
+
+    def proximity(self) -> Reading:
+        """8 IR proximity values, 0..1023, larger is closer (about 0 to 50 mm).
+
+        Sensors 0..5 go round the front from left to right, 6 and 7 are at the back.
+        """
+        state = self._link.latest()
+        return Reading(tuple(state.proximity), state.time)
+
+    def ambient(self) -> Reading:
+        """8 ambient light values, about 500 in the dark, smaller is brighter."""
+        state = self._link.latest()
+        return Reading(tuple(state.ambient), state.time)
+
+    def time(self) -> float:
+        """The robot's clock (simulated seconds in a simulation)."""
+        return self._link.latest().time
+
+    # -- LEDs
+
+    def set_leds(self, led0: bool, led1: bool) -> None:
+        self._link.send({"leds": [bool(led0), bool(led1)]})
+
+    # -- gripper turret
+
+    def set_arm(self, position: int) -> None:
+        """Arm position 0..255; mechanically about 165 (up) to 255 (down)."""
+        self._link.send({"arm": max(0, min(255, int(position)))})
+
+    def arm_up(self) -> None:
+        self.set_arm(ARM_UP)
+
+    def arm_down(self) -> None:
+        self.set_arm(ARM_DOWN)
+
+    def arm(self) -> int:
+        return self._link.latest().arm
+
+    def open_gripper(self) -> None:
+        self._link.send({"grip": False})
+
+    def close_gripper(self) -> None:
+        self._link.send({"grip": True})
+
+    def gripper_closed(self) -> bool:
+        return self._link.latest().gripper_closed
+
+    def object_present(self) -> bool:
+        """True when the barrier between the fingers sees an object."""
+        return self._link.latest().object_present
+
+    def resistivity(self) -> int:
+        """Electrical resistivity of the held object (0 when nothing is held)."""
+        return self._link.latest().resistivity
+
+
+class Controller:
+    """Base of every controller: initialize once, do_work every ``period`` s, cleanup once."""
+
+    period: ClassVar[float] = 0.05
+    robot_type: ClassVar[str] = "khepera"
+    api_version: ClassVar[int] = API_VERSION
+
+    def initialize(self, robot: Khepera) -> None:
+        """Called once before the first do_work."""
+
+    def do_work(self, robot: Khepera) -> None:
+        """Called every ``period`` seconds while the controller holds the robot."""
+        raise NotImplementedError
+
+    def cleanup(self, robot: Khepera) -> None:
+        """Called once at the end of the slot (or on stop); the robot is stopped after it."""
+
+
+@dataclass
+class ControllerLoop:
+    """Runs a controller at its period until stopped (the thesis's Figure 15 loop).
+
+    ``sleep`` and ``clock`` are injectable so tests need not wait.
+    """
+
+    controller: Controller
+    robot: Khepera
+    stop: threading.Event = field(default_factory=threading.Event)
+    clock: Callable[[], float] = time.monotonic
+    iterations: int = 0
+
+    def run(self, until: float | None = None) -> None:
+        period = float(self.controller.period)
+        if not 0.001 <= period <= 10.0:
+            raise ValueError(f"period {period} s is outside 0.001..10 s")
+        self.controller.initialize(self.robot)
+        try:
+            next_tick = self.clock()
+            while not self.stop.is_set():
+                if until is not None and self.clock() >= until:
+                    break
+                self.controller.do_work(self.robot)
+                self.iterations += 1
+                next_tick += period
+                delay = next_tick - self.clock()
+                if delay < 0:  # a slow do_work: start again from now rather than catch up
+                    next_tick = self.clock()
+                    delay = 0.0
+                self.stop.wait(delay)
+        finally:
+            try:
+                self.controller.cleanup(self.robot)
+            finally:
+                self.robot.stop()

@@ -1,0 +1,1 @@
+"""The runner: deployed controllers, each in a sandboxed subprocess."""

@@ -1,0 +1,109 @@
+"""The program that runs inside the sandbox: loads one uploaded controller and runs it.
+
+Standard library only (the sandbox offers Debian's python3 and nothing else).
+It has no Zenoh session, no keys and no lease: the trusted parent relays
+robot state on stdin and reads commands from the file descriptor given as
+its first argument, one JSON object per line each way. The student's prints
+and tracebacks go to stdout/stderr, which the parent shows as the
+controller's output.
+
+    python3 -I -S child.py CMD_FD CONTROLLER_FILE
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import sys
+import threading
+import traceback
+from typing import Any
+
+
+def main() -> int:
+    cmd_fd = int(sys.argv[1])
+    path = sys.argv[2]
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib"))
+    from common.controller import Controller, ControllerLoop, Khepera, KheperaState
+
+    out = os.fdopen(cmd_fd, "w", buffering=1)
+    out_lock = threading.Lock()
+
+    def tell(message: dict[str, Any]) -> None:
+        with out_lock:
+            out.write(json.dumps(message, separators=(",", ":")) + "\n")
+
+    class PipeLink:
+        def __init__(self) -> None:
+            self.state = KheperaState()
+            self.lock = threading.Lock()
+
+        def latest(self) -> KheperaState:
+            with self.lock:
+                return self.state
+
+        def send(self, command: dict[str, Any]) -> None:
+            tell({"t": "cmd", **command})
+
+    link = PipeLink()
+    stop = threading.Event()
+    have_state = threading.Event()
+
+    def read_parent() -> None:
+        for line in sys.stdin:
+            try:
+                message = json.loads(line)
+                if message.get("t") == "stop":
+                    break
+                if message.get("t") == "state":
+                    state = KheperaState.from_dict(message)
+                    with link.lock:
+                        link.state = state
+                    have_state.set()
+            except (ValueError, TypeError, KeyError) as exc:
+                print(f"[sandbox] ignored a bad state line: {exc}", file=sys.stderr)
+        stop.set()
+
+    threading.Thread(target=read_parent, daemon=True).start()
+
+    try:
+        spec = importlib.util.spec_from_file_location("student_controller", path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        classes = [
+            value
+            for value in vars(module).values()
+            if isinstance(value, type)
+            and issubclass(value, Controller)
+            and value is not Controller
+            and value.__module__ == module.__name__
+        ]
+        chosen = getattr(module, "CONTROLLER", None) or (classes[0] if len(classes) == 1 else None)
+        if chosen is None:
+            names = ", ".join(c.__name__ for c in classes) or "none"
+            raise TypeError(
+                f"the file must define exactly one Controller subclass (found: {names}); "
+                "or name one with CONTROLLER = MyController"
+            )
+        controller = chosen()
+    except BaseException:
+        tell({"t": "error", "message": traceback.format_exc(limit=5)})
+        return 3
+
+    tell({"t": "ready", "controller": type(controller).__name__})
+    have_state.wait(5.0)
+    loop = ControllerLoop(controller, Khepera(link), stop=stop)
+    try:
+        loop.run()
+    except BaseException:
+        traceback.print_exc()
+        tell({"t": "error", "message": traceback.format_exc(limit=5)})
+        return 4
+    tell({"t": "done", "iterations": loop.iterations})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

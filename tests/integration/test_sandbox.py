@@ -1,0 +1,224 @@
+"""Uploaded controllers run contained: limits hold, the parent keeps serving.
+
+These run the real sandbox (setpriv, prlimit, bubblewrap, Debian's python3);
+there is no Zenoh here: the runner service relays over these same pipes.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import textwrap
+import time
+
+import psutil
+import pytest
+
+from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck, sandbox_problem
+from tests.conftest import wait_for
+
+pytestmark = pytest.mark.integration
+
+_problem = sandbox_problem()
+needs_sandbox = pytest.mark.skipif(_problem is not None, reason=f"no sandbox here: {_problem}")
+
+STATE = {
+    "time": 1.0,
+    "speeds": [0, 0],
+    "counters": [0, 0],
+    "proximity": [0, 0, 900, 0, 0, 0, 0, 0],
+    "ambient": [500] * 8,
+    "leds": [False, False],
+    "arm": 165,
+    "gripper_closed": False,
+    "object_present": False,
+    "resistivity": 0,
+}
+
+
+class Run:
+    """A sandbox with its commands and output collected."""
+
+    def __init__(self, body: str, slot: float = 3.0, limits: SandboxLimits | None = None) -> None:
+        source = textwrap.dedent(body).encode()
+        self.commands: queue.Queue[dict] = queue.Queue()
+        self.output: list[str] = []
+        self.sandbox = Sandbox(
+            source, limits=limits, on_command=self.commands.put, on_output=self.output.append
+        )
+        self.started = time.monotonic()
+        self.sandbox.start(slot)
+        self.sandbox.send_state(STATE)
+
+    def finish(self, timeout: float = 15.0) -> str:
+        assert self.sandbox.wait(timeout), "the sandbox did not end"
+        return self.sandbox.exit_reason
+
+    def text(self) -> str:
+        return "\n".join(self.output)
+
+
+HEADER = "from common.controller import Controller, Khepera\n"
+
+
+@needs_sandbox
+def test_controller_reads_sensors_and_drives() -> None:
+    run = Run(
+        HEADER
+        + """
+class Avoid(Controller):
+    period = 0.02
+    def do_work(self, robot: Khepera) -> None:
+        front = robot.proximity().values[2]
+        print("front", front)
+        robot.set_speeds(-5 if front > 500 else 10, 5)
+""",
+        slot=1.5,
+    )
+    command = run.commands.get(timeout=10)
+    assert command == {"speeds": [-5, 5]}
+    reason = run.finish()
+    assert reason == "stopped at the end of its slot"
+    assert "front 900" in run.text()
+    assert "[runner] controller Avoid started" in run.text()
+
+
+@needs_sandbox
+def test_endless_loop_is_killed_at_the_end_of_its_slot() -> None:
+    run = Run(
+        HEADER
+        + """
+class Spin(Controller):
+    def do_work(self, robot):
+        while True:
+            pass
+""",
+        slot=1.0,
+    )
+    reason = run.finish()
+    assert time.monotonic() - run.started < 5.0
+    assert "slot" in reason
+
+
+@needs_sandbox
+def test_unbounded_allocation_fails_inside_the_sandbox() -> None:
+    run = Run(
+        HEADER
+        + """
+class Hog(Controller):
+    def do_work(self, robot):
+        hoard = []
+        while True:
+            hoard.append(bytearray(50 * 1024 * 1024))
+""",
+        slot=5.0,
+        limits=SandboxLimits(memory_bytes=200 * 1024 * 1024),
+    )
+    reason = run.finish()
+    assert "MemoryError" in run.text()
+    assert reason == "the controller raised an exception"
+
+
+@needs_sandbox
+def test_fork_bomb_is_contained_and_nothing_survives_the_slot() -> None:
+    run = Run(
+        HEADER
+        + """
+import os, time
+class Bomb(Controller):
+    def do_work(self, robot):
+        for _ in range(500):
+            try:
+                os.fork()
+            except OSError as exc:
+                print("fork refused:", exc.errno)
+                time.sleep(60)
+""",
+        slot=2.0,
+        limits=SandboxLimits(processes=8),
+    )
+    pid = run.sandbox.process.pid
+    run.finish()
+    assert "fork refused" in run.text()
+    assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    # No live process of the sandbox's uid range is left anywhere on the machine
+    # (a zombie awaiting the container's init holds nothing).
+    wait_for(lambda: not _live_sandbox_processes(), 5.0, "sandbox processes to end")
+
+
+def _live_sandbox_processes() -> list[int]:
+    return [
+        p.pid
+        for p in psutil.process_iter(["uids", "status"])
+        if p.info["uids"]
+        and 61000 <= p.info["uids"].real < 62000
+        and p.info["status"] != psutil.STATUS_ZOMBIE
+    ]
+
+
+@needs_sandbox
+def test_files_outside_and_the_network_are_out_of_reach() -> None:
+    secret_dir = os.path.expanduser("~")
+    run = Run(
+        HEADER
+        + f"""
+import os, socket
+class Snoop(Controller):
+    def initialize(self, robot):
+        for path in [{secret_dir!r}, "/etc/shadow", "/etc/passwd", {os.getcwd()!r}]:
+            try:
+                os.listdir(path) if os.path.isdir(path) else open(path).read()
+                print("READ", path)
+            except OSError as exc:
+                print("denied", path, type(exc).__name__)
+        try:
+            socket.create_connection(("127.0.0.1", 7447), timeout=1)
+            print("NETWORK OPEN")
+        except OSError as exc:
+            print("no network", type(exc).__name__)
+        print("uid", os.getuid(), "cwd", os.getcwd(), os.listdir("."))
+    def do_work(self, robot):
+        pass
+""",
+        slot=1.5,
+    )
+    run.finish()
+    text = run.text()
+    assert "READ" not in text and "NETWORK OPEN" not in text, text
+    assert "no network" in text and "cwd /work []" in text
+    assert "uid 0 " not in text
+
+
+@needs_sandbox
+def test_bad_commands_are_refused_and_counted() -> None:
+    run = Run(
+        HEADER
+        + """
+import os, sys
+class Liar(Controller):
+    def initialize(self, robot):
+        fd = int(sys.argv[1])
+        os.write(fd, b'not json\\n{"t":"cmd","speeds":[999,0]}\\n{"t":"cmd","format":"/"}\\n')
+        robot.set_speeds(3, 4)
+    def do_work(self, robot):
+        pass
+""",
+        slot=1.5,
+    )
+    assert run.commands.get(timeout=10) == {"speeds": [3, 4]}
+    run.finish()
+    assert run.sandbox.rejected_commands >= 3
+
+
+@pytest.mark.parametrize(
+    ("source", "message"),
+    [
+        (b"def broken(:\n", "line 1: syntax error"),
+        (b"x = 1\n", "defines no controller"),
+        (b"\xff\xfe", "not UTF-8"),
+        (b"#" * 70_000, "limited to"),
+    ],
+)
+def test_precheck_explains_what_cannot_run(source: bytes, message: str) -> None:
+    with pytest.raises(PrecheckError, match=message):
+        precheck(source)
