@@ -271,7 +271,8 @@ class RegistryDB:
 
     def admins(self) -> list[str]:
         rows = self._rows(
-            "SELECT DISTINCT user FROM grants WHERE scope='' AND grant_name IN ('admin', 'role:admin')"
+            "SELECT DISTINCT user FROM grants "
+            "WHERE scope='' AND grant_name IN ('admin', 'role:admin')"
         )
         return [str(r[0]) for r in rows]
 
@@ -400,7 +401,7 @@ class RegistryDB:
     # -- mailboxes
 
     def set_mailbox_key(self, user: str, key: bytes) -> None:
-        """Record the user's mailbox key; a new key makes the kept messages unreadable: drop them."""
+        """Record the user's mailbox key; a new key makes kept messages unreadable: drop them."""
         with self._tx() as db:
             row = db.execute("SELECT mailbox_key FROM users WHERE name=?", (user,)).fetchone()
             if row is None or row[0] == key:
