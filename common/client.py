@@ -241,19 +241,7 @@ class LabClient:
     # -- queries
 
     def _get(self, key: str, payload: bytes, what: str, timeout: float | None = None) -> list[Any]:
-        try:
-            replies = list(
-                self.z.get(
-                    key,
-                    payload=payload,
-                    timeout=timeout or self.timeout,
-                    source_info=zenoh.SourceInfo(self.z.info.zid(), 0)
-                    if hasattr(zenoh, "SourceInfo")
-                    else None,
-                )
-            )
-        except TypeError:  # a zenoh without source_info on get
-            replies = list(self.z.get(key, payload=payload, timeout=timeout or self.timeout))
+        replies = list(self.z.get(key, payload=payload, timeout=timeout or self.timeout))
         return [r.ok.payload for r in replies if r.ok is not None]
 
     def _ask(
