@@ -179,6 +179,7 @@ class LabClient:
         registry_key: bytes | str,
         *,
         timeout: float = 5.0,
+        presence: bool = True,
     ) -> None:
         if isinstance(registry_key, str):
             from common.auth import parse_public_key
@@ -188,6 +189,7 @@ class LabClient:
         self.realm = realm
         self.registry_key = registry_key
         self.timeout = timeout
+        self.presence = presence  # services are not people: they announce themselves otherwise
         self.verifier = Verifier(registry_key, realm)
         self.session: Session | None = None
         self.server_name = ""
@@ -374,9 +376,10 @@ class LabClient:
         self._inbox = self.z.declare_subscriber(
             keys.user_inbox(self.realm, session.user), self._on_inbox
         )
-        self._token = self.z.liveliness().declare_token(
-            keys.alive(self.realm, AliveKind.USER, session.user)
-        )
+        if self.presence:
+            self._token = self.z.liveliness().declare_token(
+                keys.alive(self.realm, AliveKind.USER, session.user)
+            )
         self.pending = [t for t in (self._open_private(m, kept=True) for m in reply.pending) if t]
         return session.token
 

@@ -388,7 +388,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> 
         return cli.fail("--rate must be > 0 and --burst >= 1")
 
     def build(session: zenoh.Session) -> ChatRoom:
-        client = LabClient(session, options.realm, registry_key)
+        client = LabClient(session, options.realm, registry_key, presence=False)
         login = ServiceLogin(client, args.user, identity)
         try:
             login.login(wait=120.0)
