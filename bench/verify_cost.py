@@ -33,9 +33,7 @@ def main() -> None:
     per = (time.perf_counter() - t0) / (n - 1)
     print(f"Session.seal: {seal_us:.1f} µs per message")
     print(f"Verifier.open: {per * 1e6:.1f} µs per message ({1 / per:,.0f} messages/s on one core)")
-    print(
-        f"envelope size: {len(payloads[0])} bytes for a 32-character line"
-    )
+    print(f"envelope size: {len(payloads[0])} bytes for a 32-character line")
 
 
 if __name__ == "__main__":
