@@ -114,6 +114,35 @@ class RegistryIdentity:
         return SignedToken(token=body, signature=self.signing_key.sign(body).signature)
 
 
+def load_identity_key(path: Path) -> nacl.signing.SigningKey:
+    """An Ed25519 identity key (service accounts, scripts) from a file, with a clear error.
+
+    The file holds the 32-byte seed, raw or as 64 hex digits (``wart users keygen``).
+    """
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"cannot read identity key {path}: {exc.strerror}") from None
+    if len(raw) != 32:
+        try:
+            raw = bytes.fromhex(raw.decode("ascii").strip())
+        except (UnicodeDecodeError, ValueError):
+            raw = b""
+    if len(raw) != 32:
+        raise ValueError(f"identity key file {path} is not a 32-byte Ed25519 seed (raw or hex)")
+    return nacl.signing.SigningKey(raw)
+
+
+def create_identity_key(path: Path) -> nacl.signing.SigningKey:
+    """Create an identity key file (hex seed, mode 0600); refuses to overwrite one."""
+    key = nacl.signing.SigningKey.generate()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as out:
+        out.write(bytes(key).hex() + "\n")
+    return key
+
+
 def registry_box_key(registry_verify_key: bytes) -> nacl.public.PublicKey:
     """The registry's X25519 key that login credentials are sealed to."""
     return nacl.signing.VerifyKey(registry_verify_key).to_curve25519_public_key()
@@ -199,11 +228,28 @@ class Principal:
     def has(self, permission: str) -> bool:
         return permission in self.permissions
 
-    def require(self, permission: str, what: str = "") -> None:
-        if permission not in self.permissions:
+    def allowed(
+        self, permission: str, scope: str | None = None, *, restricted: bool = False
+    ) -> bool:
+        """Whether ``permission`` holds in ``scope`` ("ctx/<ctx>", "agent/<ctx>/<agent>").
+
+        Global grants hold everywhere unless ``restricted``; see common.acl.allowed.
+        """
+        from common.acl import allowed  # common.acl imports nothing from here; avoids a cycle
+
+        return allowed(
+            permission, self.permissions, self.token.grants, scope, restricted=restricted
+        )
+
+    def require(
+        self, permission: str, what: str = "", *, scope: str | None = None, restricted: bool = False
+    ) -> None:
+        if not self.allowed(permission, scope, restricted=restricted):
             action = f" to {what}" if what else ""
+            where = f" in {scope}" if scope else ""
             raise AuthError(
-                "forbidden", f"user {self.user} does not have the '{permission}' permission{action}"
+                "forbidden",
+                f"user {self.user} does not have the '{permission}' permission{where}{action}",
             )
 
 
@@ -375,6 +421,7 @@ def issue_session(
     permissions: Iterable[str],
     *,
     roles: Iterable[str] = (),
+    grants: dict[str, list[str]] | None = None,
     ttl: float = 3600.0,
     keys: SessionKeys | None = None,
     now: float | None = None,
@@ -396,5 +443,6 @@ def issue_session(
         roles=sorted(set(roles)),
         issued_at=issued,
         expires_at=issued + ttl,
+        grants={scope: sorted(set(p)) for scope, p in (grants or {}).items()},  # type: ignore[misc]
     )
     return Session(keys, identity.sign_token(token), token)

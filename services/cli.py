@@ -17,6 +17,10 @@ from collections.abc import Sequence
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "up": ("services.up", "start a whole lab on this machine under supervision"),
     "router": ("services.router", "run a Zenoh router (one per host)"),
+    "registry": ("services.registry", "the server: accounts, login, ACL, presence, directory"),
+    "users": ("services.users", "add, change and remove accounts and grants (registry DB)"),
+    "context": ("services.context", "run a context: wart context chat --name ROOM"),
+    "chat": ("services.chat", "chat in a room from a terminal"),
 }
 
 

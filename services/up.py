@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from common import cli, keys
@@ -46,13 +46,103 @@ def default_state_dir(realm: str) -> Path:
     return Path(base) / "wart" / realm
 
 
+LOBBY = "lobby"
+
+
+def service_identity(lab: LabSettings, account: str) -> Path:
+    return lab.state_dir / "identities" / f"{account}.key"
+
+
+def provision(lab: LabSettings) -> LabSettings:
+    """What the registry and the services need before they start; idempotent.
+
+    Creates the registry key (so every child gets ``--registry-key``), the
+    database with an admin account (its password printed once and kept in
+    STATE_DIR/admin-password.txt), and a service account with an identity key
+    for each context the lab runs. Returns the settings with the key pinned.
+    """
+    from common.auth import create_identity_key, key_fingerprint, load_identity_key
+    from services.registry import provision as provision_registry
+    from services.registry_db import RegistryDB
+
+    identity, password, created = provision_registry(
+        lab.state_dir / "registry.db", lab.state_dir / "registry.key"
+    )
+    key_hex = identity.verify_key.hex()
+    if lab.network.registry_key and lab.network.registry_key.lower() != key_hex:
+        raise ValueError(
+            f"--registry-key does not match this lab's key in {lab.state_dir / 'registry.key'}"
+        )
+    db = RegistryDB(lab.state_dir / "registry.db")
+    try:
+        for account in (f"chat-{LOBBY}",):
+            path = service_identity(lab, account)
+            key = load_identity_key(path) if path.exists() else create_identity_key(path)
+            if not db.user_exists(account):
+                db.add_user(account, ["service"], public_key=bytes(key.verify_key))
+            else:
+                db.add_key(account, bytes(key.verify_key))
+    finally:
+        db.close()
+    print(
+        f"  registry key {'created' if created else 'loaded'}: {key_hex}\n"
+        f"    (fingerprint {key_fingerprint(identity.verify_key)})",
+        flush=True,
+    )
+    if password is not None:
+        print(
+            f"  first start: user 'admin', password {password}\n"
+            f"    (kept in {lab.state_dir / 'admin-password.txt'}); chat with\n"
+            f"    wart chat {LOBBY} --user admin --registry-key {key_hex}",
+            flush=True,
+        )
+    else:
+        print(f"  admin password: see {lab.state_dir / 'admin-password.txt'}", flush=True)
+    return replace(lab, network=lab.network.with_(registry_key=key_hex))
+
+
 def lab_plan(lab: LabSettings) -> list[ChildSpec]:
     """The processes of a one-machine lab, in start order (the router is separate)."""
     realm = lab.realm
     net = lab.network.as_args()
     plan: list[ChildSpec] = []
     # Each service of the lab adds its entry here, after the ones it depends on.
-    del realm, net
+    plan.append(
+        ChildSpec(
+            name="registry",
+            argv=[
+                "registry",
+                "--db",
+                str(lab.state_dir / "registry.db"),
+                "--key-file",
+                str(lab.state_dir / "registry.key"),
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.REGISTRY, "registry"),
+        )
+    )
+    account = f"chat-{LOBBY}"
+    plan.append(
+        ChildSpec(
+            name=f"chat {LOBBY}",
+            argv=[
+                "context",
+                "chat",
+                "--name",
+                LOBBY,
+                "--title",
+                "Lobby",
+                "--user",
+                account,
+                "--identity",
+                str(service_identity(lab, account)),
+                "--data-dir",
+                str(lab.state_dir / "rooms"),
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.CONTEXT, LOBBY),
+        )
+    )
     return plan
 
 
@@ -128,6 +218,11 @@ def run_lab(
             return 1
         if not lab.start_router:
             print(f"  joined the lab router at {lab.router_endpoint}", flush=True)
+        try:
+            lab = provision(lab)
+        except (ValueError, OSError) as exc:
+            print(f"  ✗ {exc}", flush=True)
+            return 1
         for spec in lab_plan(lab):
             if stop.is_set():
                 break

@@ -24,6 +24,10 @@ from common.messages.base import (
     decode,
     encode,
 )
+from common.messages.chat import *  # noqa: F403 - every chat wire type
+from common.messages.chat import __all__ as _chat_all
+from common.messages.registry import *  # noqa: F403 - every registry wire type
+from common.messages.registry import __all__ as _registry_all
 
 __all__ = [
     "ALL_PERMISSIONS",
@@ -42,4 +46,6 @@ __all__ = [
     "all_message_types",
     "decode",
     "encode",
+    *_chat_all,
+    *_registry_all,
 ]

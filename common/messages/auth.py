@@ -41,6 +41,9 @@ class SessionToken(Message):
     roles: list[Ident]
     issued_at: float
     expires_at: float
+    # Grants in one scope ("ctx/<ctx>", "agent/<ctx>/<agent>") -> permissions there,
+    # roles expanded (common.acl). Optional, so tokens without it still decode.
+    grants: dict[str, list[Permission]] = msgspec.field(default_factory=dict)
 
 
 class SignedToken(Message):

@@ -1,0 +1,694 @@
+"""The one client of the lab: used by ``wart chat``, the web viewer, services and tests.
+
+    with LabClient(zsession, realm, registry_key) as client:
+        client.login("alice", "secret")
+        room = client.join("lobby", on_event=print)
+        client.say("lobby", "hello")
+
+Every error a user can meet is a :class:`LabError` subclass whose message
+says what happened in their words (wrong password, not allowed, room not
+found, registry unreachable, registry key mismatch). Callbacks run on Zenoh
+threads: keep them short (queue the work).
+
+Services log in with an Ed25519 identity key (``login_with_key``) and keep
+their session renewed (:func:`service_login`).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import nacl.exceptions
+import nacl.public
+import nacl.pwhash
+import nacl.signing
+import nacl.utils
+import zenoh
+
+from common import acl, keys
+from common.auth import AuthError, Session, SessionKeys, Verifier, key_fingerprint
+from common.keys import AliveKind
+from common.messages import (
+    AddUser,
+    ChatSay,
+    DirectoryReply,
+    DirectoryRequest,
+    ErrorReply,
+    Grant,
+    JoinReply,
+    JoinRoom,
+    KeyCredential,
+    KickFromServer,
+    KickNotice,
+    LeaveRoom,
+    ListUsers,
+    LoginReply,
+    LoginRequest,
+    LogoutRequest,
+    MailboxDeposit,
+    Message,
+    MessageError,
+    OkReply,
+    PasswordCredential,
+    PrivateMessage,
+    RemoveUser,
+    RenameServer,
+    RoomEvent,
+    SealedLogin,
+    SessionToken,
+    SetPassword,
+    Ungrant,
+    UserInfo,
+    UserKeysReply,
+    UserKeysRequest,
+    UserList,
+    UserRemovalRequest,
+    decode,
+    encode,
+)
+from common.service import open_session
+
+log = logging.getLogger("wart.client")
+
+M = TypeVar("M", bound=Message)
+
+
+# --- errors ----------------------------------------------------------------------------
+
+
+class LabError(Exception):
+    """Something the user should be told; ``str()`` is the message."""
+
+
+class RegistryUnreachable(LabError):
+    pass
+
+
+class RegistryKeyMismatch(LabError):
+    pass
+
+
+class WrongCredentials(LabError):
+    pass
+
+
+class NotAllowed(LabError):
+    pass
+
+
+class NotFound(LabError):
+    pass
+
+
+class RateLimited(LabError):
+    def __init__(self, message: str, retry_after: float) -> None:
+        super().__init__(message)
+        self.retry_after = retry_after
+
+
+class NotLoggedIn(LabError):
+    pass
+
+
+class RequestFailed(LabError):
+    pass
+
+
+def _raise_for(reply: ErrorReply, what: str) -> None:
+    text = f"{what}: {reply.message}"
+    if reply.code == "forbidden":
+        raise NotAllowed(text)
+    if reply.code == "not_found":
+        raise NotFound(text)
+    if reply.code == "rate_limited":
+        raise RateLimited(text, reply.retry_after)
+    if reply.code == "unauthenticated":
+        raise NotLoggedIn(text)
+    raise RequestFailed(text)
+
+
+# --- private messages --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PrivateText:
+    sender: str
+    text: str
+    sent_at: float
+    kept: bool  # it waited in the mailbox while we were offline
+
+
+def mailbox_key_from_password(realm: str, user: str, password: str) -> nacl.public.PrivateKey:
+    """A password user's long-term mailbox key: argon2id of the password, no storage needed."""
+    seed = nacl.pwhash.argon2id.kdf(
+        32,
+        password.encode(),
+        acl.mailbox_salt(realm, user),
+        opslimit=nacl.pwhash.argon2id.OPSLIMIT_INTERACTIVE,
+        memlimit=nacl.pwhash.argon2id.MEMLIMIT_INTERACTIVE,
+    )
+    return nacl.public.PrivateKey(seed)
+
+
+@dataclass
+class RoomHandle:
+    """A room this client joined: what the join said, kept up to date by events."""
+
+    ctx: str
+    title: str
+    owner: str
+    members: list[str]
+    history: list[Any]
+    max_line: int
+    subscriber: Any = None
+    events: list[RoomEvent] = field(default_factory=list)
+
+
+class LabClient:
+    """A user's (or service's) connection to the lab over one Zenoh session."""
+
+    def __init__(
+        self,
+        zsession: zenoh.Session,
+        realm: str,
+        registry_key: bytes | str,
+        *,
+        timeout: float = 5.0,
+        presence: bool = True,
+    ) -> None:
+        if isinstance(registry_key, str):
+            from common.auth import parse_public_key
+
+            registry_key = parse_public_key(registry_key)
+        self.z = zsession
+        self.realm = realm
+        self.registry_key = registry_key
+        self.timeout = timeout
+        self.presence = presence  # services are not people: they announce themselves otherwise
+        self.verifier = Verifier(registry_key, realm)
+        self.session: Session | None = None
+        self.server_name = ""
+        self._mailbox: nacl.public.PrivateKey | None = None
+        self._token: Any = None
+        self._inbox: Any = None
+        self._rooms: dict[str, RoomHandle] = {}
+        self._lock = threading.Lock()
+        self.on_private: Callable[[PrivateText], None] = lambda _m: None
+        self.on_kicked: Callable[[KickNotice], None] = lambda _k: None
+        self.pending: list[PrivateText] = []  # kept messages received at login
+
+    # -- context manager
+
+    def __enter__(self) -> LabClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Leave rooms, log out (best effort) and undeclare everything."""
+        if self.session is not None:
+            for ctx in list(self._rooms):
+                try:
+                    self.leave(ctx)
+                except LabError as exc:
+                    log.debug("leaving %s: %s", ctx, exc)
+            try:
+                self.logout()
+            except LabError as exc:
+                log.debug("logout: %s", exc)
+        self._undeclare()
+
+    def _undeclare(self) -> None:
+        for handle in (self._token, self._inbox):
+            if handle is not None:
+                try:
+                    handle.undeclare()
+                except Exception as exc:
+                    log.debug("undeclare: %s", exc)
+        self._token = self._inbox = None
+        for room in self._rooms.values():
+            if room.subscriber is not None:
+                try:
+                    room.subscriber.undeclare()
+                except Exception as exc:
+                    log.debug("undeclare: %s", exc)
+        self._rooms.clear()
+
+    # -- queries
+
+    def _get(self, key: str, payload: bytes, what: str, timeout: float | None = None) -> list[Any]:
+        replies = list(self.z.get(key, payload=payload, timeout=timeout or self.timeout))
+        return [r.ok.payload for r in replies if r.ok is not None]
+
+    def _ask(
+        self,
+        key: str,
+        message: Message,
+        expected: type[M],
+        what: str,
+        *,
+        signed: bool = True,
+        not_found: str | None = None,
+    ) -> M:
+        payload = self._seal(key, message) if signed else encode(message)
+        answers = self._get(key, payload, what)
+        if not answers:
+            if not_found is not None:
+                raise NotFound(not_found)
+            raise RegistryUnreachable(f"{what}: no answer (is the registry running?)")
+        reply = decode(answers[0], (expected, ErrorReply))
+        if isinstance(reply, ErrorReply):
+            _raise_for(reply, what)
+        return reply  # type: ignore[return-value]
+
+    def _seal(self, key: str, message: Message) -> bytes:
+        if self.session is None:
+            raise NotLoggedIn("log in first")
+        return self.session.seal(key, message)
+
+    # -- login
+
+    @property
+    def user(self) -> str:
+        if self.session is None:
+            raise NotLoggedIn("not logged in")
+        return self.session.user
+
+    def login(self, user: str, password: str, *, ttl: float = 12 * 3600.0) -> SessionToken:
+        """Log in with a password; raises WrongCredentials, RateLimited, RegistryUnreachable..."""
+        keys.check_ident("user", user)
+        mailbox = mailbox_key_from_password(self.realm, user, password)
+        return self._login(
+            PasswordCredential(user=user, password=password), mailbox, SessionKeys(), ttl
+        )
+
+    def login_with_key(
+        self, user: str, identity: nacl.signing.SigningKey, *, ttl: float = 24 * 3600.0
+    ) -> SessionToken:
+        """Log in with an Ed25519 identity key registered for ``user`` (services, scripts)."""
+        session_keys = SessionKeys()
+        signed_at = time.time()
+        binding = acl.key_login_binding(
+            self.realm,
+            user,
+            session_keys.session_public_key,
+            session_keys.box_public_key,
+            signed_at,
+        )
+        cred = KeyCredential(
+            user=user,
+            public_key=bytes(identity.verify_key),
+            signed_at=signed_at,
+            signature=identity.sign(binding).signature,
+        )
+        return self._login(cred, identity.to_curve25519_private_key(), session_keys, ttl)
+
+    def _login(
+        self,
+        cred: PasswordCredential | KeyCredential,
+        mailbox: nacl.public.PrivateKey,
+        session_keys: SessionKeys,
+        ttl: float,
+    ) -> SessionToken:
+        from common.auth import registry_box_key
+
+        request = LoginRequest(
+            realm=self.realm,
+            credential=cred,
+            session_key=session_keys.session_public_key,
+            box_key=session_keys.box_public_key,
+            mailbox_key=bytes(mailbox.public_key),
+            ttl=ttl,
+        )
+        sealed = nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(encode(request))
+        key = keys.registry_login(self.realm)
+        answers = self._get(key, encode(SealedLogin(sealed=sealed)), "login")
+        if not answers:
+            raise RegistryUnreachable(
+                f"no registry answered on realm {self.realm}: is it running, and is the router "
+                "reachable?"
+            )
+        errors: list[ErrorReply] = []
+        foreign = False
+        for raw in answers:
+            try:
+                reply = decode(raw, (LoginReply, ErrorReply))
+            except MessageError:
+                continue
+            if isinstance(reply, ErrorReply):
+                errors.append(reply)
+                continue
+            try:
+                token = self.verifier.verify_token(reply.token)
+            except AuthError:
+                foreign = True
+                continue
+            if token.session_key != session_keys.session_public_key:
+                foreign = True
+                continue
+            return self._logged_in(Session(session_keys, reply.token, token), reply, mailbox)
+        pinned = key_fingerprint(self.registry_key)
+        for err in errors:
+            if err.code == "unauthenticated":
+                raise WrongCredentials(err.message)
+            if err.code == "rate_limited":
+                raise RateLimited(err.message, err.retry_after)
+        if foreign or any("sealed to another registry key" in e.message for e in errors):
+            raise RegistryKeyMismatch(
+                f"the registry that answered is not the one you trust (pinned key {pinned}); "
+                "check --registry-key"
+            )
+        raise RequestFailed("login: " + "; ".join(e.message for e in errors))
+
+    def _logged_in(
+        self, session: Session, reply: LoginReply, mailbox: nacl.public.PrivateKey
+    ) -> SessionToken:
+        self._undeclare()
+        self.session = session
+        self._mailbox = mailbox
+        self.server_name = reply.server_name
+        self._inbox = self.z.declare_subscriber(
+            keys.user_inbox(self.realm, session.user), self._on_inbox
+        )
+        if self.presence:
+            self._token = self.z.liveliness().declare_token(
+                keys.alive(self.realm, AliveKind.USER, session.user)
+            )
+        self.pending = [t for t in (self._open_private(m, kept=True) for m in reply.pending) if t]
+        return session.token
+
+    def logout(self) -> None:
+        if self.session is None:
+            return
+        try:
+            self._ask(keys.registry_logout(self.realm), LogoutRequest(), OkReply, "logout")
+        finally:
+            self.session = None
+            self._undeclare()
+
+    # -- directory
+
+    def directory(self) -> DirectoryReply:
+        return self._ask(
+            keys.registry_directory(self.realm), DirectoryRequest(), DirectoryReply, "directory"
+        )
+
+    # -- rooms
+
+    def join(
+        self, ctx: str, on_event: Callable[[RoomEvent], None] = lambda _e: None, history: int = 50
+    ) -> RoomHandle:
+        """Join a room; events (lines, status changes) go to ``on_event`` from then on."""
+        keys.check_ident("room", ctx)
+        subscriber = self.z.declare_subscriber(
+            keys.ctx_events(self.realm, ctx), lambda s: self._on_event(ctx, s, on_event)
+        )
+        try:
+            reply = self._ask(
+                keys.ctx_join(self.realm, ctx),
+                JoinRoom(history=history),
+                JoinReply,
+                f"join {ctx}",
+                not_found=f"room {ctx} not found (no context of that name is running)",
+            )
+        except BaseException:
+            subscriber.undeclare()
+            raise
+        room = RoomHandle(
+            ctx=ctx,
+            title=reply.title,
+            owner=reply.owner,
+            members=list(reply.members),
+            history=list(reply.history),
+            max_line=reply.max_line,
+            subscriber=subscriber,
+        )
+        with self._lock:
+            self._rooms[ctx] = room
+        return room
+
+    def _on_event(
+        self, ctx: str, sample: zenoh.Sample, on_event: Callable[[RoomEvent], None]
+    ) -> None:
+        try:
+            principal, event = self.verifier.open(str(sample.key_expr), sample.payload, RoomEvent)
+        except (AuthError, MessageError) as exc:
+            log.warning("ignored an event of %s: %s", ctx, exc)
+            return
+        # Only a session allowed to host contexts may speak for a room.
+        if not principal.has("host") or event.ctx != ctx:
+            log.warning("ignored an event of %s from %s", ctx, principal.user)
+            return
+        room = self._rooms.get(ctx)
+        if room is not None:
+            room.members = list(event.members)
+        on_event(event)
+
+    def room(self, ctx: str) -> RoomHandle | None:
+        return self._rooms.get(ctx)
+
+    def leave(self, ctx: str) -> None:
+        with self._lock:
+            room = self._rooms.pop(ctx, None)
+        try:
+            self._ask(
+                keys.ctx_leave(self.realm, ctx),
+                LeaveRoom(),
+                OkReply,
+                f"leave {ctx}",
+                not_found=f"room {ctx} not found",
+            )
+        finally:
+            if room is not None and room.subscriber is not None:
+                room.subscriber.undeclare()
+
+    def say(self, ctx: str, text: str, *, wait: bool = True) -> None:
+        """Say a line in a room; with ``wait`` the room's refusal (too long, too fast) is raised."""
+        if wait:
+            self._ask(
+                keys.ctx_request(self.realm, ctx),
+                ChatSay(text=text),
+                OkReply,
+                f"say in {ctx}",
+                not_found=f"room {ctx} not found",
+            )
+        else:
+            key = keys.ctx_in(self.realm, ctx)
+            self.z.put(key, self._seal(key, ChatSay(text=text)))
+
+    def kick(self, ctx: str, user: str, reason: str = "") -> None:
+        """Remove ``user`` from a room (needs the kick permission there)."""
+        self._ask(
+            keys.ctx_request(self.realm, ctx),
+            UserRemovalRequest(user=user, reason=reason),
+            OkReply,
+            f"kick {user} from {ctx}",
+            not_found=f"room {ctx} not found",
+        )
+
+    # -- private messages
+
+    def send_private(self, user: str, text: str) -> bool:
+        """Send an end-to-end encrypted message; True if delivered live, False if kept for later."""
+        if self.session is None:
+            raise NotLoggedIn("log in first")
+        where = self._ask(
+            keys.registry_directory(self.realm),
+            UserKeysRequest(user=user),
+            UserKeysReply,
+            f"message {user}",
+        )
+        if where.online and where.session_box_keys:
+            inbox = keys.user_inbox(self.realm, user)
+            for box_key in where.session_box_keys:
+                message = self._encrypt(user, box_key, text)
+                self.z.put(inbox, self.session.seal(inbox, message))
+            return True
+        if where.mailbox_key is None:
+            raise NotFound(f"{user} has never logged in: there is no key to encrypt to yet")
+        self._ask(
+            keys.registry_directory(self.realm),
+            MailboxDeposit(message=self._encrypt(user, where.mailbox_key, text)),
+            OkReply,
+            f"message {user}",
+        )
+        return False
+
+    def _encrypt(self, user: str, to_key: bytes, text: str) -> PrivateMessage:
+        assert self.session is not None
+        box = nacl.public.Box(self.session.keys.box_key, nacl.public.PublicKey(to_key))
+        sent_at = time.time()
+        return PrivateMessage(
+            sender=self.session.user,
+            recipient=user,
+            sender_box_key=self.session.keys.box_public_key,
+            to_key=to_key,
+            ciphertext=bytes(box.encrypt(text.encode())),
+            sent_at=sent_at,
+        )
+
+    def _open_private(self, message: PrivateMessage, *, kept: bool) -> PrivateText | None:
+        if self.session is None or self._mailbox is None:
+            return None
+        if message.to_key == self.session.keys.box_public_key:
+            mine = self.session.keys.box_key
+        elif message.to_key == bytes(self._mailbox.public_key):
+            mine = self._mailbox
+        else:
+            return None  # for another of this user's sessions
+        try:
+            box = nacl.public.Box(mine, nacl.public.PublicKey(message.sender_box_key))
+            text = box.decrypt(message.ciphertext).decode("utf-8")
+        except (nacl.exceptions.CryptoError, UnicodeDecodeError):
+            log.warning("could not decrypt a private message from %s", message.sender)
+            return None
+        return PrivateText(sender=message.sender, text=text, sent_at=message.sent_at, kept=kept)
+
+    def _on_inbox(self, sample: zenoh.Sample) -> None:
+        try:
+            principal, message = self.verifier.open(
+                str(sample.key_expr), sample.payload, (PrivateMessage, KickNotice)
+            )
+        except (AuthError, MessageError) as exc:
+            log.warning("ignored an inbox message: %s", exc)
+            return
+        if isinstance(message, KickNotice):
+            if principal.has("admin"):
+                self.on_kicked(message)
+            return
+        # The sender's box key must be the one in their own signed token.
+        if message.sender != principal.user or message.sender_box_key != principal.token.box_key:
+            log.warning("ignored a private message whose sender does not match its session")
+            return
+        opened = self._open_private(message, kept=False)
+        if opened is not None:
+            self.on_private(opened)
+
+    # -- admin
+
+    def _admin(self, message: Message, what: str, expected: type[M] = OkReply) -> M:  # type: ignore[assignment]
+        return self._ask(keys.registry_admin(self.realm), message, expected, what)
+
+    def _seal_secret(self, secret: str) -> bytes:
+        from common.auth import registry_box_key
+
+        return bytes(
+            nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(secret.encode())
+        )
+
+    def list_users(self) -> list[UserInfo]:
+        return self._admin(ListUsers(), "list users", UserList).users
+
+    def add_user(
+        self,
+        user: str,
+        password: str | None = None,
+        roles: tuple[str, ...] = ("student",),
+        public_key: bytes | None = None,
+    ) -> str:
+        sealed = self._seal_secret(password) if password is not None else None
+        return self._admin(
+            AddUser(user=user, roles=list(roles), sealed_password=sealed, public_key=public_key),
+            f"add user {user}",
+        ).detail
+
+    def set_password(self, user: str, password: str) -> str:
+        return self._admin(
+            SetPassword(user=user, sealed_password=self._seal_secret(password)),
+            f"set the password of {user}",
+        ).detail
+
+    def remove_user(self, user: str) -> str:
+        return self._admin(RemoveUser(user=user), f"remove user {user}").detail
+
+    def grant(self, user: str, grant: str, scope: str = "") -> str:
+        return self._admin(
+            Grant(user=user, grant=grant, scope=scope), f"grant {grant} to {user}"
+        ).detail
+
+    def ungrant(self, user: str, grant: str, scope: str = "") -> str:
+        return self._admin(
+            Ungrant(user=user, grant=grant, scope=scope), f"revoke {grant} from {user}"
+        ).detail
+
+    def kick_from_server(self, user: str, reason: str = "") -> str:
+        return self._admin(KickFromServer(user=user, reason=reason), f"kick {user}").detail
+
+    def rename_server(self, name: str) -> str:
+        return self._admin(RenameServer(name=name), "rename the server").detail
+
+
+class ServiceLogin:
+    """A service's session, logged in with its identity key and renewed before it expires.
+
+    ``session`` always returns the current one; seal with it at send time.
+    """
+
+    def __init__(
+        self,
+        client: LabClient,
+        user: str,
+        identity: nacl.signing.SigningKey,
+        ttl: float = 24 * 3600.0,
+    ) -> None:
+        self.client = client
+        self.user = user
+        self.identity = identity
+        self.ttl = ttl
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def session(self) -> Session:
+        session = self.client.session
+        if session is None:
+            raise NotLoggedIn(f"service account {self.user} is not logged in")
+        return session
+
+    def login(self, wait: float = 60.0) -> Session:
+        """Log in, retrying while no registry answers (it may start after us)."""
+        deadline = time.monotonic() + wait
+        delay = 0.2
+        while True:
+            try:
+                self.client.login_with_key(self.user, self.identity, ttl=self.ttl)
+                break
+            except (RegistryUnreachable, RateLimited) as exc:
+                if time.monotonic() > deadline:
+                    raise
+                log.info("service login as %s: %s; retrying", self.user, exc)
+                self._stop.wait(delay)
+                delay = min(delay * 2, 2.0)
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._renew, name="renew", daemon=True)
+            self._thread.start()
+        return self.session
+
+    def _renew(self) -> None:
+        while not self._stop.is_set():
+            session = self.client.session
+            remaining = (session.token.expires_at - time.time()) if session else 0.0
+            if self._stop.wait(max(1.0, remaining * 0.8)):
+                return
+            try:
+                self.client.login_with_key(self.user, self.identity, ttl=self.ttl)
+            except LabError as exc:
+                log.warning("could not renew the session of %s: %s", self.user, exc)
+
+    def close(self) -> None:
+        self._stop.set()
+        self.client.close()
+
+
+def connect(options: Any, *, wait: float = 10.0) -> zenoh.Session:
+    """A Zenoh session for a client, with a clear error when no router answers."""
+    try:
+        return open_session(options, wait=wait)
+    except ConnectionError as exc:
+        raise RegistryUnreachable(str(exc)) from None

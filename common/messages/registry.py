@@ -1,0 +1,297 @@
+"""Wire types of the registry: login, directory, presence, admin, revocations, private messages.
+
+Secrets never travel in the clear: a login request and any password in an
+admin request are sealed (nacl SealedBox) to the registry's box key, and a
+private message is a nacl Box from the sender's session box key to the
+recipient's key. See docs/ARCHITECTURE.md §5.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar
+
+import msgspec
+
+from common.messages.auth import SessionId, SignedToken
+from common.messages.base import (
+    Bytes32,
+    Bytes64,
+    Ident,
+    Message,
+    ShortText,
+)
+
+Password = Annotated[str, msgspec.Meta(min_length=1, max_length=1024)]
+Scope = Annotated[str, msgspec.Meta(max_length=200)]
+"""Where a grant applies: "" (everywhere), "ctx/<ctx>", "agent/<ctx>/<agent>" (common.acl)."""
+GrantName = Annotated[str, msgspec.Meta(min_length=1, max_length=70)]
+"""A permission ("kick") or a role ("role:instructor")."""
+
+
+# --- login ------------------------------------------------------------------------
+
+
+class PasswordCredential(Message):
+    user: Ident
+    password: Password
+
+
+class KeyCredential(Message):
+    """Proof of an Ed25519 identity key: a signature over the login's binding (common.acl)."""
+
+    user: Ident
+    public_key: Bytes32
+    signed_at: float
+    signature: Bytes64
+
+
+class LoginRequest(Message):
+    """What a client seals to the registry's box key to log in."""
+
+    realm: Ident
+    credential: PasswordCredential | KeyCredential
+    session_key: Bytes32  # the new session's Ed25519 verify key
+    box_key: Bytes32  # the new session's X25519 public key
+    mailbox_key: Bytes32  # the user's long-term X25519 key: offline messages are sealed to it
+    ttl: Annotated[float, msgspec.Meta(gt=0)] = 12 * 3600.0
+
+
+class SealedLogin(Message):
+    """The payload of a login query: a LoginRequest in a SealedBox to the registry."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/login",)
+
+    sealed: Annotated[bytes, msgspec.Meta(max_length=8192)]
+
+
+class PrivateMessage(Message):
+    """A private message, encrypted end to end (nacl Box sender box key -> ``to_key``)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("user/<name>/inbox",)
+
+    sender: Ident
+    recipient: Ident
+    sender_box_key: Bytes32
+    to_key: Bytes32  # which of the recipient's keys it is for (a session's, or the mailbox)
+    ciphertext: Annotated[bytes, msgspec.Meta(max_length=8192)]  # nonce + box
+    sent_at: float
+
+
+class LoginReply(Message):
+    token: SignedToken
+    server_name: ShortText
+    pending: list[PrivateMessage] = msgspec.field(default_factory=list)  # kept while offline
+
+
+class LogoutRequest(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/logout",)
+
+
+# --- directory ----------------------------------------------------------------------
+
+
+class ContextInfoRequest(Message):
+    """Asked (authenticated) on ctx/<ctx>/state by the registry for its directory."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/state",)
+
+
+class ContextInfo(Message):
+    """What a context says about itself in the directory."""
+
+    ctx: Ident
+    kind: Ident  # "chat", "agent"
+    owner: Ident
+    title: ShortText = ""
+    members: list[Ident] = msgspec.field(default_factory=list)
+
+
+class DirectoryRequest(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
+
+
+class DirectoryReply(Message):
+    server_name: ShortText
+    users: list[Ident]  # online: a live presence token and a session in force
+    contexts: list[ContextInfo]
+
+
+class UserKeysRequest(Message):
+    """Where to send a private message to ``user``."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
+
+    user: Ident
+
+
+class UserKeysReply(Message):
+    user: Ident
+    online: bool
+    session_box_keys: list[Bytes32]  # one per session in force (when online)
+    mailbox_key: Bytes32 | None  # None: the user never logged in, nothing can be kept
+
+
+class MailboxDeposit(Message):
+    """Keep a private message for an offline user (still encrypted to their mailbox key)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
+
+    message: PrivateMessage
+
+
+# --- revocations ----------------------------------------------------------------------
+
+
+class Revocation(Message):
+    session_id: SessionId
+    user: Ident
+    expires_at: float  # the token's expiry: after it, the revocation can be forgotten
+    reason: ShortText  # "logout", "kicked from the server: ...", "account removed"
+    kicked: bool = False  # contexts announce a kick differently from a logout
+
+
+class RevocationList(Message):
+    revoked: list[Revocation]
+    issued_at: float
+
+
+class SignedRevocations(Message):
+    """A RevocationList signed by the registry; published on registry/revocations and served."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/revocations",)
+
+    body: bytes  # an encoded RevocationList
+    signature: Bytes64
+
+
+class RevocationsRequest(Message):
+    """Ask for every revocation still in force (a service starting up)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/revocations",)
+
+
+class KickNotice(Message):
+    """Sent by the registry (sealed as its own session) to a kicked user's inbox."""
+
+    user: Ident
+    reason: ShortText
+    by: Ident
+
+
+# --- admin --------------------------------------------------------------------------------
+
+
+class UserInfo(Message):
+    name: Ident
+    roles: list[Ident]
+    grants: dict[Scope, list[GrantName]]  # scope -> permissions and roles granted there
+    credentials: list[Ident]  # credential kinds: "password", "ed25519"
+    online: bool = False
+
+
+class ListUsers(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+
+class UserList(Message):
+    users: list[UserInfo]
+
+
+class AddUser(Message):
+    """Create an account. ``sealed_password`` is the password sealed to the registry box key."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    roles: list[Ident] = msgspec.field(default_factory=lambda: ["student"])
+    sealed_password: bytes | None = None
+    public_key: Bytes32 | None = None
+
+
+class SetPassword(Message):
+    """Admins set anyone's password; a user may set their own."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    sealed_password: Annotated[bytes, msgspec.Meta(max_length=4096)]
+
+
+class RemoveUser(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+
+
+class Grant(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    grant: GrantName
+    scope: Scope = ""
+
+
+class Ungrant(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    grant: GrantName
+    scope: Scope = ""
+
+
+class KickFromServer(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    reason: ShortText = ""
+
+
+class RenameServer(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    name: Annotated[str, msgspec.Meta(min_length=1, max_length=80)]
+
+
+ADMIN_REQUESTS = (
+    ListUsers,
+    AddUser,
+    SetPassword,
+    RemoveUser,
+    Grant,
+    Ungrant,
+    KickFromServer,
+    RenameServer,
+)
+
+__all__ = [
+    "ADMIN_REQUESTS",
+    "AddUser",
+    "ContextInfo",
+    "ContextInfoRequest",
+    "DirectoryReply",
+    "DirectoryRequest",
+    "Grant",
+    "KeyCredential",
+    "KickFromServer",
+    "KickNotice",
+    "ListUsers",
+    "LoginReply",
+    "LoginRequest",
+    "LogoutRequest",
+    "MailboxDeposit",
+    "PasswordCredential",
+    "PrivateMessage",
+    "RemoveUser",
+    "RenameServer",
+    "Revocation",
+    "RevocationList",
+    "RevocationsRequest",
+    "SealedLogin",
+    "SetPassword",
+    "SignedRevocations",
+    "Ungrant",
+    "UserInfo",
+    "UserKeysReply",
+    "UserKeysRequest",
+    "UserList",
+]

@@ -1,0 +1,570 @@
+"""``wart registry``: the Server of the thesis (chapter 5).
+
+Accounts and grants (SQLite, services/registry_db.py), login with sealed
+credentials, signed session tokens, logout and revocations, presence and the
+directory of online users and live contexts, private-message mailboxes for
+offline users, kick from the server, admin queries, the server's name.
+
+On first start it creates its key (``--key-file``), its database (``--db``)
+and an ``admin`` account, and prints the key every service must pin
+(``--registry-key``) and the admin's password.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import nacl.exceptions
+import nacl.public
+import nacl.signing
+import zenoh
+
+from common import acl, cli, keys
+from common.auth import (
+    AuthError,
+    Principal,
+    RegistryIdentity,
+    Session,
+    Verifier,
+    issue_session,
+    key_fingerprint,
+    new_session_id,
+)
+from common.keys import AliveKind
+from common.messages import (
+    ADMIN_REQUESTS,
+    AddUser,
+    ContextInfo,
+    ContextInfoRequest,
+    DirectoryReply,
+    DirectoryRequest,
+    Grant,
+    KeyCredential,
+    KickFromServer,
+    KickNotice,
+    ListUsers,
+    LoginReply,
+    LoginRequest,
+    LogoutRequest,
+    MailboxDeposit,
+    Message,
+    MessageError,
+    OkReply,
+    PrivateMessage,
+    RemoveUser,
+    RenameServer,
+    Revocation,
+    RevocationList,
+    SealedLogin,
+    SessionToken,
+    SetPassword,
+    SignedRevocations,
+    Ungrant,
+    UserInfo,
+    UserKeysReply,
+    UserKeysRequest,
+    UserList,
+    decode,
+    encode,
+)
+from common.service import RequestError, Service, run_service
+from common.supervisor import AliveWatch
+from services.registry_db import DbError, RegistryDB, SessionRecord
+
+log = logging.getLogger("wart.registry")
+
+REGISTRY_USER = "registry"  # the registry's own session (kick notices, context queries)
+MAX_TTL = 7 * 24 * 3600.0
+DEFAULT_SERVER_NAME = "wart lab"
+
+
+class LoginThrottle:
+    """Slows down failed logins per account and per source.
+
+    After ``free`` failures, each further attempt must wait 2, 4, 8 ... up to
+    ``cap`` seconds after the last failure; a success clears the account.
+    Zenoh does not tell a queryable who asked, so "source" is the querier's
+    Zenoh id when it supplies one (our client does); the per-account limit is
+    the one an attacker cannot dodge.
+    """
+
+    def __init__(self, free: int = 3, source_free: int = 10, cap: float = 300.0) -> None:
+        self.free = free
+        self.source_free = source_free
+        self.cap = cap
+        self._lock = threading.Lock()
+        self._fails: dict[str, tuple[int, float]] = {}  # bucket -> (failures, last failure)
+
+    def _wait(self, bucket: str, free: int, now: float) -> float:
+        count, last = self._fails.get(bucket, (0, 0.0))
+        if count < free:
+            return 0.0
+        return max(0.0, last + min(self.cap, 2.0 ** (count - free + 1)) - now)
+
+    def check(self, user: str, source: str | None, now: float) -> None:
+        with self._lock:
+            wait = self._wait("user:" + user, self.free, now)
+            if source:
+                wait = max(wait, self._wait("source:" + source, self.source_free, now))
+        if wait > 0:
+            raise RequestError(
+                "rate_limited",
+                f"too many failed logins: try again in {math.ceil(wait)} s",
+                retry_after=wait,
+            )
+
+    def failed(self, user: str, source: str | None, now: float) -> None:
+        with self._lock:
+            for bucket in ("user:" + user, "source:" + source if source else None):
+                if bucket:
+                    count, _ = self._fails.get(bucket, (0, 0.0))
+                    self._fails[bucket] = (count + 1, now)
+            if len(self._fails) > 100_000:  # a flood of names: forget the oldest half
+                for bucket in sorted(self._fails, key=lambda b: self._fails[b][1])[:50_000]:
+                    del self._fails[bucket]
+
+    def succeeded(self, user: str) -> None:
+        with self._lock:
+            self._fails.pop("user:" + user, None)
+
+
+class Registry(Service):
+    kind = AliveKind.REGISTRY
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        realm: str,
+        db: RegistryDB,
+        identity: RegistryIdentity,
+        *,
+        ident: str = "registry",
+        throttle: LoginThrottle | None = None,
+    ) -> None:
+        super().__init__(session, realm, ident)
+        self.db = db
+        self.identity = identity
+        self.throttle = throttle or LoginThrottle()
+        self.verifier = Verifier(identity.verify_key, realm)
+        self._unsealer = nacl.public.SealedBox(identity.box_private_key)
+        self._own: Session | None = None
+        self._own_lock = threading.Lock()
+        self._contexts: dict[str, ContextInfo] = {}
+        self._contexts_lock = threading.Lock()
+        self._refresh = threading.Event()
+        self._stop = threading.Event()
+        self._watch: AliveWatch | None = None
+        self._thread: threading.Thread | None = None
+        self._revocation_pub: zenoh.Publisher | None = None
+
+    # -- lifecycle
+
+    def on_start(self) -> None:
+        for rec in self.db.revocations():
+            self.verifier.revoke(rec.session_id, rec.expires_at)
+        self._watch = AliveWatch(self.session, keys.alive_all(self.realm))
+        self._revocation_pub = self.track(
+            self.session.declare_publisher(keys.registry_revocations(self.realm))
+        )
+        self.serve(keys.registry_login(self.realm), self.on_login)
+        self.serve(keys.registry_logout(self.realm), self.on_logout)
+        self.serve(keys.registry_directory(self.realm), self.on_directory)
+        self.serve(keys.registry_admin(self.realm), self.on_admin)
+        self.serve(keys.registry_revocations(self.realm), self.on_revocations)
+        self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
+        self._thread.start()
+
+    def on_stop(self, timeout: float) -> None:
+        self._stop.set()
+        self._refresh.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        if self._watch is not None:
+            self._watch.close()
+
+    @property
+    def server_name(self) -> str:
+        return self.db.setting("server_name", DEFAULT_SERVER_NAME)
+
+    def own_session(self) -> Session:
+        """The registry's own session: it signs kick notices and its queries to contexts."""
+        with self._own_lock:
+            if self._own is None or self._own.token.expires_at - time.time() < 3600:
+                self._own = issue_session(
+                    self.identity, self.realm, REGISTRY_USER, ["admin", "host"], ttl=86400.0
+                )
+            return self._own
+
+    # -- login and logout
+
+    def on_login(self, query: zenoh.Query) -> Message:
+        sealed = decode(query.payload, SealedLogin)
+        try:
+            request = decode(self._unsealer.decrypt(sealed.sealed), LoginRequest)
+        except nacl.exceptions.CryptoError:
+            raise RequestError(
+                "bad_request",
+                "the login was sealed to another registry key: the registry key you pinned is "
+                f"not this registry's (this one's fingerprint is "
+                f"{key_fingerprint(self.identity.verify_key)})",
+            ) from None
+        if request.realm != self.realm:
+            raise RequestError(
+                "bad_request", f"this registry serves realm {self.realm}, not {request.realm}"
+            )
+        cred = request.credential
+        user = cred.user
+        source = _source(query)
+        now = time.time()
+        self.throttle.check(user, source, now)
+        if not self._credential_ok(request, now):
+            self.throttle.failed(user, source, now)
+            log.info("failed login for %s (source %s)", user, source or "unknown")
+            what = "key" if isinstance(cred, KeyCredential) else "password"
+            raise RequestError("unauthenticated", f"wrong user name or {what}")
+        self.throttle.succeeded(user)
+        everywhere, scoped, roles = acl.expand(self.db.grants_of(user))
+        ttl = min(request.ttl, MAX_TTL)
+        token = SessionToken(
+            realm=self.realm,
+            user=user,
+            session_id=new_session_id(),
+            session_key=request.session_key,
+            box_key=request.box_key,
+            permissions=sorted(everywhere),  # type: ignore[arg-type]
+            roles=roles,
+            issued_at=now,
+            expires_at=now + ttl,
+            grants=scoped,  # type: ignore[arg-type]
+        )
+        self.db.record_session(token.session_id, user, request.box_key, now, token.expires_at)
+        self.db.set_mailbox_key(user, request.mailbox_key)
+        pending = []
+        for raw in self.db.take_mailbox(user):
+            try:
+                pending.append(decode(raw, PrivateMessage))
+            except MessageError as exc:
+                log.warning("dropped a damaged stored message for %s: %s", user, exc)
+        log.info("%s logged in (session %s)", user, token.session_id.hex()[:8])
+        return LoginReply(
+            token=self.identity.sign_token(token), server_name=self.server_name, pending=pending
+        )
+
+    def _credential_ok(self, request: LoginRequest, now: float) -> bool:
+        cred = request.credential
+        if cred.user == REGISTRY_USER:
+            return False
+        if isinstance(cred, KeyCredential):
+            if abs(now - cred.signed_at) > acl.KEY_LOGIN_MAX_AGE:
+                return False
+            binding = acl.key_login_binding(
+                self.realm, cred.user, request.session_key, request.box_key, cred.signed_at
+            )
+            try:
+                nacl.signing.VerifyKey(cred.public_key).verify(binding, cred.signature)
+            except (nacl.exceptions.BadSignatureError, nacl.exceptions.ValueError):
+                return False
+            return self.db.check_credential(cred.user, "ed25519", cred.public_key)
+        return self.db.check_credential(cred.user, "password", cred.password)
+
+    def on_logout(self, query: zenoh.Query) -> Message:
+        principal, _ = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
+        self._revoke([principal.session_id], "logged out")
+        return OkReply(detail="logged out")
+
+    # -- revocations
+
+    def _revoke(self, session_ids: list[bytes], reason: str, *, kicked: bool = False) -> int:
+        revoked = []
+        for session_id in session_ids:
+            rec = self.db.revoke(session_id, reason, kicked=kicked)
+            if rec is not None:
+                self.verifier.revoke(rec.session_id, rec.expires_at)
+                revoked.append(_revocation(rec))
+        if revoked and self._revocation_pub is not None:
+            self._revocation_pub.put(self._signed_revocations(revoked))
+        return len(revoked)
+
+    def _signed_revocations(self, revoked: list[Revocation]) -> bytes:
+        body = encode(RevocationList(revoked=revoked, issued_at=time.time()))
+        signature = self.identity.signing_key.sign(body).signature
+        return encode(SignedRevocations(body=body, signature=signature))
+
+    def on_revocations(self, query: zenoh.Query) -> Message:
+        # The list is signed and public: services ask before they hold a session.
+        body = encode(
+            RevocationList(
+                revoked=[_revocation(rec) for rec in self.db.revocations()], issued_at=time.time()
+            )
+        )
+        return SignedRevocations(
+            body=body, signature=self.identity.signing_key.sign(body).signature
+        )
+
+    # -- presence and directory
+
+    def _alive(self, kind: AliveKind) -> list[str]:
+        if self._watch is None:
+            return []
+        found = []
+        for key in self._watch.keys():  # noqa: SIM118 - AliveWatch, not a dict
+            parsed = keys.parse_alive(self.realm, key)
+            if parsed is not None and parsed[0] == kind:
+                found.append(parsed[1])
+        return sorted(found)
+
+    def online_users(self) -> list[str]:
+        """Users with a presence token and a session in force (a token alone proves nothing)."""
+        return [u for u in self._alive(AliveKind.USER) if self.db.active_sessions(u)]
+
+    def _watch_contexts(self) -> None:
+        """Keep ContextInfo of every live context, asked on ctx/<ctx>/state.
+
+        Done here, not inside the directory query's callback: waiting for
+        replies inside a Zenoh callback would stall the session.
+        """
+        known: set[str] = set()
+        last = 0.0
+        while not self._stop.is_set():
+            self._refresh.wait(0.3)
+            self._refresh.clear()
+            live = set(self._alive(AliveKind.CONTEXT))
+            if live == known and time.monotonic() - last < 2.0:
+                continue
+            known, last = live, time.monotonic()
+            infos = {}
+            for ctx in sorted(live):
+                info = self._ask_context(ctx)
+                infos[ctx] = info or ContextInfo(ctx=ctx, kind="unknown", owner=REGISTRY_USER)
+            with self._contexts_lock:
+                self._contexts = infos
+
+    def _ask_context(self, ctx: str) -> ContextInfo | None:
+        key = keys.ctx_state(self.realm, ctx)
+        try:
+            payload = self.own_session().seal(key, ContextInfoRequest())
+            for reply in self.session.get(key, payload=payload, timeout=1.0):
+                if reply.ok is not None:
+                    try:
+                        return decode(reply.ok.payload, ContextInfo)
+                    except MessageError:
+                        continue
+        except Exception as exc:  # the session may be closing
+            log.debug("context %s did not answer: %s", ctx, exc)
+        return None
+
+    def on_directory(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(
+            str(query.key_expr),
+            query.payload,
+            (DirectoryRequest, UserKeysRequest, MailboxDeposit),
+        )
+        if isinstance(request, UserKeysRequest):
+            return self._user_keys(request.user)
+        if isinstance(request, MailboxDeposit):
+            return self._deposit(principal, request.message)
+        self._refresh.set()
+        with self._contexts_lock:
+            contexts = [self._contexts[c] for c in sorted(self._contexts)]
+        live = set(self._alive(AliveKind.CONTEXT))
+        return DirectoryReply(
+            server_name=self.server_name,
+            users=self.online_users(),
+            contexts=[c for c in contexts if c.ctx in live],
+        )
+
+    def _user_keys(self, user: str) -> UserKeysReply:
+        if not self.db.user_exists(user):
+            raise RequestError("not_found", f"no user named {user}")
+        sessions = self.db.active_sessions(user)
+        online = bool(sessions) and user in self._alive(AliveKind.USER)
+        return UserKeysReply(
+            user=user,
+            online=online,
+            session_box_keys=[s.box_key for s in sessions] if online else [],
+            mailbox_key=self.db.mailbox_key(user),
+        )
+
+    def _deposit(self, principal: Principal, message: PrivateMessage) -> Message:
+        if message.sender != principal.user:
+            raise AuthError("forbidden", "a private message must be sent under your own name")
+        principal.require("chat", "send private messages")
+        if message.to_key != self.db.mailbox_key(message.recipient):
+            raise RequestError("conflict", f"{message.recipient}'s mailbox key has changed")
+        try:
+            self.db.deposit(message.recipient, encode(message))
+        except DbError as exc:
+            raise RequestError(exc.code, exc.message) from None
+        return OkReply(detail=f"kept for {message.recipient} until they log in")
+
+    # -- admin
+
+    def _password(self, sealed: bytes) -> str:
+        try:
+            return self._unsealer.decrypt(sealed).decode("utf-8")
+        except (nacl.exceptions.CryptoError, UnicodeDecodeError):
+            raise RequestError(
+                "bad_request", "the password was not sealed to this registry's key"
+            ) from None
+
+    def on_admin(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, ADMIN_REQUESTS)
+        if not (isinstance(request, SetPassword) and request.user == principal.user):
+            principal.require("admin", f"do {type(request).__name__}")
+        try:
+            return self._admin(principal, request)
+        except DbError as exc:
+            raise RequestError(exc.code, exc.message) from None
+
+    def _admin(self, principal: Principal, request: Message) -> Message:
+        if isinstance(request, ListUsers):
+            online = set(self.online_users())
+            users = []
+            for rec in self.db.users():
+                _, _, roles = acl.expand(rec.grants)
+                grants: dict[str, list[str]] = {}
+                for scope, grant in rec.grants:
+                    grants.setdefault(scope, []).append(grant)
+                users.append(
+                    UserInfo(
+                        name=rec.name,
+                        roles=roles,
+                        grants=grants,
+                        credentials=list(rec.credential_kinds),
+                        online=rec.name in online,
+                    )
+                )
+            return UserList(users=users)
+        if isinstance(request, AddUser):
+            if request.user == REGISTRY_USER:
+                raise RequestError("conflict", f"the name {REGISTRY_USER} is reserved")
+            password = self._password(request.sealed_password) if request.sealed_password else None
+            self.db.add_user(
+                request.user, request.roles, password=password, public_key=request.public_key
+            )
+            return OkReply(detail=f"user {request.user} added")
+        if isinstance(request, SetPassword):
+            self.db.set_password(request.user, self._password(request.sealed_password))
+            return OkReply(detail=f"password of {request.user} changed")
+        if isinstance(request, RemoveUser):
+            if request.user == principal.user:
+                raise RequestError("conflict", "you cannot remove your own account")
+            sessions = [s.session_id for s in self.db.active_sessions(request.user)]
+            self._revoke(sessions, "account removed", kicked=True)
+            self.db.remove_user(request.user)
+            return OkReply(detail=f"user {request.user} removed")
+        if isinstance(request, Grant):
+            self.db.grant(request.user, request.grant, request.scope)
+            return OkReply(detail="granted; it takes effect at the user's next login")
+        if isinstance(request, Ungrant):
+            self.db.ungrant(request.user, request.grant, request.scope)
+            return OkReply(detail="revoked; it takes effect at the user's next login")
+        if isinstance(request, KickFromServer):
+            return self._kick(principal, request)
+        if isinstance(request, RenameServer):
+            self.db.set_setting("server_name", request.name)
+            return OkReply(detail=f"server renamed to {request.name}")
+        raise RequestError("bad_request", f"unknown admin request {type(request).__name__}")
+
+    def _kick(self, principal: Principal, request: KickFromServer) -> Message:
+        if not self.db.user_exists(request.user):
+            raise RequestError("not_found", f"no user named {request.user}")
+        reason = request.reason or "no reason given"
+        # Tell the user first, while their client still listens on its inbox.
+        key = keys.user_inbox(self.realm, request.user)
+        notice = KickNotice(user=request.user, reason=reason, by=principal.user)
+        self.session.put(key, self.own_session().seal(key, notice))
+        sessions = [s.session_id for s in self.db.active_sessions(request.user)]
+        count = self._revoke(
+            sessions, f"kicked from the server by {principal.user}: {reason}", kicked=True
+        )
+        log.info("%s kicked %s from the server (%d sessions)", principal.user, request.user, count)
+        return OkReply(detail=f"{request.user} kicked ({count} sessions revoked)")
+
+
+def _revocation(rec: SessionRecord) -> Revocation:
+    return Revocation(
+        session_id=rec.session_id,
+        user=rec.user,
+        expires_at=rec.expires_at,
+        reason=rec.reason[:256],
+        kicked=rec.kicked,
+    )
+
+
+def _source(query: zenoh.Query) -> str | None:
+    info = query.source_info
+    if info is None or info.source_id is None:
+        return None
+    return str(info.source_id.zid)
+
+
+# --- the process ---------------------------------------------------------------------
+
+
+def provision(db_path: Path, key_path: Path) -> tuple[RegistryIdentity, str | None, bool]:
+    """Create the key and the database if needed; (identity, new admin password, key created)."""
+    identity, created = RegistryIdentity.load_or_create(key_path)
+    db = RegistryDB(db_path)
+    try:
+        password = db.ensure_admin()
+    finally:
+        db.close()
+    if password is not None:
+        secret = db_path.parent / "admin-password.txt"
+        secret.write_text(f"{password}\n")
+        secret.chmod(0o600)
+    return identity, password, created
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("--db", type=Path, required=True, help="the SQLite database (created if absent)")
+    p.add_argument(
+        "--key-file",
+        type=Path,
+        required=True,
+        help="the registry's Ed25519 key (created if absent; keep it secret)",
+    )
+    p.add_argument("--name", help="rename the server (shown in the directory)")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        identity, password, created = provision(args.db, args.key_file)
+    except (ValueError, OSError) as exc:
+        return cli.fail(str(exc))
+    key_hex = identity.verify_key.hex()
+    if options.registry_key and options.registry_key.lower() != key_hex:
+        return cli.fail(
+            f"--registry-key does not match the key in {args.key_file} "
+            f"(that key's fingerprint is {key_fingerprint(identity.verify_key)})"
+        )
+    say = "created" if created else "loaded"
+    print(f"registry key {say}: {key_hex}", flush=True)
+    print(f"  fingerprint {key_fingerprint(identity.verify_key)}; pin it with --registry-key")
+    if password is not None:
+        print(
+            f"first start: created user 'admin' with password {password}\n"
+            f"  (also written to {args.db.parent / 'admin-password.txt'}); log in with\n"
+            f"  wart chat lobby --user admin --registry-key {key_hex}",
+            flush=True,
+        )
+    db = RegistryDB(args.db)
+    if args.name:
+        db.set_setting("server_name", args.name)
+    try:
+        return run_service(
+            "registry", options, lambda session: Registry(session, options.realm, db, identity)
+        )
+    finally:
+        db.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,129 @@
+"""``wart users``: edit accounts and grants in the registry's database.
+
+Works directly on the SQLite file (--db), also while the registry runs (WAL).
+Grants and roles take effect at each user's next login.
+
+  wart users --db DB add alice --role student            (asks for the password)
+  wart users --db DB add chat-lobby --role service --key-file lobby.key
+  wart users --db DB passwd alice
+  wart users --db DB grant bob kick --scope ctx/lobby
+  wart users --db DB revoke bob kick --scope ctx/lobby
+  wart users --db DB remove alice
+  wart users --db DB list
+  wart users keygen lobby.key                          (an identity key for a service)
+"""
+
+from __future__ import annotations
+
+import argparse
+import getpass
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from common import acl, cli
+from common.auth import create_identity_key, load_identity_key, parse_public_key
+from services.registry_db import DbError, RegistryDB
+
+
+def read_password(args: argparse.Namespace, prompt: str) -> str:
+    """From --password-file, WART_PASSWORD, or a prompt (asked twice)."""
+    if getattr(args, "password_file", None):
+        return Path(args.password_file).read_text().rstrip("\n")
+    if os.environ.get("WART_PASSWORD"):
+        return os.environ["WART_PASSWORD"]
+    first = getpass.getpass(prompt)
+    if getpass.getpass("again: ") != first:
+        raise DbError("bad_request", "the two passwords differ")
+    return first
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart users") -> int:
+    p = cli.parser(prog, __doc__ or "", network=False)
+    p.add_argument("--db", type=Path, help="the registry database (STATE_DIR/registry.db)")
+    sub = p.add_subparsers(dest="command", required=True)
+    add = sub.add_parser("add", help="create an account")
+    add.add_argument("user")
+    add.add_argument("--role", action="append", choices=sorted(acl.DEFAULT_ROLES))
+    add.add_argument("--password-file", help="read the password from this file")
+    add.add_argument("--no-password", action="store_true", help="key login only")
+    add.add_argument("--key-file", type=Path, help="an identity key file: allow key login")
+    add.add_argument("--public-key", help="allow key login with this hex public key")
+    pw = sub.add_parser("passwd", help="set a user's password")
+    pw.add_argument("user")
+    pw.add_argument("--password-file")
+    rm = sub.add_parser("remove", help="delete an account")
+    rm.add_argument("user")
+    sub.add_parser("list", help="list accounts and their grants")
+    for name, text in (("grant", "give a permission or role:NAME"), ("revoke", "take one away")):
+        g = sub.add_parser(name, help=text)
+        g.add_argument("user")
+        g.add_argument("grant", help="a permission (kick, chat, ...) or role:NAME")
+        g.add_argument(
+            "--scope", default="", help="ctx/ROOM or agent/CTX/AGENT (default: everywhere)"
+        )
+    kg = sub.add_parser("keygen", help="create an identity key file and print its public key")
+    kg.add_argument("file", type=Path)
+    args, _ = cli.parse(p, argv)
+
+    if args.command == "keygen":
+        try:
+            key = create_identity_key(args.file)
+        except FileExistsError:
+            return cli.fail(f"{args.file} exists; not overwriting an identity key")
+        print(bytes(key.verify_key).hex())
+        return 0
+    if args.db is None:
+        return cli.fail("--db is required (the registry's database file)")
+    if args.command != "add" and not args.db.exists():
+        return cli.fail(f"no registry database at {args.db}")
+    db = RegistryDB(args.db)
+    try:
+        return _run(args, db)
+    except DbError as exc:
+        return cli.fail(exc.message)
+    except (ValueError, OSError) as exc:
+        return cli.fail(str(exc))
+    finally:
+        db.close()
+
+
+def _run(args: argparse.Namespace, db: RegistryDB) -> int:
+    if args.command == "add":
+        public_key = None
+        if args.key_file:
+            public_key = bytes(load_identity_key(args.key_file).verify_key)
+        elif args.public_key:
+            public_key = parse_public_key(args.public_key)
+        password = None
+        if not args.no_password and public_key is None:
+            password = read_password(args, f"password for {args.user}: ")
+        db.add_user(args.user, args.role or ["student"], password=password, public_key=public_key)
+        print(f"user {args.user} added")
+    elif args.command == "passwd":
+        db.set_password(args.user, read_password(args, f"new password for {args.user}: "))
+        print(f"password of {args.user} changed")
+    elif args.command == "remove":
+        db.remove_user(args.user)
+        print(
+            f"user {args.user} removed (a running session ends at its expiry; kick to end it now)"
+        )
+    elif args.command == "grant":
+        db.grant(args.user, args.grant, args.scope)
+        print(f"granted {args.grant} to {args.user}" + (f" in {args.scope}" if args.scope else ""))
+    elif args.command == "revoke":
+        db.ungrant(args.user, args.grant, args.scope)
+        print(
+            f"revoked {args.grant} from {args.user}" + (f" in {args.scope}" if args.scope else "")
+        )
+    elif args.command == "list":
+        for rec in db.users():
+            grants = ", ".join(f"{g}@{s}" if s else g for s, g in rec.grants) or "-"
+            creds = ",".join(rec.credential_kinds) or "none"
+            print(f"{rec.name:<20} {grants}  [{creds}]")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,111 @@
+"""The registry as a process: login errors, throttling, persistence across kill -9, admin."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from common.auth import RegistryIdentity, create_identity_key
+from common.client import (
+    LabClient,
+    NotAllowed,
+    RateLimited,
+    RegistryKeyMismatch,
+    RegistryUnreachable,
+    WrongCredentials,
+)
+from common.service import close_session
+from services.registry_db import RegistryDB
+from tests.conftest import Procs, Router, wait_for
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    return lab
+
+
+def test_wrong_passwords_are_slowed_down(lab: Lab) -> None:
+    with lab.client() as client:
+        for _ in range(3):
+            with pytest.raises(WrongCredentials, match="wrong user name or password"):
+                client.login("alice", "not it at all")
+        with pytest.raises(RateLimited, match="too many failed logins") as info:
+            client.login("alice", PASSWORD)  # even the right one must wait now
+        assert info.value.retry_after > 0
+        client.login("bob", PASSWORD)  # another account is not affected
+        with pytest.raises(WrongCredentials):
+            client.login("nobody", "whatever123")
+
+
+def test_client_refuses_a_registry_with_another_key(lab: Lab) -> None:
+    session = lab.zsession()
+    try:
+        client = LabClient(session, lab.router.realm, RegistryIdentity.generate().verify_key)
+        with pytest.raises(RegistryKeyMismatch, match="not the one you trust"):
+            client.login("alice", PASSWORD)
+    finally:
+        close_session(session)
+
+
+def test_no_registry_is_reported_as_unreachable(lab: Lab) -> None:
+    assert lab.registry is not None
+    lab.registry.stop()
+    with lab.client() as client, pytest.raises(RegistryUnreachable, match="no registry answered"):
+        client.login("alice", PASSWORD)
+
+
+def test_key_login_for_services(lab: Lab) -> None:
+    key = create_identity_key(lab.state / "script.key")
+    db = RegistryDB(lab.db_path)
+    db.add_user("script", ["service"], public_key=bytes(key.verify_key))
+    db.close()
+    with lab.client() as client:
+        token = client.login_with_key("script", key)
+        assert token.user == "script" and "world" in token.permissions
+        with pytest.raises(WrongCredentials, match="wrong user name or key"):
+            client.login_with_key("alice", key)
+
+
+def test_kill9_and_restart_keeps_accounts_grants_and_revocations(lab: Lab) -> None:
+    with lab.client("admin") as admin:
+        admin.add_user("dave", "dave's password", roles=("instructor",))
+        admin.grant("alice", "kick", "ctx/lobby")
+    with lab.client("bob") as bob:
+        stolen = bob.session
+        bob.logout()
+    assert lab.registry is not None
+    lab.registry.kill9()
+    lab.start_registry()
+    with lab.client("dave", "dave's password") as dave:
+        assert "kick" in dave.session.token.permissions
+    with lab.client("alice") as alice:
+        assert alice.session.token.grants == {"ctx/lobby": ["kick"]}
+    # The restarted registry still refuses the logged-out session.
+    with lab.client() as client:
+        client.session = stolen
+        with pytest.raises(Exception, match="revoked"):
+            client.directory()
+
+
+def test_admin_queries(lab: Lab) -> None:
+    with lab.client("admin") as admin, lab.client("alice") as alice:
+        with pytest.raises(NotAllowed, match="'admin' permission"):
+            alice.list_users()
+        admin.add_user("erin", "erin's password")
+        users = {u.name: u for u in admin.list_users()}
+        assert users["erin"].roles == ["student"] and users["alice"].online
+        admin.set_password("erin", "a new password")
+        alice.set_password("alice", "alice's new one")  # one's own password: allowed
+        with pytest.raises(NotAllowed):
+            alice.set_password("bob", "not yours at all")
+        admin.ungrant("erin", "role:student")
+        admin.remove_user("erin")
+        wait_for(lambda: "erin" not in {u.name for u in admin.list_users()}, 5, "erin removed")
+    with lab.client() as client:
+        with pytest.raises(WrongCredentials):
+            client.login("erin", "a new password")
+        client.login("alice", "alice's new one")
