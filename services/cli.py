@@ -17,6 +17,10 @@ from collections.abc import Sequence
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "up": ("services.up", "start a whole lab on this machine under supervision"),
     "router": ("services.router", "run a Zenoh router (one per host)"),
+    "khepera-emulator": (
+        "services.bridge.emulator",
+        "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
+    ),
 }
 
 
