@@ -239,10 +239,18 @@ class KheperaRobot:
         return self.command(P.set_speed(left, right))
 
     def command(self, request: P.Request[T]) -> Future[T]:
-        """Queue any request; it is sent before the next sensor request, in call order."""
+        """Queue any request; it is sent before the next sensor request, in call order.
+
+        The future fails at once with LinkOffline while the robot is offline.
+        """
         future: Future[T] = Future()
         if self._stop.is_set():
             future.set_exception(RobotStopped(f"{self.port}: robot handle is stopped"))
+            return future
+        if not self._state.online:
+            # Refused, not kept: a motor command replayed when the robot returns
+            # (maybe minutes later) would move it for no one.
+            future.set_exception(LinkOffline(f"{self.port}: robot offline"))
             return future
         with self._wake:
             self._last_command = time.monotonic()
