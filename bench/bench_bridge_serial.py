@@ -17,14 +17,15 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from services.bridge import protocol as P  # noqa: E402
-from services.bridge.body import KinematicBody  # noqa: E402
-from services.bridge.emulator import EmulatorOptions, KheperaEmulator  # noqa: E402
-from services.bridge.link import KheperaLink  # noqa: E402
-from services.bridge.robot import KheperaRobot, RobotOptions  # noqa: E402
+from services.bridge import protocol as P
+from services.bridge.body import KinematicBody
+from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.link import KheperaLink
+from services.bridge.robot import KheperaRobot, RobotOptions
 
 
 def wire_time(baud: int, *messages: bytes) -> float:
@@ -46,11 +47,16 @@ def latency(baud: int, n: int, reply_delay: float) -> dict[str, tuple[float, flo
     with KheperaEmulator(body(), opts) as emu:
         link = KheperaLink.open(emu.port, baud)
         try:
-            for name, req, reply in [
+            cases: list[tuple[str, P.Request[Any], bytes]] = [
                 ("D (set speed)", P.set_speed(0, 0), b"d\r\n"),
-                ("N (proximity)", P.read_proximity(), b"n,1023,1000,999,1010,1001,1002,1003,1004\r\n"),
+                (
+                    "N (proximity)",
+                    P.read_proximity(),
+                    b"n,1023,1000,999,1010,1001,1002,1003,1004\r\n",
+                ),
                 ("H (counters)", P.read_counters(), b"h,0,0\r\n"),
-            ]:
+            ]
+            for name, req, reply in cases:
                 samples = []
                 for _ in range(n):
                     t0 = time.perf_counter()
@@ -67,11 +73,15 @@ def latency(baud: int, n: int, reply_delay: float) -> dict[str, tuple[float, flo
     return out
 
 
-def refresh(baud: int, seconds: float, gripper: bool, reply_delay: float) -> tuple[float, float, float]:
+def refresh(
+    baud: int, seconds: float, gripper: bool, reply_delay: float
+) -> tuple[float, float, float]:
     """Sensor rounds per second polling flat out, set_speed latency under that load, wire floor."""
     opts = EmulatorOptions(baud=baud, pace=True, banner=False, reply_delay=reply_delay)
     with KheperaEmulator(body(), opts) as emu:
-        robot_opts = RobotOptions(baud=baud, poll_interval=0.0, gripper=gripper, gripper_every=4, watchdog=5)
+        robot_opts = RobotOptions(
+            baud=baud, poll_interval=0.0, gripper=gripper, gripper_every=4, watchdog=5
+        )
         with KheperaRobot(emu.port, robot_opts) as robot:
             if not robot.wait_online(5):
                 raise SystemExit("emulated robot did not come online")
@@ -99,7 +109,11 @@ def refresh(baud: int, seconds: float, gripper: bool, reply_delay: float) -> tup
     ]
     floor = sum(wire_time(baud, c, r) for c, r in per_round)
     if gripper:
-        grip = [(b"T,1,H,1\r", b"t,1,h,165\r\n"), (b"T,1,H,0\r", b"t,1,h,0\r\n"), (b"T,1,G\r", b"t,1,g,0\r\n")]
+        grip = [
+            (b"T,1,H,1\r", b"t,1,h,165\r\n"),
+            (b"T,1,H,0\r", b"t,1,h,0\r\n"),
+            (b"T,1,G\r", b"t,1,g,0\r\n"),
+        ]
         floor += sum(wire_time(baud, c, r) for c, r in grip) / 4
     # The driver's D commands share the wire: 20 per second. (Zero speeds keep
     # the counters at 0, so the reply lengths above are exact.)
@@ -114,8 +128,10 @@ def main() -> int:
     ap.add_argument("--bauds", type=int, nargs="+", default=[38400, 9600])
     ap.add_argument("--reply-delay", type=float, default=0.0, help="robot think time per reply (s)")
     args = ap.parse_args()
-    print(f"Khepera bridge serial benchmark (emulator paced at baud/11 bytes/s, reply delay "
-          f"{args.reply_delay * 1000:.1f} ms)\n")
+    print(
+        f"Khepera bridge serial benchmark (emulator paced at baud/11 bytes/s, reply delay "
+        f"{args.reply_delay * 1000:.1f} ms)\n"
+    )
     for baud in args.bauds:
         print(f"== {baud} baud ({baud / 11:.0f} bytes/s each way)")
         print(f"{'request':<16} {'median ms':>10} {'p95 ms':>8} {'wire-only ms':>13}")
