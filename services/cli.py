@@ -21,6 +21,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "users": ("services.users", "add, change and remove accounts and grants (registry DB)"),
     "context": ("services.context", "run a context: wart context chat --name ROOM"),
     "chat": ("services.chat", "chat in a room from a terminal"),
+    "khepera-emulator": (
+        "services.bridge.emulator",
+        "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
+    ),
 }
 
 
