@@ -365,9 +365,14 @@ class World:
                 other = info.shape
                 if other is None or other.body is body:
                     continue
-                if other.filter.categories & mask and info.contact_point_set.points:
-                    if min(p.distance for p in info.contact_point_set.points) < -0.5:
-                        return True
+                points = info.contact_point_set.points
+                # A real overlap, not two shapes merely touching.
+                if (
+                    other.filter.categories & mask
+                    and points
+                    and min(p.distance for p in points) < -0.5
+                ):
+                    return True
         return False
 
     # -- lights and zones ---------------------------------------------------------------
