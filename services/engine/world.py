@@ -429,7 +429,9 @@ class World:
         *,
         gripper: bool = True,
         colour: str | None = None,
+        defer_tables: bool = False,
     ) -> Agent:
+        """Add a robot. ``defer_tables``: the caller adds many, then calls finish_agents()."""
         self._check_new_id(ident)
         r = spec.radius_mm
         if not self._inside([(x, y)], r):
@@ -475,9 +477,14 @@ class World:
         self._agent_by_body[id_of(body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
         self._append_agent_state((x, y, heading), arm)
-        self._rebuild_tables()
+        if not defer_tables:
+            self._rebuild_tables()
         self.layout += 1
         return agent
+
+    def finish_agents(self) -> None:
+        """Rebuild the per-agent tables after add_agent(..., defer_tables=True)."""
+        self._rebuild_tables()
 
     # -- generic edits ------------------------------------------------------------------
 
