@@ -191,6 +191,7 @@ class World:
             ),
         )
         self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
+        self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}
         self.agent_sensing = sensing.AgentSensing.build(self.agents)
         self._rows_stale = True
 
@@ -210,10 +211,8 @@ class World:
             raise EditError(f"an object named {ident!r} already exists in this world")
 
     def agent_slot(self, agent_id: str) -> int:
-        for slot, agent in enumerate(self.agents):
-            if agent.id == agent_id:
-                return slot
-        raise KeyError(agent_id)
+        """The agent's row in the state arrays; KeyError if there is no such agent."""
+        return self._slot_by_id[agent_id]
 
     def find_object(self, ident: str) -> MovableObject | None:
         return next((o for o in self.objects if o.id == ident), None)
