@@ -34,6 +34,7 @@ from common.messages import (
     AddItem,
     AgentCommand,
     EditResult,
+    ErrorReply,
     Lease,
     MapRequest,
     Message,
@@ -280,10 +281,17 @@ class EngineService(Service):
                 self._apply(item)
                 continue
             fn, future = item
+            # Errors become reply messages here, never exceptions handed across
+            # threads: a re-raised exception's traceback would keep the Zenoh
+            # query alive (and its final reply unsent) until garbage collection.
             try:
-                future.set_result(fn(self.world))
-            except Exception as exc:
-                future.set_exception(exc)
+                reply = fn(self.world)
+            except RequestError as exc:
+                reply = ErrorReply(code=exc.code, message=exc.message)  # type: ignore[arg-type]
+            except Exception:
+                self.log.exception("error serving a request (kept running)")
+                reply = ErrorReply(code="internal", message="internal error; see the engine log")
+            future.set_result(reply)
 
     def _apply(self, item: _Command) -> None:
         world = self.world
