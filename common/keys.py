@@ -12,7 +12,7 @@ its own ``alive`` namespace.
     wart/<realm>/ctx/<ctx>/{join,leave,state,request}      context queryables
     wart/<realm>/ctx/<ctx>/{in,events}                     context pub/sub
     wart/<realm>/world/<world>/{snapshot,edit,map}         world queryables
-    wart/<realm>/world/<world>/frame                       world frame each tick
+    wart/<realm>/world/<world>/{frame,sensors}             world frame / all sensors each tick
     wart/<realm>/world/<world>/agent/<agent>/{sensors,cmd,lease}
     wart/<realm>/runner/<runner>/run                       runner queryable
     wart/<realm>/host/<host>/{spawn,load}                  host queryable / load reports
@@ -193,6 +193,11 @@ def world_map(realm: str, world: str) -> str:
 
 def world_frame(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/frame"
+
+
+def world_sensors(realm: str, world: str) -> str:
+    """Every agent's sensor readings in one message per tick (SensorBatch)."""
+    return f"{_world(realm, world)}/sensors"
 
 
 def _agent(realm: str, world: str, agent: str) -> str:

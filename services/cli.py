@@ -25,6 +25,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "services.bridge.emulator",
         "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
     ),
+    "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
 }
 
 

@@ -143,6 +143,26 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             alive_key=keys.alive(realm, AliveKind.CONTEXT, LOBBY),
         )
     )
+    maps_dir = Path(__file__).resolve().parent.parent / "maps"
+    plan.append(
+        ChildSpec(
+            name="engine",
+            argv=[
+                "engine",
+                "--map",
+                str(maps_dir / "foraging.json"),
+                "--world",
+                "arena1",
+                "--seed",
+                "1",
+                "--maps-dir",
+                str(lab.state_dir / "maps"),
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.WORLD, "arena1"),
+            detail="simulated world arena1 (maps/foraging.json)",
+        )
+    )
     return plan
 
 

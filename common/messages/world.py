@@ -1,0 +1,227 @@
+"""Wire types of worlds (Sim2D engines, Khepera bridges): frames, sensors, commands, leases, edits.
+
+Units: mm, radians, seconds (docs/ARCHITECTURE.md section 6). Sensor values
+are the robot type's raw units (Khepera: proximity 0..1023, ambient ~500 dark).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import msgspec
+
+from common.messages.auth import SessionId
+from common.messages.base import Ident, Message, NonNegInt, PackedArray, ShortText
+
+Speed = Annotated[int, msgspec.Meta(ge=-32768, le=32767)]
+Counter = Annotated[int, msgspec.Meta(ge=-(2**31), le=2**31 - 1)]
+Byte = Annotated[int, msgspec.Meta(ge=0, le=255)]
+Millimetres = Annotated[float, msgspec.Meta(ge=-1e7, le=1e7)]
+Positive = Annotated[float, msgspec.Meta(gt=0.0, le=1e7)]
+
+
+class GripperReading(msgspec.Struct, frozen=True, kw_only=True):
+    """The gripper turret as its protocol exposes it."""
+
+    arm: Byte  # 165 up .. 255 down (Khepera)
+    fingers: Literal["open", "closed", "holding"]
+    presence: Byte  # object-presence barrier: 255 something between the fingers
+    resistivity: Byte  # of the held object; 255 when nothing is held
+
+
+class SensorSample(Message):
+    """One agent's readings at one tick (``agent/<agent>/sensors``)."""
+
+    world: Ident
+    agent: Ident
+    tick: NonNegInt
+    sim_time: float
+    proximity: list[int]
+    ambient: list[int]
+    counters: tuple[int, int]  # pulses
+    speeds: tuple[int, int]  # the type's speed unit (Khepera: pulses per 10 ms)
+    leds: list[int]
+    gripper: GripperReading | None = None
+
+
+class SensorBatch(Message):
+    """Every agent's readings in one message (``world/<world>/sensors``).
+
+    Rows follow ``WorldSnapshot.agents``; cheaper than 1,000 per-agent puts.
+    """
+
+    world: Ident
+    tick: NonNegInt
+    sim_time: float
+    layout: NonNegInt
+    proximity: PackedArray  # uint16 (agents, 8)
+    ambient: PackedArray  # uint16 (agents, 8)
+    counters: PackedArray  # int32 (agents, 2)
+
+
+class WorldFrame(Message):
+    """Every moving pose at one tick (``world/<world>/frame``).
+
+    ``poses`` rows are ``WorldSnapshot.rows`` (agents first, then movable
+    objects); when ``layout`` differs from the snapshot's, fetch a new one.
+    """
+
+    world: Ident
+    tick: NonNegInt
+    sim_time: float
+    layout: NonNegInt
+    poses: PackedArray  # float32 (rows, 3): x mm, y mm, heading rad
+    agent_state: PackedArray  # uint8 (agents, 4): led bits, arm, fingers 0/1/2, presence
+    lights: PackedArray  # uint8 (lights,): 1 lit
+
+
+class ShapeInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """An outline in its own frame: circle (radius) or polygon (points, mm)."""
+
+    kind: Literal["circle", "polygon"]
+    radius: float = 0.0
+    points: list[tuple[float, float]] = msgspec.field(default_factory=list)
+
+
+class ItemInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """An obstacle, movable object or zone of a snapshot."""
+
+    id: Ident
+    category: Literal["obstacle", "object", "zone"]
+    kind: ShortText  # "wall", "box", "ball", "nest", ...
+    shape: ShapeInfo
+    x: float
+    y: float
+    heading: float
+    colour: ShortText
+    mass: float = 0.0
+    resistivity: int = 0
+
+
+class LightInfo(msgspec.Struct, frozen=True, kw_only=True):
+    id: Ident
+    x: float
+    y: float
+    intensity: float
+    radius: float
+    mode: Literal["on", "off", "blink"]
+    period: float
+    colour: ShortText
+    on: bool
+
+
+class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
+    id: Ident
+    type: Ident
+    radius: float
+    colour: ShortText
+    x: float
+    y: float
+    heading: float
+    gripper: bool
+    leds: int
+    proximity_sensors: list[tuple[float, float, float]]  # x, y, heading in the robot frame
+    proximity_max: int
+    speed_limit: int
+
+
+class WorldSnapshot(Message):
+    """The whole world for a late joiner (reply of ``world/<world>/snapshot``)."""
+
+    world: Ident
+    tick: NonNegInt
+    sim_time: float
+    layout: NonNegInt
+    tick_s: float
+    seed: int
+    width: float
+    height: float
+    items: list[ItemInfo]
+    lights: list[LightInfo]
+    agents: list[AgentInfo]
+    rows: list[Ident]  # WorldFrame.poses row order
+
+
+class AgentCommand(Message):
+    """Actuator commands to one agent (sealed in an AuthEnvelope on ``agent/<agent>/cmd``).
+
+    Fields left None are unchanged. An empty command only feeds the watchdog.
+    """
+
+    agent: Ident
+    speeds: tuple[Speed, Speed] | None = None  # clamped by the type (Khepera +-127)
+    counters: tuple[Counter, Counter] | None = None  # set the position counters
+    leds: list[Annotated[int, msgspec.Meta(ge=0, le=2)]] | None = (
+        None  # per LED: 0 off, 1 on, 2 toggle
+    )
+    arm: Byte | None = None
+    fingers: Literal["open", "closed"] | None = None
+
+
+class Lease(Message):
+    """Who may command an agent, and when (sealed, on ``agent/<agent>/lease``).
+
+    Issued by a principal with the ``lease`` permission (the agent context)
+    and republished periodically, so a restarted engine learns it. A lease
+    with the same id replaces the earlier one (e.g. ended early).
+    """
+
+    lease_id: Ident
+    world: Ident
+    agent: Ident
+    holder_user: Ident
+    holder_session: SessionId
+    start: float  # wall-clock seconds (time.time())
+    end: float
+
+
+class AddItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
+    """Add an entry, written as in a map file's section (see docs/MAPS.md)."""
+
+    section: Literal["obstacles", "objects", "lights", "zones", "agents"]
+    entry: dict[str, Any]
+
+
+class MoveItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
+    id: Ident
+    x: Millimetres
+    y: Millimetres
+    heading: float | None = None  # radians; None keeps it
+
+
+class RotateItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
+    id: Ident
+    heading: float  # radians
+
+
+class RemoveItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
+    id: Ident
+
+
+class ResizeArena(msgspec.Struct, frozen=True, tag=True, kw_only=True):
+    width: Positive
+    height: Positive
+
+
+EditOp = AddItem | MoveItem | RotateItem | RemoveItem | ResizeArena
+
+
+class WorldEdit(Message):
+    """A live edit (sealed, ``edit_map`` permission, on ``world/<world>/edit``)."""
+
+    op: EditOp
+
+
+class EditResult(Message):
+    """Reply to a WorldEdit or MapRequest that succeeded."""
+
+    layout: NonNegInt
+    detail: ShortText = ""
+    maps: list[Ident] = msgspec.field(default_factory=list)
+
+
+class MapRequest(Message):
+    """Save the world to a map, load another, or list them (sealed, ``edit_map``)."""
+
+    action: Literal["save", "load", "list"]
+    name: Ident | None = None  # a map's name in the engine's maps directory (no path)

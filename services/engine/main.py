@@ -1,0 +1,87 @@
+"""``wart engine``: one simulated world (the Sim2D engine) on the lab's Zenoh network.
+
+    wart engine --map maps/foraging.json --world arena1 --seed 7 [--speed X | --fast]
+
+Loads the map (errors name the field and line), steps the world every
+--tick-ms of simulated time, paced to the wall clock (times --speed, or as
+fast as it goes with --fast), publishes frames and sensor samples, obeys
+commands from lease holders, and serves snapshots, live edits and map
+save/load (maps are saved only in --maps-dir).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+from common import cli
+from common.auth import parse_public_key
+from common.keys import is_ident
+from common.service import run_service
+from services.engine.maps import MapError, load_map
+from services.engine.service import EngineService, EngineSettings
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("--map", type=Path, required=True, help="the map file to load (JSON)")
+    p.add_argument("--world", help="this world's name (default: the map file's name)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed: same seed, same run")
+    pace = p.add_mutually_exclusive_group()
+    pace.add_argument("--speed", type=float, default=1.0, help="times real time (default 1)")
+    pace.add_argument("--fast", action="store_true", help="as fast as possible (headless runs)")
+    p.add_argument("--tick-ms", type=float, default=20.0, help="simulated ms a tick (default 20)")
+    p.add_argument(
+        "--watchdog-ms",
+        type=float,
+        default=300.0,
+        help="stop a robot whose commands stop for this long (default 300)",
+    )
+    p.add_argument(
+        "--maps-dir",
+        type=Path,
+        help="where map save/load requests read and write (default: the map's directory)",
+    )
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    world_name = args.world or args.map.stem
+    if not is_ident(world_name):
+        p.error(f"--world {world_name!r} is not a valid name (letters, digits, _ - .)")
+    if not 0.1 <= args.tick_ms <= 1000:
+        p.error("--tick-ms must be between 0.1 and 1000")
+    if not 0.01 <= args.speed <= 10_000:
+        p.error("--speed must be between 0.01 and 10000")
+    if args.watchdog_ms <= 0:
+        p.error("--watchdog-ms must be positive")
+    registry_key = None
+    if options.registry_key:
+        try:
+            registry_key = parse_public_key(options.registry_key)
+        except ValueError as exc:
+            p.error(f"--registry-key: {exc}")
+    tick_s = args.tick_ms / 1000.0
+    try:
+        world = load_map(args.map, name=world_name, seed=args.seed, tick_s=tick_s)
+    except MapError as exc:
+        return cli.fail(str(exc))
+    settings = EngineSettings(
+        tick_s=tick_s,
+        speed=args.speed,
+        fast=args.fast,
+        watchdog_s=args.watchdog_ms / 1000.0,
+        maps_dir=args.maps_dir or args.map.parent,
+        seed=args.seed,
+        registry_key=registry_key,
+    )
+
+    def build(session: zenoh.Session) -> EngineService:
+        return EngineService(session, options.realm, world, settings)
+
+    return run_service(f"engine {world_name}", options, build)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,377 @@
+"""The engine on the Zenoh network: one world per process, stepped by one thread.
+
+Zenoh callbacks stay short: they verify the envelope (and the lease, for
+commands) and hand the work to the sim thread through a queue; requests that
+need an answer (snapshot, edit, map) wait for the sim thread's result, at most
+one tick. Only the sim thread touches the world (pymunk is not thread-safe).
+
+Publishes: ``world/<w>/frame`` (WorldFrame) each tick; ``agent/<a>/sensors``
+(SensorSample) for agents someone subscribes to; ``world/<w>/sensors``
+(SensorBatch) when someone subscribes. Subscribes: ``agent/*/cmd``
+(AgentCommand, sealed, holder of the current lease only) and ``agent/*/lease``
+(Lease, sealed, ``lease`` permission). Serves: ``snapshot`` (anyone),
+``edit`` and ``map`` (sealed, ``edit_map``). Token: ``alive/world/<w>``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import queue
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common import keys
+from common.auth import AuthError, Principal, Verifier
+from common.keys import AliveKind
+from common.messages import (
+    AddItem,
+    AgentCommand,
+    EditResult,
+    ErrorReply,
+    Lease,
+    MapRequest,
+    Message,
+    MoveItem,
+    RemoveItem,
+    ResizeArena,
+    RotateItem,
+    WorldEdit,
+    encode,
+)
+from common.service import RequestError, Service
+from services.engine import maps, wire
+from services.engine.world import EditError, World
+
+_FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
+
+
+@dataclass(frozen=True)
+class EngineSettings:
+    tick_s: float = 0.02
+    speed: float = 1.0  # times real time
+    fast: bool = False  # as fast as possible
+    watchdog_s: float = 0.3
+    maps_dir: Path = Path("maps")
+    seed: int = 0
+    registry_key: bytes | None = None
+
+
+@dataclass
+class _Command:
+    agent: str
+    command: AgentCommand
+    received: float  # monotonic
+
+
+class EngineService(Service):
+    kind = AliveKind.WORLD
+
+    def __init__(
+        self, session: zenoh.Session, realm: str, world: World, settings: EngineSettings
+    ) -> None:
+        super().__init__(session, realm, world.name)
+        self.world = world
+        self.settings = settings
+        self.verifier = (
+            Verifier(settings.registry_key, realm) if settings.registry_key is not None else None
+        )
+        self._work: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._leases: dict[str, Lease] = {}
+        self._lease_lock = threading.Lock()
+        self._last_cmd: dict[str, float] = {}
+        self._thread: threading.Thread | None = None
+        self._halt = threading.Event()
+        self._agent_pubs: dict[str, Any] = {}
+        self._matched: set[str] = set()
+        self._match_lock = threading.Lock()
+        self.commands_accepted = 0
+        self.commands_refused = 0
+        self.ticks_late = 0
+
+    # -- lifecycle
+
+    def on_start(self) -> None:
+        if self.verifier is None:
+            self.log.warning("no --registry-key: every command, lease and edit will be refused")
+        realm, name = self.realm, self.ident
+        self._frame_pub = self.track(self.session.declare_publisher(keys.world_frame(realm, name)))
+        self._batch_pub = self.track(
+            self.session.declare_publisher(keys.world_sensors(realm, name))
+        )
+        self.subscribe(keys.agent_cmd_all(realm, name), self._on_command)
+        self.subscribe(keys.agent_lease_all(realm, name), self._on_lease)
+        self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
+        self.serve(keys.world_edit(realm, name), self._on_edit)
+        self.serve(keys.world_map(realm, name), self._on_map)
+        self._declare_agent_publishers()
+        self._thread = threading.Thread(target=self._run, name=f"sim-{name}", daemon=True)
+        self._thread.start()
+
+    def on_stop(self, timeout: float) -> None:
+        self._halt.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        for pub in self._agent_pubs.values():
+            pub.undeclare()
+        self._agent_pubs.clear()
+
+    # -- per-agent sensor publishers, only used when someone listens
+
+    def _declare_agent_publishers(self) -> None:
+        wanted = {a.id for a in self.world.agents}
+        for agent in set(self._agent_pubs) - wanted:
+            self._agent_pubs.pop(agent).undeclare()
+            with self._match_lock:
+                self._matched.discard(agent)
+        for agent in sorted(wanted - set(self._agent_pubs)):
+            pub = self.session.declare_publisher(keys.agent_sensors(self.realm, self.ident, agent))
+
+            def on_match(status: Any, agent: str = agent) -> None:
+                with self._match_lock:
+                    if status.matching:
+                        self._matched.add(agent)
+                    else:
+                        self._matched.discard(agent)
+
+            pub.declare_matching_listener(on_match)
+            if pub.matching_status.matching:
+                with self._match_lock:
+                    self._matched.add(agent)
+            self._agent_pubs[agent] = pub
+
+    # -- callbacks (Zenoh threads): verify, then queue
+
+    def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]:
+        if self.verifier is None:
+            raise AuthError("unauthenticated", "this engine was started without --registry-key")
+        return self.verifier.open(key, payload, expected)
+
+    def _on_lease(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        principal, lease = self._open(key, sample.payload, Lease)
+        principal.require("lease", "grant leases on agents")
+        agent = keys.parse_agent_key(self.realm, self.ident, key)
+        if lease.world != self.ident or lease.agent != agent:
+            raise AuthError("forbidden", f"lease for {lease.world}/{lease.agent} sent on {key}")
+        with self._lease_lock:
+            current = self._leases.get(lease.agent)
+            if (
+                current is None
+                or current.lease_id == lease.lease_id
+                or lease.start >= current.start
+            ):
+                self._leases[lease.agent] = lease
+
+    def lease_of(self, agent: str) -> Lease | None:
+        with self._lease_lock:
+            return self._leases.get(agent)
+
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        agent = keys.parse_agent_key(self.realm, self.ident, key)
+        try:
+            principal, command = self._open(key, sample.payload, AgentCommand)
+            if agent is None or command.agent != agent:
+                raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
+            lease = self.lease_of(agent)
+            now = time.time()
+            if lease is None:
+                raise AuthError("forbidden", f"{agent} has no lease: command dropped")
+            if principal.session_id != lease.holder_session:
+                raise AuthError("forbidden", f"{principal.user} does not hold {agent}'s lease")
+            if not lease.start <= now <= lease.end:
+                raise AuthError("forbidden", f"{principal.user}'s lease on {agent} is not in force")
+        except Exception:
+            self.commands_refused += 1
+            raise
+        self.commands_accepted += 1
+        self._work.put(_Command(agent, command, time.monotonic()))
+
+    def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message:
+        """Run ``fn`` on the sim thread between ticks and return its reply."""
+        future: Future[Message] = Future()
+        self._work.put((fn, future))
+        try:
+            return future.result(timeout)
+        except TimeoutError:
+            raise RequestError("unavailable", "the simulation did not answer in time") from None
+
+    def _on_snapshot(self, query: zenoh.Query) -> Message:
+        return self._in_sim(wire.snapshot)
+
+    def _on_edit(self, query: zenoh.Query) -> Message:
+        principal, edit = self._open(str(query.key_expr), query.payload, WorldEdit)
+        principal.require("edit_map", "edit the world")
+        op = edit.op
+
+        def apply(world: World) -> Message:
+            try:
+                if isinstance(op, AddItem):
+                    maps.add_entry(world, op.section, op.entry, op.section)
+                elif isinstance(op, MoveItem):
+                    world.move(op.id, op.x, op.y, op.heading)
+                elif isinstance(op, RotateItem):
+                    world.rotate(op.id, op.heading)
+                elif isinstance(op, RemoveItem):
+                    world.remove(op.id)
+                elif isinstance(op, ResizeArena):
+                    world.resize(op.width, op.height)
+            except (EditError, maps.MapError) as exc:
+                raise RequestError("conflict", str(exc)) from None
+            self.log.info("%s edited the world: %s", principal.user, type(op).__name__)
+            return EditResult(layout=world.layout, detail=type(op).__name__)
+
+        return self._in_sim(apply)
+
+    def _on_map(self, query: zenoh.Query) -> Message:
+        principal, request = self._open(str(query.key_expr), query.payload, MapRequest)
+        principal.require("edit_map", "save or load maps")
+        maps_dir = self.settings.maps_dir
+        if request.action == "list":
+            return EditResult(layout=self.world.layout, maps=maps.list_maps(maps_dir))
+        if request.name is None:
+            raise RequestError("bad_request", f"{request.action} needs a map name")
+        try:
+            path = maps.map_path(maps_dir, request.name)
+        except maps.MapError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        if request.action == "save":
+
+            def save(world: World) -> Message:
+                written = maps.save_map(world, maps_dir, request.name or "")
+                self.log.info("%s saved the world to %s", principal.user, written)
+                return EditResult(layout=world.layout, detail=f"saved {written.name}")
+
+            return self._in_sim(save)
+        if not path.is_file():
+            raise RequestError("not_found", f"no map named {request.name} in the maps directory")
+        try:
+            new_world = maps.load_map(
+                path, name=self.ident, seed=self.settings.seed, tick_s=self.settings.tick_s
+            )
+        except maps.MapError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+
+        def swap(world: World) -> Message:
+            new_world.layout = world.layout + 1  # viewers must refetch the snapshot
+            self.world = new_world
+            self._last_cmd.clear()
+            self._declare_agent_publishers()
+            self.log.info("%s loaded map %s", principal.user, path.name)
+            return EditResult(layout=new_world.layout, detail=f"loaded {path.name}")
+
+        return self._in_sim(swap)
+
+    # -- the sim thread
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                item = self._work.get_nowait()
+            except queue.Empty:
+                return
+            if isinstance(item, _Command):
+                self._apply(item)
+                continue
+            fn, future = item
+            # Errors become reply messages here, never exceptions handed across
+            # threads: a re-raised exception's traceback would keep the Zenoh
+            # query alive (and its final reply unsent) until garbage collection.
+            try:
+                reply = fn(self.world)
+            except RequestError as exc:
+                reply = ErrorReply(code=exc.code, message=exc.message)  # type: ignore[arg-type]
+            except Exception:
+                self.log.exception("error serving a request (kept running)")
+                reply = ErrorReply(code="internal", message="internal error; see the engine log")
+            future.set_result(reply)
+
+    def _apply(self, item: _Command) -> None:
+        world = self.world
+        try:
+            slot = world.agent_slot(item.agent)
+        except KeyError:
+            return
+        cmd = item.command
+        try:
+            if cmd.speeds is not None:
+                world.set_speeds(slot, *cmd.speeds)
+            if cmd.counters is not None:
+                world.set_counters(slot, *cmd.counters)
+            for led, action in enumerate(cmd.leds or []):
+                on = not world.leds[slot, led] if action == 2 else bool(action)
+                world.set_led(slot, led, on)
+            if cmd.arm is not None:
+                world.set_arm(slot, cmd.arm)
+            if cmd.fingers is not None:
+                world.set_fingers(slot, cmd.fingers == "closed")
+        except EditError as exc:
+            self.log.info("command to %s partly ignored: %s", item.agent, exc)
+        self._last_cmd[item.agent] = item.received
+
+    def _watchdog(self) -> None:
+        """A robot whose commands stopped arriving stops (like the real robot's bridge)."""
+        now = time.monotonic()
+        for agent, last in list(self._last_cmd.items()):
+            if now - last > self.settings.watchdog_s:
+                del self._last_cmd[agent]
+                with contextlib.suppress(KeyError):
+                    self.world.set_speeds(self.world.agent_slot(agent), 0, 0)
+                self.log.info(
+                    "watchdog: no command for %s in %.0f ms, stopped it",
+                    agent,
+                    self.settings.watchdog_s * 1000,
+                )
+
+    def _publish(self) -> None:
+        world = self.world
+        self._frame_pub.put(encode(wire.frame(world)))
+        with self._match_lock:
+            listening = sorted(self._matched)
+        for agent in listening:
+            pub = self._agent_pubs.get(agent)
+            try:
+                slot = world.agent_slot(agent)
+            except KeyError:
+                continue
+            if pub is not None:
+                pub.put(encode(wire.sample(world, slot)))
+        if self._batch_pub.matching_status.matching:
+            self._batch_pub.put(encode(wire.batch(world)))
+
+    def _run(self) -> None:
+        settings = self.settings
+        period = 0.0 if settings.fast else settings.tick_s / settings.speed
+        next_tick = time.monotonic()
+        last_publish = 0.0
+        layout = self.world.layout
+        while not self._halt.is_set():
+            try:
+                self._drain()
+                self._watchdog()
+                self.world.step()
+                if self.world.layout != layout:
+                    layout = self.world.layout
+                    self._declare_agent_publishers()
+                now = time.monotonic()
+                if not settings.fast or now - last_publish >= _FAST_PUBLISH_S:
+                    last_publish = now
+                    self._publish()
+            except Exception:
+                self.log.exception("error in tick %d (kept running)", self.world.tick)
+            if settings.fast:
+                continue
+            next_tick += period
+            delay = next_tick - time.monotonic()
+            if delay > 0:
+                self._halt.wait(delay)
+            elif delay < -0.5:  # far behind (a stall): do not try to catch up in a burst
+                self.ticks_late += 1
+                next_tick = time.monotonic()

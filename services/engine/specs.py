@@ -1,0 +1,152 @@
+"""Named, frozen specifications of robot bodies and their components.
+
+Every number carries its unit in its name or docstring (millimetres, radians,
+seconds, grams). An agent type is one :class:`AgentTypeSpec`: a body plus
+components (drive, IR proximity ring, ambient light ring, LEDs, an optional
+gripper turret). The world is generic over these specs; adding a robot type
+is adding one module under ``services/engine/agents/``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SensorPose:
+    """Where a sensor sits on the robot, in the robot frame (x forward, y left)."""
+
+    x_mm: float
+    y_mm: float
+    heading_rad: float
+
+
+def poses_deg(*rows: tuple[float, float, float]) -> tuple[SensorPose, ...]:
+    """Sensor poses from (x mm, y mm, heading in degrees) rows, as manuals list them."""
+    return tuple(SensorPose(x, y, math.radians(h)) for x, y, h in rows)
+
+
+@dataclass(frozen=True)
+class ResponseCurve:
+    """A piecewise-linear map from distance (mm) to a raw sensor value.
+
+    Calibratable: a lab measures its robots and replaces the table. Beyond the
+    last distance the value is the last entry.
+    """
+
+    distances_mm: tuple[float, ...]
+    values: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.distances_mm) != len(self.values) or len(self.values) < 2:
+            raise ValueError("a response curve needs at least two (distance, value) points")
+        if any(b <= a for a, b in zip(self.distances_mm, self.distances_mm[1:], strict=False)):
+            raise ValueError("response curve distances must increase")
+
+    @property
+    def range_mm(self) -> float:
+        return self.distances_mm[-1]
+
+    def __call__(self, distance_mm: np.ndarray) -> np.ndarray:
+        return np.interp(distance_mm, self.distances_mm, self.values)
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """Differential drive in the robot's native speed unit.
+
+    A wheel speed of ``s`` units moves the wheel ``s * mm_per_pulse`` mm every
+    ``unit_time_s`` seconds; the position counters count pulses.
+    """
+
+    wheel_base_mm: float
+    mm_per_pulse: float
+    unit_time_s: float  # the speed unit is pulses per this many seconds
+    max_speed: int  # commands are clamped to +-max_speed units
+    max_force: float = 2.0e6  # g*mm/s^2 the motors can push with (tank pattern pivot)
+    max_torque: float = 5.0e8  # g*mm^2/s^2 (tank pattern gear)
+
+    def mm_per_s(self, speed_units: np.ndarray) -> np.ndarray:
+        return speed_units * (self.mm_per_pulse / self.unit_time_s)
+
+
+@dataclass(frozen=True)
+class ProximitySpec:
+    """An IR proximity ring: each sensor casts ``rays_per_sensor`` rays over ``spread_rad``.
+
+    The reading is ``curve(nearest hit distance)`` with multiplicative noise of
+    ``noise_fraction`` (standard deviation) plus additive ``noise_counts``,
+    clipped to ``0..max_value``.
+    """
+
+    poses: tuple[SensorPose, ...]
+    curve: ResponseCurve
+    max_value: int = 1023
+    rays_per_sensor: int = 3
+    spread_rad: float = math.radians(30.0)  # total angle covered by the rays of one sensor
+    noise_fraction: float = 0.03
+    noise_counts: float = 2.0
+
+
+@dataclass(frozen=True)
+class AmbientSpec:
+    """An ambient light ring (the Khepera Simulator's model).
+
+    Each lit, visible light within ``half_angle_rad`` of a sensor's axis lowers
+    the reading by ``cos(1.5 * bearing) * closeness * drop * intensity``, where
+    closeness falls linearly from 1 at the light to 0 at the light's radius.
+    """
+
+    poses: tuple[SensorPose, ...]
+    dark_value: int = 500
+    floor_value: int = 50
+    drop: float = 450.0
+    half_angle_rad: float = math.radians(60.0)
+    noise_fraction: float = 0.02
+
+
+@dataclass(frozen=True)
+class GripperSpec:
+    """A gripper turret in front of the body (Khepera's gripper, thesis 6.8.3).
+
+    The grip area is a box in the robot frame between the tongs; an object whose
+    centre lies in it does not collide with the robot while the grip is open
+    and the arm down (the collision exception area).
+    """
+
+    arm_down: int = 255  # arm position when on the floor
+    arm_up: int = 165  # arm position fully raised
+    lowered_above: int = 230  # the tongs touch the floor at or above this position
+    arm_rate_per_s: float = 300.0  # arm position units per second
+    tong_x_mm: tuple[float, float] = (20.0, 52.0)  # tongs from..to, robot frame
+    tong_width_mm: float = 4.0
+    gap_mm: float = 28.0  # between the open tongs
+    grip_x_mm: tuple[float, float] = (28.0, 50.0)  # collision exception area along x
+    presence_x_mm: tuple[float, float] = (30.0, 46.0)  # the light barrier between the fingers
+    presence_half_width_mm: float = 10.0
+    empty_resistivity: int = 255  # open circuit: nothing between the fingers
+
+
+@dataclass(frozen=True)
+class AgentTypeSpec:
+    """Everything the world needs to simulate one robot type."""
+
+    name: str
+    radius_mm: float
+    mass_g: float
+    colour: str
+    drive: DriveSpec
+    proximity: ProximitySpec
+    ambient: AmbientSpec
+    leds: int = 2
+    gripper: GripperSpec | None = None
+    extra: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def sensor_reach_mm(self) -> float:
+        """How far from the centre any IR ray can see."""
+        origin = max(math.hypot(p.x_mm, p.y_mm) for p in self.proximity.poses)
+        return origin + self.proximity.curve.range_mm

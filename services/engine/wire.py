@@ -1,0 +1,190 @@
+"""Conversions between the world and its wire types (frames, samples, snapshots)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.messages import (
+    AgentInfo,
+    GripperReading,
+    ItemInfo,
+    LightInfo,
+    PackedArray,
+    SensorBatch,
+    SensorSample,
+    ShapeInfo,
+    WorldFrame,
+    WorldSnapshot,
+)
+from services.engine.entities import ShapeSpec
+from services.engine.world import World
+
+_FINGERS = ("open", "closed", "holding")
+
+
+def rows(world: World) -> list[str]:
+    """The row order of WorldFrame.poses: agents, then movable objects."""
+    return [a.id for a in world.agents] + [o.id for o in world.objects]
+
+
+def frame(world: World) -> WorldFrame:
+    poses = np.concatenate([world.agent_pose, world.object_pose]).astype(np.float32)
+    n = len(world.agents)
+    state = np.zeros((n, 4), dtype=np.uint8)
+    if n:
+        bits = (
+            world.leds.astype(np.uint16) << np.arange(world.leds.shape[1], dtype=np.uint16)
+        ).sum(1)
+        state[:, 0] = np.minimum(bits, 255)
+        state[:, 1] = np.clip(world.arm, 0, 255)
+        state[:, 2] = world.fingers
+        held = np.array([a.held is not None for a in world.agents], dtype=bool)
+        state[held, 2] = 2
+        state[:, 3] = np.clip(world.presence, 0, 255)
+    return WorldFrame(
+        world=world.name,
+        tick=world.tick,
+        sim_time=world.sim_time,
+        layout=world.layout,
+        poses=PackedArray.from_numpy(poses.reshape(-1, 3)),
+        agent_state=PackedArray.from_numpy(state),
+        lights=PackedArray.from_numpy(world.lights_on().astype(np.uint8)),
+    )
+
+
+def sample(world: World, slot: int) -> SensorSample:
+    agent = world.agents[slot]
+    spec = agent.spec
+    gripper = None
+    if agent.has_gripper:
+        gripper = GripperReading(
+            arm=int(np.clip(round(world.arm[slot]), 0, 255)),
+            fingers=_FINGERS[world.gripper_state(slot)],  # type: ignore[arg-type]
+            presence=int(world.presence[slot]),
+            resistivity=world.resistivity(slot),
+        )
+    return SensorSample(
+        world=world.name,
+        agent=agent.id,
+        tick=world.tick,
+        sim_time=world.sim_time,
+        proximity=world.proximity[slot, : len(spec.proximity.poses)].tolist(),
+        ambient=world.ambient[slot, : len(spec.ambient.poses)].tolist(),
+        counters=(int(world.counters[slot, 0]), int(world.counters[slot, 1])),
+        speeds=(int(world.cmd[slot, 0]), int(world.cmd[slot, 1])),
+        leds=world.leds[slot, : spec.leds].tolist(),
+        gripper=gripper,
+    )
+
+
+def batch(world: World) -> SensorBatch:
+    return SensorBatch(
+        world=world.name,
+        tick=world.tick,
+        sim_time=world.sim_time,
+        layout=world.layout,
+        proximity=PackedArray.from_numpy(world.proximity.astype(np.uint16)),
+        ambient=PackedArray.from_numpy(world.ambient.astype(np.uint16)),
+        counters=PackedArray.from_numpy(world.counters.astype(np.int64).astype(np.int32)),
+    )
+
+
+def _shape(shape: ShapeSpec) -> ShapeInfo:
+    if shape.kind == "circle":
+        return ShapeInfo(kind="circle", radius=shape.radius_mm)
+    return ShapeInfo(kind="polygon", points=[(float(x), float(y)) for x, y in shape.vertices()])
+
+
+def snapshot(world: World) -> WorldSnapshot:
+    items: list[ItemInfo] = []
+    for o in world.obstacles.values():
+        kind = "wall" if o.shape.kind == "box" else o.shape.kind
+        items.append(
+            ItemInfo(
+                id=o.id,
+                category="obstacle",
+                kind=kind,
+                shape=_shape(o.shape),
+                x=o.x,
+                y=o.y,
+                heading=o.heading,
+                colour=o.colour,
+            )
+        )
+    for i, obj in enumerate(world.objects):
+        x, y, h = world.object_pose[i] if i < len(world.object_pose) else world.pose_of(obj.id)
+        items.append(
+            ItemInfo(
+                id=obj.id,
+                category="object",
+                kind=obj.kind,
+                shape=_shape(obj.shape),
+                x=float(x),
+                y=float(y),
+                heading=float(h),
+                colour=obj.colour,
+                mass=obj.mass_g,
+                resistivity=obj.resistivity,
+            )
+        )
+    for z in world.zones.values():
+        items.append(
+            ItemInfo(
+                id=z.id,
+                category="zone",
+                kind=z.kind,
+                shape=_shape(z.shape),
+                x=z.x,
+                y=z.y,
+                heading=z.heading,
+                colour=z.colour,
+            )
+        )
+    on = world.lights_on()
+    lights = [
+        LightInfo(
+            id=lt.id,
+            x=lt.x,
+            y=lt.y,
+            intensity=lt.intensity,
+            radius=lt.radius_mm,
+            mode=lt.mode,
+            period=lt.period_s,
+            colour=lt.colour,
+            on=bool(on[i]),
+        )
+        for i, lt in enumerate(world.lights)
+    ]
+    agents = []
+    for slot, a in enumerate(world.agents):
+        x, y, h = world.agent_pose[slot]
+        agents.append(
+            AgentInfo(
+                id=a.id,
+                type=a.spec.name,
+                radius=a.spec.radius_mm,
+                colour=a.colour,
+                x=float(x),
+                y=float(y),
+                heading=float(h),
+                gripper=a.has_gripper,
+                leds=a.spec.leds,
+                proximity_sensors=[(p.x_mm, p.y_mm, p.heading_rad) for p in a.spec.proximity.poses],
+                proximity_max=a.spec.proximity.max_value,
+                speed_limit=a.spec.drive.max_speed,
+            )
+        )
+    return WorldSnapshot(
+        world=world.name,
+        tick=world.tick,
+        sim_time=world.sim_time,
+        layout=world.layout,
+        tick_s=world.tick_s,
+        seed=world.seed,
+        width=world.width,
+        height=world.height,
+        items=items,
+        lights=lights,
+        agents=agents,
+        rows=rows(world),
+    )

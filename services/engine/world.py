@@ -1,0 +1,897 @@
+"""The Sim2D world (thesis 6.7.2, AgentWorldSim2D): a pymunk space in millimetres.
+
+One world is stepped by one thread (pymunk is not thread-safe). Collision rules
+follow the thesis, through pymunk:
+
+- obstacles are static bodies: they never move, and push anything out;
+- agents are dynamic bodies pulled by a kinematic control body through
+  force-limited pivot and gear joints (pymunk's tank pattern), so walls push
+  them back and two agents share the push;
+- movable objects are dynamic bodies held to the floor by force-limited
+  joints to the static body (top-down friction: nothing slides forever);
+- the gripper's collision exception area lets an object between the open
+  tongs overlap the robot (thesis 6.8.3).
+
+Per-agent state lives in numpy arrays indexed by the agent's slot (its index
+in :attr:`World.agents`); body state moves through ``pymunk.batch`` and the
+sensors are cast in numpy (services/engine/sensing.py), so a tick has no
+per-robot Python loop.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import pymunk
+import pymunk.batch as pbatch
+
+from services.engine import sensing
+from services.engine.entities import (
+    Agent,
+    Light,
+    LightMode,
+    MovableObject,
+    Obstacle,
+    ShapeSpec,
+    Zone,
+)
+from services.engine.specs import AgentTypeSpec
+
+# Collision categories (bit masks) and collision types.
+CAT_OBSTACLE = 0b0001
+CAT_ROBOT = 0b0010
+CAT_OBJECT = 0b0100
+CAT_TONGS = 0b1000
+CAT_ALL = 0xFFFFFFFF
+COLL_ROBOT = 1
+COLL_TONGS = 2
+COLL_OBJECT = 3
+
+GRAVITY_MM_S2 = 9810.0
+WALL_THICKNESS_MM = 20.0
+FINGERS_OPEN = 0
+FINGERS_CLOSED = 1
+
+
+class EditError(ValueError):
+    """An edit or a map would break the world's rules; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class Tables:
+    """Per-agent constants derived from the agents' types (rebuilt when agents change)."""
+
+    mm_s_per_unit: np.ndarray  # (N,)
+    pulses_per_s_per_unit: np.ndarray  # (N,)
+    wheel_base: np.ndarray  # (N,)
+    max_speed: np.ndarray  # (N,)
+    radius: np.ndarray  # (N,)
+    has_gripper: np.ndarray  # (N,) bool
+    arm_rate: np.ndarray  # (N,) arm position units per second (0 without a gripper)
+    arm_lowered_above: np.ndarray  # (N,) arm position at and above which the tongs are down
+
+
+class World:
+    """A bounded 2D world: arena, obstacles, movable objects, lights, zones and agents."""
+
+    def __init__(
+        self,
+        width_mm: float,
+        height_mm: float,
+        *,
+        seed: int = 0,
+        tick_s: float = 0.02,
+        sensor_period_s: float = 0.02,
+        substeps: int | None = None,
+        name: str = "world",
+    ) -> None:
+        if not (width_mm > 0 and height_mm > 0):
+            raise EditError("the arena's width and height must be positive")
+        if not tick_s > 0:
+            raise EditError("the tick must be positive")
+        self.name = name
+        self.seed = seed
+        self.tick_s = tick_s
+        self.sensor_period_s = sensor_period_s
+        # Physics never steps more than 10 ms at a time: a speed change then shows
+        # up in the pose within 10 ms whatever the tick (pymunk integrates the
+        # position before it solves the joints that set the new velocity).
+        self.substeps = substeps or max(1, math.ceil(tick_s / 0.01 - 1e-9))
+        self.width = float(width_mm)
+        self.height = float(height_mm)
+        self.rng = np.random.default_rng(seed)
+        self.tick = 0
+        self.sim_time = 0.0
+        self.layout = 1  # bumped whenever objects are added, removed or change shape
+        self._next_sense = 0.0
+        self._serial = 0
+
+        self.space = pymunk.Space()
+        self.space.damping = 1.0
+        self.space.on_collision(COLL_ROBOT, COLL_OBJECT, pre_solve=self._grip_exception)
+        self.space.on_collision(COLL_TONGS, COLL_OBJECT, pre_solve=self._grip_exception)
+        self._walls: list[pymunk.Shape] = []
+        self._build_walls()
+
+        self.obstacles: dict[str, Obstacle] = {}
+        self.objects: list[MovableObject] = []
+        self.lights: list[Light] = []
+        self.zones: dict[str, Zone] = {}
+        self.agents: list[Agent] = []
+        self._agent_by_body: dict[int, Agent] = {}
+        self._object_by_body: dict[int, MovableObject] = {}
+
+        self._init_agent_state(0)
+        self._rebuild_tables()
+        self.object_pose = np.zeros((0, 3))
+        self._batch = pbatch.Buffer()
+        self._batch_ids = np.zeros(0, dtype=np.uintp)
+        self._rows_stale = True
+        self._static_dirty = True
+        self.static_geometry: sensing.StaticGeometry | None = None
+
+    # -- per-agent state -------------------------------------------------------------
+
+    def _init_agent_state(self, n: int) -> None:
+        self.cmd = np.zeros((n, 2))  # wheel speeds, the type's units, clamped
+        self.counters = np.zeros((n, 2))  # position counters, pulses
+        self.proximity = np.zeros((n, 8), dtype=np.int32)
+        self.ambient = np.zeros((n, 8), dtype=np.int32)
+        self.leds = np.zeros((n, 8), dtype=np.uint8)
+        self.arm = np.zeros(n)
+        self.arm_target = np.zeros(n)
+        self.fingers = np.zeros(n, dtype=np.int8)
+        self.presence = np.zeros(n, dtype=np.int32)
+        self.agent_pose = np.zeros((n, 3))
+        self.agent_vel = np.zeros((n, 3))
+
+    _STATE = (
+        "cmd",
+        "counters",
+        "proximity",
+        "ambient",
+        "leds",
+        "arm",
+        "arm_target",
+        "fingers",
+        "presence",
+        "agent_pose",
+        "agent_vel",
+    )
+
+    def _append_agent_state(self, pose: tuple[float, float, float], arm: float) -> None:
+        for name in self._STATE:
+            arr = getattr(self, name)
+            row = np.zeros((1, *arr.shape[1:]), dtype=arr.dtype)
+            setattr(self, name, np.concatenate([arr, row]))
+        self.agent_pose[-1] = pose
+        self.arm[-1] = self.arm_target[-1] = arm
+
+    def _delete_agent_state(self, slot: int) -> None:
+        for name in self._STATE:
+            setattr(self, name, np.delete(getattr(self, name), slot, axis=0))
+
+    def _rebuild_tables(self) -> None:
+        specs = [a.spec for a in self.agents]
+        self.tables = Tables(
+            mm_s_per_unit=np.array([s.drive.mm_per_s(np.float64(1.0)) for s in specs]),
+            pulses_per_s_per_unit=np.array([1.0 / s.drive.unit_time_s for s in specs]),
+            wheel_base=np.array([s.drive.wheel_base_mm for s in specs]),
+            max_speed=np.array([float(s.drive.max_speed) for s in specs]),
+            radius=np.array([s.radius_mm for s in specs]),
+            has_gripper=np.array([a.has_gripper for a in self.agents], dtype=bool),
+            arm_rate=np.array(
+                [s.gripper.arm_rate_per_s if s.gripper else 0.0 for s in specs], dtype=float
+            ),
+            arm_lowered_above=np.array(
+                [s.gripper.lowered_above if s.gripper else np.inf for s in specs], dtype=float
+            ),
+        )
+        self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
+        self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}
+        self.agent_sensing = sensing.AgentSensing.build(self.agents)
+        self._rows_stale = True
+
+    # -- ids ---------------------------------------------------------------------
+
+    def ids(self) -> set[str]:
+        return (
+            set(self.obstacles)
+            | {o.id for o in self.objects}
+            | {light.id for light in self.lights}
+            | set(self.zones)
+            | {a.id for a in self.agents}
+        )
+
+    def _check_new_id(self, ident: str) -> None:
+        if ident in self.ids():
+            raise EditError(f"an object named {ident!r} already exists in this world")
+
+    def agent_slot(self, agent_id: str) -> int:
+        """The agent's row in the state arrays; KeyError if there is no such agent."""
+        return self._slot_by_id[agent_id]
+
+    def find_object(self, ident: str) -> MovableObject | None:
+        return next((o for o in self.objects if o.id == ident), None)
+
+    # -- arena -------------------------------------------------------------------
+
+    def _build_walls(self) -> None:
+        for shape in self._walls:
+            self.space.remove(shape)
+        t, w, h = WALL_THICKNESS_MM, self.width, self.height
+        boxes = [
+            (-t, -t, w + t, 0.0),
+            (-t, h, w + t, h + t),
+            (-t, 0.0, 0.0, h),
+            (w, 0.0, w + t, h),
+        ]
+        self._walls = []
+        for x0, y0, x1, y1 in boxes:
+            poly = pymunk.Poly(self.space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            poly.filter = pymunk.ShapeFilter(categories=CAT_OBSTACLE)
+            poly.friction = 0.3
+            self._walls.append(poly)
+        self.space.add(*self._walls)
+        self._static_dirty = True
+
+    def resize(self, width_mm: float, height_mm: float) -> None:
+        if not (width_mm > 0 and height_mm > 0):
+            raise EditError("the arena's width and height must be positive")
+        old = (self.width, self.height)
+        self.width, self.height = float(width_mm), float(height_mm)
+        outside = [i for i in self.ids() if not self._inside_arena_id(i)]
+        if outside:
+            self.width, self.height = old
+            raise EditError(
+                f"the arena {width_mm:.0f} x {height_mm:.0f} mm would leave outside: "
+                + ", ".join(sorted(outside)[:10])
+            )
+        self._build_walls()
+        self.layout += 1
+
+    def _inside(self, pts: Iterable[tuple[float, float]], margin: float = 0.0) -> bool:
+        return all(
+            x - margin >= -1e-6
+            and x + margin <= self.width + 1e-6
+            and y - margin >= -1e-6
+            and y + margin <= self.height + 1e-6
+            for x, y in pts
+        )
+
+    def _shape_inside(self, shape: ShapeSpec, x: float, y: float, heading: float) -> bool:
+        if shape.kind == "circle":
+            return self._inside([(x, y)], shape.radius_mm)
+        return self._inside(shape.world_vertices(x, y, heading))
+
+    def _inside_arena_id(self, ident: str) -> bool:
+        x, y, heading = self.pose_of(ident)
+        shape = self.shape_of(ident)
+        return shape is None or self._shape_inside(shape, x, y, heading)
+
+    # -- obstacles ------------------------------------------------------------------
+
+    def add_obstacle(
+        self,
+        ident: str,
+        shape: ShapeSpec,
+        x: float,
+        y: float,
+        heading: float = 0.0,
+        colour: str = "#808080",
+    ) -> Obstacle:
+        self._check_new_id(ident)
+        if not self._shape_inside(shape, x, y, heading):
+            raise EditError(f"obstacle {ident} would stick out of the arena")
+        body = pymunk.Body(body_type=pymunk.Body.STATIC)
+        body.position = (x, y)
+        body.angle = heading
+        shapes = _make_shapes(body, shape)
+        for s in shapes:
+            s.filter = pymunk.ShapeFilter(categories=CAT_OBSTACLE)
+            s.friction = 0.3
+        self.space.add(body, *shapes)
+        overlapping = self._agents_touching(shapes)
+        if overlapping:
+            self.space.remove(body, *shapes)
+            raise EditError(f"obstacle {ident} would overlap agent(s) {', '.join(overlapping)}")
+        obstacle = Obstacle(ident, shape, x, y, heading, colour, body, shapes)
+        self.obstacles[ident] = obstacle
+        self._static_dirty = True
+        self.layout += 1
+        return obstacle
+
+    def _agents_touching(self, shapes: list[pymunk.Shape]) -> list[str]:
+        found = []
+        for shape in shapes:
+            for info in self.space.shape_query(shape):
+                agent = self._agent_by_body.get(id_of(info.shape.body)) if info.shape else None
+                if agent is not None and info.shape is agent.shape:
+                    found.append(agent.id)
+        return sorted(set(found))
+
+    # -- movable objects -----------------------------------------------------------------
+
+    def add_object(
+        self,
+        ident: str,
+        kind: str,
+        shape: ShapeSpec,
+        x: float,
+        y: float,
+        heading: float = 0.0,
+        *,
+        mass_g: float = 10.0,
+        friction: float = 0.5,
+        resistivity: int = 128,
+        colour: str = "#ff8c00",
+    ) -> MovableObject:
+        self._check_new_id(ident)
+        if not self._shape_inside(shape, x, y, heading):
+            raise EditError(f"object {ident} would stick out of the arena")
+        if mass_g <= 0:
+            raise EditError(f"object {ident}: mass must be positive")
+        if shape.kind == "circle":
+            moment = pymunk.moment_for_circle(mass_g, 0, shape.radius_mm)
+        else:
+            moment = pymunk.moment_for_poly(mass_g, shape.vertices())
+        body = pymunk.Body(mass_g, moment)
+        body.position = (x, y)
+        body.angle = heading
+        shapes = _make_shapes(body, shape)
+        for s in shapes:
+            s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
+            s.collision_type = COLL_OBJECT
+            s.friction = 0.4
+        if self._blocked(shapes, CAT_OBSTACLE | CAT_ROBOT, body):
+            raise EditError(f"object {ident} would overlap an obstacle or an agent")
+        obj = MovableObject(ident, kind, shape, mass_g, friction, resistivity, colour, body, shapes)
+        obj.floor_joints = _floor_friction(self.space.static_body, body, mass_g, friction, shape)
+        self.space.add(body, *shapes, *obj.floor_joints)
+        self.objects.append(obj)
+        self._object_by_body[id_of(body)] = obj
+        self._rows_stale = True
+        self.layout += 1
+        return obj
+
+    def _blocked(self, shapes: list[pymunk.Shape], mask: int, body: pymunk.Body) -> bool:
+        for shape in shapes:
+            shape.cache_bb()
+            for info in self.space.shape_query(shape):
+                other = info.shape
+                if other is None or other.body is body:
+                    continue
+                points = info.contact_point_set.points
+                # A real overlap, not two shapes merely touching.
+                if (
+                    other.filter.categories & mask
+                    and points
+                    and min(p.distance for p in points) < -0.5
+                ):
+                    return True
+        return False
+
+    # -- lights and zones ---------------------------------------------------------------
+
+    def add_light(
+        self,
+        ident: str,
+        x: float,
+        y: float,
+        *,
+        intensity: float = 1.0,
+        radius_mm: float = 300.0,
+        mode: LightMode = "on",
+        period_s: float = 1.0,
+        colour: str = "#ffd700",
+    ) -> Light:
+        self._check_new_id(ident)
+        if not self._inside([(x, y)]):
+            raise EditError(f"light {ident} is outside the arena")
+        if period_s <= 0 or radius_mm <= 0 or intensity < 0:
+            raise EditError(f"light {ident}: period and radius must be positive, intensity >= 0")
+        light = Light(ident, x, y, intensity, radius_mm, mode, period_s, colour)
+        self.lights.append(light)
+        self.layout += 1
+        return light
+
+    def add_zone(
+        self,
+        ident: str,
+        kind: str,
+        shape: ShapeSpec,
+        x: float,
+        y: float,
+        heading: float = 0.0,
+        colour: str = "#c8e6c9",
+    ) -> Zone:
+        self._check_new_id(ident)
+        if not self._shape_inside(shape, x, y, heading):
+            raise EditError(f"zone {ident} would stick out of the arena")
+        zone = Zone(ident, kind, shape, x, y, heading, colour)
+        self.zones[ident] = zone
+        self.layout += 1
+        return zone
+
+    # -- agents ----------------------------------------------------------------------
+
+    def add_agent(
+        self,
+        ident: str,
+        spec: AgentTypeSpec,
+        x: float,
+        y: float,
+        heading: float = 0.0,
+        *,
+        gripper: bool = True,
+        colour: str | None = None,
+        defer_tables: bool = False,
+    ) -> Agent:
+        """Add a robot. ``defer_tables``: the caller adds many, then calls finish_agents()."""
+        self._check_new_id(ident)
+        r = spec.radius_mm
+        if not self._inside([(x, y)], r):
+            raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would stick out of the arena")
+        hits = self.space.point_query((x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE))
+        if hits:
+            raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle")
+        self._serial += 1
+        group = self._serial
+        body = pymunk.Body(spec.mass_g, pymunk.moment_for_circle(spec.mass_g, 0, r))
+        body.position = (x, y)
+        body.angle = heading
+        circle = pymunk.Circle(body, r)
+        circle.filter = pymunk.ShapeFilter(group=group, categories=CAT_ROBOT)
+        circle.collision_type = COLL_ROBOT
+        circle.friction = 0.3
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        control.position = (x, y)
+        control.angle = heading
+        pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
+        pivot.max_bias = 0.0  # velocity only: the pivot never yanks the robot back
+        pivot.max_force = spec.drive.max_force
+        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
+        gear.error_bias = 0.0
+        gear.max_bias = 0.0
+        gear.max_force = spec.drive.max_torque
+        fitted = gripper and spec.gripper is not None
+        agent = Agent(ident, spec, group, fitted, colour or spec.colour, body, control, circle)
+        agent.joints = [pivot, gear]
+        if fitted and spec.gripper is not None:
+            g = spec.gripper
+            for side in (1.0, -1.0):
+                y0 = side * g.gap_mm / 2
+                y1 = side * (g.gap_mm / 2 + g.tong_width_mm)
+                x0, x1 = g.tong_x_mm
+                tong = pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+                tong.filter = pymunk.ShapeFilter(group=group, categories=CAT_TONGS)
+                tong.collision_type = COLL_TONGS
+                tong.friction = 0.3
+                agent.tongs.append(tong)
+        self.space.add(body, control, circle, *agent.tongs, pivot, gear)
+        self.agents.append(agent)
+        self._agent_by_body[id_of(body)] = agent
+        arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
+        self._append_agent_state((x, y, heading), arm)
+        if not defer_tables:
+            self._rebuild_tables()
+        self.layout += 1
+        return agent
+
+    def finish_agents(self) -> None:
+        """Rebuild the per-agent tables after add_agent(..., defer_tables=True)."""
+        self._rebuild_tables()
+
+    # -- generic edits ------------------------------------------------------------------
+
+    def pose_of(self, ident: str) -> tuple[float, float, float]:
+        for slot, agent in enumerate(self.agents):
+            if agent.id == ident:
+                x, y, h = self.agent_pose[slot]
+                return float(x), float(y), float(h)
+        for obj in self.objects:
+            if obj.id == ident and obj.body is not None:
+                return obj.body.position.x, obj.body.position.y, obj.body.angle
+        if ident in self.obstacles:
+            o = self.obstacles[ident]
+            return o.x, o.y, o.heading
+        if ident in self.zones:
+            z = self.zones[ident]
+            return z.x, z.y, z.heading
+        for light in self.lights:
+            if light.id == ident:
+                return light.x, light.y, 0.0
+        raise EditError(f"no object named {ident!r} in this world")
+
+    def shape_of(self, ident: str) -> ShapeSpec | None:
+        for agent in self.agents:
+            if agent.id == ident:
+                return ShapeSpec.circle(agent.spec.radius_mm)
+        obj = self.find_object(ident)
+        if obj is not None:
+            return obj.shape
+        if ident in self.obstacles:
+            return self.obstacles[ident].shape
+        if ident in self.zones:
+            return self.zones[ident].shape
+        return None  # lights are points
+
+    def move(self, ident: str, x: float, y: float, heading: float | None = None) -> None:
+        """Move (and optionally rotate) anything; validated, undone if it breaks a rule."""
+        old = self.pose_of(ident)
+        heading = old[2] if heading is None else heading
+        shape = self.shape_of(ident)
+        if shape is not None and not self._shape_inside(shape, x, y, heading):
+            raise EditError(f"{ident} would stick out of the arena at ({x:.0f}, {y:.0f})")
+        if shape is None and not self._inside([(x, y)]):
+            raise EditError(f"{ident} would be outside the arena at ({x:.0f}, {y:.0f})")
+        for light in self.lights:
+            if light.id == ident:
+                light.x, light.y = x, y
+                self.layout += 1
+                return
+        if ident in self.zones:
+            z = self.zones[ident]
+            z.x, z.y, z.heading = x, y, heading
+            self.layout += 1
+            return
+        if ident in self.obstacles:
+            o = self.obstacles[ident]
+            assert o.body is not None
+            o.body.position, o.body.angle = (x, y), heading
+            self.space.reindex_shapes_for_body(o.body)
+            overlapping = self._agents_touching(o.shapes)
+            if overlapping:
+                o.body.position, o.body.angle = (o.x, o.y), o.heading
+                self.space.reindex_shapes_for_body(o.body)
+                raise EditError(f"obstacle {ident} would overlap agent(s) {', '.join(overlapping)}")
+            o.x, o.y, o.heading = x, y, heading
+            self._static_dirty = True
+            self.layout += 1
+            return
+        for slot, agent in enumerate(self.agents):
+            if agent.id == ident:
+                r = agent.spec.radius_mm
+                hits = self.space.point_query(
+                    (x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE)
+                )
+                if hits:
+                    raise EditError(
+                        f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle"
+                    )
+                for b in (agent.body, agent.control):
+                    b.position, b.angle = (x, y), heading
+                    b.velocity, b.angular_velocity = (0, 0), 0.0
+                self.space.reindex_shapes_for_body(agent.body)
+                self.agent_pose[slot] = (x, y, heading)
+                self.layout += 1
+                return
+        obj = self.find_object(ident)
+        if obj is not None and obj.body is not None:
+            if obj.held_by is not None:
+                self._release(obj)
+            old_pos, old_angle = obj.body.position, obj.body.angle
+            obj.body.position, obj.body.angle = (x, y), heading
+            self.space.reindex_shapes_for_body(obj.body)
+            if self._blocked(obj.shapes, CAT_OBSTACLE, obj.body):
+                obj.body.position, obj.body.angle = old_pos, old_angle
+                self.space.reindex_shapes_for_body(obj.body)
+                raise EditError(f"object {ident} would overlap an obstacle at ({x:.0f}, {y:.0f})")
+            obj.body.velocity, obj.body.angular_velocity = (0, 0), 0.0
+            self.layout += 1
+            return
+        raise EditError(f"no object named {ident!r} in this world")
+
+    def rotate(self, ident: str, heading: float) -> None:
+        x, y, _ = self.pose_of(ident)
+        self.move(ident, x, y, heading)
+
+    def remove(self, ident: str) -> None:
+        if ident in self.obstacles:
+            o = self.obstacles.pop(ident)
+            self.space.remove(o.body, *o.shapes)
+            self._static_dirty = True
+        elif ident in self.zones:
+            del self.zones[ident]
+        elif any(light.id == ident for light in self.lights):
+            self.lights = [light for light in self.lights if light.id != ident]
+        elif (obj := self.find_object(ident)) is not None:
+            if obj.held_by is not None:
+                self._release(obj)
+            self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
+            self.objects.remove(obj)
+            self._object_by_body.pop(id_of(obj.body), None)
+        else:
+            try:
+                slot = self.agent_slot(ident)
+            except KeyError:
+                raise EditError(f"no object named {ident!r} in this world") from None
+            agent = self.agents[slot]
+            if agent.held is not None:
+                self._release(agent.held)
+            self.space.remove(agent.body, agent.control, agent.shape, *agent.tongs, *agent.joints)
+            del self.agents[slot]
+            self._agent_by_body.pop(id_of(agent.body), None)
+            self._delete_agent_state(slot)
+            self._rebuild_tables()
+        self._rows_stale = True
+        self.layout += 1
+
+    # -- commands (the API a controller, the service and a serial emulator use) ---------
+
+    def set_speeds(self, slot: int, left: float, right: float) -> None:
+        top = self.tables.max_speed[slot]
+        self.cmd[slot] = (float(np.clip(left, -top, top)), float(np.clip(right, -top, top)))
+
+    def set_speeds_all(self, speeds: np.ndarray) -> None:
+        """Every agent's (left, right) at once, clamped per type: the bulk path."""
+        top = self.tables.max_speed[:, None]
+        self.cmd[:] = np.clip(np.rint(speeds), -top, top)
+
+    def set_counters(self, slot: int, left: int, right: int) -> None:
+        self.counters[slot] = (left, right)
+
+    def set_led(self, slot: int, led: int, on: bool) -> None:
+        if not 0 <= led < self.agents[slot].spec.leds:
+            raise EditError(f"{self.agents[slot].id} has no LED {led}")
+        self.leds[slot, led] = 1 if on else 0
+
+    def set_arm(self, slot: int, position: int) -> None:
+        g = self.agents[slot].spec.gripper
+        if g is None or not self.agents[slot].has_gripper:
+            raise EditError(f"{self.agents[slot].id} has no gripper")
+        self.arm_target[slot] = float(np.clip(position, g.arm_up, g.arm_down))
+
+    def set_fingers(self, slot: int, closed: bool) -> None:
+        agent = self.agents[slot]
+        if not agent.has_gripper:
+            raise EditError(f"{agent.id} has no gripper")
+        self.fingers[slot] = FINGERS_CLOSED if closed else FINGERS_OPEN
+        if closed and agent.held is None:
+            obj = self._object_in_grip(slot)
+            if obj is not None:
+                self._grip(slot, obj)
+        elif not closed and agent.held is not None:
+            self._release(agent.held)
+
+    def resistivity(self, slot: int) -> int:
+        agent = self.agents[slot]
+        g = agent.spec.gripper
+        if agent.held is not None:
+            return agent.held.resistivity
+        return g.empty_resistivity if g else 0
+
+    # -- gripper ----------------------------------------------------------------------
+
+    def _to_robot_frame(self, slot: int, x: float, y: float) -> tuple[float, float]:
+        ax, ay, th = self.agent_pose[slot]
+        dx, dy = x - ax, y - ay
+        c, s = math.cos(th), math.sin(th)
+        return c * dx + s * dy, -s * dx + c * dy
+
+    def _arm_lowered(self, slot: int) -> bool:
+        g = self.agents[slot].spec.gripper
+        return g is not None and self.arm[slot] >= g.lowered_above
+
+    def _object_in_grip(self, slot: int) -> MovableObject | None:
+        agent = self.agents[slot]
+        g = agent.spec.gripper
+        if g is None or not self._arm_lowered(slot):
+            return None
+        best: MovableObject | None = None
+        for obj in self.objects:
+            if obj.held_by is not None or obj.body is None:
+                continue
+            lx, ly = self._to_robot_frame(slot, obj.body.position.x, obj.body.position.y)
+            if (
+                g.presence_x_mm[0] <= lx <= g.presence_x_mm[1]
+                and abs(ly) <= g.presence_half_width_mm
+            ):
+                best = obj
+        return best
+
+    def _grip(self, slot: int, obj: MovableObject) -> None:
+        agent = self.agents[slot]
+        assert obj.body is not None
+        lx, ly = self._to_robot_frame(slot, obj.body.position.x, obj.body.position.y)
+        obj.held_by = agent
+        obj.held_offset = (lx, ly, obj.body.angle - self.agent_pose[slot, 2])
+        agent.held = obj
+        self.space.remove(*obj.floor_joints)
+        obj.body.body_type = pymunk.Body.KINEMATIC
+        for s in obj.shapes:
+            s.filter = pymunk.ShapeFilter(group=agent.serial, categories=CAT_OBJECT)
+        self._rows_stale = True
+
+    def _release(self, obj: MovableObject) -> None:
+        agent = obj.held_by
+        if agent is None or obj.body is None:
+            return
+        obj.held_by = None
+        agent.held = None
+        obj.body.body_type = pymunk.Body.DYNAMIC
+        obj.body.mass = obj.mass_g
+        if obj.shape.kind == "circle":
+            obj.body.moment = pymunk.moment_for_circle(obj.mass_g, 0, obj.shape.radius_mm)
+        else:
+            obj.body.moment = pymunk.moment_for_poly(obj.mass_g, obj.shape.vertices())
+        obj.body.velocity, obj.body.angular_velocity = (0, 0), 0.0
+        for s in obj.shapes:
+            s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
+        self.space.add(*obj.floor_joints)
+        self._rows_stale = True
+
+    def _grip_exception(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
+        """Objects whose centre is between the open, lowered tongs do not collide (6.8.3)."""
+        robot_shape, object_shape = arbiter.shapes
+        agent = self._agent_by_body.get(id_of(robot_shape.body))
+        if agent is None or not agent.has_gripper or agent.spec.gripper is None:
+            return
+        slot = self._slot_of[agent.serial]
+        if self.fingers[slot] != FINGERS_OPEN or not self._arm_lowered(slot):
+            return
+        g = agent.spec.gripper
+        p = object_shape.body.position
+        lx, ly = self._to_robot_frame(slot, p.x, p.y)
+        if g.grip_x_mm[0] <= lx <= g.grip_x_mm[1] and abs(ly) <= g.gap_mm / 2:
+            arbiter.process_collision = False
+
+    def _update_arms(self, dt: float) -> None:
+        if not len(self.agents) or not np.any(self.arm != self.arm_target):
+            return
+        was_lowered = self.arm >= self.tables.arm_lowered_above
+        step = self.tables.arm_rate * dt
+        self.arm += np.clip(self.arm_target - self.arm, -step, step)
+        now_lowered = self.arm >= self.tables.arm_lowered_above
+        for slot in np.nonzero(was_lowered != now_lowered)[0]:  # only arms that crossed
+            agent = self.agents[int(slot)]
+            mask = CAT_ALL if now_lowered[slot] else 0  # a raised arm passes over everything
+            for tong in agent.tongs:
+                tong.filter = pymunk.ShapeFilter(
+                    group=agent.serial, categories=CAT_TONGS, mask=mask
+                )
+            if agent.held is not None:
+                for s in agent.held.shapes:
+                    s.filter = pymunk.ShapeFilter(
+                        group=agent.serial, categories=CAT_OBJECT, mask=mask
+                    )
+
+    def _carry_held(self) -> None:
+        for slot, agent in enumerate(self.agents):
+            obj = agent.held
+            if obj is None or obj.body is None:
+                continue
+            x, y, th = self.agent_pose[slot]
+            lx, ly, lh = obj.held_offset
+            c, s = math.cos(th), math.sin(th)
+            obj.body.position = (x + c * lx - s * ly, y + s * lx + c * ly)
+            obj.body.angle = th + lh
+            vx, vy, w = self.agent_vel[slot]
+            obj.body.velocity = (vx - w * (s * lx + c * ly), vy + w * (c * lx - s * ly))
+            obj.body.angular_velocity = w
+
+    # -- stepping -------------------------------------------------------------------------
+
+    def _refresh_rows(self, ids: np.ndarray) -> None:
+        row_of = {int(b): i for i, b in enumerate(ids)}
+        self._agent_rows = np.array([row_of[id_of(a.body)] for a in self.agents], dtype=np.int64)
+        self._control_rows = np.array(
+            [row_of[id_of(a.control)] for a in self.agents], dtype=np.int64
+        )
+        self._object_rows = np.array(
+            [row_of[id_of(o.body)] for o in self.objects if o.body is not None], dtype=np.int64
+        )
+        self._batch_ids = ids.copy()
+        self._rows_stale = False
+
+    def _read_bodies(self) -> np.ndarray:
+        fields = (
+            pbatch.BodyFields.BODY_ID
+            | pbatch.BodyFields.POSITION
+            | pbatch.BodyFields.ANGLE
+            | pbatch.BodyFields.VELOCITY
+            | pbatch.BodyFields.ANGULAR_VELOCITY
+        )
+        self._batch.clear()
+        pbatch.get_space_bodies(self.space, fields, self._batch)
+        ids = np.frombuffer(self._batch.int_buf(), dtype=np.uintp)
+        state = np.frombuffer(self._batch.float_buf(), dtype=np.float64).reshape(-1, 6)
+        if (
+            self._rows_stale
+            or len(ids) != len(self._batch_ids)
+            or not np.array_equal(ids, self._batch_ids)
+        ):
+            self._refresh_rows(ids)
+        if len(self.agents):
+            rows = state[self._agent_rows]
+            self.agent_pose = rows[:, 0:3].copy()
+            self.agent_vel = rows[:, 3:6].copy()
+        self.object_pose = (
+            state[self._object_rows, 0:3].copy() if len(self.objects) else np.zeros((0, 3))
+        )
+        return state
+
+    def _drive(self, state: np.ndarray) -> None:
+        if not len(self.agents):
+            return
+        wheel = self.cmd * self.tables.mm_s_per_unit[:, None]
+        v = wheel.mean(axis=1)
+        w = (wheel[:, 1] - wheel[:, 0]) / self.tables.wheel_base
+        theta = self.agent_pose[:, 2]
+        vel = state[:, 3:6].copy()
+        vel[self._control_rows, 0] = v * np.cos(theta)
+        vel[self._control_rows, 1] = v * np.sin(theta)
+        vel[self._control_rows, 2] = w
+        buf = pbatch.Buffer()
+        flat = np.ascontiguousarray(vel.ravel())
+        buf.set_float_buf(flat)
+        pbatch.set_space_bodies(
+            self.space, pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY, buf
+        )
+
+    def step(self) -> None:
+        """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
+        dt = self.tick_s
+        self._update_arms(dt)
+        state = self._read_bodies()
+        self._drive(state)
+        sub = dt / self.substeps
+        for _ in range(self.substeps):
+            self.space.step(sub)
+        if len(self.agents):
+            self.counters += self.cmd * (dt * self.tables.pulses_per_s_per_unit)[:, None]
+        self._read_bodies()
+        self._carry_held()
+        self.tick += 1
+        self.sim_time = self.tick * dt
+        if self.sim_time + 1e-9 >= self._next_sense:
+            self.sense()
+            self._next_sense = self.sim_time + self.sensor_period_s - 1e-9
+
+    def sense(self) -> None:
+        """Recompute every agent's proximity, ambient and gripper presence readings."""
+        if self._static_dirty or self.static_geometry is None:
+            self.static_geometry = sensing.StaticGeometry.build(self)
+            self._static_dirty = False
+        sensing.sense(self)
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds / self.tick_s)):
+            self.step()
+
+    # -- reading ---------------------------------------------------------------------------
+
+    def lights_on(self) -> np.ndarray:
+        return np.array([light.is_on(self.sim_time) for light in self.lights], dtype=bool)
+
+    def gripper_state(self, slot: int) -> int:
+        """0 open, 1 closed, 2 holding."""
+        if self.agents[slot].held is not None:
+            return 2
+        return int(self.fingers[slot])
+
+
+def id_of(body: pymunk.Body) -> int:
+    return int(body.id)
+
+
+def _make_shapes(body: pymunk.Body, shape: ShapeSpec) -> list[pymunk.Shape]:
+    if shape.kind == "circle":
+        return [pymunk.Circle(body, shape.radius_mm)]
+    return [pymunk.Poly(body, shape.vertices())]
+
+
+def _floor_friction(
+    static: pymunk.Body, body: pymunk.Body, mass_g: float, mu: float, shape: ShapeSpec
+) -> list[pymunk.Constraint]:
+    """Top-down friction (pymunk's tank pattern): velocity-only joints to the floor."""
+    pivot = pymunk.PivotJoint(static, body, (0, 0), (0, 0))
+    pivot.max_bias = 0.0
+    pivot.max_force = mu * mass_g * GRAVITY_MM_S2
+    gear = pymunk.GearJoint(static, body, 0.0, 1.0)
+    gear.max_bias = 0.0
+    gear.max_force = mu * mass_g * GRAVITY_MM_S2 * shape.bounding_radius_mm / 2
+    return [pivot, gear]

@@ -1,0 +1,251 @@
+"""A real engine process on a real router: frames, sensors, snapshot, leases, watchdog, edits."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from common import keys
+from common.auth import RegistryIdentity, Session, issue_session
+from common.keys import AliveKind
+from common.messages import (
+    AddItem,
+    AgentCommand,
+    EditResult,
+    ErrorReply,
+    Lease,
+    MapRequest,
+    Message,
+    MoveItem,
+    SensorSample,
+    WorldEdit,
+    WorldFrame,
+    WorldSnapshot,
+    decode,
+)
+from common.supervisor import AliveWatch
+from tests.conftest import REPO, Procs, Router, wait_for
+
+pytestmark = pytest.mark.integration
+WORLD = "w1"
+
+
+class Latest:
+    """The newest decoded message on a key (callback kept short)."""
+
+    def __init__(self, session: zenoh.Session, key: str, kind: type[Message]) -> None:
+        self.value: object = None
+        self.count = 0
+        self._lock = threading.Lock()
+
+        def on(sample: zenoh.Sample) -> None:
+            with self._lock:
+                self.value = decode(sample.payload, kind)
+                self.count += 1
+
+        self.sub = session.declare_subscriber(key, on)
+
+    def get(self) -> object:
+        with self._lock:
+            return self.value
+
+
+@pytest.fixture
+def identity() -> RegistryIdentity:
+    return RegistryIdentity.generate()
+
+
+@pytest.fixture
+def engine(
+    router: Router,
+    procs: Procs,
+    identity: RegistryIdentity,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> Path:
+    maps_dir = tmp_path / "maps"
+    maps_dir.mkdir()
+    shutil.copy(REPO / "maps" / "foraging.json", maps_dir / "foraging.json")
+    net = router.options(registry_key=identity.verify_key.hex()).as_args()
+    proc = procs.start(
+        "engine",
+        [
+            "engine",
+            "--map",
+            str(maps_dir / "foraging.json"),
+            "--world",
+            WORLD,
+            "--seed",
+            "3",
+            "--watchdog-ms",
+            "300",
+            *net,
+        ],
+    )
+    key = keys.alive(router.realm, AliveKind.WORLD, WORLD)
+    assert alive_watch.wait(key, 30.0), proc.output()
+    return maps_dir
+
+
+def ask(session: zenoh.Session, key: str, payload: bytes | None = None) -> Message:
+    for reply in session.get(key, payload=payload, timeout=10.0):
+        assert reply.ok is not None, reply.err
+        return decode(reply.ok.payload, (WorldSnapshot, EditResult, ErrorReply))
+    raise AssertionError(f"no reply on {key}")
+
+
+def lease_for(realm: str, holder: Session, *, start: float, end: float, lid: str = "L1") -> Lease:
+    return Lease(
+        lease_id=lid,
+        world=WORLD,
+        agent="k0",
+        holder_user=holder.user,
+        holder_session=holder.session_id,
+        start=start,
+        end=end,
+    )
+
+
+def x_of(frame: object, row: int = 0) -> float:
+    assert isinstance(frame, WorldFrame)
+    return float(frame.poses.to_numpy()[row, 0])
+
+
+def test_frames_sensors_and_snapshot(router: Router, zsession: zenoh.Session, engine: Path) -> None:
+    realm = router.realm
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    sensors = Latest(zsession, keys.agent_sensors(realm, WORLD, "k0"), SensorSample)
+    wait_for(lambda: frames.count > 5 and sensors.count > 5, 15, "frames and sensor samples")
+    snap = ask(zsession, keys.world_snapshot(realm, WORLD))
+    assert isinstance(snap, WorldSnapshot)
+    assert snap.rows[:4] == ["k0", "k1", "k2", "k3"] and "ball0" in snap.rows
+    assert {i.category for i in snap.items} == {"obstacle", "object", "zone"}
+    assert snap.agents[0].type == "khepera" and snap.agents[0].gripper
+    frame = frames.get()
+    assert isinstance(frame, WorldFrame) and frame.layout == snap.layout
+    assert frame.poses.to_numpy().shape == (len(snap.rows), 3)
+    sample = sensors.get()
+    assert isinstance(sample, SensorSample) and len(sample.proximity) == 8
+    assert sample.gripper is not None and sample.gripper.arm == 255
+    assert sample.ambient[0] < 500  # the nest lamp is near
+
+
+def test_only_the_lease_holder_drives_and_the_watchdog_stops(
+    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+) -> None:
+    realm = router.realm
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    mallory = issue_session(identity, realm, "mallory", ["control"])
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    wait_for(lambda: frames.count > 0, 10, "a frame")
+    lease_key = keys.agent_lease(realm, WORLD, "k0")
+    cmd_key = keys.agent_cmd(realm, WORLD, "k0")
+    go = AgentCommand(agent="k0", speeds=(10, 10))
+
+    def drive(who: Session, seconds: float) -> float:
+        start_x = x_of(frames.get())
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            zsession.put(cmd_key, who.seal(cmd_key, go))
+            time.sleep(0.05)  # a controller's period, not a wait for a condition
+        return x_of(frames.get()) - start_x
+
+    # No lease at all: nothing moves.
+    assert abs(drive(alice, 0.6)) < 1.0
+    now = time.time()
+    zsession.put(
+        lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
+    )
+    # A lease published by someone without the 'lease' permission is ignored.
+    fake = lease_for(realm, mallory, start=now, end=now + 60, lid="L2")
+    zsession.put(lease_key, mallory.seal(lease_key, fake))
+    # Mallory does not hold the lease.
+    assert abs(drive(mallory, 0.6)) < 1.0
+    # Alice does: 80 mm/s.
+    moved = drive(alice, 1.0)
+    assert moved > 40.0, moved
+    # Watchdog: she stops sending; within 300 ms (plus delivery) the robot stops.
+    time.sleep(0.5)
+    x1 = x_of(frames.get())
+    wait_for(lambda: frames.count > 0, 1)
+    time.sleep(0.3)
+    assert abs(x_of(frames.get()) - x1) < 1.0
+    # The lease ends early (same id, new end): her commands are refused.
+    now = time.time()
+    ended = lease_for(realm, alice, start=now - 10, end=now - 1)
+    zsession.put(lease_key, context.seal(lease_key, ended))
+    time.sleep(0.2)
+    assert abs(drive(alice, 0.6)) < 1.0
+
+
+def test_edits_need_edit_map_and_are_validated(
+    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+) -> None:
+    realm = router.realm
+    editor = issue_session(identity, realm, "teacher", ["edit_map"])
+    student = issue_session(identity, realm, "student", ["control"])
+    edit_key = keys.world_edit(realm, WORLD)
+    map_key = keys.world_map(realm, WORLD)
+    move = WorldEdit(op=MoveItem(id="rock1", x=800.0, y=900.0))
+    refused = ask(zsession, edit_key, student.seal(edit_key, move))
+    assert isinstance(refused, ErrorReply) and refused.code == "forbidden"
+    unsigned = ask(zsession, edit_key, b"junk")
+    assert isinstance(unsigned, ErrorReply) and unsigned.code == "unauthenticated"
+    before = ask(zsession, keys.world_snapshot(realm, WORLD))
+    assert isinstance(before, WorldSnapshot)
+    done = ask(zsession, edit_key, editor.seal(edit_key, move))
+    assert isinstance(done, EditResult) and done.layout > before.layout
+    outside = WorldEdit(op=MoveItem(id="rock1", x=5000.0, y=900.0))
+    bad = ask(zsession, edit_key, editor.seal(edit_key, outside))
+    assert isinstance(bad, ErrorReply) and bad.code == "conflict" and "arena" in bad.message
+    onto_wall = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1250, "y": 300}))
+    bad = ask(zsession, edit_key, editor.seal(edit_key, onto_wall))
+    assert isinstance(bad, ErrorReply) and "overlap an obstacle" in bad.message
+    add = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1400, "y": 150}))
+    assert isinstance(ask(zsession, edit_key, editor.seal(edit_key, add)), EditResult)
+    after = ask(zsession, keys.world_snapshot(realm, WORLD))
+    assert isinstance(after, WorldSnapshot) and "k9" in after.rows
+    rock = next(i for i in after.items if i.id == "rock1")
+    assert (rock.x, rock.y) == (800.0, 900.0)
+    # Save under a plain name; paths are refused; then load it back.
+    saved = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="save", name="edited")))
+    assert isinstance(saved, EditResult), saved
+    data = json.loads((engine / "edited.json").read_text())
+    assert any(a["id"] == "k9" for a in data["agents"])
+    evil = b'{"action": "save", "name": "../x"}'
+    assert isinstance(ask(zsession, map_key, evil), ErrorReply)
+    loaded = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="load", name="edited")))
+    assert isinstance(loaded, EditResult), loaded
+    listed = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="list")))
+    assert isinstance(listed, EditResult) and "edited" in listed.maps
+
+
+def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "wart-map", "version": 1,\n "arena": {"width": 500 "height": 1}}\n')
+    proc = procs.start("engine-bad", ["engine", "--map", str(bad)])
+    assert proc.popen.wait(30) == 2
+    assert "line 3" in proc.output() or "line 2" in proc.output(), proc.output()
+    typo = tmp_path / "typo.json"
+    typo.write_text(
+        json.dumps(
+            {
+                "format": "wart-map",
+                "version": 1,
+                "arena": {"width": 500, "height": 500},
+                "objects": [
+                    {"id": "b", "shape": "circle", "x": 10, "y": 10, "radius": 5, "colr": "#ffffff"}
+                ],
+            }
+        )
+    )
+    proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
+    assert proc.popen.wait(30) == 2
+    assert "objects[0].colr" in proc.output(), proc.output()

@@ -1,0 +1,108 @@
+"""Map files (schema, errors, round trip) and the world wire types."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.messages import (
+    AgentCommand,
+    Lease,
+    MapRequest,
+    MessageError,
+    MoveItem,
+    SensorSample,
+    WorldEdit,
+    WorldFrame,
+    WorldSnapshot,
+    decode,
+    encode,
+)
+from services.engine import maps, wire
+from services.engine.maps import MapError
+
+MAPS = Path(__file__).resolve().parents[3] / "maps"
+
+
+@pytest.mark.parametrize("name", ["empty", "maze", "foraging", "phototaxis", "swarm"])
+def test_shipped_maps_load(name: str) -> None:
+    world = maps.load_map(MAPS / f"{name}.json", name=name)
+    assert world.agents
+    if name == "swarm":
+        assert len(world.agents) == 1000
+
+
+def _map(**sections: object) -> str:
+    return json.dumps(
+        {"format": "wart-map", "version": 1, "arena": {"width": 500, "height": 500}, **sections},
+        indent=1,
+    )
+
+
+def test_errors_name_the_field_and_line() -> None:
+    with pytest.raises(MapError, match=r"line 1 column 2"):
+        maps.parse_map("{oops}", "m")
+    with pytest.raises(MapError, match="version"):
+        maps.parse_map('{"format": "wart-map", "version": 9}', "m")
+    text = _map(objects=[{"id": "b1", "shape": "circle", "x": 10, "y": 10, "radius": -3}])
+    with pytest.raises(MapError, match=r"line \d+: objects\[0\]\.radius: must be positive"):
+        maps.build_world(maps.parse_map(text), name="w", text=text)
+    text = _map(agents=[{"id": "k1", "type": "roomba", "x": 100, "y": 100}])
+    with pytest.raises(MapError, match=r"agents\[0\]\.type: must be one of epuck, khepera"):
+        maps.build_world(maps.parse_map(text), name="w", text=text)
+    text = _map(
+        obstacles=[{"id": "o", "shape": "box", "x": 100, "y": 100, "width": 100, "height": 100}],
+        agents=[{"id": "k1", "x": 110, "y": 100}],
+    )
+    with pytest.raises(MapError, match=r"k1.*overlap an obstacle"):
+        maps.build_world(maps.parse_map(text), name="w", text=text)
+
+
+def test_save_and_reload_round_trip(tmp_path: Path) -> None:
+    world = maps.load_map(MAPS / "foraging.json", name="w")
+    world.run(0.2)
+    path = maps.save_map(world, tmp_path, "copy")
+    again = maps.load_map(path, name="w")
+    assert wire.rows(again) == wire.rows(world)
+    assert np.allclose(again.agent_pose, world.agent_pose, atol=0.01)
+    with pytest.raises(MapError):
+        maps.map_path(tmp_path, "../escape")
+
+
+def test_wire_messages_round_trip() -> None:
+    world = maps.load_map(MAPS / "foraging.json", name="w")
+    world.run(0.1)
+    for message in (
+        wire.frame(world),
+        wire.sample(world, 0),
+        wire.snapshot(world),
+        wire.batch(world),
+    ):
+        assert decode(encode(message), type(message)) == message
+    frame = wire.frame(world)
+    assert isinstance(frame, WorldFrame)
+    assert frame.poses.to_numpy().shape == (len(wire.rows(world)), 3)
+    snap = wire.snapshot(world)
+    assert isinstance(snap, WorldSnapshot) and snap.rows == wire.rows(world)
+    sample = wire.sample(world, 0)
+    assert isinstance(sample, SensorSample) and sample.gripper is not None
+    for message in (
+        AgentCommand(agent="k0", speeds=(10, -10), leds=[1, 2], arm=200, fingers="closed"),
+        Lease(
+            lease_id="L1",
+            world="w",
+            agent="k0",
+            holder_user="u",
+            holder_session=b"x" * 16,
+            start=1.0,
+            end=2.0,
+        ),
+        WorldEdit(op=MoveItem(id="a", x=1.0, y=2.0)),
+        MapRequest(action="save", name="m"),
+    ):
+        assert decode(encode(message), type(message)) == message
+    with pytest.raises(MessageError):
+        decode(encode(AgentCommand(agent="k0")).replace(b"k0", b"k/"), AgentCommand)
