@@ -38,7 +38,12 @@ def sample_value(tp: object, name: str = "") -> object:
         return sample_value(base, name)
     if origin is typing.Literal:
         return typing.get_args(tp)[0]
-    if origin in (list, tuple, set, frozenset):
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return (sample_value(args[0], name),)
+        return tuple(sample_value(arg, name) for arg in args)
+    if origin in (list, set, frozenset):
         args = typing.get_args(tp)
         return [sample_value(args[0], name)] if args else []
     if origin is dict:
