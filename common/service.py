@@ -175,10 +175,13 @@ def _quietly(fn: Callable[[], object]) -> None:
 # --- running a service as a process -------------------------------------------------
 
 
-def open_session(options: NetworkOptions, *, wait: float | None = None) -> zenoh.Session:
+def open_session(
+    options: NetworkOptions, *, wait: float | None = None, quiet: bool = False
+) -> zenoh.Session:
     """Open a Zenoh session, retrying while no router answers.
 
-    ``wait`` is how long to keep trying (None: until stopped by a signal).
+    ``wait`` is how long to keep trying (None: until stopped by a signal);
+    ``quiet`` skips the "waiting for a router" warning (a router just started).
     """
     conf_error: Exception | None = None
     delay = 0.2
@@ -193,7 +196,7 @@ def open_session(options: NetworkOptions, *, wait: float | None = None) -> zenoh
             raise ConnectionError(
                 f"no Zenoh router reachable at {', '.join(options.effective_connect)}: {conf_error}"
             )
-        if not announced:
+        if not announced and not quiet:
             log.warning(
                 "waiting for a Zenoh router at %s (%s)",
                 ", ".join(options.effective_connect) or "(scouting)",

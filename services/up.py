@@ -23,7 +23,7 @@ from common import cli, keys
 from common.keys import AliveKind
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch, ChildSpec, Supervisor
-from common.zconfig import DEFAULT_PORT, NetworkOptions
+from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
 
 log = logging.getLogger("wart.up")
 
@@ -93,12 +93,22 @@ def provision(lab: LabSettings) -> LabSettings:
         print(
             f"  first start: user 'admin', password {password}\n"
             f"    (kept in {lab.state_dir / 'admin-password.txt'}); chat with\n"
-            f"    wart chat {LOBBY} --user admin --registry-key {key_hex}",
+            f"    wart chat {LOBBY} --user admin{client_flags(lab)} --registry-key {key_hex}",
             flush=True,
         )
     else:
         print(f"  admin password: see {lab.state_dir / 'admin-password.txt'}", flush=True)
     return replace(lab, network=lab.network.with_(registry_key=key_hex))
+
+
+def client_flags(lab: LabSettings) -> str:
+    """The flags a user's client needs to reach this lab, beyond the defaults."""
+    flags = ""
+    if lab.realm != DEFAULT_REALM:
+        flags += f" --realm {lab.realm}"
+    if lab.router_endpoint != DEFAULT_ROUTER:
+        flags += f" --connect {lab.router_endpoint}"
+    return flags
 
 
 def lab_plan(lab: LabSettings) -> list[ChildSpec]:
@@ -229,7 +239,7 @@ def run_lab(
             supervisor.add(router_spec(lab))
             supervisor.spawn(supervisor.children[0])
         try:
-            session = open_session(lab.network, wait=30.0)
+            session = open_session(lab.network, wait=30.0, quiet=lab.start_router)
         except ConnectionError as exc:
             print(f"  ✗ {exc}", flush=True)
             return 1
