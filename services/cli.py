@@ -17,6 +17,7 @@ from collections.abc import Sequence
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "up": ("services.up", "start a whole lab on this machine under supervision"),
     "router": ("services.router", "run a Zenoh router (one per host)"),
+    "viewer": ("viewers.web.app", "serve the web viewer (browser WARTApp on viser)"),
 }
 
 
