@@ -90,14 +90,14 @@ class ViserPage:
     name: str
 
     @property
-    def p(self):  # noqa: ANN201 - the Playwright Page, untyped here to keep the import lazy
+    def p(self):
         return self.page
 
     def wait_ready(self, timeout: float = 15_000) -> None:
         self.p.wait_for_selector("canvas", timeout=timeout)
         self.button("Connect").wait_for(timeout=timeout)
 
-    def input_after_label(self, label: str, nth: int = -1):  # noqa: ANN201
+    def input_after_label(self, label: str, nth: int = -1):
         # get_by_label does not find viser inputs (the label's `for` does not match
         # the input id): take the first input or textarea after the label's text.
         xpath = (
@@ -112,13 +112,13 @@ class ViserPage:
         field.fill(text)
         field.press("Enter")  # viser sends text inputs on change; Enter settles it
 
-    def button(self, name: str):  # noqa: ANN201
+    def button(self, name: str):
         return self.p.get_by_role("button", name=name, exact=True).last
 
     def click(self, name: str, timeout: float = 10_000) -> None:
         self.button(name).click(timeout=timeout)
 
-    def tab(self, name: str):  # noqa: ANN201
+    def tab(self, name: str):
         return self.p.get_by_role("tab", name=re.compile(re.escape(name)))
 
     def wait_text(self, text: str, timeout: float = 10_000) -> None:
