@@ -94,7 +94,8 @@ class ViserPage:
         return self.page
 
     def wait_ready(self, timeout: float = 15_000) -> None:
-        self.p.wait_for_selector("canvas", timeout=timeout)
+        # viser's GUI arrives over its websocket once the page is up (the page has
+        # more than one canvas, some never visible: wait for the GUI instead).
         self.button("Connect").wait_for(timeout=timeout)
 
     def input_after_label(self, label: str, nth: int = -1):
