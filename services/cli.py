@@ -26,6 +26,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
     ),
     "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
+    "viewer": ("viewers.web.app", "serve the web viewer (browser WARTApp on viser)"),
 }
 
 

@@ -173,7 +173,41 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             detail="simulated world arena1 (maps/foraging.json)",
         )
     )
+    # The viewer comes last: it is the front door once everything else serves.
+    plan.append(
+        ChildSpec(
+            name=VIEWER_NAME,
+            argv=[
+                "viewer",
+                *net,
+                "--id",
+                "web",
+                "--http-port",
+                str(lab.http_port),
+                "--url-file",
+                str(viewer_url_file(lab)),
+                "--data-dir",
+                str(lab.state_dir / "viewer"),
+            ],
+            alive_key=keys.alive(realm, AliveKind.VIEWER, "web"),
+        )
+    )
     return plan
+
+
+VIEWER_NAME = "viewer"
+
+
+def viewer_url_file(lab: LabSettings) -> Path:
+    """Where the viewer writes the page's actual URL (viser moves on if the port is busy)."""
+    return lab.state_dir / "viewer.url"
+
+
+def viewer_url(lab: LabSettings) -> str | None:
+    try:
+        return viewer_url_file(lab).read_text().strip() or None
+    except OSError:
+        return None
 
 
 def router_spec(lab: LabSettings) -> ChildSpec:
@@ -253,11 +287,14 @@ def run_lab(
         except (ValueError, OSError) as exc:
             print(f"  ✗ {exc}", flush=True)
             return 1
+        viewer_url_file(lab).unlink(missing_ok=True)  # never report a previous run's URL
         for spec in lab_plan(lab):
             if stop.is_set():
                 break
             if not supervisor.start(spec):
                 code = 1
+            elif spec.name == VIEWER_NAME:
+                print(f"  web viewer: {viewer_url(lab) or '(address unknown)'}", flush=True)
         if not stop.is_set():
             print("The lab is running. Press Ctrl-C to stop it.", flush=True)
             if ready is not None:

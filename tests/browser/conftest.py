@@ -1,0 +1,169 @@
+"""Real-browser fixtures: Debian's Chromium driven by Playwright, a viewer on fakes.
+
+The browser is never downloaded: Playwright launches /usr/bin/chromium with
+the usual headless flags (software WebGL). Screenshots go to test-artifacts/
+and are kept as artefacts of the run.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import ARTIFACTS, free_port
+from viewers.web.app import WebViewer
+from viewers.web.fakes import FakeConnector, FakeLab
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+VIEWPORT = {"width": 1280, "height": 800}  # a laptop screen
+
+pytestmark = pytest.mark.browser
+
+
+def _skip_reason() -> str | None:
+    if not CHROMIUM.exists():
+        return f"{CHROMIUM} is missing (apt-get install chromium)"
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "the playwright package is missing (pip install playwright)"
+    return None
+
+
+@pytest.fixture(scope="session")
+def chromium() -> Iterator[object]:
+    reason = _skip_reason()
+    if reason:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        # A plain launch gets a fresh temporary profile (user-data-dir) from
+        # Playwright, deleted on close; Playwright refuses --user-data-dir here.
+        browser = pw.chromium.launch(
+            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+        )
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+@pytest.fixture
+def fake_lab() -> Iterator[FakeLab]:
+    lab = FakeLab("Test lab", robots=12)
+    yield lab
+    lab.close()
+
+
+@pytest.fixture
+def viewer(fake_lab: FakeLab, tmp_path: Path) -> Iterator[WebViewer]:
+    app = WebViewer(
+        FakeConnector(("lab", fake_lab)),
+        port=free_port(),
+        data_dir=tmp_path / "viewer",
+    )
+    yield app
+    app.stop()
+
+
+@dataclass
+class ViserPage:
+    """A viser page in a browser tab, with helpers that find viser's widgets."""
+
+    page: object  # playwright.sync_api.Page
+    name: str
+
+    @property
+    def p(self):
+        return self.page
+
+    def wait_ready(self, timeout: float = 15_000) -> None:
+        # viser's GUI arrives over its websocket once the page is up (the page has
+        # more than one canvas, some never visible: wait for the GUI instead).
+        self.button("Connect").wait_for(timeout=timeout)
+
+    def input_after_label(self, label: str, nth: int = -1):
+        # get_by_label does not find viser inputs (the label's `for` does not match
+        # the input id): take the first input or textarea after the label's text.
+        xpath = (
+            f"xpath=//label[normalize-space(.)='{label}']"
+            "/following::*[self::input or self::textarea][1]"
+        )
+        loc = self.p.locator(xpath)
+        return loc.nth(nth) if nth >= 0 else loc.last
+
+    def fill(self, label: str, text: str) -> None:
+        field = self.input_after_label(label)
+        field.fill(text)
+        field.press("Enter")  # viser sends text inputs on change; Enter settles it
+
+    def button(self, name: str):
+        return self.p.get_by_role("button", name=name, exact=True).last
+
+    def click(self, name: str, timeout: float = 10_000) -> None:
+        self.button(name).click(timeout=timeout)
+
+    def tab(self, name: str):
+        return self.p.get_by_role("tab", name=re.compile(re.escape(name)))
+
+    def wait_text(self, text: str, timeout: float = 10_000) -> None:
+        self.p.get_by_text(text, exact=False).first.wait_for(timeout=timeout)
+
+    def screenshot(self, label: str) -> Path:
+        ARTIFACTS.mkdir(exist_ok=True)
+        path = ARTIFACTS / f"{self.name}-{label}.png"
+        self.p.screenshot(path=str(path))
+        return path
+
+    def log_in(self, address: str, user: str, password: str) -> None:
+        self.fill("Address", address)
+        self.click("Connect")
+        self.button("Log in").wait_for(timeout=10_000)
+        self.fill("User", user)
+        self.fill("Password", password)
+        self.click("Log in")
+
+
+@pytest.fixture
+def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureRequest):
+    """Open the viewer in a new browser context (its own cookies and storage)."""
+    contexts: list[object] = []
+
+    def opener(tag: str = "a") -> ViserPage:
+        context = chromium.new_context(viewport=VIEWPORT)  # type: ignore[attr-defined]
+        contexts.append(context)
+        page = context.new_page()
+        page.goto(viewer.url.replace("localhost", "127.0.0.1"))
+        vp = ViserPage(page, f"{request.node.name}-{tag}")
+        vp.wait_ready()
+        return vp
+
+    yield opener
+    for context in contexts:
+        context.close()  # type: ignore[attr-defined]
+
+
+def wait_until(condition: Callable[[], bool], timeout: float = 10.0, what: str = "") -> None:
+    """Poll a condition (state read from the server or the page), never a fixed sleep."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what or condition}")

@@ -1,0 +1,1 @@
+"""Browser-facing clients of the lab (the viser web viewer)."""

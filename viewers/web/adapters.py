@@ -1,0 +1,300 @@
+"""What the viewer needs from the lab, as small Protocols.
+
+The viewer's UI is written against these, never against Zenoh or the wire
+messages directly. Phase 1 runs on the in-memory fakes (viewers/web/fakes.py);
+phase 2 implements them over the registry client (``LabClient``, issue 3) and
+the Sim2D world messages (issue 4). Everything here is plain data: numpy
+arrays for bulk poses, frozen dataclasses for the rest.
+
+Units are the world's: millimetres, radians, seconds; x right, y up, the
+origin at the arena's lower-left corner. Conversion to viser's metres happens
+in viewers/web/geometry.py only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from viewers.web.address import LabAddress
+
+F32 = npt.NDArray[np.float32]
+
+# --- errors ---------------------------------------------------------------------
+
+
+class LabError(Exception):
+    """A refused or failed request; ``str()`` is shown to the person as is."""
+
+
+class LoginError(LabError):
+    """Wrong user or password, no such lab, registry not answering."""
+
+
+# --- lab: directory, contexts, chat ------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ContextSummary:
+    """A live context as the lobby lists it."""
+
+    ctx: str
+    kind: str  # "chat" or "agent" (an arena)
+    owner: str
+    title: str = ""
+    members: int = 0
+    world: str | None = None  # the world an agent context is bound to
+
+
+@dataclass(frozen=True)
+class Directory:
+    server_name: str
+    users: tuple[str, ...]
+    contexts: tuple[ContextSummary, ...]
+
+
+@dataclass(frozen=True)
+class ChatLine:
+    seq: int
+    sender: str
+    text: str
+    at: float
+
+
+@dataclass(frozen=True)
+class JoinedContext:
+    """What a join returns: enough to draw the context's tab."""
+
+    ctx: str
+    kind: str
+    title: str
+    owner: str
+    members: tuple[str, ...]
+    history: tuple[ChatLine, ...]
+    world: str | None = None
+    can_kick: bool = False
+
+
+# Events arrive on the lab connection's own threads; the viewer only updates
+# GUI handles from them (cheap, non-blocking), never waits on the network.
+
+
+@dataclass(frozen=True)
+class ChatEvent:
+    ctx: str
+    line: ChatLine
+
+
+@dataclass(frozen=True)
+class MemberEvent:
+    ctx: str
+    user: str
+    status: Literal["joined", "left", "kicked"]
+    members: tuple[str, ...]
+    by: str | None = None
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class PrivateEvent:
+    sender: str
+    text: str
+    at: float
+
+
+@dataclass(frozen=True)
+class DirectoryEvent:
+    """The directory changed (someone came or went, a context opened or closed)."""
+
+
+@dataclass(frozen=True)
+class DisconnectedEvent:
+    """The session ended from the other side (kicked from the server, lab gone)."""
+
+    reason: str
+
+
+@dataclass(frozen=True)
+class AgentsEvent:
+    """An arena's agents or queues changed."""
+
+    ctx: str
+
+
+LabEvent = ChatEvent | MemberEvent | PrivateEvent | DirectoryEvent | DisconnectedEvent | AgentsEvent
+
+# --- agents, queues, controllers --------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AgentStatus:
+    """One robot of an arena, as the robot panel lists it."""
+
+    agent: str
+    holder: str | None  # who controls it now
+    queue: int  # how many wait for it
+    my_position: int | None = None  # 1 = next; None = I am not queued
+    eta_s: float | None = None  # until my slot starts
+
+
+MAX_CONTROLLER_BYTES = 256 * 1024
+CONTROLLER_SUFFIXES = (".py",)
+
+# --- world ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A wall or box: centre, size, rotation (mm, rad)."""
+
+    ident: str
+    x: float
+    y: float
+    w: float
+    h: float
+    angle: float = 0.0
+
+
+@dataclass(frozen=True)
+class Ball:
+    ident: str
+    x: float
+    y: float
+    r: float
+
+
+@dataclass(frozen=True)
+class Light:
+    ident: str
+    x: float
+    y: float
+    on: bool = True
+
+
+@dataclass(frozen=True)
+class WorldSnapshot:
+    """The slowly-changing part of a world: the arena and its fixed things.
+
+    ``version`` changes whenever an edit changes any of it, so a view knows to
+    redraw; robots' poses travel in :class:`WorldFrame` instead.
+    """
+
+    world: str
+    width: float  # mm
+    height: float  # mm
+    obstacles: tuple[Obstacle, ...]
+    balls: tuple[Ball, ...]
+    lights: tuple[Light, ...]
+    robots: tuple[str, ...]  # agent names, in the order of the frame arrays
+    robot_radius: float = 27.5  # Khepera I: 55 mm across
+    version: int = 0
+
+
+@dataclass(frozen=True)
+class WorldFrame:
+    """One tick: every robot's pose in packed arrays (index = snapshot.robots order)."""
+
+    seq: int
+    t: float
+    poses: F32  # (N, 3): x mm, y mm, theta rad
+    gripper: npt.NDArray[np.uint8]  # (N,): 0 none/open, 1 closed, 2 holding
+    ball_xy: F32 = field(default_factory=lambda: np.zeros((0, 2), np.float32))  # (B, 2)
+    lights_on: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, np.bool_))
+
+
+@dataclass(frozen=True)
+class SensorSample:
+    """The selected robot's sensors: 8 IR proximity and 8 ambient readings (0..1023)."""
+
+    agent: str
+    t: float
+    ir: F32
+    ambient: F32
+
+
+@dataclass(frozen=True)
+class MapEdit:
+    """One edit of the map; ``op`` says which fields matter."""
+
+    op: Literal["move", "add", "delete", "resize"]
+    kind: Literal["obstacle", "ball", "light", "agent", "arena"]
+    ident: str = ""
+    x: float = 0.0
+    y: float = 0.0
+    angle: float = 0.0
+    w: float = 0.0
+    h: float = 0.0
+
+
+class WorldFeed(Protocol):
+    """A world, as the viewer watches it.
+
+    ``latest`` must be cheap and never block: phase 2 backs it with a Zenoh
+    ring channel that keeps only the newest frame.
+    """
+
+    @property
+    def world(self) -> str: ...
+
+    def snapshot(self) -> WorldSnapshot: ...
+
+    def latest(self) -> WorldFrame | None: ...
+
+    def sensors(self, agent: str) -> SensorSample | None: ...
+
+    def edit(self, edit: MapEdit) -> None:
+        """Apply an edit with the user's session; :class:`LabError` if refused."""
+        ...
+
+
+class LabConnection(Protocol):
+    """One logged-in user's session with one lab (the viewer holds one per tab group)."""
+
+    @property
+    def address(self) -> LabAddress: ...
+
+    @property
+    def user(self) -> str: ...
+
+    @property
+    def permissions(self) -> frozenset[str]: ...
+
+    def directory(self) -> Directory: ...
+
+    def join(self, ctx: str) -> JoinedContext: ...
+
+    def leave(self, ctx: str) -> None: ...
+
+    def say(self, ctx: str, text: str) -> None: ...
+
+    def kick(self, ctx: str, user: str, reason: str = "") -> None: ...
+
+    def host(self, kind: Literal["chat", "agent"], name: str, map_name: str = "") -> str:
+        """Open a new context; returns its id."""
+        ...
+
+    def send_private(self, to: str, text: str) -> None: ...
+
+    def subscribe(self, callback: Callable[[LabEvent], None]) -> Callable[[], None]:
+        """Call ``callback`` for every event from now on; returns the unsubscriber."""
+        ...
+
+    def world(self, world: str) -> WorldFeed: ...
+
+    def agents(self, ctx: str) -> list[AgentStatus]: ...
+
+    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> None: ...
+
+    def cancel_control(self, ctx: str, agent: str) -> None: ...
+
+    def logout(self) -> None: ...
+
+
+class LabConnector(Protocol):
+    """Opens lab connections; :class:`LoginError` with plain words when it cannot."""
+
+    def login(self, address: LabAddress, user: str, password: str) -> LabConnection: ...

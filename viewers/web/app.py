@@ -1,0 +1,228 @@
+"""``wart viewer``: one viser server, one Zenoh session, a WARTApp per browser.
+
+:class:`WebViewer` is the browser side (viser server, frame pump, a
+:class:`BrowserSession` per connected browser) and takes its lab connector as
+a parameter, so tests and the benchmark run it on in-memory fakes.
+:class:`ViewerService` puts it on the Zenoh network with the liveliness token
+``wart/<realm>/alive/viewer/<id>``.
+
+The actual address: viser silently takes the next port when the asked one is
+busy, so the viewer prints ``viewer: http://HOST:PORT`` once it serves, and
+writes the same URL to ``--url-file`` (``wart up`` reads it and prints it).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import sys
+import tempfile
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+
+import viser
+import zenoh
+
+from common import cli
+from common.keys import AliveKind, check_ident
+from common.service import Service, run_service
+from common.zconfig import DEFAULT_PORT, NetworkOptions
+from viewers.web.adapters import LabConnection, LabConnector, LoginError
+from viewers.web.address import LabAddress, SavedConnections, parse_address
+from viewers.web.client import BrowserSession
+from viewers.web.pump import DEFAULT_RATE, FramePump
+
+log = logging.getLogger("wart.viewer")
+
+
+class WebViewer:
+    """The viser server and every browser's session; no Zenoh in here."""
+
+    def __init__(
+        self,
+        connector: LabConnector,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        default_address: LabAddress | None = None,
+        data_dir: Path | None = None,
+        rate: float = DEFAULT_RATE,
+        label: str = "WART lab",
+    ) -> None:
+        self.connector = connector
+        self.default_address = default_address or LabAddress("127.0.0.1")
+        self.saved = SavedConnections(data_dir / "connections.json" if data_dir else None)
+        self.pump = FramePump(rate)
+        self.sessions: dict[int, BrowserSession] = {}
+        self._lock = threading.Lock()
+        self.server = viser.ViserServer(host=host, port=port, label=label, verbose=False)
+        self.host = host
+        self.server.gui.configure_theme(
+            control_width="large", show_logo=False, show_share_button=False
+        )
+        # Docked at the right edge: the arena keeps the rest of a laptop screen.
+        self.server.gui.main_panel.dock_right()
+        self.server.on_client_connect(self._connected)
+        self.server.on_client_disconnect(self._disconnected)
+        self.pump.start()
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()  # the real one: viser moves on if the asked one is busy
+
+    @property
+    def url(self) -> str:
+        host = self.host
+        if host in ("0.0.0.0", "::", ""):
+            host = socket.gethostname()
+        return f"http://{host}:{self.port}"
+
+    def _connected(self, client: viser.ClientHandle) -> None:
+        session = BrowserSession(
+            client, self.connector, self.saved, self.pump, self.default_address
+        )
+        with self._lock:
+            self.sessions[client.client_id] = session
+        log.info("browser %d connected (%d open)", client.client_id, len(self.sessions))
+
+    def _disconnected(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            session.close()  # logs the browser's users out of every lab
+        log.info("browser %d left (%d open)", client.client_id, len(self.sessions))
+
+    def stop(self) -> None:
+        self.pump.stop()
+        with self._lock:
+            sessions = list(self.sessions.values())
+            self.sessions.clear()
+        for session in sessions:
+            session.close()
+        self.server.stop()
+
+
+class PendingConnector:
+    """Until the lab client (issue 3) is wired in, say so in plain words at login."""
+
+    def login(self, address: LabAddress, user: str, password: str) -> LabConnection:
+        raise LoginError(
+            "this viewer cannot reach the lab's registry yet (the lab client is not "
+            "wired in); start it with --demo to try the page"
+        )
+
+
+class ViewerService(Service):
+    kind = AliveKind.VIEWER
+
+    def __init__(
+        self, session: zenoh.Session, realm: str, ident: str, **viewer_args: object
+    ) -> None:
+        super().__init__(session, realm, ident)
+        self._viewer_args = viewer_args
+        self.viewer: WebViewer | None = None
+        self.url_file: Path | None = None
+
+    def on_start(self) -> None:
+        self.viewer = WebViewer(**self._viewer_args)  # type: ignore[arg-type]
+        announce(self.viewer.url, self.url_file)
+
+    def on_stop(self, timeout: float) -> None:
+        if self.viewer is not None:
+            self.viewer.stop()
+
+
+def announce(url: str, url_file: Path | None) -> None:
+    """Say where the page is: on stdout and, atomically, in ``url_file``."""
+    print(f"viewer: {url}", flush=True)
+    if url_file is None:
+        return
+    url_file.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=url_file.parent, prefix=".viewer-url.")
+    with os.fdopen(fd, "w") as out:
+        out.write(url + "\n")
+    os.replace(tmp, url_file)
+
+
+def default_data_dir(realm: str) -> Path:
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "wart" / realm / "viewer"
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument(
+        "--http-port",
+        type=int,
+        default=8080,
+        help="web port (default 8080; the next free one if busy)",
+    )
+    p.add_argument(
+        "--host", default="127.0.0.1", help="web interface to listen on (default 127.0.0.1)"
+    )
+    p.add_argument("--id", default="web", help="this viewer's id in the lab (default web)")
+    p.add_argument("--url-file", type=Path, help="write the page's actual URL to this file")
+    p.add_argument(
+        "--data-dir", type=Path, help="saved connections (default ~/.local/state/wart/REALM/viewer)"
+    )
+    p.add_argument("--lab-address", help="what the address bar starts with (default: this lab)")
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=DEFAULT_RATE,
+        help="world frames per second to each browser (default 25)",
+    )
+    p.add_argument(
+        "--demo",
+        action="store_true",
+        help="serve an in-memory demo lab (users ana/ana-pw, ben/ben-pw)",
+    )
+    p.add_argument(
+        "--demo-robots", type=int, default=20, help="robots in the demo arena (default 20)"
+    )
+    args, options = cli.parse(p, argv)
+    assert isinstance(options, NetworkOptions)
+    if not 0 < args.http_port < 65536:
+        p.error(f"--http-port {args.http_port} is not a TCP port (1 to 65535)")
+    if not 0 < args.rate <= 60:
+        p.error(f"--rate {args.rate} must be between 0 and 60")
+    try:
+        check_ident("viewer id", args.id)
+        router = options.effective_connect[0] if options.effective_connect else ""
+        host, _, port = router.partition("/")[2].rpartition(":")
+        default = parse_address(
+            args.lab_address or f"{host or '127.0.0.1'}:{port or DEFAULT_PORT}/{options.realm}",
+            default_realm=options.realm,
+        )
+    except ValueError as exc:
+        p.error(str(exc))
+    connector: LabConnector
+    if args.demo:
+        from viewers.web.fakes import FakeConnector, FakeLab
+
+        connector = FakeConnector((default.realm, FakeLab("Demo lab", robots=args.demo_robots)))
+    else:
+        connector = PendingConnector()
+
+    def build(session: zenoh.Session) -> Service:
+        service = ViewerService(
+            session,
+            options.realm,
+            args.id,
+            connector=connector,
+            host=args.host,
+            port=args.http_port,
+            default_address=default,
+            data_dir=args.data_dir or default_data_dir(options.realm),
+            rate=args.rate,
+        )
+        service.url_file = args.url_file
+        return service
+
+    return run_service("viewer", options, build)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

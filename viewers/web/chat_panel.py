@@ -1,0 +1,188 @@
+"""A joined context's tab: chat history, members, live lines, notices, kick, leave.
+
+An arena (agent context) tab also carries the robot panel and, for those
+with edit_map, the map editor, and a button that shows its world in the view.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable
+
+import viser
+
+from viewers.web.adapters import (
+    ChatEvent,
+    ChatLine,
+    JoinedContext,
+    LabConnection,
+    LabError,
+    MemberEvent,
+    WorldFeed,
+)
+from viewers.web.editor import MapEditor
+from viewers.web.robot_panel import RobotPanel
+from viewers.web.text import check_line, clock, escape_md
+from viewers.web.world_view import WorldView
+
+log = logging.getLogger("wart.viewer.chat")
+
+SHOWN_LINES = 100  # older lines scroll away; the context keeps the full history
+
+
+class ChatPanel:
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        tabs: viser.GuiTabGroupHandle,
+        connection: LabConnection,
+        joined: JoinedContext,
+        *,
+        on_close: Callable[[ChatPanel], None],
+        on_watch: Callable[[WorldFeed, ChatPanel], None] | None = None,
+    ) -> None:
+        self.client = client
+        self.connection = connection
+        self.ctx = joined.ctx
+        self.kind = joined.kind
+        self.world = joined.world
+        self.members: tuple[str, ...] = joined.members
+        self._on_close = on_close
+        self._on_watch = on_watch
+        self._lines: deque[str] = deque(maxlen=SHOWN_LINES)
+        for line in joined.history:
+            self._lines.append(self._format(line))
+        gui = client.gui
+        label = f"{self.ctx}" if self.kind == "chat" else f"{self.ctx} (arena)"
+        self.tab = tabs.add_tab(label, icon=viser.Icon.MESSAGE if self.kind == "chat" else None)
+        with self.tab:
+            title = escape_md(joined.title or self.ctx)
+            gui.add_markdown(
+                f"**{title}** · {escape_md(connection.address.label)} · owner "
+                f"{escape_md(joined.owner)}"
+            )
+            self.members_md = gui.add_markdown("")
+            self.log_md = gui.add_markdown("")
+            self.message = gui.add_text("Message", "")
+            self.send = gui.add_button("Send", color="blue")
+            self.notice = gui.add_markdown("", visible=False)
+            self.kick_who = gui.add_dropdown(
+                "Member", self._others() or ("(nobody)",), visible=joined.can_kick
+            )
+            self.kick = gui.add_button("Kick", color="red", visible=joined.can_kick)
+            self.robots: RobotPanel | None = None
+            self.editor: MapEditor | None = None
+            if self.kind == "agent" and self.world and on_watch is not None:
+                self.watch = gui.add_button("Show this arena", color="teal")
+                self.watch.on_click(lambda _: self.show_world())
+                self.robots = RobotPanel(client, connection, self.ctx)
+                if "edit_map" in connection.permissions:
+                    self.editor = MapEditor(client)
+            self.leave = gui.add_button("Leave")
+        self.send.on_click(lambda _: self.submit())
+        self.kick.on_click(lambda _: self.kick_selected())
+        self.leave.on_click(lambda _: self.close(leave=True))
+        self._render()
+
+    # -- rendering
+
+    @staticmethod
+    def _format(line: ChatLine) -> str:
+        return f"`{clock(line.at)}` **{escape_md(line.sender)}**: {escape_md(line.text)}"
+
+    def _others(self) -> tuple[str, ...]:
+        return tuple(m for m in self.members if m != self.connection.user)
+
+    def _render(self) -> None:
+        self.members_md.content = "Members: " + ", ".join(escape_md(m) for m in self.members)
+        # Two spaces before the newline: markdown line breaks, one line per message.
+        self.log_md.content = "  \n".join(self._lines) or "_No messages yet._"
+        if self.kick.visible:
+            self.kick_who.options = self._others() or ("(nobody)",)
+
+    def say_notice(self, text: str) -> None:
+        self.notice.content = f"_{escape_md(text)}_"
+        self.notice.visible = True
+
+    # -- events from the lab (any thread)
+
+    def on_event(self, event: ChatEvent | MemberEvent) -> None:
+        if isinstance(event, ChatEvent):
+            self._lines.append(self._format(event.line))
+        else:
+            self.members = event.members
+            who = escape_md(event.user)
+            if event.status == "kicked":
+                by = f" by {escape_md(event.by)}" if event.by else ""
+                self._lines.append(f"_{who} was kicked{by}_")
+                if event.user == self.connection.user:
+                    self.client.add_notification(
+                        title=f"Removed from {self.ctx}",
+                        body=f"You were kicked{by}.",
+                        color="red",
+                    )
+                    self.close(leave=False)
+                    return
+            else:
+                self._lines.append(f"_{who} {event.status}_")
+        self._render()
+
+    # -- actions
+
+    def submit(self) -> None:
+        text = self.message.value
+        problem = check_line(text)
+        if problem:
+            self.say_notice(problem)
+            return
+        try:
+            self.connection.say(self.ctx, text)
+        except LabError as exc:
+            self.say_notice(f"Not sent: {exc}")
+            return
+        self.message.value = ""
+        self.notice.visible = False
+
+    def kick_selected(self) -> None:
+        who = self.kick_who.value
+        if who not in self._others():
+            self.say_notice("Choose a member to kick.")
+            return
+        try:
+            self.connection.kick(self.ctx, who)
+        except LabError as exc:
+            self.say_notice(f"Could not kick {who}: {exc}")
+
+    def show_world(self) -> None:
+        if self.world is None or self._on_watch is None:
+            return
+        try:
+            feed = self.connection.world(self.world)
+        except LabError as exc:
+            self.say_notice(f"Cannot show the arena: {exc}")
+            return
+        self._on_watch(feed, self)
+
+    def close(self, *, leave: bool) -> None:
+        if leave:
+            try:
+                self.connection.leave(self.ctx)
+            except LabError as exc:
+                log.info("leaving %s: %s", self.ctx, exc)
+        self.unbind()
+        self.tab.remove()
+        self._on_close(self)
+
+    def bind(self, view: WorldView, feed: WorldFeed) -> None:
+        """This arena is now the one in the view: wire its robot panel and editor to it."""
+        if self.robots is not None:
+            self.robots.bind(view, feed)
+        if self.editor is not None:
+            self.editor.bind(view, feed)
+
+    def unbind(self) -> None:
+        if self.robots is not None:
+            self.robots.unbind()
+        if self.editor is not None:
+            self.editor.unbind()

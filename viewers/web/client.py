@@ -1,0 +1,193 @@
+"""One browser's WARTApp: the address bar, its tabs, its labs, its world view.
+
+Everything here is per viser client, so one person's login form, labs and
+instructor buttons never show in another's page.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import viser
+
+from viewers.web.adapters import LabConnection, LabConnector, WorldFeed
+from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
+from viewers.web.chat_panel import ChatPanel
+from viewers.web.lobby import LabTab
+from viewers.web.login import LoginForm
+from viewers.web.pump import FramePump
+from viewers.web.text import escape_md
+from viewers.web.world_view import WorldView
+
+log = logging.getLogger("wart.viewer.client")
+
+NO_SAVED = "(saved and recent addresses)"
+HELP = """### Welcome to the WART lab
+Type a lab's address above and press **Connect**, e.g.
+`wart://you@lab.example.org/lab` or just `lab.example.org`.
+You can be connected to several labs at once: each gets its own tab."""
+
+
+class BrowserSession:
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        connector: LabConnector,
+        saved: SavedConnections,
+        pump: FramePump,
+        default_address: LabAddress,
+    ) -> None:
+        self.client = client
+        self.connector = connector
+        self.saved = saved
+        self.pump = pump
+        self.default = default_address
+        self.labs: dict[tuple[str, int, str], LabTab] = {}
+        self.login: LoginForm | None = None
+        self.watching: ChatPanel | None = None
+        self._lock = threading.RLock()
+        gui = client.gui
+        self.address = gui.add_text(
+            "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
+        )
+        self.recent = gui.add_dropdown("Saved", (NO_SAVED,))
+        with gui.add_folder("Address actions", expand_by_default=True):
+            self.connect_button = gui.add_button("Connect", color="green", icon=viser.Icon.PLUG)
+            self.save_button = gui.add_button("Save address", icon=viser.Icon.STAR)
+        self.notice = gui.add_markdown("", visible=False)
+        self.tabs = gui.add_tab_group()
+        self.home = self.tabs.add_tab("Start", icon=viser.Icon.INFO_CIRCLE)
+        with self.home:
+            gui.add_markdown(HELP)
+        self.connect_button.on_click(lambda _: self.connect(self.address.value))
+        self.save_button.on_click(lambda _: self.save_address())
+        self.recent.on_update(lambda _: self._recent_chosen())
+        self.address.on_update(lambda _: self._complete())
+        self.view = WorldView(client)
+        pump.attach(self.view)
+        self._refresh_recent()
+
+    # -- address bar
+
+    def say_notice(self, text: str) -> None:
+        self.notice.content = f"**{escape_md(text)}**"
+        self.notice.visible = True
+
+    def _candidates(self) -> list[str]:
+        seen: list[str] = []
+        for tab in list(self.labs.values()):
+            for url in self.saved.for_user(tab.connection.user):
+                if url not in seen:
+                    seen.append(url)
+        default = self.default.url()
+        return seen if default in seen else [*seen, default]
+
+    def _refresh_recent(self, typed: str = "") -> None:
+        options = complete(typed, self._candidates()) if typed else self._candidates()
+        self.recent.options = (NO_SAVED, *options)
+
+    def _complete(self) -> None:
+        self._refresh_recent(self.address.value)
+
+    def _recent_chosen(self) -> None:
+        if self.recent.value != NO_SAVED:
+            self.address.value = self.recent.value
+
+    def save_address(self) -> None:
+        try:
+            address = parse_address(self.address.value, default_realm=self.default.realm)
+        except AddressError as exc:
+            self.say_notice(str(exc))
+            return
+        tab = self.labs.get(address.lab_key)
+        users = [tab.connection.user] if tab else [t.connection.user for t in self.labs.values()]
+        if not users:
+            self.say_notice("Log in first: saved addresses are kept for your user.")
+            return
+        for user in users:
+            self.saved.save(user, address)
+        self.notice.visible = False
+        self._refresh_recent()
+
+    def connect(self, text: str) -> None:
+        try:
+            address = parse_address(text, default_realm=self.default.realm)
+        except AddressError as exc:
+            self.say_notice(str(exc))
+            return
+        self.notice.visible = False
+        tab = self.labs.get(address.lab_key)
+        if tab is not None:
+            if address.context:
+                tab.join(address.context)
+            else:
+                self.say_notice(f"You are already connected to {address.label}.")
+            return
+        if self.login is not None:
+            self.login.close()
+        self.login = LoginForm(
+            self.client, self.connector, address, lambda conn: self._logged_in(conn, address)
+        )
+
+    def _logged_in(self, connection: LabConnection, address: LabAddress) -> None:
+        self.login = None
+        self.saved.add_recent(connection.user, address.with_user(connection.user))
+        tab = LabTab(
+            self.client,
+            self.tabs,
+            connection,
+            on_logout=self._logged_out,
+            on_watch=self.watch,
+            on_context=self._context_opened,
+            on_context_closed=self._context_closed,
+        )
+        with self._lock:
+            self.labs[address.lab_key] = tab
+        self.address.value = address.with_user(connection.user).url()
+        self._refresh_recent()
+        # viser 1.1 cannot switch tabs from the server: point at the new one.
+        self.client.add_notification(
+            title=f"Logged in to {address.label}",
+            body=f"Its lobby is in the tab '{address.label}'.",
+            auto_close_seconds=5.0,
+        )
+        if address.context:
+            tab.join(address.context)
+
+    def _logged_out(self, tab: LabTab) -> None:
+        with self._lock:
+            for key, value in list(self.labs.items()):
+                if value is tab:
+                    del self.labs[key]
+        self._refresh_recent()
+
+    # -- the world view
+
+    def _context_opened(self, panel: ChatPanel) -> None:
+        if panel.kind == "agent" and self.watching is None:
+            panel.show_world()  # the first arena joined shows itself
+
+    def _context_closed(self, panel: ChatPanel) -> None:
+        if self.watching is panel:
+            self.watching = None
+            self.view.hide()
+
+    def watch(self, feed: WorldFeed, panel: ChatPanel) -> None:
+        if self.watching is not None and self.watching is not panel:
+            self.watching.unbind()
+        self.view.show(feed)
+        panel.bind(self.view, feed)
+        self.watching = panel
+
+    # -- the browser went away
+
+    def close(self) -> None:
+        self.pump.detach(self.view)
+        for tab in list(self.labs.values()):
+            try:
+                tab.logout()
+            except Exception:
+                # A half-gone client's GUI may refuse updates; the lab must still be told.
+                log.exception("while closing %s for a departed browser", tab.label)
+                tab.connection.logout()

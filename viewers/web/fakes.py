@@ -1,0 +1,467 @@
+"""In-memory labs and worlds behind the viewer's Protocols.
+
+Used by the phase-1 tests, ``wart viewer --demo`` and bench/bench_viewer.py.
+They behave like the real services in the ways the UI relies on: logins can
+fail, several connections share one lab (so two browsers chat), events arrive
+on other threads, a world produces frames at its own rate on its own thread.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+from common.keys import is_ident
+from viewers.web.adapters import (
+    AgentsEvent,
+    AgentStatus,
+    Ball,
+    ChatEvent,
+    ChatLine,
+    ContextSummary,
+    Directory,
+    DirectoryEvent,
+    JoinedContext,
+    LabError,
+    LabEvent,
+    Light,
+    LoginError,
+    MapEdit,
+    MemberEvent,
+    Obstacle,
+    PrivateEvent,
+    SensorSample,
+    WorldFrame,
+    WorldSnapshot,
+)
+from viewers.web.address import LabAddress
+
+STUDENT = frozenset({"join", "chat", "control", "deploy"})
+INSTRUCTOR = STUDENT | {"edit_map", "kick", "host"}
+ADMIN = INSTRUCTOR | {"admin"}
+
+
+class FakeWorld:
+    """A world whose robots circle their home spots; frames at ``rate`` Hz on a thread."""
+
+    def __init__(
+        self,
+        world: str = "arena",
+        robots: int = 8,
+        *,
+        width: float = 2000.0,
+        height: float = 2000.0,
+        rate: float = 50.0,
+        start: bool = True,
+    ) -> None:
+        self._world = world
+        self.rate = rate
+        names = tuple(f"k{i}" for i in range(robots))
+        cols = max(1, math.ceil(math.sqrt(robots)))
+        rows = max(1, math.ceil(robots / cols))
+        ix = np.arange(robots) % cols
+        iy = np.arange(robots) // cols
+        self._home = np.stack(
+            [(ix + 0.5) * width / cols, (iy + 0.5) * height / rows], axis=1
+        ).astype(np.float64)
+        self._radius = 0.3 * min(width / cols, height / rows)
+        self._phase = np.linspace(0, 2 * math.pi, robots, endpoint=False)
+        wall = 20.0
+        self._snapshot = WorldSnapshot(
+            world=world,
+            width=width,
+            height=height,
+            obstacles=(
+                Obstacle("wall_s", width / 2, wall / 2, width, wall),
+                Obstacle("wall_n", width / 2, height - wall / 2, width, wall),
+                Obstacle("wall_w", wall / 2, height / 2, wall, height),
+                Obstacle("wall_e", width - wall / 2, height / 2, wall, height),
+                Obstacle("box1", width * 0.3, height * 0.6, 200.0, 100.0, 0.3),
+            ),
+            balls=(Ball("ball1", width * 0.7, height * 0.3, 30.0),),
+            lights=(Light("light1", width * 0.8, height * 0.8, True),),
+            robots=names,
+        )
+        self._lock = threading.Lock()
+        self._latest: WorldFrame | None = None
+        self._seq = itertools.count()
+        self._t0 = time.monotonic()
+        self.edits: list[MapEdit] = []
+        self.refuse_edits = ""  # set to a reason to make edit() fail
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.produce()
+        if start:
+            self.start()
+
+    @property
+    def world(self) -> str:
+        return self._world
+
+    def start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(
+                target=self._run, name=f"fake-{self._world}", daemon=True
+            )
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+
+    def _run(self) -> None:
+        period = 1.0 / self.rate
+        next_at = time.monotonic()
+        while not self._stop.is_set():
+            self.produce()
+            next_at += period
+            delay = next_at - time.monotonic()
+            if delay < -period:  # fell behind: skip rather than burst
+                next_at = time.monotonic()
+            self._stop.wait(max(0.0, delay))
+
+    def produce(self, t: float | None = None) -> WorldFrame:
+        """Compute the frame at time ``t`` (default: now) and make it the latest."""
+        t = time.monotonic() - self._t0 if t is None else t
+        angle = 0.5 * t + self._phase
+        poses = np.empty((len(self._phase), 3), np.float32)
+        poses[:, 0] = self._home[:, 0] + self._radius * np.cos(angle)
+        poses[:, 1] = self._home[:, 1] + self._radius * np.sin(angle)
+        poses[:, 2] = angle + math.pi / 2  # heading along the circle
+        gripper = (np.arange(len(poses)) % 3).astype(np.uint8)
+        snap = self._snapshot
+        frame = WorldFrame(
+            seq=next(self._seq),
+            t=t,
+            poses=poses,
+            gripper=gripper,
+            ball_xy=np.array([[b.x, b.y] for b in snap.balls], np.float32).reshape(-1, 2),
+            lights_on=np.array([lt.on for lt in snap.lights], np.bool_),
+        )
+        self._latest = frame  # one reference swap: readers never see half a frame
+        return frame
+
+    def snapshot(self) -> WorldSnapshot:
+        return self._snapshot
+
+    def latest(self) -> WorldFrame | None:
+        return self._latest
+
+    def sensors(self, agent: str) -> SensorSample | None:
+        if agent not in self._snapshot.robots:
+            return None
+        t = time.monotonic() - self._t0
+        k = np.arange(8, dtype=np.float32)
+        ir = 512 + 500 * np.sin(t * 2 + k)
+        ambient = 400 + 300 * np.cos(t + k / 2)
+        return SensorSample(agent, t, ir.astype(np.float32), ambient.astype(np.float32))
+
+    def edit(self, edit: MapEdit) -> None:
+        if self.refuse_edits:
+            raise LabError(self.refuse_edits)
+        with self._lock:
+            snap = self._snapshot
+            self.edits.append(edit)
+            if edit.kind == "obstacle":
+                obstacles = list(snap.obstacles)
+                if edit.op == "add":
+                    ident = edit.ident or f"box{len(obstacles)}"
+                    obstacles.append(Obstacle(ident, edit.x, edit.y, edit.w or 100, edit.h or 100))
+                elif edit.op == "delete":
+                    obstacles = [o for o in obstacles if o.ident != edit.ident]
+                elif edit.op == "move":
+                    obstacles = [
+                        replace(o, x=edit.x, y=edit.y, angle=edit.angle)
+                        if o.ident == edit.ident
+                        else o
+                        for o in obstacles
+                    ]
+                snap = replace(snap, obstacles=tuple(obstacles))
+            elif edit.kind == "light" and edit.op == "add":
+                ident = edit.ident or f"light{len(snap.lights) + 1}"
+                snap = replace(snap, lights=(*snap.lights, Light(ident, edit.x, edit.y)))
+            elif edit.kind == "ball" and edit.op == "add":
+                ident = edit.ident or f"ball{len(snap.balls) + 1}"
+                snap = replace(snap, balls=(*snap.balls, Ball(ident, edit.x, edit.y, 30.0)))
+            self._snapshot = replace(snap, version=snap.version + 1)
+
+
+@dataclass
+class _Context:
+    summary: ContextSummary
+    members: list[str] = field(default_factory=list)
+    history: list[ChatLine] = field(default_factory=list)
+    queue: dict[str, list[str]] = field(default_factory=dict)  # agent -> users waiting
+
+
+class FakeLab:
+    """One lab shared by all its connections: accounts, contexts, chat, worlds."""
+
+    def __init__(self, server_name: str = "Fake lab", *, robots: int = 8, rate: float = 50.0):
+        self.server_name = server_name
+        self.accounts: dict[str, tuple[str, frozenset[str]]] = {
+            "ana": ("ana-pw", INSTRUCTOR),
+            "ben": ("ben-pw", STUDENT),
+            "root": ("root-pw", ADMIN),
+        }
+        self.worlds: dict[str, FakeWorld] = {"arena": FakeWorld("arena", robots, rate=rate)}
+        self._lock = threading.RLock()
+        self._contexts: dict[str, _Context] = {}
+        self._online: dict[str, int] = {}
+        self._subs: dict[int, tuple[str, Callable[[LabEvent], None]]] = {}
+        self._ids = itertools.count(1)
+        self._seq = itertools.count(1)
+        self._open("lobby", "chat", "ana", "Lobby chat")
+        self._open("arena", "agent", "ana", "Simulated arena", world="arena")
+
+    def close(self) -> None:
+        for world in self.worlds.values():
+            world.stop()
+
+    def _open(self, ctx: str, kind: str, owner: str, title: str, world: str | None = None) -> None:
+        summary = ContextSummary(ctx, kind, owner, title, 0, world)
+        context = _Context(summary)
+        if world is not None:
+            context.queue = {name: [] for name in self.worlds[world].snapshot().robots[:8]}
+        self._contexts[ctx] = context
+
+    # -- what connections call
+
+    def login(self, address: LabAddress, user: str, password: str) -> FakeConnection:
+        account = self.accounts.get(user)
+        if account is None or account[0] != password:
+            raise LoginError("wrong user name or password")
+        with self._lock:
+            self._online[user] = self._online.get(user, 0) + 1
+        self._broadcast(DirectoryEvent())
+        return FakeConnection(self, address.with_user(user), user, account[1])
+
+    def _broadcast(self, event: LabEvent, only: set[str] | None = None) -> None:
+        with self._lock:
+            targets = [cb for user, cb in self._subs.values() if only is None or user in only]
+        for callback in targets:  # outside the lock: a callback may call back in
+            callback(event)
+
+    def directory(self) -> Directory:
+        with self._lock:
+            contexts = tuple(
+                replace(c.summary, members=len(c.members)) for c in self._contexts.values()
+            )
+            return Directory(self.server_name, tuple(sorted(self._online)), contexts)
+
+    def context(self, ctx: str) -> _Context:
+        context = self._contexts.get(ctx)
+        if context is None:
+            raise LabError(f"there is no context {ctx!r} (any more)")
+        return context
+
+    def next_seq(self) -> int:
+        return next(self._seq)
+
+
+class FakeConnector:
+    """A :class:`~viewers.web.adapters.LabConnector` over one or more fake labs.
+
+    Labs are found by realm; an unknown realm fails the way an unreachable lab would.
+    """
+
+    def __init__(self, *labs: tuple[str, FakeLab]) -> None:
+        self.labs = dict(labs)
+
+    def login(self, address: LabAddress, user: str, password: str) -> FakeConnection:
+        lab = self.labs.get(address.realm)
+        if lab is None:
+            raise LoginError(f"no lab answers at {address.label}: check the address")
+        return lab.login(address, user, password)
+
+
+class FakeConnection:
+    """One user's session with a :class:`FakeLab`."""
+
+    def __init__(self, lab: FakeLab, address: LabAddress, user: str, perms: frozenset[str]):
+        self._lab = lab
+        self._address = address
+        self._user = user
+        self._perms = perms
+        self._sub_ids: list[int] = []
+        self._joined: set[str] = set()
+        self.uploads: list[tuple[str, str, str, int]] = []  # ctx, agent, filename, size
+        self.closed = False
+
+    @property
+    def address(self) -> LabAddress:
+        return self._address
+
+    @property
+    def user(self) -> str:
+        return self._user
+
+    @property
+    def permissions(self) -> frozenset[str]:
+        return self._perms
+
+    def _need(self, permission: str, doing: str) -> None:
+        if self.closed:
+            raise LabError("you are logged out of this lab")
+        if permission not in self._perms:
+            raise LabError(f"you may not {doing} (no '{permission}' permission)")
+
+    def directory(self) -> Directory:
+        return self._lab.directory()
+
+    def join(self, ctx: str) -> JoinedContext:
+        self._need("join", "join contexts")
+        lab = self._lab
+        with lab._lock:
+            context = lab.context(ctx)
+            if self._user not in context.members:
+                context.members.append(self._user)
+            members = tuple(context.members)
+            self._joined.add(ctx)
+            joined = JoinedContext(
+                ctx=ctx,
+                kind=context.summary.kind,
+                title=context.summary.title,
+                owner=context.summary.owner,
+                members=members,
+                history=tuple(context.history[-50:]),
+                world=context.summary.world,
+                can_kick="kick" in self._perms or context.summary.owner == self._user,
+            )
+        lab._broadcast(MemberEvent(ctx, self._user, "joined", members))
+        lab._broadcast(DirectoryEvent())
+        return joined
+
+    def leave(self, ctx: str) -> None:
+        self._remove(ctx, self._user, "left")
+
+    def _remove(self, ctx: str, user: str, status: Literal["left", "kicked"], by: str = "") -> None:
+        lab = self._lab
+        with lab._lock:
+            context = lab.context(ctx)
+            if user not in context.members:
+                return
+            context.members.remove(user)
+            members = tuple(context.members)
+        lab._broadcast(MemberEvent(ctx, user, status, members, by or None))
+        lab._broadcast(DirectoryEvent())
+
+    def say(self, ctx: str, text: str) -> None:
+        self._need("chat", "chat")
+        lab = self._lab
+        with lab._lock:
+            context = lab.context(ctx)
+            if self._user not in context.members:
+                raise LabError(f"join {ctx} before writing there")
+            line = ChatLine(lab.next_seq(), self._user, text, time.time())
+            context.history.append(line)
+            members = set(context.members)
+        lab._broadcast(ChatEvent(ctx, line), only=members)
+
+    def kick(self, ctx: str, user: str, reason: str = "") -> None:
+        context = self._lab.context(ctx)
+        if "kick" not in self._perms and context.summary.owner != self._user:
+            raise LabError("you may not kick people from this context")
+        if user == self._user:
+            raise LabError("you cannot kick yourself; use Leave")
+        self._remove(ctx, user, "kicked", by=self._user)
+
+    def host(self, kind: Literal["chat", "agent"], name: str, map_name: str = "") -> str:
+        self._need("host", "open new contexts")
+        if not is_ident(name):
+            raise LabError(f"{name!r} is not a valid name: letters, digits, '_', '-', '.'")
+        lab = self._lab
+        with lab._lock:
+            if name in lab._contexts:
+                raise LabError(f"a context named {name!r} already exists")
+            world = None
+            if kind == "agent":
+                world = name
+                lab.worlds[name] = FakeWorld(name, 4)
+            lab._open(name, kind, self._user, map_name or name, world)
+        lab._broadcast(DirectoryEvent())
+        return name
+
+    def send_private(self, to: str, text: str) -> None:
+        self._need("chat", "send messages")
+        self._lab._broadcast(PrivateEvent(self._user, text, time.time()), only={to})
+
+    def subscribe(self, callback: Callable[[LabEvent], None]) -> Callable[[], None]:
+        lab = self._lab
+        with lab._lock:
+            sub_id = next(lab._ids)
+            lab._subs[sub_id] = (self._user, callback)
+        self._sub_ids.append(sub_id)
+
+        def unsubscribe() -> None:
+            with lab._lock:
+                lab._subs.pop(sub_id, None)
+
+        return unsubscribe
+
+    def world(self, world: str) -> FakeWorld:
+        feed = self._lab.worlds.get(world)
+        if feed is None:
+            raise LabError(f"there is no world {world!r}")
+        return feed
+
+    def agents(self, ctx: str) -> list[AgentStatus]:
+        with self._lab._lock:
+            context = self._lab.context(ctx)
+            out = []
+            for agent, waiting in context.queue.items():
+                holder = waiting[0] if waiting else None
+                mine = waiting.index(self._user) if self._user in waiting else None
+                out.append(
+                    AgentStatus(
+                        agent=agent,
+                        holder=holder,
+                        queue=max(0, len(waiting) - 1),
+                        my_position=mine,
+                        eta_s=None if mine is None else 60.0 * mine,
+                    )
+                )
+            return out
+
+    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> None:
+        self._need("deploy", "upload controllers")
+        with self._lab._lock:
+            queue = self._lab.context(ctx).queue.get(agent)
+            if queue is None:
+                raise LabError(f"there is no robot {agent!r} in {ctx}")
+            if self._user not in queue:
+                queue.append(self._user)
+            self.uploads.append((ctx, agent, filename, len(source)))
+        self._lab._broadcast(AgentsEvent(ctx))
+
+    def cancel_control(self, ctx: str, agent: str) -> None:
+        with self._lab._lock:
+            queue = self._lab.context(ctx).queue.get(agent, [])
+            if self._user in queue:
+                queue.remove(self._user)
+        self._lab._broadcast(AgentsEvent(ctx))
+
+    def logout(self) -> None:
+        if self.closed:
+            return
+        for ctx in list(self._joined):
+            self._remove(ctx, self._user, "left")
+        lab = self._lab
+        with lab._lock:
+            for sub_id in self._sub_ids:
+                lab._subs.pop(sub_id, None)
+            left = lab._online.get(self._user, 1) - 1
+            if left <= 0:
+                lab._online.pop(self._user, None)
+            else:
+                lab._online[self._user] = left
+        self.closed = True
+        lab._broadcast(DirectoryEvent())

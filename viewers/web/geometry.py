@@ -1,0 +1,126 @@
+"""World (mm, radians, origin lower-left) to viser (metres, quaternions), vectorised.
+
+Everything the pump does per frame is one numpy pass here, shared by every
+browser watching the same world: the per-browser cost is then only viser's
+serialisation of two arrays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+MM = 0.001  # metres per millimetre
+CAMERA_FOV = math.radians(20.0)  # narrow: close to an orthographic top-down look
+ROBOT_Z = 0.01  # robots drawn just above the floor (metres)
+
+# Khepera I IR sensor bearings (radians, 0 = ahead, counter-clockwise positive):
+# six at the front from left to right, two at the back (K-Team manual, fig. 3).
+IR_BEARINGS = np.radians([90.0, 45.0, 10.0, -10.0, -45.0, -90.0, -170.0, 170.0]).astype(np.float32)
+IR_RANGE_MM = 60.0  # beyond this a Khepera's IR reads (nearly) nothing
+
+
+def yaw_to_wxyz(theta: npt.ArrayLike) -> npt.NDArray[np.float32]:
+    """Rotations about +z by ``theta`` as (N, 4) quaternions w, x, y, z."""
+    half = np.asarray(theta, dtype=np.float32) * 0.5
+    out = np.zeros((*half.shape, 4), np.float32)
+    out[..., 0] = np.cos(half)
+    out[..., 3] = np.sin(half)
+    return out
+
+
+def poses_to_viser(
+    poses: npt.NDArray[np.float32], z: float = ROBOT_Z
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """(N, 3) x mm, y mm, theta rad to (positions (N, 3) metres, wxyzs (N, 4))."""
+    positions = np.empty((len(poses), 3), np.float32)
+    positions[:, :2] = poses[:, :2] * MM
+    positions[:, 2] = z
+    return positions, yaw_to_wxyz(poses[:, 2])
+
+
+def viser_to_world(x: float, y: float) -> tuple[float, float]:
+    """A viser point (metres) back to world millimetres."""
+    return x / MM, y / MM
+
+
+def wxyz_to_yaw(wxyz: npt.ArrayLike) -> float:
+    """The rotation about z of a quaternion (the editor reads gizmos back with it)."""
+    w, x, y, z = (float(v) for v in np.asarray(wxyz).reshape(4))
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def camera_height(width_mm: float, height_mm: float, aspect: float = 1.6) -> float:
+    """How high (m) a camera with CAMERA_FOV must be for the arena to fill the view."""
+    half_tan = math.tan(CAMERA_FOV / 2)
+    need_v = height_mm * MM * 1.1 / 2
+    need_h = width_mm * MM * 1.1 / 2 / aspect
+    return max(need_v, need_h) / half_tan
+
+
+def robot_mesh(
+    radius_m: float, height_m: float = 0.01, segments: int = 16
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
+    """A flat disc with a raised nose wedge pointing along +x: a robot with its heading.
+
+    One mesh for every robot (batched); 2 * segments + 3 triangles keeps 1,000
+    instances cheap for software WebGL.
+    """
+    angles = np.linspace(0, 2 * math.pi, segments, endpoint=False)
+    rim = np.stack([np.cos(angles), np.sin(angles), np.zeros(segments)], 1) * radius_m
+    bottom_centre = [[0.0, 0.0, 0.0]]
+    top_centre = [[0.0, 0.0, height_m]]
+    top_rim = rim + np.array([0.0, 0.0, height_m])
+    nose_h = height_m * 1.5
+    nose = [
+        [radius_m * 0.95, 0.0, nose_h],
+        [-radius_m * 0.2, radius_m * 0.45, nose_h],
+        [-radius_m * 0.2, -radius_m * 0.45, nose_h],
+    ]
+    vertices = np.concatenate([bottom_centre, top_centre, rim, top_rim, nose]).astype(np.float32)
+    faces: list[tuple[int, int, int]] = []
+    r0, t0 = 2, 2 + segments
+    for i in range(segments):
+        j = (i + 1) % segments
+        faces.append((1, t0 + i, t0 + j))  # top
+        faces.append((r0 + i, r0 + j, t0 + j))  # side
+        faces.append((r0 + i, t0 + j, t0 + i))
+    n0 = 2 + 2 * segments
+    faces.append((n0, n0 + 1, n0 + 2))
+    return vertices, np.asarray(faces, np.uint32)
+
+
+def ir_segments(
+    pose: npt.ArrayLike, ir: npt.ArrayLike, robot_radius_mm: float
+) -> npt.NDArray[np.float32]:
+    """(8, 2, 3) line segments (metres) for one robot's IR rays.
+
+    A ray is drawn as long as the distance its reading implies: a high reading
+    (near 1023) means something close, so a short ray.
+    """
+    x, y, theta = (float(v) for v in np.asarray(pose).reshape(3))
+    reading = np.clip(np.asarray(ir, np.float32).reshape(-1)[: len(IR_BEARINGS)], 0, 1023)
+    length = IR_RANGE_MM * (1.0 - reading / 1023.0)
+    bearing = theta + IR_BEARINGS[: len(reading)]
+    start_r = robot_radius_mm
+    seg = np.zeros((len(reading), 2, 3), np.float32)
+    seg[:, 0, 0] = x + start_r * np.cos(bearing)
+    seg[:, 0, 1] = y + start_r * np.sin(bearing)
+    seg[:, 1, 0] = x + (start_r + length) * np.cos(bearing)
+    seg[:, 1, 1] = y + (start_r + length) * np.sin(bearing)
+    seg[:, :, :2] *= MM
+    seg[:, :, 2] = ROBOT_Z * 2
+    return seg
+
+
+def trail_segments(points_mm: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """(K, 2) successive positions to (K-1, 2, 3) segments (metres)."""
+    if len(points_mm) < 2:
+        return np.zeros((0, 2, 3), np.float32)
+    seg = np.zeros((len(points_mm) - 1, 2, 3), np.float32)
+    seg[:, 0, :2] = points_mm[:-1] * MM
+    seg[:, 1, :2] = points_mm[1:] * MM
+    seg[:, :, 2] = ROBOT_Z / 2
+    return seg

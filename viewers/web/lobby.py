@@ -1,0 +1,249 @@
+"""One lab's lobby tab (thesis 7.3.3): server name, who is online, contexts, host, messages.
+
+A :class:`LabTab` owns the user's connection to that lab, dispatches the
+lab's events to the lobby and to the context tabs it opened, and logs out.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+import viser
+
+from common.keys import is_ident
+from viewers.web.adapters import (
+    AgentsEvent,
+    ChatEvent,
+    Directory,
+    DirectoryEvent,
+    DisconnectedEvent,
+    LabConnection,
+    LabError,
+    LabEvent,
+    MemberEvent,
+    PrivateEvent,
+    WorldFeed,
+)
+from viewers.web.chat_panel import ChatPanel
+from viewers.web.text import check_line, clock, escape_md
+
+log = logging.getLogger("wart.viewer.lobby")
+
+KIND_NAMES = {"chat": "chat room", "agent": "arena"}
+
+
+class LabTab:
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        tabs: viser.GuiTabGroupHandle,
+        connection: LabConnection,
+        *,
+        on_logout: Callable[[LabTab], None],
+        on_watch: Callable[[WorldFeed, ChatPanel], None],
+        on_context: Callable[[ChatPanel], None] | None = None,
+        on_context_closed: Callable[[ChatPanel], None] | None = None,
+    ) -> None:
+        self.client = client
+        self.tabs = tabs
+        self.connection = connection
+        self.panels: dict[str, ChatPanel] = {}
+        self._on_logout = on_logout
+        self._on_watch = on_watch
+        self._on_context = on_context
+        self._on_context_closed = on_context_closed
+        self._lock = threading.RLock()
+        self._directory: Directory | None = None
+        self._rows: list[viser.GuiMarkdownHandle | viser.GuiButtonHandle] = []
+        self._private: list[str] = []
+        gui = client.gui
+        self.tab = tabs.add_tab(connection.address.label, icon=viser.Icon.HOME)
+        with self.tab:
+            self.header = gui.add_markdown("")
+            self.online = gui.add_markdown("")
+            self.contexts = gui.add_folder("Contexts")
+            can_host = "host" in connection.permissions
+            with gui.add_folder("Host a new context", visible=can_host, expand_by_default=False):
+                self.host_name = gui.add_text("Name", "")
+                self.host_map = gui.add_text("Map (arena)", "default")
+                self.host_chat = gui.add_button("Host chat room")
+                self.host_arena = gui.add_button("Host arena")
+            with gui.add_folder("Private messages", expand_by_default=False):
+                self.pm_log = gui.add_markdown("_None yet._")
+                self.pm_to = gui.add_text("To", "")
+                self.pm_text = gui.add_text("Private message", "")
+                self.pm_send = gui.add_button("Send privately")
+            self.notice = gui.add_markdown("", visible=False)
+            self.logout_button = gui.add_button("Log out", color="gray")
+        self.host_chat.on_click(lambda _: self.host("chat"))
+        self.host_arena.on_click(lambda _: self.host("agent"))
+        self.pm_send.on_click(lambda _: self.send_private())
+        self.logout_button.on_click(lambda _: self.logout())
+        self._unsubscribe = connection.subscribe(self.on_event)
+        self.refresh()
+
+    @property
+    def label(self) -> str:
+        return self.connection.address.label
+
+    def say_notice(self, text: str) -> None:
+        self.notice.content = f"**{escape_md(text)}**"
+        self.notice.visible = True
+
+    # -- directory
+
+    def refresh(self) -> None:
+        try:
+            directory = self.connection.directory()
+        except LabError as exc:
+            self.say_notice(f"Could not read the directory: {exc}")
+            return
+        with self._lock:
+            if directory == self._directory:
+                return
+            self._directory = directory
+            self.header.content = (
+                f"### {escape_md(directory.server_name)}\n"
+                f"Logged in as **{escape_md(self.connection.user)}**"
+            )
+            self.online.content = "Online: " + (
+                ", ".join(escape_md(u) for u in directory.users) or "nobody"
+            )
+            for row in self._rows:
+                row.remove()
+            self._rows = []
+            gui = self.client.gui
+            with self.contexts:
+                for c in directory.contexts:
+                    kind = KIND_NAMES.get(c.kind, c.kind)
+                    self._rows.append(
+                        gui.add_markdown(
+                            f"**{escape_md(c.ctx)}** · {kind} · owner {escape_md(c.owner)} · "
+                            f"{c.members} member{'s' if c.members != 1 else ''}"
+                        )
+                    )
+                    button = gui.add_button(
+                        f"Join {c.ctx}", disabled=c.ctx in self.panels, color="blue"
+                    )
+                    button.on_click(lambda _, ctx=c.ctx: self.join(ctx))
+                    self._rows.append(button)
+
+    # -- actions
+
+    def join(self, ctx: str) -> ChatPanel | None:
+        with self._lock:
+            if ctx in self.panels:
+                return self.panels[ctx]
+        try:
+            joined = self.connection.join(ctx)
+        except LabError as exc:
+            self.say_notice(f"Could not join {ctx}: {exc}")
+            return None
+        panel = ChatPanel(
+            self.client,
+            self.tabs,
+            self.connection,
+            joined,
+            on_close=self._panel_closed,
+            on_watch=self._on_watch,
+        )
+        with self._lock:
+            self.panels[ctx] = panel
+        self._directory = None  # the Join button's state changed
+        self.refresh()
+        if self._on_context is not None:
+            self._on_context(panel)
+        return panel
+
+    def _panel_closed(self, panel: ChatPanel) -> None:
+        with self._lock:
+            self.panels.pop(panel.ctx, None)
+        if self._on_context_closed is not None:
+            self._on_context_closed(panel)
+        self._directory = None
+        self.refresh()
+
+    def host(self, kind: str) -> None:
+        name = self.host_name.value.strip()
+        if not is_ident(name):
+            self.say_notice("Give the new context a name: letters, digits, '_', '-' or '.'.")
+            return
+        map_name = self.host_map.value.strip() if kind == "agent" else ""
+        try:
+            ctx = self.connection.host("agent" if kind == "agent" else "chat", name, map_name)
+        except LabError as exc:
+            self.say_notice(f"Could not host {name}: {exc}")
+            return
+        self.host_name.value = ""
+        self.join(ctx)
+
+    def send_private(self) -> None:
+        to = self.pm_to.value.strip()
+        text = self.pm_text.value
+        if not is_ident(to):
+            self.say_notice("Write the user name of who the message is for.")
+            return
+        problem = check_line(text)
+        if problem:
+            self.say_notice(problem)
+            return
+        try:
+            self.connection.send_private(to, text)
+        except LabError as exc:
+            self.say_notice(f"Not sent: {exc}")
+            return
+        self.pm_text.value = ""
+        self._add_private(f"to **{escape_md(to)}**: {escape_md(text)}")
+
+    def _add_private(self, line: str) -> None:
+        self._private = [*self._private[-19:], line]
+        self.pm_log.content = "  \n".join(self._private)
+
+    def logout(self) -> None:
+        self._unsubscribe()
+        for panel in list(self.panels.values()):
+            panel.close(leave=True)
+        try:
+            self.connection.logout()
+        except LabError as exc:
+            log.info("logout from %s: %s", self.label, exc)
+        self.tab.remove()
+        self._on_logout(self)
+
+    # -- events (the connection's threads)
+
+    def on_event(self, event: LabEvent) -> None:
+        try:
+            self._dispatch(event)
+        except Exception:
+            # A GUI update for a browser that just went away must not break the lab's thread.
+            log.exception("could not show an event from %s", self.label)
+
+    def _dispatch(self, event: LabEvent) -> None:
+        if isinstance(event, ChatEvent | MemberEvent):
+            panel = self.panels.get(event.ctx)
+            if panel is not None:
+                panel.on_event(event)
+        elif isinstance(event, DirectoryEvent):
+            self.refresh()
+        elif isinstance(event, PrivateEvent):
+            self._add_private(
+                f"`{clock(event.at)}` from **{escape_md(event.sender)}**: {escape_md(event.text)}"
+            )
+            self.pm_to.value = event.sender  # answering is one click on Send
+            self.client.add_notification(
+                title=f"Message from {event.sender} ({self.label})",
+                body=event.text[:200],
+                auto_close_seconds=10.0,
+            )
+        elif isinstance(event, AgentsEvent):
+            panel = self.panels.get(event.ctx)
+            if panel is not None and panel.robots is not None:
+                panel.robots.refresh_agents()
+        elif isinstance(event, DisconnectedEvent):
+            self.client.add_notification(
+                title=f"Disconnected from {self.label}", body=event.reason, color="red"
+            )
+            self.logout()

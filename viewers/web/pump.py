@@ -1,0 +1,94 @@
+"""The paced loop that carries the newest world frame to every watching browser.
+
+One thread for the whole viewer. Each tick (default 25 Hz) it takes each
+watched world's newest frame (``WorldFeed.latest()``, which never blocks),
+converts it once (:class:`PreparedFrame`), and lets every view of that world
+apply it. Pacing matters: an unpaced loop holds the GIL and starves viser's
+sender thread. A browser that is slow costs nothing here: viser keeps only
+the newest value of each scene property, so the browser skips frames instead
+of the server queueing them.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+from viewers.web.world_view import PreparedFrame, WorldView
+
+log = logging.getLogger("wart.viewer.pump")
+
+DEFAULT_RATE = 25.0
+SLOW_EVERY = 5  # slow hooks (plots, agent lists) run every 5th tick: 5 Hz at 25 Hz
+
+
+class FramePump:
+    def __init__(self, rate: float = DEFAULT_RATE) -> None:
+        if not 0 < rate <= 60:
+            raise ValueError(f"frame rate {rate} must be between 0 and 60 per second")
+        self.period = 1.0 / rate
+        self._views: dict[int, WorldView] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.ticks = 0
+        self.busy_s = 0.0  # time spent working, for the benchmark and the log
+
+    def attach(self, view: WorldView) -> None:
+        with self._lock:
+            self._views[id(view)] = view
+
+    def detach(self, view: WorldView) -> None:
+        with self._lock:
+            self._views.pop(id(view), None)
+
+    def start(self) -> FramePump:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="frame-pump", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        next_at = time.monotonic()
+        while not self._stop.is_set():
+            started = time.monotonic()
+            self.tick()
+            self.busy_s += time.monotonic() - started
+            next_at += self.period
+            delay = next_at - time.monotonic()
+            if delay < -self.period:  # overloaded: drop the backlog, never burst
+                next_at = time.monotonic()
+                delay = 0.0
+            self._stop.wait(max(0.001, delay))  # always yield the GIL a little
+
+    def tick(self) -> None:
+        self.ticks += 1
+        with self._lock:
+            views = list(self._views.values())
+        prepared: dict[int, PreparedFrame | None] = {}
+        for view in views:
+            feed = view.feed
+            if feed is None:
+                continue
+            try:
+                key = id(feed)
+                if key not in prepared:
+                    frame = feed.latest()
+                    prepared[key] = None if frame is None else PreparedFrame.of(frame)
+                snap = feed.snapshot()
+                if view.snapshot is not None and snap.version != view.snapshot.version:
+                    view.redraw(snap)  # an edit: everyone watching sees it
+                ready = prepared[key]
+                if ready is not None:
+                    view.apply(ready)
+                if self.ticks % SLOW_EVERY == 0:
+                    view.slow_tick()
+            except Exception:
+                # One broken view (a browser gone mid-frame) must not stop the others.
+                log.exception("could not update a world view; it stays attached")

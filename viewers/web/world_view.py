@@ -1,0 +1,352 @@
+"""One browser's top-down view of a world (everything here draws into ``client.scene``).
+
+Drawn from the world's snapshot (floor, obstacles, balls, lights), then kept
+live by :class:`~viewers.web.pump.FramePump`, which hands every watching view
+the same :class:`PreparedFrame` (converted once per world per tick). All
+robots are ONE batched mesh: a frame is two array assignments inside
+``client.atomic()``, whatever the number of robots. Only the selected robot
+gets extras (label, trail, IR rays); with few robots every one is labelled.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import viser
+
+from viewers.web import geometry as geo
+from viewers.web.adapters import WorldFeed, WorldFrame, WorldSnapshot
+
+log = logging.getLogger("wart.viewer.world")
+
+LABEL_ALL_UP_TO = 12  # more robots than this: only the selected one is labelled
+TRAIL_POINTS = 300
+# Gripper state 0 open/none, 1 closed, 2 holding: the robot's body colour says which.
+GRIPPER_COLOURS = np.array([[70, 130, 220], [230, 150, 40], [40, 170, 80]], np.uint8)
+FLOOR_COLOUR = (235, 235, 230)
+OBSTACLE_COLOUR = (110, 110, 120)
+BALL_COLOUR = (220, 60, 60)
+LIGHT_ON, LIGHT_OFF = (255, 220, 40), (150, 150, 150)
+
+
+@dataclass(frozen=True)
+class PreparedFrame:
+    """A frame converted for viser once, shared by every view of the world."""
+
+    frame: WorldFrame
+    positions: npt.NDArray[np.float32]
+    wxyzs: npt.NDArray[np.float32]
+    colours: npt.NDArray[np.uint8]
+    gripper_key: bytes  # colours change rarely: views compare this before resending
+
+    @staticmethod
+    def of(frame: WorldFrame) -> PreparedFrame:
+        positions, wxyzs = geo.poses_to_viser(frame.poses)
+        state = np.clip(frame.gripper, 0, len(GRIPPER_COLOURS) - 1)
+        return PreparedFrame(frame, positions, wxyzs, GRIPPER_COLOURS[state], state.tobytes())
+
+
+class WorldView:
+    """The arena in one client's 3D canvas; selection and extras are this client's own."""
+
+    def __init__(self, client: viser.ClientHandle) -> None:
+        self.client = client
+        self.feed: WorldFeed | None = None
+        self.snapshot: WorldSnapshot | None = None
+        self.selected: int | None = None
+        self.show_rays = False
+        self.last_seq = -1
+        self.frames_applied = 0
+        self._lock = threading.RLock()  # the pump thread and GUI callbacks both draw
+        self._robots: viser.BatchedMeshHandle | None = None
+        self._ring: viser.SceneNodeHandle | None = None
+        self._labels: dict[int, viser.LabelHandle] = {}
+        self._trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_POINTS)
+        self._trail_handle: viser.LineSegmentsHandle | None = None
+        self._rays: viser.LineSegmentsHandle | None = None
+        self._static: list[viser.SceneNodeHandle] = []
+        self._balls: list[viser.SceneNodeHandle] = []
+        self._lights: list[viser.SceneNodeHandle] = []
+        self._light_state: bytes = b""
+        self._gripper_key: bytes = b""
+        self._ticks = 0
+        self.on_select: list[Callable[[int | None], None]] = []
+        self.on_obstacle_click: list[Callable[[str], None]] = []
+        self.slow_hooks: list[Callable[[], None]] = []  # run at about 5 Hz by the pump
+        self._setup_scene()
+
+    def _setup_scene(self) -> None:
+        scene = self.client.scene
+        # Software WebGL (headless Chromium, cheap laptops) renders default lights,
+        # environment map and shadows at about 2 fps; flat ambient light at about 25.
+        scene.configure_default_lights(enabled=False, cast_shadow=False)
+        scene.configure_environment_map(hdri=None)
+        scene.add_light_ambient("/light", intensity=2.5)
+        scene.set_up_direction("+z")
+
+    # -- what the UI calls
+
+    @property
+    def robot_names(self) -> tuple[str, ...]:
+        return self.snapshot.robots if self.snapshot else ()
+
+    @property
+    def selected_name(self) -> str | None:
+        names = self.robot_names
+        if self.selected is None or self.selected >= len(names):
+            return None
+        return names[self.selected]
+
+    def show(self, feed: WorldFeed) -> None:
+        """Watch ``feed``: draw its snapshot, aim the camera; frames follow from the pump."""
+        with self._lock:
+            self.feed = feed
+            self.selected = None
+            self.last_seq = -1
+            self._trail.clear()
+            self.redraw(feed.snapshot())
+            snap = self.snapshot
+            assert snap is not None
+            cx, cy = snap.width * geo.MM / 2, snap.height * geo.MM / 2
+            cam = self.client.camera
+            cam.fov = geo.CAMERA_FOV
+            cam.up_direction = (0.0, 1.0, 0.0)  # screen-up is world +y
+            cam.position = (cx, cy, geo.camera_height(snap.width, snap.height))
+            cam.look_at = (cx, cy, 0.0)
+
+    def hide(self) -> None:
+        with self._lock:
+            self.feed = None
+            self.snapshot = None
+            self._clear_all()
+
+    def select(self, index: int | None) -> None:
+        with self._lock:
+            if index is not None and not 0 <= index < len(self.robot_names):
+                index = None
+            if index == self.selected:
+                return
+            self.selected = index
+            self._trail.clear()
+            if self._trail_handle is not None:
+                self._trail_handle.remove()
+                self._trail_handle = None
+            if self._rays is not None:
+                self._rays.remove()
+                self._rays = None
+            self._sync_labels()
+        for callback in list(self.on_select):
+            callback(index)
+
+    # -- drawing
+
+    def _clear_all(self) -> None:
+        for handle in [*self._static, *self._balls, *self._lights, *self._labels.values()]:
+            handle.remove()
+        self._static, self._balls, self._lights, self._labels = [], [], [], {}
+        for extra in (self._robots, self._ring, self._trail_handle, self._rays):
+            if extra is not None:
+                extra.remove()
+        self._robots = self._ring = self._trail_handle = self._rays = None
+        self._gripper_key = b""
+        self._light_state = b""
+
+    def redraw(self, snap: WorldSnapshot) -> None:
+        """Draw (or redraw after an edit) everything that comes from the snapshot."""
+        with self._lock:
+            robots_changed = self.snapshot is None or self.snapshot.robots != snap.robots
+            self.snapshot = snap
+            scene = self.client.scene
+            for handle in [*self._static, *self._balls, *self._lights]:
+                handle.remove()
+            self._static, self._balls, self._lights = [], [], []
+            self._light_state = b""
+            floor = scene.add_box(
+                "/world/floor",
+                color=FLOOR_COLOUR,
+                dimensions=(snap.width * geo.MM, snap.height * geo.MM, 0.002),
+                position=(snap.width * geo.MM / 2, snap.height * geo.MM / 2, -0.002),
+                cast_shadow=False,
+                receive_shadow=False,
+            )
+            self._static.append(floor)
+            for ob in snap.obstacles:
+                box = scene.add_box(
+                    f"/world/obstacles/{ob.ident}",
+                    color=OBSTACLE_COLOUR,
+                    dimensions=(ob.w * geo.MM, ob.h * geo.MM, 0.03),
+                    position=(ob.x * geo.MM, ob.y * geo.MM, 0.015),
+                    wxyz=tuple(geo.yaw_to_wxyz(ob.angle)),
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+                box.on_click(self._obstacle_clicked(ob.ident))
+                self._static.append(box)
+            for ball in snap.balls:
+                self._balls.append(
+                    scene.add_cylinder(
+                        f"/world/balls/{ball.ident}",
+                        radius=ball.r * geo.MM,
+                        height=0.02,
+                        color=BALL_COLOUR,
+                        position=(ball.x * geo.MM, ball.y * geo.MM, 0.01),
+                        cast_shadow=False,
+                        receive_shadow=False,
+                    )
+                )
+            for light in snap.lights:
+                self._lights.append(
+                    scene.add_cylinder(
+                        f"/world/lights/{light.ident}",
+                        radius=0.03,
+                        height=0.005,
+                        color=LIGHT_ON if light.on else LIGHT_OFF,
+                        position=(light.x * geo.MM, light.y * geo.MM, 0.003),
+                        cast_shadow=False,
+                        receive_shadow=False,
+                    )
+                )
+            if robots_changed or self._robots is None:
+                self._draw_robots(snap)
+
+    def _obstacle_clicked(self, ident: str) -> Callable[[object], None]:
+        def clicked(_event: object) -> None:
+            for callback in list(self.on_obstacle_click):
+                callback(ident)
+
+        return clicked
+
+    def _draw_robots(self, snap: WorldSnapshot) -> None:
+        scene = self.client.scene
+        if self._robots is not None:
+            self._robots.remove()
+        n = len(snap.robots)
+        vertices, faces = geo.robot_mesh(snap.robot_radius * geo.MM)
+        self._robots = scene.add_batched_meshes_simple(
+            "/world/robots",
+            vertices=vertices,
+            faces=faces,
+            batched_wxyzs=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+            batched_positions=np.zeros((n, 3), np.float32),
+            batched_colors=np.tile(GRIPPER_COLOURS[0], (n, 1)),
+            lod="off",  # a 35-triangle mesh needs no simplification
+            cast_shadow=False,
+            receive_shadow=False,
+            flat_shading=True,
+        )
+        self._robots.on_click(self._robot_clicked)
+        self._gripper_key = b""
+        if self._ring is not None:
+            self._ring.remove()
+        self._ring = scene.add_cylinder(
+            "/world/selected",
+            radius=snap.robot_radius * geo.MM * 1.5,
+            height=0.004,
+            color=(255, 60, 200),
+            position=(0.0, 0.0, 0.0),
+            visible=False,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
+        self._sync_labels()
+
+    def _robot_clicked(self, event: viser.SceneNodePointerEvent[viser.BatchedMeshHandle]) -> None:
+        self.select(event.instance_index)
+
+    def _sync_labels(self) -> None:
+        """Labels: every robot when few, else only the selected one."""
+        names = self.robot_names
+        wanted = set(range(len(names))) if len(names) <= LABEL_ALL_UP_TO else set()
+        if self.selected is not None:
+            wanted.add(self.selected)
+        for index in set(self._labels) - wanted:
+            self._labels.pop(index).remove()
+        for index in wanted - set(self._labels):
+            self._labels[index] = self.client.scene.add_label(
+                f"/world/labels/{index}", names[index], anchor="bottom-center"
+            )
+
+    def apply(self, prepared: PreparedFrame) -> None:
+        """Show a frame (called by the pump thread, paced)."""
+        with self._lock:
+            robots = self._robots
+            snap = self.snapshot
+            if robots is None or snap is None or prepared.frame.seq == self.last_seq:
+                return
+            frame = prepared.frame
+            if len(prepared.positions) != len(snap.robots):
+                return  # frame from before a robot was added or removed: wait for the next
+            self._ticks += 1
+            with self.client.atomic():
+                robots.batched_positions = prepared.positions
+                robots.batched_wxyzs = prepared.wxyzs
+                if prepared.gripper_key != self._gripper_key:
+                    robots.batched_colors = prepared.colours
+                    self._gripper_key = prepared.gripper_key
+                for index, label in self._labels.items():
+                    x, y, _ = prepared.positions[index]
+                    label.position = (float(x), float(y), 0.05)
+                self._apply_objects(frame)
+                self._apply_selected(prepared)
+            self.last_seq = frame.seq
+            self.frames_applied += 1
+
+    def _apply_objects(self, frame: WorldFrame) -> None:
+        for handle, (x, y) in zip(self._balls, frame.ball_xy, strict=False):
+            position = (float(x) * geo.MM, float(y) * geo.MM, 0.01)
+            if tuple(handle.position) != position:
+                handle.position = position
+        state = frame.lights_on.tobytes()
+        if state != self._light_state:
+            for handle, on in zip(self._lights, frame.lights_on, strict=False):
+                handle.color = LIGHT_ON if on else LIGHT_OFF
+            self._light_state = state
+
+    def _apply_selected(self, prepared: PreparedFrame) -> None:
+        ring = self._ring
+        index = self.selected
+        if ring is None:
+            return
+        if index is None or index >= len(prepared.positions):
+            if ring.visible:
+                ring.visible = False
+            return
+        x, y, _ = prepared.positions[index]
+        ring.position = (float(x), float(y), 0.001)
+        if not ring.visible:
+            ring.visible = True
+        pose = prepared.frame.poses[index]
+        self._trail.append((float(pose[0]), float(pose[1])))
+        if self._ticks % 5 == 0:  # the trail grows slowly: 5 Hz is plenty
+            segments = geo.trail_segments(np.asarray(self._trail, np.float32))
+            if len(segments):
+                if self._trail_handle is None:
+                    self._trail_handle = self.client.scene.add_line_segments(
+                        "/world/trail", segments, colors=(255, 60, 200), thickness=0.004
+                    )
+                else:
+                    self._trail_handle.points = segments
+        if self.show_rays and self.feed is not None and self.selected_name is not None:
+            sample = self.feed.sensors(self.selected_name)
+            if sample is not None:
+                radius = self.snapshot.robot_radius if self.snapshot else 27.5
+                rays = geo.ir_segments(pose, sample.ir, radius)
+                if self._rays is None:
+                    self._rays = self.client.scene.add_line_segments(
+                        "/world/rays", rays, colors=(255, 0, 0), thickness=0.002
+                    )
+                else:
+                    self._rays.points = rays
+        elif self._rays is not None:
+            self._rays.remove()
+            self._rays = None
+
+    def slow_tick(self) -> None:
+        for hook in list(self.slow_hooks):
+            hook()
