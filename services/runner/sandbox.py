@@ -35,6 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import psutil
+
 from common import controller as controller_api
 
 log = logging.getLogger("wart.runner.sandbox")
@@ -148,9 +150,13 @@ _UID_BASE = 61000
 
 
 def _take_uid() -> int:
-    # A uid of its own per sandbox: RLIMIT_NPROC counts processes per uid.
+    # A uid of its own per sandbox: RLIMIT_NPROC counts processes per uid, so a
+    # uid that still owns anything (even a zombie left by a crash) is skipped.
+    busy = {p.info["uids"].real for p in psutil.process_iter(["uids"]) if p.info["uids"]}
     with _uid_lock:
-        uid = next(u for u in range(_UID_BASE, _UID_BASE + 1000) if u not in _uids_in_use)
+        uid = next(
+            u for u in range(_UID_BASE, _UID_BASE + 1000) if u not in _uids_in_use and u not in busy
+        )
         _uids_in_use.add(uid)
         return uid
 
@@ -426,8 +432,7 @@ class Sandbox:
         except subprocess.TimeoutExpired:
             if not self._exit_reason:
                 self._exit_reason = reason
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGKILL)
+            _kill_sandbox(proc)
         self._done.wait(5.0)
 
     def wait(self, timeout: float | None = None) -> bool:
@@ -444,6 +449,32 @@ class Sandbox:
         if self._uid is not None:
             _give_uid(self._uid)
             self._uid = None
+
+
+def _kill_sandbox(proc: subprocess.Popen[bytes]) -> None:
+    """Kill a sandbox so that nothing is left, not even a zombie.
+
+    The outer bwrap (our child) runs an inner bwrap as init of the sandbox's
+    pid namespace. Killing that init makes the kernel kill and reap every
+    process inside; the outer bwrap then reaps it and exits. Killing the outer
+    one first would orphan the inner one to the machine's init, and where that
+    init does not reap (containers), zombies pile up and count against
+    RLIMIT_NPROC for the sandbox's uid.
+    """
+    try:
+        inner = psutil.Process(proc.pid).children()
+    except psutil.Error:
+        inner = []
+    for child in inner:
+        with contextlib.suppress(psutil.Error):
+            child.kill()
+    try:
+        proc.wait(2.0)
+        return
+    except subprocess.TimeoutExpired:
+        pass
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
 
 
 class _RateBudget:

@@ -47,6 +47,7 @@ class Run:
             source, limits=limits, on_command=self.commands.put, on_output=self.output.append
         )
         self.started = time.monotonic()
+        self.started_wall = time.time()
         self.sandbox.start(slot)
         self.sandbox.send_state(STATE)
 
