@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -53,6 +54,22 @@ def service_identity(lab: LabSettings, account: str) -> Path:
     return lab.state_dir / "identities" / f"{account}.key"
 
 
+SHIPPED_MAPS = Path(__file__).resolve().parent.parent / "maps"
+
+
+def seed_maps(maps_dir: Path) -> None:
+    """Copy the shipped maps into the lab's maps directory, never over a saved map.
+
+    The engine loads and saves by name inside its maps directory; keeping that
+    in the state dir leaves the repository's maps pristine.
+    """
+    maps_dir.mkdir(parents=True, exist_ok=True)
+    for shipped in SHIPPED_MAPS.glob("*.json"):
+        target = maps_dir / shipped.name
+        if not target.exists():
+            shutil.copyfile(shipped, target)
+
+
 def provision(lab: LabSettings) -> LabSettings:
     """What the registry and the services need before they start; idempotent.
 
@@ -65,6 +82,7 @@ def provision(lab: LabSettings) -> LabSettings:
     from services.registry import provision as provision_registry
     from services.registry_db import RegistryDB
 
+    seed_maps(lab.state_dir / "maps")
     identity, password, created = provision_registry(
         lab.state_dir / "registry.db", lab.state_dir / "registry.key"
     )
@@ -153,14 +171,13 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             alive_key=keys.alive(realm, AliveKind.CONTEXT, LOBBY),
         )
     )
-    maps_dir = Path(__file__).resolve().parent.parent / "maps"
     plan.append(
         ChildSpec(
             name="engine",
             argv=[
                 "engine",
                 "--map",
-                str(maps_dir / "foraging.json"),
+                str(lab.state_dir / "maps" / "foraging.json"),
                 "--world",
                 "arena1",
                 "--seed",
