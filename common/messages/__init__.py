@@ -24,6 +24,8 @@ from common.messages.base import (
     decode,
     encode,
 )
+from common.messages.agent import *  # noqa: F403 - every agent-context and runner wire type
+from common.messages.agent import __all__ as _agent_all
 from common.messages.chat import *  # noqa: F403 - every chat wire type
 from common.messages.chat import __all__ as _chat_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
@@ -86,6 +88,7 @@ __all__ = [
     "all_message_types",
     "decode",
     "encode",
+    *_agent_all,
     *_chat_all,
     *_registry_all,
 ]
