@@ -26,6 +26,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
     ),
     "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
+    "runner": ("services.runner.service", "run uploaded controllers in sandboxes"),
+    "control": ("services.control", "drive a robot with your controller from this machine"),
+    "deploy": ("services.deploy", "upload a controller to run on a robot in the lab"),
 }
 
 

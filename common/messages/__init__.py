@@ -4,6 +4,8 @@ Import message types from ``common.messages``; each domain module declares
 its own types on the shared :class:`~common.messages.base.Message` base.
 """
 
+from common.messages.agent import *  # noqa: F403 - every agent-context and runner wire type
+from common.messages.agent import __all__ as _agent_all
 from common.messages.auth import (
     ALL_PERMISSIONS,
     AuthEnvelope,
@@ -24,8 +26,6 @@ from common.messages.base import (
     decode,
     encode,
 )
-from common.messages.agent import *  # noqa: F403 - every agent-context and runner wire type
-from common.messages.agent import __all__ as _agent_all
 from common.messages.chat import *  # noqa: F403 - every chat wire type
 from common.messages.chat import __all__ as _chat_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type

@@ -22,7 +22,6 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from common.messages.auth import SessionId
 from common.messages.base import Ident, Message, NonNegInt, ShortText
 
 MAX_UPLOAD_BYTES = 64 * 1024
