@@ -173,6 +173,16 @@ class AgentClient:
                     return entry.position, entry.start_eta
         return None
 
+    def position_of_user(self, user: str, agent: str) -> int | None:
+        """The position of ``user``'s first request on ``agent`` (0 running); None if none."""
+        state = self.latest_state
+        for line in state.agents if state else []:
+            if line.agent == agent:
+                for entry in line.entries:
+                    if entry.user == user:
+                        return entry.position
+        return None
+
     # -- remote mode: drive from this machine
 
     def drive(
