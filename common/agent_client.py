@@ -162,6 +162,16 @@ class AgentClient:
                     return None
                 self._cond.wait(remaining)
 
+    def statuses_of_user(self, user: str) -> list[str]:
+        """Request ids of ``user`` in the newest queue state (running first)."""
+        state = self.latest_state
+        return [
+            entry.request_id
+            for line in (state.agents if state else [])
+            for entry in line.entries
+            if entry.user == user
+        ]
+
     def position(self, request_id: str) -> tuple[int, float | None] | None:
         """(position, estimated start) of a request in the newest queue state; None if gone."""
         state = self.latest_state
