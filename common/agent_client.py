@@ -148,11 +148,11 @@ class AgentClient:
         timeout: float | None = None,
         stop: threading.Event | None = None,
     ) -> RequestStatus | None:
-        """The first status of ``request_id`` among ``wanted`` (None on timeout or ``stop``)."""
+        """The newest status of ``request_id`` among ``wanted`` (None on timeout or ``stop``)."""
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._cond:
             while True:
-                for status in self._statuses.get(request_id, []):
+                for status in reversed(self._statuses.get(request_id, [])):
                     if status.status in wanted:
                         return status
                 if stop is not None and stop.is_set():

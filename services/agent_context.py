@@ -95,6 +95,7 @@ class AgentContext(ChatRoom):
         self._dirty = True
         self._layout: int | None = None
         self._frames: Any = None
+        self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
         self._runner_users: dict[str, str] = {}  # request id -> the runner account driving it
 
     # -- lifecycle
@@ -375,6 +376,8 @@ class AgentContext(ChatRoom):
         with self._wake:
             found = self.book.find(report.request_id)
             run = found[0].running if found is not None and found[2] else None
+            # Lines can trail the end of a slot (the last prints, a traceback).
+            run = run or self._recent.get(report.request_id)
             if run is None or run.holder_session != principal.session_id:
                 raise AuthError(
                     "forbidden", f"{principal.user} does not drive request {report.request_id}"
@@ -532,6 +535,10 @@ class AgentContext(ChatRoom):
             if ended or starts:
                 self._dirty = True
         for run in ended:
+            with self._lock:
+                self._recent[run.job.request_id] = run
+                while len(self._recent) > 64:
+                    self._recent.pop(next(iter(self._recent)))
             self._runner_users.pop(run.job.request_id, None)
             status, reason = self._end_reasons.pop(
                 run.job.request_id, ("finished", "its slot ended")

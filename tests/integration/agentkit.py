@@ -1,4 +1,4 @@
-"""An agent lab for integration tests: registry, engine, runner and an agent context, as processes."""
+"""An agent lab for integration tests: registry, engine, runner, agent context (processes)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import shutil
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np

@@ -12,7 +12,6 @@ import pytest
 
 from common.agent_client import FINAL, AgentClient, DriveResult
 from common.controller import Controller, Khepera
-from common.messages import OutputLines
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import (
     Poses,
@@ -163,8 +162,11 @@ def test_robot_stops_when_the_controller_process_is_killed(lab: Lab, procs: Proc
             ],
             env={"WART_PASSWORD": "correct horse"},
         )
-        wait_for(lambda: carol.state() and carol.position_of_user("alice", "k2") == 0, 20,
-                 "alice's wart control driving")
+        wait_for(
+            lambda: carol.state() and carol.position_of_user("alice", "k2") == 0,
+            20,
+            "alice's wart control driving",
+        )
         wait_for(lambda: moved(poses, "k2", 0.2) > 5, 10, "k2 moving")
         proc.kill9()
         killed = time.monotonic()
