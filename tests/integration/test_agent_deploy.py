@@ -182,3 +182,24 @@ def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: Lab) ->
         watcher.cancel(rid.request_id)
         final = watcher.wait_status(rid.request_id, FINAL, timeout=10)
         assert final is not None and final.status == "cancelled"
+
+
+def test_one_example_drives_unchanged_in_both_run_modes(lab: Lab) -> None:
+
+    from common.controller import load_controller
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
+    with lab.zsession() as z, agent_user(lab, "alice") as alice:
+        poses = Poses(z, lab.router.realm)
+        # remote: the controller runs in this process, over Zenoh
+        start = poses.xy("k1")
+        result = alice.drive("k1", load_controller(path))
+        assert result.status == "finished" and result.iterations > 20, result
+        remote = float(np.linalg.norm(poses.xy("k1") - start))
+        # deploy: the same file, uploaded, run by the runner in its sandbox
+        start = poses.xy("k1")
+        queued = alice.queue("k1", "deploy", source=path.read_bytes(), filename=path.name)
+        final = alice.wait_status(queued.request_id, FINAL, timeout=20)
+        assert final is not None and final.status == "finished", final
+        deployed = float(np.linalg.norm(poses.xy("k1") - start))
+        assert remote > 50 and deployed > 50, (remote, deployed)
