@@ -173,3 +173,28 @@ def test_robot_stops_when_the_controller_process_is_killed(lab: Lab, procs: Proc
         # The engine's watchdog (300 ms) stops it; generous bound for a loaded machine.
         wait_for(lambda: moved(poses, "k2", 0.15) < 0.5, 5, "k2 stopped")
         assert time.monotonic() - killed < 2.0
+
+
+def test_only_the_host_or_an_instructor_manages_the_context(lab: Lab) -> None:
+    from common.client import NotAllowed
+
+    with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:
+        for call in (
+            lambda: alice.settings(slot_seconds=5),
+            lambda: alice.settings(enabled=False),
+            lambda: alice.stop_agent("k0"),
+        ):
+            with pytest.raises(NotAllowed, match="owner of arena"):
+                call()
+        assert "k1" in ida.settings(enabled=False, agent="k1")
+        with pytest.raises(NotAllowed, match="disabled"):
+            alice.queue("k1", "remote")
+        ida.settings(enabled=True, agent="k1", slot_seconds=3)
+        assert ida.state().slot_seconds == 3
+        done: list[DriveResult] = []
+        t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
+        t.start()
+        wait_for(lambda: alice.position_of_user("alice", "k1") == 0, 10, "alice's slot")
+        ida.stop_agent("k1", "demo over")
+        t.join(10)
+        assert done and done[0].status == "cancelled" and "demo over" in done[0].reason
