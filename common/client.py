@@ -35,6 +35,7 @@ from common.auth import AuthError, Session, SessionKeys, Verifier, key_fingerpri
 from common.keys import AliveKind
 from common.messages import (
     AddUser,
+    AgentEvent,
     ChatSay,
     DirectoryReply,
     DirectoryRequest,
@@ -167,6 +168,7 @@ class RoomHandle:
     max_line: int
     subscriber: Any = None
     events: list[RoomEvent] = field(default_factory=list)
+    on_agent_event: Callable[[AgentEvent], None] | None = None
 
 
 class LabClient:
@@ -266,6 +268,16 @@ class LabClient:
         if isinstance(reply, ErrorReply):
             _raise_for(reply, what)
         return reply  # type: ignore[return-value]
+
+    def request(self, ctx: str, message: Message, expected: type[M], what: str) -> M:
+        """Send ``message`` to a context's request queryable; its reply, or a LabError."""
+        return self._ask(
+            keys.ctx_request(self.realm, ctx),
+            message,
+            expected,
+            what,
+            not_found=f"context {ctx} not found (no context of that name is running)",
+        )
 
     def _seal(self, key: str, message: Message) -> bytes:
         if self.session is None:
@@ -402,9 +414,19 @@ class LabClient:
     # -- rooms
 
     def join(
-        self, ctx: str, on_event: Callable[[RoomEvent], None] = lambda _e: None, history: int = 50
+        self,
+        ctx: str,
+        on_event: Callable[[RoomEvent], None] = lambda _e: None,
+        history: int = 50,
+        *,
+        on_agent_event: Callable[[AgentEvent], None] | None = None,
     ) -> RoomHandle:
-        """Join a room; events (lines, status changes) go to ``on_event`` from then on."""
+        """Join a room; events (lines, status changes) go to ``on_event`` from then on.
+
+        An agent context also publishes AgentEvents (queues, request status,
+        controller output): they go to ``on_agent_event``, and are ignored
+        quietly without one (a chat-only client in an agent context).
+        """
         keys.check_ident("room", ctx)
         subscriber = self.z.declare_subscriber(
             keys.ctx_events(self.realm, ctx), lambda s: self._on_event(ctx, s, on_event)
@@ -428,6 +450,7 @@ class LabClient:
             history=list(reply.history),
             max_line=reply.max_line,
             subscriber=subscriber,
+            on_agent_event=on_agent_event,
         )
         with self._lock:
             self._rooms[ctx] = room
@@ -437,7 +460,9 @@ class LabClient:
         self, ctx: str, sample: zenoh.Sample, on_event: Callable[[RoomEvent], None]
     ) -> None:
         try:
-            principal, event = self.verifier.open(str(sample.key_expr), sample.payload, RoomEvent)
+            principal, event = self.verifier.open(
+                str(sample.key_expr), sample.payload, (RoomEvent, AgentEvent)
+            )
         except (AuthError, MessageError) as exc:
             log.warning("ignored an event of %s: %s", ctx, exc)
             return
@@ -446,6 +471,11 @@ class LabClient:
             log.warning("ignored an event of %s from %s", ctx, principal.user)
             return
         room = self._rooms.get(ctx)
+        if isinstance(event, AgentEvent):
+            handler = room.on_agent_event if room is not None else None
+            if handler is not None:
+                handler(event)
+            return
         if room is not None:
             room.members = list(event.members)
         on_event(event)

@@ -28,10 +28,12 @@ This module uses only the standard library: it is what the sandbox offers.
 
 from __future__ import annotations
 
+import importlib.util
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
 API_VERSION = 1
@@ -257,3 +259,33 @@ class ControllerLoop:
                 self.controller.cleanup(self.robot)
             finally:
                 self.robot.stop()
+
+
+def load_controller(path: str | Path) -> Controller:
+    """Import a controller file and instantiate its controller (on the student's own machine).
+
+    The file must define exactly one Controller subclass, or name one with
+    ``CONTROLLER = MyController`` (the same rule as the lab's sandbox).
+    """
+    path = Path(path)
+    spec = importlib.util.spec_from_file_location(f"wart_controller_{path.stem}", path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot load {path} as Python")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    classes = [
+        value
+        for value in vars(module).values()
+        if isinstance(value, type)
+        and issubclass(value, Controller)
+        and value is not Controller
+        and value.__module__ == module.__name__
+    ]
+    chosen = getattr(module, "CONTROLLER", None) or (classes[0] if len(classes) == 1 else None)
+    if chosen is None:
+        names = ", ".join(c.__name__ for c in classes) or "none"
+        raise TypeError(
+            f"{path.name} must define exactly one Controller subclass (found: {names}); "
+            "or name one with CONTROLLER = MyController"
+        )
+    return chosen()

@@ -10,7 +10,7 @@ its own ``alive`` namespace.
     wart/<realm>/alive/<kind>/<id>                         liveliness tokens
     wart/<realm>/user/<name>/inbox                         private messages
     wart/<realm>/ctx/<ctx>/{join,leave,state,request}      context queryables
-    wart/<realm>/ctx/<ctx>/{in,events}                     context pub/sub
+    wart/<realm>/ctx/<ctx>/{in,events,output}              context pub/sub
     wart/<realm>/world/<world>/{snapshot,edit,map}         world queryables
     wart/<realm>/world/<world>/{frame,sensors}             world frame / all sensors each tick
     wart/<realm>/world/<world>/agent/<agent>/{sensors,cmd,lease}
@@ -169,6 +169,11 @@ def ctx_in(realm: str, ctx: str) -> str:
 def ctx_events(realm: str, ctx: str) -> str:
     """Context to its members (chat lines, status changes, queue updates, output)."""
     return f"{_ctx(realm, ctx)}/events"
+
+
+def ctx_output(realm: str, ctx: str) -> str:
+    """A running controller's output, from whoever drives (runner, wart control) to its context."""
+    return f"{_ctx(realm, ctx)}/output"
 
 
 # --- worlds (Sim2D engines and Khepera bridges) ------------------------------

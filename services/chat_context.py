@@ -259,6 +259,7 @@ class ChatRoom(Service):
 
     def on_leave(self, query: zenoh.Query) -> Message:
         principal, _ = self.verifier.open(str(query.key_expr), query.payload, LeaveRoom)
+        self.on_session_left(principal)
         with self._lock:
             sessions = self._members.get(principal.user)
             if sessions is None or principal.session_id not in sessions:
@@ -270,6 +271,9 @@ class ChatRoom(Service):
         if gone:
             self._publish(status=MemberStatus(user=principal.user, status="left"))
         return OkReply(detail=f"left {self.room}")
+
+    def on_session_left(self, principal: Principal) -> None:
+        """A member's session asked to leave (subclasses drop what it held)."""
 
     def on_state(self, query: zenoh.Query) -> Message:
         self.verifier.open(str(query.key_expr), query.payload, ContextInfoRequest)

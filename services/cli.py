@@ -27,6 +27,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     ),
     "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
     "viewer": ("viewers.web.app", "serve the web viewer (browser WARTApp on viser)"),
+    "runner": ("services.runner.service", "run uploaded controllers in sandboxes"),
+    "control": ("services.control", "drive a robot with your controller from this machine"),
+    "deploy": ("services.deploy", "upload a controller to run on a robot in the lab"),
 }
 
 

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 KINDS: dict[str, tuple[str, str]] = {
     "chat": ("services.chat_context", "a chat room"),
+    "agent": ("services.agent_context", "an agent context: chat + per-robot queues and leases"),
 }
 
 

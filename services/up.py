@@ -48,6 +48,10 @@ def default_state_dir(realm: str) -> Path:
 
 
 LOBBY = "lobby"
+ARENA = "arena"  # the agent context on the simulated world
+WORLD = "arena1"
+RUNNER = "runner"
+SERVICE_ACCOUNTS = (f"chat-{LOBBY}", f"ctx-{ARENA}", f"runner-{RUNNER}")
 
 
 def service_identity(lab: LabSettings, account: str) -> Path:
@@ -93,7 +97,7 @@ def provision(lab: LabSettings) -> LabSettings:
         )
     db = RegistryDB(lab.state_dir / "registry.db")
     try:
-        for account in (f"chat-{LOBBY}",):
+        for account in SERVICE_ACCOUNTS:
             path = service_identity(lab, account)
             key = load_identity_key(path) if path.exists() else create_identity_key(path)
             if not db.user_exists(account):
@@ -179,15 +183,60 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
                 "--map",
                 str(lab.state_dir / "maps" / "foraging.json"),
                 "--world",
-                "arena1",
+                WORLD,
                 "--seed",
                 "1",
                 "--maps-dir",
                 str(lab.state_dir / "maps"),
                 *net,
             ],
-            alive_key=keys.alive(realm, AliveKind.WORLD, "arena1"),
-            detail="simulated world arena1 (maps/foraging.json)",
+            alive_key=keys.alive(realm, AliveKind.WORLD, WORLD),
+            detail=f"simulated world {WORLD} (maps/foraging.json)",
+        )
+    )
+    account = f"runner-{RUNNER}"
+    plan.append(
+        ChildSpec(
+            name=RUNNER,
+            argv=[
+                "runner",
+                "--name",
+                RUNNER,
+                "--user",
+                account,
+                "--identity",
+                str(service_identity(lab, account)),
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.RUNNER, RUNNER),
+            detail="sandboxed uploaded controllers",
+        )
+    )
+    account = f"ctx-{ARENA}"
+    plan.append(
+        ChildSpec(
+            name=f"agent context {ARENA}",
+            argv=[
+                "context",
+                "agent",
+                "--name",
+                ARENA,
+                "--title",
+                "Arena (simulated)",
+                "--world",
+                WORLD,
+                "--runner",
+                RUNNER,
+                "--user",
+                account,
+                "--identity",
+                str(service_identity(lab, account)),
+                "--data-dir",
+                str(lab.state_dir / "rooms"),
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.CONTEXT, ARENA),
+            detail=f"queues and leases for the robots of {WORLD}",
         )
     )
     # The viewer comes last: it is the front door once everything else serves.

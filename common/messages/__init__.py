@@ -4,6 +4,8 @@ Import message types from ``common.messages``; each domain module declares
 its own types on the shared :class:`~common.messages.base.Message` base.
 """
 
+from common.messages.agent import *  # noqa: F403 - every agent-context and runner wire type
+from common.messages.agent import __all__ as _agent_all
 from common.messages.auth import (
     ALL_PERMISSIONS,
     AuthEnvelope,
@@ -86,6 +88,7 @@ __all__ = [
     "all_message_types",
     "decode",
     "encode",
+    *_agent_all,
     *_chat_all,
     *_registry_all,
 ]

@@ -19,7 +19,6 @@ parent over pipes, one JSON object per line; every line it sends is checked
 
 from __future__ import annotations
 
-import ast
 import contextlib
 import json
 import logging
@@ -38,18 +37,16 @@ from typing import Any
 import psutil
 
 from common import controller as controller_api
+from common.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
 
 log = logging.getLogger("wart.runner.sandbox")
 
-MAX_SOURCE_BYTES = 64 * 1024
+__all__ = ["MAX_SOURCE_BYTES", "PrecheckError", "Sandbox", "SandboxLimits", "precheck"]
+
 MAX_LINE_BYTES = 4096
 SANDBOX_PYTHON = "/usr/bin/python3"
 _CHILD = Path(__file__).with_name("child.py")
 _API = Path(controller_api.__file__)
-
-
-class PrecheckError(ValueError):
-    """An uploaded controller cannot run; the message says why, for the student."""
 
 
 @dataclass(frozen=True)
@@ -61,39 +58,6 @@ class SandboxLimits:
     file_size_bytes: int = 1024 * 1024
     output_lines_per_second: int = 50
     commands_per_second: int = 200
-
-
-def precheck(source: bytes, filename: str = "controller.py") -> str:
-    """Check an upload before it queues; returns the controller class name.
-
-    Refuses oversized files, non-UTF-8 text, syntax errors (with the line) and
-    files without a Controller subclass.
-    """
-    if len(source) > MAX_SOURCE_BYTES:
-        raise PrecheckError(
-            f"{filename} is {len(source)} bytes; controllers are limited to {MAX_SOURCE_BYTES}"
-        )
-    try:
-        text = source.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise PrecheckError(f"{filename} is not UTF-8 text (byte {exc.start})") from None
-    try:
-        tree = ast.parse(text, filename=filename)
-    except SyntaxError as exc:
-        raise PrecheckError(f"{filename}, line {exc.lineno}: syntax error: {exc.msg}") from None
-    classes = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ClassDef):
-            for base in node.bases:
-                name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
-                if name.endswith("Controller"):
-                    classes.append(node.name)
-    if not classes:
-        raise PrecheckError(
-            f"{filename} defines no controller: write a class deriving from "
-            "common.controller.Controller with a do_work(self, robot) method"
-        )
-    return classes[0]
 
 
 def validate_command(message: dict[str, Any]) -> dict[str, Any]:

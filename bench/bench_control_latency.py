@@ -1,0 +1,267 @@
+"""Control-loop latency: a sensor sample's publication to the resulting command taking effect.
+
+20 remote controllers (one Zenoh client process, one ZenohRobotLink per
+agent, the same path ``wart control`` uses) react to every sensor sample of
+their agent (the engine publishes at 50 Hz) with a sealed AgentCommand. The
+engine runs in this process, instrumented: for each command it matches the
+sample it answers (the controller echoes the sample's time in ``counters``)
+and records
+
+- *accepted*: sample published -> command verified against the lease by
+  the engine (the network and security path);
+- *applied*: sample published -> command applied to the world, at the
+  engine's next tick (adds up to one 20 ms tick by design).
+
+Beside it, in the same run and through the same router, the raw Zenoh round
+trip (put -> echo -> back, two client sessions) at the same rate. Run:
+
+    .venv/bin/python bench/bench_control_latency.py [--controllers 20] [--seconds 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.labproc import REPO, BenchLab
+from common import keys
+from common.auth import RegistryIdentity, issue_session
+from common.keys import AliveKind
+from common.messages import Lease
+from common.service import close_session, open_session
+from common.zconfig import NetworkOptions
+from services.engine.agents import agent_type
+from services.engine.service import EngineService, EngineSettings, _Command
+from services.engine.world import World
+
+WORLD = "bench"
+
+
+class TimedEngine(EngineService):
+    """The engine, recording when each sample was published and each command arrived."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.published: dict[tuple[str, int], float] = {}  # (agent, sample ms) -> put time
+        self.accepted: list[float] = []
+        self.applied: list[float] = []
+        self.recording = False
+
+    def _publish(self) -> None:
+        for agent, pub in list(self._agent_pubs.items()):
+            if not isinstance(pub, _TimedPublisher):
+                self._agent_pubs[agent] = _TimedPublisher(pub, agent, self)
+        super()._publish()
+
+    def _apply(self, item: _Command) -> None:
+        now = time.monotonic()
+        super()._apply(item)
+        counters = item.command.counters
+        if counters is None or not self.recording:
+            return
+        sent = self.published.get((item.agent, counters[0]))
+        if sent is not None:
+            self.accepted.append(item.received - sent)
+            self.applied.append(now - sent)
+
+
+class _TimedPublisher:
+    """An agent's sensor publisher that notes when each sample went out."""
+
+    def __init__(self, pub: Any, agent: str, engine: TimedEngine) -> None:
+        self.pub, self.agent, self.engine = pub, agent, engine
+
+    def put(self, payload: bytes) -> None:
+        ms = round(self.engine.world.sim_time * 1000)
+        self.engine.published[(self.agent, ms)] = time.monotonic()
+        self.pub.put(payload)
+
+    def undeclare(self) -> None:
+        self.pub.undeclare()
+
+
+def build_world(n: int) -> World:
+    world = World(2000, 2000, seed=1, tick_s=0.02, name=WORLD)
+    spec = agent_type("khepera")
+    for i in range(n):
+        world.add_agent(f"k{i}", spec, 150 + (i % 5) * 300, 150 + (i // 5) * 300, 0.0)
+    return world
+
+
+def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) -> None:
+    """Raw Zenoh round trips between two client sessions through the router, at 50 Hz."""
+    a = open_session(options, wait=10)
+    b = open_session(options, wait=10)
+    ping, pong = f"{WORLD}/rtt/ping", f"{WORLD}/rtt/pong"
+    got = threading.Event()
+    echo = b.declare_subscriber(ping, lambda s: b.put(pong, s.payload))
+    back = a.declare_subscriber(pong, lambda _s: got.set())
+    try:
+        time.sleep(0.5)  # let both subscriptions reach the router before measuring
+        while not stop.is_set():
+            got.clear()
+            start = time.monotonic()
+            a.put(ping, b"x" * 64)
+            if got.wait(1.0):
+                out.append(time.monotonic() - start)
+            stop.wait(0.02)
+    finally:
+        echo.undeclare()
+        back.undeclare()
+        close_session(a)
+        close_session(b)
+
+
+def child(args: argparse.Namespace) -> int:
+    """The controllers' process: one ZenohRobotLink per agent, answering every sample."""
+    from common.remote_robot import ZenohRobotLink
+
+    identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
+    options = NetworkOptions(realm=args.realm, connect=(args.connect,))
+    z = open_session(options, wait=10)
+    sessions = [
+        issue_session(identity, args.realm, f"c{i}", ["control"]) for i in range(args.controllers)
+    ]
+    print(json.dumps([s.session_id.hex() for s in sessions]), flush=True)
+    stop = threading.Event()
+    links = [
+        ZenohRobotLink(z, args.realm, WORLD, f"k{i}", lambda s=s: s, keepalive=1.0)
+        for i, s in enumerate(sessions)
+    ]
+
+    def react(link: ZenohRobotLink) -> None:
+        seen = 0
+        while not stop.is_set():
+            newest = link.wait_sample(seen, 0.5)
+            if newest == seen:
+                continue
+            seen = newest
+            link.send({"counters": [round(link.latest().time * 1000), 0]})
+
+    threads = [threading.Thread(target=react, args=(link,), daemon=True) for link in links]
+    for t in threads:
+        t.start()
+    sys.stdin.readline()  # the parent says when to stop
+    stop.set()
+    for link in links:
+        link.close(stop=False)
+    close_session(z)
+    return 0
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(np.array(values) * 1000, q)) if values else float("nan")
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--controllers", type=int, default=20)
+    p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--identity", help=argparse.SUPPRESS)
+    p.add_argument("--realm", help=argparse.SUPPRESS)
+    p.add_argument("--connect", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        return child(args)
+
+    lab = BenchLab([], "unused")
+    lab.spawn(
+        ["router", "--realm", lab.realm, "--name", "r", "--listen", f"tcp/127.0.0.1:{lab.port}"],
+        (AliveKind.ROUTER, "r"),
+    )
+    ident_path = Path(tempfile.mkdtemp(prefix="wart-bench-")) / "registry.key"
+    identity, _ = RegistryIdentity.load_or_create(ident_path)
+    z = open_session(lab.options, wait=10)
+    engine = TimedEngine(
+        z,
+        lab.realm,
+        build_world(args.controllers),
+        EngineSettings(tick_s=0.02, registry_key=identity.verify_key),
+    )
+    engine.start()
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bench.bench_control_latency",
+            "--child",
+            "--controllers",
+            str(args.controllers),
+            "--identity",
+            str(ident_path),
+            "--realm",
+            lab.realm,
+            "--connect",
+            lab.options.connect[0],
+        ],
+        cwd=REPO,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    rtts: list[float] = []
+    stop = threading.Event()
+    try:
+        assert proc.stdout is not None and proc.stdin is not None
+        holders = [bytes.fromhex(h) for h in json.loads(proc.stdout.readline())]
+        context = issue_session(identity, lab.realm, "ctx", ["lease"])
+        now = time.time()
+        for i, holder in enumerate(holders):
+            key = keys.agent_lease(lab.realm, WORLD, f"k{i}")
+            lease = Lease(
+                lease_id=f"L{i}",
+                world=WORLD,
+                agent=f"k{i}",
+                holder_user=f"c{i}",
+                holder_session=holder,
+                start=now,
+                end=now + args.seconds + 60,
+            )
+            z.put(key, context.seal(key, lease))
+        time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
+        probe = threading.Thread(target=rtt_probe, args=(lab.options, stop, rtts))
+        probe.start()
+        engine.recording = True
+        time.sleep(args.seconds)
+        engine.recording = False
+        stop.set()
+        probe.join(10)
+        proc.stdin.write("stop\n")
+        proc.stdin.flush()
+        proc.wait(20)
+    finally:
+        stop.set()
+        if proc.poll() is None:
+            proc.kill()
+        engine.stop()
+        close_session(z)
+        lab.stop()
+    n = len(engine.accepted)
+    print(f"engine: {engine.commands_accepted} accepted, {engine.commands_refused} refused")
+    rate = n / args.seconds / max(1, args.controllers)
+    print(f"{args.controllers} remote controllers, {n} commands ({rate:.1f} Hz each)")
+    print(f"{'path':<40} {'p50 ms':>8} {'p99 ms':>8}")
+    print(f"{'raw Zenoh round trip (2 clients)':<40} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
+    print(
+        f"{'sample -> command accepted by engine':<40} "
+        f"{pct(engine.accepted, 50):8.2f} {pct(engine.accepted, 99):8.2f}"
+    )
+    print(
+        f"{'sample -> command applied (next tick)':<40} "
+        f"{pct(engine.applied, 50):8.2f} {pct(engine.applied, 99):8.2f}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,312 @@
+"""A user's side of an agent context: queue, wait, drive or upload, see the output.
+
+Used by ``wart control`` / ``wart deploy``, by the web viewer and by tests::
+
+    with LabClient(zsession, realm, registry_key) as client:
+        client.login("alice", password)
+        agents = AgentClient(client, "arena").join()
+        queued = agents.queue("k1", "deploy", source=Path("avoid.py").read_bytes())
+        status = agents.wait_status(queued.request_id, {"finished", "cancelled", "refused"})
+
+For ``remote`` mode, :meth:`AgentClient.drive` runs a controller on this
+machine during the slot (it queues, waits for the lease, drives over Zenoh,
+stops at the slot's end or when the context ends the request).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from common import keys
+from common.client import LabClient, LabError, NotLoggedIn
+from common.controller import Controller, ControllerLoop, Khepera
+from common.messages import (
+    AgentContextState,
+    AgentEvent,
+    CancelControl,
+    ContextSettings,
+    ControllerOutput,
+    ControlQueued,
+    ControlRequest,
+    OkReply,
+    OutputLines,
+    QueueStateRequest,
+    RequestStatus,
+    RoomEvent,
+    RunMode,
+    StopControl,
+)
+from common.remote_robot import ZenohRobotLink
+
+log = logging.getLogger("wart.agent_client")
+
+FINAL = frozenset({"finished", "cancelled", "refused"})
+
+
+@dataclass
+class DriveResult:
+    request_id: str
+    status: str  # finished, cancelled, refused, interrupted
+    reason: str
+    iterations: int = 0
+    error: str = ""  # the controller's traceback, if it raised
+
+
+@dataclass
+class AgentClient:
+    """One agent context as a user sees it, over a logged-in LabClient."""
+
+    client: LabClient
+    ctx: str
+    on_output: Callable[[OutputLines], None] = lambda _o: None
+    on_state: Callable[[AgentContextState], None] = lambda _s: None
+    on_status: Callable[[RequestStatus], None] = lambda _s: None
+    on_room: Callable[[RoomEvent], None] = lambda _e: None
+    latest_state: AgentContextState | None = None
+    _statuses: dict[str, list[RequestStatus]] = field(default_factory=dict)
+    _cond: threading.Condition = field(default_factory=threading.Condition)
+
+    def join(self, history: int = 0) -> AgentClient:
+        keys.check_ident("context", self.ctx)
+        self.client.join(self.ctx, self.on_room, history, on_agent_event=self._on_event)
+        self.latest_state = self.state()
+        return self
+
+    def leave(self) -> None:
+        self.client.leave(self.ctx)
+
+    # -- events (Zenoh thread: short)
+
+    def _on_event(self, event: AgentEvent) -> None:
+        if event.state is not None:
+            with self._cond:
+                if self.latest_state is None or event.state.at >= self.latest_state.at:
+                    self.latest_state = event.state
+            self.on_state(event.state)
+        if event.request is not None:
+            with self._cond:
+                self._statuses.setdefault(event.request.request_id, []).append(event.request)
+                self._cond.notify_all()
+            self.on_status(event.request)
+        if event.output is not None:
+            self.on_output(event.output)
+
+    # -- requests
+
+    def state(self) -> AgentContextState:
+        state = self.client.request(
+            self.ctx, QueueStateRequest(), AgentContextState, f"queues of {self.ctx}"
+        )
+        with self._cond:
+            if self.latest_state is None or state.at >= self.latest_state.at:
+                self.latest_state = state
+        return state
+
+    def queue(
+        self, agent: str, mode: RunMode, *, source: bytes = b"", filename: str = "controller.py"
+    ) -> ControlQueued:
+        request = ControlRequest(agent=agent, mode=mode, source=source, filename=filename)
+        return self.client.request(self.ctx, request, ControlQueued, f"queue on {agent}")
+
+    def cancel(self, request_id: str) -> str:
+        reply = self.client.request(
+            self.ctx, CancelControl(request_id=request_id), OkReply, f"cancel {request_id}"
+        )
+        return reply.detail
+
+    def stop_agent(self, agent: str, reason: str = "") -> str:
+        reply = self.client.request(
+            self.ctx, StopControl(agent=agent, reason=reason), OkReply, f"stop {agent}"
+        )
+        return reply.detail
+
+    def settings(
+        self,
+        *,
+        slot_seconds: float | None = None,
+        enabled: bool | None = None,
+        agent: str | None = None,
+    ) -> str:
+        message = ContextSettings(slot_seconds=slot_seconds, enabled=enabled, agent=agent)
+        return self.client.request(self.ctx, message, OkReply, "change settings").detail
+
+    # -- waiting
+
+    def statuses(self, request_id: str) -> list[RequestStatus]:
+        with self._cond:
+            return list(self._statuses.get(request_id, []))
+
+    def wait_status(
+        self,
+        request_id: str,
+        wanted: set[str] | frozenset[str],
+        timeout: float | None = None,
+        stop: threading.Event | None = None,
+    ) -> RequestStatus | None:
+        """The newest status of ``request_id`` among ``wanted`` (None on timeout or ``stop``)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for status in reversed(self._statuses.get(request_id, [])):
+                    if status.status in wanted:
+                        return status
+                if stop is not None and stop.is_set():
+                    return None
+                remaining = 0.2 if deadline is None else min(0.2, deadline - time.monotonic())
+                if remaining <= 0:
+                    return None
+                self._cond.wait(remaining)
+
+    def statuses_of_user(self, user: str) -> list[str]:
+        """Request ids of ``user`` in the newest queue state (running first)."""
+        state = self.latest_state
+        return [
+            entry.request_id
+            for line in (state.agents if state else [])
+            for entry in line.entries
+            if entry.user == user
+        ]
+
+    def position(self, request_id: str) -> tuple[int, float | None] | None:
+        """(position, estimated start) of a request in the newest queue state; None if gone."""
+        state = self.latest_state
+        if state is None:
+            return None
+        for line in state.agents:
+            for entry in line.entries:
+                if entry.request_id == request_id:
+                    return entry.position, entry.start_eta
+        return None
+
+    def position_of_user(self, user: str, agent: str) -> int | None:
+        """The position of ``user``'s first request on ``agent`` (0 running); None if none."""
+        state = self.latest_state
+        for line in state.agents if state else []:
+            if line.agent == agent:
+                for entry in line.entries:
+                    if entry.user == user:
+                        return entry.position
+        return None
+
+    # -- remote mode: drive from this machine
+
+    def drive(
+        self,
+        agent: str,
+        controller: Controller,
+        *,
+        stop: threading.Event | None = None,
+        on_wait: Callable[[int, float | None], None] = lambda _p, _e: None,
+        on_start: Callable[[RequestStatus], None] = lambda _s: None,
+    ) -> DriveResult:
+        """Queue, wait for the slot, run ``controller`` on this machine for it, return why it ended.
+
+        ``stop`` (e.g. set on Ctrl-C) cancels the request, waiting or running.
+        """
+        stop = stop or threading.Event()
+        queued = self.queue(agent, "remote")
+        rid = queued.request_id
+        on_wait(queued.position, queued.start_eta)
+        try:
+            return self._drive_queued(rid, agent, controller, stop, on_wait, on_start)
+        except BaseException:
+            self.cancel_quietly(rid)
+            raise
+
+    def _drive_queued(
+        self,
+        rid: str,
+        agent: str,
+        controller: Controller,
+        stop: threading.Event,
+        on_wait: Callable[[int, float | None], None],
+        on_start: Callable[[RequestStatus], None],
+    ) -> DriveResult:
+        shown: tuple[int, float | None] | None = None
+        started: RequestStatus | None = None
+        while started is None:
+            status = self.wait_status(rid, FINAL | {"running"}, timeout=0.5, stop=stop)
+            if stop.is_set():
+                self.cancel_quietly(rid)
+                return DriveResult(rid, "interrupted", "stopped before its slot")
+            if status is not None and status.status != "running":
+                return DriveResult(rid, status.status, status.reason)
+            if status is not None:
+                started = status
+                break
+            where = self.position(rid)
+            if where is not None and where != shown and where[0] > 0:
+                shown = where
+                on_wait(*where)
+        on_start(started)
+        state = self.latest_state
+        assert state is not None
+        session = self.client.session
+        if session is None:
+            raise NotLoggedIn("logged out while waiting")
+        end = started.end or time.time()
+        link = ZenohRobotLink(
+            self.client.z,
+            self.client.realm,
+            state.world,
+            agent,
+            lambda: self.client.session,  # type: ignore[arg-type,return-value]
+        )
+        loop = ControllerLoop(controller, Khepera(link))
+        ended = threading.Event()
+
+        def watch() -> None:
+            # The context may end the slot early (stopped, disabled): stop driving then.
+            while not ended.is_set():
+                if stop.is_set() or self.wait_status(rid, FINAL, timeout=0.2) is not None:
+                    loop.stop.set()
+                    return
+
+        watcher = threading.Thread(target=watch, name="drive-watch", daemon=True)
+        watcher.start()
+        error = ""
+        try:
+            loop.run(until=time.monotonic() + max(0.0, end - time.time()))
+        except Exception:
+            error = traceback.format_exc(limit=5)
+        finally:
+            ended.set()
+            link.close(stop=True)
+        reason = "the controller raised an exception" if error else "slot over"
+        if stop.is_set():
+            reason = "interrupted"
+        self._report_end(rid, reason, error)
+        if stop.is_set():
+            self.cancel_quietly(rid)
+            return DriveResult(rid, "interrupted", reason, loop.iterations, error)
+        final = self.wait_status(rid, FINAL, timeout=2.0)
+        if final is None:
+            return DriveResult(rid, "finished", reason, loop.iterations, error)
+        return DriveResult(rid, final.status, final.reason, loop.iterations, error)
+
+    def _report_end(self, rid: str, reason: str, error: str) -> None:
+        session = self.client.session
+        if session is None:
+            return
+        key = keys.ctx_output(self.client.realm, self.ctx)
+        lines = [line[:1000] for line in error.splitlines()][:100]
+        try:
+            self.client.z.put(
+                key,
+                session.seal(
+                    key, ControllerOutput(request_id=rid, lines=lines, done=True, reason=reason)
+                ),
+            )
+        except Exception as exc:  # the session is closing
+            log.debug("could not report the end of %s: %s", rid, exc)
+
+    def cancel_quietly(self, rid: str) -> None:
+        try:
+            self.cancel(rid)
+        except LabError as exc:
+            log.debug("cancel %s: %s", rid, exc)

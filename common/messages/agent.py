@@ -1,0 +1,243 @@
+"""Wire types of agent contexts (thesis 7.4.2) and the runner: queues, leases, uploads, output.
+
+Clients ask an agent context (``ctx/<ctx>/request``, AuthEnvelopes) to queue a
+controller for one agent (:class:`ControlRequest`), cancel it
+(:class:`CancelControl`), read the queues (:class:`QueueStateRequest`), and,
+with the manage right, change the settings (:class:`ContextSettings`) or stop
+the running controller (:class:`StopControl`). The context publishes
+:class:`AgentEvent` on ``ctx/<ctx>/events`` (beside the chat's RoomEvent),
+sealed with its service session.
+
+The context asks a runner (``runner/<runner>/run``) to run an uploaded
+controller (:class:`RunRequest`), and to stop it (:class:`RunStop`). The
+runner's reply carries a claim sealed with its own session
+(:class:`RunAccepted`), whose session id the lease names. Whoever drives an
+agent (the runner, or the student's ``wart control``) reports the
+controller's output and end on ``ctx/<ctx>/output`` (:class:`ControllerOutput`).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar, Literal
+
+import msgspec
+
+from common.messages.base import Ident, Message, NonNegInt, ShortText
+
+MAX_UPLOAD_BYTES = 64 * 1024
+"""An uploaded controller's largest size (the sandbox's pre-check uses the same figure)."""
+
+MAX_OUTPUT_LINE = 1000
+RunMode = Literal["remote", "deploy"]
+"""remote: the student's own machine drives (wart control); deploy: the lab's runner does."""
+
+Upload = Annotated[bytes, msgspec.Meta(max_length=MAX_UPLOAD_BYTES)]
+OutputLine = Annotated[str, msgspec.Meta(max_length=MAX_OUTPUT_LINE)]
+SlotSeconds = Annotated[float, msgspec.Meta(ge=1.0, le=3600.0)]
+
+RequestStatusKind = Literal["queued", "running", "finished", "cancelled", "refused"]
+
+
+# --- client to agent context -----------------------------------------------------------
+
+
+class ControlRequest(Message):
+    """Queue a controller on an agent (the thesis's AgentControlRequest).
+
+    ``remote``: the requester's own session will drive (the lease names it).
+    ``deploy``: ``source`` is uploaded and run by the lab's runner.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    agent: Ident
+    mode: RunMode
+    source: Upload = b""
+    filename: ShortText = "controller.py"
+
+
+class ControlQueued(Message):
+    """The reply to a ControlRequest: where it waits and when it should start."""
+
+    request_id: Ident
+    agent: Ident
+    position: NonNegInt  # 0: running now; 1: next; ...
+    start_eta: float | None  # wall-clock seconds; None while the agent is disabled
+    slot_seconds: float
+
+
+class CancelControl(Message):
+    """Withdraw a request (one's own; anyone's with the manage right)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    request_id: Ident
+
+
+class StopControl(Message):
+    """Stop the controller running on an agent (manage right: owner or ``kick``)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    agent: Ident
+    reason: ShortText = ""
+
+
+class ContextSettings(Message):
+    """Change the slot length, or enable/disable remote control (manage right).
+
+    ``enabled`` applies to ``agent`` if given, else to the whole context.
+    Fields left None are unchanged.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    slot_seconds: SlotSeconds | None = None
+    enabled: bool | None = None
+    agent: Ident | None = None
+
+
+class QueueStateRequest(Message):
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+
+# --- agent context state and events ----------------------------------------------------
+
+
+class QueueEntry(msgspec.Struct, frozen=True, kw_only=True):
+    request_id: Ident
+    user: Ident
+    mode: RunMode
+    position: NonNegInt  # 0 running
+    start_eta: float | None  # running: when it started
+    end: float | None = None  # running: when its slot ends
+
+
+class AgentQueue(msgspec.Struct, frozen=True, kw_only=True):
+    agent: Ident
+    type: Ident
+    enabled: bool
+    entries: list[QueueEntry]  # running first (position 0), then the waiting ones in order
+
+
+class AgentContextState(Message):
+    """Every agent of the context and its queue (reply of QueueStateRequest, and in events)."""
+
+    ctx: Ident
+    world: Ident
+    slot_seconds: float
+    enabled: bool
+    agents: list[AgentQueue]
+    at: float  # the context's wall clock when it was made
+
+
+class RequestStatus(msgspec.Struct, frozen=True, kw_only=True):
+    request_id: Ident
+    agent: Ident
+    user: Ident
+    status: RequestStatusKind
+    reason: ShortText = ""
+    start: float | None = None  # running: the lease's start and end
+    end: float | None = None
+
+
+class OutputLines(msgspec.Struct, frozen=True, kw_only=True):
+    request_id: Ident
+    agent: Ident
+    user: Ident
+    lines: list[OutputLine]
+
+
+class AgentEvent(Message):
+    """An agent context's news, published on ``ctx/<ctx>/events`` beside RoomEvents."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/events",)
+
+    ctx: Ident
+    state: AgentContextState | None = None
+    request: RequestStatus | None = None
+    output: OutputLines | None = None
+
+
+# --- whoever drives, to the agent context ----------------------------------------------
+
+
+class ControllerOutput(Message):
+    """Lines a running controller printed, and its end (sealed, ``ctx/<ctx>/output``).
+
+    Accepted from the session its lease names (the runner, or the student's
+    ``wart control``). ``done`` with ``reason`` says the controller has ended.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/output",)
+
+    request_id: Ident
+    lines: Annotated[list[OutputLine], msgspec.Meta(max_length=100)] = msgspec.field(
+        default_factory=list
+    )
+    done: bool = False
+    reason: ShortText = ""
+
+
+# --- agent context to runner -----------------------------------------------------------
+
+
+class RunRequest(Message):
+    """Run an uploaded controller on an agent until ``end`` (sealed, ``lease`` permission)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
+
+    request_id: Ident
+    ctx: Ident
+    world: Ident
+    agent: Ident
+    user: Ident  # whose controller it is (for the logs)
+    source: Upload
+    end: float  # wall-clock seconds: the sandbox is killed then at the latest
+    filename: ShortText = "controller.py"
+
+
+class RunClaim(Message):
+    """Sealed by the runner's session: this session will drive ``request_id``."""
+
+    request_id: Ident
+    agent: Ident
+
+
+class RunAccepted(Message):
+    """The runner's reply to a RunRequest: ``claim`` is an AuthEnvelope of a RunClaim."""
+
+    claim: bytes
+
+
+class RunStop(Message):
+    """Stop a run early (sealed, ``lease`` permission)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
+
+    request_id: Ident
+    reason: ShortText = "stopped"
+
+
+__all__ = [
+    "MAX_OUTPUT_LINE",
+    "MAX_UPLOAD_BYTES",
+    "AgentContextState",
+    "AgentEvent",
+    "AgentQueue",
+    "CancelControl",
+    "ContextSettings",
+    "ControlQueued",
+    "ControlRequest",
+    "ControllerOutput",
+    "OutputLines",
+    "QueueEntry",
+    "QueueStateRequest",
+    "RequestStatus",
+    "RunAccepted",
+    "RunClaim",
+    "RunMode",
+    "RunRequest",
+    "RunStop",
+    "StopControl",
+]

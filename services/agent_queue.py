@@ -1,0 +1,177 @@
+"""Per-agent FIFO queues of controller requests (the thesis's AgentControlRequest), pure logic.
+
+No Zenoh and no clock of its own: the agent context calls these methods under
+its lock with the current wall-clock time, and does the I/O (leases, the
+runner, events) itself. Each agent has at most one running request (holding
+the lease) and a FIFO of waiting ones; a request runs for the slot length in
+force when it starts.
+"""
+
+from __future__ import annotations
+
+import itertools
+import secrets
+from collections import deque
+from dataclasses import dataclass, field
+
+from common.messages import AgentQueue, QueueEntry, RunMode
+
+
+@dataclass
+class ControlJob:
+    """One queued request: who, for which agent, how it will run."""
+
+    request_id: str
+    agent: str
+    user: str
+    session_id: bytes  # the requester's session (the lease holder in remote mode)
+    mode: RunMode
+    source: bytes = b""
+    filename: str = "controller.py"
+
+
+@dataclass
+class RunningJob:
+    job: ControlJob
+    lease_id: str
+    holder_session: bytes  # the requester's (remote) or the runner's (deploy) session
+    start: float
+    end: float
+
+
+@dataclass
+class AgentLine:
+    agent: str
+    type: str
+    enabled: bool = True
+    waiting: deque[ControlJob] = field(default_factory=deque)
+    running: RunningJob | None = None
+
+
+_counter = itertools.count(1)
+
+
+def new_request_id(agent: str) -> str:
+    """Unique, readable, and one key chunk (lease ids derive from it)."""
+    return f"{agent}-{next(_counter)}-{secrets.token_hex(3)}"
+
+
+class QueueBook:
+    """Every agent's queue. Not thread-safe: the context holds its lock around calls."""
+
+    def __init__(self, slot_seconds: float) -> None:
+        self.slot_seconds = slot_seconds
+        self.enabled = True
+        self.lines: dict[str, AgentLine] = {}
+
+    # -- agents
+
+    def set_agents(self, agents: dict[str, str]) -> list[ControlJob]:
+        """Adopt the world's agent list (id -> type); returns waiting jobs of vanished agents."""
+        gone: list[ControlJob] = []
+        for agent in list(self.lines):
+            if agent not in agents:
+                line = self.lines.pop(agent)
+                gone.extend(line.waiting)
+                if line.running is not None:
+                    gone.append(line.running.job)
+        for agent, kind in agents.items():
+            line = self.lines.get(agent)
+            if line is None:
+                self.lines[agent] = AgentLine(agent=agent, type=kind)
+            else:
+                line.type = kind
+        return gone
+
+    def can_run(self, agent: str) -> bool:
+        line = self.lines.get(agent)
+        return bool(line and line.enabled and self.enabled)
+
+    # -- requests
+
+    def add(self, job: ControlJob) -> int:
+        """Queue ``job``; its position (1 = next)."""
+        line = self.lines[job.agent]
+        line.waiting.append(job)
+        return len(line.waiting)
+
+    def find(self, request_id: str) -> tuple[AgentLine, ControlJob, bool] | None:
+        """(line, job, running) of a request, or None."""
+        for line in self.lines.values():
+            if line.running is not None and line.running.job.request_id == request_id:
+                return line, line.running.job, True
+            for job in line.waiting:
+                if job.request_id == request_id:
+                    return line, job, False
+        return None
+
+    def remove_waiting(self, request_id: str) -> ControlJob | None:
+        for line in self.lines.values():
+            for job in line.waiting:
+                if job.request_id == request_id:
+                    line.waiting.remove(job)
+                    return job
+        return None
+
+    def jobs_of_session(self, session_id: bytes) -> list[tuple[ControlJob, bool]]:
+        out: list[tuple[ControlJob, bool]] = []
+        for line in self.lines.values():
+            if line.running is not None and line.running.job.session_id == session_id:
+                out.append((line.running.job, True))
+            out.extend((job, False) for job in line.waiting if job.session_id == session_id)
+        return out
+
+    def next_to_start(self, agent: str) -> ControlJob | None:
+        line = self.lines[agent]
+        if line.running is not None or not line.waiting or not self.can_run(agent):
+            return None
+        return line.waiting.popleft()
+
+    def expired(self, now: float) -> list[RunningJob]:
+        return [
+            line.running
+            for line in self.lines.values()
+            if line.running is not None and now >= line.running.end
+        ]
+
+    # -- what users see
+
+    def eta(self, agent: str, position: int, now: float) -> float | None:
+        """When the waiting request at ``position`` (1 = next) should start; None if disabled."""
+        line = self.lines[agent]
+        if not self.can_run(agent):
+            return None
+        start = max(now, line.running.end) if line.running is not None else now
+        return start + (position - 1) * self.slot_seconds
+
+    def agent_queues(self, now: float) -> list[AgentQueue]:
+        out = []
+        for agent in sorted(self.lines):
+            line = self.lines[agent]
+            entries: list[QueueEntry] = []
+            if line.running is not None:
+                job = line.running.job
+                entries.append(
+                    QueueEntry(
+                        request_id=job.request_id,
+                        user=job.user,
+                        mode=job.mode,
+                        position=0,
+                        start_eta=line.running.start,
+                        end=line.running.end,
+                    )
+                )
+            for position, job in enumerate(line.waiting, start=1):
+                entries.append(
+                    QueueEntry(
+                        request_id=job.request_id,
+                        user=job.user,
+                        mode=job.mode,
+                        position=position,
+                        start_eta=self.eta(agent, position, now),
+                    )
+                )
+            out.append(
+                AgentQueue(agent=agent, type=line.type, enabled=line.enabled, entries=entries)
+            )
+        return out

@@ -1,0 +1,76 @@
+"""``wart deploy --context CTX --agent k1 my_controller.py``: run your controller in the lab.
+
+Uploads the file (checked here and again by the lab: at most 64 KiB of UTF-8
+Python with a Controller subclass), queues it for the agent, shows your
+position and estimated start, then the controller's output (prints,
+exceptions) live while the lab's runner runs it in a sandbox for one slot.
+Exits when the slot ends. Ctrl-C cancels the request (waiting or running).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+from common import cli
+from common.agent_client import FINAL, AgentClient
+from common.messages import RequestStatus
+from common.precheck import PrecheckError
+from services.chat import say
+from services.control import (
+    interrupt_event,
+    read_checked,
+    session_for,
+    show_output,
+    show_wait,
+    tool_parser,
+)
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:
+    p = tool_parser(prog, __doc__ or "")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        source = read_checked(args.controller)
+    except (PrecheckError, OSError) as exc:
+        return cli.fail(str(exc))
+    stop = interrupt_event()
+
+    def body(agents: AgentClient) -> int:
+        agents.on_output = lambda o: show_output(o) if o.request_id == rid[0] else None
+        rid: list[str] = [""]
+        queued = agents.queue(args.agent, "deploy", source=source, filename=args.controller.name)
+        rid[0] = queued.request_id
+        say(f"uploaded {args.controller.name} as request {queued.request_id}")
+        show_wait(queued.position, queued.start_eta)
+        shown: tuple[int, float | None] | None = None
+        running = False
+        final: RequestStatus | None = None
+        while final is None:
+            status = agents.wait_status(rid[0], FINAL | {"running"}, timeout=0.5, stop=stop)
+            if stop.is_set():
+                agents.cancel_quietly(rid[0])
+                final = agents.wait_status(rid[0], FINAL, timeout=5.0)
+                say(f"cancelled: {final.reason if final else 'request withdrawn'}")
+                return 0
+            if status is not None and status.status in FINAL:
+                final = status
+                break
+            if status is not None and not running:
+                running = True
+                left = (status.end or 0) - status.start if status.start else 0
+                say(f"running on {args.agent} for {left:.0f} s; output follows")
+                continue
+            where = agents.position(rid[0])
+            if not running and where is not None and where != shown and where[0] > 0:
+                shown = where
+                show_wait(*where)
+        say(f"{final.status}: {final.reason}")
+        return 0 if final.status == "finished" else 1
+
+    return session_for(args, options, body)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

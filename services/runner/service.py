@@ -1,0 +1,293 @@
+"""``wart runner``: runs uploaded controllers for agent contexts, each in a sandbox.
+
+An agent context (a principal with ``lease``) asks on ``runner/<name>/run``
+(:class:`RunRequest`) to run a controller on an agent until a wall-clock
+end. The runner pre-checks the source again (never trusting the context's
+check), starts a :class:`~services.runner.sandbox.Sandbox`, and replies with a
+claim sealed by its own session: the context's lease names that session.
+Then, per run:
+
+- a relay thread hands the agent's newest sensor sample to the sandbox (the
+  Zenoh callback only keeps the newest one: a stalled sandbox stalls nothing);
+- the sandbox's validated commands become ``AgentCommand`` sealed with the
+  runner's session (``common.remote_robot.ZenohRobotLink``, whose keep-alive
+  feeds the world's watchdog while the sandbox lives);
+- output lines (prints, tracebacks) go to the context as
+  :class:`ControllerOutput` on ``ctx/<ctx>/output``, batched every 100 ms;
+- at the end (slot over, :class:`RunStop`, the controller ended or crashed)
+  the robot is told to stop and the context gets ``done`` with the reason.
+
+Uploaded code never sees Zenoh, keys or the lease: only pipes to this process.
+Token: ``alive/runner/<name>``.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+from common import cli, keys
+from common.auth import Verifier, load_identity_key, parse_public_key
+from common.client import LabClient, LabError, ServiceLogin
+from common.keys import AliveKind
+from common.messages import (
+    MAX_OUTPUT_LINE,
+    ControllerOutput,
+    Message,
+    OkReply,
+    RunAccepted,
+    RunClaim,
+    RunRequest,
+    RunStop,
+)
+from common.precheck import PrecheckError, precheck
+from common.remote_robot import ZenohRobotLink, state_to_dict
+from common.service import RequestError, Service, run_service
+from services.runner.sandbox import Sandbox, SandboxLimits
+
+log = logging.getLogger("wart.runner")
+
+MAX_RUNS = 32
+MAX_SLOT_S = 3600.0
+OUTPUT_FLUSH_S = 0.1
+
+
+class Run:
+    """One controller running for one request: sandbox, robot link, relays."""
+
+    def __init__(self, runner: RunnerService, request: RunRequest, limits: SandboxLimits) -> None:
+        self.runner = runner
+        self.request = request
+        self.ended = threading.Event()
+        self._lines: list[str] = []
+        self._lines_lock = threading.Lock()
+        self.link = ZenohRobotLink(
+            runner.session,
+            runner.realm,
+            request.world,
+            request.agent,
+            lambda: runner.login.session,
+        )
+        self.sandbox = Sandbox(
+            request.source,
+            filename=request.filename,
+            limits=limits,
+            on_command=self.link.send,
+            on_output=self._on_output,
+            on_exit=self._on_exit,
+        )
+        self._output_key = keys.ctx_output(runner.realm, request.ctx)
+
+    def start(self) -> None:
+        self.sandbox.start(max(0.1, self.request.end - time.time()))
+        threading.Thread(
+            target=self._relay, name=f"relay-{self.request.agent}", daemon=True
+        ).start()
+        threading.Thread(target=self._flush_loop, name="run-output", daemon=True).start()
+
+    def _relay(self) -> None:
+        seen = 0
+        while not self.ended.is_set():
+            newest = self.link.wait_sample(seen, 0.2)
+            if newest == seen:
+                continue
+            seen = newest
+            if not self.sandbox.send_state(state_to_dict(self.link.latest())):
+                return
+
+    def _on_output(self, line: str) -> None:
+        with self._lines_lock:
+            if len(self._lines) < 200:  # the sandbox already caps lines per second
+                self._lines.append(line[:MAX_OUTPUT_LINE])
+
+    def _flush(self, *, done: bool = False, reason: str = "") -> None:
+        with self._lines_lock:
+            lines, self._lines = self._lines, []
+        while lines or done:
+            batch, lines = lines[:100], lines[100:]
+            last = done and not lines
+            if batch or last:
+                self.runner.report(
+                    self._output_key,
+                    ControllerOutput(
+                        request_id=self.request.request_id,
+                        lines=batch,
+                        done=last,
+                        reason=reason[:256] if last else "",
+                    ),
+                )
+            if last or not lines:
+                break
+
+    def _flush_loop(self) -> None:
+        while not self.ended.wait(OUTPUT_FLUSH_S):
+            self._flush()
+
+    def _on_exit(self, reason: str) -> None:
+        self.link.close(stop=True)  # the robot stops now, not 300 ms later
+        self.ended.set()
+        self._flush(done=True, reason=reason)
+        log.info(
+            "%s on %s for %s ended: %s",
+            self.request.request_id,
+            self.request.agent,
+            self.request.user,
+            reason,
+        )
+        self.runner.forget(self.request.request_id)
+
+    def stop(self, reason: str) -> None:
+        threading.Thread(
+            target=self.sandbox.stop, kwargs={"grace": 0.5, "reason": reason}, daemon=True
+        ).start()
+
+
+class RunnerService(Service):
+    kind = AliveKind.RUNNER
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        realm: str,
+        name: str,
+        *,
+        registry_key: bytes,
+        login: ServiceLogin,
+        limits: SandboxLimits | None = None,
+    ) -> None:
+        super().__init__(session, realm, name)
+        self.verifier = Verifier(registry_key, realm)
+        self.login = login
+        self.limits = limits or SandboxLimits()
+        self._runs: dict[str, Run] = {}
+        self._lock = threading.Lock()
+        self._key = keys.runner_run(realm, name)
+
+    def on_start(self) -> None:
+        self.serve(self._key, self._on_run)
+
+    def on_stop(self, timeout: float) -> None:
+        with self._lock:
+            runs = list(self._runs.values())
+        for run in runs:
+            run.sandbox.stop(grace=0.2, reason="the runner stopped")
+        for run in runs:
+            run.ended.wait(max(0.1, timeout / max(1, len(runs))))
+
+    def runs(self) -> list[str]:
+        with self._lock:
+            return sorted(self._runs)
+
+    def forget(self, request_id: str) -> None:
+        with self._lock:
+            self._runs.pop(request_id, None)
+
+    def report(self, key: str, message: ControllerOutput) -> None:
+        try:
+            self.session.put(key, self.login.session.seal(key, message))
+        except Exception as exc:  # the session closing at shutdown
+            self.log.debug("could not report on %s: %s", key, exc)
+
+    def _on_run(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(
+            str(query.key_expr), query.payload, (RunRequest, RunStop)
+        )
+        principal.require("lease", "ask a runner to run controllers")
+        if isinstance(request, RunStop):
+            with self._lock:
+                run = self._runs.get(request.request_id)
+            if run is None:
+                return OkReply(detail=f"{request.request_id} is not running")
+            run.stop(request.reason or f"stopped by {principal.user}")
+            return OkReply(detail=f"stopping {request.request_id}")
+        return self._start(request)
+
+    def _start(self, request: RunRequest) -> Message:
+        now = time.time()
+        if not now < request.end <= now + MAX_SLOT_S:
+            raise RequestError("bad_request", "the run's end must be within the next hour")
+        try:
+            precheck(request.source, request.filename)
+        except PrecheckError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        with self._lock:
+            if request.request_id in self._runs:
+                raise RequestError("conflict", f"{request.request_id} already runs")
+            if len(self._runs) >= MAX_RUNS:
+                raise RequestError("unavailable", f"the runner is full ({MAX_RUNS} controllers)")
+            try:
+                run = Run(self, request, self.limits)
+            except (RuntimeError, ValueError) as exc:
+                raise RequestError("unavailable", str(exc)) from None
+            self._runs[request.request_id] = run
+        try:
+            run.start()
+        except OSError as exc:
+            self.forget(request.request_id)
+            run.link.close(stop=False)
+            raise RequestError("unavailable", f"could not start the sandbox: {exc}") from None
+        self.log.info(
+            "running %s of %s on %s/%s until %.1f",
+            request.request_id,
+            request.user,
+            request.world,
+            request.agent,
+            request.end,
+        )
+        claim = RunClaim(request_id=request.request_id, agent=request.agent)
+        return RunAccepted(claim=self.login.session.seal(self._key, claim))
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("--name", default="runner", help="the runner's id (default runner)")
+    p.add_argument("--user", required=True, help="the runner's service account (with 'run')")
+    p.add_argument(
+        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    )
+    p.add_argument("--cpu-seconds", type=int, default=120, help="CPU time per controller")
+    p.add_argument("--memory-mb", type=int, default=256, help="address space per controller")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        keys.check_ident("runner", args.name)
+        keys.check_ident("user", args.user)
+        if not options.registry_key:
+            raise ValueError("--registry-key is required: the runner must know whom to trust")
+        registry_key = parse_public_key(options.registry_key)
+        identity = load_identity_key(args.identity)
+    except ValueError as exc:
+        return cli.fail(str(exc))
+    if not (1 <= args.cpu_seconds <= 3600 and 32 <= args.memory_mb <= 8192):
+        return cli.fail("--cpu-seconds must be 1..3600 and --memory-mb 32..8192")
+    from services.runner.sandbox import sandbox_problem
+
+    problem = sandbox_problem()
+    if problem:
+        return cli.fail(f"cannot run uploaded controllers here: {problem}")
+    limits = SandboxLimits(cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20)
+
+    def build(session: zenoh.Session) -> RunnerService:
+        client = LabClient(session, options.realm, registry_key, presence=False)
+        login = ServiceLogin(client, args.user, identity)
+        try:
+            login.login(wait=120.0)
+        except LabError as exc:
+            raise RuntimeError(
+                f"runner {args.name} could not log in as {args.user}: {exc}"
+            ) from None
+        return RunnerService(
+            session, options.realm, args.name, registry_key=registry_key, login=login, limits=limits
+        )
+
+    return run_service(f"runner {args.name}", options, build)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

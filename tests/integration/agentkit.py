@@ -1,0 +1,141 @@
+"""An agent lab for integration tests: registry, engine, runner, agent context (processes)."""
+
+from __future__ import annotations
+
+import shutil
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from common import keys
+from common.agent_client import AgentClient
+from common.auth import create_identity_key
+from common.client import LabClient
+from common.keys import AliveKind
+from common.messages import WorldFrame, WorldSnapshot, decode
+from common.service import close_session, open_session
+from services.registry_db import RegistryDB
+from tests.conftest import REPO, Proc, wait_for
+from tests.integration.labkit import PASSWORD, Lab
+
+WORLD = "w1"
+CTX = "arena"
+
+
+def service_account(lab: Lab, account: str) -> Path:
+    key_file = lab.state / f"{account}.key"
+    if not key_file.exists():
+        key = create_identity_key(key_file)
+        db = RegistryDB(lab.db_path)
+        db.add_user(account, ["service"], public_key=bytes(key.verify_key))
+        db.close()
+    return key_file
+
+
+def start_engine(lab: Lab, map_name: str = "foraging") -> Proc:
+    maps_dir = lab.state / "maps"
+    maps_dir.mkdir(exist_ok=True)
+    shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
+    proc = lab.procs.start(
+        "engine",
+        [
+            "engine",
+            "--map",
+            str(maps_dir / f"{map_name}.json"),
+            "--world",
+            WORLD,
+            "--seed",
+            "3",
+            "--maps-dir",
+            str(maps_dir),
+            *lab.net_args(),
+        ],
+    )
+    lab.wait_alive(AliveKind.WORLD, WORLD, proc)
+    return proc
+
+
+def start_runner(lab: Lab, name: str = "runner") -> Proc:
+    key = service_account(lab, "runner-svc")
+    proc = lab.procs.start(
+        "runner",
+        ["runner", "--name", name, "--user", "runner-svc", "--identity", str(key), *lab.net_args()],
+    )
+    lab.wait_alive(AliveKind.RUNNER, name, proc)
+    return proc
+
+
+def start_agent_context(lab: Lab, *extra: str, slot: float = 2.5) -> Proc:
+    key = service_account(lab, "ctx-arena")
+    proc = lab.procs.start(
+        "agent-context",
+        [
+            "context",
+            "agent",
+            "--name",
+            CTX,
+            "--world",
+            WORLD,
+            "--user",
+            "ctx-arena",
+            "--identity",
+            str(key),
+            "--owner",
+            "ida",
+            "--slot-seconds",
+            str(slot),
+            "--data-dir",
+            str(lab.state / "rooms"),
+            *extra,
+            *lab.net_args(),
+        ],
+    )
+    lab.wait_alive(AliveKind.CONTEXT, CTX, proc)
+    return proc
+
+
+class Poses:
+    """The newest agent poses of the world, from its frames (callback kept short)."""
+
+    def __init__(self, session: zenoh.Session, realm: str) -> None:
+        self._raw: bytes | None = None
+        self._lock = threading.Lock()
+        self.count = 0
+        rows: list[str] = []
+        for reply in session.get(keys.world_snapshot(realm, WORLD), timeout=10.0):
+            if reply.ok is not None:
+                rows = decode(reply.ok.payload, WorldSnapshot).rows
+        self.rows = rows
+
+        def on(sample: zenoh.Sample) -> None:
+            with self._lock:
+                self._raw = bytes(sample.payload.to_bytes())
+                self.count += 1
+
+        self.sub = session.declare_subscriber(keys.world_frame(realm, WORLD), on)
+        wait_for(lambda: self.count > 0, 10, "a world frame")
+
+    def xy(self, agent: str) -> np.ndarray:
+        with self._lock:
+            raw = self._raw
+        assert raw is not None
+        frame = decode(raw, WorldFrame)
+        return frame.poses.to_numpy()[self.rows.index(agent), :2].astype(float)
+
+    def close(self) -> None:
+        self.sub.undeclare()
+
+
+@contextmanager
+def agent_user(lab: Lab, user: str) -> Iterator[AgentClient]:
+    session = open_session(lab.router.options(), wait=10.0)
+    try:
+        with LabClient(session, lab.router.realm, lab.identity.verify_key) as client:
+            client.login(user, PASSWORD)
+            yield AgentClient(client, CTX).join()
+    finally:
+        close_session(session)

@@ -1,0 +1,200 @@
+"""Agent contexts with real processes: queues, leases, remote and deployed controllers."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.agent_client import FINAL, AgentClient, DriveResult
+from common.controller import Controller, Khepera
+from tests.conftest import Procs, Router, wait_for
+from tests.integration.agentkit import (
+    Poses,
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+)
+from tests.integration.labkit import Lab, make_lab
+
+pytestmark = pytest.mark.integration
+CONTROLLERS = Path(__file__).with_name("controllers")
+
+
+class Forward(Controller):
+    period = 0.05
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(12, 12)
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab)
+    start_runner(lab)
+    start_agent_context(lab)
+    yield lab
+
+
+def moved(poses: Poses, agent: str, seconds: float) -> float:
+    """How far ``agent`` moved (mm) over ``seconds`` of wall time from now."""
+    before = poses.xy(agent)
+    time.sleep(seconds)  # a measurement window, not a wait for a condition
+    return float(np.linalg.norm(poses.xy(agent) - before))
+
+
+def test_two_users_take_turns_and_see_their_position(lab: Lab) -> None:
+    with lab.zsession() as z, agent_user(lab, "alice") as alice, agent_user(lab, "bob") as bob:
+        poses = Poses(z, lab.router.realm)
+        results: dict[str, DriveResult] = {}
+        waits: dict[str, list[int]] = {"alice": [], "bob": []}
+
+        def drive(name: str, client: AgentClient) -> None:
+            results[name] = client.drive(
+                "k0", Forward(), on_wait=lambda p, _e: waits[name].append(p)
+            )
+
+        a = threading.Thread(target=drive, args=("alice", alice))
+        a.start()
+        wait_for(
+            lambda: alice.latest_state and alice.position_of_user("alice", "k0") == 0,
+            10,
+            "alice's slot",
+        )
+        b = threading.Thread(target=drive, args=("bob", bob))
+        b.start()
+        wait_for(lambda: waits["bob"], 10, "bob told his position")
+        assert waits["bob"][0] == 1
+        assert moved(poses, "k0", 0.5) > 10, "alice's controller drives during her slot"
+        a.join(15)
+        assert results["alice"].status == "finished", results["alice"]
+        wait_for(lambda: bob.position_of_user("bob", "k0") == 0, 10, "bob's slot")
+        assert moved(poses, "k0", 0.5) > 10, "bob's controller drives during his slot"
+        b.join(15)
+        assert results["bob"].status == "finished", results["bob"]
+        assert results["alice"].iterations > 10 and results["bob"].iterations > 10
+
+
+def sealed_command(lab: Lab, client: AgentClient, speeds: tuple[int, int]) -> None:
+    """Put one AgentCommand for k0 sealed with ``client``'s session (it may hold no lease)."""
+    from common import keys
+    from common.messages import AgentCommand
+
+    session = client.client.session
+    assert session is not None
+    key = keys.agent_cmd(lab.router.realm, "w1", "k0")
+    client.client.z.put(key, session.seal(key, AgentCommand(agent="k0", speeds=speeds)))
+
+
+def test_commands_without_the_current_lease_move_nothing(lab: Lab) -> None:
+    class Still(Controller):
+        def do_work(self, robot: Khepera) -> None:
+            robot.set_speeds(0, 0)
+
+    with lab.zsession() as z, agent_user(lab, "alice") as alice, agent_user(lab, "bob") as bob:
+        poses = Poses(z, lab.router.realm)
+        done: list[DriveResult] = []
+        t = threading.Thread(target=lambda: done.append(alice.drive("k0", Still())))
+        t.start()
+        wait_for(lambda: alice.position_of_user("alice", "k0") == 0, 10, "alice's slot")
+        # bob holds no lease: his commands are refused while alice holds k0
+        start = poses.xy("k0")
+        for _ in range(20):
+            sealed_command(lab, bob, (40, 40))
+            time.sleep(0.02)  # pacing the flood, not waiting for a condition
+        assert float(np.linalg.norm(poses.xy("k0") - start)) < 3
+        t.join(15)
+        assert done and done[0].status == "finished"
+        # alice's lease has expired: her own commands move nothing now
+        start = poses.xy("k0")
+        for _ in range(20):
+            sealed_command(lab, alice, (40, 40))
+            time.sleep(0.02)
+        assert float(np.linalg.norm(poses.xy("k0") - start)) < 3
+
+
+def test_cancel_a_waiting_request(lab: Lab) -> None:
+    with agent_user(lab, "alice") as alice, agent_user(lab, "bob") as bob:
+        done: list[DriveResult] = []
+        t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
+        t.start()
+        wait_for(lambda: alice.position_of_user("alice", "k1") == 0, 10, "alice's slot")
+        queued = bob.queue("k1", "remote")
+        assert queued.position == 1 and queued.start_eta is not None
+        assert queued.start_eta > time.time()
+        wait_for(lambda: bob.position_of_user("bob", "k1") == 1, 10, "bob waiting")
+        bob.cancel(queued.request_id)
+        status = bob.wait_status(queued.request_id, FINAL, timeout=5)
+        assert status is not None and status.status == "cancelled"
+        wait_for(lambda: bob.position_of_user("bob", "k1") is None, 10, "bob gone from the queue")
+        # bob may not cancel alice's request; the owner may (and that stops it)
+        rid = alice.statuses_of_user("alice")[0]
+        with pytest.raises(Exception, match="not yours"):
+            bob.cancel(rid)
+        with agent_user(lab, "ida") as ida:
+            ida.cancel(rid)
+        t.join(10)
+        assert done and done[0].status == "cancelled" and "ida" in done[0].reason
+
+
+def test_robot_stops_when_the_controller_process_is_killed(lab: Lab, procs: Procs) -> None:
+    with lab.zsession() as z, agent_user(lab, "carol") as carol:
+        poses = Poses(z, lab.router.realm)
+        proc = procs.start(
+            "control",
+            [
+                "control",
+                str(CONTROLLERS / "forward.py"),
+                "--context",
+                "arena",
+                "--agent",
+                "k2",
+                "--user",
+                "alice",
+                *lab.net_args(),
+            ],
+            env={"WART_PASSWORD": "correct horse"},
+        )
+        wait_for(
+            lambda: carol.state() and carol.position_of_user("alice", "k2") == 0,
+            20,
+            "alice's wart control driving",
+        )
+        wait_for(lambda: moved(poses, "k2", 0.2) > 5, 10, "k2 moving")
+        proc.kill9()
+        killed = time.monotonic()
+        # The engine's watchdog (300 ms) stops it; generous bound for a loaded machine.
+        wait_for(lambda: moved(poses, "k2", 0.15) < 0.5, 5, "k2 stopped")
+        assert time.monotonic() - killed < 2.0
+
+
+def test_only_the_host_or_an_instructor_manages_the_context(lab: Lab) -> None:
+    from common.client import NotAllowed
+
+    with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:
+        for call in (
+            lambda: alice.settings(slot_seconds=5),
+            lambda: alice.settings(enabled=False),
+            lambda: alice.stop_agent("k0"),
+        ):
+            with pytest.raises(NotAllowed, match="owner of arena"):
+                call()
+        assert "k1" in ida.settings(enabled=False, agent="k1")
+        with pytest.raises(NotAllowed, match="disabled"):
+            alice.queue("k1", "remote")
+        ida.settings(enabled=True, agent="k1", slot_seconds=3)
+        assert ida.state().slot_seconds == 3
+        done: list[DriveResult] = []
+        t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
+        t.start()
+        wait_for(lambda: alice.position_of_user("alice", "k1") == 0, 10, "alice's slot")
+        ida.stop_agent("k1", "demo over")
+        t.join(10)
+        assert done and done[0].status == "cancelled" and "demo over" in done[0].reason

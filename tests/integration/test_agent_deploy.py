@@ -1,0 +1,205 @@
+"""Deployed controllers through the agent context and the runner, with real processes."""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import keys
+from common.agent_client import FINAL
+from common.client import LabError
+from common.keys import AliveKind
+from common.messages import OutputLines
+from services.runner.sandbox import sandbox_problem
+from tests.conftest import Procs, Router, wait_for
+from tests.integration.agentkit import (
+    Poses,
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+)
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+]
+CONTROLLERS = Path(__file__).with_name("controllers")
+HEADER = "from common.controller import Controller, Khepera\n"
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab)
+    start_runner(lab)
+    start_agent_context(lab)
+    yield lab
+
+
+def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: Lab, procs: Procs) -> None:
+    with lab.zsession() as z:
+        poses = Poses(z, lab.router.realm)
+        start = poses.xy("k3")
+        proc = procs.start(
+            "deploy",
+            [
+                "deploy",
+                str(CONTROLLERS / "talker.py"),
+                "--context",
+                "arena",
+                "--agent",
+                "k3",
+                "--user",
+                "bob",
+                *lab.net_args(),
+            ],
+            env={"WART_PASSWORD": PASSWORD},
+        )
+        assert proc.popen.wait(30) == 0, proc.output()
+        out = proc.output()
+        assert "uploaded talker.py" in out
+        assert "[k3] hello from the sandbox" in out
+        assert "[k3] front" in out
+        assert "finished: " in out
+        assert float(np.linalg.norm(poses.xy("k3") - start)) > 20, "the upload drove k3"
+
+
+def test_bad_uploads_are_refused_before_they_queue(lab: Lab) -> None:
+    with agent_user(lab, "alice") as alice:
+        with pytest.raises(LabError, match="line 1: syntax error"):
+            alice.queue("k0", "deploy", source=b"def (:\n")
+        with pytest.raises(LabError, match="defines no controller"):
+            alice.queue("k0", "deploy", source=b"x = 1\n")
+        with pytest.raises(LabError, match="no agent zz"):
+            alice.queue("zz", "deploy", source=(CONTROLLERS / "talker.py").read_bytes())
+        with pytest.raises(LabError, match=r"bad_request|not a valid|64"):
+            alice.queue("k0", "deploy", source=b"#" * (70 * 1024))
+
+
+HOSTILE = {
+    "loop": """
+class Spin(Controller):
+    def do_work(self, robot):
+        while True:
+            pass
+""",
+    "memory": """
+class Hog(Controller):
+    def do_work(self, robot):
+        hoard = []
+        while True:
+            hoard.append(bytearray(50 * 1024 * 1024))
+""",
+    "fork": """
+import os
+class Forker(Controller):
+    def do_work(self, robot):
+        while True:
+            try:
+                os.fork()
+            except OSError as exc:
+                print("fork refused:", exc)
+                break
+""",
+    "files": """
+class Snoop(Controller):
+    def do_work(self, robot):
+        for path in ("/etc/shadow", "/root/.ssh/id_rsa", "/home", "../../etc/passwd"):
+            try:
+                print(path, "read", len(open(path).read()))
+            except Exception as exc:
+                print(path, "refused", type(exc).__name__)
+        robot.set_speeds(0, 0)
+""",
+    "socket": """
+import socket
+class Net(Controller):
+    def do_work(self, robot):
+        try:
+            socket.create_connection(("127.0.0.1", 7447), timeout=1)
+            print("socket connected")
+        except OSError as exc:
+            print("socket refused", type(exc).__name__)
+        robot.set_speeds(0, 0)
+""",
+}
+
+
+def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: Lab) -> None:
+    outputs: dict[str, list[str]] = {}
+
+    def collect(out: OutputLines) -> None:
+        outputs.setdefault(out.request_id, []).extend(out.lines)
+
+    agents = ["k0", "k1", "k2", "k3", "k0"]
+    users = ["alice", "bob", "carol", "ida", "bob"]
+    with agent_user(lab, "alice") as watcher:
+        watcher.on_output = collect
+        requests: dict[str, str] = {}
+        clients = []
+        for (name, body), agent, user in zip(HOSTILE.items(), agents, users, strict=True):
+            cm = agent_user(lab, user)
+            client = cm.__enter__()
+            clients.append(cm)
+            source = textwrap.dedent(HEADER + body).encode()
+            requests[name] = client.queue(agent, "deploy", source=source).request_id
+        try:
+            for name, rid in requests.items():
+                status = watcher.wait_status(rid, FINAL, timeout=30)
+                assert status is not None, f"{name} never ended"
+                assert status.status == "finished", (name, status)
+            text = {name: "\n".join(outputs.get(rid, [])) for name, rid in requests.items()}
+            assert "MemoryError" in text["memory"]
+            assert "read" not in text["files"].replace("refused", ""), text["files"]
+            assert "socket refused" in text["socket"], text["socket"]
+            assert "socket connected" not in text["socket"]
+        finally:
+            for cm in reversed(clients):
+                cm.__exit__(None, None, None)
+        # the context, the engine and the runner still serve
+        state = watcher.state()
+        assert {line.agent for line in state.agents} == {"k0", "k1", "k2", "k3"}
+        with lab.zsession() as z:
+            poses = Poses(z, lab.router.realm)
+            assert poses.count > 0
+            alive = [
+                str(r.ok.key_expr)
+                for r in z.liveliness().get(keys.alive_of_kind(lab.router.realm, AliveKind.RUNNER))
+                if r.ok is not None
+            ]
+            assert alive, "the runner is still alive"
+        rid = watcher.queue("k1", "deploy", source=(CONTROLLERS / "talker.py").read_bytes())
+        status = watcher.wait_status(rid.request_id, {"running"}, timeout=15)
+        assert status is not None
+        wait_for(lambda: any("hello" in x for x in outputs.get(rid.request_id, [])), 15, "output")
+        watcher.cancel(rid.request_id)
+        final = watcher.wait_status(rid.request_id, FINAL, timeout=10)
+        assert final is not None and final.status == "cancelled"
+
+
+def test_one_example_drives_unchanged_in_both_run_modes(lab: Lab) -> None:
+
+    from common.controller import load_controller
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
+    with lab.zsession() as z, agent_user(lab, "alice") as alice:
+        poses = Poses(z, lab.router.realm)
+        # remote: the controller runs in this process, over Zenoh
+        start = poses.xy("k1")
+        result = alice.drive("k1", load_controller(path))
+        assert result.status == "finished" and result.iterations > 20, result
+        remote = float(np.linalg.norm(poses.xy("k1") - start))
+        # deploy: the same file, uploaded, run by the runner in its sandbox
+        start = poses.xy("k1")
+        queued = alice.queue("k1", "deploy", source=path.read_bytes(), filename=path.name)
+        final = alice.wait_status(queued.request_id, FINAL, timeout=20)
+        assert final is not None and final.status == "finished", final
+        deployed = float(np.linalg.norm(poses.xy("k1") - start))
+        assert remote > 50 and deployed > 50, (remote, deployed)

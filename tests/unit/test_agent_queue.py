@@ -1,0 +1,45 @@
+"""The per-agent FIFO queues: order, positions, ETAs, disabling, vanished agents."""
+
+from __future__ import annotations
+
+from services.agent_queue import ControlJob, QueueBook, RunningJob
+
+
+def job(rid: str, agent: str = "k1", user: str = "alice") -> ControlJob:
+    return ControlJob(request_id=rid, agent=agent, user=user, session_id=b"s" * 16, mode="remote")
+
+
+def test_fifo_positions_and_etas() -> None:
+    book = QueueBook(slot_seconds=10)
+    book.set_agents({"k1": "khepera", "k2": "khepera"})
+    assert book.add(job("a")) == 1 and book.add(job("b")) == 2
+    first = book.next_to_start("k1")
+    assert first is not None and first.request_id == "a"
+    book.lines["k1"].running = RunningJob(first, "L", b"s" * 16, start=100.0, end=110.0)
+    assert book.next_to_start("k1") is None  # one at a time
+    assert book.eta("k1", 1, now=103.0) == 110.0
+    queues = {q.agent: q for q in book.agent_queues(now=103.0)}
+    assert [(e.request_id, e.position) for e in queues["k1"].entries] == [("a", 0), ("b", 1)]
+    assert book.expired(109.0) == [] and book.expired(110.0)[0].job.request_id == "a"
+
+
+def test_disabled_agents_do_not_start_and_have_no_eta() -> None:
+    book = QueueBook(slot_seconds=10)
+    book.set_agents({"k1": "khepera"})
+    book.add(job("a"))
+    book.lines["k1"].enabled = False
+    assert book.next_to_start("k1") is None and book.eta("k1", 1, 0.0) is None
+    book.lines["k1"].enabled = True
+    book.enabled = False
+    assert book.next_to_start("k1") is None
+    book.enabled = True
+    assert book.next_to_start("k1") is not None
+
+
+def test_vanished_agents_give_back_their_jobs() -> None:
+    book = QueueBook(slot_seconds=10)
+    book.set_agents({"k1": "khepera", "k2": "khepera"})
+    book.add(job("a", "k2"))
+    gone = book.set_agents({"k1": "khepera"})
+    assert [j.request_id for j in gone] == ["a"] and "k2" not in book.lines
+    assert book.remove_waiting("zz") is None and book.find("a") is None

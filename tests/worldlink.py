@@ -1,0 +1,58 @@
+"""Run a controller against an in-process World (fast behaviour tests of examples)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from common.controller import Controller, ControllerLoop, Khepera, KheperaState
+from common.remote_robot import command_from_dict, state_from_sample
+from services.engine import wire
+from services.engine.world import World
+
+
+class WorldLink:
+    """A RobotLink on one agent of a World, applying commands like the engine does."""
+
+    def __init__(self, world: World, agent: str) -> None:
+        self.world = world
+        self.agent = agent
+
+    def latest(self) -> KheperaState:
+        return state_from_sample(wire.sample(self.world, self.world.agent_slot(self.agent)))
+
+    def send(self, command: dict[str, Any]) -> None:
+        cmd = command_from_dict(self.agent, command)
+        world, slot = self.world, self.world.agent_slot(self.agent)
+        if cmd.speeds is not None:
+            world.set_speeds(slot, *cmd.speeds)
+        if cmd.counters is not None:
+            world.set_counters(slot, *cmd.counters)
+        for led, on in enumerate(cmd.leds or []):
+            world.set_led(slot, led, bool(on))
+        if cmd.arm is not None:
+            world.set_arm(slot, cmd.arm)
+        if cmd.fingers is not None:
+            world.set_fingers(slot, cmd.fingers == "closed")
+
+
+def run_in_world(
+    controller: Controller, world: World, agent: str, seconds: float, each: Any = None
+) -> WorldLink:
+    """Run ``controller`` for ``seconds`` of simulated time, stepping the world between calls."""
+    link = WorldLink(world, agent)
+    robot = Khepera(link)
+    ticks = max(1, round(controller.period / world.tick_s))
+    controller.initialize(robot)
+    t = 0.0
+    while t < seconds:
+        controller.do_work(robot)
+        for _ in range(ticks):
+            world.step()
+        t += ticks * world.tick_s
+        if each is not None:
+            each(world)
+    controller.cleanup(robot)
+    return link
+
+
+__all__ = ["ControllerLoop", "WorldLink", "run_in_world"]
