@@ -26,6 +26,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
     ),
     "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
+    "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
 }
 
 
