@@ -47,6 +47,16 @@ def default_state_dir(realm: str) -> Path:
 
 
 LOBBY = "lobby"
+# The real-robot path without hardware: an emulated Khepera (Sim2D-backed, on a
+# pty whose stable link is KHEPERA_LINK in the state dir) exposed by a bridge as
+# world REAL_WORLD, agent REAL_AGENT. The agent context for it uses these names.
+REAL_WORLD = "real1"
+REAL_AGENT = "k1"
+REAL_MAP = "empty.json"
+
+
+def khepera_link(lab: LabSettings) -> Path:
+    return lab.state_dir / "dev" / "khepera0"
 
 
 def service_identity(lab: LabSettings, account: str) -> Path:
@@ -73,6 +83,7 @@ def provision(lab: LabSettings) -> LabSettings:
         raise ValueError(
             f"--registry-key does not match this lab's key in {lab.state_dir / 'registry.key'}"
         )
+    khepera_link(lab).parent.mkdir(parents=True, exist_ok=True)
     db = RegistryDB(lab.state_dir / "registry.db")
     try:
         for account in (f"chat-{LOBBY}",):
@@ -171,6 +182,32 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             ],
             alive_key=keys.alive(realm, AliveKind.WORLD, "arena1"),
             detail="simulated world arena1 (maps/foraging.json)",
+        )
+    )
+    link = khepera_link(lab)  # its directory is made by provision()
+    plan.append(
+        ChildSpec(
+            name="khepera emulator",
+            argv=["khepera-emulator", "--map", str(maps_dir / REAL_MAP), "--link", str(link)],
+            alive_key=None,  # not on the network: the bridge below is its presence
+            detail=f"emulated Khepera at {link}",
+        )
+    )
+    plan.append(
+        ChildSpec(
+            name=f"bridge {REAL_WORLD}",
+            argv=[
+                "bridge",
+                "--world",
+                REAL_WORLD,
+                "--port",
+                # The emulated robot stands at (500, 500) facing +x in its map: the
+                # bridge's odometry starts there too, so both views agree.
+                f"{link}={REAL_AGENT}@500,500,0",
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.WORLD, REAL_WORLD),
+            detail=f"real world {REAL_WORLD}, robot {REAL_AGENT} (the emulated Khepera)",
         )
     )
     return plan
