@@ -98,6 +98,9 @@ class SimBody:
                 try:
                     self._position_control()
                     self.world.step()
+                    # Again after the step, so a wheel that just reached its target
+                    # reads speed 0 now, not one tick later.
+                    self._position_control()
                     self.ticks += 1
                 except Exception:  # one bad tick must not freeze the robot for good
                     log.exception("sim body: error in tick %d (kept running)", self.world.tick)

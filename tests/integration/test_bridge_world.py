@@ -8,6 +8,7 @@ thresholds leave room for a loaded 2-core machine.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import select
@@ -34,7 +35,9 @@ from common.messages import (
     decode,
 )
 from common.supervisor import AliveWatch
+from services.bridge import protocol as P
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.link import KheperaLink
 from services.bridge.simbody import SimBody
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
 
@@ -342,3 +345,38 @@ def test_bridge_refuses_bad_arguments(procs: Procs) -> None:
         proc = procs.start(f"bad{i}", args)
         assert proc.popen.wait(30) == 2, proc.output()
         assert expected in proc.output(), proc.output()
+
+
+def test_sim_backed_emulator_process_sees_the_walls_of_its_map(
+    procs: Procs, tmp_path: Path
+) -> None:
+    arena = {"width": 600, "height": 400}
+    robots = [
+        {"id": "near", "type": "khepera", "x": 600 - 27.5 - 8, "y": 100, "heading_deg": 0},
+        {"id": "far", "type": "khepera", "x": 300, "y": 300, "heading_deg": 0},
+    ]
+    path = tmp_path / "walls.json"
+    path.write_text(
+        json.dumps({"format": "wart-map", "version": 1, "arena": arena, "agents": robots})
+    )
+
+    def front_ir(agent: str) -> tuple[int, ...]:
+        link = tmp_path / f"khepera-{agent}"
+        proc = procs.start(
+            f"emu-{agent}",
+            ["khepera-emulator", "--map", str(path), "--agent", agent, "--link", str(link)],
+        )
+        wait_for(lambda: link.exists() or proc.popen.poll() is not None, 30, "the pty link")
+        assert proc.popen.poll() is None, proc.output()
+        serial_link = KheperaLink.open(str(link), 38400)
+        try:
+            return serial_link.request(P.read_proximity()).values
+        finally:
+            serial_link.close()
+            proc.stop()
+
+    near, far = front_ir("near"), front_ir("far")
+    assert min(near[2], near[3]) > 150, near
+    assert max(far) < 50, far
+    bad = procs.start("emu-bad", ["khepera-emulator", "--map", str(path), "--agent", "k9"])
+    assert bad.popen.wait(30) == 2 and "no agent 'k9'" in bad.output(), bad.output()
