@@ -43,6 +43,10 @@ class RobotStopped(LinkError):
     """The robot handle was stopped before the command could be sent."""
 
 
+class CommandDropped(LinkError):
+    """A queued command was dropped by halt() before it was sent."""
+
+
 @dataclass(frozen=True)
 class RobotOptions:
     """Polling, safety and odometry settings of one robot."""
@@ -266,10 +270,20 @@ class KheperaRobot:
             self._last_command = time.monotonic()
 
     def halt(self) -> None:
-        """Zero the motors now, ahead of anything queued (the lease ended, an operator stop)."""
+        """Zero the motors now (the lease ended, an operator stop).
+
+        Commands still queued are dropped (their futures fail with
+        CommandDropped): they were given for a slot that is over, and a
+        queued ``D`` sent after the halt would start the robot again.
+        Commands given after halt() are sent as usual.
+        """
         with self._wake:
             self._halt_requested = True
+            queued, self._queue = list(self._queue), deque()
             self._wake.notify_all()
+        for item in queued:
+            if not item.future.done():
+                item.future.set_exception(CommandDropped(f"{self.port}: halted before it was sent"))
 
     def set_pose(self, pose: Pose) -> None:
         """Place the odometry estimate (e.g. where the robot was put in the arena)."""

@@ -316,8 +316,13 @@ class BridgeService(Service):
 
     def _on_command(self, sample: zenoh.Sample) -> None:
         agent, command = self.leases.check_command(str(sample.key_expr), sample.payload)
+        lease = self.leases.lease_of(agent)
         with self._lock:
             entry = self._agents.get(agent)
+            if entry is not None and lease is not None:
+                # Remember whose slot moved the robot, so its end halts it even if
+                # the lease began and ended between two frame-thread checks.
+                entry.driving = (lease.lease_id, lease.holder_session)
         if entry is None:
             raise AuthError("not_found", f"no robot {agent} on this bridge")
         self._send(entry, command)
@@ -380,10 +385,14 @@ class BridgeService(Service):
         for agent in agents:
             lease = self.leases.in_force(agent.id, now)
             current = (lease.lease_id, lease.holder_session) if lease else None
-            if agent.driving is not None and current != agent.driving:
+            with self._lock:
+                ended, agent.driving = (
+                    agent.driving if agent.driving not in (None, current) else None,
+                    current,
+                )
+            if ended is not None:
                 agent.robot.halt()
-                self.log.info("lease %s on %s ended: robot halted", agent.driving[0], agent.id)
-            agent.driving = current
+                self.log.info("lease %s on %s ended: robot halted", ended[0], agent.id)
 
     def _publish(self) -> None:
         with self._lock:
