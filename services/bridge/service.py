@@ -53,7 +53,14 @@ from common.messages import (
 from common.service import RequestError, Service
 from services.bridge import protocol as P
 from services.bridge.link import LinkOffline
-from services.bridge.robot import KheperaRobot, Pose, RobotOptions, RobotState, detect
+from services.bridge.robot import (
+    KheperaRobot,
+    Pose,
+    RobotOptions,
+    RobotState,
+    candidate_ports,
+    detect,
+)
 
 # Khepera I facts the snapshot carries (KHEPERA.md "Body" and "Sensor placement").
 KHEPERA_RADIUS_MM = 27.5
@@ -226,8 +233,6 @@ class BridgeService(Service):
 
     def scan_once(self) -> list[str]:
         """Probe the candidate ports not in use; add every robot that answers. New agent ids."""
-        from services.bridge.robot import candidate_ports
-
         used = self.ports_in_use()
         ports = [
             p
