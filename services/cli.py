@@ -30,6 +30,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "runner": ("services.runner.service", "run uploaded controllers in sandboxes"),
     "control": ("services.control", "drive a robot with your controller from this machine"),
     "deploy": ("services.deploy", "upload a controller to run on a robot in the lab"),
+    "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
 }
 
 

@@ -51,7 +51,18 @@ LOBBY = "lobby"
 ARENA = "arena"  # the agent context on the simulated world
 WORLD = "arena1"
 RUNNER = "runner"
-SERVICE_ACCOUNTS = (f"chat-{LOBBY}", f"ctx-{ARENA}", f"runner-{RUNNER}")
+REAL_CONTEXT = "robots"  # the agent context on the real world
+SERVICE_ACCOUNTS = (f"chat-{LOBBY}", f"ctx-{ARENA}", f"ctx-{REAL_CONTEXT}", f"runner-{RUNNER}")
+# The real-robot path without hardware: an emulated Khepera (Sim2D-backed, on a
+# pty whose stable link is KHEPERA_LINK in the state dir) exposed by a bridge as
+# world REAL_WORLD, agent REAL_AGENT. The agent context for it uses these names.
+REAL_WORLD = "real1"
+REAL_AGENT = "k1"
+REAL_MAP = "empty.json"
+
+
+def khepera_link(lab: LabSettings) -> Path:
+    return lab.state_dir / "dev" / "khepera0"
 
 
 def service_identity(lab: LabSettings, account: str) -> Path:
@@ -95,6 +106,7 @@ def provision(lab: LabSettings) -> LabSettings:
         raise ValueError(
             f"--registry-key does not match this lab's key in {lab.state_dir / 'registry.key'}"
         )
+    khepera_link(lab).parent.mkdir(parents=True, exist_ok=True)
     db = RegistryDB(lab.state_dir / "registry.db")
     try:
         for account in SERVICE_ACCOUNTS:
@@ -131,6 +143,35 @@ def client_flags(lab: LabSettings) -> str:
     if lab.router_endpoint != DEFAULT_ROUTER:
         flags += f" --connect {lab.router_endpoint}"
     return flags
+
+
+def agent_context_spec(lab: LabSettings, name: str, title: str, world: str) -> ChildSpec:
+    """An agent context: queues and leases for the robots of ``world``."""
+    account = f"ctx-{name}"
+    return ChildSpec(
+        name=f"agent context {name}",
+        argv=[
+            "context",
+            "agent",
+            "--name",
+            name,
+            "--title",
+            title,
+            "--world",
+            world,
+            "--runner",
+            RUNNER,
+            "--user",
+            account,
+            "--identity",
+            str(service_identity(lab, account)),
+            "--data-dir",
+            str(lab.state_dir / "rooms"),
+            *lab.network.as_args(),
+        ],
+        alive_key=keys.alive(lab.realm, AliveKind.CONTEXT, name),
+        detail=f"queues and leases for the robots of {world}",
+    )
 
 
 def lab_plan(lab: LabSettings) -> list[ChildSpec]:
@@ -212,33 +253,40 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             detail="sandboxed uploaded controllers",
         )
     )
-    account = f"ctx-{ARENA}"
+    plan.append(agent_context_spec(lab, ARENA, "Arena (simulated)", WORLD))
+    link = khepera_link(lab)  # its directory is made by provision()
     plan.append(
         ChildSpec(
-            name=f"agent context {ARENA}",
+            name="khepera emulator",
             argv=[
-                "context",
-                "agent",
-                "--name",
-                ARENA,
-                "--title",
-                "Arena (simulated)",
-                "--world",
-                WORLD,
-                "--runner",
-                RUNNER,
-                "--user",
-                account,
-                "--identity",
-                str(service_identity(lab, account)),
-                "--data-dir",
-                str(lab.state_dir / "rooms"),
-                *net,
+                "khepera-emulator",
+                "--map",
+                str(lab.state_dir / "maps" / REAL_MAP),
+                "--link",
+                str(link),
             ],
-            alive_key=keys.alive(realm, AliveKind.CONTEXT, ARENA),
-            detail=f"queues and leases for the robots of {WORLD}",
+            alive_key=None,  # not on the network: the bridge below is its presence
+            detail=f"emulated Khepera at {link}",
         )
     )
+    plan.append(
+        ChildSpec(
+            name=f"bridge {REAL_WORLD}",
+            argv=[
+                "bridge",
+                "--world",
+                REAL_WORLD,
+                "--port",
+                # The emulated robot stands at (500, 500) facing +x in its map: the
+                # bridge's odometry starts there too, so both views agree.
+                f"{link}={REAL_AGENT}@500,500,0",
+                *net,
+            ],
+            alive_key=keys.alive(realm, AliveKind.WORLD, REAL_WORLD),
+            detail=f"real world {REAL_WORLD}, robot {REAL_AGENT} (the emulated Khepera)",
+        )
+    )
+    plan.append(agent_context_spec(lab, REAL_CONTEXT, "Khepera (real robot)", REAL_WORLD))
     # The viewer comes last: it is the front door once everything else serves.
     plan.append(
         ChildSpec(

@@ -123,6 +123,7 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     proximity_sensors: list[tuple[float, float, float]]  # x, y, heading in the robot frame
     proximity_max: int
     speed_limit: int
+    online: bool = True  # a real robot (Khepera bridge) unplugged or silent is offline
 
 
 class WorldSnapshot(Message):

@@ -23,12 +23,15 @@ import os
 import random
 import select
 import signal
+import sys
 import threading
 import time
 import tty
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import FrameType, TracebackType
+from typing import TYPE_CHECKING
 
 from services.bridge.body import KinematicBody, RobotBody
 from services.bridge.link import BAUD_RATES
@@ -44,6 +47,9 @@ from services.bridge.protocol import (
     format_reply,
     parse_command,
 )
+
+if TYPE_CHECKING:
+    from services.bridge.simbody import SimBody
 
 log = logging.getLogger("wart.bridge.emulator")
 
@@ -518,7 +524,20 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         default="crlf",
         help="reply terminator (default crlf)",
     )
+    p.add_argument(
+        "--map",
+        type=Path,
+        metavar="FILE",
+        help="back the robot with a Sim2D Khepera in this map (sensors see its walls, lamps, "
+        "balls); without it, a kinematic body with fixed sensor readings",
+    )
+    p.add_argument(
+        "--agent", metavar="ID", help="which agent of the map is this robot (default: the first)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="the map's sensor-noise seed (default 0)")
     args, _ = parse(p, argv)
+    if args.agent is not None and args.map is None:
+        p.error("--agent needs --map")
     if not 1 <= args.split <= 64:
         p.error("--split must be 1..64")
     if args.garbage_every < 0:
@@ -535,7 +554,19 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         not_found_text="Command not found" if args.not_found == "plain" else "z,Command not found",
         dialect=Dialect(reply_eol=eol),
     )
-    emulator = KheperaEmulator(options=options)
+    body: RobotBody | None = None
+    sim: SimBody | None = None
+    if args.map is not None:
+        from services.bridge.simbody import SimBody  # imports the engine: only when asked
+        from services.engine.maps import MapError
+
+        try:
+            sim = SimBody.from_map(args.map, args.agent, seed=args.seed)
+        except (MapError, ValueError) as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            return 2
+        body = sim.start()
+    emulator = KheperaEmulator(body, options=options)
     stop = threading.Event()
     toggle = threading.Event()
 
@@ -552,9 +583,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         emulator.start()
     except OSError as exc:
         print(f"error: cannot create the pty or link: {exc}", flush=True)
+        if sim is not None:
+            sim.stop()
         return 1
+    where = f" in {args.map} as {sim.agent}" if sim is not None else ""
     print(
-        f"emulated Khepera at {emulator.pty_path}" + (f" (link {args.link})" if args.link else ""),
+        f"emulated Khepera at {emulator.pty_path}"
+        + (f" (link {args.link})" if args.link else "")
+        + where,
         flush=True,
     )
     try:
@@ -569,4 +605,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
                     print(f"plugged in at {emulator.pty_path}", flush=True)
     finally:
         emulator.stop()
+        if sim is not None:
+            sim.stop()
     return 0

@@ -43,6 +43,10 @@ class RobotStopped(LinkError):
     """The robot handle was stopped before the command could be sent."""
 
 
+class CommandDropped(LinkError):
+    """A queued command was dropped by halt() before it was sent."""
+
+
 @dataclass(frozen=True)
 class RobotOptions:
     """Polling, safety and odometry settings of one robot."""
@@ -72,6 +76,7 @@ class GripperState:
     arm: int  # 0..255, about 165 up to 255 down
     fingers: int  # finger position reading
     object: int  # object-presence barrier reading
+    resistivity: int = 255  # of the held object (T,1,F); 255 with nothing held
 
 
 @dataclass(frozen=True)
@@ -95,6 +100,7 @@ class RobotState:
     counters: P.WheelPair | None = None
     speed: P.WheelPair | None = None
     gripper: GripperState | None = None
+    leds: tuple[int, int] = (0, 0)  # as last set by L (the robot cannot be asked)
     pose: Pose = Pose()
     rounds: int = 0  # completed sensor rounds since start
     updated: float = 0.0  # time.monotonic() of the last completed round
@@ -258,11 +264,26 @@ class KheperaRobot:
             self._wake.notify_all()
         return future
 
+    def keepalive(self) -> None:
+        """Feed the watchdog without sending anything (a controller's empty command)."""
+        with self._wake:
+            self._last_command = time.monotonic()
+
     def halt(self) -> None:
-        """Zero the motors now, ahead of anything queued (the lease ended, an operator stop)."""
+        """Zero the motors now (the lease ended, an operator stop).
+
+        Commands still queued are dropped (their futures fail with
+        CommandDropped): they were given for a slot that is over, and a
+        queued ``D`` sent after the halt would start the robot again.
+        Commands given after halt() are sent as usual.
+        """
         with self._wake:
             self._halt_requested = True
+            queued, self._queue = list(self._queue), deque()
             self._wake.notify_all()
+        for item in queued:
+            if not item.future.done():
+                item.future.set_exception(CommandDropped(f"{self.port}: halted before it was sent"))
 
     def set_pose(self, pose: Pose) -> None:
         """Place the odometry estimate (e.g. where the robot was put in the arena)."""
@@ -401,6 +422,12 @@ class KheperaRobot:
             self._motors_on = True
         elif letter == "G":
             self._odometry.rebaseline()  # counters set by hand: not a movement
+        elif letter == "L":
+            led, action = (int(f) for f in request.fields)
+            leds = list(self._state.leds)
+            if 0 <= led < len(leds):
+                leds[led] = 1 - leds[led] if action == 2 else action
+                self._update(leds=(leds[0], leds[1]))
 
     def _zero_motors(self, why: str) -> None:
         try:
@@ -470,12 +497,14 @@ class KheperaRobot:
             arm=self._request(P.gripper_arm_position()).value,
             fingers=self._request(P.gripper_finger_position()).value,
             object=self._request(P.gripper_object()).value,
+            resistivity=self._request(P.gripper_resistivity()).value,
         )
 
     def _on_banner(self, line: str) -> None:
-        # The robot rebooted: its counters restarted at zero and its motors stopped.
+        # The robot rebooted: its counters restarted at zero, its motors and LEDs are off.
         self._odometry.rebaseline()
         self._motors_on = False
+        self._update(leds=(0, 0))
 
     def _update(self, **changes: Any) -> None:
         with self._state_lock:

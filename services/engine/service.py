@@ -30,6 +30,7 @@ import zenoh
 from common import keys
 from common.auth import AuthError, Principal, Verifier
 from common.keys import AliveKind
+from common.leases import LeaseBook
 from common.messages import (
     AddItem,
     AgentCommand,
@@ -83,16 +84,13 @@ class EngineService(Service):
             Verifier(settings.registry_key, realm) if settings.registry_key is not None else None
         )
         self._work: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._leases: dict[str, Lease] = {}
-        self._lease_lock = threading.Lock()
+        self.leases = LeaseBook(realm, world.name, self.verifier)
         self._last_cmd: dict[str, float] = {}
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
         self._agent_pubs: dict[str, Any] = {}
         self._matched: set[str] = set()
         self._match_lock = threading.Lock()
-        self.commands_accepted = 0
-        self.commands_refused = 0
         self.ticks_late = 0
 
     # -- lifecycle
@@ -154,44 +152,21 @@ class EngineService(Service):
         return self.verifier.open(key, payload, expected)
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
-        principal, lease = self._open(key, sample.payload, Lease)
-        principal.require("lease", "grant leases on agents")
-        agent = keys.parse_agent_key(self.realm, self.ident, key)
-        if lease.world != self.ident or lease.agent != agent:
-            raise AuthError("forbidden", f"lease for {lease.world}/{lease.agent} sent on {key}")
-        with self._lease_lock:
-            current = self._leases.get(lease.agent)
-            if (
-                current is None
-                or current.lease_id == lease.lease_id
-                or lease.start >= current.start
-            ):
-                self._leases[lease.agent] = lease
+        self.leases.accept_lease(str(sample.key_expr), sample.payload)
 
     def lease_of(self, agent: str) -> Lease | None:
-        with self._lease_lock:
-            return self._leases.get(agent)
+        return self.leases.lease_of(agent)
+
+    @property
+    def commands_accepted(self) -> int:
+        return self.leases.commands_accepted
+
+    @property
+    def commands_refused(self) -> int:
+        return self.leases.commands_refused
 
     def _on_command(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
-        agent = keys.parse_agent_key(self.realm, self.ident, key)
-        try:
-            principal, command = self._open(key, sample.payload, AgentCommand)
-            if agent is None or command.agent != agent:
-                raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
-            lease = self.lease_of(agent)
-            now = time.time()
-            if lease is None:
-                raise AuthError("forbidden", f"{agent} has no lease: command dropped")
-            if principal.session_id != lease.holder_session:
-                raise AuthError("forbidden", f"{principal.user} does not hold {agent}'s lease")
-            if not lease.start <= now <= lease.end:
-                raise AuthError("forbidden", f"{principal.user}'s lease on {agent} is not in force")
-        except Exception:
-            self.commands_refused += 1
-            raise
-        self.commands_accepted += 1
+        agent, command = self.leases.check_command(str(sample.key_expr), sample.payload)
         self._work.put(_Command(agent, command, time.monotonic()))
 
     def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message:

@@ -239,7 +239,8 @@ def test_watchdog_zeroes_the_motors(emulator: KheperaEmulator, body: KinematicBo
         # Unfed, it stops: not before the watchdog period (how long after depends on load).
         wait_for(lambda: body.speed() == (0, 0), 5, "the watchdog to stop the motors")
         assert time.monotonic() - stopped_feeding >= 0.25
-        assert robot.state().watchdog_stops == 1
+        # Counted once the robot acknowledged D,0,0, a moment after the body stopped.
+        wait_for(lambda: robot.state().watchdog_stops == 1, 5, "the watchdog stop counted")
 
 
 def test_halt_and_stop_zero_the_motors(emulator: KheperaEmulator, body: KinematicBody) -> None:

@@ -7,12 +7,14 @@ from pathlib import Path
 
 import psutil
 import pytest
+import zenoh
 
 from common import keys
+from common.messages import WorldSnapshot, decode
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch
 from common.zconfig import NetworkOptions
-from services.up import lab_plan, router_spec, settings_from_args
+from services.up import REAL_AGENT, REAL_WORLD, lab_plan, router_spec, settings_from_args
 from tests.conftest import wait_for
 from tests.lab import Lab
 
@@ -35,6 +37,12 @@ def test_lab_comes_up_restarts_a_killed_child_and_stops_cleanly(tmp_path: Path, 
         try:
             for key in expected_tokens(lab):
                 assert watch.wait(key, 20), f"{key} never appeared:\n" + "\n".join(lab.lines)
+            # The real-robot path without hardware: the bridge has the emulated Khepera online.
+            wait_for(
+                lambda: _real_robot_online(session, realm),
+                30,
+                f"{REAL_AGENT} online in {REAL_WORLD}",
+            )
 
             # kill -9 one service: the supervisor says so and brings it back.
             victim = lab.children()[-1]
@@ -62,6 +70,15 @@ def test_lab_comes_up_restarts_a_killed_child_and_stops_cleanly(tmp_path: Path, 
         if psutil.pid_exists(pid) and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
     ]
     assert not left, f"children left running after Ctrl-C: {left}"
+
+
+def _real_robot_online(session: zenoh.Session, realm: str) -> bool:
+    for reply in session.get(keys.world_snapshot(realm, REAL_WORLD), timeout=5.0):
+        if reply.ok is None:
+            return False
+        snap = decode(reply.ok.payload, WorldSnapshot)
+        return any(a.id == REAL_AGENT and a.online for a in snap.agents)
+    return False
 
 
 def _alive_child(lab: Lab, subcommand: str) -> psutil.Process | None:

@@ -1,0 +1,511 @@
+"""The Khepera bridge on the Zenoh network: real robots as the agents of a real world.
+
+Same keys and messages as the Sim2D engine (docs/ARCHITECTURE.md), so the
+agent context, the viewer and controllers cannot tell the two apart:
+
+Publishes ``world/<w>/frame`` (WorldFrame: every robot's odometry pose) every
+``frame_interval``; ``agent/<a>/sensors`` (SensorSample) after every sensor
+round of that robot; ``world/<w>/sensors`` (SensorBatch) while someone
+subscribes. Subscribes ``agent/*/cmd`` (AgentCommand, sealed, from the current
+lease holder only) and ``agent/*/lease`` (Lease, sealed, ``lease``
+permission), both checked by common.leases.LeaseBook exactly as the engine
+does. Serves ``snapshot`` (arena, agents with their online state);
+``edit`` and ``map`` answer ``bad_request`` (a real arena cannot be edited).
+Token ``alive/world/<w>``.
+
+Threads: one I/O thread per robot (KheperaRobot) owns its serial port;
+Zenoh callbacks only check and queue commands on it (never wait on the
+wire); the frame thread publishes frames and halts robots whose lease
+ended; the scan thread (``--autodetect``) probes new ports.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import threading
+import time
+from collections.abc import Sequence
+from concurrent.futures import Future
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from common import keys
+from common.auth import AuthError, Verifier
+from common.keys import AliveKind
+from common.leases import LeaseBook
+from common.messages import (
+    AgentCommand,
+    AgentInfo,
+    GripperReading,
+    Message,
+    PackedArray,
+    SensorBatch,
+    SensorSample,
+    WorldFrame,
+    WorldSnapshot,
+    encode,
+)
+from common.service import RequestError, Service
+from services.bridge import protocol as P
+from services.bridge.link import LinkOffline
+from services.bridge.robot import (
+    KheperaRobot,
+    Pose,
+    RobotOptions,
+    RobotState,
+    candidate_ports,
+    detect,
+)
+
+# Khepera I facts the snapshot carries (KHEPERA.md "Body" and "Sensor placement").
+KHEPERA_RADIUS_MM = 27.5
+KHEPERA_LEDS = 2
+KHEPERA_SPEED_LIMIT = 127
+KHEPERA_PROXIMITY_MAX = 1023
+KHEPERA_IR_POSES: tuple[tuple[float, float, float], ...] = tuple(
+    (x, y, math.radians(deg))
+    for x, y, deg in (
+        (10, 24, 90),
+        (19, 17, 45),
+        (25, 6, 0),
+        (25, -6, 0),
+        (19, -17, -45),
+        (10, -24, -90),
+        (-24, -10, 180),
+        (-24, 10, 180),
+    )
+)
+FINGERS_CLOSED_ABOVE = 100  # a finger-position reading above this is a closed grip
+ONLINE_COLOUR, OFFLINE_COLOUR = "#2e86de", "#8a8a8a"
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """A robot added by hand: its serial port and its agent id."""
+
+    port: str
+    agent: str
+    pose: Pose | None = None  # where it stands in the arena at start (None: spread out)
+
+
+@dataclass(frozen=True)
+class BridgeSettings:
+    robots: tuple[RobotSpec, ...] = ()
+    autodetect: bool = False
+    scan: tuple[str, ...] = ()  # extra paths / globs to probe (besides pyserial's list)
+    system_ports: bool = True  # probe the ports pyserial lists too
+    scan_interval: float = 5.0  # s between probes for new robots (0: only at start)
+    bauds: tuple[int, ...] = (38400,)  # tried in order when probing
+    arena: tuple[float, float] = (1000.0, 1000.0)  # mm
+    robot: RobotOptions = field(default_factory=RobotOptions)
+    frame_interval: float = 0.05  # s
+    registry_key: bytes | None = None
+
+
+def agent_id_for(port: str, taken: Sequence[str] = ()) -> str:
+    """A stable agent id from a port path: its file name made an identifier, made unique."""
+    base = re.sub(r"[^A-Za-z0-9_.-]", "-", os.path.basename(port.rstrip("/")))[:56]
+    base = base.lstrip("_.-") or "khepera"
+    ident, n = base, 2
+    while ident in taken:
+        ident, n = f"{base}-{n}", n + 1
+    return ident
+
+
+@dataclass
+class _Agent:
+    id: str
+    robot: KheperaRobot
+    publisher: Any
+    online: bool = False
+    driving: tuple[str, bytes] | None = None  # (lease id, holder) of the lease last in force
+
+
+class BridgeService(Service):
+    kind = AliveKind.WORLD
+
+    def __init__(
+        self, session: zenoh.Session, realm: str, world: str, settings: BridgeSettings
+    ) -> None:
+        super().__init__(session, realm, world)
+        self.settings = settings
+        self.verifier = (
+            Verifier(settings.registry_key, realm) if settings.registry_key is not None else None
+        )
+        self.leases = LeaseBook(realm, world, self.verifier)
+        self._agents: dict[str, _Agent] = {}  # insertion order = frame row order
+        self._lock = threading.Lock()  # the agent table and layout
+        self.layout = 0
+        self._frames = 0
+        self._t0 = time.monotonic()
+        self._halt = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.commands_failed = 0
+
+    # -- lifecycle
+
+    def on_start(self) -> None:
+        if self.verifier is None:
+            self.log.warning("no --registry-key: every command and lease will be refused")
+        realm, name = self.realm, self.ident
+        self._frame_pub = self.track(self.session.declare_publisher(keys.world_frame(realm, name)))
+        self._batch_pub = self.track(
+            self.session.declare_publisher(keys.world_sensors(realm, name))
+        )
+        self.subscribe(keys.agent_cmd_all(realm, name), self._on_command)
+        self.subscribe(keys.agent_lease_all(realm, name), self._on_lease)
+        self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
+        self.serve(keys.world_edit(realm, name), self._on_edit)
+        self.serve(keys.world_map(realm, name), self._on_edit)
+        n = len(self.settings.robots)
+        for i, spec in enumerate(self.settings.robots):
+            self.add_robot(spec.port, spec.agent, spec.pose or self._spread(i, n))
+        self._thread("bridge-frames", self._frame_loop)
+        if self.settings.autodetect:
+            self._thread("bridge-scan", self._scan_loop)
+
+    def _thread(self, name: str, target: Any) -> None:
+        thread = threading.Thread(target=target, name=name, daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def on_stop(self, timeout: float) -> None:
+        self._halt.set()
+        deadline = time.monotonic() + timeout
+        for thread in self._threads:
+            thread.join(max(0.1, deadline - time.monotonic()))
+        with self._lock:
+            agents = list(self._agents.values())
+        # Each robot's stop() zeroes its motors before its port closes.
+        for agent in agents:
+            agent.robot.stop(max(0.1, deadline - time.monotonic()))
+        for agent in agents:
+            agent.publisher.undeclare()
+
+    # -- robots
+
+    def _spread(self, i: int, n: int) -> Pose:
+        """Robots whose start pose nobody gave stand in a row across the arena's middle."""
+        w, h = self.settings.arena
+        return Pose(w * (i + 1) / (n + 1), h / 2, math.pi / 2)
+
+    def add_robot(
+        self, port: str, agent: str, pose: Pose | None = None, options: RobotOptions | None = None
+    ) -> KheperaRobot:
+        """Manual add (thesis 7.4.3): polled from now on, online when it answers B."""
+        keys.check_ident("agent", agent)
+        with self._lock:
+            if agent in self._agents:
+                raise ValueError(f"agent {agent} is already on {self._agents[agent].robot.port}")
+        robot = KheperaRobot(port, options or self.settings.robot)
+        robot.set_pose(pose or Pose(self.settings.arena[0] / 2, self.settings.arena[1] / 2))
+        publisher = self.session.declare_publisher(
+            keys.agent_sensors(self.realm, self.ident, agent)
+        )
+        entry = _Agent(agent, robot, publisher)
+        robot.add_listener(lambda state, a=entry: self._on_state(a, state))
+        with self._lock:
+            self._agents[agent] = entry
+            self.layout += 1  # a new row: viewers refetch the snapshot
+        robot.start()
+        self.log.info("robot %s added on %s", agent, port)
+        return robot
+
+    def ports_in_use(self) -> set[str]:
+        with self._lock:
+            ports = [a.robot.port for a in self._agents.values()]
+        return {os.path.realpath(p) for p in ports} | set(ports)
+
+    def _scan_loop(self) -> None:
+        interval = self.settings.scan_interval
+        while not self._halt.is_set():
+            try:
+                self.scan_once()
+            except Exception:  # a scan that failed is retried at the next interval
+                self.log.exception("robot scan failed (will retry)")
+            if interval <= 0 or self._halt.wait(interval):
+                return
+
+    def scan_once(self) -> list[str]:
+        """Probe the candidate ports not in use; add every robot that answers. New agent ids."""
+        used = self.ports_in_use()
+        ports = [
+            p
+            for p in candidate_ports(self.settings.scan, system=self.settings.system_ports)
+            if p not in used and os.path.realpath(p) not in used
+        ]
+        added = []
+        for found in detect(ports, self.settings.bauds):
+            if self._halt.is_set():
+                break
+            with self._lock:
+                agent = agent_id_for(found.port, list(self._agents))
+                n = len(self._agents)
+            self.log.info(
+                "found a Khepera on %s at %d baud (BIOS %s): agent %s",
+                found.port,
+                found.baud,
+                found.version.bios,
+                agent,
+            )
+            self.add_robot(
+                found.port,
+                agent,
+                self._spread(n, n + 1),
+                replace(self.settings.robot, baud=found.baud),
+            )
+            added.append(agent)
+        return added
+
+    def agent_ids(self) -> list[str]:
+        with self._lock:
+            return list(self._agents)
+
+    def robot(self, agent: str) -> KheperaRobot | None:
+        with self._lock:
+            entry = self._agents.get(agent)
+        return entry.robot if entry else None
+
+    # -- robot I/O threads -> the network
+
+    def _on_state(self, agent: _Agent, state: RobotState) -> None:
+        """Called by the robot's I/O thread after each sensor round and on online changes."""
+        if state.online != agent.online:
+            with self._lock:
+                agent.online = state.online
+                self.layout += 1  # the agent list's online states changed: refetch
+            self.log.warning("robot %s is %s", agent.id, "online" if state.online else "OFFLINE")
+        sample = self._sample(agent.id, state)
+        if sample is not None:
+            agent.publisher.put(encode(sample))
+
+    def _sample(self, agent: str, state: RobotState) -> SensorSample | None:
+        if not state.online or None in (state.proximity, state.ambient, state.counters):
+            return None
+        assert state.proximity is not None and state.ambient is not None
+        assert state.counters is not None
+        speed = state.speed or P.WheelPair(0, 0)
+        gripper = None
+        if state.gripper is not None:
+            g = state.gripper
+            closed = g.fingers > FINGERS_CLOSED_ABOVE
+            fingers = "holding" if closed and g.object > 0 else "closed" if closed else "open"
+            gripper = GripperReading(
+                arm=_byte(g.arm),
+                fingers=fingers,  # type: ignore[arg-type]
+                presence=_byte(g.object),
+                resistivity=_byte(g.resistivity),
+            )
+        return SensorSample(
+            world=self.ident,
+            agent=agent,
+            tick=state.rounds,
+            sim_time=round(state.updated - self._t0, 6) if state.updated else 0.0,
+            proximity=list(state.proximity),
+            ambient=list(state.ambient),
+            counters=(state.counters.left, state.counters.right),
+            speeds=(speed.left, speed.right),
+            leds=list(state.leds),
+            gripper=gripper,
+        )
+
+    # -- the network -> robots
+
+    def _on_lease(self, sample: zenoh.Sample) -> None:
+        self.leases.accept_lease(str(sample.key_expr), sample.payload)
+
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        agent, command = self.leases.check_command(str(sample.key_expr), sample.payload)
+        lease = self.leases.lease_of(agent)
+        with self._lock:
+            entry = self._agents.get(agent)
+            if entry is not None and lease is not None:
+                # Remember whose slot moved the robot, so its end halts it even if
+                # the lease began and ended between two frame-thread checks.
+                entry.driving = (lease.lease_id, lease.holder_session)
+        if entry is None:
+            raise AuthError("not_found", f"no robot {agent} on this bridge")
+        self._send(entry, command)
+
+    def _send(self, agent: _Agent, cmd: AgentCommand) -> None:
+        """Queue the command's requests on the robot's I/O thread, in a fixed order; no wait."""
+        requests: list[P.Request[Any]] = []
+        if cmd.speeds is not None:
+            requests.append(P.set_speed(*cmd.speeds))  # clamped to +-127 by the protocol
+        if cmd.counters is not None:
+            requests.append(P.set_counters(*cmd.counters))
+        for led, action in enumerate((cmd.leds or [])[:KHEPERA_LEDS]):
+            requests.append(P.set_led(led, action))
+        if cmd.arm is not None:
+            requests.append(P.gripper_arm(cmd.arm))
+        if cmd.fingers is not None:
+            requests.append(P.gripper_fingers(cmd.fingers == "closed"))
+        robot = agent.robot
+        if not requests:
+            robot.keepalive()
+            return
+        for request in requests:
+            robot.command(request).add_done_callback(
+                lambda f, a=agent.id, r=request: self._sent(a, r, f)
+            )
+
+    def _sent(self, agent: str, request: P.Request[Any], future: Future[Any]) -> None:
+        exc = future.exception()
+        if exc is None:
+            return
+        self.commands_failed += 1
+        level = self.log.debug if isinstance(exc, LinkOffline) else self.log.warning
+        if isinstance(exc, P.ProtocolError):  # offline, unanswered, not understood
+            level("command %s to %s failed: %s", request.letter, agent, exc)
+        else:
+            self.log.error("command %s to %s failed: %r", request.letter, agent, exc)
+
+    # -- frames, lease ends
+
+    def _frame_loop(self) -> None:
+        next_frame = time.monotonic()
+        while not self._halt.is_set():
+            try:
+                self._check_leases()
+                self._publish()
+            except Exception:  # a bad frame must not stop the next ones
+                self.log.exception("error publishing frame %d (kept running)", self._frames)
+            next_frame += self.settings.frame_interval
+            delay = next_frame - time.monotonic()
+            if delay < -0.5:
+                next_frame, delay = time.monotonic(), 0.0
+            if delay > 0 and self._halt.wait(delay):
+                return
+
+    def _check_leases(self) -> None:
+        """Halt a robot whose lease ended or passed to someone else (before its watchdog)."""
+        now = time.time()
+        with self._lock:
+            agents = list(self._agents.values())
+        for agent in agents:
+            lease = self.leases.in_force(agent.id, now)
+            current = (lease.lease_id, lease.holder_session) if lease else None
+            with self._lock:
+                ended, agent.driving = (
+                    agent.driving if agent.driving not in (None, current) else None,
+                    current,
+                )
+            if ended is not None:
+                agent.robot.halt()
+                self.log.info("lease %s on %s ended: robot halted", ended[0], agent.id)
+
+    def _publish(self) -> None:
+        with self._lock:
+            agents = list(self._agents.values())
+            layout = self.layout
+        states = [a.robot.state() for a in agents]
+        self._frames += 1
+        self._frame_pub.put(encode(self.frame(states, layout)))
+        if agents and self._batch_pub.matching_status.matching:
+            batch = self._batch(states, layout)
+            if batch is not None:
+                self._batch_pub.put(encode(batch))
+
+    def frame(self, states: Sequence[RobotState], layout: int) -> WorldFrame:
+        n = len(states)
+        poses = np.array(
+            [(s.pose.x, s.pose.y, s.pose.heading) for s in states], dtype=np.float32
+        ).reshape(n, 3)
+        agent_state = np.zeros((n, 4), dtype=np.uint8)
+        for i, s in enumerate(states):
+            agent_state[i, 0] = sum(bit << k for k, bit in enumerate(s.leds))
+            if s.gripper is not None:
+                closed = s.gripper.fingers > FINGERS_CLOSED_ABOVE
+                agent_state[i, 1] = _byte(s.gripper.arm)
+                agent_state[i, 2] = (2 if s.gripper.object > 0 else 1) if closed else 0
+                agent_state[i, 3] = _byte(s.gripper.object)
+        return WorldFrame(
+            world=self.ident,
+            tick=self._frames,
+            sim_time=round(time.monotonic() - self._t0, 6),
+            layout=layout,
+            poses=PackedArray.from_numpy(poses),
+            agent_state=PackedArray.from_numpy(agent_state),
+            lights=PackedArray.from_numpy(np.zeros(0, dtype=np.uint8)),
+        )
+
+    def _batch(self, states: Sequence[RobotState], layout: int) -> SensorBatch | None:
+        n = len(states)
+        prox = np.zeros((n, 8), dtype=np.uint16)
+        amb = np.full((n, 8), 500, dtype=np.uint16)  # offline robots read as "dark, nothing"
+        counters = np.zeros((n, 2), dtype=np.int32)
+        for i, s in enumerate(states):
+            if s.proximity is not None:
+                prox[i] = s.proximity[:8]
+            if s.ambient is not None:
+                amb[i] = s.ambient[:8]
+            if s.counters is not None:
+                counters[i] = (s.counters.left, s.counters.right)
+        return SensorBatch(
+            world=self.ident,
+            tick=self._frames,
+            sim_time=round(time.monotonic() - self._t0, 6),
+            layout=layout,
+            proximity=PackedArray.from_numpy(prox),
+            ambient=PackedArray.from_numpy(amb),
+            counters=PackedArray.from_numpy(counters),
+        )
+
+    # -- queries
+
+    def snapshot(self) -> WorldSnapshot:
+        with self._lock:
+            agents = list(self._agents.values())
+            layout = self.layout
+        infos = []
+        for a in agents:
+            s = a.robot.state()
+            infos.append(
+                AgentInfo(
+                    id=a.id,
+                    type="khepera",
+                    radius=KHEPERA_RADIUS_MM,
+                    colour=ONLINE_COLOUR if s.online else OFFLINE_COLOUR,
+                    x=s.pose.x,
+                    y=s.pose.y,
+                    heading=s.pose.heading,
+                    gripper=s.gripper is not None,
+                    leds=KHEPERA_LEDS,
+                    proximity_sensors=list(KHEPERA_IR_POSES),
+                    proximity_max=KHEPERA_PROXIMITY_MAX,
+                    speed_limit=KHEPERA_SPEED_LIMIT,
+                    online=s.online,
+                )
+            )
+        w, h = self.settings.arena
+        return WorldSnapshot(
+            world=self.ident,
+            tick=self._frames,
+            sim_time=round(time.monotonic() - self._t0, 6),
+            layout=layout,
+            tick_s=self.settings.frame_interval,
+            seed=0,
+            width=w,
+            height=h,
+            items=[],
+            lights=[],
+            agents=infos,
+            rows=[a.id for a in agents],
+        )
+
+    def _on_snapshot(self, query: zenoh.Query) -> Message:
+        return self.snapshot()
+
+    def _on_edit(self, query: zenoh.Query) -> Message:
+        raise RequestError(
+            "bad_request", f"{self.ident} is a real arena (Khepera bridge): it cannot be edited"
+        )
+
+
+def _byte(value: int) -> int:
+    return max(0, min(255, int(value)))

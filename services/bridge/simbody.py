@@ -1,0 +1,240 @@
+"""SimBody: the emulated Khepera's physical robot is a Khepera of a Sim2D world.
+
+The emulator's firmware asks a :class:`~services.bridge.body.RobotBody` for
+everything physical; this one answers from the Sim2D engine's Khepera model
+(the same drive, IR curve, ambient model and gripper as ``wart engine``), so
+the emulated robot's sensors respond to a simulated arena loaded from a map:
+walls and obstacles raise its IR readings, lamps lower its ambient readings,
+balls can be gripped.
+
+Threads: pymunk is not thread-safe, so the world is touched only under
+``self._lock``. Our own thread steps it at ``tick_s``, paced to the wall
+clock (the robot keeps moving whether or not the host asks anything); the
+emulator's I/O thread calls the RobotBody methods, which take the same lock
+for a read or a command between two ticks.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+
+from services.bridge.body import KinematicSpec
+from services.engine.maps import load_map
+from services.engine.world import EditError, World
+
+log = logging.getLogger("wart.bridge.simbody")
+
+
+class SimBody:
+    """A RobotBody over one agent of a Sim2D World stepped by its own thread."""
+
+    def __init__(
+        self,
+        world: World,
+        agent: str | None = None,
+        *,
+        spec: KinematicSpec | None = None,
+        speed: float = 1.0,
+    ) -> None:
+        if not world.agents:
+            raise ValueError("the map has no agents: the emulated Khepera needs one to be")
+        self.world = world
+        self.agent = agent or world.agents[0].id
+        try:
+            self.slot = world.agent_slot(self.agent)
+        except KeyError:
+            raise ValueError(f"the map has no agent {self.agent!r}") from None
+        kind = world.agents[self.slot].spec.name
+        if kind != "khepera":
+            raise ValueError(f"agent {self.agent!r} is a {kind}, not a khepera")
+        self.spec = spec or KinematicSpec()
+        self.rate = speed  # times real time
+        self._lock = threading.Lock()
+        self._mode = "speed"  # "speed" | "position" (C: counter targets)
+        self._target = (0, 0)
+        self._vmax = (20, 20)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.ticks = 0
+
+    @classmethod
+    def from_map(
+        cls, path: Path, agent: str | None = None, *, seed: int = 0, tick_s: float = 0.01
+    ) -> SimBody:
+        """Load a map (MapError names the field) and take ``agent`` (default: the first one)."""
+        return cls(load_map(path, name="emulator", seed=seed, tick_s=tick_s), agent)
+
+    # ------------------------------------------------------------ the stepping thread
+
+    def start(self) -> SimBody:
+        if self._thread is None:
+            self._stop.clear()
+            with self._lock:
+                self.world.sense()  # readings valid before the first tick
+            self._thread = threading.Thread(target=self._run, name="sim-body", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    def __enter__(self) -> SimBody:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        period = self.world.tick_s / self.rate
+        next_tick = time.monotonic()
+        while not self._stop.is_set():
+            with self._lock:
+                try:
+                    self._position_control()
+                    self.world.step()
+                    # Again after the step, so a wheel that just reached its target
+                    # reads speed 0 now, not one tick later.
+                    self._position_control()
+                    self.ticks += 1
+                except Exception:  # one bad tick must not freeze the robot for good
+                    log.exception("sim body: error in tick %d (kept running)", self.world.tick)
+            next_tick += period
+            delay = next_tick - time.monotonic()
+            if delay > 0:
+                self._stop.wait(delay)
+            elif delay < -0.5:  # stalled (a loaded machine): do not catch up in a burst
+                next_tick = time.monotonic()
+
+    def _position_control(self) -> None:
+        """C: each wheel at up to its profile speed toward its counter target, stopping on it."""
+        if self._mode != "position":
+            return
+        w, s = self.world, self.slot
+        per_tick = w.tick_s * float(w.tables.pulses_per_s_per_unit[s])  # pulses a unit a tick
+        out = []
+        for i in (0, 1):
+            remaining = self._target[i] - float(w.counters[s, i])
+            out.append(max(-self._vmax[i], min(self._vmax[i], remaining / per_tick)))
+        w.set_speeds(s, out[0], out[1])
+
+    # ------------------------------------------------------------ RobotBody
+
+    def advance(self, now: float) -> None:
+        """Nothing to do: the world is stepped by its own thread, on the wall clock."""
+
+    def set_speed(self, left: int, right: int) -> None:
+        with self._lock:
+            self._mode = "speed"
+            self.world.set_speeds(self.slot, left, right)
+
+    def set_pwm(self, left: int, right: int) -> None:
+        k = self.spec.pwm_to_speed
+        self.set_speed(round(left * k), round(right * k))
+
+    def move_to(self, left: int, right: int, vmax: tuple[int, int], acc: tuple[int, int]) -> None:
+        with self._lock:
+            self._mode, self._target = "position", (left, right)
+            self._vmax = (max(1, vmax[0]), max(1, vmax[1]))
+
+    def speed(self) -> tuple[int, int]:
+        with self._lock:
+            cmd = self.world.cmd[self.slot]
+            return round(float(cmd[0])), round(float(cmd[1]))
+
+    def counters(self) -> tuple[int, int]:
+        with self._lock:
+            c = self.world.counters[self.slot]
+            return _wrap32(round(float(c[0]))), _wrap32(round(float(c[1])))
+
+    def set_counters(self, left: int, right: int) -> None:
+        with self._lock:
+            self.world.set_counters(self.slot, left, right)
+            if self._mode == "position":
+                self._target = (left, right)
+
+    def motion_status(self) -> tuple[int, int, int, int, int, int]:
+        with self._lock:
+            out: list[int] = []
+            for i in (0, 1):
+                if self._mode == "position":
+                    err = round(self._target[i] - float(self.world.counters[self.slot, i]))
+                    out += [int(err == 0), 0, err]
+                else:
+                    out += [1, 1, 0]
+            return out[0], out[1], out[2], out[3], out[4], out[5]
+
+    def proximity(self) -> tuple[int, ...]:
+        with self._lock:
+            return tuple(_sensor(v) for v in self.world.proximity[self.slot, :8])
+
+    def ambient(self) -> tuple[int, ...]:
+        with self._lock:
+            return tuple(_sensor(v) for v in self.world.ambient[self.slot, :8])
+
+    def analog(self, channel: int) -> int:
+        return 0  # nothing is wired to the A/D inputs of the simulated robot
+
+    def set_fingers(self, closed: bool) -> None:
+        with self._lock:
+            try:
+                self.world.set_fingers(self.slot, closed)
+            except EditError as exc:  # a map agent with "gripper": false
+                log.info("sim body: %s", exc)
+
+    def set_arm(self, position: int) -> None:
+        with self._lock:
+            try:
+                self.world.set_arm(self.slot, position)
+            except EditError as exc:
+                log.info("sim body: %s", exc)
+
+    def finger_position(self) -> int:
+        with self._lock:
+            closed = self.world.gripper_state(self.slot) != 0
+        return self.spec.finger_closed if closed else self.spec.finger_open
+
+    def arm_position(self) -> int:
+        with self._lock:
+            return max(0, min(255, round(float(self.world.arm[self.slot]))))
+
+    def object_present(self) -> int:
+        with self._lock:
+            return max(0, min(255, int(self.world.presence[self.slot])))
+
+    def resistivity(self) -> int:
+        with self._lock:
+            return max(0, min(255, self.world.resistivity(self.slot)))
+
+    def reset(self) -> None:
+        with self._lock:
+            self._mode = "speed"
+            self.world.set_speeds(self.slot, 0, 0)
+            self.world.set_counters(self.slot, 0, 0)
+
+    # ------------------------------------------------------------ for tests and displays
+
+    def pose(self) -> tuple[float, float, float]:
+        """Where the simulated robot is: x mm, y mm, heading rad (world frame)."""
+        with self._lock:
+            x, y, h = self.world.agent_pose[self.slot]
+            return float(x), float(y), float(h)
+
+    def place(self, x: float, y: float, heading: float) -> None:
+        """Put the robot somewhere else in its arena (EditError if it would overlap)."""
+        with self._lock:
+            self.world.move(self.agent, x, y, heading)
+            self.world.sense()
+
+
+def _sensor(value: float) -> int:
+    return max(0, min(1023, int(value)))
+
+
+def _wrap32(value: int) -> int:
+    return (value + 2**31) % 2**32 - 2**31

@@ -1,0 +1,115 @@
+"""SimBody: the emulated Khepera's body is a Sim2D Khepera (in-process, its own stepping thread)."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from services.bridge.body import RobotBody
+from services.bridge.emulator import Firmware
+from services.bridge.main import parse_port
+from services.bridge.service import agent_id_for
+from services.bridge.simbody import SimBody
+from services.engine.maps import MapError
+from tests.conftest import REPO, wait_for
+
+EMPTY = REPO / "maps" / "empty.json"
+
+
+@pytest.fixture
+def sim() -> Iterator[SimBody]:
+    with SimBody.from_map(EMPTY, seed=1) as body:
+        yield body
+
+
+def test_is_a_robot_body(sim: SimBody) -> None:
+    assert isinstance(sim, RobotBody)
+    assert sim.agent == "k1" and sim.pose() == (500.0, 500.0, 0.0)
+
+
+def test_ir_rises_near_a_wall_and_stays_low_in_the_open(sim: SimBody) -> None:
+    assert max(sim.proximity()) < 50, sim.proximity()
+    sim.place(1000 - 27.5 - 8, 500, 0.0)  # facing the east wall from 8 mm
+    front = sim.proximity()
+    assert min(front[2], front[3]) > 150, front
+    assert max(front[6], front[7]) < 50, front  # the back sensors see nothing
+    assert all(300 < v <= 1023 for v in sim.ambient())  # no lamp: about 500
+
+
+def test_speed_moves_the_body_and_counts_pulses(sim: SimBody) -> None:
+    sim.set_speed(20, 20)  # 160 mm/s
+    wait_for(lambda: sim.pose()[0] > 530, 10, "the body to drive forward")
+    assert sim.speed() == (20, 20)
+    left, right = sim.counters()
+    assert left > 300 and abs(left - right) <= 1
+    sim.set_speed(-10, 10)  # spin on the spot
+    wait_for(lambda: abs(sim.pose()[2]) > 0.5, 10, "the body to turn")
+    sim.reset()
+    assert sim.speed() == (0, 0) and sim.counters() == (0, 0)
+
+
+def test_position_control_stops_on_the_target(sim: SimBody) -> None:
+    sim.set_counters(0, 0)
+    sim.move_to(400, -400, (20, 20), (64, 64))
+    wait_for(lambda: sim.motion_status()[0] == 1 and sim.motion_status()[3] == 1, 10, "on target")
+    assert sim.counters() == (400, -400) and sim.speed() == (0, 0)
+
+
+def test_gripper_arm_and_fingers(sim: SimBody) -> None:
+    sim.set_arm(255)
+    wait_for(lambda: sim.arm_position() == 255, 10, "the arm down")
+    sim.set_fingers(True)
+    assert sim.finger_position() > 100 and sim.resistivity() == 255  # closed on nothing
+
+
+def test_firmware_over_a_sim_body_answers_from_the_world(sim: SimBody) -> None:
+    fw = Firmware(sim)
+    assert fw.handle("D,10,-10\r") == b"d\r\n"
+    assert fw.handle("E\r") == b"e,10,-10\r\n"
+    assert fw.handle("N\r").startswith(b"n,") and fw.handle("N\r").count(b",") == 8
+
+
+def test_calls_from_another_thread_while_it_steps(sim: SimBody) -> None:
+    errors: list[BaseException] = []
+
+    def hammer() -> None:
+        try:
+            for i in range(300):
+                sim.set_speed(i % 30, -(i % 30))
+                sim.proximity()
+                sim.counters()
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=hammer) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert not errors and sim.ticks > 0
+
+
+def test_bad_maps_and_agents_are_clear_errors(tmp_path: object) -> None:
+    with pytest.raises(ValueError, match="no agent 'k9'"):
+        SimBody.from_map(EMPTY, "k9")
+    with pytest.raises(MapError):
+        SimBody.from_map(REPO / "maps" / "no-such-map.json")
+
+
+def test_agent_ids_and_port_arguments() -> None:
+    assert agent_id_for("/dev/ttyUSB0") == "ttyUSB0"
+    assert agent_id_for("/dev/serial/by-id/usb-FTDI:x y") == "usb-FTDI-x-y"
+    assert agent_id_for("/dev/ttyUSB0", ["ttyUSB0"]) == "ttyUSB0-2"
+    spec = parse_port("/dev/ttyUSB0=k1@100,200,90", [])
+    assert spec.agent == "k1" and spec.pose is not None
+    assert (spec.pose.x, spec.pose.y) == (100, 200)
+    assert spec.pose.heading == pytest.approx(math.pi / 2)
+    assert parse_port("/tmp/khepera0", []).agent == "khepera0"
+    for bad in ("=k1", "/a=bad/id", "/a=k1@1,2", "/a=k1@x,y,z", "/a=k1@nan,1,1"):
+        with pytest.raises(ValueError):
+            parse_port(bad, [])
+    with pytest.raises(ValueError, match="twice"):
+        parse_port("/b=k1", ["k1"])
