@@ -158,6 +158,29 @@ def _cell(v, cell, n):  # pragma: no cover
     return i
 
 
+@njit(cache=_CACHE, inline="always")
+def _interp(x, xp, fp, n):  # pragma: no cover
+    """np.interp(x, xp[:n], fp[:n]) for one value, with numpy's exact arithmetic."""
+    if x < xp[0]:
+        return fp[0]
+    if x > xp[n - 1]:
+        return fp[n - 1]
+    if x != x:  # NaN
+        return x
+    j = 0
+    while j + 1 < n and xp[j + 1] <= x:
+        j += 1
+    if j == n - 1 or xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    res = slope * (x - xp[j]) + fp[j]
+    if res != res:
+        res = slope * (x - xp[j + 1]) + fp[j + 1]
+        if res != res and fp[j] == fp[j + 1]:
+            res = fp[j]
+    return res
+
+
 @njit(cache=_CACHE)
 def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
     """Whether a static obstacle lies on the segment p -> q."""
@@ -184,7 +207,7 @@ def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
 @njit(cache=_CACHE)
 def sense(
     pose,  # (N, 3) agents' x, y, heading
-    ray_local,  # (N, S*K, 3) rays in the robot frame: x, y, angle
+    ray_local,  # (N, S*K, 5) rays in the robot frame: x, y, angle, cos(angle), sin(angle)
     sensors,  # S (padded sensors per agent)
     rays_per_sensor,  # K
     agent_f,  # (N, N_AGENT_F) per-agent floats
@@ -264,6 +287,8 @@ def sense(
     per_sensor = np.empty(sensors)
     n_amb = amb_local.shape[1]
     total = np.empty(n_amb)
+    cand = np.empty(nc, dtype=np.int64)
+    ecand = np.empty(edges.shape[0], dtype=np.int64)
 
     for a in range(n):
         x = pose[a, 0]
@@ -272,17 +297,9 @@ def sense(
         co = math.cos(th)
         si = math.sin(th)
         reach = agent_f[a, F_REACH]
-        for r in range(nrays):
-            lx = ray_local[a, r, 0]
-            ly = ray_local[a, r, 1]
-            ox[r] = x + co * lx - si * ly
-            oy[r] = y + si * lx + co * ly
-            ang = th + ray_local[a, r, 2]
-            dx[r] = math.cos(ang)
-            dy[r] = math.sin(ang)
-            dist[r] = np.inf
 
-        # Circles in the 3x3 cells around the agent, within reach.
+        # Candidates. Circles: in the 3x3 cells around the agent and within reach.
+        ncand = 0
         seen = False
         if holding[a]:
             seen = True
@@ -300,10 +317,8 @@ def sense(
                     lim = reach + cr[c]
                     if not (ddx * ddx + ddy * ddy < lim * lim):
                         continue
-                    for r in range(nrays):
-                        t = _ray_circle(ox[r], oy[r], dx[r], dy[r], cx[c], cy[c], cr[c])
-                        if t < dist[r]:
-                            dist[r] = t
+                    cand[ncand] = c
+                    ncand += 1
                     # The gripper's light barrier: a movable object's centre between the fingers.
                     if (
                         not seen
@@ -320,36 +335,71 @@ def sense(
                         ):
                             seen = True
         presence_out[a] = 255 if seen else 0
-
         # Static edges binned in the agent's own cell.
         k = ix * grid_ny + iy
-        for p in range(grid_start[k], grid_start[k + 1]):
-            s = grid_items[p]
-            ax = segs[s, 0]
-            ay = segs[s, 1]
-            bx = segs[s, 2]
-            by = segs[s, 3]
-            for r in range(nrays):
-                t = _ray_segment(ox[r], oy[r], dx[r], dy[r], ax, ay, bx, by)
-                if t < dist[r]:
-                    dist[r] = t
-
+        s0 = grid_start[k]
+        s1 = grid_start[k + 1]
         # Edges of movable polygons (few): every one whose midpoint is within reach.
+        nedge = 0
         for e in range(edges.shape[0]):
-            ax = edges[e, 0]
-            ay = edges[e, 1]
-            bx = edges[e, 2]
-            by = edges[e, 3]
-            mx = (ax + bx) / 2
-            my = (ay + by) / 2
-            half = math.hypot(bx - ax, by - ay) / 2
+            mx = (edges[e, 0] + edges[e, 2]) / 2
+            my = (edges[e, 1] + edges[e, 3]) / 2
+            half = math.hypot(edges[e, 2] - edges[e, 0], edges[e, 3] - edges[e, 1]) / 2
             lim = reach + half
-            if not ((x - mx) ** 2 + (y - my) ** 2 < lim * lim):
-                continue
+            if (x - mx) ** 2 + (y - my) ** 2 < lim * lim:
+                ecand[nedge] = e
+                nedge += 1
+
+        for r in range(nrays):
+            dist[r] = np.inf
+        if ncand or s1 > s0 or nedge:  # nothing near: every ray misses, skip the casting
             for r in range(nrays):
-                t = _ray_segment(ox[r], oy[r], dx[r], dy[r], ax, ay, bx, by)
-                if t < dist[r]:
-                    dist[r] = t
+                lx = ray_local[a, r, 0]
+                ly = ray_local[a, r, 1]
+                ox[r] = x + co * lx - si * ly
+                oy[r] = y + si * lx + co * ly
+                # cos/sin(th + angle) by the angle-addition formula, from the layout's
+                # cos/sin of each ray's angle: no trigonometry per ray.
+                ca = ray_local[a, r, 3]
+                sa = ray_local[a, r, 4]
+                dx[r] = co * ca - si * sa
+                dy[r] = si * ca + co * sa
+            for q in range(ncand):
+                c = cand[q]
+                for r in range(nrays):
+                    t = _ray_circle(ox[r], oy[r], dx[r], dy[r], cx[c], cy[c], cr[c])
+                    if t < dist[r]:
+                        dist[r] = t
+            for p in range(s0, s1):
+                sg = grid_items[p]
+                for r in range(nrays):
+                    t = _ray_segment(
+                        ox[r],
+                        oy[r],
+                        dx[r],
+                        dy[r],
+                        segs[sg, 0],
+                        segs[sg, 1],
+                        segs[sg, 2],
+                        segs[sg, 3],
+                    )
+                    if t < dist[r]:
+                        dist[r] = t
+            for q in range(nedge):
+                e = ecand[q]
+                for r in range(nrays):
+                    t = _ray_segment(
+                        ox[r],
+                        oy[r],
+                        dx[r],
+                        dy[r],
+                        edges[e, 0],
+                        edges[e, 1],
+                        edges[e, 2],
+                        edges[e, 3],
+                    )
+                    if t < dist[r]:
+                        dist[r] = t
 
         # Nearest hit per sensor -> response curve -> seeded noise.
         for s in range(sensors):
@@ -370,7 +420,7 @@ def sense(
             if j >= agent_i[a, I_PROX_SENSORS]:
                 prox_out[a, j] = 0
                 continue
-            v = np.interp(per_sensor[j], curve_x[g, :ng], curve_y[g, :ng])
+            v = _interp(per_sensor[j], curve_x[g], curve_y[g], ng)
             v = v * (1.0 + nf * noise[mul + j]) + ncounts * noise[add + j]
             v = np.rint(v)
             v = min(max(v, 0.0), top)
@@ -398,10 +448,12 @@ def sense(
                 sy = y + si * l0 + co * l1
                 vx = lxx - sx
                 vy = lyy - sy
+                closeness = 1.0 - math.hypot(vx, vy) / radius
+                if closeness <= 0.0:
+                    continue  # beyond the light's radius: adds exactly nothing
+                closeness = min(closeness, 1.0)
                 raw = math.atan2(vy, vx) - th - amb_local[a, i, 2]
                 bearing = math.atan2(math.sin(raw), math.cos(raw))
-                closeness = 1.0 - math.hypot(vx, vy) / radius
-                closeness = min(max(closeness, 0.0), 1.0)
                 contrib = math.cos(1.5 * bearing) if abs(bearing) < half else 0.0
                 contrib = contrib * closeness
                 contrib *= scale * (1.0 if amb_valid[a, i] else 0.0)
@@ -445,7 +497,7 @@ def warm_up() -> float:
     i[0, I_AMB_SENSORS] = 1
     sense(
         np.zeros((1, 3)),
-        np.zeros((1, 1, 3)),
+        np.zeros((1, 1, 5)),
         1,
         1,
         f,

@@ -44,7 +44,7 @@ class AgentSensing:
 
     sensors: int  # proximity sensors per agent (padded)
     rays_per_sensor: int  # padded
-    ray_local: np.ndarray  # (N, S*K, 3): x, y, angle in the robot frame
+    ray_local: np.ndarray  # (N, S*K, 5): x, y, angle, cos(angle), sin(angle) in the robot frame
     reach: np.ndarray  # (N,) farthest any ray reaches from the centre
     prox_groups: list[tuple[ProximitySpec, np.ndarray]]  # (spec, agent slots) per type
     amb_local: np.ndarray  # (N, A, 3)
@@ -67,7 +67,7 @@ class AgentSensing:
         s_max = max((len(a.spec.proximity.poses) for a in agents), default=8)
         k_max = max((a.spec.proximity.rays_per_sensor for a in agents), default=1)
         a_max = max((len(a.spec.ambient.poses) for a in agents), default=8)
-        ray_local = np.zeros((n, s_max * k_max, 3))
+        ray_local = np.zeros((n, s_max * k_max, 5))
         reach = np.zeros(n)
         amb_local = np.zeros((n, a_max, 3))
         amb_valid = np.zeros((n, a_max), dtype=bool)
@@ -84,7 +84,14 @@ class AgentSensing:
                 for j in range(k_max):
                     # padding rays repeat the sensor's last ray: they change no minimum
                     off = offsets[min(j, k - 1)]
-                    ray_local[slot, i * k_max + j] = (pose.x_mm, pose.y_mm, pose.heading_rad + off)
+                    angle = pose.heading_rad + off
+                    ray_local[slot, i * k_max + j] = (
+                        pose.x_mm,
+                        pose.y_mm,
+                        angle,
+                        np.cos(angle),
+                        np.sin(angle),
+                    )
             for i in range(len(prox.poses), s_max):
                 ray_local[slot, i * k_max : (i + 1) * k_max] = ray_local[slot, 0]
             reach[slot] = spec.sensor_reach_mm

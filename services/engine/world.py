@@ -111,6 +111,7 @@ class World:
         self._next_sense = 0.0
         self._serial = 0
         self._n_held = 0  # agents holding an object (the per-tick carry loop runs only if > 0)
+        self._arms_moving = False  # set by set_arm; the arm update runs only while true
         self._cell_cache: tuple[int, float] | None = None  # (layout, sensing grid cell)
         # CPU seconds per phase, accumulated while ``profile`` is true (bench/engine_bench.py).
         self.profile = False
@@ -644,7 +645,10 @@ class World:
     def set_speeds_all(self, speeds: np.ndarray) -> None:
         """Every agent's (left, right) at once, clamped per type: the bulk path."""
         top = self.tables.max_speed[:, None]
-        self.cmd[:] = np.clip(np.rint(speeds), -top, top)
+        s = np.rint(speeds)
+        np.maximum(s, -top, out=s)  # = np.clip, without its Python-level overhead
+        np.minimum(s, top, out=s)
+        self.cmd[:] = s
 
     def set_counters(self, slot: int, left: int, right: int) -> None:
         self.counters[slot] = (left, right)
@@ -659,6 +663,7 @@ class World:
         if g is None or not self.agents[slot].has_gripper:
             raise EditError(f"{self.agents[slot].id} has no gripper")
         self.arm_target[slot] = float(np.clip(position, g.arm_up, g.arm_down))
+        self._arms_moving = True
 
     def set_fingers(self, slot: int, closed: bool) -> None:
         agent = self.agents[slot]
@@ -757,7 +762,10 @@ class World:
             arbiter.process_collision = False
 
     def _update_arms(self, dt: float) -> None:
+        if not self._arms_moving:
+            return
         if not len(self.agents) or not np.any(self.arm != self.arm_target):
+            self._arms_moving = False
             return
         was_lowered = self.arm >= self.tables.arm_lowered_above
         step = self.tables.arm_rate * dt
