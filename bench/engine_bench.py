@@ -1,19 +1,26 @@
 """Sim2D engine benchmark: N Khepera, all sensors on, obstacle avoidance, 10 ms steps.
 
-Headless, no network. Prints simulated seconds per CPU second and per wall
-second for each N (figures recorded in docs/BENCHMARKS.md). Run:
+Headless, no network. For each N prints simulated seconds per CPU second
+(``time.process_time``: what to compare on a shared machine) and per wall
+second, best and median of ``--repeats`` runs, then where the CPU time goes
+per simulated second: physics (arms, drive, pymunk step, reading body state),
+sensing (IR, ambient, presence: every 20 ms of simulated time), control (the
+obstacle-avoidance rule and ``set_speeds_all``). Publishing is not included
+(no network). Figures are recorded in docs/BENCHMARKS.md. Run:
 
-    .venv/bin/python bench/engine_bench.py [--sim-seconds 5] [--sizes 10 35 100 1000]
+    .venv/bin/python bench/engine_bench.py [--sim-seconds 5] [--sizes 10 35 100 1000] [--repeats 3]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import statistics
 import time
 
 import numpy as np
 
+from services.engine import kernels
 from services.engine.agents import agent_type
 from services.engine.entities import ShapeSpec
 from services.engine.world import World
@@ -23,6 +30,7 @@ from services.engine.world import World
 _W_LEFT = np.array([4, 3, 2, 1, -1, -2, 0, 0]) / 400.0
 _W_RIGHT = -_W_LEFT[::-1].copy()
 _W_RIGHT[[6, 7]] = 0.0
+_W = np.stack([_W_LEFT, _W_RIGHT], axis=1)  # (8, 2): both wheels in one product
 
 
 def build(n: int, seed: int = 1) -> World:
@@ -47,35 +55,58 @@ def build(n: int, seed: int = 1) -> World:
 
 
 def control(world: World) -> None:
-    prox = world.proximity.astype(np.float64)
-    left = 8.0 + prox @ _W_LEFT
-    right = 8.0 + prox @ _W_RIGHT
-    world.set_speeds_all(np.stack([left, right], axis=1))
+    world.set_speeds_all(8.0 + world.proximity @ _W)
 
 
-def run(n: int, sim_seconds: float) -> tuple[float, float]:
+def run(n: int, sim_seconds: float, profile: bool = False) -> tuple[float, float, dict[str, float]]:
+    """(sim s per CPU s, sim s per wall s, CPU s per sim s by phase if ``profile``)."""
     world = build(n)
     steps = round(sim_seconds / world.tick_s)
     for _ in range(20):  # warm up
         control(world)
         world.step()
+    world.profile = profile
+    control_cpu = 0.0
     cpu0, wall0 = time.process_time(), time.perf_counter()
     for _ in range(steps):
-        control(world)
+        if profile:
+            t = time.process_time()
+            control(world)
+            control_cpu += time.process_time() - t
+        else:
+            control(world)
         world.step()
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
-    return sim_seconds / cpu, sim_seconds / wall
+    phases = {k: v / sim_seconds for k, v in world.phase_cpu.items()}
+    phases["control"] = control_cpu / sim_seconds
+    return sim_seconds / cpu, sim_seconds / wall, phases
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 35, 100, 1000])
     p.add_argument("--sim-seconds", type=float, default=5.0)
+    p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args()
-    print(f"{'N':>6} {'sim s / CPU s':>14} {'sim s / wall s':>15}")
+    print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
+    print(
+        f"{'N':>6} {'sim s / CPU s':>20} {'sim s / wall s':>20}   "
+        "CPU ms per simulated s: physics / sensing / control"
+    )
+    print(f"{'':>6} {'best  median':>20} {'best  median':>20}")
     for n in args.sizes:
-        per_cpu, per_wall = run(n, args.sim_seconds if n < 1000 else args.sim_seconds / 2)
-        print(f"{n:>6} {per_cpu:>14.1f} {per_wall:>15.1f}", flush=True)
+        seconds = args.sim_seconds if n < 1000 else args.sim_seconds / 2
+        runs = [run(n, seconds) for _ in range(args.repeats)]
+        cpu = [r[0] for r in runs]
+        wall = [r[1] for r in runs]
+        _, _, ph = run(n, seconds, profile=True)
+        print(
+            f"{n:>6} {max(cpu):>12.1f} {statistics.median(cpu):>7.1f}"
+            f" {max(wall):>12.1f} {statistics.median(wall):>7.1f}"
+            f"   {ph['physics'] * 1e3:7.1f} / {ph['sensing'] * 1e3:7.1f} / "
+            f"{ph['control'] * 1e3:6.1f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

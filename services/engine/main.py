@@ -21,6 +21,7 @@ from common import cli
 from common.auth import parse_public_key
 from common.keys import is_ident
 from common.service import run_service
+from services.engine import kernels
 from services.engine.maps import MapError, load_map
 from services.engine.service import EngineService, EngineSettings
 
@@ -67,6 +68,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         world = load_map(args.map, name=world_name, seed=args.seed, tick_s=tick_s)
     except MapError as exc:
         return cli.fail(str(exc))
+    # Compile the per-tick kernels now (or load them from numba's on-disk cache) rather
+    # than on the first tick; a fresh checkout compiles once, in a few seconds.
+    print(f"engine: kernels ready in {kernels.warm_up():.2f} s", file=sys.stderr, flush=True)
     settings = EngineSettings(
         tick_s=tick_s,
         speed=args.speed,

@@ -1,16 +1,24 @@
 """Every agent's sensors at once: IR proximity, ambient light, gripper presence.
 
-No per-robot Python loop: rays of all agents are numpy arrays of shape
-(agents, rays); candidates come from a uniform grid (services/engine/geometry.py);
-per-ray minima are taken with ``np.minimum.reduceat`` over pairs sorted by
-agent. The only loops are over robot *types* and light sources, both few.
+No per-robot Python loop: one compiled kernel (services/engine/kernels.py)
+casts every robot's rays against the circles (robots, round objects, round
+obstacles) of the 3x3 grid cells around it, the static obstacle edges binned
+in its own cell, and the edges of movable polygons nearby, then applies the
+response curve and the seeded noise, the ambient model and the gripper's
+presence barrier. This module prepares the kernel's tables: per-agent sensor
+layouts (rebuilt when agents change) and the static geometry (rebuilt when
+obstacles or the arena change); a sensing pass only gathers what moves.
 
-Readings (see docs/ENGINE.md for the curves):
+Readings (see the "Sensor models" part of docs/ARCHITECTURE.md section 9):
 - proximity: each sensor casts ``rays_per_sensor`` rays across its spread; the
   nearest hit distance goes through the type's response curve; seeded noise.
 - ambient: each lit light within a sensor's cone and radius, not hidden by an
   obstacle (a ray from the robot's centre), lowers the reading.
 - presence: the gripper's light barrier sees a round object between the fingers.
+
+Noise: one ``standard_normal`` draw per pass from the world's generator, laid
+out as the earlier per-type draws were (per type: proximity multiplicative and
+additive, then per type: ambient), so a seed gives the same readings.
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from services.engine import geometry
+from services.engine import kernels as K
 from services.engine.specs import AmbientSpec, ProximitySpec
 
 if TYPE_CHECKING:
@@ -36,21 +44,30 @@ class AgentSensing:
 
     sensors: int  # proximity sensors per agent (padded)
     rays_per_sensor: int  # padded
-    ray_local: np.ndarray  # (N, S*K, 3): x, y, angle in the robot frame
+    ray_local: np.ndarray  # (N, S*K, 5): x, y, angle, cos(angle), sin(angle) in the robot frame
     reach: np.ndarray  # (N,) farthest any ray reaches from the centre
     prox_groups: list[tuple[ProximitySpec, np.ndarray]]  # (spec, agent slots) per type
     amb_local: np.ndarray  # (N, A, 3)
     amb_valid: np.ndarray  # (N, A)
     amb_groups: list[tuple[AmbientSpec, np.ndarray]]
     gripper: np.ndarray  # (N, 4): presence x0, x1, half width, has gripper (1/0)
+    # The kernel's packed tables (services/engine/kernels.py names the columns).
+    agent_f: np.ndarray  # (N, kernels.N_AGENT_F)
+    agent_i: np.ndarray  # (N, kernels.N_AGENT_I)
+    curve_x: np.ndarray  # (types, points) response curves, padded
+    curve_y: np.ndarray
+    curve_n: np.ndarray  # (types,) points used
+    noise_total: int  # standard normal draws per sensing pass
 
     @classmethod
-    def build(cls, agents: list[Agent]) -> AgentSensing:
+    def build(
+        cls, agents: list[Agent], radius: np.ndarray, arm_lowered_above: np.ndarray
+    ) -> AgentSensing:
         n = len(agents)
         s_max = max((len(a.spec.proximity.poses) for a in agents), default=8)
         k_max = max((a.spec.proximity.rays_per_sensor for a in agents), default=1)
         a_max = max((len(a.spec.ambient.poses) for a in agents), default=8)
-        ray_local = np.zeros((n, s_max * k_max, 3))
+        ray_local = np.zeros((n, s_max * k_max, 5))
         reach = np.zeros(n)
         amb_local = np.zeros((n, a_max, 3))
         amb_valid = np.zeros((n, a_max), dtype=bool)
@@ -67,7 +84,14 @@ class AgentSensing:
                 for j in range(k_max):
                     # padding rays repeat the sensor's last ray: they change no minimum
                     off = offsets[min(j, k - 1)]
-                    ray_local[slot, i * k_max + j] = (pose.x_mm, pose.y_mm, pose.heading_rad + off)
+                    angle = pose.heading_rad + off
+                    ray_local[slot, i * k_max + j] = (
+                        pose.x_mm,
+                        pose.y_mm,
+                        angle,
+                        np.cos(angle),
+                        np.sin(angle),
+                    )
             for i in range(len(prox.poses), s_max):
                 ray_local[slot, i * k_max : (i + 1) * k_max] = ray_local[slot, 0]
             reach[slot] = spec.sensor_reach_mm
@@ -84,19 +108,84 @@ class AgentSensing:
             spec = agents[slots[0]].spec
             prox_groups.append((spec.proximity, np.array(slots)))
             amb_groups.append((spec.ambient, np.array(slots)))
+
+        # Packed per-agent tables for the kernel.
+        f = np.zeros((n, K.N_AGENT_F))
+        i_tab = np.zeros((n, K.N_AGENT_I), dtype=np.int64)
+        f[:, K.F_REACH] = reach
+        f[:, K.F_RADIUS] = radius
+        f[:, K.F_GRIP_X0 : K.F_HAS_GRIP + 1] = gripper
+        f[:, K.F_ARM_LOWERED_ABOVE] = arm_lowered_above
+        curves = [p.curve for p, _ in prox_groups]
+        points = max((len(c.distances_mm) for c in curves), default=2)
+        curve_x = np.zeros((len(curves), points))
+        curve_y = np.zeros((len(curves), points))
+        curve_n = np.zeros(len(curves), dtype=np.int64)
+        # Noise layout, in the order the draws were made one type at a time:
+        # per type (2, agents, sensors) for proximity, then per type (agents, sensors).
+        offset = 0
+        for g, (p, slots) in enumerate(prox_groups):
+            c = p.curve
+            curve_n[g] = len(c.distances_mm)
+            curve_x[g, : curve_n[g]] = c.distances_mm
+            curve_y[g, : curve_n[g]] = c.values
+            k = len(p.poses)
+            f[slots, K.F_PROX_NOISE_FRACTION] = p.noise_fraction
+            f[slots, K.F_PROX_NOISE_COUNTS] = p.noise_counts
+            f[slots, K.F_PROX_MAX] = float(p.max_value)
+            i_tab[slots, K.I_PROX_SENSORS] = k
+            i_tab[slots, K.I_CURVE] = g
+            i_tab[slots, K.I_PROX_NOISE_MUL] = offset + np.arange(len(slots)) * k
+            i_tab[slots, K.I_PROX_NOISE_ADD] = offset + (len(slots) + np.arange(len(slots))) * k
+            offset += 2 * len(slots) * k
+        for a, slots in amb_groups:
+            k = len(a.poses)
+            f[slots, K.F_AMB_HALF_ANGLE] = a.half_angle_rad
+            f[slots, K.F_AMB_DROP] = a.drop
+            f[slots, K.F_AMB_DARK] = float(a.dark_value)
+            f[slots, K.F_AMB_FLOOR] = float(a.floor_value)
+            f[slots, K.F_AMB_NOISE_FRACTION] = a.noise_fraction
+            i_tab[slots, K.I_AMB_SENSORS] = k
+            i_tab[slots, K.I_AMB_NOISE] = offset + np.arange(len(slots)) * k
+            offset += len(slots) * k
         return cls(
-            s_max, k_max, ray_local, reach, prox_groups, amb_local, amb_valid, amb_groups, gripper
+            s_max,
+            k_max,
+            ray_local,
+            reach,
+            prox_groups,
+            amb_local,
+            amb_valid,
+            amb_groups,
+            gripper,
+            f,
+            i_tab,
+            curve_x,
+            curve_y,
+            curve_n,
+            offset,
         )
 
 
 @dataclass(frozen=True)
 class StaticGeometry:
-    """Obstacles as segments (binned in a grid) and circles, for sensing."""
+    """Obstacles as segments (binned in a dense grid) and circles, for sensing.
 
-    segments: np.ndarray  # (S, 4)
-    grid: geometry.SegmentGrid
+    Built once and rebuilt only when obstacles or the arena change (or an object
+    larger than the grid was made for arrives).
+    """
+
+    segments: np.ndarray  # (S, 4), the arena's 4 walls first
     circle_centres: np.ndarray  # (C, 2)
     circle_radii: np.ndarray  # (C,)
+    cell_mm: float
+    nx: int  # grid cells along x and y (one margin cell on every side)
+    ny: int
+    cell_start: np.ndarray  # (nx * ny + 1,) CSR offsets, cell index = ix * ny + iy
+    cell_items: np.ndarray  # segment index of each (cell, segment) entry
+    occluders: np.ndarray  # segments that can hide a light (all but the arena's walls)
+    # Circles passed to the kernel when there are no movable objects.
+    no_objects: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
     @classmethod
     def build(cls, world: World, cell_mm: float | None = None) -> StaticGeometry:
@@ -118,16 +207,48 @@ class StaticGeometry:
             for a, b in zip(pts, pts[1:] + pts[:1], strict=True):
                 segs.append((a[0], a[1], b[0], b[1]))
         segments = np.array(segs, dtype=np.float64)
-        cell = cell_mm or cell_size(world)
+        cell = float(cell_mm or cell_size(world))
+        nx = int(np.floor(w / cell)) + 3
+        ny = int(np.floor(h / cell)) + 3
+        # Every segment goes into every cell within one cell of its bounding box.
+        buckets: list[list[int]] = [[] for _ in range(nx * ny)]
+        for s, (ax, ay, bx, by) in enumerate(segments):
+            x0 = max(int(np.floor(min(ax, bx) / cell)), 0)
+            x1 = min(int(np.floor(max(ax, bx) / cell)) + 2, nx - 1)
+            y0 = max(int(np.floor(min(ay, by) / cell)), 0)
+            y1 = min(int(np.floor(max(ay, by) / cell)) + 2, ny - 1)
+            for ix in range(x0, x1 + 1):
+                for iy in range(y0, y1 + 1):
+                    buckets[ix * ny + iy].append(s)
+        start = np.zeros(nx * ny + 1, dtype=np.int64)
+        start[1:] = np.cumsum([len(b) for b in buckets])
+        items = np.array([s for b in buckets for s in b], dtype=np.int64)
+        centres_a = np.array(centres, dtype=np.float64).reshape(-1, 2)
+        radii_a = np.array(radii, dtype=np.float64)
         return cls(
             segments,
-            geometry.SegmentGrid.build(segments, cell),
-            np.array(centres, dtype=np.float64).reshape(-1, 2),
-            np.array(radii, dtype=np.float64),
+            centres_a,
+            radii_a,
+            cell,
+            nx,
+            ny,
+            start,
+            items,
+            np.ascontiguousarray(segments[4:]),
+            (
+                centres_a,
+                radii_a,
+                np.full(len(radii_a), -1, dtype=np.int64),
+                np.zeros(len(radii_a), dtype=bool),
+            ),
         )
 
 
 def cell_size(world: World) -> float:
+    """Grid cell: the longest sensor reach plus the largest radius (at least 120 mm)."""
+    cached = world._cell_cache
+    if cached is not None and cached[0] == world.layout:
+        return cached[1]
     reach = float(world.agent_sensing.reach.max()) if len(world.agents) else 0.0
     radius = max(
         [a.spec.radius_mm for a in world.agents]
@@ -135,106 +256,13 @@ def cell_size(world: World) -> float:
         + [o.shape.bounding_radius_mm for o in world.obstacles.values() if o.shape.kind == "circle"]
         + [0.0]
     )
-    return max(_MIN_CELL_MM, reach + radius)
+    value = max(_MIN_CELL_MM, reach + radius)
+    world._cell_cache = (world.layout, value)
+    return value
 
 
-def _min_by_agent(dist: np.ndarray, agents: np.ndarray, t: np.ndarray) -> None:
-    """dist[a] = min(dist[a], t rows of a); ``agents`` sorted ascending."""
-    if len(agents) == 0:
-        return
-    starts = np.flatnonzero(np.r_[True, agents[1:] != agents[:-1]])
-    mins = np.minimum.reduceat(t, starts, axis=0)
-    rows = agents[starts]
-    dist[rows] = np.minimum(dist[rows], mins)
-
-
-def sense(world: World) -> None:
-    n = len(world.agents)
-    if n == 0:
-        return
-    layout = world.agent_sensing
-    static = world.static_geometry
-    assert layout is not None and static is not None
-    cell = static.grid.cell_mm
-    if cell < cell_size(world):  # an object larger than the grid was made for arrived
-        static = world.static_geometry = StaticGeometry.build(world)
-        cell = static.grid.cell_mm
-    pose = world.agent_pose
-    xy = pose[:, :2]
-    c = np.cos(pose[:, 2])[:, None]
-    s = np.sin(pose[:, 2])[:, None]
-    rl = layout.ray_local
-    origins = np.stack(
-        [
-            xy[:, 0:1] + c * rl[..., 0] - s * rl[..., 1],
-            xy[:, 1:2] + s * rl[..., 0] + c * rl[..., 1],
-        ],
-        axis=-1,
-    )
-    angle = pose[:, 2:3] + rl[..., 2]
-    dirs = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
-    dist = np.full(angle.shape, np.inf)
-
-    # Circles: agents, round objects on the floor, round obstacles.
-    round_objects = [
-        (i, o)
-        for i, o in enumerate(world.objects)
-        if o.shape.kind == "circle" and _on_floor(world, o)
-    ]
-    obj_xy = (
-        world.object_pose[[i for i, _ in round_objects], :2] if round_objects else np.zeros((0, 2))
-    )
-    obj_owner = np.array(
-        [world._slot_of[o.held_by.serial] if o.held_by else -1 for _, o in round_objects],
-        dtype=np.int64,
-    )
-    centres = np.concatenate([xy, obj_xy, static.circle_centres])
-    radii = np.concatenate(
-        [world.tables.radius, [o.shape.radius_mm for _, o in round_objects], static.circle_radii]
-    )
-    owner = np.concatenate(
-        [np.arange(n), obj_owner, np.full(len(static.circle_radii), -1, dtype=np.int64)]
-    )
-    pa, pc = geometry.circle_pairs(xy, centres, cell)
-    if len(pa):
-        d2 = np.sum((centres[pc] - xy[pa]) ** 2, axis=1)
-        keep = (owner[pc] != pa) & (d2 < (layout.reach[pa] + radii[pc]) ** 2)
-        pa, pc = pa[keep], pc[keep]
-        t = geometry.ray_circle(origins[pa], dirs[pa], centres[pc][:, None, :], radii[pc][:, None])
-        _min_by_agent(dist, pa, t)
-
-    # Obstacle edges through the static grid.
-    sa, ss = static.grid.pairs(xy)
-    if len(sa):
-        t = geometry.ray_segment(origins[sa], dirs[sa], static.segments[ss][:, None, :])
-        _min_by_agent(dist, sa, t)
-
-    # Edges of movable boxes and polygons (few): every agent against every edge nearby.
-    edges = _object_edges(world)
-    if len(edges):
-        mid = (edges[:, :2] + edges[:, 2:]) / 2
-        half = np.hypot(*(edges[:, 2:] - edges[:, :2]).T) / 2
-        near = (
-            np.sum((xy[:, None, :] - mid[None]) ** 2, axis=2)
-            < (layout.reach[:, None] + half[None]) ** 2
-        )
-        ea, ee = np.nonzero(near)
-        if len(ea):
-            t = geometry.ray_segment(origins[ea], dirs[ea], edges[ee][:, None, :])
-            _min_by_agent(dist, ea, t)
-
-    per_sensor = dist.reshape(n, layout.sensors, layout.rays_per_sensor).min(axis=2)
-    prox = np.zeros((n, world.proximity.shape[1]), dtype=np.int32)
-    for spec, slots in layout.prox_groups:
-        k = len(spec.poses)
-        value = spec.curve(per_sensor[slots, :k])
-        noise = world.rng.standard_normal((2, len(slots), k))
-        value = value * (1.0 + spec.noise_fraction * noise[0]) + spec.noise_counts * noise[1]
-        prox[slots[:, None], np.arange(k)[None, :]] = np.clip(np.rint(value), 0, spec.max_value)
-    world.proximity = prox
-
-    _presence(world, pa, pc, centres, n)
-    _ambient(world, static)
+_NO_EDGES = np.zeros((0, 4))
+_NO_LIGHTS = np.zeros((0, 4))
 
 
 def _on_floor(world: World, obj: object) -> bool:
@@ -245,105 +273,94 @@ def _on_floor(world: World, obj: object) -> bool:
     return bool(world.arm[slot] >= world.tables.arm_lowered_above[slot])
 
 
-def _object_edges(world: World) -> np.ndarray:
+def _objects(
+    world: World, static: StaticGeometry
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Circles other than the agents (round objects on the floor, round obstacles) and edges."""
+    if not world.objects:
+        return (*static.no_objects, _NO_EDGES)
+    idx: list[int] = []
+    radius: list[float] = []
+    owner: list[int] = []
     edges: list[tuple[float, float, float, float]] = []
     for i, obj in enumerate(world.objects):
-        if obj.shape.kind == "circle" or not _on_floor(world, obj):
+        if not _on_floor(world, obj):
+            continue
+        if obj.shape.kind == "circle":
+            idx.append(i)
+            radius.append(obj.shape.radius_mm)
+            owner.append(world._slot_of[obj.held_by.serial] if obj.held_by else -1)
             continue
         x, y, h = world.object_pose[i]
         pts = obj.shape.world_vertices(x, y, h)
         for a, b in zip(pts, pts[1:] + pts[:1], strict=True):
             edges.append((a[0], a[1], b[0], b[1]))
-    return np.array(edges, dtype=np.float64).reshape(-1, 4)
+    xy = np.concatenate([world.object_pose[idx, :2], static.circle_centres])
+    r = np.concatenate([np.array(radius, dtype=np.float64), static.circle_radii])
+    own = np.concatenate([np.array(owner, dtype=np.int64), static.no_objects[2]])
+    is_obj = np.zeros(len(r), dtype=bool)
+    is_obj[: len(idx)] = True
+    return xy, r, own, is_obj, np.array(edges, dtype=np.float64).reshape(-1, 4)
 
 
-def _presence(world: World, pa: np.ndarray, pc: np.ndarray, centres: np.ndarray, n: int) -> None:
-    """The gripper's light barrier: a round object's centre between the fingers, arm down."""
-    grip = world.agent_sensing.gripper if world.agent_sensing else np.zeros((n, 4))
-    presence = np.zeros(n, dtype=np.int32)
-    holding = np.array([a.held is not None for a in world.agents], dtype=bool)
-    presence[holding] = 255
-    is_object = (pc >= n) & (pc < n + len(world.objects))
-    if len(pa) and np.any(is_object):
-        a, c = pa[is_object], pc[is_object]
-        keep = grip[a, 3] > 0
-        a, c = a[keep], c[keep]
-        pose = world.agent_pose[a]
-        d = centres[c] - pose[:, :2]
-        co, si = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-        lx = co * d[:, 0] + si * d[:, 1]
-        ly = -si * d[:, 0] + co * d[:, 1]
-        inside = (lx >= grip[a, 0]) & (lx <= grip[a, 1]) & (np.abs(ly) <= grip[a, 2])
-        inside &= world.arm[a] >= world.tables.arm_lowered_above[a]
-        presence[a[inside]] = 255
-    world.presence = presence
-
-
-def _ambient(world: World, static: StaticGeometry) -> None:
-    n = len(world.agents)
-    layout = world.agent_sensing
-    assert layout is not None
-    total = np.zeros((n, layout.amb_local.shape[1]))
+def _lights(world: World) -> np.ndarray:
     lit = [light for light in world.lights if light.is_on(world.sim_time) and light.intensity > 0]
-    xy = world.agent_pose[:, :2]
-    if lit:
-        lxy = np.array([(light.x, light.y) for light in lit])
-        radius = np.array([light.radius_mm for light in lit])
-        intensity = np.array([light.intensity for light in lit])
-        d2 = np.sum((xy[:, None, :] - lxy[None]) ** 2, axis=2)
-        pa, pl = np.nonzero(d2 < (radius[None] + 40.0) ** 2)
-        if len(pa):
-            visible = ~_occluded(xy[pa], lxy[pl], static)
-            pa, pl = pa[visible], pl[visible]
-        if len(pa):
-            pose = world.agent_pose[pa]
-            local = layout.amb_local[pa]  # (P, A, 3)
-            co, si = np.cos(pose[:, 2])[:, None], np.sin(pose[:, 2])[:, None]
-            sx = pose[:, 0:1] + co * local[..., 0] - si * local[..., 1]
-            sy = pose[:, 1:2] + si * local[..., 0] + co * local[..., 1]
-            vx = lxy[pl, 0][:, None] - sx
-            vy = lxy[pl, 1][:, None] - sy
-            bearing = np.angle(np.exp(1j * (np.arctan2(vy, vx) - pose[:, 2:3] - local[..., 2])))
-            closeness = np.clip(1.0 - np.hypot(vx, vy) / radius[pl][:, None], 0.0, 1.0)
-            half = np.zeros(len(pa))
-            drop = np.zeros(len(pa))
-            for spec, slots in layout.amb_groups:
-                mask = np.isin(pa, slots)
-                half[mask] = spec.half_angle_rad
-                drop[mask] = spec.drop
-            cone = np.abs(bearing) < half[:, None]
-            contrib = np.where(cone, np.cos(1.5 * bearing), 0.0) * closeness
-            contrib *= (drop * intensity[pl])[:, None] * layout.amb_valid[pa]
-            np.add.at(total, pa, contrib)
-    amb = np.zeros_like(world.ambient)
-    for spec, slots in layout.amb_groups:
-        k = len(spec.poses)
-        value = np.clip(spec.dark_value - total[slots, :k], spec.floor_value, spec.dark_value)
-        value = value * (1.0 + spec.noise_fraction * world.rng.standard_normal((len(slots), k)))
-        amb[slots[:, None], np.arange(k)[None, :]] = np.clip(np.rint(value), 0, 1023 * 4)
+    if not lit:
+        return _NO_LIGHTS
+    return np.array(
+        [(light.x, light.y, light.radius_mm, light.intensity) for light in lit], dtype=np.float64
+    )
+
+
+def sense(world: World) -> None:
+    n = len(world.agents)
+    if n == 0:
+        return
+    layout = world.agent_sensing
+    static = world.static_geometry
+    assert layout is not None and static is not None
+    if static.cell_mm < cell_size(world):  # an object larger than the grid was made for arrived
+        static = world.static_geometry = StaticGeometry.build(world)
+    circ_xy, circ_r, circ_owner, circ_obj, edges = _objects(world, static)
+    holding = world.holding()
+    noise = world.rng.standard_normal(layout.noise_total)
+    prox = np.empty((n, world.proximity.shape[1]), dtype=np.int32)
+    amb = np.empty((n, world.ambient.shape[1]), dtype=np.int32)
+    presence = np.empty(n, dtype=np.int32)
+    K.sense(
+        world.agent_pose,
+        layout.ray_local,
+        layout.sensors,
+        layout.rays_per_sensor,
+        layout.agent_f,
+        layout.agent_i,
+        layout.curve_x,
+        layout.curve_y,
+        layout.curve_n,
+        world.arm,
+        holding,
+        circ_xy,
+        circ_r,
+        circ_owner,
+        circ_obj,
+        edges,
+        static.segments,
+        static.cell_start,
+        static.cell_items,
+        static.nx,
+        static.ny,
+        static.cell_mm,
+        static.occluders,
+        static.circle_centres,
+        static.circle_radii,
+        layout.amb_local,
+        layout.amb_valid,
+        _lights(world),
+        noise,
+        prox,
+        amb,
+        presence,
+    )
+    world.proximity = prox
     world.ambient = amb
-
-
-def _occluded(p: np.ndarray, q: np.ndarray, static: StaticGeometry) -> np.ndarray:
-    """Whether an obstacle lies on each segment p -> q (chunked to bound memory)."""
-    out = np.zeros(len(p), dtype=bool)
-    segs = static.segments[4:]  # the arena's own walls never stand between two inside points
-    chunk = max(1, 200_000 // max(1, len(segs) + len(static.circle_radii)))
-    for start in range(0, len(p), chunk):
-        a, b = p[start : start + chunk], q[start : start + chunk]
-        hit = np.zeros(len(a), dtype=bool)
-        if len(segs):
-            hit |= geometry.segments_cross(a[:, None, :], b[:, None, :], segs[None]).any(axis=1)
-        if len(static.circle_radii):
-            d = b - a
-            length = np.hypot(d[:, 0], d[:, 1])
-            unit = d / np.maximum(length, 1e-9)[:, None]
-            t = geometry.ray_circle(
-                a[:, None, :],
-                unit[:, None, :],
-                static.circle_centres[None],
-                static.circle_radii[None],
-            )
-            hit |= (t < length[:, None]).any(axis=1)
-        out[start : start + chunk] = hit
-    return out
+    world.presence = presence

@@ -15,12 +15,14 @@ follow the thesis, through pymunk:
 Per-agent state lives in numpy arrays indexed by the agent's slot (its index
 in :attr:`World.agents`); body state moves through ``pymunk.batch`` and the
 sensors are cast in numpy (services/engine/sensing.py), so a tick has no
-per-robot Python loop.
+per-robot Python loop. The per-tick work (reading body state, driving,
+sensing) runs in compiled kernels (services/engine/kernels.py).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -28,7 +30,7 @@ import numpy as np
 import pymunk
 import pymunk.batch as pbatch
 
-from services.engine import sensing
+from services.engine import kernels, sensing
 from services.engine.entities import (
     Agent,
     Light,
@@ -108,6 +110,12 @@ class World:
         self.layout = 1  # bumped whenever objects are added, removed or change shape
         self._next_sense = 0.0
         self._serial = 0
+        self._n_held = 0  # agents holding an object (the per-tick carry loop runs only if > 0)
+        self._arms_moving = False  # set by set_arm; the arm update runs only while true
+        self._cell_cache: tuple[int, float] | None = None  # (layout, sensing grid cell)
+        # CPU seconds per phase, accumulated while ``profile`` is true (bench/engine_bench.py).
+        self.profile = False
+        self.phase_cpu = {"physics": 0.0, "sensing": 0.0}
 
         self.space = pymunk.Space()
         self.space.damping = 1.0
@@ -130,6 +138,12 @@ class World:
         self._batch = pbatch.Buffer()
         self._batch_ids = np.zeros(0, dtype=np.uintp)
         self._rows_stale = True
+        # The last body state read (after the previous step) and the layout it was read at:
+        # the next tick drives from it unless something moved bodies in between.
+        self._state: np.ndarray | None = None
+        self._state_layout = -1
+        self._vel_buf = pbatch.Buffer()
+        self._vel_out = np.zeros(0)
         self._static_dirty = True
         self.static_geometry: sensing.StaticGeometry | None = None
 
@@ -192,7 +206,9 @@ class World:
         )
         self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
         self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}
-        self.agent_sensing = sensing.AgentSensing.build(self.agents)
+        self.agent_sensing = sensing.AgentSensing.build(
+            self.agents, self.tables.radius, self.tables.arm_lowered_above
+        )
         self._rows_stale = True
 
     # -- ids ---------------------------------------------------------------------
@@ -629,7 +645,10 @@ class World:
     def set_speeds_all(self, speeds: np.ndarray) -> None:
         """Every agent's (left, right) at once, clamped per type: the bulk path."""
         top = self.tables.max_speed[:, None]
-        self.cmd[:] = np.clip(np.rint(speeds), -top, top)
+        s = np.rint(speeds)
+        np.maximum(s, -top, out=s)  # = np.clip, without its Python-level overhead
+        np.minimum(s, top, out=s)
+        self.cmd[:] = s
 
     def set_counters(self, slot: int, left: int, right: int) -> None:
         self.counters[slot] = (left, right)
@@ -644,6 +663,7 @@ class World:
         if g is None or not self.agents[slot].has_gripper:
             raise EditError(f"{self.agents[slot].id} has no gripper")
         self.arm_target[slot] = float(np.clip(position, g.arm_up, g.arm_down))
+        self._arms_moving = True
 
     def set_fingers(self, slot: int, closed: bool) -> None:
         agent = self.agents[slot]
@@ -700,6 +720,7 @@ class World:
         obj.held_by = agent
         obj.held_offset = (lx, ly, obj.body.angle - self.agent_pose[slot, 2])
         agent.held = obj
+        self._n_held += 1
         self.space.remove(*obj.floor_joints)
         obj.body.body_type = pymunk.Body.KINEMATIC
         for s in obj.shapes:
@@ -712,6 +733,7 @@ class World:
             return
         obj.held_by = None
         agent.held = None
+        self._n_held -= 1
         obj.body.body_type = pymunk.Body.DYNAMIC
         obj.body.mass = obj.mass_g
         if obj.shape.kind == "circle":
@@ -740,7 +762,10 @@ class World:
             arbiter.process_collision = False
 
     def _update_arms(self, dt: float) -> None:
+        if not self._arms_moving:
+            return
         if not len(self.agents) or not np.any(self.arm != self.arm_target):
+            self._arms_moving = False
             return
         was_lowered = self.arm >= self.tables.arm_lowered_above
         step = self.tables.arm_rate * dt
@@ -759,7 +784,15 @@ class World:
                         group=agent.serial, categories=CAT_OBJECT, mask=mask
                     )
 
+    def holding(self) -> np.ndarray:
+        """(N,) bool: which agents hold an object."""
+        if not self._n_held:
+            return np.zeros(len(self.agents), dtype=bool)
+        return np.array([a.held is not None for a in self.agents], dtype=bool)
+
     def _carry_held(self) -> None:
+        if not self._n_held:
+            return
         for slot, agent in enumerate(self.agents):
             obj = agent.held
             if obj is None or obj.body is None:
@@ -787,69 +820,91 @@ class World:
         self._batch_ids = ids.copy()
         self._rows_stale = False
 
+    _READ_FIELDS = (
+        pbatch.BodyFields.BODY_ID
+        | pbatch.BodyFields.POSITION
+        | pbatch.BodyFields.ANGLE
+        | pbatch.BodyFields.VELOCITY
+        | pbatch.BodyFields.ANGULAR_VELOCITY
+    )
+    _VEL_FIELDS = pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY
+
     def _read_bodies(self) -> np.ndarray:
-        fields = (
-            pbatch.BodyFields.BODY_ID
-            | pbatch.BodyFields.POSITION
-            | pbatch.BodyFields.ANGLE
-            | pbatch.BodyFields.VELOCITY
-            | pbatch.BodyFields.ANGULAR_VELOCITY
-        )
         self._batch.clear()
-        pbatch.get_space_bodies(self.space, fields, self._batch)
+        pbatch.get_space_bodies(self.space, self._READ_FIELDS, self._batch)
         ids = np.frombuffer(self._batch.int_buf(), dtype=np.uintp)
-        state = np.frombuffer(self._batch.float_buf(), dtype=np.float64).reshape(-1, 6)
-        if (
-            self._rows_stale
-            or len(ids) != len(self._batch_ids)
-            or not np.array_equal(ids, self._batch_ids)
-        ):
+        # A copy: the batch buffer is reused by the next read.
+        state = np.frombuffer(self._batch.float_buf(), dtype=np.float64).reshape(-1, 6).copy()
+        if self._rows_stale:
             self._refresh_rows(ids)
-        if len(self.agents):
-            rows = state[self._agent_rows]
-            self.agent_pose = rows[:, 0:3].copy()
-            self.agent_vel = rows[:, 3:6].copy()
-        self.object_pose = (
-            state[self._object_rows, 0:3].copy() if len(self.objects) else np.zeros((0, 3))
+        ok, pose, vel, obj = kernels.gather_bodies(
+            state, ids, self._batch_ids, self._agent_rows, self._object_rows
         )
+        if not ok:  # bodies were added or removed behind our back
+            self._refresh_rows(ids)
+            ok, pose, vel, obj = kernels.gather_bodies(
+                state, ids, self._batch_ids, self._agent_rows, self._object_rows
+            )
+        self.agent_pose, self.agent_vel, self.object_pose = pose, vel, obj
+        self._state = state
+        self._state_layout = self.layout
         return state
 
-    def _drive(self, state: np.ndarray) -> None:
-        if not len(self.agents):
-            return
-        wheel = self.cmd * self.tables.mm_s_per_unit[:, None]
-        v = wheel.mean(axis=1)
-        w = (wheel[:, 1] - wheel[:, 0]) / self.tables.wheel_base
-        theta = self.agent_pose[:, 2]
-        vel = state[:, 3:6].copy()
-        vel[self._control_rows, 0] = v * np.cos(theta)
-        vel[self._control_rows, 1] = v * np.sin(theta)
-        vel[self._control_rows, 2] = w
-        buf = pbatch.Buffer()
-        flat = np.ascontiguousarray(vel.ravel())
-        buf.set_float_buf(flat)
-        pbatch.set_space_bodies(
-            self.space, pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY, buf
+    def _current_state(self) -> np.ndarray:
+        """Body state as of now: the last read, unless something moved bodies since."""
+        if (
+            self._state is None
+            or self._rows_stale
+            or self._n_held
+            or self._state_layout != self.layout
+        ):
+            return self._read_bodies()
+        return self._state
+
+    def _drive(self, state: np.ndarray, dt: float) -> None:
+        """Control bodies' velocities from the wheel speeds; counters count this tick's pulses."""
+        if len(self._vel_out) != 3 * len(state):
+            self._vel_out = np.zeros(3 * len(state))
+            self._vel_buf = pbatch.Buffer()
+            self._vel_buf.set_float_buf(self._vel_out)
+        t = self.tables
+        kernels.drive(
+            state,
+            self._control_rows,
+            self.cmd,
+            t.mm_s_per_unit,
+            t.wheel_base,
+            self.agent_pose[:, 2],
+            self.counters,
+            dt * t.pulses_per_s_per_unit,
+            self._vel_out,
         )
+        pbatch.set_space_bodies(self.space, self._VEL_FIELDS, self._vel_buf)
 
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
+        profile = self.profile
+        if profile:
+            t0 = time.process_time()
         dt = self.tick_s
         self._update_arms(dt)
-        state = self._read_bodies()
-        self._drive(state)
+        state = self._current_state()
+        self._drive(state, dt)
         sub = dt / self.substeps
         for _ in range(self.substeps):
             self.space.step(sub)
-        if len(self.agents):
-            self.counters += self.cmd * (dt * self.tables.pulses_per_s_per_unit)[:, None]
         self._read_bodies()
         self._carry_held()
         self.tick += 1
         self.sim_time = self.tick * dt
+        if profile:
+            t1 = time.process_time()
+            self.phase_cpu["physics"] += t1 - t0
         if self.sim_time + 1e-9 >= self._next_sense:
             self.sense()
             self._next_sense = self.sim_time + self.sensor_period_s - 1e-9
+            if profile:
+                self.phase_cpu["sensing"] += time.process_time() - t1
 
     def sense(self) -> None:
         """Recompute every agent's proximity, ambient and gripper presence readings."""

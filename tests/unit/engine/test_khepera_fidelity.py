@@ -170,3 +170,24 @@ def test_epuck_is_a_second_type_in_the_same_world() -> None:
     world.run(1.0)
     assert world.agent_pose[1, 0] - 600.0 == pytest.approx(129.0, rel=0.03)
     assert not world.agents[1].has_gripper
+
+
+def test_presence_sees_round_objects_not_round_obstacles() -> None:
+    world = lone_khepera()
+    world.add_object("crate", "box", ShapeSpec.box(30.0, 30.0), 700.0, 700.0)
+    world.add_obstacle("post", ShapeSpec.circle(5.0), 538.0, 500.0)  # between the fingers
+    world.step()
+    assert world.presence[0] == 0
+    world.remove("post")
+    world.add_object("ball", "ball", ShapeSpec.circle(5.0), 538.0, 500.0, mass_g=5.0)
+    world.step()
+    assert world.presence[0] == 255
+
+
+def test_an_edit_between_ticks_is_seen_by_the_next_tick() -> None:
+    world = lone_khepera()
+    world.set_speeds(0, 10, 10)
+    world.run(0.2)
+    world.move("k1", 200.0, 300.0, 0.0)
+    world.step()
+    assert np.hypot(world.agent_pose[0, 0] - 200.0, world.agent_pose[0, 1] - 300.0) < 1.0
