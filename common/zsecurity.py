@@ -28,6 +28,8 @@ from typing import Any
 
 from common.certs import CA_CERT
 from common.keys import realm_root
+from common.labfile import LabFile
+from common.zconfig import NetworkOptions
 
 # The roles, i.e. the certificate common names the rules know. A host's
 # processes use the certificate of their role from that host's directory;
@@ -94,7 +96,7 @@ _PEOPLE = (
     _g("sub", "world/*/frame", "world/*/sensors", "world/*/agent/*/sensors"),
     _g("ask", "world/*/snapshot", "world/*/edit", "world/*/map"),
     _g("sub", "host/*/load"),
-    _g("ask", "host/*/spawn", "runner/*/run"),
+    _g("ask", "host/*/load", "host/*/spawn", "runner/*/run"),
     _g("token", "alive/user/*"),
     _g("watch", "alive/**"),
 )
@@ -143,7 +145,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     ),
     "host": (
         *_SERVICE_BASE,
-        _g("serve", "host/*/spawn"),
+        _g("serve", "host/*/spawn", "host/*/load"),
         _g("pub", "host/*/load"),
         _g("token", "alive/host/*"),
     ),
@@ -292,3 +294,26 @@ def write_config(path: Path, conf: Mapping[str, Any]) -> Path:
     path.write_text(json.dumps(conf, indent=2) + "\n")
     path.chmod(0o600)
     return path
+
+
+def client_options(
+    lab: LabFile,
+    cert: str,
+    *,
+    connect: tuple[str, ...] = (),
+    registry_key: str | None = None,
+) -> NetworkOptions:
+    """Network options for a person's tool (arena, doctor, chat) joining a lab over mTLS.
+
+    ``cert`` names a client certificate in ``<pki>/clients/``; without
+    ``connect`` the tool may reach any host's router (the first that answers).
+    """
+    tls = client_tls(lab.security.pki, cert)
+    link = zenoh_security(tls, lease_ms=lab.lease_ms)["transport"]["link"]
+    return NetworkOptions(
+        realm=lab.realm,
+        mode="client",
+        connect=connect or tuple(h.endpoint for h in lab.hosts),
+        registry_key=registry_key,
+        extra={"transport/link/tls": link["tls"], "transport/link/tx/lease": lab.lease_ms},
+    )

@@ -26,6 +26,13 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
     ),
     "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
+    "host": ("services.host", "run this machine's share of a multi-host lab (lab file)"),
+    "arena": ("services.arena", "start, list and stop simulated arenas on the lab's hosts"),
+    "certs": ("services.certs", "the lab's CA and TLS certificates (routers, services, clients)"),
+    "doctor": (
+        "services.doctor",
+        "check a lab's hosts, routers, links and services; say what is wrong",
+    ),
 }
 
 
