@@ -127,6 +127,8 @@ def write_configs(ctx: HostContext) -> None:
             lease_ms=lab.lease_ms,
             acl=acl if role == "router" else None,
         )
+        # The doctor names routers by this (the admin space shows it with the links).
+        conf["metadata"] = {"name": host.name, "role": role, "realm": lab.realm}
         write_config(ctx.config_path(role), conf)
 
 
