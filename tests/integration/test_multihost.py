@@ -8,6 +8,7 @@ Transport lease 2 s, so a cut link is noticed within about 2 s.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -167,14 +168,14 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[MultiLab]:
         finally:
             for proc in procs.values():
                 _stop(proc)
+            # Children orphaned by a crash: only processes whose command line names
+            # this test's own directory (configs, logs), never anyone else's.
             leftovers = subprocess.run(
-                ["pgrep", "-f", str(lab_path)], capture_output=True, text=True
+                ["pgrep", "-f", str(tmp)], capture_output=True, text=True
             ).stdout.split()
-            for pid in leftovers:  # only processes started with this test's lab file
-                try:
+            for pid in leftovers:
+                with contextlib.suppress(ProcessLookupError):
                     os.kill(int(pid), signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
 
 
 def test_services_talk_across_hosts_and_the_doctor_sees_the_mesh(lab: MultiLab) -> None:
