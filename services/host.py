@@ -430,9 +430,19 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart host") -> int:
     p.add_argument("--lab", type=Path, required=True, help="the lab file (deploy/lab.example.toml)")
     p.add_argument("--name", required=True, help="which host of the lab file this machine is")
     p.add_argument("--state-dir", type=Path, help="database, logs, generated configs")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="validate, write this host's Zenoh configs, print what would run, and exit",
+    )
     args, _ = cli.parse(p, argv)
     try:
         ctx = prepare(load(args.lab), args.name, args.state_dir)
+        if args.check:
+            for spec in [router_spec(ctx), *host_plan(ctx)]:
+                print(f"{spec.name:<16} wart {' '.join(spec.argv)}")
+            print(f"configs in {ctx.state_dir / 'zenoh'}")
+            return 0
     except (LabFileError, FileNotFoundError, OSError, ValueError) as exc:
         return cli.fail(str(exc))
     stop = threading.Event()
