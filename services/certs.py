@@ -6,6 +6,7 @@
     wart certs client  NAME --dir PKI [--role student|admin]      a person's tool
     wart certs lab     --lab FILE                      everything the lab file needs
     wart certs list    --dir PKI                       what exists, and when it expires
+    wart certs client-config --lab FILE [--name student]   Zenoh config for people's tools
 
 The certificate's common name is the role the routers' access rules match
 (router, engine, agent, registry, student...). Files: PKI/ca.pem,
@@ -126,6 +127,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart certs") -> int:
     s_cli.add_argument("--dir", type=Path, required=True)
     s_lab = sub.add_parser("lab", help="everything a lab file needs")
     s_lab.add_argument("--lab", type=Path, required=True)
+    s_conf = sub.add_parser(
+        "client-config", help="print the Zenoh config (JSON5) a person's tool needs: --config FILE"
+    )
+    s_conf.add_argument("--lab", type=Path, required=True)
+    s_conf.add_argument("--name", default="student", help="client certificate name")
     s_list = sub.add_parser("list", help="certificates and their expiry")
     s_list.add_argument("--dir", type=Path, required=True)
     args, _ = cli.parse(p, argv)
@@ -156,6 +162,13 @@ def _run(args: argparse.Namespace) -> int:
         print(f"client certificate {args.name}: {issued.cert} and {issued.key}")
     elif args.verb == "lab":
         issue_lab(load(args.lab))
+    elif args.verb == "client-config":
+        from common.zsecurity import client_tls, zenoh_security
+
+        lab = load(args.lab)
+        conf = zenoh_security(client_tls(lab.security.pki, args.name), lease_ms=lab.lease_ms)
+        conf["connect"] = {"endpoints": [h.endpoint for h in lab.hosts]}
+        print(json.dumps(conf, indent=2))
     elif args.verb == "list":
         return _list(args.dir)
     return 0
