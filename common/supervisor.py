@@ -260,6 +260,23 @@ class Supervisor:
         if self.watch is not None:
             self.watch.close()
 
+    def stop_child(self, child: Child, timeout: float = 8.0) -> None:
+        """Stop one child for good (an arena being stopped) and forget it."""
+        with self._lock:
+            if child in self.children:
+                self.children.remove(child)
+        child.restart_at = None
+        proc = child.process
+        if proc is None or proc.poll() is not None:
+            return
+        proc.terminate()
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.say(f"  {child.spec.name} did not stop in time; killing it")
+            proc.kill()
+            proc.wait(timeout=5)
+
     def pids(self) -> list[int]:
         with self._lock:
             return [c.process.pid for c in self.children if c.process is not None]

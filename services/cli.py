@@ -31,6 +31,13 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "control": ("services.control", "drive a robot with your controller from this machine"),
     "deploy": ("services.deploy", "upload a controller to run on a robot in the lab"),
     "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
+    "host": ("services.host", "run this machine's share of a multi-host lab (lab file)"),
+    "arena": ("services.arena", "start, list and stop simulated arenas on the lab's hosts"),
+    "certs": ("services.certs", "the lab's CA and TLS certificates (routers, services, clients)"),
+    "doctor": (
+        "services.doctor",
+        "check a lab's hosts, routers, links and services; say what is wrong",
+    ),
 }
 
 

@@ -16,7 +16,7 @@ import shutil
 import signal
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -95,7 +95,6 @@ def provision(lab: LabSettings) -> LabSettings:
     """
     from common.auth import create_identity_key, key_fingerprint, load_identity_key
     from services.registry import provision as provision_registry
-    from services.registry_db import RegistryDB
 
     seed_maps(lab.state_dir / "maps")
     identity, password, created = provision_registry(
@@ -107,17 +106,12 @@ def provision(lab: LabSettings) -> LabSettings:
             f"--registry-key does not match this lab's key in {lab.state_dir / 'registry.key'}"
         )
     khepera_link(lab).parent.mkdir(parents=True, exist_ok=True)
-    db = RegistryDB(lab.state_dir / "registry.db")
-    try:
-        for account in SERVICE_ACCOUNTS:
-            path = service_identity(lab, account)
-            key = load_identity_key(path) if path.exists() else create_identity_key(path)
-            if not db.user_exists(account):
-                db.add_user(account, ["service"], public_key=bytes(key.verify_key))
-            else:
-                db.add_key(account, bytes(key.verify_key))
-    finally:
-        db.close()
+    accounts = {}
+    for account in SERVICE_ACCOUNTS:
+        path = service_identity(lab, account)
+        key = load_identity_key(path) if path.exists() else create_identity_key(path)
+        accounts[account] = bytes(key.verify_key)
+    register_service_accounts(lab.state_dir / "registry.db", accounts)
     print(
         f"  registry key {'created' if created else 'loaded'}: {key_hex}\n"
         f"    (fingerprint {key_fingerprint(identity.verify_key)})",
@@ -133,6 +127,25 @@ def provision(lab: LabSettings) -> LabSettings:
     else:
         print(f"  admin password: see {lab.state_dir / 'admin-password.txt'}", flush=True)
     return replace(lab, network=lab.network.with_(registry_key=key_hex))
+
+
+def register_service_accounts(db_path: Path, accounts: Mapping[str, bytes]) -> None:
+    """Make sure each service account exists with the ``service`` role and its public key.
+
+    Shared by ``wart up`` (its own services) and ``wart host`` (every service
+    of a lab file, keys from the lab's PKI directory); idempotent.
+    """
+    from services.registry_db import RegistryDB
+
+    db = RegistryDB(db_path)
+    try:
+        for account, public_key in accounts.items():
+            if not db.user_exists(account):
+                db.add_user(account, ["service"], public_key=public_key)
+            else:
+                db.add_key(account, public_key)
+    finally:
+        db.close()
 
 
 def client_flags(lab: LabSettings) -> str:

@@ -28,6 +28,8 @@ from common.messages.base import (
 )
 from common.messages.chat import *  # noqa: F403 - every chat wire type
 from common.messages.chat import __all__ as _chat_all
+from common.messages.host import *  # noqa: F403 - every host wire type
+from common.messages.host import __all__ as _host_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
 from common.messages.registry import __all__ as _registry_all
 from common.messages.world import (
@@ -90,5 +92,6 @@ __all__ = [
     "encode",
     *_agent_all,
     *_chat_all,
+    *_host_all,
     *_registry_all,
 ]

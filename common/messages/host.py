@@ -1,0 +1,86 @@
+"""Wire types of hosts (``wart host``): load reports and arena placement.
+
+``host/<host>/load``: each host publishes a :class:`HostLoad` every few
+seconds and answers a query on the same key with its latest one.
+``host/<host>/spawn``: ``AuthEnvelope`` of :class:`SpawnArena` (reply
+:class:`ArenaReply`) or :class:`StopArena` (reply ``OkReply``), from a user
+with the ``host`` permission.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar, Literal
+
+import msgspec
+
+from common.messages.base import Ident, Message, NonNegInt, ShortText
+
+Percent = Annotated[float, msgspec.Meta(ge=0.0, le=100.0 * 1024)]  # summed over cores
+Megabytes = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+Robots = Annotated[int, msgspec.Meta(ge=1, le=1000)]
+
+
+class ArenaInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """One arena (engine + agent context) a host runs."""
+
+    world: Ident
+    host: Ident
+    map: Ident
+    robots: NonNegInt
+    owner: Ident  # who asked for it ("lab" for the lab file's own worlds)
+    state: Literal["starting", "running", "restarting", "failed"]
+    started_at: float
+    pids: list[NonNegInt] = msgspec.field(default_factory=list)
+    rss_mb: Megabytes = 0.0  # resident memory of its processes
+    cpu_percent: Percent = 0.0  # of one core, summed over its processes
+
+
+class HostLoad(Message):
+    """How busy a host is, and what it runs (``host/<host>/load``)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/load",)
+
+    host: Ident
+    at: float  # wall clock of the host
+    cpus: NonNegInt
+    cpu_percent: Percent  # whole machine, 0..100
+    load1: float
+    mem_total_mb: Megabytes
+    mem_available_mb: Megabytes
+    services: list[ShortText]  # "registry", "chat lobby", "engine arena1" (with state)
+    arenas: list[ArenaInfo]
+    max_arenas: NonNegInt
+    accepting: bool  # would take a new arena now
+    reason: ShortText = ""  # why not, when it would not
+
+
+class LoadRequest(Message):
+    """Ask a host for its latest HostLoad (no authentication: loads are public)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/load",)
+
+
+class SpawnArena(Message):
+    """Start an arena on this host (``host`` permission)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
+
+    world: Ident
+    map: Ident  # a map name from the host's maps directory, never a path
+    robots: Robots | None = None  # None: the map's own robots
+    seed: NonNegInt = 1
+
+
+class StopArena(Message):
+    """Stop an arena this host runs (``host`` permission)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
+
+    world: Ident
+
+
+class ArenaReply(Message):
+    arena: ArenaInfo
+
+
+__all__ = ["ArenaInfo", "ArenaReply", "HostLoad", "LoadRequest", "SpawnArena", "StopArena"]

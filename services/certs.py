@@ -1,0 +1,185 @@
+"""``wart certs``: the lab's small CA and its certificates (Zenoh TLS and mutual TLS).
+
+    wart certs init    --dir PKI                       create the CA (ca.pem, ca.key)
+    wart certs host    NAME --dir PKI --address IP [--dns NAME]   the router of host NAME
+    wart certs service ROLE --host NAME --dir PKI      a process role on host NAME
+    wart certs client  NAME --dir PKI [--role student|admin]      a person's tool
+    wart certs lab     --lab FILE                      everything the lab file needs
+    wart certs list    --dir PKI                       what exists, and when it expires
+    wart certs client-config --lab FILE [--name student]   Zenoh config for people's tools
+
+The certificate's common name is the role the routers' access rules match
+(router, engine, agent, registry, student...). Files: PKI/ca.pem,
+PKI/<host>/<role>.{pem,key}, PKI/clients/<name>.{pem,key}; keys are 0600.
+Running a command again re-issues (rotates) the certificate; see
+docs/DEPLOY.md for rotation. ``lab`` also creates the registry's key and the
+service accounts' identity keys (PKI/<host>/identities/) and their public
+halves (PKI/accounts.json, PKI/registry.pub), so the one PKI directory made on
+the operator's machine carries every secret each host needs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from common import cli
+from common.certs import CA_CERT, CA_KEY, CertError, init_ca, inspect, issue
+from common.labfile import LabFile, LabFileError, load
+from common.zsecurity import ROLES
+
+REGISTRY_PUB = "registry.pub"
+ACCOUNTS = "accounts.json"
+
+
+def host_roles(lab: LabFile, host: str) -> list[str]:
+    """The certificates a host needs: its router, its supervisor, its services, arenas."""
+    entry = lab.host(host)
+    roles = ["router", "host", *sorted(entry.kinds())]
+    if entry.arenas:
+        roles += ["engine", "agent"]
+    return sorted(set(roles), key=ROLES.index)
+
+
+def service_accounts(lab: LabFile, host: str) -> list[str]:
+    """The registry accounts of a host's services (chat rooms, the arenas' agent contexts)."""
+    entry = lab.host(host)
+    accounts = [f"chat-{s.ident}" for s in entry.services if s.kind == "chat"]
+    if entry.arenas:
+        accounts.append(f"agent-{host}")
+    return accounts
+
+
+def identity_path(pki: Path, host: str, account: str) -> Path:
+    return pki / host / "identities" / f"{account}.key"
+
+
+def registry_key_path(lab: LabFile) -> Path:
+    return lab.security.pki / lab.registry_host().name / "identities" / "registry.key"
+
+
+def issue_lab(lab: LabFile, *, say: object = print) -> None:
+    """Issue every certificate and key the lab file needs (re-issues existing ones)."""
+    from common.auth import RegistryIdentity, create_identity_key, load_identity_key
+
+    pki = lab.security.pki
+    out = say if callable(say) else print
+    if not (pki / CA_KEY).exists():
+        init_ca(pki, f"wart {lab.realm} CA")
+        out(f"created the CA in {pki}")
+    accounts: dict[str, str] = {}
+    for host in lab.hosts:
+        alt = [host.address, *host.names]
+        for role in host_roles(lab, host.name):
+            issued = issue(pki, role, alt_names=alt, out_dir=pki / host.name)
+            out(f"  {host.name}: {role:<9} {issued.cert} (until {issued.not_after:%Y-%m-%d})")
+        for account in service_accounts(lab, host.name):
+            path = identity_path(pki, host.name, account)
+            key = load_identity_key(path) if path.exists() else create_identity_key(path)
+            accounts[account] = bytes(key.verify_key).hex()
+    for name in lab.security.student_names + lab.security.admin_names:
+        issued = issue(pki, name, out_dir=pki / "clients")
+        out(f"  client:  {name:<9} {issued.cert}")
+    identity, created = RegistryIdentity.load_or_create(registry_key_path(lab))
+    (pki / REGISTRY_PUB).write_text(identity.verify_key.hex() + "\n")
+    (pki / ACCOUNTS).write_text(json.dumps(accounts, indent=2, sort_keys=True) + "\n")
+    out(
+        f"  registry key {'created' if created else 'kept'}: {registry_key_path(lab)}; "
+        f"public key in {pki / REGISTRY_PUB}"
+    )
+
+
+def _list(pki: Path) -> int:
+    if not (pki / CA_CERT).exists():
+        return cli.fail(f"no CA in {pki}")
+    for path in sorted(pki.rglob("*.pem")):
+        info = inspect(path)
+        where = path.relative_to(pki)
+        flag = "  EXPIRES SOON" if info.days_left() < 30 else ""
+        print(
+            f"{where!s:<28} CN={info.common_name:<10} until {info.not_after:%Y-%m-%d} "
+            f"({info.days_left():.0f} days){flag}  {', '.join(info.alt_names)}"
+        )
+    return 0
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart certs") -> int:
+    p = cli.parser(prog, __doc__ or "", network=False)
+    sub = p.add_subparsers(dest="verb", required=True)
+    s_init = sub.add_parser("init", help="create the lab's CA")
+    s_init.add_argument("--dir", type=Path, required=True)
+    s_init.add_argument("--force", action="store_true", help="replace an existing CA (re-keys all)")
+    s_host = sub.add_parser("host", help="the router certificate of a host")
+    s_host.add_argument("name")
+    s_host.add_argument("--dir", type=Path, required=True)
+    s_host.add_argument("--address", action="append", required=True, help="IP or DNS (repeatable)")
+    s_host.add_argument("--dns", action="append", default=[], help="extra DNS name (repeatable)")
+    s_svc = sub.add_parser("service", help="a process role's certificate on a host")
+    s_svc.add_argument("role", choices=[r for r in ROLES if r not in ("student", "admin")])
+    s_svc.add_argument("--host", required=True)
+    s_svc.add_argument("--dir", type=Path, required=True)
+    s_svc.add_argument("--address", action="append", default=[])
+    s_cli = sub.add_parser("client", help="a person's tool certificate (CN = NAME)")
+    s_cli.add_argument("name")
+    s_cli.add_argument("--dir", type=Path, required=True)
+    s_lab = sub.add_parser("lab", help="everything a lab file needs")
+    s_lab.add_argument("--lab", type=Path, required=True)
+    s_conf = sub.add_parser(
+        "client-config", help="print the Zenoh config (JSON5) a person's tool needs: --config FILE"
+    )
+    s_conf.add_argument("--lab", type=Path, required=True)
+    s_conf.add_argument("--name", default="student", help="client certificate name")
+    s_list = sub.add_parser("list", help="certificates and their expiry")
+    s_list.add_argument("--dir", type=Path, required=True)
+    args, _ = cli.parse(p, argv)
+    try:
+        return _run(args)
+    except (CertError, LabFileError, OSError) as exc:
+        return cli.fail(str(exc))
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.verb == "init":
+        issued = init_ca(args.dir, force=args.force)
+        print(f"CA created: {issued.cert} (key {issued.key}, keep it off the hosts)")
+    elif args.verb == "host":
+        _check_name(args.name)
+        issued = issue(
+            args.dir, "router", alt_names=[*args.address, *args.dns], out_dir=args.dir / args.name
+        )
+        print(
+            f"router certificate of {args.name}: {issued.cert} (until {issued.not_after:%Y-%m-%d})"
+        )
+    elif args.verb == "service":
+        _check_name(args.host)
+        issued = issue(args.dir, args.role, alt_names=args.address, out_dir=args.dir / args.host)
+        print(f"{args.role} certificate on {args.host}: {issued.cert}")
+    elif args.verb == "client":
+        issued = issue(args.dir, args.name, out_dir=args.dir / "clients")
+        print(f"client certificate {args.name}: {issued.cert} and {issued.key}")
+    elif args.verb == "lab":
+        issue_lab(load(args.lab))
+    elif args.verb == "client-config":
+        from common.zsecurity import client_tls, zenoh_security
+
+        lab = load(args.lab)
+        conf = zenoh_security(client_tls(lab.security.pki, args.name), lease_ms=lab.lease_ms)
+        conf["connect"] = {"endpoints": [h.endpoint for h in lab.hosts]}
+        print(json.dumps(conf, indent=2))
+    elif args.verb == "list":
+        return _list(args.dir)
+    return 0
+
+
+def _check_name(name: str) -> None:
+    from common.keys import is_ident
+
+    if not is_ident(name):
+        raise CertError(f"host name {name!r} is not valid (letters, digits, '_', '-', '.')")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,267 @@
+"""``wart doctor --lab FILE``: is the lab healthy, and if not, what is wrong, in words.
+
+Checks, for each host of the lab file: that its router's port answers (TCP),
+that a mutual-TLS Zenoh session opens to it, the round-trip time of a query
+to its admin space, its links to the other routers, the services the lab file
+gives it (their liveliness tokens) and its load report. Then lists every live
+token of the realm and the arenas. Uses an operator's client certificate
+(``--cert admin``): the routers let only admins read their admin space.
+Exit code 0 when nothing is wrong, 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import socket
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common import cli, keys
+from common.keys import AliveKind
+from common.labfile import HostEntry, LabFile, LabFileError, load
+from common.service import close_session, open_session
+from common.zsecurity import client_options
+
+
+@dataclass
+class RouterView:
+    name: str
+    zid: str
+    rtt_ms: float
+    peers: list[str]  # router names it has a link to
+    clients: int
+
+
+@dataclass
+class Report:
+    lines: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    def ok(self, text: str) -> None:
+        self.lines.append(f"  ✓ {text}")
+
+    def bad(self, text: str) -> None:
+        self.lines.append(f"  ✗ {text}")
+        self.problems.append(text)
+
+    def info(self, text: str) -> None:
+        self.lines.append(f"    {text}")
+
+    def head(self, text: str) -> None:
+        self.lines.append(text)
+
+
+def tcp_check(host: HostEntry, timeout: float = 2.0) -> str | None:
+    """None if the router's port accepts a TCP connection, else why not, in words."""
+    try:
+        with socket.create_connection((host.address, host.port), timeout=timeout):
+            return None
+    except ConnectionRefusedError:
+        return (
+            f"no router at {host.endpoint}: connection refused — is `wart host` running on "
+            f"{host.name}? is port {host.port} open in its firewall?"
+        )
+    except TimeoutError:
+        return (
+            f"no answer from {host.address}:{host.port} within {timeout:.0f} s — is {host.name} "
+            f"up and reachable (network link, routing, a firewall dropping port {host.port})?"
+        )
+    except OSError as exc:
+        if exc.errno in (errno.ENETUNREACH, errno.EHOSTUNREACH):
+            return f"{host.address} is unreachable from here ({exc.strerror}): check the network"
+        return f"cannot reach {host.endpoint}: {exc.strerror or exc}"
+
+
+def tls_check(lab: LabFile, host: HostEntry, cert: str) -> tuple[zenoh.Session | None, str]:
+    """A session to this host's router alone; (None, why) if TLS or Zenoh refuses it."""
+    options = client_options(lab, cert, connect=(host.endpoint,))
+    started = time.monotonic()
+    try:
+        session = open_session(options, wait=0.0, quiet=True)
+    except ConnectionError as exc:
+        return None, (
+            f"the port answers but a Zenoh TLS session to {host.endpoint} fails: "
+            f"{str(exc).splitlines()[0][:160]} — check that {host.name}'s certificate is signed "
+            f"by this lab's CA ({lab.security.pki / 'ca.pem'}) and names {host.address}, and "
+            f"that the client certificate '{cert}' is valid"
+        )
+    return session, f"{(time.monotonic() - started) * 1000:.0f} ms to open"
+
+
+def routers(session: zenoh.Session, timeout: float = 3.0) -> list[tuple[dict[str, Any], float]]:
+    """The admin view of every router reachable from this session, with each one's RTT."""
+    found: list[dict[str, Any]] = []
+    for reply in session.get(
+        "@/*/router",
+        timeout=timeout,
+        target=zenoh.QueryTarget.ALL,
+        consolidation=zenoh.ConsolidationMode.NONE,
+    ):
+        if reply.ok is None:
+            continue
+        try:
+            found.append(json.loads(reply.ok.payload.to_bytes()))
+        except ValueError:
+            continue
+    out = []
+    for info in found:
+        zid = str(info.get("zid", ""))
+        started = time.monotonic()
+        answered = any(r.ok is not None for r in session.get(f"@/{zid}/router", timeout=timeout))
+        rtt = (time.monotonic() - started) * 1000 if answered else float("nan")
+        out.append((info, rtt))
+    return out
+
+
+def router_views(raw: list[tuple[dict[str, Any], float]]) -> list[RouterView]:
+    names = {}
+    for info, _ in raw:
+        meta = info.get("metadata") or {}
+        names[str(info.get("zid"))] = str(meta.get("name") or str(info.get("zid"))[:8])
+    views = []
+    for info, rtt in raw:
+        sessions = info.get("sessions") or []
+        peers = sorted(
+            names.get(str(s.get("peer")), str(s.get("peer"))[:8])
+            for s in sessions
+            if s.get("whatami") == "router"
+        )
+        clients = sum(1 for s in sessions if s.get("whatami") == "client")
+        views.append(
+            RouterView(names[str(info.get("zid"))], str(info.get("zid")), rtt, peers, clients)
+        )
+    return sorted(views, key=lambda v: v.name)
+
+
+def expected_tokens(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
+    """(what, liveliness key) of every process the lab file puts on ``host``."""
+    realm = lab.realm
+    out = [
+        (f"router {host.name}", keys.alive(realm, AliveKind.ROUTER, host.name)),
+        (f"host {host.name}", keys.alive(realm, AliveKind.HOST, host.name)),
+    ]
+    for svc in host.services:
+        if svc.kind == "registry":
+            out.append(("registry", keys.alive(realm, AliveKind.REGISTRY, "registry")))
+        elif svc.kind == "chat":
+            out.append((f"chat {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident)))
+        elif svc.kind in ("engine", "bridge"):
+            out.append((f"{svc.kind} {svc.ident}", keys.alive(realm, AliveKind.WORLD, svc.ident)))
+        elif svc.kind == "viewer":
+            out.append(("viewer", keys.alive(realm, AliveKind.VIEWER, host.name)))
+        elif svc.kind == "runner":
+            out.append((f"runner {svc.ident}", keys.alive(realm, AliveKind.RUNNER, svc.ident)))
+    return out
+
+
+def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Report:
+    from services.arena import format_loads, host_loads
+
+    report = Report()
+    sessions: list[zenoh.Session] = []
+    try:
+        report.head(f"lab '{lab.realm}' ({lab.path}), {len(lab.hosts)} hosts")
+        reachable: list[HostEntry] = []
+        for host in lab.hosts:
+            report.head(f"host {host.name} ({host.endpoint})")
+            why = tcp_check(host)
+            if why:
+                report.bad(why)
+                continue
+            session, detail = tls_check(lab, host, cert)
+            if session is None:
+                report.bad(detail)
+                continue
+            sessions.append(session)
+            reachable.append(host)
+            report.ok(f"router answers over mutual TLS ({detail})")
+        if not sessions:
+            report.head("nothing reachable: no further checks")
+            return report
+        session = sessions[0]
+        views = router_views(routers(session))
+        report.head("routers and links (admin space)")
+        if not views:
+            report.bad(
+                "no router admin space answered: is this certificate an admin one "
+                f"(--cert, one of {', '.join(lab.security.admin_names)})?"
+            )
+        for view in views:
+            report.ok(
+                f"router {view.name}: rtt {view.rtt_ms:.1f} ms, links to "
+                f"{', '.join(view.peers) or 'no other router'}, {view.clients} clients"
+            )
+        seen = {v.name for v in views}
+        for host in lab.hosts:
+            if host.name not in seen and host in reachable:
+                report.bad(f"router {host.name} answers TLS but not in the mesh seen from here")
+            for other in host.connect:
+                view = next((v for v in views if v.name == host.name), None)
+                if view is not None and other in seen and other not in view.peers:
+                    report.bad(
+                        f"router {host.name} has no link to {other} (it should connect to "
+                        f"{lab.host(other).endpoint}): check {host.name}'s router log"
+                    )
+        report.head("services (liveliness)")
+        live = {
+            str(r.ok.key_expr)
+            for r in session.liveliness().get(keys.alive_all(lab.realm), timeout=3.0)
+            if r.ok is not None
+        }
+        for host in lab.hosts:
+            for what, key in expected_tokens(lab, host):
+                if key in live:
+                    report.ok(f"{what} on {host.name} is alive")
+                else:
+                    report.bad(
+                        f"{what} on {host.name} is not alive: look at the log of `wart host` "
+                        f"on {host.name} (STATE_DIR/logs/)"
+                    )
+        others = sorted(live - {k for h in lab.hosts for _, k in expected_tokens(lab, h)})
+        for key in others:
+            parsed = keys.parse_alive(lab.realm, key)
+            if parsed:
+                report.info(f"also alive: {parsed[0].value} {parsed[1]}")
+        report.head("hosts' load")
+        for line in format_loads(host_loads(session, lab.realm)).splitlines():
+            report.info(line)
+        report.head("access denials")
+        report.info(
+            "routers drop denied messages silently; to see them, run wart host with "
+            "RUST_LOG=zenoh::net::routing::interceptor=debug and read the router's log"
+        )
+        return report
+    finally:
+        for s in sessions:
+            close_session(s)
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart doctor") -> int:
+    p = cli.parser(prog, __doc__ or "", network=False)
+    p.add_argument("--lab", type=Path, required=True, help="the lab file")
+    p.add_argument("--cert", default="admin", help="client certificate name (default admin)")
+    args, _ = cli.parse(p, argv)
+    try:
+        lab = load(args.lab)
+        report = diagnose(lab, args.cert)
+    except (LabFileError, FileNotFoundError) as exc:
+        return cli.fail(str(exc))
+    print("\n".join(report.lines))
+    if report.problems:
+        print(f"\n{len(report.problems)} problem(s):")
+        for text in report.problems:
+            print(f"  - {text}")
+        return 1
+    print("\nno problem found")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,225 @@
+"""Probes the multi-host tests run inside a host's network namespace.
+
+    python -m tests.integration.multihost_probe VERB LAB_FILE [ARGS...]
+
+Each verb prints what it saw as one JSON line (``RESULT {...}``) and exits 0,
+or prints why and exits 1. The test process itself lives outside the
+namespaces, so everything that talks to the lab runs here.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import keys
+from common.client import LabClient
+from common.keys import AliveKind
+from common.labfile import load
+from common.messages import Lease, PackedArray, WorldFrame, decode, encode
+from common.messages.world import WorldSnapshot
+from common.service import close_session, open_session
+from common.zsecurity import TlsFiles, client_tls, host_tls, zenoh_security
+from services.arena import new_arena, stop_arena
+from services.hostplan import read_registry_key
+
+FORGED_TICK = 987_654
+
+
+def result(**values: object) -> int:
+    print("RESULT " + json.dumps(values), flush=True)
+    return 0
+
+
+def session_for(lab_path: Path, tls: TlsFiles | None, endpoint: str, lab_lease: int):
+    from common.zconfig import NetworkOptions
+
+    extra: dict[str, object] = {}
+    if tls is not None:
+        link = zenoh_security(tls, lease_ms=lab_lease)["transport"]["link"]
+        extra = {"transport/link/tls": link["tls"]}
+    lab = load(lab_path)
+    return open_session(
+        NetworkOptions(realm=lab.realm, connect=(endpoint,), extra=extra), wait=5.0, quiet=True
+    )
+
+
+def main() -> int:
+    verb, lab_path = sys.argv[1], Path(sys.argv[2])
+    args = sys.argv[3:]
+    lab = load(lab_path)
+    realm, pki = lab.realm, lab.security.pki
+
+    if verb == "join":
+        # join HOST CERTDIR NAME: can a process with this certificate join HOST's router?
+        host, cert_dir, name = args
+        tls = TlsFiles(
+            pki / "ca.pem", Path(cert_dir) / f"{name}.pem", Path(cert_dir) / f"{name}.key"
+        )
+        try:
+            s = session_for(lab_path, tls, lab.host(host).endpoint, lab.lease_ms)
+        except ConnectionError as exc:
+            return result(joined=False, why=str(exc)[:200])
+        close_session(s)
+        return result(joined=True)
+
+    if verb == "across":
+        # across HOST PASSWORD_FILE: log in (registry on A) and fetch the snapshot of
+        # arena1 (engine on B) from HOST, with the student certificate.
+        host, password_file = args
+        s = session_for(lab_path, client_tls(pki, "student"), lab.host(host).endpoint, lab.lease_ms)
+        try:
+            with LabClient(s, realm, read_registry_key(lab), presence=False) as client:
+                client.login("admin", Path(password_file).read_text().strip())
+                directory = client.directory()
+                replies = [
+                    r.ok.payload
+                    for r in s.get(keys.world_snapshot(realm, "arena1"), timeout=5)
+                    if r.ok is not None
+                ]
+                snap = decode(replies[0], WorldSnapshot) if replies else None
+                return result(
+                    contexts=[c.ctx for c in directory.contexts],
+                    snapshot_agents=len(snap.agents) if snap else 0,
+                )
+        finally:
+            close_session(s)
+
+    if verb == "watch-frames":
+        # watch-frames HOST SECONDS: count real and forged frames of arena1 seen from HOST.
+        host, seconds = args[0], float(args[1])
+        s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
+        counts = {"real": 0, "forged": 0}
+
+        def on_frame(sample) -> None:
+            frame = decode(sample.payload, WorldFrame)
+            counts["forged" if frame.tick == FORGED_TICK else "real"] += 1
+
+        sub = s.declare_subscriber(keys.world_frame(realm, "arena1"), on_frame)
+        print("READY", flush=True)
+        time.sleep(seconds)
+        sub.undeclare()
+        close_session(s)
+        return result(**counts)
+
+    if verb == "watch-leases":
+        # watch-leases HOST SECONDS: as an engine of HOST, count leases of arena1 by holder.
+        host, seconds = args[0], float(args[1])
+        s = session_for(
+            lab_path, host_tls(pki, host, "engine"), lab.host(host).local_endpoint, lab.lease_ms
+        )
+        holders: dict[str, int] = {}
+        lock = threading.Lock()
+
+        def on_lease(sample) -> None:
+            from common.messages import AuthEnvelope
+
+            env = decode(sample.payload, AuthEnvelope)
+            lease = decode(env.body, Lease)
+            with lock:
+                holders[lease.holder_user] = holders.get(lease.holder_user, 0) + 1
+
+        sub = s.declare_subscriber(keys.agent_lease_all(realm, "arena1"), on_lease)
+        print("READY", flush=True)
+        time.sleep(seconds)
+        sub.undeclare()
+        close_session(s)
+        return result(holders=holders)
+
+    if verb == "forge":
+        # forge HOST CERT PASSWORD_FILE ROLE: publish a frame and a sealed lease with
+        # the given certificate (a student's, or an agent context's as a control).
+        host, cert, password_file, role = args
+        tls = client_tls(pki, cert) if role == "client" else host_tls(pki, host, cert)
+        endpoint = lab.host(host).endpoint if role == "client" else lab.host(host).local_endpoint
+        s = session_for(lab_path, tls, endpoint, lab.lease_ms)
+        try:
+            with LabClient(s, realm, read_registry_key(lab), presence=False) as client:
+                client.login("admin", Path(password_file).read_text().strip())
+                assert client.session is not None
+                now = time.time()
+                frame = WorldFrame(
+                    world="arena1",
+                    tick=FORGED_TICK,
+                    sim_time=0.0,
+                    layout=0,
+                    poses=PackedArray.from_numpy(np.zeros((4, 3), np.float32)),
+                    agent_state=PackedArray.from_numpy(np.zeros((4, 4), np.uint8)),
+                    lights=PackedArray.from_numpy(np.zeros((1,), np.uint8)),
+                )
+                lease = Lease(
+                    lease_id=f"forged-{cert}",
+                    world="arena1",
+                    agent="k0",
+                    holder_user=cert,
+                    holder_session=client.session.session_id,
+                    start=now,
+                    end=now + 60,
+                )
+                lease_key = keys.agent_lease(realm, "arena1", "k0")
+                for _ in range(10):
+                    s.put(keys.world_frame(realm, "arena1"), encode(frame))
+                    s.put(lease_key, client.session.seal(lease_key, lease))
+                    time.sleep(0.1)
+                return result(sent=10)
+        finally:
+            close_session(s)
+
+    if verb == "alive":
+        # alive HOST KIND ID: is this liveliness token seen from HOST (admin certificate)?
+        host, kind, ident = args
+        s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
+        try:
+            key = keys.alive(realm, AliveKind(kind), ident)
+            live = {str(r.ok.key_expr) for r in s.liveliness().get(key, timeout=3) if r.ok}
+            return result(alive=key in live)
+        finally:
+            close_session(s)
+
+    if verb == "follow":
+        # follow HOST KIND ID SECONDS: print token events with timestamps for SECONDS.
+        host, kind, ident, seconds = args[0], args[1], args[2], float(args[3])
+        s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
+        key = keys.alive(realm, AliveKind(kind), ident)
+        events: list[tuple[str, float]] = []
+        started = time.monotonic()
+
+        def on_event(sample) -> None:
+            kind_ = "put" if str(sample.kind).endswith("PUT") else "delete"
+            events.append((kind_, round(time.monotonic() - started, 2)))
+            print("EVENT", kind_, flush=True)
+
+        sub = s.liveliness().declare_subscriber(key, on_event, history=True)
+        print("READY", flush=True)
+        time.sleep(seconds)
+        sub.undeclare()
+        close_session(s)
+        return result(events=events)
+
+    if verb == "arena":
+        # arena HOST PASSWORD_FILE WORLD: start an arena from HOST (placed by load), see
+        # its world token from HOST, stop it.
+        host, password_file, world = args
+        s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
+        try:
+            with LabClient(s, realm, read_registry_key(lab), presence=False) as client:
+                client.login("admin", Path(password_file).read_text().strip())
+                arena = new_arena(client, map_name="foraging", robots=3, world=world, host=None)
+                key = keys.alive(realm, AliveKind.WORLD, world)
+                seen = any(r.ok for r in s.liveliness().get(key, timeout=3))
+                detail = stop_arena(client, world)
+                return result(host=arena.host, seen=seen, stopped=detail)
+        finally:
+            close_session(s)
+
+    print(f"unknown verb {verb}", flush=True)
+    return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,263 @@
+"""A three-host lab in network namespaces, routers meshed over mutual TLS with access rules.
+
+A: router, registry, chat lobby (takes no arenas); B: router, engine arena1;
+C: router (spare capacity). Each host runs ``wart host`` from one lab file;
+probes (tests/integration/multihost_probe.py) run inside the namespaces.
+Transport lease 2 s, so a cut link is noticed within about 2 s.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from common.certs import init_ca, issue
+from common.labfile import load
+from services.certs import issue_lab
+from tests import netns
+
+pytestmark = [pytest.mark.integration, pytest.mark.netns]
+
+_reason = netns.available()
+if _reason is not None:
+    print(f"multi-host tests skipped: {_reason}")
+    pytestmark.append(pytest.mark.skip(reason=f"multi-host tests skipped: {_reason}"))
+
+LAB = """
+realm = "{realm}"
+lease_ms = 2000
+state_dir = "state"
+[security]
+pki = "pki"
+[limits]
+max_cpu_percent = 100.0
+load_period_s = 1.0
+max_arenas_per_host = 3
+[[hosts]]
+name = "A"
+address = "{a}"
+arenas = false
+[[hosts.services]]
+kind = "registry"
+[[hosts.services]]
+kind = "chat"
+name = "lobby"
+[[hosts]]
+name = "B"
+address = "{b}"
+[[hosts.services]]
+kind = "engine"
+world = "arena1"
+map = "foraging"
+[[hosts]]
+name = "C"
+address = "{c}"
+"""
+
+
+@dataclass
+class MultiLab:
+    net: netns.Network
+    lab_path: Path
+    tmp: Path
+    hosts: dict[str, subprocess.Popen[bytes]]
+
+    def host(self, name: str) -> netns.HostNet:
+        return self.net.hosts["ABC".index(name)]
+
+    @property
+    def password_file(self) -> Path:
+        return self.tmp / "state" / "A" / "admin-password.txt"
+
+    def probe(self, on: str, verb: str, *args: str, timeout: float = 40.0) -> dict:
+        proc = self.start_probe(on, verb, *args)
+        try:
+            proc.wait(timeout)
+        finally:
+            _stop(proc)
+        return self.result(proc, verb)
+
+    def start_probe(self, on: str, verb: str, *args: str) -> subprocess.Popen[bytes]:
+        log = self.tmp / f"probe-{verb}-{on}-{time.monotonic_ns()}.log"
+        proc = self.host(on).popen(
+            ["-m", "tests.integration.multihost_probe", verb, str(self.lab_path), *args], log
+        )
+        proc.log_path = log  # type: ignore[attr-defined]
+        return proc
+
+    def wait_line(self, proc: subprocess.Popen[bytes], needle: str, timeout: float = 20.0) -> None:
+        log: Path = proc.log_path  # type: ignore[attr-defined]
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if needle in log.read_text(errors="replace"):
+                return
+            if proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        raise AssertionError(f"probe never printed {needle!r}:\n{log.read_text(errors='replace')}")
+
+    def result(self, proc: subprocess.Popen[bytes], verb: str) -> dict:
+        log: Path = proc.log_path  # type: ignore[attr-defined]
+        text = log.read_text(errors="replace")
+        for line in text.splitlines():
+            if line.startswith("RESULT "):
+                return json.loads(line[len("RESULT ") :])
+        raise AssertionError(f"probe {verb} failed:\n{text}\n{self.logs()}")
+
+    def logs(self) -> str:
+        out = []
+        for path in sorted((self.tmp).glob("host-*.log")):
+            out.append(f"--- {path.name}\n{path.read_text(errors='replace')[-3000:]}")
+        return "\n".join(out)
+
+
+def _stop(proc: subprocess.Popen[bytes], timeout: float = 15.0) -> None:
+    """SIGTERM the process group (ip netns exec + python), SIGKILL what is left."""
+    if proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(5)
+    except ProcessLookupError:
+        pass
+
+
+def _wait_ready(log: Path, proc: subprocess.Popen[bytes], timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        text = log.read_text(errors="replace") if log.exists() else ""
+        if "is running. Press Ctrl-C" in text:
+            return
+        if proc.poll() is not None:
+            break
+        time.sleep(0.1)
+    raise AssertionError(f"wart host did not come up:\n{log.read_text(errors='replace')}")
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[MultiLab]:
+    tmp = tmp_path_factory.mktemp("multihost")
+    with netns.Network(3) as net:
+        a, b, c = (h.address for h in net.hosts)
+        lab_path = tmp / "lab.toml"
+        lab_path.write_text(LAB.format(realm=f"m{net.tag}", a=a, b=b, c=c))
+        issue_lab(load(lab_path), say=lambda _text: None)
+        procs: dict[str, subprocess.Popen[bytes]] = {}
+        try:
+            # B and C first: their routers retry the link to A until A is up.
+            for name in ("A", "B", "C"):
+                log = tmp / f"host-{name}.log"
+                procs[name] = net.hosts["ABC".index(name)].popen(
+                    ["-m", "services.cli", "host", "--lab", str(lab_path), "--name", name], log
+                )
+            for name, proc in procs.items():
+                _wait_ready(tmp / f"host-{name}.log", proc)
+            yield MultiLab(net, lab_path, tmp, procs)
+        finally:
+            for proc in procs.values():
+                _stop(proc)
+            # Children orphaned by a crash: only processes whose command line names
+            # this test's own directory (configs, logs), never anyone else's.
+            leftovers = subprocess.run(
+                ["pgrep", "-f", str(tmp)], capture_output=True, text=True
+            ).stdout.split()
+            for pid in leftovers:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(int(pid), signal.SIGKILL)
+
+
+def test_services_talk_across_hosts_and_the_doctor_sees_the_mesh(lab: MultiLab) -> None:
+    # From C: log in (registry on A), the directory lists A's chat room, and the
+    # engine on B answers a snapshot.
+    seen = lab.probe("C", "across", "C", str(lab.password_file))
+    assert "lobby" in seen["contexts"]
+    assert seen["snapshot_agents"] > 0
+    doctor = lab.host("A").popen(
+        ["-m", "services.cli", "doctor", "--lab", str(lab.lab_path)], lab.tmp / "doctor.log"
+    )
+    code = doctor.wait(60)
+    out = (lab.tmp / "doctor.log").read_text()
+    assert code == 0, out
+    assert "router B: rtt" in out and "links to A" in out
+    assert "engine arena1 on B is alive" in out
+
+
+def test_a_process_without_a_valid_certificate_cannot_join(lab: MultiLab) -> None:
+    rogue = lab.tmp / "rogue"
+    init_ca(rogue)
+    issue(rogue, "engine", alt_names=[lab.host("A").address])
+    refused = lab.probe("C", "join", "A", str(rogue), "engine")
+    assert refused["joined"] is False
+    # The control: the lab's own student certificate joins.
+    pki = load(lab.lab_path).security.pki
+    assert lab.probe("C", "join", "A", str(pki / "clients"), "student")["joined"] is True
+
+
+def test_a_student_cannot_publish_frames_or_leases_even_well_formed(lab: MultiLab) -> None:
+    frames = lab.start_probe("C", "watch-frames", "C", "6")
+    leases = lab.start_probe("B", "watch-leases", "B", "6")
+    try:
+        lab.wait_line(frames, "READY")
+        lab.wait_line(leases, "READY")
+        lab.probe("A", "forge", "A", "student", str(lab.password_file), "client")
+        # Control: an agent context's certificate may publish leases.
+        lab.probe("B", "forge", "B", "agent", str(lab.password_file), "host")
+        frames.wait(30)
+        leases.wait(30)
+    finally:
+        _stop(frames)
+        _stop(leases)
+    counted = lab.result(frames, "watch-frames")
+    assert counted["real"] > 0, "the engine's own frames must arrive (the control)"
+    assert counted["forged"] == 0, "a student's frame went through the routers"
+    holders = lab.result(leases, "watch-leases")["holders"]
+    assert holders.get("agent", 0) > 0, "the agent's leases must arrive (the control)"
+    assert "student" not in holders, "a student's lease went through the routers"
+
+
+def test_arena_requested_from_a_starts_on_b_or_c_and_appears(lab: MultiLab) -> None:
+    started = lab.probe("A", "arena", "A", str(lab.password_file), "extra1", timeout=90)
+    assert started["host"] in ("B", "C")
+    assert started["seen"] is True
+    assert "stopped" in started["stopped"]
+
+
+def test_cutting_b_link_drops_its_world_then_it_returns_without_restart(lab: MultiLab) -> None:
+    b_log = lab.tmp / "host-B.log"
+    before = b_log.read_text(errors="replace").count("restarting")
+    follow = lab.start_probe("A", "follow", "A", "world", "arena1", "25")
+    try:
+        lab.wait_line(follow, "READY")
+        lab.wait_line(follow, "EVENT put")
+        cut = time.monotonic()
+        lab.host("B").down()
+        try:
+            lab.wait_line(follow, "EVENT delete", timeout=10)
+            gone_after = time.monotonic() - cut
+        finally:
+            lab.host("B").up()
+        back = time.monotonic()
+        log_text = follow.log_path.read_text()  # type: ignore[attr-defined]
+        assert log_text.count("EVENT put") == 1
+        deadline = time.monotonic() + 20
+        while follow.log_path.read_text().count("EVENT put") < 2:  # type: ignore[attr-defined]
+            assert time.monotonic() < deadline, "arena1 did not come back after the link returned"
+            time.sleep(0.1)
+        back_after = time.monotonic() - back
+    finally:
+        _stop(follow)
+    assert gone_after < 2.0 * 2 + 1.0, f"took {gone_after:.1f} s to notice (lease 2 s)"
+    print(f"arena1 left after {gone_after:.1f} s, came back {back_after:.1f} s after the link")
+    assert b_log.read_text(errors="replace").count("restarting") == before, "a service restarted"
