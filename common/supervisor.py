@@ -168,9 +168,12 @@ class Supervisor:
 
     def wait_ready(self, child: Child) -> bool:
         spec = child.spec
-        if spec.alive_key is None or self.watch is None:
-            return True
         proc = child.process
+        if spec.alive_key is None or self.watch is None:
+            # Nothing on the network to wait for (an emulator on a pty): say it started.
+            detail = f"  {spec.detail}" if spec.detail else ""
+            self.say(f"  ✓ {spec.name:<22} started{detail}  (pid {proc.pid if proc else '-'})")
+            return True
 
         def died() -> bool:
             return self._stopping.is_set() or proc is None or proc.poll() is not None
