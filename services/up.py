@@ -10,6 +10,7 @@ order on Ctrl-C. Logs of each child go to STATE_DIR/logs/.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import shutil
@@ -40,6 +41,13 @@ class LabSettings:
     router_listen: tuple[str, ...]
     network: NetworkOptions  # what the children get (client mode, the router above)
     http_port: int
+
+
+def say(text: str) -> None:
+    """One line for the operator; a closed terminal or pipe (``wart up | tee``,
+    then Ctrl-C) must never interrupt an orderly stop."""
+    with contextlib.suppress(BrokenPipeError, OSError):
+        print(text, flush=True)
 
 
 def default_state_dir(realm: str) -> Path:
@@ -112,20 +120,18 @@ def provision(lab: LabSettings) -> LabSettings:
         key = load_identity_key(path) if path.exists() else create_identity_key(path)
         accounts[account] = bytes(key.verify_key)
     register_service_accounts(lab.state_dir / "registry.db", accounts)
-    print(
+    say(
         f"  registry key {'created' if created else 'loaded'}: {key_hex}\n"
-        f"    (fingerprint {key_fingerprint(identity.verify_key)})",
-        flush=True,
+        f"    (fingerprint {key_fingerprint(identity.verify_key)})"
     )
     if password is not None:
-        print(
+        say(
             f"  first start: user 'admin', password {password}\n"
             f"    (kept in {lab.state_dir / 'admin-password.txt'}); chat with\n"
-            f"    wart chat {LOBBY} --user admin{client_flags(lab)} --registry-key {key_hex}",
-            flush=True,
+            f"    wart chat {LOBBY} --user admin{client_flags(lab)} --registry-key {key_hex}"
         )
     else:
-        print(f"  admin password: see {lab.state_dir / 'admin-password.txt'}", flush=True)
+        say(f"  admin password: see {lab.state_dir / 'admin-password.txt'}")
     return replace(lab, network=lab.network.with_(registry_key=key_hex))
 
 
@@ -391,8 +397,8 @@ def run_lab(
 ) -> int:
     """Start the lab, keep it running until ``stop`` is set, then stop it all."""
     lab.state_dir.mkdir(parents=True, exist_ok=True)
-    supervisor = Supervisor(lab.state_dir / "logs", say=lambda text: print(text, flush=True))
-    print(f"wart lab '{lab.realm}': state and logs in {lab.state_dir}", flush=True)
+    supervisor = Supervisor(lab.state_dir / "logs", say=say)
+    say(f"wart lab '{lab.realm}': state and logs in {lab.state_dir}")
     session = None
     code = 0
     try:
@@ -402,17 +408,17 @@ def run_lab(
         try:
             session = open_session(lab.network, wait=30.0, quiet=lab.start_router)
         except ConnectionError as exc:
-            print(f"  ✗ {exc}", flush=True)
+            say(f"  ✗ {exc}")
             return 1
         supervisor.watch = AliveWatch(session, keys.alive_all(lab.realm))
         if lab.start_router and not supervisor.wait_ready(supervisor.children[0]):
             return 1
         if not lab.start_router:
-            print(f"  joined the lab router at {lab.router_endpoint}", flush=True)
+            say(f"  joined the lab router at {lab.router_endpoint}")
         try:
             lab = provision(lab)
         except (ValueError, OSError) as exc:
-            print(f"  ✗ {exc}", flush=True)
+            say(f"  ✗ {exc}")
             return 1
         viewer_url_file(lab).unlink(missing_ok=True)  # never report a previous run's URL
         for spec in lab_plan(lab):
@@ -421,18 +427,18 @@ def run_lab(
             if not supervisor.start(spec):
                 code = 1
             elif spec.name == VIEWER_NAME:
-                print(f"  web viewer: {viewer_url(lab) or '(address unknown)'}", flush=True)
+                say(f"  web viewer: {viewer_url(lab) or '(address unknown)'}")
         if not stop.is_set():
-            print("The lab is running. Press Ctrl-C to stop it.", flush=True)
+            say("The lab is running. Press Ctrl-C to stop it.")
             if ready is not None:
                 ready.set()
             supervisor.run_until(stop)
     finally:
-        print("Stopping the lab...", flush=True)
+        say("Stopping the lab...")
         supervisor.stop_all()
         if session is not None:
             close_session(session)
-        print("Lab stopped.", flush=True)
+        say("Lab stopped.")
     return code
 
 
