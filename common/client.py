@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TypeVar
 
 import nacl.exceptions
@@ -31,7 +32,15 @@ import nacl.utils
 import zenoh
 
 from common import acl, keys
-from common.auth import AuthError, Session, SessionKeys, Verifier, key_fingerprint
+from common.auth import (
+    AuthError,
+    Session,
+    SessionKeys,
+    Verifier,
+    key_fingerprint,
+    load_identity_key,
+    parse_public_key,
+)
 from common.keys import AliveKind
 from common.messages import (
     AddUser,
@@ -722,3 +731,39 @@ def connect(options: Any, *, wait: float = 10.0) -> zenoh.Session:
         return open_session(options, wait=wait)
     except ConnectionError as exc:
         raise RegistryUnreachable(str(exc)) from None
+
+
+@dataclass(frozen=True)
+class ServiceCredentials:
+    """What a service needs to log in: the pinned registry key, its account, its key.
+
+    Every service process (rooms, agent contexts, runners) builds one from its
+    command line and logs in through it, so the checks and the error words are
+    the same everywhere.
+    """
+
+    registry_key: bytes
+    user: str
+    identity: nacl.signing.SigningKey
+
+    @classmethod
+    def from_options(
+        cls, registry_key_hex: str | None, user: str, identity_file: Path, what: str
+    ) -> ServiceCredentials:
+        """Check the flags; ValueError with a message naming the flag that is wrong."""
+        keys.check_ident("user", user)
+        if not registry_key_hex:
+            raise ValueError(f"--registry-key is required: the {what} must know whom to trust")
+        return cls(parse_public_key(registry_key_hex), user, load_identity_key(identity_file))
+
+    def login(
+        self, session: zenoh.Session, realm: str, what: str, wait: float = 120.0
+    ) -> ServiceLogin:
+        """Log in as the service account (waiting for the registry), renewed until stopped."""
+        client = LabClient(session, realm, self.registry_key, presence=False)
+        login = ServiceLogin(client, self.user, self.identity)
+        try:
+            login.login(wait=wait)
+        except LabError as exc:
+            raise RuntimeError(f"{what} could not log in as {self.user}: {exc}") from None
+        return login

@@ -30,8 +30,8 @@ from typing import Any
 import zenoh
 
 from common import acl, cli, keys
-from common.auth import AuthError, Principal, load_identity_key, parse_public_key
-from common.client import LabClient, LabError, ServiceLogin
+from common.auth import AuthError, Principal
+from common.client import ServiceCredentials
 from common.messages import (
     AgentContextState,
     AgentEvent,
@@ -697,13 +697,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context agent") ->
         keys.check_ident("context", args.name)
         keys.check_ident("world", args.world)
         keys.check_ident("runner", args.runner)
-        keys.check_ident("user", args.user)
         if args.owner:
             keys.check_ident("owner", args.owner)
-        if not options.registry_key:
-            raise ValueError("--registry-key is required: the context must know whom to trust")
-        registry_key = parse_public_key(options.registry_key)
-        identity = load_identity_key(args.identity)
+        credentials = ServiceCredentials.from_options(
+            options.registry_key, args.user, args.identity, "context"
+        )
     except ValueError as exc:
         return cli.fail(str(exc))
     if not 1.0 <= args.slot_seconds <= 3600.0:
@@ -712,14 +710,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context agent") ->
         return cli.fail("--history must be 1..100000")
 
     def build(session: zenoh.Session) -> AgentContext:
-        client = LabClient(session, options.realm, registry_key, presence=False)
-        login = ServiceLogin(client, args.user, identity)
-        try:
-            login.login(wait=120.0)
-        except LabError as exc:
-            raise RuntimeError(
-                f"context {args.name} could not log in as {args.user}: {exc}"
-            ) from None
+        login = credentials.login(session, options.realm, f"context {args.name}")
         return AgentContext(
             session,
             options.realm,
@@ -727,7 +718,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context agent") ->
             world=args.world,
             runner=args.runner,
             slot_seconds=args.slot_seconds,
-            registry_key=registry_key,
+            registry_key=credentials.registry_key,
             login=login,
             owner=args.owner or args.user,
             title=args.title,

@@ -28,8 +28,8 @@ import msgspec
 import zenoh
 
 from common import acl, cli, keys
-from common.auth import AuthError, Principal, Verifier, load_identity_key, parse_public_key
-from common.client import LabClient, LabError, ServiceLogin
+from common.auth import AuthError, Principal, Verifier
+from common.client import ServiceCredentials, ServiceLogin
 from common.keys import AliveKind
 from common.messages import (
     MAX_LINE_CHARS,
@@ -377,13 +377,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> 
     assert options is not None
     try:
         keys.check_ident("room", args.name)
-        keys.check_ident("user", args.user)
         if args.owner:
             keys.check_ident("owner", args.owner)
-        if not options.registry_key:
-            raise ValueError("--registry-key is required: the room must know whom to trust")
-        registry_key = parse_public_key(options.registry_key)
-        identity = load_identity_key(args.identity)
+        credentials = ServiceCredentials.from_options(
+            options.registry_key, args.user, args.identity, "room"
+        )
     except ValueError as exc:
         return cli.fail(str(exc))
     if not (1 <= args.history <= 100_000 and 1 <= args.max_line <= 16_000):
@@ -392,18 +390,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> 
         return cli.fail("--rate must be > 0 and --burst >= 1")
 
     def build(session: zenoh.Session) -> ChatRoom:
-        client = LabClient(session, options.realm, registry_key, presence=False)
-        login = ServiceLogin(client, args.user, identity)
-        try:
-            login.login(wait=120.0)
-        except LabError as exc:
-            raise RuntimeError(f"room {args.name} could not log in as {args.user}: {exc}") from None
+        login = credentials.login(session, options.realm, f"room {args.name}")
         log.info("room %s logged in as %s", args.name, args.user)
         return ChatRoom(
             session,
             options.realm,
             args.name,
-            registry_key=registry_key,
+            registry_key=credentials.registry_key,
             login=login,
             owner=args.owner or args.user,
             title=args.title,

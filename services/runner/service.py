@@ -33,8 +33,8 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
-from common.auth import Verifier, load_identity_key, parse_public_key
-from common.client import LabClient, LabError, ServiceLogin
+from common.auth import Verifier
+from common.client import ServiceCredentials, ServiceLogin
 from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
@@ -257,11 +257,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
     assert options is not None
     try:
         keys.check_ident("runner", args.name)
-        keys.check_ident("user", args.user)
-        if not options.registry_key:
-            raise ValueError("--registry-key is required: the runner must know whom to trust")
-        registry_key = parse_public_key(options.registry_key)
-        identity = load_identity_key(args.identity)
+        credentials = ServiceCredentials.from_options(
+            options.registry_key, args.user, args.identity, "runner"
+        )
     except ValueError as exc:
         return cli.fail(str(exc))
     if not (1 <= args.cpu_seconds <= 3600 and 32 <= args.memory_mb <= 8192):
@@ -274,16 +272,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
     limits = SandboxLimits(cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20)
 
     def build(session: zenoh.Session) -> RunnerService:
-        client = LabClient(session, options.realm, registry_key, presence=False)
-        login = ServiceLogin(client, args.user, identity)
-        try:
-            login.login(wait=120.0)
-        except LabError as exc:
-            raise RuntimeError(
-                f"runner {args.name} could not log in as {args.user}: {exc}"
-            ) from None
+        login = credentials.login(session, options.realm, f"runner {args.name}")
         return RunnerService(
-            session, options.realm, args.name, registry_key=registry_key, login=login, limits=limits
+            session,
+            options.realm,
+            args.name,
+            registry_key=credentials.registry_key,
+            login=login,
+            limits=limits,
         )
 
     return run_service(f"runner {args.name}", options, build)
