@@ -12,7 +12,6 @@ controller's output.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import sys
@@ -25,7 +24,7 @@ def main() -> int:
     cmd_fd = int(sys.argv[1])
     path = sys.argv[2]
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib"))
-    from common.controller import Controller, ControllerLoop, Khepera, KheperaState
+    from common.controller import ControllerLoop, Khepera, KheperaState, load_controller
 
     out = os.fdopen(cmd_fd, "w", buffering=1)
     out_lock = threading.Lock()
@@ -68,26 +67,7 @@ def main() -> int:
     threading.Thread(target=read_parent, daemon=True).start()
 
     try:
-        spec = importlib.util.spec_from_file_location("student_controller", path)
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        classes = [
-            value
-            for value in vars(module).values()
-            if isinstance(value, type)
-            and issubclass(value, Controller)
-            and value is not Controller
-            and value.__module__ == module.__name__
-        ]
-        chosen = getattr(module, "CONTROLLER", None) or (classes[0] if len(classes) == 1 else None)
-        if chosen is None:
-            names = ", ".join(c.__name__ for c in classes) or "none"
-            raise TypeError(
-                f"the file must define exactly one Controller subclass (found: {names}); "
-                "or name one with CONTROLLER = MyController"
-            )
-        controller = chosen()
+        controller = load_controller(path)
     except BaseException:
         tell({"t": "error", "message": traceback.format_exc(limit=5)})
         return 3
