@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TypeVar
 
 import nacl.exceptions
@@ -31,7 +32,14 @@ import nacl.utils
 import zenoh
 
 from common import acl, keys
-from common.auth import AuthError, Session, SessionKeys, Verifier, key_fingerprint
+from common.auth import (
+    AuthError,
+    Session,
+    SessionKeys,
+    Verifier,
+    key_fingerprint,
+    load_identity_key,
+)
 from common.keys import AliveKind
 from common.messages import (
     AddUser,
@@ -714,6 +722,37 @@ class ServiceLogin:
     def close(self) -> None:
         self._stop.set()
         self.client.close()
+
+
+def add_world_identity_args(p: Any) -> None:
+    """``--user/--identity`` of a world (engine, bridge): optional, unlike other services'.
+
+    With them the world logs in as a service account with the ``world``
+    permission and advertises its token, so contexts can grant MAC leases;
+    without them it keeps working, every command an Ed25519 envelope.
+    """
+    p.add_argument("--user", help="the world's service account (optional; enables MAC leases)")
+    p.add_argument("--identity", type=Path, help="the service account's Ed25519 key file")
+
+
+def world_login(
+    session: zenoh.Session, realm: str, registry_key: bytes | None, user: str | None, key: Any
+) -> ServiceLogin | None:
+    """The world's logged-in ServiceLogin, or None without ``--user``; RuntimeError if it fails."""
+    if not user:
+        return None
+    if key is None or registry_key is None:
+        raise RuntimeError("--user needs --identity and --registry-key")
+    client = LabClient(session, realm, registry_key, presence=False)
+    login = ServiceLogin(client, user, load_identity_key(Path(key)))
+    try:
+        login.login(wait=120.0)
+    except LabError as exc:
+        raise RuntimeError(f"world could not log in as {user}: {exc}") from None
+    if not login.session.has("world"):
+        login.close()
+        raise RuntimeError(f"account {user} lacks the 'world' permission")
+    return login
 
 
 def connect(options: Any, *, wait: float = 10.0) -> zenoh.Session:
