@@ -48,6 +48,7 @@ class LeaseBook:
         self._lock = threading.Lock()
         self.commands_accepted = 0
         self.commands_refused = 0
+        self.mac_accepted = 0  # of commands_accepted, those MACed under a MAC lease
 
     def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]:
         if self.verifier is None:
@@ -136,6 +137,7 @@ class LeaseBook:
                 raise AuthError("unauthenticated", f"not an authenticated command: {exc}") from None
             if isinstance(envelope, MacCommand):
                 command = self._check_mac(key, agent, envelope)
+                self.mac_accepted += 1
             else:
                 assert isinstance(envelope, AuthEnvelope)  # the decoder allowed only these two
                 command = self._check_signed(key, agent, envelope)
