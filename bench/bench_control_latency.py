@@ -13,9 +13,15 @@ and records
   engine's next tick (adds up to one 20 ms tick by design).
 
 Beside it, in the same run and through the same router, the raw Zenoh round
-trip (put -> echo -> back, two client sessions) at the same rate. Run:
+trip (put -> echo -> back, two client sessions) at the same rate.
 
-    .venv/bin/python bench/bench_control_latency.py [--controllers 20] [--seconds 10]
+Two rounds on one engine that has an identity: *signed* (leases without
+keys: every command an Ed25519 AuthEnvelope) and *MAC* (leases carrying the
+lease key sealed to each controller and to the engine: MacCommands). Then
+the per-command cost of the world's check (LeaseBook.check_command) and of
+the sender's sealing, both paths, in this process. Run:
+
+    .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10]
 """
 
 from __future__ import annotations
@@ -30,13 +36,16 @@ import time
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from bench.labproc import REPO, BenchLab
 from common import keys
-from common.auth import RegistryIdentity, issue_session
+from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.keys import AliveKind
-from common.messages import Lease
+from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
+from common.leases import LeaseBook
+from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.engine.agents import agent_type
@@ -131,10 +140,14 @@ def child(args: argparse.Namespace) -> int:
     sessions = [
         issue_session(identity, args.realm, f"c{i}", ["control"]) for i in range(args.controllers)
     ]
-    print(json.dumps([s.session_id.hex() for s in sessions]), flush=True)
+    holders = [[s.session_id.hex(), s.keys.box_public_key.hex()] for s in sessions]
+    print(json.dumps(holders), flush=True)
     stop = threading.Event()
+    verifier = Verifier(identity.verify_key, args.realm)  # to accept MAC leases
     links = [
-        ZenohRobotLink(z, args.realm, WORLD, f"k{i}", lambda s=s: s, keepalive=1.0)
+        ZenohRobotLink(
+            z, args.realm, WORLD, f"k{i}", lambda s=s: s, keepalive=1.0, verifier=verifier
+        )
         for i, s in enumerate(sessions)
     ]
 
@@ -156,6 +169,111 @@ def child(args: argparse.Namespace) -> int:
         link.close(stop=False)
     close_session(z)
     return 0
+
+
+def grant(
+    z: Any,
+    context: Session,
+    realm: str,
+    holders: list[tuple[bytes, bytes]],
+    seconds: float,
+    world: Session,
+    *,
+    mac: bool,
+) -> None:
+    """A lease per agent, as the agent context grants them: with MAC keys or without."""
+    now = time.time()
+    for i, (holder, box) in enumerate(holders):
+        key = keys.agent_lease(realm, WORLD, f"k{i}")
+        lease = Lease(
+            lease_id=f"L{i}{'m' if mac else 's'}",
+            world=WORLD,
+            agent=f"k{i}",
+            holder_user=f"c{i}",
+            holder_session=holder,
+            start=now,
+            end=now + seconds + 60,
+        )
+        if mac:
+            k = new_lease_key()
+            lease = msgspec.structs.replace(
+                lease,
+                holder_key=seal_key(k, box),
+                world_key=seal_key(k, world.keys.box_public_key),
+                world_box=world.keys.box_public_key,
+            )
+        z.put(key, context.seal(key, lease))
+
+
+def measure(
+    engine: TimedEngine, options: NetworkOptions, seconds: float
+) -> tuple[list[float], list[float], list[float]]:
+    """One round: RTT probe beside the engine's accepted/applied latencies."""
+    rtts: list[float] = []
+    stop = threading.Event()
+    engine.accepted, engine.applied = [], []
+    probe = threading.Thread(target=rtt_probe, args=(options, stop, rtts))
+    probe.start()
+    engine.recording = True
+    try:
+        time.sleep(seconds)
+    finally:
+        engine.recording = False
+        stop.set()
+        probe.join(10)
+    return rtts, list(engine.accepted), list(engine.applied)
+
+
+def command_costs(n: int = 5000) -> None:
+    """Per-command cost of the world's check and the sender's sealing, both paths."""
+    identity = RegistryIdentity.generate()
+    realm = "bench"
+    holder = issue_session(identity, realm, "c0", ["control"])
+    world = issue_session(identity, realm, "engine-bench", ["world"])
+    context = issue_session(identity, realm, "ctx", ["lease"])
+
+    book = LeaseBook(
+        realm, WORLD, Verifier(identity.verify_key, realm), WorldBoxKeys(lambda: world)
+    )
+    k = new_lease_key()
+    now = time.time()
+    lease = Lease(
+        lease_id="L0",
+        world=WORLD,
+        agent="k0",
+        holder_user="c0",
+        holder_session=holder.session_id,
+        start=now,
+        end=now + 600,
+        holder_key=seal_key(k, holder.keys.box_public_key),
+        world_key=seal_key(k, world.keys.box_public_key),
+        world_box=world.keys.box_public_key,
+    )
+    lkey = keys.agent_lease(realm, WORLD, "k0")
+    book.accept_lease(lkey, context.seal(lkey, lease))
+    ckey = keys.agent_cmd(realm, WORLD, "k0")
+    command = AgentCommand(agent="k0", speeds=(10, 10))
+    t0 = time.perf_counter()
+    signed = [holder.seal(ckey, command) for _ in range(n)]
+    t1 = time.perf_counter()
+    maced = [mac_command(k, ckey, "L0", i + 1, command, time.time()) for i in range(n)]
+    t2 = time.perf_counter()
+    for payload in signed:
+        book.check_command(ckey, payload)
+    t3 = time.perf_counter()
+    for payload in maced:
+        book.check_command(ckey, payload)
+    t4 = time.perf_counter()
+    us = 1e6 / n
+    print(f"per command, one core, {n} each (LeaseBook.check_command: decode, auth, lease):")
+    print(
+        f"  signed (Ed25519 AuthEnvelope): world {(t3 - t2) * us:6.1f} µs, "
+        f"sender {(t1 - t0) * us:6.1f} µs, {len(signed[0])} bytes"
+    )
+    print(
+        f"  MAC (keyed BLAKE2b MacCommand): world {(t4 - t3) * us:6.1f} µs, "
+        f"sender {(t2 - t1) * us:6.1f} µs, {len(maced[0])} bytes"
+    )
 
 
 def pct(values: list[float], q: float) -> float:
@@ -181,12 +299,14 @@ def main() -> int:
     )
     ident_path = Path(tempfile.mkdtemp(prefix="wart-bench-")) / "registry.key"
     identity, _ = RegistryIdentity.load_or_create(ident_path)
+    world_session = issue_session(identity, lab.realm, "engine-bench", ["world"])
     z = open_session(lab.options, wait=10)
     engine = TimedEngine(
         z,
         lab.realm,
         build_world(args.controllers),
         EngineSettings(tick_s=0.02, registry_key=identity.verify_key),
+        identity=lambda: world_session,
     )
     engine.start()
     proc = subprocess.Popen(
@@ -209,57 +329,46 @@ def main() -> int:
         stdout=subprocess.PIPE,
         text=True,
     )
-    rtts: list[float] = []
-    stop = threading.Event()
+    results: dict[str, tuple[list[float], list[float], list[float]]] = {}
+    context = issue_session(identity, lab.realm, "ctx", ["lease"])
     try:
         assert proc.stdout is not None and proc.stdin is not None
-        holders = [bytes.fromhex(h) for h in json.loads(proc.stdout.readline())]
-        context = issue_session(identity, lab.realm, "ctx", ["lease"])
-        now = time.time()
-        for i, holder in enumerate(holders):
-            key = keys.agent_lease(lab.realm, WORLD, f"k{i}")
-            lease = Lease(
-                lease_id=f"L{i}",
-                world=WORLD,
-                agent=f"k{i}",
-                holder_user=f"c{i}",
-                holder_session=holder,
-                start=now,
-                end=now + args.seconds + 60,
-            )
-            z.put(key, context.seal(key, lease))
-        time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
-        probe = threading.Thread(target=rtt_probe, args=(lab.options, stop, rtts))
-        probe.start()
-        engine.recording = True
-        time.sleep(args.seconds)
-        engine.recording = False
-        stop.set()
-        probe.join(10)
+        holders = [
+            (bytes.fromhex(h), bytes.fromhex(b)) for h, b in json.loads(proc.stdout.readline())
+        ]
+        for path in ("signed", "mac"):
+            grant(z, context, lab.realm, holders, args.seconds, world_session, mac=path == "mac")
+            time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
+            results[path] = measure(engine, lab.options, args.seconds)
         proc.stdin.write("stop\n")
         proc.stdin.flush()
         proc.wait(20)
     finally:
-        stop.set()
         if proc.poll() is None:
             proc.kill()
         engine.stop()
         close_session(z)
         lab.stop()
-    n = len(engine.accepted)
-    print(f"engine: {engine.commands_accepted} accepted, {engine.commands_refused} refused")
-    rate = n / args.seconds / max(1, args.controllers)
-    print(f"{args.controllers} remote controllers, {n} commands ({rate:.1f} Hz each)")
-    print(f"{'path':<40} {'p50 ms':>8} {'p99 ms':>8}")
-    print(f"{'raw Zenoh round trip (2 clients)':<40} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
+    n = sum(len(r[1]) for r in results.values())
     print(
-        f"{'sample -> command accepted by engine':<40} "
-        f"{pct(engine.accepted, 50):8.2f} {pct(engine.accepted, 99):8.2f}"
+        f"engine: {engine.commands_accepted} accepted ({engine.leases.mac_accepted} MACed), "
+        f"{engine.commands_refused} refused; {n} commands timed"
     )
-    print(
-        f"{'sample -> command applied (next tick)':<40} "
-        f"{pct(engine.applied, 50):8.2f} {pct(engine.applied, 99):8.2f}"
-    )
+    print(f"{args.controllers} remote controllers at 50 Hz, {args.seconds:g} s per path")
+    print(f"{'path':<44} {'p50 ms':>8} {'p99 ms':>8}")
+    for path, (rtts, accepted, applied) in results.items():
+        rate = len(accepted) / args.seconds / max(1, args.controllers)
+        print(f"-- {path} commands ({len(accepted)}, {rate:.1f} Hz each)")
+        print(f"{'raw Zenoh round trip (2 clients)':<44} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
+        print(
+            f"{'sample -> command accepted by engine':<44} "
+            f"{pct(accepted, 50):8.2f} {pct(accepted, 99):8.2f}"
+        )
+        print(
+            f"{'sample -> command applied (next tick)':<44} "
+            f"{pct(applied, 50):8.2f} {pct(applied, 99):8.2f}"
+        )
+    command_costs()
     return 0
 
 

@@ -256,6 +256,7 @@ class AgentClient:
             state.world,
             agent,
             lambda: self.client.session,  # type: ignore[arg-type,return-value]
+            verifier=self.client.verifier,  # accepts a MAC lease: commands cost µs to check
         )
         loop = ControllerLoop(controller, Khepera(link))
         ended = threading.Event()

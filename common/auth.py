@@ -195,12 +195,16 @@ class Session:
     def has(self, permission: str) -> bool:
         return permission in self.token.permissions
 
+    def next_seq(self) -> int:
+        """The session's next sequence number (envelopes and MAC commands share the counter)."""
+        with self._lock:
+            self._seq += 1
+            return self._seq
+
     def seal(self, key_expr: str, message: Message, *, now: float | None = None) -> bytes:
         """The encoded AuthEnvelope carrying ``message`` to ``key_expr``."""
         body = encode(message)
-        with self._lock:
-            self._seq += 1
-            seq = self._seq
+        seq = self.next_seq()
         sent_at = time.time() if now is None else now
         signature = self.keys.signing_key.sign(
             _signed_bytes(key_expr, seq, sent_at, body)
@@ -253,7 +257,7 @@ class Principal:
             )
 
 
-class _ReplayWindow:
+class ReplayWindow:
     """Accepts each sequence number once, within REPLAY_WINDOW of the newest seen."""
 
     __slots__ = ("expires_at", "highest", "seen")
@@ -266,7 +270,11 @@ class _ReplayWindow:
     def accept(self, seq: int) -> bool:
         if seq > self.highest:
             shift = seq - self.highest
-            self.seen = ((self.seen << shift) | 1) & ((1 << REPLAY_WINDOW) - 1)
+            # A jump past the window forgets everything; shifting by it would build a huge int.
+            if shift >= REPLAY_WINDOW:
+                self.seen = 1
+            else:
+                self.seen = ((self.seen << shift) | 1) & ((1 << REPLAY_WINDOW) - 1)
             self.highest = seq
             return True
         offset = self.highest - seq
@@ -297,7 +305,7 @@ class Verifier:
         self.clock = clock
         self._lock = threading.Lock()
         self._tokens: dict[bytes, SessionToken] = {}  # by token signature
-        self._replay: dict[bytes, _ReplayWindow] = {}  # by session id
+        self._replay: dict[bytes, ReplayWindow] = {}  # by session id
         self._revoked: dict[bytes, float] = {}  # session id -> token expiry
         self.rejected = 0
 
@@ -372,6 +380,12 @@ class Verifier:
         except MessageError as exc:
             self.rejected += 1
             raise AuthError("unauthenticated", f"not an authenticated message ({exc})") from None
+        return self.open_envelope(key_expr, envelope, expected)
+
+    def open_envelope(
+        self, key_expr: str, envelope: AuthEnvelope, expected: type[M] | tuple[type[M], ...]
+    ) -> tuple[Principal, M]:
+        """:meth:`open` for an envelope already decoded (a caller that accepts several kinds)."""
         try:
             token = self.verify_token(envelope.token)
             now = self.clock()
@@ -394,7 +408,7 @@ class Verifier:
             with self._lock:
                 window = self._replay.get(token.session_id)
                 if window is None:
-                    window = self._replay[token.session_id] = _ReplayWindow(token.expires_at)
+                    window = self._replay[token.session_id] = ReplayWindow(token.expires_at)
                 fresh = window.accept(envelope.seq)
             if not fresh:
                 raise AuthError("unauthenticated", f"replayed message from {token.user} refused")
@@ -402,6 +416,17 @@ class Verifier:
             self.rejected += 1
             raise
         return self.principal(token), decode(envelope.body, expected)
+
+    def check_fresh(self, sent_at: float, who: str) -> None:
+        """AuthError unless ``sent_at`` is within the freshness window of this service's clock."""
+        now = self.clock()
+        if abs(now - sent_at) > self.window:
+            self.rejected += 1
+            raise AuthError(
+                "unauthenticated",
+                f"message from {who} is {now - sent_at:+.1f} s off this service's clock "
+                f"(allowed ±{self.window:.0f} s): check the clocks, or it is a replay",
+            )
 
     def _prune_locked(self) -> None:
         now = self.clock()

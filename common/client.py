@@ -725,6 +725,33 @@ class ServiceLogin:
         self.client.close()
 
 
+def add_world_identity_args(p: Any) -> None:
+    """``--user/--identity`` of a world (engine, bridge): optional, unlike other services'.
+
+    With them the world logs in as a service account with the ``world``
+    permission and advertises its token, so contexts can grant MAC leases;
+    without them it keeps working, every command an Ed25519 envelope.
+    """
+    p.add_argument("--user", help="the world's service account (optional; enables MAC leases)")
+    p.add_argument("--identity", type=Path, help="the service account's Ed25519 key file")
+
+
+def world_login(
+    session: zenoh.Session, realm: str, registry_key: bytes | None, user: str | None, key: Any
+) -> ServiceLogin | None:
+    """The world's logged-in ServiceLogin, or None without ``--user``; RuntimeError if it fails."""
+    if not user:
+        return None
+    if key is None or registry_key is None:
+        raise RuntimeError("--user needs --identity and --registry-key")
+    credentials = ServiceCredentials(registry_key, user, load_identity_key(Path(key)))
+    login = credentials.login(session, realm, "world")
+    if not login.session.has("world"):
+        login.close()
+        raise RuntimeError(f"account {user} lacks the 'world' permission")
+    return login
+
+
 def connect(options: Any, *, wait: float = 10.0) -> zenoh.Session:
     """A Zenoh session for a client, with a clear error when no router answers."""
     try:

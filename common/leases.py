@@ -7,6 +7,10 @@ within its start..end (the world's wall clock). Both worlds use this one
 class, so a controller cannot tell a simulated robot from a real one by what
 it is allowed to do.
 
+A command is either an Ed25519 ``AuthEnvelope`` (any world) or, under a MAC
+lease, a ``MacCommand`` keyed with the lease key the context sealed to this
+world (common/leasemac.py): only for worlds with an identity (``box_keys``).
+
 Thread safety: the lease table has its own lock; Zenoh callback threads call
 :meth:`LeaseBook.accept_lease` and :meth:`LeaseBook.check_command` while the
 world's own thread reads :meth:`LeaseBook.in_force`.
@@ -14,24 +18,37 @@ world's own thread reads :meth:`LeaseBook.in_force`.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from typing import Any
 
 from common import keys
-from common.auth import AuthError, Principal, Verifier
-from common.messages import AgentCommand, Lease
+from common.auth import AuthError, Principal, ReplayWindow, Verifier
+from common.leasemac import WorldBoxKeys, command_mac, mac_matches, open_key
+from common.messages import AgentCommand, AuthEnvelope, Lease, MacCommand, MessageError, decode
+
+log = logging.getLogger("wart.leases")
 
 
 class LeaseBook:
     """The current lease of each agent of one world, and the checks that use it."""
 
-    def __init__(self, realm: str, world: str, verifier: Verifier | None) -> None:
+    def __init__(
+        self,
+        realm: str,
+        world: str,
+        verifier: Verifier | None,
+        box_keys: WorldBoxKeys | None = None,
+    ) -> None:
         self.realm, self.world, self.verifier = realm, world, verifier
+        self.box_keys = box_keys  # this world's identity: opens lease keys sealed to it
         self._leases: dict[str, Lease] = {}
+        self._mac: dict[str, tuple[str, bytes, ReplayWindow]] = {}  # agent -> lease id, K, seqs
         self._lock = threading.Lock()
         self.commands_accepted = 0
         self.commands_refused = 0
+        self.mac_accepted = 0  # of commands_accepted, those MACed under a MAC lease
 
     def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]:
         if self.verifier is None:
@@ -50,6 +67,7 @@ class LeaseBook:
         agent = keys.parse_agent_key(self.realm, self.world, key)
         if lease.world != self.world or lease.agent != agent:
             raise AuthError("forbidden", f"lease for {lease.world}/{lease.agent} sent on {key}")
+        lease_key = self._lease_key(lease)
         with self._lock:
             current = self._leases.get(lease.agent)
             if (
@@ -58,7 +76,34 @@ class LeaseBook:
                 or lease.start >= current.start
             ):
                 self._leases[lease.agent] = lease
+                mac = self._mac.get(lease.agent)
+                if lease_key is None:
+                    self._mac.pop(lease.agent, None)
+                elif mac is None or mac[0] != lease.lease_id or mac[1] != lease_key:
+                    # A new lease (or a new key) starts a new replay window; a
+                    # republication of the same one keeps the window it has.
+                    self._mac[lease.agent] = (lease.lease_id, lease_key, ReplayWindow(lease.end))
         return lease
+
+    def _lease_key(self, lease: Lease) -> bytes | None:
+        """This world's copy of the lease key, if the lease carries one it can open."""
+        if lease.world_key is None or lease.world_box is None or self.box_keys is None:
+            return None
+        private = self.box_keys.private_for(lease.world_box)
+        if private is None:
+            # Sealed to a box key this world never had (it restarted, with a new
+            # session): Ed25519 commands only, until the context reseals.
+            log.info("lease %s: key sealed to another identity of %s", lease.lease_id, self.world)
+            return None
+        try:
+            return open_key(lease.world_key, private)
+        except AuthError as exc:
+            log.warning("lease %s: %s", lease.lease_id, exc.message)
+            return None
+
+    def has_mac_key(self, agent: str) -> bool:
+        with self._lock:
+            return agent in self._mac
 
     def lease_of(self, agent: str) -> Lease | None:
         with self._lock:
@@ -81,19 +126,78 @@ class LeaseBook:
         """
         agent = keys.parse_agent_key(self.realm, self.world, key)
         try:
-            principal, command = self._open(key, payload, AgentCommand)
-            if agent is None or command.agent != agent:
-                raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
-            lease = self.lease_of(agent)
-            now = time.time()
-            if lease is None:
-                raise AuthError("forbidden", f"{agent} has no lease: command dropped")
-            if principal.session_id != lease.holder_session:
-                raise AuthError("forbidden", f"{principal.user} does not hold {agent}'s lease")
-            if not lease.start <= now <= lease.end:
-                raise AuthError("forbidden", f"{principal.user}'s lease on {agent} is not in force")
+            if self.verifier is None:
+                raise AuthError("unauthenticated", "this world was started without --registry-key")
+            if agent is None:
+                raise AuthError("forbidden", f"{key} is not an agent's command key")
+            try:
+                envelope = decode(payload, (AuthEnvelope, MacCommand))
+            except MessageError as exc:
+                self.verifier.rejected += 1
+                raise AuthError("unauthenticated", f"not an authenticated command: {exc}") from None
+            if isinstance(envelope, MacCommand):
+                command = self._check_mac(key, agent, envelope)
+                self.mac_accepted += 1
+            else:
+                assert isinstance(envelope, AuthEnvelope)  # the decoder allowed only these two
+                command = self._check_signed(key, agent, envelope)
         except Exception:
             self.commands_refused += 1
             raise
         self.commands_accepted += 1
         return agent, command
+
+    def _check_signed(self, key: str, agent: str, envelope: AuthEnvelope) -> AgentCommand:
+        """The command of an Ed25519 AuthEnvelope from the current lease holder; else AuthError."""
+        assert self.verifier is not None
+        principal, command = self.verifier.open_envelope(key, envelope, AgentCommand)
+        if command.agent != agent:
+            raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
+        lease = self.lease_of(agent)
+        now = time.time()
+        if lease is None:
+            raise AuthError("forbidden", f"{agent} has no lease: command dropped")
+        if principal.session_id != lease.holder_session:
+            raise AuthError("forbidden", f"{principal.user} does not hold {agent}'s lease")
+        if not lease.start <= now <= lease.end:
+            raise AuthError("forbidden", f"{principal.user}'s lease on {agent} is not in force")
+        return command
+
+    def _check_mac(self, key: str, agent: str, message: MacCommand) -> AgentCommand:
+        """The command of a MacCommand, if it is the current MAC lease holder's; else AuthError.
+
+        Order: the cheap refusals first, then the MAC (before decoding the body
+        or touching the replay window, so nobody without K can move either).
+        """
+        assert self.verifier is not None
+        lease = self.lease_of(agent)
+        with self._lock:
+            mac = self._mac.get(agent)
+        if lease is None:
+            raise AuthError("forbidden", f"{agent} has no lease: command dropped")
+        if lease.lease_id != message.lease_id:
+            raise AuthError("forbidden", f"lease {message.lease_id} is not {agent}'s current lease")
+        if mac is None or mac[0] != lease.lease_id:
+            raise AuthError(
+                "forbidden", f"lease {lease.lease_id} carries no key for this world: sign commands"
+            )
+        _, lease_key, window = mac
+        expected = command_mac(
+            lease_key, key, message.lease_id, message.seq, message.sent_at, message.body
+        )
+        if not mac_matches(expected, message.mac):
+            self.verifier.rejected += 1
+            raise AuthError("unauthenticated", f"command MAC does not match lease {lease.lease_id}")
+        now = time.time()
+        if not lease.start <= now <= lease.end:
+            raise AuthError("forbidden", f"lease {lease.lease_id} on {agent} is not in force")
+        self.verifier.check_fresh(message.sent_at, lease.holder_user)
+        with self._lock:
+            fresh = window.accept(message.seq)
+        if not fresh:
+            self.verifier.rejected += 1
+            raise AuthError("unauthenticated", f"replayed command under lease {lease.lease_id}")
+        command = decode(message.body, AgentCommand)
+        if command.agent != agent:
+            raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
+        return command

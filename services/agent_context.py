@@ -13,6 +13,11 @@ its sandbox; the lease names the runner's session). Output of the running
 controller comes in on ``ctx/<ctx>/output`` from the lease holder and goes
 out to members as :class:`~common.messages.AgentEvent`.
 
+MAC leases (common/leasemac.py): when the world's snapshot carries an
+identity token the registry signed with the ``world`` permission, each lease
+also carries a fresh per-lease key sealed to the holder and to that world,
+so the holder's commands are MACed (µs to check) rather than signed.
+
 Rights (registry ACL, scopes ``ctx/<ctx>`` and ``agent/<ctx>/<agent>``):
 ``join``; ``control`` (remote) or ``deploy`` (upload) on the agent; the
 owner, or ``kick`` in the context, *manages*: slot length, stop, enable or
@@ -27,11 +32,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import zenoh
 
 from common import acl, cli, keys
 from common.auth import AuthError, Principal
 from common.client import ServiceCredentials
+from common.leasemac import check_world_token, new_lease_key, seal_key
 from common.messages import (
     AgentContextState,
     AgentEvent,
@@ -55,6 +62,7 @@ from common.messages import (
     RunClaim,
     RunRequest,
     RunStop,
+    SessionToken,
     StopControl,
     UserRemovalRequest,
     WorldFrame,
@@ -68,6 +76,7 @@ from services.chat_context import ChatRoom, log
 
 LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
+WORLD_IDENTITY_REFRESH_S = 5.0  # a restarted world has a new identity: reseal lease keys to it
 MAX_WAITING_PER_USER = 4
 
 
@@ -97,6 +106,7 @@ class AgentContext(ChatRoom):
         self._frames: Any = None
         self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
         self._runner_users: dict[str, str] = {}  # request id -> the runner account driving it
+        self._world_token: SessionToken | None = None  # verified; lease keys are sealed to it
 
     # -- lifecycle
 
@@ -209,6 +219,7 @@ class AgentContext(ChatRoom):
             agent=request.agent,
             user=principal.user,
             session_id=principal.session_id,
+            box_key=principal.token.box_key,
             mode=request.mode,
             source=request.source,
             filename=request.filename,
@@ -442,7 +453,9 @@ class AgentContext(ChatRoom):
         while not self._halt.is_set():
             try:
                 now = time.time()
-                if self._need_snapshot() and now - last_snapshot_try >= SNAPSHOT_RETRY_S:
+                if (
+                    self._need_snapshot() and now - last_snapshot_try >= SNAPSHOT_RETRY_S
+                ) or now - last_snapshot_try >= WORLD_IDENTITY_REFRESH_S:
                     last_snapshot_try = now
                     self._refresh_agents()
                 self._turn()
@@ -499,6 +512,7 @@ class AgentContext(ChatRoom):
                 continue
             if not isinstance(snap, WorldSnapshot):
                 continue
+            self._note_world_identity(snap)
             with self._wake:
                 first = self._layout is None
                 self._layout = snap.layout
@@ -520,6 +534,19 @@ class AgentContext(ChatRoom):
                     )
                 )
             return
+
+    def _note_world_identity(self, snap: WorldSnapshot) -> None:
+        """Keep the world's verified identity token, or none: lease keys are sealed only to it."""
+        token: SessionToken | None = None
+        if snap.identity is not None:
+            try:
+                token = check_world_token(self.verifier, snap.identity, self.world)
+            except AuthError as exc:
+                self.log.warning("world %s identity refused (no MAC leases): %s", self.world, exc)
+        previous = self._world_token
+        if token is not None and (previous is None or previous.box_key != token.box_key):
+            self.log.info("world %s runs as %s: leases carry MAC keys", self.world, token.user)
+        self._world_token = token
 
     def _turn(self) -> None:
         now = time.time()
@@ -560,10 +587,10 @@ class AgentContext(ChatRoom):
     def _start(self, job: ControlJob) -> None:
         start = time.time()
         end = start + self.book.slot_seconds
-        holder = job.session_id
+        holder, holder_box = job.session_id, job.box_key
         if job.mode == "deploy":
             try:
-                holder = self._start_on_runner(job, end)
+                holder, holder_box = self._start_on_runner(job, end)
             except RequestError as exc:
                 log.warning("%s refused: %s", job.request_id, exc.message)
                 self._publish_agent(
@@ -579,6 +606,8 @@ class AgentContext(ChatRoom):
             holder_session=holder,
             start=start,
             end=end,
+            holder_box=holder_box,
+            lease_key=new_lease_key(),
         )
         with self._lock:
             line = self.book.lines.get(job.agent)
@@ -607,10 +636,35 @@ class AgentContext(ChatRoom):
             start=run.start,
             end=end,
         )
+        sealed = self._lease_keys(run)
+        if sealed is not None:
+            lease = msgspec.structs.replace(
+                lease, holder_key=sealed[0], world_key=sealed[1], world_box=sealed[2]
+            )
         try:
             pub.put(self.login.session.seal(key, lease))
         except Exception as exc:
             self.log.warning("could not publish the lease of %s: %s", agent, exc)
+
+    def _lease_keys(self, run: RunningJob) -> tuple[bytes, bytes, bytes] | None:
+        """The MAC lease fields: K sealed to the holder and to the world's verified identity.
+
+        (holder's copy, world's copy, the world box key sealed to); None when
+        the world has no (valid, unexpired) identity: the holder then
+        signs its commands, as every world understands.
+        """
+        world = self._world_token
+        if world is None or world.expires_at <= time.time() or len(run.holder_box) != 32:
+            return None
+        cache = (run.holder_box, world.box_key)
+        sealed = run.sealed.get(cache)
+        if sealed is None:
+            sealed = (
+                seal_key(run.lease_key, run.holder_box),
+                seal_key(run.lease_key, world.box_key),
+            )
+            run.sealed[cache] = sealed
+        return sealed[0], sealed[1], world.box_key
 
     def runner_user(self, run: RunningJob) -> str:
         return self._runner_users.get(run.job.request_id, run.job.user)
@@ -637,7 +691,8 @@ class AgentContext(ChatRoom):
                 self.log.warning("unreadable runner reply: %s", exc)
         return None
 
-    def _start_on_runner(self, job: ControlJob, end: float) -> bytes:
+    def _start_on_runner(self, job: ControlJob, end: float) -> tuple[bytes, bytes]:
+        """The runner's session id and box key, once it accepted to run ``job``."""
         key = keys.runner_run(self.realm, self.runner)
         reply = self._ask_runner(
             RunRequest(
@@ -665,7 +720,7 @@ class AgentContext(ChatRoom):
         if not principal.has("run") or claim.request_id != job.request_id:
             raise RequestError("unavailable", f"{principal.user} may not run controllers")
         self._runner_users[job.request_id] = principal.user
-        return principal.session_id
+        return principal.session_id, principal.token.box_key
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart context agent") -> int:

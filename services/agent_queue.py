@@ -28,6 +28,7 @@ class ControlJob:
     mode: RunMode
     source: bytes = b""
     filename: str = "controller.py"
+    box_key: bytes = b""  # the requester's session box key (a MAC lease's key is sealed to it)
 
 
 @dataclass
@@ -37,6 +38,11 @@ class RunningJob:
     holder_session: bytes  # the requester's (remote) or the runner's (deploy) session
     start: float
     end: float
+    holder_box: bytes = b""  # the holder session's box key
+    lease_key: bytes = b""  # K of a MAC lease (common/leasemac.py); sealed per publication
+    # (holder box, world box) -> (K sealed to the holder, K sealed to the world): sealed
+    # once, so a republished lease is byte-identical and the holder skips unsealing it.
+    sealed: dict[tuple[bytes, bytes], tuple[bytes, bytes]] = field(default_factory=dict)
 
 
 @dataclass

@@ -60,11 +60,20 @@ ARENA = "arena"  # the agent context on the simulated world
 WORLD = "arena1"
 RUNNER = "runner"
 REAL_CONTEXT = "robots"  # the agent context on the real world
-SERVICE_ACCOUNTS = (f"chat-{LOBBY}", f"ctx-{ARENA}", f"ctx-{REAL_CONTEXT}", f"runner-{RUNNER}")
 # The real-robot path without hardware: an emulated Khepera (Sim2D-backed, on a
 # pty whose stable link is KHEPERA_LINK in the state dir) exposed by a bridge as
 # world REAL_WORLD, agent REAL_AGENT. The agent context for it uses these names.
 REAL_WORLD = "real1"
+# The worlds log in too (optional for them): with an identity, agent contexts
+# grant MAC leases and commands cost µs to check instead of an Ed25519 verify.
+SERVICE_ACCOUNTS = (
+    f"chat-{LOBBY}",
+    f"ctx-{ARENA}",
+    f"ctx-{REAL_CONTEXT}",
+    f"runner-{RUNNER}",
+    f"engine-{WORLD}",
+    f"bridge-{REAL_WORLD}",
+)
 REAL_AGENT = "k1"
 REAL_MAP = "empty.json"
 
@@ -75,6 +84,11 @@ def khepera_link(lab: LabSettings) -> Path:
 
 def service_identity(lab: LabSettings, account: str) -> Path:
     return lab.state_dir / "identities" / f"{account}.key"
+
+
+def service_login(lab: LabSettings, account: str) -> list[str]:
+    """The ``--user/--identity`` flags of a service account provisioned by ``provision``."""
+    return ["--user", account, "--identity", str(service_identity(lab, account))]
 
 
 SHIPPED_MAPS = Path(__file__).resolve().parent.parent / "maps"
@@ -248,6 +262,7 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
                 "1",
                 "--maps-dir",
                 str(lab.state_dir / "maps"),
+                *service_login(lab, f"engine-{WORLD}"),
                 *net,
             ],
             alive_key=keys.alive(realm, AliveKind.WORLD, WORLD),
@@ -299,6 +314,7 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
                 # The emulated robot stands at (500, 500) facing +x in its map: the
                 # bridge's odometry starts there too, so both views agree.
                 f"{link}={REAL_AGENT}@500,500,0",
+                *service_login(lab, f"bridge-{REAL_WORLD}"),
                 *net,
             ],
             alive_key=keys.alive(realm, AliveKind.WORLD, REAL_WORLD),

@@ -25,6 +25,7 @@ import zenoh
 
 from common import cli
 from common.auth import parse_public_key
+from common.client import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
 from services.bridge.link import BAUD_RATES
@@ -108,8 +109,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart bridge") -> int:
         default=300.0,
         help="stop a robot whose commands stop for this long (default 300)",
     )
+    add_world_identity_args(p)
     args, options = cli.parse(p, argv)
     assert options is not None
+    if args.user and (args.identity is None or not options.registry_key):
+        p.error("--user needs --identity and --registry-key")
     if not is_ident(args.world):
         p.error(f"--world {args.world!r} is not a valid name (letters, digits, _ - .)")
     if not args.port and not args.autodetect:
@@ -154,7 +158,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart bridge") -> int:
     )
 
     def build(session: zenoh.Session) -> BridgeService:
-        return BridgeService(session, options.realm, args.world, settings)
+        login = world_login(session, options.realm, registry_key, args.user, args.identity)
+        identity = (lambda: login.session) if login is not None else None
+        return BridgeService(session, options.realm, args.world, settings, identity=identity)
 
     return run_service(f"bridge {args.world}", options, build)
 

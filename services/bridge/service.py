@@ -26,7 +26,7 @@ import os
 import re
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -35,8 +35,9 @@ import numpy as np
 import zenoh
 
 from common import keys
-from common.auth import AuthError, Verifier
+from common.auth import AuthError, Session, Verifier
 from common.keys import AliveKind
+from common.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
@@ -130,14 +131,21 @@ class BridgeService(Service):
     kind = AliveKind.WORLD
 
     def __init__(
-        self, session: zenoh.Session, realm: str, world: str, settings: BridgeSettings
+        self,
+        session: zenoh.Session,
+        realm: str,
+        world: str,
+        settings: BridgeSettings,
+        identity: Callable[[], Session] | None = None,
     ) -> None:
+        """``identity`` returns the bridge's service session (None: no MAC leases)."""
         super().__init__(session, realm, world)
         self.settings = settings
         self.verifier = (
             Verifier(settings.registry_key, realm) if settings.registry_key is not None else None
         )
-        self.leases = LeaseBook(realm, world, self.verifier)
+        self.box_keys = WorldBoxKeys(identity) if identity is not None else None
+        self.leases = LeaseBook(realm, world, self.verifier, self.box_keys)
         self._agents: dict[str, _Agent] = {}  # insertion order = frame row order
         self._lock = threading.Lock()  # the agent table and layout
         self.layout = 0
@@ -499,7 +507,7 @@ class BridgeService(Service):
         )
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:
-        return self.snapshot()
+        return snapshot_with_identity(self.snapshot(), self.box_keys)
 
     def _on_edit(self, query: zenoh.Query) -> Message:
         raise RequestError(

@@ -19,6 +19,7 @@ import zenoh
 
 from common import cli
 from common.auth import parse_public_key
+from common.client import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
 from services.engine import kernels
@@ -46,8 +47,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         type=Path,
         help="where map save/load requests read and write (default: the map's directory)",
     )
+    add_world_identity_args(p)
     args, options = cli.parse(p, argv)
     assert options is not None
+    if args.user and (args.identity is None or not options.registry_key):
+        p.error("--user needs --identity and --registry-key")
     world_name = args.world or args.map.stem
     if not is_ident(world_name):
         p.error(f"--world {world_name!r} is not a valid name (letters, digits, _ - .)")
@@ -82,7 +86,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     )
 
     def build(session: zenoh.Session) -> EngineService:
-        return EngineService(session, options.realm, world, settings)
+        login = world_login(session, options.realm, registry_key, args.user, args.identity)
+        identity = (lambda: login.session) if login is not None else None
+        return EngineService(session, options.realm, world, settings, identity=identity)
 
     return run_service(f"engine {world_name}", options, build)
 

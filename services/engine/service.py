@@ -11,6 +11,10 @@ Publishes: ``world/<w>/frame`` (WorldFrame) each tick; ``agent/<a>/sensors``
 (AgentCommand, sealed, holder of the current lease only) and ``agent/*/lease``
 (Lease, sealed, ``lease`` permission). Serves: ``snapshot`` (anyone),
 ``edit`` and ``map`` (sealed, ``edit_map``). Token: ``alive/world/<w>``.
+
+With an identity (``--user/--identity``, a service account with ``world``)
+the snapshot carries its registry-signed token; contexts then seal each
+lease's MAC key to it and commands are MacCommands (common/leasemac.py).
 """
 
 from __future__ import annotations
@@ -28,8 +32,9 @@ from typing import Any
 import zenoh
 
 from common import keys
-from common.auth import AuthError, Principal, Verifier
+from common.auth import AuthError, Principal, Session, Verifier
 from common.keys import AliveKind
+from common.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.leases import LeaseBook
 from common.messages import (
     AddItem,
@@ -75,8 +80,14 @@ class EngineService(Service):
     kind = AliveKind.WORLD
 
     def __init__(
-        self, session: zenoh.Session, realm: str, world: World, settings: EngineSettings
+        self,
+        session: zenoh.Session,
+        realm: str,
+        world: World,
+        settings: EngineSettings,
+        identity: Callable[[], Session] | None = None,
     ) -> None:
+        """``identity`` returns the world's service session (None: no MAC leases)."""
         super().__init__(session, realm, world.name)
         self.world = world
         self.settings = settings
@@ -84,7 +95,8 @@ class EngineService(Service):
             Verifier(settings.registry_key, realm) if settings.registry_key is not None else None
         )
         self._work: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self.leases = LeaseBook(realm, world.name, self.verifier)
+        self.box_keys = WorldBoxKeys(identity) if identity is not None else None
+        self.leases = LeaseBook(realm, world.name, self.verifier, self.box_keys)
         self._last_cmd: dict[str, float] = {}
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
@@ -179,7 +191,8 @@ class EngineService(Service):
             raise RequestError("unavailable", "the simulation did not answer in time") from None
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:
-        return self._in_sim(wire.snapshot)
+        snap = self._in_sim(wire.snapshot)
+        return snapshot_with_identity(snap, self.box_keys)
 
     def _on_edit(self, query: zenoh.Query) -> Message:
         principal, edit = self._open(str(query.key_expr), query.payload, WorldEdit)

@@ -73,6 +73,7 @@ class Run:
             request.world,
             request.agent,
             lambda: runner.login.session,
+            verifier=runner.verifier,  # accepts a MAC lease: commands cost µs to check
         )
         self.sandbox = Sandbox(
             request.source,

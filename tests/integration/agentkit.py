@@ -36,7 +36,11 @@ def service_account(lab: Lab, account: str) -> Path:
     return key_file
 
 
-def start_engine(lab: Lab, map_name: str = "foraging") -> Proc:
+def start_engine(lab: Lab, map_name: str = "foraging", *, identity: bool = False) -> Proc:
+    """The engine of WORLD; with ``identity`` it logs in as a service account (MAC leases)."""
+    login: list[str] = []
+    if identity:
+        login = ["--user", "engine-w1", "--identity", str(service_account(lab, "engine-w1"))]
     maps_dir = lab.state / "maps"
     maps_dir.mkdir(exist_ok=True)
     shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
@@ -52,6 +56,7 @@ def start_engine(lab: Lab, map_name: str = "foraging") -> Proc:
             "3",
             "--maps-dir",
             str(maps_dir),
+            *login,
             *lab.net_args(),
         ],
     )

@@ -1,0 +1,157 @@
+"""Per-lease session keys: agent commands MACed instead of signed (docs/ARCHITECTURE.md §5).
+
+An Ed25519 verification costs the world 60-150 µs per command, serially in
+its subscriber thread; 20 controllers answering one tick then queue behind
+each other for milliseconds. Under a *MAC lease* the agent context picks a
+random 32-byte key K when it grants the lease and seals K (a) to the
+holder's session box key and (b) to the world's box key, named by the
+world's registry-signed token (service accounts with the ``world``
+permission). Both copies travel inside the lease, which stays an Ed25519
+envelope signed by the context. The holder then sends a
+:class:`~common.messages.MacCommand`: a keyed BLAKE2b over the key
+expression, lease id, sequence number, send time and command body. The
+world checks it in a few µs.
+
+Only the context, the holder and the world know K; a non-holder who knows
+the lease id cannot produce a valid MAC. The world still requires the lease
+to be in force, a fresh ``sent_at`` and an unseen ``seq`` (per lease).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import hmac
+import secrets
+import struct
+import threading
+from collections.abc import Callable
+
+import msgspec
+import nacl.exceptions
+import nacl.public
+
+from common.auth import AuthError, Session, Verifier
+from common.client import NotLoggedIn
+from common.messages import (
+    MacCommand,
+    Message,
+    SessionToken,
+    SignedToken,
+    WorldSnapshot,
+    encode,
+)
+
+LEASE_KEY_BYTES = 32
+MAC_BYTES = 32
+_PERSON = b"wart.cmd.v1"  # BLAKE2b personalisation: a command MAC is never valid as another MAC
+
+
+def new_lease_key() -> bytes:
+    return secrets.token_bytes(LEASE_KEY_BYTES)
+
+
+def seal_key(lease_key: bytes, box_public_key: bytes) -> bytes:
+    """K sealed (anonymous sender) to one X25519 public key."""
+    return nacl.public.SealedBox(nacl.public.PublicKey(box_public_key)).encrypt(lease_key)
+
+
+def open_key(sealed: bytes, box_private_key: nacl.public.PrivateKey) -> bytes:
+    """K from ``seal_key``'s output; AuthError if it was not sealed to this key."""
+    try:
+        key = nacl.public.SealedBox(box_private_key).decrypt(sealed)
+    except nacl.exceptions.CryptoError:
+        raise AuthError("unauthenticated", "lease key not sealed to this session") from None
+    if len(key) != LEASE_KEY_BYTES:
+        raise AuthError("unauthenticated", f"lease key has {len(key)} bytes, not 32")
+    return key
+
+
+def command_mac(
+    lease_key: bytes, key_expr: str, lease_id: str, seq: int, sent_at: float, body: bytes
+) -> bytes:
+    """The MAC of one command: bound to its key expression, lease, order and time."""
+    key = key_expr.encode()
+    lid = lease_id.encode()
+    h = hashlib.blake2b(key=lease_key, digest_size=MAC_BYTES, person=_PERSON)
+    # Length prefixes keep the fields apart: no two field splits hash alike.
+    h.update(struct.pack("<II", len(key), len(lid)))
+    h.update(key)
+    h.update(lid)
+    h.update(struct.pack("<Qd", seq, sent_at))
+    h.update(body)
+    return h.digest()
+
+
+def mac_command(
+    lease_key: bytes, key_expr: str, lease_id: str, seq: int, message: Message, now: float
+) -> bytes:
+    """The encoded MacCommand carrying ``message`` to ``key_expr`` under a MAC lease."""
+    body = encode(message)
+    tag = command_mac(lease_key, key_expr, lease_id, seq, now, body)
+    return encode(MacCommand(lease_id=lease_id, seq=seq, sent_at=now, body=body, mac=tag))
+
+
+def mac_matches(expected: bytes, received: bytes) -> bool:
+    """Constant-time comparison: timing must not reveal how many MAC bytes were right."""
+    return hmac.compare_digest(expected, received)
+
+
+def check_world_token(verifier: Verifier, signed: SignedToken, world: str) -> SessionToken:
+    """A world's identity token, if the registry signed it for this realm with ``world``.
+
+    The context seals K only to such a token's box key: a forged or expired
+    token, or an account without the ``world`` permission, gets AuthError.
+    ``world`` names the world for the error message only: any service account
+    with ``world`` may serve any world of the realm (as for leases).
+    """
+    token = verifier.verify_token(signed)
+    if "world" not in token.permissions:
+        raise AuthError(
+            "forbidden",
+            f"{token.user} advertises itself as world {world} without the 'world' permission",
+        )
+    return token
+
+
+class WorldBoxKeys:
+    """The box private keys a world's identity has used; finds the one a lease key is sealed to.
+
+    A service login renews its session (new keys) before expiry; leases
+    sealed to the previous box key must still open until the context reseals
+    them, so the last few are kept. Thread-safe.
+    """
+
+    KEEP = 4
+
+    def __init__(self, session: Callable[[], Session]) -> None:
+        self._session = session
+        self._keys: dict[bytes, nacl.public.PrivateKey] = {}
+        self._lock = threading.Lock()
+
+    def current(self) -> Session:
+        """The current session (remembering its box key)."""
+        session = self._session()
+        with self._lock:
+            if session.keys.box_public_key not in self._keys:
+                self._keys[session.keys.box_public_key] = session.keys.box_key
+                while len(self._keys) > self.KEEP:
+                    self._keys.pop(next(iter(self._keys)))
+        return session
+
+    def private_for(self, box_public_key: bytes) -> nacl.public.PrivateKey | None:
+        with contextlib.suppress(NotLoggedIn):  # not logged in (yet): remembered keys answer
+            self.current()
+        with self._lock:
+            return self._keys.get(box_public_key)
+
+
+def snapshot_with_identity(snap: Message, box_keys: WorldBoxKeys | None) -> Message:
+    """A world's snapshot with its identity token, when it has one (MAC leases)."""
+    if box_keys is None or not isinstance(snap, WorldSnapshot):
+        return snap
+    try:
+        token = box_keys.current().signed_token
+    except NotLoggedIn:
+        return snap  # between logins: the context asks again in a few seconds
+    return msgspec.structs.replace(snap, identity=token)
