@@ -51,7 +51,7 @@ class MapEditor:
                 "_Click an obstacle, ball, light or robot in the view to move, rotate or "
                 "delete it._"
                 if allowed
-                else f"_{REFUSED}_"
+                else f"**{escape_md(REFUSED)}**"
             )
             self.add_box = gui.add_button("Add box", disabled=off)
             self.add_ball = gui.add_button("Add ball", disabled=off)

@@ -568,11 +568,10 @@ class RealConnection:
         AgentContextState.agents (running entry = holder, the rest = queue,
         my position and start_eta) into AgentStatus rows.
         """
-        world = self._worlds.get(ctx) or next(
-            (w for w in self._worlds.values() if w.world == ctx), None
-        )
+        summary = self._kinds.get(ctx)
+        world = self._worlds.get(summary.world or "") if summary is not None else None
         if world is None:
-            return []
+            return []  # the world is not shown yet; RobotPanel.bind asks again
         return [AgentStatus(name, None, 0) for name in world.snapshot().robots]
 
     def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> None:
