@@ -31,6 +31,7 @@ log = logging.getLogger("wart.viewer.robots")
 MAX_ROWS = 20  # robots listed in the table
 MAX_CHOICES = 200  # robots in the dropdown
 PLOT_POINTS = 60  # 12 s at the pump's 5 Hz slow tick
+NONE = "(none)"
 
 
 def check_controller(filename: str, content: bytes) -> str | None:
@@ -82,7 +83,7 @@ class RobotPanel:
         gui = client.gui
         with gui.add_folder("Robots"):
             self.agents_md = gui.add_markdown("")
-            self.robot = gui.add_dropdown("Robot", ("(none)",))
+            self.robot = gui.add_dropdown("Robot", (NONE,))
             self.upload = gui.add_upload_button(
                 "Upload controller (.py)", mime_type="text/x-python", icon=viser.Icon.UPLOAD
             )
@@ -115,7 +116,8 @@ class RobotPanel:
             return
         self.agents_md.content = format_agents(rows)
         # A dropdown of a swarm's 1,000 names is no use: past that, click robots instead.
-        names = tuple(r.agent for r in rows[:MAX_CHOICES]) or ("(none)",)
+        # NONE stays first, so a new list never selects a robot by itself.
+        names = (NONE, *(r.agent for r in rows[:MAX_CHOICES]))
         if tuple(self.robot.options) != names:
             self.robot.options = names
 
@@ -123,10 +125,10 @@ class RobotPanel:
 
     def bind(self, view: WorldView, feed: WorldFeed) -> None:
         self.view, self.feed = view, feed
-        self.refresh_agents()  # an arena's robots are known once its world is shown
         view.on_select.append(self._selected)
         view.slow_hooks.append(self._sample)
         view.show_rays = self.rays.value
+        self.refresh_agents()  # an arena's robots are known once its world is shown
 
     def unbind(self) -> None:
         view = self.view
@@ -188,7 +190,7 @@ class RobotPanel:
             self.say_notice(f"Not queued: {problem}")
             return
         agent = self.robot.value
-        if agent == "(none)":
+        if agent == NONE:
             self.say_notice("Choose a robot first.")
             return
         try:
