@@ -202,3 +202,27 @@ def test_unknown_lab_and_world_listing(open_page, lab: RealLab) -> None:
     page.wait_text("does not know the lab")
     # The engine's world is listed in the lobby through its liveliness token.
     assert keys.alive(lab.router.realm, AliveKind.WORLD, WORLD)
+
+
+ROBOT_RGB = np.array([151, 184, 210])  # an idle robot's body as rendered (flat ambient light)
+
+
+def test_clicking_a_robot_selects_it(open_page, lab: RealLab) -> None:
+    """viser 1.1.1 reports the batched mesh's instance index on a click (measured here)."""
+    page = open_page("carol")
+    log_in(page, lab, "carol")
+    page.click(f"Join {WORLD}")
+    view = session_of(lab.viewer, "carol").view
+    wait_until(lambda: view.frames_applied > 5, 15, what="frames")
+    page.p.wait_for_timeout(500)  # let the software renderer draw the first frames
+    image = scene(page.p.screenshot())  # cropped at SCENE_BOX: rows from y=170
+    close = np.abs(image - ROBOT_RGB).sum(axis=2) < 30
+    ys, xs = np.nonzero(close)
+    keep = ~((xs < 330) & (ys < 120))  # viser's notifications sit top-left
+    ys, xs = ys[keep], xs[keep]
+    assert len(xs) > 50, "no robot found in the screenshot"
+    near = (np.abs(xs - xs[0]) < 25) & (np.abs(ys - ys[0]) < 25)
+    x, y = float(xs[near].mean()), float(ys[near].mean()) + SCENE_BOX[1]
+    page.p.mouse.click(x, y + 8)  # a little below the centre: the name label sits on it
+    wait_until(lambda: view.selected is not None, 10, what="a robot selected by the click")
+    page.screenshot("real-clicked")
