@@ -12,6 +12,12 @@ Playwright), logs each one in and joins the arena, then for --seconds counts:
   in child processes, measured separately), via psutil.
 
     .venv/bin/python bench/bench_viewer.py --browsers 10 --robots 1000
+    .venv/bin/python bench/bench_viewer.py --real --browsers 4   # real engine, maps/swarm.json
+
+With ``--real`` the lab is real processes (router, registry, lobby room and
+a Sim2D engine on maps/swarm.json: 1,000 Khepera) and the viewer runs over
+:class:`~viewers.web.real.RealConnector`, as in tests/browser/test_real_lab.py;
+the process CPU then excludes the world (the engine is its own process).
 """
 
 from __future__ import annotations
@@ -72,12 +78,39 @@ def main() -> int:
     ap.add_argument("--world-rate", type=float, default=50.0)
     ap.add_argument("--rate", type=float, default=25.0, help="the viewer's pump rate")
     ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--real", action="store_true", help="real lab processes, maps/swarm.json")
     args = ap.parse_args()
+    if args.real:
+        import tempfile
+        from contextlib import ExitStack
 
-    from playwright.sync_api import sync_playwright
+        from tests.browser.reallab import PASSWORD, WORLD, real_lab
 
+        with ExitStack() as stack:
+            env = stack.enter_context(real_lab(Path(tempfile.mkdtemp()), "swarm"))
+            users = [(u, PASSWORD) for u in ("alice", "bob", "carol", "ida")]
+            return run(args, env.viewer, env.url, env.address.label, WORLD, users, None)
     lab = FakeLab("Bench lab", robots=args.robots, rate=args.world_rate)
     viewer = WebViewer(FakeConnector(("lab", lab)), port=free_port(), rate=args.rate)
+    try:
+        users = [("ana", "ana-pw"), ("ben", "ben-pw")]
+        return run(args, viewer, "127.0.0.1", "lab@127.0.0.1", "arena", users, lab)
+    finally:
+        viewer.stop()
+        lab.close()
+
+
+def run(
+    args: argparse.Namespace,
+    viewer: WebViewer,
+    address: str,
+    tab: str,
+    arena: str,
+    users: list[tuple[str, str]],
+    lab: FakeLab | None,
+) -> int:
+    from playwright.sync_api import sync_playwright
+
     me = psutil.Process()
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
@@ -94,16 +127,16 @@ def main() -> int:
             page.goto(viewer.url)
             vp = ViserPage(page, f"bench-{i}")
             vp.wait_ready(60_000)
-            user = "ana" if i % 2 == 0 else "ben"
-            vp.log_in("127.0.0.1", user, f"{user}-pw")
-            vp.tab("lab@127.0.0.1").first.click()
-            vp.button("Join arena").wait_for(timeout=60_000)
+            user, password = users[i % len(users)]
+            vp.log_in(address, user, password)
+            vp.tab(tab).first.click()
+            vp.button(f"Join {arena}").wait_for(timeout=60_000)
             pages.append(vp)
             print(f"browser {i + 1} logged in", flush=True)
         # Join only once every page is up: a page rendering 1,000 robots in
         # software WebGL slows the next page's loading on a small machine.
         for i, vp in enumerate(pages):
-            vp.click("Join arena", timeout=60_000)
+            vp.click(f"Join {arena}", timeout=60_000)
             print(f"browser {i + 1} watches the arena", flush=True)
         views = [s.view for s in viewer.sessions.values()]
         deadline = time.monotonic() + 60
@@ -119,28 +152,31 @@ def main() -> int:
 
         pump_busy0 = viewer.pump.busy_s
         s0, a0, c0, t0 = sample()
-        world0 = lab.worlds["arena"].latest()
+        world0 = views[0].feed.latest() if views[0].feed else None
         # Playwright's sync API delivers events only while it runs: wait inside it.
         pages[0].p.wait_for_timeout(args.seconds * 1000)
         s1, a1, c1, t1 = sample()
-        world1 = lab.worlds["arena"].latest()
+        world1 = views[0].feed.latest() if views[0].feed else None
+        robots = len(world1.poses) if world1 is not None else 0
         pump_busy = viewer.pump.busy_s - pump_busy0
         elapsed = t1 - t0
         browser.close()
-    viewer.stop()
-    lab.close()
 
     assert world0 is not None and world1 is not None
     msg_rates = [(b["messages"] - a["messages"]) / elapsed for a, b in zip(s0, s1, strict=True)]
     mb_rates = [(b["bytes"] - a["bytes"]) / elapsed / 1e6 for a, b in zip(s0, s1, strict=True)]
     applied = [(b - a) / elapsed for a, b in zip(a0, a1, strict=True)]
+    # Fake frames count 1 per frame; the engine's seq is its tick (50 per simulated s).
     world_rate = (world1.seq - world0.seq) / elapsed
+    if lab is None:
+        world_rate = (world1.t - world0.t) / elapsed  # simulated s per wall s
     # This process also runs the fake world and Playwright's client; both are
     # counted in, so the viewer's own share is at most this.
     cpu = 100 * (c1 - c0) / elapsed
     print(
-        f"browsers {args.browsers}, robots {args.robots}, world {world_rate:.1f} frames/s, "
-        f"pump {args.rate:.0f} Hz, {elapsed:.1f} s"
+        f"browsers {args.browsers}, robots {robots}, "
+        + (f"world {world_rate:.1f} frames/s, " if lab else f"world x{world_rate:.2f} realtime, ")
+        + f"pump {args.rate:.0f} Hz, {elapsed:.1f} s"
     )
     print(
         f"ws messages/s per browser: min {min(msg_rates):.1f} "
@@ -149,7 +185,8 @@ def main() -> int:
     print(f"MB/s per browser: mean {sum(mb_rates) / len(mb_rates):.2f}")
     print(f"frames applied/s per view (server): min {min(applied):.1f} max {max(applied):.1f}")
     print(f"pump thread busy: {100 * pump_busy / elapsed:.1f} % of a core")
-    print(f"viewer process CPU (incl. fake world + Playwright client): {cpu:.1f} % of a core")
+    what = "fake world + " if lab else ""
+    print(f"viewer process CPU (incl. {what}Playwright client): {cpu:.1f} % of a core")
     print(f"machine: {psutil.cpu_count()} CPUs")
     ok = min(msg_rates) >= 20
     print("target >= 20 updates/s to every browser:", "MET" if ok else "NOT MET")

@@ -157,6 +157,7 @@ class Obstacle:
     w: float
     h: float
     angle: float = 0.0
+    round: bool = False  # a pillar: a disc of diameter w
 
 
 @dataclass(frozen=True)
@@ -218,7 +219,7 @@ class SensorSample:
 
 @dataclass(frozen=True)
 class MapEdit:
-    """One edit of the map; ``op`` says which fields matter."""
+    """One edit of the map; ``op`` says which fields matter (resize: ``w``, ``h`` of the arena)."""
 
     op: Literal["move", "add", "delete", "resize"]
     kind: Literal["obstacle", "ball", "light", "agent", "arena"]
@@ -249,6 +250,28 @@ class WorldFeed(Protocol):
     def edit(self, edit: MapEdit) -> None:
         """Apply an edit with the user's session; :class:`LabError` if refused."""
         ...
+
+    def maps(self) -> list[str]:
+        """The map files the world's engine can load (edit_map)."""
+        ...
+
+    def save_map(self, name: str) -> str:
+        """Save the world as map ``name``; returns what the engine said."""
+        ...
+
+    def load_map(self, name: str) -> str:
+        """Replace the world by map ``name``; every view refetches."""
+        ...
+
+
+@dataclass(frozen=True)
+class Account:
+    """One account as the admin panel lists it."""
+
+    name: str
+    roles: tuple[str, ...]
+    grants: tuple[tuple[str, tuple[str, ...]], ...]  # (scope, grants there); "" = everywhere
+    online: bool = False
 
 
 class LabConnection(Protocol):
@@ -292,6 +315,24 @@ class LabConnection(Protocol):
     def cancel_control(self, ctx: str, agent: str) -> None: ...
 
     def logout(self) -> None: ...
+
+    # -- admin (thesis 9.2.1); each raises LabError without the admin permission
+
+    def list_accounts(self) -> list[Account]: ...
+
+    def add_account(self, user: str, password: str, roles: tuple[str, ...]) -> str: ...
+
+    def set_password(self, user: str, password: str) -> str: ...
+
+    def remove_account(self, user: str) -> str: ...
+
+    def grant(self, user: str, grant: str, scope: str = "") -> str: ...
+
+    def ungrant(self, user: str, grant: str, scope: str = "") -> str: ...
+
+    def kick_from_server(self, user: str, reason: str = "") -> str: ...
+
+    def rename_server(self, name: str) -> str: ...
 
 
 class LabConnector(Protocol):

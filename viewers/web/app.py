@@ -29,10 +29,11 @@ from common import cli
 from common.keys import AliveKind, check_ident
 from common.service import Service, run_service
 from common.zconfig import DEFAULT_PORT, NetworkOptions
-from viewers.web.adapters import LabConnection, LabConnector, LoginError
+from viewers.web.adapters import LabConnector
 from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
 from viewers.web.pump import DEFAULT_RATE, FramePump
+from viewers.web.real import RealConnector
 
 log = logging.getLogger("wart.viewer")
 
@@ -104,16 +105,6 @@ class WebViewer:
         self.server.stop()
 
 
-class PendingConnector:
-    """Until the lab client (issue 3) is wired in, say so in plain words at login."""
-
-    def login(self, address: LabAddress, user: str, password: str) -> LabConnection:
-        raise LoginError(
-            "this viewer cannot reach the lab's registry yet (the lab client is not "
-            "wired in); start it with --demo to try the page"
-        )
-
-
 class ViewerService(Service):
     kind = AliveKind.VIEWER
 
@@ -131,7 +122,10 @@ class ViewerService(Service):
 
     def on_stop(self, timeout: float) -> None:
         if self.viewer is not None:
-            self.viewer.stop()
+            self.viewer.stop()  # every browser's users are logged out first
+        closer = getattr(self._viewer_args.get("connector"), "close", None)
+        if callable(closer):
+            closer()  # the other labs' sessions
 
 
 def announce(url: str, url_file: Path | None) -> None:
@@ -198,15 +192,24 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
         )
     except ValueError as exc:
         p.error(str(exc))
-    connector: LabConnector
-    if args.demo:
-        from viewers.web.fakes import FakeConnector, FakeLab
-
-        connector = FakeConnector((default.realm, FakeLab("Demo lab", robots=args.demo_robots)))
-    else:
-        connector = PendingConnector()
+    data_dir: Path = args.data_dir or default_data_dir(options.realm)
+    if not args.demo and not options.registry_key:
+        p.error(
+            "--registry-key is required: the viewer must know its lab's registry key to check "
+            "logins (wart up passes it; or use --demo)"
+        )
 
     def build(session: zenoh.Session) -> Service:
+        connector: LabConnector
+        if args.demo:
+            from viewers.web.fakes import FakeConnector, FakeLab
+
+            lab = FakeLab("Demo lab", robots=args.demo_robots)
+            connector = FakeConnector((default.realm, lab))
+        else:
+            # The gateway: this process's one session to its own lab, and a
+            # LabClient per logged-in browser user on it (viewers/web/real.py).
+            connector = RealConnector(session, default, options.registry_key, data_dir=data_dir)
         service = ViewerService(
             session,
             options.realm,
@@ -215,7 +218,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
             host=args.host,
             port=args.http_port,
             default_address=default,
-            data_dir=args.data_dir or default_data_dir(options.realm),
+            data_dir=data_dir,
             rate=args.rate,
         )
         service.url_file = args.url_file

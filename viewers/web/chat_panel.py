@@ -28,6 +28,7 @@ from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.chat")
 
+ARENA_KINDS = ("agent", "world")  # an agent context, or a world no context announces yet
 SHOWN_LINES = 100  # older lines scroll away; the context keeps the full history
 
 
@@ -54,7 +55,7 @@ class ChatPanel:
         for line in joined.history:
             self._lines.append(self._format(line))
         gui = client.gui
-        label = f"{self.ctx}" if self.kind == "chat" else f"{self.ctx} (arena)"
+        label = f"{self.ctx}" if self.kind not in ARENA_KINDS else f"{self.ctx} (arena)"
         self.tab = tabs.add_tab(label, icon=viser.Icon.MESSAGE if self.kind == "chat" else None)
         with self.tab:
             title = escape_md(joined.title or self.ctx)
@@ -73,12 +74,12 @@ class ChatPanel:
             self.kick = gui.add_button("Kick", color="red", visible=joined.can_kick)
             self.robots: RobotPanel | None = None
             self.editor: MapEditor | None = None
-            if self.kind == "agent" and self.world and on_watch is not None:
+            if self.kind in ARENA_KINDS and self.world and on_watch is not None:
                 self.watch = gui.add_button("Show this arena", color="teal")
                 self.watch.on_click(lambda _: self.show_world())
                 self.robots = RobotPanel(client, connection, self.ctx)
-                if "edit_map" in connection.permissions:
-                    self.editor = MapEditor(client)
+                # Everyone sees the editor; without edit_map it is disabled and says why.
+                self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
             self.leave = gui.add_button("Leave")
         self.send.on_click(lambda _: self.submit())
         self.kick.on_click(lambda _: self.kick_selected())

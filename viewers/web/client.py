@@ -13,7 +13,7 @@ import viser
 
 from viewers.web.adapters import LabConnection, LabConnector, WorldFeed
 from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
-from viewers.web.chat_panel import ChatPanel
+from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginForm
 from viewers.web.pump import FramePump
@@ -47,6 +47,7 @@ class BrowserSession:
         self.login: LoginForm | None = None
         self.watching: ChatPanel | None = None
         self._lock = threading.RLock()
+        self.closed = False
         gui = client.gui
         self.address = gui.add_text(
             "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
@@ -132,6 +133,9 @@ class BrowserSession:
 
     def _logged_in(self, connection: LabConnection, address: LabAddress) -> None:
         self.login = None
+        if self.closed:  # the page closed while the login was on its way
+            connection.logout()
+            return
         self.saved.add_recent(connection.user, address.with_user(connection.user))
         tab = LabTab(
             self.client,
@@ -165,7 +169,7 @@ class BrowserSession:
     # -- the world view
 
     def _context_opened(self, panel: ChatPanel) -> None:
-        if panel.kind == "agent" and self.watching is None:
+        if panel.kind in ARENA_KINDS and self.watching is None:
             panel.show_world()  # the first arena joined shows itself
 
     def _context_closed(self, panel: ChatPanel) -> None:
@@ -183,11 +187,20 @@ class BrowserSession:
     # -- the browser went away
 
     def close(self) -> None:
+        """The browser went away: stop drawing, then log out of every lab.
+
+        Nothing here touches the page: its connection is closed, and a GUI
+        update queued now would only be dropped with a warning. The lab must
+        still be told (rooms left, presence gone, subscriptions undeclared).
+        """
+        self.closed = True
         self.pump.detach(self.view)
-        for tab in list(self.labs.values()):
+        self.view.feed = None
+        with self._lock:
+            tabs = list(self.labs.values())
+            self.labs.clear()
+        for tab in tabs:
             try:
-                tab.logout()
+                tab.shutdown()
             except Exception:
-                # A half-gone client's GUI may refuse updates; the lab must still be told.
                 log.exception("while closing %s for a departed browser", tab.label)
-                tab.connection.logout()

@@ -1,19 +1,26 @@
-"""Map editor skeleton (edit_map permission): select, move/rotate, add, delete.
+"""Map editor (edit_map permission): select, move/rotate, add, delete, resize, maps.
 
-Clicking an obstacle puts viser transform controls on it, limited to x/y
+Clicking an obstacle, ball, light or robot puts viser transform controls on it, limited to x/y
 moves and rotation about z (``active_axes=(True, True, False)``). When a drag
 ends the new pose goes, in mm and radians, through ``WorldFeed.edit``; the
 world's new snapshot then reaches every view (the pump redraws on a version
 change), so the edit appears live for everyone. The gizmo is in this
 browser's scene only.
+
+Everyone in an arena gets the editor's folder; without edit_map its buttons
+are disabled and trying anyway (clicking an item) says why, in plain words.
+The engine re-checks edit_map on every edit: the page is only a convenience.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from typing import Literal
 
 import viser
 
+from common.keys import is_ident
 from viewers.web import geometry as geo
 from viewers.web.adapters import LabError, MapEdit, WorldFeed
 from viewers.web.text import escape_md
@@ -22,27 +29,53 @@ from viewers.web.world_view import WorldView
 log = logging.getLogger("wart.viewer.editor")
 
 NEW_BOX_MM = 150.0
+MAX_ARENA_MM = 50_000.0
+NO_MAPS = "(no saved maps)"
+Kind = Literal["obstacle", "ball", "light", "agent"]
+REFUSED = "You may not edit this map: it needs the 'edit_map' permission."
 
 
 class MapEditor:
-    def __init__(self, client: viser.ClientHandle) -> None:
+    def __init__(self, client: viser.ClientHandle, *, allowed: bool = True) -> None:
         self.client = client
+        self.allowed = allowed
         self.view: WorldView | None = None
         self.feed: WorldFeed | None = None
         self.selected: str | None = None
+        self.selected_kind: Kind = "obstacle"
         self._gizmo: viser.TransformControlsHandle | None = None
         gui = client.gui
+        off = not allowed
         with gui.add_folder("Map editor", expand_by_default=False):
-            self.info = gui.add_markdown("_Click an obstacle in the view to move or rotate it._")
-            self.add_box = gui.add_button("Add box")
-            self.add_ball = gui.add_button("Add ball")
-            self.add_light = gui.add_button("Add light")
+            self.info = gui.add_markdown(
+                "_Click an obstacle, ball, light or robot in the view to move, rotate or "
+                "delete it._"
+                if allowed
+                else f"**{escape_md(REFUSED)}**"
+            )
+            self.add_box = gui.add_button("Add box", disabled=off)
+            self.add_ball = gui.add_button("Add ball", disabled=off)
+            self.add_light = gui.add_button("Add light", disabled=off)
+            self.add_agent = gui.add_button("Add robot", disabled=off)
             self.delete = gui.add_button("Delete selected", color="red", disabled=True)
+            self.width = gui.add_number("Arena width (mm)", 1000.0, min=100.0, step=10.0)
+            self.height = gui.add_number("Arena height (mm)", 1000.0, min=100.0, step=10.0)
+            self.resize = gui.add_button("Resize arena", disabled=off)
+            self.map_name = gui.add_text("Map name", "")
+            self.save = gui.add_button("Save map", disabled=off)
+            self.maps = gui.add_dropdown("Saved maps", (NO_MAPS,), disabled=off)
+            self.list_maps = gui.add_button("List maps", disabled=off)
+            self.load = gui.add_button("Load map", disabled=off)
             self.notice = gui.add_markdown("", visible=False)
         self.add_box.on_click(lambda _: self._add("obstacle"))
         self.add_ball.on_click(lambda _: self._add("ball"))
         self.add_light.on_click(lambda _: self._add("light"))
+        self.add_agent.on_click(lambda _: self._add("agent"))
         self.delete.on_click(lambda _: self._delete())
+        self.resize.on_click(lambda _: self._resize())
+        self.save.on_click(lambda _: self._save())
+        self.list_maps.on_click(lambda _: self._list())
+        self.load.on_click(lambda _: self._load())
 
     def say_notice(self, text: str) -> None:
         self.notice.content = f"**{escape_md(text)}**"
@@ -51,10 +84,18 @@ class MapEditor:
     def bind(self, view: WorldView, feed: WorldFeed) -> None:
         self.view, self.feed = view, feed
         view.on_obstacle_click.append(self.select)
+        view.on_select.append(self._robot_selected)
+        snap = view.snapshot
+        if snap is not None:
+            self.width.value, self.height.value = snap.width, snap.height
 
     def unbind(self) -> None:
-        if self.view is not None and self.select in self.view.on_obstacle_click:
-            self.view.on_obstacle_click.remove(self.select)
+        view = self.view
+        if view is not None:
+            if self.select in view.on_obstacle_click:
+                view.on_obstacle_click.remove(self.select)
+            if self._robot_selected in view.on_select:
+                view.on_select.remove(self._robot_selected)
         self._drop_gizmo()
         self.view = self.feed = None
 
@@ -65,25 +106,57 @@ class MapEditor:
         self.selected = None
         self.delete.disabled = True
 
-    def select(self, ident: str) -> None:
+    def _find(self, ident: str) -> tuple[Kind, float, float, float] | None:
         feed = self.feed
         if feed is None:
+            return None
+        snap = feed.snapshot()
+        for ob in snap.obstacles:
+            if ob.ident == ident:
+                return "obstacle", ob.x, ob.y, ob.angle
+        frame = feed.latest()
+        for i, ball in enumerate(snap.balls):
+            if ball.ident == ident:
+                if frame is not None and i < len(frame.ball_xy):
+                    return "ball", float(frame.ball_xy[i, 0]), float(frame.ball_xy[i, 1]), 0.0
+                return "ball", ball.x, ball.y, 0.0
+        for light in snap.lights:
+            if light.ident == ident:
+                return "light", light.x, light.y, 0.0
+        if ident in snap.robots and frame is not None:
+            i = snap.robots.index(ident)
+            if i < len(frame.poses):
+                x, y, theta = (float(v) for v in frame.poses[i])
+                return "agent", x, y, theta
+        return None
+
+    def _robot_selected(self, index: int | None) -> None:
+        view = self.view
+        name = view.selected_name if view is not None else None
+        if name is not None and self.allowed:
+            self.select(name)
+
+    def select(self, ident: str) -> None:
+        if not self.allowed:
+            self.say_notice(REFUSED)
             return
-        found = [o for o in feed.snapshot().obstacles if o.ident == ident]
-        if not found:
+        found = self._find(ident)
+        if found is None:
             return
-        ob = found[0]
+        kind, x, y, angle = found
         self._drop_gizmo()
-        self.selected = ident
+        self.selected, self.selected_kind = ident, kind
         self.delete.disabled = False
-        self.info.content = f"Selected **{escape_md(ident)}**: drag the arrows or the ring."
+        self.info.content = (
+            f"Selected **{escape_md(ident)}** ({kind}): drag the arrows or the ring."
+        )
         gizmo = self.client.scene.add_transform_controls(
             "/editor/gizmo",
             scale=0.25,
             active_axes=(True, True, False),  # x/y moves, rotation about z only
             disable_sliders=True,
-            position=(ob.x * geo.MM, ob.y * geo.MM, 0.04),
-            wxyz=tuple(geo.yaw_to_wxyz(ob.angle)),
+            position=(x * geo.MM, y * geo.MM, 0.04),
+            wxyz=tuple(geo.yaw_to_wxyz(angle)),
         )
         gizmo.on_update(self._moved)
         self._gizmo = gizmo
@@ -95,30 +168,88 @@ class MapEditor:
         if gizmo is None or feed is None or ident is None:
             return
         x, y = geo.viser_to_world(float(gizmo.position[0]), float(gizmo.position[1]))
-        self._send(
-            feed, MapEdit("move", "obstacle", ident, x=x, y=y, angle=geo.wxyz_to_yaw(gizmo.wxyz))
-        )
+        angle = geo.wxyz_to_yaw(gizmo.wxyz)
+        self._send(feed, MapEdit("move", self.selected_kind, ident, x=x, y=y, angle=angle))
 
-    def _add(self, kind: str) -> None:
-        feed = self.feed
-        if feed is None:
+    def _ready(self) -> WorldFeed | None:
+        if not self.allowed:
+            self.say_notice(REFUSED)
+            return None
+        if self.feed is None:
             self.say_notice("Press 'Show this arena' first.")
+        return self.feed
+
+    def _add(self, kind: Kind) -> None:
+        feed = self._ready()
+        if feed is None:
             return
         snap = feed.snapshot()
         x, y = snap.width / 2, snap.height / 2
-        edit = MapEdit("add", kind, x=x, y=y, w=NEW_BOX_MM, h=NEW_BOX_MM)  # type: ignore[arg-type]
-        self._send(feed, edit)
+        self._send(feed, MapEdit("add", kind, x=x, y=y, w=NEW_BOX_MM, h=NEW_BOX_MM))
 
     def _delete(self) -> None:
-        if self.feed is None or self.selected is None:
+        feed = self._ready()
+        if feed is None or self.selected is None:
             return
-        self._send(self.feed, MapEdit("delete", "obstacle", self.selected))
-        self._drop_gizmo()
+        if self._send(feed, MapEdit("delete", self.selected_kind, self.selected)):
+            self._drop_gizmo()
 
-    def _send(self, feed: WorldFeed, edit: MapEdit) -> None:
+    def _resize(self) -> None:
+        feed = self._ready()
+        if feed is None:
+            return
+        w, h = float(self.width.value), float(self.height.value)
+        if not (100.0 <= w <= MAX_ARENA_MM and 100.0 <= h <= MAX_ARENA_MM):
+            self.say_notice(f"An arena is 100 to {MAX_ARENA_MM:.0f} mm on each side.")
+            return
+        self._send(feed, MapEdit("resize", "arena", w=w, h=h))
+
+    def _save(self) -> None:
+        feed = self._ready()
+        name = self.map_name.value.strip()
+        if feed is None:
+            return
+        if not is_ident(name):
+            self.say_notice("Name the map: letters, digits, '_', '-' or '.'.")
+            return
+        self._map_call(lambda: feed.save_map(name))
+
+    def _list(self) -> None:
+        feed = self._ready()
+        if feed is None:
+            return
+        try:
+            names = feed.maps()
+        except LabError as exc:
+            self.say_notice(f"Could not list maps: {exc}")
+            return
+        self.maps.options = tuple(names) or (NO_MAPS,)
+        self.notice.visible = False
+
+    def _load(self) -> None:
+        feed = self._ready()
+        name = self.maps.value
+        if feed is None:
+            return
+        if name == NO_MAPS:
+            self.say_notice("Press 'List maps' and choose one first.")
+            return
+        self._drop_gizmo()
+        self._map_call(lambda: feed.load_map(name))
+
+    def _map_call(self, call: Callable[[], str]) -> None:
+        try:
+            said = call()
+        except LabError as exc:
+            self.say_notice(f"Refused: {exc}")
+            return
+        self.say_notice(said.capitalize() + ".")
+
+    def _send(self, feed: WorldFeed, edit: MapEdit) -> bool:
         try:
             feed.edit(edit)
         except LabError as exc:
             self.say_notice(f"Edit refused: {exc}")
-            return
+            return False
         self.notice.visible = False
+        return True

@@ -20,6 +20,7 @@ import numpy as np
 
 from common.keys import is_ident
 from viewers.web.adapters import (
+    Account,
     AgentsEvent,
     AgentStatus,
     Ball,
@@ -28,6 +29,7 @@ from viewers.web.adapters import (
     ContextSummary,
     Directory,
     DirectoryEvent,
+    DisconnectedEvent,
     JoinedContext,
     LabError,
     LabEvent,
@@ -94,6 +96,7 @@ class FakeWorld:
         self._seq = itertools.count()
         self._t0 = time.monotonic()
         self.edits: list[MapEdit] = []
+        self.saved: dict[str, WorldSnapshot] = {}
         self.refuse_edits = ""  # set to a reason to make edit() fail
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -185,6 +188,16 @@ class FakeWorld:
                         for o in obstacles
                     ]
                 snap = replace(snap, obstacles=tuple(obstacles))
+            elif edit.kind == "arena" and edit.op == "resize":
+                if edit.w <= 0 or edit.h <= 0:
+                    raise LabError("the arena's width and height must be positive")
+                snap = replace(snap, width=edit.w, height=edit.h)
+            elif edit.op == "delete":
+                snap = replace(
+                    snap,
+                    balls=tuple(b for b in snap.balls if b.ident != edit.ident),
+                    lights=tuple(lt for lt in snap.lights if lt.ident != edit.ident),
+                )
             elif edit.kind == "light" and edit.op == "add":
                 ident = edit.ident or f"light{len(snap.lights) + 1}"
                 snap = replace(snap, lights=(*snap.lights, Light(ident, edit.x, edit.y)))
@@ -192,6 +205,29 @@ class FakeWorld:
                 ident = edit.ident or f"ball{len(snap.balls) + 1}"
                 snap = replace(snap, balls=(*snap.balls, Ball(ident, edit.x, edit.y, 30.0)))
             self._snapshot = replace(snap, version=snap.version + 1)
+
+    def maps(self) -> list[str]:
+        if self.refuse_edits:
+            raise LabError(self.refuse_edits)
+        return sorted(self.saved)
+
+    def save_map(self, name: str) -> str:
+        if self.refuse_edits:
+            raise LabError(self.refuse_edits)
+        if not is_ident(name):
+            raise LabError(f"{name!r} is not a map name: letters, digits, '_', '-', '.'")
+        self.saved[name] = self._snapshot
+        return f"saved {name}.json"
+
+    def load_map(self, name: str) -> str:
+        if self.refuse_edits:
+            raise LabError(self.refuse_edits)
+        snap = self.saved.get(name)
+        if snap is None:
+            raise LabError(f"no map named {name}")
+        with self._lock:
+            self._snapshot = replace(snap, version=self._snapshot.version + 1)
+        return f"loaded {name}.json"
 
 
 @dataclass
@@ -448,6 +484,71 @@ class FakeConnection:
             if self._user in queue:
                 queue.remove(self._user)
         self._lab._broadcast(AgentsEvent(ctx))
+
+    # -- admin
+
+    def list_accounts(self) -> list[Account]:
+        self._need("admin", "manage accounts")
+        with self._lab._lock:
+            return [
+                Account(name, (), (("", tuple(sorted(perms))),), name in self._lab._online)
+                for name, (_pw, perms) in sorted(self._lab.accounts.items())
+            ]
+
+    def add_account(self, user: str, password: str, roles: tuple[str, ...]) -> str:
+        self._need("admin", "manage accounts")
+        with self._lab._lock:
+            if user in self._lab.accounts:
+                raise LabError(f"{user} already exists")
+            perms = INSTRUCTOR if "instructor" in roles else STUDENT
+            self._lab.accounts[user] = (password, perms)
+        return f"added {user}"
+
+    def set_password(self, user: str, password: str) -> str:
+        self._need("admin", "manage accounts")
+        with self._lab._lock:
+            if user not in self._lab.accounts:
+                raise LabError(f"there is no user {user}")
+            self._lab.accounts[user] = (password, self._lab.accounts[user][1])
+        return f"password of {user} set"
+
+    def remove_account(self, user: str) -> str:
+        self._need("admin", "manage accounts")
+        with self._lab._lock:
+            if self._lab.accounts.pop(user, None) is None:
+                raise LabError(f"there is no user {user}")
+        return f"removed {user}"
+
+    def grant(self, user: str, grant: str, scope: str = "") -> str:
+        self._need("admin", "manage accounts")
+        with self._lab._lock:
+            if user not in self._lab.accounts:
+                raise LabError(f"there is no user {user}")
+            pw, perms = self._lab.accounts[user]
+            self._lab.accounts[user] = (pw, perms | {grant})
+        return f"granted {grant} to {user}"
+
+    def ungrant(self, user: str, grant: str, scope: str = "") -> str:
+        self._need("admin", "manage accounts")
+        with self._lab._lock:
+            if user not in self._lab.accounts:
+                raise LabError(f"there is no user {user}")
+            pw, perms = self._lab.accounts[user]
+            self._lab.accounts[user] = (pw, perms - {grant})
+        return f"revoked {grant} from {user}"
+
+    def kick_from_server(self, user: str, reason: str = "") -> str:
+        self._need("admin", "kick people from the server")
+        self._lab._broadcast(
+            DisconnectedEvent(f"kicked from the server by {self._user}: {reason}"), only={user}
+        )
+        return f"kicked {user}"
+
+    def rename_server(self, name: str) -> str:
+        self._need("admin", "rename the server")
+        self._lab.server_name = name
+        self._lab._broadcast(DirectoryEvent())
+        return f"renamed to {name}"
 
     def logout(self) -> None:
         if self.closed:

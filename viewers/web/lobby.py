@@ -26,12 +26,13 @@ from viewers.web.adapters import (
     PrivateEvent,
     WorldFeed,
 )
+from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.text import check_line, clock, escape_md
 
 log = logging.getLogger("wart.viewer.lobby")
 
-KIND_NAMES = {"chat": "chat room", "agent": "arena"}
+KIND_NAMES = {"chat": "chat room", "agent": "arena", "world": "simulated world (watch, edit)"}
 
 
 class LabTab:
@@ -58,6 +59,7 @@ class LabTab:
         self._directory: Directory | None = None
         self._rows: list[viser.GuiMarkdownHandle | viser.GuiButtonHandle] = []
         self._private: list[str] = []
+        self.closed = False
         gui = client.gui
         self.tab = tabs.add_tab(connection.address.label, icon=viser.Icon.HOME)
         with self.tab:
@@ -75,6 +77,9 @@ class LabTab:
                 self.pm_to = gui.add_text("To", "")
                 self.pm_text = gui.add_text("Private message", "")
                 self.pm_send = gui.add_button("Send privately")
+            self.admin = (
+                AdminPanel(client, connection) if "admin" in connection.permissions else None
+            )
             self.notice = gui.add_markdown("", visible=False)
             self.logout_button = gui.add_button("Log out", color="gray")
         self.host_chat.on_click(lambda _: self.host("chat"))
@@ -201,7 +206,17 @@ class LabTab:
         self._private = [*self._private[-19:], line]
         self.pm_log.content = "  \n".join(self._private)
 
+    def shutdown(self) -> None:
+        """The browser went away: end the lab session without touching its (closed) page."""
+        self.closed = True
+        self._unsubscribe()
+        try:
+            self.connection.logout()  # leaves rooms; the user's presence goes
+        except LabError as exc:
+            log.info("logout from %s: %s", self.label, exc)
+
     def logout(self) -> None:
+        self.closed = True
         self._unsubscribe()
         for panel in list(self.panels.values()):
             panel.close(leave=True)
@@ -215,6 +230,8 @@ class LabTab:
     # -- events (the connection's threads)
 
     def on_event(self, event: LabEvent) -> None:
+        if self.closed:
+            return  # a late event for a page that is gone or a lab logged out of
         try:
             self._dispatch(event)
         except Exception:

@@ -77,7 +77,9 @@ class FramePump:
             if feed is None:
                 continue
             try:
-                key = id(feed)
+                # Per-user feeds over one shared world (viewers/web/real.py) say so with
+                # ``source``: its frame is converted once for all of them.
+                key = id(getattr(feed, "source", feed))
                 if key not in prepared:
                     frame = feed.latest()
                     prepared[key] = None if frame is None else PreparedFrame.of(frame)

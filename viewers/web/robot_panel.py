@@ -28,7 +28,10 @@ from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.robots")
 
+MAX_ROWS = 20  # robots listed in the table
+MAX_CHOICES = 200  # robots in the dropdown
 PLOT_POINTS = 60  # 12 s at the pump's 5 Hz slow tick
+NONE = "(none)"
 
 
 def check_controller(filename: str, content: bytes) -> str | None:
@@ -55,13 +58,15 @@ def format_agents(rows: list[AgentStatus]) -> str:
     if not rows:
         return "_No robots in this arena._"
     lines = ["| robot | driven by | waiting | me | ETA |", "| --- | --- | --- | --- | --- |"]
-    for r in rows:
+    for r in rows[:MAX_ROWS]:
         mine = (
             "-" if r.my_position is None else ("now" if r.my_position == 0 else f"#{r.my_position}")
         )
         eta = "-" if r.eta_s is None else f"{r.eta_s:.0f} s"
         holder = escape_md(r.holder) if r.holder else "-"
         lines.append(f"| {escape_md(r.agent)} | {holder} | {r.queue} | {mine} | {eta} |")
+    if len(rows) > MAX_ROWS:
+        lines.append(f"\n_and {len(rows) - MAX_ROWS} more: click a robot in the view._")
     return "\n".join(lines)
 
 
@@ -78,7 +83,7 @@ class RobotPanel:
         gui = client.gui
         with gui.add_folder("Robots"):
             self.agents_md = gui.add_markdown("")
-            self.robot = gui.add_dropdown("Robot", ("(none)",))
+            self.robot = gui.add_dropdown("Robot", (NONE,))
             self.upload = gui.add_upload_button(
                 "Upload controller (.py)", mime_type="text/x-python", icon=viser.Icon.UPLOAD
             )
@@ -110,7 +115,9 @@ class RobotPanel:
             self.say_notice(f"Could not read the robots: {exc}")
             return
         self.agents_md.content = format_agents(rows)
-        names = tuple(r.agent for r in rows) or ("(none)",)
+        # A dropdown of a swarm's 1,000 names is no use: past that, click robots instead.
+        # NONE stays first, so a new list never selects a robot by itself.
+        names = (NONE, *(r.agent for r in rows[:MAX_CHOICES]))
         if tuple(self.robot.options) != names:
             self.robot.options = names
 
@@ -121,6 +128,7 @@ class RobotPanel:
         view.on_select.append(self._selected)
         view.slow_hooks.append(self._sample)
         view.show_rays = self.rays.value
+        self.refresh_agents()  # an arena's robots are known once its world is shown
 
     def unbind(self) -> None:
         view = self.view
@@ -182,7 +190,7 @@ class RobotPanel:
             self.say_notice(f"Not queued: {problem}")
             return
         agent = self.robot.value
-        if agent == "(none)":
+        if agent == NONE:
             self.say_notice("Choose a robot first.")
             return
         try:

@@ -25,6 +25,7 @@ from viewers.web.adapters import WorldFeed, WorldFrame, WorldSnapshot
 
 log = logging.getLogger("wart.viewer.world")
 
+MAX_ITEM_NODES = 500
 LABEL_ALL_UP_TO = 12  # more robots than this: only the selected one is labelled
 TRAIL_POINTS = 300
 # Gripper state 0 open/none, 1 closed, 2 holding: the robot's body colour says which.
@@ -176,42 +177,57 @@ class WorldView:
                 receive_shadow=False,
             )
             self._static.append(floor)
-            for ob in snap.obstacles:
-                box = scene.add_box(
-                    f"/world/obstacles/{ob.ident}",
-                    color=OBSTACLE_COLOUR,
-                    dimensions=(ob.w * geo.MM, ob.h * geo.MM, 0.03),
-                    position=(ob.x * geo.MM, ob.y * geo.MM, 0.015),
-                    wxyz=tuple(geo.yaw_to_wxyz(ob.angle)),
+            # Each item is its own scene node (about 50 us per change): past this many of
+            # a kind a map would need a batched mesh; the rest are not drawn.
+            shown = MAX_ITEM_NODES
+            for ob in snap.obstacles[:shown]:
+                node: viser.SceneNodeHandle
+                if ob.round:  # pillars: discs from above
+                    node = scene.add_cylinder(
+                        f"/world/obstacles/{ob.ident}",
+                        radius=ob.w * geo.MM / 2,
+                        height=0.03,
+                        color=OBSTACLE_COLOUR,
+                        position=(ob.x * geo.MM, ob.y * geo.MM, 0.015),
+                        cast_shadow=False,
+                        receive_shadow=False,
+                    )
+                else:
+                    node = scene.add_box(
+                        f"/world/obstacles/{ob.ident}",
+                        color=OBSTACLE_COLOUR,
+                        dimensions=(ob.w * geo.MM, ob.h * geo.MM, 0.03),
+                        position=(ob.x * geo.MM, ob.y * geo.MM, 0.015),
+                        wxyz=tuple(geo.yaw_to_wxyz(ob.angle)),
+                        cast_shadow=False,
+                        receive_shadow=False,
+                    )
+                node.on_click(self._obstacle_clicked(ob.ident))
+                self._static.append(node)
+            for ball in snap.balls[:shown]:
+                node = scene.add_cylinder(
+                    f"/world/balls/{ball.ident}",
+                    radius=ball.r * geo.MM,
+                    height=0.02,
+                    color=BALL_COLOUR,
+                    position=(ball.x * geo.MM, ball.y * geo.MM, 0.01),
                     cast_shadow=False,
                     receive_shadow=False,
                 )
-                box.on_click(self._obstacle_clicked(ob.ident))
-                self._static.append(box)
-            for ball in snap.balls:
-                self._balls.append(
-                    scene.add_cylinder(
-                        f"/world/balls/{ball.ident}",
-                        radius=ball.r * geo.MM,
-                        height=0.02,
-                        color=BALL_COLOUR,
-                        position=(ball.x * geo.MM, ball.y * geo.MM, 0.01),
-                        cast_shadow=False,
-                        receive_shadow=False,
-                    )
+                node.on_click(self._obstacle_clicked(ball.ident))
+                self._balls.append(node)
+            for light in snap.lights[:shown]:
+                node = scene.add_cylinder(
+                    f"/world/lights/{light.ident}",
+                    radius=0.03,
+                    height=0.005,
+                    color=LIGHT_ON if light.on else LIGHT_OFF,
+                    position=(light.x * geo.MM, light.y * geo.MM, 0.003),
+                    cast_shadow=False,
+                    receive_shadow=False,
                 )
-            for light in snap.lights:
-                self._lights.append(
-                    scene.add_cylinder(
-                        f"/world/lights/{light.ident}",
-                        radius=0.03,
-                        height=0.005,
-                        color=LIGHT_ON if light.on else LIGHT_OFF,
-                        position=(light.x * geo.MM, light.y * geo.MM, 0.003),
-                        cast_shadow=False,
-                        receive_shadow=False,
-                    )
-                )
+                node.on_click(self._obstacle_clicked(light.ident))
+                self._lights.append(node)
             if robots_changed or self._robots is None:
                 self._draw_robots(snap)
 

@@ -1,0 +1,166 @@
+"""One real lab per test module for browser tests: router, registry, lobby room, engine, viewer.
+
+Everything but the viewer is a real ``wart`` process on 127.0.0.1 (multicast
+scouting off); the viewer runs in the test process over a real Zenoh session
+with :class:`~viewers.web.real.RealConnector`, so tests can read its state
+(views, frames) as well as the page.
+"""
+
+from __future__ import annotations
+
+import shutil
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from common import keys
+from common.auth import issue_session
+from common.client import LabClient
+from common.keys import AliveKind
+from common.messages import AgentCommand, Lease
+from common.service import close_session, open_session
+from common.supervisor import AliveWatch
+from tests.conftest import REPO, Procs, Router, free_port
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+from viewers.web.address import LabAddress
+from viewers.web.app import WebViewer
+from viewers.web.real import RealConnector
+
+WORLD = "w1"
+
+
+@dataclass
+class RealLab:
+    lab: Lab
+    router: Router
+    address: LabAddress
+    session: zenoh.Session
+    connector: RealConnector
+    viewer: WebViewer
+
+    @property
+    def url(self) -> str:
+        return self.address.url()
+
+    @contextmanager
+    def driving(self, agent: str = "k0", speeds: tuple[int, int] = (8, 3)) -> Iterator[None]:
+        """Drive ``agent`` the real way while the block runs.
+
+        alice logs in with her password; a lease for her session is published
+        with a session that has the ``lease`` permission (what an agent
+        context does; issued here with the registry's identity); her sealed
+        commands then pass the engine's lease check.
+        """
+        realm = self.router.realm
+        with self.lab.client("alice") as alice:
+            session = alice.session
+            assert session is not None
+            grantor = issue_session(self.lab.identity, realm, "ctx-test", ["lease"])
+            now = time.time()
+            lease = Lease(
+                lease_id=f"L{uuid.uuid4().hex[:8]}",
+                world=WORLD,
+                agent=agent,
+                holder_user="alice",
+                holder_session=session.session_id,
+                start=now - 1,
+                end=now + 120,
+            )
+            lease_key = keys.agent_lease(realm, WORLD, agent)
+            z = alice.z
+            z.put(lease_key, grantor.seal(lease_key, lease))
+            stop = threading.Event()
+            cmd_key = keys.agent_cmd(realm, WORLD, agent)
+
+            def loop() -> None:
+                command = AgentCommand(agent=agent, speeds=speeds)
+                while not stop.is_set():
+                    z.put(cmd_key, session.seal(cmd_key, command))
+                    stop.wait(0.05)  # a controller's period
+
+            thread = threading.Thread(target=loop, daemon=True)
+            thread.start()
+            try:
+                yield
+            finally:
+                stop.set()
+                thread.join(2)
+
+
+def start_router(procs: Procs, realm: str) -> Router:
+    port = free_port()
+    proc = procs.start(
+        "router",
+        [
+            "router",
+            "--realm",
+            realm,
+            "--name",
+            "test-router",
+            "--listen",
+            f"tcp/127.0.0.1:{port}",
+            "--no-multicast-scouting",
+        ],
+    )
+    router = Router(realm=realm, port=port, proc=proc)
+    session = open_session(router.options(), wait=20.0)
+    try:
+        watch = AliveWatch(session, keys.alive(realm, AliveKind.ROUTER, "test-router"))
+        assert watch.wait(keys.alive(realm, AliveKind.ROUTER, "test-router"), 20.0), proc.output()
+        watch.close()
+    finally:
+        close_session(session)
+    return router
+
+
+@contextmanager
+def real_lab(tmp: Path, map_name: str = "foraging") -> Iterator[RealLab]:
+    procs = Procs(tmp)
+    realm = f"t{uuid.uuid4().hex[:10]}"
+    try:
+        router = start_router(procs, realm)
+        lab = make_lab(router, procs, tmp)
+        lab.start_registry()
+        lab.start_room("lobby")
+        maps_dir = tmp / "maps"
+        maps_dir.mkdir()
+        shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
+        engine = procs.start(
+            "engine",
+            [
+                "engine",
+                "--map",
+                str(maps_dir / f"{map_name}.json"),
+                "--world",
+                WORLD,
+                "--seed",
+                "3",
+                "--maps-dir",
+                str(maps_dir),
+                *lab.net_args(),
+            ],
+        )
+        lab.wait_alive(AliveKind.WORLD, WORLD, engine)
+        session = open_session(router.options(), wait=10.0)
+        address = LabAddress("127.0.0.1", router.port, realm)
+        connector = RealConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")
+        viewer = WebViewer(
+            connector, port=free_port(), default_address=address, data_dir=tmp / "viewer"
+        )
+        try:
+            yield RealLab(lab, router, address, session, connector, viewer)
+        finally:
+            viewer.stop()
+            connector.close()
+            close_session(session)
+    finally:
+        procs.stop_all()
+
+
+__all__ = ["PASSWORD", "WORLD", "LabClient", "RealLab", "real_lab"]

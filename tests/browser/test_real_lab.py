@@ -1,0 +1,228 @@
+"""The page against a REAL lab: router, registry, chat room and engine processes (no fakes).
+
+One lab for the whole module (starting it costs several seconds); each test
+opens its own browser contexts and logs in its own users.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common import keys
+from common.keys import AliveKind
+from tests.browser.conftest import wait_until
+from tests.browser.reallab import PASSWORD, WORLD, RealLab, real_lab
+from viewers.web.app import WebViewer
+from viewers.web.client import BrowserSession
+from viewers.web.real import UserWorld
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+SCENE_BOX = (0, 170, 860, 800)  # left of the docked panel, below viser's WebGL notice
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    with real_lab(Path(tmp_path_factory.mktemp("reallab"))) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer  # open_page (conftest) opens this viewer
+
+
+def session_of(viewer: WebViewer, user: str) -> BrowserSession:
+    for session in list(viewer.sessions.values()):
+        if any(t.connection.user == user for t in session.labs.values()):
+            return session
+    raise AssertionError(f"no browser session for {user}")
+
+
+def log_in(page, lab: RealLab, user: str, password: str = PASSWORD) -> None:
+    page.log_in(lab.url, user, password)
+    page.tab(lab.address.label).first.click()
+    page.wait_text("Logged in as")
+
+
+def online(lab: RealLab) -> set[str]:
+    with lab.lab.client("admin") as admin:
+        return set(admin.directory().users)
+
+
+def test_login_wrong_password_and_presence(open_page, lab: RealLab) -> None:
+    page = open_page("bob")
+    page.log_in(lab.url, "bob", "not-his-password")
+    page.wait_text("wrong user name or password")
+    page.screenshot("real-wrong-password")
+    page.fill("Password", PASSWORD)
+    page.click("Log in")
+    page.tab(lab.address.label).first.click()
+    page.wait_text("Logged in as")
+    page.wait_text("Online:")
+    wait_until(lambda: "bob" in online(lab), what="bob online in the registry")
+    page.screenshot("real-lobby")
+    # Closing the page logs him out of the registry: his presence goes.
+    page.p.context.close()
+    wait_until(lambda: "bob" not in online(lab), 15, what="bob's presence to go")
+
+
+def test_two_sessions_chat_through_the_real_room(open_page, lab: RealLab) -> None:
+    alice, carol = open_page("alice"), open_page("carol")
+    for page, user in ((alice, "alice"), (carol, "carol")):
+        log_in(page, lab, user)
+        page.click("Join lobby")
+        page.tab("lobby").last.click()
+    alice.wait_text("carol joined")
+    alice.fill("Message", "hello carol, over real Zenoh")
+    alice.click("Send")
+    carol.wait_text("hello carol, over real Zenoh")
+    carol.fill("Message", "loud and clear")
+    carol.click("Send")
+    alice.wait_text("loud and clear")
+    alice.screenshot("real-chat")
+    carol.screenshot("real-chat")
+
+
+def scene(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB").crop(SCENE_BOX), np.int16)
+
+
+def test_arena_robots_move_when_driven(open_page, lab: RealLab) -> None:
+    page = open_page("ida")
+    log_in(page, lab, "ida")
+    page.click(f"Join {WORLD}")
+    view = session_of(lab.viewer, "ida").view
+    wait_until(lambda: view.frames_applied > 5 and view.snapshot is not None, 15, what="frames")
+    assert view.snapshot is not None and "k0" in view.snapshot.robots
+    feed = view.feed
+    assert feed is not None
+    start = feed.latest()
+    assert start is not None
+    with lab.driving("k0"):
+        first = page.p.screenshot()
+        wait_until(
+            lambda: np.hypot(*(feed.latest().poses[0, :2] - start.poses[0, :2])) > 40,  # type: ignore[union-attr]
+            15,
+            what="k0 to move 40 mm",
+        )
+        second = page.p.screenshot()
+    page.screenshot("real-arena")
+    changed = np.abs(scene(first) - scene(second)).sum(axis=2) > 30
+    assert changed.sum() > 20, f"only {changed.sum()} pixels changed"
+    # The selected robot's plots take real sensor samples.
+    view.select(0)
+    page.tab(WORLD).last.click()
+    page.wait_text("Selected: k0")
+    panel = next(iter(session_of(lab.viewer, "ida").labs.values())).panels[WORLD]
+    assert panel.robots is not None
+    wait_until(lambda: len(panel.robots._t) > 3, 15, what="sensor samples in the plots")
+    assert np.asarray(panel.robots._ambient).max() > 0
+    page.screenshot("real-plots")
+
+
+def test_edit_moves_for_the_other_session_and_students_cannot(open_page, lab: RealLab) -> None:
+    ida, bob = open_page("ida"), open_page("bob")
+    for page, user in ((ida, "ida"), (bob, "bob")):
+        log_in(page, lab, user)
+        page.click(f"Join {WORLD}")
+    ida_session, bob_session = session_of(lab.viewer, "ida"), session_of(lab.viewer, "bob")
+    for s in (ida_session, bob_session):
+        wait_until(lambda s=s: s.view.snapshot is not None, 15, what="the arena drawn")
+    ida_panel = next(iter(ida_session.labs.values())).panels[WORLD]
+    bob_panel = next(iter(bob_session.labs.values())).panels[WORLD]
+    editor = ida_panel.editor
+    assert editor is not None and editor.allowed
+    snap = ida_session.view.snapshot
+    assert snap is not None
+    target = next(o for o in snap.obstacles if not o.ident.startswith("wall"))
+    # What a finished gizmo drag does: the gizmo's new pose goes to the engine as an edit.
+    editor.select(target.ident)
+    assert editor._gizmo is not None
+    new_x = target.x + 100.0 if target.x + 200.0 < snap.width else target.x - 100.0
+    editor._gizmo.position = (new_x / 1000.0, target.y / 1000.0, 0.04)
+
+    class End:
+        phase = "end"
+
+    editor._moved(End())  # type: ignore[arg-type]
+    assert not editor.notice.visible, editor.notice.content
+
+    def moved_for_bob() -> bool:
+        s = bob_session.view.snapshot
+        return s is not None and any(
+            o.ident == target.ident and abs(o.x - new_x) < 1.0 for o in s.obstacles
+        )
+
+    wait_until(moved_for_bob, 15, what="bob's view to redraw the moved obstacle")
+    bob.screenshot("real-edit-seen")
+
+    # bob (student) sees the editor disabled and a plain refusal if he tries.
+    bob_editor = bob_panel.editor
+    assert bob_editor is not None and not bob_editor.allowed
+    assert bob_editor.add_box.disabled
+    bob_editor.select(target.ident)
+    assert "You may not edit this map" in bob_editor.notice.content
+    bob.tab(WORLD).last.click()
+    bob.p.get_by_text("Map editor").first.click()
+    bob.wait_text("You may not edit this map")
+    bob.screenshot("real-editor-refused")
+    feed = bob_session.view.feed
+    assert isinstance(feed, UserWorld)
+    with pytest.raises(Exception, match="edit_map"):
+        feed.save_map("nope")
+
+
+def test_admin_adds_a_user_who_can_then_log_in(open_page, lab: RealLab) -> None:
+    admin = open_page("admin")
+    log_in(admin, lab, "admin")
+    admin.p.get_by_text("Administration").first.click()
+    admin.fill("Account", "zoe")
+    admin.fill("New password", "zoe-secret-1")
+    admin.click("Add account")
+    admin.wait_text("zoe")
+    admin.screenshot("real-admin")
+    zoe = open_page("zoe")
+    log_in(zoe, lab, "zoe", "zoe-secret-1")
+    zoe.screenshot("real-zoe")
+    with lab.lab.client("zoe", "zoe-secret-1") as client:
+        assert client.user == "zoe"
+
+
+def test_unknown_lab_and_world_listing(open_page, lab: RealLab) -> None:
+    page = open_page("alice")
+    page.log_in("wart://alice@10.255.0.1:7447/other", "alice", PASSWORD)
+    page.wait_text("does not know the lab")
+    # The engine's world is listed in the lobby through its liveliness token.
+    assert keys.alive(lab.router.realm, AliveKind.WORLD, WORLD)
+
+
+ROBOT_RGB = np.array([151, 184, 210])  # an idle robot's body as rendered (flat ambient light)
+
+
+def test_clicking_a_robot_selects_it(open_page, lab: RealLab) -> None:
+    """viser 1.1.1 reports the batched mesh's instance index on a click (measured here)."""
+    page = open_page("carol")
+    log_in(page, lab, "carol")
+    page.click(f"Join {WORLD}")
+    view = session_of(lab.viewer, "carol").view
+    wait_until(lambda: view.frames_applied > 5, 15, what="frames")
+    page.p.wait_for_timeout(500)  # let the software renderer draw the first frames
+    image = scene(page.p.screenshot())  # cropped at SCENE_BOX: rows from y=170
+    close = np.abs(image - ROBOT_RGB).sum(axis=2) < 30
+    ys, xs = np.nonzero(close)
+    keep = ~((xs < 330) & (ys < 120))  # viser's notifications sit top-left
+    ys, xs = ys[keep], xs[keep]
+    assert len(xs) > 50, "no robot found in the screenshot"
+    near = (np.abs(xs - xs[0]) < 25) & (np.abs(ys - ys[0]) < 25)
+    x, y = float(xs[near].mean()), float(ys[near].mean()) + SCENE_BOX[1]
+    page.p.mouse.click(x, y + 8)  # a little below the centre: the name label sits on it
+    wait_until(lambda: view.selected is not None, 10, what="a robot selected by the click")
+    page.screenshot("real-clicked")
