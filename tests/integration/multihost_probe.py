@@ -21,7 +21,7 @@ from common import keys
 from common.client import LabClient
 from common.keys import AliveKind
 from common.labfile import load
-from common.messages import Lease, PackedArray, WorldFrame, decode, encode
+from common.messages import AgentCommand, Lease, PackedArray, WorldFrame, decode, encode
 from common.messages.world import WorldSnapshot
 from common.service import close_session, open_session
 from common.zsecurity import TlsFiles, client_tls, host_tls, zenoh_security
@@ -290,6 +290,26 @@ def main() -> int:
                             driven = agents.drive(agent, load_controller(EXAMPLE))
                             out[f"{world}_remote"] = driven.status
                             out[f"{world}_remote_mm"] = moved(start, poses.xy(agent))
+                        # Forged: commands sealed by this (logged-in) student while
+                        # no lease of theirs is in force. The transport lets
+                        # students publish commands; the engine or bridge drops them.
+                        # First let the robot come to rest after its slot (the motors
+                        # stop at the lease's end; the last frames may still move).
+                        start = poses.xy(agent)
+                        deadline = time.monotonic() + 5
+                        while time.monotonic() < deadline:
+                            time.sleep(0.5)
+                            now = poses.xy(agent)
+                            if moved(start, now) < 0.5:
+                                break
+                            start = now
+                        key = keys.agent_cmd(realm, world, agent)
+                        assert client.session is not None
+                        for _ in range(30):
+                            command = AgentCommand(agent=agent, speeds=(20, 20))
+                            s.put(key, client.session.seal(key, command))
+                            time.sleep(0.05)
+                        out[f"{world}_forged_mm"] = moved(start, poses.xy(agent))
                     finally:
                         agents.leave()
                         poses.close()

@@ -235,6 +235,12 @@ def test_a_student_on_a_queues_and_drives_robots_on_b_and_c(lab: MultiLab) -> No
     assert seen["arena1_deploy_mm"] > 50, seen
     assert seen["real1_deploy_mm"] > 50, seen
     assert seen["real1_remote_mm"] > 50, seen
+    # Then the same student, logged in but holding no lease, sends well-formed
+    # sealed commands for 1.5 s at a speed that would cover over 200 mm: neither
+    # the engine nor the bridge obeys them.
+    assert seen["arena1_forged_mm"] < 10, seen
+    assert seen["real1_forged_mm"] < 10, seen
+    print(f"moved (mm): {seen}")
 
 
 def test_a_process_without_a_valid_certificate_cannot_join(lab: MultiLab) -> None:
