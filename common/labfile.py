@@ -21,14 +21,15 @@ from typing import Any
 
 from common.keys import is_ident
 
-# What a host can run, and the command each kind needs. Kinds whose command
-# lands with another issue are accepted by the parser and refused by
-# ``wart host`` with a clear message while this build lacks the command.
+# What a host can run: the fields each kind requires, then the optional ones.
+# ``agent`` is an agent context for a world the lab file names (a bridge's
+# real robots, usually); every engine gets its own from the [arena] template.
 SERVICE_KINDS: dict[str, tuple[str, ...]] = {
     "registry": (),
     "chat": ("name",),
     "engine": ("world", "map"),
     "bridge": ("world",),
+    "agent": ("name", "world"),
     "viewer": (),
     "runner": ("name",),
 }
@@ -36,14 +37,17 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "registry": ("server_name",),
     "chat": ("title",),
     "engine": ("seed", "robots"),
-    "bridge": ("ports",),
-    "viewer": ("http_port",),
+    # ports: PATH=ID@X,Y,DEG as for `wart bridge --port`; emulate: a map name
+    # whose first robot an emulated Khepera plays (a lab without hardware).
+    "bridge": ("ports", "emulate"),
+    "agent": ("title", "runner", "slot_seconds"),
+    "viewer": ("http_port", "http_host"),
     "runner": (),
 }
 
 # The default arena processes. ``{placeholders}`` are filled by wart host;
-# an empty template is skipped. The agent context's command lands with
-# issue 5 (``wart context agent``); a lab file sets [arena].agent once it has.
+# an empty template is skipped (a lab file may set ``agent = []`` for arenas
+# without agent contexts).
 DEFAULT_ENGINE_TEMPLATE: tuple[str, ...] = (
     "engine",
     "--map",
@@ -62,14 +66,17 @@ AGENT_CONTEXT_TEMPLATE: tuple[str, ...] = (
     "{world}",
     "--name",
     "{world}",
+    "--runner",
+    "{runner}",
     "--user",
     "{account}",
     "--identity",
     "{identity}",
 )
 TEMPLATE_FIELDS = frozenset(
-    {"world", "map", "seed", "robots", "maps_dir", "account", "identity", "host"}
+    {"world", "map", "seed", "robots", "maps_dir", "account", "identity", "host", "runner"}
 )
+DEFAULT_RUNNER = "runner"  # what agent contexts name when the lab file has no runner
 
 
 class LabFileError(ValueError):
@@ -131,7 +138,7 @@ class Limits:
 @dataclass(frozen=True)
 class ArenaTemplates:
     engine: tuple[str, ...]
-    agent: tuple[str, ...]  # empty until agent contexts exist
+    agent: tuple[str, ...]  # empty: arenas without an agent context
 
 
 @dataclass(frozen=True)
@@ -158,6 +165,13 @@ class LabFile:
 
     def hosts_dir(self, host: str) -> Path:
         return self.security.pki / host
+
+    def runner_for(self, host: str) -> str:
+        """The runner an agent context on ``host`` uses by default: its host's, else the lab's."""
+        runners = [
+            (h.name != host, s.ident) for h in self.hosts for s in h.services if s.kind == "runner"
+        ]
+        return min(runners)[1] if runners else DEFAULT_RUNNER
 
 
 # --- parsing ----------------------------------------------------------------------
@@ -249,10 +263,10 @@ def _service(where: str, raw: Any) -> ServiceEntry:
         if name not in table:
             raise LabFileError(f"{where}: a {kind} service needs '{name}'")
     params: dict[str, Any] = {}
-    for name in ("name", "world"):
+    for name in ("name", "world", "runner"):
         if name in table:
             params[name] = _ident(f"{where}.{name}", table[name])
-    for name in ("map", "title", "server_name"):
+    for name in ("map", "title", "server_name", "http_host"):
         if name in table:
             params[name] = _type(f"{where}.{name}", table[name], str, "a string")
     if "seed" in table:
@@ -263,6 +277,12 @@ def _service(where: str, raw: Any) -> ServiceEntry:
         params["http_port"] = _int(f"{where}.http_port", table["http_port"], 1, 65535)
     if "ports" in table:
         params["ports"] = _strings(f"{where}.ports", table["ports"])
+    if "emulate" in table:
+        params["emulate"] = _ident(f"{where}.emulate", table["emulate"])
+    if "slot_seconds" in table:
+        params["slot_seconds"] = _number(f"{where}.slot_seconds", table["slot_seconds"], 1, 3600)
+    if kind == "bridge" and not (params.get("ports") or params.get("emulate")):
+        raise LabFileError(f"{where}: a bridge needs 'ports' (its robots) or 'emulate' (a map)")
     return ServiceEntry(kind=kind, params=params)
 
 
@@ -363,7 +383,7 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
     _unknown("arena", arena, ("engine", "agent"))
     templates = ArenaTemplates(
         engine=_template("arena.engine", arena.get("engine", list(DEFAULT_ENGINE_TEMPLATE))),
-        agent=_template("arena.agent", arena.get("agent", [])),
+        agent=_template("arena.agent", arena.get("agent", list(AGENT_CONTEXT_TEMPLATE))),
     )
     if not templates.engine:
         raise LabFileError("arena.engine: an arena needs an engine command")
@@ -428,14 +448,17 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
             f"{', '.join(registries) or 'none'})"
         )
     worlds: dict[str, str] = {}
-    rooms: dict[str, str] = {}
+    rooms: dict[str, str] = {}  # contexts: chat rooms, agent contexts (and arenas' below)
+    runners: dict[str, str] = {}
     for host in hosts:
         for svc in host.services:
             table_by_kind = (
                 worlds
                 if svc.kind in ("engine", "bridge")
                 else rooms
-                if svc.kind == "chat"
+                if svc.kind in ("chat", "agent")
+                else runners
+                if svc.kind == "runner"
                 else None
             )
             if table_by_kind is None:
@@ -446,6 +469,26 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
                     f"{host.name}: names are lab-wide"
                 )
             table_by_kind[svc.ident] = host.name
+    if templates.agent:
+        # An engine's agent context is named after its world: it shares the
+        # context names with chat rooms and the lab file's agent contexts.
+        for world, where_world in worlds.items():
+            if world in rooms and any(
+                s.kind == "engine" and s.ident == world for h in hosts for s in h.services
+            ):
+                raise LabFileError(
+                    f"hosts: engine {world!r} on {where_world} gets an agent context named "
+                    f"{world!r} from [arena].agent, and a context on {rooms[world]} has that name"
+                )
+    known_runners = set(runners)
+    for i, host in enumerate(hosts):
+        for j, svc in enumerate(host.services):
+            runner = svc.params.get("runner")
+            if runner is not None and runner not in known_runners:
+                raise LabFileError(
+                    f"hosts[{i}].services[{j}].runner: no runner named {runner!r} in the lab "
+                    f"({', '.join(sorted(known_runners)) or 'none'})"
+                )
     return LabFile(
         path=path,
         realm=realm,

@@ -47,7 +47,7 @@ ROLES = (
     "student",
     "admin",
 )
-SERVICE_ROLES = {"registry", "chat", "engine", "bridge", "viewer", "runner"}
+SERVICE_ROLES = {"registry", "chat", "engine", "bridge", "agent", "viewer", "runner"}
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,9 @@ _PEOPLE = (
     _g("ask", "registry/login", "registry/logout", "registry/directory", "registry/admin"),
     _g("ask", "registry/revocations"),
     _g("sub", "registry/revocations", "user/*/inbox"),
-    _g("pub", "user/*/inbox", "ctx/*/in", "world/*/agent/*/cmd"),
+    # ctx/*/output: a controller run from a student's machine (wart control)
+    # reports its output to the context, which checks the sender holds the lease.
+    _g("pub", "user/*/inbox", "ctx/*/in", "ctx/*/output", "world/*/agent/*/cmd"),
     _g("ask", "ctx/*/join", "ctx/*/leave", "ctx/*/request", "ctx/*/state"),
     _g("sub", "ctx/*/events"),
     _g("sub", "world/*/frame", "world/*/sensors", "world/*/agent/*/sensors"),
@@ -117,11 +119,11 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("token", "alive/context/*"),
     ),
     # Agent contexts: a chat room plus the robots' queues; the only role that
-    # may publish leases.
+    # may publish leases. They hear controllers' output (runner, wart control).
     "agent": (
         *_SERVICE_BASE,
         _g("serve", "ctx/*/join", "ctx/*/leave", "ctx/*/state", "ctx/*/request"),
-        _g("sub", "ctx/*/in"),
+        _g("sub", "ctx/*/in", "ctx/*/output"),
         _g("pub", "ctx/*/events", "world/*/agent/*/lease"),
         _g("sub", "world/*/frame", "world/*/agent/*/sensors"),
         _g("ask", "world/*/snapshot", "runner/*/run"),
@@ -135,10 +137,14 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("serve", "world/*/snapshot", "world/*/edit", "world/*/map"),
         _g("token", "alive/world/*"),
     ),
+    # The runner is the parent of untrusted code: a client like a student's, that
+    # may command robots (the engine or bridge obeys only the lease holder) and
+    # report output, but never publish frames, samples or leases. Its sandboxes
+    # have no network at all; they talk to it over a pipe.
     "runner": (
         *_SERVICE_BASE,
         _g("serve", "runner/*/run"),
-        _g("pub", "world/*/agent/*/cmd"),
+        _g("pub", "world/*/agent/*/cmd", "ctx/*/output"),
         _g("sub", "world/*/agent/*/sensors", "world/*/agent/*/lease", "world/*/frame"),
         _g("ask", "world/*/snapshot"),
         _g("token", "alive/runner/*"),
@@ -149,6 +155,8 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("pub", "host/*/load"),
         _g("token", "alive/host/*"),
     ),
+    # The viewer is a gateway: browsers' users act through it with their own
+    # sessions, so it holds exactly people's rights, plus its presence.
     "viewer": (*_PEOPLE, _g("token", "alive/viewer/*")),
     "student": _PEOPLE,
     # Operators' tools (wart doctor, wart arena): people's rights plus the

@@ -39,16 +39,23 @@ def host_roles(lab: LabFile, host: str) -> list[str]:
     """The certificates a host needs: its router, its supervisor, its services, arenas."""
     entry = lab.host(host)
     roles = ["router", "host", *sorted(entry.kinds())]
-    if entry.arenas:
-        roles += ["engine", "agent"]
+    if entry.arenas or "engine" in entry.kinds():
+        roles += ["engine", "agent"]  # an engine is an arena: its agent context comes along
     return sorted(set(roles), key=ROLES.index)
 
 
+# The registry account of each service kind that logs in (named after its ident).
+ACCOUNT_PREFIX = {"chat": "chat-", "agent": "ctx-", "runner": "runner-"}
+
+
 def service_accounts(lab: LabFile, host: str) -> list[str]:
-    """The registry accounts of a host's services (chat rooms, the arenas' agent contexts)."""
+    """The registry accounts of a host's services: chat rooms, agent contexts, runners, and
+    the one its arenas' agent contexts share (also for engines the lab file names)."""
     entry = lab.host(host)
-    accounts = [f"chat-{s.ident}" for s in entry.services if s.kind == "chat"]
-    if entry.arenas:
+    accounts = [
+        ACCOUNT_PREFIX[s.kind] + s.ident for s in entry.services if s.kind in ACCOUNT_PREFIX
+    ]
+    if lab.arena.agent and (entry.arenas or "engine" in entry.kinds()):
         accounts.append(f"agent-{host}")
     return accounts
 

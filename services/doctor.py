@@ -153,7 +153,18 @@ def expected_tokens(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
         elif svc.kind == "chat":
             out.append((f"chat {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident)))
         elif svc.kind in ("engine", "bridge"):
-            out.append((f"{svc.kind} {svc.ident}", keys.alive(realm, AliveKind.WORLD, svc.ident)))
+            what = f"{svc.kind} {svc.ident}"
+            if svc.kind == "bridge" and svc.params.get("emulate"):
+                what += " (with its emulated Khepera)"  # the emulator is off the network
+            out.append((what, keys.alive(realm, AliveKind.WORLD, svc.ident)))
+            if svc.kind == "engine" and lab.arena.agent:
+                out.append(
+                    (f"agent context {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident))
+                )
+        elif svc.kind == "agent":
+            out.append(
+                (f"agent context {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident))
+            )
         elif svc.kind == "viewer":
             out.append(("viewer", keys.alive(realm, AliveKind.VIEWER, host.name)))
         elif svc.kind == "runner":
@@ -230,8 +241,35 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
             if parsed:
                 report.info(f"also alive: {parsed[0].value} {parsed[1]}")
         report.head("hosts' load")
-        for line in format_loads(host_loads(session, lab.realm)).splitlines():
+        loads = host_loads(session, lab.realm)
+        for line in format_loads(loads).splitlines():
             report.info(line)
+        report.head("services per host (as each host's supervisor sees them)")
+        for load_ in loads:
+            up = [name for name in load_.services if not name.endswith(" (down)")]
+            report.info(f"{load_.host}: {', '.join(up) or 'no services'}")
+            for name in load_.services:
+                if name.endswith(" (down)"):
+                    report.bad(
+                        f"{name[: -len(' (down)')]} on {load_.host} is down (restarting); "
+                        f"see its log in STATE_DIR/logs/ on {load_.host}"
+                    )
+            for arena in load_.arenas:
+                # An arena is its engine and, with [arena].agent, its agent context:
+                # both must be present for students to see and use it.
+                wanted = [("engine", keys.alive(lab.realm, AliveKind.WORLD, arena.world))]
+                if lab.arena.agent:
+                    wanted.append(
+                        ("agent context", keys.alive(lab.realm, AliveKind.CONTEXT, arena.world))
+                    )
+                for what, key in wanted:
+                    if key in live:
+                        report.ok(f"arena {arena.world} on {load_.host}: {what} alive")
+                    else:
+                        report.bad(
+                            f"arena {arena.world} on {load_.host}: its {what} is not alive "
+                            f"({arena.state}); see the logs on {load_.host}"
+                        )
         report.head("access denials")
         report.info(
             "routers drop denied messages silently; to see them, run wart host with "

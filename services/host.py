@@ -4,8 +4,8 @@ Starts the host's Zenoh router (TLS, mutual TLS and the lab's access rules,
 meshed with the routers of the hosts it lists), then the services the lab file
 gives this host, under the same supervision as ``wart up`` (wait for each
 liveliness token, restart with backoff, stop in reverse order). Publishes its
-load on ``host/<host>/load`` and starts or stops arenas (an engine, and the
-agent context once it exists) on request on ``host/<host>/spawn`` from users
+load on ``host/<host>/load`` and starts or stops arenas (an engine and its
+agent context) on request on ``host/<host>/spawn`` from users
 with the ``host`` permission. Adding a host to a lab is starting ``wart host``
 on one more machine.
 """
@@ -170,10 +170,11 @@ class HostService(Service):
                 )
             )
         reason = self._refusal(len(arenas), cpu, mem.available / 2**20)
+        in_arenas = {id(c) for arena in current for c in arena.children}
         services = [
             c.spec.name + ("" if c.process is not None and c.process.poll() is None else " (down)")
             for c in list(self.supervisor.children)
-            if not c.spec.name.startswith(("engine ", "agent "))
+            if id(c) not in in_arenas
         ]
         return HostLoad(
             host=self.ident,
@@ -395,6 +396,8 @@ def run_host(ctx: HostContext, stop: threading.Event) -> int:
         if not supervisor.wait_ready(router):
             return 1
         service = HostService(session, ctx, supervisor).start()
+        engines = {s.ident: s for s in host.services if s.kind == "engine"}
+        arena_children: dict[str, list[Child]] = {}
         for spec in host_plan(ctx):
             if stop.is_set():
                 break
@@ -402,15 +405,14 @@ def run_host(ctx: HostContext, stop: threading.Event) -> int:
             supervisor.spawn(child)
             if not supervisor.wait_ready(child):
                 code = 1
-            if spec.name.startswith("engine "):
-                svc = next(
-                    s
-                    for s in host.services
-                    if s.kind == "engine" and f"engine {s.ident}" == spec.name
-                )
-                service.adopt(
-                    svc.ident, str(svc.params["map"]), [child], int(svc.params.get("robots", 0))
-                )
+            # An engine of the lab file and its agent context are one arena (named
+            # "engine W" and "agent W" by arena_specs), counted in the load reports.
+            kind, _, world = spec.name.partition(" ")
+            if kind in ("engine", "agent") and world in engines:
+                arena_children.setdefault(world, []).append(child)
+        for world, children in arena_children.items():
+            svc = engines[world]
+            service.adopt(world, str(svc.params["map"]), children, int(svc.params.get("robots", 0)))
         if not stop.is_set():
             print(f"Host {host.name} is running. Press Ctrl-C to stop it.", flush=True)
             supervisor.run_until(stop)

@@ -2,8 +2,8 @@
 
 Kept apart from the process (services/host.py) so tests and ``wart doctor``
 can compute a host's plan without starting anything. The arena's processes
-come from the lab file's ``[arena]`` templates (engine, and the agent context
-once ``wart context agent`` exists), filled by :func:`arena_specs`.
+come from the lab file's ``[arena]`` templates (engine and agent context),
+filled by :func:`arena_specs`; an engine named in the lab file is an arena too.
 """
 
 from __future__ import annotations
@@ -22,15 +22,19 @@ from services.certs import identity_path, registry_key_path
 
 REPO_MAPS = Path(__file__).resolve().parent.parent / "maps"
 
-# The command each service kind needs, and the issue that brings it when absent.
-NEEDS: dict[str, tuple[tuple[str, ...], str]] = {
-    "registry": (("registry",), ""),
-    "chat": (("context", "chat"), ""),
-    "engine": (("engine",), ""),
-    "bridge": (("bridge",), "issue 7 (the Khepera bridge on Zenoh)"),
-    "viewer": (("viewer",), "issue 6 (the web viewer)"),
-    "runner": (("runner",), "issue 5 (agent contexts and the runner)"),
+# The command each service kind needs (a build without one refuses the host).
+NEEDS: dict[str, tuple[str, ...]] = {
+    "registry": ("registry",),
+    "chat": ("context", "chat"),
+    "engine": ("engine",),
+    "bridge": ("bridge",),
+    "agent": ("context", "agent"),
+    "viewer": ("viewer",),
+    "runner": ("runner",),
 }
+# Where an emulated Khepera's robot starts when its map names none (the bridge's
+# odometry must start where the emulated body is, or the two views disagree).
+DEFAULT_POSE = (500.0, 500.0, 0.0)
 
 
 def command_available(argv: tuple[str, ...] | list[str]) -> bool:
@@ -95,17 +99,17 @@ def read_registry_key(lab: LabFile) -> str:
 def check_available(lab: LabFile, host: HostEntry) -> None:
     """Refuse, before anything starts, a host whose share needs a command this build lacks."""
     for i, svc in enumerate(host.services):
-        argv, issue = NEEDS[svc.kind]
+        argv = NEEDS[svc.kind]
         if not command_available(argv):
             raise LabFileError(
                 f"hosts[{lab.hosts.index(host)}].services[{i}]: a {svc.kind} needs "
-                f"`wart {' '.join(argv)}`, which this build does not have yet ({issue})"
+                f"`wart {' '.join(argv)}`, which this build does not have"
             )
-    if host.arenas and lab.arena.agent and not command_available(lab.arena.agent[:2]):
-        raise LabFileError(
-            f"arena.agent: `wart {' '.join(lab.arena.agent[:2])}` does not exist in this build "
-            "(agent contexts land with issue 5); leave arena.agent empty until then"
-        )
+    for which, template in (("engine", lab.arena.engine), ("agent", lab.arena.agent)):
+        if template and not command_available(template[:2]):
+            raise LabFileError(
+                f"arena.{which}: `wart {' '.join(template[:2])}` does not exist in this build"
+            )
 
 
 def write_configs(ctx: HostContext) -> None:
@@ -193,7 +197,7 @@ def arena_specs(
 ) -> list[ChildSpec]:
     """The processes of one arena: the engine, then the agent context (when configured)."""
     lab, host = ctx.lab, ctx.host
-    account = f"agent-{host.name}"
+    account = arena_account(host.name)
     values = {
         "world": world,
         "map": map_path,
@@ -203,6 +207,7 @@ def arena_specs(
         "account": account,
         "identity": identity_path(lab.security.pki, host.name, account),
         "host": host.name,
+        "runner": lab.runner_for(host.name),
     }
     specs = [
         ChildSpec(
@@ -221,6 +226,64 @@ def arena_specs(
                 detail=f"agent context of {world}",
             )
         )
+    return specs
+
+
+def arena_account(host: str) -> str:
+    """The one service account the agent contexts of a host's arenas share."""
+    return f"agent-{host}"
+
+
+def map_pose(map_path: Path) -> tuple[float, float, float]:
+    """Where the map's first robot stands (x mm, y mm, heading degrees)."""
+    data: dict[str, Any] = json.loads(map_path.read_text())
+    for agent in data.get("agents", []):
+        return (
+            float(agent.get("x", DEFAULT_POSE[0])),
+            float(agent.get("y", DEFAULT_POSE[1])),
+            float(agent.get("heading_deg", DEFAULT_POSE[2])),
+        )
+    return DEFAULT_POSE
+
+
+def emulator_link(ctx: HostContext, world: str) -> Path:
+    """The stable path of an emulated Khepera's pty (what a real one's by-id path would be)."""
+    return ctx.state_dir / "dev" / f"{world}-khepera"
+
+
+def bridge_specs(ctx: HostContext, svc: ServiceEntry) -> list[ChildSpec]:
+    """A bridge, preceded by the emulated Khepera it drives when the lab has no hardware."""
+    p, world = svc.params, svc.ident
+    ports = [str(port) for port in p.get("ports", ())]
+    specs: list[ChildSpec] = []
+    if p.get("emulate"):
+        map_path = resolve_map(ctx.lab, str(p["emulate"]))
+        link = emulator_link(ctx, world)
+        link.parent.mkdir(parents=True, exist_ok=True)
+        x, y, deg = map_pose(map_path)
+        specs.append(
+            ChildSpec(
+                name=f"khepera emulator {world}",
+                argv=["khepera-emulator", "--map", str(map_path), "--link", str(link)],
+                alive_key=None,  # not on the network: the bridge below is its presence
+                detail=f"emulated Khepera at {link} ({map_path.name})",
+            )
+        )
+        taken = {port.partition("=")[2].partition("@")[0] for port in ports}
+        agent = next(f"k{n}" for n in range(1, len(ports) + 2) if f"k{n}" not in taken)
+        ports.append(f"{link}={agent}@{x:g},{y:g},{deg:g}")
+    argv = ["bridge", "--world", world]
+    for port in ports:
+        argv += ["--port", port]
+    specs.append(
+        ChildSpec(
+            name=f"bridge {world}",
+            argv=[*argv, *ctx.net_args("bridge")],
+            alive_key=keys.alive(ctx.realm, AliveKind.WORLD, world),
+            detail=f"real world {world}, {len(ports)} robot(s)"
+            + (" (one emulated)" if p.get("emulate") else ""),
+        )
+    )
     return specs
 
 
@@ -263,13 +326,96 @@ def service_spec(ctx: HostContext, svc: ServiceEntry) -> list[ChildSpec]:
         if robots:
             map_path = map_with_robots(map_path, robots, state / "arenas" / f"{p['world']}.json")
         return arena_specs(ctx, str(p["world"]), map_path, seed=int(p.get("seed", 1)))
-    # bridge, viewer, runner: refused by check_available until their commands land.
-    raise LabFileError(f"{svc.kind} services are not supported by this build yet")
+    if svc.kind == "bridge":
+        return bridge_specs(ctx, svc)
+    if svc.kind == "agent":
+        name, account = svc.ident, f"ctx-{svc.ident}"
+        argv = [
+            "context",
+            "agent",
+            "--name",
+            name,
+            "--world",
+            str(p["world"]),
+            "--runner",
+            str(p.get("runner") or lab.runner_for(host.name)),
+            "--user",
+            account,
+            "--identity",
+            str(identity_path(lab.security.pki, host.name, account)),
+            "--data-dir",
+            str(state / "rooms"),
+            *ctx.net_args("agent"),
+        ]
+        if p.get("title"):
+            argv += ["--title", str(p["title"])]
+        if p.get("slot_seconds"):
+            argv += ["--slot-seconds", f"{float(p['slot_seconds']):g}"]
+        return [
+            ChildSpec(
+                f"agent context {name}",
+                argv,
+                keys.alive(ctx.realm, AliveKind.CONTEXT, name),
+                detail=f"queues and leases for the robots of {p['world']}",
+            )
+        ]
+    if svc.kind == "runner":
+        name, account = svc.ident, f"runner-{svc.ident}"
+        argv = [
+            "runner",
+            "--name",
+            name,
+            "--user",
+            account,
+            "--identity",
+            str(identity_path(lab.security.pki, host.name, account)),
+            *ctx.net_args("runner"),
+        ]
+        return [
+            ChildSpec(
+                f"runner {name}",
+                argv,
+                keys.alive(ctx.realm, AliveKind.RUNNER, name),
+                detail="sandboxed uploaded controllers",
+            )
+        ]
+    if svc.kind == "viewer":
+        # The viewer's id is its host's name: one viewer per host, and the doctor
+        # knows which token to expect. Browsers elsewhere reach it on the host's
+        # address (http_host), and it offers them this lab by the same address.
+        http_host = str(p.get("http_host") or host.address)
+        argv = [
+            "viewer",
+            "--id",
+            host.name,
+            "--http-port",
+            str(p.get("http_port", 8080)),
+            "--host",
+            http_host,
+            "--lab-address",
+            f"{host.address}:{host.port}/{ctx.realm}",
+            "--url-file",
+            str(state / "viewer.url"),
+            "--data-dir",
+            str(state / "viewer"),
+            *ctx.net_args("viewer"),
+        ]
+        return [
+            ChildSpec(
+                "viewer",
+                argv,
+                keys.alive(ctx.realm, AliveKind.VIEWER, host.name),
+                detail=f"web viewer on {http_host}:{p.get('http_port', 8080)}",
+            )
+        ]
+    raise LabFileError(f"{svc.kind} services are not supported by this build")
 
 
 def host_plan(ctx: HostContext) -> list[ChildSpec]:
     """The host's own services in start order (the router is started first, separately)."""
-    order = {"registry": 0, "chat": 1, "engine": 2, "bridge": 2, "runner": 3, "viewer": 4}
+    # Worlds before the contexts that lease their robots; the viewer, the front
+    # door, once the rest serves.
+    order = dict(registry=0, chat=1, engine=2, bridge=2, runner=3, agent=4, viewer=5)
     specs: list[ChildSpec] = []
     for svc in sorted(ctx.host.services, key=lambda s: order[s.kind]):
         specs += service_spec(ctx, svc)

@@ -21,7 +21,7 @@ from common import keys
 from common.client import LabClient
 from common.keys import AliveKind
 from common.labfile import load
-from common.messages import Lease, PackedArray, WorldFrame, decode, encode
+from common.messages import AgentCommand, Lease, PackedArray, WorldFrame, decode, encode
 from common.messages.world import WorldSnapshot
 from common.service import close_session, open_session
 from common.zsecurity import TlsFiles, client_tls, host_tls, zenoh_security
@@ -29,6 +29,43 @@ from services.arena import new_arena, stop_arena
 from services.hostplan import read_registry_key
 
 FORGED_TICK = 987_654
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
+
+
+class Poses:
+    """The newest frame of a world, seen from this host (callback kept short)."""
+
+    def __init__(self, session, realm: str, world: str) -> None:
+        self.rows: list[str] = []
+        for reply in session.get(keys.world_snapshot(realm, world), timeout=10.0):
+            if reply.ok is not None:
+                self.rows = decode(reply.ok.payload, WorldSnapshot).rows
+        self._raw: bytes | None = None
+        self._lock = threading.Lock()
+
+        def on(sample) -> None:
+            with self._lock:
+                self._raw = bytes(sample.payload.to_bytes())
+
+        self.sub = session.declare_subscriber(keys.world_frame(realm, world), on)
+        deadline = time.monotonic() + 10
+        while self._raw is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+
+    def xy(self, agent: str) -> tuple[float, float]:
+        with self._lock:
+            raw = self._raw
+        if raw is None:
+            raise RuntimeError("no frame of this world arrived")
+        pose = decode(raw, WorldFrame).poses.to_numpy()[self.rows.index(agent)]
+        return float(pose[0]), float(pose[1])
+
+    def close(self) -> None:
+        self.sub.undeclare()
+
+
+def moved(before: tuple[float, float], after: tuple[float, float]) -> float:
+    return float(np.hypot(after[0] - before[0], after[1] - before[1]))
 
 
 def result(**values: object) -> int:
@@ -203,7 +240,7 @@ def main() -> int:
 
     if verb == "arena":
         # arena HOST PASSWORD_FILE WORLD: start an arena from HOST (placed by load), see
-        # its world token from HOST, stop it.
+        # its world token from HOST and its agent context in the directory, stop it.
         host, password_file, world = args
         s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
         try:
@@ -212,8 +249,92 @@ def main() -> int:
                 arena = new_arena(client, map_name="foraging", robots=3, world=world, host=None)
                 key = keys.alive(realm, AliveKind.WORLD, world)
                 seen = any(r.ok for r in s.liveliness().get(key, timeout=3))
+                kind = None
+                deadline = time.monotonic() + 15
+                while kind is None and time.monotonic() < deadline:
+                    kinds = {c.ctx: c.kind for c in client.directory().contexts}
+                    kind = kinds.get(world)
+                    time.sleep(0.3)
                 detail = stop_arena(client, world)
-                return result(host=arena.host, seen=seen, stopped=detail)
+                return result(host=arena.host, seen=seen, kind=kind, stopped=detail)
+        finally:
+            close_session(s)
+
+    if verb == "drive":
+        # drive HOST PASSWORD_FILE: a student's process on HOST (student certificate)
+        # queues the example controller on arena1 (runs in the runner's sandbox) and
+        # on the emulated Khepera of real1, and drives real1's robot from here.
+        from common.agent_client import FINAL, AgentClient
+        from common.controller import load_controller
+
+        host, password_file = args
+        s = session_for(lab_path, client_tls(pki, "student"), lab.host(host).endpoint, lab.lease_ms)
+        out: dict[str, object] = {}
+        try:
+            with LabClient(s, realm, read_registry_key(lab), presence=False) as client:
+                client.login("admin", Path(password_file).read_text().strip())
+                for ctx, world in (("arena1", "arena1"), ("robots", "real1")):
+                    poses = Poses(s, realm, world)
+                    agent = poses.rows[0]
+                    agents = AgentClient(client, ctx).join()
+                    try:
+                        start = poses.xy(agent)
+                        queued = agents.queue(
+                            agent, "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name
+                        )
+                        final = agents.wait_status(queued.request_id, FINAL, timeout=30)
+                        out[f"{world}_deploy"] = final.status if final else "timeout"
+                        out[f"{world}_deploy_mm"] = moved(start, poses.xy(agent))
+                        if world == "real1":
+                            start = poses.xy(agent)
+                            driven = agents.drive(agent, load_controller(EXAMPLE))
+                            out[f"{world}_remote"] = driven.status
+                            out[f"{world}_remote_mm"] = moved(start, poses.xy(agent))
+                        # Forged: commands sealed by this (logged-in) student while
+                        # no lease of theirs is in force. The transport lets
+                        # students publish commands; the engine or bridge drops them.
+                        # First let the robot come to rest after its slot (the motors
+                        # stop at the lease's end; the last frames may still move).
+                        start = poses.xy(agent)
+                        deadline = time.monotonic() + 5
+                        while time.monotonic() < deadline:
+                            time.sleep(0.5)
+                            now = poses.xy(agent)
+                            if moved(start, now) < 0.5:
+                                break
+                            start = now
+                        key = keys.agent_cmd(realm, world, agent)
+                        assert client.session is not None
+                        for _ in range(30):
+                            command = AgentCommand(agent=agent, speeds=(20, 20))
+                            s.put(key, client.session.seal(key, command))
+                            time.sleep(0.05)
+                        out[f"{world}_forged_mm"] = moved(start, poses.xy(agent))
+                    finally:
+                        agents.leave()
+                        poses.close()
+                return result(**out)
+        finally:
+            close_session(s)
+
+    if verb == "dir-follow":
+        # dir-follow HOST PASSWORD_FILE CTX SECONDS: poll the directory, print whether
+        # CTX is listed each time that changes.
+        host, password_file, ctx, seconds = args[0], args[1], args[2], float(args[3])
+        s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
+        try:
+            with LabClient(s, realm, read_registry_key(lab), presence=False) as client:
+                client.login("admin", Path(password_file).read_text().strip())
+                print("READY", flush=True)
+                listed: bool | None = None
+                end = time.monotonic() + seconds
+                while time.monotonic() < end:
+                    now = ctx in {c.ctx for c in client.directory().contexts}
+                    if now != listed:
+                        listed = now
+                        print("EVENT", "listed" if now else "unlisted", flush=True)
+                    time.sleep(0.2)
+                return result(listed=listed)
         finally:
             close_session(s)
 

@@ -1,9 +1,11 @@
 """A three-host lab in network namespaces, routers meshed over mutual TLS with access rules.
 
-A: router, registry, chat lobby (takes no arenas); B: router, engine arena1;
-C: router (spare capacity). Each host runs ``wart host`` from one lab file;
-probes (tests/integration/multihost_probe.py) run inside the namespaces.
-Transport lease 2 s, so a cut link is noticed within about 2 s.
+A: router, registry, chat lobby, web viewer (takes no arenas); B: router, engine
+arena1 with its agent context, the runner; C: router, bridge real1 driving an
+emulated Khepera, agent context robots for it (its controllers run on B's
+runner). Each host runs ``wart host`` from one lab file; probes
+(tests/integration/multihost_probe.py) run inside the namespaces. Transport
+lease 2 s, so a cut link is noticed within about 2 s.
 """
 
 from __future__ import annotations
@@ -42,6 +44,10 @@ pki = "pki"
 max_cpu_percent = 100.0
 load_period_s = 1.0
 max_arenas_per_host = 3
+[arena]   # the default agent template, with 3 s slots so a test drives quickly
+agent = ["context", "agent", "--world", "{{world}}", "--name", "{{world}}",
+         "--runner", "{{runner}}", "--user", "{{account}}", "--identity", "{{identity}}",
+         "--slot-seconds", "3"]
 [[hosts]]
 name = "A"
 address = "{a}"
@@ -51,6 +57,8 @@ kind = "registry"
 [[hosts.services]]
 kind = "chat"
 name = "lobby"
+[[hosts.services]]
+kind = "viewer"
 [[hosts]]
 name = "B"
 address = "{b}"
@@ -58,9 +66,21 @@ address = "{b}"
 kind = "engine"
 world = "arena1"
 map = "foraging"
+[[hosts.services]]
+kind = "runner"
+name = "run1"
 [[hosts]]
 name = "C"
 address = "{c}"
+[[hosts.services]]
+kind = "bridge"
+world = "real1"
+emulate = "empty"
+[[hosts.services]]
+kind = "agent"
+name = "robots"
+world = "real1"
+slot_seconds = 3
 """
 
 
@@ -134,7 +154,7 @@ def _stop(proc: subprocess.Popen[bytes], timeout: float = 15.0) -> None:
         pass
 
 
-def _wait_ready(log: Path, proc: subprocess.Popen[bytes], timeout: float = 60.0) -> None:
+def _wait_ready(log: Path, proc: subprocess.Popen[bytes], timeout: float = 120.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         text = log.read_text(errors="replace") if log.exists() else ""
@@ -191,7 +211,36 @@ def test_services_talk_across_hosts_and_the_doctor_sees_the_mesh(lab: MultiLab) 
     out = (lab.tmp / "doctor.log").read_text()
     assert code == 0, out
     assert "router B: rtt" in out and "links to A" in out
-    assert "engine arena1 on B is alive" in out
+    for line in (
+        "engine arena1 on B is alive",
+        "agent context arena1 on B is alive",
+        "runner run1 on B is alive",
+        "bridge real1 (with its emulated Khepera) on C is alive",
+        "agent context robots on C is alive",
+        "viewer on A is alive",
+        "arena arena1 on B: agent context alive",
+    ):
+        assert line in out, out
+
+
+def test_a_student_on_a_queues_and_drives_robots_on_b_and_c(lab: MultiLab) -> None:
+    # On B: the example controller, uploaded from A, runs in B's runner sandbox and
+    # moves a simulated robot. On C: the same upload (run on B, commanding C's
+    # bridge across two links) and a remote drive from A move the emulated Khepera.
+    seen = lab.probe("A", "drive", "A", str(lab.password_file), timeout=55)
+    assert seen["arena1_deploy"] == "finished", seen
+    assert seen["real1_deploy"] == "finished", seen
+    assert seen["real1_remote"] == "finished", seen
+    # Braitenberg cruises at about 80 mm/s: a 3 s slot covers well over 50 mm.
+    assert seen["arena1_deploy_mm"] > 50, seen
+    assert seen["real1_deploy_mm"] > 50, seen
+    assert seen["real1_remote_mm"] > 50, seen
+    # Then the same student, logged in but holding no lease, sends well-formed
+    # sealed commands for 1.5 s at a speed that would cover over 200 mm: neither
+    # the engine nor the bridge obeys them.
+    assert seen["arena1_forged_mm"] < 10, seen
+    assert seen["real1_forged_mm"] < 10, seen
+    print(f"moved (mm): {seen}")
 
 
 def test_a_process_without_a_valid_certificate_cannot_join(lab: MultiLab) -> None:
@@ -231,33 +280,48 @@ def test_arena_requested_from_a_starts_on_b_or_c_and_appears(lab: MultiLab) -> N
     started = lab.probe("A", "arena", "A", str(lab.password_file), "extra1", timeout=90)
     assert started["host"] in ("B", "C")
     assert started["seen"] is True
+    assert started["kind"] == "agent", "the arena's agent context is not in the directory"
     assert "stopped" in started["stopped"]
 
 
-def test_cutting_b_link_drops_its_world_then_it_returns_without_restart(lab: MultiLab) -> None:
-    b_log = lab.tmp / "host-B.log"
-    before = b_log.read_text(errors="replace").count("restarting")
-    follow = lab.start_probe("A", "follow", "A", "world", "arena1", "25")
+def _count(proc: subprocess.Popen[bytes], needle: str) -> int:
+    return proc.log_path.read_text().count(needle)  # type: ignore[attr-defined]
+
+
+def test_cutting_b_link_drops_its_world_and_context_then_they_return(lab: MultiLab) -> None:
+    host_logs = {name: lab.tmp / f"host-{name}.log" for name in "ABC"}
+    before = {n: p.read_text(errors="replace").count("restarting") for n, p in host_logs.items()}
+    follow = lab.start_probe("A", "follow", "A", "world", "arena1", "30")
+    listing = lab.start_probe("A", "dir-follow", "A", str(lab.password_file), "arena1", "30")
     try:
         lab.wait_line(follow, "READY")
         lab.wait_line(follow, "EVENT put")
+        lab.wait_line(listing, "EVENT listed")
         cut = time.monotonic()
         lab.host("B").down()
         try:
             lab.wait_line(follow, "EVENT delete", timeout=10)
             gone_after = time.monotonic() - cut
+            lab.wait_line(listing, "EVENT unlisted", timeout=10)
+            unlisted_after = time.monotonic() - cut
         finally:
             lab.host("B").up()
         back = time.monotonic()
-        log_text = follow.log_path.read_text()  # type: ignore[attr-defined]
-        assert log_text.count("EVENT put") == 1
+        assert _count(follow, "EVENT put") == 1
         deadline = time.monotonic() + 20
-        while follow.log_path.read_text().count("EVENT put") < 2:  # type: ignore[attr-defined]
+        while _count(follow, "EVENT put") < 2 or _count(listing, "EVENT listed") < 2:
             assert time.monotonic() < deadline, "arena1 did not come back after the link returned"
             time.sleep(0.1)
         back_after = time.monotonic() - back
     finally:
         _stop(follow)
+        _stop(listing)
     assert gone_after < 2.0 * 2 + 1.0, f"took {gone_after:.1f} s to notice (lease 2 s)"
-    print(f"arena1 left after {gone_after:.1f} s, came back {back_after:.1f} s after the link")
-    assert b_log.read_text(errors="replace").count("restarting") == before, "a service restarted"
+    # The registry drops a context with its token: the same bound, plus a poll.
+    assert unlisted_after < 2.0 * 2 + 1.5, f"the directory kept arena1 {unlisted_after:.1f} s"
+    print(
+        f"arena1 left after {gone_after:.1f} s (directory {unlisted_after:.1f} s), "
+        f"came back {back_after:.1f} s after the link"
+    )
+    after = {n: p.read_text(errors="replace").count("restarting") for n, p in host_logs.items()}
+    assert after == before, "a service restarted"
