@@ -304,7 +304,8 @@ class Verifier:
         self.window = window
         self.clock = clock
         self._lock = threading.Lock()
-        self._tokens: dict[bytes, SessionToken] = {}  # by token signature
+        # Verified tokens, keyed by exactly what was verified (bytes and signature).
+        self._tokens: dict[tuple[bytes, bytes], SessionToken] = {}
         self._replay: dict[bytes, ReplayWindow] = {}  # by session id
         self._revoked: dict[bytes, float] = {}  # session id -> token expiry
         self.rejected = 0
@@ -328,7 +329,7 @@ class Verifier:
     def verify_token(self, signed: SignedToken) -> SessionToken:
         """The token, if the registry signed it for this realm and it is in force."""
         with self._lock:
-            token = self._tokens.get(signed.signature)
+            token = self._tokens.get((signed.token, signed.signature))
         if token is None:
             try:
                 self._registry_key.verify(signed.token, signed.signature)
@@ -348,7 +349,7 @@ class Verifier:
             with self._lock:
                 if len(self._tokens) > 10_000:
                     self._prune_locked()
-                self._tokens[signed.signature] = token
+                self._tokens[(signed.token, signed.signature)] = token
         now = self.clock()
         if now > token.expires_at:
             raise AuthError("unauthenticated", f"session of {token.user} has expired: log in again")

@@ -117,3 +117,20 @@ def test_permission_check_names_the_permission(identity: RegistryIdentity) -> No
 def test_fingerprint_is_stable_and_short(identity: RegistryIdentity) -> None:
     fp = key_fingerprint(identity.verify_key)
     assert fp == key_fingerprint(identity.verify_key) and len(fp) == 39
+
+
+def test_cached_signature_does_not_vouch_for_other_token_bytes(identity: RegistryIdentity) -> None:
+    import msgspec
+
+    from common.messages import decode
+    from common.messages.auth import SessionToken, SignedToken
+
+    verifier = Verifier(identity.verify_key, REALM)
+    session = issue_session(identity, REALM, "alice", ["chat"])
+    verifier.verify_token(session.signed_token)  # now cached
+    forged_token = msgspec.structs.replace(
+        decode(session.signed_token.token, SessionToken), user="admin", permissions=["admin"]
+    )
+    forged = SignedToken(token=encode(forged_token), signature=session.signed_token.signature)
+    with pytest.raises(AuthError, match="not signed by this lab's registry"):
+        verifier.verify_token(forged)
