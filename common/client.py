@@ -191,6 +191,7 @@ class LabClient:
         *,
         timeout: float = 5.0,
         presence: bool = True,
+        via: str = "",
     ) -> None:
         if isinstance(registry_key, str):
             from common.auth import parse_public_key
@@ -212,6 +213,11 @@ class LabClient:
         self.on_private: Callable[[PrivateText], None] = lambda _m: None
         self.on_kicked: Callable[[KickNotice], None] = lambda _k: None
         self.pending: list[PrivateText] = []  # kept messages received at login
+        # A gateway's name for where this client's person is (the viewer: one
+        # browser connection); the registry throttles failed logins per source.
+        self.via = via[:200]
+        self._querier: Any = None
+        self._source_sn = 0
 
     # -- context manager
 
@@ -233,6 +239,12 @@ class LabClient:
                 self.logout()
             except LabError as exc:
                 log.debug("logout: %s", exc)
+        if self._querier is not None:
+            try:
+                self._querier.undeclare()
+            except Exception as exc:  # the session may already be closed
+                log.debug("querier: %s", exc)
+            self._querier = None
         self._undeclare()
 
     def _undeclare(self) -> None:
@@ -253,9 +265,30 @@ class LabClient:
 
     # -- queries
 
-    def _get(self, key: str, payload: bytes, what: str, timeout: float | None = None) -> list[Any]:
-        replies = list(self.z.get(key, payload=payload, timeout=timeout or self.timeout))
+    def _get(
+        self,
+        key: str,
+        payload: bytes,
+        what: str,
+        timeout: float | None = None,
+        *,
+        declare_source: bool = False,
+    ) -> list[Any]:
+        source_info = self._source_info(key) if declare_source else None
+        wait = timeout or self.timeout
+        replies = list(self.z.get(key, payload=payload, timeout=wait, source_info=source_info))
         return [r.ok.payload for r in replies if r.ok is not None]
+
+    def _source_info(self, key: str) -> zenoh.SourceInfo:
+        """This session as the source of a query (the registry throttles failed logins by it).
+
+        zenoh-python builds an entity id only for declared entities, so a querier
+        is declared once for it.
+        """
+        if self._querier is None:
+            self._querier = self.z.declare_querier(key)
+        self._source_sn += 1
+        return zenoh.SourceInfo(self._querier.id, self._source_sn)
 
     def _ask(
         self,
@@ -346,10 +379,11 @@ class LabClient:
             box_key=session_keys.box_public_key,
             mailbox_key=bytes(mailbox.public_key),
             ttl=ttl,
+            via=self.via,
         )
         sealed = nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(encode(request))
         key = keys.registry_login(self.realm)
-        answers = self._get(key, encode(SealedLogin(sealed=sealed)), "login")
+        answers = self._get(key, encode(SealedLogin(sealed=sealed)), "login", declare_source=True)
         if not answers:
             raise RegistryUnreachable(
                 f"no registry answered on realm {self.realm}: is it running, and is the router "

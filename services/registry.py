@@ -89,9 +89,12 @@ class LoginThrottle:
 
     After ``free`` failures, each further attempt must wait 2, 4, 8 ... up to
     ``cap`` seconds after the last failure; a success clears the account.
-    Zenoh does not tell a queryable who asked, so "source" is the querier's
-    Zenoh id when it supplies one (our client does); the per-account limit is
-    the one an attacker cannot dodge.
+    Zenoh does not tell a queryable which transport a query came in on, so the
+    "source" is what the querier declares: its Zenoh session id (our client
+    sets it) plus, behind a gateway, the gateway's name for the connection
+    (the viewer names each browser). Queries that declare nothing share one
+    "undeclared" bucket, so leaving it out does not escape the limit; the
+    per-account limit is the one an attacker cannot dodge at all.
     """
 
     def __init__(self, free: int = 3, source_free: int = 10, cap: float = 300.0) -> None:
@@ -220,12 +223,12 @@ class Registry(Service):
             )
         cred = request.credential
         user = cred.user
-        source = _source(query)
+        source = f"{_source(query) or 'undeclared'}/{request.via}"
         now = time.time()
         self.throttle.check(user, source, now)
         if not self._credential_ok(request, now):
             self.throttle.failed(user, source, now)
-            log.info("failed login for %s (source %s)", user, source or "unknown")
+            log.info("failed login for %s (from %s)", user, source)
             what = "key" if isinstance(cred, KeyCredential) else "password"
             raise RequestError("unauthenticated", f"wrong user name or {what}")
         self.throttle.succeeded(user)

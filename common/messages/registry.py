@@ -54,6 +54,11 @@ class LoginRequest(Message):
     box_key: Bytes32  # the new session's X25519 public key
     mailbox_key: Bytes32  # the user's long-term X25519 key: offline messages are sealed to it
     ttl: Annotated[float, msgspec.Meta(gt=0)] = 12 * 3600.0
+    # Where the attempt comes from, as a gateway knows it (the viewer names the
+    # browser connection); with the querier's Zenoh id it makes the registry's
+    # per-source throttle bucket. Said by the client, so the per-account limit
+    # stays the one nobody can dodge.
+    via: ShortText = ""
 
 
 class SealedLogin(Message):

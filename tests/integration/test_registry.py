@@ -41,6 +41,37 @@ def test_wrong_passwords_are_slowed_down(lab: Lab) -> None:
             client.login("nobody", "whatever123")
 
 
+def test_one_source_spraying_wrong_passwords_is_slowed_down_others_are_not(lab: Lab) -> None:
+    # Ten failures from one source, each on a different account (no account
+    # reaches its own limit), then that source must wait even for a good login.
+    with lab.client() as sprayer:
+        for i in range(10):
+            with pytest.raises(WrongCredentials):
+                sprayer.login(f"guess{i}", "not it at all")
+        with pytest.raises(RateLimited, match="too many failed logins"):
+            sprayer.login("carol", PASSWORD)
+    # Another session (another source) is not affected...
+    with lab.client() as other:
+        other.login("carol", PASSWORD)
+    # ...and behind one gateway session, two browsers are two sources.
+    session = lab.zsession()
+    try:
+        key = lab.identity.verify_key
+        for i in range(10):
+            browser_a = LabClient(session, lab.router.realm, key, via="browser-1")
+            with pytest.raises(WrongCredentials):
+                browser_a.login(f"typo{i}", "not it at all")
+            browser_a.close()
+        browser_a = LabClient(session, lab.router.realm, key, via="browser-1")
+        with pytest.raises(RateLimited):
+            browser_a.login("bob", PASSWORD)
+        browser_b = LabClient(session, lab.router.realm, key, via="browser-2")
+        browser_b.login("bob", PASSWORD)
+        browser_b.close()
+    finally:
+        close_session(session)
+
+
 def test_client_refuses_a_registry_with_another_key(lab: Lab) -> None:
     session = lab.zsession()
     try:

@@ -338,4 +338,6 @@ class LabConnection(Protocol):
 class LabConnector(Protocol):
     """Opens lab connections; :class:`LoginError` with plain words when it cannot."""
 
-    def login(self, address: LabAddress, user: str, password: str) -> LabConnection: ...
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> LabConnection:
+        """Log in; ``via`` names the browser connection (the registry throttles per source)."""
+        ...

@@ -312,7 +312,7 @@ class FakeConnector:
     def __init__(self, *labs: tuple[str, FakeLab]) -> None:
         self.labs = dict(labs)
 
-    def login(self, address: LabAddress, user: str, password: str) -> FakeConnection:
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> FakeConnection:
         lab = self.labs.get(address.realm)
         if lab is None:
             raise LoginError(f"no lab answers at {address.label}: check the address")

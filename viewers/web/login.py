@@ -73,7 +73,9 @@ class LoginForm:
             return False
         self.submit.disabled = True
         try:
-            connection = self.connector.login(self.address.with_user(user), user, password)
+            connection = self.connector.login(
+                self.address.with_user(user), user, password, via=f"browser-{self.client.client_id}"
+            )
         except LabError as exc:
             self.show_error(f"Could not log in: {exc}")
             return False

@@ -273,9 +273,11 @@ class RealConnector:
             self._links.pop(link.address.lab_key, None)
         link.close()
 
-    def login(self, address: LabAddress, user: str, password: str) -> RealConnection:
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> RealConnection:
         link = self._link(address)
-        client = lab.LabClient(link.session, address.realm, link.registry_key, timeout=self.timeout)
+        client = lab.LabClient(
+            link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
+        )
         try:
             client.login(user, password)
         except lab.WrongCredentials:
