@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import getpass
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,13 +27,28 @@ from services.registry_db import DbError, RegistryDB
 
 
 def read_password(args: argparse.Namespace, prompt: str) -> str:
-    """From --password-file, WART_PASSWORD, or a prompt (asked twice)."""
+    """A new password: from --password-file, one line piped on stdin, or a prompt asked twice.
+
+    Never from WART_PASSWORD: that is the password people log in with, and it
+    must not silently become someone else's new password.
+    """
     if getattr(args, "password_file", None):
         return Path(args.password_file).read_text().rstrip("\n")
-    if os.environ.get("WART_PASSWORD"):
-        return os.environ["WART_PASSWORD"]
-    first = getpass.getpass(prompt)
-    if getpass.getpass("again: ") != first:
+    if not sys.stdin.isatty():
+        line = sys.stdin.readline()
+        if not line.strip():
+            raise DbError(
+                "bad_request",
+                "no password given: pipe one line, use --password-file, or run "
+                "this in a terminal to be asked",
+            )
+        return line.rstrip("\n")
+    try:
+        first = getpass.getpass(prompt)
+        again = getpass.getpass("again: ")
+    except EOFError:
+        raise DbError("bad_request", "no password given") from None
+    if again != first:
         raise DbError("bad_request", "the two passwords differ")
     return first
 

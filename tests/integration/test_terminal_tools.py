@@ -1,0 +1,146 @@
+"""The terminal tools as a person uses them: `wart chat` in tmux, `wart users` on a database.
+
+`wart chat` runs in a real tmux pane (keys sent, screen read back), against a
+real registry and room on a real router; no mouse, no curses tricks.
+"""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import subprocess
+import sys
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.client import LabClient
+from services.registry_db import RegistryDB
+from tests.conftest import REPO, Procs, Router, wait_for, wart_env
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    lab.start_room("lobby")
+    yield lab
+
+
+class Pane:
+    """A program in a detached tmux session of its own."""
+
+    def __init__(self, command: list[str], env: dict[str, str]) -> None:
+        self.name = f"wart-test-{uuid.uuid4().hex[:8]}"
+        exports = " ".join(f"{k}={shlex.quote(v)}" for k, v in env.items())
+        line = f"cd {shlex.quote(str(REPO))} && env {exports} {shlex.join(command)}"
+        subprocess.run(
+            ["tmux", "new-session", "-d", "-s", self.name, "-x", "160", "-y", "40", line],
+            check=True,
+        )
+
+    def type(self, text: str) -> None:
+        subprocess.run(["tmux", "send-keys", "-t", self.name, "-l", text], check=True)
+        subprocess.run(["tmux", "send-keys", "-t", self.name, "Enter"], check=True)
+
+    def screen(self) -> str:
+        out = subprocess.run(
+            ["tmux", "capture-pane", "-p", "-t", self.name], capture_output=True, text=True
+        )
+        return out.stdout
+
+    def close(self) -> None:
+        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+def test_wart_chat_in_tmux_sees_history_members_and_live_lines(lab: Lab) -> None:
+    with lab.client("bob") as bob:
+        heard: list[str] = []
+        room = bob.join("lobby", on_event=lambda e: heard.append(e.line.text) if e.line else None)
+        bob.say("lobby", "said before alice came")
+
+        def lines() -> list[str]:
+            return list(heard)
+
+        env = {k: v for k, v in wart_env().items() if k in ("PYTHONPATH", "PATH", "HOME")}
+        env["WART_PASSWORD"] = PASSWORD
+        pane = Pane(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "chat",
+                "lobby",
+                "--user",
+                "alice",
+                *lab.net_args(),
+            ],
+            env,
+        )
+        try:
+            wait_for(
+                lambda: "here: " in pane.screen() and "alice" in pane.screen(),
+                30,
+                "wart chat to join:\n" + pane.screen(),
+            )
+            assert "said before alice came" in pane.screen()  # the history
+            pane.type("hello from the terminal")
+            wait_for(lambda: "hello from the terminal" in lines(), 15, "bob to get the line")
+            bob.say("lobby", "hi alice, live")
+            wait_for(lambda: "<bob> hi alice, live" in pane.screen(), 15, "the live line")
+            pane.type("/who")
+            wait_for(lambda: "bob" in pane.screen().split("/who")[-1], 10, "the member list")
+            pane.type("/quit")
+            wait_for(lambda: "alice" not in room.members, 15, "alice to leave")
+        finally:
+            pane.close()
+
+
+def run_users(db: Path, *args: str, stdin: str = "") -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "services.cli", "users", "--db", str(db), *args],
+        input=stdin,
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=wart_env(),
+        timeout=60,
+    )
+
+
+def test_wart_users_manages_accounts_and_explains_mistakes(lab: Lab) -> None:
+    db = lab.db_path
+    # The new account's password comes from the piped line, never from WART_PASSWORD
+    # (the variable people log in with).
+    added = run_users(db, "add", "zoe", "--role", "student", stdin="zoe-first-pw\n")
+    assert added.returncode == 0, added.stderr
+    assert "zoe" in run_users(db, "list").stdout
+    assert run_users(db, "grant", "zoe", "kick", "--scope", "ctx/lobby").returncode == 0
+    grants = RegistryDB(db)
+    try:
+        assert any("kick" in str(g) and "ctx/lobby" in str(g) for g in grants.grants_of("zoe"))
+    finally:
+        grants.close()
+    with lab.client() as client:
+        client.login("zoe", "zoe-first-pw")
+    assert run_users(db, "passwd", "zoe", stdin="zoe-second-pw\n").returncode == 0
+    with lab.client() as client:
+        client.login("zoe", "zoe-second-pw")  # the new password works on the running registry
+    # Mistakes get a clear message and a non-zero exit, nothing half-done.
+    dup = run_users(db, "add", "zoe", "--role", "student", stdin="x-password-1\n")
+    assert dup.returncode != 0 and "zoe" in (dup.stderr + dup.stdout)
+    bad = run_users(db, "add", "no/slash", "--role", "student", stdin="x-password-1\n")
+    assert bad.returncode != 0 and "not a valid name" in (bad.stderr + bad.stdout)
+    role = run_users(db, "add", "yan", "--role", "wizard", stdin="x-password-1\n")
+    assert role.returncode != 0 and "wizard" in (role.stderr + role.stdout)
+    assert run_users(db, "remove", "zoe").returncode == 0
+    assert "zoe" not in run_users(db, "list").stdout
+    with lab.client() as client, pytest.raises(Exception, match="wrong user name or password"):
+        client.login("zoe", "zoe-second-pw")
+    assert isinstance(client, LabClient)
