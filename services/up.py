@@ -198,6 +198,9 @@ def agent_context_spec(lab: LabSettings, name: str, title: str, world: str) -> C
             account,
             "--identity",
             str(service_identity(lab, account)),
+            # The lab's own contexts belong to its admin, who manages them from the page.
+            "--owner",
+            "admin",
             "--data-dir",
             str(lab.state_dir / "rooms"),
             *lab.network.as_args(),
@@ -242,6 +245,8 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
                 account,
                 "--identity",
                 str(service_identity(lab, account)),
+                "--owner",
+                "admin",
                 "--data-dir",
                 str(lab.state_dir / "rooms"),
                 *net,
