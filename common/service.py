@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import signal
 import threading
 import time
@@ -175,6 +176,14 @@ def _quietly(fn: Callable[[], object]) -> None:
 # --- running a service as a process -------------------------------------------------
 
 
+def zenoh_reason(exc: Exception | None) -> str:
+    """Zenoh's error text without the Rust source location it appends."""
+    if exc is None:
+        return ""
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return re.sub(r"\s+at /\S+\.rs:\d+\.?$", "", text).rstrip()
+
+
 def open_session(
     options: NetworkOptions, *, wait: float | None = None, quiet: bool = False
 ) -> zenoh.Session:
@@ -194,13 +203,14 @@ def open_session(
             conf_error = exc
         if deadline is not None and time.monotonic() >= deadline:
             raise ConnectionError(
-                f"no Zenoh router reachable at {', '.join(options.effective_connect)}: {conf_error}"
+                f"no Zenoh router reachable at {', '.join(options.effective_connect)}: "
+                f"{zenoh_reason(conf_error)}"
             )
         if not announced and not quiet:
             log.warning(
                 "waiting for a Zenoh router at %s (%s)",
                 ", ".join(options.effective_connect) or "(scouting)",
-                str(conf_error).splitlines()[0] if conf_error else "",
+                zenoh_reason(conf_error),
             )
             announced = True
         time.sleep(delay)

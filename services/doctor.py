@@ -1,4 +1,9 @@
-"""``wart doctor --lab FILE``: is the lab healthy, and if not, what is wrong, in words.
+"""``wart doctor [--lab FILE]``: is the lab healthy, and if not, what is wrong, in words.
+
+Without ``--lab`` (a one-machine ``wart up`` lab, or any lab seen as a plain
+client with the usual --connect/--realm flags), it surveys what any client
+sees: the routers' admin space, every live service and the hosts' loads.
+With a lab file:
 
 Checks, for each host of the lab file: that its router's port answers (TCP),
 that a mutual-TLS Zenoh session opens to it, the round-trip time of a query
@@ -12,14 +17,12 @@ Exit code 0 when nothing is wrong, 1 otherwise.
 from __future__ import annotations
 
 import errno
-import json
 import socket
 import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import zenoh
 
@@ -27,16 +30,9 @@ from common import cli, keys
 from common.keys import AliveKind
 from common.labfile import HostEntry, LabFile, LabFileError, load
 from common.service import close_session, open_session
+from common.survey import router_views, routers, survey
+from common.zconfig import NetworkOptions
 from common.zsecurity import client_options
-
-
-@dataclass
-class RouterView:
-    name: str
-    zid: str
-    rtt_ms: float
-    peers: list[str]  # router names it has a link to
-    clients: int
 
 
 @dataclass
@@ -93,51 +89,6 @@ def tls_check(lab: LabFile, host: HostEntry, cert: str) -> tuple[zenoh.Session |
             f"that the client certificate '{cert}' is valid"
         )
     return session, f"{(time.monotonic() - started) * 1000:.0f} ms to open"
-
-
-def routers(session: zenoh.Session, timeout: float = 3.0) -> list[tuple[dict[str, Any], float]]:
-    """The admin view of every router reachable from this session, with each one's RTT."""
-    found: list[dict[str, Any]] = []
-    for reply in session.get(
-        "@/*/router",
-        timeout=timeout,
-        target=zenoh.QueryTarget.ALL,
-        consolidation=zenoh.ConsolidationMode.NONE,
-    ):
-        if reply.ok is None:
-            continue
-        try:
-            found.append(json.loads(reply.ok.payload.to_bytes()))
-        except ValueError:
-            continue
-    out = []
-    for info in found:
-        zid = str(info.get("zid", ""))
-        started = time.monotonic()
-        answered = any(r.ok is not None for r in session.get(f"@/{zid}/router", timeout=timeout))
-        rtt = (time.monotonic() - started) * 1000 if answered else float("nan")
-        out.append((info, rtt))
-    return out
-
-
-def router_views(raw: list[tuple[dict[str, Any], float]]) -> list[RouterView]:
-    names = {}
-    for info, _ in raw:
-        meta = info.get("metadata") or {}
-        names[str(info.get("zid"))] = str(meta.get("name") or str(info.get("zid"))[:8])
-    views = []
-    for info, rtt in raw:
-        sessions = info.get("sessions") or []
-        peers = sorted(
-            names.get(str(s.get("peer")), str(s.get("peer"))[:8])
-            for s in sessions
-            if s.get("whatami") == "router"
-        )
-        clients = sum(1 for s in sessions if s.get("whatami") == "client")
-        views.append(
-            RouterView(names[str(info.get("zid"))], str(info.get("zid")), rtt, peers, clients)
-        )
-    return sorted(views, key=lambda v: v.name)
 
 
 def expected_tokens(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
@@ -281,11 +232,33 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
             close_session(s)
 
 
+def survey_main(options: NetworkOptions) -> int:
+    """The lab-file-free check: what a plain client of the realm sees."""
+    try:
+        session = open_session(options, wait=5.0)
+    except ConnectionError as exc:
+        print(f"✗ {exc}\n  is the lab running (wart up), and is --connect right?")
+        return 1
+    try:
+        result = survey(session, options.realm)
+    finally:
+        close_session(session)
+    print("\n".join(result.lines()))
+    if result.problems:
+        print(f"\n{len(result.problems)} problem(s)")
+        return 1
+    print("\nno problem found")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "wart doctor") -> int:
-    p = cli.parser(prog, __doc__ or "", network=False)
-    p.add_argument("--lab", type=Path, required=True, help="the lab file")
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("--lab", type=Path, help="the lab file (several hosts, TLS)")
     p.add_argument("--cert", default="admin", help="client certificate name (default admin)")
-    args, _ = cli.parse(p, argv)
+    args, options = cli.parse(p, argv)
+    if args.lab is None:
+        assert options is not None
+        return survey_main(options)
     try:
         lab = load(args.lab)
         report = diagnose(lab, args.cert)

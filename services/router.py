@@ -49,7 +49,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart router") -> int:
         p.error("a router runs in router mode; drop --mode")
     if not options.listen:
         options = options.with_(listen=(f"tcp/127.0.0.1:{DEFAULT_PORT}",))
-    options = options.with_(extra={"adminspace/enabled": True})
+    # The name in the metadata is what `wart doctor` and the admin page show.
+    options = options.with_(
+        extra={"adminspace/enabled": True, "metadata": {"name": args.name, "realm": options.realm}}
+    )
 
     def build(session: zenoh.Session) -> Router:
         router = Router(session, options.realm, args.name)
