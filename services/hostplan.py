@@ -193,9 +193,20 @@ def map_with_robots(base: Path, robots: int, out: Path) -> Path:
 
 
 def arena_specs(
-    ctx: HostContext, world: str, map_path: Path, *, seed: int = 1, robots: int = 0
+    ctx: HostContext,
+    world: str,
+    map_path: Path,
+    *,
+    seed: int = 1,
+    robots: int = 0,
+    owner: str | None = None,
 ) -> list[ChildSpec]:
-    """The processes of one arena: the engine, then the agent context (when configured)."""
+    """The processes of one arena: the engine, then the agent context (when configured).
+
+    ``owner`` (the user who asked for the arena) becomes the agent context's
+    owner, so they can manage and kick there; a template that does not place
+    ``{owner}`` itself gets ``--owner`` appended.
+    """
     lab, host = ctx.lab, ctx.host
     account = arena_account(host.name)
     values = {
@@ -208,6 +219,7 @@ def arena_specs(
         "identity": identity_path(lab.security.pki, host.name, account),
         "host": host.name,
         "runner": lab.runner_for(host.name),
+        "owner": owner or account,
     }
     specs = [
         ChildSpec(
@@ -218,10 +230,13 @@ def arena_specs(
         )
     ]
     if lab.arena.agent:
+        argv = fill(lab.arena.agent, values)
+        if owner and not any("{owner}" in arg for arg in lab.arena.agent):
+            argv += ["--owner", owner]
         specs.append(
             ChildSpec(
                 name=f"agent {world}",
-                argv=[*fill(lab.arena.agent, values), *ctx.net_args("agent")],
+                argv=[*argv, *ctx.net_args("agent")],
                 alive_key=keys.alive(ctx.realm, AliveKind.CONTEXT, world),
                 detail=f"agent context of {world}",
             )
