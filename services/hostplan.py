@@ -163,13 +163,19 @@ def router_spec(ctx: HostContext) -> ChildSpec:
 
 def resolve_map(lab: LabFile, name: str) -> Path:
     """A map by plain name (never a path from the network): the lab's, then the shipped ones."""
+    return find_map(name, (lab.maps_dir, REPO_MAPS))
+
+
+def find_map(name: str, directories: tuple[Path, ...]) -> Path:
+    """``NAME.json`` in the first directory that has it; the name is one key chunk, not a path."""
     keys.check_ident("map", name)
     stem = name[:-5] if name.endswith(".json") else name
-    for directory in (lab.maps_dir, REPO_MAPS):
+    for directory in directories:
         candidate = directory / f"{stem}.json"
         if candidate.is_file():
             return candidate
-    raise FileNotFoundError(f"no map named {name!r} in {lab.maps_dir} or {REPO_MAPS}")
+    where = " or ".join(str(d) for d in directories)
+    raise FileNotFoundError(f"map {name!r} not found (looked in {where})")
 
 
 def map_with_robots(base: Path, robots: int, out: Path) -> Path:
