@@ -74,7 +74,7 @@ AGENT_CONTEXT_TEMPLATE: tuple[str, ...] = (
     "{identity}",
 )
 TEMPLATE_FIELDS = frozenset(
-    {"world", "map", "seed", "robots", "maps_dir", "account", "identity", "host", "runner"}
+    {"world", "map", "seed", "robots", "maps_dir", "account", "identity", "host", "runner", "owner"}
 )
 DEFAULT_RUNNER = "runner"  # what agent contexts name when the lab file has no runner
 

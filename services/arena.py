@@ -1,90 +1,44 @@
 """``wart arena``: start, list and stop simulated arenas on a lab's hosts.
 
-    wart arena list --lab FILE
-    wart arena new  --lab FILE --user NAME --map foraging [--robots 10] [--world NAME] [--on HOST]
-    wart arena stop --lab FILE --user NAME WORLD
+    wart arena list [--lab FILE]
+    wart arena new  [--lab FILE] --user NAME --map foraging [--robots 10] [--world NAME] [--on HOST]
+    wart arena stop [--lab FILE] --user NAME WORLD
 
 ``new`` and ``stop`` need the ``host`` permission (instructors and admins);
 the password comes from --password-file, WART_PASSWORD or a prompt. Without
 --on, the host is chosen by load: among hosts that accept an arena now, the
-one with the fewest arenas, then the lowest CPU. The tool joins the lab over
-mutual TLS with a client certificate (--cert, default "student").
+one with the fewest arenas, then the lowest CPU. With --lab the tool joins a
+multi-host lab over mutual TLS with a client certificate (--cert, default
+"student"); without it, the lab of the network flags (``wart up``'s, whose
+one host is "local"; --registry-key or WART_REGISTRY_KEY).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import uuid
 from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
 
-from common import cli, keys
-from common.client import LabClient, LabError, _raise_for
-from common.labfile import LabFile, LabFileError, load
-from common.messages import ErrorReply, MessageError, OkReply, decode, encode
-from common.messages.host import ArenaInfo, ArenaReply, HostLoad, LoadRequest, SpawnArena, StopArena
+from common import cli
+from common.client import LabClient, LabError
+from common.host_client import (
+    HostError,
+    choose_host,
+    host_arena,
+    host_loads,
+    stop_hosted,
+)
+from common.labfile import LabFileError, load
+from common.messages.host import ArenaInfo, HostLoad
 from common.service import close_session, open_session
+from common.zconfig import NetworkOptions
 from common.zsecurity import client_options
 
-
-class ArenaError(Exception):
-    """Why an arena request could not be carried out, in words."""
-
-
-def host_loads(session: zenoh.Session, realm: str, timeout: float = 3.0) -> list[HostLoad]:
-    """Every live host's current load (each host answers on its load key)."""
-    loads: dict[str, HostLoad] = {}
-    replies = session.get(
-        keys.host_load_all(realm),
-        payload=encode(LoadRequest()),
-        timeout=timeout,
-        target=zenoh.QueryTarget.ALL,
-        consolidation=zenoh.ConsolidationMode.NONE,
-    )
-    for reply in replies:
-        if reply.ok is None:
-            continue
-        try:
-            load_ = decode(reply.ok.payload, HostLoad)
-        except MessageError:
-            continue
-        loads[load_.host] = load_
-    return sorted(loads.values(), key=lambda h: h.host)
-
-
-def choose_host(loads: Sequence[HostLoad], wanted: str | None = None) -> HostLoad:
-    """The host an arena goes to: ``wanted`` if given, else the least busy that accepts."""
-    if wanted is not None:
-        for load_ in loads:
-            if load_.host == wanted:
-                if not load_.accepting:
-                    raise ArenaError(f"host {wanted} takes no arena now: {load_.reason}")
-                return load_
-        seen = ", ".join(h.host for h in loads) or "none"
-        raise ArenaError(f"host {wanted} did not answer (hosts that did: {seen}); is it running?")
-    ready = [h for h in loads if h.accepting]
-    if not ready:
-        if not loads:
-            raise ArenaError("no host answered: is `wart host` running on the lab's machines?")
-        why = "; ".join(f"{h.host}: {h.reason}" for h in loads)
-        raise ArenaError(f"no host takes an arena now ({why})")
-    return min(ready, key=lambda h: (len(h.arenas) / max(1, h.max_arenas), h.cpu_percent, h.host))
-
-
-def _ask(client: LabClient, key: str, message: SpawnArena | StopArena, timeout: float) -> object:
-    if client.session is None:
-        raise ArenaError("log in first")
-    payload = client.session.seal(key, message)
-    replies = [r for r in client.z.get(key, payload=payload, timeout=timeout) if r.ok is not None]
-    if not replies:
-        raise ArenaError(f"no answer on {key}: the host went away or the network dropped it")
-    reply = decode(replies[0].ok.payload, (ArenaReply, OkReply, ErrorReply))
-    if isinstance(reply, ErrorReply):
-        _raise_for(reply, "the host")
-    return reply
+ArenaError = HostError  # the name this module's callers know
+__all__ = ["ArenaError", "choose_host", "format_loads", "host_loads", "new_arena", "stop_arena"]
 
 
 def new_arena(
@@ -97,29 +51,11 @@ def new_arena(
     seed: int = 1,
     timeout: float = 90.0,
 ) -> ArenaInfo:
-    loads = host_loads(client.z, client.realm)
-    target = choose_host(loads, host)
-    name = world or f"{map_name}-{uuid.uuid4().hex[:4]}"
-    keys.check_ident("world", name)
-    reply = _ask(
-        client,
-        keys.host_spawn(client.realm, target.host),
-        SpawnArena(world=name, map=map_name, robots=robots, seed=seed),
-        timeout,
-    )
-    assert isinstance(reply, ArenaReply)
-    return reply.arena
+    return host_arena(client, world, map_name, robots, host=host, seed=seed, timeout=timeout)
 
 
 def stop_arena(client: LabClient, world: str, timeout: float = 30.0) -> str:
-    for load_ in host_loads(client.z, client.realm):
-        if any(a.world == world for a in load_.arenas):
-            reply = _ask(
-                client, keys.host_spawn(client.realm, load_.host), StopArena(world=world), timeout
-            )
-            assert isinstance(reply, OkReply)
-            return reply.detail
-    raise ArenaError(f"no host runs an arena named {world}")
+    return stop_hosted(client, world, "arena", timeout=timeout)
 
 
 def format_loads(loads: Sequence[HostLoad]) -> str:
@@ -138,7 +74,35 @@ def format_loads(loads: Sequence[HostLoad]) -> str:
                 f"    {a.world:<20} {a.map:<12} robots {a.robots:<4} {a.state:<10} "
                 f"owner {a.owner:<10} {a.rss_mb:.0f} MB  CPU {a.cpu_percent:.0f} %"
             )
+        for r in h.rooms:
+            lines.append(f"    room {r.name:<15} {r.title[:30]:<30} {r.state:<10} owner {r.owner}")
     return "\n".join(lines)
+
+
+def add_lab_arguments(p: argparse.ArgumentParser) -> None:
+    """--lab and --cert (a multi-host lab); the network flags reach a ``wart up`` lab."""
+    p.add_argument("--lab", type=Path, help="a multi-host lab file (default: the network flags)")
+    p.add_argument("--cert", default="student", help="client certificate name (PKI/clients/)")
+
+
+def lab_session(
+    args: argparse.Namespace, options: NetworkOptions
+) -> tuple[zenoh.Session, str, str]:
+    """The Zenoh session, realm and registry key of the lab the tool talks to."""
+    if args.lab is not None:
+        from services.hostplan import read_registry_key
+
+        lab = load(args.lab)
+        registry_key = read_registry_key(lab)
+        tls = client_options(
+            lab, args.cert, connect=tuple(args.connect or ()), registry_key=registry_key
+        )
+        return open_session(tls, wait=10.0), lab.realm, registry_key
+    if not options.registry_key:
+        raise HostError(
+            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
+        )
+    return open_session(options, wait=10.0), options.realm, options.registry_key
 
 
 def _password(args: argparse.Namespace) -> str:
@@ -148,12 +112,10 @@ def _password(args: argparse.Namespace) -> str:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
-    p = cli.parser(prog, __doc__ or "", network=False)
-    p.add_argument("--lab", type=Path, required=True, help="the lab file")
-    p.add_argument("--cert", default="student", help="client certificate name (PKI/clients/)")
-    p.add_argument("--connect", action="append", help="a router to join (default: any host's)")
+    p = cli.parser(prog, __doc__ or "")
+    add_lab_arguments(p)
     sub = p.add_subparsers(dest="verb", required=True)
-    sub.add_parser("list", help="hosts, their load and their arenas")
+    sub.add_parser("list", help="hosts, their load, their arenas and rooms")
     s_new = sub.add_parser("new", help="start an arena on a host chosen by load")
     s_new.add_argument("--map", required=True, help="a map name (maps/NAME.json)")
     s_new.add_argument("--robots", type=int, help="this many Khepera instead of the map's robots")
@@ -165,42 +127,31 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
     for s in (s_new, s_stop):
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
-    args, _ = cli.parse(p, argv)
+    args, options = cli.parse(p, argv)
+    assert options is not None
     try:
-        lab = load(args.lab)
-        return _run(args, lab)
-    except (LabFileError, ArenaError, LabError, ValueError, OSError) as exc:
+        return _run(args, options)
+    except (LabFileError, LabError, ValueError, OSError) as exc:
         return cli.fail(str(exc), 1)
 
 
-def _run(args: argparse.Namespace, lab: LabFile) -> int:
-    from services.hostplan import read_registry_key
-
+def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
     if getattr(args, "robots", None) is not None and not 1 <= args.robots <= 1000:
-        raise ArenaError("--robots must be between 1 and 1000")
-    registry_key = read_registry_key(lab)
-    options = client_options(
-        lab, args.cert, connect=tuple(args.connect or ()), registry_key=registry_key
-    )
-    session = open_session(options, wait=10.0)
+        raise HostError("--robots must be between 1 and 1000")
+    session, realm, registry_key = lab_session(args, options)
     try:
         if args.verb == "list":
-            print(format_loads(host_loads(session, lab.realm)))
+            print(format_loads(host_loads(session, realm)))
             return 0
-        with LabClient(session, lab.realm, registry_key, presence=False) as client:
+        with LabClient(session, realm, registry_key, presence=False) as client:
             client.login(args.user, _password(args))
             if args.verb == "new":
-                arena = new_arena(
-                    client,
-                    map_name=args.map,
-                    robots=args.robots,
-                    world=args.world,
-                    host=args.host,
-                    seed=args.seed,
+                arena = host_arena(
+                    client, args.world, args.map, args.robots, host=args.host, seed=args.seed
                 )
                 print(f"arena {arena.world} ({arena.map}) is running on {arena.host}")
             else:
-                print(stop_arena(client, args.world))
+                print(stop_hosted(client, args.world, "arena"))
         return 0
     finally:
         close_session(session)

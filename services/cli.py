@@ -33,6 +33,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
     "host": ("services.host", "run this machine's share of a multi-host lab (lab file)"),
     "arena": ("services.arena", "start, list and stop simulated arenas on the lab's hosts"),
+    "room": ("services.room", "start and stop chat rooms on request (host permission)"),
     "certs": ("services.certs", "the lab's CA and TLS certificates (routers, services, clients)"),
     "doctor": (
         "services.doctor",

@@ -12,41 +12,25 @@ on one more machine.
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
 import threading
-import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import psutil
 import zenoh
 
 from common import cli, keys
-from common.auth import Verifier, parse_public_key
-from common.keys import AliveKind
 from common.labfile import LabFile, LabFileError, load
-from common.messages import ErrorReply, MessageError, OkReply, decode, encode
-from common.messages.host import (
-    ArenaInfo,
-    ArenaReply,
-    HostLoad,
-    LoadRequest,
-    SpawnArena,
-    StopArena,
-)
-from common.revocations import RevocationFeed
-from common.service import RequestError, Service, close_session, open_session
-from common.supervisor import AliveWatch, Child, Supervisor
+from common.service import close_session, open_session
+from common.supervisor import AliveWatch, Child, ChildSpec, Supervisor
 from common.zconfig import NetworkOptions
+from services.hosting import HostingPlan, HostingService
 from services.hostplan import (
     HostContext,
     arena_specs,
     check_available,
     host_plan,
-    map_with_robots,
     read_registry_key,
     resolve_map,
     router_spec,
@@ -54,266 +38,40 @@ from services.hostplan import (
 )
 
 
-@dataclass
-class Arena:
-    info: ArenaInfo
-    children: list[Child] = field(default_factory=list)
+class LabFilePlan(HostingPlan):
+    """A lab file's host: its limits, the lab's maps, the ``[arena]`` templates."""
 
-
-class HostService(Service):
-    """Load reports and arena placement for one host; the processes are the supervisor's."""
-
-    kind = AliveKind.HOST
-
-    def __init__(
-        self,
-        session: zenoh.Session,
-        ctx: HostContext,
-        supervisor: Supervisor,
-        *,
-        clock: object = time.time,
-    ) -> None:
-        super().__init__(session, ctx.realm, ctx.host.name)
+    def __init__(self, ctx: HostContext) -> None:
         self.ctx = ctx
-        self.lab: LabFile = ctx.lab
-        self.supervisor = supervisor
-        registry_key = parse_public_key(ctx.registry_key)
-        self.verifier = Verifier(registry_key, ctx.realm)
-        self._registry_key = registry_key
-        self._feed: RevocationFeed | None = None
-        self.arenas: dict[str, Arena] = {}
-        self._lock = threading.Lock()
-        self._spawn_lock = threading.Lock()  # one arena start at a time on a host
-        self._load_thread: threading.Thread | None = None
-        self._latest: HostLoad | None = None
-        self._procs: dict[int, psutil.Process] = {}
-        psutil.cpu_percent(None)  # the first reading is meaningless; start the interval now
+        self.realm = ctx.realm
+        self.host = ctx.host.name
+        self.registry_key = ctx.registry_key
+        self.limits = ctx.lab.limits
+        self.state_dir = ctx.state_dir
+        # Chat rooms need a service account from the lab's PKI, which `wart certs`
+        # makes only for the rooms the lab file names: none on request here.
+        self.max_rooms = 0
 
-    # -- lifecycle
-
-    def on_start(self) -> None:
-        self._feed = RevocationFeed(self.session, self.realm, self._registry_key, self.verifier)
-        self.publisher = self.track(
-            self.session.declare_publisher(keys.host_load(self.realm, self.ident))
-        )
-        self.serve(keys.host_spawn(self.realm, self.ident), self._on_spawn)
-        # Not self.serve: a reply must carry this host's own key, or the answers of
-        # several hosts to one `host/*/load` query are consolidated into one.
-        self.track(
-            self.session.declare_queryable(
-                keys.host_load(self.realm, self.ident), self._on_load_query
-            )
-        )
-        self._load_thread = threading.Thread(target=self._report, name="load", daemon=True)
-        self._load_thread.start()
-
-    def on_stop(self, timeout: float) -> None:
-        if self._feed is not None:
-            self._feed.close()
-        if self._load_thread is not None:
-            self._load_thread.join(timeout)
-
-    def adopt(self, world: str, map_name: str, children: list[Child], robots: int) -> None:
-        """Count a world of the lab file as one of this host's arenas (owner "lab")."""
-        info = ArenaInfo(
-            world=world,
-            host=self.ident,
-            map=map_name,
-            robots=robots,
-            owner="lab",
-            state="running",
-            started_at=time.time(),
-        )
-        with self._lock:
-            self.arenas[world] = Arena(info, children)
-
-    # -- load
-
-    def load(self) -> HostLoad:
-        mem = psutil.virtual_memory()
-        cpu = psutil.cpu_percent(None)
-        arenas = []
-        with self._lock:
-            current = list(self.arenas.values())
-        for arena in current:
-            rss = cpu_arena = 0.0
-            pids = []
-            state = arena.info.state
-            for child in arena.children:
-                proc = child.process
-                if proc is None:
-                    continue
-                if proc.poll() is not None or child.restart_at is not None:
-                    state = "restarting"
-                    continue
-                pids.append(proc.pid)
-                try:
-                    p = self._procs.get(proc.pid)
-                    if p is None:  # keep the object: cpu_percent measures since its last call
-                        p = self._procs[proc.pid] = psutil.Process(proc.pid)
-                    rss += p.memory_info().rss / 2**20
-                    cpu_arena += p.cpu_percent(None)
-                except psutil.Error:
-                    continue
-            arenas.append(
-                ArenaInfo(
-                    world=arena.info.world,
-                    host=self.ident,
-                    map=arena.info.map,
-                    robots=arena.info.robots,
-                    owner=arena.info.owner,
-                    state=state,
-                    started_at=arena.info.started_at,
-                    pids=pids,
-                    rss_mb=round(rss, 1),
-                    cpu_percent=round(cpu_arena, 1),
-                )
-            )
-        reason = self._refusal(len(arenas), cpu, mem.available / 2**20)
-        in_arenas = {id(c) for arena in current for c in arena.children}
-        services = [
-            c.spec.name + ("" if c.process is not None and c.process.poll() is None else " (down)")
-            for c in list(self.supervisor.children)
-            if id(c) not in in_arenas
-        ]
-        return HostLoad(
-            host=self.ident,
-            at=time.time(),
-            cpus=psutil.cpu_count() or 1,
-            cpu_percent=min(100.0, cpu),
-            load1=os.getloadavg()[0],
-            mem_total_mb=round(mem.total / 2**20, 1),
-            mem_available_mb=round(mem.available / 2**20, 1),
-            services=services,
-            arenas=arenas,
-            max_arenas=self.lab.limits.max_arenas_per_host if self.ctx.host.arenas else 0,
-            accepting=not reason,
-            reason=reason,
-        )
-
-    def _refusal(self, count: int, cpu: float, available_mb: float) -> str:
-        limits = self.lab.limits
+    def no_arenas(self) -> str:
         if not self.ctx.host.arenas:
             return "this host takes no arenas (arenas = false in the lab file)"
-        if count >= limits.max_arenas_per_host:
-            return f"already runs {count} arenas (limits.max_arenas_per_host)"
-        if cpu > limits.max_cpu_percent:
-            return f"CPU at {cpu:.0f} % (over limits.max_cpu_percent {limits.max_cpu_percent:.0f})"
-        if available_mb < limits.min_free_memory_mb:
-            return f"only {available_mb:.0f} MB free (limits.min_free_memory_mb)"
         return ""
 
-    def _report(self) -> None:
-        period = self.lab.limits.load_period_s
-        while not self._stopped.wait(period):
-            try:
-                self._latest = self.load()
-                self.publisher.put(encode(self._latest))
-            except Exception as exc:  # the session may be closing; the next round retries
-                self.log.debug("load report: %s", exc)
+    def resolve_map(self, name: str) -> Path:
+        return resolve_map(self.ctx.lab, name)
 
-    def _on_load_query(self, query: zenoh.Query) -> None:
-        try:
-            if query.payload is not None:
-                decode(query.payload, LoadRequest)
-            reply: HostLoad | ErrorReply = self.load()
-        except MessageError as exc:
-            reply = ErrorReply(code="bad_request", message=str(exc))
-        except Exception as exc:
-            self.log.exception("load report failed")
-            reply = ErrorReply(code="internal", message=f"load report failed: {exc}")
-        try:
-            query.reply(keys.host_load(self.realm, self.ident), encode(reply))
-        except Exception as exc:  # the querier may have gone away
-            self.log.debug("could not reply with the load: %s", exc)
-
-    # -- arenas
-
-    def _on_spawn(self, query: zenoh.Query) -> ArenaReply | OkReply:
-        key = str(query.key_expr)
-        principal, request = self.verifier.open(key, query.payload, (SpawnArena, StopArena))
-        if isinstance(request, StopArena):
-            principal.require("host", "stop arenas")
-            return self.stop_arena(request.world, by=principal.user)
-        principal.require("host", "start arenas")
-        return ArenaReply(arena=self.start_arena(request, owner=principal.user))
-
-    def start_arena(self, request: SpawnArena, owner: str) -> ArenaInfo:
-        limits = self.lab.limits
-        if request.robots is not None and request.robots > limits.max_robots_per_arena:
-            raise RequestError(
-                "bad_request",
-                f"{request.robots} robots is over the lab's limit of {limits.max_robots_per_arena}",
-            )
-        with self._spawn_lock:
-            alive = keys.alive(self.realm, AliveKind.WORLD, request.world)
-            with self._lock:
-                taken = request.world in self.arenas
-            if taken or (
-                self.supervisor.watch is not None and self.supervisor.watch.present(alive)
-            ):
-                raise RequestError("conflict", f"a world named {request.world} already runs")
-            reason = self.load().reason
-            if reason:
-                raise RequestError("unavailable", f"host {self.ident} takes no arena now: {reason}")
-            try:
-                map_path = resolve_map(self.lab, request.map)
-            except (FileNotFoundError, ValueError) as exc:
-                raise RequestError("not_found", str(exc)) from None
-            robots = request.robots or 0
-            if robots:
-                map_path = map_with_robots(
-                    map_path, robots, self.ctx.state_dir / "arenas" / f"{request.world}.json"
-                )
-            info = ArenaInfo(
-                world=request.world,
-                host=self.ident,
-                map=request.map,
-                robots=robots,
-                owner=owner,
-                state="starting",
-                started_at=time.time(),
-            )
-            arena = Arena(info)
-            with self._lock:
-                self.arenas[request.world] = arena
-            self.log.info("starting arena %s (%s) for %s", request.world, request.map, owner)
-            for spec in arena_specs(
-                self.ctx, request.world, map_path, seed=request.seed, robots=robots
-            ):
-                child = self.supervisor.add(spec)
-                arena.children.append(child)
-                self.supervisor.spawn(child)
-                if not self.supervisor.wait_ready(child):
-                    self._discard(request.world)
-                    raise RequestError(
-                        "internal", f"{spec.name} did not come up on {self.ident}; see its log"
-                    )
-            running = ArenaInfo(**{**_fields(info), "state": "running"})
-            arena.info = running
-            return running
-
-    def stop_arena(self, world: str, by: str) -> OkReply:
-        with self._lock:
-            arena = self.arenas.get(world)
-        if arena is None:
-            raise RequestError("not_found", f"host {self.ident} runs no arena named {world}")
-        if arena.info.owner == "lab":
-            raise RequestError("forbidden", f"{world} is in the lab file; remove it there instead")
-        self._discard(world)
-        self.log.info("stopped arena %s for %s", world, by)
-        return OkReply(detail=f"arena {world} stopped on {self.ident}")
-
-    def _discard(self, world: str) -> None:
-        with self._lock:
-            arena = self.arenas.pop(world, None)
-        if arena is not None:
-            for child in reversed(arena.children):
-                self.supervisor.stop_child(child)
+    def arena_specs(
+        self, world: str, map_path: Path, *, seed: int, robots: int, owner: str
+    ) -> list[ChildSpec]:
+        return arena_specs(self.ctx, world, map_path, seed=seed, robots=robots, owner=owner)
 
 
-def _fields(info: ArenaInfo) -> dict[str, object]:
-    return {name: getattr(info, name) for name in info.__struct_fields__}
+class HostService(HostingService):
+    """The hosting service of a lab file's host (see services/hosting.py)."""
+
+    def __init__(self, session: zenoh.Session, ctx: HostContext, supervisor: Supervisor) -> None:
+        super().__init__(session, LabFilePlan(ctx), supervisor)
+        self.ctx = ctx
 
 
 # --- the process -----------------------------------------------------------------------

@@ -163,13 +163,19 @@ def router_spec(ctx: HostContext) -> ChildSpec:
 
 def resolve_map(lab: LabFile, name: str) -> Path:
     """A map by plain name (never a path from the network): the lab's, then the shipped ones."""
+    return find_map(name, (lab.maps_dir, REPO_MAPS))
+
+
+def find_map(name: str, directories: tuple[Path, ...]) -> Path:
+    """``NAME.json`` in the first directory that has it; the name is one key chunk, not a path."""
     keys.check_ident("map", name)
     stem = name[:-5] if name.endswith(".json") else name
-    for directory in (lab.maps_dir, REPO_MAPS):
+    for directory in directories:
         candidate = directory / f"{stem}.json"
         if candidate.is_file():
             return candidate
-    raise FileNotFoundError(f"no map named {name!r} in {lab.maps_dir} or {REPO_MAPS}")
+    where = " or ".join(str(d) for d in directories)
+    raise FileNotFoundError(f"map {name!r} not found (looked in {where})")
 
 
 def map_with_robots(base: Path, robots: int, out: Path) -> Path:
@@ -193,9 +199,20 @@ def map_with_robots(base: Path, robots: int, out: Path) -> Path:
 
 
 def arena_specs(
-    ctx: HostContext, world: str, map_path: Path, *, seed: int = 1, robots: int = 0
+    ctx: HostContext,
+    world: str,
+    map_path: Path,
+    *,
+    seed: int = 1,
+    robots: int = 0,
+    owner: str | None = None,
 ) -> list[ChildSpec]:
-    """The processes of one arena: the engine, then the agent context (when configured)."""
+    """The processes of one arena: the engine, then the agent context (when configured).
+
+    ``owner`` (the user who asked for the arena) becomes the agent context's
+    owner, so they can manage and kick there; a template that does not place
+    ``{owner}`` itself gets ``--owner`` appended.
+    """
     lab, host = ctx.lab, ctx.host
     account = arena_account(host.name)
     values = {
@@ -208,6 +225,7 @@ def arena_specs(
         "identity": identity_path(lab.security.pki, host.name, account),
         "host": host.name,
         "runner": lab.runner_for(host.name),
+        "owner": owner or account,
     }
     specs = [
         ChildSpec(
@@ -218,10 +236,13 @@ def arena_specs(
         )
     ]
     if lab.arena.agent:
+        argv = fill(lab.arena.agent, values)
+        if owner and not any("{owner}" in arg for arg in lab.arena.agent):
+            argv += ["--owner", owner]
         specs.append(
             ChildSpec(
                 name=f"agent {world}",
-                argv=[*fill(lab.arena.agent, values), *ctx.net_args("agent")],
+                argv=[*argv, *ctx.net_args("agent")],
                 alive_key=keys.alive(ctx.realm, AliveKind.CONTEXT, world),
                 detail=f"agent context of {world}",
             )

@@ -23,9 +23,12 @@ from pathlib import Path
 
 from common import cli, keys
 from common.keys import AliveKind
+from common.labfile import Limits
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch, ChildSpec, Supervisor
 from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
+from services.hosting import HostingPlan, HostingService
+from services.hostplan import find_map
 
 log = logging.getLogger("wart.up")
 
@@ -66,6 +69,12 @@ REAL_CONTEXT = "robots"  # the agent context on the real world
 REAL_WORLD = "real1"
 # The worlds log in too (optional for them): with an identity, agent contexts
 # grant MAC leases and commands cost µs to check instead of an Ed25519 verify.
+# Contexts started on request (services/hosting.py) share one account per kind:
+# an account may hold several sessions, and provisioning them here, before the
+# registry starts, means nothing is registered while the lab runs.
+HOST_NAME = "local"  # the one-machine lab's host, on host/local/{spawn,load}
+HOSTED_ARENA_ACCOUNT = f"agent-{HOST_NAME}"  # the agent contexts of arenas on request
+HOSTED_ROOM_ACCOUNT = f"room-{HOST_NAME}"  # chat rooms on request
 SERVICE_ACCOUNTS = (
     f"chat-{LOBBY}",
     f"ctx-{ARENA}",
@@ -73,6 +82,8 @@ SERVICE_ACCOUNTS = (
     f"runner-{RUNNER}",
     f"engine-{WORLD}",
     f"bridge-{REAL_WORLD}",
+    HOSTED_ARENA_ACCOUNT,
+    HOSTED_ROOM_ACCOUNT,
 )
 REAL_AGENT = "k1"
 REAL_MAP = "empty.json"
@@ -178,9 +189,21 @@ def client_flags(lab: LabSettings) -> str:
     return flags
 
 
-def agent_context_spec(lab: LabSettings, name: str, title: str, world: str) -> ChildSpec:
-    """An agent context: queues and leases for the robots of ``world``."""
-    account = f"ctx-{name}"
+def agent_context_spec(
+    lab: LabSettings,
+    name: str,
+    title: str,
+    world: str,
+    *,
+    account: str | None = None,
+    owner: str | None = None,
+) -> ChildSpec:
+    """An agent context: queues and leases for the robots of ``world``.
+
+    Its account is ``ctx-NAME`` unless given; ``owner`` (default: the account)
+    may manage and kick there.
+    """
+    account = account or f"ctx-{name}"
     return ChildSpec(
         name=f"agent context {name}",
         argv=[
@@ -198,16 +221,56 @@ def agent_context_spec(lab: LabSettings, name: str, title: str, world: str) -> C
             account,
             "--identity",
             str(service_identity(lab, account)),
-            # The lab's own contexts belong to its admin, who manages them from the page.
-            "--owner",
-            "admin",
             "--data-dir",
             str(lab.state_dir / "rooms"),
+            *(["--owner", owner] if owner else []),
             *lab.network.as_args(),
         ],
         alive_key=keys.alive(lab.realm, AliveKind.CONTEXT, name),
         detail=f"queues and leases for the robots of {world}",
     )
+
+
+def chat_room_spec(
+    lab: LabSettings, name: str, title: str, *, account: str | None = None, owner: str | None = None
+) -> ChildSpec:
+    """A chat room; account ``chat-NAME`` unless given, owned by ``owner`` (default the account)."""
+    account = account or f"chat-{name}"
+    return ChildSpec(
+        name=f"chat {name}",
+        argv=[
+            "context",
+            "chat",
+            "--name",
+            name,
+            "--title",
+            title,
+            "--user",
+            account,
+            "--identity",
+            str(service_identity(lab, account)),
+            "--data-dir",
+            str(lab.state_dir / "rooms"),
+            *(["--owner", owner] if owner else []),
+            *lab.network.as_args(),
+        ],
+        alive_key=keys.alive(lab.realm, AliveKind.CONTEXT, name),
+    )
+
+
+def engine_spec(lab: LabSettings, world: str, map_path: Path, *, seed: int = 1) -> list[str]:
+    """The argv of a simulated world on ``map_path`` (saves go to the lab's maps dir)."""
+    return [
+        "engine",
+        "--map",
+        str(map_path),
+        "--world",
+        world,
+        "--seed",
+        str(seed),
+        "--maps-dir",
+        str(lab.state_dir / "maps"),
+    ]
 
 
 def lab_plan(lab: LabSettings) -> list[ChildSpec]:
@@ -230,43 +293,13 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             alive_key=keys.alive(realm, AliveKind.REGISTRY, "registry"),
         )
     )
-    account = f"chat-{LOBBY}"
-    plan.append(
-        ChildSpec(
-            name=f"chat {LOBBY}",
-            argv=[
-                "context",
-                "chat",
-                "--name",
-                LOBBY,
-                "--title",
-                "Lobby",
-                "--user",
-                account,
-                "--identity",
-                str(service_identity(lab, account)),
-                "--owner",
-                "admin",
-                "--data-dir",
-                str(lab.state_dir / "rooms"),
-                *net,
-            ],
-            alive_key=keys.alive(realm, AliveKind.CONTEXT, LOBBY),
-        )
-    )
+    # The lab's own contexts belong to its admin, who manages them from the page.
+    plan.append(chat_room_spec(lab, LOBBY, "Lobby", owner="admin"))
     plan.append(
         ChildSpec(
             name="engine",
             argv=[
-                "engine",
-                "--map",
-                str(lab.state_dir / "maps" / "foraging.json"),
-                "--world",
-                WORLD,
-                "--seed",
-                "1",
-                "--maps-dir",
-                str(lab.state_dir / "maps"),
+                *engine_spec(lab, WORLD, lab.state_dir / "maps" / "foraging.json"),
                 *service_login(lab, f"engine-{WORLD}"),
                 *net,
             ],
@@ -292,7 +325,7 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             detail="sandboxed uploaded controllers",
         )
     )
-    plan.append(agent_context_spec(lab, ARENA, "Arena (simulated)", WORLD))
+    plan.append(agent_context_spec(lab, ARENA, "Arena (simulated)", WORLD, owner="admin"))
     link = khepera_link(lab)  # its directory is made by provision()
     plan.append(
         ChildSpec(
@@ -326,7 +359,9 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
             detail=f"real world {REAL_WORLD}, robot {REAL_AGENT} (the emulated Khepera)",
         )
     )
-    plan.append(agent_context_spec(lab, REAL_CONTEXT, "Khepera (real robot)", REAL_WORLD))
+    plan.append(
+        agent_context_spec(lab, REAL_CONTEXT, "Khepera (real robot)", REAL_WORLD, owner="admin")
+    )
     # The viewer comes last: it is the front door once everything else serves.
     plan.append(
         ChildSpec(
@@ -347,6 +382,55 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
         )
     )
     return plan
+
+
+# The one machine is the whole lab: its operator chose to run it here, so the
+# CPU does not refuse an arena (a busy laptop would otherwise refuse them all);
+# count and free memory still do.
+LOCAL_LIMITS = Limits(
+    max_arenas_per_host=4,
+    max_robots_per_arena=50,
+    max_cpu_percent=100.0,
+    min_free_memory_mb=256,
+    load_period_s=5.0,
+)
+LOCAL_MAX_ROOMS = 16
+
+
+class LocalPlan(HostingPlan):
+    """Host "local" of ``wart up``: maps from STATE/maps, the lab's runner, shared accounts."""
+
+    def __init__(self, lab: LabSettings) -> None:
+        if not lab.network.registry_key:
+            raise ValueError("the lab's registry key is needed (provision first)")
+        self.lab = lab
+        self.realm = lab.realm
+        self.host = HOST_NAME
+        self.registry_key = lab.network.registry_key
+        self.limits = LOCAL_LIMITS
+        self.state_dir = lab.state_dir
+        self.max_rooms = LOCAL_MAX_ROOMS
+
+    def resolve_map(self, name: str) -> Path:
+        return find_map(name, (self.lab.state_dir / "maps", SHIPPED_MAPS))
+
+    def arena_specs(
+        self, world: str, map_path: Path, *, seed: int, robots: int, owner: str
+    ) -> list[ChildSpec]:
+        engine = ChildSpec(
+            name=f"engine {world}",
+            argv=[*engine_spec(self.lab, world, map_path, seed=seed), *self.lab.network.as_args()],
+            alive_key=keys.alive(self.realm, AliveKind.WORLD, world),
+            detail=f"simulated world {world} ({map_path.name}), for {owner}",
+        )
+        context = agent_context_spec(
+            self.lab, world, world, world, account=HOSTED_ARENA_ACCOUNT, owner=owner
+        )
+        return [engine, context]
+
+    def room_specs(self, name: str, title: str, owner: str) -> list[ChildSpec]:
+        spec = chat_room_spec(self.lab, name, title, account=HOSTED_ROOM_ACCOUNT, owner=owner)
+        return [replace(spec, detail=f"chat room for {owner}")]
 
 
 VIEWER_NAME = "viewer"
@@ -421,6 +505,7 @@ def run_lab(
     supervisor = Supervisor(lab.state_dir / "logs", say=say)
     say(f"wart lab '{lab.realm}': state and logs in {lab.state_dir}")
     session = None
+    hosting: HostingService | None = None
     code = 0
     try:
         if lab.start_router:
@@ -450,12 +535,22 @@ def run_lab(
             elif spec.name == VIEWER_NAME:
                 say(f"  web viewer: {viewer_url(lab) or '(address unknown)'}")
         if not stop.is_set():
+            # In this process (not a child): its spawned contexts are this
+            # supervisor's children, restarted and stopped with the rest.
+            hosting = HostingService(session, LocalPlan(lab), supervisor).start()
+            say(
+                f"  ✓ {'hosting ' + HOST_NAME:<22} up  rooms and arenas on request "
+                f"(host/{HOST_NAME}/spawn, `host` permission)"
+            )
+        if not stop.is_set():
             say("The lab is running. Press Ctrl-C to stop it.")
             if ready is not None:
                 ready.set()
             supervisor.run_until(stop)
     finally:
         say("Stopping the lab...")
+        if hosting is not None:
+            hosting.stop()  # no new context starts while the children stop
         supervisor.stop_all()
         if session is not None:
             close_session(session)

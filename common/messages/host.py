@@ -3,7 +3,8 @@
 ``host/<host>/load``: each host publishes a :class:`HostLoad` every few
 seconds and answers a query on the same key with its latest one.
 ``host/<host>/spawn``: ``AuthEnvelope`` of :class:`SpawnArena` (reply
-:class:`ArenaReply`) or :class:`StopArena` (reply ``OkReply``), from a user
+:class:`ArenaReply`), :class:`SpawnRoom` (reply :class:`RoomReply`),
+:class:`StopArena` or :class:`StopRoom` (reply ``OkReply``), from a user
 with the ``host`` permission.
 """
 
@@ -35,6 +36,17 @@ class ArenaInfo(msgspec.Struct, frozen=True, kw_only=True):
     cpu_percent: Percent = 0.0  # of one core, summed over its processes
 
 
+class RoomInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """One chat room a host started on request."""
+
+    name: Ident
+    host: Ident
+    title: ShortText
+    owner: Ident  # who asked for it
+    state: Literal["starting", "running", "restarting", "failed"]
+    started_at: float
+
+
 class HostLoad(Message):
     """How busy a host is, and what it runs (``host/<host>/load``)."""
 
@@ -52,6 +64,10 @@ class HostLoad(Message):
     max_arenas: NonNegInt
     accepting: bool  # would take a new arena now
     reason: ShortText = ""  # why not, when it would not
+    # Chat rooms started on request; a host that hosts none (a lab file's host)
+    # says so with max_rooms 0. Defaults keep older hosts' reports readable.
+    rooms: list[RoomInfo] = msgspec.field(default_factory=list)
+    max_rooms: NonNegInt = 0
 
 
 class LoadRequest(Message):
@@ -83,4 +99,36 @@ class ArenaReply(Message):
     arena: ArenaInfo
 
 
-__all__ = ["ArenaInfo", "ArenaReply", "HostLoad", "LoadRequest", "SpawnArena", "StopArena"]
+class SpawnRoom(Message):
+    """Start a chat room on this host, owned by the requester (``host`` permission)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
+
+    name: Ident  # the room's id: one key chunk, unique in the lab
+    title: ShortText = ""
+
+
+class StopRoom(Message):
+    """Stop a chat room this host started on request (``host`` permission)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
+
+    name: Ident
+
+
+class RoomReply(Message):
+    room: RoomInfo
+
+
+__all__ = [
+    "ArenaInfo",
+    "ArenaReply",
+    "HostLoad",
+    "LoadRequest",
+    "RoomInfo",
+    "RoomReply",
+    "SpawnArena",
+    "SpawnRoom",
+    "StopArena",
+    "StopRoom",
+]

@@ -54,7 +54,7 @@ def test_named_host_and_clear_refusals() -> None:
         choose_host(loads, "A")
     with pytest.raises(ArenaError, match="host Z did not answer"):
         choose_host(loads, "Z")
-    with pytest.raises(ArenaError, match="no host answered"):
+    with pytest.raises(ArenaError, match="no host serves this lab"):
         choose_host([])
     with pytest.raises(ArenaError, match="A: no arenas"):
         choose_host(loads[:1])

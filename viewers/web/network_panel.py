@@ -38,7 +38,11 @@ def format_survey(result: Survey) -> str:
     for kind, ids in result.alive.items():
         lines.append(f"| {escape_md(kind)} | {', '.join(escape_md(i) for i in ids)} |")
     if result.hosts:
-        lines += ["", "| host | CPU | free memory | arenas | new arenas |", "| --- | --- | --- | --- | --- |"]
+        lines += [
+            "",
+            "| host | CPU | free memory | arenas | new arenas |",
+            "| --- | --- | --- | --- | --- |",
+        ]
         for load in result.hosts:
             arenas = ", ".join(escape_md(a.world) for a in load.arenas) or "-"
             state = "yes" if load.accepting else f"no: {escape_md(load.reason)}"

@@ -1,0 +1,66 @@
+"""``wart room``: start and stop chat rooms on request (``host`` permission).
+
+    wart room new  --user NAME ROOM [--title "Reading group"] [--on HOST]
+    wart room stop --user NAME ROOM
+
+The room is owned by the user who asks (they may kick there) and appears in
+the lobby's directory for everyone. Network flags as for ``wart chat`` (a
+``wart up`` lab: --registry-key or WART_REGISTRY_KEY), or --lab FILE for a
+multi-host lab; see ``wart arena``. The password comes from --password-file,
+WART_PASSWORD or a prompt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from common import cli
+from common.client import LabClient, LabError
+from common.host_client import host_room, stop_hosted
+from common.labfile import LabFileError
+from common.service import close_session
+from common.zconfig import NetworkOptions
+from services.arena import add_lab_arguments, lab_session
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    add_lab_arguments(p)
+    sub = p.add_subparsers(dest="verb", required=True)
+    s_new = sub.add_parser("new", help="start a chat room owned by you")
+    s_new.add_argument("--title", default="", help="the title shown to users (default: the name)")
+    s_new.add_argument("--on", dest="host", help="this host instead of the least busy")
+    s_stop = sub.add_parser("stop", help="stop a chat room started on request")
+    for s in (s_new, s_stop):
+        s.add_argument("room", help="the room's name: letters, digits, _ - .")
+        s.add_argument("--user", required=True)
+        s.add_argument("--password-file", help="read the password from this file")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        return _run(args, options)
+    except (LabFileError, LabError, ValueError, OSError) as exc:
+        return cli.fail(str(exc), 1)
+
+
+def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
+    from services.chat import password_from
+
+    session, realm, registry_key = lab_session(args, options)
+    try:
+        with LabClient(session, realm, registry_key, presence=False) as client:
+            client.login(args.user, password_from(args))
+            if args.verb == "new":
+                room = host_room(client, args.room, args.title, host=args.host)
+                print(f"chat room {room.name} ({room.title}) is open on {room.host}")
+            else:
+                print(stop_hosted(client, args.room, "room"))
+        return 0
+    finally:
+        close_session(session)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
