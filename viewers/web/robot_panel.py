@@ -276,8 +276,8 @@ class RobotPanel:
         except LabError as exc:
             self.say_notice(f"Not queued: {exc}")
             return
-        if queued.position == 0:
-            where = "it runs now"
+        if queued.position == 0 or (queued.eta_s is not None and queued.eta_s < 1.0):
+            where = "it starts now"
         else:
             eta = "" if queued.eta_s is None else f", starting in about {queued.eta_s:.0f} s"
             where = f"you are #{queued.position} in the queue{eta}"
