@@ -8,6 +8,7 @@ place in the queue, the robot obey, the output, and the queue advance.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -170,3 +171,54 @@ def test_cancel_and_owner_controls(open_page, lab: RealLab) -> None:
     ida.fill("Slot length (s)", str(int(SLOT)))
     ida.click("Set slot length")
     ida.wait_text(f"slots of {SLOT:g} s from the next one")
+
+
+def _rgb(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), np.int16)
+
+
+def test_mouse_drag_of_the_gizmo_moves_an_obstacle_for_the_other_session(
+    open_page, lab: RealLab
+) -> None:
+    """A real drag: mouse down on the gizmo's x arrow, move, up; bob's view redraws it."""
+    ida, bob = open_page("ida"), open_page("bob")
+    ida_panel = enter_arena(ida, lab, "ida")
+    enter_arena(bob, lab, "bob")
+    ida_view, bob_view = session_of(lab.viewer, "ida").view, session_of(lab.viewer, "bob").view
+    wait_until(lambda: ida_view.frames_applied > 3, 15, what="ida's arena drawn")
+    snap = ida_view.snapshot
+    assert snap is not None and ida_panel.editor is not None
+    target = next(o for o in snap.obstacles if not o.ident.startswith("wall"))
+    ida.p.wait_for_timeout(500)
+    before = _rgb(ida.p.screenshot())
+    ida_panel.editor.select(target.ident)  # what clicking it does (tested in test_real_lab)
+    ida.p.wait_for_timeout(1000)  # software WebGL: let the gizmo be drawn
+    after = _rgb(ida.p.screenshot())
+    scene = np.zeros(after.shape[:2], bool)
+    scene[170:760, :880] = True  # left of the panel, below the WebGL notice
+    changed = np.abs(after - before).sum(axis=2) > 60
+    r, g, b = after[..., 0], after[..., 1], after[..., 2]
+    red = changed & scene & (r > 150) & (g < 110) & (b < 110)  # the x arrow (red)
+    ys, xs = np.nonzero(red)
+    assert len(xs) > 20, "the gizmo's x arrow was not found on screen"
+    # Grab the arrow half-way along it (its pixels right of the gizmo's centre).
+    x, y = float(np.median(xs)), float(np.median(ys))
+    mouse = ida.p.mouse
+    mouse.move(x, y)
+    mouse.down()
+    for step in range(1, 11):
+        mouse.move(x + 8 * step, y, steps=2)
+    mouse.up()
+    ida.screenshot("gizmo-dragged")
+
+    def moved_for_bob() -> bool:
+        s = bob_view.snapshot
+        moved = next((o for o in s.obstacles if o.ident == target.ident), None) if s else None
+        # The gizmo turns with the box: its x arrow points along the box's heading, so
+        # a drag to the right moves the box along that arrow (right, and up or down).
+        return moved is not None and moved.x - target.x > 20
+
+    wait_until(moved_for_bob, 15, what="bob's view to show the obstacle dragged to the right")
+    bob.screenshot("gizmo-drag-seen")
