@@ -539,7 +539,11 @@ class RealConnection:
         world = summary.world if summary is not None else None
         if kind == "agent":
             # An agent context: chat and AgentEvents (queues, output) over one join.
-            arena = ArenaLink(self.client, ctx, self._queue.put, lambda e: self._room_event(ctx, e))
+
+            def on_room(event: RoomEvent) -> None:
+                self._room_event(ctx, event)
+
+            arena = self._call(lambda: ArenaLink(self.client, ctx, self._queue.put, on_room))
             room = arena.join(HISTORY)
             world = arena.world or world
             if world is not None:
