@@ -74,6 +74,14 @@ def choose(page: ViserPage, label: str, option: str) -> None:
     page.p.get_by_role("option", name=option, exact=True).click()
 
 
+def pick_robot(page: ViserPage, panel: ChatPanel, agent: str) -> None:
+    """Choose a robot in the panel's list; wait until the server has the choice."""
+    choose(page, "Robot", agent)
+    robots = panel.robots
+    assert robots is not None
+    wait_until(lambda: robots.robot.value == agent, 10, what=f"{agent} chosen")
+
+
 def upload(page: ViserPage, name: str, content: bytes) -> None:
     page.p.locator("input[type=file]").last.set_input_files(
         {"name": name, "mimeType": "text/x-python", "buffer": content}
@@ -93,11 +101,11 @@ def test_upload_queue_obey_output_and_advance(open_page, lab: RealLab) -> None:
     assert not alice_panel.robots.manage.visible  # a student: no instructor controls
 
     # A file that cannot run is refused in the page, in words, before anything queues.
-    choose(alice, "Robot", "k0")
+    pick_robot(alice, alice_panel, "k0")
     upload(alice, "broken.py", b"from common.controller import Controller\ndef (:\n")
     alice.wait_text("Not queued: broken.py, line 2: syntax error")
 
-    choose(bob, "Robot", "k0")
+    pick_robot(bob, bob_panel, "k0")
     start = view.feed.latest()
     assert start is not None
     upload(alice, BRAITENBERG.name, BRAITENBERG.read_bytes())
@@ -129,7 +137,7 @@ def test_upload_queue_obey_output_and_advance(open_page, lab: RealLab) -> None:
 def test_cancel_and_owner_controls(open_page, lab: RealLab) -> None:
     ida, carol, alice = open_page("ida"), open_page("carol"), open_page("alice")
     ida_panel = enter_arena(ida, lab, "ida")
-    enter_arena(carol, lab, "carol")
+    carol_panel = enter_arena(carol, lab, "carol")
     alice_panel = enter_arena(alice, lab, "alice")
     assert ida_panel.robots is not None and alice_panel.robots is not None
     wait_until(lambda: ida_panel.robots.manage.visible, 10, what="ida's arena settings")
@@ -141,10 +149,10 @@ def test_cancel_and_owner_controls(open_page, lab: RealLab) -> None:
     ida.click("Set slot length")
     ida.wait_text("slots of 30 s from the next one")
 
-    choose(carol, "Robot", "k1")
+    pick_robot(carol, carol_panel, "k1")
     upload(carol, BRAITENBERG.name, BRAITENBERG.read_bytes())
     carol.wait_text("01_braitenberg.py is queued for k1")
-    choose(alice, "Robot", "k1")
+    pick_robot(alice, alice_panel, "k1")
     upload(alice, "hello.py", HELLO)
     alice.wait_text("you are #1 in the queue")
     alice.screenshot("agents-before-cancel")
@@ -158,8 +166,9 @@ def test_cancel_and_owner_controls(open_page, lab: RealLab) -> None:
     )
 
     # The owner stops carol's running controller, then turns remote control off and on.
-    choose(ida, "Robot", "k1")
+    pick_robot(ida, ida_panel, "k1")
     ida.click("Stop the running controller")
+    ida.wait_text("stopping k1")  # the context's answer: it ends the slot at once
     carol.wait_text("your controller on k1 was cancelled: stopped by ida", timeout=15_000)
     ida.click("Disable remote control")
     ida.wait_text("remote control is off")
