@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common import keys
-from common.client import LabClient, LabError, NotLoggedIn
+from common.client import LabClient, LabError, NotLoggedIn, RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
 from common.messages import (
     AgentContextState,
@@ -68,12 +68,13 @@ class AgentClient:
     on_status: Callable[[RequestStatus], None] = lambda _s: None
     on_room: Callable[[RoomEvent], None] = lambda _e: None
     latest_state: AgentContextState | None = None
+    room: RoomHandle | None = None  # what the join said (title, owner, members, history)
     _statuses: dict[str, list[RequestStatus]] = field(default_factory=dict)
     _cond: threading.Condition = field(default_factory=threading.Condition)
 
     def join(self, history: int = 0) -> AgentClient:
         keys.check_ident("context", self.ctx)
-        self.client.join(self.ctx, self.on_room, history, on_agent_event=self._on_event)
+        self.room = self.client.join(self.ctx, self.on_room, history, on_agent_event=self._on_event)
         self.latest_state = self.state()
         return self
 

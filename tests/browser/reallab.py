@@ -3,7 +3,10 @@
 Everything but the viewer is a real ``wart`` process on 127.0.0.1 (multicast
 scouting off); the viewer runs in the test process over a real Zenoh session
 with :class:`~viewers.web.real.RealConnector`, so tests can read its state
-(views, frames) as well as the page.
+(views, frames) as well as the page. With ``agents`` the lab also runs a
+runner (sandboxed uploads) and the agent context ``arena`` on the world
+(owner ida, short slots), and the engine logs in as a service account so
+leases carry per-lease MAC keys, as under ``wart up``.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, free_port
+from tests.integration.agentkit import CTX, start_agent_context, start_engine, start_runner
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
@@ -120,7 +124,9 @@ def start_router(procs: Procs, realm: str) -> Router:
 
 
 @contextmanager
-def real_lab(tmp: Path, map_name: str = "foraging") -> Iterator[RealLab]:
+def real_lab(
+    tmp: Path, map_name: str = "foraging", *, agents: bool = False, slot: float = 4.0
+) -> Iterator[RealLab]:
     procs = Procs(tmp)
     realm = f"t{uuid.uuid4().hex[:10]}"
     try:
@@ -128,25 +134,30 @@ def real_lab(tmp: Path, map_name: str = "foraging") -> Iterator[RealLab]:
         lab = make_lab(router, procs, tmp)
         lab.start_registry()
         lab.start_room("lobby")
-        maps_dir = tmp / "maps"
-        maps_dir.mkdir()
-        shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
-        engine = procs.start(
-            "engine",
-            [
+        if agents:
+            start_engine(lab, map_name, identity=True)
+            start_runner(lab)
+            start_agent_context(lab, slot=slot)
+        else:
+            maps_dir = tmp / "maps"
+            maps_dir.mkdir()
+            shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
+            engine = procs.start(
                 "engine",
-                "--map",
-                str(maps_dir / f"{map_name}.json"),
-                "--world",
-                WORLD,
-                "--seed",
-                "3",
-                "--maps-dir",
-                str(maps_dir),
-                *lab.net_args(),
-            ],
-        )
-        lab.wait_alive(AliveKind.WORLD, WORLD, engine)
+                [
+                    "engine",
+                    "--map",
+                    str(maps_dir / f"{map_name}.json"),
+                    "--world",
+                    WORLD,
+                    "--seed",
+                    "3",
+                    "--maps-dir",
+                    str(maps_dir),
+                    *lab.net_args(),
+                ],
+            )
+            lab.wait_alive(AliveKind.WORLD, WORLD, engine)
         session = open_session(router.options(), wait=10.0)
         address = LabAddress("127.0.0.1", router.port, realm)
         connector = RealConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")
@@ -163,4 +174,4 @@ def real_lab(tmp: Path, map_name: str = "foraging") -> Iterator[RealLab]:
         procs.stop_all()
 
 
-__all__ = ["PASSWORD", "WORLD", "LabClient", "RealLab", "real_lab"]
+__all__ = ["CTX", "PASSWORD", "WORLD", "LabClient", "RealLab", "real_lab"]

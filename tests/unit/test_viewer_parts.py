@@ -7,11 +7,14 @@ import math
 import numpy as np
 import pytest
 
+from common.messages.agent import MAX_UPLOAD_BYTES
+from tests.conftest import REPO
 from viewers.web import geometry as geo
-from viewers.web.adapters import LabError, LoginError, MapEdit
+from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError, MapEdit
 from viewers.web.address import LabAddress
 from viewers.web.fakes import FakeConnector, FakeLab, FakeWorld
 from viewers.web.login import check_login_input
+from viewers.web.real_agents import check_upload
 from viewers.web.robot_panel import check_controller, format_agents
 from viewers.web.text import check_line, escape_md
 from viewers.web.world_view import PreparedFrame
@@ -73,16 +76,23 @@ def test_text_is_escaped_and_checked() -> None:
 
 
 def test_controller_uploads_are_checked_not_run() -> None:
-    good = b"class C:\n    def do_work(self):\n        pass\n"
+    good = b"from common.controller import Controller\n\nclass C(Controller):\n    pass\n"
     assert check_controller("ctl.py", good) is None
     assert "not a Python file" in (check_controller("ctl.exe", good) or "")
     assert "empty" in (check_controller("ctl.py", b"") or "")
-    assert "larger" in (check_controller("ctl.py", b"#" * 300_000) or "")
+    # The page's limit is the agent context's (one constant): 64 KiB.
+    assert MAX_CONTROLLER_BYTES == MAX_UPLOAD_BYTES == 64 * 1024
+    too_big = check_controller("ctl.py", good + b"#" * MAX_CONTROLLER_BYTES) or ""
+    assert "limited to 64 KiB" in too_big
     assert "UTF-8" in (check_controller("ctl.py", b"\xff\xfe") or "")
     assert "line 1" in (check_controller("ctl.py", b"def (:") or "")
-    boom = b"raise SystemExit('ran!')\n"
-    assert check_controller("boom.py", boom) is None  # compiled, never executed
+    assert "defines no controller" in (check_controller("ctl.py", b"x = 1\n") or "")
+    boom = b"raise SystemExit('ran!')\nclass B(Controller):\n    pass\n"
+    assert check_controller("boom.py", boom) is None  # parsed, never executed
     assert "../" not in (check_controller("../../x.txt", good) or "")
+    assert check_upload("C:\\Users\\me\\ctl.py", good) == ("ctl.py", None)
+    example = (REPO / "examples" / "01_braitenberg.py").read_bytes()
+    assert check_controller("01_braitenberg.py", example) is None
 
 
 def test_fake_lab_behaves_like_a_lab() -> None:
@@ -120,8 +130,20 @@ def test_fake_lab_behaves_like_a_lab() -> None:
         moved = next(o for o in world.snapshot().obstacles if o.ident == "box1")
         assert (moved.x, moved.y, moved.angle) == (10, 20, 0.5)
         assert world.snapshot().version == 1
-        ben.request_control("arena", "k0", "c.py", b"pass")
+        queued = ben.request_control("arena", "k0", "c.py", b"pass")
+        assert queued.position == 0  # nobody else: it runs now
+        with pytest.raises(LabError, match="already have a request"):
+            ben.request_control("arena", "k0", "c.py", b"pass")
         assert format_agents(ben.agents("arena")).count("| k") == 4
+        with pytest.raises(LabError, match="only the owner"):
+            ben.set_slot("arena", 5)
+        assert ana.arena_settings("arena").can_manage
+        assert not ben.arena_settings("arena").can_manage
+        ana.set_slot("arena", 5)
+        assert "Slots of 5 s" in format_agents(ben.agents("arena"), ben.arena_settings("arena"))
+        assert "cancelled" in ben.cancel_control("arena", "k0")
+        with pytest.raises(LabError, match="no request"):
+            ben.cancel_control("arena", "k0")
         ana.logout()
         assert "ana" not in ben.directory().users
     finally:

@@ -6,21 +6,27 @@ import json
 import math
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from common.messages import (
     AddItem,
+    AgentContextState,
     AgentInfo,
+    AgentQueue,
     ItemInfo,
     LightInfo,
     MoveItem,
+    QueueEntry,
     RemoveItem,
     ResizeArena,
     ShapeInfo,
     WorldSnapshot,
 )
-from viewers.web.adapters import LabError, MapEdit
+from viewers.web.adapters import AgentStatus, ArenaSettings, LabError, MapEdit
 from viewers.web.real import convert_snapshot, load_labs, to_wire_edit
+from viewers.web.real_agents import agent_rows
+from viewers.web.robot_panel import format_agents
 
 KEY = "11" * 32
 
@@ -161,3 +167,53 @@ def test_lab_list_is_validated(tmp_path: Path) -> None:
     assert list(labs) == [("physics.example.org", 7447, "phys")]
     path.write_text("{not json")
     assert load_labs(path, "lab") == {}
+
+
+def test_offline_robots_are_marked() -> None:
+    snap = wire_snapshot()
+    offline = msgspec.structs.replace(
+        snap, agents=[msgspec.structs.replace(snap.agents[0], online=False)]
+    )
+    assert convert_snapshot(snap)[0].offline == frozenset()
+    assert convert_snapshot(offline)[0].offline == {"k0"}
+    assert "k0 (offline)" in format_agents([AgentStatus("k0", None, 0, online=False)])
+
+
+def test_queue_state_as_panel_rows() -> None:
+    now = 1000.0
+    state = AgentContextState(
+        ctx="arena",
+        world="w1",
+        slot_seconds=3.0,
+        enabled=True,
+        agents=[
+            AgentQueue(
+                agent="k0",
+                type="khepera",
+                enabled=True,
+                entries=[
+                    QueueEntry(
+                        request_id="r1",
+                        user="alice",
+                        mode="deploy",
+                        position=0,
+                        start_eta=now - 1,
+                        end=now + 2,
+                    ),
+                    QueueEntry(
+                        request_id="r2", user="bob", mode="deploy", position=1, start_eta=now + 2
+                    ),
+                ],
+            ),
+            AgentQueue(agent="k1", type="khepera", enabled=False, entries=[]),
+        ],
+        at=now,
+    )
+    k0, k1 = agent_rows(state, "bob", now, frozenset({"k1"}))
+    assert (k0.holder, k0.queue, k0.my_position, k0.my_request) == ("alice", 1, 1, "r2")
+    assert k0.eta_s == pytest.approx(2.0) and k0.slot_left_s == pytest.approx(2.0)
+    assert (k1.holder, k1.enabled, k1.online, k1.my_position) == (None, False, False, None)
+    mine = agent_rows(state, "alice", now)[0]
+    assert (mine.my_position, mine.eta_s) == (0, None)  # running: no ETA
+    table = format_agents([k0, k1], ArenaSettings(3.0, True, False))
+    assert "Slots of 3 s" in table and "alice (2 s left)" in table and "#1" in table

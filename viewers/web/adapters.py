@@ -20,6 +20,7 @@ from typing import Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from common.messages.agent import MAX_UPLOAD_BYTES
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
@@ -125,7 +126,39 @@ class AgentsEvent:
     ctx: str
 
 
-LabEvent = ChatEvent | MemberEvent | PrivateEvent | DirectoryEvent | DisconnectedEvent | AgentsEvent
+@dataclass(frozen=True)
+class RequestEvent:
+    """A controller request changed state (queued, running, finished, cancelled, refused)."""
+
+    ctx: str
+    request_id: str
+    agent: str
+    user: str
+    status: str
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class OutputEvent:
+    """Lines a running controller printed (its prints and tracebacks)."""
+
+    ctx: str
+    request_id: str
+    agent: str
+    user: str
+    lines: tuple[str, ...]
+
+
+LabEvent = (
+    ChatEvent
+    | MemberEvent
+    | PrivateEvent
+    | DirectoryEvent
+    | DisconnectedEvent
+    | AgentsEvent
+    | RequestEvent
+    | OutputEvent
+)
 
 # --- agents, queues, controllers --------------------------------------------------
 
@@ -137,11 +170,36 @@ class AgentStatus:
     agent: str
     holder: str | None  # who controls it now
     queue: int  # how many wait for it
-    my_position: int | None = None  # 1 = next; None = I am not queued
-    eta_s: float | None = None  # until my slot starts
+    my_position: int | None = None  # 0 = mine runs now, 1 = next; None = I am not queued
+    eta_s: float | None = None  # until my slot starts (None: now, or the agent is disabled)
+    enabled: bool = True  # remote control allowed (the context and this agent)
+    online: bool = True  # a real robot unplugged or silent is offline
+    my_request: str | None = None  # my request's id on this agent
+    slot_left_s: float | None = None  # what remains of the running slot
 
 
-MAX_CONTROLLER_BYTES = 256 * 1024
+@dataclass(frozen=True)
+class Queued:
+    """Where a request waits: 0 runs now, 1 next; ``eta_s`` until its slot (None: disabled)."""
+
+    request_id: str
+    agent: str
+    position: int
+    eta_s: float | None
+    slot_seconds: float
+
+
+@dataclass(frozen=True)
+class ArenaSettings:
+    """An agent context's settings as the robot panel shows them."""
+
+    slot_seconds: float
+    enabled: bool
+    can_manage: bool  # the owner or 'kick' there: slot length, stop, enable/disable
+
+
+# One figure for the page's check and the agent context's limit (the wire type's bound).
+MAX_CONTROLLER_BYTES = MAX_UPLOAD_BYTES
 CONTROLLER_SUFFIXES = (".py",)
 
 # --- world ------------------------------------------------------------------------
@@ -193,6 +251,7 @@ class WorldSnapshot:
     robots: tuple[str, ...]  # agent names, in the order of the frame arrays
     robot_radius: float = 27.5  # Khepera I: 55 mm across
     version: int = 0
+    offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
 
 
 @dataclass(frozen=True)
@@ -310,9 +369,21 @@ class LabConnection(Protocol):
 
     def agents(self, ctx: str) -> list[AgentStatus]: ...
 
-    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> None: ...
+    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> Queued:
+        """Queue an uploaded controller on ``agent``; :class:`LabError` says why not."""
+        ...
 
-    def cancel_control(self, ctx: str, agent: str) -> None: ...
+    def cancel_control(self, ctx: str, agent: str) -> str:
+        """Cancel my request on ``agent`` (waiting or running); returns what the context said."""
+        ...
+
+    def arena_settings(self, ctx: str) -> ArenaSettings: ...
+
+    def set_slot(self, ctx: str, seconds: float) -> str: ...
+
+    def stop_agent(self, ctx: str, agent: str) -> str: ...
+
+    def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str: ...
 
     def logout(self) -> None: ...
 

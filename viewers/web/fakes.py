@@ -23,6 +23,7 @@ from viewers.web.adapters import (
     Account,
     AgentsEvent,
     AgentStatus,
+    ArenaSettings,
     Ball,
     ChatEvent,
     ChatLine,
@@ -39,6 +40,7 @@ from viewers.web.adapters import (
     MemberEvent,
     Obstacle,
     PrivateEvent,
+    Queued,
     SensorSample,
     WorldFrame,
     WorldSnapshot,
@@ -236,6 +238,8 @@ class _Context:
     members: list[str] = field(default_factory=list)
     history: list[ChatLine] = field(default_factory=list)
     queue: dict[str, list[str]] = field(default_factory=dict)  # agent -> users waiting
+    slot_seconds: float = 60.0
+    enabled: bool = True
 
 
 class FakeLab:
@@ -462,28 +466,69 @@ class FakeConnection:
                         holder=holder,
                         queue=max(0, len(waiting) - 1),
                         my_position=mine,
-                        eta_s=None if mine is None else 60.0 * mine,
+                        eta_s=None if mine is None else context.slot_seconds * mine,
+                        enabled=context.enabled,
                     )
                 )
             return out
 
-    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> None:
+    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> Queued:
         self._need("deploy", "upload controllers")
         with self._lab._lock:
-            queue = self._lab.context(ctx).queue.get(agent)
+            context = self._lab.context(ctx)
+            queue = context.queue.get(agent)
             if queue is None:
                 raise LabError(f"there is no robot {agent!r} in {ctx}")
-            if self._user not in queue:
-                queue.append(self._user)
+            if not context.enabled:
+                raise LabError(f"remote control is disabled in {ctx} for now")
+            if self._user in queue:
+                raise LabError(f"you already have a request on {agent}: cancel it first")
+            queue.append(self._user)
+            position = queue.index(self._user)
             self.uploads.append((ctx, agent, filename, len(source)))
         self._lab._broadcast(AgentsEvent(ctx))
+        slot = context.slot_seconds
+        return Queued(f"{agent}-{len(self.uploads)}", agent, position, slot * position, slot)
 
-    def cancel_control(self, ctx: str, agent: str) -> None:
+    def cancel_control(self, ctx: str, agent: str) -> str:
         with self._lab._lock:
             queue = self._lab.context(ctx).queue.get(agent, [])
-            if self._user in queue:
-                queue.remove(self._user)
+            if self._user not in queue:
+                raise LabError(f"you have no request on {agent}")
+            queue.remove(self._user)
         self._lab._broadcast(AgentsEvent(ctx))
+        return f"your request on {agent} is cancelled"
+
+    def arena_settings(self, ctx: str) -> ArenaSettings:
+        with self._lab._lock:
+            context = self._lab.context(ctx)
+            manage = context.summary.owner == self._user or "kick" in self._perms
+            return ArenaSettings(context.slot_seconds, context.enabled, manage)
+
+    def _manage(self, ctx: str) -> _Context:
+        context = self._lab.context(ctx)
+        if context.summary.owner != self._user and "kick" not in self._perms:
+            raise LabError(f"only the owner of {ctx} or a user with 'kick' there may do that")
+        return context
+
+    def set_slot(self, ctx: str, seconds: float) -> str:
+        with self._lab._lock:
+            self._manage(ctx).slot_seconds = seconds
+        self._lab._broadcast(AgentsEvent(ctx))
+        return f"slots of {seconds:g} s from the next one"
+
+    def stop_agent(self, ctx: str, agent: str) -> str:
+        with self._lab._lock:
+            queue = self._manage(ctx).queue.get(agent, [])
+            who = queue.pop(0) if queue else None
+        self._lab._broadcast(AgentsEvent(ctx))
+        return f"stopped {who}'s controller" if who else f"nothing runs on {agent}"
+
+    def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
+        with self._lab._lock:
+            self._manage(ctx).enabled = enabled
+        self._lab._broadcast(AgentsEvent(ctx))
+        return f"remote control {'on' if enabled else 'off'}"
 
     # -- admin
 

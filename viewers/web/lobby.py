@@ -23,7 +23,9 @@ from viewers.web.adapters import (
     LabError,
     LabEvent,
     MemberEvent,
+    OutputEvent,
     PrivateEvent,
+    RequestEvent,
     WorldFeed,
 )
 from viewers.web.admin_panel import AdminPanel
@@ -255,10 +257,17 @@ class LabTab:
                 body=event.text[:200],
                 auto_close_seconds=10.0,
             )
-        elif isinstance(event, AgentsEvent):
+        elif isinstance(event, AgentsEvent | RequestEvent | OutputEvent):
             panel = self.panels.get(event.ctx)
-            if panel is not None and panel.robots is not None:
-                panel.robots.refresh_agents()
+            robots = panel.robots if panel is not None else None
+            if robots is None:
+                return
+            if isinstance(event, AgentsEvent):
+                robots.refresh_agents()
+            elif isinstance(event, RequestEvent):
+                robots.on_request(event)
+            else:
+                robots.on_output(event)
         elif isinstance(event, DisconnectedEvent):
             self.client.add_notification(
                 title=f"Disconnected from {self.label}", body=event.reason, color="red"

@@ -35,12 +35,14 @@ from common.auth import parse_public_key
 from common.keys import AliveKind, is_ident
 from common.messages import (
     AddItem,
+    AgentContextState,
     EditResult,
     ErrorReply,
     MapRequest,
     Message,
     MessageError,
     MoveItem,
+    QueueStateRequest,
     RemoveItem,
     ResizeArena,
     RoomEvent,
@@ -55,6 +57,7 @@ from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
     Account,
     AgentStatus,
+    ArenaSettings,
     Ball,
     ChatEvent,
     ChatLine,
@@ -71,20 +74,24 @@ from viewers.web.adapters import (
     MemberEvent,
     Obstacle,
     PrivateEvent,
+    Queued,
     SensorSample,
     WorldFrame,
     WorldSnapshot,
 )
 from viewers.web.address import AddressError, LabAddress, parse_address
+from viewers.web.real_agents import ArenaLink
+from viewers.web.world_view import OFFLINE
 
 log = logging.getLogger("wart.viewer.real")
 
 QUERY_TIMEOUT = 5.0
 DIRECTORY_POLL_S = 3.0  # the registry has no directory events: poll, emit on change
 SENSOR_IDLE_S = 5.0  # a robot's sensor subscription ends when nobody asked for it this long
-QUEUES_LATER = (
-    "controller queues arrive with the agent-context release: until then robots are "
-    "driven with 'wart control' and leases from the agent context"
+HISTORY = 50  # chat lines a join asks for
+NOT_AN_ARENA = (
+    "this is a world without an agent context: robots are queued and driven through an "
+    "agent context (join one from the lobby)"
 )
 LABS_FILE = "labs.json"
 
@@ -359,6 +366,8 @@ class RealConnection:
         self._kinds: dict[str, ContextSummary] = {}
         self._worlds: dict[str, UserWorld] = {}
         self._world_only: set[str] = set()
+        self._arenas: dict[str, ArenaLink] = {}  # joined agent contexts
+        self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
         client.on_kicked = lambda k: self._queue.put(
             DisconnectedEvent(
@@ -458,11 +467,14 @@ class RealConnection:
     def directory(self) -> Directory:
         reply = self._call(self.client.directory)
         contexts = [
-            ContextSummary(c.ctx, c.kind, c.owner, c.title, len(c.members)) for c in reply.contexts
+            ContextSummary(
+                c.ctx, c.kind, c.owner, c.title, len(c.members), self._world_of(c.ctx, c.kind)
+            )
+            for c in reply.contexts
         ]
-        named = {c.ctx for c in contexts}
-        # Running engines appear too, so their arenas can be watched (and edited) before
-        # an agent context announces them.
+        named = {c.ctx for c in contexts} | {c.world for c in contexts if c.world}
+        # Running engines (and bridges) no agent context announces appear too, so their
+        # arenas can be watched (and edited) before a context queues their robots.
         for world in sorted(self._live_worlds()):
             if world not in named:
                 contexts.append(
@@ -473,6 +485,22 @@ class RealConnection:
             self._directory = directory
             self._kinds = {c.ctx: c for c in contexts}
         return directory
+
+    def _world_of(self, ctx: str, kind: str) -> str | None:
+        """An agent context's world, from its queue state (asked once per context)."""
+        if kind != "agent":
+            return None
+        world = self._ctx_worlds.get(ctx)
+        if world is None:
+            try:
+                state = self.client.request(
+                    ctx, QueueStateRequest(), AgentContextState, f"queues of {ctx}"
+                )
+            except lab.LabError as exc:  # not answering yet: the next poll asks again
+                log.debug("world of %s: %s", ctx, exc)
+                return None
+            world = self._ctx_worlds[ctx] = state.world
+        return world
 
     def _live_worlds(self) -> set[str]:
         worlds: set[str] = set()
@@ -509,9 +537,26 @@ class RealConnection:
                 history=(),
                 world=summary.world,
             )
-        room = self._call(lambda: self.client.join(ctx, lambda e: self._room_event(ctx, e)))
-        history = tuple(ChatLine(h.seq, h.sender, h.text, h.at) for h in room.history)
         kind = summary.kind if summary is not None else "chat"
+        world = summary.world if summary is not None else None
+        if kind == "agent":
+            # An agent context: chat and AgentEvents (queues, output) over one join.
+
+            def on_room(event: RoomEvent) -> None:
+                self._room_event(ctx, event)
+
+            arena = self._call(lambda: ArenaLink(self.client, ctx, self._queue.put, on_room))
+            room = arena.join(HISTORY)
+            world = arena.world or world
+            if world is not None:
+                self._ctx_worlds[ctx] = world
+            with self._lock:
+                self._arenas[ctx] = arena
+        else:
+            room = self._call(
+                lambda: self.client.join(ctx, lambda e: self._room_event(ctx, e), HISTORY)
+            )
+        history = tuple(ChatLine(h.seq, h.sender, h.text, h.at) for h in room.history)
         return JoinedContext(
             ctx=ctx,
             kind=kind,
@@ -519,7 +564,7 @@ class RealConnection:
             owner=room.owner,
             members=tuple(room.members),
             history=history,
-            world=summary.world if summary is not None else None,
+            world=world,
             can_kick=self._may("kick", ctx) or room.owner == self.user,
         )
 
@@ -527,11 +572,13 @@ class RealConnection:
         if ctx in self._world_only:
             self._world_only.discard(ctx)
             return
+        with self._lock:
+            self._arenas.pop(ctx, None)
         self._call(lambda: self.client.leave(ctx))
 
     def say(self, ctx: str, text: str) -> None:
         if ctx in self._world_only:
-            raise LabError(f"{ctx} has no chat room yet: {QUEUES_LATER}")
+            raise LabError(f"{ctx} has no chat room: {NOT_AN_ARENA}")
         self._call(lambda: self.client.say(ctx, text))
 
     def kick(self, ctx: str, user: str, reason: str = "") -> None:
@@ -561,28 +608,62 @@ class RealConnection:
         self._worlds[world] = feed
         return feed
 
-    # -- agents: behind the stub until agent contexts are in this viewer's base
+    # -- agents: the joined agent contexts' queues, uploads and settings
+
+    def _arena(self, ctx: str) -> ArenaLink:
+        if self._closed.is_set():
+            raise LabError("you are logged out of this lab")
+        arena = self._arenas.get(ctx)
+        if arena is None:
+            if ctx in self._world_only:
+                raise LabError(f"{ctx}: {NOT_AN_ARENA}")
+            raise LabError(f"join {ctx} first")
+        return arena
+
+    def _offline(self, world: str | None) -> frozenset[str]:
+        feed = self._worlds.get(world or "")
+        if feed is None:
+            return frozenset()
+        try:
+            return feed.snapshot().offline
+        except LabError:
+            return frozenset()
 
     def agents(self, ctx: str) -> list[AgentStatus]:
-        """The robots of the arena, without queues (see QUEUES_LATER).
-
-        TODO(issue-5): ask ``ctx/<ctx>/request`` with QueueStateRequest and map
-        AgentContextState.agents (running entry = holder, the rest = queue,
-        my position and start_eta) into AgentStatus rows.
-        """
+        """The robots and their queues; a world without context lists its robots only."""
+        arena = self._arenas.get(ctx)
+        if arena is not None:
+            return arena.rows(self._offline(arena.world))
         summary = self._kinds.get(ctx)
         world = self._worlds.get(summary.world or "") if summary is not None else None
         if world is None:
             return []  # the world is not shown yet; RobotPanel.bind asks again
-        return [AgentStatus(name, None, 0) for name in world.snapshot().robots]
+        snap = world.snapshot()
+        return [
+            AgentStatus(name, None, 0, enabled=False, online=name not in snap.offline)
+            for name in snap.robots
+        ]
 
-    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> None:
-        """TODO(issue-5): ControlRequest(agent, "deploy", source, filename), ctx/<ctx>/request."""
-        raise LabError(QUEUES_LATER)
+    def request_control(self, ctx: str, agent: str, filename: str, source: bytes) -> Queued:
+        return self._arena(ctx).request(agent, filename, source)
 
-    def cancel_control(self, ctx: str, agent: str) -> None:
-        """TODO(issue-5): CancelControl on ctx/<ctx>/request."""
-        raise LabError(QUEUES_LATER)
+    def cancel_control(self, ctx: str, agent: str) -> str:
+        return self._arena(ctx).cancel(agent)
+
+    def arena_settings(self, ctx: str) -> ArenaSettings:
+        arena = self._arenas.get(ctx)
+        if arena is None:
+            return ArenaSettings(slot_seconds=0.0, enabled=False, can_manage=False)
+        return arena.settings(self._may("kick", ctx))
+
+    def set_slot(self, ctx: str, seconds: float) -> str:
+        return self._arena(ctx).set_slot(seconds)
+
+    def stop_agent(self, ctx: str, agent: str) -> str:
+        return self._arena(ctx).stop(agent)
+
+    def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
+        return self._arena(ctx).set_enabled(enabled, agent)
 
     # -- admin
 
@@ -632,6 +713,7 @@ class RealConnection:
         for feed in list(self._worlds.values()):
             self.link.release(feed.source)
         self._worlds.clear()
+        self._arenas.clear()
         try:
             self.client.close()  # leaves rooms, logs out, undeclares the presence token
         except Exception:
@@ -689,6 +771,7 @@ def convert_snapshot(snap: WireSnapshot) -> tuple[WorldSnapshot, tuple[str, ...]
         robots=agents,
         robot_radius=radius,
         version=snap.layout,
+        offline=frozenset(a.id for a in snap.agents if not a.online),
     )
     return view, object_rows
 
@@ -790,6 +873,9 @@ class WorldWatch:
         n = len(snap.robots)
         state = wire.agent_state.to_numpy()
         gripper = state[:, 2].astype(np.uint8) if state.ndim == 2 and len(state) == n else None
+        if snap.offline:
+            gripper = np.zeros(n, np.uint8) if gripper is None else gripper.copy()
+            gripper[[i for i, a in enumerate(snap.robots) if a in snap.offline]] = OFFLINE
         self._frame = WorldFrame(
             seq=wire.tick,
             t=wire.sim_time,

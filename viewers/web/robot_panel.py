@@ -1,28 +1,38 @@
-"""The robot panel of an arena tab: agents and queues, controller upload, live sensor plots.
+"""The robot panel of an arena tab: agents and queues, uploads, output, settings, plots.
 
-A thin skeleton over :class:`LabConnection` (agents, request_control,
-cancel_control) and :class:`WorldFeed.sensors`; phase 2 fills in the
-controller's output and the queue's live updates from the agent context.
+Over :class:`LabConnection` (agents, request_control, cancel_control,
+arena_settings, set_slot, stop_agent, set_enabled) and
+:class:`WorldFeed.sensors`. The table shows every robot with who drives it,
+how many wait, my place and when my slot should start; an upload is checked
+in the page (the same pre-check the agent context runs) before it is sent;
+the running controllers' prints arrive live. The owner of the context (or
+someone with 'kick' there) also gets its settings: slot length, stop the
+running controller, disable or enable a robot or the whole context. The
+agent context re-checks every right: the page only hides what would be
+refused.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections import deque
-from pathlib import PurePath
+from collections.abc import Callable
 
 import numpy as np
 import viser
 import viser.uplot
 
 from viewers.web.adapters import (
-    CONTROLLER_SUFFIXES,
-    MAX_CONTROLLER_BYTES,
     AgentStatus,
+    ArenaSettings,
     LabConnection,
     LabError,
+    OutputEvent,
+    RequestEvent,
     WorldFeed,
 )
+from viewers.web.real_agents import check_upload
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
 
@@ -31,40 +41,46 @@ log = logging.getLogger("wart.viewer.robots")
 MAX_ROWS = 20  # robots listed in the table
 MAX_CHOICES = 200  # robots in the dropdown
 PLOT_POINTS = 60  # 12 s at the pump's 5 Hz slow tick
+OUTPUT_LINES = 40  # older output scrolls away
+TABLE_EVERY_S = 1.0  # the ETAs count down between the context's events
 NONE = "(none)"
+ALL = "(all robots)"
+STATUS_WORDS = {
+    "queued": "is queued",
+    "running": "is running",
+    "finished": "finished",
+    "cancelled": "was cancelled",
+    "refused": "was refused",
+}
 
 
 def check_controller(filename: str, content: bytes) -> str | None:
     """Why an uploaded controller is refused (None: it may be queued). Never runs it."""
-    name = PurePath(filename).name
-    if PurePath(name).suffix not in CONTROLLER_SUFFIXES:
-        return f"{name or 'the file'} is not a Python file (.py)."
-    if not content:
-        return f"{name} is empty."
-    if len(content) > MAX_CONTROLLER_BYTES:
-        return f"{name} is larger than {MAX_CONTROLLER_BYTES // 1024} KiB."
-    try:
-        source = content.decode("utf-8")
-    except UnicodeDecodeError:
-        return f"{name} is not UTF-8 text."
-    try:
-        compile(source, name, "exec", dont_inherit=True)  # a syntax check; nothing runs
-    except SyntaxError as exc:
-        return f"{name} has a syntax error on line {exc.lineno}: {exc.msg}"
-    return None
+    return check_upload(filename, content)[1]
 
 
-def format_agents(rows: list[AgentStatus]) -> str:
+def format_agents(rows: list[AgentStatus], settings: ArenaSettings | None = None) -> str:
     if not rows:
         return "_No robots in this arena._"
-    lines = ["| robot | driven by | waiting | me | ETA |", "| --- | --- | --- | --- | --- |"]
+    lines = []
+    if settings is not None and settings.slot_seconds > 0:
+        state = "" if settings.enabled else " · **remote control is off**"
+        lines.append(f"Slots of {settings.slot_seconds:g} s{state}\n")
+    lines += ["| robot | driven by | waiting | me | ETA |", "| --- | --- | --- | --- | --- |"]
     for r in rows[:MAX_ROWS]:
         mine = (
             "-" if r.my_position is None else ("now" if r.my_position == 0 else f"#{r.my_position}")
         )
         eta = "-" if r.eta_s is None else f"{r.eta_s:.0f} s"
         holder = escape_md(r.holder) if r.holder else "-"
-        lines.append(f"| {escape_md(r.agent)} | {holder} | {r.queue} | {mine} | {eta} |")
+        if r.holder and r.slot_left_s is not None:
+            holder += f" ({r.slot_left_s:.0f} s left)"
+        name = escape_md(r.agent)
+        if not r.online:
+            name += " (offline)"
+        elif not r.enabled and settings is not None and settings.slot_seconds > 0:
+            name += " (disabled)"
+        lines.append(f"| {name} | {holder} | {r.queue} | {mine} | {eta} |")
     if len(rows) > MAX_ROWS:
         lines.append(f"\n_and {len(rows) - MAX_ROWS} more: click a robot in the view._")
     return "\n".join(lines)
@@ -80,6 +96,10 @@ class RobotPanel:
         self._ir: deque[np.ndarray] = deque(maxlen=PLOT_POINTS)
         self._ambient: deque[np.ndarray] = deque(maxlen=PLOT_POINTS)
         self._t: deque[float] = deque(maxlen=PLOT_POINTS)
+        self._rows: list[AgentStatus] = []
+        self._settings: ArenaSettings | None = None
+        self._output: deque[str] = deque(maxlen=OUTPUT_LINES)
+        self._table_at = 0.0
         gui = client.gui
         with gui.add_folder("Robots"):
             self.agents_md = gui.add_markdown("")
@@ -89,6 +109,17 @@ class RobotPanel:
             )
             self.cancel = gui.add_button("Cancel my request")
             self.notice = gui.add_markdown("", visible=False)
+            with gui.add_folder("Controller output"):
+                self.output_md = gui.add_markdown("_Nothing printed yet._")
+            # Instructor controls: shown to the context's owner or those with 'kick' there.
+            with gui.add_folder("Arena settings", expand_by_default=False) as self.manage:
+                self.slot = gui.add_number("Slot length (s)", 60.0, min=1.0, max=3600.0, step=1.0)
+                self.set_slot = gui.add_button("Set slot length")
+                self.stop = gui.add_button("Stop the running controller", color="red")
+                self.disable = gui.add_button("Disable remote control")
+                self.enable = gui.add_button("Enable remote control")
+                self.which = gui.add_dropdown("Applies to", (ALL, "the chosen robot"))
+            self.manage.visible = False
             self.selected_md = gui.add_markdown("_Click a robot in the view to select it._")
             self.rays = gui.add_checkbox("Show IR rays", False)
             empty = (np.zeros(0), *[np.zeros(0)] * 8)
@@ -102,6 +133,10 @@ class RobotPanel:
         self.cancel.on_click(lambda _: self._cancel())
         self.robot.on_update(lambda _: self._robot_chosen())
         self.rays.on_update(lambda _: self._rays_toggled())
+        self.set_slot.on_click(lambda _: self._set_slot())
+        self.stop.on_click(lambda _: self._stop())
+        self.disable.on_click(lambda _: self._enable(False))
+        self.enable.on_click(lambda _: self._enable(True))
         self.refresh_agents()
 
     def say_notice(self, text: str) -> None:
@@ -109,17 +144,52 @@ class RobotPanel:
         self.notice.visible = True
 
     def refresh_agents(self) -> None:
+        """Re-read the queues (cheap: the connection keeps the context's newest state)."""
         try:
             rows = self.connection.agents(self.ctx)
+            settings = self.connection.arena_settings(self.ctx)
         except LabError as exc:
             self.say_notice(f"Could not read the robots: {exc}")
             return
-        self.agents_md.content = format_agents(rows)
+        self._rows, self._settings = rows, settings
+        self._table_at = time.monotonic()
+        content = format_agents(rows, settings)
+        if self.agents_md.content != content:
+            self.agents_md.content = content
+        if self.manage.visible != settings.can_manage:
+            self.manage.visible = settings.can_manage
+            if settings.can_manage:
+                self.slot.value = settings.slot_seconds
         # A dropdown of a swarm's 1,000 names is no use: past that, click robots instead.
         # NONE stays first, so a new list never selects a robot by itself.
         names = (NONE, *(r.agent for r in rows[:MAX_CHOICES]))
         if tuple(self.robot.options) != names:
             self.robot.options = names
+
+    # -- the agent context's news (the connection's thread)
+
+    def on_request(self, event: RequestEvent) -> None:
+        mine = event.user == self.connection.user
+        who = "your" if mine else f"{escape_md(event.user)}'s"
+        why = f": {escape_md(event.reason)}" if event.reason else ""
+        words = STATUS_WORDS.get(event.status, event.status)
+        self._add_output(f"_{who} controller on {escape_md(event.agent)} {words}{why}_")
+        if mine and event.status in ("running", "finished", "cancelled", "refused"):
+            self.client.add_notification(
+                title=f"{event.agent}: your controller {words}",
+                body=event.reason or f"in {self.ctx}",
+                auto_close_seconds=5.0,
+                color="red" if event.status == "refused" else None,
+            )
+
+    def on_output(self, event: OutputEvent) -> None:
+        tag = f"`{escape_md(event.agent)}` {escape_md(event.user)}:"
+        for line in event.lines:
+            self._add_output(f"{tag} `{escape_md(line)}`" if line.strip() else tag)
+
+    def _add_output(self, line: str) -> None:
+        self._output.append(line)
+        self.output_md.content = "  \n".join(self._output)
 
     # -- the world view
 
@@ -165,6 +235,8 @@ class RobotPanel:
 
     def _sample(self) -> None:
         """Called at about 5 Hz by the pump: append the selected robot's sensors, replot."""
+        if time.monotonic() - self._table_at >= TABLE_EVERY_S:
+            self.refresh_agents()  # ETAs and slot time count down
         view, feed = self.view, self.feed
         name = view.selected_name if view else None
         if feed is None or name is None:
@@ -183,32 +255,83 @@ class RobotPanel:
 
     # -- controllers
 
+    def _chosen(self) -> str | None:
+        agent = self.robot.value
+        if agent == NONE or agent not in self.robot.options:
+            self.say_notice("Choose a robot first (the list, or click one in the view).")
+            return None
+        return agent
+
     def _uploaded(self) -> None:
         uploaded = self.upload.value
-        problem = check_controller(uploaded.name, uploaded.content)
+        name, problem = check_upload(uploaded.name, uploaded.content)
         if problem:
             self.say_notice(f"Not queued: {problem}")
             return
-        agent = self.robot.value
-        if agent == NONE:
-            self.say_notice("Choose a robot first.")
+        agent = self._chosen()
+        if agent is None:
             return
         try:
-            self.connection.request_control(self.ctx, agent, uploaded.name, uploaded.content)
+            queued = self.connection.request_control(self.ctx, agent, name, uploaded.content)
         except LabError as exc:
             self.say_notice(f"Not queued: {exc}")
             return
-        self.say_notice(f"{PurePath(uploaded.name).name} is queued for {agent}.")
+        if queued.position == 0 or (queued.eta_s is not None and queued.eta_s < 1.0):
+            where = "it starts now"
+        else:
+            eta = "" if queued.eta_s is None else f", starting in about {queued.eta_s:.0f} s"
+            where = f"you are #{queued.position} in the queue{eta}"
+        self.say_notice(f"{name} is queued for {agent}: {where}.")
         self.refresh_agents()
 
     def _cancel(self) -> None:
-        agent = self.robot.value
+        agent = self._chosen()
+        if agent is None:
+            return
         try:
-            self.connection.cancel_control(self.ctx, agent)
+            detail = self.connection.cancel_control(self.ctx, agent)
         except LabError as exc:
             self.say_notice(f"Could not cancel: {exc}")
             return
+        self.say_notice(detail or f"Your request on {agent} is cancelled.")
         self.refresh_agents()
+
+    # -- the owner's settings
+
+    def _manage(self, what: str, act: Callable[[], str]) -> None:
+        try:
+            detail = act()
+        except LabError as exc:
+            self.say_notice(f"Could not {what}: {exc}")
+            return
+        self.say_notice(detail)
+        self.refresh_agents()
+
+    def _set_slot(self) -> None:
+        seconds = self.slot.value
+        if not isinstance(seconds, int | float) or not 1.0 <= float(seconds) <= 3600.0:
+            self.say_notice("A slot lasts between 1 and 3600 seconds.")
+            return
+        self._manage(
+            "change the slot length", lambda: self.connection.set_slot(self.ctx, float(seconds))
+        )
+
+    def _stop(self) -> None:
+        agent = self._chosen()
+        if agent is not None:
+            self._manage("stop it", lambda: self.connection.stop_agent(self.ctx, agent))
+
+    def _enable(self, enabled: bool) -> None:
+        agent: str | None = None
+        if self.which.value != ALL:
+            agent = self._chosen()
+            if agent is None:
+                return
+        what = "enable" if enabled else "disable"
+        self._manage(
+            f"{what} remote control",
+            lambda: self.connection.set_enabled(self.ctx, enabled, agent),
+        )
 
 
 def _colour(i: int) -> str:

@@ -29,7 +29,11 @@ MAX_ITEM_NODES = 500
 LABEL_ALL_UP_TO = 12  # more robots than this: only the selected one is labelled
 TRAIL_POINTS = 300
 # Gripper state 0 open/none, 1 closed, 2 holding: the robot's body colour says which.
-GRIPPER_COLOURS = np.array([[70, 130, 220], [230, 150, 40], [40, 170, 80]], np.uint8)
+# OFFLINE (3) is the feed's own mark for a real robot the bridge cannot reach: grey.
+OFFLINE = 3
+GRIPPER_COLOURS = np.array(
+    [[70, 130, 220], [230, 150, 40], [40, 170, 80], [160, 160, 160]], np.uint8
+)
 FLOOR_COLOUR = (235, 235, 230)
 OBSTACLE_COLOUR = (110, 110, 120)
 BALL_COLOUR = (220, 60, 60)
@@ -161,7 +165,8 @@ class WorldView:
     def redraw(self, snap: WorldSnapshot) -> None:
         """Draw (or redraw after an edit) everything that comes from the snapshot."""
         with self._lock:
-            robots_changed = self.snapshot is None or self.snapshot.robots != snap.robots
+            old = self.snapshot
+            robots_changed = old is None or (old.robots, old.offline) != (snap.robots, snap.offline)
             self.snapshot = snap
             scene = self.client.scene
             for handle in [*self._static, *self._balls, *self._lights]:
@@ -229,6 +234,9 @@ class WorldView:
                 node.on_click(self._obstacle_clicked(light.ident))
                 self._lights.append(node)
             if robots_changed or self._robots is None:
+                for label in self._labels.values():  # names or online states changed
+                    label.remove()
+                self._labels.clear()
                 self._draw_robots(snap)
 
     def _obstacle_clicked(self, ident: str) -> Callable[[object], None]:
@@ -284,8 +292,11 @@ class WorldView:
         for index in set(self._labels) - wanted:
             self._labels.pop(index).remove()
         for index in wanted - set(self._labels):
+            offline = self.snapshot is not None and names[index] in self.snapshot.offline
             self._labels[index] = self.client.scene.add_label(
-                f"/world/labels/{index}", names[index], anchor="bottom-center"
+                f"/world/labels/{index}",
+                f"{names[index]} (offline)" if offline else names[index],
+                anchor="bottom-center",
             )
 
     def apply(self, prepared: PreparedFrame) -> None:

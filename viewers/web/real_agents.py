@@ -1,0 +1,249 @@
+"""The robot panel's side of a real agent context: queues, uploads, output, settings.
+
+One :class:`ArenaLink` per joined agent context and browser user wraps
+:class:`~common.agent_client.AgentClient` (the same client ``wart deploy``
+uses) on that user's :class:`~common.client.LabClient`, so every request is
+sealed with the person's session and the context checks their rights. Its
+AgentEvents arrive on Zenoh's threads and are only translated and queued
+here; the page handles them on the connection's own thread.
+
+Pure helpers (:func:`agent_rows`, :func:`check_upload`) are unit-tested
+without a lab.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from pathlib import PurePath
+from typing import TypeVar
+
+from common import client as lab
+from common.agent_client import AgentClient
+from common.keys import is_ident
+from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
+from common.precheck import PrecheckError, precheck
+from viewers.web.adapters import (
+    CONTROLLER_SUFFIXES,
+    MAX_CONTROLLER_BYTES,
+    AgentsEvent,
+    AgentStatus,
+    ArenaSettings,
+    LabError,
+    LabEvent,
+    OutputEvent,
+    Queued,
+    RequestEvent,
+)
+
+log = logging.getLogger("wart.viewer.agents")
+
+T = TypeVar("T")
+
+MAX_FILENAME = 128  # what the page keeps of an uploaded file's name
+
+
+def check_upload(filename: str, content: bytes) -> tuple[str, str | None]:
+    """(the file's plain name, why it is refused or None); never runs the file.
+
+    The page's own checks (a .py name, not empty) then ``common.precheck``, the
+    same check the agent context and the runner make (size, UTF-8, syntax with
+    the line, a Controller subclass), so a student hears at once, in words.
+    """
+    name = PurePath(str(filename).replace("\\", "/")).name[:MAX_FILENAME]
+    if PurePath(name).suffix not in CONTROLLER_SUFFIXES:
+        return name, f"{name or 'the file'} is not a Python file (.py)."
+    if not content:
+        return name, f"{name} is empty."
+    if len(content) > MAX_CONTROLLER_BYTES:
+        return name, (
+            f"{name} is {len(content)} bytes; controllers are limited to "
+            f"{MAX_CONTROLLER_BYTES // 1024} KiB."
+        )
+    try:
+        precheck(content, name)
+    except PrecheckError as exc:
+        return name, str(exc)
+    return name, None
+
+
+def agent_rows(
+    state: AgentContextState,
+    user: str,
+    now: float,
+    offline: frozenset[str] = frozenset(),
+) -> list[AgentStatus]:
+    """The context's queues as robot-panel rows, seen by ``user`` at wall time ``now``."""
+    rows = []
+    for line in state.agents:
+        running = next((e for e in line.entries if e.position == 0), None)
+        mine = next((e for e in line.entries if e.user == user), None)
+        eta = None
+        if mine is not None and mine.position > 0 and mine.start_eta is not None:
+            eta = max(0.0, mine.start_eta - now)
+        left = None
+        if running is not None and running.end is not None:
+            left = max(0.0, running.end - now)
+        rows.append(
+            AgentStatus(
+                agent=line.agent,
+                holder=running.user if running is not None else None,
+                queue=sum(1 for e in line.entries if e.position > 0),
+                my_position=mine.position if mine is not None else None,
+                eta_s=eta,
+                enabled=line.enabled and state.enabled,
+                online=line.agent not in offline,
+                my_request=mine.request_id if mine is not None else None,
+                slot_left_s=left,
+            )
+        )
+    return rows
+
+
+def _plain(exc: lab.LabError) -> LabError:
+    if isinstance(exc, lab.NotAllowed):
+        return LabError(f"not allowed: {exc}")
+    if isinstance(exc, lab.NotLoggedIn):
+        return LabError("your session with this lab has ended: log in again")
+    if isinstance(exc, lab.RateLimited):
+        return LabError(f"too many requests: {exc}")
+    return LabError(str(exc))
+
+
+class ArenaLink:
+    """One user in one agent context: the AgentClient, and its events for the page."""
+
+    def __init__(
+        self,
+        client: lab.LabClient,
+        ctx: str,
+        emit: Callable[[LabEvent], None],
+        on_room: Callable[[RoomEvent], None],
+    ) -> None:
+        self.ctx = ctx
+        self.user = client.user
+        self._emit = emit
+        self.agents = AgentClient(
+            client,
+            ctx,
+            on_output=self._on_output,
+            on_state=lambda _s: emit(AgentsEvent(ctx)),
+            on_status=self._on_status,
+            on_room=on_room,
+        )
+
+    def join(self, history: int) -> lab.RoomHandle:
+        """Join the context (chat and agent events) and read its queues once."""
+        try:
+            self._call(lambda: self.agents.join(history))
+        except LabError:
+            if self.agents.room is not None:  # joined, but the queues did not answer
+                self.leave()
+            raise
+        room = self.agents.room
+        assert room is not None
+        return room
+
+    def leave(self) -> None:
+        self._call(self.agents.leave)
+
+    @property
+    def owner(self) -> str:
+        room = self.agents.room
+        return room.owner if room is not None else ""
+
+    # Zenoh threads: translate and queue, nothing more.
+    def _on_output(self, out: OutputLines) -> None:
+        self._emit(OutputEvent(self.ctx, out.request_id, out.agent, out.user, tuple(out.lines)))
+
+    def _on_status(self, status: RequestStatus) -> None:
+        self._emit(
+            RequestEvent(
+                self.ctx, status.request_id, status.agent, status.user, status.status, status.reason
+            )
+        )
+        self._emit(AgentsEvent(self.ctx))
+
+    # -- requests (the page's threads; each may block up to the query timeout)
+
+    def _call(self, fn: Callable[[], T]) -> T:
+        try:
+            return fn()
+        except lab.LabError as exc:
+            raise _plain(exc) from None
+
+    def state(self, *, fresh: bool = False) -> AgentContextState:
+        state = self.agents.latest_state
+        if state is None or fresh:
+            state = self._call(self.agents.state)
+        return state
+
+    @property
+    def world(self) -> str | None:
+        state = self.agents.latest_state
+        return state.world if state is not None else None
+
+    def rows(self, offline: frozenset[str] = frozenset()) -> list[AgentStatus]:
+        return agent_rows(self.state(), self.user, time.time(), offline)
+
+    def request(self, agent: str, filename: str, source: bytes) -> Queued:
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        name, problem = check_upload(filename, source)
+        if problem:
+            raise LabError(problem)
+        queued = self._call(
+            lambda: self.agents.queue(agent, "deploy", source=source, filename=name)
+        )
+        now = time.time()
+        eta = None if queued.start_eta is None else max(0.0, queued.start_eta - now)
+        self._refresh()
+        return Queued(queued.request_id, queued.agent, queued.position, eta, queued.slot_seconds)
+
+    def cancel(self, agent: str) -> str:
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        rows = agent_rows(self.state(fresh=True), self.user, time.time())
+        mine = next((r for r in rows if r.agent == agent and r.my_request), None)
+        if mine is None or mine.my_request is None:
+            raise LabError(f"you have no request on {agent}")
+        rid = mine.my_request
+        detail = self._call(lambda: self.agents.cancel(rid))
+        self._refresh()
+        return detail
+
+    def settings(self, user_may_kick: bool) -> ArenaSettings:
+        state = self.state()
+        return ArenaSettings(
+            slot_seconds=state.slot_seconds,
+            enabled=state.enabled,
+            can_manage=user_may_kick or self.owner == self.user,
+        )
+
+    def set_slot(self, seconds: float) -> str:
+        if not (1.0 <= seconds <= 3600.0):
+            raise LabError("a slot lasts between 1 and 3600 seconds")
+        detail = self._call(lambda: self.agents.settings(slot_seconds=seconds))
+        self._refresh()
+        return detail
+
+    def stop(self, agent: str) -> str:
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        return self._call(lambda: self.agents.stop_agent(agent, "stopped from the web page"))
+
+    def set_enabled(self, enabled: bool, agent: str | None) -> str:
+        if agent is not None and not is_ident(agent):
+            raise LabError("choose a robot first")
+        detail = self._call(lambda: self.agents.settings(enabled=enabled, agent=agent))
+        self._refresh()
+        return detail
+
+    def _refresh(self) -> None:
+        """Read the queues now so the page shows a change at once (events follow anyway)."""
+        try:
+            self.agents.state()
+        except lab.LabError as exc:
+            log.debug("queues of %s: %s", self.ctx, exc)
+        self._emit(AgentsEvent(self.ctx))
