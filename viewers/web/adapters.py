@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages.agent import MAX_UPLOAD_BYTES
+from common.survey import Survey
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
@@ -357,6 +358,10 @@ class LabConnection(Protocol):
 
     def host(self, kind: Literal["chat", "agent"], name: str, map_name: str = "") -> str:
         """Open a new context; returns its id."""
+        ...
+
+    def survey(self) -> Survey:
+        """The lab's routers, live services and hosts, with findings (admins)."""
         ...
 
     def send_private(self, to: str, text: str) -> None: ...

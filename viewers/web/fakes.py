@@ -19,6 +19,7 @@ from typing import Literal
 import numpy as np
 
 from common.keys import is_ident
+from common.survey import RouterView, Survey
 from viewers.web.adapters import (
     Account,
     AgentsEvent,
@@ -413,6 +414,17 @@ class FakeConnection:
         if user == self._user:
             raise LabError("you cannot kick yourself; use Leave")
         self._remove(ctx, user, "kicked", by=self._user)
+
+    def survey(self) -> Survey:
+        self._need("admin", "survey the lab's network")
+        with self._lab._lock:
+            contexts = sorted(self._lab._contexts)
+        return Survey(
+            realm="demo",
+            routers=[RouterView("demo-router", "0" * 32, 0.1, [], 1)],
+            alive={"context": contexts, "registry": ["registry"]},
+            hosts=[],
+        )
 
     def host(self, kind: Literal["chat", "agent"], name: str, map_name: str = "") -> str:
         self._need("host", "open new contexts")

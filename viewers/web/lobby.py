@@ -30,11 +30,12 @@ from viewers.web.adapters import (
 )
 from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
+from viewers.web.network_panel import NetworkPanel
 from viewers.web.text import check_line, clock, escape_md
 
 log = logging.getLogger("wart.viewer.lobby")
 
-KIND_NAMES = {"chat": "chat room", "agent": "arena", "world": "simulated world (watch, edit)"}
+KIND_NAMES = {"chat": "chat room", "agent": "arena", "world": "world (watch; edit if simulated)"}
 
 
 class LabTab:
@@ -71,7 +72,9 @@ class LabTab:
             can_host = "host" in connection.permissions
             with gui.add_folder("Host a new context", visible=can_host, expand_by_default=False):
                 self.host_name = gui.add_text("Name", "")
-                self.host_map = gui.add_text("Map (arena)", "default")
+                # A map of the lab (STATE_DIR/maps, then the shipped ones): empty, maze,
+                # foraging, phototaxis, swarm.
+                self.host_map = gui.add_text("Map (arena)", "foraging")
                 self.host_chat = gui.add_button("Host chat room")
                 self.host_arena = gui.add_button("Host arena")
             with gui.add_folder("Private messages", expand_by_default=False):
@@ -79,9 +82,9 @@ class LabTab:
                 self.pm_to = gui.add_text("To", "")
                 self.pm_text = gui.add_text("Private message", "")
                 self.pm_send = gui.add_button("Send privately")
-            self.admin = (
-                AdminPanel(client, connection) if "admin" in connection.permissions else None
-            )
+            is_admin = "admin" in connection.permissions
+            self.admin = AdminPanel(client, connection) if is_admin else None
+            self.network = NetworkPanel(client, connection) if is_admin else None
             self.notice = gui.add_markdown("", visible=False)
             self.logout_button = gui.add_button("Log out", color="gray")
         self.host_chat.on_click(lambda _: self.host("chat"))
@@ -178,6 +181,7 @@ class LabTab:
             self.say_notice("Give the new context a name: letters, digits, '_', '-' or '.'.")
             return
         map_name = self.host_map.value.strip() if kind == "agent" else ""
+        self.say_notice(f"Starting {name}: this takes a few seconds...")
         try:
             ctx = self.connection.host("agent" if kind == "agent" else "chat", name, map_name)
         except LabError as exc:

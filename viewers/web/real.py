@@ -30,7 +30,7 @@ import numpy as np
 import zenoh
 
 from common import client as lab
-from common import keys
+from common import host_client, keys
 from common.auth import parse_public_key
 from common.keys import AliveKind, is_ident
 from common.messages import (
@@ -53,6 +53,7 @@ from common.messages import SensorSample as WireSample
 from common.messages import WorldFrame as WireFrame
 from common.messages import WorldSnapshot as WireSnapshot
 from common.service import close_session, open_session
+from common.survey import Survey, survey
 from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
     Account,
@@ -478,7 +479,7 @@ class RealConnection:
         for world in sorted(self._live_worlds()):
             if world not in named:
                 contexts.append(
-                    ContextSummary(world, "world", "engine", f"simulated world {world}", 0, world)
+                    ContextSummary(world, "world", "engine", f"world {world}", 0, world)
                 )
         directory = Directory(reply.server_name, tuple(reply.users), tuple(contexts))
         with self._lock:
@@ -585,13 +586,24 @@ class RealConnection:
         self._call(lambda: self.client.kick(ctx, user, reason))
 
     def host(self, kind: Literal["chat", "agent"], name: str, map_name: str = "") -> str:
-        # Starting contexts on request is the host service's job (multi-host issue),
-        # which this lab does not run yet.
-        what = "chat rooms" if kind == "chat" else "arenas"
-        raise LabError(
-            f"starting new {what} from the page is not available in this lab yet; "
-            "an operator starts them with 'wart context' or 'wart engine'"
-        )
+        """Start a new context on one of the lab's hosts (``host`` permission), as this user.
+
+        Blocks until its processes serve (seconds); the lobby calls it off the
+        page's thread. An arena's agent context is named after its world.
+        """
+        if kind == "chat":
+            room = self._call(lambda: host_client.host_room(self.client, name, name))
+            return room.name
+        if not map_name:
+            raise LabError("choose a map for the new arena")
+        arena = self._call(lambda: host_client.host_arena(self.client, name, map_name))
+        return arena.world
+
+    def survey(self) -> Survey:
+        """What the lab looks like from the viewer (admins' network page)."""
+        if "admin" not in self._perms:
+            raise LabError("only admins can survey the lab's network")
+        return survey(self.client.z, self._address.realm)
 
     def send_private(self, to: str, text: str) -> None:
         self._call(lambda: self.client.send_private(to, text))

@@ -1,0 +1,67 @@
+"""A whole `wart up` lab in a real browser: the admin hosts a room and an arena, and
+surveys the network, from the page (thesis 7.3.3; issue 8's doctor page for admins)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.browser.conftest import ViserPage
+from tests.lab import Lab
+
+pytestmark = [pytest.mark.browser, pytest.mark.smoke]
+
+
+@pytest.fixture
+def lab(tmp_path: Path, realm: str) -> Iterator[Lab]:
+    lab = Lab(realm=realm, state_dir=tmp_path / "state").start()
+    try:
+        lab.wait_line("The lab is running", timeout=120)
+        yield lab
+    finally:
+        lab.stop()
+
+
+def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
+    lab: Lab, chromium: object, request: pytest.FixtureRequest
+) -> None:
+    url = lab.wait_line("web viewer:").split("web viewer:")[1].strip()
+    password = (lab.state_dir / "admin-password.txt").read_text().strip()
+    context = chromium.new_context(viewport={"width": 1280, "height": 900})  # type: ignore[attr-defined]
+    try:
+        page = context.new_page()
+        page.goto(url.replace("localhost", "127.0.0.1"))
+        vp = ViserPage(page, request.node.name)
+        vp.wait_ready()
+        vp.click("Connect")
+        vp.button("Log in").wait_for(timeout=10_000)
+        vp.fill("User", "admin")
+        vp.fill("Password", password)
+        vp.click("Log in")
+        vp.tab("@").first.wait_for(timeout=15_000)
+        vp.tab(f"{lab.realm}@").click()
+        vp.button("Join lobby").wait_for(timeout=15_000)
+
+        page.get_by_text("Host a new context").click()
+        vp.fill("Name", "seminar")
+        vp.click("Host chat room")
+        vp.tab("seminar").wait_for(timeout=60_000)  # hosted, then joined
+
+        vp.tab(f"{lab.realm}@").click()
+        vp.fill("Name", "maze2")
+        vp.fill("Map (arena)", "maze")
+        vp.click("Host arena")
+        vp.tab("maze2").wait_for(timeout=90_000)
+        vp.wait_text("maze2 · arena · owner admin", 20_000)
+        vp.screenshot("hosted")
+
+        vp.tab(f"{lab.realm}@").click()
+        page.get_by_text("Network (doctor)").click()
+        vp.click("Survey the lab")
+        vp.wait_text("no problem found", 20_000)
+        vp.wait_text("lab-router", 5_000)
+        vp.screenshot("network")
+    finally:
+        context.close()  # type: ignore[attr-defined]
