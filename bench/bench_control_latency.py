@@ -137,9 +137,8 @@ def child(args: argparse.Namespace) -> int:
     identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))
     z = open_session(options, wait=10)
-    sessions = [
-        issue_session(identity, args.realm, f"c{i}", ["control"]) for i in range(args.controllers)
-    ]
+    indices = range(args.first, args.first + args.controllers)
+    sessions = [issue_session(identity, args.realm, f"c{i}", ["control"]) for i in indices]
     holders = [[s.session_id.hex(), s.keys.box_public_key.hex()] for s in sessions]
     print(json.dumps(holders), flush=True)
     stop = threading.Event()
@@ -148,7 +147,7 @@ def child(args: argparse.Namespace) -> int:
         ZenohRobotLink(
             z, args.realm, WORLD, f"k{i}", lambda s=s: s, keepalive=1.0, verifier=verifier
         )
-        for i, s in enumerate(sessions)
+        for i, s in zip(indices, sessions, strict=True)
     ]
 
     def react(link: ZenohRobotLink) -> None:
@@ -284,6 +283,14 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--controllers", type=int, default=20)
     p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument(
+        "--processes",
+        type=int,
+        default=1,
+        help="client processes the controllers are spread over (1: all 20 share one GIL, the "
+        "pessimistic case; students' controllers really run on their own machines)",
+    )
+    p.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--identity", help=argparse.SUPPRESS)
     p.add_argument("--realm", help=argparse.SUPPRESS)
@@ -309,43 +316,61 @@ def main() -> int:
         identity=lambda: world_session,
     )
     engine.start()
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "bench.bench_control_latency",
-            "--child",
-            "--controllers",
-            str(args.controllers),
-            "--identity",
-            str(ident_path),
-            "--realm",
-            lab.realm,
-            "--connect",
-            lab.options.connect[0],
-        ],
-        cwd=REPO,
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    count = max(1, min(args.processes, args.controllers))
+    share = [
+        args.controllers // count + (1 if i < args.controllers % count else 0) for i in range(count)
+    ]
+    procs = []
+    first = 0
+    for n in share:
+        procs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "bench.bench_control_latency",
+                    "--child",
+                    "--controllers",
+                    str(n),
+                    "--first",
+                    str(first),
+                    "--identity",
+                    str(ident_path),
+                    "--realm",
+                    lab.realm,
+                    "--connect",
+                    lab.options.connect[0],
+                ],
+                cwd=REPO,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+        )
+        first += n
     results: dict[str, tuple[list[float], list[float], list[float]]] = {}
     context = issue_session(identity, lab.realm, "ctx", ["lease"])
     try:
-        assert proc.stdout is not None and proc.stdin is not None
-        holders = [
-            (bytes.fromhex(h), bytes.fromhex(b)) for h, b in json.loads(proc.stdout.readline())
-        ]
+        holders = []
+        for proc in procs:  # in index order: k0.. of the first, then the next's
+            assert proc.stdout is not None
+            holders += [
+                (bytes.fromhex(h), bytes.fromhex(b)) for h, b in json.loads(proc.stdout.readline())
+            ]
         for path in ("signed", "mac"):
             grant(z, context, lab.realm, holders, args.seconds, world_session, mac=path == "mac")
             time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
             results[path] = measure(engine, lab.options, args.seconds)
-        proc.stdin.write("stop\n")
-        proc.stdin.flush()
-        proc.wait(20)
+        for proc in procs:
+            assert proc.stdin is not None
+            proc.stdin.write("stop\n")
+            proc.stdin.flush()
+        for proc in procs:
+            proc.wait(20)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
         engine.stop()
         close_session(z)
         lab.stop()
@@ -354,7 +379,10 @@ def main() -> int:
         f"engine: {engine.commands_accepted} accepted ({engine.leases.mac_accepted} MACed), "
         f"{engine.commands_refused} refused; {n} commands timed"
     )
-    print(f"{args.controllers} remote controllers at 50 Hz, {args.seconds:g} s per path")
+    print(
+        f"{args.controllers} remote controllers at 50 Hz in {count} client process(es), "
+        f"{args.seconds:g} s per path"
+    )
     print(f"{'path':<44} {'p50 ms':>8} {'p99 ms':>8}")
     for path, (rtts, accepted, applied) in results.items():
         rate = len(accepted) / args.seconds / max(1, args.controllers)
