@@ -8,10 +8,11 @@ from __future__ import annotations
 import sys
 import time
 
+from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.messages import ChatSay
 
-KEY = "wart/lab/ctx/lobby/in"
+KEY = keys.ctx_in("lab", "lobby")
 
 
 def main() -> None:

@@ -262,3 +262,20 @@ def host_load(realm: str, host: str) -> str:
 
 def host_load_all(realm: str) -> str:
     return f"{realm_root(realm)}/host/*/load"
+
+
+# --- Zenoh's own admin space (routers describe themselves there) ----------------
+
+
+def router_admin(zid: str) -> str:
+    """One router's admin view (its locators, sessions and links)."""
+    return f"@/{zid}/router"
+
+
+def routers_admin_all() -> str:
+    return "@/*/router"
+
+
+def admin_space_all() -> str:
+    """The whole admin space (access-control rules reserve it to admins)."""
+    return "@/**"

@@ -34,7 +34,7 @@ def routers(session: zenoh.Session, timeout: float = 3.0) -> list[tuple[dict[str
     """The admin view of every router reachable from this session, with each one's RTT."""
     found: list[dict[str, Any]] = []
     for reply in session.get(
-        "@/*/router",
+        keys.routers_admin_all(),
         timeout=timeout,
         target=zenoh.QueryTarget.ALL,
         consolidation=zenoh.ConsolidationMode.NONE,
@@ -49,7 +49,9 @@ def routers(session: zenoh.Session, timeout: float = 3.0) -> list[tuple[dict[str
     for info in found:
         zid = str(info.get("zid", ""))
         started = time.monotonic()
-        answered = any(r.ok is not None for r in session.get(f"@/{zid}/router", timeout=timeout))
+        answered = any(
+            r.ok is not None for r in session.get(keys.router_admin(zid), timeout=timeout)
+        )
         rtt = (time.monotonic() - started) * 1000 if answered else float("nan")
         out.append((info, rtt))
     return out

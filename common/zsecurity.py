@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from common import keys
 from common.certs import CA_CERT
 from common.keys import realm_root
 from common.labfile import LabFile
@@ -190,7 +191,7 @@ def acl_config(
             "permission": "allow",
             "flows": ["ingress", "egress"],
             "messages": all_messages,
-            "key_exprs": ["**", "@/**"],
+            "key_exprs": ["**", keys.admin_space_all()],
         }
     )
     rules.append(
@@ -199,7 +200,7 @@ def acl_config(
             "permission": "allow",
             "flows": ["ingress", "egress"],
             "messages": ["query", "reply", "declare_queryable"],
-            "key_exprs": ["@/**"],
+            "key_exprs": [keys.admin_space_all()],
         }
     )
     for role, grants in sorted(ROLE_GRANTS.items()):

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import zenoh
 
-from common import cli
+from common import cli, keys
 from common.keys import AliveKind, is_ident
 from common.service import Service, run_service
 from common.zconfig import DEFAULT_PORT
@@ -28,7 +28,7 @@ class Router(Service):
     def locators(self) -> list[str]:
         """The endpoints this router actually listens on (port 0 resolved)."""
         zid = str(self.session.zid())
-        for reply in self.session.get(f"@/{zid}/router", timeout=2.0):
+        for reply in self.session.get(keys.router_admin(zid), timeout=2.0):
             if reply.ok is not None:
                 info = json.loads(reply.ok.payload.to_bytes())
                 return [str(loc) for loc in info.get("locators", [])]

@@ -29,8 +29,8 @@ def builders() -> list[tuple[str, object]]:
     for name, fn in inspect.getmembers(keys, inspect.isfunction):
         if fn.__module__ != keys.__name__ or name.startswith("_"):
             continue
-        if name.startswith(("check_", "is_", "parse_")):
-            continue
+        if name.startswith(("check_", "is_", "parse_")) or "admin" in name:
+            continue  # admin-space keys are Zenoh's own: tested below
         found.append((name, fn))
     return found
 
@@ -68,3 +68,11 @@ def test_parse_helpers_round_trip() -> None:
     assert keys.parse_alive("other", keys.alive("lab", AliveKind.WORLD, "arena")) is None
     assert keys.parse_agent_key("lab", "arena", keys.agent_sensors("lab", "arena", "k3")) == "k3"
     assert keys.parse_agent_key("lab", "arena", keys.world_frame("lab", "arena")) is None
+
+
+def test_admin_space_keys_are_valid_and_outside_every_realm() -> None:
+    for key in (keys.router_admin("7c049dee"), keys.routers_admin_all(), keys.admin_space_all()):
+        assert key.startswith("@/") and str(zenoh.KeyExpr(key)) == key
+    assert zenoh.KeyExpr(keys.routers_admin_all()).intersects(
+        zenoh.KeyExpr(keys.router_admin("7c049dee"))
+    )
