@@ -36,7 +36,6 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Session, Verifier
-from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.leases import LeaseBook
 from common.messages import (
@@ -51,7 +50,8 @@ from common.messages import (
     WorldSnapshot,
     encode,
 )
-from common.service import RequestError, Service
+from common.service import RequestError
+from common.world_service import WorldService
 from services.bridge import protocol as P
 from services.bridge.link import LinkOffline
 from services.bridge.robot import (
@@ -127,9 +127,7 @@ class _Agent:
     driving: tuple[str, bytes] | None = None  # (lease id, holder) of the lease last in force
 
 
-class BridgeService(Service):
-    kind = AliveKind.WORLD
-
+class BridgeService(WorldService):
     def __init__(
         self,
         session: zenoh.Session,
@@ -160,16 +158,7 @@ class BridgeService(Service):
     def on_start(self) -> None:
         if self.verifier is None:
             self.log.warning("no --registry-key: every command and lease will be refused")
-        realm, name = self.realm, self.ident
-        self._frame_pub = self.track(self.session.declare_publisher(keys.world_frame(realm, name)))
-        self._batch_pub = self.track(
-            self.session.declare_publisher(keys.world_sensors(realm, name))
-        )
-        self.subscribe(keys.agent_cmd_all(realm, name), self._on_command)
-        self.subscribe(keys.agent_lease_all(realm, name), self._on_lease)
-        self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
-        self.serve(keys.world_edit(realm, name), self._on_edit)
-        self.serve(keys.world_map(realm, name), self._on_edit)
+        self.declare_world_interface()
         n = len(self.settings.robots)
         for i, spec in enumerate(self.settings.robots):
             self.add_robot(spec.port, spec.agent, spec.pose or self._spread(i, n))
@@ -508,6 +497,9 @@ class BridgeService(Service):
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:
         return snapshot_with_identity(self.snapshot(), self.box_keys)
+
+    def _on_map(self, query: zenoh.Query) -> Message:
+        return self._on_edit(query)
 
     def _on_edit(self, query: zenoh.Query) -> Message:
         raise RequestError(

@@ -33,7 +33,6 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Principal, Session, Verifier
-from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.leases import LeaseBook
 from common.messages import (
@@ -51,7 +50,8 @@ from common.messages import (
     WorldEdit,
     encode,
 )
-from common.service import RequestError, Service
+from common.service import RequestError
+from common.world_service import WorldService
 from services.engine import maps, wire
 from services.engine.world import EditError, World
 
@@ -76,9 +76,7 @@ class _Command:
     received: float  # monotonic
 
 
-class EngineService(Service):
-    kind = AliveKind.WORLD
-
+class EngineService(WorldService):
     def __init__(
         self,
         session: zenoh.Session,
@@ -110,18 +108,9 @@ class EngineService(Service):
     def on_start(self) -> None:
         if self.verifier is None:
             self.log.warning("no --registry-key: every command, lease and edit will be refused")
-        realm, name = self.realm, self.ident
-        self._frame_pub = self.track(self.session.declare_publisher(keys.world_frame(realm, name)))
-        self._batch_pub = self.track(
-            self.session.declare_publisher(keys.world_sensors(realm, name))
-        )
-        self.subscribe(keys.agent_cmd_all(realm, name), self._on_command)
-        self.subscribe(keys.agent_lease_all(realm, name), self._on_lease)
-        self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
-        self.serve(keys.world_edit(realm, name), self._on_edit)
-        self.serve(keys.world_map(realm, name), self._on_map)
+        self.declare_world_interface()
         self._declare_agent_publishers()
-        self._thread = threading.Thread(target=self._run, name=f"sim-{name}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"sim-{self.ident}", daemon=True)
         self._thread.start()
 
     def on_stop(self, timeout: float) -> None:
