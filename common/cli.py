@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from common.log import setup_logging
 from common.zconfig import ConfigError, NetworkOptions, add_network_arguments, options_from_args
@@ -47,3 +48,21 @@ def parse(
 def fail(message: str, code: int = 2) -> int:
     print(f"error: {message}", file=sys.stderr)
     return code
+
+
+def add_context_arguments(p: argparse.ArgumentParser, what: str, example: str) -> None:
+    """The options every context process shares (chat rooms, agent contexts)."""
+    p.add_argument("--name", required=True, help=f"the {what}'s id (one key chunk, e.g. {example})")
+    p.add_argument("--title", default="", help=f"the {what}'s title shown to users")
+    p.add_argument("--user", required=True, help=f"the {what}'s service account")
+    p.add_argument(
+        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    )
+    p.add_argument("--owner", help=f"the user who owns the {what} (default: the service account)")
+    p.add_argument("--data-dir", type=Path, help=f"where the {what} keeps its chat history")
+    p.add_argument("--history", type=int, default=200, help="lines of history kept (default 200)")
+    p.add_argument(
+        "--restricted",
+        action="store_true",
+        help=f"only users granted rights in this {what} (scope ctx/NAME) may act",
+    )

@@ -29,7 +29,6 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -725,26 +724,13 @@ class AgentContext(ChatRoom):
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart context agent") -> int:
     p = cli.parser(prog, __doc__ or "")
-    p.add_argument("--name", required=True, help="the context's id (one key chunk, e.g. arena)")
+    cli.add_context_arguments(p, "context", "arena")
     p.add_argument("--world", required=True, help="the world whose agents it queues (e.g. arena1)")
-    p.add_argument("--title", default="", help="the title shown to users")
-    p.add_argument("--user", required=True, help="the context's service account")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
-    )
-    p.add_argument("--owner", help="the user who owns the context (default: the service account)")
     p.add_argument(
         "--runner", default="runner", help="the runner that runs uploads (default runner)"
     )
     p.add_argument(
         "--slot-seconds", type=float, default=60.0, help="each controller's time slot (default 60)"
-    )
-    p.add_argument("--data-dir", type=Path, help="where the context keeps its chat history")
-    p.add_argument("--history", type=int, default=200, help="lines of chat history kept")
-    p.add_argument(
-        "--restricted",
-        action="store_true",
-        help="only users granted rights in this context (ctx/NAME, agent/NAME/A) may act",
     )
     args, options = cli.parse(p, argv)
     assert options is not None

@@ -356,23 +356,10 @@ class ChatRoom(Service):
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> int:
     p = cli.parser(prog, __doc__ or "")
-    p.add_argument("--name", required=True, help="the room's id (one key chunk, e.g. lobby)")
-    p.add_argument("--title", default="", help="the room's title shown to users")
-    p.add_argument("--user", required=True, help="the room's service account")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
-    )
-    p.add_argument("--owner", help="the user who owns the room (default: the service account)")
-    p.add_argument("--data-dir", type=Path, help="where the room keeps its history")
-    p.add_argument("--history", type=int, default=200, help="lines of history kept (default 200)")
+    cli.add_context_arguments(p, "room", "lobby")
     p.add_argument("--max-line", type=int, default=MAX_LINE_CHARS, help="longest line accepted")
     p.add_argument("--rate", type=float, default=2.0, help="lines per second per user (default 2)")
     p.add_argument("--burst", type=float, default=10.0, help="lines a user may send at once")
-    p.add_argument(
-        "--restricted",
-        action="store_true",
-        help="only users granted join/chat in this room (ctx/ROOM) may enter",
-    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
