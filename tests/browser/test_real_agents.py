@@ -143,11 +143,12 @@ def test_cancel_and_owner_controls(open_page, lab: RealLab) -> None:
     wait_until(lambda: ida_panel.robots.manage.visible, 10, what="ida's arena settings")
     assert not alice_panel.robots.manage.visible
 
-    # The owner lengthens the slots from the page.
+    # The owner lengthens the slots from the page: long enough that carol's slot cannot run
+    # out on a loaded machine before ida stops it below (the stop is what ends it).
     ida.p.get_by_text("Arena settings").first.click()
-    ida.fill("Slot length (s)", "30")
+    ida.fill("Slot length (s)", "300")
     ida.click("Set slot length")
-    ida.wait_text("slots of 30 s from the next one")
+    ida.wait_text("slots of 300 s from the next one")
 
     pick_robot(carol, carol_panel, "k1")
     upload(carol, BRAITENBERG.name, BRAITENBERG.read_bytes())
