@@ -87,7 +87,7 @@ def main() -> int:
         from tests.browser.reallab import PASSWORD, WORLD, real_lab
 
         with ExitStack() as stack:
-            env = stack.enter_context(real_lab(Path(tempfile.mkdtemp()), "swarm"))
+            env = stack.enter_context(real_lab(Path(tempfile.mkdtemp()), "swarm", wander=True))
             users = [(u, PASSWORD) for u in ("alice", "bob", "carol", "ida")]
             return run(args, env.viewer, env.url, env.address.label, WORLD, users, None)
     lab = FakeLab("Bench lab", robots=args.robots, rate=args.world_rate)

@@ -23,14 +23,8 @@ import numpy as np
 from services.engine import kernels
 from services.engine.agents import agent_type
 from services.engine.entities import ShapeSpec
+from services.engine.wander import braitenberg
 from services.engine.world import World
-
-# Braitenberg obstacle avoidance: each sensor pushes the opposite wheel.
-# Sensor order: 0 left, 1 front-left, 2-3 front, 4 front-right, 5 right, 6-7 back.
-_W_LEFT = np.array([4, 3, 2, 1, -1, -2, 0, 0]) / 400.0
-_W_RIGHT = -_W_LEFT[::-1].copy()
-_W_RIGHT[[6, 7]] = 0.0
-_W = np.stack([_W_LEFT, _W_RIGHT], axis=1)  # (8, 2): both wheels in one product
 
 
 def build(n: int, seed: int = 1) -> World:
@@ -55,7 +49,7 @@ def build(n: int, seed: int = 1) -> World:
 
 
 def control(world: World) -> None:
-    world.set_speeds_all(8.0 + world.proximity @ _W)
+    world.set_speeds_all(braitenberg(world.proximity))
 
 
 def run(n: int, sim_seconds: float, profile: bool = False) -> tuple[float, float, dict[str, float]]:

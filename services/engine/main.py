@@ -43,6 +43,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         help="stop a robot whose commands stop for this long (default 300)",
     )
     p.add_argument(
+        "--wander",
+        action="store_true",
+        help="robots no controller drives avoid obstacles on their own (demos, swarm displays)",
+    )
+    p.add_argument(
         "--maps-dir",
         type=Path,
         help="where map save/load requests read and write (default: the map's directory)",
@@ -83,6 +88,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         maps_dir=args.maps_dir or args.map.parent,
         seed=args.seed,
         registry_key=registry_key,
+        wander=args.wander,
     )
 
     def build(session: zenoh.Session) -> EngineService:

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from common import keys
@@ -52,7 +53,7 @@ from common.messages import (
 )
 from common.service import RequestError
 from common.world_service import WorldService
-from services.engine import maps, wire
+from services.engine import maps, wander, wire
 from services.engine.world import EditError, World
 
 _FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
@@ -67,6 +68,7 @@ class EngineSettings:
     maps_dir: Path = Path("maps")
     seed: int = 0
     registry_key: bytes | None = None
+    wander: bool = False  # robots nobody commands avoid obstacles on their own (wander.py)
 
 
 @dataclass
@@ -96,6 +98,8 @@ class EngineService(WorldService):
         self.box_keys = WorldBoxKeys(identity) if identity is not None else None
         self.leases = LeaseBook(realm, world.name, self.verifier, self.box_keys)
         self._last_cmd: dict[str, float] = {}
+        self._wander_layout = -1
+        self._wanderers = np.zeros(0, bool)
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
         self._agent_pubs: dict[str, Any] = {}
@@ -293,6 +297,24 @@ class EngineService(WorldService):
             self.log.info("command to %s partly ignored: %s", item.agent, exc)
         self._last_cmd[item.agent] = item.received
 
+    def _wander(self) -> None:
+        """Undriven robots with the Khepera's IR layout run the built-in avoidance rule."""
+        world = self.world
+        if self._wander_layout != world.layout:  # which robots can wander changes with edits
+            self._wander_layout = world.layout
+            self._wanderers = np.array(
+                [len(a.spec.proximity.poses) == len(wander.WEIGHTS) for a in world.agents], bool
+            )
+        if not self._wanderers.any() or world.proximity.shape[1] < len(wander.WEIGHTS):
+            return
+        mask = self._wanderers.copy()
+        for agent in self._last_cmd:  # a controller drives it: leave its command alone
+            with contextlib.suppress(KeyError):
+                mask[world.agent_slot(agent)] = False
+        speeds = world.cmd.astype(np.float64)
+        speeds[mask] = wander.braitenberg(world.proximity[mask])
+        world.set_speeds_all(speeds)
+
     def _watchdog(self) -> None:
         """A robot whose commands stopped arriving stops (like the real robot's bridge)."""
         now = time.monotonic()
@@ -333,6 +355,8 @@ class EngineService(WorldService):
             try:
                 self._drain()
                 self._watchdog()
+                if settings.wander:
+                    self._wander()
                 self.world.step()
                 if self.world.layout != layout:
                     layout = self.world.layout

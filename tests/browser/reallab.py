@@ -125,7 +125,12 @@ def start_router(procs: Procs, realm: str) -> Router:
 
 @contextmanager
 def real_lab(
-    tmp: Path, map_name: str = "foraging", *, agents: bool = False, slot: float = 4.0
+    tmp: Path,
+    map_name: str = "foraging",
+    *,
+    agents: bool = False,
+    slot: float = 4.0,
+    wander: bool = False,
 ) -> Iterator[RealLab]:
     procs = Procs(tmp)
     realm = f"t{uuid.uuid4().hex[:10]}"
@@ -154,6 +159,7 @@ def real_lab(
                     "3",
                     "--maps-dir",
                     str(maps_dir),
+                    *(["--wander"] if wander else []),
                     *lab.net_args(),
                 ],
             )

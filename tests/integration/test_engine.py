@@ -8,6 +8,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -69,6 +70,18 @@ def engine(
     alive_watch: AliveWatch,
     tmp_path: Path,
 ) -> Path:
+    return start_engine(router, procs, identity, alive_watch, tmp_path)
+
+
+def start_engine(
+    router: Router,
+    procs: Procs,
+    identity: RegistryIdentity,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+    *extra: str,
+) -> Path:
+    """`wart engine` on a copy of maps/foraging.json (4 Khepera), its token seen."""
     maps_dir = tmp_path / "maps"
     maps_dir.mkdir()
     shutil.copy(REPO / "maps" / "foraging.json", maps_dir / "foraging.json")
@@ -85,6 +98,7 @@ def engine(
             "3",
             "--watchdog-ms",
             "300",
+            *extra,
             *net,
         ],
     )
@@ -249,3 +263,56 @@ def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
     proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
     assert proc.popen.wait(30) == 2
     assert "objects[0].colr" in proc.output(), proc.output()
+
+
+def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller(
+    router: Router,
+    procs: Procs,
+    identity: RegistryIdentity,
+    alive_watch: AliveWatch,
+    zsession: zenoh.Session,
+    tmp_path: Path,
+) -> None:
+    start_engine(router, procs, identity, alive_watch, tmp_path, "--wander")
+    realm = router.realm
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    wait_for(lambda: frames.count > 0, 10, "a frame")
+
+    def poses() -> np.ndarray:
+        frame = frames.get()
+        assert isinstance(frame, WorldFrame)
+        return frame.poses.to_numpy()[:4].astype(float)  # k0..k3 come first
+
+    def moved(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        return np.hypot(*(after[:, :2] - before[:, :2]).T) + 100 * abs(after[:, 2] - before[:, 2])
+
+    # Nobody drives: every robot moves (or turns away from what it sees) on its own.
+    before = poses()
+    time.sleep(1.5)
+    assert (moved(before, poses()) > 10).all(), moved(before, poses())
+
+    # k0's lease holder commands it to stand still: it obeys its controller, not the rule,
+    # while the others keep wandering.
+    alice = issue_session(identity, realm, "alice", ["control"])
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    lease_key, cmd_key = keys.agent_lease(realm, WORLD, "k0"), keys.agent_cmd(realm, WORLD, "k0")
+    now = time.time()
+    zsession.put(
+        lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
+    )
+    halt = AgentCommand(agent="k0", speeds=(0, 0))
+    for _ in range(6):  # let the lease and the first commands land
+        zsession.put(cmd_key, alice.seal(cmd_key, halt))
+        time.sleep(0.05)
+    before = poses()
+    for _ in range(20):  # a controller's period, not a wait for a condition
+        zsession.put(cmd_key, alice.seal(cmd_key, halt))
+        time.sleep(0.05)
+    held = moved(before, poses())
+    assert held[0] < 2.0, held
+    assert (held[1:] > 5).all(), held
+
+    # Her commands stop: after the watchdog, k0 wanders again.
+    before = poses()
+    time.sleep(1.5)
+    assert moved(before, poses())[0] > 10
