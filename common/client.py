@@ -85,6 +85,9 @@ from common.service import open_session
 
 log = logging.getLogger("wart.client")
 
+# Inbox messages kept while a login is in flight (a person gets a handful, not a flood).
+_EARLY_INBOX_MAX = 64
+
 M = TypeVar("M", bound=Message)
 
 
@@ -208,6 +211,9 @@ class LabClient:
         self._mailbox: nacl.public.PrivateKey | None = None
         self._token: Any = None
         self._inbox: Any = None
+        self._inbox_user = ""  # whose inbox and presence token are declared
+        self._early: list[zenoh.Sample] = []  # inbox samples from before the login reply
+        self._inbox_lock = threading.Lock()
         self._rooms: dict[str, RoomHandle] = {}
         self._lock = threading.Lock()
         self.on_private: Callable[[PrivateText], None] = lambda _m: None
@@ -255,6 +261,9 @@ class LabClient:
                 except Exception as exc:
                     log.debug("undeclare: %s", exc)
         self._token = self._inbox = None
+        self._inbox_user = ""
+        with self._inbox_lock:
+            self._early.clear()
         for room in self._rooms.values():
             if room.subscriber is not None:
                 try:
@@ -383,6 +392,31 @@ class LabClient:
         )
         sealed = nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(encode(request))
         key = keys.registry_login(self.realm)
+        # On a first login, be reachable before asking: the inbox, then the presence token,
+        # travel ahead of the login query on this link, so by the time the registry has our
+        # session it has seen the token, and a message sent to us from then on is delivered
+        # live to a subscription the router already has. Declared after the reply instead, a
+        # message sent in between was kept in the mailbox until our *next* login.
+        early = self.session is None
+        if early:
+            try:
+                self._declare_inbox(cred.user)
+            except keys.BadIdentifier as exc:  # no such account can exist: say why, locally
+                raise WrongCredentials(str(exc)) from None
+        try:
+            return self._login_reply(key, sealed, session_keys, mailbox)
+        except BaseException:
+            if early:
+                self._undeclare()
+            raise
+
+    def _login_reply(
+        self,
+        key: str,
+        sealed: bytes,
+        session_keys: SessionKeys,
+        mailbox: nacl.public.PrivateKey,
+    ) -> SessionToken:
         answers = self._get(key, encode(SealedLogin(sealed=sealed)), "login", declare_source=True)
         if not answers:
             raise RegistryUnreachable(
@@ -424,19 +458,26 @@ class LabClient:
     def _logged_in(
         self, session: Session, reply: LoginReply, mailbox: nacl.public.PrivateKey
     ) -> SessionToken:
-        self._undeclare()
-        self.session = session
-        self._mailbox = mailbox
+        if self._inbox is None or self._inbox_user != session.user:  # a re-login
+            self._undeclare()
+            self._declare_inbox(session.user)
+        with self._inbox_lock:
+            self.session = session
+            self._mailbox = mailbox
+            early, self._early = self._early, []
         self.server_name = reply.server_name
-        self._inbox = self.z.declare_subscriber(
-            keys.user_inbox(self.realm, session.user), self._on_inbox
-        )
-        if self.presence:
-            self._token = self.z.liveliness().declare_token(
-                keys.alive(self.realm, AliveKind.USER, session.user)
-            )
+        for sample in early:
+            self._deliver(sample)
         self.pending = [t for t in (self._open_private(m, kept=True) for m in reply.pending) if t]
         return session.token
+
+    def _declare_inbox(self, user: str) -> None:
+        self._inbox = self.z.declare_subscriber(keys.user_inbox(self.realm, user), self._on_inbox)
+        if self.presence:
+            self._token = self.z.liveliness().declare_token(
+                keys.alive(self.realm, AliveKind.USER, user)
+            )
+        self._inbox_user = user
 
     def logout(self) -> None:
         if self.session is None:
@@ -624,6 +665,14 @@ class LabClient:
         return PrivateText(sender=message.sender, text=text, sent_at=message.sent_at, kept=kept)
 
     def _on_inbox(self, sample: zenoh.Sample) -> None:
+        with self._inbox_lock:
+            if self.session is None:  # logging in: read it once the session is ours
+                if len(self._early) < _EARLY_INBOX_MAX:
+                    self._early.append(sample)
+                return
+        self._deliver(sample)
+
+    def _deliver(self, sample: zenoh.Sample) -> None:
         try:
             principal, message = self.verifier.open(
                 str(sample.key_expr), sample.payload, (PrivateMessage, KickNotice)

@@ -9,10 +9,10 @@ import pytest
 
 from common import keys
 from common.auth import issue_session
-from common.client import NotAllowed, NotFound, RateLimited, RequestFailed
+from common.client import NotAllowed, NotFound, RateLimited, RequestFailed, WrongCredentials
 from common.messages import ChatSay, RoomEvent
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.labkit import Lab, make_lab
+from tests.integration.labkit import PASSWORD, Lab, make_lab
 
 
 class Events:
@@ -199,6 +199,25 @@ def test_private_messages_live_and_kept_for_offline_users(lab: Lab) -> None:
         assert [(m.sender, m.text, m.kept) for m in carol.pending] == [
             ("alice", "see you later", True)
         ]
+
+
+def test_a_message_sent_right_after_the_recipients_login_is_delivered_live(lab: Lab) -> None:
+    # The recipient is reachable from the moment its login succeeds: a message sent then is
+    # not kept for its next login (it was, when presence was declared after the login reply).
+    with lab.client("alice") as alice:
+        for i in range(5):
+            with lab.client("bob") as bob:
+                got: list = []
+                bob.on_private = got.append
+                assert alice.send_private("bob", f"hello {i}") is True
+                wait_for(lambda got=got: got, 5, "the private message")
+                assert got[0].text == f"hello {i}" and not got[0].kept
+                assert bob.pending == []
+
+
+def test_a_user_name_that_cannot_exist_is_refused_in_words(lab: Lab) -> None:
+    with lab.client() as client, pytest.raises(WrongCredentials, match="is not a valid name"):
+        client.login("a b", PASSWORD)
 
 
 def test_directory_lists_server_users_and_rooms(lab: Lab) -> None:
