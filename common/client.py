@@ -399,10 +399,7 @@ class LabClient:
         # message sent in between was kept in the mailbox until our *next* login.
         early = self.session is None
         if early:
-            try:
-                self._declare_inbox(cred.user)
-            except keys.BadIdentifier as exc:  # no such account can exist: say why, locally
-                raise WrongCredentials(str(exc)) from None
+            self._declare_inbox(cred.user)
         try:
             return self._login_reply(key, sealed, session_keys, mailbox)
         except BaseException:
