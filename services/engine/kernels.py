@@ -1,4 +1,4 @@
-"""Compiled (numba) kernels for the engine's per-tick work: body state, drive, sensing.
+"""Compiled (numba) kernels for the engine's per-tick work: drive and physics, sensing.
 
 Why compiled: at small N a tick's cost was the fixed overhead of ~150 small
 numpy calls (a few microseconds each), not arithmetic; at large N the
@@ -29,6 +29,8 @@ import time
 
 import numpy as np
 from numba import njit
+
+from services.engine import chipmunk as C
 
 # Column indices of the per-agent float table (AgentSensing.agent_f).
 F_REACH = 0
@@ -61,57 +63,80 @@ _CACHE = True
 
 
 @njit(cache=_CACHE)
-def gather_bodies(state, ids, expected_ids, agent_rows, object_rows):  # pragma: no cover
-    """Agent pose and velocity and object pose from a pymunk.batch read.
+def read_bodies(fns, agents, objects):  # pragma: no cover
+    """(pose, vel, obj): agents' x, y, heading and vx, vy, w; objects' x, y, heading.
 
-    ``state`` is (bodies, 6): x, y, angle, vx, vy, w. Returns ok=False (and
-    empty arrays) if the bodies are not the ones the row tables were built for.
+    ``agents`` and ``objects`` are cpBody addresses (services/engine/chipmunk.py).
     """
-    n, m = len(agent_rows), len(object_rows)
+    n, m = len(agents), len(objects)
     pose = np.empty((n, 3))
     vel = np.empty((n, 3))
     obj = np.empty((m, 3))
-    if len(ids) != len(expected_ids):
-        return False, pose, vel, obj
-    for i in range(len(ids)):
-        if ids[i] != expected_ids[i]:
-            return False, pose, vel, obj
     for a in range(n):
-        r = agent_rows[a]
-        for k in range(3):
-            pose[a, k] = state[r, k]
-            vel[a, k] = state[r, 3 + k]
+        b = agents[a]
+        pose[a, 0], pose[a, 1] = C.get_vect(fns[C.GET_POSITION], b)
+        pose[a, 2] = C.get_double(fns[C.GET_ANGLE], b)
+        vel[a, 0], vel[a, 1] = C.get_vect(fns[C.GET_VELOCITY], b)
+        vel[a, 2] = C.get_double(fns[C.GET_ANGULAR_VELOCITY], b)
     for o in range(m):
-        r = object_rows[o]
-        for k in range(3):
-            obj[o, k] = state[r, k]
-    return True, pose, vel, obj
+        b = objects[o]
+        obj[o, 0], obj[o, 1] = C.get_vect(fns[C.GET_POSITION], b)
+        obj[o, 2] = C.get_double(fns[C.GET_ANGLE], b)
+    return pose, vel, obj
 
 
 @njit(cache=_CACHE)
-def drive(
-    state, control_rows, cmd, mm_s_per_unit, wheel_base, theta, counters, pulses_per_tick, out
+def physics_tick(
+    fns,
+    space,
+    substep_s,
+    substeps,
+    controls,
+    agents,
+    objects,
+    cmd,
+    mm_s_per_unit,
+    wheel_base,
+    counters,
+    pulses_per_tick,
 ):  # pragma: no cover
-    """Velocities for pymunk.batch (every body; control bodies from the wheel speeds).
+    """Drive, step chipmunk ``substeps`` times, and read the bodies back.
 
-    ``out`` is the flat (bodies * 3) float buffer: vx, vy, w per body. Also
-    advances the position counters by this tick's pulses.
+    Each robot's kinematic control body gets the velocity its wheel speeds
+    give along the robot's current heading (the pivot and gear joints pull
+    the robot after it); the position counters advance by this tick's pulses.
+    Returns :func:`read_bodies` of the result. With ``substeps`` 0 it only
+    drives: the caller steps the space through pymunk and reads it after.
     """
-    nb = state.shape[0]
-    for b in range(nb):
-        out[3 * b] = state[b, 3]
-        out[3 * b + 1] = state[b, 4]
-        out[3 * b + 2] = state[b, 5]
-    for a in range(len(control_rows)):
+    for a in range(len(controls)):
         w0 = cmd[a, 0] * mm_s_per_unit[a]
         w1 = cmd[a, 1] * mm_s_per_unit[a]
         v = (w0 + w1) / 2.0
-        r = control_rows[a]
-        out[3 * r] = v * math.cos(theta[a])
-        out[3 * r + 1] = v * math.sin(theta[a])
-        out[3 * r + 2] = (w1 - w0) / wheel_base[a]
+        theta = C.get_double(fns[C.GET_ANGLE], agents[a])
+        c = controls[a]
+        C.set_vect(fns[C.SET_VELOCITY], c, v * math.cos(theta), v * math.sin(theta))
+        C.set_double(fns[C.SET_ANGULAR_VELOCITY], c, (w1 - w0) / wheel_base[a])
         counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
         counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
+    for _ in range(substeps):
+        C.set_double(fns[C.SPACE_STEP], space, substep_s)
+    return read_bodies(fns, agents, objects)
+
+
+@njit(cache=_CACHE)
+def clamp_speeds(speeds, top, cmd):  # pragma: no cover
+    """cmd = speeds rounded to whole units and clamped to +-top per agent; NaN stops the wheel."""
+    for a in range(cmd.shape[0]):
+        t = top[a]
+        for k in range(2):
+            s = np.rint(speeds[a, k])
+            if s != s:
+                s = 0.0
+            elif s > t:
+                s = t
+            elif s < -t:
+                s = -t
+            cmd[a, k] = s
 
 
 @njit(cache=_CACHE, inline="always")
@@ -476,21 +501,23 @@ def sense(
 def warm_up() -> float:
     """Compile (or load from the on-disk cache) every kernel; returns the seconds it took."""
     t0 = time.perf_counter()
-    state = np.zeros((2, 6))
-    ids = np.arange(2, dtype=np.uintp)
-    rows = np.zeros(1, dtype=np.int64)
-    gather_bodies(state, ids, ids, rows, np.zeros(0, dtype=np.int64))
-    drive(
-        state,
-        rows,
-        np.zeros((1, 2)),
-        np.ones(1),
-        np.ones(1),
-        np.zeros(1),
-        np.zeros((1, 2)),
-        np.ones(1),
-        np.zeros(6),
+    none = np.zeros(0, dtype=np.uint64)  # no bodies: compiles without touching chipmunk
+    physics_tick(
+        C.FUNCTIONS,
+        np.uint64(0),
+        0.01,
+        0,
+        none,
+        none,
+        none,
+        np.zeros((0, 2)),
+        np.ones(0),
+        np.ones(0),
+        np.zeros((0, 2)),
+        np.ones(0),
     )
+    read_bodies(C.FUNCTIONS, none, none)
+    clamp_speeds(np.zeros((1, 2)), np.ones(1), np.zeros((1, 2)))
     f = np.zeros((1, N_AGENT_F))
     i = np.zeros((1, N_AGENT_I), dtype=np.int64)
     i[0, I_PROX_SENSORS] = 1

@@ -13,10 +13,11 @@ follow the thesis, through pymunk:
   tongs overlap the robot (thesis 6.8.3).
 
 Per-agent state lives in numpy arrays indexed by the agent's slot (its index
-in :attr:`World.agents`); body state moves through ``pymunk.batch`` and the
-sensors are cast in numpy (services/engine/sensing.py), so a tick has no
-per-robot Python loop. The per-tick work (reading body state, driving,
-sensing) runs in compiled kernels (services/engine/kernels.py).
+in :attr:`World.agents`), so a tick has no per-robot Python loop. The
+per-tick work runs in compiled kernels (services/engine/kernels.py): one sets
+the control bodies' velocities, steps chipmunk and reads the bodies back,
+calling chipmunk's C functions directly (services/engine/chipmunk.py); one
+casts every sensor (services/engine/sensing.py prepares its tables).
 """
 
 from __future__ import annotations
@@ -27,10 +28,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import pymunk
-import pymunk.batch as pbatch
 
-from services.engine import kernels, sensing
+from services.engine import chipmunk, kernels, sensing
 from services.engine.entities import (
     Agent,
     Light,
@@ -105,6 +106,7 @@ class World:
         self.width = float(width_mm)
         self.height = float(height_mm)
         self.rng = np.random.default_rng(seed)
+        self.noise = sensing.NoiseStream(self.rng)  # sensor noise: the only draw from rng
         self.tick = 0
         self.sim_time = 0.0
         self.layout = 1  # bumped whenever objects are added, removed or change shape
@@ -135,15 +137,13 @@ class World:
         self._init_agent_state(0)
         self._rebuild_tables()
         self.object_pose = np.zeros((0, 3))
-        self._batch = pbatch.Buffer()
-        self._batch_ids = np.zeros(0, dtype=np.uintp)
+        # cpBody addresses for the compiled physics tick (services/engine/chipmunk.py),
+        # rebuilt whenever bodies are added or removed (_rows_stale).
+        self._space_address = np.uint64(chipmunk.space_address(self.space))
+        self._agent_bodies = self._control_bodies = self._object_bodies = np.zeros(
+            0, dtype=np.uint64
+        )
         self._rows_stale = True
-        # The last body state read (after the previous step) and the layout it was read at:
-        # the next tick drives from it unless something moved bodies in between.
-        self._state: np.ndarray | None = None
-        self._state_layout = -1
-        self._vel_buf = pbatch.Buffer()
-        self._vel_out = np.zeros(0)
         self._static_dirty = True
         self.static_geometry: sensing.StaticGeometry | None = None
 
@@ -642,13 +642,14 @@ class World:
         top = self.tables.max_speed[slot]
         self.cmd[slot] = (float(np.clip(left, -top, top)), float(np.clip(right, -top, top)))
 
-    def set_speeds_all(self, speeds: np.ndarray) -> None:
-        """Every agent's (left, right) at once, clamped per type: the bulk path."""
-        top = self.tables.max_speed[:, None]
-        s = np.rint(speeds)
-        np.maximum(s, -top, out=s)  # = np.clip, without its Python-level overhead
-        np.minimum(s, top, out=s)
-        self.cmd[:] = s
+    def set_speeds_all(self, speeds: npt.ArrayLike) -> None:
+        """Every agent's (left, right) at once, rounded and clamped per type: the bulk path."""
+        s = np.asarray(speeds, dtype=np.float64)
+        if s.shape != self.cmd.shape:
+            raise ValueError(
+                f"expected {self.cmd.shape} wheel speeds (one row per agent), got {s.shape}"
+            )
+        kernels.clamp_speeds(s, self.tables.max_speed, self.cmd)
 
     def set_counters(self, slot: int, left: int, right: int) -> None:
         self.counters[slot] = (left, right)
@@ -808,78 +809,11 @@ class World:
 
     # -- stepping -------------------------------------------------------------------------
 
-    def _refresh_rows(self, ids: np.ndarray) -> None:
-        row_of = {int(b): i for i, b in enumerate(ids)}
-        self._agent_rows = np.array([row_of[id_of(a.body)] for a in self.agents], dtype=np.int64)
-        self._control_rows = np.array(
-            [row_of[id_of(a.control)] for a in self.agents], dtype=np.int64
-        )
-        self._object_rows = np.array(
-            [row_of[id_of(o.body)] for o in self.objects if o.body is not None], dtype=np.int64
-        )
-        self._batch_ids = ids.copy()
+    def _refresh_rows(self) -> None:
+        self._agent_bodies = chipmunk.addresses([a.body for a in self.agents])
+        self._control_bodies = chipmunk.addresses([a.control for a in self.agents])
+        self._object_bodies = chipmunk.addresses([o.body for o in self.objects if o.body])
         self._rows_stale = False
-
-    _READ_FIELDS = (
-        pbatch.BodyFields.BODY_ID
-        | pbatch.BodyFields.POSITION
-        | pbatch.BodyFields.ANGLE
-        | pbatch.BodyFields.VELOCITY
-        | pbatch.BodyFields.ANGULAR_VELOCITY
-    )
-    _VEL_FIELDS = pbatch.BodyFields.VELOCITY | pbatch.BodyFields.ANGULAR_VELOCITY
-
-    def _read_bodies(self) -> np.ndarray:
-        self._batch.clear()
-        pbatch.get_space_bodies(self.space, self._READ_FIELDS, self._batch)
-        ids = np.frombuffer(self._batch.int_buf(), dtype=np.uintp)
-        # A copy: the batch buffer is reused by the next read.
-        state = np.frombuffer(self._batch.float_buf(), dtype=np.float64).reshape(-1, 6).copy()
-        if self._rows_stale:
-            self._refresh_rows(ids)
-        ok, pose, vel, obj = kernels.gather_bodies(
-            state, ids, self._batch_ids, self._agent_rows, self._object_rows
-        )
-        if not ok:  # bodies were added or removed behind our back
-            self._refresh_rows(ids)
-            ok, pose, vel, obj = kernels.gather_bodies(
-                state, ids, self._batch_ids, self._agent_rows, self._object_rows
-            )
-        self.agent_pose, self.agent_vel, self.object_pose = pose, vel, obj
-        self._state = state
-        self._state_layout = self.layout
-        return state
-
-    def _current_state(self) -> np.ndarray:
-        """Body state as of now: the last read, unless something moved bodies since."""
-        if (
-            self._state is None
-            or self._rows_stale
-            or self._n_held
-            or self._state_layout != self.layout
-        ):
-            return self._read_bodies()
-        return self._state
-
-    def _drive(self, state: np.ndarray, dt: float) -> None:
-        """Control bodies' velocities from the wheel speeds; counters count this tick's pulses."""
-        if len(self._vel_out) != 3 * len(state):
-            self._vel_out = np.zeros(3 * len(state))
-            self._vel_buf = pbatch.Buffer()
-            self._vel_buf.set_float_buf(self._vel_out)
-        t = self.tables
-        kernels.drive(
-            state,
-            self._control_rows,
-            self.cmd,
-            t.mm_s_per_unit,
-            t.wheel_base,
-            self.agent_pose[:, 2],
-            self.counters,
-            dt * t.pulses_per_s_per_unit,
-            self._vel_out,
-        )
-        pbatch.set_space_bodies(self.space, self._VEL_FIELDS, self._vel_buf)
 
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
@@ -888,12 +822,34 @@ class World:
             t0 = time.process_time()
         dt = self.tick_s
         self._update_arms(dt)
-        state = self._current_state()
-        self._drive(state, dt)
+        if self._rows_stale:
+            self._refresh_rows()
+        t = self.tables
+        # Straight through chipmunk unless pymunk's own step has bookkeeping to do
+        # (bodies or shapes just added or removed): then drive only, and step via pymunk.
+        via_pymunk = chipmunk.space_step_pending(self.space)
         sub = dt / self.substeps
-        for _ in range(self.substeps):
-            self.space.step(sub)
-        self._read_bodies()
+        pose, vel, obj = kernels.physics_tick(
+            chipmunk.FUNCTIONS,
+            self._space_address,
+            sub,
+            0 if via_pymunk else self.substeps,
+            self._control_bodies,
+            self._agent_bodies,
+            self._object_bodies,
+            self.cmd,
+            t.mm_s_per_unit,
+            t.wheel_base,
+            self.counters,
+            dt * t.pulses_per_s_per_unit,
+        )
+        if via_pymunk:
+            for _ in range(self.substeps):
+                self.space.step(sub)
+            pose, vel, obj = kernels.read_bodies(
+                chipmunk.FUNCTIONS, self._agent_bodies, self._object_bodies
+            )
+        self.agent_pose, self.agent_vel, self.object_pose = pose, vel, obj
         self._carry_held()
         self.tick += 1
         self.sim_time = self.tick * dt

@@ -1,0 +1,164 @@
+"""Chipmunk's body accessors and space step, callable from compiled kernels.
+
+A tick at 10 robots spends as long in the Python glue around chipmunk (pymunk's
+batch buffers, descriptors, numpy views, one kernel call to lay the velocities
+out and one to gather the poses back) as chipmunk spends stepping the space.
+Here the kernels call chipmunk's own C functions instead: the drive kernel sets
+each control body's velocity, steps the space and reads every robot's and
+object's pose in one compiled call (kernels.physics_tick).
+
+Function addresses are looked up in pymunk's C extension at run time and
+passed to the kernels as a table of integers (``FUNCTIONS``), so the kernels'
+on-disk cache holds no address of a particular process. Bodies and spaces are
+passed as their ``cpBody *`` / ``cpSpace *`` addresses (``body_address``,
+``space_address``); the caller keeps the pymunk objects alive for as long as a
+kernel may use them.
+
+This reaches one step below pymunk's public API (``Body._body``,
+``Space._space``, the C library in ``pymunk._chipmunk``), in pymunk 7
+(pyproject pins ``pymunk < 8``). ``check_signatures`` verifies at import that
+every function still has the C signature the code generation below assumes;
+tests/unit/engine/test_chipmunk.py checks values against pymunk's own
+accessors and a whole trajectory against ``Space.step``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pymunk
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+from pymunk._chipmunk import ffi, lib
+
+# Indices into FUNCTIONS.
+GET_POSITION = 0
+GET_ANGLE = 1
+GET_VELOCITY = 2
+GET_ANGULAR_VELOCITY = 3
+SET_VELOCITY = 4
+SET_ANGULAR_VELOCITY = 5
+SPACE_STEP = 6
+
+# Name and the C signature the intrinsics below are generated for.
+_SIGNATURES = (
+    ("cpBodyGetPosition", "cpVect(*)(cpBody *)"),
+    ("cpBodyGetAngle", "double(*)(cpBody *)"),
+    ("cpBodyGetVelocity", "cpVect(*)(cpBody *)"),
+    ("cpBodyGetAngularVelocity", "double(*)(cpBody *)"),
+    ("cpBodySetVelocity", "void(*)(cpBody *, cpVect)"),
+    ("cpBodySetAngularVelocity", "void(*)(cpBody *, double)"),
+    ("cpSpaceStep", "void(*)(cpSpace *, double)"),
+)
+
+
+def check_signatures() -> None:
+    """Fail loudly if pymunk's chipmunk no longer matches the generated calls."""
+    if ffi.sizeof("cpFloat") != 8 or ffi.sizeof("cpVect") != 16:
+        raise ImportError("pymunk's chipmunk is not built with double-precision cpFloat")
+    for name, expected in _SIGNATURES:
+        found = ffi.typeof(ffi.addressof(lib, name)).cname.replace("struct ", "")
+        if found.replace("cpFloat", "double") != expected:
+            raise ImportError(f"pymunk's {name} is {found}, expected {expected}")
+
+
+check_signatures()
+FUNCTIONS = np.array(
+    [int(ffi.cast("uintptr_t", ffi.addressof(lib, name))) for name, _ in _SIGNATURES],
+    dtype=np.uint64,
+)
+
+
+def body_address(body: pymunk.Body) -> int:
+    return int(ffi.cast("uintptr_t", body._body))
+
+
+def space_address(space: pymunk.Space) -> int:
+    return int(ffi.cast("uintptr_t", space._space))
+
+
+def addresses(bodies: list[pymunk.Body]) -> np.ndarray:
+    return np.array([body_address(b) for b in bodies], dtype=np.uint64)
+
+
+# cpVect is a struct of two doubles: returned in two floating-point registers
+# and passed by value as two floating-point arguments on x86-64 (System V) and
+# AArch64, which is how clang lowers it and how it is declared here.
+_DOUBLE = ir.DoubleType()
+_VECT = ir.LiteralStructType([_DOUBLE, _DOUBLE])
+_PTR = ir.IntType(8).as_pointer()
+
+
+def _function(builder: ir.IRBuilder, address: ir.Value, ret: ir.Type, args: list[ir.Type]) -> Any:
+    return builder.inttoptr(address, ir.FunctionType(ret, args).as_pointer())
+
+
+@intrinsic
+def get_vect(typingctx, fn, obj):  # type: ignore[no-untyped-def]
+    """(x, y) = fn(obj) for a ``cpVect fn(cpBody *)``; both arguments are addresses."""
+    sig = types.UniTuple(types.float64, 2)(types.uint64, types.uint64)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        f = _function(builder, args[0], _VECT, [_PTR])
+        out = builder.call(f, [builder.inttoptr(args[1], _PTR)])
+        parts = [builder.extract_value(out, 0), builder.extract_value(out, 1)]
+        return context.make_tuple(builder, signature.return_type, parts)
+
+    return sig, codegen
+
+
+@intrinsic
+def get_double(typingctx, fn, obj):  # type: ignore[no-untyped-def]
+    """fn(obj) for a ``double fn(cpBody *)``."""
+    sig = types.float64(types.uint64, types.uint64)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        f = _function(builder, args[0], _DOUBLE, [_PTR])
+        return builder.call(f, [builder.inttoptr(args[1], _PTR)])
+
+    return sig, codegen
+
+
+@intrinsic
+def set_vect(typingctx, fn, obj, x, y):  # type: ignore[no-untyped-def]
+    """fn(obj, (x, y)) for a ``void fn(cpBody *, cpVect)``."""
+    sig = types.void(types.uint64, types.uint64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        f = _function(builder, args[0], ir.VoidType(), [_PTR, _DOUBLE, _DOUBLE])
+        builder.call(f, [builder.inttoptr(args[1], _PTR), args[2], args[3]])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def set_double(typingctx, fn, obj, value):  # type: ignore[no-untyped-def]
+    """fn(obj, value) for a ``void fn(cpBody *, double)`` or ``void fn(cpSpace *, double)``."""
+    sig = types.void(types.uint64, types.uint64, types.float64)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        f = _function(builder, args[0], ir.VoidType(), [_PTR, _DOUBLE])
+        builder.call(f, [builder.inttoptr(args[1], _PTR), args[2]])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+def space_step_pending(space: pymunk.Space) -> bool:
+    """True if pymunk's own ``Space.step`` has work besides chipmunk's step.
+
+    After shapes or bodies are added or removed, pymunk checks new bodies'
+    masses and releases removed shapes in its step; callbacks may have queued
+    additions, removals or post-step callbacks. The engine steps through pymunk
+    then, and straight through chipmunk otherwise.
+    """
+    return bool(
+        space._bodies_to_check
+        or space._removed_shapes
+        or space._add_later
+        or space._remove_later
+        or space._post_step_callbacks
+    )
