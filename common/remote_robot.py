@@ -56,8 +56,12 @@ PRESENCE_THRESHOLD = 128
 
 def _fit(values: list[int], count: int, fill: int) -> tuple[int, ...]:
     """Exactly ``count`` values within 0..1023 (robot types differ in sensor counts)."""
-    out = [max(0, min(1023, int(v))) for v in values[:count]]
-    return tuple(out + [fill] * (count - len(out)))
+    out = values[:count]
+    if len(out) < count:
+        out = out + [fill] * (count - len(out))
+    if out and (min(out) < 0 or max(out) > 1023):  # rare: clamp only then (per sample, 50 Hz)
+        out = [max(0, min(1023, v)) for v in out]
+    return tuple(out)
 
 
 def state_from_sample(sample: SensorSample) -> KheperaState:

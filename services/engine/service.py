@@ -134,7 +134,9 @@ class EngineService(WorldService):
             with self._match_lock:
                 self._matched.discard(agent)
         for agent in sorted(wanted - set(self._agent_pubs)):
-            pub = self.session.declare_publisher(keys.agent_sensors(self.realm, self.ident, agent))
+            pub = self.session.declare_publisher(
+                keys.agent_sensors(self.realm, self.ident, agent), express=True
+            )
 
             def on_match(status: Any, agent: str = agent) -> None:
                 with self._match_lock:
@@ -331,9 +333,10 @@ class EngineService(WorldService):
 
     def _publish(self) -> None:
         world = self.world
-        self._frame_pub.put(encode(wire.frame(world)))
+        # Samples first: controllers react to them; viewers draw the frame at their own pace.
         with self._match_lock:
             listening = sorted(self._matched)
+        pubs, slots = [], []
         for agent in listening:
             pub = self._agent_pubs.get(agent)
             try:
@@ -341,7 +344,11 @@ class EngineService(WorldService):
             except KeyError:
                 continue
             if pub is not None:
-                pub.put(encode(wire.sample(world, slot)))
+                pubs.append(pub)
+                slots.append(slot)
+        for pub, message in zip(pubs, wire.samples(world, slots), strict=True):
+            pub.put(encode(message))
+        self._frame_pub.put(encode(wire.frame(world)))
         if self._batch_pub.matching_status.matching:
             self._batch_pub.put(encode(wire.batch(world)))
 

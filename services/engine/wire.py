@@ -53,28 +53,55 @@ def frame(world: World) -> WorldFrame:
 
 
 def sample(world: World, slot: int) -> SensorSample:
-    agent = world.agents[slot]
-    spec = agent.spec
-    gripper = None
-    if agent.has_gripper:
-        gripper = GripperReading(
-            arm=int(np.clip(round(world.arm[slot]), 0, 255)),
-            fingers=_FINGERS[world.gripper_state(slot)],  # type: ignore[arg-type]
-            presence=int(world.presence[slot]),
-            resistivity=world.resistivity(slot),
+    return samples(world, [slot])[0]
+
+
+def samples(world: World, slots: list[int]) -> list[SensorSample]:
+    """The SensorSample of each agent in ``slots``, at this tick.
+
+    Built from the world's arrays converted to Python lists once for all of
+    them: the engine publishes every driven agent's sample each tick, and
+    per-element numpy access cost more than the message itself.
+    """
+    if not slots:
+        return []
+    proximity = world.proximity.tolist()
+    ambient = world.ambient.tolist()
+    counters = world.counters.tolist()
+    speeds = world.cmd.tolist()
+    leds = world.leds.tolist()
+    arm = np.clip(np.rint(world.arm), 0, 255).astype(np.int64).tolist()
+    presence = world.presence.tolist()
+    fingers = world.fingers.tolist()
+    name, tick, sim_time = world.name, world.tick, world.sim_time
+    out = []
+    for slot in slots:
+        agent = world.agents[slot]
+        spec = agent.spec
+        gripper = None
+        if agent.has_gripper:
+            gripper = GripperReading(
+                arm=arm[slot],
+                fingers=_FINGERS[2 if agent.held is not None else int(fingers[slot])],  # type: ignore[arg-type]
+                presence=int(presence[slot]),
+                resistivity=world.resistivity(slot),
+            )
+        c, v = counters[slot], speeds[slot]
+        out.append(
+            SensorSample(
+                world=name,
+                agent=agent.id,
+                tick=tick,
+                sim_time=sim_time,
+                proximity=proximity[slot][: len(spec.proximity.poses)],
+                ambient=ambient[slot][: len(spec.ambient.poses)],
+                counters=(int(c[0]), int(c[1])),
+                speeds=(int(v[0]), int(v[1])),
+                leds=leds[slot][: spec.leds],
+                gripper=gripper,
+            )
         )
-    return SensorSample(
-        world=world.name,
-        agent=agent.id,
-        tick=world.tick,
-        sim_time=world.sim_time,
-        proximity=world.proximity[slot, : len(spec.proximity.poses)].tolist(),
-        ambient=world.ambient[slot, : len(spec.ambient.poses)].tolist(),
-        counters=(int(world.counters[slot, 0]), int(world.counters[slot, 1])),
-        speeds=(int(world.cmd[slot, 0]), int(world.cmd[slot, 1])),
-        leds=world.leds[slot, : spec.leds].tolist(),
-        gripper=gripper,
-    )
+    return out
 
 
 def batch(world: World) -> SensorBatch:

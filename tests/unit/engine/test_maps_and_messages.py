@@ -22,7 +22,9 @@ from common.messages import (
     encode,
 )
 from services.engine import maps, wire
+from services.engine.agents import agent_type
 from services.engine.maps import MapError
+from services.engine.world import World
 
 MAPS = Path(__file__).resolve().parents[3] / "maps"
 
@@ -106,3 +108,26 @@ def test_wire_messages_round_trip() -> None:
         assert decode(encode(message), type(message)) == message
     with pytest.raises(MessageError):
         decode(encode(AgentCommand(agent="k0")).replace(b"k0", b"k/"), AgentCommand)
+
+
+def test_samples_report_each_agents_own_readings() -> None:
+    world = World(1000.0, 1000.0, seed=2, name="w")
+    world.add_agent("k", agent_type("khepera"), 300.0, 300.0)
+    world.add_agent("e", agent_type("epuck"), 700.0, 700.0)
+    world.add_agent("k2", agent_type("khepera"), 300.0, 700.0, gripper=False)
+    world.set_speeds(0, 5, -3)
+    world.set_led(0, 1, True)
+    world.set_arm(0, 200)
+    world.run(0.5)
+    samples = wire.samples(world, [2, 0, 1])
+    assert [s.agent for s in samples] == ["k2", "k", "e"]
+    k2, k, e = samples
+    assert k.speeds == (5, -3) and k.leds[1] == 1 and k.gripper is not None
+    assert k.gripper.arm == round(float(world.arm[0])) and k.gripper.fingers == "open"
+    assert k.counters == (int(world.counters[0, 0]), int(world.counters[0, 1]))
+    assert k.proximity == world.proximity[0, :8].tolist()
+    assert k2.gripper is None
+    epuck = agent_type("epuck")
+    assert len(e.proximity) == len(epuck.proximity.poses)
+    assert len(e.ambient) == len(epuck.ambient.poses)
+    assert wire.samples(world, []) == []
