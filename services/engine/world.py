@@ -138,12 +138,14 @@ class World:
         self._rebuild_tables()
         self.object_pose = np.zeros((0, 3))
         # cpBody addresses for the compiled physics tick (services/engine/chipmunk.py),
-        # rebuilt whenever bodies are added or removed (_rows_stale).
+        # rebuilt whenever bodies may have been added or removed (_rows_stale, or any
+        # layout change): an address kept past its body's removal would read freed memory.
         self._space_address = np.uint64(chipmunk.space_address(self.space))
         self._agent_bodies = self._control_bodies = self._object_bodies = np.zeros(
             0, dtype=np.uint64
         )
         self._rows_stale = True
+        self._rows_layout = -1
         self._static_dirty = True
         self.static_geometry: sensing.StaticGeometry | None = None
 
@@ -814,6 +816,7 @@ class World:
         self._control_bodies = chipmunk.addresses([a.control for a in self.agents])
         self._object_bodies = chipmunk.addresses([o.body for o in self.objects if o.body])
         self._rows_stale = False
+        self._rows_layout = self.layout
 
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
@@ -822,7 +825,7 @@ class World:
             t0 = time.process_time()
         dt = self.tick_s
         self._update_arms(dt)
-        if self._rows_stale:
+        if self._rows_stale or self._rows_layout != self.layout:
             self._refresh_rows()
         t = self.tables
         # Straight through chipmunk unless pymunk's own step has bookkeeping to do
