@@ -138,13 +138,12 @@ class World:
         self._rebuild_tables()
         self.object_pose = np.zeros((0, 3))
         # cpBody addresses for the compiled physics tick (services/engine/chipmunk.py),
-        # rebuilt whenever bodies may have been added or removed (_rows_stale, or any
-        # layout change): an address kept past its body's removal would read freed memory.
+        # rebuilt at the first tick after any layout change (every add and remove bumps
+        # the layout): an address kept past its body's removal would read freed memory.
         self._space_address = np.uint64(chipmunk.space_address(self.space))
         self._agent_bodies = self._control_bodies = self._object_bodies = np.zeros(
             0, dtype=np.uint64
         )
-        self._rows_stale = True
         self._rows_layout = -1
         self._static_dirty = True
         self.static_geometry: sensing.StaticGeometry | None = None
@@ -211,7 +210,6 @@ class World:
         self.agent_sensing = sensing.AgentSensing.build(
             self.agents, self.tables.radius, self.tables.arm_lowered_above
         )
-        self._rows_stale = True
 
     # -- ids ---------------------------------------------------------------------
 
@@ -371,7 +369,6 @@ class World:
         self.space.add(body, *shapes, *obj.floor_joints)
         self.objects.append(obj)
         self._object_by_body[id_of(body)] = obj
-        self._rows_stale = True
         self.layout += 1
         return obj
 
@@ -635,7 +632,6 @@ class World:
             self._agent_by_body.pop(id_of(agent.body), None)
             self._delete_agent_state(slot)
             self._rebuild_tables()
-        self._rows_stale = True
         self.layout += 1
 
     # -- commands (the API a controller, the service and a serial emulator use) ---------
@@ -728,7 +724,6 @@ class World:
         obj.body.body_type = pymunk.Body.KINEMATIC
         for s in obj.shapes:
             s.filter = pymunk.ShapeFilter(group=agent.serial, categories=CAT_OBJECT)
-        self._rows_stale = True
 
     def _release(self, obj: MovableObject) -> None:
         agent = obj.held_by
@@ -747,7 +742,6 @@ class World:
         for s in obj.shapes:
             s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
         self.space.add(*obj.floor_joints)
-        self._rows_stale = True
 
     def _grip_exception(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
         """Objects whose centre is between the open, lowered tongs do not collide (6.8.3)."""
@@ -815,7 +809,6 @@ class World:
         self._agent_bodies = chipmunk.addresses([a.body for a in self.agents])
         self._control_bodies = chipmunk.addresses([a.control for a in self.agents])
         self._object_bodies = chipmunk.addresses([o.body for o in self.objects if o.body])
-        self._rows_stale = False
         self._rows_layout = self.layout
 
     def step(self) -> None:
@@ -825,7 +818,7 @@ class World:
             t0 = time.process_time()
         dt = self.tick_s
         self._update_arms(dt)
-        if self._rows_stale or self._rows_layout != self.layout:
+        if self._rows_layout != self.layout:
             self._refresh_rows()
         t = self.tables
         # Straight through chipmunk unless pymunk's own step has bookkeeping to do
