@@ -72,7 +72,6 @@ def samples(world: World, slots: list[int]) -> list[SensorSample]:
     leds = world.leds.tolist()
     arm = np.clip(np.rint(world.arm), 0, 255).astype(np.int64).tolist()
     presence = world.presence.tolist()
-    fingers = world.fingers.tolist()
     name, tick, sim_time = world.name, world.tick, world.sim_time
     out = []
     for slot in slots:
@@ -82,7 +81,7 @@ def samples(world: World, slots: list[int]) -> list[SensorSample]:
         if agent.has_gripper:
             gripper = GripperReading(
                 arm=arm[slot],
-                fingers=_FINGERS[2 if agent.held is not None else int(fingers[slot])],  # type: ignore[arg-type]
+                fingers=_FINGERS[world.gripper_state(slot)],  # type: ignore[arg-type]
                 presence=int(presence[slot]),
                 resistivity=world.resistivity(slot),
             )
