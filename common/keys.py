@@ -205,6 +205,16 @@ def world_sensors(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/sensors"
 
 
+def world_samples(realm: str, world: str) -> str:
+    """The leased agents' SensorSamples in one message per tick (SampleBundle)."""
+    return f"{_world(realm, world)}/samples"
+
+
+def world_commands(realm: str, world: str) -> str:
+    """Several agents' sealed or MACed commands in one message (CommandBundle)."""
+    return f"{_world(realm, world)}/cmds"
+
+
 def _agent(realm: str, world: str, agent: str) -> str:
     return f"{_world(realm, world)}/agent/{check_ident('agent', agent)}"
 

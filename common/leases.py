@@ -117,6 +117,12 @@ class LeaseBook:
             return lease
         return None
 
+    def agents_in_force(self, now: float | None = None) -> list[str]:
+        """The agents whose lease is in force at ``now`` (wall clock), sorted."""
+        t = time.time() if now is None else now
+        with self._lock:
+            return sorted(a for a, lease in self._leases.items() if lease.start <= t <= lease.end)
+
     def check_command(self, key: str, payload: Any) -> tuple[str, AgentCommand]:
         """The agent and command of a sealed AgentCommand the world must obey.
 

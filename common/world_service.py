@@ -1,8 +1,9 @@
 """What every world serves, simulated (the Sim2D engine) or real (the Khepera bridge).
 
 A controller cannot tell the two apart because both declare exactly this
-interface, here, once (ARGoS's control interface, Enki's world): frames and
-sensor batches out, commands and leases in, snapshot, edit and map queries.
+interface, here, once (ARGoS's control interface, Enki's world): frames,
+sensor batches and sample bundles out, commands (alone or bundled) and leases
+in, snapshot, edit and map queries.
 """
 
 from __future__ import annotations
@@ -12,8 +13,9 @@ from typing import Any
 import zenoh
 
 from common import keys
+from common.auth import AuthError
 from common.keys import AliveKind
-from common.messages import Message
+from common.messages import CommandBundle, Message, MessageError, decode
 from common.service import Service
 
 
@@ -23,6 +25,7 @@ class WorldService(Service):
     kind = AliveKind.WORLD
     _frame_pub: Any
     _batch_pub: Any
+    _samples_pub: Any
 
     def declare_world_interface(self) -> None:
         """Declare the world's keys (call from on_start, before the service's own threads)."""
@@ -31,15 +34,44 @@ class WorldService(Service):
         self._batch_pub = self.track(
             self.session.declare_publisher(keys.world_sensors(realm, name))
         )
+        # Express: a sample bundle is what controllers react to; batching it with
+        # the frame would only add latency.
+        self._samples_pub = self.track(
+            self.session.declare_publisher(keys.world_samples(realm, name), express=True)
+        )
         self.subscribe(keys.agent_cmd_all(realm, name), self._on_command)
+        self.subscribe(keys.world_commands(realm, name), self._on_command_bundle)
         self.subscribe(keys.agent_lease_all(realm, name), self._on_lease)
         self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
         self.serve(keys.world_edit(realm, name), self._on_edit)
         self.serve(keys.world_map(realm, name), self._on_map)
 
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        self._accept_command(str(sample.key_expr), sample.payload)
+
+    def _on_command_bundle(self, sample: zenoh.Sample) -> None:
+        """Each bundled command as if put on its agent's own key; one refusal spares the rest."""
+        bundle = decode(sample.payload, CommandBundle)
+        refused: list[str] = []
+        for item in bundle.commands:
+            try:
+                key = keys.agent_cmd(self.realm, self.ident, item.agent)
+                self._accept_command(key, item.payload)
+            except (AuthError, MessageError, ValueError) as exc:
+                refused.append(f"{item.agent}: {exc}")
+        if refused:
+            self.dropped += len(refused)
+            self.log.warning(
+                "refused %d of %d bundled commands: %s",
+                len(refused),
+                len(bundle.commands),
+                "; ".join(refused[:3]),
+            )
+
     # -- what each world does with them
 
-    def _on_command(self, sample: zenoh.Sample) -> None:
+    def _accept_command(self, key: str, payload: Any) -> None:
+        """Check a sealed or MACed command put on ``key`` and obey it; AuthError if refused."""
         raise NotImplementedError
 
     def _on_lease(self, sample: zenoh.Sample) -> None:

@@ -94,9 +94,11 @@ _PEOPLE = (
     # ctx/*/output: a controller run from a student's machine (wart control)
     # reports its output to the context, which checks the sender holds the lease.
     _g("pub", "user/*/inbox", "ctx/*/in", "ctx/*/output", "world/*/agent/*/cmd"),
+    _g("pub", "world/*/cmds"),
     _g("ask", "ctx/*/join", "ctx/*/leave", "ctx/*/request", "ctx/*/state"),
     _g("sub", "ctx/*/events"),
     _g("sub", "world/*/frame", "world/*/sensors", "world/*/agent/*/sensors"),
+    _g("sub", "world/*/samples"),
     _g("ask", "world/*/snapshot", "world/*/edit", "world/*/map"),
     _g("sub", "host/*/load"),
     _g("ask", "host/*/load", "host/*/spawn", "runner/*/run"),
@@ -134,7 +136,8 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     "engine": (
         *_SERVICE_BASE,
         _g("pub", "world/*/frame", "world/*/sensors", "world/*/agent/*/sensors"),
-        _g("sub", "world/*/agent/*/cmd", "world/*/agent/*/lease"),
+        _g("pub", "world/*/samples"),
+        _g("sub", "world/*/agent/*/cmd", "world/*/cmds", "world/*/agent/*/lease"),
         _g("serve", "world/*/snapshot", "world/*/edit", "world/*/map"),
         _g("token", "alive/world/*"),
     ),
@@ -145,8 +148,9 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     "runner": (
         *_SERVICE_BASE,
         _g("serve", "runner/*/run"),
-        _g("pub", "world/*/agent/*/cmd", "ctx/*/output"),
-        _g("sub", "world/*/agent/*/sensors", "world/*/agent/*/lease", "world/*/frame"),
+        _g("pub", "world/*/agent/*/cmd", "world/*/cmds", "ctx/*/output"),
+        _g("sub", "world/*/agent/*/sensors", "world/*/samples", "world/*/agent/*/lease"),
+        _g("sub", "world/*/frame"),
         _g("ask", "world/*/snapshot"),
         _g("token", "alive/runner/*"),
     ),

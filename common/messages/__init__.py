@@ -33,9 +33,12 @@ from common.messages.host import __all__ as _host_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
 from common.messages.registry import __all__ as _registry_all
 from common.messages.world import (
+    MAX_BUNDLED,
     AddItem,
     AgentCommand,
     AgentInfo,
+    BundledCommand,
+    CommandBundle,
     EditResult,
     GripperReading,
     ItemInfo,
@@ -47,6 +50,7 @@ from common.messages.world import (
     RemoveItem,
     ResizeArena,
     RotateItem,
+    SampleBundle,
     SensorBatch,
     SensorSample,
     ShapeInfo,
@@ -57,11 +61,14 @@ from common.messages.world import (
 
 __all__ = [
     "ALL_PERMISSIONS",
+    "MAX_BUNDLED",
     "MAX_MESSAGE_BYTES",
     "AddItem",
     "AgentCommand",
     "AgentInfo",
     "AuthEnvelope",
+    "BundledCommand",
+    "CommandBundle",
     "EditResult",
     "ErrorCode",
     "ErrorReply",
@@ -81,6 +88,7 @@ __all__ = [
     "RemoveItem",
     "ResizeArena",
     "RotateItem",
+    "SampleBundle",
     "SensorBatch",
     "SensorSample",
     "SessionToken",

@@ -63,6 +63,48 @@ class SensorBatch(Message):
     counters: PackedArray  # int32 (agents, 2)
 
 
+MAX_BUNDLED = 1024
+"""The most samples or commands one bundle carries (a runner drives at most tens of robots)."""
+
+
+class SampleBundle(Message):
+    """The newest SensorSample of several agents in one message (``world/<world>/samples``).
+
+    A world puts one per tick holding every agent under a lease in force (the
+    Khepera bridge: one per robot's sensor round), while someone subscribes.
+    A process that drives many robots (the runner) receives one message per
+    tick instead of one per robot: on a loaded host, Zenoh's per-message cost,
+    not the payload, is what delays a burst of 20 samples.
+
+    ``samples[i]`` is ``agents[i]``'s encoded SensorSample, left undecoded
+    (msgspec Raw) so each reader decodes only the agents it drives.
+    """
+
+    world: Ident
+    tick: NonNegInt
+    agents: Annotated[list[Ident], msgspec.Meta(max_length=MAX_BUNDLED)]
+    samples: Annotated[list[msgspec.Raw], msgspec.Meta(max_length=MAX_BUNDLED)]
+
+
+class BundledCommand(msgspec.Struct, frozen=True, array_like=True):
+    """One agent's command inside a CommandBundle."""
+
+    agent: Ident
+    payload: Annotated[bytes, msgspec.Meta(max_length=4096)]
+    """Exactly what would be put on ``agent/<agent>/cmd``: an AuthEnvelope or a MacCommand."""
+
+
+class CommandBundle(Message):
+    """Several agents' commands in one message (``world/<world>/cmds``).
+
+    Each payload is checked as if it had been put on its agent's own ``cmd``
+    key (the signature or MAC covers that key expression): the bundle adds no
+    authority, only saves messages. A refused item does not affect the others.
+    """
+
+    commands: Annotated[list[BundledCommand], msgspec.Meta(max_length=MAX_BUNDLED)]
+
+
 class WorldFrame(Message):
     """Every moving pose at one tick (``world/<world>/frame``).
 

@@ -5,9 +5,12 @@ agent context, the viewer and controllers cannot tell the two apart:
 
 Publishes ``world/<w>/frame`` (WorldFrame: every robot's odometry pose) every
 ``frame_interval``; ``agent/<a>/sensors`` (SensorSample) after every sensor
-round of that robot; ``world/<w>/sensors`` (SensorBatch) while someone
-subscribes. Subscribes ``agent/*/cmd`` (AgentCommand, sealed, from the current
-lease holder only) and ``agent/*/lease`` (Lease, sealed, ``lease``
+round of that robot, and then ``world/<w>/samples`` (a SampleBundle of that
+one sample) if the robot is leased and someone subscribes;
+``world/<w>/sensors`` (SensorBatch) while someone subscribes. Subscribes
+``agent/*/cmd`` and ``world/<w>/cmds`` (AgentCommand, sealed or MACed, alone
+or in a CommandBundle, from the current lease holder only) and
+``agent/*/lease`` (Lease, sealed, ``lease``
 permission), both checked by common.leases.LeaseBook exactly as the engine
 does. Serves ``snapshot`` (arena, agents with their online state);
 ``edit`` and ``map`` answer ``bad_request`` (a real arena cannot be edited).
@@ -31,6 +34,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import msgspec
 import numpy as np
 import zenoh
 
@@ -44,6 +48,7 @@ from common.messages import (
     GripperReading,
     Message,
     PackedArray,
+    SampleBundle,
     SensorBatch,
     SensorSample,
     WorldFrame,
@@ -278,8 +283,23 @@ class BridgeService(WorldService):
                 self.layout += 1  # the agent list's online states changed: refetch
             self.log.warning("robot %s is %s", agent.id, "online" if state.online else "OFFLINE")
         sample = self._sample(agent.id, state)
-        if sample is not None:
-            agent.publisher.put(encode(sample))
+        if sample is None:
+            return
+        payload = encode(sample)
+        agent.publisher.put(payload)
+        # Robots are sampled each on its own serial line, so a bundle holds one
+        # robot's round: the same key and type as the engine's, for the runner.
+        if self.leases.in_force(agent.id) and self._samples_pub.matching_status.matching:
+            self._samples_pub.put(
+                encode(
+                    SampleBundle(
+                        world=self.ident,
+                        tick=sample.tick,
+                        agents=[agent.id],
+                        samples=[msgspec.Raw(payload)],
+                    )
+                )
+            )
 
     def _sample(self, agent: str, state: RobotState) -> SensorSample | None:
         if not state.online or None in (state.proximity, state.ambient, state.counters):
@@ -316,8 +336,8 @@ class BridgeService(WorldService):
     def _on_lease(self, sample: zenoh.Sample) -> None:
         self.leases.accept_lease(str(sample.key_expr), sample.payload)
 
-    def _on_command(self, sample: zenoh.Sample) -> None:
-        agent, command = self.leases.check_command(str(sample.key_expr), sample.payload)
+    def _accept_command(self, key: str, payload: Any) -> None:
+        agent, command = self.leases.check_command(key, payload)
         lease = self.leases.lease_of(agent)
         with self._lock:
             entry = self._agents.get(agent)

@@ -6,9 +6,11 @@ need an answer (snapshot, edit, map) wait for the sim thread's result, at most
 one tick. Only the sim thread touches the world (pymunk is not thread-safe).
 
 Publishes: ``world/<w>/frame`` (WorldFrame) each tick; ``agent/<a>/sensors``
-(SensorSample) for agents someone subscribes to; ``world/<w>/sensors``
-(SensorBatch) when someone subscribes. Subscribes: ``agent/*/cmd``
-(AgentCommand, sealed, holder of the current lease only) and ``agent/*/lease``
+(SensorSample) for agents someone subscribes to; ``world/<w>/samples``
+(SampleBundle: every leased agent's sample) and ``world/<w>/sensors``
+(SensorBatch) when someone subscribes. Subscribes: ``agent/*/cmd`` and
+``world/<w>/cmds`` (AgentCommand, sealed or MACed, alone or in a
+CommandBundle; holder of the current lease only) and ``agent/*/lease``
 (Lease, sealed, ``lease`` permission). Serves: ``snapshot`` (anyone),
 ``edit`` and ``map`` (sealed, ``edit_map``). Token: ``alive/world/<w>``.
 
@@ -29,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import zenoh
 
@@ -48,6 +51,7 @@ from common.messages import (
     RemoveItem,
     ResizeArena,
     RotateItem,
+    SampleBundle,
     WorldEdit,
     encode,
 )
@@ -172,8 +176,8 @@ class EngineService(WorldService):
     def commands_refused(self) -> int:
         return self.leases.commands_refused
 
-    def _on_command(self, sample: zenoh.Sample) -> None:
-        agent, command = self.leases.check_command(str(sample.key_expr), sample.payload)
+    def _accept_command(self, key: str, payload: Any) -> None:
+        agent, command = self.leases.check_command(key, payload)
         self._work.put(_Command(agent, command, time.monotonic()))
 
     def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message:
@@ -335,19 +339,36 @@ class EngineService(WorldService):
         world = self.world
         # Samples first: controllers react to them; viewers draw the frame at their own pace.
         with self._match_lock:
-            listening = sorted(self._matched)
-        pubs, slots = [], []
-        for agent in listening:
-            pub = self._agent_pubs.get(agent)
+            listening = set(self._matched)
+        bundled = (
+            self.leases.agents_in_force() if self._samples_pub.matching_status.matching else []
+        )
+        agents, slots = [], []
+        for agent in sorted(listening.union(bundled)):
             try:
-                slot = world.agent_slot(agent)
+                slots.append(world.agent_slot(agent))
             except KeyError:
                 continue
-            if pub is not None:
-                pubs.append(pub)
-                slots.append(slot)
-        for pub, message in zip(pubs, wire.samples(world, slots), strict=True):
-            pub.put(encode(message))
+            agents.append(agent)
+        if agents:
+            encoded = dict(zip(agents, map(encode, wire.samples(world, slots)), strict=True))
+            if bundled:
+                inside = [a for a in bundled if a in encoded]
+                self._samples_pub.put(
+                    encode(
+                        SampleBundle(
+                            world=world.name,
+                            tick=world.tick,
+                            agents=inside,
+                            samples=[msgspec.Raw(encoded[a]) for a in inside],
+                        )
+                    )
+                )
+            for agent in listening:
+                pub = self._agent_pubs.get(agent)
+                payload = encoded.get(agent)
+                if pub is not None and payload is not None:
+                    pub.put(payload)
         self._frame_pub.put(encode(wire.frame(world)))
         if self._batch_pub.matching_status.matching:
             self._batch_pub.put(encode(wire.batch(world)))

@@ -8,6 +8,7 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import zenoh
@@ -18,17 +19,21 @@ from common.keys import AliveKind
 from common.messages import (
     AddItem,
     AgentCommand,
+    BundledCommand,
+    CommandBundle,
     EditResult,
     ErrorReply,
     Lease,
     MapRequest,
     Message,
     MoveItem,
+    SampleBundle,
     SensorSample,
     WorldEdit,
     WorldFrame,
     WorldSnapshot,
     decode,
+    encode,
 )
 from common.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
@@ -316,3 +321,57 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
     before = poses()
     time.sleep(1.5)
     assert moved(before, poses())[0] > 10
+
+
+def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_one_by_one(
+    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+) -> None:
+    """world/<w>/samples and world/<w>/cmds, the runner's path, obey the same leases."""
+    realm = router.realm
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    bob = issue_session(identity, realm, "bob", ["control"])
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    bundles = Latest(zsession, keys.world_samples(realm, WORLD), SampleBundle)
+    wait_for(lambda: frames.count > 5, 10, "frames")
+    assert bundles.count == 0, "no lease in force: nothing to bundle"
+
+    now = time.time()
+    for agent, holder in (("k2", alice), ("k1", bob)):
+        lease = msgspec.structs.replace(
+            lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}"), agent=agent
+        )
+        key = keys.agent_lease(realm, WORLD, agent)
+        zsession.put(key, context.seal(key, lease))
+    wait_for(lambda: bundles.count > 3, 10, "sample bundles")
+    got = bundles.get()
+    assert isinstance(got, SampleBundle) and got.agents == ["k1", "k2"]
+    samples = [decode(bytes(raw), SensorSample) for raw in got.samples]
+    assert [s.agent for s in samples] == ["k1", "k2"] and samples[0].tick == got.tick
+
+    def command(who: Session, agent: str) -> BundledCommand:
+        key = keys.agent_cmd(realm, WORLD, agent)
+        return BundledCommand(agent, who.seal(key, AgentCommand(agent=agent, speeds=(10, 10))))
+
+    def xs() -> np.ndarray:
+        frame = frames.get()
+        assert isinstance(frame, WorldFrame)
+        return frame.poses.to_numpy()[:3, 0].astype(float)
+
+    cmds_key = keys.world_commands(realm, WORLD)
+    zsession.put(cmds_key, b"\x92garbage")  # malformed: dropped, the engine keeps serving
+    start = xs()
+    deadline = time.monotonic() + 1.0
+    while time.monotonic() < deadline:
+        bundle = CommandBundle(
+            commands=[
+                command(alice, "k0"),  # no lease on k0: refused
+                command(alice, "k1"),  # k1 is bob's: refused, without spoiling the rest
+                command(alice, "k2"),  # alice holds k2: obeyed
+            ]
+        )
+        zsession.put(cmds_key, encode(bundle))
+        time.sleep(0.05)  # a controller's period
+    moved = xs() - start
+    assert moved[2] > 40.0, moved
+    assert abs(moved[0]) < 1.0 and abs(moved[1]) < 1.0, moved
