@@ -64,6 +64,8 @@ def sample_value(tp: object, name: str = "") -> object:
             return "text"
         if issubclass(tp, bytes):
             return b"\x00\x01"
+        if tp is msgspec.Raw:  # an embedded, still-encoded message
+            return msgspec.Raw(msgspec.msgpack.encode({"embedded": 1}))
         if tp is PackedArray:
             return PackedArray.from_numpy(np.arange(6, dtype=np.float32).reshape(2, 3))
         if issubclass(tp, msgspec.Struct):
