@@ -13,6 +13,13 @@ world's watchdog) goes out when the controller has sent nothing for
 ``keepalive`` seconds: a controller that set its speeds once keeps moving,
 and one whose process dies stops within the watchdog's 300 ms.
 
+A process that drives many robots of one world (the runner) gives its links
+one shared :class:`WorldChannel`: each tick's samples of every leased agent
+then arrive in one message (``world/<w>/samples``) and the controllers'
+commands leave in as few messages as the burst allows (``world/<w>/cmds``).
+On a loaded host Zenoh's cost per message, not per byte, is what delays a
+burst of 20 robots' samples and commands (docs/BENCHMARKS.md).
+
 Given a verifier, the link also listens to the agent's lease: when the lease
 names its session and carries the lease key sealed to it (a MAC lease,
 common/leasemac.py), commands go out as MacCommands (a keyed BLAKE2b, a few
@@ -22,10 +29,11 @@ arrives (the context republishes it every second), commands are signed.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import zenoh
@@ -41,11 +49,16 @@ from common.controller import (
 )
 from common.leasemac import mac_command, open_key
 from common.messages import (
+    MAX_BUNDLED,
     AgentCommand,
+    BundledCommand,
+    CommandBundle,
     Lease,
     MessageError,
+    SampleBundle,
     SensorSample,
     decode,
+    encode,
 )
 
 log = logging.getLogger("wart.remote_robot")
@@ -130,12 +143,127 @@ class _MacLease:
         self.end = 0.0
 
 
+class WorldChannel:
+    """One world's sample bundles in and command bundles out, shared by a process's links.
+
+    Samples: one subscriber to ``world/<w>/samples``; each bundle's raw
+    samples are handed to the attached links of those agents (decoded only
+    when a controller reads). The world puts a bundle only for agents under
+    a lease in force: a link on a channel sees no samples outside its slot.
+
+    Commands: :meth:`submit` queues a sealed command; the first thread that
+    finds no put in flight sends every queued command in one CommandBundle,
+    and commands queued meanwhile leave in its next put. Nothing waits for a
+    batch to fill: alone, a command leaves at once; in a burst of 20, in a
+    few messages instead of 20.
+    """
+
+    def __init__(self, zsession: zenoh.Session, realm: str, world: str) -> None:
+        self.realm, self.world = realm, world
+        self._links: dict[str, ZenohRobotLink] = {}
+        self._links_lock = threading.Lock()
+        self._pending: list[BundledCommand] = []
+        self._pending_lock = threading.Lock()
+        self._sending = threading.Lock()
+        self._held = threading.local()  # burst() depth of the calling thread
+        self.bundles = 0  # sample bundles received
+        self.puts = 0  # command bundles sent
+        self.commands = 0  # commands sent in them
+        self._publisher = zsession.declare_publisher(
+            keys.world_commands(realm, world),
+            congestion_control=zenoh.CongestionControl.DROP,
+            express=True,
+        )
+        self._subscriber = zsession.declare_subscriber(
+            keys.world_samples(realm, world), self._on_bundle
+        )
+
+    def attach(self, link: ZenohRobotLink) -> None:
+        """Hand ``link`` its agent's samples from now on (the newest link of an agent wins:
+        a slot's run may start while the one before it is still closing)."""
+        with self._links_lock:
+            self._links = {**self._links, link.agent: link}  # copied: the callback reads lock-free
+
+    def detach(self, link: ZenohRobotLink) -> None:
+        with self._links_lock:
+            if self._links.get(link.agent) is link:
+                self._links = {a: x for a, x in self._links.items() if a != link.agent}
+
+    def _on_bundle(self, sample: zenoh.Sample) -> None:
+        try:
+            bundle = decode(sample.payload, SampleBundle)
+        except MessageError as exc:
+            log.warning("ignored a malformed sample bundle of %s: %s", self.world, exc)
+            return
+        if bundle.world != self.world or len(bundle.agents) != len(bundle.samples):
+            log.warning(
+                "ignored a sample bundle naming world %s with %d agents for %d samples",
+                bundle.world,
+                len(bundle.agents),
+                len(bundle.samples),
+            )
+            return
+        self.bundles += 1
+        links = self._links
+        for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
+            link = links.get(agent)
+            if link is not None:
+                link._deliver(bytes(raw))
+
+    @contextlib.contextmanager
+    def burst(self) -> Iterator[None]:
+        """Hold this thread's commands until the block ends, then send them in one bundle.
+
+        For code that answers many robots in one thread (a swarm controller):
+        one message for the burst instead of one per robot.
+        """
+        self._held.count = getattr(self._held, "count", 0) + 1
+        try:
+            yield
+        finally:
+            self._held.count -= 1
+            if self._held.count == 0:
+                self._flush()
+
+    def submit(self, agent: str, payload: bytes) -> None:
+        """Send ``payload`` (what would go on ``agent/<agent>/cmd``) in the next bundle."""
+        with self._pending_lock:
+            self._pending.append(BundledCommand(agent, payload))
+        if not getattr(self._held, "count", 0):
+            self._flush()
+
+    def _flush(self) -> None:
+        while self._sending.acquire(blocking=False):
+            try:
+                with self._pending_lock:
+                    batch, self._pending = self._pending, []
+                for i in range(0, len(batch), MAX_BUNDLED):
+                    chunk = batch[i : i + MAX_BUNDLED]
+                    self._publisher.put(encode(CommandBundle(commands=chunk)))
+                    self.puts += 1
+                    self.commands += len(chunk)
+            finally:
+                self._sending.release()
+            with self._pending_lock:
+                if not self._pending:
+                    return
+
+    def close(self) -> None:
+        for handle in (self._subscriber, self._publisher):
+            try:
+                handle.undeclare()
+            except Exception as exc:
+                log.debug("undeclare: %s", exc)
+
+
 class ZenohRobotLink:
     """A RobotLink to ``world/<world>/agent/<agent>`` over an open Zenoh session.
 
     ``session`` returns the driving session at send time (a service's
     session may be renewed while it runs). ``verifier`` (the registry key's)
-    lets it accept MAC leases; without one it always signs.
+    lets it accept MAC leases; without one it always signs. ``channel``: get
+    samples and send commands through a shared :class:`WorldChannel` (of the
+    same world) instead of the agent's own keys.
     """
 
     def __init__(
@@ -148,13 +276,21 @@ class ZenohRobotLink:
         *,
         keepalive: float = 0.1,
         verifier: Verifier | None = None,
+        channel: WorldChannel | None = None,
     ) -> None:
+        if channel is not None and channel.world != world:
+            raise ValueError(f"a channel of world {channel.world} cannot carry {world}/{agent}")
         self.world = world
         self.agent = agent
         self._session = session
         self._cmd_key = keys.agent_cmd(realm, world, agent)
-        self._publisher = zsession.declare_publisher(
-            self._cmd_key, congestion_control=zenoh.CongestionControl.DROP, express=True
+        self._channel = channel
+        self._publisher = (
+            zsession.declare_publisher(
+                self._cmd_key, congestion_control=zenoh.CongestionControl.DROP, express=True
+            )
+            if channel is None
+            else None
         )
         self._lock = threading.Lock()
         self._raw: bytes | None = None
@@ -176,9 +312,13 @@ class ZenohRobotLink:
             if verifier is not None
             else None
         )
-        self._subscriber = zsession.declare_subscriber(
-            keys.agent_sensors(realm, world, agent), self._on_sample
-        )
+        self._subscriber = None
+        if channel is not None:
+            channel.attach(self)
+        else:
+            self._subscriber = zsession.declare_subscriber(
+                keys.agent_sensors(realm, world, agent), self._on_sample
+            )
         self._keepalive_s = keepalive
         self._keepalive = threading.Thread(
             target=self._keep_alive, name=f"keepalive-{agent}", daemon=True
@@ -188,7 +328,10 @@ class ZenohRobotLink:
     # -- the Zenoh side (callback: keep it short)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        raw = bytes(sample.payload.to_bytes())
+        self._deliver(bytes(sample.payload.to_bytes()))
+
+    def _deliver(self, raw: bytes) -> None:
+        """Keep ``raw`` (an encoded SensorSample) as the newest; wake whoever waits."""
         with self._fresh:
             self._raw = raw
             self._raw_seq += 1
@@ -259,7 +402,11 @@ class ZenohRobotLink:
                 mac = True
             else:
                 payload = session.seal(self._cmd_key, message)
-            self._publisher.put(payload)
+            if self._channel is not None:
+                self._channel.submit(self.agent, payload)
+            else:
+                assert self._publisher is not None
+                self._publisher.put(payload)
         except Exception as exc:  # a closed session at shutdown, a lost login
             log.debug("could not send a command to %s: %s", self.agent, exc)
             return
@@ -289,6 +436,8 @@ class ZenohRobotLink:
         self._closed.set()
         with self._fresh:
             self._fresh.notify_all()
+        if self._channel is not None:
+            self._channel.detach(self)
         for handle in (self._subscriber, self._publisher, self._lease_sub):
             if handle is None:
                 continue

@@ -12,6 +12,9 @@ Then, per run:
 - the sandbox's validated commands become ``AgentCommand`` sealed with the
   runner's session (``common.remote_robot.ZenohRobotLink``, whose keep-alive
   feeds the world's watchdog while the sandbox lives);
+- all runs on one world share a ``WorldChannel``: the world's samples of
+  every leased agent arrive in one ``SampleBundle`` per tick and the runs'
+  commands leave in ``CommandBundle``s, not one message per robot each way;
 - output lines (prints, tracebacks) go to the context as
   :class:`ControllerOutput` on ``ctx/<ctx>/output``, batched every 100 ms;
 - at the end (slot over, :class:`RunStop`, the controller ended or crashed)
@@ -47,7 +50,7 @@ from common.messages import (
     RunStop,
 )
 from common.precheck import PrecheckError, precheck
-from common.remote_robot import ZenohRobotLink, state_to_dict
+from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from common.service import RequestError, Service, run_service
 from services.runner.sandbox import Sandbox, SandboxLimits
 
@@ -74,6 +77,7 @@ class Run:
             request.agent,
             lambda: runner.login.session,
             verifier=runner.verifier,  # accepts a MAC lease: commands cost µs to check
+            channel=runner.channel(request.world),  # one message per tick for all its runs
         )
         self.sandbox = Sandbox(
             request.source,
@@ -167,6 +171,8 @@ class RunnerService(Service):
         self.login = login
         self.limits = limits or SandboxLimits()
         self._runs: dict[str, Run] = {}
+        self._channels: dict[str, WorldChannel] = {}
+        self._channels_lock = threading.Lock()  # not _lock: runs are made while it is held
         self._lock = threading.Lock()
         self._key = keys.runner_run(realm, name)
 
@@ -180,6 +186,19 @@ class RunnerService(Service):
             run.sandbox.stop(grace=0.2, reason="the runner stopped")
         for run in runs:
             run.ended.wait(max(0.1, timeout / max(1, len(runs))))
+        with self._channels_lock:
+            channels, self._channels = list(self._channels.values()), {}
+        for channel in channels:
+            channel.close()
+
+    def channel(self, world: str) -> WorldChannel:
+        """The runs' shared channel to ``world``: its samples in, their commands out."""
+        with self._channels_lock:
+            channel = self._channels.get(world)
+            if channel is None:
+                channel = WorldChannel(self.session, self.realm, world)
+                self._channels[world] = channel
+            return channel
 
     def runs(self) -> list[str]:
         with self._lock:

@@ -1,0 +1,231 @@
+"""WorldChannel: one world's sample bundles in, command bundles out, shared by many links.
+
+The Zenoh session is faked (a publisher that records puts, a subscriber whose
+callback the test calls): what is tested is the routing and the batching.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import msgspec
+import pytest
+
+from common import keys
+from common.auth import AuthError, RegistryIdentity, Verifier, issue_session
+from common.messages import (
+    AgentCommand,
+    AuthEnvelope,
+    CommandBundle,
+    SampleBundle,
+    SensorSample,
+    decode,
+    encode,
+)
+from common.remote_robot import WorldChannel, ZenohRobotLink
+
+REALM, WORLD = "r", "w"
+
+
+class FakePayload:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class FakeSample:
+    def __init__(self, data: bytes) -> None:
+        self.payload = FakePayload(data)
+
+
+class FakePublisher:
+    def __init__(self, key: str, hold_s: float) -> None:
+        self.key, self.hold_s = key, hold_s
+        self.puts: list[bytes] = []
+        self._lock = threading.Lock()
+
+    def put(self, payload: bytes) -> None:
+        time.sleep(self.hold_s)  # a put in flight: others queue behind it meanwhile
+        with self._lock:
+            self.puts.append(payload)
+
+    def undeclare(self) -> None:
+        pass
+
+
+class FakeSession:
+    """Records publishers and subscribers by key expression."""
+
+    def __init__(self, hold_s: float = 0.0) -> None:
+        self.hold_s = hold_s
+        self.publishers: dict[str, FakePublisher] = {}
+        self.callbacks: dict[str, Callable[[Any], None]] = {}
+
+    def declare_publisher(self, key: str, **_: Any) -> FakePublisher:
+        self.publishers[key] = FakePublisher(key, self.hold_s)
+        return self.publishers[key]
+
+    def declare_subscriber(self, key: str, callback: Callable[[Any], None]) -> Any:
+        self.callbacks[key] = callback
+        return FakePublisher(key, 0.0)  # only undeclare() is used
+
+
+def sample(agent: str, tick: int) -> SensorSample:
+    return SensorSample(
+        world=WORLD,
+        agent=agent,
+        tick=tick,
+        sim_time=tick * 0.02,
+        proximity=[tick] * 8,
+        ambient=[500] * 8,
+        counters=(tick, -tick),
+        speeds=(0, 0),
+        leds=[0, 0],
+    )
+
+
+def bundle(agents: list[str], tick: int) -> bytes:
+    return encode(
+        SampleBundle(
+            world=WORLD,
+            tick=tick,
+            agents=agents,
+            samples=[msgspec.Raw(encode(sample(a, tick))) for a in agents],
+        )
+    )
+
+
+IDENTITY = RegistryIdentity.generate()
+RUNNER = issue_session(IDENTITY, REALM, "runner", ["control"])
+
+
+def link_on(zs: FakeSession, channel: WorldChannel, agent: str) -> ZenohRobotLink:
+    return ZenohRobotLink(
+        zs,  # type: ignore[arg-type]
+        REALM,
+        WORLD,
+        agent,
+        lambda: RUNNER,
+        keepalive=3600.0,  # no keep-alives in these tests
+        channel=channel,
+    )
+
+
+def make(zs: FakeSession, agents: list[str]) -> tuple[WorldChannel, list[ZenohRobotLink]]:
+    channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
+    return channel, [link_on(zs, channel, agent) for agent in agents]
+
+
+def sent_commands(zs: FakeSession) -> list[tuple[str, bytes]]:
+    """(agent, payload) of every command put, in put order."""
+    out = []
+    for payload in zs.publishers[keys.world_commands(REALM, WORLD)].puts:
+        out += [(c.agent, c.payload) for c in decode(payload, CommandBundle).commands]
+    return out
+
+
+def deliver(zs: FakeSession, data: bytes) -> None:
+    zs.callbacks[keys.world_samples(REALM, WORLD)](FakeSample(data))
+
+
+def test_each_link_gets_its_own_agents_sample_from_a_bundle() -> None:
+    zs = FakeSession()
+    channel, (k0, k1) = make(zs, ["k0", "k1"])
+    assert not any("/agent/" in key and key.endswith("/sensors") for key in zs.callbacks), (
+        "links on a channel declare no per-agent sensor subscriber"
+    )
+    deliver(zs, bundle(["k1", "k9", "k0"], tick=7))  # k9: nobody here drives it
+    assert k0.samples == 1 and k1.samples == 1
+    assert k0.latest().counters == (7, -7) and k1.latest().proximity == (7,) * 8
+    deliver(zs, bundle(["k1"], tick=8))  # a bundle need not hold every agent
+    assert k0.samples == 1 and k1.samples == 2 and k1.latest().counters == (8, -8)
+    assert channel.bundles == 2
+
+
+def test_malformed_or_mismatched_bundles_are_ignored_and_the_channel_keeps_serving() -> None:
+    zs = FakeSession()
+    channel, (k0,) = make(zs, ["k0"])
+    deliver(zs, b"\x93not a bundle")
+    other_world = msgspec.structs.replace(decode(bundle(["k0"], 1), SampleBundle), world="x")
+    deliver(zs, encode(other_world))
+    short = msgspec.structs.replace(decode(bundle(["k0"], 1), SampleBundle), agents=["k0", "k1"])
+    deliver(zs, encode(short))
+    assert k0.samples == 0 and channel.bundles == 0
+    deliver(zs, bundle(["k0"], tick=3))
+    assert k0.samples == 1 and k0.latest().counters == (3, -3)
+    # A bundle whose sample for k0 is garbage: the link keeps its last good state.
+    bad = SampleBundle(world=WORLD, tick=4, agents=["k0"], samples=[msgspec.Raw(b"\xc1")])
+    deliver(zs, encode(bad))
+    assert k0.latest().counters == (3, -3)
+
+
+def test_a_lone_command_leaves_at_once_sealed_for_its_agents_own_key() -> None:
+    zs = FakeSession()
+    channel, (k0,) = make(zs, ["k0"])
+    k0.send({"speeds": [5, 5]})
+    sent = sent_commands(zs)
+    assert [agent for agent, _ in sent] == ["k0"] and channel.puts == 1
+    # Sealed for k0's own cmd key, which is what the world checks a bundled command on.
+    verifier = Verifier(IDENTITY.verify_key, REALM)
+    principal, command = verifier.open(keys.agent_cmd(REALM, WORLD, "k0"), sent[0][1], AgentCommand)
+    assert principal.user == "runner" and command.speeds == (5, 5)
+    with pytest.raises(AuthError):
+        verifier.open(keys.agent_cmd(REALM, WORLD, "k1"), sent[0][1], AgentCommand)
+
+
+def test_a_burst_from_many_threads_is_batched_and_nothing_is_lost_or_reordered() -> None:
+    zs = FakeSession(hold_s=0.002)  # each put takes 2 ms: commands pile up behind it
+    agents = [f"k{i}" for i in range(20)]
+    channel, links = make(zs, agents)
+    per_link = 30
+    start = threading.Barrier(len(links))
+
+    def drive(link: ZenohRobotLink) -> None:
+        start.wait()
+        for n in range(per_link):
+            link.send({"counters": [n, 0]})
+
+    threads = [threading.Thread(target=drive, args=(link,)) for link in links]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    sent = sent_commands(zs)
+    assert len(sent) == len(agents) * per_link == channel.commands
+    assert channel.puts < len(sent) / 3, f"{channel.puts} puts for {len(sent)} commands"
+    for agent in agents:
+        mine = [p for a, p in sent if a == agent]
+        counters = [
+            decode(decode(p, AuthEnvelope).body, AgentCommand).counters[0]  # type: ignore[index]
+            for p in mine
+        ]
+        assert counters == list(range(per_link)), f"{agent}'s commands out of order"
+
+
+def test_burst_sends_one_threads_commands_in_one_message() -> None:
+    zs = FakeSession()
+    channel, links = make(zs, [f"k{i}" for i in range(12)])
+    with channel.burst():
+        for link in links:
+            link.send({"speeds": [1, 1]})
+        assert channel.puts == 0  # held until the block ends
+    assert channel.puts == 1 and len(sent_commands(zs)) == 12
+
+
+def test_a_closed_link_stops_getting_samples_and_a_newer_link_takes_its_agent() -> None:
+    zs = FakeSession()
+    channel, (old,) = make(zs, ["k0"])
+    new = link_on(zs, channel, "k0")
+    deliver(zs, bundle(["k0"], tick=1))
+    assert (old.samples, new.samples) == (0, 1), "the newest link of an agent wins"
+    old.close(stop=False)  # the older run closing must not unhook the newer one
+    deliver(zs, bundle(["k0"], tick=2))
+    assert new.samples == 2
+    new.close(stop=False)
+    deliver(zs, bundle(["k0"], tick=3))
+    assert new.samples == 2
