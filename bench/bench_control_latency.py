@@ -1,7 +1,10 @@
 """Control-loop latency: a sensor sample's publication to the resulting command taking effect.
 
 20 remote controllers (one Zenoh client process, one ZenohRobotLink per
-agent, the same path ``wart control`` uses) react to every sensor sample of
+agent, as the runner drives robots: all links share one WorldChannel, so each
+tick's samples arrive in one SampleBundle and the commands leave in
+CommandBundles; ``--per-agent``: each link on its agent's own keys, the path
+``wart control`` uses for its one robot) react to every sensor sample of
 their agent (the engine publishes at 50 Hz) with a sealed AgentCommand. The
 engine runs in this process, instrumented: for each command it matches the
 sample it answers (the controller echoes the sample's time in ``counters``)
@@ -28,13 +31,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import msgspec
 import numpy as np
@@ -45,7 +49,7 @@ from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.leases import LeaseBook
-from common.messages import AgentCommand, Lease
+from common.messages import AgentCommand, Lease, SampleBundle, decode
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.engine.agents import agent_type
@@ -69,6 +73,8 @@ class TimedEngine(EngineService):
         for agent, pub in list(self._agent_pubs.items()):
             if not isinstance(pub, _TimedPublisher):
                 self._agent_pubs[agent] = _TimedPublisher(pub, agent, self)
+        if not isinstance(self._samples_pub, _TimedBundles):
+            self._samples_pub = _TimedBundles(self._samples_pub, self)
         super()._publish()
 
     def _apply(self, item: _Command) -> None:
@@ -93,6 +99,27 @@ class _TimedPublisher:
         ms = round(self.engine.world.sim_time * 1000)
         self.engine.published[(self.agent, ms)] = time.monotonic()
         self.pub.put(payload)
+
+    def undeclare(self) -> None:
+        self.pub.undeclare()
+
+
+class _TimedBundles:
+    """The world's sample-bundle publisher, noting when each agent's sample went out."""
+
+    def __init__(self, pub: Any, engine: TimedEngine) -> None:
+        self.pub, self.engine = pub, engine
+
+    @property
+    def matching_status(self) -> Any:
+        return self.pub.matching_status
+
+    def put(self, payload: bytes) -> None:
+        sent = time.monotonic()
+        self.pub.put(payload)
+        ms = round(self.engine.world.sim_time * 1000)
+        for agent in decode(payload, SampleBundle).agents:  # after the put: not timed
+            self.engine.published[(agent, ms)] = sent
 
     def undeclare(self) -> None:
         self.pub.undeclare()
@@ -132,11 +159,12 @@ def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) 
 
 def child(args: argparse.Namespace) -> int:
     """The controllers' process: one ZenohRobotLink per agent, answering every sample."""
-    from common.remote_robot import ZenohRobotLink
+    from common.remote_robot import WorldChannel, ZenohRobotLink
 
     identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))
     z = open_session(options, wait=10)
+    channel = None if args.per_agent else WorldChannel(z, args.realm, WORLD)
     indices = range(args.first, args.first + args.controllers)
     sessions = [issue_session(identity, args.realm, f"c{i}", ["control"]) for i in indices]
     holders = [[s.session_id.hex(), s.keys.box_public_key.hex()] for s in sessions]
@@ -145,7 +173,14 @@ def child(args: argparse.Namespace) -> int:
     verifier = Verifier(identity.verify_key, args.realm)  # to accept MAC leases
     links = [
         ZenohRobotLink(
-            z, args.realm, WORLD, f"k{i}", lambda s=s: s, keepalive=1.0, verifier=verifier
+            z,
+            args.realm,
+            WORLD,
+            f"k{i}",
+            lambda s=s: s,
+            keepalive=1.0,
+            verifier=verifier,
+            channel=channel,
         )
         for i, s in zip(indices, sessions, strict=True)
     ]
@@ -166,6 +201,13 @@ def child(args: argparse.Namespace) -> int:
     stop.set()
     for link in links:
         link.close(stop=False)
+    if channel is not None:
+        print(
+            f"client: {channel.bundles} sample bundles in, {channel.commands} commands out "
+            f"in {channel.puts} bundles",
+            file=sys.stderr,
+        )
+        channel.close()
     close_session(z)
     return 0
 
@@ -204,23 +246,46 @@ def grant(
         z.put(key, context.seal(key, lease))
 
 
+def cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time the processes used so far (Linux /proc); nan elsewhere."""
+    total = 0.0
+    try:
+        for pid in pids:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+    return total
+
+
+class Round(NamedTuple):
+    rtts: list[float]
+    accepted: list[float]
+    applied: list[float]
+    cpu_ms_per_tick: dict[str, float]  # role -> CPU ms its processes used per 20 ms tick
+
+
 def measure(
-    engine: TimedEngine, options: NetworkOptions, seconds: float
-) -> tuple[list[float], list[float], list[float]]:
-    """One round: RTT probe beside the engine's accepted/applied latencies."""
+    engine: TimedEngine, options: NetworkOptions, seconds: float, pids: dict[str, list[int]]
+) -> Round:
+    """One round: RTT probe beside the engine's accepted/applied latencies, and CPU per role."""
     rtts: list[float] = []
     stop = threading.Event()
     engine.accepted, engine.applied = [], []
     probe = threading.Thread(target=rtt_probe, args=(options, stop, rtts))
     probe.start()
     engine.recording = True
+    before = {role: cpu_seconds(p) for role, p in pids.items()}
+    start = time.monotonic()
     try:
         time.sleep(seconds)
     finally:
+        ticks = (time.monotonic() - start) / engine.settings.tick_s
+        cpu = {role: (cpu_seconds(p) - before[role]) * 1000 / ticks for role, p in pids.items()}
         engine.recording = False
         stop.set()
         probe.join(10)
-    return rtts, list(engine.accepted), list(engine.applied)
+    return Round(rtts, list(engine.accepted), list(engine.applied), cpu)
 
 
 def command_costs(n: int = 5000) -> None:
@@ -290,6 +355,12 @@ def main() -> int:
         help="client processes the controllers are spread over (1: all 20 share one GIL, the "
         "pessimistic case; students' controllers really run on their own machines)",
     )
+    p.add_argument(
+        "--per-agent",
+        action="store_true",
+        help="each controller on its agent's own sensors and cmd keys (as wart control) instead "
+        "of one shared WorldChannel (as the runner)",
+    )
     p.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--identity", help=argparse.SUPPRESS)
@@ -340,6 +411,7 @@ def main() -> int:
                     lab.realm,
                     "--connect",
                     lab.options.connect[0],
+                    *(["--per-agent"] if args.per_agent else []),
                 ],
                 cwd=REPO,
                 stdin=subprocess.PIPE,
@@ -348,7 +420,12 @@ def main() -> int:
             )
         )
         first += n
-    results: dict[str, tuple[list[float], list[float], list[float]]] = {}
+    results: dict[str, Round] = {}
+    pids = {
+        "router": [lab.procs[0].pid],
+        "engine (and RTT probe)": [os.getpid()],
+        "controllers": [p.pid for p in procs],
+    }
     context = issue_session(identity, lab.realm, "ctx", ["lease"])
     try:
         holders = []
@@ -360,7 +437,7 @@ def main() -> int:
         for path in ("signed", "mac"):
             grant(z, context, lab.realm, holders, args.seconds, world_session, mac=path == "mac")
             time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
-            results[path] = measure(engine, lab.options, args.seconds)
+            results[path] = measure(engine, lab.options, args.seconds, pids)
         for proc in procs:
             assert proc.stdin is not None
             proc.stdin.write("stop\n")
@@ -374,17 +451,18 @@ def main() -> int:
         engine.stop()
         close_session(z)
         lab.stop()
-    n = sum(len(r[1]) for r in results.values())
+    n = sum(len(r.accepted) for r in results.values())
     print(
         f"engine: {engine.commands_accepted} accepted ({engine.leases.mac_accepted} MACed), "
         f"{engine.commands_refused} refused; {n} commands timed"
     )
     print(
         f"{args.controllers} remote controllers at 50 Hz in {count} client process(es), "
+        f"{'each on its own keys' if args.per_agent else 'sharing a WorldChannel'}, "
         f"{args.seconds:g} s per path"
     )
     print(f"{'path':<44} {'p50 ms':>8} {'p99 ms':>8}")
-    for path, (rtts, accepted, applied) in results.items():
+    for path, (rtts, accepted, applied, cpu) in results.items():
         rate = len(accepted) / args.seconds / max(1, args.controllers)
         print(f"-- {path} commands ({len(accepted)}, {rate:.1f} Hz each)")
         print(f"{'raw Zenoh round trip (2 clients)':<44} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
@@ -395,6 +473,11 @@ def main() -> int:
         print(
             f"{'sample -> command applied (next tick)':<44} "
             f"{pct(applied, 50):8.2f} {pct(applied, 99):8.2f}"
+        )
+        print(
+            "CPU per 20 ms tick: "
+            + ", ".join(f"{role} {ms:.2f} ms" for role, ms in cpu.items())
+            + f" (2 cores: {2 * 20} ms)"
         )
     command_costs()
     return 0
