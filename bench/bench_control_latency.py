@@ -22,7 +22,9 @@ Two rounds on one engine that has an identity: *signed* (leases without
 keys: every command an Ed25519 AuthEnvelope) and *MAC* (leases carrying the
 lease key sealed to each controller and to the engine: MacCommands). Then
 the per-command cost of the world's check (LeaseBook.check_command) and of
-the sender's sealing, both paths, in this process. Run:
+the sender's sealing, both paths, in this process; and the floor under N
+controller threads in one process with no network at all (N threads handed
+a sample at once, each decoding it and MACing a command). Run:
 
     .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10]
 """
@@ -49,7 +51,7 @@ from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.leases import LeaseBook
-from common.messages import AgentCommand, Lease, SampleBundle, decode
+from common.messages import AgentCommand, Lease, SampleBundle, SensorSample, decode, encode
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.engine.agents import agent_type
@@ -340,6 +342,69 @@ def command_costs(n: int = 5000) -> None:
     )
 
 
+def wake_storm(n: int, rounds: int = 200) -> None:
+    """The floor under n controller threads in one process, without any network.
+
+    One thread hands n waiting threads a sample each, as the client's Zenoh
+    callback does; each wakes, decodes it and MACs a command (the bench's
+    reaction, minus the put). Printed: when the median and the last thread
+    are done, after the hand-out began.
+    """
+    from common.remote_robot import command_from_dict, state_from_sample
+
+    raw = encode(
+        SensorSample(
+            world=WORLD,
+            agent="k0",
+            tick=1,
+            sim_time=0.02,
+            proximity=[0] * 8,
+            ambient=[500] * 8,
+            counters=(0, 0),
+            speeds=(0, 0),
+            leds=[0, 0],
+        )
+    )
+    key, cmd_key = new_lease_key(), keys.agent_cmd("bench", WORLD, "k0")
+    fresh = [threading.Condition() for _ in range(n)]
+    handed = [0] * n
+    done = [0.0] * n
+    stop = False
+
+    def react(i: int) -> None:
+        seen = 0
+        while not stop:
+            with fresh[i]:
+                fresh[i].wait_for(lambda seen=seen: handed[i] > seen, 0.5)
+                if handed[i] == seen:
+                    continue
+                seen = handed[i]
+            state = state_from_sample(decode(raw, SensorSample))
+            command = command_from_dict("k0", {"counters": [round(state.time * 1000), 0]})
+            mac_command(key, cmd_key, "L0", seen, command, time.time())
+            done[i] = time.perf_counter()
+
+    threads = [threading.Thread(target=react, args=(i,), daemon=True) for i in range(n)]
+    for t in threads:
+        t.start()
+    spans = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        for i in range(n):
+            with fresh[i]:
+                handed[i] += 1
+                fresh[i].notify_all()
+        time.sleep(0.02)
+        ends = sorted(done)
+        spans.append((ends[n // 2] - start, ends[-1] - start))
+    stop = True
+    median = np.median(np.array(spans[rounds // 10 :]) * 1000, axis=0)
+    print(
+        f"{n} controller threads woken at once, no network: median thread done after "
+        f"{median[0]:.2f} ms, last after {median[1]:.2f} ms (p50 over {rounds} rounds)"
+    )
+
+
 def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.array(values) * 1000, q)) if values else float("nan")
 
@@ -480,6 +545,7 @@ def main() -> int:
             + f" (2 cores: {2 * 20} ms)"
         )
     command_costs()
+    wake_storm(args.controllers)
     return 0
 
 
