@@ -77,7 +77,8 @@ def test_certificates_and_accounts_cover_every_service(lab_dir: Path) -> None:
 
 def test_the_runner_holds_no_right_to_frames_samples_or_leases() -> None:
     published = {k for g in ROLE_GRANTS["runner"] if g.verb == "pub" for k in g.keys}
-    assert published == {"world/*/agent/*/cmd", "ctx/*/output"}
+    assert published == {"world/*/agent/*/cmd", "world/*/cmds", "ctx/*/output"}
+    assert not any(word in k for k in published for word in ("frame", "sens", "sample", "lease"))
     assert not any(
         g.verb == "token" and "context" in k for g in ROLE_GRANTS["viewer"] for k in g.keys
     )
