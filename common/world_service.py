@@ -10,12 +10,13 @@ from __future__ import annotations
 
 from typing import Any
 
+import msgspec
 import zenoh
 
 from common import keys
 from common.auth import AuthError
 from common.keys import AliveKind
-from common.messages import CommandBundle, Message, MessageError, decode
+from common.messages import CommandBundle, Message, MessageError, SampleBundle, decode, encode
 from common.service import Service
 
 
@@ -45,6 +46,19 @@ class WorldService(Service):
         self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
         self.serve(keys.world_edit(realm, name), self._on_edit)
         self.serve(keys.world_map(realm, name), self._on_map)
+
+    def publish_sample_bundle(self, tick: int, samples: dict[str, bytes]) -> None:
+        """Put ``samples`` (agent -> its encoded SensorSample) as one SampleBundle."""
+        self._samples_pub.put(
+            encode(
+                SampleBundle(
+                    world=self.ident,
+                    tick=tick,
+                    agents=list(samples),
+                    samples=[msgspec.Raw(payload) for payload in samples.values()],
+                )
+            )
+        )
 
     def _on_command(self, sample: zenoh.Sample) -> None:
         self._accept_command(str(sample.key_expr), sample.payload)

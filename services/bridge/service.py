@@ -34,7 +34,6 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import msgspec
 import numpy as np
 import zenoh
 
@@ -48,7 +47,6 @@ from common.messages import (
     GripperReading,
     Message,
     PackedArray,
-    SampleBundle,
     SensorBatch,
     SensorSample,
     WorldFrame,
@@ -290,16 +288,7 @@ class BridgeService(WorldService):
         # Robots are sampled each on its own serial line, so a bundle holds one
         # robot's round: the same key and type as the engine's, for the runner.
         if self.leases.in_force(agent.id) and self._samples_pub.matching_status.matching:
-            self._samples_pub.put(
-                encode(
-                    SampleBundle(
-                        world=self.ident,
-                        tick=sample.tick,
-                        agents=[agent.id],
-                        samples=[msgspec.Raw(payload)],
-                    )
-                )
-            )
+            self.publish_sample_bundle(sample.tick, {agent.id: payload})
 
     def _sample(self, agent: str, state: RobotState) -> SensorSample | None:
         if not state.online or None in (state.proximity, state.ambient, state.counters):

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import msgspec
 import numpy as np
 import zenoh
 
@@ -51,7 +50,6 @@ from common.messages import (
     RemoveItem,
     ResizeArena,
     RotateItem,
-    SampleBundle,
     WorldEdit,
     encode,
 )
@@ -353,17 +351,8 @@ class EngineService(WorldService):
         if agents:
             encoded = dict(zip(agents, map(encode, wire.samples(world, slots)), strict=True))
             if bundled:
-                inside = [a for a in bundled if a in encoded]
-                self._samples_pub.put(
-                    encode(
-                        SampleBundle(
-                            world=world.name,
-                            tick=world.tick,
-                            agents=inside,
-                            samples=[msgspec.Raw(encoded[a]) for a in inside],
-                        )
-                    )
-                )
+                inside = {a: encoded[a] for a in bundled if a in encoded}
+                self.publish_sample_bundle(world.tick, inside)
             for agent in listening:
                 pub = self._agent_pubs.get(agent)
                 payload = encoded.get(agent)
