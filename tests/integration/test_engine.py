@@ -8,7 +8,6 @@ import threading
 import time
 from pathlib import Path
 
-import msgspec
 import numpy as np
 import pytest
 import zenoh
@@ -119,11 +118,13 @@ def ask(session: zenoh.Session, key: str, payload: bytes | None = None) -> Messa
     raise AssertionError(f"no reply on {key}")
 
 
-def lease_for(realm: str, holder: Session, *, start: float, end: float, lid: str = "L1") -> Lease:
+def lease_for(
+    realm: str, holder: Session, *, start: float, end: float, lid: str = "L1", agent: str = "k0"
+) -> Lease:
     return Lease(
         lease_id=lid,
         world=WORLD,
-        agent="k0",
+        agent=agent,
         holder_user=holder.user,
         holder_session=holder.session_id,
         start=start,
@@ -338,9 +339,7 @@ def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_
 
     now = time.time()
     for agent, holder in (("k2", alice), ("k1", bob)):
-        lease = msgspec.structs.replace(
-            lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}"), agent=agent
-        )
+        lease = lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}", agent=agent)
         key = keys.agent_lease(realm, WORLD, agent)
         zsession.put(key, context.seal(key, lease))
     wait_for(lambda: bundles.count > 3, 10, "sample bundles")
