@@ -229,3 +229,34 @@ def test_a_closed_link_stops_getting_samples_and_a_newer_link_takes_its_agent() 
     new.close(stop=False)
     deliver(zs, bundle(["k0"], tick=3))
     assert new.samples == 2
+
+
+def test_a_tick_listener_answers_every_robot_of_a_bundle_in_one_message() -> None:
+    zs = FakeSession()
+    channel, links = make(zs, ["k0", "k1", "k2"])
+    by_agent = {link.agent: link for link in links}
+    seen: list[tuple[int, list[str]]] = []
+
+    def swarm(tick: int, agents: list[str]) -> None:
+        seen.append((tick, agents))
+        for agent in agents:
+            state = by_agent[agent].latest()  # already this tick's sample
+            by_agent[agent].send({"counters": [state.counters[0], 0]})
+
+    def broken(_tick: int, _agents: list[str]) -> None:
+        raise RuntimeError("a bug in someone's swarm code")
+
+    channel.on_tick(broken)  # first: its failure must not keep swarm from running
+    remove = channel.on_tick(swarm)
+    deliver(zs, bundle(["k2", "k9", "k0"], tick=5))  # k9 is not driven here
+    assert seen == [(5, ["k2", "k0"])]
+    assert channel.puts == 1, "the listener's commands leave in one message"
+    sent = sent_commands(zs)
+    assert [agent for agent, _ in sent] == ["k2", "k0"]
+    counters = [decode(decode(p, AuthEnvelope).body, AgentCommand).counters for _, p in sent]
+    assert counters == [(5, 0), (5, 0)]
+    deliver(zs, bundle(["k9"], tick=6))  # nothing for this process: no call
+    assert len(seen) == 1
+    remove()
+    deliver(zs, bundle(["k1"], tick=7))
+    assert len(seen) == 1 and links[1].samples == 1 and channel.puts == 1
