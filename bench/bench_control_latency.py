@@ -15,8 +15,15 @@ and records
 - *applied*: sample published -> command applied to the world, at the
   engine's next tick (adds up to one 20 ms tick by design).
 
-Beside it, in the same run and through the same router, the raw Zenoh round
-trip (put -> echo -> back, two client sessions) at the same rate.
+Beside it, in the same run and through the same router, two raw Zenoh round
+trips at the same rate: between two client sessions of the world's process,
+and over the loop's own path (the world's session -> the controllers'
+process, which echoes -> back, express as the loop's publishers). The
+target line judges p50 against 2x the path's round trip and p99 against 5 ms.
+
+``--inline``: instead of one thread per controller, one function answers
+every robot in the channel's own thread (``WorldChannel.on_tick``), as a
+swarm controller would: no thread hand-off per robot, one message per tick.
 
 Two rounds on one engine that has an identity: *signed* (leases without
 keys: every command an Ed25519 AuthEnvelope) and *MAC* (leases carrying the
@@ -26,7 +33,7 @@ the sender's sealing, both paths, in this process; and the floor under N
 controller threads in one process with no network at all (N threads handed
 a sample at once, each decoding it and MACing a command). Run:
 
-    .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10]
+    .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10] [--inline]
 """
 
 from __future__ import annotations
@@ -159,6 +166,34 @@ def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) 
         close_session(b)
 
 
+PING, PONG = f"{WORLD}/rtt/path/ping", f"{WORLD}/rtt/path/pong"
+
+
+def path_probe(z: Any, stop: threading.Event, out: list[float]) -> None:
+    """Raw Zenoh round trips over the control loop's own path, at 50 Hz.
+
+    From the world's session through the router to the controllers' process
+    (whose session echoes, see ``child``) and back: the same processes, hops
+    and express publishers as a sample and the command answering it, without
+    the controllers' and the world's work.
+    """
+    got = threading.Event()
+    ping = z.declare_publisher(PING, express=True)
+    back = z.declare_subscriber(PONG, lambda _s: got.set())
+    try:
+        time.sleep(0.5)
+        while not stop.is_set():
+            got.clear()
+            start = time.monotonic()
+            ping.put(b"x" * 64)
+            if got.wait(1.0):
+                out.append(time.monotonic() - start)
+            stop.wait(0.02)
+    finally:
+        back.undeclare()
+        ping.undeclare()
+
+
 def child(args: argparse.Namespace) -> int:
     """The controllers' process: one ZenohRobotLink per agent, answering every sample."""
     from common.remote_robot import WorldChannel, ZenohRobotLink
@@ -166,6 +201,8 @@ def child(args: argparse.Namespace) -> int:
     identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))
     z = open_session(options, wait=10)
+    pong = z.declare_publisher(PONG, express=True)
+    echo = z.declare_subscriber(PING, lambda s: pong.put(s.payload))  # for path_probe
     channel = None if args.per_agent else WorldChannel(z, args.realm, WORLD)
     indices = range(args.first, args.first + args.controllers)
     sessions = [issue_session(identity, args.realm, f"c{i}", ["control"]) for i in indices]
@@ -196,9 +233,19 @@ def child(args: argparse.Namespace) -> int:
             seen = newest
             link.send({"counters": [round(link.latest().time * 1000), 0]})
 
-    threads = [threading.Thread(target=react, args=(link,), daemon=True) for link in links]
-    for t in threads:
-        t.start()
+    if args.inline:
+        assert channel is not None
+        by_agent = {link.agent: link for link in links}
+
+        def swarm(_tick: int, agents: list[str]) -> None:
+            for agent in agents:
+                link = by_agent[agent]
+                link.send({"counters": [round(link.latest().time * 1000), 0]})
+
+        channel.on_tick(swarm)
+    else:
+        for link in links:
+            threading.Thread(target=react, args=(link,), daemon=True).start()
     sys.stdin.readline()  # the parent says when to stop
     stop.set()
     for link in links:
@@ -210,6 +257,8 @@ def child(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         channel.close()
+    echo.undeclare()
+    pong.undeclare()
     close_session(z)
     return 0
 
@@ -261,21 +310,31 @@ def cpu_seconds(pids: list[int]) -> float:
 
 
 class Round(NamedTuple):
-    rtts: list[float]
+    rtts: list[float]  # two sessions in the world's process
+    path_rtts: list[float]  # world's session <-> controllers' process (path_probe)
     accepted: list[float]
     applied: list[float]
     cpu_ms_per_tick: dict[str, float]  # role -> CPU ms its processes used per 20 ms tick
 
 
 def measure(
-    engine: TimedEngine, options: NetworkOptions, seconds: float, pids: dict[str, list[int]]
+    engine: TimedEngine,
+    z: Any,
+    options: NetworkOptions,
+    seconds: float,
+    pids: dict[str, list[int]],
 ) -> Round:
-    """One round: RTT probe beside the engine's accepted/applied latencies, and CPU per role."""
+    """One round: both RTT probes beside the engine's accepted/applied latencies, CPU per role."""
     rtts: list[float] = []
+    path_rtts: list[float] = []
     stop = threading.Event()
     engine.accepted, engine.applied = [], []
-    probe = threading.Thread(target=rtt_probe, args=(options, stop, rtts))
-    probe.start()
+    probes = [
+        threading.Thread(target=rtt_probe, args=(options, stop, rtts)),
+        threading.Thread(target=path_probe, args=(z, stop, path_rtts)),
+    ]
+    for probe in probes:
+        probe.start()
     engine.recording = True
     before = {role: cpu_seconds(p) for role, p in pids.items()}
     start = time.monotonic()
@@ -286,8 +345,9 @@ def measure(
         cpu = {role: (cpu_seconds(p) - before[role]) * 1000 / ticks for role, p in pids.items()}
         engine.recording = False
         stop.set()
-        probe.join(10)
-    return Round(rtts, list(engine.accepted), list(engine.applied), cpu)
+        for probe in probes:
+            probe.join(10)
+    return Round(rtts, path_rtts, list(engine.accepted), list(engine.applied), cpu)
 
 
 def command_costs(n: int = 5000) -> None:
@@ -409,6 +469,21 @@ def pct(values: list[float], q: float) -> float:
     return float(np.percentile(np.array(values) * 1000, q)) if values else float("nan")
 
 
+def verdict(accepted: list[float], rtts: list[float], path_rtts: list[float]) -> str:
+    """The issue's target, judged against each round trip: p50 within 2x RTT, p99 under 5 ms."""
+    p50, p99 = pct(accepted, 50), pct(accepted, 99)
+    ratios = ", ".join(
+        f"{p50 / pct(r, 50):.1f}x the {name} RTT"
+        for name, r in (("2-client", rtts), ("path", path_rtts))
+    )
+    ok50 = "met" if p50 <= 2 * pct(path_rtts, 50) else "missed"
+    ok99 = "met" if p99 < 5.0 else "missed"
+    return (
+        f"target: p50 {p50:.2f} ms = {ratios} (<= 2x path RTT: {ok50}); "
+        f"p99 {p99:.2f} ms (< 5 ms: {ok99})"
+    )
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--controllers", type=int, default=20)
@@ -426,12 +501,20 @@ def main() -> int:
         help="each controller on its agent's own sensors and cmd keys (as wart control) instead "
         "of one shared WorldChannel (as the runner)",
     )
+    p.add_argument(
+        "--inline",
+        action="store_true",
+        help="one swarm function answers every robot in the channel's thread (WorldChannel."
+        "on_tick) instead of one thread per controller: no hand-off, one message per tick",
+    )
     p.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--identity", help=argparse.SUPPRESS)
     p.add_argument("--realm", help=argparse.SUPPRESS)
     p.add_argument("--connect", help=argparse.SUPPRESS)
     args = p.parse_args()
+    if args.inline and args.per_agent:
+        p.error("--inline answers in the shared WorldChannel's thread; it excludes --per-agent")
     if args.child:
         return child(args)
 
@@ -477,6 +560,7 @@ def main() -> int:
                     "--connect",
                     lab.options.connect[0],
                     *(["--per-agent"] if args.per_agent else []),
+                    *(["--inline"] if args.inline else []),
                 ],
                 cwd=REPO,
                 stdin=subprocess.PIPE,
@@ -502,7 +586,7 @@ def main() -> int:
         for path in ("signed", "mac"):
             grant(z, context, lab.realm, holders, args.seconds, world_session, mac=path == "mac")
             time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
-            results[path] = measure(engine, lab.options, args.seconds, pids)
+            results[path] = measure(engine, z, lab.options, args.seconds, pids)
         for proc in procs:
             assert proc.stdin is not None
             proc.stdin.write("stop\n")
@@ -523,14 +607,24 @@ def main() -> int:
     )
     print(
         f"{args.controllers} remote controllers at 50 Hz in {count} client process(es), "
-        f"{'each on its own keys' if args.per_agent else 'sharing a WorldChannel'}, "
-        f"{args.seconds:g} s per path"
+        + (
+            "each on its own keys"
+            if args.per_agent
+            else "answering in the WorldChannel's thread (on_tick)"
+            if args.inline
+            else "one thread each, sharing a WorldChannel"
+        )
+        + f", {args.seconds:g} s per path"
     )
     print(f"{'path':<44} {'p50 ms':>8} {'p99 ms':>8}")
-    for path, (rtts, accepted, applied, cpu) in results.items():
+    for path, (rtts, path_rtts, accepted, applied, cpu) in results.items():
         rate = len(accepted) / args.seconds / max(1, args.controllers)
         print(f"-- {path} commands ({len(accepted)}, {rate:.1f} Hz each)")
         print(f"{'raw Zenoh round trip (2 clients)':<44} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
+        print(
+            f"{'raw Zenoh round trip (world <-> controllers)':<44} "
+            f"{pct(path_rtts, 50):8.2f} {pct(path_rtts, 99):8.2f}"
+        )
         print(
             f"{'sample -> command accepted by engine':<44} "
             f"{pct(accepted, 50):8.2f} {pct(accepted, 99):8.2f}"
@@ -544,6 +638,7 @@ def main() -> int:
             + ", ".join(f"{role} {ms:.2f} ms" for role, ms in cpu.items())
             + f" (2 cores: {2 * 20} ms)"
         )
+        print(verdict(accepted, rtts, path_rtts))
     command_costs()
     wake_storm(args.controllers)
     return 0
