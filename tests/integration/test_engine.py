@@ -34,6 +34,7 @@ from common.messages import (
     decode,
     encode,
 )
+from common.remote_robot import WorldChannel, ZenohRobotLink
 from common.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
 
@@ -374,3 +375,58 @@ def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_
     moved = xs() - start
     assert moved[2] > 40.0, moved
     assert abs(moved[0]) < 1.0 and abs(moved[1]) < 1.0, moved
+
+
+def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
+    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+) -> None:
+    """WorldChannel.on_tick on a real router: called with each tick's leased agents, drives them."""
+    realm = router.realm
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    wait_for(lambda: frames.count > 5, 10, "frames")
+    channel = WorldChannel(zsession, realm, WORLD)
+    links = {
+        # No keep-alives: every put counted below is the listener's.
+        agent: ZenohRobotLink(
+            zsession, realm, WORLD, agent, lambda: alice, channel=channel, keepalive=3600.0
+        )
+        for agent in ("k0", "k1", "k2")
+    }
+    calls: list[tuple[int, list[str]]] = []
+
+    def swarm(tick: int, agents: list[str]) -> None:
+        calls.append((tick, agents))
+        for agent in agents:
+            links[agent].send({"speeds": [10, 10]})
+
+    try:
+        channel.on_tick(swarm)
+        time.sleep(0.5)
+        assert calls == [], "no lease in force: no bundle, no call"
+
+        def xs() -> np.ndarray:
+            frame = frames.get()
+            assert isinstance(frame, WorldFrame)
+            return frame.poses.to_numpy()[:3, 0].astype(float)
+
+        start = xs()
+        now = time.time()
+        for agent in ("k1", "k2"):  # alice holds these two; k0 has no lease
+            lease = lease_for(realm, alice, start=now, end=now + 60, lid=f"S{agent}", agent=agent)
+            key = keys.agent_lease(realm, WORLD, agent)
+            zsession.put(key, context.seal(key, lease))
+        wait_for(lambda: len(calls) > 25, 10, "tick listener calls")
+        time.sleep(0.5)
+        moved = xs() - start
+        assert moved[1] > 40.0 and moved[2] > 40.0, moved
+        assert abs(moved[0]) < 1.0, moved  # not leased: neither called for nor moved
+        ticks = [tick for tick, _ in calls]
+        assert ticks == sorted(set(ticks)), "one call per bundle, in tick order"
+        assert all(agents == ["k1", "k2"] for _, agents in calls)
+        assert channel.puts <= channel.bundles, "one command message per tick at most"
+    finally:
+        for link in links.values():
+            link.close(stop=False)
+        channel.close()
