@@ -46,6 +46,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -142,6 +143,20 @@ def build_world(n: int) -> World:
     return world
 
 
+def ping_until(
+    send: Callable[[], None], got: threading.Event, stop: threading.Event, out: list[float]
+) -> None:
+    """``send`` a ping at 50 Hz until ``stop``; note the RTT whenever ``got`` is set within 1 s."""
+    time.sleep(0.5)  # let the subscriptions reach the router before measuring
+    while not stop.is_set():
+        got.clear()
+        start = time.monotonic()
+        send()
+        if got.wait(1.0):
+            out.append(time.monotonic() - start)
+        stop.wait(0.02)
+
+
 def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) -> None:
     """Raw Zenoh round trips between two client sessions through the router, at 50 Hz."""
     a = open_session(options, wait=10)
@@ -151,14 +166,7 @@ def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) 
     echo = b.declare_subscriber(ping, lambda s: b.put(pong, s.payload))
     back = a.declare_subscriber(pong, lambda _s: got.set())
     try:
-        time.sleep(0.5)  # let both subscriptions reach the router before measuring
-        while not stop.is_set():
-            got.clear()
-            start = time.monotonic()
-            a.put(ping, b"x" * 64)
-            if got.wait(1.0):
-                out.append(time.monotonic() - start)
-            stop.wait(0.02)
+        ping_until(lambda: a.put(ping, b"x" * 64), got, stop, out)
     finally:
         echo.undeclare()
         back.undeclare()
@@ -181,14 +189,7 @@ def path_probe(z: Any, stop: threading.Event, out: list[float]) -> None:
     ping = z.declare_publisher(PING, express=True)
     back = z.declare_subscriber(PONG, lambda _s: got.set())
     try:
-        time.sleep(0.5)
-        while not stop.is_set():
-            got.clear()
-            start = time.monotonic()
-            ping.put(b"x" * 64)
-            if got.wait(1.0):
-                out.append(time.monotonic() - start)
-            stop.wait(0.02)
+        ping_until(lambda: ping.put(b"x" * 64), got, stop, out)
     finally:
         back.undeclare()
         ping.undeclare()
