@@ -64,7 +64,10 @@ def encode(message: Message) -> bytes:
 
 @functools.cache
 def _decoder(expected: Any) -> msgspec.msgpack.Decoder[Any]:
-    return msgspec.msgpack.Decoder(expected)
+    """The decoder of one type or of a tuple of types (cached by it: building a
+    ``Union`` on every call cost more than decoding a small message)."""
+    target: Any = Union[expected] if isinstance(expected, tuple) else expected  # noqa: UP007
+    return msgspec.msgpack.Decoder(target)
 
 
 @functools.cache
@@ -102,9 +105,8 @@ def decode(data: Any, expected: type[M] | tuple[type[M], ...]) -> M:
             f"a {_type_names(expected)} message of {len(raw)} bytes is over the "
             f"{MAX_MESSAGE_BYTES}-byte limit"
         )
-    target: Any = Union[expected] if isinstance(expected, tuple) else expected  # noqa: UP007
     try:
-        message = _decoder(target).decode(raw)
+        message = _decoder(expected).decode(raw)
     except msgspec.ValidationError as exc:
         raise MessageError(f"not a valid {_type_names(expected)} message: {exc}") from None
     except msgspec.DecodeError as exc:
