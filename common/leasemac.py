@@ -67,28 +67,60 @@ def open_key(sealed: bytes, box_private_key: nacl.public.PrivateKey) -> bytes:
     return key
 
 
+class CommandMac:
+    """The MACs of one lease's commands on one key expression.
+
+    The fields fixed for the lease (its key, the key expression, the lease
+    id) are hashed once; each command then only hashes its sequence number,
+    time and body into a copy. Sender and world both do this at 50 Hz per
+    robot, where a fresh keyed hash per command was a third of the MAC's cost.
+    """
+
+    __slots__ = ("_prefix",)
+
+    def __init__(self, lease_key: bytes, key_expr: str, lease_id: str) -> None:
+        key = key_expr.encode()
+        lid = lease_id.encode()
+        prefix = hashlib.blake2b(key=lease_key, digest_size=MAC_BYTES, person=_PERSON)
+        # Length prefixes keep the fields apart: no two field splits hash alike.
+        prefix.update(struct.pack("<II", len(key), len(lid)))
+        prefix.update(key)
+        prefix.update(lid)
+        self._prefix = prefix
+
+    def tag(self, seq: int, sent_at: float, body: bytes) -> bytes:
+        """The MAC of one command: bound to its key expression, lease, order and time."""
+        h = self._prefix.copy()
+        h.update(struct.pack("<Qd", seq, sent_at))
+        h.update(body)
+        return h.digest()
+
+
 def command_mac(
     lease_key: bytes, key_expr: str, lease_id: str, seq: int, sent_at: float, body: bytes
 ) -> bytes:
-    """The MAC of one command: bound to its key expression, lease, order and time."""
-    key = key_expr.encode()
-    lid = lease_id.encode()
-    h = hashlib.blake2b(key=lease_key, digest_size=MAC_BYTES, person=_PERSON)
-    # Length prefixes keep the fields apart: no two field splits hash alike.
-    h.update(struct.pack("<II", len(key), len(lid)))
-    h.update(key)
-    h.update(lid)
-    h.update(struct.pack("<Qd", seq, sent_at))
-    h.update(body)
-    return h.digest()
+    """The MAC of one command (:class:`CommandMac`, for a single use)."""
+    return CommandMac(lease_key, key_expr, lease_id).tag(seq, sent_at, body)
 
 
 def mac_command(
-    lease_key: bytes, key_expr: str, lease_id: str, seq: int, message: Message, now: float
+    lease_key: bytes | CommandMac,
+    key_expr: str,
+    lease_id: str,
+    seq: int,
+    message: Message,
+    now: float,
 ) -> bytes:
-    """The encoded MacCommand carrying ``message`` to ``key_expr`` under a MAC lease."""
+    """The encoded MacCommand carrying ``message`` to ``key_expr`` under a MAC lease.
+
+    ``lease_key``: the lease key, or the lease's :class:`CommandMac` for
+    ``key_expr`` (a sender that keeps one pays less per command).
+    """
     body = encode(message)
-    tag = command_mac(lease_key, key_expr, lease_id, seq, now, body)
+    if isinstance(lease_key, CommandMac):
+        tag = lease_key.tag(seq, now, body)
+    else:
+        tag = command_mac(lease_key, key_expr, lease_id, seq, now, body)
     return encode(MacCommand(lease_id=lease_id, seq=seq, sent_at=now, body=body, mac=tag))
 
 

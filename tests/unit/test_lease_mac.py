@@ -10,8 +10,10 @@ import pytest
 from common import keys
 from common.auth import AuthError, RegistryIdentity, Session, Verifier, issue_session
 from common.leasemac import (
+    CommandMac,
     WorldBoxKeys,
     check_world_token,
+    command_mac,
     mac_command,
     new_lease_key,
     open_key,
@@ -153,6 +155,26 @@ def test_command_under_an_older_lease_id_is_refused(s: Setup) -> None:
     s.grant()
     with pytest.raises(AuthError, match="not k1's current lease"):
         s.book.check_command(CMD, s.command(lease_id="L0"))
+
+
+def test_a_kept_command_mac_signs_as_the_one_shot_function() -> None:
+    k = new_lease_key()
+    kept = CommandMac(k, CMD, "L1")
+    for seq in (1, 2, 10**9):
+        assert kept.tag(seq, 1.5, b"body") == command_mac(k, CMD, "L1", seq, 1.5, b"body")
+    assert kept.tag(1, 1.5, b"body") != CommandMac(k, CMD + "x", "L1").tag(1, 1.5, b"body")
+    assert kept.tag(1, 1.5, b"body") != CommandMac(k, CMD, "L2").tag(1, 1.5, b"body")
+
+
+def test_a_lease_resealed_with_a_new_key_drops_the_old_one(s: Setup) -> None:
+    s.grant()
+    assert s.book.check_command(CMD, s.command(seq=1))[0] == AGENT
+    old = s.k
+    s.k = new_lease_key()  # same lease id, new key: the world must stop trusting the old one
+    s.grant()
+    with pytest.raises(AuthError, match="MAC does not match"):
+        s.book.check_command(CMD, s.command(key=old, seq=2))
+    assert s.book.check_command(CMD, s.command(seq=3))[0] == AGENT
 
 
 def test_lease_without_a_key_for_the_world_refuses_mac(s: Setup) -> None:
