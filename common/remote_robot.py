@@ -47,7 +47,7 @@ from common.controller import (
     PROXIMITY_SENSORS,
     KheperaState,
 )
-from common.leasemac import mac_command, open_key
+from common.leasemac import CommandMac, mac_command, open_key
 from common.messages import (
     MAX_BUNDLED,
     AgentCommand,
@@ -69,28 +69,32 @@ PRESENCE_THRESHOLD = 128
 
 def _fit(values: list[int], count: int, fill: int) -> tuple[int, ...]:
     """Exactly ``count`` values within 0..1023 (robot types differ in sensor counts)."""
-    out = values[:count]
-    if len(out) < count:
-        out = out + [fill] * (count - len(out))
-    if out and (min(out) < 0 or max(out) > 1023):  # rare: clamp only then (per sample, 50 Hz)
-        out = [max(0, min(1023, v)) for v in out]
-    return tuple(out)
+    if len(values) == count:  # the usual case, 50 times a second per robot: no copies
+        out = tuple(values)
+    elif len(values) > count:
+        out = tuple(values[:count])
+    else:
+        out = (*values, *([fill] * (count - len(values))))
+    if out and (min(out) < 0 or max(out) > 1023):  # rare: clamp only then
+        out = tuple(max(0, min(1023, v)) for v in out)
+    return out
+
+
+def _speed(value: int) -> int:
+    return value if -MAX_SPEED <= value <= MAX_SPEED else max(-MAX_SPEED, min(MAX_SPEED, value))
 
 
 def state_from_sample(sample: SensorSample) -> KheperaState:
     """What a controller sees of one SensorSample."""
     gripper = sample.gripper
-    leds = [bool(v) for v in sample.leds[:2]] + [False, False]
+    leds = sample.leds
     return KheperaState(
         time=sample.sim_time,
-        speeds=(
-            max(-MAX_SPEED, min(MAX_SPEED, sample.speeds[0])),
-            max(-MAX_SPEED, min(MAX_SPEED, sample.speeds[1])),
-        ),
-        counters=(sample.counters[0], sample.counters[1]),
+        speeds=(_speed(sample.speeds[0]), _speed(sample.speeds[1])),
+        counters=sample.counters,
         proximity=_fit(sample.proximity, PROXIMITY_SENSORS, 0),
         ambient=_fit(sample.ambient, LIGHT_SENSORS, 500),
-        leds=(leds[0], leds[1]),
+        leds=(bool(leds[0]) if leds else False, bool(leds[1]) if len(leds) > 1 else False),
         arm=gripper.arm if gripper else ARM_UP,
         gripper_closed=bool(gripper and gripper.fingers != "open"),
         object_present=bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
@@ -134,12 +138,15 @@ def command_from_dict(agent: str, command: dict[str, Any]) -> AgentCommand:
 
 
 class _MacLease:
-    """The lease key this link's session holds, from a MAC lease."""
+    """The lease key this link's session holds, from a MAC lease, and its MAC on the link's key."""
 
-    __slots__ = ("end", "key", "lease_id", "sealed", "session_id")
+    __slots__ = ("end", "lease_id", "mac", "sealed", "session_id")
 
-    def __init__(self, lease_id: str, session_id: bytes, key: bytes, sealed: bytes) -> None:
-        self.lease_id, self.session_id, self.key, self.sealed = lease_id, session_id, key, sealed
+    def __init__(
+        self, lease_id: str, session_id: bytes, key: bytes, sealed: bytes, cmd_key: str
+    ) -> None:
+        self.lease_id, self.session_id, self.sealed = lease_id, session_id, sealed
+        self.mac = CommandMac(key, cmd_key, lease_id)
         self.end = 0.0
 
 
@@ -392,7 +399,9 @@ class ZenohRobotLink:
         except Exception as exc:  # not logged in (yet), a session closing
             log.debug("could not read a lease on %s: %s", self.agent, exc)
             return
-        self._mac_lease = _MacLease(lease.lease_id, session.session_id, key, lease.holder_key)
+        self._mac_lease = _MacLease(
+            lease.lease_id, session.session_id, key, lease.holder_key, self._cmd_key
+        )
         self._mac_lease.end = lease.end
         log.info("lease %s on %s: commands MACed from now on", lease.lease_id, self.agent)
 
@@ -432,7 +441,7 @@ class ZenohRobotLink:
             now = time.time()
             if lease is not None and lease.session_id == session.session_id and now <= lease.end:
                 seq = session.next_seq()
-                payload = mac_command(lease.key, self._cmd_key, lease.lease_id, seq, message, now)
+                payload = mac_command(lease.mac, self._cmd_key, lease.lease_id, seq, message, now)
                 mac = True
             else:
                 payload = session.seal(self._cmd_key, message)
