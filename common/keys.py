@@ -23,6 +23,7 @@ message type on each key).
 
 from __future__ import annotations
 
+import functools
 import re
 from enum import StrEnum
 
@@ -227,7 +228,10 @@ def agent_sensors_all(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/agent/*/sensors"
 
 
+@functools.lru_cache(maxsize=4096)
 def agent_cmd(realm: str, world: str, agent: str) -> str:
+    """Cached: worlds and links build it for every command, 50 times a second per robot
+    (a bad name raises BadIdentifier and is not cached)."""
     return f"{_agent(realm, world, agent)}/cmd"
 
 

@@ -72,6 +72,7 @@ class LeaseBook:
         if lease.world != self.world or lease.agent != agent:
             raise AuthError("forbidden", f"lease for {lease.world}/{lease.agent} sent on {key}")
         lease_key = self._lease_key(lease)
+        cmd_key = self.command_key(lease.agent)
         with self._lock:
             current = self._leases.get(lease.agent)
             if (
@@ -90,9 +91,9 @@ class LeaseBook:
                         lease.lease_id,
                         lease_key,
                         ReplayWindow(lease.end),
-                        CommandMac(lease_key, self.command_key(lease.agent), lease.lease_id),
+                        CommandMac(lease_key, cmd_key, lease.lease_id),
                     )
-                self._agent_of[self.command_key(lease.agent)] = lease.agent
+                self._agent_of[cmd_key] = lease.agent
         return lease
 
     def command_key(self, agent: str) -> str:

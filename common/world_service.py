@@ -19,9 +19,6 @@ from common.keys import AliveKind
 from common.messages import CommandBundle, Message, MessageError, SampleBundle, decode, encode
 from common.service import Service
 
-_CACHED_COMMAND_KEYS = 4096
-"""Agent names whose command key a world remembers (a bundle names each at 50 Hz)."""
-
 
 class WorldService(Service):
     """Base of the engine's and the bridge's services; subclasses implement the handlers."""
@@ -34,7 +31,6 @@ class WorldService(Service):
     def declare_world_interface(self) -> None:
         """Declare the world's keys (call from on_start, before the service's own threads)."""
         realm, name = self.realm, self.ident
-        self._cmd_keys: dict[str, str] = {}
         self._frame_pub = self.track(self.session.declare_publisher(keys.world_frame(realm, name)))
         self._batch_pub = self.track(
             self.session.declare_publisher(keys.world_sensors(realm, name))
@@ -73,11 +69,7 @@ class WorldService(Service):
         refused: list[str] = []
         for item in bundle.commands:
             try:
-                key = self._cmd_keys.get(item.agent)
-                if key is None:
-                    key = keys.agent_cmd(self.realm, self.ident, item.agent)  # checks the name
-                    if len(self._cmd_keys) < _CACHED_COMMAND_KEYS:
-                        self._cmd_keys[item.agent] = key
+                key = keys.agent_cmd(self.realm, self.ident, item.agent)
                 self._accept_command(key, item.payload)
             except (AuthError, MessageError, ValueError) as exc:
                 refused.append(f"{item.agent}: {exc}")

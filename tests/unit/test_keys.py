@@ -26,7 +26,8 @@ IDS = {
 
 def builders() -> list[tuple[str, object]]:
     found = []
-    for name, fn in inspect.getmembers(keys, inspect.isfunction):
+    # unwrap: a cached builder (functools.lru_cache) is a builder too
+    for name, fn in inspect.getmembers(keys, lambda f: inspect.isfunction(inspect.unwrap(f))):
         if fn.__module__ != keys.__name__ or name.startswith("_"):
             continue
         if name.startswith(("check_", "is_", "parse_")) or "admin" in name:
