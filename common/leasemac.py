@@ -76,9 +76,10 @@ class CommandMac:
     robot, where a fresh keyed hash per command was a third of the MAC's cost.
     """
 
-    __slots__ = ("_prefix",)
+    __slots__ = ("_prefix", "lease_id")
 
     def __init__(self, lease_key: bytes, key_expr: str, lease_id: str) -> None:
+        self.lease_id = lease_id
         key = key_expr.encode()
         lid = lease_id.encode()
         prefix = hashlib.blake2b(key=lease_key, digest_size=MAC_BYTES, person=_PERSON)
@@ -95,6 +96,12 @@ class CommandMac:
         h.update(body)
         return h.digest()
 
+    def command(self, seq: int, message: Message, now: float) -> bytes:
+        """The encoded MacCommand carrying ``message`` on this key expression."""
+        body = encode(message)
+        tag = self.tag(seq, now, body)
+        return encode(MacCommand(lease_id=self.lease_id, seq=seq, sent_at=now, body=body, mac=tag))
+
 
 def command_mac(
     lease_key: bytes, key_expr: str, lease_id: str, seq: int, sent_at: float, body: bytes
@@ -104,24 +111,11 @@ def command_mac(
 
 
 def mac_command(
-    lease_key: bytes | CommandMac,
-    key_expr: str,
-    lease_id: str,
-    seq: int,
-    message: Message,
-    now: float,
+    lease_key: bytes, key_expr: str, lease_id: str, seq: int, message: Message, now: float
 ) -> bytes:
-    """The encoded MacCommand carrying ``message`` to ``key_expr`` under a MAC lease.
-
-    ``lease_key``: the lease key, or the lease's :class:`CommandMac` for
-    ``key_expr`` (a sender that keeps one pays less per command).
-    """
-    body = encode(message)
-    if isinstance(lease_key, CommandMac):
-        tag = lease_key.tag(seq, now, body)
-    else:
-        tag = command_mac(lease_key, key_expr, lease_id, seq, now, body)
-    return encode(MacCommand(lease_id=lease_id, seq=seq, sent_at=now, body=body, mac=tag))
+    """The encoded MacCommand carrying ``message`` to ``key_expr`` under a MAC lease
+    (:class:`CommandMac`, for a single use)."""
+    return CommandMac(lease_key, key_expr, lease_id).command(seq, message, now)
 
 
 def mac_matches(expected: bytes, received: bytes) -> bool:

@@ -47,7 +47,7 @@ from common.controller import (
     PROXIMITY_SENSORS,
     KheperaState,
 )
-from common.leasemac import CommandMac, mac_command, open_key
+from common.leasemac import CommandMac, open_key
 from common.messages import (
     MAX_BUNDLED,
     AgentCommand,
@@ -441,7 +441,7 @@ class ZenohRobotLink:
             now = time.time()
             if lease is not None and lease.session_id == session.session_id and now <= lease.end:
                 seq = session.next_seq()
-                payload = mac_command(lease.mac, self._cmd_key, lease.lease_id, seq, message, now)
+                payload = lease.mac.command(seq, message, now)
                 mac = True
             else:
                 payload = session.seal(self._cmd_key, message)
