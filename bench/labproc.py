@@ -14,7 +14,7 @@ from common.keys import AliveKind
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch
 from common.zconfig import NetworkOptions
-from services.registry_db import RegistryDB
+from services.registry.accounts_db import RegistryDB
 
 REPO = Path(__file__).resolve().parent.parent
 

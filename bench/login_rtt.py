@@ -13,7 +13,7 @@ from bench.labproc import BenchLab
 from common.auth import create_identity_key
 from common.client import LabClient
 from common.service import close_session, open_session
-from services.registry_db import RegistryDB
+from services.registry.accounts_db import RegistryDB
 
 PASSWORD = "benchmark password"
 

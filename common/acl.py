@@ -8,7 +8,7 @@ into the session token: ``permissions`` (global) and ``grants`` (scope ->
 permissions), so a service decides offline with :meth:`Principal.allowed`.
 
 Credential types are pluggable: each kind has a name stored in the registry's
-database and a check (services/registry_db.py); the client side of the
+database and a check (services/registry/accounts_db.py); the client side of the
 Ed25519 key credential is :func:`key_login_binding`.
 """
 

@@ -15,28 +15,43 @@ from collections.abc import Sequence
 
 # name: (module, one-line description). Kept in the order of the help text.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "up": ("services.up", "start a whole lab on this machine under supervision"),
-    "router": ("services.router", "run a Zenoh router (one per host)"),
-    "registry": ("services.registry", "the server: accounts, login, ACL, presence, directory"),
-    "users": ("services.users", "add, change and remove accounts and grants (registry DB)"),
-    "context": ("services.context", "run a context: wart context chat --name ROOM"),
-    "chat": ("services.chat", "chat in a room from a terminal"),
+    "up": ("services.commands.up", "start a whole lab on this machine under supervision"),
+    "router": ("services.router.main", "run a Zenoh router (one per host)"),
+    "registry": (
+        "services.registry.main",
+        "the server: accounts, login, ACL, presence, directory",
+    ),
+    "users": (
+        "services.commands.users",
+        "add, change and remove accounts and grants (registry DB)",
+    ),
+    "context": ("services.context.main", "run a context: wart context chat --name ROOM"),
+    "chat": ("services.commands.chat", "chat in a room from a terminal"),
     "khepera-emulator": (
         "services.bridge.emulator",
         "an emulated Khepera robot on a pseudo-terminal (no hardware needed)",
     ),
     "engine": ("services.engine.main", "run a simulated world (the Sim2D engine)"),
     "viewer": ("viewers.web.app", "serve the web viewer (browser WARTApp on viser)"),
-    "runner": ("services.runner.service", "run uploaded controllers in sandboxes"),
-    "control": ("services.control", "drive a robot with your controller from this machine"),
-    "deploy": ("services.deploy", "upload a controller to run on a robot in the lab"),
+    "runner": ("services.runner.main", "run uploaded controllers in sandboxes"),
+    "control": (
+        "services.commands.control",
+        "drive a robot with your controller from this machine",
+    ),
+    "deploy": ("services.commands.deploy", "upload a controller to run on a robot in the lab"),
     "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
-    "host": ("services.host", "run this machine's share of a multi-host lab (lab file)"),
-    "arena": ("services.arena", "start, list and stop simulated arenas on the lab's hosts"),
-    "room": ("services.room", "start and stop chat rooms on request (host permission)"),
-    "certs": ("services.certs", "the lab's CA and TLS certificates (routers, services, clients)"),
+    "host": ("services.host.main", "run this machine's share of a multi-host lab (lab file)"),
+    "arena": (
+        "services.commands.arena",
+        "start, list and stop simulated arenas on the lab's hosts",
+    ),
+    "room": ("services.commands.room", "start and stop chat rooms on request (host permission)"),
+    "certs": (
+        "services.commands.certs",
+        "the lab's CA and TLS certificates (routers, services, clients)",
+    ),
     "doctor": (
-        "services.doctor",
+        "services.commands.doctor",
         "check a lab's hosts, routers, links and services; say what is wrong",
     ),
 }

@@ -27,17 +27,14 @@ Token: ``alive/runner/<name>``.
 from __future__ import annotations
 
 import logging
-import sys
 import threading
 import time
-from collections.abc import Sequence
-from pathlib import Path
 
 import zenoh
 
-from common import cli, keys
+from common import keys
 from common.auth import Verifier
-from common.client import ServiceCredentials, ServiceLogin
+from common.client import ServiceLogin
 from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
@@ -51,7 +48,7 @@ from common.messages import (
 )
 from common.precheck import PrecheckError, precheck
 from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
-from common.service import RequestError, Service, run_service
+from common.service import RequestError, Service
 from services.runner.sandbox import Sandbox, SandboxLimits
 
 log = logging.getLogger("wart.runner")
@@ -262,48 +259,3 @@ class RunnerService(Service):
         )
         claim = RunClaim(request_id=request.request_id, agent=request.agent)
         return RunAccepted(claim=self.login.session.seal(self._key, claim))
-
-
-def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
-    p = cli.parser(prog, __doc__ or "")
-    p.add_argument("--name", default="runner", help="the runner's id (default runner)")
-    p.add_argument("--user", required=True, help="the runner's service account (with 'run')")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
-    )
-    p.add_argument("--cpu-seconds", type=int, default=120, help="CPU time per controller")
-    p.add_argument("--memory-mb", type=int, default=256, help="address space per controller")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        keys.check_ident("runner", args.name)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "runner"
-        )
-    except ValueError as exc:
-        return cli.fail(str(exc))
-    if not (1 <= args.cpu_seconds <= 3600 and 32 <= args.memory_mb <= 8192):
-        return cli.fail("--cpu-seconds must be 1..3600 and --memory-mb 32..8192")
-    from services.runner.sandbox import sandbox_problem
-
-    problem = sandbox_problem()
-    if problem:
-        return cli.fail(f"cannot run uploaded controllers here: {problem}")
-    limits = SandboxLimits(cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20)
-
-    def build(session: zenoh.Session) -> RunnerService:
-        login = credentials.login(session, options.realm, f"runner {args.name}")
-        return RunnerService(
-            session,
-            options.realm,
-            args.name,
-            registry_key=credentials.registry_key,
-            login=login,
-            limits=limits,
-        )
-
-    return run_service(f"runner {args.name}", options, build)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -18,7 +18,7 @@ from common.client import LabClient
 from common.keys import AliveKind
 from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session
-from services.registry_db import RegistryDB
+from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Proc, wait_for
 from tests.integration.labkit import PASSWORD, Lab
 

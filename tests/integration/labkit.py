@@ -15,7 +15,7 @@ from common.client import LabClient
 from common.keys import AliveKind
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch
-from services.registry_db import RegistryDB
+from services.registry.accounts_db import RegistryDB
 from tests.conftest import Proc, Procs, Router
 
 PASSWORD = "correct horse"

@@ -25,8 +25,8 @@ from common.messages import AgentCommand, Lease, PackedArray, WorldFrame, decode
 from common.messages.world import WorldSnapshot
 from common.service import close_session, open_session
 from common.zsecurity import TlsFiles, client_tls, host_tls, zenoh_security
-from services.arena import new_arena, stop_arena
-from services.hostplan import read_registry_key
+from services.commands.arena import new_arena, stop_arena
+from services.lab.plan import read_registry_key
 
 FORGED_TICK = 987_654
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"

@@ -24,7 +24,7 @@ import pytest
 
 from common.certs import init_ca, issue
 from common.labfile import load
-from services.certs import issue_lab
+from services.commands.certs import issue_lab
 from tests import netns
 
 pytestmark = [pytest.mark.integration, pytest.mark.netns]

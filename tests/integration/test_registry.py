@@ -16,7 +16,7 @@ from common.client import (
     WrongCredentials,
 )
 from common.service import close_session
-from services.registry_db import RegistryDB
+from services.registry.accounts_db import RegistryDB
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 

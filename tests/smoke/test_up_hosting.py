@@ -21,7 +21,7 @@ from common.host_client import NameTaken, host_arena, host_loads, host_room, sto
 from common.messages import ContextInfo
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
-from services.registry_db import RegistryDB
+from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, wait_for, wart_env
 from tests.lab import Lab
 

@@ -10,7 +10,7 @@ import pytest
 from common import acl
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.messages import OkReply
-from services.registry_db import DbError, RegistryDB
+from services.registry.accounts_db import DbError, RegistryDB
 
 
 def test_roles_expand_and_scoped_grants_stay_in_their_scope() -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from services.agent_queue import ControlJob, QueueBook, RunningJob
+from services.context.agent_queue import ControlJob, QueueBook, RunningJob
 
 
 def job(rid: str, agent: str = "k1", user: str = "alice") -> ControlJob:

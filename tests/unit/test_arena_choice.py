@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from common.messages.host import ArenaInfo, HostLoad
-from services.arena import ArenaError, choose_host
+from services.commands.arena import ArenaError, choose_host
 
 
 def load(host: str, arenas: int, cpu: float, accepting: bool = True, reason: str = "") -> HostLoad:

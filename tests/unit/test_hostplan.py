@@ -10,8 +10,8 @@ import pytest
 
 from common.labfile import LabFileError, load, parse
 from common.zsecurity import ROLE_GRANTS
-from services.certs import host_roles, issue_lab, service_accounts
-from services.hostplan import HostContext, host_plan, read_registry_key, write_configs
+from services.commands.certs import host_roles, issue_lab, service_accounts
+from services.lab.plan import HostContext, host_plan, read_registry_key, write_configs
 from tests.conftest import REPO
 
 EXAMPLE = REPO / "deploy" / "lab.example.toml"

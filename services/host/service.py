@@ -44,7 +44,7 @@ from common.messages.host import (
 from common.revocations import RevocationFeed
 from common.service import RequestError, Service
 from common.supervisor import Child, ChildSpec, Supervisor
-from services.hostplan import map_with_robots
+from services.lab.plan import map_with_robots
 
 
 class HostingPlan(ABC):

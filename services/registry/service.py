@@ -1,6 +1,6 @@
 """``wart registry``: the Server of the thesis (chapter 5).
 
-Accounts and grants (SQLite, services/registry_db.py), login with sealed
+Accounts and grants (SQLite, services/registry/accounts_db.py), login with sealed
 credentials, signed session tokens, logout and revocations, presence and the
 directory of online users and live contexts, private-message mailboxes for
 offline users, kick from the server, admin queries, the server's name.
@@ -14,10 +14,8 @@ from __future__ import annotations
 
 import logging
 import math
-import sys
 import threading
 import time
-from collections.abc import Sequence
 from pathlib import Path
 
 import nacl.exceptions
@@ -25,7 +23,7 @@ import nacl.public
 import nacl.signing
 import zenoh
 
-from common import acl, cli, keys
+from common import acl, keys
 from common.auth import (
     AuthError,
     Principal,
@@ -73,9 +71,9 @@ from common.messages import (
     decode,
     encode,
 )
-from common.service import RequestError, Service, run_service
+from common.service import RequestError, Service
 from common.supervisor import AliveWatch
-from services.registry_db import DbError, RegistryDB, SessionRecord
+from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 
 log = logging.getLogger("wart.registry")
 
@@ -524,50 +522,3 @@ def provision(db_path: Path, key_path: Path) -> tuple[RegistryIdentity, str | No
         secret.write_text(f"{password}\n")
         secret.chmod(0o600)
     return identity, password, created
-
-
-def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
-    p = cli.parser(prog, __doc__ or "")
-    p.add_argument("--db", type=Path, required=True, help="the SQLite database (created if absent)")
-    p.add_argument(
-        "--key-file",
-        type=Path,
-        required=True,
-        help="the registry's Ed25519 key (created if absent; keep it secret)",
-    )
-    p.add_argument("--name", help="rename the server (shown in the directory)")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        identity, password, created = provision(args.db, args.key_file)
-    except (ValueError, OSError) as exc:
-        return cli.fail(str(exc))
-    key_hex = identity.verify_key.hex()
-    if options.registry_key and options.registry_key.lower() != key_hex:
-        return cli.fail(
-            f"--registry-key does not match the key in {args.key_file} "
-            f"(that key's fingerprint is {key_fingerprint(identity.verify_key)})"
-        )
-    say = "created" if created else "loaded"
-    print(f"registry key {say}: {key_hex}", flush=True)
-    print(f"  fingerprint {key_fingerprint(identity.verify_key)}; pin it with --registry-key")
-    if password is not None:
-        print(
-            f"first start: created user 'admin' with password {password}\n"
-            f"  (also written to {args.db.parent / 'admin-password.txt'}); log in with\n"
-            f"  wart chat lobby --user admin --registry-key {key_hex}",
-            flush=True,
-        )
-    db = RegistryDB(args.db)
-    if args.name:
-        db.set_setting("server_name", args.name)
-    try:
-        return run_service(
-            "registry", options, lambda session: Registry(session, options.realm, db, identity)
-        )
-    finally:
-        db.close()
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -10,25 +10,15 @@ prompt. Type a line and Enter to say it. Commands:
 
 from __future__ import annotations
 
-import argparse
-import getpass
-import os
 import sys
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 
 from common import cli, keys
 from common.client import LabClient, LabError, PrivateText, connect
 from common.messages import ChatLine, KickNotice, RoomEvent
-
-_print_lock = threading.Lock()
-
-
-def say(text: str) -> None:
-    with _print_lock:
-        print(text, flush=True)
+from services.commands.terminal import password_from, say
 
 
 def show_line(line: ChatLine) -> None:
@@ -43,12 +33,6 @@ def on_event(event: RoomEvent) -> None:
         extra = f" by {s.by}" if s.by else ""
         why = f" ({s.reason})" if s.reason else ""
         say(f"* {s.user} {s.status}{extra}{why}; here: {', '.join(event.members)}")
-
-
-def password_from(args: argparse.Namespace) -> str:
-    if args.password_file:
-        return Path(args.password_file).read_text().rstrip("\n")
-    return os.environ.get("WART_PASSWORD") or getpass.getpass(f"password for {args.user}: ")
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart chat") -> int:

@@ -1,6 +1,6 @@
 """``wart context agent --world W --name CTX``: an agent context (the thesis's AgentContext, 7.4.2).
 
-Everything a chat room has (it *is* a :class:`~services.chat_context.ChatRoom`:
+Everything a chat room has (it *is* a :class:`~services.context.chat_room.ChatRoom`:
 members, chat, history, kick), plus the agents of one world (simulated by an
 engine or real behind a bridge: the same keys, so it does not care which) and
 a FIFO queue of controller requests per agent. The request at the head runs
@@ -28,15 +28,13 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Sequence
 from typing import Any
 
 import msgspec
 import zenoh
 
-from common import acl, cli, keys
+from common import acl, keys
 from common.auth import AuthError, Principal
-from common.client import ServiceCredentials
 from common.leasemac import check_world_token, new_lease_key, seal_key
 from common.messages import (
     AgentContextState,
@@ -69,9 +67,9 @@ from common.messages import (
     decode,
 )
 from common.precheck import PrecheckError, precheck
-from common.service import RequestError, run_service
-from services.agent_queue import ControlJob, QueueBook, RunningJob, new_request_id
-from services.chat_context import ChatRoom, log
+from common.service import RequestError
+from services.context.agent_queue import ControlJob, QueueBook, RunningJob, new_request_id
+from services.context.chat_room import ChatRoom, log
 
 LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
@@ -720,52 +718,3 @@ class AgentContext(ChatRoom):
             raise RequestError("unavailable", f"{principal.user} may not run controllers")
         self._runner_users[job.request_id] = principal.user
         return principal.session_id, principal.token.box_key
-
-
-def main(argv: Sequence[str] | None = None, prog: str = "wart context agent") -> int:
-    p = cli.parser(prog, __doc__ or "")
-    cli.add_context_arguments(p, "context", "arena")
-    p.add_argument("--world", required=True, help="the world whose agents it queues (e.g. arena1)")
-    p.add_argument(
-        "--runner", default="runner", help="the runner that runs uploads (default runner)"
-    )
-    p.add_argument(
-        "--slot-seconds", type=float, default=60.0, help="each controller's time slot (default 60)"
-    )
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        keys.check_ident("context", args.name)
-        keys.check_ident("world", args.world)
-        keys.check_ident("runner", args.runner)
-        if args.owner:
-            keys.check_ident("owner", args.owner)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "context"
-        )
-    except ValueError as exc:
-        return cli.fail(str(exc))
-    if not 1.0 <= args.slot_seconds <= 3600.0:
-        return cli.fail("--slot-seconds must be 1..3600")
-    if not 1 <= args.history <= 100_000:
-        return cli.fail("--history must be 1..100000")
-
-    def build(session: zenoh.Session) -> AgentContext:
-        login = credentials.login(session, options.realm, f"context {args.name}")
-        return AgentContext(
-            session,
-            options.realm,
-            args.name,
-            world=args.world,
-            runner=args.runner,
-            slot_seconds=args.slot_seconds,
-            registry_key=credentials.registry_key,
-            login=login,
-            owner=args.owner or args.user,
-            title=args.title,
-            data_dir=args.data_dir,
-            history_size=args.history,
-            restricted=args.restricted,
-        )
-
-    return run_service(f"agent context {args.name}", options, build)

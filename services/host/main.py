@@ -25,8 +25,8 @@ from common.labfile import LabFile, LabFileError, load
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch, Child, ChildSpec, Supervisor
 from common.zconfig import NetworkOptions
-from services.hosting import HostingPlan, HostingService
-from services.hostplan import (
+from services.host.service import HostingPlan, HostingService
+from services.lab.plan import (
     HostContext,
     arena_specs,
     check_available,
@@ -67,7 +67,7 @@ class LabFilePlan(HostingPlan):
 
 
 class HostService(HostingService):
-    """The hosting service of a lab file's host (see services/hosting.py)."""
+    """The hosting service of a lab file's host (see services/host/service.py)."""
 
     def __init__(self, session: zenoh.Session, ctx: HostContext, supervisor: Supervisor) -> None:
         super().__init__(session, LabFilePlan(ctx), supervisor)
@@ -83,7 +83,7 @@ def prepare(lab: LabFile, host_name: str, state_dir: Path | None) -> HostContext
     check_available(lab, host)
     state = state_dir or (lab.state_dir / host.name if lab.state_dir else None)
     if state is None:
-        from services.up import default_state_dir
+        from services.commands.up import default_state_dir
 
         state = default_state_dir(lab.realm) / host.name
     state.mkdir(parents=True, exist_ok=True)
@@ -98,9 +98,9 @@ def provision_registry_host(ctx: HostContext) -> None:
     """The registry's DB, its admin account, and every service account of the lab."""
     import json
 
-    from services.certs import ACCOUNTS, registry_key_path
-    from services.registry import provision
-    from services.up import register_service_accounts
+    from services.commands.certs import ACCOUNTS, registry_key_path
+    from services.commands.up import register_service_accounts
+    from services.registry.service import provision
 
     identity, password, _ = provision(ctx.state_dir / "registry.db", registry_key_path(ctx.lab))
     if identity.verify_key.hex() != ctx.registry_key:

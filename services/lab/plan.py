@@ -1,6 +1,6 @@
 """What ``wart host`` runs on one host, as data: child specs from the lab file.
 
-Kept apart from the process (services/host.py) so tests and ``wart doctor``
+Kept apart from the process (services/host/main.py) so tests and ``wart doctor``
 can compute a host's plan without starting anything. The arena's processes
 come from the lab file's ``[arena]`` templates (engine and agent context),
 filled by :func:`arena_specs`; an engine named in the lab file is an arena too.
@@ -18,9 +18,9 @@ from common.keys import AliveKind
 from common.labfile import HostEntry, LabFile, LabFileError, ServiceEntry, fill
 from common.supervisor import ChildSpec
 from common.zsecurity import acl_config, host_tls, write_config, zenoh_security
-from services.certs import identity_path, registry_key_path
+from services.commands.certs import identity_path, registry_key_path
 
-REPO_MAPS = Path(__file__).resolve().parent.parent / "maps"
+REPO_MAPS = Path(__file__).resolve().parents[2] / "maps"
 
 # The command each service kind needs (a build without one refuses the host).
 NEEDS: dict[str, tuple[str, ...]] = {
@@ -44,7 +44,7 @@ def command_available(argv: tuple[str, ...] | list[str]) -> bool:
     if not argv or argv[0] not in SUBCOMMANDS:
         return False
     if argv[0] == "context" and len(argv) > 1:
-        from services.context import KINDS
+        from services.context.main import KINDS
 
         return argv[1] in KINDS
     return True
@@ -123,7 +123,7 @@ def write_configs(ctx: HostContext) -> None:
             "admin": lab.security.admin_names,
         }
         acl = acl_config(lab.realm, names)
-    from services.certs import host_roles
+    from services.commands.certs import host_roles
 
     for role in host_roles(lab, host.name):
         conf = zenoh_security(

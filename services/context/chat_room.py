@@ -17,19 +17,17 @@ events with that session, so clients can tell them from forgeries.
 from __future__ import annotations
 
 import logging
-import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
 from pathlib import Path
 
 import msgspec
 import zenoh
 
-from common import acl, cli, keys
+from common import acl, keys
 from common.auth import AuthError, Principal, Verifier
-from common.client import ServiceCredentials, ServiceLogin
+from common.client import ServiceLogin
 from common.keys import AliveKind
 from common.messages import (
     MAX_LINE_CHARS,
@@ -48,7 +46,7 @@ from common.messages import (
     UserRemovalRequest,
 )
 from common.revocations import RevocationFeed
-from common.service import RequestError, Service, run_service
+from common.service import RequestError, Service
 
 log = logging.getLogger("wart.chat")
 
@@ -352,51 +350,3 @@ class ChatRoom(Service):
             parsed[1],
             MemberStatus(user=parsed[1], status="disconnected", reason="the client went away"),
         )
-
-
-def main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> int:
-    p = cli.parser(prog, __doc__ or "")
-    cli.add_context_arguments(p, "room", "lobby")
-    p.add_argument("--max-line", type=int, default=MAX_LINE_CHARS, help="longest line accepted")
-    p.add_argument("--rate", type=float, default=2.0, help="lines per second per user (default 2)")
-    p.add_argument("--burst", type=float, default=10.0, help="lines a user may send at once")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        keys.check_ident("room", args.name)
-        if args.owner:
-            keys.check_ident("owner", args.owner)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "room"
-        )
-    except ValueError as exc:
-        return cli.fail(str(exc))
-    if not (1 <= args.history <= 100_000 and 1 <= args.max_line <= 16_000):
-        return cli.fail("--history must be 1..100000 and --max-line 1..16000")
-    if args.rate <= 0 or args.burst < 1:
-        return cli.fail("--rate must be > 0 and --burst >= 1")
-
-    def build(session: zenoh.Session) -> ChatRoom:
-        login = credentials.login(session, options.realm, f"room {args.name}")
-        log.info("room %s logged in as %s", args.name, args.user)
-        return ChatRoom(
-            session,
-            options.realm,
-            args.name,
-            registry_key=credentials.registry_key,
-            login=login,
-            owner=args.owner or args.user,
-            title=args.title,
-            data_dir=args.data_dir,
-            history_size=args.history,
-            max_line=args.max_line,
-            burst=args.burst,
-            per_second=args.rate,
-            restricted=args.restricted,
-        )
-
-    return run_service(f"chat room {args.name}", options, build)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

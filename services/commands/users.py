@@ -23,7 +23,7 @@ from pathlib import Path
 
 from common import acl, cli
 from common.auth import create_identity_key, load_identity_key, parse_public_key
-from services.registry_db import DbError, RegistryDB
+from services.registry.accounts_db import DbError, RegistryDB
 
 
 def read_password(args: argparse.Namespace, prompt: str) -> str:

@@ -124,7 +124,7 @@ def expected_tokens(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
 
 
 def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Report:
-    from services.arena import format_loads, host_loads
+    from services.commands.arena import format_loads, host_loads
 
     report = Report()
     sessions: list[zenoh.Session] = []

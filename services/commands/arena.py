@@ -90,7 +90,7 @@ def lab_session(
 ) -> tuple[zenoh.Session, str, str]:
     """The Zenoh session, realm and registry key of the lab the tool talks to."""
     if args.lab is not None:
-        from services.hostplan import read_registry_key
+        from services.lab.plan import read_registry_key
 
         lab = load(args.lab)
         registry_key = read_registry_key(lab)
@@ -106,7 +106,7 @@ def lab_session(
 
 
 def _password(args: argparse.Namespace) -> str:
-    from services.chat import password_from
+    from services.commands.terminal import password_from
 
     return password_from(args)
 

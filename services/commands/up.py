@@ -27,8 +27,8 @@ from common.labfile import Limits
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch, ChildSpec, Supervisor
 from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
-from services.hosting import HostingPlan, HostingService
-from services.hostplan import find_map
+from services.host.service import HostingPlan, HostingService
+from services.lab.plan import find_map
 
 log = logging.getLogger("wart.up")
 
@@ -69,7 +69,7 @@ REAL_CONTEXT = "robots"  # the agent context on the real world
 REAL_WORLD = "real1"
 # The worlds log in too (optional for them): with an identity, agent contexts
 # grant MAC leases and commands cost µs to check instead of an Ed25519 verify.
-# Contexts started on request (services/hosting.py) share one account per kind:
+# Contexts started on request (services/host/service.py) share one account per kind:
 # an account may hold several sessions, and provisioning them here, before the
 # registry starts, means nothing is registered while the lab runs.
 HOST_NAME = "local"  # the one-machine lab's host, on host/local/{spawn,load}
@@ -102,7 +102,7 @@ def service_login(lab: LabSettings, account: str) -> list[str]:
     return ["--user", account, "--identity", str(service_identity(lab, account))]
 
 
-SHIPPED_MAPS = Path(__file__).resolve().parent.parent / "maps"
+SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "maps"
 
 
 def seed_maps(maps_dir: Path) -> None:
@@ -127,7 +127,7 @@ def provision(lab: LabSettings) -> LabSettings:
     for each context the lab runs. Returns the settings with the key pinned.
     """
     from common.auth import create_identity_key, key_fingerprint, load_identity_key
-    from services.registry import provision as provision_registry
+    from services.registry.service import provision as provision_registry
 
     seed_maps(lab.state_dir / "maps")
     identity, password, created = provision_registry(
@@ -166,7 +166,7 @@ def register_service_accounts(db_path: Path, accounts: Mapping[str, bytes]) -> N
     Shared by ``wart up`` (its own services) and ``wart host`` (every service
     of a lab file, keys from the lab's PKI directory); idempotent.
     """
-    from services.registry_db import RegistryDB
+    from services.registry.accounts_db import RegistryDB
 
     db = RegistryDB(db_path)
     try:

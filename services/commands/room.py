@@ -22,7 +22,7 @@ from common.host_client import host_room, stop_hosted
 from common.labfile import LabFileError
 from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.arena import add_lab_arguments, lab_session
+from services.commands.arena import add_lab_arguments, lab_session
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
@@ -46,7 +46,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
 
 
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
-    from services.chat import password_from
+    from services.commands.terminal import password_from
 
     session, realm, registry_key = lab_session(args, options)
     try:

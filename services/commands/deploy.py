@@ -16,8 +16,7 @@ from common import cli
 from common.agent_client import FINAL, AgentClient
 from common.messages import RequestStatus
 from common.precheck import PrecheckError
-from services.chat import say
-from services.control import (
+from services.commands.control import (
     interrupt_event,
     read_checked,
     session_for,
@@ -25,6 +24,7 @@ from services.control import (
     show_wait,
     tool_parser,
 )
+from services.commands.terminal import say
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:

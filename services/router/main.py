@@ -8,36 +8,14 @@ interfaces: ``wart router --listen tcp/0.0.0.0:7447``.
 
 from __future__ import annotations
 
-import json
-import socket
 from collections.abc import Sequence
 
 import zenoh
 
-from common import cli, keys
-from common.keys import AliveKind, is_ident
-from common.service import Service, run_service
+from common import cli
+from common.service import run_service
 from common.zconfig import DEFAULT_PORT
-
-
-class Router(Service):
-    """The router's own presence; the routing is Zenoh's, in the same session."""
-
-    kind = AliveKind.ROUTER
-
-    def locators(self) -> list[str]:
-        """The endpoints this router actually listens on (port 0 resolved)."""
-        zid = str(self.session.zid())
-        for reply in self.session.get(keys.router_admin(zid), timeout=2.0):
-            if reply.ok is not None:
-                info = json.loads(reply.ok.payload.to_bytes())
-                return [str(loc) for loc in info.get("locators", [])]
-        return []
-
-
-def default_name() -> str:
-    name = socket.gethostname().split(".")[0]
-    return name if is_ident(name) else "router"
+from services.router.service import Router, default_name
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart router") -> int:

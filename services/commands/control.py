@@ -26,7 +26,7 @@ from common.controller import load_controller
 from common.messages import OutputLines, RequestStatus
 from common.precheck import PrecheckError, precheck
 from common.service import close_session
-from services.chat import password_from, say
+from services.commands.terminal import password_from, say
 
 
 def tool_parser(prog: str, doc: str) -> argparse.ArgumentParser:

@@ -1,0 +1,72 @@
+"""``wart registry``: the Server of the thesis (chapter 5).
+
+Accounts and grants (SQLite, services/registry/accounts_db.py), login with sealed
+credentials, signed session tokens, logout and revocations, presence and the
+directory of online users and live contexts, private-message mailboxes for
+offline users, kick from the server, admin queries, the server's name.
+
+On first start it creates its key (``--key-file``), its database (``--db``)
+and an ``admin`` account, and prints the key every service must pin
+(``--registry-key``) and the admin's password.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from common import cli
+from common.auth import (
+    key_fingerprint,
+)
+from common.service import run_service
+from services.registry.accounts_db import RegistryDB
+from services.registry.service import Registry, provision
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("--db", type=Path, required=True, help="the SQLite database (created if absent)")
+    p.add_argument(
+        "--key-file",
+        type=Path,
+        required=True,
+        help="the registry's Ed25519 key (created if absent; keep it secret)",
+    )
+    p.add_argument("--name", help="rename the server (shown in the directory)")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        identity, password, created = provision(args.db, args.key_file)
+    except (ValueError, OSError) as exc:
+        return cli.fail(str(exc))
+    key_hex = identity.verify_key.hex()
+    if options.registry_key and options.registry_key.lower() != key_hex:
+        return cli.fail(
+            f"--registry-key does not match the key in {args.key_file} "
+            f"(that key's fingerprint is {key_fingerprint(identity.verify_key)})"
+        )
+    say = "created" if created else "loaded"
+    print(f"registry key {say}: {key_hex}", flush=True)
+    print(f"  fingerprint {key_fingerprint(identity.verify_key)}; pin it with --registry-key")
+    if password is not None:
+        print(
+            f"first start: created user 'admin' with password {password}\n"
+            f"  (also written to {args.db.parent / 'admin-password.txt'}); log in with\n"
+            f"  wart chat lobby --user admin --registry-key {key_hex}",
+            flush=True,
+        )
+    db = RegistryDB(args.db)
+    if args.name:
+        db.set_setting("server_name", args.name)
+    try:
+        return run_service(
+            "registry", options, lambda session: Registry(session, options.realm, db, identity)
+        )
+    finally:
+        db.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""``wart runner``: runs uploaded controllers for agent contexts, each in a sandbox.
+
+An agent context (a principal with ``lease``) asks on ``runner/<name>/run``
+(:class:`RunRequest`) to run a controller on an agent until a wall-clock
+end. The runner pre-checks the source again (never trusting the context's
+check), starts a :class:`~services.runner.sandbox.Sandbox`, and replies with a
+claim sealed by its own session: the context's lease names that session.
+Then, per run:
+
+- a relay thread hands the agent's newest sensor sample to the sandbox (the
+  Zenoh callback only keeps the newest one: a stalled sandbox stalls nothing);
+- the sandbox's validated commands become ``AgentCommand`` sealed with the
+  runner's session (``common.remote_robot.ZenohRobotLink``, whose keep-alive
+  feeds the world's watchdog while the sandbox lives);
+- all runs on one world share a ``WorldChannel``: the world's samples of
+  every leased agent arrive in one ``SampleBundle`` per tick and the runs'
+  commands leave in ``CommandBundle``s, not one message per robot each way;
+- output lines (prints, tracebacks) go to the context as
+  :class:`ControllerOutput` on ``ctx/<ctx>/output``, batched every 100 ms;
+- at the end (slot over, :class:`RunStop`, the controller ended or crashed)
+  the robot is told to stop and the context gets ``done`` with the reason.
+
+Uploaded code never sees Zenoh, keys or the lease: only pipes to this process.
+Token: ``alive/runner/<name>``.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+from common import cli, keys
+from common.client import ServiceCredentials
+from common.service import run_service
+from services.runner.sandbox import SandboxLimits
+from services.runner.service import RunnerService
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("--name", default="runner", help="the runner's id (default runner)")
+    p.add_argument("--user", required=True, help="the runner's service account (with 'run')")
+    p.add_argument(
+        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    )
+    p.add_argument("--cpu-seconds", type=int, default=120, help="CPU time per controller")
+    p.add_argument("--memory-mb", type=int, default=256, help="address space per controller")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        keys.check_ident("runner", args.name)
+        credentials = ServiceCredentials.from_options(
+            options.registry_key, args.user, args.identity, "runner"
+        )
+    except ValueError as exc:
+        return cli.fail(str(exc))
+    if not (1 <= args.cpu_seconds <= 3600 and 32 <= args.memory_mb <= 8192):
+        return cli.fail("--cpu-seconds must be 1..3600 and --memory-mb 32..8192")
+    from services.runner.sandbox import sandbox_problem
+
+    problem = sandbox_problem()
+    if problem:
+        return cli.fail(f"cannot run uploaded controllers here: {problem}")
+    limits = SandboxLimits(cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20)
+
+    def build(session: zenoh.Session) -> RunnerService:
+        login = credentials.login(session, options.realm, f"runner {args.name}")
+        return RunnerService(
+            session,
+            options.realm,
+            args.name,
+            registry_key=credentials.registry_key,
+            login=login,
+            limits=limits,
+        )
+
+    return run_service(f"runner {args.name}", options, build)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
