@@ -471,7 +471,7 @@ class KheperaRobot:
         reads: list[tuple[str, Callable[[], object]]] = [
             ("proximity", lambda: self._request(P.read_proximity()).values),
             ("ambient", lambda: self._request(P.read_ambient()).values),
-            ("counters", lambda: self._request(P.read_counters())),
+            ("counters", self._read_counters),
             ("speed", lambda: self._request(P.read_speed())),
         ]
         rounds = self._state.rounds
@@ -486,11 +486,17 @@ class KheperaRobot:
                 raise
             except P.ProtocolError as exc:
                 log.warning("%s: %s read failed: %s", self.port, name, exc)
-        now = time.monotonic()
-        counters = changes.get("counters")
-        if isinstance(counters, P.WheelPair):
-            changes["pose"] = self._odometry.update(counters.left, counters.right, now)
-        self._update(rounds=rounds + 1, updated=now, **changes)
+        changes["pose"] = self._odometry.pose
+        self._update(rounds=rounds + 1, updated=time.monotonic(), **changes)
+
+    def _read_counters(self) -> P.WheelPair:
+        # The pose is advanced the moment the counters are read, not at the end of the
+        # round: a reset banner seen by a later read of the same round (E, the gripper)
+        # must rebaseline after this reading, or the round would end by taking the
+        # pre-reset counters as the new reference and the next delta would run backwards.
+        counters = self._request(P.read_counters())
+        self._odometry.update(counters.left, counters.right, time.monotonic())
+        return counters
 
     def _read_gripper(self) -> GripperState:
         return GripperState(
