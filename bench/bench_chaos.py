@@ -1,0 +1,378 @@
+"""Chaos: kill -9 each service of a running ``wart up`` lab, with clients attached.
+
+For every service it prints how long until the service is back (every
+liveliness token present before the kill is present again) and how long until
+the clients are whole again without any user action: a terminal chat client's
+new line reaches a second terminal client through the room. At the end a
+fresh client reads the room's history: every line acknowledged before a kill
+(seen by the other client) must still be there.
+
+    python -m bench.bench_chaos                  # every service once
+    python -m bench.bench_chaos --only registry --only router
+
+The assertions on the same run live in tests/smoke/test_chaos.py; this prints
+the figures that docs/BENCHMARKS.md records.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import psutil
+
+from common import keys
+from common.service import close_session, open_session
+from common.supervisor import AliveWatch
+from common.zconfig import NetworkOptions
+
+REPO = Path(__file__).resolve().parent.parent
+# The children of a default `wart up`, named by their subcommand and --name (or --world).
+SERVICES = (
+    "router",
+    "registry",
+    "context chat lobby",
+    "engine arena1",
+    "runner runner",
+    "context agent arena",
+    "bridge real1",
+    "viewer",
+)
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def lab_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONUNBUFFERED"] = "1"
+    env["WART_NO_MULTICAST"] = "1"
+    for name in ("WART_CONNECT", "WART_REALM", "WART_PASSWORD", "WART_REGISTRY_KEY"):
+        env.pop(name, None)
+    return env
+
+
+class Lines:
+    """A child's output lines, read by a thread, searchable from any point on."""
+
+    def __init__(self, popen: subprocess.Popen[str]) -> None:
+        self.popen = popen
+        self.lines: list[str] = []
+        self._queue: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.popen.stdout is not None
+        for line in self.popen.stdout:
+            self.lines.append(line.rstrip("\n"))
+            self._queue.put(line.rstrip("\n"))
+
+    def wait(self, needle: str, timeout: float, since: int = 0) -> str | None:
+        deadline = time.monotonic() + timeout
+        seen = since
+        while True:
+            while seen < len(self.lines):
+                if needle in self.lines[seen]:
+                    return self.lines[seen]
+                seen += 1
+            if time.monotonic() > deadline or self.popen.poll() is not None:
+                return None
+            with suppress(queue.Empty):
+                self._queue.get(timeout=0.05)
+
+
+@dataclass
+class ChaosLab:
+    """``wart up`` in a subprocess on free ports with its own realm and state directory."""
+
+    state_dir: Path
+    realm: str = field(default_factory=lambda: f"chaos{os.getpid()}")
+    port: int = field(default_factory=free_port)
+    http_port: int = field(default_factory=free_port)
+    popen: subprocess.Popen[str] | None = None
+    output: Lines | None = None
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/127.0.0.1:{self.port}"
+
+    def start(self, timeout: float = 180.0) -> None:
+        self.popen = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "up",
+                "--realm",
+                self.realm,
+                "--state-dir",
+                str(self.state_dir),
+                "--port",
+                str(self.port),
+                "--http-port",
+                str(self.http_port),
+            ],
+            cwd=REPO,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=lab_env(),
+            start_new_session=True,
+        )
+        self.output = Lines(self.popen)
+        if self.output.wait("The lab is running", timeout) is None:
+            self.stop()
+            raise RuntimeError("the lab did not come up:\n" + "\n".join(self.output.lines))
+
+    def admin_password(self) -> str:
+        return (self.state_dir / "admin-password.txt").read_text().strip()
+
+    def registry_key(self) -> str:
+        assert self.output is not None
+        line = self.output.wait("registry key", 1.0) or ""
+        return line.split(":", 1)[1].split()[0] if ":" in line else ""
+
+    def child(self, service: str) -> psutil.Process | None:
+        """The running child whose command line is ``wart SERVICE ...`` (words in order)."""
+        assert self.popen is not None
+        words = service.split()
+        try:
+            children = psutil.Process(self.popen.pid).children(recursive=True)
+        except psutil.NoSuchProcess:
+            return None
+        for proc in children:
+            try:
+                cmd = proc.cmdline()
+            except psutil.NoSuchProcess:
+                continue
+            if "services.cli" not in cmd:
+                continue
+            args = cmd[cmd.index("services.cli") + 1 :]
+            if args[:1] != words[:1]:
+                continue
+            if len(words) == 1 or _names(args, words[1:]):
+                return proc
+        return None
+
+    def stop(self) -> None:
+        if self.popen is None or self.popen.poll() is not None:
+            return
+        self.popen.send_signal(signal.SIGINT)
+        try:
+            self.popen.wait(40)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+            self.popen.wait(5)
+
+
+def _names(args: Sequence[str], words: Sequence[str]) -> bool:
+    """``context agent arena`` matches ``context agent ... --name arena``; ``engine arena1``
+    matches ``engine ... --world arena1``."""
+    rest = list(words)
+    if rest and len(args) > 1 and args[1] == rest[0]:
+        rest = rest[1:]
+    if not rest:
+        return True
+    for flag in ("--name", "--world"):
+        if (
+            flag in args
+            and args.index(flag) + 1 < len(args)
+            and args[args.index(flag) + 1] == rest[0]
+        ):
+            return True
+    return False
+
+
+class ChatProbe:
+    """``wart chat lobby`` as a user types it, in a subprocess."""
+
+    def __init__(self, lab: ChaosLab, user: str, password: str) -> None:
+        env = lab_env()
+        env["WART_PASSWORD"] = password
+        env["WART_REGISTRY_KEY"] = lab.registry_key()
+        self.popen = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "chat",
+                "lobby",
+                "--user",
+                user,
+                "--realm",
+                lab.realm,
+                "--connect",
+                lab.endpoint,
+                "--no-multicast-scouting",
+            ],
+            cwd=REPO,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+            start_new_session=True,
+        )
+        self.output = Lines(self.popen)
+
+    def say(self, text: str) -> None:
+        assert self.popen.stdin is not None
+        self.popen.stdin.write(text + "\n")
+        self.popen.stdin.flush()
+
+    def close(self) -> None:
+        if self.popen.poll() is None:
+            try:
+                self.say("/quit")
+                self.popen.wait(5)
+            except (OSError, subprocess.TimeoutExpired):
+                self.popen.kill()
+                self.popen.wait(5)
+
+
+@dataclass
+class Outcome:
+    service: str
+    back_s: float | None  # every token present before the kill present again
+    whole_s: float | None  # a new chat line goes through the room again
+    note: str = ""
+
+
+@contextmanager
+def running_lab(state_dir: Path | None = None) -> Iterator[ChaosLab]:
+    tmp = Path(tempfile.mkdtemp(prefix="wart-chaos-")) if state_dir is None else state_dir
+    lab = ChaosLab(tmp / "state")
+    lab.start()
+    try:
+        yield lab
+    finally:
+        lab.stop()
+
+
+class Chaos:
+    """Kills services one at a time and times the way back."""
+
+    def __init__(self, lab: ChaosLab, deadline_s: float = 30.0) -> None:
+        self.lab = lab
+        self.deadline_s = deadline_s
+        password = lab.admin_password()
+        self.talker = ChatProbe(lab, "admin", password)
+        self.listener = ChatProbe(lab, "admin", password)
+        self.acknowledged: list[str] = []  # lines the other client saw: the room had them
+        self._n = 0
+        session_options = NetworkOptions(realm=lab.realm, connect=(lab.endpoint,))
+        self.session = open_session(session_options, wait=20.0)
+        self.watch = AliveWatch(self.session, keys.alive_all(lab.realm))
+        for probe in (self.talker, self.listener):
+            if probe.output.wait("here:", 30) is None:
+                raise RuntimeError("a chat client did not join:\n" + "\n".join(probe.output.lines))
+
+    def _line_goes_through(self, tag: str, timeout: float) -> float | None:
+        """Say fresh lines until the listener sees one; the time it took, or None."""
+        start = time.monotonic()
+        since = len(self.listener.output.lines)
+        while time.monotonic() - start < timeout:
+            self._n += 1
+            text = f"{tag}-{self._n}"
+            self.talker.say(text)
+            if self.listener.output.wait(text, 0.5, since) is not None:
+                self.acknowledged.append(text)
+                return time.monotonic() - start
+        return None
+
+    def kill(self, service: str) -> Outcome:
+        if self._line_goes_through(f"before-{service.replace(' ', '_')}", 10) is None:
+            return Outcome(service, None, None, "the chat was not working before the kill")
+        victim = self.lab.child(service)
+        if victim is None:
+            return Outcome(service, None, None, "no such child")
+        tokens = self.watch.keys()
+        killed_at = time.monotonic()
+        victim.kill()
+        back_s = None
+        # The old tokens go (the router's: all of them) and come back under new sessions.
+        deadline = killed_at + self.deadline_s
+        while time.monotonic() < deadline:
+            new = self.lab.child(service)
+            if new is not None and new.pid != victim.pid and tokens <= self.watch.keys():
+                back_s = time.monotonic() - killed_at
+                break
+            time.sleep(0.02)
+        whole = self._line_goes_through(
+            f"after-{service.replace(' ', '_')}", max(1.0, deadline - time.monotonic())
+        )
+        whole_s = None if whole is None else time.monotonic() - killed_at
+        return Outcome(service, back_s, whole_s)
+
+    def lost_lines(self) -> list[str]:
+        """Acknowledged lines missing from the room's history, as a new client reads it."""
+        reader = ChatProbe(self.lab, "admin", self.lab.admin_password())
+        try:
+            reader.output.wait("here:", 30)
+            last = self.acknowledged[-1] if self.acknowledged else ""
+            reader.output.wait(last, 10)
+            text = "\n".join(reader.output.lines)
+            return [line for line in self.acknowledged if line not in text]
+        finally:
+            reader.close()
+
+    def close(self) -> None:
+        for probe in (self.talker, self.listener):
+            probe.close()
+        self.watch.close()
+        close_session(self.session)
+
+
+def _fmt(value: float | None) -> str:
+    return "never" if value is None else f"{value:5.2f} s"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.bench_chaos", description=__doc__)
+    p.add_argument(
+        "--only", action="append", choices=SERVICES, help="kill only this service (repeatable)"
+    )
+    p.add_argument("--deadline", type=float, default=30.0, help="give up on a service after (s)")
+    args = p.parse_args(argv)
+    services = args.only or list(SERVICES)
+    print(f"chaos: starting a lab ({len(services)} services to kill)...", flush=True)
+    with running_lab() as lab:
+        chaos = Chaos(lab, args.deadline)
+        try:
+            print(f"{'service':<22} {'back':>8} {'clients whole':>14}", flush=True)
+            for service in services:
+                out = chaos.kill(service)
+                note = f"  ({out.note})" if out.note else ""
+                print(
+                    f"{service:<22} {_fmt(out.back_s):>8} {_fmt(out.whole_s):>14}{note}", flush=True
+                )
+            lost = chaos.lost_lines()
+            print(
+                f"acknowledged chat lines: {len(chaos.acknowledged)}, lost: {len(lost)}"
+                + (f" ({', '.join(lost)})" if lost else ""),
+                flush=True,
+            )
+        finally:
+            chaos.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
