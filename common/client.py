@@ -73,6 +73,7 @@ from common.messages import (
     SessionToken,
     SetPassword,
     Ungrant,
+    UnlockLogins,
     UserInfo,
     UserKeysReply,
     UserKeysRequest,
@@ -741,6 +742,10 @@ class LabClient:
 
     def rename_server(self, name: str) -> str:
         return self._admin(RenameServer(name=name), "rename the server").detail
+
+    def unlock_logins(self, user: str) -> str:
+        """Forget the account's failed logins (admin): every source may try again at once."""
+        return self._admin(UnlockLogins(user=user), f"unlock the logins of {user}").detail
 
 
 class ServiceLogin:

@@ -17,6 +17,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, TypeVar
 
 import zenoh
@@ -49,6 +50,7 @@ class Service:
         self.ident = ident
         self.log = logging.getLogger(f"wart.{self.kind.value}.{ident}")
         self._declared: list[Any] = []
+        self._pools: list[ThreadPoolExecutor] = []
         self._token: Any = None
         self._started = False
         self._stopped = threading.Event()
@@ -85,6 +87,8 @@ class Service:
         for handle in reversed(self._declared):
             _quietly(handle.undeclare)
         self._declared.clear()
+        for pool in self._pools:  # queries being answered finish; waiting ones are dropped
+            pool.shutdown(wait=False, cancel_futures=True)
 
     @property
     def stopped(self) -> bool:
@@ -128,8 +132,22 @@ class Service:
 
         return self.track(self.session.declare_subscriber(key_expr, guarded))
 
-    def serve(self, key_expr: str, handler: Callable[[zenoh.Query], Message]) -> Any:
-        """A queryable: ``handler`` returns the reply message; errors become ErrorReply."""
+    def serve(
+        self,
+        key_expr: str,
+        handler: Callable[[zenoh.Query], Message],
+        *,
+        workers: int = 0,
+        max_waiting: int = 256,
+    ) -> Any:
+        """A queryable: ``handler`` returns the reply message; errors become ErrorReply.
+
+        Zenoh calls one queryable's callback one query at a time. A handler that
+        spends real CPU outside the GIL (argon2id password checks) gets
+        ``workers`` threads instead, so queries are answered in parallel on every
+        core; at most ``max_waiting`` queries wait for a worker, and the next is
+        told the service is busy rather than queued without bound.
+        """
 
         def guarded(query: zenoh.Query) -> None:
             reply: Message
@@ -153,7 +171,37 @@ class Service:
             except Exception as exc:  # the querier may have gone away
                 self.log.debug("could not reply on %s: %s", query.key_expr, exc)
 
-        return self.track(self.session.declare_queryable(key_expr, guarded))
+        if workers <= 0:
+            return self.track(self.session.declare_queryable(key_expr, guarded))
+
+        pool = ThreadPoolExecutor(workers, thread_name_prefix=f"{self.ident}-serve")
+        slots = threading.BoundedSemaphore(workers + max_waiting)
+        self._pools.append(pool)
+
+        def in_pool(query: zenoh.Query) -> None:
+            try:
+                guarded(query)
+            finally:
+                query.drop()  # the reply leaves now, not when the object is collected
+                slots.release()
+
+        def dispatch(query: zenoh.Query) -> None:
+            if not slots.acquire(blocking=False):
+                self.log.warning("too many queries waiting on %s: told the querier", key_expr)
+                reply = ErrorReply(
+                    code="rate_limited", message="the service is busy: try again", retry_after=0.5
+                )
+                try:
+                    query.reply(query.key_expr, encode(reply))
+                except Exception as exc:
+                    self.log.debug("could not reply on %s: %s", query.key_expr, exc)
+                return
+            try:
+                pool.submit(in_pool, query)
+            except RuntimeError:  # stopping: the pool takes no more work
+                slots.release()
+
+        return self.track(self.session.declare_queryable(key_expr, dispatch))
 
 
 class RequestError(Exception):

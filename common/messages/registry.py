@@ -192,6 +192,7 @@ class UserInfo(Message):
     grants: dict[Scope, list[GrantName]]  # scope -> permissions and roles granted there
     credentials: list[Ident]  # credential kinds: "password", "ed25519"
     online: bool = False
+    failed_logins: int = 0  # failed logins on the account since its last unlock or restart
 
 
 class ListUsers(Message):
@@ -251,6 +252,14 @@ class KickFromServer(Message):
     reason: ShortText = ""
 
 
+class UnlockLogins(Message):
+    """Forget the account's failed logins: every source may try again at once."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+
+
 class RenameServer(Message):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
@@ -266,6 +275,7 @@ ADMIN_REQUESTS = (
     Ungrant,
     KickFromServer,
     RenameServer,
+    UnlockLogins,
 )
 
 __all__ = [
@@ -295,6 +305,7 @@ __all__ = [
     "SetPassword",
     "SignedRevocations",
     "Ungrant",
+    "UnlockLogins",
     "UserInfo",
     "UserKeysReply",
     "UserKeysRequest",

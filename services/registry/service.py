@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -64,6 +65,7 @@ from common.messages import (
     SetPassword,
     SignedRevocations,
     Ungrant,
+    UnlockLogins,
     UserInfo,
     UserKeysReply,
     UserKeysRequest,
@@ -83,21 +85,35 @@ DEFAULT_SERVER_NAME = "wart lab"
 
 
 class LoginThrottle:
-    """Slows down failed logins per account and per source.
+    """Slows password guessing without letting anyone lock the owner out.
 
-    After ``free`` failures, each further attempt must wait 2, 4, 8 ... up to
-    ``cap`` seconds after the last failure; a success clears the account.
-    Zenoh does not tell a queryable which transport a query came in on, so the
-    "source" is what the querier declares: its Zenoh session id (our client
-    sets it) plus, behind a gateway, the gateway's name for the connection
-    (the viewer names each browser). Queries that declare nothing share one
-    "undeclared" bucket, so leaving it out does not escape the limit; the
-    per-account limit is the one an attacker cannot dodge at all.
+    Three buckets of failed logins, each allowed a few free failures and then an
+    exponential wait (2, 4, 8 ... up to ``cap`` seconds after the last failure):
+
+    - the *pair* (account, source): one source guessing one account;
+    - the *source*, across accounts: one source spraying many accounts;
+    - the *account*, across sources: distributed guessing. This one applies only
+      to sources that already failed on the account ("suspect" sources). A
+      source with no failure on the account is still checked, so the owner's
+      correct password gets through while others guess; a wrong one makes that
+      source suspect, and every later try from it waits the account's time too.
+
+    Key logins are exempt from the account bucket (a signature cannot be
+    guessed). The admin's unlock clears every bucket of an account.
+
+    The "source" is what the querier declares: its Zenoh session id plus, behind
+    a gateway, the gateway's name for the connection (the viewer names each
+    browser). A client that forges a fresh source for every attempt is slowed
+    only by the argon2id cost of each check and by the router's access control;
+    the security model (docs/ARCHITECTURE.md) says so.
     """
 
-    def __init__(self, free: int = 3, source_free: int = 10, cap: float = 300.0) -> None:
+    def __init__(
+        self, free: int = 3, source_free: int = 10, account_free: int = 10, cap: float = 300.0
+    ) -> None:
         self.free = free
         self.source_free = source_free
+        self.account_free = account_free
         self.cap = cap
         self._lock = threading.Lock()
         self._fails: dict[str, tuple[int, float]] = {}  # bucket -> (failures, last failure)
@@ -108,31 +124,52 @@ class LoginThrottle:
             return 0.0
         return max(0.0, last + min(self.cap, 2.0 ** (count - free + 1)) - now)
 
-    def check(self, user: str, source: str | None, now: float) -> None:
+    @staticmethod
+    def _buckets(user: str, source: str) -> tuple[str, str, str]:
+        return f"pair:{user}|{source}", f"source:{source}", f"user:{user}"
+
+    def check(self, user: str, source: str, now: float, *, key_login: bool = False) -> None:
+        pair, by_source, account = self._buckets(user, source)
         with self._lock:
-            wait = self._wait("user:" + user, self.free, now)
-            if source:
-                wait = max(wait, self._wait("source:" + source, self.source_free, now))
+            wait = max(
+                self._wait(pair, self.free, now), self._wait(by_source, self.source_free, now)
+            )
+            suspect = pair in self._fails
+            if suspect and not key_login:
+                wait = max(wait, self._wait(account, self.account_free, now))
         if wait > 0:
             raise RequestError(
                 "rate_limited",
-                f"too many failed logins: try again in {math.ceil(wait)} s",
+                f"too many failed logins from here: try again in {math.ceil(wait)} s",
                 retry_after=wait,
             )
 
-    def failed(self, user: str, source: str | None, now: float) -> None:
+    def failed(self, user: str, source: str, now: float) -> None:
         with self._lock:
-            for bucket in ("user:" + user, "source:" + source if source else None):
-                if bucket:
-                    count, _ = self._fails.get(bucket, (0, 0.0))
-                    self._fails[bucket] = (count + 1, now)
+            for bucket in self._buckets(user, source):
+                count, _ = self._fails.get(bucket, (0, 0.0))
+                self._fails[bucket] = (count + 1, now)
             if len(self._fails) > 100_000:  # a flood of names: forget the oldest half
                 for bucket in sorted(self._fails, key=lambda b: self._fails[b][1])[:50_000]:
                     del self._fails[bucket]
 
-    def succeeded(self, user: str) -> None:
+    def succeeded(self, user: str, source: str) -> None:
+        """The right credential from this source: its pair is clean again."""
         with self._lock:
-            self._fails.pop("user:" + user, None)
+            self._fails.pop(self._buckets(user, source)[0], None)
+
+    def failures(self, user: str) -> int:
+        """Failed logins on the account since its last unlock (for the admin's list)."""
+        with self._lock:
+            return self._fails.get(f"user:{user}", (0, 0.0))[0]
+
+    def unlock(self, user: str) -> int:
+        """Forget every failure on the account (admin): how many buckets were cleared."""
+        with self._lock:
+            gone = [b for b in self._fails if b == f"user:{user}" or b.startswith(f"pair:{user}|")]
+            for bucket in gone:
+                del self._fails[bucket]
+            return len(gone)
 
 
 class Registry(Service):
@@ -173,7 +210,8 @@ class Registry(Service):
         self._revocation_pub = self.track(
             self.session.declare_publisher(keys.registry_revocations(self.realm))
         )
-        self.serve(keys.registry_login(self.realm), self.on_login)
+        # argon2id releases the GIL: one worker per core checks passwords in parallel.
+        self.serve(keys.registry_login(self.realm), self.on_login, workers=os.cpu_count() or 2)
         self.serve(keys.registry_logout(self.realm), self.on_logout)
         self.serve(keys.registry_directory(self.realm), self.on_directory)
         self.serve(keys.registry_admin(self.realm), self.on_admin)
@@ -223,13 +261,13 @@ class Registry(Service):
         user = cred.user
         source = f"{_source(query) or 'undeclared'}/{request.via}"
         now = time.time()
-        self.throttle.check(user, source, now)
+        self.throttle.check(user, source, now, key_login=isinstance(cred, KeyCredential))
         if not self._credential_ok(request, now):
             self.throttle.failed(user, source, now)
             log.info("failed login for %s (from %s)", user, source)
             what = "key" if isinstance(cred, KeyCredential) else "password"
             raise RequestError("unauthenticated", f"wrong user name or {what}")
-        self.throttle.succeeded(user)
+        self.throttle.succeeded(user, source)
         everywhere, scoped, roles = acl.expand(self.db.grants_of(user))
         ttl = min(request.ttl, MAX_TTL)
         token = SessionToken(
@@ -439,6 +477,7 @@ class Registry(Service):
                         grants=grants,
                         credentials=list(rec.credential_kinds),
                         online=rec.name in online,
+                        failed_logins=self.throttle.failures(rec.name),
                     )
                 )
             return UserList(users=users)
@@ -468,6 +507,12 @@ class Registry(Service):
             return OkReply(detail="revoked; it takes effect at the user's next login")
         if isinstance(request, KickFromServer):
             return self._kick(principal, request)
+        if isinstance(request, UnlockLogins):
+            if not self.db.user_exists(request.user):
+                raise RequestError("not_found", f"no user {request.user}")
+            self.throttle.unlock(request.user)
+            log.info("%s unlocked the logins of %s", principal.user, request.user)
+            return OkReply(detail=f"failed logins of {request.user} forgotten: they may log in now")
         if isinstance(request, RenameServer):
             self.db.set_setting("server_name", request.name)
             return OkReply(detail=f"server renamed to {request.name}")

@@ -140,3 +140,70 @@ def test_admin_queries(lab: Lab) -> None:
         with pytest.raises(WrongCredentials):
             client.login("erin", "a new password")
         client.login("alice", "alice's new one")
+
+
+def test_nobody_can_lock_the_owner_out(lab: Lab) -> None:
+    """An attacker guessing alice's password from several sources never blocks alice."""
+    session = lab.zsession()
+    try:
+        key = lab.identity.verify_key
+        for source in range(6):  # 6 sources x 4 guesses: far past every free allowance
+            attacker = LabClient(session, lab.router.realm, key, via=f"attacker-{source}")
+            for _ in range(4):
+                with pytest.raises((WrongCredentials, RateLimited)):
+                    attacker.login("alice", "guess guess")
+            # the attacker's own source is slowed, even with the right password
+            with pytest.raises(RateLimited, match="too many failed logins"):
+                attacker.login("alice", PASSWORD)
+            attacker.close()
+    finally:
+        close_session(session)
+    # alice, from her own machine, gets in at once; so does the admin
+    with lab.client() as owner:
+        assert owner.login("alice", PASSWORD).user == "alice"
+    with lab.client("admin") as admin:
+        listed = {u.name: u for u in admin.list_users()}
+        # the admin sees the attack (each source got 3 guesses, then 1 once the account
+        # was under attack: the rest were refused before any password check)
+        assert listed["alice"].failed_logins >= 10
+        assert "forgotten" in admin.unlock_logins("alice")
+        assert {u.name: u for u in admin.list_users()}["alice"].failed_logins == 0
+        with pytest.raises(NotAllowed), lab.client("bob") as bob:  # only an admin may unlock
+            bob.unlock_logins("alice")
+
+
+def test_an_unlock_lets_a_slowed_source_try_again(lab: Lab) -> None:
+    with lab.client() as client:
+        for _ in range(3):
+            with pytest.raises(WrongCredentials):
+                client.login("carol", "typo typo")
+        with pytest.raises(RateLimited):
+            client.login("carol", PASSWORD)
+        with lab.client("admin") as admin:
+            admin.unlock_logins("carol")
+        assert client.login("carol", PASSWORD).user == "carol"
+
+
+def test_fifty_concurrent_logins_are_all_answered_right(lab: Lab) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    session = lab.zsession()
+    try:
+        key = lab.identity.verify_key
+
+        def one(i: int) -> str:
+            client = LabClient(session, lab.router.realm, key, via=f"student-{i}")
+            try:
+                user, password = ("bob", PASSWORD) if i % 5 else ("bob", "wrong password")
+                try:
+                    return client.login(user, password).user
+                except WrongCredentials:
+                    return "refused"
+            finally:
+                client.close()
+
+        with ThreadPoolExecutor(50) as pool:
+            results = list(pool.map(one, range(50)))
+    finally:
+        close_session(session)
+    assert results.count("bob") == 40 and results.count("refused") == 10
