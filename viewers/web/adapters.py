@@ -332,6 +332,7 @@ class Account:
     roles: tuple[str, ...]
     grants: tuple[tuple[str, tuple[str, ...]], ...]  # (scope, grants there); "" = everywhere
     online: bool = False
+    failed_logins: int = 0  # since the registry started or the last unlock
 
 
 class LabConnection(Protocol):
@@ -409,6 +410,8 @@ class LabConnection(Protocol):
     def kick_from_server(self, user: str, reason: str = "") -> str: ...
 
     def rename_server(self, name: str) -> str: ...
+
+    def unlock_logins(self, user: str) -> str: ...
 
 
 class LabConnector(Protocol):

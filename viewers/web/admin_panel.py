@@ -40,7 +40,10 @@ MAX_SERVER_NAME = 80
 def format_accounts(accounts: list[Account]) -> str:
     if not accounts:
         return "_No accounts._"
-    lines = ["| user | roles | grants | online |", "| --- | --- | --- | --- |"]
+    lines = [
+        "| user | roles | grants | online | failed logins |",
+        "| --- | --- | --- | --- | --- |",
+    ]
     for a in accounts:
         grants = "; ".join(
             f"{escape_md(scope or 'everywhere')}: {', '.join(escape_md(g) for g in gs)}"
@@ -50,7 +53,7 @@ def format_accounts(accounts: list[Account]) -> str:
         online = "yes" if a.online else ""
         lines.append(
             f"| {escape_md(a.name)} | {', '.join(escape_md(r) for r in a.roles)} | "
-            f"{grants or '-'} | {online} |"
+            f"{grants or '-'} | {online} | {a.failed_logins or ''} |"
         )
     return "\n".join(lines)
 
@@ -80,6 +83,7 @@ class AdminPanel:
             self.add_button = gui.add_button("Add account", color="green")
             self.password_button = gui.add_button("Set password")
             self.remove_button = gui.add_button("Remove account", color="red")
+            self.unlock_button = gui.add_button("Unlock logins")
             self.grant = gui.add_dropdown("Permission or role", GRANTS, initial_value="edit_map")
             self.scope = gui.add_text("In context (empty: everywhere)", "")
             self.grant_button = gui.add_button("Grant")
@@ -93,6 +97,7 @@ class AdminPanel:
         self.add_button.on_click(lambda _: self._add())
         self.password_button.on_click(lambda _: self._set_password())
         self.remove_button.on_click(lambda _: self._account_call(self.connection.remove_account))
+        self.unlock_button.on_click(lambda _: self._account_call(self.connection.unlock_logins))
         self.grant_button.on_click(lambda _: self._grant(self.connection.grant))
         self.ungrant_button.on_click(lambda _: self._grant(self.connection.ungrant))
         self.kick_button.on_click(lambda _: self._kick())

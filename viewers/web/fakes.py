@@ -601,6 +601,10 @@ class FakeConnection:
         )
         return f"kicked {user}"
 
+    def unlock_logins(self, user: str) -> str:
+        self._need("admin", "unlock logins")
+        return f"failed logins of {user} forgotten: they may log in now"
+
     def rename_server(self, name: str) -> str:
         self._need("admin", "rename the server")
         self._lab.server_name = name

@@ -687,6 +687,7 @@ class RealConnection:
                 tuple(u.roles),
                 tuple(sorted((scope, tuple(g)) for scope, g in u.grants.items())),
                 u.online,
+                u.failed_logins,
             )
             for u in users
         ]
@@ -711,6 +712,9 @@ class RealConnection:
 
     def rename_server(self, name: str) -> str:
         return str(self._call(lambda: self.client.rename_server(name)))
+
+    def unlock_logins(self, user: str) -> str:
+        return str(self._call(lambda: self.client.unlock_logins(user)))
 
     # -- the end
 
