@@ -50,6 +50,11 @@ class LeaseBook:
         # check skips parsing and re-validating the key (bounded by the world's agents).
         self._agent_of: dict[str, str] = {}
         self._lock = threading.Lock()
+        # This world's epoch: the replay windows live in memory, so after a restart a
+        # command sealed before it would look fresh again (the context republishes the
+        # lease, and reseals its key to the restarted world). Nothing sealed before the
+        # world started is obeyed: senders' clocks are trusted to ±30 s already.
+        self.started_at = time.time()
         self.commands_accepted = 0
         self.commands_refused = 0
         self.mac_accepted = 0  # of commands_accepted, those MACed under a MAC lease
@@ -168,9 +173,19 @@ class LeaseBook:
         self.commands_accepted += 1
         return agent, command
 
+    def _check_epoch(self, sent_at: float, lease_id: str) -> None:
+        if sent_at < self.started_at:
+            assert self.verifier is not None
+            self.verifier.rejected += 1
+            raise AuthError(
+                "unauthenticated",
+                f"command under lease {lease_id} was sealed before this world started",
+            )
+
     def _check_signed(self, key: str, agent: str, envelope: AuthEnvelope) -> AgentCommand:
         """The command of an Ed25519 AuthEnvelope from the current lease holder; else AuthError."""
         assert self.verifier is not None
+        self._check_epoch(envelope.sent_at, "(signed)")
         principal, command = self.verifier.open_envelope(key, envelope, AgentCommand)
         if command.agent != agent:
             raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
@@ -215,6 +230,7 @@ class LeaseBook:
         now = time.time()
         if not lease.start <= now <= lease.end:
             raise AuthError("forbidden", f"lease {lease.lease_id} on {agent} is not in force")
+        self._check_epoch(message.sent_at, lease.lease_id)
         self.verifier.check_fresh(message.sent_at, lease.holder_user)
         with self._lock:
             fresh = window.accept(message.seq)

@@ -152,3 +152,55 @@ def test_controller_under_a_mac_lease_drives_and_a_non_holder_does_not(lab: Lab)
         assert done and done[0].status == "finished", done
         for sub in wire.subs:
             sub.undeclare()
+
+
+class ForwardThenStill(Controller):
+    """Drives forward for its first second, then holds the robot still."""
+
+    period = 0.05
+
+    def initialize(self, robot: Khepera) -> None:
+        self.started = time.monotonic()
+
+    def do_work(self, robot: Khepera) -> None:
+        moving = time.monotonic() - self.started < 1.0
+        robot.set_speeds(*((12, 12) if moving else (0, 0)))
+
+
+def test_commands_sealed_before_a_world_restart_are_refused_after_it(
+    router: Router, procs: Procs, tmp_path: Path
+) -> None:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    engine = start_engine(lab, identity=True)
+    start_agent_context(lab, slot=30.0)
+    realm = lab.router.realm
+    key = keys.agent_cmd(realm, WORLD, "k0")
+    captured: list[bytes] = []
+    with lab.zsession() as z, agent_user(lab, "alice") as alice:
+        poses = Poses(z, realm)
+        sub = z.declare_subscriber(key, lambda s: captured.append(bytes(s.payload.to_bytes())))
+        stop = threading.Event()
+        done: list[DriveResult] = []
+        t = threading.Thread(
+            target=lambda: done.append(alice.drive("k0", ForwardThenStill(), stop=stop))
+        )
+        t.start()
+        wait_for(lambda: len(captured) > 10, 10, "alice's forward commands on the wire")
+        forward = list(captured[:10])  # sealed while the lease was live, the robot moving
+        engine.kill9()
+        start_engine(lab, identity=True)  # the same world, restarted: a new epoch
+        wait_for(lambda: poses.xy("k0") is not None, 10, "frames from the restarted world")
+        # alice's lease is republished and resealed to the restarted world; her
+        # controller is in its still phase by now, so nothing legitimate moves k0.
+        time.sleep(2.5)  # the context's identity refresh (≤ 5 s) and the still phase settle
+        start = poses.xy("k0").copy()
+        for payload in forward * 3:  # replayed, 4 s after the restart as in the issue
+            z.put(key, payload)
+            time.sleep(0.02)  # pacing the replay, not waiting for a condition
+        time.sleep(0.5)  # time for a replayed command to have moved the robot
+        moved = float(np.linalg.norm(poses.xy("k0") - start))
+        stop.set()
+        t.join(15)
+        sub.undeclare()
+    assert moved < 1.0, f"replayed commands moved k0 {moved:.1f} mm after the world restarted"

@@ -139,9 +139,19 @@ def test_replayed_command_is_refused(s: Setup) -> None:
 
 
 def test_stale_command_is_refused(s: Setup) -> None:
+    s.book.started_at = 0.0  # a world running for long: only freshness refuses it
     s.grant()
     with pytest.raises(AuthError, match="off this service's clock"):
         s.book.check_command(CMD, s.command(now=time.time() - 120))
+
+
+def test_command_sealed_before_the_world_started_is_refused(s: Setup) -> None:
+    s.grant()
+    s.book.check_command(CMD, s.command(seq=1))
+    s.book.started_at = time.time() + 0.001  # the world restarted just now
+    with pytest.raises(AuthError, match="sealed before this world started"):
+        s.book.check_command(CMD, s.command(seq=2, now=time.time() - 0.5))
+    s.book.check_command(CMD, s.command(seq=3, now=time.time() + 0.01))
 
 
 def test_expired_lease_is_refused(s: Setup) -> None:
