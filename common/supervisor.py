@@ -23,9 +23,14 @@ from pathlib import Path
 
 import zenoh
 
+from common.log import RotatingFile, pump
+
 log = logging.getLogger("wart.supervisor")
 
-BACKOFF_FIRST = 1.0
+# A first crash is most likely a one-off (a killed process, a router blip): restart at
+# once. A crash loop still backs off: 0.1, 0.5, 1, 2, 4 ... 30 s.
+BACKOFF_FIRST = 0.1
+BACKOFF_SECOND = 0.5
 BACKOFF_MAX = 30.0
 STABLE_AFTER = 60.0  # a child that ran this long starts again from the first backoff
 
@@ -46,11 +51,20 @@ class ChildSpec:
 class Child:
     spec: ChildSpec
     log_path: Path
+    log: RotatingFile | None = None
+    pump: threading.Thread | None = None  # copies the child's output into ``log``
     process: subprocess.Popen[bytes] | None = None
     started_at: float = 0.0
     restarts: int = 0
     backoff: float = BACKOFF_FIRST
     restart_at: float | None = None
+
+
+def next_backoff(current: float) -> float:
+    """The wait before the restart after the one that waited ``current``."""
+    if current < BACKOFF_SECOND:
+        return BACKOFF_SECOND
+    return min(max(current * 2, 1.0), BACKOFF_MAX)
 
 
 def wart_command(args: Sequence[str]) -> list[str]:
@@ -71,7 +85,9 @@ def describe_exit(code: int) -> str:
 
 def tail(path: Path, lines: int = 6) -> str:
     try:
-        text = path.read_text(errors="replace").splitlines()
+        with open(path, "rb") as f:
+            f.seek(max(0, f.seek(0, os.SEEK_END) - 65536))
+            text = f.read().decode(errors="replace").splitlines()
     except OSError:
         return ""
     return "\n".join(f"      | {line}" for line in text[-lines:])
@@ -138,18 +154,31 @@ class Supervisor:
         env.update(child.spec.env)
         env["WART_PARENT_PID"] = str(os.getpid())
         env.setdefault("PYTHONUNBUFFERED", "1")
-        with open(child.log_path, "ab") as out:
-            out.write(f"\n--- started {time.strftime('%Y-%m-%d %H:%M:%S')} ---\n".encode())
-            out.flush()
+        if child.log is None:
+            child.log = RotatingFile(child.log_path)
+        child.log.write(f"\n--- started {time.strftime('%Y-%m-%d %H:%M:%S')} ---\n".encode())
+        # The child writes to a pipe that this process copies into a file rotated at a
+        # size cap: a child flooding its output cannot fill the disk.
+        read_end, write_end = os.pipe()
+        try:
             child.process = subprocess.Popen(
                 wart_command(child.spec.argv),
                 stdin=subprocess.DEVNULL,
-                stdout=out,
+                stdout=write_end,
                 stderr=subprocess.STDOUT,
                 env=env,
                 # Ctrl-C reaches the supervisor only; it stops the children in order.
                 start_new_session=True,
             )
+        except BaseException:
+            os.close(read_end)
+            raise
+        finally:
+            os.close(write_end)
+        child.pump = threading.Thread(
+            target=pump, args=(read_end, child.log), name=f"log {child.spec.name}", daemon=True
+        )
+        child.pump.start()
         child.started_at = time.monotonic()
         child.restart_at = None
 
@@ -220,13 +249,15 @@ class Supervisor:
                 child.backoff = BACKOFF_FIRST
             self.say(
                 f"  ! {child.spec.name} {describe_exit(proc.returncode)} after {ran:.1f} s; "
-                f"restarting in {child.backoff:.0f} s (log {child.log_path})"
+                f"restarting in {child.backoff:.1f} s (log {child.log_path})"
             )
+            if child.pump is not None:
+                child.pump.join(1.0)  # its last words reach the file before we show them
             text = tail(child.log_path, 4)
             if text:
                 self.say(text)
             child.restart_at = now + child.backoff
-            child.backoff = min(child.backoff * 2, BACKOFF_MAX)
+            child.backoff = next_backoff(child.backoff)
 
     def run_until(self, stop: threading.Event, period: float = 0.2) -> None:
         while not stop.wait(period):

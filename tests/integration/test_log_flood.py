@@ -1,0 +1,41 @@
+"""A flood of bad messages does not flood the log: a real engine, 20,000 junk commands."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from common.messages import WorldSnapshot, decode
+from tests.conftest import Procs, Router, wait_for
+from tests.integration.agentkit import WORLD, start_engine
+from tests.integration.labkit import make_lab
+
+pytestmark = pytest.mark.integration
+
+
+def test_twenty_thousand_junk_commands_leave_a_short_log_and_a_count(
+    router: Router, procs: Procs, tmp_path: Path
+) -> None:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    engine = start_engine(lab)
+    before = len(engine.output().encode())
+    realm = router.realm
+    key = keys.agent_cmd(realm, WORLD, "k0")
+    with lab.zsession() as z:
+        pub = z.declare_publisher(key)
+        for _ in range(20_000):
+            pub.put(b"\x00")
+        pub.undeclare()
+        # the engine still serves, and says how many it dropped once the window ends
+        replies = list(z.get(keys.world_snapshot(realm, WORLD), timeout=10.0))
+        assert any(r.ok is not None and decode(r.ok.payload, WorldSnapshot) for r in replies)
+        wait_for(lambda: "more like this" in engine.output(), 30, "the flood's summary line")
+    grown = len(engine.output().encode()) - before
+    print(f"engine log grew {grown} bytes for 20,000 junk commands")
+    assert grown < 20_000, engine.output()[-3000:]  # was about 5 MB before summaries
+    summary = [line for line in engine.output().splitlines() if "more like this" in line]
+    counted = sum(int(line.split(" more like this")[0].rsplit(" ", 1)[-1]) for line in summary)
+    assert counted > 10_000, summary  # the dropped ones are counted, not lost from view
