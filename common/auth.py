@@ -320,6 +320,11 @@ class Verifier:
         for session_id, expires_at in sessions:
             self.revoke(session_id, expires_at)
 
+    @property
+    def registry_key(self) -> bytes:
+        """The registry's verify key this verifier trusts (its revocations are signed by it)."""
+        return bytes(self._registry_key)
+
     def is_revoked(self, session_id: bytes) -> bool:
         with self._lock:
             return session_id in self._revoked

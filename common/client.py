@@ -82,6 +82,7 @@ from common.messages import (
     decode,
     encode,
 )
+from common.revocations import RevocationFeed
 from common.service import open_session
 
 log = logging.getLogger("wart.client")
@@ -225,6 +226,7 @@ class LabClient:
         self.via = via[:200]
         self._querier: Any = None
         self._source_sn = 0
+        self._revocations: RevocationFeed | None = None
 
     # -- context manager
 
@@ -246,6 +248,9 @@ class LabClient:
                 self.logout()
             except LabError as exc:
                 log.debug("logout: %s", exc)
+        if self._revocations is not None:
+            self._revocations.close()
+            self._revocations = None
         if self._querier is not None:
             try:
                 self._querier.undeclare()
@@ -459,6 +464,10 @@ class LabClient:
         if self._inbox is None or self._inbox_user != session.user:  # a re-login
             self._undeclare()
             self._declare_inbox(session.user)
+        if self._revocations is None:
+            # The registry's revocations, so a private message sealed by a kicked or
+            # logged-out session is dropped here like anywhere else.
+            self._revocations = RevocationFeed(self.z, self.realm, self.registry_key, self.verifier)
         with self._inbox_lock:
             self.session = session
             self._mailbox = mailbox

@@ -73,6 +73,12 @@ class LeaseBook:
         """
         principal, lease = self._open(key, payload, Lease)
         principal.require("lease", "grant leases on agents")
+        assert self.verifier is not None
+        if self.verifier.is_revoked(lease.holder_session):
+            raise AuthError(
+                "forbidden",
+                f"lease {lease.lease_id} is held by a revoked session of {lease.holder_user}",
+            )
         agent = keys.parse_agent_key(self.realm, self.world, key)
         if lease.world != self.world or lease.agent != agent:
             raise AuthError("forbidden", f"lease for {lease.world}/{lease.agent} sent on {key}")
@@ -100,6 +106,15 @@ class LeaseBook:
                     )
                 self._agent_of[cmd_key] = lease.agent
         return lease
+
+    def revoke_session(self, session_id: bytes) -> list[str]:
+        """Drop every lease held by a revoked session: the agents it held, now undriven."""
+        with self._lock:
+            agents = [a for a, lease in self._leases.items() if lease.holder_session == session_id]
+            for agent in agents:
+                del self._leases[agent]
+                self._mac.pop(agent, None)
+        return agents
 
     def command_key(self, agent: str) -> str:
         """``agent/<agent>/cmd`` of this world; BadIdentifier (a ValueError) for a bad name."""

@@ -16,7 +16,17 @@ import zenoh
 from common import keys
 from common.auth import AuthError
 from common.keys import AliveKind
-from common.messages import CommandBundle, Message, MessageError, SampleBundle, decode, encode
+from common.leases import LeaseBook
+from common.messages import (
+    CommandBundle,
+    Message,
+    MessageError,
+    Revocation,
+    SampleBundle,
+    decode,
+    encode,
+)
+from common.revocations import RevocationFeed
 from common.service import Service
 
 
@@ -27,6 +37,7 @@ class WorldService(Service):
     _frame_pub: Any
     _batch_pub: Any
     _samples_pub: Any
+    _revocations: RevocationFeed | None = None
 
     def declare_world_interface(self) -> None:
         """Declare the world's keys (call from on_start, before the service's own threads)."""
@@ -46,6 +57,32 @@ class WorldService(Service):
         self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
         self.serve(keys.world_edit(realm, name), self._on_edit)
         self.serve(keys.world_map(realm, name), self._on_map)
+        verifier = getattr(self, "verifier", None)
+        if verifier is not None:
+            # A kicked or logged-out user's sessions lose their leases here too, not
+            # only in the context: the robot stops even if the context is down.
+            self._revocations = RevocationFeed(
+                self.session, realm, verifier.registry_key, verifier, self._on_revoked
+            )
+
+    def close_world_interface(self) -> None:
+        """Stop following revocations (call from on_stop)."""
+        feed = getattr(self, "_revocations", None)
+        if feed is not None:
+            feed.close()
+
+    def _on_revoked(self, rev: Revocation) -> None:
+        leases: LeaseBook | None = getattr(self, "leases", None)
+        if leases is None:
+            return
+        for agent in leases.revoke_session(rev.session_id):
+            self.log.info(
+                "%s's lease on %s ended: session revoked (%s); robot stopped",
+                rev.user,
+                agent,
+                rev.reason,
+            )
+            self.halt_agent(agent)
 
     def publish_sample_bundle(self, tick: int, samples: dict[str, bytes]) -> None:
         """Put ``samples`` (agent -> its encoded SensorSample) as one SampleBundle."""
@@ -89,6 +126,10 @@ class WorldService(Service):
         raise NotImplementedError
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
+        raise NotImplementedError
+
+    def halt_agent(self, agent: str) -> None:
+        """Stop the agent's wheels now (its driver lost the right to drive it)."""
         raise NotImplementedError
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:

@@ -175,6 +175,7 @@ class BridgeService(WorldService):
         self._threads.append(thread)
 
     def on_stop(self, timeout: float) -> None:
+        self.close_world_interface()
         self._halt.set()
         deadline = time.monotonic() + timeout
         for thread in self._threads:
@@ -324,6 +325,14 @@ class BridgeService(WorldService):
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
         self.leases.accept_lease(str(sample.key_expr), sample.payload)
+
+    def halt_agent(self, agent: str) -> None:
+        with self._lock:
+            entry = self._agents.get(agent)
+            if entry is not None:
+                entry.driving = None
+        if entry is not None:
+            entry.robot.halt()
 
     def _accept_command(self, key: str, payload: Any) -> None:
         agent, command = self.leases.check_command(key, payload)

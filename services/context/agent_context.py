@@ -55,6 +55,7 @@ from common.messages import (
     OutputLines,
     QueueStateRequest,
     RequestStatus,
+    Revocation,
     RunAccepted,
     RunClaim,
     RunRequest,
@@ -336,6 +337,15 @@ class AgentContext(ChatRoom):
         line.running.end = min(line.running.end, time.time())
 
     # -- members leaving: their requests go with them
+
+    def _on_revoked(self, rev: Revocation) -> None:
+        super()._on_revoked(rev)
+        # Kicked, removed or logged out: the session's requests end, waiting or running
+        # (the worlds drop its leases themselves, from the same revocation).
+        why = "you were kicked from the server" if rev.kicked else "your session ended"
+        self._drop_session_jobs(
+            rev.session_id, f"{why}: {rev.reason}" if rev.reason else why, remote_only=False
+        )
 
     def on_session_left(self, principal: Principal) -> None:
         self._drop_session_jobs(principal.session_id, "left the context", remote_only=False)

@@ -120,6 +120,7 @@ class EngineService(WorldService):
         self._thread.start()
 
     def on_stop(self, timeout: float) -> None:
+        self.close_world_interface()
         self._halt.set()
         if self._thread is not None:
             self._thread.join(timeout)
@@ -173,6 +174,10 @@ class EngineService(WorldService):
     @property
     def commands_refused(self) -> int:
         return self.leases.commands_refused
+
+    def halt_agent(self, agent: str) -> None:
+        stop = AgentCommand(agent=agent, speeds=(0, 0))
+        self._work.put(_Command(agent, stop, time.monotonic()))
 
     def _accept_command(self, key: str, payload: Any) -> None:
         agent, command = self.leases.check_command(key, payload)
