@@ -183,6 +183,8 @@ class RoomHandle:
     subscriber: Any = None
     events: list[RoomEvent] = field(default_factory=list)
     on_agent_event: Callable[[AgentEvent], None] | None = None
+    watch: Any = None  # the room's liveliness: when it comes back, this client joins again
+    rejoins: int = 0  # times this client joined again by itself (room restart, router blip)
 
 
 class LabClient:
@@ -328,12 +330,15 @@ class LabClient:
 
     def request(self, ctx: str, message: Message, expected: type[M], what: str) -> M:
         """Send ``message`` to a context's request queryable; its reply, or a LabError."""
-        return self._ask(
-            keys.ctx_request(self.realm, ctx),
-            message,
-            expected,
-            what,
-            not_found=f"context {ctx} not found (no context of that name is running)",
+        return self._member_call(
+            ctx,
+            lambda: self._ask(
+                keys.ctx_request(self.realm, ctx),
+                message,
+                expected,
+                what,
+                not_found=f"context {ctx} not found (no context of that name is running)",
+            ),
         )
 
     def _seal(self, key: str, message: Message) -> bytes:
@@ -543,9 +548,47 @@ class LabClient:
             subscriber=subscriber,
             on_agent_event=on_agent_event,
         )
+        # A restarted room, or one that lost us in a router blip, no longer counts us
+        # as a member: when its token comes back we join again, without the user.
+        room.watch = self.z.liveliness().declare_subscriber(
+            keys.alive(self.realm, AliveKind.CONTEXT, ctx),
+            lambda s: self._on_room_alive(ctx, s),
+        )
         with self._lock:
             self._rooms[ctx] = room
         return room
+
+    def _on_room_alive(self, ctx: str, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            # Not in Zenoh's callback thread: the join is a query of its own.
+            threading.Thread(target=self.rejoin, args=(ctx,), daemon=True).start()
+
+    def rejoin(self, ctx: str) -> bool:
+        """Join a room this client is in again (the room forgot it); False if that failed."""
+        room = self._rooms.get(ctx)
+        if room is None or self.session is None:
+            return False
+        try:
+            reply = self._ask(
+                keys.ctx_join(self.realm, ctx), JoinRoom(history=0), JoinReply, f"join {ctx}"
+            )
+        except LabError as exc:
+            log.info("could not join %s again: %s", ctx, exc)
+            return False
+        room.members = list(reply.members)
+        room.rejoins += 1
+        log.info("joined %s again (it had restarted or lost us)", ctx)
+        return True
+
+    def _member_call(self, ctx: str, call: Callable[[], M]) -> M:
+        """``call`` on a room; if the room says we are not a member (it forgot us), join
+        again once and retry."""
+        try:
+            return call()
+        except NotAllowed as exc:
+            if ctx not in self._rooms or "first" not in str(exc) or not self.rejoin(ctx):
+                raise
+            return call()
 
     def _on_event(
         self, ctx: str, sample: zenoh.Sample, on_event: Callable[[RoomEvent], None]
@@ -577,6 +620,8 @@ class LabClient:
     def leave(self, ctx: str) -> None:
         with self._lock:
             room = self._rooms.pop(ctx, None)
+        if room is not None and room.watch is not None:
+            room.watch.undeclare()
         try:
             self._ask(
                 keys.ctx_leave(self.realm, ctx),
@@ -592,12 +637,15 @@ class LabClient:
     def say(self, ctx: str, text: str, *, wait: bool = True) -> None:
         """Say a line in a room; with ``wait`` the room's refusal (too long, too fast) is raised."""
         if wait:
-            self._ask(
-                keys.ctx_request(self.realm, ctx),
-                ChatSay(text=text),
-                OkReply,
-                f"say in {ctx}",
-                not_found=f"room {ctx} not found",
+            self._member_call(
+                ctx,
+                lambda: self._ask(
+                    keys.ctx_request(self.realm, ctx),
+                    ChatSay(text=text),
+                    OkReply,
+                    f"say in {ctx}",
+                    not_found=f"room {ctx} not found",
+                ),
             )
         else:
             key = keys.ctx_in(self.realm, ctx)
