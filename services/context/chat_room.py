@@ -17,6 +17,7 @@ events with that session, so clients can tell them from forgeries.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -28,6 +29,7 @@ import zenoh
 from common import acl, keys
 from common.auth import AuthError, Principal, Verifier
 from common.client import ServiceLogin
+from common.files import write_atomic
 from common.keys import AliveKind
 from common.messages import (
     MAX_LINE_CHARS,
@@ -89,14 +91,14 @@ class History:
                     self._compact()
                 with self.path.open("ab") as out:
                     out.write(msgspec.json.encode(line) + b"\n")
+                    out.flush()
+                    os.fsync(out.fileno())  # the line is acknowledged once this returns
                 self._written += 1
             return line
 
     def _compact(self) -> None:
         assert self.path is not None
-        tmp = self.path.with_suffix(".tmp")
-        tmp.write_bytes(b"".join(msgspec.json.encode(line) + b"\n" for line in self.lines))
-        tmp.replace(self.path)
+        write_atomic(self.path, b"".join(msgspec.json.encode(line) + b"\n" for line in self.lines))
         self._written = len(self.lines)
 
     def recent(self, count: int) -> list[ChatLine]:

@@ -86,6 +86,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         fast=args.fast,
         watchdog_s=args.watchdog_ms / 1000.0,
         maps_dir=args.maps_dir or args.map.parent,
+        base_map=args.map.stem,
         seed=args.seed,
         registry_key=registry_key,
         wander=args.wander,

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from pathlib import Path
 from typing import Any
 
+from common.files import write_atomic
 from common.keys import is_ident
 from services.engine.agents import AGENT_TYPES
 from services.engine.entities import ShapeSpec
@@ -446,9 +446,8 @@ def map_path(maps_dir: Path, name: str) -> Path:
 def save_map(world: World, maps_dir: Path, name: str) -> Path:
     path = map_path(maps_dir, name)
     maps_dir.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(world_to_map(world, name), indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, path)  # a reader never sees half a map
+    # a reader never sees half a map, and a saved map survives a crash
+    write_atomic(path, (json.dumps(world_to_map(world, name), indent=1) + "\n").encode())
     return path
 
 

@@ -36,6 +36,7 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Principal, Session, Verifier
+from common.files import Journal
 from common.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.leases import LeaseBook
 from common.messages import (
@@ -46,11 +47,13 @@ from common.messages import (
     Lease,
     MapRequest,
     Message,
+    MessageError,
     MoveItem,
     RemoveItem,
     ResizeArena,
     RotateItem,
     WorldEdit,
+    decode,
     encode,
 )
 from common.service import RequestError
@@ -71,6 +74,9 @@ class EngineSettings:
     seed: int = 0
     registry_key: bytes | None = None
     wander: bool = False  # robots nobody commands avoid obstacles on their own (wander.py)
+    # The --map the world started from: live edits are journalled against it (in
+    # maps_dir) and replayed when the engine restarts on the same map. "" = no journal.
+    base_map: str = ""
 
 
 @dataclass
@@ -108,6 +114,51 @@ class EngineService(WorldService):
         self._matched: set[str] = set()
         self._match_lock = threading.Lock()
         self.ticks_late = 0
+        self._journal: Journal | None = None
+        self.replayed_edits = 0
+        if settings.base_map:
+            self._open_journal(settings.base_map)
+
+    # -- the journal of live edits (an acknowledged edit survives a crash)
+
+    def _open_journal(self, base: str) -> None:
+        try:
+            marker = encode(MapRequest(action="load", name=base))
+        except MessageError:
+            self.log.warning("map name %r is not a plain name: live edits are not journalled", base)
+            return
+        journal = Journal(self.settings.maps_dir / f".{self.ident}.edits")
+        records = list(journal.records())
+        if not records or records[0] != marker:
+            journal.restart(marker)  # a journal of another map, or none: start afresh
+        else:
+            for raw in records[1:]:
+                try:
+                    self._replay(decode(raw, (WorldEdit, MapRequest)))
+                except (MessageError, RequestError, maps.MapError, EditError) as exc:
+                    self.log.warning("skipped a journalled edit that no longer applies: %s", exc)
+            if self.replayed_edits:
+                self.log.info(
+                    "replayed %d live edits since %s was loaded (journal %s)",
+                    self.replayed_edits,
+                    base,
+                    journal.path,
+                )
+        self._journal = journal
+
+    def _replay(self, record: Message) -> None:
+        if isinstance(record, WorldEdit):
+            self._apply_op(self.world, record.op)
+        elif isinstance(record, MapRequest) and record.action == "load" and record.name:
+            path = maps.map_path(self.settings.maps_dir, record.name)
+            self.world = maps.load_map(
+                path, name=self.ident, seed=self.settings.seed, tick_s=self.settings.tick_s
+            )
+        self.replayed_edits += 1
+
+    def _journal_append(self, record: Message) -> None:
+        if self._journal is not None:
+            self._journal.append(encode(record))
 
     # -- lifecycle
 
@@ -203,22 +254,27 @@ class EngineService(WorldService):
 
         def apply(world: World) -> Message:
             try:
-                if isinstance(op, AddItem):
-                    maps.add_entry(world, op.section, op.entry, op.section)
-                elif isinstance(op, MoveItem):
-                    world.move(op.id, op.x, op.y, op.heading)
-                elif isinstance(op, RotateItem):
-                    world.rotate(op.id, op.heading)
-                elif isinstance(op, RemoveItem):
-                    world.remove(op.id)
-                elif isinstance(op, ResizeArena):
-                    world.resize(op.width, op.height)
+                self._apply_op(world, op)
             except (EditError, maps.MapError) as exc:
                 raise RequestError("conflict", str(exc)) from None
+            self._journal_append(edit)  # synced before the edit is acknowledged
             self.log.info("%s edited the world: %s", principal.user, type(op).__name__)
             return EditResult(layout=world.layout, detail=type(op).__name__)
 
         return self._in_sim(apply)
+
+    @staticmethod
+    def _apply_op(world: World, op: Any) -> None:
+        if isinstance(op, AddItem):
+            maps.add_entry(world, op.section, op.entry, op.section)
+        elif isinstance(op, MoveItem):
+            world.move(op.id, op.x, op.y, op.heading)
+        elif isinstance(op, RotateItem):
+            world.rotate(op.id, op.heading)
+        elif isinstance(op, RemoveItem):
+            world.remove(op.id)
+        elif isinstance(op, ResizeArena):
+            world.resize(op.width, op.height)
 
     def _on_map(self, query: zenoh.Query) -> Message:
         principal, request = self._open(str(query.key_expr), query.payload, MapRequest)
@@ -254,6 +310,7 @@ class EngineService(WorldService):
             self.world = new_world
             self._last_cmd.clear()
             self._declare_agent_publishers()
+            self._journal_append(request)
             self.log.info("%s loaded map %s", principal.user, path.name)
             return EditResult(layout=new_world.layout, detail=f"loaded {path.name}")
 

@@ -1,0 +1,74 @@
+"""Files written so that an acknowledged write survives a crash or a power cut.
+
+``write_atomic`` replaces a file whole (a reader sees the old or the new, never
+half); ``Journal`` appends records and syncs each before it returns, and reads
+back every whole record, ignoring a tail torn by a crash mid-append.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+
+_LENGTH = struct.Struct(">I")
+MAX_RECORD = 1 << 20
+
+
+def fsync_dir(directory: Path) -> None:
+    """Make a rename or a new file in ``directory`` durable."""
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Replace ``path`` with ``data``: written to a temporary file, synced, renamed, synced."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as out:
+        out.write(data)
+        out.flush()
+        os.fsync(out.fileno())
+    os.replace(tmp, path)
+    fsync_dir(path.parent)
+
+
+class Journal:
+    """An append-only file of length-prefixed records, each synced before ``append`` returns."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def append(self, record: bytes) -> None:
+        if len(record) > MAX_RECORD:
+            raise ValueError(f"a journal record is at most {MAX_RECORD} bytes")
+        new = not self.path.exists()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.path, "ab") as out:
+            out.write(_LENGTH.pack(len(record)) + record)
+            out.flush()
+            os.fsync(out.fileno())
+        if new:
+            fsync_dir(self.path.parent)
+
+    def records(self) -> Iterator[bytes]:
+        """Every whole record, oldest first (a torn last record, from a crash, is skipped)."""
+        try:
+            data = self.path.read_bytes()
+        except FileNotFoundError:
+            return
+        at = 0
+        while at + _LENGTH.size <= len(data):
+            (size,) = _LENGTH.unpack_from(data, at)
+            if size > MAX_RECORD or at + _LENGTH.size + size > len(data):
+                return
+            yield data[at + _LENGTH.size : at + _LENGTH.size + size]
+            at += _LENGTH.size + size
+
+    def restart(self, first: bytes) -> None:
+        """Replace the journal by one holding only ``first``."""
+        write_atomic(self.path, _LENGTH.pack(len(first)) + first)

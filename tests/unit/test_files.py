@@ -1,0 +1,39 @@
+"""Atomic replacement and the append journal keep what was acknowledged."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from common import files
+from common.files import Journal, write_atomic
+
+
+def test_a_failed_write_leaves_the_old_file_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "map.json"
+    write_atomic(path, b"old map")
+
+    def power_cut(fd: int) -> None:
+        raise OSError("disk gone")
+
+    monkeypatch.setattr(files.os, "fsync", power_cut)
+    with pytest.raises(OSError, match="disk gone"):
+        write_atomic(path, b"new map, half written")
+    assert path.read_bytes() == b"old map"
+
+
+def test_a_journal_gives_back_every_whole_record_and_skips_a_torn_tail(tmp_path: Path) -> None:
+    journal = Journal(tmp_path / "world.edits")
+    for i in range(5):
+        journal.append(f"edit {i}".encode())
+    with open(journal.path, "ab") as out:  # a crash in the middle of the sixth append
+        out.write(b"\x00\x00\x00\x40half")
+    assert [r.decode() for r in journal.records()] == [f"edit {i}" for i in range(5)]
+    journal.restart(b"base")
+    assert list(journal.records()) == [b"base"]
+    assert not list(Journal(tmp_path / "none").records())
+    assert os.path.getsize(journal.path) == 8
