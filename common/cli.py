@@ -59,7 +59,11 @@ def add_context_arguments(p: argparse.ArgumentParser, what: str, example: str) -
         "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
     )
     p.add_argument("--owner", help=f"the user who owns the {what} (default: the service account)")
-    p.add_argument("--data-dir", type=Path, help=f"where the {what} keeps its chat history")
+    p.add_argument(
+        "--data-dir",
+        type=Path,
+        help=f"where the {what} keeps its chat history (and an agent context its queues)",
+    )
     p.add_argument("--history", type=int, default=200, help="lines of history kept (default 200)")
     p.add_argument(
         "--restricted",

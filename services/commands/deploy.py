@@ -10,6 +10,7 @@ Exits when the slot ends. Ctrl-C cancels the request (waiting or running).
 from __future__ import annotations
 
 import sys
+import time
 from collections.abc import Sequence
 
 from common import cli
@@ -25,6 +26,8 @@ from services.commands.control import (
     tool_parser,
 )
 from services.commands.terminal import say
+
+GONE_AFTER_S = 10.0  # the request missing from every queue state for this long: lost
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:
@@ -47,8 +50,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:
         shown: tuple[int, float | None] | None = None
         running = False
         final: RequestStatus | None = None
+        missing_since: float | None = None
         while final is None:
-            status = agents.wait_status(rid[0], FINAL | {"running"}, timeout=0.5, stop=stop)
+            # Once running, only the end matters: waiting for "running" again would
+            # return at once, every time, and spin a core.
+            wanted = FINAL if running else FINAL | {"running"}
+            status = agents.wait_status(rid[0], wanted, timeout=0.5, stop=stop)
             if stop.is_set():
                 agents.cancel_quietly(rid[0])
                 final = agents.wait_status(rid[0], FINAL, timeout=5.0)
@@ -63,6 +70,15 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:
                 say(f"running on {args.agent} for {left:.0f} s; output follows")
                 continue
             where = agents.position(rid[0])
+            if where is None and agents.latest_state is not None:
+                # The arena's queues no longer hold the request (it restarted without
+                # them, or ended it while we were away): say so rather than wait forever.
+                missing_since = missing_since or time.monotonic()
+                if time.monotonic() - missing_since > GONE_AFTER_S:
+                    say(f"request {rid[0]} is no longer in {args.context}'s queues: it was lost")
+                    return 1
+            else:
+                missing_since = None
             if not running and where is not None and where != shown and where[0] > 0:
                 shown = where
                 show_wait(*where)

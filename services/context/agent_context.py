@@ -26,8 +26,10 @@ disable remote control for the context or one agent, cancel anyone's request.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -35,6 +37,7 @@ import zenoh
 
 from common import acl, keys
 from common.auth import AuthError, Principal
+from common.files import write_atomic
 from common.leasemac import check_world_token, new_lease_key, seal_key
 from common.messages import (
     AgentContextState,
@@ -69,7 +72,14 @@ from common.messages import (
 )
 from common.precheck import PrecheckError, precheck
 from common.service import RequestError
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob, new_request_id
+from services.context.agent_queue import (
+    ControlJob,
+    QueueBook,
+    RunningJob,
+    load_book,
+    new_request_id,
+    save_book,
+)
 from services.context.chat_room import ChatRoom, log
 
 LEASE_REPUBLISH_S = 1.0
@@ -94,6 +104,11 @@ class AgentContext(ChatRoom):
         self.world = keys.check_ident("world", world)
         self.runner = keys.check_ident("runner", runner)
         self.book = QueueBook(slot_seconds)
+        data_dir = room.get("data_dir")
+        # Queues, settings and running slots survive a crash of this process: written
+        # (atomically, synced) whenever they change, read back here.
+        self._book_path: Path | None = None if data_dir is None else data_dir / f"{name}.queues"
+        self._restore_book()
         self._wake = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
@@ -105,6 +120,35 @@ class AgentContext(ChatRoom):
         self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
         self._runner_users: dict[str, str] = {}  # request id -> the runner account driving it
         self._world_token: SessionToken | None = None  # verified; lease keys are sealed to it
+
+    def _restore_book(self) -> None:
+        if self._book_path is None or not self._book_path.exists():
+            return
+        try:
+            self.book = load_book(self._book_path.read_bytes())
+        except (OSError, ValueError) as exc:
+            self.log.warning("could not restore the queues from %s: %s", self._book_path, exc)
+            return
+        waiting = sum(len(line.waiting) for line in self.book.lines.values())
+        running = [line.running for line in self.book.lines.values() if line.running]
+        self.log.info(
+            "restored %d waiting and %d running requests (slots of %g s) from %s",
+            waiting,
+            len(running),
+            self.book.slot_seconds,
+            self._book_path,
+        )
+
+    def _save_book(self) -> None:
+        if self._book_path is None:
+            return
+        with self._lock:
+            data = save_book(self.book)
+        try:
+            write_atomic(self._book_path, data)
+            os.chmod(self._book_path, 0o600)  # running slots carry their lease keys
+        except OSError as exc:
+            self.log.error("could not save the queues to %s: %s", self._book_path, exc)
 
     # -- lifecycle
 
@@ -130,6 +174,10 @@ class AgentContext(ChatRoom):
             running = [line.running for line in self.book.lines.values() if line.running]
         for run in running:
             self._end_run(run, "cancelled", "the agent context stopped")
+        with self._lock:
+            for line in self.book.lines.values():
+                line.running = None
+        self._save_book()  # a clean stop ends the slots: they must not come back
         for pub in self._lease_pubs.values():
             pub.undeclare()
         super().on_stop(timeout)
@@ -474,6 +522,7 @@ class AgentContext(ChatRoom):
                         self._publish_lease(run, run.end)
                 if self._dirty:
                     self._dirty = False
+                    self._save_book()
                     self._publish_agent(AgentEvent(ctx=self.room, state=self.state_message()))
             except Exception:
                 self.log.exception("error in the agent scheduler (kept running)")

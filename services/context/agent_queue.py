@@ -14,6 +14,8 @@ import secrets
 from collections import deque
 from dataclasses import dataclass, field
 
+import msgspec
+
 from common.messages import AgentQueue, QueueEntry, RunMode
 
 
@@ -181,3 +183,78 @@ class QueueBook:
                 AgentQueue(agent=agent, type=line.type, enabled=line.enabled, entries=entries)
             )
         return out
+
+
+# -- what survives a restart of the context
+
+
+class _SavedRun(msgspec.Struct):
+    job: ControlJob
+    lease_id: str
+    holder_session: bytes
+    start: float
+    end: float
+    holder_box: bytes = b""
+    lease_key: bytes = b""
+
+
+class _SavedLine(msgspec.Struct):
+    agent: str
+    type: str
+    enabled: bool
+    waiting: list[ControlJob]
+    running: _SavedRun | None = None
+
+
+class _SavedBook(msgspec.Struct):
+    version: int
+    slot_seconds: float
+    enabled: bool
+    lines: list[_SavedLine]
+
+
+_BOOK_VERSION = 1
+_book_decoder = msgspec.msgpack.Decoder(_SavedBook)
+
+
+def save_book(book: QueueBook) -> bytes:
+    """The queues, their settings and the running slots (with their lease keys) as bytes."""
+    lines = []
+    for line in book.lines.values():
+        run = line.running
+        saved_run = None
+        if run is not None:
+            saved_run = _SavedRun(
+                run.job,
+                run.lease_id,
+                run.holder_session,
+                run.start,
+                run.end,
+                run.holder_box,
+                run.lease_key,
+            )
+        lines.append(_SavedLine(line.agent, line.type, line.enabled, list(line.waiting), saved_run))
+    return msgspec.msgpack.encode(_SavedBook(_BOOK_VERSION, book.slot_seconds, book.enabled, lines))
+
+
+def load_book(data: bytes) -> QueueBook:
+    """A QueueBook from :func:`save_book`'s bytes; ValueError if they are not one."""
+    try:
+        saved = _book_decoder.decode(data)
+    except msgspec.DecodeError as exc:
+        raise ValueError(f"not a saved queue book: {exc}") from None
+    if saved.version != _BOOK_VERSION:
+        raise ValueError(f"saved queue book version {saved.version}, expected {_BOOK_VERSION}")
+    book = QueueBook(saved.slot_seconds)
+    book.enabled = saved.enabled
+    for line in saved.lines:
+        running = None
+        if line.running is not None:
+            r = line.running
+            running = RunningJob(
+                r.job, r.lease_id, r.holder_session, r.start, r.end, r.holder_box, r.lease_key
+            )
+        book.lines[line.agent] = AgentLine(
+            line.agent, line.type, line.enabled, deque(line.waiting), running
+        )
+    return book

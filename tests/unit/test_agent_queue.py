@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob
+import pytest
+
+from services.context.agent_queue import (
+    ControlJob,
+    QueueBook,
+    RunningJob,
+    load_book,
+    save_book,
+)
 
 
 def job(rid: str, agent: str = "k1", user: str = "alice") -> ControlJob:
@@ -43,3 +51,28 @@ def test_vanished_agents_give_back_their_jobs() -> None:
     gone = book.set_agents({"k1": "khepera"})
     assert [j.request_id for j in gone] == ["a"] and "k2" not in book.lines
     assert book.remove_waiting("zz") is None and book.find("a") is None
+
+
+def test_a_saved_book_comes_back_whole() -> None:
+    book = QueueBook(30.0)
+    book.enabled = False
+    book.set_agents({"k0": "khepera", "k1": "khepera"})
+    book.add(ControlJob("k0-1", "k0", "alice", b"a" * 16, "remote"))
+    book.add(ControlJob("k0-2", "k0", "bob", b"b" * 16, "deploy", source=b"print(1)"))
+    book.lines["k1"].running = RunningJob(
+        ControlJob("k1-1", "k1", "carol", b"c" * 16, "remote"),
+        "L1",
+        b"h",
+        1.0,
+        2.0,
+        b"x",
+        b"k" * 32,
+    )
+    back = load_book(save_book(book))
+    assert back.slot_seconds == 30.0 and back.enabled is False
+    assert [j.request_id for j in back.lines["k0"].waiting] == ["k0-1", "k0-2"]
+    assert back.lines["k0"].waiting[1].source == b"print(1)"
+    run = back.lines["k1"].running
+    assert run is not None and (run.lease_id, run.end, run.lease_key) == ("L1", 2.0, b"k" * 32)
+    with pytest.raises(ValueError, match="not a saved queue book"):
+        load_book(b"junk")

@@ -1,0 +1,67 @@
+"""An agent context killed with -9 comes back with its queues, settings and running slot."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.agent_client import DriveResult
+from common.controller import Controller, Khepera
+from tests.conftest import Procs, Router, wait_for
+from tests.integration.agentkit import Poses, agent_user, start_agent_context, start_engine
+from tests.integration.labkit import make_lab
+
+pytestmark = pytest.mark.integration
+
+
+class Forward(Controller):
+    period = 0.05
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(10, 10)
+
+
+def test_queues_settings_and_the_running_slot_survive_a_kill(
+    router: Router, procs: Procs, tmp_path: Path
+) -> None:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab, identity=True)
+    context = start_agent_context(lab, slot=12.0)
+    with (
+        lab.zsession() as z,
+        agent_user(lab, "alice") as alice,
+        agent_user(lab, "bob") as bob,
+        agent_user(lab, "ida") as ida,
+    ):
+        poses = Poses(z, lab.router.realm)
+        done: list[DriveResult] = []
+        t = threading.Thread(target=lambda: done.append(alice.drive("k0", Forward())))
+        t.start()
+        wait_for(lambda: alice.position_of_user("alice", "k0") == 0, 10, "alice's slot")
+        waiting = bob.queue("k0", "remote")
+        assert waiting.position == 1
+        ida.settings(slot_seconds=9.0)  # the owner's live setting
+        killed_at = time.monotonic()
+        context.kill9()
+        restarted = start_agent_context(lab, slot=12.0)
+        back = time.monotonic() - killed_at
+        # the clients rejoin by themselves and see the restored queue
+        wait_for(lambda: bob.position(waiting.request_id) is not None, 10, "bob's request back")
+        whole = time.monotonic() - killed_at
+        print(f"agent context back {back:.2f} s, clients whole {whole:.2f} s after kill -9")
+        assert bob.position(waiting.request_id)[0] == 1
+        assert alice.position_of_user("alice", "k0") == 0
+        state = bob.state()
+        assert state.slot_seconds == 9.0
+        # alice keeps driving through the restart, and her slot ends as it was going to
+        start = poses.xy("k0").copy()
+        wait_for(lambda: np.linalg.norm(poses.xy("k0") - start) > 5, 5, "k0 still driven")
+        t.join(30)
+        assert done and done[0].status == "finished", done
+        bob.cancel_quietly(waiting.request_id)
+    assert "restored 1 waiting and 1 running requests" in restarted.output()
