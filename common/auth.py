@@ -474,6 +474,6 @@ def issue_session(
         roles=sorted(set(roles)),
         issued_at=issued,
         expires_at=issued + ttl,
-        grants={scope: sorted(set(p)) for scope, p in (grants or {}).items()},  # type: ignore[misc]
+        grants={scope: sorted(set(p)) for scope, p in (grants or {}).items()},  # type: ignore[arg-type]
     )
     return Session(keys, identity.sign_token(token), token)

@@ -128,7 +128,9 @@ def _ask(client: LabClient, host: str, message: object, timeout: float) -> objec
     replies = [r for r in client.z.get(key, payload=payload, timeout=timeout) if r.ok is not None]
     if not replies:
         raise HostError(f"host {host} did not answer: it went away or the network dropped it")
-    reply = decode(replies[0].ok.payload, (ArenaReply, RoomReply, OkReply, ErrorReply))
+    first = replies[0].ok
+    assert first is not None  # kept only replies with a sample
+    reply = decode(first.payload, (ArenaReply, RoomReply, OkReply, ErrorReply))
     if isinstance(reply, ErrorReply):
         if reply.code == "conflict":
             raise NameTaken(f"host {host}: {reply.message}")

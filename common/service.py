@@ -25,7 +25,7 @@ import zenoh
 from common import keys
 from common.auth import AuthError
 from common.keys import AliveKind
-from common.messages import ErrorReply, Message, MessageError, encode
+from common.messages import ErrorCode, ErrorReply, Message, MessageError, encode
 from common.zconfig import NetworkOptions, zenoh_config
 
 log = logging.getLogger("wart.service")
@@ -207,7 +207,7 @@ class Service:
 class RequestError(Exception):
     """Raised by a handler to answer a request with an ErrorReply."""
 
-    def __init__(self, code: str, message: str, retry_after: float = 0.0) -> None:
+    def __init__(self, code: ErrorCode, message: str, retry_after: float = 0.0) -> None:
         super().__init__(message)
         self.code = code
         self.message = message

@@ -84,11 +84,11 @@ class QueueBook:
                 if line.running is not None:
                     gone.append(line.running.job)
         for agent, kind in agents.items():
-            line = self.lines.get(agent)
-            if line is None:
+            known = self.lines.get(agent)
+            if known is None:
                 self.lines[agent] = AgentLine(agent=agent, type=kind)
             else:
-                line.type = kind
+                known.type = kind
         return gone
 
     def can_run(self, agent: str) -> bool:

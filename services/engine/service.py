@@ -334,7 +334,7 @@ class EngineService(WorldService):
             try:
                 reply = fn(self.world)
             except RequestError as exc:
-                reply = ErrorReply(code=exc.code, message=exc.message)  # type: ignore[arg-type]
+                reply = ErrorReply(code=exc.code, message=exc.message)
             except Exception:
                 self.log.exception("error serving a request (kept running)")
                 reply = ErrorReply(code="internal", message="internal error; see the engine log")

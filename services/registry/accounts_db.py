@@ -27,6 +27,7 @@ import nacl.pwhash
 
 from common import acl
 from common.keys import check_ident, is_ident
+from common.messages import ErrorCode
 
 log = logging.getLogger("wart.registry.db")
 
@@ -80,7 +81,7 @@ MIN_PASSWORD = 8
 class DbError(ValueError):
     """A request to the database is wrong (unknown user, name taken, bad grant)."""
 
-    def __init__(self, code: str, message: str) -> None:
+    def __init__(self, code: ErrorCode, message: str) -> None:
         super().__init__(message)
         self.code = code
         self.message = message
