@@ -53,7 +53,7 @@ class RobotBody(Protocol):
         """Per wheel: on target (0/1), mode (0 position, 1 speed; polarity uncertain), error."""
 
     def proximity(self) -> tuple[int, ...]:
-        """Eight IR proximity readings 0..1023, sensor order of KHEPERA.md."""
+        """Eight IR proximity readings 0..1023, sensor order of docs/KHEPERA_PROTOCOL.md."""
 
     def ambient(self) -> tuple[int, ...]:
         """Eight ambient light readings 0..1023."""
@@ -79,7 +79,7 @@ class RobotBody(Protocol):
 
 @dataclass(frozen=True)
 class KinematicSpec:
-    """Khepera I geometry and units (KHEPERA.md "Body and units")."""
+    """Khepera I geometry and units (docs/KHEPERA_PROTOCOL.md "Body and units")."""
 
     mm_per_pulse: float = 0.08  # some K-Team code says 1/12 mm
     wheel_base_mm: float = 53.0

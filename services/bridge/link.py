@@ -66,7 +66,7 @@ class LinkOffline(LinkError):
 
 @dataclass(frozen=True)
 class LinkOptions:
-    """Timing and retry policy. Defaults follow the usual host pattern (KHEPERA.md)."""
+    """Timing and retry policy: the usual host pattern (docs/KHEPERA_PROTOCOL.md)."""
 
     reply_timeout: float = 0.3  # seconds to wait for the reply line of one try
     tries: int = 3

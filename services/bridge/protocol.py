@@ -4,7 +4,7 @@ Nothing here touches a port. A :class:`Request` knows its exact bytes on the
 wire and how to check and decode the one reply line that answers it; the
 link (link.py) moves bytes, the emulator (emulator.py) speaks the other side
 with the same helpers. Facts and the items that sources disagree on are in
-../shared/KHEPERA.md; the disagreeing ones live in :class:`Dialect`.
+docs/KHEPERA_PROTOCOL.md; the disagreeing ones live in :class:`Dialect`.
 
 Wire shape: a command is one upper-case letter, then comma-separated decimal
 integers, ended by CR (or LF: ``Dialect.command_eol``); a reply is the letter
@@ -56,7 +56,7 @@ class CommandNotFound(ProtocolError):
 
 @dataclass(frozen=True)
 class Dialect:
-    """The protocol details that sources disagree on (KHEPERA.md "uncertain"); all configurable.
+    """Protocol details that sources disagree on (docs/KHEPERA_PROTOCOL.md "Uncertain items").
 
     command_eol: what ends a command we send (the manual allows CR or LF).
     reply_eol: what the robot ends a reply with (the emulator uses it; the link
@@ -114,7 +114,7 @@ class WheelPair:
 
 @dataclass(frozen=True)
 class SensorArray:
-    """Eight 10-bit readings in sensor order 0..7 (KHEPERA.md sensor placement)."""
+    """Eight 10-bit readings in sensor order 0..7 (docs/KHEPERA_PROTOCOL.md sensor placement)."""
 
     values: tuple[int, ...]
 
@@ -451,7 +451,7 @@ def gripper_fingers(closed: bool) -> Request[Ack]:
     return _turret("D", (1 if closed else 0,), _ack)
 
 
-ARM_UP, ARM_DOWN = 165, 255  # mechanical range of the arm position (KHEPERA.md)
+ARM_UP, ARM_DOWN = 165, 255  # mechanical range of the arm position (docs/KHEPERA_PROTOCOL.md)
 
 
 def gripper_arm(position: int) -> Request[Ack]:

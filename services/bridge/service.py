@@ -66,7 +66,7 @@ from services.bridge.robot import (
     detect,
 )
 
-# Khepera I facts the snapshot carries (KHEPERA.md "Body" and "Sensor placement").
+# Khepera I facts the snapshot carries (docs/KHEPERA_PROTOCOL.md "Body" and "Sensor placement").
 KHEPERA_RADIUS_MM = 27.5
 KHEPERA_LEDS = 2
 KHEPERA_SPEED_LIMIT = 127

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import re
 from pathlib import Path
 
 import pytest
@@ -48,3 +49,38 @@ def test_every_key_suffix_is_in_the_key_table() -> None:
         if last not in ("**", "*", "r") and last not in DOC:
             missing.append(f"{name} ({key})")
     assert not missing, f"keys missing from docs/ARCHITECTURE.md: {missing}"
+
+
+REPO = Path(__file__).resolve().parents[2]
+_PATH = re.compile(
+    r"(?<![\w./-])((?:services|common|viewers|tests|bench|docs|maps|deploy|examples)"
+    r"/[\w./-]*\w)"
+)
+
+
+def _cited_paths() -> list[tuple[str, str]]:
+    cited = []
+    sources = [*sorted((REPO / "docs").glob("*.md")), REPO / "README.md"]
+    for folder in ("common", "services", "viewers"):
+        sources += sorted((REPO / folder).rglob("*.py"))
+    for source in sources:
+        for match in _PATH.finditer(source.read_text()):
+            path = match.group(1)
+            if any(c in path for c in "<>*{}") or path.endswith((".", "-")):
+                continue
+            cited.append((str(source.relative_to(REPO)), path))
+    return cited
+
+
+def test_every_path_the_docs_and_docstrings_cite_exists() -> None:
+    def exists(path: str) -> bool:
+        path = path.split(":")[0]  # file.py:12
+        module, _, _attr = path.rpartition(".")  # services/x/y.Class
+        return (REPO / path).exists() or bool(module and (REPO / f"{module}.py").exists())
+
+    missing = sorted(
+        f"{where}: {path}"
+        for where, path in _cited_paths()
+        if not exists(path) and not Path(path).stem.isupper()  # maps/NAME.json: a placeholder
+    )
+    assert not missing, "cited paths that do not exist:\n" + "\n".join(missing)
