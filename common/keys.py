@@ -24,8 +24,11 @@ message type on each key).
 from __future__ import annotations
 
 import functools
+import inspect
 import re
+from collections.abc import Callable
 from enum import StrEnum
+from typing import Any
 
 ROOT = "wart"
 
@@ -74,6 +77,26 @@ def realm_all(realm: str) -> str:
     return f"{realm_root(realm)}/**"
 
 
+def wildcard(builder: Callable[..., str], **fixed: Any) -> str:
+    """What ``builder`` builds, relative to the realm root, with every free id a ``*``.
+
+    ``wildcard(ctx_join)`` is ``ctx/*/join``; ``wildcard(alive, kind=AliveKind.USER)``
+    is ``alive/user/*``. Access-control rules (common/zsecurity.py) are written with
+    it, so they name exactly the keys the services use.
+    """
+    params = [p for p in inspect.signature(builder).parameters if p != "realm"]
+    sentinels = {p: f"wildcard{i}" for i, p in enumerate(params) if p not in fixed}
+    key = builder(realm=_PATTERN_REALM, **sentinels, **fixed)
+    prefix = realm_root(_PATTERN_REALM) + "/"
+    if not key.startswith(prefix):
+        raise ValueError(f"{builder.__name__} does not build a key of the realm")
+    wild = set(sentinels.values())
+    return "/".join("*" if chunk in wild else chunk for chunk in key[len(prefix) :].split("/"))
+
+
+_PATTERN_REALM = "pattern"
+
+
 # --- registry ---------------------------------------------------------------
 
 
@@ -91,6 +114,11 @@ def registry_directory(realm: str) -> str:
 
 def registry_admin(realm: str) -> str:
     return f"{realm_root(realm)}/registry/admin"
+
+
+def registry_all(realm: str) -> str:
+    """Every registry key (what the registry serves)."""
+    return f"{realm_root(realm)}/registry/**"
 
 
 def registry_revocations(realm: str) -> str:

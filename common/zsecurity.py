@@ -28,7 +28,7 @@ from typing import Any
 
 from common import keys
 from common.certs import CA_CERT
-from common.keys import realm_root
+from common.keys import AliveKind, realm_root
 from common.labfile import LabFile
 from common.zconfig import NetworkOptions
 
@@ -59,8 +59,11 @@ class Grant:
     keys: tuple[str, ...]
 
 
-def _g(verb: str, *keys: str) -> Grant:
-    return Grant(verb, keys)
+def _g(verb: str, *patterns: str) -> Grant:
+    return Grant(verb, patterns)
+
+
+W = keys.wildcard  # every pattern below is built from the key builders
 
 
 # What a verb needs from the router, per flow (seen from the router: ingress is
@@ -80,66 +83,78 @@ VERB_MESSAGES: dict[str, dict[str, tuple[str, ...]]] = {
 
 # Every service logs in (or checks tokens) with the registry and follows presence.
 _SERVICE_BASE = (
-    _g("ask", "registry/login", "registry/logout", "registry/directory", "registry/revocations"),
-    _g("sub", "registry/revocations", "user/*/inbox"),
-    _g("watch", "alive/**"),
+    _g(
+        "ask",
+        W(keys.registry_login),
+        W(keys.registry_logout),
+        W(keys.registry_directory),
+        W(keys.registry_revocations),
+    ),
+    _g("sub", W(keys.registry_revocations), W(keys.user_inbox)),
+    _g("watch", W(keys.alive_all)),
 )
 # What people's processes need: log in, the directory, rooms, watching worlds,
 # driving robots they hold a lease on (the engine checks the lease), private
 # messages, asking hosts for arenas (the host checks the `host` permission).
 _PEOPLE = (
-    _g("ask", "registry/login", "registry/logout", "registry/directory", "registry/admin"),
-    _g("ask", "registry/revocations"),
-    _g("sub", "registry/revocations", "user/*/inbox"),
+    _g(
+        "ask",
+        W(keys.registry_login),
+        W(keys.registry_logout),
+        W(keys.registry_directory),
+        W(keys.registry_admin),
+    ),
+    _g("ask", W(keys.registry_revocations)),
+    _g("sub", W(keys.registry_revocations), W(keys.user_inbox)),
     # ctx/*/output: a controller run from a student's machine (wart control)
     # reports its output to the context, which checks the sender holds the lease.
-    _g("pub", "user/*/inbox", "ctx/*/in", "ctx/*/output", "world/*/agent/*/cmd"),
-    _g("pub", "world/*/cmds"),
-    _g("ask", "ctx/*/join", "ctx/*/leave", "ctx/*/request", "ctx/*/state"),
-    _g("sub", "ctx/*/events"),
-    _g("sub", "world/*/frame", "world/*/sensors", "world/*/agent/*/sensors"),
-    _g("sub", "world/*/samples"),
-    _g("ask", "world/*/snapshot", "world/*/edit", "world/*/map"),
-    _g("sub", "host/*/load"),
-    _g("ask", "host/*/load", "host/*/spawn", "runner/*/run"),
-    _g("token", "alive/user/*"),
-    _g("watch", "alive/**"),
+    _g("pub", W(keys.user_inbox), W(keys.ctx_in), W(keys.ctx_output), W(keys.agent_cmd)),
+    _g("pub", W(keys.world_commands)),
+    _g("ask", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_request), W(keys.ctx_state)),
+    _g("sub", W(keys.ctx_events)),
+    _g("sub", W(keys.world_frame), W(keys.world_sensors), W(keys.agent_sensors)),
+    _g("sub", W(keys.world_samples)),
+    _g("ask", W(keys.world_snapshot), W(keys.world_edit), W(keys.world_map)),
+    _g("sub", W(keys.host_load)),
+    _g("ask", W(keys.host_load), W(keys.host_spawn), W(keys.runner_run)),
+    _g("token", W(keys.alive, kind=AliveKind.USER)),
+    _g("watch", W(keys.alive_all)),
 )
 
 ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     "registry": (
-        _g("serve", "registry/**"),
-        _g("pub", "registry/revocations", "user/*/inbox"),
-        _g("ask", "ctx/*/state"),
-        _g("token", "alive/registry/*"),
-        _g("watch", "alive/**"),
+        _g("serve", W(keys.registry_all)),
+        _g("pub", W(keys.registry_revocations), W(keys.user_inbox)),
+        _g("ask", W(keys.ctx_state)),
+        _g("token", W(keys.alive, kind=AliveKind.REGISTRY)),
+        _g("watch", W(keys.alive_all)),
     ),
     "chat": (
         *_SERVICE_BASE,
-        _g("serve", "ctx/*/join", "ctx/*/leave", "ctx/*/state", "ctx/*/request"),
-        _g("sub", "ctx/*/in"),
-        _g("pub", "ctx/*/events"),
-        _g("token", "alive/context/*"),
+        _g("serve", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_state), W(keys.ctx_request)),
+        _g("sub", W(keys.ctx_in)),
+        _g("pub", W(keys.ctx_events)),
+        _g("token", W(keys.alive, kind=AliveKind.CONTEXT)),
     ),
     # Agent contexts: a chat room plus the robots' queues; the only role that
     # may publish leases. They hear controllers' output (runner, wart control).
     "agent": (
         *_SERVICE_BASE,
-        _g("serve", "ctx/*/join", "ctx/*/leave", "ctx/*/state", "ctx/*/request"),
-        _g("sub", "ctx/*/in", "ctx/*/output"),
-        _g("pub", "ctx/*/events", "world/*/agent/*/lease"),
-        _g("sub", "world/*/frame", "world/*/agent/*/sensors"),
-        _g("ask", "world/*/snapshot", "runner/*/run"),
-        _g("token", "alive/context/*"),
+        _g("serve", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_state), W(keys.ctx_request)),
+        _g("sub", W(keys.ctx_in), W(keys.ctx_output)),
+        _g("pub", W(keys.ctx_events), W(keys.agent_lease)),
+        _g("sub", W(keys.world_frame), W(keys.agent_sensors)),
+        _g("ask", W(keys.world_snapshot), W(keys.runner_run)),
+        _g("token", W(keys.alive, kind=AliveKind.CONTEXT)),
     ),
     # Engines and bridges: the only roles that publish world frames and samples.
     "engine": (
         *_SERVICE_BASE,
-        _g("pub", "world/*/frame", "world/*/sensors", "world/*/agent/*/sensors"),
-        _g("pub", "world/*/samples"),
-        _g("sub", "world/*/agent/*/cmd", "world/*/cmds", "world/*/agent/*/lease"),
-        _g("serve", "world/*/snapshot", "world/*/edit", "world/*/map"),
-        _g("token", "alive/world/*"),
+        _g("pub", W(keys.world_frame), W(keys.world_sensors), W(keys.agent_sensors)),
+        _g("pub", W(keys.world_samples)),
+        _g("sub", W(keys.agent_cmd), W(keys.world_commands), W(keys.agent_lease)),
+        _g("serve", W(keys.world_snapshot), W(keys.world_edit), W(keys.world_map)),
+        _g("token", W(keys.alive, kind=AliveKind.WORLD)),
     ),
     # The runner is the parent of untrusted code: a client like a student's, that
     # may command robots (the engine or bridge obeys only the lease holder) and
@@ -147,22 +162,22 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     # have no network at all; they talk to it over a pipe.
     "runner": (
         *_SERVICE_BASE,
-        _g("serve", "runner/*/run"),
-        _g("pub", "world/*/agent/*/cmd", "world/*/cmds", "ctx/*/output"),
-        _g("sub", "world/*/agent/*/sensors", "world/*/samples", "world/*/agent/*/lease"),
-        _g("sub", "world/*/frame"),
-        _g("ask", "world/*/snapshot"),
-        _g("token", "alive/runner/*"),
+        _g("serve", W(keys.runner_run)),
+        _g("pub", W(keys.agent_cmd), W(keys.world_commands), W(keys.ctx_output)),
+        _g("sub", W(keys.agent_sensors), W(keys.world_samples), W(keys.agent_lease)),
+        _g("sub", W(keys.world_frame)),
+        _g("ask", W(keys.world_snapshot)),
+        _g("token", W(keys.alive, kind=AliveKind.RUNNER)),
     ),
     "host": (
         *_SERVICE_BASE,
-        _g("serve", "host/*/spawn", "host/*/load"),
-        _g("pub", "host/*/load"),
-        _g("token", "alive/host/*"),
+        _g("serve", W(keys.host_spawn), W(keys.host_load)),
+        _g("pub", W(keys.host_load)),
+        _g("token", W(keys.alive, kind=AliveKind.HOST)),
     ),
     # The viewer is a gateway: browsers' users act through it with their own
     # sessions, so it holds exactly people's rights, plus its presence.
-    "viewer": (*_PEOPLE, _g("token", "alive/viewer/*")),
+    "viewer": (*_PEOPLE, _g("token", W(keys.alive, kind=AliveKind.VIEWER))),
     "student": _PEOPLE,
     # Operators' tools (wart doctor, wart arena): people's rights plus the
     # routers' admin space (links, sessions) and every load report.

@@ -30,8 +30,8 @@ def builders() -> list[tuple[str, object]]:
     for name, fn in inspect.getmembers(keys, lambda f: inspect.isfunction(inspect.unwrap(f))):
         if fn.__module__ != keys.__name__ or name.startswith("_"):
             continue
-        if name.startswith(("check_", "is_", "parse_")) or "admin" in name:
-            continue  # admin-space keys are Zenoh's own: tested below
+        if name.startswith(("check_", "is_", "parse_", "wildcard")) or "admin" in name:
+            continue  # admin-space keys are Zenoh's own: tested below; wildcard makes patterns
         found.append((name, fn))
     return found
 

@@ -1,0 +1,60 @@
+"""Access-control rules are built from the key builders, and name keys the services use."""
+
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+
+import zenoh
+
+from common import keys, zsecurity
+from common.keys import AliveKind
+
+
+def _concrete_keys(realm: str) -> list[str]:
+    """One real key from every builder, with sample ids (what services put and serve on)."""
+    built = []
+    sample = {"ctx": "lobby", "world": "arena1", "agent": "k0", "user": "alice"}
+    sample |= {"runner": "runner", "host": "local", "ident": "x"}
+    for name, fn in inspect.getmembers(keys, inspect.isfunction):
+        if fn.__module__ != keys.__name__ or name.startswith(("_", "check_", "is_", "parse_")):
+            continue
+        params = [p for p in inspect.signature(fn).parameters if p != "realm"]
+        if "realm" not in inspect.signature(fn).parameters or "builder" in params:
+            continue
+        kinds = list(AliveKind) if "kind" in params else [None]
+        for kind in kinds:
+            args = {p: sample[p] for p in params if p != "kind"}
+            if kind is not None:
+                args["kind"] = kind
+            built.append(fn(realm=realm, **args))
+    return built
+
+
+def test_every_acl_pattern_names_keys_the_services_build() -> None:
+    realm = "lab"
+    root = keys.realm_root(realm)
+    real = [zenoh.KeyExpr(k) for k in _concrete_keys(realm)]
+    unused = []
+    for role, grants in zsecurity.ROLE_GRANTS.items():
+        for grant in grants:
+            for pattern in grant.keys:
+                expr = zenoh.KeyExpr(f"{root}/{pattern}")
+                if not any(expr.intersects(k) for k in real):
+                    unused.append(f"{role} {grant.verb} {pattern}")
+    assert not unused, f"ACL patterns no builder makes a key for: {unused}"
+
+
+def test_wildcard_builds_the_pattern_of_a_builder() -> None:
+    assert keys.wildcard(keys.ctx_join) == "ctx/*/join"
+    assert keys.wildcard(keys.agent_cmd) == "world/*/agent/*/cmd"
+    assert keys.wildcard(keys.alive, kind=AliveKind.USER) == "alive/user/*"
+    assert keys.wildcard(keys.alive_all) == "alive/**"
+
+
+def test_no_key_string_literal_is_left_in_the_acl_module() -> None:
+    source = Path(zsecurity.__file__).read_text()
+    grants = source[source.index("_SERVICE_BASE = (") : source.index('ROLE_GRANTS["bridge"]')]
+    literals = re.findall(r'"([a-z*]+(?:/[a-z*]+)+)"', grants)
+    assert not literals, f"key patterns written by hand: {literals}"
