@@ -56,6 +56,7 @@ import numpy as np
 from bench.labproc import REPO, BenchLab
 from common import keys
 from common.auth import RegistryIdentity, Session, Verifier, issue_session
+from common.controller import RobotCommand
 from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.leases import LeaseBook
@@ -232,7 +233,7 @@ def child(args: argparse.Namespace) -> int:
             if newest == seen:
                 continue
             seen = newest
-            link.send({"counters": [round(link.latest().time * 1000), 0]})
+            link.send(RobotCommand(counters=(round(link.latest().time * 1000), 0)))
 
     if args.inline:
         assert channel is not None
@@ -241,7 +242,7 @@ def child(args: argparse.Namespace) -> int:
         def swarm(_tick: int, agents: list[str]) -> None:
             for agent in agents:
                 link = by_agent[agent]
-                link.send({"counters": [round(link.latest().time * 1000), 0]})
+                link.send(RobotCommand(counters=(round(link.latest().time * 1000), 0)))
 
         channel.on_tick(swarm)
     else:
@@ -411,7 +412,7 @@ def wake_storm(n: int, rounds: int = 200) -> None:
     reaction, minus the put). Printed: when the median and the last thread
     are done, after the hand-out began.
     """
-    from common.remote_robot import command_from_dict, state_from_sample
+    from common.remote_robot import agent_command, state_from_sample
 
     raw = encode(
         SensorSample(
@@ -441,7 +442,7 @@ def wake_storm(n: int, rounds: int = 200) -> None:
                     continue
                 seen = handed[i]
             state = state_from_sample(decode(raw, SensorSample))
-            command = command_from_dict("k0", {"counters": [round(state.time * 1000), 0]})
+            command = agent_command("k0", RobotCommand(counters=(round(state.time * 1000), 0)))
             mac_command(key, cmd_key, "L0", seen, command, time.time())
             done[i] = time.perf_counter()
 

@@ -104,12 +104,85 @@ class KheperaState:
         )
 
 
+COUNTER_LIMIT = 2**31 - 1
+COMMAND_FIELDS = ("speeds", "counters", "leds", "arm", "grip")
+
+
+@dataclass(frozen=True)
+class RobotCommand:
+    """One command a controller gives its robot; exactly one field is set.
+
+    The one schema every transport carries: the sandbox's pipe (as a dict, see
+    :meth:`to_dict`), Zenoh (``common.remote_robot`` turns it into an
+    AgentCommand), and a test's in-process world. Stdlib only, like this module,
+    because the sandboxed child imports it.
+    """
+
+    speeds: tuple[int, int] | None = None  # pulses per 10 ms, each within ±MAX_SPEED
+    counters: tuple[int, int] | None = None  # position counters to set, in pulses
+    leds: tuple[bool, bool] | None = None
+    arm: int | None = None  # 0..255
+    grip: bool | None = None  # True: close the fingers
+
+    def __post_init__(self) -> None:
+        given = [name for name in COMMAND_FIELDS if getattr(self, name) is not None]
+        if len(given) != 1:
+            raise ValueError(f"a command sets exactly one of {', '.join(COMMAND_FIELDS)}")
+        for name, bound in (("speeds", MAX_SPEED), ("counters", COUNTER_LIMIT)):
+            value = getattr(self, name)
+            if value is not None and (
+                not isinstance(value, tuple)
+                or len(value) != 2
+                or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+                or not all(-bound <= v <= bound for v in value)
+            ):
+                raise ValueError(f"{name} must be two integers within ±{bound}")
+        if self.leds is not None and (
+            not isinstance(self.leds, tuple)
+            or len(self.leds) != 2
+            or not all(isinstance(v, bool) for v in self.leds)
+        ):
+            raise ValueError("leds must be two booleans")
+        if self.arm is not None and (
+            not isinstance(self.arm, int) or isinstance(self.arm, bool) or not 0 <= self.arm <= 255
+        ):
+            raise ValueError("arm must be an integer 0..255")
+        if self.grip is not None and not isinstance(self.grip, bool):
+            raise ValueError("grip must be true or false")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The wire form on the sandbox's pipe: ``{"speeds": [10, -10]}``."""
+        for name in COMMAND_FIELDS:
+            value = getattr(self, name)
+            if value is not None:
+                return {name: list(value) if isinstance(value, tuple) else value}
+        raise AssertionError("unreachable: __post_init__ requires one field")
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RobotCommand:
+        """A command from its wire form (a ``"t"`` tag is ignored); ValueError if it is not one."""
+        if not isinstance(data, dict):
+            raise ValueError("a command is a JSON object")
+        fields = {k: v for k, v in data.items() if k != "t"}
+        unknown = set(fields) - set(COMMAND_FIELDS)
+        if unknown:
+            raise ValueError(f"unknown command fields: {', '.join(sorted(map(str, unknown)))}")
+        if len(fields) != 1:
+            raise ValueError(f"a command sets exactly one of {', '.join(COMMAND_FIELDS)}")
+        ((name, value),) = fields.items()
+        if name in ("speeds", "counters", "leds"):
+            if not isinstance(value, list | tuple):
+                raise ValueError(f"{name} must be a list of two values")
+            value = tuple(value)
+        return cls(**{name: value})
+
+
 class RobotLink(Protocol):
     """What a robot handle needs from its transport (sandbox pipe, Zenoh, a test)."""
 
     def latest(self) -> KheperaState: ...
 
-    def send(self, command: dict[str, Any]) -> None: ...
+    def send(self, command: RobotCommand) -> None: ...
 
 
 def _clamp_speed(value: float) -> int:
@@ -130,7 +203,7 @@ class Khepera:
 
     def set_speeds(self, left: float, right: float) -> None:
         """Wheel speeds in pulses per 10 ms (about 8 mm/s each), clamped to ±127."""
-        self._link.send({"speeds": [_clamp_speed(left), _clamp_speed(right)]})
+        self._link.send(RobotCommand(speeds=(_clamp_speed(left), _clamp_speed(right))))
 
     def stop(self) -> None:
         self.set_speeds(0, 0)
@@ -146,7 +219,7 @@ class Khepera:
 
     def set_position(self, left: int, right: int) -> None:
         """Set the position counters (e.g. to zero before measuring a distance)."""
-        self._link.send({"counters": [int(left), int(right)]})
+        self._link.send(RobotCommand(counters=(int(left), int(right))))
 
     # -- sensors
 
@@ -170,13 +243,13 @@ class Khepera:
     # -- LEDs
 
     def set_leds(self, led0: bool, led1: bool) -> None:
-        self._link.send({"leds": [bool(led0), bool(led1)]})
+        self._link.send(RobotCommand(leds=(bool(led0), bool(led1))))
 
     # -- gripper turret
 
     def set_arm(self, position: int) -> None:
         """Arm position 0..255; mechanically about 165 (up) to 255 (down)."""
-        self._link.send({"arm": max(0, min(255, int(position)))})
+        self._link.send(RobotCommand(arm=max(0, min(255, int(position)))))
 
     def arm_up(self) -> None:
         self.set_arm(ARM_UP)
@@ -188,10 +261,10 @@ class Khepera:
         return self._link.latest().arm
 
     def open_gripper(self) -> None:
-        self._link.send({"grip": False})
+        self._link.send(RobotCommand(grip=False))
 
     def close_gripper(self) -> None:
-        self._link.send({"grip": True})
+        self._link.send(RobotCommand(grip=True))
 
     def gripper_closed(self) -> bool:
         return self._link.latest().gripper_closed

@@ -46,6 +46,7 @@ from common.controller import (
     MAX_SPEED,
     PROXIMITY_SENSORS,
     KheperaState,
+    RobotCommand,
 )
 from common.leasemac import CommandMac, open_key
 from common.messages import (
@@ -118,22 +119,15 @@ def state_to_dict(state: KheperaState) -> dict[str, Any]:
     }
 
 
-def command_from_dict(agent: str, command: dict[str, Any]) -> AgentCommand:
-    """A controller's command dict as an AgentCommand; ValueError if it is not one."""
-    speeds = command.get("speeds")
-    leds = command.get("leds")
-    counters = command.get("counters")
-    grip = command.get("grip")
-    unknown = set(command) - {"speeds", "leds", "counters", "arm", "grip"}
-    if unknown:
-        raise ValueError(f"unknown command fields: {', '.join(sorted(unknown))}")
+def agent_command(agent: str, command: RobotCommand) -> AgentCommand:
+    """A controller's command as the AgentCommand the world obeys."""
     return AgentCommand(
         agent=agent,
-        speeds=(int(speeds[0]), int(speeds[1])) if speeds is not None else None,
-        counters=(int(counters[0]), int(counters[1])) if counters is not None else None,
-        leds=[1 if bool(v) else 0 for v in leds] if leds is not None else None,
-        arm=int(command["arm"]) if command.get("arm") is not None else None,
-        fingers=None if grip is None else ("closed" if grip else "open"),
+        speeds=command.speeds,
+        counters=command.counters,
+        leds=None if command.leds is None else [1 if on else 0 for on in command.leds],
+        arm=command.arm,
+        fingers=None if command.grip is None else ("closed" if command.grip else "open"),
     )
 
 
@@ -422,16 +416,10 @@ class ZenohRobotLink:
                 self._state, self._decoded_seq = state, seq
             return self._state
 
-    def send(self, command: dict[str, Any]) -> None:
+    def send(self, command: RobotCommand) -> None:
         if self._closed.is_set():
             return
-        try:
-            message = command_from_dict(self.agent, command)
-        except (ValueError, TypeError, IndexError, KeyError) as exc:
-            self.refused += 1
-            log.warning("refused a command for %s: %s", self.agent, exc)
-            return
-        self._put(message)
+        self._put(agent_command(self.agent, command))
 
     def _put(self, message: AgentCommand) -> None:
         mac = False

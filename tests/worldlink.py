@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from common.controller import Controller, ControllerLoop, Khepera, KheperaState
-from common.remote_robot import command_from_dict, state_from_sample
+from common.controller import Controller, ControllerLoop, Khepera, KheperaState, RobotCommand
+from common.remote_robot import agent_command, state_from_sample
 from services.engine import wire
 from services.engine.world import World
 
@@ -20,15 +20,16 @@ class WorldLink:
     def latest(self) -> KheperaState:
         return state_from_sample(wire.sample(self.world, self.world.agent_slot(self.agent)))
 
-    def send(self, command: dict[str, Any]) -> None:
-        cmd = command_from_dict(self.agent, command)
+    def send(self, command: RobotCommand) -> None:
+        cmd = agent_command(self.agent, command)
         world, slot = self.world, self.world.agent_slot(self.agent)
         if cmd.speeds is not None:
             world.set_speeds(slot, *cmd.speeds)
         if cmd.counters is not None:
             world.set_counters(slot, *cmd.counters)
-        for led, on in enumerate(cmd.leds or []):
-            world.set_led(slot, led, bool(on))
+        for led, action in enumerate(cmd.leds or []):  # the engine's rule: 2 toggles
+            on = not world.leds[slot, led] if action == 2 else bool(action)
+            world.set_led(slot, led, on)
         if cmd.arm is not None:
             world.set_arm(slot, cmd.arm)
         if cmd.fingers is not None:

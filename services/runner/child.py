@@ -24,7 +24,13 @@ def main() -> int:
     cmd_fd = int(sys.argv[1])
     path = sys.argv[2]
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib"))
-    from common.controller import ControllerLoop, Khepera, KheperaState, load_controller
+    from common.controller import (
+        ControllerLoop,
+        Khepera,
+        KheperaState,
+        RobotCommand,
+        load_controller,
+    )
 
     out = os.fdopen(cmd_fd, "w", buffering=1)
     out_lock = threading.Lock()
@@ -42,8 +48,8 @@ def main() -> int:
             with self.lock:
                 return self.state
 
-        def send(self, command: dict[str, Any]) -> None:
-            tell({"t": "cmd", **command})
+        def send(self, command: RobotCommand) -> None:
+            tell({"t": "cmd", **command.to_dict()})
 
     link = PipeLink()
     stop = threading.Event()

@@ -60,39 +60,9 @@ class SandboxLimits:
     commands_per_second: int = 200
 
 
-def validate_command(message: dict[str, Any]) -> dict[str, Any]:
-    """One command from the sandbox, checked and normalised; ValueError if it is not one."""
-    command = {k: v for k, v in message.items() if k != "t"}
-    if len(command) != 1:
-        raise ValueError("a command sets exactly one of speeds, leds, arm, grip, counters")
-    ((name, value),) = command.items()
-    if name == "speeds" or name == "counters":
-        bound = controller_api.MAX_SPEED if name == "speeds" else 2**31 - 1
-        if (
-            not isinstance(value, list)
-            or len(value) != 2
-            or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
-            or not all(-bound <= v <= bound for v in value)
-        ):
-            raise ValueError(f"{name} must be two integers within ±{bound}")
-        return {name: [int(value[0]), int(value[1])]}
-    if name == "leds":
-        if (
-            not isinstance(value, list)
-            or len(value) != 2
-            or not all(isinstance(v, bool) for v in value)
-        ):
-            raise ValueError("leds must be two booleans")
-        return {name: list(value)}
-    if name == "arm":
-        if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 255:
-            raise ValueError("arm must be an integer 0..255")
-        return {name: value}
-    if name == "grip":
-        if not isinstance(value, bool):
-            raise ValueError("grip must be true or false")
-        return {name: value}
-    raise ValueError(f"unknown command {name!r}")
+def validate_command(message: dict[str, Any]) -> controller_api.RobotCommand:
+    """One command from the sandbox, checked; ValueError (saying why) if it is not one."""
+    return controller_api.RobotCommand.from_dict(message)
 
 
 def sandbox_problem() -> str | None:
@@ -144,7 +114,7 @@ class Sandbox:
         *,
         filename: str = "controller.py",
         limits: SandboxLimits | None = None,
-        on_command: Callable[[dict[str, Any]], None],
+        on_command: Callable[[controller_api.RobotCommand], None],
         on_output: Callable[[str], None],
         on_exit: Callable[[str], None] = lambda reason: None,
     ) -> None:

@@ -14,6 +14,7 @@ import zenoh
 
 from common import keys
 from common.auth import RegistryIdentity, Session, issue_session
+from common.controller import RobotCommand
 from common.keys import AliveKind
 from common.messages import (
     AddItem,
@@ -399,7 +400,7 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
     def swarm(tick: int, agents: list[str]) -> None:
         calls.append((tick, agents))
         for agent in agents:
-            links[agent].send({"speeds": [10, 10]})
+            links[agent].send(RobotCommand(speeds=(10, 10)))
 
     try:
         channel.on_tick(swarm)

@@ -14,6 +14,7 @@ import time
 import psutil
 import pytest
 
+from common.controller import RobotCommand
 from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck, sandbox_problem
 from tests.conftest import wait_for
 
@@ -77,7 +78,7 @@ class Avoid(Controller):
         slot=1.5,
     )
     command = run.commands.get(timeout=10)
-    assert command == {"speeds": [-5, 5]}
+    assert command == RobotCommand(speeds=(-5, 5))
     reason = run.finish()
     assert reason == "stopped at the end of its slot"
     assert "front 900" in run.text()
@@ -206,7 +207,7 @@ class Liar(Controller):
 """,
         slot=1.5,
     )
-    assert run.commands.get(timeout=10) == {"speeds": [3, 4]}
+    assert run.commands.get(timeout=10) == RobotCommand(speeds=(3, 4))
     run.finish()
     assert run.sandbox.rejected_commands >= 3
 

@@ -16,6 +16,7 @@ import pytest
 
 from common import keys
 from common.auth import AuthError, RegistryIdentity, Verifier, issue_session
+from common.controller import RobotCommand
 from common.messages import (
     AgentCommand,
     AuthEnvelope,
@@ -167,7 +168,7 @@ def test_malformed_or_mismatched_bundles_are_ignored_and_the_channel_keeps_servi
 def test_a_lone_command_leaves_at_once_sealed_for_its_agents_own_key() -> None:
     zs = FakeSession()
     channel, (k0,) = make(zs, ["k0"])
-    k0.send({"speeds": [5, 5]})
+    k0.send(RobotCommand(speeds=(5, 5)))
     sent = sent_commands(zs)
     assert [agent for agent, _ in sent] == ["k0"] and channel.puts == 1
     # Sealed for k0's own cmd key, which is what the world checks a bundled command on.
@@ -188,7 +189,7 @@ def test_a_burst_from_many_threads_is_batched_and_nothing_is_lost_or_reordered()
     def drive(link: ZenohRobotLink) -> None:
         start.wait()
         for n in range(per_link):
-            link.send({"counters": [n, 0]})
+            link.send(RobotCommand(counters=(n, 0)))
 
     threads = [threading.Thread(target=drive, args=(link,)) for link in links]
     for t in threads:
@@ -212,7 +213,7 @@ def test_burst_sends_one_threads_commands_in_one_message() -> None:
     channel, links = make(zs, [f"k{i}" for i in range(12)])
     with channel.burst():
         for link in links:
-            link.send({"speeds": [1, 1]})
+            link.send(RobotCommand(speeds=(1, 1)))
         assert channel.puts == 0  # held until the block ends
     assert channel.puts == 1 and len(sent_commands(zs)) == 12
 
@@ -241,7 +242,7 @@ def test_a_tick_listener_answers_every_robot_of_a_bundle_in_one_message() -> Non
         seen.append((tick, agents))
         for agent in agents:
             state = by_agent[agent].latest()  # already this tick's sample
-            by_agent[agent].send({"counters": [state.counters[0], 0]})
+            by_agent[agent].send(RobotCommand(counters=(state.counters[0], 0)))
 
     def broken(_tick: int, _agents: list[str]) -> None:
         raise RuntimeError("a bug in someone's swarm code")
