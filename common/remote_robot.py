@@ -1,7 +1,7 @@
 """A robot over Zenoh: the RobotLink that ``wart control`` and the runner drive robots with.
 
 :class:`ZenohRobotLink` turns the agent's ``SensorSample`` stream into
-:class:`~common.controller.KheperaState` and a controller's command dicts
+:class:`~common.controller.KheperaState` and a controller's RobotCommands
 into ``AgentCommand`` messages sealed with the driving session (the one the
 agent's lease names). A simulated world and a real one publish the same
 keys and messages, so the same controller drives either, unchanged.
