@@ -9,8 +9,9 @@ Layers, outermost first (each one alone would not be enough):
 2. ``prlimit`` sets CPU time, address space, processes, open files and file size.
 3. ``bwrap --unshare-all`` gives new user, pid, network, IPC and UTS
    namespaces: no network at all, a /proc of its own processes only, and a
-   file system of read-only /usr plus size-limited tmpfs /work and /tmp (a
-   quarter of the memory limit, taken off the address space). No /root, no
+   file system of read-only /, /usr and /dev plus size-limited tmpfs /work,
+   /tmp and /dev/shm (together a quarter of the memory limit, taken off the
+   address space). No /root, no
    /home, no keys, no Zenoh session.
 4. A seccomp filter (:mod:`services.runner.syscalls`) refuses namespaces,
    mounts, ptrace, BPF, perf, keyrings, io_uring and non-AF_UNIX sockets.
@@ -81,7 +82,7 @@ class SandboxLimits:
 
     @property
     def writable_bytes(self) -> int:
-        """The tmpfs space (/work and /tmp together): it is host memory, so it is
+        """The tmpfs space (/work, /tmp and /dev/shm together): it is host memory, so it is
         a quarter of the memory limit and the address space gets the rest."""
         return self.memory_bytes // 4
 
@@ -248,8 +249,10 @@ class Sandbox:
         if os.geteuid() == 0:
             self._uid = _take_uid()
             argv += ["setpriv", f"--reuid={self._uid}", f"--regid={self._uid}", "--clear-groups"]
-        # /work gets three quarters of the writable space, /tmp the rest.
-        work_bytes = lim.writable_bytes * 3 // 4
+        # /work gets half of the writable space, /tmp and /dev/shm a quarter
+        # each; / and /dev (bwrap's own tmpfs, of no set size) are read-only.
+        work_bytes = lim.writable_bytes // 2
+        tmp_bytes = lim.writable_bytes // 4
         argv += [
             "prlimit",
             f"--cpu={lim.cpu_seconds}",
@@ -283,13 +286,21 @@ class Sandbox:
             "--tmpfs",
             "/work",
             "--size",
-            str(lim.writable_bytes - work_bytes),
+            str(tmp_bytes),
             "--tmpfs",
             "/tmp",
             "--proc",
             "/proc",
             "--dev",
             "/dev",
+            "--size",
+            str(lim.writable_bytes - work_bytes - tmp_bytes),
+            "--tmpfs",
+            "/dev/shm",
+            "--remount-ro",
+            "/dev",
+            "--remount-ro",  # bwrap's root is a tmpfs of no set size too
+            "/",
             "--chdir",
             "/work",
             "--clearenv",

@@ -86,7 +86,10 @@ class SyscallFilterError(RuntimeError):
 
 
 def build_filter() -> bytes:
-    """The BPF program, built by /usr/bin/python3 with libseccomp; SyscallFilterError if it cannot be."""
+    """The BPF program, built by /usr/bin/python3 with libseccomp.
+
+    Raises SyscallFilterError (saying what to install) if it cannot be built.
+    """
     try:
         done = subprocess.run(
             [SANDBOX_PYTHON, "-I", str(Path(__file__).resolve())],
@@ -107,7 +110,7 @@ def build_filter() -> bytes:
 
 def _export() -> int:
     # Runs under /usr/bin/python3, where Debian's bindings live.
-    import seccomp  # type: ignore[import-not-found]
+    import seccomp
 
     denied = seccomp.ERRNO(errno.EPERM)
     rules = seccomp.SyscallFilter(defaction=seccomp.ALLOW)
