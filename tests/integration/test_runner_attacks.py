@@ -11,6 +11,7 @@ from __future__ import annotations
 import textwrap
 import time
 from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
 
 import psutil
@@ -71,13 +72,14 @@ def test_stalled_flooding_and_filling_uploads_end_on_time_and_say_why(lab: Lab) 
     before = runner.memory_info().rss
     attacks = {"stalled": ("bob", "k0", STALLED), "flood": ("carol", "k1", FLOOD)}
     attacks["files"] = ("ida", "k2", FILES)
-    with agent_user(lab, "alice") as watcher:
+    with agent_user(lab, "alice") as watcher, ExitStack() as users:
         rids: dict[str, str] = {}
         queued = time.monotonic()
         for name, (user, agent, body) in attacks.items():
-            with agent_user(lab, user) as client:
-                source = textwrap.dedent(HEADER + body).encode()
-                rids[name] = client.queue(agent, "deploy", source=source).request_id
+            # each student stays: a student who leaves has their runs cancelled
+            client = users.enter_context(agent_user(lab, user))
+            source = textwrap.dedent(HEADER + body).encode()
+            rids[name] = client.queue(agent, "deploy", source=source).request_id
         took: dict[str, float] = {}
         reasons: dict[str, str] = {}
         for name, rid in rids.items():
