@@ -255,7 +255,8 @@ class Sandbox:
         tmp_bytes = lim.writable_bytes // 4
         argv += [
             "prlimit",
-            f"--cpu={lim.cpu_seconds}",
+            # SIGXCPU at the soft limit says why; SIGKILL a second later if caught
+            f"--cpu={lim.cpu_seconds}:{lim.cpu_seconds + 1}",
             f"--as={lim.address_space_bytes}",
             f"--nproc={lim.processes}",
             f"--nofile={lim.open_files}",
@@ -490,8 +491,12 @@ class Sandbox:
                 self._exit_reason = self._stop_reason
             elif code == -signal.SIGXCPU or code == 128 + signal.SIGXCPU:
                 self._exit_reason = f"killed: it used up its CPU time ({self.limits.cpu_seconds} s)"
-            elif code < 0:
-                self._exit_reason = f"killed by {signal.Signals(-code).name}"
+            elif code < 0 or code > 128:
+                # bwrap passes a child's death by a signal on as 128 + signal
+                number = -code if code < 0 else code - 128
+                with contextlib.suppress(ValueError):
+                    self._exit_reason = f"killed by {signal.Signals(number).name}"
+                self._exit_reason = self._exit_reason or f"exited with code {code}"
             else:
                 self._exit_reason = f"exited with code {code}"
         # Its stdout may still be held by a leftover grandchild: the group goes too.

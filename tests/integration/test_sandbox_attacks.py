@@ -302,3 +302,20 @@ def test_the_sandbox_leaves_no_cgroup_behind() -> None:
     assert_still_serves()
     wait_for(lambda: not any(p.is_dir() for p in base.iterdir()), 5, "cgroups removed")
     assert os.path.isdir(base)
+
+
+def test_a_run_that_uses_up_its_cpu_time_is_told_so() -> None:
+    attack = Attack(
+        """
+class Spin(Controller):
+    def do_work(self, robot):
+        while True:
+            pass
+""",
+        slot=15.0,
+        limits=SandboxLimits(cpu_seconds=1),
+    )
+    reason, took = attack.finish()
+    assert reason == "killed: it used up its CPU time (1 s)", reason
+    assert took < 10
+    assert_still_serves()
