@@ -13,12 +13,16 @@ import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
+from types import SimpleNamespace
 
 import psutil
 import pytest
 
 from common.agent_client import FINAL
+from common.messages import RunAccepted, RunRequest
+from common.service import RequestError, close_session, open_session
 from services.runner.sandbox import sandbox_problem
+from services.runner.service import MAX_RUNS_PER_USER, RunnerService
 from tests.conftest import Procs, Router
 from tests.integration.agentkit import agent_user, start_agent_context, start_engine, start_runner
 from tests.integration.labkit import Lab, make_lab
@@ -30,6 +34,8 @@ pytestmark = [
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
 SLOT = 2.5
+# Stands in for the runner's login where only its RunClaim is sealed with it.
+_CLAIM_SEALER = SimpleNamespace(session=SimpleNamespace(seal=lambda key, message: b"sealed"))
 MB = 1 << 20
 
 STALLED = """
@@ -101,3 +107,45 @@ def test_stalled_flooding_and_filling_uploads_end_on_time_and_say_why(lab: Lab) 
         assert watcher.wait_status(talker.request_id, {"running"}, timeout=15) is not None
         final = watcher.wait_status(talker.request_id, FINAL, timeout=SLOT + 15)
         assert final is not None and final.status == "finished", final
+
+
+def test_one_user_cannot_take_every_place_on_a_runner(router: Router) -> None:
+    sleeper = textwrap.dedent(
+        HEADER
+        + """
+import time
+class Sleeper(Controller):
+    def do_work(self, robot):
+        time.sleep(60)
+"""
+    ).encode()
+    session = open_session(router.options(), wait=10.0)
+    runner = RunnerService(
+        session,
+        router.realm,
+        "runner",
+        registry_key=bytes(32),
+        login=_CLAIM_SEALER,  # type: ignore[arg-type]
+    )
+
+    def request(n: int, user: str) -> RunRequest:
+        return RunRequest(
+            request_id=f"r{n}",
+            ctx="arena",
+            world="arena",
+            agent=f"k{n}",
+            user=user,
+            source=sleeper,
+            end=time.time() + 30,
+        )
+
+    try:
+        for n in range(MAX_RUNS_PER_USER):
+            assert isinstance(runner._start(request(n, "mallory")), RunAccepted)
+        with pytest.raises(RequestError, match="mallory already runs 4 controllers"):
+            runner._start(request(9, "mallory"))
+        assert isinstance(runner._start(request(10, "alice")), RunAccepted)
+    finally:
+        runner.on_stop(10.0)
+        close_session(session)
+    assert runner.runs() == []
