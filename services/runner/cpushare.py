@@ -43,6 +43,17 @@ def _own_cgroup_dirs() -> list[tuple[str, Path]]:
     return found
 
 
+def _remove_stale(parent: Path) -> None:
+    """Remove the empty groups of runners that are gone (a crash skips close())."""
+    for group in parent.glob("wart-runner-*"):
+        pid = group.name.rsplit("-", 1)[-1]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists():
+            for path in [*group.iterdir(), group]:
+                if path.is_dir():
+                    with contextlib.suppress(OSError):
+                        path.rmdir()
+
+
 def _read(path: Path) -> str:
     try:
         return path.read_text()
@@ -60,6 +71,7 @@ class CpuShare:
         self.version = ""
         self.base: Path | None = None
         for version, parent in _own_cgroup_dirs():
+            _remove_stale(parent)
             base = parent / f"wart-runner-{os.getpid()}"
             try:
                 base.mkdir(exist_ok=True)

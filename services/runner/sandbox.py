@@ -31,6 +31,7 @@ parent over pipes, one JSON object per line; every line it sends is checked
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
 import json
@@ -159,6 +160,7 @@ def cpu_share(fraction: float) -> CpuShare:
         share = _cpu_shares.get(fraction)
         if share is None:
             share = _cpu_shares[fraction] = CpuShare(fraction)
+            atexit.register(share.close)  # its cgroup directory outlives it otherwise
             log.info("CPU share of a sandbox: %s", share.mode)
         return share
 
