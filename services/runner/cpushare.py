@@ -1,7 +1,8 @@
 """A CPU share per sandbox, so a busy loop or a fork bomb cannot starve the engine.
 
 Each sandbox gets a cgroup of its own with a quota of ``fraction`` of one
-core: cgroup v2 ``cpu.max`` where the unified hierarchy has the cpu
+core, inside the runner's group, whose quota leaves one core of the machine
+to everything else (the engine first): cgroup v2 ``cpu.max`` where the unified hierarchy has the cpu
 controller, else cgroup v1 ``cpu.cfs_quota_us``. The sandbox enters its
 cgroup before anything of it runs (a shell writes its own pid to
 ``cgroup.procs`` and then execs the sandbox), so every process it forks is
@@ -68,6 +69,8 @@ class CpuShare:
         if not 0.01 <= fraction <= 64:
             raise ValueError("the CPU share must be 0.01..64 cores")
         self.quota_us = int(_PERIOD_US * fraction)
+        # All sandboxes together leave one core to the engine and the runner.
+        self.total_us = int(_PERIOD_US * max(fraction, (os.cpu_count() or 1) - 1))
         self.version = ""
         self.base: Path | None = None
         for version, parent in _own_cgroup_dirs():
@@ -76,9 +79,9 @@ class CpuShare:
             try:
                 base.mkdir(exist_ok=True)
                 if version == "v2":
-                    # The quota lives in the per-sandbox groups: let them use cpu.
+                    # The per-sandbox groups get quotas of their own: let them use cpu.
                     (base / "cgroup.subtree_control").write_text("+cpu")
-                self._limit(version, base, probe=True)
+                self._limit(version, base, self.total_us)
             except OSError as exc:
                 log.debug("no %s cpu cgroup under %s: %s", version, parent, exc)
                 with contextlib.suppress(OSError):
@@ -92,16 +95,18 @@ class CpuShare:
         if self.base is None:
             return NICE_ONLY
         knob = "cpu.max" if self.version == "v2" else "cpu.cfs_quota_us"
-        return f"cgroup {self.version} {knob} = {self.quota_us / _PERIOD_US:.2f} core per sandbox"
+        return (
+            f"cgroup {self.version} {knob} = {self.quota_us / _PERIOD_US:.2f} core per sandbox,"
+            f" {self.total_us / _PERIOD_US:.2f} for all"
+        )
 
-    def _limit(self, version: str, group: Path, *, probe: bool = False) -> None:
+    @staticmethod
+    def _limit(version: str, group: Path, quota_us: int) -> None:
         if version == "v2":
-            if not probe:
-                (group / "cpu.max").write_text(f"{self.quota_us} {_PERIOD_US}")
+            (group / "cpu.max").write_text(f"{quota_us} {_PERIOD_US}")
         else:
             (group / "cpu.cfs_period_us").write_text(str(_PERIOD_US))
-            if not probe:
-                (group / "cpu.cfs_quota_us").write_text(str(self.quota_us))
+            (group / "cpu.cfs_quota_us").write_text(str(quota_us))
 
     def prefix(self, name: str) -> list[str]:
         """The argv that puts what follows into cgroup ``name`` (made now), then nice 19."""
@@ -111,7 +116,7 @@ class CpuShare:
         group = self.base / name
         try:
             group.mkdir(exist_ok=True)
-            self._limit(self.version, group)
+            self._limit(self.version, group, self.quota_us)
         except OSError as exc:
             log.warning("sandbox %s runs at nice 19 only: its cpu cgroup failed: %s", name, exc)
             return nice
