@@ -35,7 +35,7 @@ import zenoh
 from common import cli, keys
 from common.client import ServiceCredentials
 from common.service import run_service
-from services.runner.sandbox import SandboxLimits
+from services.runner.sandbox import SandboxLimits, sandbox_problem
 from services.runner.service import RunnerService
 
 
@@ -47,7 +47,18 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
         "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
     )
     p.add_argument("--cpu-seconds", type=int, default=120, help="CPU time per controller")
-    p.add_argument("--memory-mb", type=int, default=256, help="address space per controller")
+    p.add_argument(
+        "--memory-mb",
+        type=int,
+        default=256,
+        help="memory per controller: a quarter is its writable space, the rest address space",
+    )
+    p.add_argument(
+        "--cpu-share",
+        type=float,
+        default=0.5,
+        help="cores per controller, where a cpu cgroup can be made (else nice 19 only)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -57,14 +68,16 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
         )
     except ValueError as exc:
         return cli.fail(str(exc))
-    if not (1 <= args.cpu_seconds <= 3600 and 32 <= args.memory_mb <= 8192):
-        return cli.fail("--cpu-seconds must be 1..3600 and --memory-mb 32..8192")
-    from services.runner.sandbox import sandbox_problem
-
+    if not (1 <= args.cpu_seconds <= 3600 and 64 <= args.memory_mb <= 8192):
+        return cli.fail("--cpu-seconds must be 1..3600 and --memory-mb 64..8192")
+    if not 0.05 <= args.cpu_share <= 64:
+        return cli.fail("--cpu-share must be 0.05..64 cores")
     problem = sandbox_problem()
     if problem:
         return cli.fail(f"cannot run uploaded controllers here: {problem}")
-    limits = SandboxLimits(cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20)
+    limits = SandboxLimits(
+        cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20, cpu_share=args.cpu_share
+    )
 
     def build(session: zenoh.Session) -> RunnerService:
         login = credentials.login(session, options.realm, f"runner {args.name}")

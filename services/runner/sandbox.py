@@ -2,14 +2,26 @@
 
 Layers, outermost first (each one alone would not be enough):
 
+0. A cpu cgroup with a quota of part of one core, and nice 19
+   (:mod:`services.runner.cpushare`; nice alone where no cgroup can be made).
 1. ``setpriv`` drops to an unprivileged uid/gid when the runner is root: the
    kernel ignores RLIMIT_NPROC for root, so without this a fork bomb is free.
 2. ``prlimit`` sets CPU time, address space, processes, open files and file size.
 3. ``bwrap --unshare-all`` gives new user, pid, network, IPC and UTS
-   namespaces: no network at all, no view of other processes, and a file
-   system of read-only /usr plus a tmpfs working directory. No /root, no
+   namespaces: no network at all, a /proc of its own processes only, and a
+   file system of read-only /, /usr and /dev plus size-limited tmpfs /work,
+   /tmp and /dev/shm (together a quarter of the memory limit, taken off the
+   address space). No /root, no
    /home, no keys, no Zenoh session.
-4. A wall-clock kill at the end of the slot, of the whole process group.
+4. A seccomp filter (:mod:`services.runner.syscalls`) refuses namespaces,
+   mounts, ptrace, BPF, perf, keyrings, io_uring and non-AF_UNIX sockets.
+5. A wall-clock kill at the end of the slot, from a timer that shares no pipe
+   and no lock with the child, of its whole pid namespace.
+
+Nothing the child does can block or grow the runner: writes to it are
+non-blocking (a state it does not read in time is dropped), reads from it are
+in bounded chunks (long lines cut), and printing faster than
+``output_bytes_per_second`` ends the run as an output flood.
 
 The child is Debian's ``/usr/bin/python3`` running services/runner/child.py
 with only the standard library and common/controller.py. It talks to this
@@ -19,7 +31,9 @@ parent over pipes, one JSON object per line; every line it sends is checked
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import functools
 import json
 import logging
 import os
@@ -28,7 +42,6 @@ import signal
 import subprocess
 import tempfile
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,13 +51,16 @@ import psutil
 
 from common import controller as controller_api
 from common.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
+from services.runner.cpushare import CpuShare
+from services.runner.pipes import RateBudget, read_lines, write_nowait
+from services.runner.syscalls import SANDBOX_PYTHON, SyscallFilterError, build_filter
 
 log = logging.getLogger("wart.runner.sandbox")
 
 __all__ = ["MAX_SOURCE_BYTES", "PrecheckError", "Sandbox", "SandboxLimits", "precheck"]
 
 MAX_LINE_BYTES = 4096
-SANDBOX_PYTHON = "/usr/bin/python3"
+MAX_OUTPUT_LINE_BYTES = 1000
 _CHILD = Path(__file__).with_name("child.py")
 _API = Path(controller_api.__file__)
 
@@ -58,6 +74,22 @@ class SandboxLimits:
     file_size_bytes: int = 1024 * 1024
     output_lines_per_second: int = 50
     commands_per_second: int = 200
+    output_bytes_per_second: int = 64 * 1024  # faster than this (4 s of burst) ends the run
+    cpu_share: float = 0.5  # of one core, where a cpu cgroup can be made
+
+    def __post_init__(self) -> None:
+        if self.memory_bytes < 64 << 20:
+            raise ValueError("a sandbox needs a memory limit of at least 64 MB")
+
+    @property
+    def writable_bytes(self) -> int:
+        """The tmpfs space (/work, /tmp and /dev/shm together): it is host memory, so it is
+        a quarter of the memory limit and the address space gets the rest."""
+        return self.memory_bytes // 4
+
+    @property
+    def address_space_bytes(self) -> int:
+        return self.memory_bytes - self.writable_bytes
 
 
 def validate_command(message: dict[str, Any]) -> controller_api.RobotCommand:
@@ -75,7 +107,32 @@ def sandbox_problem() -> str | None:
         return "setpriv is missing (Debian package util-linux)"
     if shutil.which("prlimit") is None:
         return "prlimit is missing (Debian package util-linux)"
+    try:
+        syscall_filter()
+    except SyscallFilterError as exc:
+        return str(exc)
     return None
+
+
+@functools.lru_cache(maxsize=1)
+def syscall_filter() -> bytes:
+    """The seccomp program every sandbox gets, built once per runner."""
+    return build_filter()
+
+
+_cpu_lock = threading.Lock()
+_cpu_shares: dict[float, CpuShare] = {}
+
+
+def cpu_share(fraction: float) -> CpuShare:
+    """The runner's one CpuShare for ``fraction`` (its cgroup directory is per runner)."""
+    with _cpu_lock:
+        share = _cpu_shares.get(fraction)
+        if share is None:
+            share = _cpu_shares[fraction] = CpuShare(fraction)
+            atexit.register(share.close)  # its cgroup directory outlives it otherwise
+            log.info("CPU share of a sandbox: %s", share.mode)
+        return share
 
 
 _uid_lock = threading.Lock()
@@ -128,11 +185,15 @@ class Sandbox:
         self.on_output = on_output
         self.on_exit = on_exit
         self.rejected_commands = 0
+        self.dropped_states = 0
         self.process: subprocess.Popen[bytes] | None = None
         self._stage: Path | None = None
         self._uid: int | None = None
         self._cmd_read: int | None = None
+        self._cpu = cpu_share(self.limits.cpu_share)
+        self._cgroup = ""
         self._lock = threading.Lock()
+        self._stdin_lock = threading.Lock()  # held only for non-blocking writes
         self._stopping = False
         self._stop_reason = ""
         self._exit_reason = ""
@@ -153,22 +214,29 @@ class Sandbox:
             path.chmod(0o755 if path.is_dir() else 0o644)
         return stage
 
-    def command_line(self, stage: Path, cmd_fd: int) -> list[str]:
+    def command_line(self, stage: Path, cmd_fd: int, seccomp_fd: int) -> list[str]:
         lim = self.limits
-        argv: list[str] = []
+        self._cgroup = stage.name
+        argv = self._cpu.prefix(self._cgroup)
         if os.geteuid() == 0:
             self._uid = _take_uid()
             argv += ["setpriv", f"--reuid={self._uid}", f"--regid={self._uid}", "--clear-groups"]
+        # /work gets half of the writable space, /tmp and /dev/shm a quarter
+        # each; / and /dev (bwrap's own tmpfs, of no set size) are read-only.
+        work_bytes = lim.writable_bytes // 2
+        tmp_bytes = lim.writable_bytes // 4
         argv += [
             "prlimit",
-            f"--cpu={lim.cpu_seconds}",
-            f"--as={lim.memory_bytes}",
+            # SIGXCPU at the soft limit says why; SIGKILL a second later if caught
+            f"--cpu={lim.cpu_seconds}:{lim.cpu_seconds + 1}",
+            f"--as={lim.address_space_bytes}",
             f"--nproc={lim.processes}",
             f"--nofile={lim.open_files}",
             f"--fsize={lim.file_size_bytes}",
             "--",
             "bwrap",
             "--unshare-all",
+            "--unshare-pid",  # in --unshare-all too: said here because /proc relies on it
             "--die-with-parent",
             "--new-session",
             "--ro-bind",
@@ -186,14 +254,26 @@ class Sandbox:
             "--ro-bind",
             str(stage),
             "/ctl",
+            "--size",
+            str(work_bytes),
             "--tmpfs",
             "/work",
+            "--size",
+            str(tmp_bytes),
             "--tmpfs",
             "/tmp",
             "--proc",
             "/proc",
             "--dev",
             "/dev",
+            "--size",
+            str(lim.writable_bytes - work_bytes - tmp_bytes),
+            "--tmpfs",
+            "/dev/shm",
+            "--remount-ro",
+            "/dev",
+            "--remount-ro",  # bwrap's root is a tmpfs of no set size too
+            "/",
             "--chdir",
             "/work",
             "--clearenv",
@@ -206,6 +286,8 @@ class Sandbox:
             "--setenv",
             "PYTHONDONTWRITEBYTECODE",
             "1",
+            "--seccomp",
+            str(seccomp_fd),
             "--",
             SANDBOX_PYTHON,
             "-I",
@@ -221,14 +303,18 @@ class Sandbox:
         """Start the controller; it is killed ``slot_seconds`` from now at the latest."""
         self._stage = self._stage_files()
         cmd_read, cmd_write = os.pipe()
+        filter_read, filter_write = os.pipe()
         self._cmd_read = cmd_read
         try:
+            # A few hundred bytes: the pipe holds them all, bwrap reads them at start.
+            os.write(filter_write, syscall_filter())
+            os.close(filter_write)
             self.process = subprocess.Popen(
-                self.command_line(self._stage, cmd_write),
+                self.command_line(self._stage, cmd_write, filter_read),
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
-                pass_fds=(cmd_write,),
+                pass_fds=(cmd_write, filter_read),
                 start_new_session=True,
             )
         except OSError:
@@ -237,78 +323,126 @@ class Sandbox:
             raise
         finally:
             os.close(cmd_write)
-        threading.Thread(target=self._read_commands, daemon=True, name="sandbox-cmd").start()
-        threading.Thread(target=self._read_output, daemon=True, name="sandbox-out").start()
-        threading.Thread(target=self._wait, daemon=True, name="sandbox-wait").start()
+            os.close(filter_read)
+        assert self.process.stdin is not None
+        os.set_blocking(self.process.stdin.fileno(), False)
+        # The deadline first: nothing below can keep it from firing.
         self._kill_timer = threading.Timer(slot_seconds, self._slot_over)
         self._kill_timer.daemon = True
         self._kill_timer.start()
+        threading.Thread(target=self._read_commands, daemon=True, name="sandbox-cmd").start()
+        threading.Thread(target=self._read_output, daemon=True, name="sandbox-out").start()
+        threading.Thread(target=self._wait, daemon=True, name="sandbox-wait").start()
 
     # -- relaying
 
-    def send_state(self, state: dict[str, Any]) -> bool:
-        """Hand the newest robot state to the controller; False once it has gone."""
-        line = (json.dumps({"t": "state", **state}, separators=(",", ":")) + "\n").encode()
+    def _write(self, line: bytes) -> bool | None:
+        """True if written, False if the child's pipe is full, None if it is closed."""
         proc = self.process
-        if proc is None or proc.stdin is None or proc.poll() is not None:
+        with self._stdin_lock:
+            if proc is None or proc.stdin is None or proc.stdin.closed:
+                return None
+            try:
+                return write_nowait(proc.stdin.fileno(), line)
+            except (OSError, ValueError):
+                return None
+
+    def send_state(self, state: dict[str, Any]) -> bool:
+        """Hand the newest robot state to the controller; False once it has gone.
+
+        Never blocks: a controller that does not read its states loses them
+        (the next one is newer anyway) and is told so once.
+        """
+        line = (json.dumps({"t": "state", **state}, separators=(",", ":")) + "\n").encode()
+        if self.process is None or self.process.poll() is not None:
             return False
-        try:
-            proc.stdin.write(line)
-            proc.stdin.flush()
-            return True
-        except (BrokenPipeError, OSError, ValueError):
+        written = self._write(line)
+        if written is None:
             return False
+        if not written:
+            self.dropped_states += 1
+            if self.dropped_states == 1:
+                self._say("[runner] the controller is not reading its robot states: dropping them")
+        return True
 
     def _read_commands(self) -> None:
         assert self._cmd_read is not None
-        budget = _RateBudget(self.limits.commands_per_second)
-        with os.fdopen(self._cmd_read, "rb") as pipe:
-            for raw in pipe:
-                if len(raw) > MAX_LINE_BYTES:
+        budget = RateBudget(self.limits.commands_per_second)
+        try:
+            for raw, cut in read_lines(self._cmd_read, MAX_LINE_BYTES):
+                if cut:
                     self.rejected_commands += 1
                     continue
-                try:
-                    message = json.loads(raw)
-                    if not isinstance(message, dict):
-                        raise ValueError("not an object")
-                except ValueError:
-                    self.rejected_commands += 1
-                    continue
-                kind = message.get("t")
-                if kind == "cmd":
-                    try:
-                        command = validate_command(message)
-                    except ValueError as exc:
-                        self.rejected_commands += 1
-                        self._say(f"[runner] command refused: {exc}")
-                        continue
-                    if budget.take():
-                        self.on_command(command)
-                    else:
-                        self.rejected_commands += 1
-                elif kind == "ready":
-                    self._say(f"[runner] controller {str(message.get('controller'))[:64]} started")
-                elif kind == "error":
-                    self._exit_reason = "the controller raised an exception"
-                    for line in str(message.get("message", ""))[:4000].splitlines():
-                        self._say(line)
-                elif kind == "done":
-                    self._exit_reason = self._stop_reason or "the controller finished"
+                self._on_message(raw, budget)
+        finally:
+            os.close(self._cmd_read)
+
+    def _on_message(self, raw: bytes, budget: RateBudget) -> None:
+        try:
+            message = json.loads(raw)
+            if not isinstance(message, dict):
+                raise ValueError("not an object")
+        except ValueError:
+            self.rejected_commands += 1
+            return
+        kind = message.get("t")
+        if kind == "cmd":
+            try:
+                command = validate_command(message)
+            except ValueError as exc:
+                self.rejected_commands += 1
+                self._say(f"[runner] command refused: {exc}")
+                return
+            if budget.take():
+                self.on_command(command)
+            else:
+                self.rejected_commands += 1
+        elif kind == "ready":
+            self._say(f"[runner] controller {str(message.get('controller'))[:64]} started")
+        elif kind == "error":
+            text = str(message.get("message", ""))[:4000]
+            self._exit_reason = self._stop_reason or self._failure_reason(text)
+            for line in text.splitlines():
+                self._say(line)
+        elif kind == "done":
+            self._exit_reason = self._stop_reason or "the controller finished"
+
+    def _failure_reason(self, traceback_text: str) -> str:
+        """Why the controller raised, in the student's terms where a limit did it."""
+        mb = self.limits.memory_bytes >> 20
+        if "MemoryError" in traceback_text:
+            return f"ended: out of memory (the limit is {mb} MB)"
+        if any(s in traceback_text for s in ("No space left on device", "File too large")):
+            disk = self.limits.writable_bytes >> 20
+            big = self.limits.file_size_bytes >> 20
+            return f"ended: out of disk space ({disk} MB in all, {big} MB a file)"
+        return "the controller raised an exception"
 
     def _read_output(self) -> None:
         proc = self.process
         assert proc is not None and proc.stdout is not None
-        budget = _RateBudget(self.limits.output_lines_per_second)
+        lim = self.limits
+        lines = RateBudget(lim.output_lines_per_second)
+        flood = RateBudget(lim.output_bytes_per_second, 4 * lim.output_bytes_per_second)
+
+        def count(n: int) -> None:
+            if not flood.take(n) and not self._stopping:
+                kb = lim.output_bytes_per_second >> 10
+                self._end_now(f"killed: output flood (over {kb} KB/s printed)")
+
         dropped = 0
-        for raw in proc.stdout:
-            if budget.take():
+        for raw, cut in read_lines(proc.stdout.fileno(), MAX_OUTPUT_LINE_BYTES, count):
+            if lines.take():
                 if dropped:
                     self._say(
                         f"[runner] {dropped} output lines dropped (over "
-                        f"{self.limits.output_lines_per_second} lines/s)"
+                        f"{lim.output_lines_per_second} lines/s)"
                     )
                     dropped = 0
-                self._say(raw[:1000].decode("utf-8", "replace").rstrip("\n"))
+                text = raw.decode("utf-8", "replace")
+                if cut:
+                    text += f" [runner: line cut at {MAX_OUTPUT_LINE_BYTES} bytes]"
+                self._say(text)
             else:
                 dropped += 1
 
@@ -328,11 +462,22 @@ class Sandbox:
             if self._stopping:
                 self._exit_reason = self._stop_reason
             elif code == -signal.SIGXCPU or code == 128 + signal.SIGXCPU:
-                self._exit_reason = "killed: it used up its CPU time"
-            elif code < 0:
-                self._exit_reason = f"killed by {signal.Signals(-code).name}"
+                self._exit_reason = f"killed: it used up its CPU time ({self.limits.cpu_seconds} s)"
+            elif code < 0 or code > 128:
+                # bwrap passes a child's death by a signal on as 128 + signal
+                number = -code if code < 0 else code - 128
+                with contextlib.suppress(ValueError):
+                    self._exit_reason = f"killed by {signal.Signals(number).name}"
+                self._exit_reason = self._exit_reason or f"exited with code {code}"
             else:
                 self._exit_reason = f"exited with code {code}"
+        # Its stdout may still be held by a leftover grandchild: the group goes too.
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        with self._stdin_lock:
+            if proc.stdin is not None:
+                with contextlib.suppress(OSError):
+                    proc.stdin.close()
         self._cleanup_files()
         self._done.set()
         try:
@@ -345,8 +490,24 @@ class Sandbox:
     def _slot_over(self) -> None:
         self.stop(grace=0.5, reason="stopped at the end of its slot")
 
+    def _end_now(self, reason: str) -> None:
+        """Kill at once for ``reason`` (called on a reader thread: the kill runs on its own)."""
+        with self._lock:
+            if self._stopping:
+                return
+            self._stopping = True
+            self._stop_reason = reason
+        proc = self.process
+        if proc is not None:
+            threading.Thread(target=_kill_sandbox, args=(proc,), daemon=True).start()
+
     def stop(self, grace: float = 1.0, reason: str = "stopped") -> None:
-        """Ask the controller to clean up, then kill its whole process group."""
+        """Ask the controller to clean up, then kill its whole process group.
+
+        Nothing here waits on the child's pipes: the stop message is written
+        without blocking (lost if its pipe is full), the kill follows ``grace``
+        seconds later whatever the child does.
+        """
         with self._lock:
             if self._stopping:
                 return
@@ -355,12 +516,12 @@ class Sandbox:
         proc = self.process
         if proc is None:
             return
-        if proc.poll() is None and proc.stdin is not None:
-            try:
-                proc.stdin.write(b'{"t":"stop"}\n')
-                proc.stdin.close()
-            except (BrokenPipeError, OSError, ValueError):
-                pass
+        if proc.poll() is None:
+            self._write(b'{"t":"stop"}\n')
+            with self._stdin_lock:
+                if proc.stdin is not None:
+                    with contextlib.suppress(OSError):
+                        proc.stdin.close()
         try:
             proc.wait(grace)
         except subprocess.TimeoutExpired:
@@ -380,6 +541,9 @@ class Sandbox:
         if self._stage is not None:
             shutil.rmtree(self._stage, ignore_errors=True)
             self._stage = None
+        if self._cgroup:
+            self._cpu.release(self._cgroup)
+            self._cgroup = ""
         if self._uid is not None:
             _give_uid(self._uid)
             self._uid = None
@@ -409,21 +573,3 @@ def _kill_sandbox(proc: subprocess.Popen[bytes]) -> None:
         pass
     with contextlib.suppress(ProcessLookupError):
         os.killpg(proc.pid, signal.SIGKILL)
-
-
-class _RateBudget:
-    """A token bucket: ``rate`` events per second, bursts up to one second's worth."""
-
-    def __init__(self, rate: int) -> None:
-        self.rate = float(rate)
-        self.tokens = float(rate)
-        self.stamp = time.monotonic()
-
-    def take(self) -> bool:
-        now = time.monotonic()
-        self.tokens = min(self.rate, self.tokens + (now - self.stamp) * self.rate)
-        self.stamp = now
-        if self.tokens >= 1.0:
-            self.tokens -= 1.0
-            return True
-        return False

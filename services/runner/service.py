@@ -49,11 +49,13 @@ from common.messages import (
 from common.precheck import PrecheckError, precheck
 from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from common.service import RequestError, Service
-from services.runner.sandbox import Sandbox, SandboxLimits
+from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share
 
 log = logging.getLogger("wart.runner")
 
 MAX_RUNS = 32
+# One user's stalled or hostile uploads must not take every place.
+MAX_RUNS_PER_USER = 4
 MAX_SLOT_S = 3600.0
 OUTPUT_FLUSH_S = 0.1
 
@@ -174,6 +176,7 @@ class RunnerService(Service):
         self._key = keys.runner_run(realm, name)
 
     def on_start(self) -> None:
+        self.log.info("sandbox CPU share: %s", cpu_share(self.limits.cpu_share).mode)
         self.serve(self._key, self._on_run)
 
     def on_stop(self, timeout: float) -> None:
@@ -187,6 +190,7 @@ class RunnerService(Service):
             channels, self._channels = list(self._channels.values()), {}
         for channel in channels:
             channel.close()
+        cpu_share(self.limits.cpu_share).close()
 
     def channel(self, world: str) -> WorldChannel:
         """The runs' shared channel to ``world``: its samples in, their commands out."""
@@ -238,6 +242,13 @@ class RunnerService(Service):
                 raise RequestError("conflict", f"{request.request_id} already runs")
             if len(self._runs) >= MAX_RUNS:
                 raise RequestError("unavailable", f"the runner is full ({MAX_RUNS} controllers)")
+            mine = sum(1 for r in self._runs.values() if r.request.user == request.user)
+            if mine >= MAX_RUNS_PER_USER:
+                raise RequestError(
+                    "unavailable",
+                    f"{request.user} already runs {mine} controllers here "
+                    f"(at most {MAX_RUNS_PER_USER} per user): stop one first",
+                )
             try:
                 run = Run(self, request, self.limits)
             except (RuntimeError, ValueError) as exc:

@@ -118,7 +118,7 @@ class Hog(Controller):
     )
     reason = run.finish()
     assert "MemoryError" in run.text()
-    assert reason == "the controller raised an exception"
+    assert reason == "ended: out of memory (the limit is 200 MB)"
 
 
 @needs_sandbox
