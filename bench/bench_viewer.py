@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from tests.browser.conftest import CHROMIUM_ARGS, ViserPage
 from tests.conftest import free_port
 from viewers.web.app import WebViewer
-from viewers.web.fakes import FakeConnector, FakeLab
+from viewers.web.demo_lab import DemoConnector, DemoLab
 
 BENCH_VIEWPORT = {"width": 960, "height": 600}
 
@@ -91,8 +91,8 @@ def main() -> int:
             env = stack.enter_context(real_lab(Path(tempfile.mkdtemp()), "swarm", wander=True))
             users = [(u, PASSWORD) for u in ("alice", "bob", "carol", "ida")]
             return run(args, env.viewer, env.url, env.address.label, WORLD, users, None)
-    lab = FakeLab("Bench lab", robots=args.robots, rate=args.world_rate)
-    viewer = WebViewer(FakeConnector(("lab", lab)), port=free_port(), rate=args.rate)
+    lab = DemoLab("Bench lab", robots=args.robots, rate=args.world_rate)
+    viewer = WebViewer(DemoConnector(("lab", lab)), port=free_port(), rate=args.rate)
     try:
         users = [("ana", "ana-pw"), ("ben", "ben-pw")]
         return run(args, viewer, "127.0.0.1", "lab@127.0.0.1", "arena", users, lab)
@@ -108,7 +108,7 @@ def run(
     tab: str,
     arena: str,
     users: list[tuple[str, str]],
-    lab: FakeLab | None,
+    lab: DemoLab | None,
 ) -> int:
     from playwright.sync_api import sync_playwright
 

@@ -1,4 +1,4 @@
-"""Real-browser fixtures: Debian's Chromium driven by Playwright, a viewer on fakes.
+"""Real-browser fixtures: Debian's Chromium driven by Playwright, a viewer on the demo lab.
 
 The browser is never downloaded: Playwright launches /usr/bin/chromium with
 the usual headless flags (software WebGL). Screenshots go to test-artifacts/
@@ -17,7 +17,7 @@ import pytest
 
 from tests.conftest import ARTIFACTS, free_port
 from viewers.web.app import WebViewer
-from viewers.web.fakes import FakeConnector, FakeLab
+from viewers.web.demo_lab import DemoConnector, DemoLab
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -65,16 +65,16 @@ def chromium() -> Iterator[object]:
 
 
 @pytest.fixture
-def fake_lab() -> Iterator[FakeLab]:
-    lab = FakeLab("Test lab", robots=12)
+def fake_lab() -> Iterator[DemoLab]:
+    lab = DemoLab("Test lab", robots=12)
     yield lab
     lab.close()
 
 
 @pytest.fixture
-def viewer(fake_lab: FakeLab, tmp_path: Path) -> Iterator[WebViewer]:
+def viewer(fake_lab: DemoLab, tmp_path: Path) -> Iterator[WebViewer]:
     app = WebViewer(
-        FakeConnector(("lab", fake_lab)),
+        DemoConnector(("lab", fake_lab)),
         port=free_port(),
         data_dir=tmp_path / "viewer",
     )

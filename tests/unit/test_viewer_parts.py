@@ -1,4 +1,4 @@
-"""Pure parts of the viewer: geometry, text checks, upload checks, the fakes."""
+"""Pure parts of the viewer: geometry, text checks, upload checks, the demo lab."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from tests.conftest import REPO
 from viewers.web import geometry as geo
 from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError, MapEdit
 from viewers.web.address import LabAddress
-from viewers.web.fakes import FakeConnector, FakeLab, FakeWorld
+from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
 from viewers.web.login import check_login_input
 from viewers.web.real_agents import check_upload
 from viewers.web.robot_panel import check_controller, format_agents
@@ -57,7 +57,7 @@ def test_robot_mesh_and_rays() -> None:
 
 
 def test_prepared_frame_colours_by_gripper() -> None:
-    world = FakeWorld(robots=5, start=False)
+    world = DemoWorld(robots=5, start=False)
     prepared = PreparedFrame.of(world.produce(1.0))
     assert prepared.positions.shape == (5, 3) and prepared.colours.shape == (5, 3)
 
@@ -96,9 +96,9 @@ def test_controller_uploads_are_checked_not_run() -> None:
 
 
 def test_fake_lab_behaves_like_a_lab() -> None:
-    lab = FakeLab(robots=4)
+    lab = DemoLab(robots=4)
     try:
-        connector = FakeConnector(("lab", lab))
+        connector = DemoConnector(("lab", lab))
         where = LabAddress("127.0.0.1")
         with pytest.raises(LoginError, match="wrong user name or password"):
             connector.login(where, "ana", "nope")

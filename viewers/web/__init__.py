@@ -4,7 +4,7 @@ Modules, one concern each:
 
     address.py     the address bar's parser (pure) and saved connections (JSON)
     adapters.py    the Protocols the viewer talks through (lab connection, world feed)
-    fakes.py       in-memory implementations of those Protocols (tests, demo, bench)
+    demo_lab.py    the demo lab: in-memory implementations of those Protocols (--demo, tests, bench)
     geometry.py    mm/radian world poses to viser metres/quaternions (pure numpy)
     world_view.py  one browser's top-down arena view: batched robots, trail, rays
     pump.py        the paced loop that pushes the newest frame to every watching view

@@ -1,7 +1,7 @@
 """What the viewer needs from the lab, as small Protocols.
 
 The viewer's UI is written against these, never against Zenoh or the wire
-messages directly. Phase 1 runs on the in-memory fakes (viewers/web/fakes.py);
+messages directly. The demo lab runs in memory (viewers/web/demo_lab.py);
 phase 2 implements them over the registry client (``LabClient``, issue 3) and
 the Sim2D world messages (issue 4). Everything here is plain data: numpy
 arrays for bulk poses, frozen dataclasses for the rest.
@@ -60,7 +60,7 @@ class Directory:
 
 
 @dataclass(frozen=True)
-class ChatLine:
+class ChatEntry:
     seq: int
     sender: str
     text: str
@@ -76,7 +76,7 @@ class JoinedContext:
     title: str
     owner: str
     members: tuple[str, ...]
-    history: tuple[ChatLine, ...]
+    history: tuple[ChatEntry, ...]
     world: str | None = None
     can_kick: bool = False
 
@@ -88,7 +88,7 @@ class JoinedContext:
 @dataclass(frozen=True)
 class ChatEvent:
     ctx: str
-    line: ChatLine
+    line: ChatEntry
 
 
 @dataclass(frozen=True)
@@ -236,11 +236,11 @@ class Light:
 
 
 @dataclass(frozen=True)
-class WorldSnapshot:
+class SceneLayout:
     """The slowly-changing part of a world: the arena and its fixed things.
 
     ``version`` changes whenever an edit changes any of it, so a view knows to
-    redraw; robots' poses travel in :class:`WorldFrame` instead.
+    redraw; robots' poses travel in :class:`SceneFrame` instead.
     """
 
     world: str
@@ -256,7 +256,7 @@ class WorldSnapshot:
 
 
 @dataclass(frozen=True)
-class WorldFrame:
+class SceneFrame:
     """One tick: every robot's pose in packed arrays (index = snapshot.robots order)."""
 
     seq: int
@@ -268,7 +268,7 @@ class WorldFrame:
 
 
 @dataclass(frozen=True)
-class SensorSample:
+class RobotReadings:
     """The selected robot's sensors: 8 IR proximity and 8 ambient readings (0..1023)."""
 
     agent: str
@@ -301,11 +301,11 @@ class WorldFeed(Protocol):
     @property
     def world(self) -> str: ...
 
-    def snapshot(self) -> WorldSnapshot: ...
+    def snapshot(self) -> SceneLayout: ...
 
-    def latest(self) -> WorldFrame | None: ...
+    def latest(self) -> SceneFrame | None: ...
 
-    def sensors(self, agent: str) -> SensorSample | None: ...
+    def sensors(self, agent: str) -> RobotReadings | None: ...
 
     def edit(self, edit: MapEdit) -> None:
         """Apply an edit with the user's session; :class:`LabError` if refused."""

@@ -2,7 +2,7 @@
 
 :class:`WebViewer` is the browser side (viser server, frame pump, a
 :class:`BrowserSession` per connected browser) and takes its lab connector as
-a parameter, so tests and the benchmark run it on in-memory fakes.
+a parameter, so tests and the benchmark run it on the in-memory demo lab.
 :class:`ViewerService` puts it on the Zenoh network with the liveliness token
 ``wart/<realm>/alive/viewer/<id>``.
 
@@ -202,10 +202,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
     def build(session: zenoh.Session) -> Service:
         connector: LabConnector
         if args.demo:
-            from viewers.web.fakes import FakeConnector, FakeLab
+            from viewers.web.demo_lab import DemoConnector, DemoLab
 
-            lab = FakeLab("Demo lab", robots=args.demo_robots)
-            connector = FakeConnector((default.realm, lab))
+            lab = DemoLab("Demo lab", robots=args.demo_robots)
+            connector = DemoConnector((default.realm, lab))
         else:
             # The gateway: this process's one session to its own lab, and a
             # LabClient per logged-in browser user on it (viewers/web/real.py).

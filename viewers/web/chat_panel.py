@@ -13,8 +13,8 @@ from collections.abc import Callable
 import viser
 
 from viewers.web.adapters import (
+    ChatEntry,
     ChatEvent,
-    ChatLine,
     JoinedContext,
     LabConnection,
     LabError,
@@ -89,7 +89,7 @@ class ChatPanel:
     # -- rendering
 
     @staticmethod
-    def _format(line: ChatLine) -> str:
+    def _format(line: ChatEntry) -> str:
         return f"`{clock(line.at)}` **{escape_md(line.sender)}**: {escape_md(line.text)}"
 
     def _others(self) -> tuple[str, ...]:

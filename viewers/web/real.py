@@ -46,12 +46,12 @@ from common.messages import (
     RemoveItem,
     ResizeArena,
     RoomEvent,
+    SensorSample,
     WorldEdit,
+    WorldFrame,
+    WorldSnapshot,
     decode,
 )
-from common.messages import SensorSample as WireSample
-from common.messages import WorldFrame as WireFrame
-from common.messages import WorldSnapshot as WireSnapshot
 from common.service import close_session, open_session
 from common.survey import Survey, survey
 from common.zconfig import NetworkOptions
@@ -60,8 +60,8 @@ from viewers.web.adapters import (
     AgentStatus,
     ArenaSettings,
     Ball,
+    ChatEntry,
     ChatEvent,
-    ChatLine,
     ContextSummary,
     Directory,
     DirectoryEvent,
@@ -76,9 +76,9 @@ from viewers.web.adapters import (
     Obstacle,
     PrivateEvent,
     Queued,
-    SensorSample,
-    WorldFrame,
-    WorldSnapshot,
+    RobotReadings,
+    SceneFrame,
+    SceneLayout,
 )
 from viewers.web.address import AddressError, LabAddress, parse_address
 from viewers.web.real_agents import ArenaLink
@@ -454,7 +454,7 @@ class RealConnection:
         members = tuple(event.members)
         if event.line is not None:
             line = event.line
-            self._queue.put(ChatEvent(ctx, ChatLine(line.seq, line.sender, line.text, line.at)))
+            self._queue.put(ChatEvent(ctx, ChatEntry(line.seq, line.sender, line.text, line.at)))
         if event.status is not None:
             status = event.status
             kind: Literal["joined", "left", "kicked"] = (
@@ -557,7 +557,7 @@ class RealConnection:
             room = self._call(
                 lambda: self.client.join(ctx, lambda e: self._room_event(ctx, e), HISTORY)
             )
-        history = tuple(ChatLine(h.seq, h.sender, h.text, h.at) for h in room.history)
+        history = tuple(ChatEntry(h.seq, h.sender, h.text, h.at) for h in room.history)
         return JoinedContext(
             ctx=ctx,
             kind=kind,
@@ -748,7 +748,7 @@ def _decode(raw: Any, kinds: Any) -> Message | None:
         return None
 
 
-def convert_snapshot(snap: WireSnapshot) -> tuple[WorldSnapshot, tuple[str, ...]]:
+def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]:
     """The engine's snapshot as the view draws it, and the frame's object rows (ball order)."""
     obstacles: list[Obstacle] = []
     objects: dict[str, Ball] = {}
@@ -777,7 +777,7 @@ def convert_snapshot(snap: WireSnapshot) -> tuple[WorldSnapshot, tuple[str, ...]
     balls = tuple(objects[o] for o in object_rows if o in objects)
     lights = tuple(Light(lt.id, lt.x, lt.y, lt.on) for lt in snap.lights)
     radius = snap.agents[0].radius if snap.agents else 27.5
-    view = WorldSnapshot(
+    view = SceneLayout(
         world=snap.world,
         width=snap.width,
         height=snap.height,
@@ -806,8 +806,8 @@ class WorldWatch:
         self._raw: Any = None
         self._raw_count = 0
         self._decoded_count = 0
-        self._frame: WorldFrame | None = None
-        self._snapshot: WorldSnapshot | None = None
+        self._frame: SceneFrame | None = None
+        self._snapshot: SceneLayout | None = None
         self._rows = 0
         self._want = threading.Event()
         self._first = threading.Event()
@@ -849,13 +849,13 @@ class WorldWatch:
             keys.world_snapshot(self.realm, self.world), timeout=QUERY_TIMEOUT
         ):
             if answer.ok is not None:
-                reply = _decode(answer.ok.payload, (WireSnapshot, ErrorReply))
+                reply = _decode(answer.ok.payload, (WorldSnapshot, ErrorReply))
                 break
         if reply is None:
             raise LabError(f"the world {self.world} does not answer (is its engine running?)")
         if isinstance(reply, ErrorReply):
             raise LabError(f"the world {self.world}: {reply.message}")
-        assert isinstance(reply, WireSnapshot)
+        assert isinstance(reply, WorldSnapshot)
         view, object_rows = convert_snapshot(reply)
         with self._lock:
             self._snapshot = view
@@ -864,20 +864,20 @@ class WorldWatch:
         self.refetches += 1
         self._first.set()
 
-    def snapshot(self) -> WorldSnapshot:
+    def snapshot(self) -> SceneLayout:
         snap = self._snapshot
         if snap is None:
             raise LabError(f"the world {self.world} has not answered yet")
         return snap
 
-    def latest(self) -> WorldFrame | None:
+    def latest(self) -> SceneFrame | None:
         count, raw = self._raw_count, self._raw
         if raw is None or count == self._decoded_count:
             return self._frame
         self._decoded_count = count
-        wire = _decode(raw, WireFrame)
+        wire = _decode(raw, WorldFrame)
         snap = self._snapshot
-        if not isinstance(wire, WireFrame) or snap is None:
+        if not isinstance(wire, WorldFrame) or snap is None:
             return self._frame
         if wire.layout != snap.version:
             self._want.set()  # an edit or a new map: everyone's view refetches
@@ -892,7 +892,7 @@ class WorldWatch:
         if snap.offline:
             gripper = np.zeros(n, np.uint8) if gripper is None else gripper.copy()
             gripper[[i for i, a in enumerate(snap.robots) if a in snap.offline]] = OFFLINE
-        self._frame = WorldFrame(
+        self._frame = SceneFrame(
             seq=wire.tick,
             t=wire.sim_time,
             poses=np.ascontiguousarray(poses[:n], np.float32),
@@ -902,7 +902,7 @@ class WorldWatch:
         )
         return self._frame
 
-    def sensors(self, agent: str) -> SensorSample | None:
+    def sensors(self, agent: str) -> RobotReadings | None:
         now = time.monotonic()
         with self._lock:
             for name in [n for n, s in self._sensors.items() if now - s.asked > SENSOR_IDLE_S]:
@@ -941,18 +941,18 @@ class _SensorSub:
     def _on(self, sample: zenoh.Sample) -> None:
         self._raw = sample.payload.to_bytes()
 
-    def latest(self, agent: str) -> SensorSample | None:
+    def latest(self, agent: str) -> RobotReadings | None:
         raw = self._raw
         if raw is None:
             return None
-        wire = _decode(raw, WireSample)
-        if not isinstance(wire, WireSample) or wire.agent != agent:
+        wire = _decode(raw, SensorSample)
+        if not isinstance(wire, SensorSample) or wire.agent != agent:
             return None
         ir = np.zeros(8, np.float32)
         ambient = np.zeros(8, np.float32)
         ir[: min(8, len(wire.proximity))] = wire.proximity[:8]
         ambient[: min(8, len(wire.ambient))] = wire.ambient[:8]
-        return SensorSample(agent, wire.sim_time, ir, ambient)
+        return RobotReadings(agent, wire.sim_time, ir, ambient)
 
     def close(self) -> None:
         try:
@@ -976,13 +976,13 @@ class UserWorld:
     def world(self) -> str:
         return self.source.world
 
-    def snapshot(self) -> WorldSnapshot:
+    def snapshot(self) -> SceneLayout:
         return self.source.snapshot()
 
-    def latest(self) -> WorldFrame | None:
+    def latest(self) -> SceneFrame | None:
         return self.source.latest()
 
-    def sensors(self, agent: str) -> SensorSample | None:
+    def sensors(self, agent: str) -> RobotReadings | None:
         return self.source.sensors(agent)
 
     def _ask(self, key: str, message: Message, what: str) -> EditResult:
@@ -1033,7 +1033,7 @@ class UserWorld:
         return self._ask(key, MapRequest(action="load", name=name), "load maps").detail
 
 
-def fresh_id(kind: str, snap: WorldSnapshot) -> str:
+def fresh_id(kind: str, snap: SceneLayout) -> str:
     taken = {o.ident for o in snap.obstacles} | {b.ident for b in snap.balls}
     taken |= {lt.ident for lt in snap.lights} | set(snap.robots)
     prefix = NEW_ITEM_PREFIX.get(kind, "item")
@@ -1043,7 +1043,7 @@ def fresh_id(kind: str, snap: WorldSnapshot) -> str:
     return f"{prefix}{i}"
 
 
-def to_wire_edit(edit: MapEdit, snap: WorldSnapshot) -> Any:
+def to_wire_edit(edit: MapEdit, snap: SceneLayout) -> Any:
     """A viewer edit as the engine's edit op; validated here so a browser cannot send junk."""
     for value in (edit.x, edit.y, edit.angle, edit.w, edit.h):
         if not np.isfinite(value):

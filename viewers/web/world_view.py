@@ -21,7 +21,7 @@ import numpy.typing as npt
 import viser
 
 from viewers.web import geometry as geo
-from viewers.web.adapters import WorldFeed, WorldFrame, WorldSnapshot
+from viewers.web.adapters import SceneFrame, SceneLayout, WorldFeed
 
 log = logging.getLogger("wart.viewer.world")
 
@@ -44,14 +44,14 @@ LIGHT_ON, LIGHT_OFF = (255, 220, 40), (150, 150, 150)
 class PreparedFrame:
     """A frame converted for viser once, shared by every view of the world."""
 
-    frame: WorldFrame
+    frame: SceneFrame
     positions: npt.NDArray[np.float32]
     wxyzs: npt.NDArray[np.float32]
     colours: npt.NDArray[np.uint8]
     gripper_key: bytes  # colours change rarely: views compare this before resending
 
     @staticmethod
-    def of(frame: WorldFrame) -> PreparedFrame:
+    def of(frame: SceneFrame) -> PreparedFrame:
         positions, wxyzs = geo.poses_to_viser(frame.poses)
         state = np.clip(frame.gripper, 0, len(GRIPPER_COLOURS) - 1)
         return PreparedFrame(frame, positions, wxyzs, GRIPPER_COLOURS[state], state.tobytes())
@@ -63,7 +63,7 @@ class WorldView:
     def __init__(self, client: viser.ClientHandle) -> None:
         self.client = client
         self.feed: WorldFeed | None = None
-        self.snapshot: WorldSnapshot | None = None
+        self.snapshot: SceneLayout | None = None
         self.selected: int | None = None
         self.show_rays = False
         self.last_seq = -1
@@ -162,7 +162,7 @@ class WorldView:
         self._gripper_key = b""
         self._light_state = b""
 
-    def redraw(self, snap: WorldSnapshot) -> None:
+    def redraw(self, snap: SceneLayout) -> None:
         """Draw (or redraw after an edit) everything that comes from the snapshot."""
         with self._lock:
             old = self.snapshot
@@ -246,7 +246,7 @@ class WorldView:
 
         return clicked
 
-    def _draw_robots(self, snap: WorldSnapshot) -> None:
+    def _draw_robots(self, snap: SceneLayout) -> None:
         scene = self.client.scene
         if self._robots is not None:
             self._robots.remove()
@@ -324,7 +324,7 @@ class WorldView:
             self.last_seq = frame.seq
             self.frames_applied += 1
 
-    def _apply_objects(self, frame: WorldFrame) -> None:
+    def _apply_objects(self, frame: SceneFrame) -> None:
         for handle, (x, y) in zip(self._balls, frame.ball_xy, strict=False):
             position = (float(x) * geo.MM, float(y) * geo.MM, 0.01)
             if tuple(handle.position) != position:

@@ -1,4 +1,4 @@
-"""In-memory labs and worlds behind the viewer's Protocols.
+"""The demo lab: in-memory labs and worlds behind the viewer's Protocols.
 
 Used by the phase-1 tests, ``wart viewer --demo`` and bench/bench_viewer.py.
 They behave like the real services in the ways the UI relies on: logins can
@@ -26,8 +26,8 @@ from viewers.web.adapters import (
     AgentStatus,
     ArenaSettings,
     Ball,
+    ChatEntry,
     ChatEvent,
-    ChatLine,
     ContextSummary,
     Directory,
     DirectoryEvent,
@@ -42,9 +42,9 @@ from viewers.web.adapters import (
     Obstacle,
     PrivateEvent,
     Queued,
-    SensorSample,
-    WorldFrame,
-    WorldSnapshot,
+    RobotReadings,
+    SceneFrame,
+    SceneLayout,
 )
 from viewers.web.address import LabAddress
 
@@ -53,7 +53,7 @@ INSTRUCTOR = STUDENT | {"edit_map", "kick", "host"}
 ADMIN = INSTRUCTOR | {"admin"}
 
 
-class FakeWorld:
+class DemoWorld:
     """A world whose robots circle their home spots; frames at ``rate`` Hz on a thread."""
 
     def __init__(
@@ -79,7 +79,7 @@ class FakeWorld:
         self._radius = 0.3 * min(width / cols, height / rows)
         self._phase = np.linspace(0, 2 * math.pi, robots, endpoint=False)
         wall = 20.0
-        self._snapshot = WorldSnapshot(
+        self._snapshot = SceneLayout(
             world=world,
             width=width,
             height=height,
@@ -95,11 +95,11 @@ class FakeWorld:
             robots=names,
         )
         self._lock = threading.Lock()
-        self._latest: WorldFrame | None = None
+        self._latest: SceneFrame | None = None
         self._seq = itertools.count()
         self._t0 = time.monotonic()
         self.edits: list[MapEdit] = []
-        self.saved: dict[str, WorldSnapshot] = {}
+        self.saved: dict[str, SceneLayout] = {}
         self.refuse_edits = ""  # set to a reason to make edit() fail
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -134,7 +134,7 @@ class FakeWorld:
                 next_at = time.monotonic()
             self._stop.wait(max(0.0, delay))
 
-    def produce(self, t: float | None = None) -> WorldFrame:
+    def produce(self, t: float | None = None) -> SceneFrame:
         """Compute the frame at time ``t`` (default: now) and make it the latest."""
         t = time.monotonic() - self._t0 if t is None else t
         angle = 0.5 * t + self._phase
@@ -144,7 +144,7 @@ class FakeWorld:
         poses[:, 2] = angle + math.pi / 2  # heading along the circle
         gripper = (np.arange(len(poses)) % 3).astype(np.uint8)
         snap = self._snapshot
-        frame = WorldFrame(
+        frame = SceneFrame(
             seq=next(self._seq),
             t=t,
             poses=poses,
@@ -155,20 +155,20 @@ class FakeWorld:
         self._latest = frame  # one reference swap: readers never see half a frame
         return frame
 
-    def snapshot(self) -> WorldSnapshot:
+    def snapshot(self) -> SceneLayout:
         return self._snapshot
 
-    def latest(self) -> WorldFrame | None:
+    def latest(self) -> SceneFrame | None:
         return self._latest
 
-    def sensors(self, agent: str) -> SensorSample | None:
+    def sensors(self, agent: str) -> RobotReadings | None:
         if agent not in self._snapshot.robots:
             return None
         t = time.monotonic() - self._t0
         k = np.arange(8, dtype=np.float32)
         ir = 512 + 500 * np.sin(t * 2 + k)
         ambient = 400 + 300 * np.cos(t + k / 2)
-        return SensorSample(agent, t, ir.astype(np.float32), ambient.astype(np.float32))
+        return RobotReadings(agent, t, ir.astype(np.float32), ambient.astype(np.float32))
 
     def edit(self, edit: MapEdit) -> None:
         if self.refuse_edits:
@@ -237,13 +237,13 @@ class FakeWorld:
 class _Context:
     summary: ContextSummary
     members: list[str] = field(default_factory=list)
-    history: list[ChatLine] = field(default_factory=list)
+    history: list[ChatEntry] = field(default_factory=list)
     queue: dict[str, list[str]] = field(default_factory=dict)  # agent -> users waiting
     slot_seconds: float = 60.0
     enabled: bool = True
 
 
-class FakeLab:
+class DemoLab:
     """One lab shared by all its connections: accounts, contexts, chat, worlds."""
 
     def __init__(self, server_name: str = "Fake lab", *, robots: int = 8, rate: float = 50.0):
@@ -253,7 +253,7 @@ class FakeLab:
             "ben": ("ben-pw", STUDENT),
             "root": ("root-pw", ADMIN),
         }
-        self.worlds: dict[str, FakeWorld] = {"arena": FakeWorld("arena", robots, rate=rate)}
+        self.worlds: dict[str, DemoWorld] = {"arena": DemoWorld("arena", robots, rate=rate)}
         self._lock = threading.RLock()
         self._contexts: dict[str, _Context] = {}
         self._online: dict[str, int] = {}
@@ -276,14 +276,14 @@ class FakeLab:
 
     # -- what connections call
 
-    def login(self, address: LabAddress, user: str, password: str) -> FakeConnection:
+    def login(self, address: LabAddress, user: str, password: str) -> DemoConnection:
         account = self.accounts.get(user)
         if account is None or account[0] != password:
             raise LoginError("wrong user name or password")
         with self._lock:
             self._online[user] = self._online.get(user, 0) + 1
         self._broadcast(DirectoryEvent())
-        return FakeConnection(self, address.with_user(user), user, account[1])
+        return DemoConnection(self, address.with_user(user), user, account[1])
 
     def _broadcast(self, event: LabEvent, only: set[str] | None = None) -> None:
         with self._lock:
@@ -308,26 +308,26 @@ class FakeLab:
         return next(self._seq)
 
 
-class FakeConnector:
+class DemoConnector:
     """A :class:`~viewers.web.adapters.LabConnector` over one or more fake labs.
 
     Labs are found by realm; an unknown realm fails the way an unreachable lab would.
     """
 
-    def __init__(self, *labs: tuple[str, FakeLab]) -> None:
+    def __init__(self, *labs: tuple[str, DemoLab]) -> None:
         self.labs = dict(labs)
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> FakeConnection:
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> DemoConnection:
         lab = self.labs.get(address.realm)
         if lab is None:
             raise LoginError(f"no lab answers at {address.label}: check the address")
         return lab.login(address, user, password)
 
 
-class FakeConnection:
-    """One user's session with a :class:`FakeLab`."""
+class DemoConnection:
+    """One user's session with a :class:`DemoLab`."""
 
-    def __init__(self, lab: FakeLab, address: LabAddress, user: str, perms: frozenset[str]):
+    def __init__(self, lab: DemoLab, address: LabAddress, user: str, perms: frozenset[str]):
         self._lab = lab
         self._address = address
         self._user = user
@@ -402,7 +402,7 @@ class FakeConnection:
             context = lab.context(ctx)
             if self._user not in context.members:
                 raise LabError(f"join {ctx} before writing there")
-            line = ChatLine(lab.next_seq(), self._user, text, time.time())
+            line = ChatEntry(lab.next_seq(), self._user, text, time.time())
             context.history.append(line)
             members = set(context.members)
         lab._broadcast(ChatEvent(ctx, line), only=members)
@@ -437,7 +437,7 @@ class FakeConnection:
             world = None
             if kind == "agent":
                 world = name
-                lab.worlds[name] = FakeWorld(name, 4)
+                lab.worlds[name] = DemoWorld(name, 4)
             lab._open(name, kind, self._user, map_name or name, world)
         lab._broadcast(DirectoryEvent())
         return name
@@ -459,7 +459,7 @@ class FakeConnection:
 
         return unsubscribe
 
-    def world(self, world: str) -> FakeWorld:
+    def world(self, world: str) -> DemoWorld:
         feed = self._lab.worlds.get(world)
         if feed is None:
             raise LabError(f"there is no world {world!r}")
