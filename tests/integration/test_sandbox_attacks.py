@@ -18,6 +18,7 @@ from pathlib import Path
 import psutil
 import pytest
 
+from common.controller import RobotCommand
 from services.runner.cpushare import NICE_ONLY
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, sandbox_problem
 from tests.conftest import wait_for
@@ -84,7 +85,7 @@ class Fine(Controller):
 """,
         slot=1.0,
     )
-    assert good.commands.get(timeout=10) == {"speeds": [1, 2]}
+    assert good.commands.get(timeout=10) == RobotCommand(speeds=(1, 2))
     reason, _ = good.finish()
     assert reason == "stopped at the end of its slot"
 
