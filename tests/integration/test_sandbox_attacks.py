@@ -48,7 +48,7 @@ class Attack:
     """One hostile controller in a sandbox, its output collected."""
 
     def __init__(self, body: str, slot: float, limits: SandboxLimits | None = None) -> None:
-        self.commands: queue.Queue[dict] = queue.Queue()
+        self.commands: queue.Queue[RobotCommand] = queue.Queue()
         self.output: list[str] = []
         self.sandbox = Sandbox(
             textwrap.dedent(HEADER + body).encode(),
