@@ -247,6 +247,61 @@ class ChatProbe:
                 self.popen.wait(5)
 
 
+class DeployProbe:
+    """``wart deploy`` of example 01 on the arena's k0, as a student runs it."""
+
+    def __init__(self, lab: ChaosLab, password: str) -> None:
+        env = lab_env()
+        env["WART_PASSWORD"] = password
+        env["WART_REGISTRY_KEY"] = lab.registry_key()
+        self.popen = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "deploy",
+                str(REPO / "examples" / "01_braitenberg.py"),
+                "--context",
+                "arena",
+                "--agent",
+                "k0",
+                "--user",
+                "admin",
+                "--realm",
+                lab.realm,
+                "--connect",
+                lab.endpoint,
+                "--no-multicast-scouting",
+            ],
+            cwd=REPO,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+            start_new_session=True,
+        )
+        self.output = Lines(self.popen)
+
+    def ending(self, timeout: float) -> str:
+        """How it ended: its last line once it exits (or 'still running')."""
+        try:
+            self.popen.wait(timeout)
+        except subprocess.TimeoutExpired:
+            return "still running"
+        time.sleep(0.2)  # the reader thread takes the last lines
+        return self.output.lines[-1] if self.output.lines else f"exit {self.popen.returncode}"
+
+    def close(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGINT)
+            try:
+                self.popen.wait(10)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(5)
+
+
 @dataclass
 class Outcome:
     service: str
@@ -355,6 +410,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"chaos: starting a lab ({len(services)} services to kill)...", flush=True)
     with running_lab() as lab:
         chaos = Chaos(lab, args.deadline)
+        deploy = DeployProbe(lab, lab.admin_password())
+        if deploy.output.wait("running on k0", 60) is None:
+            print("the deployed controller did not start:\n" + "\n".join(deploy.output.lines))
         try:
             print(f"{'service':<22} {'back':>8} {'clients whole':>14}", flush=True)
             for service in services:
@@ -369,7 +427,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 + (f" ({', '.join(lost)})" if lost else ""),
                 flush=True,
             )
+            print(f"the deployed controller (wart deploy): {deploy.ending(90)}", flush=True)
         finally:
+            deploy.close()
             chaos.close()
     return 0
 

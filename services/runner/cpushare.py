@@ -14,6 +14,7 @@ which one is in force, and the runner logs it at start.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import os
 import time
@@ -23,6 +24,7 @@ log = logging.getLogger("wart.runner.cpu")
 
 _ROOT = Path("/sys/fs/cgroup")
 _PERIOD_US = 100_000
+_instances = itertools.count(1)
 NICE_ONLY = "nice 19 + RLIMIT_CPU (no cgroup could be made here)"
 
 
@@ -47,7 +49,7 @@ def _own_cgroup_dirs() -> list[tuple[str, Path]]:
 def _remove_stale(parent: Path) -> None:
     """Remove the empty groups of runners that are gone (a crash skips close())."""
     for group in parent.glob("wart-runner-*"):
-        pid = group.name.rsplit("-", 1)[-1]
+        pid = group.name.split("-")[2]  # wart-runner-<pid>-<n>
         if pid.isdigit() and not Path(f"/proc/{pid}").exists():
             for path in [*group.iterdir(), group]:
                 if path.is_dir():
@@ -73,9 +75,12 @@ class CpuShare:
         self.total_us = int(_PERIOD_US * max(fraction, (os.cpu_count() or 1) - 1))
         self.version = ""
         self.base: Path | None = None
+        self._owner = os.getpid()
         for version, parent in _own_cgroup_dirs():
             _remove_stale(parent)
-            base = parent / f"wart-runner-{os.getpid()}"
+            # One group per CpuShare, not per process: a process may hold several
+            # (tests do), and one closing must not remove another's group.
+            base = parent / f"wart-runner-{os.getpid()}-{next(_instances)}"
             try:
                 base.mkdir(exist_ok=True)
                 if version == "v2":
@@ -139,6 +144,8 @@ class CpuShare:
         log.warning("could not remove the cpu cgroup %s", group)
 
     def close(self) -> None:
-        if self.base is not None:
+        # A forked child inherits the atexit hook that calls this: only the process
+        # that made the group may remove it (a test's forked helper once did).
+        if self.base is not None and os.getpid() == self._owner:
             with contextlib.suppress(OSError):
                 self.base.rmdir()

@@ -135,6 +135,14 @@ def cpu_share(fraction: float) -> CpuShare:
         return share
 
 
+def release_cpu_share(fraction: float) -> None:
+    """Remove the CpuShare of ``fraction`` and its cgroup; the next cpu_share() makes anew."""
+    with _cpu_lock:
+        share = _cpu_shares.pop(fraction, None)
+    if share is not None:
+        share.close()
+
+
 _uid_lock = threading.Lock()
 _uids_in_use: set[int] = set()
 _UID_BASE = 61000

@@ -49,7 +49,7 @@ from common.messages import (
 from common.precheck import PrecheckError, precheck
 from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from common.service import RequestError, Service
-from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share
+from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
 log = logging.getLogger("wart.runner")
 
@@ -190,7 +190,7 @@ class RunnerService(Service):
             channels, self._channels = list(self._channels.values()), {}
         for channel in channels:
             channel.close()
-        cpu_share(self.limits.cpu_share).close()
+        release_cpu_share(self.limits.cpu_share)
 
     def channel(self, world: str) -> WorldChannel:
         """The runs' shared channel to ``world``: its samples in, their commands out."""
