@@ -226,3 +226,15 @@ def test_clicking_a_robot_selects_it(open_page, lab: RealLab) -> None:
     page.p.mouse.click(x, y + 8)  # a little below the centre: the name label sits on it
     wait_until(lambda: view.selected is not None, 10, what="a robot selected by the click")
     page.screenshot("real-clicked")
+
+
+def test_a_student_kicked_from_the_server_is_told_on_the_page(open_page, lab: RealLab) -> None:
+    with lab.lab.client("admin") as admin:
+        admin.add_user("kim", "kim-secret-1")
+        page = open_page("kim")
+        log_in(page, lab, "kim", "kim-secret-1")
+        wait_until(lambda: "kim" in online(lab), what="kim online")
+        admin.kick_from_server("kim", "cheating in the exam")
+    page.wait_text("cheating in the exam", timeout=15_000)  # the page says why, at once
+    page.screenshot("real-kicked")
+    wait_until(lambda: "kim" not in online(lab), 15, what="kim's session to end")
