@@ -38,6 +38,7 @@ import zenoh
 from common import acl, keys
 from common.auth import AuthError, Principal
 from common.files import write_atomic
+from common.keys import AliveKind
 from common.leasemac import check_world_token, new_lease_key, seal_key
 from common.messages import (
     AgentContextState,
@@ -86,6 +87,7 @@ LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
 WORLD_IDENTITY_REFRESH_S = 5.0  # a restarted world has a new identity: reseal lease keys to it
 MAX_WAITING_PER_USER = 4
+RUNNER_GRACE_S = 1.5  # how long to wait before taking a runner's token loss as its death
 
 
 class AgentContext(ChatRoom):
@@ -155,6 +157,20 @@ class AgentContext(ChatRoom):
     def on_start(self) -> None:
         super().on_start()
         self.subscribe(keys.ctx_output(self.realm, self.room), self._on_output)
+        # A runner that dies takes its sandboxes with it: their students are told so.
+        # The registry's token tells a runner's death from our own router blip (in a
+        # blip every token goes at once, and the runner's sandboxes keep running).
+        self._registry_gone_at = 0.0
+        self.track(
+            self.session.liveliness().declare_subscriber(
+                keys.alive(self.realm, AliveKind.RUNNER, self.runner), self._on_runner_presence
+            )
+        )
+        self.track(
+            self.session.liveliness().declare_subscriber(
+                keys.alive_of_kind(self.realm, AliveKind.REGISTRY), self._on_registry_presence
+            )
+        )
         self._frames = self.track(
             self.session.declare_subscriber(
                 keys.world_frame(self.realm, self.world), zenoh.handlers.RingChannel(1)
@@ -415,6 +431,39 @@ class AgentContext(ChatRoom):
             self._publish_agent(
                 AgentEvent(ctx=self.room, request=self._status(job, "cancelled", reason))
             )
+
+    def _on_registry_presence(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            self._registry_gone_at = time.monotonic()
+
+    def _on_runner_presence(self, sample: zenoh.Sample) -> None:
+        if sample.kind != zenoh.SampleKind.DELETE:
+            return
+        gone_at = time.monotonic()
+        timer = threading.Timer(RUNNER_GRACE_S, self._runner_gone, args=(gone_at,))
+        timer.daemon = True
+        timer.start()
+
+    def _runner_gone(self, gone_at: float) -> None:
+        if abs(self._registry_gone_at - gone_at) < RUNNER_GRACE_S:
+            self.log.info("runner %s and the registry went together: a router blip", self.runner)
+            return
+        with self._wake:
+            ended = [
+                line.running.job.request_id
+                for line in self.book.lines.values()
+                if line.running is not None and line.running.job.mode == "deploy"
+            ]
+            for request_id in ended:
+                self._finish_soon(
+                    request_id,
+                    "cancelled",
+                    f"the lab's runner {self.runner} stopped (crashed or restarted): your "
+                    "controller was ended; upload it again",
+                )
+            self._wake.notify_all()
+        if ended:
+            self.log.warning("runner %s went away: ended %s", self.runner, ", ".join(ended))
 
     def _on_presence(self, sample: zenoh.Sample) -> None:
         super()._on_presence(sample)
