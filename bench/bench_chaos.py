@@ -200,35 +200,32 @@ def _names(args: Sequence[str], words: Sequence[str]) -> bool:
     return False
 
 
+def wart_client(
+    lab: ChaosLab, args: list[str], password: str, *, stdin: int | None = None
+) -> subprocess.Popen[str]:
+    """``wart ARGS`` as a person on this lab runs it (password and registry key from the env)."""
+    env = lab_env()
+    env["WART_PASSWORD"] = password
+    env["WART_REGISTRY_KEY"] = lab.registry_key()
+    net = ["--realm", lab.realm, "--connect", lab.endpoint, "--no-multicast-scouting"]
+    return subprocess.Popen(
+        [sys.executable, "-m", "services.cli", *args, *net],
+        cwd=REPO,
+        stdin=subprocess.DEVNULL if stdin is None else stdin,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+
+
 class ChatProbe:
     """``wart chat lobby`` as a user types it, in a subprocess."""
 
     def __init__(self, lab: ChaosLab, user: str, password: str) -> None:
-        env = lab_env()
-        env["WART_PASSWORD"] = password
-        env["WART_REGISTRY_KEY"] = lab.registry_key()
-        self.popen = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "chat",
-                "lobby",
-                "--user",
-                user,
-                "--realm",
-                lab.realm,
-                "--connect",
-                lab.endpoint,
-                "--no-multicast-scouting",
-            ],
-            cwd=REPO,
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            env=env,
-            start_new_session=True,
+        self.popen = wart_client(
+            lab, ["chat", "lobby", "--user", user], password, stdin=subprocess.PIPE
         )
         self.output = Lines(self.popen)
 
@@ -251,36 +248,9 @@ class DeployProbe:
     """``wart deploy`` of example 01 on the arena's k0, as a student runs it."""
 
     def __init__(self, lab: ChaosLab, password: str) -> None:
-        env = lab_env()
-        env["WART_PASSWORD"] = password
-        env["WART_REGISTRY_KEY"] = lab.registry_key()
-        self.popen = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "deploy",
-                str(REPO / "examples" / "01_braitenberg.py"),
-                "--context",
-                "arena",
-                "--agent",
-                "k0",
-                "--user",
-                "admin",
-                "--realm",
-                lab.realm,
-                "--connect",
-                lab.endpoint,
-                "--no-multicast-scouting",
-            ],
-            cwd=REPO,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            env=env,
-            start_new_session=True,
-        )
+        example = str(REPO / "examples" / "01_braitenberg.py")
+        args = ["deploy", example, "--context", "arena", "--agent", "k0", "--user", "admin"]
+        self.popen = wart_client(lab, args, password)
         self.output = Lines(self.popen)
 
     def ending(self, timeout: float) -> str:

@@ -1,14 +1,4 @@
-"""``wart registry``: the Server of the thesis (chapter 5).
-
-Accounts and grants (SQLite, services/registry/accounts_db.py), login with sealed
-credentials, signed session tokens, logout and revocations, presence and the
-directory of online users and live contexts, private-message mailboxes for
-offline users, kick from the server, admin queries, the server's name.
-
-On first start it creates its key (``--key-file``), its database (``--db``)
-and an ``admin`` account, and prints the key every service must pin
-(``--registry-key``) and the admin's password.
-"""
+"""``wart registry``: the command line; what the service does is service.py's docstring."""
 
 from __future__ import annotations
 
@@ -21,12 +11,13 @@ from common.auth import (
     key_fingerprint,
 )
 from common.service import run_service
+from services.registry import service
 from services.registry.accounts_db import RegistryDB
 from services.registry.service import Registry, provision
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
-    p = cli.parser(prog, __doc__ or "")
+    p = cli.parser(prog, service.__doc__ or "")
     p.add_argument("--db", type=Path, required=True, help="the SQLite database (created if absent)")
     p.add_argument(
         "--key-file",

@@ -1,10 +1,4 @@
-"""``wart router``: a Zenoh router in a Python process (no zenohd binary needed).
-
-Every host of a lab runs one; services and browsers' gateways connect to it as
-clients, and routers of several hosts mesh with ``--connect``. It listens on
-127.0.0.1 by default; a lab host that others must reach listens on all
-interfaces: ``wart router --listen tcp/0.0.0.0:7447``.
-"""
+"""``wart router``: the command line; what the service does is service.py's docstring."""
 
 from __future__ import annotations
 
@@ -15,11 +9,12 @@ import zenoh
 from common import cli
 from common.service import run_service
 from common.zconfig import DEFAULT_PORT
+from services.router import service
 from services.router.service import Router, default_name
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart router") -> int:
-    p = cli.parser(prog, __doc__ or "", default_mode="router")
+    p = cli.parser(prog, service.__doc__ or "", default_mode="router")
     p.add_argument("--name", default=default_name(), help="this router's name (default: host name)")
     args, options = cli.parse(p, argv)
     assert options is not None

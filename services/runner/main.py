@@ -1,28 +1,4 @@
-"""``wart runner``: runs uploaded controllers for agent contexts, each in a sandbox.
-
-An agent context (a principal with ``lease``) asks on ``runner/<name>/run``
-(:class:`RunRequest`) to run a controller on an agent until a wall-clock
-end. The runner pre-checks the source again (never trusting the context's
-check), starts a :class:`~services.runner.sandbox.Sandbox`, and replies with a
-claim sealed by its own session: the context's lease names that session.
-Then, per run:
-
-- a relay thread hands the agent's newest sensor sample to the sandbox (the
-  Zenoh callback only keeps the newest one: a stalled sandbox stalls nothing);
-- the sandbox's validated commands become ``AgentCommand`` sealed with the
-  runner's session (``common.remote_robot.ZenohRobotLink``, whose keep-alive
-  feeds the world's watchdog while the sandbox lives);
-- all runs on one world share a ``WorldChannel``: the world's samples of
-  every leased agent arrive in one ``SampleBundle`` per tick and the runs'
-  commands leave in ``CommandBundle``s, not one message per robot each way;
-- output lines (prints, tracebacks) go to the context as
-  :class:`ControllerOutput` on ``ctx/<ctx>/output``, batched every 100 ms;
-- at the end (slot over, :class:`RunStop`, the controller ended or crashed)
-  the robot is told to stop and the context gets ``done`` with the reason.
-
-Uploaded code never sees Zenoh, keys or the lease: only pipes to this process.
-Token: ``alive/runner/<name>``.
-"""
+"""``wart runner``: the command line; what the service does is service.py's docstring."""
 
 from __future__ import annotations
 
@@ -35,12 +11,13 @@ import zenoh
 from common import cli, keys
 from common.client import ServiceCredentials
 from common.service import run_service
+from services.runner import service
 from services.runner.sandbox import SandboxLimits, sandbox_problem
 from services.runner.service import RunnerService
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
-    p = cli.parser(prog, __doc__ or "")
+    p = cli.parser(prog, service.__doc__ or "")
     p.add_argument("--name", default="runner", help="the runner's id (default runner)")
     p.add_argument("--user", required=True, help="the runner's service account (with 'run')")
     p.add_argument(
