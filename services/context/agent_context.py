@@ -110,6 +110,7 @@ class AgentContext(ChatRoom):
         # Queues, settings and running slots survive a crash of this process: written
         # (atomically, synced) whenever they change, read back here.
         self._book_path: Path | None = None if data_dir is None else data_dir / f"{name}.queues"
+        self._save_lock = threading.Lock()
         self._restore_book()
         self._wake = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
@@ -144,13 +145,14 @@ class AgentContext(ChatRoom):
     def _save_book(self) -> None:
         if self._book_path is None:
             return
-        with self._lock:
-            data = save_book(self.book)
-        try:
-            write_atomic(self._book_path, data)
-            os.chmod(self._book_path, 0o600)  # running slots carry their lease keys
-        except OSError as exc:
-            self.log.error("could not save the queues to %s: %s", self._book_path, exc)
+        with self._save_lock:  # one writer at a time, the newest state last
+            with self._lock:
+                data = save_book(self.book)
+            try:
+                write_atomic(self._book_path, data)
+                os.chmod(self._book_path, 0o600)  # running slots carry their lease keys
+            except OSError as exc:
+                self.log.error("could not save the queues to %s: %s", self._book_path, exc)
 
     # -- lifecycle
 
@@ -251,13 +253,18 @@ class AgentContext(ChatRoom):
         if isinstance(request, QueueStateRequest):
             self._require(principal, "join", "see the queues")
             return self.state_message()
+        reply: Message
         if isinstance(request, ControlRequest):
-            return self._queue(principal, request)
-        if isinstance(request, CancelControl):
-            return self._cancel(principal, request)
-        if isinstance(request, StopControl):
-            return self._stop_agent(principal, request)
-        return self._settings(principal, request)
+            reply = self._queue(principal, request)
+        elif isinstance(request, CancelControl):
+            reply = self._cancel(principal, request)
+        elif isinstance(request, StopControl):
+            reply = self._stop_agent(principal, request)
+        else:
+            reply = self._settings(principal, request)
+        # On disk before the answer: an acknowledged request survives a crash right after.
+        self._save_book()
+        return reply
 
     def _queue(self, principal: Principal, request: ControlRequest) -> Message:
         self._require_member(principal)
