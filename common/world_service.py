@@ -14,7 +14,7 @@ import msgspec
 import zenoh
 
 from common import keys
-from common.auth import AuthError
+from common.auth import AuthError, Verifier
 from common.keys import AliveKind
 from common.leases import LeaseBook
 from common.messages import (
@@ -38,6 +38,9 @@ class WorldService(Service):
     _batch_pub: Any
     _samples_pub: Any
     _revocations: RevocationFeed | None = None
+    # Set by each world before declare_world_interface: who signs, and who may drive.
+    verifier: Verifier | None
+    leases: LeaseBook
 
     def declare_world_interface(self) -> None:
         """Declare the world's keys (call from on_start, before the service's own threads)."""
@@ -57,7 +60,7 @@ class WorldService(Service):
         self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
         self.serve(keys.world_edit(realm, name), self._on_edit)
         self.serve(keys.world_map(realm, name), self._on_map)
-        verifier = getattr(self, "verifier", None)
+        verifier = self.verifier
         if verifier is not None:
             # A kicked or logged-out user's sessions lose their leases here too, not
             # only in the context: the robot stops even if the context is down.
@@ -67,15 +70,11 @@ class WorldService(Service):
 
     def close_world_interface(self) -> None:
         """Stop following revocations (call from on_stop)."""
-        feed = getattr(self, "_revocations", None)
-        if feed is not None:
-            feed.close()
+        if self._revocations is not None:
+            self._revocations.close()
 
     def _on_revoked(self, rev: Revocation) -> None:
-        leases: LeaseBook | None = getattr(self, "leases", None)
-        if leases is None:
-            return
-        for agent in leases.revoke_session(rev.session_id):
+        for agent in self.leases.revoke_session(rev.session_id):
             self.log.info(
                 "%s's lease on %s ended: session revoked (%s); robot stopped",
                 rev.user,
