@@ -35,13 +35,18 @@ SERVICE_KINDS: dict[str, tuple[str, ...]] = {
 }
 OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "registry": ("server_name",),
-    "chat": ("title",),
-    "engine": ("seed", "robots"),
+    # owner: the user who manages the room or context (default: its own account).
+    "chat": ("title", "owner"),
+    # An engine is an arena: ``context`` names its agent context (default: the
+    # world's name); ``login`` gives the engine an account, so agent contexts
+    # grant it MAC leases (commands checked in µs instead of an Ed25519 verify).
+    "engine": ("seed", "robots", "context", "title", "owner", "login"),
     # ports: PATH=ID@X,Y,DEG as for `wart bridge --port`; emulate: a map name
     # whose first robot an emulated Khepera plays (a lab without hardware).
-    "bridge": ("ports", "emulate"),
-    "agent": ("title", "runner", "slot_seconds"),
-    "viewer": ("http_port", "http_host"),
+    "bridge": ("ports", "emulate", "login"),
+    "agent": ("title", "runner", "slot_seconds", "owner"),
+    # name: the viewer's id in the lab (default: its host's name).
+    "viewer": ("name", "http_port", "http_host"),
     "runner": (),
 }
 
@@ -65,16 +70,34 @@ AGENT_CONTEXT_TEMPLATE: tuple[str, ...] = (
     "--world",
     "{world}",
     "--name",
-    "{world}",
+    "{context}",
+    "--title",
+    "{title}",
     "--runner",
     "{runner}",
     "--user",
     "{account}",
     "--identity",
     "{identity}",
+    "--data-dir",
+    "{rooms_dir}",
 )
 TEMPLATE_FIELDS = frozenset(
-    {"world", "map", "seed", "robots", "maps_dir", "account", "identity", "host", "runner", "owner"}
+    {
+        "world",
+        "map",
+        "seed",
+        "robots",
+        "maps_dir",
+        "account",
+        "identity",
+        "host",
+        "runner",
+        "owner",
+        "context",
+        "title",
+        "rooms_dir",
+    }
 )
 DEFAULT_RUNNER = "runner"  # what agent contexts name when the lab file has no runner
 
@@ -250,7 +273,8 @@ def _address(where: str, value: Any) -> str:
     return str(value)
 
 
-def _service(where: str, raw: Any) -> ServiceEntry:
+def service_entry(where: str, raw: Any) -> ServiceEntry:
+    """One ``[[hosts.services]]`` table, validated; ``where`` names it in errors."""
     table = _table(where, raw)
     kind = table.get("kind")
     if kind not in SERVICE_KINDS:
@@ -263,7 +287,7 @@ def _service(where: str, raw: Any) -> ServiceEntry:
         if name not in table:
             raise LabFileError(f"{where}: a {kind} service needs '{name}'")
     params: dict[str, Any] = {}
-    for name in ("name", "world", "runner"):
+    for name in ("name", "world", "runner", "owner", "context"):
         if name in table:
             params[name] = _ident(f"{where}.{name}", table[name])
     for name in ("map", "title", "server_name", "http_host"):
@@ -277,6 +301,8 @@ def _service(where: str, raw: Any) -> ServiceEntry:
         params["http_port"] = _int(f"{where}.http_port", table["http_port"], 1, 65535)
     if "ports" in table:
         params["ports"] = _strings(f"{where}.ports", table["ports"])
+    if "login" in table:
+        params["login"] = bool(_type(f"{where}.login", table["login"], bool, "true or false"))
     if "emulate" in table:
         params["emulate"] = _ident(f"{where}.emulate", table["emulate"])
     if "slot_seconds" in table:
@@ -420,7 +446,7 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
             # it, so adding a host at the end changes nothing on the others.
             connect = tuple(h.name for h in hosts)
         services = tuple(
-            _service(f"{where}.services[{j}]", s)
+            service_entry(f"{where}.services[{j}]", s)
             for j, s in enumerate(
                 _type(f"{where}.services", table.get("services", []), list, "a list")
             )

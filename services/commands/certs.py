@@ -27,9 +27,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from common import cli
+from common.auth import RegistryIdentity, create_identity_key, load_identity_key
 from common.certs import CA_CERT, CA_KEY, CertError, init_ca, inspect, issue
 from common.labfile import LabFile, LabFileError, load
 from common.zsecurity import ROLES
+from services.lab.wiring import host_accounts
 
 REGISTRY_PUB = "registry.pub"
 ACCOUNTS = "accounts.json"
@@ -44,20 +46,13 @@ def host_roles(lab: LabFile, host: str) -> list[str]:
     return sorted(set(roles), key=ROLES.index)
 
 
-# The registry account of each service kind that logs in (named after its ident).
-ACCOUNT_PREFIX = {"chat": "chat-", "agent": "ctx-", "runner": "runner-"}
-
-
 def service_accounts(lab: LabFile, host: str) -> list[str]:
-    """The registry accounts of a host's services: chat rooms, agent contexts, runners, and
-    the one its arenas' agent contexts share (also for engines the lab file names)."""
+    """The registry accounts of a host's services: chat rooms, agent contexts, runners,
+    engines and bridges that log in, and the one its arenas' agent contexts share (also
+    for engines the lab file names)."""
     entry = lab.host(host)
-    accounts = [
-        ACCOUNT_PREFIX[s.kind] + s.ident for s in entry.services if s.kind in ACCOUNT_PREFIX
-    ]
-    if lab.arena.agent and (entry.arenas or "engine" in entry.kinds()):
-        accounts.append(f"agent-{host}")
-    return accounts
+    arenas = bool(lab.arena.agent) and (entry.arenas or "engine" in entry.kinds())
+    return host_accounts(entry.services, host, arenas=arenas)
 
 
 def identity_path(pki: Path, host: str, account: str) -> Path:
@@ -70,8 +65,6 @@ def registry_key_path(lab: LabFile) -> Path:
 
 def issue_lab(lab: LabFile, *, say: object = print) -> None:
     """Issue every certificate and key the lab file needs (re-issues existing ones)."""
-    from common.auth import RegistryIdentity, create_identity_key, load_identity_key
-
     pki = lab.security.pki
     out = say if callable(say) else print
     if not (pki / CA_KEY).exists():

@@ -23,54 +23,38 @@ import zenoh
 from common import cli, keys
 from common.labfile import LabFile, LabFileError, load
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch, Child, ChildSpec, Supervisor
+from common.supervisor import AliveWatch, Child, Supervisor
 from common.zconfig import NetworkOptions
+from services.commands.certs import ACCOUNTS, registry_key_path
 from services.host.service import HostingPlan, HostingService
+from services.lab import provision
 from services.lab.plan import (
     HostContext,
-    arena_specs,
     check_available,
     host_plan,
     read_registry_key,
-    resolve_map,
     router_spec,
     write_configs,
 )
-
-
-class LabFilePlan(HostingPlan):
-    """A lab file's host: its limits, the lab's maps, the ``[arena]`` templates."""
-
-    def __init__(self, ctx: HostContext) -> None:
-        self.ctx = ctx
-        self.realm = ctx.realm
-        self.host = ctx.host.name
-        self.registry_key = ctx.registry_key
-        self.limits = ctx.lab.limits
-        self.state_dir = ctx.state_dir
-        # Chat rooms need a service account from the lab's PKI, which `wart certs`
-        # makes only for the rooms the lab file names: none on request here.
-        self.max_rooms = 0
-
-    def no_arenas(self) -> str:
-        if not self.ctx.host.arenas:
-            return "this host takes no arenas (arenas = false in the lab file)"
-        return ""
-
-    def resolve_map(self, name: str) -> Path:
-        return resolve_map(self.ctx.lab, name)
-
-    def arena_specs(
-        self, world: str, map_path: Path, *, seed: int, robots: int, owner: str
-    ) -> list[ChildSpec]:
-        return arena_specs(self.ctx, world, map_path, seed=seed, robots=robots, owner=owner)
+from services.lab.wiring import default_state_dir
 
 
 class HostService(HostingService):
     """The hosting service of a lab file's host (see services/host/service.py)."""
 
     def __init__(self, session: zenoh.Session, ctx: HostContext, supervisor: Supervisor) -> None:
-        super().__init__(session, LabFilePlan(ctx), supervisor)
+        plan = HostingPlan(
+            wiring=ctx.wiring(),
+            registry_key=ctx.registry_key,
+            limits=ctx.lab.limits,
+            # Chat rooms need a service account from the lab's PKI, which `wart certs`
+            # makes only for the rooms the lab file names: none on request here.
+            max_rooms=0,
+            no_arenas_reason=""
+            if ctx.host.arenas
+            else "this host takes no arenas (arenas = false in the lab file)",
+        )
+        super().__init__(session, plan, supervisor)
         self.ctx = ctx
 
 
@@ -83,8 +67,6 @@ def prepare(lab: LabFile, host_name: str, state_dir: Path | None) -> HostContext
     check_available(lab, host)
     state = state_dir or (lab.state_dir / host.name if lab.state_dir else None)
     if state is None:
-        from services.commands.up import default_state_dir
-
         state = default_state_dir(lab.realm) / host.name
     state.mkdir(parents=True, exist_ok=True)
     ctx = HostContext(lab=lab, host=host, state_dir=state, registry_key=read_registry_key(lab))
@@ -96,28 +78,15 @@ def prepare(lab: LabFile, host_name: str, state_dir: Path | None) -> HostContext
 
 def provision_registry_host(ctx: HostContext) -> None:
     """The registry's DB, its admin account, and every service account of the lab."""
-    import json
-
-    from services.commands.certs import ACCOUNTS, registry_key_path
-    from services.commands.up import register_service_accounts
-    from services.registry.service import provision
-
-    identity, password, _ = provision(ctx.state_dir / "registry.db", registry_key_path(ctx.lab))
-    if identity.verify_key.hex() != ctx.registry_key:
-        raise LabFileError(
-            f"{registry_key_path(ctx.lab)} does not match {ctx.lab.security.pki / 'registry.pub'}"
-        )
-    path = ctx.lab.security.pki / ACCOUNTS
-    try:
-        accounts = {
-            name: bytes.fromhex(hexkey) for name, hexkey in json.loads(path.read_text()).items()
-        }
-    except (OSError, ValueError) as exc:
-        raise LabFileError(f"cannot read the service accounts in {path}: {exc}") from None
-    register_service_accounts(ctx.state_dir / "registry.db", accounts)
-    if password is not None:
+    done = provision.provision_registry_host(
+        ctx.state_dir,
+        registry_key_path(ctx.lab),
+        ctx.lab.security.pki / ACCOUNTS,
+        ctx.registry_key,
+    )
+    if done.admin_password is not None:
         print(
-            f"  first start: user 'admin', password {password}\n"
+            f"  first start: user 'admin', password {done.admin_password}\n"
             f"    (kept in {ctx.state_dir / 'admin-password.txt'})",
             flush=True,
         )
@@ -155,6 +124,11 @@ def run_host(ctx: HostContext, stop: threading.Event) -> int:
             return 1
         service = HostService(session, ctx, supervisor).start()
         engines = {s.ident: s for s in host.services if s.kind == "engine"}
+        # An engine of the lab file and its agent context are one arena (named
+        # "engine W" and "agent C" by arena_specs, C the context's name).
+        arena_of = {f"engine {w}": w for w in engines} | {
+            f"agent {s.params.get('context') or w}": w for w, s in engines.items()
+        }
         arena_children: dict[str, list[Child]] = {}
         for spec in host_plan(ctx):
             if stop.is_set():
@@ -163,11 +137,8 @@ def run_host(ctx: HostContext, stop: threading.Event) -> int:
             supervisor.spawn(child)
             if not supervisor.wait_ready(child):
                 code = 1
-            # An engine of the lab file and its agent context are one arena (named
-            # "engine W" and "agent W" by arena_specs), counted in the load reports.
-            kind, _, world = spec.name.partition(" ")
-            if kind in ("engine", "agent") and world in engines:
-                arena_children.setdefault(world, []).append(child)
+            if spec.name in arena_of:  # counted in the load reports
+                arena_children.setdefault(arena_of[spec.name], []).append(child)
         for world, children in arena_children.items():
             svc = engines[world]
             service.adopt(world, str(svc.params["map"]), children, int(svc.params.get("robots", 0)))

@@ -17,7 +17,6 @@ from __future__ import annotations
 import os
 import threading
 import time
-from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,36 +43,65 @@ from common.messages.host import (
 from common.revocations import RevocationFeed
 from common.service import RequestError, Service
 from common.supervisor import Child, ChildSpec, Supervisor
-from services.lab.plan import map_with_robots
+from services.lab.wiring import (
+    Wiring,
+    arena_specs,
+    chat_room_spec,
+    map_with_robots,
+    room_account,
+)
 
 
-class HostingPlan(ABC):
-    """Where a host's contexts come from: its limits, maps and process templates."""
+@dataclass(frozen=True)
+class HostingPlan:
+    """Where a host's contexts come from: its wiring (maps, accounts, templates) and limits."""
 
-    realm: str
-    host: str
+    wiring: Wiring
     registry_key: str  # hex, pinned by the Verifier of spawn requests
     limits: Limits
-    state_dir: Path  # arenas' generated maps go to STATE/arenas/
     max_rooms: int = 0  # 0: this host starts no chat rooms
+    no_arenas_reason: str = ""  # why this host takes no arena at all ("" when it takes them)
+
+    @property
+    def realm(self) -> str:
+        return self.wiring.realm
+
+    @property
+    def host(self) -> str:
+        return self.wiring.host
+
+    @property
+    def state_dir(self) -> Path:
+        """Arenas' generated maps go to STATE/arenas/."""
+        return self.wiring.state_dir
 
     def no_arenas(self) -> str:
-        """Why this host takes no arena at all, or "" when it takes them."""
-        return ""
+        return self.no_arenas_reason
 
-    @abstractmethod
     def resolve_map(self, name: str) -> Path:
         """A map by plain name; FileNotFoundError or ValueError when there is none."""
+        return self.wiring.resolve_map(name)
 
-    @abstractmethod
     def arena_specs(
         self, world: str, map_path: Path, *, seed: int, robots: int, owner: str
     ) -> list[ChildSpec]:
         """The engine, then its agent context (named after the world, owned by ``owner``)."""
+        return arena_specs(self.wiring, world, map_path, seed=seed, robots=robots, owner=owner)
 
     def room_specs(self, name: str, title: str, owner: str) -> list[ChildSpec]:
         """The chat room's process, owned by ``owner`` (only when ``max_rooms`` > 0)."""
-        raise RequestError("unavailable", f"host {self.host} starts no chat rooms")
+        if self.max_rooms <= 0:
+            raise RequestError("unavailable", f"host {self.host} starts no chat rooms")
+        return [
+            chat_room_spec(
+                self.wiring,
+                name,
+                title=title,
+                account=room_account(self.host),
+                owner=owner,
+                detail=f"chat room for {owner}",
+            )
+        ]
 
 
 @dataclass

@@ -1,0 +1,506 @@
+"""Every process's command line and every service account's name, in one place.
+
+Both ways of starting a lab go through here: ``wart host`` (a lab file's host:
+TLS, the lab's PKI) and ``wart up`` (one machine: plain TCP on loopback, keys in
+the state directory). What differs between them is a :class:`Wiring` (how a
+child reaches the router and where its secrets are); what a registry, a chat
+room, an arena, a bridge or a viewer is started with is written once, below.
+A new flag on a service is one edit here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from common import keys
+from common.keys import AliveKind
+from common.labfile import ArenaTemplates, LabFileError, ServiceEntry, fill
+from common.supervisor import ChildSpec
+
+SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "maps"
+
+# Where an emulated Khepera's robot starts when its map names none (the bridge's
+# odometry must start where the emulated body is, or the two views disagree).
+DEFAULT_POSE = (500.0, 500.0, 0.0)
+
+# --- account names ----------------------------------------------------------------------
+
+# The registry account of each service kind that logs in, named after its ident.
+# Engines and bridges log in only when asked (``login = true``).
+ACCOUNT_PREFIX = {
+    "chat": "chat-",
+    "agent": "ctx-",
+    "runner": "runner-",
+    "engine": "engine-",
+    "bridge": "bridge-",
+}
+
+
+def service_account(kind: str, ident: str) -> str:
+    """The account of a service named in a lab description (``chat-lobby``, ``ctx-robots``)."""
+    return ACCOUNT_PREFIX[kind] + ident
+
+
+def arena_account(host: str) -> str:
+    """The one account the agent contexts of a host's arenas share."""
+    return f"agent-{host}"
+
+
+def room_account(host: str) -> str:
+    """The one account the chat rooms a host starts on request share."""
+    return f"room-{host}"
+
+
+def logs_in(svc: ServiceEntry) -> bool:
+    if svc.kind in ("engine", "bridge"):
+        return bool(svc.params.get("login"))
+    return svc.kind in ACCOUNT_PREFIX
+
+
+def host_accounts(
+    services: Iterable[ServiceEntry], host: str, *, arenas: bool, rooms: bool = False
+) -> list[str]:
+    """Every account a host's processes log in with.
+
+    ``arenas``: the host runs arenas with agent contexts (which share one
+    account); ``rooms``: it starts chat rooms on request (another shared one).
+    """
+    accounts = [service_account(s.kind, s.ident) for s in services if logs_in(s)]
+    if arenas:
+        accounts.append(arena_account(host))
+    if rooms:
+        accounts.append(room_account(host))
+    return accounts
+
+
+# --- how a host's children are wired ---------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Wiring:
+    """How the processes of one host reach the lab and find their secrets and files."""
+
+    realm: str
+    host: str
+    state_dir: Path
+    net_args: Callable[[str], list[str]]  # a role (engine, agent...) -> its network flags
+    identity: Callable[[str], Path]  # an account -> its identity key file
+    registry_key_file: Path
+    map_dirs: tuple[Path, ...]  # where maps are looked up by name, in order
+    runner: str  # the runner agent contexts use unless told
+    arena: ArenaTemplates
+    # The viewer's public side; None: the viewer's own defaults (loopback).
+    http_host: str | None = None
+    lab_address: str | None = None
+
+    @property
+    def maps_dir(self) -> Path:
+        """Where engines load and save maps by name (never the repository's maps/)."""
+        return self.state_dir / "maps"
+
+    @property
+    def rooms_dir(self) -> Path:
+        """Where chat rooms and agent contexts keep their history and queues."""
+        return self.state_dir / "rooms"
+
+    def login(self, account: str) -> list[str]:
+        return ["--user", account, "--identity", str(self.identity(account))]
+
+    def resolve_map(self, name: str) -> Path:
+        """A map by plain name (never a path from the network)."""
+        return find_map(name, self.map_dirs)
+
+    def viewer_url_file(self) -> Path:
+        """Where the viewer writes the page's actual URL (viser moves on if the port is busy)."""
+        return self.state_dir / "viewer.url"
+
+
+def default_state_dir(realm: str) -> Path:
+    """Where a lab keeps its database, keys and logs unless told: ~/.local/state/wart/REALM."""
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "wart" / realm
+
+
+def find_map(name: str, directories: Sequence[Path]) -> Path:
+    """``NAME.json`` in the first directory that has it; the name is one key chunk, not a path."""
+    keys.check_ident("map", name)
+    stem = name[:-5] if name.endswith(".json") else name
+    for directory in directories:
+        candidate = directory / f"{stem}.json"
+        if candidate.is_file():
+            return candidate
+    where = " or ".join(str(d) for d in directories)
+    raise FileNotFoundError(f"map {name!r} not found (looked in {where})")
+
+
+def map_with_robots(base: Path, robots: int, out: Path) -> Path:
+    """A copy of a map whose robots are replaced by ``robots`` Khepera on a grid."""
+    data: dict[str, Any] = json.loads(base.read_text())
+    width, height = data["arena"]["width"], data["arena"]["height"]
+    data.pop("agents", None)
+    data["agent_groups"] = [
+        {
+            "type": "khepera",
+            "count": robots,
+            "prefix": "k",
+            "area": [100, 100, width - 100, height - 100],
+            "spacing": 90,
+            "gripper": False,
+        }
+    ]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(data, indent=1))
+    return out
+
+
+def map_pose(map_path: Path) -> tuple[float, float, float]:
+    """Where the map's first robot stands (x mm, y mm, heading degrees)."""
+    data: dict[str, Any] = json.loads(map_path.read_text())
+    for agent in data.get("agents", []):
+        return (
+            float(agent.get("x", DEFAULT_POSE[0])),
+            float(agent.get("y", DEFAULT_POSE[1])),
+            float(agent.get("heading_deg", DEFAULT_POSE[2])),
+        )
+    return DEFAULT_POSE
+
+
+# --- one builder per process -------------------------------------------------------------
+
+
+def router_spec(
+    realm: str,
+    name: str,
+    listen: Sequence[str],
+    *,
+    connect: Sequence[str] = (),
+    config: Path | None = None,
+    detail: str | None = None,
+) -> ChildSpec:
+    argv = ["router", "--realm", realm, "--name", name]
+    for endpoint in listen:
+        argv += ["--listen", endpoint]
+    if config is not None:
+        argv += ["--config", str(config), "--no-multicast-scouting"]
+    for endpoint in connect:
+        argv += ["--connect", endpoint]
+    return ChildSpec(
+        name="router",
+        argv=argv,
+        alive_key=keys.alive(realm, AliveKind.ROUTER, name),
+        detail=detail or ", ".join(listen),
+    )
+
+
+def registry_spec(w: Wiring, *, server_name: str | None = None) -> ChildSpec:
+    argv = [
+        "registry",
+        "--db",
+        str(w.state_dir / "registry.db"),
+        "--key-file",
+        str(w.registry_key_file),
+        *w.net_args("registry"),
+    ]
+    if server_name:
+        argv += ["--name", server_name]
+    return ChildSpec("registry", argv, keys.alive(w.realm, AliveKind.REGISTRY, "registry"))
+
+
+def chat_room_spec(
+    w: Wiring,
+    name: str,
+    *,
+    title: str | None = None,
+    account: str | None = None,
+    owner: str | None = None,
+    detail: str | None = None,
+) -> ChildSpec:
+    """A chat room; account ``chat-NAME`` unless given, owned by ``owner`` (default the account)."""
+    argv = [
+        "context",
+        "chat",
+        "--name",
+        name,
+        *w.login(account or service_account("chat", name)),
+        "--data-dir",
+        str(w.rooms_dir),
+        *w.net_args("chat"),
+    ]
+    if title:
+        argv += ["--title", title]
+    if owner:
+        argv += ["--owner", owner]
+    return ChildSpec(
+        f"chat {name}", argv, keys.alive(w.realm, AliveKind.CONTEXT, name), detail or ""
+    )
+
+
+def agent_context_spec(
+    w: Wiring,
+    name: str,
+    world: str,
+    *,
+    title: str | None = None,
+    runner: str | None = None,
+    owner: str | None = None,
+    slot_seconds: float | None = None,
+) -> ChildSpec:
+    """An agent context named in a lab description: queues and leases for ``world``'s robots."""
+    argv = [
+        "context",
+        "agent",
+        "--name",
+        name,
+        "--world",
+        world,
+        "--runner",
+        runner or w.runner,
+        *w.login(service_account("agent", name)),
+        "--data-dir",
+        str(w.rooms_dir),
+        *w.net_args("agent"),
+    ]
+    if title:
+        argv += ["--title", title]
+    if slot_seconds:
+        argv += ["--slot-seconds", f"{slot_seconds:g}"]
+    if owner:
+        argv += ["--owner", owner]
+    return ChildSpec(
+        f"agent context {name}",
+        argv,
+        keys.alive(w.realm, AliveKind.CONTEXT, name),
+        detail=f"queues and leases for the robots of {world}",
+    )
+
+
+def arena_specs(
+    w: Wiring,
+    world: str,
+    map_path: Path,
+    *,
+    seed: int = 1,
+    robots: int = 0,
+    owner: str | None = None,
+    context: str | None = None,
+    title: str | None = None,
+    login: bool = False,
+) -> list[ChildSpec]:
+    """An arena: the engine, then its agent context (when the templates have one).
+
+    The processes come from the ``[arena]`` templates. ``context`` names the
+    agent context (default: the world's name); ``owner`` (the user who asked
+    for the arena) may manage and kick there; a template that does not place
+    ``{owner}`` itself gets ``--owner`` appended. ``login`` gives the engine
+    its own account (``engine-WORLD``).
+    """
+    account = arena_account(w.host)
+    context = context or world
+    values = {
+        "world": world,
+        "map": map_path,
+        "seed": seed,
+        "robots": robots,
+        "maps_dir": w.maps_dir,
+        "account": account,
+        "identity": w.identity(account),
+        "host": w.host,
+        "runner": w.runner,
+        "owner": owner or account,
+        "context": context,
+        "title": title or context,
+        "rooms_dir": w.rooms_dir,
+    }
+    engine_argv = [*fill(w.arena.engine, values), *w.net_args("engine")]
+    if login:
+        engine_argv += w.login(service_account("engine", world))
+    specs = [
+        ChildSpec(
+            name=f"engine {world}",
+            argv=engine_argv,
+            alive_key=keys.alive(w.realm, AliveKind.WORLD, world),
+            detail=f"simulated world {world} ({map_path.name})"
+            + (f", for {owner}" if owner else ""),
+        )
+    ]
+    if w.arena.agent:
+        argv = fill(w.arena.agent, values)
+        if owner and not any("{owner}" in arg for arg in w.arena.agent):
+            argv += ["--owner", owner]
+        specs.append(
+            ChildSpec(
+                name=f"agent {context}",
+                argv=[*argv, *w.net_args("agent")],
+                alive_key=keys.alive(w.realm, AliveKind.CONTEXT, context),
+                detail=f"agent context of {world}",
+            )
+        )
+    return specs
+
+
+def runner_spec(w: Wiring, name: str) -> ChildSpec:
+    argv = ["runner", "--name", name, *w.login(service_account("runner", name))]
+    return ChildSpec(
+        f"runner {name}",
+        [*argv, *w.net_args("runner")],
+        keys.alive(w.realm, AliveKind.RUNNER, name),
+        detail="sandboxed uploaded controllers",
+    )
+
+
+def emulator_link(w: Wiring, world: str) -> Path:
+    """The stable path of an emulated Khepera's pty (what a real one's by-id path would be)."""
+    return w.state_dir / "dev" / f"{world}-khepera"
+
+
+def bridge_specs(
+    w: Wiring,
+    world: str,
+    ports: Sequence[str],
+    *,
+    emulate: str | None = None,
+    login: bool = False,
+) -> list[ChildSpec]:
+    """A bridge, preceded by the emulated Khepera it drives when the lab has no hardware."""
+    ports = list(ports)
+    specs: list[ChildSpec] = []
+    if emulate:
+        map_path = w.resolve_map(emulate)
+        link = emulator_link(w, world)
+        link.parent.mkdir(parents=True, exist_ok=True)
+        x, y, deg = map_pose(map_path)
+        specs.append(
+            ChildSpec(
+                name=f"khepera emulator {world}",
+                argv=["khepera-emulator", "--map", str(map_path), "--link", str(link)],
+                alive_key=None,  # not on the network: the bridge below is its presence
+                detail=f"emulated Khepera at {link} ({map_path.name})",
+            )
+        )
+        taken = {port.partition("=")[2].partition("@")[0] for port in ports}
+        agent = next(f"k{n}" for n in range(1, len(ports) + 2) if f"k{n}" not in taken)
+        # The bridge's odometry starts where the emulated body stands, so both views agree.
+        ports.append(f"{link}={agent}@{x:g},{y:g},{deg:g}")
+    argv = ["bridge", "--world", world]
+    for port in ports:
+        argv += ["--port", port]
+    if login:
+        argv += w.login(service_account("bridge", world))
+    specs.append(
+        ChildSpec(
+            name=f"bridge {world}",
+            argv=[*argv, *w.net_args("bridge")],
+            alive_key=keys.alive(w.realm, AliveKind.WORLD, world),
+            detail=f"real world {world}, {len(ports)} robot(s)"
+            + (" (one emulated)" if emulate else ""),
+        )
+    )
+    return specs
+
+
+def viewer_spec(
+    w: Wiring, ident: str, *, http_port: int = 8080, http_host: str | None = None
+) -> ChildSpec:
+    """The web viewer; browsers elsewhere reach it on ``http_host`` (default ``w.http_host``)."""
+    http_host = http_host or w.http_host
+    argv = ["viewer", "--id", ident, "--http-port", str(http_port)]
+    if http_host:
+        argv += ["--host", http_host]
+    if w.lab_address:
+        argv += ["--lab-address", w.lab_address]
+    argv += [
+        "--url-file",
+        str(w.viewer_url_file()),
+        "--data-dir",
+        str(w.state_dir / "viewer"),
+        *w.net_args("viewer"),
+    ]
+    return ChildSpec(
+        "viewer",
+        argv,
+        keys.alive(w.realm, AliveKind.VIEWER, ident),
+        detail=f"web viewer on {http_host or '127.0.0.1'}:{http_port}",
+    )
+
+
+# --- a lab description -> the processes ----------------------------------------------------
+
+
+def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
+    """The processes of one service of a lab description (a lab file's or ``wart up``'s)."""
+    p: Mapping[str, Any] = svc.params
+    owner = str(p["owner"]) if p.get("owner") else None
+    title = str(p["title"]) if p.get("title") else None
+    if svc.kind == "registry":
+        return [registry_spec(w, server_name=p.get("server_name"))]
+    if svc.kind == "chat":
+        return [chat_room_spec(w, str(p["name"]), title=title, owner=owner)]
+    if svc.kind == "engine":
+        world = str(p["world"])
+        map_path = w.resolve_map(str(p["map"]))
+        robots = int(p.get("robots", 0))
+        if robots:
+            map_path = map_with_robots(map_path, robots, w.state_dir / "arenas" / f"{world}.json")
+        return arena_specs(
+            w,
+            world,
+            map_path,
+            seed=int(p.get("seed", 1)),
+            owner=owner,
+            context=p.get("context"),
+            title=title,
+            login=bool(p.get("login")),
+        )
+    if svc.kind == "bridge":
+        return bridge_specs(
+            w,
+            svc.ident,
+            [str(port) for port in p.get("ports", ())],
+            emulate=p.get("emulate"),
+            login=bool(p.get("login")),
+        )
+    if svc.kind == "agent":
+        slot = p.get("slot_seconds")
+        return [
+            agent_context_spec(
+                w,
+                svc.ident,
+                str(p["world"]),
+                title=title,
+                runner=p.get("runner"),
+                owner=owner,
+                slot_seconds=float(slot) if slot else None,
+            )
+        ]
+    if svc.kind == "runner":
+        return [runner_spec(w, svc.ident)]
+    if svc.kind == "viewer":
+        # The viewer's id defaults to its host's name: one viewer per host, and
+        # the doctor knows which token to expect.
+        return [
+            viewer_spec(
+                w,
+                str(p.get("name") or w.host),
+                http_port=int(p.get("http_port", 8080)),
+                http_host=p.get("http_host"),
+            )
+        ]
+    raise LabFileError(f"{svc.kind} services are not supported by this build")
+
+
+# Worlds before the contexts that lease their robots; the viewer, the front
+# door, once the rest serves.
+START_ORDER = {"registry": 0, "chat": 1, "engine": 2, "bridge": 2, "runner": 3, "agent": 4}
+
+
+def host_plan(w: Wiring, services: Iterable[ServiceEntry]) -> list[ChildSpec]:
+    """A host's services in start order (its router is started first, separately)."""
+    specs: list[ChildSpec] = []
+    for svc in sorted(services, key=lambda s: START_ORDER.get(s.kind, 5)):
+        specs += service_specs(w, svc)
+    return specs

@@ -1,0 +1,74 @@
+"""One module builds every process's command line: ``wart up``'s lab and a lab file's hosts."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from common.labfile import LabFileError, service_entry
+from common.zconfig import NetworkOptions
+from services.commands.up import LabSettings, lab_plan, service_accounts, settings_from_args
+
+
+def settings(tmp_path: Path) -> LabSettings:
+    args = argparse.Namespace(state_dir=tmp_path, port=17447, http_port=18080)
+    return settings_from_args(args, NetworkOptions(realm="lab"))
+
+
+def flag(argv: list[str] | tuple[str, ...], name: str) -> str:
+    return argv[list(argv).index(name) + 1]
+
+
+def test_wart_up_runs_the_one_host_lab_in_dependency_order(tmp_path: Path) -> None:
+    plan = lab_plan(settings(tmp_path))
+    assert [s.name for s in plan] == [
+        "registry",
+        "chat lobby",
+        "engine arena1",
+        "agent arena",
+        "khepera emulator real1",
+        "bridge real1",
+        "runner runner",
+        "agent context robots",
+        "viewer",
+    ]
+    by_name = {s.name: list(s.argv) for s in plan}
+    # The simulated arena's context keeps its name, its owner and its runner.
+    arena = by_name["agent arena"]
+    assert (flag(arena, "--world"), flag(arena, "--owner"), flag(arena, "--runner")) == (
+        "arena1",
+        "admin",
+        "runner",
+    )
+    assert flag(arena, "--title") == "Arena (simulated)"
+    # The bridge drives the emulated Khepera's pty, its odometry at the map's pose.
+    emulator, bridge = by_name["khepera emulator real1"], by_name["bridge real1"]
+    assert flag(bridge, "--port") == f"{flag(emulator, '--link')}=k1@500,500,0"
+    # Every child reaches the lab's router, never scouting for another.
+    for spec in plan:
+        if spec.name != "khepera emulator real1":
+            assert "--no-multicast-scouting" in spec.argv, spec.name
+            assert flag(spec.argv, "--connect") == "tcp/127.0.0.1:17447", spec.name
+    assert flag(by_name["viewer"], "--http-port") == "18080"
+
+
+def test_every_account_a_process_logs_in_with_is_provisioned(tmp_path: Path) -> None:
+    lab = settings(tmp_path)
+    provisioned = set(service_accounts(lab))
+    used = {flag(s.argv, "--user") for s in lab_plan(lab) if "--user" in s.argv}
+    assert used <= provisioned, used - provisioned
+    # Arenas and rooms started on request share one account per kind.
+    assert {"agent-local", "room-local", "engine-arena1", "bridge-real1"} <= provisioned
+
+
+def test_a_lab_file_service_says_who_owns_it_and_whether_it_logs_in() -> None:
+    engine = service_entry(
+        "s", {"kind": "engine", "world": "w1", "map": "m", "context": "c1", "login": True}
+    )
+    assert engine.params["context"] == "c1" and engine.params["login"] is True
+    with pytest.raises(LabFileError, match=r"s.login: expected true or false"):
+        service_entry("s", {"kind": "bridge", "world": "w", "emulate": "m", "login": "yes"})
+    with pytest.raises(LabFileError, match=r"s.owner"):
+        service_entry("s", {"kind": "chat", "name": "r", "owner": "no such/user"})
