@@ -23,8 +23,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common import keys
-from common.client import LabClient, LabError, NotLoggedIn, RoomHandle
+from common.client import LabClient, RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
+from common.lab_errors import LabError, NotLoggedIn
 from common.messages import (
     AgentContextState,
     AgentEvent,

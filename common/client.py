@@ -11,7 +11,9 @@ found, registry unreachable, registry key mismatch). Callbacks run on Zenoh
 threads: keep them short (queue the work).
 
 Services log in with an Ed25519 identity key (``login_with_key``) and keep
-their session renewed (:func:`service_login`).
+their session renewed (common/service_login.py). The errors are in
+common/lab_errors.py, private messages' crypto in common/private_mail.py, the
+admin calls in common/registry_admin.py.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, TypeVar
 
 import nacl.exceptions
@@ -38,25 +39,33 @@ from common.auth import (
     SessionKeys,
     Verifier,
     key_fingerprint,
-    load_identity_key,
     parse_public_key,
+    registry_box_key,
 )
 from common.keys import AliveKind
+from common.lab_errors import (
+    LabError,
+    NotAllowed,
+    NotFound,
+    NotLoggedIn,
+    RateLimited,
+    RegistryKeyMismatch,
+    RegistryUnreachable,
+    RequestFailed,
+    WrongCredentials,
+    raise_for,
+)
 from common.messages import (
-    AddUser,
     AgentEvent,
     ChatSay,
     DirectoryReply,
     DirectoryRequest,
     ErrorReply,
-    Grant,
     JoinReply,
     JoinRoom,
     KeyCredential,
-    KickFromServer,
     KickNotice,
     LeaveRoom,
-    ListUsers,
     LoginReply,
     LoginRequest,
     LogoutRequest,
@@ -66,24 +75,18 @@ from common.messages import (
     OkReply,
     PasswordCredential,
     PrivateMessage,
-    RemoveUser,
-    RenameServer,
     RoomEvent,
     SealedLogin,
     SessionToken,
-    SetPassword,
-    Ungrant,
-    UnlockLogins,
-    UserInfo,
     UserKeysReply,
     UserKeysRequest,
-    UserList,
     UserRemovalRequest,
     decode,
     encode,
 )
+from common.private_mail import PrivateText, mailbox_key_from_password, open_private, seal_private
+from common.registry_admin import RegistryAdminCalls
 from common.revocations import RevocationFeed
-from common.service import open_session
 
 log = logging.getLogger("wart.client")
 
@@ -91,83 +94,6 @@ log = logging.getLogger("wart.client")
 _EARLY_INBOX_MAX = 64
 
 M = TypeVar("M", bound=Message)
-
-
-# --- errors ----------------------------------------------------------------------------
-
-
-class LabError(Exception):
-    """Something the user should be told; ``str()`` is the message."""
-
-
-class RegistryUnreachable(LabError):
-    pass
-
-
-class RegistryKeyMismatch(LabError):
-    pass
-
-
-class WrongCredentials(LabError):
-    pass
-
-
-class NotAllowed(LabError):
-    pass
-
-
-class NotFound(LabError):
-    pass
-
-
-class RateLimited(LabError):
-    def __init__(self, message: str, retry_after: float) -> None:
-        super().__init__(message)
-        self.retry_after = retry_after
-
-
-class NotLoggedIn(LabError):
-    pass
-
-
-class RequestFailed(LabError):
-    pass
-
-
-def _raise_for(reply: ErrorReply, what: str) -> None:
-    text = f"{what}: {reply.message}"
-    if reply.code == "forbidden":
-        raise NotAllowed(text)
-    if reply.code == "not_found":
-        raise NotFound(text)
-    if reply.code == "rate_limited":
-        raise RateLimited(text, reply.retry_after)
-    if reply.code == "unauthenticated":
-        raise NotLoggedIn(text)
-    raise RequestFailed(text)
-
-
-# --- private messages --------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class PrivateText:
-    sender: str
-    text: str
-    sent_at: float
-    kept: bool  # it waited in the mailbox while we were offline
-
-
-def mailbox_key_from_password(realm: str, user: str, password: str) -> nacl.public.PrivateKey:
-    """A password user's long-term mailbox key: argon2id of the password, no storage needed."""
-    seed = nacl.pwhash.argon2id.kdf(
-        32,
-        password.encode(),
-        acl.mailbox_salt(realm, user),
-        opslimit=nacl.pwhash.argon2id.OPSLIMIT_INTERACTIVE,
-        memlimit=nacl.pwhash.argon2id.MEMLIMIT_INTERACTIVE,
-    )
-    return nacl.public.PrivateKey(seed)
 
 
 @dataclass
@@ -187,7 +113,7 @@ class RoomHandle:
     rejoins: int = 0  # times this client joined again by itself (room restart, router blip)
 
 
-class LabClient:
+class LabClient(RegistryAdminCalls):
     """A user's (or service's) connection to the lab over one Zenoh session."""
 
     def __init__(
@@ -201,8 +127,6 @@ class LabClient:
         via: str = "",
     ) -> None:
         if isinstance(registry_key, str):
-            from common.auth import parse_public_key
-
             registry_key = parse_public_key(registry_key)
         self.z = zsession
         self.realm = realm
@@ -325,7 +249,7 @@ class LabClient:
             raise RegistryUnreachable(f"{what}: no answer (is the registry running?)")
         reply = decode(answers[0], (expected, ErrorReply))
         if isinstance(reply, ErrorReply):
-            _raise_for(reply, what)
+            raise_for(reply, what)
         return reply  # type: ignore[return-value]
 
     def request(self, ctx: str, message: Message, expected: type[M], what: str) -> M:
@@ -390,8 +314,6 @@ class LabClient:
         session_keys: SessionKeys,
         ttl: float,
     ) -> SessionToken:
-        from common.auth import registry_box_key
-
         request = LoginRequest(
             realm=self.realm,
             credential=cred,
@@ -691,33 +613,12 @@ class LabClient:
 
     def _encrypt(self, user: str, to_key: bytes, text: str) -> PrivateMessage:
         assert self.session is not None
-        box = nacl.public.Box(self.session.keys.box_key, nacl.public.PublicKey(to_key))
-        sent_at = time.time()
-        return PrivateMessage(
-            sender=self.session.user,
-            recipient=user,
-            sender_box_key=self.session.keys.box_public_key,
-            to_key=to_key,
-            ciphertext=bytes(box.encrypt(text.encode())),
-            sent_at=sent_at,
-        )
+        return seal_private(self.session, user, to_key, text)
 
     def _open_private(self, message: PrivateMessage, *, kept: bool) -> PrivateText | None:
         if self.session is None or self._mailbox is None:
             return None
-        if message.to_key == self.session.keys.box_public_key:
-            mine = self.session.keys.box_key
-        elif message.to_key == bytes(self._mailbox.public_key):
-            mine = self._mailbox
-        else:
-            return None  # for another of this user's sessions
-        try:
-            box = nacl.public.Box(mine, nacl.public.PublicKey(message.sender_box_key))
-            text = box.decrypt(message.ciphertext).decode("utf-8")
-        except (nacl.exceptions.CryptoError, UnicodeDecodeError):
-            log.warning("could not decrypt a private message from %s", message.sender)
-            return None
-        return PrivateText(sender=message.sender, text=text, sent_at=message.sent_at, kept=kept)
+        return open_private(self.session, self._mailbox, message, kept=kept)
 
     def _on_inbox(self, sample: zenoh.Sample) -> None:
         with self._inbox_lock:
@@ -746,193 +647,3 @@ class LabClient:
         opened = self._open_private(message, kept=False)
         if opened is not None:
             self.on_private(opened)
-
-    # -- admin
-
-    def _admin(self, message: Message, what: str, expected: type[M] = OkReply) -> M:  # type: ignore[assignment]
-        return self._ask(keys.registry_admin(self.realm), message, expected, what)
-
-    def _seal_secret(self, secret: str) -> bytes:
-        from common.auth import registry_box_key
-
-        return bytes(
-            nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(secret.encode())
-        )
-
-    def list_users(self) -> list[UserInfo]:
-        return self._admin(ListUsers(), "list users", UserList).users
-
-    def add_user(
-        self,
-        user: str,
-        password: str | None = None,
-        roles: tuple[str, ...] = ("student",),
-        public_key: bytes | None = None,
-    ) -> str:
-        sealed = self._seal_secret(password) if password is not None else None
-        return self._admin(
-            AddUser(user=user, roles=list(roles), sealed_password=sealed, public_key=public_key),
-            f"add user {user}",
-        ).detail
-
-    def set_password(self, user: str, password: str) -> str:
-        return self._admin(
-            SetPassword(user=user, sealed_password=self._seal_secret(password)),
-            f"set the password of {user}",
-        ).detail
-
-    def remove_user(self, user: str) -> str:
-        return self._admin(RemoveUser(user=user), f"remove user {user}").detail
-
-    def grant(self, user: str, grant: str, scope: str = "") -> str:
-        return self._admin(
-            Grant(user=user, grant=grant, scope=scope), f"grant {grant} to {user}"
-        ).detail
-
-    def ungrant(self, user: str, grant: str, scope: str = "") -> str:
-        return self._admin(
-            Ungrant(user=user, grant=grant, scope=scope), f"revoke {grant} from {user}"
-        ).detail
-
-    def kick_from_server(self, user: str, reason: str = "") -> str:
-        return self._admin(KickFromServer(user=user, reason=reason), f"kick {user}").detail
-
-    def rename_server(self, name: str) -> str:
-        return self._admin(RenameServer(name=name), "rename the server").detail
-
-    def unlock_logins(self, user: str) -> str:
-        """Forget the account's failed logins (admin): every source may try again at once."""
-        return self._admin(UnlockLogins(user=user), f"unlock the logins of {user}").detail
-
-
-class ServiceLogin:
-    """A service's session, logged in with its identity key and renewed before it expires.
-
-    ``session`` always returns the current one; seal with it at send time.
-    """
-
-    def __init__(
-        self,
-        client: LabClient,
-        user: str,
-        identity: nacl.signing.SigningKey,
-        ttl: float = 24 * 3600.0,
-    ) -> None:
-        self.client = client
-        self.user = user
-        self.identity = identity
-        self.ttl = ttl
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    @property
-    def session(self) -> Session:
-        session = self.client.session
-        if session is None:
-            raise NotLoggedIn(f"service account {self.user} is not logged in")
-        return session
-
-    def login(self, wait: float = 60.0) -> Session:
-        """Log in, retrying while no registry answers (it may start after us)."""
-        deadline = time.monotonic() + wait
-        delay = 0.2
-        while True:
-            try:
-                self.client.login_with_key(self.user, self.identity, ttl=self.ttl)
-                break
-            except (RegistryUnreachable, RateLimited) as exc:
-                if time.monotonic() > deadline:
-                    raise
-                log.info("service login as %s: %s; retrying", self.user, exc)
-                self._stop.wait(delay)
-                delay = min(delay * 2, 2.0)
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._renew, name="renew", daemon=True)
-            self._thread.start()
-        return self.session
-
-    def _renew(self) -> None:
-        while not self._stop.is_set():
-            session = self.client.session
-            remaining = (session.token.expires_at - time.time()) if session else 0.0
-            if self._stop.wait(max(1.0, remaining * 0.8)):
-                return
-            try:
-                self.client.login_with_key(self.user, self.identity, ttl=self.ttl)
-            except LabError as exc:
-                log.warning("could not renew the session of %s: %s", self.user, exc)
-
-    def close(self) -> None:
-        self._stop.set()
-        self.client.close()
-
-
-def add_world_identity_args(p: Any) -> None:
-    """``--user/--identity`` of a world (engine, bridge): optional, unlike other services'.
-
-    With them the world logs in as a service account with the ``world``
-    permission and advertises its token, so contexts can grant MAC leases;
-    without them it keeps working, every command an Ed25519 envelope.
-    """
-    p.add_argument("--user", help="the world's service account (optional; enables MAC leases)")
-    p.add_argument("--identity", type=Path, help="the service account's Ed25519 key file")
-
-
-def world_login(
-    session: zenoh.Session, realm: str, registry_key: bytes | None, user: str | None, key: Any
-) -> ServiceLogin | None:
-    """The world's logged-in ServiceLogin, or None without ``--user``; RuntimeError if it fails."""
-    if not user:
-        return None
-    if key is None or registry_key is None:
-        raise RuntimeError("--user needs --identity and --registry-key")
-    credentials = ServiceCredentials(registry_key, user, load_identity_key(Path(key)))
-    login = credentials.login(session, realm, "world")
-    if not login.session.has("world"):
-        login.close()
-        raise RuntimeError(f"account {user} lacks the 'world' permission")
-    return login
-
-
-def connect(options: Any, *, wait: float = 10.0) -> zenoh.Session:
-    """A Zenoh session for a client, with a clear error when no router answers."""
-    try:
-        return open_session(options, wait=wait)
-    except ConnectionError as exc:
-        raise RegistryUnreachable(str(exc)) from None
-
-
-@dataclass(frozen=True)
-class ServiceCredentials:
-    """What a service needs to log in: the pinned registry key, its account, its key.
-
-    Every service process (rooms, agent contexts, runners) builds one from its
-    command line and logs in through it, so the checks and the error words are
-    the same everywhere.
-    """
-
-    registry_key: bytes
-    user: str
-    identity: nacl.signing.SigningKey
-
-    @classmethod
-    def from_options(
-        cls, registry_key_hex: str | None, user: str, identity_file: Path, what: str
-    ) -> ServiceCredentials:
-        """Check the flags; ValueError with a message naming the flag that is wrong."""
-        keys.check_ident("user", user)
-        if not registry_key_hex:
-            raise ValueError(f"--registry-key is required: the {what} must know whom to trust")
-        return cls(parse_public_key(registry_key_hex), user, load_identity_key(identity_file))
-
-    def login(
-        self, session: zenoh.Session, realm: str, what: str, wait: float = 120.0
-    ) -> ServiceLogin:
-        """Log in as the service account (waiting for the registry), renewed until stopped."""
-        client = LabClient(session, realm, self.registry_key, presence=False)
-        login = ServiceLogin(client, self.user, self.identity)
-        try:
-            login.login(wait=wait)
-        except LabError as exc:
-            raise RuntimeError(f"{what} could not log in as {self.user}: {exc}") from None
-        return login

@@ -25,7 +25,8 @@ from typing import Literal
 import zenoh
 
 from common import keys
-from common.client import LabClient, LabError, NotFound, RequestFailed, _raise_for
+from common.client import LabClient
+from common.lab_errors import LabError, NotFound, RequestFailed, raise_for
 from common.messages import ErrorReply, MessageError, OkReply, decode, encode
 from common.messages.host import (
     ArenaInfo,
@@ -136,7 +137,7 @@ def _ask(client: LabClient, host: str, message: object, timeout: float) -> objec
             raise NameTaken(f"host {host}: {reply.message}")
         if reply.code == "unavailable":
             raise HostError(f"host {host}: {reply.message}")
-        _raise_for(reply, f"host {host}")
+        raise_for(reply, f"host {host}")
     return reply
 
 

@@ -32,7 +32,7 @@ import nacl.exceptions
 import nacl.public
 
 from common.auth import AuthError, Session, Verifier
-from common.client import NotLoggedIn
+from common.lab_errors import NotLoggedIn
 from common.messages import (
     MacCommand,
     Message,

@@ -23,7 +23,7 @@ from pathlib import Path
 import zenoh
 
 from common import cli
-from common.client import LabClient, LabError
+from common.client import LabClient
 from common.host_client import (
     HostError,
     choose_host,
@@ -31,6 +31,7 @@ from common.host_client import (
     host_loads,
     stop_hosted,
 )
+from common.lab_errors import LabError
 from common.labfile import LabFileError, load
 from common.messages.host import ArenaInfo, HostLoad
 from common.service import close_session, open_session

@@ -16,9 +16,11 @@ import time
 from collections.abc import Sequence
 
 from common import cli, keys
-from common.client import LabClient, LabError, PrivateText, connect
+from common.client import LabClient
+from common.lab_errors import LabError
 from common.messages import ChatLine, KickNotice, RoomEvent
-from services.commands.terminal import password_from, say
+from common.private_mail import PrivateText
+from services.commands.terminal import connect, password_from, say
 
 
 def show_line(line: ChatLine) -> None:

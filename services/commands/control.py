@@ -21,12 +21,14 @@ from pathlib import Path
 
 from common import cli, keys
 from common.agent_client import AgentClient
-from common.client import LabClient, LabError, connect
+from common.client import LabClient
 from common.controller import load_controller
+from common.lab_errors import LabError
 from common.messages import OutputLines, RequestStatus
 from common.precheck import PrecheckError, precheck
 from common.service import close_session
-from services.commands.terminal import password_from, say
+from common.zconfig import NetworkOptions
+from services.commands.terminal import connect, password_from, say
 
 
 def tool_parser(prog: str, doc: str) -> argparse.ArgumentParser:
@@ -66,7 +68,7 @@ def show_output(output: OutputLines) -> None:
 
 
 def session_for(
-    args: argparse.Namespace, options: object, body: Callable[[AgentClient], int]
+    args: argparse.Namespace, options: NetworkOptions, body: Callable[[AgentClient], int]
 ) -> int:
     """Connect, log in, join the context and run ``body``; errors become clear messages."""
     try:
@@ -75,7 +77,7 @@ def session_for(
         keys.check_ident("user", args.user)
     except ValueError as exc:
         return cli.fail(str(exc))
-    if not getattr(options, "registry_key", None):
+    if not options.registry_key:
         return cli.fail(
             "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
         )
@@ -84,7 +86,7 @@ def session_for(
     except LabError as exc:
         return cli.fail(str(exc))
     try:
-        with LabClient(zsession, options.realm, options.registry_key) as client:  # type: ignore[attr-defined]
+        with LabClient(zsession, options.realm, options.registry_key) as client:
             client.login(args.user, password_from(args))
             agents = AgentClient(client, args.context).join()
             return body(agents)

@@ -17,8 +17,9 @@ import sys
 from collections.abc import Sequence
 
 from common import cli
-from common.client import LabClient, LabError
+from common.client import LabClient
 from common.host_client import host_room, stop_hosted
+from common.lab_errors import LabError
 from common.labfile import LabFileError
 from common.service import close_session
 from common.zconfig import NetworkOptions

@@ -28,7 +28,6 @@ import zenoh
 
 from common import acl, keys
 from common.auth import AuthError, Principal, Verifier
-from common.client import ServiceLogin
 from common.files import write_atomic
 from common.keys import AliveKind
 from common.messages import (
@@ -49,6 +48,7 @@ from common.messages import (
 )
 from common.revocations import RevocationFeed
 from common.service import RequestError, Service
+from common.service_login import ServiceLogin
 
 log = logging.getLogger("wart.chat")
 

@@ -19,9 +19,9 @@ import zenoh
 
 from common import cli
 from common.auth import parse_public_key
-from common.client import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
+from common.service_login import add_world_identity_args, world_login
 from services.engine import kernels
 from services.engine.maps import MapError, load_map
 from services.engine.service import EngineService, EngineSettings

@@ -34,7 +34,6 @@ import zenoh
 
 from common import keys
 from common.auth import Verifier
-from common.client import ServiceLogin
 from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
@@ -49,6 +48,7 @@ from common.messages import (
 from common.precheck import PrecheckError, precheck
 from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from common.service import RequestError, Service
+from common.service_login import ServiceLogin
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
 log = logging.getLogger("wart.runner")

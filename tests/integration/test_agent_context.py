@@ -176,7 +176,7 @@ def test_robot_stops_when_the_controller_process_is_killed(lab: Lab, procs: Proc
 
 
 def test_only_the_host_or_an_instructor_manages_the_context(lab: Lab) -> None:
-    from common.client import NotAllowed
+    from common.lab_errors import NotAllowed
 
     with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:
         for call in (

@@ -11,8 +11,8 @@ import pytest
 
 from common import keys
 from common.agent_client import FINAL
-from common.client import LabError
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import OutputLines
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for

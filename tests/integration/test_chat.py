@@ -9,7 +9,7 @@ import pytest
 
 from common import keys
 from common.auth import issue_session
-from common.client import NotAllowed, NotFound, RateLimited, RequestFailed
+from common.lab_errors import NotAllowed, NotFound, RateLimited, RequestFailed
 from common.messages import ChatSay, RoomEvent
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.labkit import Lab, make_lab

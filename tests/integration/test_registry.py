@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from common.auth import RegistryIdentity, create_identity_key
-from common.client import (
-    LabClient,
+from common.client import LabClient
+from common.lab_errors import (
     NotAllowed,
     RateLimited,
     RegistryKeyMismatch,

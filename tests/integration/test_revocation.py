@@ -17,9 +17,9 @@ import pytest
 
 from common import keys
 from common.agent_client import DriveResult
-from common.client import PrivateText
 from common.controller import Controller, Khepera
 from common.messages import EditResult, ErrorReply, MoveItem, WorldEdit, decode
+from common.private_mail import PrivateText
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import (
     WORLD,

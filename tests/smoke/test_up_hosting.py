@@ -16,8 +16,9 @@ import psutil
 import pytest
 import zenoh
 
-from common.client import LabClient, NotAllowed, NotFound
+from common.client import LabClient
 from common.host_client import NameTaken, host_arena, host_loads, host_room, stop_hosted
+from common.lab_errors import NotAllowed, NotFound
 from common.messages import ContextInfo
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions

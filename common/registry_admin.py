@@ -1,0 +1,104 @@
+"""The registry's administration calls (the ``admin`` permission), as LabClient methods.
+
+Kept apart from the client's session, rooms and messages; a LabClient is a
+RegistryAdminCalls, so ``client.add_user(...)`` reads as it always did.
+Passwords travel sealed to the registry's key, never in clear on the network.
+"""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+import nacl.public
+
+from common import keys
+from common.auth import registry_box_key
+from common.messages import (
+    AddUser,
+    Grant,
+    KickFromServer,
+    ListUsers,
+    Message,
+    OkReply,
+    RemoveUser,
+    RenameServer,
+    SetPassword,
+    Ungrant,
+    UnlockLogins,
+    UserInfo,
+    UserList,
+)
+
+M = TypeVar("M", bound=Message)
+
+
+class RegistryAdminCalls:
+    """Account and server administration; each call raises a LabError in the user's words."""
+
+    realm: str
+    registry_key: bytes
+
+    def _ask(
+        self,
+        key: str,
+        message: Message,
+        expected: type[M],
+        what: str,
+        *,
+        signed: bool = True,
+        not_found: str | None = None,
+    ) -> M:
+        raise NotImplementedError  # the LabClient's: a sealed query, its reply or a LabError
+
+    def _admin(self, message: Message, what: str, expected: type[M] = OkReply) -> M:  # type: ignore[assignment]
+        return self._ask(keys.registry_admin(self.realm), message, expected, what)
+
+    def _seal_secret(self, secret: str) -> bytes:
+        return bytes(
+            nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(secret.encode())
+        )
+
+    def list_users(self) -> list[UserInfo]:
+        return self._admin(ListUsers(), "list users", UserList).users
+
+    def add_user(
+        self,
+        user: str,
+        password: str | None = None,
+        roles: tuple[str, ...] = ("student",),
+        public_key: bytes | None = None,
+    ) -> str:
+        sealed = self._seal_secret(password) if password is not None else None
+        return self._admin(
+            AddUser(user=user, roles=list(roles), sealed_password=sealed, public_key=public_key),
+            f"add user {user}",
+        ).detail
+
+    def set_password(self, user: str, password: str) -> str:
+        return self._admin(
+            SetPassword(user=user, sealed_password=self._seal_secret(password)),
+            f"set the password of {user}",
+        ).detail
+
+    def remove_user(self, user: str) -> str:
+        return self._admin(RemoveUser(user=user), f"remove user {user}").detail
+
+    def grant(self, user: str, grant: str, scope: str = "") -> str:
+        return self._admin(
+            Grant(user=user, grant=grant, scope=scope), f"grant {grant} to {user}"
+        ).detail
+
+    def ungrant(self, user: str, grant: str, scope: str = "") -> str:
+        return self._admin(
+            Ungrant(user=user, grant=grant, scope=scope), f"revoke {grant} from {user}"
+        ).detail
+
+    def kick_from_server(self, user: str, reason: str = "") -> str:
+        return self._admin(KickFromServer(user=user, reason=reason), f"kick {user}").detail
+
+    def rename_server(self, name: str) -> str:
+        return self._admin(RenameServer(name=name), "rename the server").detail
+
+    def unlock_logins(self, user: str) -> str:
+        """Forget the account's failed logins (admin): every source may try again at once."""
+        return self._admin(UnlockLogins(user=user), f"unlock the logins of {user}").detail
