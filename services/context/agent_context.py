@@ -32,14 +32,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-import msgspec
 import zenoh
 
 from common import acl, keys
 from common.auth import AuthError, Principal
 from common.files import write_atomic
 from common.keys import AliveKind
-from common.leasemac import check_world_token, new_lease_key, seal_key
 from common.messages import (
     AgentContextState,
     AgentEvent,
@@ -51,25 +49,14 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
-    ErrorReply,
-    Lease,
     Message,
-    MessageError,
     OkReply,
     OutputLines,
     QueueStateRequest,
     RequestStatus,
     Revocation,
-    RunAccepted,
-    RunClaim,
-    RunRequest,
-    RunStop,
-    SessionToken,
     StopControl,
     UserRemovalRequest,
-    WorldFrame,
-    WorldSnapshot,
-    decode,
 )
 from common.precheck import PrecheckError, precheck
 from common.service import RequestError
@@ -82,6 +69,9 @@ from services.context.agent_queue import (
     save_book,
 )
 from services.context.chat_room import ChatRoom, log
+from services.context.lease_signer import LeaseSigner
+from services.context.runner_link import RunnerLink
+from services.context.slots import SlotScheduler
 
 LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
@@ -90,7 +80,7 @@ MAX_WAITING_PER_USER = 4
 RUNNER_GRACE_S = 1.5  # how long to wait before taking a runner's token loss as its death
 
 
-class AgentContext(ChatRoom):
+class AgentContext(SlotScheduler, ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -115,14 +105,19 @@ class AgentContext(ChatRoom):
         self._wake = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
-        self._lease_pubs: dict[str, zenoh.Publisher] = {}
+        self.leases = LeaseSigner(session, realm, self.world, self._seal, self.verifier, self.log)
+        self.runner_link = RunnerLink(
+            session, realm, self.runner, self._seal, self.verifier, self.log
+        )
         self._end_reasons: dict[str, tuple[str, str]] = {}  # request id -> (status, reason)
         self._dirty = True
         self._layout: int | None = None
         self._frames: Any = None
         self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
-        self._runner_users: dict[str, str] = {}  # request id -> the runner account driving it
-        self._world_token: SessionToken | None = None  # verified; lease keys are sealed to it
+
+    def _seal(self, key: str, message: Message) -> bytes:
+        """Sealed with the context's current session (renewed sessions included)."""
+        return self.login.session.seal(key, message)
 
     def _restore_book(self) -> None:
         if self._book_path is None or not self._book_path.exists():
@@ -196,8 +191,7 @@ class AgentContext(ChatRoom):
             for line in self.book.lines.values():
                 line.running = None
         self._save_book()  # a clean stop ends the slots: they must not come back
-        for pub in self._lease_pubs.values():
-            pub.undeclare()
+        self.leases.close()
         super().on_stop(timeout)
 
     # -- manage rights
@@ -555,281 +549,3 @@ class AgentContext(ChatRoom):
             self._publisher.put(self.login.session.seal(self._events_key, event))
         except Exception as exc:  # the session closing at shutdown
             self.log.debug("could not publish an event: %s", exc)
-
-    # -- the scheduler thread: agents, leases, starts and ends
-
-    def _schedule(self) -> None:
-        last_snapshot_try = 0.0
-        last_republish = 0.0
-        while not self._halt.is_set():
-            try:
-                now = time.time()
-                if (
-                    self._need_snapshot() and now - last_snapshot_try >= SNAPSHOT_RETRY_S
-                ) or now - last_snapshot_try >= WORLD_IDENTITY_REFRESH_S:
-                    last_snapshot_try = now
-                    self._refresh_agents()
-                self._turn()
-                if time.monotonic() - last_republish >= LEASE_REPUBLISH_S:
-                    last_republish = time.monotonic()
-                    with self._lock:
-                        running = [ln.running for ln in self.book.lines.values() if ln.running]
-                    for run in running:
-                        self._publish_lease(run, run.end)
-                if self._dirty:
-                    self._dirty = False
-                    self._save_book()
-                    self._publish_agent(AgentEvent(ctx=self.room, state=self.state_message()))
-            except Exception:
-                self.log.exception("error in the agent scheduler (kept running)")
-            with self._wake:
-                if not self._halt.is_set():
-                    self._wake.wait(self._next_wait())
-
-    def _next_wait(self) -> float:
-        now = time.time()
-        ends = [ln.running.end - now for ln in self.book.lines.values() if ln.running is not None]
-        return max(0.01, min([0.25, *ends]))
-
-    def _need_snapshot(self) -> bool:
-        if self._layout is None:
-            return True
-        try:
-            sample = self._frames.try_recv() if self._frames is not None else None
-        except Exception:
-            return False
-        if sample is None:
-            return False
-        try:
-            frame = decode(sample.payload, WorldFrame)
-        except MessageError:
-            return False
-        return frame.layout != self._layout
-
-    def _refresh_agents(self) -> None:
-        try:
-            replies = list(
-                self.session.get(keys.world_snapshot(self.realm, self.world), timeout=3.0)
-            )
-        except Exception as exc:
-            self.log.info("world %s snapshot: %s", self.world, exc)
-            return
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
-            except MessageError as exc:
-                self.log.warning("unreadable snapshot of %s: %s", self.world, exc)
-                continue
-            if not isinstance(snap, WorldSnapshot):
-                continue
-            self._note_world_identity(snap)
-            with self._wake:
-                first = self._layout is None
-                self._layout = snap.layout
-                gone = self.book.set_agents({a.id: a.type for a in snap.agents})
-                for job in gone:
-                    self._end_reasons.setdefault(
-                        job.request_id, ("cancelled", f"{job.agent} left the world")
-                    )
-                self._dirty = True
-            if first:
-                self.log.info(
-                    "world %s has agents %s", self.world, ", ".join(a.id for a in snap.agents)
-                )
-            for job in gone:
-                self._publish_agent(
-                    AgentEvent(
-                        ctx=self.room,
-                        request=self._status(job, "cancelled", f"{job.agent} left the world"),
-                    )
-                )
-            return
-
-    def _note_world_identity(self, snap: WorldSnapshot) -> None:
-        """Keep the world's verified identity token, or none: lease keys are sealed only to it."""
-        token: SessionToken | None = None
-        if snap.identity is not None:
-            try:
-                token = check_world_token(self.verifier, snap.identity, self.world)
-            except AuthError as exc:
-                self.log.warning("world %s identity refused (no MAC leases): %s", self.world, exc)
-        previous = self._world_token
-        if token is not None and (previous is None or previous.box_key != token.box_key):
-            self.log.info("world %s runs as %s: leases carry MAC keys", self.world, token.user)
-        self._world_token = token
-
-    def _turn(self) -> None:
-        now = time.time()
-        with self._lock:
-            ended = self.book.expired(now)
-            for run in ended:
-                self.book.lines[run.job.agent].running = None
-            starts = []
-            for agent in list(self.book.lines):
-                job = self.book.next_to_start(agent)
-                if job is not None:
-                    starts.append(job)
-            if ended or starts:
-                self._dirty = True
-        for run in ended:
-            with self._lock:
-                self._recent[run.job.request_id] = run
-                while len(self._recent) > 64:
-                    self._recent.pop(next(iter(self._recent)))
-            self._runner_users.pop(run.job.request_id, None)
-            status, reason = self._end_reasons.pop(
-                run.job.request_id, ("finished", "its slot ended")
-            )
-            self._end_run(run, status, reason)
-        for job in starts:
-            self._start(job)
-
-    def _end_run(self, run: RunningJob, status: str, reason: str) -> None:
-        # The same lease id, ending now, replaces the lease in the world at once.
-        self._publish_lease(run, min(run.end, time.time()))
-        if run.job.mode == "deploy":
-            self._ask_runner(RunStop(request_id=run.job.request_id, reason=reason), timeout=2.0)
-        log.info("%s %s on %s: %s", run.job.request_id, status, run.job.agent, reason)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(run.job, status, reason))
-        )
-
-    def _start(self, job: ControlJob) -> None:
-        start = time.time()
-        end = start + self.book.slot_seconds
-        holder, holder_box = job.session_id, job.box_key
-        if job.mode == "deploy":
-            try:
-                holder, holder_box = self._start_on_runner(job, end)
-            except RequestError as exc:
-                log.warning("%s refused: %s", job.request_id, exc.message)
-                self._publish_agent(
-                    AgentEvent(ctx=self.room, request=self._status(job, "refused", exc.message))
-                )
-                with self._wake:
-                    self._dirty = True
-                    self._wake.notify_all()
-                return
-        run = RunningJob(
-            job=job,
-            lease_id=f"{self.room}.{job.request_id}"[:64],
-            holder_session=holder,
-            start=start,
-            end=end,
-            holder_box=holder_box,
-            lease_key=new_lease_key(),
-        )
-        with self._lock:
-            line = self.book.lines.get(job.agent)
-            if line is None or line.running is not None:
-                return
-            line.running = run
-            self._dirty = True
-        self._publish_lease(run, end)
-        log.info("%s runs on %s for %s until %.1f", job.request_id, job.agent, job.user, end)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(job, "running", run=run))
-        )
-
-    def _publish_lease(self, run: RunningJob, end: float) -> None:
-        agent = run.job.agent
-        key = keys.agent_lease(self.realm, self.world, agent)
-        pub = self._lease_pubs.get(agent)
-        if pub is None:
-            pub = self._lease_pubs[agent] = self.session.declare_publisher(key)
-        lease = Lease(
-            lease_id=run.lease_id,
-            world=self.world,
-            agent=agent,
-            holder_user=run.job.user if run.job.mode == "remote" else self.runner_user(run),
-            holder_session=run.holder_session,
-            start=run.start,
-            end=end,
-        )
-        sealed = self._lease_keys(run)
-        if sealed is not None:
-            lease = msgspec.structs.replace(
-                lease, holder_key=sealed[0], world_key=sealed[1], world_box=sealed[2]
-            )
-        try:
-            pub.put(self.login.session.seal(key, lease))
-        except Exception as exc:
-            self.log.warning("could not publish the lease of %s: %s", agent, exc)
-
-    def _lease_keys(self, run: RunningJob) -> tuple[bytes, bytes, bytes] | None:
-        """The MAC lease fields: K sealed to the holder and to the world's verified identity.
-
-        (holder's copy, world's copy, the world box key sealed to); None when
-        the world has no (valid, unexpired) identity: the holder then
-        signs its commands, as every world understands.
-        """
-        world = self._world_token
-        if world is None or world.expires_at <= time.time() or len(run.holder_box) != 32:
-            return None
-        cache = (run.holder_box, world.box_key)
-        sealed = run.sealed.get(cache)
-        if sealed is None:
-            sealed = (
-                seal_key(run.lease_key, run.holder_box),
-                seal_key(run.lease_key, world.box_key),
-            )
-            run.sealed[cache] = sealed
-        return sealed[0], sealed[1], world.box_key
-
-    def runner_user(self, run: RunningJob) -> str:
-        return self._runner_users.get(run.job.request_id, run.job.user)
-
-    # -- the runner
-
-    def _ask_runner(self, message: Message, timeout: float) -> Message | None:
-        key = keys.runner_run(self.realm, self.runner)
-        try:
-            replies = list(
-                self.session.get(
-                    key, payload=self.login.session.seal(key, message), timeout=timeout
-                )
-            )
-        except Exception as exc:
-            self.log.warning("runner %s: %s", self.runner, exc)
-            return None
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                return decode(reply.ok.payload, (RunAccepted, OkReply, ErrorReply))
-            except MessageError as exc:
-                self.log.warning("unreadable runner reply: %s", exc)
-        return None
-
-    def _start_on_runner(self, job: ControlJob, end: float) -> tuple[bytes, bytes]:
-        """The runner's session id and box key, once it accepted to run ``job``."""
-        key = keys.runner_run(self.realm, self.runner)
-        reply = self._ask_runner(
-            RunRequest(
-                request_id=job.request_id,
-                ctx=self.room,
-                world=self.world,
-                agent=job.agent,
-                user=job.user,
-                source=job.source,
-                end=end,
-                filename=job.filename,
-            ),
-            timeout=10.0,
-        )
-        if reply is None:
-            raise RequestError("unavailable", f"no runner {self.runner} answered")
-        if isinstance(reply, ErrorReply):
-            raise RequestError("unavailable", f"runner: {reply.message}")
-        if not isinstance(reply, RunAccepted):
-            raise RequestError("unavailable", "runner gave an unexpected reply")
-        try:
-            principal, claim = self.verifier.open(key, reply.claim, RunClaim)
-        except (AuthError, MessageError) as exc:
-            raise RequestError("unavailable", f"runner's claim refused: {exc}") from None
-        if not principal.has("run") or claim.request_id != job.request_id:
-            raise RequestError("unavailable", f"{principal.user} may not run controllers")
-        self._runner_users[job.request_id] = principal.user
-        return principal.session_id, principal.token.box_key

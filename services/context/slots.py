@@ -1,0 +1,247 @@
+"""The scheduler thread of an agent context: the world's agents, slots that start and end.
+
+Every quarter second (sooner when a slot ends) it ends the slots whose time
+is up, starts the head of each free agent's queue (asking the runner first
+for a deployed controller), republishes the leases in force every second,
+re-reads the world's agents when its layout changes (and its identity every
+few seconds: a restarted world has a new one), and saves the queues when
+anything changed. It is a base of :class:`~services.context.agent_context.
+AgentContext`, whose requests and events it shares state with under its lock.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from common import keys
+from common.leasemac import new_lease_key
+from common.messages import (
+    AgentContextState,
+    AgentEvent,
+    ErrorReply,
+    MessageError,
+    RequestStatus,
+    WorldFrame,
+    WorldSnapshot,
+    decode,
+)
+from common.service import RequestError
+from services.context.agent_queue import ControlJob, QueueBook, RunningJob
+from services.context.lease_signer import LeaseSigner
+from services.context.runner_link import RunnerLink
+
+log = logging.getLogger("wart.chat")  # the context's own logger (chat_room.py)
+
+LEASE_REPUBLISH_S = 1.0
+SNAPSHOT_RETRY_S = 2.0
+WORLD_IDENTITY_REFRESH_S = 5.0  # a restarted world has a new identity: reseal lease keys to it
+
+
+class SlotScheduler:
+    """Slots of one world's agents; the state is the context's (set in its ``__init__``)."""
+
+    session: zenoh.Session
+    realm: str
+    room: str
+    world: str
+    log: logging.Logger
+    book: QueueBook
+    leases: LeaseSigner
+    runner_link: RunnerLink
+    _lock: threading.Lock
+    _wake: threading.Condition
+    _halt: threading.Event
+    _dirty: bool
+    _layout: int | None
+    _frames: Any
+    _recent: dict[str, RunningJob]
+    _end_reasons: dict[str, tuple[str, str]]
+
+    # What the context provides (agent_context.py).
+    def _save_book(self) -> None:
+        raise NotImplementedError
+
+    def _publish_agent(self, event: AgentEvent) -> None:
+        raise NotImplementedError
+
+    def state_message(self) -> AgentContextState:
+        raise NotImplementedError
+
+    def _status(
+        self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
+    ) -> RequestStatus:
+        raise NotImplementedError
+
+    def _schedule(self) -> None:
+        last_snapshot_try = 0.0
+        last_republish = 0.0
+        while not self._halt.is_set():
+            try:
+                now = time.time()
+                if (
+                    self._need_snapshot() and now - last_snapshot_try >= SNAPSHOT_RETRY_S
+                ) or now - last_snapshot_try >= WORLD_IDENTITY_REFRESH_S:
+                    last_snapshot_try = now
+                    self._refresh_agents()
+                self._turn()
+                if time.monotonic() - last_republish >= LEASE_REPUBLISH_S:
+                    last_republish = time.monotonic()
+                    with self._lock:
+                        running = [ln.running for ln in self.book.lines.values() if ln.running]
+                    for run in running:
+                        self._publish_lease(run, run.end)
+                if self._dirty:
+                    self._dirty = False
+                    self._save_book()
+                    self._publish_agent(AgentEvent(ctx=self.room, state=self.state_message()))
+            except Exception:
+                self.log.exception("error in the agent scheduler (kept running)")
+            with self._wake:
+                if not self._halt.is_set():
+                    self._wake.wait(self._next_wait())
+
+    def _next_wait(self) -> float:
+        now = time.time()
+        ends = [ln.running.end - now for ln in self.book.lines.values() if ln.running is not None]
+        return max(0.01, min([0.25, *ends]))
+
+    def _need_snapshot(self) -> bool:
+        if self._layout is None:
+            return True
+        try:
+            sample = self._frames.try_recv() if self._frames is not None else None
+        except Exception:
+            return False
+        if sample is None:
+            return False
+        try:
+            frame = decode(sample.payload, WorldFrame)
+        except MessageError:
+            return False
+        return frame.layout != self._layout
+
+    def _refresh_agents(self) -> None:
+        try:
+            replies = list(
+                self.session.get(keys.world_snapshot(self.realm, self.world), timeout=3.0)
+            )
+        except Exception as exc:
+            self.log.info("world %s snapshot: %s", self.world, exc)
+            return
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
+            except MessageError as exc:
+                self.log.warning("unreadable snapshot of %s: %s", self.world, exc)
+                continue
+            if not isinstance(snap, WorldSnapshot):
+                continue
+            self.leases.note_world_identity(snap.identity)
+            with self._wake:
+                first = self._layout is None
+                self._layout = snap.layout
+                gone = self.book.set_agents({a.id: a.type for a in snap.agents})
+                for job in gone:
+                    self._end_reasons.setdefault(
+                        job.request_id, ("cancelled", f"{job.agent} left the world")
+                    )
+                self._dirty = True
+            if first:
+                self.log.info(
+                    "world %s has agents %s", self.world, ", ".join(a.id for a in snap.agents)
+                )
+            for job in gone:
+                self._publish_agent(
+                    AgentEvent(
+                        ctx=self.room,
+                        request=self._status(job, "cancelled", f"{job.agent} left the world"),
+                    )
+                )
+            return
+
+    def _turn(self) -> None:
+        now = time.time()
+        with self._lock:
+            ended = self.book.expired(now)
+            for run in ended:
+                self.book.lines[run.job.agent].running = None
+            starts = []
+            for agent in list(self.book.lines):
+                job = self.book.next_to_start(agent)
+                if job is not None:
+                    starts.append(job)
+            if ended or starts:
+                self._dirty = True
+        for run in ended:
+            with self._lock:
+                self._recent[run.job.request_id] = run
+                while len(self._recent) > 64:
+                    self._recent.pop(next(iter(self._recent)))
+            self.runner_link.forget(run.job.request_id)
+            status, reason = self._end_reasons.pop(
+                run.job.request_id, ("finished", "its slot ended")
+            )
+            self._end_run(run, status, reason)
+        for job in starts:
+            self._start(job)
+
+    def _end_run(self, run: RunningJob, status: str, reason: str) -> None:
+        # The same lease id, ending now, replaces the lease in the world at once.
+        self._publish_lease(run, min(run.end, time.time()))
+        if run.job.mode == "deploy":
+            self.runner_link.stop(run.job.request_id, reason)
+        log.info("%s %s on %s: %s", run.job.request_id, status, run.job.agent, reason)
+        self._publish_agent(
+            AgentEvent(ctx=self.room, request=self._status(run.job, status, reason))
+        )
+
+    def _start(self, job: ControlJob) -> None:
+        start = time.time()
+        end = start + self.book.slot_seconds
+        holder, holder_box = job.session_id, job.box_key
+        if job.mode == "deploy":
+            try:
+                holder, holder_box = self.runner_link.start(job, self.room, self.world, end)
+            except RequestError as exc:
+                log.warning("%s refused: %s", job.request_id, exc.message)
+                self._publish_agent(
+                    AgentEvent(ctx=self.room, request=self._status(job, "refused", exc.message))
+                )
+                with self._wake:
+                    self._dirty = True
+                    self._wake.notify_all()
+                return
+        run = RunningJob(
+            job=job,
+            lease_id=f"{self.room}.{job.request_id}"[:64],
+            holder_session=holder,
+            start=start,
+            end=end,
+            holder_box=holder_box,
+            lease_key=new_lease_key(),
+        )
+        with self._lock:
+            line = self.book.lines.get(job.agent)
+            if line is None or line.running is not None:
+                return
+            line.running = run
+            self._dirty = True
+        self._publish_lease(run, end)
+        log.info("%s runs on %s for %s until %.1f", job.request_id, job.agent, job.user, end)
+        self._publish_agent(
+            AgentEvent(ctx=self.room, request=self._status(job, "running", run=run))
+        )
+
+    def _publish_lease(self, run: RunningJob, end: float) -> None:
+        holder = run.job.user if run.job.mode == "remote" else self.runner_user(run)
+        self.leases.publish(run, end, holder)
+
+    def runner_user(self, run: RunningJob) -> str:
+        return self.runner_link.driver(run.job.request_id, run.job.user)
