@@ -11,9 +11,9 @@ Every host of a lab (each ``wart host`` of a lab file; ``local`` in ``wart
 up``) answers ``host/<h>/load`` with its load and what it runs, and serves
 ``host/<h>/spawn`` for users with the ``host`` permission. The new context is
 owned by the requesting user, and appears in the registry's directory once
-it is up (within ~2 s). Errors are :class:`~common.client.LabError`s whose
-text says what to do: :class:`NoHost`, :class:`~common.client.NotAllowed`,
-:class:`NameTaken`, :class:`~common.client.NotFound` (unknown map or context).
+it is up (within ~2 s). Errors are :class:`~common.lab_errors.LabError`s whose
+text says what to do: :class:`NoHost`, :class:`~common.lab_errors.NotAllowed`,
+:class:`NameTaken`, :class:`~common.lab_errors.NotFound` (unknown map or context).
 """
 
 from __future__ import annotations

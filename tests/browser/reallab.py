@@ -34,7 +34,7 @@ from tests.integration.agentkit import CTX, start_agent_context, start_engine, s
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
-from viewers.web.real import RealConnector
+from viewers.web.connector import RealConnector
 
 WORLD = "w1"
 

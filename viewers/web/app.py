@@ -32,8 +32,8 @@ from common.zconfig import DEFAULT_PORT, NetworkOptions
 from viewers.web.adapters import LabConnector
 from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
+from viewers.web.connector import RealConnector
 from viewers.web.pump import DEFAULT_RATE, FramePump
-from viewers.web.real import RealConnector
 
 log = logging.getLogger("wart.viewer")
 

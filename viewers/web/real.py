@@ -6,60 +6,34 @@ to) and, per logged-in browser user, one :class:`~common.client.LabClient` on
 that session: every query, chat line, edit and admin request is sealed with
 that person's session, so the services' ACL checks apply to the person.
 
-Worlds are watched once per lab and world (:class:`WorldWatch`), shared by
-every browser: a short subscriber callback keeps only the newest frame's
-bytes; the pump's ``latest()`` decodes it at most once per new frame; a frame
-whose layout differs from the snapshot's wakes a thread that refetches the
-snapshot (Zenoh queries never run inside Zenoh callbacks). Edits go through a
-per-user :class:`UserWorld` that seals them with that user's session.
+The labs it knows and their router sessions are in lab_links.py, the worlds
+it shows in real_world.py.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import queue
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
-import numpy as np
 import zenoh
 
 from common import client as lab
-from common import host_client, keys
-from common.auth import parse_public_key
+from common import host_client, keys, lab_errors
 from common.keys import AliveKind, is_ident
 from common.messages import (
-    AddItem,
     AgentContextState,
-    EditResult,
-    ErrorReply,
-    MapRequest,
-    Message,
-    MessageError,
-    MoveItem,
     QueueStateRequest,
-    RemoveItem,
-    ResizeArena,
     RoomEvent,
-    SensorSample,
-    WorldEdit,
-    WorldFrame,
-    WorldSnapshot,
-    decode,
 )
-from common.service import close_session, open_session
 from common.survey import Survey, survey
-from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
     Account,
     AgentStatus,
     ArenaSettings,
-    Ball,
     ChatEntry,
     ChatEvent,
     ContextSummary,
@@ -69,264 +43,39 @@ from viewers.web.adapters import (
     JoinedContext,
     LabError,
     LabEvent,
-    Light,
-    LoginError,
-    MapEdit,
     MemberEvent,
-    Obstacle,
     PrivateEvent,
     Queued,
-    RobotReadings,
-    SceneFrame,
-    SceneLayout,
 )
-from viewers.web.address import AddressError, LabAddress, parse_address
+from viewers.web.address import LabAddress
+from viewers.web.lab_links import LabLink
 from viewers.web.real_agents import ArenaLink
-from viewers.web.world_view import OFFLINE
+from viewers.web.real_world import UserWorld
+
+if TYPE_CHECKING:  # the connector makes connections; only its type is needed here
+    from viewers.web.connector import RealConnector
 
 log = logging.getLogger("wart.viewer.real")
 
-QUERY_TIMEOUT = 5.0
 DIRECTORY_POLL_S = 3.0  # the registry has no directory events: poll, emit on change
-SENSOR_IDLE_S = 5.0  # a robot's sensor subscription ends when nobody asked for it this long
 HISTORY = 50  # chat lines a join asks for
 NOT_AN_ARENA = (
     "this is a world without an agent context: robots are queued and driven through an "
     "agent context (join one from the lobby)"
 )
-LABS_FILE = "labs.json"
 
 
-def _plain(exc: lab.LabError, address: LabAddress) -> LabError:
+def plain_error(exc: lab_errors.LabError, address: LabAddress) -> LabError:
     """The registry client's errors, in the words the page shows."""
-    if isinstance(exc, lab.RegistryUnreachable):
+    if isinstance(exc, lab_errors.RegistryUnreachable):
         return LabError(f"the lab at {address.label} does not answer (is its registry running?)")
-    if isinstance(exc, lab.NotAllowed):
+    if isinstance(exc, lab_errors.NotAllowed):
         return LabError(f"not allowed: {exc}")
-    if isinstance(exc, lab.NotLoggedIn):
+    if isinstance(exc, lab_errors.NotLoggedIn):
         return LabError("your session with this lab has ended: log in again")
-    if isinstance(exc, lab.RateLimited):
+    if isinstance(exc, lab_errors.RateLimited):
         return LabError(f"too many requests: try again in {exc.retry_after:.0f} s")
     return LabError(str(exc))
-
-
-# --- the labs this viewer knows --------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class KnownLab:
-    address: LabAddress
-    registry_key: bytes
-    name: str = ""
-
-
-def load_labs(path: Path | None, default_realm: str) -> dict[tuple[str, int, str], KnownLab]:
-    """Read the admin-kept lab list (``DATA_DIR/labs.json``); bad entries are logged and skipped.
-
-    Format: ``{"labs": [{"address": "wart://host:7447/realm", "registry_key": "HEX",
-    "name": "..."}]}``. Only labs listed here (and the viewer's own) can be
-    logged in to: a registry key is never learnt from whoever answers.
-    """
-    if path is None or not path.is_file():
-        return {}
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        log.warning("%s is unreadable, no other labs are known: %s", path, exc)
-        return {}
-    out: dict[tuple[str, int, str], KnownLab] = {}
-    entries = data.get("labs", []) if isinstance(data, dict) else []
-    for i, entry in enumerate(entries if isinstance(entries, list) else []):
-        try:
-            if not isinstance(entry, dict):
-                raise ValueError("not an object")
-            address = parse_address(str(entry["address"]), default_realm=default_realm)
-            key = parse_public_key(str(entry["registry_key"]))
-            known = KnownLab(address.with_user(None), key, str(entry.get("name", "")))
-        except (KeyError, ValueError, AddressError) as exc:
-            log.warning("%s: labs[%d] skipped: %s", path, i, exc)
-            continue
-        out[address.lab_key] = known
-    return out
-
-
-# --- one router's session, shared by everyone logged in through it -----------------------
-
-
-class LabLink:
-    """A Zenoh session to one lab's router, its pinned registry key, and its world watches."""
-
-    def __init__(
-        self, address: LabAddress, session: zenoh.Session, registry_key: bytes, *, own: bool
-    ) -> None:
-        self.address = address
-        self.session = session
-        self.registry_key = registry_key
-        self.own = own  # the viewer's own session: never closed here
-        self.users = 0
-        self._watches: dict[str, WorldWatch] = {}
-        self._lock = threading.Lock()
-
-    def watch(self, world: str) -> WorldWatch:
-        with self._lock:
-            watch = self._watches.get(world)
-            if watch is None or watch.closed:
-                watch = WorldWatch(self.session, self.address.realm, world)
-                self._watches[world] = watch
-            watch.users += 1
-        try:
-            watch.ready()
-        except LabError:
-            self.release(watch)
-            raise
-        return watch
-
-    def release(self, watch: WorldWatch) -> None:
-        with self._lock:
-            watch.users -= 1
-            if watch.users > 0:
-                return
-            if self._watches.get(watch.world) is watch:
-                del self._watches[watch.world]
-        watch.close()
-
-    def close(self) -> None:
-        with self._lock:
-            watches = list(self._watches.values())
-            self._watches.clear()
-        for watch in watches:
-            watch.close()
-        if not self.own:
-            close_session(self.session)
-
-
-class RealConnector:
-    """Logs browsers in to labs: the viewer's own, or one listed in the admin's labs file."""
-
-    def __init__(
-        self,
-        own_session: zenoh.Session,
-        own_address: LabAddress,
-        own_registry_key: bytes | str | None,
-        *,
-        data_dir: Path | None = None,
-        timeout: float = QUERY_TIMEOUT,
-    ) -> None:
-        if isinstance(own_registry_key, str):
-            own_registry_key = parse_public_key(own_registry_key)
-        self.own_address = own_address.with_user(None)
-        self.own_registry_key = own_registry_key
-        self.labs_path = data_dir / LABS_FILE if data_dir else None
-        self.timeout = timeout
-        self._own_session = own_session
-        self._links: dict[tuple[str, int, str], LabLink] = {}
-        self._lock = threading.Lock()
-        self._connections: list[RealConnection] = []
-
-    def _is_own(self, address: LabAddress) -> bool:
-        own = self.own_address
-        if address.realm != own.realm or address.port != own.port:
-            return False
-        local = {"127.0.0.1", "localhost", "::1"}
-        return address.host == own.host or (address.host in local and own.host in local)
-
-    def _link(self, address: LabAddress) -> LabLink:
-        key = address.lab_key
-        with self._lock:
-            link = self._links.get(key)
-            if link is not None:
-                link.users += 1
-                return link
-        if self._is_own(address):
-            if self.own_registry_key is None:
-                raise LoginError(
-                    "this viewer was started without --registry-key, so it cannot check "
-                    "that the lab's registry is genuine; ask the lab's admin"
-                )
-            link = LabLink(address, self._own_session, self.own_registry_key, own=True)
-        else:
-            known = load_labs(self.labs_path, self.own_address.realm).get(key)
-            if known is None:
-                where = self.labs_path or "the viewer's data directory"
-                raise LoginError(
-                    f"this viewer does not know the lab {address.label}: its admin must add "
-                    f"it, with its registry key, to {where} (keys are never trusted blindly)"
-                )
-            options = NetworkOptions(
-                realm=address.realm, mode="client", connect=(address.endpoint,)
-            )
-            try:
-                session = open_session(options, wait=3.0, quiet=True)
-            except ConnectionError:
-                raise LoginError(
-                    f"no lab router answers at {address.host}:{address.port}"
-                ) from None
-            link = LabLink(address, session, known.registry_key, own=False)
-        with self._lock:
-            existing = self._links.get(key)
-            if existing is not None:  # another browser opened it meanwhile: use theirs
-                existing.users += 1
-                if link.session is not self._own_session:
-                    close_session(link.session)
-                return existing
-            link.users = 1
-            self._links[key] = link
-        return link
-
-    def _unlink(self, link: LabLink) -> None:
-        with self._lock:
-            link.users -= 1
-            if link.users > 0 or link.own:
-                return
-            self._links.pop(link.address.lab_key, None)
-        link.close()
-
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> RealConnection:
-        link = self._link(address)
-        client = lab.LabClient(
-            link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
-        )
-        try:
-            client.login(user, password)
-        except lab.WrongCredentials:
-            self._unlink(link)
-            raise LoginError("wrong user name or password") from None
-        except lab.RegistryKeyMismatch:
-            self._unlink(link)
-            raise LoginError(
-                f"the registry answering at {address.label} is not the one this viewer trusts "
-                "(its key differs): tell the lab's admin"
-            ) from None
-        except lab.RegistryUnreachable:
-            self._unlink(link)
-            raise LoginError(
-                f"the lab's registry at {address.label} does not answer (is the lab running?)"
-            ) from None
-        except lab.LabError as exc:
-            self._unlink(link)
-            raise LoginError(str(_plain(exc, address))) from None
-        connection = RealConnection(self, link, client, address.with_user(user))
-        with self._lock:
-            self._connections.append(connection)
-        return connection
-
-    def _closed(self, connection: RealConnection) -> None:
-        with self._lock:
-            if connection in self._connections:
-                self._connections.remove(connection)
-        self._unlink(connection.link)
-
-    def close(self) -> None:
-        """Log everyone out and close the other labs' sessions (the viewer is stopping)."""
-        with self._lock:
-            connections = list(self._connections)
-        for connection in connections:
-            connection.logout()
-        with self._lock:
-            links = list(self._links.values())
-            self._links.clear()
-        for link in links:
-            link.close()
 
 
 # --- one user's connection ----------------------------------------------------------------
@@ -403,8 +152,8 @@ class RealConnection:
             raise LabError("you are logged out of this lab")
         try:
             return fn()
-        except lab.LabError as exc:
-            raise _plain(exc, self._address) from None
+        except lab_errors.LabError as exc:
+            raise plain_error(exc, self._address) from None
 
     # -- events
 
@@ -497,7 +246,7 @@ class RealConnection:
                 state = self.client.request(
                     ctx, QueueStateRequest(), AgentContextState, f"queues of {ctx}"
                 )
-            except lab.LabError as exc:  # not answering yet: the next poll asks again
+            except lab_errors.LabError as exc:  # not answering yet: the next poll asks again
                 log.debug("world of %s: %s", ctx, exc)
                 return None
             world = self._ctx_worlds[ctx] = state.world
@@ -735,349 +484,3 @@ class RealConnection:
         except Exception:
             log.exception("logging %s out of %s", self.user, self._address.label)
         self.connector._closed(self)
-
-
-# --- worlds ------------------------------------------------------------------------------
-
-
-def _decode(raw: Any, kinds: Any) -> Message | None:
-    try:
-        return decode(raw, kinds)
-    except MessageError as exc:
-        log.warning("dropped a malformed world message: %s", exc)
-        return None
-
-
-def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]:
-    """The engine's snapshot as the view draws it, and the frame's object rows (ball order)."""
-    obstacles: list[Obstacle] = []
-    objects: dict[str, Ball] = {}
-    for item in snap.items:
-        shape = item.shape
-        if item.category == "obstacle":
-            if shape.kind == "circle":
-                d = 2 * shape.radius
-                obstacles.append(Obstacle(item.id, item.x, item.y, d, d, item.heading, round=True))
-            else:
-                xs = [p[0] for p in shape.points] or [0.0]
-                ys = [p[1] for p in shape.points] or [0.0]
-                w, h = max(xs) - min(xs), max(ys) - min(ys)
-                cx, cy = (max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2
-                c, s = np.cos(item.heading), np.sin(item.heading)
-                x, y = item.x + c * cx - s * cy, item.y + s * cx + c * cy
-                obstacles.append(Obstacle(item.id, float(x), float(y), w, h, item.heading))
-        elif item.category == "object":
-            if shape.kind == "circle":
-                r = shape.radius
-            else:  # a crate or polygon: drawn as its bounding disc
-                r = max((float(np.hypot(*p)) for p in shape.points), default=20.0)
-            objects[item.id] = Ball(item.id, item.x, item.y, r)
-    agents = tuple(a.id for a in snap.agents)
-    object_rows = tuple(snap.rows[len(agents) :])
-    balls = tuple(objects[o] for o in object_rows if o in objects)
-    lights = tuple(Light(lt.id, lt.x, lt.y, lt.on) for lt in snap.lights)
-    radius = snap.agents[0].radius if snap.agents else 27.5
-    view = SceneLayout(
-        world=snap.world,
-        width=snap.width,
-        height=snap.height,
-        obstacles=tuple(obstacles),
-        balls=balls,
-        lights=lights,
-        robots=agents,
-        robot_radius=radius,
-        version=snap.layout,
-        offline=frozenset(a.id for a in snap.agents if not a.online),
-    )
-    return view, object_rows
-
-
-class WorldWatch:
-    """One world watched by the viewer, shared by every browser showing it."""
-
-    def __init__(self, session: zenoh.Session, realm: str, world: str) -> None:
-        self.session = session
-        self.realm = realm
-        self.world = world
-        self.users = 0
-        self.closed = False
-        self.refetches = 0
-        self._lock = threading.Lock()
-        self._raw: Any = None
-        self._raw_count = 0
-        self._decoded_count = 0
-        self._frame: SceneFrame | None = None
-        self._snapshot: SceneLayout | None = None
-        self._rows = 0
-        self._want = threading.Event()
-        self._first = threading.Event()
-        self._error = ""
-        self._sensors: dict[str, _SensorSub] = {}
-        self._sub = session.declare_subscriber(keys.world_frame(realm, world), self._on_frame)
-        self._thread = threading.Thread(target=self._refetcher, name=f"snap-{world}", daemon=True)
-        self._want.set()
-        self._thread.start()
-
-    # Zenoh thread: keep the newest bytes, nothing else.
-    def _on_frame(self, sample: zenoh.Sample) -> None:
-        self._raw = sample.payload.to_bytes()
-        self._raw_count += 1
-
-    def ready(self, timeout: float = QUERY_TIMEOUT + 1.0) -> None:
-        """Wait for the first snapshot; :class:`LabError` when the world does not answer."""
-        if not self._first.wait(timeout) or self._snapshot is None:
-            raise LabError(self._error or f"the world {self.world} does not answer (not running?)")
-
-    def _refetcher(self) -> None:
-        while not self.closed:
-            self._want.wait(1.0)
-            if self.closed or not self._want.is_set():
-                continue
-            self._want.clear()
-            try:
-                self.refetch()
-            except LabError as exc:
-                self._error = str(exc)
-                log.info("snapshot of %s: %s", self.world, exc)
-                if not self._first.is_set():
-                    self._first.set()
-                time.sleep(0.5)  # a world restarting: do not hammer it
-
-    def refetch(self) -> None:
-        reply = None
-        for answer in self.session.get(
-            keys.world_snapshot(self.realm, self.world), timeout=QUERY_TIMEOUT
-        ):
-            if answer.ok is not None:
-                reply = _decode(answer.ok.payload, (WorldSnapshot, ErrorReply))
-                break
-        if reply is None:
-            raise LabError(f"the world {self.world} does not answer (is its engine running?)")
-        if isinstance(reply, ErrorReply):
-            raise LabError(f"the world {self.world}: {reply.message}")
-        assert isinstance(reply, WorldSnapshot)
-        view, object_rows = convert_snapshot(reply)
-        with self._lock:
-            self._snapshot = view
-            self._rows = len(view.robots) + len(object_rows)
-            self._decoded_count = 0  # re-split the newest frame against the new layout
-        self.refetches += 1
-        self._first.set()
-
-    def snapshot(self) -> SceneLayout:
-        snap = self._snapshot
-        if snap is None:
-            raise LabError(f"the world {self.world} has not answered yet")
-        return snap
-
-    def latest(self) -> SceneFrame | None:
-        count, raw = self._raw_count, self._raw
-        if raw is None or count == self._decoded_count:
-            return self._frame
-        self._decoded_count = count
-        wire = _decode(raw, WorldFrame)
-        snap = self._snapshot
-        if not isinstance(wire, WorldFrame) or snap is None:
-            return self._frame
-        if wire.layout != snap.version:
-            self._want.set()  # an edit or a new map: everyone's view refetches
-            return self._frame
-        poses = wire.poses.to_numpy()
-        if poses.shape != (self._rows, 3):
-            self._want.set()
-            return self._frame
-        n = len(snap.robots)
-        state = wire.agent_state.to_numpy()
-        gripper = state[:, 2].astype(np.uint8) if state.ndim == 2 and len(state) == n else None
-        if snap.offline:
-            gripper = np.zeros(n, np.uint8) if gripper is None else gripper.copy()
-            gripper[[i for i, a in enumerate(snap.robots) if a in snap.offline]] = OFFLINE
-        self._frame = SceneFrame(
-            seq=wire.tick,
-            t=wire.sim_time,
-            poses=np.ascontiguousarray(poses[:n], np.float32),
-            gripper=gripper if gripper is not None else np.zeros(n, np.uint8),
-            ball_xy=np.ascontiguousarray(poses[n:, :2], np.float32),
-            lights_on=wire.lights.to_numpy().astype(np.bool_),
-        )
-        return self._frame
-
-    def sensors(self, agent: str) -> RobotReadings | None:
-        now = time.monotonic()
-        with self._lock:
-            for name in [n for n, s in self._sensors.items() if now - s.asked > SENSOR_IDLE_S]:
-                self._sensors.pop(name).close()
-            sub = self._sensors.get(agent)
-            if sub is None:
-                if self.closed or agent not in (self._snapshot.robots if self._snapshot else ()):
-                    return None
-                sub = _SensorSub(self.session, keys.agent_sensors(self.realm, self.world, agent))
-                self._sensors[agent] = sub
-            sub.asked = now
-        return sub.latest(agent)
-
-    def close(self) -> None:
-        self.closed = True
-        self._want.set()
-        try:
-            self._sub.undeclare()
-        except zenoh.ZError as exc:
-            log.debug("undeclare frames of %s: %s", self.world, exc)
-        with self._lock:
-            subs = list(self._sensors.values())
-            self._sensors.clear()
-        for sub in subs:
-            sub.close()
-
-
-class _SensorSub:
-    """One robot's sensor stream, newest sample only (only the selected robot's is asked)."""
-
-    def __init__(self, session: zenoh.Session, key: str) -> None:
-        self.asked = time.monotonic()
-        self._raw: Any = None
-        self._sub = session.declare_subscriber(key, self._on)
-
-    def _on(self, sample: zenoh.Sample) -> None:
-        self._raw = sample.payload.to_bytes()
-
-    def latest(self, agent: str) -> RobotReadings | None:
-        raw = self._raw
-        if raw is None:
-            return None
-        wire = _decode(raw, SensorSample)
-        if not isinstance(wire, SensorSample) or wire.agent != agent:
-            return None
-        ir = np.zeros(8, np.float32)
-        ambient = np.zeros(8, np.float32)
-        ir[: min(8, len(wire.proximity))] = wire.proximity[:8]
-        ambient[: min(8, len(wire.ambient))] = wire.ambient[:8]
-        return RobotReadings(agent, wire.sim_time, ir, ambient)
-
-    def close(self) -> None:
-        try:
-            self._sub.undeclare()
-        except zenoh.ZError as exc:
-            log.debug("undeclare sensors: %s", exc)
-
-
-_SECTIONS = {"obstacle": "obstacles", "ball": "objects", "light": "lights", "agent": "agents"}
-NEW_ITEM_PREFIX = {"obstacle": "box", "ball": "ball", "light": "light", "agent": "k"}
-
-
-class UserWorld:
-    """A world as one user sees it: the shared watch, plus edits sealed with their session."""
-
-    def __init__(self, source: WorldWatch, connection: RealConnection) -> None:
-        self.source = source  # the pump converts each shared frame once (see FramePump.tick)
-        self._connection = connection
-
-    @property
-    def world(self) -> str:
-        return self.source.world
-
-    def snapshot(self) -> SceneLayout:
-        return self.source.snapshot()
-
-    def latest(self) -> SceneFrame | None:
-        return self.source.latest()
-
-    def sensors(self, agent: str) -> RobotReadings | None:
-        return self.source.sensors(agent)
-
-    def _ask(self, key: str, message: Message, what: str) -> EditResult:
-        client = self._connection.client
-        if "edit_map" not in self._connection.permissions:
-            raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
-        session = client.session
-        if session is None:
-            raise LabError("you are logged out of this lab")
-        reply = None
-        for answer in self.source.session.get(
-            key, payload=session.seal(key, message), timeout=QUERY_TIMEOUT
-        ):
-            if answer.ok is not None:
-                reply = _decode(answer.ok.payload, (EditResult, ErrorReply))
-                break
-        if reply is None:
-            raise LabError(f"the world {self.world} does not answer (is its engine running?)")
-        if isinstance(reply, ErrorReply):
-            if reply.code == "forbidden":
-                raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
-            raise LabError(reply.message)
-        assert isinstance(reply, EditResult)
-        self.source._want.set()  # show the result at once, not at the next frame
-        return reply
-
-    def edit(self, edit: MapEdit) -> None:
-        self._ask(
-            keys.world_edit(self.source.realm, self.world),
-            WorldEdit(op=to_wire_edit(edit, self.snapshot())),
-            "edit the map",
-        )
-
-    def maps(self) -> list[str]:
-        key = keys.world_map(self.source.realm, self.world)
-        return list(self._ask(key, MapRequest(action="list"), "list maps").maps)
-
-    def save_map(self, name: str) -> str:
-        if not is_ident(name):
-            raise LabError(f"{name!r} is not a map name: letters, digits, '_', '-', '.'")
-        key = keys.world_map(self.source.realm, self.world)
-        return self._ask(key, MapRequest(action="save", name=name), "save maps").detail
-
-    def load_map(self, name: str) -> str:
-        if not is_ident(name):
-            raise LabError(f"{name!r} is not a map name")
-        key = keys.world_map(self.source.realm, self.world)
-        return self._ask(key, MapRequest(action="load", name=name), "load maps").detail
-
-
-def fresh_id(kind: str, snap: SceneLayout) -> str:
-    taken = {o.ident for o in snap.obstacles} | {b.ident for b in snap.balls}
-    taken |= {lt.ident for lt in snap.lights} | set(snap.robots)
-    prefix = NEW_ITEM_PREFIX.get(kind, "item")
-    i = 1
-    while f"{prefix}{i}" in taken:
-        i += 1
-    return f"{prefix}{i}"
-
-
-def to_wire_edit(edit: MapEdit, snap: SceneLayout) -> Any:
-    """A viewer edit as the engine's edit op; validated here so a browser cannot send junk."""
-    for value in (edit.x, edit.y, edit.angle, edit.w, edit.h):
-        if not np.isfinite(value):
-            raise LabError("that edit has a number that is not finite")
-    if edit.op == "resize":
-        if edit.w <= 0 or edit.h <= 0:
-            raise LabError("the arena's width and height must be positive")
-        return ResizeArena(width=edit.w, height=edit.h)
-    if edit.op in ("move", "delete") and not is_ident(edit.ident):
-        raise LabError("select something first")
-    if edit.op == "move":
-        return MoveItem(id=edit.ident, x=edit.x, y=edit.y, heading=edit.angle)
-    if edit.op == "delete":
-        return RemoveItem(id=edit.ident)
-    ident = edit.ident or fresh_id(edit.kind, snap)
-    if not is_ident(ident):
-        raise LabError(f"{ident!r} is not a valid name")
-    heading_deg = float(np.degrees(edit.angle))
-    entry: dict[str, Any]
-    if edit.kind == "obstacle":
-        entry = {"id": ident, "shape": "box", "width": edit.w or 100.0, "height": edit.h or 100.0}
-        entry |= {"x": edit.x, "y": edit.y, "heading_deg": heading_deg}
-    elif edit.kind == "ball":
-        entry = {"id": ident, "shape": "circle", "radius": 20.0, "x": edit.x, "y": edit.y}
-    elif edit.kind == "light":
-        entry = {"id": ident, "x": edit.x, "y": edit.y}
-    elif edit.kind == "agent":
-        entry = {
-            "id": ident,
-            "type": "khepera",
-            "x": edit.x,
-            "y": edit.y,
-            "heading_deg": heading_deg,
-        }
-    else:
-        raise LabError(f"cannot add a {edit.kind}")
-    return AddItem(section=_SECTIONS[edit.kind], entry=entry)  # type: ignore[arg-type]

@@ -20,6 +20,7 @@ from pathlib import PurePath
 from typing import TypeVar
 
 from common import client as lab
+from common import lab_errors
 from common.agent_client import AgentClient
 from common.keys import is_ident
 from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
@@ -101,12 +102,12 @@ def agent_rows(
     return rows
 
 
-def _plain(exc: lab.LabError) -> LabError:
-    if isinstance(exc, lab.NotAllowed):
+def _plain(exc: lab_errors.LabError) -> LabError:
+    if isinstance(exc, lab_errors.NotAllowed):
         return LabError(f"not allowed: {exc}")
-    if isinstance(exc, lab.NotLoggedIn):
+    if isinstance(exc, lab_errors.NotLoggedIn):
         return LabError("your session with this lab has ended: log in again")
-    if isinstance(exc, lab.RateLimited):
+    if isinstance(exc, lab_errors.RateLimited):
         return LabError(f"too many requests: {exc}")
     return LabError(str(exc))
 
@@ -170,7 +171,7 @@ class ArenaLink:
     def _call(self, fn: Callable[[], T]) -> T:
         try:
             return fn()
-        except lab.LabError as exc:
+        except lab_errors.LabError as exc:
             raise _plain(exc) from None
 
     def state(self, *, fresh: bool = False) -> AgentContextState:
@@ -244,6 +245,6 @@ class ArenaLink:
         """Read the queues now so the page shows a change at once (events follow anyway)."""
         try:
             self.agents.state()
-        except lab.LabError as exc:
+        except lab_errors.LabError as exc:
             log.debug("queues of %s: %s", self.ctx, exc)
         self._emit(AgentsEvent(self.ctx))

@@ -1,0 +1,160 @@
+"""Browsers log in here: the viewer's own lab, or one its admin listed in the labs file.
+
+One :class:`~viewers.web.lab_links.LabLink` (a Zenoh session) per lab router,
+shared by everyone logged in through it; one
+:class:`~viewers.web.real.RealConnection` per logged-in browser.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from pathlib import Path
+
+import zenoh
+
+from common import client as lab
+from common import lab_errors
+from common.auth import parse_public_key
+from common.service import close_session, open_session
+from common.zconfig import NetworkOptions
+from viewers.web.adapters import (
+    LoginError,
+)
+from viewers.web.address import LabAddress
+from viewers.web.lab_links import LabLink, load_labs
+from viewers.web.real import RealConnection, plain_error
+from viewers.web.real_world import QUERY_TIMEOUT
+
+log = logging.getLogger("wart.viewer.real")
+
+LABS_FILE = "labs.json"
+
+
+class RealConnector:
+    """Logs browsers in to labs: the viewer's own, or one listed in the admin's labs file."""
+
+    def __init__(
+        self,
+        own_session: zenoh.Session,
+        own_address: LabAddress,
+        own_registry_key: bytes | str | None,
+        *,
+        data_dir: Path | None = None,
+        timeout: float = QUERY_TIMEOUT,
+    ) -> None:
+        if isinstance(own_registry_key, str):
+            own_registry_key = parse_public_key(own_registry_key)
+        self.own_address = own_address.with_user(None)
+        self.own_registry_key = own_registry_key
+        self.labs_path = data_dir / LABS_FILE if data_dir else None
+        self.timeout = timeout
+        self._own_session = own_session
+        self._links: dict[tuple[str, int, str], LabLink] = {}
+        self._lock = threading.Lock()
+        self._connections: list[RealConnection] = []
+
+    def _is_own(self, address: LabAddress) -> bool:
+        own = self.own_address
+        if address.realm != own.realm or address.port != own.port:
+            return False
+        local = {"127.0.0.1", "localhost", "::1"}
+        return address.host == own.host or (address.host in local and own.host in local)
+
+    def _link(self, address: LabAddress) -> LabLink:
+        key = address.lab_key
+        with self._lock:
+            link = self._links.get(key)
+            if link is not None:
+                link.users += 1
+                return link
+        if self._is_own(address):
+            if self.own_registry_key is None:
+                raise LoginError(
+                    "this viewer was started without --registry-key, so it cannot check "
+                    "that the lab's registry is genuine; ask the lab's admin"
+                )
+            link = LabLink(address, self._own_session, self.own_registry_key, own=True)
+        else:
+            known = load_labs(self.labs_path, self.own_address.realm).get(key)
+            if known is None:
+                where = self.labs_path or "the viewer's data directory"
+                raise LoginError(
+                    f"this viewer does not know the lab {address.label}: its admin must add "
+                    f"it, with its registry key, to {where} (keys are never trusted blindly)"
+                )
+            options = NetworkOptions(
+                realm=address.realm, mode="client", connect=(address.endpoint,)
+            )
+            try:
+                session = open_session(options, wait=3.0, quiet=True)
+            except ConnectionError:
+                raise LoginError(
+                    f"no lab router answers at {address.host}:{address.port}"
+                ) from None
+            link = LabLink(address, session, known.registry_key, own=False)
+        with self._lock:
+            existing = self._links.get(key)
+            if existing is not None:  # another browser opened it meanwhile: use theirs
+                existing.users += 1
+                if link.session is not self._own_session:
+                    close_session(link.session)
+                return existing
+            link.users = 1
+            self._links[key] = link
+        return link
+
+    def _unlink(self, link: LabLink) -> None:
+        with self._lock:
+            link.users -= 1
+            if link.users > 0 or link.own:
+                return
+            self._links.pop(link.address.lab_key, None)
+        link.close()
+
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> RealConnection:
+        link = self._link(address)
+        client = lab.LabClient(
+            link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
+        )
+        try:
+            client.login(user, password)
+        except lab_errors.WrongCredentials:
+            self._unlink(link)
+            raise LoginError("wrong user name or password") from None
+        except lab_errors.RegistryKeyMismatch:
+            self._unlink(link)
+            raise LoginError(
+                f"the registry answering at {address.label} is not the one this viewer trusts "
+                "(its key differs): tell the lab's admin"
+            ) from None
+        except lab_errors.RegistryUnreachable:
+            self._unlink(link)
+            raise LoginError(
+                f"the lab's registry at {address.label} does not answer (is the lab running?)"
+            ) from None
+        except lab_errors.LabError as exc:
+            self._unlink(link)
+            raise LoginError(str(plain_error(exc, address))) from None
+        connection = RealConnection(self, link, client, address.with_user(user))
+        with self._lock:
+            self._connections.append(connection)
+        return connection
+
+    def _closed(self, connection: RealConnection) -> None:
+        with self._lock:
+            if connection in self._connections:
+                self._connections.remove(connection)
+        self._unlink(connection.link)
+
+    def close(self) -> None:
+        """Log everyone out and close the other labs' sessions (the viewer is stopping)."""
+        with self._lock:
+            connections = list(self._connections)
+        for connection in connections:
+            connection.logout()
+        with self._lock:
+            links = list(self._links.values())
+            self._links.clear()
+        for link in links:
+            link.close()
