@@ -35,8 +35,9 @@ import psutil
 
 from common import keys
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch
+from common.supervisor import AliveWatch, start_wart
 from common.zconfig import NetworkOptions
+from services.lab.wiring import up_args
 
 REPO = Path(__file__).resolve().parent.parent
 # The children of a default `wart up`, named by their subcommand and --name (or --world).
@@ -113,28 +114,8 @@ class ChaosLab:
         return f"tcp/127.0.0.1:{self.port}"
 
     def start(self, timeout: float = 180.0) -> None:
-        self.popen = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "up",
-                "--realm",
-                self.realm,
-                "--state-dir",
-                str(self.state_dir),
-                "--port",
-                str(self.port),
-                "--http-port",
-                str(self.http_port),
-            ],
-            cwd=REPO,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            env=lab_env(),
-            start_new_session=True,
+        self.popen = start_wart(
+            up_args(self.realm, self.state_dir, self.port, self.http_port), env=lab_env(), cwd=REPO
         )
         self.output = Lines(self.popen)
         if self.output.wait("The lab is running", timeout) is None:

@@ -72,6 +72,26 @@ def wart_command(args: Sequence[str]) -> list[str]:
     return [sys.executable, "-m", "services.cli", *args]
 
 
+def start_wart(
+    args: Sequence[str], *, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.Popen[str]:
+    """``wart ARGS`` in its own process group, output (stderr too) piped as text lines.
+
+    Its own group, so a stop can signal the whole tree (``os.killpg``), and a
+    Ctrl-C in the caller's terminal does not reach it twice.
+    """
+    return subprocess.Popen(
+        wart_command(args),
+        cwd=cwd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+
+
 def describe_exit(code: int) -> str:
     if code < 0:
         try:

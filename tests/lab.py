@@ -5,7 +5,6 @@ from __future__ import annotations
 import queue
 import signal
 import subprocess
-import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -13,6 +12,8 @@ from pathlib import Path
 
 import psutil
 
+from common.supervisor import start_wart
+from services.lab.wiring import up_args
 from tests.conftest import REPO, free_port, wart_env
 
 
@@ -32,29 +33,10 @@ class Lab:
         return f"tcp/127.0.0.1:{self.port}"
 
     def start(self) -> Lab:
-        self.popen = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "up",
-                "--realm",
-                self.realm,
-                "--state-dir",
-                str(self.state_dir),
-                "--port",
-                str(self.port),
-                "--http-port",
-                str(self.http_port),
-                *self.extra_args,
-            ],
-            cwd=REPO,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
+        self.popen = start_wart(
+            up_args(self.realm, self.state_dir, self.port, self.http_port, *self.extra_args),
             env=wart_env(),
-            start_new_session=True,
+            cwd=REPO,
         )
         threading.Thread(target=self._read, daemon=True).start()
         return self

@@ -170,6 +170,22 @@ def map_pose(map_path: Path) -> tuple[float, float, float]:
     return DEFAULT_POSE
 
 
+def up_args(realm: str, state_dir: Path, port: int, http_port: int, *extra: str) -> list[str]:
+    """``wart up``'s own arguments: a whole lab on this machine (tests, benchmarks)."""
+    return [
+        "up",
+        "--realm",
+        realm,
+        "--state-dir",
+        str(state_dir),
+        "--port",
+        str(port),
+        "--http-port",
+        str(http_port),
+        *extra,
+    ]
+
+
 # --- one builder per process -------------------------------------------------------------
 
 
