@@ -62,10 +62,10 @@ from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.leases import LeaseBook
 from common.messages import AgentCommand, Lease, SampleBundle, SensorSample, decode, encode
 from common.service import close_session, open_session
+from common.sim2d.agents import agent_type
+from common.sim2d.world import World
 from common.zconfig import NetworkOptions
-from services.engine.agents import agent_type
 from services.engine.service import EngineService, EngineSettings, _Command
-from services.engine.world import World
 
 WORLD = "bench"
 

@@ -20,11 +20,11 @@ import time
 
 import numpy as np
 
-from services.engine import kernels
-from services.engine.agents import agent_type
-from services.engine.entities import ShapeSpec
-from services.engine.wander import braitenberg
-from services.engine.world import World
+from common.sim2d import kernels
+from common.sim2d.agents import agent_type
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.wander import braitenberg
+from common.sim2d.world import World
 
 
 def build(n: int, seed: int = 1) -> World:

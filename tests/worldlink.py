@@ -6,8 +6,8 @@ from typing import Any
 
 from common.controller import Controller, ControllerLoop, Khepera, KheperaState, RobotCommand
 from common.remote_robot import agent_command, state_from_sample
+from common.sim2d.world import World
 from services.engine import wire
-from services.engine.world import World
 
 
 class WorldLink:

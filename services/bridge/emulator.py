@@ -557,8 +557,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
     body: RobotBody | None = None
     sim: SimBody | None = None
     if args.map is not None:
+        from common.sim2d.maps import MapError
         from services.bridge.simbody import SimBody  # imports the engine: only when asked
-        from services.engine.maps import MapError
 
         try:
             sim = SimBody.from_map(args.map, args.agent, seed=args.seed)

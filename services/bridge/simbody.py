@@ -21,9 +21,9 @@ import threading
 import time
 from pathlib import Path
 
+from common.sim2d.maps import load_map
+from common.sim2d.world import EditError, World
 from services.bridge.body import KinematicSpec
-from services.engine.maps import load_map
-from services.engine.world import EditError, World
 
 log = logging.getLogger("wart.bridge.simbody")
 

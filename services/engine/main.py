@@ -22,8 +22,8 @@ from common.auth import parse_public_key
 from common.keys import is_ident
 from common.service import run_service
 from common.service_login import add_world_identity_args, world_login
-from services.engine import kernels
-from services.engine.maps import MapError, load_map
+from common.sim2d import kernels
+from common.sim2d.maps import MapError, load_map
 from services.engine.service import EngineService, EngineSettings
 
 

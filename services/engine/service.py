@@ -57,9 +57,10 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
+from common.sim2d import maps, wander
+from common.sim2d.world import EditError, World
 from common.world_service import WorldService
-from services.engine import maps, wander, wire
-from services.engine.world import EditError, World
+from services.engine import wire
 
 _FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
 

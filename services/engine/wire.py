@@ -16,8 +16,8 @@ from common.messages import (
     WorldFrame,
     WorldSnapshot,
 )
-from services.engine.entities import ShapeSpec
-from services.engine.world import World
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.world import World
 
 _FINGERS = ("open", "closed", "holding")
 

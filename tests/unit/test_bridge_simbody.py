@@ -8,12 +8,12 @@ from collections.abc import Iterator
 
 import pytest
 
+from common.sim2d.maps import MapError
 from services.bridge.body import RobotBody
 from services.bridge.emulator import Firmware
 from services.bridge.main import parse_port
 from services.bridge.service import agent_id_for
 from services.bridge.simbody import SimBody
-from services.engine.maps import MapError
 from tests.conftest import REPO, wait_for
 
 EMPTY = REPO / "maps" / "empty.json"

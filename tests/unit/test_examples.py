@@ -14,8 +14,8 @@ import pytest
 
 from common.controller import Controller, load_controller
 from common.precheck import precheck
-from services.engine.maps import load_map
-from services.engine.world import World
+from common.sim2d.maps import load_map
+from common.sim2d.world import World
 from tests.worldlink import run_in_world
 
 REPO = Path(__file__).resolve().parents[2]

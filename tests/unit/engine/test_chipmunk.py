@@ -6,12 +6,12 @@ import numpy as np
 import pymunk
 import pytest
 
-from services.engine import chipmunk, kernels
-from services.engine.agents import agent_type
-from services.engine.entities import ShapeSpec
-from services.engine.sensing import NoiseStream
-from services.engine.wander import braitenberg
-from services.engine.world import World
+from common.sim2d import chipmunk, kernels
+from common.sim2d.agents import agent_type
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.sensing import NoiseStream
+from common.sim2d.wander import braitenberg
+from common.sim2d.world import World
 
 KHEPERA = agent_type("khepera")
 

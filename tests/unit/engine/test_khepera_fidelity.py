@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from services.engine.agents import agent_type
-from services.engine.agents.khepera import PROXIMITY_CURVE
-from services.engine.entities import ShapeSpec
-from services.engine.world import World
+from common.sim2d.agents import agent_type
+from common.sim2d.agents.khepera import PROXIMITY_CURVE
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.world import World
 
 KHEPERA = agent_type("khepera")
 

@@ -21,10 +21,11 @@ from common.messages import (
     decode,
     encode,
 )
-from services.engine import maps, wire
-from services.engine.agents import agent_type
-from services.engine.maps import MapError
-from services.engine.world import World
+from common.sim2d import maps
+from common.sim2d.agents import agent_type
+from common.sim2d.maps import MapError
+from common.sim2d.world import World
+from services.engine import wire
 
 MAPS = Path(__file__).resolve().parents[3] / "maps"
 

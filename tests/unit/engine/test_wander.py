@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from services.engine.agents import agent_type
-from services.engine.entities import ShapeSpec
-from services.engine.wander import WEIGHTS, braitenberg
-from services.engine.world import World
+from common.sim2d.agents import agent_type
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.wander import WEIGHTS, braitenberg
+from common.sim2d.world import World
 
 KHEPERA = agent_type("khepera")
 WALL_X = 700.0

@@ -15,9 +15,9 @@ from typing import Any
 
 from common.files import write_atomic
 from common.keys import is_ident
-from services.engine.agents import AGENT_TYPES
-from services.engine.entities import ShapeSpec
-from services.engine.world import EditError, World
+from common.sim2d.agents import AGENT_TYPES
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.world import EditError, World
 
 FORMAT = "wart-map"
 VERSION = 1

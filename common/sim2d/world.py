@@ -14,10 +14,10 @@ follow the thesis, through pymunk:
 
 Per-agent state lives in numpy arrays indexed by the agent's slot (its index
 in :attr:`World.agents`), so a tick has no per-robot Python loop. The
-per-tick work runs in compiled kernels (services/engine/kernels.py): one sets
+per-tick work runs in compiled kernels (common/sim2d/kernels.py): one sets
 the control bodies' velocities, steps chipmunk and reads the bodies back,
-calling chipmunk's C functions directly (services/engine/chipmunk.py); one
-casts every sensor (services/engine/sensing.py prepares its tables).
+calling chipmunk's C functions directly (common/sim2d/chipmunk.py); one
+casts every sensor (common/sim2d/sensing.py prepares its tables).
 """
 
 from __future__ import annotations
@@ -31,8 +31,15 @@ import numpy as np
 import numpy.typing as npt
 import pymunk
 
-from services.engine import chipmunk, kernels, sensing
-from services.engine.entities import (
+from common.sim2d import bodies, chipmunk, kernels, sensing
+from common.sim2d.collision import (
+    CAT_OBSTACLE,
+    CAT_ROBOT,
+    COLL_OBJECT,
+    COLL_ROBOT,
+    COLL_TONGS,
+)
+from common.sim2d.entities import (
     Agent,
     Light,
     LightMode,
@@ -41,22 +48,8 @@ from services.engine.entities import (
     ShapeSpec,
     Zone,
 )
-from services.engine.specs import AgentTypeSpec
-
-# Collision categories (bit masks) and collision types.
-CAT_OBSTACLE = 0b0001
-CAT_ROBOT = 0b0010
-CAT_OBJECT = 0b0100
-CAT_TONGS = 0b1000
-CAT_ALL = 0xFFFFFFFF
-COLL_ROBOT = 1
-COLL_TONGS = 2
-COLL_OBJECT = 3
-
-GRAVITY_MM_S2 = 9810.0
-WALL_THICKNESS_MM = 20.0
-FINGERS_OPEN = 0
-FINGERS_CLOSED = 1
+from common.sim2d.gripper import GripperTurrets
+from common.sim2d.specs import AgentTypeSpec
 
 
 class EditError(ValueError):
@@ -107,22 +100,22 @@ class World:
         self.height = float(height_mm)
         self.rng = np.random.default_rng(seed)
         self.noise = sensing.NoiseStream(self.rng)  # sensor noise: the only draw from rng
+        self.sensors = sensing.SensorSuite(self.noise)
+        self.grippers = GripperTurrets(self)
         self.tick = 0
         self.sim_time = 0.0
         self.layout = 1  # bumped whenever objects are added, removed or change shape
         self._next_sense = 0.0
         self._serial = 0
-        self._n_held = 0  # agents holding an object (the per-tick carry loop runs only if > 0)
-        self._arms_moving = False  # set by set_arm; the arm update runs only while true
-        self._cell_cache: tuple[int, float] | None = None  # (layout, sensing grid cell)
         # CPU seconds per phase, accumulated while ``profile`` is true (bench/engine_bench.py).
         self.profile = False
         self.phase_cpu = {"physics": 0.0, "sensing": 0.0}
 
         self.space = pymunk.Space()
         self.space.damping = 1.0
-        self.space.on_collision(COLL_ROBOT, COLL_OBJECT, pre_solve=self._grip_exception)
-        self.space.on_collision(COLL_TONGS, COLL_OBJECT, pre_solve=self._grip_exception)
+        exception = self.grippers.collision_exception
+        self.space.on_collision(COLL_ROBOT, COLL_OBJECT, pre_solve=exception)
+        self.space.on_collision(COLL_TONGS, COLL_OBJECT, pre_solve=exception)
         self._walls: list[pymunk.Shape] = []
         self._build_walls()
 
@@ -137,7 +130,7 @@ class World:
         self._init_agent_state(0)
         self._rebuild_tables()
         self.object_pose = np.zeros((0, 3))
-        # cpBody addresses for the compiled physics tick (services/engine/chipmunk.py),
+        # cpBody addresses for the compiled physics tick (common/sim2d/chipmunk.py),
         # rebuilt at the first tick after any layout change (every add and remove bumps
         # the layout): an address kept past its body's removal would read freed memory.
         self._space_address = np.uint64(chipmunk.space_address(self.space))
@@ -145,8 +138,6 @@ class World:
             0, dtype=np.uint64
         )
         self._rows_layout = -1
-        self._static_dirty = True
-        self.static_geometry: sensing.StaticGeometry | None = None
 
     # -- per-agent state -------------------------------------------------------------
 
@@ -207,9 +198,7 @@ class World:
         )
         self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
         self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}
-        self.agent_sensing = sensing.AgentSensing.build(
-            self.agents, self.tables.radius, self.tables.arm_lowered_above
-        )
+        self.sensors.fit(self.agents, self.tables.radius, self.tables.arm_lowered_above)
 
     # -- ids ---------------------------------------------------------------------
 
@@ -230,6 +219,17 @@ class World:
         """The agent's row in the state arrays; KeyError if there is no such agent."""
         return self._slot_by_id[agent_id]
 
+    def slot_of(self, agent: Agent) -> int:
+        """The agent's row in the state arrays."""
+        return self._slot_of[agent.serial]
+
+    def agent_of_body(self, body: pymunk.Body) -> Agent | None:
+        return self._agent_by_body.get(id_of(body))
+
+    def on_floor(self, obj: MovableObject) -> bool:
+        """On the floor, or held by a lowered arm: what IR sensors and the barrier see."""
+        return obj.held_by is None or self.grippers.lowered(self.slot_of(obj.held_by))
+
     def find_object(self, ident: str) -> MovableObject | None:
         return next((o for o in self.objects if o.id == ident), None)
 
@@ -238,21 +238,9 @@ class World:
     def _build_walls(self) -> None:
         for shape in self._walls:
             self.space.remove(shape)
-        t, w, h = WALL_THICKNESS_MM, self.width, self.height
-        boxes = [
-            (-t, -t, w + t, 0.0),
-            (-t, h, w + t, h + t),
-            (-t, 0.0, 0.0, h),
-            (w, 0.0, w + t, h),
-        ]
-        self._walls = []
-        for x0, y0, x1, y1 in boxes:
-            poly = pymunk.Poly(self.space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-            poly.filter = pymunk.ShapeFilter(categories=CAT_OBSTACLE)
-            poly.friction = 0.3
-            self._walls.append(poly)
+        self._walls = bodies.walls(self.space.static_body, self.width, self.height)
         self.space.add(*self._walls)
-        self._static_dirty = True
+        self.sensors.obstacles_changed()
 
     def resize(self, width_mm: float, height_mm: float) -> None:
         if not (width_mm > 0 and height_mm > 0):
@@ -302,13 +290,7 @@ class World:
         self._check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"obstacle {ident} would stick out of the arena")
-        body = pymunk.Body(body_type=pymunk.Body.STATIC)
-        body.position = (x, y)
-        body.angle = heading
-        shapes = _make_shapes(body, shape)
-        for s in shapes:
-            s.filter = pymunk.ShapeFilter(categories=CAT_OBSTACLE)
-            s.friction = 0.3
+        body, shapes = bodies.obstacle(shape, x, y, heading)
         self.space.add(body, *shapes)
         overlapping = self._agents_touching(shapes)
         if overlapping:
@@ -316,7 +298,7 @@ class World:
             raise EditError(f"obstacle {ident} would overlap agent(s) {', '.join(overlapping)}")
         obstacle = Obstacle(ident, shape, x, y, heading, colour, body, shapes)
         self.obstacles[ident] = obstacle
-        self._static_dirty = True
+        self.sensors.obstacles_changed()
         self.layout += 1
         return obstacle
 
@@ -350,22 +332,13 @@ class World:
             raise EditError(f"object {ident} would stick out of the arena")
         if mass_g <= 0:
             raise EditError(f"object {ident}: mass must be positive")
-        if shape.kind == "circle":
-            moment = pymunk.moment_for_circle(mass_g, 0, shape.radius_mm)
-        else:
-            moment = pymunk.moment_for_poly(mass_g, shape.vertices())
-        body = pymunk.Body(mass_g, moment)
-        body.position = (x, y)
-        body.angle = heading
-        shapes = _make_shapes(body, shape)
-        for s in shapes:
-            s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
-            s.collision_type = COLL_OBJECT
-            s.friction = 0.4
+        body, shapes = bodies.movable_object(shape, x, y, heading, mass_g)
         if self._blocked(shapes, CAT_OBSTACLE | CAT_ROBOT, body):
             raise EditError(f"object {ident} would overlap an obstacle or an agent")
         obj = MovableObject(ident, kind, shape, mass_g, friction, resistivity, colour, body, shapes)
-        obj.floor_joints = _floor_friction(self.space.static_body, body, mass_g, friction, shape)
+        obj.floor_joints = bodies.floor_friction(
+            self.space.static_body, body, mass_g, friction, shape
+        )
         self.space.add(body, *shapes, *obj.floor_joints)
         self.objects.append(obj)
         self._object_by_body[id_of(body)] = obj
@@ -454,41 +427,12 @@ class World:
         if hits:
             raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle")
         self._serial += 1
-        group = self._serial
-        body = pymunk.Body(spec.mass_g, pymunk.moment_for_circle(spec.mass_g, 0, r))
-        body.position = (x, y)
-        body.angle = heading
-        circle = pymunk.Circle(body, r)
-        circle.filter = pymunk.ShapeFilter(group=group, categories=CAT_ROBOT)
-        circle.collision_type = COLL_ROBOT
-        circle.friction = 0.3
-        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-        control.position = (x, y)
-        control.angle = heading
-        pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
-        pivot.max_bias = 0.0  # velocity only: the pivot never yanks the robot back
-        pivot.max_force = spec.drive.max_force
-        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
-        gear.error_bias = 0.0
-        gear.max_bias = 0.0
-        gear.max_force = spec.drive.max_torque
         fitted = gripper and spec.gripper is not None
-        agent = Agent(ident, spec, group, fitted, colour or spec.colour, body, control, circle)
-        agent.joints = [pivot, gear]
-        if fitted and spec.gripper is not None:
-            g = spec.gripper
-            for side in (1.0, -1.0):
-                y0 = side * g.gap_mm / 2
-                y1 = side * (g.gap_mm / 2 + g.tong_width_mm)
-                x0, x1 = g.tong_x_mm
-                tong = pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-                tong.filter = pymunk.ShapeFilter(group=group, categories=CAT_TONGS)
-                tong.collision_type = COLL_TONGS
-                tong.friction = 0.3
-                agent.tongs.append(tong)
-        self.space.add(body, control, circle, *agent.tongs, pivot, gear)
+        agent = bodies.agent(ident, spec, self._serial, x, y, heading, fitted)
+        agent.colour = colour or spec.colour
+        self.space.add(agent.body, agent.control, agent.shape, *agent.tongs, *agent.joints)
         self.agents.append(agent)
-        self._agent_by_body[id_of(body)] = agent
+        self._agent_by_body[id_of(agent.body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
         self._append_agent_state((x, y, heading), arm)
         if not defer_tables:
@@ -564,7 +508,7 @@ class World:
                 self.space.reindex_shapes_for_body(o.body)
                 raise EditError(f"obstacle {ident} would overlap agent(s) {', '.join(overlapping)}")
             o.x, o.y, o.heading = x, y, heading
-            self._static_dirty = True
+            self.sensors.obstacles_changed()
             self.layout += 1
             return
         for slot, agent in enumerate(self.agents):
@@ -587,7 +531,7 @@ class World:
         obj = self.find_object(ident)
         if obj is not None and obj.body is not None:
             if obj.held_by is not None:
-                self._release(obj)
+                self.grippers.release(obj)
             old_pos, old_angle = obj.body.position, obj.body.angle
             obj.body.position, obj.body.angle = (x, y), heading
             self.space.reindex_shapes_for_body(obj.body)
@@ -608,14 +552,14 @@ class World:
         if ident in self.obstacles:
             o = self.obstacles.pop(ident)
             self.space.remove(o.body, *o.shapes)
-            self._static_dirty = True
+            self.sensors.obstacles_changed()
         elif ident in self.zones:
             del self.zones[ident]
         elif any(light.id == ident for light in self.lights):
             self.lights = [light for light in self.lights if light.id != ident]
         elif (obj := self.find_object(ident)) is not None:
             if obj.held_by is not None:
-                self._release(obj)
+                self.grippers.release(obj)
             self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
             self.objects.remove(obj)
             self._object_by_body.pop(id_of(obj.body), None)
@@ -626,7 +570,7 @@ class World:
                 raise EditError(f"no object named {ident!r} in this world") from None
             agent = self.agents[slot]
             if agent.held is not None:
-                self._release(agent.held)
+                self.grippers.release(agent.held)
             self.space.remove(agent.body, agent.control, agent.shape, *agent.tongs, *agent.joints)
             del self.agents[slot]
             self._agent_by_body.pop(id_of(agent.body), None)
@@ -658,150 +602,19 @@ class World:
         self.leds[slot, led] = 1 if on else 0
 
     def set_arm(self, slot: int, position: int) -> None:
-        g = self.agents[slot].spec.gripper
-        if g is None or not self.agents[slot].has_gripper:
+        if not self.grippers.set_arm(slot, position):
             raise EditError(f"{self.agents[slot].id} has no gripper")
-        self.arm_target[slot] = float(np.clip(position, g.arm_up, g.arm_down))
-        self._arms_moving = True
 
     def set_fingers(self, slot: int, closed: bool) -> None:
-        agent = self.agents[slot]
-        if not agent.has_gripper:
-            raise EditError(f"{agent.id} has no gripper")
-        self.fingers[slot] = FINGERS_CLOSED if closed else FINGERS_OPEN
-        if closed and agent.held is None:
-            obj = self._object_in_grip(slot)
-            if obj is not None:
-                self._grip(slot, obj)
-        elif not closed and agent.held is not None:
-            self._release(agent.held)
+        if not self.grippers.set_fingers(slot, closed):
+            raise EditError(f"{self.agents[slot].id} has no gripper")
 
     def resistivity(self, slot: int) -> int:
-        agent = self.agents[slot]
-        g = agent.spec.gripper
-        if agent.held is not None:
-            return agent.held.resistivity
-        return g.empty_resistivity if g else 0
-
-    # -- gripper ----------------------------------------------------------------------
-
-    def _to_robot_frame(self, slot: int, x: float, y: float) -> tuple[float, float]:
-        ax, ay, th = self.agent_pose[slot]
-        dx, dy = x - ax, y - ay
-        c, s = math.cos(th), math.sin(th)
-        return c * dx + s * dy, -s * dx + c * dy
-
-    def _arm_lowered(self, slot: int) -> bool:
-        g = self.agents[slot].spec.gripper
-        return g is not None and self.arm[slot] >= g.lowered_above
-
-    def _object_in_grip(self, slot: int) -> MovableObject | None:
-        agent = self.agents[slot]
-        g = agent.spec.gripper
-        if g is None or not self._arm_lowered(slot):
-            return None
-        best: MovableObject | None = None
-        for obj in self.objects:
-            if obj.held_by is not None or obj.body is None:
-                continue
-            lx, ly = self._to_robot_frame(slot, obj.body.position.x, obj.body.position.y)
-            if (
-                g.presence_x_mm[0] <= lx <= g.presence_x_mm[1]
-                and abs(ly) <= g.presence_half_width_mm
-            ):
-                best = obj
-        return best
-
-    def _grip(self, slot: int, obj: MovableObject) -> None:
-        agent = self.agents[slot]
-        assert obj.body is not None
-        lx, ly = self._to_robot_frame(slot, obj.body.position.x, obj.body.position.y)
-        obj.held_by = agent
-        obj.held_offset = (lx, ly, obj.body.angle - self.agent_pose[slot, 2])
-        agent.held = obj
-        self._n_held += 1
-        self.space.remove(*obj.floor_joints)
-        obj.body.body_type = pymunk.Body.KINEMATIC
-        for s in obj.shapes:
-            s.filter = pymunk.ShapeFilter(group=agent.serial, categories=CAT_OBJECT)
-
-    def _release(self, obj: MovableObject) -> None:
-        agent = obj.held_by
-        if agent is None or obj.body is None:
-            return
-        obj.held_by = None
-        agent.held = None
-        self._n_held -= 1
-        obj.body.body_type = pymunk.Body.DYNAMIC
-        obj.body.mass = obj.mass_g
-        if obj.shape.kind == "circle":
-            obj.body.moment = pymunk.moment_for_circle(obj.mass_g, 0, obj.shape.radius_mm)
-        else:
-            obj.body.moment = pymunk.moment_for_poly(obj.mass_g, obj.shape.vertices())
-        obj.body.velocity, obj.body.angular_velocity = (0, 0), 0.0
-        for s in obj.shapes:
-            s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
-        self.space.add(*obj.floor_joints)
-
-    def _grip_exception(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object) -> None:
-        """Objects whose centre is between the open, lowered tongs do not collide (6.8.3)."""
-        robot_shape, object_shape = arbiter.shapes
-        agent = self._agent_by_body.get(id_of(robot_shape.body))
-        if agent is None or not agent.has_gripper or agent.spec.gripper is None:
-            return
-        slot = self._slot_of[agent.serial]
-        if self.fingers[slot] != FINGERS_OPEN or not self._arm_lowered(slot):
-            return
-        g = agent.spec.gripper
-        p = object_shape.body.position
-        lx, ly = self._to_robot_frame(slot, p.x, p.y)
-        if g.grip_x_mm[0] <= lx <= g.grip_x_mm[1] and abs(ly) <= g.gap_mm / 2:
-            arbiter.process_collision = False
-
-    def _update_arms(self, dt: float) -> None:
-        if not self._arms_moving:
-            return
-        if not len(self.agents) or not np.any(self.arm != self.arm_target):
-            self._arms_moving = False
-            return
-        was_lowered = self.arm >= self.tables.arm_lowered_above
-        step = self.tables.arm_rate * dt
-        self.arm += np.clip(self.arm_target - self.arm, -step, step)
-        now_lowered = self.arm >= self.tables.arm_lowered_above
-        for slot in np.nonzero(was_lowered != now_lowered)[0]:  # only arms that crossed
-            agent = self.agents[int(slot)]
-            mask = CAT_ALL if now_lowered[slot] else 0  # a raised arm passes over everything
-            for tong in agent.tongs:
-                tong.filter = pymunk.ShapeFilter(
-                    group=agent.serial, categories=CAT_TONGS, mask=mask
-                )
-            if agent.held is not None:
-                for s in agent.held.shapes:
-                    s.filter = pymunk.ShapeFilter(
-                        group=agent.serial, categories=CAT_OBJECT, mask=mask
-                    )
+        return self.grippers.resistivity(slot)
 
     def holding(self) -> np.ndarray:
         """(N,) bool: which agents hold an object."""
-        if not self._n_held:
-            return np.zeros(len(self.agents), dtype=bool)
-        return np.array([a.held is not None for a in self.agents], dtype=bool)
-
-    def _carry_held(self) -> None:
-        if not self._n_held:
-            return
-        for slot, agent in enumerate(self.agents):
-            obj = agent.held
-            if obj is None or obj.body is None:
-                continue
-            x, y, th = self.agent_pose[slot]
-            lx, ly, lh = obj.held_offset
-            c, s = math.cos(th), math.sin(th)
-            obj.body.position = (x + c * lx - s * ly, y + s * lx + c * ly)
-            obj.body.angle = th + lh
-            vx, vy, w = self.agent_vel[slot]
-            obj.body.velocity = (vx - w * (s * lx + c * ly), vy + w * (c * lx - s * ly))
-            obj.body.angular_velocity = w
+        return self.grippers.holding()
 
     # -- stepping -------------------------------------------------------------------------
 
@@ -817,7 +630,7 @@ class World:
         if profile:
             t0 = time.process_time()
         dt = self.tick_s
-        self._update_arms(dt)
+        self.grippers.move_arms(dt)
         if self._rows_layout != self.layout:
             self._refresh_rows()
         t = self.tables
@@ -846,7 +659,7 @@ class World:
                 chipmunk.FUNCTIONS, self._agent_bodies, self._object_bodies
             )
         self.agent_pose, self.agent_vel, self.object_pose = pose, vel, obj
-        self._carry_held()
+        self.grippers.carry()
         self.tick += 1
         self.sim_time = self.tick * dt
         if profile:
@@ -860,10 +673,15 @@ class World:
 
     def sense(self) -> None:
         """Recompute every agent's proximity, ambient and gripper presence readings."""
-        if self._static_dirty or self.static_geometry is None:
-            self.static_geometry = sensing.StaticGeometry.build(self)
-            self._static_dirty = False
-        sensing.sense(self)
+        n = len(self.agents)
+        if n == 0:
+            return
+        out = kernels.Readings(
+            np.empty((n, self.proximity.shape[1]), dtype=np.int32),
+            np.empty((n, self.ambient.shape[1]), dtype=np.int32),
+            np.empty(n, dtype=np.int32),
+        )
+        self.proximity, self.ambient, self.presence = self.sensors.read(self, out)
 
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / self.tick_s)):
@@ -876,29 +694,8 @@ class World:
 
     def gripper_state(self, slot: int) -> int:
         """0 open, 1 closed, 2 holding."""
-        if self.agents[slot].held is not None:
-            return 2
-        return int(self.fingers[slot])
+        return self.grippers.state(slot)
 
 
 def id_of(body: pymunk.Body) -> int:
     return int(body.id)
-
-
-def _make_shapes(body: pymunk.Body, shape: ShapeSpec) -> list[pymunk.Shape]:
-    if shape.kind == "circle":
-        return [pymunk.Circle(body, shape.radius_mm)]
-    return [pymunk.Poly(body, shape.vertices())]
-
-
-def _floor_friction(
-    static: pymunk.Body, body: pymunk.Body, mass_g: float, mu: float, shape: ShapeSpec
-) -> list[pymunk.Constraint]:
-    """Top-down friction (pymunk's tank pattern): velocity-only joints to the floor."""
-    pivot = pymunk.PivotJoint(static, body, (0, 0), (0, 0))
-    pivot.max_bias = 0.0
-    pivot.max_force = mu * mass_g * GRAVITY_MM_S2
-    gear = pymunk.GearJoint(static, body, 0.0, 1.0)
-    gear.max_bias = 0.0
-    gear.max_force = mu * mass_g * GRAVITY_MM_S2 * shape.bounding_radius_mm / 2
-    return [pivot, gear]

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-# Sensor order (services/engine/agents/khepera.py): 0 left, 1 front-left, 2-3 front, 4 front-right,
+# Sensor order (common/sim2d/agents/khepera.py): 0 left, 1 front-left, 2-3 front, 4 front-right,
 # 5 right, 6-7 back. The back sensors do not steer.
 _W_LEFT = np.array([4, 3, 2, 1, -1, -2, 0, 0]) / 400.0
 _W_RIGHT = _W_LEFT[[5, 4, 3, 2, 1, 0, 6, 7]]  # the mirror image: sensor i <-> sensor 5 - i

@@ -8,7 +8,7 @@ about 60 mm). No gripper.
 
 from __future__ import annotations
 
-from services.engine.specs import (
+from common.sim2d.specs import (
     AgentTypeSpec,
     AmbientSpec,
     DriveSpec,

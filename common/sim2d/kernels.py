@@ -15,7 +15,7 @@ that explicitly and returns the time it took, so the engine can report it.
 Grid: one uniform grid over the arena plus one cell of margin on every side,
 cell >= the longest sensor reach + the largest radius. Static obstacle edges
 are binned once (into every cell within one cell of their bounding box, CSR
-arrays built in services/engine/sensing.py); circles (robots, round objects,
+arrays built in common/sim2d/sensing.py); circles (robots, round objects,
 round obstacles) are binned each pass with a counting sort. A robot looks at
 the circles of its 3x3 cells and the edges of its own cell. Cells outside the
 grid are clamped to its border: that only adds far candidates, and a hit
@@ -26,11 +26,12 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from services.engine import chipmunk as C
+from common.sim2d import chipmunk as C
 
 # Column indices of the per-agent float table (AgentSensing.agent_f).
 F_REACH = 0
@@ -59,6 +60,64 @@ I_AMB_SENSORS = 4
 I_AMB_NOISE = 5
 N_AGENT_I = 6
 
+
+# The sensing kernel's arguments, packed by what changes when: a pack is built
+# once and kept until what it holds changes (numba takes named tuples as they are).
+class Robots(NamedTuple):
+    """What moves every tick."""
+
+    pose: np.ndarray  # (N, 3) agents' x, y, heading
+    arm: np.ndarray  # (N,) arm positions
+    holding: np.ndarray  # (N,) bool
+
+
+class SensorTables(NamedTuple):
+    """The agents' sensors (rebuilt when agents come or go)."""
+
+    ray_local: np.ndarray  # (N, S*K, 5) rays in the robot frame: x, y, angle, cos, sin
+    sensors: int  # S (padded proximity sensors per agent)
+    rays_per_sensor: int  # K
+    agent_f: np.ndarray  # (N, N_AGENT_F) per-agent floats
+    agent_i: np.ndarray  # (N, N_AGENT_I) per-agent ints
+    curve_x: np.ndarray  # (G, L) response curves, padded
+    curve_y: np.ndarray
+    curve_n: np.ndarray  # (G,) points used
+    amb_local: np.ndarray  # (N, A, 3) ambient sensors in the robot frame
+    amb_valid: np.ndarray  # (N, A) bool
+
+
+class StaticScene(NamedTuple):
+    """Obstacles and the arena's walls (rebuilt when they change)."""
+
+    segs: np.ndarray  # (S, 4) static edges (arena walls first)
+    grid_start: np.ndarray  # (nx*ny + 1,) CSR offsets into grid_items, cell-major
+    grid_items: np.ndarray  # static edge index per (cell, edge) entry
+    grid_nx: int
+    grid_ny: int
+    cell: float
+    occ_segs: np.ndarray  # (O, 4) static edges that can hide a light (not the arena's walls)
+    static_xy: np.ndarray  # (Q, 2) round obstacles (they hide lights too)
+    static_r: np.ndarray
+
+
+class MovingScene(NamedTuple):
+    """Objects, lights and noise of one sensing pass."""
+
+    circ_xy: np.ndarray  # (C, 2) other circles: round objects on the floor, round obstacles
+    circ_r: np.ndarray  # (C,)
+    circ_owner: np.ndarray  # (C,) agent slot that does not see it (holder), or -1
+    circ_is_object: np.ndarray  # (C,) bool: a movable object (the gripper's barrier sees it)
+    edges: np.ndarray  # (E, 4) edges of movable polygons on the floor
+    lights: np.ndarray  # (L, 4) lit lights: x, y, radius, intensity
+    noise: np.ndarray  # flat standard normal draws (offsets in agent_i)
+
+
+class Readings(NamedTuple):
+    proximity: np.ndarray  # (N, P) int32
+    ambient: np.ndarray  # (N, A) int32
+    presence: np.ndarray  # (N,) int32
+
+
 _CACHE = True
 
 
@@ -66,7 +125,7 @@ _CACHE = True
 def read_bodies(fns, agents, objects):  # pragma: no cover
     """(pose, vel, obj): agents' x, y, heading and vx, vy, w; objects' x, y, heading.
 
-    ``agents`` and ``objects`` are cpBody addresses (services/engine/chipmunk.py).
+    ``agents`` and ``objects`` are cpBody addresses (common/sim2d/chipmunk.py).
     """
     n, m = len(agents), len(objects)
     pose = np.empty((n, 3))
@@ -230,40 +289,28 @@ def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
-def sense(
-    pose,  # (N, 3) agents' x, y, heading
-    ray_local,  # (N, S*K, 5) rays in the robot frame: x, y, angle, cos(angle), sin(angle)
-    sensors,  # S (padded sensors per agent)
-    rays_per_sensor,  # K
-    agent_f,  # (N, N_AGENT_F) per-agent floats
-    agent_i,  # (N, N_AGENT_I) per-agent ints
-    curve_x,  # (G, L) response curves, padded; curve_n (G,) points used
-    curve_y,
-    curve_n,
-    arm,  # (N,) arm positions
-    holding,  # (N,) bool
-    circ_xy,  # (C, 2) other circles: round objects on the floor, then round obstacles
-    circ_r,  # (C,)
-    circ_owner,  # (C,) agent slot that does not see it (holder), or -1
-    circ_is_object,  # (C,) bool: a movable object (the gripper's barrier sees it)
-    edges,  # (E, 4) edges of movable polygons on the floor
-    segs,  # (S, 4) static edges (arena walls first)
-    grid_start,  # (nx*ny + 1,) CSR offsets into grid_items, cell-major
-    grid_items,  # static edge index per (cell, edge) entry
-    grid_nx,
-    grid_ny,
-    cell,
-    occ_segs,  # (O, 4) static edges that can hide a light (not the arena's walls)
-    static_xy,  # (Q, 2) round obstacles (they hide lights too)
-    static_r,
-    amb_local,  # (N, A, 3) ambient sensors in the robot frame
-    amb_valid,  # (N, A) bool
-    lights,  # (L, 4) lit lights: x, y, radius, intensity
-    noise,  # flat standard normal draws (offsets in agent_i)
-    prox_out,  # (N, P) int32
-    amb_out,  # (N, A2) int32
-    presence_out,  # (N,) int32
-):  # pragma: no cover
+def sense(robots, tables, scene, moving, out):  # pragma: no cover
+    """Every agent's proximity, ambient and presence readings, written into ``out``.
+
+    ``robots`` (Robots), ``tables`` (SensorTables), ``scene`` (StaticScene),
+    ``moving`` (MovingScene) and ``out`` (Readings) are the packs defined above.
+    """
+    pose, arm, holding = robots
+    (
+        ray_local,
+        sensors,
+        rays_per_sensor,
+        agent_f,
+        agent_i,
+        curve_x,
+        curve_y,
+        curve_n,
+        amb_local,
+        amb_valid,
+    ) = tables
+    segs, grid_start, grid_items, grid_nx, grid_ny, cell, occ_segs, static_xy, static_r = scene
+    circ_xy, circ_r, circ_owner, circ_is_object, edges, lights, noise = moving
+    prox_out, amb_out, presence_out = out
     n = pose.shape[0]
     nrays = ray_local.shape[1]
     nc_extra = circ_r.shape[0]
@@ -523,37 +570,43 @@ def warm_up() -> float:
     i[0, I_PROX_SENSORS] = 1
     i[0, I_AMB_SENSORS] = 1
     sense(
-        np.zeros((1, 3)),
-        np.zeros((1, 1, 5)),
-        1,
-        1,
-        f,
-        i,
-        np.array([[0.0, 1.0]]),
-        np.array([[1.0, 0.0]]),
-        np.array([2], dtype=np.int64),
-        np.zeros(1),
-        np.zeros(1, dtype=np.bool_),
-        np.zeros((0, 2)),
-        np.zeros(0),
-        np.zeros(0, dtype=np.int64),
-        np.zeros(0, dtype=np.bool_),
-        np.zeros((0, 4)),
-        np.zeros((0, 4)),
-        np.zeros(2, dtype=np.int64),
-        np.zeros(0, dtype=np.int64),
-        1,
-        1,
-        100.0,
-        np.zeros((0, 4)),
-        np.zeros((0, 2)),
-        np.zeros(0),
-        np.zeros((1, 1, 3)),
-        np.ones((1, 1), dtype=np.bool_),
-        np.zeros((0, 4)),
-        np.zeros(4),
-        np.zeros((1, 1), dtype=np.int32),
-        np.zeros((1, 1), dtype=np.int32),
-        np.zeros(1, dtype=np.int32),
+        Robots(np.zeros((1, 3)), np.zeros(1), np.zeros(1, dtype=np.bool_)),
+        SensorTables(
+            np.zeros((1, 1, 5)),
+            1,
+            1,
+            f,
+            i,
+            np.array([[0.0, 1.0]]),
+            np.array([[1.0, 0.0]]),
+            np.array([2], dtype=np.int64),
+            np.zeros((1, 1, 3)),
+            np.ones((1, 1), dtype=np.bool_),
+        ),
+        StaticScene(
+            np.zeros((0, 4)),
+            np.zeros(2, dtype=np.int64),
+            np.zeros(0, dtype=np.int64),
+            1,
+            1,
+            100.0,
+            np.zeros((0, 4)),
+            np.zeros((0, 2)),
+            np.zeros(0),
+        ),
+        MovingScene(
+            np.zeros((0, 2)),
+            np.zeros(0),
+            np.zeros(0, dtype=np.int64),
+            np.zeros(0, dtype=np.bool_),
+            np.zeros((0, 4)),
+            np.zeros((0, 4)),
+            np.zeros(4),
+        ),
+        Readings(
+            np.zeros((1, 1), dtype=np.int32),
+            np.zeros((1, 1), dtype=np.int32),
+            np.zeros(1, dtype=np.int32),
+        ),
     )
     return time.perf_counter() - t0

@@ -1,6 +1,6 @@
 """The things a world holds: shapes, obstacles, movable objects, lights, zones, agents.
 
-Plain data plus their pymunk handles. The :class:`~services.engine.world.World`
+Plain data plus their pymunk handles. The :class:`~common.sim2d.world.World`
 creates and owns them; nothing else mutates them.
 """
 
@@ -12,7 +12,7 @@ from typing import Literal
 
 import pymunk
 
-from services.engine.specs import AgentTypeSpec
+from common.sim2d.specs import AgentTypeSpec
 
 ShapeKind = Literal["circle", "box", "polygon"]
 LightMode = Literal["on", "off", "blink"]

@@ -6,8 +6,8 @@ else in the engine knows robot types by name.
 
 from __future__ import annotations
 
-from services.engine.agents import epuck, khepera
-from services.engine.specs import AgentTypeSpec
+from common.sim2d.agents import epuck, khepera
+from common.sim2d.specs import AgentTypeSpec
 
 AGENT_TYPES: dict[str, AgentTypeSpec] = {
     khepera.SPEC.name: khepera.SPEC,

@@ -4,7 +4,7 @@ Every number carries its unit in its name or docstring (millimetres, radians,
 seconds, grams). An agent type is one :class:`AgentTypeSpec`: a body plus
 components (drive, IR proximity ring, ambient light ring, LEDs, an optional
 gripper turret). The world is generic over these specs; adding a robot type
-is adding one module under ``services/engine/agents/``.
+is adding one module under ``common/sim2d/agents/``.
 """
 
 from __future__ import annotations

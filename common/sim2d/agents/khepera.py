@@ -14,7 +14,7 @@
 
 from __future__ import annotations
 
-from services.engine.specs import (
+from common.sim2d.specs import (
     AgentTypeSpec,
     AmbientSpec,
     DriveSpec,

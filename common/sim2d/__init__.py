@@ -1,0 +1,18 @@
+"""Sim2D: the 2D simulation library (thesis 6.7), with no Zenoh in it.
+
+The engine process (services/engine/) serves one World over the network; the
+Khepera emulator (services/bridge/simbody.py) uses a World as the physical
+robot behind the serial protocol. Both import only this package.
+
+- world.py: the World (arena, obstacles, objects, lights, zones, agents; edits
+  and the tick);
+- bodies.py: how each kind of thing becomes pymunk bodies and joints;
+- gripper.py: the gripper turret's rules (arm, fingers, grip, carry);
+- sensing.py: the sensor components (IR proximity ring, ambient light, the
+  gripper's barrier) and the suite that reads them all in one pass;
+- kernels.py, chipmunk.py: the compiled per-tick kernels (numba) and the
+  chipmunk functions they call;
+- specs.py, agents/: robot types as frozen specs (Khepera, e-puck);
+- entities.py, geometry.py, collision.py: the things of a world and their shapes;
+- maps.py: the map file format (load, save); wander.py: a built-in wander rule.
+"""
