@@ -18,7 +18,7 @@ This reaches one step below pymunk's public API (``Body._body``,
 ``Space._space``, the C library in ``pymunk._chipmunk``), in pymunk 7
 (pyproject pins ``pymunk < 8``). ``check_signatures`` verifies at import that
 every function still has the C signature the code generation below assumes;
-tests/unit/engine/test_chipmunk.py checks values against pymunk's own
+tests/unit/common/sim2d/test_chipmunk.py checks values against pymunk's own
 accessors and a whole trajectory against ``Space.step``.
 """
 

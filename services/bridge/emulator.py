@@ -33,6 +33,7 @@ from pathlib import Path
 from types import FrameType, TracebackType
 from typing import TYPE_CHECKING
 
+from common.cli import parse, parser
 from services.bridge.body import KinematicBody, RobotBody
 from services.bridge.link import BAUD_RATES
 from services.bridge.protocol import (
@@ -473,7 +474,6 @@ class KheperaEmulator:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator") -> int:
-    from common.cli import parse, parser
 
     p = parser(
         prog,
@@ -557,8 +557,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
     body: RobotBody | None = None
     sim: SimBody | None = None
     if args.map is not None:
+        # Sim2D (pymunk, numba's compiled kernels) loads only for a simulated body:
+        # a scripted emulator starts in a fraction of the time without it.
         from common.sim2d.maps import MapError
-        from services.bridge.simbody import SimBody  # imports the engine: only when asked
+        from services.bridge.simbody import SimBody
 
         try:
             sim = SimBody.from_map(args.map, args.agent, seed=args.seed)

@@ -37,6 +37,8 @@ from common.messages.host import ArenaInfo, HostLoad
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from common.zsecurity import client_options
+from services.commands.terminal import password_from
+from services.lab.plan import read_registry_key
 
 ArenaError = HostError  # the name this module's callers know
 __all__ = ["ArenaError", "choose_host", "format_loads", "host_loads", "new_arena", "stop_arena"]
@@ -91,8 +93,6 @@ def lab_session(
 ) -> tuple[zenoh.Session, str, str]:
     """The Zenoh session, realm and registry key of the lab the tool talks to."""
     if args.lab is not None:
-        from services.lab.plan import read_registry_key
-
         lab = load(args.lab)
         registry_key = read_registry_key(lab)
         tls = client_options(
@@ -107,7 +107,6 @@ def lab_session(
 
 
 def _password(args: argparse.Namespace) -> str:
-    from services.commands.terminal import password_from
 
     return password_from(args)
 

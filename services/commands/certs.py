@@ -29,8 +29,9 @@ from pathlib import Path
 from common import cli
 from common.auth import RegistryIdentity, create_identity_key, load_identity_key
 from common.certs import CA_CERT, CA_KEY, CertError, init_ca, inspect, issue
+from common.keys import is_ident
 from common.labfile import LabFile, LabFileError, load
-from common.zsecurity import ROLES
+from common.zsecurity import ROLES, client_tls, zenoh_security
 from services.lab.wiring import host_accounts
 
 REGISTRY_PUB = "registry.pub"
@@ -163,8 +164,6 @@ def _run(args: argparse.Namespace) -> int:
     elif args.verb == "lab":
         issue_lab(load(args.lab))
     elif args.verb == "client-config":
-        from common.zsecurity import client_tls, zenoh_security
-
         lab = load(args.lab)
         conf = zenoh_security(client_tls(lab.security.pki, args.name), lease_ms=lab.lease_ms)
         conf["connect"] = {"endpoints": [h.endpoint for h in lab.hosts]}
@@ -175,7 +174,6 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _check_name(name: str) -> None:
-    from common.keys import is_ident
 
     if not is_ident(name):
         raise CertError(f"host name {name!r} is not valid (letters, digits, '_', '-', '.')")

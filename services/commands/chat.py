@@ -20,6 +20,7 @@ from common.client import LabClient
 from common.lab_errors import LabError
 from common.messages import ChatLine, KickNotice, RoomEvent
 from common.private_mail import PrivateText
+from common.service import close_session
 from services.commands.terminal import connect, password_from, say
 
 
@@ -70,8 +71,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart chat") -> int:
     except LabError as exc:
         return cli.fail(str(exc), 1)
     finally:
-        from common.service import close_session
-
         close_session(zsession)
 
 

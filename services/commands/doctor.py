@@ -33,6 +33,7 @@ from common.service import close_session, open_session
 from common.survey import router_views, routers, survey
 from common.zconfig import NetworkOptions
 from common.zsecurity import client_options
+from services.commands.arena import format_loads, host_loads
 
 
 @dataclass
@@ -124,7 +125,6 @@ def expected_tokens(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
 
 
 def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Report:
-    from services.commands.arena import format_loads, host_loads
 
     report = Report()
     sessions: list[zenoh.Session] = []

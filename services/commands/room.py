@@ -24,6 +24,7 @@ from common.labfile import LabFileError
 from common.service import close_session
 from common.zconfig import NetworkOptions
 from services.commands.arena import add_lab_arguments, lab_session
+from services.commands.terminal import password_from
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
@@ -47,7 +48,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
 
 
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
-    from services.commands.terminal import password_from
 
     session, realm, registry_key = lab_session(args, options)
     try:

@@ -26,8 +26,9 @@ from common.sim2d.agents import agent_type
 from common.sim2d.maps import MapError
 from common.sim2d.world import World
 from services.engine import wire
+from tests.conftest import REPO
 
-MAPS = Path(__file__).resolve().parents[3] / "maps"
+MAPS = REPO / "maps"
 
 
 @pytest.mark.parametrize("name", ["empty", "maze", "foraging", "phototaxis", "swarm"])

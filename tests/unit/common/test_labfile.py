@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from common.labfile import LabFileError, fill, load, parse
+from tests.conftest import REPO
 
-REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "deploy" / "lab.example.toml"
 
 

@@ -7,7 +7,6 @@ controller API, stepping the world between do_work calls.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,9 +15,9 @@ from common.controller import Controller, load_controller
 from common.precheck import precheck
 from common.sim2d.maps import load_map
 from common.sim2d.world import World
+from tests.conftest import REPO
 from tests.worldlink import run_in_world
 
-REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
 
 
