@@ -216,7 +216,7 @@ class WorldChannel:
         for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
             link = links.get(agent)
             if link is not None:
-                link._deliver(bytes(raw))
+                link.deliver(bytes(raw))
                 delivered.append(agent)
         listeners = self._tick_listeners
         if not listeners or not delivered:
@@ -363,9 +363,9 @@ class ZenohRobotLink:
     # -- the Zenoh side (callback: keep it short)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._deliver(bytes(sample.payload.to_bytes()))
+        self.deliver(bytes(sample.payload.to_bytes()))
 
-    def _deliver(self, raw: bytes) -> None:
+    def deliver(self, raw: bytes) -> None:
         """Keep ``raw`` (an encoded SensorSample) as the newest; wake whoever waits."""
         with self._fresh:
             self._raw = raw
