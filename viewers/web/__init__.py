@@ -9,6 +9,7 @@ Modules, one concern each:
     world_view.py  one browser's top-down arena view: batched robots, trail, rays
     pump.py        the paced loop that pushes the newest frame to every watching view
     login.py       the per-browser login modal
+    masked.py      password inputs shown as dots (a style rule beside viser's text input)
     lobby.py       a lab's lobby tab (directory, join, host)
     chat_panel.py  a context's tab (history, members, live lines, kick, leave)
     robot_panel.py agents, queue, controller upload, live sensor plots

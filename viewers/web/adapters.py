@@ -263,6 +263,8 @@ class SceneFrame:
     t: float
     poses: F32  # (N, 3): x mm, y mm, theta rad
     gripper: npt.NDArray[np.uint8]  # (N,): 0 none/open, 1 closed, 2 holding
+    # (N,): LED bits (bit k: LED k lit); empty when the feed does not know them
+    leds: npt.NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
     ball_xy: F32 = field(default_factory=lambda: np.zeros((0, 2), np.float32))  # (B, 2)
     lights_on: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, np.bool_))
 

@@ -16,6 +16,7 @@ import viser
 from common.keys import is_ident
 from viewers.web.adapters import Account, LabConnection, LabError
 from viewers.web.login import MAX_PASSWORD
+from viewers.web.masked import add_masked_text
 from viewers.web.text import escape_md
 
 log = logging.getLogger("wart.viewer.admin")
@@ -77,8 +78,8 @@ class AdminPanel:
             self.accounts_md = gui.add_markdown("_Press 'List accounts'._")
             self.list_button = gui.add_button("List accounts")
             self.user = gui.add_text("Account", "")
-            # viser has no masked input: the field is emptied as soon as it is used.
-            self.password = gui.add_text("New password", "")
+            # Shown as dots, and emptied as soon as it is used.
+            self.password = add_masked_text(gui, "New password")
             self.role = gui.add_dropdown("Role", ROLES, initial_value="student")
             self.add_button = gui.add_button("Add account", color="green")
             self.password_button = gui.add_button("Set password")

@@ -143,12 +143,14 @@ class DemoWorld:
         poses[:, 1] = self._home[:, 1] + self._radius * np.sin(angle)
         poses[:, 2] = angle + math.pi / 2  # heading along the circle
         gripper = (np.arange(len(poses)) % 3).astype(np.uint8)
+        leds = ((np.arange(len(poses)) + int(t)) % 4 == 0).astype(np.uint8)  # one in 4, 1 s each
         snap = self._snapshot
         frame = SceneFrame(
             seq=next(self._seq),
             t=t,
             poses=poses,
             gripper=gripper,
+            leds=leds,
             ball_xy=np.array([[b.x, b.y] for b in snap.balls], np.float32).reshape(-1, 2),
             lights_on=np.array([lt.on for lt in snap.lights], np.bool_),
         )

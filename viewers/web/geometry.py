@@ -92,6 +92,29 @@ def robot_mesh(
     return vertices, np.asarray(faces, np.uint32)
 
 
+def heading_mesh(
+    radius_m: float, height_m: float = 0.01
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
+    """A flat arrow pointing along +x, just above :func:`robot_mesh`'s nose wedge.
+
+    Drawn as its own batched mesh (same positions and orientations as the
+    bodies) so that it can have a colour of its own: from above, a wedge in the
+    body's colour cannot be told from the body under flat lighting.
+    """
+    z = height_m * 1.7  # above the body (height_m) and its nose wedge (1.5 * height_m)
+    vertices = np.array(
+        [
+            [radius_m * 0.9, 0.0, z],  # tip
+            [-radius_m * 0.5, radius_m * 0.6, z],  # left wing
+            [-radius_m * 0.1, 0.0, z],  # notch
+            [-radius_m * 0.5, -radius_m * 0.6, z],  # right wing
+        ],
+        np.float32,
+    )
+    faces = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)  # counter-clockwise seen from +z
+    return vertices, faces
+
+
 def ir_segments(
     pose: npt.ArrayLike, ir: npt.ArrayLike, robot_radius_mm: float
 ) -> npt.NDArray[np.float32]:

@@ -1,8 +1,9 @@
 """The login form: a modal in one browser only (viser GUI is per client).
 
-viser has no login hook and no masked text input: the password field is
-cleared as soon as the attempt is made, and a deployment that leaves the lab
-network should sit behind an HTTPS reverse proxy (docs/OPERATIONS.md).
+viser has no login hook and no masked text input: the password field shows
+dots through a style rule (viewers/web/masked.py), is cleared as soon as the
+attempt is made, and a deployment that leaves the lab network should sit
+behind an HTTPS reverse proxy (docs/OPERATIONS.md).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import viser
 from common.keys import is_ident
 from viewers.web.adapters import LabConnection, LabConnector, LabError
 from viewers.web.address import LabAddress
+from viewers.web.masked import add_masked_text
 
 log = logging.getLogger("wart.viewer.login")
 
@@ -52,7 +54,7 @@ class LoginForm:
         with self.modal:
             client.gui.add_markdown(f"Lab at `{address.url(with_user=False)}`")
             self.user = client.gui.add_text("User", address.user or "")
-            self.password = client.gui.add_text("Password", "")
+            self.password = add_masked_text(client.gui, "Password")
             self.error = client.gui.add_markdown("", visible=False)
             self.submit = client.gui.add_button("Log in", color="green")
             self.cancel = client.gui.add_button("Cancel")

@@ -205,7 +205,9 @@ class WorldWatch:
             return self._frame
         n = len(snap.robots)
         state = wire.agent_state.to_numpy()
-        gripper = state[:, 2].astype(np.uint8) if state.ndim == 2 and len(state) == n else None
+        known = state.ndim == 2 and len(state) == n
+        gripper = state[:, 2].astype(np.uint8) if known else None
+        leds = state[:, 0].astype(np.uint8) if known else np.zeros(n, np.uint8)
         if snap.offline:
             gripper = np.zeros(n, np.uint8) if gripper is None else gripper.copy()
             gripper[[i for i, a in enumerate(snap.robots) if a in snap.offline]] = OFFLINE
@@ -214,6 +216,7 @@ class WorldWatch:
             t=wire.sim_time,
             poses=np.ascontiguousarray(poses[:n], np.float32),
             gripper=gripper if gripper is not None else np.zeros(n, np.uint8),
+            leds=leds,
             ball_xy=np.ascontiguousarray(poses[n:, :2], np.float32),
             lights_on=wire.lights.to_numpy().astype(np.bool_),
         )

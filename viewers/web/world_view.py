@@ -3,9 +3,12 @@
 Drawn from the world's snapshot (floor, obstacles, balls, lights), then kept
 live by :class:`~viewers.web.pump.FramePump`, which hands every watching view
 the same :class:`PreparedFrame` (converted once per world per tick). All
-robots are ONE batched mesh: a frame is two array assignments inside
-``client.atomic()``, whatever the number of robots. Only the selected robot
-gets extras (label, trail, IR rays); with few robots every one is labelled.
+robots are two batched meshes, bodies and heading arrows (never a node per
+robot): a frame is the same two arrays (positions, orientations) assigned to
+both inside ``client.atomic()``, whatever the number of robots (past
+HEADINGS_UP_TO robots the arrows are left out: level of detail). Only the
+selected robot gets extras (label, trail, IR rays); with few robots every one
+is labelled.
 """
 
 from __future__ import annotations
@@ -38,6 +41,13 @@ FLOOR_COLOUR = (235, 235, 230)
 OBSTACLE_COLOUR = (110, 110, 120)
 BALL_COLOUR = (220, 60, 60)
 LIGHT_ON, LIGHT_OFF = (255, 220, 40), (150, 150, 150)
+# The heading arrow on each robot: dark on every body colour; red while an LED is lit.
+HEADING_DARK, HEADING_LIT = (20, 20, 25), (230, 0, 0)
+HEADING_COLOURS = np.array([HEADING_DARK, HEADING_LIT], np.uint8)
+# Level of detail: arrows double what each frame sends a browser (a second pair of
+# arrays); past this many robots a heading is a few pixels anyway, so a swarm is
+# drawn as bodies alone and a browser's bandwidth stays what it was.
+HEADINGS_UP_TO = 300
 
 
 @dataclass(frozen=True)
@@ -47,14 +57,27 @@ class PreparedFrame:
     frame: SceneFrame
     positions: npt.NDArray[np.float32]
     wxyzs: npt.NDArray[np.float32]
-    colours: npt.NDArray[np.uint8]
+    colours: npt.NDArray[np.uint8]  # bodies: gripper state
     gripper_key: bytes  # colours change rarely: views compare this before resending
+    heading_colours: npt.NDArray[np.uint8]  # heading arrows: any LED lit
+    led_key: bytes
 
     @staticmethod
     def of(frame: SceneFrame) -> PreparedFrame:
         positions, wxyzs = geo.poses_to_viser(frame.poses)
         state = np.clip(frame.gripper, 0, len(GRIPPER_COLOURS) - 1)
-        return PreparedFrame(frame, positions, wxyzs, GRIPPER_COLOURS[state], state.tobytes())
+        n = len(frame.poses)
+        lit = (frame.leds != 0) if len(frame.leds) == n else np.zeros(n, np.bool_)
+        lit &= state != OFFLINE  # an unreachable robot's LEDs are not known
+        return PreparedFrame(
+            frame,
+            positions,
+            wxyzs,
+            GRIPPER_COLOURS[state],
+            state.tobytes(),
+            HEADING_COLOURS[lit.astype(np.uint8)],
+            lit.tobytes(),
+        )
 
 
 class WorldView:
@@ -70,6 +93,7 @@ class WorldView:
         self.frames_applied = 0
         self._lock = threading.RLock()  # the pump thread and GUI callbacks both draw
         self._robots: viser.BatchedMeshHandle | None = None
+        self._headings: viser.BatchedMeshHandle | None = None
         self._ring: viser.SceneNodeHandle | None = None
         self._labels: dict[int, viser.LabelHandle] = {}
         self._trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_POINTS)
@@ -80,6 +104,7 @@ class WorldView:
         self._lights: list[viser.SceneNodeHandle] = []
         self._light_state: bytes = b""
         self._gripper_key: bytes = b""
+        self._led_key: bytes = b""
         self._ticks = 0
         self.on_select: list[Callable[[int | None], None]] = []
         self.on_obstacle_click: list[Callable[[str], None]] = []
@@ -155,11 +180,11 @@ class WorldView:
         for handle in [*self._static, *self._balls, *self._lights, *self._labels.values()]:
             handle.remove()
         self._static, self._balls, self._lights, self._labels = [], [], [], {}
-        for extra in (self._robots, self._ring, self._trail_handle, self._rays):
+        for extra in (self._robots, self._headings, self._ring, self._trail_handle, self._rays):
             if extra is not None:
                 extra.remove()
-        self._robots = self._ring = self._trail_handle = self._rays = None
-        self._gripper_key = b""
+        self._robots = self._headings = self._ring = self._trail_handle = self._rays = None
+        self._gripper_key = self._led_key = b""
         self._light_state = b""
 
     def redraw(self, snap: SceneLayout) -> None:
@@ -247,28 +272,24 @@ class WorldView:
         return clicked
 
     def _draw_robots(self, snap: SceneLayout) -> None:
-        scene = self.client.scene
-        if self._robots is not None:
-            self._robots.remove()
+        for old in (self._robots, self._headings):
+            if old is not None:
+                old.remove()
+        radius = snap.robot_radius * geo.MM
         n = len(snap.robots)
-        vertices, faces = geo.robot_mesh(snap.robot_radius * geo.MM)
-        self._robots = scene.add_batched_meshes_simple(
-            "/world/robots",
-            vertices=vertices,
-            faces=faces,
-            batched_wxyzs=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
-            batched_positions=np.zeros((n, 3), np.float32),
-            batched_colors=np.tile(GRIPPER_COLOURS[0], (n, 1)),
-            lod="off",  # a 35-triangle mesh needs no simplification
-            cast_shadow=False,
-            receive_shadow=False,
-            flat_shading=True,
+        self._robots = self._add_batch(
+            "/world/robots", geo.robot_mesh(radius), n, GRIPPER_COLOURS[0]
         )
-        self._robots.on_click(self._robot_clicked)
-        self._gripper_key = b""
+        # The arrow lies on top of the body: a click on it selects the robot too.
+        self._headings = (
+            self._add_batch("/world/headings", geo.heading_mesh(radius), n, HEADING_COLOURS[0])
+            if n <= HEADINGS_UP_TO
+            else None
+        )
+        self._gripper_key = self._led_key = b""
         if self._ring is not None:
             self._ring.remove()
-        self._ring = scene.add_cylinder(
+        self._ring = self.client.scene.add_cylinder(
             "/world/selected",
             radius=snap.robot_radius * geo.MM * 1.5,
             height=0.004,
@@ -279,6 +300,30 @@ class WorldView:
             receive_shadow=False,
         )
         self._sync_labels()
+
+    def _add_batch(
+        self,
+        name: str,
+        mesh: tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]],
+        n: int,
+        colour: npt.NDArray[np.uint8],
+    ) -> viser.BatchedMeshHandle:
+        """One batched mesh with an instance per robot (placed by the first frame)."""
+        vertices, faces = mesh
+        handle = self.client.scene.add_batched_meshes_simple(
+            name,
+            vertices=vertices,
+            faces=faces,
+            batched_wxyzs=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+            batched_positions=np.zeros((n, 3), np.float32),
+            batched_colors=np.tile(colour, (n, 1)),
+            lod="off",  # meshes of a few dozen triangles need no simplification
+            cast_shadow=False,
+            receive_shadow=False,
+            flat_shading=True,
+        )
+        handle.on_click(self._robot_clicked)
+        return handle
 
     def _robot_clicked(self, event: viser.SceneNodePointerEvent[viser.BatchedMeshHandle]) -> None:
         self.select(event.instance_index)
@@ -302,7 +347,7 @@ class WorldView:
     def apply(self, prepared: PreparedFrame) -> None:
         """Show a frame (called by the pump thread, paced)."""
         with self._lock:
-            robots = self._robots
+            robots, headings = self._robots, self._headings
             snap = self.snapshot
             if robots is None or snap is None or prepared.frame.seq == self.last_seq:
                 return
@@ -311,11 +356,16 @@ class WorldView:
                 return  # frame from before a robot was added or removed: wait for the next
             self._ticks += 1
             with self.client.atomic():
-                robots.batched_positions = prepared.positions
-                robots.batched_wxyzs = prepared.wxyzs
+                for batch in (robots, headings):
+                    if batch is not None:
+                        batch.batched_positions = prepared.positions
+                        batch.batched_wxyzs = prepared.wxyzs
                 if prepared.gripper_key != self._gripper_key:
                     robots.batched_colors = prepared.colours
                     self._gripper_key = prepared.gripper_key
+                if headings is not None and prepared.led_key != self._led_key:
+                    headings.batched_colors = prepared.heading_colours
+                    self._led_key = prepared.led_key
                 for index, label in self._labels.items():
                     x, y, _ = prepared.positions[index]
                     label.position = (float(x), float(y), 0.05)

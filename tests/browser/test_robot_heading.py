@@ -1,0 +1,117 @@
+"""From above, every robot shows which way it faces: an arrow in a colour of its own.
+
+The arrow is a second batched mesh (one for all robots, like the bodies), so
+the test checks both what the server sends and what the page shows: just
+ahead of each robot's centre the arrow's colour (dark; red while an LED is
+lit), just behind it the body's colour.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from tests.browser.conftest import wait_until
+from viewers.web import geometry as geo
+from viewers.web.app import WebViewer
+from viewers.web.demo_lab import DemoLab
+from viewers.web.world_view import HEADING_DARK, HEADING_LIT
+
+pytestmark = pytest.mark.browser
+
+ROBOTS = 16  # more than LABEL_ALL_UP_TO: no name labels over the robots
+NOTICES = (330, 300)  # viser's notifications cover the page's top-left corner up to (x, y)
+
+
+@pytest.fixture
+def fake_lab() -> Iterator[DemoLab]:
+    lab = DemoLab("Test lab", robots=ROBOTS)
+    lab.worlds["arena"].stop()  # frames only when the test makes one: robots hold still
+    yield lab
+    lab.close()
+
+
+def screen_points(page, view, world_xy_mm: np.ndarray) -> np.ndarray:
+    """World millimetres to page pixels (the top-down camera the view set up; +y is up)."""
+    box = page.p.locator("canvas").first.bounding_box()
+    cam = view.client.camera
+    cx, cy, height = (float(v) for v in cam.position)
+    z = geo.ROBOT_Z * 2  # about the top of a robot
+    px_per_m = (box["height"] / 2) / ((height - z) * math.tan(cam.fov / 2))
+    xy = world_xy_mm * geo.MM
+    sx = box["x"] + box["width"] / 2 + (xy[:, 0] - cx) * px_per_m
+    sy = box["y"] + box["height"] / 2 - (xy[:, 1] - cy) * px_per_m
+    return np.stack([sx, sy], axis=1)
+
+
+def test_heading_arrow_is_drawn_in_its_own_colour(
+    open_page, viewer: WebViewer, fake_lab: DemoLab
+) -> None:
+    from PIL import Image
+
+    page = open_page("ana")
+    page.log_in("127.0.0.1", "ana", "ana-pw")
+    page.tab("lab@127.0.0.1").first.click()
+    page.click("Join arena")
+    view = next(iter(viewer.sessions.values())).view
+    frame = fake_lab.worlds["arena"].produce(2.0)
+    wait_until(lambda: view.last_seq == frame.seq, what="the test's frame in the view")
+
+    # What the server sends: one batched mesh of arrows beside the bodies, placed and
+    # turned as the robots are, coloured by LED state rather than like the bodies.
+    bodies, arrows = view._robots, view._headings
+    assert bodies is not None and arrows is not None and arrows is not bodies
+    assert np.asarray(arrows.batched_positions)[:, :2] * 1000 == pytest.approx(
+        frame.poses[:, :2], abs=0.1
+    )
+    for wxyz, pose in zip(np.asarray(arrows.batched_wxyzs), frame.poses, strict=True):
+        turn = geo.wxyz_to_yaw(wxyz) - float(pose[2])
+        assert math.remainder(turn, 2 * math.pi) == pytest.approx(0.0, abs=1e-4)
+    lit = frame.leds != 0
+    assert 0 < lit.sum() < ROBOTS  # the demo lights some LEDs: both colours are seen
+    expected = np.where(lit[:, None], HEADING_LIT, HEADING_DARK)
+    assert (np.asarray(arrows.batched_colors) == expected).all()
+
+    # What the page shows.
+    radius_mm = view.snapshot.robot_radius
+    heading = np.stack([np.cos(frame.poses[:, 2]), np.sin(frame.poses[:, 2])], axis=1)
+    centre = screen_points(page, view, frame.poses[:, :2])
+    ahead = screen_points(page, view, frame.poses[:, :2] + 0.25 * radius_mm * heading)
+    behind = screen_points(page, view, frame.poses[:, :2] - 0.7 * radius_mm * heading)
+    seen = ~((centre[:, 0] < NOTICES[0]) & (centre[:, 1] < NOTICES[1]))
+    assert seen.sum() >= ROBOTS // 2
+
+    def pixels_at(image: np.ndarray, points: np.ndarray) -> np.ndarray:
+        ix, iy = np.rint(points).astype(int).T
+        return image[iy, ix]
+
+    seen_now: list[np.ndarray] = []  # the last look: arrow (ahead) and body (behind) pixels
+
+    def arrows_stand_out() -> bool:
+        png = page.p.screenshot()
+        image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), np.int16)
+        seen_now[:] = [pixels_at(image, ahead[seen]), pixels_at(image, behind[seen])]
+        return bool((np.abs(seen_now[0] - seen_now[1]).sum(axis=1) > 150).all())
+
+    # The page draws the two meshes as their messages arrive, not always in the same
+    # frame: look until the arrows stand out; the assertions below say what is wrong.
+    with contextlib.suppress(AssertionError):
+        wait_until(arrows_stand_out, 15, what="every robot's arrow to stand out")
+    page.screenshot("headings")
+    front, back = seen_now
+    # The floor is a light grey: a robot's body, where the frame puts it, is not.
+    greyness = np.abs(back - back.mean(axis=1, keepdims=True)).max(axis=1)
+    assert (greyness > 20).all(), f"no robot body behind some centres: {back}"
+    apart = np.abs(front - back).sum(axis=1)
+    assert (apart > 150).all(), f"arrow and body look alike: {apart}"
+    for colour, on in zip(front, lit[seen], strict=True):
+        r, g, b = (int(v) for v in colour)
+        if on:
+            assert r > g + 100 and r > b + 100, f"a lit robot's arrow is red, not {colour}"
+        else:
+            assert max(r, g, b) < 90, f"an arrow is dark, not {colour}"
