@@ -21,6 +21,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from common import keys
 from common.client import LabClient, RoomHandle
@@ -37,6 +38,10 @@ from common.messages import (
     OkReply,
     OutputLines,
     QueueStateRequest,
+    RecordingChunk,
+    RecordingGet,
+    RecordingList,
+    RecordingListRequest,
     RequestStatus,
     RoomEvent,
     RunMode,
@@ -136,6 +141,45 @@ class AgentClient:
     ) -> str:
         message = ContextSettings(slot_seconds=slot_seconds, enabled=enabled, agent=agent)
         return self.client.request(self.ctx, message, OkReply, "change settings").detail
+
+    # -- recordings (every slot is recorded by the context: common/recording/)
+
+    def recordings(self, user: str | None = None, *, all_users: bool = False) -> RecordingList:
+        """Your recordings in this context; another user's (or all) with the manage right."""
+        request = RecordingListRequest(user=user, all_users=all_users)
+        return self.client.request(self.ctx, request, RecordingList, "list recordings")
+
+    def download(
+        self,
+        name: str,
+        dest: Path,
+        *,
+        summary: bool = False,
+        progress: Callable[[int, int], None] = lambda _done, _total: None,
+    ) -> Path:
+        """Fetch recording ``name`` (or its summary) into ``dest`` in chunks; ``dest``.
+
+        Written to ``dest.part`` first: an interrupted download leaves no file that
+        looks complete.
+        """
+        part = dest.with_name(dest.name + ".part")
+        offset, total = 0, None
+        with part.open("wb") as out:
+            while total is None or offset < total:
+                chunk = self.client.request(
+                    self.ctx,
+                    RecordingGet(name=name, offset=offset, summary=summary),
+                    RecordingChunk,
+                    f"download {name}",
+                )
+                total = chunk.total
+                if not chunk.data and offset < total:
+                    raise LabError(f"{name} shrank while downloading: try again")
+                out.write(chunk.data)
+                offset += len(chunk.data)
+                progress(offset, total)
+        part.replace(dest)
+        return dest
 
     # -- waiting
 

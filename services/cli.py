@@ -39,6 +39,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "drive a robot with your controller from this machine",
     ),
     "deploy": ("services.commands.deploy", "upload a controller to run on a robot in the lab"),
+    "record": ("services.commands.record", "list and download your recorded runs (MCAP)"),
+    "report": ("services.commands.report", "the summary (and plots) of a recorded run"),
     "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
     "host": ("services.host.main", "run this machine's share of a multi-host lab (lab file)"),
     "arena": (

@@ -30,6 +30,8 @@ from common.messages.chat import *  # noqa: F403 - every chat wire type
 from common.messages.chat import __all__ as _chat_all
 from common.messages.host import *  # noqa: F403 - every host wire type
 from common.messages.host import __all__ as _host_all
+from common.messages.recording import *  # noqa: F403 - every recording wire type
+from common.messages.recording import __all__ as _recording_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
 from common.messages.registry import __all__ as _registry_all
 from common.messages.world import (
@@ -103,5 +105,6 @@ __all__ = [
     *_agent_all,
     *_chat_all,
     *_host_all,
+    *_recording_all,
     *_registry_all,
 ]

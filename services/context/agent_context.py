@@ -53,12 +53,16 @@ from common.messages import (
     OkReply,
     OutputLines,
     QueueStateRequest,
+    RecordingGet,
+    RecordingListRequest,
     RequestStatus,
     Revocation,
     StopControl,
     UserRemovalRequest,
 )
+from common.messages.chat import ChatLine, MemberStatus
 from common.precheck import PrecheckError, precheck
+from common.recording.store import RecordingStore
 from common.service import RequestError
 from services.context.agent_queue import (
     ControlJob,
@@ -70,6 +74,8 @@ from services.context.agent_queue import (
 )
 from services.context.chat_room import ChatRoom, log
 from services.context.lease_signer import LeaseSigner
+from services.context.recorder import SlotRecorder
+from services.context.recordings import RecordingRequests
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
 
@@ -90,6 +96,7 @@ class AgentContext(SlotScheduler, ChatRoom):
         world: str,
         runner: str = "runner",
         slot_seconds: float = 60.0,
+        recordings: RecordingStore | None = None,
         **room: Any,
     ) -> None:
         super().__init__(session, realm, name, **room)
@@ -114,6 +121,10 @@ class AgentContext(SlotScheduler, ChatRoom):
         self._layout: int | None = None
         self._frames: Any = None
         self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
+        self.recorder = SlotRecorder(
+            session, realm, name, self.world, recordings, self.registry_key, self.log
+        )
+        self.recordings = RecordingRequests(recordings, name)
 
     def _seal(self, key: str, message: Message) -> bytes:
         """Sealed with the context's current session (renewed sessions included)."""
@@ -173,6 +184,7 @@ class AgentContext(SlotScheduler, ChatRoom):
                 keys.world_frame(self.realm, self.world), zenoh.handlers.RingChannel(1)
             )
         )
+        self.recorder.start()
         self._thread = threading.Thread(target=self._schedule, name="agent-queues", daemon=True)
         self._thread.start()
 
@@ -191,6 +203,7 @@ class AgentContext(SlotScheduler, ChatRoom):
             for line in self.book.lines.values():
                 line.running = None
         self._save_book()  # a clean stop ends the slots: they must not come back
+        self.recorder.close(timeout)
         self.leases.close()
         super().on_stop(timeout)
 
@@ -237,6 +250,8 @@ class AgentContext(SlotScheduler, ChatRoom):
                 StopControl,
                 ContextSettings,
                 QueueStateRequest,
+                RecordingListRequest,
+                RecordingGet,
             ),
         )
         if isinstance(request, ChatSay):
@@ -247,6 +262,9 @@ class AgentContext(SlotScheduler, ChatRoom):
         if isinstance(request, QueueStateRequest):
             self._require(principal, "join", "see the queues")
             return self.state_message()
+        if isinstance(request, RecordingListRequest | RecordingGet):
+            self._require(principal, "join", "see recordings")
+            return self.recordings.answer(principal, request, self._manages(principal))
         reply: Message
         if isinstance(request, ControlRequest):
             reply = self._queue(principal, request)
@@ -503,6 +521,7 @@ class AgentContext(SlotScheduler, ChatRoom):
                 self._finish_soon(report.request_id, "finished", reason)
                 self._wake.notify_all()
         if report.lines:
+            self.recorder.output(run.job.request_id, run.job.agent, list(report.lines))
             self._publish_agent(
                 AgentEvent(
                     ctx=self.room,
@@ -542,7 +561,13 @@ class AgentContext(SlotScheduler, ChatRoom):
             end=run.end if run else None,
         )
 
+    def _publish(self, *, line: ChatLine | None = None, status: MemberStatus | None = None) -> None:
+        super()._publish(line=line, status=status)
+        self.recorder.chat(line, status)  # said during a run: in its recording
+
     def _publish_agent(self, event: AgentEvent) -> None:
+        if event.output is None:
+            self.recorder.event(event)  # output is recorded where it comes in
         if self._publisher is None or (self.stopped and event.state is not None):
             return
         try:

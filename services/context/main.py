@@ -9,16 +9,19 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import zenoh
 
 from common import cli, keys
 from common.messages import MAX_LINE_CHARS
+from common.recording.store import RecordingStore
 from common.service import run_service
 from common.service_login import ServiceCredentials
 from services.context import agent_context, chat_room
 from services.context.agent_context import AgentContext
 from services.context.chat_room import ChatRoom, log
+from services.context.recorder import recordings_dir
 
 
 def chat_main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> int:
@@ -75,6 +78,21 @@ def agent_main(argv: Sequence[str] | None = None, prog: str = "wart context agen
     p.add_argument(
         "--slot-seconds", type=float, default=60.0, help="each controller's time slot (default 60)"
     )
+    p.add_argument(
+        "--keep-recordings",
+        type=int,
+        default=20,
+        metavar="N",
+        help="recordings kept per user, the oldest removed beyond N (default 20); "
+        "0 records nothing",
+    )
+    p.add_argument(
+        "--recordings-dir",
+        type=Path,
+        default=None,
+        help="where slots are recorded (default DATA_DIR/recordings/NAME; "
+        "without --data-dir nor this, nothing is recorded)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -92,6 +110,15 @@ def agent_main(argv: Sequence[str] | None = None, prog: str = "wart context agen
         return cli.fail("--slot-seconds must be 1..3600")
     if not 1 <= args.history <= 100_000:
         return cli.fail("--history must be 1..100000")
+    if not 0 <= args.keep_recordings <= 100_000:
+        return cli.fail("--keep-recordings must be 0..100000")
+    where = recordings_dir(args.name, args.data_dir, args.recordings_dir)
+    store = None
+    if where is not None and args.keep_recordings > 0:
+        try:
+            store = RecordingStore(where, args.keep_recordings)
+        except OSError as exc:
+            return cli.fail(f"cannot keep recordings in {where}: {exc.strerror or exc}")
 
     def build(session: zenoh.Session) -> AgentContext:
         login = credentials.login(session, options.realm, f"context {args.name}")
@@ -102,6 +129,7 @@ def agent_main(argv: Sequence[str] | None = None, prog: str = "wart context agen
             world=args.world,
             runner=args.runner,
             slot_seconds=args.slot_seconds,
+            recordings=store,
             registry_key=credentials.registry_key,
             login=login,
             owner=args.owner or args.user,

@@ -33,6 +33,7 @@ from common.messages import (
 from common.service import RequestError
 from services.context.agent_queue import ControlJob, QueueBook, RunningJob
 from services.context.lease_signer import LeaseSigner
+from services.context.recorder import SlotRecorder
 from services.context.runner_link import RunnerLink
 
 log = logging.getLogger("wart.chat")  # the context's own logger (chat_room.py)
@@ -61,6 +62,7 @@ class SlotScheduler:
     _frames: Any
     _recent: dict[str, RunningJob]
     _end_reasons: dict[str, tuple[str, str]]
+    recorder: SlotRecorder
 
     # What the context provides (agent_context.py).
     def _save_book(self) -> None:
@@ -198,6 +200,7 @@ class SlotScheduler:
         if run.job.mode == "deploy":
             self.runner_link.stop(run.job.request_id, reason)
         log.info("%s %s on %s: %s", run.job.request_id, status, run.job.agent, reason)
+        self.recorder.run_ended(run.job.request_id, status, reason)
         self._publish_agent(
             AgentEvent(ctx=self.room, request=self._status(run.job, status, reason))
         )
@@ -233,6 +236,8 @@ class SlotScheduler:
                 return
             line.running = run
             self._dirty = True
+        driver = job.user if job.mode == "remote" else self.runner_user(run)
+        self.recorder.run_started(run, driver)  # before the lease: the first commands count
         self._publish_lease(run, end)
         log.info("%s runs on %s for %s until %.1f", job.request_id, job.agent, job.user, end)
         self._publish_agent(

@@ -1,0 +1,105 @@
+"""Plots of a run (PNG, matplotlib): the trajectory over the map, IR and wheel speeds over time.
+
+matplotlib is optional (the ``test`` extra): :func:`available` says whether
+plots can be drawn; the summary's numbers never need it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.recording.reader import Recording
+
+
+def available() -> bool:
+    return importlib.util.find_spec("matplotlib") is not None
+
+
+def write_plots(rec: Recording, out_dir: Path, stem: str) -> list[Path]:
+    """``<stem>.trajectory.png`` and ``<stem>.sensors.png`` in ``out_dir``; the paths written."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only: no display, no GUI toolkit
+    import matplotlib.pyplot as plt
+
+    assert rec.info is not None
+    agent = rec.info.agent
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+
+    fig, ax = plt.subplots(figsize=(7, 6))
+    _map(ax, rec)
+    xy = [
+        (f.record.x[i], f.record.y[i])
+        for f in rec.frames
+        if (i := _row(f.record.rows, agent)) is not None
+    ]
+    if xy:
+        track = np.array(xy)
+        ax.plot(track[:, 0], track[:, 1], "-", lw=1.5, color="tab:blue", label=agent)
+        ax.plot(*track[0], "o", color="tab:green", label="start")
+        ax.plot(*track[-1], "s", color="tab:red", label="end")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(f"{rec.info.request_id}: {agent} on {rec.info.world}")
+    ax.legend(loc="upper right", fontsize=8)
+    path = out_dir / f"{stem}.trajectory.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    written.append(path)
+
+    fig, (ir, wheels) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    if rec.samples:
+        t0 = rec.samples[0].record.sim_time
+        t = np.array([x.record.sim_time - t0 for x in rec.samples])
+        prox = np.array([x.record.proximity for x in rec.samples])
+        for k in range(prox.shape[1]):
+            ir.plot(t, prox[:, k], lw=0.8, label=f"IR{k}")
+        speeds = np.array([x.record.speeds for x in rec.samples])
+        wheels.plot(t, speeds[:, 0], lw=1, label="left (measured)")
+        wheels.plot(t, speeds[:, 1], lw=1, label="right (measured)")
+        ir.legend(ncol=4, fontsize=7)
+        wheels.legend(fontsize=7)
+    ir.set_ylabel("proximity (raw)")
+    wheels.set_ylabel("wheel speed")
+    wheels.set_xlabel("time (s)")
+    ir.set_title(f"{rec.info.request_id}: sensors and wheels of {agent}")
+    path = out_dir / f"{stem}.sensors.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    written.append(path)
+    return written
+
+
+def _row(rows: list[str], agent: str) -> int | None:
+    try:
+        return rows.index(agent)
+    except ValueError:
+        return None
+
+
+def _map(ax: Any, rec: Recording) -> None:
+    snap = rec.snapshot
+    if snap is None:
+        return
+    from matplotlib.patches import Circle, Polygon, Rectangle
+
+    ax.add_patch(Rectangle((0, 0), snap.width, snap.height, fill=False, lw=1.5, color="black"))
+    for item in snap.items:
+        face = {"obstacle": "0.5", "zone": "#c8e6c9", "object": "#ffcc80"}[item.category]
+        if item.shape.kind == "circle":
+            ax.add_patch(Circle((item.x, item.y), item.shape.radius, color=face, alpha=0.8))
+        else:
+            c, s = math.cos(item.heading), math.sin(item.heading)
+            pts = [
+                (item.x + c * px - s * py, item.y + s * px + c * py) for px, py in item.shape.points
+            ]
+            ax.add_patch(Polygon(pts, closed=True, color=face, alpha=0.8))
+    ax.set_xlim(-20, snap.width + 20)
+    ax.set_ylim(-20, snap.height + 20)

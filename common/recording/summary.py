@@ -1,0 +1,247 @@
+"""A run's result summary, from its recording alone: how far, how long, what it hit, how it ended.
+
+Collisions are approximated from the frames (no physics needed): the robot's
+centre within its radius (+ :data:`CONTACT_MM`) of an obstacle's outline or
+of the arena's edge counts as touching; each stretch of touching is one
+collision. Objects gripped are the robot's fingers going to ``holding``;
+objects delivered are those that end inside a nest zone having started
+outside. Errors are read from the output: a traceback's last line of the
+controller's file, and the exception that ended it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import msgspec
+import numpy as np
+
+from common.messages import ItemInfo, WorldSnapshot
+from common.recording.reader import Recording
+
+CONTACT_MM = 2.0  # touching: the pymunk contact slop and float32 poses are below this
+MOVING_MM_S = 5.0  # slower than this is standing (sensor noise, a push)
+JUMP_MM = 200.0  # a step longer than this between frames is an edit or a teleport, not travel
+
+_TRACE = re.compile(r'File "([^"]+)", line (\d+)')
+_EXC = re.compile(r"^([A-Za-z_][\w.]*(?:Error|Exception|Interrupt|Exit))(?::\s*(.*))?$")
+
+
+class ErrorInfo(msgspec.Struct, frozen=True, kw_only=True):
+    kind: str  # the exception's name
+    message: str
+    file: str
+    line: int | None  # in the controller's file, when the traceback names it
+
+
+class Summary(msgspec.Struct, frozen=True, kw_only=True):
+    """The numbers of one run (``wart report`` prints them; stored as ``<run>.summary.json``)."""
+
+    request_id: str
+    user: str
+    agent: str
+    world: str
+    ctx: str
+    mode: str
+    filename: str
+    start: float
+    duration_s: float
+    status: str  # finished | cancelled | refused | unknown (a truncated file)
+    reason: str
+    distance_mm: float
+    moving_s: float
+    collisions: int
+    contact_s: float
+    gripped: int
+    delivered: int
+    frames: int
+    samples: int
+    commands: int
+    output_lines: int
+    errors: list[ErrorInfo]
+    truncated: str = ""
+
+
+def summarize(rec: Recording) -> Summary:
+    info = rec.info
+    assert info is not None  # read_recording refuses a file without one
+    xs, ys, ts, fingers = _track(rec, info.agent)
+    distance, moving = _travel(xs, ys, ts)
+    snap = rec.snapshot
+    collisions, contact = (0, 0.0)
+    radius = _radius(snap, info.agent)
+    if snap is not None and len(xs):
+        touching = _touching(snap, radius, xs, ys)
+        collisions = int(np.count_nonzero(touching[1:] & ~touching[:-1]) + int(touching[0]))
+        dt = np.diff(ts, prepend=ts[0])
+        contact = float(dt[touching].sum())
+    gripped = int(np.count_nonzero((fingers[1:] == 2) & (fingers[:-1] != 2))) if len(fingers) else 0
+    duration = float(ts[-1] - ts[0]) if len(ts) > 1 else 0.0
+    end = rec.end
+    return Summary(
+        request_id=info.request_id,
+        user=info.user,
+        agent=info.agent,
+        world=info.world,
+        ctx=info.ctx,
+        mode=info.mode,
+        filename=info.filename,
+        start=info.start,
+        duration_s=round(duration, 3),
+        status=end.status if end else "unknown",
+        reason=end.reason if end else "the recording ends without saying (cut short)",
+        distance_mm=round(distance, 1),
+        moving_s=round(moving, 2),
+        collisions=collisions,
+        contact_s=round(contact, 2),
+        gripped=gripped,
+        delivered=_delivered(rec, snap),
+        frames=len(rec.frames),
+        samples=len(rec.samples),
+        commands=len(rec.commands),
+        output_lines=len(rec.output),
+        errors=_errors([o.record.message for o in rec.output], info.filename),
+        truncated=rec.truncated,
+    )
+
+
+def _track(rec: Recording, agent: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The agent's x, y (mm), sim time (s) and fingers over the frames it appears in."""
+    xs, ys, ts, fingers = [], [], [], []
+    for stamped in rec.frames:
+        f = stamped.record
+        try:
+            row = f.rows.index(agent)
+        except ValueError:
+            continue
+        xs.append(f.x[row])
+        ys.append(f.y[row])
+        ts.append(f.sim_time)
+        fingers.append(f.fingers[row] if row < len(f.fingers) else 0)
+    return np.array(xs), np.array(ys), np.array(ts), np.array(fingers, dtype=int)
+
+
+def _travel(xs: np.ndarray, ys: np.ndarray, ts: np.ndarray) -> tuple[float, float]:
+    if len(xs) < 2:
+        return 0.0, 0.0
+    steps = np.hypot(np.diff(xs), np.diff(ys))
+    dt = np.diff(ts)
+    steps[steps > JUMP_MM] = 0.0
+    ok = dt > 0
+    speed = np.zeros_like(steps)
+    speed[ok] = steps[ok] / dt[ok]
+    return float(steps.sum()), float(dt[ok & (speed > MOVING_MM_S)].sum())
+
+
+def _radius(snap: WorldSnapshot | None, agent: str) -> float:
+    if snap is not None:
+        for a in snap.agents:
+            if a.id == agent:
+                return a.radius
+    return 35.0  # a Khepera's
+
+
+def _outline(item: ItemInfo) -> np.ndarray | None:
+    """A polygon item's corners in the world (mm); None for a circle."""
+    if item.shape.kind != "polygon" or not item.shape.points:
+        return None
+    pts = np.array(item.shape.points, dtype=float)
+    c, s = math.cos(item.heading), math.sin(item.heading)
+    rot = np.array([[c, -s], [s, c]])
+    return pts @ rot.T + np.array([item.x, item.y])
+
+
+def _segment_distance(px: np.ndarray, py: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ab = b - a
+    length2 = float(ab @ ab) or 1e-12
+    t = np.clip(((px - a[0]) * ab[0] + (py - a[1]) * ab[1]) / length2, 0.0, 1.0)
+    return np.hypot(px - (a[0] + t * ab[0]), py - (a[1] + t * ab[1]))
+
+
+def _inside(px: np.ndarray, py: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd rule, vectorised over points."""
+    inside = np.zeros(px.shape, bool)
+    n = len(poly)
+    for i in range(n):
+        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
+        crosses = (y1 > py) != (y2 > py)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xcross = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
+        inside ^= crosses & (px < xcross)
+    return inside
+
+
+def _clearance(item: ItemInfo, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Distance from each point to the item's outline (negative inside)."""
+    poly = _outline(item)
+    if poly is None:
+        return np.hypot(px - item.x, py - item.y) - item.shape.radius
+    d = np.min(
+        [_segment_distance(px, py, poly[i], poly[(i + 1) % len(poly)]) for i in range(len(poly))],
+        axis=0,
+    )
+    return np.where(_inside(px, py, poly), -d, d)
+
+
+def _touching(snap: WorldSnapshot, radius: float, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    limit = radius + CONTACT_MM
+    edge = np.minimum.reduce([xs, ys, snap.width - xs, snap.height - ys])
+    touching = edge <= limit
+    for item in snap.items:
+        if item.category == "obstacle":
+            touching |= _clearance(item, xs, ys) <= limit
+    return touching
+
+
+def _delivered(rec: Recording, snap: WorldSnapshot | None) -> int:
+    if snap is None or not rec.frames:
+        return 0
+    nests = [z for z in snap.items if z.category == "zone" and z.kind == "nest"]
+    if not nests:
+        return 0
+    first, last = rec.frames[0].record, rec.frames[-1].record
+
+    def in_nest(frame_rows: list[str], x: list[float], y: list[float]) -> set[str]:
+        names = frame_rows[first.agents :]
+        px = np.array(x[first.agents :])
+        py = np.array(y[first.agents :])
+        hit = np.zeros(px.shape, bool)
+        for nest in nests:
+            hit |= _clearance(nest, px, py) <= 0
+        return {n for n, h in zip(names, hit, strict=False) if h}
+
+    before = in_nest(first.rows, first.x, first.y)
+    after = in_nest(last.rows, last.x, last.y)
+    return len(after - before)
+
+
+def _errors(lines: list[str], filename: str) -> list[ErrorInfo]:
+    """Each traceback in the output: its exception and the deepest line in the controller's file
+    (the framework's frames around it are skipped when the file's name is known)."""
+    base = filename.rsplit("/", 1)[-1]
+    errors: list[ErrorInfo] = []
+    ours: tuple[str, int] | None = None
+    last: tuple[str, int] | None = None
+    for raw in lines:
+        for text in raw.splitlines():
+            m = _TRACE.search(text)
+            if m:
+                last = (m.group(1), int(m.group(2)))
+                if base and m.group(1).rsplit("/", 1)[-1] == base:
+                    ours = last
+                continue
+            e = _EXC.match(text.strip())
+            if e and not text[:1].isspace() and (ours or last):
+                where = ours or last
+                assert where is not None
+                errors.append(
+                    ErrorInfo(
+                        kind=e.group(1),
+                        message=(e.group(2) or "")[:300],
+                        file=where[0],
+                        line=where[1],
+                    )
+                )
+                ours = last = None
+    return errors

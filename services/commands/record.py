@@ -1,0 +1,124 @@
+"""``wart record list|get``: your recordings in an agent context, and downloading one.
+
+Every slot an agent context runs is recorded (an MCAP file: the robot's
+poses and everything in the world, what it sensed, the commands it obeyed,
+what the controller printed, how the slot ended). The context keeps each
+user's latest few (the host sets how many); you see and fetch your own, the
+context's managers anyone's::
+
+    wart record list --context arena --user alice
+    wart record get  --context arena --user alice k1-3-9f2a1c   # -> k1-3-9f2a1c.mcap
+    wart report k1-3-9f2a1c.mcap                                 # the run's summary
+
+Open the file in Foxglove (or any MCAP tool) to see poses and plot sensors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from common import cli, keys
+from common.agent_client import AgentClient
+from common.client import LabClient
+from common.lab_errors import LabError
+from common.messages import RecordingList
+from common.service import close_session
+from common.zconfig import NetworkOptions
+from services.commands.terminal import connect, password_from, say
+
+
+def _parser(prog: str) -> argparse.ArgumentParser:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("action", choices=("list", "get"), help="list your recordings, or get one")
+    p.add_argument("name", nargs="?", help="get: the recording's name (as listed)")
+    p.add_argument("--context", required=True, help="the agent context, e.g. arena")
+    p.add_argument("--user", required=True)
+    p.add_argument("--password-file", help="read the password from this file")
+    p.add_argument("--of", metavar="USER", help="list: another user's (the manage right)")
+    p.add_argument("--all", action="store_true", help="list: every user's (the manage right)")
+    p.add_argument("-o", "--output", type=Path, help="get: where to write (default NAME.mcap)")
+    p.add_argument("--summary", action="store_true", help="get: the run's summary (JSON) instead")
+    return p
+
+
+def _size(n: int) -> str:
+    return f"{n / 1e6:.1f} MB" if n >= 1e6 else f"{n / 1e3:.0f} kB"
+
+
+def show_list(listing: RecordingList) -> None:
+    if not listing.recordings:
+        say(f"no recordings in {listing.ctx} (it keeps the latest {listing.keep} per user)")
+        return
+    say(f"{len(listing.recordings)} recording(s) in {listing.ctx}, latest {listing.keep} per user:")
+    for r in listing.recordings:
+        when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(r.start))
+        dist = f"{r.distance_mm / 1000:.2f} m" if r.distance_mm is not None else "-"
+        say(
+            f"  {r.name:<24} {r.user:<12} {r.agent:<6} {when}  {_size(r.size):>8}  "
+            f"{dist:>7}  {r.status or '?'}: {r.reason}"
+        )
+
+
+def _progress() -> Callable[[int, int], None]:
+    last = [0.0]
+
+    def show(done: int, total: int) -> None:
+        now = time.monotonic()
+        if total > 2_000_000 and (now - last[0] > 0.5 or done >= total):
+            last[0] = now
+            say(f"  {_size(done)} of {_size(total)}")
+
+    return show
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
+    args, options = cli.parse(_parser(prog), argv)
+    assert options is not None
+    try:
+        keys.check_ident("context", args.context)
+        keys.check_ident("user", args.user)
+        for name in (args.name, args.of):
+            if name:
+                keys.check_ident("name", name)
+    except ValueError as exc:
+        return cli.fail(str(exc))
+    if args.action == "get" and not args.name:
+        return cli.fail("get needs the recording's name (see: wart record list)")
+    return _with_context(args, options)
+
+
+def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
+    if not options.registry_key:
+        return cli.fail(
+            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
+        )
+    try:
+        zsession = connect(options)
+    except LabError as exc:
+        return cli.fail(str(exc))
+    try:
+        with LabClient(zsession, options.realm, options.registry_key) as client:
+            client.login(args.user, password_from(args))
+            agents = AgentClient(client, args.context).join()
+            if args.action == "list":
+                show_list(agents.recordings(args.of, all_users=args.all))
+                return 0
+            suffix = ".summary.json" if args.summary else ".mcap"
+            dest = args.output or Path(f"{args.name}{suffix}")
+            agents.download(args.name, dest, summary=args.summary, progress=_progress())
+            say(f"wrote {dest} ({_size(dest.stat().st_size)})")
+            return 0
+    except LabError as exc:
+        return cli.fail(str(exc), 1)
+    except OSError as exc:
+        return cli.fail(f"cannot write: {exc}", 1)
+    finally:
+        close_session(zsession)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,158 @@
+"""Every slot is recorded by its agent context (real engine, runner, context): read back, owned."""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.agent_client import FINAL
+from common.lab_errors import LabError
+from common.recording import read_recording, summarize
+from common.recording import schema as s
+from services.runner.sandbox import sandbox_problem
+from tests.conftest import Procs, Router, wait_for
+from tests.integration.agentkit import (
+    CTX,
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+)
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+]
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
+RAISER = textwrap.dedent(
+    """
+    from common.controller import Controller, Khepera
+
+    class Raiser(Controller):
+        def do_work(self, robot: Khepera) -> None:
+            robot.set_speeds(5, 5)
+            if robot.proximity().values[0] >= 0:
+                print("about to fail")
+                raise RuntimeError("boom from the controller")
+    """
+).encode()
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab, "maze")
+    start_runner(lab)
+    start_agent_context(lab, "--keep-recordings", "2", slot=3.0)
+    yield lab
+
+
+def _recordings_dir(lab: Lab) -> Path:
+    return lab.state / "rooms" / "recordings" / CTX
+
+
+def _wait_recorded(lab: Lab, user: str, name: str) -> Path:
+    path = _recordings_dir(lab) / user / f"{name}.mcap"
+    summary = path.with_name(f"{name}.summary.json")
+    wait_for(summary.exists, 20, f"the recording of {name}")
+    return path
+
+
+def test_a_slot_of_example_01_is_recorded_with_every_channel(lab: Lab, tmp_path: Path) -> None:
+    with agent_user(lab, "alice") as alice:
+        queued = alice.queue("k1", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
+        final = alice.wait_status(queued.request_id, FINAL, timeout=30)
+        assert final is not None and final.status == "finished", final
+        _wait_recorded(lab, "alice", queued.request_id)
+        listing = alice.recordings()
+        assert [r.name for r in listing.recordings] == [queued.request_id]
+        assert listing.recordings[0].status == "finished"
+        path = alice.download(queued.request_id, tmp_path / "run.mcap")
+    rec = read_recording(path)
+    assert rec.truncated == ""
+    present = set(rec.channels)
+    agent_topics = {s.pose_topic("k1"), s.sensors_topic("k1"), s.commands_topic("k1")}
+    assert {s.RUN, s.END, s.SNAPSHOT, s.FRAME, s.OUTPUT, s.EVENTS, s.CHAT} | agent_topics <= present
+    assert rec.info is not None and rec.info.agent == "k1" and rec.info.user == "alice"
+    assert len(rec.frames) > 50 and len(rec.samples) > 20 and len(rec.commands) > 20
+    assert {c.record.sender for c in rec.commands} == {"runner-svc"}
+    assert rec.end is not None and rec.end.status == "finished"
+    assert {e.record.kind for e in rec.events} >= {"running", "finished"}
+    summary = summarize(rec)
+    assert summary.distance_mm > 50, summary
+    assert summary.moving_s > 0.5, summary
+    assert summary.status == "finished"
+
+
+def test_a_killed_run_says_how_it_ended_and_retention_keeps_two(lab: Lab, tmp_path: Path) -> None:
+    with agent_user(lab, "bob") as bob, agent_user(lab, "ida") as ida:
+        names = []
+        # 1: the controller raises
+        q = bob.queue("k2", "deploy", source=RAISER, filename="raiser.py")
+        final = bob.wait_status(q.request_id, FINAL, timeout=30)
+        assert final is not None
+        names.append(q.request_id)
+        raised = summarize(read_recording(_wait_recorded(lab, "bob", q.request_id)))
+        assert raised.errors and raised.errors[0].kind == "RuntimeError", raised
+        assert raised.errors[0].line == 9, raised.errors  # the raise, in raiser.py
+        # 2: stopped by the context's owner
+        q = bob.queue("k2", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
+        assert bob.wait_status(q.request_id, {"running"}, timeout=30) is not None
+        ida.stop_agent("k2", "enough")
+        final = bob.wait_status(q.request_id, FINAL, timeout=30)
+        assert final is not None and final.status == "cancelled"
+        names.append(q.request_id)
+        stopped = read_recording(_wait_recorded(lab, "bob", q.request_id))
+        assert stopped.end is not None and stopped.end.status == "cancelled"
+        assert "stopped by ida" in stopped.end.reason
+        # 3: a third run: the first (oldest) is removed, --keep-recordings 2
+        q = bob.queue("k2", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
+        assert bob.wait_status(q.request_id, FINAL, timeout=30) is not None
+        names.append(q.request_id)
+        _wait_recorded(lab, "bob", q.request_id)
+        wait_for(
+            lambda: [r.name for r in bob.recordings().recordings] == names[1:],
+            10,
+            "the oldest recording removed",
+        )
+        assert not (_recordings_dir(lab) / "bob" / f"{names[0]}.mcap").exists()
+        # the manager sees bob's; alice does not
+        assert [r.name for r in ida.recordings("bob").recordings] == names[1:]
+    with agent_user(lab, "alice") as alice:
+        with pytest.raises(LabError, match=r"forbidden|may list"):
+            alice.recordings("bob")
+        with pytest.raises(LabError, match="not yours"):
+            alice.download(names[2], tmp_path / "theirs.mcap")
+        assert alice.recordings().recordings == []
+
+
+def test_wart_record_and_report_from_the_command_line(
+    lab: Lab, procs: Procs, tmp_path: Path
+) -> None:
+    with agent_user(lab, "carol") as carol:
+        q = carol.queue("k1", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
+        assert carol.wait_status(q.request_id, FINAL, timeout=30) is not None
+        _wait_recorded(lab, "carol", q.request_id)
+    common = ["--context", CTX, "--user", "carol", *lab.net_args()]
+    env = {"WART_PASSWORD": PASSWORD}
+    listed = procs.start("record-list", ["record", "list", *common], env=env)
+    assert listed.popen.wait(30) == 0, listed.output()
+    assert q.request_id in listed.output()
+    out = tmp_path / "carol.mcap"
+    got = procs.start(
+        "record-get", ["record", "get", q.request_id, "-o", str(out), *common], env=env
+    )
+    assert got.popen.wait(30) == 0, got.output()
+    report = procs.start("report", ["report", str(out)])
+    assert report.popen.wait(30) == 0, report.output()
+    assert "distance:" in report.output() and "ended:       finished" in report.output()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(out.read_bytes()[:100])
+    bad = procs.start("report-bad", ["report", str(cut)])
+    assert bad.popen.wait(30) == 1
+    assert "error:" in bad.output() and "Traceback" not in bad.output()
