@@ -34,12 +34,17 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
+    FileContent,
+    FileList,
+    FileListRequest,
     OkReply,
     OutputLines,
     QueueStateRequest,
+    ReadFile,
     RequestStatus,
     RoomEvent,
     RunMode,
+    SaveFile,
     StopControl,
 )
 from common.remote_robot import ZenohRobotLink
@@ -136,6 +141,20 @@ class AgentClient:
     ) -> str:
         message = ContextSettings(slot_seconds=slot_seconds, enabled=enabled, agent=agent)
         return self.client.request(self.ctx, message, OkReply, "change settings").detail
+
+    # -- my files, kept by the context (the page's editor); always the caller's own
+
+    def save_file(self, name: str, source: bytes) -> str:
+        reply = self.client.request(
+            self.ctx, SaveFile(name=name, source=source), OkReply, f"save {name}"
+        )
+        return reply.detail
+
+    def list_files(self) -> FileList:
+        return self.client.request(self.ctx, FileListRequest(), FileList, "list my files")
+
+    def read_file(self, name: str) -> FileContent:
+        return self.client.request(self.ctx, ReadFile(name=name), FileContent, f"read {name}")
 
     # -- waiting
 

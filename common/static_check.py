@@ -136,6 +136,7 @@ def _imports(tree: ast.Module) -> list[Problem]:
     problems = []
     for node in ast.walk(tree):
         names: list[str] = []
+        line = getattr(node, "lineno", 1)
         if isinstance(node, ast.Import):
             names = [alias.name for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -159,7 +160,7 @@ def _imports(tree: ast.Module) -> list[Problem]:
             else:
                 problems.append(Problem(node.lineno, "__import__ of a computed name"))
         for name in names:
-            problem = _module_problem(name, node.lineno)
+            problem = _module_problem(name, line)
             if problem is not None:
                 problems.append(problem)
     return problems
