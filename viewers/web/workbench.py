@@ -125,6 +125,9 @@ class Workbench:
         self._traceback = TracebackReader()
         self._running_on: str | None = None  # the robot my editor's run is queued on
         self._errors: list[Problem] = []
+        # The context's news of my run counts up: a reply that arrives after the news
+        # (a run can start, or end, before the query's answer is back) must not hide it.
+        self._news = 0
         gui = client.gui
         with gui.add_folder("Editor") as self.folder:
             self.start_from = gui.add_dropdown(
@@ -275,19 +278,21 @@ class Workbench:
         if ready is None:
             return
         name, source = ready
+        self._running_on = agent
+        news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
         except LabError as exc:
             self.say(f"Not queued on {agent}: {exc}", bad=True)
             return
-        self._running_on = agent
         self._errors = []
         when = (
             "it starts now"
             if queued.position == 0 or (queued.eta_s is not None and queued.eta_s < 1.0)
             else f"you are #{queued.position} in the queue"
         )
-        self.say(f"{name} is queued on {agent} ({where}): {when}.")
+        if self._news == news:
+            self.say(f"{name} is queued on {agent} ({where}): {when}.")
         self.robots.refresh_agents()
 
     def _chosen(self) -> str | None:
@@ -336,12 +341,14 @@ class Workbench:
         agent = self._running_on or self._chosen()
         if agent is None:
             return
+        news = self._news
         try:
             detail = self.connection.cancel_control(self.ctx, agent)
         except LabError as exc:
             self.say(f"Nothing stopped on {agent}: {exc}", bad=True)
             return
-        self.say(f"Stopped: {detail}.")
+        if self._news == news:
+            self.say(f"Stopped: {detail}.")
         self.robots.refresh_agents()
 
     def _reset(self) -> None:
@@ -363,6 +370,8 @@ class Workbench:
     def on_request(self, event: RequestEvent) -> None:
         if event.user != self.connection.user or event.agent != self._running_on:
             return
+        if event.status != "queued":  # "queued" is what the request's own reply says
+            self._news += 1
         if event.status in ("finished", "cancelled", "refused"):
             why = f": {event.reason}" if event.reason else ""
             self.say(f"Your controller on {event.agent} {event.status}{why}.")
