@@ -35,9 +35,13 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
+    FileContent,
+    FileList,
+    FileListRequest,
     OkReply,
     OutputLines,
     QueueStateRequest,
+    ReadFile,
     RecordingChunk,
     RecordingGet,
     RecordingList,
@@ -45,6 +49,7 @@ from common.messages import (
     RequestStatus,
     RoomEvent,
     RunMode,
+    SaveFile,
     StopControl,
 )
 from common.remote_robot import ZenohRobotLink
@@ -180,6 +185,20 @@ class AgentClient:
                 progress(offset, total)
         part.replace(dest)
         return dest
+
+    # -- my files, kept by the context (the page's editor); always the caller's own
+
+    def save_file(self, name: str, source: bytes) -> str:
+        reply = self.client.request(
+            self.ctx, SaveFile(name=name, source=source), OkReply, f"save {name}"
+        )
+        return reply.detail
+
+    def list_files(self) -> FileList:
+        return self.client.request(self.ctx, FileListRequest(), FileList, "list my files")
+
+    def read_file(self, name: str) -> FileContent:
+        return self.client.request(self.ctx, ReadFile(name=name), FileContent, f"read {name}")
 
     # -- waiting
 

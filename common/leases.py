@@ -152,6 +152,26 @@ class LeaseBook:
             return lease
         return None
 
+    def may_reset(self, principal: Principal, agent: str, now: float | None = None) -> str | None:
+        """Why ``principal`` may not reset ``agent`` (None: it may).
+
+        A map editor may; otherwise only the holder of the agent's lease in
+        force, or the session that lease serves (the student whose uploaded
+        controller the runner drives): a reset is a jump of the robot, and
+        only whoever holds it now may make it jump.
+        """
+        if principal.has("edit_map"):
+            return None
+        lease = self.in_force(agent, now)
+        if lease is None:
+            return f"{agent} is not yours now: reset it while your controller holds it"
+        if principal.session_id in (lease.holder_session, lease.requester_session):
+            return None
+        return (
+            f"{agent} is driven by someone else's controller now: only they or a map editor "
+            "may reset it"
+        )
+
     def agents_in_force(self, now: float | None = None) -> list[str]:
         """The agents whose lease is in force at ``now`` (wall clock), sorted."""
         t = time.time() if now is None else now

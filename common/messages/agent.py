@@ -14,6 +14,11 @@ runner's reply carries a claim sealed with its own session
 (:class:`RunAccepted`), whose session id the lease names. Whoever drives an
 agent (the runner, or the student's ``wart control``) reports the
 controller's output and end on ``ctx/<ctx>/output`` (:class:`ControllerOutput`).
+
+The page's editor keeps each user's controller files in the agent context
+(:class:`SaveFile`, :class:`FileListRequest`, :class:`ReadFile`, on the same
+``ctx/<ctx>/request``). None of them names a user: the context files them
+under the user of the envelope's session, so nobody can name another's.
 """
 
 from __future__ import annotations
@@ -99,6 +104,54 @@ class ContextSettings(Message):
 
 class QueueStateRequest(Message):
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+
+# --- a user's files in the agent context (the page's editor) ----------------------------
+
+FILE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,60}\.py$"
+FileName = Annotated[str, msgspec.Meta(pattern=FILE_NAME_PATTERN, max_length=64)]
+"""A plain .py name: no directory, no leading dot, so never a path out of the user's folder."""
+
+
+class SaveFile(Message):
+    """Keep ``source`` as the sender's file ``name`` (replacing one of that name)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    name: FileName
+    source: Upload
+
+
+class FileListRequest(Message):
+    """The sender's own files, newest first (reply: :class:`FileList`)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+
+class FileInfo(msgspec.Struct, frozen=True, kw_only=True):
+    name: FileName
+    size: NonNegInt
+    saved_at: float  # wall-clock seconds
+
+
+class FileList(Message):
+    files: Annotated[list[FileInfo], msgspec.Meta(max_length=64)]
+    max_files: NonNegInt  # how many the context keeps per user (the oldest go first)
+    max_bytes: NonNegInt  # the largest file it keeps
+
+
+class ReadFile(Message):
+    """One of the sender's own files (reply: :class:`FileContent`; not_found otherwise)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    name: FileName
+
+
+class FileContent(Message):
+    name: FileName
+    source: Upload
+    saved_at: float
 
 
 # --- agent context state and events ----------------------------------------------------
@@ -230,14 +283,20 @@ __all__ = [
     "ControlQueued",
     "ControlRequest",
     "ControllerOutput",
+    "FileContent",
+    "FileInfo",
+    "FileList",
+    "FileListRequest",
     "OutputLines",
     "QueueEntry",
     "QueueStateRequest",
+    "ReadFile",
     "RequestStatus",
     "RunAccepted",
     "RunClaim",
     "RunMode",
     "RunRequest",
     "RunStop",
+    "SaveFile",
     "StopControl",
 ]

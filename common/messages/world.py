@@ -191,6 +191,8 @@ class WorldSnapshot(Message):
     # when it logged in with one: agent contexts seal lease keys to its box key
     # (common/leasemac.py). None: a world without identity, Ed25519 commands only.
     identity: SignedToken | None = None
+    # "real": a Khepera bridge (robots on serial ports); nothing can be edited or reset there.
+    kind: Literal["sim", "real"] = "sim"
 
 
 class AgentCommand(Message):
@@ -231,6 +233,10 @@ class Lease(Message):
     holder_key: SealedKey | None = None
     world_key: SealedKey | None = None
     world_box: Bytes32 | None = None
+    # The session whose request this lease serves: the student who uploaded a
+    # deployed controller (the holder is then the runner), or the holder itself
+    # (remote). The world lets it reset the agent while the lease is in force.
+    requester_session: SessionId | None = None
 
 
 class MacCommand(Message):
@@ -276,11 +282,21 @@ class ResizeArena(msgspec.Struct, frozen=True, tag=True, kw_only=True):
     height: Positive
 
 
-EditOp = AddItem | MoveItem | RotateItem | RemoveItem | ResizeArena
+class ResetAgent(msgspec.Struct, frozen=True, tag=True, kw_only=True):
+    """Put an agent back at its start pose (the map's, or where a map editor last put it).
+
+    Allowed to a map editor, and to the holder or the requester of the agent's
+    lease while it is in force (a student resets the robot their controller drives).
+    """
+
+    id: Ident
+
+
+EditOp = AddItem | MoveItem | RotateItem | RemoveItem | ResizeArena | ResetAgent
 
 
 class WorldEdit(Message):
-    """A live edit (sealed, ``edit_map`` permission, on ``world/<world>/edit``)."""
+    """A live edit (sealed, on ``world/<world>/edit``): ``edit_map``, except ResetAgent."""
 
     op: EditOp
 

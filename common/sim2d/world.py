@@ -124,6 +124,9 @@ class World:
         self.lights: list[Light] = []
         self.zones: dict[str, Zone] = {}
         self.agents: list[Agent] = []
+        # Each agent's start pose (where it was added, or a map editor last put it):
+        # where reset_agent puts it back.
+        self.homes: dict[str, tuple[float, float, float]] = {}
         self._agent_by_body: dict[int, Agent] = {}
         self._object_by_body: dict[int, MovableObject] = {}
 
@@ -435,6 +438,7 @@ class World:
         self._agent_by_body[id_of(agent.body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
         self._append_agent_state((x, y, heading), arm)
+        self.homes[ident] = (float(x), float(y), float(heading))
         if not defer_tables:
             self._rebuild_tables()
         self.layout += 1
@@ -544,6 +548,19 @@ class World:
             return
         raise EditError(f"no object named {ident!r} in this world")
 
+    def set_home(self, ident: str) -> None:
+        """Make an agent's current pose its start pose (a map editor placed it)."""
+        if ident in self.homes:
+            self.homes[ident] = self.pose_of(ident)
+
+    def reset_agent(self, ident: str) -> tuple[float, float, float]:
+        """Put an agent back at its start pose, at rest; returns the pose."""
+        home = self.homes.get(ident)
+        if home is None:
+            raise EditError(f"no agent named {ident!r} in this world")
+        self.move(ident, *home)
+        return home
+
     def rotate(self, ident: str, heading: float) -> None:
         x, y, _ = self.pose_of(ident)
         self.move(ident, x, y, heading)
@@ -573,6 +590,7 @@ class World:
                 self.grippers.release(agent.held)
             self.space.remove(agent.body, agent.control, agent.shape, *agent.tongs, *agent.joints)
             del self.agents[slot]
+            self.homes.pop(ident, None)
             self._agent_by_body.pop(id_of(agent.body), None)
             self._delete_agent_state(slot)
             self._rebuild_tables()

@@ -511,6 +511,7 @@ class BridgeService(WorldService):
             lights=[],
             agents=infos,
             rows=[a.id for a in agents],
+            kind="real",
         )
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:

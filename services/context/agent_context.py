@@ -49,14 +49,20 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
+    FileContent,
+    FileInfo,
+    FileList,
+    FileListRequest,
     Message,
     OkReply,
     OutputLines,
     QueueStateRequest,
+    ReadFile,
     RecordingGet,
     RecordingListRequest,
     RequestStatus,
     Revocation,
+    SaveFile,
     StopControl,
     UserRemovalRequest,
 )
@@ -78,6 +84,7 @@ from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
+from services.context.user_files import FileStoreError, UserFiles
 
 LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
@@ -108,6 +115,8 @@ class AgentContext(SlotScheduler, ChatRoom):
         # (atomically, synced) whenever they change, read back here.
         self._book_path: Path | None = None if data_dir is None else data_dir / f"{name}.queues"
         self._save_lock = threading.Lock()
+        # The page's editor keeps each member's last files here, beside the queues.
+        self.files = UserFiles(None if data_dir is None else data_dir / f"{name}.files")
         self._restore_book()
         self._wake = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
@@ -252,8 +261,13 @@ class AgentContext(SlotScheduler, ChatRoom):
                 QueueStateRequest,
                 RecordingListRequest,
                 RecordingGet,
+                SaveFile,
+                FileListRequest,
+                ReadFile,
             ),
         )
+        if isinstance(request, SaveFile | FileListRequest | ReadFile):
+            return self._files(principal, request)
         if isinstance(request, ChatSay):
             self._say(principal, request)
             return OkReply()
@@ -341,6 +355,32 @@ class AgentContext(SlotScheduler, ChatRoom):
             position=position,
             start_eta=eta,
             slot_seconds=self.book.slot_seconds,
+        )
+
+    def _files(
+        self, principal: Principal, request: SaveFile | FileListRequest | ReadFile
+    ) -> Message:
+        """The member's own files: always those of the envelope's user, never a named one."""
+        self._require_member(principal)
+        user = principal.user
+        try:
+            if isinstance(request, SaveFile):
+                saved = self.files.save(user, request.name, request.source)
+                return OkReply(detail=f"saved {saved.name} ({saved.size} bytes)")
+            if isinstance(request, ReadFile):
+                source, saved_at = self.files.read(user, request.name)
+                return FileContent(name=request.name, source=source, saved_at=saved_at)
+            files = self.files.listing(user)[: self.files.max_files]
+        except FileStoreError as exc:
+            code = "not_found" if exc.code == "not_found" else "bad_request"
+            raise RequestError(code, str(exc)) from None
+        except OSError as exc:
+            self.log.error("files of %s: %s", user, exc)
+            raise RequestError("unavailable", "the lab could not reach your files now") from None
+        return FileList(
+            files=[FileInfo(name=f.name, size=f.size, saved_at=f.saved_at) for f in files],
+            max_files=self.files.max_files,
+            max_bytes=self.files.max_bytes,
         )
 
     def _cancel(self, principal: Principal, request: CancelControl) -> Message:

@@ -76,6 +76,7 @@ class LeaseSigner:
             holder_session=run.holder_session,
             start=run.start,
             end=end,
+            requester_session=run.job.session_id,
         )
         sealed = self.lease_keys(run)
         if sealed is not None:

@@ -50,6 +50,7 @@ from common.messages import (
     MessageError,
     MoveItem,
     RemoveItem,
+    ResetAgent,
     ResizeArena,
     RotateItem,
     WorldEdit,
@@ -250,8 +251,10 @@ class EngineService(WorldService):
 
     def _on_edit(self, query: zenoh.Query) -> Message:
         principal, edit = self._open(str(query.key_expr), query.payload, WorldEdit)
-        principal.require("edit_map", "edit the world")
         op = edit.op
+        if isinstance(op, ResetAgent):
+            return self._reset(principal, op)
+        principal.require("edit_map", "edit the world")
 
         def apply(world: World) -> Message:
             try:
@@ -264,14 +267,36 @@ class EngineService(WorldService):
 
         return self._in_sim(apply)
 
+    def _reset(self, principal: Principal, op: ResetAgent) -> Message:
+        """A robot back at its start pose: its lease's holder or requester, or a map editor.
+
+        Not journalled: it changes where a robot is, not the map (a restart puts
+        every robot at its start pose anyway).
+        """
+        refused = self.leases.may_reset(principal, op.id)
+        if refused is not None:
+            raise AuthError("forbidden", refused)
+
+        def apply(world: World) -> Message:
+            try:
+                x, y, _ = world.reset_agent(op.id)
+            except EditError as exc:
+                raise RequestError("conflict", str(exc)) from None
+            self.log.info("%s reset %s to its start pose", principal.user, op.id)
+            return EditResult(layout=world.layout, detail=f"{op.id} is back at ({x:.0f}, {y:.0f})")
+
+        return self._in_sim(apply)
+
     @staticmethod
     def _apply_op(world: World, op: Any) -> None:
         if isinstance(op, AddItem):
             maps.add_entry(world, op.section, op.entry, op.section)
         elif isinstance(op, MoveItem):
             world.move(op.id, op.x, op.y, op.heading)
+            world.set_home(op.id)  # a robot a map editor placed starts there from now on
         elif isinstance(op, RotateItem):
             world.rotate(op.id, op.heading)
+            world.set_home(op.id)
         elif isinstance(op, RemoveItem):
             world.remove(op.id)
         elif isinstance(op, ResizeArena):

@@ -66,7 +66,10 @@ def enter_arena(page: ViserPage, lab: RealLab, user: str) -> ChatPanel:
     page.tab(f"{CTX} (arena)").last.click()
     page.wait_text("Upload controller")
     session = session_of(lab.viewer, user)
-    return next(iter(session.labs.values())).panels[CTX]
+    # The tab shows while its panel is still being built (the editor comes after the robots).
+    panels = next(iter(session.labs.values())).panels
+    wait_until(lambda: CTX in panels, 10, what=f"{user}'s {CTX} panel")
+    return panels[CTX]
 
 
 def choose(page: ViserPage, label: str, option: str) -> None:

@@ -199,6 +199,15 @@ class ArenaSettings:
     can_manage: bool  # the owner or 'kick' there: slot length, stop, enable/disable
 
 
+@dataclass(frozen=True)
+class SavedFile:
+    """One of my controller files, as the agent context keeps it for the editor."""
+
+    name: str
+    size: int
+    saved_at: float  # wall-clock seconds
+
+
 # One figure for the page's check and the agent context's limit (the wire type's bound).
 MAX_CONTROLLER_BYTES = MAX_UPLOAD_BYTES
 CONTROLLER_SUFFIXES = (".py",)
@@ -253,6 +262,7 @@ class SceneLayout:
     robot_radius: float = 27.5  # Khepera I: 55 mm across
     version: int = 0
     offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
+    real: bool = False  # real robots behind a Khepera bridge: no edits, no reset
 
 
 @dataclass(frozen=True)
@@ -392,6 +402,24 @@ class LabConnection(Protocol):
     def stop_agent(self, ctx: str, agent: str) -> str: ...
 
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str: ...
+
+    # -- the editor (workbench): my files in the arena's context, reset, the real arenas
+
+    def list_files(self, ctx: str) -> list[SavedFile]:
+        """My own files kept by ``ctx``, newest first."""
+        ...
+
+    def read_file(self, ctx: str, name: str) -> bytes: ...
+
+    def save_file(self, ctx: str, name: str, source: bytes) -> str: ...
+
+    def reset_robot(self, ctx: str, agent: str) -> str:
+        """Put ``agent`` back at its start pose (a simulated arena, while I hold it)."""
+        ...
+
+    def real_robots(self) -> list[tuple[str, str]]:
+        """(context, agent) of every robot of the real arenas I have joined."""
+        ...
 
     def logout(self) -> None: ...
 

@@ -24,6 +24,7 @@ from viewers.web.adapters import (
 from viewers.web.editor import MapEditor
 from viewers.web.robot_panel import RobotPanel
 from viewers.web.text import check_line, clock, escape_md
+from viewers.web.workbench import Workbench
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.chat")
@@ -73,11 +74,13 @@ class ChatPanel:
             )
             self.kick = gui.add_button("Kick", color="red", visible=joined.can_kick)
             self.robots: RobotPanel | None = None
+            self.workbench: Workbench | None = None
             self.editor: MapEditor | None = None
             if self.kind in ARENA_KINDS and self.world and on_watch is not None:
                 self.watch = gui.add_button("Show this arena", color="teal")
                 self.watch.on_click(lambda _: self.show_world())
                 self.robots = RobotPanel(client, connection, self.ctx)
+                self.workbench = Workbench(client, connection, self.ctx, self.robots)
                 # Everyone sees the editor; without edit_map it is disabled and says why.
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
             self.leave = gui.add_button("Leave")

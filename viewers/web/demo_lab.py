@@ -43,6 +43,7 @@ from viewers.web.adapters import (
     PrivateEvent,
     Queued,
     RobotReadings,
+    SavedFile,
     SceneFrame,
     SceneLayout,
 )
@@ -257,6 +258,7 @@ class DemoLab:
         }
         self.worlds: dict[str, DemoWorld] = {"arena": DemoWorld("arena", robots, rate=rate)}
         self._lock = threading.RLock()
+        self.files: dict[str, dict[str, tuple[bytes, float]]] = {}  # user -> name -> (src, at)
         self._contexts: dict[str, _Context] = {}
         self._online: dict[str, int] = {}
         self._subs: dict[int, tuple[str, Callable[[LabEvent], None]]] = {}
@@ -543,6 +545,45 @@ class DemoConnection:
             self._manage(ctx).enabled = enabled
         self._lab._broadcast(AgentsEvent(ctx))
         return f"remote control {'on' if enabled else 'off'}"
+
+    # -- the editor: files per user in the lab (not per connection), like the real context
+
+    def list_files(self, ctx: str) -> list[SavedFile]:
+        with self._lab._lock:
+            self._lab.context(ctx)
+            mine = self._lab.files.get(self._user, {})
+            rows = [SavedFile(n, len(src), t) for n, (src, t) in mine.items()]
+        return sorted(rows, key=lambda f: -f.saved_at)
+
+    def read_file(self, ctx: str, name: str) -> bytes:
+        with self._lab._lock:
+            kept = self._lab.files.get(self._user, {}).get(name)
+        if kept is None:
+            raise LabError(f"you have no file named {name}")
+        return kept[0]
+
+    def save_file(self, ctx: str, name: str, source: bytes) -> str:
+        if not name.endswith(".py") or not is_ident(name):
+            raise LabError(f"{name!r} is not a file name")
+        with self._lab._lock:
+            self._lab.context(ctx)
+            mine = self._lab.files.setdefault(self._user, {})
+            mine[name] = (source, time.time())
+            for old in sorted(mine, key=lambda n: mine[n][1])[: max(0, len(mine) - 10)]:
+                del mine[old]
+        return f"saved {name} ({len(source)} bytes)"
+
+    def reset_robot(self, ctx: str, agent: str) -> str:
+        with self._lab._lock:
+            queue = self._lab.context(ctx).queue.get(agent)
+            if queue is None:
+                raise LabError(f"there is no robot {agent!r} in {ctx}")
+            if not queue or queue[0] != self._user:
+                raise LabError(f"{agent} is not yours now: reset it while your controller holds it")
+        return f"{agent} is back at its start"  # demo robots circle their home spots anyway
+
+    def real_robots(self) -> list[tuple[str, str]]:
+        return []  # the demo lab has no real arena
 
     # -- admin
 

@@ -270,8 +270,12 @@ class LabTab:
                 robots.refresh_agents()
             elif isinstance(event, RequestEvent):
                 robots.on_request(event)
+                if panel is not None and panel.workbench is not None:
+                    panel.workbench.on_request(event)
             else:
                 robots.on_output(event)
+                if panel is not None and panel.workbench is not None:
+                    panel.workbench.on_output(event)
         elif isinstance(event, DisconnectedEvent):
             self.client.add_notification(
                 title=f"Disconnected from {self.label}", body=event.reason, color="red"

@@ -46,6 +46,7 @@ from viewers.web.adapters import (
     MemberEvent,
     PrivateEvent,
     Queued,
+    SavedFile,
 )
 from viewers.web.address import LabAddress
 from viewers.web.lab_links import LabLink
@@ -117,6 +118,7 @@ class RealConnection:
         self._worlds: dict[str, UserWorld] = {}
         self._world_only: set[str] = set()
         self._arenas: dict[str, ArenaLink] = {}  # joined agent contexts
+        self._real_worlds: dict[str, bool] = {}  # world -> a Khepera bridge (asked once)
         self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
         client.on_kicked = lambda k: self._queue.put(
@@ -425,6 +427,44 @@ class RealConnection:
 
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
         return self._arena(ctx).set_enabled(enabled, agent)
+
+    # -- the editor
+
+    def list_files(self, ctx: str) -> list[SavedFile]:
+        return self._arena(ctx).list_files()
+
+    def read_file(self, ctx: str, name: str) -> bytes:
+        return self._arena(ctx).read_file(name)
+
+    def save_file(self, ctx: str, name: str, source: bytes) -> str:
+        return self._arena(ctx).save_file(name, source)
+
+    def reset_robot(self, ctx: str, agent: str) -> str:
+        world = self._arena(ctx).world
+        if world is None:
+            raise LabError(f"{ctx} has not said which world it drives yet: try again")
+        return self.world(world).reset(agent)
+
+    def _is_real(self, world: str) -> bool:
+        """Whether ``world`` is a Khepera bridge (asked once: a world does not change kind)."""
+        known = self._real_worlds.get(world)
+        if known is None:
+            feed = self.world(world)
+            feed.source.ready()
+            known = self._real_worlds[world] = feed.snapshot().real
+        return known
+
+    def real_robots(self) -> list[tuple[str, str]]:
+        found = []
+        for ctx, arena in list(self._arenas.items()):
+            world = arena.world
+            try:
+                if world is None or not self._is_real(world):
+                    continue
+                found += [(ctx, row.agent) for row in arena.rows(self._offline(world))]
+            except LabError as exc:
+                log.info("is %s real? %s", ctx, exc)
+        return found
 
     # -- admin
 

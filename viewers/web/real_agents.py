@@ -36,6 +36,7 @@ from viewers.web.adapters import (
     OutputEvent,
     Queued,
     RequestEvent,
+    SavedFile,
 )
 
 log = logging.getLogger("wart.viewer.agents")
@@ -240,6 +241,18 @@ class ArenaLink:
         detail = self._call(lambda: self.agents.settings(enabled=enabled, agent=agent))
         self._refresh()
         return detail
+
+    # -- my files (the editor); the context files them under my session's user
+
+    def list_files(self) -> list[SavedFile]:
+        listing = self._call(self.agents.list_files)
+        return [SavedFile(f.name, f.size, f.saved_at) for f in listing.files]
+
+    def read_file(self, name: str) -> bytes:
+        return self._call(lambda: self.agents.read_file(name)).source
+
+    def save_file(self, name: str, source: bytes) -> str:
+        return self._call(lambda: self.agents.save_file(name, source))
 
     def _refresh(self) -> None:
         """Read the queues now so the page shows a change at once (events follow anyway)."""

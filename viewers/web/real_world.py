@@ -29,6 +29,7 @@ from common.messages import (
     MessageError,
     MoveItem,
     RemoveItem,
+    ResetAgent,
     ResizeArena,
     SensorSample,
     WorldEdit,
@@ -105,6 +106,7 @@ def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]
         robot_radius=radius,
         version=snap.layout,
         offline=frozenset(a.id for a in snap.agents if not a.online),
+        real=snap.kind == "real",
     )
     return view, object_rows
 
@@ -305,9 +307,11 @@ class UserWorld:
     def sensors(self, agent: str) -> RobotReadings | None:
         return self.source.sensors(agent)
 
-    def _ask(self, key: str, message: Message, what: str) -> EditResult:
+    def _ask(
+        self, key: str, message: Message, what: str, *, needs_edit_map: bool = True
+    ) -> EditResult:
         client = self._connection.client
-        if "edit_map" not in self._connection.permissions:
+        if needs_edit_map and "edit_map" not in self._connection.permissions:
             raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
         session = client.session
         if session is None:
@@ -322,7 +326,7 @@ class UserWorld:
         if reply is None:
             raise LabError(f"the world {self.world} does not answer (is its engine running?)")
         if isinstance(reply, ErrorReply):
-            if reply.code == "forbidden":
+            if reply.code == "forbidden" and needs_edit_map:
                 raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
             raise LabError(reply.message)
         assert isinstance(reply, EditResult)
@@ -335,6 +339,16 @@ class UserWorld:
             WorldEdit(op=to_wire_edit(edit, self.snapshot())),
             "edit the map",
         )
+
+    def reset(self, agent: str) -> str:
+        """The robot back at its start pose; the world checks I hold it (or may edit maps)."""
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        if self.snapshot().real:
+            raise LabError(f"{self.world} is a real arena: put the robot back by hand")
+        key = keys.world_edit(self.source.realm, self.world)
+        message = WorldEdit(op=ResetAgent(id=agent))
+        return self._ask(key, message, f"reset {agent}", needs_edit_map=False).detail
 
     def maps(self) -> list[str]:
         key = keys.world_map(self.source.realm, self.world)

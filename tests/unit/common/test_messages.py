@@ -32,7 +32,7 @@ def sample_value(tp: object, name: str = "") -> object:
         if meta is not None and base is bytes and meta.min_length:
             return b"\x01" * meta.min_length
         if meta is not None and base is str and meta.pattern:
-            return "name-1"
+            return "name-1.py" if meta.pattern.endswith(r"\.py$") else "name-1"
         if meta is not None and base in (int, float) and meta.ge is not None:
             return base(meta.ge) + base(1)
         return sample_value(base, name)

@@ -1,0 +1,141 @@
+"""The arena's editor in Chromium against a real lab: write, Check, fix, run, see it move, stop.
+
+Router, registry, engine (MAC leases), runner (bubblewrap sandboxes) and the
+agent context ``arena``, as in test_real_agents; slots long enough that only
+Stop ends the run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.runner.sandbox import sandbox_problem
+from tests.browser.conftest import ViserPage, wait_until
+from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_agents import enter_arena, pick_robot
+from tests.browser.test_real_lab import session_of
+from viewers.web.app import WebViewer
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+GOOD = """\
+from common.controller import Controller, Khepera
+
+
+class Circle(Controller):
+    period = 0.05
+
+    def initialize(self, robot: Khepera) -> None:
+        print("circling")
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(8, 4)
+"""
+PLANTED = GOOD.replace("robot.set_speeds(8, 4)", "robot.set_speed(8, 4)")  # line 11
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    with real_lab(Path(tmp_path_factory.mktemp("workbench")), agents=True, slot=600.0) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def write_code(page: ViserPage, text: str, wait_for: object) -> None:
+    """Type into the editor as a student does: select all, then the new text."""
+    area = page.input_after_label("Code")
+    area.fill(text)
+    wait_until(lambda: wait_for() is True, 10, what="the editor's text on the server")  # type: ignore[operator]
+
+
+def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab) -> None:
+    alice = open_page("alice")
+    panel = enter_arena(alice, lab, "alice")
+    bench = panel.workbench
+    assert bench is not None
+    view = session_of(lab.viewer, "alice").view
+    wait_until(lambda: view.frames_applied > 3, 15, what="the arena's frames in alice's view")
+
+    # A planted error: Check names its line and marks it beside the code.
+    write_code(alice, PLANTED, lambda: bench.code.value == PLANTED)
+    alice.click("Check")
+    alice.wait_text("line 11: robot.set")
+    alice.wait_text("does not exist on Khepera (did you mean set")
+    assert ">> 11 |         robot.set_speed(8, 4)" in bench.problems.content
+    alice.wait_text(">> 11 |")
+    alice.screenshot("workbench-check-names-the-line")
+    # Run refuses a file Check finds wrong: nothing is queued.
+    pick_robot(alice, panel, "k0")
+    alice.click("Run in simulation")
+    alice.wait_text("Not queued: fix the problems Check found first")
+
+    # Fixed: Check is clean, the run queues on k0 and the robot moves in the world.
+    write_code(alice, GOOD, lambda: bench.code.value == GOOD)
+    alice.click("Check")
+    alice.wait_text("Check: no problems found")
+    assert view.feed is not None
+    start = view.feed.latest()
+    assert start is not None
+    k0 = view.robot_names.index("k0")
+    alice.click("Run in simulation")
+    # Queued, then running at once (nobody waits for k0): the status says the latter.
+    alice.wait_text("Your controller runs on k0", timeout=15_000)
+
+    def k0_moved() -> bool:
+        frame = view.feed.latest() if view.feed else None
+        return frame is not None and bool(
+            np.hypot(*(frame.poses[k0, :2] - start.poses[k0, :2])) > 30
+        )
+
+    wait_until(k0_moved, 20, what="k0 driven by the editor's controller")
+    alice.screenshot("workbench-running")
+    # The file is kept by the lab, under alice's name: it is in her list.
+    assert "mine: my_controller.py" in bench.start_from.options
+    assert [f.name for f in bench.connection.list_files(bench.ctx)] == ["my_controller.py"]
+
+    # Reset while she holds k0: the world puts it back at its start pose.
+    alice.click("Reset")
+    alice.wait_text("Reset: k0 is back at")
+
+    # Stop ends her controller; the context says so and k0 comes to rest.
+    alice.click("Stop")
+    # "Stopped: ..." at once, then the context's word that the run ended replaces it.
+    alice.wait_text("Your controller on k0 cancelled", timeout=15_000)
+    seen: list[np.ndarray] = []
+
+    def k0_at_rest() -> bool:
+        frame = view.feed.latest() if view.feed else None
+        if frame is None:
+            return False
+        seen.append(frame.poses[k0, :2].copy())
+        # Still over the last ten frames the page converted (about 0.4 s of frames).
+        recent = seen[-10:]
+        return len(recent) == 10 and float(np.ptp(np.asarray(recent), axis=0).max()) < 1.0
+
+    wait_until(k0_at_rest, 15, what="k0 at rest after Stop")
+    alice.screenshot("workbench-stopped")
+
+
+def test_queue_on_the_real_robot_without_a_real_arena_says_what_to_do(
+    open_page, lab: RealLab
+) -> None:
+    bob = open_page("bob")
+    panel = enter_arena(bob, lab, "bob")
+    assert panel.workbench is not None
+    bob.click("Queue on the real robot")
+    bob.wait_text("You have not joined a real arena")
+    # Keyboard only: Tab reaches the editor's buttons, each named by its text.
+    bob.button("Check").focus()
+    bob.p.keyboard.press("Enter")
+    bob.wait_text("Check: no problems found")

@@ -1,0 +1,32 @@
+"""The editor marks lines: Check's problems, and a run's exception found in relayed output."""
+
+from __future__ import annotations
+
+from common.static_check import Problem
+from viewers.web.workbench import TracebackReader, excerpt
+
+TRACEBACK = [
+    "Traceback (most recent call last):",
+    '  File "/sandbox/lib/common/controller.py", line 320, in run',
+    "    self.controller.do_work(self.robot)",
+    '  File "/work/user/controller.py", line 12, in do_work',
+    "    x = 1 / 0",
+    "ZeroDivisionError: division by zero",
+]
+
+
+def test_the_exception_is_placed_at_the_students_line_not_the_apis() -> None:
+    reader = TracebackReader("circle.py")
+    found = [p for p in (reader.feed(line) for line in TRACEBACK) if p is not None]
+    assert [str(p) for p in found] == ["line 12: ZeroDivisionError: division by zero"]
+
+
+def test_plain_prints_are_not_errors() -> None:
+    reader = TracebackReader()
+    assert reader.feed("hello") is None and reader.feed("ValueError is a word here") is None
+
+
+def test_the_excerpt_marks_each_problem_line() -> None:
+    source = "a = 1\nb = 2\nc = 3\nd = 4\ne = 5\n"
+    text = excerpt(source, [Problem(2, "x"), Problem(5, "y"), Problem(None, "file")])
+    assert ">> 2 | b = 2" in text and ">> 5 | e = 5" in text and "   3 | c = 3" in text

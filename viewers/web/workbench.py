@@ -1,0 +1,390 @@
+"""The arena tab's editor: write a controller, Check it, run it, stop it, reset the robot.
+
+A student starts from an example (examples/*.py) or one of their own files,
+which the agent context keeps per user (:meth:`LabConnection.save_file`; the
+page keeps nothing of its own), edits it in a multiline text input, and:
+
+- **Check**: :func:`common.static_check.check_source` (the pre-run check plus
+  syntax, a Controller with do_work, calls Khepera does not have, imports the
+  sandbox refuses), each problem as ``line N: what is wrong``;
+- **Run in simulation**: saves the file, then queues it on the robot chosen in
+  the robot panel, exactly as an upload does;
+- **Queue on the real robot**: the same on a robot of a real arena (a Khepera
+  bridge) the student has joined;
+- **Stop**: cancels the student's own request on the robot (running or waiting);
+- **Reset**: the robot back at its start pose (the world allows it only to
+  whoever holds the robot now, or a map editor).
+
+viser's text area cannot colour a line, so problems are "marked" beside it: a
+list, and an excerpt of the code with ``>>`` in front of each problem line. A
+run's exception (the runner relays the traceback as output lines) is parsed
+for the innermost line of the student's file and shown the same way.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import viser
+
+from common.messages.agent import FILE_NAME_PATTERN
+from common.static_check import Problem, check_source
+from viewers.web.adapters import LabConnection, LabError, OutputEvent, RequestEvent
+from viewers.web.real_agents import check_upload
+from viewers.web.robot_panel import NONE, RobotPanel
+from viewers.web.text import escape_md
+
+log = logging.getLogger("wart.viewer.workbench")
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+DEFAULT_NAME = "my_controller.py"
+EXAMPLE_PREFIX = "example: "
+MINE_PREFIX = "mine: "
+NO_REAL = "(join a real arena first)"
+CONTEXT_LINES = 1  # lines shown around each marked line
+MAX_MARKED = 8  # problems shown with an excerpt; the rest as a count
+_FILE_NAME = re.compile(FILE_NAME_PATTERN)
+# A traceback frame, and the line that ends a traceback (the exception and its message).
+_FRAME = re.compile(r'File "(?P<path>[^"]+)", line (?P<line>\d+)')
+_EXCEPTION = re.compile(r"^(?:[A-Za-z_][\w.]*\.)?[A-Za-z_]\w*(?:Error|Exception|Exit|Interrupt)\b")
+
+
+def examples() -> dict[str, bytes]:
+    """The example controllers, by file name."""
+    return {p.name: p.read_bytes() for p in sorted(EXAMPLES.glob("*.py"))}
+
+
+def excerpt(source: str, problems: list[Problem]) -> str:
+    """The code around each problem line, the line itself marked ``>>`` (markdown)."""
+    lines = source.splitlines()
+    marked = sorted({p.line for p in problems if p.line is not None and p.line >= 1})
+    if not marked or not lines:
+        return ""
+    shown: list[int] = []
+    for n in marked[:MAX_MARKED]:
+        for i in range(max(1, n - CONTEXT_LINES), min(len(lines), n + CONTEXT_LINES) + 1):
+            if i not in shown:
+                shown.append(i)
+    width = len(str(shown[-1])) if shown else 1
+    out, previous = [], 0
+    for i in shown:
+        if previous and i > previous + 1:
+            out.append("   ...")
+        mark = ">>" if i in marked else "  "
+        out.append(f"{mark} {i:>{width}} | {lines[i - 1]}")
+        previous = i
+    return "```\n" + "\n".join(out).replace("```", "'''") + "\n```"
+
+
+def format_problems(source: str, problems: list[Problem], heading: str) -> str:
+    items = [f"- {escape_md(str(p))}" for p in problems]
+    return f"**{escape_md(heading)}**\n\n" + "\n".join(items) + "\n\n" + excerpt(source, problems)
+
+
+@dataclass
+class TracebackReader:
+    """Finds ``line N: Exception: message`` for the student's file in relayed output lines."""
+
+    filename: str = DEFAULT_NAME
+    _line: int | None = None
+
+    def feed(self, text: str) -> Problem | None:
+        frame = _FRAME.search(text)
+        if frame is not None:
+            path = frame.group("path").replace("\\", "/")
+            name = path.rsplit("/", 1)[-1]
+            # The sandbox stores the upload as controller.py; the API is lib/common/controller.py.
+            if name in (self.filename, "controller.py") and "/common/" not in path:
+                self._line = int(frame.group("line"))
+            return None
+        stripped = text.strip()
+        if self._line is not None and _EXCEPTION.match(stripped):
+            found = Problem(self._line, stripped)
+            self._line = None
+            return found
+        return None
+
+
+class Workbench:
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        connection: LabConnection,
+        ctx: str,
+        robots: RobotPanel,
+    ) -> None:
+        self.client = client
+        self.connection = connection
+        self.ctx = ctx
+        self.robots = robots
+        self._examples = examples()
+        self._traceback = TracebackReader()
+        self._running_on: str | None = None  # the robot my editor's run is queued on
+        self._errors: list[Problem] = []
+        # The context's news of my run counts up: a reply that arrives after the news
+        # (a run can start, or end, before the query's answer is back) must not hide it.
+        self._news = 0
+        gui = client.gui
+        with gui.add_folder("Editor") as self.folder:
+            self.start_from = gui.add_dropdown(
+                "Start from", tuple(EXAMPLE_PREFIX + n for n in self._examples) or ("(none)",)
+            )
+            self.open = gui.add_button(
+                "Open", hint="Load the chosen example or file into the editor"
+            )
+            self.name = gui.add_text("File name", DEFAULT_NAME)
+            first = next(iter(self._examples.values()), b"")
+            self.code = gui.add_text("Code", first.decode("utf-8", "replace"), multiline=True)
+            self.check = gui.add_button("Check", icon=viser.Icon.CHECKLIST)
+            self.save = gui.add_button("Save", icon=viser.Icon.DEVICE_FLOPPY)
+            self.run = gui.add_button(
+                "Run in simulation", color="green", icon=viser.Icon.PLAYER_PLAY
+            )
+            self.real = gui.add_dropdown("Real robot", (NO_REAL,))
+            self.queue_real = gui.add_button("Queue on the real robot", icon=viser.Icon.ROBOT)
+            self.stop = gui.add_button("Stop", color="red", icon=viser.Icon.PLAYER_STOP)
+            self.reset = gui.add_button("Reset", icon=viser.Icon.REFRESH)
+            self.status = gui.add_markdown("")
+            self.problems = gui.add_markdown("")
+        self.open.on_click(lambda _: self._open())
+        self.check.on_click(lambda _: self.check_now())
+        self.save.on_click(lambda _: self._save())
+        self.run.on_click(lambda _: self._run_sim())
+        self.queue_real.on_click(lambda _: self._run_real())
+        self.stop.on_click(lambda _: self._stop())
+        self.reset.on_click(lambda _: self._reset())
+        # My files come from the lab: read them off the page's thread (a query can take 2 s).
+        threading.Thread(target=self._load_mine, name=f"files-{ctx}", daemon=True).start()
+
+    # -- what the student sees
+
+    def say(self, text: str, *, bad: bool = False) -> None:
+        self.status.content = ("**Not done:** " if bad else "") + escape_md(text)
+
+    def _show(self, problems: list[Problem], heading: str) -> None:
+        self.problems.content = (
+            format_problems(self.code.value, problems, heading) if problems else ""
+        )
+
+    # -- files
+
+    def _filename(self) -> str | None:
+        name = self.name.value.strip()
+        if not name.endswith(".py"):
+            name += ".py"
+        if not _FILE_NAME.match(name):
+            self.say(
+                f"{name!r} is not a file name: letters, digits, '_', '-', '.', ending in .py",
+                bad=True,
+            )
+            return None
+        self._traceback.filename = name
+        return name
+
+    def _source(self) -> bytes:
+        return self.code.value.encode("utf-8")
+
+    def _load_mine(self) -> None:
+        """Fill the list with my files and open my newest one (the editor's 'last file')."""
+        try:
+            mine = self.connection.list_files(self.ctx)
+        except LabError as exc:
+            log.info("files of %s in %s: %s", self.connection.user, self.ctx, exc)
+            return
+        options = tuple(MINE_PREFIX + f.name for f in mine) + tuple(
+            EXAMPLE_PREFIX + n for n in self._examples
+        )
+        if options:
+            self.start_from.options = options
+        if mine:
+            self.start_from.value = MINE_PREFIX + mine[0].name
+            self._open()
+
+    def _open(self) -> None:
+        choice = self.start_from.value
+        if choice.startswith(EXAMPLE_PREFIX):
+            name = choice[len(EXAMPLE_PREFIX) :]
+            source = self._examples.get(name)
+            if source is None:
+                return
+            self.name.value = DEFAULT_NAME  # an example is a start: saving must not look like it
+        elif choice.startswith(MINE_PREFIX):
+            name = choice[len(MINE_PREFIX) :]
+            try:
+                source = self.connection.read_file(self.ctx, name)
+            except LabError as exc:
+                self.say(f"could not open {name}: {exc}", bad=True)
+                return
+            self.name.value = name
+        else:
+            return
+        self.code.value = source.decode("utf-8", "replace")
+        self.problems.content = ""
+        self.say(f"Opened {name}.")
+
+    def _save(self) -> str | None:
+        name = self._filename()
+        if name is None:
+            return None
+        try:
+            detail = self.connection.save_file(self.ctx, name, self._source())
+        except LabError as exc:
+            self.say(f"{name} is not saved: {exc}", bad=True)
+            return None
+        option = MINE_PREFIX + name
+        rest = tuple(o for o in self.start_from.options if o != option and o != "(none)")
+        self.start_from.options = (option, *rest)
+        self.say(detail[:1].upper() + detail[1:] + ".")
+        return name
+
+    # -- check and run
+
+    def check_now(self) -> list[Problem]:
+        name = self._filename() or DEFAULT_NAME
+        problems = check_source(self._source(), name)
+        if problems:
+            count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
+            self._show(problems, f"Check: {count}")
+            self.say(f"Check found {count}: see the marked lines below.")
+        else:
+            self.problems.content = ""
+            self.say(
+                "Check: no problems found. It will load and run; whether it drives well, "
+                "only a run shows."
+            )
+        return problems
+
+    def _ready(self) -> tuple[str, bytes] | None:
+        """Checked and saved: (name, source), or None with the reason shown."""
+        if self.check_now():
+            self.say("Not queued: fix the problems Check found first.", bad=True)
+            return None
+        name = self._save()
+        if name is None:
+            return None
+        source = self._source()
+        _, problem = check_upload(name, source)
+        if problem:
+            self.say(f"Not queued: {problem}", bad=True)
+            return None
+        return name, source
+
+    def _queue(self, ctx: str, agent: str, where: str) -> None:
+        ready = self._ready()
+        if ready is None:
+            return
+        name, source = ready
+        self._running_on = agent
+        news = self._news
+        try:
+            queued = self.connection.request_control(ctx, agent, name, source)
+        except LabError as exc:
+            self.say(f"Not queued on {agent}: {exc}", bad=True)
+            return
+        self._errors = []
+        when = (
+            "it starts now"
+            if queued.position == 0 or (queued.eta_s is not None and queued.eta_s < 1.0)
+            else f"you are #{queued.position} in the queue"
+        )
+        if self._news == news:
+            self.say(f"{name} is queued on {agent} ({where}): {when}.")
+        self.robots.refresh_agents()
+
+    def _chosen(self) -> str | None:
+        agent = self.robots.robot.value
+        if agent == NONE or agent not in self.robots.robot.options:
+            self.say("Choose a robot first (the Robot list, or click one in the view).", bad=True)
+            return None
+        return agent
+
+    def _this_arena_is_real(self) -> bool:
+        feed = self.robots.feed
+        try:
+            return feed is not None and feed.snapshot().real
+        except LabError:
+            return False
+
+    def _run_sim(self) -> None:
+        agent = self._chosen()
+        if agent is None:
+            return
+        if self._this_arena_is_real():
+            self.say("This arena's robots are real: use 'Queue on the real robot'.", bad=True)
+            return
+        self._queue(self.ctx, agent, "simulation")
+
+    def refresh_real(self) -> list[tuple[str, str]]:
+        robots = self.connection.real_robots()
+        options = tuple(f"{ctx}/{agent}" for ctx, agent in robots) or (NO_REAL,)
+        if tuple(self.real.options) != options:
+            self.real.options = options
+        return robots
+
+    def _run_real(self) -> None:
+        robots = self.refresh_real()
+        if not robots:
+            self.say(
+                "You have not joined a real arena (a Khepera bridge's context): join one from "
+                "the lobby, then queue here.",
+                bad=True,
+            )
+            return
+        chosen = next((r for r in robots if f"{r[0]}/{r[1]}" == self.real.value), robots[0])
+        self._queue(chosen[0], chosen[1], f"real robot in {chosen[0]}")
+
+    def _stop(self) -> None:
+        agent = self._running_on or self._chosen()
+        if agent is None:
+            return
+        news = self._news
+        try:
+            detail = self.connection.cancel_control(self.ctx, agent)
+        except LabError as exc:
+            self.say(f"Nothing stopped on {agent}: {exc}", bad=True)
+            return
+        if self._news == news:
+            self.say(f"Stopped: {detail}.")
+        self.robots.refresh_agents()
+
+    def _reset(self) -> None:
+        agent = self._chosen()
+        if agent is None:
+            return
+        if self._this_arena_is_real():
+            self.say("This arena's robots are real: put the robot back by hand.", bad=True)
+            return
+        try:
+            detail = self.connection.reset_robot(self.ctx, agent)
+        except LabError as exc:
+            self.say(f"{agent} was not reset: {exc}", bad=True)
+            return
+        self.say(f"Reset: {detail}.")
+
+    # -- the lab's news about my run (the connection's thread)
+
+    def on_request(self, event: RequestEvent) -> None:
+        if event.user != self.connection.user or event.agent != self._running_on:
+            return
+        if event.status != "queued":  # "queued" is what the request's own reply says
+            self._news += 1
+        if event.status in ("finished", "cancelled", "refused"):
+            why = f": {event.reason}" if event.reason else ""
+            self.say(f"Your controller on {event.agent} {event.status}{why}.")
+            if event.status == "refused":
+                self._show([Problem(None, event.reason or "refused")], "The lab refused it")
+        elif event.status == "running":
+            self.say(f"Your controller runs on {event.agent}.")
+
+    def on_output(self, event: OutputEvent) -> None:
+        if event.user != self.connection.user or event.agent != self._running_on:
+            return
+        for text in event.lines:
+            found = self._traceback.feed(text)
+            if found is not None:
+                self._errors.append(found)
+                self._show(self._errors[-MAX_MARKED:], "Your controller raised an exception")
