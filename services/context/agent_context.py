@@ -49,9 +49,6 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
-    FileContent,
-    FileInfo,
-    FileList,
     FileListRequest,
     Message,
     OkReply,
@@ -84,7 +81,7 @@ from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
-from services.context.user_files import FileStoreError, UserFiles
+from services.context.user_files import UserFiles
 
 LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
@@ -267,7 +264,8 @@ class AgentContext(SlotScheduler, ChatRoom):
             ),
         )
         if isinstance(request, SaveFile | FileListRequest | ReadFile):
-            return self._files(principal, request)
+            self._require_member(principal)
+            return self.files.answer(principal.user, request)
         if isinstance(request, ChatSay):
             self._say(principal, request)
             return OkReply()
@@ -355,32 +353,6 @@ class AgentContext(SlotScheduler, ChatRoom):
             position=position,
             start_eta=eta,
             slot_seconds=self.book.slot_seconds,
-        )
-
-    def _files(
-        self, principal: Principal, request: SaveFile | FileListRequest | ReadFile
-    ) -> Message:
-        """The member's own files: always those of the envelope's user, never a named one."""
-        self._require_member(principal)
-        user = principal.user
-        try:
-            if isinstance(request, SaveFile):
-                saved = self.files.save(user, request.name, request.source)
-                return OkReply(detail=f"saved {saved.name} ({saved.size} bytes)")
-            if isinstance(request, ReadFile):
-                source, saved_at = self.files.read(user, request.name)
-                return FileContent(name=request.name, source=source, saved_at=saved_at)
-            files = self.files.listing(user)[: self.files.max_files]
-        except FileStoreError as exc:
-            code = "not_found" if exc.code == "not_found" else "bad_request"
-            raise RequestError(code, str(exc)) from None
-        except OSError as exc:
-            self.log.error("files of %s: %s", user, exc)
-            raise RequestError("unavailable", "the lab could not reach your files now") from None
-        return FileList(
-            files=[FileInfo(name=f.name, size=f.size, saved_at=f.saved_at) for f in files],
-            max_files=self.files.max_files,
-            max_bytes=self.files.max_bytes,
         )
 
     def _cancel(self, principal: Principal, request: CancelControl) -> Message:

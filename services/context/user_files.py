@@ -16,6 +16,7 @@ files live in memory, with the same limits.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import threading
@@ -25,7 +26,20 @@ from pathlib import Path
 
 from common.files import write_atomic
 from common.keys import is_ident
+from common.messages import (
+    FileContent,
+    FileInfo,
+    FileList,
+    FileListRequest,
+    Message,
+    OkReply,
+    ReadFile,
+    SaveFile,
+)
 from common.messages.agent import FILE_NAME_PATTERN, MAX_UPLOAD_BYTES
+from common.service import RequestError
+
+log = logging.getLogger("wart.context.files")
 
 MAX_FILES_PER_USER = 10
 _NAME = re.compile(FILE_NAME_PATTERN)
@@ -139,3 +153,26 @@ class UserFiles:
         except FileNotFoundError:
             raise FileStoreError("not_found", f"you have no file named {name}") from None
         return data[: self.max_bytes], saved
+
+    def answer(self, user: str, request: SaveFile | FileListRequest | ReadFile) -> Message:
+        """A request about ``user``'s own files (the authenticated sender, never a named one)."""
+        try:
+            if isinstance(request, SaveFile):
+                saved = self.save(user, request.name, request.source)
+                return OkReply(detail=f"saved {saved.name} ({saved.size} bytes)")
+            if isinstance(request, ReadFile):
+                source, saved_at = self.read(user, request.name)
+                return FileContent(name=request.name, source=source, saved_at=saved_at)
+            files = self.listing(user)[: self.max_files]
+        except FileStoreError as exc:
+            if exc.code == "not_found":
+                raise RequestError("not_found", str(exc)) from None
+            raise RequestError("bad_request", str(exc)) from None
+        except OSError as exc:
+            log.error("files of %s: %s", user, exc)
+            raise RequestError("unavailable", "the lab could not reach your files now") from None
+        return FileList(
+            files=[FileInfo(name=f.name, size=f.size, saved_at=f.saved_at) for f in files],
+            max_files=self.max_files,
+            max_bytes=self.max_bytes,
+        )

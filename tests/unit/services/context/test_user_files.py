@@ -7,7 +7,18 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from common.messages import FileListRequest, MessageError, ReadFile, SaveFile, decode, encode
+from common.messages import (
+    FileContent,
+    FileList,
+    FileListRequest,
+    MessageError,
+    OkReply,
+    ReadFile,
+    SaveFile,
+    decode,
+    encode,
+)
+from common.service import RequestError
 from services.context.user_files import FileStoreError, UserFiles
 
 SOURCE = b"from common.controller import Controller\n"
@@ -73,3 +84,20 @@ def test_the_wire_types_name_no_user_and_refuse_a_path() -> None:
     raw = encode(ReadFile(name="ok.py")).replace(b"ok.py", b"../..")
     with pytest.raises(MessageError):
         decode(raw, ReadFile)
+
+
+def test_requests_answer_for_the_sender_only(store: UserFiles) -> None:
+    """The context answers file requests for the envelope's user: a name in a request never
+    reaches another user's folder, and a refusal is a request error, not a crash."""
+    reply = store.answer("alice", SaveFile(name="mine.py", source=SOURCE))
+    assert isinstance(reply, OkReply) and "mine.py" in reply.detail
+    content = store.answer("alice", ReadFile(name="mine.py"))
+    assert isinstance(content, FileContent) and content.source == SOURCE
+    with pytest.raises(RequestError) as caught:
+        store.answer("bob", ReadFile(name="mine.py"))
+    assert caught.value.code == "not_found"
+    listing = store.answer("bob", FileListRequest())
+    assert isinstance(listing, FileList) and listing.files == []
+    with pytest.raises(RequestError) as too_big:
+        store.answer("alice", SaveFile(name="big.py", source=b"#" * 2000))
+    assert too_big.value.code == "bad_request"
