@@ -128,8 +128,17 @@ def write_comparison_plots(
     fig, ax = plt.subplots(figsize=(7, 6))
     snap = a.snapshot if cmp.map_from == cmp.a.label else b.snapshot
     _draw_map(ax, snap)
-    for tr, side, colour in ((ta, cmp.a, "tab:blue"), (tb, cmp.b, "tab:orange")):
-        ax.plot(tr.x, tr.y, "-", lw=1.5, color=colour, label=f"{side.label} ({side.world})")
+    # A drawn wide and pale under B, so where the two runs agree both stay visible.
+    for tr, side, colour, width in ((ta, cmp.a, "tab:blue", 4.0), (tb, cmp.b, "tab:orange", 1.5)):
+        ax.plot(
+            tr.x,
+            tr.y,
+            "-",
+            lw=width,
+            alpha=0.6 if width > 2 else 1.0,
+            color=colour,
+            label=f"{side.label} ({side.world})",
+        )
         ax.plot(tr.x[0], tr.y[0], "o", color=colour, mfc="white")
         ax.plot(tr.x[-1], tr.y[-1], "s", color=colour)
     ax.set_aspect("equal")

@@ -62,8 +62,9 @@ def _pose(p: tuple[float, float, float]) -> str:
     return f"({p[0]:.0f}, {p[1]:.0f}) mm, {math.degrees(p[2]):.0f} deg"
 
 
-def _per_sensor(values: list[float]) -> str:
-    return "  ".join(f"{v:+.1f}" for v in values) if values else "n/a"
+def _per_sensor(values: list[float], signed: bool = True) -> str:
+    form = "{:+.1f}" if signed else "{:.1f}"
+    return "  ".join(form.format(v) for v in values) if values else "n/a"
 
 
 def describe_comparison(cmp: Comparison) -> list[str]:
@@ -87,9 +88,9 @@ def describe_comparison(cmp: Comparison) -> list[str]:
         f"aligned samples:    {cmp.aligned_samples} over {cmp.aligned_span_s:.1f} s "
         "(B interpolated at A's sample times)",
         f"IR mean difference:        {_per_sensor(cmp.ir_mean_diff)} (B - A, sensors 0..7)",
-        f"IR mean |difference|:      {_per_sensor(cmp.ir_mean_abs_diff)}",
+        f"IR mean |difference|:      {_per_sensor(cmp.ir_mean_abs_diff, signed=False)}",
         f"ambient mean difference:   {_per_sensor(cmp.ambient_mean_diff)} (B - A, sensors 0..7)",
-        f"ambient mean |difference|: {_per_sensor(cmp.ambient_mean_abs_diff)}",
+        f"ambient mean |difference|: {_per_sensor(cmp.ambient_mean_abs_diff, signed=False)}",
     ]
     lines += [f"warning:            {w}" for w in cmp.warnings]
     return lines
