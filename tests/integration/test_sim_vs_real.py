@@ -5,8 +5,10 @@ engine's world ``sim`` (the map's k1) and the bridge's world ``real``, whose
 robot is an emulated Khepera on a real pty driving a simulated body loaded
 from that map; the bridge's odometry starts at the map's pose (as ``wart up``
 wires an emulated bridge: services/lab/wiring.py map_pose). Each world has its
-own agent context, and each records its slot. The test downloads both
-recordings as a student would and compares them with ``wart report --against``.
+own agent context, and each records its slot. The simulated run's recording
+is promoted to the real robot (its recorded file queued there); the test
+downloads both recordings as a student would and compares them with
+``wart report --against``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import pytest
 
 from common.agent_client import FINAL, AgentClient
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.recording import plots, read_recording
 from common.recording.compare import compare
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
@@ -87,14 +90,20 @@ def test_example_01_in_sim_and_on_the_emulated_robot_gives_one_report(
 ) -> None:
     source = EXAMPLE.read_bytes()
     with agent_user(lab, "alice", SIM_CTX) as sim, agent_user(lab, "alice", REAL_CTX) as real:
-        # Both queued at once: each world runs its own slot, recorded by its own context.
         on_sim = sim.queue("k1", "deploy", source=source, filename=EXAMPLE.name)
-        on_real = real.queue("k1", "deploy", source=source, filename=EXAMPLE.name)
         sim_file = _run_and_download(lab, sim, SIM_CTX, on_sim.request_id, tmp_path / "sim.mcap")
+        # Promote to real: the file recorded with the simulated run, queued on the real robot.
+        on_real = real.promote(read_recording(sim_file))
         real_file = _run_and_download(
             lab, real, REAL_CTX, on_real.request_id, tmp_path / "real.mcap"
         )
+        remote = read_recording(sim_file)
+        remote.source = None  # as a remote run's recording: its code never reached the lab
+        with pytest.raises(LabError, match="no controller file to promote"):
+            real.promote(remote)
     a, b = read_recording(sim_file), read_recording(real_file)
+    assert a.source == source and b.source == source
+    assert b.info is not None and b.info.filename == EXAMPLE.name
     assert (
         a.info is not None and a.info.world == SIM and b.info is not None and b.info.world == REAL
     )
