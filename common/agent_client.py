@@ -15,6 +15,7 @@ stops at the slot's end or when the context ends the request).
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import threading
 import time
@@ -52,6 +53,7 @@ from common.messages import (
     SaveFile,
     StopControl,
 )
+from common.recording.reader import Recording
 from common.remote_robot import ZenohRobotLink
 
 log = logging.getLogger("wart.agent_client")
@@ -124,6 +126,22 @@ class AgentClient:
     ) -> ControlQueued:
         request = ControlRequest(agent=agent, mode=mode, source=source, filename=filename)
         return self.client.request(self.ctx, request, ControlQueued, f"queue on {agent}")
+
+    def promote(self, recording: Recording, agent: str | None = None) -> ControlQueued:
+        """Queue the file of a recorded deploy run (say in simulation) on this context's robot
+        ``agent`` (default: the recorded run's agent), typically the real arena: "promote to
+        real". LabError when the recording holds no file or it does not match its hash."""
+        info = recording.info
+        if info is None or info.mode != "deploy" or recording.source is None:
+            raise LabError(
+                f"{recording.path} holds no controller file to promote: only an uploaded "
+                "(deploy) run's file is recorded; a remote run's code stayed on its machine"
+            )
+        if hashlib.sha256(recording.source).hexdigest() != info.source_sha256:
+            raise LabError(f"{recording.path}: the recorded file does not match its hash")
+        return self.queue(
+            agent or info.agent, "deploy", source=recording.source, filename=info.filename
+        )
 
     def cancel(self, request_id: str) -> str:
         reply = self.client.request(

@@ -4,6 +4,8 @@
 - :mod:`common.recording.writer`: :class:`RecordingWriter`, one run's file
 - :mod:`common.recording.reader`: :func:`read_recording` -> :class:`Recording`
 - :mod:`common.recording.summary`: :func:`summarize` -> :class:`Summary` (``wart report``)
+- :mod:`common.recording.compare`: :func:`compare` two runs -> :class:`Comparison` (sim beside
+  real, ``wart report A --against B``)
 - :mod:`common.recording.store`: the per-user directory of recordings, with retention
 """
 

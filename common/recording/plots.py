@@ -1,4 +1,5 @@
-"""Plots of a run (PNG, matplotlib): the trajectory over the map, IR and wheel speeds over time.
+"""Plots of a run (PNG, matplotlib): the trajectory over the map, IR and wheel speeds over time;
+and of two runs compared (sim beside real): both trajectories on one map, sensors overlaid.
 
 matplotlib is optional (the ``test`` extra): :func:`available` says whether
 plots can be drawn; the summary's numbers never need it.
@@ -13,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from common.messages import WorldSnapshot
+from common.recording.compare import SENSORS, Comparison, aligned_samples, robot_track
 from common.recording.reader import Recording
 
 
@@ -85,7 +88,10 @@ def _row(rows: list[str], agent: str) -> int | None:
 
 
 def _map(ax: Any, rec: Recording) -> None:
-    snap = rec.snapshot
+    _draw_map(ax, rec.snapshot)
+
+
+def _draw_map(ax: Any, snap: WorldSnapshot | None) -> None:
     if snap is None:
         return
     from matplotlib.patches import Circle, Polygon, Rectangle
@@ -103,3 +109,80 @@ def _map(ax: Any, rec: Recording) -> None:
             ax.add_patch(Polygon(pts, closed=True, color=face, alpha=0.8))
     ax.set_xlim(-20, snap.width + 20)
     ax.set_ylim(-20, snap.height + 20)
+
+
+def write_comparison_plots(
+    a: Recording, b: Recording, cmp: Comparison, out_dir: Path, stem: str
+) -> list[Path]:
+    """``<stem>.trajectories.png`` (both runs on one map) and ``<stem>.sensors.png`` (each IR
+    and ambient sensor of both runs over the slot's time, overlaid) in ``out_dir``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    ta, tb = robot_track(a), robot_track(b)
+    written = []
+
+    fig, ax = plt.subplots(figsize=(7, 6))
+    snap = a.snapshot if cmp.map_from == cmp.a.label else b.snapshot
+    _draw_map(ax, snap)
+    # A drawn wide and pale under B, so where the two runs agree both stay visible.
+    for tr, side, colour, width in ((ta, cmp.a, "tab:blue", 4.0), (tb, cmp.b, "tab:orange", 1.5)):
+        ax.plot(
+            tr.x,
+            tr.y,
+            "-",
+            lw=width,
+            alpha=0.6 if width > 2 else 1.0,
+            color=colour,
+            label=f"{side.label} ({side.world})",
+        )
+        ax.plot(tr.x[0], tr.y[0], "o", color=colour, mfc="white")
+        ax.plot(tr.x[-1], tr.y[-1], "s", color=colour)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(
+        f"{cmp.a.label} vs {cmp.b.label}: final pose error {cmp.final_pose_error_mm:.0f} mm "
+        "(o start, \u25a0 end)"
+    )
+    ax.legend(loc="upper right", fontsize=8)
+    path = out_dir / f"{stem}.trajectories.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    written.append(path)
+
+    fig, axes = plt.subplots(SENSORS, 2, figsize=(11, 12), sharex=True)
+    for col, (kind, first) in enumerate((("IR", 0), ("ambient", SENSORS))):
+        for k in range(SENSORS):
+            ax = axes[k, col]
+            for tr, side, colour in ((ta, cmp.a, "tab:blue"), (tb, cmp.b, "tab:orange")):
+                values = tr.proximity if first == 0 else tr.ambient
+                if len(tr.sample_t):
+                    ax.plot(tr.sample_t, values[:, k], lw=0.8, color=colour, label=side.label)
+            ax.set_ylabel(f"{kind}{k}", fontsize=8)
+            ax.tick_params(labelsize=7)
+        axes[0, col].set_title(f"{kind} (raw)")
+        axes[-1, col].set_xlabel("time since the slot's start (s)")
+    # The numbers beside the curves: the mean difference over the time-aligned samples.
+    t, _, _ = aligned_samples(ta, tb)
+    for col, diffs in enumerate((cmp.ir_mean_diff, cmp.ambient_mean_diff)):
+        for k, d in enumerate(diffs):
+            axes[k, col].text(
+                0.99,
+                0.9,
+                f"{cmp.b.label} - {cmp.a.label}: {d:+.1f} on average",
+                transform=axes[k, col].transAxes,
+                ha="right",
+                va="top",
+                fontsize=7,
+            )
+    axes[0, 0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"sensors overlaid ({len(t)} time-aligned samples)")
+    path = out_dir / f"{stem}.sensors.png"
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    written.append(path)
+    return written

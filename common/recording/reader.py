@@ -14,7 +14,7 @@ from typing import Any, Generic, TypeVar
 
 import msgspec
 from mcap.exceptions import McapError
-from mcap.records import Channel, Header, Message, Schema
+from mcap.records import Attachment, Channel, Header, Message, Schema
 from mcap.stream_reader import StreamReader
 
 from common.messages import WorldSnapshot
@@ -50,6 +50,7 @@ class Recording:
     chat: list[Stamped[s.ChatRecord]] = field(default_factory=list)
     channels: dict[str, str] = field(default_factory=dict)  # topic -> schema name
     counts: dict[str, int] = field(default_factory=dict)  # topic -> messages
+    source: bytes | None = None  # a deploy run's controller file (its attachment)
     truncated: str = ""  # why reading stopped early ("" when the file is whole)
     skipped: int = 0  # messages of unknown topics or that did not decode
 
@@ -105,6 +106,8 @@ def read_recording(path: str | Path) -> Recording:
                         decoders[record.id] = (record.topic, cls, msgspec.json.Decoder(cls))
                 elif isinstance(record, Message):
                     _add(recording, decoders.get(record.channel_id), record)
+                elif isinstance(record, Attachment) and record.media_type == s.SOURCE_MEDIA_TYPE:
+                    recording.source = bytes(record.data)
         except RecordingError:
             raise
         except (McapError, ValueError, OSError, EOFError, KeyError) as exc:

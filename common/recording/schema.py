@@ -23,6 +23,7 @@ from common.messages import WorldSnapshot
 FORMAT_VERSION = 1
 PROFILE = "wart"  # the MCAP header's profile: files we wrote
 JSON = "json"
+SOURCE_MEDIA_TYPE = "text/x-python"  # the attachment holding a deploy run's controller file
 
 # --- topics (the names a tool shows) ---------------------------------------------------
 
@@ -60,6 +61,9 @@ class RunInfo(msgspec.Struct, frozen=True, kw_only=True):
     filename: str = ""
     start: float  # wall-clock seconds: the slot's start
     planned_end: float  # the slot's end as granted
+    # An uploaded (deploy) run's file is attached (SOURCE_MEDIA_TYPE, named ``filename``)
+    # so the run can be promoted to the real robot as it was; this is its SHA-256.
+    source_sha256: str = ""
 
 
 class RunEnd(msgspec.Struct, frozen=True, kw_only=True):

@@ -66,16 +66,12 @@ class Summary(msgspec.Struct, frozen=True, kw_only=True):
 def summarize(rec: Recording) -> Summary:
     info = rec.info
     assert info is not None  # read_recording refuses a file without one
-    xs, ys, ts, fingers = _track(rec, info.agent)
+    xs, ys, ts, fingers = track(rec, info.agent)
     distance, moving = _travel(xs, ys, ts)
     snap = rec.snapshot
     collisions, contact = (0, 0.0)
-    radius = _radius(snap, info.agent)
-    if snap is not None and len(xs):
-        touching = _touching(snap, radius, xs, ys)
-        collisions = int(np.count_nonzero(touching[1:] & ~touching[:-1]) + int(touching[0]))
-        dt = np.diff(ts, prepend=ts[0])
-        contact = float(dt[touching].sum())
+    if snap is not None:
+        collisions, contact = count_collisions(snap, radius_of(snap, info.agent), xs, ys, ts)
     gripped = int(np.count_nonzero((fingers[1:] == 2) & (fingers[:-1] != 2))) if len(fingers) else 0
     duration = float(ts[-1] - ts[0]) if len(ts) > 1 else 0.0
     end = rec.end
@@ -106,7 +102,7 @@ def summarize(rec: Recording) -> Summary:
     )
 
 
-def _track(rec: Recording, agent: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def track(rec: Recording, agent: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The agent's x, y (mm), sim time (s) and fingers over the frames it appears in."""
     xs, ys, ts, fingers = [], [], [], []
     for stamped in rec.frames:
@@ -134,7 +130,7 @@ def _travel(xs: np.ndarray, ys: np.ndarray, ts: np.ndarray) -> tuple[float, floa
     return float(steps.sum()), float(dt[ok & (speed > MOVING_MM_S)].sum())
 
 
-def _radius(snap: WorldSnapshot | None, agent: str) -> float:
+def radius_of(snap: WorldSnapshot | None, agent: str) -> float:
     if snap is not None:
         for a in snap.agents:
             if a.id == agent:
@@ -182,6 +178,18 @@ def _clearance(item: ItemInfo, px: np.ndarray, py: np.ndarray) -> np.ndarray:
         axis=0,
     )
     return np.where(_inside(px, py, poly), -d, d)
+
+
+def count_collisions(
+    snap: WorldSnapshot, radius: float, xs: np.ndarray, ys: np.ndarray, ts: np.ndarray
+) -> tuple[int, float]:
+    """Collisions (stretches of touching) and seconds in contact of a track on ``snap``'s map."""
+    if not len(xs):
+        return 0, 0.0
+    touching = _touching(snap, radius, xs, ys)
+    collisions = int(np.count_nonzero(touching[1:] & ~touching[:-1]) + int(touching[0]))
+    dt = np.diff(ts, prepend=ts[0])
+    return collisions, float(dt[touching].sum())
 
 
 def _touching(snap: WorldSnapshot, radius: float, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:

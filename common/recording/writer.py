@@ -114,6 +114,11 @@ class RecordingWriter:
             self._channels[topic] = channel
         return channel
 
+    def attach_source(self, name: str, source: bytes, t: float) -> None:
+        """The run's controller file, as an MCAP attachment (a tool lists and saves it)."""
+        ns = int(t * 1e9)
+        self._mcap.add_attachment(ns, ns, name, s.SOURCE_MEDIA_TYPE, source)
+
     def write(self, topic: str, record: Any, t: float | None = None) -> None:
         """Append ``record`` on ``topic`` at wall-clock time ``t`` (now if None)."""
         ns = int((time.time() if t is None else t) * 1e9)

@@ -7,10 +7,18 @@ errors the controller raised with their line numbers. ``--json`` prints the
 same as JSON; ``--plots DIR`` also draws the trajectory over the map and the
 IR and wheel speeds over time (PNG, needs matplotlib). A damaged or cut-short
 file is reported as such: what it holds is summarised, with a warning.
+
+Sim beside real: ``wart report SIM.mcap --against REAL.mcap`` compares two runs
+of the same controller (say a simulated robot and the real one, from the same
+start pose): final pose error, path length ratio, collisions of each on one
+map, and per-sensor mean differences of IR and ambient over time-aligned
+samples (REAL minus SIM). With ``--plots DIR``: both trajectories on one map
+and every IR and ambient sensor of both runs overlaid.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -20,6 +28,7 @@ import msgspec
 
 from common import cli
 from common.recording import RecordingError, Summary, plots, read_recording, summarize
+from common.recording.compare import Comparison, compare
 
 
 def describe(summary: Summary) -> list[str]:
@@ -49,27 +58,87 @@ def describe(summary: Summary) -> list[str]:
     return lines
 
 
+def _pose(p: tuple[float, float, float]) -> str:
+    return f"({p[0]:.0f}, {p[1]:.0f}) mm, {math.degrees(p[2]):.0f} deg"
+
+
+def _per_sensor(values: list[float], signed: bool = True) -> str:
+    form = "{:+.1f}" if signed else "{:.1f}"
+    return "  ".join(form.format(v) for v in values) if values else "n/a"
+
+
+def describe_comparison(cmp: Comparison) -> list[str]:
+    a, b = cmp.a, cmp.b
+    ratio = "n/a" if cmp.path_length_ratio is None else f"{cmp.path_length_ratio:.3f}"
+    heading = math.degrees(cmp.final_heading_error_rad)
+    lines = [
+        f"A = {a.label}: run {a.request_id} on {a.agent} in {a.ctx} (world {a.world}), "
+        f"{a.status}, {a.duration_s:.1f} s, {a.frames} frames, {a.samples} samples",
+        f"B = {b.label}: run {b.request_id} on {b.agent} in {b.ctx} (world {b.world}), "
+        f"{b.status}, {b.duration_s:.1f} s, {b.frames} frames, {b.samples} samples",
+        f"start pose:         A {_pose(a.start_pose)}; B {_pose(b.start_pose)} "
+        f"({cmp.start_offset_mm:.0f} mm apart)",
+        f"final pose:         A {_pose(a.final_pose)}; B {_pose(b.final_pose)}",
+        f"final pose error:   {cmp.final_pose_error_mm:.1f} mm, heading {heading:+.1f} deg (B - A)",
+        f"path length:        A {a.path_mm / 1000:.3f} m, B {b.path_mm / 1000:.3f} m",
+        f"path length ratio:  {ratio} (B / A)",
+        f"collisions:         A {a.collisions} ({a.contact_s:.1f} s in contact), "
+        f"B {b.collisions} ({b.contact_s:.1f} s in contact)"
+        + (f", on {cmp.map_from}'s map" if cmp.map_from else ", no map"),
+        f"aligned samples:    {cmp.aligned_samples} over {cmp.aligned_span_s:.1f} s "
+        "(B interpolated at A's sample times)",
+        f"IR mean difference:        {_per_sensor(cmp.ir_mean_diff)} (B - A, sensors 0..7)",
+        f"IR mean |difference|:      {_per_sensor(cmp.ir_mean_abs_diff, signed=False)}",
+        f"ambient mean difference:   {_per_sensor(cmp.ambient_mean_diff)} (B - A, sensors 0..7)",
+        f"ambient mean |difference|: {_per_sensor(cmp.ambient_mean_abs_diff, signed=False)}",
+    ]
+    lines += [f"warning:            {w}" for w in cmp.warnings]
+    return lines
+
+
+def _write_plots(paths: list[Path] | None) -> None:
+    for path in paths or []:
+        print(f"wrote {path}")
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "wart report") -> int:
     p = cli.parser(prog, __doc__ or "", network=False)
-    p.add_argument("file", type=Path, help="a recording (.mcap)")
+    p.add_argument("file", type=Path, help="a recording (.mcap); with --against, run A (sim)")
+    p.add_argument(
+        "--against",
+        type=Path,
+        metavar="FILE",
+        help="compare with this recording, run B (real): sim beside real",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--plots", type=Path, metavar="DIR", help="also write plots (PNG) there")
     args, _ = cli.parse(p, argv)
+    if args.plots is not None and not plots.available():
+        # Said before any work: the numbers alone are one flag away.
+        return cli.fail("--plots needs matplotlib (pip install matplotlib; or drop --plots)", 1)
     try:
         recording = read_recording(args.file)
+        other = read_recording(args.against) if args.against is not None else None
+        result: Summary | Comparison
+        result = summarize(recording) if other is None else compare(recording, other)
     except RecordingError as exc:
         return cli.fail(str(exc), 1)
-    summary = summarize(recording)
     if args.json:
-        print(msgspec.json.format(msgspec.json.encode(summary).decode()))
+        print(msgspec.json.format(msgspec.json.encode(result).decode()))
+    elif isinstance(result, Comparison):
+        print("\n".join(describe_comparison(result)))
     else:
-        print("\n".join(describe(summary)))
+        print("\n".join(describe(result)))
     if args.plots is not None:
-        if not plots.available():
-            return cli.fail("--plots needs matplotlib (pip install matplotlib)", 1)
         try:
-            for path in plots.write_plots(recording, args.plots, args.file.stem):
-                print(f"wrote {path}")
+            if other is None:
+                _write_plots(plots.write_plots(recording, args.plots, args.file.stem))
+            else:
+                assert isinstance(result, Comparison)
+                stem = f"{args.file.stem}-vs-{args.against.stem}"
+                _write_plots(
+                    plots.write_comparison_plots(recording, other, result, args.plots, stem)
+                )
         except OSError as exc:
             return cli.fail(f"cannot write the plots: {exc}", 1)
     return 0

@@ -22,6 +22,7 @@ limit are removed.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import queue
 import threading
@@ -270,6 +271,7 @@ class SlotRecorder:
     def _start(self, run: RunningJob, driver: str) -> None:
         assert self.store is not None
         job = run.job
+        uploaded = job.mode == "deploy" and bool(job.source)
         info = s.RunInfo(
             ctx=self.ctx,
             world=self.world,
@@ -280,6 +282,7 @@ class SlotRecorder:
             filename=job.filename if job.mode == "deploy" else "",
             start=run.start,
             planned_end=run.end,
+            source_sha256=hashlib.sha256(job.source).hexdigest() if uploaded else "",
         )
         try:
             writer = RecordingWriter(self.store.path_for(job.user, job.request_id), info)
@@ -288,6 +291,8 @@ class SlotRecorder:
             with self._lock:
                 self._agents.pop(job.agent, None)
             return
+        if uploaded:
+            writer.attach_source(job.filename, job.source, run.start)
         rec = _Run(run=run, driver=driver, writer=writer)
         self._runs[job.request_id] = rec
         snap = self._world_snapshot()

@@ -36,8 +36,10 @@ def service_account(lab: Lab, account: str) -> Path:
     return key_file
 
 
-def start_engine(lab: Lab, map_name: str = "foraging", *, identity: bool = False) -> Proc:
-    """The engine of WORLD; with ``identity`` it logs in as a service account (MAC leases)."""
+def start_engine(
+    lab: Lab, map_name: str = "foraging", *, identity: bool = False, world: str = WORLD
+) -> Proc:
+    """The engine of ``world``; with ``identity`` it logs in as a service account (MAC leases)."""
     login: list[str] = []
     if identity:
         login = ["--user", "engine-w1", "--identity", str(service_account(lab, "engine-w1"))]
@@ -51,7 +53,7 @@ def start_engine(lab: Lab, map_name: str = "foraging", *, identity: bool = False
             "--map",
             str(maps_dir / f"{map_name}.json"),
             "--world",
-            WORLD,
+            world,
             "--seed",
             "3",
             "--maps-dir",
@@ -60,7 +62,7 @@ def start_engine(lab: Lab, map_name: str = "foraging", *, identity: bool = False
             *lab.net_args(),
         ],
     )
-    lab.wait_alive(AliveKind.WORLD, WORLD, proc)
+    lab.wait_alive(AliveKind.WORLD, world, proc)
     return proc
 
 
@@ -74,19 +76,27 @@ def start_runner(lab: Lab, name: str = "runner") -> Proc:
     return proc
 
 
-def start_agent_context(lab: Lab, *extra: str, slot: float = 2.5) -> Proc:
-    key = service_account(lab, "ctx-arena")
+def start_agent_context(
+    lab: Lab,
+    *extra: str,
+    slot: float = 2.5,
+    ctx: str = CTX,
+    world: str = WORLD,
+    account: str = "ctx-arena",
+) -> Proc:
+    """The agent context ``ctx`` of ``world`` (a second one: another ``ctx`` and ``account``)."""
+    key = service_account(lab, account)
     proc = lab.procs.start(
-        "agent-context",
+        "agent-context" if ctx == CTX else f"agent-context-{ctx}",
         [
             "context",
             "agent",
             "--name",
-            CTX,
+            ctx,
             "--world",
-            WORLD,
+            world,
             "--user",
-            "ctx-arena",
+            account,
             "--identity",
             str(key),
             "--owner",
@@ -99,7 +109,7 @@ def start_agent_context(lab: Lab, *extra: str, slot: float = 2.5) -> Proc:
             *lab.net_args(),
         ],
     )
-    lab.wait_alive(AliveKind.CONTEXT, CTX, proc)
+    lab.wait_alive(AliveKind.CONTEXT, ctx, proc)
     return proc
 
 
@@ -136,11 +146,11 @@ class Poses:
 
 
 @contextmanager
-def agent_user(lab: Lab, user: str) -> Iterator[AgentClient]:
+def agent_user(lab: Lab, user: str, ctx: str = CTX) -> Iterator[AgentClient]:
     session = open_session(lab.router.options(), wait=10.0)
     try:
         with LabClient(session, lab.router.realm, lab.identity.verify_key) as client:
             client.login(user, PASSWORD)
-            yield AgentClient(client, CTX).join()
+            yield AgentClient(client, ctx).join()
     finally:
         close_session(session)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import msgspec
 import pytest
 from mcap.reader import make_reader
 
@@ -121,6 +122,21 @@ def test_a_truncated_recording_is_salvaged_and_garbage_is_a_clear_error(tmp_path
         read_recording(head)
     with pytest.raises(RecordingError, match="cannot open"):
         read_recording(tmp_path / "missing.mcap")
+
+
+def test_a_deploy_runs_file_is_attached_and_read_back(tmp_path: Path) -> None:
+    import hashlib
+
+    source = b"from common.controller import Controller\n"
+    info = msgspec.structs.replace(_info(), source_sha256=hashlib.sha256(source).hexdigest())
+    writer = RecordingWriter(tmp_path / "run.mcap", info)
+    writer.attach_source("ctl.py", source, info.start)
+    writer.finish(s.RunEnd(status="finished", reason="", at=info.start + 1))
+    rec = read_recording(tmp_path / "run.mcap")
+    assert rec.source == source and rec.info == info
+    with (tmp_path / "run.mcap").open("rb") as f:  # any MCAP tool lists it
+        names = [a.name for a in make_reader(f).iter_attachments()]
+    assert names == ["ctl.py"]
 
 
 def test_retention_removes_the_oldest_of_that_user_only(tmp_path: Path) -> None:
