@@ -57,6 +57,7 @@ from common.messages.world import (
     WorldEdit,
     WorldFrame,
     WorldSnapshot,
+    WorldStop,
 )
 
 __all__ = [
@@ -97,6 +98,7 @@ __all__ = [
     "WorldEdit",
     "WorldFrame",
     "WorldSnapshot",
+    "WorldStop",
     "all_message_types",
     "decode",
     "encode",
