@@ -433,6 +433,7 @@ class AgentContext(SlotScheduler, ChatRoom):
                 why = f"emergency stop by {principal.user}" + (
                     f": {request.reason}" if request.reason else ""
                 )
+                why = why[:256]  # a RequestStatus reason's limit
                 self.book.estop = why
                 ended = [ln.running.job.request_id for ln in self.book.lines.values() if ln.running]
                 for request_id in ended:

@@ -27,7 +27,7 @@ from tests.integration.agentkit import (
     start_engine,
     start_runner,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.integration.labkit import PASSWORD, Lab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -106,3 +106,20 @@ def test_the_host_stops_four_running_controllers_and_holds_the_arena(
         moved_from = time.monotonic()
         wait_for(lambda: motion.moving(["k2"], moved_from), 30, "k2 to drive again")
         motion.close()
+
+
+def test_wart_arena_estop_and_release(lab: Lab, procs: Procs) -> None:
+    def arena(verb: str, user: str, *extra: str) -> tuple[int, str]:
+        args = ["arena", *lab.net_args(), verb, "--context", CTX, "--user", user, *extra]
+        proc = procs.start(f"arena-{verb}-{user}", args, env={"WART_PASSWORD": PASSWORD})
+        return proc.popen.wait(60), proc.output()
+
+    code, out = arena("estop", "bob")
+    assert code == 1 and "only the owner of arena or a user with 'kick'" in out, out
+    code, out = arena("estop", "ida", "--reason", "fire drill")
+    assert code == 0 and "emergency stop: every robot stopped" in out, out
+    with agent_user(lab, "carol") as carol:
+        assert carol.state().estop == "emergency stop by ida: fire drill"
+        code, out = arena("release", "ida")
+        assert code == 0 and "released" in out, out
+        assert carol.state().estop == ""
