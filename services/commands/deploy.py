@@ -44,7 +44,7 @@ def show_report(report: DryRunReport) -> None:
     )
     for hit in report.collisions[:10]:
         named = f"{hit.what} {hit.ident}" if hit.ident else hit.what
-        say(f"  collision at {hit.at:.2f} s with a {named}")
+        say(f"  collision at {hit.at:.2f} s: {named}")
     if report.commands:
         say(f"  {report.saturated} of {report.commands} wheel commands at top speed")
     for line in report.output[:20]:

@@ -40,6 +40,7 @@ from viewers.web.adapters import (
     Directory,
     DirectoryEvent,
     DisconnectedEvent,
+    DryRunResult,
     JoinedContext,
     LabError,
     LabEvent,
@@ -425,6 +426,12 @@ class RealConnection:
 
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
         return self._arena(ctx).set_enabled(enabled, agent)
+
+    def emergency_stop(self, ctx: str, engaged: bool, reason: str = "") -> str:
+        return self._arena(ctx).emergency_stop(engaged, reason)
+
+    def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
+        return self._arena(ctx).dry_run(agent, filename, source)
 
     # -- admin
 
