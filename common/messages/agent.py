@@ -146,7 +146,7 @@ class DryRunReport(Message):
     verdict: ShortText  # "will run" / "will NOT run: line 12: ZeroDivisionError ..."
     sim_seconds: float  # simulated time covered
     wall_seconds: float  # how long it took
-    steps: NonNegInt = 0  # controller steps (do_work calls)
+    steps: NonNegInt = 0  # ticks the controller answered (one robot state each)
     collisions: Annotated[list[DryRunCollision], msgspec.Meta(max_length=100)] = msgspec.field(
         default_factory=list
     )

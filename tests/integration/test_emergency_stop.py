@@ -15,12 +15,16 @@ import pytest
 
 from common import keys
 from common.agent_client import FINAL
+from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import EmergencyStop, ErrorReply, OkReply, decode
+from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.simbody import SimBody
 from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import (
     CTX,
+    WORLD,
     Motion,
     agent_user,
     start_agent_context,
@@ -123,3 +127,45 @@ def test_wart_arena_estop_and_release(lab: Lab, procs: Procs) -> None:
         code, out = arena("release", "ida")
         assert code == 0 and "released" in out, out
         assert carol.state().estop == ""
+
+
+@pytest.fixture
+def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab, SimBody]]:
+    """A real-robot arena: the Khepera bridge on an emulated robot (a real pty)."""
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    with SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body:
+        emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
+        with emulator:
+            bridge = procs.start(
+                "bridge",
+                [
+                    "bridge",
+                    "--world",
+                    WORLD,
+                    "--port",
+                    f"{tmp_path / 'khepera0'}=k1@500,500,0",
+                    *lab.net_args(),
+                ],
+            )
+            lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
+            start_runner(lab)
+            start_agent_context(lab, slot=120.0)
+            yield lab, body
+
+
+def test_the_emergency_stop_halts_a_real_robot_through_the_bridge(
+    real_lab: tuple[Lab, SimBody],
+) -> None:
+    lab, body = real_lab
+    with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:
+        queued = alice.queue("k1", "deploy", source=FORWARD, filename="forward.py")
+        assert alice.wait_status(queued.request_id, {"running"}, timeout=60)
+        wait_for(lambda: body.speed() != (0, 0), 30, "the emulated Khepera's motors to turn")
+        ida.emergency_stop()
+        final = alice.wait_status(queued.request_id, FINAL, timeout=20)
+        assert final is not None and final.reason == "emergency stop by ida"
+        wait_for(lambda: body.speed() == (0, 0), 5, "the bridge to halt the motors")
+    # The bridge itself obeyed the world stop (not only the runner's last command).
+    bridge = next(p for p in lab.procs.started if p.name == "bridge")
+    wait_for(lambda: "emergency stop by ida: every robot stopped" in bridge.output(), 10, "its log")
