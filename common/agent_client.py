@@ -36,6 +36,9 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
+    DryRunReport,
+    DryRunRequest,
+    EmergencyStop,
     FileContent,
     FileList,
     FileListRequest,
@@ -59,6 +62,9 @@ from common.remote_robot import ZenohRobotLink
 log = logging.getLogger("wart.agent_client")
 
 FINAL = frozenset({"finished", "cancelled", "refused"})
+# A dry run's answer: the runner's wall-clock limit (DRY_RUN_WALL_S in
+# services/runner/dryrun.py) plus the hops and the sandbox's start.
+DRY_RUN_WAIT_S = 30.0
 
 
 @dataclass
@@ -154,6 +160,29 @@ class AgentClient:
             self.ctx, StopControl(agent=agent, reason=reason), OkReply, f"stop {agent}"
         )
         return reply.detail
+
+    def emergency_stop(self, reason: str = "", *, release: bool = False) -> str:
+        """Stop every robot of the arena and hold it (the context's managers only);
+        ``release=True`` lets slots start again. Returns what the context said."""
+        message = EmergencyStop(engaged=not release, reason=reason)
+        what = "release the emergency stop" if release else "emergency stop"
+        return self.client.request(self.ctx, message, OkReply, what).detail
+
+    def dry_run(
+        self, agent: str, source: bytes, *, filename: str = "controller.py", seconds: float = 5.0
+    ) -> DryRunReport:
+        """A few simulated seconds of ``source`` in a private copy of the arena (needs
+        ``deploy`` on the agent); nothing is queued. The report's ``verdict`` says
+        "will run" or "will NOT run: ..."."""
+        message = DryRunRequest(agent=agent, source=source, filename=filename, seconds=seconds)
+        return self.client.request(
+            self.ctx,
+            message,
+            DryRunReport,
+            f"dry run on {agent}",
+            key=keys.ctx_dryrun(self.client.realm, self.ctx),
+            timeout=DRY_RUN_WAIT_S,
+        )
 
     def settings(
         self,

@@ -240,9 +240,10 @@ class LabClient(RegistryAdminCalls):
         *,
         signed: bool = True,
         not_found: str | None = None,
+        timeout: float | None = None,
     ) -> M:
         payload = self._seal(key, message) if signed else encode(message)
-        answers = self._get(key, payload, what)
+        answers = self._get(key, payload, what, timeout)
         if not answers:
             if not_found is not None:
                 raise NotFound(not_found)
@@ -252,16 +253,27 @@ class LabClient(RegistryAdminCalls):
             raise_for(reply, what)
         return reply  # type: ignore[return-value]
 
-    def request(self, ctx: str, message: Message, expected: type[M], what: str) -> M:
-        """Send ``message`` to a context's request queryable; its reply, or a LabError."""
+    def request(
+        self,
+        ctx: str,
+        message: Message,
+        expected: type[M],
+        what: str,
+        *,
+        key: str | None = None,
+        timeout: float | None = None,
+    ) -> M:
+        """Send ``message`` to a context's request queryable (or ``key``, another of the
+        context's queryables); its reply, or a LabError."""
         return self._member_call(
             ctx,
             lambda: self._ask(
-                keys.ctx_request(self.realm, ctx),
+                key or keys.ctx_request(self.realm, ctx),
                 message,
                 expected,
                 what,
                 not_found=f"context {ctx} not found (no context of that name is running)",
+                timeout=timeout,
             ),
         )
 

@@ -190,6 +190,11 @@ def ctx_request(realm: str, ctx: str) -> str:
     return f"{_ctx(realm, ctx)}/request"
 
 
+def ctx_dryrun(realm: str, ctx: str) -> str:
+    """Queryable for dry runs (served on threads of their own: they take seconds)."""
+    return f"{_ctx(realm, ctx)}/dryrun"
+
+
 def ctx_in(realm: str, ctx: str) -> str:
     """Client to context, fire-and-forget (chat lines)."""
     return f"{_ctx(realm, ctx)}/in"
@@ -210,6 +215,11 @@ def ctx_output(realm: str, ctx: str) -> str:
 
 def _world(realm: str, world: str) -> str:
     return f"{realm_root(realm)}/world/{check_ident('world', world)}"
+
+
+def world_estop(realm: str, world: str) -> str:
+    """The agent context's emergency stop of every robot of the world (put, sealed)."""
+    return f"{_world(realm, world)}/estop"
 
 
 def world_snapshot(realm: str, world: str) -> str:
@@ -292,6 +302,11 @@ def parse_agent_key(realm: str, world: str, key: str) -> str | None:
 
 def runner_run(realm: str, runner: str) -> str:
     return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/run"
+
+
+def runner_dryrun(realm: str, runner: str) -> str:
+    """Dry runs of controllers in a private world (beside ``run``: never delays a slot)."""
+    return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/dryrun"
 
 
 def host_spawn(realm: str, host: str) -> str:

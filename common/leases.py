@@ -26,7 +26,15 @@ from typing import Any
 from common import keys
 from common.auth import AuthError, Principal, ReplayWindow, Verifier
 from common.leasemac import CommandMac, WorldBoxKeys, command_mac, mac_matches, open_key
-from common.messages import AgentCommand, AuthEnvelope, Lease, MacCommand, MessageError, decode
+from common.messages import (
+    AgentCommand,
+    AuthEnvelope,
+    Lease,
+    MacCommand,
+    MessageError,
+    WorldStop,
+    decode,
+)
 
 log = logging.getLogger("wart.leases")
 
@@ -55,6 +63,11 @@ class LeaseBook:
         # lease, and reseals its key to the restarted world). Nothing sealed before the
         # world started is obeyed: senders' clocks are trusted to ±30 s already.
         self.started_at = time.time()
+        # The emergency stop in force ("" when none): while set, no lease is accepted
+        # and no command obeyed. _stop_sent is the newest stop's send time obeyed,
+        # so a stop or release delivered late cannot undo a newer one.
+        self.stopped = ""
+        self._stop_sent = 0.0
         self.commands_accepted = 0
         self.commands_refused = 0
         self.mac_accepted = 0  # of commands_accepted, those MACed under a MAC lease
@@ -73,6 +86,8 @@ class LeaseBook:
         """
         principal, lease = self._open(key, payload, Lease)
         principal.require("lease", "grant leases on agents")
+        if self.stopped and lease.end > time.time():
+            raise AuthError("forbidden", f"lease {lease.lease_id} refused: {self.stopped}")
         assert self.verifier is not None
         if self.verifier.is_revoked(lease.holder_session):
             raise AuthError(
@@ -106,6 +121,39 @@ class LeaseBook:
                     )
                 self._agent_of[cmd_key] = lease.agent
         return lease
+
+    def accept_stop(self, key: str, payload: Any) -> WorldStop | None:
+        """Verify a sealed WorldStop put on ``key`` and obey it; None if it changes nothing.
+
+        AuthError if refused: unsigned, without ``lease``, sealed before this
+        world started (a stop captured before a restart), or replayed (the
+        verifier's window). Engaging drops every lease: their holders' commands
+        are refused from here on, whatever their ``end``.
+        """
+        if self.verifier is None:
+            raise AuthError("unauthenticated", "this world was started without --registry-key")
+        try:
+            envelope = decode(payload, AuthEnvelope)
+        except MessageError as exc:
+            self.verifier.rejected += 1
+            raise AuthError("unauthenticated", f"not an authenticated stop: {exc}") from None
+        self._check_epoch(envelope.sent_at, "(emergency stop)")
+        principal, stop = self.verifier.open_envelope(key, envelope, WorldStop)
+        principal.require("lease", "stop a world")
+        with self._lock:
+            if envelope.sent_at <= self._stop_sent:
+                return None  # older than the stop or release already obeyed
+            self._stop_sent = envelope.sent_at
+            was = self.stopped
+            if stop.engaged:
+                self.stopped = stop.reason or f"emergency stop by {stop.by}"
+                self._leases.clear()
+                self._mac.clear()
+            else:
+                self.stopped = ""
+            if bool(was) == stop.engaged:
+                return None  # a republication of the state in force
+        return stop
 
     def revoke_session(self, session_id: bytes) -> list[str]:
         """Drop every lease held by a revoked session: the agents it held, now undriven."""
@@ -191,6 +239,8 @@ class LeaseBook:
                 raise AuthError("unauthenticated", "this world was started without --registry-key")
             if agent is None:
                 raise AuthError("forbidden", f"{key} is not an agent's command key")
+            if self.stopped:
+                raise AuthError("forbidden", f"command to {agent} refused: {self.stopped}")
             try:
                 envelope = decode(payload, (AuthEnvelope, MacCommand))
             except MessageError as exc:

@@ -3,7 +3,7 @@
 A controller cannot tell the two apart because both declare exactly this
 interface, here, once (ARGoS's control interface, Enki's world): frames,
 sensor batches and sample bundles out, commands (alone or bundled) and leases
-in, snapshot, edit and map queries.
+in, the arena's emergency stop, snapshot, edit and map queries.
 """
 
 from __future__ import annotations
@@ -57,6 +57,7 @@ class WorldService(Service):
         self.subscribe(keys.agent_cmd_all(realm, name), self._on_command)
         self.subscribe(keys.world_commands(realm, name), self._on_command_bundle)
         self.subscribe(keys.agent_lease_all(realm, name), self._on_lease)
+        self.subscribe(keys.world_estop(realm, name), self._on_stop)
         self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
         self.serve(keys.world_edit(realm, name), self._on_edit)
         self.serve(keys.world_map(realm, name), self._on_map)
@@ -82,6 +83,17 @@ class WorldService(Service):
                 rev.reason,
             )
             self.halt_agent(agent)
+
+    def _on_stop(self, sample: zenoh.Sample) -> None:
+        """The arena's emergency stop: every robot stops now and stays stopped until released."""
+        stop = self.leases.accept_stop(str(sample.key_expr), sample.payload)
+        if stop is None:
+            return
+        self.halt_all(stop.engaged)
+        if stop.engaged:
+            self.log.warning("%s: every robot stopped, commands refused", self.leases.stopped)
+        else:
+            self.log.warning("emergency stop released by %s", stop.by)
 
     def publish_sample_bundle(self, tick: int, samples: dict[str, bytes]) -> None:
         """Put ``samples`` (agent -> its encoded SensorSample) as one SampleBundle."""
@@ -129,6 +141,11 @@ class WorldService(Service):
 
     def halt_agent(self, agent: str) -> None:
         """Stop the agent's wheels now (its driver lost the right to drive it)."""
+        raise NotImplementedError
+
+    def halt_all(self, engaged: bool) -> None:
+        """Emergency stop: every robot's wheels stop now, and none moves on its own until
+        released (the engine's wander rule included)."""
         raise NotImplementedError
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:

@@ -111,6 +111,7 @@ _PEOPLE = (
     _g("pub", W(keys.user_inbox), W(keys.ctx_in), W(keys.ctx_output), W(keys.agent_cmd)),
     _g("pub", W(keys.world_commands)),
     _g("ask", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_request), W(keys.ctx_state)),
+    _g("ask", W(keys.ctx_dryrun)),
     _g("sub", W(keys.ctx_events)),
     _g("sub", W(keys.world_frame), W(keys.world_sensors), W(keys.agent_sensors)),
     _g("sub", W(keys.world_samples)),
@@ -142,9 +143,10 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         *_SERVICE_BASE,
         _g("serve", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_state), W(keys.ctx_request)),
         _g("sub", W(keys.ctx_in), W(keys.ctx_output)),
-        _g("pub", W(keys.ctx_events), W(keys.agent_lease)),
+        _g("pub", W(keys.ctx_events), W(keys.agent_lease), W(keys.world_estop)),
+        _g("serve", W(keys.ctx_dryrun)),
         _g("sub", W(keys.world_frame), W(keys.agent_sensors)),
-        _g("ask", W(keys.world_snapshot), W(keys.runner_run)),
+        _g("ask", W(keys.world_snapshot), W(keys.runner_run), W(keys.runner_dryrun)),
         _g("token", W(keys.alive, kind=AliveKind.CONTEXT)),
     ),
     # Engines and bridges: the only roles that publish world frames and samples.
@@ -153,6 +155,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("pub", W(keys.world_frame), W(keys.world_sensors), W(keys.agent_sensors)),
         _g("pub", W(keys.world_samples)),
         _g("sub", W(keys.agent_cmd), W(keys.world_commands), W(keys.agent_lease)),
+        _g("sub", W(keys.world_estop)),
         _g("serve", W(keys.world_snapshot), W(keys.world_edit), W(keys.world_map)),
         _g("token", W(keys.alive, kind=AliveKind.WORLD)),
     ),
@@ -162,7 +165,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     # have no network at all; they talk to it over a pipe.
     "runner": (
         *_SERVICE_BASE,
-        _g("serve", W(keys.runner_run)),
+        _g("serve", W(keys.runner_run), W(keys.runner_dryrun)),
         _g("pub", W(keys.agent_cmd), W(keys.world_commands), W(keys.ctx_output)),
         _g("sub", W(keys.agent_sensors), W(keys.world_samples), W(keys.agent_lease)),
         _g("sub", W(keys.world_frame)),

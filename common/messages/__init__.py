@@ -60,6 +60,7 @@ from common.messages.world import (
     WorldEdit,
     WorldFrame,
     WorldSnapshot,
+    WorldStop,
 )
 
 __all__ = [
@@ -101,6 +102,7 @@ __all__ = [
     "WorldEdit",
     "WorldFrame",
     "WorldSnapshot",
+    "WorldStop",
     "all_message_types",
     "decode",
     "encode",

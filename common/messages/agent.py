@@ -40,6 +40,8 @@ Upload = Annotated[bytes, msgspec.Meta(max_length=MAX_UPLOAD_BYTES)]
 OutputLine = Annotated[str, msgspec.Meta(max_length=MAX_OUTPUT_LINE)]
 SlotSeconds = Annotated[float, msgspec.Meta(ge=1.0, le=3600.0)]
 
+DryRunSeconds = Annotated[float, msgspec.Meta(gt=0.0, le=30.0)]
+
 RequestStatusKind = Literal["queued", "running", "finished", "cancelled", "refused"]
 
 
@@ -100,6 +102,66 @@ class ContextSettings(Message):
     slot_seconds: SlotSeconds | None = None
     enabled: bool | None = None
     agent: Ident | None = None
+
+
+class EmergencyStop(Message):
+    """Stop every robot of the arena now and hold it stopped (manage right), or release it.
+
+    ``engaged``: every running controller ends ("emergency stop by <who>"), the
+    world stops every robot and refuses commands, and no slot starts until a
+    request with ``engaged=False`` releases it. Waiting requests stay queued.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    engaged: bool = True
+    reason: ShortText = ""
+
+
+class DryRunRequest(Message):
+    """Run a controller for a few simulated seconds in a private copy of the arena.
+
+    Needs ``deploy`` on the agent (the same right as queueing it). Answered
+    with a :class:`DryRunReport`; nothing is queued and no robot moves.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/dryrun",)
+
+    agent: Ident
+    source: Upload
+    filename: ShortText = "controller.py"
+    seconds: DryRunSeconds = 5.0
+
+
+class DryRunCollision(msgspec.Struct, frozen=True, kw_only=True):
+    at: float  # simulated seconds since the start of the dry run
+    what: Literal["wall", "obstacle", "robot", "object"]
+    ident: ShortText = ""  # the obstacle's, robot's or object's id ("" for the arena's walls)
+
+
+class DryRunReport(Message):
+    """What a dry run saw; ``verdict`` is the one line a student reads first.
+
+    ``will_run`` is False when the controller raised, did not load, did not
+    answer within the wall-clock limit, or hit something (see CONTROLLERS.md:
+    a collision means it would bump the real robot into the arena).
+    """
+
+    will_run: bool
+    verdict: ShortText  # "will run" / "will NOT run: line 12: ZeroDivisionError ..."
+    sim_seconds: float  # simulated time covered
+    wall_seconds: float  # how long it took
+    steps: NonNegInt = 0  # ticks the controller answered (one robot state each)
+    collisions: Annotated[list[DryRunCollision], msgspec.Meta(max_length=100)] = msgspec.field(
+        default_factory=list
+    )
+    saturated: NonNegInt = 0  # wheel commands at (or clamped to) the robot's top speed
+    commands: NonNegInt = 0  # wheel commands in all
+    error_line: int | None = None  # the controller file's line an exception came from
+    error: ShortText = ""
+    output: Annotated[list[OutputLine], msgspec.Meta(max_length=50)] = msgspec.field(
+        default_factory=list
+    )
 
 
 class QueueStateRequest(Message):
@@ -182,6 +244,9 @@ class AgentContextState(Message):
     enabled: bool
     agents: list[AgentQueue]
     at: float  # the context's wall clock when it was made
+    # Set while the host's emergency stop holds the arena: "emergency stop by <who>: why".
+    # No slot starts until it is released (waiting requests stay, held in order).
+    estop: ShortText = ""
 
 
 class RequestStatus(msgspec.Struct, frozen=True, kw_only=True):
@@ -263,6 +328,25 @@ class RunAccepted(Message):
     claim: bytes
 
 
+class DryRun(Message):
+    """Dry-run a controller in the runner, against a private copy of ``world`` (sealed, ``lease``).
+
+    The runner builds the copy from the world's public snapshot; the reply is a
+    :class:`DryRunReport`. The runner serves these on their own key and
+    threads, so a dry run never delays a slot's start or stop.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/dryrun",)
+
+    ctx: Ident
+    world: Ident
+    agent: Ident
+    user: Ident
+    source: Upload
+    filename: ShortText = "controller.py"
+    seconds: DryRunSeconds = 5.0
+
+
 class RunStop(Message):
     """Stop a run early (sealed, ``lease`` permission)."""
 
@@ -283,6 +367,12 @@ __all__ = [
     "ControlQueued",
     "ControlRequest",
     "ControllerOutput",
+    "DryRun",
+    "DryRunCollision",
+    "DryRunReport",
+    "DryRunRequest",
+    "DryRunSeconds",
+    "EmergencyStop",
     "FileContent",
     "FileInfo",
     "FileList",

@@ -6,7 +6,7 @@ are the robot type's raw units (Khepera: proximity 0..1023, ambient ~500 dark).
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import msgspec
 
@@ -237,6 +237,23 @@ class Lease(Message):
     # deployed controller (the holder is then the runner), or the holder itself
     # (remote). The world lets it reset the agent while the lease is in force.
     requester_session: SessionId | None = None
+
+
+class WorldStop(Message):
+    """Emergency stop of a whole world (sealed by the agent context, ``lease`` permission).
+
+    ``engaged``: every robot's wheels stop at once, every lease in force is
+    dropped and commands are refused until a later ``engaged=False``. The
+    context republishes an engaged stop every second (a restarted world
+    learns it); a world obeys only stops sealed after it started, newer than
+    the last one it obeyed, and each envelope once (replay).
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("world/<w>/estop",)
+
+    engaged: bool
+    by: Ident  # who pressed it (the context's own name when it republishes)
+    reason: ShortText = ""  # "emergency stop by <who>: why", shown in the world's log
 
 
 class MacCommand(Message):

@@ -334,6 +334,14 @@ class BridgeService(WorldService):
         if entry is not None:
             entry.robot.halt()
 
+    def halt_all(self, engaged: bool) -> None:
+        if not engaged:
+            return  # robots stay at rest until a new slot's controller drives them
+        with self._lock:
+            agents = list(self._agents)
+        for agent in agents:
+            self.halt_agent(agent)
+
     def _accept_command(self, key: str, payload: Any) -> None:
         agent, command = self.leases.check_command(key, payload)
         lease = self.leases.lease_of(agent)

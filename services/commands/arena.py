@@ -3,8 +3,14 @@
     wart arena list [--lab FILE]
     wart arena new  [--lab FILE] --user NAME --map foraging [--robots 10] [--world NAME] [--on HOST]
     wart arena stop [--lab FILE] --user NAME WORLD
+    wart arena estop   [--lab FILE] --user NAME --context CTX [--reason WHY]
+    wart arena release [--lab FILE] --user NAME --context CTX
 
 ``new`` and ``stop`` need the ``host`` permission (instructors and admins);
+``estop`` (the emergency stop: every robot of the agent context's arena
+stops now, its running controllers end, no slot starts until ``release``;
+waiting requests keep their places) needs the context's manage right (its
+owner, or ``kick`` there);
 the password comes from --password-file, WART_PASSWORD or a prompt. Without
 --on, the host is chosen by load: among hosts that accept an arena now, the
 one with the fewest arenas, then the lowest CPU. With --lab the tool joins a
@@ -22,7 +28,8 @@ from pathlib import Path
 
 import zenoh
 
-from common import cli
+from common import cli, keys
+from common.agent_client import AgentClient
 from common.client import LabClient
 from common.host_client import (
     HostError,
@@ -124,7 +131,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
     s_new.add_argument("--seed", type=int, default=1)
     s_stop = sub.add_parser("stop", help="stop an arena")
     s_stop.add_argument("world")
-    for s in (s_new, s_stop):
+    s_estop = sub.add_parser(
+        "estop", help="emergency stop: every robot of an arena stops and stays stopped"
+    )
+    s_estop.add_argument("--reason", default="", help="told to every student whose run ends")
+    s_release = sub.add_parser("release", help="release an arena's emergency stop")
+    for s in (s_estop, s_release):
+        s.add_argument("--context", required=True, help="the arena's agent context, e.g. arena")
+    for s in (s_new, s_stop, s_estop, s_release):
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
     args, options = cli.parse(p, argv)
@@ -138,6 +152,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
     if getattr(args, "robots", None) is not None and not 1 <= args.robots <= 1000:
         raise HostError("--robots must be between 1 and 1000")
+    if getattr(args, "context", None) is not None:
+        keys.check_ident("context", args.context)
+    if len(getattr(args, "reason", "")) > 200:
+        raise HostError("--reason: at most 200 characters")
     session, realm, registry_key = lab_session(args, options)
     try:
         if args.verb == "list":
@@ -145,7 +163,11 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
             return 0
         with LabClient(session, realm, registry_key, presence=False) as client:
             client.login(args.user, _password(args))
-            if args.verb == "new":
+            if args.verb in ("estop", "release"):
+                agents = AgentClient(client, args.context)
+                reason = getattr(args, "reason", "")
+                print(agents.emergency_stop(reason, release=args.verb == "release"))
+            elif args.verb == "new":
                 arena = host_arena(
                     client, args.world, args.map, args.robots, host=args.host, seed=args.seed
                 )

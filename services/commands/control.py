@@ -50,7 +50,7 @@ def read_checked(path: Path) -> bytes:
 
 def when(eta: float | None) -> str:
     if eta is None:
-        return "unknown (remote control is disabled for now)"
+        return "unknown (no slot starts for now: remote control is off, or the arena is stopped)"
     wait = max(0.0, eta - time.time())
     return f"in about {wait:.0f} s (at {time.strftime('%H:%M:%S', time.localtime(eta))})"
 

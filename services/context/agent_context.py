@@ -49,6 +49,10 @@ from common.messages import (
     ControllerOutput,
     ControlQueued,
     ControlRequest,
+    DryRun,
+    DryRunReport,
+    DryRunRequest,
+    EmergencyStop,
     FileListRequest,
     Message,
     OkReply,
@@ -62,6 +66,7 @@ from common.messages import (
     SaveFile,
     StopControl,
     UserRemovalRequest,
+    WorldStop,
 )
 from common.messages.chat import ChatLine, MemberStatus
 from common.precheck import PrecheckError, precheck
@@ -87,6 +92,9 @@ LEASE_REPUBLISH_S = 1.0
 SNAPSHOT_RETRY_S = 2.0
 WORLD_IDENTITY_REFRESH_S = 5.0  # a restarted world has a new identity: reseal lease keys to it
 MAX_WAITING_PER_USER = 4
+DRY_RUN_WORKERS = 2
+DRY_RUN_WAITING = 4
+DRY_RUN_WAIT_S = 25.0  # the runner's wall-clock limit (20 s) and the sandbox's start
 RUNNER_GRACE_S = 1.5  # how long to wait before taking a runner's token loss as its death
 
 
@@ -114,6 +122,7 @@ class AgentContext(SlotScheduler, ChatRoom):
         self._save_lock = threading.Lock()
         # The page's editor keeps each member's last files here, beside the queues.
         self.files = UserFiles(None if data_dir is None else data_dir / f"{name}.files")
+        self._stop_lock = threading.Lock()  # orders the world stops this context seals
         self._restore_book()
         self._wake = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
@@ -171,6 +180,14 @@ class AgentContext(SlotScheduler, ChatRoom):
     def on_start(self) -> None:
         super().on_start()
         self.subscribe(keys.ctx_output(self.realm, self.room), self._on_output)
+        # Dry runs take seconds: their own key and threads, so queueing, stops and
+        # the emergency stop are never behind one.
+        self.serve(
+            keys.ctx_dryrun(self.realm, self.room),
+            self._on_dry_run,
+            workers=DRY_RUN_WORKERS,
+            max_waiting=DRY_RUN_WAITING,
+        )
         # A runner that dies takes its sandboxes with it: their students are told so.
         # The registry's token tells a runner's death from our own router blip (in a
         # blip every token goes at once, and the runner's sandboxes keep running).
@@ -261,6 +278,7 @@ class AgentContext(SlotScheduler, ChatRoom):
                 SaveFile,
                 FileListRequest,
                 ReadFile,
+                EmergencyStop,
             ),
         )
         if isinstance(request, SaveFile | FileListRequest | ReadFile):
@@ -284,6 +302,8 @@ class AgentContext(SlotScheduler, ChatRoom):
             reply = self._cancel(principal, request)
         elif isinstance(request, StopControl):
             reply = self._stop_agent(principal, request)
+        elif isinstance(request, EmergencyStop):
+            reply = self._emergency_stop(principal, request)
         else:
             reply = self._settings(principal, request)
         # On disk before the answer: an acknowledged request survives a crash right after.
@@ -355,6 +375,42 @@ class AgentContext(SlotScheduler, ChatRoom):
             slot_seconds=self.book.slot_seconds,
         )
 
+    def _on_dry_run(self, query: zenoh.Query) -> Message:
+        """A dry run of a controller on an agent: the same rights and check as queueing it."""
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, DryRunRequest)
+        self._require_member(principal)
+        principal.require(
+            "deploy",
+            f"dry-run a controller on {request.agent}",
+            scope=acl.agent_scope(self.room, request.agent),
+            restricted=self.restricted,
+        )
+        self._require_agent(request.agent)
+        try:
+            precheck(request.source, request.filename)
+        except PrecheckError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        report: DryRunReport = self.runner_link.dry_run(
+            DryRun(
+                ctx=self.room,
+                world=self.world,
+                agent=request.agent,
+                user=principal.user,
+                source=request.source,
+                filename=request.filename,
+                seconds=request.seconds,
+            ),
+            timeout=DRY_RUN_WAIT_S,
+        )
+        log.info(
+            "%s dry-ran %s on %s: %s",
+            principal.user,
+            request.filename,
+            request.agent,
+            report.verdict,
+        )
+        return report
+
     def _cancel(self, principal: Principal, request: CancelControl) -> Message:
         with self._wake:
             found = self.book.find(request.request_id)
@@ -389,6 +445,62 @@ class AgentContext(SlotScheduler, ChatRoom):
             self._finish_soon(run.job.request_id, "cancelled", why)
             self._wake.notify_all()
         return OkReply(detail=f"stopping {run.job.request_id}")
+
+    def _emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
+        """Stop (or release) every robot of the arena: the running controllers end now,
+        the world stops every robot and refuses commands, no slot starts until released.
+
+        The world is told first and directly (not by the scheduler's next turn):
+        its robots stop whether or not the runner or a student's machine obeys.
+        """
+        what = "stop every robot" if request.engaged else "release the emergency stop"
+        self._require_manage(principal, what)
+        with self._wake:
+            if request.engaged == bool(self.book.estop):
+                detail = self.book.estop or "no emergency stop is in force"
+                return OkReply(detail=f"nothing changed: {detail}")
+            if request.engaged:
+                why = f"emergency stop by {principal.user}" + (
+                    f": {request.reason}" if request.reason else ""
+                )
+                why = why[:256]  # a RequestStatus reason's limit
+                self.book.estop = why
+                ended = [ln.running.job.request_id for ln in self.book.lines.values() if ln.running]
+                for request_id in ended:
+                    self._finish_soon(request_id, "cancelled", why)
+            else:
+                self.book.estop = ""
+                ended = []
+            self._dirty = True
+            self._wake.notify_all()
+        self.publish_world_stop(request.engaged, principal.user)
+        if request.engaged:
+            log.warning("%s: ended %s", why, ", ".join(ended) or "nothing running")
+            return OkReply(
+                detail=f"emergency stop: every robot stopped, {len(ended)} controllers ended; "
+                "no slot starts until you release it"
+            )
+        log.warning("emergency stop released by %s", principal.user)
+        return OkReply(detail="emergency stop released: waiting requests start again")
+
+    def publish_world_stop(self, engaged: bool | None, by: str) -> None:
+        """Tell the world the stop in force (``engaged`` None: republish it, if one holds).
+
+        Sealed and put under one lock, re-reading the book inside it: the world obeys
+        the newest stop by its send time, so a republication sealed after a release
+        would stop the arena again.
+        """
+        key = keys.world_estop(self.realm, self.world)
+        with self._stop_lock:
+            with self._lock:
+                why = self.book.estop
+            if engaged is None and not why:
+                return
+            message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
+            try:
+                self.session.put(key, self._seal(key, message))
+            except Exception as exc:  # the session closing at shutdown
+                self.log.warning("could not tell world %s of the stop: %s", self.world, exc)
 
     def _settings(self, principal: Principal, request: ContextSettings) -> Message:
         self._require_manage(principal, "change the settings")
@@ -558,6 +670,7 @@ class AgentContext(SlotScheduler, ChatRoom):
                 enabled=self.book.enabled,
                 agents=self.book.agent_queues(now),
                 at=now,
+                estop=self.book.estop,
             )
 
     def _status(

@@ -70,6 +70,9 @@ class QueueBook:
     def __init__(self, slot_seconds: float) -> None:
         self.slot_seconds = slot_seconds
         self.enabled = True
+        # The host's emergency stop ("emergency stop by <who>...", "" when none): no
+        # slot starts while it holds; waiting requests keep their places.
+        self.estop = ""
         self.lines: dict[str, AgentLine] = {}
 
     # -- agents
@@ -131,7 +134,7 @@ class QueueBook:
 
     def next_to_start(self, agent: str) -> ControlJob | None:
         line = self.lines[agent]
-        if line.running is not None or not line.waiting or not self.can_run(agent):
+        if line.running is not None or not line.waiting or not self.can_run(agent) or self.estop:
             return None
         return line.waiting.popleft()
 
@@ -147,7 +150,7 @@ class QueueBook:
     def eta(self, agent: str, position: int, now: float) -> float | None:
         """When the waiting request at ``position`` (1 = next) should start; None if disabled."""
         line = self.lines[agent]
-        if not self.can_run(agent):
+        if not self.can_run(agent) or self.estop:
             return None
         start = max(now, line.running.end) if line.running is not None else now
         return start + (position - 1) * self.slot_seconds
@@ -211,6 +214,7 @@ class _SavedBook(msgspec.Struct):
     slot_seconds: float
     enabled: bool
     lines: list[_SavedLine]
+    estop: str = ""  # a held emergency stop survives a restart of the context
 
 
 _BOOK_VERSION = 1
@@ -234,7 +238,9 @@ def save_book(book: QueueBook) -> bytes:
                 run.lease_key,
             )
         lines.append(_SavedLine(line.agent, line.type, line.enabled, list(line.waiting), saved_run))
-    return msgspec.msgpack.encode(_SavedBook(_BOOK_VERSION, book.slot_seconds, book.enabled, lines))
+    return msgspec.msgpack.encode(
+        _SavedBook(_BOOK_VERSION, book.slot_seconds, book.enabled, lines, book.estop)
+    )
 
 
 def load_book(data: bytes) -> QueueBook:
@@ -247,6 +253,7 @@ def load_book(data: bytes) -> QueueBook:
         raise ValueError(f"saved queue book version {saved.version}, expected {_BOOK_VERSION}")
     book = QueueBook(saved.slot_seconds)
     book.enabled = saved.enabled
+    book.estop = saved.estop
     for line in saved.lines:
         running = None
         if line.running is not None:

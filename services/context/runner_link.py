@@ -16,6 +16,8 @@ import zenoh
 from common import keys
 from common.auth import AuthError, Verifier
 from common.messages import (
+    DryRun,
+    DryRunReport,
     ErrorReply,
     Message,
     MessageError,
@@ -99,6 +101,33 @@ class RunnerLink:
             raise RequestError("unavailable", f"{principal.user} may not run controllers")
         self._drivers[job.request_id] = principal.user
         return principal.session_id, principal.token.box_key
+
+    def dry_run(self, request: DryRun, timeout: float) -> DryRunReport:
+        """The runner's report of a dry run; RequestError if it gave none.
+
+        The report is not signed: on a lab with access control only runners may
+        serve the key; on an open one a fake report only misleads its requester.
+        """
+        key = keys.runner_dryrun(self.realm, self.runner)
+        try:
+            replies = list(self.session.get(key, payload=self.seal(key, request), timeout=timeout))
+        except Exception as exc:
+            raise RequestError("unavailable", f"runner {self.runner}: {exc}") from None
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                answer = decode(reply.ok.payload, (DryRunReport, ErrorReply))
+            except MessageError as exc:
+                self.log.warning("unreadable dry-run reply: %s", exc)
+                continue
+            if isinstance(answer, ErrorReply):
+                if answer.code == "bad_request":
+                    raise RequestError("bad_request", f"runner: {answer.message}")
+                raise RequestError("unavailable", f"runner: {answer.message}", answer.retry_after)
+            assert isinstance(answer, DryRunReport)  # the decoder allowed only these two
+            return answer
+        raise RequestError("unavailable", f"no runner {self.runner} answered the dry run")
 
     def stop(self, request_id: str, reason: str) -> None:
         """Tell the runner to end the request's sandbox (best effort: the lease ends anyway)."""

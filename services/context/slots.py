@@ -68,6 +68,9 @@ class SlotScheduler:
     def _save_book(self) -> None:
         raise NotImplementedError
 
+    def publish_world_stop(self, engaged: bool | None, by: str) -> None:
+        raise NotImplementedError
+
     def _publish_agent(self, event: AgentEvent) -> None:
         raise NotImplementedError
 
@@ -97,6 +100,8 @@ class SlotScheduler:
                         running = [ln.running for ln in self.book.lines.values() if ln.running]
                     for run in running:
                         self._publish_lease(run, run.end)
+                    # A restarted world learns a held stop as it relearns leases.
+                    self.publish_world_stop(None, self.room)
                 if self._dirty:
                     self._dirty = False
                     self._save_book()

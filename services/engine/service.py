@@ -49,6 +49,7 @@ from common.messages import (
     Message,
     MessageError,
     MoveItem,
+    OkReply,
     RemoveItem,
     ResetAgent,
     ResizeArena,
@@ -108,6 +109,7 @@ class EngineService(WorldService):
         self.box_keys = WorldBoxKeys(identity) if identity is not None else None
         self.leases = LeaseBook(realm, world.name, self.verifier, self.box_keys)
         self._last_cmd: dict[str, float] = {}
+        self._estopped = False  # the arena's emergency stop: robots do not even wander
         self._wander_layout = -1
         self._wanderers = np.zeros(0, bool)
         self._thread: threading.Thread | None = None
@@ -231,6 +233,17 @@ class EngineService(WorldService):
     def halt_agent(self, agent: str) -> None:
         stop = AgentCommand(agent=agent, speeds=(0, 0))
         self._work.put(_Command(agent, stop, time.monotonic()))
+
+    def halt_all(self, engaged: bool) -> None:
+        def apply(world: World) -> Message:
+            self._estopped = engaged
+            if engaged:
+                world.set_speeds_all(np.zeros_like(world.cmd))
+                self._last_cmd.clear()
+            return OkReply()
+
+        # Between two ticks, like a command; nobody waits for the reply.
+        self._work.put((apply, Future()))
 
     def _accept_command(self, key: str, payload: Any) -> None:
         agent, command = self.leases.check_command(key, payload)
@@ -460,7 +473,7 @@ class EngineService(WorldService):
             try:
                 self._drain()
                 self._watchdog()
-                if settings.wander:
+                if settings.wander and not self._estopped:
                     self._wander()
                 self.world.step()
                 if self.world.layout != layout:

@@ -182,7 +182,10 @@ class Sandbox:
         on_command: Callable[[controller_api.RobotCommand], None],
         on_output: Callable[[str], None],
         on_exit: Callable[[str], None] = lambda reason: None,
+        on_step: Callable[[], None] | None = None,
     ) -> None:
+        """``on_step``: a dry run (the child in lockstep, services/runner/dryrun.py); it is
+        called each time the child has answered one state."""
         self.controller_name = precheck(source, filename)
         problem = sandbox_problem()
         if problem:
@@ -192,6 +195,8 @@ class Sandbox:
         self.on_command = on_command
         self.on_output = on_output
         self.on_exit = on_exit
+        self.on_step = on_step
+        self.error_text = ""  # the traceback the controller raised, if it did
         self.rejected_commands = 0
         self.dropped_states = 0
         self.process: subprocess.Popen[bytes] | None = None
@@ -305,6 +310,8 @@ class Sandbox:
             str(cmd_fd),
             "/ctl/user/controller.py",
         ]
+        if self.on_step is not None:
+            argv.append("lockstep")
         return argv
 
     def start(self, slot_seconds: float) -> None:
@@ -405,10 +412,14 @@ class Sandbox:
                 self.on_command(command)
             else:
                 self.rejected_commands += 1
+        elif kind == "step":
+            if self.on_step is not None:
+                self.on_step()
         elif kind == "ready":
             self._say(f"[runner] controller {str(message.get('controller'))[:64]} started")
         elif kind == "error":
             text = str(message.get("message", ""))[:4000]
+            self.error_text = self.error_text or text
             self._exit_reason = self._stop_reason or self._failure_reason(text)
             for line in text.splitlines():
                 self._say(line)

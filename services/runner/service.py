@@ -20,6 +20,12 @@ Then, per run:
 - at the end (slot over, :class:`RunStop`, the controller ended or crashed)
   the robot is told to stop and the context gets ``done`` with the reason.
 
+Dry runs (:class:`DryRun`, on ``runner/<name>/dryrun``, sealed, ``lease``):
+a few simulated seconds of a controller in a private copy of the world,
+built from its public snapshot (services/runner/dryrun.py), in the same
+sandbox. They are served on threads of their own (at most
+``DRY_RUN_WORKERS`` at once), so a dry run never delays a slot's start or stop.
+
 Uploaded code never sees Zenoh, keys or the lease: only pipes to this process.
 Token: ``alive/runner/<name>``.
 """
@@ -38,17 +44,24 @@ from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
     ControllerOutput,
+    DryRun,
+    ErrorReply,
     Message,
+    MessageError,
     OkReply,
     RunAccepted,
     RunClaim,
     RunRequest,
     RunStop,
+    WorldSnapshot,
+    decode,
 )
 from common.precheck import PrecheckError, precheck
 from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from common.service import RequestError, Service
 from common.service_login import ServiceLogin
+from common.sim2d.maps import MapError
+from services.runner.dryrun import dry_run
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
 log = logging.getLogger("wart.runner")
@@ -58,6 +71,8 @@ MAX_RUNS = 32
 MAX_RUNS_PER_USER = 4
 MAX_SLOT_S = 3600.0
 OUTPUT_FLUSH_S = 0.1
+DRY_RUN_WORKERS = 2  # dry runs at once (each a sandbox at full speed for a few seconds)
+DRY_RUN_WAITING = 4  # more wait for a worker; the next is told the runner is busy
 
 
 class Run:
@@ -178,6 +193,12 @@ class RunnerService(Service):
     def on_start(self) -> None:
         self.log.info("sandbox CPU share: %s", cpu_share(self.limits.cpu_share).mode)
         self.serve(self._key, self._on_run)
+        self.serve(
+            keys.runner_dryrun(self.realm, self.ident),
+            self._on_dry_run,
+            workers=DRY_RUN_WORKERS,
+            max_waiting=DRY_RUN_WAITING,
+        )
 
     def on_stop(self, timeout: float) -> None:
         with self._lock:
@@ -228,6 +249,56 @@ class RunnerService(Service):
             run.stop(request.reason or f"stopped by {principal.user}")
             return OkReply(detail=f"stopping {request.request_id}")
         return self._start(request)
+
+    def _on_dry_run(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, DryRun)
+        principal.require("lease", "ask a runner for dry runs")
+        try:
+            precheck(request.source, request.filename)
+        except PrecheckError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        snap = self._snapshot(request.world)
+        try:
+            report = dry_run(
+                snap,
+                request.agent,
+                request.source,
+                filename=request.filename,
+                seconds=request.seconds,
+                limits=self.limits,
+            )
+        except (ValueError, MapError) as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        except (RuntimeError, OSError) as exc:
+            raise RequestError("unavailable", f"cannot dry-run here: {exc}") from None
+        self.log.info(
+            "dry run of %s's %s on %s/%s: %s (%.1f simulated s in %.1f s)",
+            request.user,
+            request.filename,
+            request.world,
+            request.agent,
+            report.verdict,
+            report.sim_seconds,
+            report.wall_seconds,
+        )
+        return report
+
+    def _snapshot(self, world: str) -> WorldSnapshot:
+        """The world's public snapshot: the arena a dry run copies."""
+        try:
+            replies = list(self.session.get(keys.world_snapshot(self.realm, world), timeout=3.0))
+        except Exception as exc:
+            raise RequestError("unavailable", f"world {world} did not answer: {exc}") from None
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
+            except MessageError:
+                continue
+            if isinstance(snap, WorldSnapshot):
+                return snap
+        raise RequestError("unavailable", f"world {world} did not answer with its snapshot")
 
     def _start(self, request: RunRequest) -> Message:
         now = time.time()

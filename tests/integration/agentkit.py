@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import itertools
 import shutil
 import threading
-from collections.abc import Iterator
+import time
+from collections import deque
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -140,6 +143,67 @@ class Poses:
         assert raw is not None
         frame = decode(raw, WorldFrame)
         return frame.poses.to_numpy()[self.rows.index(agent), :2].astype(float)
+
+    def close(self) -> None:
+        self.sub.undeclare()
+
+
+class Motion:
+    """Every frame's agent poses with the (monotonic) time it arrived: when did robots stop?
+
+    A robot is at rest from the first frame from which on it moves less than
+    ``eps`` mm a frame, for at least ``still`` frames in a row.
+    """
+
+    def __init__(self, session: zenoh.Session, realm: str, world: str = WORLD) -> None:
+        rows: list[str] = []
+        for reply in session.get(keys.world_snapshot(realm, world), timeout=10.0):
+            if reply.ok is not None:
+                rows = decode(reply.ok.payload, WorldSnapshot).rows
+        self.rows = rows
+        self._frames: deque[tuple[float, int, np.ndarray]] = deque(maxlen=2000)
+        self._lock = threading.Lock()
+
+        def on(sample: zenoh.Sample) -> None:
+            at = time.monotonic()
+            frame = decode(bytes(sample.payload.to_bytes()), WorldFrame)
+            poses = frame.poses.to_numpy()[: len(self.rows), :2].astype(float)
+            with self._lock:
+                self._frames.append((at, frame.tick, poses))
+
+        self.sub = session.declare_subscriber(keys.world_frame(realm, world), on)
+        wait_for(lambda: self.frames_since(0.0), 10, "a world frame")
+
+    def frames_since(self, t0: float) -> list[tuple[float, int, np.ndarray]]:
+        with self._lock:
+            return [f for f in self._frames if f[0] >= t0]
+
+    def moving(self, agents: Sequence[str], t0: float, eps: float = 0.3) -> bool:
+        """Whether every agent moved more than ``eps`` mm between two frames since ``t0``."""
+        frames = self.frames_since(t0)
+        if len(frames) < 2:
+            return False
+        idx = [self.rows.index(a) for a in agents]
+        step = np.linalg.norm(frames[-1][2][idx] - frames[-2][2][idx], axis=1)
+        return bool((step > eps).all())
+
+    def at_rest_since(
+        self, agents: Sequence[str], t0: float, eps: float = 0.05, still: int = 10
+    ) -> float | None:
+        """Arrival time of the first frame after ``t0`` from which every agent stays still."""
+        frames = self.frames_since(t0)
+        idx = [self.rows.index(a) for a in agents]
+        run_start: float | None = None
+        run = 0
+        for before, after in itertools.pairwise(frames):
+            step = np.linalg.norm(after[2][idx] - before[2][idx], axis=1)
+            if (step < eps).all():
+                if run == 0:
+                    run_start = before[0]
+                run += 1
+            else:
+                run, run_start = 0, None
+        return run_start if run >= still else None
 
     def close(self) -> None:
         self.sub.undeclare()

@@ -196,7 +196,17 @@ class ArenaSettings:
 
     slot_seconds: float
     enabled: bool
-    can_manage: bool  # the owner or 'kick' there: slot length, stop, enable/disable
+    can_manage: bool  # the owner or 'kick' there: slot length, stop, enable/disable, estop
+    estop: str = ""  # "emergency stop by <who>: why" while the host holds every robot
+
+
+@dataclass(frozen=True)
+class DryRunResult:
+    """A dry run's report as the page shows it: the verdict first, then what it saw."""
+
+    will_run: bool
+    verdict: str  # "will run" / "will NOT run: line 12: ..."
+    details: tuple[str, ...] = ()  # collisions, saturated wheels, printed lines
 
 
 @dataclass(frozen=True)
@@ -419,6 +429,13 @@ class LabConnection(Protocol):
 
     def real_robots(self) -> list[tuple[str, str]]:
         """(context, agent) of every robot of the real arenas I have joined."""
+
+    def emergency_stop(self, ctx: str, engaged: bool, reason: str = "") -> str:
+        """Stop every robot of the arena and hold it (``engaged``), or release it."""
+        ...
+
+    def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
+        """A few simulated seconds of the file in a private copy of the arena; queues nothing."""
         ...
 
     def logout(self) -> None: ...

@@ -32,6 +32,7 @@ from viewers.web.adapters import (
     Directory,
     DirectoryEvent,
     DisconnectedEvent,
+    DryRunResult,
     JoinedContext,
     LabError,
     LabEvent,
@@ -48,6 +49,7 @@ from viewers.web.adapters import (
     SceneLayout,
 )
 from viewers.web.address import LabAddress
+from viewers.web.real_agents import check_upload
 
 STUDENT = frozenset({"join", "chat", "control", "deploy"})
 INSTRUCTOR = STUDENT | {"edit_map", "kick", "host"}
@@ -244,6 +246,7 @@ class _Context:
     queue: dict[str, list[str]] = field(default_factory=dict)  # agent -> users waiting
     slot_seconds: float = 60.0
     enabled: bool = True
+    estop: str = ""
 
 
 class DemoLab:
@@ -519,7 +522,7 @@ class DemoConnection:
         with self._lab._lock:
             context = self._lab.context(ctx)
             manage = context.summary.owner == self._user or "kick" in self._perms
-            return ArenaSettings(context.slot_seconds, context.enabled, manage)
+            return ArenaSettings(context.slot_seconds, context.enabled, manage, context.estop)
 
     def _manage(self, ctx: str) -> _Context:
         context = self._lab.context(ctx)
@@ -584,6 +587,31 @@ class DemoConnection:
 
     def real_robots(self) -> list[tuple[str, str]]:
         return []  # the demo lab has no real arena
+
+    def emergency_stop(self, ctx: str, engaged: bool, reason: str = "") -> str:
+        with self._lab._lock:
+            context = self._manage(ctx)
+            context.estop = f"emergency stop by {self._user}" if engaged else ""
+            ended = 0
+            if engaged:  # the fake runs nothing: the head of each queue is what "runs"
+                for queue in context.queue.values():
+                    ended += bool(queue)
+                    del queue[:1]
+        self._lab._broadcast(AgentsEvent(ctx))
+        if engaged:
+            return f"emergency stop: every robot stopped, {ended} controllers ended"
+        return "emergency stop released"
+
+    def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
+        self._need("deploy", "dry-run controllers")
+        problem = check_upload(filename, source)[1]
+        if problem:
+            raise LabError(problem)
+        with self._lab._lock:
+            if agent not in self._lab.context(ctx).queue:
+                raise LabError(f"there is no robot {agent!r} in {ctx}")
+        # The fake lab has no sandbox: it runs nothing and says so.
+        return DryRunResult(True, "will run (demo lab: the file was checked, not run)")
 
     # -- admin
 

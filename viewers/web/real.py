@@ -40,6 +40,7 @@ from viewers.web.adapters import (
     Directory,
     DirectoryEvent,
     DisconnectedEvent,
+    DryRunResult,
     JoinedContext,
     LabError,
     LabEvent,
@@ -465,6 +466,12 @@ class RealConnection:
             except LabError as exc:
                 log.info("is %s real? %s", ctx, exc)
         return found
+
+    def emergency_stop(self, ctx: str, engaged: bool, reason: str = "") -> str:
+        return self._arena(ctx).emergency_stop(engaged, reason)
+
+    def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
+        return self._arena(ctx).dry_run(agent, filename, source)
 
     # -- admin
 

@@ -31,6 +31,7 @@ from viewers.web.adapters import (
     AgentsEvent,
     AgentStatus,
     ArenaSettings,
+    DryRunResult,
     LabError,
     LabEvent,
     OutputEvent,
@@ -221,7 +222,31 @@ class ArenaLink:
             slot_seconds=state.slot_seconds,
             enabled=state.enabled,
             can_manage=user_may_kick or self.owner == self.user,
+            estop=state.estop,
         )
+
+    def emergency_stop(self, engaged: bool, reason: str) -> str:
+        detail = self._call(
+            lambda: self.agents.emergency_stop(reason or "from the web page", release=not engaged)
+        )
+        self._refresh()
+        return detail
+
+    def dry_run(self, agent: str, filename: str, source: bytes) -> DryRunResult:
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        name, problem = check_upload(filename, source)
+        if problem:
+            raise LabError(problem)
+        report = self._call(lambda: self.agents.dry_run(agent, source, filename=name))
+        details = [
+            f"collision at {c.at:.2f} s: {c.what}{' ' + c.ident if c.ident else ''}"
+            for c in report.collisions[:5]
+        ]
+        if report.commands:
+            details.append(f"{report.saturated} of {report.commands} wheel commands at top speed")
+        details += [f"| {line}" for line in report.output[:5]]
+        return DryRunResult(report.will_run, report.verdict, tuple(details))
 
     def set_slot(self, seconds: float) -> str:
         if not (1.0 <= seconds <= 3600.0):

@@ -5,11 +5,13 @@ arena_settings, set_slot, stop_agent, set_enabled) and
 :class:`WorldFeed.sensors`. The table shows every robot with who drives it,
 how many wait, my place and when my slot should start; an upload is checked
 in the page (the same pre-check the agent context runs) before it is sent;
-the running controllers' prints arrive live. The owner of the context (or
+the running controllers' prints arrive live. "Dry run (.py)" runs a file a few
+simulated seconds in a private copy of the arena and shows "will run" /
+"will NOT run: ..." without queueing it. The owner of the context (or
 someone with 'kick' there) also gets its settings: slot length, stop the
-running controller, disable or enable a robot or the whole context. The
-agent context re-checks every right: the page only hides what would be
-refused.
+running controller, disable or enable a robot or the whole context, and the
+emergency stop (every robot, at once, until released). The agent context
+re-checks every right: the page only hides what would be refused.
 """
 
 from __future__ import annotations
@@ -66,6 +68,8 @@ def format_agents(rows: list[AgentStatus], settings: ArenaSettings | None = None
     if settings is not None and settings.slot_seconds > 0:
         state = "" if settings.enabled else " · **remote control is off**"
         lines.append(f"Slots of {settings.slot_seconds:g} s{state}\n")
+    if settings is not None and settings.estop:
+        lines.append(f"**{escape_md(settings.estop)}**: every robot is held until it is released\n")
     lines += ["| robot | driven by | waiting | me | ETA |", "| --- | --- | --- | --- | --- |"]
     for r in rows[:MAX_ROWS]:
         mine = (
@@ -102,8 +106,15 @@ class RobotPanel:
         self._table_at = 0.0
         gui = client.gui
         with gui.add_folder("Robots"):
+            # The host's emergency stop: first, and outside the folded settings (shown
+            # to the owner or those with 'kick' there only).
+            self.estop = gui.add_button("Emergency stop (every robot)", color="red", visible=False)
+            self.release = gui.add_button("Release the emergency stop", visible=False)
             self.agents_md = gui.add_markdown("")
             self.robot = gui.add_dropdown("Robot", (NONE,))
+            # Before the upload button: tests find the upload's input as the last one.
+            self.dry_run = gui.add_upload_button("Dry run (.py)", mime_type="text/x-python")
+            self.dry_run_md = gui.add_markdown("", visible=False)
             self.upload = gui.add_upload_button(
                 "Upload controller (.py)", mime_type="text/x-python", icon=viser.Icon.UPLOAD
             )
@@ -130,6 +141,9 @@ class RobotPanel:
             self.ir_plot = gui.add_uplot(empty, series, title="IR proximity", aspect=2.0)
             self.ambient_plot = gui.add_uplot(empty, series, title="Ambient light", aspect=2.0)
         self.upload.on_upload(lambda _: self._uploaded())
+        self.dry_run.on_upload(lambda _: self._dry_run())
+        self.estop.on_click(lambda _: self._emergency_stop(True))
+        self.release.on_click(lambda _: self._emergency_stop(False))
         self.cancel.on_click(lambda _: self._cancel())
         self.robot.on_update(lambda _: self._robot_chosen())
         self.rays.on_update(lambda _: self._rays_toggled())
@@ -160,6 +174,12 @@ class RobotPanel:
             self.manage.visible = settings.can_manage
             if settings.can_manage:
                 self.slot.value = settings.slot_seconds
+        stop_shown = settings.can_manage and not settings.estop
+        if self.estop.visible != stop_shown:
+            self.estop.visible = stop_shown
+        release_shown = settings.can_manage and bool(settings.estop)
+        if self.release.visible != release_shown:
+            self.release.visible = release_shown
         # A dropdown of a swarm's 1,000 names is no use: past that, click robots instead.
         # NONE stays first, so a new list never selects a robot by itself.
         names = (NONE, *(r.agent for r in rows[:MAX_CHOICES]))
@@ -284,6 +304,29 @@ class RobotPanel:
         self.say_notice(f"{name} is queued for {agent}: {where}.")
         self.refresh_agents()
 
+    def _dry_run(self) -> None:
+        uploaded = self.dry_run.value
+        name, problem = check_upload(uploaded.name, uploaded.content)
+        self.dry_run_md.visible = True
+        if problem:
+            self.dry_run_md.content = f"**Dry run: {escape_md(problem)}**"
+            return
+        agent = self._chosen()
+        if agent is None:
+            self.dry_run_md.visible = False
+            return
+        self.dry_run_md.content = f"_Dry run of {escape_md(name)} on {escape_md(agent)}..._"
+        try:
+            result = self.connection.dry_run(self.ctx, agent, name, uploaded.content)
+        except LabError as exc:
+            self.dry_run_md.content = f"**Dry run: {escape_md(str(exc))}**"
+            return
+        details = "".join(f"  \n{escape_md(line)}" for line in result.details)
+        self.dry_run_md.content = (
+            f"Dry run of {escape_md(name)} on {escape_md(agent)}: "
+            f"**{escape_md(result.verdict)}**{details}"
+        )
+
     def _cancel(self) -> None:
         agent = self._chosen()
         if agent is None:
@@ -306,6 +349,10 @@ class RobotPanel:
             return
         self.say_notice(detail)
         self.refresh_agents()
+
+    def _emergency_stop(self, engaged: bool) -> None:
+        what = "stop every robot" if engaged else "release the emergency stop"
+        self._manage(what, lambda: self.connection.emergency_stop(self.ctx, engaged))
 
     def _set_slot(self) -> None:
         seconds = self.slot.value

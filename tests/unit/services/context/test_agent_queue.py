@@ -76,3 +76,17 @@ def test_a_saved_book_comes_back_whole() -> None:
     assert run is not None and (run.lease_id, run.end, run.lease_key) == ("L1", 2.0, b"k" * 32)
     with pytest.raises(ValueError, match="not a saved queue book"):
         load_book(b"junk")
+
+
+def test_an_emergency_stop_holds_the_queues_in_order_and_survives_a_restart() -> None:
+    book = QueueBook(30.0)
+    book.set_agents({"k1": "khepera"})
+    first = job("a")
+    book.add(first)
+    book.estop = "emergency stop by ida"
+    assert book.next_to_start("k1") is None  # held, not dropped
+    assert book.eta("k1", 1, 100.0) is None
+    restored = load_book(save_book(book))
+    assert restored.estop == "emergency stop by ida"
+    restored.estop = ""
+    assert restored.next_to_start("k1") == first

@@ -1,0 +1,353 @@
+"""A dry run: a few simulated seconds of an uploaded controller in a private copy of the arena.
+
+Robotarium's ``debug()`` tells a student before a run whether it "will run" on
+the testbed; this is ours. The controller is untrusted code, so it runs in
+the same :class:`~services.runner.sandbox.Sandbox` as a deployed one (the
+child in lockstep: one state in, its commands and a ``step`` out), never in
+a lab process. The world is the runner's own: a Sim2D ``World`` built from
+the arena's public snapshot (obstacles, objects, lights, robots where they
+stand), stepped here one tick per answer, headless and as fast as the child
+answers, until ``seconds`` of simulated time or :data:`DRY_RUN_WALL_S` of
+wall-clock time, whichever comes first.
+
+Grading (docs/CONTROLLERS.md): "will NOT run" if the controller does not load,
+raises (with the line of the controller file), does not answer in time, or
+hits a wall, an obstacle or another robot; pushing movable objects is fine
+(foraging does it). Saturated wheels (commands at the robot's top speed) are
+reported, not failed: the robot only clamps them.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from common.controller import ARM_UP, LIGHT_SENSORS, PROXIMITY_SENSORS, RobotCommand
+from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
+from common.sim2d import maps
+from common.sim2d.collision import CAT_OBJECT, CAT_OBSTACLE, CAT_ROBOT
+from common.sim2d.world import World
+from services.runner.sandbox import Sandbox, SandboxLimits
+
+DRY_RUN_WALL_S = 20.0
+"""Longest wall-clock limit of a dry run, sandbox start included (a hostile controller's end)."""
+
+
+def wall_limit(seconds: float) -> float:
+    """The wall-clock limit of a dry run of ``seconds``: 20 s for the default 5 s.
+
+    Generous (a loaded 2-core machine starts a sandbox in 1-3 s and steps a
+    well-behaved controller at 4-5x real time), never more than DRY_RUN_WALL_S.
+    """
+    return min(DRY_RUN_WALL_S, 5.0 + 3.0 * seconds)
+
+
+MAX_COLLISIONS = 100
+MAX_OUTPUT = 50
+_LINE = re.compile(r'File "/ctl/user/controller\.py", line (\d+)')
+
+
+def snapshot_to_map(snap: WorldSnapshot) -> dict[str, Any]:
+    """The arena of a snapshot as a map (common/sim2d/maps.py format), robots where they are."""
+
+    def shape(info: Any) -> dict[str, Any]:
+        if info.shape.kind == "circle":
+            return {"shape": "circle", "radius": max(info.shape.radius, 0.1)}
+        return {"shape": "polygon", "points": [list(p) for p in info.shape.points]}
+
+    def pose(x: float, y: float, heading: float) -> dict[str, float]:
+        return {"x": x, "y": y, "heading_deg": math.degrees(heading)}
+
+    out: dict[str, Any] = {
+        "format": maps.FORMAT,
+        "version": maps.VERSION,
+        "name": snap.world,
+        "arena": {"width": snap.width, "height": snap.height},
+        "obstacles": [],
+        "objects": [],
+        "lights": [],
+        "agents": [],
+    }
+    for item in snap.items:
+        if item.category == "obstacle":
+            out["obstacles"].append(
+                {"id": item.id, **shape(item), **pose(item.x, item.y, item.heading)}
+            )
+        elif item.category == "object":
+            out["objects"].append(
+                {
+                    "id": item.id,
+                    "kind": item.kind,
+                    **shape(item),
+                    **pose(item.x, item.y, item.heading),
+                    "mass": max(item.mass, 1.0),
+                    "resistivity": item.resistivity,
+                }
+            )
+    for light in snap.lights:
+        out["lights"].append(
+            {
+                "id": light.id,
+                "x": light.x,
+                "y": light.y,
+                "intensity": light.intensity,
+                "radius": light.radius,
+                "mode": light.mode,
+                "period": light.period,
+            }
+        )
+    for agent in snap.agents:
+        out["agents"].append(
+            {
+                "id": agent.id,
+                "type": agent.type,
+                **pose(agent.x, agent.y, agent.heading),
+                "gripper": agent.gripper,
+            }
+        )
+    return out
+
+
+def world_from_snapshot(snap: WorldSnapshot) -> World:
+    """A private World like the snapshot's (MapError if it cannot be rebuilt)."""
+    return maps.build_world(
+        snapshot_to_map(snap),
+        name=snap.world,
+        seed=snap.seed,
+        tick_s=snap.tick_s,
+        source=f"world {snap.world}",
+    )
+
+
+def _state(world: World, slot: int) -> dict[str, Any]:
+    """What the controller sees of its robot this tick (as the sandbox's child reads it)."""
+    agent = world.agents[slot]
+    spec = agent.spec
+
+    def fit(values: list[int], count: int, fill: int) -> list[int]:
+        return ([max(0, min(1023, int(v))) for v in values] + [fill] * count)[:count]
+
+    prox = world.proximity[slot].tolist()[: len(spec.proximity.poses)]
+    amb = world.ambient[slot].tolist()[: len(spec.ambient.poses)]
+    leds = [*world.leds[slot].tolist()[: spec.leds], 0, 0]
+    speeds = [max(-127, min(127, int(v))) for v in world.cmd[slot].tolist()]
+    state: dict[str, Any] = {
+        "time": world.sim_time,
+        "speeds": speeds,
+        "counters": [int(c) for c in world.counters[slot].tolist()],
+        "proximity": fit(prox, PROXIMITY_SENSORS, 0),
+        "ambient": fit(amb, LIGHT_SENSORS, 500),
+        "leds": [bool(leds[0]), bool(leds[1])],
+        "arm": ARM_UP,
+    }
+    if agent.has_gripper:
+        state["arm"] = int(np.clip(np.rint(world.arm[slot]), 0, 255))
+        state["gripper_closed"] = world.gripper_state(slot) != 0
+        state["object_present"] = int(world.presence[slot]) >= 128
+        state["resistivity"] = int(world.resistivity(slot))
+    return state
+
+
+class _Touches:
+    """What the robot's body touches after a tick: new contacts become collisions."""
+
+    def __init__(self, world: World, slot: int) -> None:
+        self.world = world
+        self.body = world.agents[slot].body
+        self.touching: set[tuple[str, str]] = set()
+        self.names = self._names()
+
+    def _names(self) -> dict[int, tuple[str, str]]:
+        world, names = self.world, {}
+        for ident, obstacle in world.obstacles.items():
+            for body in [obstacle.body] if obstacle.body is not None else []:
+                names[id(body)] = ("obstacle", ident)
+        for obj in world.objects:
+            if obj.body is not None:
+                names[id(obj.body)] = ("object", obj.id)
+        for agent in world.agents:
+            names[id(agent.body)] = ("robot", agent.id)
+        return names
+
+    def new_contacts(self) -> list[tuple[str, str]]:
+        now: set[tuple[str, str]] = set()
+
+        def seen(arbiter: Any) -> None:
+            for shape in arbiter.shapes:
+                if shape.body is self.body:
+                    continue
+                named = self.names.get(id(shape.body))
+                if named is None:
+                    category = shape.filter.categories
+                    if category & CAT_OBSTACLE:
+                        named = ("wall", "")
+                    elif category & CAT_ROBOT:
+                        named = ("robot", "")
+                    elif category & CAT_OBJECT:
+                        named = ("object", "")
+                    else:
+                        continue
+                now.add(named)
+
+        self.body.each_arbiter(seen)
+        new = sorted(now - self.touching)
+        self.touching = now
+        return new
+
+
+def _error_line(text: str) -> int | None:
+    found = _LINE.findall(text)
+    return int(found[-1]) if found else None
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else "it raised an exception"
+
+
+def dry_run(
+    snap: WorldSnapshot,
+    agent: str,
+    source: bytes,
+    *,
+    filename: str = "controller.py",
+    seconds: float = 5.0,
+    limits: SandboxLimits | None = None,
+    wall_s: float | None = None,
+) -> DryRunReport:
+    """Run ``source`` on ``agent`` of a private copy of ``snap``'s world; what it saw.
+
+    Raises ValueError if the world cannot be rebuilt or has no such robot,
+    RuntimeError if no sandbox can run here.
+    """
+    started = time.monotonic()
+    wall_s = wall_limit(seconds) if wall_s is None else wall_s
+    world = world_from_snapshot(snap)
+    try:
+        slot = world.agent_slot(agent)
+    except KeyError:
+        raise ValueError(f"no robot {agent} in world {snap.world}") from None
+    top = float(world.tables.max_speed[slot])
+    output: list[str] = []
+    commands: list[RobotCommand] = []
+    lock = threading.Lock()
+    answered = threading.Event()
+
+    def on_command(command: RobotCommand) -> None:
+        with lock:
+            commands.append(command)
+
+    def on_output(line: str) -> None:
+        with lock:
+            if len(output) < MAX_OUTPUT and not line.startswith("[runner] controller"):
+                output.append(line[:1000])
+
+    # A dry run answers states far faster than real time: the per-second command
+    # budget protects a real robot's link, and here nothing but this world listens.
+    base = limits or SandboxLimits()
+    limits = SandboxLimits(
+        cpu_seconds=min(base.cpu_seconds, int(wall_s) + 1),
+        memory_bytes=base.memory_bytes,
+        processes=base.processes,
+        open_files=base.open_files,
+        file_size_bytes=base.file_size_bytes,
+        output_lines_per_second=base.output_lines_per_second,
+        commands_per_second=100_000,
+        output_bytes_per_second=base.output_bytes_per_second,
+        cpu_share=base.cpu_share,
+    )
+    sandbox = Sandbox(
+        source,
+        filename=filename,
+        limits=limits,
+        on_command=on_command,
+        on_output=on_output,
+        on_step=answered.set,
+    )
+    deadline = started + wall_s
+    sandbox.start(wall_s)
+    collisions: list[DryRunCollision] = []
+    touches = _Touches(world, slot)
+    saturated = wheel_commands = steps = 0
+    timed_out = False
+    ticks = round(seconds / world.tick_s)
+    world.step()  # one idle tick: the world's arrays (poses, readings) are filled by a step
+    t0 = world.sim_time
+    try:
+        for _ in range(ticks):
+            answered.clear()
+            if not sandbox.send_state(_state(world, slot)):
+                break  # the child is gone: the reason is its exit
+            while not answered.wait(0.05):
+                if time.monotonic() >= deadline:
+                    timed_out = True
+                    break
+                if sandbox.wait(0):
+                    break
+            if timed_out or not answered.is_set():
+                break
+            steps += 1
+            with lock:
+                mine, commands[:] = list(commands), []
+            for command in mine:
+                if command.speeds is not None:
+                    wheel_commands += 1
+                    if max(abs(command.speeds[0]), abs(command.speeds[1])) >= top:
+                        saturated += 1
+                    world.set_speeds(slot, *command.speeds)
+                if command.leds is not None:
+                    for led, on in enumerate(command.leds[: world.agents[slot].spec.leds]):
+                        world.set_led(slot, led, bool(on))
+            world.step()
+            for what, ident in touches.new_contacts():
+                if len(collisions) < MAX_COLLISIONS:
+                    collisions.append(
+                        DryRunCollision(at=round(world.sim_time - t0, 3), what=what, ident=ident)  # type: ignore[arg-type]
+                    )
+    finally:
+        sandbox.stop(grace=0.3, reason="the dry run ended")
+    wall = time.monotonic() - started
+    error = sandbox.error_text
+    sim = world.sim_time - t0
+    line = _error_line(error) if error else None
+    if error:
+        where = f"line {line}: " if line else ""
+        verdict = f"will NOT run: {where}{_last_line(error)}"
+    elif timed_out:
+        verdict = (
+            f"will NOT run: it did not answer within {wall_s:g} s of wall-clock time, at "
+            f"{sim:.2f} simulated s (an endless loop, or too slow for its period)"
+        )
+    elif steps < ticks:
+        verdict = f"will NOT run: it ended at {sim:.2f} simulated s ({sandbox.exit_reason})"
+    else:
+        hits = [c for c in collisions if c.what != "object"]
+        if hits:
+            first = hits[0]
+            what = first.what + (f" {first.ident}" if first.ident else "")
+            verdict = (
+                f"will NOT run: {len(hits)} collision{'s' * (len(hits) != 1)}, "
+                f"the first with a {what} at {first.at:.2f} s"
+            )
+        else:
+            verdict = "will run"
+        if saturated:
+            verdict += f" ({saturated} of {wheel_commands} wheel commands at top speed)"
+    return DryRunReport(
+        will_run=verdict.startswith("will run"),
+        verdict=verdict[:256],
+        sim_seconds=round(sim, 3),
+        wall_seconds=round(wall, 3),
+        steps=steps,
+        collisions=collisions,
+        saturated=saturated,
+        commands=wheel_commands,
+        error_line=line,
+        error=error[-256:] if error else "",
+        output=output,
+    )

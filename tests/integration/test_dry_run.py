@@ -1,0 +1,153 @@
+"""Dry runs: a controller's few simulated seconds in a private world, in the real sandbox.
+
+The first tests play the runner (services/runner/dryrun.py's ``dry_run`` on a
+snapshot of the foraging map); the last goes the whole way with real
+processes: ``wart deploy --dry-run`` -> agent context -> runner -> report.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.messages import WorldSnapshot
+from common.sim2d import maps
+from services.engine import wire
+from services.runner.dryrun import dry_run, wall_limit
+from services.runner.sandbox import sandbox_problem
+from tests.conftest import REPO, Procs, Router
+from tests.integration.agentkit import (
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+)
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+]
+HEADER = "from common.controller import Controller, Khepera\n"
+INTO_THE_WALL = HEADER + textwrap.dedent(
+    """
+    class Charge(Controller):
+        def do_work(self, robot: Khepera) -> None:
+            robot.set_speeds(127, 127)  # k3 faces the east wall, past a ball
+    """
+)
+
+
+@pytest.fixture(scope="module")
+def snap() -> WorldSnapshot:
+    world = maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=3)
+    return wire.snapshot(world)
+
+
+def test_driving_into_a_wall_will_not_run(snap: WorldSnapshot) -> None:
+    report = dry_run(snap, "k3", INTO_THE_WALL.encode())
+    assert not report.will_run
+    assert report.verdict.startswith("will NOT run: 1 collision, the first with a wall at ")
+    # Pushing a ball on the way is no failure (foraging does it); the wall is.
+    assert [c.what for c in report.collisions] == ["object", "wall"]
+    assert report.saturated == report.commands > 0  # every command at top speed
+    assert report.sim_seconds == pytest.approx(5.0)
+
+
+def test_an_exception_names_its_line(snap: WorldSnapshot) -> None:
+    source = HEADER + textwrap.dedent(
+        """
+        class Divide(Controller):
+            def do_work(self, robot: Khepera) -> None:
+                robot.set_speeds(3, 3)
+                if robot.time() > 0.5:
+                    print("about to fail")
+                    robot.set_speeds(1 // 0, 0)
+        """
+    )
+    line = source.splitlines().index("            robot.set_speeds(1 // 0, 0)") + 1
+    report = dry_run(snap, "k1", source.encode())
+    assert not report.will_run
+    assert report.error_line == line
+    assert report.verdict.startswith(f"will NOT run: line {line}: ZeroDivisionError")
+    assert "about to fail" in report.output
+    assert 0.4 < report.sim_seconds < 1.0  # it failed at its first step past 0.5 s
+
+
+def test_a_well_behaved_example_will_run(snap: WorldSnapshot) -> None:
+    source = (REPO / "examples" / "01_braitenberg.py").read_bytes()
+    # k3 leads the pack (k1, behind it, bumps into it: a dry run says so, rightly).
+    report = dry_run(snap, "k3", source, filename="01_braitenberg.py")
+    assert report.will_run, report
+    assert report.verdict.startswith("will run")
+    assert report.sim_seconds == pytest.approx(5.0)
+    assert not [c for c in report.collisions if c.what != "object"]
+
+
+@pytest.mark.parametrize(
+    ("name", "body"),
+    [
+        ("endless loop", "while True:\n            pass"),
+        (
+            "fork bomb",
+            "import os\n        while True:\n            try:\n                os.fork()\n"
+            "            except OSError:\n                pass",
+        ),
+    ],
+)
+def test_a_hostile_controller_ends_within_its_limit(
+    snap: WorldSnapshot, name: str, body: str
+) -> None:
+    source = HEADER + (
+        "\n\nclass Hostile(Controller):\n"
+        "    def do_work(self, robot: Khepera) -> None:\n"
+        f"        {body}\n"
+    )
+    report = dry_run(snap, "k2", source.encode(), seconds=1.0)
+    assert not report.will_run
+    assert f"did not answer within {wall_limit(1.0):g} s" in report.verdict, report.verdict
+    # It returned: the wall-clock limit ended it (the bound is loose: a loaded machine).
+    assert report.wall_seconds < wall_limit(1.0) + 15
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab)
+    start_runner(lab)
+    start_agent_context(lab)
+    yield lab
+
+
+def test_wart_deploy_dry_run_through_the_lab(lab: Lab, procs: Procs, tmp_path: Path) -> None:
+    charge = tmp_path / "charge.py"
+    charge.write_text(INTO_THE_WALL)
+    proc = procs.start(
+        "dry-run",
+        [
+            "deploy",
+            str(charge),
+            "--dry-run",
+            "--context",
+            "arena",
+            "--agent",
+            "k3",
+            "--user",
+            "bob",
+            *lab.net_args(),
+        ],
+        env={"WART_PASSWORD": PASSWORD},
+    )
+    assert proc.popen.wait(60) == 1, proc.output()
+    out = proc.output()
+    assert "will NOT run: " in out and "collision at " in out
+    assert "wheel commands at top speed" in out
+    with agent_user(lab, "alice") as alice:
+        source = (REPO / "examples" / "01_braitenberg.py").read_bytes()
+        report = alice.dry_run("k2", source, filename="01_braitenberg.py")
+        assert report.will_run, report
+        assert all(not q.entries for q in alice.state().agents)  # nothing was queued

@@ -1,0 +1,171 @@
+"""The arena host's emergency stop, with real processes: four deployed controllers end at once.
+
+Registry, engine (with a service identity: MAC leases, as under ``wart up``),
+runner and agent context are real ``wart`` processes; students and the host
+are AgentClients in this process.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from common.agent_client import FINAL
+from common.keys import AliveKind
+from common.lab_errors import LabError
+from common.messages import EmergencyStop, ErrorReply, OkReply, decode
+from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.simbody import SimBody
+from services.runner.sandbox import sandbox_problem
+from tests.conftest import REPO, Procs, Router, wait_for
+from tests.integration.agentkit import (
+    CTX,
+    WORLD,
+    Motion,
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+)
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+]
+FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
+ROBOTS = ("k0", "k1", "k2", "k3")
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab, identity=True)
+    start_runner(lab)
+    start_agent_context(lab, slot=120.0)
+    yield lab
+
+
+def test_the_host_stops_four_running_controllers_and_holds_the_arena(
+    lab: Lab, procs: Procs
+) -> None:
+    with (
+        lab.zsession() as z,
+        agent_user(lab, "alice") as alice,
+        agent_user(lab, "bob") as bob,
+        agent_user(lab, "carol") as carol,
+        agent_user(lab, "ida") as ida,
+    ):
+        motion = Motion(z, lab.router.realm)
+        owners = {"k0": alice, "k1": bob, "k2": carol, "k3": alice}
+        rids = {
+            agent: who.queue(agent, "deploy", source=FORWARD, filename="forward.py").request_id
+            for agent, who in owners.items()
+        }
+        for agent, who in owners.items():
+            assert who.wait_status(rids[agent], {"running"}, timeout=60), f"{agent} never ran"
+        wait_for(lambda: motion.moving(ROBOTS, 0.0), 30, "the four robots to drive")
+
+        # A student without the right is refused, and nothing stops.
+        with pytest.raises(LabError, match="only the owner of arena or a user with 'kick'"):
+            bob.emergency_stop("I want my turn")
+        assert motion.moving(ROBOTS, 0.0)
+
+        pressed = time.monotonic()
+        detail = ida.emergency_stop("a robot fell off the table")
+        assert "4 controllers ended" in detail
+        for agent, who in owners.items():
+            status = who.wait_status(rids[agent], FINAL, timeout=20)
+            assert status is not None, f"{agent}'s request never ended"
+            assert status.status == "cancelled"
+            assert status.reason == "emergency stop by ida: a robot fell off the table"
+        wait_for(lambda: motion.at_rest_since(ROBOTS, pressed), 20, "every robot at rest")
+
+        # Held: a new request waits (the arena says why), nothing starts.
+        state = carol.state()
+        assert state.estop.startswith("emergency stop by ida")
+        queued = carol.queue("k2", "deploy", source=FORWARD, filename="forward.py")
+        assert queued.start_eta is None
+        assert carol.wait_status(queued.request_id, {"running"}, timeout=2.0) is None
+        assert motion.at_rest_since(ROBOTS, pressed)
+
+        # A replay of the host's stop request is refused (each envelope once).
+        session = ida.client.session
+        assert session is not None
+        key = keys.ctx_request(lab.router.realm, CTX)
+        captured = session.seal(key, EmergencyStop(engaged=False))
+        first = [r.ok.payload for r in z.get(key, payload=captured, timeout=10) if r.ok]
+        assert isinstance(decode(first[0], (OkReply, ErrorReply)), OkReply)  # released
+        again = [r.ok.payload for r in z.get(key, payload=captured, timeout=10) if r.ok]
+        replayed = decode(again[0], (OkReply, ErrorReply))
+        assert isinstance(replayed, ErrorReply) and "replay" in replayed.message
+
+        # Released: the held request starts and drives k2.
+        assert carol.wait_status(queued.request_id, {"running"}, timeout=30)
+        moved_from = time.monotonic()
+        wait_for(lambda: motion.moving(["k2"], moved_from), 30, "k2 to drive again")
+        motion.close()
+
+
+def test_wart_arena_estop_and_release(lab: Lab, procs: Procs) -> None:
+    def arena(verb: str, user: str, *extra: str) -> tuple[int, str]:
+        args = ["arena", *lab.net_args(), verb, "--context", CTX, "--user", user, *extra]
+        proc = procs.start(f"arena-{verb}-{user}", args, env={"WART_PASSWORD": PASSWORD})
+        return proc.popen.wait(60), proc.output()
+
+    code, out = arena("estop", "bob")
+    assert code == 1 and "only the owner of arena or a user with 'kick'" in out, out
+    code, out = arena("estop", "ida", "--reason", "fire drill")
+    assert code == 0 and "emergency stop: every robot stopped" in out, out
+    with agent_user(lab, "carol") as carol:
+        assert carol.state().estop == "emergency stop by ida: fire drill"
+        code, out = arena("release", "ida")
+        assert code == 0 and "released" in out, out
+        assert carol.state().estop == ""
+
+
+@pytest.fixture
+def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab, SimBody]]:
+    """A real-robot arena: the Khepera bridge on an emulated robot (a real pty)."""
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    with SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body:
+        emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
+        with emulator:
+            bridge = procs.start(
+                "bridge",
+                [
+                    "bridge",
+                    "--world",
+                    WORLD,
+                    "--port",
+                    f"{tmp_path / 'khepera0'}=k1@500,500,0",
+                    *lab.net_args(),
+                ],
+            )
+            lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
+            start_runner(lab)
+            start_agent_context(lab, slot=120.0)
+            yield lab, body
+
+
+def test_the_emergency_stop_halts_a_real_robot_through_the_bridge(
+    real_lab: tuple[Lab, SimBody],
+) -> None:
+    lab, body = real_lab
+    with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:
+        queued = alice.queue("k1", "deploy", source=FORWARD, filename="forward.py")
+        assert alice.wait_status(queued.request_id, {"running"}, timeout=60)
+        wait_for(lambda: body.speed() != (0, 0), 30, "the emulated Khepera's motors to turn")
+        ida.emergency_stop()
+        final = alice.wait_status(queued.request_id, FINAL, timeout=20)
+        assert final is not None and final.reason == "emergency stop by ida"
+        wait_for(lambda: body.speed() == (0, 0), 5, "the bridge to halt the motors")
+    # The bridge itself obeyed the world stop (not only the runner's last command).
+    bridge = next(p for p in lab.procs.started if p.name == "bridge")
+    wait_for(lambda: "emergency stop by ida: every robot stopped" in bridge.output(), 10, "its log")
