@@ -34,7 +34,7 @@ from typing import Any
 
 import zenoh
 
-from common import acl, keys
+from common import keys
 from common.auth import AuthError, Principal
 from common.files import write_atomic
 from common.keys import AliveKind
@@ -47,11 +47,7 @@ from common.messages import (
     ContextInfoRequest,
     ContextSettings,
     ControllerOutput,
-    ControlQueued,
     ControlRequest,
-    DryRun,
-    DryRunReport,
-    DryRunRequest,
     EmergencyStop,
     FileListRequest,
     Message,
@@ -66,10 +62,8 @@ from common.messages import (
     SaveFile,
     StopControl,
     UserRemovalRequest,
-    WorldStop,
 )
 from common.messages.chat import ChatLine, MemberStatus
-from common.precheck import PrecheckError, precheck
 from common.recording.store import RecordingStore
 from common.service import RequestError
 from services.context.agent_queue import (
@@ -77,28 +71,23 @@ from services.context.agent_queue import (
     QueueBook,
     RunningJob,
     load_book,
-    new_request_id,
     save_book,
 )
-from services.context.chat_room import ChatRoom, log
+from services.context.chat_room import ChatRoom
 from services.context.lease_signer import LeaseSigner
+from services.context.queue_requests import QueueRequests
 from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
 from services.context.user_files import UserFiles
 
-LEASE_REPUBLISH_S = 1.0
-SNAPSHOT_RETRY_S = 2.0
-WORLD_IDENTITY_REFRESH_S = 5.0  # a restarted world has a new identity: reseal lease keys to it
-MAX_WAITING_PER_USER = 4
 DRY_RUN_WORKERS = 2
 DRY_RUN_WAITING = 4
-DRY_RUN_WAIT_S = 25.0  # the runner's wall-clock limit (20 s) and the sandbox's start
 RUNNER_GRACE_S = 1.5  # how long to wait before taking a runner's token loss as its death
 
 
-class AgentContext(SlotScheduler, ChatRoom):
+class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -309,239 +298,6 @@ class AgentContext(SlotScheduler, ChatRoom):
         # On disk before the answer: an acknowledged request survives a crash right after.
         self._save_book()
         return reply
-
-    def _queue(self, principal: Principal, request: ControlRequest) -> Message:
-        self._require_member(principal)
-        permission = "control" if request.mode == "remote" else "deploy"
-        principal.require(
-            permission,
-            f"{'drive' if request.mode == 'remote' else 'deploy a controller on'} {request.agent}",
-            scope=acl.agent_scope(self.room, request.agent),
-            restricted=self.restricted,
-        )
-        self._require_agent(request.agent)
-        if request.mode == "deploy":
-            try:
-                precheck(request.source, request.filename)
-            except PrecheckError as exc:
-                raise RequestError("bad_request", str(exc)) from None
-        elif request.source:
-            raise RequestError("bad_request", "a remote request carries no source")
-        job = ControlJob(
-            request_id=new_request_id(request.agent),
-            agent=request.agent,
-            user=principal.user,
-            session_id=principal.session_id,
-            box_key=principal.token.box_key,
-            mode=request.mode,
-            source=request.source,
-            filename=request.filename,
-        )
-        now = time.time()
-        with self._wake:
-            if not self.book.can_run(request.agent):
-                raise RequestError(
-                    "forbidden",
-                    f"remote control of {request.agent} is disabled in {self.room} for now",
-                )
-            mine = [j for j, _ in self.book.jobs_of_session(principal.session_id)]
-            if any(j.agent == request.agent for j in mine):
-                raise RequestError(
-                    "conflict", f"you already have a request on {request.agent}: cancel it first"
-                )
-            waiting = sum(
-                1
-                for line in self.book.lines.values()
-                for j in line.waiting
-                if j.user == principal.user
-            )
-            if waiting >= MAX_WAITING_PER_USER:
-                raise RequestError(
-                    "rate_limited", f"at most {MAX_WAITING_PER_USER} waiting requests per user"
-                )
-            position = self.book.add(job)
-            eta = self.book.eta(request.agent, position, now)
-            self._dirty = True
-            self._wake.notify_all()
-        log.info("%s queued %s (%s) at %d", principal.user, job.request_id, job.mode, position)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(job, "queued")),
-        )
-        return ControlQueued(
-            request_id=job.request_id,
-            agent=job.agent,
-            position=position,
-            start_eta=eta,
-            slot_seconds=self.book.slot_seconds,
-        )
-
-    def _on_dry_run(self, query: zenoh.Query) -> Message:
-        """A dry run of a controller on an agent: the same rights and check as queueing it."""
-        principal, request = self.verifier.open(str(query.key_expr), query.payload, DryRunRequest)
-        self._require_member(principal)
-        principal.require(
-            "deploy",
-            f"dry-run a controller on {request.agent}",
-            scope=acl.agent_scope(self.room, request.agent),
-            restricted=self.restricted,
-        )
-        self._require_agent(request.agent)
-        try:
-            precheck(request.source, request.filename)
-        except PrecheckError as exc:
-            raise RequestError("bad_request", str(exc)) from None
-        report: DryRunReport = self.runner_link.dry_run(
-            DryRun(
-                ctx=self.room,
-                world=self.world,
-                agent=request.agent,
-                user=principal.user,
-                source=request.source,
-                filename=request.filename,
-                seconds=request.seconds,
-            ),
-            timeout=DRY_RUN_WAIT_S,
-        )
-        log.info(
-            "%s dry-ran %s on %s: %s",
-            principal.user,
-            request.filename,
-            request.agent,
-            report.verdict,
-        )
-        return report
-
-    def _cancel(self, principal: Principal, request: CancelControl) -> Message:
-        with self._wake:
-            found = self.book.find(request.request_id)
-            if found is None:
-                raise RequestError("not_found", f"no request {request.request_id} in {self.room}")
-            _, job, running = found
-            if job.user != principal.user and not self._manages(principal):
-                raise RequestError("forbidden", f"request {request.request_id} is not yours")
-            if not running:
-                self.book.remove_waiting(job.request_id)
-                self._dirty = True
-            else:
-                self._finish_soon(job.request_id, "cancelled", f"cancelled by {principal.user}")
-            self._wake.notify_all()
-        if not running:
-            self._publish_agent(
-                AgentEvent(
-                    ctx=self.room,
-                    request=self._status(job, "cancelled", f"cancelled by {principal.user}"),
-                )
-            )
-        return OkReply(detail=f"request {request.request_id} cancelled")
-
-    def _stop_agent(self, principal: Principal, request: StopControl) -> Message:
-        self._require_manage(principal, f"stop the controller on {request.agent}")
-        self._require_agent(request.agent)
-        with self._wake:
-            run = self.book.lines[request.agent].running
-            if run is None:
-                return OkReply(detail=f"nothing runs on {request.agent}")
-            why = f"stopped by {principal.user}" + (f": {request.reason}" if request.reason else "")
-            self._finish_soon(run.job.request_id, "cancelled", why)
-            self._wake.notify_all()
-        return OkReply(detail=f"stopping {run.job.request_id}")
-
-    def _emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
-        """Stop (or release) every robot of the arena: the running controllers end now,
-        the world stops every robot and refuses commands, no slot starts until released.
-
-        The world is told first and directly (not by the scheduler's next turn):
-        its robots stop whether or not the runner or a student's machine obeys.
-        """
-        what = "stop every robot" if request.engaged else "release the emergency stop"
-        self._require_manage(principal, what)
-        with self._wake:
-            if request.engaged == bool(self.book.estop):
-                detail = self.book.estop or "no emergency stop is in force"
-                return OkReply(detail=f"nothing changed: {detail}")
-            if request.engaged:
-                why = f"emergency stop by {principal.user}" + (
-                    f": {request.reason}" if request.reason else ""
-                )
-                why = why[:256]  # a RequestStatus reason's limit
-                self.book.estop = why
-                ended = [ln.running.job.request_id for ln in self.book.lines.values() if ln.running]
-                for request_id in ended:
-                    self._finish_soon(request_id, "cancelled", why)
-            else:
-                self.book.estop = ""
-                ended = []
-            self._dirty = True
-            self._wake.notify_all()
-        self.publish_world_stop(request.engaged, principal.user)
-        if request.engaged:
-            log.warning("%s: ended %s", why, ", ".join(ended) or "nothing running")
-            return OkReply(
-                detail=f"emergency stop: every robot stopped, {len(ended)} controllers ended; "
-                "no slot starts until you release it"
-            )
-        log.warning("emergency stop released by %s", principal.user)
-        return OkReply(detail="emergency stop released: waiting requests start again")
-
-    def publish_world_stop(self, engaged: bool | None, by: str) -> None:
-        """Tell the world the stop in force (``engaged`` None: republish it, if one holds).
-
-        Sealed and put under one lock, re-reading the book inside it: the world obeys
-        the newest stop by its send time, so a republication sealed after a release
-        would stop the arena again.
-        """
-        key = keys.world_estop(self.realm, self.world)
-        with self._stop_lock:
-            with self._lock:
-                why = self.book.estop
-            if engaged is None and not why:
-                return
-            message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
-            try:
-                self.session.put(key, self._seal(key, message))
-            except Exception as exc:  # the session closing at shutdown
-                self.log.warning("could not tell world %s of the stop: %s", self.world, exc)
-
-    def _settings(self, principal: Principal, request: ContextSettings) -> Message:
-        self._require_manage(principal, "change the settings")
-        if request.agent is not None:
-            self._require_agent(request.agent)
-        done: list[str] = []
-        with self._wake:
-            if request.slot_seconds is not None:
-                self.book.slot_seconds = request.slot_seconds
-                done.append(f"slots of {request.slot_seconds:g} s from the next one")
-            if request.enabled is not None:
-                if request.agent is not None:
-                    self.book.lines[request.agent].enabled = request.enabled
-                    lines = [self.book.lines[request.agent]]
-                else:
-                    self.book.enabled = request.enabled
-                    lines = list(self.book.lines.values())
-                where = request.agent or "every agent"
-                done.append(f"remote control {'on' if request.enabled else 'off'} for {where}")
-                if not request.enabled:
-                    for line in lines:
-                        if line.running is not None:
-                            self._finish_soon(
-                                line.running.job.request_id,
-                                "cancelled",
-                                f"remote control disabled by {principal.user}",
-                            )
-            self._dirty = True
-            self._wake.notify_all()
-        log.info("%s changed the settings: %s", principal.user, "; ".join(done))
-        return OkReply(detail="; ".join(done) or "nothing changed")
-
-    def _finish_soon(self, request_id: str, status: str, reason: str) -> None:
-        """Make a running request end at the scheduler's next turn (lock held)."""
-        found = self.book.find(request_id)
-        if found is None or not found[2]:
-            return
-        line = found[0]
-        assert line.running is not None
-        self._end_reasons.setdefault(request_id, (status, reason))
-        line.running.end = min(line.running.end, time.time())
 
     # -- members leaving: their requests go with them
 

@@ -64,7 +64,7 @@ class SlotScheduler:
     _end_reasons: dict[str, tuple[str, str]]
     recorder: SlotRecorder
 
-    # What the context provides (agent_context.py).
+    # What the context provides (agent_context.py, queue_requests.py).
     def _save_book(self) -> None:
         raise NotImplementedError
 
