@@ -293,7 +293,8 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
     """Every agent's proximity, ambient and presence readings, written into ``out``.
 
     ``robots`` (Robots), ``tables`` (SensorTables), ``scene`` (StaticScene),
-    ``moving`` (MovingScene) and ``out`` (Readings) are the packs defined above.
+    ``moving`` (MovingScene) and ``out`` (Readings) are the packs defined above,
+    passed as plain tuples in that layout (see SensorSuite.read: dispatch cost).
     """
     pose, arm, holding = robots
     (
@@ -569,7 +570,7 @@ def warm_up() -> float:
     i = np.zeros((1, N_AGENT_I), dtype=np.int64)
     i[0, I_PROX_SENSORS] = 1
     i[0, I_AMB_SENSORS] = 1
-    sense(
+    packs = (
         Robots(np.zeros((1, 3)), np.zeros(1), np.zeros(1, dtype=np.bool_)),
         SensorTables(
             np.zeros((1, 1, 5)),
@@ -609,4 +610,5 @@ def warm_up() -> float:
             np.zeros(1, dtype=np.int32),
         ),
     )
+    sense(*(tuple(p) for p in packs))  # plain tuples, as SensorSuite.read passes them
     return time.perf_counter() - t0

@@ -213,6 +213,7 @@ class AgentSensing:
     ambient: AmbientSensors
     tables: K.SensorTables
     noise_total: int  # standard normal draws per sensing pass
+    kernel_tables: tuple[object, ...]  # ``tables`` as a plain tuple (SensorSuite.read)
 
     @classmethod
     def build(
@@ -238,7 +239,7 @@ class AgentSensing:
             ambient.local,
             ambient.valid,
         )
-        return cls(ring, ambient, tables, noise_at)
+        return cls(ring, ambient, tables, noise_at, tuple(tables))
 
 
 @dataclass(frozen=True)
@@ -254,6 +255,7 @@ class StaticGeometry:
     circle_radii: np.ndarray  # (C,)
     cell_mm: float
     scene: K.StaticScene  # the same, packed for the kernel
+    kernel_scene: tuple[object, ...]  # ``scene`` as a plain tuple (SensorSuite.read)
     # Circles passed to the kernel when there are no movable objects.
     no_objects: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -314,7 +316,7 @@ class StaticGeometry:
             np.full(len(radii_a), -1, dtype=np.int64),
             np.zeros(len(radii_a), dtype=bool),
         )
-        return cls(segments, centres_a, radii_a, cell, scene, no_objects)
+        return cls(segments, centres_a, radii_a, cell, scene, tuple(scene), no_objects)
 
 
 _NO_EDGES = np.zeros((0, 4))
@@ -405,13 +407,13 @@ class SensorSuite:
         """Every agent's proximity, ambient and presence readings, written into ``out``."""
         static = self.static_geometry(world)
         layout = self.agents
-        moving = K.MovingScene(
-            *_objects(world, static),
-            self._lit(world),
-            self.noise.take(layout.noise_total),
-        )
-        robots = K.Robots(world.agent_pose, world.arm, world.holding())
-        K.sense(robots, layout.tables, static.scene, moving, out)
+        # The packs go to the kernel as plain tuples, laid out as K.MovingScene and
+        # K.Robots: numba's dispatcher types a plain tuple of arrays on its C fast
+        # path, a named tuple through Python (measured: 13 against 23 us a call at
+        # 10 robots, more than the sensing itself).
+        moving = (*_objects(world, static), self._lit(world), self.noise.take(layout.noise_total))
+        robots = (world.agent_pose, world.arm, world.holding())
+        K.sense(robots, layout.kernel_tables, static.kernel_scene, moving, tuple(out))
         return out
 
     def _lit(self, world: SensedWorld) -> np.ndarray:
