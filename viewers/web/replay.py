@@ -198,6 +198,7 @@ class ReplayControls:
         self.closed = False
         self._on_leave = on_leave
         self._shown = -1
+        self._was_playing = False  # the last refresh saw it playing: the end must reach the slider
         duration = max(self.player.timeline.duration, SLIDER_STEP)
         gui = client.gui
         with gui.add_folder("Replay") as self.folder:
@@ -254,6 +255,7 @@ class ReplayControls:
 
     def _pause(self) -> None:
         self.player.pause()
+        self._was_playing = True  # the slider goes to where the cursor stopped
         self.refresh()
 
     def _speed(self) -> None:
@@ -283,8 +285,14 @@ class ReplayControls:
     def refresh(self) -> None:
         cursor = self.player.cursor
         value = round(cursor, 2)
-        if abs(float(self.slider.value) - value) >= SLIDER_STEP / 2:
+        # Only a playing cursor moves the slider (and Play/Pause/the end): when paused the
+        # slider is the student's, and writing back a cursor a step behind their drag would
+        # pull the thumb back under their hand.
+        if (self.player.playing or self._was_playing) and abs(
+            float(self.slider.value) - value
+        ) >= SLIDER_STEP / 2:
             self.slider.value = value
+        self._was_playing = self.player.playing
         self.play.disabled = self.player.playing
         self.pause.disabled = not self.player.playing
         moment = self.player.moment()
