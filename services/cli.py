@@ -41,6 +41,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "deploy": ("services.commands.deploy", "upload a controller to run on a robot in the lab"),
     "record": ("services.commands.record", "list and download your recorded runs (MCAP)"),
     "report": ("services.commands.report", "the summary (and plots) of a recorded run"),
+    "replay": (
+        "viewers.web.replay",
+        "replay a recorded run in a web viewer: timeline, play, speed (no lab needed)",
+    ),
     "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
     "host": ("services.host.main", "run this machine's share of a multi-host lab (lab file)"),
     "arena": (

@@ -27,6 +27,7 @@ class RecordingInfo(msgspec.Struct, frozen=True, kw_only=True):
     status: ShortText = ""  # finished / cancelled / ... (from its summary; "" if none)
     reason: ShortText = ""
     distance_mm: float | None = None
+    duration_s: float | None = None  # from its summary (the page lists it); None if none
 
 
 class RecordingListRequest(Message):

@@ -7,6 +7,8 @@
 - :mod:`common.recording.compare`: :func:`compare` two runs -> :class:`Comparison` (sim beside
   real, ``wart report A --against B``)
 - :mod:`common.recording.store`: the per-user directory of recordings, with retention
+- :mod:`common.recording.replay`: :class:`Timeline` (what was, at a cursor time) and
+  :class:`Player` (play, pause, speed): the page's replay and ``wart replay``
 """
 
 from common.recording.reader import Recording, RecordingError, Stamped, read_recording

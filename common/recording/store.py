@@ -86,6 +86,7 @@ class RecordingStore:
             status=summary.status if summary else "",
             reason=(summary.reason if summary else "")[:256],
             distance_mm=summary.distance_mm if summary else None,
+            duration_s=summary.duration_s if summary else None,
         )
 
     def listing(self, users: list[str]) -> list[RecordingInfo]:

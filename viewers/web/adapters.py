@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal, Protocol
 
 import numpy as np
@@ -216,6 +217,20 @@ class SavedFile:
     name: str
     size: int
     saved_at: float  # wall-clock seconds
+
+
+@dataclass(frozen=True)
+class RecordingEntry:
+    """One of my recorded runs in an arena, as the Recordings folder lists it."""
+
+    name: str  # the run's request id (what a download asks for)
+    agent: str
+    start: float  # wall-clock seconds
+    size: int  # bytes of the MCAP file
+    status: str = ""  # how it ended (finished, cancelled, ...); "" when not summarised
+    reason: str = ""
+    duration_s: float | None = None
+    distance_mm: float | None = None
 
 
 # One figure for the page's check and the agent context's limit (the wire type's bound).
@@ -436,6 +451,20 @@ class LabConnection(Protocol):
 
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         """A few simulated seconds of the file in a private copy of the arena; queues nothing."""
+        ...
+
+    # -- my recordings (every slot an agent context runs is recorded: common/recording/)
+
+    def recordings(self, ctx: str) -> list[RecordingEntry]:
+        """My recorded runs in ``ctx``, newest first."""
+        ...
+
+    def fetch_recording(self, ctx: str, name: str, dest: Path) -> Path:
+        """Download recording ``name`` of ``ctx`` into the file ``dest``; returns ``dest``."""
+        ...
+
+    def promote(self, ctx: str, agent: str, recording: Path) -> Queued:
+        """Queue the controller file of a recorded (deploy) run on ``agent`` of ``ctx``."""
         ...
 
     def logout(self) -> None: ...

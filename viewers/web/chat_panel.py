@@ -22,6 +22,8 @@ from viewers.web.adapters import (
     WorldFeed,
 )
 from viewers.web.editor import MapEditor
+from viewers.web.recordings_panel import RecordingsPanel
+from viewers.web.replay import ReplayFeed
 from viewers.web.robot_panel import RobotPanel
 from viewers.web.text import check_line, clock, escape_md
 from viewers.web.workbench import Workbench
@@ -76,6 +78,8 @@ class ChatPanel:
             self.robots: RobotPanel | None = None
             self.workbench: Workbench | None = None
             self.editor: MapEditor | None = None
+            self.recordings: RecordingsPanel | None = None
+            self.view: WorldView | None = None  # the page's view, once this arena was shown
             if self.kind in ARENA_KINDS and self.world and on_watch is not None:
                 self.watch = gui.add_button("Show this arena", color="teal")
                 self.watch.on_click(lambda _: self.show_world())
@@ -83,6 +87,14 @@ class ChatPanel:
                 self.workbench = Workbench(client, connection, self.ctx, self.robots)
                 # Everyone sees the editor; without edit_map it is disabled and says why.
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
+                self.recordings = RecordingsPanel(
+                    client,
+                    connection,
+                    self.ctx,
+                    view=lambda: self.view,
+                    show=self._show_replay,
+                    back_to_live=self.show_world,
+                )
             self.leave = gui.add_button("Leave")
         self.send.on_click(lambda _: self.submit())
         self.kick.on_click(lambda _: self.kick_selected())
@@ -168,7 +180,14 @@ class ChatPanel:
             return
         self._on_watch(feed, self)
 
+    def _show_replay(self, feed: ReplayFeed) -> None:
+        """A recording of this arena in the view: the panels follow the replay's cursor."""
+        if self._on_watch is not None:
+            self._on_watch(feed, self)
+
     def close(self, *, leave: bool) -> None:
+        if self.recordings is not None:
+            self.recordings.close()
         if leave:
             try:
                 self.connection.leave(self.ctx)
@@ -180,6 +199,7 @@ class ChatPanel:
 
     def bind(self, view: WorldView, feed: WorldFeed) -> None:
         """This arena is now the one in the view: wire its robot panel and editor to it."""
+        self.view = view
         if self.robots is not None:
             self.robots.bind(view, feed)
         if self.editor is not None:

@@ -178,7 +178,8 @@ class BrowserSession:
             self.view.hide()
 
     def watch(self, feed: WorldFeed, panel: ChatPanel) -> None:
-        if self.watching is not None and self.watching is not panel:
+        """Show ``feed`` (an arena live, or one of its recordings) bound to ``panel``."""
+        if self.watching is not None:  # the same panel too: it rebinds to the new feed
             self.watching.unbind()
         self.view.show(feed)
         panel.bind(self.view, feed)

@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import itertools
 import math
+import shutil
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
 from common.keys import is_ident
+from common.recording import RecordingError, read_recording, summarize
 from common.survey import RouterView, Survey
 from viewers.web.adapters import (
     Account,
@@ -43,6 +46,7 @@ from viewers.web.adapters import (
     Obstacle,
     PrivateEvent,
     Queued,
+    RecordingEntry,
     RobotReadings,
     SavedFile,
     SceneFrame,
@@ -262,6 +266,8 @@ class DemoLab:
         self.worlds: dict[str, DemoWorld] = {"arena": DemoWorld("arena", robots, rate=rate)}
         self._lock = threading.RLock()
         self.files: dict[str, dict[str, tuple[bytes, float]]] = {}  # user -> name -> (src, at)
+        # ctx -> its recordings (the demo records nothing itself: tests and demos add files)
+        self.recordings: dict[str, dict[str, tuple[Path, RecordingEntry, str]]] = {}
         self._contexts: dict[str, _Context] = {}
         self._online: dict[str, int] = {}
         self._subs: dict[int, tuple[str, Callable[[LabEvent], None]]] = {}
@@ -269,6 +275,24 @@ class DemoLab:
         self._seq = itertools.count(1)
         self._open("lobby", "chat", "ana", "Lobby chat")
         self._open("arena", "agent", "ana", "Simulated arena", world="arena")
+
+    def add_recording(self, ctx: str, path: Path) -> RecordingEntry:
+        """Offer the recording ``path`` in ``ctx`` to the user who ran it (its RunInfo.user)."""
+        rec = read_recording(path)
+        summary = summarize(rec)
+        entry = RecordingEntry(
+            name=summary.request_id,
+            agent=summary.agent,
+            start=summary.start,
+            size=path.stat().st_size,
+            status=summary.status,
+            reason=summary.reason,
+            duration_s=summary.duration_s,
+            distance_mm=summary.distance_mm,
+        )
+        with self._lock:
+            self.recordings.setdefault(ctx, {})[entry.name] = (path, entry, summary.user)
+        return entry
 
     def close(self) -> None:
         for world in self.worlds.values():
@@ -612,6 +636,33 @@ class DemoConnection:
                 raise LabError(f"there is no robot {agent!r} in {ctx}")
         # The fake lab has no sandbox: it runs nothing and says so.
         return DryRunResult(True, "will run (demo lab: the file was checked, not run)")
+
+    # -- recordings
+
+    def recordings(self, ctx: str) -> list[RecordingEntry]:
+        with self._lab._lock:
+            self._lab.context(ctx)
+            kept = list(self._lab.recordings.get(ctx, {}).values())
+        mine = [entry for _, entry, user in kept if user == self._user]
+        return sorted(mine, key=lambda r: r.start, reverse=True)
+
+    def fetch_recording(self, ctx: str, name: str, dest: Path) -> Path:
+        with self._lab._lock:
+            kept = self._lab.recordings.get(ctx, {}).get(name)
+        if kept is None or kept[2] != self._user:
+            raise LabError(f"you have no recording named {name} in {ctx}")
+        shutil.copyfile(kept[0], dest)
+        return dest
+
+    def promote(self, ctx: str, agent: str, recording: Path) -> Queued:
+        try:
+            rec = read_recording(recording)
+        except RecordingError as exc:
+            raise LabError(str(exc)) from None
+        info = rec.info
+        if info is None or info.mode != "deploy" or rec.source is None:
+            raise LabError("this run's recording holds no controller file to promote")
+        return self.request_control(ctx, agent, info.filename or "controller.py", rec.source)
 
     # -- admin
 

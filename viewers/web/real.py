@@ -17,6 +17,7 @@ import queue
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import zenoh
@@ -47,6 +48,7 @@ from viewers.web.adapters import (
     MemberEvent,
     PrivateEvent,
     Queued,
+    RecordingEntry,
     SavedFile,
 )
 from viewers.web.address import LabAddress
@@ -445,6 +447,15 @@ class RealConnection:
         if world is None:
             raise LabError(f"{ctx} has not said which world it drives yet: try again")
         return self.world(world).reset(agent)
+
+    def recordings(self, ctx: str) -> list[RecordingEntry]:
+        return self._arena(ctx).recordings()
+
+    def fetch_recording(self, ctx: str, name: str, dest: Path) -> Path:
+        return self._arena(ctx).fetch_recording(name, dest)
+
+    def promote(self, ctx: str, agent: str, recording: Path) -> Queued:
+        return self._arena(ctx).promote(agent, recording)
 
     def _is_real(self, world: str) -> bool:
         """Whether ``world`` is a Khepera bridge (asked once: a world does not change kind)."""

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from pathlib import PurePath
+from pathlib import Path, PurePath
 from typing import TypeVar
 
 from common import client as lab
@@ -25,6 +25,7 @@ from common.agent_client import AgentClient
 from common.keys import is_ident
 from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
 from common.precheck import PrecheckError, precheck
+from common.recording import RecordingError, read_recording
 from viewers.web.adapters import (
     CONTROLLER_SUFFIXES,
     MAX_CONTROLLER_BYTES,
@@ -36,6 +37,7 @@ from viewers.web.adapters import (
     LabEvent,
     OutputEvent,
     Queued,
+    RecordingEntry,
     RequestEvent,
     SavedFile,
 )
@@ -278,6 +280,45 @@ class ArenaLink:
 
     def save_file(self, name: str, source: bytes) -> str:
         return self._call(lambda: self.agents.save_file(name, source))
+
+    # -- my recordings (the context lists and serves only my own without the manage right)
+
+    def recordings(self) -> list[RecordingEntry]:
+        listing = self._call(self.agents.recordings)
+        mine = [
+            RecordingEntry(
+                name=r.name,
+                agent=r.agent,
+                start=r.start,
+                size=r.size,
+                status=r.status,
+                reason=r.reason,
+                duration_s=r.duration_s,
+                distance_mm=r.distance_mm,
+            )
+            for r in listing.recordings
+            if r.user == self.user
+        ]
+        return sorted(mine, key=lambda r: r.start, reverse=True)
+
+    def fetch_recording(self, name: str, dest: Path) -> Path:
+        if not is_ident(name):
+            raise LabError(f"{name!r} is not a recording's name")
+        return self._call(lambda: self.agents.download(name, dest))
+
+    def promote(self, agent: str, recording: Path) -> Queued:
+        """Queue a recorded deploy run's file on ``agent`` here (a real arena's robot)."""
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        try:
+            rec = read_recording(recording)
+        except RecordingError as exc:
+            raise LabError(str(exc)) from None
+        queued = self._call(lambda: self.agents.promote(rec, agent))
+        now = time.time()
+        eta = None if queued.start_eta is None else max(0.0, queued.start_eta - now)
+        self._refresh()
+        return Queued(queued.request_id, queued.agent, queued.position, eta, queued.slot_seconds)
 
     def _refresh(self) -> None:
         """Read the queues now so the page shows a change at once (events follow anyway)."""

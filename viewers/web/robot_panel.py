@@ -264,6 +264,10 @@ class RobotPanel:
         sample = feed.sensors(name)
         if sample is None:
             return
+        if self._t and sample.t < self._t[-1]:  # a replay scrubbed back: start the plot again
+            self._t.clear()
+            self._ir.clear()
+            self._ambient.clear()
         self._t.append(sample.t)
         self._ir.append(sample.ir)
         self._ambient.append(sample.ambient)

@@ -91,6 +91,7 @@ class WorldView:
         self.show_rays = False
         self.last_seq = -1
         self.frames_applied = 0
+        self.drawn: PreparedFrame | None = None  # the frame the robots are drawn at now
         self._lock = threading.RLock()  # the pump thread and GUI callbacks both draw
         self._robots: viser.BatchedMeshHandle | None = None
         self._headings: viser.BatchedMeshHandle | None = None
@@ -133,12 +134,19 @@ class WorldView:
             return None
         return names[self.selected]
 
+    def drawn_positions(self) -> npt.NDArray[np.float32] | None:
+        """The robots' positions (viser metres) as last assigned to the browser's mesh."""
+        with self._lock:
+            robots = self._robots
+            return None if robots is None else np.array(robots.batched_positions, np.float32)
+
     def show(self, feed: WorldFeed) -> None:
         """Watch ``feed``: draw its snapshot, aim the camera; frames follow from the pump."""
         with self._lock:
             self.feed = feed
             self.selected = None
             self.last_seq = -1
+            self.drawn = None
             self._trail.clear()
             self.redraw(feed.snapshot())
             snap = self.snapshot
@@ -373,6 +381,7 @@ class WorldView:
                 self._apply_selected(prepared)
             self.last_seq = frame.seq
             self.frames_applied += 1
+            self.drawn = prepared
 
     def _apply_objects(self, frame: SceneFrame) -> None:
         for handle, (x, y) in zip(self._balls, frame.ball_xy, strict=False):

@@ -19,13 +19,13 @@ from services.engine import wire
 REPO = Path(__file__).resolve().parents[3]
 
 
-def _info(agent: str = "k1", rid: str = "k1-1-abc") -> s.RunInfo:
+def _info(agent: str = "k1", rid: str = "k1-1-abc", user: str = "alice") -> s.RunInfo:
     now = time.time()
     return s.RunInfo(
         ctx="arena",
         world="w1",
         agent=agent,
-        user="alice",
+        user=user,
         request_id=rid,
         mode="deploy",
         filename="ctl.py",
@@ -34,11 +34,13 @@ def _info(agent: str = "k1", rid: str = "k1-1-abc") -> s.RunInfo:
     )
 
 
-def _record(path: Path, *, seconds: float = 2.0, finish: bool = True) -> RecordingWriter:
+def _record(
+    path: Path, *, seconds: float = 2.0, finish: bool = True, user: str = "alice"
+) -> RecordingWriter:
     world = maps.load_map(REPO / "maps" / "empty.json", name="w1", seed=1)
     snap = wire.snapshot(world)
     agent = snap.agents[0].id
-    writer = RecordingWriter(path, _info(agent))
+    writer = RecordingWriter(path, _info(agent, user=user))
     writer.write(s.SNAPSHOT, snap)
     slot = world.agent_slot(agent)
     t0 = time.time()

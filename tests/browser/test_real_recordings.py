@@ -1,0 +1,80 @@
+"""A real lab records a student's slot; the page lists it as hers and replays it.
+
+Router, registry, engine, runner and the agent context ``arena`` (2 s slots, its
+data dir keeps recordings). alice runs a tiny controller from the page; when the
+slot ends her Recordings folder lists the run (robot, how it ended, duration)
+and Replay draws it in her view.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from services.runner.sandbox import sandbox_problem
+from tests.browser.conftest import wait_until
+from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_agents import enter_arena, pick_robot, upload
+from tests.browser.test_real_lab import session_of
+from viewers.web.app import WebViewer
+from viewers.web.replay import ReplayFeed
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+SLOT = 2.0
+TINY = b"""\
+from common.controller import Controller, Khepera
+
+
+class Ahead(Controller):
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(6, 6)
+"""
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    with real_lab(Path(tmp_path_factory.mktemp("reclab")), agents=True, slot=SLOT) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab) -> None:
+    alice = open_page("alice")
+    panel = enter_arena(alice, lab, "alice")
+    recordings = panel.recordings
+    assert recordings is not None
+    pick_robot(alice, panel, "k0")
+    upload(alice, "ahead.py", TINY)
+    alice.wait_text("Your controller on k0 finished", timeout=30_000)  # the slot ran out
+
+    alice.p.get_by_text("Recordings", exact=True).first.click()
+
+    # The context writes the file (and its summary) 1.5 s after the slot's end.
+    def listed() -> bool:
+        alice.click("Refresh")
+        return any(e.status for e in recordings.refresh())
+
+    wait_until(listed, 30, what="alice's recording, summarised, in her list")
+    entry = recordings._entries[0]
+    assert entry.agent == "k0" and entry.status == "finished"
+    assert entry.duration_s is not None and entry.duration_s > 1.0
+    # The page's table (markdown, drawn as an HTML table): the robot and how it ended.
+    alice.p.get_by_role("cell", name="k0", exact=True).first.wait_for(timeout=10_000)
+    alice.p.get_by_role("cell", name="finished", exact=False).first.wait_for(timeout=10_000)
+    alice.click("Replay")
+    view = session_of(lab.viewer, "alice").view
+    wait_until(lambda: isinstance(view.feed, ReplayFeed), 15, what="the replay in alice's view")
+    wait_until(lambda: view.drawn is not None, 10, what="a recorded frame drawn")
+    alice.screenshot("real-recording-replay")
+    alice.click("Back to live")
+    wait_until(lambda: not isinstance(view.feed, ReplayFeed), 15, what="the live arena again")

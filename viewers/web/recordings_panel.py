@@ -1,0 +1,279 @@
+"""The arena tab's Recordings folder: my recorded runs, and what I can do with each.
+
+Every slot an agent context runs is recorded (services/context/recorder.py);
+the context lists and serves a student's own. Here, newest first (robot,
+when, how it ended, duration), and for the chosen one:
+
+- **Download**: the MCAP file, through viser's file download (a link in a
+  notification);
+- **Summary**: :func:`common.recording.summarize`'s numbers as text (the
+  same lines ``wart report`` prints);
+- **Plots**: the trajectory over the map and IR and wheel speeds over time,
+  drawn by common/recording/plots.py (matplotlib) and shown as images;
+- **Replay**: the run in the world view with a timeline (viewers/web/replay.py);
+  "Back to live" returns to the arena;
+- **Promote to real**: the run's controller file queued on a robot of a real
+  arena the student has joined (``AgentClient.promote``).
+
+A recording is downloaded once into a per-panel temporary directory and read
+there; a file that is not a readable recording is said in words.
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import viser
+
+from common.recording import Recording, RecordingError, plots, read_recording, summarize
+from common.recording.replay import Timeline
+from viewers.web.adapters import LabConnection, LabError, RecordingEntry
+from viewers.web.replay import ReplayControls, ReplayFeed
+from viewers.web.text import escape_md
+from viewers.web.world_view import WorldView
+
+log = logging.getLogger("wart.viewer.recordings")
+
+NONE = "(no recordings yet)"
+NO_REAL = "(join a real arena first)"
+MAX_LISTED = 20  # rows in the table (the context keeps 20 per user by default)
+
+
+def describe(entry: RecordingEntry) -> str:
+    when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(entry.start))
+    return f"{entry.agent} {when}"
+
+
+def format_recordings(entries: list[RecordingEntry]) -> str:
+    if not entries:
+        return "_No recordings of yours here yet: every slot you run is recorded._"
+    lines = ["| robot | when | how it ended | duration |", "| --- | --- | --- | --- |"]
+    for e in entries[:MAX_LISTED]:
+        when = time.strftime("%m-%d %H:%M:%S", time.localtime(e.start))
+        ended = escape_md(e.status or "?") + (f": {escape_md(e.reason)}" if e.reason else "")
+        took = "-" if e.duration_s is None else f"{e.duration_s:.1f} s"
+        lines.append(f"| {escape_md(e.agent)} | {when} | {ended} | {took} |")
+    return "\n".join(lines)
+
+
+def summary_text(rec: Recording) -> str:
+    from services.commands.report import describe as report_lines  # the lines wart report prints
+
+    return "```\n" + "\n".join(report_lines(summarize(rec))).replace("```", "'''") + "\n```"
+
+
+class RecordingsPanel:
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        connection: LabConnection,
+        ctx: str,
+        *,
+        view: Callable[[], WorldView | None],
+        show: Callable[[ReplayFeed], None],
+        back_to_live: Callable[[], None],
+    ) -> None:
+        self.client = client
+        self.connection = connection
+        self.ctx = ctx
+        self._view = view
+        self._show = show
+        self._back_to_live = back_to_live
+        self._entries: list[RecordingEntry] = []
+        self._files: dict[str, Path] = {}
+        self._tmp = tempfile.TemporaryDirectory(prefix="wart-recordings-")
+        self._lock = threading.Lock()
+        self._images: list[viser.GuiImageHandle] = []
+        self.replay: ReplayControls | None = None
+        gui = client.gui
+        with gui.add_folder("Recordings", expand_by_default=False) as self.folder:
+            self.table = gui.add_markdown("_Press Refresh to list your recordings._")
+            self.refresh_button = gui.add_button("Refresh", icon=viser.Icon.REFRESH)
+            self.chosen = gui.add_dropdown("Recording", (NONE,))
+            self.download = gui.add_button("Download", icon=viser.Icon.DOWNLOAD)
+            self.summary = gui.add_button("Summary", icon=viser.Icon.LIST_NUMBERS)
+            self.plots = gui.add_button("Plots", icon=viser.Icon.CHART_LINE)
+            self.replay_button = gui.add_button(
+                "Replay", color="grape", icon=viser.Icon.PLAYER_PLAY
+            )
+            self.real = gui.add_dropdown("Real robot", (NO_REAL,))
+            self.promote = gui.add_button("Promote to real", icon=viser.Icon.ROBOT)
+            self.status = gui.add_markdown("")
+            self.details = gui.add_markdown("")
+            self.pictures = gui.add_folder("Plots of the run", visible=False)
+            self.controls_at = gui.add_folder("Replay controls", visible=False)
+        self.refresh_button.on_click(lambda _: self.refresh())
+        self.download.on_click(lambda _: self._download())
+        self.summary.on_click(lambda _: self._summary())
+        self.plots.on_click(lambda _: self._plots())
+        self.replay_button.on_click(lambda _: self._replay())
+        self.promote.on_click(lambda _: self._promote())
+
+    def say(self, text: str, *, bad: bool = False) -> None:
+        self.status.content = ("**Not done:** " if bad else "") + escape_md(text)
+
+    # -- the list
+
+    def refresh(self) -> list[RecordingEntry]:
+        try:
+            entries = self.connection.recordings(self.ctx)
+        except LabError as exc:
+            self.say(f"Could not list your recordings: {exc}", bad=True)
+            return self._entries
+        self._entries = entries
+        self.table.content = format_recordings(entries)
+        options = tuple(describe(e) for e in entries[:MAX_LISTED]) or (NONE,)
+        if tuple(self.chosen.options) != options:
+            keep = self.chosen.value
+            self.chosen.options = options
+            self.chosen.value = keep if keep in options else options[0]
+        robots = self.connection.real_robots()
+        real = tuple(f"{c}/{a}" for c, a in robots) or (NO_REAL,)
+        if tuple(self.real.options) != real:
+            self.real.options = real
+        self.say(f"{len(entries)} recording{'s' if len(entries) != 1 else ''}.")
+        return entries
+
+    def _entry(self) -> RecordingEntry | None:
+        label = self.chosen.value
+        entry = next((e for e in self._entries if describe(e) == label), None)
+        if entry is None:
+            self.say("Choose a recording first (press Refresh if the list is empty).", bad=True)
+        return entry
+
+    def _file(self, entry: RecordingEntry) -> Path | None:
+        """The recording's file here, downloaded once."""
+        with self._lock:
+            path = self._files.get(entry.name)
+            if path is not None and path.exists():
+                return path
+            dest = Path(self._tmp.name) / f"{entry.name}.mcap"
+            try:
+                self.connection.fetch_recording(self.ctx, entry.name, dest)
+            except (LabError, OSError) as exc:
+                self.say(f"Could not fetch {entry.name}: {exc}", bad=True)
+                return None
+            self._files[entry.name] = dest
+            return dest
+
+    def _read(self, entry: RecordingEntry) -> Recording | None:
+        path = self._file(entry)
+        if path is None:
+            return None
+        try:
+            return read_recording(path)
+        except RecordingError as exc:
+            self.say(f"{entry.name} cannot be read: {exc}", bad=True)
+            return None
+
+    # -- the actions
+
+    def _download(self) -> None:
+        entry = self._entry()
+        path = self._file(entry) if entry is not None else None
+        if entry is None or path is None:
+            return
+        self.client.send_file_download(f"{entry.name}.mcap", path.read_bytes())
+        self.say(f"{entry.name}.mcap is on its way: the link is in the notification.")
+
+    def _summary(self) -> None:
+        entry = self._entry()
+        rec = self._read(entry) if entry is not None else None
+        if rec is None:
+            return
+        self.details.content = summary_text(rec)
+        self.say(f"Summary of {entry.name}." if entry else "")
+
+    def _plots(self) -> None:
+        entry = self._entry()
+        rec = self._read(entry) if entry is not None else None
+        if entry is None or rec is None:
+            return
+        if not plots.available():
+            self.say("Plots need matplotlib on the viewer's machine (pip install matplotlib).")
+            return
+        import matplotlib.image
+
+        out = Path(self._tmp.name) / "plots"
+        try:
+            written = plots.write_plots(rec, out, entry.name)
+        except (ValueError, OSError) as exc:  # a recording too damaged to draw
+            self.say(f"Could not draw {entry.name}: {exc}", bad=True)
+            return
+        for old in self._images:
+            old.remove()
+        self._images = []
+        with self.pictures:
+            for path in written:
+                pixels = (matplotlib.image.imread(str(path))[:, :, :3] * 255).astype(np.uint8)
+                label = "trajectory over the map" if "trajectory" in path.name else "IR and wheels"
+                self._images.append(self.client.gui.add_image(pixels, label=label))
+        self.pictures.visible = True
+        self.say(f"Plots of {entry.name}: below.")
+
+    def _replay(self) -> None:
+        entry = self._entry()
+        rec = self._read(entry) if entry is not None else None
+        if entry is None or rec is None:
+            return
+        view = self._view()
+        if view is None:
+            self.say("The page has no world view to replay in.", bad=True)
+            return
+        if self.replay is not None:
+            self.replay.close()
+        try:
+            Timeline(rec)
+        except RecordingError as exc:
+            self.say(f"{entry.name} cannot be replayed: {exc}", bad=True)
+            return
+        with self.controls_at:
+            self.replay = ReplayControls(
+                self.client, view, rec, on_leave=self._left, show=self._show
+            )
+        self.controls_at.visible = True
+        self.say(f"Replaying {entry.name} in the view: scrub the timeline, or press Play.")
+
+    def _left(self, _controls: ReplayControls) -> None:
+        self.replay = None
+        self.controls_at.visible = False
+        self.say("Back to the live arena.")
+        self._back_to_live()
+
+    def _promote(self) -> None:
+        entry = self._entry()
+        if entry is None:
+            return
+        robots = self.connection.real_robots()
+        if not robots:
+            self.say(
+                "Promote to real needs a real arena (a Khepera bridge's context): join one from "
+                "the lobby, then promote the run here.",
+                bad=True,
+            )
+            return
+        chosen = next((r for r in robots if f"{r[0]}/{r[1]}" == self.real.value), robots[0])
+        path = self._file(entry)
+        if path is None:
+            return
+        try:
+            queued = self.connection.promote(chosen[0], chosen[1], path)
+        except LabError as exc:
+            self.say(f"Not promoted: {exc}", bad=True)
+            return
+        self.say(
+            f"{entry.name}'s controller is queued on the real robot {chosen[1]} in {chosen[0]}"
+            f" (#{queued.position} in its queue)."
+        )
+
+    def close(self) -> None:
+        if self.replay is not None:
+            self.replay.close()
+            self.replay = None
+        self._tmp.cleanup()
