@@ -10,7 +10,8 @@ from viewers.web.labels import LABEL_FIX_JS, label_fixer_html
 
 def test_the_script_is_one_escaped_attribute_of_a_hidden_image() -> None:
     markup = label_fixer_html()
-    match = re.fullmatch(r'<img src="data:," alt="" style="display:none" onerror="([^"]*)">', markup)
+    shape = r'<img src="data:," alt="" style="display:none" onerror="([^"]*)">'
+    match = re.fullmatch(shape, markup)
     assert match is not None  # no quote of the script ends the attribute early
     script = html.unescape(match.group(1))
     assert "aria-labelledby" in script and "MutationObserver" in script
