@@ -139,3 +139,30 @@ def test_queue_on_the_real_robot_without_a_real_arena_says_what_to_do(
     bob.button("Check").focus()
     bob.p.keyboard.press("Enter")
     bob.wait_text("Check: no problems found")
+
+
+INTO_THE_WALL = """\
+from common.controller import Controller, Khepera
+
+
+class Charge(Controller):
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(127, 127)
+"""
+
+
+def test_the_editors_dry_run_says_a_controller_that_charges_a_wall_will_not_run(
+    open_page, lab: RealLab
+) -> None:
+    carol = open_page("carol")
+    panel = enter_arena(carol, lab, "carol")
+    bench = panel.workbench
+    assert bench is not None and panel.robots is not None
+    write_code(carol, INTO_THE_WALL, lambda: bench.code.value == INTO_THE_WALL)
+    pick_robot(carol, panel, "k3")
+    carol.click("Dry run")
+    carol.wait_text("on k3: will NOT run: 1 collision, the first with a wall", timeout=40_000)
+    carol.wait_text("wheel commands at top speed")
+    carol.screenshot("workbench-dry-run-wall")
+    assert "collision at" in bench.problems.content  # what it saw, under the code
+    assert all(not r.queue and r.holder is None for r in panel.robots._rows)  # nothing queued

@@ -208,6 +208,7 @@ class DryRunResult:
     will_run: bool
     verdict: str  # "will run" / "will NOT run: line 12: ..."
     details: tuple[str, ...] = ()  # collisions, saturated wheels, printed lines
+    line: int | None = None  # the controller file's line an exception came from
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ import viser
 from viewers.web.adapters import LabConnection, LabConnector, WorldFeed
 from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
+from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginForm
 from viewers.web.pump import FramePump
@@ -49,6 +50,7 @@ class BrowserSession:
         self._lock = threading.RLock()
         self.closed = False
         gui = client.gui
+        add_label_fixer(gui)  # every labelled input gets its accessible name (labels.py)
         self.address = gui.add_text(
             "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
         )

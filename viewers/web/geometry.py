@@ -20,6 +20,11 @@ ROBOT_Z = 0.01  # robots drawn just above the floor (metres)
 # six at the front from left to right, two at the back (K-Team manual, fig. 3).
 IR_BEARINGS = np.radians([90.0, 45.0, 10.0, -10.0, -45.0, -90.0, -170.0, 170.0]).astype(np.float32)
 IR_RANGE_MM = 60.0  # beyond this a Khepera's IR reads (nearly) nothing
+IR_MAX = 1023.0  # a Khepera's IR reading at contact
+IR_RAY_MM = IR_RANGE_MM  # a ray's length at IR_MAX (drawn from the body's rim)
+IR_STUB_MM = 4.0  # a ray at reading 0: enough to show the sensor's bearing
+IR_LOW_RGB = np.array([235.0, 205.0, 60.0], np.float32)  # pale yellow: nothing seen
+IR_HIGH_RGB = np.array([230.0, 0.0, 0.0], np.float32)  # red: something touching
 
 
 def yaw_to_wxyz(theta: npt.ArrayLike) -> npt.NDArray[np.float32]:
@@ -58,6 +63,34 @@ def camera_height(width_mm: float, height_mm: float, aspect: float = 1.6) -> flo
     need_v = height_mm * MM * 1.1 / 2
     need_h = width_mm * MM * 1.1 / 2 / aspect
     return max(need_v, need_h) / half_tan
+
+
+FOLLOW_DEADBAND_M = 0.002  # the follow camera ignores moves smaller than this (2 mm)
+
+
+Vec3 = tuple[float, float, float]
+
+
+def follow_camera(
+    position: npt.ArrayLike,
+    look_at: npt.ArrayLike,
+    target_xy_m: npt.ArrayLike,
+    deadband_m: float = FOLLOW_DEADBAND_M,
+) -> tuple[Vec3, Vec3] | None:
+    """The camera moved sideways so that it looks at ``target_xy_m``, or None if it does.
+
+    Position and look-at shift by the same x/y offset: the height, the zoom and
+    the orientation (top-down) stay what the student left them.
+    """
+    pos = np.asarray(position, np.float64).reshape(3)
+    look = np.asarray(look_at, np.float64).reshape(3)
+    target = np.asarray(target_xy_m, np.float64).reshape(-1)[:2]
+    offset = target - look[:2]
+    if not np.all(np.isfinite(offset)) or float(np.hypot(*offset)) < deadband_m:
+        return None
+    new_pos = (float(pos[0] + offset[0]), float(pos[1] + offset[1]), float(pos[2]))
+    new_look = (float(target[0]), float(target[1]), float(look[2]))
+    return new_pos, new_look
 
 
 def robot_mesh(
@@ -118,14 +151,17 @@ def heading_mesh(
 def ir_segments(
     pose: npt.ArrayLike, ir: npt.ArrayLike, robot_radius_mm: float
 ) -> npt.NDArray[np.float32]:
-    """(8, 2, 3) line segments (metres) for one robot's IR rays.
+    """(8, 2, 3) line segments (metres) for one robot's IR rays, from the body's rim.
 
-    A ray is drawn as long as the distance its reading implies: a high reading
-    (near 1023) means something close, so a short ray.
+    A ray grows with its reading (the issue's "rays that grow with the
+    reading"): its length is proportional to the reading, IR_RAY_MM at the
+    top of the scale (1023, something touching), never shorter than
+    IR_STUB_MM so that every sensor's bearing stays visible. A long ray is a
+    near obstacle, on the side where it is.
     """
     x, y, theta = (float(v) for v in np.asarray(pose).reshape(3))
-    reading = np.clip(np.asarray(ir, np.float32).reshape(-1)[: len(IR_BEARINGS)], 0, 1023)
-    length = IR_RANGE_MM * (1.0 - reading / 1023.0)
+    reading = ir_level(ir)
+    length = np.maximum(IR_STUB_MM, IR_RAY_MM * reading)
     bearing = theta + IR_BEARINGS[: len(reading)]
     start_r = robot_radius_mm
     seg = np.zeros((len(reading), 2, 3), np.float32)
@@ -136,6 +172,19 @@ def ir_segments(
     seg[:, :, :2] *= MM
     seg[:, :, 2] = ROBOT_Z * 2
     return seg
+
+
+def ir_level(ir: npt.ArrayLike) -> npt.NDArray[np.float32]:
+    """Readings (0..1023, as many as there are IR bearings) to 0..1."""
+    reading = np.asarray(ir, np.float32).reshape(-1)[: len(IR_BEARINGS)]
+    return np.clip(reading, 0.0, IR_MAX) / IR_MAX
+
+
+def ir_colours(ir: npt.ArrayLike) -> npt.NDArray[np.uint8]:
+    """(8, 2, 3) colours for :func:`ir_segments`: pale yellow at 0 to red at 1023."""
+    level = ir_level(ir)[:, None]
+    rgb = IR_LOW_RGB + (IR_HIGH_RGB - IR_LOW_RGB) * level
+    return np.repeat(np.rint(rgb).astype(np.uint8)[:, None, :], 2, axis=1)
 
 
 def trail_segments(points_mm: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:

@@ -248,7 +248,7 @@ class ArenaLink:
         if report.commands:
             details.append(f"{report.saturated} of {report.commands} wheel commands at top speed")
         details += [f"| {line}" for line in report.output[:5]]
-        return DryRunResult(report.will_run, report.verdict, tuple(details))
+        return DryRunResult(report.will_run, report.verdict, tuple(details), report.error_line)
 
     def set_slot(self, seconds: float) -> str:
         if not (1.0 <= seconds <= 3600.0):

@@ -132,7 +132,16 @@ class RobotPanel:
                 self.which = gui.add_dropdown("Applies to", (ALL, "the chosen robot"))
             self.manage.visible = False
             self.selected_md = gui.add_markdown("_Click a robot in the view to select it._")
-            self.rays = gui.add_checkbox("Show IR rays", False)
+            self.rays = gui.add_checkbox(
+                "Show IR rays",
+                False,
+                hint="The selected robot's IR readings as rays: longer and redder when higher",
+            )
+            self.follow = gui.add_checkbox(
+                "Follow the selected robot",
+                False,
+                hint="Keep the selected robot in the middle of the view (zoom stays yours)",
+            )
             empty = (np.zeros(0), *[np.zeros(0)] * 8)
             series = (
                 viser.uplot.Series(label="t"),
@@ -147,6 +156,7 @@ class RobotPanel:
         self.cancel.on_click(lambda _: self._cancel())
         self.robot.on_update(lambda _: self._robot_chosen())
         self.rays.on_update(lambda _: self._rays_toggled())
+        self.follow.on_update(lambda _: self._follow_toggled())
         self.set_slot.on_click(lambda _: self._set_slot())
         self.stop.on_click(lambda _: self._stop())
         self.disable.on_click(lambda _: self._enable(False))
@@ -218,6 +228,7 @@ class RobotPanel:
         view.on_select.append(self._selected)
         view.slow_hooks.append(self._sample)
         view.show_rays = self.rays.value
+        view.follow = self.follow.value
         self.refresh_agents()  # an arena's robots are known once its world is shown
 
     def unbind(self) -> None:
@@ -227,6 +238,7 @@ class RobotPanel:
                 view.on_select.remove(self._selected)
             if self._sample in view.slow_hooks:
                 view.slow_hooks.remove(self._sample)
+            view.follow = False  # the next panel bound says whether it follows
         self.view = self.feed = None
 
     def _selected(self, index: int | None) -> None:
@@ -252,6 +264,10 @@ class RobotPanel:
     def _rays_toggled(self) -> None:
         if self.view is not None:
             self.view.show_rays = self.rays.value
+
+    def _follow_toggled(self) -> None:
+        if self.view is not None:
+            self.view.follow = self.follow.value
 
     def _sample(self) -> None:
         """Called at about 5 Hz by the pump: append the selected robot's sensors, replot."""

@@ -11,6 +11,10 @@ page keeps nothing of its own), edits it in a multiline text input, and:
   the robot panel, exactly as an upload does;
 - **Queue on the real robot**: the same on a robot of a real arena (a Khepera
   bridge) the student has joined;
+- **Dry run**: the editor's text run a few simulated seconds in a private copy
+  of the arena on the chosen robot (:meth:`LabConnection.dry_run`, as the robot
+  panel's "Dry run (.py)" upload does); the verdict ("will run" / "will NOT run:
+  ...") is shown under the code, an exception's line marked as Check marks it;
 - **Stop**: cancels the student's own request on the robot (running or waiting);
 - **Reset**: the robot back at its start pose (the world allows it only to
   whoever holds the robot now, or a map editor).
@@ -33,7 +37,13 @@ import viser
 
 from common.messages.agent import FILE_NAME_PATTERN
 from common.static_check import Problem, check_source
-from viewers.web.adapters import LabConnection, LabError, OutputEvent, RequestEvent
+from viewers.web.adapters import (
+    DryRunResult,
+    LabConnection,
+    LabError,
+    OutputEvent,
+    RequestEvent,
+)
 from viewers.web.real_agents import check_upload
 from viewers.web.robot_panel import NONE, RobotPanel
 from viewers.web.text import escape_md
@@ -83,6 +93,19 @@ def excerpt(source: str, problems: list[Problem]) -> str:
 def format_problems(source: str, problems: list[Problem], heading: str) -> str:
     items = [f"- {escape_md(str(p))}" for p in problems]
     return f"**{escape_md(heading)}**\n\n" + "\n".join(items) + "\n\n" + excerpt(source, problems)
+
+
+def format_dry_run(source: str, result: DryRunResult, heading: str) -> str:
+    """A dry run's verdict (markdown): an exception's line marked as Check marks it."""
+    details = "\n".join(f"- {escape_md(line)}" for line in result.details)
+    if result.line is None:
+        body = f"**{escape_md(heading)}**"
+    else:
+        # The verdict says "will NOT run: line 12: ZeroDivisionError: ..."; the item says it once.
+        message = result.verdict.removeprefix("will NOT run: ")
+        message = message.removeprefix(f"line {result.line}: ")
+        body = format_problems(source, [Problem(result.line, message)], heading)
+    return body + ("\n\n" + details if details else "")
 
 
 @dataclass
@@ -144,6 +167,12 @@ class Workbench:
             self.run = gui.add_button(
                 "Run in simulation", color="green", icon=viser.Icon.PLAYER_PLAY
             )
+            self.dry = gui.add_button(
+                "Dry run",
+                icon=viser.Icon.FLASK,
+                hint="Run the code a few simulated seconds in a private copy of the arena: "
+                "will it run? Nothing is queued.",
+            )
             self.real = gui.add_dropdown("Real robot", (NO_REAL,))
             self.queue_real = gui.add_button("Queue on the real robot", icon=viser.Icon.ROBOT)
             self.stop = gui.add_button("Stop", color="red", icon=viser.Icon.PLAYER_STOP)
@@ -155,6 +184,7 @@ class Workbench:
         self.save.on_click(lambda _: self._save())
         self.run.on_click(lambda _: self._run_sim())
         self.queue_real.on_click(lambda _: self._run_real())
+        self.dry.on_click(lambda _: self._dry_run())
         self.stop.on_click(lambda _: self._stop())
         self.reset.on_click(lambda _: self._reset())
         # My files come from the lab: read them off the page's thread (a query can take 2 s).
@@ -317,6 +347,34 @@ class Workbench:
             self.say("This arena's robots are real: use 'Queue on the real robot'.", bad=True)
             return
         self._queue(self.ctx, agent, "simulation")
+
+    def _dry_run(self) -> None:
+        """The editor's text, dry-run on the chosen robot; the verdict under the code."""
+        agent = self._chosen()
+        if agent is None:
+            return
+        if self.check_now():
+            self.say("Not dry-run: fix the problems Check found first.", bad=True)
+            return
+        name = self._filename() or DEFAULT_NAME
+        source = self._source()
+        _, problem = check_upload(name, source)
+        if problem:
+            self.say(f"Not dry-run: {problem}", bad=True)
+            return
+        self.dry.disabled = True
+        self.say(f"Dry run of {name} on {agent}: a few simulated seconds in a private copy...")
+        try:
+            result = self.connection.dry_run(self.ctx, agent, name, source)
+        except LabError as exc:
+            self.say(f"Dry run of {name} on {agent}: {exc}", bad=True)
+            return
+        finally:
+            self.dry.disabled = False
+        verdict = "will run" if result.will_run else "will NOT run"
+        self.say(f"Dry run of {name} on {agent} done: it {verdict}, see below.")
+        heading = f"Dry run on {agent}: {result.verdict}"
+        self.problems.content = format_dry_run(self.code.value, result, heading)
 
     def refresh_real(self) -> list[tuple[str, str]]:
         robots = self.connection.real_robots()

@@ -89,6 +89,7 @@ class WorldView:
         self.snapshot: SceneLayout | None = None
         self.selected: int | None = None
         self.show_rays = False
+        self.follow = False  # keep the selected robot centred (the slow tick moves the camera)
         self.last_seq = -1
         self.frames_applied = 0
         self.drawn: PreparedFrame | None = None  # the frame the robots are drawn at now
@@ -423,16 +424,42 @@ class WorldView:
             if sample is not None:
                 radius = self.snapshot.robot_radius if self.snapshot else 27.5
                 rays = geo.ir_segments(pose, sample.ir, radius)
+                colours = geo.ir_colours(sample.ir)
                 if self._rays is None:
                     self._rays = self.client.scene.add_line_segments(
-                        "/world/rays", rays, colors=(255, 0, 0), thickness=0.002
+                        "/world/rays", rays, colors=colours, thickness=0.003
                     )
                 else:
                     self._rays.points = rays
+                    self._rays.colors = colours
         elif self._rays is not None:
             self._rays.remove()
             self._rays = None
 
+    def follow_selected(self) -> bool:
+        """Centre this browser's camera on the selected robot if following (True: moved).
+
+        Called at the pump's slow tick (5 Hz), never per frame: the camera is one
+        message per browser, and a student can still zoom (the height is kept).
+        """
+        with self._lock:
+            drawn, index = self.drawn, self.selected
+            if not self.follow or drawn is None or index is None:
+                return False
+            if index >= len(drawn.positions):
+                return False
+            cam = self.client.camera
+            try:
+                moved = geo.follow_camera(cam.position, cam.look_at, drawn.positions[index, :2])
+            except AssertionError:  # the browser has not reported its camera yet
+                return False
+            if moved is None:
+                return False
+            with self.client.atomic():
+                cam.position, cam.look_at = moved
+            return True
+
     def slow_tick(self) -> None:
+        self.follow_selected()
         for hook in list(self.slow_hooks):
             hook()

@@ -48,11 +48,15 @@ def test_robot_mesh_and_rays() -> None:
     rays = geo.ir_segments([100, 100, 0], np.full(8, 1023.0), 27.5)
     assert rays.shape == (8, 2, 3)
     lengths = np.linalg.norm(rays[:, 1] - rays[:, 0], axis=1)
-    assert lengths == pytest.approx(0.0, abs=1e-6)  # touching: zero-length rays
-    far = geo.ir_segments([100, 100, 0], np.zeros(8), 27.5)
-    assert np.linalg.norm(far[:, 1] - far[:, 0], axis=1) == pytest.approx(
-        [geo.IR_RANGE_MM * geo.MM] * 8, abs=1e-6
+    assert lengths == pytest.approx([geo.IR_RAY_MM * geo.MM] * 8, abs=1e-6)  # touching: longest
+    nothing = geo.ir_segments([100, 100, 0], np.zeros(8), 27.5)
+    assert np.linalg.norm(nothing[:, 1] - nothing[:, 0], axis=1) == pytest.approx(
+        [geo.IR_STUB_MM * geo.MM] * 8,
+        abs=1e-6,  # a stub shows where each sensor looks
     )
+    # Rays start at the body's rim, on the sensor's bearing (sensor 2: 10 degrees left).
+    start = rays[2, 0, :2] / geo.MM
+    assert math.degrees(math.atan2(start[1] - 100, start[0] - 100)) == pytest.approx(10, abs=1e-3)
     assert geo.trail_segments(np.zeros((1, 2), np.float32)).shape == (0, 2, 3)
 
 
@@ -148,3 +152,41 @@ def test_fake_lab_behaves_like_a_lab() -> None:
         assert "ana" not in ben.directory().users
     finally:
         lab.close()
+
+
+def test_an_ir_ray_grows_with_its_reading_and_reddens() -> None:
+    """The issue's words: "IR readings drawn as rays that grow with the reading"."""
+    readings = np.array([0, 100, 200, 400, 600, 800, 1000, 1023], np.float32)
+    rays = geo.ir_segments([500, 500, 0.3], readings, 27.5)
+    lengths = np.linalg.norm(rays[:, 1] - rays[:, 0], axis=1) / geo.MM
+    assert np.all(np.diff(lengths) > 0)  # every step up in reading, a longer ray
+    # Proportional above the stub: twice the reading, twice the length.
+    assert lengths[3] == pytest.approx(2 * lengths[2], rel=1e-4)
+    assert lengths[7] == pytest.approx(geo.IR_RAY_MM, rel=1e-4)
+    colours = geo.ir_colours(readings)
+    assert colours.shape == (8, 2, 3) and colours.dtype == np.uint8
+    assert (colours[:, 0] == colours[:, 1]).all()  # one colour per ray
+    assert np.all(np.diff(colours[:, 0, 1].astype(int)) <= 0)  # less green as it rises
+    assert tuple(colours[7, 0]) == tuple(geo.IR_HIGH_RGB.astype(np.uint8))
+    assert tuple(colours[0, 0]) == tuple(geo.IR_LOW_RGB.astype(np.uint8))
+    # Out-of-range readings are clipped, never drawn past the top of the scale.
+    over = geo.ir_segments([0, 0, 0], np.full(8, 5000.0), 27.5)
+    assert np.linalg.norm(over[:, 1] - over[:, 0], axis=1).max() / geo.MM == pytest.approx(
+        geo.IR_RAY_MM, rel=1e-4
+    )
+
+
+def test_the_follow_camera_shifts_sideways_and_keeps_height_and_look() -> None:
+    position, look_at = (1.0, 1.0, 6.0), (1.0, 1.0, 0.0)  # top-down over the arena's centre
+    moved = geo.follow_camera(position, look_at, (0.3, 1.7))
+    assert moved is not None
+    new_pos, new_look = moved
+    assert new_look == pytest.approx((0.3, 1.7, 0.0))
+    assert new_pos == pytest.approx((0.3, 1.7, 6.0))  # same height, still straight down
+    # A student who zoomed in and tilted keeps both: the offset is kept, shifted.
+    tilted = geo.follow_camera((1.2, 0.8, 2.0), (1.0, 1.0, 0.0), (0.5, 0.5))
+    assert tilted is not None
+    assert tilted[0] == pytest.approx((0.7, 0.3, 2.0)) and tilted[1] == pytest.approx((0.5, 0.5, 0))
+    # Within the dead band (2 mm) the camera is left alone: no message for a still robot.
+    assert geo.follow_camera(new_pos, new_look, (0.3005, 1.7005)) is None
+    assert geo.follow_camera(new_pos, new_look, (float("nan"), 1.0)) is None

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from common.static_check import Problem
-from viewers.web.workbench import TracebackReader, excerpt
+from viewers.web.adapters import DryRunResult
+from viewers.web.workbench import TracebackReader, excerpt, format_dry_run
 
 TRACEBACK = [
     "Traceback (most recent call last):",
@@ -30,3 +31,22 @@ def test_the_excerpt_marks_each_problem_line() -> None:
     source = "a = 1\nb = 2\nc = 3\nd = 4\ne = 5\n"
     text = excerpt(source, [Problem(2, "x"), Problem(5, "y"), Problem(None, "file")])
     assert ">> 2 | b = 2" in text and ">> 5 | e = 5" in text and "   3 | c = 3" in text
+
+
+def test_a_dry_runs_exception_is_marked_at_its_line_and_said_once() -> None:
+    source = "a = 1\nb = 1 / 0\nc = 3\n"
+    verdict = "will NOT run: line 2: ZeroDivisionError: division by zero"
+    result = DryRunResult(False, verdict, ("| hello",), line=2)
+    text = format_dry_run(source, result, f"Dry run of x.py on k0: {verdict}")
+    assert ">> 2 | b = 1 / 0" in text
+    assert "- line 2: ZeroDivisionError: division by zero" in text  # not "line 2: ... line 2"
+    assert text.count("line 2:") == 2  # the heading and the item
+    assert text.rstrip().endswith("- \\| hello")  # the printed lines follow, escaped
+
+
+def test_a_dry_runs_collision_has_no_line_to_mark() -> None:
+    verdict = "will NOT run: 1 collision, the first with a wall at 0.84 s"
+    result = DryRunResult(False, verdict, ("collision at 0.84 s: wall",))
+    text = format_dry_run("x = 1\n", result, f"Dry run on k3: {verdict}")
+    assert ">>" not in text and "the first with a wall" in text
+    assert "- collision at 0\\.84 s: wall" in text  # escaped for markdown

@@ -1,0 +1,53 @@
+"""The page's inputs carry accessible names: Playwright's get_by_label finds them.
+
+viser 1.1.1's labels point at ids its text inputs do not have; viewers/web/labels.py
+links each label to its input with aria-labelledby. The login form, the editor's
+Code box and the robot list are used here through their names alone, and the
+login form by keyboard (Tab from User to Password).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.browser.conftest import wait_until
+from viewers.web.app import WebViewer
+
+pytestmark = pytest.mark.browser
+
+
+def test_inputs_are_found_by_their_labels(open_page, viewer: WebViewer) -> None:
+    page = open_page("ana")
+    p = page.p
+    address = p.get_by_label("Address", exact=True)
+    address.fill("127.0.0.1")
+    address.press("Enter")
+    page.click("Connect")
+    page.button("Log in").wait_for(timeout=10_000)
+
+    user = p.get_by_label("User", exact=True)
+    user.fill("ana")
+    user.press("Tab")  # the keyboard reaches the password next
+    password = p.get_by_label("Password", exact=True)
+    assert password.evaluate("el => el === document.activeElement")
+    p.keyboard.type("ana-pw")
+    password.press("Enter")
+    page.screenshot("named-login")
+    page.click("Log in")
+    page.tab("lab@127.0.0.1").first.click()
+    page.click("Join arena")
+    page.tab("arena").last.click()
+
+    code = p.get_by_label("Code", exact=True)
+    code.wait_for(timeout=10_000)
+    assert code.evaluate("el => el.tagName") == "TEXTAREA"
+    session = next(iter(viewer.sessions.values()))
+    text = "# typed into the box named Code\n"
+    code.fill(text)
+    panel = next(tab for lab in session.labs.values() for tab in lab.panels.values())
+    bench = panel.workbench
+    assert bench is not None
+    wait_until(lambda: bench.code.value == text, what="the Code box's text on the server")
+    # Dropdowns are named too: the robot list is a combobox called "Robot".
+    assert p.get_by_role("combobox", name="Robot", exact=True).count() == 1
+    page.screenshot("named-code")

@@ -1,0 +1,20 @@
+"""The label fixer's markup: one hidden image whose onerror carries the fixed script."""
+
+from __future__ import annotations
+
+import html
+import re
+
+from viewers.web.labels import LABEL_FIX_JS, label_fixer_html
+
+
+def test_the_script_is_one_escaped_attribute_of_a_hidden_image() -> None:
+    markup = label_fixer_html()
+    shape = r'<img src="data:," alt="" style="display:none" onerror="([^"]*)">'
+    match = re.fullmatch(shape, markup)
+    assert match is not None  # no quote of the script ends the attribute early
+    script = html.unescape(match.group(1))
+    assert "aria-labelledby" in script and "MutationObserver" in script
+    assert "window.__wartLabels" in script  # once per page, however often it is added
+    assert "<" not in match.group(1) and ">" not in match.group(1)
+    assert script.split() == LABEL_FIX_JS.split()  # the same code, on one line
