@@ -339,6 +339,14 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         if sample.kind != zenoh.SampleKind.DELETE:
             return
         gone_at = time.monotonic()
+        # Our own router gone (a client session's tokens all vanish when its link
+        # drops): a blip on our side, not the runner's death; its sandboxes run on.
+        try:
+            if not list(self.session.info.routers_zid()):
+                self.log.info("runner %s out of sight with our router: a router blip", self.runner)
+                return
+        except Exception as exc:  # the session closing at shutdown
+            self.log.debug("could not ask the session for its routers: %s", exc)
         timer = threading.Timer(RUNNER_GRACE_S, self._runner_gone, args=(gone_at,))
         timer.daemon = True
         timer.start()

@@ -44,6 +44,8 @@ def test_inputs_are_found_by_their_labels(open_page, viewer: WebViewer) -> None:
     session = next(iter(viewer.sessions.values()))
     text = "# typed into the box named Code\n"
     code.fill(text)
+    # The page shows the panel's widgets while the panel is still being registered.
+    wait_until(lambda: any(lab.panels for lab in session.labs.values()), what="the arena's panel")
     panel = next(tab for lab in session.labs.values() for tab in lab.panels.values())
     bench = panel.workbench
     assert bench is not None

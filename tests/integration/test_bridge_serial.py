@@ -291,6 +291,10 @@ def test_unplugged_robot_goes_offline_and_comes_back(emulator: KheperaEmulator) 
         rounds = robot.state().rounds
         wait_for(lambda: robot.state().rounds > rounds, 2, "polling again")
         assert robot.set_speed(10, 10).result(2) == P.ACK
+    # Before its first answer the robot may be reported offline (a slow first poll on
+    # a busy machine): what counts is online, then offline when unplugged, then back.
+    while events and not events[0]:
+        events.pop(0)
     assert events[:3] == [True, False, True]
 
 
