@@ -73,7 +73,8 @@ def session_for(
     """Connect, log in, join the context and run ``body``; errors become clear messages."""
     try:
         keys.check_ident("context", args.context)
-        keys.check_ident("agent", args.agent)
+        if hasattr(args, "agent"):  # `wart record` names no robot
+            keys.check_ident("agent", args.agent)
         keys.check_ident("user", args.user)
     except ValueError as exc:
         return cli.fail(str(exc))

@@ -23,12 +23,10 @@ from pathlib import Path
 
 from common import cli, keys
 from common.agent_client import AgentClient
-from common.client import LabClient
-from common.lab_errors import LabError
 from common.messages import RecordingList
-from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.commands.terminal import connect, password_from, say
+from services.commands.control import session_for
+from services.commands.terminal import say
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
@@ -92,32 +90,20 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
 
 
 def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
-    if not options.registry_key:
-        return cli.fail(
-            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
-        )
-    try:
-        zsession = connect(options)
-    except LabError as exc:
-        return cli.fail(str(exc))
-    try:
-        with LabClient(zsession, options.realm, options.registry_key) as client:
-            client.login(args.user, password_from(args))
-            agents = AgentClient(client, args.context).join()
-            if args.action == "list":
-                show_list(agents.recordings(args.of, all_users=args.all))
-                return 0
-            suffix = ".summary.json" if args.summary else ".mcap"
-            dest = args.output or Path(f"{args.name}{suffix}")
-            agents.download(args.name, dest, summary=args.summary, progress=_progress())
-            say(f"wrote {dest} ({_size(dest.stat().st_size)})")
+    def body(agents: AgentClient) -> int:
+        if args.action == "list":
+            show_list(agents.recordings(args.of, all_users=args.all))
             return 0
-    except LabError as exc:
-        return cli.fail(str(exc), 1)
-    except OSError as exc:
-        return cli.fail(f"cannot write: {exc}", 1)
-    finally:
-        close_session(zsession)
+        suffix = ".summary.json" if args.summary else ".mcap"
+        dest = args.output or Path(f"{args.name}{suffix}")
+        try:
+            agents.download(args.name, dest, summary=args.summary, progress=_progress())
+        except OSError as exc:
+            return cli.fail(f"cannot write: {exc}", 1)
+        say(f"wrote {dest} ({_size(dest.stat().st_size)})")
+        return 0
+
+    return session_for(args, options, body)
 
 
 if __name__ == "__main__":
