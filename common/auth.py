@@ -45,6 +45,16 @@ DEFAULT_FRESHNESS_WINDOW = 30.0
 REPLAY_WINDOW = 1024
 """How far out of order a session's messages may arrive and still be accepted."""
 
+LOGIN_WAIT_S = 30.0
+"""How long a login waits for the registry's answer.
+
+Password checks are slow on purpose (argon2id, ~65 ms of a core each), so when a
+class logs in at one instant they queue at the registry: 100 at once on 2 cores
+is ~3.3 s, several times that on a busy host. A login is answered late rather
+than given up after the usual request timeout. A registry that is not running
+costs nothing extra: with no queryable to route to, the router ends the query at once.
+"""
+
 
 class AuthError(Exception):
     """A message was refused; ``code`` is the ErrorReply code to answer with."""

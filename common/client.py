@@ -34,6 +34,7 @@ import zenoh
 
 from common import acl, keys
 from common.auth import (
+    LOGIN_WAIT_S,
     AuthError,
     Session,
     SessionKeys,
@@ -359,7 +360,13 @@ class LabClient(RegistryAdminCalls):
         session_keys: SessionKeys,
         mailbox: nacl.public.PrivateKey,
     ) -> SessionToken:
-        answers = self._get(key, encode(SealedLogin(sealed=sealed)), "login", declare_source=True)
+        answers = self._get(
+            key,
+            encode(SealedLogin(sealed=sealed)),
+            "login",
+            max(self.timeout, LOGIN_WAIT_S),
+            declare_source=True,
+        )
         if not answers:
             raise RegistryUnreachable(
                 f"no registry answered on realm {self.realm}: is it running, and is the router "

@@ -139,6 +139,7 @@ class Service:
         *,
         workers: int = 0,
         max_waiting: int = 256,
+        stale_after: float = 0.0,
     ) -> Any:
         """A queryable: ``handler`` returns the reply message; errors become ErrorReply.
 
@@ -146,7 +147,10 @@ class Service:
         spends real CPU outside the GIL (argon2id password checks) gets
         ``workers`` threads instead, so queries are answered in parallel on every
         core; at most ``max_waiting`` queries wait for a worker, and the next is
-        told the service is busy rather than queued without bound.
+        told the service is busy rather than queued without bound. A query that has
+        waited more than ``stale_after`` seconds (its querier has given up by then) is
+        told the service is busy without running the handler: under a burst the
+        workers spend their time on logins somebody still waits for.
         """
 
         def guarded(query: zenoh.Query) -> None:
@@ -178,9 +182,19 @@ class Service:
         slots = threading.BoundedSemaphore(workers + max_waiting)
         self._pools.append(pool)
 
-        def in_pool(query: zenoh.Query) -> None:
+        def in_pool(query: zenoh.Query, queued_at: float) -> None:
             try:
-                guarded(query)
+                waited = time.monotonic() - queued_at
+                if stale_after > 0 and waited > stale_after:
+                    self.log.warning(
+                        "a query on %s waited %.1f s for a worker, longer than its asker "
+                        "waits: skipped it",
+                        key_expr,
+                        waited,
+                    )
+                    _reply_busy(query)
+                else:
+                    guarded(query)
             finally:
                 query.drop()  # the reply leaves now, not when the object is collected
                 slots.release()
@@ -188,20 +202,24 @@ class Service:
         def dispatch(query: zenoh.Query) -> None:
             if not slots.acquire(blocking=False):
                 self.log.warning("too many queries waiting on %s: told the querier", key_expr)
-                reply = ErrorReply(
-                    code="rate_limited", message="the service is busy: try again", retry_after=0.5
-                )
-                try:
-                    query.reply(query.key_expr, encode(reply))
-                except Exception as exc:
-                    self.log.debug("could not reply on %s: %s", query.key_expr, exc)
+                _reply_busy(query)
                 return
             try:
-                pool.submit(in_pool, query)
+                pool.submit(in_pool, query, time.monotonic())
             except RuntimeError:  # stopping: the pool takes no more work
                 slots.release()
 
         return self.track(self.session.declare_queryable(key_expr, dispatch))
+
+
+def _reply_busy(query: zenoh.Query) -> None:
+    reply = ErrorReply(
+        code="rate_limited", message="the service is busy: try again", retry_after=0.5
+    )
+    try:
+        query.reply(query.key_expr, encode(reply))
+    except Exception as exc:  # the querier may have gone away
+        log.debug("could not reply on %s: %s", query.key_expr, exc)
 
 
 class RequestError(Exception):

@@ -26,6 +26,7 @@ import zenoh
 
 from common import acl, keys
 from common.auth import (
+    LOGIN_WAIT_S,
     AuthError,
     Principal,
     RegistryIdentity,
@@ -211,7 +212,12 @@ class Registry(Service):
             self.session.declare_publisher(keys.registry_revocations(self.realm))
         )
         # argon2id releases the GIL: one worker per core checks passwords in parallel.
-        self.serve(keys.registry_login(self.realm), self.on_login, workers=os.cpu_count() or 2)
+        self.serve(
+            keys.registry_login(self.realm),
+            self.on_login,
+            workers=os.cpu_count() or 2,
+            stale_after=LOGIN_WAIT_S,
+        )
         self.serve(keys.registry_logout(self.realm), self.on_logout)
         self.serve(keys.registry_directory(self.realm), self.on_directory)
         self.serve(keys.registry_admin(self.realm), self.on_admin)

@@ -86,6 +86,21 @@ def session_for(lab_path: Path, tls: TlsFiles | None, endpoint: str, lab_lease: 
     )
 
 
+def _watch_until(seconds: float, done: Path | None) -> None:
+    """Watch for ``seconds`` at most, or until ``done`` appears and a second more.
+
+    The test writes ``done`` once the probes it watches for have returned, so a slow
+    start of those probes on a busy machine does not fall outside the window; the
+    extra second lets their last messages, already sent, arrive.
+    """
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if done is not None and done.exists():
+            time.sleep(1.0)
+            return
+        time.sleep(0.05)
+
+
 def main() -> int:
     verb, lab_path = sys.argv[1], Path(sys.argv[2])
     args = sys.argv[3:]
@@ -139,7 +154,7 @@ def main() -> int:
 
         sub = s.declare_subscriber(keys.world_frame(realm, "arena1"), on_frame)
         print("READY", flush=True)
-        time.sleep(seconds)
+        _watch_until(seconds, Path(args[2]) if len(args) > 2 else None)
         sub.undeclare()
         close_session(s)
         return result(**counts)
@@ -163,7 +178,7 @@ def main() -> int:
 
         sub = s.declare_subscriber(keys.agent_lease_all(realm, "arena1"), on_lease)
         print("READY", flush=True)
-        time.sleep(seconds)
+        _watch_until(seconds, Path(args[2]) if len(args) > 2 else None)
         sub.undeclare()
         close_session(s)
         return result(holders=holders)

@@ -281,6 +281,9 @@ def test_unplugged_robot_goes_offline_and_comes_back(emulator: KheperaEmulator) 
             lambda s: events.append(s.online) if not events or events[-1] != s.online else None
         )
         assert robot.wait_online(3)
+        # The listener came after the robot's first answer: it hears "online" with the
+        # next sensor round, which on a busy machine may come after an unplug too early.
+        wait_for(lambda: True in events, 5, "the listener hears the robot online")
         emulator.unplug()
         assert not os.path.exists(emulator.port)  # like /dev/ttyUSB0 when the cable is pulled
         wait_for(lambda: not robot.online, 2, "offline")

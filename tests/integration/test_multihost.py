@@ -255,14 +255,16 @@ def test_a_process_without_a_valid_certificate_cannot_join(lab: MultiLab) -> Non
 
 
 def test_a_student_cannot_publish_frames_or_leases_even_well_formed(lab: MultiLab) -> None:
-    frames = lab.start_probe("C", "watch-frames", "C", "6")
-    leases = lab.start_probe("B", "watch-leases", "B", "6")
+    done = lab.tmp / "forgeries-sent"
+    frames = lab.start_probe("C", "watch-frames", "C", "90", str(done))
+    leases = lab.start_probe("B", "watch-leases", "B", "90", str(done))
     try:
         lab.wait_line(frames, "READY")
         lab.wait_line(leases, "READY")
         lab.probe("A", "forge", "A", "student", str(lab.password_file), "client")
         # Control: an agent context's certificate may publish leases.
         lab.probe("B", "forge", "B", "agent", str(lab.password_file), "host")
+        done.touch()
         frames.wait(30)
         leases.wait(30)
     finally:
