@@ -412,9 +412,10 @@ def measure_against_peer(
 
     Only one loop puts samples at a time; both engines keep stepping and
     building samples, so the machine carries the same work in both blocks
-    and slow drifts of its load (other users) fall on both alike. The first
-    0.2 s of each block are not recorded: commands answering the other
-    loop's last samples are still arriving then.
+    and slow drifts of its load (other users) fall on both alike; short
+    blocks spread the other users' bursts over both. The first 0.1 s of each
+    block is not recorded: commands answering the other loop's last samples
+    are still arriving then.
     """
     kinds = ("mac", "peer")
     current = [kinds[0]]
@@ -440,7 +441,7 @@ def measure_against_peer(
             ours = kind == "mac"
             (peer.publishing if ours else engine.publishing).clear()
             (engine.publishing if ours else peer.publishing).set()
-            time.sleep(0.2)
+            time.sleep(0.1)
             if i < 0:
                 time.sleep(block)
                 continue
@@ -643,7 +644,7 @@ def main() -> int:
     p.add_argument(
         "--block",
         type=float,
-        default=1.0,
+        default=0.5,
         help="seconds of each alternating block of ours (MAC) and the plain Zenoh peer",
     )
     p.add_argument(
