@@ -61,7 +61,7 @@ from common.controller import RobotCommand
 from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.leases import LeaseBook
-from common.messages import AgentCommand, Lease, SampleBundle, SensorSample, decode, encode
+from common.messages import AgentCommand, Lease, SensorSample, decode, encode
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
@@ -80,6 +80,7 @@ class TimedEngine(EngineService):
         self.accepted: list[float] = []
         self.applied: list[float] = []
         self.recording = False
+        self.bundled: list[str] = []  # the agents of the sample bundle being put
         # Cleared while the plain peer's block runs: every tick's work but the samples' put.
         self.publishing = threading.Event()
         self.publishing.set()
@@ -91,6 +92,12 @@ class TimedEngine(EngineService):
         if not isinstance(self._samples_pub, _TimedBundles):
             self._samples_pub = _TimedBundles(self._samples_pub, self)
         super()._publish()
+
+    def publish_sample_bundle(self, tick: int, samples: dict[str, bytes]) -> None:
+        # The agents the bundle carries, for _TimedBundles: decoding the bundle after
+        # its put (as before) was work only our engine did right after the put.
+        self.bundled = list(samples)
+        super().publish_sample_bundle(tick, samples)
 
     def _apply(self, item: _Command) -> None:
         now = time.monotonic()
@@ -137,7 +144,7 @@ class _TimedBundles:
         sent = time.monotonic()
         self.pub.put(payload)
         ms = round(self.engine.world.sim_time * 1000)
-        for agent in decode(payload, SampleBundle).agents:  # after the put: not timed
+        for agent in self.engine.bundled:  # after the put: not timed
             self.engine.published[(agent, ms)] = sent
 
     def undeclare(self) -> None:
@@ -354,6 +361,7 @@ class Round(NamedTuple):
     accepted: list[float]
     applied: list[float]
     cpu_ms_per_tick: dict[str, float]  # role -> CPU ms its processes used per 20 ms tick
+    blocks: tuple[list[float], ...] = ()  # accepted, block by block (alternating with the peer)
 
 
 def measure(
@@ -422,6 +430,7 @@ def measure_against_peer(
     rtts: dict[str, list[float]] = {k: [] for k in kinds}
     path_rtts: dict[str, list[float]] = {k: [] for k in kinds}
     cpu = {k: dict.fromkeys(pids, 0.0) for k in kinds}
+    blocks: dict[str, list[list[float]]] = {k: [] for k in kinds}
     ticks = dict.fromkeys(kinds, 0.0)
     stop = threading.Event()
     engine.accepted, engine.applied = [], []
@@ -449,7 +458,9 @@ def measure_against_peer(
             engine.recording = peer.recording = True
             before = {role: cpu_seconds(p) for role, p in pids.items()}
             start = time.monotonic()
+            first = len(engine.accepted if ours else peer.accepted)
             time.sleep(block)
+            blocks[kind].append((engine.accepted if ours else peer.accepted)[first:])
             ticks[kind] += (time.monotonic() - start) / engine.settings.tick_s
             for role, p in pids.items():
                 cpu[kind][role] += cpu_seconds(p) - before[role]
@@ -468,6 +479,7 @@ def measure_against_peer(
             list(lists[k][0]),
             list(lists[k][1]),
             {role: ms * 1000 / max(ticks[k], 1.0) for role, ms in cpu[k].items()},
+            tuple(blocks[k]),
         )
         for k in kinds
     }
@@ -607,14 +619,24 @@ def verdict(accepted: list[float], rtts: list[float], path_rtts: list[float]) ->
     )
 
 
-def against_peer(ours: list[float], peer: list[float]) -> str:
-    """Issue 22's target: ours within 1.3x the plain peer's p50 and 1.5x its p99, same run."""
-    r50 = pct(ours, 50) / pct(peer, 50)
-    r99 = pct(ours, 99) / pct(peer, 99)
+def against_peer(ours: Round, peer: Round) -> str:
+    """Issue 22's target: ours within 1.3x the plain peer's p50 and 1.5x its p99, same run.
+
+    Judged on all commands of each loop; beside it, the median over
+    neighbouring block pairs of the ratio of their p50s (a burst of other
+    users' work spoils one block, not the median).
+    """
+    a, b = ours.accepted, peer.accepted
+    r50, r99 = pct(a, 50) / pct(b, 50), pct(a, 99) / pct(b, 99)
+    pairs = [
+        pct(x, 50) / pct(y, 50) for x, y in zip(ours.blocks, peer.blocks, strict=False) if x and y
+    ]
+    paired = f"{float(np.median(pairs)):.2f}x" if pairs else "n/a"
     return (
-        f"against the plain peer: p50 {pct(ours, 50):.2f} / {pct(peer, 50):.2f} ms = {r50:.2f}x "
-        f"(<= 1.3x: {'met' if r50 <= 1.3 else 'missed'}); p99 {pct(ours, 99):.2f} / "
-        f"{pct(peer, 99):.2f} ms = {r99:.2f}x (<= 1.5x: {'met' if r99 <= 1.5 else 'missed'})"
+        f"against the plain peer: p50 {pct(a, 50):.2f} / {pct(b, 50):.2f} ms = {r50:.2f}x "
+        f"(<= 1.3x: {'met' if r50 <= 1.3 else 'missed'}); p99 {pct(a, 99):.2f} / "
+        f"{pct(b, 99):.2f} ms = {r99:.2f}x (<= 1.5x: {'met' if r99 <= 1.5 else 'missed'}); "
+        f"p50 ratio over {len(pairs)} block pairs, median: {paired}"
     )
 
 
@@ -822,7 +844,7 @@ def main() -> int:
             f"alternating blocks of {args.block:g} s with ours (MAC)"
         )
     names = {"signed": "signed", "mac": "MAC", "peer": "plain Zenoh peer's"}
-    for path, (rtts, path_rtts, accepted, applied, cpu) in results.items():
+    for path, (rtts, path_rtts, accepted, applied, cpu, _blocks) in results.items():
         rate = len(accepted) / args.seconds / max(1, args.controllers)
         print(f"-- {names[path]} commands ({len(accepted)}, {rate:.1f} Hz each)")
         print(f"{'raw Zenoh round trip (2 clients)':<44} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
@@ -845,7 +867,7 @@ def main() -> int:
         )
         print(verdict(accepted, rtts, path_rtts))
     if "peer" in results:
-        print(against_peer(results["mac"].accepted, results["peer"].accepted))
+        print(against_peer(results["mac"], results["peer"]))
     command_costs()
     wake_storm(args.controllers)
     return 0
