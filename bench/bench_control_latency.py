@@ -25,15 +25,26 @@ target line judges p50 against 2x the path's round trip and p99 against 5 ms.
 every robot in the channel's own thread (``WorldChannel.on_tick``), as a
 swarm controller would: no thread hand-off per robot, one message per tick.
 
+Against a peer (issue 22): the same loop written with plain zenoh-python
+(bench/plain_peer.py: no login, lease or MAC; the same world, sample bundles
+and command bundles, inline or threads as ours) runs in the same run, in
+alternating blocks of ``--block`` seconds with our MAC round, so both see
+the same machine load. Printed: both loops' figures, the ratio of their p50
+and p99 (the target: within 1.3x and 1.5x), and the median over block pairs
+of the p50 ratio, which other users' bursts move less. ``--no-peer`` leaves
+it out (and ``--per-agent`` has no peer: the peer has no per-agent shape).
+
 Two rounds on one engine that has an identity: *signed* (leases without
-keys: every command an Ed25519 AuthEnvelope) and *MAC* (leases carrying the
-lease key sealed to each controller and to the engine: MacCommands). Then
+keys: every command an Ed25519 AuthEnvelope; ``--no-signed`` skips it) and
+*MAC* (leases carrying the lease key sealed to each controller and to the
+engine: MacCommands). Then
 the per-command cost of the world's check (LeaseBook.check_command) and of
 the sender's sealing, both paths, in this process; and the floor under N
 controller threads in one process with no network at all (N threads handed
 a sample at once, each decoding it and MACing a command). Run:
 
     .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10] [--inline]
+        [--block 0.5] [--no-peer] [--no-signed]
 """
 
 from __future__ import annotations

@@ -241,7 +241,8 @@ def controllers(args: argparse.Namespace) -> int:
         cond, slot = fresh[agent], newest[agent]
         while not stop.is_set():
             with cond:
-                cond.wait_for(lambda seen=seen: slot[1] > seen, 0.5)
+                if slot[1] == seen:
+                    cond.wait(0.5)
                 if slot[1] == seen:
                     continue
                 raw, seen = slot[0], slot[1]
