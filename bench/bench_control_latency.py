@@ -25,15 +25,26 @@ target line judges p50 against 2x the path's round trip and p99 against 5 ms.
 every robot in the channel's own thread (``WorldChannel.on_tick``), as a
 swarm controller would: no thread hand-off per robot, one message per tick.
 
+Against a peer (issue 22): the same loop written with plain zenoh-python
+(bench/plain_peer.py: no login, lease or MAC; the same world, sample bundles
+and command bundles, inline or threads as ours) runs in the same run, in
+alternating blocks of ``--block`` seconds with our MAC round, so both see
+the same machine load. Printed: both loops' figures, the ratio of their p50
+and p99 (the target: within 1.3x and 1.5x), and the median over block pairs
+of the p50 ratio, which other users' bursts move less. ``--no-peer`` leaves
+it out (and ``--per-agent`` has no peer: the peer has no per-agent shape).
+
 Two rounds on one engine that has an identity: *signed* (leases without
-keys: every command an Ed25519 AuthEnvelope) and *MAC* (leases carrying the
-lease key sealed to each controller and to the engine: MacCommands). Then
+keys: every command an Ed25519 AuthEnvelope; ``--no-signed`` skips it) and
+*MAC* (leases carrying the lease key sealed to each controller and to the
+engine: MacCommands). Then
 the per-command cost of the world's check (LeaseBook.check_command) and of
 the sender's sealing, both paths, in this process; and the floor under N
 controller threads in one process with no network at all (N threads handed
 a sample at once, each decoding it and MACing a command). Run:
 
     .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10] [--inline]
+        [--block 0.5] [--no-peer] [--no-signed]
 """
 
 from __future__ import annotations
@@ -48,19 +59,20 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import msgspec
 import numpy as np
 
 from bench.labproc import REPO, BenchLab
+from bench.plain_peer import PEER_WORLD, PlainEngine
 from common import keys
 from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.controller import RobotCommand
 from common.keys import AliveKind
 from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.leases import LeaseBook
-from common.messages import AgentCommand, Lease, SampleBundle, SensorSample, decode, encode
+from common.messages import AgentCommand, Lease, SensorSample, decode, encode
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
@@ -79,6 +91,10 @@ class TimedEngine(EngineService):
         self.accepted: list[float] = []
         self.applied: list[float] = []
         self.recording = False
+        self.bundled: list[str] = []  # the agents of the sample bundle being put
+        # Cleared while the plain peer's block runs: every tick's work but the samples' put.
+        self.publishing = threading.Event()
+        self.publishing.set()
 
     def _publish(self) -> None:
         for agent, pub in list(self._agent_pubs.items()):
@@ -87,6 +103,12 @@ class TimedEngine(EngineService):
         if not isinstance(self._samples_pub, _TimedBundles):
             self._samples_pub = _TimedBundles(self._samples_pub, self)
         super()._publish()
+
+    def publish_sample_bundle(self, tick: int, samples: dict[str, bytes]) -> None:
+        # The agents the bundle carries, for _TimedBundles: decoding the bundle after
+        # its put (as before) was work only our engine did right after the put.
+        self.bundled = list(samples)
+        super().publish_sample_bundle(tick, samples)
 
     def _apply(self, item: _Command) -> None:
         now = time.monotonic()
@@ -107,6 +129,8 @@ class _TimedPublisher:
         self.pub, self.agent, self.engine = pub, agent, engine
 
     def put(self, payload: bytes) -> None:
+        if not self.engine.publishing.is_set():
+            return
         ms = round(self.engine.world.sim_time * 1000)
         self.engine.published[(self.agent, ms)] = time.monotonic()
         self.pub.put(payload)
@@ -126,26 +150,42 @@ class _TimedBundles:
         return self.pub.matching_status
 
     def put(self, payload: bytes) -> None:
+        if not self.engine.publishing.is_set():
+            return
         sent = time.monotonic()
         self.pub.put(payload)
         ms = round(self.engine.world.sim_time * 1000)
-        for agent in decode(payload, SampleBundle).agents:  # after the put: not timed
+        for agent in self.engine.bundled:  # after the put: not timed
             self.engine.published[(agent, ms)] = sent
 
     def undeclare(self) -> None:
         self.pub.undeclare()
 
 
-def build_world(n: int) -> World:
-    world = World(2000, 2000, seed=1, tick_s=0.02, name=WORLD)
+def build_world(n: int, name: str = WORLD) -> World:
+    world = World(2000, 2000, seed=1, tick_s=0.02, name=name)
     spec = agent_type("khepera")
     for i in range(n):
         world.add_agent(f"k{i}", spec, 150 + (i % 5) * 300, 150 + (i // 5) * 300, 0.0)
     return world
 
 
+class Sink(Protocol):
+    def append(self, value: float, /) -> None: ...
+
+
+def wait_ticking(world: World, timeout: float = 300.0) -> None:
+    """Until ``world`` has stepped a few ticks: its first step compiles the kernels (numba),
+    which takes seconds, longer on a loaded machine; nothing is measured before that."""
+    deadline = time.monotonic() + timeout
+    while world.tick < 10:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"world {world.name} did not start ticking in {timeout:g} s")
+        time.sleep(0.05)
+
+
 def ping_until(
-    send: Callable[[], None], got: threading.Event, stop: threading.Event, out: list[float]
+    send: Callable[[], None], got: threading.Event, stop: threading.Event, out: Sink
 ) -> None:
     """``send`` a ping at 50 Hz until ``stop``; note the RTT whenever ``got`` is set within 1 s."""
     time.sleep(0.5)  # let the subscriptions reach the router before measuring
@@ -158,7 +198,7 @@ def ping_until(
         stop.wait(0.02)
 
 
-def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) -> None:
+def rtt_probe(options: NetworkOptions, stop: threading.Event, out: Sink) -> None:
     """Raw Zenoh round trips between two client sessions through the router, at 50 Hz."""
     a = open_session(options, wait=10)
     b = open_session(options, wait=10)
@@ -178,7 +218,7 @@ def rtt_probe(options: NetworkOptions, stop: threading.Event, out: list[float]) 
 PING, PONG = f"{WORLD}/rtt/path/ping", f"{WORLD}/rtt/path/pong"
 
 
-def path_probe(z: Any, stop: threading.Event, out: list[float]) -> None:
+def path_probe(z: Any, stop: threading.Event, out: Sink) -> None:
     """Raw Zenoh round trips over the control loop's own path, at 50 Hz.
 
     From the world's session through the router to the controllers' process
@@ -209,7 +249,6 @@ def child(args: argparse.Namespace) -> int:
     indices = range(args.first, args.first + args.controllers)
     sessions = [issue_session(identity, args.realm, f"c{i}", ["control"]) for i in indices]
     holders = [[s.session_id.hex(), s.keys.box_public_key.hex()] for s in sessions]
-    print(json.dumps(holders), flush=True)
     stop = threading.Event()
     verifier = Verifier(identity.verify_key, args.realm)  # to accept MAC leases
     links = [
@@ -219,12 +258,15 @@ def child(args: argparse.Namespace) -> int:
             WORLD,
             f"k{i}",
             lambda s=s: s,
-            keepalive=1.0,
+            # Never due while the loop answers every tick; long, so that none goes out
+            # during the plain peer's blocks either (it would load the peer's run).
+            keepalive=30.0,
             verifier=verifier,
             channel=channel,
         )
         for i, s in zip(indices, sessions, strict=True)
     ]
+    print(json.dumps(holders), flush=True)  # the links listen for their leases from here on
 
     def react(link: ZenohRobotLink) -> None:
         seen = 0
@@ -252,6 +294,10 @@ def child(args: argparse.Namespace) -> int:
     stop.set()
     for link in links:
         link.close(stop=False)
+    print(
+        f"client: {sum(x.mac_sent for x in links)} of {sum(x.sent for x in links)} commands MACed",
+        file=sys.stderr,
+    )
     if channel is not None:
         print(
             f"client: {channel.bundles} sample bundles in, {channel.commands} commands out "
@@ -274,9 +320,15 @@ def grant(
     world: Session,
     *,
     mac: bool,
-) -> None:
-    """A lease per agent, as the agent context grants them: with MAC keys or without."""
+) -> list[tuple[str, Lease]]:
+    """A lease per agent, as the agent context grants them: with MAC keys or without.
+
+    Returns each lease and its key, to republish (sealed anew) as the context
+    does every second: a subscriber declared just before the first put may
+    not have reached the router yet, and would miss it.
+    """
     now = time.time()
+    out = []
     for i, (holder, box) in enumerate(holders):
         key = keys.agent_lease(realm, WORLD, f"k{i}")
         lease = Lease(
@@ -296,7 +348,10 @@ def grant(
                 world_key=seal_key(k, world.keys.box_public_key),
                 world_box=world.keys.box_public_key,
             )
+        out.append((key, lease))
+    for key, lease in out:
         z.put(key, context.seal(key, lease))
+    return out
 
 
 def cpu_seconds(pids: list[int]) -> float:
@@ -317,6 +372,7 @@ class Round(NamedTuple):
     accepted: list[float]
     applied: list[float]
     cpu_ms_per_tick: dict[str, float]  # role -> CPU ms its processes used per 20 ms tick
+    blocks: tuple[list[float], ...] = ()  # accepted, block by block (alternating with the peer)
 
 
 def measure(
@@ -350,6 +406,94 @@ def measure(
         for probe in probes:
             probe.join(10)
     return Round(rtts, path_rtts, list(engine.accepted), list(engine.applied), cpu)
+
+
+class _ByBlock:
+    """A probe's round trips, filed under the block (ours or the peer's) running when measured."""
+
+    def __init__(self, current: list[str], into: dict[str, list[float]]) -> None:
+        self.current, self.into = current, into
+
+    def append(self, value: float, /) -> None:
+        self.into[self.current[0]].append(value)
+
+
+def measure_against_peer(
+    engine: TimedEngine,
+    peer: PlainEngine,
+    z: Any,
+    options: NetworkOptions,
+    seconds: float,
+    block: float,
+    pids: dict[str, list[int]],
+) -> dict[str, Round]:
+    """Ours (MAC) and the plain peer in alternating blocks of ``block`` seconds, ``seconds`` each.
+
+    Only one loop puts samples at a time; both engines keep stepping and
+    building samples, so the machine carries the same work in both blocks
+    and slow drifts of its load (other users) fall on both alike; short
+    blocks spread the other users' bursts over both. The first 0.1 s of each
+    block is not recorded: commands answering the other loop's last samples
+    are still arriving then.
+    """
+    kinds = ("mac", "peer")
+    current = [kinds[0]]
+    rtts: dict[str, list[float]] = {k: [] for k in kinds}
+    path_rtts: dict[str, list[float]] = {k: [] for k in kinds}
+    cpu = {k: dict.fromkeys(pids, 0.0) for k in kinds}
+    blocks: dict[str, list[list[float]]] = {k: [] for k in kinds}
+    ticks = dict.fromkeys(kinds, 0.0)
+    stop = threading.Event()
+    engine.accepted, engine.applied = [], []
+    peer.accepted, peer.applied = [], []
+    probes = [
+        threading.Thread(target=rtt_probe, args=(options, stop, _ByBlock(current, rtts))),
+        threading.Thread(target=path_probe, args=(z, stop, _ByBlock(current, path_rtts))),
+    ]
+    for probe in probes:
+        probe.start()
+    try:
+        # Two blocks unrecorded first: each loop's first samples after a pause find
+        # cold caches and sleeping threads on both ends.
+        for i in range(-2, 2 * max(1, round(seconds / block))):
+            kind = kinds[i % 2]
+            engine.recording = peer.recording = False
+            ours = kind == "mac"
+            (peer.publishing if ours else engine.publishing).clear()
+            (engine.publishing if ours else peer.publishing).set()
+            time.sleep(0.1)
+            if i < 0:
+                time.sleep(block)
+                continue
+            current[0] = kind
+            engine.recording = peer.recording = True
+            before = {role: cpu_seconds(p) for role, p in pids.items()}
+            start = time.monotonic()
+            first = len(engine.accepted if ours else peer.accepted)
+            time.sleep(block)
+            blocks[kind].append((engine.accepted if ours else peer.accepted)[first:])
+            ticks[kind] += (time.monotonic() - start) / engine.settings.tick_s
+            for role, p in pids.items():
+                cpu[kind][role] += cpu_seconds(p) - before[role]
+    finally:
+        engine.recording = peer.recording = False
+        engine.publishing.set()
+        peer.publishing.clear()
+        stop.set()
+        for probe in probes:
+            probe.join(10)
+    lists = {"mac": (engine.accepted, engine.applied), "peer": (peer.accepted, peer.applied)}
+    return {
+        k: Round(
+            rtts[k],
+            path_rtts[k],
+            list(lists[k][0]),
+            list(lists[k][1]),
+            {role: ms * 1000 / max(ticks[k], 1.0) for role, ms in cpu[k].items()},
+            tuple(blocks[k]),
+        )
+        for k in kinds
+    }
 
 
 def command_costs(n: int = 5000) -> None:
@@ -486,6 +630,27 @@ def verdict(accepted: list[float], rtts: list[float], path_rtts: list[float]) ->
     )
 
 
+def against_peer(ours: Round, peer: Round) -> str:
+    """Issue 22's target: ours within 1.3x the plain peer's p50 and 1.5x its p99, same run.
+
+    Judged on all commands of each loop; beside it, the median over
+    neighbouring block pairs of the ratio of their p50s (a burst of other
+    users' work spoils one block, not the median).
+    """
+    a, b = ours.accepted, peer.accepted
+    r50, r99 = pct(a, 50) / pct(b, 50), pct(a, 99) / pct(b, 99)
+    pairs = [
+        pct(x, 50) / pct(y, 50) for x, y in zip(ours.blocks, peer.blocks, strict=False) if x and y
+    ]
+    paired = f"{float(np.median(pairs)):.2f}x" if pairs else "n/a"
+    return (
+        f"against the plain peer: p50 {pct(a, 50):.2f} / {pct(b, 50):.2f} ms = {r50:.2f}x "
+        f"(<= 1.3x: {'met' if r50 <= 1.3 else 'missed'}); p99 {pct(a, 99):.2f} / "
+        f"{pct(b, 99):.2f} ms = {r99:.2f}x (<= 1.5x: {'met' if r99 <= 1.5 else 'missed'}); "
+        f"p50 ratio over {len(pairs)} block pairs, median: {paired}"
+    )
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--controllers", type=int, default=20)
@@ -509,6 +674,20 @@ def main() -> int:
         help="one swarm function answers every robot in the channel's thread (WorldChannel."
         "on_tick) instead of one thread per controller: no hand-off, one message per tick",
     )
+    p.add_argument(
+        "--block",
+        type=float,
+        default=0.5,
+        help="seconds of each alternating block of ours (MAC) and the plain Zenoh peer",
+    )
+    p.add_argument(
+        "--no-peer",
+        action="store_true",
+        help="leave out the plain Zenoh peer (the MAC round then runs alone, in one block)",
+    )
+    p.add_argument(
+        "--no-signed", action="store_true", help="leave out the round of Ed25519-signed commands"
+    )
     p.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--identity", help=argparse.SUPPRESS)
@@ -519,6 +698,8 @@ def main() -> int:
         p.error("--inline answers in the shared WorldChannel's thread; it excludes --per-agent")
     if args.child:
         return child(args)
+    # The peer's controllers answer from one subscriber (bundles): it has no per-agent shape.
+    with_peer = not args.no_peer and not args.per_agent
 
     lab = BenchLab([], "unused")
     lab.spawn(
@@ -537,6 +718,31 @@ def main() -> int:
         identity=lambda: world_session,
     )
     engine.start()
+    wait_ticking(engine.world)
+    peer: PlainEngine | None = None
+    peer_proc: subprocess.Popen[str] | None = None
+    if with_peer:
+        peer = PlainEngine(lab.options, build_world(args.controllers, PEER_WORLD))
+        peer.start()
+        wait_ticking(peer.world)
+        peer_proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "bench.plain_peer",
+                "--controllers",
+                str(args.controllers),
+                "--realm",
+                lab.realm,
+                "--connect",
+                lab.options.connect[0],
+                *(["--inline"] if args.inline else []),
+            ],
+            cwd=REPO,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
     count = max(1, min(args.processes, args.controllers))
     share = [
         args.controllers // count + (1 if i < args.controllers % count else 0) for i in range(count)
@@ -577,6 +783,10 @@ def main() -> int:
         "engine (and RTT probe)": [os.getpid()],
         "controllers": [p.pid for p in procs],
     }
+    if peer_proc is not None:
+        pids["engine (and RTT probe)"] = [os.getpid()]  # both engines: one process
+        pids["peer's controllers"] = [peer_proc.pid]
+    everyone = [*procs, *([peer_proc] if peer_proc is not None else [])]
     context = issue_session(identity, lab.realm, "ctx", ["lease"])
     try:
         holders = []
@@ -585,20 +795,40 @@ def main() -> int:
             holders += [
                 (bytes.fromhex(h), bytes.fromhex(b)) for h, b in json.loads(proc.stdout.readline())
             ]
+        if peer_proc is not None:
+            assert peer_proc.stdout is not None
+            if peer_proc.stdout.readline().strip() != "ready":
+                raise RuntimeError("the plain peer's controllers did not start")
         for path in ("signed", "mac"):
-            grant(z, context, lab.realm, holders, args.seconds, world_session, mac=path == "mac")
-            time.sleep(2.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
-            results[path] = measure(engine, z, lab.options, args.seconds, pids)
-        for proc in procs:
+            if path == "signed" and args.no_signed:
+                continue
+            leases = grant(
+                z, context, lab.realm, holders, 3 * args.seconds, world_session, mac=path == "mac"
+            )
+            time.sleep(1.0)  # warm-up: subscriptions matched, leases in, JIT-free steady state
+            for key, lease in leases:  # republished, as the context does
+                z.put(key, context.seal(key, lease))
+            time.sleep(1.0)
+            if path == "mac" and peer is not None:
+                results.update(
+                    measure_against_peer(
+                        engine, peer, z, lab.options, args.seconds, args.block, pids
+                    )
+                )
+            else:
+                results[path] = measure(engine, z, lab.options, args.seconds, pids)
+        for proc in everyone:
             assert proc.stdin is not None
             proc.stdin.write("stop\n")
             proc.stdin.flush()
-        for proc in procs:
+        for proc in everyone:
             proc.wait(20)
     finally:
-        for proc in procs:
+        for proc in everyone:
             if proc.poll() is None:
                 proc.kill()
+        if peer is not None:
+            peer.stop()
         engine.stop()
         close_session(z)
         lab.stop()
@@ -619,9 +849,15 @@ def main() -> int:
         + f", {args.seconds:g} s per path"
     )
     print(f"{'path':<44} {'p50 ms':>8} {'p99 ms':>8}")
-    for path, (rtts, path_rtts, accepted, applied, cpu) in results.items():
+    if peer is not None:
+        print(
+            f"plain Zenoh peer: {peer.commands} commands applied, {peer.refused} refused; "
+            f"alternating blocks of {args.block:g} s with ours (MAC)"
+        )
+    names = {"signed": "signed", "mac": "MAC", "peer": "plain Zenoh peer's"}
+    for path, (rtts, path_rtts, accepted, applied, cpu, _blocks) in results.items():
         rate = len(accepted) / args.seconds / max(1, args.controllers)
-        print(f"-- {path} commands ({len(accepted)}, {rate:.1f} Hz each)")
+        print(f"-- {names[path]} commands ({len(accepted)}, {rate:.1f} Hz each)")
         print(f"{'raw Zenoh round trip (2 clients)':<44} {pct(rtts, 50):8.2f} {pct(rtts, 99):8.2f}")
         print(
             f"{'raw Zenoh round trip (world <-> controllers)':<44} "
@@ -641,6 +877,8 @@ def main() -> int:
             + f" (2 cores: {2 * 20} ms)"
         )
         print(verdict(accepted, rtts, path_rtts))
+    if "peer" in results:
+        print(against_peer(results["mac"], results["peer"]))
     command_costs()
     wake_storm(args.controllers)
     return 0

@@ -125,6 +125,22 @@ class RobotCommand:
     grip: bool | None = None  # True: close the fingers
 
     def __post_init__(self) -> None:
+        # The usual command, 50 times a second per robot: speeds (or counters) alone,
+        # two plain ints in range. Accepted here in a few comparisons; anything
+        # else takes the full check below, which gives the reason.
+        pair = self.speeds if self.counters is None else self.counters
+        if (
+            type(pair) is tuple
+            and self.leds is None
+            and self.arm is None
+            and self.grip is None
+            and (self.speeds is None or self.counters is None)
+            and len(pair) == 2
+        ):
+            a, b = pair
+            bound = MAX_SPEED if self.counters is None else COUNTER_LIMIT
+            if type(a) is int and type(b) is int and -bound <= a <= bound and -bound <= b <= bound:
+                return
         given = [name for name in COMMAND_FIELDS if getattr(self, name) is not None]
         if len(given) != 1:
             raise ValueError(f"a command sets exactly one of {', '.join(COMMAND_FIELDS)}")

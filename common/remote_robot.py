@@ -89,12 +89,27 @@ def state_from_sample(sample: SensorSample) -> KheperaState:
     """What a controller sees of one SensorSample."""
     gripper = sample.gripper
     leds = sample.leds
+    left, right = sample.speeds
+    proximity, ambient = sample.proximity, sample.ambient
+    # The usual sample (a Khepera's 8 + 8 readings, in range) as tuples at once;
+    # _fit pads, cuts and clamps the others.
+    if len(proximity) == PROXIMITY_SENSORS and min(proximity) >= 0 and max(proximity) <= 1023:
+        prox = tuple(proximity)
+    else:
+        prox = _fit(proximity, PROXIMITY_SENSORS, 0)
+    if len(ambient) == LIGHT_SENSORS and min(ambient) >= 0 and max(ambient) <= 1023:
+        amb = tuple(ambient)
+    else:
+        amb = _fit(ambient, LIGHT_SENSORS, 500)
     return KheperaState(
         time=sample.sim_time,
-        speeds=(_speed(sample.speeds[0]), _speed(sample.speeds[1])),
+        speeds=(
+            left if -MAX_SPEED <= left <= MAX_SPEED else _speed(left),
+            right if -MAX_SPEED <= right <= MAX_SPEED else _speed(right),
+        ),
         counters=sample.counters,
-        proximity=_fit(sample.proximity, PROXIMITY_SENSORS, 0),
-        ambient=_fit(sample.ambient, LIGHT_SENSORS, 500),
+        proximity=prox,
+        ambient=amb,
         leds=(bool(leds[0]) if leds else False, bool(leds[1]) if len(leds) > 1 else False),
         arm=gripper.arm if gripper else ARM_UP,
         gripper_closed=bool(gripper and gripper.fingers != "open"),
@@ -333,6 +348,7 @@ class ZenohRobotLink:
         self._decoded_seq = 0
         self._state = KheperaState()
         self._fresh = threading.Condition(self._lock)
+        self._waiting = 0  # threads in wait_sample (under _lock)
         self._last_send = 0.0
         self._closed = threading.Event()
         self.samples = 0
@@ -371,7 +387,8 @@ class ZenohRobotLink:
             self._raw = raw
             self._raw_seq += 1
             self.samples += 1
-            self._fresh.notify_all()
+            if self._waiting:  # a swarm answering in the channel's thread waits on nothing
+                self._fresh.notify_all()
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
         assert self._verifier is not None
@@ -402,10 +419,15 @@ class ZenohRobotLink:
     # -- RobotLink
 
     def latest(self) -> KheperaState:
-        with self._lock:
-            if self._raw_seq == self._decoded_seq or self._raw is None:
-                return self._state
-            raw, seq = self._raw, self._raw_seq
+        # Read without the lock: deliver() sets _raw before _raw_seq, so the raw
+        # sample read after the number is at least that new (one lock a read
+        # less, 50 times a second per robot).
+        seq = self._raw_seq
+        if seq == self._decoded_seq:
+            return self._state
+        raw = self._raw
+        if raw is None:
+            return self._state
         try:
             state = state_from_sample(decode(raw, SensorSample))
         except MessageError as exc:
@@ -450,7 +472,13 @@ class ZenohRobotLink:
     def wait_sample(self, after: int, timeout: float) -> int:
         """Block until a sample newer than number ``after`` arrived; returns the newest number."""
         with self._fresh:
-            self._fresh.wait_for(lambda: self._raw_seq > after or self._closed.is_set(), timeout)
+            self._waiting += 1
+            try:
+                self._fresh.wait_for(
+                    lambda: self._raw_seq > after or self._closed.is_set(), timeout
+                )
+            finally:
+                self._waiting -= 1
             return self._raw_seq
 
     def _keep_alive(self) -> None:

@@ -45,3 +45,23 @@ def test_the_agent_command_carries_every_field() -> None:
 def test_a_bad_command_is_refused_with_the_reason(wire: dict[str, object], why: str) -> None:
     with pytest.raises(ValueError, match=why):
         RobotCommand.from_dict(wire)
+
+
+@pytest.mark.parametrize(
+    ("fields", "why"),
+    [
+        ({"speeds": (True, False)}, "speeds must be two integers"),
+        ({"speeds": (128, 0)}, "speeds must be two integers within ±127"),
+        ({"counters": (0, 2**31)}, "counters must be two integers"),
+        ({"speeds": (1, 2, 3)}, "speeds must be two integers"),
+        ({"speeds": [1, 2]}, "speeds must be two integers"),
+        ({"speeds": (1, 1), "counters": (0, 0)}, "exactly one of"),
+        ({"speeds": (1, 1), "grip": True}, "exactly one of"),
+    ],
+)
+def test_the_constructor_refuses_what_the_wire_form_refuses(
+    fields: dict[str, object], why: str
+) -> None:
+    # The usual speeds/counters command takes a shortcut check; these must not slip through it.
+    with pytest.raises(ValueError, match=why):
+        RobotCommand(**fields)  # type: ignore[arg-type]

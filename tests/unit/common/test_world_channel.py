@@ -261,3 +261,20 @@ def test_a_tick_listener_answers_every_robot_of_a_bundle_in_one_message() -> Non
     remove()
     deliver(zs, bundle(["k1"], tick=7))
     assert len(seen) == 1 and links[1].samples == 1 and channel.puts == 1
+
+
+def test_a_controller_thread_waiting_for_a_sample_wakes_when_its_bundle_arrives() -> None:
+    # The runner's controller threads block in wait_sample; the channel only
+    # notifies a link someone waits on, and that one must still be woken.
+    zs = FakeSession()
+    _channel, (k0, k1) = make(zs, ["k0", "k1"])
+    got: list[int] = []
+    waiter = threading.Thread(target=lambda: got.append(k0.wait_sample(0, 30.0)))
+    waiter.start()
+    while not k0._waiting:  # wait until it is really waiting (a condition, not a sleep)
+        time.sleep(0.001)
+    deliver(zs, bundle(["k1", "k0"], tick=5))
+    waiter.join(30.0)
+    assert got == [1] and k0.latest().counters == (5, -5)
+    assert k1.wait_sample(0, 0.0) == 1  # no waiter: the sample is kept all the same
+    assert k0._waiting == 0 and k1._waiting == 0
