@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+import numba
 import numpy as np
 
 from common.sim2d import kernels as K
@@ -39,6 +40,10 @@ if TYPE_CHECKING:
     from common.sim2d.specs import AgentTypeSpec
 
 _MIN_CELL_MM = 120.0
+# Below this many agents a pass runs on one thread even when more are allowed:
+# waking the pool costs more than the pass (measured in bench/engine_bench.py,
+# docs/BENCHMARKS.md "Swarms and small worlds (issue 22)").
+PARALLEL_MIN_AGENTS = 256
 
 
 class SensedWorld(Protocol):
@@ -48,6 +53,7 @@ class SensedWorld(Protocol):
     height: float
     layout: int
     sim_time: float
+    threads: int  # threads a sensing pass may use (kernels.sense_parallel)
     agents: list[Agent]
     objects: list[MovableObject]
     obstacles: dict[str, Obstacle]
@@ -413,7 +419,25 @@ class SensorSuite:
         # 10 robots, more than the sensing itself).
         moving = (*_objects(world, static), self._lit(world), self.noise.take(layout.noise_total))
         robots = (world.agent_pose, world.arm, world.holding())
-        K.sense(robots, layout.kernel_tables, static.kernel_scene, moving, tuple(out))
+        if world.threads > 1 and len(world.agent_pose) >= PARALLEL_MIN_AGENTS:
+            # Both settings are per calling thread (the sim thread's). Chunks handed out
+            # one at a time: on a shared machine a worker may be descheduled, and the
+            # others then take its share instead of waiting for it at the barrier.
+            numba.set_num_threads(world.threads)
+            chunk = numba.set_parallel_chunksize(1)
+            try:
+                K.sense_parallel(
+                    robots,
+                    layout.kernel_tables,
+                    static.kernel_scene,
+                    moving,
+                    tuple(out),
+                    world.threads,
+                )
+            finally:
+                numba.set_parallel_chunksize(chunk)
+        else:
+            K.sense(robots, layout.kernel_tables, static.kernel_scene, moving, tuple(out))
         return out
 
     def _lit(self, world: SensedWorld) -> np.ndarray:
