@@ -87,14 +87,7 @@ def test_parallel_sensing_reads_the_serial_readings_bit_for_bit(monkeypatch) -> 
 def test_the_parallel_kernel_alone_matches_the_serial_one(threads: int) -> None:
     world = _crowd()
     world.run(0.5)
-    suite = world.sensors
-    static = suite.static_geometry(world)
-    tables = suite.agents.kernel_tables
-    moving = (
-        *sensing._objects(world, static),
-        suite._lit(world),
-        suite.noise.take(suite.agents.noise_total),
-    )
+    tables, scene, moving = world.sensors.packs(world, world.sim_time)
     robots = (world.agent_pose, world.arm, world.holding())
 
     def fresh() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -106,9 +99,9 @@ def test_the_parallel_kernel_alone_matches_the_serial_one(threads: int) -> None:
         )
 
     want, got = fresh(), fresh()
-    kernels.sense(robots, tables, static.kernel_scene, moving, want)
+    kernels.sense(robots, tables, scene, moving, want)
     numba.set_num_threads(threads)
-    kernels.sense_parallel(robots, tables, static.kernel_scene, moving, got, threads)
+    kernels.sense_parallel(robots, tables, scene, moving, got, threads)
     for a, b in zip(want, got, strict=True):
         assert (a != -7).all()
         assert np.array_equal(a, b)
