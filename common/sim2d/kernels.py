@@ -304,6 +304,49 @@ def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
+def _occluded_grid(
+    px, py, qx, qy, segs, grid_start, grid_items, grid_nx, grid_ny, cell, circ_xy, circ_r
+):  # pragma: no cover
+    """:func:`_occluded`, testing only the static edges binned along the segment p -> q.
+
+    Every occluding edge of ``occ_segs`` is ``segs[4:]`` (the arena's 4 walls come
+    first and never hide a light). Points sampled along p -> q at most half a cell
+    apart land in, or next to, the cell of any point where an edge crosses it, and
+    an edge is binned in every cell within one cell of its bounding box: so every
+    crossing edge is tested, with the same formula, and the answer is the same as
+    testing them all. With obstacles in proportion to the swarm that full test was
+    O(robots x obstacles): 10,000 robots, 200 pillars, one wide lamp.
+    """
+    dx = qx - px
+    dy = qy - py
+    length = math.hypot(dx, dy)
+    steps = math.ceil(length / (0.5 * cell)) + 1
+    last = -1
+    for i in range(steps + 1):
+        f = min(i / steps, 1.0)
+        k = _cell(px + f * dx, cell, grid_nx) * grid_ny + _cell(py + f * dy, cell, grid_ny)
+        if k == last:
+            continue
+        last = k
+        for p in range(grid_start[k], grid_start[k + 1]):
+            sg = grid_items[p]
+            if sg < 4:
+                continue
+            t = _ray_segment(px, py, dx, dy, segs[sg, 0], segs[sg, 1], segs[sg, 2], segs[sg, 3])
+            if t <= 1.0:
+                return True
+    if circ_r.shape[0]:
+        scale = max(length, 1e-9)
+        ux = dx / scale
+        uy = dy / scale
+        for c in range(circ_r.shape[0]):
+            t = _ray_circle(px, py, ux, uy, circ_xy[c, 0], circ_xy[c, 1], circ_r[c])
+            if t < length:
+                return True
+    return False
+
+
+@njit(cache=_CACHE)
 def _circles(robots, tables, scene, moving):  # pragma: no cover
     """Every circle (the agents first, each owning itself, then the others), binned.
 
@@ -546,7 +589,24 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             ddy = y - lyy
             if not (ddx * ddx + ddy * ddy < (radius + 40.0) ** 2):
                 continue
-            if _occluded(x, y, lxx, lyy, occ_segs, static_xy, static_r):
+            if occ_segs.shape[0] > 64:  # many obstacles: only those along the way
+                hidden = _occluded_grid(
+                    x,
+                    y,
+                    lxx,
+                    lyy,
+                    segs,
+                    grid_start,
+                    grid_items,
+                    grid_nx,
+                    grid_ny,
+                    cell,
+                    static_xy,
+                    static_r,
+                )
+            else:
+                hidden = _occluded(x, y, lxx, lyy, occ_segs, static_xy, static_r)
+            if hidden:
                 continue
             scale = agent_f[a, F_AMB_DROP] * lights[li, 3]
             half = agent_f[a, F_AMB_HALF_ANGLE]

@@ -148,3 +148,34 @@ def test_threaded_space_drives_grips_and_pushes_like_the_serial_one() -> None:
         world.run(1.0)
         assert world.agent_pose[0, 0] - 300.0 == pytest.approx(80.0, rel=0.1)
         assert world.object_pose[0, 0] > world.agent_pose[0, 0] + 27.0
+
+
+def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
+    # 40 boxes (160 edges) and 3 round obstacles; a robot-to-light segment is hidden
+    # or not the same whether every edge is tested or only those binned along it.
+    world = World(3000.0, 2000.0, seed=1)
+    rng = np.random.default_rng(8)
+    for i in range(40):
+        x, y = rng.uniform(100, 2900), rng.uniform(100, 1900)
+        world.add_obstacle(f"box{i}", ShapeSpec.box(60, 30), x, y, float(rng.uniform(0, 3)))
+    for i in range(3):
+        world.add_obstacle(f"post{i}", ShapeSpec.circle(25), 700.0 + 800 * i, 1000.0)
+    world.add_agent("k", KHEPERA, 50.0, 50.0)
+    scene = world.sensors.static_geometry(world).scene
+    hidden = 0
+    for p in rng.uniform([0, 0, 0, 0], [3000, 2000, 3000, 2000], size=(3000, 4)):
+        full = kernels._occluded(*p, scene.occ_segs, scene.static_xy, scene.static_r)
+        along = kernels._occluded_grid(
+            *p,
+            scene.segs,
+            scene.grid_start,
+            scene.grid_items,
+            scene.grid_nx,
+            scene.grid_ny,
+            scene.cell,
+            scene.static_xy,
+            scene.static_r,
+        )
+        assert full == along, p
+        hidden += full
+    assert 300 < hidden < 2700, "too few or too many hidden segments: a weak test"
