@@ -180,8 +180,8 @@ def main() -> None:
         wall = [r[1] for r in runs]
         _, _, ph = run(n, seconds, profile=True, **kw)  # type: ignore[arg-type]
         print(
-            f"{n:>6} {max(cpu):>12.1f} {statistics.median(cpu):>7.1f}"
-            f" {max(wall):>12.1f} {statistics.median(wall):>7.1f}"
+            f"{n:>6} {max(cpu):>12.3g} {statistics.median(cpu):>7.3g}"
+            f" {max(wall):>12.3g} {statistics.median(wall):>7.3g}"
             f"   {ph['physics'] * 1e3:7.1f} / {ph['sensing'] * 1e3:7.1f} / "
             f"{ph['control'] * 1e3:6.1f}",
             flush=True,
