@@ -38,7 +38,14 @@ from common.sim2d.wander import braitenberg
 from common.sim2d.world import World
 
 
-def build(n: int, seed: int = 1, *, threads: int = 1, physics_threads: int = 1) -> World:
+def build(
+    n: int,
+    seed: int = 1,
+    *,
+    threads: int = 1,
+    physics_threads: int = 1,
+    gripper: bool = True,
+) -> World:
     """A square arena sized so robots cover about 10 % of the floor, with a few pillars."""
     side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
     world = World(
@@ -76,6 +83,7 @@ def build(n: int, seed: int = 1, *, threads: int = 1, physics_threads: int = 1) 
                 float(x),
                 float(y),
                 float(rng.uniform(-3, 3)),
+                gripper=gripper,
                 defer_tables=True,
             )
         except ValueError:
@@ -99,10 +107,11 @@ def run(
     threads: int = 1,
     physics_threads: int = 1,
     progress: bool = False,
+    gripper: bool = True,
 ) -> tuple[float, float, dict[str, float]]:
     """(sim s per CPU s, sim s per wall s, CPU s per sim s by phase if ``profile``)."""
     t0 = time.perf_counter()
-    world = build(n, threads=threads, physics_threads=physics_threads)
+    world = build(n, threads=threads, physics_threads=physics_threads, gripper=gripper)
     if progress:
         print(f"  built {n} robots in {time.perf_counter() - t0:.1f} s", flush=True)
     steps = round(sim_seconds / world.tick_s)
@@ -145,6 +154,11 @@ def main() -> None:
     )
     p.add_argument("--progress", action="store_true", help="print every simulated second")
     p.add_argument(
+        "--no-gripper",
+        action="store_true",
+        help="robots without the gripper turret (IR and ambient on, no tongs, no barrier)",
+    )
+    p.add_argument(
         "--compare-threads",
         action="store_true",
         help="each repeat: threads 1 then --threads/--physics-threads, interleaved",
@@ -158,6 +172,7 @@ def main() -> None:
     print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
     print(
         f"threads: sensing {args.threads}, physics {args.physics_threads}; "
+        f"gripper turrets {'off' if args.no_gripper else 'on'}; "
         f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
     )
     if args.compare_threads:
@@ -174,6 +189,7 @@ def main() -> None:
             "threads": args.threads,
             "physics_threads": args.physics_threads,
             "progress": args.progress,
+            "gripper": not args.no_gripper,
         }
         runs = [run(n, seconds, **kw) for _ in range(args.repeats)]  # type: ignore[arg-type]
         cpu = [r[0] for r in runs]
@@ -206,7 +222,12 @@ def compare(args: argparse.Namespace) -> None:
         for r in range(args.repeats):
             for threads, physics in configs:
                 per_cpu, per_wall, _ = run(
-                    n, seconds, threads=threads, physics_threads=physics, progress=args.progress
+                    n,
+                    seconds,
+                    threads=threads,
+                    physics_threads=physics,
+                    progress=args.progress,
+                    gripper=not args.no_gripper,
                 )
                 walls[(threads, physics)].append(per_wall)
                 label = f"sensing {threads}, physics {physics}"
