@@ -9,12 +9,23 @@ obstacle-avoidance rule and ``set_speeds_all``). Publishing is not included
 (no network). Figures are recorded in docs/BENCHMARKS.md. Run:
 
     .venv/bin/python bench/engine_bench.py [--sim-seconds 5] [--sizes 10 35 100 1000] [--repeats 3]
+
+Swarms (issue 22): ``--sizes 10000 --sim-seconds 1 --repeats 1 --threads 2
+--physics-threads 2`` (sensing on 2 threads, chipmunk's threaded space). Worlds
+of 1,000 robots and more get ``--sim-seconds / 2`` unless ``--swarm-seconds``
+says otherwise; ``--progress`` prints each simulated second as it goes.
+``--compare-threads`` runs the same size with threads 1 and with ``--threads``
+interleaved, so the ratio is measured under the same load.
+Robots are placed apart (no two overlap at the start): the first versions
+placed them anywhere, and at 3,000 robots and more the first simulated second
+went on pushing overlapping robots apart.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import statistics
 import time
 
@@ -27,23 +38,59 @@ from common.sim2d.wander import braitenberg
 from common.sim2d.world import World
 
 
-def build(n: int, seed: int = 1) -> World:
+def build(
+    n: int,
+    seed: int = 1,
+    *,
+    threads: int = 1,
+    physics_threads: int = 1,
+    gripper: bool = True,
+) -> World:
     """A square arena sized so robots cover about 10 % of the floor, with a few pillars."""
     side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
-    world = World(side, side, seed=seed, tick_s=0.01, sensor_period_s=0.02)
+    world = World(
+        side,
+        side,
+        seed=seed,
+        tick_s=0.01,
+        sensor_period_s=0.02,
+        threads=threads,
+        physics_threads=physics_threads,
+    )
     rng = np.random.default_rng(seed)
     for i in range(max(1, n // 50)):
         x, y = rng.uniform(100, side - 100, 2)
         world.add_obstacle(f"pillar{i}", ShapeSpec.box(60, 60), float(x), float(y))
     spec = agent_type("khepera")
+    apart = 2 * spec.radius_mm + 2.0
+    taken: dict[tuple[int, int], list[tuple[float, float]]] = {}
     placed = 0
     while placed < n:
         x, y = rng.uniform(40, side - 40, 2)
+        ix, iy = int(x // apart), int(y // apart)
+        near = (
+            p
+            for gx in range(ix - 1, ix + 2)
+            for gy in range(iy - 1, iy + 2)
+            for p in taken.get((gx, gy), ())
+        )
+        if any((px - x) ** 2 + (py - y) ** 2 < apart**2 for px, py in near):
+            continue
         try:
-            world.add_agent(f"k{placed}", spec, float(x), float(y), float(rng.uniform(-3, 3)))
+            world.add_agent(
+                f"k{placed}",
+                spec,
+                float(x),
+                float(y),
+                float(rng.uniform(-3, 3)),
+                gripper=gripper,
+                defer_tables=True,
+            )
         except ValueError:
             continue
+        taken.setdefault((ix, iy), []).append((float(x), float(y)))
         placed += 1
+    world.finish_agents()
     world.add_light("lamp", side / 2, side / 2, radius_mm=side / 3)
     return world
 
@@ -52,10 +99,23 @@ def control(world: World) -> None:
     world.set_speeds_all(braitenberg(world.proximity))
 
 
-def run(n: int, sim_seconds: float, profile: bool = False) -> tuple[float, float, dict[str, float]]:
+def run(
+    n: int,
+    sim_seconds: float,
+    profile: bool = False,
+    *,
+    threads: int = 1,
+    physics_threads: int = 1,
+    progress: bool = False,
+    gripper: bool = True,
+) -> tuple[float, float, dict[str, float]]:
     """(sim s per CPU s, sim s per wall s, CPU s per sim s by phase if ``profile``)."""
-    world = build(n)
+    t0 = time.perf_counter()
+    world = build(n, threads=threads, physics_threads=physics_threads, gripper=gripper)
+    if progress:
+        print(f"  built {n} robots in {time.perf_counter() - t0:.1f} s", flush=True)
     steps = round(sim_seconds / world.tick_s)
+    per_second = round(1.0 / world.tick_s)
     for _ in range(20):  # warm up
         control(world)
         world.step()
@@ -70,6 +130,12 @@ def run(n: int, sim_seconds: float, profile: bool = False) -> tuple[float, float
         else:
             control(world)
         world.step()
+        if progress and world.tick % per_second == 0:
+            print(
+                f"  {world.sim_time:.0f} sim s: {time.process_time() - cpu0:.1f} CPU s, "
+                f"{time.perf_counter() - wall0:.1f} wall s",
+                flush=True,
+            )
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
     phases = {k: v / sim_seconds for k, v in world.phase_cpu.items()}
     phases["control"] = control_cpu / sim_seconds
@@ -81,26 +147,94 @@ def main() -> None:
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 35, 100, 1000])
     p.add_argument("--sim-seconds", type=float, default=5.0)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--swarm-seconds", type=float, help="sim seconds at N >= 1000")
+    p.add_argument("--threads", type=int, default=1, help="sensing threads (World.threads)")
+    p.add_argument(
+        "--physics-threads", type=int, default=1, help="chipmunk threads (threaded space)"
+    )
+    p.add_argument("--progress", action="store_true", help="print every simulated second")
+    p.add_argument(
+        "--no-gripper",
+        action="store_true",
+        help="robots without the gripper turret (IR and ambient on, no tongs, no barrier)",
+    )
+    p.add_argument(
+        "--compare-threads",
+        action="store_true",
+        help="each repeat: threads 1 then --threads/--physics-threads, interleaved",
+    )
     args = p.parse_args()
+    for name in ("sim_seconds", "repeats", "threads", "physics_threads"):
+        if getattr(args, name) <= 0:
+            p.error(f"--{name.replace('_', '-')} must be positive")
+    if any(n <= 0 for n in args.sizes):
+        p.error("--sizes must be positive")
     print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
+    print(
+        f"threads: sensing {args.threads}, physics {args.physics_threads}; "
+        f"gripper turrets {'off' if args.no_gripper else 'on'}; "
+        f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
+    )
+    if args.compare_threads:
+        compare(args)
+        return
     print(
         f"{'N':>6} {'sim s / CPU s':>20} {'sim s / wall s':>20}   "
         "CPU ms per simulated s: physics / sensing / control"
     )
     print(f"{'':>6} {'best  median':>20} {'best  median':>20}")
     for n in args.sizes:
-        seconds = args.sim_seconds if n < 1000 else args.sim_seconds / 2
-        runs = [run(n, seconds) for _ in range(args.repeats)]
+        seconds = sized_seconds(args, n)
+        kw = {
+            "threads": args.threads,
+            "physics_threads": args.physics_threads,
+            "progress": args.progress,
+            "gripper": not args.no_gripper,
+        }
+        runs = [run(n, seconds, **kw) for _ in range(args.repeats)]  # type: ignore[arg-type]
         cpu = [r[0] for r in runs]
         wall = [r[1] for r in runs]
-        _, _, ph = run(n, seconds, profile=True)
+        _, _, ph = run(n, seconds, profile=True, **kw)  # type: ignore[arg-type]
         print(
-            f"{n:>6} {max(cpu):>12.1f} {statistics.median(cpu):>7.1f}"
-            f" {max(wall):>12.1f} {statistics.median(wall):>7.1f}"
+            f"{n:>6} {max(cpu):>12.3g} {statistics.median(cpu):>7.3g}"
+            f" {max(wall):>12.3g} {statistics.median(wall):>7.3g}"
             f"   {ph['physics'] * 1e3:7.1f} / {ph['sensing'] * 1e3:7.1f} / "
             f"{ph['control'] * 1e3:6.1f}",
             flush=True,
         )
+
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+def sized_seconds(args: argparse.Namespace, n: int) -> float:
+    if n < 1000:
+        return float(args.sim_seconds)
+    return float(args.swarm_seconds or args.sim_seconds / 2)
+
+
+def compare(args: argparse.Namespace) -> None:
+    """Serial and threaded runs interleaved: a ratio under the same load."""
+    print(f"{'N':>6} {'repeat':>6}  {'config':<22} {'sim s / CPU s':>14} {'sim s / wall s':>15}")
+    configs = [(1, 1), (args.threads, args.physics_threads)]
+    for n in args.sizes:
+        seconds = sized_seconds(args, n)
+        walls: dict[tuple[int, int], list[float]] = {c: [] for c in configs}
+        for r in range(args.repeats):
+            for threads, physics in configs:
+                per_cpu, per_wall, _ = run(
+                    n,
+                    seconds,
+                    threads=threads,
+                    physics_threads=physics,
+                    progress=args.progress,
+                    gripper=not args.no_gripper,
+                )
+                walls[(threads, physics)].append(per_wall)
+                label = f"sensing {threads}, physics {physics}"
+                print(f"{n:>6} {r + 1:>6}  {label:<22} {per_cpu:>14.3f} {per_wall:>15.3f}")
+        base = statistics.median(walls[configs[0]])
+        other = statistics.median(walls[configs[1]])
+        print(f"{n:>6} median wall speed-up: {other / base:.2f}x", flush=True)
 
 
 if __name__ == "__main__":

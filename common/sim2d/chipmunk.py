@@ -41,6 +41,7 @@ GET_ANGULAR_VELOCITY = 3
 SET_VELOCITY = 4
 SET_ANGULAR_VELOCITY = 5
 SPACE_STEP = 6
+HASTY_SPACE_STEP = 7  # the threaded space's step (pymunk.Space(threaded=True))
 
 # Name and the C signature the intrinsics below are generated for.
 _SIGNATURES = (
@@ -51,6 +52,7 @@ _SIGNATURES = (
     ("cpBodySetVelocity", "void(*)(cpBody *, cpVect)"),
     ("cpBodySetAngularVelocity", "void(*)(cpBody *, double)"),
     ("cpSpaceStep", "void(*)(cpSpace *, double)"),
+    ("cpHastySpaceStep", "void(*)(cpSpace *, double)"),
 )
 
 

@@ -25,11 +25,13 @@ beyond the sensor's range reads the same as no hit.
 from __future__ import annotations
 
 import math
+import os
 import time
 from typing import NamedTuple
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from common.sim2d import chipmunk as C
 
@@ -118,7 +120,17 @@ class Readings(NamedTuple):
     presence: np.ndarray  # (N,) int32
 
 
+# OpenMP's workers (numba's threading layer here) spin after each parallel region
+# by default: on the lab's shared 2-core machines that burned 4 to 5x the CPU of the
+# work itself and slowed the other processes (docs/BENCHMARKS.md, issue 22). Passive
+# workers sleep instead. Read once, when numba first loads OpenMP; a value the user
+# set wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 _CACHE = True
+# Threads a kernel may use: numba's pool, sized at import (NUMBA_NUM_THREADS, default
+# the machine's cores); set_num_threads can only lower it.
+MAX_THREADS = int(numba.config.NUMBA_NUM_THREADS)
 
 
 @njit(cache=_CACHE)
@@ -147,6 +159,7 @@ def read_bodies(fns, agents, objects):  # pragma: no cover
 @njit(cache=_CACHE)
 def physics_tick(
     fns,
+    space_step,
     space,
     substep_s,
     substeps,
@@ -166,6 +179,8 @@ def physics_tick(
     the robot after it); the position counters advance by this tick's pulses.
     Returns :func:`read_bodies` of the result. With ``substeps`` 0 it only
     drives: the caller steps the space through pymunk and reads it after.
+    ``space_step`` is the address of chipmunk's step for this kind of space
+    (cpSpaceStep, or cpHastySpaceStep for a threaded space).
     """
     for a in range(len(controls)):
         w0 = cmd[a, 0] * mm_s_per_unit[a]
@@ -178,7 +193,7 @@ def physics_tick(
         counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
         counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
     for _ in range(substeps):
-        C.set_double(fns[C.SPACE_STEP], space, substep_s)
+        C.set_double(space_step, space, substep_s)
     return read_bodies(fns, agents, objects)
 
 
@@ -289,35 +304,63 @@ def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
-def sense(robots, tables, scene, moving, out):  # pragma: no cover
-    """Every agent's proximity, ambient and presence readings, written into ``out``.
+def _occluded_grid(
+    px, py, qx, qy, segs, grid_start, grid_items, grid_nx, grid_ny, cell, circ_xy, circ_r
+):  # pragma: no cover
+    """:func:`_occluded`, testing only the static edges binned along the segment p -> q.
 
-    ``robots`` (Robots), ``tables`` (SensorTables), ``scene`` (StaticScene),
-    ``moving`` (MovingScene) and ``out`` (Readings) are the packs defined above,
-    passed as plain tuples in that layout (see SensorSuite.read: dispatch cost).
+    Every occluding edge of ``occ_segs`` is ``segs[4:]`` (the arena's 4 walls come
+    first and never hide a light). Points sampled along p -> q at most half a cell
+    apart land in, or next to, the cell of any point where an edge crosses it, and
+    an edge is binned in every cell within one cell of its bounding box: so every
+    crossing edge is tested, with the same formula, and the answer is the same as
+    testing them all. With obstacles in proportion to the swarm that full test was
+    O(robots x obstacles): 10,000 robots, 200 pillars, one wide lamp.
     """
-    pose, arm, holding = robots
-    (
-        ray_local,
-        sensors,
-        rays_per_sensor,
-        agent_f,
-        agent_i,
-        curve_x,
-        curve_y,
-        curve_n,
-        amb_local,
-        amb_valid,
-    ) = tables
-    segs, grid_start, grid_items, grid_nx, grid_ny, cell, occ_segs, static_xy, static_r = scene
-    circ_xy, circ_r, circ_owner, circ_is_object, edges, lights, noise = moving
-    prox_out, amb_out, presence_out = out
+    dx = qx - px
+    dy = qy - py
+    length = math.hypot(dx, dy)
+    steps = math.ceil(length / (0.5 * cell)) + 1
+    last = -1
+    for i in range(steps + 1):
+        f = min(i / steps, 1.0)
+        k = _cell(px + f * dx, cell, grid_nx) * grid_ny + _cell(py + f * dy, cell, grid_ny)
+        if k == last:
+            continue
+        last = k
+        for p in range(grid_start[k], grid_start[k + 1]):
+            sg = grid_items[p]
+            if sg < 4:
+                continue
+            t = _ray_segment(px, py, dx, dy, segs[sg, 0], segs[sg, 1], segs[sg, 2], segs[sg, 3])
+            if t <= 1.0:
+                return True
+    if circ_r.shape[0]:
+        scale = max(length, 1e-9)
+        ux = dx / scale
+        uy = dy / scale
+        for c in range(circ_r.shape[0]):
+            t = _ray_circle(px, py, ux, uy, circ_xy[c, 0], circ_xy[c, 1], circ_r[c])
+            if t < length:
+                return True
+    return False
+
+
+@njit(cache=_CACHE)
+def _circles(robots, tables, scene, moving):  # pragma: no cover
+    """Every circle (the agents first, each owning itself, then the others), binned.
+
+    Returns (cx, cy, cr, cown, cobj, count, citems): the circles and a counting
+    sort of them into the grid (``count`` the CSR offsets per cell, ``citems``
+    the circle indices cell by cell). Serial: O(circles), a small share of a pass.
+    """
+    pose = robots[0]
+    agent_f = tables[3]
+    grid_nx, grid_ny, cell = scene[3], scene[4], scene[5]
+    circ_xy, circ_r, circ_owner, circ_is_object = moving[0], moving[1], moving[2], moving[3]
     n = pose.shape[0]
-    nrays = ray_local.shape[1]
     nc_extra = circ_r.shape[0]
     nc = n + nc_extra
-
-    # All circles: the agents first (each owns itself), then the others.
     cx = np.empty(nc)
     cy = np.empty(nc)
     cr = np.empty(nc)
@@ -335,7 +378,6 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
         cown[n + c] = circ_owner[c]
         cobj[n + c] = circ_is_object[c]
 
-    # Counting sort of the circles into the grid.
     ncell = grid_nx * grid_ny
     count = np.zeros(ncell + 1, dtype=np.int64)
     ccell = np.empty(nc, dtype=np.int64)
@@ -351,19 +393,56 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
         k = ccell[c]
         citems[fill[k]] = c
         fill[k] += 1
+    return cx, cy, cr, cown, cobj, count, citems
 
-    ox = np.empty(nrays)
-    oy = np.empty(nrays)
-    dx = np.empty(nrays)
-    dy = np.empty(nrays)
-    dist = np.empty(nrays)
-    per_sensor = np.empty(sensors)
+
+@njit(cache=_CACHE)
+def _scratch(tables, moving, nc):  # pragma: no cover
+    """One worker's scratch arrays: ray origins and directions, hits, candidates."""
+    nrays = tables[0].shape[1]
+    return (
+        np.empty(nrays),
+        np.empty(nrays),
+        np.empty(nrays),
+        np.empty(nrays),
+        np.empty(nrays),
+        np.empty(tables[1]),
+        np.empty(tables[8].shape[1]),
+        np.empty(nc, dtype=np.int64),
+        np.empty(moving[4].shape[0], dtype=np.int64),
+    )
+
+
+@njit(cache=_CACHE)
+def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch):  # pragma: no cover
+    """Readings of agents ``lo`` to ``hi - 1``: reads shared state, writes their rows only.
+
+    Each agent's readings depend only on the shared inputs (poses, tables, the
+    circle grid, the pre-drawn noise), never on another agent's pass, so any
+    split of the agents between workers gives the same bits.
+    """
+    pose, arm, holding = robots
+    (
+        ray_local,
+        sensors,
+        rays_per_sensor,
+        agent_f,
+        agent_i,
+        curve_x,
+        curve_y,
+        curve_n,
+        amb_local,
+        amb_valid,
+    ) = tables
+    segs, grid_start, grid_items, grid_nx, grid_ny, cell, occ_segs, static_xy, static_r = scene
+    edges, lights, noise = moving[4], moving[5], moving[6]
+    prox_out, amb_out, presence_out = out
+    cx, cy, cr, cown, cobj, count, citems = circles
+    ox, oy, dx, dy, dist, per_sensor, total, cand, ecand = scratch
+    nrays = ray_local.shape[1]
     n_amb = amb_local.shape[1]
-    total = np.empty(n_amb)
-    cand = np.empty(nc, dtype=np.int64)
-    ecand = np.empty(edges.shape[0], dtype=np.int64)
 
-    for a in range(n):
+    for a in range(lo, hi):
         x = pose[a, 0]
         y = pose[a, 1]
         th = pose[a, 2]
@@ -510,7 +589,24 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
             ddy = y - lyy
             if not (ddx * ddx + ddy * ddy < (radius + 40.0) ** 2):
                 continue
-            if _occluded(x, y, lxx, lyy, occ_segs, static_xy, static_r):
+            if occ_segs.shape[0] > 64:  # many obstacles: only those along the way
+                hidden = _occluded_grid(
+                    x,
+                    y,
+                    lxx,
+                    lyy,
+                    segs,
+                    grid_start,
+                    grid_items,
+                    grid_nx,
+                    grid_ny,
+                    cell,
+                    static_xy,
+                    static_r,
+                )
+            else:
+                hidden = _occluded(x, y, lxx, lyy, occ_segs, static_xy, static_r)
+            if hidden:
                 continue
             scale = agent_f[a, F_AMB_DROP] * lights[li, 3]
             half = agent_f[a, F_AMB_HALF_ANGLE]
@@ -546,12 +642,51 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
             amb_out[a, j] = np.int32(v)
 
 
+@njit(cache=_CACHE)
+def sense(robots, tables, scene, moving, out):  # pragma: no cover
+    """Every agent's proximity, ambient and presence readings, written into ``out``.
+
+    ``robots`` (Robots), ``tables`` (SensorTables), ``scene`` (StaticScene),
+    ``moving`` (MovingScene) and ``out`` (Readings) are the packs defined above,
+    passed as plain tuples in that layout (see SensorSuite.read: dispatch cost).
+    """
+    circles = _circles(robots, tables, scene, moving)
+    scratch = _scratch(tables, moving, circles[0].shape[0])
+    _sense_range(0, robots[0].shape[0], robots, tables, scene, moving, out, circles, scratch)
+
+
+@njit(cache=_CACHE, parallel=True)
+def sense_parallel(robots, tables, scene, moving, out, threads):  # pragma: no cover
+    """:func:`sense` on ``threads`` threads: the agents split into chunks, same readings.
+
+    The caller sets numba's thread count for its thread (numba.set_num_threads;
+    calling it in here would keep the kernel out of the on-disk cache).
+
+    The circle grid is built once (serially) and shared read-only; each chunk
+    has its own scratch arrays and writes only its agents' rows of ``out``;
+    the noise was drawn before the call. So the result is bit-identical to
+    :func:`sense` whatever the thread count (tests/unit/common/sim2d/test_swarm.py).
+    """
+    circles = _circles(robots, tables, scene, moving)
+    n = robots[0].shape[0]
+    nc = circles[0].shape[0]
+    # A few chunks per thread: robots in crowded cells cost more, and equal
+    # shares of robots are not equal shares of work.
+    chunks = min(n, 8 * threads)
+    for c in prange(chunks):
+        lo = n * c // chunks
+        hi = n * (c + 1) // chunks
+        scratch = _scratch(tables, moving, nc)
+        _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch)
+
+
 def warm_up() -> float:
     """Compile (or load from the on-disk cache) every kernel; returns the seconds it took."""
     t0 = time.perf_counter()
     none = np.zeros(0, dtype=np.uint64)  # no bodies: compiles without touching chipmunk
     physics_tick(
         C.FUNCTIONS,
+        C.FUNCTIONS[C.SPACE_STEP],
         np.uint64(0),
         0.01,
         0,
@@ -611,4 +746,5 @@ def warm_up() -> float:
         ),
     )
     sense(*(tuple(p) for p in packs))  # plain tuples, as SensorSuite.read passes them
+    sense_parallel(*(tuple(p) for p in packs), 1)
     return time.perf_counter() - t0

@@ -319,8 +319,13 @@ def build_world(
     text: str | None = None,
     source: str = "map",
     sensor_period_s: float = 0.02,
+    threads: int = 1,
+    physics_threads: int = 1,
 ) -> World:
-    """A new world from a parsed map (errors name ``source`` and the field)."""
+    """A new world from a parsed map (errors name ``source`` and the field).
+
+    ``threads`` and ``physics_threads``: see World (sensing and chipmunk threads).
+    """
     try:
         top = _Fields(data, "", text)
         for key in ("format", "version", "name", "description", *SECTIONS):
@@ -335,6 +340,8 @@ def build_world(
             tick_s=tick_s,
             name=name,
             sensor_period_s=sensor_period_s,
+            threads=threads,
+            physics_threads=physics_threads,
         )
         arena.check_unknown()
         for section in SECTIONS:
@@ -348,13 +355,28 @@ def build_world(
     return world
 
 
-def load_map(path: Path, *, name: str, seed: int = 0, tick_s: float = 0.02) -> World:
+def load_map(
+    path: Path,
+    *,
+    name: str,
+    seed: int = 0,
+    tick_s: float = 0.02,
+    threads: int = 1,
+    physics_threads: int = 1,
+) -> World:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise MapError(f"{path}: cannot read the map: {exc.strerror}") from None
     return build_world(
-        parse_map(text, str(path)), name=name, seed=seed, tick_s=tick_s, text=text, source=str(path)
+        parse_map(text, str(path)),
+        name=name,
+        seed=seed,
+        tick_s=tick_s,
+        text=text,
+        source=str(path),
+        threads=threads,
+        physics_threads=physics_threads,
     )
 
 

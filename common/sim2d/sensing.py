@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+import numba
 import numpy as np
 
 from common.sim2d import kernels as K
@@ -39,6 +40,11 @@ if TYPE_CHECKING:
     from common.sim2d.specs import AgentTypeSpec
 
 _MIN_CELL_MM = 120.0
+# Below this many agents a pass runs on one thread even when more are allowed. A
+# judgement, not a measured crossover: a pass at 10 robots takes ~15 us, less than
+# waking a pool, and on the shared development machine no thread count beat one at
+# any size (docs/BENCHMARKS.md, "Swarms and small worlds (issue 22)").
+PARALLEL_MIN_AGENTS = 256
 
 
 class SensedWorld(Protocol):
@@ -48,6 +54,7 @@ class SensedWorld(Protocol):
     height: float
     layout: int
     sim_time: float
+    threads: int  # threads a sensing pass may use (kernels.sense_parallel)
     agents: list[Agent]
     objects: list[MovableObject]
     obstacles: dict[str, Obstacle]
@@ -403,25 +410,50 @@ class SensorSuite:
             )
         return self._static
 
-    def read(self, world: SensedWorld, out: K.Readings) -> K.Readings:
-        """Every agent's proximity, ambient and presence readings, written into ``out``."""
+    def packs(
+        self, world: SensedWorld, sim_time: float
+    ) -> tuple[tuple[object, ...], tuple[object, ...], tuple[object, ...]]:
+        """The kernel's tables, static scene and moving scene of one pass at ``sim_time``.
+
+        Draws the pass's noise: call once per pass. The packs go to the kernel as
+        plain tuples, laid out as K.SensorTables, K.StaticScene and K.MovingScene:
+        numba's dispatcher types a plain tuple of arrays on its C fast path, a
+        named tuple through Python (measured: 13 against 23 us a call at 10
+        robots, more than the sensing itself).
+        """
         static = self.static_geometry(world)
         layout = self.agents
-        # The packs go to the kernel as plain tuples, laid out as K.MovingScene and
-        # K.Robots: numba's dispatcher types a plain tuple of arrays on its C fast
-        # path, a named tuple through Python (measured: 13 against 23 us a call at
-        # 10 robots, more than the sensing itself).
-        moving = (*_objects(world, static), self._lit(world), self.noise.take(layout.noise_total))
+        moving = (
+            *_objects(world, static),
+            self._lit(world, sim_time),
+            self.noise.take(layout.noise_total),
+        )
+        return layout.kernel_tables, static.kernel_scene, moving
+
+    def read(self, world: SensedWorld, out: K.Readings) -> K.Readings:
+        """Every agent's proximity, ambient and presence readings, written into ``out``."""
+        tables, scene, moving = self.packs(world, world.sim_time)
         robots = (world.agent_pose, world.arm, world.holding())
-        K.sense(robots, layout.kernel_tables, static.kernel_scene, moving, tuple(out))
+        if world.threads > 1 and len(world.agent_pose) >= PARALLEL_MIN_AGENTS:
+            # Both settings are per calling thread (the sim thread's). Chunks handed out
+            # one at a time: on a shared machine a worker may be descheduled, and the
+            # others then take its share instead of waiting for it at the barrier.
+            numba.set_num_threads(world.threads)
+            chunk = numba.set_parallel_chunksize(1)
+            try:
+                K.sense_parallel(robots, tables, scene, moving, tuple(out), world.threads)
+            finally:
+                numba.set_parallel_chunksize(chunk)
+        else:
+            K.sense(robots, tables, scene, moving, tuple(out))
         return out
 
-    def _lit(self, world: SensedWorld) -> np.ndarray:
-        """(L, 4) x, y, radius, intensity of the lights on now (edited live: keyed on values)."""
+    def _lit(self, world: SensedWorld, sim_time: float) -> np.ndarray:
+        """(L, 4) x, y, radius, intensity of the lights on at ``sim_time`` (keyed on values)."""
         key = tuple(
             (light.x, light.y, light.radius_mm, light.intensity)
             for light in world.lights
-            if light.intensity > 0 and light.is_on(world.sim_time)
+            if light.intensity > 0 and light.is_on(sim_time)
         )
         if not key:
             return _NO_LIGHTS

@@ -83,11 +83,24 @@ class World:
         sensor_period_s: float = 0.02,
         substeps: int | None = None,
         name: str = "world",
+        threads: int = 1,
+        physics_threads: int = 1,
     ) -> None:
         if not (width_mm > 0 and height_mm > 0):
             raise EditError("the arena's width and height must be positive")
         if not tick_s > 0:
             raise EditError("the tick must be positive")
+        if not 1 <= threads <= kernels.MAX_THREADS:
+            raise EditError(f"threads must be between 1 and {kernels.MAX_THREADS}")
+        if not 1 <= physics_threads <= kernels.MAX_THREADS:
+            raise EditError(f"physics threads must be between 1 and {kernels.MAX_THREADS}")
+        # Sensing threads: the parallel kernel gives the serial kernel's readings bit
+        # for bit (each robot's pass reads shared state and writes its own row only).
+        self.threads = threads
+        # Physics threads: chipmunk's threaded ("hasty") space, whose solver splits
+        # the constraints between threads. Its results depend on the thread count
+        # and the scheduling, so it is opt-in (see docs/BENCHMARKS.md, issue 22).
+        self.physics_threads = physics_threads
         self.name = name
         self.seed = seed
         self.tick_s = tick_s
@@ -111,8 +124,13 @@ class World:
         self.profile = False
         self.phase_cpu = {"physics": 0.0, "sensing": 0.0}
 
-        self.space = pymunk.Space()
+        self.space = pymunk.Space(threaded=physics_threads > 1)
+        if physics_threads > 1:
+            self.space.threads = physics_threads
         self.space.damping = 1.0
+        self._step_fn = chipmunk.FUNCTIONS[
+            chipmunk.HASTY_SPACE_STEP if physics_threads > 1 else chipmunk.SPACE_STEP
+        ]
         exception = self.grippers.collision_exception
         self.space.on_collision(COLL_ROBOT, COLL_OBJECT, pre_solve=exception)
         self.space.on_collision(COLL_TONGS, COLL_OBJECT, pre_solve=exception)
@@ -215,7 +233,15 @@ class World:
         )
 
     def _check_new_id(self, ident: str) -> None:
-        if ident in self.ids():
+        # Not ``ident in self.ids()``: building that set for every add made adding
+        # 10,000 robots quadratic (about 40 s); ``homes`` holds every agent's id.
+        if (
+            ident in self.homes
+            or ident in self.obstacles
+            or ident in self.zones
+            or any(o.id == ident for o in self.objects)
+            or any(light.id == ident for light in self.lights)
+        ):
             raise EditError(f"an object named {ident!r} already exists in this world")
 
     def agent_slot(self, agent_id: str) -> int:
@@ -658,6 +684,7 @@ class World:
         sub = dt / self.substeps
         pose, vel, obj = kernels.physics_tick(
             chipmunk.FUNCTIONS,
+            self._step_fn,
             self._space_address,
             sub,
             0 if via_pymunk else self.substeps,

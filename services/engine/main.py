@@ -52,6 +52,20 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         type=Path,
         help="where map save/load requests read and write (default: the map's directory)",
     )
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=kernels.MAX_THREADS,
+        help=f"threads of the sensing pass (default {kernels.MAX_THREADS}: this machine's "
+        "cores); readings are the same with any count",
+    )
+    p.add_argument(
+        "--physics-threads",
+        type=int,
+        default=1,
+        help="threads of chipmunk's solver (default 1; more: its threaded space, whose "
+        "trajectories depend on scheduling)",
+    )
     add_world_identity_args(p)
     args, options = cli.parse(p, argv)
     assert options is not None
@@ -66,6 +80,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         p.error("--speed must be between 0.01 and 10000")
     if args.watchdog_ms <= 0:
         p.error("--watchdog-ms must be positive")
+    for flag, value in (("--threads", args.threads), ("--physics-threads", args.physics_threads)):
+        if not 1 <= value <= kernels.MAX_THREADS:
+            p.error(f"{flag} must be between 1 and {kernels.MAX_THREADS} (numba's thread pool)")
     registry_key = None
     if options.registry_key:
         try:
@@ -74,7 +91,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
             p.error(f"--registry-key: {exc}")
     tick_s = args.tick_ms / 1000.0
     try:
-        world = load_map(args.map, name=world_name, seed=args.seed, tick_s=tick_s)
+        world = load_map(
+            args.map,
+            name=world_name,
+            seed=args.seed,
+            tick_s=tick_s,
+            threads=args.threads,
+            physics_threads=args.physics_threads,
+        )
     except MapError as exc:
         return cli.fail(str(exc))
     # Compile the per-tick kernels now (or load them from numba's on-disk cache) rather
@@ -90,6 +114,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         seed=args.seed,
         registry_key=registry_key,
         wander=args.wander,
+        threads=args.threads,
+        physics_threads=args.physics_threads,
     )
 
     def build(session: zenoh.Session) -> EngineService:

@@ -80,6 +80,10 @@ class EngineSettings:
     # The --map the world started from: live edits are journalled against it (in
     # maps_dir) and replayed when the engine restarts on the same map. "" = no journal.
     base_map: str = ""
+    # Threads of the sim thread's kernels (World.threads, World.physics_threads); kept
+    # when a map is loaded on request.
+    threads: int = 1
+    physics_threads: int = 1
 
 
 @dataclass
@@ -156,7 +160,12 @@ class EngineService(WorldService):
         elif isinstance(record, MapRequest) and record.action == "load" and record.name:
             path = maps.map_path(self.settings.maps_dir, record.name)
             self.world = maps.load_map(
-                path, name=self.ident, seed=self.settings.seed, tick_s=self.settings.tick_s
+                path,
+                name=self.ident,
+                seed=self.settings.seed,
+                tick_s=self.settings.tick_s,
+                threads=self.settings.threads,
+                physics_threads=self.settings.physics_threads,
             )
         self.replayed_edits += 1
 
@@ -339,7 +348,12 @@ class EngineService(WorldService):
             raise RequestError("not_found", f"no map named {request.name} in the maps directory")
         try:
             new_world = maps.load_map(
-                path, name=self.ident, seed=self.settings.seed, tick_s=self.settings.tick_s
+                path,
+                name=self.ident,
+                seed=self.settings.seed,
+                tick_s=self.settings.tick_s,
+                threads=self.settings.threads,
+                physics_threads=self.settings.physics_threads,
             )
         except maps.MapError as exc:
             raise RequestError("bad_request", str(exc)) from None

@@ -44,6 +44,7 @@ def test_physics_tick_drives_control_bodies_and_counts_pulses() -> None:
     counters = np.zeros((1, 2))
     kernels.physics_tick(
         chipmunk.FUNCTIONS,
+        chipmunk.FUNCTIONS[chipmunk.SPACE_STEP],
         np.uint64(chipmunk.space_address(space)),
         0.01,
         0,  # drive only

@@ -21,11 +21,12 @@ from common.messages import (
     decode,
     encode,
 )
-from common.sim2d import maps
+from common.sim2d import kernels, maps
 from common.sim2d.agents import agent_type
 from common.sim2d.maps import MapError
 from common.sim2d.world import World
 from services.engine import wire
+from services.engine.main import main
 from tests.conftest import REPO
 
 MAPS = REPO / "maps"
@@ -133,3 +134,19 @@ def test_samples_report_each_agents_own_readings() -> None:
     assert len(e.proximity) == len(epuck.proximity.poses)
     assert len(e.ambient) == len(epuck.ambient.poses)
     assert wire.samples(world, []) == []
+
+
+def test_a_map_loads_with_the_thread_counts_asked_for() -> None:
+    two = min(2, kernels.MAX_THREADS)
+    world = maps.load_map(REPO / "maps" / "swarm.json", name="w", threads=two, physics_threads=two)
+    assert (world.threads, world.physics_threads) == (two, two)
+    assert world.space.threaded == (two > 1)
+
+
+@pytest.mark.parametrize("flag", ["--threads", "--physics-threads"])
+def test_wart_engine_refuses_thread_counts_outside_numbas_pool(flag: str, capsys) -> None:
+    for bad in ("0", str(kernels.MAX_THREADS + 1)):
+        with pytest.raises(SystemExit) as exc:
+            main(["--map", str(REPO / "maps" / "empty.json"), flag, bad])
+        assert exc.value.code == 2
+        assert f"{flag} must be between 1 and" in capsys.readouterr().err

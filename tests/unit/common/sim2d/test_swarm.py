@@ -1,0 +1,181 @@
+"""Swarms on more than one core (issue 22): parallel sensing, chipmunk's threaded space."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from common.sim2d import kernels, sensing
+from common.sim2d.agents import agent_type
+from common.sim2d.entities import ShapeSpec
+from common.sim2d.wander import braitenberg
+from common.sim2d.world import EditError, World
+
+KHEPERA = agent_type("khepera")
+TWO = min(2, kernels.MAX_THREADS)
+needs_two_cores = pytest.mark.skipif(
+    kernels.MAX_THREADS < 2, reason="numba's pool has one thread on this machine"
+)
+
+
+def _crowd(seed: int = 4, **kw) -> World:
+    """Robots, balls held and free, a box, a round and a square obstacle, two lights."""
+    world = World(900.0, 900.0, seed=seed, tick_s=0.01, sensor_period_s=0.02, **kw)
+    world.add_obstacle("pillar", ShapeSpec.box(60, 60), 450.0, 450.0)
+    world.add_obstacle("post", ShapeSpec.circle(25), 200.0, 650.0)
+    world.add_light("lamp", 450.0, 300.0, radius_mm=400.0)
+    world.add_light("blink", 150.0, 150.0, radius_mm=300.0, mode="blink", period_s=0.3)
+    rng = np.random.default_rng(seed)
+    placed = 0
+    while placed < 48:
+        x, y = rng.uniform(60, 840, 2)
+        try:
+            if placed < 40:
+                world.add_agent(
+                    f"k{placed}",
+                    KHEPERA,
+                    float(x),
+                    float(y),
+                    float(rng.uniform(-3, 3)),
+                    defer_tables=True,
+                )
+            elif placed < 46:
+                world.add_object(f"ball{placed}", "ball", ShapeSpec.circle(15), float(x), float(y))
+            else:
+                world.add_object(f"box{placed}", "box", ShapeSpec.box(30, 30), float(x), float(y))
+        except ValueError:
+            continue
+        placed += 1
+    world.finish_agents()
+    return world
+
+
+def _run(world: World, ticks: int) -> np.ndarray:
+    rows = []
+    for t in range(ticks):
+        world.set_speeds_all(braitenberg(world.proximity))
+        if t == 30:  # some grippers close: presence, held objects, owners in the kernel
+            for slot in range(0, 40, 3):
+                world.set_fingers(slot, closed=True)
+        world.step()
+        rows.append(
+            np.concatenate(
+                [
+                    world.agent_pose.ravel(),
+                    world.proximity.ravel(),
+                    world.ambient.ravel(),
+                    world.presence.ravel(),
+                ]
+            )
+        )
+    return np.array(rows)
+
+
+def test_parallel_sensing_reads_the_serial_readings_bit_for_bit(monkeypatch) -> None:
+    # The parallel kernel only runs from PARALLEL_MIN_AGENTS robots up; lowered here
+    # so a world of 40 takes it (and still has crowded cells, objects, lights).
+    monkeypatch.setattr(sensing, "PARALLEL_MIN_AGENTS", 1)
+    serial = _run(_crowd(threads=1), 120)
+    parallel = _run(_crowd(threads=TWO), 120)
+    n = 40
+    assert (serial[:, 3 * n : 3 * n + 8 * n] > 0).any(), "no proximity reading: a vacuous test"
+    assert np.array_equal(serial, parallel)
+
+
+@pytest.mark.parametrize("threads", [1, TWO])
+def test_the_parallel_kernel_alone_matches_the_serial_one(threads: int) -> None:
+    world = _crowd()
+    world.run(0.5)
+    tables, scene, moving = world.sensors.packs(world, world.sim_time)
+    robots = (world.agent_pose, world.arm, world.holding())
+
+    def fresh() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # Filled with a value no reading has: a row the kernel skipped would show.
+        return (
+            np.full(world.proximity.shape, -7, dtype=np.int32),
+            np.full(world.ambient.shape, -7, dtype=np.int32),
+            np.full(world.presence.shape, -7, dtype=np.int32),
+        )
+
+    want, got = fresh(), fresh()
+    kernels.sense(robots, tables, scene, moving, want)
+    numba.set_num_threads(threads)
+    kernels.sense_parallel(robots, tables, scene, moving, got, threads)
+    for a, b in zip(want, got, strict=True):
+        assert (a != -7).all()
+        assert np.array_equal(a, b)
+
+
+def test_thread_counts_are_checked() -> None:
+    for bad in (0, -1, kernels.MAX_THREADS + 1):
+        with pytest.raises(EditError, match="threads"):
+            World(500.0, 500.0, threads=bad)
+        with pytest.raises(EditError, match="threads"):
+            World(500.0, 500.0, physics_threads=bad)
+
+
+@needs_two_cores
+def test_threaded_space_keeps_a_crowd_inside_the_walls_and_apart() -> None:
+    # 30 robots driven flat out into the right-hand wall for 3 s: 60 joints and
+    # many contacts, above chipmunk's threshold for solving on both threads.
+    world = World(1000.0, 600.0, seed=1, physics_threads=2)
+    assert world.space.threaded and world.space.threads == 2
+    for i in range(30):
+        world.add_agent(f"k{i}", KHEPERA, 100.0 + 60.0 * (i % 5), 60.0 + 80.0 * (i // 5), 0.0)
+    world.set_speeds_all(np.full((30, 2), 60.0))
+    world.run(3.0)
+    pose = world.agent_pose
+    r = KHEPERA.radius_mm
+    assert pose[:, 0].max() > 800.0, "the crowd never reached the wall"
+    assert (pose[:, 0] <= 1000.0 - r + 1.0).all() and (pose[:, 1] >= r - 1.0).all()
+    assert (pose[:, 1] <= 600.0 - r + 1.0).all()
+    gaps = np.hypot(*(pose[:, None, :2] - pose[None, :, :2]).transpose(2, 0, 1))
+    np.fill_diagonal(gaps, np.inf)
+    assert gaps.min() > 2 * r - 3.0, "robots passed into each other"
+
+
+@needs_two_cores
+def test_threaded_space_drives_grips_and_pushes_like_the_serial_one() -> None:
+    # The same short scenario on both spaces: a robot drives 80 mm in 1 s, and a
+    # ball in its way ends up ahead of it (pushed with the drive's bounded force).
+    for physics_threads in (1, 2):
+        world = World(1500.0, 1000.0, seed=2, physics_threads=physics_threads)
+        world.add_agent("k1", KHEPERA, 300.0, 500.0, 0.0)
+        world.add_object("ball", "ball", ShapeSpec.circle(10.0), 360.0, 500.0, mass_g=5.0)
+        world.set_arm(0, 165)  # arm up: the body pushes
+        world.set_speeds(0, 10, 10)
+        world.run(1.0)
+        assert world.agent_pose[0, 0] - 300.0 == pytest.approx(80.0, rel=0.1)
+        assert world.object_pose[0, 0] > world.agent_pose[0, 0] + 27.0
+
+
+def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
+    # 40 boxes (160 edges) and 3 round obstacles; a robot-to-light segment is hidden
+    # or not the same whether every edge is tested or only those binned along it.
+    world = World(3000.0, 2000.0, seed=1)
+    rng = np.random.default_rng(8)
+    for i in range(40):
+        x, y = rng.uniform(100, 2900), rng.uniform(100, 1900)
+        world.add_obstacle(f"box{i}", ShapeSpec.box(60, 30), x, y, float(rng.uniform(0, 3)))
+    for i in range(3):
+        world.add_obstacle(f"post{i}", ShapeSpec.circle(25), 700.0 + 800 * i, 1000.0)
+    world.add_agent("k", KHEPERA, 50.0, 50.0)
+    scene = world.sensors.static_geometry(world).scene
+    hidden = 0
+    for p in rng.uniform([0, 0, 0, 0], [3000, 2000, 3000, 2000], size=(3000, 4)):
+        full = kernels._occluded(*p, scene.occ_segs, scene.static_xy, scene.static_r)
+        along = kernels._occluded_grid(
+            *p,
+            scene.segs,
+            scene.grid_start,
+            scene.grid_items,
+            scene.grid_nx,
+            scene.grid_ny,
+            scene.cell,
+            scene.static_xy,
+            scene.static_r,
+        )
+        assert full == along, p
+        hidden += full
+    assert 300 < hidden < 2700, "too few or too many hidden segments: a weak test"
