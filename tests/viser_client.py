@@ -24,10 +24,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import socket
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import msgspec
 import numpy as np
@@ -37,6 +38,7 @@ import websockets
 import websockets.asyncio.client
 import zstandard
 
+T = TypeVar("T")
 ROBOTS_NODE = "/world/robots"
 MAX_MSGPACK = 64 * 1024 * 1024  # far above any GUI or scene message the viewer sends
 
@@ -62,6 +64,26 @@ class RobotFrame:
     positions: npt.NDArray[np.float32]
     received_at: float
     index: int  # this client's count of frames received, from 1
+
+
+def run_in_thread(coro: Coroutine[Any, Any, T]) -> T:
+    """``asyncio.run(coro)`` on a thread of its own: callable where a loop already runs
+    (Playwright's sync API keeps one in the main thread of a browser test session)."""
+    box: dict[str, Any] = {}
+
+    def body() -> None:
+        try:
+            box["value"] = asyncio.run(coro)
+        except BaseException as exc:  # handed to the caller below
+            box["error"] = exc
+
+    thread = threading.Thread(target=body, name="viser-clients")
+    thread.start()
+    thread.join()
+    if "error" in box:
+        raise box["error"]
+    value: T = box["value"]
+    return value
 
 
 def _align(offset: int) -> int:
@@ -338,6 +360,21 @@ class ViserClient:
         problem = self.markdown_containing("Could not")
         if problem is not None and problem.props.get("visible", True):
             raise ConnectionError(f"{self.name}: {problem.props.get('_markdown')}")
+
+    async def join_room(self, context: str, timeout: float = 120.0) -> None:
+        """Press "Join CONTEXT" in the lobby, then wait for its chat input."""
+        before = {e.uuid for e in self.gui.values() if e.label == "Message"}
+        await self.click_until(
+            f"Join {context}",
+            lambda: any(e.label == "Message" and e.uuid not in before for e in self.gui.values()),
+            timeout,
+            every=5.0,
+        )
+
+    async def say(self, text: str, timeout: float = 60.0) -> None:
+        """Type into the newest chat panel's Message input and press Send."""
+        await self.type_into("Message", text, timeout)
+        await self.click("Send", timeout)
 
     async def join(self, context: str, timeout: float = 120.0) -> None:
         """Press "Join CONTEXT" in the lobby, then wait for the first robots frame."""

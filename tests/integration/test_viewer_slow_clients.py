@@ -10,7 +10,6 @@ viewer's sending side.
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import free_port
-from tests.viser_client import RobotFrame, ViserClient
+from tests.viser_client import RobotFrame, ViserClient, run_in_thread
 from viewers.web.app import NOTSENT_LOWAT, WRITE_HIGH, WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 
@@ -104,7 +103,7 @@ async def _stall_and_resume(viewer: WebViewer) -> Stall:
 def test_a_stalled_client_gets_current_frames_and_never_slows_the_others(
     viewer: WebViewer,
 ) -> None:
-    seen = asyncio.run(_stall_and_resume(viewer))
+    seen = run_in_thread(_stall_and_resume(viewer))
     # The others kept receiving frames while one client read nothing (the waits above).
     assert seen.good >= STALLED_FRAMES and seen.other >= STALLED_FRAMES
     # What waits for the stalled client stays bounded the whole time: viser keeps the
