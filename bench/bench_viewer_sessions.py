@@ -156,10 +156,21 @@ def _browsers(url: str, count: int, seconds: float) -> None:
             time.sleep(seconds)
         elapsed = time.monotonic() - t0
         s1 = [c.read() for c in counters]
+        # Is the page still usable? Animation frames it painted in 3 s (the
+        # canvas redraws in one; a page stuck in work paints few).
+        fps = [float(vp.p.evaluate(RAF_COUNT)) / 3.0 for vp in pages]
         browser.close()
     frames = [(b["messages"] - a["messages"]) / elapsed for a, b in zip(s0, s1, strict=True)]
     mb = [(b["bytes"] - a["bytes"]) / elapsed / 1e6 for a, b in zip(s0, s1, strict=True)]
-    print("RESULT " + json.dumps({"frames": _stats(frames), "mb": _stats(mb)}), flush=True)
+    result = {"frames": _stats(frames), "mb": _stats(mb), "paint_fps": _stats(fps)}
+    print("RESULT " + json.dumps(result), flush=True)
+
+
+RAF_COUNT = """() => new Promise(done => {
+  let n = 0; const end = performance.now() + 3000;
+  const step = t => { n += 1; if (t < end) requestAnimationFrame(step); else done(n); };
+  requestAnimationFrame(step);
+})"""
 
 
 # -- the viewer (this process) ---------------------------------------------------------------
@@ -326,9 +337,11 @@ def run_arena(args: argparse.Namespace, robots: int) -> None:
         )
     if "chromium" in results:
         cf, cm = results["chromium"]["frames"], results["chromium"]["mb"]
+        paint = results["chromium"]["paint_fps"]
         print(
             f"  Chromium updates/s per page: min {cf['min']:.1f} mean {cf['mean']:.1f} "
-            f"max {cf['max']:.1f}; {cm['mean']:.3f} MB/s per page"
+            f"max {cf['max']:.1f}; {cm['mean']:.3f} MB/s per page; the page painted "
+            f"{paint['min']:.1f} to {paint['max']:.1f} animation frames/s"
         )
     print(f"  bytes per session: {mb['mean']:.3f} MB/s (min {mb['min']:.3f}, max {mb['max']:.3f})")
     print(f"  server applied per view: min {min(applied):.1f} max {max(applied):.1f} frames/s")
