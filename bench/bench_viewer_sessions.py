@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import os
 import subprocess
 import sys
@@ -65,7 +66,13 @@ async def _clients(url: str, sessions: int, seconds: float, slow: int, slow_ever
     async def enter(i: int, client: ViserClient) -> None:
         nonlocal done
         async with gate:
-            await client.connect(max_queue=1 if i < slow else 16)
+            # A slow reader's own kernel buffer is kept small (16 KiB): its link, not
+            # its kernel, is where the bytes would wait; with Linux's default a client
+            # that reads once a second still takes every frame into its kernel.
+            if i < slow:
+                await client.connect(max_queue=1, rcvbuf=16 * 1024)
+            else:
+                await client.connect()
             user, password = USERS[i % len(USERS)]
             await client.log_in(user, password, timeout=300)
             await client.join(ARENA, timeout=300)
@@ -267,6 +274,15 @@ def run_arena(args: argparse.Namespace, robots: int) -> None:
         flush=True,
     )
     lab = DemoLab("Bench lab", robots=robots, rate=args.world_rate)
+    if robots > 1000:
+        # The demo's 2 m arena would pile a big swarm on top of itself (10,000 discs
+        # of 55 mm in 2 m: every pixel drawn a dozen times). Spread it as densely as
+        # maps/swarm.json spreads its 1,000 robots (5 m square).
+        from viewers.web.demo_lab import DemoWorld
+
+        side = 5000.0 * math.sqrt(robots / 1000)
+        lab.worlds[ARENA].stop()
+        lab.worlds[ARENA] = DemoWorld(ARENA, robots, width=side, height=side, rate=args.world_rate)
     viewer = WebViewer(DemoConnector(("lab", lab)), port=free_port(), rate=args.rate)
     children: list[Child] = []
     try:

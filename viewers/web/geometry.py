@@ -94,13 +94,12 @@ def follow_camera(
 
 
 def robot_mesh(
-    radius_m: float, height_m: float = 0.01, segments: int = 16, *, nose: bool = True
+    radius_m: float, height_m: float = 0.01, segments: int = 16
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
     """A flat disc with a raised nose wedge pointing along +x: a robot with its heading.
 
     One mesh for every robot (batched); 2 * segments + 3 triangles keeps 1,000
-    instances cheap for software WebGL. ``nose=False``: the disc alone, the same
-    from every heading, so a swarm's frames need no orientations at all.
+    instances cheap for software WebGL.
     """
     angles = np.linspace(0, 2 * math.pi, segments, endpoint=False)
     rim = np.stack([np.cos(angles), np.sin(angles), np.zeros(segments)], 1) * radius_m
@@ -108,13 +107,12 @@ def robot_mesh(
     top_centre = [[0.0, 0.0, height_m]]
     top_rim = rim + np.array([0.0, 0.0, height_m])
     nose_h = height_m * 1.5
-    nose_points = [
+    nose = [
         [radius_m * 0.95, 0.0, nose_h],
         [-radius_m * 0.2, radius_m * 0.45, nose_h],
         [-radius_m * 0.2, -radius_m * 0.45, nose_h],
     ]
-    parts = [bottom_centre, top_centre, rim, top_rim] + ([nose_points] if nose else [])
-    vertices = np.concatenate(parts).astype(np.float32)
+    vertices = np.concatenate([bottom_centre, top_centre, rim, top_rim, nose]).astype(np.float32)
     faces: list[tuple[int, int, int]] = []
     r0, t0 = 2, 2 + segments
     for i in range(segments):
@@ -122,9 +120,25 @@ def robot_mesh(
         faces.append((1, t0 + i, t0 + j))  # top
         faces.append((r0 + i, r0 + j, t0 + j))  # side
         faces.append((r0 + i, t0 + j, t0 + i))
-    if nose:
-        n0 = 2 + 2 * segments
-        faces.append((n0, n0 + 1, n0 + 2))
+    n0 = 2 + 2 * segments
+    faces.append((n0, n0 + 1, n0 + 2))
+    return vertices, np.asarray(faces, np.uint32)
+
+
+def swarm_disc_mesh(
+    radius_m: float, height_m: float = 0.01, segments: int = 8
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
+    """A swarm robot seen from above: the top of the disc only, ``segments`` triangles.
+
+    The top-down camera never sees a side, and a swarm robot is a few pixels
+    wide: 8 triangles instead of :func:`robot_mesh`'s 51 keep 10,000 instances
+    within what software WebGL can draw.
+    """
+    angles = np.linspace(0, 2 * math.pi, segments, endpoint=False)
+    rim = np.stack([np.cos(angles), np.sin(angles), np.full(segments, height_m)], 1)
+    rim[:, :2] *= radius_m
+    vertices = np.concatenate([[[0.0, 0.0, height_m]], rim]).astype(np.float32)
+    faces = [(0, 1 + i, 1 + (i + 1) % segments) for i in range(segments)]  # ccw from +z
     return vertices, np.asarray(faces, np.uint32)
 
 

@@ -311,7 +311,10 @@ class WorldView:
         n = len(snap.robots)
         swarm = n > HEADINGS_UP_TO
         self._robots = self._add_batch(
-            "/world/robots", geo.robot_mesh(radius, nose=not swarm), n, GRIPPER_COLOURS[0]
+            "/world/robots",
+            geo.swarm_disc_mesh(radius) if swarm else geo.robot_mesh(radius),
+            n,
+            GRIPPER_COLOURS[0],
         )
         # The arrow lies on top of the body: a click on it selects the robot too.
         self._headings = (
