@@ -323,6 +323,7 @@ class WorldView:
             else None
         )
         self._gripper_key = self._led_key = b""
+        self.drawn = None  # new meshes start at the origin: the next frame must place them
         if self._ring is not None:
             self._ring.remove()
         self._ring = self.client.scene.add_cylinder(
