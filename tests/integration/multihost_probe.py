@@ -73,6 +73,52 @@ def result(**values: object) -> int:
     return 0
 
 
+STUDENT_PASSWORD = "viewer-test-pw"
+VIEWER_PORT = 8080  # the lab file's default
+
+
+async def _two_viewers(at_a: str, at_b: str) -> dict[str, object]:
+    """stu1 on A's viewer, stu2 on B's: log in, chat both ways in the lobby, watch arena1."""
+    from tests.viser_client import ViserClient
+
+    on_a = ViserClient(f"ws://{at_a}:{VIEWER_PORT}", "viewer-A")
+    on_b = ViserClient(f"ws://{at_b}:{VIEWER_PORT}", "viewer-B")
+    try:
+        await on_a.connect()
+        await on_b.connect()
+        await on_a.log_in("stu1", STUDENT_PASSWORD)
+        await on_b.log_in("stu2", STUDENT_PASSWORD)
+        await on_a.join_room("lobby")
+        await on_b.join_room("lobby")
+        await on_a.say("hello from A")
+        await on_b.wait_for(lambda: on_b.markdown_containing("hello from A"), 30)
+        await on_b.say("hello from B")
+        await on_a.wait_for(lambda: on_a.markdown_containing("hello from B"), 30)
+        await on_a.join("arena1")
+        await on_b.join("arena1")
+
+        def same_world() -> bool:
+            # The same engine's robots, drawn from two viewers: equal counts, and each
+            # robot within 30 mm of itself (frames a tick or two apart may differ).
+            a, b = on_a.latest, on_b.latest
+            if a is None or b is None or a.positions.shape != b.positions.shape:
+                return False
+            return bool(np.abs(a.positions - b.positions).max() < 0.03)
+
+        same = await on_a.wait_for(same_world, 30)
+        robots = len(on_a.latest.positions) if on_a.latest is not None else 0
+        return {
+            "chat_a_saw_b": on_a.markdown_containing("hello from B") is not None,
+            "chat_b_saw_a": on_b.markdown_containing("hello from A") is not None,
+            "same_world": bool(same),
+            "robots": robots,
+            "frames": [on_a.frames, on_b.frames],
+        }
+    finally:
+        await on_a.close()
+        await on_b.close()
+
+
 def session_for(lab_path: Path, tls: TlsFiles | None, endpoint: str, lab_lease: int):
     from common.zconfig import NetworkOptions
 
@@ -119,6 +165,24 @@ def main() -> int:
             return result(joined=False, why=str(exc)[:200])
         close_session(s)
         return result(joined=True)
+
+    if verb == "viewers":
+        # viewers PASSWORD_FILE ADDRESS_A ADDRESS_B: two students, one on the web viewer
+        # of each host (a browser's address can name either), chat and watch arena1.
+        password_file, at_a, at_b = args
+        s = session_for(lab_path, client_tls(pki, "student"), lab.host("C").endpoint, lab.lease_ms)
+        try:
+            with LabClient(s, realm, read_registry_key(lab), presence=False) as admin:
+                admin.login("admin", Path(password_file).read_text().strip())
+                known = {u.name for u in admin.list_users()}
+                for user in ("stu1", "stu2"):
+                    if user not in known:
+                        admin.add_user(user, STUDENT_PASSWORD)
+        finally:
+            close_session(s)
+        from tests.viser_client import run_in_thread
+
+        return result(**run_in_thread(_two_viewers(at_a, at_b)))
 
     if verb == "across":
         # across HOST PASSWORD_FILE: log in (registry on A) and fetch the snapshot of

@@ -1,7 +1,7 @@
 """A three-host lab in network namespaces, routers meshed over mutual TLS with access rules.
 
-A: router, registry, chat lobby, web viewer (takes no arenas); B: router, engine
-arena1 with its agent context, the runner; C: router, bridge real1 driving an
+A: router, registry, chat lobby, web viewer (takes no arenas); B: router, a second
+web viewer, engine arena1 with its agent context, the runner; C: router, bridge real1 driving an
 emulated Khepera, agent context robots for it (its controllers run on B's
 runner). Each host runs ``wart host`` from one lab file; probes
 (tests/integration/multihost_probe.py) run inside the namespaces. Transport
@@ -59,9 +59,13 @@ kind = "chat"
 name = "lobby"
 [[hosts.services]]
 kind = "viewer"
+http_host = "{a}"
 [[hosts]]
 name = "B"
 address = "{b}"
+[[hosts.services]]
+kind = "viewer"   # a second web viewer: any viewer serves any user of the lab
+http_host = "{b}"
 [[hosts.services]]
 kind = "engine"
 world = "arena1"
@@ -218,6 +222,7 @@ def test_services_talk_across_hosts_and_the_doctor_sees_the_mesh(lab: MultiLab) 
         "bridge real1 (with its emulated Khepera) on C is alive",
         "agent context robots on C is alive",
         "viewer on A is alive",
+        "viewer on B is alive",
         "arena arena1 on B: agent context alive",
     ):
         assert line in out, out
@@ -241,6 +246,16 @@ def test_a_student_on_a_queues_and_drives_robots_on_b_and_c(lab: MultiLab) -> No
     assert seen["arena1_forged_mm"] < 10, seen
     assert seen["real1_forged_mm"] < 10, seen
     print(f"moved (mm): {seen}")
+
+
+def test_two_viewers_on_two_hosts_serve_the_same_lab(lab: MultiLab) -> None:
+    # From C, as two browsers would: stu1 on A's viewer, stu2 on B's (headless clients
+    # speaking viser's protocol). Each logs in through its page, both chat in the
+    # lobby and each sees the other's line, both watch arena1 and see the same robots.
+    a, b = lab.host("A").address, lab.host("B").address
+    seen = lab.probe("C", "viewers", str(lab.password_file), a, b, timeout=150)
+    assert seen["chat_a_saw_b"] and seen["chat_b_saw_a"], seen
+    assert seen["same_world"] and seen["robots"] > 0, seen
 
 
 def test_a_process_without_a_valid_certificate_cannot_join(lab: MultiLab) -> None:

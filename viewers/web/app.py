@@ -37,6 +37,19 @@ from viewers.web.pump import DEFAULT_RATE, FramePump
 
 log = logging.getLogger("wart.viewer")
 
+# Unsent bytes a browser's socket may hold in the kernel before the viewer stops
+# writing to it (TCP_NOTSENT_LOWAT). Without it Linux autotunes a socket's send
+# buffer up to net.ipv4.tcp_wmem's max (4 MiB here): a slow or stalled browser
+# then has seconds of old frames queued in the kernel, and sees them in order
+# (measured: 149 stale frames of 1,000 robots after a 8 s stall). With it the
+# kernel holds less than one 1,000-robot frame beyond what is in flight; the rest
+# waits in viser's per-client buffer, where each scene property keeps only its
+# newest value, so a slow browser gets fewer, current frames and the pump (which
+# only ever appends to that buffer) is never held up.
+NOTSENT_LOWAT = 4 * 1024
+WRITE_HIGH = 8 * 1024  # the socket's user-space buffer (websockets' default: 32 KiB)
+_TCP_NOTSENT_LOWAT = getattr(socket, "TCP_NOTSENT_LOWAT", 25)  # Linux's number
+
 
 class WebViewer:
     """The viser server and every browser's session; no Zenoh in here."""
@@ -81,6 +94,7 @@ class WebViewer:
         return f"http://{host}:{self.port}"
 
     def _connected(self, client: viser.ClientHandle) -> None:
+        limit_send_queue(self.server, client.client_id)
         session = BrowserSession(
             client, self.connector, self.saved, self.pump, self.default_address
         )
@@ -95,6 +109,16 @@ class WebViewer:
             session.close()  # logs the browser's users out of every lab
         log.info("browser %d left (%d open)", client.client_id, len(self.sessions))
 
+    def send_backlog(self, client_id: int) -> tuple[int, int] | None:
+        """What waits to go to one browser: (viser messages, bytes in the socket's
+        user-space buffer); None once it has gone. For tests and the benchmark."""
+        ws = self.server._websock_server  # viser 1.1.1 internals, read only
+        state = ws._client_state_from_id.get(viser.infra.ClientId(client_id))
+        conn = ws._live_connections.get(viser.infra.ClientId(client_id))
+        if state is None or conn is None:
+            return None
+        return len(state.message_buffer.message_from_id), conn.transport.get_write_buffer_size()
+
     def stop(self) -> None:
         self.pump.stop()
         with self._lock:
@@ -103,6 +127,29 @@ class WebViewer:
         for session in sessions:
             session.close()
         self.server.stop()
+
+
+def limit_send_queue(server: viser.ViserServer, client_id: int) -> bool:
+    """Keep a browser's kernel send queue short (see NOTSENT_LOWAT); False if not possible.
+
+    viser 1.1.1 has no hook for its accepted sockets, so the connection is taken
+    from its websocket server's table (read only); a viser without it, or a
+    platform without the option, leaves the socket as it was and says so.
+    """
+    try:
+        conn = server._websock_server._live_connections.get(viser.infra.ClientId(client_id))
+        sock = conn.transport.get_extra_info("socket") if conn is not None else None
+        if conn is None or sock is None:
+            log.warning("browser %d: no socket to limit; slow browsers may lag", client_id)
+            return False
+        sock.setsockopt(socket.IPPROTO_TCP, _TCP_NOTSENT_LOWAT, NOTSENT_LOWAT)
+        # Above this websockets' send() waits (and viser's producer with it, so
+        # frames coalesce in viser's buffer instead of queueing in this one).
+        conn.transport.set_write_buffer_limits(high=WRITE_HIGH)
+        return True
+    except (AttributeError, OSError) as exc:
+        log.warning("browser %d: could not limit its send queue (%s)", client_id, exc)
+        return False
 
 
 class ViewerService(Service):

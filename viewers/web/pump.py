@@ -15,6 +15,7 @@ import logging
 import threading
 import time
 
+from viewers.web.viser_fast import HeldBuffers
 from viewers.web.world_view import PreparedFrame, WorldView
 
 log = logging.getLogger("wart.viewer.pump")
@@ -27,6 +28,7 @@ class FramePump:
     def __init__(self, rate: float = DEFAULT_RATE) -> None:
         if not 0 < rate <= 60:
             raise ValueError(f"frame rate {rate} must be between 0 and 60 per second")
+        self.rate = rate
         self.period = 1.0 / rate
         self._views: dict[int, WorldView] = {}
         self._lock = threading.Lock()
@@ -72,6 +74,15 @@ class FramePump:
         with self._lock:
             views = list(self._views.values())
         prepared: dict[int, PreparedFrame | None] = {}
+        held = HeldBuffers()  # one event-loop wake-up for every browser, not one each
+        try:
+            self._tick_views(views, prepared, held)
+        finally:
+            held.release()
+
+    def _tick_views(
+        self, views: list[WorldView], prepared: dict[int, PreparedFrame | None], held: HeldBuffers
+    ) -> None:
         for view in views:
             feed = view.feed
             if feed is None:
@@ -87,10 +98,14 @@ class FramePump:
                 if view.snapshot is not None and snap.version != view.snapshot.version:
                     view.redraw(snap)  # an edit: everyone watching sees it
                 ready = prepared[key]
-                if ready is not None:
+                held.hold(view.client)
+                # A swarm too big for a browser's byte budget is drawn every k-th tick
+                # (world_view.ROBOT_BYTES_PER_S); every view of it on the same ticks.
+                if ready is not None and self.ticks % ready.every(self.rate) == 0:
                     view.apply(ready)
                 if self.ticks % SLOW_EVERY == 0:
                     view.slow_tick()
+                held.done(view.client)
             except Exception:
                 # One broken view (a browser gone mid-frame) must not stop the others.
                 log.exception("could not update a world view; it stays attached")

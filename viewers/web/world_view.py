@@ -6,7 +6,9 @@ the same :class:`PreparedFrame` (converted once per world per tick). All
 robots are two batched meshes, bodies and heading arrows (never a node per
 robot): a frame is the same two arrays (positions, orientations) assigned to
 both inside ``client.atomic()``, whatever the number of robots (past
-HEADINGS_UP_TO robots the arrows are left out: level of detail). Only the
+HEADINGS_UP_TO robots the arrows are left out and the bodies are plain discs
+sent as positions only, and a huge swarm's frames are decimated to a byte
+budget: level of detail). Only the
 selected robot gets extras (label, trail, IR rays); with few robots every one
 is labelled.
 """
@@ -14,6 +16,7 @@ is labelled.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections import deque
 from collections.abc import Callable
@@ -25,6 +28,7 @@ import viser
 
 from viewers.web import geometry as geo
 from viewers.web.adapters import SceneFrame, SceneLayout, WorldFeed
+from viewers.web.viser_fast import set_shared_arrays
 
 log = logging.getLogger("wart.viewer.world")
 
@@ -48,6 +52,22 @@ HEADING_COLOURS = np.array([HEADING_DARK, HEADING_LIT], np.uint8)
 # arrays); past this many robots a heading is a few pixels anyway, so a swarm is
 # drawn as bodies alone and a browser's bandwidth stays what it was.
 HEADINGS_UP_TO = 300
+# Past HEADINGS_UP_TO a robot is a plain disc: the same from every heading, so a frame
+# carries positions alone (12 bytes a robot instead of 28 for the bodies).
+SWARM_BYTES_PER_ROBOT = 12
+FULL_BYTES_PER_ROBOT = 2 * 28  # bodies and arrows: positions and orientations each
+# What one browser is sent per second at most for the robots, whatever their number: a
+# frame that would exceed it at the pump's rate goes out every k-th tick instead
+# (10,000 robots at 25 Hz would be 3 MB/s; they get 8.3 frames a second, 1 MB/s). It is
+# about what 1,000 robots cost before issue 22 (0.7 MB/s), so a student's link that
+# showed those shows any swarm.
+ROBOT_BYTES_PER_S = 1_000_000
+
+
+def frames_every(robots: int, rate: float) -> int:
+    """Send a world of ``robots`` every how many pump ticks (1: every tick) at ``rate`` Hz."""
+    per_robot = SWARM_BYTES_PER_ROBOT if robots > HEADINGS_UP_TO else FULL_BYTES_PER_ROBOT
+    return max(1, math.ceil(robots * per_robot * rate / ROBOT_BYTES_PER_S))
 
 
 @dataclass(frozen=True)
@@ -61,6 +81,9 @@ class PreparedFrame:
     gripper_key: bytes  # colours change rarely: views compare this before resending
     heading_colours: npt.NDArray[np.uint8]  # heading arrows: any LED lit
     led_key: bytes
+
+    def every(self, rate: float) -> int:
+        return frames_every(len(self.positions), rate)
 
     @staticmethod
     def of(frame: SceneFrame) -> PreparedFrame:
@@ -286,8 +309,12 @@ class WorldView:
                 old.remove()
         radius = snap.robot_radius * geo.MM
         n = len(snap.robots)
+        swarm = n > HEADINGS_UP_TO
         self._robots = self._add_batch(
-            "/world/robots", geo.robot_mesh(radius), n, GRIPPER_COLOURS[0]
+            "/world/robots",
+            geo.swarm_disc_mesh(radius) if swarm else geo.robot_mesh(radius),
+            n,
+            GRIPPER_COLOURS[0],
         )
         # The arrow lies on top of the body: a click on it selects the robot too.
         self._headings = (
@@ -296,6 +323,7 @@ class WorldView:
             else None
         )
         self._gripper_key = self._led_key = b""
+        self.drawn = None  # new meshes start at the origin: the next frame must place them
         if self._ring is not None:
             self._ring.remove()
         self._ring = self.client.scene.add_cylinder(
@@ -365,10 +393,20 @@ class WorldView:
                 return  # frame from before a robot was added or removed: wait for the next
             self._ticks += 1
             with self.client.atomic():
-                for batch in (robots, headings):
-                    if batch is not None:
-                        batch.batched_positions = prepared.positions
-                        batch.batched_wxyzs = prepared.wxyzs
+                # The prepared arrays are shared by every view (viser_fast: no copies).
+                moved = self.drawn is None or not np.array_equal(
+                    self.drawn.positions, prepared.positions
+                )
+                turned = self.drawn is None or not np.array_equal(self.drawn.wxyzs, prepared.wxyzs)
+                # A still world sends nothing (as viser's own setter did); a swarm of
+                # discs (no arrows) sends no orientations.
+                arrays = {"batched_positions": prepared.positions} if moved else {}
+                if turned and headings is not None:
+                    arrays["batched_wxyzs"] = prepared.wxyzs
+                if arrays:
+                    set_shared_arrays(robots, arrays)
+                    if headings is not None:
+                        set_shared_arrays(headings, arrays)
                 if prepared.gripper_key != self._gripper_key:
                     robots.batched_colors = prepared.colours
                     self._gripper_key = prepared.gripper_key

@@ -1,0 +1,135 @@
+"""The frame path's two shortcuts through viser 1.1.1, for a class on one arena (issue 22).
+
+Measured with 100 headless sessions on a 35-robot arena (2 cores): the pump
+spent 65 ms of CPU and 154 ms of wall time a tick (25 Hz needs under 40), and
+each session got 8.3 frames a second. Two costs were per view and avoidable:
+
+- **Wake-ups.** Each view's ``client.atomic()`` ends with a
+  ``call_soon_threadsafe`` on viser's event loop: a write to its self-pipe, and
+  a GIL hand-off to the loop thread, per browser per frame (0.5 ms each in the
+  profile). :class:`HeldBuffers` holds every watching browser's buffer for the
+  whole tick and wakes the loop once, for all of them.
+- **Array assignment.** ``handle.batched_positions = a`` casts, compares and
+  copies ``a`` twice per browser (viser cannot know the caller will not mutate
+  it). A :class:`~viewers.web.world_view.PreparedFrame`'s arrays are made once
+  per frame and never written again, so :func:`set_shared_array` hands the
+  same array to every browser's message.
+
+Both read or write viser internals (named below). Each checks that they are
+there and otherwise does what the public API does, so a viser upgrade costs
+speed, not correctness.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import viser
+from viser._messages import SceneNodeUpdateMessage
+
+log = logging.getLogger("wart.viewer.fast")
+
+
+def _buffer_of(client: viser.ClientHandle) -> Any | None:
+    """The client's outgoing message buffer (viser.infra.AsyncMessageBuffer), if reachable."""
+    conn = getattr(client, "_websock_connection", None)
+    get = getattr(conn, "get_message_buffer", None)
+    if get is None:
+        return None
+    buffer = get()
+    needed = ("atomic_start", "buffer_lock", "atomic_counter", "message_event", "event_loop")
+    return buffer if all(hasattr(buffer, n) for n in needed) else None
+
+
+class HeldBuffers:
+    """Browsers' buffers held atomic while the pump draws their view; one wake-up per batch.
+
+    ``hold`` is ``client.atomic()``'s start; ``done`` its end minus the wake-up
+    (the buffer is sendable again at once: a loop that is awake picks it up);
+    the loop is then woken once per WAKE_EVERY views and at ``release``, for
+    all of them. Holding every buffer for the whole tick instead was measured
+    worse: with 100 views the tick takes most of the 40 ms period, and the
+    loop had only the rest to send 100 windows (11 to 18 frames a second each).
+    Nested ``client.atomic()`` blocks inside still work (viser counts them).
+    """
+
+    WAKE_EVERY = 20
+
+    def __init__(self) -> None:
+        # By identity: viser's buffers are dataclasses, and their == compares every field.
+        self._held: dict[int, Any] = {}
+        self._to_wake: list[Any] = []
+
+    def hold(self, client: viser.ClientHandle) -> None:
+        buffer = _buffer_of(client)
+        if buffer is not None and id(buffer) not in self._held:
+            buffer.atomic_start()
+            self._held[id(buffer)] = buffer
+
+    def done(self, client: viser.ClientHandle) -> None:
+        buffer = _buffer_of(client)
+        if buffer is None or self._held.pop(id(buffer), None) is None:
+            return
+        # viser's atomic_end, minus its per-buffer wake-up: the counter under the lock.
+        with buffer.buffer_lock:
+            buffer.atomic_counter -= 1
+        self._to_wake.append(buffer)
+        if len(self._to_wake) >= self.WAKE_EVERY:
+            self._wake_all()
+
+    def release(self) -> None:
+        for buffer in list(self._held.values()):
+            with buffer.buffer_lock:
+                buffer.atomic_counter -= 1
+            self._to_wake.append(buffer)
+        self._held = {}
+        self._wake_all()
+
+    def _wake_all(self) -> None:
+        to_wake, self._to_wake = self._to_wake, []
+        loops: dict[int, tuple[asyncio.AbstractEventLoop, list[Any]]] = {}
+        for buffer in to_wake:
+            loops.setdefault(id(buffer.event_loop), (buffer.event_loop, []))[1].append(buffer)
+        for loop, buffers in loops.values():
+            with contextlib.suppress(RuntimeError):  # the server stopped: nobody to send to
+                loop.call_soon_threadsafe(_wake, buffers)
+
+
+def _wake(buffers: list[Any]) -> None:
+    for buffer in buffers:
+        buffer.message_event.set()
+
+
+def set_shared_arrays(handle: Any, arrays: dict[str, npt.NDArray[Any]]) -> None:
+    """``handle.<prop> = array`` for each, with no copy, in ONE update message.
+
+    The arrays must never be written again (a PreparedFrame's are not). One
+    message for positions and orientations together halves what viser's event
+    loop serialises per browser (its buffer still coalesces: the message's
+    redundancy key names both properties). The handle's own state points at
+    the arrays too (what a test or a redraw reads back). A removed handle is
+    left alone, as viser's setter would refuse it.
+    """
+    impl = getattr(handle, "_impl", None)
+    props = getattr(impl, "props", None)
+    api = getattr(impl, "api", None)
+    queue = getattr(api, "_queue_scene_message", None)
+    usable = impl is not None and props is not None and queue is not None
+    for prop, array in arrays.items():
+        current = getattr(props, prop, None) if usable else None
+        if not isinstance(current, np.ndarray) or current.dtype != array.dtype:
+            usable = False  # a viser we do not know, or a cast to make: its own setter
+    if not usable or impl is None or queue is None:
+        for prop, array in arrays.items():
+            setattr(handle, prop, array)
+        return
+    if impl.removed:
+        return
+    for prop, array in arrays.items():
+        setattr(props, prop, array)
+    queue(SceneNodeUpdateMessage(impl.name, dict(arrays)))
