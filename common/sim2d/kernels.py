@@ -281,6 +281,20 @@ def _interp(x, xp, fp, n):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
+def _circle_on_segment(px, py, dx, dy, length, circ_xy, circ_r):  # pragma: no cover
+    """Whether a round obstacle lies on the segment from p along (dx, dy), ``length`` long."""
+    if circ_r.shape[0]:
+        scale = max(length, 1e-9)
+        ux = dx / scale
+        uy = dy / scale
+        for c in range(circ_r.shape[0]):
+            t = _ray_circle(px, py, ux, uy, circ_xy[c, 0], circ_xy[c, 1], circ_r[c])
+            if t < length:
+                return True
+    return False
+
+
+@njit(cache=_CACHE)
 def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
     """Whether a static obstacle lies on the segment p -> q."""
     dx = qx - px
@@ -291,16 +305,7 @@ def _occluded(px, py, qx, qy, occ_segs, circ_xy, circ_r):  # pragma: no cover
         )
         if t <= 1.0:
             return True
-    if circ_r.shape[0]:
-        length = math.hypot(dx, dy)
-        scale = max(length, 1e-9)
-        ux = dx / scale
-        uy = dy / scale
-        for c in range(circ_r.shape[0]):
-            t = _ray_circle(px, py, ux, uy, circ_xy[c, 0], circ_xy[c, 1], circ_r[c])
-            if t < length:
-                return True
-    return False
+    return _circle_on_segment(px, py, dx, dy, math.hypot(dx, dy), circ_xy, circ_r)
 
 
 @njit(cache=_CACHE)
@@ -335,15 +340,7 @@ def _occluded_grid(
             t = _ray_segment(px, py, dx, dy, segs[sg, 0], segs[sg, 1], segs[sg, 2], segs[sg, 3])
             if t <= 1.0:
                 return True
-    if circ_r.shape[0]:
-        scale = max(length, 1e-9)
-        ux = dx / scale
-        uy = dy / scale
-        for c in range(circ_r.shape[0]):
-            t = _ray_circle(px, py, ux, uy, circ_xy[c, 0], circ_xy[c, 1], circ_r[c])
-            if t < length:
-                return True
-    return False
+    return _circle_on_segment(px, py, dx, dy, length, circ_xy, circ_r)
 
 
 @njit(cache=_CACHE)

@@ -154,19 +154,23 @@ class EngineService(WorldService):
                 )
         self._journal = journal
 
+    def _load_map(self, path: Path) -> World:
+        """A map file as this engine's world: its name, seed, tick and thread counts."""
+        return maps.load_map(
+            path,
+            name=self.ident,
+            seed=self.settings.seed,
+            tick_s=self.settings.tick_s,
+            threads=self.settings.threads,
+            physics_threads=self.settings.physics_threads,
+        )
+
     def _replay(self, record: Message) -> None:
         if isinstance(record, WorldEdit):
             self._apply_op(self.world, record.op)
         elif isinstance(record, MapRequest) and record.action == "load" and record.name:
             path = maps.map_path(self.settings.maps_dir, record.name)
-            self.world = maps.load_map(
-                path,
-                name=self.ident,
-                seed=self.settings.seed,
-                tick_s=self.settings.tick_s,
-                threads=self.settings.threads,
-                physics_threads=self.settings.physics_threads,
-            )
+            self.world = self._load_map(path)
         self.replayed_edits += 1
 
     def _journal_append(self, record: Message) -> None:
@@ -347,14 +351,7 @@ class EngineService(WorldService):
         if not path.is_file():
             raise RequestError("not_found", f"no map named {request.name} in the maps directory")
         try:
-            new_world = maps.load_map(
-                path,
-                name=self.ident,
-                seed=self.settings.seed,
-                tick_s=self.settings.tick_s,
-                threads=self.settings.threads,
-                physics_threads=self.settings.physics_threads,
-            )
+            new_world = self._load_map(path)
         except maps.MapError as exc:
             raise RequestError("bad_request", str(exc)) from None
 
