@@ -651,6 +651,27 @@ def against_peer(ours: Round, peer: Round) -> str:
     )
 
 
+def _start_child(module: str, lab: BenchLab, inline: bool, *extra: str) -> subprocess.Popen[str]:
+    """A controllers' process (ours or the plain peer's) on the lab's router, piped."""
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            module,
+            *extra,
+            "--realm",
+            lab.realm,
+            "--connect",
+            lab.options.connect[0],
+            *(["--inline"] if inline else []),
+        ],
+        cwd=REPO,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--controllers", type=int, default=20)
@@ -725,23 +746,8 @@ def main() -> int:
         peer = PlainEngine(lab.options, build_world(args.controllers, PEER_WORLD))
         peer.start()
         wait_ticking(peer.world)
-        peer_proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "bench.plain_peer",
-                "--controllers",
-                str(args.controllers),
-                "--realm",
-                lab.realm,
-                "--connect",
-                lab.options.connect[0],
-                *(["--inline"] if args.inline else []),
-            ],
-            cwd=REPO,
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
+        peer_proc = _start_child(
+            "bench.plain_peer", lab, args.inline, "--controllers", str(args.controllers)
         )
     count = max(1, min(args.processes, args.controllers))
     share = [
@@ -751,29 +757,18 @@ def main() -> int:
     first = 0
     for n in share:
         procs.append(
-            subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "bench.bench_control_latency",
-                    "--child",
-                    "--controllers",
-                    str(n),
-                    "--first",
-                    str(first),
-                    "--identity",
-                    str(ident_path),
-                    "--realm",
-                    lab.realm,
-                    "--connect",
-                    lab.options.connect[0],
-                    *(["--per-agent"] if args.per_agent else []),
-                    *(["--inline"] if args.inline else []),
-                ],
-                cwd=REPO,
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                text=True,
+            _start_child(
+                "bench.bench_control_latency",
+                lab,
+                args.inline,
+                "--child",
+                "--controllers",
+                str(n),
+                "--first",
+                str(first),
+                "--identity",
+                str(ident_path),
+                *(["--per-agent"] if args.per_agent else []),
             )
         )
         first += n
