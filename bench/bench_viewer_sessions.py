@@ -41,7 +41,8 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
 
 USERS = [("ana", "ana-pw"), ("ben", "ben-pw")]
 ARENA = "arena"
@@ -56,10 +57,19 @@ def _stats(values: list[float]) -> dict[str, float]:
 # -- the headless clients (a child process) ------------------------------------------------
 
 
-async def _clients(url: str, sessions: int, seconds: float, slow: int, slow_every: float) -> None:
+async def _clients(
+    urls: list[str],
+    sessions: int,
+    seconds: float,
+    slow: int,
+    slow_every: float,
+    users: list[tuple[str, str]],
+    arena: str,
+) -> None:
     from tests.viser_client import ViserClient
 
-    clients = [ViserClient(url, f"s{i}") for i in range(sessions)]
+    # A student's address may name any viewer: sessions are dealt round the viewers.
+    clients = [ViserClient(urls[i % len(urls)], f"s{i}") for i in range(sessions)]
     gate = asyncio.Semaphore(10)  # a class logging in within a minute, ten at a time
     done = 0
 
@@ -73,9 +83,9 @@ async def _clients(url: str, sessions: int, seconds: float, slow: int, slow_ever
                 await client.connect(max_queue=1, rcvbuf=16 * 1024)
             else:
                 await client.connect()
-            user, password = USERS[i % len(USERS)]
+            user, password = users[i % len(users)]
             await client.log_in(user, password, timeout=300)
-            await client.join(ARENA, timeout=300)
+            await client.join(arena, timeout=300)
         done += 1
         if done % 10 == 0 or done == sessions:
             print(f"PROGRESS {done}/{sessions} headless sessions watch the arena", flush=True)
@@ -120,6 +130,8 @@ async def _clients(url: str, sessions: int, seconds: float, slow: int, slow_ever
         "mb": _stats(mbytes[slow:]),
         "client_cpu": cpu / elapsed,
         "errors": errors[:5],
+        "sessions": sessions - slow,
+        "slow": slow,
     }
     print("RESULT " + json.dumps(result), flush=True)
     await asyncio.gather(*(c.close() for c in clients))
@@ -128,11 +140,14 @@ async def _clients(url: str, sessions: int, seconds: float, slow: int, slow_ever
 # -- the Chromium pages (a child process) ---------------------------------------------------
 
 
-def _browsers(url: str, count: int, seconds: float) -> None:
+def _browsers(
+    url: str, count: int, seconds: float, users: list[tuple[str, str]], address: str, arena: str
+) -> None:
     from playwright.sync_api import sync_playwright
 
     from bench.bench_viewer import BENCH_VIEWPORT, WsCounter
     from tests.browser.conftest import CHROMIUM_ARGS, ViserPage
+    from viewers.web.address import parse_address
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
@@ -144,10 +159,10 @@ def _browsers(url: str, count: int, seconds: float) -> None:
             page.goto(url)
             vp = ViserPage(page, f"sessions-{i}")
             vp.wait_ready(120_000)
-            user, password = USERS[i % len(USERS)]
-            vp.log_in("127.0.0.1", user, password)
-            vp.tab("lab@127.0.0.1").first.click()
-            vp.click(f"Join {ARENA}", timeout=120_000)
+            user, password = users[i % len(users)]
+            vp.log_in(address, user, password)
+            vp.tab(parse_address(address, default_realm="lab").label).first.click()
+            vp.click(f"Join {arena}", timeout=120_000)
             pages.append(vp)
             counters.append(counter)
             print(f"PROGRESS Chromium page {i + 1}/{count} watches the arena", flush=True)
@@ -238,6 +253,81 @@ class Child:
             self.proc.wait(5)
 
 
+def _class_children(
+    args: argparse.Namespace,
+    ws_urls: list[str],
+    http_url: str,
+    users: list[tuple[str, str]],
+    address: str,
+    arena: str,
+) -> list[Child]:
+    """The class: headless clients (one process per viewer, sessions dealt round the
+    viewers) and the Chromium pages (on the first viewer)."""
+    common = [
+        "--seconds",
+        str(args.seconds),
+        "--users-json",
+        json.dumps(users),
+        "--address",
+        address,
+        "--arena",
+        arena,
+    ]
+    children: list[Child] = []
+    per_viewer = [len(range(i, args.sessions, len(ws_urls))) for i in range(len(ws_urls))]
+    slow_left = args.slow
+    for i, (url, sessions) in enumerate(zip(ws_urls, per_viewer, strict=True)):
+        slow = min(slow_left, sessions)
+        slow_left -= slow
+        children.append(
+            Child(
+                f"headless-{i}" if len(ws_urls) > 1 else "headless",
+                [
+                    "--as-clients",
+                    url,
+                    "--sessions",
+                    str(sessions),
+                    "--slow",
+                    str(slow),
+                    "--slow-every",
+                    str(args.slow_every),
+                    *common,
+                ],
+            )
+        )
+    if args.browsers:
+        children.append(
+            Child(
+                "chromium", ["--as-browsers", http_url, "--browsers", str(args.browsers), *common]
+            )
+        )
+    return children
+
+
+def _merge(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """The headless children's results as one class (means weighted by sessions)."""
+
+    def merged(key: str) -> dict[str, float]:
+        parts = [(r[key], r["sessions"] if key != "slow_frames" else r["slow"]) for r in results]
+        parts = [(st, n) for st, n in parts if n]
+        if not parts:
+            return _stats([])
+        total = sum(n for _, n in parts)
+        return {
+            "min": min(st["min"] for st, _ in parts),
+            "mean": sum(st["mean"] * n for st, n in parts) / total,
+            "max": max(st["max"] for st, _ in parts),
+        }
+
+    return {
+        "frames": merged("frames"),
+        "slow_frames": merged("slow_frames"),
+        "mb": merged("mb"),
+        "client_cpu": sum(r["client_cpu"] for r in results),
+        "errors": [e for r in results for e in r["errors"]][:5],
+    }
+
+
 def _thread_cpu() -> dict[str, float]:
     """CPU seconds so far of each of this process's threads, by thread name."""
     import psutil
@@ -288,30 +378,9 @@ def run_arena(args: argparse.Namespace, robots: int) -> None:
     try:
         idle, _ = _cpu_over(5.0)  # the fake world alone, no session
         url = f"127.0.0.1:{viewer.port}"
-        common = ["--seconds", str(args.seconds)]
-        children.append(
-            Child(
-                "headless",
-                [
-                    "--as-clients",
-                    f"ws://{url}",
-                    "--sessions",
-                    str(args.sessions),
-                    "--slow",
-                    str(args.slow),
-                    "--slow-every",
-                    str(args.slow_every),
-                    *common,
-                ],
-            )
+        children += _class_children(
+            args, [f"ws://{url}"], f"http://{url}", USERS, "127.0.0.1", ARENA
         )
-        if args.browsers:
-            children.append(
-                Child(
-                    "chromium",
-                    ["--as-browsers", f"http://{url}", "--browsers", str(args.browsers), *common],
-                )
-            )
         for child in children:
             child.ready.wait(900)
             if child.proc.poll() is not None and child.result is None:
@@ -379,6 +448,144 @@ def run_arena(args: argparse.Namespace, robots: int) -> None:
     )
 
 
+REAL_PASSWORD = "class-of-2026"
+
+
+def _class_map(path: Path, robots: int) -> None:
+    """maps/swarm.json with ``robots`` Khepera on its grid (spread wider past 1,000)."""
+    spec = json.loads((REPO / "maps" / "swarm.json").read_text())
+    group = spec["agent_groups"][0]
+    group["count"] = robots
+    if robots > 1000:
+        scale = math.sqrt(robots / 1000)
+        spec["arena"] = {"width": 5000 * scale, "height": 5000 * scale}
+        group["area"] = [c * scale for c in group["area"]]
+    path.write_text(json.dumps(spec))
+
+
+def _proc_cpu(pids: dict[str, int], seconds: float) -> dict[str, float]:
+    """Each named process's CPU over ``seconds`` of wall time, as a share of one core."""
+    import psutil
+
+    procs = {name: psutil.Process(pid) for name, pid in pids.items()}
+    t0 = time.monotonic()
+    c0 = {n: sum(p.cpu_times()[:2]) for n, p in procs.items()}
+    time.sleep(seconds)
+    elapsed = time.monotonic() - t0
+    return {n: (sum(p.cpu_times()[:2]) - c0[n]) / elapsed for n, p in procs.items()}
+
+
+def run_real(args: argparse.Namespace, robots: int) -> None:
+    """The class on a real lab: router, registry and engine as ``wart`` processes, and
+    ``--viewers`` viewer processes on the same lab, each serving its share of the class
+    (a student's address can name any of them)."""
+    from bench.labproc import BenchLab
+    from common.keys import AliveKind
+    from tests.conftest import free_port
+
+    users = [("ana", REAL_PASSWORD), ("ben", REAL_PASSWORD)]
+    load0 = os.getloadavg()
+    print(
+        f"real lab, arena of {robots} robots: {args.sessions} headless sessions over "
+        f"{args.viewers} viewer processes, {args.browsers} Chromium pages, "
+        f"load average {load0[0]:.2f}",
+        flush=True,
+    )
+    lab = BenchLab([u for u, _ in users], REAL_PASSWORD)
+    children: list[Child] = []
+    try:
+        lab.start()
+        _class_map(lab.tmp / "class.json", robots)
+        engine = ["engine", "--map", str(lab.tmp / "class.json"), "--world", ARENA, "--wander"]
+        engine += ["--maps-dir", str(lab.tmp)]
+        lab.spawn(
+            [*engine, *lab.net()],
+            (AliveKind.WORLD, ARENA),
+        )
+        pids = {"engine": lab.procs[-1].pid, "router": lab.procs[0].pid}
+        ports = []
+        for i in range(args.viewers):
+            ports.append(free_port())
+            viewer = ["viewer", "--http-port", str(ports[-1]), "--id", f"web{i}"]
+            viewer += ["--data-dir", str(lab.tmp / f"web{i}"), "--rate", str(args.rate)]
+            lab.spawn([*viewer, *lab.net()], (AliveKind.VIEWER, f"web{i}"))
+            pids[f"viewer {i}"] = lab.procs[-1].pid
+            print(f"  viewer {i} on http://127.0.0.1:{ports[-1]}", flush=True)
+        idle = _proc_cpu(pids, 5.0)  # the lab with nobody watching
+        address = f"127.0.0.1:{lab.port}/{lab.realm}"
+        children = _class_children(
+            args,
+            [f"ws://127.0.0.1:{port}" for port in ports],
+            f"http://127.0.0.1:{ports[0]}",
+            users,
+            address,
+            ARENA,
+        )
+        for child in children:
+            child.ready.wait(1800)
+            if child.proc.poll() is not None and child.result is None:
+                raise RuntimeError(f"{child.name} ended early:\n" + "\n".join(child.tail))
+        for child in children:
+            child.go()
+        loaded = _proc_cpu(pids, args.seconds)
+        results = {c.name: c.finish(120) for c in children}
+    finally:
+        for child in children:
+            child.kill()
+        lab.stop()
+    load1 = os.getloadavg()
+    head = _merge([r for n, r in results.items() if n.startswith("headless")])
+    f, mb = head["frames"], head["mb"]
+    print(
+        f"RESULTS real lab, arena of {robots} robots, {args.sessions} sessions over "
+        f"{args.viewers} viewers, {args.seconds:.0f} s, pump {args.rate:.0f} Hz"
+    )
+    for name, r in sorted(results.items()):
+        if name.startswith("headless") and len(results) > 1:
+            fr = r["frames"]
+            print(
+                f"  {name}: {r['sessions']} sessions, min {fr['min']:.1f} "
+                f"mean {fr['mean']:.1f} max {fr['max']:.1f} updates/s"
+            )
+    print(
+        f"  headless updates/s per session: min {f['min']:.1f} mean {f['mean']:.1f} "
+        f"max {f['max']:.1f}"
+    )
+    if args.slow:
+        s = head["slow_frames"]
+        print(
+            f"  slow readers ({args.slow}, reading every {args.slow_every} s): "
+            f"min {s['min']:.1f} mean {s['mean']:.1f} max {s['max']:.1f} updates/s"
+        )
+    if "chromium" in results:
+        cf, cm = results["chromium"]["frames"], results["chromium"]["mb"]
+        paint = results["chromium"]["paint_fps"]
+        print(
+            f"  Chromium updates/s per page: min {cf['min']:.1f} mean {cf['mean']:.1f} "
+            f"max {cf['max']:.1f}; {cm['mean']:.3f} MB/s per page; the page painted "
+            f"{paint['min']:.1f} to {paint['max']:.1f} animation frames/s"
+        )
+    print(f"  bytes per session: {mb['mean']:.3f} MB/s (min {mb['min']:.3f}, max {mb['max']:.3f})")
+    sessions = args.sessions + args.browsers
+    viewer_cpu = sum(v - idle[n] for n, v in loaded.items() if n.startswith("viewer"))
+    for name in pids:
+        print(
+            f"  {name} CPU: {100 * loaded[name]:.1f} % of a core "
+            f"({100 * idle[name]:.1f} % with nobody watching)"
+        )
+    print(
+        f"  viewers' CPU for the class: {100 * viewer_cpu:.1f} % of a core, "
+        f"{100 * viewer_cpu / max(1, sessions):.2f} % per session; headless clients' "
+        f"processes: {100 * head['client_cpu']:.0f} % of a core"
+    )
+    if head["errors"]:
+        print(f"  client errors: {head['errors']}")
+    print(
+        f"  load average before {load0[0]:.2f}, after {load1[0]:.2f}; {os.cpu_count()} CPUs",
+        flush=True,
+    )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -391,7 +598,18 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=25.0, help="the viewer's pump rate")
     ap.add_argument("--slow", type=int, default=0, help="headless clients that read slowly")
     ap.add_argument("--slow-every", type=float, default=1.0)
+    ap.add_argument(
+        "--real",
+        action="store_true",
+        help="a real lab (router, registry, engine with --wander) and --viewers viewer processes",
+    )
+    ap.add_argument(
+        "--viewers", type=int, default=1, help="viewer processes serving the class (with --real)"
+    )
     ap.add_argument("--as-clients", metavar="WS_URL", help=argparse.SUPPRESS)
+    ap.add_argument("--users-json", help=argparse.SUPPRESS)
+    ap.add_argument("--address", default="127.0.0.1", help=argparse.SUPPRESS)
+    ap.add_argument("--arena", default=ARENA, help=argparse.SUPPRESS)
     ap.add_argument("--as-browsers", metavar="HTTP_URL", help=argparse.SUPPRESS)
     args = ap.parse_args()
     for name in ("sessions", "browsers", "slow"):
@@ -399,18 +617,41 @@ def main() -> int:
             ap.error(f"--{name} must not be negative")
     if not 0 < args.seconds <= 3600 or not 0 < args.rate <= 60 or args.slow > args.sessions:
         ap.error("--seconds in (0, 3600], --rate in (0, 60], --slow at most --sessions")
+    users: list[tuple[str, str]] = (
+        [(str(u), str(p)) for u, p in json.loads(args.users_json)] if args.users_json else USERS
+    )
     if args.as_clients:
         asyncio.run(
-            _clients(args.as_clients, args.sessions, args.seconds, args.slow, args.slow_every)
+            _clients(
+                args.as_clients.split(","),
+                args.sessions,
+                args.seconds,
+                args.slow,
+                args.slow_every,
+                users,
+                args.arena,
+            )
         )
         return 0
     if args.as_browsers:
-        _browsers(args.as_browsers, args.browsers, args.seconds)
+        _browsers(
+            args.as_browsers,
+            args.browsers,
+            args.seconds,
+            users,
+            args.address,
+            args.arena,
+        )
         return 0
+    if args.viewers < 1 or (args.viewers > 1 and not args.real):
+        ap.error("--viewers must be at least 1, and more than 1 needs --real")
     for robots in args.robots:
         if robots < 1:
             ap.error("--robots must be at least 1")
-        run_arena(args, robots)
+        if args.real:
+            run_real(args, robots)
+        else:
+            run_arena(args, robots)
     return 0
 
 
