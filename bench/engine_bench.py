@@ -45,6 +45,7 @@ def build(
     threads: int = 1,
     physics_threads: int = 1,
     gripper: bool = True,
+    drive: str = "joints",
 ) -> World:
     """A square arena sized so robots cover about 10 % of the floor, with a few pillars."""
     side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
@@ -56,6 +57,7 @@ def build(
         sensor_period_s=0.02,
         threads=threads,
         physics_threads=physics_threads,
+        drive=drive,
     )
     rng = np.random.default_rng(seed)
     for i in range(max(1, n // 50)):
