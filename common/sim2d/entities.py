@@ -150,7 +150,7 @@ class Agent:
     def has_gripper(self) -> bool:
         return self.gripper_fitted and self.spec.gripper is not None
 
-    def physics(self) -> list[pymunk.Body | pymunk.Shape | pymunk.Constraint]:
-        """Everything of this robot that is in the world's space."""
+    def physics(self, tongs: bool = True) -> list[pymunk.Body | pymunk.Shape | pymunk.Constraint]:
+        """Everything of this robot that is in the world's space (``tongs``: with them)."""
         control = [] if self.control is None else [self.control]
-        return [self.body, *control, self.shape, *self.tongs, *self.joints]
+        return [self.body, *control, self.shape, *(self.tongs if tongs else []), *self.joints]

@@ -118,6 +118,11 @@ class World:
         self.drive = drive
         # What lowered tongs collide with (the gripper turret sets it on arms it lowers).
         self.tongs_mask = CAT_ALL if drive == "joints" else TONGS_MASK_LIGHT
+        # Whether the robots' tongs are in the space. Tongs that collide with movable
+        # objects only (the velocity drive) can meet nothing while the world has none,
+        # so they stay out of it then (_sync_tongs): in a swarm they were two of every
+        # robot's three shapes in chipmunk's bounding-box tree. They carry no mass.
+        self._tongs_in = drive == "joints"
         # Sensing threads: the parallel kernel gives the serial kernel's readings bit
         # for bit (each robot's pass reads shared state and writes its own row only).
         self.threads = threads
@@ -414,8 +419,22 @@ class World:
         self.space.add(body, *shapes, *obj.floor_joints)
         self.objects.append(obj)
         self._object_by_body[id_of(body)] = obj
+        self._sync_tongs()
         self.layout += 1
         return obj
+
+    def _sync_tongs(self) -> None:
+        """Tongs into the space, or out of it, as the objects they could touch come and go."""
+        wanted = self.drive == "joints" or bool(self.objects)
+        if wanted == self._tongs_in:
+            return
+        tongs = [tong for agent in self.agents for tong in agent.tongs]
+        if tongs:
+            if wanted:
+                self.space.add(*tongs)
+            else:
+                self.space.remove(*tongs)
+        self._tongs_in = wanted
 
     def _blocked(self, shapes: list[pymunk.Shape], mask: int, body: pymunk.Body) -> bool:
         for shape in shapes:
@@ -512,7 +531,7 @@ class World:
             tongs_mask=self.tongs_mask,
         )
         agent.colour = colour or spec.colour
-        self.space.add(*agent.physics())
+        self.space.add(*agent.physics(tongs=self._tongs_in))
         self.agents.append(agent)
         self._agent_by_body[id_of(agent.body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
@@ -661,6 +680,7 @@ class World:
             self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
             self.objects.remove(obj)
             self._object_by_body.pop(id_of(obj.body), None)
+            self._sync_tongs()
         else:
             try:
                 slot = self.agent_slot(ident)
@@ -669,7 +689,7 @@ class World:
             agent = self.agents[slot]
             if agent.held is not None:
                 self.grippers.release(agent.held)
-            self.space.remove(*agent.physics())
+            self.space.remove(*agent.physics(tongs=self._tongs_in))
             del self.agents[slot]
             self.homes.pop(ident, None)
             self._agent_by_body.pop(id_of(agent.body), None)
