@@ -182,8 +182,9 @@ def test_epuck_is_a_second_type_in_the_same_world(drive: str) -> None:
     assert not world.agents[1].has_gripper
 
 
-def test_presence_sees_round_objects_not_round_obstacles() -> None:
-    world = lone_khepera()
+@pytest.mark.parametrize("drive", DRIVES)
+def test_presence_sees_round_objects_not_round_obstacles(drive: str) -> None:
+    world = lone_khepera(drive=drive)
     world.add_object("crate", "box", ShapeSpec.box(30.0, 30.0), 700.0, 700.0)
     world.add_obstacle("post", ShapeSpec.circle(5.0), 538.0, 500.0)  # between the fingers
     world.step()
