@@ -68,8 +68,9 @@ class EditError(ValueError):
 # (docs/BENCHMARKS.md, issue 22). With "velocity" a lowered gripper's tongs also
 # collide with movable objects only (collision.TONGS_MASK_LIGHT), not with robots,
 # other tongs or obstacles: the other half of a swarm's step. "joints" stays the
-# default: the sim-beside-real comparisons, the examples' tests and recorded runs
-# were made with it, and its trajectories are unchanged.
+# default, its trajectories unchanged: the sim-beside-real comparisons and recorded
+# runs were made with it, and tongs that no longer touch walls and robots are a
+# change of the model (docs/ARCHITECTURE.md section 9, "Drives").
 DRIVES = ("joints", "velocity")
 
 
