@@ -15,7 +15,10 @@ Swarms (issue 22): ``--sizes 10000 --sim-seconds 1 --repeats 1 --threads 2
 of 1,000 robots and more get ``--sim-seconds / 2`` unless ``--swarm-seconds``
 says otherwise; ``--progress`` prints each simulated second as it goes.
 ``--compare-threads`` runs the same size with threads 1 and with ``--threads``
-interleaved, so the ratio is measured under the same load.
+interleaved, so the ratio is measured under the same load. ``--drive velocity``
+drives robots with World(drive="velocity") (no joints, light tongs);
+``--compare-drives`` runs the joints drive and the velocity drive interleaved,
+each with ``--threads`` / ``--physics-threads``.
 Robots are placed apart (no two overlap at the start): the first versions
 placed them anywhere, and at 3,000 robots and more the first simulated second
 went on pushing overlapping robots apart.
@@ -35,7 +38,7 @@ from common.sim2d import kernels
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.wander import braitenberg
-from common.sim2d.world import World
+from common.sim2d.world import DRIVES, World
 
 
 def build(
@@ -45,6 +48,7 @@ def build(
     threads: int = 1,
     physics_threads: int = 1,
     gripper: bool = True,
+    drive: str = "joints",
 ) -> World:
     """A square arena sized so robots cover about 10 % of the floor, with a few pillars."""
     side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
@@ -56,6 +60,7 @@ def build(
         sensor_period_s=0.02,
         threads=threads,
         physics_threads=physics_threads,
+        drive=drive,
     )
     rng = np.random.default_rng(seed)
     for i in range(max(1, n // 50)):
@@ -108,10 +113,11 @@ def run(
     physics_threads: int = 1,
     progress: bool = False,
     gripper: bool = True,
+    drive: str = "joints",
 ) -> tuple[float, float, dict[str, float]]:
     """(sim s per CPU s, sim s per wall s, CPU s per sim s by phase if ``profile``)."""
     t0 = time.perf_counter()
-    world = build(n, threads=threads, physics_threads=physics_threads, gripper=gripper)
+    world = build(n, threads=threads, physics_threads=physics_threads, gripper=gripper, drive=drive)
     if progress:
         print(f"  built {n} robots in {time.perf_counter() - t0:.1f} s", flush=True)
     steps = round(sim_seconds / world.tick_s)
@@ -159,9 +165,21 @@ def main() -> None:
         help="robots without the gripper turret (IR and ambient on, no tongs, no barrier)",
     )
     p.add_argument(
+        "--drive",
+        choices=DRIVES,
+        default="joints",
+        help="World(drive=...): joints (default) or velocity (no joints, light tongs)",
+    )
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument(
         "--compare-threads",
         action="store_true",
         help="each repeat: threads 1 then --threads/--physics-threads, interleaved",
+    )
+    mode.add_argument(
+        "--compare-drives",
+        action="store_true",
+        help="each repeat: the joints drive then the velocity drive, interleaved",
     )
     args = p.parse_args()
     for name in ("sim_seconds", "repeats", "threads", "physics_threads"):
@@ -172,10 +190,10 @@ def main() -> None:
     print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
     print(
         f"threads: sensing {args.threads}, physics {args.physics_threads}; "
-        f"gripper turrets {'off' if args.no_gripper else 'on'}; "
+        f"gripper turrets {'off' if args.no_gripper else 'on'}; drive {args.drive}; "
         f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
     )
-    if args.compare_threads:
+    if args.compare_threads or args.compare_drives:
         compare(args)
         return
     print(
@@ -190,6 +208,7 @@ def main() -> None:
             "physics_threads": args.physics_threads,
             "progress": args.progress,
             "gripper": not args.no_gripper,
+            "drive": args.drive,
         }
         runs = [run(n, seconds, **kw) for _ in range(args.repeats)]  # type: ignore[arg-type]
         cpu = [r[0] for r in runs]
@@ -213,14 +232,24 @@ def sized_seconds(args: argparse.Namespace, n: int) -> float:
 
 
 def compare(args: argparse.Namespace) -> None:
-    """Serial and threaded runs interleaved: a ratio under the same load."""
-    print(f"{'N':>6} {'repeat':>6}  {'config':<22} {'sim s / CPU s':>14} {'sim s / wall s':>15}")
-    configs = [(1, 1), (args.threads, args.physics_threads)]
+    """Two configurations interleaved (threads, or drives): ratios under the same load."""
+    print(
+        f"{'N':>6} {'repeat':>6}  {'config':<32} {'sim s / CPU s':>14} {'sim s / wall s':>15}  load"
+    )
+    if args.compare_drives:
+        configs = [
+            (args.threads, args.physics_threads, "joints"),
+            (args.threads, args.physics_threads, "velocity"),
+        ]
+    else:
+        configs = [(1, 1, args.drive), (args.threads, args.physics_threads, args.drive)]
     for n in args.sizes:
         seconds = sized_seconds(args, n)
-        walls: dict[tuple[int, int], list[float]] = {c: [] for c in configs}
+        cpus: dict[tuple[int, int, str], list[float]] = {c: [] for c in configs}
+        walls: dict[tuple[int, int, str], list[float]] = {c: [] for c in configs}
         for r in range(args.repeats):
-            for threads, physics in configs:
+            for config in configs:
+                threads, physics, drive = config
                 per_cpu, per_wall, _ = run(
                     n,
                     seconds,
@@ -228,13 +257,23 @@ def compare(args: argparse.Namespace) -> None:
                     physics_threads=physics,
                     progress=args.progress,
                     gripper=not args.no_gripper,
+                    drive=drive,
                 )
-                walls[(threads, physics)].append(per_wall)
-                label = f"sensing {threads}, physics {physics}"
-                print(f"{n:>6} {r + 1:>6}  {label:<22} {per_cpu:>14.3f} {per_wall:>15.3f}")
-        base = statistics.median(walls[configs[0]])
-        other = statistics.median(walls[configs[1]])
-        print(f"{n:>6} median wall speed-up: {other / base:.2f}x", flush=True)
+                cpus[config].append(per_cpu)
+                walls[config].append(per_wall)
+                label = f"sensing {threads}, physics {physics}, {drive}"
+                print(
+                    f"{n:>6} {r + 1:>6}  {label:<32} {per_cpu:>14.3f} {per_wall:>15.3f}"
+                    f"  {os.getloadavg()[0]:.1f}",
+                    flush=True,
+                )
+        a, b = configs
+        print(
+            f"{n:>6} median speed-up, second over first: "
+            f"CPU {statistics.median(cpus[b]) / statistics.median(cpus[a]):.2f}x, "
+            f"wall {statistics.median(walls[b]) / statistics.median(walls[a]):.2f}x",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ from __future__ import annotations
 import pymunk
 
 from common.sim2d.collision import (
+    CAT_ALL,
     CAT_OBJECT,
     CAT_OBSTACLE,
     CAT_ROBOT,
@@ -106,8 +107,16 @@ def agent(
     y: float,
     heading: float,
     gripper: bool,
+    joints: bool = True,
+    tongs_mask: int = CAT_ALL,
 ) -> Agent:
-    """A robot's disc, control body, joints and (``gripper``) tongs; not yet in a space."""
+    """A robot's disc, (``joints``) control body and joints, (``gripper``) tongs.
+
+    Not yet in a space. Without ``joints`` (the velocity drive) the world's
+    compiled tick drives the disc itself with a force-limited servo
+    (kernels.servo_forces), with the same force and torque limits. ``tongs_mask``:
+    what lowered tongs collide with (collision.TONGS_MASK_LIGHT for that drive).
+    """
     r = spec.radius_mm
     body = pymunk.Body(spec.mass_g, pymunk.moment_for_circle(spec.mass_g, 0, r))
     body.position = (x, y)
@@ -116,18 +125,21 @@ def agent(
     circle.filter = pymunk.ShapeFilter(group=group, categories=CAT_ROBOT)
     circle.collision_type = COLL_ROBOT
     circle.friction = FRICTION
-    control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-    control.position = (x, y)
-    control.angle = heading
-    pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
-    pivot.max_bias = 0.0  # velocity only: the pivot never yanks the robot back
-    pivot.max_force = spec.drive.max_force
-    gear = pymunk.GearJoint(control, body, 0.0, 1.0)
-    gear.error_bias = 0.0
-    gear.max_bias = 0.0
-    gear.max_force = spec.drive.max_torque
-    robot = Agent(ident, spec, group, gripper, spec.colour, body, control, circle)
-    robot.joints = [pivot, gear]
+    if not joints:
+        robot = Agent(ident, spec, group, gripper, spec.colour, body, None, circle)
+    else:
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        control.position = (x, y)
+        control.angle = heading
+        pivot = pymunk.PivotJoint(control, body, (0, 0), (0, 0))
+        pivot.max_bias = 0.0  # velocity only: the pivot never yanks the robot back
+        pivot.max_force = spec.drive.max_force
+        gear = pymunk.GearJoint(control, body, 0.0, 1.0)
+        gear.error_bias = 0.0
+        gear.max_bias = 0.0
+        gear.max_force = spec.drive.max_torque
+        robot = Agent(ident, spec, group, gripper, spec.colour, body, control, circle)
+        robot.joints = [pivot, gear]
     if gripper and spec.gripper is not None:
         g = spec.gripper
         for side in (1.0, -1.0):
@@ -135,7 +147,7 @@ def agent(
             y1 = side * (g.gap_mm / 2 + g.tong_width_mm)
             x0, x1 = g.tong_x_mm
             tong = pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-            tong.filter = pymunk.ShapeFilter(group=group, categories=CAT_TONGS)
+            tong.filter = pymunk.ShapeFilter(group=group, categories=CAT_TONGS, mask=tongs_mask)
             tong.collision_type = COLL_TONGS
             tong.friction = FRICTION
             robot.tongs.append(tong)

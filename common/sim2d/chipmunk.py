@@ -42,6 +42,8 @@ SET_VELOCITY = 4
 SET_ANGULAR_VELOCITY = 5
 SPACE_STEP = 6
 HASTY_SPACE_STEP = 7  # the threaded space's step (pymunk.Space(threaded=True))
+SET_FORCE = 8  # the velocity drive's servo (kernels.physics_tick_servo)
+SET_TORQUE = 9
 
 # Name and the C signature the intrinsics below are generated for.
 _SIGNATURES = (
@@ -53,6 +55,8 @@ _SIGNATURES = (
     ("cpBodySetAngularVelocity", "void(*)(cpBody *, double)"),
     ("cpSpaceStep", "void(*)(cpSpace *, double)"),
     ("cpHastySpaceStep", "void(*)(cpSpace *, double)"),
+    ("cpBodySetForce", "void(*)(cpBody *, cpVect)"),
+    ("cpBodySetTorque", "void(*)(cpBody *, double)"),
 )
 
 

@@ -130,7 +130,9 @@ class Zone:
 
 @dataclass
 class Agent:
-    """A robot: a dynamic body pulled by a kinematic control body (pymunk's tank pattern)."""
+    """A robot: a dynamic disc, driven through joints to a kinematic control body
+    (pymunk's tank pattern, the "joints" drive) or by a force servo (the
+    "velocity" drive: no control body, no joints)."""
 
     id: str
     spec: AgentTypeSpec
@@ -138,7 +140,7 @@ class Agent:
     gripper_fitted: bool
     colour: str
     body: pymunk.Body
-    control: pymunk.Body
+    control: pymunk.Body | None  # None with the velocity drive
     shape: pymunk.Shape
     tongs: list[pymunk.Shape] = field(default_factory=list)
     joints: list[pymunk.Constraint] = field(default_factory=list)
@@ -147,3 +149,8 @@ class Agent:
     @property
     def has_gripper(self) -> bool:
         return self.gripper_fitted and self.spec.gripper is not None
+
+    def physics(self, tongs: bool = True) -> list[pymunk.Body | pymunk.Shape | pymunk.Constraint]:
+        """Everything of this robot that is in the world's space (``tongs``: with them)."""
+        control = [] if self.control is None else [self.control]
+        return [self.body, *control, self.shape, *(self.tongs if tongs else []), *self.joints]

@@ -5,6 +5,8 @@ light barrier between the tongs (read by the sensing pass). Its rules:
 
 - a raised arm passes over everything: its tongs, and what it holds, collide
   with nothing until the arm is lowered again;
+- lowered tongs collide with everything, or with the velocity drive with movable
+  objects only (World.tongs_mask, collision.TONGS_MASK_LIGHT: what a crowd costs);
 - closing the fingers on a lowered arm grips the object whose centre lies in
   the barrier's box; the object then rides on the robot (a kinematic body
   carried every tick) until the fingers open or the object is moved or removed;
@@ -192,11 +194,13 @@ class GripperTurrets:
         now_lowered = w.arm >= t.arm_lowered_above
         for slot in np.nonzero(was_lowered != now_lowered)[0]:  # only arms that crossed
             agent = w.agents[int(slot)]
-            mask = CAT_ALL if now_lowered[slot] else 0  # a raised arm passes over everything
+            lowered = bool(now_lowered[slot])
+            mask = w.tongs_mask if lowered else 0  # a raised arm passes over everything
             for tong in agent.tongs:
                 tong.filter = pymunk.ShapeFilter(
                     group=agent.serial, categories=CAT_TONGS, mask=mask
                 )
+            mask = CAT_ALL if lowered else 0
             if agent.held is not None:
                 for s in agent.held.shapes:
                     s.filter = pymunk.ShapeFilter(

@@ -197,6 +197,108 @@ def physics_tick(
     return read_bodies(fns, agents, objects)
 
 
+# Columns of the velocity drive's per-agent table (World.tables.servo).
+S_MASS = 0
+S_MOMENT = 1
+S_MAX_FORCE = 2
+S_MAX_TORQUE = 3
+
+
+@njit(cache=_CACHE)
+def servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, h):  # pragma: no cover
+    """The velocity drive: each robot's force and torque for the next step of ``h`` s.
+
+    The force that brings the body's velocity to what its wheel speeds give (along
+    its heading now, no sideways slip) and its angular velocity to the wheels'
+    turn rate within this step, limited to the motors' force and torque: the
+    velocity constraint the tank pattern's pivot and gear joints solve, without
+    the joints. Chipmunk applies forces when it integrates velocities, after it
+    has moved the bodies and before it solves the contacts, so a wall or a
+    neighbour still has the last word on the velocity and robots are not driven
+    into walls (overwriting the velocity instead squeezed robots through walls
+    in crowds: /work/shared/VISER_PYMUNK_NOTES.md). Chipmunk clears the forces
+    after each step.
+
+    The joints are solved together with the contacts, so a robot held back (its
+    tongs against a wall, a neighbour in the way) pushes and turns with up to
+    the motors' limits. A force computed before the step cannot see the contacts,
+    so ``memory`` (N, 6: the velocity when the last forces were set, and those
+    forces) carries what the contacts took during the last step (the change of
+    velocity the servo's own force does not explain) into this one's force: held
+    back, a robot's push grows to the limit within a few steps, as a stalled
+    motor's does; free, that term is zero. A row whose first value is NaN has
+    no history (a new, moved or removed robot): its term is zero.
+    """
+    for a in range(len(agents)):
+        b = agents[a]
+        w0 = cmd[a, 0] * mm_s_per_unit[a]
+        w1 = cmd[a, 1] * mm_s_per_unit[a]
+        v = (w0 + w1) / 2.0
+        theta = C.get_double(fns[C.GET_ANGLE], b)
+        vx, vy = C.get_vect(fns[C.GET_VELOCITY], b)
+        w = C.get_double(fns[C.GET_ANGULAR_VELOCITY], b)
+        m = servo[a, S_MASS] / h
+        moment = servo[a, S_MOMENT] / h
+        fx = (v * math.cos(theta) - vx) * m
+        fy = (v * math.sin(theta) - vy) * m
+        t = ((w1 - w0) / wheel_base[a] - w) * moment
+        if memory[a, 0] == memory[a, 0]:  # not NaN: the contacts' share of the last step
+            fx += memory[a, 3] - (vx - memory[a, 0]) * m
+            fy += memory[a, 4] - (vy - memory[a, 1]) * m
+            t += memory[a, 5] - (w - memory[a, 2]) * moment
+        f = math.sqrt(fx * fx + fy * fy)
+        top = servo[a, S_MAX_FORCE]
+        if f > top:
+            fx *= top / f
+            fy *= top / f
+        top = servo[a, S_MAX_TORQUE]
+        if t > top:
+            t = top
+        elif t < -top:
+            t = -top
+        memory[a, 0] = vx
+        memory[a, 1] = vy
+        memory[a, 2] = w
+        memory[a, 3] = fx
+        memory[a, 4] = fy
+        memory[a, 5] = t
+        C.set_vect(fns[C.SET_FORCE], b, fx, fy)
+        C.set_double(fns[C.SET_TORQUE], b, t)
+
+
+@njit(cache=_CACHE)
+def physics_tick_servo(
+    fns,
+    space_step,
+    space,
+    substep_s,
+    substeps,
+    agents,
+    objects,
+    cmd,
+    mm_s_per_unit,
+    wheel_base,
+    counters,
+    pulses_per_tick,
+    servo,
+    memory,
+):  # pragma: no cover
+    """:func:`physics_tick` for the velocity drive (no control bodies, no joints).
+
+    Before each of the ``substeps`` steps, :func:`servo_forces` sets every
+    robot's force and torque; the position counters advance by this tick's
+    pulses. With ``substeps`` 0 it only counts: the caller sets the forces and
+    steps the space through pymunk, one step at a time.
+    """
+    for a in range(len(agents)):
+        counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
+        counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
+    for _ in range(substeps):
+        servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, substep_s)
+        C.set_double(space_step, space, substep_s)
+    return read_bodies(fns, agents, objects)
+
+
 @njit(cache=_CACHE)
 def clamp_speeds(speeds, top, cmd):  # pragma: no cover
     """cmd = speeds rounded to whole units and clamped to +-top per agent; NaN stops the wheel."""
@@ -695,6 +797,32 @@ def warm_up() -> float:
         np.ones(0),
         np.zeros((0, 2)),
         np.ones(0),
+    )
+    physics_tick_servo(
+        C.FUNCTIONS,
+        C.FUNCTIONS[C.SPACE_STEP],
+        np.uint64(0),
+        0.01,
+        0,
+        none,
+        none,
+        np.zeros((0, 2)),
+        np.ones(0),
+        np.ones(0),
+        np.zeros((0, 2)),
+        np.ones(0),
+        np.ones((0, 4)),
+        np.zeros((0, 6)),
+    )
+    servo_forces(
+        C.FUNCTIONS,
+        none,
+        np.zeros((0, 2)),
+        np.ones(0),
+        np.ones(0),
+        np.ones((0, 4)),
+        np.zeros((0, 6)),
+        0.01,
     )
     read_bodies(C.FUNCTIONS, none, none)
     clamp_speeds(np.zeros((1, 2)), np.ones(1), np.zeros((1, 2)))

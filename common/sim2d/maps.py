@@ -321,10 +321,12 @@ def build_world(
     sensor_period_s: float = 0.02,
     threads: int = 1,
     physics_threads: int = 1,
+    drive: str = "joints",
 ) -> World:
     """A new world from a parsed map (errors name ``source`` and the field).
 
-    ``threads`` and ``physics_threads``: see World (sensing and chipmunk threads).
+    ``threads``, ``physics_threads`` and ``drive``: see World (sensing and chipmunk
+    threads, how robots are driven).
     """
     try:
         top = _Fields(data, "", text)
@@ -342,6 +344,7 @@ def build_world(
             sensor_period_s=sensor_period_s,
             threads=threads,
             physics_threads=physics_threads,
+            drive=drive,
         )
         arena.check_unknown()
         for section in SECTIONS:
@@ -363,6 +366,7 @@ def load_map(
     tick_s: float = 0.02,
     threads: int = 1,
     physics_threads: int = 1,
+    drive: str = "joints",
 ) -> World:
     try:
         text = path.read_text(encoding="utf-8")
@@ -377,6 +381,7 @@ def load_map(
         source=str(path),
         threads=threads,
         physics_threads=physics_threads,
+        drive=drive,
     )
 
 

@@ -5,7 +5,9 @@ follow the thesis, through pymunk:
 
 - obstacles are static bodies: they never move, and push anything out;
 - agents are dynamic bodies pulled by a kinematic control body through
-  force-limited pivot and gear joints (pymunk's tank pattern), so walls push
+  force-limited pivot and gear joints (pymunk's tank pattern, ``drive="joints"``,
+  the default), or driven by a force-limited velocity servo with the same
+  limits (``drive="velocity"``, no joints: for swarms); either way walls push
   them back and two agents share the push;
 - movable objects are dynamic bodies held to the floor by force-limited
   joints to the static body (top-down friction: nothing slides forever);
@@ -33,11 +35,13 @@ import pymunk
 
 from common.sim2d import bodies, chipmunk, kernels, sensing
 from common.sim2d.collision import (
+    CAT_ALL,
     CAT_OBSTACLE,
     CAT_ROBOT,
     COLL_OBJECT,
     COLL_ROBOT,
     COLL_TONGS,
+    TONGS_MASK_LIGHT,
 )
 from common.sim2d.entities import (
     Agent,
@@ -56,6 +60,20 @@ class EditError(ValueError):
     """An edit or a map would break the world's rules; the message says which and why."""
 
 
+# How robots are driven (World(drive=...)): "joints", pymunk's tank pattern (a
+# kinematic control body per robot pulling it through a pivot and a gear joint), or
+# "velocity", a force-limited servo on the robot's own body set by the compiled tick
+# (kernels.servo_forces): the same velocity constraint and force limits without the
+# two joints and the extra body, which were most of chipmunk's step in a swarm
+# (docs/BENCHMARKS.md, issue 22). With "velocity" a lowered gripper's tongs also
+# collide with movable objects only (collision.TONGS_MASK_LIGHT), not with robots,
+# other tongs or obstacles: the other half of a swarm's step. "joints" stays the
+# default, its trajectories unchanged: the sim-beside-real comparisons and recorded
+# runs were made with it, and tongs that no longer touch walls and robots are a
+# change of the model (docs/ARCHITECTURE.md section 9, "Drives").
+DRIVES = ("joints", "velocity")
+
+
 @dataclass(frozen=True)
 class Tables:
     """Per-agent constants derived from the agents' types (rebuilt when agents change)."""
@@ -68,6 +86,7 @@ class Tables:
     has_gripper: np.ndarray  # (N,) bool
     arm_rate: np.ndarray  # (N,) arm position units per second (0 without a gripper)
     arm_lowered_above: np.ndarray  # (N,) arm position at and above which the tongs are down
+    servo: np.ndarray  # (N, 4) the velocity drive's mass, moment, max force, max torque
 
 
 class World:
@@ -85,6 +104,7 @@ class World:
         name: str = "world",
         threads: int = 1,
         physics_threads: int = 1,
+        drive: str = "joints",
     ) -> None:
         if not (width_mm > 0 and height_mm > 0):
             raise EditError("the arena's width and height must be positive")
@@ -94,6 +114,16 @@ class World:
             raise EditError(f"threads must be between 1 and {kernels.MAX_THREADS}")
         if not 1 <= physics_threads <= kernels.MAX_THREADS:
             raise EditError(f"physics threads must be between 1 and {kernels.MAX_THREADS}")
+        if drive not in DRIVES:
+            raise EditError(f"drive must be one of {', '.join(DRIVES)}, not {drive!r}")
+        self.drive = drive
+        # What lowered tongs collide with (the gripper turret sets it on arms it lowers).
+        self.tongs_mask = CAT_ALL if drive == "joints" else TONGS_MASK_LIGHT
+        # Whether the robots' tongs are in the space. Tongs that collide with movable
+        # objects only (the velocity drive) can meet nothing while the world has none,
+        # so they stay out of it then (_sync_tongs): in a swarm they were two of every
+        # robot's three shapes in chipmunk's bounding-box tree. They carry no mass.
+        self._tongs_in = drive == "joints"
         # Sensing threads: the parallel kernel gives the serial kernel's readings bit
         # for bit (each robot's pass reads shared state and writes its own row only).
         self.threads = threads
@@ -128,6 +158,12 @@ class World:
         if physics_threads > 1:
             self.space.threads = physics_threads
         self.space.damping = 1.0
+        if drive == "velocity":
+            # The servo's forces are set before the step, so the solver's iterations
+            # go to the contacts alone: with chipmunk's 10, a crowd of 140 pressed into
+            # a corner overlapped by up to 14 mm (the joints drive: 7); with 20, 11.
+            # At 10,000 robots in the bench's density the step cost the same.
+            self.space.iterations = 20
         self._step_fn = chipmunk.FUNCTIONS[
             chipmunk.HASTY_SPACE_STEP if physics_threads > 1 else chipmunk.SPACE_STEP
         ]
@@ -159,6 +195,7 @@ class World:
             0, dtype=np.uint64
         )
         self._rows_layout = -1
+        self._servo_memory = np.zeros((0, 6))
 
     # -- per-agent state -------------------------------------------------------------
 
@@ -216,6 +253,18 @@ class World:
             arm_lowered_above=np.array(
                 [s.gripper.lowered_above if s.gripper else np.inf for s in specs], dtype=float
             ),
+            servo=np.array(
+                [
+                    (
+                        a.body.mass,
+                        a.body.moment,
+                        a.spec.drive.max_force,
+                        a.spec.drive.max_torque,
+                    )
+                    for a in self.agents
+                ],
+                dtype=float,
+            ).reshape(-1, 4),
         )
         self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
         self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}
@@ -371,8 +420,22 @@ class World:
         self.space.add(body, *shapes, *obj.floor_joints)
         self.objects.append(obj)
         self._object_by_body[id_of(body)] = obj
+        self._sync_tongs()
         self.layout += 1
         return obj
+
+    def _sync_tongs(self) -> None:
+        """Tongs into the space, or out of it, as the objects they could touch come and go."""
+        wanted = self.drive == "joints" or bool(self.objects)
+        if wanted == self._tongs_in:
+            return
+        tongs = [tong for agent in self.agents for tong in agent.tongs]
+        if tongs:
+            if wanted:
+                self.space.add(*tongs)
+            else:
+                self.space.remove(*tongs)
+        self._tongs_in = wanted
 
     def _blocked(self, shapes: list[pymunk.Shape], mask: int, body: pymunk.Body) -> bool:
         for shape in shapes:
@@ -457,9 +520,19 @@ class World:
             raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle")
         self._serial += 1
         fitted = gripper and spec.gripper is not None
-        agent = bodies.agent(ident, spec, self._serial, x, y, heading, fitted)
+        agent = bodies.agent(
+            ident,
+            spec,
+            self._serial,
+            x,
+            y,
+            heading,
+            fitted,
+            joints=self.drive == "joints",
+            tongs_mask=self.tongs_mask,
+        )
         agent.colour = colour or spec.colour
-        self.space.add(agent.body, agent.control, agent.shape, *agent.tongs, *agent.joints)
+        self.space.add(*agent.physics(tongs=self._tongs_in))
         self.agents.append(agent)
         self._agent_by_body[id_of(agent.body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
@@ -552,6 +625,8 @@ class World:
                         f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle"
                     )
                 for b in (agent.body, agent.control):
+                    if b is None:
+                        continue
                     b.position, b.angle = (x, y), heading
                     b.velocity, b.angular_velocity = (0, 0), 0.0
                 self.space.reindex_shapes_for_body(agent.body)
@@ -606,6 +681,7 @@ class World:
             self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
             self.objects.remove(obj)
             self._object_by_body.pop(id_of(obj.body), None)
+            self._sync_tongs()
         else:
             try:
                 slot = self.agent_slot(ident)
@@ -614,7 +690,7 @@ class World:
             agent = self.agents[slot]
             if agent.held is not None:
                 self.grippers.release(agent.held)
-            self.space.remove(agent.body, agent.control, agent.shape, *agent.tongs, *agent.joints)
+            self.space.remove(*agent.physics(tongs=self._tongs_in))
             del self.agents[slot]
             self.homes.pop(ident, None)
             self._agent_by_body.pop(id_of(agent.body), None)
@@ -664,7 +740,12 @@ class World:
 
     def _refresh_rows(self) -> None:
         self._agent_bodies = chipmunk.addresses([a.body for a in self.agents])
-        self._control_bodies = chipmunk.addresses([a.control for a in self.agents])
+        self._control_bodies = chipmunk.addresses(
+            [a.control for a in self.agents if a.control is not None]
+        )
+        # The velocity drive's memory of the last step (kernels.servo_forces); NaN: none.
+        # An edit may have moved or stopped any robot, so after one it starts afresh.
+        self._servo_memory = np.full((len(self.agents), 6), np.nan)
         self._object_bodies = chipmunk.addresses([o.body for o in self.objects if o.body])
         self._rows_layout = self.layout
 
@@ -682,23 +763,52 @@ class World:
         # (bodies or shapes just added or removed): then drive only, and step via pymunk.
         via_pymunk = chipmunk.space_step_pending(self.space)
         sub = dt / self.substeps
-        pose, vel, obj = kernels.physics_tick(
-            chipmunk.FUNCTIONS,
-            self._step_fn,
-            self._space_address,
-            sub,
-            0 if via_pymunk else self.substeps,
-            self._control_bodies,
-            self._agent_bodies,
-            self._object_bodies,
-            self.cmd,
-            t.mm_s_per_unit,
-            t.wheel_base,
-            self.counters,
-            dt * t.pulses_per_s_per_unit,
-        )
+        if self.drive == "joints":
+            pose, vel, obj = kernels.physics_tick(
+                chipmunk.FUNCTIONS,
+                self._step_fn,
+                self._space_address,
+                sub,
+                0 if via_pymunk else self.substeps,
+                self._control_bodies,
+                self._agent_bodies,
+                self._object_bodies,
+                self.cmd,
+                t.mm_s_per_unit,
+                t.wheel_base,
+                self.counters,
+                dt * t.pulses_per_s_per_unit,
+            )
+        else:
+            pose, vel, obj = kernels.physics_tick_servo(
+                chipmunk.FUNCTIONS,
+                self._step_fn,
+                self._space_address,
+                sub,
+                0 if via_pymunk else self.substeps,
+                self._agent_bodies,
+                self._object_bodies,
+                self.cmd,
+                t.mm_s_per_unit,
+                t.wheel_base,
+                self.counters,
+                dt * t.pulses_per_s_per_unit,
+                t.servo,
+                self._servo_memory,
+            )
         if via_pymunk:
             for _ in range(self.substeps):
+                if self.drive == "velocity":
+                    kernels.servo_forces(
+                        chipmunk.FUNCTIONS,
+                        self._agent_bodies,
+                        self.cmd,
+                        t.mm_s_per_unit,
+                        t.wheel_base,
+                        t.servo,
+                        self._servo_memory,
+                        sub,
+                    )
                 self.space.step(sub)
             pose, vel, obj = kernels.read_bodies(
                 chipmunk.FUNCTIONS, self._agent_bodies, self._object_bodies

@@ -24,6 +24,7 @@ from common.service import run_service
 from common.service_login import add_world_identity_args, world_login
 from common.sim2d import kernels
 from common.sim2d.maps import MapError, load_map
+from common.sim2d.world import DRIVES
 from services.engine.service import EngineService, EngineSettings
 
 
@@ -67,6 +68,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         help="threads of chipmunk's solver (default 1; more: its threaded space, whose "
         "trajectories depend on scheduling)",
     )
+    p.add_argument(
+        "--drive",
+        choices=DRIVES,
+        default="joints",
+        help="how robots are driven: joints (default; pymunk's tank pattern) or velocity "
+        "(a force-limited servo without joints, and tongs that hit movable objects only: "
+        "for swarms, several times cheaper a robot; docs/ARCHITECTURE.md section 9)",
+    )
     add_world_identity_args(p)
     args, options = cli.parse(p, argv)
     assert options is not None
@@ -99,6 +108,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
             tick_s=tick_s,
             threads=args.threads,
             physics_threads=args.physics_threads,
+            drive=args.drive,
         )
     except MapError as exc:
         return cli.fail(str(exc))
@@ -117,6 +127,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         wander=args.wander,
         threads=args.threads,
         physics_threads=args.physics_threads,
+        drive=args.drive,
     )
 
     def build(session: zenoh.Session) -> EngineService:

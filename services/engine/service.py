@@ -84,6 +84,7 @@ class EngineSettings:
     # when a map is loaded on request.
     threads: int = 1
     physics_threads: int = 1
+    drive: str = "joints"  # World.drive, kept when a map is loaded on request
 
 
 @dataclass
@@ -163,6 +164,7 @@ class EngineService(WorldService):
             tick_s=self.settings.tick_s,
             threads=self.settings.threads,
             physics_threads=self.settings.physics_threads,
+            drive=self.settings.drive,
         )
 
     def _replay(self, record: Message) -> None:

@@ -273,6 +273,8 @@ def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
     assert "objects[0].colr" in proc.output(), proc.output()
 
 
+# Both drives (`wart engine --drive`): the swarm option runs the same service.
+@pytest.mark.parametrize("drive", ["joints", "velocity"])
 def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller(
     router: Router,
     procs: Procs,
@@ -280,8 +282,9 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
     alive_watch: AliveWatch,
     zsession: zenoh.Session,
     tmp_path: Path,
+    drive: str,
 ) -> None:
-    start_engine(router, procs, identity, alive_watch, tmp_path, "--wander")
+    start_engine(router, procs, identity, alive_watch, tmp_path, "--wander", "--drive", drive)
     realm = router.realm
     frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
     wait_for(lambda: frames.count > 0, 10, "a frame")

@@ -64,8 +64,8 @@ def test_physics_tick_drives_control_bodies_and_counts_pulses() -> None:
     assert counters.tolist() == [[5.0, 10.0]]
 
 
-def _busy_world(seed: int = 3) -> World:
-    world = World(700.0, 700.0, seed=seed, tick_s=0.01, sensor_period_s=0.02)
+def _busy_world(seed: int = 3, drive: str = "joints") -> World:
+    world = World(700.0, 700.0, seed=seed, tick_s=0.01, sensor_period_s=0.02, drive=drive)
     world.add_obstacle("pillar", ShapeSpec.box(60, 60), 350.0, 350.0)
     rng = np.random.default_rng(seed)
     placed = 0
@@ -95,10 +95,11 @@ def _trajectory(world: World, ticks: int) -> np.ndarray:
     return np.array(rows)
 
 
-def test_stepping_through_chipmunk_gives_pymunks_trajectory(monkeypatch) -> None:
-    direct = _trajectory(_busy_world(), 300)
+@pytest.mark.parametrize("drive", ["joints", "velocity"])
+def test_stepping_through_chipmunk_gives_pymunks_trajectory(monkeypatch, drive: str) -> None:
+    direct = _trajectory(_busy_world(drive=drive), 300)
     monkeypatch.setattr(chipmunk, "space_step_pending", lambda space: True)
-    via_pymunk = _trajectory(_busy_world(), 300)
+    via_pymunk = _trajectory(_busy_world(drive=drive), 300)
     assert np.abs(direct[-1] - direct[0]).max() > 50.0  # the robots did move
     assert np.array_equal(direct, via_pymunk)
 
@@ -135,9 +136,9 @@ def test_moving_a_light_moves_the_bright_readings() -> None:
     assert world.ambient[0, back].max() < 200 < world.ambient[0, front].min()
 
 
-def _edited_trajectory(seed: int, ticks: int) -> list[np.ndarray]:
+def _edited_trajectory(seed: int, ticks: int, drive: str = "joints") -> list[np.ndarray]:
     """Random live edits between ticks: agents and objects come and go, move, grip."""
-    world = _busy_world(seed)
+    world = _busy_world(seed, drive)
     rng = np.random.default_rng(seed + 100)
     rows: list[np.ndarray] = []
     for serial in range(ticks):
@@ -179,14 +180,16 @@ def _assert_arrays_are_the_bodies(world: World) -> None:
             assert row == [o.body.position.x, o.body.position.y, o.body.angle]
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_live_edits_between_ticks_step_the_same_as_pymunk(monkeypatch, seed: int) -> None:
+@pytest.mark.parametrize(("seed", "drive"), [(1, "joints"), (2, "joints"), (1, "velocity")])
+def test_live_edits_between_ticks_step_the_same_as_pymunk(
+    monkeypatch, seed: int, drive: str
+) -> None:
     # Bodies added, removed and moved between ticks: the compiled tick must never
     # read a body that is gone, nor miss one that arrived (checked against pymunk's
     # own accessors every tick), and must step as pymunk's Space.step does.
-    direct = _edited_trajectory(seed, 400)
+    direct = _edited_trajectory(seed, 400, drive)
     monkeypatch.setattr(chipmunk, "space_step_pending", lambda space: True)
-    via_pymunk = _edited_trajectory(seed, 400)
+    via_pymunk = _edited_trajectory(seed, 400, drive)
     assert len(direct) == len(via_pymunk)
     for a, b in zip(direct, via_pymunk, strict=True):
         assert np.array_equal(a, b)

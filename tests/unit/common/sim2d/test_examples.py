@@ -21,8 +21,8 @@ from tests.worldlink import run_in_world
 EXAMPLES = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
 
 
-def world(name: str, keep: str, seed: int = 1) -> World:
-    w = load_map(REPO / "maps" / f"{name}.json", name="t", seed=seed)
+def world(name: str, keep: str, seed: int = 1, drive: str = "joints") -> World:
+    w = load_map(REPO / "maps" / f"{name}.json", name="t", seed=seed, drive=drive)
     for agent in [a.id for a in w.agents if a.id != keep]:
         w.remove(agent)  # alone in the map: other robots are not what is tested
     return w
@@ -62,16 +62,20 @@ def test_every_example_passes_the_precheck_and_says_what_it_teaches() -> None:
         assert "What it teaches" in text and "Suits:" in text, path.name
 
 
-def test_braitenberg_avoids_the_maze_walls() -> None:
-    w = world("maze", "k1")
+# Both drives (World(drive=...)): a controller must behave the same whichever the
+# engine runs; the velocity drive is the swarm option (docs/ARCHITECTURE.md section 9).
+@pytest.mark.parametrize("drive", ["joints", "velocity"])
+def test_braitenberg_avoids_the_maze_walls(drive: str) -> None:
+    w = world("maze", "k1", drive=drive)
     track = Track(w, "k1")
     run_in_world(example("01"), w, "k1", 40.0, track)
     assert track.path > 1000, "it keeps moving"
     assert track.touching / track.steps < 0.05, "it rarely touches a wall"
 
 
-def test_wall_follower_keeps_a_wall_on_its_left() -> None:
-    w = world("maze", "k1")
+@pytest.mark.parametrize("drive", ["joints", "velocity"])
+def test_wall_follower_keeps_a_wall_on_its_left(drive: str) -> None:
+    w = world("maze", "k1", drive=drive)
     track = Track(w, "k1")
     run_in_world(example("02"), w, "k1", 40.0, track)
     assert track.path > 800

@@ -10,9 +10,11 @@ import pytest
 from common.sim2d.agents import agent_type
 from common.sim2d.agents.khepera import PROXIMITY_CURVE
 from common.sim2d.entities import ShapeSpec
-from common.sim2d.world import World
+from common.sim2d.world import DRIVES, World
 
 KHEPERA = agent_type("khepera")
+# Tests marked with DRIVES run with both drives (World(drive=...)): what a controller
+# sees (speeds, turns, counters, walls, the gripper) must not depend on it.
 
 
 def lone_khepera(x: float = 500.0, y: float = 500.0, heading: float = 0.0, **kw) -> World:
@@ -21,8 +23,9 @@ def lone_khepera(x: float = 500.0, y: float = 500.0, heading: float = 0.0, **kw)
     return world
 
 
-def test_speed_10_for_one_second_travels_80_mm() -> None:
-    world = lone_khepera()
+@pytest.mark.parametrize("drive", DRIVES)
+def test_speed_10_for_one_second_travels_80_mm(drive: str) -> None:
+    world = lone_khepera(drive=drive)
     world.set_speeds(0, 10, 10)
     world.run(1.0)
     travelled = world.agent_pose[0, 0] - 500.0
@@ -30,8 +33,9 @@ def test_speed_10_for_one_second_travels_80_mm() -> None:
     assert abs(world.agent_pose[0, 1] - 500.0) < 0.01
 
 
-def test_opposite_speeds_turn_at_the_wheel_base_rate() -> None:
-    world = lone_khepera()
+@pytest.mark.parametrize("drive", DRIVES)
+def test_opposite_speeds_turn_at_the_wheel_base_rate(drive: str) -> None:
+    world = lone_khepera(drive=drive)
     world.set_speeds(0, 10, -10)
     world.run(1.0)
     expected = -(2 * 10 * 8.0) / 53.0  # rad/s: wheel speeds 80 mm/s over a 53 mm base
@@ -39,8 +43,9 @@ def test_opposite_speeds_turn_at_the_wheel_base_rate() -> None:
     assert np.hypot(*(world.agent_pose[0, :2] - 500.0)) < 0.5  # turned on the spot
 
 
-def test_counters_count_pulses_and_can_be_set() -> None:
-    world = lone_khepera()
+@pytest.mark.parametrize("drive", DRIVES)
+def test_counters_count_pulses_and_can_be_set(drive: str) -> None:
+    world = lone_khepera(drive=drive)
     world.set_speeds(0, 10, -5)
     world.run(0.5)
     # 10 pulses per 10 ms for 0.5 s = 500 pulses; -5 -> -250.
@@ -93,8 +98,9 @@ def test_ambient_falls_near_a_light_and_returns_to_dark_when_occluded() -> None:
     assert world.ambient[0, 2:4].mean() == pytest.approx(500, abs=30)
 
 
-def test_robot_grips_a_ball_and_carries_it() -> None:
-    world = World(1500.0, 1000.0, seed=2)
+@pytest.mark.parametrize("drive", DRIVES)
+def test_robot_grips_a_ball_and_carries_it(drive: str) -> None:
+    world = World(1500.0, 1000.0, seed=2, drive=drive)
     world.add_agent("k1", KHEPERA, 300.0, 500.0, 0.0)
     world.add_object("ball", "ball", ShapeSpec.circle(10.0), 380.0, 500.0, mass_g=5.0)
     world.set_speeds(0, 5, 5)  # 40 mm/s onto the ball, tongs open and down
@@ -125,8 +131,9 @@ def test_robot_grips_a_ball_and_carries_it() -> None:
     assert np.hypot(*(world.object_pose[0, :2] - where)) < 1.0
 
 
-def test_a_ball_outside_the_exception_area_is_pushed() -> None:
-    world = World(1500.0, 1000.0, seed=2)
+@pytest.mark.parametrize("drive", DRIVES)
+def test_a_ball_outside_the_exception_area_is_pushed(drive: str) -> None:
+    world = World(1500.0, 1000.0, seed=2, drive=drive)
     world.add_agent("k1", KHEPERA, 300.0, 500.0, 0.0)
     world.add_object("ball", "ball", ShapeSpec.circle(10.0), 370.0, 540.0, mass_g=5.0)
     world.set_arm(0, 165)  # arm up: no tongs, the body pushes
@@ -137,16 +144,18 @@ def test_a_ball_outside_the_exception_area_is_pushed() -> None:
     assert world.object_pose[0, 0] > 380.0  # pushed ahead of the robot
 
 
-def test_walls_stop_a_robot() -> None:
-    world = lone_khepera(x=900.0)
+@pytest.mark.parametrize("drive", DRIVES)
+def test_walls_stop_a_robot(drive: str) -> None:
+    world = lone_khepera(x=900.0, drive=drive)
     world.set_speeds(0, 60, 60)
     world.run(2.0)
     assert world.agent_pose[0, 0] <= 1000.0 - 27.5 + 1.0
 
 
-def test_same_seed_same_trajectory() -> None:
+@pytest.mark.parametrize("drive", DRIVES)
+def test_same_seed_same_trajectory(drive: str) -> None:
     def run(seed: int) -> np.ndarray:
-        world = World(1000.0, 1000.0, seed=seed)
+        world = World(1000.0, 1000.0, seed=seed, drive=drive)
         world.add_obstacle("box", ShapeSpec.box(100, 100), 500.0, 700.0)
         for i in range(6):
             world.add_agent(f"k{i}", KHEPERA, 200.0 + 100 * i, 400.0, math.pi / 2)
@@ -162,8 +171,9 @@ def test_same_seed_same_trajectory() -> None:
     assert not np.array_equal(run(11), run(12))
 
 
-def test_epuck_is_a_second_type_in_the_same_world() -> None:
-    world = World(1000.0, 1000.0, seed=1)
+@pytest.mark.parametrize("drive", DRIVES)
+def test_epuck_is_a_second_type_in_the_same_world(drive: str) -> None:
+    world = World(1000.0, 1000.0, seed=1, drive=drive)
     world.add_agent("k1", KHEPERA, 300.0, 500.0)
     world.add_agent("e1", agent_type("epuck"), 600.0, 500.0)
     world.set_speeds(1, 1000, 1000)  # 1000 steps/s of 0.129 mm
@@ -172,8 +182,9 @@ def test_epuck_is_a_second_type_in_the_same_world() -> None:
     assert not world.agents[1].has_gripper
 
 
-def test_presence_sees_round_objects_not_round_obstacles() -> None:
-    world = lone_khepera()
+@pytest.mark.parametrize("drive", DRIVES)
+def test_presence_sees_round_objects_not_round_obstacles(drive: str) -> None:
+    world = lone_khepera(drive=drive)
     world.add_object("crate", "box", ShapeSpec.box(30.0, 30.0), 700.0, 700.0)
     world.add_obstacle("post", ShapeSpec.circle(5.0), 538.0, 500.0)  # between the fingers
     world.step()
@@ -184,8 +195,9 @@ def test_presence_sees_round_objects_not_round_obstacles() -> None:
     assert world.presence[0] == 255
 
 
-def test_an_edit_between_ticks_is_seen_by_the_next_tick() -> None:
-    world = lone_khepera()
+@pytest.mark.parametrize("drive", DRIVES)
+def test_an_edit_between_ticks_is_seen_by_the_next_tick(drive: str) -> None:
+    world = lone_khepera(drive=drive)
     world.set_speeds(0, 10, 10)
     world.run(0.2)
     world.move("k1", 200.0, 300.0, 0.0)
