@@ -160,6 +160,15 @@ class _MacLease:
         self.end = 0.0
 
 
+def _check_pair(name: str, pair: tuple[int, int], bound: int) -> None:
+    """ValueError unless ``pair`` is a tuple of two ints (not bools) within ±``bound``."""
+    if type(pair) is tuple and len(pair) == 2:
+        a, b = pair
+        if type(a) is int and type(b) is int and -bound <= a <= bound and -bound <= b <= bound:
+            return
+    raise ValueError(f"{name} must be a tuple of two integers within ±{bound}")
+
+
 class SwarmTick:
     """One tick of a swarm listener (:meth:`WorldChannel.on_swarm`): readings in, commands out.
 
@@ -200,21 +209,10 @@ class SwarmTick:
         a bug shows in the controller, not as a refusal in the world's log);
         False if no link of this channel drives ``agent`` (or it is closed).
         """
-        for name, pair, bound in (
-            ("speeds", speeds, MAX_SPEED),
-            ("counters", counters, COUNTER_LIMIT),
-        ):
-            if pair is None:
-                continue
-            if type(pair) is not tuple or len(pair) != 2:
-                raise ValueError(f"{name} must be a tuple of two integers")
-            a, b = pair
-            if (
-                type(a) is not int
-                or type(b) is not int
-                or not (-bound <= a <= bound and -bound <= b <= bound)
-            ):
-                raise ValueError(f"{name} must be two integers within ±{bound}")
+        if speeds is not None:
+            _check_pair("speeds", speeds, MAX_SPEED)
+        if counters is not None:
+            _check_pair("counters", counters, COUNTER_LIMIT)
         link = self._links.get(agent)
         if link is None or link._closed.is_set():
             return False
@@ -293,11 +291,14 @@ class WorldChannel:
         self.bundles += 1
         links = self._links
         delivered = []
+        raws = []
         for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
             link = links.get(agent)
             if link is not None:
-                link.deliver(bytes(raw))
+                data = bytes(raw)
+                link.deliver(data)
                 delivered.append(agent)
+                raws.append(data)
         listeners, swarms = self._tick_listeners, self._swarm_listeners
         if not delivered or not (listeners or swarms):
             return
@@ -308,20 +309,20 @@ class WorldChannel:
                 except Exception:  # one faulty listener must not starve the others
                     log.exception("a tick listener of %s failed (kept serving)", self.world)
             if swarms:
-                self._run_swarms(swarms, bundle, links)
+                self._run_swarms(swarms, bundle.tick, delivered, raws, links)
 
     def _run_swarms(
         self,
         swarms: tuple[Callable[[SwarmTick], None], ...],
-        bundle: SampleBundle,
+        tick: int,
+        delivered: list[str],
+        raws: list[bytes],
         links: dict[str, ZenohRobotLink],
     ) -> None:
         agents, samples = [], []
-        for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
-            if agent not in links:
-                continue
+        for agent, raw in zip(delivered, raws, strict=True):
             try:  # each sample decoded once for every swarm listener; validated as any input
-                sample = decode(bytes(raw), SensorSample)
+                sample = decode(raw, SensorSample)
             except MessageError as exc:
                 log.warning("ignored a malformed sensor sample of %s: %s", agent, exc)
                 continue
@@ -332,10 +333,10 @@ class WorldChannel:
             samples.append(sample)
         if not agents:
             return
-        tick = SwarmTick(bundle.tick, agents, samples, links)
+        handed = SwarmTick(tick, agents, samples, links)
         for swarm in swarms:
             try:
-                swarm(tick)
+                swarm(handed)
             except Exception:  # as for tick listeners: the others still run
                 log.exception("a swarm listener of %s failed (kept serving)", self.world)
 
