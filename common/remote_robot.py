@@ -185,7 +185,7 @@ class SwarmTick:
     (docs/BENCHMARKS.md, issue 22). Valid for the listener's call only.
     """
 
-    __slots__ = ("_links", "agents", "samples", "tick")
+    __slots__ = ("_links", "_now", "_out", "_sent", "agents", "samples", "tick")
 
     def __init__(
         self,
@@ -195,6 +195,9 @@ class SwarmTick:
         links: dict[str, ZenohRobotLink],
     ) -> None:
         self.tick, self.agents, self.samples, self._links = tick, agents, samples, links
+        self._now = time.time()  # every command of the tick is sealed at this time
+        self._out: list[BundledCommand] = []
+        self._sent: list[ZenohRobotLink] = []
 
     def send(
         self,
@@ -216,7 +219,20 @@ class SwarmTick:
         link = self._links.get(agent)
         if link is None or link._closed.is_set():
             return False
-        return link._put(AgentCommand(agent=agent, speeds=speeds, counters=counters))
+        try:
+            payload, mac = link._seal(
+                AgentCommand(agent=agent, speeds=speeds, counters=counters), self._now
+            )
+        except Exception as exc:  # a closed session at shutdown, a lost login
+            log.debug("could not send a command to %s: %s", agent, exc)
+            return False
+        # Collected here and handed to the channel in one go when the listeners return
+        # (one lock and one clock read a tick instead of one per robot).
+        self._out.append(BundledCommand(agent, payload))
+        self._sent.append(link)
+        link.sent += 1
+        link.mac_sent += mac
+        return True
 
 
 class WorldChannel:
@@ -339,6 +355,14 @@ class WorldChannel:
                 swarm(handed)
             except Exception:  # as for tick listeners: the others still run
                 log.exception("a swarm listener of %s failed (kept serving)", self.world)
+            finally:  # what it sent before failing goes out too, as with link.send
+                if handed._out:
+                    with self._pending_lock:
+                        self._pending.extend(handed._out)
+                    handed._out = []
+        now = time.monotonic()
+        for link in handed._sent:  # their keep-alives are not due
+            link._last_send = now
 
     def on_tick(self, listener: Callable[[int, list[str]], None]) -> Callable[[], None]:
         """Call ``listener(tick, agents)`` after each bundle that brought ``agents`` a sample.
@@ -565,19 +589,19 @@ class ZenohRobotLink:
             return
         self._put(agent_command(self.agent, command))
 
+    def _seal(self, message: AgentCommand, now: float) -> tuple[bytes, bool]:
+        """``message`` for this link's key: MACed under its MAC lease if it holds one in
+        force at ``now`` (True), else signed with the driving session (False)."""
+        session = self._session()
+        lease = self._mac_lease
+        if lease is not None and lease.session_id == session.session_id and now <= lease.end:
+            return lease.mac.command(session.next_seq(), message, now), True
+        return session.seal(self._cmd_key, message), False
+
     def _put(self, message: AgentCommand) -> bool:
         """MAC (or sign) ``message`` for this link's key and send it; False if it could not."""
-        mac = False
         try:
-            session = self._session()
-            lease = self._mac_lease
-            now = time.time()
-            if lease is not None and lease.session_id == session.session_id and now <= lease.end:
-                seq = session.next_seq()
-                payload = lease.mac.command(seq, message, now)
-                mac = True
-            else:
-                payload = session.seal(self._cmd_key, message)
+            payload, mac = self._seal(message, time.time())
             if self._channel is not None:
                 self._channel.submit(self.agent, payload)
             else:

@@ -290,16 +290,20 @@ def test_a_swarm_listener_reads_the_ticks_samples_in_arrays_and_answers_in_one_m
         for agent, s in zip(tick.agents, tick.samples, strict=True):
             assert tick.send(agent, speeds=(3, -3), counters=(s.counters[0], 0))
 
-    def broken(_tick: SwarmTick) -> None:
+    def broken(tick: SwarmTick) -> None:
+        tick.send("k1", speeds=(1, 1))  # what it sent before failing still goes out
         raise RuntimeError("a bug in someone's swarm code")
 
-    channel.on_swarm(broken)  # first: its failure must not keep swarm from running
+    remove_broken = channel.on_swarm(broken)  # first: its failure must not stop swarm
     remove = channel.on_swarm(swarm)
     deliver(zs, bundle(["k2", "k9", "k0"], tick=5))  # k9 is not driven here
     assert seen == [(5, ["k2", "k0"], [5, 5])]
-    assert channel.puts == 1, "the listener's commands leave in one message"
+    assert channel.puts == 1, "the listeners' commands leave in one message"
     sent = sent_commands(zs)
-    assert [agent for agent, _ in sent] == ["k2", "k0"]
+    assert [agent for agent, _ in sent] == ["k1", "k2", "k0"]
+    assert (links[1].sent, links[2].sent, links[0].sent) == (1, 1, 1)
+    remove_broken()
+    sent = sent[1:]
     # Each sealed for its agent's own cmd key, exactly as link.send would.
     verifier = Verifier(IDENTITY.verify_key, REALM)
     for agent, payload in sent:
