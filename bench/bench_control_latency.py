@@ -24,6 +24,9 @@ target line judges p50 against 2x the path's round trip and p99 against 5 ms.
 ``--inline``: instead of one thread per controller, one function answers
 every robot in the channel's own thread (``WorldChannel.on_tick``), as a
 swarm controller would: no thread hand-off per robot, one message per tick.
+``--swarm``: the same in the array API (``WorldChannel.on_swarm``: the
+tick's decoded samples in, ``tick.send(agent, ...)`` out, MACed per lease as
+ever, without a KheperaState and a RobotCommand per robot).
 
 Against a peer (issue 22): the same loop written with plain zenoh-python
 (bench/plain_peer.py: no login, lease or MAC; the same world, sample bundles
@@ -43,8 +46,8 @@ the sender's sealing, both paths, in this process; and the floor under N
 controller threads in one process with no network at all (N threads handed
 a sample at once, each decoding it and MACing a command). Run:
 
-    .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10] [--inline]
-        [--block 0.5] [--no-peer] [--no-signed]
+    .venv/bin/python -m bench.bench_control_latency [--controllers 20] [--seconds 10]
+        [--inline | --swarm] [--block 0.5] [--no-peer] [--no-signed]
 """
 
 from __future__ import annotations
@@ -238,7 +241,7 @@ def path_probe(z: Any, stop: threading.Event, out: Sink) -> None:
 
 def child(args: argparse.Namespace) -> int:
     """The controllers' process: one ZenohRobotLink per agent, answering every sample."""
-    from common.remote_robot import WorldChannel, ZenohRobotLink
+    from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 
     identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))
@@ -277,7 +280,15 @@ def child(args: argparse.Namespace) -> int:
             seen = newest
             link.send(RobotCommand(counters=(round(link.latest().time * 1000), 0)))
 
-    if args.inline:
+    if args.swarm:
+        assert channel is not None
+
+        def arrays(tick: SwarmTick) -> None:  # the same reaction, in the array API
+            for agent, sample in zip(tick.agents, tick.samples, strict=True):
+                tick.send(agent, counters=(round(sample.sim_time * 1000), 0))
+
+        channel.on_swarm(arrays)
+    elif args.inline:
         assert channel is not None
         by_agent = {link.agent: link for link in links}
 
@@ -696,6 +707,13 @@ def main() -> int:
         "on_tick) instead of one thread per controller: no hand-off, one message per tick",
     )
     p.add_argument(
+        "--swarm",
+        action="store_true",
+        help="as --inline, but in the array API (WorldChannel.on_swarm: the tick's decoded "
+        "samples in, tick.send(agent, ...) out, no per-robot KheperaState or RobotCommand); "
+        "the plain peer answers inline",
+    )
+    p.add_argument(
         "--block",
         type=float,
         default=0.5,
@@ -715,6 +733,7 @@ def main() -> int:
     p.add_argument("--realm", help=argparse.SUPPRESS)
     p.add_argument("--connect", help=argparse.SUPPRESS)
     args = p.parse_args()
+    args.inline = args.inline or args.swarm  # the swarm answers in the channel's thread too
     if args.inline and args.per_agent:
         p.error("--inline answers in the shared WorldChannel's thread; it excludes --per-agent")
     if args.child:
@@ -769,6 +788,7 @@ def main() -> int:
                 "--identity",
                 str(ident_path),
                 *(["--per-agent"] if args.per_agent else []),
+                *(["--swarm"] if args.swarm else []),
             )
         )
         first += n
@@ -837,6 +857,8 @@ def main() -> int:
         + (
             "each on its own keys"
             if args.per_agent
+            else "answering in the WorldChannel's thread in arrays (on_swarm)"
+            if args.swarm
             else "answering in the WorldChannel's thread (on_tick)"
             if args.inline
             else "one thread each, sharing a WorldChannel"

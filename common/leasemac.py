@@ -45,6 +45,7 @@ from common.messages import (
 LEASE_KEY_BYTES = 32
 MAC_BYTES = 32
 _PERSON = b"wart.cmd.v1"  # BLAKE2b personalisation: a command MAC is never valid as another MAC
+_SEQ_TIME = struct.Struct("<Qd")  # a command's sequence number and send time, as hashed
 
 
 def new_lease_key() -> bytes:
@@ -92,15 +93,20 @@ class CommandMac:
     def tag(self, seq: int, sent_at: float, body: bytes) -> bytes:
         """The MAC of one command: bound to its key expression, lease, order and time."""
         h = self._prefix.copy()
-        h.update(struct.pack("<Qd", seq, sent_at))
+        h.update(_SEQ_TIME.pack(seq, sent_at))
         h.update(body)
         return h.digest()
 
     def command(self, seq: int, message: Message, now: float) -> bytes:
         """The encoded MacCommand carrying ``message`` on this key expression."""
         body = encode(message)
-        tag = self.tag(seq, now, body)
-        return encode(MacCommand(lease_id=self.lease_id, seq=seq, sent_at=now, body=body, mac=tag))
+        # tag() inlined: this runs 50 times a second per robot on the sender.
+        h = self._prefix.copy()
+        h.update(_SEQ_TIME.pack(seq, now))
+        h.update(body)
+        return encode(
+            MacCommand(lease_id=self.lease_id, seq=seq, sent_at=now, body=body, mac=h.digest())
+        )
 
 
 def command_mac(

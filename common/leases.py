@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from common import keys
@@ -29,6 +30,7 @@ from common.leasemac import CommandMac, WorldBoxKeys, command_mac, mac_matches, 
 from common.messages import (
     AgentCommand,
     AuthEnvelope,
+    BundledCommand,
     Lease,
     MacCommand,
     MessageError,
@@ -57,6 +59,7 @@ class LeaseBook:
         # Command key -> agent, for agents that ever held a lease here: the 50 Hz
         # check skips parsing and re-validating the key (bounded by the world's agents).
         self._agent_of: dict[str, str] = {}
+        self._key_of: dict[str, str] = {}  # and back: a bundled command's agent -> its key
         self._lock = threading.Lock()
         # This world's epoch: the replay windows live in memory, so after a restart a
         # command sealed before it would look fresh again (the context republishes the
@@ -120,6 +123,7 @@ class LeaseBook:
                         CommandMac(lease_key, cmd_key, lease.lease_id),
                     )
                 self._agent_of[cmd_key] = lease.agent
+                self._key_of[lease.agent] = cmd_key
         return lease
 
     def accept_stop(self, key: str, payload: Any) -> WorldStop | None:
@@ -226,12 +230,38 @@ class LeaseBook:
         with self._lock:
             return sorted(a for a, lease in self._leases.items() if lease.start <= t <= lease.end)
 
-    def check_command(self, key: str, payload: Any) -> tuple[str, AgentCommand]:
+    def check_bundle(
+        self, items: Sequence[BundledCommand], obey: Callable[[str, AgentCommand], None]
+    ) -> list[str]:
+        """Check a CommandBundle's commands, ``obey`` each one that passes; why the others failed.
+
+        Each item is checked exactly as :meth:`check_command` checks its
+        payload put on its agent's own ``cmd`` key (the key its signature or
+        MAC covers): the bundle adds no authority. A refused item spares the
+        others, and each command is obeyed as soon as it passed, not after
+        the whole bundle. Shared per bundle: only the clock read, and the
+        lookup of each agent's key (cached for agents that held a lease here).
+        ``obey`` may refuse too (AuthError, e.g. a bridge without that robot).
+        """
+        refused: list[str] = []
+        now = time.time()
+        for item in items:
+            try:
+                key = self._key_of.get(item.agent) or self.command_key(item.agent)
+                obey(*self.check_command(key, item.payload, now))
+            except (AuthError, MessageError, ValueError) as exc:
+                refused.append(f"{item.agent}: {exc}")
+        return refused
+
+    def check_command(
+        self, key: str, payload: Any, now: float | None = None
+    ) -> tuple[str, AgentCommand]:
         """The agent and command of a sealed AgentCommand the world must obey.
 
         Raises AuthError (or MessageError for a malformed payload) for anything
         else: unsigned, for another agent, no lease, not the holder, outside
         the lease. Counted in ``commands_accepted`` / ``commands_refused``.
+        ``now``: the wall clock, when the caller read it already (a bundle).
         """
         agent = self._agent_of.get(key) or keys.parse_agent_key(self.realm, self.world, key)
         try:
@@ -246,8 +276,8 @@ class LeaseBook:
             except MessageError as exc:
                 self.verifier.rejected += 1
                 raise AuthError("unauthenticated", f"not an authenticated command: {exc}") from None
-            if isinstance(envelope, MacCommand):
-                command = self._check_mac(key, agent, envelope)
+            if type(envelope) is MacCommand:
+                command = self._check_mac(key, agent, envelope, time.time() if now is None else now)
                 self.mac_accepted += 1
             else:
                 assert isinstance(envelope, AuthEnvelope)  # the decoder allowed only these two
@@ -284,7 +314,7 @@ class LeaseBook:
             raise AuthError("forbidden", f"{principal.user}'s lease on {agent} is not in force")
         return command
 
-    def _check_mac(self, key: str, agent: str, message: MacCommand) -> AgentCommand:
+    def _check_mac(self, key: str, agent: str, message: MacCommand, now: float) -> AgentCommand:
         """The command of a MacCommand, if it is the current MAC lease holder's; else AuthError.
 
         Order: the cheap refusals first, then the MAC (before decoding the body
@@ -303,26 +333,24 @@ class LeaseBook:
                 "forbidden", f"lease {lease.lease_id} carries no key for this world: sign commands"
             )
         _, lease_key, window, on_own_key = mac
+        seq, sent_at, body = message.seq, message.sent_at, message.body
         if self._agent_of.get(key) == agent:
-            expected = on_own_key.tag(message.seq, message.sent_at, message.body)
+            expected = on_own_key.tag(seq, sent_at, body)
         else:  # a key under another prefix that still names this agent: hash it in full
-            expected = command_mac(
-                lease_key, key, message.lease_id, message.seq, message.sent_at, message.body
-            )
+            expected = command_mac(lease_key, key, message.lease_id, seq, sent_at, body)
         if not mac_matches(expected, message.mac):
             self.verifier.rejected += 1
             raise AuthError("unauthenticated", f"command MAC does not match lease {lease.lease_id}")
-        now = time.time()
         if not lease.start <= now <= lease.end:
             raise AuthError("forbidden", f"lease {lease.lease_id} on {agent} is not in force")
-        self._check_epoch(message.sent_at, lease.lease_id)
-        self.verifier.check_fresh(message.sent_at, lease.holder_user)
+        self._check_epoch(sent_at, lease.lease_id)
+        self.verifier.check_fresh(sent_at, lease.holder_user)
         with self._lock:
-            fresh = window.accept(message.seq)
+            fresh = window.accept(seq)
         if not fresh:
             self.verifier.rejected += 1
             raise AuthError("unauthenticated", f"replayed command under lease {lease.lease_id}")
-        command = decode(message.body, AgentCommand)
+        command = decode(body, AgentCommand)
         if command.agent != agent:
             raise AuthError("forbidden", f"command for {command.agent} sent on {key}")
         return command

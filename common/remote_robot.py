@@ -42,6 +42,7 @@ from common import keys
 from common.auth import AuthError, Session, Verifier
 from common.controller import (
     ARM_UP,
+    COUNTER_LIMIT,
     LIGHT_SENSORS,
     MAX_SPEED,
     PROXIMITY_SENSORS,
@@ -159,6 +160,81 @@ class _MacLease:
         self.end = 0.0
 
 
+def _check_pair(name: str, pair: tuple[int, int], bound: int) -> None:
+    """ValueError unless ``pair`` is a tuple of two ints (not bools) within ±``bound``."""
+    if type(pair) is tuple and len(pair) == 2:
+        a, b = pair
+        if type(a) is int and type(b) is int and -bound <= a <= bound and -bound <= b <= bound:
+            return
+    raise ValueError(f"{name} must be a tuple of two integers within ±{bound}")
+
+
+class SwarmTick:
+    """One tick of a swarm listener (:meth:`WorldChannel.on_swarm`): readings in, commands out.
+
+    ``agents[i]``'s decoded, validated ``SensorSample`` is ``samples[i]``, for
+    the agents of this process's links that the world's bundle carried (a
+    malformed sample leaves its agent out). :meth:`send` commands one of them
+    through its link: MACed under its lease (or signed before the MAC lease
+    arrived) exactly as ``link.send`` does, and held until the listener
+    returns, so the tick's commands leave in one bundle.
+
+    The array shape of the controller API, for one process driving many
+    robots: no per-robot ``KheperaState`` or ``RobotCommand`` object, whose
+    Python cost per robot was what separated our loop from a plain Zenoh one
+    (docs/BENCHMARKS.md, issue 22). Valid for the listener's call only.
+    """
+
+    __slots__ = ("_links", "_now", "_out", "_sent", "agents", "samples", "tick")
+
+    def __init__(
+        self,
+        tick: int,
+        agents: list[str],
+        samples: list[SensorSample],
+        links: dict[str, ZenohRobotLink],
+    ) -> None:
+        self.tick, self.agents, self.samples, self._links = tick, agents, samples, links
+        self._now = time.time()  # every command of the tick is sealed at this time
+        self._out: list[BundledCommand] = []
+        self._sent: list[ZenohRobotLink] = []
+
+    def send(
+        self,
+        agent: str,
+        *,
+        speeds: tuple[int, int] | None = None,
+        counters: tuple[int, int] | None = None,
+    ) -> bool:
+        """Command ``agent``: wheel speeds (±MAX_SPEED) and/or position counters to set.
+
+        ValueError for values that are not two ints in range (checked here, so
+        a bug shows in the controller, not as a refusal in the world's log);
+        False if no link of this channel drives ``agent`` (or it is closed).
+        """
+        if speeds is not None:
+            _check_pair("speeds", speeds, MAX_SPEED)
+        if counters is not None:
+            _check_pair("counters", counters, COUNTER_LIMIT)
+        link = self._links.get(agent)
+        if link is None or link._closed.is_set():
+            return False
+        try:
+            payload, mac = link._seal(
+                AgentCommand(agent=agent, speeds=speeds, counters=counters), self._now
+            )
+        except Exception as exc:  # a closed session at shutdown, a lost login
+            log.debug("could not send a command to %s: %s", agent, exc)
+            return False
+        # Collected here and handed to the channel in one go when the listeners return
+        # (one lock and one clock read a tick instead of one per robot).
+        self._out.append(BundledCommand(agent, payload))
+        self._sent.append(link)
+        link.sent += 1
+        link.mac_sent += mac
+        return True
+
+
 class WorldChannel:
     """One world's sample bundles in and command bundles out, shared by a process's links.
 
@@ -176,7 +252,9 @@ class WorldChannel:
     Ticks: :meth:`on_tick` runs code in the channel's own thread right after
     each bundle was handed out, with its commands held until it returns: one
     thread answering many robots (a swarm) then costs no thread hand-off per
-    robot and one message per tick.
+    robot and one message per tick. :meth:`on_swarm` does the same with the
+    tick's decoded samples in arrays (:class:`SwarmTick`), without the
+    per-robot controller objects.
     """
 
     def __init__(self, zsession: zenoh.Session, realm: str, world: str) -> None:
@@ -188,6 +266,7 @@ class WorldChannel:
         self._sending = threading.Lock()
         self._held = threading.local()  # burst() depth of the calling thread
         self._tick_listeners: tuple[Callable[[int, list[str]], None], ...] = ()
+        self._swarm_listeners: tuple[Callable[[SwarmTick], None], ...] = ()
         self.bundles = 0  # sample bundles received
         self.puts = 0  # command bundles sent
         self.commands = 0  # commands sent in them
@@ -228,13 +307,16 @@ class WorldChannel:
         self.bundles += 1
         links = self._links
         delivered = []
+        raws = []
         for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
             link = links.get(agent)
             if link is not None:
-                link.deliver(bytes(raw))
+                data = bytes(raw)
+                link.deliver(data)
                 delivered.append(agent)
-        listeners = self._tick_listeners
-        if not listeners or not delivered:
+                raws.append(data)
+        listeners, swarms = self._tick_listeners, self._swarm_listeners
+        if not delivered or not (listeners or swarms):
             return
         with self.burst():
             for listener in listeners:
@@ -242,6 +324,45 @@ class WorldChannel:
                     listener(bundle.tick, delivered)
                 except Exception:  # one faulty listener must not starve the others
                     log.exception("a tick listener of %s failed (kept serving)", self.world)
+            if swarms:
+                self._run_swarms(swarms, bundle.tick, delivered, raws, links)
+
+    def _run_swarms(
+        self,
+        swarms: tuple[Callable[[SwarmTick], None], ...],
+        tick: int,
+        delivered: list[str],
+        raws: list[bytes],
+        links: dict[str, ZenohRobotLink],
+    ) -> None:
+        agents, samples = [], []
+        for agent, raw in zip(delivered, raws, strict=True):
+            try:  # each sample decoded once for every swarm listener; validated as any input
+                sample = decode(raw, SensorSample)
+            except MessageError as exc:
+                log.warning("ignored a malformed sensor sample of %s: %s", agent, exc)
+                continue
+            if sample.agent != agent:
+                log.warning("ignored a sample of %s filed under %s", sample.agent, agent)
+                continue
+            agents.append(agent)
+            samples.append(sample)
+        if not agents:
+            return
+        handed = SwarmTick(tick, agents, samples, links)
+        for swarm in swarms:
+            try:
+                swarm(handed)
+            except Exception:  # as for tick listeners: the others still run
+                log.exception("a swarm listener of %s failed (kept serving)", self.world)
+            finally:  # what it sent before failing goes out too, as with link.send
+                if handed._out:
+                    with self._pending_lock:
+                        self._pending.extend(handed._out)
+                    handed._out = []
+        now = time.monotonic()
+        for link in handed._sent:  # their keep-alives are not due
+            link._last_send = now
 
     def on_tick(self, listener: Callable[[int, list[str]], None]) -> Callable[[], None]:
         """Call ``listener(tick, agents)`` after each bundle that brought ``agents`` a sample.
@@ -257,6 +378,23 @@ class WorldChannel:
         def remove() -> None:
             with self._links_lock:
                 self._tick_listeners = tuple(x for x in self._tick_listeners if x is not listener)
+
+        return remove
+
+    def on_swarm(self, listener: Callable[[SwarmTick], None]) -> Callable[[], None]:
+        """Call ``listener(tick)`` with each bundle's decoded samples of this channel's agents.
+
+        Like :meth:`on_tick` (the channel's thread, after the links have their
+        samples, commands held until it returns), but the listener reads
+        ``tick.samples`` and answers with ``tick.send(agent, speeds=...)``.
+        Returns the function that removes it.
+        """
+        with self._links_lock:
+            self._swarm_listeners = (*self._swarm_listeners, listener)
+
+        def remove() -> None:
+            with self._links_lock:
+                self._swarm_listeners = tuple(x for x in self._swarm_listeners if x is not listener)
 
         return remove
 
@@ -382,12 +520,20 @@ class ZenohRobotLink:
         self.deliver(bytes(sample.payload.to_bytes()))
 
     def deliver(self, raw: bytes) -> None:
-        """Keep ``raw`` (an encoded SensorSample) as the newest; wake whoever waits."""
-        with self._fresh:
-            self._raw = raw
-            self._raw_seq += 1
-            self.samples += 1
-            if self._waiting:  # a swarm answering in the channel's thread waits on nothing
+        """Keep ``raw`` (an encoded SensorSample) as the newest; wake whoever waits.
+
+        One thread delivers to a link (its subscriber's, or its channel's), so
+        the sample and its number are set without the lock, the sample first
+        (``latest`` relies on that order). The lock is taken only to wake a
+        waiter: ``wait_sample`` counts itself in ``_waiting`` under the lock
+        before it tests the number, so either it sees the new number or this
+        sees it waiting and notifies (after it released the lock in ``wait``).
+        """
+        self._raw = raw
+        self._raw_seq += 1
+        self.samples += 1
+        if self._waiting:  # a swarm answering in the channel's thread waits on nothing
+            with self._fresh:
                 self._fresh.notify_all()
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
@@ -443,18 +589,19 @@ class ZenohRobotLink:
             return
         self._put(agent_command(self.agent, command))
 
-    def _put(self, message: AgentCommand) -> None:
-        mac = False
+    def _seal(self, message: AgentCommand, now: float) -> tuple[bytes, bool]:
+        """``message`` for this link's key: MACed under its MAC lease if it holds one in
+        force at ``now`` (True), else signed with the driving session (False)."""
+        session = self._session()
+        lease = self._mac_lease
+        if lease is not None and lease.session_id == session.session_id and now <= lease.end:
+            return lease.mac.command(session.next_seq(), message, now), True
+        return session.seal(self._cmd_key, message), False
+
+    def _put(self, message: AgentCommand) -> bool:
+        """MAC (or sign) ``message`` for this link's key and send it; False if it could not."""
         try:
-            session = self._session()
-            lease = self._mac_lease
-            now = time.time()
-            if lease is not None and lease.session_id == session.session_id and now <= lease.end:
-                seq = session.next_seq()
-                payload = lease.mac.command(seq, message, now)
-                mac = True
-            else:
-                payload = session.seal(self._cmd_key, message)
+            payload, mac = self._seal(message, time.time())
             if self._channel is not None:
                 self._channel.submit(self.agent, payload)
             else:
@@ -462,10 +609,11 @@ class ZenohRobotLink:
                 self._publisher.put(payload)
         except Exception as exc:  # a closed session at shutdown, a lost login
             log.debug("could not send a command to %s: %s", self.agent, exc)
-            return
+            return False
         self.sent += 1
         self.mac_sent += mac
         self._last_send = time.monotonic()
+        return True
 
     # -- extras for relays and tools
 

@@ -14,13 +14,13 @@ import msgspec
 import zenoh
 
 from common import keys
-from common.auth import AuthError, Verifier
+from common.auth import Verifier
 from common.keys import AliveKind
 from common.leases import LeaseBook
 from common.messages import (
+    AgentCommand,
     CommandBundle,
     Message,
-    MessageError,
     Revocation,
     SampleBundle,
     decode,
@@ -114,13 +114,7 @@ class WorldService(Service):
     def _on_command_bundle(self, sample: zenoh.Sample) -> None:
         """Each bundled command as if put on its agent's own key; one refusal spares the rest."""
         bundle = decode(sample.payload, CommandBundle)
-        refused: list[str] = []
-        for item in bundle.commands:
-            try:
-                key = keys.agent_cmd(self.realm, self.ident, item.agent)
-                self._accept_command(key, item.payload)
-            except (AuthError, MessageError, ValueError) as exc:
-                refused.append(f"{item.agent}: {exc}")
+        refused = self.leases.check_bundle(bundle.commands, self._obey)
         if refused:
             self.dropped += len(refused)
             self.log.warning(
@@ -134,6 +128,10 @@ class WorldService(Service):
 
     def _accept_command(self, key: str, payload: Any) -> None:
         """Check a sealed or MACed command put on ``key`` and obey it; AuthError if refused."""
+        self._obey(*self.leases.check_command(key, payload))
+
+    def _obey(self, agent: str, command: AgentCommand) -> None:
+        """Carry out a command the lease book accepted (AuthError if this world cannot)."""
         raise NotImplementedError
 
     def _on_lease(self, sample: zenoh.Sample) -> None:

@@ -342,8 +342,7 @@ class BridgeService(WorldService):
         for agent in agents:
             self.halt_agent(agent)
 
-    def _accept_command(self, key: str, payload: Any) -> None:
-        agent, command = self.leases.check_command(key, payload)
+    def _obey(self, agent: str, command: AgentCommand) -> None:
         lease = self.leases.lease_of(agent)
         with self._lock:
             entry = self._agents.get(agent)

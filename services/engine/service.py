@@ -260,8 +260,7 @@ class EngineService(WorldService):
         # Between two ticks, like a command; nobody waits for the reply.
         self._work.put((apply, Future()))
 
-    def _accept_command(self, key: str, payload: Any) -> None:
-        agent, command = self.leases.check_command(key, payload)
+    def _obey(self, agent: str, command: AgentCommand) -> None:
         self._work.put(_Command(agent, command, time.monotonic()))
 
     def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message:

@@ -20,7 +20,15 @@ from common.leasemac import (
     seal_key,
 )
 from common.leases import LeaseBook
-from common.messages import AgentCommand, Lease, MacCommand, SignedToken, decode, encode
+from common.messages import (
+    AgentCommand,
+    BundledCommand,
+    Lease,
+    MacCommand,
+    SignedToken,
+    decode,
+    encode,
+)
 
 REALM, WORLD, AGENT = "lab", "w1", "k1"
 CMD = keys.agent_cmd(REALM, WORLD, AGENT)
@@ -253,3 +261,54 @@ def test_world_identity_token_is_checked(s: Setup) -> None:
     old = issue_session(s.registry, REALM, "engine-w1", ["world"], ttl=1, now=time.time() - 10)
     with pytest.raises(AuthError, match="expired"):
         check_world_token(s.verifier, old.signed_token, WORLD)
+
+
+def test_a_bundle_obeys_each_valid_command_and_refuses_forged_replayed_and_misfiled_ones(
+    s: Setup,
+) -> None:
+    """check_bundle: each item checked as on its agent's own key; a refusal spares the others."""
+    s.grant()
+    obeyed: list[tuple[str, AgentCommand]] = []
+    replayed = s.command(seq=2)
+    other_key = keys.agent_cmd(REALM, WORLD, "k2")
+    items = [
+        BundledCommand(AGENT, s.command(seq=1, speeds=(1, 1))),  # valid
+        BundledCommand(AGENT, s.command(key=new_lease_key(), seq=3)),  # forged: a guessed key
+        BundledCommand(AGENT, replayed),  # valid the first time ...
+        BundledCommand(AGENT, replayed),  # ... refused the second
+        BundledCommand("k2", s.command(seq=4, on=other_key)),  # k2 has no lease here
+        BundledCommand(AGENT, s.command(seq=5, on=other_key)),  # MACed for k2's key, filed as k1
+        BundledCommand("bad name!", s.command(seq=6)),  # not an agent name
+        BundledCommand(AGENT, b"\x93garbage"),
+        BundledCommand(AGENT, s.command(seq=7, speeds=(7, 7))),  # valid, after all the others
+    ]
+    refused = s.book.check_bundle(items, lambda agent, command: obeyed.append((agent, command)))
+    assert [(a, c.speeds) for a, c in obeyed] == [
+        (AGENT, (1, 1)),
+        (AGENT, (10, 10)),
+        (AGENT, (7, 7)),
+    ]
+    assert len(refused) == 6, refused
+    assert "MAC does not match" in refused[0] and "replayed" in refused[1]
+    assert "k2 has no lease" in refused[2] and "MAC does not match" in refused[3]
+    # The whole bundle replayed: nothing obeyed a second time.
+    obeyed.clear()
+    assert len(s.book.check_bundle(items, lambda a, c: obeyed.append((a, c)))) == len(items)
+    assert obeyed == []
+
+
+def test_a_bundle_under_an_expired_lease_is_refused_and_a_refusing_world_spares_the_rest(
+    s: Setup,
+) -> None:
+    now = time.time()
+    s.grant(s.lease(start=now - 30, end=now - 1))
+    refused = s.book.check_bundle([BundledCommand(AGENT, s.command())], lambda a, c: None)
+    assert len(refused) == 1 and "not in force" in refused[0]
+    s.grant(s.lease(lease_id="L2"))
+
+    def bridge_without_k1(agent: str, _command: AgentCommand) -> None:
+        raise AuthError("not_found", f"no robot {agent} on this bridge")
+
+    items = [BundledCommand(AGENT, s.command(seq=n, lease_id="L2")) for n in (1, 2)]
+    refused = s.book.check_bundle(items, bridge_without_k1)
+    assert len(refused) == 2 and all("no robot k1" in r for r in refused)

@@ -26,7 +26,7 @@ from common.messages import (
     decode,
     encode,
 )
-from common.remote_robot import WorldChannel, ZenohRobotLink
+from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 
 REALM, WORLD = "r", "w"
 
@@ -278,3 +278,72 @@ def test_a_controller_thread_waiting_for_a_sample_wakes_when_its_bundle_arrives(
     assert got == [1] and k0.latest().counters == (5, -5)
     assert k1.wait_sample(0, 0.0) == 1  # no waiter: the sample is kept all the same
     assert k0._waiting == 0 and k1._waiting == 0
+
+
+def test_a_swarm_listener_reads_the_ticks_samples_in_arrays_and_answers_in_one_message() -> None:
+    zs = FakeSession()
+    channel, links = make(zs, ["k0", "k1", "k2"])
+    seen: list[tuple[int, list[str], list[int]]] = []
+
+    def swarm(tick: SwarmTick) -> None:
+        seen.append((tick.tick, tick.agents, [s.counters[0] for s in tick.samples]))
+        for agent, s in zip(tick.agents, tick.samples, strict=True):
+            assert tick.send(agent, speeds=(3, -3), counters=(s.counters[0], 0))
+
+    def broken(tick: SwarmTick) -> None:
+        tick.send("k1", speeds=(1, 1))  # what it sent before failing still goes out
+        raise RuntimeError("a bug in someone's swarm code")
+
+    remove_broken = channel.on_swarm(broken)  # first: its failure must not stop swarm
+    remove = channel.on_swarm(swarm)
+    deliver(zs, bundle(["k2", "k9", "k0"], tick=5))  # k9 is not driven here
+    assert seen == [(5, ["k2", "k0"], [5, 5])]
+    assert channel.puts == 1, "the listeners' commands leave in one message"
+    sent = sent_commands(zs)
+    assert [agent for agent, _ in sent] == ["k1", "k2", "k0"]
+    assert (links[1].sent, links[2].sent, links[0].sent) == (1, 1, 1)
+    remove_broken()
+    sent = sent[1:]
+    # Each sealed for its agent's own cmd key, exactly as link.send would.
+    verifier = Verifier(IDENTITY.verify_key, REALM)
+    for agent, payload in sent:
+        _, command = verifier.open(keys.agent_cmd(REALM, WORLD, agent), payload, AgentCommand)
+        assert (command.agent, command.speeds, command.counters) == (agent, (3, -3), (5, 0))
+    assert links[2].latest().counters == (5, -5), "the links still get their samples"
+    remove()
+    deliver(zs, bundle(["k1"], tick=6))
+    assert len(seen) == 1 and channel.puts == 1
+
+
+def test_a_swarm_listener_cannot_send_bad_values_or_drive_robots_it_has_no_link_for() -> None:
+    zs = FakeSession()
+    channel, (k0,) = make(zs, ["k0"])
+    errors: list[str] = []
+    results: list[bool] = []
+
+    def swarm(tick: SwarmTick) -> None:
+        for bad in ((200, 0), (1, 2, 3), (True, 0), (1.5, 0), [1, 1]):
+            try:
+                tick.send("k0", speeds=bad)  # type: ignore[arg-type]
+            except ValueError as exc:
+                errors.append(str(exc))
+        results.append(tick.send("k7", speeds=(1, 1)))  # no link here for k7
+        results.append(tick.send("k0", speeds=(1, 1)))
+
+    channel.on_swarm(swarm)
+    # k0's sample is garbage in this bundle: k0 is left out of the tick, nothing is called.
+    garbage = SampleBundle(world=WORLD, tick=4, agents=["k0"], samples=[msgspec.Raw(b"\xc1")])
+    deliver(zs, encode(garbage))
+    # A sample filed under k0 that is another agent's: left out too.
+    spoofed = SampleBundle(
+        world=WORLD, tick=4, agents=["k0"], samples=[msgspec.Raw(encode(sample("k1", 4)))]
+    )
+    deliver(zs, encode(spoofed))
+    assert errors == [] and results == []
+    deliver(zs, bundle(["k0"], tick=5))
+    assert len(errors) == 5 and results == [False, True]
+    assert [agent for agent, _ in sent_commands(zs)] == ["k0"]
+    k0.close(stop=False)
+    results.clear()
+    deliver(zs, bundle(["k0"], tick=6))  # a closed link is detached: no call at all
+    assert results == []

@@ -1,0 +1,193 @@
+"""A swarm in the array API (WorldChannel.on_swarm) against a real engine, under MAC leases.
+
+A real router; the engine (with an identity, so leases carry MAC keys) in
+this process as the bench runs it; the swarm's links on their own client
+session. What a user cares about: the swarm's leased robots move and the
+others do not, its commands are MACed, and on the same bundle key a forged
+command (a guessed lease key) or a replayed bundle moves nothing.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import zenoh
+
+from common import keys
+from common.auth import RegistryIdentity, Session, Verifier, issue_session
+from common.leasemac import mac_command, new_lease_key, seal_key
+from common.messages import AgentCommand, BundledCommand, CommandBundle, Lease, encode
+from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
+from common.service import close_session, open_session
+from common.sim2d.agents import agent_type
+from common.sim2d.world import World
+from services.engine.service import EngineService, EngineSettings
+from tests.conftest import Router, wait_for
+
+pytestmark = pytest.mark.integration
+
+WORLD = "swarm"
+AGENTS = ("k0", "k1", "k2")
+
+
+class Arena:
+    def __init__(self, router: Router) -> None:
+        self.realm = router.realm
+        self.registry = RegistryIdentity.generate()
+        self.world_session = issue_session(self.registry, self.realm, "engine-t", ["world"])
+        self.context = issue_session(self.registry, self.realm, "ctx", ["lease"])
+        self.alice = issue_session(self.registry, self.realm, "alice", ["control"])
+        world = World(2000, 2000, seed=1, tick_s=0.02, name=WORLD)
+        for i, agent in enumerate(AGENTS):
+            world.add_agent(agent, agent_type("khepera"), 300 + 500 * i, 1000, 0.0)
+        self.world_z = open_session(router.options(), wait=10)
+        self.engine = EngineService(
+            self.world_z,
+            self.realm,
+            world,
+            EngineSettings(tick_s=0.02, registry_key=self.registry.verify_key),
+            identity=lambda: self.world_session,
+        ).start()
+        self.leases: dict[str, tuple[Lease, bytes]] = {}
+
+    def grant(self, agent: str, holder: Session) -> bytes:
+        """A MAC lease on ``agent`` to ``holder``, as the agent context grants it; its key."""
+        k = new_lease_key()
+        now = time.time()
+        lease = Lease(
+            lease_id=f"L-{agent}",
+            world=WORLD,
+            agent=agent,
+            holder_user=holder.user,
+            holder_session=holder.session_id,
+            start=now,
+            end=now + 120,
+            holder_key=seal_key(k, holder.keys.box_public_key),
+            world_key=seal_key(k, self.world_session.keys.box_public_key),
+            world_box=self.world_session.keys.box_public_key,
+        )
+        self.leases[agent] = (lease, k)
+        self.republish()
+        return k
+
+    def republish(self) -> None:
+        for agent, (lease, _) in self.leases.items():
+            key = keys.agent_lease(self.realm, WORLD, agent)
+            self.world_z.put(key, self.context.seal(key, lease))
+
+    def xs(self) -> np.ndarray:
+        return np.array([self.engine.world.pose_of(agent)[0] for agent in AGENTS])
+
+    def close(self) -> None:
+        self.engine.stop()
+        close_session(self.world_z)
+
+
+@pytest.fixture
+def arena(router: Router) -> Iterator[Arena]:
+    arena = Arena(router)
+    yield arena
+    arena.close()
+
+
+def test_a_swarm_drives_its_leased_robots_with_macs_and_forged_or_replayed_bundles_do_not(
+    router: Router, arena: Arena
+) -> None:
+    realm = arena.realm
+    swarm_z = open_session(router.options(), wait=10)
+    spy_z = open_session(router.options(), wait=10)
+    captured: list[bytes] = []
+    spy_lock = threading.Lock()
+
+    def on_bundle(sample: zenoh.Sample) -> None:  # anyone may listen to the bundle key
+        with spy_lock:
+            captured.append(bytes(sample.payload.to_bytes()))
+
+    spy = spy_z.declare_subscriber(keys.world_commands(realm, WORLD), on_bundle)
+    channel = WorldChannel(swarm_z, realm, WORLD)
+    verifier = Verifier(arena.registry.verify_key, realm)
+    links = {
+        agent: ZenohRobotLink(
+            swarm_z,
+            realm,
+            WORLD,
+            agent,
+            lambda: arena.alice,
+            keepalive=3600.0,  # every command below is the swarm's
+            verifier=verifier,
+            channel=channel,
+        )
+        for agent in AGENTS
+    }
+    ticks: list[list[str]] = []
+
+    def forward(tick: SwarmTick) -> None:
+        ticks.append(list(tick.agents))
+        for agent, sample in zip(tick.agents, tick.samples, strict=True):
+            assert sample.agent == agent
+            tick.send(agent, speeds=(20, 20))
+
+    try:
+        wait_for(lambda: arena.engine.world.tick > 10, 60, "the engine ticking")
+        start = arena.xs()
+        for agent in ("k1", "k2"):  # alice holds these two; k0 has no lease
+            arena.grant(agent, arena.alice)
+
+        def macs_in() -> bool:  # the links' lease subscribers may match after the first put
+            arena.republish()
+            return all(links[a]._mac_lease is not None for a in ("k1", "k2"))
+
+        wait_for(macs_in, 10, "the MAC leases at the links")
+        remove = channel.on_swarm(forward)
+        wait_for(lambda: float((arena.xs() - start)[1:].min()) > 40.0, 10, "k1 and k2 driven")
+        assert abs(float(arena.xs()[0] - start[0])) < 1.0, "k0 has no lease: not driven"
+        assert ticks and all(agents == ["k1", "k2"] for agents in ticks)
+        assert links["k1"].mac_sent == links["k1"].sent > 0, "every swarm command MACed"
+        assert arena.engine.leases.mac_accepted >= links["k1"].sent
+        remove()
+        # The engine's watchdog stops them once the commands stop.
+        wait_for(lambda: not arena.engine.world.cmd[1:].any(), 5, "the watchdog stopping them")
+        with spy_lock:
+            replay = list(captured[-20:])
+        assert replay, "the spy saw the swarm's bundles"
+
+        # A forged bundle: k1's lease id is public, its key is not (a guess here).
+        refused = arena.engine.commands_refused
+        still = arena.xs()
+        cmd_key = keys.agent_cmd(realm, WORLD, "k1")
+        for seq in range(1, 26):
+            forged = mac_command(
+                new_lease_key(),
+                cmd_key,
+                "L-k1",
+                10**6 + seq,
+                AgentCommand(agent="k1", speeds=(60, 60)),
+                time.time(),
+            )
+            spy_z.put(
+                keys.world_commands(realm, WORLD),
+                encode(CommandBundle(commands=[BundledCommand("k1", forged)])),
+            )
+        wait_for(lambda: arena.engine.commands_refused >= refused + 25, 10, "forgeries refused")
+        # Replayed: the swarm's own valid bundles, captured on the wire, put again.
+        refused = arena.engine.commands_refused
+        for payload in replay:
+            spy_z.put(keys.world_commands(realm, WORLD), payload)
+        wait_for(
+            lambda: arena.engine.commands_refused >= refused + 2 * len(replay),
+            10,
+            "replays refused",
+        )
+        time.sleep(0.2)  # a few ticks in which a wrongly obeyed command would move them
+        assert float(np.abs(arena.xs() - still).max()) < 1.0, "forged or replayed: nothing moved"
+    finally:
+        for link in links.values():
+            link.close(stop=False)
+        channel.close()
+        spy.undeclare()
+        close_session(spy_z)
+        close_session(swarm_z)
