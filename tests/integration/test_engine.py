@@ -428,7 +428,9 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
         assert abs(moved[0]) < 1.0, moved  # not leased: neither called for nor moved
         ticks = [tick for tick, _ in calls]
         assert ticks == sorted(set(ticks)), "one call per bundle, in tick order"
-        assert all(agents == ["k1", "k2"] for _, agents in calls)
+        # The two leases arrive one after the other: a tick may fall between them.
+        assert all(set(agents) <= {"k1", "k2"} for _, agents in calls), calls[:3]
+        assert calls[-1][1] == ["k1", "k2"], calls[-3:]
         assert channel.puts <= channel.bundles, "one command message per tick at most"
     finally:
         for link in links.values():
