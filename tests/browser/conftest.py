@@ -20,8 +20,19 @@ from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 
 CHROMIUM = Path("/usr/bin/chromium")
+# Why the test pages are cheaper to draw than a student's: Debian's Chromium on CI
+# renders WebGL in software (SwiftShader, in its GPU process). Measured with three
+# pages on a 12-robot arena at 1280x800 (2 cores): the GPU process took 1.4 cores,
+# each page drew 3.3 frames a second and a click took 2.3 to 4.5 s (0.1 s before
+# the pages joined the arena), because a page draws as many frames as it can and
+# each waits behind the others'. A student's browser draws on a GPU. So the test
+# browser draws without MSAA (about half a frame's cost: 6.0 frames a second
+# against 3.3) and each page at most FRAME_CAP_HZ frames a second, like a slow
+# display: every change is still drawn, and the CPU left is the services'.
+FRAME_CAP_HZ = 5
 CHROMIUM_ARGS = [
     "--headless",
+    "--webgl-antialiasing-mode=none",
     "--no-sandbox",
     "--disable-gpu",
     "--disable-quic",
@@ -31,6 +42,38 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 VIEWPORT = {"width": 1280, "height": 800}  # a laptop screen
+
+# requestAnimationFrame callbacks run together at most FRAME_CAP_HZ times a second
+# (three.js's render loop and the page's own animations alike). Playwright's own
+# checks (visible, stable) run in an isolated world with the browser's own timer.
+FRAME_CAP_SCRIPT = """(() => {
+  const raf = window.requestAnimationFrame.bind(window);
+  const period = 1000 / HZ;
+  let queue = new Map(), nextId = 1, pending = false, last = 0;
+  const flush = t => {
+    pending = false; last = t;
+    const q = queue; queue = new Map();
+    for (const cb of q.values()) cb(t);
+  };
+  window.requestAnimationFrame = cb => {
+    const id = nextId++;
+    queue.set(id, cb);
+    if (!pending) {
+      pending = true;
+      setTimeout(() => raf(flush), Math.max(0, last + period - performance.now() - 8));
+    }
+    return id;
+  };
+  window.cancelAnimationFrame = id => { queue.delete(id); };
+})()""".replace("HZ", str(FRAME_CAP_HZ))
+
+
+def new_test_context(chromium: object, viewport: dict[str, int] | None = None) -> object:
+    """A browser context (own cookies and storage) whose pages draw at most FRAME_CAP_HZ."""
+    context = chromium.new_context(viewport=viewport or VIEWPORT)  # type: ignore[attr-defined]
+    context.add_init_script(FRAME_CAP_SCRIPT)  # type: ignore[attr-defined]
+    return context
+
 
 pytestmark = pytest.mark.browser
 
@@ -146,9 +189,9 @@ def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureReques
     contexts: list[object] = []
 
     def opener(tag: str = "a") -> ViserPage:
-        context = chromium.new_context(viewport=VIEWPORT)  # type: ignore[attr-defined]
+        context = new_test_context(chromium)
         contexts.append(context)
-        page = context.new_page()
+        page = context.new_page()  # type: ignore[attr-defined]
         page.goto(viewer.url.replace("localhost", "127.0.0.1"))
         vp = ViserPage(page, f"{request.node.name}-{tag}")
         vp.wait_ready()

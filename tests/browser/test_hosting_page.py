@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser.conftest import ViserPage
+from tests.browser.conftest import ViserPage, new_test_context
 from tests.lab import Lab
 
 pytestmark = [pytest.mark.browser, pytest.mark.smoke]
@@ -29,9 +29,9 @@ def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
 ) -> None:
     url = lab.wait_line("web viewer:").split("web viewer:")[1].strip()
     password = (lab.state_dir / "admin-password.txt").read_text().strip()
-    context = chromium.new_context(viewport={"width": 1280, "height": 900})  # type: ignore[attr-defined]
+    context = new_test_context(chromium, {"width": 1280, "height": 900})
     try:
-        page = context.new_page()
+        page = context.new_page()  # type: ignore[attr-defined]
         page.goto(url.replace("localhost", "127.0.0.1"))
         vp = ViserPage(page, request.node.name)
         vp.wait_ready()
