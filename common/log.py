@@ -99,7 +99,11 @@ _summary: RepeatSummary | None = None
 
 
 def setup_logging(level: str | None = None) -> RepeatSummary:
-    """Log to stderr as ``time level name: message``; WART_LOG_LEVEL or --log-level sets it."""
+    """Log to stderr as ``time level name: message``; WART_LOG_LEVEL or --log-level sets it.
+
+    WART_LOG_SUMMARY_S sets the summary window (default 10 s); tests shorten it
+    so a flood's summary line comes out without a 10-15 s wait.
+    """
     global _summary
     chosen = (level or os.environ.get("WART_LOG_LEVEL") or "INFO").upper()
     logging.basicConfig(
@@ -110,13 +114,22 @@ def setup_logging(level: str | None = None) -> RepeatSummary:
         force=True,
     )
     if _summary is None:
-        _summary = RepeatSummary()
+        _summary = RepeatSummary(window_s=_summary_window())
         threading.Thread(target=_flush_forever, args=(_summary,), daemon=True).start()
     for handler in logging.getLogger().handlers:
         handler.addFilter(_summary)
     # Zenoh's own Rust logs are noisy at info; show only its errors unless RUST_LOG says more.
     zenoh.init_log_from_env_or("error")
     return _summary
+
+
+def _summary_window() -> float:
+    raw = os.environ.get("WART_LOG_SUMMARY_S")
+    try:
+        window = float(raw) if raw else SUMMARY_WINDOW_S
+    except ValueError:
+        return SUMMARY_WINDOW_S
+    return window if 0.1 <= window <= 3600.0 else SUMMARY_WINDOW_S
 
 
 def _flush_forever(summary: RepeatSummary) -> None:

@@ -251,12 +251,17 @@ def zenoh_reason(exc: Exception | None) -> str:
 
 
 def open_session(
-    options: NetworkOptions, *, wait: float | None = None, quiet: bool = False
+    options: NetworkOptions,
+    *,
+    wait: float | None = None,
+    quiet: bool = False,
+    stop: threading.Event | None = None,
 ) -> zenoh.Session:
     """Open a Zenoh session, retrying while no router answers.
 
-    ``wait`` is how long to keep trying (None: until stopped by a signal);
+    ``wait`` is how long to keep trying (None: until ``stop`` is set);
     ``quiet`` skips the "waiting for a router" warning (a router just started).
+    Raises ConnectionError when ``wait`` runs out or ``stop`` is set.
     """
     conf_error: Exception | None = None
     delay = 0.2
@@ -279,7 +284,10 @@ def open_session(
                 zenoh_reason(conf_error),
             )
             announced = True
-        time.sleep(delay)
+        if stop is not None and stop.wait(delay):
+            raise ConnectionError("stopped while waiting for a Zenoh router")
+        if stop is None:
+            time.sleep(delay)
         delay = min(delay * 2, 2.0)
 
 
@@ -318,8 +326,12 @@ def run_service(
     signal.signal(signal.SIGTERM, on_signal)
 
     try:
-        session = open_session(options, wait=wait_for_router)
+        # with stop: SIGTERM while no router answers ends the wait (it looped on)
+        session = open_session(options, wait=wait_for_router, stop=stop)
     except ConnectionError as exc:
+        if stop.is_set():
+            log.info("%s stopped before a router answered", name)
+            return 0
         log.error("%s: %s", name, exc)
         return 2
     service: Service | None = None

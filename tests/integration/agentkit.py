@@ -40,7 +40,12 @@ def service_account(lab: Lab, account: str) -> Path:
 
 
 def start_engine(
-    lab: Lab, map_name: str = "foraging", *, identity: bool = False, world: str = WORLD
+    lab: Lab,
+    map_name: str = "foraging",
+    *,
+    identity: bool = False,
+    world: str = WORLD,
+    env: dict[str, str] | None = None,
 ) -> Proc:
     """The engine of ``world``; with ``identity`` it logs in as a service account (MAC leases)."""
     login: list[str] = []
@@ -64,6 +69,7 @@ def start_engine(
             *login,
             *lab.net_args(),
         ],
+        env=env,
     )
     lab.wait_alive(AliveKind.WORLD, world, proc)
     return proc

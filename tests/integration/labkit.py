@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from unittest import mock
 
 import zenoh
 
@@ -15,7 +17,8 @@ from common.client import LabClient
 from common.keys import AliveKind
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch
-from services.registry.accounts_db import RegistryDB
+from services.registry import accounts_db
+from services.registry.accounts_db import RegistryDB, hash_password
 from tests.conftest import Proc, Procs, Router
 
 PASSWORD = "correct horse"
@@ -113,14 +116,25 @@ class Lab:
         return open_session(self.router.options(), wait=10.0)
 
 
+@functools.cache
+def _password_hash(password: str) -> bytes:
+    """One argon2id hash of ``password`` per test session (about 0.2 s each on a busy machine).
+
+    A salted hash string verifies whichever account holds it, so every lab's
+    accounts can share it; make_lab otherwise hashed six passwords per test.
+    """
+    return hash_password(password)
+
+
 def make_lab(router: Router, procs: Procs, tmp: Path, *, users: dict[str, str] = USERS) -> Lab:
     state = tmp / "state"
     state.mkdir()
     identity, _ = RegistryIdentity.load_or_create(state / "registry.key")
     db = RegistryDB(state / "registry.db")
-    db.ensure_admin()
-    db.set_password("admin", PASSWORD)
-    for name, role in users.items():
-        db.add_user(name, [role], password=PASSWORD)
+    with mock.patch.object(accounts_db, "hash_password", _password_hash):
+        # the admin ensure_admin would make, with PASSWORD rather than a random one
+        db.add_user("admin", ["admin"], password=PASSWORD)
+        for name, role in users.items():
+            db.add_user(name, [role], password=PASSWORD)
     db.close()
     return Lab(router=router, procs=procs, state=state, identity=identity)

@@ -31,9 +31,9 @@ def test_queues_settings_and_the_running_slot_survive_a_kill(
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     start_engine(lab, identity=True)
-    # 30 s slots: alice's slot must outlast a kill and a restart, which on a busy
-    # machine (Python, numpy and Zenoh loading under load) takes several seconds.
+    started = time.monotonic()
     context = start_agent_context(lab, slot=30.0)
+    up_s = time.monotonic() - started
     with (
         lab.zsession() as z,
         agent_user(lab, "alice") as alice,
@@ -41,6 +41,13 @@ def test_queues_settings_and_the_running_slot_survive_a_kill(
         agent_user(lab, "ida") as ida,
     ):
         poses = Poses(z, lab.router.realm)
+        # alice's slot must outlast a kill and a restart (Python, numpy and Zenoh
+        # loading: several seconds on a busy machine) and the checks after it; its
+        # end is then waited for. Sized from how long the context took to come up
+        # just now (the restart costs about as much), rather than a fixed 30 s:
+        # 12 s on a quiet machine, up to 30 s on a very busy one.
+        slot = min(30.0, max(12.0, 8.0 + 5.0 * up_s))
+        ida.settings(slot_seconds=slot)  # alice's slot, the next one, is this long
         done: list[DriveResult] = []
         t = threading.Thread(target=lambda: done.append(alice.drive("k0", Forward())))
         t.start()
@@ -55,7 +62,10 @@ def test_queues_settings_and_the_running_slot_survive_a_kill(
         # the clients rejoin by themselves and see the restored queue
         wait_for(lambda: bob.position(waiting.request_id) is not None, 10, "bob's request back")
         whole = time.monotonic() - killed_at
-        print(f"agent context back {back:.2f} s, clients whole {whole:.2f} s after kill -9")
+        print(
+            f"agent context up in {up_s:.2f} s, slot {slot:.1f} s; back {back:.2f} s, "
+            f"clients whole {whole:.2f} s after kill -9"
+        )
         assert bob.position(waiting.request_id)[0] == 1
         assert alice.position_of_user("alice", "k0") == 0
         state = bob.state()

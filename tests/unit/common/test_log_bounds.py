@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from common.log import RepeatSummary, RotatingFile, pump
+from common.log import SUMMARY_WINDOW_S, RepeatSummary, RotatingFile, _summary_window, pump
 from common.supervisor import BACKOFF_FIRST, BACKOFF_MAX, next_backoff
 
 
@@ -20,6 +20,20 @@ class Collect(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         self.lines.append(record.getMessage())
+
+
+@pytest.mark.parametrize(
+    ("raw", "window"),
+    [(None, SUMMARY_WINDOW_S), ("2", 2.0), ("soon", SUMMARY_WINDOW_S), ("0", SUMMARY_WINDOW_S)],
+)
+def test_the_summary_window_comes_from_the_environment_or_the_default(
+    monkeypatch: pytest.MonkeyPatch, raw: str | None, window: float
+) -> None:
+    if raw is None:
+        monkeypatch.delenv("WART_LOG_SUMMARY_S", raising=False)
+    else:
+        monkeypatch.setenv("WART_LOG_SUMMARY_S", raw)
+    assert _summary_window() == window
 
 
 def test_a_repeated_warning_is_printed_a_few_times_then_counted() -> None:
