@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -46,7 +47,11 @@ class BenchLab:
                 cwd=REPO,
                 stdout=log,
                 stderr=subprocess.STDOUT,
-                env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "WART_LOG_LEVEL": "WARNING"},
+                env={
+                    "PYTHONPATH": str(REPO),
+                    "PATH": "/usr/bin:/bin",
+                    "WART_LOG_LEVEL": os.environ.get("WART_BENCH_LOG_LEVEL", "WARNING"),
+                },
             )
         )
         session = open_session(self.options, wait=20.0)

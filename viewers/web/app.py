@@ -34,6 +34,7 @@ from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
 from viewers.web.connector import RealConnector
 from viewers.web.pump import DEFAULT_RATE, FramePump
+from viewers.web.viser_fast import make_loop_safe
 
 log = logging.getLogger("wart.viewer")
 
@@ -95,6 +96,12 @@ class WebViewer:
 
     def _connected(self, client: viser.ClientHandle) -> None:
         limit_send_queue(self.server, client.client_id)
+        if not make_loop_safe(client):
+            log.warning(
+                "viser's message buffer is not the one we know: browser %d may "
+                "stall under load (viewers/web/viser_fast.py)",
+                client.client_id,
+            )
         session = BrowserSession(
             client, self.connector, self.saved, self.pump, self.default_address
         )

@@ -105,6 +105,55 @@ def _wake(buffers: list[Any]) -> None:
         buffer.message_event.set()
 
 
+class LoopSafeEvent(asyncio.Event):
+    """An asyncio.Event whose ``set()`` from another thread wakes its waiters in its loop.
+
+    viser 1.1.1's ``AsyncMessageBuffer.push`` calls ``message_event.set()`` from the
+    thread that queues the message (the pump, a Zenoh callback) "so the value can be
+    read at once". asyncio's Event is not thread-safe: that set resolves the loop's
+    waiting future from the wrong thread and iterates the waiters while the loop
+    changes them. Measured with 30 to 50 headless sessions per viewer on two viewer
+    processes: "deque mutated during iteration" in the pump's log, and one browser
+    that never received another message (its window generator waited on an event
+    already marked set, so no later set woke it): its login never showed. Here a set
+    from another thread marks the value at once, as viser wants, and hands the
+    waking to the loop.
+    """
+
+    _home: asyncio.AbstractEventLoop
+
+    def set(self) -> None:
+        try:
+            here = asyncio.get_running_loop()
+        except RuntimeError:
+            here = None
+        if here is self._home:
+            super().set()
+            return
+        self._value = True  # what viser reads synchronously
+        with contextlib.suppress(RuntimeError):  # the loop is closed: nobody waits
+            self._home.call_soon_threadsafe(self._set_in_loop)
+
+    def _set_in_loop(self) -> None:
+        self._value = False  # so asyncio's own set() wakes every waiter
+        super().set()
+
+
+def make_loop_safe(client: viser.ClientHandle) -> bool:
+    """Give the client's message buffer a :class:`LoopSafeEvent`; False if unreachable.
+
+    The event object is kept (its class changed, its waiters kept): viser's window
+    generator may already be waiting on it.
+    """
+    buffer = _buffer_of(client)
+    event = getattr(buffer, "message_event", None)
+    if buffer is None or type(event) is not asyncio.Event:
+        return isinstance(event, LoopSafeEvent)
+    event._home = buffer.event_loop  # type: ignore[attr-defined]
+    event.__class__ = LoopSafeEvent
+    return True
+
+
 def set_shared_arrays(handle: Any, arrays: dict[str, npt.NDArray[Any]]) -> None:
     """``handle.<prop> = array`` for each, with no copy, in ONE update message.
 
