@@ -73,7 +73,17 @@ async def _clients(
     gate = asyncio.Semaphore(10)  # a class logging in within a minute, ten at a time
     done = 0
 
+    failed: list[str] = []
+
     async def enter(i: int, client: ViserClient) -> None:
+        try:
+            await enter_once(i, client)
+        except (TimeoutError, ConnectionError, OSError) as exc:
+            # One student who cannot get in is a finding, not the end of the run.
+            failed.append(f"{client.name}: {exc}"[:300])
+            print(f"PROGRESS {client.name} could not get in: {exc}"[:300], flush=True)
+
+    async def enter_once(i: int, client: ViserClient) -> None:
         nonlocal done
         async with gate:
             # A slow reader's own kernel buffer is kept small (16 KiB): its link, not
@@ -84,8 +94,8 @@ async def _clients(
             else:
                 await client.connect()
             user, password = users[i % len(users)]
-            await client.log_in(user, password, timeout=300)
-            await client.join(arena, timeout=300)
+            await client.log_in(user, password, timeout=120)
+            await client.join(arena, timeout=120)
         done += 1
         if done % 10 == 0 or done == sessions:
             print(f"PROGRESS {done}/{sessions} headless sessions watch the arena", flush=True)
@@ -101,6 +111,11 @@ async def _clients(
             client.resume()
             await asyncio.sleep(0.05)
 
+    out = {f.split(":", 1)[0] for f in failed}
+    everyone = clients
+    clients = [c for c in everyone if c.name not in out]  # who got in is measured
+    slow = len([c for c in everyone[:slow] if c.name not in out])
+    sessions = len(clients)
     slowed = [asyncio.get_running_loop().create_task(slow_reader(c)) for c in clients[:slow]]
     print("READY", flush=True)
     await asyncio.get_running_loop().run_in_executor(None, sys.stdin.readline)  # GO
@@ -132,9 +147,10 @@ async def _clients(
         "errors": errors[:5],
         "sessions": sessions - slow,
         "slow": slow,
+        "failed": failed,
     }
     print("RESULT " + json.dumps(result), flush=True)
-    await asyncio.gather(*(c.close() for c in clients))
+    await asyncio.gather(*(c.close() for c in everyone))
 
 
 # -- the Chromium pages (a child process) ---------------------------------------------------
@@ -325,6 +341,7 @@ def _merge(results: list[dict[str, Any]]) -> dict[str, Any]:
         "mb": merged("mb"),
         "client_cpu": sum(r["client_cpu"] for r in results),
         "errors": [e for r in results for e in r["errors"]][:5],
+        "failed": [f for r in results for f in r.get("failed", [])],
     }
 
 
@@ -580,6 +597,8 @@ def run_real(args: argparse.Namespace, robots: int) -> None:
     )
     if head["errors"]:
         print(f"  client errors: {head['errors']}")
+    if head["failed"]:
+        print(f"  could not get in ({len(head['failed'])}): {head['failed'][:3]}")
     print(
         f"  load average before {load0[0]:.2f}, after {load1[0]:.2f}; {os.cpu_count()} CPUs",
         flush=True,
