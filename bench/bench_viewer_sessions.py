@@ -369,6 +369,32 @@ def _cpu_over(seconds: float) -> tuple[float, dict[str, float]]:
     return (time.process_time() - c0) / elapsed, top
 
 
+def _print_sessions(
+    args: argparse.Namespace, head: dict[str, Any], results: dict[str, dict[str, Any]]
+) -> None:
+    """What the class received: headless sessions, slow readers, Chromium pages, bytes."""
+    f, mb = head["frames"], head["mb"]
+    print(
+        f"  headless updates/s per session: min {f['min']:.1f} mean {f['mean']:.1f} "
+        f"max {f['max']:.1f}"
+    )
+    if args.slow:
+        s = head["slow_frames"]
+        print(
+            f"  slow readers ({args.slow}, reading every {args.slow_every} s): "
+            f"min {s['min']:.1f} mean {s['mean']:.1f} max {s['max']:.1f} updates/s"
+        )
+    if "chromium" in results:
+        cf, cm = results["chromium"]["frames"], results["chromium"]["mb"]
+        paint = results["chromium"]["paint_fps"]
+        print(
+            f"  Chromium updates/s per page: min {cf['min']:.1f} mean {cf['mean']:.1f} "
+            f"max {cf['max']:.1f}; {cm['mean']:.3f} MB/s per page; the page painted "
+            f"{paint['min']:.1f} to {paint['max']:.1f} animation frames/s"
+        )
+    print(f"  bytes per session: {mb['mean']:.3f} MB/s (min {mb['min']:.3f}, max {mb['max']:.3f})")
+
+
 def run_arena(args: argparse.Namespace, robots: int) -> None:
     from tests.conftest import free_port
     from viewers.web.app import WebViewer
@@ -422,30 +448,11 @@ def run_arena(args: argparse.Namespace, robots: int) -> None:
     load1 = os.getloadavg()
     head = results["headless"]
     per_session = 100 * (loaded - idle) / max(1, sessions)
-    f, mb = head["frames"], head["mb"]
     print(
         f"RESULTS arena of {robots} robots, {sessions} sessions, {args.seconds:.0f} s, "
         f"pump {args.rate:.0f} Hz, world {args.world_rate:.0f} Hz"
     )
-    print(
-        f"  headless updates/s per session: min {f['min']:.1f} mean {f['mean']:.1f} "
-        f"max {f['max']:.1f}"
-    )
-    if args.slow:
-        s = head["slow_frames"]
-        print(
-            f"  slow readers ({args.slow}, reading every {args.slow_every} s): "
-            f"min {s['min']:.1f} mean {s['mean']:.1f} max {s['max']:.1f} updates/s"
-        )
-    if "chromium" in results:
-        cf, cm = results["chromium"]["frames"], results["chromium"]["mb"]
-        paint = results["chromium"]["paint_fps"]
-        print(
-            f"  Chromium updates/s per page: min {cf['min']:.1f} mean {cf['mean']:.1f} "
-            f"max {cf['max']:.1f}; {cm['mean']:.3f} MB/s per page; the page painted "
-            f"{paint['min']:.1f} to {paint['max']:.1f} animation frames/s"
-        )
-    print(f"  bytes per session: {mb['mean']:.3f} MB/s (min {mb['min']:.3f}, max {mb['max']:.3f})")
+    _print_sessions(args, head, results)
     print(f"  server applied per view: min {min(applied):.1f} max {max(applied):.1f} frames/s")
     print(
         f"  viewer process CPU: {100 * loaded:.1f} % of a core with sessions, "
@@ -552,7 +559,6 @@ def run_real(args: argparse.Namespace, robots: int) -> None:
         lab.stop()
     load1 = os.getloadavg()
     head = _merge([r for n, r in results.items() if n.startswith("headless")])
-    f, mb = head["frames"], head["mb"]
     print(
         f"RESULTS real lab, arena of {robots} robots, {args.sessions} sessions over "
         f"{args.viewers} viewers, {args.seconds:.0f} s, pump {args.rate:.0f} Hz"
@@ -564,25 +570,7 @@ def run_real(args: argparse.Namespace, robots: int) -> None:
                 f"  {name}: {r['sessions']} sessions, min {fr['min']:.1f} "
                 f"mean {fr['mean']:.1f} max {fr['max']:.1f} updates/s"
             )
-    print(
-        f"  headless updates/s per session: min {f['min']:.1f} mean {f['mean']:.1f} "
-        f"max {f['max']:.1f}"
-    )
-    if args.slow:
-        s = head["slow_frames"]
-        print(
-            f"  slow readers ({args.slow}, reading every {args.slow_every} s): "
-            f"min {s['min']:.1f} mean {s['mean']:.1f} max {s['max']:.1f} updates/s"
-        )
-    if "chromium" in results:
-        cf, cm = results["chromium"]["frames"], results["chromium"]["mb"]
-        paint = results["chromium"]["paint_fps"]
-        print(
-            f"  Chromium updates/s per page: min {cf['min']:.1f} mean {cf['mean']:.1f} "
-            f"max {cf['max']:.1f}; {cm['mean']:.3f} MB/s per page; the page painted "
-            f"{paint['min']:.1f} to {paint['max']:.1f} animation frames/s"
-        )
-    print(f"  bytes per session: {mb['mean']:.3f} MB/s (min {mb['min']:.3f}, max {mb['max']:.3f})")
+    _print_sessions(args, head, results)
     sessions = args.sessions + args.browsers
     viewer_cpu = sum(v - idle[n] for n, v in loaded.items() if n.startswith("viewer"))
     for name in pids:
