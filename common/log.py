@@ -125,11 +125,21 @@ def setup_logging(level: str | None = None) -> RepeatSummary:
 
 def _summary_window() -> float:
     raw = os.environ.get("WART_LOG_SUMMARY_S")
-    try:
-        window = float(raw) if raw else SUMMARY_WINDOW_S
-    except ValueError:
+    if not raw:
         return SUMMARY_WINDOW_S
-    return window if 0.1 <= window <= 3600.0 else SUMMARY_WINDOW_S
+    try:
+        window = float(raw)
+    except ValueError:
+        window = float("nan")
+    if 0.1 <= window <= 3600.0:
+        return window
+    logging.getLogger("wart.log").warning(
+        "WART_LOG_SUMMARY_S=%r is not a number of seconds between 0.1 and 3600: "
+        "repeated lines are summarised every %g s",
+        raw,
+        SUMMARY_WINDOW_S,
+    )
+    return SUMMARY_WINDOW_S
 
 
 def _flush_forever(summary: RepeatSummary) -> None:

@@ -36,6 +36,15 @@ def test_the_summary_window_comes_from_the_environment_or_the_default(
     assert _summary_window() == window
 
 
+def test_a_bad_summary_window_is_said_in_the_log(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    monkeypatch.setenv("WART_LOG_SUMMARY_S", "ten")
+    with caplog.at_level(logging.WARNING, logger="wart.log"):
+        assert _summary_window() == SUMMARY_WINDOW_S
+    assert "WART_LOG_SUMMARY_S='ten' is not a number of seconds" in caplog.text
+
+
 def test_a_repeated_warning_is_printed_a_few_times_then_counted() -> None:
     summary = RepeatSummary(window_s=60.0, first=3)
     sink = Collect()
