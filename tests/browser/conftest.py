@@ -210,3 +210,31 @@ def wait_until(condition: Callable[[], bool], timeout: float = 10.0, what: str =
             return
         time.sleep(0.05)
     raise AssertionError(f"timed out waiting for {what or condition}")
+
+
+def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
+    """Wait until the page reports the top-down camera its world view aimed at the arena.
+
+    The page reports its camera back to the server; on a busy machine a report from
+    before the aim can arrive after it, and the server's copy is then viser's default
+    camera for a while (a projection from it put a robot at pixel row 2405 of 800).
+    """
+    from viewers.web import geometry as geo
+
+    snap = view.snapshot  # type: ignore[attr-defined]
+    assert snap is not None
+    aim = (snap.width * geo.MM / 2, snap.height * geo.MM / 2)
+
+    def aimed() -> bool:
+        try:
+            cam = view.client.camera  # type: ignore[attr-defined]
+            x, y, _ = cam.position
+            return (
+                abs(x - aim[0]) < 1e-3
+                and abs(y - aim[1]) < 1e-3
+                and abs(cam.fov - geo.CAMERA_FOV) < 1e-3
+            )
+        except AssertionError:  # the page has not reported its camera yet
+            return False
+
+    wait_until(aimed, timeout, what="the page's camera on the arena, top-down")

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_until
+from tests.browser.conftest import wait_for_aimed_camera, wait_until
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
@@ -44,6 +44,7 @@ def test_the_camera_follows_the_selected_robot(
     world = fake_lab.worlds["arena"]
     frame = world.produce(2.0)
     wait_until(lambda: view.last_seq == frame.seq, what="the test's frame in the view")
+    wait_for_aimed_camera(view)  # the height below is the aimed one, not a stale report
 
     reports: list[tuple[np.ndarray, np.ndarray]] = []
     lock = threading.Lock()

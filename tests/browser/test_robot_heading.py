@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_until
+from tests.browser.conftest import wait_for_aimed_camera, wait_until
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
@@ -61,26 +61,7 @@ def test_heading_arrow_is_drawn_in_its_own_colour(
     view = next(iter(viewer.sessions.values())).view
     frame = fake_lab.worlds["arena"].produce(2.0)
     wait_until(lambda: view.last_seq == frame.seq, what="the test's frame in the view")
-    # The view aims the page's camera top-down on the arena; the page reports its camera
-    # back, and on a busy machine a report from before the aim can arrive after it.
-    # Project only once the page says it looks where the view aimed it.
-    snap = view.snapshot
-    assert snap is not None
-    aim = (snap.width * geo.MM / 2, snap.height * geo.MM / 2)
-
-    def camera_aimed() -> bool:
-        try:
-            cam = view.client.camera
-            x, y, _ = cam.position
-            return (
-                abs(x - aim[0]) < 1e-3
-                and abs(y - aim[1]) < 1e-3
-                and (abs(cam.fov - geo.CAMERA_FOV) < 1e-3)
-            )
-        except AssertionError:  # the page has not reported its camera yet
-            return False
-
-    wait_until(camera_aimed, 30, what="the page's camera on the arena, top-down")
+    wait_for_aimed_camera(view)
 
     # What the server sends: one batched mesh of arrows beside the bodies, placed and
     # turned as the robots are, coloured by LED state rather than like the bodies.
