@@ -42,6 +42,7 @@ import signal
 import subprocess
 import tempfile
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -211,6 +212,9 @@ class Sandbox:
         self._stop_reason = ""
         self._exit_reason = ""
         self._done = threading.Event()
+        # When each step of its end happened (time.monotonic()): an end that
+        # came late says which step was slow.
+        self.timeline: dict[str, float] = {}
         self._kill_timer: threading.Timer | None = None
 
     # -- start
@@ -339,6 +343,7 @@ class Sandbox:
         finally:
             os.close(cmd_write)
             os.close(filter_read)
+        self.timeline["started"] = time.monotonic()
         assert self.process.stdin is not None
         os.set_blocking(self.process.stdin.fileno(), False)
         # The deadline first: nothing below can keep it from firing.
@@ -475,6 +480,7 @@ class Sandbox:
         proc = self.process
         assert proc is not None
         code = proc.wait()
+        self.timeline["exited"] = time.monotonic()
         if self._kill_timer is not None:
             self._kill_timer.cancel()
         if not self._exit_reason:
@@ -498,6 +504,7 @@ class Sandbox:
                 with contextlib.suppress(OSError):
                     proc.stdin.close()
         self._cleanup_files()
+        self.timeline["cleaned up"] = time.monotonic()
         self._done.set()
         try:
             self.on_exit(self._exit_reason)
@@ -516,6 +523,7 @@ class Sandbox:
                 return
             self._stopping = True
             self._stop_reason = reason
+        self.timeline["kill"] = time.monotonic()
         proc = self.process
         if proc is not None:
             threading.Thread(target=_kill_sandbox, args=(proc,), daemon=True).start()
@@ -532,6 +540,7 @@ class Sandbox:
                 return
             self._stopping = True
             self._stop_reason = reason
+        self.timeline["stop"] = time.monotonic()
         proc = self.process
         if proc is None:
             return
@@ -546,6 +555,7 @@ class Sandbox:
         except subprocess.TimeoutExpired:
             if not self._exit_reason:
                 self._exit_reason = reason
+            self.timeline["kill"] = time.monotonic()
             _kill_sandbox(proc)
         self._done.wait(5.0)
 
