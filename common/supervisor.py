@@ -215,6 +215,30 @@ class Supervisor:
         self.spawn(child)
         return self.wait_ready(child)
 
+    def start_together(self, specs: Sequence[ChildSpec]) -> list[tuple[Child, bool]]:
+        """Start children at once and wait until each is alive: their starts overlap.
+
+        Each child's ready line is said as it comes up; the result keeps the
+        order of ``specs``, with False for a child that did not come up in time.
+        """
+        children = [self.add(spec) for spec in specs]
+        for child in children:
+            self.spawn(child)
+        ready = [False] * len(children)
+
+        def wait(index: int) -> None:
+            ready[index] = self.wait_ready(children[index])
+
+        waiters = [
+            threading.Thread(target=wait, args=(i,), name=f"ready {c.spec.name}", daemon=True)
+            for i, c in enumerate(children)
+        ]
+        for waiter in waiters:
+            waiter.start()
+        for waiter in waiters:
+            waiter.join()
+        return list(zip(children, ready, strict=True))
+
     def wait_ready(self, child: Child) -> bool:
         spec = child.spec
         proc = child.process

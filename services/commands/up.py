@@ -35,7 +35,14 @@ from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkO
 from services.host.service import HostingPlan, HostingService
 from services.lab import wiring
 from services.lab.provision import provision_one_host
-from services.lab.wiring import SHIPPED_MAPS, Wiring, default_state_dir, host_accounts, host_plan
+from services.lab.wiring import (
+    SHIPPED_MAPS,
+    Wiring,
+    default_state_dir,
+    host_accounts,
+    host_plan,
+    host_waves,
+)
 
 log = logging.getLogger("wart.up")
 
@@ -180,6 +187,11 @@ def lab_plan(lab: LabSettings) -> list[ChildSpec]:
     return host_plan(local_wiring(lab), one_host_lab(lab.http_port))
 
 
+def lab_waves(lab: LabSettings) -> list[list[ChildSpec]]:
+    """The processes of the one-machine lab, in the waves they start in."""
+    return host_waves(local_wiring(lab), one_host_lab(lab.http_port))
+
+
 # The one machine is the whole lab: its operator chose to run it here, so the
 # CPU does not refuse an arena (a busy laptop would otherwise refuse them all);
 # count and free memory still do.
@@ -284,13 +296,14 @@ def run_lab(
             return 1
         # never report a previous run's URL
         local_wiring(lab).viewer_url_file().unlink(missing_ok=True)
-        for spec in lab_plan(lab):
+        for wave in lab_waves(lab):
             if stop.is_set():
                 break
-            if not supervisor.start(spec):
-                code = 1
-            elif spec.name == "viewer":
-                say(f"  web viewer: {viewer_url(lab) or '(address unknown)'}")
+            for child, up in supervisor.start_together(wave):
+                if not up:
+                    code = 1
+                elif child.spec.name == "viewer":
+                    say(f"  web viewer: {viewer_url(lab) or '(address unknown)'}")
         if not stop.is_set():
             # In this process (not a child): its spawned contexts are this
             # supervisor's children, restarted and stopped with the rest.

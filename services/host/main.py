@@ -32,6 +32,7 @@ from services.lab.plan import (
     HostContext,
     check_available,
     host_plan,
+    host_waves,
     read_registry_key,
     router_spec,
     write_configs,
@@ -130,15 +131,14 @@ def run_host(ctx: HostContext, stop: threading.Event) -> int:
             f"agent {s.params.get('context') or w}": w for w, s in engines.items()
         }
         arena_children: dict[str, list[Child]] = {}
-        for spec in host_plan(ctx):
+        for wave in host_waves(ctx):
             if stop.is_set():
                 break
-            child = supervisor.add(spec)
-            supervisor.spawn(child)
-            if not supervisor.wait_ready(child):
-                code = 1
-            if spec.name in arena_of:  # counted in the load reports
-                arena_children.setdefault(arena_of[spec.name], []).append(child)
+            for child, up in supervisor.start_together(wave):
+                if not up:
+                    code = 1
+                if child.spec.name in arena_of:  # counted in the load reports
+                    arena_children.setdefault(arena_of[child.spec.name], []).append(child)
         for world, children in arena_children.items():
             svc = engines[world]
             service.adopt(world, str(svc.params["map"]), children, int(svc.params.get("robots", 0)))

@@ -163,3 +163,8 @@ def resolve_map(lab: LabFile, name: str) -> Path:
 def host_plan(ctx: HostContext) -> list[ChildSpec]:
     """The host's own services in start order (the router is started first, separately)."""
     return wiring.host_plan(ctx.wiring(), ctx.host.services)
+
+
+def host_waves(ctx: HostContext) -> list[list[ChildSpec]]:
+    """The host's own services in the waves they start in (see ``wiring.host_waves``)."""
+    return wiring.host_waves(ctx.wiring(), ctx.host.services)

@@ -520,3 +520,18 @@ def host_plan(w: Wiring, services: Iterable[ServiceEntry]) -> list[ChildSpec]:
     for svc in sorted(services, key=lambda s: START_ORDER.get(s.kind, 5)):
         specs += service_specs(w, svc)
     return specs
+
+
+def host_waves(w: Wiring, services: Iterable[ServiceEntry]) -> list[list[ChildSpec]]:
+    """A host's services as waves started together, each once the one before serves.
+
+    The registry goes alone: every other service logs in to it. The rest
+    start at once, since each already waits for what it needs (a context for
+    its world and runner, a bridge for its serial port, the viewer for the
+    rooms): starting them one by one cost a lab's start 8 s on a quiet
+    machine, 15 s on a busy one.
+    """
+    ordered = sorted(services, key=lambda s: START_ORDER.get(s.kind, 5))
+    first = [spec for svc in ordered if svc.kind == "registry" for spec in service_specs(w, svc)]
+    rest = [spec for svc in ordered if svc.kind != "registry" for spec in service_specs(w, svc)]
+    return [wave for wave in (first, rest) if wave]
