@@ -342,6 +342,9 @@ def arena_specs(
             alive_key=keys.alive(w.realm, AliveKind.WORLD, world),
             detail=f"simulated world {world} ({map_path.name})"
             + (f", for {owner}" if owner else ""),
+            # The first start of a checkout compiles the kernels: 37 s at load
+            # 5 to 10 (25 s of CPU), over a minute on a busier machine.
+            ready_timeout=ENGINE_READY_TIMEOUT_S,
         )
     ]
     if w.arena.agent:
@@ -511,6 +514,8 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
 
 # Worlds before the contexts that lease their robots; the viewer, the front
 # door, once the rest serves.
+ENGINE_READY_TIMEOUT_S = 240.0
+
 START_ORDER = {"registry": 0, "chat": 1, "engine": 2, "bridge": 2, "runner": 3, "agent": 4}
 
 
