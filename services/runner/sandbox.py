@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import fcntl
 import functools
 import json
 import logging
@@ -145,25 +146,55 @@ def release_cpu_share(fraction: float) -> None:
 
 
 _uid_lock = threading.Lock()
-_uids_in_use: set[int] = set()
+_uid_claims: dict[int, int] = {}  # uid -> the open file whose lock claims it
 _UID_BASE = 61000
+_UID_COUNT = 1000
+
+
+def _uid_claim_dir() -> Path:
+    """Where the claims live: one lock file per uid, shared by every runner of the host."""
+    for base in (Path("/run/lock"), Path(tempfile.gettempdir())):
+        path = base / "wart-sandbox-uids"
+        try:
+            path.mkdir(mode=0o700, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(path, os.W_OK):
+            return path
+    raise OSError("no directory for the sandboxes' uid claims (/run/lock, the temp dir)")
 
 
 def _take_uid() -> int:
-    # A uid of its own per sandbox: RLIMIT_NPROC counts processes per uid, so a
-    # uid that still owns anything (even a zombie left by a crash) is skipped.
+    """A uid of its own for one sandbox, for as long as it runs.
+
+    RLIMIT_NPROC counts processes per uid, and a process may signal another
+    of its uid: two sandboxes must never share one, even from two runners of
+    the same host. So each claim is an flock on a file per uid (released by
+    the kernel if the runner dies), and a uid that still owns a process (a
+    zombie left by a crash) is skipped.
+    """
+    claims = _uid_claim_dir()
     busy = {p.info["uids"].real for p in psutil.process_iter(["uids"]) if p.info["uids"]}
     with _uid_lock:
-        uid = next(
-            u for u in range(_UID_BASE, _UID_BASE + 1000) if u not in _uids_in_use and u not in busy
-        )
-        _uids_in_use.add(uid)
-        return uid
+        for uid in range(_UID_BASE, _UID_BASE + _UID_COUNT):
+            if uid in busy or uid in _uid_claims:
+                continue
+            fd = os.open(claims / str(uid), os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:  # another runner's sandbox has it
+                os.close(fd)
+                continue
+            _uid_claims[uid] = fd
+            return uid
+    raise OSError(f"all {_UID_COUNT} sandbox uids from {_UID_BASE} are in use")
 
 
 def _give_uid(uid: int) -> None:
     with _uid_lock:
-        _uids_in_use.discard(uid)
+        fd = _uid_claims.pop(uid, None)
+    if fd is not None:
+        os.close(fd)  # closing drops the flock
 
 
 class Sandbox:
