@@ -30,7 +30,13 @@ from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
 from common.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, free_port
-from tests.integration.agentkit import CTX, start_agent_context, start_engine, start_runner
+from tests.integration.agentkit import (
+    CTX,
+    start_agent_context,
+    start_engine,
+    start_runner,
+    together,
+)
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
@@ -140,8 +146,7 @@ def real_lab(
         lab.start_registry()
         lab.start_room("lobby")
         if agents:
-            start_engine(lab, map_name, identity=True)
-            start_runner(lab)
+            together(lambda: start_engine(lab, map_name, identity=True), lambda: start_runner(lab))
             start_agent_context(lab, slot=slot)
         else:
             maps_dir = tmp / "maps"

@@ -7,7 +7,8 @@ import shutil
 import threading
 import time
 from collections import deque
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -73,6 +74,18 @@ def start_engine(
     )
     lab.wait_alive(AliveKind.WORLD, world, proc)
     return proc
+
+
+def together(*starts: Callable[[], Proc]) -> list[Proc]:
+    """Run start functions at once (each starts a process and waits for its token).
+
+    For processes that do not need each other (an engine and a runner): their
+    start-up, mostly imports and loading compiled kernels, overlaps. A start
+    that fails raises here, after the others have finished.
+    """
+    with ThreadPoolExecutor(len(starts), thread_name_prefix="start") as pool:
+        futures = [pool.submit(start) for start in starts]
+    return [future.result() for future in futures]
 
 
 def start_runner(lab: Lab, name: str = "runner") -> Proc:

@@ -19,6 +19,7 @@ from tests.integration.agentkit import (
     start_agent_context,
     start_engine,
     start_runner,
+    together,
 )
 from tests.integration.labkit import Lab, make_lab
 
@@ -37,8 +38,7 @@ class Forward(Controller):
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    start_engine(lab)
-    start_runner(lab)
+    together(lambda: start_engine(lab), lambda: start_runner(lab))
     start_agent_context(lab)
     yield lab
 

@@ -30,6 +30,7 @@ from tests.integration.agentkit import (
     start_agent_context,
     start_engine,
     start_runner,
+    together,
 )
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 
@@ -45,8 +46,7 @@ ROBOTS = ("k0", "k1", "k2", "k3")
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    start_engine(lab, identity=True)
-    start_runner(lab)
+    together(lambda: start_engine(lab, identity=True), lambda: start_runner(lab))
     start_agent_context(lab, slot=120.0)
     yield lab
 

@@ -20,6 +20,7 @@ from tests.integration.agentkit import (
     start_agent_context,
     start_engine,
     start_runner,
+    together,
 )
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 
@@ -46,8 +47,7 @@ RAISER = textwrap.dedent(
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    start_engine(lab, "maze")
-    start_runner(lab)
+    together(lambda: start_engine(lab, "maze"), lambda: start_runner(lab))
     start_agent_context(lab, "--keep-recordings", "2", slot=3.0)
     yield lab
 

@@ -24,7 +24,13 @@ from common.service import RequestError, close_session, open_session
 from services.runner.sandbox import sandbox_problem
 from services.runner.service import MAX_RUNS_PER_USER, RunnerService
 from tests.conftest import Procs, Router
-from tests.integration.agentkit import agent_user, start_agent_context, start_engine, start_runner
+from tests.integration.agentkit import (
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+    together,
+)
 from tests.integration.labkit import Lab, make_lab
 
 pytestmark = [
@@ -67,8 +73,7 @@ class Filler(Controller):
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    start_engine(lab)
-    lab.runner = start_runner(lab)  # type: ignore[attr-defined]
+    _, lab.runner = together(lambda: start_engine(lab), lambda: start_runner(lab))
     start_agent_context(lab, slot=SLOT)
     yield lab
 
