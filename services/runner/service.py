@@ -81,7 +81,8 @@ class Run:
     def __init__(self, runner: RunnerService, request: RunRequest, limits: SandboxLimits) -> None:
         self.runner = runner
         self.request = request
-        self.ended = threading.Event()
+        self.ended = threading.Event()  # the sandbox is gone: relaying stops
+        self.finished = threading.Event()  # its last output sent and the run forgotten
         self._lines: list[str] = []
         self._lines_lock = threading.Lock()
         self.link = ZenohRobotLink(
@@ -160,6 +161,7 @@ class Run:
             reason,
         )
         self.runner.forget(self.request.request_id)
+        self.finished.set()
 
     def stop(self, reason: str) -> None:
         threading.Thread(
@@ -203,10 +205,27 @@ class RunnerService(Service):
     def on_stop(self, timeout: float) -> None:
         with self._lock:
             runs = list(self._runs.values())
+        # All at once, against one deadline: one by one, each stop's kill and
+        # wait came after the one before, and on a busy machine the last run
+        # was still listed when the runner closed its channels.
         for run in runs:
-            run.sandbox.stop(grace=0.2, reason="the runner stopped")
+            threading.Thread(
+                target=run.sandbox.stop,
+                kwargs={"grace": 0.2, "reason": "the runner stopped"},
+                name=f"stop-{run.request.agent}",
+                daemon=True,
+            ).start()
+        deadline = time.monotonic() + timeout
         for run in runs:
-            run.ended.wait(max(0.1, timeout / max(1, len(runs))))
+            run.finished.wait(max(0.0, deadline - time.monotonic()))
+        left = [run.request.request_id for run in runs if not run.finished.is_set()]
+        if left:
+            self.log.warning(
+                "%d run(s) had not ended %.0f s after the stop: %s",
+                len(left),
+                timeout,
+                ", ".join(left),
+            )
         with self._channels_lock:
             channels, self._channels = list(self._channels.values()), {}
         for channel in channels:
