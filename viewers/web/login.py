@@ -50,16 +50,24 @@ class LoginForm:
         self.connector = connector
         self.address = address
         self.on_success = on_success
-        self.modal = client.gui.add_modal(f"Log in to {address.label}")
-        with self.modal:
-            client.gui.add_markdown(f"Lab at `{address.url(with_user=False)}`")
-            self.user = client.gui.add_text("User", address.user or "")
-            self.password = add_masked_text(client.gui, "Password")
-            self.error = client.gui.add_markdown("", visible=False)
-            self.submit = client.gui.add_button("Log in", color="green")
-            self.cancel = client.gui.add_button("Cancel")
-        self.submit.on_click(lambda _: self.attempt())
-        self.cancel.on_click(lambda _: self.close())
+        self.closed = False
+        # Held back until the handlers below are registered: viser sends each button
+        # as it is made, and a click that reaches the viewer before its handler is
+        # dropped without a trace. On a loaded viewer the thread building the form can
+        # wait for the GIL long enough for a quick browser to click "Log in" in between
+        # (seen: 1 to 2 of 100 headless logins at load 11 to 17); that student's form
+        # then stayed on screen with no answer, for good.
+        with client.atomic():
+            self.modal = client.gui.add_modal(f"Log in to {address.label}")
+            with self.modal:
+                client.gui.add_markdown(f"Lab at `{address.url(with_user=False)}`")
+                self.user = client.gui.add_text("User", address.user or "")
+                self.password = add_masked_text(client.gui, "Password")
+                self.error = client.gui.add_markdown("", visible=False)
+                self.submit = client.gui.add_button("Log in", color="green")
+                self.cancel = client.gui.add_button("Cancel")
+            self.submit.on_click(lambda _: self.attempt())
+            self.cancel.on_click(lambda _: self.close())
 
     def show_error(self, text: str) -> None:
         self.error.content = f"**{text}**"
@@ -92,4 +100,5 @@ class LoginForm:
         return True
 
     def close(self) -> None:
+        self.closed = True
         self.modal.close()
