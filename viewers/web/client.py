@@ -16,7 +16,7 @@ from viewers.web.address import AddressError, LabAddress, SavedConnections, comp
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
-from viewers.web.login import LoginForm
+from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.pump import FramePump
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
@@ -38,8 +38,10 @@ class BrowserSession:
         saved: SavedConnections,
         pump: FramePump,
         default_address: LabAddress,
+        logins: LoginDesk,
     ) -> None:
         self.client = client
+        self.logins = logins
         self.connector = connector
         self.saved = saved
         self.pump = pump
@@ -139,7 +141,11 @@ class BrowserSession:
                 return
             login.close()
         self.login = LoginForm(
-            self.client, self.connector, address, lambda conn: self._logged_in(conn, address)
+            self.client,
+            self.connector,
+            address,
+            lambda conn: self._logged_in(conn, address),
+            self.logins,
         )
 
     def _logged_in(self, connection: LabConnection, address: LabAddress) -> None:
