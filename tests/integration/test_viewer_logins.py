@@ -16,11 +16,14 @@ import asyncio
 import contextlib
 import os
 import signal
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
+import viser
 import zenoh
 
 from common.service import close_session, open_session
@@ -30,6 +33,7 @@ from tests.viser_client import ViserClient, run_in_thread
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
 from viewers.web.connector import RealConnector
+from viewers.web.demo_lab import DemoConnector, DemoLab
 from viewers.web.login import LoginDesk
 
 pytestmark = pytest.mark.integration
@@ -186,3 +190,52 @@ def test_a_stopped_registry_is_said_and_the_retry_after_its_restart_gets_in(
 
     vlab.lab.start_registry()  # returns once its liveliness token is seen
     assert run_in_thread(_log_in_once(vlab.url, "bob")) == "in"
+
+
+# -- a click the moment the button shows (the race behind "the form stayed, no answer")
+
+HOLD_S = 3.0  # how long the form's thread is held, unless the click comes first
+
+
+@pytest.fixture
+def demo_viewer(tmp_path: Path) -> Iterator[WebViewer]:
+    lab = DemoLab("Test lab", robots=3)
+    viewer = WebViewer(DemoConnector(("lab", lab)), port=free_port(), data_dir=tmp_path / "viewer")
+    try:
+        yield viewer
+    finally:
+        viewer.stop()
+        lab.close()
+
+
+def test_a_click_the_moment_log_in_shows_is_answered(
+    demo_viewer: WebViewer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a loaded viewer the thread building the form can lose the GIL between making
+    the "Log in" button and registering its handler, and a quick browser clicks in
+    between. Here that thread is held there on purpose, until the viewer has handled a
+    click on the button (or HOLD_S, if the browser cannot see the button yet). Before
+    the fix the click was dropped and the form stayed with no answer."""
+    register = viser.GuiButtonHandle.on_click
+
+    def late_on_click(handle: Any, func: Any) -> Any:
+        if handle.label == "Log in":
+            clicked_before = handle.update_timestamp
+            deadline = time.monotonic() + HOLD_S
+            while handle.update_timestamp == clicked_before and time.monotonic() < deadline:
+                time.sleep(0.01)  # the builder starved of the GIL, as under load
+        return register(handle, func)
+
+    monkeypatch.setattr(viser.GuiButtonHandle, "on_click", late_on_click)
+
+    async def quick_student() -> str:
+        client = ViserClient(f"ws://127.0.0.1:{demo_viewer.port}", "quick")
+        try:
+            await client.connect()
+            with contextlib.suppress(ConnectionError, TimeoutError):
+                await client.log_in("ana", "ana-pw", timeout=HOLD_S + 30.0)
+            return answer(client)
+        finally:
+            await client.close()
+
+    assert run_in_thread(quick_student()) == "in"
