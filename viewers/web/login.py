@@ -237,7 +237,11 @@ class LoginForm:
             return
         except (OSError, TimeoutError) as exc:
             log.info("login to %s failed: %s", self.address.label, exc)
-            self._answered(f"Could not reach the lab at {self.address.label}.", clicked)
+            self._answered(
+                f"Could not reach the lab at {self.address.label}: check the address, "
+                "or try again in a minute.",
+                clicked,
+            )
             return
         except Exception:
             log.exception("login of %s to %s", user, self.address.label)
@@ -250,9 +254,20 @@ class LoginForm:
             self.address.label,
             time.monotonic() - clicked,
         )
-        self.close()
-        self._busy.release()
-        self.on_success(connection)
+        try:
+            self.close()
+        finally:
+            self._busy.release()
+        try:
+            self.on_success(connection)
+        except Exception:
+            # In, but the lab's tab could not be built: say so rather than show nothing.
+            log.exception("opening %s's tab for %s", self.address.label, user)
+            self.client.add_notification(
+                title=f"Logged in, but {self.address.label}'s tab could not open",
+                body="Reload the page and log in again; if it happens again, tell the staff.",
+                color="red",
+            )
 
     def _answered(self, text: str, clicked: float) -> None:
         log.info(
@@ -262,9 +277,11 @@ class LoginForm:
             time.monotonic() - clicked,
             text,
         )
-        self.show_error(text)
-        self.submit.disabled = False
-        self._busy.release()
+        try:
+            self.show_error(text)
+            self.submit.disabled = False
+        finally:
+            self._busy.release()  # whatever happened to the page, the next click is heard
 
     def close(self) -> None:
         self.closed = True
