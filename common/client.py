@@ -291,12 +291,26 @@ class LabClient(RegistryAdminCalls):
             raise NotLoggedIn("not logged in")
         return self.session.user
 
-    def login(self, user: str, password: str, *, ttl: float = 12 * 3600.0) -> SessionToken:
-        """Log in with a password; raises WrongCredentials, RateLimited, RegistryUnreachable..."""
+    def login(
+        self,
+        user: str,
+        password: str,
+        *,
+        ttl: float = 12 * 3600.0,
+        wait: float | None = None,
+    ) -> SessionToken:
+        """Log in with a password; raises WrongCredentials, RateLimited, RegistryUnreachable...
+
+        ``wait``: how long to wait for the registry's answer (default: LOGIN_WAIT_S, or
+        this client's timeout if longer); a gateway that must answer its user sooner
+        passes less.
+        """
         keys.check_ident("user", user)
+        if wait is not None and not wait > 0:
+            raise ValueError(f"a login must wait a positive time, not {wait}")
         mailbox = mailbox_key_from_password(self.realm, user, password)
         return self._login(
-            PasswordCredential(user=user, password=password), mailbox, SessionKeys(), ttl
+            PasswordCredential(user=user, password=password), mailbox, SessionKeys(), ttl, wait
         )
 
     def login_with_key(
@@ -326,6 +340,7 @@ class LabClient(RegistryAdminCalls):
         mailbox: nacl.public.PrivateKey,
         session_keys: SessionKeys,
         ttl: float,
+        wait: float | None = None,
     ) -> SessionToken:
         request = LoginRequest(
             realm=self.realm,
@@ -347,7 +362,7 @@ class LabClient(RegistryAdminCalls):
         if early:
             self._declare_inbox(cred.user)
         try:
-            return self._login_reply(key, sealed, session_keys, mailbox)
+            return self._login_reply(key, sealed, session_keys, mailbox, wait)
         except BaseException:
             if early:
                 self._undeclare()
@@ -359,12 +374,13 @@ class LabClient(RegistryAdminCalls):
         sealed: bytes,
         session_keys: SessionKeys,
         mailbox: nacl.public.PrivateKey,
+        wait: float | None,
     ) -> SessionToken:
         answers = self._get(
             key,
             encode(SealedLogin(sealed=sealed)),
             "login",
-            max(self.timeout, LOGIN_WAIT_S),
+            wait if wait is not None else max(self.timeout, LOGIN_WAIT_S),
             declare_source=True,
         )
         if not answers:

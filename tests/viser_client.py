@@ -349,6 +349,12 @@ class ViserClient:
         await self.click_until("Connect", lambda: self.find("User", "GuiTextMessage"), timeout)
         await self.type_into("User", user, timeout)
         await self.type_into("Password", password, timeout)
+        # A retry: the last answer is still on the form; wait for this attempt's own.
+        # (The viewer sends the new answer even when its words are the same: the form
+        # shows "Logging in..." in between.)
+        for element in self.gui.values():
+            if "Could not" in str(element.props.get("_markdown", "")):
+                element.props["_markdown"] = ""
         await self.click("Log in", timeout)
         await self.wait_for(
             lambda: (

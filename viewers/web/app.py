@@ -33,6 +33,7 @@ from viewers.web.adapters import LabConnector
 from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
 from viewers.web.connector import RealConnector
+from viewers.web.login import LoginDesk
 from viewers.web.pump import DEFAULT_RATE, FramePump
 from viewers.web.viser_fast import make_loop_safe
 
@@ -65,11 +66,14 @@ class WebViewer:
         data_dir: Path | None = None,
         rate: float = DEFAULT_RATE,
         label: str = "WART lab",
+        logins: LoginDesk | None = None,
     ) -> None:
         self.connector = connector
         self.default_address = default_address or LabAddress("127.0.0.1")
         self.saved = SavedConnections(data_dir / "connections.json" if data_dir else None)
         self.pump = FramePump(rate)
+        # Logins run on these threads, never on viser's callback threads (login.py).
+        self.logins = logins or LoginDesk()
         self.sessions: dict[int, BrowserSession] = {}
         self._lock = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label=label, verbose=False)
@@ -103,7 +107,7 @@ class WebViewer:
                 client.client_id,
             )
         session = BrowserSession(
-            client, self.connector, self.saved, self.pump, self.default_address
+            client, self.connector, self.saved, self.pump, self.default_address, self.logins
         )
         with self._lock:
             self.sessions[client.client_id] = session
@@ -128,6 +132,7 @@ class WebViewer:
 
     def stop(self) -> None:
         self.pump.stop()
+        self.logins.close()
         with self._lock:
             sessions = list(self.sessions.values())
             self.sessions.clear()

@@ -16,7 +16,7 @@ from viewers.web.address import AddressError, LabAddress, SavedConnections, comp
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
-from viewers.web.login import LoginForm
+from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.pump import FramePump
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
@@ -38,8 +38,10 @@ class BrowserSession:
         saved: SavedConnections,
         pump: FramePump,
         default_address: LabAddress,
+        logins: LoginDesk,
     ) -> None:
         self.client = client
+        self.logins = logins
         self.connector = connector
         self.saved = saved
         self.pump = pump
@@ -50,6 +52,14 @@ class BrowserSession:
         self._lock = threading.RLock()
         self.closed = False
         gui = client.gui
+        # The page reaches the browser once its handlers are registered (see LoginForm).
+        with client.atomic():
+            self._build(gui, default_address)
+        self.view = WorldView(client)
+        pump.attach(self.view)
+        self._refresh_recent()
+
+    def _build(self, gui: viser.GuiApi, default_address: LabAddress) -> None:
         add_label_fixer(gui)  # every labelled input gets its accessible name (labels.py)
         self.address = gui.add_text(
             "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
@@ -67,9 +77,6 @@ class BrowserSession:
         self.save_button.on_click(lambda _: self.save_address())
         self.recent.on_update(lambda _: self._recent_chosen())
         self.address.on_update(lambda _: self._complete())
-        self.view = WorldView(client)
-        pump.attach(self.view)
-        self._refresh_recent()
 
     # -- address bar
 
@@ -127,10 +134,18 @@ class BrowserSession:
             else:
                 self.say_notice(f"You are already connected to {address.label}.")
             return
-        if self.login is not None:
-            self.login.close()
+        login = self.login
+        if login is not None and not login.closed:
+            if login.address.lab_key == address.lab_key:
+                # A second click on a slow page: the form being typed into stays.
+                return
+            login.close()
         self.login = LoginForm(
-            self.client, self.connector, address, lambda conn: self._logged_in(conn, address)
+            self.client,
+            self.connector,
+            address,
+            lambda conn: self._logged_in(conn, address),
+            self.logins,
         )
 
     def _logged_in(self, connection: LabConnection, address: LabAddress) -> None:

@@ -15,7 +15,7 @@ import zenoh
 
 from common import client as lab
 from common import lab_errors
-from common.auth import parse_public_key
+from common.auth import LOGIN_WAIT_S, parse_public_key
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
@@ -42,6 +42,7 @@ class RealConnector:
         *,
         data_dir: Path | None = None,
         timeout: float = QUERY_TIMEOUT,
+        login_wait: float = LOGIN_WAIT_S,
     ) -> None:
         if isinstance(own_registry_key, str):
             own_registry_key = parse_public_key(own_registry_key)
@@ -49,6 +50,9 @@ class RealConnector:
         self.own_registry_key = own_registry_key
         self.labs_path = data_dir / LABS_FILE if data_dir else None
         self.timeout = timeout
+        if not login_wait > 0:
+            raise ValueError(f"login_wait must be positive, not {login_wait}")
+        self.login_wait = login_wait  # how long a login waits for the registry's answer
         self._own_session = own_session
         self._links: dict[tuple[str, int, str], LabLink] = {}
         self._lock = threading.Lock()
@@ -118,7 +122,7 @@ class RealConnector:
             link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
         )
         try:
-            client.login(user, password)
+            client.login(user, password, wait=self.login_wait)
         except lab_errors.WrongCredentials:
             self._unlink(link)
             raise LoginError("wrong user name or password") from None
@@ -131,8 +135,14 @@ class RealConnector:
         except lab_errors.RegistryUnreachable:
             self._unlink(link)
             raise LoginError(
-                f"the lab's registry at {address.label} does not answer (is the lab running?)"
+                f"the lab's registry at {address.label} does not answer: it is down or "
+                "overloaded. Try again in a minute; if it keeps failing, tell the lab's staff."
             ) from None
+        except lab_errors.RateLimited as exc:
+            self._unlink(link)
+            # The registry's own words: busy (a queue full of logins) or slowing
+            # repeated failures ("try again in 8 s"); both say what to do.
+            raise LoginError(f"the lab's registry says: {exc}") from None
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None
