@@ -180,21 +180,21 @@ def run_ours(n: int, sim_seconds: float, drive: str) -> float:
     return steps * world.tick_s / (time.process_time() - cpu0)
 
 
-def _sizes(text: str) -> int:
+def robot_count(text: str) -> int:
     n = int(text)
     if not 1 <= n <= MAX_N:
         raise argparse.ArgumentTypeError(f"a size must be between 1 and {MAX_N}, not {n}")
     return n
 
 
-def _seconds(text: str) -> float:
+def positive_seconds(text: str) -> float:
     s = float(text)
     if not 0 < s <= MAX_SIM_SECONDS:  # also refuses nan
         raise argparse.ArgumentTypeError(f"must be above 0 and at most {MAX_SIM_SECONDS:g}")
     return s
 
 
-def _repeats(text: str) -> int:
+def rounds(text: str) -> int:
     r = int(text)
     if not 1 <= r <= MAX_REPEATS:
         raise argparse.ArgumentTypeError(f"must be between 1 and {MAX_REPEATS}, not {r}")
@@ -205,14 +205,27 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="bench.bench_enki", description=__doc__, formatter_class=argparse.RawTextHelpFormatter
     )
-    p.add_argument("--sizes", type=_sizes, nargs="+", default=[10, 35, 100, 1000, 3000])
+    # The converters' names appear in argparse's messages ("invalid robot_count value").
     p.add_argument(
-        "--sim-seconds", type=_seconds, default=2.0, help=f"simulated seconds below N = {SWARM_N}"
+        "--sizes",
+        type=robot_count,
+        nargs="+",
+        default=[10, 35, 100, 1000, 3000],
+        help=f"robot counts, each 1 to {MAX_N}",
     )
     p.add_argument(
-        "--swarm-seconds", type=_seconds, default=0.5, help=f"simulated seconds from N = {SWARM_N}"
+        "--sim-seconds",
+        type=positive_seconds,
+        default=2.0,
+        help=f"simulated seconds below N = {SWARM_N}",
     )
-    p.add_argument("--repeats", type=_repeats, default=3, help="A/B rounds per size")
+    p.add_argument(
+        "--swarm-seconds",
+        type=positive_seconds,
+        default=0.5,
+        help=f"simulated seconds from N = {SWARM_N}",
+    )
+    p.add_argument("--repeats", type=rounds, default=3, help="A/B rounds per size")
     p.add_argument(
         "--drives",
         nargs="+",
