@@ -49,15 +49,22 @@ def build(
     physics_threads: int = 1,
     gripper: bool = True,
     drive: str = "joints",
+    sensor_period_s: float = 0.02,
+    lamp: bool = True,
 ) -> World:
-    """A square arena sized so robots cover about 10 % of the floor, with a few pillars."""
+    """A square arena sized so robots cover about 10 % of the floor, with a few pillars.
+
+    ``sensor_period_s`` and ``lamp`` are for bench/bench_enki.py: Enki refreshes
+    its IR sensors every step and has no lights, so its scenario is this one with
+    10 ms sensing and no lamp.
+    """
     side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
     world = World(
         side,
         side,
         seed=seed,
         tick_s=0.01,
-        sensor_period_s=0.02,
+        sensor_period_s=sensor_period_s,
         threads=threads,
         physics_threads=physics_threads,
         drive=drive,
@@ -96,7 +103,8 @@ def build(
         taken.setdefault((ix, iy), []).append((float(x), float(y)))
         placed += 1
     world.finish_agents()
-    world.add_light("lamp", side / 2, side / 2, radius_mm=side / 3)
+    if lamp:
+        world.add_light("lamp", side / 2, side / 2, radius_mm=side / 3)
     return world
 
 

@@ -80,6 +80,20 @@ def test_ir_rises_along_the_curve_as_a_wall_approaches() -> None:
     assert world.proximity[0, 0] < 15 and world.proximity[0, 5] < 15
 
 
+def test_a_wall_at_the_edge_of_the_ir_range_is_still_seen() -> None:
+    """The sensing kernel skips static edges beyond a robot's reach: never one a ray reads."""
+    world = World(1000.0, 1000.0, seed=3)
+    world.add_obstacle("wall", ShapeSpec.box(20.0, 600.0), 700.0, 500.0)  # face at x = 690
+    world.add_agent("k1", KHEPERA, 500.0, 500.0, 0.0)
+    for distance in (40.0, 44.0, 47.0):  # from the front sensors; the curve ends at 50 mm
+        world.move("k1", 690.0 - 25.0 - distance, 500.0, 0.0)
+        world.sense()
+        front = world.proximity[0, 2:4]
+        expected = float(PROXIMITY_CURVE(np.array([distance]))[0])
+        assert front.mean() == pytest.approx(expected, abs=8), (distance, front)
+        assert front.max() > 0, (distance, front)
+
+
 def test_ambient_falls_near_a_light_and_returns_to_dark_when_occluded() -> None:
     world = World(2000.0, 1000.0, seed=5)
     world.add_light("lamp", 1000.0, 500.0, intensity=1.0, radius_mm=400.0)
