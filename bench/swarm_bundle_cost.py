@@ -17,7 +17,12 @@ over the batches are printed:
 - *world, per-item*: decode the CommandBundle, ``LeaseBook.check_bundle``;
 - *world, arrays*: decode the MacCommandBundle, ``LeaseBook.check_mac_bundle``;
 - the plain peer's world for scale: decode a CommandBundle of plain
-  AgentCommands and each command (what bench/plain_peer.py does).
+  AgentCommands and each command (what bench/plain_peer.py does);
+- the whole client tick, ours: a SampleBundle handed to the channel's
+  subscriber callback, the bench's swarm reaction (``on_swarm``: echo each
+  sample's time in counters), the MacCommandBundle put; and the peer's
+  (bench/plain_peer.py's inline callback: decode, ``answer`` each sample,
+  one CommandBundle put).
 
     PYTHONPATH=. .venv/bin/python -m bench.swarm_bundle_cost [--robots 20] [--batches 15]
 """
@@ -31,6 +36,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import msgspec
+
+from bench.plain_peer import answer
 from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.leasemac import WorldBoxKeys, new_lease_key, seal_key
@@ -41,6 +49,7 @@ from common.messages import (
     CommandBundle,
     Lease,
     MacCommandBundle,
+    SampleBundle,
     SensorSample,
     decode,
     encode,
@@ -206,6 +215,40 @@ def main() -> int:
                 if command.agent == item.agent:
                     obey(item.agent, command)
 
+    samples_in = encode(
+        SampleBundle(
+            world=WORLD, tick=1, agents=agents, samples=[msgspec.Raw(encode(x)) for x in samples]
+        )
+    )
+    on_samples = zs.callbacks[keys.world_samples(REALM, WORLD)]
+
+    def react(tick: SwarmTick) -> None:  # bench_control_latency's --swarm reaction
+        for agent, x in zip(tick.agents, tick.samples, strict=True):
+            tick.send(agent, counters=(round(x.sim_time * 1000), 0))
+
+    channel.on_swarm(react)
+    mine = set(agents)
+    peer_pub = _Publisher()
+
+    def client_ours() -> None:
+        for _ in range(ticks):
+            on_samples(_Sample(samples_in))
+        pub.puts.clear()
+
+    def client_peer() -> None:  # plain_peer.controllers' on_bundle, --inline
+        for _ in range(ticks):
+            bundle = decode(samples_in, SampleBundle)
+            if bundle.world != WORLD or len(bundle.agents) != len(bundle.samples):
+                continue
+            items = [
+                item
+                for agent, raw in zip(bundle.agents, bundle.samples, strict=True)
+                if agent in mine and (item := answer(agent, bytes(raw))) is not None
+            ]
+            if items:
+                peer_pub.put(encode(CommandBundle(commands=items)))
+        peer_pub.puts.clear()
+
     def timed(fn: Callable[[], Any]) -> tuple[float, Any]:
         start = time.thread_time()
         out = fn()
@@ -215,6 +258,8 @@ def main() -> int:
         k: [] for k in ("sender per-item", "sender arrays", "world per-item", "world arrays")
     }
     figures["peer's world"] = []
+    figures["client tick, ours"] = []
+    figures["client, peer's"] = []
     sizes = {}
     for _ in range(args.batches):
         us, old = timed(lambda: [send_per_item() for _ in range(ticks)])
@@ -229,6 +274,10 @@ def main() -> int:
         figures["world arrays"].append(us)
         us, _ = timed(lambda: world_plain(plain))
         figures["peer's world"].append(us)
+        us, _ = timed(client_ours)
+        figures["client tick, ours"].append(us)
+        us, _ = timed(client_peer)
+        figures["client, peer's"].append(us)
         if len(obeyed) != 3 * n * ticks:
             raise RuntimeError(f"{3 * n * ticks - len(obeyed)} commands refused: {book.stopped}")
     print(
@@ -236,7 +285,7 @@ def main() -> int:
         "CPU (thread_time) per tick, median over batches (best):"
     )
     for name, values in figures.items():
-        print(f"  {name:<16} {statistics.median(values):7.1f} µs  ({min(values):.1f})")
+        print(f"  {name:<18} {statistics.median(values):7.1f} µs  ({min(values):.1f})")
     print(
         f"  bytes a tick: CommandBundle of MacCommands {sizes['per-item']}, MacCommandBundle "
         f"{sizes['arrays']}, the peer's CommandBundle of AgentCommands {sizes['plain']}"
