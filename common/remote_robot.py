@@ -164,6 +164,9 @@ class _MacLease:
         self.end = 0.0
 
 
+_pack_item = MAC_ITEM_STRUCT.pack  # 50 times a second per robot: one lookup less
+
+
 def _check_pair(name: str, pair: tuple[int, int], bound: int) -> None:
     """ValueError unless ``pair`` is a tuple of two ints (not bools) within ±``bound``."""
     if type(pair) is tuple and len(pair) == 2:
@@ -231,10 +234,14 @@ class SwarmTick:
         a bug shows in the controller, not as a refusal in the world's log);
         False if no link of this channel drives ``agent`` (or it is closed).
         """
+        flags, left, right, a, b = 0, 0, 0, 0, 0
         if speeds is not None:
             _check_pair("speeds", speeds, MAX_SPEED)
+            flags, (left, right) = MAC_ITEM_SPEEDS, speeds
         if counters is not None:
             _check_pair("counters", counters, COUNTER_LIMIT)
+            flags |= MAC_ITEM_COUNTERS
+            a, b = counters
         link = self._links.get(agent)
         if link is None or link._closed.is_set():
             return False
@@ -245,14 +252,7 @@ class SwarmTick:
             if lease is not None and lease.session_id == session.session_id and now <= lease.end:
                 # Under its MAC lease: one 29-byte record and its MAC, for the tick's
                 # MacCommandBundle (no AgentCommand or MacCommand encoded per robot).
-                record = MAC_ITEM_STRUCT.pack(
-                    session.next_seq(),
-                    now,
-                    (0 if speeds is None else MAC_ITEM_SPEEDS)
-                    | (0 if counters is None else MAC_ITEM_COUNTERS),
-                    *(speeds or (0, 0)),
-                    *(counters or (0, 0)),
-                )
+                record = _pack_item(session.next_seq(), now, flags, left, right, a, b)
                 self._item_agents.append(agent)
                 self._items.append(record)
                 self._macs.append(lease.mac.item_tag(record))
