@@ -220,7 +220,13 @@ def test_one_array_bundle_moves_the_robot_of_its_good_item_and_none_of_its_bad_o
         k2 = keys.agent_cmd(realm, WORLD, "k2")
         bobs = CommandMac(arena.grant("k2", bob), k2, "L-k2")
         alice_on_k2 = CommandMac(arena.leases["k1"][1], k2, "L-k1")
-        wait_for(lambda: arena.engine.leases.has_mac_key("k2"), 10, "the leases at the engine")
+        # Both keys in before the first bundle: an item refused only for want of its key
+        # would be obeyed when put again below (its seq never entered the window).
+        wait_for(
+            lambda: all(arena.engine.leases.has_mac_key(a) for a in ("k1", "k2")),
+            10,
+            "the leases at the engine",
+        )
         start = arena.xs()
         sent: list[bytes] = []
         seq = 0
