@@ -509,3 +509,19 @@ def test_a_mac_bundle_whose_lengths_disagree_is_refused_whole(s: Setup) -> None:
         lambda a, c: obeyed.append(a),
     )
     assert obeyed == [AGENT]
+
+
+def test_a_world_that_cannot_obey_one_item_of_a_mac_bundle_still_obeys_the_others(
+    s: Setup,
+) -> None:
+    alice, bob, _ = two_holders(s)
+    obeyed: list[str] = []
+
+    def bridge_without_k1(agent: str, _command: AgentCommand) -> None:
+        if agent == AGENT:
+            raise AuthError("not_found", f"no robot {agent} on this bridge")
+        obeyed.append(agent)
+
+    items = [(AGENT, r := record(1), alice.item_tag(r)), ("k2", r2 := record(2), bob.item_tag(r2))]
+    refused = s.book.check_mac_bundle(mac_bundle(items), bridge_without_k1)
+    assert obeyed == ["k2"] and len(refused) == 1 and "no robot k1" in refused[0]
