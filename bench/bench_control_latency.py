@@ -25,8 +25,9 @@ target line judges p50 against 2x the path's round trip and p99 against 5 ms.
 every robot in the channel's own thread (``WorldChannel.on_tick``), as a
 swarm controller would: no thread hand-off per robot, one message per tick.
 ``--swarm``: the same in the array API (``WorldChannel.on_swarm``: the
-tick's decoded samples in, ``tick.send(agent, ...)`` out, MACed per lease as
-ever, without a KheperaState and a RobotCommand per robot).
+tick's decoded samples in, ``tick.send(agent, ...)`` out, without a
+KheperaState and a RobotCommand per robot; the tick's commands leave as one
+MacCommandBundle, each item MACed under its own agent's lease).
 
 Against a peer (issue 22): the same loop written with plain zenoh-python
 (bench/plain_peer.py: no login, lease or MAC; the same world, sample bundles
@@ -710,8 +711,8 @@ def main() -> int:
         "--swarm",
         action="store_true",
         help="as --inline, but in the array API (WorldChannel.on_swarm: the tick's decoded "
-        "samples in, tick.send(agent, ...) out, no per-robot KheperaState or RobotCommand); "
-        "the plain peer answers inline",
+        "samples in, tick.send(agent, ...) out, no per-robot KheperaState or RobotCommand, "
+        "one MacCommandBundle a tick); the plain peer answers inline",
     )
     p.add_argument(
         "--block",

@@ -26,6 +26,7 @@ import secrets
 import struct
 import threading
 from collections.abc import Callable
+from typing import Any
 
 import msgspec
 import nacl.exceptions
@@ -45,6 +46,9 @@ from common.messages import (
 LEASE_KEY_BYTES = 32
 MAC_BYTES = 32
 _PERSON = b"wart.cmd.v1"  # BLAKE2b personalisation: a command MAC is never valid as another MAC
+# A MacCommandBundle item's MAC: personalised apart, so an item's MAC is never a
+# MacCommand's (or the reverse), whatever bytes either covers.
+_ITEM_PERSON = b"wart.cmdarr.v1"
 _SEQ_TIME = struct.Struct("<Qd")  # a command's sequence number and send time, as hashed
 
 
@@ -77,18 +81,20 @@ class CommandMac:
     robot, where a fresh keyed hash per command was a third of the MAC's cost.
     """
 
-    __slots__ = ("_prefix", "lease_id")
+    __slots__ = ("_item_prefix", "_prefix", "lease_id")
 
     def __init__(self, lease_key: bytes, key_expr: str, lease_id: str) -> None:
         self.lease_id = lease_id
-        key = key_expr.encode()
-        lid = lease_id.encode()
-        prefix = hashlib.blake2b(key=lease_key, digest_size=MAC_BYTES, person=_PERSON)
-        # Length prefixes keep the fields apart: no two field splits hash alike.
-        prefix.update(struct.pack("<II", len(key), len(lid)))
-        prefix.update(key)
-        prefix.update(lid)
-        self._prefix = prefix
+        self._prefix = _mac_prefix(lease_key, _PERSON, key_expr, lease_id)
+        self._item_prefix = _mac_prefix(lease_key, _ITEM_PERSON, key_expr, lease_id)
+
+    def item_tag(self, record: bytes) -> bytes:
+        """The MAC of one MacCommandBundle item: its record's bytes exactly as they travel
+        (``MAC_ITEM_STRUCT``: seq, sent_at, flags, speeds, counters), bound to this key
+        expression and lease."""
+        h = self._item_prefix.copy()
+        h.update(record)
+        return h.digest()
 
     def tag(self, seq: int, sent_at: float, body: bytes) -> bytes:
         """The MAC of one command: bound to its key expression, lease, order and time."""
@@ -107,6 +113,23 @@ class CommandMac:
         return encode(
             MacCommand(lease_id=self.lease_id, seq=seq, sent_at=now, body=body, mac=h.digest())
         )
+
+
+def _mac_prefix(lease_key: bytes, person: bytes, key_expr: str, lease_id: str) -> Any:
+    """Keyed BLAKE2b (32 bytes) over the length-prefixed key expression and lease id."""
+    key = key_expr.encode()
+    lid = lease_id.encode()
+    prefix = hashlib.blake2b(key=lease_key, digest_size=MAC_BYTES, person=person)
+    # Length prefixes keep the fields apart: no two field splits hash alike.
+    prefix.update(struct.pack("<II", len(key), len(lid)))
+    prefix.update(key)
+    prefix.update(lid)
+    return prefix
+
+
+def item_mac(lease_key: bytes, key_expr: str, lease_id: str, record: bytes) -> bytes:
+    """The MAC of one MacCommandBundle item (:meth:`CommandMac.item_tag`, for a single use)."""
+    return CommandMac(lease_key, key_expr, lease_id).item_tag(record)
 
 
 def command_mac(

@@ -26,13 +26,25 @@ from typing import Any
 
 from common import keys
 from common.auth import AuthError, Principal, ReplayWindow, Verifier
-from common.leasemac import CommandMac, WorldBoxKeys, command_mac, mac_matches, open_key
+from common.leasemac import (
+    MAC_BYTES,
+    CommandMac,
+    WorldBoxKeys,
+    command_mac,
+    mac_matches,
+    open_key,
+)
 from common.messages import (
+    MAC_ITEM_BYTES,
+    MAC_ITEM_COUNTERS,
+    MAC_ITEM_SPEEDS,
+    MAC_ITEM_STRUCT,
     AgentCommand,
     AuthEnvelope,
     BundledCommand,
     Lease,
     MacCommand,
+    MacCommandBundle,
     MessageError,
     WorldStop,
     decode,
@@ -251,6 +263,111 @@ class LeaseBook:
                 obey(*self.check_command(key, item.payload, now))
             except (AuthError, MessageError, ValueError) as exc:
                 refused.append(f"{item.agent}: {exc}")
+        return refused
+
+    def check_mac_bundle(
+        self, bundle: MacCommandBundle, obey: Callable[[str, AgentCommand], None]
+    ) -> list[str]:
+        """Check a MacCommandBundle's items, ``obey`` each one that passes; why the others failed.
+
+        Each item gets the checks a MacCommand on its agent's own ``cmd`` key
+        gets (:meth:`_check_mac`), in the same order: the emergency stop; a
+        lease for the agent carrying a key this world opened; the item's MAC
+        under that lease's key (over the agent's own key expression, the
+        lease id and the record's bytes, so an item cannot be moved to
+        another agent, lease or time, or altered); the lease in force; sent
+        after this world started; fresh (±the verifier's window); flags
+        known; and last, the sequence number unseen under that lease (the
+        replay window is touched only by an item whose MAC matched). A
+        refused item spares the others; each passing one is obeyed at once.
+
+        Shared per bundle, where the per-command path pays per command: one
+        decode of the whole bundle, one look at the lease tables under the
+        lock, one read of each clock. Lengths that disagree refuse the whole
+        bundle (MessageError): nothing in it can be attributed to an item.
+        """
+        agents, items, macs = bundle.agents, bundle.items, bundle.macs
+        n = len(agents)
+        if len(items) != n * MAC_ITEM_BYTES or len(macs) != n * MAC_BYTES:
+            self.commands_refused += n
+            raise MessageError(
+                f"MacCommandBundle of {n} agents carries {len(items)} item bytes and "
+                f"{len(macs)} MAC bytes (needs {n * MAC_ITEM_BYTES} and {n * MAC_BYTES})"
+            )
+        verifier = self.verifier
+        if verifier is None or self.stopped:
+            self.commands_refused += n
+            why = (
+                "this world was started without --registry-key"
+                if verifier is None
+                else f"refused: {self.stopped}"
+            )
+            return [f"{agent}: {why}" for agent in agents]
+        now = time.time()
+        fresh_now, fresh_window = verifier.clock(), verifier.window
+        started = self.started_at
+        with self._lock:  # one consistent look at both tables for the whole bundle
+            rows = [(self._leases.get(a), self._mac.get(a)) for a in agents]
+        refused: list[str] = []
+        unpack, compare = MAC_ITEM_STRUCT.unpack_from, mac_matches
+        for i, agent in enumerate(agents):
+            lease, mac = rows[i]
+            try:
+                if lease is None:
+                    raise AuthError("forbidden", "no lease: command dropped")
+                if mac is None or mac[0] != lease.lease_id:
+                    raise AuthError(
+                        "forbidden",
+                        f"lease {lease.lease_id} carries no key for this world: sign commands",
+                    )
+                at = i * MAC_ITEM_BYTES
+                record = items[at : at + MAC_ITEM_BYTES]
+                if not compare(mac[3].item_tag(record), macs[i * MAC_BYTES : (i + 1) * MAC_BYTES]):
+                    verifier.rejected += 1
+                    raise AuthError(
+                        "unauthenticated", f"item MAC does not match lease {lease.lease_id}"
+                    )
+                seq, sent_at, flags, left, right, a, b = unpack(record)
+                if not lease.start <= now <= lease.end:
+                    raise AuthError("forbidden", f"lease {lease.lease_id} is not in force")
+                if sent_at < started:
+                    verifier.rejected += 1
+                    raise AuthError(
+                        "unauthenticated",
+                        f"command under lease {lease.lease_id} was sealed before this world "
+                        "started",
+                    )
+                if not abs(fresh_now - sent_at) <= fresh_window:  # NaN too
+                    verifier.rejected += 1
+                    raise AuthError(
+                        "unauthenticated",
+                        f"command is {fresh_now - sent_at:+.1f} s off this world's clock "
+                        f"(allowed ±{fresh_window:.0f} s): check the clocks, or it is a replay",
+                    )
+                if flags & ~(MAC_ITEM_SPEEDS | MAC_ITEM_COUNTERS):
+                    raise AuthError("bad_request", f"unknown command flags {flags:#x}")
+                with self._lock:
+                    fresh = mac[2].accept(seq)
+                if not fresh:
+                    verifier.rejected += 1
+                    raise AuthError(
+                        "unauthenticated", f"replayed command under lease {lease.lease_id}"
+                    )
+                command = AgentCommand(
+                    agent=agent,
+                    speeds=(left, right) if flags & MAC_ITEM_SPEEDS else None,
+                    counters=(a, b) if flags & MAC_ITEM_COUNTERS else None,
+                )
+            except AuthError as exc:
+                self.commands_refused += 1
+                refused.append(f"{agent}: {exc}")
+                continue
+            self.commands_accepted += 1
+            self.mac_accepted += 1
+            try:
+                obey(agent, command)
+            except (AuthError, ValueError) as exc:  # e.g. a bridge without that robot
+                refused.append(f"{agent}: {exc}")
         return refused
 
     def check_command(

@@ -51,11 +51,15 @@ from common.controller import (
 )
 from common.leasemac import CommandMac, open_key
 from common.messages import (
+    MAC_ITEM_COUNTERS,
+    MAC_ITEM_SPEEDS,
+    MAC_ITEM_STRUCT,
     MAX_BUNDLED,
     AgentCommand,
     BundledCommand,
     CommandBundle,
     Lease,
+    MacCommandBundle,
     MessageError,
     SampleBundle,
     SensorSample,
@@ -160,6 +164,9 @@ class _MacLease:
         self.end = 0.0
 
 
+_pack_item = MAC_ITEM_STRUCT.pack  # 50 times a second per robot: one lookup less
+
+
 def _check_pair(name: str, pair: tuple[int, int], bound: int) -> None:
     """ValueError unless ``pair`` is a tuple of two ints (not bools) within ±``bound``."""
     if type(pair) is tuple and len(pair) == 2:
@@ -185,7 +192,18 @@ class SwarmTick:
     (docs/BENCHMARKS.md, issue 22). Valid for the listener's call only.
     """
 
-    __slots__ = ("_links", "_now", "_out", "_sent", "agents", "samples", "tick")
+    __slots__ = (
+        "_item_agents",
+        "_items",
+        "_links",
+        "_macs",
+        "_now",
+        "_out",
+        "_sent",
+        "agents",
+        "samples",
+        "tick",
+    )
 
     def __init__(
         self,
@@ -196,7 +214,11 @@ class SwarmTick:
     ) -> None:
         self.tick, self.agents, self.samples, self._links = tick, agents, samples, links
         self._now = time.time()  # every command of the tick is sealed at this time
-        self._out: list[BundledCommand] = []
+        self._out: list[BundledCommand] = []  # signed (before a MAC lease): a CommandBundle
+        # MACed under a MAC lease: the MacCommandBundle's arrays, one record and MAC each
+        self._item_agents: list[str] = []
+        self._items: list[bytes] = []
+        self._macs: list[bytes] = []
         self._sent: list[ZenohRobotLink] = []
 
     def send(
@@ -212,26 +234,41 @@ class SwarmTick:
         a bug shows in the controller, not as a refusal in the world's log);
         False if no link of this channel drives ``agent`` (or it is closed).
         """
+        flags, left, right, a, b = 0, 0, 0, 0, 0
         if speeds is not None:
             _check_pair("speeds", speeds, MAX_SPEED)
+            flags, (left, right) = MAC_ITEM_SPEEDS, speeds
         if counters is not None:
             _check_pair("counters", counters, COUNTER_LIMIT)
+            flags |= MAC_ITEM_COUNTERS
+            a, b = counters
         link = self._links.get(agent)
         if link is None or link._closed.is_set():
             return False
+        now = self._now
         try:
-            payload, mac = link._seal(
-                AgentCommand(agent=agent, speeds=speeds, counters=counters), self._now
-            )
+            session = link._session()
+            lease = link._mac_lease
+            if lease is not None and lease.session_id == session.session_id and now <= lease.end:
+                # Under its MAC lease: one 29-byte record and its MAC, for the tick's
+                # MacCommandBundle (no AgentCommand or MacCommand encoded per robot).
+                record = _pack_item(session.next_seq(), now, flags, left, right, a, b)
+                self._item_agents.append(agent)
+                self._items.append(record)
+                self._macs.append(lease.mac.item_tag(record))
+                link.mac_sent += 1
+            else:  # signed, until the MAC lease arrives: in a CommandBundle as before
+                payload, _ = link._seal(
+                    AgentCommand(agent=agent, speeds=speeds, counters=counters), now
+                )
+                self._out.append(BundledCommand(agent, payload))
         except Exception as exc:  # a closed session at shutdown, a lost login
             log.debug("could not send a command to %s: %s", agent, exc)
             return False
-        # Collected here and handed to the channel in one go when the listeners return
-        # (one lock and one clock read a tick instead of one per robot).
-        self._out.append(BundledCommand(agent, payload))
+        # Handed to the channel in one go when the listeners return (one lock and one
+        # clock read a tick instead of one per robot).
         self._sent.append(link)
         link.sent += 1
-        link.mac_sent += mac
         return True
 
 
@@ -356,6 +393,9 @@ class WorldChannel:
             except Exception:  # as for tick listeners: the others still run
                 log.exception("a swarm listener of %s failed (kept serving)", self.world)
             finally:  # what it sent before failing goes out too, as with link.send
+                if handed._items:
+                    self._put_mac_items(handed._item_agents, handed._items, handed._macs)
+                    handed._item_agents, handed._items, handed._macs = [], [], []
                 if handed._out:
                     with self._pending_lock:
                         self._pending.extend(handed._out)
@@ -363,6 +403,23 @@ class WorldChannel:
         now = time.monotonic()
         for link in handed._sent:  # their keep-alives are not due
             link._last_send = now
+
+    def _put_mac_items(self, agents: list[str], items: list[bytes], macs: list[bytes]) -> None:
+        """Put MACed command records (a swarm tick's) as MacCommandBundles, now."""
+        for i in range(0, len(agents), MAX_BUNDLED):
+            j = i + MAX_BUNDLED
+            payload = encode(
+                MacCommandBundle(
+                    agents=agents[i:j], items=b"".join(items[i:j]), macs=b"".join(macs[i:j])
+                )
+            )
+            try:
+                self._publisher.put(payload)
+            except Exception as exc:  # a closed session at shutdown
+                log.debug("could not put a command bundle of %s: %s", self.world, exc)
+                return
+            self.puts += 1
+            self.commands += len(agents[i:j])
 
     def on_tick(self, listener: Callable[[int, list[str]], None]) -> Callable[[], None]:
         """Call ``listener(tick, agents)`` after each bundle that brought ``agents`` a sample.

@@ -20,6 +20,7 @@ from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
     CommandBundle,
+    MacCommandBundle,
     Message,
     Revocation,
     SampleBundle,
@@ -112,15 +113,25 @@ class WorldService(Service):
         self._accept_command(str(sample.key_expr), sample.payload)
 
     def _on_command_bundle(self, sample: zenoh.Sample) -> None:
-        """Each bundled command as if put on its agent's own key; one refusal spares the rest."""
-        bundle = decode(sample.payload, CommandBundle)
-        refused = self.leases.check_bundle(bundle.commands, self._obey)
+        """Each bundled command as if put on its agent's own key; one refusal spares the rest.
+
+        Either kind of bundle: a CommandBundle (each item an AuthEnvelope or a
+        MacCommand) or a MacCommandBundle (MACed items in arrays, a swarm's).
+        """
+        bundle = decode(sample.payload, (CommandBundle, MacCommandBundle))
+        if type(bundle) is MacCommandBundle:
+            count = len(bundle.agents)
+            refused = self.leases.check_mac_bundle(bundle, self._obey)
+        else:
+            assert isinstance(bundle, CommandBundle)  # the decoder allowed only these two
+            count = len(bundle.commands)
+            refused = self.leases.check_bundle(bundle.commands, self._obey)
         if refused:
             self.dropped += len(refused)
             self.log.warning(
                 "refused %d of %d bundled commands: %s",
                 len(refused),
-                len(bundle.commands),
+                count,
                 "; ".join(refused[:3]),
             )
 

@@ -35,6 +35,11 @@ from common.messages.recording import __all__ as _recording_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
 from common.messages.registry import __all__ as _registry_all
 from common.messages.world import (
+    MAC_ITEM_BYTES,
+    MAC_ITEM_COUNTERS,
+    MAC_ITEM_DTYPE,
+    MAC_ITEM_SPEEDS,
+    MAC_ITEM_STRUCT,
     MAX_BUNDLED,
     AddItem,
     AgentCommand,
@@ -47,6 +52,7 @@ from common.messages.world import (
     Lease,
     LightInfo,
     MacCommand,
+    MacCommandBundle,
     MapRequest,
     MoveItem,
     RemoveItem,
@@ -65,6 +71,11 @@ from common.messages.world import (
 
 __all__ = [
     "ALL_PERMISSIONS",
+    "MAC_ITEM_BYTES",
+    "MAC_ITEM_COUNTERS",
+    "MAC_ITEM_DTYPE",
+    "MAC_ITEM_SPEEDS",
+    "MAC_ITEM_STRUCT",
     "MAX_BUNDLED",
     "MAX_MESSAGE_BYTES",
     "AddItem",
@@ -82,6 +93,7 @@ __all__ = [
     "Lease",
     "LightInfo",
     "MacCommand",
+    "MacCommandBundle",
     "MapRequest",
     "Message",
     "MessageError",

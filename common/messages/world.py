@@ -6,9 +6,11 @@ are the robot type's raw units (Khepera: proximity 0..1023, ambient ~500 dark).
 
 from __future__ import annotations
 
+import struct
 from typing import Annotated, Any, ClassVar, Literal
 
 import msgspec
+import numpy as np
 
 from common.messages.auth import SessionId, SignedToken
 from common.messages.base import Bytes32, Ident, Message, NonNegInt, PackedArray, ShortText
@@ -103,6 +105,51 @@ class CommandBundle(Message):
     """
 
     commands: Annotated[list[BundledCommand], msgspec.Meta(max_length=MAX_BUNDLED)]
+
+
+# One command of a MacCommandBundle, as its bytes travel and are MACed: packed,
+# little-endian, 29 bytes. The field ranges are AgentCommand's own (speeds int16,
+# counters int32), so the dtype itself keeps every value in range.
+MAC_ITEM_DTYPE = np.dtype(
+    [
+        ("seq", "<u8"),  # the holder session's sequence number (shared with its envelopes)
+        ("sent_at", "<f8"),  # wall-clock seconds when sealed
+        ("flags", "u1"),  # bit 0: speeds set, bit 1: counters set; others must be 0
+        ("speeds", "<i2", (2,)),
+        ("counters", "<i4", (2,)),
+    ]
+)
+MAC_ITEM_BYTES = MAC_ITEM_DTYPE.itemsize
+# The same record for struct: packing or unpacking 20 of these one by one costs less
+# than numpy's fixed overhead per call at a swarm's size (tens of robots).
+MAC_ITEM_STRUCT = struct.Struct("<QdBhhii")
+assert MAC_ITEM_STRUCT.size == MAC_ITEM_BYTES
+MAC_ITEM_SPEEDS = 1
+MAC_ITEM_COUNTERS = 2
+
+
+class MacCommandBundle(Message):
+    """Several agents' MACed commands in parallel arrays (``world/<world>/cmds``).
+
+    The array form of a CommandBundle of MacCommands, for a process that
+    drives many robots under MAC leases (``WorldChannel.on_swarm``): one
+    encode on the sender and one decode on the world per tick instead of one
+    of each per robot. Item ``i`` is ``agents[i]``'s command: the
+    ``MAC_ITEM_BYTES`` bytes at ``i * MAC_ITEM_BYTES`` of ``items`` (a record
+    of ``MAC_ITEM_DTYPE``: seq, sent_at, flags, speeds, counters) and its MAC,
+    the 32 bytes at ``i * 32`` of ``macs``: BLAKE2b keyed with the agent's
+    lease key, personalised ``wart.cmdarr.v1``, over the length-prefixed key
+    expression ``agent/<agent>/cmd`` and lease id, then exactly those record
+    bytes (common/leasemac.py). Each item is checked on its own, as a
+    MacCommand on its agent's key would be; a refused item spares the others.
+    Only speeds and counters travel here; other commands go as MacCommands.
+    The lengths must agree (``len(agents)`` items and MACs), else the world
+    refuses the whole bundle.
+    """
+
+    agents: Annotated[list[Ident], msgspec.Meta(max_length=MAX_BUNDLED)]
+    items: Annotated[bytes, msgspec.Meta(max_length=MAX_BUNDLED * MAC_ITEM_BYTES)]
+    macs: Annotated[bytes, msgspec.Meta(max_length=MAX_BUNDLED * 32)]
 
 
 class WorldFrame(Message):

@@ -36,8 +36,12 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Verifier
-from common.leasemac import command_mac, mac_matches
+from common.leasemac import MAC_BYTES, command_mac, item_mac, mac_matches
 from common.messages import (
+    MAC_ITEM_BYTES,
+    MAC_ITEM_COUNTERS,
+    MAC_ITEM_SPEEDS,
+    MAC_ITEM_STRUCT,
     AgentCommand,
     AgentContextState,
     AgentEvent,
@@ -46,6 +50,7 @@ from common.messages import (
     CommandBundle,
     ErrorReply,
     MacCommand,
+    MacCommandBundle,
     MemberStatus,
     MessageError,
     SampleBundle,
@@ -402,13 +407,64 @@ class SlotRecorder:
 
     def _bundle(self, payload: bytes, t: float) -> None:
         try:
-            bundle = decode(payload, CommandBundle)
+            bundle = decode(payload, (CommandBundle, MacCommandBundle))
         except MessageError:
             return
+        if isinstance(bundle, MacCommandBundle):
+            self._mac_items(bundle, t)
+            return
+        assert isinstance(bundle, CommandBundle)  # the decoder allowed only these two
         for item in bundle.commands:
             if self._recording(item.agent):
                 key = keys.agent_cmd(self.realm, self.world, item.agent)
                 self._cmd(key, item.agent, item.payload, t)
+
+    def _mac_items(self, bundle: MacCommandBundle, t: float) -> None:
+        """A swarm's MacCommandBundle: each item of a recorded agent, if MACed with its run's
+        lease key (over the agent's own key expression) and sent within the run's slot."""
+        n = len(bundle.agents)
+        if len(bundle.items) != n * MAC_ITEM_BYTES or len(bundle.macs) != n * MAC_BYTES:
+            return  # the world refuses it whole, too
+        for i, agent in enumerate(bundle.agents):
+            rec = self._active(agent)
+            if rec is None:
+                continue
+            run = rec.run
+            if not run.lease_key:  # not a MAC lease: a keyless BLAKE2b proves nothing
+                rec.refused += 1
+                continue
+            record = bundle.items[i * MAC_ITEM_BYTES : (i + 1) * MAC_ITEM_BYTES]
+            key = keys.agent_cmd(self.realm, self.world, agent)
+            expected = item_mac(run.lease_key, key, run.lease_id, record)
+            _seq, sent_at, flags, left, right, a, b = MAC_ITEM_STRUCT.unpack(record)
+            if (
+                not mac_matches(expected, bundle.macs[i * MAC_BYTES : (i + 1) * MAC_BYTES])
+                or not run.start - 1.0 <= sent_at <= run.end + 1.0
+                or flags & ~(MAC_ITEM_SPEEDS | MAC_ITEM_COUNTERS)
+            ):
+                rec.refused += 1
+                continue
+            command = AgentCommand(
+                agent=agent,
+                speeds=(left, right) if flags & MAC_ITEM_SPEEDS else None,
+                counters=(a, b) if flags & MAC_ITEM_COUNTERS else None,
+            )
+            self._write_command(rec, agent, rec.driver, "mac", command, t)
+
+    def _write_command(
+        self, rec: _Run, agent: str, sender: str, auth: str, command: AgentCommand, t: float
+    ) -> None:
+        record = s.CommandRecord(
+            agent=agent,
+            sender=sender,
+            auth=auth,
+            speeds=command.speeds,
+            counters=command.counters,
+            leds=command.leds,
+            arm=command.arm,
+            fingers=command.fingers,
+        )
+        rec.writer.write(s.commands_topic(agent), record, t)
 
     def _cmd(self, key: str, agent: str, payload: bytes, t: float) -> None:
         rec = self._active(agent)
@@ -426,7 +482,11 @@ class SlotRecorder:
                     envelope.sent_at,
                     envelope.body,
                 )
-                if envelope.lease_id != run.lease_id or not mac_matches(expected, envelope.mac):
+                if (
+                    not run.lease_key  # not a MAC lease: a keyless BLAKE2b proves nothing
+                    or envelope.lease_id != run.lease_id
+                    or not mac_matches(expected, envelope.mac)
+                ):
                     raise AuthError("forbidden", "not MACed with this run's lease key")
                 command, sender, auth, sent_at = (
                     decode(envelope.body, AgentCommand),
@@ -445,17 +505,7 @@ class SlotRecorder:
         except (AuthError, MessageError):
             rec.refused += 1
             return
-        record = s.CommandRecord(
-            agent=agent,
-            sender=sender,
-            auth=auth,
-            speeds=command.speeds,
-            counters=command.counters,
-            leds=command.leds,
-            arm=command.arm,
-            fingers=command.fingers,
-        )
-        rec.writer.write(s.commands_topic(agent), record, t)
+        self._write_command(rec, agent, sender, auth, command, t)
 
     def _output(self, request_id: str, agent: str, lines: list[str], t: float) -> None:
         rec = self._runs.get(request_id)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 import msgspec
+import numpy as np
 import pytest
 
 from common import keys
@@ -14,6 +15,7 @@ from common.leasemac import (
     WorldBoxKeys,
     check_world_token,
     command_mac,
+    item_mac,
     mac_command,
     new_lease_key,
     open_key,
@@ -21,11 +23,19 @@ from common.leasemac import (
 )
 from common.leases import LeaseBook
 from common.messages import (
+    MAC_ITEM_BYTES,
+    MAC_ITEM_COUNTERS,
+    MAC_ITEM_DTYPE,
+    MAC_ITEM_SPEEDS,
+    MAC_ITEM_STRUCT,
     AgentCommand,
     BundledCommand,
     Lease,
     MacCommand,
+    MacCommandBundle,
+    MessageError,
     SignedToken,
+    WorldStop,
     decode,
     encode,
 )
@@ -312,3 +322,206 @@ def test_a_bundle_under_an_expired_lease_is_refused_and_a_refusing_world_spares_
     items = [BundledCommand(AGENT, s.command(seq=n, lease_id="L2")) for n in (1, 2)]
     refused = s.book.check_bundle(items, bridge_without_k1)
     assert len(refused) == 2 and all("no robot k1" in r for r in refused)
+
+
+# -- MacCommandBundle: a swarm's commands in arrays, each item MACed on its own
+
+K2_CMD = keys.agent_cmd(REALM, WORLD, "k2")
+K2_LEASE = keys.agent_lease(REALM, WORLD, "k2")
+
+
+def record(
+    seq: int,
+    *,
+    sent_at: float | None = None,
+    speeds: tuple[int, int] | None = (10, 10),
+    counters: tuple[int, int] | None = None,
+    flags: int | None = None,
+) -> bytes:
+    """One item's record, as SwarmTick.send packs it."""
+    if flags is None:
+        flags = (0 if speeds is None else MAC_ITEM_SPEEDS) | (
+            0 if counters is None else MAC_ITEM_COUNTERS
+        )
+    return MAC_ITEM_STRUCT.pack(
+        seq,
+        time.time() if sent_at is None else sent_at,
+        flags,
+        *(speeds or (0, 0)),
+        *(counters or (0, 0)),
+    )
+
+
+def mac_bundle(items: list[tuple[str, bytes, bytes]]) -> MacCommandBundle:
+    """A bundle of (agent, record, mac) items, through the wire and back."""
+    bundle = MacCommandBundle(
+        agents=[a for a, _, _ in items],
+        items=b"".join(r for _, r, _ in items),
+        macs=b"".join(m for _, _, m in items),
+    )
+    return decode(encode(bundle), MacCommandBundle)
+
+
+def test_a_mac_bundle_round_trips_and_numpy_reads_its_records() -> None:
+    mac = CommandMac(new_lease_key(), CMD, "L1")
+    records = [record(7, sent_at=12.5, speeds=(-3, 4)), record(8, counters=(-(2**31), 5))]
+    original = MacCommandBundle(
+        agents=["k1", "k2"], items=b"".join(records), macs=b"".join(map(mac.item_tag, records))
+    )
+    assert decode(encode(original), MacCommandBundle) == original
+    assert len(records[0]) == MAC_ITEM_BYTES == 29
+    rows = np.frombuffer(original.items, MAC_ITEM_DTYPE)  # the documented layout
+    assert rows["seq"].tolist() == [7, 8] and rows["sent_at"][0] == 12.5
+    assert rows["flags"].tolist() == [MAC_ITEM_SPEEDS, MAC_ITEM_SPEEDS | MAC_ITEM_COUNTERS]
+    assert rows["speeds"][0].tolist() == [-3, 4] and rows["counters"][1].tolist() == [-(2**31), 5]
+    # An item's MAC is never a MacCommand's over the same bytes (personalised apart).
+    assert mac.item_tag(records[0]) != mac.tag(7, 12.5, records[0][16:])
+    assert item_mac(s_key := new_lease_key(), CMD, "L1", records[0]) == CommandMac(
+        s_key, CMD, "L1"
+    ).item_tag(records[0])
+
+
+def two_holders(s: Setup) -> tuple[CommandMac, CommandMac, Session]:
+    """alice holds k1 (key s.k), bob holds k2 (its own key); their item MACs."""
+    s.grant()
+    bob = issue_session(s.registry, REALM, "bob", ["control"])
+    k2 = new_lease_key()
+    now = time.time()
+    lease = Lease(
+        lease_id="L2",
+        world=WORLD,
+        agent="k2",
+        holder_user="bob",
+        holder_session=bob.session_id,
+        start=now - 1,
+        end=now + 60,
+        holder_key=seal_key(k2, bob.keys.box_public_key),
+        world_key=seal_key(k2, s.world.keys.box_public_key),
+        world_box=s.world.keys.box_public_key,
+    )
+    s.book.accept_lease(K2_LEASE, s.context.seal(K2_LEASE, lease))
+    return CommandMac(s.k, CMD, "L1"), CommandMac(k2, K2_CMD, "L2"), bob
+
+
+def test_a_mac_bundle_obeys_its_good_items_and_refuses_each_bad_one_alone(s: Setup) -> None:
+    alice, bob, _ = two_holders(s)
+    obeyed: list[tuple[str, AgentCommand]] = []
+
+    def item(mac: CommandMac, agent: str, rec: bytes) -> tuple[str, bytes, bytes]:
+        return agent, rec, mac.item_tag(rec)
+
+    good = item(alice, AGENT, record(1, speeds=(1, 1)))
+    tampered = bytearray(record(2, speeds=(2, 2)))
+    tag = alice.item_tag(bytes(tampered))
+    tampered[17] = 127  # the left speed, after the MAC was made
+    guessed = CommandMac(new_lease_key(), CMD, "L1")
+    old_lease = CommandMac(s.k, CMD, "L0")  # the right key, another lease id
+    items = [
+        good,
+        (AGENT, bytes(tampered), tag),  # altered in flight
+        item(guessed, AGENT, record(3)),  # forged: a guessed key
+        good,  # replayed within the same bundle
+        item(bob, AGENT, record(4)),  # bob's key, for alice's robot: another agent's lease
+        item(alice, "k2", record(5)),  # alice's key, filed under bob's robot
+        item(CommandMac(s.k, K2_CMD, "L1"), AGENT, record(6)),  # MACed for k2's key
+        item(old_lease, AGENT, record(7)),
+        item(alice, "k3", record(8)),  # k3 has no lease here
+        item(alice, AGENT, record(9, sent_at=time.time() + 100)),  # 100 s ahead
+        item(alice, AGENT, record(10, sent_at=s.book.started_at - 1)),  # before the world started
+        item(alice, AGENT, record(11, flags=0x80)),  # MACed, but flags nobody knows
+        item(bob, "k2", record(12, speeds=(5, 5))),  # bob's own robot: obeyed
+        item(alice, AGENT, record(13, speeds=None, counters=(7, 8))),  # counters only: obeyed
+    ]
+    refused = s.book.check_mac_bundle(mac_bundle(items), lambda a, c: obeyed.append((a, c)))
+    assert [(a, c.speeds, c.counters) for a, c in obeyed] == [
+        (AGENT, (1, 1), None),
+        ("k2", (5, 5), None),
+        (AGENT, None, (7, 8)),
+    ]
+    assert len(refused) == len(items) - 3, refused
+    expected = [
+        "MAC does not match",  # tampered
+        "MAC does not match",  # guessed key
+        "replayed",
+        "MAC does not match",  # bob's key on k1
+        "MAC does not match",  # alice's key on k2
+        "MAC does not match",  # moved from k2's key
+        "MAC does not match",  # another lease id
+        "no lease",
+        "off this world's clock",
+        "before this world started",
+        "unknown command flags",
+    ]
+    for why, got in zip(expected, refused, strict=True):
+        assert why in got, (why, got)
+    assert s.book.commands_accepted == 3 and s.book.commands_refused == len(items) - 3
+    # The whole bundle replayed: nothing obeyed a second time.
+    obeyed.clear()
+    assert len(s.book.check_mac_bundle(mac_bundle(items), lambda a, c: obeyed.append((a, c)))) == (
+        len(items)
+    )
+    assert obeyed == []
+
+
+def test_a_mac_bundle_under_an_expired_or_revoked_lease_or_an_emergency_stop_is_refused(
+    s: Setup,
+) -> None:
+    alice, bob, bob_session = two_holders(s)
+    now = time.time()
+    s.grant(s.lease(start=now - 30, end=now - 1))  # alice's lease on k1 ended
+    obeyed: list[str] = []
+    items = [
+        (AGENT, r := record(1), alice.item_tag(r)),
+        ("k2", r2 := record(2), bob.item_tag(r2)),
+    ]
+    refused = s.book.check_mac_bundle(mac_bundle(items), lambda a, c: obeyed.append(a))
+    assert obeyed == ["k2"] and len(refused) == 1 and "not in force" in refused[0]
+    # Bob's session revoked: his lease is dropped, his next item refused.
+    assert s.book.revoke_session(bob_session.session_id) == ["k2"]
+    items = [("k2", r := record(3), bob.item_tag(r))]
+    refused = s.book.check_mac_bundle(mac_bundle(items), lambda a, c: obeyed.append(a))
+    assert obeyed == ["k2"] and "no lease" in refused[0]
+    # A new lease for alice, then an emergency stop: everything refused.
+    s.grant(s.lease(lease_id="L3"))
+    fresh = CommandMac(s.k, CMD, "L3")
+    stop = s.context.seal(keys.world_estop(REALM, WORLD), WorldStop(engaged=True, by="ctx"))
+    s.book.accept_stop(keys.world_estop(REALM, WORLD), stop)
+    items = [(AGENT, r := record(4), fresh.item_tag(r))]
+    refused = s.book.check_mac_bundle(mac_bundle(items), lambda a, c: obeyed.append(a))
+    assert obeyed == ["k2"] and "emergency stop" in refused[0]
+
+
+def test_a_mac_bundle_whose_lengths_disagree_is_refused_whole(s: Setup) -> None:
+    alice, _, _ = two_holders(s)
+    r = record(1)
+    obeyed: list[str] = []
+    for bad in (
+        MacCommandBundle(agents=[AGENT, AGENT], items=r, macs=alice.item_tag(r) * 2),
+        MacCommandBundle(agents=[AGENT], items=r + b"\0", macs=alice.item_tag(r)),
+        MacCommandBundle(agents=[AGENT], items=r, macs=alice.item_tag(r)[:31]),
+    ):
+        with pytest.raises(MessageError, match="MacCommandBundle of"):
+            s.book.check_mac_bundle(bad, lambda a, c: obeyed.append(a))
+    assert obeyed == []
+    # The world that refused them still obeys the good item after.
+    s.book.check_mac_bundle(
+        MacCommandBundle(agents=[AGENT], items=r, macs=alice.item_tag(r)),
+        lambda a, c: obeyed.append(a),
+    )
+    assert obeyed == [AGENT]
+
+
+def test_a_world_that_cannot_obey_one_item_of_a_mac_bundle_still_obeys_the_others(
+    s: Setup,
+) -> None:
+    alice, bob, _ = two_holders(s)
+    obeyed: list[str] = []
+
+    def bridge_without_k1(agent: str, _command: AgentCommand) -> None:
+        if agent == AGENT:
+            raise AuthError("not_found", f"no robot {agent} on this bridge")
+        obeyed.append(agent)
+
+    items = [(AGENT, r := record(1), alice.item_tag(r)), ("k2", r2 := record(2), bob.item_tag(r2))]
+    refused = s.book.check_mac_bundle(mac_bundle(items), bridge_without_k1)
+    assert obeyed == ["k2"] and len(refused) == 1 and "no robot k1" in refused[0]

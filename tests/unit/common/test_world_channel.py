@@ -17,10 +17,14 @@ import pytest
 from common import keys
 from common.auth import AuthError, RegistryIdentity, Verifier, issue_session
 from common.controller import RobotCommand
+from common.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
     AuthEnvelope,
     CommandBundle,
+    Lease,
+    MacCommandBundle,
     SampleBundle,
     SensorSample,
     decode,
@@ -347,3 +351,71 @@ def test_a_swarm_listener_cannot_send_bad_values_or_drive_robots_it_has_no_link_
     results.clear()
     deliver(zs, bundle(["k0"], tick=6))  # a closed link is detached: no call at all
     assert results == []
+
+
+def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts() -> None:
+    """Links holding MAC leases: the tick's commands leave as one MacCommandBundle, each
+    item MACed under its own agent's lease; a link still without one signs, as before."""
+    world = issue_session(IDENTITY, REALM, "engine-w", ["world"])
+    context = issue_session(IDENTITY, REALM, "ctx", ["lease"])
+    book = LeaseBook(
+        REALM, WORLD, Verifier(IDENTITY.verify_key, REALM), WorldBoxKeys(lambda: world)
+    )
+    zs = FakeSession()
+    channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
+    links = [
+        ZenohRobotLink(
+            zs,  # type: ignore[arg-type]
+            REALM,
+            WORLD,
+            agent,
+            lambda: RUNNER,
+            keepalive=3600.0,
+            verifier=Verifier(IDENTITY.verify_key, REALM),  # the holder's own
+            channel=channel,
+        )
+        for agent in ("k0", "k1", "k2")
+    ]
+    now = time.time()
+    for agent in ("k0", "k1"):  # k2's lease has not arrived yet
+        k = new_lease_key()
+        lease = Lease(
+            lease_id=f"L-{agent}",
+            world=WORLD,
+            agent=agent,
+            holder_user="runner",
+            holder_session=RUNNER.session_id,
+            start=now - 1,
+            end=now + 60,
+            holder_key=seal_key(k, RUNNER.keys.box_public_key),
+            world_key=seal_key(k, world.keys.box_public_key),
+            world_box=world.keys.box_public_key,
+        )
+        key = keys.agent_lease(REALM, WORLD, agent)
+        sealed = context.seal(key, lease)
+        book.accept_lease(key, sealed)
+        zs.callbacks[key](FakeSample(sealed))
+
+    def swarm(tick: SwarmTick) -> None:
+        for agent, s in zip(tick.agents, tick.samples, strict=True):
+            assert tick.send(agent, speeds=(3, -3), counters=(s.counters[0], 0))
+
+    channel.on_swarm(swarm)
+    deliver(zs, bundle(["k0", "k1", "k2"], tick=5))
+    puts = zs.publishers[keys.world_commands(REALM, WORLD)].puts
+    assert len(puts) == 2 and channel.commands == 3
+    arrays = decode(puts[0], MacCommandBundle)
+    assert arrays.agents == ["k0", "k1"]
+    assert [c.agent for c in decode(puts[1], CommandBundle).commands] == ["k2"]  # signed
+    assert [link.mac_sent for link in links] == [1, 1, 0]
+    obeyed: list[tuple[str, AgentCommand]] = []
+    assert book.check_mac_bundle(arrays, lambda a, c: obeyed.append((a, c))) == []
+    assert [(a, c.speeds, c.counters) for a, c in obeyed] == [
+        ("k0", (3, -3), (5, 0)),
+        ("k1", (3, -3), (5, 0)),
+    ]
+    # Captured and put again: refused, item by item.
+    assert len(book.check_mac_bundle(arrays, lambda a, c: obeyed.append((a, c)))) == 2
+    assert len(obeyed) == 2
+    for link in links:
+        link.close(stop=False)
