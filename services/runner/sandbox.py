@@ -234,6 +234,9 @@ class Sandbox:
         self.process: subprocess.Popen[bytes] | None = None
         self._stage: Path | None = None
         self._uid: int | None = None
+        # The uid it ran as (root runners only), kept after the end: what to look
+        # for when checking that nothing of it is left.
+        self.uid: int | None = None
         self._cmd_read: int | None = None
         self._cpu = cpu_share(self.limits.cpu_share)
         self._cgroup = ""
@@ -267,7 +270,7 @@ class Sandbox:
         self._cgroup = stage.name
         argv = self._cpu.prefix(self._cgroup)
         if os.geteuid() == 0:
-            self._uid = _take_uid()
+            self._uid = self.uid = _take_uid()
             argv += ["setpriv", f"--reuid={self._uid}", f"--regid={self._uid}", "--clear-groups"]
         # /work gets half of the writable space, /tmp and /dev/shm a quarter
         # each; / and /dev (bwrap's own tmpfs, of no set size) are read-only.

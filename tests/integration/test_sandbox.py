@@ -140,20 +140,23 @@ class Bomb(Controller):
         limits=SandboxLimits(processes=8),
     )
     pid = run.sandbox.process.pid
+    uid = run.sandbox.uid
     run.finish()
     assert "fork refused" in run.text()
     assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
-    # No live process of the sandbox's uid range is left anywhere on the machine
-    # (a zombie awaiting the container's init holds nothing).
-    wait_for(lambda: not _live_sandbox_processes(), 5.0, "sandbox processes to end")
+    # No live process of the sandbox's uid is left anywhere on the machine (a
+    # zombie awaiting the container's init holds nothing). Its uid only: other
+    # sandboxes (other tests, other runners) may be running meanwhile.
+    if uid is not None:
+        wait_for(lambda: not _live_processes_of(uid), 5.0, "sandbox processes to end")
 
 
-def _live_sandbox_processes() -> list[int]:
+def _live_processes_of(uid: int) -> list[int]:
     return [
         p.pid
         for p in psutil.process_iter(["uids", "status"])
         if p.info["uids"]
-        and 61000 <= p.info["uids"].real < 62000
+        and p.info["uids"].real == uid
         and p.info["status"] != psutil.STATUS_ZOMBIE
     ]
 
