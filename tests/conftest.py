@@ -30,6 +30,16 @@ REPO = Path(__file__).resolve().parent.parent
 ARTIFACTS = REPO / "test-artifacts"
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    # Under xdist (./dev test), the browser tests run one at a time on one
+    # worker: each drives a Chromium rendering WebGL in software, and two at
+    # once on two cores made each page slow for nothing. The other tests,
+    # which mostly wait on their processes, share the other workers.
+    for item in items:
+        if "browser" in item.keywords or item.path.parent.name == "browser":
+            item.add_marker(pytest.mark.xdist_group("browser"))
+
+
 def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
