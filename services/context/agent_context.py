@@ -123,6 +123,7 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         self._end_reasons: dict[str, tuple[str, str]] = {}  # request id -> (status, reason)
         self._dirty = True
         self._layout: int | None = None
+        self._world_appeared = False
         self._frames: Any = None
         self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
         self.recorder = SlotRecorder(
@@ -191,6 +192,11 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
                 keys.alive_of_kind(self.realm, AliveKind.REGISTRY), self._on_registry_presence
             )
         )
+        self.track(
+            self.session.liveliness().declare_subscriber(
+                keys.alive(self.realm, AliveKind.WORLD, self.world), self._on_world_presence
+            )
+        )
         self._frames = self.track(
             self.session.declare_subscriber(
                 keys.world_frame(self.realm, self.world), zenoh.handlers.RingChannel(1)
@@ -236,7 +242,13 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
     def _require_agent(self, agent: str) -> None:
         with self._lock:
             known = agent in self.book.lines
-            names = ", ".join(sorted(self.book.lines)) or "none yet"
+            names = ", ".join(sorted(self.book.lines))
+        if not known and not names:
+            raise RequestError(
+                "not_found",
+                f"world {self.world} has not answered yet (is its engine or bridge running?): "
+                "try again in a moment",
+            )
         if not known:
             raise RequestError(
                 "not_found", f"no agent {agent} in world {self.world} (agents: {names})"

@@ -59,6 +59,7 @@ class SlotScheduler:
     _halt: threading.Event
     _dirty: bool
     _layout: int | None
+    _world_appeared: bool
     _frames: Any
     _recent: dict[str, RunningJob]
     _end_reasons: dict[str, tuple[str, str]]
@@ -88,9 +89,13 @@ class SlotScheduler:
         while not self._halt.is_set():
             try:
                 now = time.time()
+                with self._wake:
+                    appeared, self._world_appeared = self._world_appeared, False
                 if (
-                    self._need_snapshot() and now - last_snapshot_try >= SNAPSHOT_RETRY_S
-                ) or now - last_snapshot_try >= WORLD_IDENTITY_REFRESH_S:
+                    appeared
+                    or (self._need_snapshot() and now - last_snapshot_try >= SNAPSHOT_RETRY_S)
+                    or now - last_snapshot_try >= WORLD_IDENTITY_REFRESH_S
+                ):
                     last_snapshot_try = now
                     self._refresh_agents()
                 self._turn()
@@ -116,6 +121,16 @@ class SlotScheduler:
         now = time.time()
         ends = [ln.running.end - now for ln in self.book.lines.values() if ln.running is not None]
         return max(0.01, min([0.25, *ends]))
+
+    def _on_world_presence(self, sample: zenoh.Sample) -> None:
+        # The world came online (first start, a restart, or started after this
+        # context): learn its agents now, not at the next retry. Started
+        # together, a context queried before its world existed and refused
+        # queues for up to SNAPSHOT_RETRY_S after the world was up.
+        if sample.kind == zenoh.SampleKind.PUT:
+            with self._wake:
+                self._world_appeared = True
+                self._wake.notify_all()
 
     def _need_snapshot(self) -> bool:
         if self._layout is None:

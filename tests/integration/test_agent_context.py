@@ -12,6 +12,8 @@ import pytest
 
 from common.agent_client import FINAL, AgentClient, DriveResult
 from common.controller import Controller, Khepera
+from common.lab_errors import NotFound
+from common.messages import ControlQueued
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import (
     Poses,
@@ -198,3 +200,25 @@ def test_only_the_host_or_an_instructor_manages_the_context(lab: Lab) -> None:
         ida.stop_agent("k1", "demo over")
         t.join(10)
         assert done and done[0].status == "cancelled" and "demo over" in done[0].reason
+
+
+def test_a_context_started_before_its_world_says_so_and_then_serves_it(
+    router: Router, procs: Procs, tmp_path: Path
+) -> None:
+    # `wart up` and `wart host` start a lab's services together: a context may
+    # come up before its world, and must pick the world up when it appears.
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_agent_context(lab)
+    with agent_user(lab, "alice") as alice:
+        with pytest.raises(NotFound, match=r"world w1 has not answered yet .* try again"):
+            alice.queue("k0", "remote")
+        start_engine(lab)
+
+        def queued() -> ControlQueued | None:
+            try:
+                return alice.queue("k0", "remote")
+            except NotFound:
+                return None
+
+        assert wait_for(queued, 10, "the context to learn the world's robots")
