@@ -9,7 +9,8 @@ round of that robot, and then ``world/<w>/samples`` (a SampleBundle of that
 one sample) if the robot is leased and someone subscribes;
 ``world/<w>/sensors`` (SensorBatch) while someone subscribes. Subscribes
 ``agent/*/cmd`` and ``world/<w>/cmds`` (AgentCommand, sealed or MACed, alone
-or in a CommandBundle, from the current lease holder only) and
+or in a CommandBundle, or a swarm's MacCommandBundle, from the current lease
+holder only) and
 ``agent/*/lease`` (Lease, sealed, ``lease``
 permission), both checked by common.leases.LeaseBook exactly as the engine
 does. Serves ``snapshot`` (arena, agents with their online state);

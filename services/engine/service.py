@@ -10,8 +10,8 @@ Publishes: ``world/<w>/frame`` (WorldFrame) each tick; ``agent/<a>/sensors``
 (SampleBundle: every leased agent's sample) and ``world/<w>/sensors``
 (SensorBatch) when someone subscribes. Subscribes: ``agent/*/cmd`` and
 ``world/<w>/cmds`` (AgentCommand, sealed or MACed, alone or in a
-CommandBundle; holder of the current lease only) and ``agent/*/lease``
-(Lease, sealed, ``lease`` permission). Serves: ``snapshot`` (anyone),
+CommandBundle, or a swarm's MacCommandBundle; holder of the current lease
+only) and ``agent/*/lease`` (Lease, sealed, ``lease`` permission). Serves: ``snapshot`` (anyone),
 ``edit`` and ``map`` (sealed, ``edit_map``). Token: ``alive/world/<w>``.
 
 With an identity (``--user/--identity``, a service account with ``world``)
