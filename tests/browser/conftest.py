@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import re
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.conftest import ARTIFACTS, free_port
 from viewers.web.app import WebViewer
@@ -174,10 +176,31 @@ class ViserPage:
         self.p.screenshot(path=str(path))
         return path
 
+    def open_login(self) -> None:
+        """Click Connect and wait for the login form, as a student would.
+
+        Seen once in a whole-suite run on three workers beside two busy loops
+        (not reproduced alone beside three, where the form came in 0.2 s): no
+        form 10 s after the click, no error in the viewer's log. A student
+        would click again; so does this, after a screenshot and a warning in
+        the test summary, so the case is seen and can be chased. The test
+        still fails if the second click brings no form either.
+        """
+        self.click("Connect")
+        try:
+            self.button("Log in").wait_for(timeout=10_000)
+        except PlaywrightTimeout:
+            shot = self.screenshot("login-form-missing")
+            warnings.warn(
+                f"no login form 10 s after Connect (page: {shot.name}); clicking again",
+                stacklevel=2,
+            )
+            self.click("Connect")
+            self.button("Log in").wait_for(timeout=30_000)
+
     def log_in(self, address: str, user: str, password: str) -> None:
         self.fill("Address", address)
-        self.click("Connect")
-        self.button("Log in").wait_for(timeout=10_000)
+        self.open_login()
         self.fill("User", user)
         self.fill("Password", password)
         self.click("Log in")

@@ -22,8 +22,7 @@ def test_inputs_are_found_by_their_labels(open_page, viewer: WebViewer) -> None:
     address = p.get_by_label("Address", exact=True)
     address.fill("127.0.0.1")
     address.press("Enter")
-    page.click("Connect")
-    page.button("Log in").wait_for(timeout=10_000)
+    page.open_login()
 
     user = p.get_by_label("User", exact=True)
     user.fill("ana")

@@ -73,8 +73,7 @@ def assert_hidden_beside_shown(page, hidden: str, shown: str) -> None:
 def test_password_is_shown_as_dots(open_page, viewer: WebViewer) -> None:
     page = open_page()
     page.fill("Address", "127.0.0.1")
-    page.click("Connect")
-    page.button("Log in").wait_for(timeout=10_000)
+    page.open_login()
     assert_hidden_beside_shown(page, "Password", "User")
     assert text_security(page, "Address") == "none"
     page.screenshot("password-typed")
