@@ -109,7 +109,7 @@ class RobotState:
 
 
 class Odometry:
-    """Pose from position-counter deltas (differential drive, midpoint heading)."""
+    """Pose from position-counter deltas (differential drive, each step an arc)."""
 
     # Faster than any wheel can turn (127 pulses/10 ms) with a wide margin: a
     # jump this large means the counters were reset, not that the robot moved.
@@ -139,9 +139,14 @@ class Odometry:
         dl, dr = dl_p * self.mm_per_pulse, dr_p * self.mm_per_pulse
         d, dth = (dl + dr) / 2, (dr - dl) / self.wheel_base_mm
         mid = self.pose.heading + dth / 2
+        # The chord of the arc, not its length: exact for wheels at constant speeds
+        # between two readings, however far apart (a busy host reads late; at
+        # 40/60 pulses a 0.3 s gap put the arc-length estimate 4 mm out).
+        half = dth / 2
+        chord = d if abs(half) < 1e-9 else d * math.sin(half) / half
         self.pose = Pose(
-            self.pose.x + d * math.cos(mid),
-            self.pose.y + d * math.sin(mid),
+            self.pose.x + chord * math.cos(mid),
+            self.pose.y + chord * math.sin(mid),
             math.remainder(self.pose.heading + dth, math.tau),
         )
         return self.pose
