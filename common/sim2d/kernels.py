@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from common.sim2d import chipmunk as C
+from common.sim2d import discs
 
 # Column indices of the per-agent float table (AgentSensing.agent_f).
 F_REACH = 0
@@ -892,4 +893,5 @@ def warm_up() -> float:
     )
     sense(*(tuple(p) for p in packs))  # plain tuples, as SensorSuite.read passes them
     sense_parallel(*(tuple(p) for p in packs), 1)
+    discs.warm_up()
     return time.perf_counter() - t0

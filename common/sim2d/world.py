@@ -8,7 +8,10 @@ follow the thesis, through pymunk:
   force-limited pivot and gear joints (pymunk's tank pattern, ``drive="joints"``,
   the default), or driven by a force-limited velocity servo with the same
   limits (``drive="velocity"``, no joints: for swarms); either way walls push
-  them back and two agents share the push;
+  them back and two agents share the push; or (``drive="discs"``, for swarms
+  of robots and obstacles only) moved along their wheels' arcs by a compiled
+  tick that solves disc contacts itself, chipmunk not stepped
+  (common/sim2d/discs.py);
 - movable objects are dynamic bodies held to the floor by force-limited
   joints to the static body (top-down friction: nothing slides forever);
 - the gripper's collision exception area lets an object between the open
@@ -33,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pymunk
 
-from common.sim2d import bodies, chipmunk, kernels, sensing
+from common.sim2d import bodies, chipmunk, discs, kernels, sensing
 from common.sim2d.collision import (
     CAT_ALL,
     CAT_OBSTACLE,
@@ -71,7 +74,9 @@ class EditError(ValueError):
 # default, its trajectories unchanged: the sim-beside-real comparisons and recorded
 # runs were made with it, and tongs that no longer touch walls and robots are a
 # change of the model (docs/ARCHITECTURE.md section 9, "Drives").
-DRIVES = ("joints", "velocity")
+DRIVES = ("joints", "velocity", "discs")
+# The drives whose worlds can hold movable objects (the discs drive's cannot).
+OBJECT_DRIVES = ("joints", "velocity")
 
 
 @dataclass(frozen=True)
@@ -87,6 +92,7 @@ class Tables:
     arm_rate: np.ndarray  # (N,) arm position units per second (0 without a gripper)
     arm_lowered_above: np.ndarray  # (N,) arm position at and above which the tongs are down
     servo: np.ndarray  # (N, 4) the velocity drive's mass, moment, max force, max torque
+    mass: np.ndarray  # (N,) g: how the discs drive shares a push between two robots
 
 
 class World:
@@ -196,6 +202,14 @@ class World:
         )
         self._rows_layout = -1
         self._servo_memory = np.zeros((0, 6))
+        # The discs drive (common/sim2d/discs.py): the sensing grid it last binned
+        # the round obstacles of, with those bins; and whether the robots' pymunk
+        # bodies are where the robots are (the drive moves the robots, not them).
+        self._disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]] = (
+            None,
+            (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)),
+        )
+        self._bodies_placed = True
 
     # -- per-agent state -------------------------------------------------------------
 
@@ -265,6 +279,7 @@ class World:
                 ],
                 dtype=float,
             ).reshape(-1, 4),
+            mass=np.array([a.body.mass for a in self.agents], dtype=float),
         )
         self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
         self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}
@@ -380,7 +395,23 @@ class World:
         self.layout += 1
         return obstacle
 
+    def _place_bodies(self) -> None:
+        """On the discs drive, put the robots' bodies where the robots are, for a query.
+
+        Chipmunk is not stepped on that drive, so the bodies stay where an edit
+        last put them; an edit that asks the space what a shape overlaps needs
+        them where the robots are.
+        """
+        if self.drive != "discs" or self._bodies_placed:
+            return
+        for slot, agent in enumerate(self.agents):
+            x, y, heading = self.agent_pose[slot]
+            agent.body.position, agent.body.angle = (float(x), float(y)), float(heading)
+            self.space.reindex_shapes_for_body(agent.body)
+        self._bodies_placed = True
+
     def _agents_touching(self, shapes: list[pymunk.Shape]) -> list[str]:
+        self._place_bodies()
         found = []
         for shape in shapes:
             for info in self.space.shape_query(shape):
@@ -406,6 +437,11 @@ class World:
         colour: str = "#ff8c00",
     ) -> MovableObject:
         self._check_new_id(ident)
+        if self.drive == "discs":
+            raise EditError(
+                f"object {ident}: this world runs the discs drive (for swarms), which has "
+                "no movable objects; run it with the joints or velocity drive"
+            )
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"object {ident} would stick out of the arena")
         if mass_g <= 0:
@@ -438,6 +474,7 @@ class World:
         self._tongs_in = wanted
 
     def _blocked(self, shapes: list[pymunk.Shape], mask: int, body: pymunk.Body) -> bool:
+        self._place_bodies()
         for shape in shapes:
             shape.cache_bb()
             for info in self.space.shape_query(shape):
@@ -763,7 +800,43 @@ class World:
         # (bodies or shapes just added or removed): then drive only, and step via pymunk.
         via_pymunk = chipmunk.space_step_pending(self.space)
         sub = dt / self.substeps
-        if self.drive == "joints":
+        if self.drive == "discs":
+            # Chipmunk is not stepped: the robots' bodies stay where they were
+            # placed, for the edits' overlap queries (_place_bodies), and the
+            # world has no movable objects on this drive.
+            via_pymunk = False
+            static = self.sensors.static_geometry(self)
+            if self._disc_circles[0] is not static:
+                scene = static.scene
+                self._disc_circles = (
+                    static,
+                    discs.bin_circles(
+                        static.circle_centres,
+                        static.circle_radii,
+                        scene.grid_nx,
+                        scene.grid_ny,
+                        scene.cell,
+                    ),
+                )
+            pose, vel = discs.tick(
+                self.agent_pose,
+                self.cmd,
+                t.mm_s_per_unit,
+                t.wheel_base,
+                t.radius,
+                t.mass,
+                self.counters,
+                dt * t.pulses_per_s_per_unit,
+                static.kernel_scene,
+                self._disc_circles[1],
+                self.width,
+                self.height,
+                sub,
+                self.substeps,
+            )
+            obj = self.object_pose
+            self._bodies_placed = False
+        elif self.drive == "joints":
             pose, vel, obj = kernels.physics_tick(
                 chipmunk.FUNCTIONS,
                 self._step_fn,

@@ -72,9 +72,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         "--drive",
         choices=DRIVES,
         default="joints",
-        help="how robots are driven: joints (default; pymunk's tank pattern) or velocity "
-        "(a force-limited servo without joints, and tongs that hit movable objects only: "
-        "for swarms, several times cheaper a robot; docs/ARCHITECTURE.md section 9)",
+        help="how robots are driven: joints (default; pymunk's tank pattern), velocity "
+        "(a force-limited servo without joints, and tongs that hit movable objects only) "
+        "or discs (robots as discs moved by their wheels, contacts solved without "
+        "chipmunk; no movable objects): the last two for swarms, docs/ARCHITECTURE.md "
+        "section 9",
     )
     add_world_identity_args(p)
     args, options = cli.parse(p, argv)

@@ -36,6 +36,7 @@ from common.messages import (
     encode,
 )
 from common.remote_robot import WorldChannel, ZenohRobotLink
+from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
 
@@ -86,11 +87,20 @@ def start_engine(
     alive_watch: AliveWatch,
     tmp_path: Path,
     *extra: str,
+    objects: bool = True,
 ) -> Path:
-    """`wart engine` on a copy of maps/foraging.json (4 Khepera), its token seen."""
+    """`wart engine` on a copy of maps/foraging.json (4 Khepera), its token seen.
+
+    Without ``objects`` the copy has no balls or crate (the discs drive has none).
+    """
     maps_dir = tmp_path / "maps"
     maps_dir.mkdir()
     shutil.copy(REPO / "maps" / "foraging.json", maps_dir / "foraging.json")
+    if not objects:
+        path = maps_dir / "foraging.json"
+        document = json.loads(path.read_text())
+        document["objects"] = []
+        path.write_text(json.dumps(document))
     net = router.options(registry_key=identity.verify_key.hex()).as_args()
     proc = procs.start(
         "engine",
@@ -273,8 +283,19 @@ def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
     assert "objects[0].colr" in proc.output(), proc.output()
 
 
-# Both drives (`wart engine --drive`): the swarm option runs the same service.
-@pytest.mark.parametrize("drive", ["joints", "velocity"])
+def test_a_map_with_objects_on_the_discs_drive_is_refused_with_what_to_do(procs: Procs) -> None:
+    proc = procs.start(
+        "engine-discs",
+        ["engine", "--map", str(REPO / "maps" / "foraging.json"), "--drive", "discs"],
+    )
+    assert proc.popen.wait(30) == 2
+    out = proc.output()
+    assert "object ball0" in out and "no movable objects" in out, out
+    assert "joints or velocity drive" in out, out
+
+
+# Every drive (`wart engine --drive`): the swarm options run the same service.
+@pytest.mark.parametrize("drive", DRIVES)
 def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller(
     router: Router,
     procs: Procs,
@@ -284,7 +305,17 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
     tmp_path: Path,
     drive: str,
 ) -> None:
-    start_engine(router, procs, identity, alive_watch, tmp_path, "--wander", "--drive", drive)
+    start_engine(
+        router,
+        procs,
+        identity,
+        alive_watch,
+        tmp_path,
+        "--wander",
+        "--drive",
+        drive,
+        objects=drive in OBJECT_DRIVES,
+    )
     realm = router.realm
     frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
     wait_for(lambda: frames.count > 0, 10, "a frame")

@@ -19,7 +19,7 @@ import pytest
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.maps import load_map
-from common.sim2d.world import DRIVES, EditError, World
+from common.sim2d.world import DRIVES, OBJECT_DRIVES, EditError, World
 from services.engine.main import main as engine_main
 
 KHEPERA = agent_type("khepera")
@@ -34,7 +34,7 @@ def _gaps(pose: np.ndarray) -> np.ndarray:
 
 
 def test_the_drive_is_checked_by_the_world_the_maps_and_the_engine(capsys) -> None:
-    with pytest.raises(EditError, match="drive must be one of joints, velocity"):
+    with pytest.raises(EditError, match="drive must be one of joints, velocity, discs"):
         World(500.0, 500.0, drive="tank")
     world = load_map(REPO / "maps" / "maze.json", name="m", drive="velocity")
     assert world.drive == "velocity"
@@ -85,7 +85,7 @@ def test_a_robot_cannot_push_another_through_a_wall_or_into_itself(drive: str) -
     assert math.dist(pushed[:2], pusher[:2]) > 2 * R - 1.0, "the robots overlap"
 
 
-@pytest.mark.parametrize("drive", DRIVES)
+@pytest.mark.parametrize("drive", OBJECT_DRIVES)
 def test_a_robot_pushes_a_light_box_ahead_of_it(drive: str) -> None:
     world = World(1500.0, 1000.0, seed=2, drive=drive)
     world.add_agent("k1", KHEPERA, 300.0, 500.0, 0.0)

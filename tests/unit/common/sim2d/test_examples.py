@@ -14,7 +14,7 @@ import pytest
 from common.controller import Controller, load_controller
 from common.precheck import precheck
 from common.sim2d.maps import load_map
-from common.sim2d.world import World
+from common.sim2d.world import DRIVES, World
 from tests.conftest import REPO
 from tests.worldlink import run_in_world
 
@@ -64,7 +64,7 @@ def test_every_example_passes_the_precheck_and_says_what_it_teaches() -> None:
 
 # Both drives (World(drive=...)): a controller must behave the same whichever the
 # engine runs; the velocity drive is the swarm option (docs/ARCHITECTURE.md section 9).
-@pytest.mark.parametrize("drive", ["joints", "velocity"])
+@pytest.mark.parametrize("drive", DRIVES)
 def test_braitenberg_avoids_the_maze_walls(drive: str) -> None:
     w = world("maze", "k1", drive=drive)
     track = Track(w, "k1")
@@ -73,7 +73,7 @@ def test_braitenberg_avoids_the_maze_walls(drive: str) -> None:
     assert track.touching / track.steps < 0.05, "it rarely touches a wall"
 
 
-@pytest.mark.parametrize("drive", ["joints", "velocity"])
+@pytest.mark.parametrize("drive", DRIVES)
 def test_wall_follower_keeps_a_wall_on_its_left(drive: str) -> None:
     w = world("maze", "k1", drive=drive)
     track = Track(w, "k1")
