@@ -29,6 +29,7 @@ from common.client import LabClient, RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
 from common.lab_errors import LabError, NotLoggedIn
 from common.messages import (
+    ENDED,
     AgentContextState,
     AgentEvent,
     CancelControl,
@@ -61,7 +62,7 @@ from common.remote_robot import ZenohRobotLink
 
 log = logging.getLogger("wart.agent_client")
 
-FINAL = frozenset({"finished", "cancelled", "refused"})
+FINAL = ENDED  # a request's last statuses
 # A dry run's answer: the runner's wall-clock limit (DRY_RUN_WALL_S in
 # services/runner/dryrun.py) plus the hops and the sandbox's start.
 DRY_RUN_WAIT_S = 30.0
