@@ -4,7 +4,8 @@ Uploads the file (checked here and again by the lab: at most 64 KiB of UTF-8
 Python with a Controller subclass), queues it for the agent, shows your
 position and estimated start, then the controller's output (prints,
 exceptions) live while the lab's runner runs it in a sandbox for one slot.
-Exits when the slot ends. Ctrl-C cancels the request (waiting or running).
+Exits when the slot ends, with how it ended. Ctrl-C cancels the request
+(waiting or running). Should the end's news not arrive, it asks the arena.
 
 ``--dry-run`` queues nothing: the lab runs the file for a few simulated
 seconds (``--seconds``, default 5) in a private copy of the arena, headless
