@@ -176,13 +176,13 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
     def on_start(self) -> None:
         super().on_start()
         self.subscribe(keys.ctx_output(self.realm, self.room), self._on_output)
-        # Dry runs take seconds: their own key and threads, so queueing, stops and
-        # the emergency stop are never behind one.
         # Its own key: a client asking how its request ended is never behind an upload.
         self.serve(
             keys.ctx_status(self.realm, self.room),
             lambda query: self.status_desk.answer(str(query.key_expr), query.payload),
         )
+        # Dry runs take seconds: their own key and threads, so queueing, stops and
+        # the emergency stop are never behind one.
         self.serve(
             keys.ctx_dryrun(self.realm, self.room),
             self._on_dry_run,
