@@ -27,8 +27,9 @@ from pathlib import Path
 from common import keys
 from common.client import LabClient, RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
-from common.lab_errors import LabError, NotLoggedIn
+from common.lab_errors import LabError, NotFound, NotLoggedIn
 from common.messages import (
+    ENDED,
     AgentContextState,
     AgentEvent,
     CancelControl,
@@ -51,6 +52,8 @@ from common.messages import (
     RecordingList,
     RecordingListRequest,
     RequestStatus,
+    RequestStatusQuery,
+    RequestStatusReply,
     RoomEvent,
     RunMode,
     SaveFile,
@@ -61,7 +64,7 @@ from common.remote_robot import ZenohRobotLink
 
 log = logging.getLogger("wart.agent_client")
 
-FINAL = frozenset({"finished", "cancelled", "refused"})
+FINAL = ENDED  # a request's last statuses
 # A dry run's answer: the runner's wall-clock limit (DRY_RUN_WALL_S in
 # services/runner/dryrun.py) plus the hops and the sandbox's start.
 DRY_RUN_WAIT_S = 30.0
@@ -88,6 +91,8 @@ class AgentClient:
     on_room: Callable[[RoomEvent], None] = lambda _e: None
     latest_state: AgentContextState | None = None
     room: RoomHandle | None = None  # what the join said (title, owner, members, history)
+    # When the context's events last came (monotonic s): a long silence may be a missed event.
+    last_heard: float = field(default_factory=time.monotonic)
     _statuses: dict[str, list[RequestStatus]] = field(default_factory=dict)
     _cond: threading.Condition = field(default_factory=threading.Condition)
 
@@ -103,6 +108,7 @@ class AgentClient:
     # -- events (Zenoh thread: short)
 
     def _on_event(self, event: AgentEvent) -> None:
+        self.last_heard = time.monotonic()
         if event.state is not None:
             with self._cond:
                 if self.latest_state is None or event.state.at >= self.latest_state.at:
@@ -193,6 +199,31 @@ class AgentClient:
     ) -> str:
         message = ContextSettings(slot_seconds=slot_seconds, enabled=enabled, agent=agent)
         return self.client.request(self.ctx, message, OkReply, "change settings").detail
+
+    def request_status(self, request_id: str) -> RequestStatusReply | None:
+        """Where ``request_id`` stands, as the context says now; None if the context does
+        not answer at all (stopped, restarting, out of reach), which says nothing about
+        the request. For a caller that may have missed the request's last event: an
+        ended status it learns this way is kept as if the event had come, so
+        :meth:`wait_status` returns it. LabError if the context refuses (not yours).
+        """
+        try:
+            reply = self.client.request(
+                self.ctx,
+                RequestStatusQuery(request_id=request_id),
+                RequestStatusReply,
+                f"status of request {request_id}",
+                key=keys.ctx_status(self.client.realm, self.ctx),
+            )
+        except NotFound:  # the context never answers not_found here: nobody answered
+            return None
+        if reply.ended and reply.status is not None:
+            with self._cond:
+                seen = self._statuses.setdefault(request_id, [])
+                if not any(s.status in FINAL for s in seen):
+                    seen.append(reply.status)
+                    self._cond.notify_all()
+        return reply
 
     # -- recordings (every slot is recorded by the context: common/recording/)
 
@@ -398,6 +429,13 @@ class AgentClient:
             self.cancel_quietly(rid)
             return DriveResult(rid, "interrupted", reason, loop.iterations, error)
         final = self.wait_status(rid, FINAL, timeout=2.0)
+        if final is None:  # the end's event missed (or late): the context says how it ended
+            try:
+                asked = self.request_status(rid)
+            except LabError as exc:
+                log.info("could not ask how %s ended: %s", rid, exc)
+                asked = None
+            final = asked.status if asked is not None and asked.ended else None
         if final is None:
             return DriveResult(rid, "finished", reason, loop.iterations, error)
         return DriveResult(rid, final.status, final.reason, loop.iterations, error)

@@ -195,6 +195,13 @@ def ctx_dryrun(realm: str, ctx: str) -> str:
     return f"{_ctx(realm, ctx)}/dryrun"
 
 
+def ctx_status(realm: str, ctx: str) -> str:
+    """Queryable for one request's status (queued, running, ended): for a client that
+    missed its request's last event; answered from the context's record, never queued
+    behind the requests that change the queues."""
+    return f"{_ctx(realm, ctx)}/status"
+
+
 def ctx_in(realm: str, ctx: str) -> str:
     """Client to context, fire-and-forget (chat lines)."""
     return f"{_ctx(realm, ctx)}/in"

@@ -43,6 +43,8 @@ SlotSeconds = Annotated[float, msgspec.Meta(ge=1.0, le=3600.0)]
 DryRunSeconds = Annotated[float, msgspec.Meta(gt=0.0, le=30.0)]
 
 RequestStatusKind = Literal["queued", "running", "finished", "cancelled", "refused"]
+ENDED: frozenset[str] = frozenset({"finished", "cancelled", "refused"})
+"""The statuses a request ends with (its last)."""
 
 
 # --- client to agent context -----------------------------------------------------------
@@ -259,6 +261,46 @@ class RequestStatus(msgspec.Struct, frozen=True, kw_only=True):
     end: float | None = None
 
 
+class RequestStatusQuery(Message):
+    """Where one request stands now (reply: :class:`RequestStatusReply`).
+
+    The context publishes each of a request's statuses once, as an AgentEvent; a
+    client that missed the last one (it subscribed late, its link blipped) asks
+    here instead of guessing from the queues. Its owner or the context's managers.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/status",)
+
+    request_id: Ident
+
+
+class RequestStatusReply(Message):
+    """A request as the context knows it now.
+
+    ``status`` None: the context never saw the request or has forgotten it
+    (it keeps the newest ended requests, a bounded number per user). Otherwise
+    its status is ``queued`` (``position``, 1 = next, and ``start_eta``),
+    ``running`` (``status.end`` - ``at`` seconds left), or how it ended
+    (finished / cancelled / refused with the reason, at ``ended_at``; for a run,
+    ``status.start`` and ``status.end`` are its slot's start and end).
+    """
+
+    request_id: Ident
+    at: float  # the context's wall clock when it answered
+    status: RequestStatus | None = None
+    position: NonNegInt | None = None
+    start_eta: float | None = None
+    ended_at: float | None = None
+
+    @property
+    def known(self) -> bool:
+        return self.status is not None
+
+    @property
+    def ended(self) -> bool:
+        return self.status is not None and self.status.status in ENDED
+
+
 class OutputLines(msgspec.Struct, frozen=True, kw_only=True):
     request_id: Ident
     agent: Ident
@@ -357,6 +399,7 @@ class RunStop(Message):
 
 
 __all__ = [
+    "ENDED",
     "MAX_OUTPUT_LINE",
     "MAX_UPLOAD_BYTES",
     "AgentContextState",
@@ -382,6 +425,8 @@ __all__ = [
     "QueueStateRequest",
     "ReadFile",
     "RequestStatus",
+    "RequestStatusQuery",
+    "RequestStatusReply",
     "RunAccepted",
     "RunClaim",
     "RunMode",

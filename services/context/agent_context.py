@@ -58,6 +58,7 @@ from common.messages import (
     RecordingGet,
     RecordingListRequest,
     RequestStatus,
+    RequestStatusReply,
     Revocation,
     SaveFile,
     StopControl,
@@ -78,6 +79,7 @@ from services.context.lease_signer import LeaseSigner
 from services.context.queue_requests import QueueRequests
 from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
+from services.context.request_status import RequestStatusDesk, look_up
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
 from services.context.user_files import UserFiles
@@ -126,6 +128,10 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         self._world_appeared = False
         self._frames: Any = None
         self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
+        self._starting: dict[str, ControlJob] = {}  # off their queue, their slot being set up
+        self.status_desk = RequestStatusDesk(
+            name, self.owner, self.verifier, self._look_up, restricted=self.restricted
+        )
         self.recorder = SlotRecorder(
             session, realm, name, self.world, recordings, self.registry_key, self.log
         )
@@ -170,6 +176,11 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
     def on_start(self) -> None:
         super().on_start()
         self.subscribe(keys.ctx_output(self.realm, self.room), self._on_output)
+        # Its own key: a client asking how its request ended is never behind an upload.
+        self.serve(
+            keys.ctx_status(self.realm, self.room),
+            lambda query: self.status_desk.answer(str(query.key_expr), query.payload),
+        )
         # Dry runs take seconds: their own key and threads, so queueing, stops and
         # the emergency stop are never behind one.
         self.serve(
@@ -216,7 +227,7 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         with self._lock:
             running = [line.running for line in self.book.lines.values() if line.running]
         for run in running:
-            self._end_run(run, "cancelled", "the agent context stopped")
+            self._end_run(run, self._ended(run.job, "cancelled", "the agent context stopped", run))
         with self._lock:
             for line in self.book.lines.values():
                 line.running = None
@@ -228,9 +239,7 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
     # -- manage rights
 
     def _manages(self, principal: Principal) -> bool:
-        return principal.user == self.owner or principal.allowed(
-            "kick", self.scope, restricted=self.restricted
-        )
+        return self._allowed(principal, "kick")
 
     def _require_manage(self, principal: Principal, what: str) -> None:
         if not self._manages(principal):
@@ -326,7 +335,7 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         self._drop_session_jobs(principal.session_id, "left the context", remote_only=False)
 
     def _drop_session_jobs(self, session_id: bytes, reason: str, *, remote_only: bool) -> None:
-        cancelled: list[ControlJob] = []
+        cancelled: list[RequestStatus] = []
         with self._wake:
             for job, running in self.book.jobs_of_session(session_id):
                 if remote_only and job.mode != "remote":
@@ -335,13 +344,11 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
                     self._finish_soon(job.request_id, "cancelled", reason)
                 else:
                     self.book.remove_waiting(job.request_id)
-                    cancelled.append(job)
+                    cancelled.append(self._ended(job, "cancelled", reason))
             self._dirty = True
             self._wake.notify_all()
-        for job in cancelled:
-            self._publish_agent(
-                AgentEvent(ctx=self.room, request=self._status(job, "cancelled", reason))
-            )
+        for final in cancelled:
+            self._publish_agent(AgentEvent(ctx=self.room, request=final))
 
     def _on_registry_presence(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
@@ -461,6 +468,34 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
             start=run.start if run else None,
             end=run.end if run else None,
         )
+
+    def _ended(
+        self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
+    ) -> RequestStatus:
+        """A request's last status, recorded in the book before anyone is told: a client
+        that misses the event asks (``ctx/<ctx>/status``) and gets the same answer.
+
+        Called where the request leaves the queues, under the same hold of the lock.
+        For a run, ``start`` and ``end`` are its slot's start and its actual end.
+        """
+        now = time.time()
+        final = RequestStatus(
+            request_id=job.request_id,
+            agent=job.agent,
+            user=job.user,
+            status=status,  # type: ignore[arg-type]
+            reason=reason[:256],  # a RequestStatus reason's limit
+            start=run.start if run else None,
+            end=min(run.end, now) if run else None,
+        )
+        with self._lock:
+            self.book.record_end(final, now)
+            self._dirty = True
+        return final
+
+    def _look_up(self, request_id: str) -> RequestStatusReply:
+        with self._lock:
+            return look_up(self.book, self._starting, request_id, time.time())
 
     def _publish(self, *, line: ChatLine | None = None, status: MemberStatus | None = None) -> None:
         super()._publish(line=line, status=status)

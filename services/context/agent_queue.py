@@ -16,7 +16,14 @@ from dataclasses import dataclass, field
 
 import msgspec
 
-from common.messages import AgentQueue, QueueEntry, RunMode
+from common.messages import AgentQueue, QueueEntry, RequestStatus, RunMode
+
+# How many ended requests the book remembers, so a client that missed a request's
+# last event can still ask how it ended. Per user first: one student queueing and
+# cancelling in a loop pushes out only their own; then overall, which bounds the
+# saved file (a few hundred bytes each) at a size rewritten cheaply on each change.
+ENDED_PER_USER = 16
+ENDED_KEPT = 512
 
 
 @dataclass
@@ -47,6 +54,13 @@ class RunningJob:
     sealed: dict[tuple[bytes, bytes], tuple[bytes, bytes]] = field(default_factory=dict)
 
 
+class EndedRequest(msgspec.Struct, frozen=True):
+    """A request's last status and when it ended (wall-clock s)."""
+
+    status: RequestStatus
+    ended_at: float
+
+
 @dataclass
 class AgentLine:
     agent: str
@@ -74,6 +88,7 @@ class QueueBook:
         # slot starts while it holds; waiting requests keep their places.
         self.estop = ""
         self.lines: dict[str, AgentLine] = {}
+        self.ended: dict[str, EndedRequest] = {}  # request id -> its end, oldest first
 
     # -- agents
 
@@ -145,6 +160,16 @@ class QueueBook:
             if line.running is not None and now >= line.running.end
         ]
 
+    def record_end(self, status: RequestStatus, at: float) -> None:
+        """Remember how a request ended; the oldest ends beyond the bounds are forgotten."""
+        self.ended.pop(status.request_id, None)
+        self.ended[status.request_id] = EndedRequest(status, at)
+        mine = [rid for rid, end in self.ended.items() if end.status.user == status.user]
+        for rid in mine[: max(0, len(mine) - ENDED_PER_USER)]:
+            del self.ended[rid]
+        while len(self.ended) > ENDED_KEPT:
+            del self.ended[next(iter(self.ended))]
+
     # -- what users see
 
     def eta(self, agent: str, position: int, now: float) -> float | None:
@@ -215,6 +240,9 @@ class _SavedBook(msgspec.Struct):
     enabled: bool
     lines: list[_SavedLine]
     estop: str = ""  # a held emergency stop survives a restart of the context
+    # How requests ended, so a client that missed the end (or the restart that came
+    # with it, "the agent context stopped") is still told after a restart.
+    ended: list[EndedRequest] = msgspec.field(default_factory=list)
 
 
 _BOOK_VERSION = 1
@@ -222,7 +250,8 @@ _book_decoder = msgspec.msgpack.Decoder(_SavedBook)
 
 
 def save_book(book: QueueBook) -> bytes:
-    """The queues, their settings and the running slots (with their lease keys) as bytes."""
+    """The queues, their settings, the running slots (with their lease keys) and the
+    record of ended requests, as bytes."""
     lines = []
     for line in book.lines.values():
         run = line.running
@@ -239,7 +268,14 @@ def save_book(book: QueueBook) -> bytes:
             )
         lines.append(_SavedLine(line.agent, line.type, line.enabled, list(line.waiting), saved_run))
     return msgspec.msgpack.encode(
-        _SavedBook(_BOOK_VERSION, book.slot_seconds, book.enabled, lines, book.estop)
+        _SavedBook(
+            _BOOK_VERSION,
+            book.slot_seconds,
+            book.enabled,
+            lines,
+            book.estop,
+            list(book.ended.values()),
+        )
     )
 
 
@@ -254,6 +290,7 @@ def load_book(data: bytes) -> QueueBook:
     book = QueueBook(saved.slot_seconds)
     book.enabled = saved.enabled
     book.estop = saved.estop
+    book.ended = {end.status.request_id: end for end in saved.ended}
     for line in saved.lines:
         running = None
         if line.running is not None:

@@ -127,6 +127,14 @@ class RateLimit:
             return 0.0
 
 
+def room_allows(
+    principal: Principal, permission: str, *, owner: str, scope: str, restricted: bool
+) -> bool:
+    """The rule of every room: its owner may do anything there; anyone else needs
+    ``permission`` in its scope (``kick`` there is what makes a manager)."""
+    return principal.user == owner or principal.allowed(permission, scope, restricted=restricted)
+
+
 class ChatRoom(Service):
     kind = AliveKind.CONTEXT
 
@@ -206,9 +214,9 @@ class ChatRoom(Service):
         self._publisher.put(self.login.session.seal(self._events_key, event))
 
     def _allowed(self, principal: Principal, permission: str) -> bool:
-        if principal.user == self.owner:
-            return True
-        return principal.allowed(permission, self.scope, restricted=self.restricted)
+        return room_allows(
+            principal, permission, owner=self.owner, scope=self.scope, restricted=self.restricted
+        )
 
     def _require(self, principal: Principal, permission: str, what: str) -> None:
         if not self._allowed(principal, permission):

@@ -94,6 +94,11 @@ class QueueRequests:
         ) -> RequestStatus:
             raise NotImplementedError
 
+        def _ended(
+            self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
+        ) -> RequestStatus:
+            raise NotImplementedError
+
     def _queue(self, principal: Principal, request: ControlRequest) -> Message:
         self._require_member(principal)
         permission = "control" if request.mode == "remote" else "deploy"
@@ -203,19 +208,17 @@ class QueueRequests:
             _, job, running = found
             if job.user != principal.user and not self._manages(principal):
                 raise RequestError("forbidden", f"request {request.request_id} is not yours")
+            why = f"cancelled by {principal.user}"
+            final = None
             if not running:
                 self.book.remove_waiting(job.request_id)
+                final = self._ended(job, "cancelled", why)
                 self._dirty = True
             else:
-                self._finish_soon(job.request_id, "cancelled", f"cancelled by {principal.user}")
+                self._finish_soon(job.request_id, "cancelled", why)
             self._wake.notify_all()
-        if not running:
-            self._publish_agent(
-                AgentEvent(
-                    ctx=self.room,
-                    request=self._status(job, "cancelled", f"cancelled by {principal.user}"),
-                )
-            )
+        if final is not None:
+            self._publish_agent(AgentEvent(ctx=self.room, request=final))
         return OkReply(detail=f"request {request.request_id} cancelled")
 
     def _stop_agent(self, principal: Principal, request: StopControl) -> Message:

@@ -62,6 +62,7 @@ class SlotScheduler:
     _world_appeared: bool
     _frames: Any
     _recent: dict[str, RunningJob]
+    _starting: dict[str, ControlJob]
     _end_reasons: dict[str, tuple[str, str]]
     recorder: SlotRecorder
 
@@ -80,6 +81,11 @@ class SlotScheduler:
 
     def _status(
         self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
+    ) -> RequestStatus:
+        raise NotImplementedError
+
+    def _ended(
+        self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
     ) -> RequestStatus:
         raise NotImplementedError
 
@@ -170,60 +176,64 @@ class SlotScheduler:
                 first = self._layout is None
                 self._layout = snap.layout
                 gone = self.book.set_agents({a.id: a.type for a in snap.agents})
-                for job in gone:
-                    self._end_reasons.setdefault(
-                        job.request_id, ("cancelled", f"{job.agent} left the world")
-                    )
+                finals = [
+                    self._ended(job, "cancelled", f"{job.agent} left the world") for job in gone
+                ]
                 self._dirty = True
             if first:
                 self.log.info(
                     "world %s has agents %s", self.world, ", ".join(a.id for a in snap.agents)
                 )
-            for job in gone:
-                self._publish_agent(
-                    AgentEvent(
-                        ctx=self.room,
-                        request=self._status(job, "cancelled", f"{job.agent} left the world"),
-                    )
-                )
+            for final in finals:
+                self._publish_agent(AgentEvent(ctx=self.room, request=final))
             return
 
     def _turn(self) -> None:
         now = time.time()
         with self._lock:
             ended = self.book.expired(now)
+            finals = []
             for run in ended:
                 self.book.lines[run.job.agent].running = None
+                # Recorded as it leaves the queues, under the same lock: a client asking
+                # in between finds it either running or ended, never unknown.
+                status, reason = self._end_reasons.pop(
+                    run.job.request_id, ("finished", "its slot ended")
+                )
+                finals.append(self._ended(run.job, status, reason, run))
+                # Only for output lines that trail the end (the last prints, a traceback):
+                # they come within a second or two, so the newest 64 runs are plenty.
+                self._recent[run.job.request_id] = run
+                while len(self._recent) > 64:
+                    self._recent.pop(next(iter(self._recent)))
             starts = []
             for agent in list(self.book.lines):
                 job = self.book.next_to_start(agent)
                 if job is not None:
                     starts.append(job)
+                    self._starting[job.request_id] = job  # off its queue, not yet running
             if ended or starts:
                 self._dirty = True
-        for run in ended:
-            with self._lock:
-                self._recent[run.job.request_id] = run
-                while len(self._recent) > 64:
-                    self._recent.pop(next(iter(self._recent)))
+        for run, final in zip(ended, finals, strict=True):
             self.runner_link.forget(run.job.request_id)
-            status, reason = self._end_reasons.pop(
-                run.job.request_id, ("finished", "its slot ended")
-            )
-            self._end_run(run, status, reason)
+            self._end_run(run, final)
         for job in starts:
-            self._start(job)
+            try:
+                self._start(job)
+            finally:
+                with self._lock:
+                    self._starting.pop(job.request_id, None)
 
-    def _end_run(self, run: RunningJob, status: str, reason: str) -> None:
+    def _end_run(self, run: RunningJob, final: RequestStatus) -> None:
+        """Tell the world, the runner, the recording and the members that ``run`` ended
+        (``final``: its last status, already recorded with :meth:`_ended`)."""
         # The same lease id, ending now, replaces the lease in the world at once.
         self._publish_lease(run, min(run.end, time.time()))
         if run.job.mode == "deploy":
-            self.runner_link.stop(run.job.request_id, reason)
-        log.info("%s %s on %s: %s", run.job.request_id, status, run.job.agent, reason)
-        self.recorder.run_ended(run.job.request_id, status, reason)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(run.job, status, reason))
-        )
+            self.runner_link.stop(run.job.request_id, final.reason)
+        log.info("%s %s on %s: %s", run.job.request_id, final.status, run.job.agent, final.reason)
+        self.recorder.run_ended(run.job.request_id, final.status, final.reason)
+        self._publish_agent(AgentEvent(ctx=self.room, request=final))
 
     def _start(self, job: ControlJob) -> None:
         start = time.time()
@@ -234,12 +244,12 @@ class SlotScheduler:
                 holder, holder_box = self.runner_link.start(job, self.room, self.world, end)
             except RequestError as exc:
                 log.warning("%s refused: %s", job.request_id, exc.message)
-                self._publish_agent(
-                    AgentEvent(ctx=self.room, request=self._status(job, "refused", exc.message))
-                )
                 with self._wake:
+                    refused = self._ended(job, "refused", exc.message)
+                    self._starting.pop(job.request_id, None)
                     self._dirty = True
                     self._wake.notify_all()
+                self._publish_agent(AgentEvent(ctx=self.room, request=refused))
                 return
         run = RunningJob(
             job=job,
@@ -252,10 +262,21 @@ class SlotScheduler:
         )
         with self._lock:
             line = self.book.lines.get(job.agent)
-            if line is None or line.running is not None:
-                return
-            line.running = run
+            final: RequestStatus | None = None
+            if line is None:  # the agent left the world while its slot was being set up
+                final = self._ended(job, "cancelled", f"{job.agent} left the world")
+            elif line.running is not None:  # only this thread starts slots: never seen
+                self.log.error("%s: %s already runs something", job.request_id, job.agent)
+                final = self._ended(job, "cancelled", f"{job.agent} was taken: queue again")
+            else:
+                line.running = run
+            self._starting.pop(job.request_id, None)
             self._dirty = True
+        if final is not None:
+            if job.mode == "deploy":
+                self.runner_link.stop(job.request_id, final.reason)
+            self._publish_agent(AgentEvent(ctx=self.room, request=final))
+            return
         driver = job.user if job.mode == "remote" else self.runner_user(run)
         self.recorder.run_started(run, driver)  # before the lease: the first commands count
         self._publish_lease(run, end)

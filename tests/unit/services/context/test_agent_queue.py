@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import msgspec
 import pytest
 
+from common.messages import RequestStatus
 from services.context.agent_queue import (
+    ENDED_KEPT,
+    ENDED_PER_USER,
     ControlJob,
     QueueBook,
     RunningJob,
@@ -90,3 +94,36 @@ def test_an_emergency_stop_holds_the_queues_in_order_and_survives_a_restart() ->
     assert restored.estop == "emergency stop by ida"
     restored.estop = ""
     assert restored.next_to_start("k1") == first
+
+
+def ended(rid: str, user: str = "alice") -> RequestStatus:
+    return RequestStatus(request_id=rid, agent="k1", user=user, status="finished", reason="r")
+
+
+def test_ended_requests_are_kept_per_user_so_one_cannot_push_out_the_others() -> None:
+    book = QueueBook(slot_seconds=10)
+    book.record_end(ended("bob-1", user="bob"), 1.0)
+    for i in range(ENDED_PER_USER + 5):  # alice queues and cancels in a loop
+        book.record_end(ended(f"alice-{i}"), 2.0 + i)
+    assert "bob-1" in book.ended
+    mine = [rid for rid, end in book.ended.items() if end.status.user == "alice"]
+    assert mine == [f"alice-{i}" for i in range(5, ENDED_PER_USER + 5)]  # her newest
+
+
+def test_ended_requests_are_bounded_overall_oldest_first() -> None:
+    book = QueueBook(slot_seconds=10)
+    for i in range(ENDED_KEPT + 3):
+        book.record_end(ended(f"r-{i}", user=f"u{i}"), float(i))
+    assert len(book.ended) == ENDED_KEPT
+    assert "r-2" not in book.ended and "r-3" in book.ended
+
+
+def test_ended_requests_survive_a_save_and_a_book_saved_before_them_loads() -> None:
+    book = QueueBook(slot_seconds=10)
+    book.set_agents({"k1": "khepera"})
+    book.record_end(ended("r-1"), 5.0)
+    assert load_book(save_book(book)).ended == book.ended
+    # A queues file written before the record existed: read as no ended requests.
+    older = msgspec.msgpack.decode(save_book(book))
+    del older["ended"]
+    assert load_book(msgspec.msgpack.encode(older)).ended == {}

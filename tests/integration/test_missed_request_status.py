@@ -1,0 +1,167 @@
+"""A client that missed its request's last event asks the context, and is told the truth.
+
+The context publishes a request's end once. Here that one message never
+reaches the client (dropped in the client, or the client was not listening
+yet), the runner is killed mid-slot, and the student must still read the
+real reason ("the lab's runner runner stopped"), never "lost".
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.agent_client import FINAL, AgentClient
+from common.lab_errors import NotAllowed
+from common.messages import AgentEvent
+from services.commands import deploy
+from services.runner.sandbox import sandbox_problem
+from tests.conftest import Proc, Procs, Router, wait_for
+from tests.integration.agentkit import (
+    agent_user,
+    start_agent_context,
+    start_engine,
+    start_runner,
+    together,
+)
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+]
+FORWARD = Path(__file__).with_name("controllers") / "forward.py"
+RUNNER_STOPPED = "the lab's runner runner stopped"
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab, Proc, Proc]]:
+    """A lab whose slots outlast the test (30 s): a request ends only when made to."""
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    _, runner = together(lambda: start_engine(lab), lambda: start_runner(lab))
+    context = start_agent_context(lab, slot=30.0)
+    yield lab, runner, context
+
+
+def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
+    lab: tuple[Lab, Proc, Proc],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    the_lab, runner, _ = lab
+    receive = AgentClient._on_event
+
+    def drop_bobs_ends(self: AgentClient, event: AgentEvent) -> None:
+        # The one message that says how bob's request ended never arrives; the queue
+        # states (showing it gone) still do, as in the chaos test that saw "lost".
+        if self.client.user == "bob" and event.request and event.request.status in FINAL:
+            return
+        receive(self, event)
+
+    monkeypatch.setattr(AgentClient, "_on_event", drop_bobs_ends)
+    monkeypatch.setattr(deploy, "interrupt_event", threading.Event)  # pytest keeps its signals
+    monkeypatch.setenv("WART_PASSWORD", PASSWORD)
+    failures: list[BaseException] = []
+
+    with agent_user(the_lab, "ida") as ida:
+
+        def kill_the_runner_mid_slot() -> None:
+            try:
+                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
+                runner.kill9()
+            except BaseException as exc:  # seen by the test, not lost in the thread
+                failures.append(exc)
+
+        killer = threading.Thread(target=kill_the_runner_mid_slot, daemon=True)
+        killer.start()
+        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
+        code = deploy.main([*argv, *the_lab.net_args()])
+        killer.join(5)
+    out = capsys.readouterr().out
+    assert not failures, failures
+    assert code == 1, out
+    assert "running on k3" in out
+    last = out.strip().splitlines()[-1]
+    assert last.startswith(f"cancelled: {RUNNER_STOPPED}"), out
+    assert "lost" not in out, out
+
+
+def test_a_late_client_asks_how_its_request_ended_even_across_a_context_restart(
+    lab: tuple[Lab, Proc, Proc],
+) -> None:
+    the_lab, runner, context = lab
+    # Her first client stays joined (leaving would end the request) but is not the one
+    # that asks: a second session of hers joins only after the end, as a restarted
+    # `wart deploy` or a reloaded web page would.
+    with agent_user(the_lab, "alice") as first, agent_user(the_lab, "ida") as ida:
+        queued = first.queue("k2", "deploy", source=FORWARD.read_bytes(), filename="forward.py")
+        rid = queued.request_id
+        assert first.wait_status(rid, {"running"}, timeout=60), first.statuses(rid)
+        runner.kill9()
+        wait_for(lambda: ida.position_of_user("alice", "k2") is None, 30, "the end of the run")
+
+        def asked(user: str) -> str:
+            with agent_user(the_lab, user) as late:
+                assert late.statuses(rid) == []  # it never heard of the end
+                reply = late.request_status(rid)
+            assert reply is not None and reply.status is not None, reply
+            assert reply.ended and reply.status.status == "cancelled", reply
+            assert reply.status.user == "alice" and reply.status.agent == "k2"
+            return reply.status.reason
+
+        assert asked("alice").startswith(RUNNER_STOPPED)  # a new session of hers
+        assert asked("ida").startswith(RUNNER_STOPPED)  # the context's owner: anyone's
+        with agent_user(the_lab, "bob") as bob, pytest.raises(NotAllowed, match="alice's"):
+            bob.request_status(rid)
+
+        # The record is kept with the queues: the context restarted still knows.
+        context.stop()
+        context = start_agent_context(the_lab, slot=30.0)
+        assert asked("alice").startswith(RUNNER_STOPPED)
+        unknown = ida.request_status("k2-999-abcdef")
+        assert unknown is not None and not unknown.known
+        context.kill9()
+        assert ida.request_status(rid) is None  # the context down: no answer, not "lost"
+
+
+def test_wart_deploy_says_the_context_is_down_rather_than_lost(
+    lab: tuple[Lab, Proc, Proc],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    the_lab, _, context = lab
+    # Sooner than a student's minute, or the test would wait it out.
+    monkeypatch.setattr(deploy, "SILENT_AFTER_S", 1.0)
+    monkeypatch.setattr(deploy, "CONTEXT_DOWN_GIVE_UP_S", 3.0)
+    monkeypatch.setattr(deploy, "interrupt_event", threading.Event)
+    monkeypatch.setenv("WART_PASSWORD", PASSWORD)
+    failures: list[BaseException] = []
+
+    with agent_user(the_lab, "ida") as ida:
+
+        def kill_the_context_mid_slot() -> None:
+            try:
+                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
+                context.kill9()
+            except BaseException as exc:
+                failures.append(exc)
+
+        killer = threading.Thread(target=kill_the_context_mid_slot, daemon=True)
+        killer.start()
+        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
+        code = deploy.main([*argv, *the_lab.net_args()])
+        killer.join(5)
+    out = capsys.readouterr().out
+    assert not failures, failures
+    assert code == 1, out
+    assert "the arena arena is not answering (stopped or restarting?)" in out, out
+    assert (
+        out.strip()
+        .splitlines()[-1]
+        .startswith("the arena arena has not answered for 3 s: it is down")
+    ), out
+    assert "lost" not in out, out
