@@ -17,8 +17,9 @@ says otherwise; ``--progress`` prints each simulated second as it goes.
 ``--compare-threads`` runs the same size with threads 1 and with ``--threads``
 interleaved, so the ratio is measured under the same load. ``--drive velocity``
 drives robots with World(drive="velocity") (no joints, light tongs);
-``--compare-drives`` runs the joints drive and the velocity drive interleaved,
-each with ``--threads`` / ``--physics-threads``.
+``--compare-drives [A B]`` runs two drives interleaved (default the joints
+drive and the velocity drive; ``--compare-drives velocity discs`` for the
+discs drive), each with ``--threads`` / ``--physics-threads``.
 Robots are placed apart (no two overlap at the start): the first versions
 placed them anywhere, and at 3,000 robots and more the first simulated second
 went on pushing overlapping robots apart.
@@ -186,10 +187,17 @@ def main() -> None:
     )
     mode.add_argument(
         "--compare-drives",
-        action="store_true",
-        help="each repeat: the joints drive then the velocity drive, interleaved",
+        nargs="*",
+        metavar="DRIVE",
+        help="each repeat: two drives interleaved (default: joints velocity; e.g. "
+        "--compare-drives velocity discs)",
     )
     args = p.parse_args()
+    if args.compare_drives is not None:
+        drives = args.compare_drives or ["joints", "velocity"]
+        if len(drives) != 2 or any(d not in DRIVES for d in drives):
+            p.error(f"--compare-drives takes two drives of {', '.join(DRIVES)}")
+        args.compare_drives = drives
     for name in ("sim_seconds", "repeats", "threads", "physics_threads"):
         if getattr(args, name) <= 0:
             p.error(f"--{name.replace('_', '-')} must be positive")
@@ -245,9 +253,10 @@ def compare(args: argparse.Namespace) -> None:
         f"{'N':>6} {'repeat':>6}  {'config':<32} {'sim s / CPU s':>14} {'sim s / wall s':>15}  load"
     )
     if args.compare_drives:
+        first, second = args.compare_drives
         configs = [
-            (args.threads, args.physics_threads, "joints"),
-            (args.threads, args.physics_threads, "velocity"),
+            (args.threads, args.physics_threads, first),
+            (args.threads, args.physics_threads, second),
         ]
     else:
         configs = [(1, 1, args.drive), (args.threads, args.physics_threads, args.drive)]

@@ -398,6 +398,28 @@ class RunStop(Message):
     reason: ShortText = "stopped"
 
 
+MAX_CHECKED_RUNS = 256  # more than a context ever runs at once on one runner
+
+
+class RunCheck(Message):
+    """Which of ``request_ids`` does the runner still run? (sealed, ``lease`` permission)
+
+    An agent context asks when the runner's liveliness token went: a runner cut
+    off by a router blip still runs them, one that crashed and came back runs
+    none of them (docs/OPERATIONS.md, on a runner that dies).
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
+
+    request_ids: Annotated[list[Ident], msgspec.Meta(max_length=MAX_CHECKED_RUNS)]
+
+
+class RunCheckReply(Message):
+    """The runner's answer to a RunCheck: those of the asked requests it runs now."""
+
+    running: Annotated[list[Ident], msgspec.Meta(max_length=MAX_CHECKED_RUNS)]
+
+
 __all__ = [
     "ENDED",
     "MAX_OUTPUT_LINE",
@@ -428,6 +450,8 @@ __all__ = [
     "RequestStatusQuery",
     "RequestStatusReply",
     "RunAccepted",
+    "RunCheck",
+    "RunCheckReply",
     "RunClaim",
     "RunMode",
     "RunRequest",

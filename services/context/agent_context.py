@@ -86,7 +86,8 @@ from services.context.user_files import UserFiles
 
 DRY_RUN_WORKERS = 2
 DRY_RUN_WAITING = 4
-RUNNER_GRACE_S = 1.5  # how long to wait before taking a runner's token loss as its death
+RUNNER_GRACE_S = 1.5  # after a runner's token went, before asking it what it still runs
+RUNNER_CHECK_S = 15.0  # how long to keep asking before taking its silence for its death
 
 
 class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
@@ -190,17 +191,12 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
             max_waiting=DRY_RUN_WAITING,
         )
         # A runner that dies takes its sandboxes with it: their students are told so.
-        # The registry's token tells a runner's death from our own router blip (in a
-        # blip every token goes at once, and the runner's sandboxes keep running).
-        self._registry_gone_at = 0.0
+        # Its token going is not enough to say it died (a router blip takes every
+        # token away for a moment, while the sandboxes run on): the runner is asked
+        # what it still runs (_check_runner).
         self.track(
             self.session.liveliness().declare_subscriber(
                 keys.alive(self.realm, AliveKind.RUNNER, self.runner), self._on_runner_presence
-            )
-        )
-        self.track(
-            self.session.liveliness().declare_subscriber(
-                keys.alive_of_kind(self.realm, AliveKind.REGISTRY), self._on_registry_presence
             )
         )
         self.track(
@@ -350,14 +346,9 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         for final in cancelled:
             self._publish_agent(AgentEvent(ctx=self.room, request=final))
 
-    def _on_registry_presence(self, sample: zenoh.Sample) -> None:
-        if sample.kind == zenoh.SampleKind.DELETE:
-            self._registry_gone_at = time.monotonic()
-
     def _on_runner_presence(self, sample: zenoh.Sample) -> None:
         if sample.kind != zenoh.SampleKind.DELETE:
             return
-        gone_at = time.monotonic()
         # Our own router gone (a client session's tokens all vanish when its link
         # drops): a blip on our side, not the runner's death; its sandboxes run on.
         try:
@@ -366,20 +357,57 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
                 return
         except Exception as exc:  # the session closing at shutdown
             self.log.debug("could not ask the session for its routers: %s", exc)
-        timer = threading.Timer(RUNNER_GRACE_S, self._runner_gone, args=(gone_at,))
-        timer.daemon = True
-        timer.start()
-
-    def _runner_gone(self, gone_at: float) -> None:
-        if abs(self._registry_gone_at - gone_at) < RUNNER_GRACE_S:
-            self.log.info("runner %s and the registry went together: a router blip", self.runner)
             return
+        threading.Thread(
+            target=self._check_runner, name=f"check-runner-{self.runner}", daemon=True
+        ).start()
+
+    def _deploys_running(self) -> list[str]:
         with self._wake:
-            ended = [
+            return [
                 line.running.job.request_id
                 for line in self.book.lines.values()
                 if line.running is not None and line.running.job.mode == "deploy"
             ]
+
+    def _check_runner(self) -> None:
+        """After the runner's token went: end the runs it no longer has, once it says so.
+
+        A runner cut off by a router blip (its token gone from our router's view,
+        perhaps only while it or we reconnect) still runs its sandboxes, and says
+        so when asked. One that crashed and was restarted runs none of them; one
+        that is dead does not answer. Asked until RUNNER_CHECK_S has passed: the
+        token alone misled here, when our session reconnected before the runner's
+        (a false "runner stopped" in the chaos test, about one run in three).
+        """
+        if self._halt.wait(RUNNER_GRACE_S):
+            return
+        deadline = time.monotonic() + RUNNER_CHECK_S
+        while not self.stopped:
+            asked = self._deploys_running()
+            if not asked:
+                return
+            running = self.runner_link.still_running(asked, timeout=2.0)
+            if running is not None:
+                ended = [r for r in asked if r not in running]
+                if not ended:
+                    self.log.info(
+                        "runner %s answers and still runs %s: it was a blip",
+                        self.runner,
+                        ", ".join(asked),
+                    )
+                    return
+                why = "it came back without them"
+                break
+            if time.monotonic() > deadline:
+                ended = asked
+                why = f"it has not answered for {RUNNER_CHECK_S:.0f} s"
+                break
+            if self._halt.wait(1.0):
+                return
+        else:
+            return
+        with self._wake:
             for request_id in ended:
                 self._finish_soon(
                     request_id,
@@ -388,8 +416,7 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
                     "controller was ended; upload it again",
                 )
             self._wake.notify_all()
-        if ended:
-            self.log.warning("runner %s went away: ended %s", self.runner, ", ".join(ended))
+        self.log.warning("runner %s went away (%s): ended %s", self.runner, why, ", ".join(ended))
 
     def _on_presence(self, sample: zenoh.Sample) -> None:
         super()._on_presence(sample)

@@ -23,6 +23,8 @@ from common.messages import (
     MessageError,
     OkReply,
     RunAccepted,
+    RunCheck,
+    RunCheckReply,
     RunClaim,
     RunRequest,
     RunStop,
@@ -66,7 +68,7 @@ class RunnerLink:
             if reply.ok is None:
                 continue
             try:
-                return decode(reply.ok.payload, (RunAccepted, OkReply, ErrorReply))
+                return decode(reply.ok.payload, (RunAccepted, OkReply, RunCheckReply, ErrorReply))
             except MessageError as exc:
                 self.log.warning("unreadable runner reply: %s", exc)
         return None
@@ -132,6 +134,15 @@ class RunnerLink:
     def stop(self, request_id: str, reason: str) -> None:
         """Tell the runner to end the request's sandbox (best effort: the lease ends anyway)."""
         self.ask(RunStop(request_id=request_id, reason=reason), timeout=2.0)
+
+    def still_running(self, request_ids: list[str], timeout: float) -> set[str] | None:
+        """Those of ``request_ids`` the runner runs now; None when no runner answered."""
+        reply = self.ask(RunCheck(request_ids=request_ids), timeout=timeout)
+        if isinstance(reply, RunCheckReply):
+            return set(reply.running)
+        if isinstance(reply, ErrorReply):
+            self.log.warning("runner %s could not say what it runs: %s", self.runner, reply.message)
+        return None
 
     def driver(self, request_id: str, default: str) -> str:
         """The runner account driving ``request_id`` (``default`` before it accepted)."""

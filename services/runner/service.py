@@ -50,6 +50,8 @@ from common.messages import (
     MessageError,
     OkReply,
     RunAccepted,
+    RunCheck,
+    RunCheckReply,
     RunClaim,
     RunRequest,
     RunStop,
@@ -257,9 +259,13 @@ class RunnerService(Service):
 
     def _on_run(self, query: zenoh.Query) -> Message:
         principal, request = self.verifier.open(
-            str(query.key_expr), query.payload, (RunRequest, RunStop)
+            str(query.key_expr), query.payload, (RunRequest, RunStop, RunCheck)
         )
         principal.require("lease", "ask a runner to run controllers")
+        if isinstance(request, RunCheck):
+            with self._lock:
+                running = [r for r in request.request_ids if r in self._runs]
+            return RunCheckReply(running=running)
         if isinstance(request, RunStop):
             with self._lock:
                 run = self._runs.get(request.request_id)

@@ -1,0 +1,138 @@
+"""A runner cut off for a moment keeps its students' runs; a runner that crashed ends them.
+
+The runner is a client of its own router, meshed with the lab's (as on a
+second host). Killing that router takes the runner's liveliness token away
+from the agent context while the runner and its sandboxes run on: the
+context asks the runner what it still runs rather than trusting the token,
+so the student's controller goes on. A runner killed and restarted runs
+nothing of before: the student is told why their controller ended.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.keys import AliveKind
+from services.runner.sandbox import sandbox_problem
+from tests.conftest import Proc, Procs, Router, free_port, wait_for
+from tests.integration.agentkit import service_account, start_agent_context, start_engine
+from tests.integration.labkit import PASSWORD, Lab, make_lab
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+]
+CONTROLLERS = Path(__file__).with_name("controllers")
+RUNNER_END = "the lab's runner runner stopped"
+
+
+class RunnerHost:
+    """The runner on its own router ("a second host"), each restartable."""
+
+    def __init__(self, lab: Lab) -> None:
+        self.lab = lab
+        self.port = free_port()
+        self.router = self.start_router()
+        self.runner = self.start_runner()
+
+    def start_router(self) -> Proc:
+        return self.lab.procs.start(
+            "router-b",
+            [
+                "router",
+                "--realm",
+                self.lab.router.realm,
+                "--name",
+                "router-b",
+                "--listen",
+                f"tcp/127.0.0.1:{self.port}",
+                "--connect",
+                self.lab.router.endpoint,
+                "--no-multicast-scouting",
+            ],
+        )
+
+    def start_runner(self) -> Proc:
+        key = service_account(self.lab, "runner-svc")
+        net = self.lab.router.options(connect=(f"tcp/127.0.0.1:{self.port}",)).as_args()
+        proc = self.lab.procs.start(
+            "runner",
+            [
+                "runner",
+                "--name",
+                "runner",
+                "--user",
+                "runner-svc",
+                "--identity",
+                str(key),
+                *net,
+                "--registry-key",
+                self.lab.key_hex,
+            ],
+        )
+        self.lab.wait_alive(AliveKind.RUNNER, "runner", proc)
+        return proc
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab)
+    yield lab
+
+
+def deploy(lab: Lab, procs: Procs) -> Proc:
+    proc = procs.start(
+        "deploy",
+        [
+            "deploy",
+            str(CONTROLLERS / "forward.py"),
+            "--context",
+            "arena",
+            "--agent",
+            "k2",
+            "--user",
+            "bob",
+            *lab.net_args(),
+        ],
+        env={"WART_PASSWORD": PASSWORD},
+    )
+    wait_for(lambda: "running on k2" in proc.output(), 60, "bob's controller running")
+    return proc
+
+
+def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
+    lab: Lab, procs: Procs
+) -> None:
+    host = RunnerHost(lab)
+    context = start_agent_context(lab, slot=60.0)
+    student = deploy(lab, procs)
+
+    # Its router dies and comes back: the runner and its sandbox live on, but for a
+    # moment every token of that side is gone from the context's view.
+    host.router.kill9()
+    time.sleep(1.0)
+    host.router = host.start_router()
+    lab.wait_alive(AliveKind.RUNNER, "runner", host.runner)
+    wait_for(
+        lambda: "it was a blip" in context.output() or RUNNER_END in student.output(),
+        30,
+        "the context to ask the runner what it still runs",
+    )
+    assert RUNNER_END not in student.output(), student.output()
+    assert student.popen.poll() is None, "bob's deploy ended at a router blip"
+
+    # Now the runner itself crashes and is restarted: bob's controller is gone,
+    # and he is told why, without waiting for his slot's end.
+    host.runner.kill9()
+    crashed = time.monotonic()
+    host.runner = host.start_runner()
+    assert student.popen.wait(30) is not None
+    assert RUNNER_END in student.output(), student.output()
+    assert time.monotonic() - crashed < 30, "told within the check, not at the slot's end"
+    assert "it came back without them" in context.output(), context.output()
