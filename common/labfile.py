@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from common.keys import is_ident
+from common.sim2d.drives import DRIVES
 
 # What a host can run: the fields each kind requires, then the optional ones.
 # ``agent`` is an agent context for a world the lab file names (a bridge's
@@ -40,7 +41,8 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     # An engine is an arena: ``context`` names its agent context (default: the
     # world's name); ``login`` gives the engine an account, so agent contexts
     # grant it MAC leases (commands checked in µs instead of an Ed25519 verify).
-    "engine": ("seed", "robots", "context", "title", "owner", "login"),
+    # ``drive``: how its robots are driven (wart engine --drive; "discs" for swarms).
+    "engine": ("seed", "robots", "context", "title", "owner", "login", "drive"),
     # ports: PATH=ID@X,Y,DEG as for `wart bridge --port`; emulate: a map name
     # whose first robot an emulated Khepera plays (a lab without hardware).
     "bridge": ("ports", "emulate", "login"),
@@ -305,6 +307,13 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
         params["login"] = bool(_type(f"{where}.login", table["login"], bool, "true or false"))
     if "emulate" in table:
         params["emulate"] = _ident(f"{where}.emulate", table["emulate"])
+    if "drive" in table:
+        drive = _type(f"{where}.drive", table["drive"], str, "a string")
+        if drive not in DRIVES:
+            raise LabFileError(
+                f"{where}.drive: {drive!r} is not a drive (one of {', '.join(DRIVES)})"
+            )
+        params["drive"] = drive
     if "slot_seconds" in table:
         params["slot_seconds"] = _number(f"{where}.slot_seconds", table["slot_seconds"], 1, 3600)
     if kind == "bridge" and not (params.get("ports") or params.get("emulate")):

@@ -46,6 +46,7 @@ from common.sim2d.collision import (
     COLL_TONGS,
     TONGS_MASK_LIGHT,
 )
+from common.sim2d.drives import DRIVES, OBJECT_DRIVES
 from common.sim2d.entities import (
     Agent,
     Light,
@@ -74,9 +75,7 @@ class EditError(ValueError):
 # default, its trajectories unchanged: the sim-beside-real comparisons and recorded
 # runs were made with it, and tongs that no longer touch walls and robots are a
 # change of the model (docs/ARCHITECTURE.md section 9, "Drives").
-DRIVES = ("joints", "velocity", "discs")
-# The drives whose worlds can hold movable objects (the discs drive's cannot).
-OBJECT_DRIVES = ("joints", "velocity")
+__all__ = ["DRIVES", "OBJECT_DRIVES", "EditError", "World"]
 
 
 @dataclass(frozen=True)

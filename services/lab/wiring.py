@@ -306,6 +306,7 @@ def arena_specs(
     context: str | None = None,
     title: str | None = None,
     login: bool = False,
+    drive: str | None = None,
 ) -> list[ChildSpec]:
     """An arena: the engine, then its agent context (when the templates have one).
 
@@ -313,7 +314,8 @@ def arena_specs(
     agent context (default: the world's name); ``owner`` (the user who asked
     for the arena) may manage and kick there; a template that does not place
     ``{owner}`` itself gets ``--owner`` appended. ``login`` gives the engine
-    its own account (``engine-WORLD``).
+    its own account (``engine-WORLD``); ``drive``, its ``--drive`` (how its
+    robots are driven: "discs" for a swarm arena).
     """
     account = arena_account(w.host)
     context = context or world
@@ -333,6 +335,8 @@ def arena_specs(
         "rooms_dir": w.rooms_dir,
     }
     engine_argv = [*fill(w.arena.engine, values), *w.net_args("engine")]
+    if drive:
+        engine_argv += ["--drive", drive]
     if login:
         engine_argv += w.login(service_account("engine", world))
     specs = [
@@ -474,6 +478,7 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
             context=p.get("context"),
             title=title,
             login=bool(p.get("login")),
+            drive=p.get("drive"),
         )
     if svc.kind == "bridge":
         return bridge_specs(

@@ -102,3 +102,18 @@ def test_an_agent_context_names_a_known_runner(tmp_path: Path) -> None:
     data["hosts"][1]["services"] = [{"kind": "bridge", "world": "w"}]
     with pytest.raises(LabFileError, match=r"'ports'.*or 'emulate'"):
         parse(data, tmp_path / "lab.toml")
+
+
+def test_a_swarm_arena_runs_its_engine_on_the_drive_the_lab_file_names(lab_dir: Path) -> None:
+    text = (lab_dir / "lab.toml").read_text().replace('map = "foraging"', 'map = "swarm"')
+    text = text.replace('# drive = "discs"', 'drive = "discs"')
+    (lab_dir / "swarm.toml").write_text(text)
+    lab = load(lab_dir / "swarm.toml")
+    ctx = HostContext(lab, lab.host("B"), lab_dir / "state-s", read_registry_key(lab))
+    engine = next(s.argv for s in host_plan(ctx) if s.name == "engine arena1")
+    assert engine[engine.index("--drive") + 1] == "discs"
+    assert engine[engine.index("--map") + 1].endswith("swarm.json")
+    # A drive the engine does not have is refused when the file is read, naming the field.
+    (lab_dir / "typo.toml").write_text(text.replace('drive = "discs"', 'drive = "disks"'))
+    with pytest.raises(LabFileError, match=r"services\[0\]\.drive: 'disks' is not a drive"):
+        load(lab_dir / "typo.toml")

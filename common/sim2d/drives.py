@@ -1,0 +1,12 @@
+"""How a world's robots are driven: the names, for the World, the maps, the CLI and lab files.
+
+Kept apart from world.py so a lab file can be checked without loading the
+physics (pymunk, numba). What each drive does: common/sim2d/world.py and
+docs/ARCHITECTURE.md, "Drives".
+"""
+
+from __future__ import annotations
+
+DRIVES = ("joints", "velocity", "discs")
+# The drives whose worlds can hold movable objects (the discs drive's cannot).
+OBJECT_DRIVES = ("joints", "velocity")
