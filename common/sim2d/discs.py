@@ -12,12 +12,15 @@ The model, per substep (the world's ``substeps``, at most 10 ms each):
   drive, no slip), from where it is;
 - contacts are then solved by projection, as position-based dynamics does:
   two overlapping discs are pushed apart along the line between their centres,
-  in inverse proportion to their masses; a disc overlapping an obstacle's edge,
-  a round obstacle or the arena's border is pushed straight out of it. A few
-  Gauss-Seidel sweeps over the contacts found at the start of the substep;
-  the last word always goes to the obstacles, so a robot never ends a substep
-  inside a wall or a pillar, while two robots pressed together in a crowd may
-  still overlap by a little (chipmunk left up to 7 to 14 mm: docs/BENCHMARKS.md);
+  in inverse proportion to their masses, except that a pair never pushes a
+  robot into a wall it touches (the other one takes the whole push); a disc
+  overlapping an obstacle's edge, a round obstacle or the arena's border is
+  pushed straight out of it. Gauss-Seidel sweeps over the contacts found at
+  the start of the substep, from the walls outward (:func:`_layers`), until
+  no pair overlaps by more than TOLERANCE_MM; the last word always goes to
+  the obstacles, so a robot never ends a substep inside a wall or a pillar,
+  while two robots pressed together in a crowd may still overlap by a little
+  (5 mm in the tests' crowds; chipmunk left up to 7 to 14: docs/BENCHMARKS.md);
 - contacts do not turn a robot (frictionless discs): its heading follows its
   wheels alone;
 - the position counters advance by the commanded pulses, as with the other
@@ -39,14 +42,12 @@ import numpy as np
 from numba import njit
 
 _CACHE = True
-USE_LAYERS = True
-USE_BLOCK = False
 
 # Contact sweeps per substep: until no pair overlaps by more than TOLERANCE_MM,
 # at most MAX_SWEEPS. A free swarm needs one or two; a crowd pressed into a
 # corner by robots that keep driving needs more to carry the push through its
-# rows (140 robots flat out into a corner, the tests' crowd: 27.6 mm of overlap
-# with 4 sweeps, 4.4 with 20, 3.0 with 40, a fixed count each).
+# rows (140 robots at speed 60 into a corner for 3 s, solved in the cells'
+# order: 27.6 mm of overlap with 4 fixed sweeps, 11 with 10, 4.4 with 20).
 MAX_SWEEPS = 16
 TOLERANCE_MM = 0.25
 # Added (mm) to how far a contact can push within a substep (the tick's top
