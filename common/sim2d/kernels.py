@@ -51,7 +51,8 @@ F_GRIP_X1 = 11
 F_GRIP_HALF_WIDTH = 12
 F_HAS_GRIP = 13
 F_ARM_LOWERED_ABOVE = 14
-N_AGENT_F = 15
+F_AMB_COS_HALF = 15  # cos(F_AMB_HALF_ANGLE): the cone test without an angle
+N_AGENT_F = 16
 
 # Column indices of the per-agent int table (AgentSensing.agent_i).
 I_PROX_SENSORS = 0  # real (unpadded) proximity sensors
@@ -81,7 +82,7 @@ class SensorTables(NamedTuple):
     curve_x: np.ndarray  # (G, L) response curves, padded
     curve_y: np.ndarray
     curve_n: np.ndarray  # (G,) points used
-    amb_local: np.ndarray  # (N, A, 3) ambient sensors in the robot frame
+    amb_local: np.ndarray  # (N, A, 5) ambient sensors in the robot frame: x, y, angle, cos, sin
     amb_valid: np.ndarray  # (N, A) bool
 
 
@@ -485,6 +486,23 @@ def _interp(x, xp, fp, n):  # pragma: no cover
     return res
 
 
+@njit(cache=_CACHE, inline="always")
+def ambient_gain(vx, vy, d, ax, ay, cos_half):  # pragma: no cover
+    """cos(1.5 * bearing) if |bearing| < the cone's half angle, else 0; no trigonometry.
+
+    (vx, vy): sensor to light, ``d`` its length (> 0); (ax, ay): the sensor's unit
+    axis; ``cos_half``: cos of the half angle (in [0, pi]). With c = cos(bearing)
+    = (v . a) / d, |bearing| < half is c > cos(half) (cos falls on [0, pi]), and
+    cos(3b/2) = cos(b) cos(b/2) - sin(b) sin(b/2) = (2c - 1) * sqrt((1 + c) / 2),
+    since cos(b/2) >= 0 for |b| <= pi. The earlier formula (hypot, two atan2, a
+    sin, a cos and a cos per sensor) was most of the ambient model's time.
+    """
+    c = (vx * ax + vy * ay) / d
+    if not c > cos_half:
+        return 0.0
+    return (2.0 * c - 1.0) * math.sqrt(0.5 * (1.0 + c))
+
+
 @njit(cache=_CACHE)
 def _circle_on_segment(px, py, dx, dy, length, circ_xy, circ_r):  # pragma: no cover
     """Whether a round obstacle lies on the segment from p along (dx, dy), ``length`` long."""
@@ -837,7 +855,7 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             if hidden:
                 continue
             scale = agent_f[a, F_AMB_DROP] * lights[li, 3]
-            half = agent_f[a, F_AMB_HALF_ANGLE]
+            cos_half = agent_f[a, F_AMB_COS_HALF]
             for i in range(n_amb):
                 l0 = amb_local[a, i, 0]
                 l1 = amb_local[a, i, 1]
@@ -845,13 +863,20 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
                 sy = y + si * l0 + co * l1
                 vx = lxx - sx
                 vy = lyy - sy
-                closeness = 1.0 - math.hypot(vx, vy) / radius
+                d = math.sqrt(vx * vx + vy * vy)
+                closeness = 1.0 - d / radius
                 if closeness <= 0.0:
                     continue  # beyond the light's radius: adds exactly nothing
                 closeness = min(closeness, 1.0)
-                raw = math.atan2(vy, vx) - th - amb_local[a, i, 2]
-                bearing = math.atan2(math.sin(raw), math.cos(raw))
-                contrib = math.cos(1.5 * bearing) if abs(bearing) < half else 0.0
+                if d > 0.0:
+                    # the sensor's axis, th + its angle, by the angle-addition formula
+                    ca = amb_local[a, i, 3]
+                    sa = amb_local[a, i, 4]
+                    contrib = ambient_gain(
+                        vx, vy, d, co * ca - si * sa, si * ca + co * sa, cos_half
+                    )
+                else:  # the light on the sensor itself: bearing 0
+                    contrib = 1.0
                 contrib = contrib * closeness
                 contrib *= scale * (1.0 if amb_valid[a, i] else 0.0)
                 total[i] += contrib
@@ -969,7 +994,7 @@ def warm_up() -> float:
             np.array([[0.0, 1.0]]),
             np.array([[1.0, 0.0]]),
             np.array([2], dtype=np.int64),
-            np.zeros((1, 1, 3)),
+            np.zeros((1, 1, 5)),
             np.ones((1, 1), dtype=np.bool_),
         ),
         StaticScene(

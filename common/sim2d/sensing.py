@@ -153,7 +153,7 @@ class ProximitySensors:
 class AmbientSensors:
     """Ambient light sensors: a cone each; lit lights in reach lower the reading."""
 
-    local: np.ndarray  # (N, A, 3): x, y, heading in the robot frame
+    local: np.ndarray  # (N, A, 5): x, y, heading, cos(heading), sin(heading), robot frame
     valid: np.ndarray  # (N, A)
 
     @classmethod
@@ -166,16 +166,18 @@ class AmbientSensors:
     ) -> AmbientSensors:
         n = len(agents)
         a_max = max((len(a.spec.ambient.poses) for a in agents), default=8)
-        local = np.zeros((n, a_max, 3))
+        local = np.zeros((n, a_max, 5))
         valid = np.zeros((n, a_max), dtype=bool)
         for slot, agent in enumerate(agents):
             for i, pose in enumerate(agent.spec.ambient.poses):
-                local[slot, i] = (pose.x_mm, pose.y_mm, pose.heading_rad)
+                h = pose.heading_rad
+                local[slot, i] = (pose.x_mm, pose.y_mm, h, np.cos(h), np.sin(h))
                 valid[slot, i] = True
         for spec, slots in types:
             a = spec.ambient
             k = len(a.poses)
             f[slots, K.F_AMB_HALF_ANGLE] = a.half_angle_rad
+            f[slots, K.F_AMB_COS_HALF] = np.cos(a.half_angle_rad)
             f[slots, K.F_AMB_DROP] = a.drop
             f[slots, K.F_AMB_DARK] = float(a.dark_value)
             f[slots, K.F_AMB_FLOOR] = float(a.floor_value)

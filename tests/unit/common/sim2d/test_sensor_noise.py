@@ -131,3 +131,25 @@ def test_each_reading_keeps_the_documented_noise_model() -> None:
         assert got.std() == pytest.approx(sd, rel=0.06)
     # Sensors of one robot are independent of each other.
     assert abs(np.corrcoef(amb[:, dark, 0], amb[:, dark, 1])[0, 1]) < 0.1
+
+
+@pytest.mark.parametrize("half_deg", [60.0, 30.0, 90.0, 170.0])
+def test_the_trig_free_ambient_cone_equals_the_angle_formula(half_deg: float) -> None:
+    # kernels.ambient_gain against the formula it replaced: the bearing from two
+    # atan2, wrapped, then cos(1.5 * bearing) inside the cone, on random poses.
+    rng = np.random.default_rng(int(half_deg))
+    half = math.radians(half_deg)
+    cos_half = math.cos(half)
+    checked = inside = 0
+    for vx, vy, axis in rng.uniform([-500, -500, -10], [500, 500, 10], size=(20_000, 3)):
+        d = math.sqrt(vx * vx + vy * vy)
+        raw = math.atan2(vy, vx) - axis
+        bearing = math.atan2(math.sin(raw), math.cos(raw))
+        if abs(abs(bearing) - half) < 1e-9:
+            continue  # on the cone's edge: either side is within rounding
+        old = math.cos(1.5 * bearing) if abs(bearing) < half else 0.0
+        new = kernels.ambient_gain(vx, vy, d, math.cos(axis), math.sin(axis), cos_half)
+        assert new == pytest.approx(old, abs=1e-12), (vx, vy, axis)
+        checked += 1
+        inside += abs(bearing) < half
+    assert checked > 19_000 and 0.05 * checked < inside < checked
