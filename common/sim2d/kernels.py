@@ -56,7 +56,7 @@ N_AGENT_F = 16
 
 # Column indices of the per-agent int table (AgentSensing.agent_i).
 I_PROX_SENSORS = 0  # real (unpadded) proximity sensors
-I_CURVE = 1  # row in the response-curve tables (and the type's sensor layout)
+I_TYPE = 1  # the agent's type: row of the response curves and the sensor layouts
 I_AMB_SENSORS = 2
 N_AGENT_I = 3
 
@@ -74,7 +74,7 @@ class Robots(NamedTuple):
 class SensorTables(NamedTuple):
     """The agents' sensors (rebuilt when agents come or go)."""
 
-    ray_local: np.ndarray  # (N, S*K, 5) rays in the robot frame: x, y, angle, cos, sin
+    ray_local: np.ndarray  # (types, S*K, 5) rays in the robot frame: x, y, angle, cos, sin
     sensors: int  # S (padded proximity sensors per agent)
     rays_per_sensor: int  # K
     agent_f: np.ndarray  # (N, N_AGENT_F) per-agent floats
@@ -82,8 +82,8 @@ class SensorTables(NamedTuple):
     curve_x: np.ndarray  # (G, L) response curves, padded
     curve_y: np.ndarray
     curve_n: np.ndarray  # (G,) points used
-    amb_local: np.ndarray  # (N, A, 5) ambient sensors in the robot frame: x, y, angle, cos, sin
-    amb_valid: np.ndarray  # (N, A) bool
+    amb_local: np.ndarray  # (types, A, 5) ambient sensors, robot frame: x, y, angle, cos, sin
+    amb_valid: np.ndarray  # (types, A) bool
 
 
 class StaticScene(NamedTuple):
@@ -691,6 +691,7 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
         co = math.cos(th)
         si = math.sin(th)
         reach = agent_f[a, F_REACH]
+        g = agent_i[a, I_TYPE]
 
         # Candidates. Circles: in the 3x3 cells around the agent and within reach.
         ncand = 0
@@ -767,14 +768,14 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             dist[r] = np.inf
         if ncand or nseg or nedge:  # nothing near: every ray misses, skip the casting
             for r in range(nrays):
-                lx = ray_local[a, r, 0]
-                ly = ray_local[a, r, 1]
+                lx = ray_local[g, r, 0]
+                ly = ray_local[g, r, 1]
                 ox[r] = x + co * lx - si * ly
                 oy[r] = y + si * lx + co * ly
                 # cos/sin(th + angle) by the angle-addition formula, from the layout's
                 # cos/sin of each ray's angle: no trigonometry per ray.
-                ca = ray_local[a, r, 3]
-                sa = ray_local[a, r, 4]
+                ca = ray_local[g, r, 3]
+                sa = ray_local[g, r, 4]
                 dx[r] = co * ca - si * sa
                 dy[r] = si * ca + co * sa
             # Per sensor, not per ray: a sensor's rays share its origin, and a shape
@@ -782,7 +783,7 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             # can only be hit at or beyond the range, which reads as no hit (the
             # curve's last value), so none of its rays needs casting. Most of a
             # neighbour's 24 ray tests were of sensors facing away from it.
-            far = curve_x[agent_i[a, I_CURVE], curve_n[agent_i[a, I_CURVE]] - 1] + 1.0
+            far = curve_x[g, curve_n[g] - 1] + 1.0
             for s in range(sensors):
                 r0 = s * rays_per_sensor
                 sx = ox[r0]
@@ -834,7 +835,6 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
                 if d < m:
                     m = d
             per_sensor[s] = m
-        g = agent_i[a, I_CURVE]
         ng = curve_n[g]
         nf = agent_f[a, F_PROX_NOISE_FRACTION]
         ncounts = agent_f[a, F_PROX_NOISE_COUNTS]
@@ -885,8 +885,8 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             scale = agent_f[a, F_AMB_DROP] * lights[li, 3]
             cos_half = agent_f[a, F_AMB_COS_HALF]
             for i in range(n_amb):
-                l0 = amb_local[a, i, 0]
-                l1 = amb_local[a, i, 1]
+                l0 = amb_local[g, i, 0]
+                l1 = amb_local[g, i, 1]
                 sx = x + co * l0 - si * l1
                 sy = y + si * l0 + co * l1
                 vx = lxx - sx
@@ -898,15 +898,15 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
                 closeness = min(closeness, 1.0)
                 if d > 0.0:
                     # the sensor's axis, th + its angle, by the angle-addition formula
-                    ca = amb_local[a, i, 3]
-                    sa = amb_local[a, i, 4]
+                    ca = amb_local[g, i, 3]
+                    sa = amb_local[g, i, 4]
                     contrib = ambient_gain(
                         vx, vy, d, co * ca - si * sa, si * ca + co * sa, cos_half
                     )
                 else:  # the light on the sensor itself: bearing 0
                     contrib = 1.0
                 contrib = contrib * closeness
-                contrib *= scale * (1.0 if amb_valid[a, i] else 0.0)
+                contrib *= scale * (1.0 if amb_valid[g, i] else 0.0)
                 total[i] += contrib
         dark = agent_f[a, F_AMB_DARK]
         floor = agent_f[a, F_AMB_FLOOR]

@@ -89,7 +89,10 @@ class ProximitySensors:
 
     sensors: int  # per agent (padded)
     rays_per_sensor: int  # padded
-    ray_local: np.ndarray  # (N, S*K, 5): x, y, angle, cos(angle), sin(angle) in the robot frame
+    # (types, S*K, 5): x, y, angle, cos(angle), sin(angle) in the robot frame, one
+    # layout per robot type (agent_i's I_TYPE column): per agent, 10,000 copies of
+    # the same 1 KB were read from memory every pass.
+    ray_local: np.ndarray
     reach: np.ndarray  # (N,) farthest any ray reaches from the centre
     curve_x: np.ndarray  # (types, points) response curves, padded
     curve_y: np.ndarray
@@ -107,10 +110,10 @@ class ProximitySensors:
         n = len(agents)
         s_max = max((len(a.spec.proximity.poses) for a in agents), default=8)
         k_max = max((a.spec.proximity.rays_per_sensor for a in agents), default=1)
-        ray_local = np.zeros((n, s_max * k_max, 5))
+        ray_local = np.zeros((len(types), s_max * k_max, 5))
         reach = np.zeros(n)
-        for slot, agent in enumerate(agents):
-            prox = agent.spec.proximity
+        for g, (spec, slots) in enumerate(types):
+            prox = spec.proximity
             k = prox.rays_per_sensor
             offsets = (
                 np.linspace(-prox.spread_rad / 2, prox.spread_rad / 2, k) if k > 1 else np.zeros(1)
@@ -119,7 +122,7 @@ class ProximitySensors:
                 for j in range(k_max):
                     # padding rays repeat the sensor's last ray: they change no minimum
                     angle = pose.heading_rad + offsets[min(j, k - 1)]
-                    ray_local[slot, i * k_max + j] = (
+                    ray_local[g, i * k_max + j] = (
                         pose.x_mm,
                         pose.y_mm,
                         angle,
@@ -127,8 +130,8 @@ class ProximitySensors:
                         np.sin(angle),
                     )
             for i in range(len(prox.poses), s_max):
-                ray_local[slot, i * k_max : (i + 1) * k_max] = ray_local[slot, 0]
-            reach[slot] = agent.spec.sensor_reach_mm
+                ray_local[g, i * k_max : (i + 1) * k_max] = ray_local[g, 0]
+            reach[slots] = spec.sensor_reach_mm
         f[:, K.F_REACH] = reach
         points = max((len(t.proximity.curve.distances_mm) for t, _ in types), default=2)
         curve_x = np.zeros((len(types), points))
@@ -145,7 +148,7 @@ class ProximitySensors:
             f[slots, K.F_PROX_NOISE_COUNTS] = p.noise_counts
             f[slots, K.F_PROX_MAX] = float(p.max_value)
             i_tab[slots, K.I_PROX_SENSORS] = k
-            i_tab[slots, K.I_CURVE] = g
+            i_tab[slots, K.I_TYPE] = g
         return cls(s_max, k_max, ray_local, reach, curve_x, curve_y, curve_n)
 
 
@@ -153,8 +156,8 @@ class ProximitySensors:
 class AmbientSensors:
     """Ambient light sensors: a cone each; lit lights in reach lower the reading."""
 
-    local: np.ndarray  # (N, A, 5): x, y, heading, cos(heading), sin(heading), robot frame
-    valid: np.ndarray  # (N, A)
+    local: np.ndarray  # (types, A, 5): x, y, heading, cos, sin of heading, robot frame
+    valid: np.ndarray  # (types, A)
 
     @classmethod
     def build(
@@ -164,15 +167,14 @@ class AmbientSensors:
         f: np.ndarray,
         i_tab: np.ndarray,
     ) -> AmbientSensors:
-        n = len(agents)
         a_max = max((len(a.spec.ambient.poses) for a in agents), default=8)
-        local = np.zeros((n, a_max, 5))
-        valid = np.zeros((n, a_max), dtype=bool)
-        for slot, agent in enumerate(agents):
-            for i, pose in enumerate(agent.spec.ambient.poses):
+        local = np.zeros((len(types), a_max, 5))
+        valid = np.zeros((len(types), a_max), dtype=bool)
+        for g, (spec, _) in enumerate(types):
+            for i, pose in enumerate(spec.ambient.poses):
                 h = pose.heading_rad
-                local[slot, i] = (pose.x_mm, pose.y_mm, h, np.cos(h), np.sin(h))
-                valid[slot, i] = True
+                local[g, i] = (pose.x_mm, pose.y_mm, h, np.cos(h), np.sin(h))
+                valid[g, i] = True
         for spec, slots in types:
             a = spec.ambient
             k = len(a.poses)
