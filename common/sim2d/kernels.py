@@ -554,17 +554,20 @@ def _occluded_grid(
     """:func:`_occluded`, testing only the static edges binned along the segment p -> q.
 
     Every occluding edge of ``occ_segs`` is ``segs[4:]`` (the arena's 4 walls come
-    first and never hide a light). Points sampled along p -> q at most half a cell
-    apart land in, or next to, the cell of any point where an edge crosses it, and
-    an edge is binned in every cell within one cell of its bounding box: so every
-    crossing edge is tested, with the same formula, and the answer is the same as
-    testing them all. With obstacles in proportion to the swarm that full test was
-    O(robots x obstacles): 10,000 robots, 200 pillars, one wide lamp.
+    first and never hide a light). Points are sampled along p -> q at most one cell
+    apart along each axis, so every point of the segment is within half a cell of
+    a sample along each axis: its cell and the sample's differ by at most one in x
+    and in y. An edge is binned in every cell within one cell of its bounding box,
+    so every crossing edge is binned in some sampled cell and tested, with the
+    same formula: the answer is the same as testing them all. With obstacles in
+    proportion to the swarm that full test was O(robots x obstacles): 10,000
+    robots, 200 pillars, one wide lamp. (Samples were half a cell apart along
+    the segment before: 2 to 3 times as many, for the same answer.)
     """
     dx = qx - px
     dy = qy - py
     length = math.hypot(dx, dy)
-    steps = math.ceil(length / (0.5 * cell)) + 1
+    steps = math.ceil(max(abs(dx), abs(dy)) / cell) + 1
     last = -1
     for i in range(steps + 1):
         f = min(i / steps, 1.0)

@@ -179,3 +179,51 @@ def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
         assert full == along, p
         hidden += full
     assert 300 < hidden < 2700, "too few or too many hidden segments: a weak test"
+
+
+def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
+    # The walk samples a cell apart per axis; segments from grid corner to grid
+    # corner, along grid lines and short ones, against small boxes placed across
+    # grid lines, answer as testing every edge.
+    world = World(2400.0, 1800.0, seed=1)
+    world.add_agent("k", KHEPERA, 50.0, 50.0)
+    cell = world.sensors.static_geometry(world).cell_mm
+    rng = np.random.default_rng(21)
+    for i in range(60):
+        gx, gy = rng.integers(1, 2400 // cell), rng.integers(1, 1800 // cell)
+        x = gx * cell + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0, 8)
+        y = gy * cell + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0, 8)
+        world.add_obstacle(f"b{i}", ShapeSpec.box(12, 3), x, y, float(rng.uniform(0, 3.2)))
+    scene = world.sensors.static_geometry(world).scene
+    corners = np.stack(np.meshgrid(np.arange(0, 2400, cell), np.arange(0, 1800, cell)), -1)
+    corners = corners.reshape(-1, 2)
+    hidden = 0
+    for _ in range(4000):
+        p = corners[rng.integers(len(corners))]
+        kind = rng.integers(3)
+        if kind == 0:  # corner to corner
+            q = corners[rng.integers(len(corners))]
+        elif kind == 1:  # along a grid line
+            q = (
+                p + (rng.uniform(-900, 900), 0.0)
+                if rng.integers(2)
+                else p + (0.0, rng.uniform(-900, 900))
+            )
+        else:  # short, near a corner
+            q = p + rng.uniform(-cell, cell, 2)
+        seg = (float(p[0]), float(p[1]), float(q[0]), float(q[1]))
+        full = kernels._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
+        along = kernels._occluded_grid(
+            *seg,
+            scene.segs,
+            scene.grid_start,
+            scene.grid_items,
+            scene.grid_nx,
+            scene.grid_ny,
+            scene.cell,
+            scene.static_xy,
+            scene.static_r,
+        )
+        assert full == along, seg
+        hidden += full
+    assert hidden > 100, "too few hidden segments: a weak test"
