@@ -453,6 +453,21 @@ def _ray_segment(ox, oy, dx, dy, ax, ay, bx, by):  # pragma: no cover
 
 
 @njit(cache=_CACHE, inline="always")
+def _directions(dx, dy, ray_local, g, r0, k, co, si):  # pragma: no cover
+    """Rays r0 .. r0 + k - 1 of layout ``g`` turned by the robot's heading (cos co, sin si).
+
+    cos/sin(th + angle) by the angle-addition formula, from the layout's cos/sin of
+    each ray's angle: no trigonometry per ray. Returns True (the rays are ready).
+    """
+    for r in range(r0, r0 + k):
+        ca = ray_local[g, r, 3]
+        sa = ray_local[g, r, 4]
+        dx[r] = co * ca - si * sa
+        dy[r] = si * ca + co * sa
+    return True
+
+
+@njit(cache=_CACHE, inline="always")
 def _point_segment_d2(px, py, seg):  # pragma: no cover
     """Squared distance from (px, py) to the segment seg = (ax, ay, bx, by)."""
     ax = seg[0]
@@ -637,12 +652,9 @@ def _circles(robots, tables, scene, moving):  # pragma: no cover
 
 @njit(cache=_CACHE)
 def _scratch(tables, scene, moving, nc):  # pragma: no cover
-    """One worker's scratch arrays: ray origins and directions, hits, candidates."""
+    """One worker's scratch arrays: ray directions, nearest hits, candidates."""
     nrays = tables[0].shape[1]
     return (
-        np.empty(nrays),
-        np.empty(nrays),
-        np.empty(nrays),
         np.empty(nrays),
         np.empty(nrays),
         np.empty(tables[1]),
@@ -679,8 +691,7 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
     edges, lights, key = moving[4], moving[5], moving[6]
     prox_out, amb_out, presence_out = out
     cx, cy, cr, cown, cobj, count, citems = circles
-    ox, oy, dx, dy, dist, per_sensor, total, cand, ecand, scand = scratch
-    nrays = ray_local.shape[1]
+    dx, dy, per_sensor, total, cand, ecand, scand = scratch
     n_amb = amb_local.shape[1]
     n_prox = prox_out.shape[1]
     # Noise streams per agent: proximity sensor j is stream slot * stride + j,
@@ -767,30 +778,23 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
                 ecand[nedge] = e
                 nedge += 1
 
-        for r in range(nrays):
-            dist[r] = np.inf
-        if ncand or nseg or nedge:  # nothing near: every ray misses, skip the casting
-            for r in range(nrays):
-                lx = ray_local[g, r, 0]
-                ly = ray_local[g, r, 1]
-                ox[r] = x + co * lx - si * ly
-                oy[r] = y + si * lx + co * ly
-                # cos/sin(th + angle) by the angle-addition formula, from the layout's
-                # cos/sin of each ray's angle: no trigonometry per ray.
-                ca = ray_local[g, r, 3]
-                sa = ray_local[g, r, 4]
-                dx[r] = co * ca - si * sa
-                dy[r] = si * ca + co * sa
-            # Per sensor, not per ray: a sensor's rays share its origin, and a shape
-            # at least the curve's range (+1 mm against rounding) from that origin
-            # can only be hit at or beyond the range, which reads as no hit (the
-            # curve's last value), so none of its rays needs casting. Most of a
-            # neighbour's 24 ray tests were of sensors facing away from it.
-            far = curve_x[g, curve_n[g] - 1] + 1.0
-            for s in range(sensors):
+        # Nearest hit per sensor, sensor by sensor. A sensor's rays share its origin,
+        # and a shape at least the curve's range (+1 mm against rounding) from that
+        # origin can only be hit at or beyond the range, which reads as no hit (the
+        # curve's last value): none of its rays is cast at it. Most of a
+        # neighbour's 24 ray tests were of sensors facing away from it. A sensor's
+        # ray directions are worked out only once something passes that test.
+        # (The nearest hit is a minimum over the same hits whatever the order.)
+        far = curve_x[g, curve_n[g] - 1] + 1.0
+        for s in range(sensors):
+            m = np.inf
+            if ncand or nseg or nedge:  # nothing near: every ray misses, skip the casting
                 r0 = s * rays_per_sensor
-                sx = ox[r0]
-                sy = oy[r0]
+                lx = ray_local[g, r0, 0]
+                ly = ray_local[g, r0, 1]
+                sx = x + co * lx - si * ly
+                sy = y + si * lx + co * ly
+                ready = False  # this sensor's ray directions worked out
                 for q in range(ncand):
                     c = cand[q]
                     fx = sx - cx[c]
@@ -798,45 +802,22 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
                     lim = cr[c] + far
                     if fx * fx + fy * fy >= lim * lim:
                         continue
+                    if not ready:
+                        ready = _directions(dx, dy, ray_local, g, r0, rays_per_sensor, co, si)
                     for r in range(r0, r0 + rays_per_sensor):
                         t = _ray_circle(sx, sy, dx[r], dy[r], cx[c], cy[c], cr[c])
-                        if t < dist[r]:
-                            dist[r] = t
-                for q in range(nseg):
-                    sg = scand[q]
-                    if _point_segment_d2(sx, sy, segs[sg]) >= far * far:
+                        if t < m:
+                            m = t
+                for q in range(nseg + nedge):  # static edges, then movable polygons' edges
+                    sg = segs[scand[q]] if q < nseg else edges[ecand[q - nseg]]
+                    if _point_segment_d2(sx, sy, sg) >= far * far:
                         continue
+                    if not ready:
+                        ready = _directions(dx, dy, ray_local, g, r0, rays_per_sensor, co, si)
                     for r in range(r0, r0 + rays_per_sensor):
-                        t = _ray_segment(
-                            sx, sy, dx[r], dy[r], segs[sg, 0], segs[sg, 1], segs[sg, 2], segs[sg, 3]
-                        )
-                        if t < dist[r]:
-                            dist[r] = t
-                for q in range(nedge):
-                    e = ecand[q]
-                    if _point_segment_d2(sx, sy, edges[e]) >= far * far:
-                        continue
-                    for r in range(r0, r0 + rays_per_sensor):
-                        t = _ray_segment(
-                            sx,
-                            sy,
-                            dx[r],
-                            dy[r],
-                            edges[e, 0],
-                            edges[e, 1],
-                            edges[e, 2],
-                            edges[e, 3],
-                        )
-                        if t < dist[r]:
-                            dist[r] = t
-
-        # Nearest hit per sensor -> response curve -> seeded noise.
-        for s in range(sensors):
-            m = np.inf
-            for j in range(rays_per_sensor):
-                d = dist[s * rays_per_sensor + j]
-                if d < m:
-                    m = d
+                        t = _ray_segment(sx, sy, dx[r], dy[r], sg[0], sg[1], sg[2], sg[3])
+                        if t < m:
+                            m = t
             per_sensor[s] = m
         ng = curve_n[g]
         nf = agent_f[a, F_PROX_NOISE_FRACTION]
