@@ -205,9 +205,9 @@ def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
             q = corners[rng.integers(len(corners))]
         elif kind == 1:  # along a grid line
             q = (
-                p + (rng.uniform(-900, 900), 0.0)
+                p + np.array([rng.uniform(-900, 900), 0.0])
                 if rng.integers(2)
-                else p + (0.0, rng.uniform(-900, 900))
+                else p + np.array([0.0, rng.uniform(-900, 900)])
             )
         else:  # short, near a corner
             q = p + rng.uniform(-cell, cell, 2)
@@ -227,3 +227,49 @@ def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
         assert full == along, seg
         hidden += full
     assert hidden > 100, "too few hidden segments: a weak test"
+
+
+def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
+    # kernels._shadows: a robot whose bin says "in the light" must be one the walk
+    # (and the test of every edge) finds not hidden. Boxes and posts anywhere,
+    # lights among them (some right beside an obstacle), points anywhere and
+    # points just beside the obstacles, seen from the lights.
+    world = World(3000.0, 2000.0, seed=1)
+    rng = np.random.default_rng(5)
+    for i in range(50):
+        x, y = rng.uniform(100, 2900), rng.uniform(100, 1900)
+        world.add_obstacle(f"box{i}", ShapeSpec.box(60, 20), x, y, float(rng.uniform(0, 3.2)))
+    for i in range(6):
+        world.add_obstacle(f"post{i}", ShapeSpec.circle(20), *rng.uniform([100, 100], [2900, 1900]))
+    world.add_agent("k", KHEPERA, 30.0, 30.0)
+    scene = world.sensors.static_geometry(world).scene
+    occ = scene.occ_segs
+
+    def clearance(x: float, y: float) -> float:
+        edges = min(kernels._point_segment_d2(x, y, e) for e in occ) ** 0.5
+        posts = np.hypot(*(scene.static_xy - (x, y)).T) - scene.static_r
+        return float(min(edges, posts.min()))
+
+    open_spots = [p for p in rng.uniform([0, 0], [3000, 2000], (400, 2)) if clearance(*p) > 300]
+    lights = np.array(
+        [
+            [*open_spots[0], 2000.0, 1.0],  # away from every obstacle
+            [*open_spots[1], 1500.0, 1.0],
+            [occ[0, 0] + 3.0, occ[0, 1] + 3.0, 1500.0, 1.0],  # next to a box's corner
+            [*(scene.static_xy[0] + (25.0, 0.0)), 1500.0, 1.0],  # next to a post
+            [*(scene.static_xy[1] + (230.0, 0.0)), 1500.0, 1.0],  # a post just beyond 200 mm
+        ]
+    )
+    shadows = kernels._shadows(lights, occ, scene.static_xy, scene.static_r, kernels.SHADOW_BINS)
+    clear = walked = 0
+    for li, (lx, ly, _, _) in enumerate(lights):
+        points = rng.uniform([0, 0], [3000, 2000], size=(1500, 2))
+        # just beside obstacle corners, where a bin's edge and a segment graze
+        corners = occ[rng.integers(len(occ), size=1500), :2] + rng.normal(0, 2.0, (1500, 2))
+        for px, py in np.concatenate([points, corners]):
+            if kernels._in_light(shadows[li], px - lx, py - ly):
+                clear += 1
+                assert not kernels._occluded(px, py, lx, ly, occ, scene.static_xy, scene.static_r)
+            else:
+                walked += 1
+    assert clear > 1000 and walked > 3000, (clear, walked)
