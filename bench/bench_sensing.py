@@ -126,10 +126,10 @@ class _Subject:
         self.tables, self.scene, self.moving = w.sensors.packs(w, w.sim_time)
         mf = K.MovingScene._fields
         tf = K.SensorTables._fields
-        moving = list(self.moving)
+        moving: list[Any] = list(self.moving)
         moving[mf.index("lights")] = moving[mf.index("lights")][:0]
         self.moving_dark = tuple(moving)
-        tables = list(self.tables)
+        tables: list[Any] = list(self.tables)
         f = tables[tf.index("agent_f")].copy()
         f[:, K.F_REACH] = 0.0
         tables[tf.index("agent_f")] = f

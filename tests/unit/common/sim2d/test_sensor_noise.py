@@ -86,8 +86,8 @@ def test_same_seed_same_readings_other_seed_other_readings() -> None:
 
 def _noiseless(world: World) -> tuple[np.ndarray, np.ndarray]:
     """One pass with every noise coefficient 0: the readings the noise is added to."""
-    tables, scene, moving = world.sensors.packs(world, world.sim_time)
-    tables = list(tables)
+    packed, scene, moving = world.sensors.packs(world, world.sim_time)
+    tables: list[object] = list(packed)
     f = np.array(tables[3], copy=True)
     f[:, [kernels.F_PROX_NOISE_FRACTION, kernels.F_PROX_NOISE_COUNTS]] = 0.0
     f[:, kernels.F_AMB_NOISE_FRACTION] = 0.0

@@ -190,7 +190,7 @@ def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
     cell = world.sensors.static_geometry(world).cell_mm
     rng = np.random.default_rng(21)
     for i in range(60):
-        gx, gy = rng.integers(1, 2400 // cell), rng.integers(1, 1800 // cell)
+        gx, gy = rng.integers(1, int(2400 // cell)), rng.integers(1, int(1800 // cell))
         x = gx * cell + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0, 8)
         y = gy * cell + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0, 8)
         world.add_obstacle(f"b{i}", ShapeSpec.box(12, 3), x, y, float(rng.uniform(0, 3.2)))
