@@ -5,9 +5,12 @@ numpy calls (a few microseconds each), not arithmetic; at large N the
 vectorised passes built big temporaries. One loop per job, compiled once,
 does the same arithmetic with none of that overhead (see docs/BENCHMARKS.md).
 
-The arithmetic is written to match the earlier numpy implementation operation
-for operation (same formulas, same order), so readings are the same up to the
-last bit of libm's sin/cos. Kernels are cached on disk (``cache=True``, in
+The geometry was written to match the earlier numpy implementation operation
+for operation (same formulas, same order); since issue 22's swarm work the
+sensor noise is drawn in the kernel from a per-pass key (same laws, other
+numbers than numpy's draws), the ambient cone needs no trigonometry and
+shortcuts skip work that cannot change a reading (docs/BENCHMARKS.md, "A
+sensing pass at 10,000 robots"). Kernels are cached on disk (``cache=True``, in
 ``__pycache__`` or ``NUMBA_CACHE_DIR``): the first start of a fresh checkout
 compiles them (a few seconds), later starts load them. :func:`warm_up` does
 that explicitly and returns the time it took, so the engine can report it.
