@@ -417,8 +417,9 @@ def normal(key, stream):  # pragma: no cover
 def normals(key, first, count):  # pragma: no cover
     """Streams ``first`` to ``first + count - 1`` of ``key``, one normal each (for tests)."""
     out = np.empty(count)
+    k = np.uint64(key)
     for i in range(count):
-        out[i] = normal(key, first + i)
+        out[i] = normal(k, first + i)
     return out
 
 
@@ -795,7 +796,8 @@ def _sense_range(
         amb_valid,
     ) = tables
     segs, grid_start, grid_items, grid_nx, grid_ny, cell, occ_segs, static_xy, static_r = scene
-    edges, lights, key = moving[4], moving[5], moving[6]
+    edges, lights = moving[4], moving[5]
+    key = np.uint64(moving[6])  # a plain int key would turn the words' arithmetic to floats
     prox_out, amb_out, presence_out = out
     cx, cy, cr, cown, cobj, count, citems = circles
     dx, dy, per_sensor, total, cand, ecand, scand = scratch

@@ -52,6 +52,8 @@ def test_streams_and_keys_are_reproducible_and_independent() -> None:
     assert np.array_equal(a, kernels.normals(key, 1000, 50_000))
     # One stream is the same value whatever batch it is asked in (any thread split).
     assert kernels.normals(key, 1777, 1)[0] == a[777]
+    # A plain int key (below 2**63) draws what the same key as numpy's uint64 does.
+    assert np.array_equal(kernels.normals(12345, 0, 100), kernels.normals(np.uint64(12345), 0, 100))
     other = kernels.normals(np.uint64(2**63 + 12346), 1000, 50_000)
     assert not np.array_equal(a, other)
     # Neighbouring streams (a robot's sensors) and neighbouring keys (passes) are
