@@ -15,6 +15,7 @@ time (``time.process_time``) and, each round, the parts of a pass:
 - ``kernel``: the whole kernel alone (packs built once, outside the timing),
 - ``pass``: ``world.sense()`` as the engine calls it (packs, noise, readings),
   the mean of ``--passes`` passes in a row (block draws of noise included),
+- ``wall``: the same passes' wall time,
 - ``pass x2``, ``wall x2``: the same on 2 threads (``World.threads``), CPU and wall.
 
 ``--tree DIR`` (repeatable) runs the same measurement in other checkouts
@@ -43,7 +44,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-PARTS = ("noise", "circles", "ir", "ambient", "kernel", "pass", "pass x2", "wall x2")
+PARTS = ("noise", "circles", "ir", "ambient", "kernel", "pass", "wall", "pass x2", "wall x2")
 _MAX_SIZE = 20000
 
 
@@ -165,7 +166,9 @@ class _Subject:
         res["ambient"] = whole - _best_cpu(lambda: self.kernel(moving=self.moving_dark), 5)
         res["kernel"] = whole
         w.threads = 1
+        t0 = time.perf_counter()
         res["pass"] = _mean(w.sense, passes, time.process_time)
+        res["wall"] = (time.perf_counter() - t0) / passes * 1e3
         if threads and K.MAX_THREADS >= 2:
             w.threads = 2
             t0 = time.perf_counter()
