@@ -16,6 +16,8 @@ time (``time.process_time``) and, each round, the parts of a pass:
 - ``pass``: ``world.sense()`` as the engine calls it (packs, noise, readings),
   the mean of ``--passes`` passes in a row (block draws of noise included),
 - ``wall``: the same passes' wall time,
+- ``after step``: a pass right after a physics tick (the world moves on: the
+  engine's case, caches as chipmunk's step left them), the mean of ``--passes``,
 - ``pass x2``, ``wall x2``: the same on 2 threads (``World.threads``), CPU and wall.
 
 ``--tree DIR`` (repeatable) runs the same measurement in other checkouts
@@ -44,7 +46,18 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-PARTS = ("noise", "circles", "ir", "ambient", "kernel", "pass", "wall", "pass x2", "wall x2")
+PARTS = (
+    "noise",
+    "circles",
+    "ir",
+    "ambient",
+    "kernel",
+    "pass",
+    "wall",
+    "after step",
+    "pass x2",
+    "wall x2",
+)
 _MAX_SIZE = 20000
 
 
@@ -150,6 +163,20 @@ class _Subject:
             self._out(),
         )
 
+    def _after_step(self, passes: int) -> float:
+        """A pass right after a physics tick, as the engine runs it (caches as the tick left)."""
+        from bench import engine_bench
+
+        w = self.world
+        total = 0.0
+        for _ in range(passes):
+            engine_bench.control(w)
+            w.step()  # the world's own pass falls on every other tick; not timed
+            t0 = time.process_time()
+            w.sense()
+            total += time.process_time() - t0
+        return total / passes * 1e3
+
     def measure(self, passes: int, threads: bool) -> dict[str, float]:
         w, K = self.world, self.K
         stream = getattr(w, "noise", None)
@@ -169,6 +196,7 @@ class _Subject:
         t0 = time.perf_counter()
         res["pass"] = _mean(w.sense, passes, time.process_time)
         res["wall"] = (time.perf_counter() - t0) / passes * 1e3
+        res["after step"] = self._after_step(passes)
         if threads and K.MAX_THREADS >= 2:
             w.threads = 2
             t0 = time.perf_counter()
