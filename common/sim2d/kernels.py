@@ -5,9 +5,12 @@ numpy calls (a few microseconds each), not arithmetic; at large N the
 vectorised passes built big temporaries. One loop per job, compiled once,
 does the same arithmetic with none of that overhead (see docs/BENCHMARKS.md).
 
-The arithmetic is written to match the earlier numpy implementation operation
-for operation (same formulas, same order), so readings are the same up to the
-last bit of libm's sin/cos. Kernels are cached on disk (``cache=True``, in
+The geometry was written to match the earlier numpy implementation operation
+for operation (same formulas, same order); since issue 22's swarm work the
+sensor noise is drawn in the kernel from a per-pass key (same laws, other
+numbers than numpy's draws), the ambient cone needs no trigonometry and
+shortcuts skip work that cannot change a reading (docs/BENCHMARKS.md, "A
+sensing pass at 10,000 robots"). Kernels are cached on disk (``cache=True``, in
 ``__pycache__`` or ``NUMBA_CACHE_DIR``): the first start of a fresh checkout
 compiles them (a few seconds), later starts load them. :func:`warm_up` does
 that explicitly and returns the time it took, so the engine can report it.
@@ -52,16 +55,14 @@ F_GRIP_X1 = 11
 F_GRIP_HALF_WIDTH = 12
 F_HAS_GRIP = 13
 F_ARM_LOWERED_ABOVE = 14
-N_AGENT_F = 15
+F_AMB_COS_HALF = 15  # cos(F_AMB_HALF_ANGLE): the cone test without an angle
+N_AGENT_F = 16
 
 # Column indices of the per-agent int table (AgentSensing.agent_i).
 I_PROX_SENSORS = 0  # real (unpadded) proximity sensors
-I_CURVE = 1  # row in the response-curve tables
-I_PROX_NOISE_MUL = 2  # offset of the agent's multiplicative noise in the flat noise draw
-I_PROX_NOISE_ADD = 3  # offset of its additive noise
-I_AMB_SENSORS = 4
-I_AMB_NOISE = 5
-N_AGENT_I = 6
+I_TYPE = 1  # the agent's type: row of the response curves and the sensor layouts
+I_AMB_SENSORS = 2
+N_AGENT_I = 3
 
 
 # The sensing kernel's arguments, packed by what changes when: a pack is built
@@ -77,7 +78,7 @@ class Robots(NamedTuple):
 class SensorTables(NamedTuple):
     """The agents' sensors (rebuilt when agents come or go)."""
 
-    ray_local: np.ndarray  # (N, S*K, 5) rays in the robot frame: x, y, angle, cos, sin
+    ray_local: np.ndarray  # (types, S*K, 5) rays in the robot frame: x, y, angle, cos, sin
     sensors: int  # S (padded proximity sensors per agent)
     rays_per_sensor: int  # K
     agent_f: np.ndarray  # (N, N_AGENT_F) per-agent floats
@@ -85,8 +86,8 @@ class SensorTables(NamedTuple):
     curve_x: np.ndarray  # (G, L) response curves, padded
     curve_y: np.ndarray
     curve_n: np.ndarray  # (G,) points used
-    amb_local: np.ndarray  # (N, A, 3) ambient sensors in the robot frame
-    amb_valid: np.ndarray  # (N, A) bool
+    amb_local: np.ndarray  # (types, A, 5) ambient sensors, robot frame: x, y, angle, cos, sin
+    amb_valid: np.ndarray  # (types, A) bool
 
 
 class StaticScene(NamedTuple):
@@ -104,7 +105,7 @@ class StaticScene(NamedTuple):
 
 
 class MovingScene(NamedTuple):
-    """Objects, lights and noise of one sensing pass."""
+    """Objects, lights and the noise key of one sensing pass."""
 
     circ_xy: np.ndarray  # (C, 2) other circles: round objects on the floor, round obstacles
     circ_r: np.ndarray  # (C,)
@@ -112,7 +113,7 @@ class MovingScene(NamedTuple):
     circ_is_object: np.ndarray  # (C,) bool: a movable object (the gripper's barrier sees it)
     edges: np.ndarray  # (E, 4) edges of movable polygons on the floor
     lights: np.ndarray  # (L, 4) lit lights: x, y, radius, intensity
-    noise: np.ndarray  # flat standard normal draws (offsets in agent_i)
+    noise_key: np.uint64  # this pass's noise key, drawn from the world's generator
 
 
 class Readings(NamedTuple):
@@ -316,6 +317,113 @@ def clamp_speeds(speeds, top, cmd):  # pragma: no cover
             cmd[a, k] = s
 
 
+# --- Gaussian noise, counter-based -----------------------------------------------------
+# Every sensor's noise of a pass is a function of (the pass's key, the agent's slot,
+# the sensor): a key is one 64-bit draw from the world's seeded generator per pass
+# (sensing.NoiseKeys), and the kernel derives the normals itself. So the noise costs
+# no numpy call and no buffer (at 10,000 robots numpy's draw of 240,000 normals a pass
+# was about 4 ms, a quarter of the pass), a chunk of robots on any thread draws
+# exactly what one thread would, and the same seed still gives the same readings.
+#
+# Words: SplitMix64 (Steele, Lea, Flood 2014), word j of sensor stream i being the
+# generator's output at counter i * 2**16 + j from the key: consecutive counters are
+# consecutive SplitMix64 outputs, a generator that passes BigCrush. Normals: the
+# Marsaglia-Tsang ziggurat with 256 layers, as numpy's ``standard_normal`` does it
+# (same tables' construction, same 52-bit layout of a word, same tail and wedges):
+# one word and no transcendental call about 99 % of the time.
+_GAMMA = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_U30, _U27, _U31 = np.uint64(30), np.uint64(27), np.uint64(31)
+_U1, _U8, _U11, _U16 = np.uint64(1), np.uint64(8), np.uint64(11), np.uint64(16)
+_BYTE = np.uint64(0xFF)
+_MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
+_ZIG_R = 3.6541528853610088  # start of the tail
+_ZIG_V = 0.00492867323399  # area of each layer
+
+
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ki, wi, fi) for 256 layers, built as Marsaglia and Tsang (2000) and numpy do."""
+    m1 = 2.0**52
+    ki = np.zeros(256, dtype=np.int64)  # below 2**52: compared with a word's 52 bits
+    wi = np.zeros(256)
+    fi = np.zeros(256)
+    dn = tn = _ZIG_R
+    q = _ZIG_V / math.exp(-0.5 * dn * dn)
+    ki[0] = int((dn / q) * m1)
+    wi[0] = q / m1
+    wi[255] = dn / m1
+    fi[0] = 1.0
+    fi[255] = math.exp(-0.5 * dn * dn)
+    for i in range(254, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(_ZIG_V / dn + math.exp(-0.5 * dn * dn)))
+        ki[i + 1] = int((dn / tn) * m1)
+        tn = dn
+        fi[i] = math.exp(-0.5 * dn * dn)
+        wi[i] = dn / m1
+    return ki, wi, fi
+
+
+_ZIG_KI, _ZIG_WI, _ZIG_FI = _ziggurat_tables()
+
+
+@njit(cache=_CACHE, inline="always")
+def _word(key, stream, j):  # pragma: no cover
+    """The ``j``-th 64-bit word of noise stream ``stream`` under ``key`` (SplitMix64)."""
+    z = key + ((np.uint64(stream) << _U16) + np.uint64(j)) * _GAMMA
+    z = (z ^ (z >> _U30)) * _M1
+    z = (z ^ (z >> _U27)) * _M2
+    return z ^ (z >> _U31)
+
+
+@njit(cache=_CACHE, inline="always")
+def _unit(word):  # pragma: no cover
+    """A double in [0, 1) from the top 53 bits of a word."""
+    return float(word >> _U11) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=_CACHE, inline="always")
+def normal(key, stream):  # pragma: no cover
+    """One standard normal value: stream ``stream`` of ``key`` (numpy's ziggurat on its words).
+
+    Inlined, and the sign applied without a branch: a call per value and a
+    mispredicted branch on a random bit cost more than the rest (14 against 5 ns).
+    """
+    j = 0
+    while True:
+        r = _word(key, stream, j)
+        j += 1
+        idx = np.int64(r & _BYTE)
+        r = r >> _U8
+        rabs = np.int64((r >> _U1) & _MANTISSA)
+        x = float(rabs) * _ZIG_WI[idx] * (1.0 - 2.0 * float(r & _U1))
+        if rabs < _ZIG_KI[idx]:
+            return x  # inside the layer's rectangle: about 99 % of draws
+        if idx == 0:  # the tail beyond R (Marsaglia's method)
+            while True:
+                xx = -(1.0 / _ZIG_R) * math.log1p(-_unit(_word(key, stream, j)))
+                yy = -math.log1p(-_unit(_word(key, stream, j + 1)))
+                j += 2
+                if yy + yy > xx * xx:
+                    return -(_ZIG_R + xx) if (rabs >> 8) & 1 else _ZIG_R + xx
+        f0 = _ZIG_FI[idx - 1]
+        f1 = _ZIG_FI[idx]
+        u = _unit(_word(key, stream, j))
+        j += 1
+        if (f0 - f1) * u + f1 < math.exp(-0.5 * x * x):
+            return x  # under the curve in the layer's wedge
+
+
+@njit(cache=_CACHE)
+def normals(key, first, count):  # pragma: no cover
+    """Streams ``first`` to ``first + count - 1`` of ``key``, one normal each (for tests)."""
+    out = np.empty(count)
+    k = np.uint64(key)
+    for i in range(count):
+        out[i] = normal(k, first + i)
+    return out
+
+
 @njit(cache=_CACHE, inline="always")
 def _ray_circle(ox, oy, dx, dy, cx, cy, r):  # pragma: no cover
     f0 = ox - cx
@@ -350,6 +458,37 @@ def _ray_segment(ox, oy, dx, dy, ax, ay, bx, by):  # pragma: no cover
 
 
 @njit(cache=_CACHE, inline="always")
+def _directions(dx, dy, ray_local, g, r0, k, co, si):  # pragma: no cover
+    """Rays r0 .. r0 + k - 1 of layout ``g`` turned by the robot's heading (cos co, sin si).
+
+    cos/sin(th + angle) by the angle-addition formula, from the layout's cos/sin of
+    each ray's angle: no trigonometry per ray. Returns True (the rays are ready).
+    """
+    for r in range(r0, r0 + k):
+        ca = ray_local[g, r, 3]
+        sa = ray_local[g, r, 4]
+        dx[r] = co * ca - si * sa
+        dy[r] = si * ca + co * sa
+    return True
+
+
+@njit(cache=_CACHE, inline="always")
+def _point_segment_d2(px, py, seg):  # pragma: no cover
+    """Squared distance from (px, py) to the segment seg = (ax, ay, bx, by)."""
+    ax = seg[0]
+    ay = seg[1]
+    ex = seg[2] - ax
+    ey = seg[3] - ay
+    length2 = ex * ex + ey * ey
+    u = 0.0
+    if length2 > 0.0:
+        u = min(max(((px - ax) * ex + (py - ay) * ey) / length2, 0.0), 1.0)
+    qx = ax + u * ex - px
+    qy = ay + u * ey - py
+    return qx * qx + qy * qy
+
+
+@njit(cache=_CACHE, inline="always")
 def _cell(v, cell, n):  # pragma: no cover
     """Grid index of a coordinate (one margin cell below 0), clamped to the grid."""
     i = math.floor(v / cell) + 1
@@ -381,6 +520,23 @@ def _interp(x, xp, fp, n):  # pragma: no cover
         if res != res and fp[j] == fp[j + 1]:
             res = fp[j]
     return res
+
+
+@njit(cache=_CACHE, inline="always")
+def ambient_gain(vx, vy, d, ax, ay, cos_half):  # pragma: no cover
+    """cos(1.5 * bearing) if |bearing| < the cone's half angle, else 0; no trigonometry.
+
+    (vx, vy): sensor to light, ``d`` its length (> 0); (ax, ay): the sensor's unit
+    axis; ``cos_half``: cos of the half angle (in [0, pi]). With c = cos(bearing)
+    = (v . a) / d, |bearing| < half is c > cos(half) (cos falls on [0, pi]), and
+    cos(3b/2) = cos(b) cos(b/2) - sin(b) sin(b/2) = (2c - 1) * sqrt((1 + c) / 2),
+    since cos(b/2) >= 0 for |b| <= pi. The earlier formula (hypot, two atan2, a
+    sin, a cos and a cos per sensor) was most of the ambient model's time.
+    """
+    c = (vx * ax + vy * ay) / d
+    if not c > cos_half:
+        return 0.0
+    return (2.0 * c - 1.0) * math.sqrt(0.5 * (1.0 + c))
 
 
 @njit(cache=_CACHE)
@@ -418,17 +574,20 @@ def _occluded_grid(
     """:func:`_occluded`, testing only the static edges binned along the segment p -> q.
 
     Every occluding edge of ``occ_segs`` is ``segs[4:]`` (the arena's 4 walls come
-    first and never hide a light). Points sampled along p -> q at most half a cell
-    apart land in, or next to, the cell of any point where an edge crosses it, and
-    an edge is binned in every cell within one cell of its bounding box: so every
-    crossing edge is tested, with the same formula, and the answer is the same as
-    testing them all. With obstacles in proportion to the swarm that full test was
-    O(robots x obstacles): 10,000 robots, 200 pillars, one wide lamp.
+    first and never hide a light). Points are sampled along p -> q at most one cell
+    apart along each axis, so every point of the segment is within half a cell of
+    a sample along each axis: its cell and the sample's differ by at most one in x
+    and in y. An edge is binned in every cell within one cell of its bounding box,
+    so every crossing edge is binned in some sampled cell and tested, with the
+    same formula: the answer is the same as testing them all. With obstacles in
+    proportion to the swarm that full test was O(robots x obstacles): 10,000
+    robots, 200 pillars, one wide lamp. (Samples were half a cell apart along
+    the segment before: 2 to 3 times as many, for the same answer.)
     """
     dx = qx - px
     dy = qy - py
     length = math.hypot(dx, dy)
-    steps = math.ceil(length / (0.5 * cell)) + 1
+    steps = math.ceil(max(abs(dx), abs(dy)) / cell) + 1
     last = -1
     for i in range(steps + 1):
         f = min(i / steps, 1.0)
@@ -444,6 +603,108 @@ def _occluded_grid(
             if t <= 1.0:
                 return True
     return _circle_on_segment(px, py, dx, dy, length, circ_xy, circ_r)
+
+
+# Angular bins around a light for :func:`_shadows`: 2 pi / 1024, about 0.35 degrees.
+SHADOW_BINS = 1024
+# An occluder nearer a light than this shades every bin (see _shadows).
+_SHADOW_NEAR_MM = 200.0
+
+
+@njit(cache=_CACHE, inline="always")
+def _shade_arc(row, start, span, d):  # pragma: no cover
+    """row[b] = min(row[b], d) for the bins of angles start .. start + span, and one each side."""
+    nb = row.shape[0]
+    scale = nb / (2.0 * math.pi)
+    b0 = math.floor((start + math.pi) * scale) - 1
+    b1 = math.floor((start + span + math.pi) * scale) + 1
+    if b1 - b0 + 1 >= nb:
+        b0 = 0
+        b1 = nb - 1
+    for b in range(b0, b1 + 1):
+        k = b % nb
+        if d < row[k]:
+            row[k] = d
+
+
+@njit(cache=_CACHE)
+def _shadows(lights, occ_segs, circ_xy, circ_r, nb):  # pragma: no cover
+    """(lights, nb): per light and angular bin around it, how near the light an occluder comes.
+
+    An occluder (static edge that can hide a light, round obstacle) is entered,
+    with its distance from the light, in every bin its angular extent seen from
+    the light covers, plus one bin each side; one nearer the light than
+    _SHADOW_NEAR_MM in every bin. A robot at distance r from the light, in a bin
+    whose value exceeds r + 1 mm, has nothing between it and the light: an
+    occluder in that bin is more than 1 mm farther from the light than any point
+    of the robot-to-light segment, and one in no neighbouring bin is at least a
+    bin (0.0061 rad) off the segment's direction and 200 mm from the light, so
+    more than 1.2 mm off the segment. Either way the walk's formula cannot meet
+    it: :func:`_sense_range` skips the walk (same answer), which at 10,000 robots
+    round a lamp among 200 pillars is most of them. O(lights x occluders) a pass.
+    """
+    out = np.full((lights.shape[0], nb), np.inf)
+    for li in range(lights.shape[0]):
+        lx = lights[li, 0]
+        ly = lights[li, 1]
+        row = out[li]
+        for sg in range(occ_segs.shape[0]):
+            d = math.sqrt(_point_segment_d2(lx, ly, occ_segs[sg]))
+            if d < _SHADOW_NEAR_MM:
+                _shade_arc(row, -math.pi, 2.0 * math.pi, d)
+                continue
+            ta = math.atan2(occ_segs[sg, 1] - ly, occ_segs[sg, 0] - lx)
+            tb = math.atan2(occ_segs[sg, 3] - ly, occ_segs[sg, 2] - lx)
+            span = tb - ta
+            if span > math.pi:
+                span -= 2.0 * math.pi
+            elif span < -math.pi:
+                span += 2.0 * math.pi
+            # An edge that does not pass through the light covers the shorter arc.
+            if span < 0.0:
+                _shade_arc(row, tb, -span, d)
+            else:
+                _shade_arc(row, ta, span, d)
+        for c in range(circ_r.shape[0]):
+            vx = circ_xy[c, 0] - lx
+            vy = circ_xy[c, 1] - ly
+            centre = math.sqrt(vx * vx + vy * vy)
+            d = centre - circ_r[c]
+            if d < _SHADOW_NEAR_MM:
+                _shade_arc(row, -math.pi, 2.0 * math.pi, d)
+                continue
+            half = math.asin(circ_r[c] / centre)
+            _shade_arc(row, math.atan2(vy, vx) - half, 2.0 * half, d)
+    return out
+
+
+@njit(cache=_CACHE, inline="always")
+def _in_light(shadow, dx, dy):  # pragma: no cover
+    """Whether the bins say nothing lies between a robot at (dx, dy) from a light and it."""
+    if shadow.shape[0] == 0:
+        return False  # no bins this pass: walk
+    nb = shadow.shape[0]
+    b = math.floor((math.atan2(dy, dx) + math.pi) * (nb / (2.0 * math.pi))) % nb
+    return math.sqrt(dx * dx + dy * dy) + 1.0 < shadow[b]
+
+
+# Robots from which a pass bins the occluders round each light (_shadows): below,
+# its O(lights x occluders) cost is more than the robots' walks it spares.
+SHADOW_MIN_AGENTS = 256
+
+
+@njit(cache=_CACHE)
+def _shadow_table(robots, scene, moving):  # pragma: no cover
+    """:func:`_shadows` of this pass's lights, or no bins (every robot walks).
+
+    Only where robots walk along the grid (more than 64 occluding edges) and
+    are many; otherwise (lights, 0), which :func:`_in_light` reads as "walk".
+    """
+    lights = moving[5]
+    occ_segs, static_xy, static_r = scene[6], scene[7], scene[8]
+    if occ_segs.shape[0] > 64 and robots[0].shape[0] >= SHADOW_MIN_AGENTS:
+        return _shadows(lights, occ_segs, static_xy, static_r, SHADOW_BINS)
+    return np.full((lights.shape[0], 0), np.inf)
 
 
 @njit(cache=_CACHE)
@@ -498,12 +759,9 @@ def _circles(robots, tables, scene, moving):  # pragma: no cover
 
 @njit(cache=_CACHE)
 def _scratch(tables, scene, moving, nc):  # pragma: no cover
-    """One worker's scratch arrays: ray origins and directions, hits, candidates."""
+    """One worker's scratch arrays: ray directions, nearest hits, candidates."""
     nrays = tables[0].shape[1]
     return (
-        np.empty(nrays),
-        np.empty(nrays),
-        np.empty(nrays),
         np.empty(nrays),
         np.empty(nrays),
         np.empty(tables[1]),
@@ -515,12 +773,15 @@ def _scratch(tables, scene, moving, nc):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
-def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch):  # pragma: no cover
+def _sense_range(
+    lo, hi, robots, tables, scene, moving, out, circles, shadows, scratch
+):  # pragma: no cover
     """Readings of agents ``lo`` to ``hi - 1``: reads shared state, writes their rows only.
 
     Each agent's readings depend only on the shared inputs (poses, tables, the
-    circle grid, the pre-drawn noise), never on another agent's pass, so any
-    split of the agents between workers gives the same bits.
+    circle grid, the pass's noise key: its noise streams are its slot's), never
+    on another agent's pass, so any split of the agents between workers gives
+    the same bits.
     """
     pose, arm, holding = robots
     (
@@ -536,12 +797,16 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
         amb_valid,
     ) = tables
     segs, grid_start, grid_items, grid_nx, grid_ny, cell, occ_segs, static_xy, static_r = scene
-    edges, lights, noise = moving[4], moving[5], moving[6]
+    edges, lights = moving[4], moving[5]
+    key = np.uint64(moving[6])  # a plain int key would turn the words' arithmetic to floats
     prox_out, amb_out, presence_out = out
     cx, cy, cr, cown, cobj, count, citems = circles
-    ox, oy, dx, dy, dist, per_sensor, total, cand, ecand, scand = scratch
-    nrays = ray_local.shape[1]
+    dx, dy, per_sensor, total, cand, ecand, scand = scratch
     n_amb = amb_local.shape[1]
+    n_prox = prox_out.shape[1]
+    # Noise streams per agent: proximity sensor j is stream slot * stride + j,
+    # ambient sensor j is slot * stride + n_prox + j.
+    stride = n_prox + amb_out.shape[1]
 
     for a in range(lo, hi):
         x = pose[a, 0]
@@ -550,6 +815,7 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
         co = math.cos(th)
         si = math.sin(th)
         reach = agent_f[a, F_REACH]
+        g = agent_i[a, I_TYPE]
 
         # Candidates. Circles: in the 3x3 cells around the agent and within reach.
         ncand = 0
@@ -622,78 +888,60 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
                 ecand[nedge] = e
                 nedge += 1
 
-        for r in range(nrays):
-            dist[r] = np.inf
-        if ncand or nseg or nedge:  # nothing near: every ray misses, skip the casting
-            for r in range(nrays):
-                lx = ray_local[a, r, 0]
-                ly = ray_local[a, r, 1]
-                ox[r] = x + co * lx - si * ly
-                oy[r] = y + si * lx + co * ly
-                # cos/sin(th + angle) by the angle-addition formula, from the layout's
-                # cos/sin of each ray's angle: no trigonometry per ray.
-                ca = ray_local[a, r, 3]
-                sa = ray_local[a, r, 4]
-                dx[r] = co * ca - si * sa
-                dy[r] = si * ca + co * sa
-            for q in range(ncand):
-                c = cand[q]
-                for r in range(nrays):
-                    t = _ray_circle(ox[r], oy[r], dx[r], dy[r], cx[c], cy[c], cr[c])
-                    if t < dist[r]:
-                        dist[r] = t
-            for q in range(nseg):
-                sg = scand[q]
-                for r in range(nrays):
-                    t = _ray_segment(
-                        ox[r],
-                        oy[r],
-                        dx[r],
-                        dy[r],
-                        segs[sg, 0],
-                        segs[sg, 1],
-                        segs[sg, 2],
-                        segs[sg, 3],
-                    )
-                    if t < dist[r]:
-                        dist[r] = t
-            for q in range(nedge):
-                e = ecand[q]
-                for r in range(nrays):
-                    t = _ray_segment(
-                        ox[r],
-                        oy[r],
-                        dx[r],
-                        dy[r],
-                        edges[e, 0],
-                        edges[e, 1],
-                        edges[e, 2],
-                        edges[e, 3],
-                    )
-                    if t < dist[r]:
-                        dist[r] = t
-
-        # Nearest hit per sensor -> response curve -> seeded noise.
+        # Nearest hit per sensor, sensor by sensor. A sensor's rays share its origin,
+        # and a shape at least the curve's range (+1 mm against rounding) from that
+        # origin can only be hit at or beyond the range, which reads as no hit (the
+        # curve's last value): none of its rays is cast at it. Most of a
+        # neighbour's 24 ray tests were of sensors facing away from it. A sensor's
+        # ray directions are worked out only once something passes that test.
+        # (The nearest hit is a minimum over the same hits whatever the order.)
+        far = curve_x[g, curve_n[g] - 1] + 1.0
         for s in range(sensors):
             m = np.inf
-            for j in range(rays_per_sensor):
-                d = dist[s * rays_per_sensor + j]
-                if d < m:
-                    m = d
+            if ncand or nseg or nedge:  # nothing near: every ray misses, skip the casting
+                r0 = s * rays_per_sensor
+                lx = ray_local[g, r0, 0]
+                ly = ray_local[g, r0, 1]
+                sx = x + co * lx - si * ly
+                sy = y + si * lx + co * ly
+                ready = False  # this sensor's ray directions worked out
+                for q in range(ncand):
+                    c = cand[q]
+                    fx = sx - cx[c]
+                    fy = sy - cy[c]
+                    lim = cr[c] + far
+                    if fx * fx + fy * fy >= lim * lim:
+                        continue
+                    if not ready:
+                        ready = _directions(dx, dy, ray_local, g, r0, rays_per_sensor, co, si)
+                    for r in range(r0, r0 + rays_per_sensor):
+                        t = _ray_circle(sx, sy, dx[r], dy[r], cx[c], cy[c], cr[c])
+                        if t < m:
+                            m = t
+                for q in range(nseg + nedge):  # static edges, then movable polygons' edges
+                    sg = segs[scand[q]] if q < nseg else edges[ecand[q - nseg]]
+                    if _point_segment_d2(sx, sy, sg) >= far * far:
+                        continue
+                    if not ready:
+                        ready = _directions(dx, dy, ray_local, g, r0, rays_per_sensor, co, si)
+                    for r in range(r0, r0 + rays_per_sensor):
+                        t = _ray_segment(sx, sy, dx[r], dy[r], sg[0], sg[1], sg[2], sg[3])
+                        if t < m:
+                            m = t
             per_sensor[s] = m
-        g = agent_i[a, I_CURVE]
         ng = curve_n[g]
         nf = agent_f[a, F_PROX_NOISE_FRACTION]
         ncounts = agent_f[a, F_PROX_NOISE_COUNTS]
         top = agent_f[a, F_PROX_MAX]
-        mul = agent_i[a, I_PROX_NOISE_MUL]
-        add = agent_i[a, I_PROX_NOISE_ADD]
-        for j in range(prox_out.shape[1]):
+        for j in range(n_prox):
             if j >= agent_i[a, I_PROX_SENSORS]:
                 prox_out[a, j] = 0
                 continue
             v = _interp(per_sensor[j], curve_x[g], curve_y[g], ng)
-            v = v * (1.0 + nf * noise[mul + j]) + ncounts * noise[add + j]
+            # v * (1 + nf * z1) + ncounts * z2, with z1 and z2 independent standard
+            # normals, is normal with mean v and this standard deviation: one draw.
+            sd = math.sqrt((v * nf) ** 2 + ncounts * ncounts)
+            v = v + sd * normal(key, a * stride + j)
             v = np.rint(v)
             v = min(max(v, 0.0), top)
             prox_out[a, j] = np.int32(v)
@@ -709,7 +957,9 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             ddy = y - lyy
             if not (ddx * ddx + ddy * ddy < (radius + 40.0) ** 2):
                 continue
-            if occ_segs.shape[0] > 64:  # many obstacles: only those along the way
+            if _in_light(shadows[li], ddx, ddy):
+                hidden = False
+            elif occ_segs.shape[0] > 64:  # many obstacles: only those along the way
                 hidden = _occluded_grid(
                     x,
                     y,
@@ -729,34 +979,40 @@ def _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch): 
             if hidden:
                 continue
             scale = agent_f[a, F_AMB_DROP] * lights[li, 3]
-            half = agent_f[a, F_AMB_HALF_ANGLE]
+            cos_half = agent_f[a, F_AMB_COS_HALF]
             for i in range(n_amb):
-                l0 = amb_local[a, i, 0]
-                l1 = amb_local[a, i, 1]
+                l0 = amb_local[g, i, 0]
+                l1 = amb_local[g, i, 1]
                 sx = x + co * l0 - si * l1
                 sy = y + si * l0 + co * l1
                 vx = lxx - sx
                 vy = lyy - sy
-                closeness = 1.0 - math.hypot(vx, vy) / radius
+                d = math.sqrt(vx * vx + vy * vy)
+                closeness = 1.0 - d / radius
                 if closeness <= 0.0:
                     continue  # beyond the light's radius: adds exactly nothing
                 closeness = min(closeness, 1.0)
-                raw = math.atan2(vy, vx) - th - amb_local[a, i, 2]
-                bearing = math.atan2(math.sin(raw), math.cos(raw))
-                contrib = math.cos(1.5 * bearing) if abs(bearing) < half else 0.0
+                if d > 0.0:
+                    # the sensor's axis, th + its angle, by the angle-addition formula
+                    ca = amb_local[g, i, 3]
+                    sa = amb_local[g, i, 4]
+                    contrib = ambient_gain(
+                        vx, vy, d, co * ca - si * sa, si * ca + co * sa, cos_half
+                    )
+                else:  # the light on the sensor itself: bearing 0
+                    contrib = 1.0
                 contrib = contrib * closeness
-                contrib *= scale * (1.0 if amb_valid[a, i] else 0.0)
+                contrib *= scale * (1.0 if amb_valid[g, i] else 0.0)
                 total[i] += contrib
         dark = agent_f[a, F_AMB_DARK]
         floor = agent_f[a, F_AMB_FLOOR]
         anf = agent_f[a, F_AMB_NOISE_FRACTION]
-        off = agent_i[a, I_AMB_NOISE]
         for j in range(amb_out.shape[1]):
             if j >= agent_i[a, I_AMB_SENSORS]:
                 amb_out[a, j] = 0
                 continue
             v = min(max(dark - total[j], floor), dark)
-            v = v * (1.0 + anf * noise[off + j])
+            v = v * (1.0 + anf * normal(key, a * stride + n_prox + j))
             v = np.rint(v)
             v = min(max(v, 0.0), 1023.0 * 4)
             amb_out[a, j] = np.int32(v)
@@ -771,8 +1027,10 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
     passed as plain tuples in that layout (see SensorSuite.read: dispatch cost).
     """
     circles = _circles(robots, tables, scene, moving)
+    shadows = _shadow_table(robots, scene, moving)
     scratch = _scratch(tables, scene, moving, circles[0].shape[0])
-    _sense_range(0, robots[0].shape[0], robots, tables, scene, moving, out, circles, scratch)
+    n = robots[0].shape[0]
+    _sense_range(0, n, robots, tables, scene, moving, out, circles, shadows, scratch)
 
 
 @njit(cache=_CACHE, parallel=True)
@@ -782,12 +1040,14 @@ def sense_parallel(robots, tables, scene, moving, out, threads):  # pragma: no c
     The caller sets numba's thread count for its thread (numba.set_num_threads;
     calling it in here would keep the kernel out of the on-disk cache).
 
-    The circle grid is built once (serially) and shared read-only; each chunk
+    The circle grid and the lights' shadow bins are built once (serially) and
+    shared read-only; each chunk
     has its own scratch arrays and writes only its agents' rows of ``out``;
-    the noise was drawn before the call. So the result is bit-identical to
+    an agent's noise depends only on the pass's key and its slot. So the result is bit-identical to
     :func:`sense` whatever the thread count (tests/unit/common/sim2d/test_swarm.py).
     """
     circles = _circles(robots, tables, scene, moving)
+    shadows = _shadow_table(robots, scene, moving)
     n = robots[0].shape[0]
     nc = circles[0].shape[0]
     # A few chunks per thread: robots in crowded cells cost more, and equal
@@ -797,7 +1057,7 @@ def sense_parallel(robots, tables, scene, moving, out, threads):  # pragma: no c
         lo = n * c // chunks
         hi = n * (c + 1) // chunks
         scratch = _scratch(tables, scene, moving, nc)
-        _sense_range(lo, hi, robots, tables, scene, moving, out, circles, scratch)
+        _sense_range(lo, hi, robots, tables, scene, moving, out, circles, shadows, scratch)
 
 
 def warm_up() -> float:
@@ -862,7 +1122,7 @@ def warm_up() -> float:
             np.array([[0.0, 1.0]]),
             np.array([[1.0, 0.0]]),
             np.array([2], dtype=np.int64),
-            np.zeros((1, 1, 3)),
+            np.zeros((1, 1, 5)),
             np.ones((1, 1), dtype=np.bool_),
         ),
         StaticScene(
@@ -883,7 +1143,7 @@ def warm_up() -> float:
             np.zeros(0, dtype=np.bool_),
             np.zeros((0, 4)),
             np.zeros((0, 4)),
-            np.zeros(4),
+            np.uint64(1),
         ),
         Readings(
             np.zeros((1, 1), dtype=np.int32),

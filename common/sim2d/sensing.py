@@ -16,12 +16,10 @@ Readings (see the "Sensor models" part of docs/ARCHITECTURE.md section 9):
   obstacle (a ray from the robot's centre), lowers the reading.
 - presence: the gripper's light barrier sees a round object between the fingers.
 
-Noise: ``noise_total`` standard normal values per pass from the world's
-generator, laid out as the earlier per-type draws were (per type: proximity
-multiplicative and additive, then per type: ambient), so a seed gives the same
-readings. They are drawn in blocks of many passes (NoiseStream): one numpy call
-costs as much as the kernel's whole pass at 10 robots, and a block hands out
-exactly the values the per-pass draws would have, in the same order.
+Noise: one 64-bit key per pass from the world's seeded generator (NoiseKeys);
+the kernel derives every sensor's Gaussian noise from the key, the agent's slot
+and the sensor (common/sim2d/kernels.py: ``normal``), so a seed gives the same
+readings on any number of threads, and no numpy call draws noise per pass.
 """
 
 from __future__ import annotations
@@ -80,9 +78,9 @@ def _types(agents: Sequence[Agent]) -> list[tuple[AgentTypeSpec, np.ndarray]]:
 
 # --- sensor components --------------------------------------------------------------
 # One class per kind of sensor a robot carries (Enki's IRSensor, ARGoS's sensor
-# interfaces): each lays out its sensors for every agent at once, writes its
-# columns of the kernel's per-agent tables and claims its share of each pass's
-# noise draw. The kernel then reads them all in one pass over the robots.
+# interfaces): each lays out its sensors for every agent at once and writes its
+# columns of the kernel's per-agent tables. The kernel then reads them all in one
+# pass over the robots.
 
 
 @dataclass(frozen=True)
@@ -91,7 +89,10 @@ class ProximitySensors:
 
     sensors: int  # per agent (padded)
     rays_per_sensor: int  # padded
-    ray_local: np.ndarray  # (N, S*K, 5): x, y, angle, cos(angle), sin(angle) in the robot frame
+    # (types, S*K, 5): x, y, angle, cos(angle), sin(angle) in the robot frame, one
+    # layout per robot type (agent_i's I_TYPE column): per agent, 10,000 copies of
+    # the same 1 KB were read from memory every pass.
+    ray_local: np.ndarray
     reach: np.ndarray  # (N,) farthest any ray reaches from the centre
     curve_x: np.ndarray  # (types, points) response curves, padded
     curve_y: np.ndarray
@@ -104,16 +105,15 @@ class ProximitySensors:
         types: list[tuple[AgentTypeSpec, np.ndarray]],
         f: np.ndarray,
         i_tab: np.ndarray,
-        noise_at: int,
-    ) -> tuple[ProximitySensors, int]:
-        """The ring of every agent, and the noise offset after its draws."""
+    ) -> ProximitySensors:
+        """The ring of every agent."""
         n = len(agents)
         s_max = max((len(a.spec.proximity.poses) for a in agents), default=8)
         k_max = max((a.spec.proximity.rays_per_sensor for a in agents), default=1)
-        ray_local = np.zeros((n, s_max * k_max, 5))
+        ray_local = np.zeros((len(types), s_max * k_max, 5))
         reach = np.zeros(n)
-        for slot, agent in enumerate(agents):
-            prox = agent.spec.proximity
+        for g, (spec, slots) in enumerate(types):
+            prox = spec.proximity
             k = prox.rays_per_sensor
             offsets = (
                 np.linspace(-prox.spread_rad / 2, prox.spread_rad / 2, k) if k > 1 else np.zeros(1)
@@ -122,7 +122,7 @@ class ProximitySensors:
                 for j in range(k_max):
                     # padding rays repeat the sensor's last ray: they change no minimum
                     angle = pose.heading_rad + offsets[min(j, k - 1)]
-                    ray_local[slot, i * k_max + j] = (
+                    ray_local[g, i * k_max + j] = (
                         pose.x_mm,
                         pose.y_mm,
                         angle,
@@ -130,15 +130,13 @@ class ProximitySensors:
                         np.sin(angle),
                     )
             for i in range(len(prox.poses), s_max):
-                ray_local[slot, i * k_max : (i + 1) * k_max] = ray_local[slot, 0]
-            reach[slot] = agent.spec.sensor_reach_mm
+                ray_local[g, i * k_max : (i + 1) * k_max] = ray_local[g, 0]
+            reach[slots] = spec.sensor_reach_mm
         f[:, K.F_REACH] = reach
         points = max((len(t.proximity.curve.distances_mm) for t, _ in types), default=2)
         curve_x = np.zeros((len(types), points))
         curve_y = np.zeros((len(types), points))
         curve_n = np.zeros(len(types), dtype=np.int64)
-        # Noise layout, in the order the draws were once made one type at a time:
-        # per type, (2, agents, sensors): multiplicative, then additive.
         for g, (spec, slots) in enumerate(types):
             p = spec.proximity
             c = p.curve
@@ -150,20 +148,16 @@ class ProximitySensors:
             f[slots, K.F_PROX_NOISE_COUNTS] = p.noise_counts
             f[slots, K.F_PROX_MAX] = float(p.max_value)
             i_tab[slots, K.I_PROX_SENSORS] = k
-            i_tab[slots, K.I_CURVE] = g
-            i_tab[slots, K.I_PROX_NOISE_MUL] = noise_at + np.arange(len(slots)) * k
-            i_tab[slots, K.I_PROX_NOISE_ADD] = noise_at + (len(slots) + np.arange(len(slots))) * k
-            noise_at += 2 * len(slots) * k
-        ring = cls(s_max, k_max, ray_local, reach, curve_x, curve_y, curve_n)
-        return ring, noise_at
+            i_tab[slots, K.I_TYPE] = g
+        return cls(s_max, k_max, ray_local, reach, curve_x, curve_y, curve_n)
 
 
 @dataclass(frozen=True)
 class AmbientSensors:
     """Ambient light sensors: a cone each; lit lights in reach lower the reading."""
 
-    local: np.ndarray  # (N, A, 3): x, y, heading in the robot frame
-    valid: np.ndarray  # (N, A)
+    local: np.ndarray  # (types, A, 5): x, y, heading, cos, sin of heading, robot frame
+    valid: np.ndarray  # (types, A)
 
     @classmethod
     def build(
@@ -172,29 +166,26 @@ class AmbientSensors:
         types: list[tuple[AgentTypeSpec, np.ndarray]],
         f: np.ndarray,
         i_tab: np.ndarray,
-        noise_at: int,
-    ) -> tuple[AmbientSensors, int]:
-        n = len(agents)
+    ) -> AmbientSensors:
         a_max = max((len(a.spec.ambient.poses) for a in agents), default=8)
-        local = np.zeros((n, a_max, 3))
-        valid = np.zeros((n, a_max), dtype=bool)
-        for slot, agent in enumerate(agents):
-            for i, pose in enumerate(agent.spec.ambient.poses):
-                local[slot, i] = (pose.x_mm, pose.y_mm, pose.heading_rad)
-                valid[slot, i] = True
-        # Noise: per type, (agents, sensors), after every proximity draw.
+        local = np.zeros((len(types), a_max, 5))
+        valid = np.zeros((len(types), a_max), dtype=bool)
+        for g, (spec, _) in enumerate(types):
+            for i, pose in enumerate(spec.ambient.poses):
+                h = pose.heading_rad
+                local[g, i] = (pose.x_mm, pose.y_mm, h, np.cos(h), np.sin(h))
+                valid[g, i] = True
         for spec, slots in types:
             a = spec.ambient
             k = len(a.poses)
             f[slots, K.F_AMB_HALF_ANGLE] = a.half_angle_rad
+            f[slots, K.F_AMB_COS_HALF] = np.cos(a.half_angle_rad)
             f[slots, K.F_AMB_DROP] = a.drop
             f[slots, K.F_AMB_DARK] = float(a.dark_value)
             f[slots, K.F_AMB_FLOOR] = float(a.floor_value)
             f[slots, K.F_AMB_NOISE_FRACTION] = a.noise_fraction
             i_tab[slots, K.I_AMB_SENSORS] = k
-            i_tab[slots, K.I_AMB_NOISE] = noise_at + np.arange(len(slots)) * k
-            noise_at += len(slots) * k
-        return cls(local, valid), noise_at
+        return cls(local, valid)
 
 
 def fit_gripper_barriers(
@@ -219,7 +210,6 @@ class AgentSensing:
     proximity: ProximitySensors
     ambient: AmbientSensors
     tables: K.SensorTables
-    noise_total: int  # standard normal draws per sensing pass
     kernel_tables: tuple[object, ...]  # ``tables`` as a plain tuple (SensorSuite.read)
 
     @classmethod
@@ -231,8 +221,8 @@ class AgentSensing:
         f = np.zeros((n, K.N_AGENT_F))
         i_tab = np.zeros((n, K.N_AGENT_I), dtype=np.int64)
         f[:, K.F_RADIUS] = radius
-        ring, noise_at = ProximitySensors.build(agents, types, f, i_tab, 0)
-        ambient, noise_at = AmbientSensors.build(agents, types, f, i_tab, noise_at)
+        ring = ProximitySensors.build(agents, types, f, i_tab)
+        ambient = AmbientSensors.build(agents, types, f, i_tab)
         fit_gripper_barriers(agents, arm_lowered_above, f)
         tables = K.SensorTables(
             ring.ray_local,
@@ -246,7 +236,7 @@ class AgentSensing:
             ambient.local,
             ambient.valid,
         )
-        return cls(ring, ambient, tables, noise_at, tuple(tables))
+        return cls(ring, ambient, tables, tuple(tables))
 
 
 @dataclass(frozen=True)
@@ -330,31 +320,27 @@ _NO_EDGES = np.zeros((0, 4))
 _NO_LIGHTS = np.zeros((0, 4))
 
 
-class NoiseStream:
-    """Standard normal values from ``rng``, handed out in order, drawn in blocks.
+class NoiseKeys:
+    """One 64-bit noise key per sensing pass from ``rng``, drawn in blocks.
 
-    ``take(n)`` returns the next ``n`` values of the generator's stream: the same
-    values, in the same order, as ``rng.standard_normal(n)`` called each time
-    (numpy's Generator fills arrays sequentially from its bit stream), for a
-    fraction of the per-call overhead.
+    ``next()`` returns the generator's next raw 64-bit output: the same keys, in
+    the same order, whatever the block size (numpy's bit generators hand out raw
+    words in sequence), for a fraction of a numpy call per pass.
     """
 
-    def __init__(self, rng: np.random.Generator, block: int = 4096) -> None:
+    def __init__(self, rng: np.random.Generator, block: int = 256) -> None:
         self._rng = rng
         self._block = block
-        self._buf = np.zeros(0)
+        self._buf = np.zeros(0, dtype=np.uint64)
         self._pos = 0
 
-    def take(self, n: int) -> np.ndarray:
-        end = self._pos + n
-        if end > len(self._buf):
-            rest = self._buf[self._pos :]
-            fresh = self._rng.standard_normal(max(self._block, 32 * n))
-            self._buf = np.concatenate([rest, fresh]) if len(rest) else fresh
-            self._pos, end = 0, n
-        out = self._buf[self._pos : end]
-        self._pos = end
-        return out
+    def next(self) -> np.uint64:
+        if self._pos >= len(self._buf):
+            self._buf = self._rng.bit_generator.random_raw(self._block)
+            self._pos = 0
+        key = self._buf[self._pos]
+        self._pos += 1
+        return np.uint64(key)
 
 
 class SensorSuite:
@@ -365,7 +351,7 @@ class SensorSuite:
     world's public state (:class:`SensedWorld`) and returns the readings.
     """
 
-    def __init__(self, noise: NoiseStream) -> None:
+    def __init__(self, noise: NoiseKeys) -> None:
         self.noise = noise
         self.agents = AgentSensing.build([], np.zeros(0), np.zeros(0))
         self._static: StaticGeometry | None = None
@@ -415,7 +401,7 @@ class SensorSuite:
     ) -> tuple[tuple[object, ...], tuple[object, ...], tuple[object, ...]]:
         """The kernel's tables, static scene and moving scene of one pass at ``sim_time``.
 
-        Draws the pass's noise: call once per pass. The packs go to the kernel as
+        Draws the pass's noise key: call once per pass. The packs go to the kernel as
         plain tuples, laid out as K.SensorTables, K.StaticScene and K.MovingScene:
         numba's dispatcher types a plain tuple of arrays on its C fast path, a
         named tuple through Python (measured: 13 against 23 us a call at 10
@@ -426,7 +412,7 @@ class SensorSuite:
         moving = (
             *_objects(world, static),
             self._lit(world, sim_time),
-            self.noise.take(layout.noise_total),
+            self.noise.next(),
         )
         return layout.kernel_tables, static.kernel_scene, moving
 

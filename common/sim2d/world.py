@@ -147,7 +147,7 @@ class World:
         self.width = float(width_mm)
         self.height = float(height_mm)
         self.rng = np.random.default_rng(seed)
-        self.noise = sensing.NoiseStream(self.rng)  # sensor noise: the only draw from rng
+        self.noise = sensing.NoiseKeys(self.rng)  # sensor noise keys: the only draw from rng
         self.sensors = sensing.SensorSuite(self.noise)
         self.grippers = GripperTurrets(self)
         self.tick = 0

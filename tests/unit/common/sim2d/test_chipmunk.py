@@ -9,7 +9,7 @@ import pytest
 from common.sim2d import chipmunk, kernels
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
-from common.sim2d.sensing import NoiseStream
+from common.sim2d.sensing import NoiseKeys
 from common.sim2d.wander import braitenberg
 from common.sim2d.world import World
 
@@ -104,12 +104,11 @@ def test_stepping_through_chipmunk_gives_pymunks_trajectory(monkeypatch, drive: 
     assert np.array_equal(direct, via_pymunk)
 
 
-def test_noise_stream_hands_out_the_per_pass_draws_in_order() -> None:
-    sizes = [7, 240, 1, 5000, 33, 240, 240]
-    stream = NoiseStream(np.random.default_rng(11), block=64)
+def test_noise_keys_hand_out_the_generators_raw_words_in_order() -> None:
+    keys = NoiseKeys(np.random.default_rng(11), block=64)
     per_pass = np.random.default_rng(11)
-    for n in sizes:
-        assert np.array_equal(stream.take(n), per_pass.standard_normal(n))
+    for _ in range(300):  # across several blocks
+        assert keys.next() == per_pass.bit_generator.random_raw()
 
 
 def test_set_speeds_all_checks_shape_rounds_clamps_and_stops_on_nan() -> None:

@@ -101,6 +101,9 @@ def test_forager_brings_a_ball_to_the_nest(seed: int) -> None:
 
     assert in_nest() == set()
     forager = example("04")
-    run_in_world(forager, w, "k0", 120.0)
+    # 300 s, not 120: in 120 s the forager delivered a ball for 1 seed in 12 (only
+    # seed 1's noise happened to do it); in 300 s for 4 to 5 seeds in 8 with either
+    # noise generator (docs/BENCHMARKS.md, "A sensing pass at 10,000 robots").
+    run_in_world(forager, w, "k0", 300.0)
     assert in_nest(), "at least one ball was carried into the nest"
     assert forager.carried >= 1  # type: ignore[attr-defined]

@@ -179,3 +179,97 @@ def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
         assert full == along, p
         hidden += full
     assert 300 < hidden < 2700, "too few or too many hidden segments: a weak test"
+
+
+def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
+    # The walk samples a cell apart per axis; segments from grid corner to grid
+    # corner, along grid lines and short ones, against small boxes placed across
+    # grid lines, answer as testing every edge.
+    world = World(2400.0, 1800.0, seed=1)
+    world.add_agent("k", KHEPERA, 50.0, 50.0)
+    cell = world.sensors.static_geometry(world).cell_mm
+    rng = np.random.default_rng(21)
+    for i in range(60):
+        gx, gy = rng.integers(1, int(2400 // cell)), rng.integers(1, int(1800 // cell))
+        x = gx * cell + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0, 8)
+        y = gy * cell + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0, 8)
+        world.add_obstacle(f"b{i}", ShapeSpec.box(12, 3), x, y, float(rng.uniform(0, 3.2)))
+    scene = world.sensors.static_geometry(world).scene
+    corners = np.stack(np.meshgrid(np.arange(0, 2400, cell), np.arange(0, 1800, cell)), -1)
+    corners = corners.reshape(-1, 2)
+    hidden = 0
+    for _ in range(4000):
+        p = corners[rng.integers(len(corners))]
+        kind = rng.integers(3)
+        if kind == 0:  # corner to corner
+            q = corners[rng.integers(len(corners))]
+        elif kind == 1:  # along a grid line
+            q = (
+                p + np.array([rng.uniform(-900, 900), 0.0])
+                if rng.integers(2)
+                else p + np.array([0.0, rng.uniform(-900, 900)])
+            )
+        else:  # short, near a corner
+            q = p + rng.uniform(-cell, cell, 2)
+        seg = (float(p[0]), float(p[1]), float(q[0]), float(q[1]))
+        full = kernels._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
+        along = kernels._occluded_grid(
+            *seg,
+            scene.segs,
+            scene.grid_start,
+            scene.grid_items,
+            scene.grid_nx,
+            scene.grid_ny,
+            scene.cell,
+            scene.static_xy,
+            scene.static_r,
+        )
+        assert full == along, seg
+        hidden += full
+    assert hidden > 100, "too few hidden segments: a weak test"
+
+
+def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
+    # kernels._shadows: a robot whose bin says "in the light" must be one the walk
+    # (and the test of every edge) finds not hidden. Boxes and posts anywhere,
+    # lights among them (some right beside an obstacle), points anywhere and
+    # points just beside the obstacles, seen from the lights.
+    world = World(3000.0, 2000.0, seed=1)
+    rng = np.random.default_rng(5)
+    for i in range(50):
+        x, y = rng.uniform(100, 2900), rng.uniform(100, 1900)
+        world.add_obstacle(f"box{i}", ShapeSpec.box(60, 20), x, y, float(rng.uniform(0, 3.2)))
+    for i in range(6):
+        world.add_obstacle(f"post{i}", ShapeSpec.circle(20), *rng.uniform([100, 100], [2900, 1900]))
+    world.add_agent("k", KHEPERA, 30.0, 30.0)
+    scene = world.sensors.static_geometry(world).scene
+    occ = scene.occ_segs
+
+    def clearance(x: float, y: float) -> float:
+        edges = min(kernels._point_segment_d2(x, y, e) for e in occ) ** 0.5
+        posts = np.hypot(*(scene.static_xy - (x, y)).T) - scene.static_r
+        return float(min(edges, posts.min()))
+
+    open_spots = [p for p in rng.uniform([0, 0], [3000, 2000], (400, 2)) if clearance(*p) > 300]
+    lights = np.array(
+        [
+            [*open_spots[0], 2000.0, 1.0],  # away from every obstacle
+            [*open_spots[1], 1500.0, 1.0],
+            [occ[0, 0] + 3.0, occ[0, 1] + 3.0, 1500.0, 1.0],  # next to a box's corner
+            [*(scene.static_xy[0] + (25.0, 0.0)), 1500.0, 1.0],  # next to a post
+            [*(scene.static_xy[1] + (230.0, 0.0)), 1500.0, 1.0],  # a post just beyond 200 mm
+        ]
+    )
+    shadows = kernels._shadows(lights, occ, scene.static_xy, scene.static_r, kernels.SHADOW_BINS)
+    clear = walked = 0
+    for li, (lx, ly, _, _) in enumerate(lights):
+        points = rng.uniform([0, 0], [3000, 2000], size=(1500, 2))
+        # just beside obstacle corners, where a bin's edge and a segment graze
+        corners = occ[rng.integers(len(occ), size=1500), :2] + rng.normal(0, 2.0, (1500, 2))
+        for px, py in np.concatenate([points, corners]):
+            if kernels._in_light(shadows[li], px - lx, py - ly):
+                clear += 1
+                assert not kernels._occluded(px, py, lx, ly, occ, scene.static_xy, scene.static_r)
+            else:
+                walked += 1
+    assert clear > 1000 and walked > 3000, (clear, walked)
