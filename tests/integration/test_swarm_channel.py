@@ -160,6 +160,18 @@ def test_a_swarm_drives_its_leased_robots_with_macs_and_forged_or_replayed_bundl
         remove()
         # The engine's watchdog stops them once the commands stop.
         wait_for(lambda: not arena.engine.world.cmd[1:].any(), 5, "the watchdog stopping them")
+        # Zero wheel speeds show in the pose a tick later: wait until they stand still
+        # (a loaded machine once took the last tick's 1.6 mm for an obeyed forgery).
+        at_rest = [arena.xs()]
+
+        def standing_still() -> bool:
+            time.sleep(0.1)  # a few 20 ms ticks between two looks
+            now = arena.xs()
+            still_now = float(np.abs(now - at_rest[0]).max()) < 0.01
+            at_rest[0] = now
+            return still_now
+
+        wait_for(standing_still, 5, "the stopped robots to stand still")
         with spy_lock:
             replay = list(captured[-20:])
         assert replay, "the spy saw the swarm's bundles"
