@@ -297,6 +297,25 @@ def main() -> int:
         finally:
             close_session(s)
 
+    if verb == "await":
+        # await HOST KIND:ID...: wait (up to 90 s) until every token is seen from HOST.
+        # The hosts' routers mesh and propagate declarations after `wart host` says it
+        # runs; on a loaded machine a probe that logged in at once found no registry.
+        host, *wanted = args
+        s = session_for(lab_path, client_tls(pki, "admin"), lab.host(host).endpoint, lab.lease_ms)
+        try:
+            want = {keys.alive(realm, AliveKind(k), i) for k, i in (w.split(":") for w in wanted)}
+            deadline = time.monotonic() + 90.0
+            missing = set(want)
+            while missing and time.monotonic() < deadline:
+                got = s.liveliness().get(keys.alive_all(realm), timeout=3)
+                missing = want - {str(r.ok.key_expr) for r in got if r.ok}
+                if missing:
+                    time.sleep(0.5)
+            return result(missing=sorted(missing))
+        finally:
+            close_session(s)
+
     if verb == "follow":
         # follow HOST KIND ID SECONDS: print token events with timestamps for SECONDS.
         host, kind, ident, seconds = args[0], args[1], args[2], float(args[3])

@@ -9,6 +9,7 @@ real reason ("the lab's runner runner stopped"), never "lost".
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from common.agent_client import FINAL, AgentClient
 from common.lab_errors import NotAllowed
 from common.messages import AgentEvent
 from services.commands import deploy
+from services.context.agent_context import RUNNER_CHECK_S
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Proc, Procs, Router, wait_for
 from tests.integration.agentkit import (
@@ -102,7 +104,17 @@ def test_a_late_client_asks_how_its_request_ended_even_across_a_context_restart(
         rid = queued.request_id
         assert first.wait_status(rid, {"running"}, timeout=60), first.statuses(rid)
         runner.kill9()
-        wait_for(lambda: ida.position_of_user("alice", "k2") is None, 30, "the end of the run")
+
+        def ended() -> bool:
+            # Asked of the context, not read off ida's queue view: a view she has not
+            # received yet also shows no position (that once passed at once).
+            time.sleep(0.25)
+            reply = ida.request_status(rid)
+            return reply is not None and reply.ended
+
+        # The context asks the runner what it still runs for up to RUNNER_CHECK_S
+        # before taking its silence for its death.
+        wait_for(ended, RUNNER_CHECK_S + 15, "the end of the run")
 
         def asked(user: str) -> str:
             with agent_user(the_lab, user) as late:

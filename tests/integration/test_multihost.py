@@ -170,6 +170,17 @@ def _wait_ready(log: Path, proc: subprocess.Popen[bytes], timeout: float = 120.0
     raise AssertionError(f"wart host did not come up:\n{log.read_text(errors='replace')}")
 
 
+# The liveliness tokens every host must see before the tests start (kind:id).
+MESH = (
+    "registry:registry",
+    "world:arena1",
+    "context:arena1",
+    "runner:run1",
+    "world:real1",
+    "context:robots",
+)
+
+
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[MultiLab]:
     tmp = tmp_path_factory.mktemp("multihost")
@@ -188,7 +199,13 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[MultiLab]:
                 )
             for name, proc in procs.items():
                 _wait_ready(tmp / f"host-{name}.log", proc)
-            yield MultiLab(net, lab_path, tmp, procs)
+            multi = MultiLab(net, lab_path, tmp, procs)
+            # Each host running is not the mesh formed: wait until every host sees
+            # the services the tests use on the others (a condition, not a pause).
+            for name in ("A", "B", "C"):
+                seen = multi.probe(name, "await", name, *MESH, timeout=120.0)
+                assert seen["missing"] == [], f"from {name}: {seen}\n{multi.logs()}"
+            yield multi
         finally:
             for proc in procs.values():
                 _stop(proc)
