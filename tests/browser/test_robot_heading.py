@@ -81,30 +81,35 @@ def test_heading_arrow_is_drawn_in_its_own_colour(
     # What the page shows.
     radius_mm = view.snapshot.robot_radius
     heading = np.stack([np.cos(frame.poses[:, 2]), np.sin(frame.poses[:, 2])], axis=1)
-    centre = screen_points(page, view, frame.poses[:, :2])
-    ahead = screen_points(page, view, frame.poses[:, :2] + 0.25 * radius_mm * heading)
-    behind = screen_points(page, view, frame.poses[:, :2] - 0.7 * radius_mm * heading)
-    seen = ~((centre[:, 0] < NOTICES[0]) & (centre[:, 1] < NOTICES[1]))
-    assert seen.sum() >= ROBOTS // 2
+    looks: dict[str, np.ndarray] = {}  # the last look: where, and what the page showed there
 
     def pixels_at(image: np.ndarray, points: np.ndarray) -> np.ndarray:
         ix, iy = np.rint(points).astype(int).T
         return image[iy, ix]
 
-    seen_now: list[np.ndarray] = []  # the last look: arrow (ahead) and body (behind) pixels
-
-    def arrows_stand_out() -> bool:
+    def bodies_and_arrows_shown() -> bool:
+        # The points are taken afresh at every look, from the canvas's box and the
+        # camera of that moment, so a page still laying itself out is followed. (With
+        # points taken once before the first look, one robot's body read white twice
+        # in runs beside busy loops; whether the page had moved is not known.)
+        centre = screen_points(page, view, frame.poses[:, :2])
+        ahead = screen_points(page, view, frame.poses[:, :2] + 0.25 * radius_mm * heading)
+        behind = screen_points(page, view, frame.poses[:, :2] - 0.7 * radius_mm * heading)
+        seen = ~((centre[:, 0] < NOTICES[0]) & (centre[:, 1] < NOTICES[1]))
         png = page.p.screenshot()
         image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), np.int16)
-        seen_now[:] = [pixels_at(image, ahead[seen]), pixels_at(image, behind[seen])]
-        return bool((np.abs(seen_now[0] - seen_now[1]).sum(axis=1) > 150).all())
+        front, back = pixels_at(image, ahead[seen]), pixels_at(image, behind[seen])
+        looks.update(seen=seen, front=front, back=back)
+        greyness = np.abs(back - back.mean(axis=1, keepdims=True)).max(axis=1)
+        return bool((greyness > 20).all() and (np.abs(front - back).sum(axis=1) > 150).all())
 
     # The page draws the two meshes as their messages arrive, not always in the same
-    # frame: look until the arrows stand out; the assertions below say what is wrong.
+    # frame: look until both show; the assertions below say what is wrong.
     with contextlib.suppress(AssertionError):
-        wait_until(arrows_stand_out, 15, what="every robot's arrow to stand out")
+        wait_until(bodies_and_arrows_shown, 15, what="every robot's body and arrow")
+    seen, front, back = looks["seen"], looks["front"], looks["back"]
+    assert seen.sum() >= ROBOTS // 2
     page.screenshot("headings")
-    front, back = seen_now
     # The floor is a light grey: a robot's body, where the frame puts it, is not.
     greyness = np.abs(back - back.mean(axis=1, keepdims=True)).max(axis=1)
     assert (greyness > 20).all(), f"no robot body behind some centres: {back}"
