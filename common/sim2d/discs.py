@@ -164,16 +164,21 @@ def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
 
 
 @njit(cache=_CACHE, inline="always")
-def _out_of_segment(x, y, r, ax, ay, bx, by):  # pragma: no cover
-    """(x, y) pushed out of segment a-b to ``r`` from it, if closer; and whether it moved."""
+def _from_segment(x, y, ax, ay, bx, by):  # pragma: no cover
+    """(dx, dy): from the point of segment a-b nearest (x, y) to (x, y)."""
     ex = bx - ax
     ey = by - ay
     length2 = ex * ex + ey * ey
     u = 0.0
     if length2 > 0.0:
         u = min(max(((x - ax) * ex + (y - ay) * ey) / length2, 0.0), 1.0)
-    dx = x - (ax + u * ex)
-    dy = y - (ay + u * ey)
+    return x - (ax + u * ex), y - (ay + u * ey)
+
+
+@njit(cache=_CACHE, inline="always")
+def _out_of_segment(x, y, r, ax, ay, bx, by):  # pragma: no cover
+    """(x, y) pushed out of segment a-b to ``r`` from it, if closer."""
+    dx, dy = _from_segment(x, y, ax, ay, bx, by)
     d2 = dx * dx + dy * dy
     if d2 >= r * r:
         return x, y
@@ -181,7 +186,9 @@ def _out_of_segment(x, y, r, ax, ay, bx, by):  # pragma: no cover
     if d < 1e-9:
         # The centre on the edge itself: out along the edge's left normal (the
         # outside of a counter-clockwise polygon).
-        ln = math.sqrt(length2)
+        ex = bx - ax
+        ey = by - ay
+        ln = math.sqrt(ex * ex + ey * ey)
         if ln == 0.0:
             return x + r, y
         return x - ey / ln * r, y + ex / ln * r
@@ -243,16 +250,7 @@ def _near_obstacle(
     k = _static_cell(x, grid_cell, grid_nx) * grid_ny + _static_cell(y, grid_cell, grid_ny)
     for p in range(grid_start[k], grid_start[k + 1]):
         s = grid_items[p]
-        ax = segs[s, 0]
-        ay = segs[s, 1]
-        ex = segs[s, 2] - ax
-        ey = segs[s, 3] - ay
-        length2 = ex * ex + ey * ey
-        u = 0.0
-        if length2 > 0.0:
-            u = min(max(((x - ax) * ex + (y - ay) * ey) / length2, 0.0), 1.0)
-        dx = x - (ax + u * ex)
-        dy = y - (ay + u * ey)
+        dx, dy = _from_segment(x, y, segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3])
         if dx * dx + dy * dy < reach * reach:
             return True
     for p in range(circ_start[k], circ_start[k + 1]):
@@ -409,16 +407,7 @@ def _wall_normals(
             sg = grid_items[p]
             if sg < 4:  # the arena's walls: the border above
                 continue
-            ax = segs[sg, 0]
-            ay = segs[sg, 1]
-            ex = segs[sg, 2] - ax
-            ey = segs[sg, 3] - ay
-            length2 = ex * ex + ey * ey
-            u = 0.0
-            if length2 > 0.0:
-                u = min(max(((x - ax) * ex + (y - ay) * ey) / length2, 0.0), 1.0)
-            dx = x - (ax + u * ex)
-            dy = y - (ay + u * ey)
+            dx, dy = _from_segment(x, y, segs[sg, 0], segs[sg, 1], segs[sg, 2], segs[sg, 3])
             d2 = dx * dx + dy * dy
             if 1e-18 < d2 < reach * reach:
                 d = math.sqrt(d2)
