@@ -31,7 +31,13 @@ CHROMIUM = Path("/usr/bin/chromium")
 # browser draws without MSAA (about half a frame's cost: 6.0 frames a second
 # against 3.3) and each page at most FRAME_CAP_HZ frames a second, like a slow
 # display: every change is still drawn, and the CPU left is the services'.
+# The canvas also draws at half the page's pixel density (viser's ``fixedDpr``
+# page option; the page's layout and every coordinate stay those of 1280x800):
+# one page in a 12-robot arena cost Chromium 0.57 cores at full density and
+# 0.36 at half (10 s windows, 2026-11-26), and the three-page agent test, beside
+# two busy loops, went from 110-128 s (one run over pytest's 120 s guard) to 82-99 s.
 FRAME_CAP_HZ = 5
+TEST_PAGE_DPR = 0.5
 CHROMIUM_ARGS = [
     "--headless",
     "--webgl-antialiasing-mode=none",
@@ -68,6 +74,12 @@ FRAME_CAP_SCRIPT = """(() => {
   };
   window.cancelAnimationFrame = id => { queue.delete(id); };
 })()""".replace("HZ", str(FRAME_CAP_HZ))
+
+
+def page_url(url: str) -> str:
+    """The viewer's address as the test browser opens it (127.0.0.1, half-density canvas)."""
+    url = url.replace("localhost", "127.0.0.1")
+    return f"{url}{'&' if '?' in url else '?'}fixedDpr={TEST_PAGE_DPR}"
 
 
 def new_test_context(chromium: object, viewport: dict[str, int] | None = None) -> object:
@@ -215,7 +227,7 @@ def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureReques
         context = new_test_context(chromium)
         contexts.append(context)
         page = context.new_page()  # type: ignore[attr-defined]
-        page.goto(viewer.url.replace("localhost", "127.0.0.1"))
+        page.goto(page_url(viewer.url))
         vp = ViserPage(page, f"{request.node.name}-{tag}")
         vp.wait_ready()
         return vp

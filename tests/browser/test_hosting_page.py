@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser.conftest import ViserPage, new_test_context
+from tests.browser.conftest import ViserPage, new_test_context, page_url
 from tests.lab import Lab
 
 pytestmark = [pytest.mark.browser, pytest.mark.smoke]
@@ -32,7 +32,7 @@ def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
     context = new_test_context(chromium, {"width": 1280, "height": 900})
     try:
         page = context.new_page()  # type: ignore[attr-defined]
-        page.goto(url.replace("localhost", "127.0.0.1"))
+        page.goto(page_url(url))
         vp = ViserPage(page, request.node.name)
         vp.wait_ready()
         vp.open_login()
