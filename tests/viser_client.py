@@ -239,7 +239,7 @@ class ViserClient:
         kind = message["type"]
         if kind == "SceneNodeUpdateMessage" and message.get("name") == ROBOTS_NODE:
             updates = message.get("updates") or {}
-            positions = updates.get("batched_positions")
+            positions = updates.get("batched_positions", updates.get("points"))
             if isinstance(positions, np.ndarray):
                 self.frames += 1
                 frame = RobotFrame(positions.reshape(-1, 3), time.monotonic(), self.frames)

@@ -57,6 +57,30 @@ def wxyz_to_yaw(wxyz: npt.ArrayLike) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+def robot_at(
+    ray_origin: tuple[float, float, float],
+    ray_direction: tuple[float, float, float],
+    positions: npt.NDArray[np.float32],
+    radius_m: float,
+) -> int | None:
+    """The robot a click's ray lands on (index into ``positions``, metres), or None.
+
+    The ray is met with the plane the robots are drawn in; the nearest robot whose
+    disc (a little enlarged: a few-pixel target) holds that point is the one.
+    """
+    ox, oy, oz = ray_origin
+    dx, dy, dz = ray_direction
+    if len(positions) == 0 or abs(dz) < 1e-9:
+        return None  # a ray along the floor meets no robot from above
+    t = (ROBOT_Z - oz) / dz
+    if t < 0:
+        return None
+    hit = np.array([ox + t * dx, oy + t * dy], np.float32)
+    d2 = np.sum((positions[:, :2] - hit) ** 2, axis=1)
+    index = int(np.argmin(d2))
+    return index if d2[index] <= (1.5 * radius_m) ** 2 else None
+
+
 def camera_height(width_mm: float, height_mm: float, aspect: float = 1.6) -> float:
     """How high (m) a camera with CAMERA_FOV must be for the arena to fill the view."""
     half_tan = math.tan(CAMERA_FOV / 2)

@@ -54,6 +54,11 @@ HEADING_COLOURS = np.array([HEADING_DARK, HEADING_LIT], np.uint8)
 HEADINGS_UP_TO = 300
 # Past HEADINGS_UP_TO a robot is a plain disc: the same from every heading, so a frame
 # carries positions alone (12 bytes a robot instead of 28 for the bodies).
+# Past POINTS_FROM the discs are one point cloud (round sprites a robot wide) rather
+# than a batched mesh: the page then uploads the positions as they come, where viser's
+# batched mesh composes a matrix per instance in JavaScript at every frame and keeps
+# a picking tree up to date. A click is then found by where it meets the floor.
+POINTS_FROM = 2_000
 SWARM_BYTES_PER_ROBOT = 12
 FULL_BYTES_PER_ROBOT = 2 * 28  # bodies and arrows: positions and orientations each
 # What one browser is sent per second at most for the robots, whatever their number: a
@@ -117,10 +122,11 @@ class WorldView:
         self.frames_applied = 0
         self.drawn: PreparedFrame | None = None  # the frame the robots are drawn at now
         self._lock = threading.RLock()  # the pump thread and GUI callbacks both draw
-        self._robots: viser.BatchedMeshHandle | None = None
+        self._robots: viser.BatchedMeshHandle | viser.PointCloudHandle | None = None
         self._headings: viser.BatchedMeshHandle | None = None
         self._ring: viser.SceneNodeHandle | None = None
         self._labels: dict[int, viser.LabelHandle] = {}
+        self._floor_clicks: Callable[[viser.SceneClickEvent], None] | None = None
         self._trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_POINTS)
         self._trail_handle: viser.LineSegmentsHandle | None = None
         self._rays: viser.LineSegmentsHandle | None = None
@@ -162,7 +168,11 @@ class WorldView:
         """The robots' positions (viser metres) as last assigned to the browser's mesh."""
         with self._lock:
             robots = self._robots
-            return None if robots is None else np.array(robots.batched_positions, np.float32)
+            if robots is None:
+                return None
+            if isinstance(robots, viser.PointCloudHandle):
+                return np.array(robots.points, np.float32)
+            return np.array(robots.batched_positions, np.float32)
 
     def show(self, feed: WorldFeed) -> None:
         """Watch ``feed``: draw its snapshot, aim the camera; frames follow from the pump."""
@@ -310,12 +320,25 @@ class WorldView:
         radius = snap.robot_radius * geo.MM
         n = len(snap.robots)
         swarm = n > HEADINGS_UP_TO
-        self._robots = self._add_batch(
-            "/world/robots",
-            geo.swarm_disc_mesh(radius) if swarm else geo.robot_mesh(radius),
-            n,
-            GRIPPER_COLOURS[0],
-        )
+        if n > POINTS_FROM:
+            self._robots = self.client.scene.add_point_cloud(
+                "/world/robots",
+                points=np.zeros((n, 3), np.float32),
+                colors=np.tile(GRIPPER_COLOURS[0], (n, 1)),
+                point_size=2 * radius,
+                point_shape="circle",
+                precision="float32",
+                point_shading="flat",
+            )
+            if self._floor_clicks is None:
+                self._floor_clicks = self.client.scene.on_click()(self._floor_clicked)
+        else:
+            self._robots = self._add_batch(
+                "/world/robots",
+                geo.swarm_disc_mesh(radius) if swarm else geo.robot_mesh(radius),
+                n,
+                GRIPPER_COLOURS[0],
+            )
         # The arrow lies on top of the body: a click on it selects the robot too.
         self._headings = (
             self._add_batch("/world/headings", geo.heading_mesh(radius), n, HEADING_COLOURS[0])
@@ -365,6 +388,18 @@ class WorldView:
     def _robot_clicked(self, event: viser.SceneNodePointerEvent[viser.BatchedMeshHandle]) -> None:
         self.select(event.instance_index)
 
+    def _floor_clicked(self, event: viser.SceneClickEvent) -> None:
+        """A click on a swarm drawn as points: select the robot under it, if any."""
+        with self._lock:
+            robots, drawn, snap = self._robots, self.drawn, self.snapshot
+            if not isinstance(robots, viser.PointCloudHandle) or drawn is None or snap is None:
+                return
+            index = geo.robot_at(
+                event.ray_origin, event.ray_direction, drawn.positions, snap.robot_radius * geo.MM
+            )
+        if index is not None:
+            self.select(index)
+
     def _sync_labels(self) -> None:
         """Labels: every robot when few, else only the selected one."""
         names = self.robot_names
@@ -400,7 +435,9 @@ class WorldView:
                 turned = self.drawn is None or not np.array_equal(self.drawn.wxyzs, prepared.wxyzs)
                 # A still world sends nothing (as viser's own setter did); a swarm of
                 # discs (no arrows) sends no orientations.
-                arrays = {"batched_positions": prepared.positions} if moved else {}
+                points = isinstance(robots, viser.PointCloudHandle)
+                position_prop = "points" if points else "batched_positions"
+                arrays = {position_prop: prepared.positions} if moved else {}
                 if turned and headings is not None:
                     arrays["batched_wxyzs"] = prepared.wxyzs
                 if arrays:
@@ -408,7 +445,10 @@ class WorldView:
                     if headings is not None:
                         set_shared_arrays(headings, arrays)
                 if prepared.gripper_key != self._gripper_key:
-                    robots.batched_colors = prepared.colours
+                    if isinstance(robots, viser.PointCloudHandle):
+                        robots.colors = prepared.colours
+                    else:
+                        robots.batched_colors = prepared.colours
                     self._gripper_key = prepared.gripper_key
                 if headings is not None and prepared.led_key != self._led_key:
                     headings.batched_colors = prepared.heading_colours

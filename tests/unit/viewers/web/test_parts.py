@@ -42,6 +42,21 @@ def test_camera_sees_the_whole_arena() -> None:
     assert 2.0 < visible < 2.5
 
 
+def test_a_click_ray_finds_the_robot_it_lands_on() -> None:
+    radius = 27.5 * geo.MM
+    positions = np.array([[1.0, 1.0, geo.ROBOT_Z], [1.2, 1.0, geo.ROBOT_Z]], np.float32)
+    down = (0.0, 0.0, -1.0)
+    assert geo.robot_at((1.01, 1.0, 3.0), down, positions, radius) == 0
+    assert geo.robot_at((1.19, 1.02, 3.0), down, positions, radius) == 1
+    # A slanted ray from a camera off to the side lands where it meets the plane.
+    origin = (0.0, 1.0, 2.0 + geo.ROBOT_Z)
+    assert geo.robot_at(origin, (0.6, 0.0, -1.0), positions, radius) == 1
+    assert geo.robot_at((1.1, 1.0, 3.0), down, positions, radius) is None  # between them
+    assert geo.robot_at((1.0, 1.0, 3.0), (1.0, 0.0, 0.0), positions, radius) is None
+    assert geo.robot_at((1.0, 1.0, 3.0), (0.0, 0.0, 1.0), positions, radius) is None
+    assert geo.robot_at((1.0, 1.0, 3.0), down, positions[:0], radius) is None
+
+
 def test_robot_mesh_and_rays() -> None:
     vertices, faces = geo.robot_mesh(0.0275)
     assert faces.max() < len(vertices) and len(faces) == 3 * 16 + 1
