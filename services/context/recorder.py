@@ -171,6 +171,16 @@ class SlotRecorder:
         if event.request is not None or event.state is not None:
             self._put(("event", event, time.time()))
 
+    def world_snapshot(self, snap: WorldSnapshot) -> None:
+        """The world's snapshot as the context's slot engine fetched it.
+
+        The recorder then names a run's rows without asking the world itself at
+        the run's start: on a loaded machine that query could miss a short slot
+        entirely and leave a recording no one can compare (seen in a busy run).
+        """
+        if self.store is not None:
+            self._put(("snapshot", snap))
+
     def chat(self, line: ChatLine | None, status: MemberStatus | None) -> None:
         if self.store is not None and (line is not None or status is not None):
             self._put(("chat", line, status, time.time()))
@@ -222,6 +232,7 @@ class SlotRecorder:
             "samples": self._samples,
             "cmd": self._cmd,
             "bundle": self._bundle,
+            "snapshot": self._note_snapshot,
         }
         while not self._halt.is_set():
             try:
@@ -246,11 +257,20 @@ class SlotRecorder:
                 self.log.exception("error in the recorder while stopping")
         self._close_due(float("inf"))
 
+    def _note_snapshot(self, snap: WorldSnapshot) -> None:
+        if self._snapshot is not None and self._snapshot.layout == snap.layout:
+            return
+        self._snapshot = snap
+        for rec in self._runs.values():
+            rec.writer.write(s.SNAPSHOT, snap)
+
     def _world_snapshot(self, force: bool = False) -> WorldSnapshot | None:
         now = time.monotonic()
         if self._snapshot is not None and not force:
             return self._snapshot
-        if now - self._snapshot_tried < SNAPSHOT_RETRY_S and self._snapshot is not None:
+        # At most one query per SNAPSHOT_RETRY_S, answered or not: a world that does not
+        # answer would otherwise hold this thread 3 s for every frame.
+        if now - self._snapshot_tried < SNAPSHOT_RETRY_S:
             return self._snapshot
         self._snapshot_tried = now
         try:
@@ -268,9 +288,7 @@ class SlotRecorder:
             except MessageError:
                 continue
             if isinstance(snap, WorldSnapshot):
-                self._snapshot = snap
-                for rec in self._runs.values():
-                    rec.writer.write(s.SNAPSHOT, snap)
+                self._note_snapshot(snap)
         return self._snapshot
 
     def _start(self, run: RunningJob, driver: str) -> None:

@@ -172,6 +172,7 @@ class SlotScheduler:
             if not isinstance(snap, WorldSnapshot):
                 continue
             self.leases.note_world_identity(snap.identity)
+            self.recorder.world_snapshot(snap)
             with self._wake:
                 first = self._layout is None
                 self._layout = snap.layout

@@ -107,3 +107,42 @@ def test_items_under_a_lease_without_a_key_are_never_recorded() -> None:
     unkeyed = CommandMac(b"", keys.agent_cmd(REALM, WORLD, "k1"), "L1")  # anyone can make it
     recorder._bundle(payload([item(unkeyed, "k1", 1)]), time.time())
     assert commands(rec) == [] and rec.refused == 1
+
+
+def test_a_run_records_the_snapshot_the_slot_engine_handed_over(tmp_path) -> None:
+    """No query of its own at the run's start: the world may not answer in a short slot."""
+    from common.messages import WorldSnapshot
+    from common.recording import read_recording
+    from common.recording.store import RecordingStore
+
+    class NoWorld:  # a session whose world never answers: any query fails the test
+        def get(self, *_a: Any, **_k: Any) -> list[Any]:
+            raise AssertionError("the recorder asked the world for its snapshot")
+
+    recorder = SlotRecorder(
+        NoWorld(),  # type: ignore[arg-type]
+        REALM,
+        "ctx",
+        WORLD,
+        RecordingStore(tmp_path, keep=4),
+        b"\x00" * 32,
+        logging.getLogger("test"),
+    )
+    snap = WorldSnapshot(
+        world=WORLD, tick=1, sim_time=0.01, layout=3, tick_s=0.01, seed=1, width=1000.0,
+        height=1000.0, items=[], lights=[], agents=[], rows=["k0"], kind="real",
+    )  # fmt: skip
+    recorder.world_snapshot(snap)
+    now = time.time()
+    job = ControlJob("r1", "k0", "alice", b"\x01" * 16, "remote")
+    run = RunningJob(job, "L1", b"\x01" * 16, now, now + 2)
+    recorder.run_started(run, "alice")
+    recorder.run_ended("r1", "finished", "its slot ended")
+    while not recorder._queue.empty():  # what the writer thread does, in this thread
+        kind, *args = recorder._queue.get_nowait()
+        {"snapshot": recorder._note_snapshot, "start": recorder._start, "end": recorder._end}[kind](
+            *args
+        )
+    recorder._close_due(float("inf"))
+    recording = read_recording(recorder.store.path_for("alice", "r1"))  # type: ignore[union-attr]
+    assert recording.snapshot is not None and recording.snapshot.layout == 3
