@@ -454,9 +454,57 @@ def tick(
     substep_s,
     substeps,
 ):  # pragma: no cover
-    """One tick of the discs drive: returns (pose, vel) of every robot.
+    """One tick of the discs drive: returns (pose, vel) of every robot, new arrays.
 
-    ``pose`` (N, 3) is where the robots are (not changed); ``cmd`` (N, 2) their
+    See :func:`tick_into`, which this calls with fresh output arrays.
+    """
+    n = pose.shape[0]
+    out = np.empty((n, 3))
+    vel = np.empty((n, 3))
+    tick_into(
+        pose,
+        cmd,
+        mm_s_per_unit,
+        wheel_base,
+        radius,
+        mass,
+        counters,
+        pulses_per_tick,
+        scene,
+        circles,
+        width,
+        height,
+        substep_s,
+        substeps,
+        out,
+        vel,
+    )
+    return out, vel
+
+
+@njit(cache=_CACHE)
+def tick_into(
+    pose,
+    cmd,
+    mm_s_per_unit,
+    wheel_base,
+    radius,
+    mass,
+    counters,
+    pulses_per_tick,
+    scene,
+    circles,
+    width,
+    height,
+    substep_s,
+    substeps,
+    out,
+    vel,
+):  # pragma: no cover
+    """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
+
+    ``pose`` (N, 3) is where the robots are (read only, unless it is ``out``:
+    common/sim2d/fused.py moves its own buffer in place); ``cmd`` (N, 2) their
     wheel speeds in the type's units, ``mm_s_per_unit``, ``wheel_base``,
     ``radius`` and ``mass`` per robot; ``counters`` advance in place by
     ``pulses_per_tick`` per unit of speed. ``scene`` is the sensing grid's
@@ -582,17 +630,15 @@ def tick(
                 px[a], py[a] = _out_of_obstacles(
                     px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
                 )
-    out = np.empty((n, 3))
-    vel = np.empty((n, 3))
     h = substep_s * substeps
     for a in range(n):
-        out[a, 0] = px[a]
-        out[a, 1] = py[a]
-        out[a, 2] = th[a]
+        # The velocity before the pose: ``out`` may be ``pose`` itself.
         vel[a, 0] = (px[a] - pose[a, 0]) / h
         vel[a, 1] = (py[a] - pose[a, 1]) / h
         vel[a, 2] = w[a]
-    return out, vel
+        out[a, 0] = px[a]
+        out[a, 1] = py[a]
+        out[a, 2] = th[a]
 
 
 def warm_up() -> None:

@@ -1154,4 +1154,8 @@ def warm_up() -> float:
     sense(*(tuple(p) for p in packs))  # plain tuples, as SensorSuite.read passes them
     sense_parallel(*(tuple(p) for p in packs), 1)
     discs.warm_up()
+    # Imported here: common/sim2d/fused.py builds on this module.
+    from common.sim2d import fused
+
+    fused.warm_up()
     return time.perf_counter() - t0

@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pymunk
 
-from common.sim2d import bodies, chipmunk, discs, kernels, sensing
+from common.sim2d import bodies, chipmunk, discs, fused, kernels, sensing
 from common.sim2d.collision import (
     CAT_ALL,
     CAT_OBSTACLE,
@@ -209,6 +209,9 @@ class World:
             (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)),
         )
         self._bodies_placed = True
+        # The discs drive's fused tick (common/sim2d/fused.py): its state, built at
+        # the first tick after anything it holds changed (_FusedTick.key).
+        self._fused: _FusedTick | None = None
 
     # -- per-agent state -------------------------------------------------------------
 
@@ -785,9 +788,113 @@ class World:
         self._object_bodies = chipmunk.addresses([o.body for o in self.objects if o.body])
         self._rows_layout = self.layout
 
+    def _fused_key(self) -> tuple[object, ...]:
+        """What a fused tick's state was built from: a new one is built when any differs."""
+        return (
+            self.layout,
+            self.tables,
+            self.sensors.agents,
+            self.sensors.current_static(),
+            self.cmd,
+            self.counters,
+            self.arm,
+            self.tick_s,
+            self.substeps,
+        )
+
+    def _fused_state(self) -> _FusedTick:
+        key = self._fused_key()
+        f = self._fused
+        if f is not None and all(a is b for a, b in zip(f.key, key, strict=True)):
+            return f
+        t = self.tables
+        static = self.sensors.static_geometry(self)
+        n = len(self.agents)
+        pose = np.array(self.agent_pose, dtype=np.float64, order="C")
+        vel = np.array(self.agent_vel, dtype=np.float64, order="C")
+        readings = (
+            np.zeros((n, self.proximity.shape[1]), dtype=np.int32),
+            np.zeros((n, self.ambient.shape[1]), dtype=np.int32),
+            np.zeros(n, dtype=np.int32),
+        )
+        drive = (
+            t.mm_s_per_unit,
+            t.wheel_base,
+            t.radius,
+            t.mass,
+            self.tick_s * t.pulses_per_s_per_unit,
+        )
+        scene = static.scene
+        circles = discs.bin_circles(
+            static.circle_centres, static.circle_radii, scene.grid_nx, scene.grid_ny, scene.cell
+        )
+        state = fused.new_state(
+            pose,
+            vel,
+            self.cmd,
+            self.counters,
+            self.arm,
+            np.zeros(n, dtype=bool),  # the discs drive has no movable objects to hold
+            drive,
+            circles,
+            self.sensors.agents.kernel_tables,
+            static.kernel_scene,
+            (*static.no_objects, sensing.NO_EDGES),
+            readings,
+            (self.width, self.height, self.tick_s / self.substeps),
+            self.substeps,
+        )
+        # Keyed on what it was built from after the build: static_geometry may
+        # have just made the static scene.
+        f = self._fused = _FusedTick(self._fused_key(), state, pose, vel, *readings)
+        return f
+
+    def _step_fused(self) -> None:
+        """:meth:`step` on the discs drive as one compiled call (common/sim2d/fused.py).
+
+        The same work in the same order as the general path: arms, drive and
+        contacts, then a sensing pass when one is due (its noise key drawn only
+        then, as SensorSuite.packs draws it).
+        """
+        dt = self.tick_s
+        self.grippers.move_arms(dt)
+        f = self._fused_state()
+        tick = self.tick + 1
+        sim_time = tick * dt
+        sense = sim_time + 1e-9 >= self._next_sense
+        if sense:
+            lights = self.sensors.lit(self, sim_time)
+            key = self.noise.next()
+        else:
+            lights, key = sensing.NO_LIGHTS, np.uint64(0)
+        fused.tick(f.state, sense, key, lights)
+        # Copies: a caller holding the last tick's arrays must not see them change.
+        self.agent_pose = f.pose.copy()
+        self.agent_vel = f.vel.copy()
+        self._bodies_placed = False
+        self.tick = tick
+        self.sim_time = sim_time
+        if sense:
+            self.proximity = f.proximity.copy()
+            self.ambient = f.ambient.copy()
+            self.presence = f.presence.copy()
+            self._next_sense = sim_time + self.sensor_period_s - 1e-9
+
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
         profile = self.profile
+        # The discs drive in one compiled call where sensing runs on one thread.
+        # Not while profiling: the profile times physics and sensing apart, which
+        # the general path below does with the same results.
+        if (
+            self.drive == "discs"
+            and not profile
+            and self.agents
+            and not self.grippers.held
+            and (self.threads == 1 or len(self.agents) < sensing.PARALLEL_MIN_AGENTS)
+        ):
+            self._step_fused()
+            return
         if profile:
             t0 = time.process_time()
         dt = self.tick_s
@@ -922,6 +1029,19 @@ class World:
     def gripper_state(self, slot: int) -> int:
         """0 open, 1 closed, 2 holding."""
         return self.grippers.state(slot)
+
+
+@dataclass(frozen=True)
+class _FusedTick:
+    """A discs world's fused tick state and the buffers it writes (World._fused_state)."""
+
+    key: tuple[object, ...]
+    state: fused.TickState
+    pose: np.ndarray
+    vel: np.ndarray
+    proximity: np.ndarray
+    ambient: np.ndarray
+    presence: np.ndarray
 
 
 def id_of(body: pymunk.Body) -> int:
