@@ -338,9 +338,9 @@ class NoiseKeys:
         if self._pos >= len(self._buf):
             self._buf = self._rng.bit_generator.random_raw(self._block)
             self._pos = 0
-        key = self._buf[self._pos]
+        key = self._buf[self._pos]  # a numpy uint64 already: no conversion
         self._pos += 1
-        return np.uint64(key)
+        return key
 
 
 class SensorSuite:
@@ -440,6 +440,8 @@ class SensorSuite:
 
     def lit(self, world: SensedWorld, sim_time: float) -> np.ndarray:
         """(L, 4) x, y, radius, intensity of the lights on at ``sim_time`` (keyed on values)."""
+        if not world.lights:  # the common case in a swarm, every pass: no generator
+            return NO_LIGHTS
         key = tuple(
             (light.x, light.y, light.radius_mm, light.intensity)
             for light in world.lights

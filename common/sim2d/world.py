@@ -803,10 +803,23 @@ class World:
         )
 
     def _fused_state(self) -> _FusedTick:
-        key = self._fused_key()
         f = self._fused
-        if f is not None and all(a is b for a, b in zip(f.key, key, strict=True)):
-            return f
+        # Spelled out rather than a loop over _fused_key(): this runs every tick,
+        # and at 10 robots the generator alone was 1.5 us of a 25 us step.
+        if f is not None:
+            k = f.key
+            if (
+                k[0] == self.layout
+                and k[1] is self.tables
+                and k[2] is self.sensors.agents
+                and k[3] is self.sensors.current_static()
+                and k[4] is self.cmd
+                and k[5] is self.counters
+                and k[6] is self.arm
+                and k[7] == self.tick_s
+                and k[8] == self.substeps
+            ):
+                return f
         t = self.tables
         static = self.sensors.static_geometry(self)
         n = len(self.agents)
