@@ -125,41 +125,45 @@ def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
         sr[p] = radius[a]
     out = np.empty((max(16, n), 2), dtype=np.int64)
     m = 0
-    for ix in range(gx):
-        for iy in range(gy):
-            k = ix * gy + iy
-            for p in range(start[k], start[k + 1]):
-                x = sx[p]
-                y = sy[p]
-                r = sr[p] + margin
-                # Own cell (later discs only), then four neighbours: (ix, iy + 1)
-                # and the three cells of the next column.
-                for nb in range(5):
-                    if nb == 0:
-                        lo = p + 1
-                        hi = start[k + 1]
-                    else:
-                        jx = ix + (0 if nb == 1 else 1)
-                        jy = iy + (1 if nb == 1 else nb - 3)
-                        if jx >= gx or jy < 0 or jy >= gy:
-                            continue
-                        j = jx * gy + jy
-                        lo = start[j]
-                        hi = start[j + 1]
-                    for q in range(lo, hi):
-                        dx = sx[q] - x
-                        dy = sy[q] - y
-                        lim = r + sr[q]
-                        if dx * dx + dy * dy < lim * lim:
-                            if m == out.shape[0]:
-                                grown = np.empty((2 * m, 2), dtype=np.int64)
-                                grown[:m] = out
-                                out = grown
-                            a = slot[p]
-                            b = slot[q]
-                            out[m, 0] = min(a, b)
-                            out[m, 1] = max(a, b)
-                            m += 1
+    # The sorted discs in order are the cells in order with their discs: walking
+    # the discs visits the same (cell, disc) sequence as walking every cell,
+    # without the empty cells (most of them in a small arena; 58,000 cells for
+    # 10,000 robots in the bench's swarm).
+    for p in range(n):
+        k = home[slot[p]]
+        ix = k // gy
+        iy = k - ix * gy
+        x = sx[p]
+        y = sy[p]
+        r = sr[p] + margin
+        # Own cell (later discs only), then four neighbours: (ix, iy + 1)
+        # and the three cells of the next column.
+        for nb in range(5):
+            if nb == 0:
+                lo = p + 1
+                hi = start[k + 1]
+            else:
+                jx = ix + (0 if nb == 1 else 1)
+                jy = iy + (1 if nb == 1 else nb - 3)
+                if jx >= gx or jy < 0 or jy >= gy:
+                    continue
+                j = jx * gy + jy
+                lo = start[j]
+                hi = start[j + 1]
+            for q in range(lo, hi):
+                dx = sx[q] - x
+                dy = sy[q] - y
+                lim = r + sr[q]
+                if dx * dx + dy * dy < lim * lim:
+                    if m == out.shape[0]:
+                        grown = np.empty((2 * m, 2), dtype=np.int64)
+                        grown[:m] = out
+                        out = grown
+                    a = slot[p]
+                    b = slot[q]
+                    out[m, 0] = min(a, b)
+                    out[m, 1] = max(a, b)
+                    m += 1
     return out[:m]
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -859,7 +859,9 @@ class World:
         )
         # Keyed on what it was built from after the build: static_geometry may
         # have just made the static scene.
-        f = self._fused = _FusedTick(self._fused_key(), state, pose, vel, *readings)
+        f = self._fused = _FusedTick(
+            self._fused_key(), state, fused.entry(state), pose, vel, *readings
+        )
         return f
 
     def _step_fused(self) -> None:
@@ -880,7 +882,7 @@ class World:
             key = self.noise.next()
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
-        fused.tick(f.state, sense, key, lights)
+        f.call(f.state, sense, key, lights)
         # Copies: a caller holding the last tick's arrays must not see them change.
         self.agent_pose = f.pose.copy()
         self.agent_vel = f.vel.copy()
@@ -1050,6 +1052,7 @@ class _FusedTick:
 
     key: tuple[object, ...]
     state: fused.TickState
+    call: Callable[[fused.TickState, bool, np.uint64, np.ndarray], None]  # fused.entry(state)
     pose: np.ndarray
     vel: np.ndarray
     proximity: np.ndarray
