@@ -15,7 +15,8 @@ memory: set_speeds and set_counters write them in place, the tick advances the
 counters in place as before), the drive's and the sensors' tables, the static
 scene and the output readings. A tick is then :func:`tick` with the state, a
 flag, the pass's noise key and the lit lights: one structref unboxed and typed,
-whatever the number of tables.
+whatever the number of tables. In a swarm the same call runs the drive's
+per-robot loops and the sensing pass on numba's threads (World.threads).
 
 The world hands out copies of the buffers (World.agent_pose, proximity...), so
 an array a caller holds never changes under it, as when each tick allocated
@@ -69,6 +70,8 @@ FIELDS = (
     "readings",  # (proximity, ambient, presence) written by a sensing pass
     "geometry",  # (width, height, substep s) of the arena and the tick
     "substeps",
+    "threads",  # a sensing pass's threads (kernels.sense_parallel above 1)
+    "drive_chunks",  # the drive's per-robot loops in this many chunks; above 1 on threads
 )
 structref.define_proxy(TickState, TickStateType, list(FIELDS))
 
@@ -89,6 +92,8 @@ def new_state(
     readings,
     geometry,
     substeps,
+    threads,
+    drive_chunks,
 ):  # pragma: no cover
     """A :class:`TickState` holding these (arrays by reference, not copied)."""
     return TickState(
@@ -106,6 +111,8 @@ def new_state(
         readings,
         geometry,
         substeps,
+        threads,
+        drive_chunks,
     )
 
 
@@ -114,34 +121,63 @@ def tick(state, sense, key, lights):  # pragma: no cover
     """One tick: the robots move (discs.tick_into); then, if ``sense``, every sensor is read.
 
     ``key`` is the sensing pass's noise key (drawn by the caller only for a
-    pass), ``lights`` the lit lights as SensorSuite's table. Serial: the world
-    takes this path only where a pass runs on one thread.
+    pass), ``lights`` the lit lights as SensorSuite's table. With more than one
+    thread (``state.threads``, ``state.drive_chunks``) the caller has set
+    numba's thread count for its thread, as SensorSuite.read does.
     """
     mm_s_per_unit, wheel_base, radius, mass, pulses_per_tick = state.drive
     width, height, substep_s = state.geometry
     pose = state.pose
-    discs.tick_into(
-        pose,
-        state.cmd,
-        mm_s_per_unit,
-        wheel_base,
-        radius,
-        mass,
-        state.counters,
-        pulses_per_tick,
-        state.scene,
-        state.circles,
-        width,
-        height,
-        substep_s,
-        state.substeps,
-        pose,
-        state.vel,
-    )
+    if state.drive_chunks > 1:
+        discs.tick_into_parallel(
+            pose,
+            state.cmd,
+            mm_s_per_unit,
+            wheel_base,
+            radius,
+            mass,
+            state.counters,
+            pulses_per_tick,
+            state.scene,
+            state.circles,
+            width,
+            height,
+            substep_s,
+            state.substeps,
+            pose,
+            state.vel,
+            state.drive_chunks,
+        )
+    else:
+        discs.tick_into(
+            pose,
+            state.cmd,
+            mm_s_per_unit,
+            wheel_base,
+            radius,
+            mass,
+            state.counters,
+            pulses_per_tick,
+            state.scene,
+            state.circles,
+            width,
+            height,
+            substep_s,
+            state.substeps,
+            pose,
+            state.vel,
+            state.drive_chunks,
+        )
     if sense:
         objects = state.objects
         moving = (objects[0], objects[1], objects[2], objects[3], objects[4], lights, key)
-        K.sense((pose, state.arm, state.holding), state.tables, state.scene, moving, state.readings)
+        robots = (pose, state.arm, state.holding)
+        if state.threads > 1:
+            K.sense_parallel(
+                robots, state.tables, state.scene, moving, state.readings, state.threads
+            )
+        else:
+            K.sense(robots, state.tables, state.scene, moving, state.readings)
 
 
 # The types of tick's other arguments: a flag, the noise key, the lights' table
@@ -218,6 +254,8 @@ def warm_up() -> None:
         objects,
         readings,
         (100.0, 100.0, 0.01),
+        1,
+        1,
         1,
     )
     entry(state)(state, False, np.uint64(1), np.zeros((0, 4)))

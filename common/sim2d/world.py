@@ -32,6 +32,7 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 import pymunk
@@ -800,6 +801,7 @@ class World:
             self.arm,
             self.tick_s,
             self.substeps,
+            self.threads,
         )
 
     def _fused_state(self) -> _FusedTick:
@@ -818,6 +820,7 @@ class World:
                 and k[6] is self.arm
                 and k[7] == self.tick_s
                 and k[8] == self.substeps
+                and k[9] == self.threads
             ):
                 return f
         t = self.tables
@@ -856,11 +859,21 @@ class World:
             readings,
             (self.width, self.height, self.tick_s / self.substeps),
             self.substeps,
+            self.threads if n >= sensing.PARALLEL_MIN_AGENTS else 1,
+            # A few chunks per thread, as sensing's: a shared machine's cores are
+            # not equally fast from one moment to the next.
+            8 * self.threads if self.threads > 1 and n >= discs.PARALLEL_MIN_ROBOTS else 1,
         )
         # Keyed on what it was built from after the build: static_geometry may
         # have just made the static scene.
         f = self._fused = _FusedTick(
-            self._fused_key(), state, fused.entry(state), pose, vel, *readings
+            self._fused_key(),
+            state,
+            fused.entry(state),
+            self.threads > 1 and n >= min(sensing.PARALLEL_MIN_AGENTS, discs.PARALLEL_MIN_ROBOTS),
+            pose,
+            vel,
+            *readings,
         )
         return f
 
@@ -882,7 +895,17 @@ class World:
             key = self.noise.next()
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
-        f.call(f.state, sense, key, lights)
+        if f.threaded:
+            # Per calling thread, as in SensorSuite.read: chunks handed out one at
+            # a time, so a descheduled worker's share goes to the other.
+            numba.set_num_threads(self.threads)
+            chunk = numba.set_parallel_chunksize(1)
+            try:
+                f.call(f.state, sense, key, lights)
+            finally:
+                numba.set_parallel_chunksize(chunk)
+        else:
+            f.call(f.state, sense, key, lights)
         # Copies: a caller holding the last tick's arrays must not see them change.
         self.agent_pose = f.pose.copy()
         self.agent_vel = f.vel.copy()
@@ -898,16 +921,10 @@ class World:
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
         profile = self.profile
-        # The discs drive in one compiled call where sensing runs on one thread.
-        # Not while profiling: the profile times physics and sensing apart, which
-        # the general path below does with the same results.
-        if (
-            self.drive == "discs"
-            and not profile
-            and self.agents
-            and not self.grippers.held
-            and (self.threads == 1 or len(self.agents) < sensing.PARALLEL_MIN_AGENTS)
-        ):
+        # The discs drive in one compiled call. Not while profiling: the profile
+        # times physics and sensing apart, which the general path below does
+        # with the same results (its drive on one thread).
+        if self.drive == "discs" and not profile and self.agents and not self.grippers.held:
             self._step_fused()
             return
         if profile:
@@ -1053,6 +1070,7 @@ class _FusedTick:
     key: tuple[object, ...]
     state: fused.TickState
     call: Callable[[fused.TickState, bool, np.uint64, np.ndarray], None]  # fused.entry(state)
+    threaded: bool  # whether the call may use numba's threads
     pose: np.ndarray
     vel: np.ndarray
     proximity: np.ndarray
