@@ -37,10 +37,9 @@ run is reproducible bit for bit.
 from __future__ import annotations
 
 import math
-from types import FunctionType
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 _CACHE = True
 
@@ -55,10 +54,6 @@ TOLERANCE_MM = 0.25
 # speed, twice): pairs and obstacles within that at the start of a substep are
 # its candidate contacts.
 SLACK_MM = 2.0
-# From this many robots a world with threads > 1 runs the tick's per-robot loops
-# on numba's threads (tick_into_parallel). A judgement, not a measured crossover:
-# waking the pool costs tens of microseconds, the loops about 0.1 us a robot.
-PARALLEL_MIN_ROBOTS = 2000
 
 
 @njit(cache=_CACHE, inline="always")
@@ -487,12 +482,12 @@ def tick(
         substeps,
         out,
         vel,
-        1,
     )
     return out, vel
 
 
-def _tick_into(
+@njit(cache=_CACHE)
+def tick_into(
     pose,
     cmd,
     mm_s_per_unit,
@@ -509,7 +504,6 @@ def _tick_into(
     substeps,
     out,
     vel,
-    chunks,
 ):  # pragma: no cover
     """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
 
@@ -559,24 +553,17 @@ def _tick_into(
     normals = np.empty((n, 2, 2))
     count = np.zeros(n, dtype=np.int64)
     for _ in range(substeps):
-        # The loops over every robot, each writing its own slots only, run as
-        # ``chunks`` ranges of robots, on numba's threads in tick_into_parallel
-        # (the caller sets a chunk size of 1: a descheduled worker's chunks go to
-        # the other); any split gives the same bits. tick_into takes one chunk.
-        for c in prange(chunks):
-            for a in range(n * c // chunks, n * (c + 1) // chunks):
-                px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
+        for a in range(n):
+            px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
         pairs = _pairs(px, py, radius, width, height, cell, margin)
-        for c in prange(chunks):
-            for a in range(n * c // chunks, n * (c + 1) // chunks):
-                pushed[a] = False
-                moved[a] = False
-                count[a] = 0
-                is_near[a] = _near_obstacle(
-                    px[a], py[a], radius[a], margin, width, height, scene, circ_start, circ_items
-                )
         m = 0
         for a in range(n):
+            pushed[a] = False
+            moved[a] = False
+            count[a] = 0
+            is_near[a] = _near_obstacle(
+                px[a], py[a], radius[a], margin, width, height, scene, circ_start, circ_items
+            )
             if is_near[a]:
                 near[m] = a
                 m += 1
@@ -642,42 +629,20 @@ def _tick_into(
                 break
         # A robot a crowd pushed farther than the margin may have reached an
         # obstacle it was not near: the obstacles have the last word for it too.
-        for c in prange(chunks):
-            for a in range(n * c // chunks, n * (c + 1) // chunks):
-                if pushed[a] and not is_near[a]:
-                    px[a], py[a] = _out_of_obstacles(
-                        px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-                    )
+        for a in range(n):
+            if pushed[a] and not is_near[a]:
+                px[a], py[a] = _out_of_obstacles(
+                    px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+                )
     h = substep_s * substeps
-    for c in prange(chunks):
-        for a in range(n * c // chunks, n * (c + 1) // chunks):
-            # The velocity before the pose: ``out`` may be ``pose`` itself.
-            vel[a, 0] = (px[a] - pose[a, 0]) / h
-            vel[a, 1] = (py[a] - pose[a, 1]) / h
-            vel[a, 2] = w[a]
-            out[a, 0] = px[a]
-            out[a, 1] = py[a]
-            out[a, 2] = th[a]
-
-
-def _renamed(fn: FunctionType, name: str) -> FunctionType:
-    """``fn`` under another name, for a second dispatcher of the same code.
-
-    Numba names a function's cache files after its qualified name and first
-    line: two dispatchers of one function would share, and overwrite, one.
-    """
-    copy = FunctionType(fn.__code__, fn.__globals__, name, fn.__defaults__, fn.__closure__)
-    copy.__qualname__ = name
-    copy.__doc__ = fn.__doc__
-    return copy
-
-
-tick_into = njit(cache=_CACHE)(_tick_into)
-# The same tick with its per-robot loops on numba's threads (the caller sets
-# their number, numba.set_num_threads): for swarms, where the loops outweigh
-# waking the threads; the contact sweeps stay serial, in order. Same bits as
-# tick_into whatever the thread count (tests/unit/common/sim2d/test_discs.py).
-tick_into_parallel = njit(cache=_CACHE, parallel=True)(_renamed(_tick_into, "tick_into_parallel"))
+    for a in range(n):
+        # The velocity before the pose: ``out`` may be ``pose`` itself.
+        vel[a, 0] = (px[a] - pose[a, 0]) / h
+        vel[a, 1] = (py[a] - pose[a, 1]) / h
+        vel[a, 2] = w[a]
+        out[a, 0] = px[a]
+        out[a, 1] = py[a]
+        out[a, 2] = th[a]
 
 
 def warm_up() -> None:

@@ -15,8 +15,7 @@ memory: set_speeds and set_counters write them in place, the tick advances the
 counters in place as before), the drive's and the sensors' tables, the static
 scene and the output readings. A tick is then :func:`tick` with the state, a
 flag, the pass's noise key and the lit lights: one structref unboxed and typed,
-whatever the number of tables. In a swarm the same call runs the drive's
-per-robot loops and the sensing pass on numba's threads (World.threads).
+whatever the number of tables.
 
 The world hands out copies of the buffers (World.agent_pose, proximity...), so
 an array a caller holds never changes under it, as when each tick allocated
@@ -31,10 +30,15 @@ cached function.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 from numba import njit, typeof, types
+from numba.core.caching import NullCache
+from numba.core.dispatcher import Dispatcher
 from numba.experimental import structref
 
 from common.sim2d import discs
@@ -70,8 +74,6 @@ FIELDS = (
     "readings",  # (proximity, ambient, presence) written by a sensing pass
     "geometry",  # (width, height, substep s) of the arena and the tick
     "substeps",
-    "threads",  # a sensing pass's threads (kernels.sense_parallel above 1)
-    "drive_chunks",  # the drive's per-robot loops in this many chunks; above 1 on threads
 )
 structref.define_proxy(TickState, TickStateType, list(FIELDS))
 
@@ -92,8 +94,6 @@ def new_state(
     readings,
     geometry,
     substeps,
-    threads,
-    drive_chunks,
 ):  # pragma: no cover
     """A :class:`TickState` holding these (arrays by reference, not copied)."""
     return TickState(
@@ -111,8 +111,6 @@ def new_state(
         readings,
         geometry,
         substeps,
-        threads,
-        drive_chunks,
     )
 
 
@@ -121,63 +119,63 @@ def tick(state, sense, key, lights):  # pragma: no cover
     """One tick: the robots move (discs.tick_into); then, if ``sense``, every sensor is read.
 
     ``key`` is the sensing pass's noise key (drawn by the caller only for a
-    pass), ``lights`` the lit lights as SensorSuite's table. With more than one
-    thread (``state.threads``, ``state.drive_chunks``) the caller has set
-    numba's thread count for its thread, as SensorSuite.read does.
+    pass), ``lights`` the lit lights as SensorSuite's table. Serial: the world
+    takes this path only where a pass runs on one thread. (Calling
+    kernels.sense_parallel from here compiled, but the on-disk cache of a
+    function calling a parallel one loaded broken code in the next process:
+    it crashed. The drive's loops on two threads saved nothing measurable at
+    10,000 robots: docs/BENCHMARKS.md, 2026-11-26.)
     """
     mm_s_per_unit, wheel_base, radius, mass, pulses_per_tick = state.drive
     width, height, substep_s = state.geometry
     pose = state.pose
-    if state.drive_chunks > 1:
-        discs.tick_into_parallel(
-            pose,
-            state.cmd,
-            mm_s_per_unit,
-            wheel_base,
-            radius,
-            mass,
-            state.counters,
-            pulses_per_tick,
-            state.scene,
-            state.circles,
-            width,
-            height,
-            substep_s,
-            state.substeps,
-            pose,
-            state.vel,
-            state.drive_chunks,
-        )
-    else:
-        discs.tick_into(
-            pose,
-            state.cmd,
-            mm_s_per_unit,
-            wheel_base,
-            radius,
-            mass,
-            state.counters,
-            pulses_per_tick,
-            state.scene,
-            state.circles,
-            width,
-            height,
-            substep_s,
-            state.substeps,
-            pose,
-            state.vel,
-            state.drive_chunks,
-        )
+    discs.tick_into(
+        pose,
+        state.cmd,
+        mm_s_per_unit,
+        wheel_base,
+        radius,
+        mass,
+        state.counters,
+        pulses_per_tick,
+        state.scene,
+        state.circles,
+        width,
+        height,
+        substep_s,
+        state.substeps,
+        pose,
+        state.vel,
+    )
     if sense:
         objects = state.objects
         moving = (objects[0], objects[1], objects[2], objects[3], objects[4], lights, key)
-        robots = (pose, state.arm, state.holding)
-        if state.threads > 1:
-            K.sense_parallel(
-                robots, state.tables, state.scene, moving, state.readings, state.threads
-            )
-        else:
-            K.sense(robots, state.tables, state.scene, moving, state.readings)
+        K.sense((pose, state.arm, state.holding), state.tables, state.scene, moving, state.readings)
+
+
+def _stamp_with_callees(dispatcher: Dispatcher, *modules: ModuleType) -> None:
+    """Make ``dispatcher``'s on-disk cache stale whenever one of ``modules`` changes.
+
+    Numba keys a cached function on its own source file only, yet a cached
+    caller holds the machine code of every compiled function it calls: edit
+    discs.py or kernels.py and tick's cache would still load, calling the old
+    code with the new layouts (it crashed, the one time it happened). So the
+    cache's stamp gets these modules' contents too. Numba's attributes for it
+    are internal: if they are gone, the function is not cached at all (an
+    8-second compile at start) rather than cached stale.
+    """
+    cache = getattr(dispatcher, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
+        dispatcher._cache = NullCache()
+        return
+    digest = hashlib.sha256()
+    for module in modules:
+        digest.update(Path(str(module.__file__)).read_bytes())
+    cache_file._source_stamp = (cache_file._source_stamp, digest.digest())
+
+
+_stamp_with_callees(tick, discs, K)
 
 
 # The types of tick's other arguments: a flag, the noise key, the lights' table
@@ -254,8 +252,6 @@ def warm_up() -> None:
         objects,
         readings,
         (100.0, 100.0, 0.01),
-        1,
-        1,
         1,
     )
     entry(state)(state, False, np.uint64(1), np.zeros((0, 4)))

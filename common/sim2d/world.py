@@ -32,7 +32,6 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 import numpy.typing as npt
 import pymunk
@@ -801,7 +800,6 @@ class World:
             self.arm,
             self.tick_s,
             self.substeps,
-            self.threads,
         )
 
     def _fused_state(self) -> _FusedTick:
@@ -820,7 +818,6 @@ class World:
                 and k[6] is self.arm
                 and k[7] == self.tick_s
                 and k[8] == self.substeps
-                and k[9] == self.threads
             ):
                 return f
         t = self.tables
@@ -859,10 +856,6 @@ class World:
             readings,
             (self.width, self.height, self.tick_s / self.substeps),
             self.substeps,
-            self.threads if n >= sensing.PARALLEL_MIN_AGENTS else 1,
-            # A few chunks per thread, as sensing's: a shared machine's cores are
-            # not equally fast from one moment to the next.
-            8 * self.threads if self.threads > 1 and n >= discs.PARALLEL_MIN_ROBOTS else 1,
         )
         # Keyed on what it was built from after the build: static_geometry may
         # have just made the static scene.
@@ -870,7 +863,6 @@ class World:
             self._fused_key(),
             state,
             fused.entry(state),
-            self.threads > 1 and n >= min(sensing.PARALLEL_MIN_AGENTS, discs.PARALLEL_MIN_ROBOTS),
             pose,
             vel,
             *readings,
@@ -895,17 +887,7 @@ class World:
             key = self.noise.next()
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
-        if f.threaded:
-            # Per calling thread, as in SensorSuite.read: chunks handed out one at
-            # a time, so a descheduled worker's share goes to the other.
-            numba.set_num_threads(self.threads)
-            chunk = numba.set_parallel_chunksize(1)
-            try:
-                f.call(f.state, sense, key, lights)
-            finally:
-                numba.set_parallel_chunksize(chunk)
-        else:
-            f.call(f.state, sense, key, lights)
+        f.call(f.state, sense, key, lights)
         # Copies: a caller holding the last tick's arrays must not see them change.
         self.agent_pose = f.pose.copy()
         self.agent_vel = f.vel.copy()
@@ -921,10 +903,17 @@ class World:
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
         profile = self.profile
-        # The discs drive in one compiled call. Not while profiling: the profile
-        # times physics and sensing apart, which the general path below does
-        # with the same results (its drive on one thread).
-        if self.drive == "discs" and not profile and self.agents and not self.grippers.held:
+        # The discs drive in one compiled call where sensing runs on one thread
+        # (fused.tick says why). Not while profiling: the profile times physics
+        # and sensing apart, which the general path below does with the same
+        # results.
+        if (
+            self.drive == "discs"
+            and not profile
+            and self.agents
+            and not self.grippers.held
+            and (self.threads == 1 or len(self.agents) < sensing.PARALLEL_MIN_AGENTS)
+        ):
             self._step_fused()
             return
         if profile:
@@ -1070,7 +1059,6 @@ class _FusedTick:
     key: tuple[object, ...]
     state: fused.TickState
     call: Callable[[fused.TickState, bool, np.uint64, np.ndarray], None]  # fused.entry(state)
-    threaded: bool  # whether the call may use numba's threads
     pose: np.ndarray
     vel: np.ndarray
     proximity: np.ndarray

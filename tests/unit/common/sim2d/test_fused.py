@@ -4,8 +4,8 @@ What a user relies on: a world on the discs drive gives the same poses,
 velocities, counters and readings, bit for bit, whether a tick runs as one
 compiled call or as the general path (a profiled world takes the latter);
 edits between ticks (a move, new counters, a robot added or removed, an
-obstacle) are seen by the next tick; a swarm on two threads runs the
-one-thread run; and arrays a caller took from the world
+obstacle) are seen by the next tick; a swarm sensed on two threads (the
+general path) runs the one-thread run (fused); and arrays a caller took from the world
 do not change under it when the world steps on.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from bench.engine_bench import build, control
-from common.sim2d import discs, kernels
+from common.sim2d import kernels, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import EditError, World
@@ -99,15 +99,15 @@ def test_arrays_taken_from_the_world_keep_their_values() -> None:
 
 @pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
 def test_a_swarm_on_two_threads_runs_the_one_thread_run_bit_for_bit() -> None:
-    # Past discs.PARALLEL_MIN_ROBOTS the drive's per-robot loops and the sensing
-    # pass run on numba's threads: every robot's result is its own, so the same.
-    n = discs.PARALLEL_MIN_ROBOTS
+    # Past sensing.PARALLEL_MIN_AGENTS a world with two threads takes the general
+    # path (sensing on numba's threads), one thread the fused call: the same run.
+    n = 2 * sensing.PARALLEL_MIN_AGENTS
     one = build(n, seed=5, drive="discs")
     two = build(n, seed=5, drive="discs", threads=2)
     for _ in range(25):
         for world in (one, two):
             control(world)
             world.step()
-    assert two._fused is not None and two._fused.threaded
+    assert one._fused is not None and two._fused is None
     for a, b in zip(_state(one), _state(two), strict=True):
         np.testing.assert_array_equal(a, b)
