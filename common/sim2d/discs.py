@@ -111,9 +111,11 @@ def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
         start[k + 1] += start[k]
     fill = start[:-1].copy()
     slot = np.empty(n, dtype=np.int64)
+    sk = np.empty(n, dtype=np.int64)  # each sorted disc's cell, read in order below
     for a in range(n):
         k = home[a]
         slot[fill[k]] = a
+        sk[fill[k]] = k
         fill[k] += 1
     sx = np.empty(n)
     sy = np.empty(n)
@@ -128,9 +130,10 @@ def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
     # The sorted discs in order are the cells in order with their discs: walking
     # the discs visits the same (cell, disc) sequence as walking every cell,
     # without the empty cells (most of them in a small arena; 58,000 cells for
-    # 10,000 robots in the bench's swarm).
+    # 10,000 robots in the bench's swarm). Measured at 10,000: 1.17 ms against
+    # 1.32 walking the cells (with home[slot[p]] for the cell: 1.30).
     for p in range(n):
-        k = home[slot[p]]
+        k = sk[p]
         ix = k // gy
         iy = k - ix * gy
         x = sx[p]
