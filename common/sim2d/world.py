@@ -78,6 +78,34 @@ class EditError(ValueError):
 __all__ = ["DRIVES", "OBJECT_DRIVES", "EditError", "World"]
 
 
+class _CopiedOnRead:
+    """A per-agent array the fused tick writes in its own buffer (World._step_fused).
+
+    Read, it is a copy of that buffer taken at the first read after the tick:
+    an array a caller took never changes under it, as when every tick made new
+    arrays, and an array nobody reads is not copied (at 10 robots the five
+    copies were 2.3 us of a 17 us step, and a controller reads one or two).
+    Set, it is that value until the next fused tick.
+    """
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.value = "_" + name
+        self.buffer = "_" + name + "_buffer"
+
+    def __get__(self, world: object, owner: type | None = None) -> np.ndarray:
+        d = world.__dict__
+        buffer = d[self.buffer]
+        if buffer is not None:
+            d[self.value] = buffer.copy()
+            d[self.buffer] = None
+        return d[self.value]  # type: ignore[no-any-return]
+
+    def __set__(self, world: object, value: np.ndarray) -> None:
+        d = world.__dict__
+        d[self.value] = value
+        d[self.buffer] = None
+
+
 @dataclass(frozen=True)
 class Tables:
     """Per-agent constants derived from the agents' types (rebuilt when agents change)."""
@@ -96,6 +124,13 @@ class Tables:
 
 class World:
     """A bounded 2D world: arena, obstacles, movable objects, lights, zones and agents."""
+
+    # Written by the fused tick into its buffers, copied when read (_CopiedOnRead).
+    agent_pose = _CopiedOnRead()
+    agent_vel = _CopiedOnRead()
+    proximity = _CopiedOnRead()
+    ambient = _CopiedOnRead()
+    presence = _CopiedOnRead()
 
     def __init__(
         self,
@@ -888,16 +923,17 @@ class World:
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
         f.call(f.state, sense, key, lights)
-        # Copies: a caller holding the last tick's arrays must not see them change.
-        self.agent_pose = f.pose.copy()
-        self.agent_vel = f.vel.copy()
+        # The buffers are handed out as copies at their first read (_CopiedOnRead).
+        d = self.__dict__
+        d["_agent_pose_buffer"] = f.pose
+        d["_agent_vel_buffer"] = f.vel
         self._bodies_placed = False
         self.tick = tick
         self.sim_time = sim_time
         if sense:
-            self.proximity = f.proximity.copy()
-            self.ambient = f.ambient.copy()
-            self.presence = f.presence.copy()
+            d["_proximity_buffer"] = f.proximity
+            d["_ambient_buffer"] = f.ambient
+            d["_presence_buffer"] = f.presence
             self._next_sense = sim_time + self.sensor_period_s - 1e-9
 
     def step(self) -> None:
@@ -916,6 +952,8 @@ class World:
         ):
             self._step_fused()
             return
+        # The fused state's buffers would fall behind this tick: built afresh if needed.
+        self._fused = None
         if profile:
             t0 = time.process_time()
         dt = self.tick_s

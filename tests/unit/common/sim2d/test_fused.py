@@ -111,3 +111,18 @@ def test_a_swarm_on_two_threads_runs_the_one_thread_run_bit_for_bit() -> None:
     assert one._fused is not None and two._fused is None
     for a, b in zip(_state(one), _state(two), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_world_switching_between_fused_and_general_ticks_runs_the_general_run() -> None:
+    # A profiled tick takes the general path: the fused state built before it
+    # must not carry on from where it was.
+    switching = build(30, drive="discs", sensor_period_s=0.01)
+    general = build(30, drive="discs", sensor_period_s=0.01)
+    general.profile = True
+    for t in range(40):
+        switching.profile = 10 <= t < 15 or t == 30
+        for world in (switching, general):
+            control(world)
+            world.step()
+        for a, b in zip(_state(switching), _state(general), strict=True):
+            np.testing.assert_array_equal(a, b, err_msg=f"tick {t}")
