@@ -579,6 +579,11 @@ def tick_into(
             held[q] = x != px[a] or y != py[a]
             px[a] = x
             py[a] = y
+        if pairs.shape[0] == 0:
+            # No two robots close: the sweeps would move nobody, and the walls'
+            # normals and the layers serve only them (most substeps of a sparse
+            # world; about 0.5 us of a 10-robot tick).
+            continue
         _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
         order = _layers(pairs, near, held, m, n, px, py, radius, layer)
         for _sweep in range(MAX_SWEEPS):

@@ -912,7 +912,9 @@ class World:
         then, as SensorSuite.packs draws it).
         """
         dt = self.tick_s
-        self.grippers.move_arms(dt)
+        grippers = self.grippers
+        if grippers.arms_moving:  # the check move_arms starts with, without the call
+            grippers.move_arms(dt)
         f = self._fused_state()
         tick = self.tick + 1
         sim_time = tick * dt
