@@ -19,6 +19,7 @@ while our ambient sensors still run (500 in the dark).
 
     PYTHONPATH=. .venv/bin/python -m bench.bench_enki [--sizes 10 35 100 1000 3000]
         [--sim-seconds 2] [--swarm-seconds 0.5] [--repeats 3] [--drives joints velocity]
+        [--rule compiled]
 
 Needs g++ and libenki-dev (``apt-get install -y g++ libenki-dev``); without them
 it says so and exits with status 2. The compiled program is cached in
@@ -42,6 +43,7 @@ from pathlib import Path
 
 from bench.engine_bench import build, control
 from common.sim2d import kernels
+from common.sim2d.wander import CRUISE, WEIGHTS
 from common.sim2d.world import DRIVES, World
 
 REPO = Path(__file__).resolve().parents[1]
@@ -166,16 +168,30 @@ def run_enki(binary: Path, scenario: Path, sim_seconds: float) -> EnkiRun:
     return parse_enki_line(done.stdout.strip().splitlines()[-1])
 
 
-def run_ours(n: int, sim_seconds: float, drive: str) -> float:
+def compiled_control(world: World) -> None:
+    """The same Braitenberg rule as engine_bench.control, compiled (kernels.braitenberg_speeds).
+
+    Enki's side runs the rule in C++: with ``--rule compiled`` (the default) both
+    sides run it compiled, and the comparison is of the simulators, not of
+    numpy's per-call cost (about 5 us a tick at 10 robots, a third of Enki's step).
+    """
+    kernels.braitenberg_speeds(world.proximity, WEIGHTS, CRUISE, world.tables.max_speed, world.cmd)
+
+
+RULES = {"numpy": control, "compiled": compiled_control}
+
+
+def run_ours(n: int, sim_seconds: float, drive: str, rule: str = "compiled") -> float:
     """Simulated seconds per CPU second of our engine, timed as engine_bench.run times it."""
     world = scenario_world(n, drive)
+    act = RULES[rule]
     for _ in range(WARM_UP_TICKS):
-        control(world)
+        act(world)
         world.step()
     steps = round(sim_seconds / world.tick_s)
     cpu0 = time.process_time()
     for _ in range(steps):
-        control(world)
+        act(world)
         world.step()
     return steps * world.tick_s / (time.process_time() - cpu0)
 
@@ -233,6 +249,13 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=["joints", "velocity"],
         help="our drives to run, each against Enki (World(drive=...))",
     )
+    p.add_argument(
+        "--rule",
+        choices=sorted(RULES),
+        default="compiled",
+        help="our side's Braitenberg rule: compiled (numba, as Enki's is C++) or numpy "
+        "(engine_bench's, as the engine's --wander runs it)",
+    )
     args = p.parse_args(argv)
     if len(set(args.drives)) != len(args.drives):
         p.error("--drives: each drive once")
@@ -252,7 +275,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     print(f"Enki's program: {binary.relative_to(REPO)}")
     print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
-    print(f"load average before: {_load()}")
+    print(f"our rule: {args.rule}; load average before: {_load()}")
     print(f"{'N':>5} {'round':>5}  {'what':<14} {'sim s / CPU s':>13} {'CPU us a step':>13}  load")
     with tempfile.TemporaryDirectory(prefix="bench-enki-") as tmp:
         for n in args.sizes:
@@ -274,7 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                             raise RuntimeError(f"Enki's run does not match N = {n}: {run}")
                         got[what] = run.sim_per_cpu
                     else:
-                        got[what] = run_ours(n, seconds, what)
+                        got[what] = run_ours(n, seconds, what, args.rule)
                     print(
                         f"{n:>5} {r + 1:>5}  {what:<14} {got[what]:>13.4g} "
                         f"{TICK_S / got[what] * 1e6:>13.1f}  {os.getloadavg()[0]:.2f}",

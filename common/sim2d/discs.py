@@ -111,9 +111,11 @@ def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
         start[k + 1] += start[k]
     fill = start[:-1].copy()
     slot = np.empty(n, dtype=np.int64)
+    sk = np.empty(n, dtype=np.int64)  # each sorted disc's cell, read in order below
     for a in range(n):
         k = home[a]
         slot[fill[k]] = a
+        sk[fill[k]] = k
         fill[k] += 1
     sx = np.empty(n)
     sy = np.empty(n)
@@ -125,41 +127,46 @@ def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
         sr[p] = radius[a]
     out = np.empty((max(16, n), 2), dtype=np.int64)
     m = 0
-    for ix in range(gx):
-        for iy in range(gy):
-            k = ix * gy + iy
-            for p in range(start[k], start[k + 1]):
-                x = sx[p]
-                y = sy[p]
-                r = sr[p] + margin
-                # Own cell (later discs only), then four neighbours: (ix, iy + 1)
-                # and the three cells of the next column.
-                for nb in range(5):
-                    if nb == 0:
-                        lo = p + 1
-                        hi = start[k + 1]
-                    else:
-                        jx = ix + (0 if nb == 1 else 1)
-                        jy = iy + (1 if nb == 1 else nb - 3)
-                        if jx >= gx or jy < 0 or jy >= gy:
-                            continue
-                        j = jx * gy + jy
-                        lo = start[j]
-                        hi = start[j + 1]
-                    for q in range(lo, hi):
-                        dx = sx[q] - x
-                        dy = sy[q] - y
-                        lim = r + sr[q]
-                        if dx * dx + dy * dy < lim * lim:
-                            if m == out.shape[0]:
-                                grown = np.empty((2 * m, 2), dtype=np.int64)
-                                grown[:m] = out
-                                out = grown
-                            a = slot[p]
-                            b = slot[q]
-                            out[m, 0] = min(a, b)
-                            out[m, 1] = max(a, b)
-                            m += 1
+    # The sorted discs in order are the cells in order with their discs: walking
+    # the discs visits the same (cell, disc) sequence as walking every cell,
+    # without the empty cells (most of them in a small arena; 58,000 cells for
+    # 10,000 robots in the bench's swarm). Measured at 10,000: 1.17 ms against
+    # 1.32 walking the cells (with home[slot[p]] for the cell: 1.30).
+    for p in range(n):
+        k = sk[p]
+        ix = k // gy
+        iy = k - ix * gy
+        x = sx[p]
+        y = sy[p]
+        r = sr[p] + margin
+        # Own cell (later discs only), then four neighbours: (ix, iy + 1)
+        # and the three cells of the next column.
+        for nb in range(5):
+            if nb == 0:
+                lo = p + 1
+                hi = start[k + 1]
+            else:
+                jx = ix + (0 if nb == 1 else 1)
+                jy = iy + (1 if nb == 1 else nb - 3)
+                if jx >= gx or jy < 0 or jy >= gy:
+                    continue
+                j = jx * gy + jy
+                lo = start[j]
+                hi = start[j + 1]
+            for q in range(lo, hi):
+                dx = sx[q] - x
+                dy = sy[q] - y
+                lim = r + sr[q]
+                if dx * dx + dy * dy < lim * lim:
+                    if m == out.shape[0]:
+                        grown = np.empty((2 * m, 2), dtype=np.int64)
+                        grown[:m] = out
+                        out = grown
+                    a = slot[p]
+                    b = slot[q]
+                    out[m, 0] = min(a, b)
+                    out[m, 1] = max(a, b)
+                    m += 1
     return out[:m]
 
 
@@ -454,9 +461,57 @@ def tick(
     substep_s,
     substeps,
 ):  # pragma: no cover
-    """One tick of the discs drive: returns (pose, vel) of every robot.
+    """One tick of the discs drive: returns (pose, vel) of every robot, new arrays.
 
-    ``pose`` (N, 3) is where the robots are (not changed); ``cmd`` (N, 2) their
+    See :func:`tick_into`, which this calls with fresh output arrays.
+    """
+    n = pose.shape[0]
+    out = np.empty((n, 3))
+    vel = np.empty((n, 3))
+    tick_into(
+        pose,
+        cmd,
+        mm_s_per_unit,
+        wheel_base,
+        radius,
+        mass,
+        counters,
+        pulses_per_tick,
+        scene,
+        circles,
+        width,
+        height,
+        substep_s,
+        substeps,
+        out,
+        vel,
+    )
+    return out, vel
+
+
+@njit(cache=_CACHE)
+def tick_into(
+    pose,
+    cmd,
+    mm_s_per_unit,
+    wheel_base,
+    radius,
+    mass,
+    counters,
+    pulses_per_tick,
+    scene,
+    circles,
+    width,
+    height,
+    substep_s,
+    substeps,
+    out,
+    vel,
+):  # pragma: no cover
+    """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
+
+    ``pose`` (N, 3) is where the robots are (read only, unless it is ``out``:
+    common/sim2d/fused.py moves its own buffer in place); ``cmd`` (N, 2) their
     wheel speeds in the type's units, ``mm_s_per_unit``, ``wheel_base``,
     ``radius`` and ``mass`` per robot; ``counters`` advance in place by
     ``pulses_per_tick`` per unit of speed. ``scene`` is the sensing grid's
@@ -524,6 +579,11 @@ def tick(
             held[q] = x != px[a] or y != py[a]
             px[a] = x
             py[a] = y
+        if pairs.shape[0] == 0:
+            # No two robots close: the sweeps would move nobody, and the walls'
+            # normals and the layers serve only them (most substeps of a sparse
+            # world; about 0.5 us of a 10-robot tick).
+            continue
         _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
         order = _layers(pairs, near, held, m, n, px, py, radius, layer)
         for _sweep in range(MAX_SWEEPS):
@@ -582,17 +642,15 @@ def tick(
                 px[a], py[a] = _out_of_obstacles(
                     px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
                 )
-    out = np.empty((n, 3))
-    vel = np.empty((n, 3))
     h = substep_s * substeps
     for a in range(n):
-        out[a, 0] = px[a]
-        out[a, 1] = py[a]
-        out[a, 2] = th[a]
+        # The velocity before the pose: ``out`` may be ``pose`` itself.
         vel[a, 0] = (px[a] - pose[a, 0]) / h
         vel[a, 1] = (py[a] - pose[a, 1]) / h
         vel[a, 2] = w[a]
-    return out, vel
+        out[a, 0] = px[a]
+        out[a, 1] = py[a]
+        out[a, 2] = th[a]
 
 
 def warm_up() -> None:

@@ -317,6 +317,31 @@ def clamp_speeds(speeds, top, cmd):  # pragma: no cover
             cmd[a, k] = s
 
 
+@njit(cache=_CACHE)
+def braitenberg_speeds(proximity, weights, cruise, top, cmd):  # pragma: no cover
+    """common/sim2d/wander.py's rule, compiled, straight into ``cmd`` as clamp_speeds sets it.
+
+    cmd[a] = clamp(rint(cruise + proximity[a, :S] @ weights)), S = len(weights).
+    For bench/bench_enki.py, whose Enki side runs the same rule in C++; the
+    sum goes sensor by sensor, so a speed at exactly half a unit may round
+    otherwise than numpy's product (the engine's own rule stays numpy's).
+    """
+    for a in range(cmd.shape[0]):
+        t = top[a]
+        for k in range(2):
+            s = 0.0
+            for i in range(weights.shape[0]):
+                s += proximity[a, i] * weights[i, k]
+            s = np.rint(cruise + s)
+            if s != s:
+                s = 0.0
+            elif s > t:
+                s = t
+            elif s < -t:
+                s = -t
+            cmd[a, k] = s
+
+
 # --- Gaussian noise, counter-based -----------------------------------------------------
 # Every sensor's noise of a pass is a function of (the pass's key, the agent's slot,
 # the sensor): a key is one 64-bit draw from the world's seeded generator per pass
@@ -1107,6 +1132,9 @@ def warm_up() -> float:
     )
     read_bodies(C.FUNCTIONS, none, none)
     clamp_speeds(np.zeros((1, 2)), np.ones(1), np.zeros((1, 2)))
+    braitenberg_speeds(
+        np.zeros((1, 8), dtype=np.int32), np.zeros((8, 2)), 8.0, np.ones(1), np.zeros((1, 2))
+    )
     f = np.zeros((1, N_AGENT_F))
     i = np.zeros((1, N_AGENT_I), dtype=np.int64)
     i[0, I_PROX_SENSORS] = 1
@@ -1154,4 +1182,8 @@ def warm_up() -> float:
     sense(*(tuple(p) for p in packs))  # plain tuples, as SensorSuite.read passes them
     sense_parallel(*(tuple(p) for p in packs), 1)
     discs.warm_up()
+    # Imported here: common/sim2d/fused.py builds on this module.
+    from common.sim2d import fused
+
+    fused.warm_up()
     return time.perf_counter() - t0

@@ -316,8 +316,8 @@ class StaticGeometry:
         return cls(segments, centres_a, radii_a, cell, scene, tuple(scene), no_objects)
 
 
-_NO_EDGES = np.zeros((0, 4))
-_NO_LIGHTS = np.zeros((0, 4))
+NO_EDGES = np.zeros((0, 4))
+NO_LIGHTS = np.zeros((0, 4))
 
 
 class NoiseKeys:
@@ -338,9 +338,9 @@ class NoiseKeys:
         if self._pos >= len(self._buf):
             self._buf = self._rng.bit_generator.random_raw(self._block)
             self._pos = 0
-        key = self._buf[self._pos]
+        key = self._buf[self._pos]  # a numpy uint64 already: no conversion
         self._pos += 1
-        return np.uint64(key)
+        return key
 
 
 class SensorSuite:
@@ -367,6 +367,10 @@ class SensorSuite:
 
     def obstacles_changed(self) -> None:
         self._static = None
+
+    def current_static(self) -> StaticGeometry | None:
+        """The static geometry as last built, None once obstacles changed (no rebuild)."""
+        return self._static
 
     def cell_size(self, world: SensedWorld) -> float:
         """Grid cell: the longest sensor reach plus the largest radius (at least 120 mm)."""
@@ -411,7 +415,7 @@ class SensorSuite:
         layout = self.agents
         moving = (
             *_objects(world, static),
-            self._lit(world, sim_time),
+            self.lit(world, sim_time),
             self.noise.next(),
         )
         return layout.kernel_tables, static.kernel_scene, moving
@@ -434,15 +438,17 @@ class SensorSuite:
             K.sense(robots, tables, scene, moving, tuple(out))
         return out
 
-    def _lit(self, world: SensedWorld, sim_time: float) -> np.ndarray:
+    def lit(self, world: SensedWorld, sim_time: float) -> np.ndarray:
         """(L, 4) x, y, radius, intensity of the lights on at ``sim_time`` (keyed on values)."""
+        if not world.lights:  # the common case in a swarm, every pass: no generator
+            return NO_LIGHTS
         key = tuple(
             (light.x, light.y, light.radius_mm, light.intensity)
             for light in world.lights
             if light.intensity > 0 and light.is_on(sim_time)
         )
         if not key:
-            return _NO_LIGHTS
+            return NO_LIGHTS
         table = self._lights.get(key)
         if table is None:
             if len(self._lights) > 64:  # blinking sets alternate; edits make new ones
@@ -456,7 +462,7 @@ def _objects(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Circles other than the agents (round objects on the floor, round obstacles) and edges."""
     if not world.objects:
-        return (*static.no_objects, _NO_EDGES)
+        return (*static.no_objects, NO_EDGES)
     idx: list[int] = []
     radius: list[float] = []
     owner: list[int] = []

@@ -50,3 +50,22 @@ def test_both_sides_turn_alike() -> None:
     left, _ = approach(-0.5)
     turned = np.array([math.remainder(right, 2 * math.pi), -math.remainder(left, 2 * math.pi)])
     assert turned[0] == pytest.approx(turned[1], abs=0.35)  # seeded sensor noise differs
+
+
+def test_the_compiled_rule_sets_the_speeds_the_numpy_rule_sets() -> None:
+    # bench/bench_enki.py runs the rule compiled (Enki's is C++): the same speeds,
+    # but for a sum within rounding of half a unit, which may round either way.
+    from common.sim2d import kernels
+    from common.sim2d.wander import CRUISE
+
+    rng = np.random.default_rng(3)
+    prox = rng.integers(0, 1024, size=(500, 8)).astype(np.int32)
+    top = np.full(500, 20.0)
+    want = np.zeros((500, 2))
+    kernels.clamp_speeds(braitenberg(prox), top, want)
+    got = np.zeros((500, 2))
+    kernels.braitenberg_speeds(prox, WEIGHTS, CRUISE, top, got)
+    raw = braitenberg(prox)
+    tie = np.abs(raw - np.floor(raw) - 0.5) < 1e-9
+    assert np.array_equal(got[~tie], want[~tie])
+    assert np.all(np.abs(got - want) <= 1.0)

@@ -1,0 +1,257 @@
+"""The discs drive's whole tick (drive, contacts, every sensor) in one compiled call.
+
+Why: in a small world the tick's cost was not arithmetic but crossing into
+numba. Every array handed to a compiled function is unboxed on every call
+(about 0.14 us each, a NRT wrapper allocated per array) and typed by the
+dispatcher (tuples of arrays about 0.13 us an element more); the discs tick
+and the sensing pass took about 46 arguments between them, plus the Python
+that packed them. At 10 robots that was most of the step (docs/BENCHMARKS.md,
+issue 22, "Small worlds").
+
+So a world on the discs drive keeps its per-tick state in one numba
+structref, :class:`TickState`, built when the layout changes: its own pose and
+velocity buffers, the world's command, counter and arm arrays (the same
+memory: set_speeds and set_counters write them in place, the tick advances the
+counters in place as before), the drive's and the sensors' tables, the static
+scene and the output readings. A tick is then :func:`tick` with the state, a
+flag, the pass's noise key and the lit lights: one structref unboxed and typed,
+whatever the number of tables.
+
+The world hands out copies of the buffers (World.agent_pose, proximity...), so
+an array a caller holds never changes under it, as when each tick allocated
+new ones. Same arithmetic, same order as discs.tick then kernels.sense: the
+trajectories and readings are the same bits (tests/unit/common/sim2d/test_fused.py).
+
+Numba caches functions taking a structref on disk like any other (the type is
+defined at import, here, and pickled by reference); the proxy's own
+constructor is not cached, so the state is built by :func:`new_state`, a
+cached function.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+from numba import njit, typeof, types
+from numba.core.caching import NullCache
+from numba.core.dispatcher import Dispatcher
+from numba.experimental import structref
+
+from common.sim2d import discs
+from common.sim2d import kernels as K
+
+_CACHE = True
+
+
+@structref.register
+class TickStateType(types.StructRef):
+    def preprocess_fields(self, fields):  # type: ignore[no-untyped-def]
+        # Literal types (a layout's sensor count, say) would make a new
+        # specialisation per value: fields are typed by kind only.
+        return tuple((name, types.unliteral(t)) for name, t in fields)
+
+
+class TickState(structref.StructRefProxy):
+    """One discs world's per-tick state (see the module's docstring); built by :func:`new_state`."""
+
+
+FIELDS = (
+    "pose",  # (N, 3) the robots' poses: moved in place by each tick
+    "vel",  # (N, 3) the last tick's mean velocities
+    "cmd",  # (N, 2) World.cmd itself
+    "counters",  # (N, 2) World.counters itself
+    "arm",  # (N,) World.arm itself
+    "holding",  # (N,) bool: no robot holds anything on this drive
+    "drive",  # (mm_s_per_unit, wheel_base, radius, mass, pulses_per_tick), (N,) each
+    "circles",  # the round obstacles binned in the sensing grid (discs.bin_circles)
+    "tables",  # kernels.SensorTables as a plain tuple
+    "scene",  # kernels.StaticScene as a plain tuple
+    "objects",  # MovingScene's circles and edges: the round obstacles only here
+    "readings",  # (proximity, ambient, presence) written by a sensing pass
+    "geometry",  # (width, height, substep s) of the arena and the tick
+    "substeps",
+)
+structref.define_proxy(TickState, TickStateType, list(FIELDS))
+
+
+@njit(cache=_CACHE)
+def new_state(
+    pose,
+    vel,
+    cmd,
+    counters,
+    arm,
+    holding,
+    drive,
+    circles,
+    tables,
+    scene,
+    objects,
+    readings,
+    geometry,
+    substeps,
+):  # pragma: no cover
+    """A :class:`TickState` holding these (arrays by reference, not copied)."""
+    return TickState(
+        pose,
+        vel,
+        cmd,
+        counters,
+        arm,
+        holding,
+        drive,
+        circles,
+        tables,
+        scene,
+        objects,
+        readings,
+        geometry,
+        substeps,
+    )
+
+
+@njit(cache=_CACHE)
+def tick(state, sense, key, lights):  # pragma: no cover
+    """One tick: the robots move (discs.tick_into); then, if ``sense``, every sensor is read.
+
+    ``key`` is the sensing pass's noise key (drawn by the caller only for a
+    pass), ``lights`` the lit lights as SensorSuite's table. Serial: the world
+    takes this path only where a pass runs on one thread. (Calling
+    kernels.sense_parallel from here compiled, but the on-disk cache of a
+    function calling a parallel one loaded broken code in the next process:
+    it crashed. The drive's loops on two threads saved nothing measurable at
+    10,000 robots: docs/BENCHMARKS.md, 2026-11-26.)
+    """
+    mm_s_per_unit, wheel_base, radius, mass, pulses_per_tick = state.drive
+    width, height, substep_s = state.geometry
+    pose = state.pose
+    discs.tick_into(
+        pose,
+        state.cmd,
+        mm_s_per_unit,
+        wheel_base,
+        radius,
+        mass,
+        state.counters,
+        pulses_per_tick,
+        state.scene,
+        state.circles,
+        width,
+        height,
+        substep_s,
+        state.substeps,
+        pose,
+        state.vel,
+    )
+    if sense:
+        objects = state.objects
+        moving = (objects[0], objects[1], objects[2], objects[3], objects[4], lights, key)
+        K.sense((pose, state.arm, state.holding), state.tables, state.scene, moving, state.readings)
+
+
+def _stamp_with_callees(dispatcher: Dispatcher, *modules: ModuleType) -> None:
+    """Make ``dispatcher``'s on-disk cache stale whenever one of ``modules`` changes.
+
+    Numba keys a cached function on its own source file only, yet a cached
+    caller holds the machine code of every compiled function it calls: edit
+    discs.py or kernels.py and tick's cache would still load, calling the old
+    code with the new layouts (it crashed, the one time it happened). So the
+    cache's stamp gets these modules' contents too. Numba's attributes for it
+    are internal: if they are gone, the function is not cached at all (an
+    8-second compile at start) rather than cached stale.
+    """
+    cache = getattr(dispatcher, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
+        dispatcher._cache = NullCache()
+        return
+    digest = hashlib.sha256()
+    for module in modules:
+        digest.update(Path(str(module.__file__)).read_bytes())
+    cache_file._source_stamp = (cache_file._source_stamp, digest.digest())
+
+
+_stamp_with_callees(tick, discs, K)
+
+
+# The types of tick's other arguments: a flag, the noise key, the lights' table
+# (SensorSuite.lit: a C-contiguous (L, 4) float64 array, NO_LIGHTS when none).
+_REST = (types.boolean, types.uint64, types.Array(types.float64, 2, "C"))
+
+
+def entry(state: TickState) -> Callable[[TickState, bool, np.uint64, np.ndarray], None]:
+    """:func:`tick` compiled for this state's type, to be called without the dispatcher.
+
+    The dispatcher types a structref through Python on every call (about 1.7 us,
+    a tenth of a 10-robot step); the compiled entry point only unboxes the
+    arguments. It trusts them to be of the types it was compiled for: the
+    caller passes this ``state`` (its type was looked up here) and arguments of
+    the types in ``_REST``. Compiled here if the cache has no such version.
+    """
+    sig = (typeof(state), *_REST)
+    cres = tick.overloads.get(sig)
+    if cres is None:
+        tick.compile(sig)
+        cres = tick.overloads[sig]
+    return cres.entry_point  # type: ignore[no-any-return]
+
+
+def warm_up() -> None:
+    """Compile (or load from the on-disk cache) the fused tick: kernels.warm_up calls it."""
+    one = np.ones(1)
+    tables = (
+        np.zeros((1, 1, 5)),
+        1,
+        1,
+        np.zeros((1, K.N_AGENT_F)),
+        np.zeros((1, K.N_AGENT_I), dtype=np.int64),
+        np.array([[0.0, 1.0]]),
+        np.array([[1.0, 0.0]]),
+        np.array([2], dtype=np.int64),
+        np.zeros((1, 1, 5)),
+        np.ones((1, 1), dtype=np.bool_),
+    )
+    scene = (
+        np.zeros((0, 4)),
+        np.zeros(2, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        1,
+        1,
+        100.0,
+        np.zeros((0, 4)),
+        np.zeros((0, 2)),
+        np.zeros(0),
+    )
+    objects = (
+        np.zeros((0, 2)),
+        np.zeros(0),
+        np.zeros(0, dtype=np.int64),
+        np.zeros(0, dtype=np.bool_),
+        np.zeros((0, 4)),
+    )
+    readings = (
+        np.zeros((1, 1), dtype=np.int32),
+        np.zeros((1, 1), dtype=np.int32),
+        np.zeros(1, dtype=np.int32),
+    )
+    state = new_state(
+        np.full((1, 3), 50.0),
+        np.zeros((1, 3)),
+        np.zeros((1, 2)),
+        np.zeros((1, 2)),
+        np.zeros(1),
+        np.zeros(1, dtype=np.bool_),
+        (one, one, one, one, one),
+        discs.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0),
+        tables,
+        scene,
+        objects,
+        readings,
+        (100.0, 100.0, 0.01),
+        1,
+    )
+    entry(state)(state, False, np.uint64(1), np.zeros((0, 4)))
