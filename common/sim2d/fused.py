@@ -49,7 +49,9 @@ _CACHE = True
 
 @structref.register
 class TickStateType(types.StructRef):
-    def preprocess_fields(self, fields):  # type: ignore[no-untyped-def]
+    def preprocess_fields(
+        self, fields: tuple[tuple[str, types.Type], ...]
+    ) -> tuple[tuple[str, types.Type], ...]:
         # Literal types (a layout's sensor count, say) would make a new
         # specialisation per value: fields are typed by kind only.
         return tuple((name, types.unliteral(t)) for name, t in fields)
@@ -167,7 +169,7 @@ def _stamp_with_callees(dispatcher: Dispatcher, *modules: ModuleType) -> None:
     cache = getattr(dispatcher, "_cache", None)
     cache_file = getattr(cache, "_cache_file", None)
     if cache_file is None or not hasattr(cache_file, "_source_stamp"):
-        dispatcher._cache = NullCache()
+        setattr(dispatcher, "_cache", NullCache())  # noqa: B010 (numba's internal slot)
         return
     digest = hashlib.sha256()
     for module in modules:
@@ -197,7 +199,7 @@ def entry(state: TickState) -> Callable[[TickState, bool, np.uint64, np.ndarray]
     if cres is None:
         tick.compile(sig)
         cres = tick.overloads[sig]
-    return cres.entry_point  # type: ignore[no-any-return]
+    return cres.entry_point  # type: ignore[attr-defined]  # numba's internal, untyped
 
 
 def warm_up() -> None:
