@@ -10,8 +10,9 @@ from __future__ import annotations
 import re
 import time
 import warnings
+from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -141,10 +142,30 @@ def viewer(fake_lab: DemoLab, tmp_path: Path) -> Iterator[WebViewer]:
 
 @dataclass
 class ViserPage:
-    """A viser page in a browser tab, with helpers that find viser's widgets."""
+    """A viser page in a browser tab, with helpers that find viser's widgets.
+
+    Made before the page is opened, it also sees what the page sends its server
+    (:meth:`fill` waits for a typed value to have left the page).
+    """
 
     page: object  # playwright.sync_api.Page
     name: str
+    sent: deque[tuple[int, bytes]] = field(default_factory=lambda: deque(maxlen=400))
+    sent_count: int = 0  # frames sent so far: their numbers in ``sent``
+    sockets: int = 0
+
+    def __post_init__(self) -> None:
+        self.page.on("websocket", self._watch)  # type: ignore[attr-defined]
+
+    def _watch(self, ws: object) -> None:
+        self.sockets += 1
+
+        def on_sent(payload: bytes | str) -> None:
+            data = payload.encode() if isinstance(payload, str) else payload
+            self.sent.append((self.sent_count, data))
+            self.sent_count += 1
+
+        ws.on("framesent", on_sent)  # type: ignore[attr-defined]
 
     @property
     def p(self):
@@ -166,9 +187,36 @@ class ViserPage:
         return loc.nth(nth) if nth >= 0 else loc.last
 
     def fill(self, label: str, text: str) -> None:
-        field = self.input_after_label(label)
-        field.fill(text)
-        field.press("Enter")  # viser sends text inputs on change; Enter settles it
+        """Type ``text`` into the input after ``label``; return once the page has sent it.
+
+        viser 1.1.1's page sends GUI messages through ONE 50 ms throttle that keeps
+        only the newest message: a click within the window replaces a typed value
+        that had not left yet, and on a busy machine the window's timer fires late.
+        The server then acted on the old value (a fresh-clone run hosted a context
+        named "" and waited 60 s for its tab). A student typing and clicking on a
+        slow laptop can lose a value the same way; a test waits for it to leave.
+        """
+        box = self.input_after_label(label)
+        already = self.sent_count
+        unchanged = box.input_value() == text
+        box.fill(text)
+        box.press("Enter")  # viser sends text inputs on change; Enter settles it
+        if not text or unchanged or not self.sockets:
+            return  # nothing to leave: empty, the value it had, or a page opened before us
+        # A text input's message holds the text; a number input's holds a number, and
+        # its element carries the widget's uuid, which the message holds too.
+        wanted = [text.encode()]
+        uuid = box.get_attribute("id") or ""
+        if re.fullmatch(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}", uuid):
+            wanted.append(uuid.encode())
+        deadline = time.monotonic() + 15
+        while not any(
+            n >= already and any(w in data for w in wanted) for n, data in list(self.sent)
+        ):
+            if time.monotonic() > deadline:
+                raise AssertionError(f"the page did not send what was typed into {label!r}")
+            # Playwright's sync API delivers events while it waits, not during a sleep.
+            self.p.wait_for_timeout(20)
 
     def button(self, name: str):
         return self.p.get_by_role("button", name=name, exact=True).last
@@ -227,8 +275,8 @@ def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureReques
         context = new_test_context(chromium)
         contexts.append(context)
         page = context.new_page()  # type: ignore[attr-defined]
+        vp = ViserPage(page, f"{request.node.name}-{tag}")  # before the page opens its socket
         page.goto(page_url(viewer.url))
-        vp = ViserPage(page, f"{request.node.name}-{tag}")
         vp.wait_ready()
         return vp
 

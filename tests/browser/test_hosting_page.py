@@ -32,8 +32,8 @@ def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
     context = new_test_context(chromium, {"width": 1280, "height": 900})
     try:
         page = context.new_page()  # type: ignore[attr-defined]
+        vp = ViserPage(page, request.node.name)  # before the page opens its socket
         page.goto(page_url(url))
-        vp = ViserPage(page, request.node.name)
         vp.wait_ready()
         vp.open_login()
         vp.fill("User", "admin")
@@ -46,7 +46,11 @@ def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
         page.get_by_text("Host a new context").click()
         vp.fill("Name", "seminar")
         vp.click("Host chat room")
-        vp.tab("seminar").wait_for(timeout=60_000)  # hosted, then joined
+        try:
+            vp.tab("seminar").wait_for(timeout=60_000)  # hosted, then joined
+        except Exception:
+            vp.screenshot("seminar-missing")  # what the page said instead
+            raise
 
         vp.tab(f"{lab.realm}@").click()
         vp.fill("Name", "maze2")
