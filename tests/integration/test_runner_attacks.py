@@ -39,7 +39,9 @@ pytestmark = [
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
-SLOT = 2.5
+# Long enough for the filler to reach the disk limit inside its slot on a busy machine
+# (at 2.5 s a fresh-clone run saw its slot end first: "its slot ended", not the limit).
+SLOT = 5.0
 # Stands in for the runner's login where only its RunClaim is sealed with it.
 _CLAIM_SEALER = SimpleNamespace(session=SimpleNamespace(seal=lambda key, message: b"sealed"))
 MB = 1 << 20
