@@ -305,16 +305,21 @@ def physics_tick_servo(
 def clamp_speeds(speeds, top, cmd):  # pragma: no cover
     """cmd = speeds rounded to whole units and clamped to +-top per agent; NaN stops the wheel."""
     for a in range(cmd.shape[0]):
-        t = top[a]
         for k in range(2):
-            s = np.rint(speeds[a, k])
-            if s != s:
-                s = 0.0
-            elif s > t:
-                s = t
-            elif s < -t:
-                s = -t
-            cmd[a, k] = s
+            cmd[a, k] = _wheel_command(speeds[a, k], top[a])
+
+
+@njit(cache=_CACHE, inline="always")
+def _wheel_command(speed, top):  # pragma: no cover
+    """A speed rounded to whole units and clamped to +-top; NaN stops the wheel."""
+    s = np.rint(speed)
+    if s != s:
+        return 0.0
+    if s > top:
+        return top
+    if s < -top:
+        return -top
+    return s
 
 
 @njit(cache=_CACHE)
@@ -327,19 +332,11 @@ def braitenberg_speeds(proximity, weights, cruise, top, cmd):  # pragma: no cove
     otherwise than numpy's product (the engine's own rule stays numpy's).
     """
     for a in range(cmd.shape[0]):
-        t = top[a]
         for k in range(2):
             s = 0.0
             for i in range(weights.shape[0]):
                 s += proximity[a, i] * weights[i, k]
-            s = np.rint(cruise + s)
-            if s != s:
-                s = 0.0
-            elif s > t:
-                s = t
-            elif s < -t:
-                s = -t
-            cmd[a, k] = s
+            cmd[a, k] = _wheel_command(cruise + s, top[a])
 
 
 # --- Gaussian noise, counter-based -----------------------------------------------------
