@@ -55,6 +55,18 @@ than given up after the usual request timeout. A registry that is not running
 costs nothing extra: with no queryable to route to, the router ends the query at once.
 """
 
+LOGIN_FIND_S = 2.0
+"""How long a login keeps asking while no registry is routed to (the query ends at once).
+
+A registry that has just (re)started is announced to each session separately:
+a login sent in the same instant it came back was told "no registry answered"
+(a fresh-clone run, 2026-11-25), although the registry's liveliness token was
+already seen elsewhere. A login asks again every LOGIN_FIND_PAUSE_S for this
+long before saying so; a registry that is really down is said 2 s later.
+"""
+
+LOGIN_FIND_PAUSE_S = 0.25
+
 
 class AuthError(Exception):
     """A message was refused; ``code`` is the ErrorReply code to answer with."""

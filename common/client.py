@@ -34,6 +34,8 @@ import zenoh
 
 from common import acl, keys
 from common.auth import (
+    LOGIN_FIND_PAUSE_S,
+    LOGIN_FIND_S,
     LOGIN_WAIT_S,
     AuthError,
     Session,
@@ -368,6 +370,26 @@ class LabClient(RegistryAdminCalls):
                 self._undeclare()
             raise
 
+    def _find_registry(self, key: str, payload: bytes, wait: float) -> list[Any]:
+        """The login query's answers, asked again for LOGIN_FIND_S while none is routed to.
+
+        A query with no queryable to reach ends at once, empty; one the registry
+        took but has not answered (frozen, swamped) ends only at ``wait``, and
+        is not asked again (its password check may still be queued there).
+        """
+        first = time.monotonic()
+        deadline = first + wait  # the asker waits no longer in all
+        give_up = first + min(LOGIN_FIND_S, wait / 2)
+        while True:
+            started = time.monotonic()
+            answers = self._get(key, payload, "login", deadline - started, declare_source=True)
+            ended = time.monotonic()
+            # Ended long before its time: routed to no registry, not unanswered by one.
+            routed_nowhere = ended - started < (deadline - started) / 2
+            if answers or not routed_nowhere or ended + LOGIN_FIND_PAUSE_S >= give_up:
+                return answers
+            time.sleep(LOGIN_FIND_PAUSE_S)
+
     def _login_reply(
         self,
         key: str,
@@ -376,12 +398,10 @@ class LabClient(RegistryAdminCalls):
         mailbox: nacl.public.PrivateKey,
         wait: float | None,
     ) -> SessionToken:
-        answers = self._get(
+        answers = self._find_registry(
             key,
             encode(SealedLogin(sealed=sealed)),
-            "login",
             wait if wait is not None else max(self.timeout, LOGIN_WAIT_S),
-            declare_source=True,
         )
         if not answers:
             raise RegistryUnreachable(

@@ -122,6 +122,17 @@ class LeaseBook:
                 or lease.start >= current.start
             ):
                 self._leases[lease.agent] = lease
+                if current is None or current.lease_id != lease.lease_id:
+                    # One line a slot (republications keep the id): an operator can
+                    # tell "the lease never reached this world" from a refused command.
+                    log.info(
+                        "%s/%s leased to %s until %s (lease %s)",
+                        self.world,
+                        lease.agent,
+                        lease.holder_user,
+                        time.strftime("%H:%M:%S", time.localtime(lease.end)),
+                        lease.lease_id,
+                    )
                 mac = self._mac.get(lease.agent)
                 if lease_key is None:
                     self._mac.pop(lease.agent, None)

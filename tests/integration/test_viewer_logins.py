@@ -192,14 +192,10 @@ def test_a_stopped_registry_is_said_and_the_retry_after_its_restart_gets_in(
     assert "does not answer" in stopped and says_what_to_do(stopped), stopped
 
     vlab.lab.start_registry()  # returns once its liveliness token is seen
-    # As a student told "try again" does. In a fresh-clone run the first retry, in the
-    # same second as the token, was told "does not answer" (its query found no
-    # registry yet); the cause is not known. Each refusal must still say what to do.
-    deadline = time.monotonic() + 20
-    while (said := run_in_thread(_log_in_once(vlab.url, "bob"))) != "in":
-        assert "does not answer" in said and says_what_to_do(said), said
-        assert time.monotonic() < deadline, f"no login 20 s after the registry's restart: {said}"
-        time.sleep(1.0)  # a person's retry, not a wait for a condition
+    # At once, as a student told "try again" does. The viewer's session hears of
+    # the new registry separately from the test's: a login in the same instant
+    # once found no registry (a fresh-clone run), so a login asks for a moment.
+    assert run_in_thread(_log_in_once(vlab.url, "bob")) == "in"
 
 
 # -- a click the moment the button shows (the race behind "the form stayed, no answer")
