@@ -30,6 +30,7 @@ from tests.integration.labkit import PASSWORD, Lab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
+    pytest.mark.xdist_group("dry_run"),  # one worker starts the module's lab once
     pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
 ]
 HEADER = "from common.controller import Controller, Khepera\n"

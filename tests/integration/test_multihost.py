@@ -27,7 +27,8 @@ from common.labfile import load
 from services.commands.certs import issue_lab
 from tests import netns
 
-pytestmark = [pytest.mark.integration, pytest.mark.netns]
+# One worker builds the three-host network once for the module (two built it twice: 20 s).
+pytestmark = [pytest.mark.integration, pytest.mark.netns, pytest.mark.xdist_group("multihost")]
 
 _reason = netns.available()
 if _reason is not None:

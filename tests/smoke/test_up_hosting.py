@@ -26,7 +26,8 @@ from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, wait_for, wart_env
 from tests.lab import Lab
 
-pytestmark = pytest.mark.smoke
+# One worker starts the module's lab once (split between workers, each started its own).
+pytestmark = [pytest.mark.smoke, pytest.mark.xdist_group("up_hosting")]
 
 TEACHER, STUDENT, PASSWORD = "teacher", "pupil", "a long test password"
 
