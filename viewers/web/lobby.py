@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 
 import viser
@@ -182,11 +183,18 @@ class LabTab:
             return
         map_name = self.host_map.value.strip() if kind == "agent" else ""
         self.say_notice(f"Starting {name}: this takes a few seconds...")
+        # Logged both ways: a page whose new context never showed left no trace before.
+        who = f"{self.connection.user} on {self.label}"
+        log.info("%s: hosting %s %s", who, kind, name)
+        started = time.monotonic()
         try:
             ctx = self.connection.host("agent" if kind == "agent" else "chat", name, map_name)
         except LabError as exc:
+            took = time.monotonic() - started
+            log.info("%s: hosting %s ended after %.1f s: %s", who, name, took, exc)
             self.say_notice(f"Could not host {name}: {exc}")
             return
+        log.info("%s: %s is up after %.1f s; joining it", who, ctx, time.monotonic() - started)
         self.host_name.value = ""
         self.join(ctx)
 
