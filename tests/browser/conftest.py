@@ -19,8 +19,11 @@ import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.conftest import ARTIFACTS, free_port
+from viewers.web.adapters import SceneFrame
 from viewers.web.app import WebViewer
-from viewers.web.demo_lab import DemoConnector, DemoLab
+from viewers.web.client import BrowserSession
+from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
+from viewers.web.world_view import WorldView
 
 CHROMIUM = Path("/usr/bin/chromium")
 # Why the test pages are cheaper to draw than a student's: Debian's Chromium on CI
@@ -283,6 +286,30 @@ def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureReques
     yield opener
     for context in contexts:
         context.close()  # type: ignore[attr-defined]
+
+
+def join_demo_arena(
+    open_page: Callable[[str], ViserPage], viewer: WebViewer, user: str
+) -> tuple[ViserPage, BrowserSession]:
+    """``user``'s page, logged in to the demo lab and in its arena; and the server's view of it.
+
+    The demo lab's passwords are the user's name and ``-pw``. The view is the
+    first session's: the tests that use this open one page.
+    """
+    page = open_page(user)
+    page.log_in("127.0.0.1", user, f"{user}-pw")
+    page.tab("lab@127.0.0.1").first.click()
+    page.click("Join arena")
+    session = next(iter(viewer.sessions.values()))
+    return page, session
+
+
+def show_still_frame(world: DemoWorld, view: WorldView, timeout: float = 10.0) -> SceneFrame:
+    """One frame of a stopped demo world, once the view has it and the camera is aimed."""
+    frame = world.produce(2.0)
+    wait_until(lambda: view.last_seq == frame.seq, timeout, what="the test's frame in the view")
+    wait_for_aimed_camera(view)
+    return frame
 
 
 def wait_until(condition: Callable[[], bool], timeout: float = 10.0, what: str = "") -> None:

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_for_aimed_camera, wait_until
+from tests.browser.conftest import join_demo_arena, show_still_frame, wait_until
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
@@ -35,16 +35,10 @@ def fake_lab() -> Iterator[DemoLab]:
 def test_the_camera_follows_the_selected_robot(
     open_page, viewer: WebViewer, fake_lab: DemoLab
 ) -> None:
-    page = open_page("ana")
-    page.log_in("127.0.0.1", "ana", "ana-pw")
-    page.tab("lab@127.0.0.1").first.click()
-    page.click("Join arena")
-    session = next(iter(viewer.sessions.values()))
+    page, session = join_demo_arena(open_page, viewer, "ana")
     view = session.view
     world = fake_lab.worlds["arena"]
-    frame = world.produce(2.0)
-    wait_until(lambda: view.last_seq == frame.seq, what="the test's frame in the view")
-    wait_for_aimed_camera(view)  # the height below is the aimed one, not a stale report
+    frame = show_still_frame(world, view)  # the camera's height below is the aimed one
 
     reports: list[tuple[np.ndarray, np.ndarray]] = []
     lock = threading.Lock()

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from common.recording import read_recording
-from tests.browser.conftest import ViserPage, wait_until
+from tests.browser.conftest import ViserPage, join_demo_arena, wait_until
 from tests.unit.common.test_recording import _record
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
@@ -56,11 +56,7 @@ def test_a_recording_replayed_in_the_page_moves_the_robot_with_the_cursor(
     assert rec.info is not None
     agent = rec.info.agent
 
-    page = open_page("ben")
-    page.log_in("127.0.0.1", "ben", "ben-pw")
-    page.tab("lab@127.0.0.1").first.click()
-    page.click("Join arena")
-    session = next(iter(viewer.sessions.values()))
+    page, session = join_demo_arena(open_page, viewer, "ben")
     view = session.view
     wait_until(lambda: view.frames_applied > 3, what="the live arena in ben's view")
     live = view.feed

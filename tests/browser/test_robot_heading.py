@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_for_aimed_camera, wait_until
+from tests.browser.conftest import join_demo_arena, show_still_frame, wait_until
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
@@ -54,14 +54,9 @@ def test_heading_arrow_is_drawn_in_its_own_colour(
 ) -> None:
     from PIL import Image
 
-    page = open_page("ana")
-    page.log_in("127.0.0.1", "ana", "ana-pw")
-    page.tab("lab@127.0.0.1").first.click()
-    page.click("Join arena")
-    view = next(iter(viewer.sessions.values())).view
-    frame = fake_lab.worlds["arena"].produce(2.0)
-    wait_until(lambda: view.last_seq == frame.seq, what="the test's frame in the view")
-    wait_for_aimed_camera(view)
+    page, session = join_demo_arena(open_page, viewer, "ana")
+    view = session.view
+    frame = show_still_frame(fake_lab.worlds["arena"], view)
 
     # What the server sends: one batched mesh of arrows beside the bodies, placed and
     # turned as the robots are, coloured by LED state rather than like the bodies.

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import viser
 
-from tests.browser.conftest import wait_for_aimed_camera, wait_until
+from tests.browser.conftest import join_demo_arena, show_still_frame, wait_until
 from tests.browser.test_robot_heading import NOTICES, screen_points
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab, DemoWorld
@@ -43,14 +43,9 @@ def test_a_swarm_is_drawn_as_points_and_a_click_selects_a_robot(
 ) -> None:
     from PIL import Image
 
-    page = open_page("ana")
-    page.log_in("127.0.0.1", "ana", "ana-pw")
-    page.tab("lab@127.0.0.1").first.click()
-    page.click("Join arena")
-    view = next(iter(viewer.sessions.values())).view
-    frame = fake_lab.worlds["arena"].produce(2.0)
-    wait_until(lambda: view.last_seq == frame.seq, 15, what="the test's frame in the view")
-    wait_for_aimed_camera(view)
+    page, session = join_demo_arena(open_page, viewer, "ana")
+    view = session.view
+    frame = show_still_frame(fake_lab.worlds["arena"], view, 15)
     assert isinstance(view._robots, viser.PointCloudHandle)
     assert np.asarray(view._robots.points)[:, :2] * 1000 == pytest.approx(
         frame.poses[:, :2], abs=0.5

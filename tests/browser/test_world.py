@@ -7,7 +7,7 @@ import io
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_until
+from tests.browser.conftest import join_demo_arena, wait_until
 from viewers.web.app import WebViewer
 
 pytestmark = pytest.mark.browser
@@ -25,11 +25,7 @@ def scene_pixels(png: bytes) -> np.ndarray:
 
 
 def test_arena_robots_move(open_page, viewer: WebViewer) -> None:
-    page = open_page("ana")
-    page.log_in("127.0.0.1", "ana", "ana-pw")
-    page.tab("lab@127.0.0.1").first.click()
-    page.click("Join arena")
-    session = next(iter(viewer.sessions.values()))
+    page, session = join_demo_arena(open_page, viewer, "ana")
     view = session.view
     wait_until(lambda: view.frames_applied > 10, what="frames to reach the view")
 
