@@ -73,6 +73,9 @@ MAX_RUNS = 32
 MAX_RUNS_PER_USER = 4
 MAX_SLOT_S = 3600.0
 OUTPUT_FLUSH_S = 0.1
+# A robot's readings arrive 50 to 100 times a second: this long without one, the
+# student is told (Run._say_silent), once, and again when they come back.
+READINGS_SILENT_S = 5.0
 DRY_RUN_WORKERS = 2  # dry runs at once (each a sandbox at full speed for a few seconds)
 DRY_RUN_WAITING = 4  # more wait for a worker; the next is told the runner is busy
 
@@ -115,13 +118,51 @@ class Run:
 
     def _relay(self) -> None:
         seen = 0
+        last = time.monotonic()  # the run's start, then the newest reading's arrival
+        silent = False  # the student was told the readings stopped
         while not self.ended.is_set():
             newest = self.link.wait_sample(seen, 0.2)
+            now = time.monotonic()
             if newest == seen:
+                if not silent and now - last >= READINGS_SILENT_S:
+                    silent = True
+                    self._say_silent(first=seen == 0)
                 continue
-            seen = newest
+            if silent:
+                silent = False
+                self._say(f"readings from {self.request.agent} again after {now - last:.0f} s")
+            last, seen = now, newest
             if not self.sandbox.send_state(state_to_dict(self.link.latest())):
                 return
+
+    def _say_silent(self, *, first: bool) -> None:
+        """Tell the student (and the runner's log) that their robot's readings stopped coming.
+
+        A controller that "runs" while its robot neither reads nor moves is the
+        worst thing a student can be shown without a word: a world that is down
+        or frozen, a robot offline, a lease that never reached the world (the
+        world sends a robot's readings only under a lease in force).
+        """
+        request = self.request
+        when = "in the first" if first else "for"
+        self._say(
+            f"no readings from {request.agent} {when} {READINGS_SILENT_S:.0f} s: world "
+            f"{request.world} sends none (down, frozen, its robot offline, or your slot's "
+            "lease has not reached it), so your commands may not move it either. If it "
+            "lasts, tell the lab's staff."
+        )
+        log.warning(
+            "%s on %s for %s: no readings from world %s %s %.0f s",
+            request.request_id,
+            request.agent,
+            request.user,
+            request.world,
+            when,
+            READINGS_SILENT_S,
+        )
+
+    def _say(self, text: str) -> None:
+        self._on_output(f"[runner] {text}")
 
     def _on_output(self, line: str) -> None:
         with self._lines_lock:
