@@ -88,44 +88,46 @@ def _static_cell(v, cell, n):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
-def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
+def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
     """Every pair of discs closer than their radii plus ``margin``: (M, 2) slots.
 
     The discs are sorted by cell (a counting sort) and copied in that order, so
     the scan reads neighbours from contiguous memory rather than from random
     slots; each cell is compared with itself and four of its neighbours (the
     other four compare with it), so each pair is found once. The pairs come
-    out in cell order, the same for the same poses.
+    out in cell order, the same for the same poses. ``buffers`` are
+    :func:`drive_buffers`' last eight (a grid larger than its cell offsets
+    gets new ones).
     """
+    home, slot, sk, sx, sy, sr, start, out = buffers
     n = px.shape[0]
     gx = (math.floor(width / cell)) + 1
     gy = (math.floor(height / cell)) + 1
     ncell = gx * gy
-    start = np.zeros(ncell + 1, dtype=np.int64)
-    home = np.empty(n, dtype=np.int64)
+    if start.shape[0] < ncell + 1:
+        start = np.empty(ncell + 1, dtype=np.int64)
+    for k in range(ncell + 1):
+        start[k] = 0
     for a in range(n):
         k = _cell(px[a], cell, gx) * gy + _cell(py[a], cell, gy)
         home[a] = k
-        start[k + 1] += 1
-    for k in range(ncell):
-        start[k + 1] += start[k]
-    fill = start[:-1].copy()
-    slot = np.empty(n, dtype=np.int64)
-    sk = np.empty(n, dtype=np.int64)  # each sorted disc's cell, read in order below
-    for a in range(n):
+        start[k] += 1
+    # start[k]: the end of cell k's run; walking the discs backwards, each takes
+    # the last free place of its cell's run (so a cell's discs stay in slot
+    # order), and start[k] ends at the run's start.
+    for k in range(1, ncell):
+        start[k] += start[k - 1]
+    start[ncell] = n
+    for a in range(n - 1, -1, -1):
         k = home[a]
-        slot[fill[k]] = a
-        sk[fill[k]] = k
-        fill[k] += 1
-    sx = np.empty(n)
-    sy = np.empty(n)
-    sr = np.empty(n)
+        start[k] -= 1
+        slot[start[k]] = a
+        sk[start[k]] = k  # each sorted disc's cell, read in order below
     for p in range(n):
         a = slot[p]
         sx[p] = px[a]
         sy[p] = py[a]
         sr[p] = radius[a]
-    out = np.empty((max(16, n), 2), dtype=np.int64)
     m = 0
     # The sorted discs in order are the cells in order with their discs: walking
     # the discs visits the same (cell, disc) sequence as walking every cell,
@@ -468,6 +470,7 @@ def tick(
     n = pose.shape[0]
     out = np.empty((n, 3))
     vel = np.empty((n, 3))
+    buffers = drive_buffers(n, width, height, radius)
     tick_into(
         pose,
         cmd,
@@ -485,8 +488,46 @@ def tick(
         substeps,
         out,
         vel,
+        buffers,
     )
     return out, vel
+
+
+@njit(cache=_CACHE)
+def drive_buffers(n, width, height, radius):  # pragma: no cover
+    """The work arrays of :func:`tick_into` for ``n`` robots of these radii in this arena.
+
+    Kept by common/sim2d/fused.py from tick to tick: without a tick's
+    twenty-odd allocations the drive took about 8 % less at 10 robots
+    (docs/BENCHMARKS.md, issue 22, 2026-11-26). The pair grid's cell offsets
+    are sized for its smallest cell (robots standing still); the pairs' table
+    for four pairs a robot, a crowd's (it grows if a tick needs more).
+    """
+    smallest = 2.0 * (np.max(radius) if n else 0.0) + SLACK_MM + 1.0
+    ncell = (math.floor(width / smallest) + 1) * (math.floor(height / smallest) + 1)
+    return (
+        np.empty(n),  # px, py, th: the poses being moved
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),  # v, w: forward speed and turn rate
+        np.empty(n),
+        np.empty(n, dtype=np.int64),  # near: the robots near an obstacle
+        np.empty(n, dtype=np.bool_),  # is_near
+        np.empty(n, dtype=np.bool_),  # pushed: by a pair, this substep
+        np.empty(n, dtype=np.bool_),  # moved: by a pair, this sweep
+        np.empty(n, dtype=np.bool_),  # held: pushed out of an obstacle
+        np.empty(n, dtype=np.int64),  # layer (_layers)
+        np.empty((n, 2, 2)),  # normals, count (_wall_normals)
+        np.zeros(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),  # _pairs: home, slot, sk, sx, sy, sr, start, out
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(ncell + 1, dtype=np.int64),
+        np.empty((max(16, 4 * n), 2), dtype=np.int64),
+    )
 
 
 @njit(cache=_CACHE)
@@ -507,6 +548,7 @@ def tick_into(
     substeps,
     out,
     vel,
+    buffers,
 ):  # pragma: no cover
     """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
 
@@ -517,15 +559,12 @@ def tick_into(
     ``pulses_per_tick`` per unit of speed. ``scene`` is the sensing grid's
     static scene as a plain tuple (kernels.StaticScene's layout), ``circles``
     its round obstacles binned by :func:`bin_circles`. ``vel`` is the tick's
-    mean velocity: x, y (mm/s) and turn rate (rad/s).
+    mean velocity: x, y (mm/s) and turn rate (rad/s). ``buffers``: its work
+    arrays, :func:`drive_buffers` for these robots and this arena.
     """
     circ_start, circ_items = circles
     n = pose.shape[0]
-    px = np.empty(n)
-    py = np.empty(n)
-    th = np.empty(n)
-    v = np.empty(n)
-    w = np.empty(n)
+    px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     top_speed = 0.0
     top_radius = 0.0
     for a in range(n):
@@ -547,18 +586,11 @@ def tick_into(
     # Robots found in non-neighbouring cells are at least a cell apart, farther
     # than the largest pair plus the margin: they cannot touch within the substep.
     cell = 2.0 * top_radius + margin + 1.0
-    near = np.empty(n, dtype=np.int64)
-    is_near = np.empty(n, dtype=np.bool_)
-    pushed = np.empty(n, dtype=np.bool_)  # by a pair, this substep
-    moved = np.empty(n, dtype=np.bool_)  # by a pair, this sweep
-    held = np.empty(n, dtype=np.bool_)
-    layer = np.empty(n, dtype=np.int64)
-    normals = np.empty((n, 2, 2))
-    count = np.zeros(n, dtype=np.int64)
+    pair_buffers = buffers[13:]
     for _ in range(substeps):
         for a in range(n):
             px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
-        pairs = _pairs(px, py, radius, width, height, cell, margin)
+        pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)
         m = 0
         for a in range(n):
             pushed[a] = False
