@@ -37,11 +37,15 @@ run is reproducible bit for bit.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 _CACHE = True
+# Kernels that allocate nothing and return no array: no reference counting
+# (common/sim2d/kernels.py, _UNCOUNTED, says why and what it requires).
+_UNCOUNTED: dict[str, Any] = {"_nrt": False}
 
 # Contact sweeps per substep: until no pair overlaps by more than TOLERANCE_MM,
 # at most MAX_SWEEPS. A free swarm needs one or two; a crowd pressed into a
@@ -369,7 +373,7 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
     return np.argsort(key, kind="mergesort")
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def _wall_normals(
     near, m, px, py, radius, width, height, scene, circles, normals, count
 ):  # pragma: no cover

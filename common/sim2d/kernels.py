@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -130,6 +130,16 @@ class Readings(NamedTuple):
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 _CACHE = True
+# Numba's option for a kernel compiled without reference counting. Each array a
+# compiled function receives (tuples of them included) or takes a view of is
+# counted in and out with an atomic operation, and an inlined helper counts its
+# array arguments at each call: at 10 robots that was about 14 % of a step
+# (docs/BENCHMARKS.md, issue 22, 2026-11-26). A kernel that allocates nothing
+# and returns no array needs none of it: its callers hold every array it
+# touches. One that returned an array (a buffer it had filled) corrupted the
+# heap: its caller released a reference it was never given. Numba refuses to
+# compile an allocation in such a kernel.
+_UNCOUNTED: dict[str, Any] = {"_nrt": False}
 # Threads a kernel may use: numba's pool, sized at import (NUMBA_NUM_THREADS, default
 # the machine's cores); set_num_threads can only lower it.
 MAX_THREADS = int(numba.config.NUMBA_NUM_THREADS)
@@ -733,7 +743,9 @@ def _shadow_table(robots, scene, moving):  # pragma: no cover
 def _circles(robots, tables, scene, moving):  # pragma: no cover
     """:func:`_circles_into` buffers of its own."""
     nc = robots[0].shape[0] + moving[1].shape[0]
-    return _circles_into(robots, tables, scene, moving, circle_buffers(nc, scene[3] * scene[4]))
+    buffers = circle_buffers(nc, scene[3] * scene[4])
+    _circles_into(robots, tables, scene, moving, buffers)
+    return buffers
 
 
 @njit(cache=_CACHE)
@@ -751,12 +763,12 @@ def circle_buffers(nc, ncell):  # pragma: no cover
     )
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
     """Every circle (the agents first, each owning itself, then the others), binned.
 
-    Returns (cx, cy, cr, cown, cobj, count, citems, ccell), the arrays of
-    ``buffers`` (:func:`circle_buffers`) filled: the circles and a counting
+    Fills ``buffers`` (:func:`circle_buffers`): (cx, cy, cr, cown, cobj,
+    count, citems, ccell), the circles and a counting
     sort of them into the grid (``count`` the CSR offsets per cell, ``citems``
     the circle indices cell by cell, ``ccell`` each circle's cell). Serial:
     O(circles + cells), a small share of a pass. Buffers rather than new
@@ -801,7 +813,6 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
         k = ccell[c]
         count[k] -= 1
         citems[count[k]] = c
-    return buffers
 
 
 @njit(cache=_CACHE)
@@ -819,7 +830,7 @@ def scratch_buffers(tables, scene, moving, nc):  # pragma: no cover
     )
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def _sense_range(
     lo, hi, robots, tables, scene, moving, out, circles, shadows, scratch
 ):  # pragma: no cover
@@ -1087,10 +1098,10 @@ def sense_into(robots, tables, scene, moving, out, buffers, scratch):  # pragma:
     For common/sim2d/fused.py, whose state keeps them from tick to tick: the
     same readings, without a pass's allocations.
     """
-    circles = _circles_into(robots, tables, scene, moving, buffers)
+    _circles_into(robots, tables, scene, moving, buffers)
     shadows = _shadow_table(robots, scene, moving)
     n = robots[0].shape[0]
-    _sense_range(0, n, robots, tables, scene, moving, out, circles, shadows, scratch)
+    _sense_range(0, n, robots, tables, scene, moving, out, buffers, shadows, scratch)
 
 
 @njit(cache=_CACHE, parallel=True)
