@@ -450,6 +450,124 @@ def _blocked(a, ux, uy, normals, count):  # pragma: no cover
     return False
 
 
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _obstacles_first(
+    px, py, radius, margin, width, height, scene, circles, near, is_near, pushed, moved, count, held
+):  # pragma: no cover
+    """A substep's obstacles: the robots near one listed in ``near``, and pushed out of it.
+
+    Returns how many are near; ``held[q]``: whether ``near[q]`` was pushed. Also
+    clears the pair flags (``pushed``, ``moved``) and the wall normals' ``count``.
+    Its own kernel, without reference counting (_UNCOUNTED): inlined in
+    tick_into, the helpers counted the scene's arrays in and out for every robot.
+    """
+    circ_start, circ_items = circles
+    m = 0
+    for a in range(px.shape[0]):
+        pushed[a] = False
+        moved[a] = False
+        count[a] = 0
+        is_near[a] = _near_obstacle(
+            px[a], py[a], radius[a], margin, width, height, scene, circ_start, circ_items
+        )
+        if is_near[a]:
+            near[m] = a
+            m += 1
+    # The obstacles first, then what each robot now touches.
+    for q in range(m):
+        a = near[q]
+        x, y = _out_of_obstacles(
+            px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+        )
+        held[q] = x != px[a] or y != py[a]
+        px[a] = x
+        py[a] = y
+    return m
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _solve_contacts(
+    pairs,
+    order,
+    px,
+    py,
+    radius,
+    mass,
+    width,
+    height,
+    scene,
+    circles,
+    near,
+    m,
+    is_near,
+    pushed,
+    moved,
+    normals,
+    count,
+):  # pragma: no cover
+    """The contact sweeps of a substep over ``pairs`` in ``order`` (see the module's docstring).
+
+    Without reference counting, as :func:`_obstacles_first`.
+    """
+    circ_start, circ_items = circles
+    for _sweep in range(MAX_SWEEPS):
+        deepest = 0.0
+        for i in range(order.shape[0]):
+            q = order[i]
+            a = pairs[q, 0]
+            b = pairs[q, 1]
+            dx = px[b] - px[a]
+            dy = py[b] - py[a]
+            lim = radius[a] + radius[b]
+            d2 = dx * dx + dy * dy
+            if d2 >= lim * lim:
+                continue
+            d = math.sqrt(d2)
+            if d < 1e-9:  # on top of each other: apart along x, in slot order
+                dx, dy, d = 1.0, 0.0, 1.0
+                depth = lim
+            else:
+                depth = lim - d
+            deepest = max(deepest, depth)
+            # Who gives way: not a robot the push would drive into a wall it
+            # touches (walls never give way); otherwise both, by mass.
+            stuck_a = _blocked(a, -dx / d, -dy / d, normals, count)
+            stuck_b = _blocked(b, dx / d, dy / d, normals, count)
+            if stuck_a and not stuck_b:
+                share_a, share_b = 0.0, depth / d
+            elif stuck_b and not stuck_a:
+                share_a, share_b = depth / d, 0.0
+            else:
+                ma = mass[a]
+                mb = mass[b]
+                share_a = depth * mb / (ma + mb) / d
+                share_b = depth * ma / (ma + mb) / d
+            px[a] -= dx * share_a
+            py[a] -= dy * share_a
+            px[b] += dx * share_b
+            py[b] += dy * share_b
+            pushed[a] = True
+            pushed[b] = True
+            moved[a] = True
+            moved[b] = True
+        for q in range(m):
+            a = near[q]
+            if moved[a]:  # only a robot a pair just moved can be in a wall again
+                moved[a] = False
+                px[a], py[a] = _out_of_obstacles(
+                    px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+                )
+        if deepest < TOLERANCE_MM:
+            break
+    # A robot a crowd pushed farther than the margin may have reached an
+    # obstacle it was not near: the obstacles have the last word for it too.
+    for a in range(px.shape[0]):
+        if pushed[a] and not is_near[a]:
+            px[a], py[a] = _out_of_obstacles(
+                px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+            )
+
+
 @njit(cache=_CACHE)
 def tick(
     pose,
@@ -566,7 +684,6 @@ def tick_into(
     mean velocity: x, y (mm/s) and turn rate (rad/s). ``buffers``: its work
     arrays, :func:`drive_buffers` for these robots and this arena.
     """
-    circ_start, circ_items = circles
     n = pose.shape[0]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     top_speed = 0.0
@@ -595,26 +712,22 @@ def tick_into(
         for a in range(n):
             px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
         pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)
-        m = 0
-        for a in range(n):
-            pushed[a] = False
-            moved[a] = False
-            count[a] = 0
-            is_near[a] = _near_obstacle(
-                px[a], py[a], radius[a], margin, width, height, scene, circ_start, circ_items
-            )
-            if is_near[a]:
-                near[m] = a
-                m += 1
-        # The obstacles first, then what each robot now touches.
-        for q in range(m):
-            a = near[q]
-            x, y = _out_of_obstacles(
-                px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-            )
-            held[q] = x != px[a] or y != py[a]
-            px[a] = x
-            py[a] = y
+        m = _obstacles_first(
+            px,
+            py,
+            radius,
+            margin,
+            width,
+            height,
+            scene,
+            circles,
+            near,
+            is_near,
+            pushed,
+            moved,
+            count,
+            held,
+        )
         if pairs.shape[0] == 0:
             # No two robots close: the sweeps would move nobody, and the walls'
             # normals and the layers serve only them (most substeps of a sparse
@@ -622,62 +735,25 @@ def tick_into(
             continue
         _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
         order = _layers(pairs, near, held, m, n, px, py, radius, layer)
-        for _sweep in range(MAX_SWEEPS):
-            deepest = 0.0
-            for i in range(order.shape[0]):
-                q = order[i]
-                a = pairs[q, 0]
-                b = pairs[q, 1]
-                dx = px[b] - px[a]
-                dy = py[b] - py[a]
-                lim = radius[a] + radius[b]
-                d2 = dx * dx + dy * dy
-                if d2 >= lim * lim:
-                    continue
-                d = math.sqrt(d2)
-                if d < 1e-9:  # on top of each other: apart along x, in slot order
-                    dx, dy, d = 1.0, 0.0, 1.0
-                    depth = lim
-                else:
-                    depth = lim - d
-                deepest = max(deepest, depth)
-                # Who gives way: not a robot the push would drive into a wall it
-                # touches (walls never give way); otherwise both, by mass.
-                stuck_a = _blocked(a, -dx / d, -dy / d, normals, count)
-                stuck_b = _blocked(b, dx / d, dy / d, normals, count)
-                if stuck_a and not stuck_b:
-                    share_a, share_b = 0.0, depth / d
-                elif stuck_b and not stuck_a:
-                    share_a, share_b = depth / d, 0.0
-                else:
-                    ma = mass[a]
-                    mb = mass[b]
-                    share_a = depth * mb / (ma + mb) / d
-                    share_b = depth * ma / (ma + mb) / d
-                px[a] -= dx * share_a
-                py[a] -= dy * share_a
-                px[b] += dx * share_b
-                py[b] += dy * share_b
-                pushed[a] = True
-                pushed[b] = True
-                moved[a] = True
-                moved[b] = True
-            for q in range(m):
-                a = near[q]
-                if moved[a]:  # only a robot a pair just moved can be in a wall again
-                    moved[a] = False
-                    px[a], py[a] = _out_of_obstacles(
-                        px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-                    )
-            if deepest < TOLERANCE_MM:
-                break
-        # A robot a crowd pushed farther than the margin may have reached an
-        # obstacle it was not near: the obstacles have the last word for it too.
-        for a in range(n):
-            if pushed[a] and not is_near[a]:
-                px[a], py[a] = _out_of_obstacles(
-                    px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-                )
+        _solve_contacts(
+            pairs,
+            order,
+            px,
+            py,
+            radius,
+            mass,
+            width,
+            height,
+            scene,
+            circles,
+            near,
+            m,
+            is_near,
+            pushed,
+            moved,
+            normals,
+            count,
+        )
     h = substep_s * substeps
     for a in range(n):
         # The velocity before the pose: ``out`` may be ``pose`` itself.
