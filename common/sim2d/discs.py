@@ -37,11 +37,15 @@ run is reproducible bit for bit.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 _CACHE = True
+# Kernels that allocate nothing and return no array: no reference counting
+# (common/sim2d/kernels.py, _UNCOUNTED, says why and what it requires).
+_UNCOUNTED: dict[str, Any] = {"_nrt": False}
 
 # Contact sweeps per substep: until no pair overlaps by more than TOLERANCE_MM,
 # at most MAX_SWEEPS. A free swarm needs one or two; a crowd pressed into a
@@ -88,44 +92,46 @@ def _static_cell(v, cell, n):  # pragma: no cover
 
 
 @njit(cache=_CACHE)
-def _pairs(px, py, radius, width, height, cell, margin):  # pragma: no cover
+def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
     """Every pair of discs closer than their radii plus ``margin``: (M, 2) slots.
 
     The discs are sorted by cell (a counting sort) and copied in that order, so
     the scan reads neighbours from contiguous memory rather than from random
     slots; each cell is compared with itself and four of its neighbours (the
     other four compare with it), so each pair is found once. The pairs come
-    out in cell order, the same for the same poses.
+    out in cell order, the same for the same poses. ``buffers`` are
+    :func:`drive_buffers`' last eight (a grid larger than its cell offsets
+    gets new ones).
     """
+    home, slot, sk, sx, sy, sr, start, out = buffers
     n = px.shape[0]
     gx = (math.floor(width / cell)) + 1
     gy = (math.floor(height / cell)) + 1
     ncell = gx * gy
-    start = np.zeros(ncell + 1, dtype=np.int64)
-    home = np.empty(n, dtype=np.int64)
+    if start.shape[0] < ncell + 1:
+        start = np.empty(ncell + 1, dtype=np.int64)
+    for k in range(ncell + 1):
+        start[k] = 0
     for a in range(n):
         k = _cell(px[a], cell, gx) * gy + _cell(py[a], cell, gy)
         home[a] = k
-        start[k + 1] += 1
-    for k in range(ncell):
-        start[k + 1] += start[k]
-    fill = start[:-1].copy()
-    slot = np.empty(n, dtype=np.int64)
-    sk = np.empty(n, dtype=np.int64)  # each sorted disc's cell, read in order below
-    for a in range(n):
+        start[k] += 1
+    # start[k]: the end of cell k's run; walking the discs backwards, each takes
+    # the last free place of its cell's run (so a cell's discs stay in slot
+    # order), and start[k] ends at the run's start.
+    for k in range(1, ncell):
+        start[k] += start[k - 1]
+    start[ncell] = n
+    for a in range(n - 1, -1, -1):
         k = home[a]
-        slot[fill[k]] = a
-        sk[fill[k]] = k
-        fill[k] += 1
-    sx = np.empty(n)
-    sy = np.empty(n)
-    sr = np.empty(n)
+        start[k] -= 1
+        slot[start[k]] = a
+        sk[start[k]] = k  # each sorted disc's cell, read in order below
     for p in range(n):
         a = slot[p]
         sx[p] = px[a]
         sy[p] = py[a]
         sr[p] = radius[a]
-    out = np.empty((max(16, n), 2), dtype=np.int64)
     m = 0
     # The sorted discs in order are the cells in order with their discs: walking
     # the discs visits the same (cell, disc) sequence as walking every cell,
@@ -367,7 +373,7 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
     return np.argsort(key, kind="mergesort")
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def _wall_normals(
     near, m, px, py, radius, width, height, scene, circles, normals, count
 ):  # pragma: no cover
@@ -444,6 +450,124 @@ def _blocked(a, ux, uy, normals, count):  # pragma: no cover
     return False
 
 
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _obstacles_first(
+    px, py, radius, margin, width, height, scene, circles, near, is_near, pushed, moved, count, held
+):  # pragma: no cover
+    """A substep's obstacles: the robots near one listed in ``near``, and pushed out of it.
+
+    Returns how many are near; ``held[q]``: whether ``near[q]`` was pushed. Also
+    clears the pair flags (``pushed``, ``moved``) and the wall normals' ``count``.
+    Its own kernel, without reference counting (_UNCOUNTED): inlined in
+    tick_into, the helpers counted the scene's arrays in and out for every robot.
+    """
+    circ_start, circ_items = circles
+    m = 0
+    for a in range(px.shape[0]):
+        pushed[a] = False
+        moved[a] = False
+        count[a] = 0
+        is_near[a] = _near_obstacle(
+            px[a], py[a], radius[a], margin, width, height, scene, circ_start, circ_items
+        )
+        if is_near[a]:
+            near[m] = a
+            m += 1
+    # The obstacles first, then what each robot now touches.
+    for q in range(m):
+        a = near[q]
+        x, y = _out_of_obstacles(
+            px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+        )
+        held[q] = x != px[a] or y != py[a]
+        px[a] = x
+        py[a] = y
+    return m
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _solve_contacts(
+    pairs,
+    order,
+    px,
+    py,
+    radius,
+    mass,
+    width,
+    height,
+    scene,
+    circles,
+    near,
+    m,
+    is_near,
+    pushed,
+    moved,
+    normals,
+    count,
+):  # pragma: no cover
+    """The contact sweeps of a substep over ``pairs`` in ``order`` (see the module's docstring).
+
+    Without reference counting, as :func:`_obstacles_first`.
+    """
+    circ_start, circ_items = circles
+    for _sweep in range(MAX_SWEEPS):
+        deepest = 0.0
+        for i in range(order.shape[0]):
+            q = order[i]
+            a = pairs[q, 0]
+            b = pairs[q, 1]
+            dx = px[b] - px[a]
+            dy = py[b] - py[a]
+            lim = radius[a] + radius[b]
+            d2 = dx * dx + dy * dy
+            if d2 >= lim * lim:
+                continue
+            d = math.sqrt(d2)
+            if d < 1e-9:  # on top of each other: apart along x, in slot order
+                dx, dy, d = 1.0, 0.0, 1.0
+                depth = lim
+            else:
+                depth = lim - d
+            deepest = max(deepest, depth)
+            # Who gives way: not a robot the push would drive into a wall it
+            # touches (walls never give way); otherwise both, by mass.
+            stuck_a = _blocked(a, -dx / d, -dy / d, normals, count)
+            stuck_b = _blocked(b, dx / d, dy / d, normals, count)
+            if stuck_a and not stuck_b:
+                share_a, share_b = 0.0, depth / d
+            elif stuck_b and not stuck_a:
+                share_a, share_b = depth / d, 0.0
+            else:
+                ma = mass[a]
+                mb = mass[b]
+                share_a = depth * mb / (ma + mb) / d
+                share_b = depth * ma / (ma + mb) / d
+            px[a] -= dx * share_a
+            py[a] -= dy * share_a
+            px[b] += dx * share_b
+            py[b] += dy * share_b
+            pushed[a] = True
+            pushed[b] = True
+            moved[a] = True
+            moved[b] = True
+        for q in range(m):
+            a = near[q]
+            if moved[a]:  # only a robot a pair just moved can be in a wall again
+                moved[a] = False
+                px[a], py[a] = _out_of_obstacles(
+                    px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+                )
+        if deepest < TOLERANCE_MM:
+            break
+    # A robot a crowd pushed farther than the margin may have reached an
+    # obstacle it was not near: the obstacles have the last word for it too.
+    for a in range(px.shape[0]):
+        if pushed[a] and not is_near[a]:
+            px[a], py[a] = _out_of_obstacles(
+                px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
+            )
+
+
 @njit(cache=_CACHE)
 def tick(
     pose,
@@ -468,6 +592,7 @@ def tick(
     n = pose.shape[0]
     out = np.empty((n, 3))
     vel = np.empty((n, 3))
+    buffers = drive_buffers(n, width, height, radius)
     tick_into(
         pose,
         cmd,
@@ -485,8 +610,46 @@ def tick(
         substeps,
         out,
         vel,
+        buffers,
     )
     return out, vel
+
+
+@njit(cache=_CACHE)
+def drive_buffers(n, width, height, radius):  # pragma: no cover
+    """The work arrays of :func:`tick_into` for ``n`` robots of these radii in this arena.
+
+    Kept by common/sim2d/fused.py from tick to tick: without a tick's
+    twenty-odd allocations the drive took about 8 % less at 10 robots
+    (docs/BENCHMARKS.md, issue 22, 2026-11-26). The pair grid's cell offsets
+    are sized for its smallest cell (robots standing still); the pairs' table
+    for four pairs a robot, a crowd's (it grows if a tick needs more).
+    """
+    smallest = 2.0 * (np.max(radius) if n else 0.0) + SLACK_MM + 1.0
+    ncell = (math.floor(width / smallest) + 1) * (math.floor(height / smallest) + 1)
+    return (
+        np.empty(n),  # px, py, th: the poses being moved
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),  # v, w: forward speed and turn rate
+        np.empty(n),
+        np.empty(n, dtype=np.int64),  # near: the robots near an obstacle
+        np.empty(n, dtype=np.bool_),  # is_near
+        np.empty(n, dtype=np.bool_),  # pushed: by a pair, this substep
+        np.empty(n, dtype=np.bool_),  # moved: by a pair, this sweep
+        np.empty(n, dtype=np.bool_),  # held: pushed out of an obstacle
+        np.empty(n, dtype=np.int64),  # layer (_layers)
+        np.empty((n, 2, 2)),  # normals, count (_wall_normals)
+        np.zeros(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),  # _pairs: home, slot, sk, sx, sy, sr, start, out
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(ncell + 1, dtype=np.int64),
+        np.empty((max(16, 4 * n), 2), dtype=np.int64),
+    )
 
 
 @njit(cache=_CACHE)
@@ -507,6 +670,7 @@ def tick_into(
     substeps,
     out,
     vel,
+    buffers,
 ):  # pragma: no cover
     """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
 
@@ -517,15 +681,11 @@ def tick_into(
     ``pulses_per_tick`` per unit of speed. ``scene`` is the sensing grid's
     static scene as a plain tuple (kernels.StaticScene's layout), ``circles``
     its round obstacles binned by :func:`bin_circles`. ``vel`` is the tick's
-    mean velocity: x, y (mm/s) and turn rate (rad/s).
+    mean velocity: x, y (mm/s) and turn rate (rad/s). ``buffers``: its work
+    arrays, :func:`drive_buffers` for these robots and this arena.
     """
-    circ_start, circ_items = circles
     n = pose.shape[0]
-    px = np.empty(n)
-    py = np.empty(n)
-    th = np.empty(n)
-    v = np.empty(n)
-    w = np.empty(n)
+    px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     top_speed = 0.0
     top_radius = 0.0
     for a in range(n):
@@ -547,38 +707,27 @@ def tick_into(
     # Robots found in non-neighbouring cells are at least a cell apart, farther
     # than the largest pair plus the margin: they cannot touch within the substep.
     cell = 2.0 * top_radius + margin + 1.0
-    near = np.empty(n, dtype=np.int64)
-    is_near = np.empty(n, dtype=np.bool_)
-    pushed = np.empty(n, dtype=np.bool_)  # by a pair, this substep
-    moved = np.empty(n, dtype=np.bool_)  # by a pair, this sweep
-    held = np.empty(n, dtype=np.bool_)
-    layer = np.empty(n, dtype=np.int64)
-    normals = np.empty((n, 2, 2))
-    count = np.zeros(n, dtype=np.int64)
+    pair_buffers = buffers[13:]
     for _ in range(substeps):
         for a in range(n):
             px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
-        pairs = _pairs(px, py, radius, width, height, cell, margin)
-        m = 0
-        for a in range(n):
-            pushed[a] = False
-            moved[a] = False
-            count[a] = 0
-            is_near[a] = _near_obstacle(
-                px[a], py[a], radius[a], margin, width, height, scene, circ_start, circ_items
-            )
-            if is_near[a]:
-                near[m] = a
-                m += 1
-        # The obstacles first, then what each robot now touches.
-        for q in range(m):
-            a = near[q]
-            x, y = _out_of_obstacles(
-                px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-            )
-            held[q] = x != px[a] or y != py[a]
-            px[a] = x
-            py[a] = y
+        pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)
+        m = _obstacles_first(
+            px,
+            py,
+            radius,
+            margin,
+            width,
+            height,
+            scene,
+            circles,
+            near,
+            is_near,
+            pushed,
+            moved,
+            count,
+            held,
+        )
         if pairs.shape[0] == 0:
             # No two robots close: the sweeps would move nobody, and the walls'
             # normals and the layers serve only them (most substeps of a sparse
@@ -586,62 +735,25 @@ def tick_into(
             continue
         _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
         order = _layers(pairs, near, held, m, n, px, py, radius, layer)
-        for _sweep in range(MAX_SWEEPS):
-            deepest = 0.0
-            for i in range(order.shape[0]):
-                q = order[i]
-                a = pairs[q, 0]
-                b = pairs[q, 1]
-                dx = px[b] - px[a]
-                dy = py[b] - py[a]
-                lim = radius[a] + radius[b]
-                d2 = dx * dx + dy * dy
-                if d2 >= lim * lim:
-                    continue
-                d = math.sqrt(d2)
-                if d < 1e-9:  # on top of each other: apart along x, in slot order
-                    dx, dy, d = 1.0, 0.0, 1.0
-                    depth = lim
-                else:
-                    depth = lim - d
-                deepest = max(deepest, depth)
-                # Who gives way: not a robot the push would drive into a wall it
-                # touches (walls never give way); otherwise both, by mass.
-                stuck_a = _blocked(a, -dx / d, -dy / d, normals, count)
-                stuck_b = _blocked(b, dx / d, dy / d, normals, count)
-                if stuck_a and not stuck_b:
-                    share_a, share_b = 0.0, depth / d
-                elif stuck_b and not stuck_a:
-                    share_a, share_b = depth / d, 0.0
-                else:
-                    ma = mass[a]
-                    mb = mass[b]
-                    share_a = depth * mb / (ma + mb) / d
-                    share_b = depth * ma / (ma + mb) / d
-                px[a] -= dx * share_a
-                py[a] -= dy * share_a
-                px[b] += dx * share_b
-                py[b] += dy * share_b
-                pushed[a] = True
-                pushed[b] = True
-                moved[a] = True
-                moved[b] = True
-            for q in range(m):
-                a = near[q]
-                if moved[a]:  # only a robot a pair just moved can be in a wall again
-                    moved[a] = False
-                    px[a], py[a] = _out_of_obstacles(
-                        px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-                    )
-            if deepest < TOLERANCE_MM:
-                break
-        # A robot a crowd pushed farther than the margin may have reached an
-        # obstacle it was not near: the obstacles have the last word for it too.
-        for a in range(n):
-            if pushed[a] and not is_near[a]:
-                px[a], py[a] = _out_of_obstacles(
-                    px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
-                )
+        _solve_contacts(
+            pairs,
+            order,
+            px,
+            py,
+            radius,
+            mass,
+            width,
+            height,
+            scene,
+            circles,
+            near,
+            m,
+            is_near,
+            pushed,
+            moved,
+            normals,
+            count,
+        )
     h = substep_s * substeps
     for a in range(n):
         # The velocity before the pose: ``out`` may be ``pose`` itself.

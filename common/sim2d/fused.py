@@ -76,6 +76,11 @@ FIELDS = (
     "readings",  # (proximity, ambient, presence) written by a sensing pass
     "geometry",  # (width, height, substep s) of the arena and the tick
     "substeps",
+    # Work arrays, kept from tick to tick rather than allocated by each: forty-odd
+    # allocations a tick, about 1 us of a 15 us step at 10 robots (BENCHMARKS.md).
+    "drive_work",  # discs.drive_buffers
+    "circle_work",  # kernels.circle_buffers
+    "sense_work",  # kernels.scratch_buffers
 )
 structref.define_proxy(TickState, TickStateType, list(FIELDS))
 
@@ -97,7 +102,10 @@ def new_state(
     geometry,
     substeps,
 ):  # pragma: no cover
-    """A :class:`TickState` holding these (arrays by reference, not copied)."""
+    """A :class:`TickState` holding these (arrays by reference, not copied) and its work arrays."""
+    n = pose.shape[0]
+    width, height, _ = geometry
+    nc = n + objects[1].shape[0]
     return TickState(
         pose,
         vel,
@@ -113,6 +121,10 @@ def new_state(
         readings,
         geometry,
         substeps,
+        discs.drive_buffers(n, width, height, drive[2]),
+        K.circle_buffers(nc, scene[3] * scene[4]),
+        # objects[4] is the movable edges, where a MovingScene has them
+        K.scratch_buffers(tables, scene, objects, nc),
     )
 
 
@@ -148,11 +160,20 @@ def tick(state, sense, key, lights):  # pragma: no cover
         state.substeps,
         pose,
         state.vel,
+        state.drive_work,
     )
     if sense:
         objects = state.objects
         moving = (objects[0], objects[1], objects[2], objects[3], objects[4], lights, key)
-        K.sense((pose, state.arm, state.holding), state.tables, state.scene, moving, state.readings)
+        K.sense_into(
+            (pose, state.arm, state.holding),
+            state.tables,
+            state.scene,
+            moving,
+            state.readings,
+            state.circle_work,
+            state.sense_work,
+        )
 
 
 def _stamp_with_callees(dispatcher: Dispatcher, *modules: ModuleType) -> None:

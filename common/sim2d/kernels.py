@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -130,6 +130,16 @@ class Readings(NamedTuple):
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 _CACHE = True
+# Numba's option for a kernel compiled without reference counting. Each array a
+# compiled function receives (tuples of them included) or takes a view of is
+# counted in and out with an atomic operation, and an inlined helper counts its
+# array arguments at each call: at 10 robots that was about 14 % of a step
+# (docs/BENCHMARKS.md, issue 22, 2026-11-26). A kernel that allocates nothing
+# and returns no array needs none of it: its callers hold every array it
+# touches. One that returned an array (a buffer it had filled) corrupted the
+# heap: its caller released a reference it was never given. Numba refuses to
+# compile an allocation in such a kernel.
+_UNCOUNTED: dict[str, Any] = {"_nrt": False}
 # Threads a kernel may use: numba's pool, sized at import (NUMBA_NUM_THREADS, default
 # the machine's cores); set_num_threads can only lower it.
 MAX_THREADS = int(numba.config.NUMBA_NUM_THREADS)
@@ -731,29 +741,54 @@ def _shadow_table(robots, scene, moving):  # pragma: no cover
 
 @njit(cache=_CACHE)
 def _circles(robots, tables, scene, moving):  # pragma: no cover
+    """:func:`_circles_into` buffers of its own."""
+    nc = robots[0].shape[0] + moving[1].shape[0]
+    buffers = circle_buffers(nc, scene[3] * scene[4])
+    _circles_into(robots, tables, scene, moving, buffers)
+    return buffers
+
+
+@njit(cache=_CACHE)
+def circle_buffers(nc, ncell):  # pragma: no cover
+    """Buffers for :func:`_circles_into`: ``nc`` circles binned in ``ncell`` cells."""
+    return (
+        np.empty(nc),
+        np.empty(nc),
+        np.empty(nc),
+        np.empty(nc, dtype=np.int64),
+        np.empty(nc, dtype=np.bool_),
+        np.empty(ncell + 1, dtype=np.int64),
+        np.empty(nc, dtype=np.int64),
+        np.empty(nc, dtype=np.int64),
+    )
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
     """Every circle (the agents first, each owning itself, then the others), binned.
 
-    Returns (cx, cy, cr, cown, cobj, count, citems): the circles and a counting
+    Fills ``buffers`` (:func:`circle_buffers`): (cx, cy, cr, cown, cobj,
+    count, citems, ccell), the circles and a counting
     sort of them into the grid (``count`` the CSR offsets per cell, ``citems``
-    the circle indices cell by cell). Serial: O(circles), a small share of a pass.
+    the circle indices cell by cell, ``ccell`` each circle's cell). Serial:
+    O(circles + cells), a small share of a pass. Buffers rather than new
+    arrays, so that common/sim2d/fused.py can keep them from tick to tick.
+    The runs are filled backwards, which needs no copy of the offsets.
     """
     pose = robots[0]
     agent_f = tables[3]
     grid_nx, grid_ny, cell = scene[3], scene[4], scene[5]
     circ_xy, circ_r, circ_owner, circ_is_object = moving[0], moving[1], moving[2], moving[3]
+    cx, cy, cr, cown, cobj, count, citems, ccell = buffers
     n = pose.shape[0]
     nc_extra = circ_r.shape[0]
     nc = n + nc_extra
-    cx = np.empty(nc)
-    cy = np.empty(nc)
-    cr = np.empty(nc)
-    cown = np.empty(nc, dtype=np.int64)
-    cobj = np.zeros(nc, dtype=np.bool_)
     for a in range(n):
         cx[a] = pose[a, 0]
         cy[a] = pose[a, 1]
         cr[a] = agent_f[a, F_RADIUS]
         cown[a] = a
+        cobj[a] = False
     for c in range(nc_extra):
         cx[n + c] = circ_xy[c, 0]
         cy[n + c] = circ_xy[c, 1]
@@ -762,25 +797,26 @@ def _circles(robots, tables, scene, moving):  # pragma: no cover
         cobj[n + c] = circ_is_object[c]
 
     ncell = grid_nx * grid_ny
-    count = np.zeros(ncell + 1, dtype=np.int64)
-    ccell = np.empty(nc, dtype=np.int64)
+    for k in range(ncell + 1):
+        count[k] = 0
     for c in range(nc):
         k = _cell(cx[c], cell, grid_nx) * grid_ny + _cell(cy[c], cell, grid_ny)
         ccell[c] = k
-        count[k + 1] += 1
-    for k in range(ncell):
-        count[k + 1] += count[k]
-    fill = count[:-1].copy()
-    citems = np.empty(nc, dtype=np.int64)
-    for c in range(nc):
+        count[k] += 1
+    # count[k]: the end of cell k's run; walking the circles backwards, each
+    # takes the last free place of its cell's run, so the circles of a cell come
+    # out in increasing order, and count[k] ends at the run's start.
+    for k in range(1, ncell):
+        count[k] += count[k - 1]
+    count[ncell] = nc
+    for c in range(nc - 1, -1, -1):
         k = ccell[c]
-        citems[fill[k]] = c
-        fill[k] += 1
-    return cx, cy, cr, cown, cobj, count, citems
+        count[k] -= 1
+        citems[count[k]] = c
 
 
 @njit(cache=_CACHE)
-def _scratch(tables, scene, moving, nc):  # pragma: no cover
+def scratch_buffers(tables, scene, moving, nc):  # pragma: no cover
     """One worker's scratch arrays: ray directions, nearest hits, candidates."""
     nrays = tables[0].shape[1]
     return (
@@ -794,7 +830,7 @@ def _scratch(tables, scene, moving, nc):  # pragma: no cover
     )
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def _sense_range(
     lo, hi, robots, tables, scene, moving, out, circles, shadows, scratch
 ):  # pragma: no cover
@@ -822,7 +858,7 @@ def _sense_range(
     edges, lights = moving[4], moving[5]
     key = np.uint64(moving[6])  # a plain int key would turn the words' arithmetic to floats
     prox_out, amb_out, presence_out = out
-    cx, cy, cr, cown, cobj, count, citems = circles
+    cx, cy, cr, cown, cobj, count, citems, _ = circles
     dx, dy, per_sensor, total, cand, ecand, scand = scratch
     n_amb = amb_local.shape[1]
     n_prox = prox_out.shape[1]
@@ -1048,11 +1084,24 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
     ``moving`` (MovingScene) and ``out`` (Readings) are the packs defined above,
     passed as plain tuples in that layout (see SensorSuite.read: dispatch cost).
     """
-    circles = _circles(robots, tables, scene, moving)
+    nc = robots[0].shape[0] + moving[1].shape[0]
+    buffers = circle_buffers(nc, scene[3] * scene[4])
+    sense_into(
+        robots, tables, scene, moving, out, buffers, scratch_buffers(tables, scene, moving, nc)
+    )
+
+
+@njit(cache=_CACHE)
+def sense_into(robots, tables, scene, moving, out, buffers, scratch):  # pragma: no cover
+    """:func:`sense` in the caller's ``buffers`` (:func:`circle_buffers`) and ``scratch``.
+
+    For common/sim2d/fused.py, whose state keeps them from tick to tick: the
+    same readings, without a pass's allocations.
+    """
+    _circles_into(robots, tables, scene, moving, buffers)
     shadows = _shadow_table(robots, scene, moving)
-    scratch = _scratch(tables, scene, moving, circles[0].shape[0])
     n = robots[0].shape[0]
-    _sense_range(0, n, robots, tables, scene, moving, out, circles, shadows, scratch)
+    _sense_range(0, n, robots, tables, scene, moving, out, buffers, shadows, scratch)
 
 
 @njit(cache=_CACHE, parallel=True)
@@ -1078,7 +1127,7 @@ def sense_parallel(robots, tables, scene, moving, out, threads):  # pragma: no c
     for c in prange(chunks):
         lo = n * c // chunks
         hi = n * (c + 1) // chunks
-        scratch = _scratch(tables, scene, moving, nc)
+        scratch = scratch_buffers(tables, scene, moving, nc)
         _sense_range(lo, hi, robots, tables, scene, moving, out, circles, shadows, scratch)
 
 
