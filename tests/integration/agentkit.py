@@ -98,6 +98,25 @@ def start_runner(lab: Lab, name: str = "runner") -> Proc:
     return proc
 
 
+def start_deploy(lab: Lab, controller: Path, agent: str, user: str, ctx: str = CTX) -> Proc:
+    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the labkit password)."""
+    return lab.procs.start(
+        "deploy",
+        [
+            "deploy",
+            str(controller),
+            "--context",
+            ctx,
+            "--agent",
+            agent,
+            "--user",
+            user,
+            *lab.net_args(),
+        ],
+        env={"WART_PASSWORD": PASSWORD},
+    )
+
+
 def start_agent_context(
     lab: Lab,
     *extra: str,

@@ -6,10 +6,17 @@ from the agent context while the runner and its sandboxes run on: the
 context asks the runner what it still runs rather than trusting the token,
 so the student's controller goes on. A runner killed and restarted runs
 nothing of before: the student is told why their controller ended.
+
+The other far end of a run, its world, frozen mid-slot (a swapping or hung
+host): the student is told their robot's readings stopped, and when they
+return, instead of a controller that "runs" on a robot that neither reads
+nor moves.
 """
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,8 +26,15 @@ import pytest
 from common.keys import AliveKind
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Proc, Procs, Router, free_port, wait_for
-from tests.integration.agentkit import service_account, start_agent_context, start_engine
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.integration.agentkit import (
+    WORLD,
+    service_account,
+    start_agent_context,
+    start_deploy,
+    start_engine,
+    start_runner,
+)
+from tests.integration.labkit import Lab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -86,22 +100,8 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     yield lab
 
 
-def deploy(lab: Lab, procs: Procs) -> Proc:
-    proc = procs.start(
-        "deploy",
-        [
-            "deploy",
-            str(CONTROLLERS / "forward.py"),
-            "--context",
-            "arena",
-            "--agent",
-            "k2",
-            "--user",
-            "bob",
-            *lab.net_args(),
-        ],
-        env={"WART_PASSWORD": PASSWORD},
-    )
+def deploy(lab: Lab) -> Proc:
+    proc = start_deploy(lab, CONTROLLERS / "forward.py", "k2", "bob")
     wait_for(lambda: "running on k2" in proc.output(), 60, "bob's controller running")
     return proc
 
@@ -111,7 +111,7 @@ def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
 ) -> None:
     host = RunnerHost(lab)
     context = start_agent_context(lab, slot=60.0)
-    student = deploy(lab, procs)
+    student = deploy(lab)
 
     # Its router dies and comes back: the runner and its sandbox live on, but for a
     # moment every token of that side is gone from the context's view.
@@ -136,3 +136,31 @@ def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
     assert RUNNER_END in student.output(), student.output()
     assert time.monotonic() - crashed < 30, "told within the check, not at the slot's end"
     assert "it came back without them" in context.output(), context.output()
+
+
+def test_a_frozen_world_is_said_to_the_student_and_so_is_its_return(lab: Lab) -> None:
+    start_runner(lab)
+    start_agent_context(lab, slot=120.0)
+    engine = next(p for p in lab.procs.started if p.name == "engine")
+    student = start_deploy(lab, CONTROLLERS / "forward.py", "k2", "bob")
+    wait_for(lambda: "controller Forward started" in student.output(), 60, "bob's controller")
+    assert "no readings" not in student.output(), student.output()
+
+    os.kill(engine.popen.pid, signal.SIGSTOP)
+    try:
+        wait_for(
+            lambda: "[runner] no readings from k2 for 5 s" in student.output(),
+            30,
+            "bob to be told his robot's readings stopped",
+        )
+    finally:
+        os.kill(engine.popen.pid, signal.SIGCONT)
+    said = student.output()
+    assert f"world {WORLD} sends none" in said and "tell the lab's staff" in said, said
+
+    wait_for(
+        lambda: "[runner] readings from k2 again after" in student.output(),
+        30,
+        "bob to be told the readings are back",
+    )
+    assert student.popen.poll() is None, "the run ended instead of going on"
