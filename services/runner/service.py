@@ -130,7 +130,8 @@ class Run:
                 continue
             if silent:
                 silent = False
-                self._say(f"readings from {self.request.agent} again after {now - last:.0f} s")
+                back = "again" if seen else "at last"  # a gap, or the slot's first ones
+                self._say(f"readings from {self.request.agent} {back} after {now - last:.0f} s")
             last, seen = now, newest
             if not self.sandbox.send_state(state_to_dict(self.link.latest())):
                 return
