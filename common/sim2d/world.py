@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pymunk
 
-from common.sim2d import bodies, chipmunk, discs, fused, kernels, sensing
+from common.sim2d import bodies, chipmunk, discs, fused, heap, kernels, sensing
 from common.sim2d.collision import (
     CAT_ALL,
     CAT_OBSTACLE,
@@ -157,6 +157,8 @@ class World:
         if drive not in DRIVES:
             raise EditError(f"drive must be one of {', '.join(DRIVES)}, not {drive!r}")
         self.drive = drive
+        # A tick's freed arrays stay in the heap for the next tick (common/sim2d/heap.py).
+        heap.keep_freed_memory()
         # What lowered tongs collide with (the gripper turret sets it on arms it lowers).
         self.tongs_mask = CAT_ALL if drive == "joints" else TONGS_MASK_LIGHT
         # Whether the robots' tongs are in the space. Tongs that collide with movable
