@@ -425,15 +425,7 @@ class SensorSuite:
         tables, scene, moving = self.packs(world, world.sim_time)
         robots = (world.agent_pose, world.arm, world.holding())
         if world.threads > 1 and len(world.agent_pose) >= PARALLEL_MIN_AGENTS:
-            # Both settings are per calling thread (the sim thread's). Chunks handed out
-            # one at a time: on a shared machine a worker may be descheduled, and the
-            # others then take its share instead of waiting for it at the barrier.
-            numba.set_num_threads(world.threads)
-            chunk = numba.set_parallel_chunksize(1)
-            try:
-                K.sense_parallel(robots, tables, scene, moving, tuple(out), world.threads)
-            finally:
-                numba.set_parallel_chunksize(chunk)
+            sense_on_threads(robots, tables, scene, moving, tuple(out), world.threads)
         else:
             K.sense(robots, tables, scene, moving, tuple(out))
         return out
@@ -455,6 +447,26 @@ class SensorSuite:
                 self._lights.clear()
             table = self._lights[key] = np.array(key, dtype=np.float64)
         return table
+
+
+def sense_on_threads(
+    robots: tuple[np.ndarray, ...],
+    tables: tuple[object, ...],
+    scene: tuple[object, ...],
+    moving: tuple[object, ...],
+    out: tuple[np.ndarray, ...],
+    threads: int,
+) -> None:
+    """kernels.sense_parallel on ``threads`` threads: the packs as SensorSuite.packs makes them."""
+    # Both settings are per calling thread (the sim thread's). Chunks handed out
+    # one at a time: on a shared machine a worker may be descheduled, and the
+    # others then take its share instead of waiting for it at the barrier.
+    numba.set_num_threads(threads)
+    chunk = numba.set_parallel_chunksize(1)
+    try:
+        K.sense_parallel(robots, tables, scene, moving, out, threads)
+    finally:
+        numba.set_parallel_chunksize(chunk)
 
 
 def _objects(

@@ -878,18 +878,21 @@ class World:
         circles = discs.bin_circles(
             static.circle_centres, static.circle_radii, scene.grid_nx, scene.grid_ny, scene.cell
         )
+        holding = np.zeros(n, dtype=bool)  # the discs drive has no movable objects to hold
+        tables = self.sensors.agents.kernel_tables
+        objects = (*static.no_objects, sensing.NO_EDGES)
         state = fused.new_state(
             pose,
             vel,
             self.cmd,
             self.counters,
             self.arm,
-            np.zeros(n, dtype=bool),  # the discs drive has no movable objects to hold
+            holding,
             drive,
             circles,
-            self.sensors.agents.kernel_tables,
+            tables,
             static.kernel_scene,
-            (*static.no_objects, sensing.NO_EDGES),
+            objects,
             readings,
             (self.width, self.height, self.tick_s / self.substeps),
             self.substeps,
@@ -903,6 +906,11 @@ class World:
             pose,
             vel,
             *readings,
+            holding,
+            tables,
+            static.kernel_scene,
+            objects,
+            n >= sensing.PARALLEL_MIN_AGENTS,
         )
         return f
 
@@ -926,7 +934,18 @@ class World:
             key = self.noise.next()
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
-        f.call(f.state, sense, key, lights)
+        on_threads = sense and f.swarm and self.threads > 1
+        f.call(f.state, sense and not on_threads, key, lights)
+        if on_threads:
+            # The same pass on the world's threads, in the state's own arrays.
+            sensing.sense_on_threads(
+                (f.pose, self.arm, f.holding),
+                f.tables,
+                f.scene,
+                (*f.objects, lights, key),
+                (f.proximity, f.ambient, f.presence),
+                self.threads,
+            )
         # The buffers are handed out as copies at their first read (_CopiedOnRead).
         d = self.__dict__
         d["_agent_pose_buffer"] = f.pose
@@ -943,17 +962,11 @@ class World:
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
         profile = self.profile
-        # The discs drive in one compiled call where sensing runs on one thread
-        # (fused.tick says why). Not while profiling: the profile times physics
+        # The discs drive in one compiled call, its sensing pass too where it runs
+        # on one thread (fused.tick says why). Not while profiling: the profile times physics
         # and sensing apart, which the general path below does with the same
         # results.
-        if (
-            self.drive == "discs"
-            and not profile
-            and self.agents
-            and not self.grippers.held
-            and (self.threads == 1 or len(self.agents) < sensing.PARALLEL_MIN_AGENTS)
-        ):
+        if self.drive == "discs" and not profile and self.agents and not self.grippers.held:
             self._step_fused()
             return
         # The fused state's buffers would fall behind this tick: built afresh if needed.
@@ -1106,6 +1119,13 @@ class _FusedTick:
     proximity: np.ndarray
     ambient: np.ndarray
     presence: np.ndarray
+    # What a sensing pass on threads reads besides the poses (World._step_fused):
+    # the state's own, as fused.tick's pass reads them.
+    holding: np.ndarray
+    tables: tuple[object, ...]
+    scene: tuple[object, ...]
+    objects: tuple[object, ...]
+    swarm: bool  # enough robots for a pass on threads (sensing.PARALLEL_MIN_AGENTS)
 
 
 def id_of(body: pymunk.Body) -> int:

@@ -4,8 +4,8 @@ What a user relies on: a world on the discs drive gives the same poses,
 velocities, counters and readings, bit for bit, whether a tick runs as one
 compiled call or as the general path (a profiled world takes the latter);
 edits between ticks (a move, new counters, a robot added or removed, an
-obstacle) are seen by the next tick; a swarm sensed on two threads (the
-general path) runs the one-thread run (fused); and arrays a caller took from the world
+obstacle) are seen by the next tick; a swarm sensed on two threads (outside
+the fused call) runs the one-thread run; and arrays a caller took from the world
 do not change under it when the world steps on.
 """
 
@@ -99,18 +99,23 @@ def test_arrays_taken_from_the_world_keep_their_values() -> None:
 
 @pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
 def test_a_swarm_on_two_threads_runs_the_one_thread_run_bit_for_bit() -> None:
-    # Past sensing.PARALLEL_MIN_AGENTS a world with two threads takes the general
-    # path (sensing on numba's threads), one thread the fused call: the same run.
+    # Past sensing.PARALLEL_MIN_AGENTS a world with two threads runs its drive
+    # in the fused call and its sensing pass on numba's threads, in the fused
+    # state's arrays; one thread runs both in the fused call; a profiled world
+    # runs the general path. All three: the same run.
     n = 2 * sensing.PARALLEL_MIN_AGENTS
     one = build(n, seed=5, drive="discs")
     two = build(n, seed=5, drive="discs", threads=2)
-    for _ in range(25):
-        for world in (one, two):
+    general = build(n, seed=5, drive="discs", threads=2)
+    general.profile = True
+    for t in range(25):
+        for world in (one, two, general):
             control(world)
             world.step()
-    assert one._fused is not None and two._fused is None
-    for a, b in zip(_state(one), _state(two), strict=True):
-        np.testing.assert_array_equal(a, b)
+        for a, b, c in zip(_state(one), _state(two), _state(general), strict=True):
+            np.testing.assert_array_equal(a, b, err_msg=f"tick {t}")
+            np.testing.assert_array_equal(a, c, err_msg=f"tick {t}")
+    assert one._fused is not None and two._fused is not None
 
 
 def test_a_world_switching_between_fused_and_general_ticks_runs_the_general_run() -> None:
