@@ -765,15 +765,20 @@ def circle_buffers(nc, ncell):  # pragma: no cover
 
 @njit(cache=_CACHE, **_UNCOUNTED)
 def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
-    """Every circle (the agents first, each owning itself, then the others), binned.
+    """Every circle (the agents, each owning itself, then the others), binned cell by cell.
 
     Fills ``buffers`` (:func:`circle_buffers`): (cx, cy, cr, cown, cobj,
-    count, citems, ccell), the circles and a counting
-    sort of them into the grid (``count`` the CSR offsets per cell, ``citems``
-    the circle indices cell by cell, ``ccell`` each circle's cell). Serial:
-    O(circles + cells), a small share of a pass. Buffers rather than new
-    arrays, so that common/sim2d/fused.py can keep them from tick to tick.
-    The runs are filled backwards, which needs no copy of the offsets.
+    count, citems, ccell). A counting sort puts the circles in the grid's
+    order: ``count`` holds the CSR offsets per cell, and cx, cy, cr, cown,
+    cobj are the circles in that order, cell after cell (a circle's index
+    there is its place in the sort, not its index among the circles), so a
+    robot's neighbours are read from three runs of memory, not from all over
+    it. ``citems`` holds each place's index among the circles; ``ccell``
+    each circle's cell. Within a cell the circles keep their order (agents
+    first, by slot). Serial: O(circles + cells), a small share of a pass.
+    Buffers rather than new arrays, so that common/sim2d/fused.py can keep
+    them from tick to tick. The runs are filled backwards, which needs no
+    copy of the offsets.
     """
     pose = robots[0]
     agent_f = tables[3]
@@ -783,24 +788,16 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
     n = pose.shape[0]
     nc_extra = circ_r.shape[0]
     nc = n + nc_extra
-    for a in range(n):
-        cx[a] = pose[a, 0]
-        cy[a] = pose[a, 1]
-        cr[a] = agent_f[a, F_RADIUS]
-        cown[a] = a
-        cobj[a] = False
-    for c in range(nc_extra):
-        cx[n + c] = circ_xy[c, 0]
-        cy[n + c] = circ_xy[c, 1]
-        cr[n + c] = circ_r[c]
-        cown[n + c] = circ_owner[c]
-        cobj[n + c] = circ_is_object[c]
 
     ncell = grid_nx * grid_ny
     for k in range(ncell + 1):
         count[k] = 0
     for c in range(nc):
-        k = _cell(cx[c], cell, grid_nx) * grid_ny + _cell(cy[c], cell, grid_ny)
+        if c < n:
+            x, y = pose[c, 0], pose[c, 1]
+        else:
+            x, y = circ_xy[c - n, 0], circ_xy[c - n, 1]
+        k = _cell(x, cell, grid_nx) * grid_ny + _cell(y, cell, grid_ny)
         ccell[c] = k
         count[k] += 1
     # count[k]: the end of cell k's run; walking the circles backwards, each
@@ -812,7 +809,20 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
     for c in range(nc - 1, -1, -1):
         k = ccell[c]
         count[k] -= 1
-        citems[count[k]] = c
+        p = count[k]
+        citems[p] = c
+        if c < n:
+            cx[p] = pose[c, 0]
+            cy[p] = pose[c, 1]
+            cr[p] = agent_f[c, F_RADIUS]
+            cown[p] = c
+            cobj[p] = False
+        else:
+            cx[p] = circ_xy[c - n, 0]
+            cy[p] = circ_xy[c - n, 1]
+            cr[p] = circ_r[c - n]
+            cown[p] = circ_owner[c - n]
+            cobj[p] = circ_is_object[c - n]
 
 
 @njit(cache=_CACHE)
@@ -858,7 +868,7 @@ def _sense_range(
     edges, lights = moving[4], moving[5]
     key = np.uint64(moving[6])  # a plain int key would turn the words' arithmetic to floats
     prox_out, amb_out, presence_out = out
-    cx, cy, cr, cown, cobj, count, citems, _ = circles
+    cx, cy, cr, cown, cobj, count = circles[:6]
     dx, dy, per_sensor, total, cand, ecand, scand = scratch
     n_amb = amb_local.shape[1]
     n_prox = prox_out.shape[1]
@@ -885,8 +895,8 @@ def _sense_range(
         for gx in range(max(ix - 1, 0), min(ix + 2, grid_nx)):
             for gy in range(max(iy - 1, 0), min(iy + 2, grid_ny)):
                 k = gx * grid_ny + gy
-                for p in range(count[k], count[k + 1]):
-                    c = citems[p]
+                # c: the circle's place in the grid's order (_circles_into)
+                for c in range(count[k], count[k + 1]):
                     if cown[c] == a:
                         continue
                     ddx = cx[c] - x
