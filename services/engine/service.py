@@ -63,8 +63,35 @@ from common.sim2d import maps, wander
 from common.sim2d.world import EditError, World
 from common.world_service import WorldService
 from services.engine import wire
+from services.engine.pace import PaceWatch
 
 _FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
+# Robots from which declaring their sensor publishers is logged as it goes.
+_SAY_PUBLISHERS_FROM = 1000
+_PROGRESS_EVERY_S = 3.0
+
+
+class _Progress:
+    """Log lines for a long declaration: at the start, every few seconds, at the end."""
+
+    def __init__(self, log: Any, total: int) -> None:
+        self.log = log
+        self.total = total
+        self.started = self.said = time.monotonic()
+        log.info("declaring the sensor publishers of %d robots (a few seconds a thousand)", total)
+
+    def at(self, done: int) -> None:
+        now = time.monotonic()
+        if now - self.said >= _PROGRESS_EVERY_S:
+            self.said = now
+            self.log.info("sensor publishers: %d of %d declared", done, self.total)
+
+    def done(self) -> None:
+        self.log.info(
+            "sensor publishers: all %d declared in %.1f s",
+            self.total,
+            time.monotonic() - self.started,
+        )
 
 
 @dataclass(frozen=True)
@@ -123,6 +150,8 @@ class EngineService(WorldService):
         self._matched: set[str] = set()
         self._match_lock = threading.Lock()
         self.ticks_late = 0
+        # Whether the world keeps the asked pace, said in the log when it does not.
+        self.pace = PaceWatch(None if settings.fast else settings.speed, self._describe)
         self._journal: Journal | None = None
         self.replayed_edits = 0
         if settings.base_map:
@@ -206,7 +235,13 @@ class EngineService(WorldService):
             self._agent_pubs.pop(agent).undeclare()
             with self._match_lock:
                 self._matched.discard(agent)
-        for agent in sorted(wanted - set(self._agent_pubs)):
+        todo = sorted(wanted - set(self._agent_pubs))
+        # Zenoh's cost per publisher grows with their number: 10,000 took about
+        # 30 s here (docs/OPERATIONS.md, "Swarms"), so a big world says so as it goes.
+        progress = _Progress(self.log, len(todo)) if len(todo) >= _SAY_PUBLISHERS_FROM else None
+        for done, agent in enumerate(todo):
+            if progress is not None:
+                progress.at(done)
             pub = self.session.declare_publisher(
                 keys.agent_sensors(self.realm, self.ident, agent), express=True
             )
@@ -223,6 +258,8 @@ class EngineService(WorldService):
                 with self._match_lock:
                     self._matched.add(agent)
             self._agent_pubs[agent] = pub
+        if progress is not None:
+            progress.done()
 
     # -- callbacks (Zenoh threads): verify, then queue
 
@@ -481,6 +518,10 @@ class EngineService(WorldService):
         if batch is not None:
             self._batch_pub.put(batch)
 
+    def _describe(self) -> str:
+        world = self.world
+        return f"world {world.name} ({len(world.agents)} robots, {world.drive} drive)"
+
     def _run(self) -> None:
         settings = self.settings
         period = 0.0 if settings.fast else settings.tick_s / settings.speed
@@ -501,6 +542,11 @@ class EngineService(WorldService):
                 if not settings.fast or now - last_publish >= _FAST_PUBLISH_S:
                     last_publish = now
                     self._publish()
+                report = self.pace.tick(self.world.sim_time)
+                if report is not None:
+                    (self.log.warning if report.level == "warning" else self.log.info)(
+                        "%s", report.text
+                    )
             except Exception:
                 self.log.exception("error in tick %d (kept running)", self.world.tick)
             if settings.fast:
