@@ -14,6 +14,7 @@ its own ``alive`` namespace.
     wart/<realm>/world/<world>/{snapshot,edit,map}         world queryables
     wart/<realm>/world/<world>/{frame,sensors}             world frame / all sensors each tick
     wart/<realm>/world/<world>/agent/<agent>/{sensors,cmd,lease}
+    wart/<realm>/world/<world>/agent/<agent>/watch        liveliness: someone reads its sensors
     wart/<realm>/runner/<runner>/run                       runner queryable
     wart/<realm>/host/<host>/{spawn,load}                  host queryable / load reports
 
@@ -271,6 +272,20 @@ def agent_sensors(realm: str, world: str, agent: str) -> str:
 
 def agent_sensors_all(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/agent/*/sensors"
+
+
+def agent_watch(realm: str, world: str, agent: str) -> str:
+    """Liveliness token of a subscriber to ``agent_sensors``: the world's cue to publish them.
+
+    A world of more robots than it declares publishers for up front (the
+    engine's ``--streams-up-front``) declares an agent's publisher only once
+    the agent is watched (a token here) or leased.
+    """
+    return f"{_agent(realm, world, agent)}/watch"
+
+
+def agent_watch_all(realm: str, world: str) -> str:
+    return f"{_world(realm, world)}/agent/*/watch"
 
 
 @functools.lru_cache(maxsize=4096)

@@ -559,12 +559,15 @@ class ZenohRobotLink:
             else None
         )
         self._subscriber = None
+        self._watch = None
         if channel is not None:
             channel.attach(self)
         else:
             self._subscriber = zsession.declare_subscriber(
                 keys.agent_sensors(realm, world, agent), self._on_sample
             )
+            # A world of many robots publishes a robot's samples once it is watched.
+            self._watch = zsession.liveliness().declare_token(keys.agent_watch(realm, world, agent))
         self._keepalive_s = keepalive
         self._keepalive = threading.Thread(
             target=self._keep_alive, name=f"keepalive-{agent}", daemon=True
@@ -702,7 +705,7 @@ class ZenohRobotLink:
             self._fresh.notify_all()
         if self._channel is not None:
             self._channel.detach(self)
-        for handle in (self._subscriber, self._publisher, self._lease_sub):
+        for handle in (self._subscriber, self._watch, self._publisher, self._lease_sub):
             if handle is None:
                 continue
             try:

@@ -25,7 +25,7 @@ from common.service_login import add_world_identity_args, world_login
 from common.sim2d import kernels
 from common.sim2d.maps import MapError, load_map
 from common.sim2d.world import DRIVES
-from services.engine.service import EngineService, EngineSettings
+from services.engine.service import STREAMS_UP_FRONT, EngineService, EngineSettings
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
@@ -78,6 +78,17 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         "chipmunk; no movable objects): the last two for swarms, docs/ARCHITECTURE.md "
         "section 9",
     )
+    p.add_argument(
+        "--streams-up-front",
+        type=int,
+        default=STREAMS_UP_FRONT,
+        metavar="N",
+        help=f"declare every robot's sensor publisher at start in worlds of up to N robots "
+        f"(default {STREAMS_UP_FRONT}); in bigger ones, a robot's publisher is declared when "
+        "someone watches it (a liveliness token on its agent/<a>/watch key, which the lab's "
+        "viewer and robot clients declare) or it is leased. Zenoh's cost per publisher "
+        "grows with their number: 10,000 took 35 s here",
+    )
     add_world_identity_args(p)
     args, options = cli.parse(p, argv)
     assert options is not None
@@ -92,6 +103,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         p.error("--speed must be between 0.01 and 10000")
     if args.watchdog_ms <= 0:
         p.error("--watchdog-ms must be positive")
+    if args.streams_up_front < 0:
+        p.error("--streams-up-front must be 0 or more")
     for flag, value in (("--threads", args.threads), ("--physics-threads", args.physics_threads)):
         if not 1 <= value <= kernels.MAX_THREADS:
             p.error(f"{flag} must be between 1 and {kernels.MAX_THREADS} (numba's thread pool)")
@@ -130,6 +143,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         threads=args.threads,
         physics_threads=args.physics_threads,
         drive=args.drive,
+        streams_up_front=args.streams_up_front,
     )
 
     def build(session: zenoh.Session) -> EngineService:

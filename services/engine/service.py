@@ -66,6 +66,9 @@ from services.engine import wire
 from services.engine.pace import PaceWatch
 
 _FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
+# Worlds of up to this many robots declare every robot's sensor publisher at
+# start; bigger ones only those watched or leased (EngineSettings.streams_up_front).
+STREAMS_UP_FRONT = 1000
 # Robots from which declaring their sensor publishers is logged as it goes.
 _SAY_PUBLISHERS_FROM = 1000
 _PROGRESS_EVERY_S = 3.0
@@ -112,6 +115,18 @@ class EngineSettings:
     threads: int = 1
     physics_threads: int = 1
     drive: str = "joints"  # World.drive, kept when a map is loaded on request
+    # Worlds of more robots declare a robot's sensor publisher only once someone
+    # watches it (keys.agent_watch) or it is leased: Zenoh's cost per publisher
+    # grows with their number (10,000 took 35 s, docs/OPERATIONS.md "Swarms").
+    streams_up_front: int = STREAMS_UP_FRONT
+
+
+@dataclass(frozen=True)
+class _Stream:
+    """An agent someone started (or stopped) watching, or one just leased."""
+
+    agent: str
+    watched: bool | None  # None: leased
 
 
 @dataclass
@@ -148,6 +163,12 @@ class EngineService(WorldService):
         self._halt = threading.Event()
         self._agent_pubs: dict[str, Any] = {}
         self._matched: set[str] = set()
+        # Agents whose sensors someone watches (their agent/<a>/watch tokens) or
+        # that were leased: in a world past streams_up_front, the only ones with
+        # a publisher. Sim thread only.
+        self._watched: set[str] = set()
+        self._leased: set[str] = set()
+        self._on_demand = False
         self._match_lock = threading.Lock()
         self.ticks_late = 0
         # Whether the world keeps the asked pace, said in the log when it does not.
@@ -214,6 +235,12 @@ class EngineService(WorldService):
         if self.verifier is None:
             self.log.warning("no --registry-key: every command, lease and edit will be refused")
         self.declare_world_interface()
+        # History: tokens declared before this engine started count too.
+        self.track(
+            self.session.liveliness().declare_subscriber(
+                keys.agent_watch_all(self.realm, self.ident), self._on_watch, history=True
+            )
+        )
         self._declare_agent_publishers()
         self._thread = threading.Thread(target=self._run, name=f"sim-{self.ident}", daemon=True)
         self._thread.start()
@@ -229,9 +256,37 @@ class EngineService(WorldService):
 
     # -- per-agent sensor publishers, only used when someone listens
 
+    def _on_watch(self, sample: zenoh.Sample) -> None:
+        agent = keys.parse_agent_key(self.realm, self.ident, str(sample.key_expr))
+        if agent is not None:
+            self._work.put(_Stream(agent, sample.kind == zenoh.SampleKind.PUT))
+
+    def _stream(self, item: _Stream) -> None:
+        """Sim thread: note who is watched or leased; declare what is now wanted."""
+        if item.watched is None:
+            self._leased.add(item.agent)
+        elif item.watched:
+            self._watched.add(item.agent)
+        else:
+            # Its publisher stays: a robot watched once is likely watched again,
+            # and an unmatched publisher costs nothing a tick.
+            self._watched.discard(item.agent)
+        if self._on_demand and item.agent not in self._agent_pubs:
+            self._declare_agent_publishers()
+
     def _declare_agent_publishers(self) -> None:
-        wanted = {a.id for a in self.world.agents}
-        for agent in set(self._agent_pubs) - wanted:
+        present = {a.id for a in self.world.agents}
+        on_demand = len(present) > self.settings.streams_up_front
+        if on_demand and not self._on_demand:
+            self.log.info(
+                "%d robots, more than --streams-up-front %d: a robot's sensor publisher "
+                "is declared when someone watches it or it is leased",
+                len(present),
+                self.settings.streams_up_front,
+            )
+        self._on_demand = on_demand
+        wanted = present & (self._watched | self._leased) if on_demand else present
+        for agent in set(self._agent_pubs) - present:
             self._agent_pubs.pop(agent).undeclare()
             with self._match_lock:
                 self._matched.discard(agent)
@@ -269,7 +324,9 @@ class EngineService(WorldService):
         return self.verifier.open(key, payload, expected)
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
-        self.leases.accept_lease(str(sample.key_expr), sample.payload)
+        lease = self.leases.accept_lease(str(sample.key_expr), sample.payload)
+        # A leased robot gets its sensor publisher, watched or not (_stream).
+        self._work.put(_Stream(lease.agent, None))
 
     def lease_of(self, agent: str) -> Lease | None:
         return self.leases.lease_of(agent)
@@ -415,6 +472,9 @@ class EngineService(WorldService):
             if isinstance(item, _Command):
                 self._apply(item)
                 continue
+            if isinstance(item, _Stream):
+                self._stream(item)
+                continue
             fn, future = item
             # Errors become reply messages here, never exceptions handed across
             # threads: a re-raised exception's traceback would keep the Zenoh
@@ -490,7 +550,9 @@ class EngineService(WorldService):
         # after it: work right after a put delays it, since on two cores Zenoh's I/O thread
         # waits for the core this thread holds (the sample leg was 0.28 ms longer than a
         # plain Zenoh peer's with the frame built after it; docs/BENCHMARKS.md).
-        frame = encode(wire.frame(world))
+        # Nobody watching the world (a headless swarm): no frame to build (0.4 ms
+        # a tick at 10,000 robots, and its encoding).
+        frame = encode(wire.frame(world)) if self._frame_pub.matching_status.matching else None
         batch = encode(wire.batch(world)) if self._batch_pub.matching_status.matching else None
         with self._match_lock:
             listening = set(self._matched)
@@ -514,7 +576,8 @@ class EngineService(WorldService):
                 payload = encoded.get(agent)
                 if pub is not None and payload is not None:
                     pub.put(payload)
-        self._frame_pub.put(frame)
+        if frame is not None:
+            self._frame_pub.put(frame)
         if batch is not None:
             self._batch_pub.put(batch)
 

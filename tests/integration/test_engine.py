@@ -467,3 +467,51 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
         for link in links.values():
             link.close(stop=False)
         channel.close()
+
+
+def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
+    router: Router,
+    procs: Procs,
+    zsession: zenoh.Session,
+    identity: RegistryIdentity,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    # Four robots over --streams-up-front 2: the engine declares no sensor
+    # publisher up front (at 10,000 robots that took 35 s), only for robots
+    # someone watches (their agent/<a>/watch token) or that are leased.
+    start_engine(router, procs, identity, alive_watch, tmp_path, "--streams-up-front", "2")
+    realm = router.realm
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    plain = Latest(zsession, keys.agent_sensors(realm, WORLD, "k1"), SensorSample)
+    watched = Latest(zsession, keys.agent_sensors(realm, WORLD, "k2"), SensorSample)
+    leased = Latest(zsession, keys.agent_sensors(realm, WORLD, "k3"), SensorSample)
+    wait_for(lambda: frames.count > 20, 15, "frames")
+    assert watched.count == 0 and plain.count == 0, "no publisher was declared up front"
+
+    token = zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, "k2"))
+    wait_for(lambda: watched.count > 5, 15, "k2's samples once watched")
+    sample = watched.get()
+    assert isinstance(sample, SensorSample) and sample.agent == "k2"
+
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    now = time.time()
+    lease_key = keys.agent_lease(realm, WORLD, "k3")
+    lease = lease_for(realm, alice, start=now, end=now + 60, agent="k3")
+    zsession.put(lease_key, context.seal(lease_key, lease))
+    wait_for(lambda: leased.count > 5, 15, "k3's samples once leased")
+
+    # A robot watched once keeps its publisher: samples go on after the token
+    # is gone (to whoever subscribes), and a link (ZenohRobotLink) watches too.
+    token.undeclare()
+    seen = watched.count
+    wait_for(lambda: watched.count > seen + 5, 15, "k2's samples after the token")
+    assert plain.count == 0, "k1 was neither watched nor leased"
+    link = ZenohRobotLink(zsession, realm, WORLD, "k1", lambda: alice)
+    try:
+        wait_for(lambda: plain.count > 5, 15, "k1's samples once a link reads them")
+    finally:
+        link.close(stop=False)
+    engine_log = procs.started[-1].output()
+    assert "4 robots, more than --streams-up-front 2" in engine_log, engine_log

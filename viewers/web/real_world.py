@@ -233,7 +233,11 @@ class WorldWatch:
             if sub is None:
                 if self.closed or agent not in (self._snapshot.robots if self._snapshot else ()):
                     return None
-                sub = _SensorSub(self.session, keys.agent_sensors(self.realm, self.world, agent))
+                sub = _SensorSub(
+                    self.session,
+                    keys.agent_sensors(self.realm, self.world, agent),
+                    keys.agent_watch(self.realm, self.world, agent),
+                )
                 self._sensors[agent] = sub
             sub.asked = now
         return sub.latest(agent)
@@ -255,10 +259,12 @@ class WorldWatch:
 class _SensorSub:
     """One robot's sensor stream, newest sample only (only the selected robot's is asked)."""
 
-    def __init__(self, session: zenoh.Session, key: str) -> None:
+    def __init__(self, session: zenoh.Session, key: str, watch: str) -> None:
         self.asked = time.monotonic()
         self._raw: Any = None
         self._sub = session.declare_subscriber(key, self._on)
+        # ``watch``: the robot's agent/<a>/watch token, a big world's cue to publish.
+        self._watch = session.liveliness().declare_token(watch)
 
     def _on(self, sample: zenoh.Sample) -> None:
         self._raw = sample.payload.to_bytes()
@@ -277,10 +283,11 @@ class _SensorSub:
         return RobotReadings(agent, wire.sim_time, ir, ambient)
 
     def close(self) -> None:
-        try:
-            self._sub.undeclare()
-        except zenoh.ZError as exc:
-            log.debug("undeclare sensors: %s", exc)
+        for handle in (self._sub, self._watch):
+            try:
+                handle.undeclare()
+            except zenoh.ZError as exc:
+                log.debug("undeclare sensors: %s", exc)
 
 
 _SECTIONS = {"obstacle": "obstacles", "ball": "objects", "light": "lights", "agent": "agents"}
