@@ -39,6 +39,7 @@ from common.remote_robot import WorldChannel, ZenohRobotLink
 from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from viewers.web.real_world import WorldWatch
 
 pytestmark = pytest.mark.integration
 WORLD = "w1"
@@ -513,5 +514,12 @@ def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
         wait_for(lambda: plain.count > 5, 15, "k1's samples once a link reads them")
     finally:
         link.close(stop=False)
+    # The web viewer's robot panel watches the robot it shows.
+    panel = WorldWatch(zsession, realm, WORLD)
+    try:
+        panel.ready()
+        wait_for(lambda: panel.sensors("k0") is not None, 15, "k0's readings in the viewer")
+    finally:
+        panel.close()
     engine_log = procs.started[-1].output()
     assert "4 robots, more than --streams-up-front 2" in engine_log, engine_log
