@@ -71,3 +71,15 @@ def test_security_config_needs_its_files(tmp_path: Path) -> None:
     tls = conf["transport"]["link"]["tls"]
     assert tls["enable_mtls"] is True and tls["verify_name_on_connect"] is True
     assert conf["transport"]["link"]["tx"]["lease"] == 1000
+
+
+def test_whoever_may_read_a_robots_sensors_may_say_it_watches_them() -> None:
+    # A world past --streams-up-front publishes a robot's samples only once a
+    # watch token is seen: a role that may subscribe to them but not declare
+    # that token would wait for samples that never come.
+    def roles(verb: str, key: str) -> set[str]:
+        return {r for r, gs in ROLE_GRANTS.items() for g in gs if g.verb == verb and key in g.keys}
+
+    readers = roles("sub", "world/*/agent/*/sensors")
+    assert readers and readers <= roles("token", "world/*/agent/*/watch")
+    assert roles("watch", "world/*/agent/*/watch") == {"engine", "bridge"}
