@@ -273,6 +273,12 @@ class EngineService(WorldService):
             self._watched.discard(item.agent)
         if self._on_demand and item.agent not in self._agent_pubs:
             self._declare_agent_publishers()
+            if item.agent in self._agent_pubs:
+                self.log.info(
+                    "%s's sensor samples published from now on (%s)",
+                    item.agent,
+                    "leased" if item.watched is None else "someone watches it",
+                )
 
     def _declare_agent_publishers(self) -> None:
         present = {a.id for a in self.world.agents}

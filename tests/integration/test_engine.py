@@ -523,3 +523,5 @@ def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
         panel.close()
     engine_log = procs.started[-1].output()
     assert "4 robots, more than --streams-up-front 2" in engine_log, engine_log
+    assert "k2's sensor samples published from now on (someone watches it)" in engine_log
+    assert "k3's sensor samples published from now on (leased)" in engine_log
