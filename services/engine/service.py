@@ -169,6 +169,8 @@ class EngineService(WorldService):
         self._watched: set[str] = set()
         self._leased: set[str] = set()
         self._on_demand = False
+        self._rows_of: tuple[World, int] | None = None
+        self._rows: set[str] = set()
         self._match_lock = threading.Lock()
         self.ticks_late = 0
         # Whether the world keeps the asked pace, said in the log when it does not.
@@ -263,6 +265,10 @@ class EngineService(WorldService):
 
     def _stream(self, item: _Stream) -> None:
         """Sim thread: note who is watched or leased; declare what is now wanted."""
+        if item.watched and item.agent not in self._agent_rows():
+            # Not a robot of this world: a stale or hostile token. Dropped here, so
+            # that a flood of them neither grows the set nor redoes the declarations.
+            return
         if item.watched is None:
             self._leased.add(item.agent)
         elif item.watched:
@@ -271,6 +277,7 @@ class EngineService(WorldService):
             # Its publisher stays: a robot watched once is likely watched again,
             # and an unmatched publisher costs nothing a tick.
             self._watched.discard(item.agent)
+            return
         if self._on_demand and item.agent not in self._agent_pubs:
             self._declare_agent_publishers()
             if item.agent in self._agent_pubs:
@@ -280,8 +287,16 @@ class EngineService(WorldService):
                     "leased" if item.watched is None else "someone watches it",
                 )
 
+    def _agent_rows(self) -> set[str]:
+        """The world's robots by name, rebuilt when its layout changes (sim thread)."""
+        world = self.world
+        if self._rows_of != (world, world.layout):
+            self._rows_of = (world, world.layout)
+            self._rows = {a.id for a in world.agents}
+        return self._rows
+
     def _declare_agent_publishers(self) -> None:
-        present = {a.id for a in self.world.agents}
+        present = self._agent_rows()
         on_demand = len(present) > self.settings.streams_up_front
         if on_demand and not self._on_demand:
             self.log.info(

@@ -490,6 +490,12 @@ def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
     wait_for(lambda: frames.count > 20, 15, "frames")
     assert watched.count == 0 and plain.count == 0, "no publisher was declared up front"
 
+    # Tokens for robots the world does not have (stale, or a flood from a hostile
+    # client) are dropped: the engine goes on serving.
+    ghosts = [
+        zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, f"ghost{i}"))
+        for i in range(300)
+    ]
     token = zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, "k2"))
     wait_for(lambda: watched.count > 5, 15, "k2's samples once watched")
     sample = watched.get()
@@ -525,3 +531,6 @@ def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
     assert "4 robots, more than --streams-up-front 2" in engine_log, engine_log
     assert "k2's sensor samples published from now on (someone watches it)" in engine_log
     assert "k3's sensor samples published from now on (leased)" in engine_log
+    assert "ghost" not in engine_log
+    for ghost in ghosts:
+        ghost.undeclare()
