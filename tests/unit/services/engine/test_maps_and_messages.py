@@ -150,3 +150,13 @@ def test_wart_engine_refuses_thread_counts_outside_numbas_pool(flag: str, capsys
             main(["--map", str(REPO / "maps" / "empty.json"), flag, bad])
         assert exc.value.code == 2
         assert f"{flag} must be between 1 and" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("bad", "said"), [("-1", "must be 0 or more"), ("many", "invalid int value")]
+)
+def test_wart_engine_refuses_a_bad_streams_up_front(bad: str, said: str, capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--map", str(REPO / "maps" / "empty.json"), "--streams-up-front", bad])
+    assert exc.value.code == 2
+    assert said in capsys.readouterr().err
