@@ -133,8 +133,9 @@ def tick(state, sense, key, lights):  # pragma: no cover
     """One tick: the robots move (discs.tick_into); then, if ``sense``, every sensor is read.
 
     ``key`` is the sensing pass's noise key (drawn by the caller only for a
-    pass), ``lights`` the lit lights as SensorSuite's table. Serial: the world
-    takes this path only where a pass runs on one thread. (Calling
+    pass), ``lights`` the lit lights as SensorSuite's table. Serial: where a
+    pass runs on threads, the world calls this with ``sense`` False and then
+    the parallel pass itself (World._step_fused). (Calling
     kernels.sense_parallel from here compiled, but the on-disk cache of a
     function calling a parallel one loaded broken code in the next process:
     it crashed. The drive's loops on two threads saved nothing measurable at

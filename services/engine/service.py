@@ -312,8 +312,8 @@ class EngineService(WorldService):
             with self._match_lock:
                 self._matched.discard(agent)
         todo = sorted(wanted - set(self._agent_pubs))
-        # Zenoh's cost per publisher grows with their number: 10,000 took about
-        # 30 s here (docs/OPERATIONS.md, "Swarms"), so a big world says so as it goes.
+        # Zenoh's cost per publisher grows with their number: 10,000 took 35 s
+        # here (docs/OPERATIONS.md, "Swarms"), so declaring thousands is said as it goes.
         progress = _Progress(self.log, len(todo)) if len(todo) >= _SAY_PUBLISHERS_FROM else None
         for done, agent in enumerate(todo):
             if progress is not None:
