@@ -69,6 +69,11 @@ _FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
 # Worlds of up to this many robots declare every robot's sensor publisher at
 # start; bigger ones only those watched or leased (EngineSettings.streams_up_front).
 STREAMS_UP_FRONT = 1000
+# Publishers a world past streams_up_front declares for watchers (leased robots
+# always get theirs): each is declared on the sim thread, and a client declaring
+# a token for every robot would otherwise stall the world for as long as
+# declaring them all takes (35 s at 10,000).
+WATCHED_STREAMS_MAX = 256
 # Robots from which declaring their sensor publishers is logged as it goes.
 _SAY_PUBLISHERS_FROM = 1000
 _PROGRESS_EVERY_S = 3.0
@@ -119,6 +124,7 @@ class EngineSettings:
     # watches it (keys.agent_watch) or it is leased: Zenoh's cost per publisher
     # grows with their number (10,000 took 35 s, docs/OPERATIONS.md "Swarms").
     streams_up_front: int = STREAMS_UP_FRONT
+    watched_streams_max: int = WATCHED_STREAMS_MAX  # of those declared for watchers
 
 
 @dataclass(frozen=True)
@@ -272,6 +278,18 @@ class EngineService(WorldService):
         if item.watched is None:
             self._leased.add(item.agent)
         elif item.watched:
+            if (
+                self._on_demand
+                and item.agent not in self._agent_pubs
+                and len(self._agent_pubs) >= self.settings.watched_streams_max
+            ):
+                self.log.warning(
+                    "%s is watched, but %d robots' samples are published on demand "
+                    "already (the most): not published; it is if leased",
+                    item.agent,
+                    len(self._agent_pubs),
+                )
+                return
             self._watched.add(item.agent)
         else:
             # Its publisher stays: a robot watched once is likely watched again,
