@@ -35,8 +35,8 @@ import psutil
 
 from common import keys
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch, start_wart
 from common.zconfig import NetworkOptions
+from services.lab.supervisor import AliveWatch, start_wart
 from services.lab.wiring import up_args
 
 REPO = Path(__file__).resolve().parent.parent

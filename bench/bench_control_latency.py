@@ -74,12 +74,12 @@ from common import keys
 from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.controller import RobotCommand
 from common.keys import AliveKind
-from common.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
-from common.leases import LeaseBook
 from common.messages import AgentCommand, Lease, SensorSample, decode, encode
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
+from common.world.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
+from common.world.leases import LeaseBook
 from common.zconfig import NetworkOptions
 from services.engine.service import EngineService, EngineSettings, _Command
 
@@ -242,7 +242,7 @@ def path_probe(z: Any, stop: threading.Event, out: Sink) -> None:
 
 def child(args: argparse.Namespace) -> int:
     """The controllers' process: one ZenohRobotLink per agent, answering every sample."""
-    from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
+    from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 
     identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))
@@ -568,7 +568,7 @@ def wake_storm(n: int, rounds: int = 200) -> None:
     reaction, minus the put). Printed: when the median and the last thread
     are done, after the hand-out began.
     """
-    from common.remote_robot import agent_command, state_from_sample
+    from common.world.remote_robot import agent_command, state_from_sample
 
     raw = encode(
         SensorSample(

@@ -30,7 +30,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from common.agent_client import FINAL  # noqa: E402 - after the path set-up
+from common.client.agent_client import FINAL  # noqa: E402 - after the path set-up
 from tests.browser.reallab import start_router  # noqa: E402
 from tests.conftest import Procs, wait_for  # noqa: E402
 from tests.integration.agentkit import (  # noqa: E402

@@ -13,7 +13,7 @@ import threading
 import time
 
 from bench.labproc import BenchLab
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from common.messages import RoomEvent
 from common.service import close_session, open_session
 

@@ -13,8 +13,8 @@ from common import keys
 from common.auth import RegistryIdentity, create_identity_key
 from common.keys import AliveKind
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch
 from common.zconfig import NetworkOptions
+from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import RegistryDB
 
 REPO = Path(__file__).resolve().parent.parent

@@ -18,9 +18,9 @@ import nacl.pwhash
 import zenoh
 
 from bench.labproc import BenchLab
-from common import client as client_module
 from common.auth import create_identity_key
-from common.client import LabClient
+from common.client import lab_client as client_module
+from common.client.lab_client import LabClient
 from common.service import close_session, open_session
 from services.registry.accounts_db import RegistryDB
 

@@ -41,8 +41,6 @@ import msgspec
 from bench.plain_peer import answer
 from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
-from common.leasemac import WorldBoxKeys, new_lease_key, seal_key
-from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
     BundledCommand,
@@ -54,7 +52,9 @@ from common.messages import (
     decode,
     encode,
 )
-from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
+from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.world.leases import LeaseBook
+from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 
 REALM, WORLD = "bench", "swarm"
 

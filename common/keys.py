@@ -82,7 +82,7 @@ def wildcard(builder: Callable[..., str], **fixed: Any) -> str:
     """What ``builder`` builds, relative to the realm root, with every free id a ``*``.
 
     ``wildcard(ctx_join)`` is ``ctx/*/join``; ``wildcard(alive, kind=AliveKind.USER)``
-    is ``alive/user/*``. Access-control rules (common/zsecurity.py) are written with
+    is ``alive/user/*``. Access-control rules (services/lab/zsecurity.py) are written with
     it, so they name exactly the keys the services use.
     """
     params = [p for p in inspect.signature(builder).parameters if p != "realm"]

@@ -23,8 +23,8 @@ import zenoh
 from common import keys
 from common.keys import AliveKind
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch
 from common.zconfig import NetworkOptions
+from services.lab.supervisor import AliveWatch
 
 REPO = Path(__file__).resolve().parent.parent
 ARTIFACTS = REPO / "test-artifacts"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import psutil
 
-from common.supervisor import start_wart
+from services.lab.supervisor import start_wart
 from services.lab.wiring import up_args
 from tests.conftest import REPO, free_port, wart_env
 

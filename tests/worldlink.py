@@ -5,8 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 from common.controller import Controller, ControllerLoop, Khepera, KheperaState, RobotCommand
-from common.remote_robot import agent_command, state_from_sample
 from common.sim2d.world import World
+from common.world.remote_robot import agent_command, state_from_sample
 from services.engine import wire
 
 

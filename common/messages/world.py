@@ -140,7 +140,7 @@ class MacCommandBundle(Message):
     the 32 bytes at ``i * 32`` of ``macs``: BLAKE2b keyed with the agent's
     lease key, personalised ``wart.cmdarr.v1``, over the length-prefixed key
     expression ``agent/<agent>/cmd`` and lease id, then exactly those record
-    bytes (common/leasemac.py). Each item is checked on its own, as a
+    bytes (common/world/leasemac.py). Each item is checked on its own, as a
     MacCommand on its agent's key would be; a refused item spares the others.
     Only speeds and counters travel here; other commands go as MacCommands.
     The lengths must agree (``len(agents)`` items and MACs), else the world
@@ -236,7 +236,7 @@ class WorldSnapshot(Message):
     rows: list[Ident]  # WorldFrame.poses row order
     # The world's service-account token (registry-signed, ``world`` permission),
     # when it logged in with one: agent contexts seal lease keys to its box key
-    # (common/leasemac.py). None: a world without identity, Ed25519 commands only.
+    # (common/world/leasemac.py). None: a world without identity, Ed25519 commands only.
     identity: SignedToken | None = None
     # "real": a Khepera bridge (robots on serial ports); nothing can be edited or reset there.
     kind: Literal["sim", "real"] = "sim"
@@ -273,7 +273,7 @@ class Lease(Message):
     holder_session: SessionId
     start: float  # wall-clock seconds (time.time())
     end: float
-    # A MAC lease (common/leasemac.py): the lease key K sealed to the holder's
+    # A MAC lease (common/world/leasemac.py): the lease key K sealed to the holder's
     # session box key and to the world's box key (``world_box`` names which,
     # since a world's session, and so its box key, is renewed). Absent, or the
     # world cannot open its copy: commands are Ed25519 AuthEnvelopes as before.

@@ -25,9 +25,9 @@ import zenoh
 
 from common import cli
 from common.auth import parse_public_key
+from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
-from common.service_login import add_world_identity_args, world_login
 from services.bridge.link import BAUD_RATES
 from services.bridge.robot import Pose, RobotOptions
 from services.bridge.service import BridgeService, BridgeSettings, RobotSpec, agent_id_for

@@ -12,7 +12,7 @@ one sample) if the robot is leased and someone subscribes;
 or in a CommandBundle, or a swarm's MacCommandBundle, from the current lease
 holder only) and
 ``agent/*/lease`` (Lease, sealed, ``lease``
-permission), both checked by common.leases.LeaseBook exactly as the engine
+permission), both checked by common.world.leases.LeaseBook exactly as the engine
 does. Serves ``snapshot`` (arena, agents with their online state);
 ``edit`` and ``map`` answer ``bad_request`` (a real arena cannot be edited).
 Token ``alive/world/<w>``.
@@ -40,8 +40,6 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Session, Verifier
-from common.leasemac import WorldBoxKeys, snapshot_with_identity
-from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
     AgentInfo,
@@ -55,7 +53,9 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.world_service import WorldService
+from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
+from common.world.leases import LeaseBook
+from common.world.world_service import WorldService
 from services.bridge import protocol as P
 from services.bridge.link import LinkOffline
 from services.bridge.robot import (

@@ -29,23 +29,23 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
-from common.agent_client import AgentClient
-from common.client import LabClient
-from common.host_client import (
+from common.client.agent_client import AgentClient
+from common.client.host_client import (
     HostError,
     choose_host,
     host_arena,
     host_loads,
     stop_hosted,
 )
+from common.client.lab_client import LabClient
 from common.lab_errors import LabError
-from common.labfile import LabFileError, load
 from common.messages.host import ArenaInfo, HostLoad
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
-from common.zsecurity import client_options
 from services.commands.terminal import password_from
+from services.lab.labfile import LabFileError, load
 from services.lab.plan import read_registry_key
+from services.lab.zsecurity import client_options
 
 ArenaError = HostError  # the name this module's callers know
 __all__ = ["ArenaError", "choose_host", "format_loads", "host_loads", "new_arena", "stop_arena"]

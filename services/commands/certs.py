@@ -28,11 +28,11 @@ from pathlib import Path
 
 from common import cli
 from common.auth import RegistryIdentity, create_identity_key, load_identity_key
-from common.certs import CA_CERT, CA_KEY, CertError, init_ca, inspect, issue
 from common.keys import is_ident
-from common.labfile import LabFile, LabFileError, load
-from common.zsecurity import ROLES, client_tls, zenoh_security
+from services.lab.certs import CA_CERT, CA_KEY, CertError, init_ca, inspect, issue
+from services.lab.labfile import LabFile, LabFileError, load
 from services.lab.wiring import host_accounts
+from services.lab.zsecurity import ROLES, client_tls, zenoh_security
 
 REGISTRY_PUB = "registry.pub"
 ACCOUNTS = "accounts.json"

@@ -16,10 +16,10 @@ import time
 from collections.abc import Sequence
 
 from common import cli, keys
-from common.client import LabClient
+from common.client.lab_client import LabClient
+from common.client.private_mail import PrivateText
 from common.lab_errors import LabError
 from common.messages import ChatLine, KickNotice, RoomEvent
-from common.private_mail import PrivateText
 from common.service import close_session
 from services.commands.terminal import connect, password_from, say
 

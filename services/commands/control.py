@@ -20,12 +20,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from common import cli, keys
-from common.agent_client import AgentClient
-from common.client import LabClient
+from common.client.agent_client import AgentClient
+from common.client.lab_client import LabClient
 from common.controller import load_controller
+from common.controller.precheck import PrecheckError, precheck
 from common.lab_errors import LabError
 from common.messages import OutputLines, RequestStatus
-from common.precheck import PrecheckError, precheck
 from common.service import close_session
 from common.zconfig import NetworkOptions
 from services.commands.terminal import connect, password_from, say

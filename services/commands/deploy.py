@@ -22,10 +22,10 @@ import time
 from collections.abc import Sequence
 
 from common import cli
-from common.agent_client import FINAL, AgentClient
+from common.client.agent_client import FINAL, AgentClient
+from common.controller.precheck import PrecheckError
 from common.lab_errors import LabError
 from common.messages import DryRunReport, RequestStatus, RequestStatusReply
-from common.precheck import PrecheckError
 from services.commands.control import (
     interrupt_event,
     read_checked,

@@ -27,13 +27,13 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
+from common.client.survey import router_views, routers, survey
 from common.keys import AliveKind
-from common.labfile import HostEntry, LabFile, LabFileError, load
 from common.service import close_session, open_session
-from common.survey import router_views, routers, survey
 from common.zconfig import NetworkOptions
-from common.zsecurity import client_options
 from services.commands.arena import format_loads, host_loads
+from services.lab.labfile import HostEntry, LabFile, LabFileError, load
+from services.lab.zsecurity import client_options
 
 
 @dataclass

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from common import cli, keys
-from common.agent_client import AgentClient
+from common.client.agent_client import AgentClient
 from common.messages import RecordingList
 from common.zconfig import NetworkOptions
 from services.commands.control import session_for

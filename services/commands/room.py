@@ -17,14 +17,14 @@ import sys
 from collections.abc import Sequence
 
 from common import cli
-from common.client import LabClient
-from common.host_client import host_room, stop_hosted
+from common.client.host_client import host_room, stop_hosted
+from common.client.lab_client import LabClient
 from common.lab_errors import LabError
-from common.labfile import LabFileError
 from common.service import close_session
 from common.zconfig import NetworkOptions
 from services.commands.arena import add_lab_arguments, lab_session
 from services.commands.terminal import password_from
+from services.lab.labfile import LabFileError
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:

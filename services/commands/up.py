@@ -21,7 +21,11 @@ from pathlib import Path
 
 from common import cli, keys
 from common.auth import key_fingerprint
-from common.labfile import (
+from common.service import close_session, open_session
+from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
+from services.host.service import HostingPlan, HostingService
+from services.lab import wiring
+from services.lab.labfile import (
     AGENT_CONTEXT_TEMPLATE,
     DEFAULT_ENGINE_TEMPLATE,
     ArenaTemplates,
@@ -29,12 +33,8 @@ from common.labfile import (
     ServiceEntry,
     service_entry,
 )
-from common.service import close_session, open_session
-from common.supervisor import AliveWatch, ChildSpec, Supervisor
-from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
-from services.host.service import HostingPlan, HostingService
-from services.lab import wiring
 from services.lab.provision import provision_one_host
+from services.lab.supervisor import AliveWatch, ChildSpec, Supervisor
 from services.lab.wiring import (
     SHIPPED_MAPS,
     Wiring,

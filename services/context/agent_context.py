@@ -13,7 +13,7 @@ its sandbox; the lease names the runner's session). Output of the running
 controller comes in on ``ctx/<ctx>/output`` from the lease holder and goes
 out to members as :class:`~common.messages.AgentEvent`.
 
-MAC leases (common/leasemac.py): when the world's snapshot carries an
+MAC leases (common/world/leasemac.py): when the world's snapshot carries an
 identity token the registry signed with the ``world`` permission, each lease
 also carries a fresh per-lease key sealed to the holder and to that world,
 so the holder's commands are MACed (µs to check) rather than signed.

@@ -48,7 +48,7 @@ class RunningJob:
     start: float
     end: float
     holder_box: bytes = b""  # the holder session's box key
-    lease_key: bytes = b""  # K of a MAC lease (common/leasemac.py); sealed per publication
+    lease_key: bytes = b""  # K of a MAC lease (common/world/leasemac.py); sealed per publication
     # (holder box, world box) -> (K sealed to the holder, K sealed to the world): sealed
     # once, so a republished lease is byte-identical and the holder skips unsealing it.
     sealed: dict[tuple[bytes, bytes], tuple[bytes, bytes]] = field(default_factory=dict)

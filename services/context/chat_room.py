@@ -28,6 +28,7 @@ import zenoh
 
 from common import acl, keys
 from common.auth import AuthError, Principal, Verifier
+from common.client.service_login import ServiceLogin
 from common.files import write_atomic
 from common.keys import AliveKind
 from common.messages import (
@@ -48,7 +49,6 @@ from common.messages import (
 )
 from common.revocations import RevocationFeed
 from common.service import RequestError, Service
-from common.service_login import ServiceLogin
 
 log = logging.getLogger("wart.chat")
 

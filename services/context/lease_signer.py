@@ -7,7 +7,7 @@ second so a world that restarts learns it again, and republished with an
 earlier end to end it at once. When the world's snapshot carries an identity
 token the registry signed with the ``world`` permission, each lease also
 carries a fresh per-lease key sealed to the holder and to that world
-(common/leasemac.py), so the holder's commands are MACed (µs to check)
+(common/world/leasemac.py), so the holder's commands are MACed (µs to check)
 rather than signed.
 """
 
@@ -22,8 +22,8 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Verifier
-from common.leasemac import check_world_token, seal_key
 from common.messages import Lease, Message, SessionToken, SignedToken
+from common.world.leasemac import check_world_token, seal_key
 from services.context.agent_queue import RunningJob
 
 

@@ -14,10 +14,10 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
+from common.client.service_login import ServiceCredentials
 from common.messages import MAX_LINE_CHARS
 from common.recording.store import RecordingStore
 from common.service import run_service
-from common.service_login import ServiceCredentials
 from services.context import agent_context, chat_room
 from services.context.agent_context import AgentContext
 from services.context.chat_room import ChatRoom, log

@@ -18,6 +18,7 @@ import zenoh
 
 from common import acl, keys
 from common.auth import Principal, Verifier
+from common.controller.precheck import PrecheckError, precheck
 from common.messages import (
     AgentEvent,
     CancelControl,
@@ -34,7 +35,6 @@ from common.messages import (
     StopControl,
     WorldStop,
 )
-from common.precheck import PrecheckError, precheck
 from common.service import RequestError
 from services.context.agent_queue import ControlJob, QueueBook, RunningJob, new_request_id
 from services.context.runner_link import RunnerLink

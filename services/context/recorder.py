@@ -36,7 +36,6 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Verifier
-from common.leasemac import MAC_BYTES, command_mac, item_mac, mac_matches
 from common.messages import (
     MAC_ITEM_BYTES,
     MAC_ITEM_COUNTERS,
@@ -64,6 +63,7 @@ from common.recording import schema as s
 from common.recording.reader import RecordingError
 from common.recording.store import RecordingStore
 from common.recording.writer import RecordingWriter, frame_record, pose_record, sample_record
+from common.world.leasemac import MAC_BYTES, command_mac, item_mac, mac_matches
 from services.context.agent_queue import RunningJob
 
 TRAIL_S = 1.5  # how long a file stays open after its slot: the stop and the last lines

@@ -19,7 +19,6 @@ from typing import Any
 import zenoh
 
 from common import keys
-from common.leasemac import new_lease_key
 from common.messages import (
     AgentContextState,
     AgentEvent,
@@ -31,6 +30,7 @@ from common.messages import (
     decode,
 )
 from common.service import RequestError
+from common.world.leasemac import new_lease_key
 from services.context.agent_queue import ControlJob, QueueBook, RunningJob
 from services.context.lease_signer import LeaseSigner
 from services.context.recorder import SlotRecorder

@@ -19,9 +19,9 @@ import zenoh
 
 from common import cli
 from common.auth import parse_public_key
+from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
-from common.service_login import add_world_identity_args, world_login
 from common.sim2d import kernels
 from common.sim2d.maps import MapError, load_map
 from common.sim2d.world import DRIVES

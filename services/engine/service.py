@@ -16,7 +16,7 @@ only) and ``agent/*/lease`` (Lease, sealed, ``lease`` permission). Serves: ``sna
 
 With an identity (``--user/--identity``, a service account with ``world``)
 the snapshot carries its registry-signed token; contexts then seal each
-lease's MAC key to it and commands are MacCommands (common/leasemac.py).
+lease's MAC key to it and commands are MacCommands (common/world/leasemac.py).
 """
 
 from __future__ import annotations
@@ -37,8 +37,6 @@ import zenoh
 from common import keys
 from common.auth import AuthError, Principal, Session, Verifier
 from common.files import Journal
-from common.leasemac import WorldBoxKeys, snapshot_with_identity
-from common.leases import LeaseBook
 from common.messages import (
     AddItem,
     AgentCommand,
@@ -61,7 +59,9 @@ from common.messages import (
 from common.service import RequestError
 from common.sim2d import maps, wander
 from common.sim2d.world import EditError, World
-from common.world_service import WorldService
+from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
+from common.world.leases import LeaseBook
+from common.world.world_service import WorldService
 from services.engine import wire
 from services.engine.pace import PaceWatch
 

@@ -21,13 +21,12 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
-from common.labfile import LabFile, LabFileError, load
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch, Child, Supervisor
 from common.zconfig import NetworkOptions
 from services.commands.certs import ACCOUNTS, registry_key_path
 from services.host.service import HostingPlan, HostingService
 from services.lab import provision
+from services.lab.labfile import LabFile, LabFileError, load
 from services.lab.plan import (
     HostContext,
     check_available,
@@ -37,6 +36,7 @@ from services.lab.plan import (
     router_spec,
     write_configs,
 )
+from services.lab.supervisor import AliveWatch, Child, Supervisor
 from services.lab.wiring import default_state_dir
 
 

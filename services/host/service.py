@@ -3,7 +3,7 @@
 A :class:`HostingService` answers ``host/<h>/spawn`` (start or stop an arena,
 start or stop a chat room, ``host`` permission) and ``host/<h>/load`` (its
 load, public), and publishes the load every few seconds. The processes it
-starts are children of the host's :class:`~common.supervisor.Supervisor`, so
+starts are children of the host's :class:`~services.lab.supervisor.Supervisor`, so
 they are restarted with backoff and stopped in order like every other service.
 
 What differs between a host of a lab file and the one-machine lab's host
@@ -26,7 +26,6 @@ import zenoh
 from common import keys
 from common.auth import Verifier, parse_public_key
 from common.keys import AliveKind
-from common.labfile import Limits
 from common.messages import ErrorReply, MessageError, OkReply, decode, encode
 from common.messages.host import (
     ArenaInfo,
@@ -42,7 +41,8 @@ from common.messages.host import (
 )
 from common.revocations import RevocationFeed
 from common.service import RequestError, Service
-from common.supervisor import Child, ChildSpec, Supervisor
+from services.lab.labfile import Limits
+from services.lab.supervisor import Child, ChildSpec, Supervisor
 from services.lab.wiring import (
     Wiring,
     arena_specs,

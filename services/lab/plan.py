@@ -11,14 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.labfile import HostEntry, LabFile, LabFileError
-from common.supervisor import ChildSpec
-from common.zsecurity import acl_config, host_tls, write_config, zenoh_security
 from services.cli import SUBCOMMANDS
 from services.commands.certs import host_roles, identity_path, registry_key_path
 from services.context.main import KINDS as CONTEXT_KINDS
 from services.lab import wiring
+from services.lab.labfile import HostEntry, LabFile, LabFileError
+from services.lab.supervisor import ChildSpec
 from services.lab.wiring import SHIPPED_MAPS, Wiring
+from services.lab.zsecurity import acl_config, host_tls, write_config, zenoh_security
 
 # The command each service kind needs (a build without one refuses the host).
 NEEDS: dict[str, tuple[str, ...]] = {

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.auth import RegistryIdentity, create_identity_key, load_identity_key
-from common.labfile import LabFileError
+from services.lab.labfile import LabFileError
 from services.lab.wiring import SHIPPED_MAPS
 from services.registry.accounts_db import RegistryDB
 from services.registry.service import provision as provision_registry_db

@@ -19,8 +19,8 @@ from typing import Any
 
 from common import keys
 from common.keys import AliveKind
-from common.labfile import ArenaTemplates, LabFileError, ServiceEntry, fill
-from common.supervisor import ChildSpec
+from services.lab.labfile import ArenaTemplates, LabFileError, ServiceEntry, fill
+from services.lab.supervisor import ChildSpec
 
 SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "maps"
 

@@ -75,7 +75,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError, Service
-from common.supervisor import AliveWatch
+from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 
 log = logging.getLogger("wart.registry")

@@ -9,8 +9,8 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
+from common.client.service_login import ServiceCredentials
 from common.service import run_service
-from common.service_login import ServiceCredentials
 from services.runner import service
 from services.runner.sandbox import SandboxLimits, sandbox_problem
 from services.runner.service import RunnerService

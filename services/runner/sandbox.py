@@ -24,7 +24,7 @@ in bounded chunks (long lines cut), and printing faster than
 ``output_bytes_per_second`` ends the run as an output flood.
 
 The child is Debian's ``/usr/bin/python3`` running services/runner/child.py
-with only the standard library and common/controller.py. It talks to this
+with only the standard library and common/controller/. It talks to this
 parent over pipes, one JSON object per line; every line it sends is checked
 (:func:`validate_command`) before anything reaches a robot.
 """
@@ -52,7 +52,7 @@ from typing import Any
 import psutil
 
 from common import controller as controller_api
-from common.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
+from common.controller.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
 from services.runner.cpushare import CpuShare
 from services.runner.pipes import RateBudget, read_lines, write_nowait
 from services.runner.syscalls import SANDBOX_PYTHON, SyscallFilterError, build_filter
@@ -64,7 +64,7 @@ __all__ = ["MAX_SOURCE_BYTES", "PrecheckError", "Sandbox", "SandboxLimits", "pre
 MAX_LINE_BYTES = 4096
 MAX_OUTPUT_LINE_BYTES = 1000
 _CHILD = Path(__file__).with_name("child.py")
-_API = Path(controller_api.__file__)
+_API = Path(controller_api.__file__).parent  # the whole package: standard library only
 
 
 @dataclass(frozen=True)
@@ -258,7 +258,11 @@ class Sandbox:
         (stage / "lib" / "common").mkdir(parents=True)
         (stage / "user").mkdir()
         shutil.copy(_CHILD, stage / "child.py")
-        shutil.copy(_API, stage / "lib" / "common" / "controller.py")
+        shutil.copytree(
+            _API,
+            stage / "lib" / "common" / "controller",
+            ignore=shutil.ignore_patterns("__pycache__"),
+        )
         (stage / "lib" / "common" / "__init__.py").write_text("")
         (stage / "user" / "controller.py").write_bytes(self.source)
         for path in [stage, *stage.rglob("*")]:

@@ -10,7 +10,7 @@ Then, per run:
 - a relay thread hands the agent's newest sensor sample to the sandbox (the
   Zenoh callback only keeps the newest one: a stalled sandbox stalls nothing);
 - the sandbox's validated commands become ``AgentCommand`` sealed with the
-  runner's session (``common.remote_robot.ZenohRobotLink``, whose keep-alive
+  runner's session (``common.world.remote_robot.ZenohRobotLink``, whose keep-alive
   feeds the world's watchdog while the sandbox lives);
 - all runs on one world share a ``WorldChannel``: the world's samples of
   every leased agent arrive in one ``SampleBundle`` per tick and the runs'
@@ -40,6 +40,8 @@ import zenoh
 
 from common import keys
 from common.auth import Verifier
+from common.client.service_login import ServiceLogin
+from common.controller.precheck import PrecheckError, precheck
 from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
@@ -58,11 +60,9 @@ from common.messages import (
     WorldSnapshot,
     decode,
 )
-from common.precheck import PrecheckError, precheck
-from common.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from common.service import RequestError, Service
-from common.service_login import ServiceLogin
 from common.sim2d.maps import MapError
+from common.world.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
 from services.runner.dryrun import dry_run
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 

@@ -24,11 +24,11 @@ import zenoh
 
 from common import keys
 from common.auth import issue_session
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from common.keys import AliveKind
 from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch
+from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, free_port
 from tests.integration.agentkit import (
     CTX,

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from common.agent_client import FINAL
+from common.client.agent_client import FINAL
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.reallab import RealLab, real_lab

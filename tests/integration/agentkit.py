@@ -16,9 +16,9 @@ import numpy as np
 import zenoh
 
 from common import keys
-from common.agent_client import AgentClient
 from common.auth import create_identity_key
-from common.client import LabClient
+from common.client.agent_client import AgentClient
+from common.client.lab_client import LabClient
 from common.keys import AliveKind
 from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session

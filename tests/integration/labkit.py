@@ -13,10 +13,10 @@ import zenoh
 
 from common import keys
 from common.auth import RegistryIdentity, create_identity_key
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from common.keys import AliveKind
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch
+from services.lab.supervisor import AliveWatch
 from services.registry import accounts_db
 from services.registry.accounts_db import RegistryDB, hash_password
 from tests.conftest import Proc, Procs, Router

@@ -18,15 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from common import keys
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from common.keys import AliveKind
-from common.labfile import load
 from common.messages import AgentCommand, Lease, PackedArray, WorldFrame, decode, encode
 from common.messages.world import WorldSnapshot
 from common.service import close_session, open_session
-from common.zsecurity import TlsFiles, client_tls, host_tls, zenoh_security
 from services.commands.arena import new_arena, stop_arena
+from services.lab.labfile import load
 from services.lab.plan import read_registry_key
+from services.lab.zsecurity import TlsFiles, client_tls, host_tls, zenoh_security
 
 FORGED_TICK = 987_654
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
@@ -362,7 +362,7 @@ def main() -> int:
         # drive HOST PASSWORD_FILE: a student's process on HOST (student certificate)
         # queues the example controller on arena1 (runs in the runner's sandbox) and
         # on the emulated Khepera of real1, and drives real1's robot from here.
-        from common.agent_client import FINAL, AgentClient
+        from common.client.agent_client import FINAL, AgentClient
         from common.controller import load_controller
 
         host, password_file = args

@@ -16,8 +16,8 @@ from common import keys
 from common.keys import AliveKind
 from common.messages import OkReply, decode
 from common.service import Service, close_session, open_session
-from common.supervisor import AliveWatch
 from common.zconfig import NetworkOptions
+from services.lab.supervisor import AliveWatch
 
 
 class Remote(Service):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.agent_client import FINAL, AgentClient, DriveResult
+from common.client.agent_client import FINAL, AgentClient, DriveResult
 from common.controller import Controller, Khepera
 from common.lab_errors import NotFound
 from common.messages import ControlQueued

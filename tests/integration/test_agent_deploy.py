@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from common import keys
-from common.agent_client import FINAL
+from common.client.agent_client import FINAL
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import OutputLines

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.agent_client import DriveResult
+from common.client.agent_client import DriveResult
 from common.controller import Controller, Khepera
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import Poses, agent_user, start_agent_context, start_engine

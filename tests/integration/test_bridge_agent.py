@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from common.agent_client import FINAL
+from common.client.agent_client import FINAL
 from common.controller import load_controller
 from common.keys import AliveKind
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator

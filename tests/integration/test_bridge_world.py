@@ -34,11 +34,11 @@ from common.messages import (
     WorldSnapshot,
     decode,
 )
-from common.supervisor import AliveWatch
 from services.bridge import protocol as P
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.link import KheperaLink
 from services.bridge.simbody import SimBody
+from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
 
 pytestmark = pytest.mark.integration

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from common.agent_client import FINAL
+from common.client.agent_client import FINAL
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import EmergencyStop, ErrorReply, OkReply, decode

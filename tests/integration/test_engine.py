@@ -35,9 +35,9 @@ from common.messages import (
     decode,
     encode,
 )
-from common.remote_robot import WorldChannel, ZenohRobotLink
 from common.sim2d.world import DRIVES, OBJECT_DRIVES
-from common.supervisor import AliveWatch
+from common.world.remote_robot import WorldChannel, ZenohRobotLink
+from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
 from viewers.web.real_world import WorldWatch
 

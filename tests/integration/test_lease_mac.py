@@ -12,9 +12,8 @@ import pytest
 import zenoh
 
 from common import keys
-from common.agent_client import DriveResult
+from common.client.agent_client import DriveResult
 from common.controller import Controller, Khepera
-from common.leasemac import mac_command, new_lease_key
 from common.messages import (
     AgentCommand,
     AuthEnvelope,
@@ -24,6 +23,7 @@ from common.messages import (
     WorldSnapshot,
     decode,
 )
+from common.world.leasemac import mac_command, new_lease_key
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import (
     WORLD,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from common.agent_client import FINAL, AgentClient
+from common.client.agent_client import FINAL, AgentClient
 from common.lab_errors import NotAllowed
 from common.messages import AgentEvent
 from services.commands import deploy

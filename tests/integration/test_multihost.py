@@ -22,9 +22,9 @@ from pathlib import Path
 
 import pytest
 
-from common.certs import init_ca, issue
-from common.labfile import load
 from services.commands.certs import issue_lab
+from services.lab.certs import init_ca, issue
+from services.lab.labfile import load
 from tests import netns
 
 # One worker builds the three-host network once for the module (two built it twice: 20 s).

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from common.agent_client import FINAL
+from common.client.agent_client import FINAL
 from common.lab_errors import LabError
 from common.recording import read_recording, summarize
 from common.recording import schema as s

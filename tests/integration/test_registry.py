@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from common import client as client_module
 from common.auth import RegistryIdentity, create_identity_key
-from common.client import LabClient
+from common.client import lab_client as client_module
+from common.client.lab_client import LabClient
 from common.lab_errors import (
     NotAllowed,
     RateLimited,

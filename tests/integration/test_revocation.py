@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from common import keys
-from common.agent_client import DriveResult
+from common.client.agent_client import DriveResult
+from common.client.private_mail import PrivateText
 from common.controller import Controller, Khepera
 from common.messages import EditResult, ErrorReply, MoveItem, WorldEdit, decode
-from common.private_mail import PrivateText
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import (
     WORLD,

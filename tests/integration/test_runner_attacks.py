@@ -18,7 +18,7 @@ from types import SimpleNamespace
 import psutil
 import pytest
 
-from common.agent_client import FINAL
+from common.client.agent_client import FINAL
 from common.messages import RunAccepted, RunRequest
 from common.service import RequestError, close_session, open_session
 from services.runner.sandbox import sandbox_problem

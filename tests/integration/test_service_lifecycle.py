@@ -8,7 +8,7 @@ from common import keys
 from common.keys import AliveKind
 from common.messages import ErrorReply, OkReply, decode
 from common.service import RequestError, Service, close_session, open_session
-from common.supervisor import AliveWatch
+from services.lab.supervisor import AliveWatch
 from tests.conftest import Router, wait_for
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from common.agent_client import FINAL, AgentClient
+from common.client.agent_client import FINAL, AgentClient
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.recording import plots, read_recording

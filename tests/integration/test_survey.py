@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from common.client.survey import survey
 from common.service import close_session, open_session
-from common.survey import survey
 from tests.conftest import REPO, Procs, Router, wart_env
 from tests.integration.labkit import make_lab
 

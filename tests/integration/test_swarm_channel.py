@@ -19,7 +19,6 @@ import zenoh
 
 from common import keys
 from common.auth import RegistryIdentity, Session, Verifier, issue_session
-from common.leasemac import CommandMac, mac_command, new_lease_key, seal_key
 from common.messages import (
     MAC_ITEM_SPEEDS,
     MAC_ITEM_STRUCT,
@@ -30,10 +29,11 @@ from common.messages import (
     MacCommandBundle,
     encode,
 )
-from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
+from common.world.leasemac import CommandMac, mac_command, new_lease_key, seal_key
+from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from services.engine.service import EngineService, EngineSettings
 from tests.conftest import Router, wait_for
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.integration.labkit import PASSWORD, Lab, make_lab

@@ -12,9 +12,9 @@ import zenoh
 from common import keys
 from common.messages import WorldSnapshot, decode
 from common.service import close_session, open_session
-from common.supervisor import AliveWatch
 from common.zconfig import NetworkOptions
 from services.commands.up import REAL_AGENT, REAL_WORLD, lab_plan, router_spec, settings_from_args
+from services.lab.supervisor import AliveWatch
 from tests.conftest import wait_for
 from tests.lab import Lab
 

@@ -1,4 +1,6 @@
-"""``wart up`` hosts chat rooms and arenas on request (host "local"), via common/host_client.py.
+"""``wart up`` hosts chat rooms and arenas on request (host "local").
+
+Through common/client/host_client.py.
 
 One lab (a real ``wart up`` subprocess: router, registry, services) for the
 module; an instructor (``host`` permission) and a student are added to its
@@ -16,8 +18,8 @@ import psutil
 import pytest
 import zenoh
 
-from common.client import LabClient
-from common.host_client import NameTaken, host_arena, host_loads, host_room, stop_hosted
+from common.client.host_client import NameTaken, host_arena, host_loads, host_room, stop_hosted
+from common.client.lab_client import LabClient
 from common.lab_errors import NotAllowed, NotFound
 from common.messages import ContextInfo
 from common.service import close_session, open_session

@@ -21,8 +21,8 @@ from typing import Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from common.client.survey import Survey
 from common.messages.agent import MAX_UPLOAD_BYTES
-from common.survey import Survey
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import zenoh
 
-from common import client as lab
 from common import lab_errors
 from common.auth import LOGIN_WAIT_S, parse_public_key
+from common.client import lab_client as lab
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from viewers.web.adapters import (

@@ -20,9 +20,9 @@ from typing import Literal
 
 import numpy as np
 
+from common.client.survey import RouterView, Survey
 from common.keys import is_ident
 from common.recording import RecordingError, read_recording, summarize
-from common.survey import RouterView, Survey
 from viewers.web.adapters import (
     Account,
     AgentsEvent,

@@ -1,7 +1,7 @@
 """The network page of a lab's tab, for admins: what `wart doctor` says, in the browser.
 
 Routers and their links with round-trip times, every live service by kind,
-each host's load, and what looks wrong in plain words (common/survey.py, the
+each host's load, and what looks wrong in plain words (common/client/survey.py, the
 same code the doctor prints). It is read with the viewer's own Zenoh session
 on demand (a button), never on a timer: a survey queries every router.
 """
@@ -14,7 +14,7 @@ import threading
 
 import viser
 
-from common.survey import Survey
+from common.client.survey import Survey
 from viewers.web.adapters import LabConnection, LabError
 from viewers.web.text import escape_md
 

@@ -2,7 +2,7 @@
 
 The viewer is a gateway. It holds one Zenoh session per lab router (its own
 lab's, opened by ``wart viewer``, plus one per other lab a browser connects
-to) and, per logged-in browser user, one :class:`~common.client.LabClient` on
+to) and, per logged-in browser user, one :class:`~common.client.lab_client.LabClient` on
 that session: every query, chat line, edit and admin request is sealed with
 that person's session, so the services' ACL checks apply to the person.
 
@@ -22,15 +22,16 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import zenoh
 
-from common import client as lab
-from common import host_client, keys, lab_errors
+from common import keys, lab_errors
+from common.client import host_client
+from common.client import lab_client as lab
+from common.client.survey import Survey, survey
 from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
     QueueStateRequest,
     RoomEvent,
 )
-from common.survey import Survey, survey
 from viewers.web.adapters import (
     Account,
     AgentStatus,
@@ -99,7 +100,7 @@ class _Events:
 
 
 class RealConnection:
-    """One browser user's session with one lab, over :class:`~common.client.LabClient`."""
+    """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
         self, connector: RealConnector, link: LabLink, client: lab.LabClient, address: LabAddress

@@ -1,8 +1,8 @@
 """The robot panel's side of a real agent context: queues, uploads, output, settings.
 
 One :class:`ArenaLink` per joined agent context and browser user wraps
-:class:`~common.agent_client.AgentClient` (the same client ``wart deploy``
-uses) on that user's :class:`~common.client.LabClient`, so every request is
+:class:`~common.client.agent_client.AgentClient` (the same client ``wart deploy``
+uses) on that user's :class:`~common.client.lab_client.LabClient`, so every request is
 sealed with the person's session and the context checks their rights. Its
 AgentEvents arrive on Zenoh's threads and are only translated and queued
 here; the page handles them on the connection's own thread.
@@ -19,12 +19,12 @@ from collections.abc import Callable
 from pathlib import Path, PurePath
 from typing import TypeVar
 
-from common import client as lab
 from common import lab_errors
-from common.agent_client import AgentClient
+from common.client import lab_client as lab
+from common.client.agent_client import AgentClient
+from common.controller.precheck import PrecheckError, precheck
 from common.keys import is_ident
 from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
-from common.precheck import PrecheckError, precheck
 from common.recording import RecordingError, read_recording
 from viewers.web.adapters import (
     CONTROLLER_SUFFIXES,
@@ -52,7 +52,7 @@ MAX_FILENAME = 128  # what the page keeps of an uploaded file's name
 def check_upload(filename: str, content: bytes) -> tuple[str, str | None]:
     """(the file's plain name, why it is refused or None); never runs the file.
 
-    The page's own checks (a .py name, not empty) then ``common.precheck``, the
+    The page's own checks (a .py name, not empty) then ``common.controller.precheck``, the
     same check the agent context and the runner make (size, UTF-8, syntax with
     the line, a Controller subclass), so a student hears at once, in words.
     """

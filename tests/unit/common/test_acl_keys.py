@@ -8,8 +8,9 @@ from pathlib import Path
 
 import zenoh
 
-from common import keys, zsecurity
+from common import keys
 from common.keys import AliveKind
+from services.lab import zsecurity
 
 
 def _concrete_keys(realm: str) -> list[str]:

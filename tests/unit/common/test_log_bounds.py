@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from common.log import SUMMARY_WINDOW_S, RepeatSummary, RotatingFile, _summary_window, pump
-from common.supervisor import BACKOFF_FIRST, BACKOFF_MAX, next_backoff
+from services.lab.supervisor import BACKOFF_FIRST, BACKOFF_MAX, next_backoff
 
 
 class Collect(logging.Handler):

@@ -12,7 +12,6 @@ import time
 from typing import Any
 
 from common import keys
-from common.leasemac import CommandMac, new_lease_key
 from common.messages import (
     MAC_ITEM_COUNTERS,
     MAC_ITEM_SPEEDS,
@@ -21,6 +20,7 @@ from common.messages import (
     encode,
 )
 from common.recording import schema as s
+from common.world.leasemac import CommandMac, new_lease_key
 from services.context.agent_queue import ControlJob, RunningJob
 from services.context.recorder import SlotRecorder, _Run
 

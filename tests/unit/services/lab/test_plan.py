@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from common.labfile import LabFileError, load, parse
-from common.zsecurity import ROLE_GRANTS
 from services.commands.certs import host_roles, issue_lab, service_accounts
+from services.lab.labfile import LabFileError, load, parse
 from services.lab.plan import HostContext, host_plan, read_registry_key, write_configs
+from services.lab.zsecurity import ROLE_GRANTS
 from tests.conftest import REPO
 
 EXAMPLE = REPO / "deploy" / "lab.example.toml"

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from common.labfile import LabFileError, service_entry
 from common.zconfig import NetworkOptions
 from services.commands.up import LabSettings, lab_plan, service_accounts, settings_from_args
+from services.lab.labfile import LabFileError, service_entry
 
 
 def settings(tmp_path: Path) -> LabSettings:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from common.static_check import Problem
+from common.controller.static_check import Problem
 from viewers.web.adapters import DryRunResult
 from viewers.web.workbench import TracebackReader, excerpt, format_dry_run
 
 TRACEBACK = [
     "Traceback (most recent call last):",
-    '  File "/sandbox/lib/common/controller.py", line 320, in run',
+    '  File "/sandbox/lib/common/controller/__init__.py", line 320, in run',
     "    self.controller.do_work(self.robot)",
     '  File "/work/user/controller.py", line 12, in do_work',
     "    x = 1 / 0",

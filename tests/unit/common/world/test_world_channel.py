@@ -17,8 +17,6 @@ import pytest
 from common import keys
 from common.auth import AuthError, RegistryIdentity, Verifier, issue_session
 from common.controller import RobotCommand
-from common.leasemac import WorldBoxKeys, new_lease_key, seal_key
-from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
     AuthEnvelope,
@@ -30,7 +28,9 @@ from common.messages import (
     decode,
     encode,
 )
-from common.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
+from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.world.leases import LeaseBook
+from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 
 REALM, WORLD = "r", "w"
 

@@ -10,18 +10,6 @@ import pytest
 
 from common import keys
 from common.auth import AuthError, RegistryIdentity, Session, Verifier, issue_session
-from common.leasemac import (
-    CommandMac,
-    WorldBoxKeys,
-    check_world_token,
-    command_mac,
-    item_mac,
-    mac_command,
-    new_lease_key,
-    open_key,
-    seal_key,
-)
-from common.leases import LeaseBook
 from common.messages import (
     MAC_ITEM_BYTES,
     MAC_ITEM_COUNTERS,
@@ -39,6 +27,18 @@ from common.messages import (
     decode,
     encode,
 )
+from common.world.leasemac import (
+    CommandMac,
+    WorldBoxKeys,
+    check_world_token,
+    command_mac,
+    item_mac,
+    mac_command,
+    new_lease_key,
+    open_key,
+    seal_key,
+)
+from common.world.leases import LeaseBook
 
 REALM, WORLD, AGENT = "lab", "w1", "k1"
 CMD = keys.agent_cmd(REALM, WORLD, AGENT)

@@ -9,7 +9,7 @@ it is allowed to do.
 
 A command is either an Ed25519 ``AuthEnvelope`` (any world) or, under a MAC
 lease, a ``MacCommand`` keyed with the lease key the context sealed to this
-world (common/leasemac.py): only for worlds with an identity (``box_keys``).
+world (common/world/leasemac.py): only for worlds with an identity (``box_keys``).
 
 Thread safety: the lease table has its own lock; Zenoh callback threads call
 :meth:`LeaseBook.accept_lease` and :meth:`LeaseBook.check_command` while the
@@ -26,14 +26,6 @@ from typing import Any
 
 from common import keys
 from common.auth import AuthError, Principal, ReplayWindow, Verifier
-from common.leasemac import (
-    MAC_BYTES,
-    CommandMac,
-    WorldBoxKeys,
-    command_mac,
-    mac_matches,
-    open_key,
-)
 from common.messages import (
     MAC_ITEM_BYTES,
     MAC_ITEM_COUNTERS,
@@ -48,6 +40,14 @@ from common.messages import (
     MessageError,
     WorldStop,
     decode,
+)
+from common.world.leasemac import (
+    MAC_BYTES,
+    CommandMac,
+    WorldBoxKeys,
+    command_mac,
+    mac_matches,
+    open_key,
 )
 
 log = logging.getLogger("wart.leases")

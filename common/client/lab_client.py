@@ -11,9 +11,9 @@ found, registry unreachable, registry key mismatch). Callbacks run on Zenoh
 threads: keep them short (queue the work).
 
 Services log in with an Ed25519 identity key (``login_with_key``) and keep
-their session renewed (common/service_login.py). The errors are in
-common/lab_errors.py, private messages' crypto in common/private_mail.py, the
-admin calls in common/registry_admin.py.
+their session renewed (common/client/service_login.py). The errors are in
+common/lab_errors.py, private messages' crypto in common/client/private_mail.py, the
+admin calls in common/client/registry_admin.py.
 """
 
 from __future__ import annotations
@@ -45,6 +45,13 @@ from common.auth import (
     parse_public_key,
     registry_box_key,
 )
+from common.client.private_mail import (
+    PrivateText,
+    mailbox_key_from_password,
+    open_private,
+    seal_private,
+)
+from common.client.registry_admin import RegistryAdminCalls
 from common.keys import AliveKind
 from common.lab_errors import (
     LabError,
@@ -87,8 +94,6 @@ from common.messages import (
     decode,
     encode,
 )
-from common.private_mail import PrivateText, mailbox_key_from_password, open_private, seal_private
-from common.registry_admin import RegistryAdminCalls
 from common.revocations import RevocationFeed
 
 log = logging.getLogger("wart.client")

@@ -1,9 +1,9 @@
-"""What a controller sees of a SensorSample from the network (common/remote_robot.py)."""
+"""What a controller sees of a SensorSample from the network (common/world/remote_robot.py)."""
 
 from __future__ import annotations
 
 from common.messages import GripperReading, SensorSample
-from common.remote_robot import state_from_sample
+from common.world.remote_robot import state_from_sample
 
 
 def _sample(**kw: object) -> SensorSample:

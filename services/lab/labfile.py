@@ -145,7 +145,7 @@ class HostEntry:
 
 @dataclass(frozen=True)
 class Security:
-    pki: Path  # see common/certs.py and docs/DEPLOY.md for the layout
+    pki: Path  # see services/lab/certs.py and docs/DEPLOY.md for the layout
     acl: bool  # access-control rules on every router, default deny
     student_names: tuple[str, ...]  # certificate CNs of people's tools (chat, control, arena)
     admin_names: tuple[str, ...]  # certificate CNs of operators' tools (doctor)

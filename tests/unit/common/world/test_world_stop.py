@@ -1,4 +1,4 @@
-"""The arena's emergency stop as every world checks it (common/leases.py LeaseBook.accept_stop)."""
+"""The arena's emergency stop as every world checks it (LeaseBook.accept_stop)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 
 from common import keys
 from common.auth import AuthError, RegistryIdentity, Session, Verifier, issue_session
-from common.leases import LeaseBook
 from common.messages import AgentCommand, Lease, WorldStop
+from common.world.leases import LeaseBook
 
 REALM, WORLD, AGENT = "lab", "w1", "k1"
 STOP = keys.world_estop(REALM, WORLD)

@@ -27,10 +27,10 @@ from pathlib import Path
 from typing import Any
 
 from common import keys
-from common.certs import CA_CERT
 from common.keys import AliveKind, realm_root
-from common.labfile import LabFile
 from common.zconfig import NetworkOptions
+from services.lab.certs import CA_CERT
+from services.lab.labfile import LabFile
 
 # The roles, i.e. the certificate common names the rules know. A host's
 # processes use the certificate of their role from that host's directory;

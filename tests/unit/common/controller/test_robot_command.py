@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from common.controller import RobotCommand
-from common.remote_robot import agent_command
+from common.world.remote_robot import agent_command
 
 EVERY_FIELD = [
     RobotCommand(speeds=(10, -127)),

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from common.static_check import check_source
+from common.controller.static_check import check_source
 
-EXAMPLES = sorted((Path(__file__).parents[3] / "examples").glob("*.py"))
+EXAMPLES = sorted((Path(__file__).parents[4] / "examples").glob("*.py"))
+assert EXAMPLES, "the examples folder was not found"
 
 GOOD = """\
 from common.controller import Controller, Khepera

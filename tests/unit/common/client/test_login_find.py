@@ -1,4 +1,4 @@
-"""A login sent while no registry is routed to asks again for a moment (common/client.py).
+"""A login sent while no registry is routed to asks again for a moment (LabClient).
 
 The query's network is faked here (what is tested is when the client asks
 again); the real race, a login in the instant a registry comes back, runs
@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import nacl.signing
 
 from common.auth import LOGIN_FIND_S
-from common.client import LabClient
+from common.client.lab_client import LabClient
 
 
 @dataclass

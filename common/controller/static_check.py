@@ -1,7 +1,7 @@
 """A controller's static check: every problem found without running it, each with its line.
 
 The page's **Check** button shows these, one ``line N: what is wrong`` each,
-and marks the lines in the editor. It extends :func:`common.precheck.precheck`
+and marks the lines in the editor. It extends :func:`common.controller.precheck.precheck`
 (size, UTF-8, syntax, a Controller subclass), which the agent context and the
 runner still run on every upload: this check is advice for the student, not a
 gate, so it may be stricter (a misspelt robot call is legal Python) without
@@ -18,7 +18,7 @@ What it finds:
   from one of those;
 - an import the sandbox cannot satisfy or refuses (see :data:`FORBIDDEN` and
   docs/ARCHITECTURE.md, "Uploaded code"): the child is ``python3 -I -S`` with
-  the standard library and common/controller.py only, in namespaces with no
+  the standard library and common/controller/ only, in namespaces with no
   network, under a seccomp filter that refuses every socket family but
   AF_UNIX.
 
@@ -33,7 +33,7 @@ import sys
 from dataclasses import dataclass
 
 from common.controller import Khepera
-from common.precheck import PrecheckError, precheck
+from common.controller.precheck import PrecheckError, precheck
 
 # The public names of the robot's API: what a controller may call on it.
 ROBOT_API = frozenset(name for name in dir(Khepera) if not name.startswith("_"))

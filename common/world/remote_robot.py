@@ -22,7 +22,7 @@ burst of 20 robots' samples and commands (docs/BENCHMARKS.md).
 
 Given a verifier, the link also listens to the agent's lease: when the lease
 names its session and carries the lease key sealed to it (a MAC lease,
-common/leasemac.py), commands go out as MacCommands (a keyed BLAKE2b, a few
+common/world/leasemac.py), commands go out as MacCommands (a keyed BLAKE2b, a few
 µs for the world to check) instead of Ed25519 envelopes. Until such a lease
 arrives (the context republishes it every second), commands are signed.
 """
@@ -49,7 +49,6 @@ from common.controller import (
     KheperaState,
     RobotCommand,
 )
-from common.leasemac import CommandMac, open_key
 from common.messages import (
     MAC_ITEM_COUNTERS,
     MAC_ITEM_SPEEDS,
@@ -66,6 +65,7 @@ from common.messages import (
     decode,
     encode,
 )
+from common.world.leasemac import CommandMac, open_key
 
 log = logging.getLogger("wart.remote_robot")
 

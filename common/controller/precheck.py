@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import ast
 
-from common.messages.agent import MAX_UPLOAD_BYTES
-
-MAX_SOURCE_BYTES = MAX_UPLOAD_BYTES
+# The wire's upload cap (common.messages.agent.MAX_UPLOAD_BYTES), written again here
+# because this package is copied into the sandbox and imports nothing of the project;
+# tests/unit/test_import_contracts.py holds the two equal.
+MAX_SOURCE_BYTES = 64 * 1024
 
 
 class PrecheckError(ValueError):

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from common.certs import CertError, init_ca, inspect, issue
-from common.zsecurity import ROLE_GRANTS, VERB_MESSAGES, acl_config, host_tls, zenoh_security
+from services.lab.certs import CertError, init_ca, inspect, issue
+from services.lab.zsecurity import ROLE_GRANTS, VERB_MESSAGES, acl_config, host_tls, zenoh_security
 
 
 def test_ca_and_leaf_certificates(tmp_path: Path) -> None:

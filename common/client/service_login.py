@@ -18,7 +18,7 @@ import zenoh
 
 from common import keys
 from common.auth import Session, load_identity_key, parse_public_key
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from common.lab_errors import LabError, NotLoggedIn, RateLimited, RegistryUnreachable
 
 log = logging.getLogger("wart.client")

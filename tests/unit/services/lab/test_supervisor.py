@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from common import supervisor as supervisor_module
-from common.supervisor import ChildSpec, Supervisor
+from services.lab import supervisor as supervisor_module
+from services.lab.supervisor import ChildSpec, Supervisor
 
 
 class Watch:

@@ -1,6 +1,6 @@
 """Host new contexts on a lab: a chat room or a simulated arena, on the host chosen by load.
 
-For any program with a logged-in :class:`~common.client.LabClient` (``wart
+For any program with a logged-in :class:`~common.client.lab_client.LabClient` (``wart
 arena``, ``wart room``, the viewer)::
 
     room = host_room(client, "reading-group", "Reading group")
@@ -25,7 +25,7 @@ from typing import Literal
 import zenoh
 
 from common import keys
-from common.client import LabClient
+from common.client.lab_client import LabClient
 from common.lab_errors import LabError, NotFound, RequestFailed, raise_for
 from common.messages import ErrorReply, MessageError, OkReply, decode, encode
 from common.messages.host import (

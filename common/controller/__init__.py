@@ -113,7 +113,7 @@ class RobotCommand:
     """One command a controller gives its robot; exactly one field is set.
 
     The one schema every transport carries: the sandbox's pipe (as a dict, see
-    :meth:`to_dict`), Zenoh (``common.remote_robot`` turns it into an
+    :meth:`to_dict`), Zenoh (``common.world.remote_robot`` turns it into an
     AgentCommand), and a test's in-process world. Stdlib only, like this module,
     because the sandboxed child imports it.
     """

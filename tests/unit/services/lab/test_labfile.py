@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from common.labfile import LabFileError, fill, load, parse
+from services.lab.labfile import LabFileError, fill, load, parse
 from tests.conftest import REPO
 
 EXAMPLE = REPO / "deploy" / "lab.example.toml"

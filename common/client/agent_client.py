@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common import keys
-from common.client import LabClient, RoomHandle
+from common.client.lab_client import LabClient, RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
 from common.lab_errors import LabError, NotFound, NotLoggedIn
 from common.messages import (
@@ -60,7 +60,7 @@ from common.messages import (
     StopControl,
 )
 from common.recording.reader import Recording
-from common.remote_robot import ZenohRobotLink
+from common.world.remote_robot import ZenohRobotLink
 
 log = logging.getLogger("wart.agent_client")
 

@@ -16,7 +16,6 @@ import zenoh
 from common import keys
 from common.auth import Verifier
 from common.keys import AliveKind
-from common.leases import LeaseBook
 from common.messages import (
     AgentCommand,
     CommandBundle,
@@ -29,6 +28,7 @@ from common.messages import (
 )
 from common.revocations import RevocationFeed
 from common.service import Service
+from common.world.leases import LeaseBook
 
 
 class WorldService(Service):

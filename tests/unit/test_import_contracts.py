@@ -1,0 +1,175 @@
+"""Which part of the house may import which: the layout's rules, checked from the source.
+
+common/ is grouped by audience (docs/ARCHITECTURE.md §0): its root is the wire and
+the service base every process needs; world/, client/ and controller/ serve one
+audience each; sim2d/ and recording/ are libraries with no network in them.
+Breaking a rule here is how a student's sandbox ends up needing zenoh, or a
+library ends up starting a lab.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+PROJECT = ("common", "services", "viewers", "bench")
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+@cache
+def _sources() -> dict[str, Path]:
+    found = {}
+    for top in PROJECT:
+        for path in (REPO / top).rglob("*.py"):
+            found[_module_name(path)] = path
+    return found
+
+
+@cache
+def imports_of(module: str) -> frozenset[str]:
+    """Every module name ``module`` imports, at any depth of its code (functions too)."""
+    path = _sources()[module]
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            names.add(base)
+            # `from common import keys` imports the module common.keys
+            names.update(
+                f"{base}.{alias.name}"
+                for alias in node.names
+                if f"{base}.{alias.name}" in _sources()
+            )
+    return frozenset(n for n in names if n)
+
+
+def _project(name: str) -> bool:
+    return name.split(".")[0] in PROJECT
+
+
+def _inside(name: str, package: str) -> bool:
+    return name == package or name.startswith(package + ".")
+
+
+def _modules_in(package: str) -> list[str]:
+    return sorted(m for m in _sources() if _inside(m, package))
+
+
+def _violations(package: str, allowed) -> list[str]:
+    return sorted(
+        f"{module} imports {name}"
+        for module in _modules_in(package)
+        for name in imports_of(module)
+        if not allowed(name)
+    )
+
+
+def _reaches(module: str, target: str) -> list[str] | None:
+    """An import chain from ``module`` to ``target`` (a third-party top name), or None."""
+    seen: set[str] = set()
+    stack: list[tuple[str, list[str]]] = [(module, [module])]
+    while stack:
+        current, chain = stack.pop()
+        for name in imports_of(current):
+            if name.split(".")[0] == target:
+                return [*chain, name]
+            for candidate in (name, name.rpartition(".")[0]):
+                if candidate in _sources() and candidate not in seen:
+                    seen.add(candidate)
+                    stack.append((candidate, [*chain, candidate]))
+    return None
+
+
+def test_the_controller_package_needs_only_the_standard_library() -> None:
+    """The sandbox copies common/controller/ and offers nothing else of the lab's."""
+    stdlib = sys.stdlib_module_names | {"__future__"}
+
+    def allowed(name: str) -> bool:
+        return _inside(name, "common.controller") or name.split(".")[0] in stdlib
+
+    assert not _violations("common.controller", allowed)
+
+
+@pytest.mark.parametrize("library", ["common.sim2d", "common.recording"])
+def test_the_libraries_never_reach_zenoh(library: str) -> None:
+    chains = [c for m in _modules_in(library) if (c := _reaches(m, "zenoh"))]
+    assert not chains, f"{library} reaches zenoh: " + " -> ".join(chains[0])
+
+
+ROOT_SUBPACKAGES = (
+    "common.world",
+    "common.client",
+    "common.controller",
+    "common.sim2d",
+    "common.recording",
+)
+
+
+def test_the_root_of_common_never_imports_its_subpackages() -> None:
+    root = [m for m in _modules_in("common") if not any(_inside(m, s) for s in ROOT_SUBPACKAGES)]
+    bad = sorted(
+        f"{module} imports {name}"
+        for module in root
+        for name in imports_of(module)
+        if any(_inside(name, s) for s in ROOT_SUBPACKAGES)
+    )
+    assert not bad
+
+
+def test_common_never_imports_a_process_or_the_viewer() -> None:
+    assert not _violations(
+        "common", lambda n: not _inside(n, "services") and not _inside(n, "viewers")
+    )
+
+
+def test_the_world_package_never_imports_the_client_package() -> None:
+    """Worlds (engine, bridge) load common.world; a user's connection is not theirs."""
+    assert not _violations("common.world", lambda n: not _inside(n, "common.client"))
+
+
+@pytest.mark.xfail(strict=True, reason="issue 37: one wiring lands next")
+def test_the_lab_library_never_imports_a_command() -> None:
+    """services/lab/ is the library that commands and hosts share, never the other way."""
+    assert not _violations("services.lab", lambda n: not _inside(n, "services.commands"))
+
+
+@pytest.mark.xfail(strict=True, reason="issue 37: one wiring lands next")
+def test_commands_import_only_common_and_the_lab_library() -> None:
+    def allowed(name: str) -> bool:
+        if not _project(name):
+            return True
+        return any(_inside(name, p) for p in ("common", "services.lab", "services.commands"))
+
+    assert not _violations("services.commands", allowed)
+
+
+def test_the_precheck_cap_is_the_wire_cap() -> None:
+    """precheck writes the upload cap again (it may import nothing); the two stay equal."""
+    from common.controller.precheck import MAX_SOURCE_BYTES
+    from common.messages.agent import MAX_UPLOAD_BYTES
+
+    assert MAX_SOURCE_BYTES == MAX_UPLOAD_BYTES
+
+
+def test_the_contract_check_sees_a_violation() -> None:
+    """The checker itself: an import it should flag is flagged (an empty list means something)."""
+    assert "zenoh" in imports_of("common.service")
+    assert _reaches("common.service", "zenoh") is not None
+    assert "common.keys" in imports_of("common.revocations")
