@@ -3,7 +3,7 @@
 Secrets never travel in the clear: a login request and any password in an
 admin request are sealed (nacl SealedBox) to the registry's box key, and a
 private message is a nacl Box from the sender's session box key to the
-recipient's key. See docs/ARCHITECTURE.md §5.
+recipient's key. See docs/SECURITY.md.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ presence barrier. This module prepares the kernel's tables: per-agent sensor
 layouts (rebuilt when agents change) and the static geometry (rebuilt when
 obstacles or the arena change); a sensing pass only gathers what moves.
 
-Readings (see the "Sensor models" part of docs/ARCHITECTURE.md section 9):
+Readings (see the "Sensor models" part of docs/WORLDS.md):
 - proximity: each sensor casts ``rays_per_sensor`` rays across its spread; the
   nearest hit distance goes through the type's response curve; seeded noise.
 - ambient: each lit light within a sensor's cone and radius, not hidden by an

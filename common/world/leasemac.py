@@ -1,4 +1,4 @@
-"""Per-lease session keys: agent commands MACed instead of signed (docs/ARCHITECTURE.md §5).
+"""Per-lease session keys: agent commands MACed instead of signed (docs/SECURITY.md).
 
 An Ed25519 verification costs the world 60-150 µs per command, serially in
 its subscriber thread; 20 controllers answering one tick then queue behind

@@ -85,3 +85,50 @@ def test_every_path_the_docs_and_docstrings_cite_exists() -> None:
         if not exists(path) and not Path(path).stem.isupper()  # maps/NAME.json: a placeholder
     )
     assert not missing, "cited paths that do not exist:\n" + "\n".join(missing)
+
+
+def _module_index() -> dict[str, set[str]]:
+    """The module index of ARCHITECTURE.md §0: package -> the modules its row names."""
+    section = DOC.split("### Module index", 1)[1].split("\n## ", 1)[0]
+    index = {}
+    for row in section.splitlines():
+        cells = row.split("|")
+        if len(cells) < 3 or not cells[1].strip().startswith("`"):
+            continue
+        package = cells[1].strip().strip("`")
+        index[package] = set(re.findall(r"`([\w]+\.py|[\w]+/)`", cells[2]))
+    return index
+
+
+def _on_disk(package: str) -> set[str]:
+    folder = REPO / package
+    names = {
+        p.name
+        for p in folder.glob("*.py")
+        if p.name != "__init__.py" or package.endswith("controller/")
+    }
+    names |= {f"{p.name}/" for p in folder.iterdir() if (p / "__init__.py").exists()}
+    return names
+
+
+def test_the_module_index_names_every_module_and_no_other() -> None:
+    index = _module_index()
+    assert "common/" in index and "viewers/web/" in index, "module index not found"
+    wrong = []
+    for package, named in index.items():
+        on_disk = _on_disk(package)
+        if package in ("common/", "services/"):
+            on_disk = {n for n in on_disk if not n.endswith("/")} | (named & on_disk)
+        if missing := on_disk - named:
+            wrong.append(f"{package}: not in the index: {sorted(missing)}")
+        if gone := named - on_disk:
+            wrong.append(f"{package}: no such module: {sorted(gone)}")
+    packages = {
+        f"{p.parent.relative_to(REPO)}/"
+        for top in ("common", "services", "viewers")
+        for p in (REPO / top).rglob("__init__.py")
+        if p.parent.name != "agents"  # the robot types: listed as sim2d's agents/
+    }
+    if missing_packages := packages - set(index) - {"common/", "viewers/"}:
+        wrong.append(f"packages without a row: {sorted(missing_packages)}")
+    assert not wrong, "docs/ARCHITECTURE.md's module index is out of date:\n" + "\n".join(wrong)

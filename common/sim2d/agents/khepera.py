@@ -1,4 +1,4 @@
-"""The Khepera I, from the K-Team manual's numbers (docs/ARCHITECTURE.md §9 "Sensor models").
+"""The Khepera I, from the K-Team manual's numbers (docs/WORLDS.md "Sensor models").
 
 - Drive: speed in pulses per 10 ms, 0.08 mm a pulse (about 8 mm/s a unit),
   wheel base 53 mm, clamped to +-127; 32-bit position counters in pulses.

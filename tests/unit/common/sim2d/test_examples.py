@@ -63,7 +63,7 @@ def test_every_example_passes_the_precheck_and_says_what_it_teaches() -> None:
 
 
 # Both drives (World(drive=...)): a controller must behave the same whichever the
-# engine runs; the velocity drive is the swarm option (docs/ARCHITECTURE.md section 9).
+# engine runs; the velocity drive is the swarm option (docs/WORLDS.md).
 @pytest.mark.parametrize("drive", DRIVES)
 def test_braitenberg_avoids_the_maze_walls(drive: str) -> None:
     w = world("maze", "k1", drive=drive)
