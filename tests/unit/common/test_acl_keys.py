@@ -59,3 +59,27 @@ def test_no_key_string_literal_is_left_in_the_acl_module() -> None:
     grants = source[source.index("_SERVICE_BASE = (") : source.index('ROLE_GRANTS["bridge"]')]
     literals = re.findall(r'"([a-z*]+(?:/[a-z*]+)+)"', grants)
     assert not literals, f"key patterns written by hand: {literals}"
+
+
+def test_every_key_has_a_role_that_produces_it_and_one_that_consumes_it() -> None:
+    """A key no role may put (or serve) is dead in a lab with access control, and one
+    no role may read is a leak nobody hears: the grants are the dataflow, checked."""
+    realm = "lab"
+    root = keys.realm_root(realm)
+    produce, consume = {"pub", "serve", "token"}, {"sub", "ask", "watch"}
+    # A router's own liveliness token is declared inside the router, which its own
+    # access control does not filter; the realm root is a prefix, not a key.
+    exempt = {root, keys.alive(realm, AliveKind.ROUTER, "x")}
+    dead = []
+    for key in _concrete_keys(realm):
+        expr = zenoh.KeyExpr(key)
+        verbs = {
+            grant.verb
+            for grants in zsecurity.ROLE_GRANTS.values()
+            for grant in grants
+            for pattern in grant.keys
+            if zenoh.KeyExpr(f"{root}/{pattern}").intersects(expr)
+        }
+        if key not in exempt and "*" not in key and not (verbs & produce and verbs & consume):
+            dead.append(f"{key}: {sorted(verbs) or 'no grant'}")
+    assert not dead, "keys without both a producer and a consumer role:\n" + "\n".join(dead)
