@@ -138,7 +138,7 @@ class _Subject:
 
             self.circles = sense_pass._circles
         except ImportError:
-            self.circles = K._circles
+            self.circles = K._circles  # type: ignore[attr-defined]  # an older tree's
         self.world = engine_bench.build(n, drive="velocity")
         for _ in range(6):  # a few ticks: neighbours in reach, readings to steer by
             engine_bench.control(self.world)

@@ -44,6 +44,10 @@ class Message(msgspec.Struct, tag=True, tag_field="type", kw_only=True, frozen=T
     ``v`` is the schema version the sender wrote. A type that changes its
     schema raises the default of ``v`` in its own declaration; a decoder
     refuses versions newer than its own, and stays able to read older ones.
+
+    Each subclass says ``frozen=True`` again: msgspec inherits it, but mypy's
+    dataclass model of a Struct does not, and reads every subclass as a
+    mutable dataclass deriving from a frozen one (an error per class).
     """
 
     v: int = 1
