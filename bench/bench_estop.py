@@ -21,6 +21,7 @@ Then the host releases the stop and the next round starts.
 from __future__ import annotations
 
 import argparse
+import functools
 import statistics
 import sys
 import tempfile
@@ -79,7 +80,7 @@ def main() -> int:
                 for agent, who in owners.items():
                     assert who.wait_status(rids[agent], {"running"}, timeout=60), agent
                 since = time.monotonic()
-                wait_for(lambda since=since: motion.moving(ROBOTS, since), 30, "robots moving")
+                wait_for(functools.partial(motion.moving, ROBOTS, since), 30, "robots moving")
                 t0 = time.monotonic()
                 ida.emergency_stop("bench")
                 replies.append(time.monotonic() - t0)
@@ -89,7 +90,7 @@ def main() -> int:
                     assert status is not None and "emergency stop by ida" in status.reason
                     last = max(last, time.monotonic() - t0)
                 ended.append(last)
-                rest = wait_for(lambda t0=t0: motion.at_rest_since(ROBOTS, t0), 20, "rest")
+                rest = wait_for(functools.partial(motion.at_rest_since, ROBOTS, t0), 20, "rest")
                 assert isinstance(rest, float)
                 rests.append(rest - t0)
                 print(

@@ -32,7 +32,7 @@ from bench.labproc import REPO, BenchLab
 from common import keys
 from common.keys import AliveKind
 from common.messages import WorldFrame, decode, encode
-from common.service import close_session, open_session
+from common.service import close_session, has_subscribers, open_session
 from common.zconfig import NetworkOptions
 from services.engine import wire
 
@@ -131,7 +131,7 @@ def main() -> None:
             assert proc.stdout.readline().strip() == "ready"
             probe = session.declare_publisher(keys.world_frame("bench", WORLD))
             deadline = time.monotonic() + 10
-            while not probe.matching_status.matching and time.monotonic() < deadline:
+            while not has_subscribers(probe) and time.monotonic() < deadline:
                 time.sleep(0.05)  # wait on the condition: the recorder's subscription arrived
             probe.undeclare()
             cpu, wall = ticks(n, args.ticks, session)

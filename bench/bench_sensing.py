@@ -8,7 +8,8 @@ time (``time.process_time``) and, each round, the parts of a pass:
 - ``noise``: drawing the pass's Gaussian noise in Python (trees that draw it
   before the kernel; 0 where the kernel draws its own), the mean of 64 draws:
   they come in blocks of 32 passes, so one draw in 32 pays for them all,
-- ``circles``: binning the circles into the grid (``kernels._circles``),
+- ``circles``: binning the circles into the grid (``sense_pass._circles``; in older
+  trees ``kernels._circles``),
 - ``ir``: the kernel with every robot's reach set to 0 subtracted from the
   whole kernel (rays, candidates, curve; presence goes with it),
 - ``ambient``: the whole kernel less the kernel without lights,
@@ -131,6 +132,13 @@ class _Subject:
         from common.sim2d import kernels as K
 
         self.K = K
+        # The circle binning: in kernels.py in trees before it was split by job.
+        try:
+            from common.sim2d import sense_pass
+
+            self.circles = sense_pass._circles
+        except ImportError:
+            self.circles = K._circles  # type: ignore[attr-defined]  # an older tree's
         self.world = engine_bench.build(n, drive="velocity")
         for _ in range(6):  # a few ticks: neighbours in reach, readings to steer by
             engine_bench.control(self.world)
@@ -186,7 +194,7 @@ class _Subject:
             _mean(lambda: take(self.total), 64, time.process_time) if take and self.total else 0.0
         )
         res["circles"] = _best_cpu(
-            lambda: K._circles(self.robots, self.tables, self.scene, self.moving), 5
+            lambda: self.circles(self.robots, self.tables, self.scene, self.moving), 5
         )
         whole = _best_cpu(self.kernel, 5)
         res["ir"] = whole - _best_cpu(lambda: self.kernel(tables=self.tables_blind), 5)

@@ -28,6 +28,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import psutil
 
@@ -38,7 +39,10 @@ from tests.conftest import free_port
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 
-BENCH_VIEWPORT = {"width": 960, "height": 600}
+if TYPE_CHECKING:  # playwright is imported where the bench runs it
+    from playwright.sync_api import ViewportSize
+
+BENCH_VIEWPORT: ViewportSize = {"width": 960, "height": 600}
 
 
 class WsCounter:

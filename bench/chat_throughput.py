@@ -8,6 +8,7 @@ they verify every event (the room seals each one) as a real client does.
 
 from __future__ import annotations
 
+import functools
 import sys
 import threading
 import time
@@ -29,7 +30,7 @@ def main() -> None:
     lab.start(["--rate", "100000", "--burst", "100000", "--history", "100"])
     sessions = [open_session(lab.options, wait=10.0) for _ in range(max(1, members // 10))]
     total = per_sender * senders
-    received = {name: [] for name in names}
+    received: dict[str, list[int]] = {name: [] for name in names}
     done = threading.Event()
     lock = threading.Lock()
     complete = [0]
@@ -52,7 +53,7 @@ def main() -> None:
         for i, name in enumerate(names):
             client = LabClient(sessions[i % len(sessions)], lab.realm, lab.identity.verify_key)
             client.login(name, PASSWORD)
-            client.join("room", lambda e, n=name: on_event(n, e), history=0)
+            client.join("room", functools.partial(on_event, name), history=0)
             clients.append(client)
         print(f"{members} members joined; {senders} senders x {per_sender} lines")
         t0 = time.perf_counter()

@@ -226,10 +226,10 @@ def main() -> None:
             "gripper": not args.no_gripper,
             "drive": args.drive,
         }
-        runs = [run(n, seconds, **kw) for _ in range(args.repeats)]  # type: ignore[arg-type]
+        runs = [run(n, seconds, **kw) for _ in range(args.repeats)]
         cpu = [r[0] for r in runs]
         wall = [r[1] for r in runs]
-        _, _, ph = run(n, seconds, profile=True, **kw)  # type: ignore[arg-type]
+        _, _, ph = run(n, seconds, profile=True, **kw)
         print(
             f"{n:>6} {max(cpu):>12.3g} {statistics.median(cpu):>7.3g}"
             f" {max(wall):>12.3g} {statistics.median(wall):>7.3g}"

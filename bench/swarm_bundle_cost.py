@@ -30,6 +30,7 @@ over the batches are printed:
 from __future__ import annotations
 
 import argparse
+import functools
 import statistics
 import sys
 import time
@@ -268,9 +269,9 @@ def main() -> int:
         figures["sender arrays"].append(us)
         sizes = {"per-item": len(old[0]), "arrays": len(new[0]), "plain": len(plain[0])}
         obeyed.clear()
-        us, _ = timed(lambda old=old: world_per_item(old))
+        us, _ = timed(functools.partial(world_per_item, old))
         figures["world per-item"].append(us)
-        us, _ = timed(lambda new=new: world_arrays(new))
+        us, _ = timed(functools.partial(world_arrays, new))
         figures["world arrays"].append(us)
         us, _ = timed(lambda: world_plain(plain))
         figures["peer's world"].append(us)

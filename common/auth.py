@@ -28,16 +28,20 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
+from typing import TypeVar, overload
 
 import nacl.exceptions
 import nacl.public
 import nacl.signing
 
 from common.messages.auth import AuthEnvelope, SessionToken, SignedToken
-from common.messages.base import ErrorCode, Message, MessageError, decode, encode
+from common.messages.base import ErrorCode, Expected, Message, MessageError, decode, encode
 
 M = TypeVar("M", bound=Message)
+# The other members of a tuple of expected types (open's overloads, as decode's).
+M2 = TypeVar("M2", bound=Message)
+M3 = TypeVar("M3", bound=Message)
+M4 = TypeVar("M4", bound=Message)
 
 DEFAULT_FRESHNESS_WINDOW = 30.0
 """Seconds a message may be older (or newer, for clock skew) than the service's clock."""
@@ -395,9 +399,29 @@ class Verifier:
 
     # -- envelopes
 
+    # Overloads per tuple length, as decode's: a body of (A, B) is typed A | B.
+    @overload
+    def open(self, key_expr: str, payload: object, expected: type[M]) -> tuple[Principal, M]: ...
+    @overload
     def open(
-        self, key_expr: str, payload: object, expected: type[M] | tuple[type[M], ...]
-    ) -> tuple[Principal, M]:
+        self, key_expr: str, payload: object, expected: tuple[type[M], type[M2]]
+    ) -> tuple[Principal, M | M2]: ...
+    @overload
+    def open(
+        self, key_expr: str, payload: object, expected: tuple[type[M], type[M2], type[M3]]
+    ) -> tuple[Principal, M | M2 | M3]: ...
+    @overload
+    def open(
+        self,
+        key_expr: str,
+        payload: object,
+        expected: tuple[type[M], type[M2], type[M3], type[M4]],
+    ) -> tuple[Principal, M | M2 | M3 | M4]: ...
+    @overload
+    def open(
+        self, key_expr: str, payload: object, expected: tuple[type[Message], ...]
+    ) -> tuple[Principal, Message]: ...
+    def open(self, key_expr: str, payload: object, expected: Expected) -> tuple[Principal, Message]:
         """Verify an AuthEnvelope received on ``key_expr`` and decode its body.
 
         Raises AuthError ("unauthenticated") for anything not from a valid,
@@ -410,9 +434,32 @@ class Verifier:
             raise AuthError("unauthenticated", f"not an authenticated message ({exc})") from None
         return self.open_envelope(key_expr, envelope, expected)
 
+    @overload
     def open_envelope(
-        self, key_expr: str, envelope: AuthEnvelope, expected: type[M] | tuple[type[M], ...]
-    ) -> tuple[Principal, M]:
+        self, key_expr: str, envelope: AuthEnvelope, expected: type[M]
+    ) -> tuple[Principal, M]: ...
+    @overload
+    def open_envelope(
+        self, key_expr: str, envelope: AuthEnvelope, expected: tuple[type[M], type[M2]]
+    ) -> tuple[Principal, M | M2]: ...
+    @overload
+    def open_envelope(
+        self, key_expr: str, envelope: AuthEnvelope, expected: tuple[type[M], type[M2], type[M3]]
+    ) -> tuple[Principal, M | M2 | M3]: ...
+    @overload
+    def open_envelope(
+        self,
+        key_expr: str,
+        envelope: AuthEnvelope,
+        expected: tuple[type[M], type[M2], type[M3], type[M4]],
+    ) -> tuple[Principal, M | M2 | M3 | M4]: ...
+    @overload
+    def open_envelope(
+        self, key_expr: str, envelope: AuthEnvelope, expected: tuple[type[Message], ...]
+    ) -> tuple[Principal, Message]: ...
+    def open_envelope(
+        self, key_expr: str, envelope: AuthEnvelope, expected: Expected
+    ) -> tuple[Principal, Message]:
         """:meth:`open` for an envelope already decoded (a caller that accepts several kinds)."""
         try:
             token = self.verify_token(envelope.token)

@@ -291,6 +291,16 @@ def open_session(
         delay = min(delay * 2, 2.0)
 
 
+def has_subscribers(publisher: zenoh.Publisher) -> bool:
+    """Whether any subscriber matches ``publisher`` now.
+
+    zenoh's stub types ``matching_status`` as a bool; it is a MatchingStatus,
+    whose ``matching`` is the bool.
+    """
+    status: Any = publisher.matching_status
+    return bool(status.matching)
+
+
 def close_session(session: zenoh.Session, timeout: float = 5.0) -> bool:
     """Close a session within ``timeout``; False if Zenoh did not finish in time."""
     done = threading.Event()

@@ -50,7 +50,7 @@ ENDED: frozenset[str] = frozenset({"finished", "cancelled", "refused"})
 # --- client to agent context -----------------------------------------------------------
 
 
-class ControlRequest(Message):
+class ControlRequest(Message, frozen=True):
     """Queue a controller on an agent (the thesis's AgentControlRequest).
 
     ``remote``: the requester's own session will drive (the lease names it).
@@ -65,7 +65,7 @@ class ControlRequest(Message):
     filename: ShortText = "controller.py"
 
 
-class ControlQueued(Message):
+class ControlQueued(Message, frozen=True):
     """The reply to a ControlRequest: where it waits and when it should start."""
 
     request_id: Ident
@@ -75,7 +75,7 @@ class ControlQueued(Message):
     slot_seconds: float
 
 
-class CancelControl(Message):
+class CancelControl(Message, frozen=True):
     """Withdraw a request (one's own; anyone's with the manage right)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -83,7 +83,7 @@ class CancelControl(Message):
     request_id: Ident
 
 
-class StopControl(Message):
+class StopControl(Message, frozen=True):
     """Stop the controller running on an agent (manage right: owner or ``kick``)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -92,7 +92,7 @@ class StopControl(Message):
     reason: ShortText = ""
 
 
-class ContextSettings(Message):
+class ContextSettings(Message, frozen=True):
     """Change the slot length, or enable/disable remote control (manage right).
 
     ``enabled`` applies to ``agent`` if given, else to the whole context.
@@ -106,7 +106,7 @@ class ContextSettings(Message):
     agent: Ident | None = None
 
 
-class EmergencyStop(Message):
+class EmergencyStop(Message, frozen=True):
     """Stop every robot of the arena now and hold it stopped (manage right), or release it.
 
     ``engaged``: every running controller ends ("emergency stop by <who>"), the
@@ -120,7 +120,7 @@ class EmergencyStop(Message):
     reason: ShortText = ""
 
 
-class DryRunRequest(Message):
+class DryRunRequest(Message, frozen=True):
     """Run a controller for a few simulated seconds in a private copy of the arena.
 
     Needs ``deploy`` on the agent (the same right as queueing it). Answered
@@ -141,7 +141,7 @@ class DryRunCollision(msgspec.Struct, frozen=True, kw_only=True):
     ident: ShortText = ""  # the obstacle's, robot's or object's id ("" for the arena's walls)
 
 
-class DryRunReport(Message):
+class DryRunReport(Message, frozen=True):
     """What a dry run saw; ``verdict`` is the one line a student reads first.
 
     ``will_run`` is False when the controller raised, did not load, did not
@@ -166,7 +166,7 @@ class DryRunReport(Message):
     )
 
 
-class QueueStateRequest(Message):
+class QueueStateRequest(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
 
@@ -177,7 +177,7 @@ FileName = Annotated[str, msgspec.Meta(pattern=FILE_NAME_PATTERN, max_length=64)
 """A plain .py name: no directory, no leading dot, so never a path out of the user's folder."""
 
 
-class SaveFile(Message):
+class SaveFile(Message, frozen=True):
     """Keep ``source`` as the sender's file ``name`` (replacing one of that name)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -186,7 +186,7 @@ class SaveFile(Message):
     source: Upload
 
 
-class FileListRequest(Message):
+class FileListRequest(Message, frozen=True):
     """The sender's own files, newest first (reply: :class:`FileList`)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -198,13 +198,13 @@ class FileInfo(msgspec.Struct, frozen=True, kw_only=True):
     saved_at: float  # wall-clock seconds
 
 
-class FileList(Message):
+class FileList(Message, frozen=True):
     files: Annotated[list[FileInfo], msgspec.Meta(max_length=64)]
     max_files: NonNegInt  # how many the context keeps per user (the oldest go first)
     max_bytes: NonNegInt  # the largest file it keeps
 
 
-class ReadFile(Message):
+class ReadFile(Message, frozen=True):
     """One of the sender's own files (reply: :class:`FileContent`; not_found otherwise)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -212,7 +212,7 @@ class ReadFile(Message):
     name: FileName
 
 
-class FileContent(Message):
+class FileContent(Message, frozen=True):
     name: FileName
     source: Upload
     saved_at: float
@@ -237,7 +237,7 @@ class AgentQueue(msgspec.Struct, frozen=True, kw_only=True):
     entries: list[QueueEntry]  # running first (position 0), then the waiting ones in order
 
 
-class AgentContextState(Message):
+class AgentContextState(Message, frozen=True):
     """Every agent of the context and its queue (reply of QueueStateRequest, and in events)."""
 
     ctx: Ident
@@ -261,7 +261,7 @@ class RequestStatus(msgspec.Struct, frozen=True, kw_only=True):
     end: float | None = None
 
 
-class RequestStatusQuery(Message):
+class RequestStatusQuery(Message, frozen=True):
     """Where one request stands now (reply: :class:`RequestStatusReply`).
 
     The context publishes each of a request's statuses once, as an AgentEvent; a
@@ -274,7 +274,7 @@ class RequestStatusQuery(Message):
     request_id: Ident
 
 
-class RequestStatusReply(Message):
+class RequestStatusReply(Message, frozen=True):
     """A request as the context knows it now.
 
     ``status`` None: the context never saw the request or has forgotten it
@@ -308,7 +308,7 @@ class OutputLines(msgspec.Struct, frozen=True, kw_only=True):
     lines: list[OutputLine]
 
 
-class AgentEvent(Message):
+class AgentEvent(Message, frozen=True):
     """An agent context's news, published on ``ctx/<ctx>/events`` beside RoomEvents."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/events",)
@@ -322,7 +322,7 @@ class AgentEvent(Message):
 # --- whoever drives, to the agent context ----------------------------------------------
 
 
-class ControllerOutput(Message):
+class ControllerOutput(Message, frozen=True):
     """Lines a running controller printed, and its end (sealed, ``ctx/<ctx>/output``).
 
     Accepted from the session its lease names (the runner, or the student's
@@ -342,7 +342,7 @@ class ControllerOutput(Message):
 # --- agent context to runner -----------------------------------------------------------
 
 
-class RunRequest(Message):
+class RunRequest(Message, frozen=True):
     """Run an uploaded controller on an agent until ``end`` (sealed, ``lease`` permission)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
@@ -357,20 +357,20 @@ class RunRequest(Message):
     filename: ShortText = "controller.py"
 
 
-class RunClaim(Message):
+class RunClaim(Message, frozen=True):
     """Sealed by the runner's session: this session will drive ``request_id``."""
 
     request_id: Ident
     agent: Ident
 
 
-class RunAccepted(Message):
+class RunAccepted(Message, frozen=True):
     """The runner's reply to a RunRequest: ``claim`` is an AuthEnvelope of a RunClaim."""
 
     claim: bytes
 
 
-class DryRun(Message):
+class DryRun(Message, frozen=True):
     """Dry-run a controller in the runner, against a private copy of ``world`` (sealed, ``lease``).
 
     The runner builds the copy from the world's public snapshot; the reply is a
@@ -389,7 +389,7 @@ class DryRun(Message):
     seconds: DryRunSeconds = 5.0
 
 
-class RunStop(Message):
+class RunStop(Message, frozen=True):
     """Stop a run early (sealed, ``lease`` permission)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
@@ -401,7 +401,7 @@ class RunStop(Message):
 MAX_CHECKED_RUNS = 256  # more than a context ever runs at once on one runner
 
 
-class RunCheck(Message):
+class RunCheck(Message, frozen=True):
     """Which of ``request_ids`` does the runner still run? (sealed, ``lease`` permission)
 
     An agent context asks when the runner's liveliness token went: a runner cut
@@ -414,7 +414,7 @@ class RunCheck(Message):
     request_ids: Annotated[list[Ident], msgspec.Meta(max_length=MAX_CHECKED_RUNS)]
 
 
-class RunCheckReply(Message):
+class RunCheckReply(Message, frozen=True):
     """The runner's answer to a RunCheck: those of the asked requests it runs now."""
 
     running: Annotated[list[Ident], msgspec.Meta(max_length=MAX_CHECKED_RUNS)]

@@ -29,7 +29,7 @@ ALL_PERMISSIONS: tuple[str, ...] = Permission.__args__  # type: ignore[attr-defi
 SessionId = Annotated[bytes, msgspec.Meta(min_length=16, max_length=16)]
 
 
-class SessionToken(Message):
+class SessionToken(Message, frozen=True):
     """Who a session is and what it may do; signed by the registry."""
 
     realm: Ident
@@ -46,12 +46,12 @@ class SessionToken(Message):
     grants: dict[str, list[Permission]] = msgspec.field(default_factory=dict)
 
 
-class SignedToken(Message):
+class SignedToken(Message, frozen=True):
     token: bytes  # an encoded SessionToken
     signature: Bytes64  # the registry's Ed25519 signature of ``token``
 
 
-class AuthEnvelope(Message):
+class AuthEnvelope(Message, frozen=True):
     """A message from an authenticated session.
 
     ``signature`` is the session key's signature over the key expression it

@@ -10,7 +10,7 @@ malformed or hostile payload becomes one :class:`MessageError`.
 from __future__ import annotations
 
 import functools
-from typing import Annotated, Any, ClassVar, Literal, TypeVar, Union
+from typing import Annotated, Any, ClassVar, Literal, TypeVar, Union, cast, overload
 
 import msgspec
 import numpy as np
@@ -44,6 +44,10 @@ class Message(msgspec.Struct, tag=True, tag_field="type", kw_only=True, frozen=T
     ``v`` is the schema version the sender wrote. A type that changes its
     schema raises the default of ``v`` in its own declaration; a decoder
     refuses versions newer than its own, and stays able to read older ones.
+
+    Each subclass says ``frozen=True`` again: msgspec inherits it, but mypy's
+    dataclass model of a Struct does not, and reads every subclass as a
+    mutable dataclass deriving from a frozen one (an error per class).
     """
 
     v: int = 1
@@ -53,6 +57,14 @@ class Message(msgspec.Struct, tag=True, tag_field="type", kw_only=True, frozen=T
 
 
 M = TypeVar("M", bound=Message)
+# The other members of a tuple of expected types (decode's overloads).
+M2 = TypeVar("M2", bound=Message)
+M3 = TypeVar("M3", bound=Message)
+M4 = TypeVar("M4", bound=Message)
+M5 = TypeVar("M5", bound=Message)
+
+Expected = type[Message] | tuple[type[Message], ...]
+"""What :func:`decode` accepts: one message type or a tuple of them."""
 
 _encoder = msgspec.msgpack.Encoder()
 
@@ -93,7 +105,27 @@ def _type_names(expected: type[Message] | tuple[type[Message], ...]) -> str:
     return expected.__name__
 
 
-def decode(data: Any, expected: type[M] | tuple[type[M], ...]) -> M:
+# Overloads per tuple length, so that a decode of (A, B) is typed A | B and each
+# isinstance test narrows it (one typed Message would need a cast per use).
+@overload
+def decode(data: Any, expected: type[M]) -> M: ...
+@overload
+def decode(data: Any, expected: tuple[type[M]]) -> M: ...
+@overload
+def decode(data: Any, expected: tuple[type[M], type[M2]]) -> M | M2: ...
+@overload
+def decode(data: Any, expected: tuple[type[M], type[M2], type[M3]]) -> M | M2 | M3: ...
+@overload
+def decode(
+    data: Any, expected: tuple[type[M], type[M2], type[M3], type[M4]]
+) -> M | M2 | M3 | M4: ...
+@overload
+def decode(
+    data: Any, expected: tuple[type[M], type[M2], type[M3], type[M4], type[M5]]
+) -> M | M2 | M3 | M4 | M5: ...
+@overload
+def decode(data: Any, expected: tuple[type[Message], ...]) -> Message: ...
+def decode(data: Any, expected: Expected) -> Message:
     """Decode and validate ``data`` as one of the ``expected`` message types.
 
     Raises :class:`MessageError` with a message that names the expected type
@@ -106,7 +138,7 @@ def decode(data: Any, expected: type[M] | tuple[type[M], ...]) -> M:
             f"{MAX_MESSAGE_BYTES}-byte limit"
         )
     try:
-        message = _decoder(expected).decode(raw)
+        message: Message = _decoder(expected).decode(raw)
     except msgspec.ValidationError as exc:
         raise MessageError(f"not a valid {_type_names(expected)} message: {exc}") from None
     except msgspec.DecodeError as exc:
@@ -149,7 +181,7 @@ ErrorCode = Literal[
 ]
 
 
-class ErrorReply(Message):
+class ErrorReply(Message, frozen=True):
     """The answer of any queryable that refused or failed a request."""
 
     code: ErrorCode
@@ -157,7 +189,7 @@ class ErrorReply(Message):
     retry_after: float = 0.0
 
 
-class OkReply(Message):
+class OkReply(Message, frozen=True):
     """A request that has nothing to return succeeded."""
 
     detail: ShortText = ""
@@ -186,7 +218,9 @@ class PackedArray(msgspec.Struct, frozen=True, kw_only=True):
         if name not in ArrayDType.__args__:  # type: ignore[attr-defined]
             raise MessageError(f"arrays of {name} cannot be sent")
         contiguous = np.ascontiguousarray(array, dtype=dtype)
-        return cls(dtype=name, shape=list(contiguous.shape), data=contiguous.tobytes())
+        return cls(
+            dtype=cast(ArrayDType, name), shape=list(contiguous.shape), data=contiguous.tobytes()
+        )
 
     def to_numpy(self) -> np.ndarray:
         dtype = np.dtype(self.dtype).newbyteorder("<")

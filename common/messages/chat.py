@@ -21,17 +21,17 @@ LineText = Annotated[str, msgspec.Meta(max_length=16 * 1024)]
 """Decoding bound only: the room's own limit is checked with a clear error."""
 
 
-class JoinRoom(Message):
+class JoinRoom(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/join",)
 
     history: Annotated[int, msgspec.Meta(ge=0, le=1000)] = 50  # how many recent lines to send
 
 
-class LeaveRoom(Message):
+class LeaveRoom(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/leave",)
 
 
-class ChatSay(Message):
+class ChatSay(Message, frozen=True):
     """A chat line from a member (put on ctx/<ctx>/in, or a query on ctx/<ctx>/request)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/in", "ctx/<ctx>/request")
@@ -39,7 +39,7 @@ class ChatSay(Message):
     text: LineText
 
 
-class UserRemovalRequest(Message):
+class UserRemovalRequest(Message, frozen=True):
     """Remove a member from the room (thesis 7.4.1); needs ``kick`` there."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -48,7 +48,7 @@ class UserRemovalRequest(Message):
     reason: ShortText = ""
 
 
-class ChatLine(Message):
+class ChatLine(Message, frozen=True):
     seq: NonNegInt  # the room's line number: strictly increasing, survives restarts
     sender: Ident  # the verified sender
     text: LineText
@@ -58,14 +58,14 @@ class ChatLine(Message):
 StatusKind = Literal["joined", "left", "kicked", "disconnected"]
 
 
-class MemberStatus(Message):
+class MemberStatus(Message, frozen=True):
     user: Ident
     status: StatusKind
     reason: ShortText = ""
     by: Ident | None = None  # who kicked
 
 
-class RoomEvent(Message):
+class RoomEvent(Message, frozen=True):
     """One event of a room, published on ctx/<ctx>/events."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/events",)
@@ -76,7 +76,7 @@ class RoomEvent(Message):
     members: list[Ident] = msgspec.field(default_factory=list)  # the member list after it
 
 
-class JoinReply(Message):
+class JoinReply(Message, frozen=True):
     ctx: Ident
     title: ShortText
     owner: Ident

@@ -47,7 +47,7 @@ class RoomInfo(msgspec.Struct, frozen=True, kw_only=True):
     started_at: float
 
 
-class HostLoad(Message):
+class HostLoad(Message, frozen=True):
     """How busy a host is, and what it runs (``host/<host>/load``)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/load",)
@@ -70,13 +70,13 @@ class HostLoad(Message):
     max_rooms: NonNegInt = 0
 
 
-class LoadRequest(Message):
+class LoadRequest(Message, frozen=True):
     """Ask a host for its latest HostLoad (no authentication: loads are public)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/load",)
 
 
-class SpawnArena(Message):
+class SpawnArena(Message, frozen=True):
     """Start an arena on this host (``host`` permission)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
@@ -87,7 +87,7 @@ class SpawnArena(Message):
     seed: NonNegInt = 1
 
 
-class StopArena(Message):
+class StopArena(Message, frozen=True):
     """Stop an arena this host runs (``host`` permission)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
@@ -95,11 +95,11 @@ class StopArena(Message):
     world: Ident
 
 
-class ArenaReply(Message):
+class ArenaReply(Message, frozen=True):
     arena: ArenaInfo
 
 
-class SpawnRoom(Message):
+class SpawnRoom(Message, frozen=True):
     """Start a chat room on this host, owned by the requester (``host`` permission)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
@@ -108,7 +108,7 @@ class SpawnRoom(Message):
     title: ShortText = ""
 
 
-class StopRoom(Message):
+class StopRoom(Message, frozen=True):
     """Stop a chat room this host started on request (``host`` permission)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
@@ -116,7 +116,7 @@ class StopRoom(Message):
     name: Ident
 
 
-class RoomReply(Message):
+class RoomReply(Message, frozen=True):
     room: RoomInfo
 
 

@@ -30,7 +30,7 @@ class RecordingInfo(msgspec.Struct, frozen=True, kw_only=True):
     duration_s: float | None = None  # from its summary (the page lists it); None if none
 
 
-class RecordingListRequest(Message):
+class RecordingListRequest(Message, frozen=True):
     """List recordings: one's own (``user`` None or oneself); another's needs the manage right."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
@@ -39,13 +39,13 @@ class RecordingListRequest(Message):
     all_users: bool = False  # every user's (the manage right)
 
 
-class RecordingList(Message):
+class RecordingList(Message, frozen=True):
     ctx: Ident
     keep: NonNegInt  # recordings kept per user (the host's --keep-recordings)
     recordings: Annotated[list[RecordingInfo], msgspec.Meta(max_length=MAX_LISTED)]
 
 
-class RecordingGet(Message):
+class RecordingGet(Message, frozen=True):
     """Download a chunk of a recording (its owner, or the manage right).
 
     ``summary`` asks for the run's summary (JSON) instead of the MCAP file.
@@ -58,7 +58,7 @@ class RecordingGet(Message):
     summary: bool = False
 
 
-class RecordingChunk(Message):
+class RecordingChunk(Message, frozen=True):
     name: Ident
     offset: NonNegInt
     total: NonNegInt  # the file's size

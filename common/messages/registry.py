@@ -31,12 +31,12 @@ GrantName = Annotated[str, msgspec.Meta(min_length=1, max_length=70)]
 # --- login ------------------------------------------------------------------------
 
 
-class PasswordCredential(Message):
+class PasswordCredential(Message, frozen=True):
     user: Ident
     password: Password
 
 
-class KeyCredential(Message):
+class KeyCredential(Message, frozen=True):
     """Proof of an Ed25519 identity key: a signature over the login's binding (common.acl)."""
 
     user: Ident
@@ -45,7 +45,7 @@ class KeyCredential(Message):
     signature: Bytes64
 
 
-class LoginRequest(Message):
+class LoginRequest(Message, frozen=True):
     """What a client seals to the registry's box key to log in."""
 
     realm: Ident
@@ -61,7 +61,7 @@ class LoginRequest(Message):
     via: ShortText = ""
 
 
-class SealedLogin(Message):
+class SealedLogin(Message, frozen=True):
     """The payload of a login query: a LoginRequest in a SealedBox to the registry."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/login",)
@@ -69,7 +69,7 @@ class SealedLogin(Message):
     sealed: Annotated[bytes, msgspec.Meta(max_length=8192)]
 
 
-class PrivateMessage(Message):
+class PrivateMessage(Message, frozen=True):
     """A private message, encrypted end to end (nacl Box sender box key -> ``to_key``)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("user/<name>/inbox",)
@@ -82,26 +82,26 @@ class PrivateMessage(Message):
     sent_at: float
 
 
-class LoginReply(Message):
+class LoginReply(Message, frozen=True):
     token: SignedToken
     server_name: ShortText
     pending: list[PrivateMessage] = msgspec.field(default_factory=list)  # kept while offline
 
 
-class LogoutRequest(Message):
+class LogoutRequest(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/logout",)
 
 
 # --- directory ----------------------------------------------------------------------
 
 
-class ContextInfoRequest(Message):
+class ContextInfoRequest(Message, frozen=True):
     """Asked (authenticated) on ctx/<ctx>/state by the registry for its directory."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/state",)
 
 
-class ContextInfo(Message):
+class ContextInfo(Message, frozen=True):
     """What a context says about itself in the directory."""
 
     ctx: Ident
@@ -111,17 +111,17 @@ class ContextInfo(Message):
     members: list[Ident] = msgspec.field(default_factory=list)
 
 
-class DirectoryRequest(Message):
+class DirectoryRequest(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
 
 
-class DirectoryReply(Message):
+class DirectoryReply(Message, frozen=True):
     server_name: ShortText
     users: list[Ident]  # online: a live presence token and a session in force
     contexts: list[ContextInfo]
 
 
-class UserKeysRequest(Message):
+class UserKeysRequest(Message, frozen=True):
     """Where to send a private message to ``user``."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
@@ -129,14 +129,14 @@ class UserKeysRequest(Message):
     user: Ident
 
 
-class UserKeysReply(Message):
+class UserKeysReply(Message, frozen=True):
     user: Ident
     online: bool
     session_box_keys: list[Bytes32]  # one per session in force (when online)
     mailbox_key: Bytes32 | None  # None: the user never logged in, nothing can be kept
 
 
-class MailboxDeposit(Message):
+class MailboxDeposit(Message, frozen=True):
     """Keep a private message for an offline user (still encrypted to their mailbox key)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
@@ -147,7 +147,7 @@ class MailboxDeposit(Message):
 # --- revocations ----------------------------------------------------------------------
 
 
-class Revocation(Message):
+class Revocation(Message, frozen=True):
     session_id: SessionId
     user: Ident
     expires_at: float  # the token's expiry: after it, the revocation can be forgotten
@@ -155,12 +155,12 @@ class Revocation(Message):
     kicked: bool = False  # contexts announce a kick differently from a logout
 
 
-class RevocationList(Message):
+class RevocationList(Message, frozen=True):
     revoked: list[Revocation]
     issued_at: float
 
 
-class SignedRevocations(Message):
+class SignedRevocations(Message, frozen=True):
     """A RevocationList signed by the registry; published on registry/revocations and served."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/revocations",)
@@ -169,13 +169,13 @@ class SignedRevocations(Message):
     signature: Bytes64
 
 
-class RevocationsRequest(Message):
+class RevocationsRequest(Message, frozen=True):
     """Ask for every revocation still in force (a service starting up)."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/revocations",)
 
 
-class KickNotice(Message):
+class KickNotice(Message, frozen=True):
     """Sent by the registry (sealed as its own session) to a kicked user's inbox."""
 
     user: Ident
@@ -186,7 +186,7 @@ class KickNotice(Message):
 # --- admin --------------------------------------------------------------------------------
 
 
-class UserInfo(Message):
+class UserInfo(Message, frozen=True):
     name: Ident
     roles: list[Ident]
     grants: dict[Scope, list[GrantName]]  # scope -> permissions and roles granted there
@@ -195,15 +195,15 @@ class UserInfo(Message):
     failed_logins: int = 0  # failed logins on the account since its last unlock or restart
 
 
-class ListUsers(Message):
+class ListUsers(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
 
-class UserList(Message):
+class UserList(Message, frozen=True):
     users: list[UserInfo]
 
 
-class AddUser(Message):
+class AddUser(Message, frozen=True):
     """Create an account. ``sealed_password`` is the password sealed to the registry box key."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
@@ -214,7 +214,7 @@ class AddUser(Message):
     public_key: Bytes32 | None = None
 
 
-class SetPassword(Message):
+class SetPassword(Message, frozen=True):
     """Admins set anyone's password; a user may set their own."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
@@ -223,21 +223,13 @@ class SetPassword(Message):
     sealed_password: Annotated[bytes, msgspec.Meta(max_length=4096)]
 
 
-class RemoveUser(Message):
+class RemoveUser(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
     user: Ident
 
 
-class Grant(Message):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
-    user: Ident
-    grant: GrantName
-    scope: Scope = ""
-
-
-class Ungrant(Message):
+class Grant(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
     user: Ident
@@ -245,14 +237,22 @@ class Ungrant(Message):
     scope: Scope = ""
 
 
-class KickFromServer(Message):
+class Ungrant(Message, frozen=True):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    grant: GrantName
+    scope: Scope = ""
+
+
+class KickFromServer(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
     user: Ident
     reason: ShortText = ""
 
 
-class UnlockLogins(Message):
+class UnlockLogins(Message, frozen=True):
     """Forget the account's failed logins: every source may try again at once."""
 
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
@@ -260,7 +260,7 @@ class UnlockLogins(Message):
     user: Ident
 
 
-class RenameServer(Message):
+class RenameServer(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
     name: Annotated[str, msgspec.Meta(min_length=1, max_length=80)]

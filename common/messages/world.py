@@ -35,7 +35,7 @@ class GripperReading(msgspec.Struct, frozen=True, kw_only=True):
     resistivity: Byte  # of the held object; 255 when nothing is held
 
 
-class SensorSample(Message):
+class SensorSample(Message, frozen=True):
     """One agent's readings at one tick (``agent/<agent>/sensors``)."""
 
     world: Ident
@@ -50,7 +50,7 @@ class SensorSample(Message):
     gripper: GripperReading | None = None
 
 
-class SensorBatch(Message):
+class SensorBatch(Message, frozen=True):
     """Every agent's readings in one message (``world/<world>/sensors``).
 
     Rows follow ``WorldSnapshot.agents``; cheaper than 1,000 per-agent puts.
@@ -69,7 +69,7 @@ MAX_BUNDLED = 1024
 """The most samples or commands one bundle carries (a runner drives at most tens of robots)."""
 
 
-class SampleBundle(Message):
+class SampleBundle(Message, frozen=True):
     """The newest SensorSample of several agents in one message (``world/<world>/samples``).
 
     A world puts one per tick holding every agent under a lease in force (the
@@ -96,7 +96,7 @@ class BundledCommand(msgspec.Struct, frozen=True, array_like=True):
     """Exactly what would be put on ``agent/<agent>/cmd``: an AuthEnvelope or a MacCommand."""
 
 
-class CommandBundle(Message):
+class CommandBundle(Message, frozen=True):
     """Several agents' commands in one message (``world/<world>/cmds``).
 
     Each payload is checked as if it had been put on its agent's own ``cmd``
@@ -128,7 +128,7 @@ MAC_ITEM_SPEEDS = 1
 MAC_ITEM_COUNTERS = 2
 
 
-class MacCommandBundle(Message):
+class MacCommandBundle(Message, frozen=True):
     """Several agents' MACed commands in parallel arrays (``world/<world>/cmds``).
 
     The array form of a CommandBundle of MacCommands, for a process that
@@ -152,7 +152,7 @@ class MacCommandBundle(Message):
     macs: Annotated[bytes, msgspec.Meta(max_length=MAX_BUNDLED * 32)]
 
 
-class WorldFrame(Message):
+class WorldFrame(Message, frozen=True):
     """Every moving pose at one tick (``world/<world>/frame``).
 
     ``poses`` rows are ``WorldSnapshot.rows`` (agents first, then movable
@@ -219,7 +219,7 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     online: bool = True  # a real robot (Khepera bridge) unplugged or silent is offline
 
 
-class WorldSnapshot(Message):
+class WorldSnapshot(Message, frozen=True):
     """The whole world for a late joiner (reply of ``world/<world>/snapshot``)."""
 
     world: Ident
@@ -242,7 +242,7 @@ class WorldSnapshot(Message):
     kind: Literal["sim", "real"] = "sim"
 
 
-class AgentCommand(Message):
+class AgentCommand(Message, frozen=True):
     """Actuator commands to one agent (sealed in an AuthEnvelope on ``agent/<agent>/cmd``).
 
     Fields left None are unchanged. An empty command only feeds the watchdog.
@@ -258,7 +258,7 @@ class AgentCommand(Message):
     fingers: Literal["open", "closed"] | None = None
 
 
-class Lease(Message):
+class Lease(Message, frozen=True):
     """Who may command an agent, and when (sealed, on ``agent/<agent>/lease``).
 
     Issued by a principal with the ``lease`` permission (the agent context)
@@ -286,7 +286,7 @@ class Lease(Message):
     requester_session: SessionId | None = None
 
 
-class WorldStop(Message):
+class WorldStop(Message, frozen=True):
     """Emergency stop of a whole world (sealed by the agent context, ``lease`` permission).
 
     ``engaged``: every robot's wheels stop at once, every lease in force is
@@ -303,7 +303,7 @@ class WorldStop(Message):
     reason: ShortText = ""  # "emergency stop by <who>: why", shown in the world's log
 
 
-class MacCommand(Message):
+class MacCommand(Message, frozen=True):
     """An AgentCommand under a MAC lease (on ``agent/<agent>/cmd``, instead of an AuthEnvelope).
 
     ``mac`` is BLAKE2b keyed with the lease key over the key expression,
@@ -359,13 +359,13 @@ class ResetAgent(msgspec.Struct, frozen=True, tag=True, kw_only=True):
 EditOp = AddItem | MoveItem | RotateItem | RemoveItem | ResizeArena | ResetAgent
 
 
-class WorldEdit(Message):
+class WorldEdit(Message, frozen=True):
     """A live edit (sealed, on ``world/<world>/edit``): ``edit_map``, except ResetAgent."""
 
     op: EditOp
 
 
-class EditResult(Message):
+class EditResult(Message, frozen=True):
     """Reply to a WorldEdit or MapRequest that succeeded."""
 
     layout: NonNegInt
@@ -373,7 +373,7 @@ class EditResult(Message):
     maps: list[Ident] = msgspec.field(default_factory=list)
 
 
-class MapRequest(Message):
+class MapRequest(Message, frozen=True):
     """Save the world to a map, load another, or list them (sealed, ``edit_map``)."""
 
     action: Literal["save", "load", "list"]

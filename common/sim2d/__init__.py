@@ -10,8 +10,10 @@ robot behind the serial protocol. Both import only this package.
 - gripper.py: the gripper turret's rules (arm, fingers, grip, carry);
 - sensing.py: the sensor components (IR proximity ring, ambient light, the
   gripper's barrier) and the suite that reads them all in one pass;
-- kernels.py, chipmunk.py: the compiled per-tick kernels (numba) and the
-  chipmunk functions they call;
+- kernels.py, chipmunk.py: the compiled per-tick kernels (numba), gathered
+  from one module per job (packs.py, physics.py, noise.py, rays.py,
+  sense_pass.py; discs.py and contacts.py for the discs drive; jitcache.py
+  keeps their on-disk cache true), and the chipmunk functions they call;
 - specs.py, agents/: robot types as frozen specs (Khepera, e-puck);
 - entities.py, geometry.py, collision.py: the things of a world and their shapes;
 - maps.py: the map file format (load, save); wander.py: a built-in wander rule.

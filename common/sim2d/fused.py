@@ -30,19 +30,15 @@ cached function.
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable
-from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 from numba import njit, typeof, types
-from numba.core.caching import NullCache
-from numba.core.dispatcher import Dispatcher
 from numba.experimental import structref
 
-from common.sim2d import discs
+from common.sim2d import contacts, discs, noise, packs, rays, sense_pass
 from common.sim2d import kernels as K
+from common.sim2d.jitcache import stamp_with_callees
 
 _CACHE = True
 
@@ -177,29 +173,10 @@ def tick(state, sense, key, lights):  # pragma: no cover
         )
 
 
-def _stamp_with_callees(dispatcher: Dispatcher, *modules: ModuleType) -> None:
-    """Make ``dispatcher``'s on-disk cache stale whenever one of ``modules`` changes.
-
-    Numba keys a cached function on its own source file only, yet a cached
-    caller holds the machine code of every compiled function it calls: edit
-    discs.py or kernels.py and tick's cache would still load, calling the old
-    code with the new layouts (it crashed, the one time it happened). So the
-    cache's stamp gets these modules' contents too. Numba's attributes for it
-    are internal: if they are gone, the function is not cached at all (an
-    8-second compile at start) rather than cached stale.
-    """
-    cache = getattr(dispatcher, "_cache", None)
-    cache_file = getattr(cache, "_cache_file", None)
-    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
-        setattr(dispatcher, "_cache", NullCache())  # noqa: B010 (numba's internal slot)
-        return
-    digest = hashlib.sha256()
-    for module in modules:
-        digest.update(Path(str(module.__file__)).read_bytes())
-    cache_file._source_stamp = (cache_file._source_stamp, digest.digest())
-
-
-_stamp_with_callees(tick, discs, K)
+# tick and new_state call the drive's and the sensors' kernels, in other files:
+# their edits must reach these caches too (it crashed, the one time a cached
+# tick called old code with new layouts).
+stamp_with_callees(__name__, discs, contacts, packs, noise, rays, sense_pass)
 
 
 # The types of tick's other arguments: a flag, the noise key, the lights' table

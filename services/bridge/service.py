@@ -25,6 +25,7 @@ ended; the scan thread (``--autodetect``) probes new ports.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import re
@@ -210,7 +211,7 @@ class BridgeService(WorldService):
             keys.agent_sensors(self.realm, self.ident, agent)
         )
         entry = _Agent(agent, robot, publisher)
-        robot.add_listener(lambda state, a=entry: self._on_state(a, state))
+        robot.add_listener(functools.partial(self._on_state, entry))
         with self._lock:
             self._agents[agent] = entry
             self.layout += 1  # a new row: viewers refetch the snapshot
@@ -374,7 +375,7 @@ class BridgeService(WorldService):
             return
         for request in requests:
             robot.command(request).add_done_callback(
-                lambda f, a=agent.id, r=request: self._sent(a, r, f)
+                functools.partial(self._sent, agent.id, request)
             )
 
     def _sent(self, agent: str, request: P.Request[Any], future: Future[Any]) -> None:

@@ -58,7 +58,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart chat") -> int:
     try:
         with LabClient(zsession, options.realm, options.registry_key) as client:
             client.on_private = lambda m: say(_private(m))
-            client.on_kicked = lambda k: (say(_kicked(k)), done.set())
+
+            def on_kicked(notice: KickNotice) -> None:
+                say(_kicked(notice))
+                done.set()
+
+            client.on_kicked = on_kicked
             client.login(args.user, password_from(args))
             say(f"logged in to {client.server_name} as {args.user}")
             for message in client.pending:

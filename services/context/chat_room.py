@@ -47,6 +47,7 @@ from common.messages import (
     RoomEvent,
     UserRemovalRequest,
 )
+from common.messages.chat import StatusKind
 from common.revocations import RevocationFeed
 from common.service import RequestError, Service
 
@@ -347,7 +348,7 @@ class ChatRoom(Service):
             sessions.discard(rev.session_id)
             if sessions:
                 return
-        status = "kicked" if rev.kicked else "left"
+        status: StatusKind = "kicked" if rev.kicked else "left"
         self._drop(rev.user, MemberStatus(user=rev.user, status=status, reason=rev.reason))
 
     def _on_presence(self, sample: zenoh.Sample) -> None:

@@ -57,7 +57,7 @@ class QueueRequests:
     log: logging.Logger
     book: QueueBook
     runner_link: RunnerLink
-    _lock: threading.Lock
+    _lock: threading.RLock  # the chat room's: the context's one lock
     _wake: threading.Condition
     _stop_lock: threading.Lock
     _dirty: bool

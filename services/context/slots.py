@@ -54,7 +54,7 @@ class SlotScheduler:
     book: QueueBook
     leases: LeaseSigner
     runner_link: RunnerLink
-    _lock: threading.Lock
+    _lock: threading.RLock  # the chat room's: the context's one lock
     _wake: threading.Condition
     _halt: threading.Event
     _dirty: bool

@@ -89,7 +89,7 @@ def page_url(url: str) -> str:
 def new_test_context(chromium: object, viewport: dict[str, int] | None = None) -> object:
     """A browser context (own cookies and storage) whose pages draw at most FRAME_CAP_HZ."""
     context = chromium.new_context(viewport=viewport or VIEWPORT)  # type: ignore[attr-defined]
-    context.add_init_script(FRAME_CAP_SCRIPT)  # type: ignore[attr-defined]
+    context.add_init_script(FRAME_CAP_SCRIPT)
     return context
 
 

@@ -15,6 +15,7 @@ import viser
 
 from common.keys import is_ident
 from viewers.web.adapters import Account, LabConnection, LabError
+from viewers.web.inputs import set_value
 from viewers.web.login import MAX_PASSWORD
 from viewers.web.masked import add_masked_text
 from viewers.web.text import escape_md
@@ -125,7 +126,7 @@ class AdminPanel:
 
     def _take_password(self) -> str | None:
         password = self.password.value
-        self.password.value = ""  # never left on screen
+        set_value(self.password, "")  # never left on screen
         if not password:
             self.say("Type the new password.")
             return None

@@ -22,6 +22,7 @@ from viewers.web.adapters import (
     WorldFeed,
 )
 from viewers.web.editor import MapEditor
+from viewers.web.inputs import set_value
 from viewers.web.recordings_panel import RecordingsPanel
 from viewers.web.replay import ReplayFeed
 from viewers.web.robot_panel import RobotPanel
@@ -157,7 +158,7 @@ class ChatPanel:
         except LabError as exc:
             self.say_notice(f"Not sent: {exc}")
             return
-        self.message.value = ""
+        set_value(self.message, "")
         self.notice.visible = False
 
     def kick_selected(self) -> None:

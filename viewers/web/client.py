@@ -14,6 +14,7 @@ import viser
 from viewers.web.adapters import LabConnection, LabConnector, WorldFeed
 from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
+from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
@@ -102,7 +103,7 @@ class BrowserSession:
 
     def _recent_chosen(self) -> None:
         if self.recent.value != NO_SAVED:
-            self.address.value = self.recent.value
+            set_value(self.address, self.recent.value)
 
     def save_address(self) -> None:
         try:
@@ -165,7 +166,7 @@ class BrowserSession:
         )
         with self._lock:
             self.labs[address.lab_key] = tab
-        self.address.value = address.with_user(connection.user).url()
+        set_value(self.address, address.with_user(connection.user).url())
         self._refresh_recent()
         # viser 1.1 cannot switch tabs from the server: point at the new one.
         self.client.add_notification(

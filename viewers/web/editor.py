@@ -23,6 +23,7 @@ import viser
 from common.keys import is_ident
 from viewers.web import geometry as geo
 from viewers.web.adapters import LabError, MapEdit, WorldFeed
+from viewers.web.inputs import set_value
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
 
@@ -87,7 +88,8 @@ class MapEditor:
         view.on_select.append(self._robot_selected)
         snap = view.snapshot
         if snap is not None:
-            self.width.value, self.height.value = snap.width, snap.height
+            set_value(self.width, snap.width)
+            set_value(self.height, snap.height)
 
     def unbind(self) -> None:
         view = self.view

@@ -6,6 +6,7 @@ lab's events to the lobby and to the context tabs it opened, and logs out.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -31,6 +32,7 @@ from viewers.web.adapters import (
 )
 from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
+from viewers.web.inputs import on_click, set_value
 from viewers.web.network_panel import NetworkPanel
 from viewers.web.text import check_line, clock, escape_md
 
@@ -138,7 +140,7 @@ class LabTab:
                     button = gui.add_button(
                         f"Join {c.ctx}", disabled=c.ctx in self.panels, color="blue"
                     )
-                    button.on_click(lambda _, ctx=c.ctx: self.join(ctx))
+                    on_click(button, functools.partial(self.join, c.ctx))
                     self._rows.append(button)
 
     # -- actions
@@ -195,7 +197,7 @@ class LabTab:
             self.say_notice(f"Could not host {name}: {exc}")
             return
         log.info("%s: %s is up after %.1f s; joining it", who, ctx, time.monotonic() - started)
-        self.host_name.value = ""
+        set_value(self.host_name, "")
         self.join(ctx)
 
     def send_private(self) -> None:
@@ -213,7 +215,7 @@ class LabTab:
         except LabError as exc:
             self.say_notice(f"Not sent: {exc}")
             return
-        self.pm_text.value = ""
+        set_value(self.pm_text, "")
         self._add_private(f"to **{escape_md(to)}**: {escape_md(text)}")
 
     def _add_private(self, line: str) -> None:
@@ -263,7 +265,7 @@ class LabTab:
             self._add_private(
                 f"`{clock(event.at)}` from **{escape_md(event.sender)}**: {escape_md(event.text)}"
             )
-            self.pm_to.value = event.sender  # answering is one click on Send
+            set_value(self.pm_to, event.sender)  # answering is one click on Send
             self.client.add_notification(
                 title=f"Message from {event.sender} ({self.label})",
                 body=event.text[:200],

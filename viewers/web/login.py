@@ -21,6 +21,7 @@ from common.auth import LOGIN_WAIT_S
 from common.keys import is_ident
 from viewers.web.adapters import LabConnection, LabConnector, LabError
 from viewers.web.address import LabAddress
+from viewers.web.inputs import on_click, set_value
 from viewers.web.masked import add_masked_text
 
 log = logging.getLogger("wart.viewer.login")
@@ -193,7 +194,7 @@ class LoginForm:
                 self.error = client.gui.add_markdown("", visible=False)
                 self.submit = client.gui.add_button("Log in", color="green")
                 self.cancel = client.gui.add_button("Cancel")
-            self.submit.on_click(lambda _: self.attempt())
+            on_click(self.submit, self.attempt)
             self.cancel.on_click(lambda _: self.close())
 
     def show_error(self, text: str) -> None:
@@ -208,7 +209,7 @@ class LoginForm:
         """
         user = self.user.value.strip()
         password = self.password.value
-        self.password.value = ""  # never leave it on screen or in the GUI state
+        set_value(self.password, "")  # never leave it on screen or in the GUI state
         problem = check_login_input(user, password)
         if problem:
             self.show_error(problem)

@@ -213,7 +213,7 @@ class RealConnection:
         if event.status is not None:
             status = event.status
             kind: Literal["joined", "left", "kicked"] = (
-                status.status if status.status in ("joined", "kicked") else "left"  # type: ignore[assignment]
+                status.status if status.status in ("joined", "kicked") else "left"
             )
             self._queue.put(MemberEvent(ctx, status.user, kind, members, status.by, status.reason))
             self._queue.put(DirectoryEvent())

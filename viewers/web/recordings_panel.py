@@ -34,6 +34,7 @@ import viser
 from common.recording import Recording, RecordingError, plots, read_recording, summarize
 from common.recording.replay import Timeline
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
+from viewers.web.inputs import on_click, set_value
 from viewers.web.replay import ReplayControls, ReplayFeed
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
@@ -108,7 +109,7 @@ class RecordingsPanel:
             self.details = gui.add_markdown("")
             self.pictures = gui.add_folder("Plots of the run", visible=False)
             self.controls_at = gui.add_folder("Replay controls", visible=False)
-        self.refresh_button.on_click(lambda _: self.refresh())
+        on_click(self.refresh_button, self.refresh)
         self.download.on_click(lambda _: self._download())
         self.summary.on_click(lambda _: self._summary())
         self.plots.on_click(lambda _: self._plots())
@@ -132,7 +133,7 @@ class RecordingsPanel:
         if tuple(self.chosen.options) != options:
             keep = self.chosen.value
             self.chosen.options = options
-            self.chosen.value = keep if keep in options else options[0]
+            set_value(self.chosen, keep if keep in options else options[0])
         robots = self.connection.real_robots()
         real = tuple(f"{c}/{a}" for c, a in robots) or (NO_REAL,)
         if tuple(self.real.options) != real:

@@ -29,6 +29,7 @@ from common.recording import RecordingError, read_recording
 from common.recording.reader import Recording
 from common.recording.replay import SPEEDS, Player, Timeline
 from viewers.web.adapters import LabError, MapEdit, RobotReadings, SceneFrame, SceneLayout
+from viewers.web.inputs import set_value
 from viewers.web.pump import FramePump
 from viewers.web.real_world import convert_snapshot
 from viewers.web.text import escape_md
@@ -291,7 +292,7 @@ class ReplayControls:
         if (self.player.playing or self._was_playing) and abs(
             float(self.slider.value) - value
         ) >= SLIDER_STEP / 2:
-            self.slider.value = value
+            set_value(self.slider, value)
         self._was_playing = self.player.playing
         self.play.disabled = self.player.playing
         self.pause.disabled = not self.player.playing

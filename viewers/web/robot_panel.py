@@ -34,6 +34,7 @@ from viewers.web.adapters import (
     RequestEvent,
     WorldFeed,
 )
+from viewers.web.inputs import set_value
 from viewers.web.real_agents import check_upload
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
@@ -183,7 +184,7 @@ class RobotPanel:
         if self.manage.visible != settings.can_manage:
             self.manage.visible = settings.can_manage
             if settings.can_manage:
-                self.slot.value = settings.slot_seconds
+                set_value(self.slot, settings.slot_seconds)
         stop_shown = settings.can_manage and not settings.estop
         if self.estop.visible != stop_shown:
             self.estop.visible = stop_shown
@@ -251,7 +252,7 @@ class RobotPanel:
             f"Selected: **{escape_md(name)}**" if name else "_Click a robot to select it._"
         )
         if name and name in self.robot.options and self.robot.value != name:
-            self.robot.value = name
+            set_value(self.robot, name)
 
     def _robot_chosen(self) -> None:
         view = self.view

@@ -44,6 +44,7 @@ from viewers.web.adapters import (
     OutputEvent,
     RequestEvent,
 )
+from viewers.web.inputs import on_click, set_value
 from viewers.web.real_agents import check_upload
 from viewers.web.robot_panel import NONE, RobotPanel
 from viewers.web.text import escape_md
@@ -180,8 +181,8 @@ class Workbench:
             self.status = gui.add_markdown("")
             self.problems = gui.add_markdown("")
         self.open.on_click(lambda _: self._open())
-        self.check.on_click(lambda _: self.check_now())
-        self.save.on_click(lambda _: self._save())
+        on_click(self.check, self.check_now)
+        on_click(self.save, self._save)
         self.run.on_click(lambda _: self._run_sim())
         self.queue_real.on_click(lambda _: self._run_real())
         self.dry.on_click(lambda _: self._dry_run())
@@ -231,7 +232,7 @@ class Workbench:
         if options:
             self.start_from.options = options
         if mine:
-            self.start_from.value = MINE_PREFIX + mine[0].name
+            set_value(self.start_from, MINE_PREFIX + mine[0].name)
             self._open()
 
     def _open(self) -> None:
@@ -241,7 +242,8 @@ class Workbench:
             source = self._examples.get(name)
             if source is None:
                 return
-            self.name.value = DEFAULT_NAME  # an example is a start: saving must not look like it
+            # an example is a start: saving must not look like it
+            set_value(self.name, DEFAULT_NAME)
         elif choice.startswith(MINE_PREFIX):
             name = choice[len(MINE_PREFIX) :]
             try:
@@ -249,10 +251,10 @@ class Workbench:
             except LabError as exc:
                 self.say(f"could not open {name}: {exc}", bad=True)
                 return
-            self.name.value = name
+            set_value(self.name, name)
         else:
             return
-        self.code.value = source.decode("utf-8", "replace")
+        set_value(self.code, source.decode("utf-8", "replace"))
         self.problems.content = ""
         self.say(f"Opened {name}.")
 

@@ -132,7 +132,7 @@ class WorldView:
         self._rays: viser.LineSegmentsHandle | None = None
         self._static: list[viser.SceneNodeHandle] = []
         self._balls: list[viser.SceneNodeHandle] = []
-        self._lights: list[viser.SceneNodeHandle] = []
+        self._lights: list[viser.CylinderHandle] = []
         self._light_state: bytes = b""
         self._gripper_key: bytes = b""
         self._led_key: bytes = b""

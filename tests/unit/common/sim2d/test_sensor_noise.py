@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from common.sim2d import kernels
+from common.sim2d import kernels, noise
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import World
@@ -35,7 +35,7 @@ def test_the_draws_are_standard_normal() -> None:
     assert (z**3).mean() == pytest.approx(0.0, abs=0.03)
     assert (z**4).mean() == pytest.approx(3.0, abs=0.08)
     # The tail beyond the ziggurat's base (R = 3.654) and a wedge-heavy band.
-    for lo, hi in ((1.0, 2.0), (2.5, 3.0), (kernels._ZIG_R, np.inf)):
+    for lo, hi in ((1.0, 2.0), (2.5, 3.0), (noise._ZIG_R, np.inf)):
         want = 2 * (_normal_cdf(np.array([hi]))[0] - _normal_cdf(np.array([lo]))[0])
         got = ((np.abs(z) >= lo) & (np.abs(z) < hi)).mean()
         assert got == pytest.approx(want, abs=5 * math.sqrt(want / n) + 1e-5), (lo, hi)

@@ -6,7 +6,7 @@ import numba
 import numpy as np
 import pytest
 
-from common.sim2d import kernels, sensing
+from common.sim2d import kernels, rays, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.wander import braitenberg
@@ -164,8 +164,8 @@ def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
     scene = world.sensors.static_geometry(world).scene
     hidden = 0
     for p in rng.uniform([0, 0, 0, 0], [3000, 2000, 3000, 2000], size=(3000, 4)):
-        full = kernels._occluded(*p, scene.occ_segs, scene.static_xy, scene.static_r)
-        along = kernels._occluded_grid(
+        full = rays._occluded(*p, scene.occ_segs, scene.static_xy, scene.static_r)
+        along = rays._occluded_grid(
             *p,
             scene.segs,
             scene.grid_start,
@@ -212,8 +212,8 @@ def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
         else:  # short, near a corner
             q = p + rng.uniform(-cell, cell, 2)
         seg = (float(p[0]), float(p[1]), float(q[0]), float(q[1]))
-        full = kernels._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
-        along = kernels._occluded_grid(
+        full = rays._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
+        along = rays._occluded_grid(
             *seg,
             scene.segs,
             scene.grid_start,
@@ -230,7 +230,7 @@ def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
 
 
 def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
-    # kernels._shadows: a robot whose bin says "in the light" must be one the walk
+    # rays._shadows: a robot whose bin says "in the light" must be one the walk
     # (and the test of every edge) finds not hidden. Boxes and posts anywhere,
     # lights among them (some right beside an obstacle), points anywhere and
     # points just beside the obstacles, seen from the lights.
@@ -246,7 +246,7 @@ def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
     occ = scene.occ_segs
 
     def clearance(x: float, y: float) -> float:
-        edges = min(kernels._point_segment_d2(x, y, e) for e in occ) ** 0.5
+        edges = min(rays._point_segment_d2(x, y, e) for e in occ) ** 0.5
         posts = np.hypot(*(scene.static_xy - (x, y)).T) - scene.static_r
         return float(min(edges, posts.min()))
 
@@ -260,16 +260,16 @@ def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
             [*(scene.static_xy[1] + (230.0, 0.0)), 1500.0, 1.0],  # a post just beyond 200 mm
         ]
     )
-    shadows = kernels._shadows(lights, occ, scene.static_xy, scene.static_r, kernels.SHADOW_BINS)
+    shadows = rays._shadows(lights, occ, scene.static_xy, scene.static_r, kernels.SHADOW_BINS)
     clear = walked = 0
     for li, (lx, ly, _, _) in enumerate(lights):
         points = rng.uniform([0, 0], [3000, 2000], size=(1500, 2))
         # just beside obstacle corners, where a bin's edge and a segment graze
         corners = occ[rng.integers(len(occ), size=1500), :2] + rng.normal(0, 2.0, (1500, 2))
         for px, py in np.concatenate([points, corners]):
-            if kernels._in_light(shadows[li], px - lx, py - ly):
+            if rays._in_light(shadows[li], px - lx, py - ly):
                 clear += 1
-                assert not kernels._occluded(px, py, lx, ly, occ, scene.static_xy, scene.static_r)
+                assert not rays._occluded(px, py, lx, ly, occ, scene.static_xy, scene.static_r)
             else:
                 walked += 1
     assert clear > 1000 and walked > 3000, (clear, walked)

@@ -1,0 +1,118 @@
+"""What every kernel module shares: cache settings and the sensing packs' layouts.
+
+The packs and column indices are the sensing kernel's argument layouts
+(common/sim2d/sensing.py builds them).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, NamedTuple
+
+import numba
+import numpy as np
+
+# Column indices of the per-agent float table (AgentSensing.agent_f).
+F_REACH = 0
+F_RADIUS = 1
+F_PROX_NOISE_FRACTION = 2
+F_PROX_NOISE_COUNTS = 3
+F_PROX_MAX = 4
+F_AMB_HALF_ANGLE = 5
+F_AMB_DROP = 6
+F_AMB_DARK = 7
+F_AMB_FLOOR = 8
+F_AMB_NOISE_FRACTION = 9
+F_GRIP_X0 = 10
+F_GRIP_X1 = 11
+F_GRIP_HALF_WIDTH = 12
+F_HAS_GRIP = 13
+F_ARM_LOWERED_ABOVE = 14
+F_AMB_COS_HALF = 15  # cos(F_AMB_HALF_ANGLE): the cone test without an angle
+N_AGENT_F = 16
+
+# Column indices of the per-agent int table (AgentSensing.agent_i).
+I_PROX_SENSORS = 0  # real (unpadded) proximity sensors
+I_TYPE = 1  # the agent's type: row of the response curves and the sensor layouts
+I_AMB_SENSORS = 2
+N_AGENT_I = 3
+
+
+# The sensing kernel's arguments, packed by what changes when: a pack is built
+# once and kept until what it holds changes (numba takes named tuples as they are).
+class Robots(NamedTuple):
+    """What moves every tick."""
+
+    pose: np.ndarray  # (N, 3) agents' x, y, heading
+    arm: np.ndarray  # (N,) arm positions
+    holding: np.ndarray  # (N,) bool
+
+
+class SensorTables(NamedTuple):
+    """The agents' sensors (rebuilt when agents come or go)."""
+
+    ray_local: np.ndarray  # (types, S*K, 5) rays in the robot frame: x, y, angle, cos, sin
+    sensors: int  # S (padded proximity sensors per agent)
+    rays_per_sensor: int  # K
+    agent_f: np.ndarray  # (N, N_AGENT_F) per-agent floats
+    agent_i: np.ndarray  # (N, N_AGENT_I) per-agent ints
+    curve_x: np.ndarray  # (G, L) response curves, padded
+    curve_y: np.ndarray
+    curve_n: np.ndarray  # (G,) points used
+    amb_local: np.ndarray  # (types, A, 5) ambient sensors, robot frame: x, y, angle, cos, sin
+    amb_valid: np.ndarray  # (types, A) bool
+
+
+class StaticScene(NamedTuple):
+    """Obstacles and the arena's walls (rebuilt when they change)."""
+
+    segs: np.ndarray  # (S, 4) static edges (arena walls first)
+    grid_start: np.ndarray  # (nx*ny + 1,) CSR offsets into grid_items, cell-major
+    grid_items: np.ndarray  # static edge index per (cell, edge) entry
+    grid_nx: int
+    grid_ny: int
+    cell: float
+    occ_segs: np.ndarray  # (O, 4) static edges that can hide a light (not the arena's walls)
+    static_xy: np.ndarray  # (Q, 2) round obstacles (they hide lights too)
+    static_r: np.ndarray
+
+
+class MovingScene(NamedTuple):
+    """Objects, lights and the noise key of one sensing pass."""
+
+    circ_xy: np.ndarray  # (C, 2) other circles: round objects on the floor, round obstacles
+    circ_r: np.ndarray  # (C,)
+    circ_owner: np.ndarray  # (C,) agent slot that does not see it (holder), or -1
+    circ_is_object: np.ndarray  # (C,) bool: a movable object (the gripper's barrier sees it)
+    edges: np.ndarray  # (E, 4) edges of movable polygons on the floor
+    lights: np.ndarray  # (L, 4) lit lights: x, y, radius, intensity
+    noise_key: np.uint64  # this pass's noise key, drawn from the world's generator
+
+
+class Readings(NamedTuple):
+    proximity: np.ndarray  # (N, P) int32
+    ambient: np.ndarray  # (N, A) int32
+    presence: np.ndarray  # (N,) int32
+
+
+# OpenMP's workers (numba's threading layer here) spin after each parallel region
+# by default: on the lab's shared 2-core machines that burned 4 to 5x the CPU of the
+# work itself and slowed the other processes (docs/BENCHMARKS.md, issue 22). Passive
+# workers sleep instead. Read once, when numba first loads OpenMP; a value the user
+# set wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+_CACHE = True
+# Numba's option for a kernel compiled without reference counting. Each array a
+# compiled function receives (tuples of them included) or takes a view of is
+# counted in and out with an atomic operation, and an inlined helper counts its
+# array arguments at each call: at 10 robots that was about 14 % of a step
+# (docs/BENCHMARKS.md, issue 22, 2026-11-26). A kernel that allocates nothing
+# and returns no array needs none of it: its callers hold every array it
+# touches. One that returned an array (a buffer it had filled) corrupted the
+# heap: its caller released a reference it was never given. Numba refuses to
+# compile an allocation in such a kernel.
+_UNCOUNTED: dict[str, Any] = {"_nrt": False}
+# Threads a kernel may use: numba's pool, sized at import (NUMBA_NUM_THREADS, default
+# the machine's cores); set_num_threads can only lower it.
+MAX_THREADS = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at import
