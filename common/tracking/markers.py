@@ -9,6 +9,7 @@ points, their top edge toward the arena's +y. One dictionary for every lab
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -67,17 +68,36 @@ class MarkerLayout:
         object.__setattr__(self, "agent_of", {v: k for k, v in self.robots.items()})
 
 
+def robot_markers(agents: Sequence[str]) -> dict[str, int]:
+    """The lab's convention: robot ``kN`` wears marker N (so a robot keeps its marker
+    when others join or leave); other names take the lowest free ids in order."""
+    robot_ids = MARKER_IDS - len(REFERENCE_IDS)
+    if len(agents) > robot_ids:
+        raise MarkerError(f"at most {robot_ids} marked robots per arena; got {len(agents)}")
+    ids: dict[str, int] = {}
+    for agent in agents:
+        if re.fullmatch(r"k\d{1,2}", agent) and int(agent[1:]) < robot_ids:
+            ids[agent] = int(agent[1:])
+    free = (i for i in range(robot_ids) if i not in ids.values())
+    for agent in agents:
+        if agent not in ids:
+            ids[agent] = next(free)
+    return ids
+
+
 def default_layout(
-    width_mm: float, height_mm: float, agents: Sequence[str], *, inset_mm: float = 45.0
+    width_mm: float,
+    height_mm: float,
+    robots: Sequence[str] | Mapping[str, int],
+    *,
+    inset_mm: float = 45.0,
 ) -> MarkerLayout:
-    """Robot i of ``agents`` wears marker i; the references lie ``inset_mm`` in from
-    each corner (clear of a 55 mm robot pressed into the corner)."""
-    if len(agents) > MARKER_IDS - len(REFERENCE_IDS):
-        raise MarkerError(f"at most {MARKER_IDS - len(REFERENCE_IDS)} marked robots per arena")
+    """Robots' markers by :func:`robot_markers` (or as given); the references lie
+    ``inset_mm`` in from each corner (clear of a 55 mm robot pressed into it)."""
     x0, y0, x1, y1 = inset_mm, inset_mm, width_mm - inset_mm, height_mm - inset_mm
     corners = ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
     return MarkerLayout(
-        robots={agent: i for i, agent in enumerate(agents)},
+        robots=dict(robots) if isinstance(robots, Mapping) else robot_markers(robots),
         reference=dict(zip(REFERENCE_IDS, corners, strict=True)),
     )
 
