@@ -27,6 +27,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -104,13 +105,13 @@ def subscribe(connect: str, realm: str, key: str, sessions: int, seconds: float)
     from common.zconfig import NetworkOptions
 
     # Counted from 1 s after every session is open to 1 s before the end.
-    stats = [{"frames": 0, "bytes": 0, "delays": []} for _ in range(sessions)]
+    stats: list[dict[str, Any]] = [{"frames": 0, "bytes": 0, "delays": []} for _ in range(sessions)]
     window = [0.0, 0.0]
     opened = []
     for s in stats:
         session = open_session(NetworkOptions(realm=realm, connect=(connect,)), wait=10.0)
 
-        def on(sample: zenoh.Sample, s: dict = s) -> None:  # type: ignore[type-arg]
+        def on(sample: zenoh.Sample, s: dict[str, Any] = s) -> None:
             payload = bytes(sample.payload)
             frame = decode(payload, CameraFrame)
             if not window[0] <= time.time() < window[1]:
@@ -226,13 +227,13 @@ def delivery(viewers: list[int], seconds: float, fps: float) -> None:
             )
     finally:
         stop.set()
-        for p in reversed(procs):
-            p.terminate()
-        for p in procs:
+        for proc in reversed(procs):
+            proc.terminate()
+        for proc in procs:
             try:
-                p.wait(10)
+                proc.wait(10)
             except subprocess.TimeoutExpired:
-                p.kill()
+                proc.kill()
 
 
 def main(argv: list[str] | None = None) -> int:
