@@ -58,7 +58,7 @@ def tracking_error(frames: int, robots: int, width: int, height: int, seed: int)
     cost: dict[str, list[float]] = {"render": [], "track": [], "jpeg": [], "floor": []}
     h_floor = np.array([[0.5, 0, 0], [0, -0.5, 500], [0, 0, 1]]) @ cal.homography
     for i in range(frames):
-        poses = {}
+        poses: dict[str, tuple[float, float, float]] = {}
         while len(poses) < robots:  # robots apart, as they are on a floor
             x, y = rng.uniform(110, 890, 2)
             if all(math.hypot(x - p[0], y - p[1]) > 70 for p in poses.values()):

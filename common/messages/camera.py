@@ -21,7 +21,7 @@ Pixels = Annotated[int, msgspec.Meta(ge=16, le=4096)]
 FrameBytes = Annotated[bytes, msgspec.Meta(max_length=MAX_FRAME_BYTES)]
 
 
-class CameraFrame(Message):
+class CameraFrame(Message, frozen=True):
     """One frame of a camera over a world's arena: as it saw it (``.../image``), or the
     floor rectified to the arena, +y up, 2 mm a pixel (``.../floor``)."""
 
@@ -47,7 +47,7 @@ class TrackedRobot(msgspec.Struct, frozen=True):
     marker: Annotated[int, msgspec.Meta(ge=0, le=1023)]
 
 
-class TrackedPoses(Message):
+class TrackedPoses(Message, frozen=True):
     """The robots a camera found in one frame (``world/<w>/tracked``)."""
 
     KEYS = ("world/<w>/tracked",)
@@ -61,7 +61,7 @@ class TrackedPoses(Message):
     )
 
 
-class CameraStatus(Message):
+class CameraStatus(Message, frozen=True):
     """Whether a camera sees its arena (``world/<w>/camera/<c>/status``)."""
 
     KEYS = ("world/<w>/camera/<c>/status",)
