@@ -91,7 +91,7 @@ def refresh(
             def drive() -> None:
                 while not stop.wait(0.05):
                     t0 = time.perf_counter()
-                    robot.set_speed(0, 0).result(2)
+                    robot.command(P.set_speed(0, 0)).result(2)
                     lat.append(time.perf_counter() - t0)
 
             driver = threading.Thread(target=drive)

@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 import pymunk
 
+from common.controller.actuators import Actuators
 from common.sim2d import bodies, chipmunk, discs, fused, heap, kernels, sensing
 from common.sim2d.collision import (
     CAT_ALL,
@@ -774,7 +775,11 @@ class World:
             self._rebuild_tables()
         self.layout += 1
 
-    # -- commands (the API a controller, the service and a serial emulator use) ---------
+    # -- actuators (common.controller.actuators: one robot's through actuators(slot)) -----
+
+    def actuators(self, slot: int) -> RobotActuators:
+        """The robot in ``slot`` as :class:`common.controller.actuators.Actuators`."""
+        return RobotActuators(self, slot)
 
     def set_speeds(self, slot: int, left: float, right: float) -> None:
         top = self.tables.max_speed[slot]
@@ -792,17 +797,17 @@ class World:
     def set_counters(self, slot: int, left: int, right: int) -> None:
         self.counters[slot] = (left, right)
 
-    def set_led(self, slot: int, led: int, on: bool) -> None:
-        if not 0 <= led < self.agents[slot].spec.leds:
-            raise EditError(f"{self.agents[slot].id} has no LED {led}")
-        self.leds[slot, led] = 1 if on else 0
+    def set_leds(self, slot: int, leds: Sequence[bool]) -> None:
+        """LED i on or off as ``leds[i]``; LEDs the robot's type lacks are ignored."""
+        for led, on in enumerate(leds[: self.agents[slot].spec.leds]):
+            self.leds[slot, led] = 1 if on else 0
 
     def set_arm(self, slot: int, position: int) -> None:
         if not self.grippers.set_arm(slot, position):
             raise EditError(f"{self.agents[slot].id} has no gripper")
 
-    def set_fingers(self, slot: int, closed: bool) -> None:
-        if not self.grippers.set_fingers(slot, closed):
+    def set_grip(self, slot: int, closed: bool) -> None:
+        if not self.grippers.set_grip(slot, closed):
             raise EditError(f"{self.agents[slot].id} has no gripper")
 
     def resistivity(self, slot: int) -> int:
@@ -1126,6 +1131,35 @@ class _FusedTick:
     scene: tuple[object, ...]
     objects: tuple[object, ...]
     swarm: bool  # enough robots for a pass on threads (sensing.PARALLEL_MIN_AGENTS)
+
+
+class RobotActuators(Actuators):
+    """One robot of a World as :class:`common.controller.actuators.Actuators`.
+
+    A view by slot, made per command (``World.actuators``): a slot changes
+    when a robot before it is removed, so it is not kept across edits.
+    A robot without a gripper refuses arm and grip with an EditError (a ValueError).
+    """
+
+    __slots__ = ("slot", "world")
+
+    def __init__(self, world: World, slot: int) -> None:
+        self.world, self.slot = world, slot
+
+    def set_speeds(self, left: int, right: int) -> None:
+        self.world.set_speeds(self.slot, left, right)
+
+    def set_counters(self, left: int, right: int) -> None:
+        self.world.set_counters(self.slot, left, right)
+
+    def set_leds(self, leds: Sequence[bool]) -> None:
+        self.world.set_leds(self.slot, leds)
+
+    def set_arm(self, position: int) -> None:
+        self.world.set_arm(self.slot, position)
+
+    def set_grip(self, closed: bool) -> None:
+        self.world.set_grip(self.slot, closed)
 
 
 def id_of(body: pymunk.Body) -> int:

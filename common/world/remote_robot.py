@@ -145,9 +145,9 @@ def agent_command(agent: str, command: RobotCommand) -> AgentCommand:
         agent=agent,
         speeds=command.speeds,
         counters=command.counters,
-        leds=None if command.leds is None else [1 if on else 0 for on in command.leds],
+        leds=None if command.leds is None else list(command.leds),
         arm=command.arm,
-        fingers=None if command.grip is None else ("closed" if command.grip else "open"),
+        grip=command.grip,
     )
 
 

@@ -108,6 +108,7 @@ class Firmware:
     def reset(self) -> None:
         """A power-on reset: firmware defaults, body stopped and counters at zero."""
         self.leds = [0, 0]
+        self.body.set_leds([False, False])
         self.speed_pid, self.position_pid = (3800, 800, 100), (3000, 20, 4000)
         self.profile = (20, 64, 20, 64)
         self.body.reset()
@@ -128,7 +129,7 @@ class Firmware:
             b.move_to(left, right, (p[0], p[2]), (p[1], p[3]))
         elif letter == "D":
             left, right = _args(cmd, 2)
-            b.set_speed(clamp(left, SPEED_LIMIT), clamp(right, SPEED_LIMIT))
+            b.set_speeds(clamp(left, SPEED_LIMIT), clamp(right, SPEED_LIMIT))
         elif letter == "E":
             _args(cmd, 0)
             return self._reply("e", *b.speed())
@@ -151,7 +152,9 @@ class Firmware:
             led, action = _args(cmd, 2, 0, 2)
             if led > 1:
                 raise BadArguments("L: LED is 0 or 1")
+            # The firmware keeps the LEDs (it toggles them); the body shows them.
             self.leds[led] = 1 - self.leds[led] if action == 2 else action
+            b.set_leds([bool(on) for on in self.leds])
         elif letter == "N":
             _args(cmd, 0)
             return self._reply("n", *b.proximity())
@@ -191,7 +194,7 @@ class Firmware:
             return reply(*self.gripper_version)
         if sub == "D":
             (closed,) = _args(rest, 1, 0, 1)
-            b.set_fingers(bool(closed))
+            b.set_grip(bool(closed))
             return reply()
         if sub == "E":
             (pos,) = _args(rest, 1, 0, 255)

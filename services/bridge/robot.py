@@ -31,12 +31,15 @@ from typing import Any, TypeVar
 
 from serial.tools import list_ports
 
+from common.controller.actuators import Actuators
 from services.bridge import protocol as P
 from services.bridge.link import KheperaLink, LinkError, LinkOffline, LinkOptions
 
 log = logging.getLogger("wart.bridge.robot")
 
 T = TypeVar("T")
+
+LEDS = 2  # a Khepera I has two LEDs (L,0 and L,1)
 
 
 class RobotStopped(LinkError):
@@ -172,8 +175,12 @@ def _open_link(
     return KheperaLink.open(port, baud, options, on_banner=on_banner)
 
 
-class KheperaRobot:
-    """A real or emulated Khepera on one serial port: start it, read ``state()``, send commands."""
+class KheperaRobot(Actuators):
+    """A real or emulated Khepera on one serial port: start it, read ``state()``, send commands.
+
+    Its actuators are the one interface every robot has
+    (:class:`common.controller.actuators.Actuators`), each a serial request.
+    """
 
     def __init__(
         self,
@@ -200,6 +207,7 @@ class KheperaRobot:
         self._gripper = self.options.gripper
         self._failures = 0
         self._online_event = threading.Event()
+        self.commands_failed = 0  # actuator requests that failed (logged as they fail)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -245,9 +253,41 @@ class KheperaRobot:
     def wait_online(self, timeout: float) -> bool:
         return self._online_event.wait(timeout)
 
-    def set_speed(self, left: float, right: float) -> Future[P.Ack]:
+    # -- actuators (common.controller.actuators.Actuators): each queues its request;
+    # nobody waits on it (a Zenoh callback calls these), so a failure is logged and counted.
+
+    def set_speeds(self, left: int, right: int) -> None:
         """Wheel speeds in pulses per 10 ms (clamped to ±127); keeps the watchdog fed."""
-        return self.command(P.set_speed(left, right))
+        self._actuate(P.set_speed(left, right))
+
+    def set_counters(self, left: int, right: int) -> None:
+        self._actuate(P.set_counters(left, right))
+
+    def set_leds(self, leds: Sequence[bool]) -> None:
+        """A Khepera has two LEDs; more are ignored."""
+        for led, on in enumerate(leds[:LEDS]):
+            self._actuate(P.set_led(led, P.LED_ON if on else P.LED_OFF))
+
+    def set_arm(self, position: int) -> None:
+        self._actuate(P.gripper_arm(position))
+
+    def set_grip(self, closed: bool) -> None:
+        self._actuate(P.gripper_fingers(closed))
+
+    def _actuate(self, request: P.Request[Any]) -> None:
+        self.command(request).add_done_callback(lambda f: self._actuator_done(request, f))
+
+    def _actuator_done(self, request: P.Request[Any], future: Future[Any]) -> None:
+        exc = future.exception()
+        if exc is None:
+            return
+        self.commands_failed += 1
+        if isinstance(exc, LinkOffline):  # expected while unplugged: the state says offline
+            log.debug("%s: command %s failed: %s", self.port, request.letter, exc)
+        elif isinstance(exc, P.ProtocolError):  # unanswered, not understood
+            log.warning("%s: command %s failed: %s", self.port, request.letter, exc)
+        else:
+            log.error("%s: command %s failed: %r", self.port, request.letter, exc)
 
     def command(self, request: P.Request[T]) -> Future[T]:
         """Queue any request; it is sent before the next sensor request, in call order.

@@ -36,6 +36,7 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Principal, Session, Verifier
+from common.controller.actuators import apply_command
 from common.files import Journal
 from common.messages import (
     AddItem,
@@ -533,19 +534,8 @@ class EngineService(WorldService):
             slot = world.agent_slot(item.agent)
         except KeyError:
             return
-        cmd = item.command
         try:
-            if cmd.speeds is not None:
-                world.set_speeds(slot, *cmd.speeds)
-            if cmd.counters is not None:
-                world.set_counters(slot, *cmd.counters)
-            for led, action in enumerate(cmd.leds or []):
-                on = not world.leds[slot, led] if action == 2 else bool(action)
-                world.set_led(slot, led, on)
-            if cmd.arm is not None:
-                world.set_arm(slot, cmd.arm)
-            if cmd.fingers is not None:
-                world.set_fingers(slot, cmd.fingers == "closed")
+            apply_command(item.command, world.actuators(slot))
         except EditError as exc:
             self.log.info("command to %s partly ignored: %s", item.agent, exc)
         self._last_cmd[item.agent] = item.received

@@ -19,6 +19,7 @@ reported, not failed: the robot only clamps them.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import threading
@@ -28,10 +29,11 @@ from typing import Any
 import numpy as np
 
 from common.controller import ARM_UP, LIGHT_SENSORS, PROXIMITY_SENSORS, RobotCommand
+from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
 from common.sim2d import maps
 from common.sim2d.collision import CAT_OBJECT, CAT_OBSTACLE, CAT_ROBOT
-from common.sim2d.world import World
+from common.sim2d.world import EditError, World
 from services.runner.sandbox import Sandbox, SandboxLimits
 
 DRY_RUN_WALL_S = 20.0
@@ -294,15 +296,16 @@ def dry_run(
             steps += 1
             with lock:
                 mine, commands[:] = list(commands), []
+            robot = world.actuators(slot)
             for command in mine:
                 if command.speeds is not None:
                     wheel_commands += 1
                     if max(abs(command.speeds[0]), abs(command.speeds[1])) >= top:
                         saturated += 1
-                    world.set_speeds(slot, *command.speeds)
-                if command.leds is not None:
-                    for led, on in enumerate(command.leds[: world.agents[slot].spec.leds]):
-                        world.set_led(slot, led, bool(on))
+                # The engine's own mapping: the dry run's robot obeys what the lab's would
+                # (arm or grip to a robot without a gripper is ignored, as there).
+                with contextlib.suppress(EditError):
+                    apply_command(command, robot)
             world.step()
             for what, ident in touches.new_contacts():
                 if len(collisions) < MAX_COLLISIONS:

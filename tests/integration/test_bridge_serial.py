@@ -234,7 +234,7 @@ def test_watchdog_zeroes_the_motors(emulator: KheperaEmulator, body: KinematicBo
             # Taken before the command: the watchdog counts from when the bridge
             # got it, not from its acknowledgement (late on a busy machine).
             last_fed = time.monotonic()
-            robot.set_speed(20, 20).result(1)
+            robot.command(P.set_speed(20, 20)).result(1)
             time.sleep(0.05)
             assert body.speed() == (20, 20)
         assert robot.state().watchdog_stops == 0
@@ -249,11 +249,11 @@ def test_halt_and_stop_zero_the_motors(emulator: KheperaEmulator, body: Kinemati
     robot = KheperaRobot(emulator.port, RobotOptions(watchdog=10)).start()
     try:
         assert robot.wait_online(3)
-        robot.set_speed(30, 30).result(1)
+        robot.command(P.set_speed(30, 30)).result(1)
         assert body.speed() == (30, 30)
         robot.halt()
         wait_for(lambda: body.speed() == (0, 0), 1, "halt")
-        robot.set_speed(-30, 30).result(1)
+        robot.command(P.set_speed(-30, 30)).result(1)
     finally:
         robot.stop()
     assert body.speed() == (0, 0)
@@ -264,9 +264,9 @@ def test_halt_and_stop_zero_the_motors(emulator: KheperaEmulator, body: Kinemati
 def test_odometry_follows_the_body(emulator: KheperaEmulator, body: KinematicBody) -> None:
     with KheperaRobot(emulator.port, RobotOptions(poll_interval=0.01, watchdog=5)) as robot:
         assert robot.wait_online(3)
-        robot.set_speed(40, 60).result(1)  # an arc to the left
+        robot.command(P.set_speed(40, 60)).result(1)  # an arc to the left
         wait_for(lambda: body.pose.heading > 1.0, 5, "the robot to turn")
-        robot.set_speed(0, 0).result(1)
+        robot.command(P.set_speed(0, 0)).result(1)
         rounds = robot.state().rounds
         wait_for(lambda: robot.state().rounds > rounds + 1, 2, "a round after stopping")
         pose = robot.state().pose
@@ -289,13 +289,13 @@ def test_unplugged_robot_goes_offline_and_comes_back(emulator: KheperaEmulator) 
         emulator.unplug()
         assert not os.path.exists(emulator.port)  # like /dev/ttyUSB0 when the cable is pulled
         wait_for(lambda: not robot.online, 2, "offline")
-        failed = robot.set_speed(10, 10)
+        failed = robot.command(P.set_speed(10, 10))
         assert failed.exception(2) is not None
         emulator.plug()
         wait_for(lambda: robot.online, 3, "back online")
         rounds = robot.state().rounds
         wait_for(lambda: robot.state().rounds > rounds, 2, "polling again")
-        assert robot.set_speed(10, 10).result(2) == P.ACK
+        assert robot.command(P.set_speed(10, 10)).result(2) == P.ACK
     # Before its first answer the robot may be reported offline (a slow first poll on
     # a busy machine): what counts is online, then offline when unplugged, then back.
     while events and not events[0]:

@@ -189,7 +189,7 @@ def test_only_the_lease_holder_drives_and_the_watchdog_stops(
     mallory = issue_session(identity, realm, "mallory", ["control"])
     lease_key = keys.agent_lease(realm, WORLD, AGENT)
     cmd_key = keys.agent_cmd(realm, WORLD, AGENT)
-    go = AgentCommand(agent=AGENT, speeds=(10, 10), leds=[1, 0])
+    go = AgentCommand(agent=AGENT, speeds=(10, 10), leds=[True, False])
 
     def drive(who: Session, seconds: float) -> float:
         start = body.pose()

@@ -95,7 +95,7 @@ def test_wire_messages_round_trip() -> None:
     sample = wire.sample(world, 0)
     assert isinstance(sample, SensorSample) and sample.gripper is not None
     for message in (
-        AgentCommand(agent="k0", speeds=(10, -10), leds=[1, 2], arm=200, fingers="closed"),
+        AgentCommand(agent="k0", speeds=(10, -10), leds=[True, False], arm=200, grip=True),
         Lease(
             lease_id="L1",
             world="w",
@@ -119,7 +119,7 @@ def test_samples_report_each_agents_own_readings() -> None:
     world.add_agent("e", agent_type("epuck"), 700.0, 700.0)
     world.add_agent("k2", agent_type("khepera"), 300.0, 700.0, gripper=False)
     world.set_speeds(0, 5, -3)
-    world.set_led(0, 1, True)
+    world.set_leds(0, [False, True])
     world.set_arm(0, 200)
     world.run(0.5)
     samples = wire.samples(world, [2, 0, 1])

@@ -18,10 +18,9 @@ def test_a_frame_carries_each_robots_leds_arm_and_grip() -> None:
     world = World(600.0, 600.0, seed=1)
     for i in range(3):
         world.add_agent(f"k{i}", agent_type("khepera"), 100.0 + 150 * i, 300.0, 0.0, gripper=True)
-    world.set_led(0, 0, True)  # a Khepera has two LEDs
-    world.set_led(0, 1, True)
-    world.set_led(2, 1, True)
-    world.set_fingers(1, True)
+    world.set_leds(0, [True, True])  # a Khepera has two LEDs
+    world.set_leds(2, [False, True])
+    world.set_grip(1, True)
     world.step()
     world.holding = lambda: np.array([False, False, True])  # type: ignore[method-assign]
     frame = wire.frame(world)
