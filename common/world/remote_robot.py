@@ -34,7 +34,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
 
 import zenoh
 
@@ -121,22 +120,6 @@ def state_from_sample(sample: SensorSample) -> KheperaState:
         object_present=bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
         resistivity=gripper.resistivity if gripper else 0,
     )
-
-
-def state_to_dict(state: KheperaState) -> dict[str, Any]:
-    """The plain mapping the sandbox's child reads back with KheperaState.from_dict."""
-    return {
-        "time": state.time,
-        "speeds": list(state.speeds),
-        "counters": list(state.counters),
-        "proximity": list(state.proximity),
-        "ambient": list(state.ambient),
-        "leds": list(state.leds),
-        "arm": state.arm,
-        "gripper_closed": state.gripper_closed,
-        "object_present": state.object_present,
-        "resistivity": state.resistivity,
-    }
 
 
 def agent_command(agent: str, command: RobotCommand) -> AgentCommand:

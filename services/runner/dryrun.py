@@ -24,11 +24,18 @@ import math
 import re
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from common.controller import ARM_UP, LIGHT_SENSORS, PROXIMITY_SENSORS, RobotCommand
+from common.controller import (
+    ARM_UP,
+    LIGHT_SENSORS,
+    PROXIMITY_SENSORS,
+    KheperaState,
+    RobotCommand,
+)
 from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
 from common.sim2d import maps
@@ -126,7 +133,7 @@ def world_from_snapshot(snap: WorldSnapshot) -> World:
     )
 
 
-def _state(world: World, slot: int) -> dict[str, Any]:
+def _state(world: World, slot: int) -> KheperaState:
     """What the controller sees of its robot this tick (as the sandbox's child reads it)."""
     agent = world.agents[slot]
     spec = agent.spec
@@ -138,20 +145,24 @@ def _state(world: World, slot: int) -> dict[str, Any]:
     amb = world.ambient[slot].tolist()[: len(spec.ambient.poses)]
     leds = [*world.leds[slot].tolist()[: spec.leds], 0, 0]
     speeds = [max(-127, min(127, int(v))) for v in world.cmd[slot].tolist()]
-    state: dict[str, Any] = {
-        "time": world.sim_time,
-        "speeds": speeds,
-        "counters": [int(c) for c in world.counters[slot].tolist()],
-        "proximity": fit(prox, PROXIMITY_SENSORS, 0),
-        "ambient": fit(amb, LIGHT_SENSORS, 500),
-        "leds": [bool(leds[0]), bool(leds[1])],
-        "arm": ARM_UP,
-    }
+    counters = [int(c) for c in world.counters[slot].tolist()]
+    state = KheperaState(
+        time=world.sim_time,
+        speeds=(speeds[0], speeds[1]),
+        counters=(counters[0], counters[1]),
+        proximity=tuple(fit(prox, PROXIMITY_SENSORS, 0)),
+        ambient=tuple(fit(amb, LIGHT_SENSORS, 500)),
+        leds=(bool(leds[0]), bool(leds[1])),
+        arm=ARM_UP,
+    )
     if agent.has_gripper:
-        state["arm"] = int(np.clip(np.rint(world.arm[slot]), 0, 255))
-        state["gripper_closed"] = world.gripper_state(slot) != 0
-        state["object_present"] = int(world.presence[slot]) >= 128
-        state["resistivity"] = int(world.resistivity(slot))
+        state = replace(
+            state,
+            arm=int(np.clip(np.rint(world.arm[slot]), 0, 255)),
+            gripper_closed=world.gripper_state(slot) != 0,
+            object_present=int(world.presence[slot]) >= 128,
+            resistivity=int(world.resistivity(slot)),
+        )
     return state
 
 

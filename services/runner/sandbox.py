@@ -25,8 +25,10 @@ in bounded chunks (long lines cut), and printing faster than
 
 The child is Debian's ``/usr/bin/python3`` running services/runner/child.py
 with only the standard library and common/controller/. It talks to this
-parent over pipes, one JSON object per line; every line it sends is checked
-(:func:`validate_command`) before anything reaches a robot.
+parent over pipes, one JSON object per line, typed by common/controller/pipe.py;
+every line it sends is checked (``pipe.decode_from_child``) before anything
+reaches a robot, and a line that is not a message is refused, logged and
+counted while the run goes on.
 """
 
 from __future__ import annotations
@@ -35,7 +37,6 @@ import atexit
 import contextlib
 import fcntl
 import functools
-import json
 import logging
 import os
 import shutil
@@ -47,11 +48,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import psutil
 
 from common import controller as controller_api
+from common.controller import pipe
+from common.controller.pipe import MAX_LINE_BYTES
 from common.controller.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
 from services.runner.cpushare import CpuShare
 from services.runner.pipes import RateBudget, read_lines, write_nowait
@@ -61,8 +63,10 @@ log = logging.getLogger("wart.runner.sandbox")
 
 __all__ = ["MAX_SOURCE_BYTES", "PrecheckError", "Sandbox", "SandboxLimits", "precheck"]
 
-MAX_LINE_BYTES = 4096
 MAX_OUTPUT_LINE_BYTES = 1000
+# The first refused line of a run is logged, then one in this many: a hostile child
+# writes as fast as it can, and the runner's log must not grow with it.
+REFUSALS_LOGGED_EVERY = 1000
 _CHILD = Path(__file__).with_name("child.py")
 _API = Path(controller_api.__file__).parent  # the whole package: standard library only
 
@@ -92,11 +96,6 @@ class SandboxLimits:
     @property
     def address_space_bytes(self) -> int:
         return self.memory_bytes - self.writable_bytes
-
-
-def validate_command(message: dict[str, Any]) -> controller_api.RobotCommand:
-    """One command from the sandbox, checked; ValueError (saying why) if it is not one."""
-    return controller_api.RobotCommand.from_dict(message)
 
 
 def sandbox_problem() -> str | None:
@@ -405,13 +404,13 @@ class Sandbox:
             except (OSError, ValueError):
                 return None
 
-    def send_state(self, state: dict[str, Any]) -> bool:
+    def send_state(self, state: controller_api.KheperaState) -> bool:
         """Hand the newest robot state to the controller; False once it has gone.
 
         Never blocks: a controller that does not read its states loses them
         (the next one is newer anyway) and is told so once.
         """
-        line = (json.dumps({"t": "state", **state}, separators=(",", ":")) + "\n").encode()
+        line = pipe.encode(pipe.State(state))
         if self.process is None or self.process.poll() is not None:
             return False
         written = self._write(line)
@@ -429,44 +428,49 @@ class Sandbox:
         try:
             for raw, cut in read_lines(self._cmd_read, MAX_LINE_BYTES):
                 if cut:
-                    self.rejected_commands += 1
+                    self._refuse(f"a line over {MAX_LINE_BYTES} bytes", budget)
                     continue
-                self._on_message(raw, budget)
+                try:
+                    message = pipe.decode_from_child(raw)
+                except pipe.PipeError as exc:
+                    self._refuse(str(exc), budget)
+                    continue
+                self._on_message(message, budget)
         finally:
             os.close(self._cmd_read)
 
-    def _on_message(self, raw: bytes, budget: RateBudget) -> None:
-        try:
-            message = json.loads(raw)
-            if not isinstance(message, dict):
-                raise ValueError("not an object")
-        except ValueError:
-            self.rejected_commands += 1
-            return
-        kind = message.get("t")
-        if kind == "cmd":
-            try:
-                command = validate_command(message)
-            except ValueError as exc:
-                self.rejected_commands += 1
-                self._say(f"[runner] command refused: {exc}")
-                return
+    def _refuse(self, why: str, budget: RateBudget) -> None:
+        """A line from the child that is not a message: counted, logged, and the run goes on.
+
+        The student hears why while within the command rate (a flood of bad lines
+        is counted only, like a flood of good ones).
+        """
+        self.rejected_commands += 1
+        n = self.rejected_commands
+        if n == 1 or n % REFUSALS_LOGGED_EVERY == 0:
+            name = self.controller_name
+            log.warning("controller %s: refused line %d of its pipe: %s", name, n, why)
+        if budget.take():
+            self._say(f"[runner] refused a message from the controller: {why}")
+
+    def _on_message(self, message: pipe.FromChild, budget: RateBudget) -> None:
+        if isinstance(message, pipe.Command):
             if budget.take():
-                self.on_command(command)
+                self.on_command(message.command)
             else:
                 self.rejected_commands += 1
-        elif kind == "step":
+        elif isinstance(message, pipe.Step):
             if self.on_step is not None:
                 self.on_step()
-        elif kind == "ready":
-            self._say(f"[runner] controller {str(message.get('controller'))[:64]} started")
-        elif kind == "error":
-            text = str(message.get("message", ""))[:4000]
+        elif isinstance(message, pipe.Ready):
+            self._say(f"[runner] controller {message.controller} started")
+        elif isinstance(message, pipe.Failed):
+            text = message.message
             self.error_text = self.error_text or text
             self._exit_reason = self._stop_reason or self._failure_reason(text)
             for line in text.splitlines():
                 self._say(line)
-        elif kind == "done":
+        elif isinstance(message, pipe.Done):
             self._exit_reason = self._stop_reason or "the controller finished"
 
     def _failure_reason(self, traceback_text: str) -> str:
@@ -583,7 +587,7 @@ class Sandbox:
         if proc is None:
             return
         if proc.poll() is None:
-            self._write(b'{"t":"stop"}\n')
+            self._write(pipe.encode(pipe.Stop()))
             with self._stdin_lock:
                 if proc.stdin is not None:
                     with contextlib.suppress(OSError):

@@ -62,7 +62,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from common.sim2d.maps import MapError
-from common.world.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
+from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.runner.dryrun import dry_run
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
@@ -133,7 +133,7 @@ class Run:
                 back = "again" if seen else "at last"  # a gap, or the slot's first ones
                 self._say(f"readings from {self.request.agent} {back} after {now - last:.0f} s")
             last, seen = now, newest
-            if not self.sandbox.send_state(state_to_dict(self.link.latest())):
+            if not self.sandbox.send_state(self.link.latest()):
                 return
 
     def _say_silent(self, *, first: bool) -> None:

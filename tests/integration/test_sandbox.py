@@ -14,7 +14,7 @@ import time
 import psutil
 import pytest
 
-from common.controller import RobotCommand
+from common.controller import KheperaState, RobotCommand
 from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck, sandbox_problem
 from tests.conftest import wait_for
 
@@ -23,18 +23,7 @@ pytestmark = pytest.mark.integration
 _problem = sandbox_problem()
 needs_sandbox = pytest.mark.skipif(_problem is not None, reason=f"no sandbox here: {_problem}")
 
-STATE = {
-    "time": 1.0,
-    "speeds": [0, 0],
-    "counters": [0, 0],
-    "proximity": [0, 0, 900, 0, 0, 0, 0, 0],
-    "ambient": [500] * 8,
-    "leds": [False, False],
-    "arm": 165,
-    "gripper_closed": False,
-    "object_present": False,
-    "resistivity": 0,
-}
+STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))
 
 
 class Run:
@@ -210,9 +199,13 @@ class Liar(Controller):
 """,
         slot=1.5,
     )
+    # Refused with the reason, and the run goes on: the good command after them arrives.
     assert run.commands.get(timeout=10) == RobotCommand(speeds=(3, 4))
     run.finish()
     assert run.sandbox.rejected_commands >= 3
+    assert "refused a message from the controller: not JSON" in run.text()
+    assert "cmd: speeds must be two integers" in run.text()
+    assert "cmd: unknown command fields: format" in run.text()
 
 
 @pytest.mark.parametrize(
