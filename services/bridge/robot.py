@@ -14,26 +14,26 @@ once (the lease ended), and stopping the robot does it before the port closes.
 A port that vanishes (unplugged) or stops answering makes the robot
 offline; the thread reopens the port every ``reconnect_interval`` seconds
 and is online again as soon as the robot answers B.
+
+Odometry is in odometry.py; auto-detection and the Fleet in detect.py.
 """
 
 from __future__ import annotations
 
-import glob
 import logging
 import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
-
-from serial.tools import list_ports
 
 from common.controller.actuators import Actuators
 from services.bridge import protocol as P
 from services.bridge.link import KheperaLink, LinkError, LinkOffline, LinkOptions
+from services.bridge.odometry import Odometry, Pose
 
 log = logging.getLogger("wart.bridge.robot")
 
@@ -83,15 +83,6 @@ class GripperState:
 
 
 @dataclass(frozen=True)
-class Pose:
-    """Odometry estimate in the robot's start frame: mm, mm, radians (counter-clockwise)."""
-
-    x: float = 0.0
-    y: float = 0.0
-    heading: float = 0.0
-
-
-@dataclass(frozen=True)
 class RobotState:
     """One consistent snapshot of what the host knows of the robot (None: not read yet)."""
 
@@ -104,60 +95,11 @@ class RobotState:
     speed: P.WheelPair | None = None
     gripper: GripperState | None = None
     leds: tuple[int, int] = (0, 0)  # as last set by L (the robot cannot be asked)
-    pose: Pose = Pose()
+    pose: Pose = field(default_factory=Pose)  # frozen: the same as one shared default
     rounds: int = 0  # completed sensor rounds since start
     updated: float = 0.0  # time.monotonic() of the last completed round
     watchdog_stops: int = 0
     errors: int = 0  # requests that failed after all their tries
-
-
-class Odometry:
-    """Pose from position-counter deltas (differential drive, each step an arc)."""
-
-    # Faster than any wheel can turn (127 pulses/10 ms) with a wide margin: a
-    # jump this large means the counters were reset, not that the robot moved.
-    MAX_PULSES_PER_S = 127 * 100 * 2
-
-    def __init__(self, mm_per_pulse: float, wheel_base_mm: float) -> None:
-        self.mm_per_pulse, self.wheel_base_mm = mm_per_pulse, wheel_base_mm
-        self.pose = Pose()
-        self._last: tuple[int, int, float] | None = None
-
-    def rebaseline(self) -> None:
-        """Forget the last reading: the next one only sets the reference (counters were reset)."""
-        self._last = None
-
-    def set_pose(self, pose: Pose) -> None:
-        self.pose = pose
-
-    def update(self, left: int, right: int, now: float) -> Pose:
-        last, self._last = self._last, (left, right, now)
-        if last is None:
-            return self.pose
-        dl_p, dr_p = _delta32(left, last[0]), _delta32(right, last[1])
-        limit = self.MAX_PULSES_PER_S * max(now - last[2], 0.05)
-        if abs(dl_p) > limit or abs(dr_p) > limit:
-            log.warning("counters jumped by (%d, %d): taken as a reset, pose kept", dl_p, dr_p)
-            return self.pose
-        dl, dr = dl_p * self.mm_per_pulse, dr_p * self.mm_per_pulse
-        d, dth = (dl + dr) / 2, (dr - dl) / self.wheel_base_mm
-        mid = self.pose.heading + dth / 2
-        # The chord of the arc, not its length: exact for wheels at constant speeds
-        # between two readings, however far apart (a busy host reads late; at
-        # 40/60 pulses a 0.3 s gap put the arc-length estimate 4 mm out).
-        half = dth / 2
-        chord = d if abs(half) < 1e-9 else d * math.sin(half) / half
-        self.pose = Pose(
-            self.pose.x + chord * math.cos(mid),
-            self.pose.y + chord * math.sin(mid),
-            math.remainder(self.pose.heading + dth, math.tau),
-        )
-        return self.pose
-
-
-def _delta32(new: int, old: int) -> int:
-    """Counter difference across the 32-bit wrap."""
-    return (new - old + 2**31) % 2**32 - 2**31
 
 
 @dataclass
@@ -566,104 +508,3 @@ class KheperaRobot(Actuators):
                 callback(state)
             except Exception:  # a listener's bug must not stop the robot's I/O
                 log.exception("%s: state listener failed", self.port)
-
-
-# ---------------------------------------------------------------- auto-detection
-
-
-@dataclass(frozen=True)
-class DetectedRobot:
-    port: str
-    baud: int
-    version: P.Version
-
-
-def candidate_ports(patterns: Iterable[str] = (), *, system: bool = True) -> list[str]:
-    """The serial ports pyserial lists, plus the paths and globs given; no duplicates."""
-    found: list[str] = []
-    if system:
-        found += [p.device for p in list_ports.comports()]
-    for pattern in patterns:
-        matches = sorted(glob.glob(pattern)) if any(c in pattern for c in "*?[") else [pattern]
-        found += matches
-    return list(dict.fromkeys(found))
-
-
-def probe(port: str, baud: int = 38400, timeout: float = 0.3, tries: int = 2) -> P.Version | None:
-    """Ask B on ``port``; the version if a Khepera answers ``b,...``, else None (quickly)."""
-    try:
-        link = KheperaLink.open(port, baud, LinkOptions(reply_timeout=timeout, tries=tries))
-    except LinkOffline as exc:
-        log.debug("probe %s: %s", port, exc)
-        return None
-    except ValueError as exc:
-        log.debug("probe %s: %s", port, exc)
-        return None
-    try:
-        return link.request(P.read_version())
-    except P.ProtocolError as exc:
-        log.debug("probe %s at %d baud: not a Khepera: %s", port, baud, exc)
-        return None
-    finally:
-        link.close()
-
-
-def detect(
-    ports: Sequence[str], bauds: Sequence[int] = (38400,), timeout: float = 0.3
-) -> list[DetectedRobot]:
-    """Probe every port in parallel (each at each baud until one answers); robots in port order."""
-
-    def one(port: str) -> DetectedRobot | None:
-        for baud in bauds:
-            version = probe(port, baud, timeout)
-            if version is not None:
-                return DetectedRobot(port, baud, version)
-        return None
-
-    if not ports:
-        return []
-    with ThreadPoolExecutor(
-        max_workers=min(16, len(ports)), thread_name_prefix="khepera-probe"
-    ) as pool:
-        results = list(pool.map(one, ports))
-    return [r for r in results if r is not None]
-
-
-class Fleet:
-    """The robots of one bridge: added by port name or found by auto-detection."""
-
-    def __init__(self, options: RobotOptions | None = None) -> None:
-        self.options = options or RobotOptions()
-        self.robots: dict[str, KheperaRobot] = {}
-
-    def add(self, port: str, options: RobotOptions | None = None) -> KheperaRobot:
-        """Manual add (thesis 7.4.3): the robot is polled from now on, online when it answers."""
-        if port in self.robots:
-            return self.robots[port]
-        robot = KheperaRobot(port, options or self.options).start()
-        self.robots[port] = robot
-        return robot
-
-    def autodetect(
-        self,
-        patterns: Iterable[str] = (),
-        *,
-        system: bool = True,
-        bauds: Sequence[int] = (38400,),
-        timeout: float = 0.3,
-    ) -> list[KheperaRobot]:
-        """Probe the candidate ports not already in use and add every robot that answers."""
-        ports = [p for p in candidate_ports(patterns, system=system) if p not in self.robots]
-        added = []
-        for found in detect(ports, bauds, timeout):
-            added.append(self.add(found.port, replace(self.options, baud=found.baud)))
-        return added
-
-    def remove(self, port: str) -> None:
-        robot = self.robots.pop(port, None)
-        if robot is not None:
-            robot.stop()
-
-    def stop(self) -> None:
-        for port in list(self.robots):
-            self.remove(port)

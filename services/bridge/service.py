@@ -57,14 +57,9 @@ from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
 from services.bridge import protocol as P
-from services.bridge.robot import (
-    KheperaRobot,
-    Pose,
-    RobotOptions,
-    RobotState,
-    candidate_ports,
-    detect,
-)
+from services.bridge.detect import candidate_ports, detect
+from services.bridge.odometry import Pose
+from services.bridge.robot import KheperaRobot, RobotOptions, RobotState
 
 # Khepera I facts the snapshot carries (docs/KHEPERA_PROTOCOL.md "Body" and "Sensor placement").
 KHEPERA_RADIUS_MM = 27.5

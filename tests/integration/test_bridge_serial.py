@@ -23,15 +23,11 @@ import pytest
 
 from services.bridge import protocol as P
 from services.bridge.body import KinematicBody
-from services.bridge.emulator import BANNER, EmulatorOptions, KheperaEmulator
+from services.bridge.detect import Fleet, candidate_ports, detect
+from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.firmware import BANNER
 from services.bridge.link import KheperaLink, LinkOptions, SerialLike
-from services.bridge.robot import (
-    Fleet,
-    KheperaRobot,
-    RobotOptions,
-    candidate_ports,
-    detect,
-)
+from services.bridge.robot import KheperaRobot, RobotOptions
 from tests.conftest import REPO, wait_for, wart_env
 
 

@@ -13,7 +13,7 @@ from common.sim2d.agents import agent_type
 from common.sim2d.world import EditError, World
 from common.world.remote_robot import agent_command
 from services.bridge.body import KinematicBody
-from services.bridge.emulator import Firmware
+from services.bridge.firmware import Firmware
 
 
 class Recorded(Actuators):

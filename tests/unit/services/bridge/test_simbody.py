@@ -10,7 +10,7 @@ import pytest
 
 from common.sim2d.maps import MapError
 from services.bridge.body import RobotBody
-from services.bridge.emulator import Firmware
+from services.bridge.firmware import Firmware
 from services.bridge.main import parse_port
 from services.bridge.service import agent_id_for
 from services.bridge.simbody import SimBody
