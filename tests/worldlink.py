@@ -8,7 +8,7 @@ from common.controller import Controller, ControllerLoop, Khepera, KheperaState,
 from common.controller.actuators import apply_command
 from common.sim2d.world import World
 from common.world.remote_robot import agent_command, state_from_sample
-from services.engine import wire
+from services.engine import packing
 
 
 class WorldLink:
@@ -19,7 +19,7 @@ class WorldLink:
         self.agent = agent
 
     def latest(self) -> KheperaState:
-        return state_from_sample(wire.sample(self.world, self.world.agent_slot(self.agent)))
+        return state_from_sample(packing.sample(self.world, self.world.agent_slot(self.agent)))
 
     def send(self, command: RobotCommand) -> None:
         # Through the wire's form, as the engine receives it, and the engine's one mapping.

@@ -52,7 +52,7 @@ from common.sim2d.world import EditError, World
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
-from services.engine import wire
+from services.engine import packing
 from services.engine.edits import EngineEdits
 from services.engine.pace import PaceWatch
 
@@ -346,7 +346,7 @@ class EngineService(EngineEdits, WorldService):
             raise RequestError("unavailable", "the simulation did not answer in time") from None
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:
-        snap = self._in_sim(wire.snapshot)
+        snap = self._in_sim(packing.snapshot)
         return snapshot_with_identity(snap, self.box_keys)
 
     # -- the sim thread
@@ -429,8 +429,8 @@ class EngineService(EngineEdits, WorldService):
         # plain Zenoh peer's with the frame built after it; docs/BENCHMARKS.md).
         # Nobody watching the world (a headless swarm): no frame to build (0.4 ms
         # a tick at 10,000 robots, and its encoding).
-        frame = encode(wire.frame(world)) if self._frame_pub.matching_status.matching else None
-        batch = encode(wire.batch(world)) if self._batch_pub.matching_status.matching else None
+        frame = encode(packing.frame(world)) if self._frame_pub.matching_status.matching else None
+        batch = encode(packing.batch(world)) if self._batch_pub.matching_status.matching else None
         with self._match_lock:
             listening = set(self._matched)
         bundled = (
@@ -444,7 +444,7 @@ class EngineService(EngineEdits, WorldService):
                 continue
             agents.append(agent)
         if agents:
-            encoded = dict(zip(agents, map(encode, wire.samples(world, slots)), strict=True))
+            encoded = dict(zip(agents, map(encode, packing.samples(world, slots)), strict=True))
             if bundled:
                 inside = {a: encoded[a] for a in bundled if a in encoded}
                 self.publish_sample_bundle(world.tick, inside)
