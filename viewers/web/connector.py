@@ -2,7 +2,7 @@
 
 One :class:`~viewers.web.lab_links.LabLink` (a Zenoh session) per lab router,
 shared by everyone logged in through it; one
-:class:`~viewers.web.real.RealConnection` per logged-in browser.
+:class:`~viewers.web.live.LiveConnection` per logged-in browser.
 """
 
 from __future__ import annotations
@@ -23,15 +23,15 @@ from viewers.web.adapters import (
 )
 from viewers.web.address import LabAddress
 from viewers.web.lab_links import LabLink, load_labs
-from viewers.web.real import RealConnection, plain_error
-from viewers.web.real_world import QUERY_TIMEOUT
+from viewers.web.live import LiveConnection, plain_error
+from viewers.web.live_world import QUERY_TIMEOUT
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 LABS_FILE = "labs.json"
 
 
-class RealConnector:
+class LiveConnector:
     """Logs browsers in to labs: the viewer's own, or one listed in the admin's labs file."""
 
     def __init__(
@@ -56,7 +56,7 @@ class RealConnector:
         self._own_session = own_session
         self._links: dict[tuple[str, int, str], LabLink] = {}
         self._lock = threading.Lock()
-        self._connections: list[RealConnection] = []
+        self._connections: list[LiveConnection] = []
 
     def _is_own(self, address: LabAddress) -> bool:
         own = self.own_address
@@ -116,7 +116,7 @@ class RealConnector:
             self._links.pop(link.address.lab_key, None)
         link.close()
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> RealConnection:
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> LiveConnection:
         link = self._link(address)
         client = lab.LabClient(
             link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
@@ -146,12 +146,12 @@ class RealConnector:
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None
-        connection = RealConnection(self, link, client, address.with_user(user))
+        connection = LiveConnection(self, link, client, address.with_user(user))
         with self._lock:
             self._connections.append(connection)
         return connection
 
-    def _closed(self, connection: RealConnection) -> None:
+    def _closed(self, connection: LiveConnection) -> None:
         with self._lock:
             if connection in self._connections:
                 self._connections.remove(connection)

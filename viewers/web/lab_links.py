@@ -20,9 +20,9 @@ from viewers.web.adapters import (
     LabError,
 )
 from viewers.web.address import AddressError, LabAddress, parse_address
-from viewers.web.real_world import WorldWatch
+from viewers.web.live_world import WorldWatch
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from viewers.web.adapters import (
     OutputEvent,
     RequestEvent,
 )
-from viewers.web.real_agents import check_upload
+from viewers.web.live_agents import check_upload
 from viewers.web.robot_panel import NONE, RobotPanel
 from viewers.web.text import escape_md
 

@@ -1,4 +1,4 @@
-"""The robot panel's side of a real agent context: queues, uploads, output, settings.
+"""The robot panel's side of a live agent context: queues, uploads, output, settings.
 
 One :class:`ArenaLink` per joined agent context and browser user wraps
 :class:`~common.client.agent_client.AgentClient` (the same client ``wart deploy``

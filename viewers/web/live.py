@@ -1,4 +1,4 @@
-"""The viewer's Protocols over the real lab: the registry client and the engine's world keys.
+"""The viewer over the live lab (not the demo): the registry client and the world keys.
 
 The viewer is a gateway. It holds one Zenoh session per lab router (its own
 lab's, opened by ``wart viewer``, plus one per other lab a browser connects
@@ -7,7 +7,7 @@ that session: every query, chat line, edit and admin request is sealed with
 that person's session, so the services' ACL checks apply to the person.
 
 The labs it knows and their router sessions are in lab_links.py, the worlds
-it shows in real_world.py.
+it shows in live_world.py.
 """
 
 from __future__ import annotations
@@ -54,13 +54,13 @@ from viewers.web.adapters import (
 )
 from viewers.web.address import LabAddress
 from viewers.web.lab_links import LabLink
-from viewers.web.real_agents import ArenaLink
-from viewers.web.real_world import UserWorld
+from viewers.web.live_agents import ArenaLink
+from viewers.web.live_world import UserWorld
 
 if TYPE_CHECKING:  # the connector makes connections; only its type is needed here
-    from viewers.web.connector import RealConnector
+    from viewers.web.connector import LiveConnector
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 DIRECTORY_POLL_S = 3.0  # the registry has no directory events: poll, emit on change
 HISTORY = 50  # chat lines a join asks for
@@ -99,11 +99,11 @@ class _Events:
     next_id: int = 1
 
 
-class RealConnection:
+class LiveConnection:
     """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
-        self, connector: RealConnector, link: LabLink, client: lab.LabClient, address: LabAddress
+        self, connector: LiveConnector, link: LabLink, client: lab.LabClient, address: LabAddress
     ) -> None:
         self.connector = connector
         self.link = link
