@@ -51,7 +51,7 @@ import psutil
 from common import controller as controller_api
 from common.controller import pipe
 from common.controller.pipe import MAX_LINE_BYTES
-from common.controller.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
+from common.controller.upload_gate import MAX_SOURCE_BYTES, PrecheckError, precheck
 from services.runner.pipes import RateBudget, read_lines, write_nowait
 from services.runner.sandbox_host import (
     _give_uid,

@@ -41,7 +41,7 @@ import zenoh
 from common import keys
 from common.auth import Verifier
 from common.client.service_login import ServiceLogin
-from common.controller.precheck import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
