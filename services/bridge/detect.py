@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from serial.tools import list_ports
 
 from services.bridge import protocol as P
-from services.bridge.link import KheperaLink, LinkOffline, LinkOptions
+from services.bridge.link import LinkOffline, LinkOptions, SerialKheperaLink
 from services.bridge.robot import KheperaRobot, RobotOptions
 
 log = logging.getLogger("wart.bridge.robot")
@@ -43,7 +43,7 @@ def candidate_ports(patterns: Iterable[str] = (), *, system: bool = True) -> lis
 def probe(port: str, baud: int = 38400, timeout: float = 0.3, tries: int = 2) -> P.Version | None:
     """Ask B on ``port``; the version if a Khepera answers ``b,...``, else None (quickly)."""
     try:
-        link = KheperaLink.open(port, baud, LinkOptions(reply_timeout=timeout, tries=tries))
+        link = SerialKheperaLink.open(port, baud, LinkOptions(reply_timeout=timeout, tries=tries))
     except LinkOffline as exc:
         log.debug("probe %s: %s", port, exc)
         return None

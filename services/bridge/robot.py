@@ -1,4 +1,4 @@
-"""KheperaRobot: the thesis's KheperaReal over a KheperaLink, plus auto-detection of robots.
+"""KheperaRobot: the thesis's KheperaReal over a SerialKheperaLink, plus auto-detection of robots.
 
 One I/O thread per robot owns its link, so everything on the wire happens in
 one order: queued commands first (in the order they were given), then the
@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 
 from common.controller.actuators import Actuators
 from services.bridge import protocol as P
-from services.bridge.link import KheperaLink, LinkError, LinkOffline, LinkOptions
+from services.bridge.link import LinkError, LinkOffline, LinkOptions, SerialKheperaLink
 from services.bridge.odometry import Odometry, Pose
 
 log = logging.getLogger("wart.bridge.robot")
@@ -108,13 +108,13 @@ class _Queued:
     future: Future[Any]
 
 
-LinkFactory = Callable[[str, int, LinkOptions, Callable[[str], None]], KheperaLink]
+LinkFactory = Callable[[str, int, LinkOptions, Callable[[str], None]], SerialKheperaLink]
 
 
 def _open_link(
     port: str, baud: int, options: LinkOptions, on_banner: Callable[[str], None]
-) -> KheperaLink:
-    return KheperaLink.open(port, baud, options, on_banner=on_banner)
+) -> SerialKheperaLink:
+    return SerialKheperaLink.open(port, baud, options, on_banner=on_banner)
 
 
 class KheperaRobot(Actuators):
@@ -134,7 +134,7 @@ class KheperaRobot(Actuators):
         self.port = port
         self.options = options or RobotOptions()
         self._link_factory = link_factory
-        self._link: KheperaLink | None = None
+        self._link: SerialKheperaLink | None = None
         self._state = RobotState(port=port)
         self._state_lock = threading.Lock()
         self._queue: deque[_Queued] = deque()

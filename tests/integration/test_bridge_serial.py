@@ -26,7 +26,7 @@ from services.bridge.body import KinematicBody
 from services.bridge.detect import Fleet, candidate_ports, detect
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.firmware import BANNER
-from services.bridge.link import KheperaLink, LinkOptions, SerialLike
+from services.bridge.link import LinkOptions, SerialKheperaLink, SerialLike
 from services.bridge.robot import KheperaRobot, RobotOptions
 from tests.conftest import REPO, wait_for, wart_env
 
@@ -74,10 +74,10 @@ def emulator(body: KinematicBody, tmp_path: Path) -> Iterator[KheperaEmulator]:
         yield emu
 
 
-def open_recorded(port: str) -> tuple[KheperaLink, Recorder]:
-    base = KheperaLink.open(port, 38400)
+def open_recorded(port: str) -> tuple[SerialKheperaLink, Recorder]:
+    base = SerialKheperaLink.open(port, 38400)
     rec = Recorder(base._port)  # the real pyserial port, watched
-    return KheperaLink(rec, base.options, name=port), rec
+    return SerialKheperaLink(rec, base.options, name=port), rec
 
 
 # (request, exact bytes the emulator must receive, exact reply bytes, decoded value)
@@ -135,7 +135,7 @@ def test_every_command_exact_bytes_both_ways(emulator: KheperaEmulator) -> None:
 
 
 def test_position_move_and_motion_status(emulator: KheperaEmulator) -> None:
-    link = KheperaLink.open(emulator.port)
+    link = SerialKheperaLink.open(emulator.port)
     try:
         link.request(P.set_counters(0, 0))
         link.request(P.set_speed_profile(100, 64, 100, 64))
@@ -154,7 +154,7 @@ def test_position_move_and_motion_status(emulator: KheperaEmulator) -> None:
 @pytest.mark.parametrize("text", ["Command not found", "z,Command not found"])
 def test_unknown_letter_is_command_not_found(text: str) -> None:
     with KheperaEmulator(options=EmulatorOptions(not_found_text=text)) as emu:
-        link = KheperaLink.open(emu.port, options=LinkOptions(reply_timeout=0.2))
+        link = SerialKheperaLink.open(emu.port, options=LinkOptions(reply_timeout=0.2))
         try:
             with pytest.raises(P.CommandNotFound, match="'X,1'"):
                 link.request(P.raw("X", 1))
@@ -166,7 +166,7 @@ def test_unknown_letter_is_command_not_found(text: str) -> None:
 def test_split_replies_garbage_and_midstream_banner_are_survived() -> None:
     opts = EmulatorOptions(split=7, split_gap=0.001, garbage_every=3, seed=4)
     with KheperaEmulator(options=opts) as emu:
-        link = KheperaLink.open(emu.port)
+        link = SerialKheperaLink.open(emu.port)
         try:
             for i in range(30):
                 if i == 10:
@@ -184,7 +184,7 @@ def test_split_replies_garbage_and_midstream_banner_are_survived() -> None:
 def test_cr_only_and_lf_terminators() -> None:
     opts = EmulatorOptions(dialect=P.Dialect(command_eol=b"\n", reply_eol=b"\r"))
     with KheperaEmulator(options=opts) as emu:
-        link = KheperaLink.open(emu.port, options=LinkOptions(dialect=opts.dialect))
+        link = SerialKheperaLink.open(emu.port, options=LinkOptions(dialect=opts.dialect))
         try:
             link.request(P.set_speed(3, 4))
             assert emu.received[-1] == b"D,3,4\n"
@@ -390,7 +390,7 @@ def test_cli_prints_the_port_toggles_and_stops_cleanly(tmp_path: Path) -> None:
         assert proc.stdout is not None
         first = proc.stdout.readline()
         assert "emulated Khepera at /dev/pts/" in first and link in first
-        link_ = KheperaLink.open(link)
+        link_ = SerialKheperaLink.open(link)
         assert link_.request(P.read_version()).protocol == "5.01"
         link_.close()
         proc.send_signal(signal.SIGUSR1)

@@ -36,7 +36,7 @@ from common.messages import (
 )
 from services.bridge import protocol as P
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
-from services.bridge.link import KheperaLink
+from services.bridge.link import SerialKheperaLink
 from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
@@ -368,7 +368,7 @@ def test_sim_backed_emulator_process_sees_the_walls_of_its_map(
         )
         wait_for(lambda: link.exists() or proc.popen.poll() is not None, 30, "the pty link")
         assert proc.popen.poll() is None, proc.output()
-        serial_link = KheperaLink.open(str(link), 38400)
+        serial_link = SerialKheperaLink.open(str(link), 38400)
         try:
             return serial_link.request(P.read_proximity()).values
         finally:

@@ -1,6 +1,6 @@
 """Browsers log in here: the viewer's own lab, or one its admin listed in the labs file.
 
-One :class:`~viewers.web.lab_links.LabLink` (a Zenoh session) per lab router,
+One :class:`~viewers.web.lab_links.LabRouterLink` (a Zenoh session) per lab router,
 shared by everyone logged in through it; one
 :class:`~viewers.web.live.LiveConnection` per logged-in browser.
 """
@@ -22,7 +22,7 @@ from viewers.web.adapters import (
     LoginError,
 )
 from viewers.web.address import LabAddress
-from viewers.web.lab_links import LabLink, load_labs
+from viewers.web.lab_links import LabRouterLink, load_labs
 from viewers.web.live import LiveConnection, plain_error
 from viewers.web.live_world import QUERY_TIMEOUT
 
@@ -54,7 +54,7 @@ class LiveConnector:
             raise ValueError(f"login_wait must be positive, not {login_wait}")
         self.login_wait = login_wait  # how long a login waits for the registry's answer
         self._own_session = own_session
-        self._links: dict[tuple[str, int, str], LabLink] = {}
+        self._links: dict[tuple[str, int, str], LabRouterLink] = {}
         self._lock = threading.Lock()
         self._connections: list[LiveConnection] = []
 
@@ -65,7 +65,7 @@ class LiveConnector:
         local = {"127.0.0.1", "localhost", "::1"}
         return address.host == own.host or (address.host in local and own.host in local)
 
-    def _link(self, address: LabAddress) -> LabLink:
+    def _link(self, address: LabAddress) -> LabRouterLink:
         key = address.lab_key
         with self._lock:
             link = self._links.get(key)
@@ -78,7 +78,7 @@ class LiveConnector:
                     "this viewer was started without --registry-key, so it cannot check "
                     "that the lab's registry is genuine; ask the lab's admin"
                 )
-            link = LabLink(address, self._own_session, self.own_registry_key, own=True)
+            link = LabRouterLink(address, self._own_session, self.own_registry_key, own=True)
         else:
             known = load_labs(self.labs_path, self.own_address.realm).get(key)
             if known is None:
@@ -96,7 +96,7 @@ class LiveConnector:
                 raise LoginError(
                     f"no lab router answers at {address.host}:{address.port}"
                 ) from None
-            link = LabLink(address, session, known.registry_key, own=False)
+            link = LabRouterLink(address, session, known.registry_key, own=False)
         with self._lock:
             existing = self._links.get(key)
             if existing is not None:  # another browser opened it meanwhile: use theirs
@@ -108,7 +108,7 @@ class LiveConnector:
             self._links[key] = link
         return link
 
-    def _unlink(self, link: LabLink) -> None:
+    def _unlink(self, link: LabRouterLink) -> None:
         with self._lock:
             link.users -= 1
             if link.users > 0 or link.own:

@@ -65,7 +65,7 @@ def load_labs(path: Path | None, default_realm: str) -> dict[tuple[str, int, str
 # --- one router's session, shared by everyone logged in through it -----------------------
 
 
-class LabLink:
+class LabRouterLink:
     """A Zenoh session to one lab's router, its pinned registry key, and its world watches."""
 
     def __init__(

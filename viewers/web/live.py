@@ -53,8 +53,8 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
-from viewers.web.lab_links import LabLink
-from viewers.web.live_agents import ArenaLink
+from viewers.web.lab_links import LabRouterLink
+from viewers.web.live_agents import AgentContextLink
 from viewers.web.live_world import UserWorld
 
 if TYPE_CHECKING:  # the connector makes connections; only its type is needed here
@@ -103,7 +103,11 @@ class LiveConnection:
     """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
-        self, connector: LiveConnector, link: LabLink, client: lab.LabClient, address: LabAddress
+        self,
+        connector: LiveConnector,
+        link: LabRouterLink,
+        client: lab.LabClient,
+        address: LabAddress,
     ) -> None:
         self.connector = connector
         self.link = link
@@ -121,7 +125,7 @@ class LiveConnection:
         self._kinds: dict[str, ContextSummary] = {}
         self._worlds: dict[str, UserWorld] = {}
         self._world_only: set[str] = set()
-        self._arenas: dict[str, ArenaLink] = {}  # joined agent contexts
+        self._arenas: dict[str, AgentContextLink] = {}  # joined agent contexts
         self._real_worlds: dict[str, bool] = {}  # world -> a Khepera bridge (asked once)
         self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
@@ -301,7 +305,7 @@ class LiveConnection:
             def on_room(event: RoomEvent) -> None:
                 self._room_event(ctx, event)
 
-            arena = self._call(lambda: ArenaLink(self.client, ctx, self._queue.put, on_room))
+            arena = self._call(lambda: AgentContextLink(self.client, ctx, self._queue.put, on_room))
             room = arena.join(HISTORY)
             world = arena.world or world
             if world is not None:
@@ -377,7 +381,7 @@ class LiveConnection:
 
     # -- agents: the joined agent contexts' queues, uploads and settings
 
-    def _arena(self, ctx: str) -> ArenaLink:
+    def _arena(self, ctx: str) -> AgentContextLink:
         if self._closed.is_set():
             raise LabError("you are logged out of this lab")
         arena = self._arenas.get(ctx)

@@ -1,6 +1,6 @@
 """The robot panel's side of a live agent context: queues, uploads, output, settings.
 
-One :class:`ArenaLink` per joined agent context and browser user wraps
+One :class:`AgentContextLink` per joined agent context and browser user wraps
 :class:`~common.client.agent_client.AgentClient` (the same client ``wart deploy``
 uses) on that user's :class:`~common.client.lab_client.LabClient`, so every request is
 sealed with the person's session and the context checks their rights. Its
@@ -116,7 +116,7 @@ def _plain(exc: lab_errors.LabError) -> LabError:
     return LabError(str(exc))
 
 
-class ArenaLink:
+class AgentContextLink:
     """One user in one agent context: the AgentClient, and its events for the page."""
 
     def __init__(
