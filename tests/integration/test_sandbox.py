@@ -6,6 +6,7 @@ there is no Zenoh here: the runner service relays over these same pipes.
 
 from __future__ import annotations
 
+import logging
 import os
 import queue
 import textwrap
@@ -184,7 +185,8 @@ class Snoop(Controller):
 
 
 @needs_sandbox
-def test_bad_commands_are_refused_and_counted() -> None:
+def test_bad_commands_are_refused_and_counted(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING, "wart.runner.sandbox")
     run = Run(
         HEADER
         + """
@@ -206,6 +208,9 @@ class Liar(Controller):
     assert "refused a message from the controller: not JSON" in run.text()
     assert "cmd: speeds must be two integers" in run.text()
     assert "cmd: unknown command fields: format" in run.text()
+    # The runner's log says it once (not once a line: the child chooses how many).
+    refusals = [r for r in caplog.records if "refused line" in r.getMessage()]
+    assert len(refusals) == 1 and "not JSON" in refusals[0].getMessage()
 
 
 @pytest.mark.parametrize(
