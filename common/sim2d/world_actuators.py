@@ -20,11 +20,21 @@ from common.sim2d import kernels
 from common.sim2d.world_edits import EditError
 
 if TYPE_CHECKING:
-    from common.sim2d.world import World
+    from common.sim2d.entities import Agent
+    from common.sim2d.gripper import GripperTurrets
+    from common.sim2d.world import Tables
 
 
 class WorldActuators:
     """World's actuator methods (a mixin of :class:`~common.sim2d.world.World`)."""
+
+    if TYPE_CHECKING:  # the World's state these write (common/sim2d/world.py sets it)
+        tables: Tables
+        cmd: np.ndarray
+        counters: np.ndarray
+        leds: np.ndarray
+        agents: list[Agent]
+        grippers: GripperTurrets
 
     def actuators(self, slot: int) -> RobotActuators:
         """The robot in ``slot`` as :class:`common.controller.actuators.Actuators`."""
@@ -70,7 +80,7 @@ class RobotActuators(Actuators):
 
     __slots__ = ("slot", "world")
 
-    def __init__(self, world: World, slot: int) -> None:
+    def __init__(self, world: WorldActuators, slot: int) -> None:
         self.world, self.slot = world, slot
 
     def set_speeds(self, left: int, right: int) -> None:

@@ -9,6 +9,7 @@ obstacle; no obstacle onto an agent) and undone if it breaks a rule, raising
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import pymunk
 
@@ -26,6 +27,12 @@ from common.sim2d.entities import (
 )
 from common.sim2d.specs import AgentTypeSpec
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from common.sim2d.gripper import GripperTurrets
+    from common.sim2d.sensing import SensorSuite
+
 
 class EditError(ValueError):
     """An edit or a map would break the world's rules; the message says which and why."""
@@ -33,6 +40,43 @@ class EditError(ValueError):
 
 class WorldEdits:
     """World's edit methods (a mixin of :class:`~common.sim2d.world.World`)."""
+
+    if TYPE_CHECKING:  # the World's state and model these edit (common/sim2d/world.py)
+        width: float
+        height: float
+        drive: str
+        layout: int
+        space: pymunk.Space
+        sensors: SensorSuite
+        grippers: GripperTurrets
+        tongs_mask: int
+        agents: list[Agent]
+        obstacles: dict[str, Obstacle]
+        objects: list[MovableObject]
+        lights: list[Light]
+        zones: dict[str, Zone]
+        homes: dict[str, tuple[float, float, float]]
+        agent_pose: np.ndarray
+        _walls: list[pymunk.Shape]
+        _agent_by_body: dict[int, Agent]
+        _object_by_body: dict[int, MovableObject]
+        _bodies_placed: bool
+        _tongs_in: bool
+        _serial: int
+
+        def ids(self) -> set[str]: ...
+
+        def _check_new_id(self, ident: str) -> None: ...
+
+        def agent_slot(self, agent_id: str) -> int: ...
+
+        def find_object(self, ident: str) -> MovableObject | None: ...
+
+        def _append_agent_state(self, pose: tuple[float, float, float], arm: float) -> None: ...
+
+        def _delete_agent_state(self, slot: int) -> None: ...
+
+        def _rebuild_tables(self) -> None: ...
 
     # -- arena -------------------------------------------------------------------
 
@@ -123,7 +167,8 @@ class WorldEdits:
         found = []
         for shape in shapes:
             for info in self.space.shape_query(shape):
-                agent = self._agent_by_body.get(id_of(info.shape.body)) if info.shape else None
+                body = info.shape.body if info.shape else None  # a shape in the space has one
+                agent = self._agent_by_body.get(id_of(body)) if body is not None else None
                 if agent is not None and info.shape is agent.shape:
                     found.append(agent.id)
         return sorted(set(found))
@@ -414,6 +459,7 @@ class WorldEdits:
     def remove(self, ident: str) -> None:
         if ident in self.obstacles:
             o = self.obstacles.pop(ident)
+            assert o.body is not None  # set when it was added to this world
             self.space.remove(o.body, *o.shapes)
             self.sensors.obstacles_changed()
         elif ident in self.zones:
@@ -423,6 +469,7 @@ class WorldEdits:
         elif (obj := self.find_object(ident)) is not None:
             if obj.held_by is not None:
                 self.grippers.release(obj)
+            assert obj.body is not None  # set when it was added to this world
             self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
             self.objects.remove(obj)
             self._object_by_body.pop(id_of(obj.body), None)

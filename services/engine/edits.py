@@ -8,8 +8,10 @@ the next start. A mixin of :class:`~services.engine.service.EngineService`
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -34,9 +36,29 @@ from common.service import RequestError
 from common.sim2d import maps
 from common.sim2d.world import EditError, World
 
+if TYPE_CHECKING:
+    from common.world.leases import LeaseBook
+    from services.engine.service import EngineSettings
+
 
 class EngineEdits:
     """EngineService's edit, reset and map handlers and its journal."""
+
+    if TYPE_CHECKING:  # EngineService's (services/engine/service.py), of which this is part
+        log: logging.Logger
+        ident: str
+        settings: EngineSettings
+        world: World
+        leases: LeaseBook
+        replayed_edits: int
+        _journal: Journal | None
+        _last_cmd: dict[str, float]
+
+        def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]: ...
+
+        def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message: ...
+
+        def _declare_agent_publishers(self) -> None: ...
 
     # -- the journal of live edits (an acknowledged edit survives a crash)
 
