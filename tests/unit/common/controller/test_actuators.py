@@ -12,8 +12,10 @@ from common.messages import AgentCommand
 from common.sim2d.agents import agent_type
 from common.sim2d.world import EditError, World
 from common.world.remote_robot import agent_command
-from services.bridge.body import KinematicBody
+from services.bridge.body import KinematicBody, RobotBody
 from services.bridge.firmware import Firmware
+from services.bridge.robot import KheperaRobot
+from services.bridge.simbody import SimBody
 
 
 class Recorded(Actuators):
@@ -99,3 +101,15 @@ def test_the_emulated_body_shows_the_firmwares_leds() -> None:
     assert body.leds == (True, False)
     firmware.handle("D,5,-5", now=0.0)
     assert body.speed() == (5, -5)
+
+
+def test_every_kind_of_robot_has_every_actuator() -> None:
+    """Simulated, emulated and real: each implements the one interface, by the same names."""
+    names = sorted(n for n in vars(Actuators) if n.startswith("set_"))
+    assert names == ["set_arm", "set_counters", "set_grip", "set_leds", "set_speeds"]
+    world = World(600.0, 600.0, seed=1)
+    world.add_agent("k0", agent_type("khepera"), 300.0, 300.0)
+    robots = [world.actuators(0), KinematicBody(), SimBody(world), KheperaRobot("/dev/unopened")]
+    for robot in robots:
+        assert all(callable(getattr(robot, name)) for name in names), type(robot).__name__
+    assert isinstance(KinematicBody(), RobotBody) and isinstance(SimBody(world), RobotBody)
