@@ -10,14 +10,71 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.sim2d import chipmunk, discs, fused, kernels, sensing
 
+if TYPE_CHECKING:
+    import pymunk
+
+    from common.sim2d.entities import Agent, Light, MovableObject, Obstacle
+    from common.sim2d.gripper import GripperTurrets
+    from common.sim2d.world import Tables
+
 
 class WorldTick:
     """World's stepping methods (a mixin of :class:`~common.sim2d.world.World`)."""
+
+    if TYPE_CHECKING:  # the World's state the tick reads and writes (common/sim2d/world.py)
+        width: float
+        height: float
+        drive: str
+        layout: int
+        tick: int
+        sim_time: float
+        tick_s: float
+        substeps: int
+        sensor_period_s: float
+        threads: int
+        profile: bool
+        phase_cpu: dict[str, float]
+        space: pymunk.Space
+        sensors: sensing.SensorSuite
+        noise: sensing.NoiseKeys
+        grippers: GripperTurrets
+        tables: Tables
+        agents: list[Agent]
+        objects: list[MovableObject]
+        obstacles: dict[str, Obstacle]
+        lights: list[Light]
+        agent_pose: np.ndarray
+        agent_vel: np.ndarray
+        object_pose: np.ndarray
+        proximity: np.ndarray
+        ambient: np.ndarray
+        presence: np.ndarray
+        cmd: np.ndarray
+        counters: np.ndarray
+        arm: np.ndarray
+        _agent_bodies: np.ndarray
+        _control_bodies: np.ndarray
+        _object_bodies: np.ndarray
+        _servo_memory: np.ndarray
+        _space_address: np.uint64
+        _step_fn: Any
+        _rows_layout: int
+        _next_sense: float
+        _bodies_placed: bool
+        _disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]]
+        _fused: _FusedTick | None
+
+        def holding(self) -> np.ndarray: ...
+
+        def slot_of(self, agent: Agent) -> int: ...
+
+        def on_floor(self, obj: MovableObject) -> bool: ...
 
     def _refresh_rows(self) -> None:
         self._agent_bodies = chipmunk.addresses([a.body for a in self.agents])
