@@ -89,7 +89,7 @@ class _CopiedOnRead:
         if buffer is not None:
             d[self.value] = buffer.copy()
             d[self.buffer] = None
-        return d[self.value]  # type: ignore[no-any-return]
+        return d[self.value]
 
     def __set__(self, world: object, value: np.ndarray) -> None:
         d = world.__dict__
@@ -290,7 +290,7 @@ class World(WorldEdits, WorldActuators, WorldTick):
     def _rebuild_tables(self) -> None:
         specs = [a.spec for a in self.agents]
         self.tables = Tables(
-            mm_s_per_unit=np.array([s.drive.mm_per_s(np.float64(1.0)) for s in specs]),
+            mm_s_per_unit=np.array([s.drive.mm_per_s(np.asarray(1.0)) for s in specs]),
             pulses_per_s_per_unit=np.array([1.0 / s.drive.unit_time_s for s in specs]),
             wheel_base=np.array([s.drive.wheel_base_mm for s in specs]),
             max_speed=np.array([float(s.drive.max_speed) for s in specs]),
