@@ -288,7 +288,9 @@ class EngineService(EngineEdits, WorldService):
                         self._matched.discard(agent)
 
             pub.declare_matching_listener(on_match)
-            if pub.matching_status.matching:
+            # zenoh's stubs type matching_status as a bool; it is a MatchingStatus.
+            status: Any = pub.matching_status
+            if status.matching:
                 with self._match_lock:
                     self._matched.add(agent)
             self._agent_pubs[agent] = pub
