@@ -25,6 +25,7 @@ ended; the scan thread (``--autodetect``) probes new ports.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import re
@@ -203,7 +204,7 @@ class BridgeService(WorldService):
             keys.agent_sensors(self.realm, self.ident, agent)
         )
         entry = _Agent(agent, robot, publisher)
-        robot.add_listener(lambda state, a=entry: self._on_state(a, state))
+        robot.add_listener(functools.partial(self._on_state, entry))
         with self._lock:
             self._agents[agent] = entry
             self.layout += 1  # a new row: viewers refetch the snapshot
