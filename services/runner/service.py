@@ -315,6 +315,7 @@ class RunnerService(Service):
                 return OkReply(detail=f"{request.request_id} is not running")
             run.stop(request.reason or f"stopped by {principal.user}")
             return OkReply(detail=f"stopping {request.request_id}")
+        assert isinstance(request, RunRequest)  # the decoder allowed only these three
         return self._start(request)
 
     def _on_dry_run(self, query: zenoh.Query) -> Message:
