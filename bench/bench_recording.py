@@ -34,7 +34,7 @@ from common.keys import AliveKind
 from common.messages import WorldFrame, decode, encode
 from common.service import close_session, has_subscribers, open_session
 from common.zconfig import NetworkOptions
-from services.engine import wire
+from services.engine import packing
 
 WORLD = "bench"
 FRAME_HZ = 50  # the engine publishes a frame each 20 ms tick
@@ -82,12 +82,12 @@ def ticks(n: int, count: int, session: zenoh.Session) -> tuple[list[float], list
     for _ in range(20):  # warm up (numba kernels, the route)
         control(world)
         world.step()
-        pub.put(encode(wire.frame(world)))
+        pub.put(encode(packing.frame(world)))
     for _ in range(count):
         c0, w0 = time.process_time(), time.perf_counter()
         control(world)
         world.step()
-        pub.put(encode(wire.frame(world)))
+        pub.put(encode(packing.frame(world)))
         cpu.append((time.process_time() - c0) * 1000)
         wall.append((time.perf_counter() - w0) * 1000)
         time.sleep(max(0.0, 0.02 - (time.perf_counter() - w0)))  # paced like the engine

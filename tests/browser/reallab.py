@@ -2,7 +2,7 @@
 
 Everything but the viewer is a real ``wart`` process on 127.0.0.1 (multicast
 scouting off); the viewer runs in the test process over a real Zenoh session
-with :class:`~viewers.web.real.RealConnector`, so tests can read its state
+with :class:`~viewers.web.live.LiveConnector`, so tests can read its state
 (views, frames) as well as the page. With ``agents`` the lab also runs a
 runner (sandboxed uploads) and the agent context ``arena`` on the world
 (owner ida, short slots), and the engine logs in as a service account so
@@ -40,7 +40,7 @@ from tests.integration.agentkit import (
 from tests.integration.labkit import PASSWORD, Lab, make_lab
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
-from viewers.web.connector import RealConnector
+from viewers.web.connector import LiveConnector
 
 WORLD = "w1"
 
@@ -51,7 +51,7 @@ class RealLab:
     router: Router
     address: LabAddress
     session: zenoh.Session
-    connector: RealConnector
+    connector: LiveConnector
     viewer: WebViewer
 
     @property
@@ -171,7 +171,7 @@ def real_lab(
             lab.wait_alive(AliveKind.WORLD, WORLD, engine)
         session = open_session(router.options(), wait=10.0)
         address = LabAddress("127.0.0.1", router.port, realm)
-        connector = RealConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")
+        connector = LiveConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")
         viewer = WebViewer(
             connector, port=free_port(), default_address=address, data_dir=tmp / "viewer"
         )

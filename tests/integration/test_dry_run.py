@@ -15,7 +15,7 @@ import pytest
 
 from common.messages import WorldSnapshot
 from common.sim2d import maps
-from services.engine import wire
+from services.engine import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router
@@ -46,7 +46,7 @@ INTO_THE_WALL = HEADER + textwrap.dedent(
 @pytest.fixture(scope="module")
 def snap() -> WorldSnapshot:
     world = maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=3)
-    return wire.snapshot(world)
+    return packing.snapshot(world)
 
 
 def test_driving_into_a_wall_will_not_run(snap: WorldSnapshot) -> None:

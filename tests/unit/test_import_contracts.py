@@ -162,7 +162,7 @@ def test_commands_import_only_common_and_the_lab_library() -> None:
 
 def test_the_precheck_cap_is_the_wire_cap() -> None:
     """precheck writes the upload cap again (it may import nothing); the two stay equal."""
-    from common.controller.precheck import MAX_SOURCE_BYTES
+    from common.controller.upload_gate import MAX_SOURCE_BYTES
     from common.messages.agent import MAX_UPLOAD_BYTES
 
     assert MAX_SOURCE_BYTES == MAX_UPLOAD_BYTES

@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.client.survey import Survey
+from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from viewers.web.address import LabAddress
 
@@ -29,9 +30,9 @@ F32 = npt.NDArray[np.float32]
 
 # --- errors ---------------------------------------------------------------------
 
-
-class LabError(Exception):
-    """A refused or failed request; ``str()`` is shown to the person as is."""
+# LabError is the lab's one (common/lab_errors.py, imported above for the page's
+# modules): a refused or failed request, whose str() is shown to the person as is.
+# The page raises it in its own words too; plain_error words the registry client's.
 
 
 class LoginError(LabError):

@@ -32,7 +32,7 @@ from common.zconfig import DEFAULT_PORT, NetworkOptions
 from viewers.web.adapters import LabConnector
 from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
-from viewers.web.connector import RealConnector
+from viewers.web.connector import LiveConnector
 from viewers.web.login import LoginDesk
 from viewers.web.pump import DEFAULT_RATE, FramePump
 from viewers.web.viser_fast import make_loop_safe
@@ -267,8 +267,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
             connector = DemoConnector((default.realm, lab))
         else:
             # The gateway: this process's one session to its own lab, and a
-            # LabClient per logged-in browser user on it (viewers/web/real.py).
-            connector = RealConnector(session, default, options.registry_key, data_dir=data_dir)
+            # LabClient per logged-in browser user on it (viewers/web/live.py).
+            connector = LiveConnector(session, default, options.registry_key, data_dir=data_dir)
         service = ViewerService(
             session,
             options.realm,

@@ -1,8 +1,8 @@
 """Browsers log in here: the viewer's own lab, or one its admin listed in the labs file.
 
-One :class:`~viewers.web.lab_links.LabLink` (a Zenoh session) per lab router,
+One :class:`~viewers.web.lab_links.LabRouterLink` (a Zenoh session) per lab router,
 shared by everyone logged in through it; one
-:class:`~viewers.web.real.RealConnection` per logged-in browser.
+:class:`~viewers.web.live.LiveConnection` per logged-in browser.
 """
 
 from __future__ import annotations
@@ -22,16 +22,16 @@ from viewers.web.adapters import (
     LoginError,
 )
 from viewers.web.address import LabAddress
-from viewers.web.lab_links import LabLink, load_labs
-from viewers.web.real import RealConnection, plain_error
-from viewers.web.real_world import QUERY_TIMEOUT
+from viewers.web.lab_links import LabRouterLink, load_labs
+from viewers.web.live import LiveConnection, plain_error
+from viewers.web.live_world import QUERY_TIMEOUT
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 LABS_FILE = "labs.json"
 
 
-class RealConnector:
+class LiveConnector:
     """Logs browsers in to labs: the viewer's own, or one listed in the admin's labs file."""
 
     def __init__(
@@ -54,9 +54,9 @@ class RealConnector:
             raise ValueError(f"login_wait must be positive, not {login_wait}")
         self.login_wait = login_wait  # how long a login waits for the registry's answer
         self._own_session = own_session
-        self._links: dict[tuple[str, int, str], LabLink] = {}
+        self._links: dict[tuple[str, int, str], LabRouterLink] = {}
         self._lock = threading.Lock()
-        self._connections: list[RealConnection] = []
+        self._connections: list[LiveConnection] = []
 
     def _is_own(self, address: LabAddress) -> bool:
         own = self.own_address
@@ -65,7 +65,7 @@ class RealConnector:
         local = {"127.0.0.1", "localhost", "::1"}
         return address.host == own.host or (address.host in local and own.host in local)
 
-    def _link(self, address: LabAddress) -> LabLink:
+    def _link(self, address: LabAddress) -> LabRouterLink:
         key = address.lab_key
         with self._lock:
             link = self._links.get(key)
@@ -78,7 +78,7 @@ class RealConnector:
                     "this viewer was started without --registry-key, so it cannot check "
                     "that the lab's registry is genuine; ask the lab's admin"
                 )
-            link = LabLink(address, self._own_session, self.own_registry_key, own=True)
+            link = LabRouterLink(address, self._own_session, self.own_registry_key, own=True)
         else:
             known = load_labs(self.labs_path, self.own_address.realm).get(key)
             if known is None:
@@ -96,7 +96,7 @@ class RealConnector:
                 raise LoginError(
                     f"no lab router answers at {address.host}:{address.port}"
                 ) from None
-            link = LabLink(address, session, known.registry_key, own=False)
+            link = LabRouterLink(address, session, known.registry_key, own=False)
         with self._lock:
             existing = self._links.get(key)
             if existing is not None:  # another browser opened it meanwhile: use theirs
@@ -108,7 +108,7 @@ class RealConnector:
             self._links[key] = link
         return link
 
-    def _unlink(self, link: LabLink) -> None:
+    def _unlink(self, link: LabRouterLink) -> None:
         with self._lock:
             link.users -= 1
             if link.users > 0 or link.own:
@@ -116,7 +116,7 @@ class RealConnector:
             self._links.pop(link.address.lab_key, None)
         link.close()
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> RealConnection:
+    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> LiveConnection:
         link = self._link(address)
         client = lab.LabClient(
             link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
@@ -146,12 +146,12 @@ class RealConnector:
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None
-        connection = RealConnection(self, link, client, address.with_user(user))
+        connection = LiveConnection(self, link, client, address.with_user(user))
         with self._lock:
             self._connections.append(connection)
         return connection
 
-    def _closed(self, connection: RealConnection) -> None:
+    def _closed(self, connection: LiveConnection) -> None:
         with self._lock:
             if connection in self._connections:
                 self._connections.remove(connection)

@@ -44,7 +44,7 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
-from viewers.web.real_agents import check_upload
+from viewers.web.live_agents import check_upload
 
 STUDENT = frozenset({"join", "chat", "control", "deploy"})
 INSTRUCTOR = STUDENT | {"edit_map", "kick", "host"}

@@ -1,4 +1,4 @@
-"""The viewer's Protocols over the real lab: the registry client and the engine's world keys.
+"""The viewer over the live lab (not the demo): the registry client and the world keys.
 
 The viewer is a gateway. It holds one Zenoh session per lab router (its own
 lab's, opened by ``wart viewer``, plus one per other lab a browser connects
@@ -7,7 +7,7 @@ that session: every query, chat line, edit and admin request is sealed with
 that person's session, so the services' ACL checks apply to the person.
 
 The labs it knows and their router sessions are in lab_links.py, the worlds
-it shows in real_world.py.
+it shows in live_world.py.
 """
 
 from __future__ import annotations
@@ -53,14 +53,14 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
-from viewers.web.lab_links import LabLink
-from viewers.web.real_agents import ArenaLink
-from viewers.web.real_world import UserWorld
+from viewers.web.lab_links import LabRouterLink
+from viewers.web.live_agents import AgentContextLink
+from viewers.web.live_world import UserWorld
 
 if TYPE_CHECKING:  # the connector makes connections; only its type is needed here
-    from viewers.web.connector import RealConnector
+    from viewers.web.connector import LiveConnector
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 DIRECTORY_POLL_S = 3.0  # the registry has no directory events: poll, emit on change
 HISTORY = 50  # chat lines a join asks for
@@ -99,11 +99,15 @@ class _Events:
     next_id: int = 1
 
 
-class RealConnection:
+class LiveConnection:
     """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
-        self, connector: RealConnector, link: LabLink, client: lab.LabClient, address: LabAddress
+        self,
+        connector: LiveConnector,
+        link: LabRouterLink,
+        client: lab.LabClient,
+        address: LabAddress,
     ) -> None:
         self.connector = connector
         self.link = link
@@ -121,7 +125,7 @@ class RealConnection:
         self._kinds: dict[str, ContextSummary] = {}
         self._worlds: dict[str, UserWorld] = {}
         self._world_only: set[str] = set()
-        self._arenas: dict[str, ArenaLink] = {}  # joined agent contexts
+        self._arenas: dict[str, AgentContextLink] = {}  # joined agent contexts
         self._real_worlds: dict[str, bool] = {}  # world -> a Khepera bridge (asked once)
         self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
@@ -301,7 +305,7 @@ class RealConnection:
             def on_room(event: RoomEvent) -> None:
                 self._room_event(ctx, event)
 
-            arena = self._call(lambda: ArenaLink(self.client, ctx, self._queue.put, on_room))
+            arena = self._call(lambda: AgentContextLink(self.client, ctx, self._queue.put, on_room))
             room = arena.join(HISTORY)
             world = arena.world or world
             if world is not None:
@@ -377,7 +381,7 @@ class RealConnection:
 
     # -- agents: the joined agent contexts' queues, uploads and settings
 
-    def _arena(self, ctx: str) -> ArenaLink:
+    def _arena(self, ctx: str) -> AgentContextLink:
         if self._closed.is_set():
             raise LabError("you are logged out of this lab")
         arena = self._arenas.get(ctx)
