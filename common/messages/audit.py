@@ -14,7 +14,7 @@ import msgspec
 
 from common.messages.base import Ident, Message, ShortText
 
-Action = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_]{0,39}$")]
+Action = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_.-]{0,39}$")]
 """What was done, as a short name: kick, estop, release, grant, ungrant, add_user ..."""
 Outcome = Literal["ok", "refused"]
 MAX_AUDIT_PAGE = 5000

@@ -494,6 +494,10 @@ class LabConnection(Protocol):
 class LabConnector(Protocol):
     """Opens lab connections; :class:`LoginError` with plain words when it cannot."""
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> LabConnection:
-        """Log in; ``via`` names the browser connection (the registry throttles per source)."""
+    def login(
+        self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
+    ) -> LabConnection:
+        """Log in; ``via`` names the browser connection (logged by the registry);
+        ``seen_from`` is the browser's address as this viewer's socket saw it, which
+        the viewer vouches for (the registry throttles failed logins per address)."""
         ...

@@ -161,7 +161,9 @@ class DemoConnector:
     def __init__(self, *labs: tuple[str, DemoLab]) -> None:
         self.labs = dict(labs)
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> DemoConnection:
+    def login(
+        self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
+    ) -> DemoConnection:
         lab = self.labs.get(address.realm)
         if lab is None:
             raise LoginError(f"no lab answers at {address.label}: check the address")
