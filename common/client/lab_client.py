@@ -214,8 +214,8 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         zenoh-python builds an entity id only for declared entities, so a querier
         is declared once for it.
         """
-        if self._querier is None:
-            self._querier = self.z.declare_querier(key)
+        if self._querier is None:  # on the login key, whatever asks: the rights it needs
+            self._querier = self.z.declare_querier(keys.registry_login(self.realm))
         self._source_sn += 1
         return zenoh.SourceInfo(self._querier.id, self._source_sn)
 
@@ -231,7 +231,9 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         timeout: float | None = None,
     ) -> M:
         payload = self._seal(key, message) if signed else encode(message)
-        answers = self._get(key, payload, what, timeout)
+        # The registry records where admin requests come from (the audit trail).
+        to_registry = key.startswith(keys.registry_all(self.realm)[:-2])
+        answers = self._get(key, payload, what, timeout, declare_source=to_registry)
         if not answers:
             if not_found is not None:
                 raise NotFound(not_found)

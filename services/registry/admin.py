@@ -175,7 +175,7 @@ class AdminRequests:
         principal, request = self.verifier.open(str(query.key_expr), query.payload, ADMIN_REQUESTS)
         action = ACTIONS.get(type(request), type(request).__name__.lower())
         target, detail = _target(request)
-        source = source_of(query)
+        source = f"{source_of(query)} session {principal.session_id.hex()[:8]}"
         try:
             if not (isinstance(request, SetPassword) and request.user == principal.user):
                 principal.require("admin", f"do {type(request).__name__}")

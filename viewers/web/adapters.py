@@ -23,6 +23,7 @@ import numpy.typing as npt
 
 from common.client.survey import Survey
 from common.messages.agent import MAX_UPLOAD_BYTES
+from common.messages.audit import AuditEntry, AuditQuery
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
@@ -371,6 +372,7 @@ class Account:
     grants: tuple[tuple[str, tuple[str, ...]], ...]  # (scope, grants there); "" = everywhere
     online: bool = False
     failed_logins: int = 0  # since the registry started or the last unlock
+    banned: str = ""  # the ban in force, in words ("" if none)
 
 
 class LabConnection(Protocol):
@@ -489,6 +491,12 @@ class LabConnection(Protocol):
     def rename_server(self, name: str) -> str: ...
 
     def unlock_logins(self, user: str) -> str: ...
+
+    def ban(self, user: str, reason: str, until: float | None) -> str: ...
+
+    def lift_ban(self, user: str) -> str: ...
+
+    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]: ...
 
 
 class LabConnector(Protocol):
