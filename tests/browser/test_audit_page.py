@@ -15,6 +15,7 @@ import pytest
 from common.lab_errors import Banned
 from tests.browser.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
+from viewers.web.viser_fast import browser_address
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +47,9 @@ def test_an_admin_bans_from_the_page_and_reads_the_audit_trail(open_page, lab: R
     with lab.lab.client() as carol, pytest.raises(Banned, match="exam week") as refused:
         carol.login("carol", "correct horse")
     assert "UTC" in str(refused.value)
+    # What the viewer would vouch for at this page's login: its socket's peer address.
+    addresses = {browser_address(b.client) for b in list(lab.viewer.sessions.values())}
+    assert "127.0.0.1" in addresses
     # The audit list: everything the admin did, then only the bans.
     page.p.get_by_text("Audit trail").first.click()
     page.fill("Who (account)", "admin")
