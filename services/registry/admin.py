@@ -10,6 +10,7 @@ and how it ended; other services' reports arrive on ``registry/report``
 from __future__ import annotations
 
 import logging
+import math
 import time
 from datetime import UTC, datetime
 
@@ -148,6 +149,9 @@ class AdminRequests:
         principal, report = self.verifier.open(str(sample.key_expr), sample.payload, AuditReport)
         if "service" not in principal.roles:
             raise AuthError("forbidden", f"{principal.user} is not a service: it reports nothing")
+        # The service's clock says when; one far from ours (or not a time) is not trusted.
+        now = time.time()
+        at = report.at if math.isfinite(report.at) and abs(report.at - now) < 300 else now
         self.audit(
             Action(
                 actor=report.actor,
@@ -157,7 +161,7 @@ class AdminRequests:
                 detail=report.detail,
                 source=report.source,
                 reporter=principal.user,
-                at=report.at,
+                at=at,
             )
         )
 

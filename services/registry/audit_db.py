@@ -9,6 +9,7 @@ when the ban is lifted; the lifting itself is an audit line.
 from __future__ import annotations
 
 import logging
+import math
 import sqlite3
 import time
 from dataclasses import dataclass
@@ -79,6 +80,8 @@ class TermStore:
 
     def ban(self, user: str, reason: str, by: str, until: float | None) -> BanInfo:
         now = time.time()
+        if until is not None and not math.isfinite(until):
+            raise DbError("bad_request", "a ban's end must be a time (or none: until lifted)")
         if until is not None and until <= now:
             raise DbError("bad_request", "a ban must end in the future (or never)")
         with self.db._tx() as con:
