@@ -297,3 +297,22 @@ def test_wart_ban_and_wart_audit_from_the_command_line(lab: Lab, tmp_path: Path)
     assert {r["action"] for r in as_json} >= {"ban", "lift_ban"}
     wrong = _wart(lab, "audit", "--since", "yesterday")
     assert wrong.returncode != 0 and "is not a time" in wrong.stderr
+    # A grant made on the database file, past the registry, is in the trail too.
+    users = [sys.executable, "-m", "services.cli", "users", "--db", str(lab.db_path)]
+    on_file = subprocess.run(
+        [*users, "grant", "alice", "edit_map"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env=wart_env(),
+        timeout=60,
+    )
+    assert on_file.returncode == 0, on_file.stderr
+    with lab.client("admin") as admin:
+        line = _trail(admin, action="grant", target="alice")[0]
+    assert (line.actor, line.reporter, line.detail) == (
+        "local",
+        "wart-users",
+        "edit_map everywhere",
+    )
+    assert line.source.startswith("wart users by ")
