@@ -22,7 +22,7 @@ from common.auth import create_identity_key
 from common.client import lab_client as client_module
 from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
-from common.client.service_login import vouch_for
+from common.client.service_login import ServiceCredentials, vouch_for
 from common.lab_errors import Banned, NotAllowed, RateLimited, WrongCredentials
 from common.messages import AuditEntry, AuditQuery
 from common.service import close_session
@@ -131,6 +131,37 @@ def test_a_gateway_vouches_for_each_browser_and_a_forged_vouch_counts_for_nothin
         with pytest.raises(RateLimited):
             browser("10.9.9.99", liar).login("carol", PASSWORD)
     finally:
+        close_session(session)
+
+
+def test_the_viewers_connector_vouches_for_each_browser_address(lab: Lab) -> None:
+    """The viewer's own code path: its gateway account, a login per browser address."""
+    from viewers.web.adapters import LoginError
+    from viewers.web.address import LabAddress
+    from viewers.web.connector import GatewayLogin, RealConnector
+
+    key = create_identity_key(lab.state / "viewer-web.key")
+    db = RegistryDB(lab.db_path)
+    db.add_user("viewer-web", ["gateway"], public_key=bytes(key.verify_key))
+    db.close()
+    session = lab.zsession()
+    address = LabAddress("127.0.0.1", lab.router.port, lab.router.realm)
+    credentials = ServiceCredentials(lab.identity.verify_key, "viewer-web", key)
+    gateway = GatewayLogin(session, lab.router.realm, credentials)
+    connector = RealConnector(session, address, lab.key_hex, gateway=gateway)
+    try:
+        wait_for(lambda: gateway.login is not None, 30, "the viewer's gateway login")
+        for i in range(10):  # one browser mistypes ten names...
+            with pytest.raises(LoginError, match="wrong user name or password"):
+                connector.login(address, f"typo{i}", "nope nope", seen_from="10.1.1.1")
+        with pytest.raises(LoginError, match="too many failed logins"):
+            connector.login(address, "bob", PASSWORD, seen_from="10.1.1.1")
+        # ...the class behind the same viewer logs in as usual.
+        connection = connector.login(address, "bob", PASSWORD, seen_from="10.1.1.2")
+        assert connection.address.user == "bob"
+        connection.logout()
+    finally:
+        connector.close()
         close_session(session)
 
 
