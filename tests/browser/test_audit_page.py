@@ -47,6 +47,12 @@ def test_an_admin_bans_from_the_page_and_reads_the_audit_trail(open_page, lab: R
     with lab.lab.client() as carol, pytest.raises(Banned, match="exam week") as refused:
         carol.login("carol", "correct horse")
     assert "UTC" in str(refused.value)
+    # ...and on the page, in words.
+    banned = open_page("carol")
+    banned.log_in(lab.url, "carol", "correct horse")
+    banned.wait_text("you are banned until")
+    banned.wait_text("exam week: lab closed to her")
+    banned.screenshot("banned")
     # What the viewer would vouch for at this page's login: its socket's peer address.
     addresses = {browser_address(b.client) for b in list(lab.viewer.sessions.values())}
     assert "127.0.0.1" in addresses
