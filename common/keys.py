@@ -67,6 +67,7 @@ class AliveKind(StrEnum):
     RUNNER = "runner"
     VIEWER = "viewer"
     HOST = "host"
+    CAMERA = "camera"
 
 
 def realm_root(realm: str) -> str:
@@ -270,6 +271,35 @@ def world_samples(realm: str, world: str) -> str:
 def world_commands(realm: str, world: str) -> str:
     """Several agents' sealed or MACed commands in one message (CommandBundle)."""
     return f"{_world(realm, world)}/cmds"
+
+
+def world_tracked(realm: str, world: str) -> str:
+    """The robots' poses an overhead camera tracked, one message per frame (TrackedPoses)."""
+    return f"{_world(realm, world)}/tracked"
+
+
+def _camera(realm: str, world: str, camera: str) -> str:
+    return f"{_world(realm, world)}/camera/{check_ident('camera', camera)}"
+
+
+def camera_frame(realm: str, world: str, camera: str) -> str:
+    """One camera's newest compressed frame over a world's arena (CameraFrame)."""
+    return f"{_camera(realm, world, camera)}/image"
+
+
+def camera_floor(realm: str, world: str, camera: str) -> str:
+    """The arena's floor as the camera sees it, rectified to arena mm (CameraFrame)."""
+    return f"{_camera(realm, world, camera)}/floor"
+
+
+def camera_status(realm: str, world: str, camera: str) -> str:
+    """Whether a camera sees its arena, and why not (CameraStatus), on change and every 2 s."""
+    return f"{_camera(realm, world, camera)}/status"
+
+
+def camera_all(realm: str, world: str) -> str:
+    """Every camera's frames and status over one world."""
+    return f"{_world(realm, world)}/camera/**"
 
 
 def _agent(realm: str, world: str, agent: str) -> str:

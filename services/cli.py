@@ -54,6 +54,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "replay a recorded run in a web viewer: timeline, play, speed (no lab needed)",
     ),
     "bridge": ("services.bridge.main", "real Khepera robots on serial ports as a real world"),
+    "camera": (
+        "services.camera.main",
+        "a camera over a real arena: its video and the robots it tracks (and `calibrate`)",
+    ),
     "host": ("services.host.main", "run this machine's share of a multi-host lab (lab file)"),
     "arena": (
         "services.commands.arena",

@@ -28,6 +28,8 @@ from common.messages.base import (
     decode,
     encode,
 )
+from common.messages.camera import *  # noqa: F403 - every camera wire type
+from common.messages.camera import __all__ as _camera_all
 from common.messages.chat import *  # noqa: F403 - every chat wire type
 from common.messages.chat import __all__ as _chat_all
 from common.messages.host import *  # noqa: F403 - every host wire type
@@ -122,6 +124,7 @@ __all__ = [
     "encode",
     *_agent_all,
     *_audit_all,
+    *_camera_all,
     *_chat_all,
     *_host_all,
     *_recording_all,

@@ -20,6 +20,11 @@ The numbers:
   (signed) and its absolute value, over time-aligned samples: B's samples
   interpolated linearly at the times of A's, over the span both cover.
 
+A real run whose arena had a camera carries the robot's tracked poses: those
+are where the robot really was, so its track is taken from them rather than
+from the bridge's frames (odometry between camera frames, and adrift without
+one); the side says which (``poses_from``).
+
 Both recordings must be of a Khepera-type robot (the snapshot names the
 robot's type). A recording without frames of its robot is refused
 (:class:`CompareError`); one cut short, or shorter than the other, is
@@ -67,6 +72,7 @@ class Side(msgspec.Struct, frozen=True, kw_only=True):
     collisions: int
     contact_s: float
     truncated: str = ""
+    poses_from: str = "frames"  # or "camera": the robot's tracked poses (a real run)
 
 
 class Comparison(msgspec.Struct, frozen=True, kw_only=True):
@@ -97,6 +103,7 @@ class Track:
     y: np.ndarray
     heading: np.ndarray
     sample_t: np.ndarray
+    from_camera: bool
     proximity: np.ndarray  # samples x SENSORS
     ambient: np.ndarray
 
@@ -106,7 +113,17 @@ def robot_track(rec: Recording) -> Track:
     assert rec.info is not None  # read_recording refuses a file without one
     agent, start = rec.info.agent, rec.info.start
     t, x, y, h = [], [], [], []
-    for stamped in rec.frames:
+    for seen in rec.tracked:
+        for robot in seen.record.robots:
+            if robot.agent == agent:
+                t.append(seen.t - start)
+                x.append(robot.x)
+                y.append(robot.y)
+                h.append(robot.heading)
+    from_camera = len(t) >= 2
+    if not from_camera:
+        t, x, y, h = [], [], [], []
+    for stamped in [] if from_camera else rec.frames:
         f = stamped.record
         try:
             row = f.rows.index(agent)
@@ -133,6 +150,7 @@ def robot_track(rec: Recording) -> Track:
         sample_t=np.array(st, dtype=float),
         proximity=np.array(prox, dtype=float).reshape(-1, SENSORS),
         ambient=np.array(amb, dtype=float).reshape(-1, SENSORS),
+        from_camera=from_camera,
     )
 
 
@@ -283,6 +301,7 @@ def _side(rec: Recording, tr: Track, label: str, snap: WorldSnapshot | None) -> 
         collisions=collisions,
         contact_s=round(contact, 2),
         truncated=rec.truncated,
+        poses_from="camera" if tr.from_camera else "frames",
     )
 
 

@@ -48,6 +48,9 @@ class Recording:
     output: list[Stamped[s.LogLine]] = field(default_factory=list)
     events: list[Stamped[s.EventRecord]] = field(default_factory=list)
     chat: list[Stamped[s.ChatRecord]] = field(default_factory=list)
+    tracked: list[Stamped[s.TrackedRecord]] = field(default_factory=list)
+    tracked_poses: list[Stamped[s.PoseInFrame]] = field(default_factory=list)  # the run's robot
+    images: list[Stamped[s.CompressedImage]] = field(default_factory=list)
     channels: dict[str, str] = field(default_factory=dict)  # topic -> schema name
     counts: dict[str, int] = field(default_factory=dict)  # topic -> messages
     source: bytes | None = None  # a deploy run's controller file (its attachment)
@@ -70,6 +73,8 @@ _SLOTS = {
     s.LogLine: "output",
     s.EventRecord: "events",
     s.ChatRecord: "chat",
+    s.TrackedRecord: "tracked",
+    s.CompressedImage: "images",
 }
 
 
@@ -140,7 +145,7 @@ def _add(recording: Recording, decoder: Any, message: Message) -> None:
         recording.skipped += 1
         return
     recording.counts[topic] = recording.counts.get(topic, 0) + 1
-    slot = _SLOTS[cls]
+    slot = "tracked_poses" if topic.endswith("/tracked") else _SLOTS[cls]
     stamped = Stamped(message.log_time / 1e9, record)
     if slot in ("info", "end"):
         setattr(recording, slot, record)

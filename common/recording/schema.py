@@ -2,10 +2,11 @@
 
 Every channel is JSON (``message_encoding="json"``) with a ``jsonschema``
 schema generated from the record type below, so any MCAP tool can read it and
-Foxglove plots any numeric field without our code. Two channels use Foxglove's
-well-known schemas so its panels understand them: the robot's pose
-(``foxglove.PoseInFrame``, metres and a quaternion, for the 3D panel) and the
-controller's output (``foxglove.Log``, for the Log panel).
+Foxglove plots any numeric field without our code. Three kinds of channel use
+Foxglove's well-known schemas so its panels understand them: the robot's pose
+(``foxglove.PoseInFrame``, metres and a quaternion, for the 3D panel), the
+controller's output (``foxglove.Log``, for the Log panel) and a real arena's
+camera (``foxglove.CompressedImage``, JPEG, for the Image panel).
 
 These are file records, not wire messages (nothing here travels over Zenoh):
 they are plain msgspec Structs, versioned by :data:`FORMAT_VERSION` in the
@@ -34,6 +35,7 @@ FRAME = "/world/frame"
 OUTPUT = "/controller/output"
 EVENTS = "/context/events"
 CHAT = "/context/chat"
+TRACKED = "/tracking/poses"
 
 
 def pose_topic(agent: str) -> str:
@@ -46,6 +48,15 @@ def sensors_topic(agent: str) -> str:
 
 def commands_topic(agent: str) -> str:
     return f"/robot/{agent}/commands"
+
+
+def tracked_topic(agent: str) -> str:
+    """The robot's pose as the arena's camera tracked it (a real run)."""
+    return f"/robot/{agent}/tracked"
+
+
+def camera_topic(camera: str) -> str:
+    return f"/camera/{camera}/image"
 
 
 class RunInfo(msgspec.Struct, frozen=True, kw_only=True):
@@ -181,6 +192,30 @@ class PoseInFrame(msgspec.Struct, frozen=True):
     pose: Pose
 
 
+class TrackedRobotRecord(msgspec.Struct, frozen=True):
+    agent: str
+    x: float  # mm
+    y: float
+    heading: float  # rad
+
+
+class TrackedRecord(msgspec.Struct, frozen=True, kw_only=True):
+    """The robots a camera found in one frame (``/tracking/poses``), arena mm; the log
+    time is the frame's capture time, so video, poses and telemetry share one clock."""
+
+    camera: str
+    robots: list[TrackedRobotRecord]
+
+
+class CompressedImage(msgspec.Struct, frozen=True):
+    """foxglove.CompressedImage: one camera frame (JPEG), at a reduced rate."""
+
+    timestamp: Time
+    frame_id: str
+    data: bytes  # base64 in JSON, as Foxglove reads it
+    format: str
+
+
 class LogLine(msgspec.Struct, frozen=True):
     """foxglove.Log: one line the controller printed (level 2 info, 4 error)."""
 
@@ -192,7 +227,11 @@ class LogLine(msgspec.Struct, frozen=True):
     line: int
 
 
-FOXGLOVE_NAMES: dict[type, str] = {PoseInFrame: "foxglove.PoseInFrame", LogLine: "foxglove.Log"}
+FOXGLOVE_NAMES: dict[type, str] = {
+    PoseInFrame: "foxglove.PoseInFrame",
+    LogLine: "foxglove.Log",
+    CompressedImage: "foxglove.CompressedImage",
+}
 
 RECORD_TYPES: dict[str, type] = {
     RUN: RunInfo,
@@ -202,11 +241,13 @@ RECORD_TYPES: dict[str, type] = {
     OUTPUT: LogLine,
     EVENTS: EventRecord,
     CHAT: ChatRecord,
+    TRACKED: TrackedRecord,
 }
 """Topic -> record type; the per-robot topics are matched by their last chunk."""
 
 ROBOT_TYPES: dict[str, type] = {
     "pose": PoseInFrame,
+    "tracked": PoseInFrame,
     "sensors": SampleRecord,
     "commands": CommandRecord,
 }
@@ -219,6 +260,8 @@ def record_type(topic: str) -> type | None:
     parts = topic.split("/")
     if len(parts) == 4 and parts[1] == "robot":
         return ROBOT_TYPES.get(parts[3])
+    if len(parts) == 4 and parts[1] == "camera" and parts[3] == "image":
+        return CompressedImage
     return None
 
 

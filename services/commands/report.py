@@ -76,6 +76,11 @@ def describe_comparison(cmp: Comparison) -> list[str]:
         f"{a.status}, {a.duration_s:.1f} s, {a.frames} frames, {a.samples} samples",
         f"B = {b.label}: run {b.request_id} on {b.agent} in {b.ctx} (world {b.world}), "
         f"{b.status}, {b.duration_s:.1f} s, {b.frames} frames, {b.samples} samples",
+        "poses from:         "
+        + "; ".join(
+            f"{n} {'the arena camera (tracked)' if s.poses_from == 'camera' else 'its frames'}"
+            for n, s in (("A", a), ("B", b))
+        ),
         f"start pose:         A {_pose(a.start_pose)}; B {_pose(b.start_pose)} "
         f"({cmp.start_offset_mm:.0f} mm apart)",
         f"final pose:         A {_pose(a.final_pose)}; B {_pose(b.final_pose)}",

@@ -21,7 +21,7 @@ from common.service import run_service
 from services.context import agent_context, chat_room
 from services.context.agent_context import AgentContext
 from services.context.chat_room import ChatRoom, log
-from services.context.recorder import recordings_dir
+from services.context.recordings import recordings_dir
 
 
 def chat_main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> int:

@@ -29,7 +29,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -65,6 +64,7 @@ from common.recording.store import RecordingStore
 from common.recording.writer import RecordingWriter, frame_record, pose_record, sample_record
 from common.world.leasemac import MAC_BYTES, command_mac, item_mac, mac_matches
 from services.context.agent_queue import RunningJob
+from services.context.camera_tap import CameraTap
 
 TRAIL_S = 1.5  # how long a file stays open after its slot: the stop and the last lines
 QUEUE_MAX = 20_000  # items waiting for the writer thread (~7 min of one robot at 50 Hz)
@@ -113,6 +113,7 @@ class SlotRecorder:
         self._snapshot_tried = 0.0
         self.dropped = 0
         self.recorded = 0  # finished recordings
+        self.camera = CameraTap(self)  # a real arena's video and tracked poses
 
     @property
     def enabled(self) -> bool:
@@ -131,6 +132,7 @@ class SlotRecorder:
             (keys.world_samples(r, w), self._on_samples),
             (keys.agent_cmd_all(r, w), self._on_cmd),
             (keys.world_commands(r, w), self._on_bundle),
+            *self.camera.subscriptions(),
         ):
             self._subs.append(self.session.declare_subscriber(key, handler))
         self._thread = threading.Thread(target=self._work, name="recorder", daemon=True)
@@ -233,6 +235,7 @@ class SlotRecorder:
             "cmd": self._cmd,
             "bundle": self._bundle,
             "snapshot": self._note_snapshot,
+            **self.camera.handlers(),
         }
         while not self._halt.is_set():
             try:
@@ -590,11 +593,3 @@ class SlotRecorder:
                     ),
                     t,
                 )
-
-
-def recordings_dir(ctx: str, data_dir: Path | None, explicit: Path | None) -> Path | None:
-    """Where a context keeps its recordings: explicit, else ``<data dir>/recordings/<ctx>``
-    (a data dir may be shared by several contexts)."""
-    if explicit is not None:
-        return explicit
-    return None if data_dir is None else data_dir / "recordings" / ctx

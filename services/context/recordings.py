@@ -8,6 +8,8 @@ the contents are).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from common.auth import Principal
 from common.messages import (
     MAX_CHUNK,
@@ -74,3 +76,11 @@ class RecordingRequests:
         except OSError as exc:
             raise RequestError("internal", f"cannot read {request.name}: {exc.strerror}") from None
         return RecordingChunk(name=request.name, offset=request.offset, total=total, data=data)
+
+
+def recordings_dir(ctx: str, data_dir: Path | None, explicit: Path | None) -> Path | None:
+    """Where a context keeps its recordings: explicit, else ``<data dir>/recordings/<ctx>``
+    (a data dir may be shared by several contexts)."""
+    if explicit is not None:
+        return explicit
+    return None if data_dir is None else data_dir / "recordings" / ctx

@@ -45,10 +45,11 @@ ROLES = (
     "agent",
     "runner",
     "viewer",
+    "camera",
     "student",
     "admin",
 )
-SERVICE_ROLES = {"registry", "chat", "engine", "bridge", "agent", "viewer", "runner"}
+SERVICE_ROLES = {"registry", "chat", "engine", "bridge", "agent", "viewer", "runner", "camera"}
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,8 @@ _PEOPLE = (
     _g("sub", W(keys.world_frame), W(keys.world_sensors), W(keys.agent_sensors)),
     _g("token", W(keys.agent_watch)),
     _g("sub", W(keys.world_samples)),
+    # a real arena's video and tracked poses, watched like its frames
+    _g("sub", W(keys.camera_all), W(keys.world_tracked)),
     _g("ask", W(keys.world_snapshot), W(keys.world_edit), W(keys.world_map)),
     _g("sub", W(keys.host_load)),
     _g("ask", W(keys.host_load), W(keys.host_spawn), W(keys.runner_run)),
@@ -150,6 +153,8 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("pub", W(keys.registry_report)),  # kicks, stops, settings: to the audit trail
         _g("serve", W(keys.ctx_dryrun), W(keys.ctx_status)),
         _g("sub", W(keys.world_frame), W(keys.agent_sensors)),
+        # a real run's recording carries the camera's frames and tracked poses
+        _g("sub", W(keys.camera_frame), W(keys.world_tracked)),
         _g("token", W(keys.agent_watch)),
         _g("ask", W(keys.world_snapshot), W(keys.runner_run), W(keys.runner_dryrun)),
         _g("token", W(keys.alive, kind=AliveKind.CONTEXT)),
@@ -193,7 +198,17 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     # routers' admin space (links, sessions) and every load report.
     "admin": _PEOPLE,
 }
-ROLE_GRANTS["bridge"] = ROLE_GRANTS["engine"]
+# A bridge is an engine whose robots' poses a camera may correct.
+ROLE_GRANTS["bridge"] = (*ROLE_GRANTS["engine"], _g("sub", W(keys.world_tracked)))
+# A camera over a real arena: it learns the arena from the world's snapshot and
+# publishes what it sees; it logs in to nothing (its frames are as public as the
+# world's, and the routers' rules say who may put them).
+ROLE_GRANTS["camera"] = (
+    _g("ask", W(keys.world_snapshot)),
+    _g("pub", W(keys.camera_frame), W(keys.camera_floor), W(keys.camera_status)),
+    _g("pub", W(keys.world_tracked)),
+    _g("token", W(keys.alive, kind=AliveKind.CAMERA)),
+)
 
 
 def acl_config(

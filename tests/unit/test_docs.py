@@ -44,6 +44,7 @@ def test_every_key_suffix_is_in_the_key_table() -> None:
             "kind": keys.AliveKind.CONTEXT,
             "ident": "i",
             "zid": "z",
+            "camera": "c",
         }
         key = fn(**{p: sample[p] for p in params})
         last = key.rsplit("/", 1)[-1]

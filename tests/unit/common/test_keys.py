@@ -20,6 +20,7 @@ IDS = {
     "host": "host_a",
     "kind": AliveKind.CONTEXT,
     "ident": "room-1",
+    "camera": "cam-1",
     "key": "wart/lab/alive/context/room-1",
 }
 

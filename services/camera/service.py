@@ -1,0 +1,393 @@
+"""``wart camera``: one camera over a world's arena, its frames and the robots it tracks.
+
+One process per camera, supervised like every service. A thread captures from
+the source at the configured rate, finds the marked robots (once calibrated)
+and publishes, newest only (congestion control: drop), each frame as a JPEG
+(``world/<w>/camera/<c>/image``), the arena's floor seen from straight above
+when calibrated (``.../floor``: what the page lays under its world view), and
+the tracked poses (``world/<w>/tracked``, for the bridge, the page and the
+recorder). ``world/<w>/camera/<c>/status`` says whether it sees its arena and,
+if not, why: unplugged, the file ended, not calibrated.
+
+The markers' layout comes from the world's own snapshot (its arena's size and
+its robots' names: robot kN wears marker N), so nothing is configured twice.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import zenoh
+
+from common import keys
+from common.keys import AliveKind
+from common.messages import (
+    CameraFrame,
+    CameraStatus,
+    ErrorReply,
+    MessageError,
+    TrackedPoses,
+    TrackedRobot,
+    WorldSnapshot,
+    decode,
+    encode,
+)
+from common.messages.camera import MAX_FRAME_BYTES
+from common.service import Service
+from common.tracking.calibration import ArenaCalibration, CalibrationError, calibrate
+from common.tracking.markers import MarkerLayout, default_layout
+from common.tracking.tracker import Tracker
+from services.camera.sources import FrameSource, SourceError
+
+STATUS_PERIOD_S = 2.0
+RETRY_S = 2.0
+FLOOR_MM_PER_PX = 2.0  # the floor view's resolution: a 1 m arena is 500 px
+
+
+@dataclass(frozen=True)
+class CameraOptions:
+    fps: float = 10.0
+    max_width: int = 640
+    max_height: int = 480
+    jpeg_quality: int = 70
+    calibration: Path | None = None
+    auto_calibrate: bool = False
+    camera_height_mm: float = 1500.0
+
+
+class CameraService(Service):
+    kind = AliveKind.CAMERA
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        realm: str,
+        name: str,
+        *,
+        world: str,
+        source: FrameSource,
+        options: CameraOptions | None = None,
+    ) -> None:
+        super().__init__(session, realm, name)
+        keys.check_ident("world", world)
+        self.world = world
+        self.source = source
+        self.options = options or CameraOptions()
+        self.calibration: ArenaCalibration | None = None
+        self.layout: MarkerLayout | None = None
+        self.tracker: Tracker | None = None
+        self.online = False
+        self.reason = "starting"
+        self.frames = 0
+        self.size = (0, 0)
+        self._fps = 0.0
+        self._thread: threading.Thread | None = None
+        self._told: set[str] = set()
+        self._status_at = 0.0
+        self._next_layout = 0.0
+        self._next_calibration = 0.0
+        self._arena: tuple[float, float] | None = None
+        self._shown: tuple[bool, bool] = (False, False)
+
+    # -- lifecycle
+
+    def on_start(self) -> None:
+        if self.options.calibration is not None and self.options.calibration.exists():
+            self.calibration = ArenaCalibration.load(self.options.calibration)  # errors: main says
+            self.log.info(
+                "calibration %s: made at %dx%d, %.1f mm rms",
+                self.options.calibration,
+                *self.calibration.image_size,
+                self.calibration.rms_mm,
+            )
+        drop = zenoh.CongestionControl.DROP
+        self._image_pub = self.track(
+            self.session.declare_publisher(
+                keys.camera_frame(self.realm, self.world, self.ident), congestion_control=drop
+            )
+        )
+        self._floor_pub = self.track(
+            self.session.declare_publisher(
+                keys.camera_floor(self.realm, self.world, self.ident), congestion_control=drop
+            )
+        )
+        self._tracked_pub = self.track(
+            self.session.declare_publisher(
+                keys.world_tracked(self.realm, self.world), congestion_control=drop, express=True
+            )
+        )
+        self._status_pub = self.track(
+            self.session.declare_publisher(keys.camera_status(self.realm, self.world, self.ident))
+        )
+        self._thread = threading.Thread(target=self._run, name=f"camera-{self.ident}", daemon=True)
+        self._thread.start()
+
+    def on_stop(self, timeout: float) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)
+        self.source.close()
+
+    # -- the capture loop
+
+    def _run(self) -> None:
+        period = 1.0 / self.options.fps
+        opened = False
+        started, count = time.monotonic(), 0
+        next_at = time.monotonic()
+        while not self.stopped:
+            now = time.monotonic()
+            if now >= self._next_layout:
+                self._refresh_layout()
+            try:
+                if not opened:
+                    self.source.open()
+                    opened = True
+                    self._say_once("open", f"capturing from the {self.source.description}")
+                frame = self.source.read()
+            except SourceError as exc:
+                if opened:
+                    self.source.close()
+                opened = False
+                self._set_offline(str(exc))
+                self._stopped.wait(RETRY_S)
+                continue
+            captured_at = time.time()
+            self._publish(frame, captured_at)
+            count += 1
+            if time.monotonic() - started >= 2.0:
+                self._fps = count / (time.monotonic() - started)
+                started, count = time.monotonic(), 0
+            next_at = max(next_at + period, time.monotonic() - period)
+            self._stopped.wait(max(0.0, next_at - time.monotonic()))
+
+    def _publish(self, frame: np.ndarray, captured_at: float) -> None:
+        self.frames += 1
+        height, width = frame.shape[:2]
+        self.size = (width, height)
+        if not self.online:
+            self.online, self.reason = True, ""
+            self.log.info(
+                "camera online: %dx%d from the %s", width, height, self.source.description
+            )
+            self._publish_status(force=True)
+        self._maybe_calibrate(frame)
+        if self.tracker is not None:
+            found = self.tracker.track(frame, captured_at)
+            robots = [
+                TrackedRobot(agent=p.agent, x=p.x, y=p.y, heading=p.heading, marker=p.marker)
+                for p in found.poses
+            ]
+            self._tracked_pub.put(
+                encode(
+                    TrackedPoses(
+                        world=self.world,
+                        camera=self.ident,
+                        seq=self.frames,
+                        captured_at=captured_at,
+                        robots=robots,
+                    )
+                )
+            )
+            floor = self._floor_view(frame)
+            if floor is not None:
+                self._put_frame(self._floor_pub, floor, captured_at)
+        shown = _fit(frame, self.options.max_width, self.options.max_height)
+        self._put_frame(self._image_pub, shown, captured_at)
+        self._publish_status()
+
+    def _put_frame(self, publisher: zenoh.Publisher, image: np.ndarray, captured_at: float) -> None:
+        quality = self.options.jpeg_quality
+        while True:
+            ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+            if not ok:
+                self._say_once("jpeg", "a frame could not be encoded as JPEG: skipped")
+                return
+            if len(jpeg) <= MAX_FRAME_BYTES or quality <= 20:
+                break
+            quality -= 20
+        if len(jpeg) > MAX_FRAME_BYTES:
+            self._say_once(
+                "big",
+                f"frames are over {MAX_FRAME_BYTES} bytes even at quality 20: lower --max-width",
+            )
+            return
+        height, width = image.shape[:2]
+        publisher.put(
+            encode(
+                CameraFrame(
+                    world=self.world,
+                    camera=self.ident,
+                    seq=self.frames,
+                    captured_at=captured_at,
+                    width=width,
+                    height=height,
+                    data=jpeg.tobytes(),
+                )
+            )
+        )
+
+    def _floor_view(self, frame: np.ndarray) -> np.ndarray | None:
+        """The arena seen from straight above: image px -> arena mm at FLOOR_MM_PER_PX,
+        the arena's +y up (so the page lays it on its floor as it is)."""
+        if self.calibration is None or self.layout is None or self._arena is None:
+            return None
+        w_mm, h_mm = self._arena
+        s = 1.0 / FLOOR_MM_PER_PX
+        arena_to_floor = np.array([[s, 0.0, 0.0], [0.0, -s, h_mm * s], [0.0, 0.0, 1.0]])
+        size = (max(16, int(w_mm * s)), max(16, int(h_mm * s)))
+        ideal = self.calibration.undistort_frame(frame)
+        return cv2.warpPerspective(ideal, arena_to_floor @ self.calibration.homography, size)
+
+    # -- layout and calibration
+
+    def _refresh_layout(self) -> None:
+        """The arena's size and robots from the world's snapshot (asked again now and then:
+        robots may be added to a real world's serial ports)."""
+        snapshot = self._snapshot()
+        if snapshot is None:
+            self._next_layout = time.monotonic() + RETRY_S
+            if self.layout is None:
+                self._say_once("no-world", f"waiting for world {self.world} to answer its snapshot")
+            return
+        self._next_layout = time.monotonic() + 30.0
+        agents = [a.id for a in snapshot.agents]
+        arena = (float(snapshot.width), float(snapshot.height))
+        if (
+            self.layout is not None
+            and arena == self._arena
+            and sorted(self.layout.robots) == sorted(agents)
+        ):
+            return
+        self._arena = arena
+        self.layout = default_layout(arena[0], arena[1], agents)
+        self.log.info(
+            "world %s: arena %.0f x %.0f mm, markers %s",
+            self.world,
+            arena[0],
+            arena[1],
+            ", ".join(f"{a}={i}" for a, i in sorted(self.layout.robots.items())) or "none",
+        )
+        self._make_tracker()
+
+    def _snapshot(self) -> WorldSnapshot | None:
+        return world_snapshot(self.session, self.realm, self.world)
+
+    def _make_tracker(self) -> None:
+        if self.layout is None or self.calibration is None:
+            self.tracker = None
+            return
+        if self.size != (0, 0) and self.size != self.calibration.image_size:
+            self._say_once(
+                "size",
+                "the calibration was made at {}x{} but the camera gives {}x{}: no tracking "
+                "until it is calibrated again (`wart camera calibrate`)".format(
+                    *self.calibration.image_size, *self.size
+                ),
+            )
+            self.tracker = None
+            return
+        self.tracker = Tracker(self.layout, self.calibration, say=self.log.warning)
+
+    def _maybe_calibrate(self, frame: np.ndarray) -> None:
+        if self.tracker is not None or self.layout is None:
+            return
+        if self.calibration is not None:
+            self._make_tracker()
+            return
+        if not self.options.auto_calibrate:
+            self._say_once(
+                "uncalibrated",
+                "not calibrated: video only, no tracking "
+                "(`wart camera calibrate`, or --auto-calibrate)",
+            )
+            return
+        if time.monotonic() < self._next_calibration:
+            return
+        self._next_calibration = time.monotonic() + 5.0
+        try:
+            cal = calibrate(
+                frame,
+                self.layout,
+                camera_height_mm=self.options.camera_height_mm,
+                camera_matrix=self.source.camera_matrix,
+                dist_coeffs=self.source.dist_coeffs,
+            )
+        except CalibrationError as exc:
+            self._say_once("calibrate", f"cannot calibrate yet: {exc}")
+            return
+        self.calibration = cal
+        where = ""
+        if self.options.calibration is not None:
+            cal.save(self.options.calibration)
+            where = f", saved to {self.options.calibration}"
+        self.log.info("calibrated from the reference markers: %.1f mm rms%s", cal.rms_mm, where)
+        self._make_tracker()
+
+    # -- status
+
+    def _set_offline(self, reason: str) -> None:
+        if self.online or reason != self.reason:
+            self.log.warning("camera offline: %s", reason)
+        self.online, self.reason = False, reason
+        self._publish_status(force=True)
+
+    def _publish_status(self, force: bool = False) -> None:
+        """On a change of what the page shows (online, tracking), and every 2 s."""
+        now = time.monotonic()
+        shown = (self.online, self.tracker is not None)
+        if not force and shown == self._shown and now - self._status_at < STATUS_PERIOD_S:
+            return
+        self._status_at, self._shown = now, shown
+        self._status_pub.put(encode(self.status()))
+
+    def status(self) -> CameraStatus:
+        return CameraStatus(
+            world=self.world,
+            camera=self.ident,
+            online=self.online,
+            reason=self.reason[:256],
+            source=self.source.description[:256],
+            fps=round(self._fps, 2),
+            width=self.size[0],
+            height=self.size[1],
+            tracking=self.tracker is not None,
+            at=time.time(),
+        )
+
+    def _say_once(self, what: str, text: str) -> None:
+        if what not in self._told:
+            self._told.add(what)
+            self.log.info("%s", text)
+
+
+def world_snapshot(session: zenoh.Session, realm: str, world: str) -> WorldSnapshot | None:
+    """The world's snapshot, or None when it does not answer within 2 s."""
+    try:
+        replies = list(session.get(keys.world_snapshot(realm, world), timeout=2.0))
+    except Exception:
+        return None
+    for reply in replies:
+        if reply.ok is None:
+            continue
+        try:
+            snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
+        except MessageError:
+            continue
+        if isinstance(snap, WorldSnapshot):
+            return snap
+    return None
+
+
+def _fit(frame: np.ndarray, max_width: int, max_height: int) -> np.ndarray:
+    height, width = frame.shape[:2]
+    scale = min(max_width / width, max_height / height, 1.0)
+    if scale >= 1.0:
+        return frame
+    return cv2.resize(
+        frame, (int(width * scale), int(height * scale)), interpolation=cv2.INTER_AREA
+    )

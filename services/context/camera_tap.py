@@ -1,0 +1,96 @@
+"""A real arena's camera in the recordings: its frames at a reduced rate, every tracked pose.
+
+The recorder subscribes to the world's cameras and tracked poses beside its
+frames; this module holds that part. Frames are kept at most
+:data:`IMAGE_HZ` a second per camera (a minute at 640x480 is about 5 MB) as
+Foxglove's ``CompressedImage``; every tracked pose goes in, stamped with the
+frame's capture time, so the video, the tracked poses and the robot's own
+telemetry replay on one clock. A simulated world has no camera: nothing is
+subscribed to there that ever speaks.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import zenoh
+
+from common import keys
+from common.messages import CameraFrame, MessageError, TrackedPoses, decode
+from common.recording import schema as s
+from common.recording.writer import pose_record
+
+if TYPE_CHECKING:
+    from services.context.recorder import SlotRecorder
+
+IMAGE_HZ = 2.0
+
+
+class CameraTap:
+    def __init__(self, recorder: SlotRecorder) -> None:
+        self.recorder = recorder
+        self._last_image: dict[str, float] = {}  # key -> when the last kept frame came
+
+    def subscriptions(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
+        r, w = self.recorder.realm, self.recorder.world
+        return [
+            (keys.camera_all(r, w), self._on_camera),
+            (keys.world_tracked(r, w), self._on_tracked),
+        ]
+
+    def handlers(self) -> dict[str, Callable[..., None]]:
+        return {"camera": self._image, "tracked": self._tracked}
+
+    # -- Zenoh callbacks: a look and a queue put
+
+    def _on_camera(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        if not key.endswith("/image") or not self.recorder._any():
+            return
+        now = time.monotonic()
+        if now - self._last_image.get(key, 0.0) < 1.0 / IMAGE_HZ:
+            return
+        self._last_image[key] = now
+        self.recorder._put(("camera", sample.payload.to_bytes()))
+
+    def _on_tracked(self, sample: zenoh.Sample) -> None:
+        if self.recorder._any():
+            self.recorder._put(("tracked", sample.payload.to_bytes()))
+
+    # -- the writer thread
+
+    def _runs(self) -> list[Any]:
+        return list(self.recorder._runs.values())
+
+    def _image(self, payload: bytes) -> None:
+        try:
+            frame = decode(payload, CameraFrame)
+        except MessageError:
+            return
+        record = s.CompressedImage(
+            timestamp=s.stamp(frame.captured_at),
+            frame_id=f"camera/{frame.camera}",
+            data=frame.data,
+            format=frame.encoding,
+        )
+        for rec in self._runs():
+            rec.writer.write(s.camera_topic(frame.camera), record, frame.captured_at)
+
+    def _tracked(self, payload: bytes) -> None:
+        try:
+            poses = decode(payload, TrackedPoses)
+        except MessageError:
+            return
+        record = s.TrackedRecord(
+            camera=poses.camera,
+            robots=[s.TrackedRobotRecord(r.agent, r.x, r.y, r.heading) for r in poses.robots],
+        )
+        t = poses.captured_at
+        for rec in self._runs():
+            rec.writer.write(s.TRACKED, record, t)
+            for robot in poses.robots:
+                if robot.agent == rec.run.job.agent:
+                    pose = pose_record(robot.x, robot.y, robot.heading, t)
+                    rec.writer.write(s.tracked_topic(robot.agent), pose, t)

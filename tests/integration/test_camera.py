@@ -1,0 +1,241 @@
+"""``wart camera`` on a real router beside a real engine: frames, tracked poses, and what a
+user is told when the camera goes away or is set up wrong."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import zenoh
+
+from common import keys
+from common.keys import AliveKind
+from common.messages import CameraFrame, CameraStatus, Message, TrackedPoses, decode
+from common.tracking.truth import now_truth, write_truth
+from services.lab.supervisor import AliveWatch
+from tests.conftest import REPO, Procs, Router, wait_for
+
+pytestmark = pytest.mark.integration
+WORLD = "w1"
+CAMERA = "w1-cam"
+
+
+class Newest:
+    """The newest decoded message on a key, and how many came."""
+
+    def __init__(self, session: zenoh.Session, key: str, kind: type[Message]) -> None:
+        self.value: object = None
+        self.count = 0
+        self._lock = threading.Lock()
+
+        def on(sample: zenoh.Sample) -> None:
+            message = decode(sample.payload, kind)
+            with self._lock:
+                self.value, self.count = message, self.count + 1
+
+        self.sub = session.declare_subscriber(key, on)
+
+    def get(self) -> object:
+        with self._lock:
+            return self.value
+
+
+class Truth:
+    """The emulator's side of the synthetic camera: true poses, written 20 times a second."""
+
+    def __init__(self, path: Path, robots: dict[str, tuple[float, float, float]]) -> None:
+        self.path, self.robots = path, robots
+        self.paused = threading.Event()
+        self._stop = threading.Event()
+        write_truth(path, now_truth(1000.0, 1000.0, robots))
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.05):
+            if not self.paused.is_set():
+                write_truth(self.path, now_truth(1000.0, 1000.0, self.robots))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+
+
+@pytest.fixture
+def engine(router: Router, procs: Procs, alive_watch: AliveWatch) -> str:
+    """A world to take the camera's marker layout from: maps/empty.json (k1, 1 m square)."""
+    proc = procs.start(
+        "engine",
+        [
+            "engine",
+            "--map",
+            str(REPO / "maps" / "empty.json"),
+            "--world",
+            WORLD,
+            *router.net_args(),
+        ],
+    )
+    key = keys.alive(router.realm, AliveKind.WORLD, WORLD)
+    assert alive_watch.wait(key, 60.0), proc.output()
+    return WORLD
+
+
+@pytest.fixture
+def truth(tmp_path: Path) -> Iterator[Truth]:
+    t = Truth(tmp_path / "truth.json", {"k1": (300.0, 650.0, 0.7)})
+    yield t
+    t.close()
+
+
+def start_camera(procs: Procs, router: Router, *extra: str) -> object:
+    return procs.start("camera", ["camera", "--world", WORLD, *extra, *router.net_args()])
+
+
+def test_the_camera_tracks_the_robot_and_publishes_its_video(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    truth: Truth,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    realm = router.realm
+    tracked = Newest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
+    image = Newest(zsession, keys.camera_frame(realm, WORLD, CAMERA), CameraFrame)
+    floor = Newest(zsession, keys.camera_floor(realm, WORLD, CAMERA), CameraFrame)
+    status = Newest(zsession, keys.camera_status(realm, WORLD, CAMERA), CameraStatus)
+    cal = tmp_path / "arena.json"
+    proc = start_camera(
+        procs,
+        router,
+        "--source",
+        f"synthetic:{truth.path}",
+        "--auto-calibrate",
+        "--calibration",
+        str(cal),
+    )
+    assert alive_watch.wait(keys.alive(realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+
+    def robot_at(x: float, y: float, heading: float) -> bool:
+        poses = tracked.get()
+        if not isinstance(poses, TrackedPoses) or [r.agent for r in poses.robots] != ["k1"]:
+            return False
+        r = poses.robots[0]
+        return math.hypot(r.x - x, r.y - y) < 3.0 and abs(r.heading - heading) < math.radians(1.5)
+
+    wait_for(
+        lambda: robot_at(300.0, 650.0, 0.7), 60.0, f"k1 tracked at its true pose:\n{proc.output()}"
+    )
+    truth.robots["k1"] = (720.0, 240.0, -2.0)  # the robot drives: the camera follows
+    wait_for(lambda: robot_at(720.0, 240.0, -2.0), 20.0, "k1 tracked at its new pose")
+    assert cal.exists(), "the calibration made from the reference markers is saved"
+
+    frame = image.get()
+    assert isinstance(frame, CameraFrame) and (frame.width, frame.height) == (640, 480)
+    picture = cv2.imdecode(np.frombuffer(frame.data, np.uint8), cv2.IMREAD_COLOR)
+    assert picture.shape == (480, 640, 3)
+    top = wait_for(floor.get, 10.0, "the rectified floor view")
+    assert isinstance(top, CameraFrame) and (top.width, top.height) == (500, 500)
+
+    def tracking() -> bool:
+        s = status.get()
+        return isinstance(s, CameraStatus) and s.online and s.tracking
+
+    wait_for(tracking, 10.0, "the camera's status to say it tracks")
+    seen = status.get()
+    assert isinstance(seen, CameraStatus) and "synthetic camera" in seen.source
+
+
+def test_a_camera_that_loses_its_picture_says_so_and_comes_back(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    truth: Truth,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+) -> None:
+    status = Newest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+    proc = start_camera(procs, router, "--source", f"synthetic:{truth.path}")
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+
+    def online(state: bool) -> bool:
+        s = status.get()
+        return isinstance(s, CameraStatus) and s.online is state
+
+    wait_for(lambda: online(True), 30.0, "the camera online")
+    truth.paused.set()  # the emulator died: its truth goes stale
+    wait_for(lambda: online(False), 15.0, "the camera offline")
+    s = status.get()
+    assert isinstance(s, CameraStatus) and "stopped writing" in s.reason
+    assert "camera offline: the emulator stopped writing" in proc.output()
+    truth.paused.clear()
+    wait_for(lambda: online(True), 15.0, "the camera online again")
+    assert proc.popen.poll() is None, "the camera kept running through it"
+
+
+def test_a_video_file_that_ends_leaves_the_camera_offline_not_dead(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    video = tmp_path / "arena.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 20.0, (320, 240))
+    for i in range(10):
+        writer.write(np.full((240, 320, 3), 20 * i, np.uint8))
+    writer.release()
+    status = Newest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+    proc = start_camera(procs, router, "--source", str(video))
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+
+    def ended() -> bool:
+        s = status.get()
+        return isinstance(s, CameraStatus) and not s.online and "ended" in s.reason
+
+    wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
+    assert "not calibrated: video only" in proc.output()
+    assert proc.popen.poll() is None
+
+
+def test_a_bad_calibration_file_is_refused_with_its_field(
+    procs: Procs, router: Router, tmp_path: Path
+) -> None:
+    bad = tmp_path / "arena.json"
+    bad.write_text(
+        '{"format": "wart-arena-calibration", "version": 1, "image_size": [640, 480], '
+        '"homography": [[1, 0], [0, 1]], "camera_height_mm": 1500}'
+    )
+    proc = start_camera(procs, router, "--source", "0", "--calibration", str(bad))
+    assert proc.popen.wait(30) == 2
+    assert "homography: must have shape [3, 3]" in proc.output()
+    assert str(bad) in proc.output()
+
+
+def test_markers_of_no_robot_are_said_once(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    tmp_path: Path,
+    alive_watch: AliveWatch,
+    zsession: zenoh.Session,
+) -> None:
+    stray = Truth(tmp_path / "truth.json", {"k1": (300.0, 300.0, 0.0), "k7": (700.0, 700.0, 1.0)})
+    try:
+        tracked = Newest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+        proc = start_camera(
+            procs, router, "--source", f"synthetic:{stray.path}", "--auto-calibrate"
+        )
+        wait_for(lambda: tracked.count >= 20, 60.0, f"20 tracked frames:\n{proc.output()}")
+        poses = tracked.get()
+        assert isinstance(poses, TrackedPoses) and [r.agent for r in poses.robots] == ["k1"]
+        assert proc.output().count("marker 7 belongs to no robot of this arena: ignored") == 1
+    finally:
+        stray.close()
