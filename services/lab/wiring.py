@@ -38,6 +38,8 @@ ACCOUNT_PREFIX = {
     "runner": "runner-",
     "engine": "engine-",
     "bridge": "bridge-",
+    # The viewer's account has the gateway role only: it vouches for browsers' addresses.
+    "viewer": "viewer-",
 }
 
 
@@ -427,15 +429,25 @@ def bridge_specs(
 
 
 def viewer_spec(
-    w: Wiring, ident: str, *, http_port: int = 8080, http_host: str | None = None
+    w: Wiring,
+    ident: str,
+    *,
+    http_port: int = 8080,
+    http_host: str | None = None,
+    account: str | None = None,
 ) -> ChildSpec:
-    """The web viewer; browsers elsewhere reach it on ``http_host`` (default ``w.http_host``)."""
+    """The web viewer; browsers elsewhere reach it on ``http_host`` (default ``w.http_host``).
+
+    ``account``: its gateway account (it vouches for each browser's address at login).
+    """
     http_host = http_host or w.http_host
     argv = ["viewer", "--id", ident, "--http-port", str(http_port)]
     if http_host:
         argv += ["--host", http_host]
     if w.lab_address:
         argv += ["--lab-address", w.lab_address]
+    if account:
+        argv += w.login(account)
     argv += [
         "--url-file",
         str(w.viewer_url_file()),
@@ -512,6 +524,7 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
                 str(p.get("name") or w.host),
                 http_port=int(p.get("http_port", 8080)),
                 http_host=p.get("http_host"),
+                account=service_account("viewer", svc.ident),
             )
         ]
     raise LabFileError(f"{svc.kind} services are not supported by this build")

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from common.auth import RegistryIdentity, create_identity_key
 from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
+from common.client.service_login import vouch_for
 from common.lab_errors import (
     NotAllowed,
     RateLimited,
@@ -71,23 +74,36 @@ def test_one_source_spraying_wrong_passwords_is_slowed_down_others_are_not(lab: 
     # Another session (another source) is not affected...
     with lab.client() as other:
         other.login("carol", PASSWORD)
-    # ...and behind one gateway session, two browsers are two sources.
+    # ...and behind one gateway session, two browsers it vouches for are two sources.
     session = lab.zsession()
     try:
-        key = lab.identity.verify_key
+        browser = _gateway(lab, session)
         for i in range(10):
-            browser_a = LabClient(session, lab.router.realm, key, via="browser-1")
             with pytest.raises(WrongCredentials):
-                browser_a.login(f"typo{i}", "not it at all")
-            browser_a.close()
-        browser_a = LabClient(session, lab.router.realm, key, via="browser-1")
+                browser("browser-1").login(f"typo{i}", "not it at all")
         with pytest.raises(RateLimited):
-            browser_a.login("bob", PASSWORD)
-        browser_b = LabClient(session, lab.router.realm, key, via="browser-2")
-        browser_b.login("bob", PASSWORD)
-        browser_b.close()
+            browser("browser-1").login("bob", PASSWORD)
+        browser("browser-2").login("bob", PASSWORD)
     finally:
         close_session(session)
+
+
+def _gateway(lab: Lab, session: zenoh.Session) -> Callable[[str], LabClient]:
+    """A gateway (the viewer's role) logged in on ``session``: a client per vouched address."""
+    key = create_identity_key(lab.state / "gateway.key")
+    db = RegistryDB(lab.db_path)
+    db.add_user("gateway", ["gateway"], public_key=bytes(key.verify_key))
+    db.close()
+    gateway = LabClient(session, lab.router.realm, lab.identity.verify_key, presence=False)
+    gateway.login_with_key("gateway", key)
+    assert gateway.session is not None
+    vouching = gateway.session
+
+    def browser(address: str) -> LabClient:
+        voucher = vouch_for(vouching, lab.router.realm, address)
+        return LabClient(session, lab.router.realm, lab.identity.verify_key, voucher=voucher)
+
+    return browser
 
 
 def test_client_refuses_a_registry_with_another_key(lab: Lab) -> None:
@@ -162,11 +178,11 @@ def test_admin_queries(lab: Lab) -> None:
 
 def test_nobody_can_lock_the_owner_out(lab: Lab) -> None:
     """An attacker guessing alice's password from several sources never blocks alice."""
-    session = lab.zsession()
-    try:
-        key = lab.identity.verify_key
-        for source in range(6):  # 6 sources x 4 guesses: far past every free allowance
-            attacker = LabClient(session, lab.router.realm, key, via=f"attacker-{source}")
+    key = lab.identity.verify_key
+    for _ in range(6):  # 6 sources (Zenoh sessions) x 4 guesses: past every free allowance
+        session = lab.zsession()
+        try:
+            attacker = LabClient(session, lab.router.realm, key)
             for _ in range(4):
                 with pytest.raises((WrongCredentials, RateLimited)):
                     attacker.login("alice", "guess guess")
@@ -174,8 +190,8 @@ def test_nobody_can_lock_the_owner_out(lab: Lab) -> None:
             with pytest.raises(RateLimited, match="too many failed logins"):
                 attacker.login("alice", PASSWORD)
             attacker.close()
-    finally:
-        close_session(session)
+        finally:
+            close_session(session)
     # alice, from her own machine, gets in at once; so does the admin
     with lab.client() as owner:
         assert owner.login("alice", PASSWORD).user == "alice"
@@ -207,10 +223,10 @@ def test_fifty_concurrent_logins_are_all_answered_right(lab: Lab) -> None:
 
     session = lab.zsession()
     try:
-        key = lab.identity.verify_key
+        browser = _gateway(lab, session)  # a class behind the viewer: one address each
 
         def one(i: int) -> str:
-            client = LabClient(session, lab.router.realm, key, via=f"student-{i}")
+            client = browser(f"student-{i}")
             try:
                 user, password = ("bob", PASSWORD) if i % 5 else ("bob", "wrong password")
                 try:

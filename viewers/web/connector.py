@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
@@ -16,6 +17,8 @@ import zenoh
 from common import lab_errors
 from common.auth import LOGIN_WAIT_S, parse_public_key
 from common.client import lab_client as lab
+from common.client.service_login import ServiceCredentials, ServiceLogin, vouch_for
+from common.lab_errors import LabError
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
@@ -31,6 +34,53 @@ log = logging.getLogger("wart.viewer.live")
 LABS_FILE = "labs.json"
 
 
+class GatewayLogin:
+    """The viewer's own service account (role ``gateway``), logged in in the background.
+
+    With it the viewer vouches, at each browser's login, for the address its
+    socket saw; the registry then throttles failed logins per browser address
+    instead of per viewer (docs/SECURITY.md "Failed logins"). Until it is logged
+    in (the registry may start after the viewer), logins go unvouched.
+    """
+
+    def __init__(self, session: zenoh.Session, realm: str, credentials: ServiceCredentials) -> None:
+        self.session = session
+        self.realm = realm
+        self.credentials = credentials
+        self.login: ServiceLogin | None = None
+        self._closed = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gateway-login", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            login = self.credentials.login(self.session, self.realm, "viewer")
+        except (LabError, RuntimeError) as exc:
+            log.warning("the viewer's account %s cannot log in: %s", self.credentials.user, exc)
+            return
+        if not login.session.has("vouch"):
+            log.warning("account %s lacks 'vouch' (role gateway): logins go unvouched", login.user)
+        if self._closed.is_set():
+            login.close()
+            return
+        self.login = login
+
+    def voucher(self, address: str) -> Callable[[bytes], bytes] | None:
+        login = self.login
+        if login is None or login.client.session is None:
+            return None
+        try:
+            return vouch_for(login.session, self.realm, address)
+        except ValueError as exc:
+            log.info("not vouching for %r: %s", address, exc)
+            return None
+
+    def close(self) -> None:
+        self._closed.set()
+        if self.login is not None:
+            self.login.close()
+
+
 class LiveConnector:
     """Logs browsers in to labs: the viewer's own, or one listed in the admin's labs file."""
 
@@ -43,6 +93,7 @@ class LiveConnector:
         data_dir: Path | None = None,
         timeout: float = QUERY_TIMEOUT,
         login_wait: float = LOGIN_WAIT_S,
+        gateway: GatewayLogin | None = None,
     ) -> None:
         if isinstance(own_registry_key, str):
             own_registry_key = parse_public_key(own_registry_key)
@@ -54,6 +105,7 @@ class LiveConnector:
             raise ValueError(f"login_wait must be positive, not {login_wait}")
         self.login_wait = login_wait  # how long a login waits for the registry's answer
         self._own_session = own_session
+        self.gateway = gateway  # vouches for browsers' addresses to the viewer's own lab
         self._links: dict[tuple[str, int, str], LabRouterLink] = {}
         self._lock = threading.Lock()
         self._connections: list[LiveConnection] = []
@@ -116,10 +168,22 @@ class LiveConnector:
             self._links.pop(link.address.lab_key, None)
         link.close()
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> LiveConnection:
+    def login(
+        self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
+    ) -> LiveConnection:
         link = self._link(address)
+        # Only our own lab's registry knows the viewer's account: elsewhere the
+        # login counts against this viewer's Zenoh session, like any client's.
+        voucher = None
+        if link.own and self.gateway is not None and seen_from:
+            voucher = self.gateway.voucher(seen_from)
         client = lab.LabClient(
-            link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
+            link.session,
+            address.realm,
+            link.registry_key,
+            timeout=self.timeout,
+            via=via,
+            voucher=voucher,
         )
         try:
             client.login(user, password, wait=self.login_wait)
@@ -159,6 +223,8 @@ class LiveConnector:
 
     def close(self) -> None:
         """Log everyone out and close the other labs' sessions (the viewer is stopping)."""
+        if self.gateway is not None:
+            self.gateway.close()
         with self._lock:
             connections = list(self._connections)
         for connection in connections:

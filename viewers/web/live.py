@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,9 @@ from common.client.survey import Survey, survey
 from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
+    AuditEntry,
+    AuditQuery,
+    BanInfo,
     QueueStateRequest,
     RoomEvent,
 )
@@ -500,6 +504,7 @@ class LiveConnection:
                 tuple(sorted((scope, tuple(g)) for scope, g in u.grants.items())),
                 u.online,
                 u.failed_logins,
+                ban_words(u.ban),
             )
             for u in users
         ]
@@ -528,6 +533,16 @@ class LiveConnection:
     def unlock_logins(self, user: str) -> str:
         return str(self._call(lambda: self.client.unlock_logins(user)))
 
+    def ban(self, user: str, reason: str, until: float | None) -> str:
+        return str(self._call(lambda: self.client.ban(user, reason, until)))
+
+    def lift_ban(self, user: str) -> str:
+        return str(self._call(lambda: self.client.lift_ban(user)))
+
+    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]:
+        entries, _more = self._call(lambda: self.client.audit_trail(query))
+        return list(entries)
+
     # -- the end
 
     def logout(self) -> None:
@@ -547,3 +562,11 @@ class LiveConnection:
         except Exception:
             log.exception("logging %s out of %s", self.user, self._address.label)
         self.connector._closed(self)
+
+
+def ban_words(ban: BanInfo | None) -> str:
+    """A ban in force, for the admin's account list ("" if none)."""
+    if ban is None:
+        return ""
+    end = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(ban.until)) if ban.until else "lifted"
+    return f"until {end}: {ban.reason}"

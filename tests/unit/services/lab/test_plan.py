@@ -36,6 +36,8 @@ def test_each_host_runs_its_services_and_arenas_with_their_contexts(lab_dir: Pat
     a, b, c = (plan(lab_dir, h) for h in "ABC")
     assert list(a) == ["registry", "chat lobby", "viewer"]
     assert a["viewer"][:7] == ["viewer", "--id", "A", "--http-port", "8080", "--host", "10.0.0.1"]
+    # The viewer's gateway account: it vouches for browsers' addresses at login.
+    assert a["viewer"][a["viewer"].index("--user") + 1] == "viewer-viewer"
     # B's engine is an arena: its agent context (from the [arena] template) comes
     # with it and names B's runner, started after it (a job only asks it later).
     assert list(b) == ["engine arena1", "agent arena1", "runner runner"]
