@@ -68,6 +68,11 @@ from typing import Any, NamedTuple, Protocol
 import msgspec
 import numpy as np
 
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from bench.labproc import REPO, BenchLab
 from bench.plain_peer import PEER_WORLD, PlainEngine
 from common import keys

@@ -27,6 +27,11 @@ from pathlib import Path
 
 import zenoh
 
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from bench.engine_bench import build, control
 from bench.labproc import REPO, BenchLab
 from common import keys
