@@ -54,7 +54,7 @@ from services.lab.wiring import (
 
 @dataclass(frozen=True)
 class HostingPlan:
-    """Where a host's contexts come from: its wiring (maps, accounts, templates) and limits."""
+    """Where a host's contexts come from: its wiring (maps, accounts, arenas) and limits."""
 
     wiring: Wiring
     registry_key: str  # hex, pinned by the Verifier of spawn requests
@@ -82,11 +82,9 @@ class HostingPlan:
         """A map by plain name; FileNotFoundError or ValueError when there is none."""
         return self.wiring.resolve_map(name)
 
-    def arena_specs(
-        self, world: str, map_path: Path, *, seed: int, robots: int, owner: str
-    ) -> list[ChildSpec]:
+    def arena_specs(self, world: str, map_path: Path, *, seed: int, owner: str) -> list[ChildSpec]:
         """The engine, then its agent context (named after the world, owned by ``owner``)."""
-        return arena_specs(self.wiring, world, map_path, seed=seed, robots=robots, owner=owner)
+        return arena_specs(self.wiring, world, map_path, seed=seed, owner=owner)
 
     def room_specs(self, name: str, title: str, owner: str) -> list[ChildSpec]:
         """The chat room's process, owned by ``owner`` (only when ``max_rooms`` > 0)."""
@@ -357,9 +355,7 @@ class HostingService(Service):
             )
             hosted = Hosted(info)
             self.log.info("starting arena %s (%s) for %s", request.world, request.map, owner)
-            specs = self.plan.arena_specs(
-                request.world, map_path, seed=request.seed, robots=robots, owner=owner
-            )
+            specs = self.plan.arena_specs(request.world, map_path, seed=request.seed, owner=owner)
             self._start(self.arenas, request.world, hosted, specs)
             hosted.info = ArenaInfo(**{**_fields(info), "state": "running"})
             return hosted.info
