@@ -78,7 +78,6 @@ from bench.plain_peer import PEER_WORLD, PlainEngine
 from common import keys
 from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.controller import RobotCommand
-from common.keys import AliveKind
 from common.messages import AgentCommand, Lease, SensorSample, decode, encode
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
@@ -748,10 +747,7 @@ def main() -> int:
     with_peer = not args.no_peer and not args.per_agent
 
     lab = BenchLab([], "unused")
-    lab.spawn(
-        ["router", "--realm", lab.realm, "--name", "r", "--listen", f"tcp/127.0.0.1:{lab.port}"],
-        (AliveKind.ROUTER, "r"),
-    )
+    lab.start_router()
     ident_path = Path(tempfile.mkdtemp(prefix="wart-bench-")) / "registry.key"
     identity, _ = RegistryIdentity.load_or_create(ident_path)
     world_session = issue_session(identity, lab.realm, "engine-bench", ["world"])

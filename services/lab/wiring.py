@@ -396,8 +396,9 @@ def arena_specs(
     return specs
 
 
-def runner_spec(w: Wiring, name: str) -> ChildSpec:
-    argv = ["runner", "--name", name, *w.login(service_account("runner", name))]
+def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpec:
+    """A runner; its account is ``runner-NAME`` unless given."""
+    argv = ["runner", "--name", name, *w.login(account or service_account("runner", name))]
     return ChildSpec(
         f"runner {name}",
         [*argv, *w.net_args("runner")],

@@ -34,7 +34,7 @@ from tests.integration.agentkit import (
     start_engine,
     start_runner,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -47,7 +47,7 @@ RUNNER_END = "the lab's runner runner stopped"
 class RunnerHost:
     """The runner on its own router ("a second host"), each restartable."""
 
-    def __init__(self, lab: Lab) -> None:
+    def __init__(self, lab: ProcessLab) -> None:
         self.lab = lab
         self.port = free_port()
         self.router = self.start_router()
@@ -93,21 +93,21 @@ class RunnerHost:
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     start_engine(lab)
     yield lab
 
 
-def deploy(lab: Lab) -> Proc:
+def deploy(lab: ProcessLab) -> Proc:
     proc = start_deploy(lab, CONTROLLERS / "forward.py", "k2", "bob")
     wait_for(lambda: "running on k2" in proc.output(), 60, "bob's controller running")
     return proc
 
 
 def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
-    lab: Lab, procs: Procs
+    lab: ProcessLab, procs: Procs
 ) -> None:
     host = RunnerHost(lab)
     context = start_agent_context(lab, slot=60.0)
@@ -138,7 +138,7 @@ def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
     assert "it came back without them" in context.output(), context.output()
 
 
-def test_a_frozen_world_is_said_to_the_student_and_so_is_its_return(lab: Lab) -> None:
+def test_a_frozen_world_is_said_to_the_student_and_so_is_its_return(lab: ProcessLab) -> None:
     start_runner(lab)
     start_agent_context(lab, slot=120.0)
     engine = next(p for p in lab.procs.started if p.name == "engine")

@@ -11,13 +11,13 @@ import pytest
 from common.zconfig import NetworkOptions
 from services.commands.doctor import up_plan
 from tests.conftest import REPO, wart_env
-from tests.lab import Lab
+from tests.lab import UpLab
 
 pytestmark = pytest.mark.smoke
 
 
 def test_the_doctor_finds_nothing_missing_in_a_healthy_up_lab(tmp_path: Path, realm: str) -> None:
-    lab = Lab(realm=realm, state_dir=tmp_path / "state").start()
+    lab = UpLab(realm=realm, state_dir=tmp_path / "state").start()
     try:
         lab.wait_line("The lab is running", timeout=120)
         doctor = subprocess.run(
