@@ -163,11 +163,20 @@ def wait_alive(options: NetworkOptions, key: str, proc: Proc, timeout: float = 3
     assert ok, f"{proc.name} did not come up ({key}):\n{proc.output()}"
 
 
-def start_router(procs: Procs, realm: str, name: str = "test-router") -> Router:
-    """A real ``wart router`` on a free 127.0.0.1 port, multicast scouting off."""
-    port = free_port()
-    spec = wiring.router_spec(realm, name, [f"tcp/127.0.0.1:{port}"])
-    proc = procs.start("router", [*spec.argv, "--no-multicast-scouting"])
+def start_router(
+    procs: Procs,
+    realm: str,
+    name: str = "test-router",
+    *,
+    port: int | None = None,
+    connect: Sequence[str] = (),
+    log_name: str = "router",
+) -> Router:
+    """A real ``wart router`` on a free 127.0.0.1 port (or ``port``, to restart one where
+    it was), multicast scouting off; ``connect``: routers it meshes with (a second host)."""
+    port = port or free_port()
+    spec = wiring.router_spec(realm, name, [f"tcp/127.0.0.1:{port}"], connect=connect)
+    proc = procs.start(log_name, [*spec.argv, "--no-multicast-scouting"])
     router = Router(realm=realm, port=port, proc=proc)
     assert spec.alive_key is not None
     wait_alive(router.options(), spec.alive_key, proc, timeout=20.0)

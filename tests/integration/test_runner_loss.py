@@ -19,6 +19,7 @@ import os
 import signal
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -28,13 +29,12 @@ from services.runner.sandbox import sandbox_problem
 from tests.conftest import Proc, Procs, Router, free_port, wait_for
 from tests.integration.agentkit import (
     WORLD,
-    service_account,
     start_agent_context,
     start_deploy,
     start_engine,
     start_runner,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.lab import ProcessLab, make_lab, start_router
 
 pytestmark = [
     pytest.mark.integration,
@@ -54,42 +54,20 @@ class RunnerHost:
         self.runner = self.start_runner()
 
     def start_router(self) -> Proc:
-        return self.lab.procs.start(
+        router = start_router(
+            self.lab.procs,
+            self.lab.realm,
             "router-b",
-            [
-                "router",
-                "--realm",
-                self.lab.router.realm,
-                "--name",
-                "router-b",
-                "--listen",
-                f"tcp/127.0.0.1:{self.port}",
-                "--connect",
-                self.lab.router.endpoint,
-                "--no-multicast-scouting",
-            ],
+            port=self.port,
+            connect=[self.lab.router.endpoint],
+            log_name="router-b",
         )
+        return router.proc
 
     def start_runner(self) -> Proc:
-        key = service_account(self.lab, "runner-svc")
-        net = self.lab.router.options(connect=(f"tcp/127.0.0.1:{self.port}",)).as_args()
-        proc = self.lab.procs.start(
-            "runner",
-            [
-                "runner",
-                "--name",
-                "runner",
-                "--user",
-                "runner-svc",
-                "--identity",
-                str(key),
-                *net,
-                "--registry-key",
-                self.lab.key_hex,
-            ],
-        )
-        self.lab.wait_alive(AliveKind.RUNNER, "runner", proc)
-        return proc
+        # A client of router-b, as a runner on its own host is of its host's router.
+        router_b = Router(self.lab.realm, self.port, self.router)
+        return replace(self.lab, router=router_b).start_runner()
 
 
 @pytest.fixture
