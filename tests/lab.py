@@ -62,8 +62,9 @@ def wart_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
     env["PYTHONUNBUFFERED"] = "1"
     env["WART_NO_MULTICAST"] = "1"
-    env.pop("WART_CONNECT", None)
-    env.pop("WART_REALM", None)
+    # Nothing of the developer's own lab: its router, realm or credentials.
+    for name in ("WART_CONNECT", "WART_REALM", "WART_PASSWORD", "WART_REGISTRY_KEY"):
+        env.pop(name, None)
     if extra:
         env.update(extra)
     return env
