@@ -170,7 +170,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart host") -> int:
         ctx = prepare(load(args.lab), args.name, args.state_dir)
         if args.check:
             for spec in [router_spec(ctx), *host_plan(ctx)]:
-                print(f"{spec.name:<16} wart {' '.join(spec.argv)}")
+                print(f"{spec.name:<22} wart {' '.join(spec.argv)}")
             print(f"configs in {ctx.state_dir / 'zenoh'}")
             return 0
     except (LabFileError, FileNotFoundError, OSError, ValueError) as exc:
