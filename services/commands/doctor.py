@@ -214,8 +214,8 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
         }
         report.head("services per host (as each host's supervisor sees them)")
         for load_ in loads:
-            up = [name for name in load_.services if not name.endswith(" (down)")]
-            report.info(f"{load_.host}: {', '.join(up) or 'no services'}")
+            running = [name for name in load_.services if not name.endswith(" (down)")]
+            report.info(f"{load_.host}: {', '.join(running) or 'no services'}")
             for name in load_.services:
                 if name.endswith(" (down)"):
                     report.bad(
