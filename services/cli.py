@@ -22,7 +22,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "the server: accounts, login, ACL, presence, directory",
     ),
     "users": (
-        "services.commands.users",
+        "services.registry.users",
         "add, change and remove accounts and grants (registry DB)",
     ),
     "ban": (

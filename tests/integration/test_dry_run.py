@@ -26,7 +26,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -118,7 +118,7 @@ def test_a_hostile_controller_ends_within_its_limit(
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     together(lambda: start_engine(lab), lambda: start_runner(lab))
@@ -126,7 +126,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     yield lab
 
 
-def test_wart_deploy_dry_run_through_the_lab(lab: Lab, procs: Procs, tmp_path: Path) -> None:
+def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, procs: Procs, tmp_path: Path) -> None:
     charge = tmp_path / "charge.py"
     charge.write_text(INTO_THE_WALL)
     proc = procs.start(

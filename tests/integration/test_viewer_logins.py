@@ -28,7 +28,7 @@ import zenoh
 
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router, free_port
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 from tests.viser_client import ViserClient, run_in_thread
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
@@ -54,7 +54,7 @@ ANSWER_BOUND = QUEUE_WAIT + LOGIN_WAIT + 60.0
 
 @dataclass
 class ViewerLab:
-    lab: Lab
+    lab: ProcessLab
     viewer: WebViewer
     session: zenoh.Session
 
