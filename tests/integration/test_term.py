@@ -29,7 +29,8 @@ from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.integration.agentkit import CTX, start_agent_context, start_engine
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, make_lab
+from tests.lab import ProcessLab as Lab
 
 pytestmark = pytest.mark.integration
 
