@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from services.bridge import protocol as P
 from services.bridge.body import KinematicBody
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
-from services.bridge.link import KheperaLink
+from services.bridge.link import SerialKheperaLink
 from services.bridge.robot import KheperaRobot, RobotOptions
 
 
@@ -45,7 +45,7 @@ def latency(baud: int, n: int, reply_delay: float) -> dict[str, tuple[float, flo
     out: dict[str, tuple[float, float, float]] = {}
     opts = EmulatorOptions(baud=baud, pace=True, banner=False, reply_delay=reply_delay)
     with KheperaEmulator(body(), opts) as emu:
-        link = KheperaLink.open(emu.port, baud)
+        link = SerialKheperaLink.open(emu.port, baud)
         try:
             cases: list[tuple[str, P.Request[Any], bytes]] = [
                 ("D (set speed)", P.set_speed(0, 0), b"d\r\n"),
@@ -91,7 +91,7 @@ def refresh(
             def drive() -> None:
                 while not stop.wait(0.05):
                     t0 = time.perf_counter()
-                    robot.set_speed(0, 0).result(2)
+                    robot.command(P.set_speed(0, 0)).result(2)
                     lat.append(time.perf_counter() - t0)
 
             driver = threading.Thread(target=drive)

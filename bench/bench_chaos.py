@@ -20,7 +20,6 @@ import argparse
 import os
 import queue
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -28,18 +27,22 @@ import threading
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import psutil
 
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of tests.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from common import keys
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
-from services.lab.supervisor import AliveWatch, start_wart
-from services.lab.wiring import up_args
+from services.lab.supervisor import AliveWatch
+from tests.lab import REPO, UpLab, wart_env
 
-REPO = Path(__file__).resolve().parent.parent
 # The children of a default `wart up`, named by their subcommand and --name (or --world).
 SERVICES = (
     "router",
@@ -53,20 +56,9 @@ SERVICES = (
 )
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def lab_env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    env["PYTHONUNBUFFERED"] = "1"
-    env["WART_NO_MULTICAST"] = "1"
-    for name in ("WART_CONNECT", "WART_REALM", "WART_PASSWORD", "WART_REGISTRY_KEY"):
-        env.pop(name, None)
-    return env
+    """A person's tool's environment: the lab's (tests/lab.py), no credentials of this shell."""
+    return wart_env()
 
 
 class Lines:
@@ -98,47 +90,35 @@ class Lines:
                 self._queue.get(timeout=0.05)
 
 
-@dataclass
-class ChaosLab:
-    """``wart up`` in a subprocess on free ports with its own realm and state directory."""
+class ChaosLab(UpLab):
+    """``wart up`` in a subprocess on free ports with its own realm and state directory
+    (tests/lab.py's UpLab, the one starter), and what the chaos run asks of it."""
 
-    state_dir: Path
-    realm: str = field(default_factory=lambda: f"chaos{os.getpid()}")
-    port: int = field(default_factory=free_port)
-    http_port: int = field(default_factory=free_port)
-    popen: subprocess.Popen[str] | None = None
-    output: Lines | None = None
+    def __init__(self, state_dir: Path) -> None:
+        super().__init__(realm=f"chaos{os.getpid()}", state_dir=state_dir)
 
-    @property
-    def endpoint(self) -> str:
-        return f"tcp/127.0.0.1:{self.port}"
-
-    def start(self, timeout: float = 180.0) -> None:
-        self.popen = start_wart(
-            up_args(self.realm, self.state_dir, self.port, self.http_port), env=lab_env(), cwd=REPO
-        )
-        self.output = Lines(self.popen)
-        if self.output.wait("The lab is running", timeout) is None:
+    def start(self, timeout: float = 180.0) -> ChaosLab:
+        super().start()
+        try:
+            self.wait_line("The lab is running", timeout)
+        except AssertionError:
             self.stop()
-            raise RuntimeError("the lab did not come up:\n" + "\n".join(self.output.lines))
+            raise RuntimeError("the lab did not come up:\n" + "\n".join(self.lines)) from None
+        return self
 
     def admin_password(self) -> str:
         return (self.state_dir / "admin-password.txt").read_text().strip()
 
     def registry_key(self) -> str:
-        assert self.output is not None
-        line = self.output.wait("registry key", 1.0) or ""
-        return line.split(":", 1)[1].split()[0] if ":" in line else ""
+        with suppress(AssertionError):
+            line = self.wait_line("registry key", 1.0)
+            return line.split(":", 1)[1].split()[0] if ":" in line else ""
+        return ""
 
-    def child(self, service: str) -> psutil.Process | None:
+    def service(self, service: str) -> psutil.Process | None:
         """The running child whose command line is ``wart SERVICE ...`` (words in order)."""
-        assert self.popen is not None
         words = service.split()
-        try:
-            children = psutil.Process(self.popen.pid).children(recursive=True)
-        except psutil.NoSuchProcess:
-            return None
-        for proc in children:
+        for proc in self.children():
             try:
                 cmd = proc.cmdline()
             except psutil.NoSuchProcess:
@@ -152,15 +132,15 @@ class ChaosLab:
                 return proc
         return None
 
-    def stop(self) -> None:
+    def stop(self, timeout: float = 40.0) -> int:
         if self.popen is None or self.popen.poll() is not None:
-            return
-        self.popen.send_signal(signal.SIGINT)
+            return self.popen.returncode if self.popen is not None else 0
+        # A chaos run reports what it measured even if the lab is slow to stop.
         try:
-            self.popen.wait(40)
-        except subprocess.TimeoutExpired:
-            os.killpg(self.popen.pid, signal.SIGKILL)
-            self.popen.wait(5)
+            return super().stop(timeout)
+        except AssertionError as exc:
+            print(f"  {exc}", flush=True)
+            return -1
 
 
 def _names(args: Sequence[str], words: Sequence[str]) -> bool:
@@ -306,7 +286,7 @@ class Chaos:
     def kill(self, service: str) -> Outcome:
         if self._line_goes_through(f"before-{service.replace(' ', '_')}", 10) is None:
             return Outcome(service, None, None, "the chat was not working before the kill")
-        victim = self.lab.child(service)
+        victim = self.lab.service(service)
         if victim is None:
             return Outcome(service, None, None, "no such child")
         tokens = self.watch.keys()
@@ -316,7 +296,7 @@ class Chaos:
         # The old tokens go (the router's: all of them) and come back under new sessions.
         deadline = killed_at + self.deadline_s
         while time.monotonic() < deadline:
-            new = self.lab.child(service)
+            new = self.lab.service(service)
             if new is not None and new.pid != victim.pid and tokens <= self.watch.keys():
                 back_s = time.monotonic() - killed_at
                 break

@@ -54,6 +54,7 @@ a sample at once, each decoding it and MACing a command). Run:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
@@ -63,17 +64,21 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol, TypeVar
 
 import msgspec
 import numpy as np
+
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import REPO, BenchLab
 from bench.plain_peer import PEER_WORLD, PlainEngine
 from common import keys
 from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.controller import RobotCommand
-from common.keys import AliveKind
 from common.messages import AgentCommand, Lease, SensorSample, decode, encode
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
@@ -164,6 +169,17 @@ class _TimedBundles:
 
     def undeclare(self) -> None:
         self.pub.undeclare()
+
+
+T = TypeVar("T")
+
+
+def _same(value: T) -> T:
+    return value
+
+
+def _past(counts: list[int], i: int, seen: int) -> bool:
+    return counts[i] > seen
 
 
 def build_world(n: int, name: str = WORLD) -> World:
@@ -261,7 +277,7 @@ def child(args: argparse.Namespace) -> int:
             args.realm,
             WORLD,
             f"k{i}",
-            lambda s=s: s,
+            functools.partial(_same, s),
             # Never due while the loop answers every tick; long, so that none goes out
             # during the plain peer's blocks either (it would load the peer's run).
             keepalive=30.0,
@@ -593,7 +609,7 @@ def wake_storm(n: int, rounds: int = 200) -> None:
         seen = 0
         while not stop:
             with fresh[i]:
-                fresh[i].wait_for(lambda seen=seen: handed[i] > seen, 0.5)
+                fresh[i].wait_for(functools.partial(_past, handed, i, seen), 0.5)
                 if handed[i] == seen:
                     continue
                 seen = handed[i]
@@ -743,10 +759,7 @@ def main() -> int:
     with_peer = not args.no_peer and not args.per_agent
 
     lab = BenchLab([], "unused")
-    lab.spawn(
-        ["router", "--realm", lab.realm, "--name", "r", "--listen", f"tcp/127.0.0.1:{lab.port}"],
-        (AliveKind.ROUTER, "r"),
-    )
+    lab.start_router()
     ident_path = Path(tempfile.mkdtemp(prefix="wart-bench-")) / "registry.key"
     identity, _ = RegistryIdentity.load_or_create(ident_path)
     world_session = issue_session(identity, lab.realm, "engine-bench", ["world"])

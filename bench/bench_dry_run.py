@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from common.sim2d import maps  # noqa: E402 - after the path set-up
-from services.engine import wire  # noqa: E402
+from services.engine import packing  # noqa: E402
 from services.runner.dryrun import dry_run  # noqa: E402
 
 
@@ -28,7 +28,7 @@ def main() -> int:
     p.add_argument("--runs", type=int, default=7)
     p.add_argument("--seconds", type=float, default=5.0)
     args = p.parse_args()
-    snap = wire.snapshot(maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=3))
+    snap = packing.snapshot(maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=3))
     source = (REPO / "examples" / "01_braitenberg.py").read_bytes()
     walls = []
     for n in range(args.runs):

@@ -32,8 +32,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from common.client.agent_client import FINAL  # noqa: E402 - after the path set-up
-from tests.browser.reallab import start_router  # noqa: E402
-from tests.conftest import Procs, wait_for  # noqa: E402
+from tests.conftest import wait_for  # noqa: E402
 from tests.integration.agentkit import (  # noqa: E402
     Motion,
     agent_user,
@@ -41,7 +40,7 @@ from tests.integration.agentkit import (  # noqa: E402
     start_engine,
     start_runner,
 )
-from tests.integration.labkit import make_lab  # noqa: E402
+from tests.lab import Procs, make_lab, start_router  # noqa: E402
 
 FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")

@@ -27,14 +27,18 @@ from pathlib import Path
 
 import zenoh
 
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from bench.engine_bench import build, control
 from bench.labproc import REPO, BenchLab
 from common import keys
-from common.keys import AliveKind
 from common.messages import WorldFrame, decode, encode
 from common.service import close_session, has_subscribers, open_session
 from common.zconfig import NetworkOptions
-from services.engine import wire
+from services.engine import packing
 
 WORLD = "bench"
 FRAME_HZ = 50  # the engine publishes a frame each 20 ms tick
@@ -82,12 +86,12 @@ def ticks(n: int, count: int, session: zenoh.Session) -> tuple[list[float], list
     for _ in range(20):  # warm up (numba kernels, the route)
         control(world)
         world.step()
-        pub.put(encode(wire.frame(world)))
+        pub.put(encode(packing.frame(world)))
     for _ in range(count):
         c0, w0 = time.process_time(), time.perf_counter()
         control(world)
         world.step()
-        pub.put(encode(wire.frame(world)))
+        pub.put(encode(packing.frame(world)))
         cpu.append((time.process_time() - c0) * 1000)
         wall.append((time.perf_counter() - w0) * 1000)
         time.sleep(max(0.0, 0.02 - (time.perf_counter() - w0)))  # paced like the engine
@@ -108,11 +112,8 @@ def main() -> None:
     if args.record:
         sys.exit(record(args.record[0], int(args.record[1]), Path(args.record[2])))
     lab = BenchLab([], "x")
-    listen = f"tcp/127.0.0.1:{lab.port}"
-    lab.spawn(
-        ["router", "--realm", lab.realm, "--name", "r", "--listen", listen],
-        (AliveKind.ROUTER, "r"),
-    )
+    lab.start_router()
+    listen = lab.options.connect[0]  # where the recording child connects
     session = open_session(lab.options, wait=20.0)
     try:
         print(f"{'robots':>7} {'recorder':>9} {'cpu ms p50':>11} {'p95':>6} "

@@ -17,7 +17,7 @@ Playwright), logs each one in and joins the arena, then for --seconds counts:
 With ``--real`` the lab is real processes (router, registry, lobby room and
 a Sim2D engine on maps/swarm.json: 1,000 Khepera wandering with ``--wander``,
 since viser sends nothing for robots that stand still) and the viewer runs over
-:class:`~viewers.web.real.RealConnector`, as in tests/browser/test_real_lab.py;
+:class:`~viewers.web.live.LiveConnector`, as in tests/browser/test_real_lab.py;
 the process CPU then excludes the world (the engine is its own process).
 """
 

@@ -19,8 +19,15 @@ import argparse
 import asyncio
 import contextlib
 import os
+import sys
 import time
 from collections import Counter
+from pathlib import Path
+
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.keys import AliveKind

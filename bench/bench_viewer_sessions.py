@@ -178,7 +178,7 @@ def _browsers(
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
         pages, counters = [], []
         for i in range(count):
-            page = browser.new_context(viewport=BENCH_VIEWPORT).new_page()  # type: ignore[arg-type]
+            page = browser.new_context(viewport=BENCH_VIEWPORT).new_page()
             counter = WsCounter()
             counter.attach(page)
             page.goto(url)

@@ -8,10 +8,17 @@ they verify every event (the room seals each one) as a real client does.
 
 from __future__ import annotations
 
+import argparse
 import functools
 import sys
 import threading
 import time
+from pathlib import Path
+
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.client.lab_client import LabClient
@@ -22,9 +29,12 @@ PASSWORD = "benchmark password"
 
 
 def main() -> None:
-    members = int(sys.argv[1]) if len(sys.argv) > 1 else 50
-    per_sender = int(sys.argv[2]) if len(sys.argv) > 2 else 200
-    senders = int(sys.argv[3]) if len(sys.argv) > 3 else 5
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p.add_argument("members", type=int, nargs="?", default=50, help="room members (default 50)")
+    p.add_argument("per_sender", type=int, nargs="?", default=200, help="lines each (default 200)")
+    p.add_argument("senders", type=int, nargs="?", default=5, help="members who send (default 5)")
+    args = p.parse_args()
+    members, per_sender, senders = args.members, args.per_sender, args.senders
     names = [f"u{i:02d}" for i in range(members)]
     lab = BenchLab(names, PASSWORD)
     lab.start(["--rate", "100000", "--burst", "100000", "--history", "100"])

@@ -1,21 +1,28 @@
-"""Start a router, a registry and chat rooms as real processes for the benchmarks."""
+"""A router, a registry and a chat room as real processes for the benchmarks.
+
+The processes are started by tests/lab.py, the one lab starter of the tests and
+the benchmarks (with the lab's own command lines, from services/lab/wiring.py);
+this is its shape for benchmarks that start and stop a lab by hand, with the
+children's logs kept quiet (``WART_BENCH_LOG_LEVEL``, default WARNING).
+"""
 
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of tests.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from common import keys
-from common.auth import RegistryIdentity, create_identity_key
 from common.keys import AliveKind
-from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
-from services.lab.supervisor import AliveWatch
-from services.registry.accounts_db import RegistryDB
+from tests.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -24,88 +31,56 @@ class BenchLab:
     def __init__(self, users: list[str], password: str) -> None:
         self.tmp = Path(tempfile.mkdtemp(prefix="wart-bench-"))
         self.realm = "bench"
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            self.port = s.getsockname()[1]
-        self.identity, _ = RegistryIdentity.load_or_create(self.tmp / "registry.key")
-        db = RegistryDB(self.tmp / "registry.db")
-        db.ensure_admin()
-        for user in users:
-            db.add_user(user, ["student"], password=password)
-        db.close()
-        self.procs: list[subprocess.Popen[bytes]] = []
-        self.options = NetworkOptions(realm=self.realm, connect=(f"tcp/127.0.0.1:{self.port}",))
+        # The DB exists before the lab starts: a benchmark may add its own accounts first.
+        self.identity = lab_state(
+            self.tmp, users=dict.fromkeys(users, "student"), password=password
+        )
+        self._procs = Procs(
+            self.tmp, env={"WART_LOG_LEVEL": os.environ.get("WART_BENCH_LOG_LEVEL", "WARNING")}
+        )
+        self.lab: ProcessLab | None = None
+
+    def _lab(self) -> ProcessLab:
+        if self.lab is None:
+            raise RuntimeError("the bench lab is not started (BenchLab.start)")
+        return self.lab
+
+    @property
+    def port(self) -> int:
+        return self._lab().router.port
+
+    @property
+    def options(self) -> NetworkOptions:
+        """A client's network options (the router; no registry key)."""
+        return self._lab().router.options()
+
+    @property
+    def procs(self) -> list[subprocess.Popen[bytes]]:
+        """The processes started, in order (the router first)."""
+        return [proc.popen for proc in self._procs.started]
 
     def net(self) -> list[str]:
-        return [*self.options.as_args(), "--registry-key", self.identity.verify_key.hex()]
+        return self._lab().net_args()
 
     def spawn(self, args: list[str], alive: tuple[AliveKind, str]) -> None:
-        log = open(self.tmp / f"{alive[1]}.log", "wb")  # noqa: SIM115 - the child owns it
-        self.procs.append(
-            subprocess.Popen(
-                [sys.executable, "-m", "services.cli", *args],
-                cwd=REPO,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env={
-                    "PYTHONPATH": str(REPO),
-                    "PATH": "/usr/bin:/bin",
-                    "WART_LOG_LEVEL": os.environ.get("WART_BENCH_LOG_LEVEL", "WARNING"),
-                },
-            )
-        )
-        session = open_session(self.options, wait=20.0)
-        try:
-            key = keys.alive(self.realm, *alive)
-            watch = AliveWatch(session, key)
-            if not watch.wait(key, 30.0):
-                raise RuntimeError(f"{alive[1]} did not start; see {self.tmp}")
-            watch.close()
-        finally:
-            close_session(session)
+        """``wart ARGS`` (a benchmark's own process), waited for until ``alive`` is seen."""
+        proc = self._procs.start(alive[1], args)
+        wait_alive(self.options, keys.alive(self.realm, *alive), proc)
+
+    def start_router(self) -> None:
+        """The router alone (a benchmark that runs its world in-process needs no registry)."""
+        router = start_router(self._procs, self.realm, name="r")
+        self.lab = ProcessLab(router, self._procs, state=self.tmp, identity=self.identity)
 
     def start(self, room_args: list[str] | None = None) -> None:
-        listen = f"tcp/127.0.0.1:{self.port}"
-        self.spawn(
-            ["router", "--realm", self.realm, "--name", "r", "--listen", listen],
-            (AliveKind.ROUTER, "r"),
-        )
-        self.spawn(
-            [
-                "registry",
-                "--db",
-                str(self.tmp / "registry.db"),
-                "--key-file",
-                str(self.tmp / "registry.key"),
-                *self.net(),
-            ],
-            (AliveKind.REGISTRY, "registry"),
-        )
+        """The router and the registry; with ``room_args``, the chat room ``room`` too."""
+        self.start_router()
+        self._lab().start_registry()
         if room_args is not None:
-            key = create_identity_key(self.tmp / "room.key")
-            db = RegistryDB(self.tmp / "registry.db")
-            db.add_user("chat-room", ["service"], public_key=bytes(key.verify_key))
-            db.close()
-            self.spawn(
-                [
-                    "context",
-                    "chat",
-                    "--name",
-                    "room",
-                    "--user",
-                    "chat-room",
-                    "--identity",
-                    str(self.tmp / "room.key"),
-                    *room_args,
-                    *self.net(),
-                ],
-                (AliveKind.CONTEXT, "room"),
-            )
+            self._lab().start_room("room", *room_args)
 
     def stop(self) -> None:
-        for proc in reversed(self.procs):
-            proc.terminate()
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        self._procs.stop_all()
+
+
+__all__ = ["REPO", "BenchLab"]

@@ -7,15 +7,22 @@ instant and spread over 10 s, with p50 / p99 per client.
 
 from __future__ import annotations
 
+import argparse
 import functools
 import statistics
 import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import nacl.pwhash
 import zenoh
+
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.auth import create_identity_key
@@ -65,7 +72,9 @@ def class_at_once(
 
 
 def main() -> None:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 30
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p.add_argument("n", type=int, nargs="?", default=30, help="logins of each kind (default 30)")
+    n = p.parse_args().n
     lab = BenchLab(["alice"], PASSWORD)
     key = create_identity_key(lab.tmp / "script.key")
     db = RegistryDB(lab.tmp / "registry.db")

@@ -7,7 +7,7 @@ ours, message for message, so the comparison isolates what our layers cost:
 - the *engine* (:class:`PlainEngine`, a thread of the bench's process with
   its own Zenoh session) steps the same Sim2D world of Khepera at 50 Hz and
   puts each tick's SensorSamples in one SampleBundle (express), exactly the
-  bytes our engine puts (``wire.samples``, same encoding);
+  bytes our engine puts (``packing.samples``, same encoding);
 - the *controllers* (``python -m bench.plain_peer``, one client process)
   subscribe to that bundle and answer each sample with a plain encoded
   AgentCommand echoing the sample's time; ``--inline``: all of them in the
@@ -52,7 +52,7 @@ from common.messages import (
 from common.service import close_session, open_session
 from common.sim2d.world import World
 from common.zconfig import NetworkOptions
-from services.engine import wire
+from services.engine import packing
 
 PEER_WORLD = "peer"
 
@@ -137,7 +137,7 @@ class PlainEngine:
                 except queue.Empty:
                     break
             world.step()
-            samples = wire.samples(world, slots)
+            samples = packing.samples(world, slots)
             payload = encode(
                 SampleBundle(
                     world=world.name,

@@ -35,9 +35,15 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import msgspec
+
+if __package__ in (None, ""):
+    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
+    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.plain_peer import answer
 from common import keys

@@ -5,7 +5,7 @@
 
 from __future__ import annotations
 
-import sys
+import argparse
 import time
 
 from common import keys
@@ -16,7 +16,9 @@ KEY = keys.ctx_in("lab", "lobby")
 
 
 def main() -> None:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 20_000
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p.add_argument("n", type=int, nargs="?", default=20_000, help="messages (default 20000)")
+    n = p.parse_args().n
     identity = RegistryIdentity.generate()
     session = issue_session(identity, "lab", "alice", ["chat"])
     payloads = [

@@ -30,6 +30,9 @@ DEFAULT_ROLES: dict[str, frozenset[str]] = {
     # Contexts, engines, runners and bridges. ``host`` lets a room's events be
     # trusted by clients (events come from a session that may host contexts).
     "service": frozenset({"lease", "world", "run", "host", "join"}),
+    # A gateway for people (the web viewer): it only vouches for the address a
+    # browser's login comes from, so the registry throttles each browser apart.
+    "gateway": frozenset({"vouch"}),
 }
 
 CREDENTIAL_KINDS = ("password", "ed25519")

@@ -128,6 +128,16 @@ def registry_revocations(realm: str) -> str:
     return f"{realm_root(realm)}/registry/revocations"
 
 
+def registry_audit(realm: str) -> str:
+    """Admins list the audit trail here (a queryable of the registry)."""
+    return f"{realm_root(realm)}/registry/audit"
+
+
+def registry_report(realm: str) -> str:
+    """Services put their privileged actions here, sealed; the registry appends them."""
+    return f"{realm_root(realm)}/registry/report"
+
+
 # --- presence ---------------------------------------------------------------
 
 

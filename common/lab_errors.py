@@ -39,6 +39,14 @@ class RateLimited(LabError):
         self.retry_after = retry_after
 
 
+class Banned(LabError):
+    """The account is banned; the message says why and until when."""
+
+    def __init__(self, message: str, retry_after: float) -> None:
+        super().__init__(message)
+        self.retry_after = retry_after  # 0: until an admin lifts it
+
+
 class NotLoggedIn(LabError):
     pass
 

@@ -22,8 +22,16 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "the server: accounts, login, ACL, presence, directory",
     ),
     "users": (
-        "services.commands.users",
+        "services.registry.users",
         "add, change and remove accounts and grants (registry DB)",
+    ),
+    "ban": (
+        "services.commands.ban",
+        "keep an account out for a while or for good, with a reason (admins)",
+    ),
+    "audit": (
+        "services.commands.audit",
+        "who did what, when, from where: the audit trail, filtered, CSV/JSON (admins)",
     ),
     "context": ("services.context.main", "run a context: wart context chat --name ROOM"),
     "chat": ("services.commands.chat", "chat in a room from a terminal"),

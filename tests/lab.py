@@ -1,24 +1,383 @@
-"""A whole ``wart up`` lab in a subprocess, for smoke and browser tests."""
+"""The one lab starter of the tests and the benchmarks.
+
+Two shapes of lab, both started here and nowhere else:
+
+- :class:`ProcessLab`: a router, then the services a test needs, one real
+  ``wart`` process each, started with the command lines the lab itself uses
+  (services/lab/wiring.py builds them, as for ``wart up`` and ``wart host``),
+  so a test exercises the lab's real wiring, not a copy of it;
+- :class:`UpLab`: a whole ``wart up`` in a subprocess (smoke and browser tests).
+
+Every process runs on 127.0.0.1 on a free port with multicast scouting off,
+and is stopped (then killed, if it must be) when its owner stops the lab.
+"""
 
 from __future__ import annotations
 
+import functools
+import os
 import queue
 import signal
+import socket
 import subprocess
+import sys
 import threading
 import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from unittest import mock
 
 import psutil
+import zenoh
 
-from services.lab.supervisor import start_wart
-from services.lab.wiring import up_args
-from tests.conftest import REPO, free_port, wart_env
+from common import keys
+from common.auth import RegistryIdentity, create_identity_key
+from common.client.lab_client import LabClient
+from common.keys import AliveKind
+from common.service import close_session, open_session
+from common.zconfig import NetworkOptions
+from services.lab import wiring
+from services.lab.labfile import ArenaSettings
+from services.lab.supervisor import AliveWatch, ChildSpec, start_wart
+from services.lab.wiring import SHIPPED_MAPS, Wiring, up_args
+from services.registry import accounts_db
+from services.registry.accounts_db import RegistryDB, hash_password
+
+REPO = Path(__file__).resolve().parent.parent
+
+PASSWORD = "correct horse"
+USERS = {"alice": "student", "bob": "student", "carol": "student", "ida": "instructor"}
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def wart_env(extra: dict[str, str] | None = None) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONUNBUFFERED"] = "1"
+    env["WART_NO_MULTICAST"] = "1"
+    # Nothing of the developer's own lab: its router, realm or credentials.
+    for name in ("WART_CONNECT", "WART_REALM", "WART_PASSWORD", "WART_REGISTRY_KEY"):
+        env.pop(name, None)
+    if extra:
+        env.update(extra)
+    return env
+
+
+# --- processes -----------------------------------------------------------------------
 
 
 @dataclass
-class Lab:
+class Proc:
+    """A ``wart`` subprocess started by a test, with its output in a file."""
+
+    name: str
+    popen: subprocess.Popen[bytes]
+    log_path: Path
+
+    def output(self) -> str:
+        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGTERM)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(5)
+        return self.popen.returncode
+
+    def kill9(self) -> None:
+        self.popen.kill()
+        self.popen.wait(5)
+
+
+@dataclass
+class Procs:
+    """Starts ``wart`` subprocesses and stops them all at teardown.
+
+    ``env``: variables every process gets (a benchmark quiets the logs).
+    """
+
+    tmp: Path
+    started: list[Proc] = field(default_factory=list)
+    env: dict[str, str] = field(default_factory=dict)
+
+    def start(self, name: str, args: Sequence[str], env: dict[str, str] | None = None) -> Proc:
+        log_path = self.tmp / f"{name}.log"
+        out = open(log_path, "wb")  # noqa: SIM115 - the child writes to it for its lifetime
+        popen = subprocess.Popen(
+            [sys.executable, "-m", "services.cli", *args],
+            cwd=REPO,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=wart_env({**self.env, **(env or {})}),
+            start_new_session=True,
+        )
+        out.close()
+        proc = Proc(name, popen, log_path)
+        self.started.append(proc)
+        return proc
+
+    def stop_all(self) -> None:
+        for proc in reversed(self.started):
+            proc.stop()
+
+
+@dataclass
+class Router:
+    realm: str
+    port: int
+    proc: Proc
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/127.0.0.1:{self.port}"
+
+    def options(self, **changes: object) -> NetworkOptions:
+        """Network options for a client of this router (what services get in tests)."""
+        base = NetworkOptions(realm=self.realm, mode="client", connect=(self.endpoint,))
+        return base.with_(**changes) if changes else base
+
+    def net_args(self) -> list[str]:
+        return self.options().as_args()
+
+
+def wait_alive(options: NetworkOptions, key: str, proc: Proc, timeout: float = 30.0) -> None:
+    """Return once ``key``'s liveliness token is seen; fail with the process's output if it
+    exits or the token does not come in time (never a fixed sleep)."""
+    session = open_session(options, wait=20.0)
+    try:
+        watch = AliveWatch(session, key)
+        ok = watch.wait(key, timeout, lambda: proc.popen.poll() is not None)
+        watch.close()
+    finally:
+        close_session(session)
+    assert ok, f"{proc.name} did not come up ({key}):\n{proc.output()}"
+
+
+def start_router(
+    procs: Procs,
+    realm: str,
+    name: str = "test-router",
+    *,
+    port: int | None = None,
+    connect: Sequence[str] = (),
+    log_name: str = "router",
+) -> Router:
+    """A real ``wart router`` on a free 127.0.0.1 port (or ``port``, to restart one where
+    it was), multicast scouting off; ``connect``: routers it meshes with (a second host)."""
+    port = port or free_port()
+    spec = wiring.router_spec(realm, name, [f"tcp/127.0.0.1:{port}"], connect=connect)
+    proc = procs.start(log_name, [*spec.argv, "--no-multicast-scouting"])
+    router = Router(realm=realm, port=port, proc=proc)
+    assert spec.alive_key is not None
+    wait_alive(router.options(), spec.alive_key, proc, timeout=20.0)
+    return router
+
+
+# --- a lab started process by process --------------------------------------------------
+
+
+@dataclass
+class ProcessLab:
+    """A router and the services a test starts, each with the lab's own command line."""
+
+    router: Router
+    procs: Procs
+    state: Path
+    identity: RegistryIdentity
+    registry: Proc | None = None
+
+    @property
+    def realm(self) -> str:
+        return self.router.realm
+
+    @property
+    def db_path(self) -> Path:
+        return self.state / "registry.db"
+
+    @property
+    def key_hex(self) -> str:
+        return self.identity.verify_key.hex()
+
+    def options(self) -> NetworkOptions:
+        """What every service of this lab gets: the router, the pinned registry key."""
+        return self.router.options(registry_key=self.key_hex)
+
+    def net_args(self) -> list[str]:
+        return self.options().as_args()
+
+    def wiring(self) -> Wiring:
+        """This lab's host for services/lab/wiring.py: keys and maps in the state directory."""
+        return Wiring(
+            realm=self.realm,
+            host="test",
+            state_dir=self.state,
+            net_args=lambda _role: self.net_args(),
+            identity=lambda account: self.state / f"{account}.key",
+            registry_key_file=self.state / "registry.key",
+            map_dirs=(self.state / "maps", SHIPPED_MAPS),
+            runner="runner",
+            arena=ArenaSettings(),
+        )
+
+    def account(self, name: str) -> Path:
+        """A service account (role ``service``) and its identity key, made once."""
+        key_file = self.wiring().identity(name)
+        if not key_file.exists():
+            key = create_identity_key(key_file)
+            db = RegistryDB(self.db_path)
+            db.add_user(name, ["service"], public_key=bytes(key.verify_key))
+            db.close()
+        return key_file
+
+    def start(
+        self,
+        spec: ChildSpec,
+        *,
+        name: str | None = None,
+        extra: Sequence[str] = (),
+        env: dict[str, str] | None = None,
+    ) -> Proc:
+        """One process of the plan, started and waited for (its token), as a supervisor does."""
+        if spec.prepare is not None:
+            spec.prepare()
+        proc = self.procs.start(name or spec.name.replace(" ", "-"), [*spec.argv, *extra], env=env)
+        if spec.alive_key is not None:
+            wait_alive(self.router.options(), spec.alive_key, proc)
+        return proc
+
+    def wait_alive(self, kind: AliveKind, ident: str, proc: Proc) -> None:
+        wait_alive(self.router.options(), keys.alive(self.realm, kind, ident), proc)
+
+    # -- the services tests use
+
+    def start_registry(self) -> Proc:
+        self.registry = self.start(wiring.registry_spec(self.wiring()))
+        return self.registry
+
+    def start_room(self, room: str, *extra: str) -> Proc:
+        w = self.wiring()
+        self.account(wiring.service_account("chat", room))
+        return self.start(wiring.chat_room_spec(w, room), name=f"room-{room}", extra=extra)
+
+    def start_engine(
+        self,
+        map_name: str = "foraging",
+        *,
+        world: str = "w1",
+        identity: bool = False,
+        seed: int = 3,
+        extra: Sequence[str] = (),
+        env: dict[str, str] | None = None,
+    ) -> Proc:
+        """The engine of ``world`` on a copy of a shipped map; with ``identity`` it logs in
+        (``engine-WORLD``: agent contexts grant it MAC leases)."""
+        w = self.wiring()
+        w.maps_dir.mkdir(parents=True, exist_ok=True)
+        map_path = w.maps_dir / f"{map_name}.json"
+        map_path.write_bytes((SHIPPED_MAPS / f"{map_name}.json").read_bytes())
+        if identity:
+            self.account(wiring.service_account("engine", world))
+        spec = wiring.engine_spec(w, world, map_path, seed=seed, login=identity)
+        return self.start(spec, name="engine", extra=extra, env=env)
+
+    def start_runner(self, name: str = "runner", account: str = "runner-svc") -> Proc:
+        self.account(account)
+        return self.start(wiring.runner_spec(self.wiring(), name, account=account), name="runner")
+
+    def start_agent_context(
+        self,
+        *extra: str,
+        ctx: str = "arena",
+        world: str = "w1",
+        slot: float = 2.5,
+        owner: str = "ida",
+        account: str | None = None,
+    ) -> Proc:
+        """The agent context ``ctx`` of ``world`` (account ``ctx-CTX`` unless given)."""
+        account = account or wiring.service_account("agent", ctx)
+        self.account(account)
+        spec = wiring.agent_context_spec(
+            self.wiring(), ctx, world, owner=owner, slot_seconds=slot, account=account
+        )
+        name = "agent-context" if ctx == "arena" else f"agent-context-{ctx}"
+        return self.start(spec, name=name, extra=extra)
+
+    # -- clients
+
+    @contextmanager
+    def client(self, user: str | None = None, password: str = PASSWORD) -> Iterator[LabClient]:
+        session = open_session(self.router.options(), wait=10.0)
+        try:
+            with LabClient(session, self.realm, self.identity.verify_key) as client:
+                if user is not None:
+                    client.login(user, password)
+                yield client
+        finally:
+            close_session(session)
+
+    def zsession(self) -> zenoh.Session:
+        return open_session(self.router.options(), wait=10.0)
+
+
+@functools.cache
+def _password_hash(password: str) -> bytes:
+    """One argon2id hash of ``password`` per test session (about 0.2 s each on a busy machine).
+
+    A salted hash string verifies whichever account holds it, so every lab's
+    accounts can share it; make_lab otherwise hashed six passwords per test.
+    """
+    return hash_password(password)
+
+
+def lab_state(
+    state: Path, *, users: dict[str, str] = USERS, password: str = PASSWORD
+) -> RegistryIdentity:
+    """A lab's state before any process: the registry's key, and a DB with ``admin``
+    (password PASSWORD) and ``users`` (a role each, password ``password``)."""
+    state.mkdir(parents=True, exist_ok=True)
+    identity, _ = RegistryIdentity.load_or_create(state / "registry.key")
+    db = RegistryDB(state / "registry.db")
+    with mock.patch.object(accounts_db, "hash_password", _password_hash):
+        # the admin ensure_admin would make, with a known password rather than a random one
+        db.add_user("admin", ["admin"], password=PASSWORD)
+        for name, role in users.items():
+            db.add_user(name, [role], password=password)
+    db.close()
+    return identity
+
+
+def make_lab(
+    router: Router,
+    procs: Procs,
+    tmp: Path,
+    *,
+    users: dict[str, str] = USERS,
+    password: str = PASSWORD,
+) -> ProcessLab:
+    """A lab on ``router`` with its state in TMP/state (see lab_state); no service started."""
+    state = tmp / "state"
+    identity = lab_state(state, users=users, password=password)
+    return ProcessLab(router=router, procs=procs, state=state, identity=identity)
+
+
+# --- a whole `wart up` ---------------------------------------------------------------------
+
+
+@dataclass
+class UpLab:
+    """A whole ``wart up`` lab in a subprocess, for smoke and browser tests."""
+
     realm: str
     state_dir: Path
     port: int = field(default_factory=free_port)
@@ -32,7 +391,7 @@ class Lab:
     def endpoint(self) -> str:
         return f"tcp/127.0.0.1:{self.port}"
 
-    def start(self) -> Lab:
+    def start(self) -> UpLab:
         self.popen = start_wart(
             up_args(self.realm, self.state_dir, self.port, self.http_port, *self.extra_args),
             env=wart_env(),
@@ -111,3 +470,21 @@ class Lab:
                     f"wart up did not stop within {timeout:.0f} s of Ctrl-C"
                 ) from None
         return self.popen.returncode
+
+
+__all__ = [
+    "PASSWORD",
+    "REPO",
+    "USERS",
+    "Proc",
+    "ProcessLab",
+    "Procs",
+    "Router",
+    "UpLab",
+    "free_port",
+    "lab_state",
+    "make_lab",
+    "start_router",
+    "wait_alive",
+    "wart_env",
+]

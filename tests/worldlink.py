@@ -5,9 +5,10 @@ from __future__ import annotations
 from typing import Any
 
 from common.controller import Controller, ControllerLoop, Khepera, KheperaState, RobotCommand
+from common.controller.actuators import apply_command
 from common.sim2d.world import World
 from common.world.remote_robot import agent_command, state_from_sample
-from services.engine import wire
+from services.engine import packing
 
 
 class WorldLink:
@@ -18,22 +19,12 @@ class WorldLink:
         self.agent = agent
 
     def latest(self) -> KheperaState:
-        return state_from_sample(wire.sample(self.world, self.world.agent_slot(self.agent)))
+        return state_from_sample(packing.sample(self.world, self.world.agent_slot(self.agent)))
 
     def send(self, command: RobotCommand) -> None:
+        # Through the wire's form, as the engine receives it, and the engine's one mapping.
         cmd = agent_command(self.agent, command)
-        world, slot = self.world, self.world.agent_slot(self.agent)
-        if cmd.speeds is not None:
-            world.set_speeds(slot, *cmd.speeds)
-        if cmd.counters is not None:
-            world.set_counters(slot, *cmd.counters)
-        for led, action in enumerate(cmd.leds or []):  # the engine's rule: 2 toggles
-            on = not world.leds[slot, led] if action == 2 else bool(action)
-            world.set_led(slot, led, on)
-        if cmd.arm is not None:
-            world.set_arm(slot, cmd.arm)
-        if cmd.fingers is not None:
-            world.set_fingers(slot, cmd.fingers == "closed")
+        apply_command(cmd, self.world.actuators(self.world.agent_slot(self.agent)))
 
 
 def run_in_world(

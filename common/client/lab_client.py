@@ -54,6 +54,7 @@ from common.client.registry_admin import RegistryAdminCalls
 from common.client.rooms import RoomCalls, RoomHandle
 from common.keys import AliveKind
 from common.lab_errors import (
+    Banned,
     LabError,
     NotFound,
     NotLoggedIn,
@@ -108,6 +109,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         timeout: float = 5.0,
         presence: bool = True,
         via: str = "",
+        voucher: Callable[[bytes], bytes] | None = None,
     ) -> None:
         if isinstance(registry_key, str):
             registry_key = parse_public_key(registry_key)
@@ -130,9 +132,12 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         self.on_private: Callable[[PrivateText], None] = lambda _m: None
         self.on_kicked: Callable[[KickNotice], None] = lambda _k: None
         self.pending: list[PrivateText] = []  # kept messages received at login
-        # A gateway's name for where this client's person is (the viewer: one
-        # browser connection); the registry throttles failed logins per source.
+        # Where this client's person says they are: logged by the registry, never a
+        # throttle source of its own (docs/SECURITY.md "Failed logins").
         self.via = via[:200]
+        # A gateway's vouch for its person's address, given the new session's key
+        # (common/client/service_login.py vouch_for): that address is the source.
+        self.voucher = voucher
         self._querier: Any = None
         self._source_sn = 0
         self._revocations: RevocationFeed | None = None
@@ -209,8 +214,8 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         zenoh-python builds an entity id only for declared entities, so a querier
         is declared once for it.
         """
-        if self._querier is None:
-            self._querier = self.z.declare_querier(key)
+        if self._querier is None:  # on the login key, whatever asks: the rights it needs
+            self._querier = self.z.declare_querier(keys.registry_login(self.realm))
         self._source_sn += 1
         return zenoh.SourceInfo(self._querier.id, self._source_sn)
 
@@ -226,7 +231,9 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         timeout: float | None = None,
     ) -> M:
         payload = self._seal(key, message) if signed else encode(message)
-        answers = self._get(key, payload, what, timeout)
+        # The registry records where admin requests come from (the audit trail).
+        to_registry = key.startswith(keys.registry_all(self.realm)[:-2])
+        answers = self._get(key, payload, what, timeout, declare_source=to_registry)
         if not answers:
             if not_found is not None:
                 raise NotFound(not_found)
@@ -332,6 +339,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
             mailbox_key=bytes(mailbox.public_key),
             ttl=ttl,
             via=self.via,
+            vouch=self.voucher(session_keys.session_public_key) if self.voucher else None,
         )
         sealed = nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(encode(request))
         key = keys.registry_login(self.realm)
@@ -413,6 +421,8 @@ class LabClient(RoomCalls, RegistryAdminCalls):
                 raise WrongCredentials(err.message)
             if err.code == "rate_limited":
                 raise RateLimited(err.message, err.retry_after)
+            if err.code == "forbidden":
+                raise Banned(err.message, err.retry_after)
         if foreign or any("sealed to another registry key" in e.message for e in errors):
             raise RegistryKeyMismatch(
                 f"the registry that answered is not the one you trust (pinned key {pinned}); "

@@ -15,8 +15,13 @@ from common import keys
 from common.auth import registry_box_key
 from common.messages import (
     AddUser,
+    AuditEntry,
+    AuditList,
+    AuditQuery,
+    BanUser,
     Grant,
     KickFromServer,
+    LiftBan,
     ListUsers,
     Message,
     OkReply,
@@ -102,3 +107,20 @@ class RegistryAdminCalls:
     def unlock_logins(self, user: str) -> str:
         """Forget the account's failed logins (admin): every source may try again at once."""
         return self._admin(UnlockLogins(user=user), f"unlock the logins of {user}").detail
+
+    def ban(self, user: str, reason: str, until: float | None = None) -> str:
+        """Keep ``user`` out until ``until`` (wall-clock s; None: until lifted), told why."""
+        return self._admin(BanUser(user=user, reason=reason, until=until), f"ban {user}").detail
+
+    def lift_ban(self, user: str, reason: str = "") -> str:
+        return self._admin(LiftBan(user=user, reason=reason), f"lift the ban on {user}").detail
+
+    def audit_trail(self, query: AuditQuery | None = None) -> tuple[list[AuditEntry], bool]:
+        """The audit trail, newest first, filtered (admin); (entries, older ones match too)."""
+        reply = self._ask(
+            keys.registry_audit(self.realm),
+            query or AuditQuery(),
+            AuditList,
+            "read the audit trail",
+        )
+        return reply.entries, reply.more

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from common import keys
 from common.auth import Session, load_identity_key, parse_public_key
 from common.client.lab_client import LabClient
 from common.lab_errors import LabError, NotLoggedIn, RateLimited, RegistryUnreachable
+from common.messages import LoginVouch
 
 log = logging.getLogger("wart.client")
 
@@ -147,3 +149,19 @@ class ServiceCredentials:
         except LabError as exc:
             raise RuntimeError(f"{what} could not log in as {self.user}: {exc}") from None
         return login
+
+
+def vouch_for(session: Session, realm: str, address: str) -> Callable[[bytes], bytes]:
+    """A gateway's voucher for one person's login (``LabClient(voucher=...)``).
+
+    Given the new session's key, it seals a LoginVouch with the gateway's own
+    session, saying the login comes from ``address`` (the browser's address as
+    the gateway sees it). The registry then throttles that address, not the
+    gateway's whole Zenoh session; it honours the vouch only from ``vouch``.
+    """
+    if not address or len(address) > 128 or not address.isprintable():
+        raise ValueError(f"a vouched address is 1 to 128 printable characters, not {address!r}")
+    key = keys.registry_login(realm)
+    return lambda session_key: session.seal(
+        key, LoginVouch(address=address, session_key=session_key)
+    )

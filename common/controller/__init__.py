@@ -69,6 +69,21 @@ class KheperaState:
     object_present: bool = False
     resistivity: int = 0
 
+    def to_dict(self) -> dict[str, Any]:
+        """The plain mapping :meth:`from_dict` reads back (the sandbox's pipe carries it)."""
+        return {
+            "time": self.time,
+            "speeds": list(self.speeds),
+            "counters": list(self.counters),
+            "proximity": list(self.proximity),
+            "ambient": list(self.ambient),
+            "leds": list(self.leds),
+            "arm": self.arm,
+            "gripper_closed": self.gripper_closed,
+            "object_present": self.object_present,
+            "resistivity": self.resistivity,
+        }
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> KheperaState:
         """Build from a plain mapping, checking every field (data crosses a process boundary)."""
@@ -112,10 +127,11 @@ COMMAND_FIELDS = ("speeds", "counters", "leds", "arm", "grip")
 class RobotCommand:
     """One command a controller gives its robot; exactly one field is set.
 
-    The one schema every transport carries: the sandbox's pipe (as a dict, see
-    :meth:`to_dict`), Zenoh (``common.world.remote_robot`` turns it into an
-    AgentCommand), and a test's in-process world. Stdlib only, like this module,
-    because the sandboxed child imports it.
+    The one schema every transport carries: the sandbox's pipe
+    (``common.controller.pipe.Command``, its fields as :meth:`to_dict` gives
+    them), Zenoh (``common.world.remote_robot`` turns it into an AgentCommand of
+    the same field names), and a test's in-process world. Stdlib only, like this
+    module, because the sandboxed child imports it.
     """
 
     speeds: tuple[int, int] | None = None  # pulses per 10 ms, each within ±MAX_SPEED

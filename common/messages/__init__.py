@@ -6,6 +6,8 @@ its own types on the shared :class:`~common.messages.base.Message` base.
 
 from common.messages.agent import *  # noqa: F403 - every agent-context and runner wire type
 from common.messages.agent import __all__ as _agent_all
+from common.messages.audit import *  # noqa: F403 - every audit-trail wire type
+from common.messages.audit import __all__ as _audit_all
 from common.messages.auth import (
     ALL_PERMISSIONS,
     AuthEnvelope,
@@ -121,6 +123,7 @@ __all__ = [
     "decode",
     "encode",
     *_agent_all,
+    *_audit_all,
     *_camera_all,
     *_chat_all,
     *_host_all,

@@ -22,6 +22,7 @@ Permission = Literal[
     "lease",  # issue leases on agents (agent contexts)
     "world",  # serve a world: frames, sensors, obey leases (engines, bridges)
     "run",  # run deployed controllers (runners)
+    "vouch",  # say where a login through it comes from (the web viewer, a gateway)
 ]
 
 ALL_PERMISSIONS: tuple[str, ...] = Permission.__args__  # type: ignore[attr-defined]

@@ -21,6 +21,9 @@ Megabytes = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
 Robots = Annotated[int, msgspec.Meta(ge=1, le=1000)]
 
 
+HostedState = Literal["starting", "running", "restarting", "failed"]
+
+
 class ArenaInfo(msgspec.Struct, frozen=True, kw_only=True):
     """One arena (engine + agent context) a host runs."""
 
@@ -29,7 +32,7 @@ class ArenaInfo(msgspec.Struct, frozen=True, kw_only=True):
     map: Ident
     robots: NonNegInt
     owner: Ident  # who asked for it ("lab" for the lab file's own worlds)
-    state: Literal["starting", "running", "restarting", "failed"]
+    state: HostedState
     started_at: float
     pids: list[NonNegInt] = msgspec.field(default_factory=list)
     rss_mb: Megabytes = 0.0  # resident memory of its processes
@@ -43,7 +46,7 @@ class RoomInfo(msgspec.Struct, frozen=True, kw_only=True):
     host: Ident
     title: ShortText
     owner: Ident  # who asked for it
-    state: Literal["starting", "running", "restarting", "failed"]
+    state: HostedState
     started_at: float
 
 

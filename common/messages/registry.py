@@ -54,11 +54,25 @@ class LoginRequest(Message, frozen=True):
     box_key: Bytes32  # the new session's X25519 public key
     mailbox_key: Bytes32  # the user's long-term X25519 key: offline messages are sealed to it
     ttl: Annotated[float, msgspec.Meta(gt=0)] = 12 * 3600.0
-    # Where the attempt comes from, as a gateway knows it (the viewer names the
-    # browser connection); with the querier's Zenoh id it makes the registry's
-    # per-source throttle bucket. Said by the client, so the per-account limit
-    # stays the one nobody can dodge.
+    # Where the attempt says it comes from: written by the client, so the registry
+    # only logs it; it never makes a throttle source of its own (the source is the
+    # querier's Zenoh session, or an address a gateway vouches for below).
     via: ShortText = ""
+    # A gateway's word for where its person is: an encoded AuthEnvelope of a
+    # LoginVouch sealed on registry/login by a session with ``vouch`` (the viewer).
+    vouch: Annotated[bytes, msgspec.Meta(max_length=4096)] | None = None
+
+
+class LoginVouch(Message, frozen=True):
+    """A gateway vouches that the login carrying it comes from ``address``.
+
+    Bound to that login by its new session key, so it cannot be lifted onto another.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/login",)
+
+    address: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
+    session_key: Bytes32
 
 
 class SealedLogin(Message, frozen=True):
@@ -186,6 +200,15 @@ class KickNotice(Message, frozen=True):
 # --- admin --------------------------------------------------------------------------------
 
 
+class BanInfo(Message, frozen=True):
+    """A ban in force: who, why, since when and until when (None: until lifted)."""
+
+    reason: ShortText
+    by: Ident
+    at: float
+    until: float | None = None
+
+
 class UserInfo(Message, frozen=True):
     name: Ident
     roles: list[Ident]
@@ -193,6 +216,7 @@ class UserInfo(Message, frozen=True):
     credentials: list[Ident]  # credential kinds: "password", "ed25519"
     online: bool = False
     failed_logins: int = 0  # failed logins on the account since its last unlock or restart
+    ban: BanInfo | None = None  # the ban in force, if any
 
 
 class ListUsers(Message, frozen=True):
@@ -266,6 +290,24 @@ class RenameServer(Message, frozen=True):
     name: Annotated[str, msgspec.Meta(min_length=1, max_length=80)]
 
 
+class BanUser(Message, frozen=True):
+    """Keep an account out: its sessions are revoked now and its logins refused until ``until``
+    (wall-clock seconds; None: until lifted), with ``reason`` shown to it."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    reason: Annotated[str, msgspec.Meta(min_length=1, max_length=200)]
+    until: float | None = None
+
+
+class LiftBan(Message, frozen=True):
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+
+    user: Ident
+    reason: Annotated[str, msgspec.Meta(max_length=200)] = ""
+
+
 ADMIN_REQUESTS = (
     ListUsers,
     AddUser,
@@ -276,11 +318,15 @@ ADMIN_REQUESTS = (
     KickFromServer,
     RenameServer,
     UnlockLogins,
+    BanUser,
+    LiftBan,
 )
 
 __all__ = [
     "ADMIN_REQUESTS",
     "AddUser",
+    "BanInfo",
+    "BanUser",
     "ContextInfo",
     "ContextInfoRequest",
     "DirectoryReply",
@@ -289,9 +335,11 @@ __all__ = [
     "KeyCredential",
     "KickFromServer",
     "KickNotice",
+    "LiftBan",
     "ListUsers",
     "LoginReply",
     "LoginRequest",
+    "LoginVouch",
     "LogoutRequest",
     "MailboxDeposit",
     "PasswordCredential",

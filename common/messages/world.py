@@ -246,16 +246,18 @@ class AgentCommand(Message, frozen=True):
     """Actuator commands to one agent (sealed in an AuthEnvelope on ``agent/<agent>/cmd``).
 
     Fields left None are unchanged. An empty command only feeds the watchdog.
+    The fields carry the controller's names (``common.controller.RobotCommand``)
+    and map onto a robot's actuators in one place
+    (``common.controller.actuators.apply_command``).
     """
 
     agent: Ident
     speeds: tuple[Speed, Speed] | None = None  # clamped by the type (Khepera +-127)
     counters: tuple[Counter, Counter] | None = None  # set the position counters
-    leds: list[Annotated[int, msgspec.Meta(ge=0, le=2)]] | None = (
-        None  # per LED: 0 off, 1 on, 2 toggle
-    )
+    # LED i on or off; LEDs the robot lacks are ignored (an e-puck has 8, a Khepera 2).
+    leds: Annotated[list[bool], msgspec.Meta(max_length=16)] | None = None
     arm: Byte | None = None
-    fingers: Literal["open", "closed"] | None = None
+    grip: bool | None = None  # True closes the gripper's fingers, False opens them
 
 
 class Lease(Message, frozen=True):

@@ -130,8 +130,12 @@ class CommandRecord(msgspec.Struct, frozen=True, kw_only=True):
     auth: str
     speeds: tuple[int, int] | None = None
     counters: tuple[int, int] | None = None
-    leds: list[int] | None = None
+    # The command's own names (AgentCommand's). Recordings made before the command
+    # carried the controller's names hold LEDs as 0 off, 1 on, 2 toggle, and the
+    # gripper as ``fingers`` "open"/"closed": still read, never written.
+    leds: list[bool | int] | None = None
     arm: int | None = None
+    grip: bool | None = None
     fingers: str | None = None
 
 

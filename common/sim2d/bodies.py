@@ -152,3 +152,8 @@ def agent(
             tong.friction = FRICTION
             robot.tongs.append(tong)
     return robot
+
+
+def id_of(body: pymunk.Body) -> int:
+    """A body's key in the world's body -> thing maps."""
+    return int(body.id)

@@ -58,7 +58,7 @@ class GripperTurrets:
         self.arms_moving = True
         return True
 
-    def set_fingers(self, slot: int, closed: bool) -> bool:
+    def set_grip(self, slot: int, closed: bool) -> bool:
         """Close (gripping what is between the tongs) or open; False without a gripper."""
         w = self.world
         agent = w.agents[slot]

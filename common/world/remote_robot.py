@@ -34,7 +34,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
 
 import zenoh
 
@@ -115,31 +114,15 @@ def state_from_sample(sample: SensorSample) -> KheperaState:
     )
 
 
-def state_to_dict(state: KheperaState) -> dict[str, Any]:
-    """The plain mapping the sandbox's child reads back with KheperaState.from_dict."""
-    return {
-        "time": state.time,
-        "speeds": list(state.speeds),
-        "counters": list(state.counters),
-        "proximity": list(state.proximity),
-        "ambient": list(state.ambient),
-        "leds": list(state.leds),
-        "arm": state.arm,
-        "gripper_closed": state.gripper_closed,
-        "object_present": state.object_present,
-        "resistivity": state.resistivity,
-    }
-
-
 def agent_command(agent: str, command: RobotCommand) -> AgentCommand:
     """A controller's command as the AgentCommand the world obeys."""
     return AgentCommand(
         agent=agent,
         speeds=command.speeds,
         counters=command.counters,
-        leds=None if command.leds is None else [1 if on else 0 for on in command.leds],
+        leds=None if command.leds is None else list(command.leds),
         arm=command.arm,
-        fingers=None if command.grip is None else ("closed" if command.grip else "open"),
+        grip=command.grip,
     )
 
 

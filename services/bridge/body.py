@@ -14,15 +14,22 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
+
+from common.controller.actuators import Actuators
 
 TICK = 0.01  # s: the speed unit is pulses per 10 ms
 
 
 @runtime_checkable
-class RobotBody(Protocol):
+class RobotBody(Actuators, Protocol):
     """Everything physical the emulated firmware needs. ``now`` is time.monotonic() seconds.
+
+    Its actuators are the one interface every robot has
+    (:class:`common.controller.actuators.Actuators`: speeds, counters, LEDs,
+    arm, grip); the rest is what only the serial firmware asks of a body.
 
     Every method may be called from the emulator's I/O thread; an
     implementation shared with another thread (a simulation engine) must
@@ -31,9 +38,6 @@ class RobotBody(Protocol):
 
     def advance(self, now: float) -> None:
         """Bring the body's state up to ``now`` (a kinematic body integrates it)."""
-
-    def set_speed(self, left: int, right: int) -> None:
-        """Speed control: wheel speeds in pulses per 10 ms."""
 
     def set_pwm(self, left: int, right: int) -> None:
         """Open-loop drive, -255..255 per wheel."""
@@ -47,8 +51,6 @@ class RobotBody(Protocol):
     def counters(self) -> tuple[int, int]:
         """Position counters, pulses (32-bit signed on the robot)."""
 
-    def set_counters(self, left: int, right: int) -> None: ...
-
     def motion_status(self) -> tuple[int, int, int, int, int, int]:
         """Per wheel: on target (0/1), mode (0 position, 1 speed; polarity uncertain), error."""
 
@@ -60,10 +62,6 @@ class RobotBody(Protocol):
 
     def analog(self, channel: int) -> int:
         """One 10-bit A/D channel."""
-
-    def set_fingers(self, closed: bool) -> None: ...
-
-    def set_arm(self, position: int) -> None: ...
 
     def finger_position(self) -> int: ...
 
@@ -111,6 +109,7 @@ class KinematicBody:
     analog_values: dict[int, int] = field(default_factory=dict)
     object_value: int = 0
     resistivity_value: int = 0
+    leds: tuple[bool, ...] = (False, False)  # as the firmware last set them
     _counts: list[float] = field(default_factory=lambda: [0.0, 0.0])
     _speed: list[float] = field(default_factory=lambda: [0.0, 0.0])
     _mode: str = "speed"  # "speed" | "position"
@@ -154,13 +153,13 @@ class KinematicBody:
         self.pose.y += d_center * math.sin(mid)
         self.pose.heading = math.remainder(self.pose.heading + d_theta, math.tau)
 
-    def set_speed(self, left: int, right: int) -> None:
+    def set_speeds(self, left: int, right: int) -> None:
         with self._lock:
             self._mode, self._speed = "speed", [float(left), float(right)]
 
     def set_pwm(self, left: int, right: int) -> None:
         k = self.spec.pwm_to_speed
-        self.set_speed(round(left * k), round(right * k))
+        self.set_speeds(round(left * k), round(right * k))
 
     def move_to(self, left: int, right: int, vmax: tuple[int, int], acc: tuple[int, int]) -> None:
         with self._lock:
@@ -204,7 +203,11 @@ class KinematicBody:
     def analog(self, channel: int) -> int:
         return _sensor(self.analog_values.get(channel, 0))
 
-    def set_fingers(self, closed: bool) -> None:
+    def set_leds(self, leds: Sequence[bool]) -> None:
+        with self._lock:
+            self.leds = tuple(bool(on) for on in leds[:2])
+
+    def set_grip(self, closed: bool) -> None:
         self._fingers_closed = closed
 
     def set_arm(self, position: int) -> None:

@@ -1,4 +1,4 @@
-"""KheperaLink: one request at a time over a serial port, with the host pattern every client uses.
+"""SerialKheperaLink: one request at a time over a serial port, the host pattern every client uses.
 
 Write the command, reassemble reply lines from partial reads, skip (and log)
 lines that do not answer it (the reset banner, noise, stale replies), check
@@ -8,7 +8,7 @@ was unplugged) raises :class:`LinkOffline` and the link stays closed: the
 robot handle (robot.py) reopens the port when it comes back.
 
 The transport is any serial-like object (:class:`SerialLike`), so unit tests
-can feed split bytes; :meth:`KheperaLink.open` makes a pyserial port with the
+can feed split bytes; :meth:`SerialKheperaLink.open` makes a pyserial port with the
 robot's framing (8 data bits, no parity, 2 stop bits).
 """
 
@@ -99,7 +99,7 @@ class _Outcome:
     not_found: bool = False
 
 
-class KheperaLink:
+class SerialKheperaLink:
     """Thread-safe request/reply over one port. ``request`` returns the typed result."""
 
     def __init__(
@@ -127,7 +127,7 @@ class KheperaLink:
         options: LinkOptions | None = None,
         *,
         on_banner: Callable[[str], None] | None = None,
-    ) -> KheperaLink:
+    ) -> SerialKheperaLink:
         """Open ``port`` with the robot's framing; LinkOffline if it is missing or busy."""
         if baud not in BAUD_RATES:
             raise ValueError(f"baud {baud} is not one the Khepera supports {BAUD_RATES}")

@@ -29,7 +29,8 @@ from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
 from services.bridge.link import BAUD_RATES
-from services.bridge.robot import Pose, RobotOptions
+from services.bridge.odometry import Pose
+from services.bridge.robot import RobotOptions
 from services.bridge.service import BridgeService, BridgeSettings, RobotSpec, agent_id_for
 
 

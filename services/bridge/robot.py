@@ -1,4 +1,4 @@
-"""KheperaRobot: the thesis's KheperaReal over a KheperaLink, plus auto-detection of robots.
+"""KheperaRobot: the thesis's KheperaReal over a SerialKheperaLink, plus auto-detection of robots.
 
 One I/O thread per robot owns its link, so everything on the wire happens in
 one order: queued commands first (in the order they were given), then the
@@ -14,29 +14,32 @@ once (the lease ended), and stopping the robot does it before the port closes.
 A port that vanishes (unplugged) or stops answering makes the robot
 offline; the thread reopens the port every ``reconnect_interval`` seconds
 and is online again as soon as the robot answers B.
+
+Odometry is in odometry.py; auto-detection and the Fleet in detect.py.
 """
 
 from __future__ import annotations
 
-import glob
 import logging
 import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
-from serial.tools import list_ports
-
+from common.controller.actuators import Actuators
 from services.bridge import protocol as P
-from services.bridge.link import KheperaLink, LinkError, LinkOffline, LinkOptions
+from services.bridge.link import LinkError, LinkOffline, LinkOptions, SerialKheperaLink
+from services.bridge.odometry import Odometry, Pose
 
 log = logging.getLogger("wart.bridge.robot")
 
 T = TypeVar("T")
+
+LEDS = 2  # a Khepera I has two LEDs (L,0 and L,1)
 
 
 class RobotStopped(LinkError):
@@ -80,15 +83,6 @@ class GripperState:
 
 
 @dataclass(frozen=True)
-class Pose:
-    """Odometry estimate in the robot's start frame: mm, mm, radians (counter-clockwise)."""
-
-    x: float = 0.0
-    y: float = 0.0
-    heading: float = 0.0
-
-
-@dataclass(frozen=True)
 class RobotState:
     """One consistent snapshot of what the host knows of the robot (None: not read yet)."""
 
@@ -101,60 +95,11 @@ class RobotState:
     speed: P.WheelPair | None = None
     gripper: GripperState | None = None
     leds: tuple[int, int] = (0, 0)  # as last set by L (the robot cannot be asked)
-    pose: Pose = Pose()
+    pose: Pose = field(default_factory=Pose)  # frozen: the same as one shared default
     rounds: int = 0  # completed sensor rounds since start
     updated: float = 0.0  # time.monotonic() of the last completed round
     watchdog_stops: int = 0
     errors: int = 0  # requests that failed after all their tries
-
-
-class Odometry:
-    """Pose from position-counter deltas (differential drive, each step an arc)."""
-
-    # Faster than any wheel can turn (127 pulses/10 ms) with a wide margin: a
-    # jump this large means the counters were reset, not that the robot moved.
-    MAX_PULSES_PER_S = 127 * 100 * 2
-
-    def __init__(self, mm_per_pulse: float, wheel_base_mm: float) -> None:
-        self.mm_per_pulse, self.wheel_base_mm = mm_per_pulse, wheel_base_mm
-        self.pose = Pose()
-        self._last: tuple[int, int, float] | None = None
-
-    def rebaseline(self) -> None:
-        """Forget the last reading: the next one only sets the reference (counters were reset)."""
-        self._last = None
-
-    def set_pose(self, pose: Pose) -> None:
-        self.pose = pose
-
-    def update(self, left: int, right: int, now: float) -> Pose:
-        last, self._last = self._last, (left, right, now)
-        if last is None:
-            return self.pose
-        dl_p, dr_p = _delta32(left, last[0]), _delta32(right, last[1])
-        limit = self.MAX_PULSES_PER_S * max(now - last[2], 0.05)
-        if abs(dl_p) > limit or abs(dr_p) > limit:
-            log.warning("counters jumped by (%d, %d): taken as a reset, pose kept", dl_p, dr_p)
-            return self.pose
-        dl, dr = dl_p * self.mm_per_pulse, dr_p * self.mm_per_pulse
-        d, dth = (dl + dr) / 2, (dr - dl) / self.wheel_base_mm
-        mid = self.pose.heading + dth / 2
-        # The chord of the arc, not its length: exact for wheels at constant speeds
-        # between two readings, however far apart (a busy host reads late; at
-        # 40/60 pulses a 0.3 s gap put the arc-length estimate 4 mm out).
-        half = dth / 2
-        chord = d if abs(half) < 1e-9 else d * math.sin(half) / half
-        self.pose = Pose(
-            self.pose.x + chord * math.cos(mid),
-            self.pose.y + chord * math.sin(mid),
-            math.remainder(self.pose.heading + dth, math.tau),
-        )
-        return self.pose
-
-
-def _delta32(new: int, old: int) -> int:
-    """Counter difference across the 32-bit wrap."""
-    return (new - old + 2**31) % 2**32 - 2**31
 
 
 @dataclass
@@ -163,17 +108,21 @@ class _Queued:
     future: Future[Any]
 
 
-LinkFactory = Callable[[str, int, LinkOptions, Callable[[str], None]], KheperaLink]
+LinkFactory = Callable[[str, int, LinkOptions, Callable[[str], None]], SerialKheperaLink]
 
 
 def _open_link(
     port: str, baud: int, options: LinkOptions, on_banner: Callable[[str], None]
-) -> KheperaLink:
-    return KheperaLink.open(port, baud, options, on_banner=on_banner)
+) -> SerialKheperaLink:
+    return SerialKheperaLink.open(port, baud, options, on_banner=on_banner)
 
 
-class KheperaRobot:
-    """A real or emulated Khepera on one serial port: start it, read ``state()``, send commands."""
+class KheperaRobot(Actuators):
+    """A real or emulated Khepera on one serial port: start it, read ``state()``, send commands.
+
+    Its actuators are the one interface every robot has
+    (:class:`common.controller.actuators.Actuators`), each a serial request.
+    """
 
     def __init__(
         self,
@@ -185,7 +134,7 @@ class KheperaRobot:
         self.port = port
         self.options = options or RobotOptions()
         self._link_factory = link_factory
-        self._link: KheperaLink | None = None
+        self._link: SerialKheperaLink | None = None
         self._state = RobotState(port=port)
         self._state_lock = threading.Lock()
         self._queue: deque[_Queued] = deque()
@@ -200,6 +149,7 @@ class KheperaRobot:
         self._gripper = self.options.gripper
         self._failures = 0
         self._online_event = threading.Event()
+        self.commands_failed = 0  # actuator requests that failed (logged as they fail)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -245,9 +195,41 @@ class KheperaRobot:
     def wait_online(self, timeout: float) -> bool:
         return self._online_event.wait(timeout)
 
-    def set_speed(self, left: float, right: float) -> Future[P.Ack]:
+    # -- actuators (common.controller.actuators.Actuators): each queues its request;
+    # nobody waits on it (a Zenoh callback calls these), so a failure is logged and counted.
+
+    def set_speeds(self, left: int, right: int) -> None:
         """Wheel speeds in pulses per 10 ms (clamped to ±127); keeps the watchdog fed."""
-        return self.command(P.set_speed(left, right))
+        self._actuate(P.set_speed(left, right))
+
+    def set_counters(self, left: int, right: int) -> None:
+        self._actuate(P.set_counters(left, right))
+
+    def set_leds(self, leds: Sequence[bool]) -> None:
+        """A Khepera has two LEDs; more are ignored."""
+        for led, on in enumerate(leds[:LEDS]):
+            self._actuate(P.set_led(led, P.LED_ON if on else P.LED_OFF))
+
+    def set_arm(self, position: int) -> None:
+        self._actuate(P.gripper_arm(position))
+
+    def set_grip(self, closed: bool) -> None:
+        self._actuate(P.gripper_fingers(closed))
+
+    def _actuate(self, request: P.Request[Any]) -> None:
+        self.command(request).add_done_callback(lambda f: self._actuator_done(request, f))
+
+    def _actuator_done(self, request: P.Request[Any], future: Future[Any]) -> None:
+        exc = future.exception()
+        if exc is None:
+            return
+        self.commands_failed += 1
+        if isinstance(exc, LinkOffline):  # expected while unplugged: the state says offline
+            log.debug("%s: command %s failed: %s", self.port, request.letter, exc)
+        elif isinstance(exc, P.ProtocolError):  # unanswered, not understood
+            log.warning("%s: command %s failed: %s", self.port, request.letter, exc)
+        else:
+            log.error("%s: command %s failed: %r", self.port, request.letter, exc)
 
     def command(self, request: P.Request[T]) -> Future[T]:
         """Queue any request; it is sent before the next sensor request, in call order.
@@ -526,104 +508,3 @@ class KheperaRobot:
                 callback(state)
             except Exception:  # a listener's bug must not stop the robot's I/O
                 log.exception("%s: state listener failed", self.port)
-
-
-# ---------------------------------------------------------------- auto-detection
-
-
-@dataclass(frozen=True)
-class DetectedRobot:
-    port: str
-    baud: int
-    version: P.Version
-
-
-def candidate_ports(patterns: Iterable[str] = (), *, system: bool = True) -> list[str]:
-    """The serial ports pyserial lists, plus the paths and globs given; no duplicates."""
-    found: list[str] = []
-    if system:
-        found += [p.device for p in list_ports.comports()]
-    for pattern in patterns:
-        matches = sorted(glob.glob(pattern)) if any(c in pattern for c in "*?[") else [pattern]
-        found += matches
-    return list(dict.fromkeys(found))
-
-
-def probe(port: str, baud: int = 38400, timeout: float = 0.3, tries: int = 2) -> P.Version | None:
-    """Ask B on ``port``; the version if a Khepera answers ``b,...``, else None (quickly)."""
-    try:
-        link = KheperaLink.open(port, baud, LinkOptions(reply_timeout=timeout, tries=tries))
-    except LinkOffline as exc:
-        log.debug("probe %s: %s", port, exc)
-        return None
-    except ValueError as exc:
-        log.debug("probe %s: %s", port, exc)
-        return None
-    try:
-        return link.request(P.read_version())
-    except P.ProtocolError as exc:
-        log.debug("probe %s at %d baud: not a Khepera: %s", port, baud, exc)
-        return None
-    finally:
-        link.close()
-
-
-def detect(
-    ports: Sequence[str], bauds: Sequence[int] = (38400,), timeout: float = 0.3
-) -> list[DetectedRobot]:
-    """Probe every port in parallel (each at each baud until one answers); robots in port order."""
-
-    def one(port: str) -> DetectedRobot | None:
-        for baud in bauds:
-            version = probe(port, baud, timeout)
-            if version is not None:
-                return DetectedRobot(port, baud, version)
-        return None
-
-    if not ports:
-        return []
-    with ThreadPoolExecutor(
-        max_workers=min(16, len(ports)), thread_name_prefix="khepera-probe"
-    ) as pool:
-        results = list(pool.map(one, ports))
-    return [r for r in results if r is not None]
-
-
-class Fleet:
-    """The robots of one bridge: added by port name or found by auto-detection."""
-
-    def __init__(self, options: RobotOptions | None = None) -> None:
-        self.options = options or RobotOptions()
-        self.robots: dict[str, KheperaRobot] = {}
-
-    def add(self, port: str, options: RobotOptions | None = None) -> KheperaRobot:
-        """Manual add (thesis 7.4.3): the robot is polled from now on, online when it answers."""
-        if port in self.robots:
-            return self.robots[port]
-        robot = KheperaRobot(port, options or self.options).start()
-        self.robots[port] = robot
-        return robot
-
-    def autodetect(
-        self,
-        patterns: Iterable[str] = (),
-        *,
-        system: bool = True,
-        bauds: Sequence[int] = (38400,),
-        timeout: float = 0.3,
-    ) -> list[KheperaRobot]:
-        """Probe the candidate ports not already in use and add every robot that answers."""
-        ports = [p for p in candidate_ports(patterns, system=system) if p not in self.robots]
-        added = []
-        for found in detect(ports, bauds, timeout):
-            added.append(self.add(found.port, replace(self.options, baud=found.baud)))
-        return added
-
-    def remove(self, port: str) -> None:
-        robot = self.robots.pop(port, None)
-        if robot is not None:
-            robot.stop()
-
-    def stop(self) -> None:
-        for port in list(self.robots):
-            self.remove(port)

@@ -32,7 +32,6 @@ import re
 import threading
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -41,6 +40,7 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Session, Verifier
+from common.controller.actuators import apply_command
 from common.messages import (
     AgentCommand,
     AgentInfo,
@@ -58,15 +58,9 @@ from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
 from services.bridge import protocol as P
-from services.bridge.link import LinkOffline
-from services.bridge.robot import (
-    KheperaRobot,
-    Pose,
-    RobotOptions,
-    RobotState,
-    candidate_ports,
-    detect,
-)
+from services.bridge.detect import candidate_ports, detect
+from services.bridge.odometry import Pose
+from services.bridge.robot import KheperaRobot, RobotOptions, RobotState
 
 # Khepera I facts the snapshot carries (docs/KHEPERA_PROTOCOL.md "Body" and "Sensor placement").
 KHEPERA_RADIUS_MM = 27.5
@@ -156,7 +150,6 @@ class BridgeService(WorldService):
         self._t0 = time.monotonic()
         self._halt = threading.Event()
         self._threads: list[threading.Thread] = []
-        self.commands_failed = 0
 
     # -- lifecycle
 
@@ -357,37 +350,12 @@ class BridgeService(WorldService):
         self._send(entry, command)
 
     def _send(self, agent: _Agent, cmd: AgentCommand) -> None:
-        """Queue the command's requests on the robot's I/O thread, in a fixed order; no wait."""
-        requests: list[P.Request[Any]] = []
-        if cmd.speeds is not None:
-            requests.append(P.set_speed(*cmd.speeds))  # clamped to +-127 by the protocol
-        if cmd.counters is not None:
-            requests.append(P.set_counters(*cmd.counters))
-        for led, action in enumerate((cmd.leds or [])[:KHEPERA_LEDS]):
-            requests.append(P.set_led(led, action))
-        if cmd.arm is not None:
-            requests.append(P.gripper_arm(cmd.arm))
-        if cmd.fingers is not None:
-            requests.append(P.gripper_fingers(cmd.fingers == "closed"))
-        robot = agent.robot
-        if not requests:
-            robot.keepalive()
-            return
-        for request in requests:
-            robot.command(request).add_done_callback(
-                functools.partial(self._sent, agent.id, request)
-            )
+        """Queue the command's requests on the robot's I/O thread, in a fixed order; no wait.
 
-    def _sent(self, agent: str, request: P.Request[Any], future: Future[Any]) -> None:
-        exc = future.exception()
-        if exc is None:
-            return
-        self.commands_failed += 1
-        level = self.log.debug if isinstance(exc, LinkOffline) else self.log.warning
-        if isinstance(exc, P.ProtocolError):  # offline, unanswered, not understood
-            level("command %s to %s failed: %s", request.letter, agent, exc)
-        else:
-            self.log.error("command %s to %s failed: %r", request.letter, agent, exc)
+        The robot logs and counts a request that fails (KheperaRobot.commands_failed).
+        """
+        if not apply_command(cmd, agent.robot):
+            agent.robot.keepalive()  # an empty command only feeds the watchdog
 
     # -- frames, lease ends
 

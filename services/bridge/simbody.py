@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from common.sim2d.maps import load_map
@@ -128,14 +129,14 @@ class SimBody:
     def advance(self, now: float) -> None:
         """Nothing to do: the world is stepped by its own thread, on the wall clock."""
 
-    def set_speed(self, left: int, right: int) -> None:
+    def set_speeds(self, left: int, right: int) -> None:
         with self._lock:
             self._mode = "speed"
             self.world.set_speeds(self.slot, left, right)
 
     def set_pwm(self, left: int, right: int) -> None:
         k = self.spec.pwm_to_speed
-        self.set_speed(round(left * k), round(right * k))
+        self.set_speeds(round(left * k), round(right * k))
 
     def move_to(self, left: int, right: int, vmax: tuple[int, int], acc: tuple[int, int]) -> None:
         with self._lock:
@@ -180,10 +181,15 @@ class SimBody:
     def analog(self, channel: int) -> int:
         return 0  # nothing is wired to the A/D inputs of the simulated robot
 
-    def set_fingers(self, closed: bool) -> None:
+    def set_leds(self, leds: Sequence[bool]) -> None:
+        """The simulated robot shows them (a viewer of its world draws them)."""
+        with self._lock:
+            self.world.set_leds(self.slot, leds)
+
+    def set_grip(self, closed: bool) -> None:
         with self._lock:
             try:
-                self.world.set_fingers(self.slot, closed)
+                self.world.set_grip(self.slot, closed)
             except EditError as exc:  # a map agent with "gripper": false
                 log.info("sim body: %s", exc)
 

@@ -23,7 +23,7 @@ from common import cli, keys
 from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
 from common.controller import load_controller
-from common.controller.precheck import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, precheck
 from common.lab_errors import LabError
 from common.messages import OutputLines, RequestStatus
 from common.service import close_session

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 from common import cli
 from common.client.agent_client import FINAL, AgentClient
-from common.controller.precheck import PrecheckError
+from common.controller.upload_gate import PrecheckError
 from common.lab_errors import LabError
 from common.messages import DryRunReport, RequestStatus, RequestStatusReply
 from services.commands.control import (

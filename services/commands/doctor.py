@@ -16,6 +16,7 @@ Exit code 0 when nothing is wrong, 1 otherwise.
 
 from __future__ import annotations
 
+import argparse
 import errno
 import socket
 import sys
@@ -30,9 +31,13 @@ from common import cli, keys
 from common.client.survey import router_views, routers, survey
 from common.keys import AliveKind
 from common.service import close_session, open_session
-from common.zconfig import NetworkOptions
+from common.zconfig import DEFAULT_PORT, NetworkOptions
+from services.commands import up
 from services.commands.arena import format_loads, host_loads
 from services.lab.labfile import HostEntry, LabFile, LabFileError, load
+from services.lab.plan import HostContext, host_plan, host_state_dir, router_spec
+from services.lab.supervisor import ChildSpec
+from services.lab.wiring import arena_context
 from services.lab.zsecurity import client_options
 
 
@@ -92,36 +97,35 @@ def tls_check(lab: LabFile, host: HostEntry, cert: str) -> tuple[zenoh.Session |
     return session, f"{(time.monotonic() - started) * 1000:.0f} ms to open"
 
 
-def expected_tokens(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
-    """(what, liveliness key) of every process the lab file puts on ``host``."""
-    realm = lab.realm
-    out = [
-        (f"router {host.name}", keys.alive(realm, AliveKind.ROUTER, host.name)),
-        (f"host {host.name}", keys.alive(realm, AliveKind.HOST, host.name)),
-    ]
-    for svc in host.services:
-        if svc.kind == "registry":
-            out.append(("registry", keys.alive(realm, AliveKind.REGISTRY, "registry")))
-        elif svc.kind == "chat":
-            out.append((f"chat {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident)))
-        elif svc.kind in ("engine", "bridge"):
-            what = f"{svc.kind} {svc.ident}"
-            if svc.kind == "bridge" and svc.params.get("emulate"):
-                what += " (with its emulated Khepera)"  # the emulator is off the network
-            out.append((what, keys.alive(realm, AliveKind.WORLD, svc.ident)))
-            if svc.kind == "engine" and lab.arena.agent:
-                out.append(
-                    (f"agent context {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident))
-                )
-        elif svc.kind == "agent":
-            out.append(
-                (f"agent context {svc.ident}", keys.alive(realm, AliveKind.CONTEXT, svc.ident))
-            )
-        elif svc.kind == "viewer":
-            out.append(("viewer", keys.alive(realm, AliveKind.VIEWER, host.name)))
-        elif svc.kind == "runner":
-            out.append((f"runner {svc.ident}", keys.alive(realm, AliveKind.RUNNER, svc.ident)))
+def planned(specs: list[ChildSpec], host: str, host_token: str) -> list[tuple[str, str]]:
+    """(what, liveliness key) of every process a host's supervisor runs, from its plan.
+
+    The plan is the planner's own (services/lab/wiring.py, what ``wart host`` and
+    ``wart up`` start), so an engine's named context or a viewer's id is
+    expected under the name it really has. The supervisor itself is the host's
+    hosting service (its token ``alive/host/HOST``); a process off the network
+    (an emulated Khepera) has no token, its bridge stands for it.
+    """
+    out = [(f"host {host}", host_token)]
+    out += [(spec.name, spec.alive_key) for spec in specs if spec.alive_key]
     return out
+
+
+def lab_file_plan(lab: LabFile, host: HostEntry) -> list[tuple[str, str]]:
+    """What ``wart host --lab FILE --name HOST`` runs, with each process's token."""
+    ctx = HostContext(lab, host, host_state_dir(lab, host), registry_key="")
+    host_token = keys.alive(lab.realm, AliveKind.HOST, host.name)
+    return planned([router_spec(ctx), *host_plan(ctx)], host.name, host_token)
+
+
+def up_plan(options: NetworkOptions) -> list[tuple[str, str]]:
+    """What ``wart up`` runs (host ``local``): its own plan, whatever its ports and state."""
+    settings = up.settings_from_args(
+        argparse.Namespace(state_dir=None, port=DEFAULT_PORT, http_port=8080), options
+    )
+    # Its router may be another lab's (``wart up --connect``): the survey lists routers.
+    host_token = keys.alive(options.realm, AliveKind.HOST, up.HOST_NAME)
+    return planned(up.lab_plan(settings), up.HOST_NAME, host_token)
 
 
 def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Report:
@@ -165,8 +169,8 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
             if host.name not in seen and host in reachable:
                 report.bad(f"router {host.name} answers TLS but not in the mesh seen from here")
             for other in host.connect:
-                view = next((v for v in views if v.name == host.name), None)
-                if view is not None and other in seen and other not in view.peers:
+                mesh_view = next((v for v in views if v.name == host.name), None)
+                if mesh_view is not None and other in seen and other not in mesh_view.peers:
                     report.bad(
                         f"router {host.name} has no link to {other} (it should connect to "
                         f"{lab.host(other).endpoint}): check {host.name}'s router log"
@@ -177,8 +181,15 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
             for r in session.liveliness().get(keys.alive_all(lab.realm), timeout=3.0)
             if r.ok is not None
         }
+        expected: set[str] = set()
         for host in lab.hosts:
-            for what, key in expected_tokens(lab, host):
+            try:
+                plan = lab_file_plan(lab, host)
+            except (FileNotFoundError, ValueError) as exc:
+                report.bad(f"cannot tell what {host.name} should run: {exc}")
+                continue
+            for what, key in plan:
+                expected.add(key)
                 if key in live:
                     report.ok(f"{what} on {host.name} is alive")
                 else:
@@ -186,8 +197,7 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
                         f"{what} on {host.name} is not alive: look at the log of `wart host` "
                         f"on {host.name} (STATE_DIR/logs/)"
                     )
-        others = sorted(live - {k for h in lab.hosts for _, k in expected_tokens(lab, h)})
-        for key in others:
+        for key in sorted(live - expected):
             parsed = keys.parse_alive(lab.realm, key)
             if parsed:
                 report.info(f"also alive: {parsed[0].value} {parsed[1]}")
@@ -195,10 +205,17 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
         loads = host_loads(session, lab.realm)
         for line in format_loads(loads).splitlines():
             report.info(line)
+        # The lab file's engines may name their context; arenas on request are their world's.
+        contexts = {
+            s.ident: s.params.get("context")
+            for h in lab.hosts
+            for s in h.services
+            if s.kind == "engine"
+        }
         report.head("services per host (as each host's supervisor sees them)")
         for load_ in loads:
-            up = [name for name in load_.services if not name.endswith(" (down)")]
-            report.info(f"{load_.host}: {', '.join(up) or 'no services'}")
+            running = [name for name in load_.services if not name.endswith(" (down)")]
+            report.info(f"{load_.host}: {', '.join(running) or 'no services'}")
             for name in load_.services:
                 if name.endswith(" (down)"):
                     report.bad(
@@ -206,12 +223,13 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
                         f"see its log in STATE_DIR/logs/ on {load_.host}"
                     )
             for arena in load_.arenas:
-                # An arena is its engine and, with [arena].agent, its agent context:
-                # both must be present for students to see and use it.
+                # An arena is its engine and, with [arena] agent = true, its agent
+                # context: both must be present for students to see and use it.
                 wanted = [("engine", keys.alive(lab.realm, AliveKind.WORLD, arena.world))]
                 if lab.arena.agent:
+                    context = arena_context(arena.world, contexts.get(arena.world))
                     wanted.append(
-                        ("agent context", keys.alive(lab.realm, AliveKind.CONTEXT, arena.world))
+                        ("agent context", keys.alive(lab.realm, AliveKind.CONTEXT, context))
                     )
                 for what, key in wanted:
                     if key in live:
@@ -233,7 +251,11 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
 
 
 def survey_main(options: NetworkOptions) -> int:
-    """The lab-file-free check: what a plain client of the realm sees."""
+    """The lab-file-free check: what a plain client of the realm sees.
+
+    When the realm is a ``wart up`` lab (its host ``local`` reports its load),
+    every process of that lab's plan must be alive too.
+    """
     try:
         session = open_session(options, wait=5.0)
     except ConnectionError as exc:
@@ -241,11 +263,28 @@ def survey_main(options: NetworkOptions) -> int:
         return 1
     try:
         result = survey(session, options.realm)
+        lines = result.lines()
+        problems = list(result.problems)
+        if any(load_.host == up.HOST_NAME for load_ in result.hosts):
+            live = {
+                str(r.ok.key_expr)
+                for r in session.liveliness().get(keys.alive_all(options.realm), timeout=3.0)
+                if r.ok is not None
+            }
+            lines.append(f"services of the `wart up` lab (host {up.HOST_NAME}):")
+            for what, key in up_plan(options):
+                if key in live:
+                    lines.append(f"  ✓ {what} is alive")
+                else:
+                    lines.append(f"  ✗ {what} is not alive")
+                    problems.append(f"{what} is not alive: see its log in STATE_DIR/logs/")
     finally:
         close_session(session)
-    print("\n".join(result.lines()))
-    if result.problems:
-        print(f"\n{len(result.problems)} problem(s)")
+    print("\n".join(lines))
+    if problems:
+        print(f"\n{len(problems)} problem(s)")
+        for text in problems[len(result.problems) :]:
+            print(f"  - {text}")
         return 1
     print("\nno problem found")
     return 0

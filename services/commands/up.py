@@ -10,7 +10,6 @@ order on Ctrl-C. Logs of each child go to STATE_DIR/logs/.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import signal
 import sys
@@ -19,22 +18,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from common import cli, keys
+import zenoh
+
+from common import cli
 from common.auth import key_fingerprint
-from common.service import close_session, open_session
 from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
-from services.host.service import HostingPlan, HostingService
 from services.lab import wiring
-from services.lab.labfile import (
-    AGENT_CONTEXT_TEMPLATE,
-    DEFAULT_ENGINE_TEMPLATE,
-    ArenaTemplates,
-    Limits,
-    ServiceEntry,
-    service_entry,
-)
+from services.lab.driver import HostDriver, say
+from services.lab.hosting import HostingPlan, HostingService
+from services.lab.labfile import ArenaSettings, Limits, ServiceEntry, service_entry
 from services.lab.provision import provision_one_host
-from services.lab.supervisor import AliveWatch, ChildSpec, Supervisor
+from services.lab.supervisor import Child, ChildSpec, Supervisor
 from services.lab.wiring import (
     SHIPPED_MAPS,
     Wiring,
@@ -58,13 +52,6 @@ class LabSettings:
     router_listen: tuple[str, ...]
     network: NetworkOptions  # what the children get (client mode, the router above)
     http_port: int
-
-
-def say(text: str) -> None:
-    """One line for the operator; a closed terminal or pipe (``wart up | tee``,
-    then Ctrl-C) must never interrupt an orderly stop."""
-    with contextlib.suppress(BrokenPipeError, OSError):
-        print(text, flush=True)
 
 
 HOST_NAME = "local"  # the one-machine lab's host, on host/local/{spawn,load}
@@ -126,7 +113,7 @@ def local_wiring(lab: LabSettings) -> Wiring:
         registry_key_file=lab.state_dir / "registry.key",
         map_dirs=(lab.state_dir / "maps", SHIPPED_MAPS),
         runner=RUNNER,
-        arena=ArenaTemplates(DEFAULT_ENGINE_TEMPLATE, AGENT_CONTEXT_TEMPLATE),
+        arena=ArenaSettings(),
     )
 
 
@@ -265,67 +252,61 @@ def settings_from_args(args: argparse.Namespace, options: NetworkOptions) -> Lab
     )
 
 
+class LocalLab(HostDriver):
+    """The one-machine lab under the shared driver (services/lab/driver.py): host "local"."""
+
+    def __init__(self, lab: LabSettings) -> None:
+        self.lab = lab  # provision() pins the registry key in it
+        self.realm = lab.realm
+        self.state_dir = lab.state_dir
+
+    def banner(self) -> str:
+        return f"wart lab '{self.realm}': state and logs in {self.state_dir}"
+
+    def router(self) -> ChildSpec | None:
+        return router_spec(self.lab) if self.lab.start_router else None
+
+    def network(self) -> NetworkOptions:
+        return self.lab.network
+
+    def joined(self) -> str:
+        return f"  joined the lab router at {self.lab.router_endpoint}"
+
+    def provision(self) -> None:
+        self.lab = provision(self.lab)
+        # never report a previous run's URL
+        local_wiring(self.lab).viewer_url_file().unlink(missing_ok=True)
+
+    def waves(self) -> list[list[ChildSpec]]:
+        return lab_waves(self.lab)
+
+    def came_up(self, child: Child) -> None:
+        if child.spec.name == "viewer":
+            say(f"  web viewer: {viewer_url(self.lab) or '(address unknown)'}")
+
+    def hosting(self, session: zenoh.Session, supervisor: Supervisor) -> HostingService:
+        hosting = HostingService(session, hosting_plan(self.lab), supervisor).start()
+        say(
+            f"  ✓ {'hosting ' + HOST_NAME:<22} up  rooms and arenas on request "
+            f"(host/{HOST_NAME}/spawn, `host` permission)"
+        )
+        return hosting
+
+    def running(self) -> str:
+        return "The lab is running. Press Ctrl-C to stop it."
+
+    def stopping(self) -> str:
+        return "Stopping the lab..."
+
+    def stopped(self) -> str:
+        return "Lab stopped."
+
+
 def run_lab(
     lab: LabSettings, stop: threading.Event, *, ready: threading.Event | None = None
 ) -> int:
     """Start the lab, keep it running until ``stop`` is set, then stop it all."""
-    lab.state_dir.mkdir(parents=True, exist_ok=True)
-    supervisor = Supervisor(lab.state_dir / "logs", say=say)
-    say(f"wart lab '{lab.realm}': state and logs in {lab.state_dir}")
-    session = None
-    hosting: HostingService | None = None
-    code = 0
-    try:
-        if lab.start_router:
-            supervisor.add(router_spec(lab))
-            supervisor.spawn(supervisor.children[0])
-        try:
-            session = open_session(lab.network, wait=30.0, quiet=lab.start_router)
-        except ConnectionError as exc:
-            say(f"  ✗ {exc}")
-            return 1
-        supervisor.watch = AliveWatch(session, keys.alive_all(lab.realm))
-        if lab.start_router and not supervisor.wait_ready(supervisor.children[0]):
-            return 1
-        if not lab.start_router:
-            say(f"  joined the lab router at {lab.router_endpoint}")
-        try:
-            lab = provision(lab)
-        except (ValueError, OSError) as exc:
-            say(f"  ✗ {exc}")
-            return 1
-        # never report a previous run's URL
-        local_wiring(lab).viewer_url_file().unlink(missing_ok=True)
-        for wave in lab_waves(lab):
-            if stop.is_set():
-                break
-            for child, up in supervisor.start_together(wave):
-                if not up:
-                    code = 1
-                elif child.spec.name == "viewer":
-                    say(f"  web viewer: {viewer_url(lab) or '(address unknown)'}")
-        if not stop.is_set():
-            # In this process (not a child): its spawned contexts are this
-            # supervisor's children, restarted and stopped with the rest.
-            hosting = HostingService(session, hosting_plan(lab), supervisor).start()
-            say(
-                f"  ✓ {'hosting ' + HOST_NAME:<22} up  rooms and arenas on request "
-                f"(host/{HOST_NAME}/spawn, `host` permission)"
-            )
-        if not stop.is_set():
-            say("The lab is running. Press Ctrl-C to stop it.")
-            if ready is not None:
-                ready.set()
-            supervisor.run_until(stop)
-    finally:
-        say("Stopping the lab...")
-        if hosting is not None:
-            hosting.stop()  # no new context starts while the children stop
-        supervisor.stop_all()
-        if session is not None:
-            close_session(session)
-        say("Lab stopped.")
-    return code
+    return LocalLab(lab).run(stop, ready=ready)
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart up") -> int:

@@ -294,7 +294,9 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
             self._say(principal, request)
             return OkReply()
         if isinstance(request, UserRemovalRequest):
-            return self._kick(principal, request)
+            where = f"{self.scope}/{request.user}"
+            with self.audit.action(principal, "kick", where, request.reason):
+                return self._kick(principal, request)
         if isinstance(request, QueueStateRequest):
             self._require(principal, "join", "see the queues")
             return self.state_message()
@@ -307,11 +309,17 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         elif isinstance(request, CancelControl):
             reply = self._cancel(principal, request)
         elif isinstance(request, StopControl):
-            reply = self._stop_agent(principal, request)
+            where = f"agent/{self.room}/{request.agent}"
+            with self.audit.action(principal, "stop_run", where, request.reason):
+                reply = self._stop_agent(principal, request)
         elif isinstance(request, EmergencyStop):
-            reply = self._emergency_stop(principal, request)
+            action = "estop" if request.engaged else "release"
+            with self.audit.action(principal, action, self.scope, request.reason):
+                reply = self._emergency_stop(principal, request)
         else:  # the one kind left (open's overloads type a tuple this long as Message)
-            reply = self._settings(principal, cast(ContextSettings, request))
+            settings = cast(ContextSettings, request)
+            with self.audit.action(principal, "settings", self.scope, _said(settings)):
+                reply = self._settings(principal, settings)
         # On disk before the answer: an acknowledged request survives a crash right after.
         self._save_book()
         return reply
@@ -537,3 +545,14 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
             self._publisher.put(self.login.session.seal(self._events_key, event))
         except Exception as exc:  # the session closing at shutdown
             self.log.debug("could not publish an event: %s", exc)
+
+
+def _said(request: ContextSettings) -> str:
+    """A settings change in words, for its audit line (slot length, remote control)."""
+    parts = []
+    if request.slot_seconds is not None:
+        parts.append(f"slot {request.slot_seconds:g} s")
+    if request.enabled is not None:
+        where = f" on {request.agent}" if request.agent else ""
+        parts.append(f"remote control {'on' if request.enabled else 'off'}{where}")
+    return ", ".join(parts)

@@ -27,6 +27,7 @@ import msgspec
 import zenoh
 
 from common import acl, keys
+from common.audit import AuditReporter
 from common.auth import AuthError, Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.files import write_atomic
@@ -180,6 +181,8 @@ class ChatRoom(Service):
         self._feed: RevocationFeed | None = None
         self._events_key = keys.ctx_events(realm, room)
         self._publisher: zenoh.Publisher | None = None
+        # Kicks, emergency stops, settings: reported to the registry's audit trail.
+        self.audit = AuditReporter(session, realm, lambda key, m: self.login.session.seal(key, m))
 
     # -- lifecycle
 
@@ -297,7 +300,8 @@ class ChatRoom(Service):
         if isinstance(request, ChatSay):
             self._say(principal, request)
             return OkReply()
-        return self._kick(principal, request)
+        with self.audit.action(principal, "kick", f"{self.scope}/{request.user}", request.reason):
+            return self._kick(principal, request)
 
     def on_in(self, sample: zenoh.Sample) -> None:
         principal, request = self.verifier.open(str(sample.key_expr), sample.payload, ChatSay)

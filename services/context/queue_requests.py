@@ -18,7 +18,7 @@ import zenoh
 
 from common import acl, keys
 from common.auth import Principal, Verifier
-from common.controller.precheck import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, precheck
 from common.messages import (
     AgentEvent,
     CancelControl,

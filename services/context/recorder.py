@@ -475,15 +475,16 @@ class SlotRecorder:
     def _write_command(
         self, rec: _Run, agent: str, sender: str, auth: str, command: AgentCommand, t: float
     ) -> None:
+        leds: list[bool | int] | None = None if command.leds is None else [*command.leds]
         record = s.CommandRecord(
             agent=agent,
             sender=sender,
             auth=auth,
             speeds=command.speeds,
             counters=command.counters,
-            leds=command.leds,
+            leds=leds,
             arm=command.arm,
-            fingers=command.fingers,
+            grip=command.grip,
         )
         rec.writer.write(s.commands_topic(agent), record, t)
 

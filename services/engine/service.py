@@ -36,33 +36,24 @@ import zenoh
 
 from common import keys
 from common.auth import AuthError, Principal, Session, Verifier
+from common.controller.actuators import apply_command
 from common.files import Journal
 from common.messages import (
-    AddItem,
     AgentCommand,
-    EditResult,
     ErrorReply,
     Lease,
-    MapRequest,
     Message,
-    MessageError,
-    MoveItem,
     OkReply,
-    RemoveItem,
-    ResetAgent,
-    ResizeArena,
-    RotateItem,
-    WorldEdit,
-    decode,
     encode,
 )
 from common.service import RequestError
-from common.sim2d import maps, wander
+from common.sim2d import wander
 from common.sim2d.world import EditError, World
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
-from services.engine import wire
+from services.engine import packing
+from services.engine.edits import EngineEdits
 from services.engine.pace import PaceWatch
 
 _FAST_PUBLISH_S = 0.02  # with --fast, publish at most 50 times a wall second
@@ -142,7 +133,7 @@ class _Command:
     received: float  # monotonic
 
 
-class EngineService(WorldService):
+class EngineService(EngineEdits, WorldService):
     def __init__(
         self,
         session: zenoh.Session,
@@ -185,57 +176,6 @@ class EngineService(WorldService):
         self.replayed_edits = 0
         if settings.base_map:
             self._open_journal(settings.base_map)
-
-    # -- the journal of live edits (an acknowledged edit survives a crash)
-
-    def _open_journal(self, base: str) -> None:
-        try:
-            marker = encode(MapRequest(action="load", name=base))
-        except MessageError:
-            self.log.warning("map name %r is not a plain name: live edits are not journalled", base)
-            return
-        journal = Journal(self.settings.maps_dir / f".{self.ident}.edits")
-        records = list(journal.records())
-        if not records or records[0] != marker:
-            journal.restart(marker)  # a journal of another map, or none: start afresh
-        else:
-            for raw in records[1:]:
-                try:
-                    self._replay(decode(raw, (WorldEdit, MapRequest)))
-                except (MessageError, RequestError, maps.MapError, EditError) as exc:
-                    self.log.warning("skipped a journalled edit that no longer applies: %s", exc)
-            if self.replayed_edits:
-                self.log.info(
-                    "replayed %d live edits since %s was loaded (journal %s)",
-                    self.replayed_edits,
-                    base,
-                    journal.path,
-                )
-        self._journal = journal
-
-    def _load_map(self, path: Path) -> World:
-        """A map file as this engine's world: its name, seed, tick and thread counts."""
-        return maps.load_map(
-            path,
-            name=self.ident,
-            seed=self.settings.seed,
-            tick_s=self.settings.tick_s,
-            threads=self.settings.threads,
-            physics_threads=self.settings.physics_threads,
-            drive=self.settings.drive,
-        )
-
-    def _replay(self, record: Message) -> None:
-        if isinstance(record, WorldEdit):
-            self._apply_op(self.world, record.op)
-        elif isinstance(record, MapRequest) and record.action == "load" and record.name:
-            path = maps.map_path(self.settings.maps_dir, record.name)
-            self.world = self._load_map(path)
-        self.replayed_edits += 1
-
-    def _journal_append(self, record: Message) -> None:
-        if self._journal is not None:
-            self._journal.append(encode(record))
 
     # -- lifecycle
 
@@ -348,7 +288,9 @@ class EngineService(WorldService):
                         self._matched.discard(agent)
 
             pub.declare_matching_listener(on_match)
-            if pub.matching_status.matching:
+            # zenoh's stubs type matching_status as a bool; it is a MatchingStatus.
+            status: Any = pub.matching_status
+            if status.matching:
                 with self._match_lock:
                     self._matched.add(agent)
             self._agent_pubs[agent] = pub
@@ -406,99 +348,8 @@ class EngineService(WorldService):
             raise RequestError("unavailable", "the simulation did not answer in time") from None
 
     def _on_snapshot(self, query: zenoh.Query) -> Message:
-        snap = self._in_sim(wire.snapshot)
+        snap = self._in_sim(packing.snapshot)
         return snapshot_with_identity(snap, self.box_keys)
-
-    def _on_edit(self, query: zenoh.Query) -> Message:
-        principal, edit = self._open(str(query.key_expr), query.payload, WorldEdit)
-        op = edit.op
-        if isinstance(op, ResetAgent):
-            return self._reset(principal, op)
-        principal.require("edit_map", "edit the world")
-
-        def apply(world: World) -> Message:
-            try:
-                self._apply_op(world, op)
-            except (EditError, maps.MapError) as exc:
-                raise RequestError("conflict", str(exc)) from None
-            self._journal_append(edit)  # synced before the edit is acknowledged
-            self.log.info("%s edited the world: %s", principal.user, type(op).__name__)
-            return EditResult(layout=world.layout, detail=type(op).__name__)
-
-        return self._in_sim(apply)
-
-    def _reset(self, principal: Principal, op: ResetAgent) -> Message:
-        """A robot back at its start pose: its lease's holder or requester, or a map editor.
-
-        Not journalled: it changes where a robot is, not the map (a restart puts
-        every robot at its start pose anyway).
-        """
-        refused = self.leases.may_reset(principal, op.id)
-        if refused is not None:
-            raise AuthError("forbidden", refused)
-
-        def apply(world: World) -> Message:
-            try:
-                x, y, _ = world.reset_agent(op.id)
-            except EditError as exc:
-                raise RequestError("conflict", str(exc)) from None
-            self.log.info("%s reset %s to its start pose", principal.user, op.id)
-            return EditResult(layout=world.layout, detail=f"{op.id} is back at ({x:.0f}, {y:.0f})")
-
-        return self._in_sim(apply)
-
-    @staticmethod
-    def _apply_op(world: World, op: Any) -> None:
-        if isinstance(op, AddItem):
-            maps.add_entry(world, op.section, op.entry, op.section)
-        elif isinstance(op, MoveItem):
-            world.move(op.id, op.x, op.y, op.heading)
-            world.set_home(op.id)  # a robot a map editor placed starts there from now on
-        elif isinstance(op, RotateItem):
-            world.rotate(op.id, op.heading)
-            world.set_home(op.id)
-        elif isinstance(op, RemoveItem):
-            world.remove(op.id)
-        elif isinstance(op, ResizeArena):
-            world.resize(op.width, op.height)
-
-    def _on_map(self, query: zenoh.Query) -> Message:
-        principal, request = self._open(str(query.key_expr), query.payload, MapRequest)
-        principal.require("edit_map", "save or load maps")
-        maps_dir = self.settings.maps_dir
-        if request.action == "list":
-            return EditResult(layout=self.world.layout, maps=maps.list_maps(maps_dir))
-        if request.name is None:
-            raise RequestError("bad_request", f"{request.action} needs a map name")
-        try:
-            path = maps.map_path(maps_dir, request.name)
-        except maps.MapError as exc:
-            raise RequestError("bad_request", str(exc)) from None
-        if request.action == "save":
-
-            def save(world: World) -> Message:
-                written = maps.save_map(world, maps_dir, request.name or "")
-                self.log.info("%s saved the world to %s", principal.user, written)
-                return EditResult(layout=world.layout, detail=f"saved {written.name}")
-
-            return self._in_sim(save)
-        if not path.is_file():
-            raise RequestError("not_found", f"no map named {request.name} in the maps directory")
-        try:
-            new_world = self._load_map(path)
-        except maps.MapError as exc:
-            raise RequestError("bad_request", str(exc)) from None
-
-        def swap(world: World) -> Message:
-            new_world.layout = world.layout + 1  # viewers must refetch the snapshot
-            self.world = new_world
-            self._last_cmd.clear()
-            self._declare_agent_publishers()
-            self._journal_append(request)
-            self.log.info("%s loaded map %s", principal.user, path.name)
-            return EditResult(layout=new_world.layout, detail=f"loaded {path.name}")
-
-        return self._in_sim(swap)
 
     # -- the sim thread
 
@@ -533,19 +384,8 @@ class EngineService(WorldService):
             slot = world.agent_slot(item.agent)
         except KeyError:
             return
-        cmd = item.command
         try:
-            if cmd.speeds is not None:
-                world.set_speeds(slot, *cmd.speeds)
-            if cmd.counters is not None:
-                world.set_counters(slot, *cmd.counters)
-            for led, action in enumerate(cmd.leds or []):
-                on = not world.leds[slot, led] if action == 2 else bool(action)
-                world.set_led(slot, led, on)
-            if cmd.arm is not None:
-                world.set_arm(slot, cmd.arm)
-            if cmd.fingers is not None:
-                world.set_fingers(slot, cmd.fingers == "closed")
+            apply_command(item.command, world.actuators(slot))
         except EditError as exc:
             self.log.info("command to %s partly ignored: %s", item.agent, exc)
         self._last_cmd[item.agent] = item.received
@@ -591,8 +431,8 @@ class EngineService(WorldService):
         # plain Zenoh peer's with the frame built after it; docs/BENCHMARKS.md).
         # Nobody watching the world (a headless swarm): no frame to build (0.4 ms
         # a tick at 10,000 robots, and its encoding).
-        frame = encode(wire.frame(world)) if self._frame_pub.matching_status.matching else None
-        batch = encode(wire.batch(world)) if self._batch_pub.matching_status.matching else None
+        frame = encode(packing.frame(world)) if self._frame_pub.matching_status.matching else None
+        batch = encode(packing.batch(world)) if self._batch_pub.matching_status.matching else None
         with self._match_lock:
             listening = set(self._matched)
         bundled = (
@@ -606,7 +446,7 @@ class EngineService(WorldService):
                 continue
             agents.append(agent)
         if agents:
-            encoded = dict(zip(agents, map(encode, wire.samples(world, slots)), strict=True))
+            encoded = dict(zip(agents, map(encode, packing.samples(world, slots)), strict=True))
             if bundled:
                 inside = {a: encoded[a] for a in bundled if a in encoded}
                 self.publish_sample_bundle(world.tick, inside)

@@ -21,27 +21,29 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
-from common.service import close_session, open_session
+from common.keys import AliveKind
 from common.zconfig import NetworkOptions
-from services.commands.certs import ACCOUNTS, registry_key_path
-from services.host.service import HostingPlan, HostingService
 from services.lab import provision
+from services.lab.driver import HostDriver
+from services.lab.hosting import HostingPlan, HostingService
 from services.lab.labfile import LabFile, LabFileError, load
+from services.lab.pki import ACCOUNTS, registry_key_path
 from services.lab.plan import (
     HostContext,
     check_available,
     host_plan,
+    host_state_dir,
     host_waves,
     read_registry_key,
     router_spec,
     write_configs,
 )
-from services.lab.supervisor import AliveWatch, Child, Supervisor
-from services.lab.wiring import default_state_dir
+from services.lab.supervisor import Child, ChildSpec, Supervisor
+from services.lab.wiring import arena_context
 
 
 class HostService(HostingService):
-    """The hosting service of a lab file's host (see services/host/service.py)."""
+    """The hosting service of a lab file's host (see services/lab/hosting.py)."""
 
     def __init__(self, session: zenoh.Session, ctx: HostContext, supervisor: Supervisor) -> None:
         plan = HostingPlan(
@@ -66,9 +68,7 @@ def prepare(lab: LabFile, host_name: str, state_dir: Path | None) -> HostContext
     """Validate that this host can run its share, and write its Zenoh configs."""
     host = lab.host(host_name)
     check_available(lab, host)
-    state = state_dir or (lab.state_dir / host.name if lab.state_dir else None)
-    if state is None:
-        state = default_state_dir(lab.realm) / host.name
+    state = host_state_dir(lab, host, state_dir)
     state.mkdir(parents=True, exist_ok=True)
     ctx = HostContext(lab=lab, host=host, state_dir=state, registry_key=read_registry_key(lab))
     write_configs(ctx)
@@ -93,67 +93,66 @@ def provision_registry_host(ctx: HostContext) -> None:
         )
 
 
-def run_host(ctx: HostContext, stop: threading.Event) -> int:
-    """Run this host's share until ``stop`` is set, then stop it all in order."""
-    supervisor = Supervisor(ctx.state_dir / "logs", say=lambda text: print(text, flush=True))
-    host = ctx.host
-    print(
-        f"wart host {host.name} of lab '{ctx.realm}' ({ctx.lab.path}): state and logs in "
-        f"{ctx.state_dir}",
-        flush=True,
-    )
-    session: zenoh.Session | None = None
-    service: HostService | None = None
-    code = 0
-    try:
-        router = supervisor.add(router_spec(ctx))
-        supervisor.spawn(router)
-        options = NetworkOptions(
-            realm=ctx.realm,
-            mode="client",
-            connect=(host.local_endpoint,),
-            config_file=ctx.config_path("host"),
-            registry_key=ctx.registry_key,
+class LabFileHost(HostDriver):
+    """A lab file's host under the shared driver (services/lab/driver.py)."""
+
+    hosting_first = True  # its load and token are there while its services start
+
+    def __init__(self, ctx: HostContext) -> None:
+        self.ctx = ctx
+        self.realm = ctx.realm
+        self.state_dir = ctx.state_dir
+
+    def banner(self) -> str:
+        ctx = self.ctx
+        return (
+            f"wart host {ctx.host.name} of lab '{ctx.realm}' ({ctx.lab.path}): state and logs "
+            f"in {ctx.state_dir}"
         )
-        try:
-            session = open_session(options, wait=30.0, quiet=True)
-        except ConnectionError as exc:
-            print(f"  ✗ {exc}", flush=True)
-            return 1
-        supervisor.watch = AliveWatch(session, keys.alive_all(ctx.realm))
-        if not supervisor.wait_ready(router):
-            return 1
-        service = HostService(session, ctx, supervisor).start()
-        engines = {s.ident: s for s in host.services if s.kind == "engine"}
-        # An engine of the lab file and its agent context are one arena (named
-        # "engine W" and "agent C" by arena_specs, C the context's name).
-        arena_of = {f"engine {w}": w for w in engines} | {
-            f"agent {s.params.get('context') or w}": w for w, s in engines.items()
+
+    def router(self) -> ChildSpec:
+        return router_spec(self.ctx)
+
+    def network(self) -> NetworkOptions:
+        return self.ctx.network("host")
+
+    def waves(self) -> list[list[ChildSpec]]:
+        return host_waves(self.ctx)
+
+    def hosting(self, session: zenoh.Session, supervisor: Supervisor) -> HostingService:
+        return HostService(session, self.ctx, supervisor).start()
+
+    def adopt(self, hosting: HostingService, children: list[Child]) -> None:
+        realm = self.realm
+        engines = {s.ident: s for s in self.ctx.host.services if s.kind == "engine"}
+        # An engine of the lab file and its agent context are one arena: told
+        # apart by their tokens (the world's, and its context's).
+        arena_of = {keys.alive(realm, AliveKind.WORLD, w): w for w in engines} | {
+            keys.alive(realm, AliveKind.CONTEXT, arena_context(w, s.params.get("context"))): w
+            for w, s in engines.items()
         }
         arena_children: dict[str, list[Child]] = {}
-        for wave in host_waves(ctx):
-            if stop.is_set():
-                break
-            for child, up in supervisor.start_together(wave):
-                if not up:
-                    code = 1
-                if child.spec.name in arena_of:  # counted in the load reports
-                    arena_children.setdefault(arena_of[child.spec.name], []).append(child)
-        for world, children in arena_children.items():
+        for child in children:
+            world = arena_of.get(child.spec.alive_key or "")
+            if world is not None:  # counted in the load reports
+                arena_children.setdefault(world, []).append(child)
+        for world, mine in arena_children.items():
             svc = engines[world]
-            service.adopt(world, str(svc.params["map"]), children, int(svc.params.get("robots", 0)))
-        if not stop.is_set():
-            print(f"Host {host.name} is running. Press Ctrl-C to stop it.", flush=True)
-            supervisor.run_until(stop)
-    finally:
-        print(f"Stopping host {host.name}...", flush=True)
-        if service is not None:
-            service.stop()
-        supervisor.stop_all()
-        if session is not None:
-            close_session(session)
-        print(f"Host {host.name} stopped.", flush=True)
-    return code
+            hosting.adopt(world, str(svc.params["map"]), mine, int(svc.params.get("robots", 0)))
+
+    def running(self) -> str:
+        return f"Host {self.ctx.host.name} is running. Press Ctrl-C to stop it."
+
+    def stopping(self) -> str:
+        return f"Stopping host {self.ctx.host.name}..."
+
+    def stopped(self) -> str:
+        return f"Host {self.ctx.host.name} stopped."
+
+
+def run_host(ctx: HostContext, stop: threading.Event) -> int:
+    """Run this host's share until ``stop`` is set, then stop it all in order."""
+    return LabFileHost(ctx).run(stop)
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart host") -> int:
@@ -171,7 +170,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart host") -> int:
         ctx = prepare(load(args.lab), args.name, args.state_dir)
         if args.check:
             for spec in [router_spec(ctx), *host_plan(ctx)]:
-                print(f"{spec.name:<16} wart {' '.join(spec.argv)}")
+                print(f"{spec.name:<22} wart {' '.join(spec.argv)}")
             print(f"configs in {ctx.state_dir / 'zenoh'}")
             return 0
     except (LabFileError, FileNotFoundError, OSError, ValueError) as exc:

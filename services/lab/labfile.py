@@ -24,7 +24,7 @@ from common.sim2d.drives import DRIVES
 
 # What a host can run: the fields each kind requires, then the optional ones.
 # ``agent`` is an agent context for a world the lab file names (a bridge's
-# real robots, usually); every engine gets its own from the [arena] template.
+# real robots, usually); every engine gets its own when [arena].agent is true.
 SERVICE_KINDS: dict[str, tuple[str, ...]] = {
     "registry": (),
     "chat": ("name",),
@@ -52,55 +52,6 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "runner": (),
 }
 
-# The default arena processes. ``{placeholders}`` are filled by wart host;
-# an empty template is skipped (a lab file may set ``agent = []`` for arenas
-# without agent contexts).
-DEFAULT_ENGINE_TEMPLATE: tuple[str, ...] = (
-    "engine",
-    "--map",
-    "{map}",
-    "--world",
-    "{world}",
-    "--seed",
-    "{seed}",
-    "--maps-dir",
-    "{maps_dir}",
-)
-AGENT_CONTEXT_TEMPLATE: tuple[str, ...] = (
-    "context",
-    "agent",
-    "--world",
-    "{world}",
-    "--name",
-    "{context}",
-    "--title",
-    "{title}",
-    "--runner",
-    "{runner}",
-    "--user",
-    "{account}",
-    "--identity",
-    "{identity}",
-    "--data-dir",
-    "{rooms_dir}",
-)
-TEMPLATE_FIELDS = frozenset(
-    {
-        "world",
-        "map",
-        "seed",
-        "robots",
-        "maps_dir",
-        "account",
-        "identity",
-        "host",
-        "runner",
-        "owner",
-        "context",
-        "title",
-        "rooms_dir",
-    }
-)
 DEFAULT_RUNNER = "runner"  # what agent contexts name when the lab file has no runner
 
 
@@ -161,9 +112,15 @@ class Limits:
 
 
 @dataclass(frozen=True)
-class ArenaTemplates:
-    engine: tuple[str, ...]
-    agent: tuple[str, ...]  # empty: arenas without an agent context
+class ArenaSettings:
+    """What every arena is: an engine, and its agent context unless ``agent`` is false.
+
+    Data, not command lines: the processes themselves are built by
+    services/lab/wiring.py, the one place that writes each kind's command line.
+    """
+
+    agent: bool = True  # false: arenas without an agent context (engines alone)
+    slot_seconds: float | None = None  # their queues' slot length (None: the context's default)
 
 
 @dataclass(frozen=True)
@@ -174,7 +131,7 @@ class LabFile:
     hosts: tuple[HostEntry, ...]
     security: Security
     limits: Limits
-    arena: ArenaTemplates
+    arena: ArenaSettings
     state_dir: Path | None = None
     maps_dir: Path = field(default_factory=lambda: Path("maps"))
 
@@ -321,24 +278,6 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
     return ServiceEntry(kind=kind, params=params)
 
 
-def _template(where: str, value: Any) -> tuple[str, ...]:
-    argv = _strings(where, value)
-    for i, arg in enumerate(argv):
-        try:
-            names = {
-                part.split("}", 1)[0] for part in arg.split("{")[1:] if "}" in part
-            }  # "{world}" -> world
-        except IndexError:
-            names = set()
-        unknown = names - TEMPLATE_FIELDS
-        if unknown:
-            raise LabFileError(
-                f"{where}[{i}]: unknown placeholder {{{sorted(unknown)[0]}}} "
-                f"(known: {', '.join(sorted(TEMPLATE_FIELDS))})"
-            )
-    return argv
-
-
 def parse(data: Mapping[str, Any], path: Path) -> LabFile:
     """Validate a decoded lab file; raises LabFileError naming the field."""
     base = path.parent
@@ -415,13 +354,22 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
     )
 
     arena = _table("arena", top.get("arena", {}))
-    _unknown("arena", arena, ("engine", "agent"))
-    templates = ArenaTemplates(
-        engine=_template("arena.engine", arena.get("engine", list(DEFAULT_ENGINE_TEMPLATE))),
-        agent=_template("arena.agent", arena.get("agent", list(AGENT_CONTEXT_TEMPLATE))),
+    for gone in ("engine", "agent"):
+        if isinstance(arena.get(gone), list):
+            # The command-line templates of older lab files: every process's command line
+            # is now written once, in services/lab/wiring.py.
+            raise LabFileError(
+                f"arena.{gone}: command templates are no longer read; write "
+                "agent = true or false (arenas with or without an agent context) and, "
+                "for short queue slots, slot_seconds = N"
+            )
+    _unknown("arena", arena, ("agent", "slot_seconds"))
+    settings = ArenaSettings(
+        agent=bool(_type("arena.agent", arena.get("agent", True), bool, "true or false")),
+        slot_seconds=_number("arena.slot_seconds", arena["slot_seconds"], 1, 3600)
+        if "slot_seconds" in arena
+        else None,
     )
-    if not templates.engine:
-        raise LabFileError("arena.engine: an arena needs an engine command")
 
     raw_hosts = _type("hosts", top.get("hosts", []), list, "a list of [[hosts]] tables")
     if not raw_hosts:
@@ -504,7 +452,7 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
                     f"{host.name}: names are lab-wide"
                 )
             table_by_kind[svc.ident] = host.name
-    if templates.agent:
+    if settings.agent:
         # An engine's agent context is named after its world: it shares the
         # context names with chat rooms and the lab file's agent contexts.
         for world, where_world in worlds.items():
@@ -531,7 +479,7 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
         hosts=tuple(hosts),
         security=security,
         limits=limits,
-        arena=templates,
+        arena=settings,
         state_dir=state_dir,
         maps_dir=maps_dir,
     )
@@ -550,16 +498,3 @@ def load(path: Path) -> LabFile:
     except tomllib.TOMLDecodeError as exc:
         raise LabFileError(f"{path}: not valid TOML: {exc}") from None
     return parse(data, path.resolve())
-
-
-def fill(template: Sequence[str], values: Mapping[str, object]) -> list[str]:
-    """A command template with its ``{placeholders}`` filled (one argument per item)."""
-    out = []
-    for arg in template:
-        text = arg
-        for name, value in values.items():
-            text = text.replace("{" + name + "}", str(value))
-        if "{" in text and "}" in text:
-            raise LabFileError(f"template argument {arg!r} has a placeholder with no value")
-        out.append(text)
-    return out

@@ -11,13 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from common.zconfig import NetworkOptions
 from services.cli import SUBCOMMANDS
-from services.commands.certs import host_roles, identity_path, registry_key_path
 from services.context.main import KINDS as CONTEXT_KINDS
 from services.lab import wiring
 from services.lab.labfile import HostEntry, LabFile, LabFileError
+from services.lab.pki import host_roles, identity_path, registry_key_path
 from services.lab.supervisor import ChildSpec
-from services.lab.wiring import SHIPPED_MAPS, Wiring
+from services.lab.wiring import SHIPPED_MAPS, Wiring, default_state_dir
 from services.lab.zsecurity import acl_config, host_tls, write_config, zenoh_security
 
 # The command each service kind needs (a build without one refuses the host).
@@ -57,21 +58,18 @@ class HostContext:
     def config_path(self, role: str) -> Path:
         return self.state_dir / "zenoh" / f"{role}.json5"
 
+    def network(self, role: str) -> NetworkOptions:
+        """What a process of this host gets: its role's TLS config, the local router."""
+        return NetworkOptions(
+            realm=self.realm,
+            mode="client",
+            connect=(self.host.local_endpoint,),
+            config_file=self.config_path(role),
+            registry_key=self.registry_key,
+        )
+
     def net_args(self, role: str) -> list[str]:
-        """What a client child on this host gets: its role's TLS config, the local router."""
-        return [
-            "--realm",
-            self.realm,
-            "--mode",
-            "client",
-            "--connect",
-            self.host.local_endpoint,
-            "--config",
-            str(self.config_path(role)),
-            "--no-multicast-scouting",
-            "--registry-key",
-            self.registry_key,
-        ]
+        return self.network(role).as_args()
 
     def wiring(self) -> Wiring:
         """This host's children: TLS to the local router, identities from the lab's PKI."""
@@ -89,6 +87,16 @@ class HostContext:
             http_host=host.address,
             lab_address=f"{host.address}:{host.port}/{lab.realm}",
         )
+
+
+def host_state_dir(lab: LabFile, host: HostEntry, override: Path | None = None) -> Path:
+    """Where a host keeps its database, logs and configs: ``--state-dir``, else the lab
+    file's ``state_dir``/HOST, else ~/.local/state/wart/REALM/HOST."""
+    if override is not None:
+        return override
+    if lab.state_dir is not None:
+        return lab.state_dir / host.name
+    return default_state_dir(lab.realm) / host.name
 
 
 def read_registry_key(lab: LabFile) -> str:
@@ -113,11 +121,11 @@ def check_available(lab: LabFile, host: HostEntry) -> None:
                 f"hosts[{lab.hosts.index(host)}].services[{i}]: a {svc.kind} needs "
                 f"`wart {' '.join(argv)}`, which this build does not have"
             )
-    for which, template in (("engine", lab.arena.engine), ("agent", lab.arena.agent)):
-        if template and not command_available(template[:2]):
-            raise LabFileError(
-                f"arena.{which}: `wart {' '.join(template[:2])}` does not exist in this build"
-            )
+    if lab.arena.agent and not command_available(NEEDS["agent"]):
+        raise LabFileError(
+            "arena.agent: arenas' agent contexts need `wart context agent`, "
+            "which this build does not have"
+        )
 
 
 def write_configs(ctx: HostContext) -> None:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from common.auth import RegistryIdentity, create_identity_key, load_identity_key
 from services.lab.labfile import LabFileError
-from services.lab.wiring import SHIPPED_MAPS
+from services.lab.wiring import ACCOUNT_PREFIX, SHIPPED_MAPS
 from services.registry.accounts_db import RegistryDB
 from services.registry.service import provision as provision_registry_db
 
@@ -47,12 +47,17 @@ def seed_maps(maps_dir: Path) -> None:
 
 
 def register_service_accounts(db_path: Path, accounts: Mapping[str, bytes]) -> None:
-    """Make sure each service account exists with the ``service`` role and its public key."""
+    """Make sure each service account exists with its role and its public key.
+
+    The role is ``service``, but a viewer's (``viewer-*``) is ``gateway``: a
+    process facing browsers gets no right to lease, serve worlds or run code.
+    """
     db = RegistryDB(db_path)
     try:
         for account, public_key in accounts.items():
+            role = "gateway" if account.startswith(ACCOUNT_PREFIX["viewer"]) else "service"
             if not db.user_exists(account):
-                db.add_user(account, ["service"], public_key=public_key)
+                db.add_user(account, [role], public_key=public_key)
             else:
                 db.add_key(account, public_key)
     finally:

@@ -45,6 +45,10 @@ class ChildSpec:
     detail: str = ""  # shown beside the name once up (an endpoint, a map)
     ready_timeout: float = 60.0
     env: dict[str, str] = field(default_factory=dict)
+    # What must exist before the process starts (a generated map, a directory),
+    # done at each spawn rather than when the plan is made: a plan is data, so
+    # `wart doctor` can compute a host's plan without writing on its disk.
+    prepare: Callable[[], object] | None = None
 
 
 @dataclass
@@ -170,6 +174,8 @@ class Supervisor:
     # -- starting
 
     def spawn(self, child: Child) -> None:
+        if child.spec.prepare is not None:
+            child.spec.prepare()
         env = dict(os.environ)
         env.update(child.spec.env)
         env["WART_PARENT_PID"] = str(os.getpid())

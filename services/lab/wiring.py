@@ -10,6 +10,7 @@ A new flag on a service is one edit here.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -19,7 +20,7 @@ from typing import Any
 
 from common import keys
 from common.keys import AliveKind
-from services.lab.labfile import ArenaTemplates, LabFileError, ServiceEntry, fill
+from services.lab.labfile import ArenaSettings, LabFileError, ServiceEntry
 from services.lab.supervisor import ChildSpec
 
 SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "maps"
@@ -38,6 +39,8 @@ ACCOUNT_PREFIX = {
     "runner": "runner-",
     "engine": "engine-",
     "bridge": "bridge-",
+    # The viewer's account has the gateway role only: it vouches for browsers' addresses.
+    "viewer": "viewer-",
 }
 
 
@@ -93,7 +96,7 @@ class Wiring:
     registry_key_file: Path
     map_dirs: tuple[Path, ...]  # where maps are looked up by name, in order
     runner: str  # the runner agent contexts use unless told
-    arena: ArenaTemplates
+    arena: ArenaSettings
     # The viewer's public side; None: the viewer's own defaults (loopback).
     http_host: str | None = None
     lab_address: str | None = None
@@ -265,8 +268,13 @@ def agent_context_spec(
     runner: str | None = None,
     owner: str | None = None,
     slot_seconds: float | None = None,
+    account: str | None = None,
+    detail: str | None = None,
 ) -> ChildSpec:
-    """An agent context named in a lab description: queues and leases for ``world``'s robots."""
+    """An agent context: queues and leases for ``world``'s robots.
+
+    Its account is ``ctx-NAME`` unless given (an arena's shares its host's).
+    """
     argv = [
         "context",
         "agent",
@@ -276,7 +284,7 @@ def agent_context_spec(
         world,
         "--runner",
         runner or w.runner,
-        *w.login(service_account("agent", name)),
+        *w.login(account or service_account("agent", name)),
         "--data-dir",
         str(w.rooms_dir),
         *w.net_args("agent"),
@@ -291,8 +299,54 @@ def agent_context_spec(
         f"agent context {name}",
         argv,
         keys.alive(w.realm, AliveKind.CONTEXT, name),
-        detail=f"queues and leases for the robots of {world}",
+        detail=detail or f"queues and leases for the robots of {world}",
     )
+
+
+def engine_spec(
+    w: Wiring,
+    world: str,
+    map_path: Path,
+    *,
+    seed: int = 1,
+    login: bool = False,
+    drive: str | None = None,
+    detail: str = "",
+    prepare: Callable[[], object] | None = None,
+) -> ChildSpec:
+    """A simulated world; ``login`` gives it an account (``engine-WORLD``, MAC leases),
+    ``drive`` its ``--drive`` (how its robots are driven: "discs" for a swarm)."""
+    argv = [
+        "engine",
+        "--map",
+        str(map_path),
+        "--world",
+        world,
+        "--seed",
+        str(seed),
+        "--maps-dir",
+        str(w.maps_dir),
+        *w.net_args("engine"),
+    ]
+    if drive:
+        argv += ["--drive", drive]
+    if login:
+        argv += w.login(service_account("engine", world))
+    return ChildSpec(
+        name=f"engine {world}",
+        argv=argv,
+        alive_key=keys.alive(w.realm, AliveKind.WORLD, world),
+        detail=detail or f"simulated world {world} ({map_path.name})",
+        # The first start of a checkout compiles the kernels: 37 s at load
+        # 5 to 10 (25 s of CPU), over a minute on a busier machine.
+        ready_timeout=ENGINE_READY_TIMEOUT_S,
+        prepare=prepare,
+    )
+
+
+def arena_context(world: str, context: str | None = None) -> str:
+    """The name of an arena's agent context: the world's unless the lab names another."""
+    return context or world
 
 
 def arena_specs(
@@ -301,73 +355,52 @@ def arena_specs(
     map_path: Path,
     *,
     seed: int = 1,
-    robots: int = 0,
     owner: str | None = None,
     context: str | None = None,
     title: str | None = None,
     login: bool = False,
     drive: str | None = None,
+    prepare: Callable[[], object] | None = None,
 ) -> list[ChildSpec]:
-    """An arena: the engine, then its agent context (when the templates have one).
+    """An arena: the engine, then its agent context (unless the lab's arenas have none).
 
-    The processes come from the ``[arena]`` templates. ``context`` names the
-    agent context (default: the world's name); ``owner`` (the user who asked
-    for the arena) may manage and kick there; a template that does not place
-    ``{owner}`` itself gets ``--owner`` appended. ``login`` gives the engine
-    its own account (``engine-WORLD``); ``drive``, its ``--drive`` (how its
-    robots are driven: "discs" for a swarm arena).
+    ``context`` names the agent context (default: the world's name); it logs in
+    with the account the host's arenas share; ``owner`` (the user who asked
+    for the arena) may manage and kick there.
     """
-    account = arena_account(w.host)
-    context = context or world
-    values = {
-        "world": world,
-        "map": map_path,
-        "seed": seed,
-        "robots": robots,
-        "maps_dir": w.maps_dir,
-        "account": account,
-        "identity": w.identity(account),
-        "host": w.host,
-        "runner": w.runner,
-        "owner": owner or account,
-        "context": context,
-        "title": title or context,
-        "rooms_dir": w.rooms_dir,
-    }
-    engine_argv = [*fill(w.arena.engine, values), *w.net_args("engine")]
-    if drive:
-        engine_argv += ["--drive", drive]
-    if login:
-        engine_argv += w.login(service_account("engine", world))
     specs = [
-        ChildSpec(
-            name=f"engine {world}",
-            argv=engine_argv,
-            alive_key=keys.alive(w.realm, AliveKind.WORLD, world),
+        engine_spec(
+            w,
+            world,
+            map_path,
+            seed=seed,
+            login=login,
+            drive=drive,
             detail=f"simulated world {world} ({map_path.name})"
             + (f", for {owner}" if owner else ""),
-            # The first start of a checkout compiles the kernels: 37 s at load
-            # 5 to 10 (25 s of CPU), over a minute on a busier machine.
-            ready_timeout=ENGINE_READY_TIMEOUT_S,
+            prepare=prepare,
         )
     ]
     if w.arena.agent:
-        argv = fill(w.arena.agent, values)
-        if owner and not any("{owner}" in arg for arg in w.arena.agent):
-            argv += ["--owner", owner]
+        name = arena_context(world, context)
         specs.append(
-            ChildSpec(
-                name=f"agent {context}",
-                argv=[*argv, *w.net_args("agent")],
-                alive_key=keys.alive(w.realm, AliveKind.CONTEXT, context),
+            agent_context_spec(
+                w,
+                name,
+                world,
+                title=title or name,
+                owner=owner,
+                slot_seconds=w.arena.slot_seconds,
+                account=arena_account(w.host),
                 detail=f"agent context of {world}",
             )
         )
     return specs
 
 
-def runner_spec(w: Wiring, name: str) -> ChildSpec:
-    argv = ["runner", "--name", name, *w.login(service_account("runner", name))]
+def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpec:
+    """A runner; its account is ``runner-NAME`` unless given."""
+    argv = ["runner", "--name", name, *w.login(account or service_account("runner", name))]
     return ChildSpec(
         f"runner {name}",
         [*argv, *w.net_args("runner")],
@@ -395,7 +428,6 @@ def bridge_specs(
     if emulate:
         map_path = w.resolve_map(emulate)
         link = emulator_link(w, world)
-        link.parent.mkdir(parents=True, exist_ok=True)
         x, y, deg = map_pose(map_path)
         specs.append(
             ChildSpec(
@@ -403,6 +435,7 @@ def bridge_specs(
                 argv=["khepera-emulator", "--map", str(map_path), "--link", str(link)],
                 alive_key=None,  # not on the network: the bridge below is its presence
                 detail=f"emulated Khepera at {link} ({map_path.name})",
+                prepare=functools.partial(link.parent.mkdir, parents=True, exist_ok=True),
             )
         )
         taken = {port.partition("=")[2].partition("@")[0] for port in ports}
@@ -427,15 +460,25 @@ def bridge_specs(
 
 
 def viewer_spec(
-    w: Wiring, ident: str, *, http_port: int = 8080, http_host: str | None = None
+    w: Wiring,
+    ident: str,
+    *,
+    http_port: int = 8080,
+    http_host: str | None = None,
+    account: str | None = None,
 ) -> ChildSpec:
-    """The web viewer; browsers elsewhere reach it on ``http_host`` (default ``w.http_host``)."""
+    """The web viewer; browsers elsewhere reach it on ``http_host`` (default ``w.http_host``).
+
+    ``account``: its gateway account (it vouches for each browser's address at login).
+    """
     http_host = http_host or w.http_host
     argv = ["viewer", "--id", ident, "--http-port", str(http_port)]
     if http_host:
         argv += ["--host", http_host]
     if w.lab_address:
         argv += ["--lab-address", w.lab_address]
+    if account:
+        argv += w.login(account)
     argv += [
         "--url-file",
         str(w.viewer_url_file()),
@@ -467,8 +510,12 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
         world = str(p["world"])
         map_path = w.resolve_map(str(p["map"]))
         robots = int(p.get("robots", 0))
+        prepare = None
         if robots:
-            map_path = map_with_robots(map_path, robots, w.state_dir / "arenas" / f"{world}.json")
+            # Written when the engine starts, not now: planning writes nothing, so
+            # the doctor can plan a host it does not run on.
+            base, map_path = map_path, w.state_dir / "arenas" / f"{world}.json"
+            prepare = functools.partial(map_with_robots, base, robots, map_path)
         return arena_specs(
             w,
             world,
@@ -479,6 +526,7 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
             title=title,
             login=bool(p.get("login")),
             drive=p.get("drive"),
+            prepare=prepare,
         )
     if svc.kind == "bridge":
         return bridge_specs(
@@ -512,6 +560,7 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
                 str(p.get("name") or w.host),
                 http_port=int(p.get("http_port", 8080)),
                 http_host=p.get("http_host"),
+                account=service_account("viewer", svc.ident),
             )
         ]
     raise LabFileError(f"{svc.kind} services are not supported by this build")

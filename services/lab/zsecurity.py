@@ -105,7 +105,8 @@ _PEOPLE = (
         W(keys.registry_directory),
         W(keys.registry_admin),
     ),
-    _g("ask", W(keys.registry_revocations)),
+    # The audit trail: the registry answers only admins (it checks the permission).
+    _g("ask", W(keys.registry_revocations), W(keys.registry_audit)),
     _g("sub", W(keys.registry_revocations), W(keys.user_inbox)),
     # ctx/*/output: a controller run from a student's machine (wart control)
     # reports its output to the context, which checks the sender holds the lease.
@@ -130,6 +131,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     "registry": (
         _g("serve", W(keys.registry_all)),
         _g("pub", W(keys.registry_revocations), W(keys.user_inbox)),
+        _g("sub", W(keys.registry_report)),  # services' privileged actions, for the audit
         _g("ask", W(keys.ctx_state)),
         _g("token", W(keys.alive, kind=AliveKind.REGISTRY)),
         _g("watch", W(keys.alive_all)),
@@ -138,7 +140,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         *_SERVICE_BASE,
         _g("serve", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_state), W(keys.ctx_request)),
         _g("sub", W(keys.ctx_in)),
-        _g("pub", W(keys.ctx_events)),
+        _g("pub", W(keys.ctx_events), W(keys.registry_report)),  # kicks, to the audit
         _g("token", W(keys.alive, kind=AliveKind.CONTEXT)),
     ),
     # Agent contexts: a chat room plus the robots' queues; the only role that
@@ -148,6 +150,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("serve", W(keys.ctx_join), W(keys.ctx_leave), W(keys.ctx_state), W(keys.ctx_request)),
         _g("sub", W(keys.ctx_in), W(keys.ctx_output)),
         _g("pub", W(keys.ctx_events), W(keys.agent_lease), W(keys.world_estop)),
+        _g("pub", W(keys.registry_report)),  # kicks, stops, settings: to the audit trail
         _g("serve", W(keys.ctx_dryrun), W(keys.ctx_status)),
         _g("sub", W(keys.world_frame), W(keys.agent_sensors)),
         # a real run's recording carries the camera's frames and tracked poses

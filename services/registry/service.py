@@ -13,7 +13,6 @@ and an ``admin`` account, and prints the key every service must pin
 from __future__ import annotations
 
 import logging
-import math
 import os
 import threading
 import time
@@ -38,142 +37,44 @@ from common.auth import (
 )
 from common.keys import AliveKind
 from common.messages import (
-    ADMIN_REQUESTS,
-    AddUser,
     ContextInfo,
     ContextInfoRequest,
     DirectoryReply,
     DirectoryRequest,
-    Grant,
     KeyCredential,
-    KickFromServer,
-    KickNotice,
-    ListUsers,
     LoginReply,
     LoginRequest,
+    LoginVouch,
     LogoutRequest,
     MailboxDeposit,
     Message,
     MessageError,
     OkReply,
     PrivateMessage,
-    RemoveUser,
-    RenameServer,
     Revocation,
     RevocationList,
     SealedLogin,
     SessionToken,
-    SetPassword,
     SignedRevocations,
-    Ungrant,
-    UnlockLogins,
-    UserInfo,
     UserKeysReply,
     UserKeysRequest,
-    UserList,
     decode,
     encode,
 )
 from common.service import RequestError, Service
 from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
+from services.registry.admin import REGISTRY_USER, AdminRequests, ban_refusal, source_of
+from services.registry.audit_db import Action, TermStore
+from services.registry.throttle import LoginThrottle, vouched_source
 
 log = logging.getLogger("wart.registry")
 
-REGISTRY_USER = "registry"  # the registry's own session (kick notices, context queries)
 MAX_TTL = 7 * 24 * 3600.0
 DEFAULT_SERVER_NAME = "wart lab"
 
 
-class LoginThrottle:
-    """Slows password guessing without letting anyone lock the owner out.
-
-    Three buckets of failed logins, each allowed a few free failures and then an
-    exponential wait (2, 4, 8 ... up to ``cap`` seconds after the last failure):
-
-    - the *pair* (account, source): one source guessing one account;
-    - the *source*, across accounts: one source spraying many accounts;
-    - the *account*, across sources: distributed guessing. This one applies only
-      to sources that already failed on the account ("suspect" sources). A
-      source with no failure on the account is still checked, so the owner's
-      correct password gets through while others guess; a wrong one makes that
-      source suspect, and every later try from it waits the account's time too.
-
-    Key logins are exempt from the account bucket (a signature cannot be
-    guessed). The admin's unlock clears every bucket of an account.
-
-    The "source" is what the querier declares: its Zenoh session id plus, behind
-    a gateway, the gateway's name for the connection (the viewer names each
-    browser). A client that forges a fresh source for every attempt is slowed
-    only by the argon2id cost of each check and by the router's access control;
-    the security model (docs/ARCHITECTURE.md) says so.
-    """
-
-    def __init__(
-        self, free: int = 3, source_free: int = 10, account_free: int = 10, cap: float = 300.0
-    ) -> None:
-        self.free = free
-        self.source_free = source_free
-        self.account_free = account_free
-        self.cap = cap
-        self._lock = threading.Lock()
-        self._fails: dict[str, tuple[int, float]] = {}  # bucket -> (failures, last failure)
-
-    def _wait(self, bucket: str, free: int, now: float) -> float:
-        count, last = self._fails.get(bucket, (0, 0.0))
-        if count < free:
-            return 0.0
-        return max(0.0, last + min(self.cap, 2.0 ** (count - free + 1)) - now)
-
-    @staticmethod
-    def _buckets(user: str, source: str) -> tuple[str, str, str]:
-        return f"pair:{user}|{source}", f"source:{source}", f"user:{user}"
-
-    def check(self, user: str, source: str, now: float, *, key_login: bool = False) -> None:
-        pair, by_source, account = self._buckets(user, source)
-        with self._lock:
-            wait = max(
-                self._wait(pair, self.free, now), self._wait(by_source, self.source_free, now)
-            )
-            suspect = pair in self._fails
-            if suspect and not key_login:
-                wait = max(wait, self._wait(account, self.account_free, now))
-        if wait > 0:
-            raise RequestError(
-                "rate_limited",
-                f"too many failed logins from here: try again in {math.ceil(wait)} s",
-                retry_after=wait,
-            )
-
-    def failed(self, user: str, source: str, now: float) -> None:
-        with self._lock:
-            for bucket in self._buckets(user, source):
-                count, _ = self._fails.get(bucket, (0, 0.0))
-                self._fails[bucket] = (count + 1, now)
-            if len(self._fails) > 100_000:  # a flood of names: forget the oldest half
-                for bucket in sorted(self._fails, key=lambda b: self._fails[b][1])[:50_000]:
-                    del self._fails[bucket]
-
-    def succeeded(self, user: str, source: str) -> None:
-        """The right credential from this source: its pair is clean again."""
-        with self._lock:
-            self._fails.pop(self._buckets(user, source)[0], None)
-
-    def failures(self, user: str) -> int:
-        """Failed logins on the account since its last unlock (for the admin's list)."""
-        with self._lock:
-            return self._fails.get(f"user:{user}", (0, 0.0))[0]
-
-    def unlock(self, user: str) -> int:
-        """Forget every failure on the account (admin): how many buckets were cleared."""
-        with self._lock:
-            gone = [b for b in self._fails if b == f"user:{user}" or b.startswith(f"pair:{user}|")]
-            for bucket in gone:
-                del self._fails[bucket]
-            return len(gone)
-
-
-class Registry(Service):
+class Registry(AdminRequests, Service):
     kind = AliveKind.REGISTRY
 
     def __init__(
@@ -188,6 +89,7 @@ class Registry(Service):
     ) -> None:
         super().__init__(session, realm, ident)
         self.db = db
+        self.term = TermStore(db)
         self.identity = identity
         self.throttle = throttle or LoginThrottle()
         self.verifier = Verifier(identity.verify_key, realm)
@@ -222,6 +124,8 @@ class Registry(Service):
         self.serve(keys.registry_directory(self.realm), self.on_directory)
         self.serve(keys.registry_admin(self.realm), self.on_admin)
         self.serve(keys.registry_revocations(self.realm), self.on_revocations)
+        self.serve(keys.registry_audit(self.realm), self.on_audit)
+        self.subscribe(keys.registry_report(self.realm), self.on_report)
         self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
         self._thread.start()
 
@@ -246,6 +150,9 @@ class Registry(Service):
                 )
             return self._own
 
+    def own_session_seal(self, key: str, message: Message) -> bytes:
+        return self.own_session().seal(key, message)
+
     # -- login and logout
 
     def on_login(self, query: zenoh.Query) -> Message:
@@ -265,14 +172,20 @@ class Registry(Service):
             )
         cred = request.credential
         user = cred.user
-        source = f"{_source(query) or 'undeclared'}/{request.via}"
+        source = self._login_source(query, request)
         now = time.time()
         self.throttle.check(user, source, now, key_login=isinstance(cred, KeyCredential))
         if not self._credential_ok(request, now):
             self.throttle.failed(user, source, now)
-            log.info("failed login for %s (from %s)", user, source)
+            log.info("failed login for %s (from %s, says %r)", user, source, request.via)
             what = "key" if isinstance(cred, KeyCredential) else "password"
             raise RequestError("unauthenticated", f"wrong user name or {what}")
+        ban = self.term.ban_of(user, now)
+        if ban is not None:
+            # Told only once the credential is right: a name alone learns nothing.
+            refusal = ban_refusal(ban)
+            self.audit(Action(user, "login", user, "refused", refusal.message, source))
+            raise refusal
         self.throttle.succeeded(user, source)
         everywhere, scoped, roles = acl.expand(self.db.grants_of(user))
         ttl = min(request.ttl, MAX_TTL)
@@ -300,6 +213,28 @@ class Registry(Service):
         return LoginReply(
             token=self.identity.sign_token(token), server_name=self.server_name, pending=pending
         )
+
+    def _login_source(self, query: zenoh.Query, request: LoginRequest) -> str:
+        """The throttle's source: the querier's Zenoh session, or what a gateway vouches.
+
+        A vouch that does not hold (forged, replayed, made for another login, from a
+        session without ``vouch``) is logged and ignored: the login then counts
+        against the querier's session, which never gives more checks.
+        """
+        plain = source_of(query)
+        if request.vouch is None:
+            return plain
+        try:
+            gateway, vouch = self.verifier.open(
+                keys.registry_login(self.realm), request.vouch, LoginVouch
+            )
+            gateway.require("vouch", "vouch for where a login comes from")
+            if vouch.session_key != request.session_key:
+                raise AuthError("forbidden", "the vouch was made for another login")
+        except (AuthError, MessageError) as exc:
+            log.warning("ignored a login's vouch (from %s): %s", plain, exc)
+            return plain
+        return vouched_source(gateway.user, vouch.address)
 
     def _credential_ok(self, request: LoginRequest, now: float) -> bool:
         cred = request.credential
@@ -448,97 +383,6 @@ class Registry(Service):
             raise RequestError(exc.code, exc.message) from None
         return OkReply(detail=f"kept for {message.recipient} until they log in")
 
-    # -- admin
-
-    def _password(self, sealed: bytes) -> str:
-        try:
-            return self._unsealer.decrypt(sealed).decode("utf-8")
-        except (nacl.exceptions.CryptoError, UnicodeDecodeError):
-            raise RequestError(
-                "bad_request", "the password was not sealed to this registry's key"
-            ) from None
-
-    def on_admin(self, query: zenoh.Query) -> Message:
-        principal, request = self.verifier.open(str(query.key_expr), query.payload, ADMIN_REQUESTS)
-        if not (isinstance(request, SetPassword) and request.user == principal.user):
-            principal.require("admin", f"do {type(request).__name__}")
-        try:
-            return self._admin(principal, request)
-        except DbError as exc:
-            raise RequestError(exc.code, exc.message) from None
-
-    def _admin(self, principal: Principal, request: Message) -> Message:
-        if isinstance(request, ListUsers):
-            online = set(self.online_users())
-            users = []
-            for rec in self.db.users():
-                _, _, roles = acl.expand(rec.grants)
-                grants: dict[str, list[str]] = {}
-                for scope, grant in rec.grants:
-                    grants.setdefault(scope, []).append(grant)
-                users.append(
-                    UserInfo(
-                        name=rec.name,
-                        roles=roles,
-                        grants=grants,
-                        credentials=list(rec.credential_kinds),
-                        online=rec.name in online,
-                        failed_logins=self.throttle.failures(rec.name),
-                    )
-                )
-            return UserList(users=users)
-        if isinstance(request, AddUser):
-            if request.user == REGISTRY_USER:
-                raise RequestError("conflict", f"the name {REGISTRY_USER} is reserved")
-            password = self._password(request.sealed_password) if request.sealed_password else None
-            self.db.add_user(
-                request.user, request.roles, password=password, public_key=request.public_key
-            )
-            return OkReply(detail=f"user {request.user} added")
-        if isinstance(request, SetPassword):
-            self.db.set_password(request.user, self._password(request.sealed_password))
-            return OkReply(detail=f"password of {request.user} changed")
-        if isinstance(request, RemoveUser):
-            if request.user == principal.user:
-                raise RequestError("conflict", "you cannot remove your own account")
-            sessions = [s.session_id for s in self.db.active_sessions(request.user)]
-            self._revoke(sessions, "account removed", kicked=True)
-            self.db.remove_user(request.user)
-            return OkReply(detail=f"user {request.user} removed")
-        if isinstance(request, Grant):
-            self.db.grant(request.user, request.grant, request.scope)
-            return OkReply(detail="granted; it takes effect at the user's next login")
-        if isinstance(request, Ungrant):
-            self.db.ungrant(request.user, request.grant, request.scope)
-            return OkReply(detail="revoked; it takes effect at the user's next login")
-        if isinstance(request, KickFromServer):
-            return self._kick(principal, request)
-        if isinstance(request, UnlockLogins):
-            if not self.db.user_exists(request.user):
-                raise RequestError("not_found", f"no user {request.user}")
-            self.throttle.unlock(request.user)
-            log.info("%s unlocked the logins of %s", principal.user, request.user)
-            return OkReply(detail=f"failed logins of {request.user} forgotten: they may log in now")
-        if isinstance(request, RenameServer):
-            self.db.set_setting("server_name", request.name)
-            return OkReply(detail=f"server renamed to {request.name}")
-        raise RequestError("bad_request", f"unknown admin request {type(request).__name__}")
-
-    def _kick(self, principal: Principal, request: KickFromServer) -> Message:
-        if not self.db.user_exists(request.user):
-            raise RequestError("not_found", f"no user named {request.user}")
-        reason = request.reason or "no reason given"
-        # Tell the user first, while their client still listens on its inbox.
-        key = keys.user_inbox(self.realm, request.user)
-        notice = KickNotice(user=request.user, reason=reason, by=principal.user)
-        self.session.put(key, self.own_session().seal(key, notice))
-        sessions = [s.session_id for s in self.db.active_sessions(request.user)]
-        count = self._revoke(
-            sessions, f"kicked from the server by {principal.user}: {reason}", kicked=True
-        )
-        log.info("%s kicked %s from the server (%d sessions)", principal.user, request.user, count)
-        return OkReply(detail=f"{request.user} kicked ({count} sessions revoked)")
-
 
 def _revocation(rec: SessionRecord) -> Revocation:
     return Revocation(
@@ -548,13 +392,6 @@ def _revocation(rec: SessionRecord) -> Revocation:
         reason=rec.reason[:256],
         kicked=rec.kicked,
     )
-
-
-def _source(query: zenoh.Query) -> str | None:
-    info = query.source_info
-    if info is None or info.source_id is None:
-        return None
-    return str(info.source_id.zid)
 
 
 # --- the process ---------------------------------------------------------------------

@@ -3,26 +3,26 @@
 Standard library only (the sandbox offers Debian's python3 and nothing else).
 It has no Zenoh session, no keys and no lease: the trusted parent relays
 robot state on stdin and reads commands from the file descriptor given as
-its first argument, one JSON object per line each way. The student's prints
-and tracebacks go to stdout/stderr, which the parent shows as the
-controller's output.
+its first argument, one line each way, the messages of
+common/controller/pipe.py. The student's prints and tracebacks go to
+stdout/stderr, which the parent shows as the controller's output.
 
     python3 -I -S child.py CMD_FD CONTROLLER_FILE [lockstep]
 
 ``lockstep`` (a dry run): no clock of its own. Each state the parent sends
 is one tick of a private simulated world; the controller's ``do_work`` runs
 whenever the state's simulated time reaches its next period, and every state
-is answered with ``{"t": "step"}`` after the commands it caused, so the parent
+is answered with ``pipe.Step`` after the commands it caused, so the parent
 steps its world as fast as the controller answers.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import threading
 import traceback
+from collections.abc import Callable
 from typing import Any
 
 
@@ -37,14 +37,15 @@ def main() -> int:
         KheperaState,
         RobotCommand,
         load_controller,
+        pipe,
     )
 
-    out = os.fdopen(cmd_fd, "w", buffering=1)
+    out = os.fdopen(cmd_fd, "wb", buffering=0)
     out_lock = threading.Lock()
 
-    def tell(message: dict[str, Any]) -> None:
+    def tell(message: pipe.FromChild) -> None:
         with out_lock:
-            out.write(json.dumps(message, separators=(",", ":")) + "\n")
+            out.write(pipe.encode(message))
 
     class PipeLink:
         def __init__(self) -> None:
@@ -56,7 +57,7 @@ def main() -> int:
                 return self.state
 
         def send(self, command: RobotCommand) -> None:
-            tell({"t": "cmd", **command.to_dict()})
+            tell(pipe.Command(command))
 
     link = PipeLink()
     if lockstep:
@@ -67,16 +68,15 @@ def main() -> int:
     def read_parent() -> None:
         for line in sys.stdin:
             try:
-                message = json.loads(line)
-                if message.get("t") == "stop":
-                    break
-                if message.get("t") == "state":
-                    state = KheperaState.from_dict(message)
-                    with link.lock:
-                        link.state = state
-                    have_state.set()
-            except (ValueError, TypeError, KeyError) as exc:
-                print(f"[sandbox] ignored a bad state line: {exc}", file=sys.stderr)
+                message = pipe.decode_to_child(line)
+            except pipe.PipeError as exc:
+                print(f"[sandbox] ignored a bad line from the runner: {exc}", file=sys.stderr)
+                continue
+            if isinstance(message, pipe.Stop):
+                break
+            with link.lock:
+                link.state = message.state
+            have_state.set()
         stop.set()
 
     threading.Thread(target=read_parent, daemon=True).start()
@@ -84,25 +84,25 @@ def main() -> int:
     try:
         controller = load_controller(path)
     except BaseException:
-        tell({"t": "error", "message": traceback.format_exc(limit=5)})
+        tell(pipe.Failed(traceback.format_exc(limit=5)))
         return 3
 
-    tell({"t": "ready", "controller": type(controller).__name__})
+    tell(pipe.Ready(type(controller).__name__))
     have_state.wait(5.0)
     loop = ControllerLoop(controller, Khepera(link), stop=stop)
     try:
         loop.run()
     except BaseException:
         traceback.print_exc()
-        tell({"t": "error", "message": traceback.format_exc(limit=5)})
+        tell(pipe.Failed(traceback.format_exc(limit=5)))
         return 4
-    tell({"t": "done", "iterations": loop.iterations})
+    tell(pipe.Done(loop.iterations))
     return 0
 
 
-def run_lockstep(path: str, link: Any, tell: Any) -> int:
+def run_lockstep(path: str, link: Any, tell: Callable[[Any], None]) -> int:
     """Step the controller once per state read, on the states' simulated clock."""
-    from common.controller import Khepera, KheperaState, load_controller
+    from common.controller import Khepera, load_controller, pipe
 
     try:
         controller = load_controller(path)
@@ -110,20 +110,18 @@ def run_lockstep(path: str, link: Any, tell: Any) -> int:
         if not 0.001 <= period <= 10.0:
             raise ValueError(f"period {period} s is outside 0.001..10 s")
     except BaseException:
-        tell({"t": "error", "message": traceback.format_exc(limit=5)})
+        tell(pipe.Failed(traceback.format_exc(limit=5)))
         return 3
-    tell({"t": "ready", "controller": type(controller).__name__})
+    tell(pipe.Ready(type(controller).__name__))
     robot = Khepera(link)
     next_tick: float | None = None
     steps = 0
     try:
         for line in sys.stdin:
-            message = json.loads(line)
-            if message.get("t") == "stop":
+            message = pipe.decode_to_child(line)
+            if isinstance(message, pipe.Stop):
                 break
-            if message.get("t") != "state":
-                continue
-            link.state = KheperaState.from_dict(message)
+            link.state = message.state
             now = link.state.time
             if next_tick is None:
                 controller.initialize(robot)
@@ -134,12 +132,12 @@ def run_lockstep(path: str, link: Any, tell: Any) -> int:
                 next_tick += period
                 if next_tick <= now:  # a period shorter than a tick: once per tick
                     next_tick = now + period
-            tell({"t": "step", "n": steps})
+            tell(pipe.Step(steps))
         controller.cleanup(robot)
     except BaseException:
-        tell({"t": "error", "message": traceback.format_exc(limit=5)})
+        tell(pipe.Failed(traceback.format_exc(limit=5)))
         return 4
-    tell({"t": "done", "iterations": steps})
+    tell(pipe.Done(steps))
     return 0
 
 

@@ -19,19 +19,28 @@ reported, not failed: the robot only clamps them.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from common.controller import ARM_UP, LIGHT_SENSORS, PROXIMITY_SENSORS, RobotCommand
+from common.controller import (
+    ARM_UP,
+    LIGHT_SENSORS,
+    PROXIMITY_SENSORS,
+    KheperaState,
+    RobotCommand,
+)
+from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
 from common.sim2d import maps
 from common.sim2d.collision import CAT_OBJECT, CAT_OBSTACLE, CAT_ROBOT
-from common.sim2d.world import World
+from common.sim2d.world import EditError, World
 from services.runner.sandbox import Sandbox, SandboxLimits
 
 DRY_RUN_WALL_S = 20.0
@@ -124,7 +133,7 @@ def world_from_snapshot(snap: WorldSnapshot) -> World:
     )
 
 
-def _state(world: World, slot: int) -> dict[str, Any]:
+def _state(world: World, slot: int) -> KheperaState:
     """What the controller sees of its robot this tick (as the sandbox's child reads it)."""
     agent = world.agents[slot]
     spec = agent.spec
@@ -136,20 +145,24 @@ def _state(world: World, slot: int) -> dict[str, Any]:
     amb = world.ambient[slot].tolist()[: len(spec.ambient.poses)]
     leds = [*world.leds[slot].tolist()[: spec.leds], 0, 0]
     speeds = [max(-127, min(127, int(v))) for v in world.cmd[slot].tolist()]
-    state: dict[str, Any] = {
-        "time": world.sim_time,
-        "speeds": speeds,
-        "counters": [int(c) for c in world.counters[slot].tolist()],
-        "proximity": fit(prox, PROXIMITY_SENSORS, 0),
-        "ambient": fit(amb, LIGHT_SENSORS, 500),
-        "leds": [bool(leds[0]), bool(leds[1])],
-        "arm": ARM_UP,
-    }
+    counters = [int(c) for c in world.counters[slot].tolist()]
+    state = KheperaState(
+        time=world.sim_time,
+        speeds=(speeds[0], speeds[1]),
+        counters=(counters[0], counters[1]),
+        proximity=tuple(fit(prox, PROXIMITY_SENSORS, 0)),
+        ambient=tuple(fit(amb, LIGHT_SENSORS, 500)),
+        leds=(bool(leds[0]), bool(leds[1])),
+        arm=ARM_UP,
+    )
     if agent.has_gripper:
-        state["arm"] = int(np.clip(np.rint(world.arm[slot]), 0, 255))
-        state["gripper_closed"] = world.gripper_state(slot) != 0
-        state["object_present"] = int(world.presence[slot]) >= 128
-        state["resistivity"] = int(world.resistivity(slot))
+        state = replace(
+            state,
+            arm=int(np.clip(np.rint(world.arm[slot]), 0, 255)),
+            gripper_closed=world.gripper_state(slot) != 0,
+            object_present=int(world.presence[slot]) >= 128,
+            resistivity=int(world.resistivity(slot)),
+        )
     return state
 
 
@@ -294,15 +307,16 @@ def dry_run(
             steps += 1
             with lock:
                 mine, commands[:] = list(commands), []
+            robot = world.actuators(slot)
             for command in mine:
                 if command.speeds is not None:
                     wheel_commands += 1
                     if max(abs(command.speeds[0]), abs(command.speeds[1])) >= top:
                         saturated += 1
-                    world.set_speeds(slot, *command.speeds)
-                if command.leds is not None:
-                    for led, on in enumerate(command.leds[: world.agents[slot].spec.leds]):
-                        world.set_led(slot, led, bool(on))
+                # The engine's own mapping: the dry run's robot obeys what the lab's would
+                # (arm or grip to a robot without a gripper is ignored, as there).
+                with contextlib.suppress(EditError):
+                    apply_command(command, robot)
             world.step()
             for what, ident in touches.new_contacts():
                 if len(collisions) < MAX_COLLISIONS:

@@ -25,17 +25,15 @@ in bounded chunks (long lines cut), and printing faster than
 
 The child is Debian's ``/usr/bin/python3`` running services/runner/child.py
 with only the standard library and common/controller/. It talks to this
-parent over pipes, one JSON object per line; every line it sends is checked
-(:func:`validate_command`) before anything reaches a robot.
+parent over pipes, one JSON object per line, typed by common/controller/pipe.py;
+every line it sends is checked (``pipe.decode_from_child``) before anything
+reaches a robot, and a line that is not a message is refused, logged and
+counted while the run goes on.
 """
 
 from __future__ import annotations
 
-import atexit
 import contextlib
-import fcntl
-import functools
-import json
 import logging
 import os
 import shutil
@@ -47,22 +45,42 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import psutil
 
 from common import controller as controller_api
-from common.controller.precheck import MAX_SOURCE_BYTES, PrecheckError, precheck
-from services.runner.cpushare import CpuShare
+from common.controller import pipe
+from common.controller.pipe import MAX_LINE_BYTES
+from common.controller.upload_gate import MAX_SOURCE_BYTES, PrecheckError, precheck
 from services.runner.pipes import RateBudget, read_lines, write_nowait
-from services.runner.syscalls import SANDBOX_PYTHON, SyscallFilterError, build_filter
+from services.runner.sandbox_host import (
+    _give_uid,
+    _take_uid,
+    cpu_share,
+    release_cpu_share,
+    sandbox_problem,
+    syscall_filter,
+)
+from services.runner.syscalls import SANDBOX_PYTHON
 
 log = logging.getLogger("wart.runner.sandbox")
 
-__all__ = ["MAX_SOURCE_BYTES", "PrecheckError", "Sandbox", "SandboxLimits", "precheck"]
+# sandbox_problem and the CPU share are the host's (sandbox_host.py); callers find them here.
+__all__ = [
+    "MAX_SOURCE_BYTES",
+    "PrecheckError",
+    "Sandbox",
+    "SandboxLimits",
+    "cpu_share",
+    "precheck",
+    "release_cpu_share",
+    "sandbox_problem",
+]
 
-MAX_LINE_BYTES = 4096
 MAX_OUTPUT_LINE_BYTES = 1000
+# The first refused line of a run is logged, then one in this many: a hostile child
+# writes as fast as it can, and the runner's log must not grow with it.
+REFUSALS_LOGGED_EVERY = 1000
 _CHILD = Path(__file__).with_name("child.py")
 _API = Path(controller_api.__file__).parent  # the whole package: standard library only
 
@@ -92,109 +110,6 @@ class SandboxLimits:
     @property
     def address_space_bytes(self) -> int:
         return self.memory_bytes - self.writable_bytes
-
-
-def validate_command(message: dict[str, Any]) -> controller_api.RobotCommand:
-    """One command from the sandbox, checked; ValueError (saying why) if it is not one."""
-    return controller_api.RobotCommand.from_dict(message)
-
-
-def sandbox_problem() -> str | None:
-    """None if sandboxes can run here, else what is missing."""
-    if shutil.which("bwrap") is None:
-        return "bubblewrap is not installed (Debian package bubblewrap)"
-    if not Path(SANDBOX_PYTHON).exists():
-        return f"{SANDBOX_PYTHON} is missing (Debian package python3)"
-    if os.geteuid() == 0 and shutil.which("setpriv") is None:
-        return "setpriv is missing (Debian package util-linux)"
-    if shutil.which("prlimit") is None:
-        return "prlimit is missing (Debian package util-linux)"
-    try:
-        syscall_filter()
-    except SyscallFilterError as exc:
-        return str(exc)
-    return None
-
-
-@functools.lru_cache(maxsize=1)
-def syscall_filter() -> bytes:
-    """The seccomp program every sandbox gets, built once per runner."""
-    return build_filter()
-
-
-_cpu_lock = threading.Lock()
-_cpu_shares: dict[float, CpuShare] = {}
-
-
-def cpu_share(fraction: float) -> CpuShare:
-    """The runner's one CpuShare for ``fraction`` (its cgroup directory is per runner)."""
-    with _cpu_lock:
-        share = _cpu_shares.get(fraction)
-        if share is None:
-            share = _cpu_shares[fraction] = CpuShare(fraction)
-            atexit.register(share.close)  # its cgroup directory outlives it otherwise
-            log.info("CPU share of a sandbox: %s", share.mode)
-        return share
-
-
-def release_cpu_share(fraction: float) -> None:
-    """Remove the CpuShare of ``fraction`` and its cgroup; the next cpu_share() makes anew."""
-    with _cpu_lock:
-        share = _cpu_shares.pop(fraction, None)
-    if share is not None:
-        share.close()
-
-
-_uid_lock = threading.Lock()
-_uid_claims: dict[int, int] = {}  # uid -> the open file whose lock claims it
-_UID_BASE = 61000
-_UID_COUNT = 1000
-
-
-def _uid_claim_dir() -> Path:
-    """Where the claims live: one lock file per uid, shared by every runner of the host."""
-    for base in (Path("/run/lock"), Path(tempfile.gettempdir())):
-        path = base / "wart-sandbox-uids"
-        try:
-            path.mkdir(mode=0o700, exist_ok=True)
-        except OSError:
-            continue
-        if os.access(path, os.W_OK):
-            return path
-    raise OSError("no directory for the sandboxes' uid claims (/run/lock, the temp dir)")
-
-
-def _take_uid() -> int:
-    """A uid of its own for one sandbox, for as long as it runs.
-
-    RLIMIT_NPROC counts processes per uid, and a process may signal another
-    of its uid: two sandboxes must never share one, even from two runners of
-    the same host. So each claim is an flock on a file per uid (released by
-    the kernel if the runner dies), and a uid that still owns a process (a
-    zombie left by a crash) is skipped.
-    """
-    claims = _uid_claim_dir()
-    busy = {p.info["uids"].real for p in psutil.process_iter(["uids"]) if p.info["uids"]}
-    with _uid_lock:
-        for uid in range(_UID_BASE, _UID_BASE + _UID_COUNT):
-            if uid in busy or uid in _uid_claims:
-                continue
-            fd = os.open(claims / str(uid), os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:  # another runner's sandbox has it
-                os.close(fd)
-                continue
-            _uid_claims[uid] = fd
-            return uid
-    raise OSError(f"all {_UID_COUNT} sandbox uids from {_UID_BASE} are in use")
-
-
-def _give_uid(uid: int) -> None:
-    with _uid_lock:
-        fd = _uid_claims.pop(uid, None)
-    if fd is not None:
-        os.close(fd)  # closing drops the flock
 
 
 class Sandbox:
@@ -405,13 +320,13 @@ class Sandbox:
             except (OSError, ValueError):
                 return None
 
-    def send_state(self, state: dict[str, Any]) -> bool:
+    def send_state(self, state: controller_api.KheperaState) -> bool:
         """Hand the newest robot state to the controller; False once it has gone.
 
         Never blocks: a controller that does not read its states loses them
         (the next one is newer anyway) and is told so once.
         """
-        line = (json.dumps({"t": "state", **state}, separators=(",", ":")) + "\n").encode()
+        line = pipe.encode(pipe.State(state))
         if self.process is None or self.process.poll() is not None:
             return False
         written = self._write(line)
@@ -429,44 +344,49 @@ class Sandbox:
         try:
             for raw, cut in read_lines(self._cmd_read, MAX_LINE_BYTES):
                 if cut:
-                    self.rejected_commands += 1
+                    self._refuse(f"a line over {MAX_LINE_BYTES} bytes", budget)
                     continue
-                self._on_message(raw, budget)
+                try:
+                    message = pipe.decode_from_child(raw)
+                except pipe.PipeError as exc:
+                    self._refuse(str(exc), budget)
+                    continue
+                self._on_message(message, budget)
         finally:
             os.close(self._cmd_read)
 
-    def _on_message(self, raw: bytes, budget: RateBudget) -> None:
-        try:
-            message = json.loads(raw)
-            if not isinstance(message, dict):
-                raise ValueError("not an object")
-        except ValueError:
-            self.rejected_commands += 1
-            return
-        kind = message.get("t")
-        if kind == "cmd":
-            try:
-                command = validate_command(message)
-            except ValueError as exc:
-                self.rejected_commands += 1
-                self._say(f"[runner] command refused: {exc}")
-                return
+    def _refuse(self, why: str, budget: RateBudget) -> None:
+        """A line from the child that is not a message: counted, logged, and the run goes on.
+
+        The student hears why while within the command rate (a flood of bad lines
+        is counted only, like a flood of good ones).
+        """
+        self.rejected_commands += 1
+        n = self.rejected_commands
+        if n == 1 or n % REFUSALS_LOGGED_EVERY == 0:
+            name = self.controller_name
+            log.warning("controller %s: refused line %d of its pipe: %s", name, n, why)
+        if budget.take():
+            self._say(f"[runner] refused a message from the controller: {why}")
+
+    def _on_message(self, message: pipe.FromChild, budget: RateBudget) -> None:
+        if isinstance(message, pipe.Command):
             if budget.take():
-                self.on_command(command)
+                self.on_command(message.command)
             else:
                 self.rejected_commands += 1
-        elif kind == "step":
+        elif isinstance(message, pipe.Step):
             if self.on_step is not None:
                 self.on_step()
-        elif kind == "ready":
-            self._say(f"[runner] controller {str(message.get('controller'))[:64]} started")
-        elif kind == "error":
-            text = str(message.get("message", ""))[:4000]
+        elif isinstance(message, pipe.Ready):
+            self._say(f"[runner] controller {message.controller} started")
+        elif isinstance(message, pipe.Failed):
+            text = message.message
             self.error_text = self.error_text or text
             self._exit_reason = self._stop_reason or self._failure_reason(text)
             for line in text.splitlines():
                 self._say(line)
-        elif kind == "done":
+        elif isinstance(message, pipe.Done):
             self._exit_reason = self._stop_reason or "the controller finished"
 
     def _failure_reason(self, traceback_text: str) -> str:
@@ -583,7 +503,7 @@ class Sandbox:
         if proc is None:
             return
         if proc.poll() is None:
-            self._write(b'{"t":"stop"}\n')
+            self._write(pipe.encode(pipe.Stop()))
             with self._stdin_lock:
                 if proc.stdin is not None:
                     with contextlib.suppress(OSError):

@@ -41,7 +41,7 @@ import zenoh
 from common import keys
 from common.auth import Verifier
 from common.client.service_login import ServiceLogin
-from common.controller.precheck import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import AliveKind
 from common.messages import (
     MAX_OUTPUT_LINE,
@@ -62,7 +62,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from common.sim2d.maps import MapError
-from common.world.remote_robot import WorldChannel, ZenohRobotLink, state_to_dict
+from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.runner.dryrun import dry_run
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
@@ -133,7 +133,7 @@ class Run:
                 back = "again" if seen else "at last"  # a gap, or the slot's first ones
                 self._say(f"readings from {self.request.agent} {back} after {now - last:.0f} s")
             last, seen = now, newest
-            if not self.sandbox.send_state(state_to_dict(self.link.latest())):
+            if not self.sandbox.send_state(self.link.latest()):
                 return
 
     def _say_silent(self, *, first: bool) -> None:
@@ -315,6 +315,7 @@ class RunnerService(Service):
                 return OkReply(detail=f"{request.request_id} is not running")
             run.stop(request.reason or f"stopped by {principal.user}")
             return OkReply(detail=f"stopping {request.request_id}")
+        assert isinstance(request, RunRequest)  # the decoder allowed only these three
         return self._start(request)
 
     def _on_dry_run(self, query: zenoh.Query) -> Message:

@@ -1,8 +1,8 @@
 """One real lab per test module for browser tests: router, registry, lobby room, engine, viewer.
 
 Everything but the viewer is a real ``wart`` process on 127.0.0.1 (multicast
-scouting off); the viewer runs in the test process over a real Zenoh session
-with :class:`~viewers.web.real.RealConnector`, so tests can read its state
+scouting off), started by tests/lab.py; the viewer runs in the test process over
+a real Zenoh session with :class:`~viewers.web.live.LiveConnector`, so tests can read its state
 (views, frames) as well as the page. With ``agents`` the lab also runs a
 runner (sandboxed uploads) and the agent context ``arena`` on the world
 (owner ida, short slots), and the engine logs in as a service account so
@@ -11,7 +11,6 @@ leases carry per-lease MAC keys, as under ``wart up``.
 
 from __future__ import annotations
 
-import shutil
 import threading
 import time
 import uuid
@@ -25,11 +24,8 @@ import zenoh
 from common import keys
 from common.auth import issue_session
 from common.client.lab_client import LabClient
-from common.keys import AliveKind
 from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
-from services.lab.supervisor import AliveWatch
-from tests.conftest import REPO, Procs, Router, free_port
 from tests.integration.agentkit import (
     CTX,
     start_agent_context,
@@ -37,21 +33,21 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, Procs, Router, free_port, make_lab, start_router
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
-from viewers.web.connector import RealConnector
+from viewers.web.connector import LiveConnector
 
 WORLD = "w1"
 
 
 @dataclass
 class RealLab:
-    lab: Lab
+    lab: ProcessLab
     router: Router
     address: LabAddress
     session: zenoh.Session
-    connector: RealConnector
+    connector: LiveConnector
     viewer: WebViewer
 
     @property
@@ -103,32 +99,6 @@ class RealLab:
                 thread.join(2)
 
 
-def start_router(procs: Procs, realm: str) -> Router:
-    port = free_port()
-    proc = procs.start(
-        "router",
-        [
-            "router",
-            "--realm",
-            realm,
-            "--name",
-            "test-router",
-            "--listen",
-            f"tcp/127.0.0.1:{port}",
-            "--no-multicast-scouting",
-        ],
-    )
-    router = Router(realm=realm, port=port, proc=proc)
-    session = open_session(router.options(), wait=20.0)
-    try:
-        watch = AliveWatch(session, keys.alive(realm, AliveKind.ROUTER, "test-router"))
-        assert watch.wait(keys.alive(realm, AliveKind.ROUTER, "test-router"), 20.0), proc.output()
-        watch.close()
-    finally:
-        close_session(session)
-    return router
-
-
 @contextmanager
 def real_lab(
     tmp: Path,
@@ -149,29 +119,10 @@ def real_lab(
             together(lambda: start_engine(lab, map_name, identity=True), lambda: start_runner(lab))
             start_agent_context(lab, slot=slot)
         else:
-            maps_dir = tmp / "maps"
-            maps_dir.mkdir()
-            shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
-            engine = procs.start(
-                "engine",
-                [
-                    "engine",
-                    "--map",
-                    str(maps_dir / f"{map_name}.json"),
-                    "--world",
-                    WORLD,
-                    "--seed",
-                    "3",
-                    "--maps-dir",
-                    str(maps_dir),
-                    *(["--wander"] if wander else []),
-                    *lab.net_args(),
-                ],
-            )
-            lab.wait_alive(AliveKind.WORLD, WORLD, engine)
+            lab.start_engine(map_name, world=WORLD, extra=["--wander"] if wander else [])
         session = open_session(router.options(), wait=10.0)
         address = LabAddress("127.0.0.1", router.port, realm)
-        connector = RealConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")
+        connector = LiveConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")
         viewer = WebViewer(
             connector, port=free_port(), default_address=address, data_dir=tmp / "viewer"
         )

@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 
 from tests.browser.conftest import ViserPage, new_test_context, page_url
-from tests.lab import Lab
+from tests.lab import UpLab
 
 pytestmark = [pytest.mark.browser, pytest.mark.smoke]
 
 
 @pytest.fixture
-def lab(tmp_path: Path, realm: str) -> Iterator[Lab]:
-    lab = Lab(realm=realm, state_dir=tmp_path / "state").start()
+def lab(tmp_path: Path, realm: str) -> Iterator[UpLab]:
+    lab = UpLab(realm=realm, state_dir=tmp_path / "state").start()
     try:
         lab.wait_line("The lab is running", timeout=120)
         yield lab
@@ -25,7 +25,7 @@ def lab(tmp_path: Path, realm: str) -> Iterator[Lab]:
 
 
 def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
-    lab: Lab, chromium: object, request: pytest.FixtureRequest
+    lab: UpLab, chromium: object, request: pytest.FixtureRequest
 ) -> None:
     url = lab.wait_line("web viewer:").split("web viewer:")[1].strip()
     password = (lab.state_dir / "admin-password.txt").read_text().strip()

@@ -19,7 +19,7 @@ from tests.browser.conftest import wait_until
 from tests.browser.reallab import PASSWORD, WORLD, RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
-from viewers.web.real_world import UserWorld
+from viewers.web.live_world import UserWorld
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 

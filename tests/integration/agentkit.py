@@ -1,9 +1,12 @@
-"""An agent lab for integration tests: registry, engine, runner, agent context (processes)."""
+"""Agent labs for integration tests: what they watch and drive (poses, motion, a user).
+
+The processes (engine, runner, agent context) are started by tests/lab.py, the one
+lab starter; the start_* functions here are its shorthands for the agent tests.
+"""
 
 from __future__ import annotations
 
 import itertools
-import shutil
 import threading
 import time
 from collections import deque
@@ -16,32 +19,24 @@ import numpy as np
 import zenoh
 
 from common import keys
-from common.auth import create_identity_key
 from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
-from common.keys import AliveKind
 from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session
-from services.registry.accounts_db import RegistryDB
-from tests.conftest import REPO, Proc, wait_for
-from tests.integration.labkit import PASSWORD, Lab
+from tests.conftest import wait_for
+from tests.lab import PASSWORD, Proc, ProcessLab
 
 WORLD = "w1"
 CTX = "arena"
 
 
-def service_account(lab: Lab, account: str) -> Path:
-    key_file = lab.state / f"{account}.key"
-    if not key_file.exists():
-        key = create_identity_key(key_file)
-        db = RegistryDB(lab.db_path)
-        db.add_user(account, ["service"], public_key=bytes(key.verify_key))
-        db.close()
-    return key_file
+def service_account(lab: ProcessLab, account: str) -> Path:
+    """A service account and its identity key (tests/lab.py makes them)."""
+    return lab.account(account)
 
 
 def start_engine(
-    lab: Lab,
+    lab: ProcessLab,
     map_name: str = "foraging",
     *,
     identity: bool = False,
@@ -49,31 +44,7 @@ def start_engine(
     env: dict[str, str] | None = None,
 ) -> Proc:
     """The engine of ``world``; with ``identity`` it logs in as a service account (MAC leases)."""
-    login: list[str] = []
-    if identity:
-        login = ["--user", "engine-w1", "--identity", str(service_account(lab, "engine-w1"))]
-    maps_dir = lab.state / "maps"
-    maps_dir.mkdir(exist_ok=True)
-    shutil.copy(REPO / "maps" / f"{map_name}.json", maps_dir / f"{map_name}.json")
-    proc = lab.procs.start(
-        "engine",
-        [
-            "engine",
-            "--map",
-            str(maps_dir / f"{map_name}.json"),
-            "--world",
-            world,
-            "--seed",
-            "3",
-            "--maps-dir",
-            str(maps_dir),
-            *login,
-            *lab.net_args(),
-        ],
-        env=env,
-    )
-    lab.wait_alive(AliveKind.WORLD, world, proc)
-    return proc
+    return lab.start_engine(map_name, world=world, identity=identity, env=env)
 
 
 def together(*starts: Callable[[], Proc]) -> list[Proc]:
@@ -88,18 +59,12 @@ def together(*starts: Callable[[], Proc]) -> list[Proc]:
     return [future.result() for future in futures]
 
 
-def start_runner(lab: Lab, name: str = "runner") -> Proc:
-    key = service_account(lab, "runner-svc")
-    proc = lab.procs.start(
-        "runner",
-        ["runner", "--name", name, "--user", "runner-svc", "--identity", str(key), *lab.net_args()],
-    )
-    lab.wait_alive(AliveKind.RUNNER, name, proc)
-    return proc
+def start_runner(lab: ProcessLab, name: str = "runner") -> Proc:
+    return lab.start_runner(name)
 
 
-def start_deploy(lab: Lab, controller: Path, agent: str, user: str, ctx: str = CTX) -> Proc:
-    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the labkit password)."""
+def start_deploy(lab: ProcessLab, controller: Path, agent: str, user: str, ctx: str = CTX) -> Proc:
+    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the test password)."""
     return lab.procs.start(
         "deploy",
         [
@@ -118,7 +83,7 @@ def start_deploy(lab: Lab, controller: Path, agent: str, user: str, ctx: str = C
 
 
 def start_agent_context(
-    lab: Lab,
+    lab: ProcessLab,
     *extra: str,
     slot: float = 2.5,
     ctx: str = CTX,
@@ -126,32 +91,7 @@ def start_agent_context(
     account: str = "ctx-arena",
 ) -> Proc:
     """The agent context ``ctx`` of ``world`` (a second one: another ``ctx`` and ``account``)."""
-    key = service_account(lab, account)
-    proc = lab.procs.start(
-        "agent-context" if ctx == CTX else f"agent-context-{ctx}",
-        [
-            "context",
-            "agent",
-            "--name",
-            ctx,
-            "--world",
-            world,
-            "--user",
-            account,
-            "--identity",
-            str(key),
-            "--owner",
-            "ida",
-            "--slot-seconds",
-            str(slot),
-            "--data-dir",
-            str(lab.state / "rooms"),
-            *extra,
-            *lab.net_args(),
-        ],
-    )
-    lab.wait_alive(AliveKind.CONTEXT, ctx, proc)
-    return proc
+    return lab.start_agent_context(*extra, ctx=ctx, world=world, slot=slot, account=account)
 
 
 class Poses:
@@ -248,7 +188,7 @@ class Motion:
 
 
 @contextmanager
-def agent_user(lab: Lab, user: str, ctx: str = CTX) -> Iterator[AgentClient]:
+def agent_user(lab: ProcessLab, user: str, ctx: str = CTX) -> Iterator[AgentClient]:
     session = open_session(lab.router.options(), wait=10.0)
     try:
         with LabClient(session, lab.router.realm, lab.identity.verify_key) as client:

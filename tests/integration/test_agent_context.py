@@ -23,7 +23,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 CONTROLLERS = Path(__file__).with_name("controllers")
@@ -37,7 +37,7 @@ class Forward(Controller):
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     together(lambda: start_engine(lab), lambda: start_runner(lab))
@@ -62,7 +62,7 @@ def moved(poses: Poses, agent: str, seconds: float) -> float:
     return float(np.linalg.norm(poses.xy(agent) - before))
 
 
-def test_two_users_take_turns_and_see_their_position(lab: Lab) -> None:
+def test_two_users_take_turns_and_see_their_position(lab: ProcessLab) -> None:
     with lab.zsession() as z, agent_user(lab, "alice") as alice, agent_user(lab, "bob") as bob:
         poses = Poses(z, lab.router.realm)
         results: dict[str, DriveResult] = {}
@@ -94,7 +94,7 @@ def test_two_users_take_turns_and_see_their_position(lab: Lab) -> None:
         assert results["alice"].iterations > 10 and results["bob"].iterations > 10
 
 
-def sealed_command(lab: Lab, client: AgentClient, speeds: tuple[int, int]) -> None:
+def sealed_command(lab: ProcessLab, client: AgentClient, speeds: tuple[int, int]) -> None:
     """Put one AgentCommand for k0 sealed with ``client``'s session (it may hold no lease)."""
     from common import keys
     from common.messages import AgentCommand
@@ -105,7 +105,7 @@ def sealed_command(lab: Lab, client: AgentClient, speeds: tuple[int, int]) -> No
     client.client.z.put(key, session.seal(key, AgentCommand(agent="k0", speeds=speeds)))
 
 
-def test_commands_without_the_current_lease_move_nothing(lab: Lab) -> None:
+def test_commands_without_the_current_lease_move_nothing(lab: ProcessLab) -> None:
     class Still(Controller):
         def do_work(self, robot: Khepera) -> None:
             robot.set_speeds(0, 0)
@@ -132,7 +132,7 @@ def test_commands_without_the_current_lease_move_nothing(lab: Lab) -> None:
         assert float(np.linalg.norm(poses.xy("k0") - start)) < 3
 
 
-def test_cancel_a_waiting_request(lab: Lab) -> None:
+def test_cancel_a_waiting_request(lab: ProcessLab) -> None:
     with agent_user(lab, "alice") as alice, agent_user(lab, "bob") as bob:
         done: list[DriveResult] = []
         t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
@@ -156,7 +156,7 @@ def test_cancel_a_waiting_request(lab: Lab) -> None:
         assert done and done[0].status == "cancelled" and "ida" in done[0].reason
 
 
-def test_robot_stops_when_the_controller_process_is_killed(lab: Lab, procs: Procs) -> None:
+def test_robot_stops_when_the_controller_process_is_killed(lab: ProcessLab, procs: Procs) -> None:
     with lab.zsession() as z, agent_user(lab, "carol") as carol:
         poses = Poses(z, lab.router.realm)
         proc = procs.start(
@@ -187,7 +187,7 @@ def test_robot_stops_when_the_controller_process_is_killed(lab: Lab, procs: Proc
         assert time.monotonic() - killed < 2.0
 
 
-def test_only_the_host_or_an_instructor_manages_the_context(lab: Lab) -> None:
+def test_only_the_host_or_an_instructor_manages_the_context(lab: ProcessLab) -> None:
     from common.lab_errors import NotAllowed
 
     with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:

@@ -24,7 +24,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -35,7 +35,7 @@ HEADER = "from common.controller import Controller, Khepera\n"
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     together(lambda: start_engine(lab), lambda: start_runner(lab))
@@ -43,7 +43,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     yield lab
 
 
-def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: Lab, procs: Procs) -> None:
+def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab, procs: Procs) -> None:
     with lab.zsession() as z:
         poses = Poses(z, lab.router.realm)
         start = poses.xy("k3")
@@ -71,7 +71,7 @@ def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: Lab, procs: Procs
         assert float(np.linalg.norm(poses.xy("k3") - start)) > 20, "the upload drove k3"
 
 
-def test_bad_uploads_are_refused_before_they_queue(lab: Lab) -> None:
+def test_bad_uploads_are_refused_before_they_queue(lab: ProcessLab) -> None:
     with agent_user(lab, "alice") as alice:
         with pytest.raises(LabError, match="line 1: syntax error"):
             alice.queue("k0", "deploy", source=b"def (:\n")
@@ -132,7 +132,7 @@ class Net(Controller):
 }
 
 
-def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: Lab) -> None:
+def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: ProcessLab) -> None:
     outputs: dict[str, list[str]] = {}
 
     def collect(out: OutputLines) -> None:
@@ -184,7 +184,7 @@ def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: Lab) ->
         assert final is not None and final.status == "cancelled"
 
 
-def test_one_example_drives_unchanged_in_both_run_modes(lab: Lab) -> None:
+def test_one_example_drives_unchanged_in_both_run_modes(lab: ProcessLab) -> None:
 
     from common.controller import load_controller
 

@@ -23,7 +23,7 @@ from services.bridge.simbody import SimBody
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import WORLD, agent_user, start_agent_context, start_runner
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -39,7 +39,7 @@ def body() -> Iterator[SimBody]:
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
@@ -67,7 +67,7 @@ def travelled(body: SimBody, since: tuple[float, float, float]) -> float:
 
 
 def test_example_controller_drives_the_emulated_robot_in_both_run_modes(
-    lab: Lab, body: SimBody
+    lab: ProcessLab, body: SimBody
 ) -> None:
     with agent_user(lab, "alice") as alice:
         # remote: the student's process runs the controller, over Zenoh, to the bridge

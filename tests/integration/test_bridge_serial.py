@@ -23,15 +23,11 @@ import pytest
 
 from services.bridge import protocol as P
 from services.bridge.body import KinematicBody
-from services.bridge.emulator import BANNER, EmulatorOptions, KheperaEmulator
-from services.bridge.link import KheperaLink, LinkOptions, SerialLike
-from services.bridge.robot import (
-    Fleet,
-    KheperaRobot,
-    RobotOptions,
-    candidate_ports,
-    detect,
-)
+from services.bridge.detect import Fleet, candidate_ports, detect
+from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.firmware import BANNER
+from services.bridge.link import LinkOptions, SerialKheperaLink, SerialLike
+from services.bridge.robot import KheperaRobot, RobotOptions
 from tests.conftest import REPO, wait_for, wart_env
 
 
@@ -78,10 +74,10 @@ def emulator(body: KinematicBody, tmp_path: Path) -> Iterator[KheperaEmulator]:
         yield emu
 
 
-def open_recorded(port: str) -> tuple[KheperaLink, Recorder]:
-    base = KheperaLink.open(port, 38400)
+def open_recorded(port: str) -> tuple[SerialKheperaLink, Recorder]:
+    base = SerialKheperaLink.open(port, 38400)
     rec = Recorder(base._port)  # the real pyserial port, watched
-    return KheperaLink(rec, base.options, name=port), rec
+    return SerialKheperaLink(rec, base.options, name=port), rec
 
 
 # (request, exact bytes the emulator must receive, exact reply bytes, decoded value)
@@ -139,7 +135,7 @@ def test_every_command_exact_bytes_both_ways(emulator: KheperaEmulator) -> None:
 
 
 def test_position_move_and_motion_status(emulator: KheperaEmulator) -> None:
-    link = KheperaLink.open(emulator.port)
+    link = SerialKheperaLink.open(emulator.port)
     try:
         link.request(P.set_counters(0, 0))
         link.request(P.set_speed_profile(100, 64, 100, 64))
@@ -158,7 +154,7 @@ def test_position_move_and_motion_status(emulator: KheperaEmulator) -> None:
 @pytest.mark.parametrize("text", ["Command not found", "z,Command not found"])
 def test_unknown_letter_is_command_not_found(text: str) -> None:
     with KheperaEmulator(options=EmulatorOptions(not_found_text=text)) as emu:
-        link = KheperaLink.open(emu.port, options=LinkOptions(reply_timeout=0.2))
+        link = SerialKheperaLink.open(emu.port, options=LinkOptions(reply_timeout=0.2))
         try:
             with pytest.raises(P.CommandNotFound, match="'X,1'"):
                 link.request(P.raw("X", 1))
@@ -170,7 +166,7 @@ def test_unknown_letter_is_command_not_found(text: str) -> None:
 def test_split_replies_garbage_and_midstream_banner_are_survived() -> None:
     opts = EmulatorOptions(split=7, split_gap=0.001, garbage_every=3, seed=4)
     with KheperaEmulator(options=opts) as emu:
-        link = KheperaLink.open(emu.port)
+        link = SerialKheperaLink.open(emu.port)
         try:
             for i in range(30):
                 if i == 10:
@@ -188,7 +184,7 @@ def test_split_replies_garbage_and_midstream_banner_are_survived() -> None:
 def test_cr_only_and_lf_terminators() -> None:
     opts = EmulatorOptions(dialect=P.Dialect(command_eol=b"\n", reply_eol=b"\r"))
     with KheperaEmulator(options=opts) as emu:
-        link = KheperaLink.open(emu.port, options=LinkOptions(dialect=opts.dialect))
+        link = SerialKheperaLink.open(emu.port, options=LinkOptions(dialect=opts.dialect))
         try:
             link.request(P.set_speed(3, 4))
             assert emu.received[-1] == b"D,3,4\n"
@@ -234,7 +230,7 @@ def test_watchdog_zeroes_the_motors(emulator: KheperaEmulator, body: KinematicBo
             # Taken before the command: the watchdog counts from when the bridge
             # got it, not from its acknowledgement (late on a busy machine).
             last_fed = time.monotonic()
-            robot.set_speed(20, 20).result(1)
+            robot.command(P.set_speed(20, 20)).result(1)
             time.sleep(0.05)
             assert body.speed() == (20, 20)
         assert robot.state().watchdog_stops == 0
@@ -249,11 +245,11 @@ def test_halt_and_stop_zero_the_motors(emulator: KheperaEmulator, body: Kinemati
     robot = KheperaRobot(emulator.port, RobotOptions(watchdog=10)).start()
     try:
         assert robot.wait_online(3)
-        robot.set_speed(30, 30).result(1)
+        robot.command(P.set_speed(30, 30)).result(1)
         assert body.speed() == (30, 30)
         robot.halt()
         wait_for(lambda: body.speed() == (0, 0), 1, "halt")
-        robot.set_speed(-30, 30).result(1)
+        robot.command(P.set_speed(-30, 30)).result(1)
     finally:
         robot.stop()
     assert body.speed() == (0, 0)
@@ -264,9 +260,9 @@ def test_halt_and_stop_zero_the_motors(emulator: KheperaEmulator, body: Kinemati
 def test_odometry_follows_the_body(emulator: KheperaEmulator, body: KinematicBody) -> None:
     with KheperaRobot(emulator.port, RobotOptions(poll_interval=0.01, watchdog=5)) as robot:
         assert robot.wait_online(3)
-        robot.set_speed(40, 60).result(1)  # an arc to the left
+        robot.command(P.set_speed(40, 60)).result(1)  # an arc to the left
         wait_for(lambda: body.pose.heading > 1.0, 5, "the robot to turn")
-        robot.set_speed(0, 0).result(1)
+        robot.command(P.set_speed(0, 0)).result(1)
         rounds = robot.state().rounds
         wait_for(lambda: robot.state().rounds > rounds + 1, 2, "a round after stopping")
         pose = robot.state().pose
@@ -289,13 +285,13 @@ def test_unplugged_robot_goes_offline_and_comes_back(emulator: KheperaEmulator) 
         emulator.unplug()
         assert not os.path.exists(emulator.port)  # like /dev/ttyUSB0 when the cable is pulled
         wait_for(lambda: not robot.online, 2, "offline")
-        failed = robot.set_speed(10, 10)
+        failed = robot.command(P.set_speed(10, 10))
         assert failed.exception(2) is not None
         emulator.plug()
         wait_for(lambda: robot.online, 3, "back online")
         rounds = robot.state().rounds
         wait_for(lambda: robot.state().rounds > rounds, 2, "polling again")
-        assert robot.set_speed(10, 10).result(2) == P.ACK
+        assert robot.command(P.set_speed(10, 10)).result(2) == P.ACK
     # Before its first answer the robot may be reported offline (a slow first poll on
     # a busy machine): what counts is online, then offline when unplugged, then back.
     while events and not events[0]:
@@ -394,7 +390,7 @@ def test_cli_prints_the_port_toggles_and_stops_cleanly(tmp_path: Path) -> None:
         assert proc.stdout is not None
         first = proc.stdout.readline()
         assert "emulated Khepera at /dev/pts/" in first and link in first
-        link_ = KheperaLink.open(link)
+        link_ = SerialKheperaLink.open(link)
         assert link_.request(P.read_version()).protocol == "5.01"
         link_.close()
         proc.send_signal(signal.SIGUSR1)

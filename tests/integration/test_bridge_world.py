@@ -36,7 +36,7 @@ from common.messages import (
 )
 from services.bridge import protocol as P
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
-from services.bridge.link import KheperaLink
+from services.bridge.link import SerialKheperaLink
 from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
@@ -189,7 +189,7 @@ def test_only_the_lease_holder_drives_and_the_watchdog_stops(
     mallory = issue_session(identity, realm, "mallory", ["control"])
     lease_key = keys.agent_lease(realm, WORLD, AGENT)
     cmd_key = keys.agent_cmd(realm, WORLD, AGENT)
-    go = AgentCommand(agent=AGENT, speeds=(10, 10), leds=[1, 0])
+    go = AgentCommand(agent=AGENT, speeds=(10, 10), leds=[True, False])
 
     def drive(who: Session, seconds: float) -> float:
         start = body.pose()
@@ -368,7 +368,7 @@ def test_sim_backed_emulator_process_sees_the_walls_of_its_map(
         )
         wait_for(lambda: link.exists() or proc.popen.poll() is not None, 30, "the pty link")
         assert proc.popen.poll() is None, proc.output()
-        serial_link = KheperaLink.open(str(link), 38400)
+        serial_link = SerialKheperaLink.open(str(link), 38400)
         try:
             return serial_link.request(P.read_proximity()).values
         finally:

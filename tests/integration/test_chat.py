@@ -12,7 +12,7 @@ from common.auth import issue_session
 from common.lab_errors import NotAllowed, NotFound, RateLimited, RequestFailed
 from common.messages import ChatSay, RoomEvent
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 
 class Events:
@@ -36,14 +36,14 @@ class Events:
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     lab.start_room("lobby")
     return lab
 
 
-def test_two_users_chat_and_a_late_joiner_sees_history(lab: Lab) -> None:
+def test_two_users_chat_and_a_late_joiner_sees_history(lab: ProcessLab) -> None:
     with lab.client("alice") as alice, lab.client("bob") as bob:
         a_events, b_events = Events(), Events()
         alice.join("lobby", a_events)
@@ -75,7 +75,7 @@ def test_two_users_chat_and_a_late_joiner_sees_history(lab: Lab) -> None:
         )
 
 
-def test_history_survives_a_room_restart(lab: Lab) -> None:
+def test_history_survives_a_room_restart(lab: ProcessLab) -> None:
     with lab.client("alice") as alice:
         alice.join("lobby")
         alice.say("lobby", "remember me")
@@ -86,7 +86,7 @@ def test_history_survives_a_room_restart(lab: Lab) -> None:
         assert [line.text for line in bob.join("lobby").history] == ["remember me"]
 
 
-def test_kick_from_room_needs_the_permission_and_is_announced(lab: Lab) -> None:
+def test_kick_from_room_needs_the_permission_and_is_announced(lab: ProcessLab) -> None:
     with lab.client("alice") as alice, lab.client("bob") as bob, lab.client("ida") as ida:
         events = Events()
         alice.join("lobby", events)
@@ -105,7 +105,7 @@ def test_kick_from_room_needs_the_permission_and_is_announced(lab: Lab) -> None:
             bob.join("lobby")
 
 
-def test_per_context_grant_allows_kick_in_that_room_only(lab: Lab) -> None:
+def test_per_context_grant_allows_kick_in_that_room_only(lab: ProcessLab) -> None:
     lab.start_room("other")
     with lab.client("admin") as admin:
         admin.grant("bob", "kick", "ctx/lobby")
@@ -119,7 +119,7 @@ def test_per_context_grant_allows_kick_in_that_room_only(lab: Lab) -> None:
         bob.kick("lobby", "alice")
 
 
-def test_limits_give_clear_errors(lab: Lab) -> None:
+def test_limits_give_clear_errors(lab: ProcessLab) -> None:
     with lab.client("alice") as alice:
         alice.join("lobby")
         with pytest.raises(RequestFailed, match="line too long"):
@@ -132,7 +132,7 @@ def test_limits_give_clear_errors(lab: Lab) -> None:
             alice.join("nowhere")
 
 
-def test_forged_replayed_raw_expired_and_revoked_messages_are_refused(lab: Lab) -> None:
+def test_forged_replayed_raw_expired_and_revoked_messages_are_refused(lab: ProcessLab) -> None:
     from common.auth import RegistryIdentity
 
     realm = lab.router.realm
@@ -168,7 +168,7 @@ def test_forged_replayed_raw_expired_and_revoked_messages_are_refused(lab: Lab) 
         assert events.lines() == [("bob", "once"), ("bob", "still working")]
 
 
-def test_kick_from_server_revokes_drops_and_tells_the_user(lab: Lab) -> None:
+def test_kick_from_server_revokes_drops_and_tells_the_user(lab: ProcessLab) -> None:
     with lab.client("alice") as alice, lab.client("bob") as bob, lab.client("admin") as admin:
         events = Events()
         alice.join("lobby", events)
@@ -185,7 +185,7 @@ def test_kick_from_server_revokes_drops_and_tells_the_user(lab: Lab) -> None:
             bob.say("lobby", "am I here?")
 
 
-def test_private_messages_live_and_kept_for_offline_users(lab: Lab) -> None:
+def test_private_messages_live_and_kept_for_offline_users(lab: ProcessLab) -> None:
     with lab.client("alice") as alice, lab.client("bob") as bob:
         got = []
         bob.on_private = got.append
@@ -201,7 +201,7 @@ def test_private_messages_live_and_kept_for_offline_users(lab: Lab) -> None:
         ]
 
 
-def test_a_message_sent_right_after_the_recipients_login_is_delivered_live(lab: Lab) -> None:
+def test_a_message_sent_right_after_the_recipients_login_is_delivered_live(lab: ProcessLab) -> None:
     # The recipient is reachable from the moment its login succeeds: a message sent then is
     # not kept for its next login (it was, when presence was declared after the login reply).
     with lab.client("alice") as alice:
@@ -215,7 +215,7 @@ def test_a_message_sent_right_after_the_recipients_login_is_delivered_live(lab: 
                 assert bob.pending == []
 
 
-def test_directory_lists_server_users_and_rooms(lab: Lab) -> None:
+def test_directory_lists_server_users_and_rooms(lab: ProcessLab) -> None:
     with lab.client("alice") as alice, lab.client("admin") as admin:
         alice.join("lobby")
         admin.rename_server("Robotics 101")

@@ -15,7 +15,7 @@ import pytest
 
 from common.messages import WorldSnapshot
 from common.sim2d import maps
-from services.engine import wire
+from services.engine import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router
@@ -26,7 +26,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -46,7 +46,7 @@ INTO_THE_WALL = HEADER + textwrap.dedent(
 @pytest.fixture(scope="module")
 def snap() -> WorldSnapshot:
     world = maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=3)
-    return wire.snapshot(world)
+    return packing.snapshot(world)
 
 
 def test_driving_into_a_wall_will_not_run(snap: WorldSnapshot) -> None:
@@ -118,7 +118,7 @@ def test_a_hostile_controller_ends_within_its_limit(
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     together(lambda: start_engine(lab), lambda: start_runner(lab))
@@ -126,7 +126,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     yield lab
 
 
-def test_wart_deploy_dry_run_through_the_lab(lab: Lab, procs: Procs, tmp_path: Path) -> None:
+def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, procs: Procs, tmp_path: Path) -> None:
     charge = tmp_path / "charge.py"
     charge.write_text(INTO_THE_WALL)
     proc = procs.start(

@@ -32,7 +32,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -43,7 +43,7 @@ ROBOTS = ("k0", "k1", "k2", "k3")
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     together(lambda: start_engine(lab, identity=True), lambda: start_runner(lab))
@@ -52,7 +52,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
 
 
 def test_the_host_stops_four_running_controllers_and_holds_the_arena(
-    lab: Lab, procs: Procs
+    lab: ProcessLab, procs: Procs
 ) -> None:
     with (
         lab.zsession() as z,
@@ -112,7 +112,7 @@ def test_the_host_stops_four_running_controllers_and_holds_the_arena(
         motion.close()
 
 
-def test_wart_arena_estop_and_release(lab: Lab, procs: Procs) -> None:
+def test_wart_arena_estop_and_release(lab: ProcessLab, procs: Procs) -> None:
     def arena(verb: str, user: str, *extra: str) -> tuple[int, str]:
         args = ["arena", *lab.net_args(), verb, "--context", CTX, "--user", user, *extra]
         proc = procs.start(f"arena-{verb}-{user}", args, env={"WART_PASSWORD": PASSWORD})
@@ -130,7 +130,7 @@ def test_wart_arena_estop_and_release(lab: Lab, procs: Procs) -> None:
 
 
 @pytest.fixture
-def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab, SimBody]]:
+def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[ProcessLab, SimBody]]:
     """A real-robot arena: the Khepera bridge on an emulated robot (a real pty)."""
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
@@ -155,7 +155,7 @@ def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab
 
 
 def test_the_emergency_stop_halts_a_real_robot_through_the_bridge(
-    real_lab: tuple[Lab, SimBody],
+    real_lab: tuple[ProcessLab, SimBody],
 ) -> None:
     lab, body = real_lab
     with agent_user(lab, "alice") as alice, agent_user(lab, "ida") as ida:

@@ -39,7 +39,7 @@ from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
-from viewers.web.real_world import WorldWatch
+from viewers.web.live_world import WorldWatch
 
 pytestmark = pytest.mark.integration
 WORLD = "w1"

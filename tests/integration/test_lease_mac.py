@@ -32,7 +32,7 @@ from tests.integration.agentkit import (
     start_agent_context,
     start_engine,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 
@@ -52,7 +52,7 @@ class Still(Controller):
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     start_engine(lab, identity=True)
@@ -94,14 +94,14 @@ class Wire:
         ]
 
 
-def test_world_identity_is_advertised(lab: Lab) -> None:
+def test_world_identity_is_advertised(lab: ProcessLab) -> None:
     with lab.zsession() as z:
         replies = list(z.get(keys.world_snapshot(lab.router.realm, WORLD), timeout=10.0))
         snaps = [decode(r.ok.payload, WorldSnapshot) for r in replies if r.ok is not None]
         assert snaps and snaps[0].identity is not None
 
 
-def test_controller_under_a_mac_lease_drives_and_a_non_holder_does_not(lab: Lab) -> None:
+def test_controller_under_a_mac_lease_drives_and_a_non_holder_does_not(lab: ProcessLab) -> None:
     realm = lab.router.realm
     with lab.zsession() as z, agent_user(lab, "alice") as alice, agent_user(lab, "bob") as bob:
         poses = Poses(z, realm)

@@ -29,7 +29,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -40,7 +40,7 @@ RUNNER_STOPPED = "the lab's runner runner stopped"
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab, Proc, Proc]]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[ProcessLab, Proc, Proc]]:
     """A lab whose slots outlast the test (30 s): a request ends only when made to."""
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
@@ -50,7 +50,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Lab, Pro
 
 
 def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
-    lab: tuple[Lab, Proc, Proc],
+    lab: tuple[ProcessLab, Proc, Proc],
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:
@@ -93,7 +93,7 @@ def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
 
 
 def test_a_late_client_asks_how_its_request_ended_even_across_a_context_restart(
-    lab: tuple[Lab, Proc, Proc],
+    lab: tuple[ProcessLab, Proc, Proc],
 ) -> None:
     the_lab, runner, context = lab
     # Her first client stays joined (leaving would end the request) but is not the one
@@ -141,7 +141,7 @@ def test_a_late_client_asks_how_its_request_ended_even_across_a_context_restart(
 
 
 def test_wart_deploy_says_the_context_is_down_rather_than_lost(
-    lab: tuple[Lab, Proc, Proc],
+    lab: tuple[ProcessLab, Proc, Proc],
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import pytest
 
-from services.commands.certs import issue_lab
 from services.lab.certs import init_ca, issue
 from services.lab.labfile import load
+from services.lab.pki import issue_lab
 from tests import netns
 
 # One worker builds the three-host network once for the module (two built it twice: 20 s).
@@ -45,10 +45,8 @@ pki = "pki"
 max_cpu_percent = 100.0
 load_period_s = 1.0
 max_arenas_per_host = 3
-[arena]   # the default agent template, with 3 s slots so a test drives quickly
-agent = ["context", "agent", "--world", "{{world}}", "--name", "{{world}}",
-         "--runner", "{{runner}}", "--user", "{{account}}", "--identity", "{{identity}}",
-         "--slot-seconds", "3"]
+[arena]   # 3 s slots so a test drives quickly
+slot_seconds = 3
 [[hosts]]
 name = "A"
 address = "{a}"
@@ -237,7 +235,7 @@ def test_services_talk_across_hosts_and_the_doctor_sees_the_mesh(lab: MultiLab) 
         "engine arena1 on B is alive",
         "agent context arena1 on B is alive",
         "runner run1 on B is alive",
-        "bridge real1 (with its emulated Khepera) on C is alive",
+        "bridge real1 on C is alive",
         "agent context robots on C is alive",
         "viewer on A is alive",
         "viewer on B is alive",

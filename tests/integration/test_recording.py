@@ -22,7 +22,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -44,7 +44,7 @@ RAISER = textwrap.dedent(
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     together(lambda: start_engine(lab, "maze"), lambda: start_runner(lab))
@@ -52,18 +52,20 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     yield lab
 
 
-def _recordings_dir(lab: Lab) -> Path:
+def _recordings_dir(lab: ProcessLab) -> Path:
     return lab.state / "rooms" / "recordings" / CTX
 
 
-def _wait_recorded(lab: Lab, user: str, name: str) -> Path:
+def _wait_recorded(lab: ProcessLab, user: str, name: str) -> Path:
     path = _recordings_dir(lab) / user / f"{name}.mcap"
     summary = path.with_name(f"{name}.summary.json")
     wait_for(summary.exists, 20, f"the recording of {name}")
     return path
 
 
-def test_a_slot_of_example_01_is_recorded_with_every_channel(lab: Lab, tmp_path: Path) -> None:
+def test_a_slot_of_example_01_is_recorded_with_every_channel(
+    lab: ProcessLab, tmp_path: Path
+) -> None:
     with agent_user(lab, "alice") as alice:
         queued = alice.queue("k1", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
         final = alice.wait_status(queued.request_id, FINAL, timeout=30)
@@ -89,7 +91,9 @@ def test_a_slot_of_example_01_is_recorded_with_every_channel(lab: Lab, tmp_path:
     assert summary.status == "finished"
 
 
-def test_a_killed_run_says_how_it_ended_and_retention_keeps_two(lab: Lab, tmp_path: Path) -> None:
+def test_a_killed_run_says_how_it_ended_and_retention_keeps_two(
+    lab: ProcessLab, tmp_path: Path
+) -> None:
     with agent_user(lab, "bob") as bob, agent_user(lab, "ida") as ida:
         names = []
         # 1: the controller raises
@@ -132,7 +136,7 @@ def test_a_killed_run_says_how_it_ended_and_retention_keeps_two(lab: Lab, tmp_pa
 
 
 def test_wart_record_and_report_from_the_command_line(
-    lab: Lab, procs: Procs, tmp_path: Path
+    lab: ProcessLab, procs: Procs, tmp_path: Path
 ) -> None:
     with agent_user(lab, "carol") as carol:
         q = carol.queue("k1", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)

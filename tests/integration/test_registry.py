@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from common.auth import RegistryIdentity, create_identity_key
 from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
+from common.client.service_login import vouch_for
 from common.lab_errors import (
     NotAllowed,
     RateLimited,
@@ -20,11 +23,11 @@ from common.lab_errors import (
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     return lab
@@ -46,7 +49,7 @@ def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
     )
 
 
-def test_wrong_passwords_are_slowed_down(lab: Lab) -> None:
+def test_wrong_passwords_are_slowed_down(lab: ProcessLab) -> None:
     with lab.client() as client:
         for _ in range(3):
             with pytest.raises(WrongCredentials, match="wrong user name or password"):
@@ -59,7 +62,7 @@ def test_wrong_passwords_are_slowed_down(lab: Lab) -> None:
             client.login("nobody", "whatever123")
 
 
-def test_one_source_spraying_wrong_passwords_is_slowed_down_others_are_not(lab: Lab) -> None:
+def test_one_source_spraying_wrong_passwords_is_slowed_down_others_are_not(lab: ProcessLab) -> None:
     # Ten failures from one source, each on a different account (no account
     # reaches its own limit), then that source must wait even for a good login.
     with lab.client() as sprayer:
@@ -71,26 +74,39 @@ def test_one_source_spraying_wrong_passwords_is_slowed_down_others_are_not(lab: 
     # Another session (another source) is not affected...
     with lab.client() as other:
         other.login("carol", PASSWORD)
-    # ...and behind one gateway session, two browsers are two sources.
+    # ...and behind one gateway session, two browsers it vouches for are two sources.
     session = lab.zsession()
     try:
-        key = lab.identity.verify_key
+        browser = _gateway(lab, session)
         for i in range(10):
-            browser_a = LabClient(session, lab.router.realm, key, via="browser-1")
             with pytest.raises(WrongCredentials):
-                browser_a.login(f"typo{i}", "not it at all")
-            browser_a.close()
-        browser_a = LabClient(session, lab.router.realm, key, via="browser-1")
+                browser("browser-1").login(f"typo{i}", "not it at all")
         with pytest.raises(RateLimited):
-            browser_a.login("bob", PASSWORD)
-        browser_b = LabClient(session, lab.router.realm, key, via="browser-2")
-        browser_b.login("bob", PASSWORD)
-        browser_b.close()
+            browser("browser-1").login("bob", PASSWORD)
+        browser("browser-2").login("bob", PASSWORD)
     finally:
         close_session(session)
 
 
-def test_client_refuses_a_registry_with_another_key(lab: Lab) -> None:
+def _gateway(lab: ProcessLab, session: zenoh.Session) -> Callable[[str], LabClient]:
+    """A gateway (the viewer's role) logged in on ``session``: a client per vouched address."""
+    key = create_identity_key(lab.state / "gateway.key")
+    db = RegistryDB(lab.db_path)
+    db.add_user("gateway", ["gateway"], public_key=bytes(key.verify_key))
+    db.close()
+    gateway = LabClient(session, lab.router.realm, lab.identity.verify_key, presence=False)
+    gateway.login_with_key("gateway", key)
+    assert gateway.session is not None
+    vouching = gateway.session
+
+    def browser(address: str) -> LabClient:
+        voucher = vouch_for(vouching, lab.router.realm, address)
+        return LabClient(session, lab.router.realm, lab.identity.verify_key, voucher=voucher)
+
+    return browser
+
+
+def test_client_refuses_a_registry_with_another_key(lab: ProcessLab) -> None:
     session = lab.zsession()
     try:
         client = LabClient(session, lab.router.realm, RegistryIdentity.generate().verify_key)
@@ -100,14 +116,14 @@ def test_client_refuses_a_registry_with_another_key(lab: Lab) -> None:
         close_session(session)
 
 
-def test_no_registry_is_reported_as_unreachable(lab: Lab) -> None:
+def test_no_registry_is_reported_as_unreachable(lab: ProcessLab) -> None:
     assert lab.registry is not None
     lab.registry.stop()
     with lab.client() as client, pytest.raises(RegistryUnreachable, match="no registry answered"):
         client.login("alice", PASSWORD)
 
 
-def test_key_login_for_services(lab: Lab) -> None:
+def test_key_login_for_services(lab: ProcessLab) -> None:
     key = create_identity_key(lab.state / "script.key")
     db = RegistryDB(lab.db_path)
     db.add_user("script", ["service"], public_key=bytes(key.verify_key))
@@ -119,7 +135,7 @@ def test_key_login_for_services(lab: Lab) -> None:
             client.login_with_key("alice", key)
 
 
-def test_kill9_and_restart_keeps_accounts_grants_and_revocations(lab: Lab) -> None:
+def test_kill9_and_restart_keeps_accounts_grants_and_revocations(lab: ProcessLab) -> None:
     with lab.client("admin") as admin:
         admin.add_user("dave", "dave's password", roles=("instructor",))
         admin.grant("alice", "kick", "ctx/lobby")
@@ -140,7 +156,7 @@ def test_kill9_and_restart_keeps_accounts_grants_and_revocations(lab: Lab) -> No
             client.directory()
 
 
-def test_admin_queries(lab: Lab) -> None:
+def test_admin_queries(lab: ProcessLab) -> None:
     with lab.client("admin") as admin, lab.client("alice") as alice:
         with pytest.raises(NotAllowed, match="'admin' permission"):
             alice.list_users()
@@ -160,13 +176,13 @@ def test_admin_queries(lab: Lab) -> None:
         client.login("alice", "alice's new one")
 
 
-def test_nobody_can_lock_the_owner_out(lab: Lab) -> None:
+def test_nobody_can_lock_the_owner_out(lab: ProcessLab) -> None:
     """An attacker guessing alice's password from several sources never blocks alice."""
-    session = lab.zsession()
-    try:
-        key = lab.identity.verify_key
-        for source in range(6):  # 6 sources x 4 guesses: far past every free allowance
-            attacker = LabClient(session, lab.router.realm, key, via=f"attacker-{source}")
+    key = lab.identity.verify_key
+    for _ in range(6):  # 6 sources (Zenoh sessions) x 4 guesses: past every free allowance
+        session = lab.zsession()
+        try:
+            attacker = LabClient(session, lab.router.realm, key)
             for _ in range(4):
                 with pytest.raises((WrongCredentials, RateLimited)):
                     attacker.login("alice", "guess guess")
@@ -174,8 +190,8 @@ def test_nobody_can_lock_the_owner_out(lab: Lab) -> None:
             with pytest.raises(RateLimited, match="too many failed logins"):
                 attacker.login("alice", PASSWORD)
             attacker.close()
-    finally:
-        close_session(session)
+        finally:
+            close_session(session)
     # alice, from her own machine, gets in at once; so does the admin
     with lab.client() as owner:
         assert owner.login("alice", PASSWORD).user == "alice"
@@ -190,7 +206,7 @@ def test_nobody_can_lock_the_owner_out(lab: Lab) -> None:
             bob.unlock_logins("alice")
 
 
-def test_an_unlock_lets_a_slowed_source_try_again(lab: Lab) -> None:
+def test_an_unlock_lets_a_slowed_source_try_again(lab: ProcessLab) -> None:
     with lab.client() as client:
         for _ in range(3):
             with pytest.raises(WrongCredentials):
@@ -202,15 +218,15 @@ def test_an_unlock_lets_a_slowed_source_try_again(lab: Lab) -> None:
         assert client.login("carol", PASSWORD).user == "carol"
 
 
-def test_fifty_concurrent_logins_are_all_answered_right(lab: Lab) -> None:
+def test_fifty_concurrent_logins_are_all_answered_right(lab: ProcessLab) -> None:
     from concurrent.futures import ThreadPoolExecutor
 
     session = lab.zsession()
     try:
-        key = lab.identity.verify_key
+        browser = _gateway(lab, session)  # a class behind the viewer: one address each
 
         def one(i: int) -> str:
-            client = LabClient(session, lab.router.realm, key, via=f"student-{i}")
+            client = browser(f"student-{i}")
             try:
                 user, password = ("bob", PASSWORD) if i % 5 else ("bob", "wrong password")
                 try:

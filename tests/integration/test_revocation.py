@@ -28,7 +28,7 @@ from tests.integration.agentkit import (
     start_agent_context,
     start_engine,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 
@@ -41,7 +41,7 @@ class Forward(Controller):
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     start_engine(lab, identity=True)
@@ -56,7 +56,7 @@ def _still_for(poses: Poses, agent: str, seconds: float) -> float:
     return float(np.linalg.norm(poses.xy(agent) - start))
 
 
-def test_a_kicked_user_loses_the_robot_the_queue_and_the_edits(lab: Lab) -> None:
+def test_a_kicked_user_loses_the_robot_the_queue_and_the_edits(lab: ProcessLab) -> None:
     realm = lab.router.realm
     with (
         lab.zsession() as z,
@@ -93,7 +93,7 @@ def test_a_kicked_user_loses_the_robot_the_queue_and_the_edits(lab: Lab) -> None
         carol.cancel_quietly(queued.request_id)
 
 
-def test_a_kicked_instructor_cannot_edit_and_private_messages_are_dropped(lab: Lab) -> None:
+def test_a_kicked_instructor_cannot_edit_and_private_messages_are_dropped(lab: ProcessLab) -> None:
     realm = lab.router.realm
     edit_key = keys.world_edit(realm, WORLD)
     move = WorldEdit(op=MoveItem(id="rock1", x=800.0, y=900.0))

@@ -31,7 +31,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -72,7 +72,7 @@ class Filler(Controller):
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     _, lab.runner = together(lambda: start_engine(lab), lambda: start_runner(lab))
@@ -80,7 +80,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
     yield lab
 
 
-def test_stalled_flooding_and_filling_uploads_end_on_time_and_say_why(lab: Lab) -> None:
+def test_stalled_flooding_and_filling_uploads_end_on_time_and_say_why(lab: ProcessLab) -> None:
     runner = psutil.Process(lab.runner.popen.pid)  # type: ignore[attr-defined]
     before = runner.memory_info().rss
     attacks = {"stalled": ("bob", "k0", STALLED), "flood": ("carol", "k1", FLOOD)}

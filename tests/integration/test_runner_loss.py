@@ -19,6 +19,7 @@ import os
 import signal
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -28,13 +29,12 @@ from services.runner.sandbox import sandbox_problem
 from tests.conftest import Proc, Procs, Router, free_port, wait_for
 from tests.integration.agentkit import (
     WORLD,
-    service_account,
     start_agent_context,
     start_deploy,
     start_engine,
     start_runner,
 )
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab, start_router
 
 pytestmark = [
     pytest.mark.integration,
@@ -47,67 +47,45 @@ RUNNER_END = "the lab's runner runner stopped"
 class RunnerHost:
     """The runner on its own router ("a second host"), each restartable."""
 
-    def __init__(self, lab: Lab) -> None:
+    def __init__(self, lab: ProcessLab) -> None:
         self.lab = lab
         self.port = free_port()
         self.router = self.start_router()
         self.runner = self.start_runner()
 
     def start_router(self) -> Proc:
-        return self.lab.procs.start(
+        router = start_router(
+            self.lab.procs,
+            self.lab.realm,
             "router-b",
-            [
-                "router",
-                "--realm",
-                self.lab.router.realm,
-                "--name",
-                "router-b",
-                "--listen",
-                f"tcp/127.0.0.1:{self.port}",
-                "--connect",
-                self.lab.router.endpoint,
-                "--no-multicast-scouting",
-            ],
+            port=self.port,
+            connect=[self.lab.router.endpoint],
+            log_name="router-b",
         )
+        return router.proc
 
     def start_runner(self) -> Proc:
-        key = service_account(self.lab, "runner-svc")
-        net = self.lab.router.options(connect=(f"tcp/127.0.0.1:{self.port}",)).as_args()
-        proc = self.lab.procs.start(
-            "runner",
-            [
-                "runner",
-                "--name",
-                "runner",
-                "--user",
-                "runner-svc",
-                "--identity",
-                str(key),
-                *net,
-                "--registry-key",
-                self.lab.key_hex,
-            ],
-        )
-        self.lab.wait_alive(AliveKind.RUNNER, "runner", proc)
-        return proc
+        # A client of router-b, as a runner on its own host is of its host's router.
+        router_b = Router(self.lab.realm, self.port, self.router)
+        return replace(self.lab, router=router_b).start_runner()
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     start_engine(lab)
     yield lab
 
 
-def deploy(lab: Lab) -> Proc:
+def deploy(lab: ProcessLab) -> Proc:
     proc = start_deploy(lab, CONTROLLERS / "forward.py", "k2", "bob")
     wait_for(lambda: "running on k2" in proc.output(), 60, "bob's controller running")
     return proc
 
 
 def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
-    lab: Lab, procs: Procs
+    lab: ProcessLab, procs: Procs
 ) -> None:
     host = RunnerHost(lab)
     context = start_agent_context(lab, slot=60.0)
@@ -138,7 +116,7 @@ def test_a_runner_cut_off_by_its_router_keeps_the_run_and_a_crashed_one_ends_it(
     assert "it came back without them" in context.output(), context.output()
 
 
-def test_a_frozen_world_is_said_to_the_student_and_so_is_its_return(lab: Lab) -> None:
+def test_a_frozen_world_is_said_to_the_student_and_so_is_its_return(lab: ProcessLab) -> None:
     start_runner(lab)
     start_agent_context(lab, slot=120.0)
     engine = next(p for p in lab.procs.started if p.name == "engine")

@@ -6,6 +6,7 @@ there is no Zenoh here: the runner service relays over these same pipes.
 
 from __future__ import annotations
 
+import logging
 import os
 import queue
 import textwrap
@@ -14,7 +15,7 @@ import time
 import psutil
 import pytest
 
-from common.controller import RobotCommand
+from common.controller import KheperaState, RobotCommand
 from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck, sandbox_problem
 from tests.conftest import wait_for
 
@@ -23,18 +24,7 @@ pytestmark = pytest.mark.integration
 _problem = sandbox_problem()
 needs_sandbox = pytest.mark.skipif(_problem is not None, reason=f"no sandbox here: {_problem}")
 
-STATE = {
-    "time": 1.0,
-    "speeds": [0, 0],
-    "counters": [0, 0],
-    "proximity": [0, 0, 900, 0, 0, 0, 0, 0],
-    "ambient": [500] * 8,
-    "leds": [False, False],
-    "arm": 165,
-    "gripper_closed": False,
-    "object_present": False,
-    "resistivity": 0,
-}
+STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))
 
 
 class Run:
@@ -195,7 +185,8 @@ class Snoop(Controller):
 
 
 @needs_sandbox
-def test_bad_commands_are_refused_and_counted() -> None:
+def test_bad_commands_are_refused_and_counted(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.WARNING, "wart.runner.sandbox")
     run = Run(
         HEADER
         + """
@@ -210,9 +201,16 @@ class Liar(Controller):
 """,
         slot=1.5,
     )
+    # Refused with the reason, and the run goes on: the good command after them arrives.
     assert run.commands.get(timeout=10) == RobotCommand(speeds=(3, 4))
     run.finish()
     assert run.sandbox.rejected_commands >= 3
+    assert "refused a message from the controller: not JSON" in run.text()
+    assert "cmd: speeds must be two integers" in run.text()
+    assert "cmd: unknown command fields: format" in run.text()
+    # The runner's log says it once (not once a line: the child chooses how many).
+    refusals = [r for r in caplog.records if "refused line" in r.getMessage()]
+    assert len(refusals) == 1 and "not JSON" in refusals[0].getMessage()
 
 
 @pytest.mark.parametrize(

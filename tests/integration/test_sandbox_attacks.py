@@ -13,12 +13,13 @@ import queue
 import textwrap
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import psutil
 import pytest
 
-from common.controller import RobotCommand
+from common.controller import KheperaState, RobotCommand
 from services.runner.cpushare import NICE_ONLY
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, sandbox_problem
 from tests.conftest import wait_for
@@ -29,18 +30,7 @@ pytestmark = [
 ]
 
 HEADER = "from common.controller import Controller, Khepera\n"
-STATE = {
-    "time": 1.0,
-    "speeds": [0, 0],
-    "counters": [0, 0],
-    "proximity": [0, 0, 900, 0, 0, 0, 0, 0],
-    "ambient": [500] * 8,
-    "leds": [False, False],
-    "arm": 165,
-    "gripper_closed": False,
-    "object_present": False,
-    "resistivity": 0,
-}
+STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))
 MB = 1 << 20
 
 
@@ -107,7 +97,7 @@ class Frozen(Controller):
     )
     wait_for(lambda: "freezing" in attack.text(), 10, "the controller to start")
     slowest = 0.0
-    state = {**STATE, "ambient": [1000] * 8}
+    state = replace(STATE, ambient=(1000,) * 8)
     # States at 1 kHz, far above any engine's rate, fill the pipe in a
     # fraction of the slot. Not a hot loop: a thread writing to a full pipe
     # without pause starves the runner's other threads of the GIL (measured:

@@ -10,6 +10,7 @@ from common.messages import ErrorReply, OkReply, decode
 from common.service import RequestError, Service, close_session, open_session
 from services.lab.supervisor import AliveWatch
 from tests.conftest import Router, wait_for
+from tests.lab import start_router
 
 
 class Echo(Service):
@@ -68,20 +69,11 @@ def test_query_errors_become_error_replies_and_service_keeps_serving(
 
 def test_killed_process_token_disappears(router: Router, procs, alive_watch: AliveWatch) -> None:
     key = keys.alive(router.realm, AliveKind.ROUTER, "second")
-    port = __import__("tests.conftest", fromlist=["free_port"]).free_port()
-    proc = procs.start(
-        "second-router",
-        [
-            "router",
-            "--name",
-            "second",
-            "--listen",
-            f"tcp/127.0.0.1:{port}",
-            *router.net_args()[:2],
-            "--connect",
-            router.endpoint,
-        ],
+    # A second router meshed with the first, as another host's would be.
+    second = start_router(
+        procs, router.realm, "second", connect=[router.endpoint], log_name="second-router"
     )
+    proc = second.proc
     assert alive_watch.wait(key, 20.0), proc.output()
     proc.kill9()
     wait_for(lambda: not alive_watch.present(key), 15.0, "a killed router's token to go")

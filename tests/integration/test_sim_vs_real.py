@@ -30,7 +30,7 @@ from services.lab.wiring import map_pose
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import agent_user, start_agent_context, start_engine, start_runner
-from tests.integration.labkit import Lab, make_lab
+from tests.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -49,7 +49,7 @@ def body() -> Iterator[SimBody]:
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     start_engine(lab, MAP.stem, world=SIM)
@@ -77,7 +77,9 @@ def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator
         yield lab
 
 
-def _run_and_download(lab: Lab, client: AgentClient, ctx: str, request_id: str, dest: Path) -> Path:
+def _run_and_download(
+    lab: ProcessLab, client: AgentClient, ctx: str, request_id: str, dest: Path
+) -> Path:
     final = client.wait_status(request_id, FINAL, timeout=40)
     assert final is not None and final.status == "finished", final
     summary = lab.state / "rooms" / "recordings" / ctx / "alice" / f"{request_id}.summary.json"
@@ -86,7 +88,7 @@ def _run_and_download(lab: Lab, client: AgentClient, ctx: str, request_id: str, 
 
 
 def test_example_01_in_sim_and_on_the_emulated_robot_gives_one_report(
-    lab: Lab, procs: Procs, tmp_path: Path
+    lab: ProcessLab, procs: Procs, tmp_path: Path
 ) -> None:
     source = EXAMPLE.read_bytes()
     with agent_user(lab, "alice", SIM_CTX) as sim, agent_user(lab, "alice", REAL_CTX) as real:

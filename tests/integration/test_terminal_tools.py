@@ -19,13 +19,13 @@ import pytest
 from common.client.lab_client import LabClient
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Lab]:
+def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     lab.start_room("lobby")
@@ -59,7 +59,7 @@ class Pane:
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
-def test_wart_chat_in_tmux_sees_history_members_and_live_lines(lab: Lab) -> None:
+def test_wart_chat_in_tmux_sees_history_members_and_live_lines(lab: ProcessLab) -> None:
     with lab.client("bob") as bob:
         heard: list[str] = []
         room = bob.join("lobby", on_event=lambda e: heard.append(e.line.text) if e.line else None)
@@ -114,7 +114,7 @@ def run_users(db: Path, *args: str, stdin: str = "") -> subprocess.CompletedProc
     )
 
 
-def test_wart_users_manages_accounts_and_explains_mistakes(lab: Lab) -> None:
+def test_wart_users_manages_accounts_and_explains_mistakes(lab: ProcessLab) -> None:
     db = lab.db_path
     # The new account's password comes from the piped line, never from WART_PASSWORD
     # (the variable people log in with).

@@ -2,7 +2,7 @@
 
 A real router and registry (argon2id password checks on a real SQLite file) as
 ``wart`` processes; the web viewer in this process on a real Zenoh session with
-:class:`~viewers.web.connector.RealConnector`; headless clients speaking viser's
+:class:`~viewers.web.connector.LiveConnector`; headless clients speaking viser's
 protocol (tests/viser_client.py) that log in through the page's own form, clicking
 "Log in" the moment it shows, as a quick browser can.
 
@@ -28,11 +28,11 @@ import zenoh
 
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router, free_port
-from tests.integration.labkit import PASSWORD, Lab, make_lab
+from tests.lab import PASSWORD, ProcessLab, make_lab
 from tests.viser_client import ViserClient, run_in_thread
 from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
-from viewers.web.connector import RealConnector
+from viewers.web.connector import LiveConnector
 from viewers.web.demo_lab import DemoConnector, DemoLab
 from viewers.web.login import LoginDesk
 
@@ -54,7 +54,7 @@ ANSWER_BOUND = QUEUE_WAIT + LOGIN_WAIT + 60.0
 
 @dataclass
 class ViewerLab:
-    lab: Lab
+    lab: ProcessLab
     viewer: WebViewer
     session: zenoh.Session
 
@@ -69,7 +69,7 @@ def vlab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ViewerLab]:
     lab.start_registry()
     session = open_session(router.options(), wait=10.0)
     address = LabAddress("127.0.0.1", router.port, router.realm)
-    connector = RealConnector(
+    connector = LiveConnector(
         session, address, lab.key_hex, data_dir=tmp_path / "viewer", login_wait=LOGIN_WAIT
     )
     viewer = WebViewer(

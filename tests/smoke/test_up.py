@@ -16,12 +16,12 @@ from common.zconfig import NetworkOptions
 from services.commands.up import REAL_AGENT, REAL_WORLD, lab_plan, router_spec, settings_from_args
 from services.lab.supervisor import AliveWatch
 from tests.conftest import wait_for
-from tests.lab import Lab
+from tests.lab import UpLab
 
 pytestmark = pytest.mark.smoke
 
 
-def expected_tokens(lab: Lab) -> list[str]:
+def expected_tokens(lab: UpLab) -> list[str]:
     args = argparse.Namespace(state_dir=lab.state_dir, port=lab.port, http_port=lab.http_port)
     settings = settings_from_args(args, NetworkOptions(realm=lab.realm))
     specs = [router_spec(settings), *lab_plan(settings)]
@@ -29,7 +29,7 @@ def expected_tokens(lab: Lab) -> list[str]:
 
 
 def test_lab_comes_up_restarts_a_killed_child_and_stops_cleanly(tmp_path: Path, realm: str) -> None:
-    lab = Lab(realm=realm, state_dir=tmp_path / "state").start()
+    lab = UpLab(realm=realm, state_dir=tmp_path / "state").start()
     try:
         lab.wait_line("The lab is running", timeout=120)
         session = open_session(NetworkOptions(realm=realm, connect=(lab.endpoint,)), wait=10)
@@ -81,7 +81,7 @@ def _real_robot_online(session: zenoh.Session, realm: str) -> bool:
     return False
 
 
-def _alive_child(lab: Lab, subcommand: str) -> psutil.Process | None:
+def _alive_child(lab: UpLab, subcommand: str) -> psutil.Process | None:
     try:
         return lab.child(subcommand)
     except AssertionError:

@@ -26,7 +26,7 @@ from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, wait_for, wart_env
-from tests.lab import Lab
+from tests.lab import UpLab
 
 # One worker starts the module's lab once (split between workers, each started its own).
 pytestmark = [pytest.mark.smoke, pytest.mark.xdist_group("up_hosting")]
@@ -35,9 +35,9 @@ TEACHER, STUDENT, PASSWORD = "teacher", "pupil", "a long test password"
 
 
 @pytest.fixture(scope="module")
-def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Lab, str]]:
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[UpLab, str]]:
     realm = f"t{uuid.uuid4().hex[:10]}"
-    lab = Lab(realm=realm, state_dir=tmp_path_factory.mktemp("hosting") / "state").start()
+    lab = UpLab(realm=realm, state_dir=tmp_path_factory.mktemp("hosting") / "state").start()
     try:
         line = lab.wait_line("registry key", timeout=60)
         key = line.split(":", 1)[1].strip()
@@ -55,7 +55,7 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Lab, str]]:
 
 
 @pytest.fixture
-def client_of(lab: tuple[Lab, str]) -> Iterator[Callable[[str], LabClient]]:
+def client_of(lab: tuple[UpLab, str]) -> Iterator[Callable[[str], LabClient]]:
     the_lab, key = lab
     opened: list[tuple[LabClient, zenoh.Session]] = []
 
@@ -146,7 +146,7 @@ def test_refusals_say_why(client_of: Callable[[str], LabClient]) -> None:
     assert _context(teacher, "mine") is None and _context(teacher, "sunk") is None
 
 
-def test_wart_room_in_a_terminal(lab: tuple[Lab, str]) -> None:
+def test_wart_room_in_a_terminal(lab: tuple[UpLab, str]) -> None:
     the_lab, key = lab
     flags = ["--realm", the_lab.realm, "--connect", the_lab.endpoint, "--registry-key", key]
     env = wart_env({"WART_PASSWORD": PASSWORD})

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from tests.lab import Lab
+from tests.lab import UpLab
 
 pytestmark = pytest.mark.smoke
 
 
 def test_up_prints_the_viewer_url_and_it_serves(tmp_path: Path, realm: str) -> None:
-    lab = Lab(realm=realm, state_dir=tmp_path / "state").start()
+    lab = UpLab(realm=realm, state_dir=tmp_path / "state").start()
     try:
         line = lab.wait_line("web viewer:", timeout=120)
         match = re.search(r"http://\S+", line)

@@ -18,11 +18,6 @@ STILL_OVER = frozenset(
     {
         "bench/bench_control_latency.py",
         "bench/bench_viewer_sessions.py",
-        "common/sim2d/world.py",
-        "services/bridge/emulator.py",
-        "services/bridge/robot.py",
-        "services/engine/service.py",
-        "services/runner/sandbox.py",
     }
 )
 

@@ -144,13 +144,11 @@ def test_the_world_package_never_imports_the_client_package() -> None:
     assert not _violations("common.world", lambda n: not _inside(n, "common.client"))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 37: one wiring lands next")
 def test_the_lab_library_never_imports_a_command() -> None:
     """services/lab/ is the library that commands and hosts share, never the other way."""
     assert not _violations("services.lab", lambda n: not _inside(n, "services.commands"))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 37: one wiring lands next")
 def test_commands_import_only_common_and_the_lab_library() -> None:
     def allowed(name: str) -> bool:
         if not _project(name):
@@ -162,7 +160,7 @@ def test_commands_import_only_common_and_the_lab_library() -> None:
 
 def test_the_precheck_cap_is_the_wire_cap() -> None:
     """precheck writes the upload cap again (it may import nothing); the two stay equal."""
-    from common.controller.precheck import MAX_SOURCE_BYTES
+    from common.controller.upload_gate import MAX_SOURCE_BYTES
     from common.messages.agent import MAX_UPLOAD_BYTES
 
     assert MAX_SOURCE_BYTES == MAX_UPLOAD_BYTES

@@ -22,16 +22,18 @@ import numpy as np
 import numpy.typing as npt
 
 from common.client.survey import Survey
+from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
+from common.messages.audit import AuditEntry, AuditQuery
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
 
 # --- errors ---------------------------------------------------------------------
 
-
-class LabError(Exception):
-    """A refused or failed request; ``str()`` is shown to the person as is."""
+# LabError is the lab's one (common/lab_errors.py, imported above for the page's
+# modules): a refused or failed request, whose str() is shown to the person as is.
+# The page raises it in its own words too; plain_error words the registry client's.
 
 
 class LoginError(LabError):
@@ -371,6 +373,7 @@ class Account:
     grants: tuple[tuple[str, tuple[str, ...]], ...]  # (scope, grants there); "" = everywhere
     online: bool = False
     failed_logins: int = 0  # since the registry started or the last unlock
+    banned: str = ""  # the ban in force, in words ("" if none)
 
 
 class LabConnection(Protocol):
@@ -490,10 +493,20 @@ class LabConnection(Protocol):
 
     def unlock_logins(self, user: str) -> str: ...
 
+    def ban(self, user: str, reason: str, until: float | None) -> str: ...
+
+    def lift_ban(self, user: str) -> str: ...
+
+    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]: ...
+
 
 class LabConnector(Protocol):
     """Opens lab connections; :class:`LoginError` with plain words when it cannot."""
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> LabConnection:
-        """Log in; ``via`` names the browser connection (the registry throttles per source)."""
+    def login(
+        self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
+    ) -> LabConnection:
+        """Log in; ``via`` names the browser connection (logged by the registry);
+        ``seen_from`` is the browser's address as this viewer's socket saw it, which
+        the viewer vouches for (the registry throttles failed logins per address)."""
         ...

@@ -1,7 +1,8 @@
 """The admin folder of a lab's tab (admin permission; thesis 9.2.1: ACLs from the interface).
 
 Accounts, passwords, grants (everywhere or in one context), kick from the
-server, the server's name. Every action goes to the registry with the
+server, bans (with a reason and an end), the audit trail (filtered), the
+server's name. Every action goes to the registry with the
 admin's own session; the registry re-checks the admin permission, so this
 folder is only shown to admins as a convenience, not as the protection.
 """
@@ -9,11 +10,13 @@ folder is only shown to admins as a convenience, not as the protection.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 
 import viser
 
 from common.keys import is_ident
+from common.messages.audit import AuditEntry, AuditQuery
 from viewers.web.adapters import Account, LabConnection, LabError
 from viewers.web.inputs import set_value
 from viewers.web.login import MAX_PASSWORD
@@ -37,14 +40,17 @@ GRANTS = (
     "role:admin",
 )
 MAX_SERVER_NAME = 80
+MAX_BAN_HOURS = 24 * 365
+AUDIT_PAGE = 100  # lines shown at once: the CLI (wart audit) exports the rest
+OUTCOMES = ("any", "ok", "refused")
 
 
 def format_accounts(accounts: list[Account]) -> str:
     if not accounts:
         return "_No accounts._"
     lines = [
-        "| user | roles | grants | online | failed logins |",
-        "| --- | --- | --- | --- | --- |",
+        "| user | roles | grants | online | failed logins | banned |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
     for a in accounts:
         grants = "; ".join(
@@ -55,9 +61,41 @@ def format_accounts(accounts: list[Account]) -> str:
         online = "yes" if a.online else ""
         lines.append(
             f"| {escape_md(a.name)} | {', '.join(escape_md(r) for r in a.roles)} | "
-            f"{grants or '-'} | {online} | {a.failed_logins or ''} |"
+            f"{grants or '-'} | {online} | {a.failed_logins or ''} | {escape_md(a.banned)} |"
         )
     return "\n".join(lines)
+
+
+def format_audit(entries: list[AuditEntry]) -> str:
+    """The audit trail as a table, newest first (times in UTC)."""
+    if not entries:
+        return "_No audit lines match._"
+    lines = [
+        "| when (UTC) | who | did | on | outcome | detail | from |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for e in entries:
+        at = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(e.at))
+        where = e.source if e.reporter == "registry" else f"{e.source} via {e.reporter}"
+        lines.append(
+            f"| {at} | {escape_md(e.actor)} | {escape_md(e.action)} | {escape_md(e.target)} | "
+            f"{e.outcome} | {escape_md(e.detail)} | {escape_md(where)} |"
+        )
+    return "\n".join(lines)
+
+
+def check_hours(text: str) -> float | str | None:
+    """A ban's length as typed, in hours: None (until lifted), the end, or an error's words."""
+    text = text.strip()
+    if not text:
+        return None
+    try:
+        hours = float(text)
+    except ValueError:
+        return "Ban for: a number of hours (0.5, 24, 168), or empty for until lifted."
+    if not 0 < hours <= MAX_BAN_HOURS:
+        return f"Ban for: more than 0 and at most {MAX_BAN_HOURS} hours."
+    return time.time() + hours * 3600.0
 
 
 def check_scope(text: str) -> str | None:
@@ -92,9 +130,19 @@ class AdminPanel:
             self.ungrant_button = gui.add_button("Revoke")
             self.reason = gui.add_text("Reason", "")
             self.kick_button = gui.add_button("Kick from server", color="red")
+            self.ban_hours = gui.add_text("Ban for (hours; empty: until lifted)", "")
+            self.ban_button = gui.add_button("Ban", color="red")
+            self.lift_button = gui.add_button("Lift ban")
             self.server_name = gui.add_text("Server name", "")
             self.rename_button = gui.add_button("Rename server")
             self.notice = gui.add_markdown("", visible=False)
+            with gui.add_folder("Audit trail", expand_by_default=False):
+                self.audit_actor = gui.add_text("Who (account)", "")
+                self.audit_action = gui.add_text("Action (kick, ban, grant, estop...)", "")
+                self.audit_target = gui.add_text("On (contains)", "")
+                self.audit_outcome = gui.add_dropdown("Outcome", OUTCOMES, initial_value="any")
+                self.audit_button = gui.add_button("Show audit trail")
+                self.audit_md = gui.add_markdown("_Press 'Show audit trail'._")
         self.list_button.on_click(lambda _: self.refresh())
         self.add_button.on_click(lambda _: self._add())
         self.password_button.on_click(lambda _: self._set_password())
@@ -104,6 +152,9 @@ class AdminPanel:
         self.ungrant_button.on_click(lambda _: self._grant(self.connection.ungrant))
         self.kick_button.on_click(lambda _: self._kick())
         self.rename_button.on_click(lambda _: self._rename())
+        self.ban_button.on_click(lambda _: self._ban())
+        self.lift_button.on_click(lambda _: self._account_call(self.connection.lift_ban))
+        self.audit_button.on_click(lambda _: self.show_audit())
 
     def say(self, text: str) -> None:
         self.notice.content = f"**{escape_md(text)}**"
@@ -185,3 +236,43 @@ class AdminPanel:
             self.say(f"A server name is 1 to {MAX_SERVER_NAME} printable characters.")
             return
         self._done(lambda: self.connection.rename_server(name))
+
+    def _ban(self) -> None:
+        user = self._target()
+        if user is None:
+            return
+        reason = self.reason.value.strip()[:200]
+        if not reason:
+            self.say("Type the reason: the banned user is told it at each login.")
+            return
+        until = check_hours(self.ban_hours.value)
+        if isinstance(until, str):
+            self.say(until)
+            return
+        self._done(lambda: self.connection.ban(user, reason, until))
+
+    def show_audit(self) -> None:
+        """The audit trail, filtered as typed (every filter checked before it is sent)."""
+        actor = self.audit_actor.value.strip()
+        action = self.audit_action.value.strip().lower()
+        target = self.audit_target.value.strip()[:200]
+        if actor and not is_ident(actor):
+            self.say("Who: an account name (letters, digits, '_', '-' or '.'), or empty.")
+            return
+        if action and not (len(action) <= 40 and action.replace("_", "").isalnum()):
+            self.say("Action: a short name such as kick, ban, grant, estop, or empty.")
+            return
+        outcome = self.audit_outcome.value
+        query = AuditQuery(
+            actor=actor,
+            action=action,
+            target=target,
+            outcome="" if outcome == "any" else outcome,  # type: ignore[arg-type]
+            limit=AUDIT_PAGE,
+        )
+        try:
+            entries = self.connection.audit_trail(query)
+        except LabError as exc:
+            self.say(f"Could not read the audit trail: {exc}")
+            return
+        self.audit_md.content = format_audit(entries)

@@ -26,13 +26,14 @@ import viser
 import zenoh
 
 from common import cli
+from common.client.service_login import ServiceCredentials
 from common.keys import AliveKind, check_ident
 from common.service import Service, run_service
 from common.zconfig import DEFAULT_PORT, NetworkOptions
 from viewers.web.adapters import LabConnector
 from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
-from viewers.web.connector import RealConnector
+from viewers.web.connector import GatewayLogin, LiveConnector
 from viewers.web.login import LoginDesk
 from viewers.web.pump import DEFAULT_RATE, FramePump
 from viewers.web.viser_fast import make_loop_safe
@@ -235,6 +236,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
     p.add_argument(
         "--demo-robots", type=int, default=20, help="robots in the demo arena (default 20)"
     )
+    p.add_argument(
+        "--user",
+        help="this viewer's service account (role gateway, optional): it vouches for each "
+        "browser's address at login, so the registry slows failed logins per browser",
+    )
+    p.add_argument("--identity", type=Path, help="that account's Ed25519 key file")
     args, options = cli.parse(p, argv)
     assert isinstance(options, NetworkOptions)
     if not 0 < args.http_port < 65536:
@@ -251,6 +258,16 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
         )
     except ValueError as exc:
         p.error(str(exc))
+    gateway_credentials = None
+    if args.user and not args.demo:
+        if args.identity is None:
+            p.error("--user needs --identity (the account's key file)")
+        try:
+            gateway_credentials = ServiceCredentials.from_options(
+                options.registry_key, args.user, args.identity, "viewer"
+            )
+        except (ValueError, OSError) as exc:
+            p.error(str(exc))
     data_dir: Path = args.data_dir or default_data_dir(options.realm)
     if not args.demo and not options.registry_key:
         p.error(
@@ -267,8 +284,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
             connector = DemoConnector((default.realm, lab))
         else:
             # The gateway: this process's one session to its own lab, and a
-            # LabClient per logged-in browser user on it (viewers/web/real.py).
-            connector = RealConnector(session, default, options.registry_key, data_dir=data_dir)
+            # LabClient per logged-in browser user on it (viewers/web/live.py).
+            gateway = None
+            if gateway_credentials is not None:
+                gateway = GatewayLogin(session, options.realm, gateway_credentials)
+            connector = LiveConnector(
+                session, default, options.registry_key, data_dir=data_dir, gateway=gateway
+            )
         service = ViewerService(
             session,
             options.realm,

@@ -1,14 +1,15 @@
 """Browsers log in here: the viewer's own lab, or one its admin listed in the labs file.
 
-One :class:`~viewers.web.lab_links.LabLink` (a Zenoh session) per lab router,
+One :class:`~viewers.web.lab_links.LabRouterLink` (a Zenoh session) per lab router,
 shared by everyone logged in through it; one
-:class:`~viewers.web.real.RealConnection` per logged-in browser.
+:class:`~viewers.web.live.LiveConnection` per logged-in browser.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
@@ -16,22 +17,71 @@ import zenoh
 from common import lab_errors
 from common.auth import LOGIN_WAIT_S, parse_public_key
 from common.client import lab_client as lab
+from common.client.service_login import ServiceCredentials, ServiceLogin, vouch_for
+from common.lab_errors import LabError
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
     LoginError,
 )
 from viewers.web.address import LabAddress
-from viewers.web.lab_links import LabLink, load_labs
-from viewers.web.real import RealConnection, plain_error
-from viewers.web.real_world import QUERY_TIMEOUT
+from viewers.web.lab_links import LabRouterLink, load_labs
+from viewers.web.live import LiveConnection, plain_error
+from viewers.web.live_world import QUERY_TIMEOUT
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 LABS_FILE = "labs.json"
 
 
-class RealConnector:
+class GatewayLogin:
+    """The viewer's own service account (role ``gateway``), logged in in the background.
+
+    With it the viewer vouches, at each browser's login, for the address its
+    socket saw; the registry then throttles failed logins per browser address
+    instead of per viewer (docs/SECURITY.md "Failed logins"). Until it is logged
+    in (the registry may start after the viewer), logins go unvouched.
+    """
+
+    def __init__(self, session: zenoh.Session, realm: str, credentials: ServiceCredentials) -> None:
+        self.session = session
+        self.realm = realm
+        self.credentials = credentials
+        self.login: ServiceLogin | None = None
+        self._closed = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gateway-login", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            login = self.credentials.login(self.session, self.realm, "viewer")
+        except (LabError, RuntimeError) as exc:
+            log.warning("the viewer's account %s cannot log in: %s", self.credentials.user, exc)
+            return
+        if not login.session.has("vouch"):
+            log.warning("account %s lacks 'vouch' (role gateway): logins go unvouched", login.user)
+        if self._closed.is_set():
+            login.close()
+            return
+        self.login = login
+
+    def voucher(self, address: str) -> Callable[[bytes], bytes] | None:
+        login = self.login
+        if login is None or login.client.session is None:
+            return None
+        try:
+            return vouch_for(login.session, self.realm, address)
+        except ValueError as exc:
+            log.info("not vouching for %r: %s", address, exc)
+            return None
+
+    def close(self) -> None:
+        self._closed.set()
+        if self.login is not None:
+            self.login.close()
+
+
+class LiveConnector:
     """Logs browsers in to labs: the viewer's own, or one listed in the admin's labs file."""
 
     def __init__(
@@ -43,6 +93,7 @@ class RealConnector:
         data_dir: Path | None = None,
         timeout: float = QUERY_TIMEOUT,
         login_wait: float = LOGIN_WAIT_S,
+        gateway: GatewayLogin | None = None,
     ) -> None:
         if isinstance(own_registry_key, str):
             own_registry_key = parse_public_key(own_registry_key)
@@ -54,9 +105,10 @@ class RealConnector:
             raise ValueError(f"login_wait must be positive, not {login_wait}")
         self.login_wait = login_wait  # how long a login waits for the registry's answer
         self._own_session = own_session
-        self._links: dict[tuple[str, int, str], LabLink] = {}
+        self.gateway = gateway  # vouches for browsers' addresses to the viewer's own lab
+        self._links: dict[tuple[str, int, str], LabRouterLink] = {}
         self._lock = threading.Lock()
-        self._connections: list[RealConnection] = []
+        self._connections: list[LiveConnection] = []
 
     def _is_own(self, address: LabAddress) -> bool:
         own = self.own_address
@@ -65,7 +117,7 @@ class RealConnector:
         local = {"127.0.0.1", "localhost", "::1"}
         return address.host == own.host or (address.host in local and own.host in local)
 
-    def _link(self, address: LabAddress) -> LabLink:
+    def _link(self, address: LabAddress) -> LabRouterLink:
         key = address.lab_key
         with self._lock:
             link = self._links.get(key)
@@ -78,7 +130,7 @@ class RealConnector:
                     "this viewer was started without --registry-key, so it cannot check "
                     "that the lab's registry is genuine; ask the lab's admin"
                 )
-            link = LabLink(address, self._own_session, self.own_registry_key, own=True)
+            link = LabRouterLink(address, self._own_session, self.own_registry_key, own=True)
         else:
             known = load_labs(self.labs_path, self.own_address.realm).get(key)
             if known is None:
@@ -96,7 +148,7 @@ class RealConnector:
                 raise LoginError(
                     f"no lab router answers at {address.host}:{address.port}"
                 ) from None
-            link = LabLink(address, session, known.registry_key, own=False)
+            link = LabRouterLink(address, session, known.registry_key, own=False)
         with self._lock:
             existing = self._links.get(key)
             if existing is not None:  # another browser opened it meanwhile: use theirs
@@ -108,7 +160,7 @@ class RealConnector:
             self._links[key] = link
         return link
 
-    def _unlink(self, link: LabLink) -> None:
+    def _unlink(self, link: LabRouterLink) -> None:
         with self._lock:
             link.users -= 1
             if link.users > 0 or link.own:
@@ -116,10 +168,22 @@ class RealConnector:
             self._links.pop(link.address.lab_key, None)
         link.close()
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> RealConnection:
+    def login(
+        self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
+    ) -> LiveConnection:
         link = self._link(address)
+        # Only our own lab's registry knows the viewer's account: elsewhere the
+        # login counts against this viewer's Zenoh session, like any client's.
+        voucher = None
+        if link.own and self.gateway is not None and seen_from:
+            voucher = self.gateway.voucher(seen_from)
         client = lab.LabClient(
-            link.session, address.realm, link.registry_key, timeout=self.timeout, via=via
+            link.session,
+            address.realm,
+            link.registry_key,
+            timeout=self.timeout,
+            via=via,
+            voucher=voucher,
         )
         try:
             client.login(user, password, wait=self.login_wait)
@@ -146,12 +210,12 @@ class RealConnector:
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None
-        connection = RealConnection(self, link, client, address.with_user(user))
+        connection = LiveConnection(self, link, client, address.with_user(user))
         with self._lock:
             self._connections.append(connection)
         return connection
 
-    def _closed(self, connection: RealConnection) -> None:
+    def _closed(self, connection: LiveConnection) -> None:
         with self._lock:
             if connection in self._connections:
                 self._connections.remove(connection)
@@ -159,6 +223,8 @@ class RealConnector:
 
     def close(self) -> None:
         """Log everyone out and close the other labs' sessions (the viewer is stopping)."""
+        if self.gateway is not None:
+            self.gateway.close()
         with self._lock:
             connections = list(self._connections)
         for connection in connections:

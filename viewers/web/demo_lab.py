@@ -19,6 +19,7 @@ from typing import Literal
 
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
+from common.messages.audit import AuditEntry, AuditQuery
 from common.recording import RecordingError, read_recording, summarize
 from viewers.web import demo_world
 from viewers.web.adapters import (
@@ -44,7 +45,7 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
-from viewers.web.real_agents import check_upload
+from viewers.web.live_agents import check_upload
 
 STUDENT = frozenset({"join", "chat", "control", "deploy"})
 INSTRUCTOR = STUDENT | {"edit_map", "kick", "host"}
@@ -161,7 +162,9 @@ class DemoConnector:
     def __init__(self, *labs: tuple[str, DemoLab]) -> None:
         self.labs = dict(labs)
 
-    def login(self, address: LabAddress, user: str, password: str, via: str = "") -> DemoConnection:
+    def login(
+        self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
+    ) -> DemoConnection:
         lab = self.labs.get(address.realm)
         if lab is None:
             raise LoginError(f"no lab answers at {address.label}: check the address")
@@ -539,6 +542,16 @@ class DemoConnection:
     def unlock_logins(self, user: str) -> str:
         self._need("admin", "unlock logins")
         return f"failed logins of {user} forgotten: they may log in now"
+
+    def ban(self, user: str, reason: str, until: float | None) -> str:
+        raise LabError("the demo lab has no bans: a real lab's registry keeps them")
+
+    def lift_ban(self, user: str) -> str:
+        raise LabError("the demo lab has no bans")
+
+    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]:
+        self._need("admin", "read the audit trail")
+        return []  # the demo lab keeps no audit trail
 
     def rename_server(self, name: str) -> str:
         self._need("admin", "rename the server")

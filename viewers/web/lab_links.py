@@ -20,9 +20,9 @@ from viewers.web.adapters import (
     LabError,
 )
 from viewers.web.address import AddressError, LabAddress, parse_address
-from viewers.web.real_world import WorldWatch
+from viewers.web.live_world import WorldWatch
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def load_labs(path: Path | None, default_realm: str) -> dict[tuple[str, int, str
 # --- one router's session, shared by everyone logged in through it -----------------------
 
 
-class LabLink:
+class LabRouterLink:
     """A Zenoh session to one lab's router, its pinned registry key, and its world watches."""
 
     def __init__(

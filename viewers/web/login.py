@@ -23,6 +23,7 @@ from viewers.web.adapters import LabConnection, LabConnector, LabError
 from viewers.web.address import LabAddress
 from viewers.web.inputs import on_click, set_value
 from viewers.web.masked import add_masked_text
+from viewers.web.viser_fast import browser_address
 
 log = logging.getLogger("wart.viewer.login")
 
@@ -231,7 +232,11 @@ class LoginForm:
         """On a login thread: ask the lab, then show the answer (or the lab's tab)."""
         try:
             connection = self.connector.login(
-                self.address.with_user(user), user, password, via=f"browser-{self.client.client_id}"
+                self.address.with_user(user),
+                user,
+                password,
+                via=f"browser-{self.client.client_id}",
+                seen_from=browser_address(self.client),
             )
         except LabError as exc:
             self._answered(f"Could not log in: {exc}", clicked)

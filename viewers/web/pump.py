@@ -88,7 +88,7 @@ class FramePump:
             if feed is None:
                 continue
             try:
-                # Per-user feeds over one shared world (viewers/web/real.py) say so with
+                # Per-user feeds over one shared world (viewers/web/live.py) say so with
                 # ``source``: its frame is converted once for all of them.
                 key = id(getattr(feed, "source", feed))
                 if key not in prepared:

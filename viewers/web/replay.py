@@ -30,8 +30,8 @@ from common.recording.reader import Recording
 from common.recording.replay import SPEEDS, Player, Timeline
 from viewers.web.adapters import LabError, MapEdit, RobotReadings, SceneFrame, SceneLayout
 from viewers.web.inputs import set_value
+from viewers.web.live_world import convert_snapshot
 from viewers.web.pump import FramePump
-from viewers.web.real_world import convert_snapshot
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
 

@@ -35,7 +35,7 @@ from viewers.web.adapters import (
     WorldFeed,
 )
 from viewers.web.inputs import set_value
-from viewers.web.real_agents import check_upload
+from viewers.web.live_agents import check_upload
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
 

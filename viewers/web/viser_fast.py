@@ -182,3 +182,20 @@ def set_shared_arrays(handle: Any, arrays: dict[str, npt.NDArray[Any]]) -> None:
     for prop, array in arrays.items():
         setattr(props, prop, array)
     queue(SceneNodeUpdateMessage(impl.name, dict(arrays)))
+
+
+def browser_address(client: viser.ClientHandle) -> str:
+    """The browser's network address as this viewer's socket sees it ("" if unknown).
+
+    Read from viser's websocket server (``_viser_server._websock_server._live_connections``,
+    websockets' ``remote_address``): viser 1.1.1 has no public way. It is what the
+    viewer vouches for at login (the registry throttles each address apart); a
+    header the browser writes (X-Forwarded-For) is never read.
+    """
+    server = getattr(getattr(client, "_viser_server", None), "_websock_server", None)
+    connections = getattr(server, "_live_connections", None)
+    connection = connections.get(client.client_id) if isinstance(connections, dict) else None
+    remote = getattr(connection, "remote_address", None)
+    if isinstance(remote, tuple) and remote and isinstance(remote[0], str):
+        return remote[0][:128]
+    return ""

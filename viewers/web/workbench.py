@@ -4,7 +4,7 @@ A student starts from an example (examples/*.py) or one of their own files,
 which the agent context keeps per user (:meth:`LabConnection.save_file`; the
 page keeps nothing of its own), edits it in a multiline text input, and:
 
-- **Check**: :func:`common.controller.static_check.check_source` (the pre-run check plus
+- **Check**: :func:`common.controller.advice.check_source` (the pre-run check plus
   syntax, a Controller with do_work, calls Khepera does not have, imports the
   sandbox refuses), each problem as ``line N: what is wrong``;
 - **Run in simulation**: saves the file, then queues it on the robot chosen in
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import viser
 
-from common.controller.static_check import Problem, check_source
+from common.controller.advice import Problem, check_source
 from common.messages.agent import FILE_NAME_PATTERN
 from viewers.web.adapters import (
     DryRunResult,
@@ -45,7 +45,7 @@ from viewers.web.adapters import (
     RequestEvent,
 )
 from viewers.web.inputs import on_click, set_value
-from viewers.web.real_agents import check_upload
+from viewers.web.live_agents import check_upload
 from viewers.web.robot_panel import NONE, RobotPanel
 from viewers.web.text import escape_md
 

@@ -14,7 +14,7 @@ from common.recording import schema as s
 from common.recording.store import RecordingStore
 from common.recording.writer import frame_record, pose_record, sample_record
 from common.sim2d import maps
-from services.engine import wire
+from services.engine import packing
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -38,7 +38,7 @@ def _record(
     path: Path, *, seconds: float = 2.0, finish: bool = True, user: str = "alice"
 ) -> RecordingWriter:
     world = maps.load_map(REPO / "maps" / "empty.json", name="w1", seed=1)
-    snap = wire.snapshot(world)
+    snap = packing.snapshot(world)
     agent = snap.agents[0].id
     writer = RecordingWriter(path, _info(agent, user=user))
     writer.write(s.SNAPSHOT, snap)
@@ -48,11 +48,11 @@ def _record(
         world.set_speeds(slot, 10, 10)  # straight ahead, ~80 mm/s
         world.step()
         t = t0 + i * world.tick_s
-        rec = frame_record(wire.frame(world), snap.rows, len(snap.agents))
+        rec = frame_record(packing.frame(world), snap.rows, len(snap.agents))
         writer.write(s.FRAME, rec, t)
         j = rec.rows.index(agent)
         writer.write(s.pose_topic(agent), pose_record(rec.x[j], rec.y[j], rec.heading[j], t), t)
-        writer.write(s.sensors_topic(agent), sample_record(wire.sample(world, slot)), t)
+        writer.write(s.sensors_topic(agent), sample_record(packing.sample(world, slot)), t)
         writer.write(
             s.commands_topic(agent),
             s.CommandRecord(agent=agent, sender="runner-svc", auth="signed", speeds=(10, 10)),

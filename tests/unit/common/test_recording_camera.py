@@ -17,7 +17,7 @@ from common.recording.compare import compare
 from common.recording.reader import read_recording
 from common.recording.writer import RecordingWriter, pose_record
 from common.sim2d import maps
-from services.engine import wire
+from services.engine import packing
 
 AGENT = "k1"  # maps/empty.json's Khepera
 REPO = Path(__file__).resolve().parents[3]
@@ -41,7 +41,7 @@ def write_run(path: Path, world: str, *, camera: bool, drift: float = 0.0) -> No
     start = 1000.0
     writer = RecordingWriter(path, info(start, world))
     writer.write(
-        s.SNAPSHOT, wire.snapshot(maps.load_map(REPO / "maps" / "empty.json", name=world)), start
+        s.SNAPSHOT, packing.snapshot(maps.load_map(REPO / "maps" / "empty.json", name=world)), start
     )
     jpeg = cv2.imencode(".jpg", np.full((48, 64, 3), 128, np.uint8))[1].tobytes()
     for i in range(20):

@@ -13,7 +13,7 @@ from common.recording import schema as s
 from common.recording.compare import CompareError, compare
 from common.sim2d import maps
 from services.commands import report
-from services.engine import wire
+from services.engine import packing
 
 REPO = Path(__file__).resolve().parents[3]
 SECONDS = 2.0
@@ -34,7 +34,7 @@ def _write(
     frames: bool = True,
 ) -> Path:
     """A straight run at 80 mm/s from (300, 500), drifting linearly to ``offset`` at the end."""
-    snap = wire.snapshot(maps.load_map(REPO / "maps" / "empty.json", name="w1", seed=1))
+    snap = packing.snapshot(maps.load_map(REPO / "maps" / "empty.json", name="w1", seed=1))
     agent = snap.agents[0].id
     if robot_type != "khepera":
         snap = msgspec.structs.replace(

@@ -24,9 +24,9 @@ def test_every_field_round_trips_through_the_pipe_form(command: RobotCommand) ->
 def test_the_agent_command_carries_every_field() -> None:
     assert agent_command("k0", EVERY_FIELD[0]).speeds == (10, -127)
     assert agent_command("k0", EVERY_FIELD[1]).counters == (0, 2**31 - 1)
-    assert agent_command("k0", EVERY_FIELD[2]).leds == [1, 0]
+    assert agent_command("k0", EVERY_FIELD[2]).leds == [True, False]
     assert agent_command("k0", EVERY_FIELD[3]).arm == 165
-    assert agent_command("k0", EVERY_FIELD[4]).fingers == "closed"
+    assert agent_command("k0", EVERY_FIELD[4]).grip is True
 
 
 @pytest.mark.parametrize(

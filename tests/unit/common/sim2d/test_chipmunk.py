@@ -159,7 +159,7 @@ def _edited_trajectory(seed: int, ticks: int, drive: str = "joints") -> list[np.
                 world.move(world.objects[int(rng.integers(len(world.objects)))].id, x, y)
             elif op == 6 and world.agents:
                 slot = int(rng.integers(len(world.agents)))
-                world.set_fingers(slot, bool(rng.integers(2)))
+                world.set_grip(slot, bool(rng.integers(2)))
         except ValueError:
             pass  # an edit the world refused (overlap, outside): the world is unchanged
         world.step()

@@ -164,7 +164,7 @@ def test_velocity_drive_tongs_are_in_the_space_only_while_there_are_objects() ->
         if world.presence[1]:
             break
     world.set_speeds(1, 0, 0)
-    world.set_fingers(1, closed=True)
+    world.set_grip(1, closed=True)
     assert world.gripper_state(1) == 2, "gripped"
     world.remove("ball")
     assert len(world.space.shapes) == walls + 3

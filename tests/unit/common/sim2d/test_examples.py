@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from common.controller import Controller, load_controller
-from common.controller.precheck import precheck
+from common.controller.upload_gate import precheck
 from common.sim2d.maps import load_map
 from common.sim2d.world import DRIVES, World
 from tests.conftest import REPO

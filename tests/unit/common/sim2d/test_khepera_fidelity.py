@@ -124,7 +124,7 @@ def test_robot_grips_a_ball_and_carries_it(drive: str) -> None:
             break
     assert world.presence[0] == 255, "the ball never got between the fingers"
     world.set_speeds(0, 0, 0)
-    world.set_fingers(0, closed=True)
+    world.set_grip(0, closed=True)
     assert world.gripper_state(0) == 2
     assert world.resistivity(0) == world.objects[0].resistivity
     world.set_arm(0, 165)  # lift
@@ -137,7 +137,7 @@ def test_robot_grips_a_ball_and_carries_it(drive: str) -> None:
     world.set_speeds(0, 0, 0)
     world.set_arm(0, 255)
     world.run(0.5)
-    world.set_fingers(0, closed=False)
+    world.set_grip(0, closed=False)
     assert world.gripper_state(0) == 0 and world.objects[0].held_by is None
     where = world.object_pose[0, :2].copy()
     world.set_speeds(0, -10, -10)

@@ -57,7 +57,7 @@ def _run(world: World, ticks: int) -> np.ndarray:
         world.set_speeds_all(braitenberg(world.proximity))
         if t == 30:  # some grippers close: presence, held objects, owners in the kernel
             for slot in range(0, 40, 3):
-                world.set_fingers(slot, closed=True)
+                world.set_grip(slot, closed=True)
         world.step()
         rows.append(
             np.concatenate(

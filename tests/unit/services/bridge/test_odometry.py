@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from services.bridge.robot import Odometry
+from services.bridge.odometry import Odometry
 
 MM_PER_PULSE, WHEEL_BASE = 0.08, 53.0
 

@@ -3,7 +3,7 @@
 A scripted robot (the real protocol's requests and reply decoders, no port)
 drives straight, 10 pulses per wheel per round. At one chosen request of one
 round it reboots: its counters restart at zero and the link reports the reset
-banner before answering, as KheperaLink does. Whatever the position, the pose
+banner before answering, as SerialKheperaLink does. Whatever the position, the pose
 must equal the travel that the counter reads showed, and never go backwards.
 """
 

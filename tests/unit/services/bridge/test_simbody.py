@@ -10,7 +10,7 @@ import pytest
 
 from common.sim2d.maps import MapError
 from services.bridge.body import RobotBody
-from services.bridge.emulator import Firmware
+from services.bridge.firmware import Firmware
 from services.bridge.main import parse_port
 from services.bridge.service import agent_id_for
 from services.bridge.simbody import SimBody
@@ -40,12 +40,12 @@ def test_ir_rises_near_a_wall_and_stays_low_in_the_open(sim: SimBody) -> None:
 
 
 def test_speed_moves_the_body_and_counts_pulses(sim: SimBody) -> None:
-    sim.set_speed(20, 20)  # 160 mm/s
+    sim.set_speeds(20, 20)  # 160 mm/s
     wait_for(lambda: sim.pose()[0] > 530, 10, "the body to drive forward")
     assert sim.speed() == (20, 20)
     left, right = sim.counters()
     assert left > 300 and abs(left - right) <= 1
-    sim.set_speed(-10, 10)  # spin on the spot
+    sim.set_speeds(-10, 10)  # spin on the spot
     wait_for(lambda: abs(sim.pose()[2]) > 0.5, 10, "the body to turn")
     sim.reset()
     assert sim.speed() == (0, 0) and sim.counters() == (0, 0)
@@ -61,7 +61,7 @@ def test_position_control_stops_on_the_target(sim: SimBody) -> None:
 def test_gripper_arm_and_fingers(sim: SimBody) -> None:
     sim.set_arm(255)
     wait_for(lambda: sim.arm_position() == 255, 10, "the arm down")
-    sim.set_fingers(True)
+    sim.set_grip(True)
     assert sim.finger_position() > 100 and sim.resistivity() == 255  # closed on nothing
 
 
@@ -78,7 +78,7 @@ def test_calls_from_another_thread_while_it_steps(sim: SimBody) -> None:
     def hammer() -> None:
         try:
             for i in range(300):
-                sim.set_speed(i % 30, -(i % 30))
+                sim.set_speeds(i % 30, -(i % 30))
                 sim.proximity()
                 sim.counters()
         except BaseException as exc:

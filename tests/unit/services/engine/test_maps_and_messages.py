@@ -25,7 +25,7 @@ from common.sim2d import kernels, maps
 from common.sim2d.agents import agent_type
 from common.sim2d.maps import MapError
 from common.sim2d.world import World
-from services.engine import wire
+from services.engine import packing
 from services.engine.main import main
 from tests.conftest import REPO
 
@@ -71,7 +71,7 @@ def test_save_and_reload_round_trip(tmp_path: Path) -> None:
     world.run(0.2)
     path = maps.save_map(world, tmp_path, "copy")
     again = maps.load_map(path, name="w")
-    assert wire.rows(again) == wire.rows(world)
+    assert packing.rows(again) == packing.rows(world)
     assert np.allclose(again.agent_pose, world.agent_pose, atol=0.01)
     with pytest.raises(MapError):
         maps.map_path(tmp_path, "../escape")
@@ -81,21 +81,21 @@ def test_wire_messages_round_trip() -> None:
     world = maps.load_map(MAPS / "foraging.json", name="w")
     world.run(0.1)
     for message in (
-        wire.frame(world),
-        wire.sample(world, 0),
-        wire.snapshot(world),
-        wire.batch(world),
+        packing.frame(world),
+        packing.sample(world, 0),
+        packing.snapshot(world),
+        packing.batch(world),
     ):
         assert decode(encode(message), type(message)) == message
-    frame = wire.frame(world)
+    frame = packing.frame(world)
     assert isinstance(frame, WorldFrame)
-    assert frame.poses.to_numpy().shape == (len(wire.rows(world)), 3)
-    snap = wire.snapshot(world)
-    assert isinstance(snap, WorldSnapshot) and snap.rows == wire.rows(world)
-    sample = wire.sample(world, 0)
+    assert frame.poses.to_numpy().shape == (len(packing.rows(world)), 3)
+    snap = packing.snapshot(world)
+    assert isinstance(snap, WorldSnapshot) and snap.rows == packing.rows(world)
+    sample = packing.sample(world, 0)
     assert isinstance(sample, SensorSample) and sample.gripper is not None
     for message in (
-        AgentCommand(agent="k0", speeds=(10, -10), leds=[1, 2], arm=200, fingers="closed"),
+        AgentCommand(agent="k0", speeds=(10, -10), leds=[True, False], arm=200, grip=True),
         Lease(
             lease_id="L1",
             world="w",
@@ -119,10 +119,10 @@ def test_samples_report_each_agents_own_readings() -> None:
     world.add_agent("e", agent_type("epuck"), 700.0, 700.0)
     world.add_agent("k2", agent_type("khepera"), 300.0, 700.0, gripper=False)
     world.set_speeds(0, 5, -3)
-    world.set_led(0, 1, True)
+    world.set_leds(0, [False, True])
     world.set_arm(0, 200)
     world.run(0.5)
-    samples = wire.samples(world, [2, 0, 1])
+    samples = packing.samples(world, [2, 0, 1])
     assert [s.agent for s in samples] == ["k2", "k", "e"]
     k2, k, e = samples
     assert k.speeds == (5, -3) and k.leds[1] == 1 and k.gripper is not None
@@ -133,7 +133,7 @@ def test_samples_report_each_agents_own_readings() -> None:
     epuck = agent_type("epuck")
     assert len(e.proximity) == len(epuck.proximity.poses)
     assert len(e.ambient) == len(epuck.ambient.poses)
-    assert wire.samples(world, []) == []
+    assert packing.samples(world, []) == []
 
 
 def test_a_map_loads_with_the_thread_counts_asked_for() -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from services.lab.labfile import LabFileError, fill, load, parse
+from services.lab.labfile import LabFileError, load, parse
 from tests.conftest import REPO
 
 EXAMPLE = REPO / "deploy" / "lab.example.toml"
@@ -61,7 +61,9 @@ def edited(change) -> dict:
             "hosts[1].services[0].seed: -1 is out of range",
         ),
         (lambda d: d["hosts"][0]["services"].pop(0), "exactly one host runs the registry"),
-        (lambda d: d["arena"].update(engine=["engine", "{nope}"]), "arena.engine[1]"),
+        (lambda d: d["arena"].update(engine=["engine"]), "arena.engine: command templates"),
+        (lambda d: d["arena"].update(agent="yes"), "arena.agent: expected true or false"),
+        (lambda d: d["arena"].update(slot_seconds=0), "arena.slot_seconds: 0 is out of range"),
         (lambda d: d.update(hosts=[]), "no [[hosts]]"),
     ],
 )
@@ -86,10 +88,3 @@ def test_unreadable_and_malformed_files(tmp_path: Path) -> None:
     bad.write_text("realm = \n")
     with pytest.raises(LabFileError, match="not valid TOML"):
         load(bad)
-
-
-def test_templates_are_filled_one_argument_each() -> None:
-    argv = fill(["engine", "--world", "{world}", "--map", "{map}"], {"world": "w 1", "map": "m"})
-    assert argv == ["engine", "--world", "w 1", "--map", "m"]
-    with pytest.raises(LabFileError, match="placeholder with no value"):
-        fill(["{world}"], {})

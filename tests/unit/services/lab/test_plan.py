@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from services.commands.certs import host_roles, issue_lab, service_accounts
 from services.lab.labfile import LabFileError, load, parse
+from services.lab.pki import host_roles, issue_lab, service_accounts
 from services.lab.plan import HostContext, host_plan, read_registry_key, write_configs
 from services.lab.zsecurity import ROLE_GRANTS
 from tests.conftest import REPO
@@ -36,10 +36,12 @@ def test_each_host_runs_its_services_and_arenas_with_their_contexts(lab_dir: Pat
     a, b, c = (plan(lab_dir, h) for h in "ABC")
     assert list(a) == ["registry", "chat lobby", "viewer"]
     assert a["viewer"][:7] == ["viewer", "--id", "A", "--http-port", "8080", "--host", "10.0.0.1"]
-    # B's engine is an arena: its agent context (from the [arena] template) comes
+    # The viewer's gateway account: it vouches for browsers' addresses at login.
+    assert a["viewer"][a["viewer"].index("--user") + 1] == "viewer-viewer"
+    # B's engine is an arena: its agent context ([arena].agent) comes
     # with it and names B's runner, started after it (a job only asks it later).
-    assert list(b) == ["engine arena1", "agent arena1", "runner runner"]
-    agent = b["agent arena1"]
+    assert list(b) == ["engine arena1", "agent context arena1", "runner runner"]
+    agent = b["agent context arena1"]
     assert agent[agent.index("--runner") + 1] == "runner"
     assert agent[agent.index("--user") + 1] == "agent-B"
     # C's bridge on real hardware, and the agent context for it (B's runner).
@@ -117,3 +119,37 @@ def test_a_swarm_arena_runs_its_engine_on_the_drive_the_lab_file_names(lab_dir: 
     (lab_dir / "typo.toml").write_text(text.replace('drive = "discs"', 'drive = "disks"'))
     with pytest.raises(LabFileError, match=r"services\[0\]\.drive: 'disks' is not a drive"):
         load(lab_dir / "typo.toml")
+
+
+def test_arenas_are_data_their_processes_built_like_any_other(lab_dir: Path) -> None:
+    """[arena] says what an arena is; the command lines are wiring's, as for every process."""
+    text = (lab_dir / "lab.toml").read_text()
+    (lab_dir / "slots.toml").write_text(text.replace("# slot_seconds = 60", "slot_seconds = 3"))
+    lab = load(lab_dir / "slots.toml")
+    ctx = HostContext(lab, lab.host("B"), lab_dir / "state-slots", read_registry_key(lab))
+    agent = next(s.argv for s in host_plan(ctx) if s.name == "agent context arena1")
+    assert agent[agent.index("--slot-seconds") + 1] == "3"
+    assert agent[:2] == ["context", "agent"] and "--title" in agent
+    (lab_dir / "bare.toml").write_text(text.replace("agent = true", "agent = false"))
+    lab = load(lab_dir / "bare.toml")
+    ctx = HostContext(lab, lab.host("B"), lab_dir / "state-bare", read_registry_key(lab))
+    assert [s.name for s in host_plan(ctx)] == ["engine arena1", "runner runner"]
+
+
+def test_planning_writes_nothing_a_generated_map_is_written_at_start(lab_dir: Path) -> None:
+    """The doctor plans hosts it does not run on: a plan is data until the supervisor spawns."""
+    text = (lab_dir / "lab.toml").read_text().replace("seed = 1", "seed = 1\nrobots = 5")
+    text = text.replace('# emulate = "empty"', 'emulate = "empty"')
+    (lab_dir / "robots.toml").write_text(text)
+    lab = load(lab_dir / "robots.toml")
+    state = lab_dir / "state-robots"
+    specs = []
+    for host in ("B", "C"):
+        ctx = HostContext(lab, lab.host(host), state / host, read_registry_key(lab))
+        specs += host_plan(ctx)
+    assert not state.exists()
+    engine = next(s for s in specs if s.name == "engine arena1")
+    map_path = Path(engine.argv[engine.argv.index("--map") + 1])
+    assert engine.prepare is not None
+    engine.prepare()
+    assert map_path.is_file() and "agent_groups" in map_path.read_text()

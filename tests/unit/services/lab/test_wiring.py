@@ -27,7 +27,7 @@ def test_wart_up_runs_the_one_host_lab_in_dependency_order(tmp_path: Path) -> No
         "registry",
         "chat lobby",
         "engine arena1",
-        "agent arena",
+        "agent context arena",
         "khepera emulator real1",
         "bridge real1",
         "runner runner",
@@ -36,7 +36,7 @@ def test_wart_up_runs_the_one_host_lab_in_dependency_order(tmp_path: Path) -> No
     ]
     by_name = {s.name: list(s.argv) for s in plan}
     # The simulated arena's context keeps its name, its owner and its runner.
-    arena = by_name["agent arena"]
+    arena = by_name["agent context arena"]
     assert (flag(arena, "--world"), flag(arena, "--owner"), flag(arena, "--runner")) == (
         "arena1",
         "admin",

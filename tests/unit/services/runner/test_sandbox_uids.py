@@ -5,12 +5,12 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from services.runner.sandbox import _give_uid, _take_uid
+from services.runner.sandbox_host import _give_uid, _take_uid
 from tests.conftest import REPO
 
 HOLDER = """
 import sys
-from services.runner.sandbox import _take_uid
+from services.runner.sandbox_host import _take_uid
 print(_take_uid(), flush=True)
 sys.stdin.read()
 """

@@ -13,8 +13,8 @@ from viewers.web import geometry as geo
 from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError, MapEdit
 from viewers.web.address import LabAddress
 from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
+from viewers.web.live_agents import check_upload
 from viewers.web.login import check_login_input
-from viewers.web.real_agents import check_upload
 from viewers.web.robot_panel import check_controller, format_agents
 from viewers.web.text import check_line, escape_md
 from viewers.web.world_view import PreparedFrame

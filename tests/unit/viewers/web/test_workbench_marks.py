@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from common.controller.static_check import Problem
+from common.controller.advice import Problem
 from viewers.web.adapters import DryRunResult
 from viewers.web.workbench import TracebackReader, excerpt, format_dry_run
 

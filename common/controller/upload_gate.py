@@ -1,4 +1,6 @@
-"""The pre-run check of a controller file, shared by the CLI tools, the context and the runner.
+"""The upload gate: the pre-run check every service runs on a controller file before it queues.
+
+Shared by the CLI tools, the agent context and the runner (and the page, first).
 
 A file that cannot run (too big, not UTF-8, a syntax error, no Controller
 subclass) is refused with a message for the student before it queues; the

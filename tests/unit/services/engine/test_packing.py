@@ -1,4 +1,4 @@
-"""The world frame a viewer draws (services/engine/wire.py): each robot's LEDs, arm, grip.
+"""The world frame a viewer draws (services/engine/packing.py): each robot's LEDs, arm, grip.
 
 What a user relies on: the frame's agent_state row of a robot says which of
 its LEDs are lit (bit i for LED i), where its arm is, whether its fingers are
@@ -11,20 +11,19 @@ import numpy as np
 
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
-from services.engine import wire
+from services.engine import packing
 
 
 def test_a_frame_carries_each_robots_leds_arm_and_grip() -> None:
     world = World(600.0, 600.0, seed=1)
     for i in range(3):
         world.add_agent(f"k{i}", agent_type("khepera"), 100.0 + 150 * i, 300.0, 0.0, gripper=True)
-    world.set_led(0, 0, True)  # a Khepera has two LEDs
-    world.set_led(0, 1, True)
-    world.set_led(2, 1, True)
-    world.set_fingers(1, True)
+    world.set_leds(0, [True, True])  # a Khepera has two LEDs
+    world.set_leds(2, [False, True])
+    world.set_grip(1, True)
     world.step()
     world.holding = lambda: np.array([False, False, True])  # type: ignore[method-assign]
-    frame = wire.frame(world)
+    frame = packing.frame(world)
     state = frame.agent_state.to_numpy()
     assert state.shape == (3, 4) and state.dtype == np.uint8
     assert state[:, 0].tolist() == [0b11, 0, 0b10]

@@ -50,9 +50,9 @@ from viewers.web.adapters import (
 from viewers.web.world_view import OFFLINE
 
 if TYPE_CHECKING:  # the connection makes a UserWorld; only its type is needed here
-    from viewers.web.real import RealConnection
+    from viewers.web.live import LiveConnection
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 QUERY_TIMEOUT = 5.0
 SENSOR_IDLE_S = 5.0  # a robot's sensor subscription ends when nobody asked for it this long
@@ -297,7 +297,7 @@ NEW_ITEM_PREFIX = {"obstacle": "box", "ball": "ball", "light": "light", "agent":
 class UserWorld:
     """A world as one user sees it: the shared watch, plus edits sealed with their session."""
 
-    def __init__(self, source: WorldWatch, connection: RealConnection) -> None:
+    def __init__(self, source: WorldWatch, connection: LiveConnection) -> None:
         self.source = source  # the pump converts each shared frame once (see FramePump.tick)
         self._connection = connection
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from common.controller.static_check import check_source
+from common.controller.advice import check_source
 
 EXAMPLES = sorted((Path(__file__).parents[4] / "examples").glob("*.py"))
 assert EXAMPLES, "the examples folder was not found"

@@ -1,4 +1,7 @@
-"""Conversions between the world and its wire types (frames, samples, snapshots)."""
+"""Packing the world into its wire types: frames, sensor samples and batches, snapshots.
+
+(Named for what it does beside services/lab/wiring.py, which wires a lab's processes.)
+"""
 
 from __future__ import annotations
 

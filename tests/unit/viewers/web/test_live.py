@@ -25,8 +25,8 @@ from common.messages import (
 )
 from viewers.web.adapters import AgentStatus, ArenaSettings, LabError, MapEdit
 from viewers.web.lab_links import load_labs
-from viewers.web.real_agents import agent_rows
-from viewers.web.real_world import convert_snapshot, to_wire_edit
+from viewers.web.live_agents import agent_rows
+from viewers.web.live_world import convert_snapshot, to_wire_edit
 from viewers.web.robot_panel import format_agents
 
 KEY = "11" * 32

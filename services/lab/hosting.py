@@ -20,6 +20,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import msgspec
 import psutil
 import zenoh
 
@@ -30,6 +31,7 @@ from common.messages import ErrorReply, MessageError, OkReply, decode, encode
 from common.messages.host import (
     ArenaInfo,
     ArenaReply,
+    HostedState,
     HostLoad,
     LoadRequest,
     RoomInfo,
@@ -54,7 +56,7 @@ from services.lab.wiring import (
 
 @dataclass(frozen=True)
 class HostingPlan:
-    """Where a host's contexts come from: its wiring (maps, accounts, templates) and limits."""
+    """Where a host's contexts come from: its wiring (maps, accounts, arenas) and limits."""
 
     wiring: Wiring
     registry_key: str  # hex, pinned by the Verifier of spawn requests
@@ -82,11 +84,9 @@ class HostingPlan:
         """A map by plain name; FileNotFoundError or ValueError when there is none."""
         return self.wiring.resolve_map(name)
 
-    def arena_specs(
-        self, world: str, map_path: Path, *, seed: int, robots: int, owner: str
-    ) -> list[ChildSpec]:
+    def arena_specs(self, world: str, map_path: Path, *, seed: int, owner: str) -> list[ChildSpec]:
         """The engine, then its agent context (named after the world, owned by ``owner``)."""
-        return arena_specs(self.wiring, world, map_path, seed=seed, robots=robots, owner=owner)
+        return arena_specs(self.wiring, world, map_path, seed=seed, owner=owner)
 
     def room_specs(self, name: str, title: str, owner: str) -> list[ChildSpec]:
         """The chat room's process, owned by ``owner`` (only when ``max_rooms`` > 0)."""
@@ -173,11 +173,11 @@ class HostingService(Service):
 
     # -- load
 
-    def _measure(self, hosted: Hosted) -> tuple[str, list[int], float, float]:
+    def _measure(self, hosted: Hosted) -> tuple[HostedState, list[int], float, float]:
         """State, pids, resident MB and CPU % of one hosted context's processes."""
         rss = cpu = 0.0
-        pids = []
-        state = hosted.info.state
+        pids: list[int] = []
+        state: HostedState = hosted.info.state
         for child in hosted.children:
             proc = child.process
             if proc is None:
@@ -212,7 +212,7 @@ class HostingService(Service):
         for hosted in rooms_now:
             state = self._measure(hosted)[0]
             assert isinstance(hosted.info, RoomInfo)
-            rooms.append(RoomInfo(**{**_fields(hosted.info), "state": state}))
+            rooms.append(msgspec.structs.replace(hosted.info, state=state))
         reason = self._refusal(len(arenas), cpu, mem.available / 2**20)
         mine = {id(c) for hosted in [*arenas_now, *rooms_now] for c in hosted.children}
         services = [
@@ -357,11 +357,9 @@ class HostingService(Service):
             )
             hosted = Hosted(info)
             self.log.info("starting arena %s (%s) for %s", request.world, request.map, owner)
-            specs = self.plan.arena_specs(
-                request.world, map_path, seed=request.seed, robots=robots, owner=owner
-            )
+            specs = self.plan.arena_specs(request.world, map_path, seed=request.seed, owner=owner)
             self._start(self.arenas, request.world, hosted, specs)
-            hosted.info = ArenaInfo(**{**_fields(info), "state": "running"})
+            hosted.info = msgspec.structs.replace(info, state="running")
             return hosted.info
 
     def start_room(self, request: SpawnRoom, owner: str) -> RoomInfo:
@@ -396,7 +394,7 @@ class HostingService(Service):
             self.log.info("starting chat room %s for %s", request.name, owner)
             specs = self.plan.room_specs(request.name, info.title, owner)
             self._start(self.rooms, request.name, hosted, specs)
-            hosted.info = RoomInfo(**{**_fields(info), "state": "running"})
+            hosted.info = msgspec.structs.replace(info, state="running")
             return hosted.info
 
     def stop_arena(self, world: str, by: str) -> OkReply:
@@ -429,17 +427,9 @@ class HostingService(Service):
                 self.supervisor.stop_child(child)
 
 
-def _fields(info: ArenaInfo | RoomInfo) -> dict[str, object]:
-    return {name: getattr(info, name) for name in info.__struct_fields__}
-
-
-def _with(info: ArenaInfo, *, state: str, pids: list[int], rss_mb: float, cpu: float) -> ArenaInfo:
-    return ArenaInfo(
-        **{
-            **_fields(info),
-            "state": state,
-            "pids": pids,
-            "rss_mb": rss_mb,
-            "cpu_percent": round(cpu, 1),
-        }
+def _with(
+    info: ArenaInfo, *, state: HostedState, pids: list[int], rss_mb: float, cpu: float
+) -> ArenaInfo:
+    return msgspec.structs.replace(
+        info, state=state, pids=pids, rss_mb=rss_mb, cpu_percent=round(cpu, 1)
     )

@@ -1,4 +1,4 @@
-"""The viewer's Protocols over the real lab: the registry client and the engine's world keys.
+"""The viewer over the live lab (not the demo): the registry client and the world keys.
 
 The viewer is a gateway. It holds one Zenoh session per lab router (its own
 lab's, opened by ``wart viewer``, plus one per other lab a browser connects
@@ -7,7 +7,7 @@ that session: every query, chat line, edit and admin request is sealed with
 that person's session, so the services' ACL checks apply to the person.
 
 The labs it knows and their router sessions are in lab_links.py, the worlds
-it shows in real_world.py.
+it shows in live_world.py.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,9 @@ from common.client.survey import Survey, survey
 from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
+    AuditEntry,
+    AuditQuery,
+    BanInfo,
     QueueStateRequest,
     RoomEvent,
 )
@@ -53,14 +57,14 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
-from viewers.web.lab_links import LabLink
-from viewers.web.real_agents import ArenaLink
-from viewers.web.real_world import UserWorld
+from viewers.web.lab_links import LabRouterLink
+from viewers.web.live_agents import AgentContextLink
+from viewers.web.live_world import UserWorld
 
 if TYPE_CHECKING:  # the connector makes connections; only its type is needed here
-    from viewers.web.connector import RealConnector
+    from viewers.web.connector import LiveConnector
 
-log = logging.getLogger("wart.viewer.real")
+log = logging.getLogger("wart.viewer.live")
 
 DIRECTORY_POLL_S = 3.0  # the registry has no directory events: poll, emit on change
 HISTORY = 50  # chat lines a join asks for
@@ -99,11 +103,15 @@ class _Events:
     next_id: int = 1
 
 
-class RealConnection:
+class LiveConnection:
     """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
-        self, connector: RealConnector, link: LabLink, client: lab.LabClient, address: LabAddress
+        self,
+        connector: LiveConnector,
+        link: LabRouterLink,
+        client: lab.LabClient,
+        address: LabAddress,
     ) -> None:
         self.connector = connector
         self.link = link
@@ -121,7 +129,7 @@ class RealConnection:
         self._kinds: dict[str, ContextSummary] = {}
         self._worlds: dict[str, UserWorld] = {}
         self._world_only: set[str] = set()
-        self._arenas: dict[str, ArenaLink] = {}  # joined agent contexts
+        self._arenas: dict[str, AgentContextLink] = {}  # joined agent contexts
         self._real_worlds: dict[str, bool] = {}  # world -> a Khepera bridge (asked once)
         self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
@@ -301,7 +309,7 @@ class RealConnection:
             def on_room(event: RoomEvent) -> None:
                 self._room_event(ctx, event)
 
-            arena = self._call(lambda: ArenaLink(self.client, ctx, self._queue.put, on_room))
+            arena = self._call(lambda: AgentContextLink(self.client, ctx, self._queue.put, on_room))
             room = arena.join(HISTORY)
             world = arena.world or world
             if world is not None:
@@ -377,7 +385,7 @@ class RealConnection:
 
     # -- agents: the joined agent contexts' queues, uploads and settings
 
-    def _arena(self, ctx: str) -> ArenaLink:
+    def _arena(self, ctx: str) -> AgentContextLink:
         if self._closed.is_set():
             raise LabError("you are logged out of this lab")
         arena = self._arenas.get(ctx)
@@ -496,6 +504,7 @@ class RealConnection:
                 tuple(sorted((scope, tuple(g)) for scope, g in u.grants.items())),
                 u.online,
                 u.failed_logins,
+                ban_words(u.ban),
             )
             for u in users
         ]
@@ -524,6 +533,16 @@ class RealConnection:
     def unlock_logins(self, user: str) -> str:
         return str(self._call(lambda: self.client.unlock_logins(user)))
 
+    def ban(self, user: str, reason: str, until: float | None) -> str:
+        return str(self._call(lambda: self.client.ban(user, reason, until)))
+
+    def lift_ban(self, user: str) -> str:
+        return str(self._call(lambda: self.client.lift_ban(user)))
+
+    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]:
+        entries, _more = self._call(lambda: self.client.audit_trail(query))
+        return list(entries)
+
     # -- the end
 
     def logout(self) -> None:
@@ -543,3 +562,11 @@ class RealConnection:
         except Exception:
             log.exception("logging %s out of %s", self.user, self._address.label)
         self.connector._closed(self)
+
+
+def ban_words(ban: BanInfo | None) -> str:
+    """A ban in force, for the admin's account list ("" if none)."""
+    if ban is None:
+        return ""
+    end = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(ban.until)) if ban.until else "lifted"
+    return f"until {end}: {ban.reason}"

@@ -1,6 +1,6 @@
-"""The robot panel's side of a real agent context: queues, uploads, output, settings.
+"""The robot panel's side of a live agent context: queues, uploads, output, settings.
 
-One :class:`ArenaLink` per joined agent context and browser user wraps
+One :class:`AgentContextLink` per joined agent context and browser user wraps
 :class:`~common.client.agent_client.AgentClient` (the same client ``wart deploy``
 uses) on that user's :class:`~common.client.lab_client.LabClient`, so every request is
 sealed with the person's session and the context checks their rights. Its
@@ -22,7 +22,7 @@ from typing import TypeVar
 from common import lab_errors
 from common.client import lab_client as lab
 from common.client.agent_client import AgentClient
-from common.controller.precheck import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import is_ident
 from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
 from common.recording import RecordingError, read_recording
@@ -52,7 +52,7 @@ MAX_FILENAME = 128  # what the page keeps of an uploaded file's name
 def check_upload(filename: str, content: bytes) -> tuple[str, str | None]:
     """(the file's plain name, why it is refused or None); never runs the file.
 
-    The page's own checks (a .py name, not empty) then ``common.controller.precheck``, the
+    The page's own checks (a .py name, not empty) then ``common.controller.upload_gate``, the
     same check the agent context and the runner make (size, UTF-8, syntax with
     the line, a Controller subclass), so a student hears at once, in words.
     """
@@ -116,7 +116,7 @@ def _plain(exc: lab_errors.LabError) -> LabError:
     return LabError(str(exc))
 
 
-class ArenaLink:
+class AgentContextLink:
     """One user in one agent context: the AgentClient, and its events for the page."""
 
     def __init__(

@@ -1,7 +1,7 @@
-"""A controller's static check: every problem found without running it, each with its line.
+"""The page's advice on a controller: every problem found without running it, each with its line.
 
 The page's **Check** button shows these, one ``line N: what is wrong`` each,
-and marks the lines in the editor. It extends :func:`common.controller.precheck.precheck`
+and marks the lines in the editor. It extends :func:`common.controller.upload_gate.precheck`
 (size, UTF-8, syntax, a Controller subclass), which the agent context and the
 runner still run on every upload: this check is advice for the student, not a
 gate, so it may be stricter (a misspelt robot call is legal Python) without
@@ -33,7 +33,7 @@ import sys
 from dataclasses import dataclass
 
 from common.controller import Khepera
-from common.controller.precheck import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, precheck
 
 # The public names of the robot's API: what a controller may call on it.
 ROBOT_API = frozenset(name for name in dir(Khepera) if not name.startswith("_"))

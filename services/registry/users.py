@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import getpass
+import socket
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,6 +25,7 @@ from pathlib import Path
 from common import acl, cli
 from common.auth import create_identity_key, load_identity_key, parse_public_key
 from services.registry.accounts_db import DbError, RegistryDB
+from services.registry.audit_db import Action, TermStore
 
 
 def read_password(args: argparse.Namespace, prompt: str) -> str:
@@ -94,13 +96,47 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart users") -> int:
         return cli.fail(f"no registry database at {args.db}")
     db = RegistryDB(args.db)
     try:
-        return _run(args, db)
+        done = _run(args, db)
+        _audit(args, db)
+        return done
     except DbError as exc:
         return cli.fail(exc.message)
     except (ValueError, OSError) as exc:
         return cli.fail(str(exc))
     finally:
         db.close()
+
+
+# What each change is called in the registry's audit trail (as the registry names its own).
+_ACTIONS = {
+    "add": "add_user",
+    "passwd": "set_password",
+    "remove": "remove_user",
+    "grant": "grant",
+    "revoke": "ungrant",
+}
+
+
+def _audit(args: argparse.Namespace, db: RegistryDB) -> None:
+    """Changes made on the file bypass the registry: they go into its audit trail too.
+
+    The actor is ``local`` (whoever can write the database file holds every right);
+    where it came from is this machine's user and host name.
+    """
+    action = _ACTIONS.get(args.command)
+    if action is None:
+        return
+    detail = ""
+    if args.command in ("grant", "revoke"):
+        detail = f"{args.grant} {'in ' + args.scope if args.scope else 'everywhere'}"
+    elif args.command == "add":
+        detail = "roles " + ", ".join(args.role or ["student"])
+    try:
+        who = getpass.getuser()
+    except (OSError, KeyError):  # no login name in the environment nor the passwd file
+        who = "an unknown user"
+    where = f"wart users by {who} on {socket.gethostname()}"
+    TermStore(db).record(Action("local", action, args.user, "ok", detail, where, "wart-users"))
 
 
 def _run(args: argparse.Namespace, db: RegistryDB) -> int:

@@ -1,0 +1,99 @@
+"""A World's actuators: what a command sets on a robot (common.controller.actuators).
+
+The per-slot setters are the simulation's own API (a test or the engine's
+swarm path sets every robot's speeds at once with ``set_speeds_all``);
+``World.actuators(slot)`` is one robot as the one actuator interface the
+engine, the bridge and the emulator share, so a command is mapped onto it in
+one place (``apply_command``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from common.controller.actuators import Actuators
+from common.sim2d import kernels
+from common.sim2d.world_edits import EditError
+
+if TYPE_CHECKING:
+    from common.sim2d.entities import Agent
+    from common.sim2d.gripper import GripperTurrets
+    from common.sim2d.world import Tables
+
+
+class WorldActuators:
+    """World's actuator methods (a mixin of :class:`~common.sim2d.world.World`)."""
+
+    if TYPE_CHECKING:  # the World's state these write (common/sim2d/world.py sets it)
+        tables: Tables
+        cmd: np.ndarray
+        counters: np.ndarray
+        leds: np.ndarray
+        agents: list[Agent]
+        grippers: GripperTurrets
+
+    def actuators(self, slot: int) -> RobotActuators:
+        """The robot in ``slot`` as :class:`common.controller.actuators.Actuators`."""
+        return RobotActuators(self, slot)
+
+    def set_speeds(self, slot: int, left: float, right: float) -> None:
+        top = self.tables.max_speed[slot]
+        self.cmd[slot] = (float(np.clip(left, -top, top)), float(np.clip(right, -top, top)))
+
+    def set_speeds_all(self, speeds: npt.ArrayLike) -> None:
+        """Every agent's (left, right) at once, rounded and clamped per type: the bulk path."""
+        s = np.asarray(speeds, dtype=np.float64)
+        if s.shape != self.cmd.shape:
+            raise ValueError(
+                f"expected {self.cmd.shape} wheel speeds (one row per agent), got {s.shape}"
+            )
+        kernels.clamp_speeds(s, self.tables.max_speed, self.cmd)
+
+    def set_counters(self, slot: int, left: int, right: int) -> None:
+        self.counters[slot] = (left, right)
+
+    def set_leds(self, slot: int, leds: Sequence[bool]) -> None:
+        """LED i on or off as ``leds[i]``; LEDs the robot's type lacks are ignored."""
+        for led, on in enumerate(leds[: self.agents[slot].spec.leds]):
+            self.leds[slot, led] = 1 if on else 0
+
+    def set_arm(self, slot: int, position: int) -> None:
+        if not self.grippers.set_arm(slot, position):
+            raise EditError(f"{self.agents[slot].id} has no gripper")
+
+    def set_grip(self, slot: int, closed: bool) -> None:
+        if not self.grippers.set_grip(slot, closed):
+            raise EditError(f"{self.agents[slot].id} has no gripper")
+
+
+class RobotActuators(Actuators):
+    """One robot of a World as :class:`common.controller.actuators.Actuators`.
+
+    A view by slot, made per command (``World.actuators``): a slot changes
+    when a robot before it is removed, so it is not kept across edits.
+    A robot without a gripper refuses arm and grip with an EditError (a ValueError).
+    """
+
+    __slots__ = ("slot", "world")
+
+    def __init__(self, world: WorldActuators, slot: int) -> None:
+        self.world, self.slot = world, slot
+
+    def set_speeds(self, left: int, right: int) -> None:
+        self.world.set_speeds(self.slot, left, right)
+
+    def set_counters(self, left: int, right: int) -> None:
+        self.world.set_counters(self.slot, left, right)
+
+    def set_leds(self, leds: Sequence[bool]) -> None:
+        self.world.set_leds(self.slot, leds)
+
+    def set_arm(self, position: int) -> None:
+        self.world.set_arm(self.slot, position)
+
+    def set_grip(self, closed: bool) -> None:
+        self.world.set_grip(self.slot, closed)

@@ -1,0 +1,205 @@
+"""The engine's live edits: edit, reset and map requests, and the journal that replays them.
+
+An acknowledged edit survives a crash: it is appended (synced) to the
+world's journal before the reply, and replayed on the map it was made on at
+the next start. A mixin of :class:`~services.engine.service.EngineService`
+(its world, settings, log and sim-thread queue).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import zenoh
+
+from common.auth import AuthError, Principal
+from common.files import Journal
+from common.messages import (
+    AddItem,
+    EditResult,
+    MapRequest,
+    Message,
+    MessageError,
+    MoveItem,
+    RemoveItem,
+    ResetAgent,
+    ResizeArena,
+    RotateItem,
+    WorldEdit,
+    decode,
+    encode,
+)
+from common.service import RequestError
+from common.sim2d import maps
+from common.sim2d.world import EditError, World
+
+if TYPE_CHECKING:
+    from common.world.leases import LeaseBook
+    from services.engine.service import EngineSettings
+
+
+class EngineEdits:
+    """EngineService's edit, reset and map handlers and its journal."""
+
+    if TYPE_CHECKING:  # EngineService's (services/engine/service.py), of which this is part
+        log: logging.Logger
+        ident: str
+        settings: EngineSettings
+        world: World
+        leases: LeaseBook
+        replayed_edits: int
+        _journal: Journal | None
+        _last_cmd: dict[str, float]
+
+        def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]: ...
+
+        def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message: ...
+
+        def _declare_agent_publishers(self) -> None: ...
+
+    # -- the journal of live edits (an acknowledged edit survives a crash)
+
+    def _open_journal(self, base: str) -> None:
+        try:
+            marker = encode(MapRequest(action="load", name=base))
+        except MessageError:
+            self.log.warning("map name %r is not a plain name: live edits are not journalled", base)
+            return
+        journal = Journal(self.settings.maps_dir / f".{self.ident}.edits")
+        records = list(journal.records())
+        if not records or records[0] != marker:
+            journal.restart(marker)  # a journal of another map, or none: start afresh
+        else:
+            for raw in records[1:]:
+                try:
+                    self._replay(decode(raw, (WorldEdit, MapRequest)))
+                except (MessageError, RequestError, maps.MapError, EditError) as exc:
+                    self.log.warning("skipped a journalled edit that no longer applies: %s", exc)
+            if self.replayed_edits:
+                self.log.info(
+                    "replayed %d live edits since %s was loaded (journal %s)",
+                    self.replayed_edits,
+                    base,
+                    journal.path,
+                )
+        self._journal = journal
+
+    def _load_map(self, path: Path) -> World:
+        """A map file as this engine's world: its name, seed, tick and thread counts."""
+        return maps.load_map(
+            path,
+            name=self.ident,
+            seed=self.settings.seed,
+            tick_s=self.settings.tick_s,
+            threads=self.settings.threads,
+            physics_threads=self.settings.physics_threads,
+            drive=self.settings.drive,
+        )
+
+    def _replay(self, record: Message) -> None:
+        if isinstance(record, WorldEdit):
+            self._apply_op(self.world, record.op)
+        elif isinstance(record, MapRequest) and record.action == "load" and record.name:
+            path = maps.map_path(self.settings.maps_dir, record.name)
+            self.world = self._load_map(path)
+        self.replayed_edits += 1
+
+    def _journal_append(self, record: Message) -> None:
+        if self._journal is not None:
+            self._journal.append(encode(record))
+
+    # -- live edits, map save and load (sealed, ``edit_map``; a reset by the lease holder)
+
+    def _on_edit(self, query: zenoh.Query) -> Message:
+        principal, edit = self._open(str(query.key_expr), query.payload, WorldEdit)
+        op = edit.op
+        if isinstance(op, ResetAgent):
+            return self._reset(principal, op)
+        principal.require("edit_map", "edit the world")
+
+        def apply(world: World) -> Message:
+            try:
+                self._apply_op(world, op)
+            except (EditError, maps.MapError) as exc:
+                raise RequestError("conflict", str(exc)) from None
+            self._journal_append(edit)  # synced before the edit is acknowledged
+            self.log.info("%s edited the world: %s", principal.user, type(op).__name__)
+            return EditResult(layout=world.layout, detail=type(op).__name__)
+
+        return self._in_sim(apply)
+
+    def _reset(self, principal: Principal, op: ResetAgent) -> Message:
+        """A robot back at its start pose: its lease's holder or requester, or a map editor.
+
+        Not journalled: it changes where a robot is, not the map (a restart puts
+        every robot at its start pose anyway).
+        """
+        refused = self.leases.may_reset(principal, op.id)
+        if refused is not None:
+            raise AuthError("forbidden", refused)
+
+        def apply(world: World) -> Message:
+            try:
+                x, y, _ = world.reset_agent(op.id)
+            except EditError as exc:
+                raise RequestError("conflict", str(exc)) from None
+            self.log.info("%s reset %s to its start pose", principal.user, op.id)
+            return EditResult(layout=world.layout, detail=f"{op.id} is back at ({x:.0f}, {y:.0f})")
+
+        return self._in_sim(apply)
+
+    @staticmethod
+    def _apply_op(world: World, op: Any) -> None:
+        if isinstance(op, AddItem):
+            maps.add_entry(world, op.section, op.entry, op.section)
+        elif isinstance(op, MoveItem):
+            world.move(op.id, op.x, op.y, op.heading)
+            world.set_home(op.id)  # a robot a map editor placed starts there from now on
+        elif isinstance(op, RotateItem):
+            world.rotate(op.id, op.heading)
+            world.set_home(op.id)
+        elif isinstance(op, RemoveItem):
+            world.remove(op.id)
+        elif isinstance(op, ResizeArena):
+            world.resize(op.width, op.height)
+
+    def _on_map(self, query: zenoh.Query) -> Message:
+        principal, request = self._open(str(query.key_expr), query.payload, MapRequest)
+        principal.require("edit_map", "save or load maps")
+        maps_dir = self.settings.maps_dir
+        if request.action == "list":
+            return EditResult(layout=self.world.layout, maps=maps.list_maps(maps_dir))
+        if request.name is None:
+            raise RequestError("bad_request", f"{request.action} needs a map name")
+        try:
+            path = maps.map_path(maps_dir, request.name)
+        except maps.MapError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        if request.action == "save":
+
+            def save(world: World) -> Message:
+                written = maps.save_map(world, maps_dir, request.name or "")
+                self.log.info("%s saved the world to %s", principal.user, written)
+                return EditResult(layout=world.layout, detail=f"saved {written.name}")
+
+            return self._in_sim(save)
+        if not path.is_file():
+            raise RequestError("not_found", f"no map named {request.name} in the maps directory")
+        try:
+            new_world = self._load_map(path)
+        except maps.MapError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+
+        def swap(world: World) -> Message:
+            new_world.layout = world.layout + 1  # viewers must refetch the snapshot
+            self.world = new_world
+            self._last_cmd.clear()
+            self._declare_agent_publishers()
+            self._journal_append(request)
+            self.log.info("%s loaded map %s", principal.user, path.name)
+            return EditResult(layout=new_world.layout, detail=f"loaded {path.name}")
+
+        return self._in_sim(swap)

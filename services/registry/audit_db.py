@@ -1,0 +1,202 @@
+"""The registry database's term tables: bans and the audit trail.
+
+Kept beside accounts_db.py (same SQLite file, same connection and lock). The
+audit table is append-only: triggers refuse every UPDATE and DELETE on it, so
+neither a bug here nor a later tool can rewrite what happened. A ban row goes
+when the ban is lifted; the lifting itself is an audit line.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import sqlite3
+import time
+from dataclasses import dataclass
+
+import msgspec
+
+from common.keys import is_ident
+from common.messages import MAX_AUDIT_PAGE, AuditEntry, AuditQuery, BanInfo, MessageError
+from services.registry.accounts_db import DbError, RegistryDB
+
+log = logging.getLogger("wart.registry.audit")
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS bans (
+    user TEXT PRIMARY KEY REFERENCES users(name) ON DELETE CASCADE,
+    reason TEXT NOT NULL,
+    by_user TEXT NOT NULL,
+    at REAL NOT NULL,
+    until REAL
+);
+CREATE TABLE IF NOT EXISTS audit (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    at REAL NOT NULL,
+    actor TEXT NOT NULL,
+    action TEXT NOT NULL,
+    target TEXT NOT NULL,
+    outcome TEXT NOT NULL,
+    detail TEXT NOT NULL,
+    source TEXT NOT NULL,
+    reporter TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS audit_at ON audit(at);
+CREATE TRIGGER IF NOT EXISTS audit_append_only_update BEFORE UPDATE ON audit
+BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
+CREATE TRIGGER IF NOT EXISTS audit_append_only_delete BEFORE DELETE ON audit
+BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
+"""
+
+TEXT_MAX = 256  # AuditEntry's ShortText: longer words are cut, never refused
+
+
+@dataclass(frozen=True)
+class Action:
+    """One line to append: who did what on what, from where, and how it ended."""
+
+    actor: str
+    action: str
+    target: str
+    outcome: str  # "ok" or "refused"
+    detail: str = ""
+    source: str = ""
+    reporter: str = "registry"
+    at: float | None = None
+
+
+class TermStore:
+    """Bans and the audit trail in the registry's database."""
+
+    def __init__(self, db: RegistryDB) -> None:
+        self.db = db
+        try:
+            with db._lock:
+                db._db.executescript(SCHEMA)
+        except sqlite3.DatabaseError as exc:
+            raise DbError("internal", f"cannot create the audit tables: {exc}") from None
+
+    # -- bans
+
+    def ban(self, user: str, reason: str, by: str, until: float | None) -> BanInfo:
+        now = time.time()
+        if until is not None and not math.isfinite(until):
+            raise DbError("bad_request", "a ban's end must be a time (or none: until lifted)")
+        if until is not None and until <= now:
+            raise DbError("bad_request", "a ban must end in the future (or never)")
+        with self.db._tx() as con:
+            if not con.execute("SELECT 1 FROM users WHERE name=?", (user,)).fetchone():
+                raise DbError("not_found", f"no user named {user}")
+            con.execute(
+                "INSERT OR REPLACE INTO bans(user, reason, by_user, at, until) "
+                "VALUES (?, ?, ?, ?, ?)",
+                (user, reason, by, now, until),
+            )
+        return BanInfo(reason=reason[:TEXT_MAX], by=by, at=now, until=until)
+
+    def lift(self, user: str) -> BanInfo | None:
+        """Lift the user's ban; the ban that was in force (None: there was none)."""
+        ban = self.ban_of(user)
+        with self.db._tx() as con:
+            con.execute("DELETE FROM bans WHERE user=?", (user,))
+        return ban
+
+    def ban_of(self, user: str, now: float | None = None) -> BanInfo | None:
+        """The ban in force on ``user`` (an ended one is not: it lapses by itself)."""
+        now = time.time() if now is None else now
+        rows = self.db._rows("SELECT reason, by_user, at, until FROM bans WHERE user=?", user)
+        if not rows:
+            return None
+        reason, by, at, until = rows[0]
+        if until is not None and float(until) <= now:
+            return None
+        if not is_ident(str(by)):
+            by = "unknown"
+        return BanInfo(
+            reason=str(reason)[:TEXT_MAX],
+            by=str(by),
+            at=float(at),
+            until=None if until is None else float(until),
+        )
+
+    # -- the audit trail
+
+    def record(self, entry: Action) -> int:
+        """Append one line; its id."""
+        at = time.time() if entry.at is None else entry.at
+        row = (
+            at,
+            entry.actor[:64],
+            entry.action[:40],
+            entry.target[:TEXT_MAX],
+            entry.outcome,
+            entry.detail[:TEXT_MAX],
+            entry.source[:TEXT_MAX],
+            entry.reporter[:64],
+        )
+        with self.db._tx() as con:
+            cur = con.execute(
+                "INSERT INTO audit(at, actor, action, target, outcome, detail, source, reporter) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                row,
+            )
+            return int(cur.lastrowid or 0)
+
+    def entries(self, query: AuditQuery) -> tuple[list[AuditEntry], bool]:
+        """The lines matching ``query``, newest first, and whether older ones match too."""
+        where: list[str] = ["1=1"]
+        args: list[object] = []
+        for column, value in (
+            ("actor", query.actor),
+            ("action", query.action),
+            ("outcome", query.outcome),
+        ):
+            if value:
+                where.append(f"{column}=?")
+                args.append(value)
+        if query.target:
+            where.append("instr(target, ?) > 0")
+            args.append(query.target)
+        if query.since is not None:
+            where.append("at >= ?")
+            args.append(query.since)
+        if query.until is not None:
+            where.append("at <= ?")
+            args.append(query.until)
+        if query.before_id is not None:
+            where.append("id < ?")
+            args.append(query.before_id)
+        limit = min(query.limit, MAX_AUDIT_PAGE)
+        rows = self.db._rows(
+            "SELECT id, at, actor, action, target, outcome, detail, source, reporter FROM audit "
+            f"WHERE {' AND '.join(where)} ORDER BY id DESC LIMIT ?",
+            *args,
+            limit + 1,
+        )
+        out = []
+        for row in rows[:limit]:
+            try:
+                out.append(_entry(row))
+            except (MessageError, TypeError, ValueError) as exc:
+                log.warning("skipping a malformed audit line %r: %s", row[0], exc)
+        return out, len(rows) > limit
+
+
+def _entry(row: tuple) -> AuditEntry:
+    ident, at, actor, action, target, outcome, detail, source, reporter = row
+    entry = AuditEntry(
+        id=int(ident),
+        at=float(at),
+        actor=str(actor) if is_ident(str(actor)) else "unknown",
+        action=str(action),
+        target=str(target),
+        outcome=outcome,
+        detail=str(detail),
+        source=str(source),
+        reporter=str(reporter) if is_ident(str(reporter)) else "unknown",
+    )
+    # A hand-edited row could break the wire constraints: check them as a decoder would.
+    try:
+        return msgspec.convert(msgspec.to_builtins(entry), AuditEntry)
+    except msgspec.ValidationError as exc:
+        raise ValueError(str(exc)) from None
