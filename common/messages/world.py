@@ -217,6 +217,10 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     proximity_max: int
     speed_limit: int
     online: bool = True  # a real robot (Khepera bridge) unplugged or silent is offline
+    # A real robot's pose is "tracked" (the arena camera sees it), "odometry" (no camera,
+    # or it stopped tracking) or "not seen" (a live camera lost it: kept where it was
+    # last seen); "" in a simulated world, where the pose is the simulation's own.
+    pose_from: Literal["", "tracked", "odometry", "not seen"] = ""
 
 
 class WorldSnapshot(Message, frozen=True):

@@ -53,7 +53,7 @@ class WorldActuators:
             )
         kernels.clamp_speeds(s, self.tables.max_speed, self.cmd)
 
-    def set_counters(self, slot: int, left: int, right: int) -> None:
+    def set_counters(self, slot: int, left: float, right: float) -> None:
         self.counters[slot] = (left, right)
 
     def set_leds(self, slot: int, leds: Sequence[bool]) -> None:

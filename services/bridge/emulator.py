@@ -371,9 +371,29 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         "--agent", metavar="ID", help="which agent of the map is this robot (default: the first)"
     )
     p.add_argument("--seed", type=int, default=0, help="the map's sensor-noise seed (default 0)")
+    p.add_argument(
+        "--slip",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="with --map: the wheels slip, the left by FRACTION, the right by half of it "
+        "(0 to 0.5, default 0): the counters overstate the motion, so odometry drifts "
+        "as a real robot's does",
+    )
+    p.add_argument(
+        "--truth",
+        type=Path,
+        metavar="FILE",
+        help="with --map: write the robots' true poses to FILE ~30 times a second, for "
+        "`wart camera --source synthetic:FILE`",
+    )
     args, _ = parse(p, argv)
     if args.agent is not None and args.map is None:
         p.error("--agent needs --map")
+    if (args.slip or args.truth is not None) and args.map is None:
+        p.error("--slip and --truth need --map (a simulated body)")
+    if not 0.0 <= args.slip < 0.5:
+        p.error(f"--slip must be 0 to 0.5 (a fraction of the wheels' motion); got {args.slip}")
     if not 1 <= args.split <= 64:
         p.error("--split must be 1..64")
     if args.garbage_every < 0:
@@ -399,7 +419,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         from services.bridge.simbody import SimBody
 
         try:
-            sim = SimBody.from_map(args.map, args.agent, seed=args.seed)
+            sim = SimBody.from_map(
+                args.map, args.agent, seed=args.seed, slip=args.slip, truth=args.truth
+            )
         except (MapError, ValueError) as exc:
             print(f"error: {exc}", file=sys.stderr, flush=True)
             return 2

@@ -3,7 +3,7 @@
 Same keys and messages as the Sim2D engine (docs/ARCHITECTURE.md), so the
 agent context, the viewer and controllers cannot tell the two apart:
 
-Publishes ``world/<w>/frame`` (WorldFrame: every robot's odometry pose) every
+Publishes ``world/<w>/frame`` (WorldFrame: every robot's pose) every
 ``frame_interval``; ``agent/<a>/sensors`` (SensorSample) after every sensor
 round of that robot, and then ``world/<w>/samples`` (a SampleBundle of that
 one sample) if the robot is leased and someone subscribes;
@@ -16,6 +16,13 @@ permission), both checked by common.world.leases.LeaseBook exactly as the engine
 does. Serves ``snapshot`` (arena, agents with their online state);
 ``edit`` and ``map`` answer ``bad_request`` (a real arena cannot be edited).
 Token ``alive/world/<w>``.
+
+A robot's pose is its odometry, corrected by the arena camera's sightings
+when a camera tracks this world (``world/<w>/tracked``, common/tracking/
+fusion.py): odometry alone drifts off the arena within a few runs. The
+snapshot says where each pose comes from (``AgentInfo.pose_from``): a robot a
+live camera lost is "not seen" and stays where it was last seen, never a guess
+outside the arena.
 
 Threads: one I/O thread per robot (KheperaRobot) owns its serial port;
 Zenoh callbacks only check and queue commands on it (never wait on the
@@ -49,11 +56,14 @@ from common.messages import (
     PackedArray,
     SensorBatch,
     SensorSample,
+    TrackedPoses,
     WorldFrame,
     WorldSnapshot,
+    decode,
     encode,
 )
 from common.service import RequestError
+from common.tracking.fusion import PoseFusion
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
@@ -81,7 +91,7 @@ KHEPERA_IR_POSES: tuple[tuple[float, float, float], ...] = tuple(
     )
 )
 FINGERS_CLOSED_ABOVE = 100  # a finger-position reading above this is a closed grip
-ONLINE_COLOUR, OFFLINE_COLOUR = "#2e86de", "#8a8a8a"
+ONLINE_COLOUR, OFFLINE_COLOUR, NOT_SEEN_COLOUR = "#2e86de", "#8a8a8a", "#c8c8c8"
 
 
 @dataclass(frozen=True)
@@ -150,6 +160,10 @@ class BridgeService(WorldService):
         self._t0 = time.monotonic()
         self._halt = threading.Event()
         self._threads: list[threading.Thread] = []
+        w, h = settings.arena
+        self.fusion = PoseFusion(w, h, radius_mm=KHEPERA_RADIUS_MM)
+        self._pose_from: dict[str, str] = {}  # agent -> where its shown pose comes from
+        self._camera_said: bool | None = None
 
     # -- lifecycle
 
@@ -157,6 +171,7 @@ class BridgeService(WorldService):
         if self.verifier is None:
             self.log.warning("no --registry-key: every command and lease will be refused")
         self.declare_world_interface()
+        self.subscribe(keys.world_tracked(self.realm, self.ident), self._on_tracked)
         n = len(self.settings.robots)
         for i, spec in enumerate(self.settings.robots):
             self.add_robot(spec.port, spec.agent, spec.pose or self._spread(i, n))
@@ -271,6 +286,8 @@ class BridgeService(WorldService):
 
     def _on_state(self, agent: _Agent, state: RobotState) -> None:
         """Called by the robot's I/O thread after each sensor round and on online changes."""
+        pose = state.pose
+        self.fusion.odometry(agent.id, pose.x, pose.y, pose.heading, at=time.time())
         if state.online != agent.online:
             with self._lock:
                 agent.online = state.online
@@ -317,6 +334,50 @@ class BridgeService(WorldService):
         )
 
     # -- the network -> robots
+
+    def _on_tracked(self, sample: zenoh.Sample) -> None:
+        """The arena camera's sightings: each corrects its robot's odometry."""
+        seen = decode(sample.payload.to_bytes(), TrackedPoses)
+        if seen.world != self.ident:
+            return
+        self.fusion.camera_alive(seen.captured_at)
+        with self._lock:
+            known = set(self._agents)
+        for robot in seen.robots:
+            if robot.agent in known:
+                self.fusion.seen(robot.agent, robot.x, robot.y, robot.heading, seen.captured_at)
+
+    def _shown_poses(self, agents: Sequence[_Agent], states: Sequence[RobotState]) -> list[Pose]:
+        """Each robot's pose as the world shows it; a change of where poses come from
+        bumps the layout (viewers refetch the snapshot that says it) and is logged once."""
+        now = time.time()
+        camera = self.fusion.camera_live(now)
+        if camera != self._camera_said:
+            self._camera_said = camera
+            self.log.info(
+                "camera over %s tracks its robots: poses from the camera"
+                if camera
+                else "no camera tracks %s (none, offline or not calibrated): poses from odometry",
+                self.ident,
+            )
+        shown, changed = [], False
+        for agent, state in zip(agents, states, strict=True):
+            fused = self.fusion.pose(agent.id, now)
+            source = fused.source if fused is not None else "odometry"
+            if self._pose_from.get(agent.id) != source:
+                if source == "not seen":
+                    self.log.warning(
+                        "%s is not seen by the camera: shown where it was last seen", agent.id
+                    )
+                elif self._pose_from.get(agent.id) == "not seen":
+                    self.log.info("%s is seen by the camera again", agent.id)
+                self._pose_from[agent.id] = source
+                changed = True
+            shown.append(state.pose if fused is None else Pose(fused.x, fused.y, fused.heading))
+        if changed:
+            with self._lock:
+                self.layout += 1
+        return shown
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
         self.leases.accept_lease(str(sample.key_expr), sample.payload)
@@ -396,6 +457,8 @@ class BridgeService(WorldService):
             agents = list(self._agents.values())
             layout = self.layout
         states = [a.robot.state() for a in agents]
+        poses = self._shown_poses(agents, states)
+        states = [replace(s, pose=p) for s, p in zip(states, poses, strict=True)]
         self._frames += 1
         self._frame_pub.put(encode(self.frame(states, layout)))
         if agents and self._batch_pub.matching_status.matching:
@@ -457,21 +520,28 @@ class BridgeService(WorldService):
         infos = []
         for a in agents:
             s = a.robot.state()
+            fused = self.fusion.pose(a.id, time.time())
+            pose = s.pose if fused is None else Pose(fused.x, fused.y, fused.heading)
+            pose_from = self._pose_from.get(a.id, "odometry")
+            colour = ONLINE_COLOUR if s.online else OFFLINE_COLOUR
+            if s.online and pose_from == "not seen":
+                colour = NOT_SEEN_COLOUR
             infos.append(
                 AgentInfo(
                     id=a.id,
                     type="khepera",
                     radius=KHEPERA_RADIUS_MM,
-                    colour=ONLINE_COLOUR if s.online else OFFLINE_COLOUR,
-                    x=s.pose.x,
-                    y=s.pose.y,
-                    heading=s.pose.heading,
+                    colour=colour,
+                    x=pose.x,
+                    y=pose.y,
+                    heading=pose.heading,
                     gripper=s.gripper is not None,
                     leds=KHEPERA_LEDS,
                     proximity_sensors=list(KHEPERA_IR_POSES),
                     proximity_max=KHEPERA_PROXIMITY_MAX,
                     speed_limit=KHEPERA_SPEED_LIMIT,
                     online=s.online,
+                    pose_from=pose_from,  # type: ignore[arg-type]
                 )
             )
         w, h = self.settings.arena

@@ -7,6 +7,14 @@ the emulated robot's sensors respond to a simulated arena loaded from a map:
 walls and obstacles raise its IR readings, lamps lower its ambient readings,
 balls can be gripped.
 
+Wheels may slip (``slip``): the robot then moves less than its wheels turn,
+as a real Khepera's does on a smooth floor, so the counters the host reads
+overstate the motion and its odometry drifts: the left wheel by ``slip``, the
+right by half of it, so the drift turns as well as stretches. Given a truth
+file, the thread writes the robots' true poses there about 30 times a second
+for the synthetic camera (common/tracking/truth.py), which then corrects that
+drift as a real overhead camera does.
+
 Threads: pymunk is not thread-safe, so the world is touched only under
 ``self._lock``. Our own thread steps it at ``tick_s``, paced to the wall
 clock (the robot keeps moving whether or not the host asks anything); the
@@ -24,6 +32,7 @@ from pathlib import Path
 
 from common.sim2d.maps import load_map
 from common.sim2d.world import EditError, World
+from common.tracking.truth import now_truth, write_truth
 from services.bridge.body import KinematicSpec
 
 log = logging.getLogger("wart.bridge.simbody")
@@ -39,7 +48,13 @@ class SimBody:
         *,
         spec: KinematicSpec | None = None,
         speed: float = 1.0,
+        slip: float = 0.0,
+        truth: Path | None = None,
     ) -> None:
+        if not 0.0 <= slip < 0.5:
+            raise ValueError(
+                f"slip must be 0 to 0.5 (a fraction of the wheels' motion); got {slip}"
+            )
         if not world.agents:
             raise ValueError("the map has no agents: the emulated Khepera needs one to be")
         self.world = world
@@ -60,13 +75,25 @@ class SimBody:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.ticks = 0
+        # What the floor gives of each wheel's turn (1: no slip).
+        self._grip = (1.0 - slip, 1.0 - slip / 2)
+        self.truth = truth
+        self._truth_at = 0.0
 
     @classmethod
     def from_map(
-        cls, path: Path, agent: str | None = None, *, seed: int = 0, tick_s: float = 0.01
+        cls,
+        path: Path,
+        agent: str | None = None,
+        *,
+        seed: int = 0,
+        tick_s: float = 0.01,
+        slip: float = 0.0,
+        truth: Path | None = None,
     ) -> SimBody:
         """Load a map (MapError names the field) and take ``agent`` (default: the first one)."""
-        return cls(load_map(path, name="emulator", seed=seed, tick_s=tick_s), agent)
+        world = load_map(path, name="emulator", seed=seed, tick_s=tick_s)
+        return cls(world, agent, slip=slip, truth=truth)
 
     # ------------------------------------------------------------ the stepping thread
 
@@ -103,14 +130,40 @@ class SimBody:
                     # reads speed 0 now, not one tick later.
                     self._position_control()
                     self.ticks += 1
+                    truth = self._true_poses()
                 except Exception:  # one bad tick must not freeze the robot for good
                     log.exception("sim body: error in tick %d (kept running)", self.world.tick)
+                    truth = None
+            if truth is not None and self.truth is not None:
+                try:
+                    write_truth(self.truth, now_truth(self.world.width, self.world.height, truth))
+                except OSError as exc:
+                    log.warning("cannot write the truth file %s: %s", self.truth, exc)
             next_tick += period
             delay = next_tick - time.monotonic()
             if delay > 0:
                 self._stop.wait(delay)
             elif delay < -0.5:  # stalled (a loaded machine): do not catch up in a burst
                 next_tick = time.monotonic()
+
+    def _true_poses(self) -> dict[str, tuple[float, float, float]] | None:
+        """Every robot's pose when a truth file is due (about 30 a second), else None."""
+        now = time.monotonic()
+        if self.truth is None or now - self._truth_at < 0.033:
+            return None
+        self._truth_at = now
+        poses = self.world.agent_pose
+        return {
+            a.id: (float(poses[i, 0]), float(poses[i, 1]), float(poses[i, 2]))
+            for i, a in enumerate(self.world.agents)
+        }
+
+    def _counted(self, wheel: int) -> float:
+        """The counter the host reads: the wheel's turn, not the slipping robot's motion."""
+        return float(self.world.counters[self.slot, wheel]) / self._grip[wheel]
+
+    def _drive(self, left: float, right: float) -> None:
+        self.world.set_speeds(self.slot, left * self._grip[0], right * self._grip[1])
 
     def _position_control(self) -> None:
         """C: each wheel at up to its profile speed toward its counter target, stopping on it."""
@@ -120,9 +173,9 @@ class SimBody:
         per_tick = w.tick_s * float(w.tables.pulses_per_s_per_unit[s])  # pulses a unit a tick
         out = []
         for i in (0, 1):
-            remaining = self._target[i] - float(w.counters[s, i])
+            remaining = self._target[i] - self._counted(i)
             out.append(max(-self._vmax[i], min(self._vmax[i], remaining / per_tick)))
-        w.set_speeds(s, out[0], out[1])
+        self._drive(out[0], out[1])
 
     # ------------------------------------------------------------ RobotBody
 
@@ -132,7 +185,7 @@ class SimBody:
     def set_speeds(self, left: int, right: int) -> None:
         with self._lock:
             self._mode = "speed"
-            self.world.set_speeds(self.slot, left, right)
+            self._drive(left, right)
 
     def set_pwm(self, left: int, right: int) -> None:
         k = self.spec.pwm_to_speed
@@ -146,16 +199,15 @@ class SimBody:
     def speed(self) -> tuple[int, int]:
         with self._lock:
             cmd = self.world.cmd[self.slot]
-            return round(float(cmd[0])), round(float(cmd[1]))
+            return round(float(cmd[0]) / self._grip[0]), round(float(cmd[1]) / self._grip[1])
 
     def counters(self) -> tuple[int, int]:
         with self._lock:
-            c = self.world.counters[self.slot]
-            return _wrap32(round(float(c[0]))), _wrap32(round(float(c[1])))
+            return _wrap32(round(self._counted(0))), _wrap32(round(self._counted(1)))
 
     def set_counters(self, left: int, right: int) -> None:
         with self._lock:
-            self.world.set_counters(self.slot, left, right)
+            self.world.set_counters(self.slot, left * self._grip[0], right * self._grip[1])
             if self._mode == "position":
                 self._target = (left, right)
 
@@ -164,7 +216,7 @@ class SimBody:
             out: list[int] = []
             for i in (0, 1):
                 if self._mode == "position":
-                    err = round(self._target[i] - float(self.world.counters[self.slot, i]))
+                    err = round(self._target[i] - self._counted(i))
                     out += [int(err == 0), 0, err]
                 else:
                     out += [1, 1, 0]

@@ -33,6 +33,8 @@ SERVICE_KINDS: dict[str, tuple[str, ...]] = {
     "agent": ("name", "world"),
     "viewer": (),
     "runner": ("name",),
+    # A camera over a real arena (wart camera): its world and what it captures from.
+    "camera": ("world", "source"),
 }
 OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "registry": ("server_name",),
@@ -45,11 +47,15 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "engine": ("seed", "robots", "context", "title", "owner", "login", "drive"),
     # ports: PATH=ID@X,Y,DEG as for `wart bridge --port`; emulate: a map name
     # whose first robot an emulated Khepera plays (a lab without hardware).
-    "bridge": ("ports", "emulate", "login"),
+    # camera (with emulate, default true): a synthetic camera over the emulated arena.
+    "bridge": ("ports", "emulate", "login", "camera"),
     "agent": ("title", "runner", "slot_seconds", "owner"),
     # name: the viewer's id in the lab (default: its host's name).
     "viewer": ("name", "http_port", "http_host"),
     "runner": (),
+    # calibration: a file made by `wart camera calibrate` (default: the state dir's,
+    # made from the reference markers once they are in view).
+    "camera": ("name", "calibration", "fps"),
 }
 
 DEFAULT_RUNNER = "runner"  # what agent contexts name when the lab file has no runner
@@ -249,7 +255,7 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
     for name in ("name", "world", "runner", "owner", "context"):
         if name in table:
             params[name] = _ident(f"{where}.{name}", table[name])
-    for name in ("map", "title", "server_name", "http_host"):
+    for name in ("map", "title", "server_name", "http_host", "source", "calibration"):
         if name in table:
             params[name] = _type(f"{where}.{name}", table[name], str, "a string")
     if "seed" in table:
@@ -260,6 +266,10 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
         params["http_port"] = _int(f"{where}.http_port", table["http_port"], 1, 65535)
     if "ports" in table:
         params["ports"] = _strings(f"{where}.ports", table["ports"])
+    if "fps" in table:
+        params["fps"] = _number(f"{where}.fps", table["fps"], 1, 30)
+    if "camera" in table:
+        params["camera"] = bool(_type(f"{where}.camera", table["camera"], bool, "true or false"))
     if "login" in table:
         params["login"] = bool(_type(f"{where}.login", table["login"], bool, "true or false"))
     if "emulate" in table:

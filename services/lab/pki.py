@@ -25,6 +25,9 @@ def host_roles(lab: LabFile, host: str) -> list[str]:
     """The certificates a host needs: its router, its supervisor, its services, arenas."""
     entry = lab.host(host)
     roles = ["router", "host", *sorted(entry.kinds())]
+    if any(s.kind == "bridge" and s.params.get("emulate") and s.params.get("camera", True)
+           for s in entry.services):  # fmt: skip
+        roles.append("camera")  # the emulated arena's synthetic camera
     if entry.arenas or "engine" in entry.kinds():
         roles += ["engine", "agent"]  # an engine is an arena: its agent context comes along
     return sorted(set(roles), key=ROLES.index)

@@ -30,6 +30,7 @@ NEEDS: dict[str, tuple[str, ...]] = {
     "agent": ("context", "agent"),
     "viewer": ("viewer",),
     "runner": ("runner",),
+    "camera": ("camera",),
 }
 
 

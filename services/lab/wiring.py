@@ -409,56 +409,6 @@ def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpe
     )
 
 
-def emulator_link(w: Wiring, world: str) -> Path:
-    """The stable path of an emulated Khepera's pty (what a real one's by-id path would be)."""
-    return w.state_dir / "dev" / f"{world}-khepera"
-
-
-def bridge_specs(
-    w: Wiring,
-    world: str,
-    ports: Sequence[str],
-    *,
-    emulate: str | None = None,
-    login: bool = False,
-) -> list[ChildSpec]:
-    """A bridge, preceded by the emulated Khepera it drives when the lab has no hardware."""
-    ports = list(ports)
-    specs: list[ChildSpec] = []
-    if emulate:
-        map_path = w.resolve_map(emulate)
-        link = emulator_link(w, world)
-        x, y, deg = map_pose(map_path)
-        specs.append(
-            ChildSpec(
-                name=f"khepera emulator {world}",
-                argv=["khepera-emulator", "--map", str(map_path), "--link", str(link)],
-                alive_key=None,  # not on the network: the bridge below is its presence
-                detail=f"emulated Khepera at {link} ({map_path.name})",
-                prepare=functools.partial(link.parent.mkdir, parents=True, exist_ok=True),
-            )
-        )
-        taken = {port.partition("=")[2].partition("@")[0] for port in ports}
-        agent = next(f"k{n}" for n in range(1, len(ports) + 2) if f"k{n}" not in taken)
-        # The bridge's odometry starts where the emulated body stands, so both views agree.
-        ports.append(f"{link}={agent}@{x:g},{y:g},{deg:g}")
-    argv = ["bridge", "--world", world]
-    for port in ports:
-        argv += ["--port", port]
-    if login:
-        argv += w.login(service_account("bridge", world))
-    specs.append(
-        ChildSpec(
-            name=f"bridge {world}",
-            argv=[*argv, *w.net_args("bridge")],
-            alive_key=keys.alive(w.realm, AliveKind.WORLD, world),
-            detail=f"real world {world}, {len(ports)} robot(s)"
-            + (" (one emulated)" if emulate else ""),
-        )
-    )
-    return specs
-
-
 def viewer_spec(
     w: Wiring,
     ident: str,
@@ -498,6 +448,9 @@ def viewer_spec(
 
 
 def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
+    # Real arenas' specs build on this module's (a late import: no import cycle).
+    from services.lab.real_arenas import bridge_specs, camera_spec
+
     """The processes of one service of a lab description (a lab file's or ``wart up``'s)."""
     p: Mapping[str, Any] = svc.params
     owner = str(p["owner"]) if p.get("owner") else None
@@ -535,7 +488,20 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
             [str(port) for port in p.get("ports", ())],
             emulate=p.get("emulate"),
             login=bool(p.get("login")),
+            camera=bool(p.get("camera", True)),
         )
+    if svc.kind == "camera":
+        calibration = p.get("calibration")
+        return [
+            camera_spec(
+                w,
+                str(p["world"]),
+                str(p["source"]),
+                name=p.get("name"),
+                calibration=None if calibration is None else Path(calibration),
+                fps=p.get("fps"),
+            )
+        ]
     if svc.kind == "agent":
         slot = p.get("slot_seconds")
         return [
@@ -570,7 +536,15 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
 # door, once the rest serves.
 ENGINE_READY_TIMEOUT_S = 240.0
 
-START_ORDER = {"registry": 0, "chat": 1, "engine": 2, "bridge": 2, "runner": 3, "agent": 4}
+START_ORDER = {
+    "registry": 0,
+    "chat": 1,
+    "engine": 2,
+    "bridge": 2,
+    "camera": 3,
+    "runner": 3,
+    "agent": 4,
+}
 
 
 def host_plan(w: Wiring, services: Iterable[ServiceEntry]) -> list[ChildSpec]:

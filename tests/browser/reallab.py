@@ -26,6 +26,7 @@ from common.auth import issue_session
 from common.client.lab_client import LabClient
 from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
+from services.lab.real_arenas import bridge_specs
 from tests.integration.agentkit import (
     CTX,
     start_agent_context,
@@ -55,7 +56,9 @@ class RealLab:
         return self.address.url()
 
     @contextmanager
-    def driving(self, agent: str = "k0", speeds: tuple[int, int] = (8, 3)) -> Iterator[None]:
+    def driving(
+        self, agent: str = "k0", speeds: tuple[int, int] = (8, 3), world: str = WORLD
+    ) -> Iterator[None]:
         """Drive ``agent`` the real way while the block runs.
 
         alice logs in with her password; a lease for her session is published
@@ -71,18 +74,18 @@ class RealLab:
             now = time.time()
             lease = Lease(
                 lease_id=f"L{uuid.uuid4().hex[:8]}",
-                world=WORLD,
+                world=world,
                 agent=agent,
                 holder_user="alice",
                 holder_session=session.session_id,
                 start=now - 1,
                 end=now + 120,
             )
-            lease_key = keys.agent_lease(realm, WORLD, agent)
+            lease_key = keys.agent_lease(realm, world, agent)
             z = alice.z
             z.put(lease_key, grantor.seal(lease_key, lease))
             stop = threading.Event()
-            cmd_key = keys.agent_cmd(realm, WORLD, agent)
+            cmd_key = keys.agent_cmd(realm, world, agent)
 
             def loop() -> None:
                 command = AgentCommand(agent=agent, speeds=speeds)
@@ -107,7 +110,10 @@ def real_lab(
     agents: bool = False,
     slot: float = 4.0,
     wander: bool = False,
+    real_arena: str | None = None,
 ) -> Iterator[RealLab]:
+    """``real_arena``: also a real world of that name, an emulated Khepera (slipping, on
+    maps/empty.json) behind a bridge, and a synthetic camera over it (as `wart up` runs)."""
     procs = Procs(tmp)
     realm = f"t{uuid.uuid4().hex[:10]}"
     try:
@@ -120,6 +126,9 @@ def real_lab(
             start_agent_context(lab, slot=slot)
         else:
             lab.start_engine(map_name, world=WORLD, extra=["--wander"] if wander else [])
+        if real_arena:
+            for spec in bridge_specs(lab.wiring(), real_arena, [], emulate="empty"):
+                lab.start(spec)
         session = open_session(router.options(), wait=10.0)
         address = LabAddress("127.0.0.1", router.port, realm)
         connector = LiveConnector(session, address, lab.key_hex, data_dir=tmp / "viewer")

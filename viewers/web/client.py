@@ -13,6 +13,7 @@ import viser
 
 from viewers.web.adapters import LabConnection, LabConnector, WorldFeed
 from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
+from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
@@ -57,6 +58,7 @@ class BrowserSession:
         with client.atomic():
             self._build(gui, default_address)
         self.view = WorldView(client)
+        self.video = ArenaVideo(self.view)  # a real arena's camera under its robots
         pump.attach(self.view)
         self._refresh_recent()
 

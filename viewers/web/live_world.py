@@ -47,6 +47,7 @@ from viewers.web.adapters import (
     SceneFrame,
     SceneLayout,
 )
+from viewers.web.arena_video import CameraFeed
 from viewers.web.world_view import OFFLINE
 
 if TYPE_CHECKING:  # the connection makes a UserWorld; only its type is needed here
@@ -132,6 +133,7 @@ class WorldWatch:
         self._first = threading.Event()
         self._error = ""
         self._sensors: dict[str, _SensorSub] = {}
+        self._camera: CameraFeed | None = None  # a real world's cameras, once asked for
         self._sub = session.declare_subscriber(keys.world_frame(realm, world), self._on_frame)
         self._thread = threading.Thread(target=self._refetcher, name=f"snap-{world}", daemon=True)
         self._want.set()
@@ -189,6 +191,16 @@ class WorldWatch:
             raise LabError(f"the world {self.world} has not answered yet")
         return snap
 
+    def camera(self) -> CameraFeed | None:
+        """A real world's cameras (subscribed on first ask); None for a simulated one."""
+        snap = self._snapshot
+        if snap is None or not snap.real or self.closed:
+            return None
+        with self._lock:
+            if self._camera is None:
+                self._camera = CameraFeed(self.session, self.realm, self.world)
+            return self._camera
+
     def latest(self) -> SceneFrame | None:
         count, raw = self._raw_count, self._raw
         if raw is None or count == self._decoded_count:
@@ -243,6 +255,8 @@ class WorldWatch:
         return sub.latest(agent)
 
     def close(self) -> None:
+        if self._camera is not None:
+            self._camera.close()
         self.closed = True
         self._want.set()
         try:
@@ -307,6 +321,9 @@ class UserWorld:
 
     def snapshot(self) -> SceneLayout:
         return self.source.snapshot()
+
+    def camera(self) -> CameraFeed | None:
+        return self.source.camera()
 
     def latest(self) -> SceneFrame | None:
         return self.source.latest()

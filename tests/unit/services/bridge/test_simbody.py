@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -113,3 +114,28 @@ def test_agent_ids_and_port_arguments() -> None:
             parse_port(bad, [])
     with pytest.raises(ValueError, match="twice"):
         parse_port("/b=k1", ["k1"])
+
+
+def test_slipping_wheels_make_odometry_overstate_and_turn(tmp_path: Path) -> None:
+    """With slip the counters count the wheels' turn, the robot moves less and curves:
+    the drift a camera has to correct (and the truth file shows where it really is)."""
+    from common.tracking.truth import read_truth
+    from services.bridge.odometry import Odometry
+
+    truth = tmp_path / "truth.json"
+    with SimBody.from_map(EMPTY, seed=1, slip=0.04, truth=truth) as body:
+        body.place(200, 500, 0.0)
+        body.set_counters(0, 0)
+        body.set_speeds(10, 10)  # straight ahead, ~80 mm/s
+        wait_for(lambda: body.pose()[0] > 420, 30.0, "k1 to drive 220 mm")
+        body.set_speeds(0, 0)
+        left, right = body.counters()
+        x, y, heading = body.pose()
+        seen = read_truth(truth)
+    odometry = Odometry(0.08, 53.0)
+    odometry.update(0, 0, 0.0)
+    counted = odometry.update(left, right, 1.0)
+    travelled = math.hypot(x - 200, y - 500)
+    assert counted.x > travelled * 1.015  # the counters claim more than the robot drove
+    assert abs(heading) > 0.005  # the left wheel slips more: it curves left of the odometry's line
+    assert seen.robots["k1"][0] == pytest.approx(x, abs=30.0)  # written as it drove

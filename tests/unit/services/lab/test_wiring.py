@@ -30,6 +30,7 @@ def test_wart_up_runs_the_one_host_lab_in_dependency_order(tmp_path: Path) -> No
         "agent context arena",
         "khepera emulator real1",
         "bridge real1",
+        "camera real1-cam",
         "runner runner",
         "agent context robots",
         "viewer",
@@ -46,6 +47,12 @@ def test_wart_up_runs_the_one_host_lab_in_dependency_order(tmp_path: Path) -> No
     # The bridge drives the emulated Khepera's pty, its odometry at the map's pose.
     emulator, bridge = by_name["khepera emulator real1"], by_name["bridge real1"]
     assert flag(bridge, "--port") == f"{flag(emulator, '--link')}=k1@500,500,0"
+    # Its wheels slip (odometry drifts as a real robot's); its synthetic camera renders
+    # the true poses it writes, and calibrates itself from the reference markers.
+    camera = by_name["camera real1-cam"]
+    assert flag(emulator, "--slip") == "0.03"
+    assert flag(camera, "--source") == f"synthetic:{flag(emulator, '--truth')}"
+    assert "--auto-calibrate" in camera
     # Every child reaches the lab's router, never scouting for another.
     for spec in plan:
         if spec.name != "khepera emulator real1":

@@ -1,0 +1,148 @@
+"""A real robot's pose: where the camera saw it, carried on by odometry between frames.
+
+Odometry alone drifts (a wheel slips, and the error grows with every metre);
+the camera is exact but comes a few times a second, a little late, and loses a
+robot under a hand or out of view. Each camera sighting fixes a correction:
+the rigid transform that takes the odometry pose at the frame's capture time
+onto the seen pose (as a localiser's map-to-odometry transform does). The
+robot's pose is that correction applied to its current odometry pose, so it
+moves smoothly between frames and snaps back to the truth at each one.
+
+What is shown is honest about its source: ``tracked`` (seen within
+``fresh_s``), ``odometry`` (no camera over this arena, or the camera is
+offline: the world says so), or ``not seen`` (a live camera has not seen
+this robot for ``unseen_after_s``): then the last trusted pose is kept,
+never a guess, and every pose is kept inside the arena.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Literal
+
+Source = Literal["tracked", "odometry", "not seen"]
+
+
+@dataclass(frozen=True)
+class FusedPose:
+    x: float
+    y: float
+    heading: float
+    source: Source
+
+
+def _compose(
+    a: tuple[float, float, float], b: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """a ⊕ b: pose b expressed in a's frame, into a's parent frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (
+        a[0] + c * b[0] - s * b[1],
+        a[1] + s * b[0] + c * b[1],
+        math.remainder(a[2] + b[2], math.tau),
+    )
+
+
+def _inverse(a: tuple[float, float, float]) -> tuple[float, float, float]:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
+
+
+@dataclass
+class _Robot:
+    history: deque[tuple[float, tuple[float, float, float]]] = field(
+        default_factory=lambda: deque(maxlen=256)
+    )  # (wall time, odometry pose)
+    correction: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    seen_at: float | None = None
+    last_shown: tuple[float, float, float] | None = None
+
+
+class PoseFusion:
+    """Odometry and camera sightings of one world's robots, fused per robot."""
+
+    def __init__(
+        self,
+        width_mm: float,
+        height_mm: float,
+        *,
+        radius_mm: float = 27.5,
+        fresh_s: float = 0.5,
+        unseen_after_s: float = 1.0,
+        camera_silent_after_s: float = 2.0,
+    ) -> None:
+        self.width_mm, self.height_mm, self.radius_mm = width_mm, height_mm, radius_mm
+        self.fresh_s, self.unseen_after_s = fresh_s, unseen_after_s
+        self.camera_silent_after_s = camera_silent_after_s
+        self._robots: dict[str, _Robot] = {}
+        self._camera_at: float | None = None  # the last camera message of any kind
+
+    def _robot(self, agent: str) -> _Robot:
+        return self._robots.setdefault(agent, _Robot())
+
+    def odometry(self, agent: str, x: float, y: float, heading: float, at: float) -> None:
+        """The robot's odometry pose (the bridge's integration) at wall time ``at``."""
+        self._robot(agent).history.append((at, (x, y, heading)))
+
+    def camera_alive(self, at: float) -> None:
+        """The camera spoke (a frame of tracked poses, even an empty one)."""
+        self._camera_at = at if self._camera_at is None else max(self._camera_at, at)
+
+    def seen(self, agent: str, x: float, y: float, heading: float, captured_at: float) -> bool:
+        """The camera saw ``agent`` there at ``captured_at``; False if no odometry covers it yet."""
+        self.camera_alive(captured_at)
+        robot = self._robot(agent)
+        odo = self._odometry_at(robot, captured_at)
+        if odo is None:
+            return False
+        robot.correction = _compose((x, y, heading), _inverse(odo))
+        robot.seen_at = captured_at if robot.seen_at is None else max(robot.seen_at, captured_at)
+        return True
+
+    def camera_live(self, now: float) -> bool:
+        return self._camera_at is not None and now - self._camera_at <= self.camera_silent_after_s
+
+    def pose(self, agent: str, now: float) -> FusedPose | None:
+        robot = self._robots.get(agent)
+        if robot is None or not robot.history:
+            return None
+        odo = robot.history[-1][1]
+        camera = self.camera_live(now)
+        if camera and (robot.seen_at is None or now - robot.seen_at > self.unseen_after_s):
+            if robot.last_shown is not None:  # kept where it was last trusted
+                return FusedPose(*robot.last_shown, source="not seen")
+            return FusedPose(*self._inside(odo), source="not seen")
+        shown = self._inside(_compose(robot.correction, odo))
+        robot.last_shown = shown
+        fresh = robot.seen_at is not None and now - robot.seen_at <= self.fresh_s
+        return FusedPose(*shown, source="tracked" if camera and fresh else "odometry")
+
+    def _inside(self, pose: tuple[float, float, float]) -> tuple[float, float, float]:
+        r = self.radius_mm
+        x = min(max(pose[0], r), max(r, self.width_mm - r))
+        y = min(max(pose[1], r), max(r, self.height_mm - r))
+        return (x, y, pose[2])
+
+    @staticmethod
+    def _odometry_at(robot: _Robot, t: float) -> tuple[float, float, float] | None:
+        """The odometry pose at ``t``, linearly between the two readings around it."""
+        history = robot.history
+        if not history or t < history[0][0] - 0.5:
+            return None
+        times = [h[0] for h in history]
+        i = bisect.bisect_left(times, t)
+        if i == 0:
+            return history[0][1]
+        if i >= len(history):
+            return history[-1][1]
+        (t0, a), (t1, b) = history[i - 1], history[i]
+        f = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
+        dh = math.remainder(b[2] - a[2], math.tau)
+        return (
+            a[0] + f * (b[0] - a[0]),
+            a[1] + f * (b[1] - a[1]),
+            math.remainder(a[2] + f * dh, math.tau),
+        )

@@ -1,0 +1,91 @@
+"""The real arena in the page: the camera's video under the robot, the robot at its tracked
+pose (within millimetres of where it really is, while its odometry drifts), and a camera
+that goes away said in words.
+
+A real lab (router, registry, room, engine) plus the real arena `wart up` runs without
+hardware: an emulated Khepera with slipping wheels behind a bridge, and a synthetic camera
+rendering the emulator's true poses. The viewer runs in the test, so the test reads what
+it drew and sent to this browser; the DOM says what the page says.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.tracking.truth import read_truth
+from tests.browser.conftest import wait_until
+from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_lab import log_in, session_of
+from viewers.web.app import WebViewer
+from viewers.web.world_view import WorldView
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+REAL = "real1"
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    with real_lab(Path(tmp_path_factory.mktemp("realarena")), real_arena=REAL) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def truth_of(lab: RealLab) -> tuple[float, float, float]:
+    truth = read_truth(lab.lab.wiring().state_dir / "dev" / f"{REAL}-truth.json")
+    return truth.robots["k1"]
+
+
+def test_the_real_arena_shows_its_video_and_the_robot_where_it_is(open_page, lab: RealLab) -> None:
+    page = open_page("ida")
+    log_in(page, lab, "ida")
+    page.click(f"Join {REAL}")
+    browser = session_of(lab.viewer, "ida")
+    view, video = browser.view, browser.video
+    wait_until(lambda: view.snapshot is not None and view.snapshot.real, 30, what="the real arena")
+    wait_until(lambda: video.shown >= 0, 60, what="the camera's video drawn under the world")
+    with lab.driving("k1", speeds=(8, 12), world=REAL):
+        first = video.shown
+        # Driving for 20 s: the camera's frames keep coming to this browser.
+        wait_until(lambda: video.shown >= first + 20, 60, what="20 new video frames")
+        start = truth_of(lab)
+        wait_until(
+            lambda: math.dist(truth_of(lab)[:2], start[:2]) > 100, 60, what="k1 to drive 100 mm"
+        )
+    wait_until(
+        lambda: error_mm(view, lab) < 10.0, 15, what="k1 drawn within 10 mm of its true pose"
+    )
+    assert video.said == "", f"the page says: {video.said}"
+    page.screenshot("real-arena-video")
+
+
+def drawn_mm(view: WorldView) -> tuple[float, float]:
+    drawn = view.drawn_positions()
+    assert drawn is not None and len(drawn) == 1
+    return float(drawn[0][0]) * 1000.0, float(drawn[0][1]) * 1000.0
+
+
+def error_mm(view: WorldView, lab: RealLab) -> float:
+    x, y = drawn_mm(view)
+    tx, ty, _ = truth_of(lab)
+    return math.hypot(x - tx, y - ty)
+
+
+def test_a_camera_that_stops_is_said_on_the_page(open_page, lab: RealLab) -> None:
+    page = open_page("bob")
+    log_in(page, lab, "bob")
+    page.click(f"Join {REAL}")
+    video = session_of(lab.viewer, "bob").video
+    wait_until(lambda: video.shown >= 0, 60, what="the camera's video")
+    camera = next(p for p in lab.lab.procs.started if p.name.startswith("camera"))
+    camera.kill9()
+    wait_until(lambda: "stopped answering" in video.said, 30, what="the viewer to notice")
+    page.wait_text("camera offline: it has stopped answering", timeout=30_000)
+    page.screenshot("real-arena-camera-offline")

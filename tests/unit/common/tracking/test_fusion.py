@@ -1,0 +1,74 @@
+"""The bridge's pose of a real robot: the camera's sightings correct its drifting odometry."""
+
+from __future__ import annotations
+
+import math
+
+from common.tracking.fusion import PoseFusion
+
+
+def drive(
+    fusion: PoseFusion, seconds: float, *, camera_every: float | None, slip: float
+) -> list[float]:
+    """A robot driving a circle; its odometry overestimates each step by ``slip``.
+    Returns the shown pose's error against the truth at each poll (50 Hz)."""
+    errors = []
+    odo = [500.0, 200.0, 0.0]
+    true = [500.0, 200.0, 0.0]
+    last_seen = -1e9
+    for i in range(int(seconds * 50)):
+        t = i * 0.02
+        step, turn = 2.0, 0.01
+        true[2] += turn
+        true[0] += step * math.cos(true[2])
+        true[1] += step * math.sin(true[2])
+        odo[2] += turn * (1 + slip)
+        odo[0] += step * (1 + slip) * math.cos(odo[2])
+        odo[1] += step * (1 + slip) * math.sin(odo[2])
+        fusion.odometry("k1", *odo, at=t)
+        if camera_every is not None and t - last_seen >= camera_every:
+            fusion.seen("k1", *true, captured_at=t)
+            last_seen = t
+        shown = fusion.pose("k1", t)
+        assert shown is not None
+        errors.append(math.hypot(shown.x - true[0], shown.y - true[1]))
+    return errors
+
+
+def test_sightings_hold_a_slipping_robot_to_its_true_pose() -> None:
+    alone = drive(PoseFusion(1000, 1000), 60, camera_every=None, slip=0.03)
+    fused = drive(PoseFusion(1000, 1000), 60, camera_every=0.1, slip=0.03)
+    assert max(alone[-500:]) > 30.0  # odometry alone drifts far
+    assert max(fused) < 3.0  # a sighting each 0.1 s keeps it within millimetres
+
+
+def test_a_robot_the_live_camera_lost_is_not_seen_where_it_was_last_trusted() -> None:
+    fusion = PoseFusion(1000, 1000)
+    fusion.odometry("k1", 300, 300, 0, at=0.0)
+    fusion.seen("k1", 310, 305, 0.1, captured_at=0.0)
+    fusion.odometry("k1", 300, 300, 0, at=0.1)
+    assert fusion.pose("k1", 0.1).source == "tracked"  # type: ignore[union-attr]
+    for t in (0.5, 1.0, 1.5):  # the camera sees the arena, but not k1 (a hand over it)
+        fusion.camera_alive(t)
+        fusion.odometry("k1", 300 + 1000 * t, 300, 0, at=t)  # odometry runs off
+    shown = fusion.pose("k1", 1.5)
+    assert shown is not None and shown.source == "not seen"
+    assert (round(shown.x), round(shown.y)) == (310, 305)
+
+
+def test_without_a_camera_odometry_is_shown_inside_the_arena() -> None:
+    fusion = PoseFusion(1000, 1000)
+    fusion.odometry("k1", 1400.0, -80.0, 0.0, at=0.0)
+    shown = fusion.pose("k1", 0.0)
+    assert shown is not None and shown.source == "odometry"
+    assert (shown.x, shown.y) == (972.5, 27.5)
+
+
+def test_a_camera_that_went_silent_leaves_the_robot_on_odometry() -> None:
+    fusion = PoseFusion(1000, 1000)
+    fusion.odometry("k1", 100, 100, 0, at=0.0)
+    fusion.seen("k1", 200, 100, 0, captured_at=0.0)
+    fusion.odometry("k1", 150, 100, 0, at=5.0)  # 50 mm on since the sighting
+    shown = fusion.pose("k1", 5.0)
+    assert shown is not None and shown.source == "odometry"
+    assert round(shown.x) == 250  # the last correction carries on

@@ -1,0 +1,151 @@
+"""A real arena's camera in the page: its video as the floor of the world view.
+
+The camera publishes its frames rectified to the arena (``world/<w>/camera/<c>/
+floor``: 2 mm a pixel, the arena's +y up), so laid on the floor at the arena's
+size they line up with the robots drawn at their tracked poses, and no browser
+has to know the camera's geometry. One :class:`CameraFeed` per watched world
+keeps the newest frame (decoded once, however many browsers watch) and the
+camera's status; each browser's :class:`ArenaVideo` draws it a few times a
+second from its view's slow tick and says "camera offline: why" in a notice
+that stays until the camera is back.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+import viser
+import zenoh
+
+from common import keys
+from common.messages import CameraFrame, CameraStatus, MessageError, decode
+from viewers.web import geometry as geo
+from viewers.web.world_view import WorldView
+
+VIDEO_NODE = "/world/video"
+SILENT_S = 6.0  # a camera says its status every 2 s
+
+
+class CameraFeed:
+    """A real world's cameras, as the viewer watches them (shared by its browsers)."""
+
+    def __init__(self, session: zenoh.Session, realm: str, world: str) -> None:
+        self._lock = threading.Lock()
+        self._raw: bytes | None = None
+        self._count = 0
+        self._decoded: tuple[int, np.ndarray] | None = None
+        self.status: CameraStatus | None = None
+        self.heard_at: float | None = None  # the last message of any kind (wall clock)
+        self.frames = 0
+        self._sub = session.declare_subscriber(keys.camera_all(realm, world), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        self.heard_at = time.time()
+        key = str(sample.key_expr)
+        if key.endswith("/floor"):
+            self._raw = sample.payload.to_bytes()  # the newest only: decoded on demand
+            self._count += 1
+        elif key.endswith("/status"):
+            try:
+                status = decode(sample.payload.to_bytes(), CameraStatus)
+            except MessageError:
+                return
+            self.status = status
+
+    def floor(self) -> tuple[int, np.ndarray] | None:
+        """(frame number, RGB image) of the newest floor view, decoded once."""
+        with self._lock:
+            count, raw = self._count, self._raw
+            if raw is None:
+                return None
+            if self._decoded is not None and self._decoded[0] == count:
+                return self._decoded
+            try:
+                frame = decode(raw, CameraFrame)
+            except MessageError:
+                return self._decoded
+            image = cv2.imdecode(np.frombuffer(frame.data, np.uint8), cv2.IMREAD_COLOR)
+            if image is None:  # a frame that fails to decode: keep showing the last
+                return self._decoded
+            # viser lays an image's first row at the plane's -y edge; the floor view's
+            # first row is the arena's far (+y) side, so it goes in upside down.
+            self._decoded = (
+                count,
+                np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)[::-1]),
+            )
+            self.frames += 1
+            return self._decoded
+
+    def close(self) -> None:
+        with contextlib.suppress(zenoh.ZError):  # the session closing first
+            self._sub.undeclare()
+
+
+class ArenaVideo:
+    """One browser's view of a real arena's camera (a hook of its world view)."""
+
+    def __init__(self, view: WorldView) -> None:
+        self.view = view
+        self.shown = -1  # the frame number drawn
+        self.said = ""
+        self._image: viser.ImageHandle | None = None
+        self._notice: viser.NotificationHandle | None = None
+        view.slow_hooks.append(self.tick)
+
+    def _camera(self) -> CameraFeed | None:
+        feed: Any = self.view.feed
+        camera = getattr(feed, "camera", None)
+        return camera() if callable(camera) else None
+
+    def tick(self) -> None:
+        camera = self._camera()
+        snap = self.view.snapshot
+        if camera is None or snap is None or not snap.real:
+            self._clear()
+            return
+        scene = self.view.client.scene
+        floor = camera.floor()
+        if floor is not None and floor[0] != self.shown:
+            self.shown = floor[0]
+            self._image = scene.add_image(
+                VIDEO_NODE,
+                floor[1],
+                render_width=snap.width * geo.MM,
+                render_height=snap.height * geo.MM,
+                format="jpeg",
+                jpeg_quality=80,
+                position=(snap.width * geo.MM / 2, snap.height * geo.MM / 2, -0.0005),
+            )
+        status, heard = camera.status, camera.heard_at
+        text = ""
+        if heard is None:
+            text = "no camera over this arena: poses from odometry"
+        elif time.time() - heard > SILENT_S:  # it speaks at least every 2 s: gone
+            text = "camera offline: it has stopped answering (poses from odometry)"
+        elif status is None:
+            text = ""  # frames, and its status within 2 s
+        elif not status.online:
+            text = f"camera offline: {status.reason}"
+        elif not status.tracking:
+            text = "camera not calibrated: video only, poses from odometry"
+        if text != self.said:
+            self.said = text
+            if self._notice is not None:
+                self._notice.remove()
+                self._notice = None
+            if text:  # held until the camera is back (not a passing toast)
+                self._notice = self.view.client.add_notification(
+                    f"Camera over {snap.world}", text, with_close_button=True, color="yellow"
+                )
+
+    def _clear(self) -> None:
+        for handle in (self._image, self._notice):
+            if handle is not None:
+                handle.remove()
+        self._image = self._notice = None
+        self.shown, self.said = -1, ""
