@@ -5,9 +5,10 @@ floor``: 2 mm a pixel, the arena's +y up), so laid on the floor at the arena's
 size they line up with the robots drawn at their tracked poses, and no browser
 has to know the camera's geometry. One :class:`CameraFeed` per watched world
 keeps the newest frame (decoded once, however many browsers watch) and the
-camera's status; each browser's :class:`ArenaVideo` draws it a few times a
-second from its view's slow tick and says "camera offline: why" in a notice
-that stays until the camera is back.
+camera's status; each browser's :class:`ArenaVideo` draws each new frame on
+the pump's next tick (25 a second: a frame waits 20 ms on average, not the
+100 ms of the 5 Hz slow tick) and says "camera offline: why" in a notice that
+stays until the camera is back.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections import deque
 from typing import Any
 
 import cv2
@@ -38,7 +40,7 @@ class CameraFeed:
         self._lock = threading.Lock()
         self._raw: bytes | None = None
         self._count = 0
-        self._decoded: tuple[int, np.ndarray] | None = None
+        self._decoded: tuple[int, np.ndarray, float] | None = None
         self.status: CameraStatus | None = None
         self.heard_at: float | None = None  # the last message of any kind (wall clock)
         self.frames = 0
@@ -57,8 +59,8 @@ class CameraFeed:
                 return
             self.status = status
 
-    def floor(self) -> tuple[int, np.ndarray] | None:
-        """(frame number, RGB image) of the newest floor view, decoded once."""
+    def floor(self) -> tuple[int, np.ndarray, float] | None:
+        """(frame number, RGB image, capture time) of the newest floor view, decoded once."""
         with self._lock:
             count, raw = self._count, self._raw
             if raw is None:
@@ -74,10 +76,8 @@ class CameraFeed:
                 return self._decoded
             # viser lays an image's first row at the plane's -y edge; the floor view's
             # first row is the arena's far (+y) side, so it goes in upside down.
-            self._decoded = (
-                count,
-                np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)[::-1]),
-            )
+            rgb = np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)[::-1])
+            self._decoded = (count, rgb, frame.captured_at)
             self.frames += 1
             return self._decoded
 
@@ -95,7 +95,8 @@ class ArenaVideo:
         self.said = ""
         self._image: viser.ImageHandle | None = None
         self._notice: viser.NotificationHandle | None = None
-        view.slow_hooks.append(self.tick)
+        self.delays: deque[float] = deque(maxlen=1000)  # capture to sent, seconds (bench)
+        view.tick_hooks.append(self.tick)
 
     def _camera(self) -> CameraFeed | None:
         feed: Any = self.view.feed
@@ -121,6 +122,7 @@ class ArenaVideo:
                 jpeg_quality=80,
                 position=(snap.width * geo.MM / 2, snap.height * geo.MM / 2, -0.0005),
             )
+            self.delays.append(time.time() - floor[2])
         status, heard = camera.status, camera.heard_at
         text = ""
         if heard is None:

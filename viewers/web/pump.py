@@ -103,6 +103,8 @@ class FramePump:
                 # (world_view.ROBOT_BYTES_PER_S); every view of it on the same ticks.
                 if ready is not None and self.ticks % ready.every(self.rate) == 0:
                     view.apply(ready)
+                for hook in view.tick_hooks:  # every tick: a real arena's video
+                    hook()
                 if self.ticks % SLOW_EVERY == 0:
                     view.slow_tick()
                 held.done(view.client)

@@ -140,6 +140,7 @@ class WorldView:
         self.on_select: list[Callable[[int | None], None]] = []
         self.on_obstacle_click: list[Callable[[str], None]] = []
         self.slow_hooks: list[Callable[[], None]] = []  # run at about 5 Hz by the pump
+        self.tick_hooks: list[Callable[[], None]] = []  # every pump tick (25 Hz): cheap ones
         self._setup_scene()
 
     def _setup_scene(self) -> None:
