@@ -55,8 +55,10 @@ def tracked_topic(agent: str) -> str:
     return f"/robot/{agent}/tracked"
 
 
-def camera_topic(camera: str) -> str:
-    return f"/camera/{camera}/image"
+def camera_topic(camera: str, view: str = "image") -> str:
+    """``image``: the frame as the camera saw it; ``floor``: rectified to the arena
+    (2 mm a pixel, +y up), what a replay lays under its world view."""
+    return f"/camera/{camera}/{view}"
 
 
 class RunInfo(msgspec.Struct, frozen=True, kw_only=True):
@@ -264,7 +266,7 @@ def record_type(topic: str) -> type | None:
     parts = topic.split("/")
     if len(parts) == 4 and parts[1] == "robot":
         return ROBOT_TYPES.get(parts[3])
-    if len(parts) == 4 and parts[1] == "camera" and parts[3] == "image":
+    if len(parts) == 4 and parts[1] == "camera" and parts[3] in ("image", "floor"):
         return CompressedImage
     return None
 

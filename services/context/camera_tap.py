@@ -2,11 +2,12 @@
 
 The recorder subscribes to the world's cameras and tracked poses beside its
 frames; this module holds that part. Frames are kept at most
-:data:`IMAGE_HZ` a second per camera (a minute at 640x480 is about 5 MB) as
-Foxglove's ``CompressedImage``; every tracked pose goes in, stamped with the
-frame's capture time, so the video, the tracked poses and the robot's own
-telemetry replay on one clock. A simulated world has no camera: nothing is
-subscribed to there that ever speaks.
+:data:`IMAGE_HZ` a second per camera (a minute is about 5 MB) as Foxglove's
+``CompressedImage``: the floor view rectified to the arena when the camera is
+calibrated (what a replay lays under its world view), else the frame as seen;
+every tracked pose goes in, stamped with the frame's capture time, so the
+video, the tracked poses and the robot's own telemetry replay on one clock. A
+simulated world has no camera: nothing is subscribed to there that ever speaks.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ class CameraTap:
     def __init__(self, recorder: SlotRecorder) -> None:
         self.recorder = recorder
         self._last_image: dict[str, float] = {}  # key -> when the last kept frame came
+        self._floor_at: dict[str, float] = {}  # camera key -> its last floor view
 
     def subscriptions(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
         r, w = self.recorder.realm, self.recorder.world
@@ -47,13 +49,19 @@ class CameraTap:
 
     def _on_camera(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
-        if not key.endswith("/image") or not self.recorder._any():
+        view = key.rsplit("/", 1)[-1]
+        if view not in ("image", "floor") or not self.recorder._any():
             return
+        camera = key.rsplit("/", 1)[0]
         now = time.monotonic()
+        if view == "floor":
+            self._floor_at[camera] = now
+        elif now - self._floor_at.get(camera, -1e9) < 3.0:
+            return  # the floor view is recorded instead
         if now - self._last_image.get(key, 0.0) < 1.0 / IMAGE_HZ:
             return
         self._last_image[key] = now
-        self.recorder._put(("camera", sample.payload.to_bytes()))
+        self.recorder._put(("camera", sample.payload.to_bytes(), view))
 
     def _on_tracked(self, sample: zenoh.Sample) -> None:
         if self.recorder._any():
@@ -64,19 +72,20 @@ class CameraTap:
     def _runs(self) -> list[Any]:
         return list(self.recorder._runs.values())
 
-    def _image(self, payload: bytes) -> None:
+    def _image(self, payload: bytes, view: str = "image") -> None:
         try:
             frame = decode(payload, CameraFrame)
         except MessageError:
             return
+        topic = s.camera_topic(frame.camera, view)
         record = s.CompressedImage(
             timestamp=s.stamp(frame.captured_at),
-            frame_id=f"camera/{frame.camera}",
+            frame_id=topic.strip("/"),
             data=frame.data,
             format=frame.encoding,
         )
         for rec in self._runs():
-            rec.writer.write(s.camera_topic(frame.camera), record, frame.captured_at)
+            rec.writer.write(topic, record, frame.captured_at)
 
     def _tracked(self, payload: bytes) -> None:
         try:

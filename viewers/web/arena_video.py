@@ -13,10 +13,12 @@ stays until the camera is back.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import cv2
@@ -98,7 +100,7 @@ class ArenaVideo:
         self.delays: deque[float] = deque(maxlen=1000)  # capture to sent, seconds (bench)
         view.tick_hooks.append(self.tick)
 
-    def _camera(self) -> CameraFeed | None:
+    def _camera(self) -> CameraFeed | RecordedCamera | None:
         feed: Any = self.view.feed
         camera = getattr(feed, "camera", None)
         return camera() if callable(camera) else None
@@ -151,3 +153,37 @@ class ArenaVideo:
                 handle.remove()
         self._image = self._notice = None
         self.shown, self.said = -1, ""
+
+
+class RecordedCamera:
+    """A real run's recorded floor view at a replay's cursor (the camera of a recording).
+
+    ``images`` are the recording's floor frames with their capture times, in order;
+    ``cursor`` gives the replay's time on the same (wall) clock.
+    """
+
+    status: CameraStatus | None = None  # a recording has no live camera to be offline
+
+    def __init__(self, images: list[tuple[float, bytes]], cursor: Callable[[], float]) -> None:
+        self._times = [t for t, _ in images]
+        self._jpegs = [data for _, data in images]
+        self._cursor = cursor
+        self._decoded: tuple[int, np.ndarray, float] | None = None
+        self.frames = 0
+
+    @property
+    def heard_at(self) -> float:
+        return time.time()
+
+    def floor(self) -> tuple[int, np.ndarray, float] | None:
+        i = bisect.bisect_right(self._times, self._cursor()) - 1
+        if i < 0:
+            return None
+        if self._decoded is None or self._decoded[0] != i:
+            image = cv2.imdecode(np.frombuffer(self._jpegs[i], np.uint8), cv2.IMREAD_COLOR)
+            if image is None:
+                return self._decoded
+            rgb = np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)[::-1])
+            self._decoded = (i, rgb, self._times[i])
+            self.frames += 1
+        return self._decoded

@@ -29,6 +29,7 @@ from common.recording import RecordingError, read_recording
 from common.recording.reader import Recording
 from common.recording.replay import SPEEDS, Player, Timeline
 from viewers.web.adapters import LabError, MapEdit, RobotReadings, SceneFrame, SceneLayout
+from viewers.web.arena_video import ArenaVideo, RecordedCamera
 from viewers.web.inputs import set_value
 from viewers.web.live_world import convert_snapshot
 from viewers.web.pump import FramePump
@@ -60,6 +61,7 @@ class ReplayFeed:
         self._world = info.world
         self._layouts: dict[int, _Layout] = {}  # id(WorldSnapshot) -> converted
         self._frames: dict[int, SceneFrame] = {}  # frame index -> converted (at most one)
+        self._camera: RecordedCamera | bool | None = None  # False: the run has no video
 
     @property
     def world(self) -> str:
@@ -114,6 +116,21 @@ class ReplayFeed:
         )
         self._frames = {moment.index: scene}
         return scene
+
+    def camera(self) -> RecordedCamera | None:
+        """A real run's floor video at the cursor; None when it recorded none."""
+        if self._camera is None:
+            images = [
+                (stamped.t, stamped.record.data)
+                for stamped in self.timeline.recording.images
+                if stamped.record.frame_id.endswith("/floor")
+            ]
+            self._camera = RecordedCamera(images, self._wall_cursor) if images else False
+        return self._camera if isinstance(self._camera, RecordedCamera) else None
+
+    def _wall_cursor(self) -> float:
+        """The cursor on the recording's own clock (its records' log times)."""
+        return self.player.cursor + self.timeline.start
 
     def sensors(self, agent: str) -> RobotReadings | None:
         sample = self.player.moment().sample
@@ -359,6 +376,7 @@ class ReplayServer:
 
     def _connected(self, client: viser.ClientHandle) -> None:
         view = WorldView(client)
+        ArenaVideo(view)  # a real run's recorded video under its world
         self.pump.attach(view)
         client.gui.add_markdown(f"### {escape_md(self.recording.path.name)}")
         controls = ReplayControls(client, view, self.recording)

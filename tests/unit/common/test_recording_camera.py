@@ -101,3 +101,44 @@ def test_a_real_run_is_compared_by_where_the_camera_saw_its_robot(tmp_path: Path
     drifted = compare(read_recording(sim), read_recording(real_by_frames))
     assert drifted.b.poses_from == "frames"
     assert drifted.final_pose_error_mm > 50.0
+
+
+def test_a_replay_lays_the_floor_video_of_its_cursor(tmp_path: Path) -> None:
+    """The recorded floor view at the replay's cursor: the frame taken last before it."""
+    from common.recording.replay import Player, Timeline
+    from viewers.web.replay import ReplayFeed
+
+    path = tmp_path / "real.mcap"
+    start = 1000.0
+    writer = RecordingWriter(path, info(start, "real1"))
+    writer.write(
+        s.SNAPSHOT,
+        packing.snapshot(maps.load_map(REPO / "maps" / "empty.json", name="real1")),
+        start,
+    )
+    for i in range(10):
+        t = start + i * 0.5
+        writer.write(s.FRAME, frame_at(200.0 + 20 * i, 500.0, i * 0.5), t)
+        shade = np.full((50, 50, 3), 20 * i, np.uint8)  # frame i is grey level 20 i
+        jpeg = cv2.imencode(".jpg", shade)[1].tobytes()
+        topic = s.camera_topic("real1-cam", "floor")
+        writer.write(topic, s.CompressedImage(s.stamp(t), topic.strip("/"), jpeg, "jpeg"), t)
+    writer.finish(s.RunEnd(status="finished", reason="its slot ended", at=start + 5))
+    player = Player(Timeline(read_recording(path)))
+    camera = ReplayFeed(player).camera()
+    assert camera is not None
+    player.seek(2.2)  # between frames 4 (2.0 s) and 5 (2.5 s)
+    shown = camera.floor()
+    assert shown is not None and shown[0] == 4 and shown[2] == start + 2.0
+    assert abs(int(shown[1].mean()) - 80) <= 2  # grey level 20 * 4
+    player.seek(0.0)
+    assert camera.floor() is not None and camera.floor()[0] == 0  # type: ignore[index]
+
+
+def test_a_simulated_run_has_no_video_to_replay(tmp_path: Path) -> None:
+    from common.recording.replay import Player, Timeline
+    from viewers.web.replay import ReplayFeed
+
+    path = tmp_path / "sim.mcap"
+    write_run(path, "arena1", camera=False)
+    assert ReplayFeed(Player(Timeline(read_recording(path)))).camera() is None
