@@ -25,7 +25,7 @@ from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.odometry import Odometry
 from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Proc, Procs, Router, wait_for
 from tests.integration.test_camera import Newest, Truth
 
 pytestmark = pytest.mark.integration
@@ -67,6 +67,18 @@ def pose_from(session: zenoh.Session, realm: str) -> str:
     return ""
 
 
+def start_bridge_and_camera(
+    router: Router, procs: Procs, alive_watch: AliveWatch, port: str, source: str, *extra: str
+) -> tuple[Proc, Proc]:
+    """The bridge on the emulated robot's pty, then a camera over its world."""
+    net = router.net_args()
+    robot = f"{port}={AGENT}@500,500,0"
+    bridge = procs.start("bridge", ["bridge", "--world", WORLD, "--port", robot, *net])
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.WORLD, WORLD), 30.0), bridge.output()
+    argv = ["camera", "--world", WORLD, "--source", source, "--auto-calibrate", *extra, *net]
+    return bridge, procs.start("camera", argv)
+
+
 def test_the_camera_holds_a_slipping_robot_to_its_true_pose(
     router: Router,
     procs: Procs,
@@ -77,24 +89,8 @@ def test_the_camera_holds_a_slipping_robot_to_its_true_pose(
     truth: Path,
 ) -> None:
     realm = router.realm
-    net = router.net_args()
-    bridge = procs.start(
-        "bridge", ["bridge", "--world", WORLD, "--port", f"{emulator.port}={AGENT}@500,500,0", *net]
-    )
-    assert alive_watch.wait(keys.alive(realm, AliveKind.WORLD, WORLD), 30.0), bridge.output()
-    camera = procs.start(
-        "camera",
-        [
-            "camera",
-            "--world",
-            WORLD,
-            "--source",
-            f"synthetic:{truth}",
-            "--auto-calibrate",
-            "--fps",
-            "15",
-            *net,
-        ],
+    bridge, camera = start_bridge_and_camera(
+        router, procs, alive_watch, emulator.port, f"synthetic:{truth}", "--fps", "15"
     )
     frames = Newest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
     tracked = Newest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
@@ -140,13 +136,8 @@ def test_a_robot_the_camera_loses_is_not_seen_and_the_world_says_so(
 ) -> None:
     realm = router.realm
     net = router.net_args()
-    bridge = procs.start(
-        "bridge", ["bridge", "--world", WORLD, "--port", f"{emulator.port}={AGENT}@500,500,0", *net]
-    )
-    assert alive_watch.wait(keys.alive(realm, AliveKind.WORLD, WORLD), 30.0), bridge.output()
-    camera = procs.start(
-        "camera",
-        ["camera", "--world", WORLD, "--source", f"synthetic:{truth}", "--auto-calibrate", *net],
+    bridge, camera = start_bridge_and_camera(
+        router, procs, alive_watch, emulator.port, f"synthetic:{truth}"
     )
     wait_for(
         lambda: pose_from(zsession, realm) == "tracked",
