@@ -239,3 +239,32 @@ def test_markers_of_no_robot_are_said_once(
         assert proc.output().count("marker 7 belongs to no robot of this arena: ignored") == 1
     finally:
         stray.close()
+
+
+def test_wart_camera_calibrate_saves_a_calibration_the_camera_then_uses(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    truth: Truth,
+    tmp_path: Path,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+) -> None:
+    out = tmp_path / "arena.json"
+    source = f"synthetic:{truth.path}"
+    argv = ["camera", "calibrate", "--world", WORLD, "--source", source, "--out", str(out)]
+    calibrate = procs.start("calibrate", [*argv, *router.net_args()])
+    assert calibrate.popen.wait(60) == 0, calibrate.output()
+    assert "calibrated 640x480 from the reference markers" in calibrate.output()
+    tracked = Newest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+    camera = start_camera(
+        procs, router, "--source", f"synthetic:{truth.path}", "--calibration", str(out)
+    )
+    wait_for(
+        lambda: tracked.count > 3, 60.0, f"tracking with the saved calibration:\n{camera.output()}"
+    )
+    argv = ["camera", "calibrate", "--world", WORLD, "--arena", "1000x1000"]
+    argv += ["--source", str(tmp_path / "none.mp4"), "--out", str(out)]
+    missing = procs.start("calibrate-missing", argv)
+    assert missing.popen.wait(60) == 2
+    assert "no video file at" in missing.output()
