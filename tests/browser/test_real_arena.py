@@ -51,6 +51,9 @@ def test_the_real_arena_shows_its_video_and_the_robot_where_it_is(open_page, lab
     view, video = browser.view, browser.video
     wait_until(lambda: view.snapshot is not None and view.snapshot.real, 30, what="the real arena")
     wait_until(lambda: video.shown >= 0, 60, what="the camera's video drawn under the world")
+    node = video.image
+    assert node is not None
+    assert tuple(node.position) == pytest.approx((0.5, 0.5, -0.0005))  # centred on the arena
     with lab.driving("k1", speeds=(8, 12), world=REAL):
         first = video.shown
         # Driving for 20 s: the camera's frames keep coming to this browser.

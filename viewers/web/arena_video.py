@@ -100,6 +100,11 @@ class ArenaVideo:
         self.delays: deque[float] = deque(maxlen=1000)  # capture to sent, seconds (bench)
         view.tick_hooks.append(self.tick)
 
+    @property
+    def image(self) -> viser.ImageHandle | None:
+        """The video's scene node (made once per arena shown)."""
+        return self._image
+
     def _camera(self) -> CameraFeed | RecordedCamera | None:
         feed: Any = self.view.feed
         camera = getattr(feed, "camera", None)
@@ -115,15 +120,22 @@ class ArenaVideo:
         floor = camera.floor()
         if floor is not None and floor[0] != self.shown:
             self.shown = floor[0]
-            self._image = scene.add_image(
-                VIDEO_NODE,
-                floor[1],
-                render_width=snap.width * geo.MM,
-                render_height=snap.height * geo.MM,
-                format="jpeg",
-                jpeg_quality=80,
-                position=(snap.width * geo.MM / 2, snap.height * geo.MM / 2, -0.0005),
-            )
+            if self._image is None:
+                self._image = scene.add_image(
+                    VIDEO_NODE,
+                    floor[1],
+                    render_width=snap.width * geo.MM,
+                    render_height=snap.height * geo.MM,
+                    format="jpeg",
+                    jpeg_quality=80,
+                    cast_shadow=False,
+                    receive_shadow=False,
+                    position=(snap.width * geo.MM / 2, snap.height * geo.MM / 2, -0.0005),
+                )
+            else:
+                # Only the picture changes: a node made again each frame lost its position
+                # when the pump batched its messages (seen at 25 Hz in a fresh lab).
+                self._image.image = floor[1]
             self.delays.append(time.time() - floor[2])
         status, heard = camera.status, camera.heard_at
         text = ""
