@@ -113,7 +113,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wart: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(SUBCOMMANDS[name][0])
-    return int(module.main(rest, prog=f"wart {name}") or 0)
+    try:
+        return int(module.main(rest, prog=f"wart {name}") or 0)
+    except KeyboardInterrupt:  # a second Ctrl-C: quit at once, as the tool said, no traceback
+        print(f"wart {name}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
