@@ -53,9 +53,13 @@ def viewer(lab: RealLab) -> WebViewer:
 
 
 def write_code(page: ViserPage, text: str, wait_for: object) -> None:
-    """Type into the editor as a student does: select all, then the new text."""
-    area = page.input_after_label("Code")
-    area.fill(text)
+    """Put ``text`` in the code editor as a paste does (typing would auto-indent it)."""
+    page.p.get_by_role("textbox", name="Controller code", exact=True).wait_for(timeout=15_000)
+    page.p.evaluate(
+        "text => { const v = [...window.wartEditor.views.values()][0].view;"
+        " v.dispatch({changes: {from: 0, to: v.state.doc.length, insert: text}}); }",
+        text,
+    )
     wait_until(lambda: wait_for() is True, 10, what="the editor's text on the server")  # type: ignore[operator]
 
 
@@ -72,7 +76,7 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
     alice.click("Check")
     alice.wait_text("line 11: robot.set")
     alice.wait_text("does not exist on Khepera (did you mean set")
-    assert ">> 11 |         robot.set_speed(8, 4)" in bench.problems.content
+    assert "&gt;&gt; 11 |         robot.set_speed(8, 4)" in bench.problems.content
     alice.wait_text(">> 11 |")
     alice.screenshot("workbench-check-names-the-line")
     # Run refuses a file Check finds wrong: nothing is queued.

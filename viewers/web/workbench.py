@@ -19,14 +19,19 @@ page keeps nothing of its own), edits it in a multiline text input, and:
 - **Reset**: the robot back at its start pose (the world allows it only to
   whoever holds the robot now, or a map editor).
 
-viser's text area cannot colour a line, so problems are "marked" beside it: a
-list, and an excerpt of the code with ``>>`` in front of each problem line. A
-run's exception (the runner relays the traceback as output lines) is parsed
-for the innermost line of the student's file and shown the same way.
+The code is written in a CodeMirror editor (viewers/web/code_editor.py) laid
+over the viser text area ``code``, which stays what this class reads and
+writes. Problems are marked in the editor's gutter (message on hover) and
+listed under it, each line number a link that moves the editor there, with an
+excerpt of the code (``>>`` in front of each problem line), all as escaped
+HTML, never markdown. A run's exception (the runner relays the traceback as
+output lines) is parsed for the innermost line of the student's file and shown
+the same way.
 """
 
 from __future__ import annotations
 
+import html
 import logging
 import re
 import threading
@@ -44,6 +49,7 @@ from viewers.web.adapters import (
     OutputEvent,
     RequestEvent,
 )
+from viewers.web.code_editor import CodeEditor
 from viewers.web.inputs import on_click, set_value
 from viewers.web.live_agents import check_upload
 from viewers.web.robot_panel import NONE, RobotPanel
@@ -70,7 +76,7 @@ def examples() -> dict[str, bytes]:
 
 
 def excerpt(source: str, problems: list[Problem]) -> str:
-    """The code around each problem line, the line itself marked ``>>`` (markdown)."""
+    """The code around each problem line, the line itself marked ``>>`` (plain text)."""
     lines = source.splitlines()
     marked = sorted({p.line for p in problems if p.line is not None and p.line >= 1})
     if not marked or not lines:
@@ -88,25 +94,40 @@ def excerpt(source: str, problems: list[Problem]) -> str:
         mark = ">>" if i in marked else "  "
         out.append(f"{mark} {i:>{width}} | {lines[i - 1]}")
         previous = i
-    return "```\n" + "\n".join(out).replace("```", "'''") + "\n```"
+    return "\n".join(out)
+
+
+def problem_item(problem: Problem) -> str:
+    """One problem as HTML: its line a link that moves the editor there, the rest escaped."""
+    if problem.line is None:
+        return f"<li>{html.escape(problem.message)}</li>"
+    n = problem.line
+    link = f'<a href="#" data-wart-line="{n}" title="Go to line {n}">line {n}</a>'
+    return f"<li>{link}: {html.escape(problem.message)}</li>"
 
 
 def format_problems(source: str, problems: list[Problem], heading: str) -> str:
-    items = [f"- {escape_md(str(p))}" for p in problems]
-    return f"**{escape_md(heading)}**\n\n" + "\n".join(items) + "\n\n" + excerpt(source, problems)
+    """Problems as HTML (text escaped, never interpreted): a list, then the marked excerpt."""
+    items = "".join(problem_item(p) for p in problems)
+    shown = excerpt(source, problems)
+    code = f'<pre class="wart-output">{html.escape(shown)}</pre>' if shown else ""
+    return (
+        f'<div class="wart-output"><b>{html.escape(heading)}</b>'
+        f'<ul style="margin:4px 0;padding-left:18px">{items}</ul>{code}</div>'
+    )
 
 
 def format_dry_run(source: str, result: DryRunResult, heading: str) -> str:
-    """A dry run's verdict (markdown): an exception's line marked as Check marks it."""
-    details = "\n".join(f"- {escape_md(line)}" for line in result.details)
+    """A dry run's verdict (HTML): an exception's line marked as Check marks it."""
+    details = "\n".join(result.details)
     if result.line is None:
-        body = f"**{escape_md(heading)}**"
+        body = f'<div class="wart-output"><b>{html.escape(heading)}</b></div>'
     else:
         # The verdict says "will NOT run: line 12: ZeroDivisionError: ..."; the item says it once.
         message = result.verdict.removeprefix("will NOT run: ")
         message = message.removeprefix(f"line {result.line}: ")
         body = format_problems(source, [Problem(result.line, message)], heading)
-    return body + ("\n\n" + details if details else "")
+    return body + (f'<pre class="wart-output">{html.escape(details)}</pre>' if details else "")
 
 
 @dataclass
@@ -163,6 +184,8 @@ class Workbench:
             self.name = gui.add_text("File name", DEFAULT_NAME)
             first = next(iter(self._examples.values()), b"")
             self.code = gui.add_text("Code", first.decode("utf-8", "replace"), multiline=True)
+            # CodeMirror over the text area above; it hides it and writes into it.
+            self.editor = CodeEditor(gui, self.code)
             self.check = gui.add_button("Check", icon=viser.Icon.CHECKLIST)
             self.save = gui.add_button("Save", icon=viser.Icon.DEVICE_FLOPPY)
             self.run = gui.add_button(
@@ -179,7 +202,7 @@ class Workbench:
             self.stop = gui.add_button("Stop", color="red", icon=viser.Icon.PLAYER_STOP)
             self.reset = gui.add_button("Reset", icon=viser.Icon.REFRESH)
             self.status = gui.add_markdown("")
-            self.problems = gui.add_markdown("")
+            self.problems = gui.add_html("")
         self.open.on_click(lambda _: self._open())
         on_click(self.check, self.check_now)
         on_click(self.save, self._save)
@@ -200,6 +223,11 @@ class Workbench:
         self.problems.content = (
             format_problems(self.code.value, problems, heading) if problems else ""
         )
+        self.editor.mark(problems)
+
+    def _clear(self) -> None:
+        self.problems.content = ""
+        self.editor.mark([])
 
     # -- files
 
@@ -255,7 +283,7 @@ class Workbench:
         else:
             return
         set_value(self.code, source.decode("utf-8", "replace"))
-        self.problems.content = ""
+        self._clear()
         self.say(f"Opened {name}.")
 
     def _save(self) -> str | None:
@@ -283,7 +311,7 @@ class Workbench:
             self._show(problems, f"Check: {count}")
             self.say(f"Check found {count}: see the marked lines below.")
         else:
-            self.problems.content = ""
+            self._clear()
             self.say(
                 "Check: no problems found. It will load and run; whether it drives well, "
                 "only a run shows."
@@ -377,6 +405,7 @@ class Workbench:
         self.say(f"Dry run of {name} on {agent} done: it {verdict}, see below.")
         heading = f"Dry run on {agent}: {result.verdict}"
         self.problems.content = format_dry_run(self.code.value, result, heading)
+        self.editor.mark([] if result.line is None else [Problem(result.line, result.verdict)])
 
     def refresh_real(self) -> list[tuple[str, str]]:
         robots = self.connection.real_robots()
