@@ -30,11 +30,12 @@ class Circle(Controller):
     period = 0.05
 
     def initialize(self, robot: Khepera) -> None:
-        print("circling")
+        print("left_speed=[3, 4] *fast* #1 <b>x</b>")
 
     def do_work(self, robot: Khepera) -> None:
         robot.set_speeds(8, 4)
 """
+PRINTED = "left_speed=[3, 4] *fast* #1 <b>x</b>"
 PLANTED = GOOD.replace("robot.set_speeds(8, 4)", "robot.set_speed(8, 4)")  # line 11
 
 
@@ -78,6 +79,7 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
     alice.wait_text("does not exist on Khepera (did you mean set")
     assert "&gt;&gt; 11 |         robot.set_speed(8, 4)" in bench.problems.content
     alice.wait_text(">> 11 |")
+    assert alice.p.locator(".cm-lint-marker-error").count() == 1  # and in the gutter
     alice.screenshot("workbench-check-names-the-line")
     # Run refuses a file Check finds wrong: nothing is queued.
     pick_robot(alice, panel, "k0")
@@ -103,6 +105,11 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
         )
 
     wait_until(k0_moved, 20, what="k0 driven by the editor's controller")
+    # The print is shown exactly as printed: no markdown, no HTML, no backslashes.
+    printed = alice.p.locator("pre.wart-output", has_text=PRINTED)
+    printed.first.wait_for(timeout=15_000)
+    assert f"k0 alice: {PRINTED}" in printed.first.inner_text().splitlines()
+    assert printed.first.locator("b", has_text="x").count() == 0  # <b> was text, not markup
     alice.screenshot("workbench-running")
     # The file is kept by the lab, under alice's name: it is in her list.
     assert "mine: my_controller.py" in bench.start_from.options
