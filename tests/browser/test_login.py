@@ -6,6 +6,7 @@ import io
 
 import numpy as np
 import pytest
+from playwright.sync_api import expect
 
 from tests.browser.conftest import wait_until
 from viewers.web.app import WebViewer
@@ -21,12 +22,28 @@ def test_login_and_wrong_password(open_page, viewer: WebViewer) -> None:
 
     page.fill("Password", "ben-pw")
     page.click("Log in")
-    page.tab("lab@127.0.0.1").first.click()
+    # The page goes to the lab's tab by itself; its short name has the full one on hover.
+    lab_tab = page.tab("lab@127.0.0.1").first
+    expect(lab_tab).to_have_attribute("aria-selected", "true", timeout=15_000)
+    assert lab_tab.inner_text().strip() == "lab@127.0.0.1"
+    expect(lab_tab).to_have_attribute("title", "lab at 127.0.0.1:7447")
     page.wait_text("Logged in as")
     page.wait_text("Online:")
     page.screenshot("lobby")
     session = next(iter(viewer.sessions.values()))
     assert [t.connection.user for t in session.labs.values()] == ["ben"]
+
+    # Join goes to the arena's tab and shows its world.
+    page.click("Join arena")
+    arena_tab = page.tab("arena (arena)").last
+    expect(arena_tab).to_have_attribute("aria-selected", "true", timeout=15_000)
+    expect(lab_tab).to_have_attribute("aria-selected", "false")
+    wait_until(
+        lambda: session.watching is not None and session.watching.ctx == "arena",
+        what="the joined arena in the world view",
+    )
+    assert session.view.feed is not None
+    lab_tab.click()
 
     page.click("Log out")
     wait_until(lambda: not session.labs, what="the lab tab to close")

@@ -34,6 +34,7 @@ from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.inputs import on_click, set_value
 from viewers.web.network_panel import NetworkPanel
+from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
 
 log = logging.getLogger("wart.viewer.lobby")
@@ -67,7 +68,9 @@ class LabTab:
         self._private: list[str] = []
         self.closed = False
         gui = client.gui
-        self.tab = tabs.add_tab(connection.address.label, icon=viser.Icon.HOME)
+        # Short enough to read in a tab; the full address is its hover title (tabs.py).
+        self.tab_name = tab_label(connection.address)
+        self.tab = tabs.add_tab(self.tab_name, icon=viser.Icon.HOME)
         with self.tab:
             self.header = gui.add_markdown("")
             self.online = gui.add_markdown("")
