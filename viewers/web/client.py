@@ -172,6 +172,12 @@ class BrowserSession:
         self._refresh_recent()
         # The lab's tab is where the person goes next: the page shows it (tabs.py).
         self.switcher.show(tab.tab_name, tab_title(address))
+        # Also said in words (headless clients and the benchmark wait for these words).
+        self.client.add_notification(
+            title=f"Logged in to {address.label}",
+            body=f"as {connection.user}: its lobby is the tab '{tab.tab_name}'.",
+            auto_close_seconds=5.0,
+        )
         if address.context:
             tab.join(address.context)
 
