@@ -16,9 +16,10 @@ import pytest
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.reallab import RealLab, real_lab
-from tests.browser.test_real_agents import enter_arena, pick_robot
+from tests.browser.test_real_agents import choose, enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
 from viewers.web.app import WebViewer
+from viewers.web.robot_panel import NONE
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -81,8 +82,11 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
     alice.wait_text(">> 11 |")
     assert alice.p.locator(".cm-lint-marker-error").count() == 1  # and in the gutter
     alice.screenshot("workbench-check-names-the-line")
-    # Run refuses a file Check finds wrong: nothing is queued.
-    pick_robot(alice, panel, "k0")
+    # Run refuses a file Check finds wrong: nothing is queued. The robot is chosen
+    # beside the editor's buttons; the robot panel's list follows.
+    choose(alice, "Run on", "k0")
+    assert panel.robots is not None
+    wait_until(lambda: panel.robots.robot.value == "k0", 10, what="the panel following Run on")
     alice.click("Run in simulation")
     alice.wait_text("Not queued: fix the problems Check found first")
 
@@ -177,3 +181,49 @@ def test_the_editors_dry_run_says_a_controller_that_charges_a_wall_will_not_run(
     carol.screenshot("workbench-dry-run-wall")
     assert "collision at" in bench.problems.content  # what it saw, under the code
     assert all(not r.queue and r.holder is None for r in panel.robots._rows)  # nothing queued
+
+
+QUEUED = b"""\
+from common.controller import Controller, Khepera
+
+
+class Spin(Controller):
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(-5, 5)
+"""
+
+
+def test_the_editors_stop_ends_a_run_started_by_queue_with_no_robot_chosen(
+    open_page, lab: RealLab
+) -> None:
+    bob = open_page("bob")
+    panel = enter_arena(bob, lab, "bob")
+    bench, robots = panel.workbench, panel.robots
+    assert bench is not None and robots is not None
+    # Queued from the robot panel (not the editor): the run is on k2.
+    pick_robot(bob, panel, "k2")
+    wait_until(lambda: bench.target.value == "k2", 10, what="Run on following the panel")
+    upload(bob, "spin.py", QUEUED)
+    bob.wait_text("spin.py is queued for k2")
+
+    def mine() -> list[tuple[str, int | None]]:
+        return [
+            (r.agent, r.my_position) for r in bench.connection.agents(bench.ctx) if r.my_request
+        ]
+
+    wait_until(lambda: mine() == [("k2", 0)], 20, what="bob's run on k2")
+    # No robot chosen anywhere: the editor's Stop still finds and ends it.
+    choose(bob, "Run on", NONE)
+    wait_until(lambda: bench.target.value == NONE, 10, what="Run on emptied")
+    bob.click("Stop")
+    bob.wait_text("Stopped:")
+    wait_until(lambda: mine() == [], 15, what="bob's run on k2 ended by Stop")
+
+    # "Cancel my request" with one request and no robot chosen cancels it too.
+    pick_robot(bob, panel, "k2")  # "(none)" in Run on emptied the panel's choice too
+    upload(bob, "spin2.py", QUEUED)
+    bob.wait_text("spin2.py is queued for k2")
+    wait_until(lambda: mine() == [("k2", 0)], 20, what="bob's second run on k2")
+    pick_robot(bob, panel, NONE)
+    bob.click("Cancel my request")
+    wait_until(lambda: mine() == [], 15, what="bob's run cancelled from the robot panel")

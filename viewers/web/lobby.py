@@ -36,6 +36,7 @@ from viewers.web.inputs import on_click, set_value
 from viewers.web.network_panel import NetworkPanel
 from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
+from viewers.web.workbench import Workbench
 
 log = logging.getLogger("wart.viewer.lobby")
 
@@ -169,13 +170,23 @@ class LabTab:
             self.panels[ctx] = panel
         self._directory = None  # the Join button's state changed
         self.refresh()
+        for bench in self._workbenches():  # a real arena joined: its robots join the lists
+            if bench is not panel.workbench:
+                bench.refresh_targets()
         if self._on_context is not None:
             self._on_context(panel)
         return panel
 
+    def _workbenches(self) -> list[Workbench]:
+        with self._lock:
+            panels = list(self.panels.values())
+        return [p.workbench for p in panels if p.workbench is not None]
+
     def _panel_closed(self, panel: ChatPanel) -> None:
         with self._lock:
             self.panels.pop(panel.ctx, None)
+        for bench in self._workbenches():  # a real arena left: its robots leave the lists
+            bench.refresh_targets()
         if self._on_context_closed is not None:
             self._on_context_closed(panel)
         self._directory = None
@@ -276,6 +287,10 @@ class LabTab:
             )
         elif isinstance(event, AgentsEvent | RequestEvent | OutputEvent):
             panel = self.panels.get(event.ctx)
+            if isinstance(event, AgentsEvent):
+                for bench in self._workbenches():  # their lists hold the real arenas' robots
+                    if bench.ctx != event.ctx:
+                        bench.refresh_targets()
             robots = panel.robots if panel is not None else None
             if robots is None:
                 return
@@ -283,12 +298,12 @@ class LabTab:
                 robots.refresh_agents()
             elif isinstance(event, RequestEvent):
                 robots.on_request(event)
-                if panel is not None and panel.workbench is not None:
-                    panel.workbench.on_request(event)
+                for bench in self._workbenches():  # a real run may come from another arena's
+                    bench.on_request(event)
             else:
                 robots.on_output(event)
-                if panel is not None and panel.workbench is not None:
-                    panel.workbench.on_output(event)
+                for bench in self._workbenches():
+                    bench.on_output(event)
         elif isinstance(event, DisconnectedEvent):
             self.client.add_notification(
                 title=f"Disconnected from {self.label}", body=event.reason, color="red"

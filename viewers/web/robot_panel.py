@@ -106,6 +106,7 @@ class RobotPanel:
         self._settings: ArenaSettings | None = None
         self._output: deque[str] = deque(maxlen=OUTPUT_LINES)
         self._table_at = 0.0
+        self.on_rows: list[Callable[[], None]] = []  # called when the robots were re-read
         gui = client.gui
         with gui.add_folder("Robots"):
             # The host's emergency stop: first, and outside the folded settings (shown
@@ -198,6 +199,8 @@ class RobotPanel:
         names = (NONE, *(r.agent for r in rows[:MAX_CHOICES]))
         if tuple(self.robot.options) != names:
             self.robot.options = names
+        for hook in self.on_rows:
+            hook()
 
     # -- the agent context's news (the connection's thread)
 
@@ -352,7 +355,9 @@ class RobotPanel:
         )
 
     def _cancel(self) -> None:
-        agent = self._chosen()
+        mine = [r.agent for r in self._rows if r.my_request]
+        # With one request of mine there is nothing to choose: cancel it.
+        agent = mine[0] if len(mine) == 1 and self.robot.value not in mine else self._chosen()
         if agent is None:
             return
         try:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common.controller.advice import Problem
 from viewers.web.adapters import DryRunResult
-from viewers.web.workbench import TracebackReader, excerpt, format_dry_run, format_problems
+from viewers.web.marks import TracebackReader, excerpt, format_dry_run, format_problems
 
 TRACEBACK = [
     "Traceback (most recent call last):",

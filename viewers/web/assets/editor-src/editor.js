@@ -54,11 +54,47 @@ function hideArea(id, area) {
   area.setAttribute("aria-hidden", "true");
 }
 
-function writeArea(area, text) {
+function writeArea(area, text, again) {
   const setter = Object.getOwnPropertyDescriptor(HTMLTextAreaElement.prototype, "value").set;
   setter.call(area, text);
+  // Sending the same text again: React only reports a change from the value it last saw.
+  if (again && area._valueTracker) area._valueTracker.setValue(text + "\u0000");
   area.dispatchEvent(new Event("input", { bubbles: true }));
   lastWrite = performance.now();
+}
+
+// The same throttle drops an edit's message when another input of the panel sends within
+// 50 ms of it, and nothing tells the page. So after each burst of edits the whole text is
+// sent again, twice (the server ignores a value it already has) -- but only in a quiet
+// moment: a resend right after a click or a choice would drop that instead.
+const RESEND_MS = [300, 1500];
+const QUIET_MS = 80;
+let lastActivity = 0;
+
+function noteActivity(event) {
+  const t = event.target;
+  if (t && t.closest && (t.closest(".wart-editor") || t.getAttribute("aria-hidden") === "true")) {
+    return; // the editor's own typing, or its write into the hidden text area
+  }
+  lastActivity = performance.now();
+}
+
+function resendLater(entry, ms) {
+  return setTimeout(() => {
+    const text = entry.view.state.doc.toString();
+    if (text !== entry.written || !entry.area.isConnected) return;
+    if (performance.now() - lastActivity < QUIET_MS) {
+      entry.resend.push(resendLater(entry, QUIET_MS)); // not now: try again shortly
+      return;
+    }
+    writeArea(entry.area, text, true);
+  }, ms);
+}
+
+function scheduleResend(entry) {
+  for (const t of entry.resend || []) clearTimeout(t);
+  entry.resend = [];
+  for (const ms of RESEND_MS) entry.resend.push(resendLater(entry, ms));
 }
 
 function holdEarlyPress(event) {
@@ -145,6 +181,7 @@ function mount(host) {
           if (text === entry.written) return; // the server's own text, just loaded
           entry.written = text;
           writeArea(entry.area, text);
+          scheduleResend(entry);
         }),
       ],
     }),
@@ -166,6 +203,7 @@ function poll() {
     }
     const value = area.value;
     if (value !== entry.written) { // the server set the text: load it
+      for (const t of entry.resend || []) clearTimeout(t); // never send older text over it
       entry.written = value;
       const doc = entry.view.state.doc.toString();
       if (doc !== value) {
@@ -184,12 +222,16 @@ function poll() {
 if (!window.wartEditor) {
   window.wartEditor = { mount, views, goToLine, poll };
   document.addEventListener("click", holdEarlyPress, true);
+  for (const type of ["pointerdown", "keydown", "input", "change", "click"]) {
+    document.addEventListener(type, noteActivity, true);
+  }
+  // Capture phase: the panel's own handlers cannot stop it on the way down.
   document.addEventListener("click", (event) => {
     const link = event.target.closest && event.target.closest("[data-wart-line]");
     if (!link) return;
     event.preventDefault();
     goToLine(parseInt(link.dataset.wartLine, 10));
-  });
+  }, true);
   setInterval(poll, 150);
   poll();
 }
