@@ -42,6 +42,14 @@ def test_camera_sees_the_whole_arena() -> None:
     assert 2.0 < visible < 2.5
 
 
+def test_a_wide_arena_fits_a_narrow_canvas() -> None:
+    # 3 m by 1 m in the 890x800 canvas a 1280x800 screen leaves beside the panel.
+    aspect = 890 / 800
+    h = geo.camera_height(3000, 1000, aspect)
+    visible_w = 2 * h * math.tan(geo.CAMERA_FOV / 2) * aspect
+    assert 3.0 < visible_w < 3.5
+
+
 def test_a_click_ray_finds_the_robot_it_lands_on() -> None:
     radius = 27.5 * geo.MM
     positions = np.array([[1.0, 1.0, geo.ROBOT_Z], [1.2, 1.0, geo.ROBOT_Z]], np.float32)
