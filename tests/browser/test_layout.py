@@ -80,7 +80,9 @@ def test_the_whole_arena_is_on_the_canvas_beside_the_panel(
             py = top + (1 - ny) / 2 * height
             assert page.evaluate(HIT_JS, [px, py]) == "CANVAS", f"corner {wx, wy} at {px, py}"
         # Join took the page to the arena's tab (the screenshot is for a person to look at).
-        expect(vp.tab("arena (arena)").last).to_have_attribute("aria-selected", "true")
+        expect(vp.tab("arena (arena)").last).to_have_attribute(
+            "aria-selected", "true", timeout=15_000
+        )
         vp.screenshot(f"arena-{arena[0]:.0f}x{arena[1]:.0f}-at-{size[0]}x{size[1]}")
     finally:
         context.close()  # type: ignore[attr-defined]
