@@ -213,3 +213,15 @@ def test_the_follow_camera_shifts_sideways_and_keeps_height_and_look() -> None:
     # Within the dead band (2 mm) the camera is left alone: no message for a still robot.
     assert geo.follow_camera(new_pos, new_look, (0.3005, 1.7005)) is None
     assert geo.follow_camera(new_pos, new_look, (float("nan"), 1.0)) is None
+
+
+def test_the_plots_draw_each_thing_in_the_views_colour() -> None:
+    from common.recording import plots
+    from viewers.web import world_view
+
+    def hexed(rgb: object) -> str:
+        return "#" + "".join(f"{int(c):02x}" for c in rgb)  # type: ignore[attr-defined]
+
+    assert hexed(world_view.BALL_COLOUR) == plots.BALL_COLOUR
+    assert hexed(world_view.OBSTACLE_COLOUR) == plots.OBSTACLE_COLOUR
+    assert hexed(world_view.GRIPPER_COLOURS[0]) == plots.ROBOT_COLOUR
