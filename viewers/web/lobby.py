@@ -65,7 +65,8 @@ class LabTab:
         self._on_context_closed = on_context_closed
         self._lock = threading.RLock()
         self._directory: Directory | None = None
-        self._rows: list[viser.GuiMarkdownHandle | viser.GuiButtonHandle] = []
+        # Each context's row in the directory: its line and its Join button.
+        self._rows: dict[str, tuple[viser.GuiMarkdownHandle, viser.GuiButtonHandle]] = {}
         self._private: list[str] = []
         self.closed = False
         gui = client.gui
@@ -128,24 +129,34 @@ class LabTab:
             self.online.content = "Online: " + (
                 ", ".join(escape_md(u) for u in directory.users) or "nobody"
             )
-            for row in self._rows:
-                row.remove()
-            self._rows = []
+            # Rows are updated in place, added and removed one by one: rebuilding them all
+            # made the page log "Tried to update non-existent component" for the clicked
+            # Join button's own updates, sent after it had been removed.
+            shown = {c.ctx for c in directory.contexts}
+            for ctx in [ctx for ctx in self._rows if ctx not in shown]:
+                for handle in self._rows.pop(ctx):
+                    handle.remove()
             gui = self.client.gui
             with self.contexts:
                 for c in directory.contexts:
                     kind = KIND_NAMES.get(c.kind, c.kind)
-                    self._rows.append(
-                        gui.add_markdown(
-                            f"**{escape_md(c.ctx)}** · {kind} · owner {escape_md(c.owner)} · "
-                            f"{c.members} member{'s' if c.members != 1 else ''}"
-                        )
+                    text = (
+                        f"**{escape_md(c.ctx)}** · {kind} · owner {escape_md(c.owner)} · "
+                        f"{c.members} member{'s' if c.members != 1 else ''}"
                     )
-                    button = gui.add_button(
-                        f"Join {c.ctx}", disabled=c.ctx in self.panels, color="blue"
-                    )
-                    on_click(button, functools.partial(self.join, c.ctx))
-                    self._rows.append(button)
+                    joined = c.ctx in self.panels
+                    row = self._rows.get(c.ctx)
+                    if row is None:
+                        line = gui.add_markdown(text)
+                        button = gui.add_button(f"Join {c.ctx}", disabled=joined, color="blue")
+                        on_click(button, functools.partial(self.join, c.ctx))
+                        self._rows[c.ctx] = (line, button)
+                        continue
+                    markdown, button = row
+                    if markdown.content != text:
+                        markdown.content = text
+                    if button.disabled != joined:
+                        button.disabled = joined
 
     # -- actions
 
