@@ -91,6 +91,8 @@ class ChatPanel:
                 self.workbench = Workbench(client, connection, self.ctx, self.robots)
                 # Everyone sees the editor; without edit_map it is disabled and says why.
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
+                # A robot someone's controller drives is theirs: no map-editing handles on it.
+                self.editor.driven = self.robots.driven
                 self.recordings = RecordingsPanel(
                     client,
                     connection,

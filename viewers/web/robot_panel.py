@@ -202,6 +202,10 @@ class RobotPanel:
         for hook in self.on_rows:
             hook()
 
+    def driven(self, agent: str) -> bool:
+        """Does someone's controller hold ``agent`` now (as last read)?"""
+        return any(r.agent == agent and r.holder is not None for r in self._rows)
+
     # -- the agent context's news (the connection's thread)
 
     def on_request(self, event: RequestEvent) -> None:
