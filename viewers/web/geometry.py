@@ -82,8 +82,9 @@ def robot_at(
 
 
 # The canvas's width over its height when the browser has not said yet: a 1280x800
-# laptop screen beside the docked panel (the canvas is what the panel leaves, 890x800).
-ASSUMED_ASPECT = 1.1
+# laptop screen beside the docked panel (the canvas is what the 460 px panel leaves,
+# 820x800; viewers/web/app.py).
+ASSUMED_ASPECT = 1.0
 
 
 def fit_aspect(reported: float) -> float:

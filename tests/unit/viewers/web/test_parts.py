@@ -43,8 +43,8 @@ def test_camera_sees_the_whole_arena() -> None:
 
 
 def test_a_wide_arena_fits_a_narrow_canvas() -> None:
-    # 3 m by 1 m in the 890x800 canvas a 1280x800 screen leaves beside the panel.
-    aspect = 890 / 800
+    # 3 m by 1 m in the 820x800 canvas a 1280x800 screen leaves beside the panel.
+    aspect = 820 / 800
     h = geo.camera_height(3000, 1000, aspect)
     visible_w = 2 * h * math.tan(geo.CAMERA_FOV / 2) * aspect
     assert 3.0 < visible_w < 3.5
