@@ -105,6 +105,13 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
     page.p.keyboard.press("Shift+Tab")
     wait_until(lambda: bench.code.value.startswith("from common"), what="Shift-Tab's dedent")
 
+    # The keyboard can leave the editor: Escape, then Tab moves on (Tab alone indents).
+    page.p.keyboard.press("Escape")
+    page.p.keyboard.press("Tab")
+    assert not box.evaluate("el => el.contains(document.activeElement)")
+    assert bench.code.value.startswith("from common")  # that Tab indented nothing
+    box.click()
+
     # Ctrl-Enter checks: line 11 is marked in the gutter and in the text, message on hover.
     page.p.keyboard.press("Control+Enter")
     page.wait_text("Check found 1 problem")

@@ -114,6 +114,10 @@ class CodeEditor:
         self.code = code
         self.bundle = gui.add_html(bundle_html())
         self.host = gui.add_html(host_html(code, label, check, save))
+        self.keys = gui.add_markdown(
+            f"_Tab indents, Shift-Tab dedents; Esc then Tab leaves the editor; "
+            f"Ctrl-Enter: {check}; Ctrl-S: {save}; Ctrl-F: search._"
+        )
         self.markers = gui.add_html(problems_html(code, []))
 
     def mark(self, problems: Iterable[Problem]) -> None:
