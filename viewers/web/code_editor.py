@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import html
 import json
+import threading
+import weakref
 from collections.abc import Iterable
 from functools import cache
 from pathlib import Path
@@ -43,6 +45,8 @@ from common.controller.advice import Problem
 from viewers.web.masked import element_id
 
 ASSETS = Path(__file__).resolve().parent / "assets"
+_LOADED: weakref.WeakSet[viser.ClientHandle] = weakref.WeakSet()  # browsers sent the bundle
+_LOCK = threading.Lock()
 BUNDLE = ASSETS / "wart-editor.js"
 
 # Runs in the <img onerror>: turns the inert script text into a running script, once a page.
@@ -104,7 +108,7 @@ class CodeEditor:
 
     def __init__(
         self,
-        gui: viser.GuiApi,
+        client: viser.ClientHandle,
         code: viser.GuiTextHandle,
         *,
         label: str = "Controller code",
@@ -112,7 +116,13 @@ class CodeEditor:
         save: str = "Save",
     ) -> None:
         self.code = code
-        self.bundle = gui.add_html(bundle_html())
+        gui = client.gui
+        # The bundle (446 kB) goes once per browser, not once per arena tab: once run,
+        # the editor is the page's (window.wartEditor) and serves every tab.
+        with _LOCK:
+            first = client not in _LOADED
+            _LOADED.add(client)
+        self.bundle = gui.add_html(bundle_html()) if first else None
         self.host = gui.add_html(host_html(code, label, check, save))
         self.keys = gui.add_markdown(
             f"_Tab indents, Shift-Tab dedents; Esc then Tab leaves the editor; "

@@ -105,7 +105,7 @@ class Workbench:
             first = next(iter(self._examples.values()), b"")
             self.code = gui.add_text("Code", first.decode("utf-8", "replace"), multiline=True)
             # CodeMirror over the text area above; it hides it and writes into it.
-            self.editor = CodeEditor(gui, self.code)
+            self.editor = CodeEditor(client, self.code)
             # The robot the buttons below act on: this arena's robots and those of the
             # real arenas joined, beside the buttons (the robot panel's list follows it).
             self.target = gui.add_dropdown("Run on", (NONE,))
