@@ -80,7 +80,9 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
     alice.wait_text("does not exist on Khepera (did you mean set")
     assert "&gt;&gt; 11 |         robot.set_speed(8, 4)" in bench.problems.content
     alice.wait_text(">> 11 |")
-    assert alice.p.locator(".cm-lint-marker-error").count() == 1  # and in the gutter
+    marker = alice.p.locator(".cm-lint-marker-error")  # and in the gutter (within 150 ms)
+    marker.first.wait_for(timeout=10_000)
+    assert marker.count() == 1
     alice.screenshot("workbench-check-names-the-line")
     # Run refuses a file Check finds wrong: nothing is queued. The robot is chosen
     # beside the editor's buttons; the robot panel's list follows.

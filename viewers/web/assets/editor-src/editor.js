@@ -79,8 +79,16 @@ function noteActivity(event) {
   lastActivity = performance.now();
 }
 
+function forget(entry) {
+  // A replaced or vanished editor: its pending resends would send its old text.
+  for (const t of entry.resend || []) clearTimeout(t);
+  entry.resend = [];
+  entry.view.destroy();
+}
+
 function resendLater(entry, ms) {
   return setTimeout(() => {
+    if (views.get(entry.id) !== entry || !entry.view.dom.isConnected) return;
     const text = entry.view.state.doc.toString();
     if (text !== entry.written || !entry.area.isConnected) return;
     if (performance.now() - lastActivity < QUIET_MS) {
@@ -150,7 +158,10 @@ function mount(host) {
   const buttons = JSON.parse(host.dataset.keys || "{}");
   // The text area stays in the page (it is what viser reads) but out of sight and of Tab.
   hideArea(id, area);
-  const entry = { view: null, area, written: area.value, problemsShown: 0 };
+  // React drew the host anew (its old editor went with the old host): start over.
+  const old = views.get(id);
+  if (old) { views.delete(id); forget(old); }
+  const entry = { id, view: null, area, written: area.value, problemsShown: 0 };
   const keys = [
     { key: "Mod-Enter", preventDefault: true, run: () => clickButton(buttons.check || "Check") },
     { key: "Mod-s", preventDefault: true, run: () => clickButton(buttons.save || "Save") },
@@ -193,7 +204,7 @@ function mount(host) {
 function poll() {
   document.querySelectorAll("div.wart-editor[data-for]").forEach(mount);
   for (const [id, entry] of views) {
-    if (!entry.view.dom.isConnected) { views.delete(id); continue; }
+    if (!entry.view.dom.isConnected) { views.delete(id); forget(entry); continue; }
     let area = entry.area;
     if (!area.isConnected) { // React drew a new text area (a folder closed and opened)
       area = findArea(id);
