@@ -18,6 +18,13 @@ from common.messages import WorldSnapshot
 from common.recording.compare import SENSORS, Comparison, aligned_samples, robot_track
 from common.recording.reader import Recording
 
+# The web view's colours (viewers/web/world_view.py: a robot's body with its gripper
+# open, obstacles, balls), so a thing has one colour in the page and in its plots;
+# tests/unit/viewers/web/test_parts.py keeps the two the same.
+ROBOT_COLOUR = "#4682dc"
+OBSTACLE_COLOUR = "#6e6e78"
+BALL_COLOUR = "#dc3c3c"
+
 
 def available() -> bool:
     return importlib.util.find_spec("matplotlib") is not None
@@ -44,9 +51,9 @@ def write_plots(rec: Recording, out_dir: Path, stem: str) -> list[Path]:
     ]
     if xy:
         track = np.array(xy)
-        ax.plot(track[:, 0], track[:, 1], "-", lw=1.5, color="tab:blue", label=agent)
-        ax.plot(*track[0], "o", color="tab:green", label="start")
-        ax.plot(*track[-1], "s", color="tab:red", label="end")
+        ax.plot(track[:, 0], track[:, 1], "-", lw=1.5, color=ROBOT_COLOUR, label=agent)
+        ax.plot(*track[0], "o", color="black", mfc="white", label="start")
+        ax.plot(*track[-1], "s", color="black", label="end")
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
@@ -98,7 +105,9 @@ def _draw_map(ax: Any, snap: WorldSnapshot | None) -> None:
 
     ax.add_patch(Rectangle((0, 0), snap.width, snap.height, fill=False, lw=1.5, color="black"))
     for item in snap.items:
-        face = {"obstacle": "0.5", "zone": "#c8e6c9", "object": "#ffcc80"}[item.category]
+        face = {"obstacle": OBSTACLE_COLOUR, "zone": "#c8e6c9", "object": BALL_COLOUR}[
+            item.category
+        ]
         if item.shape.kind == "circle":
             ax.add_patch(Circle((item.x, item.y), item.shape.radius, color=face, alpha=0.8))
         else:

@@ -61,6 +61,8 @@ class Summary(msgspec.Struct, frozen=True, kw_only=True):
     output_lines: int
     errors: list[ErrorInfo]
     truncated: str = ""
+    # The world's kind: "real" runs on robots (durations are wall-clock time), "sim" simulated.
+    world_kind: str = "sim"
 
 
 def summarize(rec: Recording) -> Summary:
@@ -98,6 +100,7 @@ def summarize(rec: Recording) -> Summary:
         commands=len(rec.commands),
         output_lines=len(rec.output),
         errors=_errors([o.record.message for o in rec.output], info.filename),
+        world_kind=snap.kind if snap is not None else "sim",
         truncated=rec.truncated,
     )
 

@@ -38,7 +38,8 @@ def describe(summary: Summary) -> list[str]:
         f"run {summary.request_id}: {summary.user} on {summary.agent} in {summary.ctx} "
         f"(world {summary.world}), {summary.mode}{file}, {when}",
         f"ended:       {summary.status}: {summary.reason}",
-        f"duration:    {summary.duration_s:.1f} s of simulated time",
+        f"duration:    {summary.duration_s:.1f} s of "
+        + ("real time" if summary.world_kind == "real" else "simulated time"),
         f"distance:    {summary.distance_mm / 1000:.3f} m",
         f"moving:      {summary.moving_s:.1f} s",
         f"collisions:  {summary.collisions} ({summary.contact_s:.1f} s in contact)",

@@ -264,7 +264,8 @@ class QueueRequests:
         if request.engaged:
             log.warning("%s: ended %s", why, ", ".join(ended) or "nothing running")
             return OkReply(
-                detail=f"emergency stop: every robot stopped, {len(ended)} controllers ended; "
+                detail=f"emergency stop: every robot stopped, {len(ended)} "
+                f"controller{'' if len(ended) == 1 else 's'} ended; "
                 "no slot starts until you release it"
             )
         log.warning("emergency stop released by %s", principal.user)

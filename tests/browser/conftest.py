@@ -202,8 +202,8 @@ class ViserPage:
         box = self.input_after_label(label)
         already = self.sent_count
         unchanged = box.input_value() == text
+        # viser sends a text input on each change; no Enter (in the login form it logs in).
         box.fill(text)
-        box.press("Enter")  # viser sends text inputs on change; Enter settles it
         if not text or unchanged or not self.sockets:
             return  # nothing to leave: empty, the value it had, or a page opened before us
         # A text input's message holds the text; a number input's holds a number, and

@@ -1,8 +1,8 @@
 """The page's inputs carry accessible names: Playwright's get_by_label finds them.
 
 viser 1.1.1's labels point at ids its text inputs do not have; viewers/web/labels.py
-links each label to its input with aria-labelledby. The login form, the editor's
-Code box and the robot list are used here through their names alone, and the
+links each label to its input with aria-labelledby. The login form, the code
+editor and the robot list are used here through their names alone, and the
 login form by keyboard (Tab from User to Password).
 """
 
@@ -30,19 +30,20 @@ def test_inputs_are_found_by_their_labels(open_page, viewer: WebViewer) -> None:
     password = p.get_by_label("Password", exact=True)
     assert password.evaluate("el => el === document.activeElement")
     p.keyboard.type("ana-pw")
-    password.press("Enter")
     page.screenshot("named-login")
-    page.click("Log in")
+    password.press("Enter")  # Enter logs in
     page.tab("lab@127.0.0.1").first.click()
     page.click("Join arena")
     page.tab("arena").last.click()
 
-    code = p.get_by_label("Code", exact=True)
+    # The code editor (CodeMirror) is a textbox named "Controller code".
+    code = p.get_by_role("textbox", name="Controller code", exact=True)
     code.wait_for(timeout=10_000)
-    assert code.evaluate("el => el.tagName") == "TEXTAREA"
     session = next(iter(viewer.sessions.values()))
-    text = "# typed into the box named Code\n"
-    code.fill(text)
+    text = "# typed into the box named Controller code"
+    code.click()
+    p.keyboard.press("Control+a")
+    p.keyboard.type(text)
     # The page shows the panel's widgets while the panel is still being registered.
     wait_until(lambda: any(lab.panels for lab in session.labs.values()), what="the arena's panel")
     panel = next(tab for lab in session.labs.values() for tab in lab.panels.values())

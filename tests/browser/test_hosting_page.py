@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from playwright.sync_api import expect
 
 from tests.browser.conftest import ViserPage, new_test_context, page_url
 from tests.lab import UpLab
@@ -57,6 +58,9 @@ def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
         vp.fill("Map (arena)", "maze")
         vp.click("Host arena")
         vp.tab("maze2").wait_for(timeout=90_000)
+        # Hosted, then joined: the page goes to the new arena's tab; its row is in the lobby.
+        expect(vp.tab("maze2").first).to_have_attribute("aria-selected", "true", timeout=15_000)
+        vp.tab(f"{lab.realm}@").click()
         vp.wait_text("maze2 · arena · owner admin", 20_000)
         vp.screenshot("hosted")
 

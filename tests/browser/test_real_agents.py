@@ -24,6 +24,7 @@ from tests.browser.test_real_lab import session_of
 from tests.conftest import REPO
 from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
+from viewers.web.tabs import tab_label
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -62,7 +63,7 @@ def viewer(lab: RealLab) -> WebViewer:
 def enter_arena(page: ViserPage, lab: RealLab, user: str) -> ChatPanel:
     """Log in, join the agent context from the lobby, open its tab; its server-side panel."""
     page.log_in(lab.url, user, PASSWORD)
-    page.tab(lab.address.label).first.click()
+    page.tab(tab_label(lab.address)).first.click()
     page.wait_text("Logged in as")
     page.click(f"Join {CTX}", timeout=15_000)
     page.tab(f"{CTX} (arena)").last.click()

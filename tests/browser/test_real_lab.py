@@ -20,6 +20,7 @@ from tests.browser.reallab import PASSWORD, WORLD, RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
 from viewers.web.live_world import UserWorld
+from viewers.web.tabs import tab_label
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -46,7 +47,7 @@ def session_of(viewer: WebViewer, user: str) -> BrowserSession:
 
 def log_in(page, lab: RealLab, user: str, password: str = PASSWORD) -> None:
     page.log_in(lab.url, user, password)
-    page.tab(lab.address.label).first.click()
+    page.tab(tab_label(lab.address)).first.click()
     page.wait_text("Logged in as")
 
 
@@ -62,7 +63,7 @@ def test_login_wrong_password_and_presence(open_page, lab: RealLab) -> None:
     page.screenshot("real-wrong-password")
     page.fill("Password", PASSWORD)
     page.click("Log in")
-    page.tab(lab.address.label).first.click()
+    page.tab(tab_label(lab.address)).first.click()
     page.wait_text("Logged in as")
     page.wait_text("Online:")
     wait_until(lambda: "bob" in online(lab), what="bob online in the registry")

@@ -71,6 +71,13 @@ def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab)
     # The page's table (markdown, drawn as an HTML table): the robot and how it ended.
     alice.p.get_by_role("cell", name="k0", exact=True).first.wait_for(timeout=10_000)
     alice.p.get_by_role("cell", name="finished", exact=False).first.wait_for(timeout=10_000)
+    # Download: the notice's link names the whole file, not cut off.
+    alice.click("Download")
+    link = alice.p.locator(f'a[download="{entry.name}.mcap"]')
+    link.wait_for(timeout=15_000)
+    label = link.locator(".mantine-Button-label")
+    assert entry.name in label.inner_text()
+    assert label.evaluate("e => e.scrollWidth <= e.clientWidth && e.scrollHeight <= e.clientHeight")
     alice.click("Replay")
     view = session_of(lab.viewer, "alice").view
     wait_until(lambda: isinstance(view.feed, ReplayFeed), 15, what="the replay in alice's view")

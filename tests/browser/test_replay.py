@@ -131,6 +131,16 @@ def test_a_recording_replayed_in_the_page_moves_the_robot_with_the_cursor(
     assert not controls.player.playing
     page.wait_text("ZeroDivisionError")  # the output up to the cursor, at the end
     page.screenshot("replay")
+    # Play at the end starts again from the start, as a media player does.
+    page.click("Play")
+    wait_until(
+        lambda: controls.player.playing and controls.player.cursor < timeline.duration,
+        10,
+        what="playing again from the start",
+    )
+    wait_until(lambda: float(controls.slider.value) < timeline.duration, 10, what="the slider")
+    page.click("Pause")
+    wait_until(lambda: not controls.player.playing, 10, what="paused")
 
     page.click("Back to live")
     wait_until(lambda: view.feed is not None and view.feed is not controls.feed, what="live")

@@ -16,9 +16,10 @@ import pytest
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.reallab import RealLab, real_lab
-from tests.browser.test_real_agents import enter_arena, pick_robot
+from tests.browser.test_real_agents import choose, enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
 from viewers.web.app import WebViewer
+from viewers.web.robot_panel import NONE
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -30,11 +31,12 @@ class Circle(Controller):
     period = 0.05
 
     def initialize(self, robot: Khepera) -> None:
-        print("circling")
+        print("left_speed=[3, 4] *fast* #1 <b>x</b>")
 
     def do_work(self, robot: Khepera) -> None:
         robot.set_speeds(8, 4)
 """
+PRINTED = "left_speed=[3, 4] *fast* #1 <b>x</b>"
 PLANTED = GOOD.replace("robot.set_speeds(8, 4)", "robot.set_speed(8, 4)")  # line 11
 
 
@@ -53,9 +55,13 @@ def viewer(lab: RealLab) -> WebViewer:
 
 
 def write_code(page: ViserPage, text: str, wait_for: object) -> None:
-    """Type into the editor as a student does: select all, then the new text."""
-    area = page.input_after_label("Code")
-    area.fill(text)
+    """Put ``text`` in the code editor as a paste does (typing would auto-indent it)."""
+    page.p.get_by_role("textbox", name="Controller code", exact=True).wait_for(timeout=15_000)
+    page.p.evaluate(
+        "text => { const v = [...window.wartEditor.views.values()][0].view;"
+        " v.dispatch({changes: {from: 0, to: v.state.doc.length, insert: text}}); }",
+        text,
+    )
     wait_until(lambda: wait_for() is True, 10, what="the editor's text on the server")  # type: ignore[operator]
 
 
@@ -72,11 +78,17 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
     alice.click("Check")
     alice.wait_text("line 11: robot.set")
     alice.wait_text("does not exist on Khepera (did you mean set")
-    assert ">> 11 |         robot.set_speed(8, 4)" in bench.problems.content
+    assert "&gt;&gt; 11 |         robot.set_speed(8, 4)" in bench.problems.content
     alice.wait_text(">> 11 |")
+    marker = alice.p.locator(".cm-lint-marker-error")  # and in the gutter (within 150 ms)
+    marker.first.wait_for(timeout=10_000)
+    assert marker.count() == 1
     alice.screenshot("workbench-check-names-the-line")
-    # Run refuses a file Check finds wrong: nothing is queued.
-    pick_robot(alice, panel, "k0")
+    # Run refuses a file Check finds wrong: nothing is queued. The robot is chosen
+    # beside the editor's buttons; the robot panel's list follows.
+    choose(alice, "Run on", "k0")
+    assert panel.robots is not None
+    wait_until(lambda: panel.robots.robot.value == "k0", 10, what="the panel following Run on")
     alice.click("Run in simulation")
     alice.wait_text("Not queued: fix the problems Check found first")
 
@@ -99,6 +111,11 @@ def test_write_check_fix_run_see_it_move_reset_and_stop(open_page, lab: RealLab)
         )
 
     wait_until(k0_moved, 20, what="k0 driven by the editor's controller")
+    # The print is shown exactly as printed: no markdown, no HTML, no backslashes.
+    printed = alice.p.locator("pre.wart-output", has_text=PRINTED)
+    printed.first.wait_for(timeout=15_000)
+    assert f"k0 alice: {PRINTED}" in printed.first.inner_text().splitlines()
+    assert printed.first.locator("b", has_text="x").count() == 0  # <b> was text, not markup
     alice.screenshot("workbench-running")
     # The file is kept by the lab, under alice's name: it is in her list.
     assert "mine: my_controller.py" in bench.start_from.options
@@ -166,3 +183,49 @@ def test_the_editors_dry_run_says_a_controller_that_charges_a_wall_will_not_run(
     carol.screenshot("workbench-dry-run-wall")
     assert "collision at" in bench.problems.content  # what it saw, under the code
     assert all(not r.queue and r.holder is None for r in panel.robots._rows)  # nothing queued
+
+
+QUEUED = b"""\
+from common.controller import Controller, Khepera
+
+
+class Spin(Controller):
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(-5, 5)
+"""
+
+
+def test_the_editors_stop_ends_a_run_started_by_queue_with_no_robot_chosen(
+    open_page, lab: RealLab
+) -> None:
+    bob = open_page("bob")
+    panel = enter_arena(bob, lab, "bob")
+    bench, robots = panel.workbench, panel.robots
+    assert bench is not None and robots is not None
+    # Queued from the robot panel (not the editor): the run is on k2.
+    pick_robot(bob, panel, "k2")
+    wait_until(lambda: bench.target.value == "k2", 10, what="Run on following the panel")
+    upload(bob, "spin.py", QUEUED)
+    bob.wait_text("spin.py is queued for k2")
+
+    def mine() -> list[tuple[str, int | None]]:
+        return [
+            (r.agent, r.my_position) for r in bench.connection.agents(bench.ctx) if r.my_request
+        ]
+
+    wait_until(lambda: mine() == [("k2", 0)], 20, what="bob's run on k2")
+    # No robot chosen anywhere: the editor's Stop still finds and ends it.
+    choose(bob, "Run on", NONE)
+    wait_until(lambda: bench.target.value == NONE, 10, what="Run on emptied")
+    bob.click("Stop")
+    bob.wait_text("Stopped:")
+    wait_until(lambda: mine() == [], 15, what="bob's run on k2 ended by Stop")
+
+    # "Cancel my request" with one request and no robot chosen cancels it too.
+    pick_robot(bob, panel, "k2")  # "(none)" in Run on emptied the panel's choice too
+    upload(bob, "spin2.py", QUEUED)
+    bob.wait_text("spin2.py is queued for k2")
+    wait_until(lambda: mine() == [("k2", 0)], 20, what="bob's second run on k2")
+    pick_robot(bob, panel, NONE)
+    bob.click("Cancel my request")
+    wait_until(lambda: mine() == [], 15, what="bob's run cancelled from the robot panel")

@@ -53,6 +53,8 @@ NOTSENT_LOWAT = 4 * 1024
 WRITE_HIGH = 8 * 1024  # the socket's user-space buffer (websockets' default: 32 KiB)
 _TCP_NOTSENT_LOWAT = getattr(socket, "TCP_NOTSENT_LOWAT", 25)  # Linux's number
 
+PANEL_WIDTH_PX = 460  # the docked panel; 1280x800 leaves the arena 820x800
+
 
 class WebViewer:
     """The viser server and every browser's session; no Zenoh in here."""
@@ -82,8 +84,11 @@ class WebViewer:
         self.server.gui.configure_theme(
             control_width="large", show_logo=False, show_share_button=False
         )
-        # Docked at the right edge: the arena keeps the rest of a laptop screen.
+        # Docked at the right edge: the arena keeps the rest of a laptop screen. Wide
+        # enough for a line of code and for the plots (viser's default, 384 px, cut
+        # Check's excerpt and most code lines on the right); a person can drag it.
         self.server.gui.main_panel.dock_right()
+        self.server.gui.main_panel.set_width(PANEL_WIDTH_PX)
         self.server.on_client_connect(self._connected)
         self.server.on_client_disconnect(self._disconnected)
         self.pump.start()

@@ -26,6 +26,7 @@ from viewers.web.inputs import set_value
 from viewers.web.recordings_panel import RecordingsPanel
 from viewers.web.replay import ReplayFeed
 from viewers.web.robot_panel import RobotPanel
+from viewers.web.tabs import tab_title
 from viewers.web.text import check_line, clock, escape_md
 from viewers.web.workbench import Workbench
 from viewers.web.world_view import WorldView
@@ -60,6 +61,8 @@ class ChatPanel:
             self._lines.append(self._format(line))
         gui = client.gui
         label = f"{self.ctx}" if self.kind not in ARENA_KINDS else f"{self.ctx} (arena)"
+        self.tab_name = label
+        self.tab_title = f"{label} in {tab_title(connection.address)}"
         self.tab = tabs.add_tab(label, icon=viser.Icon.MESSAGE if self.kind == "chat" else None)
         with self.tab:
             title = escape_md(joined.title or self.ctx)
@@ -88,6 +91,8 @@ class ChatPanel:
                 self.workbench = Workbench(client, connection, self.ctx, self.robots)
                 # Everyone sees the editor; without edit_map it is disabled and says why.
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
+                # A robot someone's controller drives is theirs: no map-editing handles on it.
+                self.editor.driven = self.robots.driven
                 self.recordings = RecordingsPanel(
                     client,
                     connection,

@@ -20,6 +20,7 @@ from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.pump import FramePump
+from viewers.web.tabs import TabSwitcher, tab_title
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
 
@@ -76,6 +77,7 @@ class BrowserSession:
         self.home = self.tabs.add_tab("Start", icon=viser.Icon.INFO_CIRCLE)
         with self.home:
             gui.add_markdown(HELP)
+        self.switcher = TabSwitcher(gui)  # takes the page to a new lab's or arena's tab
         self.connect_button.on_click(lambda _: self.connect(self.address.value))
         self.save_button.on_click(lambda _: self.save_address())
         self.recent.on_update(lambda _: self._recent_chosen())
@@ -170,10 +172,12 @@ class BrowserSession:
             self.labs[address.lab_key] = tab
         set_value(self.address, address.with_user(connection.user).url())
         self._refresh_recent()
-        # viser 1.1 cannot switch tabs from the server: point at the new one.
+        # The lab's tab is where the person goes next: the page shows it (tabs.py).
+        self.switcher.show(tab.tab_name, tab_title(address))
+        # Also said in words (headless clients and the benchmark wait for these words).
         self.client.add_notification(
             title=f"Logged in to {address.label}",
-            body=f"Its lobby is in the tab '{address.label}'.",
+            body=f"as {connection.user}: its lobby is the tab '{tab.tab_name}'.",
             auto_close_seconds=5.0,
         )
         if address.context:
@@ -189,8 +193,10 @@ class BrowserSession:
     # -- the world view
 
     def _context_opened(self, panel: ChatPanel) -> None:
-        if panel.kind in ARENA_KINDS and self.watching is None:
-            panel.show_world()  # the first arena joined shows itself
+        # Joining is asking to go there: the page shows the new tab, and an arena's world.
+        self.switcher.show(panel.tab_name, panel.tab_title)
+        if panel.kind in ARENA_KINDS:
+            panel.show_world()
 
     def _context_closed(self, panel: ChatPanel) -> None:
         if self.watching is panel:

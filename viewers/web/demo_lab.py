@@ -439,7 +439,8 @@ class DemoConnection:
                     del queue[:1]
         self._lab._broadcast(AgentsEvent(ctx))
         if engaged:
-            return f"emergency stop: every robot stopped, {ended} controllers ended"
+            plural = "" if ended == 1 else "s"
+            return f"emergency stop: every robot stopped, {ended} controller{plural} ended"
         return "emergency stop released"
 
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:

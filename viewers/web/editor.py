@@ -45,6 +45,8 @@ class MapEditor:
         self.selected: str | None = None
         self.selected_kind: Kind = "obstacle"
         self._gizmo: viser.TransformControlsHandle | None = None
+        # Is this robot driven by someone's controller now? (set by the arena's panel)
+        self.driven: Callable[[str], bool] = lambda _name: False
         gui = client.gui
         off = not allowed
         with gui.add_folder("Map editor", expand_by_default=False):
@@ -135,8 +137,10 @@ class MapEditor:
     def _robot_selected(self, index: int | None) -> None:
         view = self.view
         name = view.selected_name if view is not None else None
-        if name is not None and self.allowed:
+        if name is not None and self.allowed and not self.driven(name):
             self.select(name)
+        elif self._gizmo is not None and self.selected_kind == "agent":
+            self._drop_gizmo()  # selecting another robot (or none) takes the handles away
 
     def select(self, ident: str) -> None:
         if not self.allowed:

@@ -81,8 +81,25 @@ def robot_at(
     return index if d2[index] <= (1.5 * radius_m) ** 2 else None
 
 
-def camera_height(width_mm: float, height_mm: float, aspect: float = 1.6) -> float:
-    """How high (m) a camera with CAMERA_FOV must be for the arena to fill the view."""
+# The canvas's width over its height when the browser has not said yet: a 1280x800
+# laptop screen beside the docked panel (the canvas is what the 460 px panel leaves,
+# 820x800; viewers/web/app.py).
+ASSUMED_ASPECT = 1.0
+
+
+def fit_aspect(reported: float) -> float:
+    """The aspect to aim for: the browser's, but never wider than ASSUMED_ASPECT.
+
+    A page can report its canvas before the panel has docked beside it (seen: a
+    camera aimed for a canvas several times wider than the one drawn); aiming for
+    a narrower canvas than the real one only leaves more floor around the arena.
+    """
+    return max(0.5, min(reported, ASSUMED_ASPECT))
+
+
+def camera_height(width_mm: float, height_mm: float, aspect: float = ASSUMED_ASPECT) -> float:
+    """How high (m) a camera with CAMERA_FOV (vertical) must be for the arena to fit a
+    canvas ``aspect`` wide (width over height), with a 5% margin on each side."""
     half_tan = math.tan(CAMERA_FOV / 2)
     need_v = height_mm * MM * 1.1 / 2
     need_h = width_mm * MM * 1.1 / 2 / aspect

@@ -34,7 +34,9 @@ from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.inputs import on_click, set_value
 from viewers.web.network_panel import NetworkPanel
+from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
+from viewers.web.workbench import Workbench
 
 log = logging.getLogger("wart.viewer.lobby")
 
@@ -63,11 +65,14 @@ class LabTab:
         self._on_context_closed = on_context_closed
         self._lock = threading.RLock()
         self._directory: Directory | None = None
-        self._rows: list[viser.GuiMarkdownHandle | viser.GuiButtonHandle] = []
+        # Each context's row in the directory: its line and its Join button.
+        self._rows: dict[str, tuple[viser.GuiMarkdownHandle, viser.GuiButtonHandle]] = {}
         self._private: list[str] = []
         self.closed = False
         gui = client.gui
-        self.tab = tabs.add_tab(connection.address.label, icon=viser.Icon.HOME)
+        # Short enough to read in a tab; the full address is its hover title (tabs.py).
+        self.tab_name = tab_label(connection.address)
+        self.tab = tabs.add_tab(self.tab_name, icon=viser.Icon.HOME)
         with self.tab:
             self.header = gui.add_markdown("")
             self.online = gui.add_markdown("")
@@ -124,24 +129,34 @@ class LabTab:
             self.online.content = "Online: " + (
                 ", ".join(escape_md(u) for u in directory.users) or "nobody"
             )
-            for row in self._rows:
-                row.remove()
-            self._rows = []
+            # Rows are updated in place, added and removed one by one: rebuilding them all
+            # made the page log "Tried to update non-existent component" for the clicked
+            # Join button's own updates, sent after it had been removed.
+            shown = {c.ctx for c in directory.contexts}
+            for ctx in [ctx for ctx in self._rows if ctx not in shown]:
+                for handle in self._rows.pop(ctx):
+                    handle.remove()
             gui = self.client.gui
             with self.contexts:
                 for c in directory.contexts:
                     kind = KIND_NAMES.get(c.kind, c.kind)
-                    self._rows.append(
-                        gui.add_markdown(
-                            f"**{escape_md(c.ctx)}** · {kind} · owner {escape_md(c.owner)} · "
-                            f"{c.members} member{'s' if c.members != 1 else ''}"
-                        )
+                    text = (
+                        f"**{escape_md(c.ctx)}** · {kind} · owner {escape_md(c.owner)} · "
+                        f"{c.members} member{'s' if c.members != 1 else ''}"
                     )
-                    button = gui.add_button(
-                        f"Join {c.ctx}", disabled=c.ctx in self.panels, color="blue"
-                    )
-                    on_click(button, functools.partial(self.join, c.ctx))
-                    self._rows.append(button)
+                    joined = c.ctx in self.panels
+                    row = self._rows.get(c.ctx)
+                    if row is None:
+                        line = gui.add_markdown(text)
+                        button = gui.add_button(f"Join {c.ctx}", disabled=joined, color="blue")
+                        on_click(button, functools.partial(self.join, c.ctx))
+                        self._rows[c.ctx] = (line, button)
+                        continue
+                    markdown, button = row
+                    if markdown.content != text:
+                        markdown.content = text
+                    if button.disabled != joined:
+                        button.disabled = joined
 
     # -- actions
 
@@ -166,13 +181,23 @@ class LabTab:
             self.panels[ctx] = panel
         self._directory = None  # the Join button's state changed
         self.refresh()
+        for bench in self._workbenches():  # a real arena joined: its robots join the lists
+            if bench is not panel.workbench:
+                bench.refresh_targets()
         if self._on_context is not None:
             self._on_context(panel)
         return panel
 
+    def _workbenches(self) -> list[Workbench]:
+        with self._lock:
+            panels = list(self.panels.values())
+        return [p.workbench for p in panels if p.workbench is not None]
+
     def _panel_closed(self, panel: ChatPanel) -> None:
         with self._lock:
             self.panels.pop(panel.ctx, None)
+        for bench in self._workbenches():  # a real arena left: its robots leave the lists
+            bench.refresh_targets()
         if self._on_context_closed is not None:
             self._on_context_closed(panel)
         self._directory = None
@@ -273,6 +298,10 @@ class LabTab:
             )
         elif isinstance(event, AgentsEvent | RequestEvent | OutputEvent):
             panel = self.panels.get(event.ctx)
+            if isinstance(event, AgentsEvent):
+                for bench in self._workbenches():  # their lists hold the real arenas' robots
+                    if bench.ctx != event.ctx:
+                        bench.refresh_targets()
             robots = panel.robots if panel is not None else None
             if robots is None:
                 return
@@ -280,12 +309,12 @@ class LabTab:
                 robots.refresh_agents()
             elif isinstance(event, RequestEvent):
                 robots.on_request(event)
-                if panel is not None and panel.workbench is not None:
-                    panel.workbench.on_request(event)
+                for bench in self._workbenches():  # a real run may come from another arena's
+                    bench.on_request(event)
             else:
                 robots.on_output(event)
-                if panel is not None and panel.workbench is not None:
-                    panel.workbench.on_output(event)
+                for bench in self._workbenches():
+                    bench.on_output(event)
         elif isinstance(event, DisconnectedEvent):
             self.client.add_notification(
                 title=f"Disconnected from {self.label}", body=event.reason, color="red"

@@ -1,7 +1,8 @@
 """The login form: a modal in one browser only (viser GUI is per client).
 
-viser has no login hook and no masked text input: the password field shows
-dots through a style rule (viewers/web/masked.py), is cleared as soon as the
+viser has no login hook and no password input: the password field is made a
+real ``<input type="password">`` in the page (viewers/web/masked.py), Enter
+in either field presses "Log in", the field is cleared as soon as the
 attempt is made, and a deployment that leaves the lab network should sit
 behind an HTTPS reverse proxy (docs/OPERATIONS.md).
 """
@@ -22,7 +23,7 @@ from common.keys import is_ident
 from viewers.web.adapters import LabConnection, LabConnector, LabError
 from viewers.web.address import LabAddress
 from viewers.web.inputs import on_click, set_value
-from viewers.web.masked import add_masked_text
+from viewers.web.masked import add_masked_text, add_submit_on_enter
 from viewers.web.viser_fast import browser_address
 
 log = logging.getLogger("wart.viewer.login")
@@ -191,7 +192,8 @@ class LoginForm:
             with self.modal:
                 client.gui.add_markdown(f"Lab at `{address.url(with_user=False)}`")
                 self.user = client.gui.add_text("User", address.user or "")
-                self.password = add_masked_text(client.gui, "Password")
+                add_submit_on_enter(client.gui, self.user, "Log in")  # Enter logs in
+                self.password = add_masked_text(client.gui, "Password", submit="Log in")
                 self.error = client.gui.add_markdown("", visible=False)
                 self.submit = client.gui.add_button("Log in", color="green")
                 self.cancel = client.gui.add_button("Cancel")

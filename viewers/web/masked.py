@@ -1,35 +1,118 @@
-"""Password inputs: viser text inputs whose typed text is drawn as dots.
+"""Password inputs: viser text inputs made real ``<input type="password">`` in the page.
 
-viser 1.1.1's text input has no mask option. Its HTML element, though, puts
-its markup in the page as is (React's ``dangerouslySetInnerHTML``, no
-sanitising), so a ``<style>`` element there styles the page. Each masked input
-gets its own rule, keyed on the input's element id: viser draws its label as
-``<label for="<id>">`` in a box beside the input's box (the input itself gets
-another id from Mantine), so the rule goes from that label's box to the input
-in the next box; ``#<id>`` is there too in case a later viser gives the input
-that id. Nothing else is masked: the rule names one input only.
+viser 1.1.1's text input has no password option. Its HTML element, though,
+puts its markup in the page as is (React's ``dangerouslySetInnerHTML``, no
+sanitising; labels.py relies on the same), so each password input gets an
+``add_html`` element beside it holding two things, keyed on the input's
+element id (viser draws its label as ``<label for="<id>">`` in a box beside
+the input's box; the input itself gets another id from Mantine):
 
-``-webkit-text-security: disc`` is supported by Chromium and WebKit. The typed
-text still reaches the viewer as every viser input does (over the page's
-websocket); callers empty the field as soon as they have used it.
+- an ``<img>`` that cannot load, whose ``onerror`` sets that one input's
+  ``type`` attribute to ``password`` (so every browser masks it and password
+  managers see a password field) and ``autocomplete``. React removes the
+  ``type`` attribute again at every render (seen: the field became a text
+  field at the first keystroke, still masked by the style rule below), so a
+  MutationObserver on that attribute puts it back at once (its callback runs
+  before the page is next drawn); another re-applies all this to an input
+  viser re-mounts. With ``submit``, Enter in the input presses that
+  button, 120 ms later: viser's page sends GUI messages through one 50 ms
+  throttle that keeps only the newest, so an immediate press could replace
+  the typed password's own message;
+- a ``<style>`` rule, ``-webkit-text-security: disc`` on the same input, for
+  the moment before the script has run (Chromium and WebKit honour it).
+
+The typed text still reaches the viewer as every viser input does (over the
+page's websocket); callers empty the field as soon as they have used it.
 """
 
 from __future__ import annotations
 
+import html
+import json
+
 import viser
 
 MASK = "-webkit-text-security: disc !important;"
+SUBMIT_DELAY_MS = 120
+
+# Fixed text; the element id and the button's label go in as JSON.
+PASSWORD_JS = """
+(function (id, submit, password) {
+  function input() {
+    var label = document.querySelector('label[for="' + id + '"]');
+    var own = label && label.parentElement && label.parentElement.parentElement;
+    var box = own && own.nextElementSibling;
+    return (box && box.querySelector('input')) || document.getElementById(id);
+  }
+  function fix() {
+    var el = input();
+    if (!el || el.dataset.wartPassword) return;
+    el.dataset.wartPassword = '1';
+    if (password) {
+      el.setAttribute('type', 'password');
+      el.autocomplete = 'current-password';
+      /* React drops the type attribute again at every render; put it back at once (a
+         mutation callback runs before the page is next drawn). */
+      new MutationObserver(function () {
+        if (el.getAttribute('type') !== 'password') el.setAttribute('type', 'password');
+      }).observe(el, { attributes: true, attributeFilter: ['type'] });
+    }
+    if (!submit) return;
+    el.addEventListener('keydown', function (e) {
+      if (e.key !== 'Enter' || e.isComposing) return;
+      e.preventDefault();
+      setTimeout(function () {
+        var buttons = document.querySelectorAll('button');
+        for (var i = buttons.length - 1; i >= 0; i--) {
+          if (buttons[i].textContent.trim() === submit && !buttons[i].disabled) {
+            buttons[i].click();
+            return;
+          }
+        }
+      }, DELAY);
+    });
+  }
+  fix();
+  new MutationObserver(fix).observe(document.body, { childList: true, subtree: true });
+})(ID, SUBMIT, PASSWORD);
+"""
+
+
+def _check_id(element_id: str) -> str:
+    if not element_id or any(c in element_id for c in "\"'\\<>{}"):
+        raise ValueError(f"not an element id: {element_id!r}")
+    return element_id
 
 
 def mask_rule(element_id: str) -> str:
     """The CSS that masks the text input labelled by ``<label for=element_id>``."""
-    if not element_id or any(c in element_id for c in '"\\<>{}'):
-        raise ValueError(f"not an element id: {element_id!r}")
+    _check_id(element_id)
     beside = f'div:has(> * > label[for="{element_id}"]) + div'
     return (
         f"{beside} input, {beside} textarea {{ {MASK} }}\n"
         f'input[id="{element_id}"], textarea[id="{element_id}"] {{ {MASK} }}'
     )
+
+
+def _script_html(element_id: str, submit: str | None, password: bool) -> str:
+    script = (
+        PASSWORD_JS.replace("ID", json.dumps(_check_id(element_id)))
+        .replace("SUBMIT", json.dumps(submit))
+        .replace("PASSWORD", json.dumps(password))
+        .replace("DELAY", str(SUBMIT_DELAY_MS))
+    )
+    script = " ".join(line.strip() for line in script.strip().splitlines())
+    return f'<img src="data:," alt="" style="display:none" onerror="{html.escape(script)}">'
+
+
+def password_html(element_id: str, submit: str | None = None) -> str:
+    """The style rule and the image whose ``onerror`` makes the input a password input."""
+    return f"<style>{mask_rule(element_id)}</style>" + _script_html(element_id, submit, True)
+
+
+def add_submit_on_enter(gui: viser.GuiApi, handle: viser.GuiTextHandle, submit: str) -> None:
+    """Enter in the text input ``handle`` presses the button labelled ``submit``."""
+    gui.add_html(_script_html(element_id(handle), submit, False))
 
 
 def element_id(handle: viser.GuiTextHandle) -> str:
@@ -38,9 +121,11 @@ def element_id(handle: viser.GuiTextHandle) -> str:
     return str(handle._impl.uuid)
 
 
-def add_masked_text(gui: viser.GuiApi, label: str, initial_value: str = "") -> viser.GuiTextHandle:
-    """A text input (in the current container) that shows dots instead of what is typed."""
+def add_masked_text(
+    gui: viser.GuiApi, label: str, initial_value: str = "", *, submit: str | None = None
+) -> viser.GuiTextHandle:
+    """A password input (in the current container); Enter presses the button ``submit``."""
     handle = gui.add_text(label, initial_value)
-    # An empty <div> with a <style> in it: it takes no room in the panel.
-    gui.add_html(f"<style>{mask_rule(element_id(handle))}</style>")
+    # An element that takes no room in the panel: a <style> and a hidden image.
+    gui.add_html(password_html(element_id(handle), submit))
     return handle

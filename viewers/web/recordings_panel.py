@@ -44,6 +44,13 @@ log = logging.getLogger("wart.viewer.recordings")
 NONE = "(no recordings yet)"
 NO_REAL = "(join a real arena first)"
 MAX_LISTED = 20  # rows in the table (the context keeps 20 per user by default)
+DOWNLOAD_NOTICE_CSS = (
+    ".mantine-Notification-root a[download] .mantine-Button-root "
+    "{ height: auto; padding-top: 4px; padding-bottom: 4px; } "
+    ".mantine-Notification-root a[download] .mantine-Button-inner, "
+    ".mantine-Notification-root a[download] .mantine-Button-label "
+    "{ white-space: normal; overflow-wrap: anywhere; overflow: visible; height: auto; }"
+)
 
 
 def describe(entry: RecordingEntry) -> str:
@@ -98,6 +105,9 @@ class RecordingsPanel:
             self.refresh_button = gui.add_button("Refresh", icon=viser.Icon.REFRESH)
             self.chosen = gui.add_dropdown("Recording", (NONE,))
             self.download = gui.add_button("Download", icon=viser.Icon.DOWNLOAD)
+            # viser's download notice is a one-line button that cut a run's long file
+            # name off: let its label wrap (a style rule; takes no room in the panel).
+            gui.add_html(f"<style>{DOWNLOAD_NOTICE_CSS}</style>")
             self.summary = gui.add_button("Summary", icon=viser.Icon.LIST_NUMBERS)
             self.plots = gui.add_button("Plots", icon=viser.Icon.CHART_LINE)
             self.replay_button = gui.add_button(

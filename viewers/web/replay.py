@@ -33,7 +33,7 @@ from viewers.web.arena_video import ArenaVideo, RecordedCamera
 from viewers.web.inputs import set_value
 from viewers.web.live_world import convert_snapshot
 from viewers.web.pump import FramePump
-from viewers.web.text import escape_md
+from viewers.web.text import escape_md, output_html, printed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.replay")
@@ -185,10 +185,11 @@ def readings_text(feed: ReplayFeed) -> str:
 
 
 def output_text(feed: ReplayFeed) -> str:
+    """The output up to the cursor (HTML): each line as printed, after its time."""
     lines = feed.timeline.output_until(feed.player.cursor, OUTPUT_LINES)
-    if not lines:
-        return "_Nothing printed by then._"
-    return "  \n".join(f"`{t:6.2f}` `{escape_md(text)}`" for t, text in lines)
+    return output_html(
+        (f"{t:6.2f}  {printed(text)}" for t, text in lines), "Nothing printed by then."
+    )
 
 
 class ReplayControls:
@@ -242,7 +243,7 @@ class ReplayControls:
             empty = (np.zeros(0), *[np.zeros(0)] * 8)
             self.ir_plot = gui.add_uplot(empty, series, title="IR up to the cursor", aspect=2.0)
             with gui.add_folder("Output up to the cursor"):
-                self.output = gui.add_markdown("")
+                self.output = gui.add_html("")
         self.slider.on_update(self._scrubbed)
         self.play.on_click(lambda _: self._play())
         self.pause.on_click(lambda _: self._pause())

@@ -36,7 +36,7 @@ from viewers.web.adapters import (
 )
 from viewers.web.inputs import set_value
 from viewers.web.live_agents import check_upload
-from viewers.web.text import escape_md
+from viewers.web.text import escape_md, output_html, printed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.robots")
@@ -45,6 +45,7 @@ MAX_ROWS = 20  # robots listed in the table
 MAX_CHOICES = 200  # robots in the dropdown
 PLOT_POINTS = 60  # 12 s at the pump's 5 Hz slow tick
 OUTPUT_LINES = 40  # older output scrolls away
+NOTHING_PRINTED = "Nothing printed yet."
 TABLE_EVERY_S = 1.0  # the ETAs count down between the context's events
 NONE = "(none)"
 ALL = "(all robots)"
@@ -105,6 +106,7 @@ class RobotPanel:
         self._settings: ArenaSettings | None = None
         self._output: deque[str] = deque(maxlen=OUTPUT_LINES)
         self._table_at = 0.0
+        self.on_rows: list[Callable[[], None]] = []  # called when the robots were re-read
         gui = client.gui
         with gui.add_folder("Robots"):
             # The host's emergency stop: first, and outside the folded settings (shown
@@ -122,7 +124,8 @@ class RobotPanel:
             self.cancel = gui.add_button("Cancel my request")
             self.notice = gui.add_markdown("", visible=False)
             with gui.add_folder("Controller output"):
-                self.output_md = gui.add_markdown("_Nothing printed yet._")
+                # HTML, not markdown: a print is shown exactly as printed.
+                self.output_md = gui.add_html(output_html([], NOTHING_PRINTED))
             # Instructor controls: shown to the context's owner or those with 'kick' there.
             with gui.add_folder("Arena settings", expand_by_default=False) as self.manage:
                 self.slot = gui.add_number("Slot length (s)", 60.0, min=1.0, max=3600.0, step=1.0)
@@ -196,15 +199,21 @@ class RobotPanel:
         names = (NONE, *(r.agent for r in rows[:MAX_CHOICES]))
         if tuple(self.robot.options) != names:
             self.robot.options = names
+        for hook in self.on_rows:
+            hook()
+
+    def driven(self, agent: str) -> bool:
+        """Does someone's controller hold ``agent`` now (as last read)?"""
+        return any(r.agent == agent and r.holder is not None for r in self._rows)
 
     # -- the agent context's news (the connection's thread)
 
     def on_request(self, event: RequestEvent) -> None:
         mine = event.user == self.connection.user
-        who = "your" if mine else f"{escape_md(event.user)}'s"
-        why = f": {escape_md(event.reason)}" if event.reason else ""
+        who = "your" if mine else f"{event.user}'s"
+        why = f": {event.reason}" if event.reason else ""
         words = STATUS_WORDS.get(event.status, event.status)
-        self._add_output(f"_{who} controller on {escape_md(event.agent)} {words}{why}_")
+        self._add_output(f"<i>{printed(f'{who} controller on {event.agent} {words}{why}')}</i>")
         if mine and event.status in ("running", "finished", "cancelled", "refused"):
             self.client.add_notification(
                 title=f"{event.agent}: your controller {words}",
@@ -214,13 +223,14 @@ class RobotPanel:
             )
 
     def on_output(self, event: OutputEvent) -> None:
-        tag = f"`{escape_md(event.agent)}` {escape_md(event.user)}:"
+        tag = f"<b>{printed(event.agent)} {printed(event.user)}:</b>"
         for line in event.lines:
-            self._add_output(f"{tag} `{escape_md(line)}`" if line.strip() else tag)
+            self._add_output(f"{tag} {printed(line)}")
 
     def _add_output(self, line: str) -> None:
+        """``line`` is HTML whose user text is escaped (:func:`printed`)."""
         self._output.append(line)
-        self.output_md.content = "  \n".join(self._output)
+        self.output_md.content = output_html(self._output, NOTHING_PRINTED)
 
     # -- the world view
 
@@ -349,7 +359,9 @@ class RobotPanel:
         )
 
     def _cancel(self) -> None:
-        agent = self._chosen()
+        mine = [r.agent for r in self._rows if r.my_request]
+        # With one request of mine there is nothing to choose: cancel it.
+        agent = mine[0] if len(mine) == 1 and self.robot.value not in mine else self._chosen()
         if agent is None:
             return
         try:

@@ -1,9 +1,11 @@
-"""Turning people's text into safe markdown, and checking what they type."""
+"""Turning people's text into safe markdown or HTML, and checking what they type."""
 
 from __future__ import annotations
 
+import html
 import re
 import time
+from collections.abc import Iterable
 
 MAX_LINE = 1000  # one chat line
 _MD_SPECIAL = re.compile(r"([\\`*_{}\[\]()#+\-.!|~>])")
@@ -13,6 +15,29 @@ def escape_md(text: str) -> str:
     """Text shown literally in viser markdown: no links, no HTML, no formatting."""
     text = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
     return _MD_SPECIAL.sub(r"\\\1", text)
+
+
+# Inline (not a class): output is shown in panels that may not have the editor's styles.
+OUTPUT_STYLE = (
+    "font-family: ui-monospace, Menlo, Consolas, monospace; font-size: 12px; margin: 0; "
+    "white-space: pre-wrap; overflow-wrap: anywhere"
+)
+
+
+def output_html(lines: Iterable[str], empty: str = "") -> str:
+    """Program output exactly as printed: each line escaped, monospace, never markdown.
+
+    ``lines`` are HTML already (see :func:`printed`); ``empty`` is plain text.
+    """
+    body = "\n".join(lines)
+    if not body:
+        return f"<i>{html.escape(empty)}</i>" if empty else ""
+    return f'<pre class="wart-output" style="{OUTPUT_STYLE}">{body}</pre>'
+
+
+def printed(text: str) -> str:
+    """One printed line as HTML: what was printed, escaped (markup and markdown shown as is)."""
+    return html.escape(text, quote=False)
 
 
 def check_line(text: str) -> str | None:

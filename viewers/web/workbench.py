@@ -19,10 +19,14 @@ page keeps nothing of its own), edits it in a multiline text input, and:
 - **Reset**: the robot back at its start pose (the world allows it only to
   whoever holds the robot now, or a map editor).
 
-viser's text area cannot colour a line, so problems are "marked" beside it: a
-list, and an excerpt of the code with ``>>`` in front of each problem line. A
-run's exception (the runner relays the traceback as output lines) is parsed
-for the innermost line of the student's file and shown the same way.
+The code is written in a CodeMirror editor (viewers/web/code_editor.py) laid
+over the viser text area ``code``, which stays what this class reads and
+writes. Problems are marked in the editor's gutter (message on hover) and
+listed under it, each line number a link that moves the editor there, with an
+excerpt of the code (``>>`` in front of each problem line), all as escaped
+HTML, never markdown. A run's exception (the runner relays the traceback as
+output lines) is parsed for the innermost line of the student's file and shown
+the same way.
 """
 
 from __future__ import annotations
@@ -30,7 +34,6 @@ from __future__ import annotations
 import logging
 import re
 import threading
-from dataclasses import dataclass
 from pathlib import Path
 
 import viser
@@ -38,99 +41,36 @@ import viser
 from common.controller.advice import Problem, check_source
 from common.messages.agent import FILE_NAME_PATTERN
 from viewers.web.adapters import (
-    DryRunResult,
+    AgentStatus,
     LabConnection,
     LabError,
     OutputEvent,
     RequestEvent,
 )
+from viewers.web.code_editor import CodeEditor
 from viewers.web.inputs import on_click, set_value
 from viewers.web.live_agents import check_upload
+from viewers.web.marks import (
+    DEFAULT_NAME,
+    MAX_MARKED,
+    TracebackReader,
+    format_dry_run,
+    format_problems,
+)
 from viewers.web.robot_panel import NONE, RobotPanel
 from viewers.web.text import escape_md
 
 log = logging.getLogger("wart.viewer.workbench")
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
-DEFAULT_NAME = "my_controller.py"
 EXAMPLE_PREFIX = "example: "
 MINE_PREFIX = "mine: "
-NO_REAL = "(join a real arena first)"
-CONTEXT_LINES = 1  # lines shown around each marked line
-MAX_MARKED = 8  # problems shown with an excerpt; the rest as a count
 _FILE_NAME = re.compile(FILE_NAME_PATTERN)
-# A traceback frame, and the line that ends a traceback (the exception and its message).
-_FRAME = re.compile(r'File "(?P<path>[^"]+)", line (?P<line>\d+)')
-_EXCEPTION = re.compile(r"^(?:[A-Za-z_][\w.]*\.)?[A-Za-z_]\w*(?:Error|Exception|Exit|Interrupt)\b")
 
 
 def examples() -> dict[str, bytes]:
     """The example controllers, by file name."""
     return {p.name: p.read_bytes() for p in sorted(EXAMPLES.glob("*.py"))}
-
-
-def excerpt(source: str, problems: list[Problem]) -> str:
-    """The code around each problem line, the line itself marked ``>>`` (markdown)."""
-    lines = source.splitlines()
-    marked = sorted({p.line for p in problems if p.line is not None and p.line >= 1})
-    if not marked or not lines:
-        return ""
-    shown: list[int] = []
-    for n in marked[:MAX_MARKED]:
-        for i in range(max(1, n - CONTEXT_LINES), min(len(lines), n + CONTEXT_LINES) + 1):
-            if i not in shown:
-                shown.append(i)
-    width = len(str(shown[-1])) if shown else 1
-    out, previous = [], 0
-    for i in shown:
-        if previous and i > previous + 1:
-            out.append("   ...")
-        mark = ">>" if i in marked else "  "
-        out.append(f"{mark} {i:>{width}} | {lines[i - 1]}")
-        previous = i
-    return "```\n" + "\n".join(out).replace("```", "'''") + "\n```"
-
-
-def format_problems(source: str, problems: list[Problem], heading: str) -> str:
-    items = [f"- {escape_md(str(p))}" for p in problems]
-    return f"**{escape_md(heading)}**\n\n" + "\n".join(items) + "\n\n" + excerpt(source, problems)
-
-
-def format_dry_run(source: str, result: DryRunResult, heading: str) -> str:
-    """A dry run's verdict (markdown): an exception's line marked as Check marks it."""
-    details = "\n".join(f"- {escape_md(line)}" for line in result.details)
-    if result.line is None:
-        body = f"**{escape_md(heading)}**"
-    else:
-        # The verdict says "will NOT run: line 12: ZeroDivisionError: ..."; the item says it once.
-        message = result.verdict.removeprefix("will NOT run: ")
-        message = message.removeprefix(f"line {result.line}: ")
-        body = format_problems(source, [Problem(result.line, message)], heading)
-    return body + ("\n\n" + details if details else "")
-
-
-@dataclass
-class TracebackReader:
-    """Finds ``line N: Exception: message`` for the student's file in relayed output lines."""
-
-    filename: str = DEFAULT_NAME
-    _line: int | None = None
-
-    def feed(self, text: str) -> Problem | None:
-        frame = _FRAME.search(text)
-        if frame is not None:
-            path = frame.group("path").replace("\\", "/")
-            name = path.rsplit("/", 1)[-1]
-            # The sandbox stores the upload as controller.py; the API is lib/common/controller/.
-            if name in (self.filename, "controller.py") and "/common/" not in path:
-                self._line = int(frame.group("line"))
-            return None
-        stripped = text.strip()
-        if self._line is not None and _EXCEPTION.match(stripped):
-            found = Problem(self._line, stripped)
-            self._line = None
-            return found
-        return None
 
 
 class Workbench:
@@ -147,7 +87,8 @@ class Workbench:
         self.robots = robots
         self._examples = examples()
         self._traceback = TracebackReader()
-        self._running_on: str | None = None  # the robot my editor's run is queued on
+        # (context, robot) my editor's run is queued on: a real one may be in another arena.
+        self._running_on: tuple[str, str] | None = None
         self._errors: list[Problem] = []
         # The context's news of my run counts up: a reply that arrives after the news
         # (a run can start, or end, before the query's answer is back) must not hide it.
@@ -163,6 +104,11 @@ class Workbench:
             self.name = gui.add_text("File name", DEFAULT_NAME)
             first = next(iter(self._examples.values()), b"")
             self.code = gui.add_text("Code", first.decode("utf-8", "replace"), multiline=True)
+            # CodeMirror over the text area above; it hides it and writes into it.
+            self.editor = CodeEditor(client, self.code)
+            # The robot the buttons below act on: this arena's robots and those of the
+            # real arenas joined, beside the buttons (the robot panel's list follows it).
+            self.target = gui.add_dropdown("Run on", (NONE,))
             self.check = gui.add_button("Check", icon=viser.Icon.CHECKLIST)
             self.save = gui.add_button("Save", icon=viser.Icon.DEVICE_FLOPPY)
             self.run = gui.add_button(
@@ -174,12 +120,11 @@ class Workbench:
                 hint="Run the code a few simulated seconds in a private copy of the arena: "
                 "will it run? Nothing is queued.",
             )
-            self.real = gui.add_dropdown("Real robot", (NO_REAL,))
             self.queue_real = gui.add_button("Queue on the real robot", icon=viser.Icon.ROBOT)
             self.stop = gui.add_button("Stop", color="red", icon=viser.Icon.PLAYER_STOP)
             self.reset = gui.add_button("Reset", icon=viser.Icon.REFRESH)
             self.status = gui.add_markdown("")
-            self.problems = gui.add_markdown("")
+            self.problems = gui.add_html("")
         self.open.on_click(lambda _: self._open())
         on_click(self.check, self.check_now)
         on_click(self.save, self._save)
@@ -188,6 +133,10 @@ class Workbench:
         self.dry.on_click(lambda _: self._dry_run())
         self.stop.on_click(lambda _: self._stop())
         self.reset.on_click(lambda _: self._reset())
+        self.target.on_update(lambda _: self._target_chosen())
+        robots.robot.on_update(lambda _: self._panel_chosen())
+        robots.on_rows.append(self.refresh_targets)
+        self.refresh_targets()
         # My files come from the lab: read them off the page's thread (a query can take 2 s).
         threading.Thread(target=self._load_mine, name=f"files-{ctx}", daemon=True).start()
 
@@ -200,6 +149,11 @@ class Workbench:
         self.problems.content = (
             format_problems(self.code.value, problems, heading) if problems else ""
         )
+        self.editor.mark(problems)
+
+    def _clear(self) -> None:
+        self.problems.content = ""
+        self.editor.mark([])
 
     # -- files
 
@@ -255,7 +209,7 @@ class Workbench:
         else:
             return
         set_value(self.code, source.decode("utf-8", "replace"))
-        self.problems.content = ""
+        self._clear()
         self.say(f"Opened {name}.")
 
     def _save(self) -> str | None:
@@ -283,7 +237,7 @@ class Workbench:
             self._show(problems, f"Check: {count}")
             self.say(f"Check found {count}: see the marked lines below.")
         else:
-            self.problems.content = ""
+            self._clear()
             self.say(
                 "Check: no problems found. It will load and run; whether it drives well, "
                 "only a run shows."
@@ -310,7 +264,7 @@ class Workbench:
         if ready is None:
             return
         name, source = ready
-        self._running_on = agent
+        self._running_on = (ctx, agent)
         news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
@@ -327,10 +281,54 @@ class Workbench:
             self.say(f"{name} is queued on {agent} ({where}): {when}.")
         self.robots.refresh_agents()
 
+    # -- the robot the buttons act on ("Run on")
+
+    def _targets(self) -> list[tuple[str, str]]:
+        """(context, robot) the editor can run on: this arena's, then the real arenas'."""
+        here = [(self.ctx, a) for a in self.robots.robot.options if a != NONE]
+        try:
+            real = [r for r in self.connection.real_robots() if r[0] != self.ctx]
+        except LabError:
+            real = []
+        return here + real
+
+    def _label(self, ctx: str, agent: str) -> str:
+        return agent if ctx == self.ctx else f"{ctx}/{agent}"
+
+    def refresh_targets(self) -> None:
+        """The list follows this arena's robots and the real arenas joined (or left)."""
+        options = (NONE, *(self._label(*t) for t in self._targets()))
+        if tuple(self.target.options) != options:
+            keep = self.target.value
+            self.target.options = options
+            set_value(self.target, keep if keep in options else NONE)
+
+    def _target_chosen(self) -> None:
+        value = self.target.value
+        if value in self.robots.robot.options and self.robots.robot.value != value:
+            set_value(self.robots.robot, value)  # the view selects it, the panel shows it
+
+    def _panel_chosen(self) -> None:
+        value = self.robots.robot.value  # chosen in the robot panel, or clicked in the view
+        if value != NONE and value in self.target.options and self.target.value != value:
+            set_value(self.target, value)
+
+    def _target(self) -> tuple[str, str] | None:
+        value = self.target.value
+        return next((t for t in self._targets() if self._label(*t) == value), None)
+
     def _chosen(self) -> str | None:
-        agent = self.robots.robot.value
-        if agent == NONE or agent not in self.robots.robot.options:
-            self.say("Choose a robot first (the Robot list, or click one in the view).", bad=True)
+        """The chosen robot of this arena, or None with what to do said."""
+        target = self._target()
+        panel = self.robots.robot.value
+        if target is None and panel != NONE and panel in self.robots.robot.options:
+            target = (self.ctx, panel)
+        if target is None:
+            self.say("Choose a robot first in 'Run on' (or click one in the view).", bad=True)
+            return None
+        ctx, agent = target
+        if ctx != self.ctx:
+            self.say(f"{agent} is a real robot in {ctx}: use 'Queue on the real robot'.", bad=True)
             return None
         return agent
 
@@ -377,16 +375,15 @@ class Workbench:
         self.say(f"Dry run of {name} on {agent} done: it {verdict}, see below.")
         heading = f"Dry run on {agent}: {result.verdict}"
         self.problems.content = format_dry_run(self.code.value, result, heading)
-
-    def refresh_real(self) -> list[tuple[str, str]]:
-        robots = self.connection.real_robots()
-        options = tuple(f"{ctx}/{agent}" for ctx, agent in robots) or (NO_REAL,)
-        if tuple(self.real.options) != options:
-            self.real.options = options
-        return robots
+        self.editor.mark([] if result.line is None else [Problem(result.line, result.verdict)])
 
     def _run_real(self) -> None:
-        robots = self.refresh_real()
+        try:
+            robots = self.connection.real_robots()
+        except LabError as exc:
+            self.say(f"Could not list the real robots: {exc}", bad=True)
+            return
+        self.refresh_targets()
         if not robots:
             self.say(
                 "You have not joined a real arena (a Khepera bridge's context): join one from "
@@ -394,21 +391,58 @@ class Workbench:
                 bad=True,
             )
             return
-        chosen = next((r for r in robots if f"{r[0]}/{r[1]}" == self.real.value), robots[0])
+        target = self._target()
+        chosen = target if target in robots else robots[0]
         self._queue(chosen[0], chosen[1], f"real robot in {chosen[0]}")
 
+    def _mine(self) -> list[tuple[str, AgentStatus]]:
+        """My requests (running or waiting) in this arena and the real arenas joined."""
+        contexts = [self.ctx, *sorted({c for c, _ in self._targets() if c != self.ctx})]
+        found: list[tuple[str, AgentStatus]] = []
+        for ctx in contexts:
+            try:
+                found += [(ctx, r) for r in self.connection.agents(ctx) if r.my_request]
+            except LabError as exc:
+                log.info("my requests in %s: %s", ctx, exc)
+        return found
+
     def _stop(self) -> None:
-        agent = self._running_on or self._chosen()
-        if agent is None:
+        """Stop my run wherever it runs: started here, by Queue or Promote, simulated or real.
+
+        Which: the editor's own run; else the chosen robot's; else whatever of mine
+        runs now; else my one waiting request. Several waiting: the student chooses.
+        """
+        mine = self._mine()
+        held = [(ctx, row.agent) for ctx, row in mine]
+        target = self._target()
+        if self._running_on in held:
+            picks = [self._running_on]
+        elif target in held:
+            picks = [target]
+        else:
+            picks = [(ctx, row.agent) for ctx, row in mine if row.my_position == 0]
+            if not picks and len(held) == 1:
+                picks = held
+        if not picks:
+            if held:
+                self.say(
+                    f"You have {len(held)} requests waiting: choose the robot in 'Run on', "
+                    "then Stop.",
+                    bad=True,
+                )
+            else:
+                self.say("Nothing of yours runs or waits on a robot.", bad=True)
             return
         news = self._news
-        try:
-            detail = self.connection.cancel_control(self.ctx, agent)
-        except LabError as exc:
-            self.say(f"Nothing stopped on {agent}: {exc}", bad=True)
-            return
+        said = []
+        for ctx, agent in picks:
+            try:
+                said.append(self.connection.cancel_control(ctx, agent))
+            except LabError as exc:
+                self.say(f"Nothing stopped on {agent}: {exc}", bad=True)
+                return
         if self._news == news:
-            self.say(f"Stopped: {detail}.")
+            self.say("Stopped: " + "; ".join(said) + ".")
         self.robots.refresh_agents()
 
     def _reset(self) -> None:
@@ -428,7 +462,7 @@ class Workbench:
     # -- the lab's news about my run (the connection's thread)
 
     def on_request(self, event: RequestEvent) -> None:
-        if event.user != self.connection.user or event.agent != self._running_on:
+        if event.user != self.connection.user or (event.ctx, event.agent) != self._running_on:
             return
         if event.status != "queued":  # "queued" is what the request's own reply says
             self._news += 1
@@ -441,7 +475,7 @@ class Workbench:
             self.say(f"Your controller runs on {event.agent}.")
 
     def on_output(self, event: OutputEvent) -> None:
-        if event.user != self.connection.user or event.agent != self._running_on:
+        if event.user != self.connection.user or (event.ctx, event.agent) != self._running_on:
             return
         for text in event.lines:
             found = self._traceback.feed(text)

@@ -190,7 +190,11 @@ class WorldView:
             cam = self.client.camera
             cam.fov = geo.CAMERA_FOV
             cam.up_direction = (0.0, 1.0, 0.0)  # screen-up is world +y
-            cam.position = (cx, cy, geo.camera_height(snap.width, snap.height))
+            try:  # the canvas the browser reported (the panel docked beside it takes the rest)
+                aspect = geo.fit_aspect(float(cam.aspect))
+            except AssertionError:  # not reported yet
+                aspect = geo.ASSUMED_ASPECT
+            cam.position = (cx, cy, geo.camera_height(snap.width, snap.height, aspect))
             cam.look_at = (cx, cy, 0.0)
 
     def hide(self) -> None:

@@ -103,6 +103,13 @@ def test_the_summary_has_distance_time_moving_and_errors(tmp_path: Path) -> None
     assert summary.moving_s > 1.0
     assert summary.status == "finished"
     assert [(e.kind, e.line) for e in summary.errors] == [("ZeroDivisionError", 12)]
+    # Its durations are said in the world's own time: simulated here, wall-clock on robots.
+    from services.commands.report import describe
+
+    assert summary.world_kind == "sim"
+    assert any(line.endswith("s of simulated time") for line in describe(summary))
+    real = msgspec.structs.replace(summary, world_kind="real")
+    assert any(line.endswith("s of real time") for line in describe(real))
 
 
 def test_a_truncated_recording_is_salvaged_and_garbage_is_a_clear_error(tmp_path: Path) -> None:

@@ -42,6 +42,14 @@ def test_camera_sees_the_whole_arena() -> None:
     assert 2.0 < visible < 2.5
 
 
+def test_a_wide_arena_fits_a_narrow_canvas() -> None:
+    # 3 m by 1 m in the 820x800 canvas a 1280x800 screen leaves beside the panel.
+    aspect = 820 / 800
+    h = geo.camera_height(3000, 1000, aspect)
+    visible_w = 2 * h * math.tan(geo.CAMERA_FOV / 2) * aspect
+    assert 3.0 < visible_w < 3.5
+
+
 def test_a_click_ray_finds_the_robot_it_lands_on() -> None:
     radius = 27.5 * geo.MM
     positions = np.array([[1.0, 1.0, geo.ROBOT_Z], [1.2, 1.0, geo.ROBOT_Z]], np.float32)
@@ -205,3 +213,15 @@ def test_the_follow_camera_shifts_sideways_and_keeps_height_and_look() -> None:
     # Within the dead band (2 mm) the camera is left alone: no message for a still robot.
     assert geo.follow_camera(new_pos, new_look, (0.3005, 1.7005)) is None
     assert geo.follow_camera(new_pos, new_look, (float("nan"), 1.0)) is None
+
+
+def test_the_plots_draw_each_thing_in_the_views_colour() -> None:
+    from common.recording import plots
+    from viewers.web import world_view
+
+    def hexed(rgb: object) -> str:
+        return "#" + "".join(f"{int(c):02x}" for c in rgb)  # type: ignore[attr-defined]
+
+    assert hexed(world_view.BALL_COLOUR) == plots.BALL_COLOUR
+    assert hexed(world_view.OBSTACLE_COLOUR) == plots.OBSTACLE_COLOUR
+    assert hexed(world_view.GRIPPER_COLOURS[0]) == plots.ROBOT_COLOUR

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common.controller.advice import Problem
 from viewers.web.adapters import DryRunResult
-from viewers.web.workbench import TracebackReader, excerpt, format_dry_run
+from viewers.web.marks import TracebackReader, excerpt, format_dry_run, format_problems
 
 TRACEBACK = [
     "Traceback (most recent call last):",
@@ -38,15 +38,24 @@ def test_a_dry_runs_exception_is_marked_at_its_line_and_said_once() -> None:
     verdict = "will NOT run: line 2: ZeroDivisionError: division by zero"
     result = DryRunResult(False, verdict, ("| hello",), line=2)
     text = format_dry_run(source, result, f"Dry run of x.py on k0: {verdict}")
-    assert ">> 2 | b = 1 / 0" in text
-    assert "- line 2: ZeroDivisionError: division by zero" in text  # not "line 2: ... line 2"
-    assert text.count("line 2:") == 2  # the heading and the item
-    assert text.rstrip().endswith("- \\| hello")  # the printed lines follow, escaped
+    assert "&gt;&gt; 2 | b = 1 / 0" in text
+    # The item links its line to the editor and says it once (not "line 2: ... line 2").
+    assert ">line 2</a>: ZeroDivisionError: division by zero</li>" in text
+    assert 'data-wart-line="2"' in text
+    assert text.count("line 2:") == 1  # the heading; the item's "line 2" is the link
+    assert text.endswith('<pre class="wart-output">| hello</pre>')  # printed lines, verbatim
 
 
 def test_a_dry_runs_collision_has_no_line_to_mark() -> None:
     verdict = "will NOT run: 1 collision, the first with a wall at 0.84 s"
     result = DryRunResult(False, verdict, ("collision at 0.84 s: wall",))
     text = format_dry_run("x = 1\n", result, f"Dry run on k3: {verdict}")
-    assert ">>" not in text and "the first with a wall" in text
-    assert "- collision at 0\\.84 s: wall" in text  # escaped for markdown
+    assert "&gt;&gt;" not in text and "the first with a wall" in text
+    assert "collision at 0.84 s: wall" in text  # as said, not escaped for markdown
+
+
+def test_problems_are_escaped_html_never_interpreted() -> None:
+    text = format_problems("x = '<b>'\n", [Problem(1, "*not* <b>bold</b> #1")], "Check: 1 [a]")
+    assert "<b>bold</b>" not in text and "&lt;b&gt;bold&lt;/b&gt;" in text
+    assert "*not*" in text and "#1" in text and "\\" not in text
+    assert "x = &#x27;&lt;b&gt;&#x27;" in text

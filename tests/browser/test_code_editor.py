@@ -1,0 +1,158 @@
+"""The workbench's code editor (CodeMirror) in Chromium, against the demo lab.
+
+Typed as a student types (Tab and Shift-Tab indent by four spaces, Enter
+auto-indents); the text reaches the server; Ctrl-Enter checks and the planted
+line is marked in the gutter with the message on hover; Ctrl-S saves; a file
+opened on the server appears in the editor; a problem's line link moves the
+cursor there. Every assertion reads the DOM or the server, never pixels.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.browser.conftest import ViserPage, join_demo_arena, wait_until
+from viewers.web.app import WebViewer
+from viewers.web.client import BrowserSession
+from viewers.web.workbench import Workbench
+
+pytestmark = pytest.mark.browser
+
+TYPED = """\
+from common.controller import Controller, Khepera
+
+
+class Circle(Controller):
+    period = 0.05
+
+    def initialize(self, robot: Khepera) -> None:
+        print("left_speed=[3, 4] *fast* #1 <b>x</b>")
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speed(8, 4)
+"""
+
+
+def workbench_of(session: BrowserSession) -> Workbench:
+    wait_until(lambda: any(lab.panels for lab in session.labs.values()), what="the arena's panel")
+    panel = next(tab for lab in session.labs.values() for tab in lab.panels.values())
+    assert panel.workbench is not None
+    return panel.workbench
+
+
+def editor(page: ViserPage):
+    return page.p.get_by_role("textbox", name="Controller code", exact=True)
+
+
+def type_as_a_student(page: ViserPage) -> None:
+    """Each line without its indent: Enter auto-indents, Tab and Shift-Tab adjust it."""
+    kb = page.p.keyboard
+    steps: list[tuple[str, str]] = [
+        ("from common.controller import Controller, Khepera", "Enter"),
+        ("", "Enter"),
+        ("", "Enter"),
+        ("class Circle(Controller):", "Enter"),  # auto-indent: 4 spaces
+        ("period = 0.05", "Enter"),
+        ("", "Enter"),
+        ("def initialize(self, robot: Khepera) -> None:", "Enter"),  # 8 spaces
+        ('print("left_speed=[3, 4] *fast* #1 <b>x</b>', "Enter"),  # ") closed by the editor
+        ("", "Shift+Tab"),  # back to 4
+        ("", "Enter"),
+        ("def do_work(self, robot: Khepera) -> None:", "Enter"),
+        ("robot.set_speed(8, 4", "Enter"),
+    ]
+    for text, key in steps:
+        if text:
+            kb.type(text)
+        if text.startswith('print("') or text.startswith("robot.set_speed("):
+            kb.press("End")  # past what the editor closed: ") or )
+        kb.press(key)
+
+
+def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> None:
+    page, session = join_demo_arena(open_page, viewer, "ana")
+    page.tab("arena").last.click()
+    box = editor(page)
+    box.wait_for(timeout=15_000)
+    bench = workbench_of(session)
+    # The old text area is still what the server reads, but out of sight and of Tab.
+    hidden = page.input_after_label("Code")
+    assert hidden.evaluate("e => e.tagName === 'TEXTAREA' && e.tabIndex === -1")
+    assert hidden.evaluate("e => e.offsetParent === null")  # drawn nowhere
+    lines = page.p.locator(".cm-gutter.cm-lineNumbers .cm-gutterElement")
+    # At least 30 lines visible at 1280x800: the editor is 30 lines tall or more.
+    height = box.evaluate("el => el.closest('.cm-editor').getBoundingClientRect().height")
+    line_height = box.evaluate("el => el.querySelector('.cm-line').getBoundingClientRect().height")
+    assert height >= 30 * line_height
+
+    box.click()
+    page.p.keyboard.press("Control+a")
+    page.p.keyboard.press("Delete")
+    wait_until(lambda: bench.code.value == "", what="the emptied editor on the server")
+    type_as_a_student(page)
+    # Trailing whitespace of the last Enter is the only difference from TYPED.
+    wait_until(
+        lambda: bench.code.value.rstrip(" ") == TYPED,
+        15,
+        what="the typed controller on the server",
+    )
+    assert lines.count() >= 12
+
+    # Tab indents the current line by four spaces, Shift-Tab takes them back.
+    page.p.keyboard.press("Control+Home")
+    page.p.keyboard.press("Tab")
+    wait_until(lambda: bench.code.value.startswith("    from common"), what="Tab's indent")
+    page.p.keyboard.press("Shift+Tab")
+    wait_until(lambda: bench.code.value.startswith("from common"), what="Shift-Tab's dedent")
+
+    # The keyboard can leave the editor: Escape, then Tab moves on (Tab alone indents).
+    page.p.keyboard.press("Escape")
+    page.p.keyboard.press("Tab")
+    assert not box.evaluate("el => el.contains(document.activeElement)")
+    assert bench.code.value.startswith("from common")  # that Tab indented nothing
+    box.click()
+
+    # Ctrl-Enter checks: line 11 is marked in the gutter and in the text, message on hover.
+    page.p.keyboard.press("Control+Enter")
+    page.wait_text("Check found 1 problem")
+    marker = page.p.locator(".cm-lint-marker-error")
+    marker.wait_for(timeout=10_000)
+    assert marker.count() == 1
+    marked = page.p.evaluate(
+        "() => [...document.querySelectorAll('.cm-content .cm-line')]"
+        ".findIndex(l => l.querySelector('.cm-lintRange-error')) + 1"
+    )
+    assert marked == 11
+    marker.hover()
+    tip = page.p.locator(".cm-tooltip-lint")
+    tip.wait_for(timeout=5_000)
+    assert "does not exist on Khepera" in tip.inner_text()
+    page.screenshot("editor-check-marks-line-11")
+
+    # The problem's line number is a link: it puts the editor's cursor on line 11.
+    box.click()
+    page.p.keyboard.press("Control+Home")
+    page.p.locator("a[data-wart-line='11']").click()
+    at = page.p.evaluate(
+        "() => { const v = [...window.wartEditor.views.values()][0].view;"
+        " return v.state.doc.lineAt(v.state.selection.main.head).number; }"
+    )
+    assert at == 11
+
+    # Ctrl-S saves under the file name: the lab keeps it, the list shows it.
+    page.p.keyboard.press("Control+s")
+    wait_until(lambda: "mine: my_controller.py" in bench.start_from.options, what="the saved file")
+
+    # A file the server opens appears in the editor.
+    bench.start_from.value = next(o for o in bench.start_from.options if o.startswith("example"))
+    example = bench._examples[bench.start_from.value.removeprefix("example: ")]
+    page.click("Open")
+    wait_until(
+        lambda: (
+            box.evaluate("el => el.cmView ? '' : el.innerText").strip()[:40]
+            == example.decode().strip()[:40]
+        ),
+        10,
+        what="the opened example in the editor",
+    )
+    assert page.p.locator(".cm-lint-marker-error").count() == 0
