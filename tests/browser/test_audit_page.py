@@ -14,6 +14,7 @@ import pytest
 
 from common.lab_errors import Banned
 from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_lab import log_in
 from viewers.web.app import WebViewer
 from viewers.web.viser_fast import browser_address
 
@@ -34,9 +35,7 @@ def test_an_admin_bans_from_the_page_and_reads_the_audit_trail(open_page, lab: R
         admin.grant("alice", "kick", "ctx/lobby")
         admin.kick_from_server("bob", "answers shared in the chat")
     page = open_page("admin")
-    page.log_in(lab.url, "admin", "correct horse")
-    page.tab(lab.address.label).first.click()
-    page.wait_text("Logged in as")
+    log_in(page, lab, "admin")
     page.p.get_by_text("Administration").first.click()
     # A ban from the page: carol is refused at login with the reason and the end.
     page.fill("Account", "carol")
