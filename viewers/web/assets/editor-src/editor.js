@@ -91,6 +91,9 @@ function resendLater(entry, ms) {
     if (views.get(entry.id) !== entry || !entry.view.dom.isConnected) return;
     const text = entry.view.state.doc.toString();
     if (text !== entry.written || !entry.area.isConnected) return;
+    // The server set another text since (a file opened): the next poll loads it, and
+    // sending ours now would put the old text back over it.
+    if (entry.area.value !== entry.written) return;
     if (performance.now() - lastActivity < QUIET_MS) {
       entry.resend.push(resendLater(entry, QUIET_MS)); // not now: try again shortly
       return;
