@@ -80,10 +80,16 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
     assert hidden.evaluate("e => e.tagName === 'TEXTAREA' && e.tabIndex === -1")
     assert hidden.evaluate("e => e.offsetParent === null")  # drawn nowhere
     lines = page.p.locator(".cm-gutter.cm-lineNumbers .cm-gutterElement")
+
     # At least 30 lines visible at 1280x800: the editor is 30 lines tall or more.
-    height = box.evaluate("el => el.closest('.cm-editor').getBoundingClientRect().height")
-    line_height = box.evaluate("el => el.querySelector('.cm-line').getBoundingClientRect().height")
-    assert height >= 30 * line_height
+    # Measured once laid out: right after the tab shows, the editor can still be 0 tall
+    # (seen in a CI run); what the DOM says then is "not laid out yet", not "too small".
+    def lines_tall() -> float:
+        height = box.evaluate("el => el.closest('.cm-editor').getBoundingClientRect().height")
+        line = box.evaluate("el => el.querySelector('.cm-line').getBoundingClientRect().height")
+        return float(height) / float(line) if line else 0.0
+
+    wait_until(lambda: lines_tall() >= 30, 10, what="the editor laid out 30 lines tall or more")
 
     box.click()
     page.p.keyboard.press("Control+a")
