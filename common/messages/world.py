@@ -221,6 +221,10 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     # or it stopped tracking) or "not seen" (a live camera lost it: kept where it was
     # last seen); "" in a simulated world, where the pose is the simulation's own.
     pose_from: Literal["", "tracked", "odometry", "not seen"] = ""
+    # The gripper's tongs that robots and walls collide with (the joints drive's), each
+    # x from, x to, y and half width in the robot frame (mm): a recording's collisions
+    # count them as the dry run's physics does. Empty where tongs touch objects only.
+    tongs: list[tuple[float, float, float, float]] = msgspec.field(default_factory=list)
 
 
 class WorldSnapshot(Message, frozen=True):

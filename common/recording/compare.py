@@ -40,8 +40,9 @@ import msgspec
 import numpy as np
 
 from common.messages import WorldSnapshot
+from common.recording import contacts
 from common.recording.reader import Recording, RecordingError
-from common.recording.summary import JUMP_MM, count_collisions, radius_of
+from common.recording.summary import JUMP_MM
 
 ROBOT_TYPE = "khepera"
 SENSORS = 8  # a Khepera's IR emitters/receivers: proximity and ambient per sensor
@@ -272,9 +273,13 @@ def _side(rec: Recording, tr: Track, label: str, snap: WorldSnapshot | None) -> 
     steps = np.hypot(np.diff(tr.x), np.diff(tr.y))
     steps[steps > JUMP_MM] = 0.0  # an edit or a teleport, not travel (as the summary counts)
     collisions, contact = (0, 0.0)
-    if snap is not None:
-        radius = radius_of(rec.snapshot, rec.info.agent)
-        collisions, contact = count_collisions(snap, radius, tr.x, tr.y, tr.t)
+    if snap is not None and len(tr.x):
+        # Walls and obstacles only: the two runs' other robots are not the same ones.
+        me = contacts.agent_info(rec.snapshot, rec.info.agent)
+        radius = contacts.radius_of(rec.snapshot, rec.info.agent)
+        gaps = contacts.map_contact(snap, radius, tr.x, tr.y, tr.heading, me)
+        collided, contact = contacts.count_collisions(gaps, tr.t)
+        collisions = sum(collided.values())
     return Side(
         label=label,
         path=str(rec.path),

@@ -1,9 +1,9 @@
 """A run's result summary, from its recording alone: how far, how long, what it hit, how it ended.
 
-Collisions are approximated from the frames (no physics needed): the robot's
-centre within its radius (+ :data:`CONTACT_MM`) of an obstacle's outline or
-of the arena's edge counts as touching; each stretch of touching is one
-collision. Objects gripped are the robot's fingers going to ``holding``;
+Collisions are counted from the frames (common/recording/contacts.py): the
+robot's footprint (disc and tongs) touching the arena's edge, an obstacle or
+another robot; each stretch of touching one kind of thing is one collision
+with it, as the dry run counts. Objects gripped are the robot's fingers going to ``holding``;
 objects delivered are those that end inside a nest zone having started
 outside. Errors are read from the output: a traceback's last line of the
 controller's file, and the exception that ended it.
@@ -11,16 +11,15 @@ controller's file, and the exception that ended it.
 
 from __future__ import annotations
 
-import math
 import re
 
 import msgspec
 import numpy as np
 
-from common.messages import ItemInfo, WorldSnapshot
+from common.messages import WorldSnapshot
+from common.recording import contacts
 from common.recording.reader import Recording
 
-CONTACT_MM = 2.0  # touching: the pymunk contact slop and float32 poses are below this
 MOVING_MM_S = 5.0  # slower than this is standing (sensor noise, a push)
 JUMP_MM = 200.0  # a step longer than this between frames is an edit or a teleport, not travel
 
@@ -51,7 +50,7 @@ class Summary(msgspec.Struct, frozen=True, kw_only=True):
     reason: str
     distance_mm: float
     moving_s: float
-    collisions: int
+    collisions: int  # with anything: the sum of collided_with
     contact_s: float
     gripped: int
     delivered: int
@@ -63,17 +62,23 @@ class Summary(msgspec.Struct, frozen=True, kw_only=True):
     truncated: str = ""
     # The world's kind: "real" runs on robots (durations are wall-clock time), "sim" simulated.
     world_kind: str = "sim"
+    # Collisions by what was hit: "wall" (the arena's edge), "obstacle", "robot".
+    collided_with: dict[str, int] = msgspec.field(default_factory=dict)
 
 
 def summarize(rec: Recording) -> Summary:
     info = rec.info
     assert info is not None  # read_recording refuses a file without one
-    xs, ys, ts, fingers = track(rec, info.agent)
+    xs, ys, hs, ts, fingers = track(rec, info.agent)
     distance, moving = _travel(xs, ys, ts)
     snap = rec.snapshot
-    collisions, contact = (0, 0.0)
-    if snap is not None:
-        collisions, contact = count_collisions(snap, radius_of(snap, info.agent), xs, ys, ts)
+    collided: dict[str, int] = {}
+    contact = 0.0
+    if snap is not None and len(xs):
+        me = contacts.agent_info(snap, info.agent)
+        gaps = contacts.map_contact(snap, contacts.radius_of(snap, info.agent), xs, ys, hs, me)
+        gaps["robot"] = contacts.robot_gaps(rec, info.agent, snap)
+        collided, contact = contacts.count_collisions(gaps, ts)
     gripped = int(np.count_nonzero((fingers[1:] == 2) & (fingers[:-1] != 2))) if len(fingers) else 0
     duration = float(ts[-1] - ts[0]) if len(ts) > 1 else 0.0
     end = rec.end
@@ -91,7 +96,8 @@ def summarize(rec: Recording) -> Summary:
         reason=end.reason if end else "the recording ends without saying (cut short)",
         distance_mm=round(distance, 1),
         moving_s=round(moving, 2),
-        collisions=collisions,
+        collisions=sum(collided.values()),
+        collided_with=collided,
         contact_s=round(contact, 2),
         gripped=gripped,
         delivered=_delivered(rec, snap),
@@ -105,9 +111,11 @@ def summarize(rec: Recording) -> Summary:
     )
 
 
-def track(rec: Recording, agent: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The agent's x, y (mm), sim time (s) and fingers over the frames it appears in."""
-    xs, ys, ts, fingers = [], [], [], []
+def track(
+    rec: Recording, agent: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The agent's x, y (mm), heading (rad), sim time (s) and fingers over the frames it is in."""
+    xs, ys, hs, ts, fingers = [], [], [], [], []
     for stamped in rec.frames:
         f = stamped.record
         try:
@@ -116,9 +124,10 @@ def track(rec: Recording, agent: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
             continue
         xs.append(f.x[row])
         ys.append(f.y[row])
+        hs.append(f.heading[row] if row < len(f.heading) else 0.0)
         ts.append(f.sim_time)
         fingers.append(f.fingers[row] if row < len(f.fingers) else 0)
-    return np.array(xs), np.array(ys), np.array(ts), np.array(fingers, dtype=int)
+    return np.array(xs), np.array(ys), np.array(hs), np.array(ts), np.array(fingers, dtype=int)
 
 
 def _travel(xs: np.ndarray, ys: np.ndarray, ts: np.ndarray) -> tuple[float, float]:
@@ -131,78 +140,6 @@ def _travel(xs: np.ndarray, ys: np.ndarray, ts: np.ndarray) -> tuple[float, floa
     speed = np.zeros_like(steps)
     speed[ok] = steps[ok] / dt[ok]
     return float(steps.sum()), float(dt[ok & (speed > MOVING_MM_S)].sum())
-
-
-def radius_of(snap: WorldSnapshot | None, agent: str) -> float:
-    if snap is not None:
-        for a in snap.agents:
-            if a.id == agent:
-                return a.radius
-    return 35.0  # a Khepera's
-
-
-def _outline(item: ItemInfo) -> np.ndarray | None:
-    """A polygon item's corners in the world (mm); None for a circle."""
-    if item.shape.kind != "polygon" or not item.shape.points:
-        return None
-    pts = np.array(item.shape.points, dtype=float)
-    c, s = math.cos(item.heading), math.sin(item.heading)
-    rot = np.array([[c, -s], [s, c]])
-    return pts @ rot.T + np.array([item.x, item.y])
-
-
-def _segment_distance(px: np.ndarray, py: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ab = b - a
-    length2 = float(ab @ ab) or 1e-12
-    t = np.clip(((px - a[0]) * ab[0] + (py - a[1]) * ab[1]) / length2, 0.0, 1.0)
-    return np.hypot(px - (a[0] + t * ab[0]), py - (a[1] + t * ab[1]))
-
-
-def _inside(px: np.ndarray, py: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd rule, vectorised over points."""
-    inside = np.zeros(px.shape, bool)
-    n = len(poly)
-    for i in range(n):
-        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
-        crosses = (y1 > py) != (y2 > py)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xcross = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (px < xcross)
-    return inside
-
-
-def _clearance(item: ItemInfo, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """Distance from each point to the item's outline (negative inside)."""
-    poly = _outline(item)
-    if poly is None:
-        return np.hypot(px - item.x, py - item.y) - item.shape.radius
-    d = np.min(
-        [_segment_distance(px, py, poly[i], poly[(i + 1) % len(poly)]) for i in range(len(poly))],
-        axis=0,
-    )
-    return np.where(_inside(px, py, poly), -d, d)
-
-
-def count_collisions(
-    snap: WorldSnapshot, radius: float, xs: np.ndarray, ys: np.ndarray, ts: np.ndarray
-) -> tuple[int, float]:
-    """Collisions (stretches of touching) and seconds in contact of a track on ``snap``'s map."""
-    if not len(xs):
-        return 0, 0.0
-    touching = _touching(snap, radius, xs, ys)
-    collisions = int(np.count_nonzero(touching[1:] & ~touching[:-1]) + int(touching[0]))
-    dt = np.diff(ts, prepend=ts[0])
-    return collisions, float(dt[touching].sum())
-
-
-def _touching(snap: WorldSnapshot, radius: float, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    limit = radius + CONTACT_MM
-    edge = np.minimum.reduce([xs, ys, snap.width - xs, snap.height - ys])
-    touching = edge <= limit
-    for item in snap.items:
-        if item.category == "obstacle":
-            touching |= _clearance(item, xs, ys) <= limit
-    return touching
 
 
 def _delivered(rec: Recording, snap: WorldSnapshot | None) -> int:
@@ -219,7 +156,7 @@ def _delivered(rec: Recording, snap: WorldSnapshot | None) -> int:
         py = np.array(y[first.agents :])
         hit = np.zeros(px.shape, bool)
         for nest in nests:
-            hit |= _clearance(nest, px, py) <= 0
+            hit |= contacts.clearance(nest, px, py) <= 0
         return {n for n, h in zip(names, hit, strict=False) if h}
 
     before = in_nest(first.rows, first.x, first.y)

@@ -1,12 +1,13 @@
 """``wart report FILE``: the summary of a recorded run (an MCAP file from ``wart record get``).
 
 Prints who ran what on which robot, how the slot ended, distance travelled,
-time moving, collisions (the robot within its radius of a wall or obstacle,
-from the recorded poses), objects gripped and delivered to a nest, and the
-errors the controller raised with their line numbers. ``--json`` prints the
-same as JSON; ``--plots DIR`` also draws the trajectory over the map and the
-IR and wheel speeds over time (PNG, needs matplotlib). A damaged or cut-short
-file is reported as such: what it holds is summarised, with a warning.
+time moving, collisions (the robot's disc or tongs touching the arena's wall, an
+obstacle or another robot, from the recorded poses), objects gripped and
+delivered to a nest, and the errors the controller raised with their line
+numbers. ``--json`` prints the same as JSON; ``--plots DIR`` also draws the
+trajectory over the map and the IR and wheel speeds over time (PNG, needs
+matplotlib). A damaged or cut-short file is reported as such: what it holds is
+summarised, with a warning.
 
 Sim beside real: ``wart report SIM.mcap --against REAL.mcap`` compares two runs
 of the same controller (say a simulated robot and the real one, from the same
@@ -31,6 +32,15 @@ from common.recording import RecordingError, Summary, plots, read_recording, sum
 from common.recording.compare import Comparison, compare
 
 
+def _with(collided: dict[str, int]) -> str:
+    """ ": 2 with a robot, 1 with the wall": what the collisions were with."""
+    names = {"wall": "the wall", "obstacle": "an obstacle", "robot": "a robot"}
+    return "".join(
+        (": " if i == 0 else ", ") + f"{n} with {names.get(k, k)}"
+        for i, (k, n) in enumerate(collided.items())
+    )
+
+
 def describe(summary: Summary) -> list[str]:
     when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(summary.start))
     file = f" ({summary.filename})" if summary.filename else ""
@@ -42,7 +52,8 @@ def describe(summary: Summary) -> list[str]:
         + ("real time" if summary.world_kind == "real" else "simulated time"),
         f"distance:    {summary.distance_mm / 1000:.3f} m",
         f"moving:      {summary.moving_s:.1f} s",
-        f"collisions:  {summary.collisions} ({summary.contact_s:.1f} s in contact)",
+        f"collisions:  {summary.collisions}{_with(summary.collided_with)} "
+        f"({summary.contact_s:.1f} s in contact)",
         f"objects:     {summary.gripped} gripped, {summary.delivered} delivered to a nest",
         f"recorded:    {summary.frames} frames, {summary.samples} sensor samples, "
         f"{summary.commands} commands, {summary.output_lines} output lines",

@@ -19,7 +19,8 @@ from common.messages import (
     WorldFrame,
     WorldSnapshot,
 )
-from common.sim2d.entities import ShapeSpec
+from common.sim2d.collision import CAT_ROBOT
+from common.sim2d.entities import Agent, ShapeSpec
 from common.sim2d.world import World
 
 _FINGERS = ("open", "closed", "holding")
@@ -128,6 +129,17 @@ def _shape(shape: ShapeSpec) -> ShapeInfo:
     return ShapeInfo(kind="polygon", points=[(float(x), float(y)) for x, y in shape.vertices()])
 
 
+def _tongs(world: World, agent: Agent) -> list[tuple[float, float, float, float]]:
+    """The agent's tongs, where they collide with robots and walls (AgentInfo.tongs)."""
+    grip = agent.spec.gripper
+    if not agent.has_gripper or grip is None or not world.tongs_mask & CAT_ROBOT:
+        return []
+    half = grip.tong_width_mm / 2
+    y = grip.gap_mm / 2 + half
+    x0, x1 = grip.tong_x_mm
+    return [(x0, x1, y, half), (x0, x1, -y, half)]
+
+
 def snapshot(world: World) -> WorldSnapshot:
     items: list[ItemInfo] = []
     for o in world.obstacles.values():
@@ -205,6 +217,7 @@ def snapshot(world: World) -> WorldSnapshot:
                 proximity_sensors=[(p.x_mm, p.y_mm, p.heading_rad) for p in a.spec.proximity.poses],
                 proximity_max=a.spec.proximity.max_value,
                 speed_limit=a.spec.drive.max_speed,
+                tongs=_tongs(world, a),
             )
         )
     return WorldSnapshot(

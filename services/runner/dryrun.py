@@ -213,6 +213,10 @@ class _Touches:
         return new
 
 
+def _article(what: str) -> str:
+    return "an" if what[:1] in ("a", "e", "i", "o", "u") else "a"
+
+
 def _error_line(text: str) -> int | None:
     found = _LINE.findall(text)
     return int(found[-1]) if found else None
@@ -346,7 +350,7 @@ def dry_run(
             what = first.what + (f" {first.ident}" if first.ident else "")
             verdict = (
                 f"will NOT run: {len(hits)} collision{'s' * (len(hits) != 1)}, "
-                f"the first with a {what} at {first.at:.2f} s"
+                f"the first with {_article(first.what)} {what} at {first.at:.2f} s"
             )
         else:
             verdict = "will run"

@@ -13,12 +13,15 @@ from pathlib import Path
 
 import pytest
 
+from common.client.agent_client import FINAL
 from common.messages import WorldSnapshot
+from common.recording import read_recording, summarize
 from common.sim2d import maps
+from services.commands.report import describe
 from services.engine import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router
+from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import (
     agent_user,
     start_agent_context,
@@ -81,12 +84,23 @@ def test_an_exception_names_its_line(snap: WorldSnapshot) -> None:
 
 def test_a_well_behaved_example_will_run(snap: WorldSnapshot) -> None:
     source = (REPO / "examples" / "01_braitenberg.py").read_bytes()
-    # k3 leads the pack (k1, behind it, bumps into it: a dry run says so, rightly).
     report = dry_run(snap, "k3", source, filename="01_braitenberg.py")
     assert report.will_run, report
     assert report.verdict.startswith("will run")
     assert report.sim_seconds == pytest.approx(5.0)
     assert not [c for c in report.collisions if c.what != "object"]
+
+
+def test_example_01_runs_a_minute_in_the_default_arena_without_a_collision(
+    snap: WorldSnapshot,
+) -> None:
+    """The first example a newcomer runs, in the arena `wart up` gives them, on any robot:
+    a simulated minute touching no wall, rock or robot (pushing a ball is fine)."""
+    source = (REPO / "examples" / "01_braitenberg.py").read_bytes()
+    for agent in ("k0", "k1", "k2", "k3"):
+        report = dry_run(snap, agent, source, filename="01_braitenberg.py", seconds=60.0)
+        assert report.verdict.startswith("will run"), (agent, report.verdict)
+        assert report.sim_seconds == pytest.approx(60.0)
 
 
 @pytest.mark.parametrize(
@@ -154,3 +168,36 @@ def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, procs: Procs, tmp_
         report = alice.dry_run("k2", source, filename="01_braitenberg.py")
         assert report.will_run, report
         assert all(not q.entries for q in alice.state().agents)  # nothing was queued
+
+
+PUSH = HEADER + textwrap.dedent(
+    """
+    class Push(Controller):
+        def do_work(self, robot: Khepera) -> None:
+            robot.set_speeds(20, 20)  # k0 stands behind k2: it pushes k2 along
+    """
+)
+
+
+def test_the_dry_run_and_the_recording_agree_on_a_robot_pushed(
+    lab: ProcessLab, tmp_path: Path
+) -> None:
+    """A controller driven into the robot ahead: the dry run refuses it for that collision,
+    and once run anyway, its recording's summary counts the same one, with a robot."""
+    with agent_user(lab, "alice") as alice:
+        report = alice.dry_run("k0", PUSH.encode(), filename="push.py", seconds=2.0)
+        assert report.verdict.startswith("will NOT run: 1 collision, the first with a robot k2")
+        queued = alice.queue("k0", "deploy", source=PUSH.encode(), filename="push.py")
+        final = alice.wait_status(queued.request_id, FINAL, timeout=30)
+        assert final is not None and final.status == "finished", final
+        path = tmp_path / "push.mcap"
+        wait_for(
+            lambda: queued.request_id in {r.name for r in alice.recordings().recordings},
+            20,
+            "the push's recording",
+        )
+        alice.download(queued.request_id, path)
+    summary = summarize(read_recording(path))
+    assert summary.collided_with == {"robot": 1}, summary
+    assert summary.collisions == 1
+    assert any("collisions:  1: 1 with a robot" in line for line in describe(summary))
