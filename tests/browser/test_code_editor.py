@@ -162,3 +162,32 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
         what="the opened example in the editor",
     )
     assert page.p.locator(".cm-lint-marker-error").count() == 0
+
+
+def test_typing_goes_on_when_the_page_redraws_the_editor(open_page, viewer: WebViewer) -> None:
+    """A busy page can draw the editor's box anew while the student types (React re-creates
+    it): the keys that follow land in the new editor, at the same place, and the whole text
+    reaches the server. Redrawn here on purpose, between two halves of a line."""
+    page, session = join_demo_arena(open_page, viewer, "ana")
+    page.tab("arena").last.click()
+    box = editor(page)
+    box.wait_for(timeout=15_000)
+    bench = workbench_of(session)
+    box.click()
+    page.p.keyboard.press("Control+a")
+    page.p.keyboard.type("# first half, ")
+    redrawn = page.p.evaluate(
+        """() => {
+            const host = document.querySelector('div.wart-editor[data-for]');
+            const fresh = host.cloneNode(false);  // as React draws it: attributes, no editor
+            delete fresh.dataset.mounted;
+            host.replaceWith(fresh);
+            return !fresh.isConnected ? 'not drawn' : 'drawn';
+        }"""
+    )
+    assert redrawn == "drawn"
+    page.p.keyboard.type("second half")
+    text = "# first half, second half"
+    wait_until(lambda: bench.code.value == text, what="the whole line on the server")
+    assert editor(page).evaluate("e => e.textContent") == text
+    assert page.p.locator("div.wart-editor .cm-editor").count() == 1  # the old one is gone

@@ -161,10 +161,19 @@ function mount(host) {
   const buttons = JSON.parse(host.dataset.keys || "{}");
   // The text area stays in the page (it is what viser reads) but out of sight and of Tab.
   hideArea(id, area);
-  // React drew the host anew (its old editor went with the old host): start over.
+  // React drew the host anew (its old editor went with the old host): start over, where
+  // the user was. A busy page redraws it while they type: the keys that follow must land
+  // in the new editor, at the same place (mount runs from a MutationObserver, before them).
   const old = views.get(id);
-  if (old) { views.delete(id); forget(old); }
-  const entry = { id, view: null, area, written: area.value, problemsShown: 0 };
+  let focused = false, selection = null;
+  if (old) {
+    const active = document.activeElement;
+    focused = old.focused && (!active || active === document.body || old.view.dom.contains(active));
+    selection = old.view.state.selection;
+    views.delete(id);
+    forget(old);
+  }
+  const entry = { id, view: null, area, written: area.value, problemsShown: 0, focused: false };
   const keys = [
     { key: "Mod-Enter", preventDefault: true, run: () => clickButton(buttons.check || "Check") },
     { key: "Mod-s", preventDefault: true, run: () => clickButton(buttons.save || "Save") },
@@ -190,6 +199,7 @@ function mount(host) {
           "aria-multiline": "true",
         }),
         EditorView.updateListener.of((u) => {
+          if (u.focusChanged) entry.focused = u.view.hasFocus;
           if (!u.docChanged) return;
           const text = u.state.doc.toString();
           if (text === entry.written) return; // the server's own text, just loaded
@@ -202,6 +212,12 @@ function mount(host) {
   });
   entry.view = view;
   views.set(id, entry);
+  if (selection) {
+    const end = view.state.doc.length;
+    const range = selection.main;
+    view.dispatch({ selection: { anchor: Math.min(range.anchor, end), head: Math.min(range.head, end) } });
+  }
+  if (focused) { view.focus(); entry.focused = true; }
 }
 
 function poll() {
@@ -247,5 +263,13 @@ if (!window.wartEditor) {
     goToLine(parseInt(link.dataset.wartLine, 10));
   }, true);
   setInterval(poll, 150);
+  // A host drawn (or drawn anew) gets its editor at once, not at the next poll: keys typed
+  // meanwhile would go nowhere.
+  let queued = false;
+  new MutationObserver(() => {
+    if (queued) return;
+    queued = true;
+    queueMicrotask(() => { queued = false; poll(); });
+  }).observe(document.body, { childList: true, subtree: true });
   poll();
 }
