@@ -119,7 +119,6 @@ class ArenaVideo:
         scene = self.view.client.scene
         floor = camera.floor()
         if floor is not None and floor[0] != self.shown:
-            self.shown = floor[0]
             if self._image is None:
                 self._image = scene.add_image(
                     VIDEO_NODE,
@@ -136,6 +135,9 @@ class ArenaVideo:
                 # Only the picture changes: a node made again each frame lost its position
                 # when the pump batched its messages (seen at 25 Hz in a fresh lab).
                 self._image.image = floor[1]
+            # Said drawn once it is: a reader of ``shown`` finds the node (JPEG-encoding the
+            # first frame took long enough on a busy machine for a test to see neither).
+            self.shown = floor[0]
             self.delays.append(time.time() - floor[2])
         status, heard = camera.status, camera.heard_at
         text = ""
