@@ -128,7 +128,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     except MapError as exc:
         return cli.fail(str(exc))
     # Compile the per-tick kernels now (or load them from numba's on-disk cache) rather
-    # than on the first tick; a fresh checkout compiles once, in a few seconds.
+    # than on the first tick. Said first: a checkout's first start compiles for a while.
+    print(
+        "engine: loading the simulation's kernels (compiled on a checkout's first start: "
+        "under a minute on 2 cores; cached after)",
+        file=sys.stderr,
+        flush=True,
+    )
     print(f"engine: kernels ready in {kernels.warm_up():.2f} s", file=sys.stderr, flush=True)
     settings = EngineSettings(
         tick_s=tick_s,

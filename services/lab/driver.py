@@ -122,12 +122,10 @@ class HostDriver:
             for wave in self.waves():
                 if stop.is_set():
                     break
-                for child, up in supervisor.start_together(wave):
+                for child, up in supervisor.start_together(wave, on_up=self.came_up):
                     children.append(child)
                     if not up:
                         code = 1
-                    else:
-                        self.came_up(child)
             if hosting is None and not stop.is_set():
                 # In this process (not a child): its spawned contexts are this
                 # supervisor's children, restarted and stopped with the rest.

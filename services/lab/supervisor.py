@@ -107,6 +107,9 @@ def describe_exit(code: int) -> str:
     return f"exited with code {code}"
 
 
+STILL_STARTING_S = 8.0  # a child not up by then is said to be still starting
+
+
 def tail(path: Path, lines: int = 6) -> str:
     try:
         with open(path, "rb") as f:
@@ -221,11 +224,15 @@ class Supervisor:
         self.spawn(child)
         return self.wait_ready(child)
 
-    def start_together(self, specs: Sequence[ChildSpec]) -> list[tuple[Child, bool]]:
+    def start_together(
+        self, specs: Sequence[ChildSpec], on_up: Callable[[Child], None] | None = None
+    ) -> list[tuple[Child, bool]]:
         """Start children at once and wait until each is alive: their starts overlap.
 
-        Each child's ready line is said as it comes up; the result keeps the
-        order of ``specs``, with False for a child that did not come up in time.
+        Each child's ready line is said as it comes up, and ``on_up(child)`` called
+        then (the web address is printed while a slower child still starts); the
+        result keeps the order of ``specs``, with False for a child that did not
+        come up in time.
         """
         children = [self.add(spec) for spec in specs]
         for child in children:
@@ -234,6 +241,8 @@ class Supervisor:
 
         def wait(index: int) -> None:
             ready[index] = self.wait_ready(children[index])
+            if ready[index] and on_up is not None:
+                on_up(children[index])
 
         waiters = [
             threading.Thread(target=wait, args=(i,), name=f"ready {c.spec.name}", daemon=True)
@@ -257,7 +266,14 @@ class Supervisor:
         def died() -> bool:
             return self._stopping.is_set() or proc is None or proc.poll() is not None
 
-        ok = self.watch.wait(spec.alive_key, spec.ready_timeout, abort=died)
+        # A child slow to start (an engine compiling its kernels on a checkout's first
+        # start) is said to be starting, with its log's last line, so nobody wonders.
+        first = min(STILL_STARTING_S, spec.ready_timeout)
+        ok = self.watch.wait(spec.alive_key, first, abort=died)
+        if not ok and not died() and spec.ready_timeout > first:
+            last = tail(child.log_path, lines=1).strip().removeprefix("| ")
+            self.say(f"  … {spec.name:<22} still starting{': ' + last if last else ''}")
+            ok = self.watch.wait(spec.alive_key, spec.ready_timeout - first, abort=died)
         pid = proc.pid if proc else "-"
         if ok:
             detail = f"  {spec.detail}" if spec.detail else ""

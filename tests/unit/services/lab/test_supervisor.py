@@ -91,3 +91,47 @@ def test_a_child_that_does_not_come_up_is_named_and_the_others_still_start(
     failed = [line for line in said if "did not come up" in line]
     assert any("engine" in line for line in failed), said
     assert any("bridge" in line and "exit" in line for line in failed), said
+
+
+class SlowWatch:
+    """``slow`` comes up only after ``delay`` seconds; the others at once."""
+
+    def __init__(self, slow: str, delay: float) -> None:
+        self.slow, self.up_at = slow, time.monotonic() + delay
+
+    def wait(self, key: str, timeout: float, abort: Callable[[], bool] = lambda: False) -> bool:
+        if key != self.slow:
+            return True
+        wait = self.up_at - time.monotonic()
+        if wait > timeout:
+            time.sleep(timeout)
+            return False
+        time.sleep(max(0.0, wait))
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_viewer_is_announced_while_a_slow_engine_still_starts(
+    tmp_path: Path, sleeper: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a checkout's first start the engine compiles for a while: the web address is said
+    as soon as the viewer is up, and the engine is said to be still starting."""
+    monkeypatch.setattr(supervisor_module, "STILL_STARTING_S", 0.3)
+    said: list[str] = []
+    sup = Supervisor(tmp_path / "logs", say=said.append)
+    sup.watch = SlowWatch("alive/engine", delay=1.5)  # type: ignore[assignment]
+    announced: list[tuple[str, int]] = []
+    try:
+        results = sup.start_together(
+            [spec("engine"), spec("viewer")],
+            on_up=lambda child: announced.append((child.spec.name, len(said))),
+        )
+    finally:
+        sup.stop_all(timeout=2.0)
+    assert [up for _, up in results] == [True, True]
+    assert [name for name, _ in announced] == ["viewer", "engine"]  # the viewer first
+    starting = [i for i, line in enumerate(said) if "still starting" in line]
+    assert len(starting) == 1 and "engine" in said[starting[0]], said
+    assert announced[0][1] <= starting[0]  # said before the engine was even called slow
