@@ -72,6 +72,13 @@ def test_a_recording_replayed_in_the_page_moves_the_robot_with_the_cursor(
     page.click("Plots")  # matplotlib's two PNGs, shown as images in the folder
     page.wait_text("Plots of k1-1-abc: below.", timeout=30_000)
     assert len(recordings._images) == 2
+    # Each plot is as wide as the panel lets it be (its box's width), not a fixed small size.
+    widths = page.p.evaluate(
+        "() => [...document.querySelectorAll('img')]"
+        ".filter(i => i.naturalWidth > 400 && i.clientWidth > 0)"
+        ".map(i => [i.clientWidth, i.parentElement.clientWidth])"
+    )
+    assert len(widths) == 2 and all(w >= box - 1 for w, box in widths), widths
 
     page.click("Replay")
     wait_until(lambda: recordings.replay is not None, what="the replay controls")
