@@ -11,6 +11,8 @@ Grants and roles take effect at each user's next login.
   wart users --db DB remove alice
   wart users --db DB list
   wart users keygen lobby.key                          (an identity key for a service)
+  wart users --db DB import class.csv --course robotics-26   (a class from a roster file)
+  wart users --db DB courses | course robotics-26
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 
 from common import acl, cli
 from common.auth import create_identity_key, load_identity_key, parse_public_key
+from services.registry import courses_cli
 from services.registry.accounts_db import DbError, RegistryDB
 from services.registry.audit_db import Action, TermStore
 
@@ -79,6 +82,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart users") -> int:
         g.add_argument(
             "--scope", default="", help="ctx/ROOM or agent/CTX/AGENT (default: everywhere)"
         )
+    courses_cli.add_parsers(sub)
     kg = sub.add_parser("keygen", help="create an identity key file and print its public key")
     kg.add_argument("file", type=Path)
     args, _ = cli.parse(p, argv)
@@ -92,11 +96,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart users") -> int:
         return 0
     if args.db is None:
         return cli.fail("--db is required (the registry's database file)")
-    if args.command != "add" and not args.db.exists():
+    if args.command not in ("add", "import") and not args.db.exists():
         return cli.fail(f"no registry database at {args.db}")
     db = RegistryDB(args.db)
     try:
-        done = _run(args, db)
+        run = courses_cli.run if args.command in courses_cli.COMMANDS else _run
+        done = run(args, db)
         _audit(args, db)
         return done
     except DbError as exc:
@@ -114,6 +119,7 @@ _ACTIONS = {
     "remove": "remove_user",
     "grant": "grant",
     "revoke": "ungrant",
+    "import": "import_roster",
 }
 
 
@@ -131,12 +137,17 @@ def _audit(args: argparse.Namespace, db: RegistryDB) -> None:
         detail = f"{args.grant} {'in ' + args.scope if args.scope else 'everywhere'}"
     elif args.command == "add":
         detail = "roles " + ", ".join(args.role or ["student"])
+    elif args.command == "import":
+        if args.dry_run:
+            return
+        detail = f"roster {args.roster.name}"
     try:
         who = getpass.getuser()
     except (OSError, KeyError):  # no login name in the environment nor the passwd file
         who = "an unknown user"
     where = f"wart users by {who} on {socket.gethostname()}"
-    TermStore(db).record(Action("local", action, args.user, "ok", detail, where, "wart-users"))
+    target = f"course/{args.course}" if args.command == "import" else args.user
+    TermStore(db).record(Action("local", action, target, "ok", detail, where, "wart-users"))
 
 
 def _run(args: argparse.Namespace, db: RegistryDB) -> int:

@@ -6,6 +6,7 @@ real registry and room on a real router; no mouse, no curses tricks.
 
 from __future__ import annotations
 
+import re
 import shlex
 import shutil
 import subprocess
@@ -17,7 +18,9 @@ from pathlib import Path
 import pytest
 
 from common.client.lab_client import LabClient
+from common.messages import AuditQuery
 from services.registry.accounts_db import RegistryDB
+from services.registry.audit_db import TermStore
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.lab import PASSWORD, ProcessLab, make_lab
 
@@ -144,3 +147,43 @@ def test_wart_users_manages_accounts_and_explains_mistakes(lab: ProcessLab) -> N
     with lab.client() as client, pytest.raises(Exception, match="wrong user name or password"):
         client.login("zoe", "zoe-second-pw")
     assert isinstance(client, LabClient)
+
+
+def test_a_teacher_imports_a_class_and_a_student_logs_in_with_the_sheet(
+    lab: ProcessLab, tmp_path: Path
+) -> None:
+    db = lab.db_path
+    roster = tmp_path / "class.csv"
+    roster.write_text("user,name,role,team\nkim,Kim Ode,student,red\nlou,Lou,teacher,\n")
+    sheet = tmp_path / "slips.html"
+    done = run_users(db, "import", str(roster), "--course", "rob26", "--sheet", str(sheet))
+    assert done.returncode == 0, done.stderr
+    assert "new accounts (2): kim, lou" in done.stdout
+    assert sheet.stat().st_mode & 0o777 == 0o600  # the owner's eyes only
+    found = dict(
+        re.findall(
+            r"user: <code>(\w+)</code><br>first password: <code>(\w+)</code>", sheet.read_text()
+        )
+    )
+    assert sorted(found) == ["kim", "lou"]
+    for password in found.values():  # never on the terminal
+        assert password not in done.stdout + done.stderr
+    with lab.client() as client:
+        client.login("kim", found["kim"])  # the running registry takes the new account
+    again = run_users(db, "import", str(roster), "--course", "rob26", "--sheet", str(sheet))
+    assert again.returncode == 0 and "unchanged: 2" in again.stdout
+    bad = tmp_path / "bad.csv"
+    bad.write_text("user,role\nmia,student\nkim,pupil\n")
+    refused = run_users(db, "import", str(bad), "--course", "rob26")
+    assert refused.returncode != 0
+    assert "line 3: role 'pupil' for kim" in refused.stderr and "nothing written" in refused.stderr
+    assert "mia" not in run_users(db, "list").stdout  # nothing half-written
+    members = run_users(db, "course", "rob26").stdout
+    assert "teacher  lou" in members and "team red" in members
+    store = RegistryDB(db)
+    try:
+        imports, _ = TermStore(store).entries(AuditQuery(action="import_roster"))
+    finally:
+        store.close()
+    assert [a.target for a in imports] == ["course/rob26", "course/rob26"]
+    assert not any(p in a.detail for a in imports for p in found.values())
