@@ -26,7 +26,7 @@ from services.registry.roster import RosterError, RosterRow, parse_roster
 COMMANDS = ("import", "courses", "course")
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parsers(sub: argparse._SubParsersAction) -> None:
     imp = sub.add_parser(
         "import",
         help="make or match the accounts of a class roster (CSV) and put them in a course",
