@@ -334,14 +334,18 @@ def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
     snap = view.snapshot  # type: ignore[attr-defined]
     assert snap is not None
     aim = (snap.width * geo.MM / 2, snap.height * geo.MM / 2)
+    # At least this high: the aim for the widest canvas aimed for (a report with the aim's
+    # x and y but an older height was seen under load, the arena cut off at both sides).
+    lowest = geo.camera_height(snap.width, snap.height)
 
     def aimed() -> bool:
         try:
             cam = view.client.camera  # type: ignore[attr-defined]
-            x, y, _ = cam.position
+            x, y, z = cam.position
             return (
                 abs(x - aim[0]) < 1e-3
                 and abs(y - aim[1]) < 1e-3
+                and z >= lowest - 1e-3
                 and abs(cam.fov - geo.CAMERA_FOV) < 1e-3
             )
         except AssertionError:  # the page has not reported its camera yet
