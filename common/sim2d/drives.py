@@ -8,5 +8,6 @@ docs/ARCHITECTURE.md, "Drives".
 from __future__ import annotations
 
 DRIVES = ("joints", "velocity", "discs")
-# The drives whose worlds can hold movable objects (the discs drive's cannot).
-OBJECT_DRIVES = ("joints", "velocity")
+# The drives whose worlds can hold movable objects: all of them (the discs drive's
+# are discs of its contact solver, common/sim2d/pucks.py).
+OBJECT_DRIVES = DRIVES

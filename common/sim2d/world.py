@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
-from common.sim2d import chipmunk, heap, kernels, sensing
+from common.sim2d import chipmunk, heap, kernels, sensing, world_discs
 from common.sim2d.bodies import id_of
 from common.sim2d.collision import (
     CAT_ALL,
@@ -127,6 +127,7 @@ class World(WorldEdits, WorldActuators, WorldTick):
     proximity = _CopiedOnRead()
     ambient = _CopiedOnRead()
     presence = _CopiedOnRead()
+    object_pose = _CopiedOnRead()
 
     def __init__(
         self,
@@ -242,6 +243,8 @@ class World(WorldEdits, WorldActuators, WorldTick):
             (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)),
         )
         self._bodies_placed = True
+        # The discs drive's movable objects in its arrays (common/sim2d/world_discs.py).
+        self._discs: world_discs.DiscObjects | None = None
         # The discs drive's fused tick (common/sim2d/fused.py): its state, built at
         # the first tick after anything it holds changed (_FusedTick.key).
         self._fused: _FusedTick | None = None
