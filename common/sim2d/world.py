@@ -42,7 +42,7 @@ from common.sim2d.collision import (
     COLL_TONGS,
     TONGS_MASK_LIGHT,
 )
-from common.sim2d.drives import DRIVES, OBJECT_DRIVES
+from common.sim2d.drives import DEFAULT_DRIVE, DRIVES, OBJECT_DRIVES
 from common.sim2d.entities import (
     Agent,
     Light,
@@ -141,7 +141,7 @@ class World(WorldEdits, WorldActuators, WorldTick):
         name: str = "world",
         threads: int = 1,
         physics_threads: int = 1,
-        drive: str = "joints",
+        drive: str = DEFAULT_DRIVE,
     ) -> None:
         if not (width_mm > 0 and height_mm > 0):
             raise EditError("the arena's width and height must be positive")
