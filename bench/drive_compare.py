@@ -95,7 +95,8 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
         controller = load_controller(path)
         robot = Khepera(_Link(world, agent.id))
         robots.append((controller, robot, world.agent_slot(agent.id)))
-    start_objects = world.object_pose.copy()
+    # Through pose_of: a world's object_pose is filled by its first tick.
+    start_objects = np.array([world.pose_of(o.id) for o in world.objects]).reshape(-1, 3)
     last = world.agent_pose[:, :2].copy()
     touching: list[set[tuple[str, str]]] = [set() for _ in world.agents]
     contacts = {"wall": 0, "obstacle": 0, "robot": 0, "object": 0}
