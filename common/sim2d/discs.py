@@ -2,9 +2,11 @@
 
 Why: at 10,000 robots chipmunk's step cost about 1.5 µs a robot a tick, more
 than a swarm's whole budget (docs/BENCHMARKS.md, issue 22), and in a small
-world its fixed cost alone matched Enki's whole step. A swarm needs none of
-what makes a general solver expensive: every robot is a disc, obstacles never
-move, and there are no movable objects (a world on this drive refuses them).
+world its fixed cost alone matched Enki's whole step. A lab's worlds need none
+of what makes a general solver expensive: every robot is a disc, obstacles
+never move, and movable objects are discs too (common/sim2d/pucks.py: after
+the robots in these arrays, moved by their pushes rather than by wheels).
+Since issue 35 this is every world's default drive.
 
 The model, per substep (the world's ``substeps``, at most 10 ms each):
 

@@ -1,21 +1,21 @@
-"""The Sim2D world (thesis 6.7.2, AgentWorldSim2D): a pymunk space in millimetres.
+"""The Sim2D world (thesis 6.7.2, AgentWorldSim2D): a bounded floor in millimetres.
 
 One world is stepped by one thread (pymunk is not thread-safe). Collision rules
-follow the thesis, through pymunk:
+follow the thesis; how they are solved is the world's drive
+(common/sim2d/drives.py, docs/WORLDS.md "Drives"):
 
-- obstacles are static bodies: they never move, and push anything out;
-- agents are dynamic bodies pulled by a kinematic control body through
-  force-limited pivot and gear joints (pymunk's tank pattern, ``drive="joints"``,
-  the default), or driven by a force-limited velocity servo with the same
-  limits (``drive="velocity"``, no joints: for swarms); either way walls push
-  them back and two agents share the push; or (``drive="discs"``, for swarms
-  of robots and obstacles only) moved along their wheels' arcs by a compiled
-  tick that solves disc contacts itself, chipmunk not stepped
-  (common/sim2d/discs.py);
-- movable objects are dynamic bodies held to the floor by force-limited
-  joints to the static body (top-down friction: nothing slides forever);
-- the gripper's collision exception area lets an object between the open
-  tongs overlap the robot (thesis 6.8.3).
+- ``drive="discs"`` (the default): robots and movable objects are discs of one
+  compiled contact solver, robots moved along their wheels' arcs, objects by
+  the pushes they get less floor friction; chipmunk is not stepped
+  (common/sim2d/discs.py, pucks.py, world_discs.py);
+- ``drive="joints"``: a pymunk space: robots are dynamic bodies pulled by a
+  kinematic control body through force-limited pivot and gear joints
+  (pymunk's tank pattern), movable objects dynamic bodies held to the floor by
+  force-limited joints (top-down friction); ``drive="velocity"``: the same
+  space, robots driven by a force-limited velocity servo (no joints);
+- on every drive obstacles never move and push anything out, two robots share
+  a push, and the gripper's collision exception area lets an object between
+  the open tongs overlap the robot (thesis 6.8.3).
 
 Per-agent state lives in numpy arrays indexed by the agent's slot (its index
 in :attr:`World.agents`), so a tick has no per-robot Python loop. The
@@ -55,17 +55,13 @@ from common.sim2d.world_actuators import RobotActuators, WorldActuators
 from common.sim2d.world_edits import EditError, WorldEdits
 from common.sim2d.world_tick import WorldTick, _FusedTick
 
-# How robots are driven (World(drive=...)): "joints", pymunk's tank pattern (a
-# kinematic control body per robot pulling it through a pivot and a gear joint), or
-# "velocity", a force-limited servo on the robot's own body set by the compiled tick
-# (kernels.servo_forces): the same velocity constraint and force limits without the
-# two joints and the extra body, which were most of chipmunk's step in a swarm
-# (docs/BENCHMARKS.md, issue 22). With "velocity" a lowered gripper's tongs also
-# collide with movable objects only (collision.TONGS_MASK_LIGHT), not with robots,
-# other tongs or obstacles: the other half of a swarm's step. "joints" stays the
-# default, its trajectories unchanged: the sim-beside-real comparisons and recorded
-# runs were made with it, and tongs that no longer touch walls and robots are a
-# change of the model (docs/ARCHITECTURE.md section 9, "Drives").
+# How robots are driven (World(drive=...)): "discs" (the default, DEFAULT_DRIVE), a
+# compiled disc solver for robots and objects alike; "joints", pymunk's tank pattern (a
+# kinematic control body per robot pulling it through a pivot and a gear joint), the
+# default before issue 35 and kept, its trajectories unchanged; or "velocity", a
+# force-limited servo on the robot's own body set by the compiled tick
+# (kernels.servo_forces), whose lowered tongs collide with movable objects only
+# (collision.TONGS_MASK_LIGHT). docs/WORLDS.md, "Drives".
 __all__ = ["DRIVES", "OBJECT_DRIVES", "EditError", "RobotActuators", "World"]
 
 
