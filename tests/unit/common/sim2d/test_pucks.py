@@ -192,3 +192,20 @@ def test_edits_between_ticks_are_seen_and_the_fused_tick_is_the_general_path() -
         assert np.array_equal(fast.agent_pose, slow.agent_pose), t
         assert np.array_equal(fast.object_pose, slow.object_pose), t
         assert np.array_equal(fast.proximity, slow.proximity), t
+
+
+def test_a_swarm_with_balls_sensed_on_two_threads_is_the_one_thread_run() -> None:
+    from bench.engine_bench import build, control
+
+    runs = []
+    for threads in (1, 2):
+        world = build(300, threads=threads, drive="discs", balls=0.5)
+        for _ in range(60):
+            control(world)
+            world.step()
+        runs.append((world.agent_pose.copy(), world.object_pose.copy(), world.proximity.copy()))
+    (p1, o1, s1), (p2, o2, s2) = runs
+    assert np.array_equal(p1, p2) and np.array_equal(o1, o2) and np.array_equal(s1, s2)
+    fresh = build(300, balls=0.5)
+    start = np.array([fresh.pose_of(o.id)[:2] for o in fresh.objects])
+    assert np.hypot(*(o1[:, :2] - start).T).max() > 1.0, "some balls were pushed"
