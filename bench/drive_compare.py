@@ -6,13 +6,16 @@ given the example would) for ``--seconds`` of simulated time, once per drive,
 same seed. Printed per example and drive:
 
 - distance: the path all robots drove, summed (mm);
-- contacts: how many times a robot's disc came to touch something (within
-  1 mm: a wall or obstacle, another robot, an object), measured the same way
-  on every drive (world_discs.touching);
+- contacts: how many times a robot came to touch something (a wall, an
+  obstacle, another robot, an object) as its drive sees it, the runner's dry
+  run's measure (services/runner/dryrun.py): chipmunk's contacts of the
+  robot's body, tongs included, on the joints drive; its disc within 0.5 mm
+  on the discs drive;
 - pushed: objects moved more than 5 mm from where they started, and the
   distance all objects moved (mm); for 04, balls in the nest at the end;
 - IR at a wall: the mean of a robot's highest IR reading over the ticks it
-  touched a wall or an obstacle.
+  touched a wall or an obstacle (so touching, on the joints drive, may be a
+  lowered tong's touch, 25 mm ahead of the body).
 
 Then a probe of one robot driven straight at a wall (arm down, then arm up):
 where it stops and what its two front sensors read there. Run:
@@ -42,13 +45,14 @@ if __package__ in (None, ""):
 
 from common.controller import Controller, Khepera, KheperaState, RobotCommand, load_controller
 from common.controller.actuators import apply_command
-from common.sim2d import kernels, world_discs
+from common.sim2d import kernels
 from common.sim2d.agents import agent_type
 from common.sim2d.drives import DRIVES
 from common.sim2d.maps import load_map
 from common.sim2d.world import World
 from common.world.remote_robot import agent_command, state_from_sample
 from services.engine import packing
+from services.runner.dryrun import _Touches
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = {  # example -> the map it suits (its docstring's "Suits:")
@@ -98,7 +102,7 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
     # Through pose_of: a world's object_pose is filled by its first tick.
     start_objects = np.array([world.pose_of(o.id) for o in world.objects]).reshape(-1, 3)
     last = world.agent_pose[:, :2].copy()
-    touching: list[set[tuple[str, str]]] = [set() for _ in world.agents]
+    touches = {slot: _Touches(world, slot) for _c, _r, slot in robots}
     contacts = {"wall": 0, "obstacle": 0, "robot": 0, "object": 0}
     distance = 0.0
     ir_sum, ir_ticks = 0.0, 0
@@ -119,11 +123,9 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
                 distance += float(np.hypot(*(pose[:, :2] - last).T).sum())
                 last = pose[:, :2].copy()
                 for _c, _r, slot in robots:
-                    now = world_discs.touching(world, slot, 1.0)
-                    for what, _ident in now - touching[slot]:
+                    for what, _ident in touches[slot].new_contacts():
                         contacts[what] += 1
-                    touching[slot] = now
-                    if any(what in ("wall", "obstacle") for what, _ in now):
+                    if any(w in ("wall", "obstacle") for w, _ in touches[slot].touching):
                         ir_sum += float(world.proximity[slot].max())
                         ir_ticks += 1
             t += ticks * world.tick_s
