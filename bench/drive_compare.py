@@ -34,7 +34,6 @@ import io
 import math
 import os
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,7 +85,6 @@ class Result:
     object_travel: float
     in_nest: int
     ir_at_wall: float
-    cpu_s: float
 
 
 def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
@@ -109,7 +107,6 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
     period = robots[0][0].period
     ticks = max(1, round(period / world.tick_s))
     quiet = io.StringIO()  # the examples print their state changes
-    cpu0 = time.process_time()
     with contextlib.redirect_stdout(quiet):
         for controller, robot, _ in robots:
             controller.initialize(robot)
@@ -129,7 +126,6 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
                         ir_sum += float(world.proximity[slot].max())
                         ir_ticks += 1
             t += ticks * world.tick_s
-    cpu = time.process_time() - cpu0
     moved = np.hypot(*(world.object_pose[:, :2] - start_objects[:, :2]).T)
     in_nest = sum(
         math.dist(world.object_pose[j, :2], NEST[:2]) < NEST[2] for j in range(len(world.objects))
@@ -141,7 +137,6 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
         float(moved.sum()),
         int(in_nest) if name.startswith("04") else 0,
         ir_sum / ir_ticks if ir_ticks else float("nan"),
-        cpu,
     )
 
 
@@ -171,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(
         f"{'example':<18} {'drive':<7} {'distance mm':>11} {'contacts w/o/r/obj':>19} "
-        f"{'pushed':>6} {'obj mm':>7} {'nest':>4} {'IR at wall':>10} {'CPU s':>6}"
+        f"{'pushed':>6} {'obj mm':>7} {'nest':>4} {'IR at wall':>10}"
     )
     for name in EXAMPLES:
         for drive in args.drives:
@@ -180,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
             touches = f"{c['wall']}/{c['obstacle']}/{c['robot']}/{c['object']}"
             print(
                 f"{name:<18} {drive:<7} {r.distance:>11.0f} {touches:>19} {r.pushed:>6} "
-                f"{r.object_travel:>7.0f} {r.in_nest:>4} {r.ir_at_wall:>10.0f} {r.cpu_s:>6.2f}",
+                f"{r.object_travel:>7.0f} {r.in_nest:>4} {r.ir_at_wall:>10.0f}",
                 flush=True,
             )
     print("a Khepera driven into a wall at speed 20 for 3 s: gap to the wall (mm), front IR")
