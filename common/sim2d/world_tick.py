@@ -221,8 +221,7 @@ class WorldTick:
         d = self.__dict__
         d["_agent_pose_buffer"] = f.pose
         d["_agent_vel_buffer"] = f.vel
-        if f.discs.objects:
-            d["_object_pose_buffer"] = f.discs.table[0]
+        d["_object_pose_buffer"] = f.discs.table[0]  # (0, 3) once the last object went
         self._bodies_placed = False
         self.tick = tick
         self.sim_time = sim_time
