@@ -327,13 +327,13 @@ class WorldEdits:
     # -- generic edits ------------------------------------------------------------------
 
     def pose_of(self, ident: str) -> tuple[float, float, float]:
-        self._place_bodies()
         for slot, agent in enumerate(self.agents):
             if agent.id == ident:
                 x, y, h = self.agent_pose[slot]
                 return float(x), float(y), float(h)
         for obj in self.objects:
             if obj.id == ident and obj.body is not None:
+                self._place_bodies()  # the discs drive moves objects in its arrays
                 return obj.body.position.x, obj.body.position.y, obj.body.angle
         if ident in self.obstacles:
             o = self.obstacles[ident]
@@ -361,7 +361,7 @@ class WorldEdits:
 
     def move(self, ident: str, x: float, y: float, heading: float | None = None) -> None:
         """Move (and optionally rotate) anything; validated, undone if it breaks a rule."""
-        old = self.pose_of(ident)  # places the bodies first (discs drive)
+        old = self.pose_of(ident)  # an object's places the bodies first (discs drive)
         heading = old[2] if heading is None else heading
         shape = self.shape_of(ident)
         if shape is not None and not self._shape_inside(shape, x, y, heading):
