@@ -18,8 +18,11 @@ IR model and noise; no gripper turret and no light (Enki's Khepera has neither),
 while our ambient sensors still run (500 in the dark).
 
     PYTHONPATH=. .venv/bin/python -m bench.bench_enki [--sizes 10 35 100 1000 3000]
-        [--sim-seconds 2] [--swarm-seconds 0.5] [--repeats 3] [--drives joints velocity]
-        [--rule compiled]
+        [--sim-seconds 2] [--swarm-seconds 0.5] [--repeats 3] [--drives joints discs]
+        [--rule compiled] [--full]
+
+``--full`` gives our world what a lab's has and Enki's cannot: gripper turrets,
+the lamp and a movable ball for every two robots (issue 35's "full scenario").
 
 Needs g++ and libenki-dev (``apt-get install -y g++ libenki-dev``); without them
 it says so and exits with status 2. The compiled program is cached in
@@ -61,6 +64,7 @@ TICK_S = 0.01  # Enki's program steps 10 ms too (its kDt)
 SENSOR_PERIOD_S = 0.01  # Enki refreshes IR every step: ours every tick as well
 WARM_UP_TICKS = 20  # as engine_bench.run and Enki's program
 SWARM_N = 1000  # from this size on, --swarm-seconds applies
+FULL_BALLS = 0.5  # --full: movable balls per robot in our world
 
 MAX_N = 20_000
 MAX_SIM_SECONDS = 600.0
@@ -142,8 +146,15 @@ def compile_enki(build_dir: Path = BUILD_DIR) -> Path:
     return binary
 
 
-def scenario_world(n: int, drive: str = "joints") -> World:
-    """engine_bench's world without what Enki lacks: no gripper turret, no lamp; IR every tick."""
+def scenario_world(n: int, drive: str = "joints", full: bool = False) -> World:
+    """engine_bench's world without what Enki lacks: no gripper turret, no lamp; IR every tick.
+
+    ``full``: our world as a lab's is, with what Enki's cannot have: gripper
+    turrets, the lamp and a movable ball for every two robots (FULL_BALLS). The
+    robots and pillars are the same either way (the balls are placed after them).
+    """
+    if full:
+        return build(n, sensor_period_s=SENSOR_PERIOD_S, drive=drive, balls=FULL_BALLS)
     return build(n, gripper=False, lamp=False, sensor_period_s=SENSOR_PERIOD_S, drive=drive)
 
 
@@ -186,9 +197,11 @@ def compiled_control(world: World) -> None:
 RULES = {"numpy": control, "compiled": compiled_control}
 
 
-def run_ours(n: int, sim_seconds: float, drive: str, rule: str = "compiled") -> float:
+def run_ours(
+    n: int, sim_seconds: float, drive: str, rule: str = "compiled", full: bool = False
+) -> float:
     """Simulated seconds per CPU second of our engine, timed as engine_bench.run times it."""
-    world = scenario_world(n, drive)
+    world = scenario_world(n, drive, full)
     act = RULES[rule]
     for _ in range(WARM_UP_TICKS):
         act(world)
@@ -251,8 +264,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--drives",
         nargs="+",
         choices=DRIVES,
-        default=["joints", "velocity"],
+        default=["joints", "discs"],
         help="our drives to run, each against Enki (World(drive=...))",
+    )
+    p.add_argument(
+        "--full",
+        action="store_true",
+        help="our world full-featured: gripper turrets, the lamp, a movable ball for "
+        "every two robots (Enki's as it can have it: robots and pillars)",
     )
     p.add_argument(
         "--rule",
@@ -280,7 +299,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     print(f"Enki's program: {binary.relative_to(REPO)}")
     print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
-    print(f"our rule: {args.rule}; load average before: {_load()}")
+    kind = "full (grippers, lamp, balls)" if args.full else "as Enki"
+    print(f"our rule: {args.rule}; our world {kind}; load average before: {_load()}")
     print(f"{'N':>5} {'round':>5}  {'what':<14} {'sim s / CPU s':>13} {'CPU us a step':>13}  load")
     with tempfile.TemporaryDirectory(prefix="bench-enki-") as tmp:
         for n in args.sizes:
@@ -302,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                             raise RuntimeError(f"Enki's run does not match N = {n}: {run}")
                         got[what] = run.sim_per_cpu
                     else:
-                        got[what] = run_ours(n, seconds, what, args.rule)
+                        got[what] = run_ours(n, seconds, what, args.rule, args.full)
                     print(
                         f"{n:>5} {r + 1:>5}  {what:<14} {got[what]:>13.4g} "
                         f"{TICK_S / got[what] * 1e6:>13.1f}  {os.getloadavg()[0]:.2f}",

@@ -37,9 +37,10 @@ import numpy as np
 
 from common.sim2d import kernels
 from common.sim2d.agents import agent_type
+from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.wander import braitenberg
-from common.sim2d.world import DRIVES, World
+from common.sim2d.world import World
 
 
 def build(
@@ -49,15 +50,18 @@ def build(
     threads: int = 1,
     physics_threads: int = 1,
     gripper: bool = True,
-    drive: str = "joints",
+    drive: str = DEFAULT_DRIVE,
     sensor_period_s: float = 0.02,
     lamp: bool = True,
+    balls: float = 0.0,
 ) -> World:
     """A square arena sized so robots cover about 10 % of the floor, with a few pillars.
 
     ``sensor_period_s`` and ``lamp`` are for bench/bench_enki.py: Enki refreshes
     its IR sensors every step and has no lights, so its scenario is this one with
-    10 ms sensing and no lamp.
+    10 ms sensing and no lamp. ``balls``: movable balls per robot (the full
+    scenario: objects to push and grip), placed after the robots, so the
+    robots' poses do not depend on it.
     """
     side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
     world = World(
@@ -104,6 +108,16 @@ def build(
         taken.setdefault((ix, iy), []).append((float(x), float(y)))
         placed += 1
     world.finish_agents()
+    placed = 0
+    while placed < round(balls * n):
+        x, y = rng.uniform(40, side - 40, 2)
+        try:
+            world.add_object(
+                f"ball{placed}", "ball", ShapeSpec.circle(10.0), float(x), float(y), mass_g=5.0
+            )
+        except ValueError:
+            continue
+        placed += 1
     if lamp:
         world.add_light("lamp", side / 2, side / 2, radius_mm=side / 3)
     return world
@@ -122,11 +136,19 @@ def run(
     physics_threads: int = 1,
     progress: bool = False,
     gripper: bool = True,
-    drive: str = "joints",
+    drive: str = DEFAULT_DRIVE,
+    balls: float = 0.0,
 ) -> tuple[float, float, dict[str, float]]:
     """(sim s per CPU s, sim s per wall s, CPU s per sim s by phase if ``profile``)."""
     t0 = time.perf_counter()
-    world = build(n, threads=threads, physics_threads=physics_threads, gripper=gripper, drive=drive)
+    world = build(
+        n,
+        threads=threads,
+        physics_threads=physics_threads,
+        gripper=gripper,
+        drive=drive,
+        balls=balls,
+    )
     if progress:
         print(f"  built {n} robots in {time.perf_counter() - t0:.1f} s", flush=True)
     steps = round(sim_seconds / world.tick_s)
@@ -176,8 +198,14 @@ def main() -> None:
     p.add_argument(
         "--drive",
         choices=DRIVES,
-        default="joints",
-        help="World(drive=...): joints (default) or velocity (no joints, light tongs)",
+        default=DEFAULT_DRIVE,
+        help=f"World(drive=...): {DEFAULT_DRIVE} (default), joints or velocity",
+    )
+    p.add_argument(
+        "--balls",
+        type=float,
+        default=0.0,
+        help="movable balls per robot (0.5: the full scenario, objects to push and grip)",
     )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
@@ -198,6 +226,8 @@ def main() -> None:
         if len(drives) != 2 or any(d not in DRIVES for d in drives):
             p.error(f"--compare-drives takes two drives of {', '.join(DRIVES)}")
         args.compare_drives = drives
+    if not 0 <= args.balls <= 10:
+        p.error("--balls must be between 0 and 10")
     for name in ("sim_seconds", "repeats", "threads", "physics_threads"):
         if getattr(args, name) <= 0:
             p.error(f"--{name.replace('_', '-')} must be positive")
@@ -207,6 +237,7 @@ def main() -> None:
     print(
         f"threads: sensing {args.threads}, physics {args.physics_threads}; "
         f"gripper turrets {'off' if args.no_gripper else 'on'}; drive {args.drive}; "
+        f"balls per robot {args.balls:g}; "
         f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
     )
     if args.compare_threads or args.compare_drives:
@@ -225,6 +256,7 @@ def main() -> None:
             "progress": args.progress,
             "gripper": not args.no_gripper,
             "drive": args.drive,
+            "balls": args.balls,
         }
         runs = [run(n, seconds, **kw) for _ in range(args.repeats)]
         cpu = [r[0] for r in runs]
@@ -275,6 +307,7 @@ def compare(args: argparse.Namespace) -> None:
                     progress=args.progress,
                     gripper=not args.no_gripper,
                     drive=drive,
+                    balls=args.balls,
                 )
                 cpus[config].append(per_cpu)
                 walls[config].append(per_wall)

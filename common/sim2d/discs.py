@@ -2,9 +2,11 @@
 
 Why: at 10,000 robots chipmunk's step cost about 1.5 µs a robot a tick, more
 than a swarm's whole budget (docs/BENCHMARKS.md, issue 22), and in a small
-world its fixed cost alone matched Enki's whole step. A swarm needs none of
-what makes a general solver expensive: every robot is a disc, obstacles never
-move, and there are no movable objects (a world on this drive refuses them).
+world its fixed cost alone matched Enki's whole step. A lab's worlds need none
+of what makes a general solver expensive: every robot is a disc, obstacles
+never move, and movable objects are discs too (common/sim2d/pucks.py: after
+the robots in these arrays, moved by their pushes rather than by wheels).
+Since issue 35 this is every world's default drive.
 
 The model, per substep (the world's ``substeps``, at most 10 ms each):
 
@@ -41,7 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
-from common.sim2d import contacts
+from common.sim2d import contacts, pucks
 from common.sim2d.contacts import (
     _layers,
     _obstacles_first,
@@ -86,15 +88,18 @@ def tick(
     height,
     substep_s,
     substeps,
+    objects,
+    arm,
 ):  # pragma: no cover
     """One tick of the discs drive: returns (pose, vel) of every robot, new arrays.
 
-    See :func:`tick_into`, which this calls with fresh output arrays.
+    See :func:`tick_into`, which this calls with fresh output arrays (the
+    objects move in place).
     """
     n = pose.shape[0]
     out = np.empty((n, 3))
     vel = np.empty((n, 3))
-    buffers = drive_buffers(n, width, height, radius)
+    buffers = drive_buffers(n, objects[0].shape[0], width, height, radius)
     tick_into(
         pose,
         cmd,
@@ -113,13 +118,17 @@ def tick(
         out,
         vel,
         buffers,
+        objects,
+        arm,
     )
     return out, vel
 
 
 @njit(cache=_CACHE)
-def drive_buffers(n, width, height, radius):  # pragma: no cover
-    """The work arrays of :func:`tick_into` for ``n`` robots of these radii in this arena.
+def drive_buffers(robots, k, width, height, radius):  # pragma: no cover
+    """The work arrays of :func:`tick_into` for ``robots`` robots and ``k`` objects in this arena.
+
+    ``radius``: the discs' radii, the robots' then the objects'.
 
     Kept by common/sim2d/fused.py from tick to tick: without a tick's
     twenty-odd allocations the drive took about 8 % less at 10 robots
@@ -127,6 +136,7 @@ def drive_buffers(n, width, height, radius):  # pragma: no cover
     are sized for its smallest cell (robots standing still); the pairs' table
     for four pairs a robot, a crowd's (it grows if a tick needs more).
     """
+    n = robots + k  # discs: the robots, then the objects (common/sim2d/pucks.py)
     smallest = 2.0 * (np.max(radius) if n else 0.0) + SLACK_MM + 1.0
     ncell = (math.floor(width / smallest) + 1) * (math.floor(height / smallest) + 1)
     return (
@@ -151,6 +161,8 @@ def drive_buffers(n, width, height, radius):  # pragma: no cover
         np.empty(n),
         np.empty(ncell + 1, dtype=np.int64),
         np.empty((max(16, 4 * n), 2), dtype=np.int64),
+        np.empty(k),  # sx, sy: where each object started the substep (pucks.py)
+        np.empty(k),
     )
 
 
@@ -173,21 +185,28 @@ def tick_into(
     out,
     vel,
     buffers,
+    objects,
+    arm,
 ):  # pragma: no cover
     """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
 
     ``pose`` (N, 3) is where the robots are (read only, unless it is ``out``:
     common/sim2d/fused.py moves its own buffer in place); ``cmd`` (N, 2) their
-    wheel speeds in the type's units, ``mm_s_per_unit``, ``wheel_base``,
-    ``radius`` and ``mass`` per robot; ``counters`` advance in place by
-    ``pulses_per_tick`` per unit of speed. ``scene`` is the sensing grid's
-    static scene as a plain tuple (kernels.StaticScene's layout), ``circles``
-    its round obstacles binned by :func:`bin_circles`. ``vel`` is the tick's
-    mean velocity: x, y (mm/s) and turn rate (rad/s). ``buffers``: its work
-    arrays, :func:`drive_buffers` for these robots and this arena.
+    wheel speeds in the type's units, ``mm_s_per_unit``, ``wheel_base`` per
+    robot; ``radius`` and ``mass`` per disc (the N robots, then the objects);
+    ``counters`` advance in place by ``pulses_per_tick`` per unit of speed.
+    ``scene`` is the sensing grid's static scene as a plain tuple
+    (kernels.StaticScene's layout), ``circles`` its round obstacles binned by
+    :func:`bin_circles`. ``vel`` is the tick's mean velocity: x, y (mm/s) and
+    turn rate (rad/s). ``buffers``: its work arrays, :func:`drive_buffers` for
+    these discs and this arena. ``objects``: the movable objects
+    (pucks.objects_table's layout), moved in place; ``arm`` World.arm.
     """
     n = pose.shape[0]
+    k = objects[0].shape[0]
+    opose, ovel = objects[0], objects[1]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
+    sx, sy = buffers[21], buffers[22]
     top_speed = 0.0
     top_radius = 0.0
     for a in range(n):
@@ -202,18 +221,35 @@ def tick_into(
         top_radius = max(top_radius, radius[a])
         counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
         counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
+    robot_speed = top_speed  # the objects' speed limit (pucks.end_substep)
+    for j in range(k):
+        # An object's v, w are its vx, vy (pucks.py); a held one rides as fast as its holder.
+        i = n + j
+        px[i] = opose[j, 0]
+        py[i] = opose[j, 1]
+        th[i] = opose[j, 2]
+        v[i] = ovel[j, 0]
+        w[i] = ovel[j, 1]
+        top_speed = max(top_speed, math.sqrt(v[i] * v[i] + w[i] * w[i]))
+        top_radius = max(top_radius, radius[i])
     # How far a contact can push a robot in one substep: two robots meeting head
     # on at top speed overlap by up to both their moves. Pairs and obstacles this
     # close at the start of a substep are its candidate contacts.
     margin = 2.0 * top_speed * substep_s + SLACK_MM
     # Robots found in non-neighbouring cells are at least a cell apart, farther
     # than the largest pair plus the margin: they cannot touch within the substep.
+    # (A held object is a gripper's length ahead of a robot: both top radii
+    # cover it, as its holder's own disc is within the margin of it.)
     cell = 2.0 * top_radius + margin + 1.0
-    pair_buffers = buffers[13:]
+    pair_buffers = buffers[13:21]
     for _ in range(substeps):
         for a in range(n):
             px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
+        if k:
+            pucks.start_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s)
         pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)
+        if k:
+            pairs = pairs[: pucks.drop_pairs(pairs, n, objects, arm, px, py, th)]
         m = _obstacles_first(
             px,
             py,
@@ -230,32 +266,33 @@ def tick_into(
             count,
             held,
         )
-        if pairs.shape[0] == 0:
-            # No two robots close: the sweeps would move nobody, and the walls'
-            # normals and the layers serve only them (most substeps of a sparse
-            # world; about 0.5 us of a 10-robot tick).
-            continue
-        _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
-        order = _layers(pairs, near, held, m, n, px, py, radius, layer)
-        _solve_contacts(
-            pairs,
-            order,
-            px,
-            py,
-            radius,
-            mass,
-            width,
-            height,
-            scene,
-            circles,
-            near,
-            m,
-            is_near,
-            pushed,
-            moved,
-            normals,
-            count,
-        )
+        if pairs.shape[0] != 0:
+            # (No two discs close: the sweeps would move nobody, and the walls'
+            # normals and the layers serve only them: most substeps of a sparse
+            # world, about 0.5 us of a 10-robot tick.)
+            _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
+            order = _layers(pairs, near, held, m, px.shape[0], px, py, radius, layer)
+            _solve_contacts(
+                pairs,
+                order,
+                px,
+                py,
+                radius,
+                mass,
+                width,
+                height,
+                scene,
+                circles,
+                near,
+                m,
+                is_near,
+                pushed,
+                moved,
+                normals,
+                count,
+            )
+        if k:
+            pucks.end_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s, robot_speed)
     h = substep_s * substeps
     for a in range(n):
         # The velocity before the pose: ``out`` may be ``pose`` itself.
@@ -265,6 +302,14 @@ def tick_into(
         out[a, 0] = px[a]
         out[a, 1] = py[a]
         out[a, 2] = th[a]
+    for j in range(k):
+        i = n + j
+        opose[j, 0] = px[i]
+        opose[j, 1] = py[i]
+        opose[j, 2] = th[i]
+        ovel[j, 0] = v[i]
+        ovel[j, 1] = w[i]
+        ovel[j, 2] = 0.0
 
 
 def warm_up() -> None:
@@ -297,8 +342,10 @@ def warm_up() -> None:
         100.0,
         0.01,
         1,
+        pucks.objects_table(0, 1),
+        np.zeros(1),
     )
 
 
 # tick_into calls the contact kernels: their edits must reach its cache too.
-stamp_with_callees(__name__, contacts)
+stamp_with_callees(__name__, contacts, pucks)

@@ -8,5 +8,10 @@ docs/ARCHITECTURE.md, "Drives".
 from __future__ import annotations
 
 DRIVES = ("joints", "velocity", "discs")
-# The drives whose worlds can hold movable objects (the discs drive's cannot).
-OBJECT_DRIVES = ("joints", "velocity")
+# Every world's drive unless told otherwise (World, load_map, wart engine, lab files):
+# the discs drive, robots and movable objects as discs of one compiled solver.
+# "joints" (chipmunk's constraints) stays for whoever wants them: no default uses it.
+DEFAULT_DRIVE = "discs"
+# The drives whose worlds can hold movable objects: all of them (the discs drive's
+# are discs of its contact solver, common/sim2d/pucks.py).
+OBJECT_DRIVES = DRIVES

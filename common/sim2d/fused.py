@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, typeof, types
 from numba.experimental import structref
 
-from common.sim2d import contacts, discs, noise, packs, rays, sense_pass
+from common.sim2d import contacts, discs, noise, packs, pucks, rays, sense_pass
 from common.sim2d import kernels as K
 from common.sim2d.jitcache import stamp_with_callees
 
@@ -63,12 +63,15 @@ FIELDS = (
     "cmd",  # (N, 2) World.cmd itself
     "counters",  # (N, 2) World.counters itself
     "arm",  # (N,) World.arm itself
-    "holding",  # (N,) bool: no robot holds anything on this drive
-    "drive",  # (mm_s_per_unit, wheel_base, radius, mass, pulses_per_tick), (N,) each
+    "holding",  # (N,) bool: which robots hold an object (world_discs.DiscObjects.holding)
+    # (mm_s_per_unit, wheel_base, pulses_per_tick) (N,) each; radius, mass (N + K,):
+    # the robots', then the objects' discs (common/sim2d/pucks.py)
+    "drive",
     "circles",  # the round obstacles binned in the sensing grid (discs.bin_circles)
     "tables",  # kernels.SensorTables as a plain tuple
     "scene",  # kernels.StaticScene as a plain tuple
-    "objects",  # MovingScene's circles and edges: the round obstacles only here
+    "pucks",  # the movable objects: pucks.objects_table's layout, moved in place
+    "objects",  # MovingScene's circles and edges: pucks.scene_into fills them per pass
     "readings",  # (proximity, ambient, presence) written by a sensing pass
     "geometry",  # (width, height, substep s) of the arena and the tick
     "substeps",
@@ -93,12 +96,16 @@ def new_state(
     circles,
     tables,
     scene,
+    pucks_table,
     objects,
     readings,
     geometry,
     substeps,
 ):  # pragma: no cover
-    """A :class:`TickState` holding these (arrays by reference, not copied) and its work arrays."""
+    """A :class:`TickState` holding these (arrays by reference, not copied) and its work arrays.
+
+    ``objects``: pucks.scene_buffers for these objects and round obstacles.
+    """
     n = pose.shape[0]
     width, height, _ = geometry
     nc = n + objects[1].shape[0]
@@ -113,11 +120,12 @@ def new_state(
         circles,
         tables,
         scene,
+        pucks_table,
         objects,
         readings,
         geometry,
         substeps,
-        discs.drive_buffers(n, width, height, drive[2]),
+        discs.drive_buffers(n, pucks_table[0].shape[0], width, height, drive[3]),
         K.circle_buffers(nc, scene[3] * scene[4]),
         # objects[4] is the movable edges, where a MovingScene has them
         K.scratch_buffers(tables, scene, objects, nc),
@@ -137,9 +145,10 @@ def tick(state, sense, key, lights):  # pragma: no cover
     it crashed. The drive's loops on two threads saved nothing measurable at
     10,000 robots: docs/BENCHMARKS.md, 2026-11-26.)
     """
-    mm_s_per_unit, wheel_base, radius, mass, pulses_per_tick = state.drive
+    mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = state.drive
     width, height, substep_s = state.geometry
     pose = state.pose
+    arm = state.arm
     discs.tick_into(
         pose,
         state.cmd,
@@ -158,15 +167,19 @@ def tick(state, sense, key, lights):  # pragma: no cover
         pose,
         state.vel,
         state.drive_work,
+        state.pucks,
+        arm,
     )
     if sense:
         objects = state.objects
-        moving = (objects[0], objects[1], objects[2], objects[3], objects[4], lights, key)
+        scene = state.scene
+        m, e = pucks.scene_into(pose.shape[0], state.pucks, arm, scene[7], scene[8], objects)
+        moving = (objects[0][:m], objects[1][:m], objects[2][:m], objects[3][:m], objects[4][:e])
         K.sense_into(
-            (pose, state.arm, state.holding),
+            (pose, arm, state.holding),
             state.tables,
             state.scene,
-            moving,
+            (*moving, lights, key),
             state.readings,
             state.circle_work,
             state.sense_work,
@@ -176,7 +189,7 @@ def tick(state, sense, key, lights):  # pragma: no cover
 # tick and new_state call the drive's and the sensors' kernels, in other files:
 # their edits must reach these caches too (it crashed, the one time a cached
 # tick called old code with new layouts).
-stamp_with_callees(__name__, discs, contacts, packs, noise, rays, sense_pass)
+stamp_with_callees(__name__, discs, contacts, pucks, packs, noise, rays, sense_pass)
 
 
 # The types of tick's other arguments: a flag, the noise key, the lights' table
@@ -227,13 +240,7 @@ def warm_up() -> None:
         np.zeros((0, 2)),
         np.zeros(0),
     )
-    objects = (
-        np.zeros((0, 2)),
-        np.zeros(0),
-        np.zeros(0, dtype=np.int64),
-        np.zeros(0, dtype=np.bool_),
-        np.zeros((0, 4)),
-    )
+    objects = pucks.scene_buffers(0, 0, 0)
     readings = (
         np.zeros((1, 1), dtype=np.int32),
         np.zeros((1, 1), dtype=np.int32),
@@ -250,6 +257,7 @@ def warm_up() -> None:
         discs.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0),
         tables,
         scene,
+        pucks.objects_table(0, 1),
         objects,
         readings,
         (100.0, 100.0, 0.01),

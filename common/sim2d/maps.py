@@ -16,6 +16,7 @@ from typing import Any
 from common.files import write_atomic
 from common.keys import is_ident
 from common.sim2d.agents import AGENT_TYPES
+from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import EditError, World
 
@@ -321,7 +322,7 @@ def build_world(
     sensor_period_s: float = 0.02,
     threads: int = 1,
     physics_threads: int = 1,
-    drive: str = "joints",
+    drive: str = DEFAULT_DRIVE,
 ) -> World:
     """A new world from a parsed map (errors name ``source`` and the field).
 
@@ -366,7 +367,7 @@ def load_map(
     tick_s: float = 0.02,
     threads: int = 1,
     physics_threads: int = 1,
-    drive: str = "joints",
+    drive: str = DEFAULT_DRIVE,
 ) -> World:
     try:
         text = path.read_text(encoding="utf-8")

@@ -1,21 +1,21 @@
-"""The Sim2D world (thesis 6.7.2, AgentWorldSim2D): a pymunk space in millimetres.
+"""The Sim2D world (thesis 6.7.2, AgentWorldSim2D): a bounded floor in millimetres.
 
 One world is stepped by one thread (pymunk is not thread-safe). Collision rules
-follow the thesis, through pymunk:
+follow the thesis; how they are solved is the world's drive
+(common/sim2d/drives.py, docs/WORLDS.md "Drives"):
 
-- obstacles are static bodies: they never move, and push anything out;
-- agents are dynamic bodies pulled by a kinematic control body through
-  force-limited pivot and gear joints (pymunk's tank pattern, ``drive="joints"``,
-  the default), or driven by a force-limited velocity servo with the same
-  limits (``drive="velocity"``, no joints: for swarms); either way walls push
-  them back and two agents share the push; or (``drive="discs"``, for swarms
-  of robots and obstacles only) moved along their wheels' arcs by a compiled
-  tick that solves disc contacts itself, chipmunk not stepped
-  (common/sim2d/discs.py);
-- movable objects are dynamic bodies held to the floor by force-limited
-  joints to the static body (top-down friction: nothing slides forever);
-- the gripper's collision exception area lets an object between the open
-  tongs overlap the robot (thesis 6.8.3).
+- ``drive="discs"`` (the default): robots and movable objects are discs of one
+  compiled contact solver, robots moved along their wheels' arcs, objects by
+  the pushes they get less floor friction; chipmunk is not stepped
+  (common/sim2d/discs.py, pucks.py, world_discs.py);
+- ``drive="joints"``: a pymunk space: robots are dynamic bodies pulled by a
+  kinematic control body through force-limited pivot and gear joints
+  (pymunk's tank pattern), movable objects dynamic bodies held to the floor by
+  force-limited joints (top-down friction); ``drive="velocity"``: the same
+  space, robots driven by a force-limited velocity servo (no joints);
+- on every drive obstacles never move and push anything out, two robots share
+  a push, and the gripper's collision exception area lets an object between
+  the open tongs overlap the robot (thesis 6.8.3).
 
 Per-agent state lives in numpy arrays indexed by the agent's slot (its index
 in :attr:`World.agents`), so a tick has no per-robot Python loop. The
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
-from common.sim2d import chipmunk, heap, kernels, sensing
+from common.sim2d import chipmunk, heap, kernels, sensing, world_discs
 from common.sim2d.bodies import id_of
 from common.sim2d.collision import (
     CAT_ALL,
@@ -42,7 +42,7 @@ from common.sim2d.collision import (
     COLL_TONGS,
     TONGS_MASK_LIGHT,
 )
-from common.sim2d.drives import DRIVES, OBJECT_DRIVES
+from common.sim2d.drives import DEFAULT_DRIVE, DRIVES, OBJECT_DRIVES
 from common.sim2d.entities import (
     Agent,
     Light,
@@ -55,17 +55,13 @@ from common.sim2d.world_actuators import RobotActuators, WorldActuators
 from common.sim2d.world_edits import EditError, WorldEdits
 from common.sim2d.world_tick import WorldTick, _FusedTick
 
-# How robots are driven (World(drive=...)): "joints", pymunk's tank pattern (a
-# kinematic control body per robot pulling it through a pivot and a gear joint), or
-# "velocity", a force-limited servo on the robot's own body set by the compiled tick
-# (kernels.servo_forces): the same velocity constraint and force limits without the
-# two joints and the extra body, which were most of chipmunk's step in a swarm
-# (docs/BENCHMARKS.md, issue 22). With "velocity" a lowered gripper's tongs also
-# collide with movable objects only (collision.TONGS_MASK_LIGHT), not with robots,
-# other tongs or obstacles: the other half of a swarm's step. "joints" stays the
-# default, its trajectories unchanged: the sim-beside-real comparisons and recorded
-# runs were made with it, and tongs that no longer touch walls and robots are a
-# change of the model (docs/ARCHITECTURE.md section 9, "Drives").
+# How robots are driven (World(drive=...)): "discs" (the default, DEFAULT_DRIVE), a
+# compiled disc solver for robots and objects alike; "joints", pymunk's tank pattern (a
+# kinematic control body per robot pulling it through a pivot and a gear joint), the
+# default before issue 35 and kept, its trajectories unchanged; or "velocity", a
+# force-limited servo on the robot's own body set by the compiled tick
+# (kernels.servo_forces), whose lowered tongs collide with movable objects only
+# (collision.TONGS_MASK_LIGHT). docs/WORLDS.md, "Drives".
 __all__ = ["DRIVES", "OBJECT_DRIVES", "EditError", "RobotActuators", "World"]
 
 
@@ -127,6 +123,7 @@ class World(WorldEdits, WorldActuators, WorldTick):
     proximity = _CopiedOnRead()
     ambient = _CopiedOnRead()
     presence = _CopiedOnRead()
+    object_pose = _CopiedOnRead()
 
     def __init__(
         self,
@@ -140,7 +137,7 @@ class World(WorldEdits, WorldActuators, WorldTick):
         name: str = "world",
         threads: int = 1,
         physics_threads: int = 1,
-        drive: str = "joints",
+        drive: str = DEFAULT_DRIVE,
     ) -> None:
         if not (width_mm > 0 and height_mm > 0):
             raise EditError("the arena's width and height must be positive")
@@ -242,6 +239,8 @@ class World(WorldEdits, WorldActuators, WorldTick):
             (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)),
         )
         self._bodies_placed = True
+        # The discs drive's movable objects in its arrays (common/sim2d/world_discs.py).
+        self._discs: world_discs.DiscObjects | None = None
         # The discs drive's fused tick (common/sim2d/fused.py): its state, built at
         # the first tick after anything it holds changed (_FusedTick.key).
         self._fused: _FusedTick | None = None

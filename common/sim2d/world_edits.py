@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import pymunk
 
-from common.sim2d import bodies
+from common.sim2d import bodies, world_discs
 from common.sim2d.bodies import id_of
 from common.sim2d.collision import CAT_OBSTACLE, CAT_ROBOT
 from common.sim2d.entities import (
@@ -148,19 +148,11 @@ class WorldEdits:
         return obstacle
 
     def _place_bodies(self) -> None:
-        """On the discs drive, put the robots' bodies where the robots are, for a query.
+        """On the discs drive, put the robots' and objects' bodies where they are (a query's need).
 
-        Chipmunk is not stepped on that drive, so the bodies stay where an edit
-        last put them; an edit that asks the space what a shape overlaps needs
-        them where the robots are.
+        Chipmunk is not stepped on that drive (common/sim2d/world_discs.py).
         """
-        if self.drive != "discs" or self._bodies_placed:
-            return
-        for slot, agent in enumerate(self.agents):
-            x, y, heading = self.agent_pose[slot]
-            agent.body.position, agent.body.angle = (float(x), float(y)), float(heading)
-            self.space.reindex_shapes_for_body(agent.body)
-        self._bodies_placed = True
+        world_discs.place_bodies(self)  # type: ignore[arg-type]  # self is the World
 
     def _agents_touching(self, shapes: list[pymunk.Shape]) -> list[str]:
         self._place_bodies()
@@ -190,11 +182,6 @@ class WorldEdits:
         colour: str = "#ff8c00",
     ) -> MovableObject:
         self._check_new_id(ident)
-        if self.drive == "discs":
-            raise EditError(
-                f"object {ident}: this world runs the discs drive (for swarms), which has "
-                "no movable objects; run it with the joints or velocity drive"
-            )
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"object {ident} would stick out of the arena")
         if mass_g <= 0:
@@ -346,6 +333,7 @@ class WorldEdits:
                 return float(x), float(y), float(h)
         for obj in self.objects:
             if obj.id == ident and obj.body is not None:
+                self._place_bodies()  # the discs drive moves objects in its arrays
                 return obj.body.position.x, obj.body.position.y, obj.body.angle
         if ident in self.obstacles:
             o = self.obstacles[ident]
@@ -373,7 +361,7 @@ class WorldEdits:
 
     def move(self, ident: str, x: float, y: float, heading: float | None = None) -> None:
         """Move (and optionally rotate) anything; validated, undone if it breaks a rule."""
-        old = self.pose_of(ident)
+        old = self.pose_of(ident)  # an object's places the bodies first (discs drive)
         heading = old[2] if heading is None else heading
         shape = self.shape_of(ident)
         if shape is not None and not self._shape_inside(shape, x, y, heading):

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from common.sim2d import chipmunk, discs, fused, kernels, sensing
+from common.sim2d import chipmunk, discs, fused, kernels, pucks, sensing, world_discs
 
 if TYPE_CHECKING:
     import pymunk
@@ -69,6 +69,8 @@ class WorldTick:
         _bodies_placed: bool
         _disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]]
         _fused: _FusedTick | None
+        _discs: world_discs.DiscObjects | None
+        fingers: np.ndarray
 
         def holding(self) -> np.ndarray: ...
 
@@ -99,6 +101,7 @@ class WorldTick:
             self.arm,
             self.tick_s,
             self.substeps,
+            self._discs,
         )
 
     def _fused_state(self) -> _FusedTick:
@@ -117,9 +120,11 @@ class WorldTick:
                 and k[6] is self.arm
                 and k[7] == self.tick_s
                 and k[8] == self.substeps
+                and k[9] is world_discs.current(self)  # type: ignore[arg-type]  # the World
             ):
                 return f
         t = self.tables
+        objs = world_discs.disc_objects(self)  # type: ignore[arg-type]  # the World
         static = self.sensors.static_geometry(self)
         n = len(self.agents)
         pose = np.array(self.agent_pose, dtype=np.float64, order="C")
@@ -132,17 +137,17 @@ class WorldTick:
         drive = (
             t.mm_s_per_unit,
             t.wheel_base,
-            t.radius,
-            t.mass,
             self.tick_s * t.pulses_per_s_per_unit,
+            objs.radius,
+            objs.mass,
         )
         scene = static.scene
         circles = discs.bin_circles(
             static.circle_centres, static.circle_radii, scene.grid_nx, scene.grid_ny, scene.cell
         )
-        holding = np.zeros(n, dtype=bool)  # the discs drive has no movable objects to hold
+        holding = objs.holding
         tables = self.sensors.agents.kernel_tables
-        objects = (*static.no_objects, sensing.NO_EDGES)
+        objects = pucks.scene_buffers(len(objs.objects), objs.edges, len(static.circle_radii))
         state = fused.new_state(
             pose,
             vel,
@@ -154,6 +159,7 @@ class WorldTick:
             circles,
             tables,
             static.kernel_scene,
+            objs.table,
             objects,
             readings,
             (self.width, self.height, self.tick_s / self.substeps),
@@ -172,6 +178,7 @@ class WorldTick:
             tables,
             static.kernel_scene,
             objects,
+            objs,
             n >= sensing.PARALLEL_MIN_AGENTS,
         )
         return f
@@ -200,11 +207,13 @@ class WorldTick:
         f.call(f.state, sense and not on_threads, key, lights)
         if on_threads:
             # The same pass on the world's threads, in the state's own arrays.
+            o = f.objects
+            m, e = pucks.scene_into(len(f.pose), f.discs.table, self.arm, f.scene[7], f.scene[8], o)
             sensing.sense_on_threads(
                 (f.pose, self.arm, f.holding),
                 f.tables,
                 f.scene,
-                (*f.objects, lights, key),
+                (o[0][:m], o[1][:m], o[2][:m], o[3][:m], o[4][:e], lights, key),
                 (f.proximity, f.ambient, f.presence),
                 self.threads,
             )
@@ -212,6 +221,7 @@ class WorldTick:
         d = self.__dict__
         d["_agent_pose_buffer"] = f.pose
         d["_agent_vel_buffer"] = f.vel
+        d["_object_pose_buffer"] = f.discs.table[0]  # (0, 3) once the last object went
         self._bodies_placed = False
         self.tick = tick
         self.sim_time = sim_time
@@ -228,7 +238,7 @@ class WorldTick:
         # on one thread (fused.tick says why). Not while profiling: the profile times physics
         # and sensing apart, which the general path below does with the same
         # results.
-        if self.drive == "discs" and not profile and self.agents and not self.grippers.held:
+        if self.drive == "discs" and not profile and self.agents:
             self._step_fused()
             return
         # The fused state's buffers would fall behind this tick: built afresh if needed.
@@ -245,10 +255,11 @@ class WorldTick:
         via_pymunk = chipmunk.space_step_pending(self.space)
         sub = dt / self.substeps
         if self.drive == "discs":
-            # Chipmunk is not stepped: the robots' bodies stay where they were
-            # placed, for the edits' overlap queries (_place_bodies), and the
-            # world has no movable objects on this drive.
+            # Chipmunk is not stepped: the robots' and objects' bodies stay where
+            # they were placed, for the edits' overlap queries (_place_bodies);
+            # the objects move in the drive's arrays (world_discs.py).
             via_pymunk = False
+            objs = world_discs.disc_objects(self)  # type: ignore[arg-type]  # the World
             static = self.sensors.static_geometry(self)
             if self._disc_circles[0] is not static:
                 scene = static.scene
@@ -267,8 +278,8 @@ class WorldTick:
                 self.cmd,
                 t.mm_s_per_unit,
                 t.wheel_base,
-                t.radius,
-                t.mass,
+                objs.radius,
+                objs.mass,
                 self.counters,
                 dt * t.pulses_per_s_per_unit,
                 static.kernel_scene,
@@ -277,8 +288,10 @@ class WorldTick:
                 self.height,
                 sub,
                 self.substeps,
+                objs.table,
+                self.arm,
             )
-            obj = self.object_pose
+            obj = objs.table[0].copy()
             self._bodies_placed = False
         elif self.drive == "joints":
             pose, vel, obj = kernels.physics_tick(
@@ -331,7 +344,8 @@ class WorldTick:
                 chipmunk.FUNCTIONS, self._agent_bodies, self._object_bodies
             )
         self.agent_pose, self.agent_vel, self.object_pose = pose, vel, obj
-        self.grippers.carry()
+        if self.drive != "discs":  # there the drive carries them (pucks.py)
+            self.grippers.carry()
         self.tick += 1
         self.sim_time = self.tick * dt
         if profile:
@@ -377,5 +391,6 @@ class _FusedTick:
     holding: np.ndarray
     tables: tuple[object, ...]
     scene: tuple[object, ...]
-    objects: tuple[object, ...]
+    objects: tuple[np.ndarray, ...]  # pucks.scene_buffers: the pass's moving scene
+    discs: world_discs.DiscObjects  # the objects' arrays the state holds
     swarm: bool  # enough robots for a pass on threads (sensing.PARALLEL_MIN_AGENTS)

@@ -23,8 +23,8 @@ from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
 from common.sim2d import kernels
+from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
 from common.sim2d.maps import MapError, load_map
-from common.sim2d.world import DRIVES
 from services.engine.service import STREAMS_UP_FRONT, EngineService, EngineSettings
 
 
@@ -71,12 +71,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     p.add_argument(
         "--drive",
         choices=DRIVES,
-        default="joints",
-        help="how robots are driven: joints (default; pymunk's tank pattern), velocity "
-        "(a force-limited servo without joints, and tongs that hit movable objects only) "
-        "or discs (robots as discs moved by their wheels, contacts solved without "
-        "chipmunk; no movable objects): the last two for swarms, docs/ARCHITECTURE.md "
-        "section 9",
+        default=DEFAULT_DRIVE,
+        help="how robots are driven: discs (default; robots and movable objects as discs "
+        "moved by their wheels and pushes, contacts solved by one compiled solver), "
+        "joints (pymunk's tank pattern: chipmunk's constraints) or velocity (a "
+        "force-limited servo without joints, tongs that hit movable objects only): "
+        "docs/WORLDS.md, 'Drives'",
     )
     p.add_argument(
         "--streams-up-front",

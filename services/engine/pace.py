@@ -88,8 +88,8 @@ class PaceWatch:
                 f"{self.describe()} runs at {factor:.2f}x real time over the last "
                 f"{wall:.0f} s, asked {self.speed:g}x: its ticks take longer than the "
                 "time they simulate on this host, so robots move slowly and "
-                "controllers get late readings. Fewer robots, a lighter drive "
-                "(--drive discs), --threads, or a host of its own: "
+                "controllers get late readings. Fewer robots, the discs drive "
+                "(the default, if it was started with another), --threads, or a host of its own: "
                 "docs/OPERATIONS.md, 'When a world falls behind'",
             )
         if self.behind and factor >= KEEPS_UP * self.speed:

@@ -48,6 +48,7 @@ from common.messages import (
 )
 from common.service import RequestError
 from common.sim2d import wander
+from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.world import EditError, World
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
@@ -110,7 +111,7 @@ class EngineSettings:
     # when a map is loaded on request.
     threads: int = 1
     physics_threads: int = 1
-    drive: str = "joints"  # World.drive, kept when a map is loaded on request
+    drive: str = DEFAULT_DRIVE  # World.drive, kept when a map is loaded on request
     # Worlds of more robots declare a robot's sensor publisher only once someone
     # watches it (keys.agent_watch) or it is leased: Zenoh's cost per publisher
     # grows with their number (10,000 took 35 s, docs/OPERATIONS.md "Swarms").

@@ -38,7 +38,7 @@ from common.controller import (
 )
 from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
-from common.sim2d import maps
+from common.sim2d import maps, world_discs
 from common.sim2d.collision import CAT_OBJECT, CAT_OBSTACLE, CAT_ROBOT
 from common.sim2d.world import EditError, World
 from services.runner.sandbox import Sandbox, SandboxLimits
@@ -171,7 +171,8 @@ class _Touches:
 
     def __init__(self, world: World, slot: int) -> None:
         self.world = world
-        self.body = world.agents[slot].body
+        self.agent = world.agents[slot]
+        self.body = self.agent.body
         self.touching: set[tuple[str, str]] = set()
         self.names = self._names()
 
@@ -188,7 +189,13 @@ class _Touches:
         return names
 
     def new_contacts(self) -> list[tuple[str, str]]:
-        now: set[tuple[str, str]] = set()
+        if self.world.drive == "discs":
+            # No chipmunk arbiters on that drive: the contacts are measured.
+            now = world_discs.touching(self.world, self.world.agents.index(self.agent))
+            new = sorted(now - self.touching)
+            self.touching = now
+            return new
+        now = set()
 
         def seen(arbiter: Any) -> None:
             for shape in arbiter.shapes:

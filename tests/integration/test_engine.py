@@ -92,7 +92,7 @@ def start_engine(
 ) -> Path:
     """`wart engine` on a copy of maps/foraging.json (4 Khepera), its token seen.
 
-    Without ``objects`` the copy has no balls or crate (the discs drive has none).
+    Without ``objects`` the copy has no balls or crate.
     """
     maps_dir = tmp_path / "maps"
     maps_dir.mkdir()
@@ -282,17 +282,6 @@ def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
     proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
     assert proc.popen.wait(30) == 2
     assert "objects[0].colr" in proc.output(), proc.output()
-
-
-def test_a_map_with_objects_on_the_discs_drive_is_refused_with_what_to_do(procs: Procs) -> None:
-    proc = procs.start(
-        "engine-discs",
-        ["engine", "--map", str(REPO / "maps" / "foraging.json"), "--drive", "discs"],
-    )
-    assert proc.popen.wait(30) == 2
-    out = proc.output()
-    assert "object ball0" in out and "no movable objects" in out, out
-    assert "joints or velocity drive" in out, out
 
 
 # Every drive (`wart engine --drive`): the swarm options run the same service.

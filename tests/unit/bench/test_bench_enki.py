@@ -18,7 +18,9 @@ def test_defaults_are_the_issue_sizes() -> None:
     args = bench_enki.parse_args([])
     assert args.sizes == [10, 35, 100, 1000, 3000]
     assert args.repeats == 3
-    assert args.drives == ["joints", "velocity"]
+    assert args.drives == ["joints", "discs"]  # the old lab default and today's
+    assert not args.full
+    assert bench_enki.parse_args(["--full"]).full
 
 
 @pytest.mark.parametrize(

@@ -130,13 +130,6 @@ def test_an_edit_sees_where_the_robots_have_driven() -> None:
     )
 
 
-def test_movable_objects_are_refused_with_what_to_do() -> None:
-    world = discs_world()
-    with pytest.raises(EditError, match=r"discs drive.*no movable objects.*joints or velocity"):
-        world.add_object("ball", "ball", ShapeSpec.circle(10.0), 500.0, 300.0)
-    assert world.objects == []
-
-
 def test_same_seed_same_swarm_run_bit_for_bit() -> None:
     runs = []
     for _ in range(2):

@@ -13,6 +13,7 @@ import pytest
 
 from common.controller import Controller, load_controller
 from common.controller.upload_gate import precheck
+from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.maps import load_map
 from common.sim2d.world import DRIVES, World
 from tests.conftest import REPO
@@ -21,7 +22,7 @@ from tests.worldlink import run_in_world
 EXAMPLES = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
 
 
-def world(name: str, keep: str, seed: int = 1, drive: str = "joints") -> World:
+def world(name: str, keep: str, seed: int = 1, drive: str = DEFAULT_DRIVE) -> World:
     w = load_map(REPO / "maps" / f"{name}.json", name="t", seed=seed, drive=drive)
     for agent in [a.id for a in w.agents if a.id != keep]:
         w.remove(agent)  # alone in the map: other robots are not what is tested

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[4]
 _TICKS = """
 import json, resource, sys
 import numpy as np
-from common.sim2d import discs, heap
+from common.sim2d import discs, heap, pucks
 from common.sim2d.world import World
 
 World(100.0, 100.0)
@@ -36,7 +36,7 @@ scene = (np.zeros((0, 4)), np.zeros(2, dtype=np.int64), np.zeros(0, dtype=np.int
          side, np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0))
 circles = discs.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, side)
 args = (cmd, 8.0 * one, 53.0 * one, 27.5 * one, 80.0 * one, np.zeros((n, 2)), one, scene,
-        circles, side, side, 0.01, 1)
+        circles, side, side, 0.01, 1, pucks.objects_table(0, n), np.zeros(n))
 for _ in range(5):
     pose, _vel = discs.tick(pose, *args)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
