@@ -18,9 +18,11 @@ from services.engine import packing
 REPO = Path(__file__).resolve().parents[3]
 
 
-def _snap() -> WorldSnapshot:
-    # The foraging arena: k0 stands 120 mm behind k2, both facing +x (the joints drive).
-    return packing.snapshot(maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=1))
+def _snap(drive: str = "joints") -> WorldSnapshot:
+    # The foraging arena: k0 stands 120 mm behind k2, both facing +x. On the joints drive
+    # the gripper's tongs collide with robots and walls; on the others they touch objects only.
+    world = maps.load_map(REPO / "maps" / "foraging.json", name="w1", seed=1, drive=drive)
+    return packing.snapshot(world)
 
 
 def _recording(snap: WorldSnapshot, k0_x: list[float]) -> Recording:
@@ -48,6 +50,8 @@ def _recording(snap: WorldSnapshot, k0_x: list[float]) -> Recording:
 def test_the_snapshot_says_which_tongs_hit_robots_and_walls() -> None:
     k0 = contacts.agent_info(_snap(), "k0")
     assert k0 is not None and [t[2] for t in k0.tongs] == [16.0, -16.0]  # both sides, y in mm
+    on_discs = contacts.agent_info(_snap("discs"), "k0")
+    assert on_discs is not None and on_discs.tongs == []
 
 
 def test_a_robot_pushed_along_is_one_collision_and_a_second_touch_is_another() -> None:
