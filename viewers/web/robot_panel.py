@@ -241,6 +241,9 @@ class RobotPanel:
         view.show_rays = self.rays.value
         view.follow = self.follow.value
         self.refresh_agents()  # an arena's robots are known once its world is shown
+        # A robot selected before this panel was bound (a click while a busy page still
+        # built it) is shown as selected, not lost until the next click.
+        self._selected(view.selected)
 
     def unbind(self) -> None:
         view = self.view
