@@ -130,8 +130,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     # Compile the per-tick kernels now (or load them from numba's on-disk cache) rather
     # than on the first tick. Said first: a checkout's first start compiles for a while.
     print(
-        "engine: loading the simulation's kernels (compiled on a checkout's first start: "
-        "under a minute on 2 cores; cached after)",
+        "engine: loading the simulation's kernels (a checkout's first start compiles them: "
+        "a minute or more on 2 cores; cached after)",
         file=sys.stderr,
         flush=True,
     )
