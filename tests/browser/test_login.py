@@ -110,3 +110,25 @@ def test_password_is_a_password_input_at_every_keystroke(open_page, viewer: WebV
     for other in ("Account", "Private message", "Reason", "Server name"):
         assert_readable(page, other)
     page.screenshot("admin-new-password")
+
+
+def test_a_student_sets_their_own_password(open_page, viewer: WebViewer) -> None:
+    """A class's first password comes on a paper slip: the student replaces it in the page."""
+    page = open_page()
+    page.log_in("wart://127.0.0.1:7447/lab", "ben", "ben-pw")
+    page.wait_text("Logged in as")
+    page.p.get_by_text("My account", exact=True).first.click()  # the folder opens
+    page.fill("My new password", "short")
+    page.click("Set my password")
+    page.wait_text("Refused: a password needs at least 8 characters")
+    new_box = page.input_after_label("My new password")
+    assert new_box.input_value() == ""  # never left on screen
+    page.fill("My new password", "ben-new-password")
+    page.click("Set my password")
+    page.wait_text("Your password is changed")
+    page.click("Log out")
+    page.log_in("wart://127.0.0.1:7447/lab", "ben", "ben-pw")
+    page.wait_text("wrong user name or password")  # the old one no longer opens the lab
+    page.fill("Password", "ben-new-password")
+    page.click("Log in")
+    page.wait_text("Logged in as")

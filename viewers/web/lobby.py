@@ -33,6 +33,8 @@ from viewers.web.adapters import (
 from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.inputs import on_click, set_value
+from viewers.web.login import MAX_PASSWORD
+from viewers.web.masked import add_masked_text
 from viewers.web.network_panel import NetworkPanel
 from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
@@ -90,11 +92,18 @@ class LabTab:
                 self.pm_to = gui.add_text("To", "")
                 self.pm_text = gui.add_text("Private message", "")
                 self.pm_send = gui.add_button("Send privately")
+            with gui.add_folder("My account", expand_by_default=False):
+                # A class's first passwords come on paper (wart users import): each
+                # student sets their own here.
+                self.my_password = add_masked_text(gui, "My new password", submit="Set my password")
+                self.my_password_button = gui.add_button("Set my password")
+                self.my_password_said = gui.add_markdown("")
             is_admin = "admin" in connection.permissions
             self.admin = AdminPanel(client, connection) if is_admin else None
             self.network = NetworkPanel(client, connection) if is_admin else None
             self.notice = gui.add_markdown("", visible=False)
             self.logout_button = gui.add_button("Log out", color="gray")
+        self.my_password_button.on_click(lambda _: self.set_my_password())
         self.host_chat.on_click(lambda _: self.host("chat"))
         self.host_arena.on_click(lambda _: self.host("agent"))
         self.pm_send.on_click(lambda _: self.send_private())
@@ -105,6 +114,19 @@ class LabTab:
     @property
     def label(self) -> str:
         return self.connection.address.label
+
+    def set_my_password(self) -> None:
+        password = self.my_password.value
+        set_value(self.my_password, "")  # never left on screen
+        if not password or len(password) > MAX_PASSWORD:  # the registry says the minimum
+            self.my_password_said.content = "_Type your new password first._"
+            return
+        try:
+            self.connection.set_password(self.connection.user, password)
+        except LabError as exc:
+            self.my_password_said.content = f"_Refused: {escape_md(str(exc))}_"
+            return
+        self.my_password_said.content = "**Your password is changed**: use it at your next login."
 
     def say_notice(self, text: str) -> None:
         self.notice.content = f"**{escape_md(text)}**"
