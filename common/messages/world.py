@@ -35,8 +35,18 @@ class GripperReading(msgspec.Struct, frozen=True, kw_only=True):
     resistivity: Byte  # of the held object; 255 when nothing is held
 
 
+PartName = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
+PartReading = Annotated[list[Counter], msgspec.Meta(max_length=64)]
+Parts = Annotated[dict[PartName, PartReading], msgspec.Meta(max_length=32)]
+
+
 class SensorSample(Message, frozen=True):
-    """One agent's readings at one tick (``agent/<agent>/sensors``)."""
+    """One agent's readings at one tick (``agent/<agent>/sensors``).
+
+    ``parts``: the readings of the robot file's batched sensors (floor, range
+    finder, bumper, a plugin's) by their names in the file; empty for a robot
+    without any (an older reader ignores the field).
+    """
 
     world: Ident
     agent: Ident
@@ -48,6 +58,7 @@ class SensorSample(Message, frozen=True):
     speeds: tuple[int, int]  # the type's speed unit (Khepera: pulses per 10 ms)
     leds: list[int]
     gripper: GripperReading | None = None
+    parts: Parts = msgspec.field(default_factory=dict)
 
 
 class SensorBatch(Message, frozen=True):
@@ -221,6 +232,11 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     # or it stopped tracking) or "not seen" (a live camera lost it: kept where it was
     # last seen); "" in a simulated world, where the pose is the simulation's own.
     pose_from: Literal["", "tracked", "odometry", "not seen"] = ""
+    # The robot file's components as (name, role): what a controller of it may call
+    # (common/controller/robot.py); empty for a type written in Python.
+    components: Annotated[list[tuple[PartName, PartName]], msgspec.Meta(max_length=32)] = (
+        msgspec.field(default_factory=list)
+    )
 
 
 class WorldSnapshot(Message, frozen=True):

@@ -6,6 +6,7 @@ the help, the validation and the documentation cannot drift apart.
 
 from __future__ import annotations
 
+from common.controller.robot import RobotApi
 from common.robots.registry import BUILT_IN, Registry
 from common.robots.schema import ComponentType, show_value
 from common.sim2d.specs import AgentTypeSpec
@@ -13,10 +14,18 @@ from common.sim2d.specs import AgentTypeSpec
 # What every robot handle answers whatever its parts (common/controller/).
 COMMON_CALLS = (
     ("time()", "float s", "the robot's clock (simulated seconds in a simulation)"),
-    ("components()", "dict name -> type", "the robot's components, as its file names them"),
+    ("sensors()", "tuple of names", "the robot file's batched sensors, by their names"),
     ("has(name)", "bool", "whether the robot has that component"),
     ("read(name)", "Reading", "a sensor's reading by its name in the robot file"),
 )
+
+
+def robot_api(spec: AgentTypeSpec, gripper: bool = True) -> RobotApi:
+    """What a controller of this type may call (``gripper``: the gripper is fitted)."""
+    return RobotApi.of(
+        spec.name,
+        ((c.name, c.role) for c in spec.components if c.role != "gripper" or gripper),
+    )
 
 
 def component_text(component: type[ComponentType], origin: str = BUILT_IN) -> str:

@@ -33,12 +33,14 @@ def read_parts(world: Any) -> Readings:
         rows = np.array(slots, dtype=np.int64)
         seed = (int(world.seed) * 1_000_003 + world.tick) * 65_537 + zlib.crc32(key.encode())
         values = np.asarray(part.component.measure(world, rows, part.values, seed % 2**63))
+        # Readings are integers on the wire (counts, mm, 0/1), clamped to 32 bits.
+        values = np.clip(np.rint(values), -(2**31), 2**31 - 1).astype(np.int64)
         out[key] = (rows, values.reshape(len(rows), part.size))
     world.__dict__["_part_readings"] = (stamp, out)
     return out
 
 
-def parts_of(world: Any, slots: list[int]) -> list[dict[str, list[float]]]:
+def parts_of(world: Any, slots: list[int]) -> list[dict[str, list[int]]]:
     """For each slot, its parts' readings by part name (empty for a robot without any)."""
     agents = world.agents
     if not any(agents[s].spec.parts for s in slots):
@@ -50,7 +52,7 @@ def parts_of(world: Any, slots: list[int]) -> list[dict[str, list[float]]]:
     out = []
     for slot in slots:
         spec = agents[slot].spec
-        mine: dict[str, list[float]] = {}
+        mine: dict[str, list[int]] = {}
         for part in spec.parts:
             key = f"{spec.name}/{part.name}"
             _rows, values = readings[key]

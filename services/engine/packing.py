@@ -20,6 +20,7 @@ from common.messages import (
     WorldSnapshot,
 )
 from common.sim2d.entities import ShapeSpec
+from common.sim2d.parts import parts_of
 from common.sim2d.world import World
 
 _FINGERS = ("open", "closed", "holding")
@@ -80,8 +81,9 @@ def samples(world: World, slots: list[int]) -> list[SensorSample]:
     arm = np.clip(np.rint(world.arm), 0, 255).astype(np.int64).tolist()
     presence = world.presence.tolist()
     name, tick, sim_time = world.name, world.tick, world.sim_time
+    parts = parts_of(world, slots)  # [{}...] at once for robots without batched sensors
     out = []
-    for slot in slots:
+    for i, slot in enumerate(slots):
         agent = world.agents[slot]
         spec = agent.spec
         gripper = None
@@ -105,6 +107,7 @@ def samples(world: World, slots: list[int]) -> list[SensorSample]:
                 speeds=(int(v[0]), int(v[1])),
                 leds=leds[slot][: spec.leds],
                 gripper=gripper,
+                parts=parts[i],
             )
         )
     return out
@@ -205,6 +208,11 @@ def snapshot(world: World) -> WorldSnapshot:
                 proximity_sensors=[(p.x_mm, p.y_mm, p.heading_rad) for p in a.spec.proximity.poses],
                 proximity_max=a.spec.proximity.max_value,
                 speed_limit=a.spec.drive.max_speed,
+                components=[
+                    (c.name, c.role)
+                    for c in a.spec.components
+                    if c.role != "gripper" or a.has_gripper
+                ],
             )
         )
     return WorldSnapshot(

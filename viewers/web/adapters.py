@@ -291,6 +291,9 @@ class SceneLayout:
     version: int = 0
     offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
     real: bool = False  # real robots behind a Khepera bridge: no edits, no reset
+    # Each robot's type and components (name, role), as its world says: what Check
+    # validates a controller's calls against (empty: a type written in Python).
+    robot_types: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

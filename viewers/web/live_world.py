@@ -108,6 +108,7 @@ def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]
         version=snap.layout,
         offline=frozenset(a.id for a in snap.agents if not a.online),
         real=snap.kind == "real",
+        robot_types={a.id: (a.type, tuple((n, r) for n, r in a.components)) for a in snap.agents},
     )
     return view, object_rows
 
