@@ -34,7 +34,7 @@ from typing import Any
 
 from common.robots import components as builtin_components
 from common.robots import sensors as builtin_sensors
-from common.robots.robotfile import MAX_BYTES, RobotFileError, parse
+from common.robots.robotfile import MAX_BYTES, RobotFileError, parse, too_big
 from common.robots.schema import ComponentType, SchemaError, check_schema
 from common.sim2d.specs import AgentTypeSpec
 
@@ -116,10 +116,13 @@ class Registry:
         """Every ``*.toml`` in a lab's robot directory (files users saved: data only)."""
         for path in sorted(directory.glob("*.toml")):
             try:
-                if path.stat().st_size > MAX_BYTES:
-                    data = b"x" * (MAX_BYTES + 1)  # refused by parse with the size
-                else:
-                    data = path.read_bytes()
+                size = path.stat().st_size
+                if size > MAX_BYTES:  # refused unread
+                    self.refuse(
+                        "wart.agents", path.name, str(directory), str(too_big(path.name, size))
+                    )
+                    continue
+                data = path.read_bytes()
             except OSError as exc:
                 self.refuse("wart.agents", path.name, str(directory), f"cannot read: {exc}")
                 continue

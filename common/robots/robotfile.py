@@ -128,16 +128,19 @@ class _Lines:
         return self._key_in(header, key) or header
 
 
+def too_big(source: str, size: int) -> RobotFileError:
+    """The refusal of a file over MAX_BYTES (said before it is read)."""
+    message = f"is {size} bytes; robot files are limited to {MAX_BYTES}"
+    return RobotFileError(source, [Problem(None, "file", message)])
+
+
 def parse(
     data: bytes | str, source: str, components: Mapping[str, type[ComponentType]]
 ) -> AgentTypeSpec:
     """Validate a robot file's bytes and compile it; RobotFileError with every problem."""
     raw = data.encode() if isinstance(data, str) else data
     if len(raw) > MAX_BYTES:
-        raise RobotFileError(
-            source,
-            [Problem(None, "file", f"is {len(raw)} bytes; robot files are limited to {MAX_BYTES}")],
-        )
+        raise too_big(source, len(raw))
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

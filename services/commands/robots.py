@@ -22,7 +22,7 @@ from pathlib import Path
 
 from common import cli
 from common.robots import describe, registry
-from common.robots.robotfile import MAX_BYTES, RobotFileError, parse
+from common.robots.robotfile import MAX_BYTES, RobotFileError, parse, too_big
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart robots") -> int:
@@ -56,13 +56,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart robots") -> int:
         return cli.fail(f"no robot or component type {args.name!r} (known: {known})", 1)
     path: Path = args.file
     try:
-        if path.stat().st_size > MAX_BYTES:
-            data = path.open("rb").read(MAX_BYTES + 1)  # refused by its size, not read whole
-        else:
-            data = path.read_bytes()
+        size = path.stat().st_size
+        data = path.read_bytes() if size <= MAX_BYTES else b""  # too big: never read
     except OSError as exc:
         return cli.fail(f"cannot read {path}: {exc.strerror or exc}", 1)
     try:
+        if size > MAX_BYTES:
+            raise too_big(path.name, size)
         spec = parse(data, path.name, reg.components)
     except RobotFileError as exc:
         print(str(exc), file=sys.stderr)
