@@ -395,6 +395,38 @@ class EditResult(Message, frozen=True):
     maps: list[Ident] = msgspec.field(default_factory=list)
 
 
+RobotTypeName = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_-]{0,31}$")]
+MAX_ROBOT_FILE_BYTES = 64 * 1024  # common.robots.robotfile.MAX_BYTES
+
+
+class RobotTypeRequest(Message, frozen=True):
+    """The robot types a world knows: list them, get one's file, or save a new one (sealed).
+
+    ``save`` (``edit_map``): ``text`` is a robot file (docs/ROBOTS.md), validated by
+    the world against its components and kept in its robot directory; data only,
+    never executed. The reply's ``detail`` says what was saved, or the refusal
+    names the file's line and field.
+    """
+
+    action: Literal["list", "get", "save"]
+    name: RobotTypeName | None = None  # get
+    text: Annotated[str, msgspec.Meta(max_length=MAX_ROBOT_FILE_BYTES)] | None = None  # save
+
+
+class RobotTypeInfo(msgspec.Struct, frozen=True, kw_only=True):
+    name: RobotTypeName
+    origin: ShortText  # built-in, a plugin's distribution, or the lab's robot directory
+    components: list[tuple[PartName, PartName]]  # (name in the file, component type)
+
+
+class RobotTypeReply(Message, frozen=True):
+    types: list[RobotTypeInfo] = msgspec.field(default_factory=list)  # list
+    component_types: list[PartName] = msgspec.field(default_factory=list)  # list
+    name: RobotTypeName | None = None  # get, save
+    text: str = ""  # get: the robot file
+    detail: ShortText = ""  # save: what was saved
+
+
 class MapRequest(Message, frozen=True):
     """Save the world to a map, load another, or list them (sealed, ``edit_map``)."""
 

@@ -32,6 +32,7 @@ from importlib import metadata, resources
 from pathlib import Path
 from typing import Any
 
+from common.files import write_atomic
 from common.robots import components as builtin_components
 from common.robots import sensors as builtin_sensors
 from common.robots.robotfile import MAX_BYTES, RobotFileError, parse, too_big
@@ -66,6 +67,8 @@ class Registry:
     contexts: dict[str, Any] = field(default_factory=dict)
     origins: dict[tuple[str, str], str] = field(default_factory=dict)
     problems: list[PluginProblem] = field(default_factory=list)
+    texts: dict[str, str] = field(default_factory=dict)  # each robot type's file
+    robots_dir: Path | None = None  # where saved robot types go (save_robot)
 
     def refuse(self, group: str, name: str, origin: str, reason: str) -> None:
         problem = PluginProblem(group, name, origin, reason)
@@ -110,6 +113,34 @@ class Registry:
             return None
         self.robots[spec.name] = spec
         self.origins[("wart.agents", spec.name)] = origin
+        self.texts[spec.name] = data.decode("utf-8")
+        return spec
+
+    def save_robot(self, data: bytes, in_use: frozenset[str] = frozenset()) -> AgentTypeSpec:
+        """Validate a robot file, keep it in the robot directory and register its type.
+
+        RobotFileError (every problem, with lines) or ValueError (no directory, or
+        the name of a type the lab ships or a plugin gives: those are not replaced).
+        A type saved before under the same name is replaced, unless robots of it
+        are in a world (``in_use``): two specs of one name would share its readings.
+        """
+        if self.robots_dir is None:
+            raise ValueError("this world keeps no robot types (its engine has no --robots-dir)")
+        spec = parse(data, "robot file", self.components)
+        origin = self.origins.get(("wart.agents", spec.name))
+        if origin is not None and origin != str(self.robots_dir):
+            raise ValueError(
+                f"robot type {spec.name!r} is the lab's ({origin}): save yours under another name"
+            )
+        if spec.name in in_use:
+            raise ValueError(
+                f"robots of type {spec.name!r} are in the world: remove them, then save it again"
+            )
+        spec = parse(data, f"{spec.name}.toml", self.components)  # named as its file
+        write_atomic(self.robots_dir / f"{spec.name}.toml", data)
+        self.robots[spec.name] = spec
+        self.origins[("wart.agents", spec.name)] = str(self.robots_dir)
+        self.texts[spec.name] = data.decode("utf-8")
         return spec
 
     def add_robot_dir(self, directory: Path) -> None:
@@ -205,8 +236,10 @@ def build(plugins: bool = True, robots_dir: Path | None = None) -> Registry:
     directory = robots_dir or (
         Path(os.environ[ROBOTS_DIR_ENV]) if os.environ.get(ROBOTS_DIR_ENV) else None
     )
-    if directory is not None and directory.is_dir():
-        reg.add_robot_dir(directory)
+    if directory is not None:
+        reg.robots_dir = directory
+        if directory.is_dir():
+            reg.add_robot_dir(directory)
     return reg
 
 
@@ -218,6 +251,13 @@ def default() -> Registry:
     global _DEFAULT
     if _DEFAULT is None:
         _DEFAULT = build()
+    return _DEFAULT
+
+
+def use(robots_dir: Path | None = None) -> Registry:
+    """Build the process's registry now, with this robot directory (the engine's --robots-dir)."""
+    global _DEFAULT
+    _DEFAULT = build(robots_dir=robots_dir)
     return _DEFAULT
 
 

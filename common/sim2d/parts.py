@@ -43,7 +43,13 @@ def read_parts(world: Any) -> Readings:
 def parts_of(world: Any, slots: list[int]) -> list[dict[str, list[int]]]:
     """For each slot, its parts' readings by part name (empty for a robot without any)."""
     agents = world.agents
-    if not any(agents[s].spec.parts for s in slots):
+    # Whether any robot of the world carries a batched sensor, kept per layout: the
+    # engine asks for every driven robot each tick, and a Khepera world has none.
+    stamp = (world.layout, len(agents))
+    known = world.__dict__.get("_has_parts")
+    if known is None or known[0] != stamp:
+        known = world.__dict__["_has_parts"] = (stamp, any(a.spec.parts for a in agents))
+    if not known[1]:
         return [{} for _ in slots]
     readings = read_parts(world)
     index: dict[str, dict[int, int]] = {

@@ -107,6 +107,11 @@ class Wiring:
         return self.state_dir / "maps"
 
     @property
+    def robots_dir(self) -> Path:
+        """Robot types the lab's users saved (docs/ROBOTS.md): engines load and add to it."""
+        return self.state_dir / "robots"
+
+    @property
     def rooms_dir(self) -> Path:
         """Where chat rooms and agent contexts keep their history and queues."""
         return self.state_dir / "rooms"
@@ -326,6 +331,8 @@ def engine_spec(
         str(seed),
         "--maps-dir",
         str(w.maps_dir),
+        "--robots-dir",
+        str(w.robots_dir),
         *w.net_args("engine"),
     ]
     if drive:

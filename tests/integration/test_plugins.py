@@ -25,6 +25,17 @@ from pathlib import Path
 
 import pytest
 
+from common import keys
+from common.auth import issue_session
+from common.messages import (
+    AddItem,
+    EditResult,
+    ErrorReply,
+    RobotTypeReply,
+    RobotTypeRequest,
+    WorldEdit,
+    decode,
+)
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
@@ -252,3 +263,109 @@ def test_a_broken_plugin_is_reported_by_doctor_and_the_lab_runs_without_it(
     listed = procs.start("robots-list", ["robots", "list"], env=env)
     assert listed.popen.wait(60) == 0
     assert re.search(r"khepera +built-in", listed.output())
+
+
+SCOUT = (
+    GOOD
+    + """
+[components.eye]
+type = "range_finder"
+pose = [30.0, 0.0, 0.0]
+beams = 3
+fov_deg = 40.0
+max_range_mm = 300.0
+"""
+)
+
+SCOUT_READER = textwrap.dedent(
+    """\
+    from common.controller import Controller
+
+
+    class Look(Controller):
+        period = 0.05
+
+        def do_work(self, robot):
+            print(f"eye {robot.eye().values}")
+            robot.set_speeds(0, 0)
+    """
+)
+
+
+@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+def test_a_robot_type_saved_to_the_lab_drives_in_its_arena(
+    router: Router, procs: Procs, tmp_path: Path
+) -> None:
+    """The builder's path without the page: save a robot file to the world (edit_map),
+    add a robot of it with the map editor's edit, run a controller that reads its range
+    finder. A bad file and a student are refused, in words."""
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    together(lambda: lab.start_engine("foraging"), lambda: lab.start_runner())
+    start_agent_context(lab, slot=2.0)
+    realm = lab.realm
+    editor = issue_session(lab.identity, realm, "ida", ["edit_map", "join"])
+    student = issue_session(lab.identity, realm, "bob", ["control", "join"])
+    key = keys.world_robots(realm, "w1")
+    with lab.zsession() as z:
+
+        def ask(payload: bytes) -> object:
+            for reply in z.get(key, payload=payload, timeout=10.0):
+                assert reply.ok is not None
+                return decode(reply.ok.payload, (RobotTypeReply, ErrorReply))
+            raise AssertionError("no reply")
+
+        listed = ask(student.seal(key, RobotTypeRequest(action="list")))
+        assert isinstance(listed, RobotTypeReply)
+        assert {"khepera", "epuck"} <= {t.name for t in listed.types}
+        assert "range_finder" in listed.component_types
+        got = ask(student.seal(key, RobotTypeRequest(action="get", name="epuck")))
+        assert isinstance(got, RobotTypeReply) and 'name = "epuck"' in got.text
+
+        save = RobotTypeRequest(action="save", text=SCOUT)
+        refused = ask(student.seal(key, save))
+        assert isinstance(refused, ErrorReply) and refused.code == "forbidden"
+        bad = ask(
+            editor.seal(
+                key, RobotTypeRequest(action="save", text=SCOUT.replace("beams = 3", "beams = 99"))
+            )
+        )
+        assert isinstance(bad, ErrorReply) and bad.code == "bad_request"
+        assert bad.message == "robot file:20: components.eye.beams: must be at most 64, got 99"
+        khepera = ask(
+            editor.seal(
+                key, RobotTypeRequest(action="save", text=SCOUT.replace('"scout"', '"khepera"'))
+            )
+        )
+        assert isinstance(khepera, ErrorReply) and "is the lab's (built-in)" in khepera.message
+        saved = ask(editor.seal(key, save))
+        assert isinstance(saved, RobotTypeReply), saved
+        assert saved.detail.startswith(
+            "saved robot type scout: body:body, drive:differential_drive"
+        )
+        assert (lab.wiring().robots_dir / "scout.toml").read_text() == SCOUT
+
+        edit_key = keys.world_edit(realm, "w1")
+        add = WorldEdit(
+            op=AddItem(
+                section="agents",
+                entry={"id": "s1", "type": "scout", "x": 1000, "y": 150, "heading_deg": 90},
+            )
+        )
+        for reply in z.get(edit_key, payload=editor.seal(edit_key, add), timeout=10.0):
+            assert reply.ok is not None
+            assert isinstance(decode(reply.ok.payload, (EditResult, ErrorReply)), EditResult)
+
+    source = tmp_path / "look.py"
+    source.write_text(SCOUT_READER)
+    deploy = wait_for(lambda: _deployed(lab, source), 30, "s1 in the agent context's queue")
+    out = deploy.output()
+    eyes = re.findall(r"\[s1\] eye \((\d+), (\d+), (\d+)\)", out)
+    assert eyes, out
+    assert all(0 <= int(v) <= 300 for v in eyes[0])
+
+
+def _deployed(lab: ProcessLab, source: Path) -> object:
+    proc = start_deploy(lab, source, "s1", "bob")
+    proc.popen.wait(60)
+    return proc if proc.popen.returncode == 0 else None
