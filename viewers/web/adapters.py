@@ -25,6 +25,7 @@ from common.client.survey import Survey
 from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from common.messages.audit import AuditEntry, AuditQuery
+from common.messages.world import RobotTypeReply
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
@@ -332,6 +333,7 @@ class MapEdit:
     angle: float = 0.0
     w: float = 0.0
     h: float = 0.0
+    robot_type: str = "khepera"  # add agent: the robot type (a name the world has)
 
 
 class WorldFeed(Protocol):
@@ -364,6 +366,18 @@ class WorldFeed(Protocol):
 
     def load_map(self, name: str) -> str:
         """Replace the world by map ``name``; every view refetches."""
+        ...
+
+    def robot_types(self) -> RobotTypeReply:
+        """The robot types and component types the world has (the robot builder)."""
+        ...
+
+    def robot_file(self, name: str) -> str:
+        """A robot type's file, as the world has it."""
+        ...
+
+    def save_robot_type(self, text: str) -> tuple[str, str]:
+        """Save a robot file to the lab (edit_map): (what the world said, the type's name)."""
         ...
 
 

@@ -1,0 +1,107 @@
+"""The robot builder in the page, against a real lab (issue 34): build, save, place, drive.
+
+ida (an instructor: edit_map) starts from the e-puck's file as the world gives
+it, adds a range finder from the component list, renames the type, Checks it
+(a broken value first: refused with its line and field), saves it to the lab,
+puts a robot of it into the arena with the map editor, and uploads a
+controller that reads the range finder by its name in the file; its output
+shows the readings. A student's page says the builder needs edit_map.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from services.runner.sandbox import sandbox_problem
+from tests.browser.conftest import wait_until
+from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_agents import choose, enter_arena, pick_robot, upload
+from tests.browser.test_real_lab import session_of
+from viewers.web.app import WebViewer
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+READER = b'''"""Reads the range finder the builder added."""
+
+from common.controller import Controller
+
+
+class Look(Controller):
+    period = 0.2
+
+    def do_work(self, robot) -> None:
+        print(f"range reads {robot.range().values}")
+        robot.set_speeds(0, 0)
+'''
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    # the empty map: "Add robot" puts the new robot at the arena's centre, free there
+    tmp = Path(tmp_path_factory.mktemp("builderlab"))
+    with real_lab(tmp, "empty", agents=True, slot=30.0) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, lab: RealLab) -> None:
+    ida = open_page("ida")
+    panel = enter_arena(ida, lab, "ida")
+    view = session_of(lab.viewer, "ida").view
+    wait_until(lambda: view.frames_applied > 3, 15, what="the arena in ida's view")
+    builder = panel.builder
+    assert builder is not None
+    wait_until(lambda: builder.feed is not None, 10, what="the builder bound to the arena")
+
+    ida.p.get_by_text("Robot builder").first.click()
+    ida.click("List types")
+    ida.wait_text("This world has")
+    choose(ida, "Start from", "epuck")
+    ida.click("Open type")
+    ida.wait_text("Opened epuck")
+    wait_until(lambda: 'name = "epuck"' in builder.text.value, 10, what="epuck's file")
+    choose(ida, "Component", "range_finder")
+    ida.click("Add component")
+    wait_until(lambda: "[components.range]" in builder.text.value, 10, what="the range finder")
+
+    scout = builder.text.value.replace('name = "epuck"', 'name = "scout"')
+    ida.fill("Robot file", scout.replace("beams = 1", "beams = 99"))
+    ida.click("Check robot file")
+    ida.wait_text("components.range.beams: must be at most 64, got 99")
+    ida.fill("Robot file", scout.replace("beams = 1", "beams = 3"))
+    ida.click("Check robot file")
+    ida.wait_text("Check: scout is a valid robot type")
+    ida.click("Save type to the lab")
+    ida.wait_text("Saved robot type scout", timeout=15_000)
+    ida.screenshot("builder-saved")
+
+    editor = panel.editor
+    assert editor is not None and editor.robot_type.value == "scout"
+    before = set(view.robot_names)
+    ida.p.get_by_text("Map editor").first.click()
+    ida.click("Add robot")
+    ida.screenshot("builder-add")
+    wait_until(
+        lambda: set(view.robot_names) - before,
+        15,
+        what=f"the scout in the arena ({editor.notice.content})",
+    )
+    (added,) = set(view.robot_names) - before
+    assert view.feed is not None
+    assert view.feed.snapshot().robot_types[added][0] == "scout"
+
+    pick_robot(ida, panel, added)
+    upload(ida, "look.py", READER)
+    ida.wait_text("range reads (", timeout=30_000)
+    ida.screenshot("builder-driven")
+    ida.click("Cancel my request")
