@@ -316,9 +316,11 @@ class Gripper(ComponentType):
     )
     api = (
         ApiCall("set_arm(position)", "0..255", "move the arm"),
-        ApiCall("arm_up() / arm_down()", "-", "raise or lower the arm"),
+        ApiCall("arm_up()", "-", "raise the arm"),
+        ApiCall("arm_down()", "-", "lower the arm"),
         ApiCall("arm()", "int 0..255", "the arm's position"),
-        ApiCall("open_gripper() / close_gripper()", "-", "open or close the fingers"),
+        ApiCall("open_gripper()", "-", "open the fingers"),
+        ApiCall("close_gripper()", "-", "close the fingers"),
         ApiCall("gripper_closed()", "bool", "whether the fingers are closed"),
         ApiCall("object_present()", "bool", "the light barrier between the fingers"),
         ApiCall("resistivity()", "int", "the held object's resistivity"),
