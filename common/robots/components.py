@@ -12,10 +12,11 @@ so a file sets only what differs.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping
 from typing import Any
 
-from common.robots.schema import ApiCall, ComponentType, Param
+from common.robots.schema import ApiCall, ComponentType, Param, Segment
 
 _GRIPPER_REF = "the Khepera's gripper turret, thesis 6.8.3"
 
@@ -39,6 +40,22 @@ class Body(ComponentType):
         ),
         Param("colour", "colour", "colour in the world view", "", "#2e8b57"),
     )
+
+    @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        """The rim (32 chords) and the heading (a line forward, a third beyond the rim)."""
+        r = float(values["radius_mm"])
+        rim = [(r * math.cos(a), r * math.sin(a)) for a in (i * math.pi / 16 for i in range(33))]
+        return [(*a, *b) for a, b in itertools.pairwise(rim)] + [(0.0, 0.0, 1.3 * r, 0.0)]
+
+
+def ray(x: float, y: float, angle: float, length: float) -> Segment:
+    """A segment from (x, y) along ``angle`` (radians), robot frame."""
+    return (x, y, x + length * math.cos(angle), y + length * math.sin(angle))
+
+
+def cross(x: float, y: float, size: float = 3.0) -> list[Segment]:
+    return [(x - size, y, x + size, y), (x, y - size, x, y + size)]
 
 
 class Drive(ComponentType):
@@ -165,6 +182,17 @@ class IrProximity(ComponentType):
     )
 
     @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        """Each sensor's rays, as far as its response table reaches."""
+        k = int(values["rays_per_sensor"])
+        spread = math.radians(float(values["spread_deg"]))
+        reach = float(values["table_mm"][-1])
+        offsets = [spread * (i / (k - 1) - 0.5) for i in range(k)] if k > 1 else [0.0]
+        return [
+            ray(x, y, math.radians(h) + o, reach) for x, y, h in values["poses"] for o in offsets
+        ]
+
+    @classmethod
     def cross_check(cls, values: Mapping[str, Any]) -> list[tuple[str, str]]:
         out = []
         xs, ys = values["table_mm"], values["table_values"]
@@ -238,6 +266,11 @@ class AmbientLight(ComponentType):
             "the light sensors, in the order of poses",
         ),
     )
+
+    @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        """A short tick along each sensor's axis."""
+        return [ray(x, y, math.radians(h), 8.0) for x, y, h in values["poses"]]
 
 
 class Leds(ComponentType):

@@ -28,6 +28,7 @@ KINDS = ("number", "integer", "boolean", "text", "colour", "choice", "numbers", 
 ``[x mm, y mm]`` points or a list of ``[x mm, y mm, heading degrees]`` poses,
 in the robot frame (x forward, y left)."""
 
+Segment = tuple[float, float, float, float]
 REQUIRED: Any = None  # a Param whose default is REQUIRED must be given in the file
 MAX_ITEMS = 64  # the longest list any parameter may hold (a ring of 64 sensors)
 
@@ -179,6 +180,13 @@ class ComponentType:
     def reading_size(cls, values: Mapping[str, Any]) -> int:
         """How many numbers one robot's reading holds (role ``sensor``)."""
         return 0
+
+    @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        """How the component looks on the body: line segments (x0, y0, x1, y1) in mm, robot
+        frame (x forward, y left), for the builder's drawing (rays, beams, points); none
+        by default."""
+        return []
 
     @classmethod
     def measure(cls, world: Any, slots: Any, values: Mapping[str, Any], key: int) -> Any:

@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from common.robots.schema import ApiCall, ComponentType, Param
+from common.robots.components import cross, ray
+from common.robots.schema import ApiCall, ComponentType, Param, Segment
 from common.sim2d import geometry
 from common.sim2d.floor import FloorLayer
 
@@ -110,6 +111,10 @@ class FloorSensor(ComponentType):
         return [] if values["points"] else [("points", "needs at least one point")]
 
     @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        return [s for x, y in values["points"] for s in cross(float(x), float(y))]
+
+    @classmethod
     def measure(cls, world: Any, slots: Any, values: Mapping[str, Any], key: int) -> Any:
         xy = np.array(values["points"], dtype=np.float64).reshape(-1, 2)
         pts = _body_points(world, slots, xy)
@@ -167,6 +172,15 @@ class RangeFinder(ComponentType):
     @classmethod
     def cross_check(cls, values: Mapping[str, Any]) -> list[tuple[str, str]]:
         return [] if len(values["pose"]) == 3 else [("pose", "must be [x, y, heading]")]
+
+    @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        """Each beam at full range."""
+        beams, reach = int(values["beams"]), float(values["max_range_mm"])
+        x, y, h = (float(v) for v in values["pose"])
+        fov = math.radians(float(values["fov_deg"]))
+        offsets = [fov * (i / (beams - 1) - 0.5) for i in range(beams)] if beams > 1 else [0.0]
+        return [ray(x, y, math.radians(h) + o, reach) for o in offsets]
 
     @classmethod
     def measure(cls, world: Any, slots: Any, values: Mapping[str, Any], key: int) -> Any:
@@ -229,6 +243,19 @@ class Bumper(ComponentType):
     @classmethod
     def reading_size(cls, values: Mapping[str, Any]) -> int:
         return int(values["count"])
+
+    @classmethod
+    def preview(cls, values: Mapping[str, Any]) -> list[Segment]:
+        """The borders between switches, short radial marks (the body's radius is not known
+        here: drawn from 20 to 40 mm from the centre)."""
+        count = int(values["count"])
+        width = 2 * math.pi / count
+        first = math.radians(float(values["offset_deg"])) - width / 2
+        out = []
+        for i in range(count):
+            a = first + i * width
+            out.append((20 * math.cos(a), 20 * math.sin(a), 40 * math.cos(a), 40 * math.sin(a)))
+        return out
 
     @classmethod
     def measure(cls, world: Any, slots: Any, values: Mapping[str, Any], key: int) -> Any:

@@ -81,6 +81,8 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
     ida.fill("Robot file", scout.replace("beams = 1", "beams = 3"))
     ida.click("Check robot file")
     ida.wait_text("Check: scout is a valid robot type")
+    ida.wait_text("Drawn at the arena's centre")  # its body, rays and beams in the view
+    assert builder._preview is not None
     ida.click("Save type to the lab")
     ida.wait_text("Saved robot type scout", timeout=15_000)
     ida.screenshot("builder-saved")

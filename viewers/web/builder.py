@@ -13,16 +13,56 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
+import numpy.typing as npt
 import viser
 
 from common.robots import registry
 from common.robots.robotfile import RobotFileError, parse
 from common.robots.schema import show_value
+from common.sim2d.specs import AgentTypeSpec
+from viewers.web import geometry as geo
 from viewers.web.adapters import LabError, WorldFeed
 from viewers.web.inputs import set_value
 from viewers.web.text import escape_md
 
 REFUSED = "Building robot types needs the 'edit_map' permission."
+# The drawing's colours by component role: the body dark, IR rays red, light sensors
+# amber, batched sensors (beams, floor points, bumper borders) blue.
+ROLE_COLOURS = {
+    "body": (40, 40, 40),
+    "proximity": (220, 50, 50),
+    "ambient": (230, 160, 0),
+    "sensor": (30, 110, 230),
+}
+PREVIEW_Z = 0.03  # metres: above the floor and the robots
+
+
+def preview_segments(
+    spec: AgentTypeSpec, x_mm: float, y_mm: float
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """The composed robot as line segments (metres, viser) at (x, y) facing +x, and colours:
+    each component draws itself (ComponentType.preview, robot frame)."""
+    segs: list[tuple[float, float, float, float]] = []
+    colours: list[tuple[int, int, int]] = []
+    components = registry.default().components
+    for info in spec.components:
+        component = components.get(info.type)
+        if component is None:
+            continue
+        drawn = component.preview(info.values)
+        segs += drawn
+        colours += [ROLE_COLOURS.get(info.role, (90, 90, 90))] * len(drawn)
+    out = np.zeros((len(segs), 2, 3), np.float32)
+    if segs:
+        a = np.asarray(segs, np.float64)
+        out[:, 0, 0], out[:, 0, 1] = (x_mm + a[:, 0]) * geo.MM, (y_mm + a[:, 1]) * geo.MM
+        out[:, 1, 0], out[:, 1, 1] = (x_mm + a[:, 2]) * geo.MM, (y_mm + a[:, 3]) * geo.MM
+        out[:, :, 2] = PREVIEW_Z
+    rgb = np.repeat(np.asarray(colours, np.uint8).reshape(-1, 1, 3), 2, axis=1)
+    return out, rgb
+
+
 NO_TYPES = "(press 'List types')"
 
 
@@ -50,6 +90,7 @@ class RobotBuilder:
         self.client = client
         self.allowed = allowed
         self.feed: WorldFeed | None = None
+        self._preview: viser.LineSegmentsHandle | None = None
         # Called with the type's name after a save (the map editor offers it).
         self.on_saved: list[Callable[[str], None]] = []
         gui = client.gui
@@ -81,6 +122,29 @@ class RobotBuilder:
 
     def unbind(self) -> None:
         self.feed = None
+        self.hide_preview()
+
+    def hide_preview(self) -> None:
+        if self._preview is not None:
+            self._preview.remove()
+            self._preview = None
+
+    def show_preview(self, spec: AgentTypeSpec) -> bool:
+        """Draw the checked robot at the arena's centre: body, heading, rays, beams, points."""
+        feed = self.feed
+        if feed is None:
+            return False
+        try:
+            snap = feed.snapshot()
+        except LabError:
+            return False
+        points, colours = preview_segments(spec, snap.width / 2, snap.height / 2)
+        self.hide_preview()
+        if len(points):
+            self._preview = self.client.scene.add_line_segments(
+                "/builder/preview", points, colors=colours, thickness=0.002
+            )
+        return True
 
     def say(self, text: str) -> None:
         self.notice.content = escape_md(text).replace("\n", "  \n")
@@ -146,7 +210,8 @@ class RobotBuilder:
             self.say(f"Check: {len(exc.problems)} problem(s)\n{exc}")
             return False
         parts = ", ".join(f"{c.name} ({c.type})" for c in spec.components)
-        self.say(f"Check: {spec.name} is a valid robot type: {parts}.")
+        drawn = " Drawn at the arena's centre." if self.show_preview(spec) else ""
+        self.say(f"Check: {spec.name} is a valid robot type: {parts}.{drawn}")
         return True
 
     def _save(self) -> None:

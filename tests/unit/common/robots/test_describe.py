@@ -60,3 +60,24 @@ def test_the_documented_calls_are_the_calls_check_allows() -> None:
             continue
         documented = {call.call.split("(")[0] for call in component.api}
         assert documented == set(ROLE_CALLS[component.role]), component.name
+
+
+def test_the_builder_draws_the_composed_robot_from_its_components() -> None:
+    """Each component draws itself: the rim and heading, each IR ray to the table's reach,
+    each light sensor's tick, a range finder's beams at full range (metres, at x, y)."""
+    from viewers.web.builder import ROLE_COLOURS, preview_segments
+
+    khepera = REG.robots["khepera"]
+    points, colours = preview_segments(khepera, 500.0, 400.0)
+    assert points.shape == (32 + 1 + 8 * 3 + 8, 2, 3) and colours.shape == (len(points), 2, 3)
+    assert tuple(colours[0, 0]) == ROLE_COLOURS["body"]
+    assert tuple(colours[40, 0]) == ROLE_COLOURS["proximity"]
+    heading = points[32]
+    assert heading[0, :2].tolist() == pytest.approx([0.5, 0.4])
+    assert heading[1, :2].tolist() == pytest.approx([0.5 + 1.3 * 0.0275, 0.4])
+    scout = parse(GOOD, "scout.toml", REG.components)  # its eye: 5 beams over 60°
+    points, colours = preview_segments(scout, 0.0, 0.0)
+    beams = points[-5:]
+    assert tuple(colours[-1, 0]) == ROLE_COLOURS["sensor"]
+    lengths = [float(abs(complex(*(b[1, :2] - b[0, :2])))) for b in beams]
+    assert lengths == pytest.approx([0.5] * 5)  # max_range_mm 500 at its default
