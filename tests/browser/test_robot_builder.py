@@ -76,9 +76,11 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
 
     scout = builder.text.value.replace('name = "epuck"', 'name = "scout"')
     ida.fill("Robot file", scout.replace("beams = 1", "beams = 99"))
+    wait_until(lambda: "beams = 99" in builder.text.value, 10, what="the edit at the server")
     ida.click("Check robot file")
     ida.wait_text("components.range.beams: must be at most 64, got 99")
     ida.fill("Robot file", scout.replace("beams = 1", "beams = 3"))
+    wait_until(lambda: "beams = 3" in builder.text.value, 10, what="the edit at the server")
     ida.click("Check robot file")
     ida.wait_text("Check: scout is a valid robot type")
     ida.wait_text("Drawn at the arena's centre")  # its body, rays and beams in the view
@@ -101,6 +103,16 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
     (added,) = set(view.robot_names) - before
     assert view.feed is not None
     assert view.feed.snapshot().robot_types[added][0] == "scout"
+    # The view draws each robot at its type's size: the e-puck-based scout (35 mm) beside
+    # the Khepera (27.5 mm).
+    wait_until(
+        lambda: view.snapshot is not None and 35.0 in view.snapshot.robot_radii,
+        10,
+        what="the scout's radius in the view",
+    )
+    robots = view._robots
+    assert robots is not None and robots.batched_scales is not None
+    assert sorted(float(s) for s in robots.batched_scales) == pytest.approx([1.0, 35.0 / 27.5])
 
     pick_robot(ida, panel, added)
     upload(ida, "look.py", READER)

@@ -289,6 +289,9 @@ class SceneLayout:
     lights: tuple[Light, ...]
     robots: tuple[str, ...]  # agent names, in the order of the frame arrays
     robot_radius: float = 27.5  # Khepera I: 55 mm across
+    # Each robot's radius (robots order) when they differ: robot files of other sizes
+    # in one arena; empty: every robot is robot_radius.
+    robot_radii: tuple[float, ...] = ()
     version: int = 0
     offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
     real: bool = False  # real robots behind a Khepera bridge: no edits, no reset

@@ -108,6 +108,9 @@ def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]
         lights=lights,
         robots=agents,
         robot_radius=radius,
+        robot_radii=(
+            tuple(a.radius for a in snap.agents) if len({a.radius for a in snap.agents}) > 1 else ()
+        ),
         version=snap.layout,
         offline=frozenset(a.id for a in snap.agents if not a.online),
         real=snap.kind == "real",

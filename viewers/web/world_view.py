@@ -325,6 +325,12 @@ class WorldView:
         radius = snap.robot_radius * geo.MM
         n = len(snap.robots)
         swarm = n > HEADINGS_UP_TO
+        # Robots of several sizes (robot files): one mesh, each instance scaled to its radius.
+        scales = (
+            np.asarray(snap.robot_radii, np.float32) / np.float32(snap.robot_radius)
+            if len(snap.robot_radii) == n and n
+            else None
+        )
         if n > POINTS_FROM:
             self._robots = self.client.scene.add_point_cloud(
                 "/world/robots",
@@ -343,10 +349,13 @@ class WorldView:
                 geo.swarm_disc_mesh(radius) if swarm else geo.robot_mesh(radius),
                 n,
                 GRIPPER_COLOURS[0],
+                scales,
             )
         # The arrow lies on top of the body: a click on it selects the robot too.
         self._headings = (
-            self._add_batch("/world/headings", geo.heading_mesh(radius), n, HEADING_COLOURS[0])
+            self._add_batch(
+                "/world/headings", geo.heading_mesh(radius), n, HEADING_COLOURS[0], scales
+            )
             if n <= HEADINGS_UP_TO
             else None
         )
@@ -372,6 +381,7 @@ class WorldView:
         mesh: tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]],
         n: int,
         colour: npt.NDArray[np.uint8],
+        scales: npt.NDArray[np.float32] | None = None,
     ) -> viser.BatchedMeshHandle:
         """One batched mesh with an instance per robot (placed by the first frame)."""
         vertices, faces = mesh
@@ -381,6 +391,7 @@ class WorldView:
             faces=faces,
             batched_wxyzs=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
             batched_positions=np.zeros((n, 3), np.float32),
+            batched_scales=scales,
             batched_colors=np.tile(colour, (n, 1)),
             lod="off",  # meshes of a few dozen triangles need no simplification
             cast_shadow=False,
