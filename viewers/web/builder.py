@@ -91,6 +91,7 @@ class RobotBuilder:
         self.allowed = allowed
         self.feed: WorldFeed | None = None
         self._preview: viser.LineSegmentsHandle | None = None
+        self.world_kinds: tuple[str, ...] = ()  # the world's component types, once listed
         # Called with the type's name after a save (the map editor offers it).
         self.on_saved: list[Callable[[str], None]] = []
         gui = client.gui
@@ -163,11 +164,16 @@ class RobotBuilder:
         if feed is None:
             return
         try:
-            names = [t.name for t in feed.robot_types().types]
+            reply = feed.robot_types()
         except LabError as exc:
             self.say(f"Could not list the robot types: {exc}")
             return
+        names = [t.name for t in reply.types]
         self.start_from.options = tuple(names) or (NO_TYPES,)
+        # The world's component types (its plugins' too), not only this page's.
+        self.world_kinds = tuple(reply.component_types)
+        if self.world_kinds:
+            self.kind.options = self.world_kinds
         self.say(f"This world has {len(names)} robot types: {', '.join(names)}.")
 
     def _open(self) -> None:
@@ -191,11 +197,14 @@ class RobotBuilder:
             self.say(REFUSED)
             return
         kind = self.kind.value
-        set_value(
-            self.text,
-            self.text.value.rstrip("\n") + "\n" + component_snippet(kind, self.text.value),
-        )
-        self.say(f"Added a {kind}: set its numbers, then Check.")
+        if kind not in registry.default().components:
+            snippet = f'\n[components.{kind}]\ntype = "{kind}"\n'
+            said = f"Added a {kind} (a component of the world this page does not describe)."
+        else:
+            snippet = component_snippet(kind, self.text.value)
+            said = f"Added a {kind}: set its numbers, then Check."
+        set_value(self.text, self.text.value.rstrip("\n") + "\n" + snippet)
+        self.say(said)
 
     def _check(self) -> None:
         self.check_now()
@@ -207,6 +216,18 @@ class RobotBuilder:
                 self.text.value.encode("utf-8"), "robot file", registry.default().components
             )
         except RobotFileError as exc:
+            page_only = [
+                p
+                for p in exc.problems
+                if "unknown component type" in p.message
+                and any(f"'{k}'" in p.message for k in self.world_kinds)
+            ]
+            if page_only and len(page_only) == len(exc.problems):
+                self.say(
+                    "Check: this page does not know some of the world's components; "
+                    "the world checks the file when you save it."
+                )
+                return True
             self.say(f"Check: {len(exc.problems)} problem(s)\n{exc}")
             return False
         parts = ", ".join(f"{c.name} ({c.type})" for c in spec.components)
