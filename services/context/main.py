@@ -151,6 +151,8 @@ KINDS: dict[str, tuple[Callable[..., int], str]] = {
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart context") -> int:
     args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] in KINDS:  # the lab's own kinds: no plugin is even looked up
+        return int(KINDS[args[0]][0](args[1:], prog=f"{prog} {args[0]}") or 0)
     # Context types from plugins (entry points ``wart.contexts``, common/robots/registry.py).
     plugins = registry.default().contexts
     if not args or args[0] in ("-h", "--help"):
@@ -161,11 +163,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context") -> int:
             origin = registry.default().describe_origin("wart.contexts", name)
             print(f"  {name:<8} {getattr(kind, 'doc', '')} (plugin {origin})")
         return 0
-    if args[0] not in KINDS and args[0] in plugins:
+    if args[0] in plugins:
         return int(plugins[args[0]].main(args[1:], prog=f"{prog} {args[0]}") or 0)
-    if args[0] not in KINDS:
-        known = ", ".join([*KINDS, *plugins])
-        print(f"{prog}: unknown context kind {args[0]!r}: one of {known}", file=sys.stderr)
-        return 2
-    run = KINDS[args[0]][0]
-    return int(run(args[1:], prog=f"{prog} {args[0]}") or 0)
+    known = ", ".join([*KINDS, *plugins])
+    print(f"{prog}: unknown context kind {args[0]!r}: one of {known}", file=sys.stderr)
+    return 2
