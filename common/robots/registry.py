@@ -207,6 +207,52 @@ class Registry:
         return self.origins.get((group, name), "?")
 
 
+HOSTED_KINDS = ("number", "integer", "boolean", "text", "choice")
+
+
+def context_arguments(kind: Any, params: dict[str, str]) -> list[str]:
+    """A plugin context type's command line from a request's params, checked by its schema.
+
+    The type declares ``params`` (Params of the kinds above); each value arrives
+    as text, is converted and checked like a robot file's, and becomes
+    ``--name value``. Unknown, missing or bad params raise ValueError naming
+    the param; a text may not start with "-" (it would read as an option).
+    """
+    schema = {p.name: p for p in getattr(kind, "params", ())}
+    out: list[str] = []
+    for name in params:
+        if name not in schema:
+            known = ", ".join(schema) or "none"
+            raise ValueError(f"{name}: not a parameter of this context type (it has: {known})")
+    for name, p in schema.items():
+        if p.kind not in HOSTED_KINDS:
+            raise ValueError(f"{name}: a {p.kind} parameter cannot be given on request")
+        if name not in params:
+            if p.required:
+                raise ValueError(f"{name}: is required ({p.doc})")
+            continue
+        text = params[name]
+        value: Any = text
+        try:
+            if p.kind == "number":
+                value = float(text)
+            elif p.kind == "integer":
+                value = int(text)
+            elif p.kind == "boolean":
+                if text not in ("true", "false"):
+                    raise ValueError
+                value = text == "true"
+        except ValueError:
+            raise ValueError(f"{name}: must be a {p.kind}, got {text!r}") from None
+        bad = p.problem(value)
+        if bad:
+            raise ValueError(f"{name}: {bad}")
+        if isinstance(value, str) and value.startswith("-"):
+            raise ValueError(f"{name}: may not start with '-'")
+        out += [f"--{name.replace('_', '-')}", text]
+    return out
+
+
 def _entry_points() -> list[metadata.EntryPoint]:
     out: list[metadata.EntryPoint] = []
     for group in GROUPS:

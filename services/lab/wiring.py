@@ -264,6 +264,26 @@ def chat_room_spec(
     )
 
 
+def plugin_context_spec(
+    w: Wiring, name: str, kind: str, args: list[str], *, detail: str = ""
+) -> ChildSpec:
+    """A plugin's context type (``wart context KIND``) started on request: its name, a data
+    directory of its own, the params its schema checked (common/robots/registry.py)."""
+    argv = [
+        "context",
+        kind,
+        "--name",
+        name,
+        "--data-dir",
+        str(w.state_dir / "contexts" / name),
+        *args,
+        *w.net_args("chat"),  # the network a hosted chat room has (TLS: its certificate)
+    ]
+    return ChildSpec(
+        f"{kind} {name}", argv, keys.alive(w.realm, AliveKind.CONTEXT, name), detail or kind
+    )
+
+
 def agent_context_spec(
     w: Wiring,
     name: str,

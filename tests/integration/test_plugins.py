@@ -139,7 +139,7 @@ def test_the_plugin_s_robot_sensor_and_race_run_in_a_real_lab(
     race = procs.start(
         "race",
         ["context", "race", "--world", "w1", "--start", "400,550,400,50", "--laps", "1",
-         "--result", str(result), "--seconds", "60", *lab.net_args()],
+         "--result", str(result), "--seconds", "60", "--exit-when-done", *lab.net_args()],
     )  # fmt: skip
     wait_for(lambda: "race on w1: 2 robots" in race.output(), 30, "the race to start")
 
