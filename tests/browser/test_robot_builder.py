@@ -75,10 +75,27 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
     wait_until(lambda: "[components.range]" in builder.text.value, 10, what="the range finder")
 
     scout = builder.text.value.replace('name = "epuck"', 'name = "scout"')
-    ida.fill("Robot file", scout.replace("beams = 1", "beams = 99"))
-    wait_until(lambda: "beams = 99" in builder.text.value, 10, what="the edit at the server")
-    ida.click("Check robot file")
-    ida.wait_text("components.range.beams: must be at most 64, got 99")
+    # Bad robot files, each refused in the page with the line and field a user reads.
+    for bad, said in (
+        (
+            scout.replace("beams = 1", "beams = 99"),
+            "components.range.beams: must be at most 64, got 99",
+        ),
+        (
+            scout.replace('type = "range_finder"', 'type = "laser"'),
+            "unknown component type 'laser'",
+        ),
+        (
+            scout.replace("mass_g = 150.0", 'mass_g = "heavy"'),
+            "components.body.mass_g: must be a number",
+        ),
+        (scout.replace("radius_mm = 35.0\n", ""), "components.body.radius_mm: is required"),
+        (scout + "#" * 70_000, "robot files are limited to 65536"),
+    ):
+        ida.fill("Robot file", bad)
+        wait_until(lambda b=bad: builder.text.value == b, 10, what="the edit at the server")
+        ida.click("Check robot file")
+        ida.wait_text(said)
     ida.fill("Robot file", scout.replace("beams = 1", "beams = 3"))
     wait_until(lambda: "beams = 3" in builder.text.value, 10, what="the edit at the server")
     ida.click("Check robot file")
