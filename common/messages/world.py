@@ -239,6 +239,14 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     )
 
 
+class FloorLineInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """A line painted on the floor (a map's floor layer: what floor sensors read)."""
+
+    points: Annotated[list[tuple[float, float]], msgspec.Meta(max_length=512)]
+    width: float
+    colour: ShortText
+
+
 class WorldSnapshot(Message, frozen=True):
     """The whole world for a late joiner (reply of ``world/<world>/snapshot``)."""
 
@@ -260,6 +268,10 @@ class WorldSnapshot(Message, frozen=True):
     identity: SignedToken | None = None
     # "real": a Khepera bridge (robots on serial ports); nothing can be edited or reset there.
     kind: Literal["sim", "real"] = "sim"
+    # The map's floor layer (docs/MAPS.md): its lines, drawn on the floor; none without one.
+    floor_lines: Annotated[list[FloorLineInfo], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=list
+    )
 
 
 class AgentCommand(Message, frozen=True):

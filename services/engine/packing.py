@@ -9,6 +9,7 @@ import numpy as np
 
 from common.messages import (
     AgentInfo,
+    FloorLineInfo,
     GripperReading,
     ItemInfo,
     LightInfo,
@@ -228,4 +229,8 @@ def snapshot(world: World) -> WorldSnapshot:
         lights=lights,
         agents=agents,
         rows=rows(world),
+        floor_lines=[
+            FloorLineInfo(points=list(line.points), width=line.width_mm, colour=line.colour)
+            for line in (world.floor.lines if world.floor is not None else ())
+        ],
     )

@@ -292,6 +292,8 @@ class SceneLayout:
     # Each robot's radius (robots order) when they differ: robot files of other sizes
     # in one arena; empty: every robot is robot_radius.
     robot_radii: tuple[float, ...] = ()
+    # Lines painted on the floor (points mm, width mm, "#rrggbb"): what floor sensors follow.
+    floor_lines: tuple[tuple[tuple[tuple[float, float], ...], float, str], ...] = ()
     version: int = 0
     offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
     real: bool = False  # real robots behind a Khepera bridge: no edits, no reset

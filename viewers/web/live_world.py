@@ -108,6 +108,10 @@ def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]
         lights=lights,
         robots=agents,
         robot_radius=radius,
+        floor_lines=tuple(
+            (tuple((float(x), float(y)) for x, y in line.points), line.width, line.colour)
+            for line in snap.floor_lines
+        ),
         robot_radii=(
             tuple(a.radius for a in snap.agents) if len({a.radius for a in snap.agents}) > 1 else ()
         ),

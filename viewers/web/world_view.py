@@ -238,7 +238,11 @@ class WorldView:
         """Draw (or redraw after an edit) everything that comes from the snapshot."""
         with self._lock:
             old = self.snapshot
-            robots_changed = old is None or (old.robots, old.offline) != (snap.robots, snap.offline)
+            robots_changed = old is None or (old.robots, old.offline, old.robot_radii) != (
+                snap.robots,
+                snap.offline,
+                snap.robot_radii,
+            )
             self.snapshot = snap
             scene = self.client.scene
             for handle in [*self._static, *self._balls, *self._lights]:
@@ -254,6 +258,17 @@ class WorldView:
                 receive_shadow=False,
             )
             self._static.append(floor)
+            for i, (points, width, colour) in enumerate(snap.floor_lines[:MAX_ITEM_NODES]):
+                line = geo.floor_line_segments(points)
+                if len(line):
+                    self._static.append(
+                        scene.add_line_segments(
+                            f"/world/floor_lines/{i}",
+                            line,
+                            colors=geo.hex_rgb(colour),
+                            thickness=width * geo.MM,
+                        )
+                    )
             # Each item is its own scene node (about 50 us per change): past this many of
             # a kind a map would need a batched mesh; the rest are not drawn.
             shown = MAX_ITEM_NODES

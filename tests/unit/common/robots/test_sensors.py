@@ -187,3 +187,25 @@ def test_a_bad_floor_layer_is_refused_with_its_field(change: dict, message: str)
     with pytest.raises(MapError) as info:
         build_world(data, name="w", source="m.json")
     assert message in str(info.value)
+
+
+def test_the_floor_layer_travels_in_the_snapshot_and_the_view_draws_it() -> None:
+    from common.messages import WorldSnapshot, decode, encode
+    from services.engine.packing import snapshot
+    from viewers.web import geometry as geo
+    from viewers.web.live_world import convert_snapshot
+
+    world = build_world(FLOOR_MAP, name="w")
+    snap = decode(encode(snapshot(world)), WorldSnapshot)
+    (line,) = snap.floor_lines
+    assert (line.points, line.width, line.colour) == (
+        [(50.0, 50.0), (450.0, 50.0), (450.0, 350.0)],
+        18.0,
+        "#101010",
+    )
+    layout, _ = convert_snapshot(snap)
+    ((points, width, colour),) = layout.floor_lines
+    segments = geo.floor_line_segments(points)
+    assert segments.shape == (2, 2, 3) and width == 18.0
+    assert segments[1, 1, :2].tolist() == pytest.approx([0.45, 0.35])
+    assert geo.hex_rgb(colour) == (16, 16, 16)
