@@ -247,6 +247,18 @@ class FloorLineInfo(msgspec.Struct, frozen=True, kw_only=True):
     colour: ShortText
 
 
+class RobotLook(msgspec.Struct, frozen=True, kw_only=True):
+    """How a robot type looks (its robot file's components drawing themselves, mm, robot frame).
+
+    ``segments`` (x0, y0, x1, y1) and the ``roles`` of the components that drew them
+    (body, proximity, ambient, sensor): the view draws the selected robot with them.
+    """
+
+    type: Ident
+    segments: Annotated[list[tuple[float, float, float, float]], msgspec.Meta(max_length=2048)]
+    roles: Annotated[list[PartName], msgspec.Meta(max_length=2048)]
+
+
 class WorldSnapshot(Message, frozen=True):
     """The whole world for a late joiner (reply of ``world/<world>/snapshot``)."""
 
@@ -270,6 +282,10 @@ class WorldSnapshot(Message, frozen=True):
     kind: Literal["sim", "real"] = "sim"
     # The map's floor layer (docs/MAPS.md): its lines, drawn on the floor; none without one.
     floor_lines: Annotated[list[FloorLineInfo], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=list
+    )
+    # Each robot type's look (types from robot files; none for a type written in Python).
+    looks: Annotated[list[RobotLook], msgspec.Meta(max_length=64)] = msgspec.field(
         default_factory=list
     )
 

@@ -14,12 +14,14 @@ from common.messages import (
     ItemInfo,
     LightInfo,
     PackedArray,
+    RobotLook,
     SensorBatch,
     SensorSample,
     ShapeInfo,
     WorldFrame,
     WorldSnapshot,
 )
+from common.robots import registry as robot_registry
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.parts import parts_of
 from common.sim2d.world import World
@@ -132,6 +134,28 @@ def _shape(shape: ShapeSpec) -> ShapeInfo:
     return ShapeInfo(kind="polygon", points=[(float(x), float(y)) for x, y in shape.vertices()])
 
 
+def looks(world: World) -> list[RobotLook]:
+    """Each robot type's look, once per type (its components draw themselves: the viewer
+    draws the selected robot with it)."""
+    components = robot_registry.default().components
+    out: dict[str, RobotLook] = {}
+    for agent in world.agents:
+        spec = agent.spec
+        if spec.name in out or not spec.components or len(out) >= 64:
+            continue
+        segments: list[tuple[float, float, float, float]] = []
+        roles: list[str] = []
+        for info in spec.components:
+            component = components.get(info.type)
+            if component is None or (info.role == "gripper" and not agent.has_gripper):
+                continue
+            drawn = component.preview(info.values)[: 2048 - len(segments)]
+            segments += [tuple(float(v) for v in s) for s in drawn]  # type: ignore[misc]
+            roles += [info.role] * len(drawn)
+        out[spec.name] = RobotLook(type=spec.name, segments=segments, roles=roles)
+    return list(out.values())
+
+
 def snapshot(world: World) -> WorldSnapshot:
     items: list[ItemInfo] = []
     for o in world.obstacles.values():
@@ -229,6 +253,7 @@ def snapshot(world: World) -> WorldSnapshot:
         lights=lights,
         agents=agents,
         rows=rows(world),
+        looks=looks(world),
         floor_lines=[
             FloorLineInfo(points=list(line.points), width=line.width_mm, colour=line.colour)
             for line in (world.floor.lines if world.floor is not None else ())

@@ -294,6 +294,9 @@ class SceneLayout:
     robot_radii: tuple[float, ...] = ()
     # Lines painted on the floor (points mm, width mm, "#rrggbb"): what floor sensors follow.
     floor_lines: tuple[tuple[tuple[tuple[float, float], ...], float, str], ...] = ()
+    # Each robot type's look: (S, 2, 3) segments in metres, robot frame, and (S, 2, 3)
+    # colours; the view draws the selected robot with its type's.
+    looks: dict[str, tuple[F32, npt.NDArray[np.uint8]]] = field(default_factory=dict)
     version: int = 0
     offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
     real: bool = False  # real robots behind a Khepera bridge: no edits, no reset

@@ -244,6 +244,7 @@ class RobotBuilder:
         except LabError as exc:
             self.say(f"Not saved: {exc}")
             return
+        self.hide_preview()  # the drawing was of the file; robots of it now show themselves
         self.say(said[:1].upper() + said[1:] + ". Add robots of it with the map editor.")
         for call in self.on_saved:
             call(name)

@@ -276,3 +276,26 @@ def hex_rgb(colour: str) -> tuple[int, int, int]:
         except ValueError:
             pass
     return (128, 128, 128)
+
+
+# A composed robot's look, by the role of the component that drew each segment: the body
+# dark, IR rays red, light sensors amber, batched sensors blue, the rest grey.
+LOOK_COLOURS = {
+    "body": (40, 40, 40),
+    "proximity": (220, 50, 50),
+    "ambient": (230, 160, 0),
+    "sensor": (30, 110, 230),
+}
+
+
+def look_segments(
+    segments: list[tuple[float, float, float, float]], roles: list[str]
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """(S, 2, 3) segments (metres, robot frame, just above the robot) and their colours."""
+    out = np.zeros((len(segments), 2, 3), np.float32)
+    if segments:
+        a = np.asarray(segments, np.float32).reshape(-1, 4) * MM
+        out[:, 0, :2], out[:, 1, :2] = a[:, :2], a[:, 2:]
+        out[:, :, 2] = ROBOT_Z * 3
+    colours = np.array([LOOK_COLOURS.get(r, (90, 90, 90)) for r in roles], np.uint8).reshape(-1, 3)
+    return out, np.repeat(colours[:, None, :], 2, axis=1)

@@ -40,6 +40,7 @@ from common.messages import (
     decode,
 )
 from common.messages.world import MAX_ROBOT_FILE_BYTES
+from viewers.web import geometry as geo
 from viewers.web.adapters import (
     Ball,
     LabError,
@@ -108,6 +109,7 @@ def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]
         lights=lights,
         robots=agents,
         robot_radius=radius,
+        looks={look.type: geo.look_segments(look.segments, look.roles) for look in snap.looks},
         floor_lines=tuple(
             (tuple((float(x), float(y)) for x, y in line.points), line.width, line.colour)
             for line in snap.floor_lines

@@ -209,3 +209,23 @@ def test_the_floor_layer_travels_in_the_snapshot_and_the_view_draws_it() -> None
     assert segments.shape == (2, 2, 3) and width == 18.0
     assert segments[1, 1, :2].tolist() == pytest.approx([0.45, 0.35])
     assert geo.hex_rgb(colour) == (16, 16, 16)
+
+
+def test_each_robot_type_s_look_travels_once_in_the_snapshot() -> None:
+    from common.messages import WorldSnapshot, decode, encode
+    from services.engine.packing import snapshot
+    from viewers.web.live_world import convert_snapshot
+
+    world = World(600, 400, seed=1)
+    world.add_agent("a", PROBE, 100, 100, 0.0)
+    world.add_agent("b", PROBE, 300, 100, 0.0)
+    snap = decode(encode(snapshot(world)), WorldSnapshot)
+    (look,) = snap.looks  # once per type
+    assert look.type == "probe"
+    # the rim (32) and heading, 2 floor points of 2 strokes, 3 beams, 4 bumper borders
+    assert len(look.segments) == 33 + 4 + 3 + 4
+    assert look.roles.count("sensor") == 11 and look.roles[0] == "body"
+    layout, _ = convert_snapshot(snap)
+    points, colours = layout.looks["probe"]
+    assert points.shape == (44, 2, 3) and colours.shape == (44, 2, 3)
+    assert points[33 + 4, 1, 0] == pytest.approx((30.0 + 300.0 * math.cos(math.radians(45))) / 1000)
