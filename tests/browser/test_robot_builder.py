@@ -133,7 +133,7 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
 
     pick_robot(ida, panel, added)
     # The selected robot is drawn as its components draw themselves (rim, rays, beams).
-    wait_until(lambda: view._look is not None, 10, what="the scout's look in the view")
+    wait_until(lambda: view._look.handle is not None, 10, what="the scout's look in the view")
     upload(ida, "look.py", READER)
     ida.wait_text("range reads (", timeout=30_000)
     ida.screenshot("builder-driven")

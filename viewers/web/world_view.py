@@ -28,6 +28,7 @@ import viser
 
 from viewers.web import geometry as geo
 from viewers.web.adapters import SceneFrame, SceneLayout, WorldFeed
+from viewers.web.look import SelectedLook
 from viewers.web.viser_fast import set_shared_arrays
 
 log = logging.getLogger("wart.viewer.world")
@@ -131,7 +132,7 @@ class WorldView:
         self._trail_handle: viser.LineSegmentsHandle | None = None
         self._rays: viser.LineSegmentsHandle | None = None
         # The selected robot's look (its robot file's components), moved with it.
-        self._look: viser.LineSegmentsHandle | None = None
+        self._look = SelectedLook(client)
         self._static: list[viser.SceneNodeHandle] = []
         self._balls: list[viser.SceneNodeHandle] = []
         self._lights: list[viser.CylinderHandle] = []
@@ -509,30 +510,7 @@ class WorldView:
             self._light_state = state
 
     def _drop_look(self) -> None:
-        if self._look is not None:
-            self._look.remove()
-            self._look = None
-
-    def _apply_look(self, index: int, prepared: PreparedFrame) -> None:
-        """The selected robot drawn as its components draw themselves, at its pose."""
-        snap = self.snapshot
-        if snap is None or index >= len(snap.robots):
-            return
-        kind = snap.robot_types.get(snap.robots[index])
-        look = snap.looks.get(kind[0]) if kind else None
-        if look is None or not len(look[0]):
-            return
-        if self._look is None:
-            self._look = self.client.scene.add_line_segments(
-                "/world/look", look[0], colors=look[1], thickness=0.0015
-            )
-        x, y, _ = prepared.positions[index]
-        position = (float(x), float(y), 0.0)
-        if tuple(self._look.position) != position:
-            self._look.position = position
-        w, qx, qy, qz = (float(v) for v in prepared.wxyzs[index])
-        if tuple(self._look.wxyz) != (w, qx, qy, qz):
-            self._look.wxyz = (w, qx, qy, qz)
+        self._look.drop()
 
     def _apply_selected(self, prepared: PreparedFrame) -> None:
         ring = self._ring
@@ -547,8 +525,8 @@ class WorldView:
         ring.position = (float(x), float(y), 0.001)
         if not ring.visible:
             ring.visible = True
-        if len(prepared.wxyzs) > index:
-            self._apply_look(index, prepared)
+        if len(prepared.wxyzs) > index and self.snapshot is not None:
+            self._look.show(self.snapshot, index, prepared.positions[index], prepared.wxyzs[index])
         pose = prepared.frame.poses[index]
         self._trail.append((float(pose[0]), float(pose[1])))
         if self._ticks % 5 == 0:  # the trail grows slowly: 5 Hz is plenty
