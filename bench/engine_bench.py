@@ -20,6 +20,9 @@ drives robots with World(drive="velocity") (no joints, light tongs);
 ``--compare-drives [A B]`` runs two drives interleaved (default the joints
 drive and the velocity drive; ``--compare-drives velocity discs`` for the
 discs drive), each with ``--threads`` / ``--physics-threads``.
+``--compare-types`` runs the Khepera as written in Python
+(common/sim2d/agents/khepera.py) and as its robot file compiles it
+(common/robots/shipped/khepera.toml, the one the lab runs: issue 34), interleaved.
 Robots are placed apart (no two overlap at the start): the first versions
 placed them anywhere, and at 3,000 robots and more the first simulated second
 went on pushing overlapping robots apart.
@@ -36,9 +39,10 @@ import time
 import numpy as np
 
 from common.sim2d import kernels
-from common.sim2d.agents import agent_type
+from common.sim2d.agents import agent_type, khepera
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
 from common.sim2d.entities import ShapeSpec
+from common.sim2d.specs import AgentTypeSpec
 from common.sim2d.wander import braitenberg
 from common.sim2d.world import World
 
@@ -54,6 +58,7 @@ def build(
     sensor_period_s: float = 0.02,
     lamp: bool = True,
     balls: float = 0.0,
+    spec: AgentTypeSpec | None = None,
 ) -> World:
     """A square arena sized so robots cover about 10 % of the floor, with a few pillars.
 
@@ -78,7 +83,7 @@ def build(
     for i in range(max(1, n // 50)):
         x, y = rng.uniform(100, side - 100, 2)
         world.add_obstacle(f"pillar{i}", ShapeSpec.box(60, 60), float(x), float(y))
-    spec = agent_type("khepera")
+    spec = spec or agent_type("khepera")
     apart = 2 * spec.radius_mm + 2.0
     taken: dict[tuple[int, int], list[tuple[float, float]]] = {}
     placed = 0
@@ -138,6 +143,7 @@ def run(
     gripper: bool = True,
     drive: str = DEFAULT_DRIVE,
     balls: float = 0.0,
+    spec: AgentTypeSpec | None = None,
 ) -> tuple[float, float, dict[str, float]]:
     """(sim s per CPU s, sim s per wall s, CPU s per sim s by phase if ``profile``)."""
     t0 = time.perf_counter()
@@ -148,6 +154,7 @@ def run(
         gripper=gripper,
         drive=drive,
         balls=balls,
+        spec=spec,
     )
     if progress:
         print(f"  built {n} robots in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -214,6 +221,11 @@ def main() -> None:
         help="each repeat: threads 1 then --threads/--physics-threads, interleaved",
     )
     mode.add_argument(
+        "--compare-types",
+        action="store_true",
+        help="each repeat: the Khepera written in Python, then from khepera.toml, interleaved",
+    )
+    mode.add_argument(
         "--compare-drives",
         nargs="*",
         metavar="DRIVE",
@@ -240,7 +252,7 @@ def main() -> None:
         f"balls per robot {args.balls:g}; "
         f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
     )
-    if args.compare_threads or args.compare_drives:
+    if args.compare_threads or args.compare_drives or args.compare_types:
         compare(args)
         return
     print(
@@ -284,21 +296,31 @@ def compare(args: argparse.Namespace) -> None:
     print(
         f"{'N':>6} {'repeat':>6}  {'config':<32} {'sim s / CPU s':>14} {'sim s / wall s':>15}  load"
     )
+    configs: list[tuple[int, int, str, str]]  # sensing, physics threads, drive, Khepera from
     if args.compare_drives:
         first, second = args.compare_drives
         configs = [
-            (args.threads, args.physics_threads, first),
-            (args.threads, args.physics_threads, second),
+            (args.threads, args.physics_threads, first, "file"),
+            (args.threads, args.physics_threads, second, "file"),
+        ]
+    elif args.compare_types:
+        configs = [
+            (args.threads, args.physics_threads, args.drive, "python"),
+            (args.threads, args.physics_threads, args.drive, "file"),
         ]
     else:
-        configs = [(1, 1, args.drive), (args.threads, args.physics_threads, args.drive)]
+        configs = [
+            (1, 1, args.drive, "file"),
+            (args.threads, args.physics_threads, args.drive, "file"),
+        ]
+    specs = {"python": khepera.SPEC, "file": agent_type("khepera")}
     for n in args.sizes:
         seconds = sized_seconds(args, n)
-        cpus: dict[tuple[int, int, str], list[float]] = {c: [] for c in configs}
-        walls: dict[tuple[int, int, str], list[float]] = {c: [] for c in configs}
+        cpus: dict[tuple[int, int, str, str], list[float]] = {c: [] for c in configs}
+        walls: dict[tuple[int, int, str, str], list[float]] = {c: [] for c in configs}
         for r in range(args.repeats):
             for config in configs:
-                threads, physics, drive = config
+                threads, physics, drive, source = config
                 per_cpu, per_wall, _ = run(
                     n,
                     seconds,
@@ -308,10 +330,13 @@ def compare(args: argparse.Namespace) -> None:
                     gripper=not args.no_gripper,
                     drive=drive,
                     balls=args.balls,
+                    spec=specs[source],
                 )
                 cpus[config].append(per_cpu)
                 walls[config].append(per_wall)
                 label = f"sensing {threads}, physics {physics}, {drive}"
+                if args.compare_types:
+                    label = f"khepera from {source}, {drive}"
                 print(
                     f"{n:>6} {r + 1:>6}  {label:<32} {per_cpu:>14.3f} {per_wall:>15.3f}"
                     f"  {os.getloadavg()[0]:.1f}",

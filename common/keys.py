@@ -254,6 +254,11 @@ def world_map(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/map"
 
 
+def world_robots(realm: str, world: str) -> str:
+    """Queryable: the robot types a world knows (list, a file's text) and saving one."""
+    return f"{_world(realm, world)}/robots"
+
+
 def world_frame(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/frame"
 

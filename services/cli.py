@@ -68,6 +68,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "services.commands.certs",
         "the lab's CA and TLS certificates (routers, services, clients)",
     ),
+    "robots": (
+        "services.commands.robots",
+        "robot types and component types from their schemas: list, describe, check a file",
+    ),
     "doctor": (
         "services.commands.doctor",
         "check a lab's hosts, routers, links and services; say what is wrong",

@@ -179,11 +179,18 @@ def host_room(
     *,
     host: str | None = None,
     timeout: float = 60.0,
+    kind: str = "chat",
+    params: dict[str, str] | None = None,
 ) -> RoomInfo:
-    """Start a chat room ``name`` owned by the caller; returns once it serves."""
+    """Start a chat room ``name`` owned by the caller; returns once it serves.
+
+    ``kind``: a plugin's context type instead (``wart robots list``), started with
+    ``params`` (text values, checked by the host against the type's schema).
+    """
     keys.check_ident("room", name)
     target = choose_room_host(host_loads(client.z, client.realm), host)
-    reply = _ask(client, target.host, SpawnRoom(name=name, title=title), timeout)
+    request = SpawnRoom(name=name, title=title, kind=kind, params=dict(params or {}))
+    reply = _ask(client, target.host, request, timeout)
     assert isinstance(reply, RoomReply)
     return reply.room
 

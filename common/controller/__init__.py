@@ -36,6 +36,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
+from common.controller.robot import check_parts
+
 API_VERSION = 1
 """Raised only when a change would break existing controllers; old ones keep working."""
 
@@ -68,6 +70,8 @@ class KheperaState:
     gripper_closed: bool = False
     object_present: bool = False
     resistivity: int = 0
+    # The robot file's batched sensors (floor, range finder, bumper ...) by their names.
+    parts: dict[str, tuple[int, ...]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """The plain mapping :meth:`from_dict` reads back (the sandbox's pipe carries it)."""
@@ -82,6 +86,7 @@ class KheperaState:
             "gripper_closed": self.gripper_closed,
             "object_present": self.object_present,
             "resistivity": self.resistivity,
+            **({"parts": {k: list(v) for k, v in self.parts.items()}} if self.parts else {}),
         }
 
     @classmethod
@@ -116,6 +121,7 @@ class KheperaState:
             gripper_closed=bool(data.get("gripper_closed", False)),
             object_present=bool(data.get("object_present", False)),
             resistivity=int(data.get("resistivity", 0)),
+            parts=check_parts(data.get("parts", {})),
         )
 
 
@@ -271,6 +277,37 @@ class Khepera:
     def time(self) -> float:
         """The robot's clock (simulated seconds in a simulation)."""
         return self._link.latest().time
+
+    # -- the robot file's own sensors (common/controller/robot.py)
+
+    def sensors(self) -> tuple[str, ...]:
+        """The names of this robot's batched sensors, as its robot file names them."""
+        return tuple(self._link.latest().parts)
+
+    def has(self, name: str) -> bool:
+        """Whether this robot has a sensor of that name (its robot file's components)."""
+        return name in self._link.latest().parts
+
+    def read(self, name: str) -> Reading:
+        """A sensor's reading by its name in the robot file (``robot.read("floor")``)."""
+        state = self._link.latest()
+        values = state.parts.get(name)
+        if values is None:
+            known = ", ".join(state.parts) or "none"
+            raise AttributeError(f"this robot has no sensor {name!r} (its sensors: {known})")
+        return Reading(values, state.time)
+
+    def __getattr__(self, name: str) -> Callable[[], Reading]:
+        # robot.floor() for a [components.floor] sensor: the API follows the robot file.
+        if name.startswith("_"):
+            raise AttributeError(name)
+        if name not in self._link.latest().parts:
+            known = ", ".join(self._link.latest().parts) or "none"
+            raise AttributeError(
+                f"this robot has no {name!r}: not a call of the robot, nor one of its "
+                f"sensors ({known})"
+            )
+        return lambda: self.read(name)
 
     # -- LEDs
 

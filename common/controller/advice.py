@@ -12,7 +12,10 @@ What it finds:
 - a syntax error (the parser stops there, so only that one);
 - no class deriving from ``Controller``, or one without ``do_work``;
 - a call on the robot that :class:`common.controller.Khepera` does not have
-  (``robot.set_speed(...)``; "did you mean set_speeds?"). The robot is the
+  (``robot.set_speed(...)``; "did you mean set_speeds?"), or, given the chosen
+  robot's components (:class:`common.controller.robot.RobotApi`), a call its
+  components do not give ("this robot (epuck) has no gripper"; a sensor of its
+  robot file, ``robot.floor()``, is a call it has). The robot is the
   second parameter of ``initialize``/``do_work``/``cleanup`` (whatever its
   name), any parameter annotated ``Khepera``, and ``self.<attr>`` assigned
   from one of those;
@@ -33,6 +36,7 @@ import sys
 from dataclasses import dataclass
 
 from common.controller import Khepera
+from common.controller.robot import RobotApi
 from common.controller.upload_gate import PrecheckError, precheck
 
 # The public names of the robot's API: what a controller may call on it.
@@ -78,8 +82,14 @@ class Problem:
         return self.message if self.line is None else f"line {self.line}: {self.message}"
 
 
-def check_source(source: bytes, filename: str = "controller.py") -> list[Problem]:
-    """Every problem found in ``source`` (empty: it looks runnable), sorted by line."""
+def check_source(
+    source: bytes, filename: str = "controller.py", robot: RobotApi | None = None
+) -> list[Problem]:
+    """Every problem found in ``source`` (empty: it looks runnable), sorted by line.
+
+    ``robot``: the chosen robot's components; the robot's calls are checked
+    against them (None: against the Khepera's API).
+    """
     try:
         text = source.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -96,7 +106,7 @@ def check_source(source: bytes, filename: str = "controller.py") -> list[Problem
         problems.append(Problem(None, str(exc)))
     problems += _imports(tree)
     for cls in _controller_classes(tree):
-        problems += _check_class(cls)
+        problems += _check_class(cls, robot)
     return sorted(set(problems), key=lambda p: (p.line or 0, p.message))
 
 
@@ -181,7 +191,22 @@ def _robot_params(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> set[str]:
     return names
 
 
-def _check_class(cls: ast.ClassDef) -> list[Problem]:
+def _check_call(what: str, attr: str, robot: RobotApi | None) -> str | None:
+    """What is wrong with ``what.attr`` on this robot, or None."""
+    api = ROBOT_API if robot is None else robot.calls()
+    if attr in api:
+        return None
+    if robot is not None:
+        missing = robot.missing(attr)
+        if missing:
+            return f"{what}.{attr}: {missing}"
+    close = difflib.get_close_matches(attr, sorted(api), n=1)
+    hint = f" (did you mean {close[0]}?)" if close else ""
+    name = "Khepera" if robot is None else f"this robot ({robot.type_name})"
+    return f"{what}.{attr} does not exist on {name}{hint}"
+
+
+def _check_class(cls: ast.ClassDef, robot: RobotApi | None = None) -> list[Problem]:
     methods = [n for n in cls.body if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)]
     problems = []
     if not any(m.name == "do_work" for m in methods):
@@ -220,11 +245,7 @@ def _check_class(cls: ast.ClassDef) -> list[Problem]:
                 what = f"self.{owner.attr}"
             else:
                 continue
-            if node.attr in ROBOT_API:
-                continue
-            close = difflib.get_close_matches(node.attr, sorted(ROBOT_API), n=1)
-            hint = f" (did you mean {close[0]}?)" if close else ""
-            problems.append(
-                Problem(node.lineno, f"{what}.{node.attr} does not exist on Khepera{hint}")
-            )
+            message = _check_call(what, node.attr, robot)
+            if message is not None:
+                problems.append(Problem(node.lineno, message))
     return problems

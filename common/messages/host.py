@@ -48,6 +48,7 @@ class RoomInfo(msgspec.Struct, frozen=True, kw_only=True):
     owner: Ident  # who asked for it
     state: HostedState
     started_at: float
+    kind: Ident = "chat"  # or a plugin's context type (entry points wart.contexts)
 
 
 class HostLoad(Message, frozen=True):
@@ -109,6 +110,12 @@ class SpawnRoom(Message, frozen=True):
 
     name: Ident  # the room's id: one key chunk, unique in the lab
     title: ShortText = ""
+    # "chat", or a context type a plugin gives (wart.contexts, docs/ROBOTS.md), started
+    # with ``params`` checked against that type's schema (its ``params``).
+    kind: Ident = "chat"
+    params: Annotated[dict[Ident, ShortText], msgspec.Meta(max_length=16)] = msgspec.field(
+        default_factory=dict
+    )
 
 
 class StopRoom(Message, frozen=True):

@@ -35,8 +35,18 @@ class GripperReading(msgspec.Struct, frozen=True, kw_only=True):
     resistivity: Byte  # of the held object; 255 when nothing is held
 
 
+PartName = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
+PartReading = Annotated[list[Counter], msgspec.Meta(max_length=64)]
+Parts = Annotated[dict[PartName, PartReading], msgspec.Meta(max_length=32)]
+
+
 class SensorSample(Message, frozen=True):
-    """One agent's readings at one tick (``agent/<agent>/sensors``)."""
+    """One agent's readings at one tick (``agent/<agent>/sensors``).
+
+    ``parts``: the readings of the robot file's batched sensors (floor, range
+    finder, bumper, a plugin's) by their names in the file; empty for a robot
+    without any (an older reader ignores the field).
+    """
 
     world: Ident
     agent: Ident
@@ -48,6 +58,7 @@ class SensorSample(Message, frozen=True):
     speeds: tuple[int, int]  # the type's speed unit (Khepera: pulses per 10 ms)
     leds: list[int]
     gripper: GripperReading | None = None
+    parts: Parts = msgspec.field(default_factory=dict)
 
 
 class SensorBatch(Message, frozen=True):
@@ -225,6 +236,31 @@ class AgentInfo(msgspec.Struct, frozen=True, kw_only=True):
     # x from, x to, y and half width in the robot frame (mm): a recording's collisions
     # count them as the dry run's physics does. Empty where tongs touch objects only.
     tongs: list[tuple[float, float, float, float]] = msgspec.field(default_factory=list)
+    # The robot file's components as (name, role): what a controller of it may call
+    # (common/controller/robot.py); empty for a type written in Python.
+    components: Annotated[list[tuple[PartName, PartName]], msgspec.Meta(max_length=32)] = (
+        msgspec.field(default_factory=list)
+    )
+
+
+class FloorLineInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """A line painted on the floor (a map's floor layer: what floor sensors read)."""
+
+    points: Annotated[list[tuple[float, float]], msgspec.Meta(max_length=512)]
+    width: float
+    colour: ShortText
+
+
+class RobotLook(msgspec.Struct, frozen=True, kw_only=True):
+    """How a robot type looks (its robot file's components drawing themselves, mm, robot frame).
+
+    ``segments`` (x0, y0, x1, y1) and the ``roles`` of the components that drew them
+    (body, proximity, ambient, sensor): the view draws the selected robot with them.
+    """
+
+    type: Ident
+    segments: Annotated[list[tuple[float, float, float, float]], msgspec.Meta(max_length=2048)]
+    roles: Annotated[list[PartName], msgspec.Meta(max_length=2048)]
 
 
 class WorldSnapshot(Message, frozen=True):
@@ -248,6 +284,14 @@ class WorldSnapshot(Message, frozen=True):
     identity: SignedToken | None = None
     # "real": a Khepera bridge (robots on serial ports); nothing can be edited or reset there.
     kind: Literal["sim", "real"] = "sim"
+    # The map's floor layer (docs/MAPS.md): its lines, drawn on the floor; none without one.
+    floor_lines: Annotated[list[FloorLineInfo], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=list
+    )
+    # Each robot type's look (types from robot files; none for a type written in Python).
+    looks: Annotated[list[RobotLook], msgspec.Meta(max_length=64)] = msgspec.field(
+        default_factory=list
+    )
 
 
 class AgentCommand(Message, frozen=True):
@@ -381,6 +425,38 @@ class EditResult(Message, frozen=True):
     layout: NonNegInt
     detail: ShortText = ""
     maps: list[Ident] = msgspec.field(default_factory=list)
+
+
+RobotTypeName = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_-]{0,31}$")]
+MAX_ROBOT_FILE_BYTES = 64 * 1024  # common.robots.robotfile.MAX_BYTES
+
+
+class RobotTypeRequest(Message, frozen=True):
+    """The robot types a world knows: list them, get one's file, or save a new one (sealed).
+
+    ``save`` (``edit_map``): ``text`` is a robot file (docs/ROBOTS.md), validated by
+    the world against its components and kept in its robot directory; data only,
+    never executed. The reply's ``detail`` says what was saved, or the refusal
+    names the file's line and field.
+    """
+
+    action: Literal["list", "get", "save"]
+    name: RobotTypeName | None = None  # get
+    text: Annotated[str, msgspec.Meta(max_length=MAX_ROBOT_FILE_BYTES)] | None = None  # save
+
+
+class RobotTypeInfo(msgspec.Struct, frozen=True, kw_only=True):
+    name: RobotTypeName
+    origin: ShortText  # built-in, a plugin's distribution, or the lab's robot directory
+    components: list[tuple[PartName, PartName]]  # (name in the file, component type)
+
+
+class RobotTypeReply(Message, frozen=True):
+    types: list[RobotTypeInfo] = msgspec.field(default_factory=list)  # list
+    component_types: list[PartName] = msgspec.field(default_factory=list)  # list
+    name: RobotTypeName | None = None  # get, save
+    text: str = ""  # get: the robot file
+    detail: ShortText = ""  # save: what was saved
 
 
 class MapRequest(Message, frozen=True):

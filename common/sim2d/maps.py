@@ -18,6 +18,7 @@ from common.keys import is_ident
 from common.sim2d.agents import AGENT_TYPES
 from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.entities import ShapeSpec
+from common.sim2d.floor import FloorLayer, FloorLine
 from common.sim2d.world import EditError, World
 
 FORMAT = "wart-map"
@@ -333,7 +334,7 @@ def build_world(
         top = _Fields(data, "", text)
         for key in ("format", "version", "name", "description", *SECTIONS):
             top.used.add(key)
-        top.used.add("arena")
+        top.used.update(("arena", "floor"))
         top.check_unknown()
         arena = _Fields(data.get("arena"), "arena", text)
         world = World(
@@ -348,6 +349,8 @@ def build_world(
             drive=drive,
         )
         arena.check_unknown()
+        if "floor" in data:
+            world.floor = _floor(data["floor"], world, text)
         for section in SECTIONS:
             entries = data.get(section, [])
             if not isinstance(entries, list):
@@ -357,6 +360,45 @@ def build_world(
     except MapError as exc:
         raise MapError(f"{source}: {exc}") from None
     return world
+
+
+MAX_FLOOR_LINES = 256
+MAX_LINE_POINTS = 512
+
+
+def _floor(data: Any, world: World, text: str | None) -> FloorLayer:
+    """The optional floor layer: a shade and painted lines (docs/MAPS.md, "floor")."""
+    f = _Fields(data, "floor", text)
+    colour = f.colour("#ffffff")
+    f.used.add("lines")
+    lines = f.data.get("lines", [])
+    if not isinstance(lines, list) or len(lines) > MAX_FLOOR_LINES:
+        raise f.fail("lines", f"must be a list of at most {MAX_FLOOR_LINES} lines")
+    f.check_unknown()
+    out = []
+    for i, entry in enumerate(lines):
+        g = _Fields(entry, f"floor.lines[{i}]", text)
+        width = g.number("width", 20.0, lo=0.1, hi=1000.0)
+        line_colour = g.colour("#000000")
+        g.used.add("points")
+        points = g.data.get("points")
+        if not isinstance(points, list) or not 2 <= len(points) <= MAX_LINE_POINTS:
+            raise g.fail("points", f"must be a list of 2 to {MAX_LINE_POINTS} [x, y] points")
+        xy = []
+        for j, p in enumerate(points):
+            if not (
+                isinstance(p, list)
+                and len(p) == 2
+                and all(isinstance(v, int | float) and not isinstance(v, bool) for v in p)
+                and all(math.isfinite(v) for v in p)
+            ):
+                raise g.fail(f"points[{j}]", f"must be [x, y] in mm, got {p!r}")
+            if not (0 <= p[0] <= world.width and 0 <= p[1] <= world.height):
+                raise g.fail(f"points[{j}]", f"{p!r} is outside the arena")
+            xy.append((float(p[0]), float(p[1])))
+        g.check_unknown()
+        out.append(FloorLine(tuple(xy), width, line_colour))
+    return FloorLayer(colour, tuple(out))
 
 
 def load_map(
@@ -460,6 +502,18 @@ def world_to_map(world: World, name: str) -> dict[str, Any]:
             for a in world.agents
         ],
     }
+    if world.floor is not None:
+        out["floor"] = {
+            "colour": world.floor.colour,
+            "lines": [
+                {
+                    "points": [[_r(x), _r(y)] for x, y in line.points],
+                    "width": _r(line.width_mm),
+                    "colour": line.colour,
+                }
+                for line in world.floor.lines
+            ],
+        }
     return out
 
 

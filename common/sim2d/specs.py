@@ -3,14 +3,16 @@
 Every number carries its unit in its name or docstring (millimetres, radians,
 seconds, grams). An agent type is one :class:`AgentTypeSpec`: a body plus
 components (drive, IR proximity ring, ambient light ring, LEDs, an optional
-gripper turret). The world is generic over these specs; adding a robot type
-is adding one module under ``common/sim2d/agents/``.
+gripper turret), and any batched sensors (:class:`PartSpec`: floor, range
+finder, bumper, a plugin's). The world is generic over these specs; a robot
+type is a TOML file (common/robots/robotfile.py compiles it into one).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -131,6 +133,32 @@ class GripperSpec:
 
 
 @dataclass(frozen=True)
+class PartSpec:
+    """A batched sensor a robot carries beyond the engine's own rings (floor, range, bumper).
+
+    ``component`` is its type (a common.robots.schema.ComponentType subclass: it
+    measures every robot carrying it at once), ``values`` its validated
+    parameters, ``name`` the name the robot file gives it: the name a
+    controller reads it by.
+    """
+
+    name: str
+    component: Any
+    values: dict[str, Any]
+    size: int  # numbers in one robot's reading
+
+
+@dataclass(frozen=True)
+class ComponentInfo:
+    """One component of a robot type as its file names it: what the controller API follows."""
+
+    name: str  # the name in the robot file (components.<name>)
+    type: str  # the component type (body, ir_proximity, floor_sensor, ...)
+    role: str  # body, drive, proximity, ambient, leds, gripper, sensor
+    values: dict[str, Any] = field(default_factory=dict)  # its parameters, defaults filled in
+
+
+@dataclass(frozen=True)
 class AgentTypeSpec:
     """Everything the world needs to simulate one robot type."""
 
@@ -144,9 +172,14 @@ class AgentTypeSpec:
     leds: int = 2
     gripper: GripperSpec | None = None
     extra: dict[str, float] = field(default_factory=dict)
+    parts: tuple[PartSpec, ...] = ()
+    components: tuple[ComponentInfo, ...] = ()  # empty: a spec written in Python
+    source: str = ""  # the robot file it was compiled from
 
     @property
     def sensor_reach_mm(self) -> float:
-        """How far from the centre any IR ray can see."""
+        """How far from the centre any IR ray can see (0 without an IR ring)."""
+        if not self.proximity.poses:
+            return 0.0
         origin = max(math.hypot(p.x_mm, p.y_mm) for p in self.proximity.poses)
         return origin + self.proximity.curve.range_mm

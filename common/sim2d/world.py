@@ -50,6 +50,7 @@ from common.sim2d.entities import (
     Obstacle,
     Zone,
 )
+from common.sim2d.floor import FloorLayer
 from common.sim2d.gripper import GripperTurrets
 from common.sim2d.world_actuators import RobotActuators, WorldActuators
 from common.sim2d.world_edits import EditError, WorldEdits
@@ -212,6 +213,8 @@ class World(WorldEdits, WorldActuators, WorldTick):
         self.objects: list[MovableObject] = []
         self.lights: list[Light] = []
         self.zones: dict[str, Zone] = {}
+        # The floor's shade and painted lines (floor sensors read it); None: plain white.
+        self.floor: FloorLayer | None = None
         self.agents: list[Agent] = []
         # Each agent's start pose (where it was added, or a map editor last put it):
         # where reset_agent puts it back.

@@ -111,6 +111,7 @@ def state_from_sample(sample: SensorSample) -> KheperaState:
         gripper_closed=bool(gripper and gripper.fingers != "open"),
         object_present=bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
         resistivity=gripper.resistivity if gripper else 0,
+        parts={k: tuple(v) for k, v in sample.parts.items()} if sample.parts else {},
     )
 
 

@@ -62,6 +62,7 @@ class WorldService(Service):
         self.serve(keys.world_snapshot(realm, name), self._on_snapshot)
         self.serve(keys.world_edit(realm, name), self._on_edit)
         self.serve(keys.world_map(realm, name), self._on_map)
+        self.serve(keys.world_robots(realm, name), self._on_robots)
         verifier = self.verifier
         if verifier is not None:
             # A kicked or logged-out user's sessions lose their leases here too, not
@@ -164,4 +165,7 @@ class WorldService(Service):
         raise NotImplementedError
 
     def _on_map(self, query: zenoh.Query) -> Message:
+        raise NotImplementedError
+
+    def _on_robots(self, query: zenoh.Query) -> Message:
         raise NotImplementedError

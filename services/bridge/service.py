@@ -567,6 +567,9 @@ class BridgeService(WorldService):
     def _on_map(self, query: zenoh.Query) -> Message:
         return self._on_edit(query)
 
+    def _on_robots(self, query: zenoh.Query) -> Message:
+        return self._on_edit(query)  # its robots are the real ones: no robot types to add
+
     def _on_edit(self, query: zenoh.Query) -> Message:
         raise RequestError(
             "bad_request", f"{self.ident} is a real arena (Khepera bridge): it cannot be edited"

@@ -12,6 +12,11 @@ gives it (their liveliness tokens) and its load report. Then lists every live
 token of the realm and the arenas. Uses an operator's client certificate
 (``--cert admin``): the routers let only admins read their admin space.
 Exit code 0 when nothing is wrong, 1 otherwise.
+
+Either way it first checks this machine's plugins (entry points
+``wart.components``, ``wart.agents``, ``wart.engines``, ``wart.contexts``,
+docs/ROBOTS.md): one that fails to import or declares a bad schema is a
+problem, with the reason (the lab runs without it). ``--plugins``: only that.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import zenoh
 from common import cli, keys
 from common.client.survey import router_views, routers, survey
 from common.keys import AliveKind
+from common.robots import registry
 from common.service import close_session, open_session
 from common.zconfig import DEFAULT_PORT, NetworkOptions
 from services.commands import up
@@ -290,23 +296,54 @@ def survey_main(options: NetworkOptions) -> int:
     return 0
 
 
+def plugin_report() -> tuple[list[str], list[str]]:
+    """This machine's plugins: (lines, problems), from the registry as the lab builds it."""
+    reg = registry.build()
+    plugins = sorted({origin for origin in reg.origins.values() if origin != registry.BUILT_IN})
+    lines = ["plugins on this machine:"]
+    lines += [f"  ✓ {origin}" for origin in plugins] or ["  (none installed)"]
+    counts = (
+        f"  {len(reg.robots)} robot types, {len(reg.components)} component types, "
+        f"{len(reg.contexts)} plugin context types, {len(reg.engines)} plugin engine types"
+    )
+    lines.append(counts)
+    problems = [f"plugin refused, the lab runs without it: {p}" for p in reg.problems]
+    lines += [f"  ✗ {p}" for p in reg.problems]
+    return lines, problems
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "wart doctor") -> int:
     p = cli.parser(prog, __doc__ or "")
     p.add_argument("--lab", type=Path, help="the lab file (several hosts, TLS)")
     p.add_argument("--cert", default="admin", help="client certificate name (default admin)")
+    p.add_argument("--plugins", action="store_true", help="check this machine's plugins only")
     args, options = cli.parse(p, argv)
+    lines, problems = plugin_report()
+    print("\n".join(lines))
+    if args.plugins:
+        if problems:
+            print(f"\n{len(problems)} problem(s):")
+            print("\n".join(f"  - {text}" for text in problems))
+            return 1
+        print("\nno problem found")
+        return 0
+    print()
     if args.lab is None:
         assert options is not None
-        return survey_main(options)
+        code = survey_main(options)
+        if problems:  # said again at the end, where the eye looks
+            print("\n".join(f"  - {text}" for text in problems))
+        return 1 if problems else code
     try:
         lab = load(args.lab)
         report = diagnose(lab, args.cert)
     except (LabFileError, FileNotFoundError) as exc:
         return cli.fail(str(exc))
     print("\n".join(report.lines))
-    if report.problems:
-        print(f"\n{len(report.problems)} problem(s):")
-        for text in report.problems:
+    if report.problems or problems:
+        every = [*report.problems, *problems]
+        print(f"\n{len(every)} problem(s):")
+        for text in every:
             print(f"  - {text}")
         return 1
     print("\nno problem found")

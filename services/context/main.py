@@ -17,6 +17,7 @@ from common import cli, keys
 from common.client.service_login import ServiceCredentials
 from common.messages import MAX_LINE_CHARS
 from common.recording.store import RecordingStore
+from common.robots import registry
 from common.service import run_service
 from services.context import agent_context, chat_room
 from services.context.agent_context import AgentContext
@@ -150,15 +151,20 @@ KINDS: dict[str, tuple[Callable[..., int], str]] = {
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart context") -> int:
     args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] in KINDS:  # the lab's own kinds: no plugin is even looked up
+        return int(KINDS[args[0]][0](args[1:], prog=f"{prog} {args[0]}") or 0)
+    # Context types from plugins (entry points ``wart.contexts``, common/robots/registry.py).
+    plugins = registry.default().contexts
     if not args or args[0] in ("-h", "--help"):
         print(f"usage: {prog} KIND [options]   ({prog} KIND --help for each)\n\nkinds:")
         for name, (_, text) in KINDS.items():
             print(f"  {name:<8} {text}")
+        for name, kind in plugins.items():
+            origin = registry.default().describe_origin("wart.contexts", name)
+            print(f"  {name:<8} {getattr(kind, 'doc', '')} (plugin {origin})")
         return 0
-    if args[0] not in KINDS:
-        print(
-            f"{prog}: unknown context kind {args[0]!r}: one of {', '.join(KINDS)}", file=sys.stderr
-        )
-        return 2
-    run = KINDS[args[0]][0]
-    return int(run(args[1:], prog=f"{prog} {args[0]}") or 0)
+    if args[0] in plugins:
+        return int(plugins[args[0]].main(args[1:], prog=f"{prog} {args[0]}") or 0)
+    known = ", ".join([*KINDS, *plugins])
+    print(f"{prog}: unknown context kind {args[0]!r}: one of {known}", file=sys.stderr)
+    return 2

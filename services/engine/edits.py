@@ -27,11 +27,16 @@ from common.messages import (
     RemoveItem,
     ResetAgent,
     ResizeArena,
+    RobotTypeInfo,
+    RobotTypeReply,
+    RobotTypeRequest,
     RotateItem,
     WorldEdit,
     decode,
     encode,
 )
+from common.robots import registry as robot_registry
+from common.robots.robotfile import RobotFileError
 from common.service import RequestError
 from common.sim2d import maps
 from common.sim2d.world import EditError, World
@@ -165,6 +170,50 @@ class EngineEdits:
             world.remove(op.id)
         elif isinstance(op, ResizeArena):
             world.resize(op.width, op.height)
+
+    def _on_robots(self, query: zenoh.Query) -> Message:
+        """The world's robot types: list and get (any user), save (``edit_map``).
+
+        A saved file is data: validated against the components this engine has
+        (common/robots/), kept in its robot directory, and from then on a type
+        the map editor can put into the arena (AddItem agents, ``type``).
+        """
+        principal, request = self._open(str(query.key_expr), query.payload, RobotTypeRequest)
+        reg = robot_registry.default()
+        if request.action == "list":
+            return RobotTypeReply(
+                types=[
+                    RobotTypeInfo(
+                        name=name,
+                        origin=reg.describe_origin("wart.agents", name)[-256:],
+                        components=[(c.name, c.type) for c in spec.components],
+                    )
+                    for name, spec in sorted(reg.robots.items())
+                ],
+                component_types=sorted(reg.components),
+            )
+        if request.action == "get":
+            if request.name not in reg.texts:
+                raise RequestError("not_found", f"no robot type {request.name!r} in this world")
+            return RobotTypeReply(name=request.name, text=reg.texts[request.name])
+        principal.require("edit_map", "add robot types")
+        if not request.text:
+            raise RequestError("bad_request", "save needs the robot file's text")
+        data = request.text.encode("utf-8")
+
+        def save(world: World) -> Message:
+            # In the sim thread: maps and edits read the registry's types there.
+            try:
+                spec = reg.save_robot(data, frozenset(a.spec.name for a in world.agents))
+            except RobotFileError as exc:
+                raise RequestError("bad_request", str(exc)) from None
+            except ValueError as exc:
+                raise RequestError("conflict", str(exc)) from None
+            self.log.info("%s saved robot type %s", principal.user, spec.name)
+            parts = ", ".join(f"{c.name}:{c.type}" for c in spec.components)
+            return RobotTypeReply(name=spec.name, detail=f"saved robot type {spec.name}: {parts}")
+
+        return self._in_sim(save)
 
     def _on_map(self, query: zenoh.Query) -> Message:
         principal, request = self._open(str(query.key_expr), query.payload, MapRequest)

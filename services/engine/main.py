@@ -21,6 +21,7 @@ from common import cli
 from common.auth import parse_public_key
 from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
+from common.robots import registry as robot_registry
 from common.service import run_service
 from common.sim2d import kernels
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
@@ -89,6 +90,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         "viewer and robot clients declare) or it is leased. Zenoh's cost per publisher "
         "grows with their number: 10,000 took 35 s here",
     )
+    p.add_argument(
+        "--robots-dir",
+        type=Path,
+        metavar="DIR",
+        help="robot files (*.toml) of this lab, beside the shipped types and the installed "
+        "plugins' (default: WART_ROBOTS_DIR), and where robot types users save go; a "
+        "refused file is logged and left out (docs/ROBOTS.md)",
+    )
     add_world_identity_args(p)
     args, options = cli.parse(p, argv)
     assert options is not None
@@ -115,6 +124,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         except ValueError as exc:
             p.error(f"--registry-key: {exc}")
     tick_s = args.tick_ms / 1000.0
+    if args.robots_dir is not None:
+        try:
+            args.robots_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            p.error(f"--robots-dir {args.robots_dir}: {exc.strerror or exc}")
+        robot_registry.use(robots_dir=args.robots_dir)
     try:
         world = load_map(
             args.map,

@@ -9,18 +9,22 @@ import numpy as np
 
 from common.messages import (
     AgentInfo,
+    FloorLineInfo,
     GripperReading,
     ItemInfo,
     LightInfo,
     PackedArray,
+    RobotLook,
     SensorBatch,
     SensorSample,
     ShapeInfo,
     WorldFrame,
     WorldSnapshot,
 )
+from common.robots import registry as robot_registry
 from common.sim2d.collision import CAT_ROBOT
 from common.sim2d.entities import Agent, ShapeSpec
+from common.sim2d.parts import parts_of
 from common.sim2d.world import World
 
 _FINGERS = ("open", "closed", "holding")
@@ -81,8 +85,9 @@ def samples(world: World, slots: list[int]) -> list[SensorSample]:
     arm = np.clip(np.rint(world.arm), 0, 255).astype(np.int64).tolist()
     presence = world.presence.tolist()
     name, tick, sim_time = world.name, world.tick, world.sim_time
+    parts = parts_of(world, slots)  # [{}...] at once for robots without batched sensors
     out = []
-    for slot in slots:
+    for i, slot in enumerate(slots):
         agent = world.agents[slot]
         spec = agent.spec
         gripper = None
@@ -106,6 +111,7 @@ def samples(world: World, slots: list[int]) -> list[SensorSample]:
                 speeds=(int(v[0]), int(v[1])),
                 leds=leds[slot][: spec.leds],
                 gripper=gripper,
+                parts=parts[i],
             )
         )
     return out
@@ -138,6 +144,28 @@ def _tongs(world: World, agent: Agent) -> list[tuple[float, float, float, float]
     y = grip.gap_mm / 2 + half
     x0, x1 = grip.tong_x_mm
     return [(x0, x1, y, half), (x0, x1, -y, half)]
+
+
+def looks(world: World) -> list[RobotLook]:
+    """Each robot type's look, once per type (its components draw themselves: the viewer
+    draws the selected robot with it)."""
+    components = robot_registry.default().components
+    out: dict[str, RobotLook] = {}
+    for agent in world.agents:
+        spec = agent.spec
+        if spec.name in out or not spec.components or len(out) >= 64:
+            continue
+        segments: list[tuple[float, float, float, float]] = []
+        roles: list[str] = []
+        for info in spec.components:
+            component = components.get(info.type)
+            if component is None or (info.role == "gripper" and not agent.has_gripper):
+                continue
+            drawn = component.preview(info.values)[: 2048 - len(segments)]
+            segments += [tuple(float(v) for v in s) for s in drawn]  # type: ignore[misc]
+            roles += [info.role] * len(drawn)
+        out[spec.name] = RobotLook(type=spec.name, segments=segments, roles=roles)
+    return list(out.values())
 
 
 def snapshot(world: World) -> WorldSnapshot:
@@ -218,6 +246,11 @@ def snapshot(world: World) -> WorldSnapshot:
                 proximity_max=a.spec.proximity.max_value,
                 speed_limit=a.spec.drive.max_speed,
                 tongs=_tongs(world, a),
+                components=[
+                    (c.name, c.role)
+                    for c in a.spec.components
+                    if c.role != "gripper" or a.has_gripper
+                ],
             )
         )
     return WorldSnapshot(
@@ -233,4 +266,9 @@ def snapshot(world: World) -> WorldSnapshot:
         lights=lights,
         agents=agents,
         rows=rows(world),
+        looks=looks(world),
+        floor_lines=[
+            FloorLineInfo(points=list(line.points), width=line.width_mm, colour=line.colour)
+            for line in (world.floor.lines if world.floor is not None else ())
+        ],
     )

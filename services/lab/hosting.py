@@ -42,6 +42,7 @@ from common.messages.host import (
     StopRoom,
 )
 from common.revocations import RevocationFeed
+from common.robots import registry as robot_registry
 from common.service import RequestError, Service
 from services.lab.labfile import Limits
 from services.lab.supervisor import Child, ChildSpec, Supervisor
@@ -50,6 +51,7 @@ from services.lab.wiring import (
     arena_specs,
     chat_room_spec,
     map_with_robots,
+    plugin_context_spec,
     room_account,
 )
 
@@ -87,6 +89,12 @@ class HostingPlan:
     def arena_specs(self, world: str, map_path: Path, *, seed: int, owner: str) -> list[ChildSpec]:
         """The engine, then its agent context (named after the world, owned by ``owner``)."""
         return arena_specs(self.wiring, world, map_path, seed=seed, owner=owner)
+
+    def context_specs(self, name: str, kind: str, args: list[str], owner: str) -> list[ChildSpec]:
+        """A plugin's context type (``wart context KIND``), its params checked already."""
+        if self.max_rooms <= 0:
+            raise RequestError("unavailable", f"host {self.host} starts no contexts")
+        return [plugin_context_spec(self.wiring, name, kind, args, detail=f"{kind} for {owner}")]
 
     def room_specs(self, name: str, title: str, owner: str) -> list[ChildSpec]:
         """The chat room's process, owned by ``owner`` (only when ``max_rooms`` > 0)."""
@@ -391,8 +399,25 @@ class HostingService(Service):
                 started_at=time.time(),
             )
             hosted = Hosted(info)
-            self.log.info("starting chat room %s for %s", request.name, owner)
-            specs = self.plan.room_specs(request.name, info.title, owner)
+            if request.kind == "chat":
+                self.log.info("starting chat room %s for %s", request.name, owner)
+                specs = self.plan.room_specs(request.name, info.title, owner)
+            else:
+                kind = robot_registry.default().contexts.get(request.kind)
+                if kind is None:
+                    known = ", ".join(["chat", *robot_registry.default().contexts])
+                    raise RequestError(
+                        "not_found",
+                        f"host {self.ident} has no context type {request.kind!r} (it has: {known})",
+                    )
+                try:
+                    args = robot_registry.context_arguments(kind, dict(request.params))
+                except ValueError as exc:
+                    raise RequestError("bad_request", f"{request.kind}: {exc}") from None
+                info = msgspec.structs.replace(info, kind=request.kind)
+                hosted = Hosted(info)
+                self.log.info("starting %s %s for %s", request.kind, request.name, owner)
+                specs = self.plan.context_specs(request.name, request.kind, args, owner)
             self._start(self.rooms, request.name, hosted, specs)
             hosted.info = msgspec.structs.replace(info, state="running")
             return hosted.info

@@ -107,6 +107,11 @@ class Wiring:
         return self.state_dir / "maps"
 
     @property
+    def robots_dir(self) -> Path:
+        """Robot types the lab's users saved (docs/ROBOTS.md): engines load and add to it."""
+        return self.state_dir / "robots"
+
+    @property
     def rooms_dir(self) -> Path:
         """Where chat rooms and agent contexts keep their history and queues."""
         return self.state_dir / "rooms"
@@ -259,6 +264,26 @@ def chat_room_spec(
     )
 
 
+def plugin_context_spec(
+    w: Wiring, name: str, kind: str, args: list[str], *, detail: str = ""
+) -> ChildSpec:
+    """A plugin's context type (``wart context KIND``) started on request: its name, a data
+    directory of its own, the params its schema checked (common/robots/registry.py)."""
+    argv = [
+        "context",
+        kind,
+        "--name",
+        name,
+        "--data-dir",
+        str(w.state_dir / "contexts" / name),
+        *args,
+        *w.net_args("chat"),  # the network a hosted chat room has (TLS: its certificate)
+    ]
+    return ChildSpec(
+        f"{kind} {name}", argv, keys.alive(w.realm, AliveKind.CONTEXT, name), detail or kind
+    )
+
+
 def agent_context_spec(
     w: Wiring,
     name: str,
@@ -326,6 +351,8 @@ def engine_spec(
         str(seed),
         "--maps-dir",
         str(w.maps_dir),
+        "--robots-dir",
+        str(w.robots_dir),
         *w.net_args("engine"),
     ]
     if drive:

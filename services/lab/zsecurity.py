@@ -121,6 +121,7 @@ _PEOPLE = (
     # a real arena's video and tracked poses, watched like its frames
     _g("sub", W(keys.camera_all), W(keys.world_tracked)),
     _g("ask", W(keys.world_snapshot), W(keys.world_edit), W(keys.world_map)),
+    _g("ask", W(keys.world_robots)),
     _g("sub", W(keys.host_load)),
     _g("ask", W(keys.host_load), W(keys.host_spawn), W(keys.runner_run)),
     _g("token", W(keys.alive, kind=AliveKind.USER)),
@@ -168,6 +169,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("sub", W(keys.world_estop)),
         _g("watch", W(keys.agent_watch)),
         _g("serve", W(keys.world_snapshot), W(keys.world_edit), W(keys.world_map)),
+        _g("serve", W(keys.world_robots)),
         _g("token", W(keys.alive, kind=AliveKind.WORLD)),
     ),
     # The runner is the parent of untrusted code: a client like a student's, that

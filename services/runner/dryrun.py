@@ -40,6 +40,7 @@ from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
 from common.sim2d import maps, world_discs
 from common.sim2d.collision import CAT_OBJECT, CAT_OBSTACLE, CAT_ROBOT
+from common.sim2d.parts import parts_of
 from common.sim2d.world import EditError, World
 from services.runner.sandbox import Sandbox, SandboxLimits
 
@@ -154,6 +155,7 @@ def _state(world: World, slot: int) -> KheperaState:
         ambient=tuple(fit(amb, LIGHT_SENSORS, 500)),
         leds=(bool(leds[0]), bool(leds[1])),
         arm=ARM_UP,
+        parts={k: tuple(int(x) for x in v) for k, v in parts_of(world, [slot])[0].items()},
     )
     if agent.has_gripper:
         state = replace(

@@ -107,7 +107,9 @@ def test_the_controller_package_needs_only_the_standard_library() -> None:
     assert not _violations("common.controller", allowed)
 
 
-@pytest.mark.parametrize("library", ["common.sim2d", "common.recording", "common.tracking"])
+@pytest.mark.parametrize(
+    "library", ["common.sim2d", "common.recording", "common.tracking", "common.robots"]
+)
 def test_the_libraries_never_reach_zenoh(library: str) -> None:
     chains = [c for m in _modules_in(library) if (c := _reaches(m, "zenoh"))]
     assert not chains, f"{library} reaches zenoh: " + " -> ".join(chains[0])
@@ -119,6 +121,7 @@ ROOT_SUBPACKAGES = (
     "common.controller",
     "common.sim2d",
     "common.recording",
+    "common.robots",
 )
 
 

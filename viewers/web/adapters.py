@@ -25,6 +25,7 @@ from common.client.survey import Survey
 from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from common.messages.audit import AuditEntry, AuditQuery
+from common.messages.world import RobotTypeReply
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
@@ -288,9 +289,20 @@ class SceneLayout:
     lights: tuple[Light, ...]
     robots: tuple[str, ...]  # agent names, in the order of the frame arrays
     robot_radius: float = 27.5  # Khepera I: 55 mm across
+    # Each robot's radius (robots order) when they differ: robot files of other sizes
+    # in one arena; empty: every robot is robot_radius.
+    robot_radii: tuple[float, ...] = ()
+    # Lines painted on the floor (points mm, width mm, "#rrggbb"): what floor sensors follow.
+    floor_lines: tuple[tuple[tuple[tuple[float, float], ...], float, str], ...] = ()
+    # Each robot type's look: (S, 2, 3) segments in metres, robot frame, and (S, 2, 3)
+    # colours; the view draws the selected robot with its type's.
+    looks: dict[str, tuple[F32, npt.NDArray[np.uint8]]] = field(default_factory=dict)
     version: int = 0
     offline: frozenset[str] = frozenset()  # robots the bridge cannot reach (drawn grey)
     real: bool = False  # real robots behind a Khepera bridge: no edits, no reset
+    # Each robot's type and components (name, role), as its world says: what Check
+    # validates a controller's calls against (empty: a type written in Python).
+    robot_types: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -329,6 +341,7 @@ class MapEdit:
     angle: float = 0.0
     w: float = 0.0
     h: float = 0.0
+    robot_type: str = "khepera"  # add agent: the robot type (a name the world has)
 
 
 class WorldFeed(Protocol):
@@ -361,6 +374,18 @@ class WorldFeed(Protocol):
 
     def load_map(self, name: str) -> str:
         """Replace the world by map ``name``; every view refetches."""
+        ...
+
+    def robot_types(self) -> RobotTypeReply:
+        """The robot types and component types the world has (the robot builder)."""
+        ...
+
+    def robot_file(self, name: str) -> str:
+        """A robot type's file, as the world has it."""
+        ...
+
+    def save_robot_type(self, text: str) -> tuple[str, str]:
+        """Save a robot file to the lab (edit_map): (what the world said, the type's name)."""
         ...
 
 

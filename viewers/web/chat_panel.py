@@ -21,6 +21,7 @@ from viewers.web.adapters import (
     MemberEvent,
     WorldFeed,
 )
+from viewers.web.builder import RobotBuilder
 from viewers.web.editor import MapEditor
 from viewers.web.inputs import set_value
 from viewers.web.recordings_panel import RecordingsPanel
@@ -82,6 +83,7 @@ class ChatPanel:
             self.robots: RobotPanel | None = None
             self.workbench: Workbench | None = None
             self.editor: MapEditor | None = None
+            self.builder: RobotBuilder | None = None
             self.recordings: RecordingsPanel | None = None
             self.view: WorldView | None = None  # the page's view, once this arena was shown
             if self.kind in ARENA_KINDS and self.world and on_watch is not None:
@@ -93,6 +95,8 @@ class ChatPanel:
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
                 # A robot someone's controller drives is theirs: no map-editing handles on it.
                 self.editor.driven = self.robots.driven
+                self.builder = RobotBuilder(client, allowed="edit_map" in connection.permissions)
+                self.builder.on_saved.append(self.editor.offer_type)
                 self.recordings = RecordingsPanel(
                     client,
                     connection,
@@ -210,9 +214,13 @@ class ChatPanel:
             self.robots.bind(view, feed)
         if self.editor is not None:
             self.editor.bind(view, feed)
+        if self.builder is not None:
+            self.builder.bind(feed)
 
     def unbind(self) -> None:
         if self.robots is not None:
             self.robots.unbind()
         if self.editor is not None:
             self.editor.unbind()
+        if self.builder is not None:
+            self.builder.unbind()

@@ -15,6 +15,8 @@ from dataclasses import replace
 import numpy as np
 
 from common.keys import is_ident
+from common.messages import RobotTypeInfo, RobotTypeReply
+from common.robots import registry
 from viewers.web.adapters import (
     Ball,
     LabError,
@@ -197,6 +199,29 @@ class DemoWorld:
             raise LabError(f"{name!r} is not a map name: letters, digits, '_', '-', '.'")
         self.saved[name] = self._snapshot
         return f"saved {name}.json"
+
+    def robot_types(self) -> RobotTypeReply:
+        reg = registry.default()
+        return RobotTypeReply(
+            types=[
+                RobotTypeInfo(
+                    name=name,
+                    origin=reg.describe_origin("wart.agents", name)[-256:],
+                    components=[(c.name, c.type) for c in spec.components],
+                )
+                for name, spec in sorted(reg.robots.items())
+            ],
+            component_types=sorted(reg.components),
+        )
+
+    def robot_file(self, name: str) -> str:
+        text = registry.default().texts.get(name)
+        if text is None:
+            raise LabError(f"no robot type {name!r}")
+        return text
+
+    def save_robot_type(self, text: str) -> tuple[str, str]:
+        raise LabError("the demo lab keeps no robot types: save them in a real lab")
 
     def load_map(self, name: str) -> str:
         if self.refuse_edits:

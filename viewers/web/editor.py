@@ -60,6 +60,8 @@ class MapEditor:
             self.add_ball = gui.add_button("Add ball", disabled=off)
             self.add_light = gui.add_button("Add light", disabled=off)
             self.add_agent = gui.add_button("Add robot", disabled=off)
+            # The type of robot "Add robot" adds: the world's (the robot builder's too).
+            self.robot_type = gui.add_dropdown("Robot type", ("khepera",), disabled=off)
             self.delete = gui.add_button("Delete selected", color="red", disabled=True)
             self.width = gui.add_number("Arena width (mm)", 1000.0, min=100.0, step=10.0)
             self.height = gui.add_number("Arena height (mm)", 1000.0, min=100.0, step=10.0)
@@ -92,6 +94,20 @@ class MapEditor:
         if snap is not None:
             set_value(self.width, snap.width)
             set_value(self.height, snap.height)
+        if self.allowed:
+            try:
+                names = tuple(t.name for t in feed.robot_types().types)
+            except LabError:
+                names = ()
+            if names:
+                self.robot_type.options = names
+
+    def offer_type(self, name: str) -> None:
+        """A robot type just saved (the builder): offered, and chosen, for "Add robot"."""
+        options = tuple(self.robot_type.options)
+        if name not in options:
+            self.robot_type.options = (*options, name)
+        set_value(self.robot_type, name)
 
     def unbind(self) -> None:
         view = self.view
@@ -191,7 +207,9 @@ class MapEditor:
             return
         snap = feed.snapshot()
         x, y = snap.width / 2, snap.height / 2
-        self._send(feed, MapEdit("add", kind, x=x, y=y, w=NEW_BOX_MM, h=NEW_BOX_MM))
+        robot_type = str(self.robot_type.value)
+        edit = MapEdit("add", kind, x=x, y=y, w=NEW_BOX_MM, h=NEW_BOX_MM, robot_type=robot_type)
+        self._send(feed, edit)
 
     def _delete(self) -> None:
         feed = self._ready()

@@ -254,3 +254,48 @@ def trail_segments(points_mm: npt.NDArray[np.float32]) -> npt.NDArray[np.float32
     seg[:, 1, :2] = points_mm[1:] * MM
     seg[:, :, 2] = ROBOT_Z / 2
     return seg
+
+
+def floor_line_segments(points_mm: tuple[tuple[float, float], ...]) -> npt.NDArray[np.float32]:
+    """(S, 2, 3) segments (metres) of a polyline painted on the floor, just above it."""
+    pts = np.asarray(points_mm, np.float32).reshape(-1, 2)
+    if len(pts) < 2:
+        return np.zeros((0, 2, 3), np.float32)
+    seg = np.zeros((len(pts) - 1, 2, 3), np.float32)
+    seg[:, 0, :2] = pts[:-1] * MM
+    seg[:, 1, :2] = pts[1:] * MM
+    seg[:, :, 2] = 0.0005
+    return seg
+
+
+def hex_rgb(colour: str) -> tuple[int, int, int]:
+    """``#rrggbb`` as an RGB tuple (grey if it is not one)."""
+    if len(colour) == 7 and colour.startswith("#"):
+        try:
+            return (int(colour[1:3], 16), int(colour[3:5], 16), int(colour[5:7], 16))
+        except ValueError:
+            pass
+    return (128, 128, 128)
+
+
+# A composed robot's look, by the role of the component that drew each segment: the body
+# dark, IR rays red, light sensors amber, batched sensors blue, the rest grey.
+LOOK_COLOURS = {
+    "body": (40, 40, 40),
+    "proximity": (220, 50, 50),
+    "ambient": (230, 160, 0),
+    "sensor": (30, 110, 230),
+}
+
+
+def look_segments(
+    segments: list[tuple[float, float, float, float]], roles: list[str]
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """(S, 2, 3) segments (metres, robot frame, just above the robot) and their colours."""
+    out = np.zeros((len(segments), 2, 3), np.float32)
+    if segments:
+        a = np.asarray(segments, np.float32).reshape(-1, 4) * MM
+        out[:, 0, :2], out[:, 1, :2] = a[:, :2], a[:, 2:]
+        out[:, :, 2] = ROBOT_Z * 3
+    colours = np.array([LOOK_COLOURS.get(r, (90, 90, 90)) for r in roles], np.uint8).reshape(-1, 3)
+    return out, np.repeat(colours[:, None, :], 2, axis=1)

@@ -31,12 +31,16 @@ from common.messages import (
     RemoveItem,
     ResetAgent,
     ResizeArena,
+    RobotTypeReply,
+    RobotTypeRequest,
     SensorSample,
     WorldEdit,
     WorldFrame,
     WorldSnapshot,
     decode,
 )
+from common.messages.world import MAX_ROBOT_FILE_BYTES
+from viewers.web import geometry as geo
 from viewers.web.adapters import (
     Ball,
     LabError,
@@ -105,9 +109,18 @@ def convert_snapshot(snap: WorldSnapshot) -> tuple[SceneLayout, tuple[str, ...]]
         lights=lights,
         robots=agents,
         robot_radius=radius,
+        looks={look.type: geo.look_segments(look.segments, look.roles) for look in snap.looks},
+        floor_lines=tuple(
+            (tuple((float(x), float(y)) for x, y in line.points), line.width, line.colour)
+            for line in snap.floor_lines
+        ),
+        robot_radii=(
+            tuple(a.radius for a in snap.agents) if len({a.radius for a in snap.agents}) > 1 else ()
+        ),
         version=snap.layout,
         offline=frozenset(a.id for a in snap.agents if not a.online),
         real=snap.kind == "real",
+        robot_types={a.id: (a.type, tuple((n, r) for n, r in a.components)) for a in snap.agents},
     )
     return view, object_rows
 
@@ -390,6 +403,41 @@ class UserWorld:
         key = keys.world_map(self.source.realm, self.world)
         return self._ask(key, MapRequest(action="load", name=name), "load maps").detail
 
+    # -- robot types (the robot builder; docs/ROBOTS.md)
+
+    def _robots(self, request: RobotTypeRequest, what: str) -> RobotTypeReply:
+        session = self._connection.client.session
+        if session is None:
+            raise LabError("you are logged out of this lab")
+        key = keys.world_robots(self.source.realm, self.world)
+        for answer in self.source.session.get(
+            key, payload=session.seal(key, request), timeout=QUERY_TIMEOUT
+        ):
+            if answer.ok is not None:
+                reply = _decode(answer.ok.payload, (RobotTypeReply, ErrorReply))
+                if isinstance(reply, ErrorReply):
+                    if reply.code == "forbidden":
+                        raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
+                    raise LabError(reply.message)
+                assert isinstance(reply, RobotTypeReply)
+                return reply
+        raise LabError(f"the world {self.world} does not answer (is its engine running?)")
+
+    def robot_types(self) -> RobotTypeReply:
+        return self._robots(RobotTypeRequest(action="list"), "list robot types")
+
+    def robot_file(self, name: str) -> str:
+        return self._robots(RobotTypeRequest(action="get", name=name), "read robot types").text
+
+    def save_robot_type(self, text: str) -> tuple[str, str]:
+        if "edit_map" not in self._connection.permissions:
+            raise LabError("you may not save robot types: it needs the 'edit_map' permission")
+        if len(text.encode("utf-8")) > MAX_ROBOT_FILE_BYTES:
+            raise LabError(f"a robot file is at most {MAX_ROBOT_FILE_BYTES} bytes")
+        reply = self._robots(RobotTypeRequest(action="save", text=text), "save robot types")
+        self.source._want.set()
+        return reply.detail, reply.name or ""
+
 
 def fresh_id(kind: str, snap: SceneLayout) -> str:
     taken = {o.ident for o in snap.obstacles} | {b.ident for b in snap.balls}
@@ -431,7 +479,7 @@ def to_wire_edit(edit: MapEdit, snap: SceneLayout) -> Any:
     elif edit.kind == "agent":
         entry = {
             "id": ident,
-            "type": "khepera",
+            "type": edit.robot_type,
             "x": edit.x,
             "y": edit.y,
             "heading_deg": heading_deg,

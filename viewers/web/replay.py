@@ -24,7 +24,7 @@ import numpy as np
 import viser
 import viser.uplot
 
-from common.messages import WorldSnapshot
+from common.messages import RobotTypeReply, WorldSnapshot
 from common.recording import RecordingError, read_recording
 from common.recording.reader import Recording
 from common.recording.replay import SPEEDS, Player, Timeline
@@ -152,6 +152,15 @@ class ReplayFeed:
         raise LabError(NOT_EDITABLE)
 
     def load_map(self, name: str) -> str:
+        raise LabError(NOT_EDITABLE)
+
+    def robot_types(self) -> RobotTypeReply:
+        raise LabError(NOT_EDITABLE)
+
+    def robot_file(self, name: str) -> str:
+        raise LabError(NOT_EDITABLE)
+
+    def save_robot_type(self, text: str) -> tuple[str, str]:
         raise LabError(NOT_EDITABLE)
 
 

@@ -39,6 +39,7 @@ from pathlib import Path
 import viser
 
 from common.controller.advice import Problem, check_source
+from common.controller.robot import RobotApi
 from common.messages.agent import FILE_NAME_PATTERN
 from viewers.web.adapters import (
     AgentStatus,
@@ -231,7 +232,7 @@ class Workbench:
 
     def check_now(self) -> list[Problem]:
         name = self._filename() or DEFAULT_NAME
-        problems = check_source(self._source(), name)
+        problems = check_source(self._source(), name, self._robot_api())
         if problems:
             count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
             self._show(problems, f"Check: {count}")
@@ -331,6 +332,22 @@ class Workbench:
             self.say(f"{agent} is a real robot in {ctx}: use 'Queue on the real robot'.", bad=True)
             return None
         return agent
+
+    def _robot_api(self) -> RobotApi | None:
+        """The chosen robot's components, when its world says them (else the Khepera's API)."""
+        target = self._target()
+        panel = self.robots.robot.value
+        agent = target[1] if target else (panel if panel in self.robots.robot.options else None)
+        feed = self.robots.feed
+        if agent is None or feed is None:
+            return None
+        try:
+            known = feed.snapshot().robot_types.get(agent)
+        except LabError:
+            return None
+        if not known or not known[1]:
+            return None
+        return RobotApi.of(known[0], known[1])
 
     def _this_arena_is_real(self) -> bool:
         feed = self.robots.feed

@@ -28,6 +28,7 @@ import viser
 
 from viewers.web import geometry as geo
 from viewers.web.adapters import SceneFrame, SceneLayout, WorldFeed
+from viewers.web.look import SelectedLook
 from viewers.web.viser_fast import set_shared_arrays
 
 log = logging.getLogger("wart.viewer.world")
@@ -130,6 +131,8 @@ class WorldView:
         self._trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_POINTS)
         self._trail_handle: viser.LineSegmentsHandle | None = None
         self._rays: viser.LineSegmentsHandle | None = None
+        # The selected robot's look (its robot file's components), moved with it.
+        self._look = SelectedLook(client)
         self._static: list[viser.SceneNodeHandle] = []
         self._balls: list[viser.SceneNodeHandle] = []
         self._lights: list[viser.CylinderHandle] = []
@@ -217,6 +220,7 @@ class WorldView:
             if self._rays is not None:
                 self._rays.remove()
                 self._rays = None
+            self._drop_look()
             self._sync_labels()
         for callback in list(self.on_select):
             callback(index)
@@ -231,6 +235,7 @@ class WorldView:
             if extra is not None:
                 extra.remove()
         self._robots = self._headings = self._ring = self._trail_handle = self._rays = None
+        self._drop_look()
         self._gripper_key = self._led_key = b""
         self._light_state = b""
 
@@ -238,7 +243,11 @@ class WorldView:
         """Draw (or redraw after an edit) everything that comes from the snapshot."""
         with self._lock:
             old = self.snapshot
-            robots_changed = old is None or (old.robots, old.offline) != (snap.robots, snap.offline)
+            robots_changed = old is None or (old.robots, old.offline, old.robot_radii) != (
+                snap.robots,
+                snap.offline,
+                snap.robot_radii,
+            )
             self.snapshot = snap
             scene = self.client.scene
             for handle in [*self._static, *self._balls, *self._lights]:
@@ -254,6 +263,17 @@ class WorldView:
                 receive_shadow=False,
             )
             self._static.append(floor)
+            for i, (points, width, colour) in enumerate(snap.floor_lines[:MAX_ITEM_NODES]):
+                line = geo.floor_line_segments(points)
+                if len(line):
+                    self._static.append(
+                        scene.add_line_segments(
+                            f"/world/floor_lines/{i}",
+                            line,
+                            colors=geo.hex_rgb(colour),
+                            thickness=width * geo.MM,
+                        )
+                    )
             # Each item is its own scene node (about 50 us per change): past this many of
             # a kind a map would need a batched mesh; the rest are not drawn.
             shown = MAX_ITEM_NODES
@@ -325,6 +345,12 @@ class WorldView:
         radius = snap.robot_radius * geo.MM
         n = len(snap.robots)
         swarm = n > HEADINGS_UP_TO
+        # Robots of several sizes (robot files): one mesh, each instance scaled to its radius.
+        scales = (
+            np.asarray(snap.robot_radii, np.float32) / np.float32(snap.robot_radius)
+            if len(snap.robot_radii) == n and n
+            else None
+        )
         if n > POINTS_FROM:
             self._robots = self.client.scene.add_point_cloud(
                 "/world/robots",
@@ -343,10 +369,13 @@ class WorldView:
                 geo.swarm_disc_mesh(radius) if swarm else geo.robot_mesh(radius),
                 n,
                 GRIPPER_COLOURS[0],
+                scales,
             )
         # The arrow lies on top of the body: a click on it selects the robot too.
         self._headings = (
-            self._add_batch("/world/headings", geo.heading_mesh(radius), n, HEADING_COLOURS[0])
+            self._add_batch(
+                "/world/headings", geo.heading_mesh(radius), n, HEADING_COLOURS[0], scales
+            )
             if n <= HEADINGS_UP_TO
             else None
         )
@@ -372,6 +401,7 @@ class WorldView:
         mesh: tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]],
         n: int,
         colour: npt.NDArray[np.uint8],
+        scales: npt.NDArray[np.float32] | None = None,
     ) -> viser.BatchedMeshHandle:
         """One batched mesh with an instance per robot (placed by the first frame)."""
         vertices, faces = mesh
@@ -381,6 +411,7 @@ class WorldView:
             faces=faces,
             batched_wxyzs=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
             batched_positions=np.zeros((n, 3), np.float32),
+            batched_scales=scales,
             batched_colors=np.tile(colour, (n, 1)),
             lod="off",  # meshes of a few dozen triangles need no simplification
             cast_shadow=False,
@@ -478,6 +509,9 @@ class WorldView:
                 handle.color = LIGHT_ON if on else LIGHT_OFF
             self._light_state = state
 
+    def _drop_look(self) -> None:
+        self._look.drop()
+
     def _apply_selected(self, prepared: PreparedFrame) -> None:
         ring = self._ring
         index = self.selected
@@ -491,6 +525,8 @@ class WorldView:
         ring.position = (float(x), float(y), 0.001)
         if not ring.visible:
             ring.visible = True
+        if len(prepared.wxyzs) > index and self.snapshot is not None:
+            self._look.show(self.snapshot, index, prepared.positions[index], prepared.wxyzs[index])
         pose = prepared.frame.poses[index]
         self._trail.append((float(pose[0]), float(pose[1])))
         if self._ticks % 5 == 0:  # the trail grows slowly: 5 Hz is plenty

@@ -1,4 +1,4 @@
-"""An e-puck-like robot: proves that a type is one module and touches nothing else.
+"""An e-puck-like robot as written in Python before robot files (epuck.toml: checked against it).
 
 Numbers from the e-puck's public documentation: 70 mm body, 53 mm wheel base,
 stepper motors of 1000 steps per wheel turn on 41 mm wheels (0.129 mm a step),

@@ -1,4 +1,6 @@
-"""The Khepera I, from the K-Team manual's numbers (docs/WORLDS.md "Sensor models").
+"""The Khepera I as written in Python before robot files (khepera.toml is checked against it).
+
+From the K-Team manual's numbers (docs/WORLDS.md "Sensor models").
 
 - Drive: speed in pulses per 10 ms, 0.08 mm a pulse (about 8 mm/s a unit),
   wheel base 53 mm, clamped to +-127; 32-bit position counters in pulses.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import re
 import typing
 
 import msgpack
@@ -32,7 +33,8 @@ def sample_value(tp: object, name: str = "") -> object:
         if meta is not None and base is bytes and meta.min_length:
             return b"\x01" * meta.min_length
         if meta is not None and base is str and meta.pattern:
-            return "name-1.py" if meta.pattern.endswith(r"\.py$") else "name-1"
+            # the first of these the pattern takes (a part name is an identifier: no "-")
+            return next(c for c in ("name-1.py", "name-1", "name_1") if re.match(meta.pattern, c))
         if meta is not None and base in (int, float) and meta.ge is not None:
             return base(meta.ge) + base(1)
         return sample_value(base, name)

@@ -1,0 +1,140 @@
+"""The robot builder in the page, against a real lab (issue 34): build, save, place, drive.
+
+ida (an instructor: edit_map) starts from the e-puck's file as the world gives
+it, adds a range finder from the component list, renames the type, Checks it
+(a broken value first: refused with its line and field), saves it to the lab,
+puts a robot of it into the arena with the map editor, and uploads a
+controller that reads the range finder by its name in the file; its output
+shows the readings. A student's page says the builder needs edit_map.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from services.runner.sandbox import sandbox_problem
+from tests.browser.conftest import wait_until
+from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_agents import choose, enter_arena, pick_robot, upload
+from tests.browser.test_real_lab import session_of
+from viewers.web.app import WebViewer
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+READER = b'''"""Reads the range finder the builder added."""
+
+from common.controller import Controller
+
+
+class Look(Controller):
+    period = 0.2
+
+    def do_work(self, robot) -> None:
+        print(f"range reads {robot.range().values}")
+        robot.set_speeds(0, 0)
+'''
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    # the empty map: "Add robot" puts the new robot at the arena's centre, free there
+    tmp = Path(tmp_path_factory.mktemp("builderlab"))
+    with real_lab(tmp, "empty", agents=True, slot=30.0) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, lab: RealLab) -> None:
+    ida = open_page("ida")
+    panel = enter_arena(ida, lab, "ida")
+    view = session_of(lab.viewer, "ida").view
+    wait_until(lambda: view.frames_applied > 3, 15, what="the arena in ida's view")
+    builder = panel.builder
+    assert builder is not None
+    wait_until(lambda: builder.feed is not None, 10, what="the builder bound to the arena")
+
+    ida.p.get_by_text("Robot builder").first.click()
+    ida.click("List types")
+    ida.wait_text("This world has")
+    choose(ida, "Start from", "epuck")
+    ida.click("Open type")
+    ida.wait_text("Opened epuck")
+    wait_until(lambda: 'name = "epuck"' in builder.text.value, 10, what="epuck's file")
+    choose(ida, "Component", "range_finder")
+    ida.click("Add component")
+    wait_until(lambda: "[components.range]" in builder.text.value, 10, what="the range finder")
+
+    scout = builder.text.value.replace('name = "epuck"', 'name = "scout"')
+    # Bad robot files, each refused in the page with the line and field a user reads.
+    for bad, said in (
+        (
+            scout.replace("beams = 1", "beams = 99"),
+            "components.range.beams: must be at most 64, got 99",
+        ),
+        (
+            scout.replace('type = "range_finder"', 'type = "laser"'),
+            "unknown component type 'laser'",
+        ),
+        (
+            scout.replace("mass_g = 150.0", 'mass_g = "heavy"'),
+            "components.body.mass_g: must be a number",
+        ),
+        (scout.replace("radius_mm = 35.0\n", ""), "components.body.radius_mm: is required"),
+        (scout + "#" * 70_000, "robot files are limited to 65536"),
+    ):
+        ida.fill("Robot file", bad)
+        wait_until(lambda b=bad: builder.text.value == b, 10, what="the edit at the server")
+        ida.click("Check robot file")
+        ida.wait_text(said)
+    ida.fill("Robot file", scout.replace("beams = 1", "beams = 3"))
+    wait_until(lambda: "beams = 3" in builder.text.value, 10, what="the edit at the server")
+    ida.click("Check robot file")
+    ida.wait_text("Check: scout is a valid robot type")
+    ida.wait_text("Drawn at the arena's centre")  # its body, rays and beams in the view
+    assert builder._preview is not None
+    ida.click("Save type to the lab")
+    ida.wait_text("Saved robot type scout", timeout=15_000)
+    ida.screenshot("builder-saved")
+
+    editor = panel.editor
+    assert editor is not None and editor.robot_type.value == "scout"
+    before = set(view.robot_names)
+    ida.p.get_by_text("Map editor").first.click()
+    ida.click("Add robot")
+    ida.screenshot("builder-add")
+    wait_until(
+        lambda: set(view.robot_names) - before,
+        15,
+        what=f"the scout in the arena ({editor.notice.content})",
+    )
+    (added,) = set(view.robot_names) - before
+    assert view.feed is not None
+    assert view.feed.snapshot().robot_types[added][0] == "scout"
+    # The view draws each robot at its type's size: the e-puck-based scout (35 mm) beside
+    # the Khepera (27.5 mm).
+    wait_until(
+        lambda: view.snapshot is not None and 35.0 in view.snapshot.robot_radii,
+        10,
+        what="the scout's radius in the view",
+    )
+    robots = view._robots
+    assert robots is not None and robots.batched_scales is not None
+    assert sorted(float(s) for s in robots.batched_scales) == pytest.approx([1.0, 35.0 / 27.5])
+
+    pick_robot(ida, panel, added)
+    # The selected robot is drawn as its components draw themselves (rim, rays, beams).
+    wait_until(lambda: view._look.handle is not None, 10, what="the scout's look in the view")
+    upload(ida, "look.py", READER)
+    ida.wait_text("range reads (", timeout=30_000)
+    ida.screenshot("builder-driven")
+    ida.click("Cancel my request")
