@@ -11,6 +11,8 @@ from common.messages import (
     Leaderboard,
     LeaderboardQuery,
     Message,
+    OkReply,
+    SetPseudonym,
     SubmissionInfo,
     SubmissionList,
     SubmissionsQuery,
@@ -59,6 +61,11 @@ class GraderClient:
             if time.monotonic() >= deadline:
                 raise TimeoutError(f"{submission} not graded within {timeout:g} s")
             time.sleep(0.5)
+
+    def set_pseudonym(self, assignment: str, pseudonym: str) -> str:
+        """Show under ``pseudonym`` on the leaderboards of the assignment's course ("": none)."""
+        message = SetPseudonym(assignment=assignment, pseudonym=pseudonym)
+        return self._ask(message, OkReply, "pseudonym").detail
 
     def leaderboard(self, assignment: str) -> Leaderboard:
         return self._ask(LeaderboardQuery(assignment=assignment), Leaderboard, "leaderboard")

@@ -146,6 +146,19 @@ class SubmissionList(Message, frozen=True):
     submissions: Annotated[list[SubmissionInfo], msgspec.Meta(max_length=500)]
 
 
+PSEUDONYM_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9 _.\-]{0,31}$"
+
+
+class SetPseudonym(Message, frozen=True):
+    """The name the sender's scores show under on the leaderboards of the assignment's course
+    ("" for their roster name again); unique within the course. Answered with OkReply."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    assignment: Ident
+    pseudonym: Annotated[str, msgspec.Meta(max_length=32)] = ""
+
+
 class LeaderboardQuery(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
 
@@ -175,6 +188,7 @@ class Leaderboard(Message, frozen=True):
 __all__ = [
     "MAX_EPISODE_S",
     "MAX_MAP_BYTES",
+    "PSEUDONYM_PATTERN",
     "STUDENT_CAUSES",
     "Episode",
     "EpisodeCause",
@@ -183,6 +197,7 @@ __all__ = [
     "LeaderEntry",
     "Leaderboard",
     "LeaderboardQuery",
+    "SetPseudonym",
     "SubmissionInfo",
     "SubmissionList",
     "SubmissionStatus",

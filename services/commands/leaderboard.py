@@ -2,7 +2,10 @@
 
     wart leaderboard reach-goal --user alice
 
-Names are the course roster's display names (or the account). Where the
+    wart leaderboard reach-goal --user alice --pseudonym "Speedy"   # show as Speedy
+
+Names are the course roster's display names (or the account), or the
+pseudonym a student chose (unique in the course; teachers see both). Where the
 assignment hides scores until its deadline, students see that it is hidden;
 the course's teachers see it all along.
 """
@@ -25,10 +28,17 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart leaderboard") -> i
     p.add_argument("--user", required=True)
     p.add_argument("--password-file", help="read the password from this file")
     p.add_argument("--grader", default="grader", help="the grader's name (default grader)")
+    p.add_argument(
+        "--pseudonym",
+        metavar="NAME",
+        help="first show under NAME on the course's leaderboards ('' for your roster name)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
 
     def body(grader: GraderClient) -> int:
+        if args.pseudonym is not None:
+            say(grader.set_pseudonym(args.assignment, args.pseudonym))
         board = grader.leaderboard(args.assignment)
         better = "higher" if board.order == "higher" else "lower"
         unit = f" ({board.unit})" if board.unit else ""

@@ -57,6 +57,13 @@ CREATE TABLE IF NOT EXISTS episodes (
     lab_reruns INTEGER NOT NULL DEFAULT 0,
     PRIMARY KEY (submission, episode)
 );
+CREATE TABLE IF NOT EXISTS pseudonyms (
+    course TEXT NOT NULL,
+    user TEXT NOT NULL,
+    pseudonym TEXT NOT NULL,
+    PRIMARY KEY (course, user),
+    UNIQUE (course, pseudonym COLLATE NOCASE)
+);
 """
 
 
@@ -115,6 +122,32 @@ class GradingStore:
     def display_names(self, course: str) -> dict[str, str]:
         rows = self.db._rows("SELECT user, display_name FROM course_members WHERE course=?", course)
         return {str(u): str(n) for u, n in rows}
+
+    def set_pseudonym(self, course: str, user: str, pseudonym: str) -> None:
+        """``user``'s name on the course's leaderboards ("": none); DbError if taken."""
+        with self.db._tx() as con:
+            con.execute("DELETE FROM pseudonyms WHERE course=? AND user=?", (course, user))
+            if not pseudonym:
+                return
+            taken = con.execute(
+                "SELECT 1 FROM pseudonyms WHERE course=? AND pseudonym=? COLLATE NOCASE",
+                (course, pseudonym),
+            ).fetchone()
+            names = con.execute(
+                "SELECT 1 FROM course_members WHERE course=? AND user!=? AND "
+                "(user=?3 COLLATE NOCASE OR display_name=?3 COLLATE NOCASE)",
+                (course, user, pseudonym),
+            ).fetchone()
+            if taken or names:
+                raise DbError("conflict", f"the name {pseudonym!r} is taken in {course}")
+            con.execute(
+                "INSERT INTO pseudonyms(course, user, pseudonym) VALUES (?, ?, ?)",
+                (course, user, pseudonym),
+            )
+
+    def pseudonyms(self, course: str) -> dict[str, str]:
+        rows = self.db._rows("SELECT user, pseudonym FROM pseudonyms WHERE course=?", course)
+        return {str(u): str(p) for u, p in rows}
 
     # -- submissions
 

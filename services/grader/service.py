@@ -20,6 +20,7 @@ start and graded then. Token: ``alive/grader/<name>``.
 from __future__ import annotations
 
 import math
+import re
 import threading
 import time
 
@@ -30,10 +31,13 @@ from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import AliveKind, grader_request
 from common.messages import (
+    PSEUDONYM_PATTERN,
     Leaderboard,
     LeaderboardQuery,
     LeaderEntry,
     Message,
+    OkReply,
+    SetPseudonym,
     SubmissionList,
     SubmissionsQuery,
     Submit,
@@ -48,6 +52,13 @@ from services.registry.accounts_db import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
 TEACHERS = frozenset({"teacher"})
+
+
+def _shown(name: str, pseudonym: str | None, teacher: bool) -> str:
+    """A student's name on a leaderboard: their pseudonym, which teachers see beside the name."""
+    if not pseudonym:
+        return name
+    return f"{name} (as {pseudonym})" if teacher else pseudonym
 
 
 def _when(t: float) -> str:
@@ -100,7 +111,9 @@ class GraderService(Service):
 
     def _on_request(self, query: zenoh.Query) -> Message:
         principal, request = self.verifier.open(
-            str(query.key_expr), query.payload, (Submit, SubmissionsQuery, LeaderboardQuery)
+            str(query.key_expr),
+            query.payload,
+            (Submit, SubmissionsQuery, LeaderboardQuery, SetPseudonym),
         )
         try:
             assignment, _map = self.store.assignment(request.assignment)
@@ -114,6 +127,8 @@ class GraderService(Service):
         teacher = role in TEACHERS or principal.has("admin")
         if isinstance(request, Submit):
             return self._submit(principal, request, assignment)
+        if isinstance(request, SetPseudonym):
+            return self._pseudonym(principal.user, assignment, request.pseudonym.strip())
         if isinstance(request, SubmissionsQuery):
             # A teacher names a submission by its id alone; anyone else sees only their own.
             user = request.user or (None if teacher and request.submission else principal.user)
@@ -167,11 +182,25 @@ class GraderService(Service):
             note=note,
         )
 
+    def _pseudonym(self, user: str, a: Assignment, pseudonym: str) -> OkReply:
+        if pseudonym and not re.match(PSEUDONYM_PATTERN, pseudonym):
+            raise RequestError(
+                "bad_request", "a pseudonym is 1 to 32 letters, digits, spaces, '_', '-', '.'"
+            )
+        try:
+            self.store.set_pseudonym(a.course, user, pseudonym)
+        except DbError as exc:
+            raise RequestError("conflict", str(exc)) from None
+        if not pseudonym:
+            return OkReply(detail=f"your roster name shows on {a.course}'s leaderboards")
+        return OkReply(detail=f"you show as {pseudonym} on {a.course}'s leaderboards")
+
     def leaderboard(self, a: Assignment, teacher: bool) -> Leaderboard:
         hidden = a.hidden and time.time() < a.deadline
         entries: list[LeaderEntry] = []
         if teacher or not hidden:
             names = self.store.display_names(a.course)
+            chosen = self.store.pseudonyms(a.course)
             best = self.store.best(a.name, higher=a.order == "higher")
             best.sort(key=lambda row: (-row[1] if a.order == "higher" else row[1], row[3]))
             rank, previous = 0, None
@@ -181,7 +210,7 @@ class GraderService(Service):
                 entries.append(
                     LeaderEntry(
                         rank=rank,
-                        name=names.get(user) or user,
+                        name=_shown(names.get(user) or user, chosen.get(user), teacher),
                         score=round(score, 4),
                         submission=sub,
                         at=at,

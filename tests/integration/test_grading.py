@@ -180,6 +180,17 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
         with pytest.raises(LabError, match="only the course's teachers see others' runs"):
             grader.submissions("reach-goal", user="alice")
         assert [s.submission for s in grader.submissions("reach-goal")] == [subs["bob"]]
+        assert grader.set_pseudonym("reach-goal", "Loopy") == (
+            f"you show as Loopy on {COURSE}'s leaderboards"
+        )
+    with lab.client("carol") as client:
+        grader = GraderClient(client)
+        with pytest.raises(LabError, match=f"the name 'loopy' is taken in {COURSE}"):
+            grader.set_pseudonym("reach-goal", "loopy")
+        with pytest.raises(LabError, match="is taken"):
+            grader.set_pseudonym("reach-goal", "Alice A")  # another's roster name
+        with pytest.raises(LabError, match="a pseudonym is 1 to 32 letters"):
+            grader.set_pseudonym("reach-goal", "<b>bold</b>")
     with lab.client("alice") as client:
         grader = GraderClient(client)
         first = grader.submit("one-a-day", source("works"), "works.py")
@@ -199,6 +210,15 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
     assert board_cli.returncode == 0, board_cli.stderr
     assert "you see it as a teacher" in board_cli.stdout
     assert "1. Alice A" in board_cli.stdout
+    assert "Bob B (as Loopy)" in board_cli.stdout  # the teacher sees who is behind a pseudonym
+    # one-a-day is not hidden: a student sees it, under the pseudonym alice chooses here.
+    mine = wart(
+        lab, "leaderboard", "one-a-day", "--user", "alice", "--password-file", str(pw),
+        "--pseudonym", "Speedy", *lab.net_args(),
+    )  # fmt: skip
+    assert mine.returncode == 0, mine.stderr
+    assert f"you show as Speedy on {COURSE}'s leaderboards" in mine.stdout
+    assert "1. Speedy" in mine.stdout and "Alice" not in mine.stdout.split("\n", 2)[2]
 
 
 def test_a_runner_killed_mid_grading_reruns_free(lab: ProcessLab, tmp_path: Path) -> None:
