@@ -8,9 +8,12 @@ from typing import TypeVar
 from common import keys
 from common.client.lab_client import LabClient
 from common.messages import (
+    AssignmentInfo,
+    AssignmentList,
     Leaderboard,
     LeaderboardQuery,
     Message,
+    MyAssignments,
     OkReply,
     SetPseudonym,
     SubmissionInfo,
@@ -62,6 +65,10 @@ class GraderClient:
                 raise TimeoutError(f"{submission} not graded within {timeout:g} s")
             time.sleep(0.5)
 
+    def assignments(self) -> list[AssignmentInfo]:
+        """The assignments of my courses."""
+        return list(self._ask(MyAssignments(), AssignmentList, "assignments").assignments)
+
     def set_pseudonym(self, assignment: str, pseudonym: str) -> str:
         """Show under ``pseudonym`` on the leaderboards of the assignment's course ("": none)."""
         message = SetPseudonym(assignment=assignment, pseudonym=pseudonym)
@@ -69,3 +76,12 @@ class GraderClient:
 
     def leaderboard(self, assignment: str) -> Leaderboard:
         return self._ask(LeaderboardQuery(assignment=assignment), Leaderboard, "leaderboard")
+
+
+def submitted_words(accepted: SubmitAccepted) -> str:
+    """What a student is told when a submission is taken."""
+    words = (
+        f"submitted {accepted.submission}: place {accepted.position} in the queue; "
+        f"{accepted.used} of {accepted.quota} graded runs in the last 24 h"
+    )
+    return words + (f"; {accepted.note}" if accepted.note else "")

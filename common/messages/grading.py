@@ -146,6 +146,31 @@ class SubmissionList(Message, frozen=True):
     submissions: Annotated[list[SubmissionInfo], msgspec.Meta(max_length=500)]
 
 
+class MyAssignments(Message, frozen=True):
+    """The assignments of the sender's courses (the page's Course folder)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+
+class AssignmentInfo(msgspec.Struct, frozen=True, kw_only=True):
+    name: Ident
+    course: Ident
+    title: ShortText
+    opens: float
+    deadline: float
+    episodes: NonNegInt
+    time_limit: float
+    score_name: ShortText
+    unit: ShortText
+    order: Literal["higher", "lower"]
+    quota: NonNegInt
+    rule: ShortText = ""
+
+
+class AssignmentList(Message, frozen=True):
+    assignments: Annotated[list[AssignmentInfo], msgspec.Meta(max_length=500)]
+
+
 PSEUDONYM_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9 _.\-]{0,31}$"
 
 
@@ -190,6 +215,8 @@ __all__ = [
     "MAX_MAP_BYTES",
     "PSEUDONYM_PATTERN",
     "STUDENT_CAUSES",
+    "AssignmentInfo",
+    "AssignmentList",
     "Episode",
     "EpisodeCause",
     "EpisodeReport",
@@ -197,6 +224,7 @@ __all__ = [
     "LeaderEntry",
     "Leaderboard",
     "LeaderboardQuery",
+    "MyAssignments",
     "SetPseudonym",
     "SubmissionInfo",
     "SubmissionList",

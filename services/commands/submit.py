@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from common import cli, keys
-from common.client.grader_client import GraderClient
+from common.client.grader_client import GraderClient, submitted_words
 from common.client.lab_client import LabClient
 from common.lab_errors import LabError
 from common.messages import SubmissionInfo
@@ -90,11 +90,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:
                 show(sub)
             return 0
         accepted = grader.submit(args.assignment, source, args.file.name)
-        say(
-            f"submitted {accepted.submission}: place {accepted.position} in the queue; "
-            f"{accepted.used} of {accepted.quota} graded runs in the last 24 h"
-            + (f"; {accepted.note}" if accepted.note else "")
-        )
+        say(submitted_words(accepted))
         if args.wait is None:
             return 0
         try:

@@ -113,6 +113,15 @@ class GradingStore:
         )
         return [Assignment.from_json(r[0]) for r in rows]
 
+    def assignments_of(self, user: str) -> list[Assignment]:
+        """The assignments of every course ``user`` is a member of."""
+        rows = self.db._rows(
+            "SELECT a.spec FROM assignments a JOIN course_members m ON m.course = a.course "
+            "WHERE m.user=? ORDER BY a.course, a.name",
+            user,
+        )
+        return [Assignment.from_json(r[0]) for r in rows]
+
     def role_in(self, course: str, user: str) -> str | None:
         rows = self.db._rows(
             "SELECT role FROM course_members WHERE course=? AND user=?", course, user

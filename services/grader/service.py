@@ -23,6 +23,7 @@ import math
 import re
 import threading
 import time
+from typing import cast
 
 import zenoh
 
@@ -32,10 +33,13 @@ from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import AliveKind, grader_request
 from common.messages import (
     PSEUDONYM_PATTERN,
+    AssignmentInfo,
+    AssignmentList,
     Leaderboard,
     LeaderboardQuery,
     LeaderEntry,
     Message,
+    MyAssignments,
     OkReply,
     SetPseudonym,
     SubmissionList,
@@ -52,6 +56,23 @@ from services.registry.accounts_db import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
 TEACHERS = frozenset({"teacher"})
+
+
+def info(a: Assignment) -> AssignmentInfo:
+    return AssignmentInfo(
+        name=a.name,
+        course=a.course,
+        title=a.title[:256],
+        opens=a.opens,
+        deadline=a.deadline,
+        episodes=a.episodes,
+        time_limit=a.time_limit,
+        score_name=a.score_name,
+        unit=a.unit,
+        order=a.order,  # type: ignore[arg-type]
+        quota=a.quota,
+        rule=a.rule[:256],
+    )
 
 
 def _shown(name: str, pseudonym: str | None, teacher: bool) -> str:
@@ -113,10 +134,15 @@ class GraderService(Service):
         principal, request = self.verifier.open(
             str(query.key_expr),
             query.payload,
-            (Submit, SubmissionsQuery, LeaderboardQuery, SetPseudonym),
+            (Submit, SubmissionsQuery, LeaderboardQuery, SetPseudonym, MyAssignments),
         )
+        if isinstance(request, MyAssignments):
+            return AssignmentList(
+                assignments=[info(a) for a in self.store.assignments_of(principal.user)][-500:]
+            )
+        named = cast(Submit | SubmissionsQuery | LeaderboardQuery | SetPseudonym, request)
         try:
-            assignment, _map = self.store.assignment(request.assignment)
+            assignment, _map = self.store.assignment(named.assignment)
         except DbError as exc:
             raise RequestError("not_found", str(exc)) from None
         role = self.store.role_in(assignment.course, principal.user)
