@@ -53,8 +53,11 @@ class Graded:
 
 
 class EpisodeRunner:
-    def __init__(self, session: zenoh.Session, realm: str, seal: Seal) -> None:
+    def __init__(
+        self, session: zenoh.Session, realm: str, seal: Seal, runner_wait: float = RUNNER_WAIT_S
+    ) -> None:
         self.session = session
+        self.runner_wait = runner_wait
         self.realm = realm
         self.seal = seal
         self._turn = itertools.count()
@@ -76,7 +79,7 @@ class EpisodeRunner:
         return names
 
     def _pick(self) -> str | None:
-        deadline = time.monotonic() + RUNNER_WAIT_S
+        deadline = time.monotonic() + self.runner_wait
         while not self._stop.is_set():
             found = self.runners()
             if found:

@@ -12,6 +12,7 @@ from common import cli, keys
 from common.client.service_login import ServiceCredentials
 from common.service import run_service
 from services.grader import service
+from services.grader.episodes import RUNNER_WAIT_S
 from services.grader.grading_db import GradingStore
 from services.grader.service import WORKERS, GraderService
 from services.registry.accounts_db import DbError, RegistryDB
@@ -33,6 +34,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
     p.add_argument(
         "--workers", type=int, default=WORKERS, help=f"submissions graded at once ({WORKERS})"
     )
+    p.add_argument(
+        "--runner-wait",
+        type=float,
+        default=RUNNER_WAIT_S,
+        metavar="S",
+        help=f"how long an episode waits for a live runner before the lab is at fault "
+        f"(default {RUNNER_WAIT_S:g})",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -44,6 +53,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
         return cli.fail(str(exc))
     if not 1 <= args.workers <= 64:
         return cli.fail("--workers must be 1..64")
+    if not 0.5 <= args.runner_wait <= 3600:
+        return cli.fail("--runner-wait must be 0.5..3600 s")
     if not args.db.exists():
         return cli.fail(f"{args.db}: no registry database there (start the registry first)")
     try:
@@ -62,6 +73,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
             login=login,
             store=store,
             workers=args.workers,
+            runner_wait=args.runner_wait,
         )
 
     try:

@@ -49,7 +49,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
-from services.grader.episodes import EpisodeRunner
+from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
 from services.registry.accounts_db import DbError
@@ -99,6 +99,7 @@ class GraderService(Service):
         login: ServiceLogin,
         store: GradingStore,
         workers: int = WORKERS,
+        runner_wait: float = RUNNER_WAIT_S,
     ) -> None:
         super().__init__(session, realm, name)
         self.verifier = Verifier(registry_key, realm)
@@ -106,7 +107,9 @@ class GraderService(Service):
         self.store = store
         self.workers = workers
         self.queue: FairQueue[Pending] = FairQueue()
-        self.episodes = EpisodeRunner(session, realm, lambda k, m: login.session.seal(k, m))
+        self.episodes = EpisodeRunner(
+            session, realm, lambda k, m: login.session.seal(k, m), runner_wait
+        )
         self._threads: list[threading.Thread] = []
         self._submit_lock = threading.Lock()  # quota checked and submission written as one
 

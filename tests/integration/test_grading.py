@@ -242,3 +242,30 @@ def test_a_runner_killed_mid_grading_reruns_free(lab: ProcessLab, tmp_path: Path
         # Counted once: the quota of one is used by this submission, not by the lab's fault.
         with pytest.raises(LabError, match="quota: 1 of 1"):
             grader.submit("long", source("works"), "works.py")
+
+
+def test_a_submission_the_lab_cannot_grade_is_not_counted(
+    router: Router, procs: Procs, tmp_path: Path
+) -> None:
+    """No runner at all: every try is the lab's fault; the student is told, the quota kept."""
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    roster = tmp_path / "class.csv"
+    roster.write_text("user,name\nalice,Alice A\n")
+    done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
+    assert done.returncode == 0, done.stderr
+    add_assignment(lab, tmp_path, "once", episodes="1", seeds="[1]", quota="1")
+    lab.account(wiring.service_account("grader", "grader"))
+    lab.start(wiring.grader_spec(lab.wiring()), name="grader", extra=["--runner-wait", "0.5"])
+    with lab.client("alice") as client:
+        grader = GraderClient(client)
+        sub = grader.submit("once", source("works"), "works.py").submission
+        failed = grader.wait_graded("once", sub, 120)
+        assert failed.status == "failed" and not failed.counted and failed.mean is None
+        assert failed.message.startswith("the lab could not grade it (no runner is alive")
+        assert failed.message.endswith("not counted against your quota; submit again")
+        [episode] = failed.episodes
+        assert episode.cause == "lab" and episode.lab_reruns == 4
+        # The quota of one is still whole: this submission is taken.
+        again = grader.submit("once", source("works"), "works.py")
+        assert again.used == 1 and again.quota == 1
