@@ -269,3 +269,22 @@ def test_a_submission_the_lab_cannot_grade_is_not_counted(
         # The quota of one is still whole: this submission is taken.
         again = grader.submit("once", source("works"), "works.py")
         assert again.used == 1 and again.quota == 1
+
+
+def test_a_grader_killed_mid_grading_grades_it_at_its_next_start(
+    lab: ProcessLab, tmp_path: Path
+) -> None:
+    add_assignment(lab, tmp_path, "long", time_limit="8.0", episodes="1", seeds="[1]")
+    grader_proc = next(p for p in lab.procs.started if p.name == "grader")
+    with lab.client("carol") as client:
+        grader = GraderClient(client)
+        sub = grader.submit("long", source("slow"), "slow.py").submission
+        wait_for(
+            lambda: grader.submissions("long", submission=sub)[0].status == "running", 60, "running"
+        )
+        grader_proc.kill9()
+        lab.start(wiring.grader_spec(lab.wiring()), name="grader-again")
+        graded = grader.wait_graded("long", sub, 180)
+        assert graded.status == "graded" and graded.counted
+        assert [e.cause for e in graded.episodes] == ["ok"]
+        assert len(grader.submissions("long")) == 1  # the same submission, not a second one
