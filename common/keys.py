@@ -68,6 +68,7 @@ class AliveKind(StrEnum):
     VIEWER = "viewer"
     HOST = "host"
     CAMERA = "camera"
+    GRADER = "grader"
 
 
 def realm_root(realm: str) -> str:
@@ -374,6 +375,16 @@ def runner_run(realm: str, runner: str) -> str:
 def runner_dryrun(realm: str, runner: str) -> str:
     """Dry runs of controllers in a private world (beside ``run``: never delays a slot)."""
     return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/dryrun"
+
+
+def runner_episode(realm: str, runner: str) -> str:
+    """Graded episodes of a submission in a private world (the grader asks; beside ``run``)."""
+    return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/episode"
+
+
+def grader_request(realm: str, grader: str) -> str:
+    """Submissions, their results and leaderboards (students and teachers ask the grader)."""
+    return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/request"
 
 
 def host_spawn(realm: str, host: str) -> str:

@@ -25,6 +25,16 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "services.registry.users",
         "add, change and remove accounts and grants (registry DB)",
     ),
+    "course": (
+        "services.grader.course_cli",
+        "a course's assignments: add or check an assignment file (registry DB)",
+    ),
+    "grader": ("services.grader.main", "grade submissions to assignments in simulation"),
+    "submit": (
+        "services.commands.submit",
+        "hand a controller in to an assignment; see your scores",
+    ),
+    "leaderboard": ("services.commands.leaderboard", "an assignment's best score per student"),
     "ban": (
         "services.commands.ban",
         "keep an account out for a while or for good, with a reason (admins)",

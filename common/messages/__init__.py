@@ -32,6 +32,8 @@ from common.messages.camera import *  # noqa: F403 - every camera wire type
 from common.messages.camera import __all__ as _camera_all
 from common.messages.chat import *  # noqa: F403 - every chat wire type
 from common.messages.chat import __all__ as _chat_all
+from common.messages.grading import *  # noqa: F403 - every grader wire type
+from common.messages.grading import __all__ as _grading_all
 from common.messages.host import *  # noqa: F403 - every host wire type
 from common.messages.host import __all__ as _host_all
 from common.messages.recording import *  # noqa: F403 - every recording wire type
@@ -136,6 +138,7 @@ __all__ = [
     *_audit_all,
     *_camera_all,
     *_chat_all,
+    *_grading_all,
     *_host_all,
     *_recording_all,
     *_registry_all,

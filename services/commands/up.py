@@ -88,6 +88,7 @@ def one_host_lab(http_port: int) -> tuple[ServiceEntry, ...]:
             "login": True,
         },
         {"kind": "runner", "name": RUNNER},
+        {"kind": "grader"},
         {"kind": "bridge", "world": REAL_WORLD, "emulate": "empty", "login": True},
         {
             "kind": "agent",

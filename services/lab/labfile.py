@@ -33,6 +33,8 @@ SERVICE_KINDS: dict[str, tuple[str, ...]] = {
     "agent": ("name", "world"),
     "viewer": (),
     "runner": ("name",),
+    # The grader (issue 36): on the registry's host (it shares its database).
+    "grader": (),
     # A camera over a real arena (wart camera): its world and what it captures from.
     "camera": ("world", "source"),
 }
@@ -53,6 +55,7 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     # name: the viewer's id in the lab (default: its host's name).
     "viewer": ("name", "http_port", "http_host"),
     "runner": (),
+    "grader": ("name",),
     # calibration: a file made by `wart camera calibrate` (default: the state dir's,
     # made from the reference markers once they are in view).
     "camera": ("name", "calibration", "fps"),

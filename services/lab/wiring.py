@@ -37,6 +37,7 @@ ACCOUNT_PREFIX = {
     "chat": "chat-",
     "agent": "ctx-",
     "runner": "runner-",
+    "grader": "grader-",
     "engine": "engine-",
     "bridge": "bridge-",
     # The viewer's account has the gateway role only: it vouches for browsers' addresses.
@@ -436,6 +437,18 @@ def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpe
     )
 
 
+def grader_spec(w: Wiring, name: str = "grader", *, account: str | None = None) -> ChildSpec:
+    """The grader; it reads and writes the registry's database, so it runs on its host."""
+    argv = ["grader", "--name", name, *w.login(account or service_account("grader", name))]
+    argv += ["--db", str(w.state_dir / "registry.db")]
+    return ChildSpec(
+        f"grader {name}",
+        [*argv, *w.net_args("grader")],
+        keys.alive(w.realm, AliveKind.GRADER, name),
+        detail="submissions graded in simulation",
+    )
+
+
 def viewer_spec(
     w: Wiring,
     ident: str,
@@ -544,6 +557,8 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
         ]
     if svc.kind == "runner":
         return [runner_spec(w, svc.ident)]
+    if svc.kind == "grader":
+        return [grader_spec(w, svc.ident)]
     if svc.kind == "viewer":
         # The viewer's id defaults to its host's name: one viewer per host, and
         # the doctor knows which token to expect.
@@ -570,6 +585,7 @@ START_ORDER = {
     "bridge": 2,
     "camera": 3,
     "runner": 3,
+    "grader": 3,
     "agent": 4,
 }
 

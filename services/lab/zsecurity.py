@@ -44,12 +44,15 @@ ROLES = (
     "bridge",
     "agent",
     "runner",
+    "grader",
     "viewer",
     "camera",
     "student",
     "admin",
 )
-SERVICE_ROLES = {"registry", "chat", "engine", "bridge", "agent", "viewer", "runner", "camera"}
+SERVICE_ROLES = {
+    "registry", "chat", "engine", "bridge", "agent", "viewer", "runner", "grader", "camera",
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,7 @@ _PEOPLE = (
     _g("ask", W(keys.world_robots)),
     _g("sub", W(keys.host_load)),
     _g("ask", W(keys.host_load), W(keys.host_spawn), W(keys.runner_run)),
+    _g("ask", W(keys.grader_request)),  # submissions and leaderboards (issue 36)
     _g("token", W(keys.alive, kind=AliveKind.USER)),
     _g("watch", W(keys.alive_all)),
 )
@@ -178,13 +182,21 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     # have no network at all; they talk to it over a pipe.
     "runner": (
         *_SERVICE_BASE,
-        _g("serve", W(keys.runner_run), W(keys.runner_dryrun)),
+        _g("serve", W(keys.runner_run), W(keys.runner_dryrun), W(keys.runner_episode)),
         _g("pub", W(keys.agent_cmd), W(keys.world_commands), W(keys.ctx_output)),
         _g("sub", W(keys.agent_sensors), W(keys.world_samples), W(keys.agent_lease)),
         _g("token", W(keys.agent_watch)),
         _g("sub", W(keys.world_frame)),
         _g("ask", W(keys.world_snapshot)),
         _g("token", W(keys.alive, kind=AliveKind.RUNNER)),
+    ),
+    # The grader reads the registry's database (it runs on the registry's host) and
+    # hands episodes to runners; it commands no robot.
+    "grader": (
+        *_SERVICE_BASE,
+        _g("serve", W(keys.grader_request)),
+        _g("ask", W(keys.runner_episode)),
+        _g("token", W(keys.alive, kind=AliveKind.GRADER)),
     ),
     "host": (
         *_SERVICE_BASE,

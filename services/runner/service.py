@@ -26,6 +26,12 @@ built from its public snapshot (services/runner/dryrun.py), in the same
 sandbox. They are served on threads of their own (at most
 ``DRY_RUN_WORKERS`` at once), so a dry run never delays a slot's start or stop.
 
+Graded episodes (:class:`Episode`, on ``runner/<name>/episode``, sealed,
+``lease``: the grader's service account): one seeded episode of a submission
+on a World built from the assignment's map (services/runner/episode.py), on
+workers of their own likewise; a sandbox that cannot start is answered as the
+lab's fault (``cause="lab"``), never the student's.
+
 Uploaded code never sees Zenoh, keys or the lease: only pipes to this process.
 Token: ``alive/runner/<name>``.
 """
@@ -47,6 +53,8 @@ from common.messages import (
     MAX_OUTPUT_LINE,
     ControllerOutput,
     DryRun,
+    Episode,
+    EpisodeReport,
     ErrorReply,
     Message,
     MessageError,
@@ -64,6 +72,7 @@ from common.service import RequestError, Service
 from common.sim2d.maps import MapError
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.runner.dryrun import dry_run
+from services.runner.episode import run_episode
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
 log = logging.getLogger("wart.runner")
@@ -77,6 +86,8 @@ OUTPUT_FLUSH_S = 0.1
 # student is told (Run._say_silent), once, and again when they come back.
 READINGS_SILENT_S = 5.0
 DRY_RUN_WORKERS = 2  # dry runs at once (each a sandbox at full speed for a few seconds)
+EPISODE_WORKERS = 2  # graded episodes at once (the grader sends no more than it has workers)
+EPISODE_WAITING = 8
 DRY_RUN_WAITING = 4  # more wait for a worker; the next is told the runner is busy
 
 
@@ -245,6 +256,12 @@ class RunnerService(Service):
             workers=DRY_RUN_WORKERS,
             max_waiting=DRY_RUN_WAITING,
         )
+        self.serve(
+            keys.runner_episode(self.realm, self.ident),
+            self._on_episode,
+            workers=EPISODE_WORKERS,
+            max_waiting=EPISODE_WAITING,
+        )
 
     def on_stop(self, timeout: float) -> None:
         with self._lock:
@@ -346,6 +363,31 @@ class RunnerService(Service):
             request.world,
             request.agent,
             report.verdict,
+            report.sim_seconds,
+            report.wall_seconds,
+        )
+        return report
+
+    def _on_episode(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, Episode)
+        principal.require("lease", "ask a runner for graded episodes")
+        try:
+            precheck(request.source, request.filename)
+        except PrecheckError as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        try:
+            report = run_episode(request, limits=self.limits)
+        except (ValueError, MapError) as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        except (RuntimeError, OSError) as exc:
+            # The lab's fault, said as such: the grader re-runs it elsewhere, free.
+            return EpisodeReport(cause="lab", detail=f"the sandbox could not start: {exc}"[:256])
+        self.log.info(
+            "episode %d of %s (%s): %s, %.1f simulated s in %.1f s",
+            request.episode,
+            request.submission,
+            request.user,
+            report.cause,
             report.sim_seconds,
             report.wall_seconds,
         )

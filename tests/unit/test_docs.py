@@ -45,6 +45,7 @@ def test_every_key_suffix_is_in_the_key_table() -> None:
             "ident": "i",
             "zid": "z",
             "camera": "c",
+            "grader": "g",
         }
         key = fn(**{p: sample[p] for p in params})
         last = key.rsplit("/", 1)[-1]

@@ -26,6 +26,7 @@ from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from common.messages.audit import AuditEntry, AuditQuery
 from common.messages.world import RobotTypeReply
+from common.messages.grading import AssignmentInfo, Leaderboard, SubmissionInfo
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
@@ -495,6 +496,22 @@ class LabConnection(Protocol):
     def promote(self, ctx: str, agent: str, recording: Path) -> Queued:
         """Queue the controller file of a recorded (deploy) run on ``agent`` of ``ctx``."""
         ...
+
+    # -- my courses (the grader: docs/COURSES.md)
+
+    def assignments(self) -> list[AssignmentInfo]:
+        """The assignments of my courses."""
+        ...
+
+    def submit(self, assignment: str, filename: str, source: bytes) -> str:
+        """Hand the file in to ``assignment``; what the grader said, in words."""
+        ...
+
+    def submissions(self, assignment: str) -> list[SubmissionInfo]:
+        """My submissions to ``assignment``, oldest first, with their scores."""
+        ...
+
+    def leaderboard(self, assignment: str) -> Leaderboard: ...
 
     def logout(self) -> None: ...
 

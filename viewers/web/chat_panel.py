@@ -22,6 +22,7 @@ from viewers.web.adapters import (
     WorldFeed,
 )
 from viewers.web.builder import RobotBuilder
+from viewers.web.course_panel import CoursePanel
 from viewers.web.editor import MapEditor
 from viewers.web.inputs import set_value
 from viewers.web.recordings_panel import RecordingsPanel
@@ -85,12 +86,15 @@ class ChatPanel:
             self.editor: MapEditor | None = None
             self.builder: RobotBuilder | None = None
             self.recordings: RecordingsPanel | None = None
+            self.course: CoursePanel | None = None
             self.view: WorldView | None = None  # the page's view, once this arena was shown
             if self.kind in ARENA_KINDS and self.world and on_watch is not None:
                 self.watch = gui.add_button("Show this arena", color="teal")
                 self.watch.on_click(lambda _: self.show_world())
                 self.robots = RobotPanel(client, connection, self.ctx)
                 self.workbench = Workbench(client, connection, self.ctx, self.robots)
+                # Assignments are handed in from here: the file open in the editor above.
+                self.course = CoursePanel(client, connection, source=self.workbench.current_file)
                 # Everyone sees the editor; without edit_map it is disabled and says why.
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
                 # A robot someone's controller drives is theirs: no map-editing handles on it.

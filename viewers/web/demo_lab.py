@@ -20,6 +20,7 @@ from typing import Literal
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
 from common.messages.audit import AuditEntry, AuditQuery
+from common.messages.grading import AssignmentInfo, Leaderboard, SubmissionInfo
 from common.recording import RecordingError, read_recording, summarize
 from viewers.web import demo_world
 from viewers.web.adapters import (
@@ -442,6 +443,20 @@ class DemoConnection:
             plural = "" if ended == 1 else "s"
             return f"emergency stop: every robot stopped, {ended} controller{plural} ended"
         return "emergency stop released"
+
+    # -- courses: the demo lab has no grader (a real lab's is `wart grader`)
+
+    def assignments(self) -> list[AssignmentInfo]:
+        return []
+
+    def submit(self, assignment: str, filename: str, source: bytes) -> str:
+        raise LabError("the demo lab grades nothing: no grader runs here")
+
+    def submissions(self, assignment: str) -> list[SubmissionInfo]:
+        return []
+
+    def leaderboard(self, assignment: str) -> Leaderboard:
+        raise LabError("the demo lab has no leaderboards: no grader runs here")
 
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         self._need("deploy", "dry-run controllers")

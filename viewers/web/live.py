@@ -26,15 +26,19 @@ import zenoh
 from common import keys, lab_errors
 from common.client import host_client
 from common.client import lab_client as lab
+from common.client.grader_client import GraderClient, submitted_words
 from common.client.survey import Survey, survey
 from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
+    AssignmentInfo,
     AuditEntry,
     AuditQuery,
     BanInfo,
+    Leaderboard,
     QueueStateRequest,
     RoomEvent,
+    SubmissionInfo,
 )
 from viewers.web.adapters import (
     Account,
@@ -492,6 +496,19 @@ class LiveConnection:
 
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         return self._arena(ctx).dry_run(agent, filename, source)
+
+    def assignments(self) -> list[AssignmentInfo]:
+        return list(self._call(GraderClient(self.client).assignments))
+
+    def submit(self, assignment: str, filename: str, source: bytes) -> str:
+        ok = self._call(lambda: GraderClient(self.client).submit(assignment, source, filename))
+        return submitted_words(ok)
+
+    def submissions(self, assignment: str) -> list[SubmissionInfo]:
+        return list(self._call(lambda: GraderClient(self.client).submissions(assignment)))
+
+    def leaderboard(self, assignment: str) -> Leaderboard:
+        return self._call(lambda: GraderClient(self.client).leaderboard(assignment))
 
     # -- admin
 

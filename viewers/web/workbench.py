@@ -174,6 +174,11 @@ class Workbench:
     def _source(self) -> bytes:
         return self.code.value.encode("utf-8")
 
+    def current_file(self) -> tuple[str, bytes] | None:
+        """The editor's file name and code (None, and said why, if the name is not one)."""
+        name = self._filename()
+        return None if name is None else (name, self._source())
+
     def _load_mine(self) -> None:
         """Fill the list with my files and open my newest one (the editor's 'last file')."""
         try:

@@ -17,7 +17,13 @@ def _concrete_keys(realm: str) -> list[str]:
     """One real key from every builder, with sample ids (what services put and serve on)."""
     built = []
     sample = {"ctx": "lobby", "world": "arena1", "agent": "k0", "user": "alice"}
-    sample |= {"runner": "runner", "host": "local", "ident": "x", "camera": "cam"}
+    sample |= {
+        "runner": "runner",
+        "host": "local",
+        "ident": "x",
+        "camera": "cam",
+        "grader": "grader",
+    }
     for name, fn in inspect.getmembers(keys, inspect.isfunction):
         if fn.__module__ != keys.__name__ or name.startswith(("_", "check_", "is_", "parse_")):
             continue

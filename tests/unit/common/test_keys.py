@@ -21,6 +21,7 @@ IDS = {
     "kind": AliveKind.CONTEXT,
     "ident": "room-1",
     "camera": "cam-1",
+    "grader": "g-1",
     "key": "wart/lab/alive/context/room-1",
 }
 

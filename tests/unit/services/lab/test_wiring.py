@@ -32,6 +32,7 @@ def test_wart_up_runs_the_one_host_lab_in_dependency_order(tmp_path: Path) -> No
         "bridge real1",
         "camera real1-cam",
         "runner runner",
+        "grader grader",
         "agent context robots",
         "viewer",
     ]

@@ -1,0 +1,87 @@
+"""A student's or teacher's calls on the grader: submit, one's submissions, the leaderboard."""
+
+from __future__ import annotations
+
+import time
+from typing import TypeVar
+
+from common import keys
+from common.client.lab_client import LabClient
+from common.messages import (
+    AssignmentInfo,
+    AssignmentList,
+    Leaderboard,
+    LeaderboardQuery,
+    Message,
+    MyAssignments,
+    OkReply,
+    SetPseudonym,
+    SubmissionInfo,
+    SubmissionList,
+    SubmissionsQuery,
+    Submit,
+    SubmitAccepted,
+)
+
+GRADER = "grader"
+M = TypeVar("M", bound=Message)
+
+
+class GraderClient:
+    def __init__(self, client: LabClient, grader: str = GRADER) -> None:
+        self.client = client
+        self.key = keys.grader_request(client.realm, grader)
+
+    def _ask(self, message: Message, expected: type[M], what: str) -> M:
+        return self.client._ask(
+            self.key,
+            message,
+            expected,
+            what,
+            not_found="no grader answered (is `wart grader` running?)",
+            timeout=10.0,
+        )
+
+    def submit(
+        self, assignment: str, source: bytes, filename: str = "controller.py"
+    ) -> SubmitAccepted:
+        message = Submit(assignment=assignment, source=source, filename=filename)
+        return self._ask(message, SubmitAccepted, "submit")
+
+    def submissions(
+        self, assignment: str, user: str | None = None, submission: str | None = None
+    ) -> list[SubmissionInfo]:
+        query = SubmissionsQuery(assignment=assignment, user=user, submission=submission)
+        return list(self._ask(query, SubmissionList, "submissions").submissions)
+
+    def wait_graded(self, assignment: str, submission: str, timeout: float) -> SubmissionInfo:
+        """The submission once graded (or failed); TimeoutError after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        while True:
+            found = self.submissions(assignment, submission=submission)
+            if found and found[0].status in ("graded", "failed"):
+                return found[0]
+            if time.monotonic() >= deadline:
+                raise TimeoutError(f"{submission} not graded within {timeout:g} s")
+            time.sleep(0.5)
+
+    def assignments(self) -> list[AssignmentInfo]:
+        """The assignments of my courses."""
+        return list(self._ask(MyAssignments(), AssignmentList, "assignments").assignments)
+
+    def set_pseudonym(self, assignment: str, pseudonym: str) -> str:
+        """Show under ``pseudonym`` on the leaderboards of the assignment's course ("": none)."""
+        message = SetPseudonym(assignment=assignment, pseudonym=pseudonym)
+        return self._ask(message, OkReply, "pseudonym").detail
+
+    def leaderboard(self, assignment: str) -> Leaderboard:
+        return self._ask(LeaderboardQuery(assignment=assignment), Leaderboard, "leaderboard")
+
+
+def submitted_words(accepted: SubmitAccepted) -> str:
+    """What a student is told when a submission is taken."""
+    words = (
+        f"submitted {accepted.submission}: place {accepted.position} in the queue; "
+        f"{accepted.used} of {accepted.quota} graded runs in the last 24 h"
+    )
+    return words + (f"; {accepted.note}" if accepted.note else "")

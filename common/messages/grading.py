@@ -1,0 +1,235 @@
+"""Wire types of the grader (issue 36): submissions, episodes on a runner, leaderboards.
+
+A student sends a sealed :class:`Submit` to the grader (``grader/<g>/request``);
+the grader runs the assignment's seeded episodes, each an :class:`Episode` on a
+runner (``runner/<r>/episode``, sealed with the grader's service session,
+``lease``), answered with an :class:`EpisodeReport`: what happened in the
+episode (zones reached and when, objects delivered, collisions, time) and how
+it ended (``cause``). The grader scores it and keeps it; students ask for
+their submissions (:class:`SubmissionsQuery`) and the leaderboard
+(:class:`LeaderboardQuery`) on the same key.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar, Literal
+
+import msgspec
+
+from common.messages.agent import Upload
+from common.messages.base import Ident, Message, NonNegInt, ShortText
+
+MAX_MAP_BYTES = 256 * 1024
+MAX_EPISODE_S = 300.0
+
+EpisodeCause = Literal[
+    "ok",  # ran its whole time
+    "finished",  # the controller returned before the time limit (scored as it stood)
+    "exception",  # student: raised (error_line says where)
+    "timeout",  # student: did not answer in wall-clock time (a loop)
+    "memory",  # student: out of memory
+    "output",  # student: printed a flood
+    "cpu",  # student: used its CPU time
+    "ended",  # student: the controller process ended otherwise
+    "lab",  # the lab: runner died, sandbox could not start, no runner answered
+]
+STUDENT_CAUSES: frozenset[str] = frozenset(
+    {"exception", "timeout", "memory", "output", "cpu", "ended"}
+)
+
+MapText = Annotated[str, msgspec.Meta(max_length=MAX_MAP_BYTES)]
+EpisodeSeconds = Annotated[float, msgspec.Meta(gt=0.0, le=MAX_EPISODE_S)]
+
+
+class Episode(Message, frozen=True):
+    """One seeded episode of a submission, run by a runner in a private world."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/episode",)
+
+    submission: Ident
+    episode: NonNegInt
+    user: Ident
+    map: MapText  # the map (maps.py format) as JSON, the assignment's zones added
+    agent: Ident  # the robot of the map the controller drives
+    seed: int
+    x: float
+    y: float
+    heading: float  # radians
+    seconds: EpisodeSeconds
+    source: Upload
+    filename: ShortText = "controller.py"
+
+
+class EpisodeReport(Message, frozen=True):
+    """What an episode saw and how it ended."""
+
+    cause: EpisodeCause
+    detail: ShortText = ""  # the one line a student reads ("line 7: ZeroDivisionError: ...")
+    error_line: int | None = None
+    sim_seconds: float = 0.0
+    wall_seconds: float = 0.0
+    steps: NonNegInt = 0
+    # new contacts of the robot, by what it hit: wall, obstacle, robot, object
+    collisions: dict[str, NonNegInt] = msgspec.field(default_factory=dict)
+    reached: dict[str, float] = msgspec.field(default_factory=dict)  # zone -> first sim s
+    delivered: dict[str, float] = msgspec.field(default_factory=dict)  # object -> sim s in a nest
+    distance_mm: float = 0.0
+    output: Annotated[list[ShortText], msgspec.Meta(max_length=20)] = msgspec.field(
+        default_factory=list
+    )
+
+
+# --- student / teacher to the grader ----------------------------------------------------
+
+SubmissionStatus = Literal["queued", "running", "graded", "failed"]
+
+
+class Submit(Message, frozen=True):
+    """Grade this controller on an assignment (the envelope's user is the student)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    assignment: Ident
+    source: Upload
+    filename: ShortText = "controller.py"
+
+
+class SubmitAccepted(Message, frozen=True):
+    submission: Ident
+    position: NonNegInt  # in the grader's queue (1 = next)
+    used: NonNegInt  # graded runs counted in the rolling 24 h, this one included
+    quota: NonNegInt
+    late_days: NonNegInt = 0
+    note: ShortText = ""
+
+
+class SubmissionsQuery(Message, frozen=True):
+    """The sender's submissions to an assignment (a teacher: ``user`` names another)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    assignment: Ident
+    user: Ident | None = None
+    submission: Ident | None = None
+
+
+class EpisodeResult(msgspec.Struct, frozen=True, kw_only=True):
+    episode: NonNegInt
+    seed: int
+    cause: EpisodeCause
+    detail: ShortText = ""
+    error_line: int | None = None
+    score: float | None = None  # None: not scored (a lab fault left it)
+    metrics: dict[str, float] = msgspec.field(default_factory=dict)
+    lab_reruns: NonNegInt = 0  # how often a lab fault made it run again, free
+
+
+class SubmissionInfo(msgspec.Struct, frozen=True, kw_only=True):
+    submission: Ident
+    assignment: Ident
+    user: Ident
+    status: SubmissionStatus
+    submitted_at: float
+    graded_at: float | None = None
+    mean: float | None = None
+    min: float | None = None
+    late_days: NonNegInt = 0
+    penalty: float = 0.0
+    counted: bool = True  # against the quota (False: the lab's fault)
+    message: ShortText = ""
+    episodes: Annotated[list[EpisodeResult], msgspec.Meta(max_length=100)] = msgspec.field(
+        default_factory=list
+    )
+
+
+class SubmissionList(Message, frozen=True):
+    submissions: Annotated[list[SubmissionInfo], msgspec.Meta(max_length=500)]
+
+
+class MyAssignments(Message, frozen=True):
+    """The assignments of the sender's courses (the page's Course folder)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+
+class AssignmentInfo(msgspec.Struct, frozen=True, kw_only=True):
+    name: Ident
+    course: Ident
+    title: ShortText
+    opens: float
+    deadline: float
+    episodes: NonNegInt
+    time_limit: float
+    score_name: ShortText
+    unit: ShortText
+    order: Literal["higher", "lower"]
+    quota: NonNegInt
+    rule: ShortText = ""
+
+
+class AssignmentList(Message, frozen=True):
+    assignments: Annotated[list[AssignmentInfo], msgspec.Meta(max_length=500)]
+
+
+PSEUDONYM_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9 _.\-]{0,31}$"
+
+
+class SetPseudonym(Message, frozen=True):
+    """The name the sender's scores show under on the leaderboards of the assignment's course
+    ("" for their roster name again); unique within the course. Answered with OkReply."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    assignment: Ident
+    pseudonym: Annotated[str, msgspec.Meta(max_length=32)] = ""
+
+
+class LeaderboardQuery(Message, frozen=True):
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    assignment: Ident
+
+
+class LeaderEntry(msgspec.Struct, frozen=True, kw_only=True):
+    rank: int
+    name: ShortText  # the display name (or the account) of the student
+    score: float
+    submission: Ident
+    at: float
+
+
+class Leaderboard(Message, frozen=True):
+    assignment: Ident
+    score_name: ShortText
+    unit: ShortText
+    order: Literal["higher", "lower"]
+    hidden: bool  # hidden from students until the deadline (a teacher still sees)
+    deadline: float
+    entries: Annotated[list[LeaderEntry], msgspec.Meta(max_length=5000)] = msgspec.field(
+        default_factory=list
+    )
+
+
+__all__ = [
+    "MAX_EPISODE_S",
+    "MAX_MAP_BYTES",
+    "PSEUDONYM_PATTERN",
+    "STUDENT_CAUSES",
+    "AssignmentInfo",
+    "AssignmentList",
+    "Episode",
+    "EpisodeCause",
+    "EpisodeReport",
+    "EpisodeResult",
+    "LeaderEntry",
+    "Leaderboard",
+    "LeaderboardQuery",
+    "MyAssignments",
+    "SetPseudonym",
+    "SubmissionInfo",
+    "SubmissionList",
+    "SubmissionStatus",
+    "SubmissionsQuery",
+    "Submit",
+    "SubmitAccepted",
+]

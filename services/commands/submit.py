@@ -1,0 +1,106 @@
+"""``wart submit``: hand a controller in to an assignment; it is graded automatically.
+
+    wart submit --assignment reach-goal --user alice my_controller.py [--wait]
+    wart submit --assignment reach-goal --user alice --list
+
+The grader runs the assignment's seeded episodes in simulation and scores
+them; ``--wait`` waits for the score and prints the per-episode table (how
+each episode ended: your code's fault, with the line, or the lab's, re-run
+free). ``--list`` shows your submissions and their scores. docs/COURSES.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from common import cli, keys
+from common.client.grader_client import GraderClient, submitted_words
+from common.client.lab_client import LabClient
+from common.lab_errors import LabError
+from common.messages import SubmissionInfo
+from common.service import close_session
+from common.zconfig import NetworkOptions
+from services.commands.terminal import connect, password_from, say
+
+
+def grader_session(
+    args: argparse.Namespace, options: NetworkOptions, body: Callable[[GraderClient], int]
+) -> int:
+    """Connect, log in and run ``body`` with the grader; errors become clear messages."""
+    try:
+        keys.check_ident("user", args.user)
+        keys.check_ident("assignment", args.assignment)
+    except ValueError as exc:
+        return cli.fail(str(exc))
+    if not options.registry_key:
+        return cli.fail(
+            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
+        )
+    try:
+        zsession = connect(options)
+    except LabError as exc:
+        return cli.fail(str(exc))
+    try:
+        with LabClient(zsession, options.realm, options.registry_key) as client:
+            client.login(args.user, password_from(args))
+            return body(GraderClient(client, args.grader))
+    except LabError as exc:
+        return cli.fail(str(exc), 1)
+    finally:
+        close_session(zsession)
+
+
+def show(sub: SubmissionInfo) -> None:
+    score = "" if sub.mean is None else f"  mean {sub.mean:g}, min {sub.min:g}"
+    if sub.penalty:
+        score += f" (late {sub.late_days} day(s): {abs(sub.penalty):g} off)"
+    say(f"{sub.submission}  {sub.status}{score}  {sub.message}")
+    for e in sub.episodes:
+        value = "-" if e.score is None else f"{e.score:g}"
+        say(f"  episode {e.episode} (seed {e.seed}): {value:>8}  {e.cause}: {e.detail}")
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:
+    p = cli.parser(prog, __doc__ or "")
+    p.add_argument("file", nargs="?", type=Path, help="the controller (.py)")
+    p.add_argument("--assignment", required=True)
+    p.add_argument("--user", required=True)
+    p.add_argument("--password-file", help="read the password from this file")
+    p.add_argument("--grader", default="grader", help="the grader's name (default grader)")
+    p.add_argument("--wait", type=float, nargs="?", const=600.0, metavar="S",
+                   help="wait for the score (at most S s, default 600)")  # fmt: skip
+    p.add_argument("--list", action="store_true", help="your submissions and their scores")
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    if not args.list and args.file is None:
+        return cli.fail("name the controller file to submit (or --list)")
+    source = b""
+    if args.file is not None:
+        try:
+            source = args.file.read_bytes()
+        except OSError as exc:
+            return cli.fail(f"cannot read {args.file}: {exc.strerror or exc}")
+
+    def body(grader: GraderClient) -> int:
+        if args.list:
+            for sub in grader.submissions(args.assignment):
+                show(sub)
+            return 0
+        accepted = grader.submit(args.assignment, source, args.file.name)
+        say(submitted_words(accepted))
+        if args.wait is None:
+            return 0
+        try:
+            show(grader.wait_graded(args.assignment, accepted.submission, args.wait))
+        except TimeoutError as exc:
+            return cli.fail(f"{exc}: see it later with --list", 1)
+        return 0
+
+    return grader_session(args, options, body)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

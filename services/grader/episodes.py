@@ -1,0 +1,182 @@
+"""A submission's episodes on the lab's runners, lab faults re-run free, then scored.
+
+Each episode goes to a live runner (``alive/runner/*``, taken in turn) as a
+sealed :class:`Episode`. A runner that dies mid-episode, does not answer, is
+busy, or cannot start a sandbox is the lab's fault: the episode runs again on
+a runner alive then (at most ``LAB_RETRIES`` times, waiting for one to come
+back), and the count is kept (``lab_reruns``) so the student is told. Only
+when the lab cannot run it at all does the submission fail, not counted
+against the quota.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import zenoh
+
+from common import keys
+from common.keys import AliveKind
+from common.messages import (
+    STUDENT_CAUSES,
+    Episode,
+    EpisodeReport,
+    EpisodeResult,
+    ErrorReply,
+    Message,
+    MessageError,
+    decode,
+)
+from services.grader.assignment import Assignment
+from services.grader.grading_db import Pending
+from services.grader.score import metrics
+
+log = logging.getLogger("wart.grader")
+
+LAB_RETRIES = 4
+RUNNER_WAIT_S = 30.0  # how long an episode waits for a runner to be alive
+Seal = Callable[[str, Message], bytes]
+
+
+@dataclass(frozen=True)
+class Graded:
+    episodes: list[EpisodeResult]
+    mean: float | None
+    low: float | None
+    lab_failed: str  # "" or why the lab could not grade it
+
+
+class EpisodeRunner:
+    def __init__(
+        self, session: zenoh.Session, realm: str, seal: Seal, runner_wait: float = RUNNER_WAIT_S
+    ) -> None:
+        self.session = session
+        self.runner_wait = runner_wait
+        self.realm = realm
+        self.seal = seal
+        self._turn = itertools.count()
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def runners(self) -> list[str]:
+        """The runners alive now (their liveliness tokens)."""
+        try:
+            replies = self.session.liveliness().get(
+                keys.alive_of_kind(self.realm, AliveKind.RUNNER), timeout=2.0
+            )
+            names = sorted({str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok})
+        except Exception as exc:  # the session closing
+            log.debug("no runner list: %s", exc)
+            return []
+        return names
+
+    def _pick(self) -> str | None:
+        deadline = time.monotonic() + self.runner_wait
+        while not self._stop.is_set():
+            found = self.runners()
+            if found:
+                return found[next(self._turn) % len(found)]
+            if time.monotonic() >= deadline:
+                return None
+            self._stop.wait(0.5)
+        return None
+
+    def once(self, request: Episode) -> EpisodeReport:
+        """One try: the runner's report, or a report with cause ``lab``."""
+        runner = self._pick()
+        if runner is None:
+            return EpisodeReport(cause="lab", detail="no runner is alive in the lab")
+        key = keys.runner_episode(self.realm, runner)
+        timeout = 15.0 + 1.5 * request.seconds + 10.0
+        try:
+            replies = list(self.session.get(key, payload=self.seal(key, request), timeout=timeout))
+        except Exception as exc:
+            return EpisodeReport(cause="lab", detail=f"runner {runner}: {exc}"[:256])
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                answer = decode(reply.ok.payload, (EpisodeReport, ErrorReply))
+            except MessageError:
+                continue
+            if isinstance(answer, ErrorReply):
+                return EpisodeReport(cause="lab", detail=f"runner {runner}: {answer.message}"[:256])
+            return answer
+        return EpisodeReport(
+            cause="lab", detail=f"runner {runner} did not answer (it stopped or died)"
+        )
+
+    def grade(self, sub: Pending, a: Assignment, map_text: str) -> Graded:
+        rule = a.score
+        zones = sorted(rule.zones)
+        results: list[EpisodeResult] = []
+        for n in range(a.episodes):
+            start = a.start(n)
+            request = Episode(
+                submission=sub.id,
+                episode=n,
+                user=sub.user,
+                map=map_text,
+                agent=a.robot,
+                seed=a.seeds[n],
+                x=start.x,
+                y=start.y,
+                heading=math.radians(start.heading_deg),
+                seconds=a.time_limit,
+                source=sub.source,
+                filename=sub.filename,
+            )
+            reruns = 0
+            report = self.once(request)
+            while report.cause == "lab" and reruns < LAB_RETRIES and not self._stop.is_set():
+                reruns += 1
+                log.warning(
+                    "episode %d of %s: the lab's fault (%s); running it again, free (%d)",
+                    n,
+                    sub.id,
+                    report.detail,
+                    reruns,
+                )
+                self._stop.wait(min(2.0, 0.5 * reruns))
+                report = self.once(request)
+            if report.cause == "lab":
+                results.append(
+                    EpisodeResult(
+                        episode=n,
+                        seed=a.seeds[n],
+                        cause="lab",
+                        detail=report.detail,
+                        lab_reruns=reruns,
+                    )
+                )
+                return Graded(results, None, None, report.detail)
+            # An episode the student's code ended is scored as the world stood then.
+            score = rule.evaluate(report, a.time_limit)
+            detail = report.detail
+            if report.cause in STUDENT_CAUSES:
+                detail = f"your controller: {detail}"
+            if reruns:
+                detail = f"{detail} (re-run {reruns}x after a lab fault, free)"
+            results.append(
+                EpisodeResult(
+                    episode=n,
+                    seed=a.seeds[n],
+                    cause=report.cause,
+                    detail=detail[:256],
+                    error_line=report.error_line,
+                    score=round(score, 4),
+                    metrics=metrics(report, zones, a.time_limit),
+                    lab_reruns=reruns,
+                )
+            )
+        scores = [r.score for r in results if r.score is not None]
+        mean = round(sum(scores) / len(scores), 4) if scores else None
+        return Graded(results, mean, min(scores) if scores else None, "")

@@ -1,0 +1,86 @@
+"""``wart grader``: the command line; what the service does is service.py's docstring."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+from common import cli, keys
+from common.client.service_login import ServiceCredentials
+from common.service import run_service
+from services.grader import service
+from services.grader.episodes import RUNNER_WAIT_S
+from services.grader.grading_db import GradingStore
+from services.grader.service import WORKERS, GraderService
+from services.registry.accounts_db import DbError, RegistryDB
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
+    p = cli.parser(prog, service.__doc__ or "")
+    p.add_argument("--name", default="grader", help="the grader's id (default grader)")
+    p.add_argument("--user", required=True, help="the grader's service account (with 'lease')")
+    p.add_argument(
+        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    )
+    p.add_argument(
+        "--db",
+        type=Path,
+        required=True,
+        help="the registry's database (assignments, courses; submissions are written there)",
+    )
+    p.add_argument(
+        "--workers", type=int, default=WORKERS, help=f"submissions graded at once ({WORKERS})"
+    )
+    p.add_argument(
+        "--runner-wait",
+        type=float,
+        default=RUNNER_WAIT_S,
+        metavar="S",
+        help=f"how long an episode waits for a live runner before the lab is at fault "
+        f"(default {RUNNER_WAIT_S:g})",
+    )
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        keys.check_ident("grader", args.name)
+        credentials = ServiceCredentials.from_options(
+            options.registry_key, args.user, args.identity, "grader"
+        )
+    except ValueError as exc:
+        return cli.fail(str(exc))
+    if not 1 <= args.workers <= 64:
+        return cli.fail("--workers must be 1..64")
+    if not 0.5 <= args.runner_wait <= 3600:
+        return cli.fail("--runner-wait must be 0.5..3600 s")
+    if not args.db.exists():
+        return cli.fail(f"{args.db}: no registry database there (start the registry first)")
+    try:
+        db = RegistryDB(args.db)
+        store = GradingStore(db)
+    except DbError as exc:
+        return cli.fail(str(exc))
+
+    def build(session: zenoh.Session) -> GraderService:
+        login = credentials.login(session, options.realm, f"grader {args.name}")
+        return GraderService(
+            session,
+            options.realm,
+            args.name,
+            registry_key=credentials.registry_key,
+            login=login,
+            store=store,
+            workers=args.workers,
+            runner_wait=args.runner_wait,
+        )
+
+    try:
+        return run_service(f"grader {args.name}", options, build)
+    finally:
+        db.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,310 @@
+"""``wart grader``: submissions to assignments, graded automatically in simulation.
+
+A student (a member of the assignment's course) sends a sealed
+:class:`Submit` on ``grader/<name>/request``. The grader checks the opening,
+the deadline and late policy, and the quota (graded runs in a rolling 24 h;
+runs the lab failed do not count), pre-checks the controller like every
+upload, writes the submission to the registry's database and queues it,
+round-robin by student (services/grader/fair_queue.py). Workers take
+submissions in turn and run the assignment's seeded episodes on the lab's
+runners (services/grader/episodes.py), score each with the assignment's rule
+and keep the per-episode table with the mean and min. On the same key:
+:class:`SubmissionsQuery` (one's own; a teacher: anyone's) and
+:class:`LeaderboardQuery` (best per student, hidden from students until the
+deadline where the assignment says so).
+
+Submissions not graded when the grader stops (or dies) are found again at its
+start and graded then. Token: ``alive/grader/<name>``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import threading
+import time
+from typing import cast
+
+import zenoh
+
+from common.auth import Principal, Verifier
+from common.client.service_login import ServiceLogin
+from common.controller.upload_gate import PrecheckError, precheck
+from common.keys import AliveKind, grader_request
+from common.messages import (
+    PSEUDONYM_PATTERN,
+    AssignmentInfo,
+    AssignmentList,
+    Leaderboard,
+    LeaderboardQuery,
+    LeaderEntry,
+    Message,
+    MyAssignments,
+    OkReply,
+    SetPseudonym,
+    SubmissionList,
+    SubmissionsQuery,
+    Submit,
+    SubmitAccepted,
+)
+from common.service import RequestError, Service
+from services.grader.assignment import DAY_S, Assignment
+from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
+from services.grader.fair_queue import FairQueue
+from services.grader.grading_db import GradingStore, Pending
+from services.registry.accounts_db import DbError
+
+WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
+TEACHERS = frozenset({"teacher"})
+
+
+def info(a: Assignment) -> AssignmentInfo:
+    return AssignmentInfo(
+        name=a.name,
+        course=a.course,
+        title=a.title[:256],
+        opens=a.opens,
+        deadline=a.deadline,
+        episodes=a.episodes,
+        time_limit=a.time_limit,
+        score_name=a.score_name,
+        unit=a.unit,
+        order=a.order,  # type: ignore[arg-type]
+        quota=a.quota,
+        rule=a.rule[:256],
+    )
+
+
+def _shown(name: str, pseudonym: str | None, teacher: bool) -> str:
+    """A student's name on a leaderboard: their pseudonym, which teachers see beside the name."""
+    if not pseudonym:
+        return name
+    return f"{name} (as {pseudonym})" if teacher else pseudonym
+
+
+def _when(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(t))
+
+
+class GraderService(Service):
+    kind = AliveKind.GRADER
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        realm: str,
+        name: str,
+        *,
+        registry_key: bytes,
+        login: ServiceLogin,
+        store: GradingStore,
+        workers: int = WORKERS,
+        runner_wait: float = RUNNER_WAIT_S,
+    ) -> None:
+        super().__init__(session, realm, name)
+        self.verifier = Verifier(registry_key, realm)
+        self.login = login
+        self.store = store
+        self.workers = workers
+        self.queue: FairQueue[Pending] = FairQueue()
+        self.episodes = EpisodeRunner(
+            session, realm, lambda k, m: login.session.seal(k, m), runner_wait
+        )
+        self._threads: list[threading.Thread] = []
+        self._submit_lock = threading.Lock()  # quota checked and submission written as one
+
+    def on_start(self) -> None:
+        for sub in self.store.pending():
+            self.log.info("submission %s of %s was not graded: queued again", sub.id, sub.user)
+            self.store.set_status(sub.id, "queued")
+            self.queue.put(sub.user, sub)
+        self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)
+        for i in range(self.workers):
+            thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+
+    def on_stop(self, timeout: float) -> None:
+        self.queue.close()
+        self.episodes.stop()
+        deadline = time.monotonic() + timeout
+        for thread in self._threads:
+            thread.join(max(0.0, deadline - time.monotonic()))
+
+    # -- requests
+
+    def _on_request(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(
+            str(query.key_expr),
+            query.payload,
+            (Submit, SubmissionsQuery, LeaderboardQuery, SetPseudonym, MyAssignments),
+        )
+        if isinstance(request, MyAssignments):
+            return AssignmentList(
+                assignments=[info(a) for a in self.store.assignments_of(principal.user)][-500:]
+            )
+        named = cast(Submit | SubmissionsQuery | LeaderboardQuery | SetPseudonym, request)
+        try:
+            assignment, _map = self.store.assignment(named.assignment)
+        except DbError as exc:
+            raise RequestError("not_found", str(exc)) from None
+        role = self.store.role_in(assignment.course, principal.user)
+        if role is None and not principal.has("admin"):
+            raise RequestError(
+                "forbidden", f"{principal.user} is not in the course {assignment.course}"
+            )
+        teacher = role in TEACHERS or principal.has("admin")
+        if isinstance(request, Submit):
+            return self._submit(principal, request, assignment)
+        if isinstance(request, SetPseudonym):
+            return self._pseudonym(principal.user, assignment, request.pseudonym.strip())
+        if isinstance(request, SubmissionsQuery):
+            # A teacher names a submission by its id alone; anyone else sees only their own.
+            user = request.user or (None if teacher and request.submission else principal.user)
+            if user != principal.user and not teacher:
+                raise RequestError("forbidden", "only the course's teachers see others' runs")
+            found = self.store.submissions(assignment.name, user, request.submission)
+            return SubmissionList(submissions=found[-500:])
+        return self.leaderboard(assignment, teacher)
+
+    def _submit(self, principal: Principal, request: Submit, a: Assignment) -> Message:
+        now = time.time()
+        if now < a.opens:
+            raise RequestError("forbidden", f"{a.name} opens at {_when(a.opens)}")
+        late_days = 0
+        if now > a.deadline:
+            if a.late == "refuse":
+                raise RequestError(
+                    "forbidden", f"the deadline of {a.name} was {_when(a.deadline)}: closed"
+                )
+            late_days = math.ceil((now - a.deadline) / DAY_S)
+        try:
+            precheck(request.source, request.filename)
+        except PrecheckError as exc:
+            raise RequestError("bad_request", f"not submitted: {exc}") from None
+        user = principal.user
+        with self._submit_lock:
+            since = now - DAY_S
+            used = self.store.counted_since(a.name, user, since)
+            if used >= a.quota:
+                oldest = self.store.oldest_counted_since(a.name, user, since) or now
+                raise RequestError(
+                    "forbidden",
+                    f"quota: {used} of {a.quota} graded runs in the last 24 h; the next is "
+                    f"possible at {_when(oldest + DAY_S)} (runs the lab failed do not count)",
+                    retry_after=max(1.0, oldest + DAY_S - now),
+                )
+            sub = self.store.add_submission(
+                a.name, user, request.filename, request.source, late_days
+            )
+            position = self.queue.put(user, sub)
+        self.log.info("submission %s of %s to %s queued (%d)", sub.id, user, a.name, position)
+        note = ""
+        if late_days:
+            note = f"late by {late_days} day(s): {late_days * a.penalty_per_day:g} off the score"
+        return SubmitAccepted(
+            submission=sub.id,
+            position=position,
+            used=used + 1,
+            quota=a.quota,
+            late_days=late_days,
+            note=note,
+        )
+
+    def _pseudonym(self, user: str, a: Assignment, pseudonym: str) -> OkReply:
+        if pseudonym and not re.match(PSEUDONYM_PATTERN, pseudonym):
+            raise RequestError(
+                "bad_request", "a pseudonym is 1 to 32 letters, digits, spaces, '_', '-', '.'"
+            )
+        try:
+            self.store.set_pseudonym(a.course, user, pseudonym)
+        except DbError as exc:
+            raise RequestError("conflict", str(exc)) from None
+        if not pseudonym:
+            return OkReply(detail=f"your roster name shows on {a.course}'s leaderboards")
+        return OkReply(detail=f"you show as {pseudonym} on {a.course}'s leaderboards")
+
+    def leaderboard(self, a: Assignment, teacher: bool) -> Leaderboard:
+        hidden = a.hidden and time.time() < a.deadline
+        entries: list[LeaderEntry] = []
+        if teacher or not hidden:
+            names = self.store.display_names(a.course)
+            chosen = self.store.pseudonyms(a.course)
+            best = self.store.best(a.name, higher=a.order == "higher")
+            best.sort(key=lambda row: (-row[1] if a.order == "higher" else row[1], row[3]))
+            rank, previous = 0, None
+            for i, (user, score, sub, at) in enumerate(best):
+                if score != previous:
+                    rank, previous = i + 1, score
+                entries.append(
+                    LeaderEntry(
+                        rank=rank,
+                        name=_shown(names.get(user) or user, chosen.get(user), teacher),
+                        score=round(score, 4),
+                        submission=sub,
+                        at=at,
+                    )
+                )
+        return Leaderboard(
+            assignment=a.name,
+            score_name=a.score_name,
+            unit=a.unit,
+            order=a.order,  # type: ignore[arg-type]
+            hidden=hidden,
+            deadline=a.deadline,
+            entries=entries,
+        )
+
+    # -- grading
+
+    def _work(self) -> None:
+        while True:
+            item = self.queue.get()
+            if item is None:
+                return
+            _user, sub = item
+            try:
+                self._grade(sub)
+            except Exception:
+                self.log.exception("grading %s failed", sub.id)
+                self.store.set_status(sub.id, "queued", "the grader failed: queued again")
+
+    def _grade(self, sub: Pending) -> None:
+        a, map_text = self.store.assignment(sub.assignment)
+        self.store.set_status(sub.id, "running")
+        graded = self.episodes.grade(sub, a, map_text)
+        if self.stopped and graded.lab_failed:
+            return  # the grader is stopping: left queued, graded at the next start
+        if graded.lab_failed:
+            self.store.finish(
+                sub.id,
+                graded.episodes,
+                status="failed",
+                counted=False,
+                mean=None,
+                low=None,
+                penalty=0.0,
+                message=f"the lab could not grade it ({graded.lab_failed}): not counted "
+                "against your quota; submit again",
+            )
+            self.log.warning("submission %s: the lab failed: %s", sub.id, graded.lab_failed)
+            return
+        late = self.store.submissions(sub.assignment, sub.user, sub.id)[0].late_days
+        taken = late * a.penalty_per_day
+        # Stored as what comes off the mean: an addition when lower is better.
+        penalty = taken if a.order == "higher" else -taken
+        reruns = sum(e.lab_reruns for e in graded.episodes)
+        message = f"{a.score_name}: mean {graded.mean:g}, min {graded.low:g}"
+        if reruns:
+            message += f"; {reruns} episode run(s) failed through the lab and ran again, free"
+        self.store.finish(
+            sub.id,
+            graded.episodes,
+            status="graded",
+            counted=True,
+            mean=graded.mean,
+            low=graded.low,
+            penalty=penalty,
+            message=message,
+        )
+        self.log.info("submission %s of %s graded: %s", sub.id, sub.user, message)

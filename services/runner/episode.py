@@ -1,0 +1,229 @@
+"""A graded episode: a submission's controller for an assignment's time in a private world.
+
+The dry run's machinery (services/runner/dryrun.py: the sandbox in lockstep,
+one state in and a ``step`` out, the robot's new contacts) on a World built
+from the assignment's map with its seed and start pose, instead of a copy of
+a running arena. What it records is what an assignment's score reads
+(services/grader/score.py): the time each zone was first reached by the
+robot's centre, the time each movable object first lay in a zone of kind
+``nest``, the robot's new contacts by kind, the distance it drove and the
+simulated time. How it ended is the ``cause``: the student's code (an
+exception with its line, a timeout, memory, CPU, an output flood) or the lab
+(the sandbox could not start): the grader re-runs a lab fault for free.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import threading
+import time
+
+from common.controller import RobotCommand
+from common.controller.actuators import apply_command
+from common.messages import Episode, EpisodeReport
+from common.sim2d import maps
+from common.sim2d.entities import Zone
+from common.sim2d.world import EditError, World
+from services.runner.dryrun import _error_line, _last_line, _state, _Touches
+from services.runner.sandbox import Sandbox, SandboxLimits
+
+MAX_OUTPUT = 20
+DELIVERY_EVERY_S = 0.1  # objects in nests are looked at this often (simulated s)
+
+
+def episode_wall_limit(seconds: float) -> float:
+    """Wall-clock time an episode may take: a well-behaved controller steps at several
+    times real time on a loaded 2-core machine; a loop is caught well before this."""
+    return 10.0 + 1.5 * seconds
+
+
+def build_episode_world(request: Episode) -> World:
+    """The episode's World: its map with its seed, the robot at its start pose (ValueError)."""
+    try:
+        data = json.loads(request.map)
+    except ValueError as exc:
+        raise ValueError(f"the episode's map is not JSON: {exc}") from None
+    world = maps.build_world(
+        maps.parse_map(json.dumps(data), source="assignment map"),
+        name="episode",
+        seed=request.seed,
+        source="assignment map",
+    )
+    try:
+        world.agent_slot(request.agent)
+    except KeyError:
+        raise ValueError(f"the map has no robot {request.agent}") from None
+    try:
+        world.move(request.agent, request.x, request.y, request.heading)
+    except EditError as exc:
+        raise ValueError(f"start pose: {exc}") from None
+    return world
+
+
+def in_zone(zone: Zone, x: float, y: float) -> bool:
+    """Whether the point (mm) lies in the zone's outline."""
+    if zone.shape.kind == "circle":
+        return math.hypot(x - zone.x, y - zone.y) <= zone.shape.radius_mm
+    pts = zone.shape.world_vertices(zone.x, zone.y, zone.heading)
+    inside = False
+    for (ax, ay), (bx, by) in zip(pts, pts[1:] + pts[:1], strict=True):
+        if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
+            inside = not inside
+    return inside
+
+
+def _cause(sandbox: Sandbox, timed_out: bool, finished_early: bool) -> tuple[str, str]:
+    """(cause, detail) of an episode that did not run its whole time."""
+    error = sandbox.error_text
+    reason = sandbox.exit_reason
+    if error:
+        line = _error_line(error)
+        where = f"line {line}: " if line else ""
+        if "out of memory" in reason:
+            return "memory", f"{where}{reason}"
+        return "exception", f"{where}{_last_line(error)}"
+    if "output flood" in reason:
+        return "output", reason
+    if "CPU time" in reason:
+        return "cpu", reason
+    if timed_out:
+        return "timeout", "it did not answer in time (an endless loop, or too slow for its period)"
+    if "SIGKILL" in reason or "SIGSEGV" in reason:
+        # The kernel's OOM killer, or the address-space limit, ends it by a signal.
+        return "memory", f"{reason} (out of memory?)"
+    if finished_early and reason == "the controller finished":
+        return "finished", "the controller returned before the time limit"
+    return "ended", reason or "the controller ended"
+
+
+def run_episode(
+    request: Episode, *, limits: SandboxLimits | None = None, wall_s: float | None = None
+) -> EpisodeReport:
+    """Run the episode; ValueError for a bad map or pose, RuntimeError/OSError if no
+    sandbox can start (the lab's fault: the caller says so)."""
+    wall_s = episode_wall_limit(request.seconds) if wall_s is None else wall_s
+    world = build_episode_world(request)
+    slot = world.agent_slot(request.agent)
+    # One idle tick before the clock starts: it fills the world's arrays (poses, readings),
+    # and a runner's first one compiles the kernels, which is no student's time.
+    world.step()
+    started = time.monotonic()
+    output: list[str] = []
+    commands: list[RobotCommand] = []
+    lock = threading.Lock()
+    answered = threading.Event()
+
+    def on_command(command: RobotCommand) -> None:
+        with lock:
+            commands.append(command)
+
+    def on_output(line: str) -> None:
+        with lock:
+            if len(output) < MAX_OUTPUT and not line.startswith("[runner] controller"):
+                output.append(line[:256])
+
+    base = limits or SandboxLimits()
+    limits = SandboxLimits(
+        cpu_seconds=min(base.cpu_seconds, int(wall_s) + 1),
+        memory_bytes=base.memory_bytes,
+        processes=base.processes,
+        open_files=base.open_files,
+        file_size_bytes=base.file_size_bytes,
+        output_lines_per_second=base.output_lines_per_second,
+        commands_per_second=100_000,  # lockstep: nothing but this world listens
+        output_bytes_per_second=base.output_bytes_per_second,
+        cpu_share=base.cpu_share,
+    )
+    sandbox = Sandbox(
+        request.source,
+        filename=request.filename,
+        limits=limits,
+        on_command=on_command,
+        on_output=on_output,
+        on_step=answered.set,
+    )
+    deadline = started + wall_s
+    sandbox.start(wall_s)
+    touches = _Touches(world, slot)
+    collisions: dict[str, int] = {}
+    reached: dict[str, float] = {}
+    delivered: dict[str, float] = {}
+    nests = [z for z in world.zones.values() if z.kind == "nest"]
+    check_every = max(1, round(DELIVERY_EVERY_S / world.tick_s))
+    steps = 0
+    distance = 0.0
+    timed_out = False
+    ticks = round(request.seconds / world.tick_s)
+    t0 = world.sim_time
+    last = world.agent_pose[slot][:2].copy()
+    try:
+        for tick in range(ticks):
+            answered.clear()
+            if not sandbox.send_state(_state(world, slot)):
+                break
+            while not answered.wait(0.05):
+                if time.monotonic() >= deadline:
+                    timed_out = True
+                    break
+                if sandbox.wait(0):
+                    break
+            if timed_out or not answered.is_set():
+                break
+            steps += 1
+            with lock:
+                mine, commands[:] = list(commands), []
+            robot = world.actuators(slot)
+            for command in mine:
+                with contextlib.suppress(EditError):
+                    apply_command(command, robot)
+            world.step()
+            at = round(world.sim_time - t0, 3)
+            for what, _ident in touches.new_contacts():
+                collisions[what] = collisions.get(what, 0) + 1
+            x, y = (float(v) for v in world.agent_pose[slot][:2])
+            distance += math.hypot(x - last[0], y - last[1])
+            last = (x, y)
+            for zone in world.zones.values():
+                if zone.id not in reached and in_zone(zone, x, y):
+                    reached[zone.id] = at
+            if nests and tick % check_every == 0:
+                _deliveries(world, nests, delivered, at)
+    finally:
+        sandbox.stop(grace=0.3, reason="the episode ended")
+    if nests:
+        _deliveries(world, nests, delivered, round(world.sim_time - t0, 3))
+    sim = world.sim_time - t0
+    if steps >= ticks:
+        cause, detail = "ok", f"ran its {request.seconds:g} simulated s"
+    else:
+        cause, detail = _cause(sandbox, timed_out, finished_early=True)
+    error = sandbox.error_text
+    return EpisodeReport(
+        cause=cause,  # type: ignore[arg-type]
+        detail=detail[:256],
+        error_line=_error_line(error) if error else None,
+        sim_seconds=round(sim, 3),
+        wall_seconds=round(time.monotonic() - started, 3),
+        steps=steps,
+        collisions=collisions,
+        reached=reached,
+        delivered=delivered,
+        distance_mm=round(distance, 1),
+        output=output,
+    )
+
+
+def _deliveries(world: World, nests: list[Zone], delivered: dict[str, float], at: float) -> None:
+    """Objects lying in a nest now, first time noted."""
+    poses = world.object_pose if world.drive == "discs" else None
+    for j, obj in enumerate(world.objects):
+        if obj.id in delivered:
+            continue
+        if poses is not None and j < len(poses):
+            x, y = float(poses[j][0]), float(poses[j][1])
+        else:
+            x, y, _ = world.pose_of(obj.id)
+        if any(in_zone(nest, x, y) for nest in nests):
+            delivered[obj.id] = at

@@ -1,0 +1,169 @@
+"""The Course folder of an arena's panel: my assignments, submit the editor's code, my scores,
+the leaderboard (the grader, docs/COURSES.md).
+
+A student picks an assignment of their courses, hands in the file open in the
+workbench's editor, and reads their submissions (status, mean, each episode's
+score and how it ended: their code's fault with the line, or the lab's, re-run
+free) and the leaderboard, each refreshed on request.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import viser
+
+from common.messages import AssignmentInfo, Leaderboard, SubmissionInfo
+from viewers.web.adapters import LabConnection, LabError
+from viewers.web.inputs import on_click, set_value
+from viewers.web.text import escape_md
+
+NONE = "(no assignment)"
+MAX_SHOWN = 10  # the latest submissions in the table
+
+
+def _when(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(t))
+
+
+def _num(value: float | None) -> str:
+    return "-" if value is None else f"{value:g}"
+
+
+def format_assignment(a: AssignmentInfo) -> str:
+    better = "higher" if a.order == "higher" else "lower"
+    unit = f" {escape_md(a.unit)}" if a.unit else ""
+    return (
+        f"**{escape_md(a.title)}** ({escape_md(a.course)}): {a.episodes} episodes of "
+        f"{a.time_limit:g} simulated s; due {_when(a.deadline)}; {a.quota} graded runs a day. "
+        f"Score: {escape_md(a.score_name)}{unit}, {better} is better: `{escape_md(a.rule)}`"
+    )
+
+
+def format_submissions(subs: list[SubmissionInfo]) -> str:
+    if not subs:
+        return "_No submission of yours yet._"
+    lines = ["| submitted | status | mean | episodes |", "| --- | --- | --- | --- |"]
+    for s in subs[-MAX_SHOWN:][::-1]:
+        episodes = "; ".join(
+            f"{e.episode}: {_num(e.score)} ({escape_md(e.cause)}"
+            + (f", line {e.error_line}" if e.error_line else "")
+            + (f", lab re-run {e.lab_reruns}x free" if e.lab_reruns else "")
+            + ")"
+            for e in s.episodes
+        )
+        status = s.status if s.status != "failed" else "failed (the lab's; not counted)"
+        when = time.strftime("%H:%M:%S", time.localtime(s.submitted_at))
+        lines.append(f"| {when} | {status} | {_num(s.mean)} | {episodes or '-'} |")
+    return "\n".join(lines)
+
+
+def format_board(board: Leaderboard) -> str:
+    if board.hidden and not board.entries:
+        return f"_Hidden until the deadline, {_when(board.deadline)}._"
+    if not board.entries:
+        return "_No graded submission yet._"
+    lines = ["| rank | name | score |", "| --- | --- | --- |"]
+    for e in board.entries[:50]:
+        lines.append(f"| {e.rank} | {escape_md(e.name)} | {e.score:g} |")
+    return "\n".join(lines)
+
+
+class CoursePanel:
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        connection: LabConnection,
+        *,
+        source: Callable[[], tuple[str, bytes] | None],
+    ) -> None:
+        """``source``: the editor's file name and code (None: the name is not a file name)."""
+        self.connection = connection
+        self._source = source
+        self._assignments: dict[str, AssignmentInfo] = {}
+        gui = client.gui
+        with gui.add_folder("Course", expand_by_default=False) as self.folder:
+            self.refresh_button = gui.add_button("Refresh assignments", icon=viser.Icon.REFRESH)
+            self.chosen = gui.add_dropdown("Assignment", (NONE,))
+            self.about = gui.add_markdown("")
+            self.submit_button = gui.add_button(
+                "Submit the editor's code", color="green", icon=viser.Icon.SEND
+            )
+            self.status = gui.add_markdown("")
+            self.scores_button = gui.add_button("My scores", icon=viser.Icon.LIST_NUMBERS)
+            self.scores = gui.add_markdown("")
+            self.board_button = gui.add_button("Leaderboard", icon=viser.Icon.TROPHY)
+            self.board = gui.add_markdown("")
+        on_click(self.refresh_button, self.refresh)
+        on_click(self.submit_button, self.submit)
+        on_click(self.scores_button, self.show_scores)
+        on_click(self.board_button, self.show_board)
+        self.chosen.on_update(lambda _: self._describe())
+
+    def say(self, text: str, *, bad: bool = False) -> None:
+        self.status.content = ("**Not done:** " if bad else "") + escape_md(text)
+
+    def _assignment(self) -> str | None:
+        name = self.chosen.value
+        if name not in self._assignments:
+            self.say("Pick an assignment first (Refresh assignments lists yours).", bad=True)
+            return None
+        return name
+
+    def _describe(self) -> None:
+        a = self._assignments.get(self.chosen.value)
+        self.about.content = format_assignment(a) if a else ""
+
+    def refresh(self) -> list[str]:
+        try:
+            found = self.connection.assignments()
+        except LabError as exc:
+            self.say(f"Could not list your assignments: {exc}", bad=True)
+            return []
+        self._assignments = {a.name: a for a in found}
+        options = tuple(self._assignments) or (NONE,)
+        keep = self.chosen.value
+        self.chosen.options = options
+        set_value(self.chosen, keep if keep in options else options[0])
+        self._describe()
+        self.say(f"{len(found)} assignment(s) in your courses." if found else "No assignment yet.")
+        return list(self._assignments)
+
+    def submit(self) -> str | None:
+        name = self._assignment()
+        file = self._source()
+        if name is None or file is None:
+            return None
+        filename, code = file
+        try:
+            said = self.connection.submit(name, filename, code)
+        except LabError as exc:
+            self.say(str(exc), bad=True)
+            return None
+        self.say(said + " (My scores shows it once graded)")
+        return said
+
+    def show_scores(self) -> list[SubmissionInfo]:
+        name = self._assignment()
+        if name is None:
+            return []
+        try:
+            subs = self.connection.submissions(name)
+        except LabError as exc:
+            self.say(f"Could not read your scores: {exc}", bad=True)
+            return []
+        self.scores.content = format_submissions(subs)
+        return subs
+
+    def show_board(self) -> Leaderboard | None:
+        name = self._assignment()
+        if name is None:
+            return None
+        try:
+            board = self.connection.leaderboard(name)
+        except LabError as exc:
+            self.say(f"Could not read the leaderboard: {exc}", bad=True)
+            return None
+        self.board.content = format_board(board)
+        return board
