@@ -41,7 +41,7 @@ from common import keys  # noqa: E402
 from common.messages import WorldFrame, decode  # noqa: E402
 from common.service import close_session, open_session  # noqa: E402
 from common.zconfig import NetworkOptions  # noqa: E402
-from services.lab.wiring import map_with_robots  # noqa: E402
+from services.lab.lab_maps import map_with_robots  # noqa: E402
 
 REALM = "benchhost"
 REAL_TIME = 0.95

@@ -39,9 +39,10 @@ from common.keys import AliveKind
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.lab import wiring
+from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.labfile import ArenaSettings
 from services.lab.supervisor import AliveWatch, ChildSpec, start_wart
-from services.lab.wiring import SHIPPED_MAPS, Wiring, up_args
+from services.lab.wiring import Wiring, up_args
 from services.registry import accounts_db
 from services.registry.accounts_db import RegistryDB, hash_password
 

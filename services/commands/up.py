@@ -26,11 +26,11 @@ from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkO
 from services.lab import wiring
 from services.lab.driver import HostDriver, say
 from services.lab.hosting import HostingPlan, HostingService
+from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.labfile import ArenaSettings, Limits, ServiceEntry, service_entry
 from services.lab.provision import provision_one_host
 from services.lab.supervisor import Child, ChildSpec, Supervisor
 from services.lab.wiring import (
-    SHIPPED_MAPS,
     Wiring,
     default_state_dir,
     host_accounts,

@@ -19,9 +19,8 @@ from pathlib import Path
 
 from services.grader.assignment import AssignmentError, parse_assignment
 from services.grader.grading_db import GradingStore
+from services.lab.lab_maps import SHIPPED_MAPS
 from services.registry.accounts_db import DbError, RegistryDB
-
-SHIPPED_MAPS = Path(__file__).resolve().parents[2] / "maps"
 
 
 def _when(t: float) -> str:

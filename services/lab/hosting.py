@@ -44,13 +44,13 @@ from common.messages.host import (
 from common.revocations import RevocationFeed
 from common.robots import registry as robot_registry
 from common.service import RequestError, Service
+from services.lab.lab_maps import map_with_robots
 from services.lab.labfile import Limits
 from services.lab.supervisor import Child, ChildSpec, Supervisor
 from services.lab.wiring import (
     Wiring,
     arena_specs,
     chat_room_spec,
-    map_with_robots,
     plugin_context_spec,
     room_account,
 )

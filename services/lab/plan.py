@@ -15,10 +15,11 @@ from common.zconfig import NetworkOptions
 from services.cli import SUBCOMMANDS
 from services.context.main import KINDS as CONTEXT_KINDS
 from services.lab import wiring
+from services.lab.lab_maps import SHIPPED_MAPS, find_map
 from services.lab.labfile import HostEntry, LabFile, LabFileError
 from services.lab.pki import host_roles, identity_path, registry_key_path
 from services.lab.supervisor import ChildSpec
-from services.lab.wiring import SHIPPED_MAPS, Wiring, default_state_dir
+from services.lab.wiring import Wiring, default_state_dir
 from services.lab.zsecurity import acl_config, host_tls, write_config, zenoh_security
 
 # The command each service kind needs (a build without one refuses the host).
@@ -166,7 +167,7 @@ def router_spec(ctx: HostContext) -> ChildSpec:
 
 def resolve_map(lab: LabFile, name: str) -> Path:
     """A map by plain name (never a path from the network): the lab's, then the shipped ones."""
-    return wiring.find_map(name, (lab.maps_dir, SHIPPED_MAPS))
+    return find_map(name, (lab.maps_dir, SHIPPED_MAPS))
 
 
 def host_plan(ctx: HostContext) -> list[ChildSpec]:

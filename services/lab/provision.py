@@ -18,8 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.auth import RegistryIdentity, create_identity_key, load_identity_key
+from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.labfile import LabFileError
-from services.lab.wiring import ACCOUNT_PREFIX, SHIPPED_MAPS
+from services.lab.wiring import ACCOUNT_PREFIX
 from services.registry.accounts_db import RegistryDB
 from services.registry.service import provision as provision_registry_db
 

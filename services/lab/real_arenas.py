@@ -11,8 +11,9 @@ from pathlib import Path
 
 from common import keys
 from common.keys import AliveKind
+from services.lab.lab_maps import map_pose
 from services.lab.supervisor import ChildSpec
-from services.lab.wiring import Wiring, map_pose, service_account
+from services.lab.wiring import Wiring, service_account
 
 
 def emulator_link(w: Wiring, world: str) -> Path:

@@ -26,7 +26,7 @@ from common.recording import plots, read_recording
 from common.recording.compare import compare
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
-from services.lab.wiring import map_pose
+from services.lab.lab_maps import map_pose
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import agent_user, start_agent_context, start_engine, start_runner

@@ -25,8 +25,8 @@ from common.client.survey import Survey
 from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from common.messages.audit import AuditEntry, AuditQuery
-from common.messages.world import RobotTypeReply
 from common.messages.grading import AssignmentInfo, Leaderboard, SubmissionInfo
+from common.messages.world import RobotTypeReply
 from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
