@@ -51,6 +51,7 @@ from common.messages import (
     MessageError,
     OkReply,
     PrivateMessage,
+    ResumeCredential,
     Revocation,
     RevocationList,
     SealedLogin,
@@ -66,6 +67,7 @@ from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 from services.registry.admin import REGISTRY_USER, AdminRequests, ban_refusal, source_of
 from services.registry.audit_db import Action, TermStore
+from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, vouched_source
 
 log = logging.getLogger("wart.registry")
@@ -91,6 +93,7 @@ class Registry(AdminRequests, Service):
         self.db = db
         self.term = TermStore(db)
         self.identity = identity
+        self.resumes = ResumeStore(db, identity, realm)
         self.throttle = throttle or LoginThrottle()
         self.verifier = Verifier(identity.verify_key, realm)
         self._unsealer = nacl.public.SealedBox(identity.box_private_key)
@@ -175,7 +178,15 @@ class Registry(AdminRequests, Service):
         source = self._login_source(query, request)
         now = time.time()
         self.throttle.check(user, source, now, key_login=isinstance(cred, KeyCredential))
-        if not self._credential_ok(request, now):
+        if isinstance(cred, ResumeCredential):
+            try:
+                self.resumes.use(user, cred.token, now)
+            except RequestError:
+                # A bad token counts as a failed login: guessing tokens is throttled too.
+                self.throttle.failed(user, source, now)
+                log.info("refused a resume of %s (from %s)", user, source)
+                raise
+        elif not self._credential_ok(request, now):
             self.throttle.failed(user, source, now)
             log.info("failed login for %s (from %s, says %r)", user, source, request.via)
             what = "key" if isinstance(cred, KeyCredential) else "password"
@@ -202,16 +213,26 @@ class Registry(AdminRequests, Service):
             grants=scoped,  # type: ignore[arg-type]
         )
         self.db.record_session(token.session_id, user, request.box_key, now, token.expires_at)
-        self.db.set_mailbox_key(user, request.mailbox_key)
         pending = []
-        for raw in self.db.take_mailbox(user):
-            try:
-                pending.append(decode(raw, PrivateMessage))
-            except MessageError as exc:
-                log.warning("dropped a damaged stored message for %s: %s", user, exc)
-        log.info("%s logged in (session %s)", user, token.session_id.hex()[:8])
+        # A resume knows no mailbox key (no password to derive it from): kept messages
+        # stay kept for the next password login.
+        if request.mailbox_key is not None:
+            self.db.set_mailbox_key(user, request.mailbox_key)
+            for raw in self.db.take_mailbox(user):
+                try:
+                    pending.append(decode(raw, PrivateMessage))
+                except MessageError as exc:
+                    log.warning("dropped a damaged stored message for %s: %s", user, exc)
+        resume = None
+        if request.resume and not isinstance(cred, KeyCredential):
+            resume = self.resumes.issue(user, token.session_id, token.expires_at, now)
+        how = "resumed" if isinstance(cred, ResumeCredential) else "logged in"
+        log.info("%s %s (session %s)", user, how, token.session_id.hex()[:8])
         return LoginReply(
-            token=self.identity.sign_token(token), server_name=self.server_name, pending=pending
+            token=self.identity.sign_token(token),
+            server_name=self.server_name,
+            pending=pending,
+            resume=resume,
         )
 
     def _login_source(self, query: zenoh.Query, request: LoginRequest) -> str:
@@ -238,7 +259,7 @@ class Registry(AdminRequests, Service):
 
     def _credential_ok(self, request: LoginRequest, now: float) -> bool:
         cred = request.credential
-        if cred.user == REGISTRY_USER:
+        if cred.user == REGISTRY_USER or isinstance(cred, ResumeCredential):
             return False
         if isinstance(cred, KeyCredential):
             if abs(now - cred.signed_at) > acl.KEY_LOGIN_MAX_AGE:
@@ -254,13 +275,22 @@ class Registry(AdminRequests, Service):
         return self.db.check_credential(cred.user, "password", cred.password)
 
     def on_logout(self, query: zenoh.Query) -> Message:
-        principal, _ = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
-        self._revoke([principal.session_id], "logged out")
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
+        self._revoke([principal.session_id], "logged out", keep_resume=request.keep_resume)
         return OkReply(detail="logged out")
 
     # -- revocations
 
-    def _revoke(self, session_ids: list[bytes], reason: str, *, kicked: bool = False) -> int:
+    def _revoke(
+        self,
+        session_ids: list[bytes],
+        reason: str,
+        *,
+        kicked: bool = False,
+        keep_resume: bool = False,
+    ) -> int:
+        if not keep_resume:
+            self.resumes.revoke_sessions(session_ids, reason)
         revoked = []
         for session_id in session_ids:
             rec = self.db.revoke(session_id, reason, kicked=kicked)

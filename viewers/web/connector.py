@@ -171,6 +171,29 @@ class LiveConnector:
     def login(
         self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
     ) -> LiveConnection:
+        return self._open(
+            address,
+            lambda c: c.login(user, password, wait=self.login_wait, resume=True),
+            "wrong user name or password",
+            via,
+            seen_from,
+        )
+
+    def resume(
+        self, address: LabAddress, token: bytes, via: str = "", seen_from: str = ""
+    ) -> LiveConnection:
+        """A saved login (viewers/web/saved_login.py): no password, one signature check."""
+        resume = lambda c: c.resume(token, wait=self.login_wait)  # noqa: E731
+        return self._open(address, resume, "", via, seen_from)
+
+    def _open(
+        self,
+        address: LabAddress,
+        log_in: Callable[[lab.LabClient], object],
+        wrong: str,
+        via: str,
+        seen_from: str,
+    ) -> LiveConnection:
         link = self._link(address)
         # Only our own lab's registry knows the viewer's account: elsewhere the
         # login counts against this viewer's Zenoh session, like any client's.
@@ -186,10 +209,16 @@ class LiveConnector:
             voucher=voucher,
         )
         try:
-            client.login(user, password, wait=self.login_wait)
-        except lab_errors.WrongCredentials:
+            log_in(client)
+        except lab_errors.WrongCredentials as exc:
             self._unlink(link)
-            raise LoginError("wrong user name or password") from None
+            # A password's refusal says nothing more; a saved login's says why it ended.
+            raise LoginError(wrong or str(exc)) from None
+        except ValueError as exc:  # a saved login's token that is not one at all
+            self._unlink(link)
+            raise LoginError(
+                f"your saved login is damaged ({exc}): log in with your password"
+            ) from None
         except lab_errors.RegistryKeyMismatch:
             self._unlink(link)
             raise LoginError(
@@ -210,7 +239,7 @@ class LiveConnector:
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None
-        connection = LiveConnection(self, link, client, address.with_user(user))
+        connection = LiveConnection(self, link, client, address.with_user(client.user))
         with self._lock:
             self._connections.append(connection)
         return connection
@@ -228,7 +257,7 @@ class LiveConnector:
         with self._lock:
             connections = list(self._connections)
         for connection in connections:
-            connection.logout()
+            connection.logout(keep_resume=True)  # the viewer stops, the person did not log out
         with self._lock:
             links = list(self._links.values())
             self._links.clear()
