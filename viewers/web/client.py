@@ -188,8 +188,12 @@ class BrowserSession:
         self._save_login(address, None)
         if self.closed:
             return
-        self.say_notice(f"Could not log in again with your saved login: {why}")
         self.connect(address.url())  # the password form, for that lab and user
+        words = f"Could not log in again with your saved login: {why}"
+        if self.login is not None:
+            self.login.show_error(words)
+        else:
+            self.say_notice(words)
 
     def _save_login(self, address: LabAddress, token: bytes | None) -> None:
         """Keep (or with None, forget) this lab's saved login in the browser's cookie."""
