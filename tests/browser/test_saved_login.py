@@ -43,9 +43,7 @@ def _wait_saved(page, want: bool) -> None:
     raise AssertionError(f"the page's saved login: wanted {want}, cookies {_saved(page)}")
 
 
-def test_a_reload_resumes_without_the_password_and_log_out_forgets(
-    open_page, lab: RealLab
-) -> None:
+def test_a_reload_resumes_without_the_password_and_log_out_forgets(open_page, lab: RealLab) -> None:
     page = open_page("alice")
     log_in(page, lab, "alice")
     _wait_saved(page, True)
