@@ -74,6 +74,8 @@ from common.messages import (
     LoginReply,
     LoginRequest,
     LogoutRequest,
+    MailboxClaim,
+    MailboxContents,
     MailboxDeposit,
     Message,
     MessageError,
@@ -295,17 +297,21 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         ttl: float = 12 * 3600.0,
         wait: float | None = None,
         resume: bool = False,
+        defer_mailbox: bool = False,
     ) -> SessionToken:
         """Log in with a password; raises WrongCredentials, RateLimited, RegistryUnreachable...
 
         ``wait``: how long to wait for the registry's answer (default: LOGIN_WAIT_S, or
         this client's timeout if longer); a gateway that must answer its user sooner
         passes less. ``resume``: ask for a resume token too (``resume_token``).
+        ``defer_mailbox``: log in without deriving the mailbox key (argon2id, as costly as
+        the registry's check); the caller derives it after, with :meth:`claim_mailbox`
+        (a gateway logging a class in at once on the lab's own cores).
         """
         keys.check_ident("user", user)
         if wait is not None and not wait > 0:
             raise ValueError(f"a login must wait a positive time, not {wait}")
-        mailbox = mailbox_key_from_password(self.realm, user, password)
+        mailbox = None if defer_mailbox else mailbox_key_from_password(self.realm, user, password)
         return self._login(
             PasswordCredential(user=user, password=password),
             mailbox,
@@ -314,6 +320,24 @@ class LabClient(RoomCalls, RegistryAdminCalls):
             wait,
             resume=resume,
         )
+
+    def claim_mailbox(self, password: str) -> list[PrivateText]:
+        """After a ``defer_mailbox`` login: derive the mailbox key, tell the registry, and
+        return the messages kept while offline (each also given to ``on_private``)."""
+        if self.session is None:
+            raise NotLoggedIn("log in first")
+        mailbox = mailbox_key_from_password(self.realm, self.session.user, password)
+        reply = self._ask(
+            keys.registry_directory(self.realm),
+            MailboxClaim(mailbox_key=bytes(mailbox.public_key)),
+            MailboxContents,
+            "mailbox",
+        )
+        self._mailbox = mailbox
+        kept = [t for t in (self._open_private(m, kept=True) for m in reply.pending) if t]
+        for text in kept:
+            self.on_private(text)
+        return kept
 
     def resume(
         self, token: bytes, *, ttl: float = 12 * 3600.0, wait: float | None = None
@@ -546,7 +570,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         return seal_private(self.session, user, to_key, text)
 
     def _open_private(self, message: PrivateMessage, *, kept: bool) -> PrivateText | None:
-        if self.session is None or self._mailbox is None:
+        if self.session is None:
             return None
         return open_private(self.session, self._mailbox, message, kept=kept)
 

@@ -193,6 +193,19 @@ class MailboxDeposit(Message, frozen=True):
     message: PrivateMessage
 
 
+class MailboxClaim(Message, frozen=True):
+    """A session's mailbox key, sent after its login (derived off the login's path):
+    the registry records it and answers with the messages kept meanwhile."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
+
+    mailbox_key: Bytes32
+
+
+class MailboxContents(Message, frozen=True):
+    pending: list[PrivateMessage] = msgspec.field(default_factory=list)
+
+
 # --- revocations ----------------------------------------------------------------------
 
 
@@ -376,6 +389,8 @@ __all__ = [
     "LoginRequest",
     "LoginVouch",
     "LogoutRequest",
+    "MailboxClaim",
+    "MailboxContents",
     "MailboxDeposit",
     "PasswordCredential",
     "PrivateMessage",

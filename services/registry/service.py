@@ -46,6 +46,8 @@ from common.messages import (
     LoginRequest,
     LoginVouch,
     LogoutRequest,
+    MailboxClaim,
+    MailboxContents,
     MailboxDeposit,
     Message,
     MessageError,
@@ -213,16 +215,11 @@ class Registry(AdminRequests, Service):
             grants=scoped,  # type: ignore[arg-type]
         )
         self.db.record_session(token.session_id, user, request.box_key, now, token.expires_at)
+        # No mailbox key: a resume (no password to derive it from), or a client that
+        # derives it after its login (MailboxClaim): kept messages stay kept till then.
         pending = []
-        # A resume knows no mailbox key (no password to derive it from): kept messages
-        # stay kept for the next password login.
         if request.mailbox_key is not None:
-            self.db.set_mailbox_key(user, request.mailbox_key)
-            for raw in self.db.take_mailbox(user):
-                try:
-                    pending.append(decode(raw, PrivateMessage))
-                except MessageError as exc:
-                    log.warning("dropped a damaged stored message for %s: %s", user, exc)
+            pending = self._mailbox(user, request.mailbox_key)
         resume = None
         if request.resume and not isinstance(cred, KeyCredential):
             resume = self.resumes.issue(user, token.session_id, token.expires_at, now)
@@ -234,6 +231,17 @@ class Registry(AdminRequests, Service):
             pending=pending,
             resume=resume,
         )
+
+    def _mailbox(self, user: str, mailbox_key: bytes) -> list[PrivateMessage]:
+        """Record ``user``'s mailbox key; the messages kept for them, taken."""
+        self.db.set_mailbox_key(user, mailbox_key)
+        pending = []
+        for raw in self.db.take_mailbox(user):
+            try:
+                pending.append(decode(raw, PrivateMessage))
+            except MessageError as exc:
+                log.warning("dropped a damaged stored message for %s: %s", user, exc)
+        return pending
 
     def _login_source(self, query: zenoh.Query, request: LoginRequest) -> str:
         """The throttle's source: the querier's Zenoh session, or what a gateway vouches.
@@ -373,10 +381,12 @@ class Registry(AdminRequests, Service):
         principal, request = self.verifier.open(
             str(query.key_expr),
             query.payload,
-            (DirectoryRequest, UserKeysRequest, MailboxDeposit),
+            (DirectoryRequest, UserKeysRequest, MailboxDeposit, MailboxClaim),
         )
         if isinstance(request, UserKeysRequest):
             return self._user_keys(request.user)
+        if isinstance(request, MailboxClaim):
+            return MailboxContents(pending=self._mailbox(principal.user, request.mailbox_key))
         if isinstance(request, MailboxDeposit):
             return self._deposit(principal, request.message)
         self._refresh.set()

@@ -4,7 +4,8 @@ and logout, kick, ban and a password change each end it, in words."""
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -39,10 +40,10 @@ def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @contextmanager
-def _client(lab: ProcessLab) -> Iterator[LabClient]:
+def _client(lab: ProcessLab, presence: bool = False) -> Iterator[LabClient]:
     session = open_session(lab.router.options(), wait=10.0)
     try:
-        with LabClient(session, lab.realm, lab.identity.verify_key, presence=False) as client:
+        with LabClient(session, lab.realm, lab.identity.verify_key, presence=presence) as client:
             yield client
     finally:
         close_session(session)
@@ -122,3 +123,41 @@ def test_a_forged_token_is_refused_in_words(lab: ProcessLab) -> None:
     assert "log in with your password" in str(info.value)
     with _client(lab) as page:
         page.resume(token)  # the real one was not touched by the forgery
+
+
+def test_a_login_deriving_its_mailbox_key_after_still_gets_its_kept_messages(
+    lab: ProcessLab,
+) -> None:
+    with _client(lab) as first:
+        first.login("bob", PASSWORD)  # his mailbox key is known from then on
+    with _client(lab) as alice:
+        alice.login("alice", PASSWORD)
+        assert not alice.send_private("bob", "kept for you")  # bob is offline: kept
+        with _client(lab, presence=True) as page:
+            page.login("bob", PASSWORD, defer_mailbox=True)
+            assert page.pending == []  # not yet: no mailbox key was sent
+            got: list[str] = []
+            page.on_private = lambda m: got.append(m.text)
+            _wait(lambda: alice.send_private("bob", "live"))  # once bob is seen online
+            _wait(lambda: "live" in got)  # it opens without the mailbox key
+            kept = page.claim_mailbox(PASSWORD)
+            assert [m.text for m in kept] == ["kept for you"]
+            assert "kept for you" in got
+        with _client(lab) as page:  # a resumed session's live messages open too
+            page.login("bob", PASSWORD, resume=True)
+            token = page.resume_token
+            assert token is not None
+            page.keep_resume = True
+        with _client(lab, presence=True) as page:
+            page.resume(token)
+            got = []
+            page.on_private = lambda m: got.append(m.text)
+            _wait(lambda: alice.send_private("bob", "after the reload"))
+            _wait(lambda: got == ["after the reload"])
+
+
+def _wait(condition: Callable[[], bool], timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.05)
