@@ -43,6 +43,7 @@ from common.auth import (
     key_fingerprint,
     parse_public_key,
     registry_box_key,
+    resume_user,
 )
 from common.client.private_mail import (
     PrivateText,
@@ -83,10 +84,8 @@ from common.messages import (
     PasswordCredential,
     PrivateMessage,
     ResumeCredential,
-    ResumeGrant,
     SealedLogin,
     SessionToken,
-    SignedResume,
     UserKeysReply,
     UserKeysRequest,
     decode,
@@ -312,18 +311,12 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         if wait is not None and not wait > 0:
             raise ValueError(f"a login must wait a positive time, not {wait}")
         mailbox = None if defer_mailbox else mailbox_key_from_password(self.realm, user, password)
-        return self._login(
-            PasswordCredential(user=user, password=password),
-            mailbox,
-            SessionKeys(),
-            ttl,
-            wait,
-            resume=resume,
-        )
+        cred = PasswordCredential(user=user, password=password)
+        return self._login(cred, mailbox, SessionKeys(), ttl, wait, resume=resume)
 
     def claim_mailbox(self, password: str) -> list[PrivateText]:
-        """After a ``defer_mailbox`` login: derive the mailbox key, tell the registry, and
-        return the messages kept while offline (each also given to ``on_private``)."""
+        """After a ``defer_mailbox`` login: derive the mailbox key and tell the registry;
+        the messages kept while offline, each also given to ``on_private``."""
         if self.session is None:
             raise NotLoggedIn("log in first")
         mailbox = mailbox_key_from_password(self.realm, self.session.user, password)
@@ -520,12 +513,8 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         if self.session is None:
             return
         try:
-            self._ask(
-                keys.registry_logout(self.realm),
-                LogoutRequest(keep_resume=self.keep_resume),
-                OkReply,
-                "logout",
-            )
+            logout = LogoutRequest(keep_resume=self.keep_resume)
+            self._ask(keys.registry_logout(self.realm), logout, OkReply, "logout")
         finally:
             self.session = None
             self._undeclare()
@@ -601,11 +590,3 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         opened = self._open_private(message, kept=False)
         if opened is not None:
             self.on_private(opened)
-
-
-def resume_user(token: bytes) -> str:
-    """The account a resume token names, unchecked (the registry checks it); ValueError."""
-    try:
-        return decode(decode(token, SignedResume).grant, ResumeGrant).user
-    except MessageError as exc:
-        raise ValueError(f"not a resume token: {exc}") from None

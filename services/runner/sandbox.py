@@ -96,10 +96,15 @@ class SandboxLimits:
     commands_per_second: int = 200
     output_bytes_per_second: int = 64 * 1024  # faster than this (4 s of burst) ends the run
     cpu_share: float = 0.5  # of one core, where a cpu cgroup can be made
+    # A do_work that has not returned for this long ends the run, told where it was
+    # (0: only when the slot's end nears, see PROBE_AHEAD_S).
+    hang_seconds: float = 0.0
 
     def __post_init__(self) -> None:
         if self.memory_bytes < 64 << 20:
             raise ValueError("a sandbox needs a memory limit of at least 64 MB")
+        if not 0 <= self.hang_seconds <= 24 * 3600:
+            raise ValueError("hang_seconds is 0 (off) or a positive number of seconds")
 
     @property
     def writable_bytes(self) -> int:
@@ -110,6 +115,14 @@ class SandboxLimits:
     @property
     def address_space_bytes(self) -> int:
         return self.memory_bytes - self.writable_bytes
+
+
+PROBE_AHEAD_S = 1.0
+"""How long before the slot's end the child is asked whether do_work is stuck.
+
+A stuck one is ended then, with where it was, so the agent context hears "hung: ..."
+from the runner before its own clock would say "its slot ended". It loses the last
+second of a slot it spent stuck anyway; a controller that is not stuck loses nothing."""
 
 
 class Sandbox:
@@ -134,6 +147,7 @@ class Sandbox:
         """``on_step``: a dry run (the child in lockstep, services/runner/dryrun.py); it is
         called each time the child has answered one state."""
         self.controller_name = precheck(source, filename)
+        self.filename = filename
         problem = sandbox_problem()
         if problem:
             raise RuntimeError(f"cannot sandbox uploaded code: {problem}")
@@ -165,6 +179,8 @@ class Sandbox:
         # came late says which step was slow.
         self.timeline: dict[str, float] = {}
         self._kill_timer: threading.Timer | None = None
+        self._probe_timer: threading.Timer | None = None
+        self._commands: threading.Thread | None = None
 
     # -- start
 
@@ -269,6 +285,8 @@ class Sandbox:
         ]
         if self.on_step is not None:
             argv.append("lockstep")
+        elif lim.hang_seconds > 0:
+            argv.append(f"hang={lim.hang_seconds:g}")
         return argv
 
     def start(self, slot_seconds: float) -> None:
@@ -303,7 +321,14 @@ class Sandbox:
         self._kill_timer = threading.Timer(slot_seconds, self._slot_over)
         self._kill_timer.daemon = True
         self._kill_timer.start()
-        threading.Thread(target=self._read_commands, daemon=True, name="sandbox-cmd").start()
+        if self.on_step is None and slot_seconds > PROBE_AHEAD_S + pipe.HUNG_AFTER_S:
+            self._probe_timer = threading.Timer(slot_seconds - PROBE_AHEAD_S, self._probe)
+            self._probe_timer.daemon = True
+            self._probe_timer.start()
+        self._commands = threading.Thread(
+            target=self._read_commands, daemon=True, name="sandbox-cmd"
+        )
+        self._commands.start()
         threading.Thread(target=self._read_output, daemon=True, name="sandbox-out").start()
         threading.Thread(target=self._wait, daemon=True, name="sandbox-wait").start()
 
@@ -386,6 +411,10 @@ class Sandbox:
             self._exit_reason = self._stop_reason or self._failure_reason(text)
             for line in text.splitlines():
                 self._say(line)
+        elif isinstance(message, pipe.Hung):
+            reason = pipe.hung_reason(message, self.filename)
+            log.info("controller %s: %s", self.controller_name, reason)
+            self._end_now(reason)
         elif isinstance(message, pipe.Done):
             self._exit_reason = self._stop_reason or "the controller finished"
 
@@ -439,8 +468,12 @@ class Sandbox:
         assert proc is not None
         code = proc.wait()
         self.timeline["exited"] = time.monotonic()
-        if self._kill_timer is not None:
-            self._kill_timer.cancel()
+        for timer in (self._kill_timer, self._probe_timer):
+            if timer is not None:
+                timer.cancel()
+        if self._commands is not None:
+            # Its last lines (a Hung, a Failed) are read before the reason is said.
+            self._commands.join(1.0)
         if not self._exit_reason:
             if self._stopping:
                 self._exit_reason = self._stop_reason
@@ -470,6 +503,11 @@ class Sandbox:
             log.exception("exit callback failed")
 
     # -- stopping
+
+    def _probe(self) -> None:
+        """Near the slot's end: ask the child whether do_work is stuck (it says Hung if so)."""
+        if not self._stopping:
+            self._write(pipe.encode(pipe.Probe()))
 
     def _slot_over(self) -> None:
         self.stop(grace=0.5, reason="stopped at the end of its slot")

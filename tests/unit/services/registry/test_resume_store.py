@@ -7,8 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from common.auth import RegistryIdentity
-from common.client.lab_client import resume_user
+from common.auth import RegistryIdentity, resume_user
 from common.messages import ResumeGrant, SignedResume, decode, encode
 from common.service import RequestError
 from services.registry import resume
