@@ -39,11 +39,9 @@ import os
 import shutil
 import signal
 import subprocess
-import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import psutil
@@ -61,6 +59,7 @@ from services.runner.sandbox_host import (
     sandbox_problem,
     syscall_filter,
 )
+from services.runner.stage import MEMINFO, SandboxLimits, stage_files
 from services.runner.syscalls import SANDBOX_PYTHON
 
 log = logging.getLogger("wart.runner.sandbox")
@@ -81,40 +80,6 @@ MAX_OUTPUT_LINE_BYTES = 1000
 # The first refused line of a run is logged, then one in this many: a hostile child
 # writes as fast as it can, and the runner's log must not grow with it.
 REFUSALS_LOGGED_EVERY = 1000
-_CHILD = Path(__file__).with_name("child.py")
-_API = Path(controller_api.__file__).parent  # the whole package: standard library only
-
-
-@dataclass(frozen=True)
-class SandboxLimits:
-    cpu_seconds: int = 120
-    memory_bytes: int = 256 * 1024 * 1024
-    processes: int = 16
-    open_files: int = 64
-    file_size_bytes: int = 1024 * 1024
-    output_lines_per_second: int = 50
-    commands_per_second: int = 200
-    output_bytes_per_second: int = 64 * 1024  # faster than this (4 s of burst) ends the run
-    cpu_share: float = 0.5  # of one core, where a cpu cgroup can be made
-    # A do_work that has not returned for this long ends the run, told where it was
-    # (0: only when the slot's end nears, see PROBE_AHEAD_S).
-    hang_seconds: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.memory_bytes < 64 << 20:
-            raise ValueError("a sandbox needs a memory limit of at least 64 MB")
-        if not 0 <= self.hang_seconds <= 24 * 3600:
-            raise ValueError("hang_seconds is 0 (off) or a positive number of seconds")
-
-    @property
-    def writable_bytes(self) -> int:
-        """The tmpfs space (/work, /tmp and /dev/shm together): it is host memory, so it is
-        a quarter of the memory limit and the address space gets the rest."""
-        return self.memory_bytes // 4
-
-    @property
-    def address_space_bytes(self) -> int:
-        return self.memory_bytes - self.writable_bytes
 
 
 PROBE_AHEAD_S = 1.0
@@ -185,20 +150,7 @@ class Sandbox:
     # -- start
 
     def _stage_files(self) -> Path:
-        stage = Path(tempfile.mkdtemp(prefix="wart-sandbox-"))
-        (stage / "lib" / "common").mkdir(parents=True)
-        (stage / "user").mkdir()
-        shutil.copy(_CHILD, stage / "child.py")
-        shutil.copytree(
-            _API,
-            stage / "lib" / "common" / "controller",
-            ignore=shutil.ignore_patterns("__pycache__"),
-        )
-        (stage / "lib" / "common" / "__init__.py").write_text("")
-        (stage / "user" / "controller.py").write_bytes(self.source)
-        for path in [stage, *stage.rglob("*")]:
-            path.chmod(0o755 if path.is_dir() else 0o644)
-        return stage
+        return stage_files(self.source, self.limits)
 
     def command_line(self, stage: Path, cmd_fd: int, seccomp_fd: int) -> list[str]:
         lim = self.limits
@@ -250,6 +202,11 @@ class Sandbox:
             "/tmp",
             "--proc",
             "/proc",
+            # The sandbox's memory, not the host's: a file made for its limits
+            # (services/runner/stage.py), over the new /proc's meminfo.
+            "--ro-bind",
+            str(stage / MEMINFO),
+            "/proc/meminfo",
             "--dev",
             "/dev",
             "--size",
