@@ -185,7 +185,10 @@ class BrowserSession:
 
     def _resume_failed(self, address: LabAddress, why: str) -> None:
         log.info("browser %d: saved login to %s refused: %s", self.client.client_id, address, why)
-        self._save_login(address, None)
+        if "(used" not in why:
+            # A used token: another tab of this browser resumed with it first and saved
+            # its new one under the same name, which a deletion would take away.
+            self._save_login(address, None)
         if self.closed:
             return
         self.connect(address.url())  # the password form, for that lab and user
