@@ -52,6 +52,7 @@ from common.messages import (
     Message,
     MessageError,
     OkReply,
+    PasswordCredential,
     PrivateMessage,
     ResumeCredential,
     Revocation,
@@ -75,6 +76,7 @@ from services.registry.throttle import LoginThrottle, vouched_source
 log = logging.getLogger("wart.registry")
 
 MAX_TTL = 7 * 24 * 3600.0
+CLAIM_WITHIN_S = 600.0  # a deferred mailbox key is sent this soon after the login, or never
 DEFAULT_SERVER_NAME = "wart lab"
 
 
@@ -96,6 +98,11 @@ class Registry(AdminRequests, Service):
         self.term = TermStore(db)
         self.identity = identity
         self.resumes = ResumeStore(db, identity, realm)
+        # Sessions of a password login that left its mailbox key for later: each may
+        # send it once (MailboxClaim). Anyone else (a resumed session, a stolen token)
+        # must never choose the key the account's offline mail is sealed to.
+        self._claims: dict[bytes, float] = {}
+        self._claims_lock = threading.Lock()
         self.throttle = throttle or LoginThrottle()
         self.verifier = Verifier(identity.verify_key, realm)
         self._unsealer = nacl.public.SealedBox(identity.box_private_key)
@@ -220,6 +227,11 @@ class Registry(AdminRequests, Service):
         pending = []
         if request.mailbox_key is not None:
             pending = self._mailbox(user, request.mailbox_key)
+        elif isinstance(cred, PasswordCredential):
+            with self._claims_lock:
+                for old in [s for s, t in self._claims.items() if now - t > CLAIM_WITHIN_S]:
+                    del self._claims[old]
+                self._claims[token.session_id] = now
         resume = None
         if request.resume and not isinstance(cred, KeyCredential):
             resume = self.resumes.issue(user, token.session_id, token.expires_at, now)
@@ -386,6 +398,14 @@ class Registry(AdminRequests, Service):
         if isinstance(request, UserKeysRequest):
             return self._user_keys(request.user)
         if isinstance(request, MailboxClaim):
+            with self._claims_lock:
+                at = self._claims.pop(principal.session_id, None)
+            if at is None or time.time() - at > CLAIM_WITHIN_S:
+                raise AuthError(
+                    "forbidden",
+                    "only a session that logged in with the password may set the mailbox key, "
+                    "once, soon after its login",
+                )
             return MailboxContents(pending=self._mailbox(principal.user, request.mailbox_key))
         if isinstance(request, MailboxDeposit):
             return self._deposit(principal, request.message)

@@ -13,7 +13,7 @@ import pytest
 
 from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
-from common.lab_errors import WrongCredentials
+from common.lab_errors import NotAllowed, WrongCredentials
 from common.messages import ResumeGrant, SignedResume, decode, encode
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router
@@ -143,6 +143,8 @@ def test_a_login_deriving_its_mailbox_key_after_still_gets_its_kept_messages(
             kept = page.claim_mailbox(PASSWORD)
             assert [m.text for m in kept] == ["kept for you"]
             assert "kept for you" in got
+            with pytest.raises(NotAllowed):  # once
+                page.claim_mailbox(PASSWORD)
         with _client(lab) as page:  # a resumed session's live messages open too
             page.login("bob", PASSWORD, resume=True)
             token = page.resume_token
@@ -150,6 +152,9 @@ def test_a_login_deriving_its_mailbox_key_after_still_gets_its_kept_messages(
             page.keep_resume = True
         with _client(lab, presence=True) as page:
             page.resume(token)
+            # A resumed session never chooses the key offline mail is sealed to.
+            with pytest.raises(NotAllowed, match="only a session that logged in with the pass"):
+                page.claim_mailbox("whatever it likes")
             got = []
             page.on_private = lambda m: got.append(m.text)
             _wait(lambda: alice.send_private("bob", "after the reload"))
