@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import queue
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -36,17 +37,39 @@ log = logging.getLogger("wart.viewer.live")
 LABS_FILE = "labs.json"
 
 
-def _claim_mailbox(client: lab.LabClient, password: str) -> None:
-    """Derive a page user's mailbox key after their login, behind every other thread."""
-    with contextlib.suppress(OSError, AttributeError):  # Linux: a thread's own nice value
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
-    try:
-        kept = client.claim_mailbox(password)
-    except LabError as exc:
-        log.info("the mailbox of %s was not claimed: %s", client.session and client.user, exc)
-        return
-    if kept:
-        log.info("%d kept messages for %s", len(kept), client.user)
+class MailboxClaims:
+    """Page users' mailbox keys, derived after their logins: one at a time, at nice 19.
+
+    Each is an argon2id run (~75 ms of a core, 64 MiB). Run as they came, a class
+    logging in at once would hold 60 of them, 3.8 GB, beside the registry's checks;
+    one low-priority thread takes them in turn behind everything else.
+    """
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[lab.LabClient, str] | None] = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name="mailbox-claims", daemon=True)
+        self._thread.start()
+
+    def submit(self, client: lab.LabClient, password: str) -> None:
+        self._jobs.put((client, password))
+
+    def close(self) -> None:
+        self._jobs.put(None)
+
+    def _run(self) -> None:
+        with contextlib.suppress(OSError, AttributeError):  # Linux: a thread's own nice
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+        while (job := self._jobs.get()) is not None:
+            client, password = job
+            if client.session is None:
+                continue  # logged out meanwhile
+            try:
+                kept = client.claim_mailbox(password)
+            except LabError as exc:
+                log.info("a mailbox was not claimed: %s", exc)
+                continue
+            if kept:
+                log.info("%d kept messages for %s", len(kept), client.user)
 
 
 class GatewayLogin:
@@ -124,6 +147,7 @@ class LiveConnector:
         self._links: dict[tuple[str, int, str], LabRouterLink] = {}
         self._lock = threading.Lock()
         self._connections: list[LiveConnection] = []
+        self.claims = MailboxClaims()
 
     def _is_own(self, address: LabAddress) -> bool:
         own = self.own_address
@@ -198,12 +222,7 @@ class LiveConnector:
             via,
             seen_from,
         )
-        threading.Thread(
-            target=_claim_mailbox,
-            args=(connection.client, password),
-            name=f"mailbox-{user}",
-            daemon=True,
-        ).start()
+        self.claims.submit(connection.client, password)
         return connection
 
     def resume(
@@ -279,6 +298,7 @@ class LiveConnector:
 
     def close(self) -> None:
         """Log everyone out and close the other labs' sessions (the viewer is stopping)."""
+        self.claims.close()
         if self.gateway is not None:
             self.gateway.close()
         with self._lock:
