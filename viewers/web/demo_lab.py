@@ -171,6 +171,11 @@ class DemoConnector:
             raise LoginError(f"no lab answers at {address.label}: check the address")
         return lab.login(address, user, password)
 
+    def resume(
+        self, address: LabAddress, token: bytes, via: str = "", seen_from: str = ""
+    ) -> DemoConnection:
+        raise LoginError("this lab keeps no saved logins: log in with your password")
+
 
 class DemoConnection:
     """One user's session with a :class:`DemoLab`."""
@@ -578,7 +583,9 @@ class DemoConnection:
         self._lab._broadcast(DirectoryEvent())
         return f"renamed to {name}"
 
-    def logout(self) -> None:
+    resume_token: bytes | None = None  # a demo lab keeps no saved logins
+
+    def logout(self, keep_resume: bool = False) -> None:
         if self.closed:
             return
         for ctx in list(self._joined):
