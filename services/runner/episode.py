@@ -22,7 +22,7 @@ import time
 
 from common.controller import RobotCommand
 from common.controller.actuators import apply_command
-from common.messages import Episode, EpisodeReport
+from common.messages import TRACE_EVERY_S, Episode, EpisodeReport, TracePoint
 from common.sim2d import maps
 from common.sim2d.entities import Zone
 from common.sim2d.world import EditError, World
@@ -158,6 +158,10 @@ def run_episode(
     ticks = round(request.seconds / world.tick_s)
     t0 = world.sim_time
     last = world.agent_pose[slot][:2].copy()
+    trace: list[TracePoint] = []
+    trace_every = max(1, round(TRACE_EVERY_S / world.tick_s))
+    if request.trace:
+        trace.append((0.0, float(last[0]), float(last[1]), float(world.agent_pose[slot][2])))
     try:
         for tick in range(ticks):
             answered.clear()
@@ -185,6 +189,10 @@ def run_episode(
             x, y = (float(v) for v in world.agent_pose[slot][:2])
             distance += math.hypot(x - last[0], y - last[1])
             last = (x, y)
+            if request.trace and (tick + 1) % trace_every == 0:
+                trace.append(
+                    (at, round(x, 2), round(y, 2), round(float(world.agent_pose[slot][2]), 4))
+                )
             for zone in world.zones.values():
                 if zone.id not in reached and in_zone(zone, x, y):
                     reached[zone.id] = at
@@ -212,6 +220,7 @@ def run_episode(
         delivered=delivered,
         distance_mm=round(distance, 1),
         output=output,
+        trace=trace,
     )
 
 
