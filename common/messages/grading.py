@@ -18,6 +18,7 @@ import msgspec
 
 from common.messages.agent import Upload
 from common.messages.base import Ident, Message, NonNegInt, ShortText
+from common.messages.world import WorldSnapshot
 
 MAX_MAP_BYTES = 256 * 1024
 MAX_EPISODE_S = 300.0
@@ -64,6 +65,9 @@ class Episode(Message, frozen=True):
 TRACE_EVERY_S = 0.1  # a traced episode's path: one pose per this many simulated s
 MAX_TRACE = int(MAX_EPISODE_S / TRACE_EVERY_S) + 2
 TracePoint = tuple[float, float, float, float]  # simulated s, x mm, y mm, heading rad
+MAX_TRACE_ROWS = 200  # a traced episode's frames carry at most this many rows (robots, objects)
+# simulated s, then x, y, heading of each of the snapshot's rows in order
+TraceFrame = tuple[float, Annotated[list[float], msgspec.Meta(max_length=3 * MAX_TRACE_ROWS)]]
 
 
 class EpisodeReport(Message, frozen=True):
@@ -84,6 +88,11 @@ class EpisodeReport(Message, frozen=True):
         default_factory=list
     )
     trace: Annotated[list[TracePoint], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
+        default_factory=list
+    )
+    # A traced episode's world (for a replay) and every row's pose each TRACE_EVERY_S.
+    snapshot: WorldSnapshot | None = None
+    frames: Annotated[list[TraceFrame], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
         default_factory=list
     )
 
@@ -281,6 +290,7 @@ __all__ = [
     "MAX_EPISODE_S",
     "MAX_MAP_BYTES",
     "MAX_TRACE",
+    "MAX_TRACE_ROWS",
     "PSEUDONYM_PATTERN",
     "STUDENT_CAUSES",
     "TRACE_EVERY_S",
@@ -306,5 +316,6 @@ __all__ = [
     "SubmissionsQuery",
     "Submit",
     "SubmitAccepted",
+    "TraceFrame",
     "TracePoint",
 ]

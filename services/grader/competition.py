@@ -248,6 +248,9 @@ class Competitions:
                 ),
             )
             writer.attach_source(sub.filename, sub.source, began)
+            if report.snapshot is not None:
+                writer.write(s.SNAPSHOT, report.snapshot, began)
+                _write_frames(writer, report, began)
             topic = s.pose_topic(a.robot)
             for t, x, y, heading in report.trace:
                 writer.write(topic, pose_record(x, y, heading, began + t), began + t)
@@ -261,3 +264,24 @@ class Competitions:
             log.warning("heat %d of %s not recorded: %s", heat, name, exc)
             return ""
         return str(path)
+
+
+def _write_frames(writer: RecordingWriter, report: EpisodeReport, began: float) -> None:
+    """The heat's frames (every row's pose each traced step): what a replay draws."""
+    snap = report.snapshot
+    assert snap is not None
+    n_agents = len(snap.agents)
+    for tick, (t, flat) in enumerate(report.frames):
+        n = min(len(snap.rows), len(flat) // 3)
+        record = s.FrameRecord(
+            tick=tick,
+            sim_time=t,
+            layout=snap.layout,
+            agents=min(n_agents, n),
+            rows=list(snap.rows[:n]),
+            x=flat[0 : 3 * n : 3],
+            y=flat[1 : 3 * n : 3],
+            heading=flat[2 : 3 * n : 3],
+            fingers=[0] * min(n_agents, n),
+        )
+        writer.write(s.FRAME, record, began + t)

@@ -22,10 +22,19 @@ import time
 
 from common.controller import RobotCommand
 from common.controller.actuators import apply_command
-from common.messages import TRACE_EVERY_S, Episode, EpisodeReport, TracePoint
+from common.messages import (
+    MAX_TRACE_ROWS,
+    TRACE_EVERY_S,
+    Episode,
+    EpisodeReport,
+    TraceFrame,
+    TracePoint,
+    WorldSnapshot,
+)
 from common.sim2d import maps
 from common.sim2d.entities import Zone
 from common.sim2d.world import EditError, World
+from services.engine import packing
 from services.runner.dryrun import _error_line, _last_line, _state, _Touches
 from services.runner.sandbox import Sandbox, SandboxLimits
 
@@ -160,8 +169,12 @@ def run_episode(
     last = world.agent_pose[slot][:2].copy()
     trace: list[TracePoint] = []
     trace_every = max(1, round(TRACE_EVERY_S / world.tick_s))
+    frames: list[TraceFrame] = []
+    snapshot: WorldSnapshot | None = None
     if request.trace:
         trace.append((0.0, float(last[0]), float(last[1]), float(world.agent_pose[slot][2])))
+        snapshot = packing.snapshot(world)
+        frames.append((0.0, _rows(world)))
     try:
         for tick in range(ticks):
             answered.clear()
@@ -190,9 +203,9 @@ def run_episode(
             distance += math.hypot(x - last[0], y - last[1])
             last = (x, y)
             if request.trace and (tick + 1) % trace_every == 0:
-                trace.append(
-                    (at, round(x, 2), round(y, 2), round(float(world.agent_pose[slot][2]), 4))
-                )
+                heading = round(float(world.agent_pose[slot][2]), 4)
+                trace.append((at, round(x, 2), round(y, 2), heading))
+                frames.append((at, _rows(world)))
             for zone in world.zones.values():
                 if zone.id not in reached and in_zone(zone, x, y):
                     reached[zone.id] = at
@@ -221,7 +234,18 @@ def run_episode(
         distance_mm=round(distance, 1),
         output=output,
         trace=trace,
+        snapshot=snapshot,
+        frames=frames,
     )
+
+
+def _rows(world: World) -> list[float]:
+    """x, y, heading of each of the world's first MAX_TRACE_ROWS rows (robots, then objects)."""
+    poses = packing.frame(world).poses.to_numpy()[:MAX_TRACE_ROWS]
+    out: list[float] = []
+    for x, y, heading in poses[:, :3]:
+        out += (round(float(x), 2), round(float(y), 2), round(float(heading), 4))
+    return out
 
 
 def _deliveries(world: World, nests: list[Zone], delivered: dict[str, float], at: float) -> None:

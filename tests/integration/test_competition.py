@@ -22,6 +22,7 @@ from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.messages import Standings
 from common.recording.reader import read_recording
+from common.recording.replay import Timeline
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router
@@ -144,8 +145,16 @@ def test_a_competition_of_two_teams_and_a_solo_student(lab: ProcessLab, tmp_path
         assert recording.end is not None and recording.end.reason.startswith(e.cause)
         assert recording.poses, "the heat's path is recorded"
         assert recording.source is not None and not recording.truncated
-    path = read_recording(by_team["red"].recording).poses
+    red = read_recording(by_team["red"].recording)
+    path = red.poses
     assert path[-1].record.pose.position.x > path[0].record.pose.position.x  # it drove forward
+    # Replayable: the world it ran in and its frames, through the replay's own lookups.
+    assert red.snapshot is not None and "k1" in red.snapshot.rows
+    replay = Timeline(red)
+    assert replay.duration == pytest.approx(3.0, abs=0.2)
+    start, end = replay.at(0.0), replay.at(replay.duration)
+    k1 = end.frame.rows.index("k1")
+    assert end.frame.x[k1] > start.frame.x[k1] + 50  # the robot moves in the replay
 
     with lab.client("ida") as client, pytest.raises(LabError, match="exists already"):
         GraderClient(client).run_competition("reach-goal", "final")
