@@ -277,7 +277,7 @@ class Standings(Message, frozen=True):
     score_name: ShortText
     unit: ShortText
     order: Literal["higher", "lower"]
-    status: Literal["running", "finished"]
+    status: Literal["running", "finished", "stopped"]  # stopped: the grader stopped mid-way
     heats: NonNegInt
     heat: NonNegInt = 0  # the heat in progress (0: none)
     entries: Annotated[list[StandingEntry], msgspec.Meta(max_length=500)] = msgspec.field(

@@ -90,10 +90,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course competition
                     st = seen.get(timeout=1.0)
                 except queue.Empty:
                     continue
-                if st.status == "finished" or any(e.cause != "waiting" for e in st.entries):
+                if st.status != "running" or any(e.cause != "waiting" for e in st.entries):
                     print_standings(st)
                 if st.status == "finished":
                     return 0
+                if st.status == "stopped":
+                    return cli.fail("the grader stopped during the competition", 1)
             # Published ones may be missed (joined late): the grader still has the last.
             st = grader.standings(first.competition)
             print_standings(st)

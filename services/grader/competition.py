@@ -84,6 +84,24 @@ class Competitions:
         self._live: dict[str, Standings] = {}
         self._threads: list[threading.Thread] = []
 
+    def recover(self) -> list[str]:
+        """Competitions a grader stopped mid-way (found running at start): marked stopped,
+        the heats not run said so; their names. They are not run again: the teacher
+        starts a new one (a heat half-run would be unfair to re-run for one team only)."""
+        stopped = []
+        for path in sorted(self.root.glob(f"*/{STANDINGS}")):
+            st = self.standings(path.parent.name)
+            if st is None or st.status != "running":
+                continue
+            why = "not run: the grader stopped during the competition"
+            entries = [
+                e if e.cause != "waiting" else msgspec.structs.replace(e, detail=why)
+                for e in st.entries
+            ]
+            self._save(msgspec.structs.replace(st, status="stopped", heat=0, entries=entries))
+            stopped.append(st.competition)
+        return stopped
+
     def standings(self, name: str) -> Standings | None:
         with self._lock:
             live = self._live.get(name)

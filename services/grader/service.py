@@ -127,6 +127,8 @@ class GraderService(Service):
             self.log.info("submission %s of %s was not graded: queued again", sub.id, sub.user)
             self.store.set_status(sub.id, "queued")
             self.queue.put(sub.user, sub)
+        for name in self.competitions.recover():
+            self.log.warning("competition %s was running when the grader stopped: stopped", name)
         self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)
         for i in range(self.workers):
             thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)

@@ -90,7 +90,8 @@ def format_standings(st: Standings) -> str:
     ]
     for e in st.entries[:50]:
         if e.cause == "waiting":
-            ended = "running" if st.status == "running" and e.heat == st.heat else "waiting"
+            running = st.status == "running" and e.heat == st.heat
+            ended = "running" if running else (e.detail or "waiting")
         else:
             ended = f"{e.cause}: {e.detail}"
         rank = str(e.rank) if e.rank else "-"

@@ -7,7 +7,7 @@ from typing import Any, cast
 
 import pytest
 
-from common.messages import StandingEntry
+from common.messages import StandingEntry, Standings
 from services.grader.assignment import parse_assignment
 from services.grader.competition import CompetitionError, Competitions, pick_entries, ranked
 from services.grader.grading_db import GradingStore, Pending
@@ -78,3 +78,31 @@ def test_no_entries_and_several_per_heat_are_refused(tmp_path: Path) -> None:
     with pytest.raises(CompetitionError, match="heats of one entry only"):
         runs.start("final", assignment(), "{}", "latest", 2)
     assert not (tmp_path / "final").exists()  # nothing half-written
+
+
+def test_a_competition_the_grader_stopped_mid_way_is_marked_stopped(tmp_path: Path) -> None:
+    store = cast(GradingStore, FakeStore(TEAMS, GRADED))
+    saved = Competitions(store, cast(Any, None), tmp_path, lambda st: None)
+    # As the grader left it when it died after heat 1: one entry run, two waiting.
+    running = Standings(
+        competition="final",
+        assignment="reach-goal",
+        course="robotics-26",
+        score_name="points",
+        unit="pts",
+        order="higher",
+        status="running",
+        heats=3,
+        heat=2,
+        entries=[entry("blue", 1, 5.0), entry("carol", 2, None), entry("red", 3, None)],
+    )
+    (tmp_path / "final").mkdir()
+    saved._save(running)
+    again = Competitions(store, cast(Any, None), tmp_path, lambda st: None)
+    assert again.recover() == ["final"]
+    found = again.standings("final")
+    assert found is not None and found.status == "stopped" and found.heat == 0
+    assert [e.detail for e in found.entries][1:] == [
+        "not run: the grader stopped during the competition"
+    ] * 2
+    assert again.recover() == []  # once
