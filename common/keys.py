@@ -387,6 +387,16 @@ def grader_request(realm: str, grader: str) -> str:
     return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/request"
 
 
+def grader_standings(realm: str, grader: str, competition: str) -> str:
+    """A competition's standings, published (sealed) by the grader as each heat ends."""
+    g = check_ident("grader", grader)
+    return f"{realm_root(realm)}/grader/{g}/competition/{check_ident('competition', competition)}"
+
+
+def grader_standings_all(realm: str, grader: str) -> str:
+    return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/competition/*"
+
+
 def host_spawn(realm: str, host: str) -> str:
     return f"{realm_root(realm)}/host/{check_ident('host', host)}/spawn"
 

@@ -2,20 +2,29 @@
 
 from __future__ import annotations
 
+import logging
 import time
+from collections.abc import Callable
 from typing import TypeVar
 
+import zenoh
+
 from common import keys
+from common.auth import AuthError
 from common.client.lab_client import LabClient
 from common.messages import (
     AssignmentInfo,
     AssignmentList,
+    CompetitionQuery,
+    CompetitionRun,
     Leaderboard,
     LeaderboardQuery,
     Message,
+    MessageError,
     MyAssignments,
     OkReply,
     SetPseudonym,
+    Standings,
     SubmissionInfo,
     SubmissionList,
     SubmissionsQuery,
@@ -24,12 +33,14 @@ from common.messages import (
 )
 
 GRADER = "grader"
+log = logging.getLogger("wart.client")
 M = TypeVar("M", bound=Message)
 
 
 class GraderClient:
     def __init__(self, client: LabClient, grader: str = GRADER) -> None:
         self.client = client
+        self.grader = grader
         self.key = keys.grader_request(client.realm, grader)
 
     def _ask(self, message: Message, expected: type[M], what: str) -> M:
@@ -76,6 +87,47 @@ class GraderClient:
 
     def leaderboard(self, assignment: str) -> Leaderboard:
         return self._ask(LeaderboardQuery(assignment=assignment), Leaderboard, "leaderboard")
+
+    def run_competition(
+        self, assignment: str, name: str | None = None, pick: str = "latest", per_heat: int = 1
+    ) -> Standings:
+        """Start a competition (the course's teachers): its first standings, all waiting."""
+        message = CompetitionRun(
+            assignment=assignment,
+            name=name,
+            pick=pick,  # type: ignore[arg-type]
+            per_heat=per_heat,
+        )
+        return self._ask(message, Standings, "competition")
+
+    def standings(self, name: str) -> Standings:
+        return self._ask(CompetitionQuery(name=name), Standings, "competition")
+
+    def watch_standings(
+        self, name: str | None, on_standings: Callable[[Standings], None]
+    ) -> Callable[[], None]:
+        """Call ``on_standings`` with each sealed standings the grader publishes (one
+        competition, or all with None); the returned function stops watching."""
+        if name is None:
+            key = keys.grader_standings_all(self.client.realm, self.grader)
+        else:
+            key = keys.grader_standings(self.client.realm, self.grader, name)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                principal, message = self.client.verifier.open(
+                    str(sample.key_expr), sample.payload, Standings
+                )
+            except (AuthError, MessageError) as exc:
+                log.warning("ignored standings: %s", exc)
+                return
+            if not principal.has("lease"):  # a service's seal (the grader's), not a person's
+                log.warning("ignored standings sealed by %s, not a service", principal.user)
+                return
+            on_standings(message)
+
+        subscriber = self.client.z.declare_subscriber(key, on_sample)
+        return subscriber.undeclare
 
 
 def submitted_words(accepted: SubmitAccepted) -> str:

@@ -18,6 +18,7 @@ import msgspec
 
 from common.messages.agent import Upload
 from common.messages.base import Ident, Message, NonNegInt, ShortText
+from common.messages.world import WorldSnapshot
 
 MAX_MAP_BYTES = 256 * 1024
 MAX_EPISODE_S = 300.0
@@ -58,6 +59,15 @@ class Episode(Message, frozen=True):
     seconds: EpisodeSeconds
     source: Upload
     filename: ShortText = "controller.py"
+    trace: bool = False  # report the robot's path (a competition's heat records it)
+
+
+TRACE_EVERY_S = 0.1  # a traced episode's path: one pose per this many simulated s
+MAX_TRACE = int(MAX_EPISODE_S / TRACE_EVERY_S) + 2
+TracePoint = tuple[float, float, float, float]  # simulated s, x mm, y mm, heading rad
+MAX_TRACE_ROWS = 200  # a traced episode's frames carry at most this many rows (robots, objects)
+# simulated s, then x, y, heading of each of the snapshot's rows in order
+TraceFrame = tuple[float, Annotated[list[float], msgspec.Meta(max_length=3 * MAX_TRACE_ROWS)]]
 
 
 class EpisodeReport(Message, frozen=True):
@@ -75,6 +85,14 @@ class EpisodeReport(Message, frozen=True):
     delivered: dict[str, float] = msgspec.field(default_factory=dict)  # object -> sim s in a nest
     distance_mm: float = 0.0
     output: Annotated[list[ShortText], msgspec.Meta(max_length=20)] = msgspec.field(
+        default_factory=list
+    )
+    trace: Annotated[list[TracePoint], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
+        default_factory=list
+    )
+    # A traced episode's world (for a replay) and every row's pose each TRACE_EVERY_S.
+    snapshot: WorldSnapshot | None = None
+    frames: Annotated[list[TraceFrame], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
         default_factory=list
     )
 
@@ -210,13 +228,77 @@ class Leaderboard(Message, frozen=True):
     )
 
 
+# --- competitions: every team's entry in heats, standings published live -----------------
+
+EntryCause = Literal[
+    "waiting", "ok", "finished", "exception", "timeout", "memory", "output", "cpu", "ended", "lab"
+]
+
+
+class CompetitionRun(Message, frozen=True):
+    """Run a competition on an assignment (the course's teachers): each team's latest (or
+    best) graded submission is its entry, one entry per heat. Answered with the first
+    :class:`Standings` (every entry waiting); the rest is published as heats end."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    assignment: Ident
+    name: Ident | None = None  # default: the assignment's name and the time
+    pick: Literal["latest", "best"] = "latest"
+    per_heat: Annotated[int, msgspec.Meta(ge=1, le=16)] = 1
+
+
+class CompetitionQuery(Message, frozen=True):
+    """A competition's standings (anyone in its course)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    name: Ident
+
+
+class StandingEntry(msgspec.Struct, frozen=True, kw_only=True):
+    rank: NonNegInt  # 0 while not run yet
+    team: ShortText
+    user: Ident  # whose submission is the team's entry
+    submission: Ident
+    heat: NonNegInt  # 1-based
+    score: float | None = None
+    cause: EntryCause = "waiting"
+    detail: ShortText = ""
+    recording: ShortText = ""  # the heat's MCAP file (on the grader's host)
+
+
+class Standings(Message, frozen=True):
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/competition/<competition>",)
+
+    competition: Ident
+    assignment: Ident
+    course: Ident
+    score_name: ShortText
+    unit: ShortText
+    order: Literal["higher", "lower"]
+    status: Literal["running", "finished", "stopped"]  # stopped: the grader stopped mid-way
+    heats: NonNegInt
+    heat: NonNegInt = 0  # the heat in progress (0: none)
+    entries: Annotated[list[StandingEntry], msgspec.Meta(max_length=500)] = msgspec.field(
+        default_factory=list
+    )
+    at: float = 0.0
+
+
 __all__ = [
     "MAX_EPISODE_S",
     "MAX_MAP_BYTES",
+    "MAX_TRACE",
+    "MAX_TRACE_ROWS",
     "PSEUDONYM_PATTERN",
     "STUDENT_CAUSES",
+    "TRACE_EVERY_S",
     "AssignmentInfo",
     "AssignmentList",
+    "CompetitionQuery",
+    "CompetitionRun",
+    "EntryCause",
     "Episode",
     "EpisodeCause",
     "EpisodeReport",
@@ -226,10 +308,14 @@ __all__ = [
     "LeaderboardQuery",
     "MyAssignments",
     "SetPseudonym",
+    "StandingEntry",
+    "Standings",
     "SubmissionInfo",
     "SubmissionList",
     "SubmissionStatus",
     "SubmissionsQuery",
     "Submit",
     "SubmitAccepted",
+    "TraceFrame",
+    "TracePoint",
 ]

@@ -3,6 +3,8 @@
   wart course --db DB assignment add reach-goal.toml [--maps DIR]
   wart course --db DB assignment check reach-goal.toml [--maps DIR]
   wart course --db DB assignments [COURSE]
+  wart course competition run ASSIGNMENT --user TEACHER [--wait S]   (over the lab)
+  wart course competition show NAME --user USER
 
 The file's format is docs/COURSES.md. A file with problems is refused whole,
 each problem with its field; adding it again replaces it (same name).
@@ -28,6 +30,11 @@ def _when(t: float) -> str:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["competition"]:  # over the network, as a course member: not the DB
+        from services.commands import competition
+
+        return competition.main(argv[1:], f"{prog} competition")
     p = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

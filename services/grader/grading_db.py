@@ -321,3 +321,23 @@ class GradingStore:
             )
             out.append((str(user), float(score), str(sub[0][0]), float(sub[0][1])))
         return out
+
+    def graded(self, assignment: str) -> list[tuple[Pending, float]]:
+        """Every graded submission with its score after penalty, oldest first."""
+        rows = self.db._rows(
+            "SELECT id, assignment, user, filename, source, submitted_at, mean - penalty "
+            "FROM submissions WHERE assignment=? AND status='graded' AND mean IS NOT NULL "
+            "ORDER BY submitted_at",
+            assignment,
+        )
+        return [
+            (Pending(str(i), str(a), str(u), str(f), bytes(s), float(t)), float(score))
+            for i, a, u, f, s, t, score in rows
+        ]
+
+    def teams(self, course: str) -> dict[str, str]:
+        """Each student's team in the course; a student without a team is their own."""
+        rows = self.db._rows(
+            "SELECT user, team FROM course_members WHERE course=? AND role='student'", course
+        )
+        return {str(u): str(t) or str(u) for u, t in rows}

@@ -42,6 +42,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
         help=f"how long an episode waits for a live runner before the lab is at fault "
         f"(default {RUNNER_WAIT_S:g})",
     )
+    p.add_argument(
+        "--competitions",
+        type=Path,
+        metavar="DIR",
+        help="competitions' standings and heat recordings (default: competitions/ beside --db)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -74,6 +80,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
             store=store,
             workers=args.workers,
             runner_wait=args.runner_wait,
+            competitions=args.competitions or args.db.parent / "competitions",
         )
 
     try:

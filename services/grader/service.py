@@ -23,6 +23,7 @@ import math
 import re
 import threading
 import time
+from pathlib import Path
 from typing import cast
 
 import zenoh
@@ -30,11 +31,13 @@ import zenoh
 from common.auth import Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
-from common.keys import AliveKind, grader_request
+from common.keys import AliveKind, grader_request, grader_standings
 from common.messages import (
     PSEUDONYM_PATTERN,
     AssignmentInfo,
     AssignmentList,
+    CompetitionQuery,
+    CompetitionRun,
     Leaderboard,
     LeaderboardQuery,
     LeaderEntry,
@@ -42,6 +45,7 @@ from common.messages import (
     MyAssignments,
     OkReply,
     SetPseudonym,
+    Standings,
     SubmissionList,
     SubmissionsQuery,
     Submit,
@@ -49,6 +53,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
+from services.grader.competition import CompetitionError, Competitions
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
@@ -100,6 +105,7 @@ class GraderService(Service):
         store: GradingStore,
         workers: int = WORKERS,
         runner_wait: float = RUNNER_WAIT_S,
+        competitions: Path | None = None,
     ) -> None:
         super().__init__(session, realm, name)
         self.verifier = Verifier(registry_key, realm)
@@ -110,6 +116,9 @@ class GraderService(Service):
         self.episodes = EpisodeRunner(
             session, realm, lambda k, m: login.session.seal(k, m), runner_wait
         )
+        self.competitions = Competitions(
+            store, self.episodes, competitions or Path("competitions"), self._publish
+        )
         self._threads: list[threading.Thread] = []
         self._submit_lock = threading.Lock()  # quota checked and submission written as one
 
@@ -118,6 +127,8 @@ class GraderService(Service):
             self.log.info("submission %s of %s was not graded: queued again", sub.id, sub.user)
             self.store.set_status(sub.id, "queued")
             self.queue.put(sub.user, sub)
+        for name in self.competitions.recover():
+            self.log.warning("competition %s was running when the grader stopped: stopped", name)
         self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)
         for i in range(self.workers):
             thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)
@@ -128,6 +139,7 @@ class GraderService(Service):
         self.queue.close()
         self.episodes.stop()
         deadline = time.monotonic() + timeout
+        self.competitions.join(timeout / 2)
         for thread in self._threads:
             thread.join(max(0.0, deadline - time.monotonic()))
 
@@ -137,13 +149,25 @@ class GraderService(Service):
         principal, request = self.verifier.open(
             str(query.key_expr),
             query.payload,
-            (Submit, SubmissionsQuery, LeaderboardQuery, SetPseudonym, MyAssignments),
+            (
+                Submit,
+                SubmissionsQuery,
+                LeaderboardQuery,
+                SetPseudonym,
+                MyAssignments,
+                CompetitionRun,
+                CompetitionQuery,
+            ),
         )
         if isinstance(request, MyAssignments):
             return AssignmentList(
                 assignments=[info(a) for a in self.store.assignments_of(principal.user)][-500:]
             )
-        named = cast(Submit | SubmissionsQuery | LeaderboardQuery | SetPseudonym, request)
+        if isinstance(request, CompetitionQuery):
+            return self._standings(principal, request.name)
+        named = cast(
+            Submit | SubmissionsQuery | LeaderboardQuery | SetPseudonym | CompetitionRun, request
+        )
         try:
             assignment, _map = self.store.assignment(named.assignment)
         except DbError as exc:
@@ -154,6 +178,18 @@ class GraderService(Service):
                 "forbidden", f"{principal.user} is not in the course {assignment.course}"
             )
         teacher = role in TEACHERS or principal.has("admin")
+        if isinstance(request, CompetitionRun):
+            if not teacher:
+                raise RequestError(
+                    "forbidden", f"only the teachers of {assignment.course} run a competition"
+                )
+            name = request.name or f"{assignment.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+            try:
+                return self.competitions.start(
+                    name, assignment, _map, request.pick, request.per_heat
+                )
+            except CompetitionError as exc:
+                raise RequestError("bad_request", str(exc)) from None
         if isinstance(request, Submit):
             return self._submit(principal, request, assignment)
         if isinstance(request, SetPseudonym):
@@ -166,6 +202,19 @@ class GraderService(Service):
             found = self.store.submissions(assignment.name, user, request.submission)
             return SubmissionList(submissions=found[-500:])
         return self.leaderboard(assignment, teacher)
+
+    def _standings(self, principal: Principal, name: str) -> Standings:
+        found = self.competitions.standings(name)
+        if found is None:
+            raise RequestError("not_found", f"no competition named {name}")
+        role = self.store.role_in(found.course, principal.user)
+        if role is None and not principal.has("admin"):
+            raise RequestError("forbidden", f"{principal.user} is not in the course {found.course}")
+        return found
+
+    def _publish(self, standings: Standings) -> None:
+        key = grader_standings(self.realm, self.ident, standings.competition)
+        self.session.put(key, self.login.session.seal(key, standings))
 
     def _submit(self, principal: Principal, request: Submit, a: Assignment) -> Message:
         now = time.time()

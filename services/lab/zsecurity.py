@@ -128,6 +128,7 @@ _PEOPLE = (
     _g("sub", W(keys.host_load)),
     _g("ask", W(keys.host_load), W(keys.host_spawn), W(keys.runner_run)),
     _g("ask", W(keys.grader_request)),  # submissions and leaderboards (issue 36)
+    _g("sub", W(keys.grader_standings)),  # competitions' standings, live (sealed)
     _g("token", W(keys.alive, kind=AliveKind.USER)),
     _g("watch", W(keys.alive_all)),
 )
@@ -195,6 +196,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     "grader": (
         *_SERVICE_BASE,
         _g("serve", W(keys.grader_request)),
+        _g("pub", W(keys.grader_standings)),  # a competition's standings as heats end
         _g("ask", W(keys.runner_episode)),
         _g("token", W(keys.alive, kind=AliveKind.GRADER)),
     ),

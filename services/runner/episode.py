@@ -20,10 +20,19 @@ import math
 import time
 
 from common.controller.actuators import apply_command
-from common.messages import Episode, EpisodeReport
+from common.messages import (
+    MAX_TRACE_ROWS,
+    TRACE_EVERY_S,
+    Episode,
+    EpisodeReport,
+    TraceFrame,
+    TracePoint,
+    WorldSnapshot,
+)
 from common.sim2d import maps
 from common.sim2d.entities import Zone
 from common.sim2d.world import EditError, World
+from services.engine import packing
 from services.runner.dryrun import _error_line, _last_line
 from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import Sandbox, SandboxLimits
@@ -130,6 +139,14 @@ def run_episode(
     ticks = round(request.seconds / world.tick_s)
     t0 = world.sim_time
     last = world.agent_pose[slot][:2].copy()
+    trace: list[TracePoint] = []
+    trace_every = max(1, round(TRACE_EVERY_S / world.tick_s))
+    frames: list[TraceFrame] = []
+    snapshot: WorldSnapshot | None = None
+    if request.trace:
+        trace.append((0.0, float(last[0]), float(last[1]), float(world.agent_pose[slot][2])))
+        snapshot = packing.snapshot(world)
+        frames.append((0.0, _rows(world)))
     try:
         for tick, mine in enumerate(run.ticks(ticks)):
             robot = world.actuators(slot)
@@ -148,6 +165,10 @@ def run_episode(
                     reached[zone.id] = at
             if nests and tick % check_every == 0:
                 _deliveries(world, nests, delivered, at)
+            if request.trace and (tick + 1) % trace_every == 0:
+                heading = round(float(world.agent_pose[slot][2]), 4)
+                trace.append((at, round(x, 2), round(y, 2), heading))
+                frames.append((at, _rows(world)))
     finally:
         run.stop("the episode ended")
     steps, timed_out, output = run.steps, run.timed_out, run.output
@@ -171,6 +192,9 @@ def run_episode(
         delivered=delivered,
         distance_mm=round(distance, 1),
         output=output,
+        trace=trace,
+        snapshot=snapshot,
+        frames=frames,
     )
 
 
@@ -186,3 +210,12 @@ def _deliveries(world: World, nests: list[Zone], delivered: dict[str, float], at
             x, y, _ = world.pose_of(obj.id)
         if any(in_zone(nest, x, y) for nest in nests):
             delivered[obj.id] = at
+
+
+def _rows(world: World) -> list[float]:
+    """x, y, heading of each of the world's first MAX_TRACE_ROWS rows (robots, then objects)."""
+    poses = packing.frame(world).poses.to_numpy()[:MAX_TRACE_ROWS]
+    out: list[float] = []
+    for x, y, heading in poses[:, :3]:
+        out += (round(float(x), 2), round(float(y), 2), round(float(heading), 4))
+    return out

@@ -46,6 +46,7 @@ def test_every_key_suffix_is_in_the_key_table() -> None:
             "zid": "z",
             "camera": "c",
             "grader": "g",
+            "competition": "competition",
         }
         key = fn(**{p: sample[p] for p in params})
         last = key.rsplit("/", 1)[-1]

@@ -25,7 +25,7 @@ from common.client.survey import Survey
 from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from common.messages.audit import AuditEntry, AuditQuery
-from common.messages.grading import AssignmentInfo, Leaderboard, SubmissionInfo
+from common.messages.grading import AssignmentInfo, Leaderboard, Standings, SubmissionInfo
 from common.messages.world import RobotTypeReply
 from viewers.web.address import LabAddress
 
@@ -512,6 +512,10 @@ class LabConnection(Protocol):
         ...
 
     def leaderboard(self, assignment: str) -> Leaderboard: ...
+
+    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
+        """Competitions' standings as the grader publishes them; returns: stop watching."""
+        ...
 
     def logout(self, keep_resume: bool = False) -> None:
         """Log out; ``keep_resume`` (the page closed, not "Log out") keeps its saved login."""

@@ -202,6 +202,8 @@ class ChatPanel:
     def close(self, *, leave: bool) -> None:
         if self.recordings is not None:
             self.recordings.close()
+        if self.course is not None:
+            self.course.close()
         if leave:
             try:
                 self.connection.leave(self.ctx)

@@ -1,26 +1,30 @@
 """The Course folder of an arena's panel: my assignments, submit the editor's code, my scores,
-the leaderboard (the grader, docs/COURSES.md).
+the leaderboard (the grader, docs/COURSES.md), and the competitions of my courses, live.
 
 A student picks an assignment of their courses, hands in the file open in the
 workbench's editor, and reads their submissions (status, mean, each episode's
 score and how it ended: their code's fault with the line, or the lab's, re-run
-free) and the leaderboard, each refreshed on request.
+free) and the leaderboard, each refreshed on request. A competition's standings
+come as the grader publishes them (each heat's start and end): whoever has the
+folder open sees the ranking change when a heat ends, with the heat in progress.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 
 import viser
 
-from common.messages import AssignmentInfo, Leaderboard, SubmissionInfo
+from common.messages import AssignmentInfo, Leaderboard, Standings, SubmissionInfo
 from viewers.web.adapters import LabConnection, LabError
 from viewers.web.inputs import on_click, set_value
 from viewers.web.text import escape_md
 
 NONE = "(no assignment)"
 MAX_SHOWN = 10  # the latest submissions in the table
+MAX_COMPETITIONS = 3  # the latest competitions shown
 
 
 def _when(t: float) -> str:
@@ -70,6 +74,33 @@ def format_board(board: Leaderboard) -> str:
     return "\n".join(lines)
 
 
+def format_standings(st: Standings) -> str:
+    better = "higher" if st.order == "higher" else "lower"
+    if st.status == "running" and st.heat:
+        where = f"heat {st.heat} of {st.heats} running"
+    else:
+        where = f"{st.status}, {st.heats} heat(s)"
+    unit = f" ({escape_md(st.unit)})" if st.unit else ""
+    lines = [
+        f"**Competition {escape_md(st.competition)}** on {escape_md(st.assignment)}: {where}; "
+        f"{escape_md(st.score_name)}{unit}, {better} is better",
+        "",
+        "| rank | team | score | heat | how it ended |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for e in st.entries[:50]:
+        if e.cause == "waiting":
+            running = st.status == "running" and e.heat == st.heat
+            ended = "running" if running else (e.detail or "waiting")
+        else:
+            ended = f"{e.cause}: {e.detail}"
+        rank = str(e.rank) if e.rank else "-"
+        lines.append(
+            f"| {rank} | {escape_md(e.team)} | {_num(e.score)} | {e.heat} | {escape_md(ended)} |"
+        )
+    return "\n".join(lines)
+
+
 class CoursePanel:
     def __init__(
         self,
@@ -82,6 +113,9 @@ class CoursePanel:
         self.connection = connection
         self._source = source
         self._assignments: dict[str, AssignmentInfo] = {}
+        self._courses: set[str] = set()  # mine, once the assignments are listed
+        self._standings: dict[str, Standings] = {}
+        self._lock = threading.Lock()
         gui = client.gui
         with gui.add_folder("Course", expand_by_default=False) as self.folder:
             self.refresh_button = gui.add_button("Refresh assignments", icon=viser.Icon.REFRESH)
@@ -95,11 +129,37 @@ class CoursePanel:
             self.scores = gui.add_markdown("")
             self.board_button = gui.add_button("Leaderboard", icon=viser.Icon.TROPHY)
             self.board = gui.add_markdown("")
+            self.competitions = gui.add_markdown("")
         on_click(self.refresh_button, self.refresh)
         on_click(self.submit_button, self.submit)
         on_click(self.scores_button, self.show_scores)
         on_click(self.board_button, self.show_board)
         self.chosen.on_update(lambda _: self._describe())
+        try:
+            self._unwatch = connection.watch_standings(self.on_standings)
+        except LabError as exc:
+            self._unwatch = lambda: None
+            self.competitions.content = f"_Competitions are not shown live: {escape_md(str(exc))}_"
+
+    def close(self) -> None:
+        self._unwatch()
+
+    def on_standings(self, st: Standings) -> None:
+        """A competition's standings from the grader (any thread): shown if of my courses."""
+        with self._lock:
+            held = self._standings.get(st.competition)
+            if held is not None and held.at > st.at:
+                return  # an older one, late
+            self._standings[st.competition] = st
+        self._show_standings()
+
+    def _show_standings(self) -> None:
+        with self._lock:
+            mine = [s for s in self._standings.values() if s.course in self._courses]
+        mine.sort(key=lambda s: s.at, reverse=True)
+        self.competitions.content = "\n\n".join(
+            format_standings(s) for s in mine[:MAX_COMPETITIONS]
+        )
 
     def say(self, text: str, *, bad: bool = False) -> None:
         self.status.content = ("**Not done:** " if bad else "") + escape_md(text)
@@ -122,6 +182,9 @@ class CoursePanel:
             self.say(f"Could not list your assignments: {exc}", bad=True)
             return []
         self._assignments = {a.name: a for a in found}
+        with self._lock:
+            self._courses = {a.course for a in found}
+        self._show_standings()
         options = tuple(self._assignments) or (NONE,)
         keep = self.chosen.value
         self.chosen.options = options

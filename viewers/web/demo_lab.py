@@ -19,7 +19,7 @@ from typing import Literal
 
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
-from common.messages.grading import AssignmentInfo, Leaderboard, SubmissionInfo
+from common.messages.grading import AssignmentInfo, Leaderboard, Standings, SubmissionInfo
 from common.recording import RecordingError, read_recording, summarize
 from viewers.web import demo_world
 from viewers.web.adapters import (
@@ -456,6 +456,9 @@ class DemoConnection(DemoAdmin):
 
     def leaderboard(self, assignment: str) -> Leaderboard:
         raise LabError("the demo lab has no leaderboards: no grader runs here")
+
+    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
+        return lambda: None  # no grader: no competition
 
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         self._need("deploy", "dry-run controllers")

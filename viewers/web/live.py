@@ -38,6 +38,7 @@ from common.messages import (
     Leaderboard,
     QueueStateRequest,
     RoomEvent,
+    Standings,
     SubmissionInfo,
 )
 from viewers.web.adapters import (
@@ -509,6 +510,9 @@ class LiveConnection:
 
     def leaderboard(self, assignment: str) -> Leaderboard:
         return self._call(lambda: GraderClient(self.client).leaderboard(assignment))
+
+    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
+        return self._call(lambda: GraderClient(self.client).watch_standings(None, on_standings))
 
     # -- admin
 

@@ -22,6 +22,7 @@ IDS = {
     "ident": "room-1",
     "camera": "cam-1",
     "grader": "g-1",
+    "competition": "final-1",
     "key": "wart/lab/alive/context/room-1",
 }
 

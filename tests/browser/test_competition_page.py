@@ -1,0 +1,95 @@
+"""A student watches a competition's ranking change in the page as heats end (issue 36 item 7).
+
+A real lab (router, registry, engine, runner, the agent context ``arena``) and
+the grader as processes. alice (team ants) and bob (team zebras) have graded
+submissions; alice opens her Course folder and lists her assignments, then the
+teacher starts a competition. With no click of hers, the page shows heat 1's
+result while heat 2 runs, then the final ranking with each entry's cause.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from common.client.grader_client import GraderClient
+from services.grader.assignment import parse_assignment
+from services.grader.grading_db import GradingStore
+from services.lab import wiring
+from services.registry.accounts_db import RegistryDB
+from services.registry.courses_db import CourseStore
+from services.registry.roster import RosterRow
+from services.runner.sandbox import sandbox_problem
+from tests.browser.reallab import RealLab, real_lab
+from tests.browser.test_real_agents import enter_arena
+from tests.integration.test_grading import assignment_toml
+from viewers.web.app import WebViewer
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]
+REPO = Path(__file__).resolve().parents[2]
+GRADING = REPO / "tests" / "integration" / "grading"
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    with real_lab(Path(tmp_path_factory.mktemp("competelab")), agents=True) as env:
+        db = RegistryDB(env.lab.db_path)
+        rows = [
+            RosterRow(line=2, user="alice", name="Alice A", team="ants"),
+            RosterRow(line=3, user="bob", name="Bob B", team="zebras"),
+            RosterRow(line=4, user="ida", name="Ida I", role="teacher"),
+        ]
+        CourseStore(db).import_roster("robotics-26", rows)
+        text = assignment_toml("reach-goal", episodes="1", seeds="[4]")
+        assignment, map_text = parse_assignment(text.encode(), "a.toml", REPO / "maps")
+        GradingStore(db).put_assignment(assignment, map_text)
+        db.close()
+        env.lab.account(wiring.service_account("grader", "grader"))
+        env.lab.start(wiring.grader_spec(env.lab.wiring()), name="grader")
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def test_a_student_sees_the_ranking_change_as_heats_end(open_page, lab: RealLab) -> None:
+    # Heat 1 is ants (works: a few seconds), heat 2 zebras (loops: caught after ~15 s).
+    for user, name in (("alice", "works"), ("bob", "loops")):
+        with lab.lab.client(user) as client:
+            grader = GraderClient(client)
+            sub = grader.submit("reach-goal", (GRADING / f"{name}.py").read_bytes(), f"{name}.py")
+            assert grader.wait_graded("reach-goal", sub.submission, 180).status == "graded"
+
+    alice = open_page("alice")
+    enter_arena(alice, lab, "alice")
+    alice.p.get_by_text("Course", exact=True).first.click()
+    alice.click("Refresh assignments")
+    alice.wait_text("1 assignment(s) in your courses.")
+
+    with lab.lab.client("ida") as client:
+        first = GraderClient(client).run_competition("reach-goal", "final")
+    assert [e.team for e in first.entries] == ["ants", "zebras"]
+
+    # Live, with no click: heat 1 ended (its score and cause) while heat 2 runs.
+    alice.wait_text("Competition final", timeout=30_000)
+    alice.wait_text("heat 2 of 2 running", timeout=60_000)
+    alice.p.get_by_role("cell", name="ok: ran its 3 simulated s", exact=True).first.wait_for(
+        timeout=10_000
+    )
+    alice.p.get_by_role("cell", name="99.62", exact=True).first.wait_for(timeout=10_000)
+    # Then the end: zebras ranked second with its cause.
+    alice.wait_text("finished, 2 heat(s)", timeout=90_000)
+    alice.p.get_by_role("cell", name="-3", exact=True).first.wait_for(timeout=10_000)
+    alice.wait_text("timeout: the entry's controller: it did not answer in time")
+    rows = alice.p.get_by_role("row").all_inner_texts()
+    ranked = [r.split("\t")[:2] for r in rows if "ants" in r or "zebras" in r]
+    assert [r[1].strip() for r in ranked[-2:]] == ["ants", "zebras"], rows
+    alice.p.get_by_text("Competition final").first.scroll_into_view_if_needed()
+    alice.screenshot("competition-finished")
