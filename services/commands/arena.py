@@ -5,12 +5,16 @@
     wart arena stop [--lab FILE] --user NAME WORLD
     wart arena estop   [--lab FILE] --user NAME --context CTX [--reason WHY]
     wart arena release [--lab FILE] --user NAME --context CTX
+    wart arena takeover ROBOT [--lab FILE] --user NAME --context CTX [--controller FILE]
+    wart arena handback ROBOT [--lab FILE] --user NAME --context CTX
 
 ``new`` and ``stop`` need the ``host`` permission (instructors and admins);
 ``estop`` (the emergency stop: every robot of the agent context's arena
 stops now, its running controllers end, no slot starts until ``release``;
 waiting requests keep their places) needs the context's manage right (its
-owner, or ``kick`` there);
+owner, or ``kick`` there), as do ``takeover`` (a student's running controller
+paused, the robot held or driven by your controller until Ctrl-C; see
+services/commands/arena_takeover.py) and ``handback``;
 the password comes from --password-file, WART_PASSWORD or a prompt. Without
 --on, the host is chosen by load: among hosts that accept an arena now, the
 one with the fewest arenas, then the lowest CPU. With --lab the tool joins a
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -42,6 +47,8 @@ from common.lab_errors import LabError
 from common.messages.host import ArenaInfo, HostLoad
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
+from services.commands.arena_takeover import add_takeover_parsers, run_takeover
+from services.commands.control import interrupt_event
 from services.commands.terminal import password_from
 from services.lab.labfile import LabFileError, load
 from services.lab.plan import read_registry_key
@@ -136,9 +143,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
     )
     s_estop.add_argument("--reason", default="", help="told to every student whose run ends")
     s_release = sub.add_parser("release", help="release an arena's emergency stop")
-    for s in (s_estop, s_release):
+    takeover = add_takeover_parsers(sub)
+    for s in (s_estop, s_release, *takeover):
         s.add_argument("--context", required=True, help="the arena's agent context, e.g. arena")
-    for s in (s_new, s_stop, s_estop, s_release):
+    for s in (s_new, s_stop, s_estop, s_release, *takeover):
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
     args, options = cli.parse(p, argv)
@@ -156,6 +164,8 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
         keys.check_ident("context", args.context)
     if len(getattr(args, "reason", "")) > 200:
         raise HostError("--reason: at most 200 characters")
+    # Ctrl-C ends a take-over cleanly: the robot is handed back.
+    stop = interrupt_event() if args.verb == "takeover" else threading.Event()
     session, realm, registry_key = lab_session(args, options)
     try:
         if args.verb == "list":
@@ -167,6 +177,8 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
                 agents = AgentClient(client, args.context)
                 reason = getattr(args, "reason", "")
                 print(agents.emergency_stop(reason, release=args.verb == "release"))
+            elif args.verb in ("takeover", "handback"):
+                return run_takeover(AgentClient(client, args.context).join(), args, stop)
             elif args.verb == "new":
                 arena = host_arena(
                     client, args.world, args.map, args.robots, host=args.host, seed=args.seed
