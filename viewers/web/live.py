@@ -441,6 +441,12 @@ class LiveConnection:
     def stop_agent(self, ctx: str, agent: str) -> str:
         return self._arena(ctx).stop(agent)
 
+    def take_over(self, ctx: str, agent: str, take: bool) -> str:
+        return self._arena(ctx).take_over(agent, take)
+
+    def drive(self, ctx: str, agent: str, left: int, right: int) -> None:
+        self._arena(ctx).drive(agent, left, right)
+
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
         return self._arena(ctx).set_enabled(enabled, agent)
 
