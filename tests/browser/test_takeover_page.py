@@ -62,7 +62,7 @@ def test_the_teacher_takes_over_in_the_page_and_hands_back(open_page, lab: RealL
         ida.wait_text("k1 taken over from alice: their controller is paused")
         ida.wait_text("taken over by ida")  # the robots' table
         alice.wait_text("your robot is driven by ida since", timeout=15_000)
-        alice.wait_text("your controller is paused")
+        alice.wait_text("k1: your controller is paused: a teacher took the robot over")
         wait_until(lambda: motion.at_rest_since(["k1"], taken), 20, what="k1 paused at rest")
         alice.screenshot("takeover-student-view")
 
@@ -77,6 +77,7 @@ def test_the_teacher_takes_over_in_the_page_and_hands_back(open_page, lab: RealL
         ida.click("Hand back")
         ida.wait_text("k1 handed back to alice's controller")
         alice.wait_text("ida handed your robot back: your controller drives again", 15_000)
+        alice.wait_text("k1: your controller drives again: the robot was handed back")
         resumed = time.monotonic()
         wait_until(lambda: motion.moving(["k1"], resumed), 20, what="alice's controller again")
         assert al.wait_status(rid, FINAL, timeout=0.2) is None  # the same slot goes on

@@ -142,6 +142,7 @@ class RequestEvent:
     user: str
     status: str
     reason: str = ""
+    takeover: str | None = None  # running, a teacher's take-over: "taken" or "handed_back"
 
 
 @dataclass(frozen=True)

@@ -169,7 +169,13 @@ class AgentContextLink:
     def _on_status(self, status: RequestStatus) -> None:
         self._emit(
             RequestEvent(
-                self.ctx, status.request_id, status.agent, status.user, status.status, status.reason
+                self.ctx,
+                status.request_id,
+                status.agent,
+                status.user,
+                status.status,
+                status.reason,
+                status.takeover,
             )
         )
         self._emit(AgentsEvent(self.ctx))

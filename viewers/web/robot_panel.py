@@ -63,6 +63,8 @@ STATUS_WORDS = {
     "finished": "finished",
     "cancelled": "was cancelled",
     "refused": "was refused",
+    "taken": "is paused: a teacher took the robot over",
+    "handed_back": "drives again: the robot was handed back",
 }
 
 
@@ -235,7 +237,7 @@ class RobotPanel:
         mine = event.user == self.connection.user
         who = "your" if mine else f"{event.user}'s"
         why = f": {event.reason}" if event.reason else ""
-        words = STATUS_WORDS.get(event.status, event.status)
+        words = STATUS_WORDS.get(event.takeover or event.status, event.status)
         self._add_output(f"<i>{printed(f'{who} controller on {event.agent} {words}{why}')}</i>")
         if mine and event.status in ("running", "finished", "cancelled", "refused"):
             self.client.add_notification(
