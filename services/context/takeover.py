@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 
 import msgspec
 
+from common.audit import AuditReporter
 from common.auth import Principal
 from common.messages import AgentEvent, HandBack, Message, OkReply, RequestStatus, TakenOver
 from common.messages import TakeOver as TakeOverRequest
@@ -61,6 +62,7 @@ class TakeOvers:
     world: str
     book: QueueBook
     leases: LeaseSigner
+    audit: AuditReporter
     _lock: threading.RLock
     _wake: threading.Condition
     _dirty: bool
@@ -170,6 +172,9 @@ class TakeOvers:
                 if run is not None and taken is not None and taken.holder_session == session_id:
                     handed.append((run, *self._give_back(run, f"{taken.job.user} {why}")))
         for run, taken, status in handed:
+            # In the audit trail as the context's doing, in the teacher's name.
+            where = f"agent/{self.room}/{run.job.agent}"
+            self.audit.report(taken.job.user, "handback", where, "ok", status.reason)
             self._after_hand_back(run, taken, status)
 
     def _give_back(self, run: RunningJob, said: str) -> tuple[RunningJob, RequestStatus]:

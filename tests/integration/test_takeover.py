@@ -38,6 +38,14 @@ pytestmark = [
     pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
 ]
 FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
+REVERSE = """\
+from common.controller import Controller, Khepera
+
+
+class Reverse(Controller):
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(-10, -10)
+"""
 
 
 @pytest.fixture
@@ -117,6 +125,12 @@ def test_a_teacher_takes_over_a_running_robot_drives_it_and_hands_it_back(
         wait_for(lambda: motion.moving(["k1"], resumed), 20, "alice's controller to drive again")
         assert alice.state().agents[1].entries[0].taken_by is None
         assert alice.wait_status(rid, FINAL, timeout=0.2) is None
+
+        # A teacher who leaves the context while holding the robot gives it back.
+        ida.take_over("k1")
+        ida.leave()
+        wait_for(lambda: len(_steps(seen)) == 4, 10, "the hand-back of a teacher who left")
+        assert seen[-1].reason == "ida went away (left the context): your controller drives again"
         alice.cancel(rid)
         assert alice.wait_status(rid, FINAL, timeout=20) is not None
         motion.close()
@@ -137,12 +151,14 @@ def test_a_teacher_takes_over_a_running_robot_drives_it_and_hands_it_back(
             entries, _ = admin.audit_trail(AuditQuery(action=action))
             return sorted((e.actor, e.outcome) for e in entries)
 
-        wait_for(lambda: trail("handback") == [("ida", "ok"), ("ida", "refused")], 10, "audit")
-        assert trail("takeover") == [("bob", "refused"), ("ida", "ok"), ("ida", "refused")]
+        handbacks = [("ida", "ok"), ("ida", "ok"), ("ida", "refused")]  # by hand, and on leaving
+        wait_for(lambda: trail("handback") == handbacks, 10, "the audit trail's hand-backs")
+        takes = [("bob", "refused"), ("ida", "ok"), ("ida", "ok"), ("ida", "refused")]  # k2: idle
+        assert trail("takeover") == takes
 
 
-def test_wart_arena_takeover_holds_the_robot_until_ctrl_c_and_hands_it_back(
-    lab: ProcessLab, procs: Procs
+def test_wart_arena_takeover_holds_or_drives_the_robot_until_ctrl_c_and_hands_it_back(
+    lab: ProcessLab, procs: Procs, tmp_path: Path
 ) -> None:
     def arena(verb: str, user: str, *extra: str) -> Proc:
         args = ["arena", *lab.net_args(), verb, "k1", "--context", CTX, "--user", user, *extra]
@@ -166,3 +182,20 @@ def test_wart_arena_takeover_holds_the_robot_until_ctrl_c_and_hands_it_back(
         wait_for(lambda: _steps(seen) == ["taken", "handed_back"], 10, "the hand-back")
         assert "handed back to alice's controller" in holding.output()
         assert alice.wait_status(rid, FINAL, timeout=0.2) is None  # her run goes on
+
+        # The teacher's own controller, run on the teacher's machine, drives k1.
+        reverse = tmp_path / "reverse.py"
+        reverse.write_text(REVERSE)
+        with lab.zsession() as z:
+            motion = Motion(z, lab.router.realm)
+            driving = arena("takeover", "ida", "--controller", str(reverse))
+            wait_for(lambda: _steps(seen) == ["taken", "handed_back", "taken"], 30, "taken again")
+            wait_for(lambda: "driving it with reverse.py" in driving.output(), 10, "its words")
+            since = time.monotonic()
+            wait_for(lambda: motion.moving(["k1"], since), 20, "ida's controller to drive k1")
+            driving.popen.send_signal(signal.SIGINT)
+            assert driving.popen.wait(30) == 0, driving.output()
+            wait_for(lambda: _steps(seen)[-1] == "handed_back", 10, "handed back again")
+            assert "steps driven" in driving.output()
+            motion.close()
+        assert alice.wait_status(rid, FINAL, timeout=0.2) is None
