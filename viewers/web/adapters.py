@@ -184,6 +184,7 @@ class AgentStatus:
     my_request: str | None = None  # my request's id on this agent
     slot_left_s: float | None = None  # what remains of the running slot
     taken_by: str | None = None  # a teacher who took the running controller's robot over
+    waiting: tuple[str, ...] = ()  # who waits for it, in order
 
 
 @dataclass(frozen=True)

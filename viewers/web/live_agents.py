@@ -103,6 +103,7 @@ def agent_rows(
                 my_request=mine.request_id if mine is not None else None,
                 slot_left_s=left,
                 taken_by=running.taken_by if running is not None else None,
+                waiting=tuple(e.user for e in line.entries if e.position > 0),
             )
         )
     return rows

@@ -98,7 +98,11 @@ def format_agents(rows: list[AgentStatus], settings: ArenaSettings | None = None
             name += " (offline)"
         elif not r.enabled and settings is not None and settings.slot_seconds > 0:
             name += " (disabled)"
-        lines.append(f"| {name} | {holder} | {r.queue} | {mine} | {eta} |")
+        waiting = str(r.queue)
+        if r.waiting and settings is not None and settings.can_manage:  # the teacher's view
+            waiting += ": " + ", ".join(escape_md(u) for u in r.waiting[:5])
+            waiting += " ..." if len(r.waiting) > 5 else ""
+        lines.append(f"| {name} | {holder} | {waiting} | {mine} | {eta} |")
     if len(rows) > MAX_ROWS:
         lines.append(f"\n_and {len(rows) - MAX_ROWS} more: click a robot in the view._")
     return "\n".join(lines)
