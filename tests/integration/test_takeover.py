@@ -27,6 +27,7 @@ from tests.integration.agentkit import (
     Motion,
     agent_user,
     start_agent_context,
+    start_deploy,
     start_engine,
     start_runner,
     together,
@@ -37,7 +38,8 @@ pytestmark = [
     pytest.mark.integration,
     pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
 ]
-FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
+CONTROLLERS = Path(__file__).with_name("controllers")
+FORWARD = (CONTROLLERS / "forward.py").read_bytes()
 REVERSE = """\
 from common.controller import Controller, Khepera
 
@@ -167,7 +169,10 @@ def test_wart_arena_takeover_holds_or_drives_the_robot_until_ctrl_c_and_hands_it
     with agent_user(lab, "alice") as alice:
         seen: list[RequestStatus] = []
         alice.on_status = seen.append
-        rid = alice.queue("k1", "deploy", source=FORWARD, filename="forward.py").request_id
+        # Her controller uploaded with wart deploy, which tells her of each step.
+        deploy = start_deploy(lab, CONTROLLERS / "forward.py", "k1", "alice")
+        wait_for(lambda: alice.statuses_of_user("alice"), 60, "her request in the queue state")
+        rid = alice.statuses_of_user("alice")[0]
         assert alice.wait_status(rid, {"running"}, timeout=60)
 
         refused = arena("takeover", "bob")
@@ -182,6 +187,9 @@ def test_wart_arena_takeover_holds_or_drives_the_robot_until_ctrl_c_and_hands_it
         wait_for(lambda: _steps(seen) == ["taken", "handed_back"], 10, "the hand-back")
         assert "handed back to alice's controller" in holding.output()
         assert alice.wait_status(rid, FINAL, timeout=0.2) is None  # her run goes on
+        wait_for(lambda: "ida handed your robot back" in deploy.output(), 10, "wart deploy's words")
+        assert "your robot is driven by ida since " in deploy.output()
+        assert "your controller is paused (demo)" in deploy.output()
 
         # The teacher's own controller, run on the teacher's machine, drives k1.
         reverse = tmp_path / "reverse.py"
