@@ -209,6 +209,9 @@ class AgentClient:
         slot's end, ``stop``, or the context says the take-over ended (handed back by
         another manager, the run ended). Does not hand back. Returns its iterations."""
         stop = stop or threading.Event()
+        # The take-over is in the context's state from its reply on: read it now, or the
+        # watch below could see an older state (its event not come yet) and end at once.
+        self.state()
         link = self.robot_link(taken.world, taken.agent)
         loop = ControllerLoop(controller, Khepera(link))
         me = self.client.user
