@@ -51,7 +51,7 @@ from common.sim2d.maps import load_map
 from common.sim2d.world import World
 from common.world.remote_robot import agent_command, state_from_sample
 from services.engine import packing
-from services.runner.dryrun import _Touches
+from services.runner.lockstep import Touches
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = {  # example -> the map it suits (its docstring's "Suits:")
@@ -100,7 +100,7 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
     # Through pose_of: a world's object_pose is filled by its first tick.
     start_objects = np.array([world.pose_of(o.id) for o in world.objects]).reshape(-1, 3)
     last = world.agent_pose[:, :2].copy()
-    touches = {slot: _Touches(world, slot) for _c, _r, slot in robots}
+    touches = {slot: Touches(world, slot) for _c, _r, slot in robots}
     contacts = {"wall": 0, "obstacle": 0, "robot": 0, "object": 0}
     distance = 0.0
     ir_sum, ir_ticks = 0.0, 0

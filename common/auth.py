@@ -36,6 +36,7 @@ import nacl.signing
 
 from common.messages.auth import AuthEnvelope, SessionToken, SignedToken
 from common.messages.base import ErrorCode, Expected, Message, MessageError, decode, encode
+from common.messages.registry import ResumeGrant, SignedResume
 
 M = TypeVar("M", bound=Message)
 # The other members of a tuple of expected types (open's overloads, as decode's).
@@ -546,3 +547,11 @@ def issue_session(
         grants={scope: sorted(set(p)) for scope, p in (grants or {}).items()},  # type: ignore[arg-type]
     )
     return Session(keys, identity.sign_token(token), token)
+
+
+def resume_user(token: bytes) -> str:
+    """The account a resume token names, unchecked (the registry checks it); ValueError."""
+    try:
+        return decode(decode(token, SignedResume).grant, ResumeGrant).user
+    except MessageError as exc:
+        raise ValueError(f"not a resume token: {exc}") from None

@@ -9,6 +9,7 @@ rotate at a size cap (:class:`RotatingFile`).
 from __future__ import annotations
 
 import logging
+import logging.handlers
 import os
 import sys
 import threading
@@ -121,6 +122,37 @@ def setup_logging(level: str | None = None) -> RepeatSummary:
     # Zenoh's own Rust logs are noisy at info; show only its errors unless RUST_LOG says more.
     zenoh.init_log_from_env_or(ZENOH_LOG_FILTER)
     return _summary
+
+
+def log_to_file(
+    name: str, path: Path, terminal_level: int = logging.ERROR
+) -> logging.handlers.RotatingFileHandler:
+    """Logger ``name`` (and those under it) to its own rotating file, like a child's log.
+
+    For a service that runs inside another process (``wart up``'s host "local"): its
+    lines (a refused request, a fuzzer's junk) go to the file; the terminal it shares
+    with the operator gets only ``terminal_level`` and above, what they must act on.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    file = logging.handlers.RotatingFileHandler(
+        path, maxBytes=LOG_FILE_MAX_BYTES, backupCount=LOG_FILE_BACKUPS, encoding="utf-8"
+    )
+    terminal = logging.StreamHandler(sys.stderr)
+    terminal.setLevel(terminal_level)
+    for handler in (file, terminal):
+        handler.setFormatter(
+            logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s", "%H:%M:%S")
+        )
+        if _summary is not None:
+            handler.addFilter(_summary)
+    logger = logging.getLogger(name)
+    for old in list(logger.handlers):  # a second start in one process (tests)
+        logger.removeHandler(old)
+        old.close()
+    logger.addHandler(file)
+    logger.addHandler(terminal)
+    logger.propagate = False
+    return file
 
 
 # Errors only, but not zenoh's "Unknown token id=0" from a client's token routing:

@@ -43,6 +43,7 @@ from common.auth import (
     key_fingerprint,
     parse_public_key,
     registry_box_key,
+    resume_user,
 )
 from common.client.private_mail import (
     PrivateText,
@@ -74,12 +75,15 @@ from common.messages import (
     LoginReply,
     LoginRequest,
     LogoutRequest,
+    MailboxClaim,
+    MailboxContents,
     MailboxDeposit,
     Message,
     MessageError,
     OkReply,
     PasswordCredential,
     PrivateMessage,
+    ResumeCredential,
     SealedLogin,
     SessionToken,
     UserKeysReply,
@@ -122,6 +126,10 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         self.session: Session | None = None
         self.server_name = ""
         self._mailbox: nacl.public.PrivateKey | None = None
+        # The registry's resume token of the last login that asked for one (a browser
+        # keeps it to come back without a password; see services/registry/resume.py).
+        self.resume_token: bytes | None = None
+        self.keep_resume = False  # close() logs out leaving the resume token good
         self._token: Any = None
         self._inbox: Any = None
         self._inbox_user = ""  # whose inbox and presence token are declared
@@ -287,19 +295,58 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         *,
         ttl: float = 12 * 3600.0,
         wait: float | None = None,
+        resume: bool = False,
+        defer_mailbox: bool = False,
     ) -> SessionToken:
         """Log in with a password; raises WrongCredentials, RateLimited, RegistryUnreachable...
 
         ``wait``: how long to wait for the registry's answer (default: LOGIN_WAIT_S, or
         this client's timeout if longer); a gateway that must answer its user sooner
-        passes less.
+        passes less. ``resume``: ask for a resume token too (``resume_token``).
+        ``defer_mailbox``: log in without deriving the mailbox key (argon2id, as costly as
+        the registry's check); the caller derives it after, with :meth:`claim_mailbox`
+        (a gateway logging a class in at once on the lab's own cores).
         """
         keys.check_ident("user", user)
         if wait is not None and not wait > 0:
             raise ValueError(f"a login must wait a positive time, not {wait}")
-        mailbox = mailbox_key_from_password(self.realm, user, password)
+        mailbox = None if defer_mailbox else mailbox_key_from_password(self.realm, user, password)
+        cred = PasswordCredential(user=user, password=password)
+        return self._login(cred, mailbox, SessionKeys(), ttl, wait, resume=resume)
+
+    def claim_mailbox(self, password: str) -> list[PrivateText]:
+        """After a ``defer_mailbox`` login: derive the mailbox key and tell the registry;
+        the messages kept while offline, each also given to ``on_private``."""
+        if self.session is None:
+            raise NotLoggedIn("log in first")
+        mailbox = mailbox_key_from_password(self.realm, self.session.user, password)
+        reply = self._ask(
+            keys.registry_directory(self.realm),
+            MailboxClaim(mailbox_key=bytes(mailbox.public_key)),
+            MailboxContents,
+            "mailbox",
+        )
+        self._mailbox = mailbox
+        kept = [t for t in (self._open_private(m, kept=True) for m in reply.pending) if t]
+        for text in kept:
+            self.on_private(text)
+        return kept
+
+    def resume(
+        self, token: bytes, *, ttl: float = 12 * 3600.0, wait: float | None = None
+    ) -> SessionToken:
+        """Log in again with a resume token from an earlier login (no password check).
+
+        The token is used up; the new one is ``resume_token``. A token that is no good
+        (forged, expired, revoked, used) raises WrongCredentials with the registry's
+        words ("your saved login expired 3 min ago: log in with your password").
+        Messages kept while offline stay kept until the next password login.
+        """
+        user = resume_user(token)
+        if wait is not None and not wait > 0:
+            raise ValueError(f"a login must wait a positive time, not {wait}")
         return self._login(
-            PasswordCredential(user=user, password=password), mailbox, SessionKeys(), ttl, wait
+            ResumeCredential(user=user, token=token), None, SessionKeys(), ttl, wait, resume=True
         )
 
     def login_with_key(
@@ -325,21 +372,24 @@ class LabClient(RoomCalls, RegistryAdminCalls):
 
     def _login(
         self,
-        cred: PasswordCredential | KeyCredential,
-        mailbox: nacl.public.PrivateKey,
+        cred: PasswordCredential | KeyCredential | ResumeCredential,
+        mailbox: nacl.public.PrivateKey | None,
         session_keys: SessionKeys,
         ttl: float,
         wait: float | None = None,
+        *,
+        resume: bool = False,
     ) -> SessionToken:
         request = LoginRequest(
             realm=self.realm,
             credential=cred,
             session_key=session_keys.session_public_key,
             box_key=session_keys.box_public_key,
-            mailbox_key=bytes(mailbox.public_key),
+            mailbox_key=None if mailbox is None else bytes(mailbox.public_key),
             ttl=ttl,
             via=self.via,
             vouch=self.voucher(session_keys.session_public_key) if self.voucher else None,
+            resume=resume,
         )
         sealed = nacl.public.SealedBox(registry_box_key(self.registry_key)).encrypt(encode(request))
         key = keys.registry_login(self.realm)
@@ -383,7 +433,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         key: str,
         sealed: bytes,
         session_keys: SessionKeys,
-        mailbox: nacl.public.PrivateKey,
+        mailbox: nacl.public.PrivateKey | None,
         wait: float | None,
     ) -> SessionToken:
         answers = self._find_registry(
@@ -431,7 +481,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         raise RequestFailed("login: " + "; ".join(e.message for e in errors))
 
     def _logged_in(
-        self, session: Session, reply: LoginReply, mailbox: nacl.public.PrivateKey
+        self, session: Session, reply: LoginReply, mailbox: nacl.public.PrivateKey | None
     ) -> SessionToken:
         if self._inbox is None or self._inbox_user != session.user:  # a re-login
             self._undeclare()
@@ -445,6 +495,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
             self._mailbox = mailbox
             early, self._early = self._early, []
         self.server_name = reply.server_name
+        self.resume_token = reply.resume
         for sample in early:
             self._deliver(sample)
         self.pending = [t for t in (self._open_private(m, kept=True) for m in reply.pending) if t]
@@ -462,7 +513,8 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         if self.session is None:
             return
         try:
-            self._ask(keys.registry_logout(self.realm), LogoutRequest(), OkReply, "logout")
+            logout = LogoutRequest(keep_resume=self.keep_resume)
+            self._ask(keys.registry_logout(self.realm), logout, OkReply, "logout")
         finally:
             self.session = None
             self._undeclare()
@@ -507,7 +559,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         return seal_private(self.session, user, to_key, text)
 
     def _open_private(self, message: PrivateMessage, *, kept: bool) -> PrivateText | None:
-        if self.session is None or self._mailbox is None:
+        if self.session is None:
             return None
         return open_private(self.session, self._mailbox, message, kept=kept)
 

@@ -57,12 +57,20 @@ def seal_private(session: Session, user: str, to_key: bytes, text: str) -> Priva
 
 
 def open_private(
-    session: Session, mailbox: nacl.public.PrivateKey, message: PrivateMessage, *, kept: bool
+    session: Session,
+    mailbox: nacl.public.PrivateKey | None,
+    message: PrivateMessage,
+    *,
+    kept: bool,
 ) -> PrivateText | None:
-    """The text, or None when it is for another of this user's sessions or does not open."""
+    """The text, or None when it is for another of this user's sessions or does not open.
+
+    ``mailbox`` None: a session that has no mailbox key (yet): a resumed login, or one
+    whose key is still being derived; messages to the session's own key still open.
+    """
     if message.to_key == session.keys.box_public_key:
         mine = session.keys.box_key
-    elif message.to_key == bytes(mailbox.public_key):
+    elif mailbox is not None and message.to_key == bytes(mailbox.public_key):
         mine = mailbox
     else:
         return None

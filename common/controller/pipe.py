@@ -47,6 +47,11 @@ class Stop:
     """End the controller: cleanup runs, then the child exits."""
 
 
+@dataclass(frozen=True)
+class Probe:
+    """Just before the slot ends: is do_work stuck? (answered with Hung only if it is)."""
+
+
 # -- child -> runner
 
 
@@ -79,14 +84,27 @@ class Failed:
 
 
 @dataclass(frozen=True)
+class Hung:
+    """do_work has not returned for ``seconds``; the student's file was at ``line``, in
+    ``function`` (the innermost frame of the controller's own file in the main thread)."""
+
+    seconds: float
+    line: int
+    function: str
+
+
+@dataclass(frozen=True)
 class Done:
     """The controller's loop ended normally after ``iterations`` do_work calls."""
 
     iterations: int
 
 
-ToChild = State | Stop
-FromChild = Command | Ready | Step | Failed | Done
+ToChild = State | Stop | Probe
+FromChild = Command | Ready | Step | Failed | Hung | Done
+
+HUNG_AFTER_S = 1.0
+"""A do_work still running this long when the slot's end nears is reported as hung."""
 
 _TAGS: dict[type, str] = {
     State: "state",
@@ -95,6 +113,8 @@ _TAGS: dict[type, str] = {
     Ready: "ready",
     Step: "step",
     Failed: "error",
+    Probe: "probe",
+    Hung: "hung",
     Done: "done",
 }
 
@@ -114,6 +134,8 @@ def encode(message: ToChild | FromChild) -> bytes:
         body = {"message": message.message}
     elif isinstance(message, Done):
         body = {"iterations": message.iterations}
+    elif isinstance(message, Hung):
+        body = {"seconds": message.seconds, "line": message.line, "function": message.function}
     else:
         body = {}
     line = json.dumps({"t": _TAGS[type(message)], **body}, separators=(",", ":"))
@@ -171,7 +193,26 @@ def decode_from_child(line: bytes | str) -> FromChild:
         return Failed(_text(kind, data, "message", MAX_ERROR_CHARS))
     if kind == "done":
         return Done(_count(kind, data, "iterations"))
+    if kind == "hung":
+        _only(kind, data, "seconds", "line", "function")
+        seconds, lineno, function = data.get("seconds"), data.get("line"), data.get("function")
+        if not isinstance(seconds, int | float) or isinstance(seconds, bool):
+            raise PipeError("hung: seconds must be a number of seconds")
+        if not 0 <= seconds < 1e7:
+            raise PipeError("hung: seconds must be a number of seconds")
+        if type(lineno) is not int or not 0 <= lineno < 10**7:
+            raise PipeError("hung: line must be a line number")
+        if not isinstance(function, str):
+            raise PipeError("hung: function must be a string")
+        return Hung(float(seconds), lineno, function[:MAX_NAME_CHARS])
     raise PipeError(f"unknown message {kind[:32]!r}")
+
+
+def hung_reason(hung: Hung, filename: str) -> str:
+    """How a hung run ended, in the student's words: their file, its line and function."""
+    where = f"{filename}:{hung.line}" if hung.line else filename
+    function = f" (in {hung.function})" if hung.function else ""
+    return f"hung: do_work did not return for {hung.seconds:.0f} s; it was at {where}{function}"
 
 
 def decode_to_child(line: bytes | str) -> ToChild:
@@ -180,6 +221,9 @@ def decode_to_child(line: bytes | str) -> ToChild:
     if kind == "stop":
         _only(kind, data)
         return Stop()
+    if kind == "probe":
+        _only(kind, data)
+        return Probe()
     if kind == "state":
         try:
             return State(KheperaState.from_dict(data))

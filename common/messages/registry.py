@@ -45,14 +45,42 @@ class KeyCredential(Message, frozen=True):
     signature: Bytes64
 
 
+class ResumeGrant(Message, frozen=True):
+    """What a resume token says, signed by the registry: ``user`` may log in again
+    without a password until ``expires_at``, unless the registry revoked ``resume_id``
+    (logout, kick, ban, password change) or it was used (each is good once)."""
+
+    realm: Ident
+    user: Ident
+    resume_id: SessionId
+    issued_at: float
+    expires_at: float
+
+
+class SignedResume(Message, frozen=True):
+    """A resume token as the client keeps it (a browser: in a cookie)."""
+
+    grant: Annotated[bytes, msgspec.Meta(max_length=512)]  # an encoded ResumeGrant
+    signature: Bytes64  # the registry's Ed25519 signature of ``grant``
+
+
+class ResumeCredential(Message, frozen=True):
+    """A login by a resume token instead of a password (no argon2id check)."""
+
+    user: Ident
+    token: Annotated[bytes, msgspec.Meta(max_length=1024)]  # an encoded SignedResume
+
+
 class LoginRequest(Message, frozen=True):
     """What a client seals to the registry's box key to log in."""
 
     realm: Ident
-    credential: PasswordCredential | KeyCredential
+    credential: PasswordCredential | KeyCredential | ResumeCredential
     session_key: Bytes32  # the new session's Ed25519 verify key
     box_key: Bytes32  # the new session's X25519 public key
-    mailbox_key: Bytes32  # the user's long-term X25519 key: offline messages are sealed to it
+    # The user's long-term X25519 key: offline messages are sealed to it. None (a
+    # resume, which knows no password to derive it from): the mailbox is left as is.
+    mailbox_key: Bytes32 | None
     ttl: Annotated[float, msgspec.Meta(gt=0)] = 12 * 3600.0
     # Where the attempt says it comes from: written by the client, so the registry
     # only logs it; it never makes a throttle source of its own (the source is the
@@ -61,6 +89,8 @@ class LoginRequest(Message, frozen=True):
     # A gateway's word for where its person is: an encoded AuthEnvelope of a
     # LoginVouch sealed on registry/login by a session with ``vouch`` (the viewer).
     vouch: Annotated[bytes, msgspec.Meta(max_length=4096)] | None = None
+    # Ask for a resume token in the reply (a browser that may reload its page).
+    resume: bool = False
 
 
 class LoginVouch(Message, frozen=True):
@@ -100,10 +130,15 @@ class LoginReply(Message, frozen=True):
     token: SignedToken
     server_name: ShortText
     pending: list[PrivateMessage] = msgspec.field(default_factory=list)  # kept while offline
+    resume: Annotated[bytes, msgspec.Meta(max_length=1024)] | None = None  # a SignedResume
 
 
 class LogoutRequest(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/logout",)
+
+    # True when a page closes (a reload): its resume token stays good. A person's
+    # "Log out" leaves it False, and the session's resume token is revoked too.
+    keep_resume: bool = False
 
 
 # --- directory ----------------------------------------------------------------------
@@ -156,6 +191,19 @@ class MailboxDeposit(Message, frozen=True):
     KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
 
     message: PrivateMessage
+
+
+class MailboxClaim(Message, frozen=True):
+    """A session's mailbox key, sent after its login (derived off the login's path):
+    the registry records it and answers with the messages kept meanwhile."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
+
+    mailbox_key: Bytes32
+
+
+class MailboxContents(Message, frozen=True):
+    pending: list[PrivateMessage] = msgspec.field(default_factory=list)
 
 
 # --- revocations ----------------------------------------------------------------------
@@ -341,16 +389,21 @@ __all__ = [
     "LoginRequest",
     "LoginVouch",
     "LogoutRequest",
+    "MailboxClaim",
+    "MailboxContents",
     "MailboxDeposit",
     "PasswordCredential",
     "PrivateMessage",
     "RemoveUser",
     "RenameServer",
+    "ResumeCredential",
+    "ResumeGrant",
     "Revocation",
     "RevocationList",
     "RevocationsRequest",
     "SealedLogin",
     "SetPassword",
+    "SignedResume",
     "SignedRevocations",
     "Ungrant",
     "UnlockLogins",

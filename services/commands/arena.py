@@ -5,6 +5,8 @@
     wart arena stop [--lab FILE] --user NAME WORLD
     wart arena estop   [--lab FILE] --user NAME --context CTX [--reason WHY]
     wart arena release [--lab FILE] --user NAME --context CTX
+    wart arena settings [--lab FILE] --user NAME --context CTX [--slot SECONDS]
+                        [--enable | --disable] [--agent AGENT]
     wart arena takeover ROBOT [--lab FILE] --user NAME --context CTX [--controller FILE]
     wart arena handback ROBOT [--lab FILE] --user NAME --context CTX
 
@@ -12,9 +14,13 @@
 ``estop`` (the emergency stop: every robot of the agent context's arena
 stops now, its running controllers end, no slot starts until ``release``;
 waiting requests keep their places) needs the context's manage right (its
-owner, or ``kick`` there), as do ``takeover`` (a student's running controller
-paused, the robot held or driven by your controller until Ctrl-C; see
-services/commands/arena_takeover.py) and ``handback``;
+owner, or ``kick`` there); so does ``settings``, which sets what the page's
+arena panel sets: the slot length (``--slot``, 1 to 3600 s, from the next
+slot on) and remote control on or off for the whole arena or one robot
+(``--enable``/``--disable``, ``--agent``); without a change it shows them; and
+so do ``takeover`` (a student's running controller paused, the robot held or
+driven by your controller until Ctrl-C; see services/commands/arena_takeover.py)
+and ``handback``;
 the password comes from --password-file, WART_PASSWORD or a prompt. Without
 --on, the host is chosen by load: among hosts that accept an arena now, the
 one with the fewest arenas, then the lowest CPU. With --lab the tool joins a
@@ -26,6 +32,7 @@ one host is "local"; --registry-key or WART_REGISTRY_KEY).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import threading
 from collections.abc import Sequence
@@ -143,10 +150,18 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
     )
     s_estop.add_argument("--reason", default="", help="told to every student whose run ends")
     s_release = sub.add_parser("release", help="release an arena's emergency stop")
+    s_settings = sub.add_parser(
+        "settings", help="show or set an arena's slot length and who may control its robots"
+    )
+    s_settings.add_argument("--slot", type=float, help="slot length in seconds (1 to 3600)")
+    on_off = s_settings.add_mutually_exclusive_group()
+    on_off.add_argument("--enable", action="store_true", help="let students queue (again)")
+    on_off.add_argument("--disable", action="store_true", help="queue nothing new; runs end")
+    s_settings.add_argument("--agent", help="--enable/--disable this robot only")
     takeover = add_takeover_parsers(sub)
-    for s in (s_estop, s_release, *takeover):
+    for s in (s_estop, s_release, s_settings, *takeover):
         s.add_argument("--context", required=True, help="the arena's agent context, e.g. arena")
-    for s in (s_new, s_stop, s_estop, s_release, *takeover):
+    for s in (s_new, s_stop, s_estop, s_release, s_settings, *takeover):
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
     args, options = cli.parse(p, argv)
@@ -164,6 +179,8 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
         keys.check_ident("context", args.context)
     if len(getattr(args, "reason", "")) > 200:
         raise HostError("--reason: at most 200 characters")
+    if args.verb == "settings":
+        _check_settings(args)
     # Ctrl-C ends a take-over cleanly: the robot is handed back.
     stop = interrupt_event() if args.verb == "takeover" else threading.Event()
     session, realm, registry_key = lab_session(args, options)
@@ -173,7 +190,9 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
             return 0
         with LabClient(session, realm, registry_key, presence=False) as client:
             client.login(args.user, _password(args))
-            if args.verb in ("estop", "release"):
+            if args.verb == "settings":
+                print(_settings(AgentClient(client, args.context), args))
+            elif args.verb in ("estop", "release"):
                 agents = AgentClient(client, args.context)
                 reason = getattr(args, "reason", "")
                 print(agents.emergency_stop(reason, release=args.verb == "release"))
@@ -189,6 +208,34 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
         return 0
     finally:
         close_session(session)
+
+
+def _check_settings(args: argparse.Namespace) -> None:
+    slot = args.slot
+    if slot is not None and not (math.isfinite(slot) and 1.0 <= slot <= 3600.0):
+        raise HostError(f"--slot must be between 1 and 3600 seconds, not {slot:g}")
+    if args.agent is not None:
+        keys.check_ident("agent", args.agent)
+        if not (args.enable or args.disable):
+            raise HostError("--agent says which robot --enable or --disable applies to")
+
+
+def _settings(agents: AgentClient, args: argparse.Namespace) -> str:
+    """Change what was asked (the context's own words back), then show the settings."""
+    said = []
+    if args.slot is not None:
+        said.append(agents.settings(slot_seconds=args.slot))
+    if args.enable or args.disable:
+        said.append(agents.settings(enabled=bool(args.enable), agent=args.agent))
+    state = agents.state()
+    off = [q.agent for q in state.agents if not q.enabled]
+    lines = [*said, f"arena {args.context} (world {state.world}):"]
+    lines.append(f"  slot length   {state.slot_seconds:g} s")
+    lines.append(f"  remote control {'on' if state.enabled else 'off'} for the arena")
+    lines.append(f"  robots off    {', '.join(off) if off else 'none'}")
+    if state.estop:
+        lines.append(f"  {state.estop}")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

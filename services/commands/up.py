@@ -256,6 +256,8 @@ def settings_from_args(args: argparse.Namespace, options: NetworkOptions) -> Lab
 class LocalLab(HostDriver):
     """The one-machine lab under the shared driver (services/lab/driver.py): host "local"."""
 
+    host_log = f"host-{HOST_NAME}.log"
+
     def __init__(self, lab: LabSettings) -> None:
         self.lab = lab  # provision() pins the registry key in it
         self.realm = lab.realm
@@ -289,7 +291,7 @@ class LocalLab(HostDriver):
         hosting = HostingService(session, hosting_plan(self.lab), supervisor).start()
         say(
             f"  ✓ {'hosting ' + HOST_NAME:<22} up  rooms and arenas on request "
-            f"(host/{HOST_NAME}/spawn, `host` permission)"
+            f"(host/{HOST_NAME}/spawn, `host` permission; log {self.host_log})"
         )
         return hosting
 

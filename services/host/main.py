@@ -102,6 +102,7 @@ class LabFileHost(HostDriver):
         self.ctx = ctx
         self.realm = ctx.realm
         self.state_dir = ctx.state_dir
+        self.host_log = f"host-{ctx.host.name}.log"
 
     def banner(self) -> str:
         ctx = self.ctx

@@ -20,6 +20,8 @@ from pathlib import Path
 import zenoh
 
 from common import keys
+from common.keys import AliveKind
+from common.log import log_to_file
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.lab.hosting import HostingService
@@ -41,6 +43,8 @@ class HostDriver:
     # wart host serves hosting (its load, its token) while its services start; wart up
     # opens its front door for contexts on request once its own lab serves.
     hosting_first = False
+    # The in-process hosting service's own log (under STATE_DIR/logs, beside its children's).
+    host_log = "host.log"
 
     # -- what differs (overridden)
 
@@ -91,6 +95,10 @@ class HostDriver:
         """Start the host, keep it running until ``stop`` is set, then stop it all."""
         self.state_dir.mkdir(parents=True, exist_ok=True)
         supervisor = Supervisor(self.state_dir / "logs", say=say)
+        # The hosting service runs in this process: its lines (refused requests, junk
+        # from a fuzzer) go to its own file like every service's, not to the operator's
+        # terminal, which keeps only its errors and the supervisor's words.
+        log_to_file(f"wart.{AliveKind.HOST.value}", self.state_dir / "logs" / self.host_log)
         say(self.banner())
         session: zenoh.Session | None = None
         hosting: HostingService | None = None

@@ -46,6 +46,7 @@ from common.messages import (
 from common.service import RequestError
 from services.registry.accounts_db import DbError, RegistryDB
 from services.registry.audit_db import Action, TermStore
+from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, query_source
 
 log = logging.getLogger("wart.registry")
@@ -108,6 +109,7 @@ class AdminRequests:
     term: TermStore
     verifier: Verifier
     throttle: LoginThrottle
+    resumes: ResumeStore
     session: zenoh.Session
     realm: str
     _unsealer: nacl.public.SealedBox
@@ -118,7 +120,14 @@ class AdminRequests:
     def own_session_seal(self, key: str, message: Message) -> bytes:
         raise NotImplementedError
 
-    def _revoke(self, session_ids: list[bytes], reason: str, *, kicked: bool = False) -> int:
+    def _revoke(
+        self,
+        session_ids: list[bytes],
+        reason: str,
+        *,
+        kicked: bool = False,
+        keep_resume: bool = False,
+    ) -> int:
         raise NotImplementedError
 
     # -- the audit trail
@@ -208,6 +217,8 @@ class AdminRequests:
             return OkReply(detail=f"user {request.user} added")
         if isinstance(request, SetPassword):
             self.db.set_password(request.user, self._password(request.sealed_password))
+            # A saved login outlives no password: every resume token of the account goes.
+            self.resumes.revoke_user(request.user, "the password was changed")
             return OkReply(detail=f"password of {request.user} changed")
         if isinstance(request, RemoveUser):
             if request.user == principal.user:
@@ -282,9 +293,9 @@ class AdminRequests:
         notice = KickNotice(user=user, reason=reason[:256], by=principal.user)
         self.session.put(key, self.own_session_seal(key, notice))
         sessions = [s.session_id for s in self.db.active_sessions(user)]
-        count = self._revoke(
-            sessions, f"kicked from the server by {principal.user}: {reason}", kicked=True
-        )
+        why = f"kicked from the server by {principal.user}: {reason}"
+        count = self._revoke(sessions, why, kicked=True)
+        self.resumes.revoke_user(user, why)  # a page's token too, whichever session it came from
         log.info("%s kicked %s from the server (%d sessions)", principal.user, user, count)
         return OkReply(detail=f"{user} kicked ({count} sessions revoked)")
 

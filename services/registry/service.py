@@ -46,11 +46,15 @@ from common.messages import (
     LoginRequest,
     LoginVouch,
     LogoutRequest,
+    MailboxClaim,
+    MailboxContents,
     MailboxDeposit,
     Message,
     MessageError,
     OkReply,
+    PasswordCredential,
     PrivateMessage,
+    ResumeCredential,
     Revocation,
     RevocationList,
     SealedLogin,
@@ -66,11 +70,13 @@ from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 from services.registry.admin import REGISTRY_USER, AdminRequests, ban_refusal, source_of
 from services.registry.audit_db import Action, TermStore
+from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, vouched_source
 
 log = logging.getLogger("wart.registry")
 
 MAX_TTL = 7 * 24 * 3600.0
+CLAIM_WITHIN_S = 600.0  # a deferred mailbox key is sent this soon after the login, or never
 DEFAULT_SERVER_NAME = "wart lab"
 
 
@@ -91,6 +97,12 @@ class Registry(AdminRequests, Service):
         self.db = db
         self.term = TermStore(db)
         self.identity = identity
+        self.resumes = ResumeStore(db, identity, realm)
+        # Sessions of a password login that left its mailbox key for later: each may
+        # send it once (MailboxClaim). Anyone else (a resumed session, a stolen token)
+        # must never choose the key the account's offline mail is sealed to.
+        self._claims: dict[bytes, float] = {}
+        self._claims_lock = threading.Lock()
         self.throttle = throttle or LoginThrottle()
         self.verifier = Verifier(identity.verify_key, realm)
         self._unsealer = nacl.public.SealedBox(identity.box_private_key)
@@ -175,7 +187,15 @@ class Registry(AdminRequests, Service):
         source = self._login_source(query, request)
         now = time.time()
         self.throttle.check(user, source, now, key_login=isinstance(cred, KeyCredential))
-        if not self._credential_ok(request, now):
+        if isinstance(cred, ResumeCredential):
+            try:
+                self.resumes.use(user, cred.token, now)
+            except RequestError:
+                # A bad token counts as a failed login: guessing tokens is throttled too.
+                self.throttle.failed(user, source, now)
+                log.info("refused a resume of %s (from %s)", user, source)
+                raise
+        elif not self._credential_ok(request, now):
             self.throttle.failed(user, source, now)
             log.info("failed login for %s (from %s, says %r)", user, source, request.via)
             what = "key" if isinstance(cred, KeyCredential) else "password"
@@ -202,17 +222,38 @@ class Registry(AdminRequests, Service):
             grants=scoped,  # type: ignore[arg-type]
         )
         self.db.record_session(token.session_id, user, request.box_key, now, token.expires_at)
-        self.db.set_mailbox_key(user, request.mailbox_key)
+        # No mailbox key: a resume (no password to derive it from), or a client that
+        # derives it after its login (MailboxClaim): kept messages stay kept till then.
+        pending = []
+        if request.mailbox_key is not None:
+            pending = self._mailbox(user, request.mailbox_key)
+        elif isinstance(cred, PasswordCredential):
+            with self._claims_lock:
+                for old in [s for s, t in self._claims.items() if now - t > CLAIM_WITHIN_S]:
+                    del self._claims[old]
+                self._claims[token.session_id] = now
+        resume = None
+        if request.resume and not isinstance(cred, KeyCredential):
+            resume = self.resumes.issue(user, token.session_id, token.expires_at, now)
+        how = "resumed" if isinstance(cred, ResumeCredential) else "logged in"
+        log.info("%s %s (session %s)", user, how, token.session_id.hex()[:8])
+        return LoginReply(
+            token=self.identity.sign_token(token),
+            server_name=self.server_name,
+            pending=pending,
+            resume=resume,
+        )
+
+    def _mailbox(self, user: str, mailbox_key: bytes) -> list[PrivateMessage]:
+        """Record ``user``'s mailbox key; the messages kept for them, taken."""
+        self.db.set_mailbox_key(user, mailbox_key)
         pending = []
         for raw in self.db.take_mailbox(user):
             try:
                 pending.append(decode(raw, PrivateMessage))
             except MessageError as exc:
                 log.warning("dropped a damaged stored message for %s: %s", user, exc)
-        log.info("%s logged in (session %s)", user, token.session_id.hex()[:8])
-        return LoginReply(
-            token=self.identity.sign_token(token), server_name=self.server_name, pending=pending
-        )
+        return pending
 
     def _login_source(self, query: zenoh.Query, request: LoginRequest) -> str:
         """The throttle's source: the querier's Zenoh session, or what a gateway vouches.
@@ -238,7 +279,7 @@ class Registry(AdminRequests, Service):
 
     def _credential_ok(self, request: LoginRequest, now: float) -> bool:
         cred = request.credential
-        if cred.user == REGISTRY_USER:
+        if cred.user == REGISTRY_USER or isinstance(cred, ResumeCredential):
             return False
         if isinstance(cred, KeyCredential):
             if abs(now - cred.signed_at) > acl.KEY_LOGIN_MAX_AGE:
@@ -254,13 +295,22 @@ class Registry(AdminRequests, Service):
         return self.db.check_credential(cred.user, "password", cred.password)
 
     def on_logout(self, query: zenoh.Query) -> Message:
-        principal, _ = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
-        self._revoke([principal.session_id], "logged out")
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
+        self._revoke([principal.session_id], "logged out", keep_resume=request.keep_resume)
         return OkReply(detail="logged out")
 
     # -- revocations
 
-    def _revoke(self, session_ids: list[bytes], reason: str, *, kicked: bool = False) -> int:
+    def _revoke(
+        self,
+        session_ids: list[bytes],
+        reason: str,
+        *,
+        kicked: bool = False,
+        keep_resume: bool = False,
+    ) -> int:
+        if not keep_resume:
+            self.resumes.revoke_sessions(session_ids, reason)
         revoked = []
         for session_id in session_ids:
             rec = self.db.revoke(session_id, reason, kicked=kicked)
@@ -343,10 +393,20 @@ class Registry(AdminRequests, Service):
         principal, request = self.verifier.open(
             str(query.key_expr),
             query.payload,
-            (DirectoryRequest, UserKeysRequest, MailboxDeposit),
+            (DirectoryRequest, UserKeysRequest, MailboxDeposit, MailboxClaim),
         )
         if isinstance(request, UserKeysRequest):
             return self._user_keys(request.user)
+        if isinstance(request, MailboxClaim):
+            with self._claims_lock:
+                at = self._claims.pop(principal.session_id, None)
+            if at is None or time.time() - at > CLAIM_WITHIN_S:
+                raise AuthError(
+                    "forbidden",
+                    "only a session that logged in with the password may set the mailbox key, "
+                    "once, soon after its login",
+                )
+            return MailboxContents(pending=self._mailbox(principal.user, request.mailbox_key))
         if isinstance(request, MailboxDeposit):
             return self._deposit(principal, request.message)
         self._refresh.set()

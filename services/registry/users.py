@@ -26,7 +26,7 @@ from pathlib import Path
 
 from common import acl, cli
 from common.auth import create_identity_key, load_identity_key, parse_public_key
-from services.registry import courses_cli
+from services.registry import courses_cli, resume
 from services.registry.accounts_db import DbError, RegistryDB
 from services.registry.audit_db import Action, TermStore
 
@@ -164,6 +164,7 @@ def _run(args: argparse.Namespace, db: RegistryDB) -> int:
         print(f"user {args.user} added")
     elif args.command == "passwd":
         db.set_password(args.user, read_password(args, f"new password for {args.user}: "))
+        resume.revoke_user(db, args.user, "the password was changed")
         print(f"password of {args.user} changed")
     elif args.command == "remove":
         db.remove_user(args.user)

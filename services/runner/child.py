@@ -7,13 +7,19 @@ its first argument, one line each way, the messages of
 common/controller/pipe.py. The student's prints and tracebacks go to
 stdout/stderr, which the parent shows as the controller's output.
 
-    python3 -I -S child.py CMD_FD CONTROLLER_FILE [lockstep]
+    python3 -I -S child.py CMD_FD CONTROLLER_FILE [lockstep | hang=SECONDS]
 
 ``lockstep`` (a dry run): no clock of its own. Each state the parent sends
 is one tick of a private simulated world; the controller's ``do_work`` runs
 whenever the state's simulated time reaches its next period, and every state
 is answered with ``pipe.Step`` after the commands it caused, so the parent
 steps its world as fast as the controller answers.
+
+A do_work that does not return is told where it was: asked by ``pipe.Probe`` just
+before its slot ends (or, with ``hang=SECONDS``, by a watchdog once do_work has run
+that long), the reader thread looks at the main thread's stack
+(``sys._current_frames``) and sends ``pipe.Hung`` with the line and function of the
+controller's own file it was in. The parent then ends the run and says so.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 import traceback
 from collections.abc import Callable
 from typing import Any
@@ -30,6 +37,10 @@ def main() -> int:
     cmd_fd = int(sys.argv[1])
     path = sys.argv[2]
     lockstep = sys.argv[3:] == ["lockstep"]
+    hang_after = 0.0
+    for arg in sys.argv[3:]:
+        if arg.startswith("hang="):
+            hang_after = float(arg[len("hang=") :])
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib"))
     from common.controller import (
         ControllerLoop,
@@ -64,6 +75,7 @@ def main() -> int:
         return run_lockstep(path, link, tell)
     stop = threading.Event()
     have_state = threading.Event()
+    watch = HangWatch(path, threading.get_ident(), tell)
 
     def read_parent() -> None:
         for line in sys.stdin:
@@ -74,6 +86,9 @@ def main() -> int:
                 continue
             if isinstance(message, pipe.Stop):
                 break
+            if isinstance(message, pipe.Probe):
+                watch.report(pipe.HUNG_AFTER_S)
+                continue
             with link.lock:
                 link.state = message.state
             have_state.set()
@@ -89,6 +104,9 @@ def main() -> int:
 
     tell(pipe.Ready(type(controller).__name__))
     have_state.wait(5.0)
+    watch.wrap(controller)
+    if hang_after > 0:
+        threading.Thread(target=watch.watchdog, args=(hang_after,), daemon=True).start()
     loop = ControllerLoop(controller, Khepera(link), stop=stop)
     try:
         loop.run()
@@ -98,6 +116,59 @@ def main() -> int:
         return 4
     tell(pipe.Done(loop.iterations))
     return 0
+
+
+class HangWatch:
+    """When do_work started, if it is running, and where the main thread is in it."""
+
+    def __init__(self, path: str, main_thread: int, tell: Callable[[Any], None]) -> None:
+        self.path = path
+        self.main_thread = main_thread
+        self.tell = tell
+        self.since: float | None = None  # time.monotonic() do_work was entered
+        self.told = False
+
+    def wrap(self, controller: Any) -> None:
+        """Time each do_work call (an instance attribute over the class's method)."""
+        do_work = controller.do_work
+
+        def timed(robot: Any) -> Any:
+            self.since = time.monotonic()
+            try:
+                return do_work(robot)
+            finally:
+                self.since = None
+
+        controller.do_work = timed
+
+    def where(self) -> tuple[int, str]:
+        """(line, function) of the innermost frame of the controller's file; (0, "") if none."""
+        frame = sys._current_frames().get(self.main_thread)
+        while frame is not None:
+            if frame.f_code.co_filename == self.path:
+                return frame.f_lineno, frame.f_code.co_name
+            frame = frame.f_back
+        return 0, ""
+
+    def report(self, after: float) -> bool:
+        """Tell the runner do_work hangs if it has run ``after`` seconds; True if told."""
+        from common.controller import pipe
+
+        since = self.since
+        if since is None or self.told:
+            return False
+        seconds = time.monotonic() - since
+        if seconds < after:
+            return False
+        line, function = self.where()
+        self.told = True
+        self.tell(pipe.Hung(round(seconds, 1), line, function))
+        return True
+
+    def watchdog(self, after: float) -> None:
+        while not self.told:
+            self.report(after)
+            time.sleep(min(0.25, after / 4))
 
 
 def run_lockstep(path: str, link: Any, tell: Callable[[Any], None]) -> int:
@@ -121,6 +192,8 @@ def run_lockstep(path: str, link: Any, tell: Callable[[Any], None]) -> int:
             message = pipe.decode_to_child(line)
             if isinstance(message, pipe.Stop):
                 break
+            if isinstance(message, pipe.Probe):
+                continue
             link.state = message.state
             now = link.state.time
             if next_tick is None:

@@ -22,27 +22,15 @@ from __future__ import annotations
 import contextlib
 import math
 import re
-import threading
 import time
-from dataclasses import replace
 from typing import Any
 
-import numpy as np
-
-from common.controller import (
-    ARM_UP,
-    LIGHT_SENSORS,
-    PROXIMITY_SENSORS,
-    KheperaState,
-    RobotCommand,
-)
 from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
-from common.sim2d import maps, world_discs
-from common.sim2d.collision import CAT_OBJECT, CAT_OBSTACLE, CAT_ROBOT
-from common.sim2d.parts import parts_of
+from common.sim2d import maps
 from common.sim2d.world import EditError, World
-from services.runner.sandbox import Sandbox, SandboxLimits
+from services.runner.lockstep import Lockstep, Touches
+from services.runner.sandbox import SandboxLimits
 
 DRY_RUN_WALL_S = 20.0
 """Longest wall-clock limit of a dry run, sandbox start included (a hostile controller's end)."""
@@ -134,94 +122,6 @@ def world_from_snapshot(snap: WorldSnapshot) -> World:
     )
 
 
-def _state(world: World, slot: int) -> KheperaState:
-    """What the controller sees of its robot this tick (as the sandbox's child reads it)."""
-    agent = world.agents[slot]
-    spec = agent.spec
-
-    def fit(values: list[int], count: int, fill: int) -> list[int]:
-        return ([max(0, min(1023, int(v))) for v in values] + [fill] * count)[:count]
-
-    prox = world.proximity[slot].tolist()[: len(spec.proximity.poses)]
-    amb = world.ambient[slot].tolist()[: len(spec.ambient.poses)]
-    leds = [*world.leds[slot].tolist()[: spec.leds], 0, 0]
-    speeds = [max(-127, min(127, int(v))) for v in world.cmd[slot].tolist()]
-    counters = [int(c) for c in world.counters[slot].tolist()]
-    state = KheperaState(
-        time=world.sim_time,
-        speeds=(speeds[0], speeds[1]),
-        counters=(counters[0], counters[1]),
-        proximity=tuple(fit(prox, PROXIMITY_SENSORS, 0)),
-        ambient=tuple(fit(amb, LIGHT_SENSORS, 500)),
-        leds=(bool(leds[0]), bool(leds[1])),
-        arm=ARM_UP,
-        parts={k: tuple(int(x) for x in v) for k, v in parts_of(world, [slot])[0].items()},
-    )
-    if agent.has_gripper:
-        state = replace(
-            state,
-            arm=int(np.clip(np.rint(world.arm[slot]), 0, 255)),
-            gripper_closed=world.gripper_state(slot) != 0,
-            object_present=int(world.presence[slot]) >= 128,
-            resistivity=int(world.resistivity(slot)),
-        )
-    return state
-
-
-class _Touches:
-    """What the robot's body touches after a tick: new contacts become collisions."""
-
-    def __init__(self, world: World, slot: int) -> None:
-        self.world = world
-        self.agent = world.agents[slot]
-        self.body = self.agent.body
-        self.touching: set[tuple[str, str]] = set()
-        self.names = self._names()
-
-    def _names(self) -> dict[int, tuple[str, str]]:
-        world, names = self.world, {}
-        for ident, obstacle in world.obstacles.items():
-            for body in [obstacle.body] if obstacle.body is not None else []:
-                names[id(body)] = ("obstacle", ident)
-        for obj in world.objects:
-            if obj.body is not None:
-                names[id(obj.body)] = ("object", obj.id)
-        for agent in world.agents:
-            names[id(agent.body)] = ("robot", agent.id)
-        return names
-
-    def new_contacts(self) -> list[tuple[str, str]]:
-        if self.world.drive == "discs":
-            # No chipmunk arbiters on that drive: the contacts are measured.
-            now = world_discs.touching(self.world, self.world.agents.index(self.agent))
-            new = sorted(now - self.touching)
-            self.touching = now
-            return new
-        now = set()
-
-        def seen(arbiter: Any) -> None:
-            for shape in arbiter.shapes:
-                if shape.body is self.body:
-                    continue
-                named = self.names.get(id(shape.body))
-                if named is None:
-                    category = shape.filter.categories
-                    if category & CAT_OBSTACLE:
-                        named = ("wall", "")
-                    elif category & CAT_ROBOT:
-                        named = ("robot", "")
-                    elif category & CAT_OBJECT:
-                        named = ("object", "")
-                    else:
-                        continue
-                now.add(named)
-
-        self.body.each_arbiter(seen)
-        new = sorted(now - self.touching)
-        self.touching = now
-        return new
-
-
 def _article(what: str) -> str:
     return "an" if what[:1] in ("a", "e", "i", "o", "u") else "a"
 
@@ -259,67 +159,18 @@ def dry_run(
     except KeyError:
         raise ValueError(f"no robot {agent} in world {snap.world}") from None
     top = float(world.tables.max_speed[slot])
-    output: list[str] = []
-    commands: list[RobotCommand] = []
-    lock = threading.Lock()
-    answered = threading.Event()
-
-    def on_command(command: RobotCommand) -> None:
-        with lock:
-            commands.append(command)
-
-    def on_output(line: str) -> None:
-        with lock:
-            if len(output) < MAX_OUTPUT and not line.startswith("[runner] controller"):
-                output.append(line[:1000])
-
-    # A dry run answers states far faster than real time: the per-second command
-    # budget protects a real robot's link, and here nothing but this world listens.
-    base = limits or SandboxLimits()
-    limits = SandboxLimits(
-        cpu_seconds=min(base.cpu_seconds, int(wall_s) + 1),
-        memory_bytes=base.memory_bytes,
-        processes=base.processes,
-        open_files=base.open_files,
-        file_size_bytes=base.file_size_bytes,
-        output_lines_per_second=base.output_lines_per_second,
-        commands_per_second=100_000,
-        output_bytes_per_second=base.output_bytes_per_second,
-        cpu_share=base.cpu_share,
+    run = Lockstep(
+        source, filename, world, slot, wall_s=wall_s, limits=limits, max_output=MAX_OUTPUT
     )
-    sandbox = Sandbox(
-        source,
-        filename=filename,
-        limits=limits,
-        on_command=on_command,
-        on_output=on_output,
-        on_step=answered.set,
-    )
-    deadline = started + wall_s
-    sandbox.start(wall_s)
+    sandbox = run.sandbox
     collisions: list[DryRunCollision] = []
-    touches = _Touches(world, slot)
-    saturated = wheel_commands = steps = 0
-    timed_out = False
+    touches = Touches(world, slot)
+    saturated = wheel_commands = 0
     ticks = round(seconds / world.tick_s)
     world.step()  # one idle tick: the world's arrays (poses, readings) are filled by a step
     t0 = world.sim_time
     try:
-        for _ in range(ticks):
-            answered.clear()
-            if not sandbox.send_state(_state(world, slot)):
-                break  # the child is gone: the reason is its exit
-            while not answered.wait(0.05):
-                if time.monotonic() >= deadline:
-                    timed_out = True
-                    break
-                if sandbox.wait(0):
-                    break
-            if timed_out or not answered.is_set():
-                break
-            steps += 1
-            with lock:
-                mine, commands[:] = list(commands), []
+        for mine in run.ticks(ticks):
             robot = world.actuators(slot)
             for command in mine:
                 if command.speeds is not None:
@@ -337,7 +188,8 @@ def dry_run(
                         DryRunCollision(at=round(world.sim_time - t0, 3), what=what, ident=ident)  # type: ignore[arg-type]
                     )
     finally:
-        sandbox.stop(grace=0.3, reason="the dry run ended")
+        run.stop("the dry run ended")
+    steps, timed_out, output = run.steps, run.timed_out, run.output
     wall = time.monotonic() - started
     error = sandbox.error_text
     sim = world.sim_time - t0

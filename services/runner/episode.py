@@ -17,16 +17,15 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import threading
 import time
 
-from common.controller import RobotCommand
 from common.controller.actuators import apply_command
 from common.messages import Episode, EpisodeReport
 from common.sim2d import maps
 from common.sim2d.entities import Zone
 from common.sim2d.world import EditError, World
-from services.runner.dryrun import _error_line, _last_line, _state, _Touches
+from services.runner.dryrun import _error_line, _last_line
+from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import Sandbox, SandboxLimits
 
 MAX_OUTPUT = 20
@@ -110,70 +109,29 @@ def run_episode(
     # and a runner's first one compiles the kernels, which is no student's time.
     world.step()
     started = time.monotonic()
-    output: list[str] = []
-    commands: list[RobotCommand] = []
-    lock = threading.Lock()
-    answered = threading.Event()
-
-    def on_command(command: RobotCommand) -> None:
-        with lock:
-            commands.append(command)
-
-    def on_output(line: str) -> None:
-        with lock:
-            if len(output) < MAX_OUTPUT and not line.startswith("[runner] controller"):
-                output.append(line[:256])
-
-    base = limits or SandboxLimits()
-    limits = SandboxLimits(
-        cpu_seconds=min(base.cpu_seconds, int(wall_s) + 1),
-        memory_bytes=base.memory_bytes,
-        processes=base.processes,
-        open_files=base.open_files,
-        file_size_bytes=base.file_size_bytes,
-        output_lines_per_second=base.output_lines_per_second,
-        commands_per_second=100_000,  # lockstep: nothing but this world listens
-        output_bytes_per_second=base.output_bytes_per_second,
-        cpu_share=base.cpu_share,
-    )
-    sandbox = Sandbox(
+    run = Lockstep(
         request.source,
-        filename=request.filename,
+        request.filename,
+        world,
+        slot,
+        wall_s=wall_s,
         limits=limits,
-        on_command=on_command,
-        on_output=on_output,
-        on_step=answered.set,
+        max_output=MAX_OUTPUT,
+        max_line=256,
     )
-    deadline = started + wall_s
-    sandbox.start(wall_s)
-    touches = _Touches(world, slot)
+    sandbox = run.sandbox
+    touches = Touches(world, slot)
     collisions: dict[str, int] = {}
     reached: dict[str, float] = {}
     delivered: dict[str, float] = {}
     nests = [z for z in world.zones.values() if z.kind == "nest"]
     check_every = max(1, round(DELIVERY_EVERY_S / world.tick_s))
-    steps = 0
     distance = 0.0
-    timed_out = False
     ticks = round(request.seconds / world.tick_s)
     t0 = world.sim_time
     last = world.agent_pose[slot][:2].copy()
     try:
-        for tick in range(ticks):
-            answered.clear()
-            if not sandbox.send_state(_state(world, slot)):
-                break
-            while not answered.wait(0.05):
-                if time.monotonic() >= deadline:
-                    timed_out = True
-                    break
-                if sandbox.wait(0):
-                    break
-            if timed_out or not answered.is_set():
-                break
-            steps += 1
-            with lock:
-                mine, commands[:] = list(commands), []
+        for tick, mine in enumerate(run.ticks(ticks)):
             robot = world.actuators(slot)
             for command in mine:
                 with contextlib.suppress(EditError):
@@ -191,7 +149,8 @@ def run_episode(
             if nests and tick % check_every == 0:
                 _deliveries(world, nests, delivered, at)
     finally:
-        sandbox.stop(grace=0.3, reason="the episode ended")
+        run.stop("the episode ended")
+    steps, timed_out, output = run.steps, run.timed_out, run.output
     if nests:
         _deliveries(world, nests, delivered, round(world.sim_time - t0, 3))
     sim = world.sim_time - t0

@@ -36,6 +36,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
         default=0.5,
         help="cores per controller, where a cpu cgroup can be made (else nice 19 only)",
     )
+    p.add_argument(
+        "--hang-seconds",
+        type=float,
+        default=0.0,
+        help="end a run whose do_work has not returned for this long, saying where it was "
+        "(default 0: only near the slot's end)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -49,11 +56,16 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
         return cli.fail("--cpu-seconds must be 1..3600 and --memory-mb 64..8192")
     if not 0.05 <= args.cpu_share <= 64:
         return cli.fail("--cpu-share must be 0.05..64 cores")
+    if not 0 <= args.hang_seconds <= 3600:
+        return cli.fail("--hang-seconds must be 0 (off) .. 3600 seconds")
     problem = sandbox_problem()
     if problem:
         return cli.fail(f"cannot run uploaded controllers here: {problem}")
     limits = SandboxLimits(
-        cpu_seconds=args.cpu_seconds, memory_bytes=args.memory_mb << 20, cpu_share=args.cpu_share
+        cpu_seconds=args.cpu_seconds,
+        memory_bytes=args.memory_mb << 20,
+        cpu_share=args.cpu_share,
+        hang_seconds=args.hang_seconds,
     )
 
     def build(session: zenoh.Session) -> RunnerService:

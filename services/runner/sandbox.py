@@ -39,11 +39,9 @@ import os
 import shutil
 import signal
 import subprocess
-import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import psutil
@@ -61,6 +59,7 @@ from services.runner.sandbox_host import (
     sandbox_problem,
     syscall_filter,
 )
+from services.runner.stage import MEMINFO, SandboxLimits, stage_files
 from services.runner.syscalls import SANDBOX_PYTHON
 
 log = logging.getLogger("wart.runner.sandbox")
@@ -81,35 +80,14 @@ MAX_OUTPUT_LINE_BYTES = 1000
 # The first refused line of a run is logged, then one in this many: a hostile child
 # writes as fast as it can, and the runner's log must not grow with it.
 REFUSALS_LOGGED_EVERY = 1000
-_CHILD = Path(__file__).with_name("child.py")
-_API = Path(controller_api.__file__).parent  # the whole package: standard library only
 
 
-@dataclass(frozen=True)
-class SandboxLimits:
-    cpu_seconds: int = 120
-    memory_bytes: int = 256 * 1024 * 1024
-    processes: int = 16
-    open_files: int = 64
-    file_size_bytes: int = 1024 * 1024
-    output_lines_per_second: int = 50
-    commands_per_second: int = 200
-    output_bytes_per_second: int = 64 * 1024  # faster than this (4 s of burst) ends the run
-    cpu_share: float = 0.5  # of one core, where a cpu cgroup can be made
+PROBE_AHEAD_S = 1.0
+"""How long before the slot's end the child is asked whether do_work is stuck.
 
-    def __post_init__(self) -> None:
-        if self.memory_bytes < 64 << 20:
-            raise ValueError("a sandbox needs a memory limit of at least 64 MB")
-
-    @property
-    def writable_bytes(self) -> int:
-        """The tmpfs space (/work, /tmp and /dev/shm together): it is host memory, so it is
-        a quarter of the memory limit and the address space gets the rest."""
-        return self.memory_bytes // 4
-
-    @property
-    def address_space_bytes(self) -> int:
-        return self.memory_bytes - self.writable_bytes
+A stuck one is ended then, with where it was, so the agent context hears "hung: ..."
+from the runner before its own clock would say "its slot ended". It loses the last
+second of a slot it spent stuck anyway; a controller that is not stuck loses nothing."""
 
 
 class Sandbox:
@@ -134,6 +112,7 @@ class Sandbox:
         """``on_step``: a dry run (the child in lockstep, services/runner/dryrun.py); it is
         called each time the child has answered one state."""
         self.controller_name = precheck(source, filename)
+        self.filename = filename
         problem = sandbox_problem()
         if problem:
             raise RuntimeError(f"cannot sandbox uploaded code: {problem}")
@@ -165,24 +144,13 @@ class Sandbox:
         # came late says which step was slow.
         self.timeline: dict[str, float] = {}
         self._kill_timer: threading.Timer | None = None
+        self._probe_timer: threading.Timer | None = None
+        self._commands: threading.Thread | None = None
 
     # -- start
 
     def _stage_files(self) -> Path:
-        stage = Path(tempfile.mkdtemp(prefix="wart-sandbox-"))
-        (stage / "lib" / "common").mkdir(parents=True)
-        (stage / "user").mkdir()
-        shutil.copy(_CHILD, stage / "child.py")
-        shutil.copytree(
-            _API,
-            stage / "lib" / "common" / "controller",
-            ignore=shutil.ignore_patterns("__pycache__"),
-        )
-        (stage / "lib" / "common" / "__init__.py").write_text("")
-        (stage / "user" / "controller.py").write_bytes(self.source)
-        for path in [stage, *stage.rglob("*")]:
-            path.chmod(0o755 if path.is_dir() else 0o644)
-        return stage
+        return stage_files(self.source, self.limits)
 
     def command_line(self, stage: Path, cmd_fd: int, seccomp_fd: int) -> list[str]:
         lim = self.limits
@@ -234,6 +202,11 @@ class Sandbox:
             "/tmp",
             "--proc",
             "/proc",
+            # The sandbox's memory, not the host's: a file made for its limits
+            # (services/runner/stage.py), over the new /proc's meminfo.
+            "--ro-bind",
+            str(stage / MEMINFO),
+            "/proc/meminfo",
             "--dev",
             "/dev",
             "--size",
@@ -269,6 +242,8 @@ class Sandbox:
         ]
         if self.on_step is not None:
             argv.append("lockstep")
+        elif lim.hang_seconds > 0:
+            argv.append(f"hang={lim.hang_seconds:g}")
         return argv
 
     def start(self, slot_seconds: float) -> None:
@@ -303,7 +278,14 @@ class Sandbox:
         self._kill_timer = threading.Timer(slot_seconds, self._slot_over)
         self._kill_timer.daemon = True
         self._kill_timer.start()
-        threading.Thread(target=self._read_commands, daemon=True, name="sandbox-cmd").start()
+        if self.on_step is None and slot_seconds > PROBE_AHEAD_S + pipe.HUNG_AFTER_S:
+            self._probe_timer = threading.Timer(slot_seconds - PROBE_AHEAD_S, self._probe)
+            self._probe_timer.daemon = True
+            self._probe_timer.start()
+        self._commands = threading.Thread(
+            target=self._read_commands, daemon=True, name="sandbox-cmd"
+        )
+        self._commands.start()
         threading.Thread(target=self._read_output, daemon=True, name="sandbox-out").start()
         threading.Thread(target=self._wait, daemon=True, name="sandbox-wait").start()
 
@@ -386,6 +368,10 @@ class Sandbox:
             self._exit_reason = self._stop_reason or self._failure_reason(text)
             for line in text.splitlines():
                 self._say(line)
+        elif isinstance(message, pipe.Hung):
+            reason = pipe.hung_reason(message, self.filename)
+            log.info("controller %s: %s", self.controller_name, reason)
+            self._end_now(reason)
         elif isinstance(message, pipe.Done):
             self._exit_reason = self._stop_reason or "the controller finished"
 
@@ -439,8 +425,12 @@ class Sandbox:
         assert proc is not None
         code = proc.wait()
         self.timeline["exited"] = time.monotonic()
-        if self._kill_timer is not None:
-            self._kill_timer.cancel()
+        for timer in (self._kill_timer, self._probe_timer):
+            if timer is not None:
+                timer.cancel()
+        if self._commands is not None:
+            # Its last lines (a Hung, a Failed) are read before the reason is said.
+            self._commands.join(1.0)
         if not self._exit_reason:
             if self._stopping:
                 self._exit_reason = self._stop_reason
@@ -470,6 +460,11 @@ class Sandbox:
             log.exception("exit callback failed")
 
     # -- stopping
+
+    def _probe(self) -> None:
+        """Near the slot's end: ask the child whether do_work is stuck (it says Hung if so)."""
+        if not self._stopping:
+            self._write(pipe.encode(pipe.Probe()))
 
     def _slot_over(self) -> None:
         self.stop(grace=0.5, reason="stopped at the end of its slot")

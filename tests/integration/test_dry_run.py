@@ -98,7 +98,11 @@ def test_example_01_runs_a_minute_in_the_default_arena_without_a_collision(
     a simulated minute touching no wall, rock or robot (pushing a ball is fine)."""
     source = (REPO / "examples" / "01_braitenberg.py").read_bytes()
     for agent in ("k0", "k1", "k2", "k3"):
-        report = dry_run(snap, agent, source, filename="01_braitenberg.py", seconds=60.0)
+        # The lab's wall-clock cap for a dry run (20 s) is not what this asks: a busy machine
+        # may take longer over a simulated minute, and that says nothing about collisions.
+        report = dry_run(
+            snap, agent, source, filename="01_braitenberg.py", seconds=60.0, wall_s=600.0
+        )
         assert report.verdict.startswith("will run"), (agent, report.verdict)
         assert report.sim_seconds == pytest.approx(60.0)
 

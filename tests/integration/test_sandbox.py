@@ -93,6 +93,33 @@ class Spin(Controller):
 
 
 @needs_sandbox
+def test_proc_meminfo_shows_the_sandboxs_memory_not_the_hosts() -> None:
+    limits = SandboxLimits(memory_bytes=192 << 20)
+    run = Run(
+        HEADER
+        + """
+class Meminfo(Controller):
+    def initialize(self, robot):
+        for line in open("/proc/meminfo"):
+            if line.split(":")[0] in ("MemTotal", "MemFree", "MemAvailable", "SwapTotal"):
+                print("mem", line.split()[0], line.split()[1])
+    def do_work(self, robot):
+        pass
+""",
+        slot=1.5,
+        limits=limits,
+    )
+    run.finish()
+    seen = dict(line.split()[1:3] for line in run.output if line.startswith("mem "))
+    assert seen["MemTotal:"] == str(192 * 1024), run.text()  # the limit, in kB
+    available = int(seen["MemAvailable:"])
+    assert int(seen["MemFree:"]) == available == limits.address_space_bytes >> 10
+    assert seen["SwapTotal:"] == "0"
+    host_kb = psutil.virtual_memory().total >> 10
+    assert host_kb > 192 * 1024  # the host has more: what the sandbox must not see
+
+
+@needs_sandbox
 def test_unbounded_allocation_fails_inside_the_sandbox() -> None:
     run = Run(
         HEADER

@@ -128,7 +128,7 @@ def test_instructor_hosts_a_room_and_an_arena_everyone_sees_them_then_stops_them
     assert local.rooms == [] and all(a.world != "arena7" for a in local.arenas)
 
 
-def test_refusals_say_why(client_of: Callable[[str], LabClient]) -> None:
+def test_refusals_say_why(client_of: Callable[[str], LabClient], lab: tuple[UpLab, str]) -> None:
     teacher = client_of(TEACHER)
     student = client_of(STUDENT)
     with pytest.raises(NotAllowed, match="does not have the 'host' permission"):
@@ -144,6 +144,13 @@ def test_refusals_say_why(client_of: Callable[[str], LabClient]) -> None:
     with pytest.raises(NotFound, match="no host runs a chat room named nothing"):
         stop_hosted(teacher, "nothing", "room")
     assert _context(teacher, "mine") is None and _context(teacher, "sunk") is None
+    # Host "local" runs inside `wart up`: its refusals go to its own log file, like every
+    # service's, and not to the operator's terminal.
+    the_lab = lab[0]
+    log = the_lab.state_dir / "logs" / "host-local.log"
+    refused = "does not have the 'host' permission"
+    wait_for(lambda: refused in log.read_text(), 10, "the refusal in host-local.log")
+    assert not any(refused in line for line in the_lab.lines), "\n".join(the_lab.lines)
 
 
 def test_wart_room_in_a_terminal(lab: tuple[UpLab, str]) -> None:

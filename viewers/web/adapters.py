@@ -524,7 +524,14 @@ class LabConnection(Protocol):
 
     def leaderboard(self, assignment: str) -> Leaderboard: ...
 
-    def logout(self) -> None: ...
+    def logout(self, keep_resume: bool = False) -> None:
+        """Log out; ``keep_resume`` (the page closed, not "Log out") keeps its saved login."""
+        ...
+
+    @property
+    def resume_token(self) -> bytes | None:
+        """The registry's token to come back without a password (None: none was given)."""
+        ...
 
     # -- admin (thesis 9.2.1); each raises LabError without the admin permission
 
@@ -562,4 +569,10 @@ class LabConnector(Protocol):
         """Log in; ``via`` names the browser connection (logged by the registry);
         ``seen_from`` is the browser's address as this viewer's socket saw it, which
         the viewer vouches for (the registry throttles failed logins per address)."""
+        ...
+
+    def resume(
+        self, address: LabAddress, token: bytes, via: str = "", seen_from: str = ""
+    ) -> LabConnection:
+        """Log in again with a saved login's resume token; LoginError in the lab's words."""
         ...

@@ -11,7 +11,7 @@ import threading
 
 import viser
 
-from viewers.web.adapters import LabConnection, LabConnector, WorldFeed
+from viewers.web.adapters import LabConnection, LabConnector, LoginError, WorldFeed
 from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
@@ -20,8 +20,10 @@ from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.pump import FramePump
+from viewers.web.saved_login import SavedLogin, parse_cookies, saved_login_html
 from viewers.web.tabs import TabSwitcher, tab_title
 from viewers.web.text import escape_md
+from viewers.web.viser_fast import browser_address, browser_cookies
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.client")
@@ -62,6 +64,8 @@ class BrowserSession:
         self.video = ArenaVideo(self.view)  # a real arena's camera under its robots
         pump.attach(self.view)
         self._refresh_recent()
+        for kept in parse_cookies(browser_cookies(client), default_address.realm):
+            self._resume(kept)
 
     def _build(self, gui: viser.GuiApi, default_address: LabAddress) -> None:
         add_label_fixer(gui)  # every labelled input gets its accessible name (labels.py)
@@ -73,6 +77,8 @@ class BrowserSession:
             self.connect_button = gui.add_button("Connect", color="green", icon=viser.Icon.PLUG)
             self.save_button = gui.add_button("Save address", icon=viser.Icon.STAR)
         self.notice = gui.add_markdown("", visible=False)
+        self._cookie = gui.add_html("")  # sets and deletes saved logins (saved_login.py)
+        self._cookies_set = 0
         self.tabs = gui.add_tab_group()
         self.home = self.tabs.add_tab("Start", icon=viser.Icon.INFO_CIRCLE)
         with self.home:
@@ -153,11 +159,57 @@ class BrowserSession:
             self.logins,
         )
 
+    def _resume(self, saved: SavedLogin) -> None:
+        """Log in again with the saved login this browser sent (a reload): no password."""
+        address = saved.address
+        self.say_notice(f"Logging in again to {address.label} as {address.user} (saved login)...")
+
+        def run() -> None:
+            try:
+                connection = self.connector.resume(
+                    address,
+                    saved.token,
+                    via=f"browser-{self.client.client_id}",
+                    seen_from=browser_address(self.client),
+                )
+            except (LoginError, OSError, TimeoutError) as exc:
+                self._resume_failed(address, str(exc))
+                return
+            self.notice.visible = False
+            self._logged_in(connection, address)
+
+        def too_late() -> None:
+            self._resume_failed(address, "the lab is busy, many people are logging in at once")
+
+        self.logins.submit(run, too_late)
+
+    def _resume_failed(self, address: LabAddress, why: str) -> None:
+        log.info("browser %d: saved login to %s refused: %s", self.client.client_id, address, why)
+        if "(used" not in why:
+            # A used token: another tab of this browser resumed with it first and saved
+            # its new one under the same name, which a deletion would take away.
+            self._save_login(address, None)
+        if self.closed:
+            return
+        self.connect(address.url())  # the password form, for that lab and user
+        words = f"Could not log in again with your saved login: {why}"
+        if self.login is not None:
+            self.login.show_error(words)
+        else:
+            self.say_notice(words)
+
+    def _save_login(self, address: LabAddress, token: bytes | None) -> None:
+        """Keep (or with None, forget) this lab's saved login in the browser's cookie."""
+        self._cookies_set += 1
+        self._cookie.content = saved_login_html(address, token, self._cookies_set)
+
     def _logged_in(self, connection: LabConnection, address: LabAddress) -> None:
         self.login = None
         if self.closed:  # the page closed while the login was on its way
-            connection.logout()
+            connection.logout(keep_resume=connection.resume_token is not None)
             return
+        if connection.resume_token is not None:
+            self._save_login(address.with_user(connection.user), connection.resume_token)
         self.saved.add_recent(connection.user, address.with_user(connection.user))
         tab = LabTab(
             self.client,
@@ -184,6 +236,7 @@ class BrowserSession:
             tab.join(address.context)
 
     def _logged_out(self, tab: LabTab) -> None:
+        self._save_login(tab.connection.address, None)  # "Log out" forgets the saved login
         with self._lock:
             for key, value in list(self.labs.items()):
                 if value is tab:

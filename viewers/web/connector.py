@@ -7,7 +7,10 @@ shared by everyone logged in through it; one
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import queue
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -32,6 +35,41 @@ from viewers.web.live_world import QUERY_TIMEOUT
 log = logging.getLogger("wart.viewer.live")
 
 LABS_FILE = "labs.json"
+
+
+class MailboxClaims:
+    """Page users' mailbox keys, derived after their logins: one at a time, at nice 19.
+
+    Each is an argon2id run (~75 ms of a core, 64 MiB). Run as they came, a class
+    logging in at once would hold 60 of them, 3.8 GB, beside the registry's checks;
+    one low-priority thread takes them in turn behind everything else.
+    """
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[lab.LabClient, str] | None] = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name="mailbox-claims", daemon=True)
+        self._thread.start()
+
+    def submit(self, client: lab.LabClient, password: str) -> None:
+        self._jobs.put((client, password))
+
+    def close(self) -> None:
+        self._jobs.put(None)
+
+    def _run(self) -> None:
+        with contextlib.suppress(OSError, AttributeError):  # Linux: a thread's own nice
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+        while (job := self._jobs.get()) is not None:
+            client, password = job
+            if client.session is None:
+                continue  # logged out meanwhile
+            try:
+                kept = client.claim_mailbox(password)
+            except LabError as exc:
+                log.info("a mailbox was not claimed: %s", exc)
+                continue
+            if kept:
+                log.info("%d kept messages for %s", len(kept), client.user)
 
 
 class GatewayLogin:
@@ -109,6 +147,7 @@ class LiveConnector:
         self._links: dict[tuple[str, int, str], LabRouterLink] = {}
         self._lock = threading.Lock()
         self._connections: list[LiveConnection] = []
+        self.claims = MailboxClaims()
 
     def _is_own(self, address: LabAddress) -> bool:
         own = self.own_address
@@ -171,6 +210,36 @@ class LiveConnector:
     def login(
         self, address: LabAddress, user: str, password: str, via: str = "", seen_from: str = ""
     ) -> LiveConnection:
+        # The mailbox key is derived after the login, at the lowest CPU priority: on
+        # the lab's own cores it cost as much as the registry's check, and a class
+        # logging in at once waited for both (docs/BENCHMARKS.md, the login burst).
+        connection = self._open(
+            address,
+            lambda c: c.login(
+                user, password, wait=self.login_wait, resume=True, defer_mailbox=True
+            ),
+            "wrong user name or password",
+            via,
+            seen_from,
+        )
+        self.claims.submit(connection.client, password)
+        return connection
+
+    def resume(
+        self, address: LabAddress, token: bytes, via: str = "", seen_from: str = ""
+    ) -> LiveConnection:
+        """A saved login (viewers/web/saved_login.py): no password, one signature check."""
+        resume = lambda c: c.resume(token, wait=self.login_wait)  # noqa: E731
+        return self._open(address, resume, "", via, seen_from)
+
+    def _open(
+        self,
+        address: LabAddress,
+        log_in: Callable[[lab.LabClient], object],
+        wrong: str,
+        via: str,
+        seen_from: str,
+    ) -> LiveConnection:
         link = self._link(address)
         # Only our own lab's registry knows the viewer's account: elsewhere the
         # login counts against this viewer's Zenoh session, like any client's.
@@ -186,10 +255,16 @@ class LiveConnector:
             voucher=voucher,
         )
         try:
-            client.login(user, password, wait=self.login_wait)
-        except lab_errors.WrongCredentials:
+            log_in(client)
+        except lab_errors.WrongCredentials as exc:
             self._unlink(link)
-            raise LoginError("wrong user name or password") from None
+            # A password's refusal says nothing more; a saved login's says why it ended.
+            raise LoginError(wrong or str(exc)) from None
+        except ValueError as exc:  # a saved login's token that is not one at all
+            self._unlink(link)
+            raise LoginError(
+                f"your saved login is damaged ({exc}): log in with your password"
+            ) from None
         except lab_errors.RegistryKeyMismatch:
             self._unlink(link)
             raise LoginError(
@@ -210,7 +285,7 @@ class LiveConnector:
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None
-        connection = LiveConnection(self, link, client, address.with_user(user))
+        connection = LiveConnection(self, link, client, address.with_user(client.user))
         with self._lock:
             self._connections.append(connection)
         return connection
@@ -223,12 +298,13 @@ class LiveConnector:
 
     def close(self) -> None:
         """Log everyone out and close the other labs' sessions (the viewer is stopping)."""
+        self.claims.close()
         if self.gateway is not None:
             self.gateway.close()
         with self._lock:
             connections = list(self._connections)
         for connection in connections:
-            connection.logout()
+            connection.logout(keep_resume=True)  # the viewer stops, the person did not log out
         with self._lock:
             links = list(self._links.values())
             self._links.clear()

@@ -19,12 +19,10 @@ from typing import Any, Literal
 
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
-from common.messages.audit import AuditEntry, AuditQuery
 from common.messages.grading import AssignmentInfo, Leaderboard, SubmissionInfo
 from common.recording import RecordingError, read_recording, summarize
 from viewers.web import demo_world
 from viewers.web.adapters import (
-    Account,
     AgentsEvent,
     AgentStatus,
     ArenaSettings,
@@ -33,7 +31,6 @@ from viewers.web.adapters import (
     ContextSummary,
     Directory,
     DirectoryEvent,
-    DisconnectedEvent,
     DryRunResult,
     JoinedContext,
     LabError,
@@ -46,11 +43,8 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
+from viewers.web.demo_admin import ADMIN, INSTRUCTOR, STUDENT, DemoAdmin
 from viewers.web.live_agents import check_upload
-
-STUDENT = frozenset({"join", "chat", "control", "deploy"})
-INSTRUCTOR = STUDENT | {"edit_map", "kick", "host"}
-ADMIN = INSTRUCTOR | {"admin"}
 
 # The demo world, in a module of its own; still importable from here, as the
 # tests and benches do.
@@ -169,8 +163,13 @@ class DemoConnector:
             raise LoginError(f"no lab answers at {address.label}: check the address")
         return lab.login(address, user, password)
 
+    def resume(
+        self, address: LabAddress, token: bytes, via: str = "", seen_from: str = ""
+    ) -> DemoConnection:
+        raise LoginError("this lab keeps no saved logins: log in with your password")
 
-class DemoConnection:
+
+class DemoConnection(DemoAdmin):
     """One user's session with a :class:`DemoLab`."""
 
     def __init__(self, lab: DemoLab, address: LabAddress, user: str, perms: frozenset[str]):
@@ -499,89 +498,9 @@ class DemoConnection:
             raise LabError("this run's recording holds no controller file to promote")
         return self.request_control(ctx, agent, info.filename or "controller.py", rec.source)
 
-    # -- admin
+    resume_token: bytes | None = None  # a demo lab keeps no saved logins
 
-    def list_accounts(self) -> list[Account]:
-        self._need("admin", "manage accounts")
-        with self._lab._lock:
-            return [
-                Account(name, (), (("", tuple(sorted(perms))),), name in self._lab._online)
-                for name, (_pw, perms) in sorted(self._lab.accounts.items())
-            ]
-
-    def add_account(self, user: str, password: str, roles: tuple[str, ...]) -> str:
-        self._need("admin", "manage accounts")
-        with self._lab._lock:
-            if user in self._lab.accounts:
-                raise LabError(f"{user} already exists")
-            perms = INSTRUCTOR if "instructor" in roles else STUDENT
-            self._lab.accounts[user] = (password, perms)
-        return f"added {user}"
-
-    def set_password(self, user: str, password: str) -> str:
-        if user != self._user:  # one's own password needs no permission, as in a lab
-            self._need("admin", "manage accounts")
-        if len(password) < 8:
-            raise LabError("a password needs at least 8 characters")
-        with self._lab._lock:
-            if user not in self._lab.accounts:
-                raise LabError(f"there is no user {user}")
-            self._lab.accounts[user] = (password, self._lab.accounts[user][1])
-        return f"password of {user} set"
-
-    def remove_account(self, user: str) -> str:
-        self._need("admin", "manage accounts")
-        with self._lab._lock:
-            if self._lab.accounts.pop(user, None) is None:
-                raise LabError(f"there is no user {user}")
-        return f"removed {user}"
-
-    def grant(self, user: str, grant: str, scope: str = "") -> str:
-        self._need("admin", "manage accounts")
-        with self._lab._lock:
-            if user not in self._lab.accounts:
-                raise LabError(f"there is no user {user}")
-            pw, perms = self._lab.accounts[user]
-            self._lab.accounts[user] = (pw, perms | {grant})
-        return f"granted {grant} to {user}"
-
-    def ungrant(self, user: str, grant: str, scope: str = "") -> str:
-        self._need("admin", "manage accounts")
-        with self._lab._lock:
-            if user not in self._lab.accounts:
-                raise LabError(f"there is no user {user}")
-            pw, perms = self._lab.accounts[user]
-            self._lab.accounts[user] = (pw, perms - {grant})
-        return f"revoked {grant} from {user}"
-
-    def kick_from_server(self, user: str, reason: str = "") -> str:
-        self._need("admin", "kick people from the server")
-        self._lab._broadcast(
-            DisconnectedEvent(f"kicked from the server by {self._user}: {reason}"), only={user}
-        )
-        return f"kicked {user}"
-
-    def unlock_logins(self, user: str) -> str:
-        self._need("admin", "unlock logins")
-        return f"failed logins of {user} forgotten: they may log in now"
-
-    def ban(self, user: str, reason: str, until: float | None) -> str:
-        raise LabError("the demo lab has no bans: a real lab's registry keeps them")
-
-    def lift_ban(self, user: str) -> str:
-        raise LabError("the demo lab has no bans")
-
-    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]:
-        self._need("admin", "read the audit trail")
-        return []  # the demo lab keeps no audit trail
-
-    def rename_server(self, name: str) -> str:
-        self._need("admin", "rename the server")
-        self._lab.server_name = name
-        self._lab._broadcast(DirectoryEvent())
-        return f"renamed to {name}"
-
-    def logout(self) -> None:
+    def logout(self, keep_resume: bool = False) -> None:
         if self.closed:
             return
         for ctx in list(self._joined):

@@ -568,11 +568,16 @@ class LiveConnection:
 
     # -- the end
 
-    def logout(self) -> None:
+    @property
+    def resume_token(self) -> bytes | None:
+        return self.client.resume_token
+
+    def logout(self, keep_resume: bool = False) -> None:
         """Leave every room, log out (presence goes), release worlds; safe to call twice."""
         if self._closed.is_set():
             return
         self._closed.set()
+        self.client.keep_resume = keep_resume
         with self._lock:
             self._events.subscribers.clear()
         self._queue.put(None)

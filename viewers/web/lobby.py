@@ -274,7 +274,8 @@ class LabTab:
         self.closed = True
         self._unsubscribe()
         try:
-            self.connection.logout()  # leaves rooms; the user's presence goes
+            # leaves rooms; the user's presence goes; a reload may resume (saved_login.py)
+            self.connection.logout(keep_resume=True)
         except LabError as exc:
             log.info("logout from %s: %s", self.label, exc)
 

@@ -48,6 +48,18 @@ BROKEN = (
 )
 STOPPING = "Could not log in: this web viewer is stopping. Reload the page in a minute."
 
+PROGRESS_AFTER_S = 1.0
+"""A login still under way after this long says how long it has waited, every half second:
+when a class logs in at once each password check queues (argon2id, ~75 ms of a core)."""
+
+
+def progress_words(waited: float, queued_here: int) -> str:
+    """What the form says while a login takes long (a second and more)."""
+    words = f"Logging in... {waited:.0f} s"
+    if queued_here > 0:
+        return f"{words}: {queued_here} more logins wait here; many people are logging in at once."
+    return f"{words}: the lab is checking the password (each check takes time on purpose)."
+
 
 @dataclass
 class _Job:
@@ -181,6 +193,7 @@ class LoginForm:
         self.address = address
         self.on_success = on_success
         self.closed = False
+        self._done = threading.Event()  # set when the login under way is answered
         # Held back until the handlers below are registered: viser sends each button
         # as it is made, and a click that reaches the viewer before its handler is
         # dropped without a trace. On a loaded viewer the thread building the form can
@@ -223,12 +236,23 @@ class LoginForm:
         self.error.content = "Logging in..."
         self.error.visible = True
         clicked = time.monotonic()
+        self._done = threading.Event()
+        threading.Thread(
+            target=self._progress, args=(clicked, self._done), name="login-progress", daemon=True
+        ).start()
 
         def too_late() -> None:
             self._answered(STOPPING if self.desk.closed else BUSY, clicked)
 
         self.desk.submit(lambda: self._log_in(user, password, clicked), too_late)
         return True
+
+    def _progress(self, clicked: float, done: threading.Event) -> None:
+        """Past PROGRESS_AFTER_S, the form says how long the login has waited, until answered."""
+        while not done.wait(0.5):
+            waited = time.monotonic() - clicked
+            if waited >= PROGRESS_AFTER_S and not self.closed:
+                self.error.content = progress_words(waited, self.desk.waiting)
 
     def _log_in(self, user: str, password: str, clicked: float) -> None:
         """On a login thread: ask the lab, then show the answer (or the lab's tab)."""
@@ -255,6 +279,7 @@ class LoginForm:
             log.exception("login of %s to %s", user, self.address.label)
             self._answered(BROKEN, clicked)
             return
+        self._done.set()
         log.info(
             "browser %d: %s logged in to %s after %.1f s",
             self.client.client_id,
@@ -278,6 +303,7 @@ class LoginForm:
             )
 
     def _answered(self, text: str, clicked: float) -> None:
+        self._done.set()
         log.info(
             "browser %d: login to %s ended after %.1f s: %s",
             self.client.client_id,

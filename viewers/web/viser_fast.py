@@ -199,3 +199,23 @@ def browser_address(client: viser.ClientHandle) -> str:
     if isinstance(remote, tuple) and remote and isinstance(remote[0], str):
         return remote[0][:128]
     return ""
+
+
+def browser_cookies(client: viser.ClientHandle) -> str:
+    """The Cookie header of the browser's websocket handshake ("" if none or unknown).
+
+    Read where browser_address reads (viser 1.1.1 keeps the websockets connection,
+    whose ``request`` is the handshake). A browser sends the page's cookies with it
+    (same origin; SameSite=Strict ones never from another site's page).
+    """
+    server = getattr(getattr(client, "_viser_server", None), "_websock_server", None)
+    connections = getattr(server, "_live_connections", None)
+    connection = connections.get(client.client_id) if isinstance(connections, dict) else None
+    request = getattr(connection, "request", None)
+    headers = getattr(request, "headers", None)
+    if headers is None:
+        return ""
+    try:
+        return str(headers.get("Cookie", ""))[:8192]
+    except Exception:  # a headers object we do not know
+        return ""

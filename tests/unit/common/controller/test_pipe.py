@@ -12,6 +12,7 @@ FROM_CHILD = [
     pipe.Ready("Avoid"),
     pipe.Step(3),
     pipe.Failed("Traceback ...\nZeroDivisionError"),
+    pipe.Hung(30.5, 8, "do_work"),
     pipe.Done(42),
 ]
 
@@ -25,7 +26,11 @@ def test_every_child_message_round_trips(message: pipe.FromChild) -> None:
 
 @pytest.mark.parametrize(
     "message",
-    [pipe.State(KheperaState(time=1.5, speeds=(3, 4), leds=(True, False))), pipe.Stop()],
+    [
+        pipe.State(KheperaState(time=1.5, speeds=(3, 4), leds=(True, False))),
+        pipe.Stop(),
+        pipe.Probe(),
+    ],
     ids=lambda m: type(m).__name__,
 )
 def test_every_runner_message_round_trips(message: pipe.ToChild) -> None:
@@ -66,3 +71,33 @@ def test_long_texts_are_cut_to_what_the_runner_keeps() -> None:
 def test_the_child_refuses_a_bad_state() -> None:
     with pytest.raises(pipe.PipeError, match="state: speeds: expected 2 integers"):
         pipe.decode_to_child(b'{"t": "state", "speeds": [1]}')
+
+
+@pytest.mark.parametrize(
+    ("line", "why"),
+    [
+        (b'{"t":"hung","seconds":"a lot","line":8,"function":"f"}', "seconds must be"),
+        (b'{"t":"hung","seconds":-1,"line":8,"function":"f"}', "seconds must be"),
+        (b'{"t":"hung","seconds":3,"line":8.5,"function":"f"}', "line must be"),
+        (b'{"t":"hung","seconds":3,"line":-2,"function":"f"}', "line must be"),
+        (b'{"t":"hung","seconds":3,"line":8,"function":7}', "function must be"),
+        (b'{"t":"hung","seconds":3,"line":8,"function":"f","x":1}', "unknown fields x"),
+    ],
+)
+def test_a_hung_report_is_checked_field_by_field(line: bytes, why: str) -> None:
+    with pytest.raises(pipe.PipeError, match=why):
+        pipe.decode_from_child(line)
+
+
+def test_a_hung_run_is_said_with_the_students_file_line_and_function() -> None:
+    long_name = pipe.decode_from_child(
+        b'{"t":"hung","seconds":29.7,"line":8,"function":"' + b"f" * 500 + b'"}'
+    )
+    assert isinstance(long_name, pipe.Hung) and len(long_name.function) == pipe.MAX_NAME_CHARS
+    assert pipe.hung_reason(pipe.Hung(29.7, 8, "do_work"), "spin.py") == (
+        "hung: do_work did not return for 30 s; it was at spin.py:8 (in do_work)"
+    )
+    # No frame of the student's file on the stack (stuck inside the library): no line.
+    assert pipe.hung_reason(pipe.Hung(5.0, 0, ""), "spin.py") == (
+        "hung: do_work did not return for 5 s; it was at spin.py"
+    )
