@@ -43,6 +43,7 @@ from common.messages import (
     FileContent,
     FileList,
     FileListRequest,
+    HandBack,
     OkReply,
     OutputLines,
     QueueStateRequest,
@@ -58,6 +59,8 @@ from common.messages import (
     RunMode,
     SaveFile,
     StopControl,
+    TakenOver,
+    TakeOver,
 )
 from common.recording.reader import Recording
 from common.world.remote_robot import ZenohRobotLink
@@ -173,6 +176,67 @@ class AgentClient:
         message = EmergencyStop(engaged=not release, reason=reason)
         what = "release the emergency stop" if release else "emergency stop"
         return self.client.request(self.ctx, message, OkReply, what).detail
+
+    def take_over(self, agent: str, reason: str = "") -> TakenOver:
+        """Take over ``agent`` while a student's controller runs on it (the context's
+        managers): the controller is paused, this session drives (:meth:`robot_link`)
+        until :meth:`hand_back` or the slot's end. LabError with the context's reason
+        if refused (not a manager, nothing running, taken by someone else)."""
+        message = TakeOver(agent=agent, reason=reason)
+        return self.client.request(self.ctx, message, TakenOver, f"take over {agent}")
+
+    def hand_back(self, agent: str) -> str:
+        """Give a taken-over ``agent`` back to its student's controller; what the context said."""
+        message = HandBack(agent=agent)
+        return self.client.request(self.ctx, message, OkReply, f"hand back {agent}").detail
+
+    def robot_link(self, world: str, agent: str) -> ZenohRobotLink:
+        """A link that drives ``agent`` with this session, while it holds the agent's lease
+        (its own request running, or a take-over); close it when done."""
+        return ZenohRobotLink(
+            self.client.z,
+            self.client.realm,
+            world,
+            agent,
+            lambda: self.client.session,  # type: ignore[arg-type,return-value]
+            verifier=self.client.verifier,  # accepts a MAC lease: commands cost µs to check
+        )
+
+    def drive_taken(
+        self, taken: TakenOver, controller: Controller, stop: threading.Event | None = None
+    ) -> int:
+        """Run ``controller`` on this machine on a robot this session took over, until the
+        slot's end, ``stop``, or the context says the take-over ended (handed back by
+        another manager, the run ended). Does not hand back. Returns its iterations."""
+        stop = stop or threading.Event()
+        # The take-over is in the context's state from its reply on: read it now, or the
+        # watch below could see an older state (its event not come yet) and end at once.
+        self.state()
+        link = self.robot_link(taken.world, taken.agent)
+        loop = ControllerLoop(controller, Khepera(link))
+        me = self.client.user
+
+        def watch() -> None:
+            while not loop.stop.is_set():
+                if stop.wait(0.2) or not self.is_taken_by(taken.agent, me):
+                    loop.stop.set()
+
+        watcher = threading.Thread(target=watch, name="takeover-watch", daemon=True)
+        watcher.start()
+        try:
+            loop.run(until=time.monotonic() + max(0.0, taken.end - time.time()))
+        finally:
+            loop.stop.set()
+            link.close(stop=True)
+        return loop.iterations
+
+    def is_taken_by(self, agent: str, user: str | None) -> bool:
+        """Whether the newest queue state says ``user`` has taken ``agent`` over."""
+        state = self.latest_state
+        for line in state.agents if state else []:
+            if line.agent == agent:
+                return any(e.position == 0 and e.taken_by == user for e in line.entries)
+        return False
 
     def dry_run(
         self, agent: str, source: bytes, *, filename: str = "controller.py", seconds: float = 5.0

@@ -120,6 +120,41 @@ class EmergencyStop(Message, frozen=True):
     reason: ShortText = ""
 
 
+class TakeOver(Message, frozen=True):
+    """Take over the robot ``agent`` while a student's controller runs on it (manage right).
+
+    The student's controller is paused, not ended: the context leases the robot to
+    the sender's session (its commands, from the page's keys or the sender's own
+    controller, are obeyed; the student's are refused by the world) until a
+    :class:`HandBack`, or the student's slot ends. Answered with :class:`TakenOver`.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    agent: Ident
+    reason: ShortText = ""
+
+
+class TakenOver(Message, frozen=True):
+    """The reply to a TakeOver: whose run is paused, and until when the sender may drive."""
+
+    agent: Ident
+    world: Ident
+    request_id: Ident  # the paused request
+    user: Ident  # its student
+    since: float  # wall-clock s: the take-over's start
+    end: float  # the student's slot end: the take-over ends then at the latest
+
+
+class HandBack(Message, frozen=True):
+    """Give a taken-over robot back: the student's controller drives it again for the rest
+    of its slot (manage right; any manager may hand back, not only the one who took it)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+
+    agent: Ident
+
+
 class DryRunRequest(Message, frozen=True):
     """Run a controller for a few simulated seconds in a private copy of the arena.
 
@@ -228,6 +263,9 @@ class QueueEntry(msgspec.Struct, frozen=True, kw_only=True):
     position: NonNegInt  # 0 running
     start_eta: float | None  # running: when it started
     end: float | None = None  # running: when its slot ends
+    # Running and taken over: who drives instead of the student's paused controller, since when.
+    taken_by: Ident | None = None
+    taken_at: float | None = None
 
 
 class AgentQueue(msgspec.Struct, frozen=True, kw_only=True):
@@ -259,6 +297,12 @@ class RequestStatus(msgspec.Struct, frozen=True, kw_only=True):
     reason: ShortText = ""
     start: float | None = None  # running: the lease's start and end
     end: float | None = None
+    # A take-over's steps, sent as a ``running`` status with the reason in words:
+    # "taken" (``taken_by`` drives since ``taken_at``; the controller is paused) and
+    # "handed_back" (the controller drives again).
+    takeover: Literal["taken", "handed_back"] | None = None
+    taken_by: Ident | None = None
+    taken_at: float | None = None
 
 
 class RequestStatusQuery(Message, frozen=True):
@@ -442,6 +486,7 @@ __all__ = [
     "FileInfo",
     "FileList",
     "FileListRequest",
+    "HandBack",
     "OutputLines",
     "QueueEntry",
     "QueueStateRequest",
@@ -458,4 +503,6 @@ __all__ = [
     "RunStop",
     "SaveFile",
     "StopControl",
+    "TakeOver",
+    "TakenOver",
 ]

@@ -145,7 +145,9 @@ class EventRecord(msgspec.Struct, frozen=True, kw_only=True):
     """A context event about the run or its robot (``/context/events``).
 
     ``kind``: queued, running, finished, cancelled, refused (the request's
-    status), or ``queue`` (the robot's queue changed: ``detail`` lists it).
+    status), ``taken`` / ``handed_back`` (a teacher took the robot over, the
+    controller paused; and gave it back: ``reason`` in words), or ``queue``
+    (the robot's queue changed: ``detail`` lists it).
     """
 
     kind: str

@@ -7,6 +7,8 @@
     wart arena release [--lab FILE] --user NAME --context CTX
     wart arena settings [--lab FILE] --user NAME --context CTX [--slot SECONDS]
                         [--enable | --disable] [--agent AGENT]
+    wart arena takeover ROBOT [--lab FILE] --user NAME --context CTX [--controller FILE]
+    wart arena handback ROBOT [--lab FILE] --user NAME --context CTX
 
 ``new`` and ``stop`` need the ``host`` permission (instructors and admins);
 ``estop`` (the emergency stop: every robot of the agent context's arena
@@ -15,7 +17,10 @@ waiting requests keep their places) needs the context's manage right (its
 owner, or ``kick`` there); so does ``settings``, which sets what the page's
 arena panel sets: the slot length (``--slot``, 1 to 3600 s, from the next
 slot on) and remote control on or off for the whole arena or one robot
-(``--enable``/``--disable``, ``--agent``); without a change it shows them;
+(``--enable``/``--disable``, ``--agent``); without a change it shows them; and
+so do ``takeover`` (a student's running controller paused, the robot held or
+driven by your controller until Ctrl-C; see services/commands/arena_takeover.py)
+and ``handback``;
 the password comes from --password-file, WART_PASSWORD or a prompt. Without
 --on, the host is chosen by load: among hosts that accept an arena now, the
 one with the fewest arenas, then the lowest CPU. With --lab the tool joins a
@@ -29,6 +34,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -48,6 +54,8 @@ from common.lab_errors import LabError
 from common.messages.host import ArenaInfo, HostLoad
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
+from services.commands.arena_takeover import add_takeover_parsers, run_takeover
+from services.commands.control import interrupt_event
 from services.commands.terminal import password_from
 from services.lab.labfile import LabFileError, load
 from services.lab.plan import read_registry_key
@@ -150,9 +158,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
     on_off.add_argument("--enable", action="store_true", help="let students queue (again)")
     on_off.add_argument("--disable", action="store_true", help="queue nothing new; runs end")
     s_settings.add_argument("--agent", help="--enable/--disable this robot only")
-    for s in (s_estop, s_release, s_settings):
+    takeover = add_takeover_parsers(sub)
+    for s in (s_estop, s_release, s_settings, *takeover):
         s.add_argument("--context", required=True, help="the arena's agent context, e.g. arena")
-    for s in (s_new, s_stop, s_estop, s_release, s_settings):
+    for s in (s_new, s_stop, s_estop, s_release, s_settings, *takeover):
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
     args, options = cli.parse(p, argv)
@@ -172,6 +181,8 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
         raise HostError("--reason: at most 200 characters")
     if args.verb == "settings":
         _check_settings(args)
+    # Ctrl-C ends a take-over cleanly: the robot is handed back.
+    stop = interrupt_event() if args.verb == "takeover" else threading.Event()
     session, realm, registry_key = lab_session(args, options)
     try:
         if args.verb == "list":
@@ -185,6 +196,8 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
                 agents = AgentClient(client, args.context)
                 reason = getattr(args, "reason", "")
                 print(agents.emergency_stop(reason, release=args.verb == "release"))
+            elif args.verb in ("takeover", "handback"):
+                return run_takeover(AgentClient(client, args.context).join(), args, stop)
             elif args.verb == "new":
                 arena = host_arena(
                     client, args.world, args.map, args.robots, host=args.host, seed=args.seed

@@ -164,6 +164,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:
 
     def body(agents: AgentClient) -> int:
         agents.on_output = lambda o: show_output(o) if o.request_id == rid[0] else None
+
+        def on_status(status: RequestStatus) -> None:
+            if status.takeover and status.request_id == rid[0]:
+                say(status.reason)  # a teacher's take-over and hand-back, in words
+
+        agents.on_status = on_status
         rid: list[str] = [""]
         queued = agents.queue(args.agent, "deploy", source=source, filename=args.controller.name)
         rid[0] = queued.request_id

@@ -50,6 +50,7 @@ from common.messages import (
     ControlRequest,
     EmergencyStop,
     FileListRequest,
+    HandBack,
     Message,
     OkReply,
     OutputLines,
@@ -62,6 +63,7 @@ from common.messages import (
     Revocation,
     SaveFile,
     StopControl,
+    TakeOver,
     UserRemovalRequest,
 )
 from common.messages.chat import ChatLine, MemberStatus
@@ -82,6 +84,7 @@ from services.context.recordings import RecordingRequests
 from services.context.request_status import RequestStatusDesk, look_up
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
+from services.context.takeover import TakeOvers
 from services.context.user_files import UserFiles
 
 DRY_RUN_WORKERS = 2
@@ -90,7 +93,7 @@ RUNNER_GRACE_S = 1.5  # after a runner's token went, before asking it what it st
 RUNNER_CHECK_S = 15.0  # how long to keep asking before taking its silence for its death
 
 
-class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
+class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -285,6 +288,8 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
                 FileListRequest,
                 ReadFile,
                 EmergencyStop,
+                TakeOver,
+                HandBack,
             ),
         )
         if isinstance(request, SaveFile | FileListRequest | ReadFile):
@@ -312,6 +317,14 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "stop_run", where, request.reason):
                 reply = self._stop_agent(principal, request)
+        elif isinstance(request, TakeOver):
+            where = f"agent/{self.room}/{request.agent}"
+            with self.audit.action(principal, "takeover", where, request.reason):
+                reply = self._take_over(principal, request)
+        elif isinstance(request, HandBack):
+            where = f"agent/{self.room}/{request.agent}"
+            with self.audit.action(principal, "handback", where, ""):
+                reply = self._hand_back(principal, request)
         elif isinstance(request, EmergencyStop):
             action = "estop" if request.engaged else "release"
             with self.audit.action(principal, action, self.scope, request.reason):
@@ -339,6 +352,8 @@ class AgentContext(QueueRequests, SlotScheduler, ChatRoom):
         self._drop_session_jobs(principal.session_id, "left the context", remote_only=False)
 
     def _drop_session_jobs(self, session_id: bytes, reason: str, *, remote_only: bool) -> None:
+        # A teacher gone (left, vanished, revoked) gives back what they took over.
+        self._hand_back_session(session_id, f"went away ({reason})")
         cancelled: list[RequestStatus] = []
         with self._wake:
             for job, running in self.book.jobs_of_session(session_id):

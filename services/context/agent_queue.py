@@ -52,6 +52,12 @@ class RunningJob:
     # (holder box, world box) -> (K sealed to the holder, K sealed to the world): sealed
     # once, so a republished lease is byte-identical and the holder skips unsealing it.
     sealed: dict[tuple[bytes, bytes], tuple[bytes, bytes]] = field(default_factory=dict)
+    # A teacher's take-over (services/context/takeover.py): their lease, a run of its own
+    # (job.user the teacher, start when taken), in force instead of this one's until
+    # handed back. The world keeps the lease with the later start, so a run handed back
+    # republishes its own lease from ``lease_start`` (the hand-back) on.
+    taken: RunningJob | None = None
+    lease_start: float = 0.0
 
 
 class EndedRequest(msgspec.Struct, frozen=True):
@@ -195,6 +201,8 @@ class QueueBook:
                         position=0,
                         start_eta=line.running.start,
                         end=line.running.end,
+                        taken_by=line.running.taken.job.user if line.running.taken else None,
+                        taken_at=line.running.taken.start if line.running.taken else None,
                     )
                 )
             for position, job in enumerate(line.waiting, start=1):
@@ -224,6 +232,36 @@ class _SavedRun(msgspec.Struct):
     end: float
     holder_box: bytes = b""
     lease_key: bytes = b""
+    lease_start: float = 0.0
+    taken: _SavedRun | None = None  # a take-over in force survives a restart too
+
+
+def _saved_run(run: RunningJob) -> _SavedRun:
+    return _SavedRun(
+        run.job,
+        run.lease_id,
+        run.holder_session,
+        run.start,
+        run.end,
+        run.holder_box,
+        run.lease_key,
+        run.lease_start,
+        None if run.taken is None else _saved_run(run.taken),
+    )
+
+
+def _running_job(r: _SavedRun) -> RunningJob:
+    return RunningJob(
+        r.job,
+        r.lease_id,
+        r.holder_session,
+        r.start,
+        r.end,
+        r.holder_box,
+        r.lease_key,
+        taken=None if r.taken is None else _running_job(r.taken),
+        lease_start=r.lease_start,
+    )
 
 
 class _SavedLine(msgspec.Struct):
@@ -255,17 +293,7 @@ def save_book(book: QueueBook) -> bytes:
     lines = []
     for line in book.lines.values():
         run = line.running
-        saved_run = None
-        if run is not None:
-            saved_run = _SavedRun(
-                run.job,
-                run.lease_id,
-                run.holder_session,
-                run.start,
-                run.end,
-                run.holder_box,
-                run.lease_key,
-            )
+        saved_run = None if run is None else _saved_run(run)
         lines.append(_SavedLine(line.agent, line.type, line.enabled, list(line.waiting), saved_run))
     return msgspec.msgpack.encode(
         _SavedBook(
@@ -292,12 +320,7 @@ def load_book(data: bytes) -> QueueBook:
     book.estop = saved.estop
     book.ended = {end.status.request_id: end for end in saved.ended}
     for line in saved.lines:
-        running = None
-        if line.running is not None:
-            r = line.running
-            running = RunningJob(
-                r.job, r.lease_id, r.holder_session, r.start, r.end, r.holder_box, r.lease_key
-            )
+        running = None if line.running is None else _running_job(line.running)
         book.lines[line.agent] = AgentLine(
             line.agent, line.type, line.enabled, deque(line.waiting), running
         )

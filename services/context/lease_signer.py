@@ -74,7 +74,7 @@ class LeaseSigner:
             agent=agent,
             holder_user=holder_user,
             holder_session=run.holder_session,
-            start=run.start,
+            start=max(run.start, run.lease_start),  # a run handed back: from the hand-back
             end=end,
             requester_session=run.job.session_id,
         )

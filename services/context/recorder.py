@@ -450,7 +450,7 @@ class SlotRecorder:
             rec = self._active(agent)
             if rec is None:
                 continue
-            run = rec.run
+            run = rec.run.taken or rec.run  # taken over: the teacher's lease is in force
             if not run.lease_key:  # not a MAC lease: a keyless BLAKE2b proves nothing
                 rec.refused += 1
                 continue
@@ -470,7 +470,8 @@ class SlotRecorder:
                 speeds=(left, right) if flags & MAC_ITEM_SPEEDS else None,
                 counters=(a, b) if flags & MAC_ITEM_COUNTERS else None,
             )
-            self._write_command(rec, agent, rec.driver, "mac", command, t)
+            driver = rec.driver if run is rec.run else run.job.user
+            self._write_command(rec, agent, driver, "mac", command, t)
 
     def _write_command(
         self, rec: _Run, agent: str, sender: str, auth: str, command: AgentCommand, t: float
@@ -492,7 +493,7 @@ class SlotRecorder:
         rec = self._active(agent)
         if rec is None:
             return
-        run = rec.run
+        run = rec.run.taken or rec.run  # taken over: the teacher's lease is in force
         try:
             envelope = decode(payload, (AuthEnvelope, MacCommand))
             if isinstance(envelope, MacCommand):
@@ -512,7 +513,7 @@ class SlotRecorder:
                     raise AuthError("forbidden", "not MACed with this run's lease key")
                 command, sender, auth, sent_at = (
                     decode(envelope.body, AgentCommand),
-                    rec.driver,
+                    rec.driver if run is rec.run else run.job.user,
                     "mac",
                     envelope.sent_at,
                 )
@@ -552,7 +553,7 @@ class SlotRecorder:
                     rec.writer.write(
                         s.EVENTS,
                         s.EventRecord(
-                            kind=status.status,
+                            kind=status.takeover or status.status,  # or taken, handed_back
                             request_id=status.request_id,
                             agent=status.agent,
                             user=status.user,

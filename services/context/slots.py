@@ -287,6 +287,10 @@ class SlotScheduler:
         )
 
     def _publish_lease(self, run: RunningJob, end: float) -> None:
+        taken = run.taken
+        if taken is not None:  # taken over: the teacher's lease is the one in force
+            self.leases.publish(taken, end, taken.job.user)
+            return
         holder = run.job.user if run.job.mode == "remote" else self.runner_user(run)
         self.leases.publish(run, end, holder)
 

@@ -142,6 +142,7 @@ class RequestEvent:
     user: str
     status: str
     reason: str = ""
+    takeover: str | None = None  # running, a teacher's take-over: "taken" or "handed_back"
 
 
 @dataclass(frozen=True)
@@ -182,6 +183,8 @@ class AgentStatus:
     online: bool = True  # a real robot unplugged or silent is offline
     my_request: str | None = None  # my request's id on this agent
     slot_left_s: float | None = None  # what remains of the running slot
+    taken_by: str | None = None  # a teacher who took the running controller's robot over
+    waiting: tuple[str, ...] = ()  # who waits for it, in order
 
 
 @dataclass(frozen=True)
@@ -455,6 +458,14 @@ class LabConnection(Protocol):
     def set_slot(self, ctx: str, seconds: float) -> str: ...
 
     def stop_agent(self, ctx: str, agent: str) -> str: ...
+
+    def take_over(self, ctx: str, agent: str, take: bool) -> str:
+        """Take ``agent`` over from its running controller (``take``), or hand it back."""
+        ...
+
+    def drive(self, ctx: str, agent: str, left: int, right: int) -> None:
+        """Wheel speeds for a robot I took over, held until changed (0, 0: stop)."""
+        ...
 
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str: ...
 

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
@@ -149,10 +149,8 @@ class DemoLab:
 
 
 class DemoConnector:
-    """A :class:`~viewers.web.adapters.LabConnector` over one or more fake labs.
-
-    Labs are found by realm; an unknown realm fails the way an unreachable lab would.
-    """
+    """A :class:`~viewers.web.adapters.LabConnector` over one or more fake labs, found by
+    realm; an unknown realm fails the way an unreachable lab would."""
 
     def __init__(self, *labs: tuple[str, DemoLab]) -> None:
         self.labs = dict(labs)
@@ -382,6 +380,11 @@ class DemoConnection(DemoAdmin):
             who = queue.pop(0) if queue else None
         self._lab._broadcast(AgentsEvent(ctx))
         return f"stopped {who}'s controller" if who else f"nothing runs on {agent}"
+
+    def _no_take_over(self, *_: object) -> Any:
+        raise LabError("the demo lab runs no one's controller: nothing to take over")
+
+    take_over = drive = _no_take_over
 
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
         with self._lab._lock:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,9 +31,6 @@ from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
     AssignmentInfo,
-    AuditEntry,
-    AuditQuery,
-    BanInfo,
     Leaderboard,
     QueueStateRequest,
     RoomEvent,
@@ -42,7 +38,6 @@ from common.messages import (
     SubmissionInfo,
 )
 from viewers.web.adapters import (
-    Account,
     AgentStatus,
     ArenaSettings,
     ChatEntry,
@@ -63,6 +58,7 @@ from viewers.web.adapters import (
 )
 from viewers.web.address import LabAddress
 from viewers.web.lab_links import LabRouterLink
+from viewers.web.live_admin import LiveAdmin
 from viewers.web.live_agents import AgentContextLink
 from viewers.web.live_world import UserWorld
 
@@ -108,7 +104,7 @@ class _Events:
     next_id: int = 1
 
 
-class LiveConnection:
+class LiveConnection(LiveAdmin):
     """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
@@ -442,6 +438,12 @@ class LiveConnection:
     def stop_agent(self, ctx: str, agent: str) -> str:
         return self._arena(ctx).stop(agent)
 
+    def take_over(self, ctx: str, agent: str, take: bool) -> str:
+        return self._arena(ctx).take_over(agent, take)
+
+    def drive(self, ctx: str, agent: str, left: int, right: int) -> None:
+        self._arena(ctx).drive(agent, left, right)
+
     def set_enabled(self, ctx: str, enabled: bool, agent: str | None = None) -> str:
         return self._arena(ctx).set_enabled(enabled, agent)
 
@@ -514,56 +516,6 @@ class LiveConnection:
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         return self._call(lambda: GraderClient(self.client).watch_standings(None, on_standings))
 
-    # -- admin
-
-    def list_accounts(self) -> list[Account]:
-        users = self._call(self.client.list_users)
-        return [
-            Account(
-                u.name,
-                tuple(u.roles),
-                tuple(sorted((scope, tuple(g)) for scope, g in u.grants.items())),
-                u.online,
-                u.failed_logins,
-                ban_words(u.ban),
-            )
-            for u in users
-        ]
-
-    def add_account(self, user: str, password: str, roles: tuple[str, ...]) -> str:
-        return str(self._call(lambda: self.client.add_user(user, password, roles)))
-
-    def set_password(self, user: str, password: str) -> str:
-        return str(self._call(lambda: self.client.set_password(user, password)))
-
-    def remove_account(self, user: str) -> str:
-        return str(self._call(lambda: self.client.remove_user(user)))
-
-    def grant(self, user: str, grant: str, scope: str = "") -> str:
-        return str(self._call(lambda: self.client.grant(user, grant, scope)))
-
-    def ungrant(self, user: str, grant: str, scope: str = "") -> str:
-        return str(self._call(lambda: self.client.ungrant(user, grant, scope)))
-
-    def kick_from_server(self, user: str, reason: str = "") -> str:
-        return str(self._call(lambda: self.client.kick_from_server(user, reason)))
-
-    def rename_server(self, name: str) -> str:
-        return str(self._call(lambda: self.client.rename_server(name)))
-
-    def unlock_logins(self, user: str) -> str:
-        return str(self._call(lambda: self.client.unlock_logins(user)))
-
-    def ban(self, user: str, reason: str, until: float | None) -> str:
-        return str(self._call(lambda: self.client.ban(user, reason, until)))
-
-    def lift_ban(self, user: str) -> str:
-        return str(self._call(lambda: self.client.lift_ban(user)))
-
-    def audit_trail(self, query: AuditQuery) -> list[AuditEntry]:
-        entries, _more = self._call(lambda: self.client.audit_trail(query))
-        return list(entries)
-
     # -- the end
 
     @property
@@ -588,11 +540,3 @@ class LiveConnection:
         except Exception:
             log.exception("logging %s out of %s", self.user, self._address.label)
         self.connector._closed(self)
-
-
-def ban_words(ban: BanInfo | None) -> str:
-    """A ban in force, for the admin's account list ("" if none)."""
-    if ban is None:
-        return ""
-    end = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(ban.until)) if ban.until else "lifted"
-    return f"until {end}: {ban.reason}"

@@ -41,6 +41,7 @@ from viewers.web.adapters import (
     RequestEvent,
     SavedFile,
 )
+from viewers.web.key_driver import KeyDriver
 
 log = logging.getLogger("wart.viewer.agents")
 
@@ -101,6 +102,8 @@ def agent_rows(
                 online=line.agent not in offline,
                 my_request=mine.request_id if mine is not None else None,
                 slot_left_s=left,
+                taken_by=running.taken_by if running is not None else None,
+                waiting=tuple(e.user for e in line.entries if e.position > 0),
             )
         )
     return rows
@@ -137,6 +140,7 @@ class AgentContextLink:
             on_status=self._on_status,
             on_room=on_room,
         )
+        self.driver = KeyDriver(self.agents)
 
     def join(self, history: int) -> lab.RoomHandle:
         """Join the context (chat and agent events) and read its queues once."""
@@ -151,6 +155,7 @@ class AgentContextLink:
         return room
 
     def leave(self) -> None:
+        self.driver.stop()
         self._call(self.agents.leave)
 
     @property
@@ -165,7 +170,13 @@ class AgentContextLink:
     def _on_status(self, status: RequestStatus) -> None:
         self._emit(
             RequestEvent(
-                self.ctx, status.request_id, status.agent, status.user, status.status, status.reason
+                self.ctx,
+                status.request_id,
+                status.agent,
+                status.user,
+                status.status,
+                status.reason,
+                status.takeover,
             )
         )
         self._emit(AgentsEvent(self.ctx))
@@ -261,6 +272,26 @@ class AgentContextLink:
         if not is_ident(agent):
             raise LabError("choose a robot first")
         return self._call(lambda: self.agents.stop_agent(agent, "stopped from the web page"))
+
+    def take_over(self, agent: str, take: bool) -> str:
+        """Take ``agent`` over (its student's controller paused), or hand it back."""
+        if not is_ident(agent):
+            raise LabError("choose a robot first")
+        if take:
+            taken = self._call(lambda: self.agents.take_over(agent, "from the web page"))
+            self._refresh()
+            return f"{agent} taken over from {taken.user}: their controller is paused"
+        self.driver.stop()
+        detail = self._call(lambda: self.agents.hand_back(agent))
+        self._refresh()
+        return detail
+
+    def drive(self, agent: str, left: int, right: int) -> None:
+        if not self.agents.is_taken_by(agent, self.user):
+            raise LabError(f"take {agent} over first")
+        world = self.world
+        assert world is not None  # a state was read: the take-over came from it
+        self.driver.set(world, agent, left, right)
 
     def set_enabled(self, enabled: bool, agent: str | None) -> str:
         if agent is not None and not is_ident(agent):

@@ -49,12 +49,22 @@ NOTHING_PRINTED = "Nothing printed yet."
 TABLE_EVERY_S = 1.0  # the ETAs count down between the context's events
 NONE = "(none)"
 ALL = "(all robots)"
+# The take-over's drive buttons: wheel speeds (Khepera units), held until the next press.
+DRIVE_SPEEDS = {
+    "Forward": (10, 10),
+    "Reverse": (-10, -10),
+    "Turn left": (-5, 5),
+    "Turn right": (5, -5),
+    "Stop driving": (0, 0),
+}
 STATUS_WORDS = {
     "queued": "is queued",
     "running": "is running",
     "finished": "finished",
     "cancelled": "was cancelled",
     "refused": "was refused",
+    "taken": "is paused: a teacher took the robot over",
+    "handed_back": "drives again: the robot was handed back",
 }
 
 
@@ -81,12 +91,18 @@ def format_agents(rows: list[AgentStatus], settings: ArenaSettings | None = None
         holder = escape_md(r.holder) if r.holder else "-"
         if r.holder and r.slot_left_s is not None:
             holder += f" ({r.slot_left_s:.0f} s left)"
+        if r.taken_by:
+            holder += f", **taken over by {escape_md(r.taken_by)}** (paused)"
         name = escape_md(r.agent)
         if not r.online:
             name += " (offline)"
         elif not r.enabled and settings is not None and settings.slot_seconds > 0:
             name += " (disabled)"
-        lines.append(f"| {name} | {holder} | {r.queue} | {mine} | {eta} |")
+        waiting = str(r.queue)
+        if r.waiting and settings is not None and settings.can_manage:  # the teacher's view
+            waiting += ": " + ", ".join(escape_md(u) for u in r.waiting[:5])
+            waiting += " ..." if len(r.waiting) > 5 else ""
+        lines.append(f"| {name} | {holder} | {waiting} | {mine} | {eta} |")
     if len(rows) > MAX_ROWS:
         lines.append(f"\n_and {len(rows) - MAX_ROWS} more: click a robot in the view._")
     return "\n".join(lines)
@@ -135,6 +151,13 @@ class RobotPanel:
                 self.enable = gui.add_button("Enable remote control")
                 self.which = gui.add_dropdown("Applies to", (ALL, "the chosen robot"))
             self.manage.visible = False
+            # A teacher's take-over of the chosen robot (the same managers): the running
+            # controller paused, the robot driven from here, handed back.
+            with gui.add_folder("Take over (teacher)") as self.takeover:
+                self.take = gui.add_button("Take over the chosen robot", color="orange")
+                self.give_back = gui.add_button("Hand back")
+                self.drive_buttons = {label: gui.add_button(label) for label in DRIVE_SPEEDS}
+            self.takeover.visible = False
             self.selected_md = gui.add_markdown("_Click a robot in the view to select it._")
             self.rays = gui.add_checkbox(
                 "Show IR rays",
@@ -165,6 +188,10 @@ class RobotPanel:
         self.stop.on_click(lambda _: self._stop())
         self.disable.on_click(lambda _: self._enable(False))
         self.enable.on_click(lambda _: self._enable(True))
+        self.take.on_click(lambda _: self._take_over(True))
+        self.give_back.on_click(lambda _: self._take_over(False))
+        for label, button in self.drive_buttons.items():
+            button.on_click(self._drive_on_click(*DRIVE_SPEEDS[label]))
         self.refresh_agents()
 
     def say_notice(self, text: str) -> None:
@@ -184,6 +211,8 @@ class RobotPanel:
         content = format_agents(rows, settings)
         if self.agents_md.content != content:
             self.agents_md.content = content
+        if self.takeover.visible != settings.can_manage:
+            self.takeover.visible = settings.can_manage
         if self.manage.visible != settings.can_manage:
             self.manage.visible = settings.can_manage
             if settings.can_manage:
@@ -212,7 +241,7 @@ class RobotPanel:
         mine = event.user == self.connection.user
         who = "your" if mine else f"{event.user}'s"
         why = f": {event.reason}" if event.reason else ""
-        words = STATUS_WORDS.get(event.status, event.status)
+        words = STATUS_WORDS.get(event.takeover or event.status, event.status)
         self._add_output(f"<i>{printed(f'{who} controller on {event.agent} {words}{why}')}</i>")
         if mine and event.status in ("running", "finished", "cancelled", "refused"):
             self.client.add_notification(
@@ -403,6 +432,24 @@ class RobotPanel:
         agent = self._chosen()
         if agent is not None:
             self._manage("stop it", lambda: self.connection.stop_agent(self.ctx, agent))
+
+    def _take_over(self, take: bool) -> None:
+        agent = self._chosen()
+        if agent is not None:
+            what = f"take {agent} over" if take else f"hand {agent} back"
+            self._manage(what, lambda: self.connection.take_over(self.ctx, agent, take))
+
+    def _drive_on_click(self, left: int, right: int) -> Callable[[object], None]:
+        return lambda _: self._drive(left, right)
+
+    def _drive(self, left: int, right: int) -> None:
+        agent = self._chosen()
+        if agent is None:
+            return
+        try:
+            self.connection.drive(self.ctx, agent, left, right)
+        except LabError as exc:
+            self.say_notice(f"Could not drive {agent}: {exc}")
 
     def _enable(self, enabled: bool) -> None:
         agent: str | None = None

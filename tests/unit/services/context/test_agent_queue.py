@@ -127,3 +127,26 @@ def test_ended_requests_survive_a_save_and_a_book_saved_before_them_loads() -> N
     older = msgspec.msgpack.decode(save_book(book))
     del older["ended"]
     assert load_book(msgspec.msgpack.encode(older)).ended == {}
+
+
+def test_a_take_over_shows_in_the_queues_and_survives_a_restart() -> None:
+    book = QueueBook(60.0)
+    book.set_agents({"k1": "khepera"})
+    run = RunningJob(job("a"), "arena.a", b"s" * 16, start=100.0, end=160.0, lease_key=b"k" * 32)
+    teacher = ControlJob("a", "k1", "ida", b"i" * 16, "remote")
+    run.taken = RunningJob(teacher, "take-1.arena", b"i" * 16, 120.0, 160.0, lease_key=b"t" * 32)
+    book.lines["k1"].running = run
+    entry = book.agent_queues(now=130.0)[0].entries[0]
+    assert (entry.user, entry.taken_by, entry.taken_at) == ("alice", "ida", 120.0)
+    back = load_book(save_book(book)).lines["k1"].running
+    assert back is not None and back.taken is not None
+    assert (back.taken.job.user, back.taken.lease_id, back.taken.lease_key) == (
+        "ida",
+        "take-1.arena",
+        b"t" * 32,
+    )
+    # Handed back: the student's lease from the hand-back on, nobody's take-over left.
+    run.taken, run.lease_start = None, 140.0
+    back = load_book(save_book(book)).lines["k1"].running
+    assert back is not None and back.taken is None and back.lease_start == 140.0
+    assert book.agent_queues(now=150.0)[0].entries[0].taken_by is None

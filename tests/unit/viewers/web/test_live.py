@@ -218,3 +218,33 @@ def test_queue_state_as_panel_rows() -> None:
     assert (mine.my_position, mine.eta_s) == (0, None)  # running: no ETA
     table = format_agents([k0, k1], ArenaSettings(3.0, True, False))
     assert "Slots of 3 s" in table and "alice (2 s left)" in table and "#1" in table
+
+
+def test_the_teachers_table_names_the_queue_and_a_take_over() -> None:
+    now = 1000.0
+    running = QueueEntry(
+        request_id="r1",
+        user="alice",
+        mode="deploy",
+        position=0,
+        start_eta=now - 1,
+        end=now + 9,
+        taken_by="ida",
+        taken_at=now - 0.5,
+    )
+    waiting = QueueEntry(request_id="r2", user="bob", mode="deploy", position=1, start_eta=now)
+    state = AgentContextState(
+        ctx="arena",
+        world="w1",
+        slot_seconds=10.0,
+        enabled=True,
+        agents=[AgentQueue(agent="k0", type="khepera", enabled=True, entries=[running, waiting])],
+        at=now,
+    )
+    (row,) = agent_rows(state, "ida", now)
+    assert (row.holder, row.taken_by, row.waiting) == ("alice", "ida", ("bob",))
+    teacher = format_agents([row], ArenaSettings(10.0, True, True))
+    assert "alice (9 s left), **taken over by ida** (paused)" in teacher
+    assert "| 1: bob |" in teacher
+    student = format_agents([row], ArenaSettings(10.0, True, False))
+    assert "taken over by ida" in student and "bob" not in student  # names: managers only
