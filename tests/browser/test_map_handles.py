@@ -29,6 +29,9 @@ def test_no_map_handles_on_a_driven_robot(open_page, viewer: WebViewer) -> None:
     wait_until(lambda: robots.driven(driven), 10, what=f"{driven} held by ana's controller")
     assert not robots.driven(idle)
 
+    # A click selects a robot the view has drawn: its pose comes with the frames (a busy
+    # machine's first frame came after this select, and the handles had no pose to go to).
+    wait_until(lambda: view.frames_applied > 0, what="the arena's first frame in the view")
     view.select(names.index(idle))
     wait_until(lambda: editor.selected == idle, 10, what="handles on the idle robot")
     view.select(names.index(driven))
