@@ -139,11 +139,18 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
     box.click()
     page.p.keyboard.press("Control+Home")
     page.p.locator("a[data-wart-line='11']").click()
-    at = page.p.evaluate(
-        "() => { const v = [...window.wartEditor.views.values()][0].view;"
-        " return v.state.doc.lineAt(v.state.selection.main.head).number; }"
-    )
-    assert at == 11
+
+    def cursor_line() -> int:
+        # The editor on the page now: a view React replaced stays listed until the next poll.
+        return int(
+            page.p.evaluate(
+                "() => { const e = [...window.wartEditor.views.values()]"
+                ".find(e => e.view.dom.isConnected); const v = e.view;"
+                " return v.state.doc.lineAt(v.state.selection.main.head).number; }"
+            )
+        )
+
+    wait_until(lambda: cursor_line() == 11, what="the cursor on line 11")
 
     # Ctrl-S saves under the file name: the lab keeps it, the list shows it.
     page.p.keyboard.press("Control+s")

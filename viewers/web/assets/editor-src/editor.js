@@ -144,6 +144,9 @@ function applyProblems(entry, problems) {
 
 function goToLine(n) {
   for (const entry of views.values()) {
+    // A view whose host React just replaced is still listed until the next poll:
+    // moving its cursor would be lost with it.
+    if (!entry.view.dom.isConnected) continue;
     const doc = entry.view.state.doc;
     const line = doc.line(Math.max(1, Math.min(n, doc.lines)));
     entry.view.dispatch({ selection: { anchor: line.from }, scrollIntoView: true });
