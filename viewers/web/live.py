@@ -31,6 +31,8 @@ from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
     AssignmentInfo,
+    ClassTable,
+    GradingChanged,
     Leaderboard,
     QueueStateRequest,
     RoomEvent,
@@ -515,6 +517,12 @@ class LiveConnection(LiveAdmin):
 
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         return self._call(lambda: GraderClient(self.client).watch_standings(None, on_standings))
+
+    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        return self._call(lambda: GraderClient(self.client).watch_changes(on_change))
+
+    def class_tables(self) -> list[ClassTable]:
+        return list(self._call(GraderClient(self.client).class_tables))
 
     # -- the end
 
