@@ -110,7 +110,8 @@ def drive_html(keys_input: viser.GuiTextHandle) -> str:
     return (
         f"<style>{hide}</style>"
         f'<div id="{box}" tabindex="0" role="application" aria-label="{html.escape(BOX_LABEL)}" '
-        'style="border: 2px dashed #999; border-radius: 6px; padding: 10px; text-align: center; '
-        'outline-offset: 2px">Driving box: click here, then hold ← ↑ → ↓ or W A S D</div>'
+        'style="box-sizing: border-box; width: 100%; border: 2px dashed #999; border-radius: 6px; '
+        'padding: 10px; text-align: center; outline-offset: 2px">'
+        "Driving box: click here, then hold ← ↑ → ↓ or W A S D</div>"
         f'<img src="data:," alt="" style="display:none" onerror="{html.escape(script)}">'
     )
