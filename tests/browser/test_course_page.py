@@ -144,13 +144,13 @@ def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
 
         choose(ida, "Student", "alice")
         wait_until(lambda: klass.student.value == "alice", 10, what="alice chosen")
-        ida.click("Watch")
+        ida.click("Watch their robot")
         ida.wait_text("Watching alice's robot k1: the view follows it.")
         view = robots.view
         assert view is not None and view.follow and view.selected_name == "k1"
 
         taken = time.monotonic()
-        ida.click("Take over")
+        ida.click("Take over their robot")
         ida.wait_text("k1 taken over from alice: their controller is paused")
         alice.wait_text("your robot is driven by ida since", timeout=15_000)
         wait_until(lambda: motion.at_rest_since(["k1"], taken), 20, what="k1 paused at rest")
@@ -179,7 +179,7 @@ def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
         ida.p.keyboard.up("ArrowDown")
         ida.screenshot("class-driving")
 
-        ida.click("Hand back")
+        ida.click("Hand their robot back")
         ida.wait_text("k1 handed back to alice's controller")
         alice.wait_text("ida handed your robot back: your controller drives again", 15_000)
         resumed = time.monotonic()

@@ -9,12 +9,12 @@ running (robot, time left). It is read again when the grader says a
 submission of the course changed (``GradingChanged``) and drawn again when the
 arena's robots change, with no click.
 
-From a student's row: **Watch** shows the arena with the view following their
-robot; **Take over** pauses their controller (the context's TakeOver, as the
+From a student's row: **Watch their robot** shows the arena with the view following their
+robot; **Take over their robot** pauses their controller (the context's TakeOver, as the
 robot panel's button); the teacher then drives by keyboard in the driving box
 or the world view (drive_keys.py: arrow keys or WASD, released keys or lost
 focus stop the robot, and so does a page gone quiet for 0.6 s) or with the
-robot panel's buttons; **Hand back** gives the robot back. The student's page
+robot panel's buttons; **Hand their robot back** gives the robot back. The student's page
 says each step (the robot panel's status line), and the slot's recording
 keeps them among its events.
 """
@@ -30,7 +30,7 @@ import viser
 
 from common.messages import ClassTable, GradingChanged
 from viewers.web.adapters import LabConnection, LabError
-from viewers.web.class_table import format_class, live_runs, parse_keys, speeds_for, students
+from viewers.web.class_table import KeyHold, format_class, live_runs, students
 from viewers.web.drive_keys import DEADMAN_S, drive_html
 from viewers.web.inputs import on_click, set_value
 from viewers.web.robot_panel import RobotPanel
@@ -62,15 +62,14 @@ class ClassPanel:
         self._dirty = threading.Event()
         self._closed = threading.Event()
         self._driving: str | None = None  # the robot I took over from here
-        self._held = ""  # the directions held in the page
-        self._heard = 0.0  # monotonic time of the page's last word about keys
+        self._keys = KeyHold(DEADMAN_S)  # the directions held in the page, and its deadman
         gui = client.gui
         with gui.add_folder("Class", expand_by_default=True, visible=False) as self.folder:
             self.table = gui.add_markdown("")
             self.student = gui.add_dropdown("Student", (NONE,))
-            self.watch_button = gui.add_button("Watch", icon=viser.Icon.EYE)
-            self.take_button = gui.add_button("Take over", color="orange")
-            self.give_button = gui.add_button("Hand back")
+            self.watch_button = gui.add_button("Watch their robot", icon=viser.Icon.EYE)
+            self.take_button = gui.add_button("Take over their robot", color="orange")
+            self.give_button = gui.add_button("Hand their robot back")
             self.keys = gui.add_text("Drive keys", "")
             self.drive_box = gui.add_html(drive_html(self.keys))
             self.status = gui.add_markdown("")
@@ -208,26 +207,23 @@ class ClassPanel:
     # -- driving by keyboard
 
     def _keys_changed(self, value: str) -> None:
-        held = parse_keys(value)
-        self._heard = time.monotonic()
-        if held == self._held:
+        speeds = self._keys.update(value, time.monotonic())
+        if speeds is None:
             return  # a heartbeat: the same keys still held
-        self._held = held
         agent = self._driving
         if agent is None:
-            if held:
-                self.say("Take a robot over first (Take over), then drive.", bad=True)
+            if speeds != (0, 0):
+                self.say("Take their robot over first, then drive.", bad=True)
             return
         try:
-            self.connection.drive(self.ctx, agent, *speeds_for(held))
+            self.connection.drive(self.ctx, agent, *speeds)
         except LabError as exc:
             self.say(f"Could not drive {agent}: {exc}", bad=True)
 
     def _deadman(self) -> None:
         """Keys held but the page silent (closed, cut off): stop the robot."""
-        if self._held and time.monotonic() - self._heard > DEADMAN_S:
+        if self._keys.expired(time.monotonic()):
             log.info("no word from the page for %.1f s: %s stopped", DEADMAN_S, self._driving)
-            self._held = ""
             self._stop_driving()
 
     def _stop_driving(self) -> None:

@@ -74,6 +74,33 @@ def parse_keys(value: str) -> str:
     return "".join(sorted(set(held)))
 
 
+class KeyHold:
+    """The keys a page holds, and its deadman: nothing heard for ``deadman_s`` while keys are
+    held means the page is gone (closed, cut off) and the robot must stop."""
+
+    def __init__(self, deadman_s: float) -> None:
+        self.deadman_s = deadman_s
+        self.held = ""
+        self._heard = 0.0
+
+    def update(self, value: str, now: float) -> tuple[int, int] | None:
+        """The page's text at ``now`` (monotonic s): new wheel speeds, or None if the same
+        keys are still held (a heartbeat)."""
+        held = parse_keys(value)
+        self._heard = now
+        if held == self.held:
+            return None
+        self.held = held
+        return speeds_for(held)
+
+    def expired(self, now: float) -> bool:
+        """True once (then nothing is held) if keys are held and the page went quiet."""
+        if self.held and now - self._heard > self.deadman_s:
+            self.held = ""
+            return True
+        return False
+
+
 def _num(value: float | None) -> str:
     return "-" if value is None else f"{value:g}"
 

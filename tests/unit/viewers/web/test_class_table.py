@@ -5,6 +5,7 @@ from __future__ import annotations
 from common.messages import ClassRow, ClassTable
 from viewers.web.adapters import AgentStatus
 from viewers.web.class_table import (
+    KeyHold,
     format_class,
     live_runs,
     parse_keys,
@@ -67,3 +68,15 @@ def test_held_keys_become_wheel_speeds_and_nothing_held_stops() -> None:
     assert speeds_for("fr") == (12, 5) and speeds_for("fl") == (5, 12)
     assert speeds_for("bf") == (0, 0)  # opposite keys cancel
     assert speeds_for("blr") == (-12, -12)
+
+
+def test_the_deadman_stops_a_robot_whose_page_went_quiet_with_keys_held() -> None:
+    keys = KeyHold(deadman_s=0.6)
+    assert keys.update("f 1", now=10.0) == (12, 12)
+    assert keys.update("f 2", now=10.2) is None  # a heartbeat: nothing to change
+    assert not keys.expired(now=10.7)  # 0.5 s since the last word
+    assert keys.expired(now=10.9)  # 0.7 s: the page is gone, stop
+    assert not keys.expired(now=11.5) and keys.held == ""  # once
+    assert keys.update("fr 3", now=12.0) == (12, 5)  # the page is back
+    assert keys.update(" 4", now=12.1) == (0, 0)  # released: stop at once
+    assert not keys.expired(now=20.0)  # nothing held: no deadman to fire
