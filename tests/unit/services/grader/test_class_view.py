@@ -92,3 +92,13 @@ def test_the_queue_order_is_the_order_jobs_are_taken() -> None:
     taken = [queue.get(0.1) for _ in range(len(said))]
     assert said == taken
     assert [job for _u, job in said] == ["rerun", "a1", "b1", "c1", "a2", "c2", "a3"]
+
+
+def test_a_published_change_carries_no_score_and_no_name() -> None:
+    """Everyone in the realm may hear it: what each may see, each page asks the grader for
+    (a leaderboard hidden until the deadline stays there for students)."""
+    from common.messages import GradingChanged
+
+    assert set(GradingChanged.__struct_fields__) == {
+        "course", "assignment", "submission", "status", "at", "v",
+    }  # fmt: skip
