@@ -40,6 +40,7 @@ log = logging.getLogger("wart.viewer.class")
 
 NONE = "(no student)"
 COALESCE_S = 0.2  # changes that come together are read once
+RETRY_S = 15.0  # the grader did not answer (not started yet, restarting): ask again then
 
 
 class ClassPanel:
@@ -63,6 +64,7 @@ class ClassPanel:
         self._closed = threading.Event()
         self._driving: str | None = None  # the robot I took over from here
         self._keys = KeyHold(DEADMAN_S)  # the directions held in the page, and its deadman
+        self._retry_at: float | None = None
         gui = client.gui
         with gui.add_folder("Class", expand_by_default=True, visible=False) as self.folder:
             self.table = gui.add_markdown("")
@@ -112,13 +114,17 @@ class ClassPanel:
                 if self._closed.is_set():
                     return
                 self.refresh()
+            elif self._retry_at is not None and time.monotonic() >= self._retry_at:
+                self._retry_at = None
+                self._dirty.set()
             self._deadman()
 
     def refresh(self) -> list[ClassTable]:
         try:
             tables = self.connection.class_tables()
         except LabError as exc:
-            log.info("class of %s: %s", self.connection.user, exc)
+            log.debug("class of %s: %s", self.connection.user, exc)  # asked again later
+            self._retry_at = time.monotonic() + RETRY_S
             return self._tables
         with self._lock:
             self._tables = tables
@@ -132,7 +138,7 @@ class ClassPanel:
         """Draw the tables with the arena's runs as last read (no network)."""
         if not self._tables:
             return
-        runs = live_runs(list(self.robots._rows))
+        runs = live_runs(self.robots.rows)
         content = format_class(self._tables, runs)
         if self.table.content != content:
             self.table.content = content
@@ -153,7 +159,7 @@ class ClassPanel:
             self.say("Choose a student first.", bad=True)
             return None
         self.robots.refresh_agents()
-        run = live_runs(list(self.robots._rows)).get(user)
+        run = live_runs(self.robots.rows).get(user)
         if run is None:
             self.say(f"{user} runs nothing on {self.ctx} now.", bad=True)
             return None
