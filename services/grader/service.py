@@ -369,6 +369,7 @@ class GraderService(Service):
             except Exception:
                 self.log.exception("grading %s failed", sub.id)
                 self.store.set_status(sub.id, "queued", "the grader failed: queued again")
+                self._changed(sub, "queued")
 
     def _grade(self, sub: Pending) -> None:
         a, map_text = self.store.assignment(sub.assignment)
