@@ -397,6 +397,16 @@ def grader_standings_all(realm: str, grader: str) -> str:
     return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/competition/*"
 
 
+def grader_changed(realm: str, grader: str, course: str) -> str:
+    """A submission of the course changed state (sealed by the grader; no score, no name)."""
+    g = check_ident("grader", grader)
+    return f"{realm_root(realm)}/grader/{g}/changed/{check_ident('course', course)}"
+
+
+def grader_changed_all(realm: str, grader: str) -> str:
+    return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/changed/*"
+
+
 def host_spawn(realm: str, host: str) -> str:
     return f"{realm_root(realm)}/host/{check_ident('host', host)}/spawn"
 

@@ -15,8 +15,12 @@ from common.client.lab_client import LabClient
 from common.messages import (
     AssignmentInfo,
     AssignmentList,
+    ClassQuery,
+    ClassTable,
+    ClassTables,
     CompetitionQuery,
     CompetitionRun,
+    GradingChanged,
     Leaderboard,
     LeaderboardQuery,
     Message,
@@ -113,18 +117,37 @@ class GraderClient:
         else:
             key = keys.grader_standings(self.client.realm, self.grader, name)
 
+        return self._watch(key, Standings, on_standings)
+
+    def class_tables(self, course: str | None = None) -> list[ClassTable]:
+        """The teacher's view of ``course`` (None: of every course I teach; none for a
+        student). LabError if refused (a student naming a course)."""
+        return list(self._ask(ClassQuery(course=course), ClassTables, "class").tables)
+
+    def watch_changes(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        """Call ``on_change`` as submissions of any course change state (queued, running,
+        graded, failed); the returned function stops watching."""
+        return self._watch(
+            keys.grader_changed_all(self.client.realm, self.grader), GradingChanged, on_change
+        )
+
+    def _watch(
+        self, key: str, kind: type[M], on_message: Callable[[M], None]
+    ) -> Callable[[], None]:
+        """A subscriber that passes on what a service sealed (the grader), nothing else."""
+
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 principal, message = self.client.verifier.open(
-                    str(sample.key_expr), sample.payload, Standings
+                    str(sample.key_expr), sample.payload, kind
                 )
             except (AuthError, MessageError) as exc:
-                log.warning("ignored standings: %s", exc)
+                log.warning("ignored %s: %s", kind.__name__, exc)
                 return
             if not principal.has("lease"):  # a service's seal (the grader's), not a person's
-                log.warning("ignored standings sealed by %s, not a service", principal.user)
+                log.warning("ignored %s sealed by %s, not a service", kind.__name__, principal.user)
                 return
-            on_standings(message)
+            on_message(message)
 
         subscriber = self.client.z.declare_subscriber(key, on_sample)
         return subscriber.undeclare

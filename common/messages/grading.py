@@ -286,6 +286,63 @@ class Standings(Message, frozen=True):
     at: float = 0.0
 
 
+# --- live changes, and the teacher's view of a class ----------------------------------------
+
+
+class GradingChanged(Message, frozen=True):
+    """A submission of the course changed state: pages showing that assignment ask again.
+
+    Deliberately no score and no student: each page asks the grader for what its
+    user may see (a hidden-until-deadline leaderboard stays in the grader for students)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/changed/<course>",)
+
+    course: Ident
+    assignment: Ident
+    submission: Ident
+    status: SubmissionStatus
+    at: float
+
+
+class ClassQuery(Message, frozen=True):
+    """The teacher's view: every student of a course with their latest submission (the
+    course's teachers; admins). ``course`` None: every course the asker teaches (none for a
+    student, who is refused a named course)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
+
+    course: Ident | None = None
+
+
+class ClassRow(msgspec.Struct, frozen=True, kw_only=True):
+    user: Ident
+    name: ShortText  # the roster's display name ("" if none)
+    team: ShortText = ""
+    assignment: Ident | None = None  # of the latest submission (None: none yet)
+    submission: Ident | None = None
+    status: SubmissionStatus | None = None
+    submitted_at: float | None = None
+    queue_place: NonNegInt | None = None  # queued: 1 = graded next
+    score: float | None = None  # the latest graded submission's, after penalty
+    failure: ShortText = ""  # how the last run that failed ended ("exception: line 7: ...")
+    submissions: NonNegInt = 0
+
+
+class ClassTable(Message, frozen=True):
+    course: Ident
+    title: ShortText
+    rows: Annotated[list[ClassRow], msgspec.Meta(max_length=5000)] = msgspec.field(
+        default_factory=list
+    )
+    at: float = 0.0
+
+
+class ClassTables(Message, frozen=True):
+    tables: Annotated[list[ClassTable], msgspec.Meta(max_length=100)] = msgspec.field(
+        default_factory=list
+    )
+
+
 __all__ = [
     "MAX_EPISODE_S",
     "MAX_MAP_BYTES",
@@ -296,6 +353,10 @@ __all__ = [
     "TRACE_EVERY_S",
     "AssignmentInfo",
     "AssignmentList",
+    "ClassQuery",
+    "ClassRow",
+    "ClassTable",
+    "ClassTables",
     "CompetitionQuery",
     "CompetitionRun",
     "EntryCause",
@@ -303,6 +364,7 @@ __all__ = [
     "EpisodeCause",
     "EpisodeReport",
     "EpisodeResult",
+    "GradingChanged",
     "LeaderEntry",
     "Leaderboard",
     "LeaderboardQuery",

@@ -47,6 +47,18 @@ class FairQueue(Generic[T]):
                 place += min(len(jobs), nth if before else nth - 1)
         return place
 
+    def order(self) -> list[tuple[str, T]]:
+        """Every queued (user, job) in the order :meth:`get` will take them (if nobody else
+        submits meanwhile): the head, then round by round one job of each student still
+        holding one, in rotation order (a student moved to the end keeps their place
+        relative to the others)."""
+        with self._cond:
+            out = list(self._head)
+            rounds = max((len(jobs) for jobs in self._by_user.values()), default=0)
+            for k in range(rounds):
+                out += [(u, jobs[k]) for u, jobs in self._by_user.items() if k < len(jobs)]
+            return out
+
     def get(self, timeout: float | None = None) -> tuple[str, T] | None:
         """The next (user, job), or None when closed or on timeout."""
         with self._cond:

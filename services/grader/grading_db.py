@@ -341,3 +341,56 @@ class GradingStore:
             "SELECT user, team FROM course_members WHERE course=? AND role='student'", course
         )
         return {str(u): str(t) or str(u) for u, t in rows}
+
+    # -- the teacher's view of a class (services/grader/class_view.py)
+
+    def taught_by(self, user: str) -> list[tuple[str, str]]:
+        """(course, title) of each course ``user`` teaches."""
+        rows = self.db._rows(
+            "SELECT c.name, c.title FROM courses c JOIN course_members m ON m.course = c.name "
+            "WHERE m.user=? AND m.role='teacher' ORDER BY c.name",
+            user,
+        )
+        return [(str(n), str(t)) for n, t in rows]
+
+    def course_title(self, course: str) -> str | None:
+        rows = self.db._rows("SELECT title FROM courses WHERE name=?", course)
+        return str(rows[0][0]) if rows else None
+
+    def students(self, course: str) -> list[tuple[str, str, str]]:
+        """(user, display name, team) of each student of the course, by user."""
+        rows = self.db._rows(
+            "SELECT user, display_name, team FROM course_members "
+            "WHERE course=? AND role='student' ORDER BY user",
+            course,
+        )
+        return [(str(u), str(n), str(t)) for u, n, t in rows]
+
+    def course_submissions(self, course: str) -> list[CourseSubmission]:
+        """Every submission to the course's assignments, oldest first, with the first
+        episode of each that did not end well (its cause and detail)."""
+        rows = self.db._rows(
+            "SELECT s.id, s.assignment, s.user, s.status, s.submitted_at, "
+            "CASE WHEN s.mean IS NULL THEN NULL ELSE s.mean - s.penalty END, s.message, "
+            "(SELECT e.cause || ': ' || e.detail FROM episodes e WHERE e.submission = s.id "
+            " AND e.cause NOT IN ('ok', 'finished') ORDER BY e.episode LIMIT 1) "
+            "FROM submissions s JOIN assignments a ON a.name = s.assignment "
+            "WHERE a.course=? ORDER BY s.submitted_at",
+            course,
+        )
+        return [
+            CourseSubmission(str(i), str(a), str(u), str(st), float(at), sc, str(msg), fail or "")
+            for i, a, u, st, at, sc, msg, fail in rows
+        ]
+
+
+@dataclass(frozen=True)
+class CourseSubmission:
+    id: str
+    assignment: str
+    user: str
+    status: str
+    submitted_at: float
+    score: float | None  # after penalty; None until graded
+    message: str
+    failed_episode: str  # "cause: detail" of its first episode that did not end well, or ""

@@ -31,13 +31,16 @@ import zenoh
 from common.auth import Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
-from common.keys import AliveKind, grader_request, grader_standings
+from common.keys import AliveKind, grader_changed, grader_request, grader_standings
 from common.messages import (
     PSEUDONYM_PATTERN,
     AssignmentInfo,
     AssignmentList,
+    ClassQuery,
+    ClassTables,
     CompetitionQuery,
     CompetitionRun,
+    GradingChanged,
     Leaderboard,
     LeaderboardQuery,
     LeaderEntry,
@@ -53,6 +56,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
+from services.grader.class_view import class_table
 from services.grader.competition import CompetitionError, Competitions
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
@@ -157,8 +161,11 @@ class GraderService(Service):
                 MyAssignments,
                 CompetitionRun,
                 CompetitionQuery,
+                ClassQuery,
             ),
         )
+        if isinstance(request, ClassQuery):
+            return self._class(principal, request.course)
         if isinstance(request, MyAssignments):
             return AssignmentList(
                 assignments=[info(a) for a in self.store.assignments_of(principal.user)][-500:]
@@ -212,6 +219,50 @@ class GraderService(Service):
             raise RequestError("forbidden", f"{principal.user} is not in the course {found.course}")
         return found
 
+    def _class(self, principal: Principal, course: str | None) -> ClassTables:
+        """The teacher's view of ``course`` (None: of each course the asker teaches)."""
+        if course is None:
+            courses = self.store.taught_by(principal.user)
+        else:
+            title = self.store.course_title(course)
+            if title is None:
+                raise RequestError("not_found", f"no course named {course}")
+            role = self.store.role_in(course, principal.user)
+            if role not in TEACHERS and not principal.has("admin"):
+                raise RequestError(
+                    "forbidden", f"only the teachers of {course} see its class (whole roster)"
+                )
+            courses = [(course, title)]
+        queued = [sub.id for _user, sub in self.queue.order()]
+        return ClassTables(
+            tables=[
+                class_table(
+                    name,
+                    title,
+                    self.store.students(name),
+                    self.store.course_submissions(name),
+                    queued,
+                )
+                for name, title in courses[:100]
+            ]
+        )
+
+    def _changed(self, sub: Pending, status: str, course: str | None = None) -> None:
+        """Say that ``sub`` changed (no score, no name: each page asks for what it may see)."""
+        try:
+            course = course or self.store.assignment(sub.assignment)[0].course
+            key = grader_changed(self.realm, self.ident, course)
+            change = GradingChanged(
+                course=course,
+                assignment=sub.assignment,
+                submission=sub.id,
+                status=status,  # type: ignore[arg-type]
+                at=time.time(),
+            )
+            self.session.put(key, self.login.session.seal(key, change))
+        except Exception as exc:  # a page that misses it catches up at its next refresh
+            self.log.warning("could not publish the change of %s: %s", sub.id, exc)
+
     def _publish(self, standings: Standings) -> None:
         key = grader_standings(self.realm, self.ident, standings.competition)
         self.session.put(key, self.login.session.seal(key, standings))
@@ -247,6 +298,7 @@ class GraderService(Service):
                 a.name, user, request.filename, request.source, late_days
             )
             position = self.queue.put(user, sub)
+        self._changed(sub, "queued", a.course)
         self.log.info("submission %s of %s to %s queued (%d)", sub.id, user, a.name, position)
         note = ""
         if late_days:
@@ -317,10 +369,12 @@ class GraderService(Service):
             except Exception:
                 self.log.exception("grading %s failed", sub.id)
                 self.store.set_status(sub.id, "queued", "the grader failed: queued again")
+                self._changed(sub, "queued")
 
     def _grade(self, sub: Pending) -> None:
         a, map_text = self.store.assignment(sub.assignment)
         self.store.set_status(sub.id, "running")
+        self._changed(sub, "running", a.course)
         graded = self.episodes.grade(sub, a, map_text)
         if self.stopped and graded.lab_failed:
             return  # the grader is stopping: left queued, graded at the next start
@@ -337,6 +391,7 @@ class GraderService(Service):
                 "against your quota; submit again",
             )
             self.log.warning("submission %s: the lab failed: %s", sub.id, graded.lab_failed)
+            self._changed(sub, "failed", a.course)
             return
         late = self.store.submissions(sub.assignment, sub.user, sub.id)[0].late_days
         taken = late * a.penalty_per_day
@@ -357,3 +412,4 @@ class GraderService(Service):
             message=message,
         )
         self.log.info("submission %s of %s graded: %s", sub.id, sub.user, message)
+        self._changed(sub, "graded", a.course)

@@ -129,6 +129,7 @@ _PEOPLE = (
     _g("ask", W(keys.host_load), W(keys.host_spawn), W(keys.runner_run)),
     _g("ask", W(keys.grader_request)),  # submissions and leaderboards (issue 36)
     _g("sub", W(keys.grader_standings)),  # competitions' standings, live (sealed)
+    _g("sub", W(keys.grader_changed)),  # a course's submissions changed (no score in it)
     _g("token", W(keys.alive, kind=AliveKind.USER)),
     _g("watch", W(keys.alive_all)),
 )
@@ -197,6 +198,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         *_SERVICE_BASE,
         _g("serve", W(keys.grader_request)),
         _g("pub", W(keys.grader_standings)),  # a competition's standings as heats end
+        _g("pub", W(keys.grader_changed)),  # a submission queued, grading, graded, failed
         _g("ask", W(keys.runner_episode)),
         _g("token", W(keys.alive, kind=AliveKind.GRADER)),
     ),

@@ -8,6 +8,7 @@ causes, refusals and the leaderboard are what the students and the teacher see.
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 import textwrap
@@ -19,6 +20,7 @@ import pytest
 
 from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
+from common.messages import GradingChanged
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
@@ -116,7 +118,7 @@ def source(name: str) -> bytes:
 
 
 def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
-    lab: ProcessLab, procs: Procs, tmp_path: Path
+    lab: ProcessLab, procs: Procs, tmp_path: Path, request: pytest.FixtureRequest
 ) -> None:
     # A bad file is refused whole, with its field; nothing is written.
     bad = tmp_path / "bad.toml"
@@ -131,6 +133,13 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
         lab, tmp_path, "closed", opens="2025-01-01T00:00:00Z", deadline="2025-02-01T00:00:00Z"
     )
     add_assignment(lab, tmp_path, "future", opens="2098-01-01T00:00:00Z")
+
+    # The teacher's view, live: every change is published (no score in it).
+    stack = contextlib.ExitStack()
+    request.addfinalizer(stack.close)
+    watcher = GraderClient(stack.enter_context(lab.client("ida")))
+    changes: list[GradingChanged] = []
+    stack.callback(watcher.watch_changes(changes.append))
 
     subs: dict[str, str] = {}
     for user, name in (("carol", "raises"), ("bob", "loops")):
@@ -174,12 +183,28 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
     assert board.entries[0].score == pytest.approx(99.6, abs=0.1)
     assert {e.name for e in board.entries} == {"Alice A", "Bob B", "Carol C"}
 
+    def steps(sub: str) -> list[str]:
+        return [c.status for c in changes if c.submission == sub]
+
+    wait_for(lambda: steps(subs["carol"]) == ["queued", "running", "graded"], 10, "changes")
+    assert {(c.course, c.assignment) for c in changes} == {(COURSE, "reach-goal")}
+    (table,) = watcher.class_tables()  # the one course ida teaches
+    rows = {r.user: r for r in table.rows}
+    assert sorted(rows) == ["alice", "bob", "carol"]  # the students, not the teacher
+    assert rows["carol"].failure.startswith("exception: your controller: line 13: ZeroDiv")
+    assert rows["bob"].failure.startswith("timeout: your controller: it did not answer")
+    assert rows["alice"].score == pytest.approx(99.6, abs=0.1) and not rows["alice"].failure
+    assert {r.status for r in rows.values()} == {"graded"}
+
     with lab.client("bob") as client:
         grader = GraderClient(client)
         assert grader.leaderboard("reach-goal").entries == []  # hidden for a student
         with pytest.raises(LabError, match="only the course's teachers see others' runs"):
             grader.submissions("reach-goal", user="alice")
         assert [s.submission for s in grader.submissions("reach-goal")] == [subs["bob"]]
+        assert grader.class_tables() == []  # a student teaches nothing
+        with pytest.raises(LabError, match=f"only the teachers of {COURSE} see its class"):
+            grader.class_tables(COURSE)
         assert grader.set_pseudonym("reach-goal", "Loopy") == (
             f"you show as Loopy on {COURSE}'s leaderboards"
         )

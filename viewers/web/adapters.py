@@ -25,7 +25,14 @@ from common.client.survey import Survey
 from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
 from common.messages.audit import AuditEntry, AuditQuery
-from common.messages.grading import AssignmentInfo, Leaderboard, Standings, SubmissionInfo
+from common.messages.grading import (
+    AssignmentInfo,
+    ClassTable,
+    GradingChanged,
+    Leaderboard,
+    Standings,
+    SubmissionInfo,
+)
 from common.messages.world import RobotTypeReply
 from viewers.web.address import LabAddress
 
@@ -526,6 +533,14 @@ class LabConnection(Protocol):
 
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         """Competitions' standings as the grader publishes them; returns: stop watching."""
+        ...
+
+    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        """Submissions changing state (any course; no score in it); returns: stop watching."""
+        ...
+
+    def class_tables(self) -> list[ClassTable]:
+        """The teacher's view of each course I teach (none for a student)."""
         ...
 
     def logout(self, keep_resume: bool = False) -> None:

@@ -22,6 +22,7 @@ from viewers.web.adapters import (
     WorldFeed,
 )
 from viewers.web.builder import RobotBuilder
+from viewers.web.class_panel import ClassPanel
 from viewers.web.course_panel import CoursePanel
 from viewers.web.editor import MapEditor
 from viewers.web.inputs import set_value
@@ -87,6 +88,7 @@ class ChatPanel:
             self.builder: RobotBuilder | None = None
             self.recordings: RecordingsPanel | None = None
             self.course: CoursePanel | None = None
+            self.klass: ClassPanel | None = None
             self.view: WorldView | None = None  # the page's view, once this arena was shown
             if self.kind in ARENA_KINDS and self.world and on_watch is not None:
                 self.watch = gui.add_button("Show this arena", color="teal")
@@ -95,6 +97,10 @@ class ChatPanel:
                 self.workbench = Workbench(client, connection, self.ctx, self.robots)
                 # Assignments are handed in from here: the file open in the editor above.
                 self.course = CoursePanel(client, connection, source=self.workbench.current_file)
+                # A course's teachers only: every student, live; watch and take over.
+                self.klass = ClassPanel(
+                    client, connection, self.ctx, self.robots, show_arena=self.show_world
+                )
                 # Everyone sees the editor; without edit_map it is disabled and says why.
                 self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
                 # A robot someone's controller drives is theirs: no map-editing handles on it.
@@ -204,6 +210,8 @@ class ChatPanel:
             self.recordings.close()
         if self.course is not None:
             self.course.close()
+        if self.klass is not None:
+            self.klass.close()
         if leave:
             try:
                 self.connection.leave(self.ctx)

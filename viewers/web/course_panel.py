@@ -1,23 +1,29 @@
 """The Course folder of an arena's panel: my assignments, submit the editor's code, my scores,
-the leaderboard (the grader, docs/COURSES.md), and the competitions of my courses, live.
+the leaderboard (the grader, docs/COURSES.md), and the competitions of my courses, all live.
 
 A student picks an assignment of their courses, hands in the file open in the
 workbench's editor, and reads their submissions (status, mean, each episode's
 score and how it ended: their code's fault with the line, or the lab's, re-run
-free) and the leaderboard, each refreshed on request. A competition's standings
+free) and the leaderboard. Both update by themselves: the grader says when a
+submission changes (``GradingChanged``: no score, no name), and the panel asks
+again for what its user may see: "my scores" when the change is one of mine,
+the leaderboard when a submission of the chosen assignment was graded (a board
+hidden until the deadline stays hidden: the grader answers a student with no
+entries). The buttons still read both at once. A competition's standings
 come as the grader publishes them (each heat's start and end): whoever has the
 folder open sees the ranking change when a heat ends, with the heat in progress.
 """
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from collections.abc import Callable
 
 import viser
 
-from common.messages import AssignmentInfo, Leaderboard, Standings, SubmissionInfo
+from common.messages import AssignmentInfo, GradingChanged, Leaderboard, Standings, SubmissionInfo
 from viewers.web.adapters import LabConnection, LabError
 from viewers.web.inputs import on_click, set_value
 from viewers.web.text import escape_md
@@ -25,6 +31,8 @@ from viewers.web.text import escape_md
 NONE = "(no assignment)"
 MAX_SHOWN = 10  # the latest submissions in the table
 MAX_COMPETITIONS = 3  # the latest competitions shown
+COALESCE_S = 0.1  # changes that come together are read once
+SUBMITTED = re.compile(r"submitted (\S+):")  # the id in submitted_words' text
 
 
 def _when(t: float) -> str:
@@ -116,6 +124,10 @@ class CoursePanel:
         self._courses: set[str] = set()  # mine, once the assignments are listed
         self._standings: dict[str, Standings] = {}
         self._lock = threading.Lock()
+        self._mine: set[str] = set()  # my submissions' ids (shown or handed in here)
+        self._want_scores = self._want_board = False
+        self._dirty = threading.Event()
+        self._closed = threading.Event()
         gui = client.gui
         with gui.add_folder("Course", expand_by_default=False) as self.folder:
             self.refresh_button = gui.add_button("Refresh assignments", icon=viser.Icon.REFRESH)
@@ -140,9 +152,46 @@ class CoursePanel:
         except LabError as exc:
             self._unwatch = lambda: None
             self.competitions.content = f"_Competitions are not shown live: {escape_md(str(exc))}_"
+        try:
+            self._unwatch_grading = connection.watch_grading(self.on_change)
+        except LabError:
+            self._unwatch_grading = lambda: None  # the buttons still read them
+        self._thread = threading.Thread(target=self._loop, name="course-live", daemon=True)
+        self._thread.start()
 
     def close(self) -> None:
+        self._closed.set()
+        self._dirty.set()
         self._unwatch()
+        self._unwatch_grading()
+
+    def on_change(self, change: GradingChanged) -> None:
+        """A submission changed (a Zenoh thread): read again what it changes here, soon."""
+        if change.assignment != self.chosen.value:
+            return
+        with self._lock:
+            if change.submission in self._mine:
+                self._want_scores = True
+            if change.status == "graded":
+                self._want_board = True
+            wanted = self._want_scores or self._want_board
+        if wanted:
+            self._dirty.set()
+
+    def _loop(self) -> None:
+        """Reads what changed off the Zenoh thread (a query from a callback could block it)."""
+        while self._dirty.wait():
+            if self._closed.is_set():
+                return
+            time.sleep(COALESCE_S)
+            self._dirty.clear()
+            with self._lock:
+                scores, board = self._want_scores, self._want_board
+                self._want_scores = self._want_board = False
+            if scores:
+                self.show_scores()
+            if board:
+                self.show_board()
 
     def on_standings(self, st: Standings) -> None:
         """A competition's standings from the grader (any thread): shown if of my courses."""
@@ -204,7 +253,12 @@ class CoursePanel:
         except LabError as exc:
             self.say(str(exc), bad=True)
             return None
-        self.say(said + " (My scores shows it once graded)")
+        found = SUBMITTED.match(said)
+        if found:
+            with self._lock:
+                self._mine.add(found.group(1))
+        self.say(said + " (My scores and the leaderboard update as it is graded)")
+        self.show_scores()
         return said
 
     def show_scores(self) -> list[SubmissionInfo]:
@@ -216,6 +270,8 @@ class CoursePanel:
         except LabError as exc:
             self.say(f"Could not read your scores: {exc}", bad=True)
             return []
+        with self._lock:
+            self._mine.update(s.submission for s in subs)
         self.scores.content = format_submissions(subs)
         return subs
 

@@ -19,7 +19,14 @@ from typing import Any, Literal
 
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
-from common.messages.grading import AssignmentInfo, Leaderboard, Standings, SubmissionInfo
+from common.messages.grading import (
+    AssignmentInfo,
+    ClassTable,
+    GradingChanged,
+    Leaderboard,
+    Standings,
+    SubmissionInfo,
+)
 from common.recording import RecordingError, read_recording, summarize
 from viewers.web import demo_world
 from viewers.web.adapters import (
@@ -462,6 +469,12 @@ class DemoConnection(DemoAdmin):
 
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         return lambda: None  # no grader: no competition
+
+    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        return lambda: None  # no grader: nothing changes
+
+    def class_tables(self) -> list[ClassTable]:
+        return []  # no grader: no class
 
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         self._need("deploy", "dry-run controllers")

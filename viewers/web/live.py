@@ -31,6 +31,8 @@ from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
     AssignmentInfo,
+    ClassTable,
+    GradingChanged,
     Leaderboard,
     QueueStateRequest,
     RoomEvent,
@@ -57,6 +59,7 @@ from viewers.web.adapters import (
     SavedFile,
 )
 from viewers.web.address import LabAddress
+from viewers.web.fanout import Fanout
 from viewers.web.lab_links import LabRouterLink
 from viewers.web.live_admin import LiveAdmin
 from viewers.web.live_agents import AgentContextLink
@@ -133,6 +136,10 @@ class LiveConnection(LiveAdmin):
         self._arenas: dict[str, AgentContextLink] = {}  # joined agent contexts
         self._real_worlds: dict[str, bool] = {}  # world -> a Khepera bridge (asked once)
         self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
+        # The grader's feeds, one subscription each for all panels (fanout.py: why).
+        grader = GraderClient(client)
+        self._standings: Fanout[Standings] = Fanout(lambda f: grader.watch_standings(None, f))
+        self._grading: Fanout[GradingChanged] = Fanout(grader.watch_changes)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
         client.on_kicked = lambda k: self._queue.put(
             DisconnectedEvent(
@@ -514,7 +521,13 @@ class LiveConnection(LiveAdmin):
         return self._call(lambda: GraderClient(self.client).leaderboard(assignment))
 
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
-        return self._call(lambda: GraderClient(self.client).watch_standings(None, on_standings))
+        return self._call(lambda: self._standings.add(on_standings))
+
+    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        return self._call(lambda: self._grading.add(on_change))
+
+    def class_tables(self) -> list[ClassTable]:
+        return list(self._call(GraderClient(self.client).class_tables))
 
     # -- the end
 
@@ -535,6 +548,8 @@ class LiveConnection(LiveAdmin):
             self.link.release(feed.source)
         self._worlds.clear()
         self._arenas.clear()
+        self._standings.close()
+        self._grading.close()
         try:
             self.client.close()  # leaves rooms, logs out, undeclares the presence token
         except Exception:

@@ -231,6 +231,11 @@ class RobotPanel:
         for hook in self.on_rows:
             hook()
 
+    @property
+    def rows(self) -> list[AgentStatus]:
+        """The arena's robots as last read (no network)."""
+        return list(self._rows)
+
     def driven(self, agent: str) -> bool:
         """Does someone's controller hold ``agent`` now (as last read)?"""
         return any(r.agent == agent and r.holder is not None for r in self._rows)

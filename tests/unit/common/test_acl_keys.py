@@ -24,6 +24,7 @@ def _concrete_keys(realm: str) -> list[str]:
         "camera": "cam",
         "grader": "grader",
         "competition": "final",
+        "course": "robotics-26",
     }
     for name, fn in inspect.getmembers(keys, inspect.isfunction):
         if fn.__module__ != keys.__name__ or name.startswith(("_", "check_", "is_", "parse_")):

@@ -23,6 +23,7 @@ IDS = {
     "camera": "cam-1",
     "grader": "g-1",
     "competition": "final-1",
+    "course": "robotics-26",
     "key": "wart/lab/alive/context/room-1",
 }
 
