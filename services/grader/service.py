@@ -31,13 +31,14 @@ import zenoh
 from common.auth import Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
-from common.keys import AliveKind, grader_request, grader_standings
+from common.keys import AliveKind, grader_graded, grader_request, grader_standings
 from common.messages import (
     PSEUDONYM_PATTERN,
     AssignmentInfo,
     AssignmentList,
     CompetitionQuery,
     CompetitionRun,
+    Graded,
     Leaderboard,
     LeaderboardQuery,
     LeaderEntry,
@@ -357,3 +358,25 @@ class GraderService(Service):
             message=message,
         )
         self.log.info("submission %s of %s graded: %s", sub.id, sub.user, message)
+        self._announce(sub, a, (graded.mean or 0.0) - penalty)
+
+    def _announce(self, sub: Pending, a: Assignment, score: float) -> None:
+        """Say a submission is graded (the lti service passes scores back to an LMS).
+
+        Published once, after the score is written: a listener that misses it (down,
+        unreachable) can still read the score from the submissions like anyone.
+        """
+        key = grader_graded(self.realm, self.ident)
+        graded = Graded(
+            submission=sub.id,
+            assignment=a.name,
+            course=a.course,
+            user=sub.user,
+            score=score,
+            order=a.order,  # type: ignore[arg-type]
+            graded_at=time.time(),
+        )
+        try:
+            self.session.put(key, self.login.session.seal(key, graded))
+        except Exception as exc:  # a closing session, a lapsed login: the score is kept
+            self.log.warning("could not announce submission %s as graded: %s", sub.id, exc)

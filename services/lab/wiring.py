@@ -32,6 +32,8 @@ ACCOUNT_PREFIX = {
     "agent": "ctx-",
     "runner": "runner-",
     "grader": "grader-",
+    # The LTI tool's account has the lti role only: it asks the registry for launched users.
+    "lti": "lti-",
     "engine": "engine-",
     "bridge": "bridge-",
     # The viewer's account has the gateway role only: it vouches for browsers' addresses.
@@ -396,6 +398,27 @@ def grader_spec(w: Wiring, name: str = "grader", *, account: str | None = None) 
         [*argv, *w.net_args("grader")],
         keys.alive(w.realm, AliveKind.GRADER, name),
         detail="submissions graded in simulation",
+    )
+
+
+def lti_spec(
+    w: Wiring,
+    platforms: Path,
+    name: str = "lti",
+    *,
+    http_port: int = 8090,
+    http_host: str = "127.0.0.1",
+    account: str | None = None,
+) -> ChildSpec:
+    """The LTI 1.3 tool (services/lti/): its key and outbox in the state directory."""
+    argv = ["lti", "--name", name, *w.login(account or service_account("lti", name))]
+    argv += ["--platforms", str(platforms), "--state-dir", str(w.state_dir / "lti")]
+    argv += ["--http-host", http_host, "--http-port", str(http_port)]
+    return ChildSpec(
+        f"lti {name}",
+        [*argv, *w.net_args("lti")],
+        keys.alive(w.realm, AliveKind.LTI, name),
+        detail=f"LTI 1.3 tool on {http_host}:{http_port}",
     )
 
 
