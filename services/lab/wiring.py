@@ -532,6 +532,9 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
         return [runner_spec(w, svc.ident)]
     if svc.kind == "grader":
         return [grader_spec(w, svc.ident)]
+    if svc.kind == "lti":
+        port, host = int(p.get("http_port", 8090)), str(p.get("http_host") or "127.0.0.1")
+        return [lti_spec(w, Path(p["platforms"]), svc.ident, http_port=port, http_host=host)]
     if svc.kind == "viewer":
         # The viewer's id defaults to its host's name: one viewer per host, and
         # the doctor knows which token to expect.
@@ -559,6 +562,7 @@ START_ORDER = {
     "camera": 3,
     "runner": 3,
     "grader": 3,
+    "lti": 4,
     "agent": 4,
 }
 

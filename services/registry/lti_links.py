@@ -45,7 +45,7 @@ RANK = {"student": 0, "teacher": 1}
 def account_name(issuer: str, subject: str) -> str:
     """A new account's name: stable per platform user, and no guess from outside the LMS."""
     digest = hashlib.blake2b(f"{issuer}\n{subject}".encode(), digest_size=5).hexdigest()
-    return f"lti-{digest}"
+    return f"lms-{digest}"
 
 
 class LtiLinks:

@@ -197,7 +197,7 @@ def test_a_learner_and_an_instructor_launch_into_their_course(lti: LtiLab) -> No
     saved = parse_cookies(header, lti.lab.realm)
     assert len(saved) == 1 and saved[0].address.port == lti.lab.router.port
     user = saved[0].address.user
-    assert user is not None and user.startswith("lti-")
+    assert user is not None and user.startswith("lms-")
     assert lti.rows("SELECT COUNT(*) FROM users")[0][0] == users_before + 1
     assert lti.rows(
         "SELECT role, display_name FROM course_members WHERE course=? AND user=?", COURSE, user
