@@ -39,6 +39,9 @@ NONCE_KEEP_S = 3600.0  # used nonces are remembered at least as long as a token 
 LEEWAY_S = 30.0  # clock skew allowed on exp/iat (as every service allows ±30 s)
 MAX_TOKEN_AGE_S = 3600.0  # an id_token issued longer ago than this is refused
 JWKS_CACHE_S = 300.0
+# An unknown kid fetches the key set again (a platform rolled its key over), at most
+# once per this many seconds: tokens with made-up kids cannot make us hammer the LMS.
+JWKS_COOLDOWN_S = 5.0
 
 ROLE_TEACHER = ("#Instructor", "#TeachingAssistant", "#Administrator", "#ContentDeveloper")
 ROLE_STUDENT = ("#Learner", "#Student")
@@ -182,7 +185,11 @@ class Launcher:
             client = self._jwks.get(platform.key_set_url)
             if client is None:
                 client = jwt.PyJWKClient(
-                    platform.key_set_url, cache_keys=True, lifespan=int(JWKS_CACHE_S), timeout=10
+                    platform.key_set_url,
+                    cache_keys=True,
+                    lifespan=int(JWKS_CACHE_S),
+                    timeout=10,
+                    cooldown_duration=JWKS_COOLDOWN_S,
                 )
                 self._jwks[platform.key_set_url] = client
             return client

@@ -220,6 +220,15 @@ def test_a_learner_and_an_instructor_launch_into_their_course(lti: LtiLab) -> No
     assert lti.rows("SELECT role FROM course_members WHERE course=? AND user=?", COURSE, tuser) == [
         ("teacher",)
     ]
+    # The platform rolls its key over: the tool fetches the key set again for the new kid
+    # (at most once per JWKS_COOLDOWN_S: a launch meanwhile is refused, and tried again).
+    fetches = lti.platform.jwks_fetches
+    lti.platform.key, lti.platform.kid = new_key(), "platform-key-2"
+    wait_for(lambda: lti.launch(Launcher(sub="u-1001")).status == 303, 30, "the new key taken")
+    assert lti.platform.jwks_fetches > fetches
+    # The tool's own key: made once in the state directory, readable by its owner only.
+    key_file = lti.lab.wiring().state_dir / "lti" / "lti-tool-key.pem"
+    assert key_file.stat().st_mode & 0o777 == 0o600
 
 
 @pytest.mark.parametrize(
