@@ -133,7 +133,9 @@ def wart(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def start_lti(lab: ProcessLab, tmp: Path, platform: FakePlatform) -> str:
+def start_lti(
+    lab: ProcessLab, tmp: Path, platform: FakePlatform, page: str = PAGE, lab_address: str = ""
+) -> str:
     """The lti service's account (role lti), its platforms file, the process; its URL."""
     key = create_identity_key(lab.wiring().identity(LTI_ACCOUNT))
     db = RegistryDB(lab.db_path)
@@ -146,8 +148,8 @@ def start_lti(lab: ProcessLab, tmp: Path, platform: FakePlatform) -> str:
     config.write_text(
         "[tool]\n"
         f'url = "{tool}"\n'
-        f'page = "{PAGE}"\n'
-        f'lab_address = "wart://127.0.0.1:{lab.router.port}/{lab.realm}"\n\n'
+        f'page = "{page}"\n'
+        f'lab_address = "{lab_address or f"wart://127.0.0.1:{lab.router.port}/{lab.realm}"}"\n\n'
         + platform.toml({"link-1": "reach-goal"})
     )
     lab.start(wiring.lti_spec(lab.wiring(), config, http_port=port), name="lti")
