@@ -28,6 +28,7 @@ class ToolKey:
 
     def jwk(self) -> dict[str, Any]:
         public = json.loads(RSAAlgorithm.to_jwk(self.private.public_key()))
+        public.pop("key_ops", None)  # "use" says it; RFC 7517 advises against both
         return {**public, "kid": self.kid, "alg": "RS256", "use": "sig"}
 
     def jwks(self) -> dict[str, Any]:
