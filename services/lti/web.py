@@ -95,7 +95,10 @@ class ToolServer:
     def _params(self, h: BaseHTTPRequestHandler, method: str) -> dict[str, str]:
         params = dict(parse_qsl(urlsplit(h.path).query))
         if method == "POST":
-            length = int(h.headers.get("Content-Length") or 0)
+            try:
+                length = int(h.headers.get("Content-Length") or 0)
+            except ValueError:
+                raise LaunchError(400, "the request's Content-Length is not a number") from None
             if length > MAX_BODY:
                 raise LaunchError(413, f"the request is over {MAX_BODY // 1024} KiB")
             kind = h.headers.get("Content-Type", "").split(";")[0].strip()

@@ -114,8 +114,11 @@ class FakePlatform:
 
     # -- what it signs
 
-    def claims(self, nonce: str) -> dict[str, Any]:
+    def claims(self, nonce: str, hint: str = "") -> dict[str, Any]:
+        """``hint``: the login_hint; "sub:ID" launches that user (many launches at once)."""
         who = self.next
+        if hint.startswith("sub:"):
+            who = Launcher(sub=hint[4:], name=hint[4:], roles=who.roles)
         now = int(time.time())
         custom = {"assignment": who.assignment} if who.assignment else {}
         return {
@@ -182,7 +185,7 @@ class FakePlatform:
         if p.get("client_id") != CLIENT_ID or p.get("response_mode") != "form_post":
             self._send(h, 400, {"error": "bad auth request"})
             return
-        claims = self.claims(p["nonce"])
+        claims = self.claims(p["nonce"], p.get("login_hint", ""))
         header: dict[str, Any] = {"kid": self.kid}
         token = ""
         if self.tamper is not None:
