@@ -28,6 +28,13 @@ log = logging.getLogger("wart.lti")
 MAX_BODY = 64 * 1024
 
 
+class _Server(ThreadingHTTPServer):
+    # A class clicks the link at once: the standard library's backlog of 5 connections
+    # made the 6th wait for the kernel's SYN retry (1 s, 3 s, 7 s: bench/bench_lti.py).
+    request_queue_size = 128
+    daemon_threads = True
+
+
 class Landing:
     """Where a verified launch sends the browser: a URL, and the cookies to set first."""
 
@@ -72,8 +79,7 @@ class ToolServer:
             def do_POST(self) -> None:
                 tool.handle(self, "POST")
 
-        self.httpd = ThreadingHTTPServer((host, port), Handler)
-        self.httpd.daemon_threads = True
+        self.httpd = _Server((host, port), Handler)
         self._thread: threading.Thread | None = None
 
     @property
