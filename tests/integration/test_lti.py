@@ -301,6 +301,15 @@ def test_a_replayed_launch_is_refused(lti: LtiLab) -> None:
     assert replay.status == 401
     assert "the id_token's nonce was used before: a replayed launch" in replay.text
     assert lti.rows("SELECT COUNT(*) FROM users")[0][0] == before
+    # A banned account's launch is refused as its login would be.
+    user = parse_cookies(first.cookies[0].split(";")[0], lti.lab.realm)[0].address.user
+    assert user is not None
+    with lti.lab.client("admin") as admin:
+        admin.ban(user, "copied a classmate's controller")
+    lti.platform.tamper = None
+    banned = lti.launch(Launcher(sub="u-55"))
+    assert banned.status == 403
+    assert "you are banned until an admin lifts it: copied a classmate's controller" in banned.text
 
 
 @pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
