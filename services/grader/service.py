@@ -173,6 +173,11 @@ class GraderService(Service):
             assignment, _map = self.store.assignment(named.assignment)
         except DbError as exc:
             raise RequestError("not_found", str(exc)) from None
+        if isinstance(request, SubmissionsQuery) and "lti" in principal.roles:
+            # The LTI tool catches up on scores it did not hear announced (services/lti/):
+            # it reads, never writes; a submission's source is not in these answers.
+            found = self.store.submissions(assignment.name, request.user, request.submission)
+            return SubmissionList(submissions=found[-500:])
         role = self.store.role_in(assignment.course, principal.user)
         if role is None and not principal.has("admin"):
             raise RequestError(

@@ -208,6 +208,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     "lti": (
         *_SERVICE_BASE,
         _g("ask", W(keys.registry_lti)),
+        _g("ask", W(keys.grader_request)),  # scores it missed, read back (never written)
         _g("sub", W(keys.grader_graded)),
         _g("token", W(keys.alive, kind=AliveKind.LTI)),
     ),

@@ -23,11 +23,13 @@ that outlives an LMS outage and this service's restarts. Token:
 from __future__ import annotations
 
 import logging
+import threading
 
 import zenoh
 
 from common import keys
 from common.auth import AuthError, Verifier
+from common.client.grader_client import GraderClient
 from common.client.service_login import ServiceLogin
 from common.keys import AliveKind, is_ident
 from common.lab_errors import LabError
@@ -45,6 +47,8 @@ from viewers.web.saved_login import cookie_name, cookie_value
 log = logging.getLogger("wart.lti")
 
 LAUNCH_COOKIE_S = 600  # the resume token in it is good for as long (lti_links.py)
+CATCH_UP_FIRST_S = 2.0  # after the start: the grader may be starting too
+CATCH_UP_S = 300.0
 
 
 class LtiService(Service):
@@ -73,6 +77,9 @@ class LtiService(Service):
         self.launcher = Launcher(config)
         self.passback = Passback(config, store, key)
         self.http = ToolServer(http_host, http_port, self.launcher, self.on_launch, key.jwks())
+        self._stop = threading.Event()
+        self._catch_up_wait = CATCH_UP_FIRST_S
+        self._catch_up = threading.Thread(target=self._catch_up_loop, name="catch-up", daemon=True)
         try:
             self.address = parse_address(config.lab_address, default_realm=realm)
         except AddressError as exc:
@@ -82,11 +89,14 @@ class LtiService(Service):
         self.subscribe(keys.grader_graded(self.realm, self.config.grader), self.on_graded)
         self.passback.start()
         self.http.start()
+        self._catch_up.start()
         self.log.info("LTI tool on %s (login %s)", self.config.url, self.config.login_url)
 
     def on_stop(self, timeout: float) -> None:
-        self.http.stop(timeout / 2)
-        self.passback.stop(timeout / 2)
+        self._stop.set()
+        self.http.stop(timeout / 3)
+        self.passback.stop(timeout / 3)
+        self._catch_up.join(timeout / 3)
 
     # -- a launch
 
@@ -160,30 +170,74 @@ class LtiService(Service):
         principal, graded = self.verifier.open(str(sample.key_expr), sample.payload, Graded)
         if "service" not in principal.roles:
             raise AuthError("forbidden", f"{principal.user} is not a service: no grades from it")
-        link = self.store.launch_of(graded.user, graded.assignment)
+        self._pass_back(
+            graded.submission, graded.user, graded.assignment, graded.score, graded.graded_at
+        )
+
+    def _pass_back(
+        self, submission: str, user: str, assignment: str, score: float, graded_at: float
+    ) -> bool:
+        """Keep a graded submission's score for the platform; True if newly kept."""
+        link = self.store.launch_of(user, assignment)
         if link is None:
-            return  # not launched from an LMS with grade passback: nothing to pass back
+            return False  # not launched from an LMS with grade passback: nothing to pass back
         platform = self.config.platform(link.issuer, link.client_id)
         if platform is None:
-            self.log.warning("%s's score has no platform any more (%s)", graded.user, link.issuer)
-            return
+            self.log.warning("%s's score has no platform any more (%s)", user, link.issuer)
+            return False
         out = Outgoing(
-            submission=graded.submission,
-            user=graded.user,
-            assignment=graded.assignment,
+            submission=submission,
+            user=user,
+            assignment=assignment,
             issuer=link.issuer,
             client_id=link.client_id,
             subject=link.subject,
             lineitem=link.lineitem,
-            score=graded.score,
+            score=score,
             maximum=platform.score_maximum,
-            graded_at=graded.graded_at,
+            graded_at=graded_at,
             attempts=0,
         )
-        if self.store.enqueue(out):
-            self.log.info("score of %s for %s (%s): %g, to be posted to %s",
-                          graded.submission, graded.user, graded.assignment, graded.score,
-                          link.issuer)  # fmt: skip
-            self.passback.wake()
-        else:
-            self.log.info("score of %s was already passed on: not posted twice", graded.submission)
+        if not self.store.enqueue(out):
+            self.log.info("score of %s was already passed on: not posted twice", submission)
+            return False
+        self.log.info("score of %s for %s (%s): %g, to be posted to %s",
+                      submission, user, assignment, score, link.issuer)  # fmt: skip
+        self.passback.wake()
+        return True
+
+    def _catch_up_loop(self) -> None:
+        """At start and every CATCH_UP_S: scores graded while no announcement reached us.
+
+        The grader announces each graded submission once; a tool that was down or cut
+        off then asks the grader (its lti role may read submissions) for those of the
+        launched students since their first launch, and keeps the ones it never had.
+        """
+        while not self._stop.wait(self._catch_up_wait):
+            self._catch_up_wait = CATCH_UP_S
+            try:
+                self.catch_up()
+            except Exception:  # a lapsed login, the session closing: next time
+                self.log.exception("catching up on missed scores failed")
+
+    def catch_up(self) -> int:
+        grader = GraderClient(self.login.client, self.config.grader)
+        kept = 0
+        for user, assignment, since in self.store.launches():
+            if self._stop.is_set():
+                break
+            try:
+                found = grader.submissions(assignment, user=user)
+            except LabError as exc:
+                self.log.info("could not ask the grader for %s's scores: %s", user, exc)
+                continue
+            for s in sorted(found, key=lambda s: s.graded_at or 0.0):
+                if s.status != "graded" or s.mean is None or s.graded_at is None:
+                    continue
+                if s.graded_at < since or self.store.known(s.submission):
+                    continue
+                self.log.info("score of %s was not announced to us: catching up", s.submission)
+                kept += self._pass_back(
+                    s.submission, user, assignment, s.mean - s.penalty, s.graded_at
+                )
+        return kept

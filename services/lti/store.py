@@ -88,8 +88,11 @@ class LtiStore:
 
     def record_launch(self, user: str, assignment: str, link: LaunchLink) -> None:
         with self._lock:
+            # ``at`` stays the first launch's: scores graded since then are passed back.
             self._db.execute(
-                "INSERT OR REPLACE INTO launches VALUES (?, ?, ?, ?, ?, ?, ?)",
+                "INSERT INTO launches VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT(user, assignment) "
+                "DO UPDATE SET issuer=excluded.issuer, client_id=excluded.client_id, "
+                "subject=excluded.subject, lineitem=excluded.lineitem",
                 (user, assignment, link.issuer, link.client_id, link.subject, link.lineitem,
                  time.time()),
             )  # fmt: skip
@@ -102,6 +105,19 @@ class LtiStore:
                 (user, assignment),
             ).fetchone()
         return None if row is None else LaunchLink(*map(str, row))
+
+    def launches(self) -> list[tuple[str, str, float]]:
+        """(user, assignment, first launch) of every launch with grade passback."""
+        with self._lock:
+            rows = self._db.execute("SELECT user, assignment, at FROM launches").fetchall()
+        return [(str(u), str(a), float(t)) for u, a, t in rows]
+
+    def known(self, submission: str) -> bool:
+        with self._lock:
+            row = self._db.execute(
+                "SELECT 1 FROM scores WHERE submission=?", (submission,)
+            ).fetchone()
+        return row is not None
 
     def enqueue(self, out: Outgoing) -> bool:
         """Keep a score to post; False if this submission's score is already kept."""

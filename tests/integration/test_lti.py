@@ -361,3 +361,19 @@ def test_a_launched_students_score_reaches_the_platform(lti: LtiLab, tmp_path: P
         GraderClient(client).wait_graded("reach-goal", other.submission, 240)
     time.sleep(1.0)  # the announcement would have arrived by now
     assert len(lti.platform.scores) == 1
+    # The tool is down while Sam's next submission is graded: at its next start it asks
+    # the grader for what it missed, and that score arrives too (and the first not again).
+    relaunch = lti.launch(Launcher(sub="u-2002", name="Sam Student", assignment="reach-goal"))
+    sams_next_login = parse_cookies(relaunch.cookies[0].split(";")[0], lab.realm)[0].token
+    next(p for p in lab.procs.started if p.name == "lti-again").stop()
+    with lab.client() as client:
+        client.resume(sams_next_login)
+        grader = GraderClient(client)
+        second = grader.submit("reach-goal", (CONTROLLERS / "works.py").read_bytes(), "works.py")
+        assert grader.wait_graded("reach-goal", second.submission, 240).status == "graded"
+    lab.start(spec, name="lti-third")
+    wait_for(lambda: len(lti.platform.scores) == 2, timeout=120, what="the missed score")
+    assert lti.platform.scores[1]["userId"] == "u-2002"
+    assert lti.platform.scores[1]["comment"] == f"wart submission {second.submission}"
+    log = (lab.procs.tmp / "lti-third.log").read_text()
+    assert f"score of {second.submission} was not announced to us: catching up" in log
