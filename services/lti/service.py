@@ -32,7 +32,7 @@ from common.auth import AuthError, Verifier
 from common.client.grader_client import GraderClient
 from common.client.service_login import ServiceLogin
 from common.keys import AliveKind, is_ident
-from common.lab_errors import LabError
+from common.lab_errors import LabError, RegistryUnreachable
 from common.messages import Graded, LtiAccount, LtiAccountRequest
 from common.service import Service
 from services.lti.ags import Passback
@@ -144,6 +144,8 @@ class LtiService(Service):
                 keys.registry_lti(self.realm), request, LtiAccount, "an LTI launch's account",
                 timeout=10.0,
             )  # fmt: skip
+        except RegistryUnreachable as exc:
+            raise LaunchError(503, f"the lab's registry did not answer ({exc})") from None
         except LabError as exc:
             raise LaunchError(403, f"the lab refused the launch: {exc}") from None
         if assignment is not None and launch.lineitem is not None and role == "student":
