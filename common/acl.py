@@ -33,6 +33,9 @@ DEFAULT_ROLES: dict[str, frozenset[str]] = {
     # A gateway for people (the web viewer): it only vouches for the address a
     # browser's login comes from, so the registry throttles each browser apart.
     "gateway": frozenset({"vouch"}),
+    # The lti service (services/lti/): it may ask the registry for a launched LMS user's
+    # account (registry/lti), which no other role may; no permission beyond that.
+    "lti": frozenset(),
 }
 
 CREDENTIAL_KINDS = ("password", "ed25519")

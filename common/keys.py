@@ -69,6 +69,7 @@ class AliveKind(StrEnum):
     HOST = "host"
     CAMERA = "camera"
     GRADER = "grader"
+    LTI = "lti"
 
 
 def realm_root(realm: str) -> str:
@@ -137,6 +138,11 @@ def registry_audit(realm: str) -> str:
 def registry_report(realm: str) -> str:
     """Services put their privileged actions here, sealed; the registry appends them."""
     return f"{realm_root(realm)}/registry/report"
+
+
+def registry_lti(realm: str) -> str:
+    """The lti service asks here for a launched platform user's account (issue 36)."""
+    return f"{realm_root(realm)}/registry/lti"
 
 
 # --- presence ---------------------------------------------------------------
@@ -391,6 +397,11 @@ def grader_standings(realm: str, grader: str, competition: str) -> str:
     """A competition's standings, published (sealed) by the grader as each heat ends."""
     g = check_ident("grader", grader)
     return f"{realm_root(realm)}/grader/{g}/competition/{check_ident('competition', competition)}"
+
+
+def grader_graded(realm: str, grader: str) -> str:
+    """Each submission as it is graded (sealed by the grader; the lti service passes it back)."""
+    return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/graded"
 
 
 def grader_standings_all(realm: str, grader: str) -> str:

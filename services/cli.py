@@ -30,6 +30,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "a course's assignments: add or check an assignment file (registry DB)",
     ),
     "grader": ("services.grader.main", "grade submissions to assignments in simulation"),
+    "lti": (
+        "services.lti.main",
+        "an LTI 1.3 tool: launches from Moodle or Canvas, grades passed back",
+    ),
     "submit": (
         "services.commands.submit",
         "hand a controller in to an assignment; see your scores",

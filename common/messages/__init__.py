@@ -36,6 +36,8 @@ from common.messages.grading import *  # noqa: F403 - every grader wire type
 from common.messages.grading import __all__ as _grading_all
 from common.messages.host import *  # noqa: F403 - every host wire type
 from common.messages.host import __all__ as _host_all
+from common.messages.lti import *  # noqa: F403 - every LTI wire type
+from common.messages.lti import __all__ as _lti_all
 from common.messages.recording import *  # noqa: F403 - every recording wire type
 from common.messages.recording import __all__ as _recording_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
@@ -140,6 +142,7 @@ __all__ = [
     *_chat_all,
     *_grading_all,
     *_host_all,
+    *_lti_all,
     *_recording_all,
     *_registry_all,
 ]

@@ -52,6 +52,8 @@ class LabSettings:
     router_listen: tuple[str, ...]
     network: NetworkOptions  # what the children get (client mode, the router above)
     http_port: int
+    lti: Path | None = None  # the LTI tool's platforms file: ``wart lti`` runs too
+    lti_port: int = 8090
 
 
 HOST_NAME = "local"  # the one-machine lab's host, on host/local/{spawn,load}
@@ -68,7 +70,9 @@ REAL_AGENT = "k1"
 VIEWER_ID = "web"
 
 
-def one_host_lab(http_port: int) -> tuple[ServiceEntry, ...]:
+def one_host_lab(
+    http_port: int, lti: Path | None = None, lti_port: int = 8090
+) -> tuple[ServiceEntry, ...]:
     """The lab ``wart up`` runs, written as a lab file's ``[[hosts.services]]`` tables.
 
     The worlds log in too (``login``): with an identity, agent contexts grant
@@ -100,6 +104,8 @@ def one_host_lab(http_port: int) -> tuple[ServiceEntry, ...]:
         # The viewer comes last: it is the front door once everything else serves.
         {"kind": "viewer", "name": VIEWER_ID, "http_port": http_port},
     ]
+    if lti is not None:  # optional: a lab that takes launches from an LMS (docs/COURSES.md)
+        tables.append({"kind": "lti", "platforms": str(lti.resolve()), "http_port": lti_port})
     return tuple(service_entry(f"wart up services[{i}]", t) for i, t in enumerate(tables))
 
 
@@ -124,7 +130,8 @@ def service_identity(lab: LabSettings, account: str) -> Path:
 
 def service_accounts(lab: LabSettings) -> list[str]:
     """Every account the lab's processes log in with, those of contexts on request included."""
-    return host_accounts(one_host_lab(lab.http_port), HOST_NAME, arenas=True, rooms=True)
+    services = one_host_lab(lab.http_port, lab.lti, lab.lti_port)
+    return host_accounts(services, HOST_NAME, arenas=True, rooms=True)
 
 
 def provision(lab: LabSettings) -> LabSettings:
@@ -172,12 +179,12 @@ def client_flags(lab: LabSettings) -> str:
 
 def lab_plan(lab: LabSettings) -> list[ChildSpec]:
     """The processes of the one-machine lab, in start order (the router is separate)."""
-    return host_plan(local_wiring(lab), one_host_lab(lab.http_port))
+    return host_plan(local_wiring(lab), one_host_lab(lab.http_port, lab.lti, lab.lti_port))
 
 
 def lab_waves(lab: LabSettings) -> list[list[ChildSpec]]:
     """The processes of the one-machine lab, in the waves they start in."""
-    return host_waves(local_wiring(lab), one_host_lab(lab.http_port))
+    return host_waves(local_wiring(lab), one_host_lab(lab.http_port, lab.lti, lab.lti_port))
 
 
 # The one machine is the whole lab: its operator chose to run it here, so the
@@ -250,6 +257,8 @@ def settings_from_args(args: argparse.Namespace, options: NetworkOptions) -> Lab
         router_listen=router_listen,
         network=network,
         http_port=args.http_port,
+        lti=getattr(args, "lti", None),
+        lti_port=getattr(args, "lti_port", 8090),
     )
 
 
@@ -331,9 +340,21 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart up") -> int:
         default=8080,
         help="the web viewer's port (default 8080; the next free one if busy)",
     )
+    p.add_argument(
+        "--lti",
+        type=Path,
+        metavar="PLATFORMS",
+        help="also run the LTI 1.3 tool (wart lti) with this platforms file (docs/COURSES.md)",
+    )
+    p.add_argument(
+        "--lti-port", type=int, default=8090, help="the LTI tool's HTTP port (default 8090)"
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
-    for port, what in ((args.port, "--port"), (args.http_port, "--http-port")):
+    if args.lti is not None and not args.lti.is_file():
+        p.error(f"--lti {args.lti}: no such file")
+    checks = ((args.port, "--port"), (args.http_port, "--http-port"), (args.lti_port, "--lti-port"))
+    for port, what in checks:
         if not 0 < port < 65536:
             p.error(f"{what} {port} is not a TCP port (1 to 65535)")
     lab = settings_from_args(args, options)

@@ -37,6 +37,8 @@ SERVICE_KINDS: dict[str, tuple[str, ...]] = {
     "grader": (),
     # A camera over a real arena (wart camera): its world and what it captures from.
     "camera": ("world", "source"),
+    # The LTI 1.3 tool (services/lti/): its platforms file (TOML, docs/COURSES.md).
+    "lti": ("platforms",),
 }
 OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "registry": ("server_name",),
@@ -59,6 +61,7 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     # calibration: a file made by `wart camera calibrate` (default: the state dir's,
     # made from the reference markers once they are in view).
     "camera": ("name", "calibration", "fps"),
+    "lti": ("name", "http_port", "http_host"),
 }
 
 DEFAULT_RUNNER = "runner"  # what agent contexts name when the lab file has no runner
@@ -258,7 +261,7 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
     for name in ("name", "world", "runner", "owner", "context"):
         if name in table:
             params[name] = _ident(f"{where}.{name}", table[name])
-    for name in ("map", "title", "server_name", "http_host", "source", "calibration"):
+    for name in ("map", "title", "server_name", "http_host", "source", "calibration", "platforms"):
         if name in table:
             params[name] = _type(f"{where}.{name}", table[name], str, "a string")
     if "seed" in table:

@@ -51,12 +51,15 @@ def register_service_accounts(db_path: Path, accounts: Mapping[str, bytes]) -> N
     """Make sure each service account exists with its role and its public key.
 
     The role is ``service``, but a viewer's (``viewer-*``) is ``gateway``: a
-    process facing browsers gets no right to lease, serve worlds or run code.
+    process facing browsers gets no right to lease, serve worlds or run code;
+    the LTI tool's (``lti-*``) is ``lti``, for the same reason.
     """
     db = RegistryDB(db_path)
     try:
         for account, public_key in accounts.items():
             role = "gateway" if account.startswith(ACCOUNT_PREFIX["viewer"]) else "service"
+            if account.startswith(ACCOUNT_PREFIX["lti"]):
+                role = "lti"  # asks the registry for launched LMS users' accounts, nothing else
             if not db.user_exists(account):
                 db.add_user(account, [role], public_key=public_key)
             else:

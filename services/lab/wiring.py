@@ -32,6 +32,8 @@ ACCOUNT_PREFIX = {
     "agent": "ctx-",
     "runner": "runner-",
     "grader": "grader-",
+    # The LTI tool's account has the lti role only: it asks the registry for launched users.
+    "lti": "lti-",
     "engine": "engine-",
     "bridge": "bridge-",
     # The viewer's account has the gateway role only: it vouches for browsers' addresses.
@@ -399,6 +401,27 @@ def grader_spec(w: Wiring, name: str = "grader", *, account: str | None = None) 
     )
 
 
+def lti_spec(
+    w: Wiring,
+    platforms: Path,
+    name: str = "lti",
+    *,
+    http_port: int = 8090,
+    http_host: str = "127.0.0.1",
+    account: str | None = None,
+) -> ChildSpec:
+    """The LTI 1.3 tool (services/lti/): its key and outbox in the state directory."""
+    argv = ["lti", "--name", name, *w.login(account or service_account("lti", name))]
+    argv += ["--platforms", str(platforms), "--state-dir", str(w.state_dir / "lti")]
+    argv += ["--http-host", http_host, "--http-port", str(http_port)]
+    return ChildSpec(
+        f"lti {name}",
+        [*argv, *w.net_args("lti")],
+        keys.alive(w.realm, AliveKind.LTI, name),
+        detail=f"LTI 1.3 tool on {http_host}:{http_port}",
+    )
+
+
 def viewer_spec(
     w: Wiring,
     ident: str,
@@ -509,6 +532,9 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
         return [runner_spec(w, svc.ident)]
     if svc.kind == "grader":
         return [grader_spec(w, svc.ident)]
+    if svc.kind == "lti":
+        port, host = int(p.get("http_port", 8090)), str(p.get("http_host") or "127.0.0.1")
+        return [lti_spec(w, Path(p["platforms"]), svc.ident, http_port=port, http_host=host)]
     if svc.kind == "viewer":
         # The viewer's id defaults to its host's name: one viewer per host, and
         # the doctor knows which token to expect.
@@ -536,6 +562,7 @@ START_ORDER = {
     "camera": 3,
     "runner": 3,
     "grader": 3,
+    "lti": 4,
     "agent": 4,
 }
 

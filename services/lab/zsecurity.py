@@ -45,6 +45,7 @@ ROLES = (
     "agent",
     "runner",
     "grader",
+    "lti",
     "viewer",
     "camera",
     "student",
@@ -52,6 +53,7 @@ ROLES = (
 )
 SERVICE_ROLES = {
     "registry", "chat", "engine", "bridge", "agent", "viewer", "runner", "grader", "camera",
+    "lti",
 }  # fmt: skip
 
 
@@ -199,8 +201,18 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("serve", W(keys.grader_request)),
         _g("pub", W(keys.grader_standings)),  # a competition's standings as heats end
         _g("pub", W(keys.grader_changed)),  # a submission queued, grading, graded, failed
+        _g("pub", W(keys.grader_graded)),  # each graded submission (the LTI tool's passback)
         _g("ask", W(keys.runner_episode)),
         _g("token", W(keys.alive, kind=AliveKind.GRADER)),
+    ),
+    # The LTI tool faces browsers and LMSs: it asks the registry for launched users'
+    # accounts and hears graded submissions; it commands nothing.
+    "lti": (
+        *_SERVICE_BASE,
+        _g("ask", W(keys.registry_lti)),
+        _g("ask", W(keys.grader_request)),  # scores it missed, read back (never written)
+        _g("sub", W(keys.grader_graded)),
+        _g("token", W(keys.alive, kind=AliveKind.LTI)),
     ),
     "host": (
         *_SERVICE_BASE,

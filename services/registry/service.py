@@ -46,6 +46,7 @@ from common.messages import (
     LoginRequest,
     LoginVouch,
     LogoutRequest,
+    LtiAccountRequest,
     MailboxClaim,
     MailboxContents,
     MailboxDeposit,
@@ -70,6 +71,7 @@ from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 from services.registry.admin import REGISTRY_USER, AdminRequests, ban_refusal, source_of
 from services.registry.audit_db import Action, TermStore
+from services.registry.lti_links import LtiLinks
 from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, vouched_source
 
@@ -98,6 +100,7 @@ class Registry(AdminRequests, Service):
         self.term = TermStore(db)
         self.identity = identity
         self.resumes = ResumeStore(db, identity, realm)
+        self.lti = LtiLinks(db, self.resumes)
         # Sessions of a password login that left its mailbox key for later: each may
         # send it once (MailboxClaim). Anyone else (a resumed session, a stolen token)
         # must never choose the key the account's offline mail is sealed to.
@@ -137,6 +140,7 @@ class Registry(AdminRequests, Service):
         self.serve(keys.registry_admin(self.realm), self.on_admin)
         self.serve(keys.registry_revocations(self.realm), self.on_revocations)
         self.serve(keys.registry_audit(self.realm), self.on_audit)
+        self.serve(keys.registry_lti(self.realm), self.on_lti)
         self.subscribe(keys.registry_report(self.realm), self.on_report)
         self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
         self._thread.start()
@@ -298,6 +302,45 @@ class Registry(AdminRequests, Service):
         principal, request = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
         self._revoke([principal.session_id], "logged out", keep_resume=request.keep_resume)
         return OkReply(detail="logged out")
+
+    # -- LTI launches
+
+    def on_lti(self, query: zenoh.Query) -> Message:
+        """A launched LMS user's account (services/registry/lti_links.py): the lti role only."""
+        principal, request = self.verifier.open(
+            str(query.key_expr), query.payload, LtiAccountRequest
+        )
+        source = f"{source_of(query)} session {principal.session_id.hex()[:8]}"
+        what = f"{request.subject} of {request.issuer} as {request.role} in {request.course}"
+        if "lti" not in principal.roles:
+            self.audit(Action(principal.user, "lti_account", "lti", "refused", what, source))
+            raise AuthError("forbidden", f"{principal.user} is not the lti service")
+        existing = self.lti.user_of(request.issuer, request.subject)
+        ban = None if existing is None else self.term.ban_of(existing, time.time())
+        if ban is not None:
+            refusal = ban_refusal(ban)
+            self.audit(
+                Action(
+                    principal.user,
+                    "lti_account",
+                    existing or "",
+                    "refused",
+                    refusal.message,
+                    source,
+                )
+            )
+            raise refusal
+        try:
+            reply = self.lti.launch(request)
+        except DbError as exc:
+            self.audit(Action(principal.user, "lti_account", "lti", "refused", exc.message, source))
+            raise RequestError(exc.code, exc.message) from None
+        how = "made" if reply.created else "matched"
+        self.audit(
+            Action(principal.user, "lti_account", reply.user, "ok", f"{how}: {what}", source)
+        )
+        log.info("lti launch: %s %s (%s)", how, reply.user, what)
+        return reply
 
     # -- revocations
 

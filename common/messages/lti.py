@@ -1,0 +1,61 @@
+"""Wire types of LTI 1.3 (issue 36): a platform's user made a lab account, a grade passed back.
+
+The lti service (services/lti/) verifies a launch from an LMS, then asks the
+registry for the account of the platform's user with a sealed
+:class:`LtiAccountRequest` on ``registry/lti`` (only a session of an account
+with the ``lti`` role may ask); the registry makes or matches the account, puts
+it in the course and answers an :class:`LtiAccount` with a resume token the
+page logs in with. The grader publishes a :class:`Graded` (sealed with its
+service session) on ``grader/<g>/graded`` as each submission is graded; the lti
+service posts the score of a launched student's submission to the platform.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar, Literal
+
+import msgspec
+
+from common.messages.base import Ident, Message, ShortText
+
+PlatformText = Annotated[str, msgspec.Meta(min_length=1, max_length=255)]
+"""An issuer URL or a platform's user id (LTI's ``sub`` is at most 255 characters)."""
+
+
+class LtiAccountRequest(Message, frozen=True):
+    """The account of platform user (issuer, subject), made on first launch, in ``course``."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("registry/lti",)
+
+    issuer: PlatformText
+    subject: PlatformText
+    course: Ident
+    role: Literal["student", "teacher"]
+    name: ShortText = ""  # the platform's display name (the roster's name column)
+    email: ShortText = ""
+
+
+class LtiAccount(Message, frozen=True):
+    """The lab account a launch logs in as, and a resume token for the page (used once)."""
+
+    user: Ident
+    created: bool  # made by this launch
+    joined: bool  # put in the course (or given another role there) by this launch
+    resume: Annotated[bytes, msgspec.Meta(max_length=1024)]  # an encoded SignedResume
+
+
+class Graded(Message, frozen=True):
+    """A submission graded (published by the grader once, as it is written)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/graded",)
+
+    submission: Ident
+    assignment: Ident
+    course: Ident
+    user: Ident
+    score: float  # the mean with any late penalty taken off: what the leaderboard shows
+    order: Literal["higher", "lower"]
+    graded_at: float  # wall-clock seconds
+
+
+__all__ = ["Graded", "LtiAccount", "LtiAccountRequest", "PlatformText"]
