@@ -33,6 +33,7 @@ EpisodeCause = Literal[
     "cpu",  # student: used its CPU time
     "ended",  # student: the controller process ended otherwise
     "lab",  # the lab: runner died, sandbox could not start, no runner answered
+    "grader",  # the teacher: the assignment's grader function failed (the run is not charged)
 ]
 STUDENT_CAUSES: frozenset[str] = frozenset(
     {"exception", "timeout", "memory", "output", "cpu", "ended"}
@@ -60,6 +61,10 @@ class Episode(Message, frozen=True):
     source: Upload
     filename: ShortText = "controller.py"
     trace: bool = False  # report the robot's path (a competition's heat records it)
+    # The assignment's grader function (docs/COURSES.md), run on the episode's data after it.
+    grader: Upload | None = None
+    grader_filename: ShortText = "grader.py"
+    grader_seconds: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 10.0
 
 
 TRACE_EVERY_S = 0.1  # a traced episode's path: one pose per this many simulated s
@@ -95,6 +100,12 @@ class EpisodeReport(Message, frozen=True):
     frames: Annotated[list[TraceFrame], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
         default_factory=list
     )
+    # What the assignment's grader function returned, or why it gave nothing (the teacher's).
+    grader_metrics: Annotated[dict[str, float], msgspec.Meta(max_length=32)] = msgspec.field(
+        default_factory=dict
+    )
+    grader_error: ShortText = ""
+    grader_line: int | None = None
 
 
 # --- student / teacher to the grader ----------------------------------------------------
@@ -231,7 +242,17 @@ class Leaderboard(Message, frozen=True):
 # --- competitions: every team's entry in heats, standings published live -----------------
 
 EntryCause = Literal[
-    "waiting", "ok", "finished", "exception", "timeout", "memory", "output", "cpu", "ended", "lab"
+    "waiting",
+    "ok",
+    "finished",
+    "exception",
+    "timeout",
+    "memory",
+    "output",
+    "cpu",
+    "ended",
+    "lab",
+    "grader",
 ]
 
 

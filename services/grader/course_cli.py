@@ -59,6 +59,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
                     f"{x.name:<20} {x.course:<16} map {x.map_name}, {x.episodes} episodes of "
                     f"{x.time_limit:g} s, due {_when(x.deadline)}, quota {x.quota}/24 h"
                 )
+                if x.grader_file:
+                    failed, latest = store.grader_failures(x.name)
+                    print(f"  grader {x.grader_file}: {failed} submission(s) it failed")
+                    if failed:
+                        print(f"  latest: {latest}")
             return 0
         try:
             raw = args.file.read_bytes()
@@ -83,6 +88,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
             f"{assignment.course}: {assignment.episodes} episodes of {assignment.time_limit:g} "
             f"simulated s on {assignment.map_name}, opens {_when(assignment.opens)}, "
             f"due {_when(assignment.deadline)}"
+            + (f"; grader {assignment.grader_file} stored with it" * bool(assignment.grader_file))
         )
         return 0
     except DbError as exc:

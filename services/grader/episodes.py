@@ -35,7 +35,7 @@ from common.messages import (
 )
 from services.grader.assignment import Assignment
 from services.grader.grading_db import Pending
-from services.grader.score import metrics
+from services.grader.score import MissingMetric, metrics
 
 log = logging.getLogger("wart.grader")
 
@@ -50,6 +50,7 @@ class Graded:
     mean: float | None
     low: float | None
     lab_failed: str  # "" or why the lab could not grade it
+    grader_failed: str = ""  # "" or why the teacher's grader function gave no score
 
 
 class EpisodeRunner:
@@ -96,6 +97,8 @@ class EpisodeRunner:
             return EpisodeReport(cause="lab", detail="no runner is alive in the lab")
         key = keys.runner_episode(self.realm, runner)
         timeout = 15.0 + 1.5 * request.seconds + 10.0
+        if request.grader is not None:
+            timeout += request.grader_seconds + 10.0
         try:
             replies = list(self.session.get(key, payload=self.seal(key, request), timeout=timeout))
         except Exception as exc:
@@ -133,6 +136,9 @@ class EpisodeRunner:
                 seconds=a.time_limit,
                 source=sub.source,
                 filename=sub.filename,
+                grader=a.grader_source.encode() if a.grader_file else None,
+                grader_filename=a.grader_file or "grader.py",
+                grader_seconds=a.grader_seconds,
             )
             reruns = 0
             report = self.once(request)
@@ -159,7 +165,27 @@ class EpisodeRunner:
                 )
                 return Graded(results, None, None, report.detail)
             # An episode the student's code ended is scored as the world stood then.
-            score = rule.evaluate(report, a.time_limit)
+            teacher = report.grader_error
+            score = 0.0
+            if not teacher:
+                try:
+                    score = rule.evaluate(report, a.time_limit)
+                except MissingMetric as exc:
+                    teacher = f"{a.grader_file}: {exc}"
+            if teacher:
+                # The teacher's grader failed: no score, and the student is not charged.
+                results.append(
+                    EpisodeResult(
+                        episode=n,
+                        seed=a.seeds[n],
+                        cause="grader",
+                        detail=f"the teacher's grader failed: {teacher}"[:256],
+                        error_line=report.grader_line,
+                        metrics=metrics(report, zones, a.time_limit),
+                        lab_reruns=reruns,
+                    )
+                )
+                return Graded(results, None, None, "", teacher)
             detail = report.detail
             if report.cause in STUDENT_CAUSES:
                 detail = f"your controller: {detail}"

@@ -253,6 +253,17 @@ class GradingStore:
                 (status, int(counted), mean, low, penalty, time.time(), message[:256], sub),
             )
 
+    def grader_failures(self, assignment: str) -> tuple[int, str]:
+        """How many submissions the teacher's grader function failed, and the latest's message."""
+        failed = "assignment=?1 AND message LIKE 'the teacher''s grader failed:%'"
+        rows = self.db._rows(
+            f"SELECT COUNT(*), (SELECT message FROM submissions WHERE {failed} "
+            f"ORDER BY graded_at DESC LIMIT 1) FROM submissions WHERE {failed}",
+            assignment,
+        )
+        count, latest = rows[0] if rows else (0, None)
+        return int(count or 0), str(latest or "")
+
     def submissions(
         self, assignment: str, user: str | None = None, sub: str | None = None
     ) -> list[SubmissionInfo]:

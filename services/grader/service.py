@@ -61,6 +61,7 @@ from services.registry.accounts_db import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
 TEACHERS = frozenset({"teacher"})
+GRADER_FAILED = "the teacher's grader failed: "  # a submission's message (wart course finds it)
 
 
 def info(a: Assignment) -> AssignmentInfo:
@@ -337,6 +338,25 @@ class GraderService(Service):
                 "against your quota; submit again",
             )
             self.log.warning("submission %s: the lab failed: %s", sub.id, graded.lab_failed)
+            return
+        if graded.grader_failed:
+            self.store.finish(
+                sub.id,
+                graded.episodes,
+                status="failed",
+                counted=False,
+                mean=None,
+                low=None,
+                penalty=0.0,
+                message=f"{GRADER_FAILED}{graded.grader_failed}"[:200]
+                + ": not counted against your quota; your teacher is told",
+            )
+            self.log.warning(
+                "submission %s: the teacher's grader of %s failed: %s",
+                sub.id,
+                a.name,
+                graded.grader_failed,
+            )
             return
         late = self.store.submissions(sub.assignment, sub.user, sub.id)[0].late_days
         taken = late * a.penalty_per_day
