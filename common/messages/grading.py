@@ -108,6 +108,28 @@ class EpisodeReport(Message, frozen=True):
     grader_line: int | None = None
 
 
+class GradeData(Message, frozen=True):
+    """Run an assignment's grader function on an episode's data (a real attempt's: the
+    grader built it from the recording; the structure of docs/COURSES.md, as JSON)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/grade",)
+
+    grader: Upload
+    episode: Annotated[bytes, msgspec.Meta(max_length=4 * 1024 * 1024)]
+    grader_filename: ShortText = "grader.py"
+    grader_seconds: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 10.0
+
+
+class GradeResult(Message, frozen=True):
+    """What grade() returned, or why it gave nothing (the teacher's fault)."""
+
+    metrics: Annotated[dict[str, float], msgspec.Meta(max_length=32)] = msgspec.field(
+        default_factory=dict
+    )
+    error: ShortText = ""
+    line: int | None = None
+
+
 # --- student / teacher to the grader ----------------------------------------------------
 
 SubmissionStatus = Literal["queued", "running", "graded", "failed"]
@@ -151,6 +173,7 @@ class EpisodeResult(msgspec.Struct, frozen=True, kw_only=True):
     score: float | None = None  # None: not scored (a lab fault left it)
     metrics: dict[str, float] = msgspec.field(default_factory=dict)
     lab_reruns: NonNegInt = 0  # how often a lab fault made it run again, free
+    real: bool = False  # the real-robot attempt's row (an arena's agent context ran it)
 
 
 class SubmissionInfo(msgspec.Struct, frozen=True, kw_only=True):
@@ -225,6 +248,7 @@ class LeaderEntry(msgspec.Struct, frozen=True, kw_only=True):
     score: float
     submission: Ident
     at: float
+    real: float | None = None  # that submission's real-robot attempt's score, once run
 
 
 class Leaderboard(Message, frozen=True):
@@ -324,6 +348,8 @@ __all__ = [
     "EpisodeCause",
     "EpisodeReport",
     "EpisodeResult",
+    "GradeData",
+    "GradeResult",
     "LeaderEntry",
     "Leaderboard",
     "LeaderboardQuery",

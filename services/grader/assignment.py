@@ -72,6 +72,11 @@ class Assignment:
     grader_file: str = ""
     grader_source: str = ""
     grader_seconds: float = GRADER_SECONDS
+    # A real-robot attempt after the simulated episodes (docs/COURSES.md): "" for none.
+    real_arena: str = ""
+    real_robot: str = ""
+    real_time_limit: float = 0.0
+    real_after: str = "simulation-passed"  # or "always"
 
     @property
     def score(self) -> Rule:
@@ -122,7 +127,7 @@ def parse_assignment(
     known = {
         "name", "course", "title", "map", "robot", "time_limit", "episodes", "seeds",
         "start", "opens", "deadline", "late", "quota", "hide_until_deadline", "zones",
-        "score", "grader", "grader_time_limit",
+        "score", "grader", "grader_time_limit", "real",
     }  # fmt: skip
     for key in sorted(set(data) - known):
         problems.append(f"{key}: unknown field (one of {', '.join(sorted(known))})")
@@ -211,6 +216,7 @@ def parse_assignment(
             f"score.rule: reads metric({sorted(rule.metrics)[0]!r}), but the assignment names "
             'no grader = "file.py" to compute it'
         )
+    real = _real(data.get("real"), problems)
     map_text = ""
     map_name = str(data.get("map", ""))
     if not map_name:
@@ -244,8 +250,35 @@ def parse_assignment(
         grader_file=grader_file,
         grader_source=grader_source,
         grader_seconds=grader_seconds,
+        real_arena=real[0],
+        real_robot=real[1],
+        real_time_limit=real[2],
+        real_after=real[3],
     )
     return assignment, map_text
+
+
+def _real(value: Any, problems: list[str]) -> tuple[str, str, float, str]:
+    """The [real] table: arena (an agent context), robot, time_limit, after."""
+    if value is None:
+        return "", "", 0.0, "simulation-passed"
+    if not isinstance(value, dict):
+        problems.append('real: a table: arena = "...", robot = "...", time_limit, after')
+        return "", "", 0.0, "simulation-passed"
+    for key in sorted(set(value) - {"arena", "robot", "time_limit", "after"}):
+        problems.append(f"real.{key}: unknown field (arena, robot, time_limit, after)")
+    arena, robot = value.get("arena"), value.get("robot")
+    for key, v in (("arena", arena), ("robot", robot)):
+        if not isinstance(v, str) or not is_ident(v):
+            problems.append(f"real.{key}: required, a name (the real arena's agent context, robot)")
+    limit = value.get("time_limit", 10.0)
+    if isinstance(limit, bool) or not isinstance(limit, int | float) or not 1 <= limit <= 300:
+        problems.append("real.time_limit: a number of seconds from 1 to 300")
+        limit = 10.0
+    after = value.get("after", "simulation-passed")
+    if after not in ("simulation-passed", "always"):
+        problems.append('real.after: "simulation-passed" (the default) or "always"')
+    return str(arena), str(robot), float(limit), str(after)
 
 
 def _grader(value: Any, base: Path | None, problems: list[str]) -> tuple[str, str]:

@@ -19,9 +19,11 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from common.acl import agent_scope
 from services.grader.assignment import AssignmentError, parse_assignment
 from services.grader.grading_db import GradingStore
 from services.lab.lab_maps import SHIPPED_MAPS
+from services.lab.wiring import service_account
 from services.registry.accounts_db import DbError, RegistryDB
 
 
@@ -44,6 +46,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
     a.add_argument("action", choices=("add", "check"))
     a.add_argument("file", type=Path, help="the assignment (TOML)")
     a.add_argument("--maps", type=Path, default=SHIPPED_MAPS, help="the maps directory")
+    a.add_argument(
+        "--grader-account",
+        default=service_account("grader", "grader"),
+        help="the grader's service account, granted deploy on a [real] arena's robot",
+    )
     ls = sub.add_parser("assignments", help="list the assignments (of a course)")
     ls.add_argument("course", nargs="?")
     args = p.parse_args(argv)
@@ -82,6 +89,16 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
         if args.action == "check":
             print(f"{args.file}: assignment {assignment.name} is fine; nothing written")
             return 0
+        if assignment.real_arena:
+            # The grader queues the real attempt as itself: it may deploy on that robot.
+            scope = agent_scope(assignment.real_arena, assignment.real_robot)
+            try:
+                db.grant(args.grader_account, "deploy", scope)
+            except DbError as exc:
+                print(f"{args.file} was refused (nothing written):", file=sys.stderr)
+                print(f"  real: the grader's account {args.grader_account}: {exc}",
+                      file=sys.stderr)  # fmt: skip
+                return 1
         new = store.put_assignment(assignment, map_text)
         print(
             f"assignment {assignment.name} {'added' if new else 'replaced'} in course "
@@ -90,6 +107,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
             f"due {_when(assignment.deadline)}"
             + (f"; grader {assignment.grader_file} stored with it" * bool(assignment.grader_file))
         )
+        if assignment.real_arena:
+            print(
+                f"real-robot attempt on {assignment.real_arena}/{assignment.real_robot} "
+                f"({assignment.real_after}); {args.grader_account} may deploy there"
+            )
         return 0
     except DbError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)

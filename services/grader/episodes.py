@@ -29,6 +29,8 @@ from common.messages import (
     EpisodeReport,
     EpisodeResult,
     ErrorReply,
+    GradeData,
+    GradeResult,
     Message,
     MessageError,
     decode,
@@ -116,6 +118,43 @@ class EpisodeRunner:
         return EpisodeReport(
             cause="lab", detail=f"runner {runner} did not answer (it stopped or died)"
         )
+
+    def grade_data(self, a: Assignment, episode: bytes) -> tuple[dict[str, float], str, int | None]:
+        """The assignment's grader function on a real attempt's data, on a runner:
+        (metrics, the teacher's error, its line); RuntimeError if no runner could run it."""
+        request = GradeData(
+            grader=a.grader_source.encode(),
+            grader_filename=a.grader_file,
+            grader_seconds=a.grader_seconds,
+            episode=episode,
+        )
+        problem = "no runner is alive in the lab"
+        for _ in range(LAB_RETRIES):
+            runner = self._pick()
+            if runner is None:
+                break
+            key = keys.runner_grade(self.realm, runner)
+            try:
+                replies = list(
+                    self.session.get(
+                        key, payload=self.seal(key, request), timeout=a.grader_seconds + 30.0
+                    )
+                )
+            except Exception as exc:
+                problem = f"runner {runner}: {exc}"
+                continue
+            for reply in replies:
+                if reply.ok is None:
+                    continue
+                try:
+                    answer = decode(reply.ok.payload, (GradeResult, ErrorReply))
+                except MessageError:
+                    continue
+                if isinstance(answer, GradeResult):
+                    return answer.metrics, answer.error, answer.line
+                problem = f"runner {runner}: {answer.message}"
+            self._stop.wait(1.0)
+        raise RuntimeError(f"the grader function could not run: {problem}")
 
     def grade(self, sub: Pending, a: Assignment, map_text: str) -> Graded:
         rule = a.score

@@ -20,6 +20,7 @@ start and graded then. Token: ``alive/grader/<name>``.
 from __future__ import annotations
 
 import math
+import queue
 import re
 import threading
 import time
@@ -28,6 +29,7 @@ from typing import cast
 
 import zenoh
 
+from common import keys
 from common.auth import Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
@@ -57,6 +59,7 @@ from services.grader.competition import CompetitionError, Competitions
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
+from services.grader.real_attempt import RealAttempt
 from services.registry.accounts_db import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
@@ -121,6 +124,12 @@ class GraderService(Service):
             store, self.episodes, competitions or Path("competitions"), self._publish
         )
         self._threads: list[threading.Thread] = []
+        # Real-robot attempts, one at a time (services/grader/real_attempt.py).
+        self._real_stop = threading.Event()
+        self.real = RealAttempt(
+            login.client, self.episodes.grade_data, self._real_stop, relogin=login.login
+        )
+        self._reals: queue.Queue[Pending | None] = queue.Queue()
         self._submit_lock = threading.Lock()  # quota checked and submission written as one
 
     def on_start(self) -> None:
@@ -135,9 +144,14 @@ class GraderService(Service):
             thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)
             thread.start()
             self._threads.append(thread)
+        thread = threading.Thread(target=self._work_real, name="real", daemon=True)
+        thread.start()
+        self._threads.append(thread)
 
     def on_stop(self, timeout: float) -> None:
         self.queue.close()
+        self._real_stop.set()
+        self._reals.put(None)
         self.episodes.stop()
         deadline = time.monotonic() + timeout
         self.competitions.join(timeout / 2)
@@ -232,6 +246,13 @@ class GraderService(Service):
             precheck(request.source, request.filename)
         except PrecheckError as exc:
             raise RequestError("bad_request", f"not submitted: {exc}") from None
+        if a.real_arena and not self._arena_alive(a.real_arena):
+            raise RequestError(
+                "not_found",
+                f"{a.name} asks for a real-robot attempt on the arena {a.real_arena}, which is "
+                f"not in the lab (no agent context {a.real_arena} is alive): nothing submitted; "
+                "tell your teacher",
+            )
         user = principal.user
         with self._submit_lock:
             since = now - DAY_S
@@ -260,6 +281,16 @@ class GraderService(Service):
             late_days=late_days,
             note=note,
         )
+
+    def _arena_alive(self, arena: str) -> bool:
+        try:
+            replies = self.session.liveliness().get(
+                keys.alive(self.realm, AliveKind.CONTEXT, arena), timeout=2.0
+            )
+            return any(r.ok is not None for r in replies)
+        except Exception as exc:  # the session closing
+            self.log.debug("no arena list: %s", exc)
+            return False
 
     def _pseudonym(self, user: str, a: Assignment, pseudonym: str) -> OkReply:
         if pseudonym and not re.match(PSEUDONYM_PATTERN, pseudonym):
@@ -293,6 +324,7 @@ class GraderService(Service):
                         score=round(score, 4),
                         submission=sub,
                         at=at,
+                        real=self.store.real_score(sub) if a.real_arena else None,
                     )
                 )
         return Leaderboard(
@@ -377,3 +409,33 @@ class GraderService(Service):
             message=message,
         )
         self.log.info("submission %s of %s graded: %s", sub.id, sub.user, message)
+        if a.real_arena:
+            passed = all(e.cause in ("ok", "finished") for e in graded.episodes)
+            if passed or a.real_after == "always":
+                self.store.set_message(
+                    sub.id, f"{message}; its real-robot attempt is queued on {a.real_arena}"
+                )
+                self._reals.put(sub)
+            else:
+                self.store.set_message(
+                    sub.id, f"{message}; no real-robot attempt: an episode did not pass"
+                )
+
+    def _work_real(self) -> None:
+        while True:
+            sub = self._reals.get()
+            if sub is None:
+                return
+            try:
+                a, map_text = self.store.assignment(sub.assignment)
+                result = self.real.run(sub, a, map_text)
+                before = self.store.submissions(sub.assignment, sub.user, sub.id)[0].message
+                head = before.split("; its real-robot attempt", 1)[0]
+                if result.score is not None:
+                    said = f"real-robot attempt: {a.score_name} {result.score:g}"
+                else:
+                    said = f"real-robot attempt: {result.cause}: {result.detail}"
+                self.store.add_real(sub.id, result, f"{head}; {said}")
+                self.log.info("real attempt of %s: %s %s", sub.id, result.cause, result.detail)
+            except Exception:
+                self.log.exception("the real attempt of %s failed", sub.id)
