@@ -108,6 +108,46 @@ class EpisodeReport(Message, frozen=True):
     grader_line: int | None = None
 
 
+MAX_PER_HEAT = 16
+
+
+class HeatEntry(msgspec.Struct, frozen=True, kw_only=True):
+    """One team's entry in a heat: its controller on one robot of the map."""
+
+    submission: Ident
+    user: Ident
+    agent: Ident
+    x: float
+    y: float
+    heading: float  # radians
+    source: Upload
+    filename: ShortText = "controller.py"
+
+
+class Heat(Message, frozen=True):
+    """Several entries' controllers in one world at once (a competition's heat): each drives
+    its own robot, stepped in lockstep together; answered with :class:`HeatReport`."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/heat",)
+
+    competition: Ident
+    heat: NonNegInt
+    map: MapText
+    seed: int
+    seconds: EpisodeSeconds
+    entries: Annotated[list[HeatEntry], msgspec.Meta(min_length=1, max_length=MAX_PER_HEAT)]
+
+
+class HeatReport(Message, frozen=True):
+    """Each entry's report (as an episode's, in the heat's order), the world and its frames."""
+
+    entries: Annotated[list[EpisodeReport], msgspec.Meta(max_length=MAX_PER_HEAT)]
+    snapshot: WorldSnapshot | None = None
+    frames: Annotated[list[TraceFrame], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
+        default_factory=list
+    )
+
+
 class GradeData(Message, frozen=True):
     """Run an assignment's grader function on an episode's data (a real attempt's: the
     grader built it from the recording; the structure of docs/COURSES.md, as JSON)."""
@@ -290,7 +330,7 @@ class CompetitionRun(Message, frozen=True):
     assignment: Ident
     name: Ident | None = None  # default: the assignment's name and the time
     pick: Literal["latest", "best"] = "latest"
-    per_heat: Annotated[int, msgspec.Meta(ge=1, le=16)] = 1
+    per_heat: Annotated[int, msgspec.Meta(ge=1, le=MAX_PER_HEAT)] = 1
 
 
 class CompetitionQuery(Message, frozen=True):
@@ -334,6 +374,7 @@ class Standings(Message, frozen=True):
 __all__ = [
     "MAX_EPISODE_S",
     "MAX_MAP_BYTES",
+    "MAX_PER_HEAT",
     "MAX_TRACE",
     "MAX_TRACE_ROWS",
     "PSEUDONYM_PATTERN",
@@ -350,6 +391,9 @@ __all__ = [
     "EpisodeResult",
     "GradeData",
     "GradeResult",
+    "Heat",
+    "HeatEntry",
+    "HeatReport",
     "LeaderEntry",
     "Leaderboard",
     "LeaderboardQuery",

@@ -110,6 +110,30 @@ class Lockstep:
                 mine, self._commands = self._commands, []
             yield mine
 
+    # -- one tick at a time, for a caller stepping several controllers in one world (heat.py)
+
+    def offer(self) -> bool:
+        """Send this tick's state; False if the child is gone."""
+        self._answered.clear()
+        return self.sandbox.send_state(state_of(self.world, self.slot))
+
+    def answer(self, deadline: float) -> bool:
+        """Wait for the child's answer to the state offered; False if it exited or the wall
+        clock ran out (``timed_out``) first. Its commands are then :meth:`take`'s."""
+        while not self._answered.wait(0.05):
+            if time.monotonic() >= deadline:
+                self.timed_out = True
+                return False
+            if self.sandbox.wait(0):
+                return False
+        self.steps += 1
+        return True
+
+    def take(self) -> list[RobotCommand]:
+        with self._lock:
+            mine, self._commands = self._commands, []
+        return mine
+
     def stop(self, reason: str) -> None:
         self.sandbox.stop(grace=0.3, reason=reason)
 

@@ -59,6 +59,8 @@ from common.messages import (
     ErrorReply,
     GradeData,
     GradeResult,
+    Heat,
+    HeatReport,
     Message,
     MessageError,
     OkReply,
@@ -77,6 +79,7 @@ from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.runner.dryrun import dry_run
 from services.runner.episode import run_episode
 from services.runner.grader_run import run_grader
+from services.runner.heat import run_heat
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
 log = logging.getLogger("wart.runner")
@@ -267,6 +270,7 @@ class RunnerService(Service):
             max_waiting=EPISODE_WAITING,
         )
         self.serve(keys.runner_grade(self.realm, self.ident), self._on_grade, workers=1)
+        self.serve(keys.runner_heat(self.realm, self.ident), self._on_heat, workers=1)
 
     def on_stop(self, timeout: float) -> None:
         with self._lock:
@@ -370,6 +374,33 @@ class RunnerService(Service):
             report.verdict,
             report.sim_seconds,
             report.wall_seconds,
+        )
+        return report
+
+    def _on_heat(self, query: zenoh.Query) -> Message:
+        """A competition's heat: several entries in one world (services/runner/heat.py)."""
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, Heat)
+        principal.require("lease", "ask a runner for a competition's heat")
+        for e in request.entries:
+            try:
+                precheck(e.source, e.filename)
+            except PrecheckError as exc:
+                raise RequestError("bad_request", f"{e.submission}: {exc}") from None
+        try:
+            report = run_heat(request, limits=self.limits)
+        except (ValueError, MapError) as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        except (RuntimeError, OSError) as exc:
+            lab = EpisodeReport(cause="lab", detail=f"the sandbox could not start: {exc}"[:256])
+            return HeatReport(entries=[lab] * len(request.entries))
+        self.log.info(
+            "heat %d of %s: %s",
+            request.heat,
+            request.competition,
+            ", ".join(
+                f"{e.submission} {r.cause}"
+                for e, r in zip(request.entries, report.entries, strict=True)
+            ),
         )
         return report
 
