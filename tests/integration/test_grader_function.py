@@ -10,11 +10,15 @@ grader's file and line), is not charged, and the teacher sees it in `wart course
 
 from __future__ import annotations
 
+import contextlib
+import io
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from common.client.grader_client import GraderClient
+from services.grader import course_cli
 from tests.integration.test_grading import assignment_toml, lab, source, wart  # noqa: F401
 from tests.lab import ProcessLab
 
@@ -22,6 +26,16 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 GRADERS = Path(__file__).parent / "grading" / "graders"
 RULE = """rule = '100 * reached("goal") - 5 * collisions() - time_to("goal")'"""
 WOBBLE = """rule = '100 * reached("goal") - metric("wobble")'"""
+
+
+def course(*args: str) -> subprocess.CompletedProcess[str]:
+    """`wart course ...` in this process (its own code, on the lab's database file): a
+    subprocess per call cost a second or two of imports each."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = course_cli.main(list(args))
+    return subprocess.CompletedProcess(["wart", "course", *args], code, out.getvalue(),
+                                       err.getvalue())  # fmt: skip
 
 
 def add(on: ProcessLab, tmp: Path, name: str, grader: str, **fields: str) -> None:
@@ -32,7 +46,7 @@ def add(on: ProcessLab, tmp: Path, name: str, grader: str, **fields: str) -> Non
         name, grader=f'"{grader}"', episodes="1", seeds="[1]", time_limit="1.0", **fields
     )
     path.write_text(text.replace(RULE, WOBBLE))
-    done = wart(on, "course", "--db", str(on.db_path), "assignment", "add", str(path))
+    done = course("--db", str(on.db_path), "assignment", "add", str(path))
     assert done.returncode == 0, done.stderr
     assert f"grader {grader} stored with it" in done.stdout
 
@@ -52,13 +66,13 @@ def test_a_teachers_grader_scores_and_its_failures_are_the_teachers(
         ("missing.py", "grader: cannot read missing.py (No such file or directory)"),
     ):
         bad.write_text(assignment_toml("bad", grader=f'"{grader}"').replace(RULE, WOBBLE))
-        done = wart(lab, "course", "--db", db, "assignment", "add", str(bad))
+        done = course("--db", db, "assignment", "add", str(bad))
         assert done.returncode == 1 and problem in done.stderr, done.stderr
         assert "refused (nothing written)" in done.stderr
     bad.write_text(assignment_toml("bad").replace(RULE, WOBBLE))  # metric() with no grader
-    done = wart(lab, "course", "--db", db, "assignment", "add", str(bad))
+    done = course("--db", db, "assignment", "add", str(bad))
     assert "reads metric('wobble'), but the assignment names no grader" in done.stderr
-    assert " bad " not in wart(lab, "course", "--db", db, "assignments").stdout
+    assert " bad " not in course("--db", db, "assignments").stdout
 
     add(lab, tmp_path, "wobbly", "wobble.py")
     add(lab, tmp_path, "g-raises", "raises.py", quota="1")
@@ -97,7 +111,7 @@ def test_a_teachers_grader_scores_and_its_failures_are_the_teachers(
         again = grader.submit("g-raises", source("works"), "works.py")
         assert again.used == 1
         assert grader.wait_graded("g-raises", again.submission, 120).status == "failed"
-    listing = wart(lab, "course", "--db", db, "assignments")
+    listing = course("--db", db, "assignments")
     assert "grader raises.py: 2 submission(s) it failed" in listing.stdout, listing.stdout
     assert "latest: the teacher's grader failed: raises.py, line 3" in listing.stdout
     assert "grader wobble.py: 0 submission(s) it failed" in listing.stdout

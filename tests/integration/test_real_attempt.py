@@ -27,6 +27,7 @@ from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router
 from tests.integration.agentkit import WORLD, start_agent_context, start_runner
+from tests.integration.test_grader_function import course
 from tests.integration.test_grading import COURSE, source, wart
 from tests.lab import PASSWORD, ProcessLab, make_lab
 
@@ -87,10 +88,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     (tmp_path / "wobble.py").write_bytes((GRADERS / "wobble.py").read_bytes())
     for name, arena in (("real-goal", "arena"), ("nowhere", "nowhere")):
         (tmp_path / f"{name}.toml").write_text(assignment(name, arena))
-        done = wart(
-            lab, "course", "--db", str(lab.db_path), "assignment", "add",
-            str(tmp_path / f"{name}.toml"),
-        )  # fmt: skip
+        done = course("--db", str(lab.db_path), "assignment", "add", str(tmp_path / f"{name}.toml"))
         assert done.returncode == 0, done.stderr
         assert f"real-robot attempt on {arena}/k1 (simulation-passed)" in done.stdout
     with SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body:
