@@ -271,6 +271,17 @@ class GradingStore:
             )  # fmt: skip
             con.execute("UPDATE submissions SET message=? WHERE id=?", (message[:256], sub))
 
+    def real_pending(self) -> list[Pending]:
+        """Graded submissions whose real-robot attempt was queued and has no row yet."""
+        rows = self.db._rows(
+            "SELECT id, assignment, user, filename, source, submitted_at FROM submissions s "
+            "WHERE status='graded' AND message LIKE '%its real-robot attempt is queued on%' "
+            "AND NOT EXISTS (SELECT 1 FROM episodes e WHERE e.submission=s.id AND e.real=1) "
+            "ORDER BY submitted_at"
+        )
+        return [Pending(str(i), str(a), str(u), str(f), bytes(s), float(t))
+                for i, a, u, f, s, t in rows]  # fmt: skip
+
     def set_message(self, sub: str, message: str) -> None:
         with self.db._tx() as con:
             con.execute("UPDATE submissions SET message=? WHERE id=?", (message[:256], sub))

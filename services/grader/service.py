@@ -137,6 +137,9 @@ class GraderService(Service):
             self.log.info("submission %s of %s was not graded: queued again", sub.id, sub.user)
             self.store.set_status(sub.id, "queued")
             self.queue.put(sub.user, sub)
+        for sub in self.store.real_pending():
+            self.log.info("the real-robot attempt of %s was not run: queued again", sub.id)
+            self._reals.put(sub)
         for name in self.competitions.recover():
             self.log.warning("competition %s was running when the grader stopped: stopped", name)
         self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)

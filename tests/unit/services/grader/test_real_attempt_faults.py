@@ -9,11 +9,14 @@ from typing import Any, ClassVar
 import pytest
 
 from common.lab_errors import LabError
-from common.messages import ControlQueued, RequestStatus
+from common.messages import ControlQueued, EpisodeResult, RequestStatus
 from services.grader import real_attempt
 from services.grader.assignment import parse_assignment
-from services.grader.grading_db import Pending
+from services.grader.grading_db import GradingStore, Pending
 from services.grader.real_attempt import REAL_RETRIES, RealAttempt
+from services.registry.accounts_db import RegistryDB
+from services.registry.courses_db import CourseStore
+from services.registry.roster import RosterRow
 
 MAPS = Path(__file__).resolve().parents[4] / "maps"
 TOML = b"""
@@ -93,3 +96,27 @@ def test_an_arena_that_does_not_answer_is_the_labs_fault(monkeypatch: pytest.Mon
     result = attempt.run(Pending("s1", "r", "alice", "w.py", b"x", 0.0), a, map_text)
     assert result.cause == "lab" and result.lab_reruns == REAL_RETRIES
     assert result.detail.startswith("the real arena arena did not answer")
+
+
+def test_a_real_attempt_queued_when_the_grader_stopped_is_found_at_its_start(
+    tmp_path: Path,
+) -> None:
+    db = RegistryDB(tmp_path / "registry.db")
+    try:
+        CourseStore(db).import_roster("c", [RosterRow(line=2, user="alice", name="Alice")])
+        store = GradingStore(db)
+        a, map_text = parse_assignment(TOML, "r.toml", MAPS)
+        store.put_assignment(a, map_text)
+        subs = [store.add_submission("r", "alice", "w.py", b"x", 0) for _ in range(3)]
+        for sub in subs:
+            store.finish(sub.id, [], status="graded", counted=True, mean=1.0, low=1.0,
+                         penalty=0.0, message="points: mean 1")  # fmt: skip
+        for sub in subs[:2]:
+            store.set_message(sub.id, "points: mean 1; its real-robot attempt is queued on arena")
+        done = EpisodeResult(episode=1, seed=0, cause="ok", score=2.0, real=True)
+        store.add_real(subs[0].id, done, "points: mean 1; real-robot attempt: points 2")
+        assert [p.id for p in store.real_pending()] == [subs[1].id]  # queued, never run
+        assert store.real_score(subs[0].id) == 2.0
+        assert [e.real for e in store.submissions("r", sub=subs[0].id)[0].episodes] == [True]
+    finally:
+        db.close()
