@@ -18,6 +18,7 @@ is queued again, free, up to ``REAL_RETRIES`` times, then the row says so (cause
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import math
@@ -39,7 +40,9 @@ from services.grader.score import MissingMetric, metrics
 
 log = logging.getLogger("wart.grader.real")
 
-REAL_RETRIES = 2  # a lab fault queues the attempt again, free, this many times
+REAL_RETRIES = 3  # a lab fault queues the attempt again, free, this many times
+RETRY_WAIT_S = 5.0  # times the try: a robot or bridge coming back takes seconds
+POSE_GAP_S = 1.5  # no pose of the robot for this long in its run: the arena lost it
 SAMPLE_EVERY_S = 0.1  # the grader function's poses and IR, as in simulation
 # (cause, detail) from a finished run's reason: the runner's words for the student's code
 _STUDENT_REASONS = (
@@ -77,7 +80,7 @@ class RealAttempt:
             reruns += 1
             log.warning("real attempt of %s: the lab's fault (%s); queued again, free", sub.id,
                         result.detail)  # fmt: skip
-            self.stop.wait(2.0)
+            self.stop.wait(RETRY_WAIT_S * reruns)
 
     def _once(
         self, sub: Pending, a: Assignment, map_text: str, reruns: int
@@ -112,6 +115,9 @@ class RealAttempt:
             agents.leave()
         if recording is None:
             return lab("the real run's recording could not be read")
+        lost = pose_gap(recording, final, a.real_time_limit)
+        if lost:
+            return lab(lost)
         cause, detail = _cause(final)
         report, data = real_episode(recording, a, map_text, cause)
         if a.grader_file:
@@ -175,6 +181,27 @@ def _fetch(agents: AgentClient, request_id: str) -> Recording | None:
                 return read_recording(path)
             time.sleep(1.0)
     return None
+
+
+def pose_gap(rec: Recording, final: RequestStatus, limit: float) -> str:
+    """"" if the robot's pose came all through its run (up to ``limit`` s), else what was
+    missing: the bridge died, its serial link or the robot went offline, the camera lost
+    it. The context's slot runs on regardless; the grader tells it from the recording."""
+    times = sorted(p.t for p in rec.poses)
+    start = final.start if final.start is not None else (times[0] if times else 0.0)
+    end = min(final.end if final.end is not None else start + limit, start + limit)
+    if end - start < POSE_GAP_S:
+        return ""  # too short a run to tell (the controller ended it at once)
+    if not times:
+        return "the real arena recorded no pose of the robot: its bridge or camera lost it"
+    edges = [start, *(t for t in times if start <= t <= end), end]
+    for a, b in itertools.pairwise(edges):
+        if b - a > POSE_GAP_S:
+            return (
+                f"the real arena lost the robot from {a - start:.1f} s to {b - start:.1f} s of "
+                "its run (no pose: its bridge, serial link or camera went away)"
+            )
+    return ""
 
 
 def _cause(final: RequestStatus) -> tuple[str, str]:

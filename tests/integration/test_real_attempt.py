@@ -13,19 +13,23 @@ the lab is refused at submission, nothing written.
 from __future__ import annotations
 
 import textwrap
+import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
+from common.client.agent_client import AgentClient
 from common.client.grader_client import GraderClient
 from common.keys import AliveKind
 from common.lab_errors import LabError
+from common.messages import EpisodeResult, SubmissionInfo
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router
+from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import WORLD, start_agent_context, start_runner
 from tests.integration.test_grader_function import course
 from tests.integration.test_grading import COURSE, source, wart
@@ -76,8 +80,23 @@ def assignment(name: str, arena: str) -> str:
     )
 
 
+@dataclass
+class RealLab:
+    lab: ProcessLab
+    body: SimBody
+    bridge_args: list[str]
+
+    def kill_bridge(self) -> None:
+        next(p for p in self.lab.procs.started if p.name == "bridge").kill9()
+
+    def start_bridge(self) -> None:
+        """The bridge started again (by its supervisor, after a crash)."""
+        again = self.lab.procs.start("bridge-again", self.bridge_args)
+        self.lab.wait_alive(AliveKind.WORLD, WORLD, again)
+
+
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
+def real(router: Router, procs: Procs, tmp_path: Path) -> Iterator[RealLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     roster = tmp_path / "class.csv"
@@ -94,21 +113,31 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     with SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body:
         emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
         with emulator:
-            bridge = procs.start(
-                "bridge",
-                ["bridge", "--world", WORLD, "--port", f"{tmp_path / 'khepera0'}=k1@500,500,0",
-                 *lab.net_args()],
-            )  # fmt: skip
+            port = f"{tmp_path / 'khepera0'}=k1@500,500,0"
+            args = ["bridge", "--world", WORLD, "--port", port, *lab.net_args()]
+            bridge = procs.start("bridge", args)
             lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
             start_runner(lab)
             start_agent_context(lab, slot=3.0)
             lab.start(wiring.grader_spec(lab.wiring()), name="grader")
-            yield lab
+            yield RealLab(lab, body, args)
+
+
+def real_row(grader: GraderClient, sub: str) -> tuple[SubmissionInfo, EpisodeResult]:
+    """The submission once its real row is there."""
+    for _ in range(180):
+        found = grader.submissions("real-goal", submission=sub)[0]
+        rows = [e for e in found.episodes if e.real]
+        if rows:
+            return found, rows[0]
+        time.sleep(1.0)
+    raise AssertionError(f"no real row: {found}")
 
 
 def test_a_real_attempt_joins_the_submission_after_its_simulation_passed(
-    lab: ProcessLab, tmp_path: Path
+    real: RealLab, tmp_path: Path
 ) -> None:
+    lab = real.lab
     with lab.client("alice") as client:
         grader = GraderClient(client)
         # The arena the assignment names is not in the lab: refused, nothing written.
@@ -118,21 +147,29 @@ def test_a_real_attempt_joins_the_submission_after_its_simulation_passed(
         sub = grader.submit("real-goal", source("works"), "works.py").submission
         graded = grader.wait_graded("real-goal", sub, 120)
         assert graded.status == "graded", graded
-        real = None
-        for _ in range(120):
-            found = grader.submissions("real-goal", submission=sub)[0]
-            rows = [e for e in found.episodes if e.real]
-            if rows:
-                real = rows[0]
-                break
-            __import__("time").sleep(1.0)
-        assert real is not None, found
+        found, row = real_row(grader, sub)
+        # The bridge dies during the next real attempt: the lab's fault, queued again free.
+        again = grader.submit("real-goal", source("works"), "works.py").submission
+        assert grader.wait_graded("real-goal", again, 120).status == "graded"
+        wait_for(lambda: real.body.speed() != (0, 0), 60, "the real attempt to drive the robot")
+        real.kill_bridge()
+        with lab.client("ida") as teacher:  # the context's slot runs on without the robot
+            arena = AgentClient(teacher, "arena").join()
+
+            def slot_over() -> bool:
+                return not any(e.position == 0 for q in arena.state().agents for e in q.entries)
+
+            wait_for(slot_over, 30, "the real run's slot to end")
+        real.start_bridge()
+        _, retried = real_row(grader, again)
+    assert retried.cause == "ok" and retried.lab_reruns >= 1, retried
+    assert "after a lab fault, free" in retried.detail
     assert [e.real for e in found.episodes] == [False, True]  # simulated, then real
-    assert real.cause == "ok", real
-    assert real.detail.startswith("on arena/k1: ran its slot"), real.detail
+    assert row.cause == "ok", row
+    assert row.detail.startswith("on arena/k1: ran its slot"), row.detail
     # Scored from the recording as in simulation: the goal reached, the grader's wobble.
-    assert real.metrics["time_to_goal"] < 3.0 and real.metrics["distance_m"] > 0.05, real
-    assert real.score == pytest.approx(100 - real.metrics["wobble"], abs=1e-3)
+    assert row.metrics["time_to_goal"] < 3.0 and row.metrics["distance_m"] > 0.05, row
+    assert row.score == pytest.approx(100 - row.metrics["wobble"], abs=1e-3)
     assert "real-robot attempt: points" in found.message, found.message
     pw = tmp_path / "pw"
     pw.write_text(PASSWORD)
@@ -141,4 +178,4 @@ def test_a_real_attempt_joins_the_submission_after_its_simulation_passed(
         *lab.net_args(),
     )  # fmt: skip
     assert board.returncode == 0, board.stderr
-    assert f"real {real.score:g}" in board.stdout, board.stdout
+    assert f"real {row.score:g}" in board.stdout, board.stdout
