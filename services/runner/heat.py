@@ -45,6 +45,10 @@ from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import SandboxLimits
 
 STOP = RobotCommand(speeds=(0, 0))
+# A controller that has not answered one tick's state in this long (wall clock, counted from
+# when it had loaded: a sandbox's start takes seconds on a busy host) is ended as a timeout,
+# so that one loop does not hold the others until the heat's own limit.
+TICK_ANSWER_S = 5.0
 
 
 @dataclass
@@ -136,8 +140,10 @@ def _loop(request: Heat, world: World, entries: list[_Entry], deadline: float) -
             if not e.run.offer():
                 e.active = False
         for e in live:
-            if e.active and not e.run.answer(deadline):
+            if e.active and not e.run.answer(deadline, TICK_ANSWER_S):
                 e.active = False
+                if e.run.timed_out:  # stopped now: its loop must not slow the others' heat
+                    e.run.stop("it did not answer in time")
         for e in entries:
             robot = world.actuators(e.slot)
             for command in e.run.take() if e.active else [STOP]:

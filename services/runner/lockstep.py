@@ -68,6 +68,7 @@ class Lockstep:
         self.output: list[str] = []
         self.steps = 0
         self.timed_out = False
+        self.ready: float | None = None  # when the child had loaded the controller
         self._commands: list[RobotCommand] = []
         self._lock = threading.Lock()
         self._answered = threading.Event()
@@ -86,6 +87,8 @@ class Lockstep:
             self._commands.append(command)
 
     def _on_output(self, line: str) -> None:
+        if self.ready is None and line.startswith("[runner] controller "):
+            self.ready = time.monotonic()  # loaded (the sandbox says so on its Ready)
         with self._lock:
             if len(self.output) < self._max_output and not line.startswith("[runner] controller"):
                 self.output.append(line[: self._max_line])
@@ -117,11 +120,19 @@ class Lockstep:
         self._answered.clear()
         return self.sandbox.send_state(state_of(self.world, self.slot))
 
-    def answer(self, deadline: float) -> bool:
+    def answer(self, deadline: float, tick_limit: float | None = None) -> bool:
         """Wait for the child's answer to the state offered; False if it exited or the wall
-        clock ran out (``timed_out``) first. Its commands are then :meth:`take`'s."""
+        clock ran out (``timed_out``) first: ``deadline``, or ``tick_limit`` s of waiting
+        once the controller has loaded. Its commands are then :meth:`take`'s."""
+        began = time.monotonic()
         while not self._answered.wait(0.05):
-            if time.monotonic() >= deadline:
+            now = time.monotonic()
+            loaded = self.ready
+            if tick_limit is not None and loaded is not None:
+                late = now - max(began, loaded) >= tick_limit
+            else:
+                late = False
+            if now >= deadline or late:
                 self.timed_out = True
                 return False
             if self.sandbox.wait(0):
