@@ -184,8 +184,8 @@ def _fetch(agents: AgentClient, request_id: str) -> Recording | None:
 
 
 def pose_gap(rec: Recording, final: RequestStatus, limit: float) -> str:
-    """"" if the robot's pose came all through its run (up to ``limit`` s), else what was
-    missing: the bridge died, its serial link or the robot went offline, the camera lost
+    """What was missing if the robot's pose did not come all through its run (up to ``limit``
+    s), else "": the bridge died, its serial link or the robot went offline, the camera lost
     it. The context's slot runs on regardless; the grader tells it from the recording."""
     times = sorted(p.t for p in rec.poses)
     start = final.start if final.start is not None else (times[0] if times else 0.0)
