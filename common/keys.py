@@ -388,6 +388,17 @@ def runner_episode(realm: str, runner: str) -> str:
     return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/episode"
 
 
+def runner_heat(realm: str, runner: str) -> str:
+    """A competition's heat of several entries in one world (the grader asks)."""
+    return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/heat"
+
+
+def runner_grade(realm: str, runner: str) -> str:
+    """A teacher's grader function on a real attempt's data (the grader asks; beside
+    ``episode``, which runs it after a simulated episode itself)."""
+    return f"{realm_root(realm)}/runner/{check_ident('runner', runner)}/grade"
+
+
 def grader_request(realm: str, grader: str) -> str:
     """Submissions, their results and leaderboards (students and teachers ask the grader)."""
     return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/request"

@@ -100,8 +100,19 @@ class Done:
     iterations: int
 
 
+@dataclass(frozen=True)
+class Metrics:
+    """A teacher's grader (child.py's ``grade`` mode): what its ``grade(episode)`` returned,
+    names to finite numbers, checked by the child and again by the runner."""
+
+    values: dict[str, float]
+
+
 ToChild = State | Stop | Probe
-FromChild = Command | Ready | Step | Failed | Hung | Done
+FromChild = Command | Ready | Step | Failed | Hung | Done | Metrics
+
+MAX_METRICS = 32  # a grader's metrics per episode
+MAX_METRIC_NAME = 32
 
 HUNG_AFTER_S = 1.0
 """A do_work still running this long when the slot's end nears is reported as hung."""
@@ -116,6 +127,7 @@ _TAGS: dict[type, str] = {
     Probe: "probe",
     Hung: "hung",
     Done: "done",
+    Metrics: "metrics",
 }
 
 
@@ -136,6 +148,8 @@ def encode(message: ToChild | FromChild) -> bytes:
         body = {"iterations": message.iterations}
     elif isinstance(message, Hung):
         body = {"seconds": message.seconds, "line": message.line, "function": message.function}
+    elif isinstance(message, Metrics):
+        body = {"values": message.values}
     else:
         body = {}
     line = json.dumps({"t": _TAGS[type(message)], **body}, separators=(",", ":"))
@@ -205,14 +219,44 @@ def decode_from_child(line: bytes | str) -> FromChild:
         if not isinstance(function, str):
             raise PipeError("hung: function must be a string")
         return Hung(float(seconds), lineno, function[:MAX_NAME_CHARS])
+    if kind == "metrics":
+        _only(kind, data, "values")
+        return Metrics(check_metrics(data.get("values")))
     raise PipeError(f"unknown message {kind[:32]!r}")
 
 
-def hung_reason(hung: Hung, filename: str) -> str:
+def check_metrics(values: Any) -> dict[str, float]:
+    """A grader's result as metrics, or PipeError saying what is wrong with it."""
+    if not isinstance(values, dict):
+        raise PipeError(f"grade() returned {type(values).__name__}, not a dict of names to numbers")
+    if len(values) > MAX_METRICS:
+        raise PipeError(f"grade() returned {len(values)} metrics; at most {MAX_METRICS}")
+    out: dict[str, float] = {}
+    for name, value in values.items():
+        ok_name = isinstance(name, str) and 0 < len(name) <= MAX_METRIC_NAME
+        if not ok_name or not all(c.isalnum() or c in "_-." for c in name):
+            shown = repr(name)[:40]
+            raise PipeError(
+                f"grade() returned a metric named {shown}: names are 1 to {MAX_METRIC_NAME} "
+                "letters, digits, '_', '-', '.'"
+            )
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise PipeError(f"grade() returned {name}={type(value).__name__}, not a number")
+        try:
+            number = float(value)
+        except OverflowError:
+            number = float("inf")
+        if number != number or number in (float("inf"), float("-inf")):
+            raise PipeError(f"grade() returned {name}={str(value)[:20]}, not a finite number")
+        out[name] = number
+    return out
+
+
+def hung_reason(hung: Hung, filename: str, what: str = "do_work") -> str:
     """How a hung run ended, in the student's words: their file, its line and function."""
     where = f"{filename}:{hung.line}" if hung.line else filename
     function = f" (in {hung.function})" if hung.function else ""
-    return f"hung: do_work did not return for {hung.seconds:.0f} s; it was at {where}{function}"
+    return f"hung: {what} did not return for {hung.seconds:.0f} s; it was at {where}{function}"
 
 
 def decode_to_child(line: bytes | str) -> ToChild:

@@ -33,6 +33,7 @@ EpisodeCause = Literal[
     "cpu",  # student: used its CPU time
     "ended",  # student: the controller process ended otherwise
     "lab",  # the lab: runner died, sandbox could not start, no runner answered
+    "grader",  # the teacher: the assignment's grader function failed (the run is not charged)
 ]
 STUDENT_CAUSES: frozenset[str] = frozenset(
     {"exception", "timeout", "memory", "output", "cpu", "ended"}
@@ -60,6 +61,10 @@ class Episode(Message, frozen=True):
     source: Upload
     filename: ShortText = "controller.py"
     trace: bool = False  # report the robot's path (a competition's heat records it)
+    # The assignment's grader function (docs/COURSES.md), run on the episode's data after it.
+    grader: Upload | None = None
+    grader_filename: ShortText = "grader.py"
+    grader_seconds: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 10.0
 
 
 TRACE_EVERY_S = 0.1  # a traced episode's path: one pose per this many simulated s
@@ -95,6 +100,74 @@ class EpisodeReport(Message, frozen=True):
     frames: Annotated[list[TraceFrame], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
         default_factory=list
     )
+    # What the assignment's grader function returned, or why it gave nothing (the teacher's).
+    grader_metrics: Annotated[dict[str, float], msgspec.Meta(max_length=32)] = msgspec.field(
+        default_factory=dict
+    )
+    grader_error: ShortText = ""
+    grader_line: int | None = None
+
+
+MAX_PER_HEAT = 16
+
+
+class HeatEntry(msgspec.Struct, frozen=True, kw_only=True):
+    """One team's entry in a heat: its controller on one robot of the map."""
+
+    submission: Ident
+    user: Ident
+    agent: Ident
+    x: float
+    y: float
+    heading: float  # radians
+    source: Upload
+    filename: ShortText = "controller.py"
+
+
+class Heat(Message, frozen=True):
+    """Several entries' controllers in one world at once (a competition's heat): each drives
+    its own robot, stepped in lockstep together; answered with :class:`HeatReport`."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/heat",)
+
+    competition: Ident
+    heat: NonNegInt
+    map: MapText
+    seed: int
+    seconds: EpisodeSeconds
+    entries: Annotated[list[HeatEntry], msgspec.Meta(min_length=1, max_length=MAX_PER_HEAT)]
+
+
+class HeatReport(Message, frozen=True):
+    """Each entry's report (as an episode's, in the heat's order), the world and its frames."""
+
+    entries: Annotated[list[EpisodeReport], msgspec.Meta(max_length=MAX_PER_HEAT)]
+    snapshot: WorldSnapshot | None = None
+    frames: Annotated[list[TraceFrame], msgspec.Meta(max_length=MAX_TRACE)] = msgspec.field(
+        default_factory=list
+    )
+
+
+class GradeData(Message, frozen=True):
+    """Run an assignment's grader function on an episode's data (a real attempt's: the
+    grader built it from the recording; the structure of docs/COURSES.md, as JSON)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/grade",)
+
+    grader: Upload
+    episode: Annotated[bytes, msgspec.Meta(max_length=4 * 1024 * 1024)]
+    grader_filename: ShortText = "grader.py"
+    grader_seconds: Annotated[float, msgspec.Meta(gt=0.0, le=60.0)] = 10.0
+
+
+class GradeResult(Message, frozen=True):
+    """What grade() returned, or why it gave nothing (the teacher's fault)."""
+
+    metrics: Annotated[dict[str, float], msgspec.Meta(max_length=32)] = msgspec.field(
+        default_factory=dict
+    )
+    error: ShortText = ""
+    line: int | None = None
 
 
 # --- student / teacher to the grader ----------------------------------------------------
@@ -140,6 +213,7 @@ class EpisodeResult(msgspec.Struct, frozen=True, kw_only=True):
     score: float | None = None  # None: not scored (a lab fault left it)
     metrics: dict[str, float] = msgspec.field(default_factory=dict)
     lab_reruns: NonNegInt = 0  # how often a lab fault made it run again, free
+    real: bool = False  # the real-robot attempt's row (an arena's agent context ran it)
 
 
 class SubmissionInfo(msgspec.Struct, frozen=True, kw_only=True):
@@ -214,6 +288,7 @@ class LeaderEntry(msgspec.Struct, frozen=True, kw_only=True):
     score: float
     submission: Ident
     at: float
+    real: float | None = None  # that submission's real-robot attempt's score, once run
 
 
 class Leaderboard(Message, frozen=True):
@@ -231,7 +306,17 @@ class Leaderboard(Message, frozen=True):
 # --- competitions: every team's entry in heats, standings published live -----------------
 
 EntryCause = Literal[
-    "waiting", "ok", "finished", "exception", "timeout", "memory", "output", "cpu", "ended", "lab"
+    "waiting",
+    "ok",
+    "finished",
+    "exception",
+    "timeout",
+    "memory",
+    "output",
+    "cpu",
+    "ended",
+    "lab",
+    "grader",
 ]
 
 
@@ -245,7 +330,7 @@ class CompetitionRun(Message, frozen=True):
     assignment: Ident
     name: Ident | None = None  # default: the assignment's name and the time
     pick: Literal["latest", "best"] = "latest"
-    per_heat: Annotated[int, msgspec.Meta(ge=1, le=16)] = 1
+    per_heat: Annotated[int, msgspec.Meta(ge=1, le=MAX_PER_HEAT)] = 1
 
 
 class CompetitionQuery(Message, frozen=True):
@@ -346,6 +431,7 @@ class ClassTables(Message, frozen=True):
 __all__ = [
     "MAX_EPISODE_S",
     "MAX_MAP_BYTES",
+    "MAX_PER_HEAT",
     "MAX_TRACE",
     "MAX_TRACE_ROWS",
     "PSEUDONYM_PATTERN",
@@ -364,7 +450,12 @@ __all__ = [
     "EpisodeCause",
     "EpisodeReport",
     "EpisodeResult",
+    "GradeData",
+    "GradeResult",
     "GradingChanged",
+    "Heat",
+    "HeatEntry",
+    "HeatReport",
     "LeaderEntry",
     "Leaderboard",
     "LeaderboardQuery",

@@ -55,7 +55,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course competition
     p.add_argument("--name", help="run: the competition's name (default: assignment and time)")
     p.add_argument("--pick", choices=("latest", "best"), default="latest")
     p.add_argument(
-        "--per-heat", type=int, default=1, help="entries in one world at once (only 1 for now)"
+        "--per-heat",
+        type=int,
+        default=1,
+        help="entries in one world at once, each on its own robot (default 1)",
     )
     p.add_argument("--wait", type=float, metavar="S", help="run: print standings until done")
     args, options = cli.parse(p, argv)

@@ -50,7 +50,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart leaderboard") -> i
         if board.hidden:
             say("  (hidden from students until the deadline: you see it as a teacher)")
         for e in board.entries:
-            say(f"  {e.rank:>3}. {e.name:<24} {e.score:>10g}  {e.submission}")
+            real = f"  real {e.real:g}" if e.real is not None else ""
+            say(f"  {e.rank:>3}. {e.name:<24} {e.score:>10g}  {e.submission}{real}")
         if not board.entries:
             say("  no graded submission yet")
         return 0

@@ -60,7 +60,8 @@ def show(sub: SubmissionInfo) -> None:
     say(f"{sub.submission}  {sub.status}{score}  {sub.message}")
     for e in sub.episodes:
         value = "-" if e.score is None else f"{e.score:g}"
-        say(f"  episode {e.episode} (seed {e.seed}): {value:>8}  {e.cause}: {e.detail}")
+        which = "real robot" if e.real else f"episode {e.episode} (seed {e.seed})"
+        say(f"  {which}: {value:>8}  {e.cause}: {e.detail}")
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:

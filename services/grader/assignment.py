@@ -8,6 +8,7 @@ assignment's world.
 
 from __future__ import annotations
 
+import ast
 import datetime as dt
 import json
 import math
@@ -20,6 +21,9 @@ from common.keys import is_ident
 from common.messages import MAX_EPISODE_S, MAX_MAP_BYTES
 from common.sim2d import maps
 from services.grader.score import Rule, RuleError, parse_rule
+
+GRADER_SECONDS = 10.0  # a grader function's default wall-clock time per episode
+MAX_GRADER_SECONDS = 60.0
 
 MAX_FILE_BYTES = 64 * 1024
 MAX_EPISODES = 20
@@ -64,6 +68,15 @@ class Assignment:
     order: str  # "higher" or "lower" is better
     rule: str
     zones: list[dict[str, Any]] = field(default_factory=list)
+    # The teacher's grader function (docs/COURSES.md): its file's name and text, kept here.
+    grader_file: str = ""
+    grader_source: str = ""
+    grader_seconds: float = GRADER_SECONDS
+    # A real-robot attempt after the simulated episodes (docs/COURSES.md): "" for none.
+    real_arena: str = ""
+    real_robot: str = ""
+    real_time_limit: float = 0.0
+    real_after: str = "simulation-passed"  # or "always"
 
     @property
     def score(self) -> Rule:
@@ -114,7 +127,7 @@ def parse_assignment(
     known = {
         "name", "course", "title", "map", "robot", "time_limit", "episodes", "seeds",
         "start", "opens", "deadline", "late", "quota", "hide_until_deadline", "zones",
-        "score",
+        "score", "grader", "grader_time_limit", "real",
     }  # fmt: skip
     for key in sorted(set(data) - known):
         problems.append(f"{key}: unknown field (one of {', '.join(sorted(known))})")
@@ -196,6 +209,14 @@ def parse_assignment(
             rule = parse_rule(score.get("rule", ""))
         except RuleError as exc:
             problems.append(f"score.rule: {exc}")
+    grader_file, grader_source = _grader(data.get("grader"), base, problems)
+    grader_seconds = number("grader_time_limit", 1, MAX_GRADER_SECONDS, GRADER_SECONDS)
+    if rule is not None and rule.metrics and not grader_file and "grader" not in data:
+        problems.append(
+            f"score.rule: reads metric({sorted(rule.metrics)[0]!r}), but the assignment names "
+            'no grader = "file.py" to compute it'
+        )
+    real = _real(data.get("real"), problems)
     map_text = ""
     map_name = str(data.get("map", ""))
     if not map_name:
@@ -226,8 +247,77 @@ def parse_assignment(
         order=str(order),
         rule=rule.text,
         zones=list(zones),
+        grader_file=grader_file,
+        grader_source=grader_source,
+        grader_seconds=grader_seconds,
+        real_arena=real[0],
+        real_robot=real[1],
+        real_time_limit=real[2],
+        real_after=real[3],
     )
     return assignment, map_text
+
+
+def _real(value: Any, problems: list[str]) -> tuple[str, str, float, str]:
+    """The [real] table: arena (an agent context), robot, time_limit, after."""
+    if value is None:
+        return "", "", 0.0, "simulation-passed"
+    if not isinstance(value, dict):
+        problems.append('real: a table: arena = "...", robot = "...", time_limit, after')
+        return "", "", 0.0, "simulation-passed"
+    for key in sorted(set(value) - {"arena", "robot", "time_limit", "after"}):
+        problems.append(f"real.{key}: unknown field (arena, robot, time_limit, after)")
+    arena, robot = value.get("arena"), value.get("robot")
+    for key, v in (("arena", arena), ("robot", robot)):
+        if not isinstance(v, str) or not is_ident(v):
+            problems.append(f"real.{key}: required, a name (the real arena's agent context, robot)")
+    limit = value.get("time_limit", 10.0)
+    if isinstance(limit, bool) or not isinstance(limit, int | float) or not 1 <= limit <= 300:
+        problems.append("real.time_limit: a number of seconds from 1 to 300")
+        limit = 10.0
+    after = value.get("after", "simulation-passed")
+    if after not in ("simulation-passed", "always"):
+        problems.append('real.after: "simulation-passed" (the default) or "always"')
+    return str(arena), str(robot), float(limit), str(after)
+
+
+def _grader(value: Any, base: Path | None, problems: list[str]) -> tuple[str, str]:
+    """The grader file's name and text, checked: it exists, parses, and defines grade()."""
+    if value is None:
+        return "", ""
+    if not isinstance(value, str) or not value.endswith(".py") or "/" in value or "\\" in value:
+        problems.append('grader: a Python file beside the assignment, e.g. grader = "g.py"')
+        return "", ""
+    path = (base or Path.cwd()) / value
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        problems.append(f"grader: cannot read {value} ({exc.strerror or exc})")
+        return "", ""
+    if len(raw) > MAX_FILE_BYTES:
+        problems.append(f"grader: {value} is over {MAX_FILE_BYTES // 1024} KiB")
+        return "", ""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        problems.append(f"grader: {value} is not UTF-8 text (byte {exc.start})")
+        return "", ""
+    try:
+        tree = ast.parse(text, filename=value)
+    except SyntaxError as exc:
+        problems.append(f"grader: {value}, line {exc.lineno}: syntax error: {exc.msg}")
+        return "", ""
+    grade = [
+        node for node in tree.body if isinstance(node, ast.FunctionDef) and node.name == "grade"
+    ]
+    if not grade:
+        problems.append(f"grader: {value} defines no grade(episode) function at its top level")
+        return "", ""
+    args = grade[-1].args
+    if len(args.posonlyargs) + len(args.args) < 1 and args.vararg is None:
+        problems.append(f"grader: {value}, line {grade[-1].lineno}: grade() takes the episode")
+        return "", ""
+    return value, text
 
 
 def _starts(value: Any, problems: list[str]) -> list[StartPose]:

@@ -4,8 +4,9 @@ Each team's latest (or best) graded submission is its entry; a student with no
 team is a team of one. Entries run one per heat, in turn, as an episode on the
 lab's runners (services/grader/episodes.py: lab faults re-run free), with the
 assignment's map, first start pose and first seed, so every entry faces the
-same world; the assignment's score ranks them in its order. Several
-controllers in one world are not run yet: a heat holds one entry (docs/COURSES.md).
+same world; the assignment's score ranks them in its order. With ``per_heat``
+N > 1 a heat holds N entries in one world at once, each on its own robot
+(services/grader/heats.py).
 
 As each heat ends the standings are published, sealed, on
 ``grader/<g>/competition/<name>`` and written to ``<root>/<name>/standings.json``;
@@ -31,6 +32,8 @@ from common.recording.writer import RecordingWriter, pose_record
 from services.grader.assignment import Assignment
 from services.grader.episodes import LAB_RETRIES, EpisodeRunner
 from services.grader.grading_db import GradingStore, Pending
+from services.grader.heats import HeatError, heat_request, heat_robots, record_heat, score_heat
+from services.grader.score import MissingMetric
 
 log = logging.getLogger("wart.grader")
 
@@ -115,11 +118,11 @@ class Competitions:
 
     def start(self, name: str, a: Assignment, map_text: str, pick: str, per_heat: int) -> Standings:
         """The first standings (every entry waiting); the heats run on a thread."""
-        if per_heat != 1:
-            raise CompetitionError(
-                "heats of one entry only: several controllers in one world are not supported "
-                "yet (--per-heat 1)"
-            )
+        if per_heat > 1:
+            try:
+                heat_robots(a, map_text, per_heat)
+            except HeatError as exc:
+                raise CompetitionError(str(exc)) from None
         entries = pick_entries(self.store, a, pick)
         if not entries:
             raise CompetitionError(
@@ -137,11 +140,15 @@ class Competitions:
                 unit=a.unit,
                 order=a.order,  # type: ignore[arg-type]
                 status="running",
-                heats=len(entries),
+                heats=math.ceil(len(entries) / per_heat),
                 heat=1,
                 entries=[
                     StandingEntry(
-                        rank=0, team=team[:256], user=sub.user, submission=sub.id, heat=n + 1
+                        rank=0,
+                        team=team[:256],
+                        user=sub.user,
+                        submission=sub.id,
+                        heat=n // per_heat + 1,
                     )
                     for n, (team, sub) in enumerate(entries)
                 ],
@@ -151,7 +158,7 @@ class Competitions:
         self._save(first)
         thread = threading.Thread(
             target=self._run,
-            args=(first, a, map_text, entries),
+            args=(first, a, map_text, entries, per_heat),
             name=f"compete-{name}",
             daemon=True,
         )
@@ -180,20 +187,59 @@ class Competitions:
             log.debug("standings of %s not published: %s", st.competition, exc)
 
     def _run(
-        self, st: Standings, a: Assignment, map_text: str, entries: list[tuple[str, Pending]]
+        self,
+        st: Standings,
+        a: Assignment,
+        map_text: str,
+        entries: list[tuple[str, Pending]],
+        per_heat: int = 1,
     ) -> None:
-        for n, (team, sub) in enumerate(entries):
-            heat = n + 1
+        for n in range(0, len(entries), per_heat):
+            heat = n // per_heat + 1
             st = msgspec.structs.replace(st, heat=heat, at=time.time())
             self._update(st)
-            entry = self._heat(st.competition, heat, team, sub, a, map_text)
-            done = [entry if e.heat == heat else e for e in st.entries]
+            group = entries[n : n + per_heat]
+            if per_heat == 1:
+                team, sub = group[0]
+                ran = [self._heat(st.competition, heat, team, sub, a, map_text)]
+            else:
+                ran = self._heat_of(st, heat, group, a, map_text, per_heat)
+            by_sub = {e.submission: e for e in ran}
+            done = [by_sub.get(e.submission, e) if e.heat == heat else e for e in st.entries]
             st = msgspec.structs.replace(st, entries=ranked(done, a.order), at=time.time())
-            log.info("competition %s heat %d (%s): %s", st.competition, heat, team, entry.detail)
+            for entry in ran:
+                log.info("competition %s heat %d (%s): %s", st.competition, heat, entry.team,
+                         entry.detail)  # fmt: skip
         st = msgspec.structs.replace(st, status="finished", heat=0, at=time.time())
         self._update(st)
         with self._lock:
             self._live.pop(st.competition, None)
+
+    def _heat_of(
+        self,
+        st: Standings,
+        heat: int,
+        group: list[tuple[str, Pending]],
+        a: Assignment,
+        map_text: str,
+        per_heat: int,
+    ) -> list[StandingEntry]:
+        """A heat of several entries in one world (services/grader/heats.py)."""
+        subs = [sub for _team, sub in group]
+        request = heat_request(st.competition, heat, a, map_text, subs, per_heat)
+        began = time.time()
+        report = self.episodes.heat(request)
+        path = self.root / st.competition / f"heat-{heat:03d}.mcap"
+        try:
+            recorded = record_heat(path, st.competition, heat, a, request, report, began)
+        except (OSError, ValueError) as exc:
+            log.warning("heat %d of %s not recorded: %s", heat, st.competition, exc)
+            recorded = ""
+        bases = [
+            StandingEntry(rank=0, team=team[:256], user=sub.user, submission=sub.id, heat=heat)
+            for team, sub in group
+        ]
+        return score_heat(a, request, report, bases, recorded)
 
     def _heat(
         self, name: str, heat: int, team: str, sub: Pending, a: Assignment, map_text: str
@@ -213,6 +259,9 @@ class Competitions:
             source=sub.source,
             filename=sub.filename,
             trace=True,
+            grader=a.grader_source.encode() if a.grader_file else None,
+            grader_filename=a.grader_file or "grader.py",
+            grader_seconds=a.grader_seconds,
         )
         began = time.time()
         report = self.episodes.once(request)
@@ -229,7 +278,18 @@ class Competitions:
                 base, cause="lab", detail=f"the lab could not run it: {report.detail}"[:256],
                 recording=recorded,
             )  # fmt: skip
-        score = a.score.evaluate(report, a.time_limit)
+        teacher = report.grader_error
+        score = 0.0
+        if not teacher:
+            try:
+                score = a.score.evaluate(report, a.time_limit)
+            except MissingMetric as exc:
+                teacher = f"{a.grader_file}: {exc}"
+        if teacher:
+            return msgspec.structs.replace(
+                base, cause="grader", detail=f"the teacher's grader failed: {teacher}"[:256],
+                recording=recorded,
+            )  # fmt: skip
         detail = report.detail
         if report.cause in STUDENT_CAUSES:
             detail = f"the entry's controller: {detail}"

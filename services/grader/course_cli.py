@@ -19,9 +19,11 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from common.acl import agent_scope
 from services.grader.assignment import AssignmentError, parse_assignment
 from services.grader.grading_db import GradingStore
 from services.lab.lab_maps import SHIPPED_MAPS
+from services.lab.wiring import service_account
 from services.registry.accounts_db import DbError, RegistryDB
 
 
@@ -44,6 +46,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
     a.add_argument("action", choices=("add", "check"))
     a.add_argument("file", type=Path, help="the assignment (TOML)")
     a.add_argument("--maps", type=Path, default=SHIPPED_MAPS, help="the maps directory")
+    a.add_argument(
+        "--grader-account",
+        default=service_account("grader", "grader"),
+        help="the grader's service account, granted deploy on a [real] arena's robot",
+    )
     ls = sub.add_parser("assignments", help="list the assignments (of a course)")
     ls.add_argument("course", nargs="?")
     args = p.parse_args(argv)
@@ -59,6 +66,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
                     f"{x.name:<20} {x.course:<16} map {x.map_name}, {x.episodes} episodes of "
                     f"{x.time_limit:g} s, due {_when(x.deadline)}, quota {x.quota}/24 h"
                 )
+                if x.grader_file:
+                    failed, latest = store.grader_failures(x.name)
+                    print(f"  grader {x.grader_file}: {failed} submission(s) it failed")
+                    if failed:
+                        print(f"  latest: {latest}")
             return 0
         try:
             raw = args.file.read_bytes()
@@ -77,13 +89,29 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
         if args.action == "check":
             print(f"{args.file}: assignment {assignment.name} is fine; nothing written")
             return 0
+        if assignment.real_arena:
+            # The grader queues the real attempt as itself: it may deploy on that robot.
+            scope = agent_scope(assignment.real_arena, assignment.real_robot)
+            try:
+                db.grant(args.grader_account, "deploy", scope)
+            except DbError as exc:
+                print(f"{args.file} was refused (nothing written):", file=sys.stderr)
+                print(f"  real: the grader's account {args.grader_account}: {exc}",
+                      file=sys.stderr)  # fmt: skip
+                return 1
         new = store.put_assignment(assignment, map_text)
         print(
             f"assignment {assignment.name} {'added' if new else 'replaced'} in course "
             f"{assignment.course}: {assignment.episodes} episodes of {assignment.time_limit:g} "
             f"simulated s on {assignment.map_name}, opens {_when(assignment.opens)}, "
             f"due {_when(assignment.deadline)}"
+            + (f"; grader {assignment.grader_file} stored with it" * bool(assignment.grader_file))
         )
+        if assignment.real_arena:
+            print(
+                f"real-robot attempt on {assignment.real_arena}/{assignment.real_robot} "
+                f"({assignment.real_after}); {args.grader_account} may deploy there"
+            )
         return 0
     except DbError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)

@@ -29,13 +29,17 @@ from common.messages import (
     EpisodeReport,
     EpisodeResult,
     ErrorReply,
+    GradeData,
+    GradeResult,
+    Heat,
+    HeatReport,
     Message,
     MessageError,
     decode,
 )
 from services.grader.assignment import Assignment
 from services.grader.grading_db import Pending
-from services.grader.score import metrics
+from services.grader.score import MissingMetric, metrics
 
 log = logging.getLogger("wart.grader")
 
@@ -50,6 +54,7 @@ class Graded:
     mean: float | None
     low: float | None
     lab_failed: str  # "" or why the lab could not grade it
+    grader_failed: str = ""  # "" or why the teacher's grader function gave no score
 
 
 class EpisodeRunner:
@@ -96,6 +101,8 @@ class EpisodeRunner:
             return EpisodeReport(cause="lab", detail="no runner is alive in the lab")
         key = keys.runner_episode(self.realm, runner)
         timeout = 15.0 + 1.5 * request.seconds + 10.0
+        if request.grader is not None:
+            timeout += request.grader_seconds + 10.0
         try:
             replies = list(self.session.get(key, payload=self.seal(key, request), timeout=timeout))
         except Exception as exc:
@@ -113,6 +120,81 @@ class EpisodeRunner:
         return EpisodeReport(
             cause="lab", detail=f"runner {runner} did not answer (it stopped or died)"
         )
+
+    def heat(self, request: Heat) -> HeatReport:
+        """A competition's heat of several entries on one runner; lab faults run it again
+        (the whole heat: it is one world), at last every entry's report says ``lab``."""
+        detail = "no runner is alive in the lab"
+        for tries in range(LAB_RETRIES + 1):
+            if tries:
+                self._stop.wait(min(2.0, 0.5 * tries))
+            runner = self._pick()
+            if runner is None:
+                break
+            key = keys.runner_heat(self.realm, runner)
+            timeout = 15.0 + 1.5 * request.seconds + 10.0 + 3.0 * len(request.entries)
+            try:
+                replies = list(
+                    self.session.get(key, payload=self.seal(key, request), timeout=timeout)
+                )
+            except Exception as exc:
+                detail = f"runner {runner}: {exc}"
+                continue
+            detail = f"runner {runner} did not answer (it stopped or died)"
+            for reply in replies:
+                if reply.ok is None:
+                    continue
+                try:
+                    answer = decode(reply.ok.payload, (HeatReport, ErrorReply))
+                except MessageError:
+                    continue
+                if isinstance(answer, ErrorReply):
+                    detail = f"runner {runner}: {answer.message}"
+                elif all(r.cause != "lab" for r in answer.entries):
+                    return answer
+                else:
+                    detail = answer.entries[0].detail
+            if self._stop.is_set():
+                break
+        lab = EpisodeReport(cause="lab", detail=detail[:256])
+        return HeatReport(entries=[lab] * len(request.entries))
+
+    def grade_data(self, a: Assignment, episode: bytes) -> tuple[dict[str, float], str, int | None]:
+        """The assignment's grader function on a real attempt's data, on a runner:
+        (metrics, the teacher's error, its line); RuntimeError if no runner could run it."""
+        request = GradeData(
+            grader=a.grader_source.encode(),
+            grader_filename=a.grader_file,
+            grader_seconds=a.grader_seconds,
+            episode=episode,
+        )
+        problem = "no runner is alive in the lab"
+        for _ in range(LAB_RETRIES):
+            runner = self._pick()
+            if runner is None:
+                break
+            key = keys.runner_grade(self.realm, runner)
+            try:
+                replies = list(
+                    self.session.get(
+                        key, payload=self.seal(key, request), timeout=a.grader_seconds + 30.0
+                    )
+                )
+            except Exception as exc:
+                problem = f"runner {runner}: {exc}"
+                continue
+            for reply in replies:
+                if reply.ok is None:
+                    continue
+                try:
+                    answer = decode(reply.ok.payload, (GradeResult, ErrorReply))
+                except MessageError:
+                    continue
+                if isinstance(answer, GradeResult):
+                    return answer.metrics, answer.error, answer.line
+                problem = f"runner {runner}: {answer.message}"
+            self._stop.wait(1.0)
+        raise RuntimeError(f"the grader function could not run: {problem}")
 
     def grade(self, sub: Pending, a: Assignment, map_text: str) -> Graded:
         rule = a.score
@@ -133,6 +215,9 @@ class EpisodeRunner:
                 seconds=a.time_limit,
                 source=sub.source,
                 filename=sub.filename,
+                grader=a.grader_source.encode() if a.grader_file else None,
+                grader_filename=a.grader_file or "grader.py",
+                grader_seconds=a.grader_seconds,
             )
             reruns = 0
             report = self.once(request)
@@ -159,7 +244,27 @@ class EpisodeRunner:
                 )
                 return Graded(results, None, None, report.detail)
             # An episode the student's code ended is scored as the world stood then.
-            score = rule.evaluate(report, a.time_limit)
+            teacher = report.grader_error
+            score = 0.0
+            if not teacher:
+                try:
+                    score = rule.evaluate(report, a.time_limit)
+                except MissingMetric as exc:
+                    teacher = f"{a.grader_file}: {exc}"
+            if teacher:
+                # The teacher's grader failed: no score, and the student is not charged.
+                results.append(
+                    EpisodeResult(
+                        episode=n,
+                        seed=a.seeds[n],
+                        cause="grader",
+                        detail=f"the teacher's grader failed: {teacher}"[:256],
+                        error_line=report.grader_line,
+                        metrics=metrics(report, zones, a.time_limit),
+                        lab_reruns=reruns,
+                    )
+                )
+                return Graded(results, None, None, "", teacher)
             detail = report.detail
             if report.cause in STUDENT_CAUSES:
                 detail = f"your controller: {detail}"

@@ -83,6 +83,11 @@ class GradingStore:
         try:
             with db._lock:
                 db._db.executescript(SCHEMA)
+                columns = {row[1] for row in db._db.execute("PRAGMA table_info(episodes)")}
+                if "real" not in columns:  # a database of before real-robot attempts
+                    db._db.execute(
+                        "ALTER TABLE episodes ADD COLUMN real INTEGER NOT NULL DEFAULT 0"
+                    )
         except sqlite3.DatabaseError as exc:
             raise DbError("internal", f"cannot create the grading tables: {exc}") from None
 
@@ -234,7 +239,7 @@ class GradingStore:
             for e in episodes:
                 con.execute(
                     "INSERT INTO episodes(submission, episode, seed, cause, detail, error_line, "
-                    "score, metrics, lab_reruns) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "score, metrics, lab_reruns, real) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (
                         sub,
                         e.episode,
@@ -245,6 +250,7 @@ class GradingStore:
                         e.score,
                         json.dumps(e.metrics),
                         e.lab_reruns,
+                        int(e.real),
                     ),
                 )
             con.execute(
@@ -252,6 +258,50 @@ class GradingStore:
                 "graded_at=?, message=? WHERE id=?",
                 (status, int(counted), mean, low, penalty, time.time(), message[:256], sub),
             )
+
+    def add_real(self, sub: str, e: EpisodeResult, message: str) -> None:
+        """The real-robot attempt's row joined to a graded submission, and its message."""
+        with self.db._tx() as con:
+            con.execute("DELETE FROM episodes WHERE submission=? AND real=1", (sub,))
+            con.execute(
+                "INSERT INTO episodes(submission, episode, seed, cause, detail, error_line, "
+                "score, metrics, lab_reruns, real) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 1)",
+                (sub, e.episode, e.seed, e.cause, e.detail, e.error_line, e.score,
+                 json.dumps(e.metrics), e.lab_reruns),
+            )  # fmt: skip
+            con.execute("UPDATE submissions SET message=? WHERE id=?", (message[:256], sub))
+
+    def real_pending(self) -> list[Pending]:
+        """Graded submissions whose real-robot attempt was queued and has no row yet."""
+        rows = self.db._rows(
+            "SELECT id, assignment, user, filename, source, submitted_at FROM submissions s "
+            "WHERE status='graded' AND message LIKE '%its real-robot attempt is queued on%' "
+            "AND NOT EXISTS (SELECT 1 FROM episodes e WHERE e.submission=s.id AND e.real=1) "
+            "ORDER BY submitted_at"
+        )
+        return [Pending(str(i), str(a), str(u), str(f), bytes(s), float(t))
+                for i, a, u, f, s, t in rows]  # fmt: skip
+
+    def set_message(self, sub: str, message: str) -> None:
+        with self.db._tx() as con:
+            con.execute("UPDATE submissions SET message=? WHERE id=?", (message[:256], sub))
+
+    def real_score(self, sub: str) -> float | None:
+        rows = self.db._rows(
+            "SELECT score FROM episodes WHERE submission=? AND real=1 AND score IS NOT NULL", sub
+        )
+        return float(rows[0][0]) if rows else None
+
+    def grader_failures(self, assignment: str) -> tuple[int, str]:
+        """How many submissions the teacher's grader function failed, and the latest's message."""
+        failed = "assignment=?1 AND message LIKE 'the teacher''s grader failed:%'"
+        rows = self.db._rows(
+            f"SELECT COUNT(*), (SELECT message FROM submissions WHERE {failed} "
+            f"ORDER BY graded_at DESC LIMIT 1) FROM submissions WHERE {failed}",
+            assignment,
+        )
+        count, latest = rows[0] if rows else (0, None)
+        return int(count or 0), str(latest or "")
 
     def submissions(
         self, assignment: str, user: str | None = None, sub: str | None = None
@@ -276,10 +326,11 @@ class GradingStore:
                     score=score,
                     metrics=json.loads(m),
                     lab_reruns=int(reruns),
+                    real=bool(real),
                 )
-                for n, seed, cause, detail, line, score, m, reruns in self.db._rows(
-                    "SELECT episode, seed, cause, detail, error_line, score, metrics, lab_reruns "
-                    "FROM episodes WHERE submission=? ORDER BY episode",
+                for n, seed, cause, detail, line, score, m, reruns, real in self.db._rows(
+                    "SELECT episode, seed, cause, detail, error_line, score, metrics, lab_reruns, "
+                    "real FROM episodes WHERE submission=? ORDER BY episode",
                     i,
                 )
             ]

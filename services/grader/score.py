@@ -15,7 +15,9 @@ else is refused with what and where, before the assignment is stored):
   ``delivered()`` objects lying in a nest zone at some point, ``delivered("id")`` 1/0;
   ``collisions()`` new contacts with walls, obstacles and robots (pushing
   objects is not one); ``collisions("wall"|"obstacle"|"robot"|"object")``;
-  ``time()`` the simulated s the episode ran; ``distance()`` metres driven.
+  ``time()`` the simulated s the episode ran; ``distance()`` metres driven;
+  ``metric("name")`` a number the assignment's grader function returned for
+  the episode (services/runner/grader_run.py); only with a grader.
 
 Division by zero scores 0 for that term's quotient rather than failing the run.
 """
@@ -40,6 +42,7 @@ _EVENTS: dict[str, tuple[int, int]] = {
     "collisions": (0, 1),
     "time": (0, 0),
     "distance": (0, 0),
+    "metric": (1, 1),
 }
 _MATH: dict[str, Callable[..., float]] = {"min": min, "max": max, "abs": abs}
 
@@ -52,11 +55,16 @@ class RuleError(ValueError):
     """The rule is not in the grammar; the message says what and where."""
 
 
+class MissingMetric(RuleError):
+    """The rule reads a metric the grader function did not return (the teacher's fault)."""
+
+
 @dataclass(frozen=True)
 class Rule:
     text: str
     tree: ast.expr
     zones: frozenset[str]  # the zones it names (the assignment must have them)
+    metrics: frozenset[str] = frozenset()  # the grader's metrics it reads
 
     def evaluate(self, report: EpisodeReport, time_limit: float) -> float:
         value = _eval(self.tree, report, time_limit)
@@ -78,7 +86,12 @@ def parse_rule(text: str) -> Rule:
     zones: set[str] = set()
     for node in nodes:
         _check(node, zones)
-    return Rule(text=text.strip(), tree=tree.body, zones=frozenset(zones))
+    named = frozenset(
+        n.args[0].value  # type: ignore[attr-defined]  # _check_call let constants only
+        for n in nodes
+        if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id == "metric"
+    )
+    return Rule(text=text.strip(), tree=tree.body, zones=frozenset(zones), metrics=named)
 
 
 def _where(node: ast.AST) -> str:
@@ -151,6 +164,11 @@ def event(name: str, arg: str | None, report: EpisodeReport, time_limit: float) 
         return float(report.sim_seconds)
     if name == "distance":
         return float(report.distance_mm) / 1000.0
+    if name == "metric":
+        if arg not in report.grader_metrics:
+            have = ", ".join(sorted(report.grader_metrics)) or "none"
+            raise MissingMetric(f"grade() returned no metric {arg!r} (it returned: {have})")
+        return float(report.grader_metrics[arg])
     raise RuleError(f"unknown event {name}")
 
 
@@ -188,4 +206,6 @@ def metrics(report: EpisodeReport, zones: list[str], time_limit: float) -> dict[
     }
     for zone in zones:
         out[f"time_to_{zone}"] = event("time_to", zone, report, time_limit)
+    for name, value in sorted(report.grader_metrics.items()):
+        out.setdefault(name, value)  # the grader's own numbers, beside ours
     return out

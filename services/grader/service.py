@@ -20,6 +20,7 @@ start and graded then. Token: ``alive/grader/<name>``.
 from __future__ import annotations
 
 import math
+import queue
 import re
 import threading
 import time
@@ -28,6 +29,7 @@ from typing import cast
 
 import zenoh
 
+from common import keys
 from common.auth import Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
@@ -68,10 +70,12 @@ from services.grader.competition import CompetitionError, Competitions
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
+from services.grader.real_attempt import RealAttempt
 from services.registry.accounts_db import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
 TEACHERS = frozenset({"teacher"})
+GRADER_FAILED = "the teacher's grader failed: "  # a submission's message (wart course finds it)
 
 
 def info(a: Assignment) -> AssignmentInfo:
@@ -131,6 +135,12 @@ class GraderService(Service):
             store, self.episodes, competitions or Path("competitions"), self._publish
         )
         self._threads: list[threading.Thread] = []
+        # Real-robot attempts, one at a time (services/grader/real_attempt.py).
+        self._real_stop = threading.Event()
+        self.real = RealAttempt(
+            login.client, self.episodes.grade_data, self._real_stop, relogin=login.login
+        )
+        self._reals: queue.Queue[Pending | None] = queue.Queue()
         self._submit_lock = threading.Lock()  # quota checked and submission written as one
 
     def on_start(self) -> None:
@@ -138,6 +148,9 @@ class GraderService(Service):
             self.log.info("submission %s of %s was not graded: queued again", sub.id, sub.user)
             self.store.set_status(sub.id, "queued")
             self.queue.put(sub.user, sub)
+        for sub in self.store.real_pending():
+            self.log.info("the real-robot attempt of %s was not run: queued again", sub.id)
+            self._reals.put(sub)
         for name in self.competitions.recover():
             self.log.warning("competition %s was running when the grader stopped: stopped", name)
         self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)
@@ -145,9 +158,14 @@ class GraderService(Service):
             thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)
             thread.start()
             self._threads.append(thread)
+        thread = threading.Thread(target=self._work_real, name="real", daemon=True)
+        thread.start()
+        self._threads.append(thread)
 
     def on_stop(self, timeout: float) -> None:
         self.queue.close()
+        self._real_stop.set()
+        self._reals.put(None)
         self.episodes.stop()
         deadline = time.monotonic() + timeout
         self.competitions.join(timeout / 2)
@@ -294,6 +312,13 @@ class GraderService(Service):
             precheck(request.source, request.filename)
         except PrecheckError as exc:
             raise RequestError("bad_request", f"not submitted: {exc}") from None
+        if a.real_arena and not self._arena_alive(a.real_arena):
+            raise RequestError(
+                "not_found",
+                f"{a.name} asks for a real-robot attempt on the arena {a.real_arena}, which is "
+                f"not in the lab (no agent context {a.real_arena} is alive): nothing submitted; "
+                "tell your teacher",
+            )
         user = principal.user
         with self._submit_lock:
             since = now - DAY_S
@@ -323,6 +348,16 @@ class GraderService(Service):
             late_days=late_days,
             note=note,
         )
+
+    def _arena_alive(self, arena: str) -> bool:
+        try:
+            replies = self.session.liveliness().get(
+                keys.alive(self.realm, AliveKind.CONTEXT, arena), timeout=2.0
+            )
+            return any(r.ok is not None for r in replies)
+        except Exception as exc:  # the session closing
+            self.log.debug("no arena list: %s", exc)
+            return False
 
     def _pseudonym(self, user: str, a: Assignment, pseudonym: str) -> OkReply:
         if pseudonym and not re.match(PSEUDONYM_PATTERN, pseudonym):
@@ -356,6 +391,7 @@ class GraderService(Service):
                         score=round(score, 4),
                         submission=sub,
                         at=at,
+                        real=self.store.real_score(sub) if a.real_arena else None,
                     )
                 )
         return Leaderboard(
@@ -405,6 +441,25 @@ class GraderService(Service):
             self.log.warning("submission %s: the lab failed: %s", sub.id, graded.lab_failed)
             self._changed(sub, "failed", a.course)
             return
+        if graded.grader_failed:
+            self.store.finish(
+                sub.id,
+                graded.episodes,
+                status="failed",
+                counted=False,
+                mean=None,
+                low=None,
+                penalty=0.0,
+                message=f"{GRADER_FAILED}{graded.grader_failed}"[:200]
+                + ": not counted against your quota; your teacher is told",
+            )
+            self.log.warning(
+                "submission %s: the teacher's grader of %s failed: %s",
+                sub.id,
+                a.name,
+                graded.grader_failed,
+            )
+            return
         late = self.store.submissions(sub.assignment, sub.user, sub.id)[0].late_days
         taken = late * a.penalty_per_day
         # Stored as what comes off the mean: an addition when lower is better.
@@ -424,6 +479,17 @@ class GraderService(Service):
             message=message,
         )
         self.log.info("submission %s of %s graded: %s", sub.id, sub.user, message)
+        if a.real_arena:
+            passed = all(e.cause in ("ok", "finished") for e in graded.episodes)
+            if passed or a.real_after == "always":
+                self.store.set_message(
+                    sub.id, f"{message}; its real-robot attempt is queued on {a.real_arena}"
+                )
+                self._reals.put(sub)
+            else:
+                self.store.set_message(
+                    sub.id, f"{message}; no real-robot attempt: an episode did not pass"
+                )
         self._changed(sub, "graded", a.course)
         self._announce(sub, a, (graded.mean or 0.0) - penalty)
 
@@ -447,3 +513,23 @@ class GraderService(Service):
             self.session.put(key, self.login.session.seal(key, graded))
         except Exception as exc:  # a closing session, a lapsed login: the score is kept
             self.log.warning("could not announce submission %s as graded: %s", sub.id, exc)
+
+    def _work_real(self) -> None:
+        while True:
+            sub = self._reals.get()
+            if sub is None:
+                return
+            try:
+                a, map_text = self.store.assignment(sub.assignment)
+                result = self.real.run(sub, a, map_text)
+                before = self.store.submissions(sub.assignment, sub.user, sub.id)[0].message
+                head = before.split("; its real-robot attempt", 1)[0]
+                if result.score is not None:
+                    said = f"real-robot attempt: {a.score_name} {result.score:g}"
+                else:
+                    said = f"real-robot attempt: {result.cause}: {result.detail}"
+                self.store.add_real(sub.id, result, f"{head}; {said}")
+                self._changed(sub, "graded", a.course)  # the pages read the real row now
+                self.log.info("real attempt of %s: %s %s", sub.id, result.cause, result.detail)
+            except Exception:
+                self.log.exception("the real attempt of %s failed", sub.id)

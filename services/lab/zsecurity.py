@@ -186,7 +186,14 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
     # have no network at all; they talk to it over a pipe.
     "runner": (
         *_SERVICE_BASE,
-        _g("serve", W(keys.runner_run), W(keys.runner_dryrun), W(keys.runner_episode)),
+        _g(
+            "serve",
+            W(keys.runner_run),
+            W(keys.runner_dryrun),
+            W(keys.runner_episode),
+            W(keys.runner_heat),  # a competition's heat of several entries
+            W(keys.runner_grade),  # a teacher's grader function on a real attempt's data
+        ),
         _g("pub", W(keys.agent_cmd), W(keys.world_commands), W(keys.ctx_output)),
         _g("sub", W(keys.agent_sensors), W(keys.world_samples), W(keys.agent_lease)),
         _g("token", W(keys.agent_watch)),
@@ -202,7 +209,7 @@ ROLE_GRANTS: dict[str, tuple[Grant, ...]] = {
         _g("pub", W(keys.grader_standings)),  # a competition's standings as heats end
         _g("pub", W(keys.grader_changed)),  # a submission queued, grading, graded, failed
         _g("pub", W(keys.grader_graded)),  # each graded submission (the LTI tool's passback)
-        _g("ask", W(keys.runner_episode)),
+        _g("ask", W(keys.runner_episode), W(keys.runner_heat), W(keys.runner_grade)),
         _g("token", W(keys.alive, kind=AliveKind.GRADER)),
     ),
     # The LTI tool faces browsers and LMSs: it asks the registry for launched users'

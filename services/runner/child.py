@@ -8,6 +8,12 @@ common/controller/pipe.py. The student's prints and tracebacks go to
 stdout/stderr, which the parent shows as the controller's output.
 
     python3 -I -S child.py CMD_FD CONTROLLER_FILE [lockstep | hang=SECONDS]
+    python3 -I -S child.py CMD_FD GRADER_FILE grade hang=SECONDS
+
+``grade`` (a teacher's grader, docs/COURSES.md): the file is not a controller
+but defines ``grade(episode)``; it is called once with the episode's data
+(``episode.json`` beside the file) and its dict goes back as ``pipe.Metrics``.
+A grade() still running after ``hang`` seconds is told where it was (``pipe.Hung``).
 
 ``lockstep`` (a dry run): no clock of its own. Each state the parent sends
 is one tick of a private simulated world; the controller's ``do_work`` runs
@@ -37,6 +43,7 @@ def main() -> int:
     cmd_fd = int(sys.argv[1])
     path = sys.argv[2]
     lockstep = sys.argv[3:] == ["lockstep"]
+    grading = "grade" in sys.argv[3:]
     hang_after = 0.0
     for arg in sys.argv[3:]:
         if arg.startswith("hang="):
@@ -70,6 +77,8 @@ def main() -> int:
         def send(self, command: RobotCommand) -> None:
             tell(pipe.Command(command))
 
+    if grading:
+        return run_grader(path, tell, hang_after)
     link = PipeLink()
     if lockstep:
         return run_lockstep(path, link, tell)
@@ -211,6 +220,40 @@ def run_lockstep(path: str, link: Any, tell: Callable[[Any], None]) -> int:
         tell(pipe.Failed(traceback.format_exc(limit=5)))
         return 4
     tell(pipe.Done(steps))
+    return 0
+
+
+def run_grader(path: str, tell: Callable[[Any], None], hang_after: float) -> int:
+    """Load the teacher's file, call its grade() once on the episode, send what it returned."""
+    import json
+
+    from common.controller import pipe
+
+    try:
+        with open(os.path.join(os.path.dirname(path), "episode.json"), encoding="utf-8") as f:
+            episode = json.load(f)
+        namespace: dict[str, Any] = {"__name__": "grader", "__file__": path}
+        with open(path, encoding="utf-8") as f:
+            code = compile(f.read(), path, "exec")
+        exec(code, namespace)  # the teacher's file, in the sandbox like a student's
+        grade = namespace.get("grade")
+        if not callable(grade):
+            raise TypeError("the grader file defines no grade(episode) function")
+        watch = HangWatch(path, threading.get_ident(), tell)
+        if hang_after > 0:
+            threading.Thread(target=watch.watchdog, args=(hang_after,), daemon=True).start()
+        watch.since = time.monotonic()
+        result = grade(episode)
+        watch.since = None
+        values = pipe.check_metrics(result)
+    except pipe.PipeError as exc:  # what it returned is wrong, not where: no traceback
+        tell(pipe.Failed(str(exc)))
+        return 4
+    except BaseException:
+        tell(pipe.Failed(traceback.format_exc(limit=5)))
+        return 4
+    tell(pipe.Metrics(values))
+    tell(pipe.Done(1))
     return 0
 
 

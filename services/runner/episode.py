@@ -34,10 +34,12 @@ from common.sim2d.entities import Zone
 from common.sim2d.world import EditError, World
 from services.engine import packing
 from services.runner.dryrun import _error_line, _last_line
+from services.runner.grader_run import GraderOutcome, episode_data, run_grader
 from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import Sandbox, SandboxLimits
 
 MAX_OUTPUT = 20
+MAX_CONTACTS = 1000  # a grader's contact list (collisions still counts them all)
 DELIVERY_EVERY_S = 0.1  # objects in nests are looked at this often (simulated s)
 
 
@@ -143,6 +145,11 @@ def run_episode(
     trace_every = max(1, round(TRACE_EVERY_S / world.tick_s))
     frames: list[TraceFrame] = []
     snapshot: WorldSnapshot | None = None
+    grading = request.grader is not None
+    samples: list[list[float]] = []  # a grader's poses and IR readings (grader_run.py)
+    contacts: list[list[object]] = []
+    if grading:
+        samples.append(_sample(world, slot, 0.0))
     if request.trace:
         trace.append((0.0, float(last[0]), float(last[1]), float(world.agent_pose[slot][2])))
         snapshot = packing.snapshot(world)
@@ -155,8 +162,10 @@ def run_episode(
                     apply_command(command, robot)
             world.step()
             at = round(world.sim_time - t0, 3)
-            for what, _ident in touches.new_contacts():
+            for what, ident in touches.new_contacts():
                 collisions[what] = collisions.get(what, 0) + 1
+                if grading and len(contacts) < MAX_CONTACTS:
+                    contacts.append([at, what, ident])
             x, y = (float(v) for v in world.agent_pose[slot][:2])
             distance += math.hypot(x - last[0], y - last[1])
             last = (x, y)
@@ -169,6 +178,8 @@ def run_episode(
                 heading = round(float(world.agent_pose[slot][2]), 4)
                 trace.append((at, round(x, 2), round(y, 2), heading))
                 frames.append((at, _rows(world)))
+            if grading and (tick + 1) % trace_every == 0:
+                samples.append(_sample(world, slot, at))
     finally:
         run.stop("the episode ended")
     steps, timed_out, output = run.steps, run.timed_out, run.output
@@ -180,6 +191,30 @@ def run_episode(
     else:
         cause, detail = _cause(sandbox, timed_out, finished_early=True)
     error = sandbox.error_text
+    graded = GraderOutcome({})
+    if request.grader is not None:
+        zones = {z.id: {"kind": z.kind, "x": z.x, "y": z.y} for z in world.zones.values()}
+        data = episode_data(
+            robot=request.agent,
+            seed=request.seed,
+            time_limit=request.seconds,
+            cause=cause,
+            sim_seconds=round(sim, 3),
+            distance_mm=round(distance, 1),
+            samples=samples,
+            contacts=contacts,
+            reached=reached,
+            delivered=delivered,
+            collisions=collisions,
+            zones=zones,
+        )
+        graded = run_grader(
+            request.grader,
+            request.grader_filename,
+            data,
+            seconds=request.grader_seconds,
+            limits=limits,
+        )
     return EpisodeReport(
         cause=cause,  # type: ignore[arg-type]
         detail=detail[:256],
@@ -195,7 +230,17 @@ def run_episode(
         trace=trace,
         snapshot=snapshot,
         frames=frames,
+        grader_metrics=graded.metrics,
+        grader_error=graded.error[:256],
+        grader_line=graded.line,
     )
+
+
+def _sample(world: World, slot: int, at: float) -> list[float]:
+    """t, x, y, heading and the proximity readings of the robot now (a grader's input)."""
+    x, y, heading = (float(v) for v in world.agent_pose[slot][:3])
+    ir = [int(v) for v in world.proximity[slot].tolist()[:8]]
+    return [at, round(x, 2), round(y, 2), round(heading, 4), *ir]
 
 
 def _deliveries(world: World, nests: list[Zone], delivered: dict[str, float], at: float) -> None:

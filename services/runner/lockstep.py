@@ -68,6 +68,7 @@ class Lockstep:
         self.output: list[str] = []
         self.steps = 0
         self.timed_out = False
+        self.ready: float | None = None  # when the child had loaded the controller
         self._commands: list[RobotCommand] = []
         self._lock = threading.Lock()
         self._answered = threading.Event()
@@ -86,6 +87,8 @@ class Lockstep:
             self._commands.append(command)
 
     def _on_output(self, line: str) -> None:
+        if self.ready is None and line.startswith("[runner] controller "):
+            self.ready = time.monotonic()  # loaded (the sandbox says so on its Ready)
         with self._lock:
             if len(self.output) < self._max_output and not line.startswith("[runner] controller"):
                 self.output.append(line[: self._max_line])
@@ -109,6 +112,38 @@ class Lockstep:
             with self._lock:
                 mine, self._commands = self._commands, []
             yield mine
+
+    # -- one tick at a time, for a caller stepping several controllers in one world (heat.py)
+
+    def offer(self) -> bool:
+        """Send this tick's state; False if the child is gone."""
+        self._answered.clear()
+        return self.sandbox.send_state(state_of(self.world, self.slot))
+
+    def answer(self, deadline: float, tick_limit: float | None = None) -> bool:
+        """Wait for the child's answer to the state offered; False if it exited or the wall
+        clock ran out (``timed_out``) first: ``deadline``, or ``tick_limit`` s of waiting
+        once the controller has loaded. Its commands are then :meth:`take`'s."""
+        began = time.monotonic()
+        while not self._answered.wait(0.05):
+            now = time.monotonic()
+            loaded = self.ready
+            if tick_limit is not None and loaded is not None:
+                late = now - max(began, loaded) >= tick_limit
+            else:
+                late = False
+            if now >= deadline or late:
+                self.timed_out = True
+                return False
+            if self.sandbox.wait(0):
+                return False
+        self.steps += 1
+        return True
+
+    def take(self) -> list[RobotCommand]:
+        with self._lock:
+            mine, self._commands = self._commands, []
+        return mine
 
     def stop(self, reason: str) -> None:
         self.sandbox.stop(grace=0.3, reason=reason)

@@ -108,10 +108,14 @@ class Sandbox:
         on_output: Callable[[str], None],
         on_exit: Callable[[str], None] = lambda reason: None,
         on_step: Callable[[], None] | None = None,
+        grade_input: bytes | None = None,
     ) -> None:
         """``on_step``: a dry run (the child in lockstep, services/runner/dryrun.py); it is
-        called each time the child has answered one state."""
-        self.controller_name = precheck(source, filename)
+        called each time the child has answered one state. ``grade_input``: the source is a
+        teacher's grader, run once on this episode data (services/runner/grader_run.py)."""
+        self.grade_input = grade_input
+        self.metrics: dict[str, float] | None = None  # what a grader's grade() returned
+        self.controller_name = filename if grade_input is not None else precheck(source, filename)
         self.filename = filename
         problem = sandbox_problem()
         if problem:
@@ -150,7 +154,7 @@ class Sandbox:
     # -- start
 
     def _stage_files(self) -> Path:
-        return stage_files(self.source, self.limits)
+        return stage_files(self.source, self.limits, self.grade_input)
 
     def command_line(self, stage: Path, cmd_fd: int, seccomp_fd: int) -> list[str]:
         lim = self.limits
@@ -240,7 +244,9 @@ class Sandbox:
             str(cmd_fd),
             "/ctl/user/controller.py",
         ]
-        if self.on_step is not None:
+        if self.grade_input is not None:
+            argv += ["grade", f"hang={lim.hang_seconds:g}"]
+        elif self.on_step is not None:
             argv.append("lockstep")
         elif lim.hang_seconds > 0:
             argv.append(f"hang={lim.hang_seconds:g}")
@@ -278,7 +284,8 @@ class Sandbox:
         self._kill_timer = threading.Timer(slot_seconds, self._slot_over)
         self._kill_timer.daemon = True
         self._kill_timer.start()
-        if self.on_step is None and slot_seconds > PROBE_AHEAD_S + pipe.HUNG_AFTER_S:
+        probe = self.on_step is None and self.grade_input is None
+        if probe and slot_seconds > PROBE_AHEAD_S + pipe.HUNG_AFTER_S:
             self._probe_timer = threading.Timer(slot_seconds - PROBE_AHEAD_S, self._probe)
             self._probe_timer.daemon = True
             self._probe_timer.start()
@@ -369,9 +376,12 @@ class Sandbox:
             for line in text.splitlines():
                 self._say(line)
         elif isinstance(message, pipe.Hung):
-            reason = pipe.hung_reason(message, self.filename)
+            what = "grade()" if self.grade_input is not None else "do_work"
+            reason = pipe.hung_reason(message, self.filename, what)
             log.info("controller %s: %s", self.controller_name, reason)
             self._end_now(reason)
+        elif isinstance(message, pipe.Metrics):
+            self.metrics = message.values
         elif isinstance(message, pipe.Done):
             self._exit_reason = self._stop_reason or "the controller finished"
 

@@ -38,6 +38,7 @@ Token: ``alive/runner/<name>``.
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -56,6 +57,10 @@ from common.messages import (
     Episode,
     EpisodeReport,
     ErrorReply,
+    GradeData,
+    GradeResult,
+    Heat,
+    HeatReport,
     Message,
     MessageError,
     OkReply,
@@ -73,6 +78,8 @@ from common.sim2d.maps import MapError
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.runner.dryrun import dry_run
 from services.runner.episode import run_episode
+from services.runner.grader_run import run_grader
+from services.runner.heat import run_heat
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
 
 log = logging.getLogger("wart.runner")
@@ -262,6 +269,8 @@ class RunnerService(Service):
             workers=EPISODE_WORKERS,
             max_waiting=EPISODE_WAITING,
         )
+        self.serve(keys.runner_grade(self.realm, self.ident), self._on_grade, workers=1)
+        self.serve(keys.runner_heat(self.realm, self.ident), self._on_heat, workers=1)
 
     def on_stop(self, timeout: float) -> None:
         with self._lock:
@@ -367,6 +376,53 @@ class RunnerService(Service):
             report.wall_seconds,
         )
         return report
+
+    def _on_heat(self, query: zenoh.Query) -> Message:
+        """A competition's heat: several entries in one world (services/runner/heat.py)."""
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, Heat)
+        principal.require("lease", "ask a runner for a competition's heat")
+        for e in request.entries:
+            try:
+                precheck(e.source, e.filename)
+            except PrecheckError as exc:
+                raise RequestError("bad_request", f"{e.submission}: {exc}") from None
+        try:
+            report = run_heat(request, limits=self.limits)
+        except (ValueError, MapError) as exc:
+            raise RequestError("bad_request", str(exc)) from None
+        except (RuntimeError, OSError) as exc:
+            lab = EpisodeReport(cause="lab", detail=f"the sandbox could not start: {exc}"[:256])
+            return HeatReport(entries=[lab] * len(request.entries))
+        self.log.info(
+            "heat %d of %s: %s",
+            request.heat,
+            request.competition,
+            ", ".join(
+                f"{e.submission} {r.cause}"
+                for e, r in zip(request.entries, report.entries, strict=True)
+            ),
+        )
+        return report
+
+    def _on_grade(self, query: zenoh.Query) -> Message:
+        """A teacher's grader function on a real attempt's data, in the sandbox."""
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, GradeData)
+        principal.require("lease", "ask a runner to run a grader function")
+        try:
+            data = json.loads(request.episode)
+        except ValueError as exc:
+            raise RequestError("bad_request", f"the episode's data is not JSON: {exc}") from None
+        try:
+            out = run_grader(
+                request.grader,
+                request.grader_filename,
+                data,
+                seconds=request.grader_seconds,
+                limits=self.limits,
+            )
+        except (RuntimeError, OSError) as exc:
+            raise RequestError("unavailable", f"the sandbox could not start: {exc}") from None
+        return GradeResult(metrics=out.metrics, error=out.error[:256], line=out.line)
 
     def _on_episode(self, query: zenoh.Query) -> Message:
         principal, request = self.verifier.open(str(query.key_expr), query.payload, Episode)

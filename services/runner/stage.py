@@ -73,8 +73,9 @@ def meminfo_text(limits: SandboxLimits) -> str:
     return "".join(f"{name + ':':<16}{kb:>8} kB\n" for name, kb in fields)
 
 
-def stage_files(source: bytes, limits: SandboxLimits) -> Path:
-    """A new stage for one run (the caller removes it when the run is over)."""
+def stage_files(source: bytes, limits: SandboxLimits, episode: bytes | None = None) -> Path:
+    """A new stage for one run (the caller removes it when the run is over); ``episode``:
+    a teacher's grader's input, user/episode.json."""
     stage = Path(tempfile.mkdtemp(prefix="wart-sandbox-"))
     (stage / "lib" / "common").mkdir(parents=True)
     (stage / "user").mkdir()
@@ -86,6 +87,8 @@ def stage_files(source: bytes, limits: SandboxLimits) -> Path:
     )
     (stage / "lib" / "common" / "__init__.py").write_text("")
     (stage / "user" / "controller.py").write_bytes(source)
+    if episode is not None:
+        (stage / "user" / "episode.json").write_bytes(episode)
     (stage / MEMINFO).write_text(meminfo_text(limits))
     for path in [stage, *stage.rglob("*")]:
         path.chmod(0o755 if path.is_dir() else 0o644)

@@ -10,6 +10,7 @@ the recordings are and each is a readable MCAP of the heat's run.
 
 from __future__ import annotations
 
+import json
 import queue
 import subprocess
 import sys
@@ -27,7 +28,7 @@ from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router
 from tests.integration.agentkit import start_runner, together
-from tests.integration.test_grading import COURSE, add_assignment, source
+from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab, wart_env
 
 pytestmark = [
@@ -158,3 +159,46 @@ def test_a_competition_of_two_teams_and_a_solo_student(lab: ProcessLab, tmp_path
 
     with lab.client("ida") as client, pytest.raises(LabError, match="exists already"):
         GraderClient(client).run_competition("reach-goal", "final")
+
+    # Heats of several entries: red and blue in one world at once, each on its own robot,
+    # driving at each other. A heat bigger than the map's robots is refused.
+    duel = json.loads((REPO / "maps" / "empty.json").read_text())
+    duel["agents"].append({"id": "k2", "type": "khepera", "x": 800, "y": 200})
+    (tmp_path / "duel.json").write_text(json.dumps(duel))
+    toml = tmp_path / "duel.toml"
+    toml.write_text(
+        assignment_toml("duel", map='"duel.json"', episodes="1", seeds="[3]", time_limit="2.0")
+        + "\n[[start]]\nx = 600\ny = 500\nheading_deg = 180\n"
+    )
+    added = wart("course", "--db", str(lab.db_path), "assignment", "add", str(toml))
+    assert added.returncode == 0, added.stderr
+    for user in ("alice", "bob"):
+        with lab.client(user) as client:
+            grader = GraderClient(client)
+            sub = grader.submit("duel", source("works"), "works.py").submission
+            assert grader.wait_graded("duel", sub, 180).status == "graded"
+    three = wart(*run, "duel", "--per-heat", "3", "--user", "ida", "--password-file", str(pw), *net)
+    assert three.returncode == 1
+    assert "the map duel.json has 2 robot(s) (k1, k2): a heat holds at most 2" in three.stderr
+    done = wart(
+        *run, "duel", "--name", "pairs", "--per-heat", "2", "--wait", "300", "--user", "ida",
+        "--password-file", str(pw), *net,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    with lab.client("carol") as client:
+        pairs = GraderClient(client).standings("pairs")
+    assert pairs.status == "finished" and pairs.heats == 1
+    by_team = {e.team: e for e in pairs.entries}
+    assert by_team["red"].heat == by_team["blue"].heat == 1
+    # Places in the teams' name order: blue on the assignment's robot, red on the other.
+    assert by_team["blue"].detail.startswith("on k1: ran its 2 simulated s")
+    assert by_team["red"].detail.startswith("on k2: ran its 2 simulated s")
+    for e in pairs.entries:  # they met: a robot collision counted for each
+        assert "collision(s) with another robot" in e.detail, e.detail
+    assert by_team["red"].recording == by_team["blue"].recording  # one heat, one recording
+    heat = read_recording(by_team["red"].recording)
+    assert heat.snapshot is not None and {"k1", "k2"} <= set(heat.snapshot.rows)
+    assert {p.record.frame_id for p in heat.poses} == {"arena"} and len(heat.poses) > 20
+    replay = Timeline(heat)
+    k2 = replay.at(0.0).frame.rows.index("k2")
+    assert replay.at(replay.duration).frame.x[k2] < replay.at(0.0).frame.x[k2]  # it drove

@@ -59,13 +59,14 @@ def format_submissions(subs: list[SubmissionInfo]) -> str:
     lines = ["| submitted | status | mean | episodes |", "| --- | --- | --- | --- |"]
     for s in subs[-MAX_SHOWN:][::-1]:
         episodes = "; ".join(
-            f"{e.episode}: {_num(e.score)} ({escape_md(e.cause)}"
+            f"{'real' if e.real else e.episode}: {_num(e.score)} ({escape_md(e.cause)}"
             + (f", line {e.error_line}" if e.error_line else "")
             + (f", lab re-run {e.lab_reruns}x free" if e.lab_reruns else "")
             + ")"
             for e in s.episodes
         )
-        status = s.status if s.status != "failed" else "failed (the lab's; not counted)"
+        whose = "the teacher's grader" if s.message.startswith("the teacher's") else "the lab's"
+        status = s.status if s.status != "failed" else f"failed ({whose}; not counted)"
         when = time.strftime("%H:%M:%S", time.localtime(s.submitted_at))
         lines.append(f"| {when} | {status} | {_num(s.mean)} | {episodes or '-'} |")
     return "\n".join(lines)
@@ -76,9 +77,9 @@ def format_board(board: Leaderboard) -> str:
         return f"_Hidden until the deadline, {_when(board.deadline)}._"
     if not board.entries:
         return "_No graded submission yet._"
-    lines = ["| rank | name | score |", "| --- | --- | --- |"]
+    lines = ["| rank | name | score | real |", "| --- | --- | --- | --- |"]
     for e in board.entries[:50]:
-        lines.append(f"| {e.rank} | {escape_md(e.name)} | {e.score:g} |")
+        lines.append(f"| {e.rank} | {escape_md(e.name)} | {e.score:g} | {_num(e.real)} |")
     return "\n".join(lines)
 
 

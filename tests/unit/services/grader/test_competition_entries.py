@@ -75,8 +75,9 @@ def test_no_entries_and_several_per_heat_are_refused(tmp_path: Path) -> None:
     runs = Competitions(store, cast(Any, None), tmp_path, lambda st: None)
     with pytest.raises(CompetitionError, match="no entries: no team of robotics-26 has a graded"):
         runs.start("final", assignment(), "{}", "latest", 1)
-    with pytest.raises(CompetitionError, match="heats of one entry only"):
-        runs.start("final", assignment(), "{}", "latest", 2)
+    a, map_text = parse_assignment(GOOD, "a.toml", MAPS)
+    with pytest.raises(CompetitionError, match=r"has 1 robot\(s\) \(k1\): a heat holds at most 1"):
+        runs.start("final", a, map_text, "latest", 2)
     assert not (tmp_path / "final").exists()  # nothing half-written
 
 

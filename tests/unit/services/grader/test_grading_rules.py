@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
 
+from common.controller.pipe import PipeError, check_metrics
 from common.messages import EpisodeReport
 from services.grader.assignment import AssignmentError, parse_assignment
 from services.grader.fair_queue import FairQueue
-from services.grader.score import RuleError, metrics, parse_rule
+from services.grader.score import MissingMetric, RuleError, metrics, parse_rule
 
 MAPS = Path(__file__).resolve().parents[4] / "maps"
 GOOD = b"""
@@ -115,3 +117,50 @@ def test_the_queue_takes_students_in_turn() -> None:
     order = [q.get(0)[1] for _ in range(5)]  # type: ignore[index]
     assert order == ["lab-rerun", "g0", "a0", "b0", "g1"]
     assert len(q) == 8
+
+
+def test_a_rule_reads_the_graders_metrics_and_a_missing_one_is_the_teachers() -> None:
+    rule = parse_rule('100 * reached("goal") - metric("wobble")')
+    assert rule.metrics == {"wobble"}
+    graded = report(reached={"goal": 1.0}, grader_metrics={"wobble": 2.5})
+    assert rule.evaluate(graded, 10.0) == pytest.approx(97.5)
+    assert metrics(graded, [], 10.0)["wobble"] == 2.5  # shown beside ours
+    with pytest.raises(MissingMetric, match=r"grade\(\) returned no metric 'wobble'"):
+        rule.evaluate(report(grader_metrics={"wobbel": 1.0}), 10.0)
+    with pytest.raises(RuleError, match=r"metric\(\) takes a quoted name"):
+        parse_rule("metric(3)")
+
+
+def test_a_grader_file_is_checked_at_add(tmp_path: Path) -> None:
+    text = GOOD.replace(b"quota = 10", b'quota = 10\ngrader = "g.py"\ngrader_time_limit = 5')
+    (tmp_path / "g.py").write_text("import math\n\ndef grade(episode):\n    return {}\n")
+    a, _ = parse_assignment(text, "a.toml", MAPS, base=tmp_path)
+    assert (a.grader_file, a.grader_seconds) == ("g.py", 5.0)
+    assert "def grade(episode)" in a.grader_source  # stored with the assignment
+    assert type(a).from_json(a.to_json()) == a
+    (tmp_path / "g.py").write_text("def grade():\n    return {}\n")
+    with pytest.raises(AssignmentError, match=r"g.py, line 1: grade\(\) takes the episode"):
+        parse_assignment(text, "a.toml", MAPS, base=tmp_path)
+    (tmp_path / "g.py").write_bytes(b"\xff")
+    with pytest.raises(AssignmentError, match=r"g\.py is not UTF-8 text"):
+        parse_assignment(text, "a.toml", MAPS, base=tmp_path)
+    escape = GOOD.replace(b"quota = 10", b'quota = 10\ngrader = "../g.py"')
+    with pytest.raises(AssignmentError, match="grader: a Python file beside the assignment"):
+        parse_assignment(escape, "a.toml", MAPS, base=tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("value", "problem"),
+    [
+        ([1], "grade() returned list, not a dict of names to numbers"),
+        ({"a b": 1}, "grade() returned a metric named 'a b'"),
+        ({"x": "1"}, "grade() returned x=str, not a number"),
+        ({"x": float("nan")}, "grade() returned x=nan, not a finite number"),
+        ({"x": 10**400}, "not a finite number"),
+        ({f"m{i}": i for i in range(33)}, "grade() returned 33 metrics; at most 32"),
+    ],
+)
+def test_what_a_grader_returns_is_checked(value: object, problem: str) -> None:
+    with pytest.raises(PipeError, match=re.escape(problem)):
+        check_metrics(value)
+    assert check_metrics({"wobble": 1, "ir.peak-2": 3.5}) == {"wobble": 1.0, "ir.peak-2": 3.5}

@@ -1,0 +1,3 @@
+def grade(episode):
+    while True:
+        print("x" * 900)

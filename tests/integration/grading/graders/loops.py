@@ -1,0 +1,4 @@
+def grade(episode):
+    n = 0
+    while True:
+        n += 1

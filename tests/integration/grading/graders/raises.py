@@ -1,0 +1,3 @@
+def grade(episode):
+    poses = episode["poses"]
+    return {"wobble": 1 / (len(poses) - len(poses))}
