@@ -14,6 +14,7 @@ import pytest
 from tests.browser.conftest import ViserPage, join_demo_arena, wait_until
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
+from viewers.web.inputs import set_value
 from viewers.web.workbench import Workbench
 
 pytestmark = pytest.mark.browser
@@ -151,6 +152,15 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
         )
 
     wait_until(lambda: cursor_line() == 11, what="the cursor on line 11")
+
+    # The server's copy of the text arriving late and a little different (a busy page)
+    # changes only what differs: the cursor stays on line 11 (it went to line 1).
+    text = bench.code.value
+    set_value(bench.code, text.rstrip("\n") + "\n# kept by the server\n")
+    wait_until(lambda: "# kept by the server" in box.inner_text(), what="the server's text")
+    assert cursor_line() == 11
+    set_value(bench.code, text)
+    wait_until(lambda: "# kept by the server" not in box.inner_text(), what="the text back")
 
     # Ctrl-S saves under the file name: the lab keeps it, the list shows it.
     page.p.keyboard.press("Control+s")

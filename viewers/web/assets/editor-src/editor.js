@@ -223,6 +223,21 @@ function mount(host) {
   if (focused) { view.focus(); entry.focused = true; }
 }
 
+// The one span where two texts differ. Replacing only it keeps the cursor and the
+// scroll where they are when the server's copy comes back late and differs from the
+// editor's in a line or two (a whole-text replace put the cursor on line 1).
+function smallestChange(doc, value) {
+  const most = Math.min(doc.length, value.length);
+  let head = 0;
+  while (head < most && doc.charCodeAt(head) === value.charCodeAt(head)) head++;
+  let tail = 0;
+  while (
+    tail < most - head &&
+    doc.charCodeAt(doc.length - 1 - tail) === value.charCodeAt(value.length - 1 - tail)
+  ) tail++;
+  return { from: head, to: doc.length - tail, insert: value.slice(head, value.length - tail) };
+}
+
 function poll() {
   document.querySelectorAll("div.wart-editor[data-for]").forEach(mount);
   for (const [id, entry] of views) {
@@ -239,9 +254,7 @@ function poll() {
       for (const t of entry.resend || []) clearTimeout(t); // never send older text over it
       entry.written = value;
       const doc = entry.view.state.doc.toString();
-      if (doc !== value) {
-        entry.view.dispatch({ changes: { from: 0, to: doc.length, insert: value } });
-      }
+      if (doc !== value) entry.view.dispatch({ changes: smallestChange(doc, value) });
     }
     const holder = document.querySelector(`div.wart-problems[data-for="${CSS.escape(id)}"]`);
     const json = holder ? holder.dataset.problems || "[]" : "[]";
