@@ -74,6 +74,7 @@ from services.grader.real_attempt import RealAttempt
 from services.registry.accounts_db import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
+GRADER_TRIES = 3  # the grader's own failures on one submission before it is failed, not counted
 TEACHERS = frozenset({"teacher"})
 GRADER_FAILED = "the teacher's grader failed: "  # a submission's message (wart course finds it)
 
@@ -142,6 +143,7 @@ class GraderService(Service):
         )
         self._reals: queue.Queue[Pending | None] = queue.Queue()
         self._submit_lock = threading.Lock()  # quota checked and submission written as one
+        self._grader_failures: dict[str, int] = {}  # submission -> the grader's failed tries
 
     def on_start(self) -> None:
         for sub in self.store.pending():
@@ -414,10 +416,39 @@ class GraderService(Service):
             _user, sub = item
             try:
                 self._grade(sub)
-            except Exception:
-                self.log.exception("grading %s failed", sub.id)
-                self.store.set_status(sub.id, "queued", "the grader failed: queued again")
-                self._changed(sub, "queued")
+                self._grader_failures.pop(sub.id, None)
+            except Exception as exc:
+                self._grader_failed(sub, exc)
+
+    def _grader_failed(self, sub: Pending, exc: Exception) -> None:
+        """The grader's own fault: queued again at the head, and given up after a few tries.
+
+        Left "queued" without a place in the queue it waited for the grader's next
+        start; one that fails every time (a broken assignment row) must not loop.
+        """
+        tries = self._grader_failures.get(sub.id, 0) + 1
+        self._grader_failures[sub.id] = tries
+        self.log.error(
+            "grading %s failed (try %d of %d)", sub.id, tries, GRADER_TRIES, exc_info=exc
+        )
+        if tries < GRADER_TRIES:
+            self.store.set_status(sub.id, "queued", "the grader failed: queued again")
+            self.queue.put_first(sub.user, sub)
+            self._changed(sub, "queued")
+            return
+        self._grader_failures.pop(sub.id, None)
+        self.store.finish(
+            sub.id,
+            [],
+            status="failed",
+            counted=False,
+            mean=None,
+            low=None,
+            penalty=0.0,
+            message=f"the lab could not grade it (the grader failed {tries} times: {exc}): "
+            "not counted against your quota; submit again",
+        )
+        self._changed(sub, "failed")
 
     def _grade(self, sub: Pending) -> None:
         a, map_text = self.store.assignment(sub.assignment)
