@@ -13,12 +13,14 @@ than 15 s to arrive is dropped.
 
 from __future__ import annotations
 
+import contextlib
 import html
 import json
 import logging
 import threading
 from collections.abc import Callable
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 from services.lti.launch import Launch, Launcher, LaunchError
@@ -28,11 +30,40 @@ log = logging.getLogger("wart.lti")
 MAX_BODY = 64 * 1024
 
 
+MAX_IN_FLIGHT = 64  # connections served at once; beyond, a 503 at once
+
+
 class _Server(ThreadingHTTPServer):
     # A class clicks the link at once: the standard library's backlog of 5 connections
     # made the 6th wait for the kernel's SYN retry (1 s, 3 s, 7 s: bench/bench_lti.py).
     request_queue_size = 128
     daemon_threads = True
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        # One thread per connection, and a slow client holds its thread (15 s a read):
+        # a flood of idle connections must not grow threads without bound.
+        self._slots = threading.BoundedSemaphore(MAX_IN_FLIGHT)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        if not self._slots.acquire(blocking=False):
+            log.warning(
+                "busy: %d connections at once; %s refused", MAX_IN_FLIGHT, client_address[0]
+            )
+            with contextlib.suppress(OSError):
+                request.sendall(
+                    b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\n"
+                    b"Content-Length: 0\r\nConnection: close\r\n\r\n"
+                )
+            self.shutdown_request(request)
+            return
+        super().process_request(request, client_address)
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
 
 
 class Landing:

@@ -1,0 +1,46 @@
+"""A flood of idle connections gets the tool's 503, not a thread each; it serves again after."""
+
+from __future__ import annotations
+
+import socket
+import time
+import urllib.error
+import urllib.request
+from typing import Any
+
+import pytest
+
+from services.lti import web
+
+
+def test_idle_connections_beyond_the_cap_are_refused_and_service_resumes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(web, "MAX_IN_FLIGHT", 2)
+    launcher: Any = object()  # the JWKS path asks nothing of it
+    server = web.ToolServer("127.0.0.1", 0, launcher, lambda launch: None, {"keys": []})  # type: ignore[arg-type,return-value]
+    server.start()
+    idle = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(2)]
+    try:
+        with socket.create_connection(("127.0.0.1", server.port), timeout=5) as third:
+            third.sendall(b"GET /lti/jwks HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert third.recv(200).startswith(b"HTTP/1.1 503 Service Unavailable")
+    finally:
+        for s in idle:
+            s.close()
+
+    def jwks() -> bytes:
+        with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/lti/jwks", timeout=5) as r:
+            return bytes(r.read())
+
+    # The idle ones gone, their slots come back (the server sees them close at its next read).
+    for _ in range(100):
+        try:
+            assert jwks() == b'{"keys": []}'
+            break
+        except urllib.error.HTTPError as exc:
+            assert exc.code == 503
+            time.sleep(0.05)
+    else:
+        raise AssertionError("the tool never served again after the idle connections closed")
+    server.stop(5)
