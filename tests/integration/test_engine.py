@@ -6,8 +6,12 @@ import json
 import shutil
 import threading
 import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import zenoh
@@ -35,13 +39,16 @@ from common.messages import (
     decode,
     encode,
 )
+from common.service import close_session, open_session
 from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from tests.lab import start_router
 from viewers.web.live_world import WorldWatch
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's router and shared engine once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine")]
 WORLD = "w1"
 
 
@@ -65,20 +72,80 @@ class Latest:
             return self.value
 
 
+@pytest.fixture(scope="module")
+def router_process(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Router]:
+    """One ``wart router`` for the module: it routes any realm, and every test has its own."""
+    procs = Procs(tmp_path_factory.mktemp("router"))
+    router = start_router(procs, f"t{uuid.uuid4().hex[:10]}")
+    yield router
+    procs.stop_all()
+
+
+@pytest.fixture
+def router(router_process: Router, realm: str) -> Router:
+    """This test's own realm on the module's router (all its keys are under the realm)."""
+    return Router(realm=realm, port=router_process.port, proc=router_process.proc)
+
+
 @pytest.fixture
 def identity() -> RegistryIdentity:
     return RegistryIdentity.generate()
 
 
-@pytest.fixture
-def engine(
-    router: Router,
-    procs: Procs,
-    identity: RegistryIdentity,
-    alive_watch: AliveWatch,
-    tmp_path: Path,
-) -> Path:
-    return start_engine(router, procs, identity, alive_watch, tmp_path)
+@dataclass
+class Engine:
+    """The module's engine (maps/foraging.json), shared by the tests that watch, lease or edit:
+    each ends its leases (``end_leases``), so the others' "nothing leased" controls hold."""
+
+    realm: str
+    identity: RegistryIdentity
+    maps_dir: Path
+
+
+@pytest.fixture(scope="module")
+def engine(router_process: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Engine]:
+    tmp = tmp_path_factory.mktemp("engine")
+    procs = Procs(tmp)
+    identity = RegistryIdentity.generate()
+    session = open_session(router_process.options(), wait=10.0)
+    watch = AliveWatch(session, keys.alive_all(router_process.realm))
+    try:
+        yield Engine(
+            router_process.realm,
+            identity,
+            start_engine(router_process, procs, identity, watch, tmp),
+        )
+    finally:
+        watch.close()
+        close_session(session)
+        procs.stop_all()
+
+
+def end_leases(
+    session: zenoh.Session, engine: Engine, context: Session, leases: list[Lease]
+) -> None:
+    """Publish each lease again ending in the past (same id), and return once the engine
+    has none in force: frames go on without a sample bundle between them."""
+    if not leases:
+        return
+    bundles = Latest(session, keys.world_samples(engine.realm, WORLD), SampleBundle)
+    frames = Latest(session, keys.world_frame(engine.realm, WORLD), WorldFrame)
+    now = time.time()
+    for lease in leases:
+        key = keys.agent_lease(engine.realm, WORLD, lease.agent)
+        ended = msgspec.structs.replace(lease, start=now - 10, end=now - 1)
+        session.put(key, context.seal(key, ended))
+    seen = [bundles.count, frames.count]
+
+    def no_bundles() -> bool:
+        if bundles.count != seen[0]:
+            seen[:] = [bundles.count, frames.count]
+            return False
+        return frames.count - seen[1] >= 5
+
+    wait_for(no_bundles, 10, "the engine to drop the ended leases")
+    bundles.sub.undeclare()
+    frames.sub.undeclare()
 
 
 def start_engine(
@@ -150,8 +217,8 @@ def x_of(frame: object, row: int = 0) -> float:
     return float(frame.poses.to_numpy()[row, 0])
 
 
-def test_frames_sensors_and_snapshot(router: Router, zsession: zenoh.Session, engine: Path) -> None:
-    realm = router.realm
+def test_frames_sensors_and_snapshot(zsession: zenoh.Session, engine: Engine) -> None:
+    realm = engine.realm
     frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
     sensors = Latest(zsession, keys.agent_sensors(realm, WORLD, "k0"), SensorSample)
     wait_for(lambda: frames.count > 5 and sensors.count > 5, 15, "frames and sensor samples")
@@ -170,9 +237,9 @@ def test_frames_sensors_and_snapshot(router: Router, zsession: zenoh.Session, en
 
 
 def test_only_the_lease_holder_drives_and_the_watchdog_stops(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+    zsession: zenoh.Session, engine: Engine
 ) -> None:
-    realm = router.realm
+    realm, identity = engine.realm, engine.identity
     context = issue_session(identity, realm, "ctx", ["lease"])
     alice = issue_session(identity, realm, "alice", ["control"])
     mallory = issue_session(identity, realm, "mallory", ["control"])
@@ -218,10 +285,8 @@ def test_only_the_lease_holder_drives_and_the_watchdog_stops(
     assert abs(drive(alice, 0.6)) < 1.0
 
 
-def test_edits_need_edit_map_and_are_validated(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
-) -> None:
-    realm = router.realm
+def test_edits_need_edit_map_and_are_validated(zsession: zenoh.Session, engine: Engine) -> None:
+    realm, identity = engine.realm, engine.identity
     editor = issue_session(identity, realm, "teacher", ["edit_map"])
     student = issue_session(identity, realm, "student", ["control"])
     edit_key = keys.world_edit(realm, WORLD)
@@ -250,7 +315,7 @@ def test_edits_need_edit_map_and_are_validated(
     # Save under a plain name; paths are refused; then load it back.
     saved = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="save", name="edited")))
     assert isinstance(saved, EditResult), saved
-    data = json.loads((engine / "edited.json").read_text())
+    data = json.loads((engine.maps_dir / "edited.json").read_text())
     assert any(a["id"] == "k9" for a in data["agents"])
     evil = b'{"action": "save", "name": "../x"}'
     assert isinstance(ask(zsession, map_key, evil), ErrorReply)
@@ -351,10 +416,10 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
 
 
 def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_one_by_one(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+    zsession: zenoh.Session, engine: Engine
 ) -> None:
     """world/<w>/samples and world/<w>/cmds, the runner's path, obey the same leases."""
-    realm = router.realm
+    realm, identity = engine.realm, engine.identity
     context = issue_session(identity, realm, "ctx", ["lease"])
     alice = issue_session(identity, realm, "alice", ["control"])
     bob = issue_session(identity, realm, "bob", ["control"])
@@ -364,49 +429,55 @@ def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_
     assert bundles.count == 0, "no lease in force: nothing to bundle"
 
     now = time.time()
-    for agent, holder in (("k2", alice), ("k1", bob)):
-        lease = lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}", agent=agent)
-        key = keys.agent_lease(realm, WORLD, agent)
-        zsession.put(key, context.seal(key, lease))
-    wait_for(lambda: bundles.count > 3, 10, "sample bundles")
-    got = bundles.get()
-    assert isinstance(got, SampleBundle) and got.agents == ["k1", "k2"]
-    samples = [decode(bytes(raw), SensorSample) for raw in got.samples]
-    assert [s.agent for s in samples] == ["k1", "k2"] and samples[0].tick == got.tick
+    leases = [
+        lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}", agent=agent)
+        for agent, holder in (("k2", alice), ("k1", bob))
+    ]
+    try:
+        for lease in leases:
+            key = keys.agent_lease(realm, WORLD, lease.agent)
+            zsession.put(key, context.seal(key, lease))
+        wait_for(lambda: bundles.count > 3, 10, "sample bundles")
+        got = bundles.get()
+        assert isinstance(got, SampleBundle) and got.agents == ["k1", "k2"]
+        samples = [decode(bytes(raw), SensorSample) for raw in got.samples]
+        assert [s.agent for s in samples] == ["k1", "k2"] and samples[0].tick == got.tick
 
-    def command(who: Session, agent: str) -> BundledCommand:
-        key = keys.agent_cmd(realm, WORLD, agent)
-        return BundledCommand(agent, who.seal(key, AgentCommand(agent=agent, speeds=(10, 10))))
+        def command(who: Session, agent: str) -> BundledCommand:
+            key = keys.agent_cmd(realm, WORLD, agent)
+            return BundledCommand(agent, who.seal(key, AgentCommand(agent=agent, speeds=(10, 10))))
 
-    def xs() -> np.ndarray:
-        frame = frames.get()
-        assert isinstance(frame, WorldFrame)
-        return frame.poses.to_numpy()[:3, 0].astype(float)
+        def xs() -> np.ndarray:
+            frame = frames.get()
+            assert isinstance(frame, WorldFrame)
+            return frame.poses.to_numpy()[:3, 0].astype(float)
 
-    cmds_key = keys.world_commands(realm, WORLD)
-    zsession.put(cmds_key, b"\x92garbage")  # malformed: dropped, the engine keeps serving
-    start = xs()
-    deadline = time.monotonic() + 1.0
-    while time.monotonic() < deadline:
-        bundle = CommandBundle(
-            commands=[
-                command(alice, "k0"),  # no lease on k0: refused
-                command(alice, "k1"),  # k1 is bob's: refused, without spoiling the rest
-                command(alice, "k2"),  # alice holds k2: obeyed
-            ]
-        )
-        zsession.put(cmds_key, encode(bundle))
-        time.sleep(0.05)  # a controller's period
-    moved = xs() - start
-    assert moved[2] > 40.0, moved
-    assert abs(moved[0]) < 1.0 and abs(moved[1]) < 1.0, moved
+        cmds_key = keys.world_commands(realm, WORLD)
+        zsession.put(cmds_key, b"\x92garbage")  # malformed: dropped, the engine keeps serving
+        start = xs()
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            bundle = CommandBundle(
+                commands=[
+                    command(alice, "k0"),  # no lease on k0: refused
+                    command(alice, "k1"),  # k1 is bob's: refused, without spoiling the rest
+                    command(alice, "k2"),  # alice holds k2: obeyed
+                ]
+            )
+            zsession.put(cmds_key, encode(bundle))
+            time.sleep(0.05)  # a controller's period
+        moved = xs() - start
+        assert moved[2] > 40.0, moved
+        assert abs(moved[0]) < 1.0 and abs(moved[1]) < 1.0, moved
+    finally:
+        end_leases(zsession, engine, context, leases)
 
 
 def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
+    zsession: zenoh.Session, engine: Engine
 ) -> None:
     """WorldChannel.on_tick on a real router: called with each tick's leased agents, drives them."""
-    realm = router.realm
+    realm, identity = engine.realm, engine.identity
     context = issue_session(identity, realm, "ctx", ["lease"])
     alice = issue_session(identity, realm, "alice", ["control"])
     frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
@@ -420,6 +491,7 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
         for agent in ("k0", "k1", "k2")
     }
     calls: list[tuple[int, list[str]]] = []
+    leases: list[Lease] = []
 
     def swarm(tick: int, agents: list[str]) -> None:
         calls.append((tick, agents))
@@ -440,6 +512,7 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
         now = time.time()
         for agent in ("k1", "k2"):  # alice holds these two; k0 has no lease
             lease = lease_for(realm, alice, start=now, end=now + 60, lid=f"S{agent}", agent=agent)
+            leases.append(lease)
             key = keys.agent_lease(realm, WORLD, agent)
             zsession.put(key, context.seal(key, lease))
         wait_for(lambda: len(calls) > 25, 10, "tick listener calls")
@@ -457,6 +530,7 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
         for link in links.values():
             link.close(stop=False)
         channel.close()
+        end_leases(zsession, engine, context, leases)
 
 
 def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
