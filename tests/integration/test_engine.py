@@ -6,7 +6,6 @@ import json
 import shutil
 import threading
 import time
-import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +43,6 @@ from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.lab import start_router
 from viewers.web.live_world import WorldWatch
 
 # One worker starts the module's router and shared engine once.
@@ -72,19 +70,9 @@ class Latest:
             return self.value
 
 
-@pytest.fixture(scope="module")
-def router_process(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Router]:
-    """One ``wart router`` for the module: it routes any realm, and every test has its own."""
-    procs = Procs(tmp_path_factory.mktemp("router"))
-    router = start_router(procs, f"t{uuid.uuid4().hex[:10]}")
-    yield router
-    procs.stop_all()
-
-
 @pytest.fixture
-def router(router_process: Router, realm: str) -> Router:
-    """This test's own realm on the module's router (all its keys are under the realm)."""
-    return Router(realm=realm, port=router_process.port, proc=router_process.proc)
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture
@@ -103,17 +91,17 @@ class Engine:
 
 
 @pytest.fixture(scope="module")
-def engine(router_process: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Engine]:
+def engine(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Engine]:
     tmp = tmp_path_factory.mktemp("engine")
     procs = Procs(tmp)
     identity = RegistryIdentity.generate()
-    session = open_session(router_process.options(), wait=10.0)
-    watch = AliveWatch(session, keys.alive_all(router_process.realm))
+    session = open_session(module_router.options(), wait=10.0)
+    watch = AliveWatch(session, keys.alive_all(module_router.realm))
     try:
         yield Engine(
-            router_process.realm,
+            module_router.realm,
             identity,
-            start_engine(router_process, procs, identity, watch, tmp),
+            start_engine(module_router, procs, identity, watch, tmp),
         )
     finally:
         watch.close()
@@ -217,6 +205,165 @@ def x_of(frame: object, row: int = 0) -> float:
     return float(frame.poses.to_numpy()[row, 0])
 
 
+def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "wart-map", "version": 1,\n "arena": {"width": 500 "height": 1}}\n')
+    typo = tmp_path / "typo.json"
+    typo.write_text(
+        json.dumps(
+            {
+                "format": "wart-map",
+                "version": 1,
+                "arena": {"width": 500, "height": 500},
+                "objects": [
+                    {"id": "b", "shape": "circle", "x": 10, "y": 10, "radius": 5, "colr": "#ffffff"}
+                ],
+            }
+        )
+    )
+    # Both at once: each process spends its seconds importing before it reads its map.
+    proc = procs.start("engine-bad", ["engine", "--map", str(bad)])
+    typo_proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
+    assert proc.popen.wait(30) == 2
+    assert "line 3" in proc.output() or "line 2" in proc.output(), proc.output()
+    assert typo_proc.popen.wait(30) == 2
+    assert "objects[0].colr" in typo_proc.output(), typo_proc.output()
+
+
+# Every drive (`wart engine --drive`): the swarm options run the same service.
+@pytest.mark.parametrize("drive", DRIVES)
+def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller(
+    router: Router,
+    procs: Procs,
+    identity: RegistryIdentity,
+    alive_watch: AliveWatch,
+    zsession: zenoh.Session,
+    tmp_path: Path,
+    drive: str,
+) -> None:
+    start_engine(
+        router,
+        procs,
+        identity,
+        alive_watch,
+        tmp_path,
+        "--wander",
+        "--drive",
+        drive,
+        objects=drive in OBJECT_DRIVES,
+    )
+    realm = router.realm
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    wait_for(lambda: frames.count > 0, 10, "a frame")
+
+    def poses() -> np.ndarray:
+        frame = frames.get()
+        assert isinstance(frame, WorldFrame)
+        return frame.poses.to_numpy()[:4].astype(float)  # k0..k3 come first
+
+    def moved(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        return np.hypot(*(after[:, :2] - before[:, :2]).T) + 100 * abs(after[:, 2] - before[:, 2])
+
+    # Nobody drives: every robot moves (or turns away from what it sees) on its own.
+    before = poses()
+    time.sleep(1.5)
+    assert (moved(before, poses()) > 10).all(), moved(before, poses())
+
+    # k0's lease holder commands it to stand still: it obeys its controller, not the rule,
+    # while the others keep wandering.
+    alice = issue_session(identity, realm, "alice", ["control"])
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    lease_key, cmd_key = keys.agent_lease(realm, WORLD, "k0"), keys.agent_cmd(realm, WORLD, "k0")
+    now = time.time()
+    zsession.put(
+        lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
+    )
+    halt = AgentCommand(agent="k0", speeds=(0, 0))
+    for _ in range(6):  # let the lease and the first commands land
+        zsession.put(cmd_key, alice.seal(cmd_key, halt))
+        time.sleep(0.05)
+    before = poses()
+    for _ in range(20):  # a controller's period, not a wait for a condition
+        zsession.put(cmd_key, alice.seal(cmd_key, halt))
+        time.sleep(0.05)
+    held = moved(before, poses())
+    assert held[0] < 2.0, held
+    assert (held[1:] > 5).all(), held
+
+    # Her commands stop: after the watchdog, k0 wanders again.
+    before = poses()
+    time.sleep(1.5)
+    assert moved(before, poses())[0] > 10
+
+
+def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
+    router: Router,
+    procs: Procs,
+    zsession: zenoh.Session,
+    identity: RegistryIdentity,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    # Four robots over --streams-up-front 2: the engine declares no sensor
+    # publisher up front (at 10,000 robots that took 35 s), only for robots
+    # someone watches (their agent/<a>/watch token) or that are leased.
+    start_engine(router, procs, identity, alive_watch, tmp_path, "--streams-up-front", "2")
+    realm = router.realm
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    plain = Latest(zsession, keys.agent_sensors(realm, WORLD, "k1"), SensorSample)
+    watched = Latest(zsession, keys.agent_sensors(realm, WORLD, "k2"), SensorSample)
+    leased = Latest(zsession, keys.agent_sensors(realm, WORLD, "k3"), SensorSample)
+    wait_for(lambda: frames.count > 20, 15, "frames")
+    assert watched.count == 0 and plain.count == 0, "no publisher was declared up front"
+
+    # Tokens for robots the world does not have (stale, or a flood from a hostile
+    # client) are dropped: the engine goes on serving.
+    ghosts = [
+        zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, f"ghost{i}"))
+        for i in range(300)
+    ]
+    token = zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, "k2"))
+    wait_for(lambda: watched.count > 5, 15, "k2's samples once watched")
+    sample = watched.get()
+    assert isinstance(sample, SensorSample) and sample.agent == "k2"
+
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    now = time.time()
+    lease_key = keys.agent_lease(realm, WORLD, "k3")
+    lease = lease_for(realm, alice, start=now, end=now + 60, agent="k3")
+    zsession.put(lease_key, context.seal(lease_key, lease))
+    wait_for(lambda: leased.count > 5, 15, "k3's samples once leased")
+
+    # A robot watched once keeps its publisher: samples go on after the token
+    # is gone (to whoever subscribes), and a link (ZenohRobotLink) watches too.
+    token.undeclare()
+    seen = watched.count
+    wait_for(lambda: watched.count > seen + 5, 15, "k2's samples after the token")
+    assert plain.count == 0, "k1 was neither watched nor leased"
+    link = ZenohRobotLink(zsession, realm, WORLD, "k1", lambda: alice)
+    try:
+        wait_for(lambda: plain.count > 5, 15, "k1's samples once a link reads them")
+    finally:
+        link.close(stop=False)
+    # The web viewer's robot panel watches the robot it shows.
+    panel = WorldWatch(zsession, realm, WORLD)
+    try:
+        panel.ready()
+        wait_for(lambda: panel.sensors("k0") is not None, 15, "k0's readings in the viewer")
+    finally:
+        panel.close()
+    engine_log = procs.started[-1].output()
+    assert "4 robots, more than --streams-up-front 2" in engine_log, engine_log
+    assert "k2's sensor samples published from now on (someone watches it)" in engine_log
+    assert "k3's sensor samples published from now on (leased)" in engine_log
+    assert "ghost" not in engine_log
+    for ghost in ghosts:
+        ghost.undeclare()
+
+
+# The shared engine's tests come last: it runs from the first of them to the module's end,
+# and would otherwise load the machine while the tests above start engines of their own.
 def test_frames_sensors_and_snapshot(zsession: zenoh.Session, engine: Engine) -> None:
     realm = engine.realm
     frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
@@ -323,96 +470,6 @@ def test_edits_need_edit_map_and_are_validated(zsession: zenoh.Session, engine: 
     assert isinstance(loaded, EditResult), loaded
     listed = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="list")))
     assert isinstance(listed, EditResult) and "edited" in listed.maps
-
-
-def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
-    bad = tmp_path / "bad.json"
-    bad.write_text('{"format": "wart-map", "version": 1,\n "arena": {"width": 500 "height": 1}}\n')
-    proc = procs.start("engine-bad", ["engine", "--map", str(bad)])
-    assert proc.popen.wait(30) == 2
-    assert "line 3" in proc.output() or "line 2" in proc.output(), proc.output()
-    typo = tmp_path / "typo.json"
-    typo.write_text(
-        json.dumps(
-            {
-                "format": "wart-map",
-                "version": 1,
-                "arena": {"width": 500, "height": 500},
-                "objects": [
-                    {"id": "b", "shape": "circle", "x": 10, "y": 10, "radius": 5, "colr": "#ffffff"}
-                ],
-            }
-        )
-    )
-    proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
-    assert proc.popen.wait(30) == 2
-    assert "objects[0].colr" in proc.output(), proc.output()
-
-
-# Every drive (`wart engine --drive`): the swarm options run the same service.
-@pytest.mark.parametrize("drive", DRIVES)
-def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller(
-    router: Router,
-    procs: Procs,
-    identity: RegistryIdentity,
-    alive_watch: AliveWatch,
-    zsession: zenoh.Session,
-    tmp_path: Path,
-    drive: str,
-) -> None:
-    start_engine(
-        router,
-        procs,
-        identity,
-        alive_watch,
-        tmp_path,
-        "--wander",
-        "--drive",
-        drive,
-        objects=drive in OBJECT_DRIVES,
-    )
-    realm = router.realm
-    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    wait_for(lambda: frames.count > 0, 10, "a frame")
-
-    def poses() -> np.ndarray:
-        frame = frames.get()
-        assert isinstance(frame, WorldFrame)
-        return frame.poses.to_numpy()[:4].astype(float)  # k0..k3 come first
-
-    def moved(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-        return np.hypot(*(after[:, :2] - before[:, :2]).T) + 100 * abs(after[:, 2] - before[:, 2])
-
-    # Nobody drives: every robot moves (or turns away from what it sees) on its own.
-    before = poses()
-    time.sleep(1.5)
-    assert (moved(before, poses()) > 10).all(), moved(before, poses())
-
-    # k0's lease holder commands it to stand still: it obeys its controller, not the rule,
-    # while the others keep wandering.
-    alice = issue_session(identity, realm, "alice", ["control"])
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    lease_key, cmd_key = keys.agent_lease(realm, WORLD, "k0"), keys.agent_cmd(realm, WORLD, "k0")
-    now = time.time()
-    zsession.put(
-        lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
-    )
-    halt = AgentCommand(agent="k0", speeds=(0, 0))
-    for _ in range(6):  # let the lease and the first commands land
-        zsession.put(cmd_key, alice.seal(cmd_key, halt))
-        time.sleep(0.05)
-    before = poses()
-    for _ in range(20):  # a controller's period, not a wait for a condition
-        zsession.put(cmd_key, alice.seal(cmd_key, halt))
-        time.sleep(0.05)
-    held = moved(before, poses())
-    assert held[0] < 2.0, held
-    assert (held[1:] > 5).all(), held
-
-    # Her commands stop: after the watchdog, k0 wanders again.
-    before = poses()
-    time.sleep(1.5)
-    assert moved(before, poses())[0] > 10
 
 
 def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_one_by_one(
@@ -531,69 +588,3 @@ def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
             link.close(stop=False)
         channel.close()
         end_leases(zsession, engine, context, leases)
-
-
-def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
-    router: Router,
-    procs: Procs,
-    zsession: zenoh.Session,
-    identity: RegistryIdentity,
-    alive_watch: AliveWatch,
-    tmp_path: Path,
-) -> None:
-    # Four robots over --streams-up-front 2: the engine declares no sensor
-    # publisher up front (at 10,000 robots that took 35 s), only for robots
-    # someone watches (their agent/<a>/watch token) or that are leased.
-    start_engine(router, procs, identity, alive_watch, tmp_path, "--streams-up-front", "2")
-    realm = router.realm
-    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    plain = Latest(zsession, keys.agent_sensors(realm, WORLD, "k1"), SensorSample)
-    watched = Latest(zsession, keys.agent_sensors(realm, WORLD, "k2"), SensorSample)
-    leased = Latest(zsession, keys.agent_sensors(realm, WORLD, "k3"), SensorSample)
-    wait_for(lambda: frames.count > 20, 15, "frames")
-    assert watched.count == 0 and plain.count == 0, "no publisher was declared up front"
-
-    # Tokens for robots the world does not have (stale, or a flood from a hostile
-    # client) are dropped: the engine goes on serving.
-    ghosts = [
-        zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, f"ghost{i}"))
-        for i in range(300)
-    ]
-    token = zsession.liveliness().declare_token(keys.agent_watch(realm, WORLD, "k2"))
-    wait_for(lambda: watched.count > 5, 15, "k2's samples once watched")
-    sample = watched.get()
-    assert isinstance(sample, SensorSample) and sample.agent == "k2"
-
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
-    now = time.time()
-    lease_key = keys.agent_lease(realm, WORLD, "k3")
-    lease = lease_for(realm, alice, start=now, end=now + 60, agent="k3")
-    zsession.put(lease_key, context.seal(lease_key, lease))
-    wait_for(lambda: leased.count > 5, 15, "k3's samples once leased")
-
-    # A robot watched once keeps its publisher: samples go on after the token
-    # is gone (to whoever subscribes), and a link (ZenohRobotLink) watches too.
-    token.undeclare()
-    seen = watched.count
-    wait_for(lambda: watched.count > seen + 5, 15, "k2's samples after the token")
-    assert plain.count == 0, "k1 was neither watched nor leased"
-    link = ZenohRobotLink(zsession, realm, WORLD, "k1", lambda: alice)
-    try:
-        wait_for(lambda: plain.count > 5, 15, "k1's samples once a link reads them")
-    finally:
-        link.close(stop=False)
-    # The web viewer's robot panel watches the robot it shows.
-    panel = WorldWatch(zsession, realm, WORLD)
-    try:
-        panel.ready()
-        wait_for(lambda: panel.sensors("k0") is not None, 15, "k0's readings in the viewer")
-    finally:
-        panel.close()
-    engine_log = procs.started[-1].output()
-    assert "4 robots, more than --streams-up-front 2" in engine_log, engine_log
-    assert "k2's sensor samples published from now on (someone watches it)" in engine_log
-    assert "k3's sensor samples published from now on (leased)" in engine_log
-    assert "ghost" not in engine_log
-    for ghost in ghosts:
-        ghost.undeclare()
