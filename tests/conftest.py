@@ -68,6 +68,18 @@ def router(procs: Procs, realm: str) -> Iterator[Router]:
     r.proc.stop()
 
 
+@pytest.fixture(scope="module")
+def module_router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Router]:
+    """One ``wart router`` for a whole module. A router routes any realm and every key a
+    test uses is under its realm, so a module whose tests neither stop nor restart their
+    router may give each test its own realm on this one (about 2 s a test on a busy
+    machine), by overriding ``router`` with ``module_router.in_realm(realm)``."""
+    procs = Procs(tmp_path_factory.mktemp("router"))
+    r = start_router(procs, f"t{uuid.uuid4().hex[:10]}")
+    yield r
+    procs.stop_all()
+
+
 __all__ = ["REPO", "Proc", "Procs", "Router", "free_port", "wait_for", "wart_env"]
 
 

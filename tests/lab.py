@@ -151,6 +151,10 @@ class Router:
     def net_args(self) -> list[str]:
         return self.options().as_args()
 
+    def in_realm(self, realm: str) -> Router:
+        """The same router process, for clients and services of another realm."""
+        return Router(realm=realm, port=self.port, proc=self.proc)
+
 
 def wait_alive(options: NetworkOptions, key: str, proc: Proc, timeout: float = 30.0) -> None:
     """Return once ``key``'s liveliness token is seen; fail with the process's output if it

@@ -25,7 +25,8 @@ from tests.integration.agentkit import (
 )
 from tests.lab import ProcessLab, make_lab
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's lab once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("agent_context")]
 CONTROLLERS = Path(__file__).with_name("controllers")
 
 
@@ -37,12 +38,24 @@ class Forward(Controller):
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab)
-    yield lab
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
+
+
+@pytest.fixture(scope="module")
+def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
+    """One lab for the module's tests: each drives its own robots (k0, k1 or k2), and
+    each leaves their queues empty and the context's settings as it found them."""
+    tmp = tmp_path_factory.mktemp("lab")
+    procs = Procs(tmp)
+    lab = make_lab(module_router, procs, tmp)
+    try:
+        lab.start_registry()
+        together(lambda: start_engine(lab), lambda: start_runner(lab))
+        start_agent_context(lab)
+        yield lab
+    finally:
+        procs.stop_all()
 
 
 def drives_away(poses: Poses, agent: str, mm: float, timeout: float, what: str) -> None:
@@ -201,15 +214,18 @@ def test_only_the_host_or_an_instructor_manages_the_context(lab: ProcessLab) -> 
         assert "k1" in ida.settings(enabled=False, agent="k1")
         with pytest.raises(NotAllowed, match="disabled"):
             alice.queue("k1", "remote")
-        ida.settings(enabled=True, agent="k1", slot_seconds=3)
-        assert ida.state().slot_seconds == 3
-        done: list[DriveResult] = []
-        t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
-        t.start()
-        wait_for(lambda: alice.position_of_user("alice", "k1") == 0, 10, "alice's slot")
-        ida.stop_agent("k1", "demo over")
-        t.join(10)
-        assert done and done[0].status == "cancelled" and "demo over" in done[0].reason
+        try:
+            ida.settings(enabled=True, agent="k1", slot_seconds=3)
+            assert ida.state().slot_seconds == 3
+            done: list[DriveResult] = []
+            t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
+            t.start()
+            wait_for(lambda: alice.position_of_user("alice", "k1") == 0, 10, "alice's slot")
+            ida.stop_agent("k1", "demo over")
+            t.join(10)
+            assert done and done[0].status == "cancelled" and "demo over" in done[0].reason
+        finally:  # the module's lab is shared: k1 enabled, the slot as the lab started it
+            ida.settings(enabled=True, agent="k1", slot_seconds=2.5)
 
 
 def test_a_context_started_before_its_world_says_so_and_then_serves_it(

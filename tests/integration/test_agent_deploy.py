@@ -28,19 +28,27 @@ from tests.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
+    pytest.mark.xdist_group("agent_deploy"),  # one worker starts the module's lab once
     pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
 
 
-@pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab)
-    yield lab
+@pytest.fixture(scope="module")
+def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
+    """One lab for the module: each test's requests have ended when it returns, so the
+    next finds every queue empty (the hostile test queues on all four robots at once)."""
+    tmp = tmp_path_factory.mktemp("lab")
+    procs = Procs(tmp)
+    lab = make_lab(module_router, procs, tmp)
+    try:
+        lab.start_registry()
+        together(lambda: start_engine(lab), lambda: start_runner(lab))
+        start_agent_context(lab)
+        yield lab
+    finally:
+        procs.stop_all()
 
 
 def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab, procs: Procs) -> None:

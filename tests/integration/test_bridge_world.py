@@ -41,7 +41,8 @@ from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's router once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("bridge_world")]
 WORLD = "real1"
 AGENT = "k1"
 
@@ -65,6 +66,11 @@ class Latest:
     def get(self) -> object:
         with self._lock:
             return self.value
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

@@ -20,7 +20,8 @@ from common.tracking.truth import now_truth, write_truth
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's router once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera")]
 WORLD = "w1"
 CAMERA = "w1-cam"
 
@@ -64,6 +65,11 @@ class Truth:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(2)
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

@@ -35,6 +35,15 @@ class Events:
             return [(e.status.user, e.status.status) for e in self.items if e.status]
 
 
+# One worker starts the module's router once.
+pytestmark = pytest.mark.xdist_group("chat")
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
+
+
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     lab = make_lab(router, procs, tmp_path)

@@ -6,8 +6,11 @@ import json
 import shutil
 import threading
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import zenoh
@@ -35,13 +38,15 @@ from common.messages import (
     decode,
     encode,
 )
+from common.service import close_session, open_session
 from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
 from viewers.web.live_world import WorldWatch
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's router and shared engine once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine")]
 WORLD = "w1"
 
 
@@ -66,19 +71,69 @@ class Latest:
 
 
 @pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
+
+
+@pytest.fixture
 def identity() -> RegistryIdentity:
     return RegistryIdentity.generate()
 
 
-@pytest.fixture
-def engine(
-    router: Router,
-    procs: Procs,
-    identity: RegistryIdentity,
-    alive_watch: AliveWatch,
-    tmp_path: Path,
-) -> Path:
-    return start_engine(router, procs, identity, alive_watch, tmp_path)
+@dataclass
+class Engine:
+    """The module's engine (maps/foraging.json), shared by the tests that watch, lease or edit:
+    each ends its leases (``end_leases``), so the others' "nothing leased" controls hold."""
+
+    realm: str
+    identity: RegistryIdentity
+    maps_dir: Path
+
+
+@pytest.fixture(scope="module")
+def engine(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Engine]:
+    tmp = tmp_path_factory.mktemp("engine")
+    procs = Procs(tmp)
+    identity = RegistryIdentity.generate()
+    session = open_session(module_router.options(), wait=10.0)
+    watch = AliveWatch(session, keys.alive_all(module_router.realm))
+    try:
+        yield Engine(
+            module_router.realm,
+            identity,
+            start_engine(module_router, procs, identity, watch, tmp),
+        )
+    finally:
+        watch.close()
+        close_session(session)
+        procs.stop_all()
+
+
+def end_leases(
+    session: zenoh.Session, engine: Engine, context: Session, leases: list[Lease]
+) -> None:
+    """Publish each lease again ending in the past (same id), and return once the engine
+    has none in force: frames go on without a sample bundle between them."""
+    if not leases:
+        return
+    bundles = Latest(session, keys.world_samples(engine.realm, WORLD), SampleBundle)
+    frames = Latest(session, keys.world_frame(engine.realm, WORLD), WorldFrame)
+    now = time.time()
+    for lease in leases:
+        key = keys.agent_lease(engine.realm, WORLD, lease.agent)
+        ended = msgspec.structs.replace(lease, start=now - 10, end=now - 1)
+        session.put(key, context.seal(key, ended))
+    seen = [bundles.count, frames.count]
+
+    def no_bundles() -> bool:
+        if bundles.count != seen[0]:
+            seen[:] = [bundles.count, frames.count]
+            return False
+        return frames.count - seen[1] >= 5
+
+    wait_for(no_bundles, 10, "the engine to drop the ended leases")
+    bundles.sub.undeclare()
+    frames.sub.undeclare()
 
 
 def start_engine(
@@ -150,122 +205,9 @@ def x_of(frame: object, row: int = 0) -> float:
     return float(frame.poses.to_numpy()[row, 0])
 
 
-def test_frames_sensors_and_snapshot(router: Router, zsession: zenoh.Session, engine: Path) -> None:
-    realm = router.realm
-    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    sensors = Latest(zsession, keys.agent_sensors(realm, WORLD, "k0"), SensorSample)
-    wait_for(lambda: frames.count > 5 and sensors.count > 5, 15, "frames and sensor samples")
-    snap = ask(zsession, keys.world_snapshot(realm, WORLD))
-    assert isinstance(snap, WorldSnapshot)
-    assert snap.rows[:4] == ["k0", "k1", "k2", "k3"] and "ball0" in snap.rows
-    assert {i.category for i in snap.items} == {"obstacle", "object", "zone"}
-    assert snap.agents[0].type == "khepera" and snap.agents[0].gripper
-    frame = frames.get()
-    assert isinstance(frame, WorldFrame) and frame.layout == snap.layout
-    assert frame.poses.to_numpy().shape == (len(snap.rows), 3)
-    sample = sensors.get()
-    assert isinstance(sample, SensorSample) and len(sample.proximity) == 8
-    assert sample.gripper is not None and sample.gripper.arm == 255
-    assert sample.ambient[0] < 500  # the nest lamp is near
-
-
-def test_only_the_lease_holder_drives_and_the_watchdog_stops(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
-) -> None:
-    realm = router.realm
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
-    mallory = issue_session(identity, realm, "mallory", ["control"])
-    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    wait_for(lambda: frames.count > 0, 10, "a frame")
-    lease_key = keys.agent_lease(realm, WORLD, "k0")
-    cmd_key = keys.agent_cmd(realm, WORLD, "k0")
-    go = AgentCommand(agent="k0", speeds=(10, 10))
-
-    def drive(who: Session, seconds: float) -> float:
-        start_x = x_of(frames.get())
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            zsession.put(cmd_key, who.seal(cmd_key, go))
-            time.sleep(0.05)  # a controller's period, not a wait for a condition
-        return x_of(frames.get()) - start_x
-
-    # No lease at all: nothing moves.
-    assert abs(drive(alice, 0.6)) < 1.0
-    now = time.time()
-    zsession.put(
-        lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
-    )
-    # A lease published by someone without the 'lease' permission is ignored.
-    fake = lease_for(realm, mallory, start=now, end=now + 60, lid="L2")
-    zsession.put(lease_key, mallory.seal(lease_key, fake))
-    # Mallory does not hold the lease.
-    assert abs(drive(mallory, 0.6)) < 1.0
-    # Alice does: 80 mm/s.
-    moved = drive(alice, 1.0)
-    assert moved > 40.0, moved
-    # Watchdog: she stops sending; within 300 ms (plus delivery) the robot stops.
-    time.sleep(0.5)
-    x1 = x_of(frames.get())
-    wait_for(lambda: frames.count > 0, 1)
-    time.sleep(0.3)
-    assert abs(x_of(frames.get()) - x1) < 1.0
-    # The lease ends early (same id, new end): her commands are refused.
-    now = time.time()
-    ended = lease_for(realm, alice, start=now - 10, end=now - 1)
-    zsession.put(lease_key, context.seal(lease_key, ended))
-    time.sleep(0.2)
-    assert abs(drive(alice, 0.6)) < 1.0
-
-
-def test_edits_need_edit_map_and_are_validated(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
-) -> None:
-    realm = router.realm
-    editor = issue_session(identity, realm, "teacher", ["edit_map"])
-    student = issue_session(identity, realm, "student", ["control"])
-    edit_key = keys.world_edit(realm, WORLD)
-    map_key = keys.world_map(realm, WORLD)
-    move = WorldEdit(op=MoveItem(id="rock1", x=800.0, y=900.0))
-    refused = ask(zsession, edit_key, student.seal(edit_key, move))
-    assert isinstance(refused, ErrorReply) and refused.code == "forbidden"
-    unsigned = ask(zsession, edit_key, b"junk")
-    assert isinstance(unsigned, ErrorReply) and unsigned.code == "unauthenticated"
-    before = ask(zsession, keys.world_snapshot(realm, WORLD))
-    assert isinstance(before, WorldSnapshot)
-    done = ask(zsession, edit_key, editor.seal(edit_key, move))
-    assert isinstance(done, EditResult) and done.layout > before.layout
-    outside = WorldEdit(op=MoveItem(id="rock1", x=5000.0, y=900.0))
-    bad = ask(zsession, edit_key, editor.seal(edit_key, outside))
-    assert isinstance(bad, ErrorReply) and bad.code == "conflict" and "arena" in bad.message
-    onto_wall = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1250, "y": 300}))
-    bad = ask(zsession, edit_key, editor.seal(edit_key, onto_wall))
-    assert isinstance(bad, ErrorReply) and "overlap an obstacle" in bad.message
-    add = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1400, "y": 150}))
-    assert isinstance(ask(zsession, edit_key, editor.seal(edit_key, add)), EditResult)
-    after = ask(zsession, keys.world_snapshot(realm, WORLD))
-    assert isinstance(after, WorldSnapshot) and "k9" in after.rows
-    rock = next(i for i in after.items if i.id == "rock1")
-    assert (rock.x, rock.y) == (800.0, 900.0)
-    # Save under a plain name; paths are refused; then load it back.
-    saved = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="save", name="edited")))
-    assert isinstance(saved, EditResult), saved
-    data = json.loads((engine / "edited.json").read_text())
-    assert any(a["id"] == "k9" for a in data["agents"])
-    evil = b'{"action": "save", "name": "../x"}'
-    assert isinstance(ask(zsession, map_key, evil), ErrorReply)
-    loaded = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="load", name="edited")))
-    assert isinstance(loaded, EditResult), loaded
-    listed = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="list")))
-    assert isinstance(listed, EditResult) and "edited" in listed.maps
-
-
 def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "wart-map", "version": 1,\n "arena": {"width": 500 "height": 1}}\n')
-    proc = procs.start("engine-bad", ["engine", "--map", str(bad)])
-    assert proc.popen.wait(30) == 2
-    assert "line 3" in proc.output() or "line 2" in proc.output(), proc.output()
     typo = tmp_path / "typo.json"
     typo.write_text(
         json.dumps(
@@ -279,9 +221,13 @@ def test_bad_map_file_gives_a_clear_error(procs: Procs, tmp_path: Path) -> None:
             }
         )
     )
-    proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
+    # Both at once: each process spends its seconds importing before it reads its map.
+    proc = procs.start("engine-bad", ["engine", "--map", str(bad)])
+    typo_proc = procs.start("engine-typo", ["engine", "--map", str(typo)])
     assert proc.popen.wait(30) == 2
-    assert "objects[0].colr" in proc.output(), proc.output()
+    assert "line 3" in proc.output() or "line 2" in proc.output(), proc.output()
+    assert typo_proc.popen.wait(30) == 2
+    assert "objects[0].colr" in typo_proc.output(), typo_proc.output()
 
 
 # Every drive (`wart engine --drive`): the swarm options run the same service.
@@ -350,115 +296,6 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
     assert moved(before, poses())[0] > 10
 
 
-def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_one_by_one(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
-) -> None:
-    """world/<w>/samples and world/<w>/cmds, the runner's path, obey the same leases."""
-    realm = router.realm
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
-    bob = issue_session(identity, realm, "bob", ["control"])
-    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    bundles = Latest(zsession, keys.world_samples(realm, WORLD), SampleBundle)
-    wait_for(lambda: frames.count > 5, 10, "frames")
-    assert bundles.count == 0, "no lease in force: nothing to bundle"
-
-    now = time.time()
-    for agent, holder in (("k2", alice), ("k1", bob)):
-        lease = lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}", agent=agent)
-        key = keys.agent_lease(realm, WORLD, agent)
-        zsession.put(key, context.seal(key, lease))
-    wait_for(lambda: bundles.count > 3, 10, "sample bundles")
-    got = bundles.get()
-    assert isinstance(got, SampleBundle) and got.agents == ["k1", "k2"]
-    samples = [decode(bytes(raw), SensorSample) for raw in got.samples]
-    assert [s.agent for s in samples] == ["k1", "k2"] and samples[0].tick == got.tick
-
-    def command(who: Session, agent: str) -> BundledCommand:
-        key = keys.agent_cmd(realm, WORLD, agent)
-        return BundledCommand(agent, who.seal(key, AgentCommand(agent=agent, speeds=(10, 10))))
-
-    def xs() -> np.ndarray:
-        frame = frames.get()
-        assert isinstance(frame, WorldFrame)
-        return frame.poses.to_numpy()[:3, 0].astype(float)
-
-    cmds_key = keys.world_commands(realm, WORLD)
-    zsession.put(cmds_key, b"\x92garbage")  # malformed: dropped, the engine keeps serving
-    start = xs()
-    deadline = time.monotonic() + 1.0
-    while time.monotonic() < deadline:
-        bundle = CommandBundle(
-            commands=[
-                command(alice, "k0"),  # no lease on k0: refused
-                command(alice, "k1"),  # k1 is bob's: refused, without spoiling the rest
-                command(alice, "k2"),  # alice holds k2: obeyed
-            ]
-        )
-        zsession.put(cmds_key, encode(bundle))
-        time.sleep(0.05)  # a controller's period
-    moved = xs() - start
-    assert moved[2] > 40.0, moved
-    assert abs(moved[0]) < 1.0 and abs(moved[1]) < 1.0, moved
-
-
-def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
-    router: Router, zsession: zenoh.Session, engine: Path, identity: RegistryIdentity
-) -> None:
-    """WorldChannel.on_tick on a real router: called with each tick's leased agents, drives them."""
-    realm = router.realm
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
-    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    wait_for(lambda: frames.count > 5, 10, "frames")
-    channel = WorldChannel(zsession, realm, WORLD)
-    links = {
-        # No keep-alives: every put counted below is the listener's.
-        agent: ZenohRobotLink(
-            zsession, realm, WORLD, agent, lambda: alice, channel=channel, keepalive=3600.0
-        )
-        for agent in ("k0", "k1", "k2")
-    }
-    calls: list[tuple[int, list[str]]] = []
-
-    def swarm(tick: int, agents: list[str]) -> None:
-        calls.append((tick, agents))
-        for agent in agents:
-            links[agent].send(RobotCommand(speeds=(10, 10)))
-
-    try:
-        channel.on_tick(swarm)
-        time.sleep(0.5)
-        assert calls == [], "no lease in force: no bundle, no call"
-
-        def xs() -> np.ndarray:
-            frame = frames.get()
-            assert isinstance(frame, WorldFrame)
-            return frame.poses.to_numpy()[:3, 0].astype(float)
-
-        start = xs()
-        now = time.time()
-        for agent in ("k1", "k2"):  # alice holds these two; k0 has no lease
-            lease = lease_for(realm, alice, start=now, end=now + 60, lid=f"S{agent}", agent=agent)
-            key = keys.agent_lease(realm, WORLD, agent)
-            zsession.put(key, context.seal(key, lease))
-        wait_for(lambda: len(calls) > 25, 10, "tick listener calls")
-        time.sleep(0.5)
-        moved = xs() - start
-        assert moved[1] > 40.0 and moved[2] > 40.0, moved
-        assert abs(moved[0]) < 1.0, moved  # not leased: neither called for nor moved
-        ticks = [tick for tick, _ in calls]
-        assert ticks == sorted(set(ticks)), "one call per bundle, in tick order"
-        # The two leases arrive one after the other: a tick may fall between them.
-        assert all(set(agents) <= {"k1", "k2"} for _, agents in calls), calls[:3]
-        assert calls[-1][1] == ["k1", "k2"], calls[-3:]
-        assert channel.puts <= channel.bundles, "one command message per tick at most"
-    finally:
-        for link in links.values():
-            link.close(stop=False)
-        channel.close()
-
-
 def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
     router: Router,
     procs: Procs,
@@ -523,3 +360,231 @@ def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
     assert "ghost" not in engine_log
     for ghost in ghosts:
         ghost.undeclare()
+
+
+# The shared engine's tests come last: it runs from the first of them to the module's end,
+# and would otherwise load the machine while the tests above start engines of their own.
+def test_frames_sensors_and_snapshot(zsession: zenoh.Session, engine: Engine) -> None:
+    realm = engine.realm
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    sensors = Latest(zsession, keys.agent_sensors(realm, WORLD, "k0"), SensorSample)
+    wait_for(lambda: frames.count > 5 and sensors.count > 5, 15, "frames and sensor samples")
+    snap = ask(zsession, keys.world_snapshot(realm, WORLD))
+    assert isinstance(snap, WorldSnapshot)
+    assert snap.rows[:4] == ["k0", "k1", "k2", "k3"] and "ball0" in snap.rows
+    assert {i.category for i in snap.items} == {"obstacle", "object", "zone"}
+    assert snap.agents[0].type == "khepera" and snap.agents[0].gripper
+    frame = frames.get()
+    assert isinstance(frame, WorldFrame) and frame.layout == snap.layout
+    assert frame.poses.to_numpy().shape == (len(snap.rows), 3)
+    sample = sensors.get()
+    assert isinstance(sample, SensorSample) and len(sample.proximity) == 8
+    assert sample.gripper is not None and sample.gripper.arm == 255
+    assert sample.ambient[0] < 500  # the nest lamp is near
+
+
+def test_only_the_lease_holder_drives_and_the_watchdog_stops(
+    zsession: zenoh.Session, engine: Engine
+) -> None:
+    realm, identity = engine.realm, engine.identity
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    mallory = issue_session(identity, realm, "mallory", ["control"])
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    wait_for(lambda: frames.count > 0, 10, "a frame")
+    lease_key = keys.agent_lease(realm, WORLD, "k0")
+    cmd_key = keys.agent_cmd(realm, WORLD, "k0")
+    go = AgentCommand(agent="k0", speeds=(10, 10))
+
+    def drive(who: Session, seconds: float) -> float:
+        start_x = x_of(frames.get())
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            zsession.put(cmd_key, who.seal(cmd_key, go))
+            time.sleep(0.05)  # a controller's period, not a wait for a condition
+        return x_of(frames.get()) - start_x
+
+    # No lease at all: nothing moves.
+    assert abs(drive(alice, 0.6)) < 1.0
+    now = time.time()
+    zsession.put(
+        lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
+    )
+    # A lease published by someone without the 'lease' permission is ignored.
+    fake = lease_for(realm, mallory, start=now, end=now + 60, lid="L2")
+    zsession.put(lease_key, mallory.seal(lease_key, fake))
+    # Mallory does not hold the lease.
+    assert abs(drive(mallory, 0.6)) < 1.0
+    # Alice does: 80 mm/s.
+    moved = drive(alice, 1.0)
+    assert moved > 40.0, moved
+    # Watchdog: she stops sending; within 300 ms (plus delivery) the robot stops.
+    time.sleep(0.5)
+    x1 = x_of(frames.get())
+    wait_for(lambda: frames.count > 0, 1)
+    time.sleep(0.3)
+    assert abs(x_of(frames.get()) - x1) < 1.0
+    # The lease ends early (same id, new end): her commands are refused.
+    now = time.time()
+    ended = lease_for(realm, alice, start=now - 10, end=now - 1)
+    zsession.put(lease_key, context.seal(lease_key, ended))
+    time.sleep(0.2)
+    assert abs(drive(alice, 0.6)) < 1.0
+
+
+def test_edits_need_edit_map_and_are_validated(zsession: zenoh.Session, engine: Engine) -> None:
+    realm, identity = engine.realm, engine.identity
+    editor = issue_session(identity, realm, "teacher", ["edit_map"])
+    student = issue_session(identity, realm, "student", ["control"])
+    edit_key = keys.world_edit(realm, WORLD)
+    map_key = keys.world_map(realm, WORLD)
+    move = WorldEdit(op=MoveItem(id="rock1", x=800.0, y=900.0))
+    refused = ask(zsession, edit_key, student.seal(edit_key, move))
+    assert isinstance(refused, ErrorReply) and refused.code == "forbidden"
+    unsigned = ask(zsession, edit_key, b"junk")
+    assert isinstance(unsigned, ErrorReply) and unsigned.code == "unauthenticated"
+    before = ask(zsession, keys.world_snapshot(realm, WORLD))
+    assert isinstance(before, WorldSnapshot)
+    done = ask(zsession, edit_key, editor.seal(edit_key, move))
+    assert isinstance(done, EditResult) and done.layout > before.layout
+    outside = WorldEdit(op=MoveItem(id="rock1", x=5000.0, y=900.0))
+    bad = ask(zsession, edit_key, editor.seal(edit_key, outside))
+    assert isinstance(bad, ErrorReply) and bad.code == "conflict" and "arena" in bad.message
+    onto_wall = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1250, "y": 300}))
+    bad = ask(zsession, edit_key, editor.seal(edit_key, onto_wall))
+    assert isinstance(bad, ErrorReply) and "overlap an obstacle" in bad.message
+    add = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1400, "y": 150}))
+    assert isinstance(ask(zsession, edit_key, editor.seal(edit_key, add)), EditResult)
+    after = ask(zsession, keys.world_snapshot(realm, WORLD))
+    assert isinstance(after, WorldSnapshot) and "k9" in after.rows
+    rock = next(i for i in after.items if i.id == "rock1")
+    assert (rock.x, rock.y) == (800.0, 900.0)
+    # Save under a plain name; paths are refused; then load it back.
+    saved = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="save", name="edited")))
+    assert isinstance(saved, EditResult), saved
+    data = json.loads((engine.maps_dir / "edited.json").read_text())
+    assert any(a["id"] == "k9" for a in data["agents"])
+    evil = b'{"action": "save", "name": "../x"}'
+    assert isinstance(ask(zsession, map_key, evil), ErrorReply)
+    loaded = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="load", name="edited")))
+    assert isinstance(loaded, EditResult), loaded
+    listed = ask(zsession, map_key, editor.seal(map_key, MapRequest(action="list")))
+    assert isinstance(listed, EditResult) and "edited" in listed.maps
+
+
+def test_sample_bundles_hold_the_leased_agents_and_bundled_commands_are_checked_one_by_one(
+    zsession: zenoh.Session, engine: Engine
+) -> None:
+    """world/<w>/samples and world/<w>/cmds, the runner's path, obey the same leases."""
+    realm, identity = engine.realm, engine.identity
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    bob = issue_session(identity, realm, "bob", ["control"])
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    bundles = Latest(zsession, keys.world_samples(realm, WORLD), SampleBundle)
+    wait_for(lambda: frames.count > 5, 10, "frames")
+    assert bundles.count == 0, "no lease in force: nothing to bundle"
+
+    now = time.time()
+    leases = [
+        lease_for(realm, holder, start=now, end=now + 60, lid=f"L{agent}", agent=agent)
+        for agent, holder in (("k2", alice), ("k1", bob))
+    ]
+    try:
+        for lease in leases:
+            key = keys.agent_lease(realm, WORLD, lease.agent)
+            zsession.put(key, context.seal(key, lease))
+        wait_for(lambda: bundles.count > 3, 10, "sample bundles")
+        got = bundles.get()
+        assert isinstance(got, SampleBundle) and got.agents == ["k1", "k2"]
+        samples = [decode(bytes(raw), SensorSample) for raw in got.samples]
+        assert [s.agent for s in samples] == ["k1", "k2"] and samples[0].tick == got.tick
+
+        def command(who: Session, agent: str) -> BundledCommand:
+            key = keys.agent_cmd(realm, WORLD, agent)
+            return BundledCommand(agent, who.seal(key, AgentCommand(agent=agent, speeds=(10, 10))))
+
+        def xs() -> np.ndarray:
+            frame = frames.get()
+            assert isinstance(frame, WorldFrame)
+            return frame.poses.to_numpy()[:3, 0].astype(float)
+
+        cmds_key = keys.world_commands(realm, WORLD)
+        zsession.put(cmds_key, b"\x92garbage")  # malformed: dropped, the engine keeps serving
+        start = xs()
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            bundle = CommandBundle(
+                commands=[
+                    command(alice, "k0"),  # no lease on k0: refused
+                    command(alice, "k1"),  # k1 is bob's: refused, without spoiling the rest
+                    command(alice, "k2"),  # alice holds k2: obeyed
+                ]
+            )
+            zsession.put(cmds_key, encode(bundle))
+            time.sleep(0.05)  # a controller's period
+        moved = xs() - start
+        assert moved[2] > 40.0, moved
+        assert abs(moved[0]) < 1.0 and abs(moved[1]) < 1.0, moved
+    finally:
+        end_leases(zsession, engine, context, leases)
+
+
+def test_a_swarm_answers_its_leased_robots_from_one_tick_listener(
+    zsession: zenoh.Session, engine: Engine
+) -> None:
+    """WorldChannel.on_tick on a real router: called with each tick's leased agents, drives them."""
+    realm, identity = engine.realm, engine.identity
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    wait_for(lambda: frames.count > 5, 10, "frames")
+    channel = WorldChannel(zsession, realm, WORLD)
+    links = {
+        # No keep-alives: every put counted below is the listener's.
+        agent: ZenohRobotLink(
+            zsession, realm, WORLD, agent, lambda: alice, channel=channel, keepalive=3600.0
+        )
+        for agent in ("k0", "k1", "k2")
+    }
+    calls: list[tuple[int, list[str]]] = []
+    leases: list[Lease] = []
+
+    def swarm(tick: int, agents: list[str]) -> None:
+        calls.append((tick, agents))
+        for agent in agents:
+            links[agent].send(RobotCommand(speeds=(10, 10)))
+
+    try:
+        channel.on_tick(swarm)
+        time.sleep(0.5)
+        assert calls == [], "no lease in force: no bundle, no call"
+
+        def xs() -> np.ndarray:
+            frame = frames.get()
+            assert isinstance(frame, WorldFrame)
+            return frame.poses.to_numpy()[:3, 0].astype(float)
+
+        start = xs()
+        now = time.time()
+        for agent in ("k1", "k2"):  # alice holds these two; k0 has no lease
+            lease = lease_for(realm, alice, start=now, end=now + 60, lid=f"S{agent}", agent=agent)
+            leases.append(lease)
+            key = keys.agent_lease(realm, WORLD, agent)
+            zsession.put(key, context.seal(key, lease))
+        wait_for(lambda: len(calls) > 25, 10, "tick listener calls")
+        time.sleep(0.5)
+        moved = xs() - start
+        assert moved[1] > 40.0 and moved[2] > 40.0, moved
+        assert abs(moved[0]) < 1.0, moved  # not leased: neither called for nor moved
+        ticks = [tick for tick, _ in calls]
+        assert ticks == sorted(set(ticks)), "one call per bundle, in tick order"
+        # The two leases arrive one after the other: a tick may fall between them.
+        assert all(set(agents) <= {"k1", "k2"} for _, agents in calls), calls[:3]
+        assert calls[-1][1] == ["k1", "k2"], calls[-3:]
+        assert channel.puts <= channel.bundles, "one command message per tick at most"
+    finally:
+        for link in links.values():
+            link.close(stop=False)
+        channel.close()
+        end_leases(zsession, engine, context, leases)

@@ -34,7 +34,8 @@ from tests.integration.agentkit import (
 )
 from tests.lab import ProcessLab, make_lab
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's lab once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("lease_mac")]
 
 
 class Forward(Controller):
@@ -52,12 +53,24 @@ class Still(Controller):
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    start_engine(lab, identity=True)
-    start_agent_context(lab, slot=5.0)
-    yield lab
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
+
+
+@pytest.fixture(scope="module")
+def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
+    """The lab of the tests that only read it or drive k0 to the end of their requests
+    (the world-restart test starts its own)."""
+    tmp = tmp_path_factory.mktemp("lab")
+    procs = Procs(tmp)
+    lab = make_lab(module_router, procs, tmp)
+    try:
+        lab.start_registry()
+        start_engine(lab, identity=True)
+        start_agent_context(lab, slot=5.0)
+        yield lab
+    finally:
+        procs.stop_all()
 
 
 class Wire:

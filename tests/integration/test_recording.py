@@ -22,10 +22,11 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.lab import PASSWORD, USERS, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
+    pytest.mark.xdist_group("recording"),  # one worker starts the module's lab once
     pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
 ]
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
@@ -43,13 +44,21 @@ RAISER = textwrap.dedent(
 ).encode()
 
 
-@pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab, "maze"), lambda: start_runner(lab))
-    start_agent_context(lab, "--keep-recordings", "2", slot=3.0)
-    yield lab
+@pytest.fixture(scope="module")
+def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
+    """One lab for the module. Recordings are kept per user: each test records as its own
+    user (dave, bob, carol), so another's runs count neither in its listings nor its
+    retention, and alice records nothing (the test of bob's runs checks she sees none)."""
+    tmp = tmp_path_factory.mktemp("lab")
+    procs = Procs(tmp)
+    lab = make_lab(module_router, procs, tmp, users={**USERS, "dave": "student"})
+    try:
+        lab.start_registry()
+        together(lambda: start_engine(lab, "maze"), lambda: start_runner(lab))
+        start_agent_context(lab, "--keep-recordings", "2", slot=3.0)
+        yield lab
+    finally:
+        procs.stop_all()
 
 
 def _recordings_dir(lab: ProcessLab) -> Path:
@@ -66,21 +75,21 @@ def _wait_recorded(lab: ProcessLab, user: str, name: str) -> Path:
 def test_a_slot_of_example_01_is_recorded_with_every_channel(
     lab: ProcessLab, tmp_path: Path
 ) -> None:
-    with agent_user(lab, "alice") as alice:
-        queued = alice.queue("k1", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
-        final = alice.wait_status(queued.request_id, FINAL, timeout=30)
+    with agent_user(lab, "dave") as dave:
+        queued = dave.queue("k1", "deploy", source=EXAMPLE.read_bytes(), filename=EXAMPLE.name)
+        final = dave.wait_status(queued.request_id, FINAL, timeout=30)
         assert final is not None and final.status == "finished", final
-        _wait_recorded(lab, "alice", queued.request_id)
-        listing = alice.recordings()
+        _wait_recorded(lab, "dave", queued.request_id)
+        listing = dave.recordings()
         assert [r.name for r in listing.recordings] == [queued.request_id]
         assert listing.recordings[0].status == "finished"
-        path = alice.download(queued.request_id, tmp_path / "run.mcap")
+        path = dave.download(queued.request_id, tmp_path / "run.mcap")
     rec = read_recording(path)
     assert rec.truncated == ""
     present = set(rec.channels)
     agent_topics = {s.pose_topic("k1"), s.sensors_topic("k1"), s.commands_topic("k1")}
     assert {s.RUN, s.END, s.SNAPSHOT, s.FRAME, s.OUTPUT, s.EVENTS, s.CHAT} | agent_topics <= present
-    assert rec.info is not None and rec.info.agent == "k1" and rec.info.user == "alice"
+    assert rec.info is not None and rec.info.agent == "k1" and rec.info.user == "dave"
     assert len(rec.frames) > 50 and len(rec.samples) > 20 and len(rec.commands) > 20
     assert {c.record.sender for c in rec.commands} == {"runner-svc"}
     assert rec.end is not None and rec.end.status == "finished"
@@ -144,19 +153,20 @@ def test_wart_record_and_report_from_the_command_line(
         _wait_recorded(lab, "carol", q.request_id)
     common = ["--context", CTX, "--user", "carol", *lab.net_args()]
     env = {"WART_PASSWORD": PASSWORD}
+    # Commands that do not need each other's results run at once (each is mostly imports).
     listed = procs.start("record-list", ["record", "list", *common], env=env)
-    assert listed.popen.wait(30) == 0, listed.output()
-    assert q.request_id in listed.output()
     out = tmp_path / "carol.mcap"
     got = procs.start(
         "record-get", ["record", "get", q.request_id, "-o", str(out), *common], env=env
     )
+    assert listed.popen.wait(30) == 0, listed.output()
+    assert q.request_id in listed.output()
     assert got.popen.wait(30) == 0, got.output()
     report = procs.start("report", ["report", str(out)])
-    assert report.popen.wait(30) == 0, report.output()
-    assert "distance:" in report.output() and "ended:       finished" in report.output()
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(out.read_bytes()[:100])
     bad = procs.start("report-bad", ["report", str(cut)])
+    assert report.popen.wait(30) == 0, report.output()
+    assert "distance:" in report.output() and "ended:       finished" in report.output()
     assert bad.popen.wait(30) == 1
     assert "error:" in bad.output() and "Traceback" not in bad.output()

@@ -25,6 +25,14 @@ from services.registry.accounts_db import RegistryDB
 from tests.conftest import Procs, Router, wait_for
 from tests.lab import PASSWORD, ProcessLab, make_lab
 
+# One worker starts the module's router once.
+pytestmark = pytest.mark.xdist_group("registry")
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
+
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:

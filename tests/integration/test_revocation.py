@@ -10,7 +10,6 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,7 +29,8 @@ from tests.integration.agentkit import (
 )
 from tests.lab import ProcessLab, make_lab
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's lab once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("revocation")]
 
 
 class Forward(Controller):
@@ -40,13 +40,19 @@ class Forward(Controller):
         robot.set_speeds(15, 15)
 
 
-@pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    start_engine(lab, identity=True)
-    start_agent_context(lab, slot=30.0)
-    yield lab
+@pytest.fixture(scope="module")
+def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
+    """One lab for both tests: each kicks another user (alice, ida) and ends its requests."""
+    tmp = tmp_path_factory.mktemp("lab")
+    procs = Procs(tmp)
+    lab = make_lab(module_router, procs, tmp)
+    try:
+        lab.start_registry()
+        start_engine(lab, identity=True)
+        start_agent_context(lab, slot=30.0)
+        yield lab
+    finally:
+        procs.stop_all()
 
 
 def _still_for(poses: Poses, agent: str, seconds: float) -> float:

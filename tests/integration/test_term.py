@@ -32,7 +32,13 @@ from tests.integration.agentkit import CTX, start_agent_context, start_engine
 from tests.lab import PASSWORD, make_lab
 from tests.lab import ProcessLab as Lab
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's router once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("term")]
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

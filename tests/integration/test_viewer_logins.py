@@ -36,7 +36,8 @@ from viewers.web.connector import LiveConnector
 from viewers.web.demo_lab import DemoConnector, DemoLab
 from viewers.web.login import LoginDesk
 
-pytestmark = pytest.mark.integration
+# One worker starts the module's router once.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("viewer_logins")]
 
 USERS = ("alice", "bob", "carol", "ida")
 CLASS = 24  # browsers logging in at the same instant through one viewer
@@ -61,6 +62,11 @@ class ViewerLab:
     @property
     def url(self) -> str:
         return f"ws://127.0.0.1:{self.viewer.port}"
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture
