@@ -279,9 +279,16 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
         lease_key, context.seal(lease_key, lease_for(realm, alice, start=now, end=now + 60))
     )
     halt = AgentCommand(agent="k0", speeds=(0, 0))
-    for _ in range(6):  # let the lease and the first commands land
+
+    def k0_halted() -> bool:
+        # The lease and the first commands have landed once k0 stands across a few frames.
         zsession.put(cmd_key, alice.seal(cmd_key, halt))
-        time.sleep(0.05)
+        first, seen = poses(), frames.count
+        wait_for(lambda: frames.count >= seen + 3, 10, "three more frames")
+        zsession.put(cmd_key, alice.seal(cmd_key, halt))
+        return bool(moved(first, poses())[0] < 0.5)
+
+    wait_for(k0_halted, 30, "k0 standing still for its lease holder")
     before = poses()
     for _ in range(20):  # a controller's period, not a wait for a condition
         zsession.put(cmd_key, alice.seal(cmd_key, halt))

@@ -13,7 +13,8 @@ import pytest
 
 from bench.bench_chaos import Chaos, DeployProbe, running_lab
 
-pytestmark = pytest.mark.smoke
+# A whole lab, every service killed in turn and waited back: its hang guard is longer.
+pytestmark = [pytest.mark.smoke, pytest.mark.timeout(300)]
 
 # Every service a chat client depends on, the router first.
 VICTIMS = ("router", "context chat lobby", "registry", "engine arena1", "context agent arena")
