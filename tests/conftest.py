@@ -24,14 +24,16 @@ from tests.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_e
 ARTIFACTS = REPO / "test-artifacts"
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+def pytest_itemcollected(item: pytest.Item) -> None:
     # Under xdist (./dev test), the browser tests run one at a time on one
     # worker: each drives a Chromium rendering WebGL in software, and two at
     # once on two cores made each page slow for nothing. The other tests,
     # which mostly wait on their processes, share the other workers.
-    for item in items:
-        if "browser" in item.keywords or item.path.parent.name == "browser":
-            item.add_marker(pytest.mark.xdist_group("browser"))
+    # Marked as each item is collected: xdist reads the groups into the node ids
+    # in its own collection_modifyitems, and marked there (after it) they were
+    # ignored and the browser tests spread over every worker.
+    if "browser" in item.keywords or item.path.parent.name == "browser":
+        item.add_marker(pytest.mark.xdist_group("browser"))
 
 
 @pytest.fixture
