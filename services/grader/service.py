@@ -48,6 +48,7 @@ from common.messages import (
     ClassTables,
     CompetitionQuery,
     CompetitionRun,
+    EpisodeResult,
     Graded,
     GradingChanged,
     Leaderboard,
@@ -420,6 +421,19 @@ class GraderService(Service):
             except Exception as exc:
                 self._grader_failed(sub, exc)
 
+    def _fail_uncounted(self, sub: Pending, episodes: list[EpisodeResult], message: str) -> None:
+        """A submission that could not be graded through no fault of the student's."""
+        self.store.finish(
+            sub.id,
+            episodes,
+            status="failed",
+            counted=False,
+            mean=None,
+            low=None,
+            penalty=0.0,
+            message=message,
+        )
+
     def _grader_failed(self, sub: Pending, exc: Exception) -> None:
         """The grader's own fault: queued again at the head, and given up after a few tries.
 
@@ -437,15 +451,10 @@ class GraderService(Service):
             self._changed(sub, "queued")
             return
         self._grader_failures.pop(sub.id, None)
-        self.store.finish(
-            sub.id,
+        self._fail_uncounted(
+            sub,
             [],
-            status="failed",
-            counted=False,
-            mean=None,
-            low=None,
-            penalty=0.0,
-            message=f"the lab could not grade it (the grader failed {tries} times: {exc}): "
+            f"the lab could not grade it (the grader failed {tries} times: {exc}): "
             "not counted against your quota; submit again",
         )
         self._changed(sub, "failed")
@@ -458,30 +467,20 @@ class GraderService(Service):
         if self.stopped and graded.lab_failed:
             return  # the grader is stopping: left queued, graded at the next start
         if graded.lab_failed:
-            self.store.finish(
-                sub.id,
+            self._fail_uncounted(
+                sub,
                 graded.episodes,
-                status="failed",
-                counted=False,
-                mean=None,
-                low=None,
-                penalty=0.0,
-                message=f"the lab could not grade it ({graded.lab_failed}): not counted "
+                f"the lab could not grade it ({graded.lab_failed}): not counted "
                 "against your quota; submit again",
             )
             self.log.warning("submission %s: the lab failed: %s", sub.id, graded.lab_failed)
             self._changed(sub, "failed", a.course)
             return
         if graded.grader_failed:
-            self.store.finish(
-                sub.id,
+            self._fail_uncounted(
+                sub,
                 graded.episodes,
-                status="failed",
-                counted=False,
-                mean=None,
-                low=None,
-                penalty=0.0,
-                message=f"{GRADER_FAILED}{graded.grader_failed}"[:200]
+                f"{GRADER_FAILED}{graded.grader_failed}"[:200]
                 + ": not counted against your quota; your teacher is told",
             )
             self.log.warning(

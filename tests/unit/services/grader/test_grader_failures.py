@@ -36,6 +36,9 @@ def grader() -> SimpleNamespace:
         changes=[],
     )
     g._changed = lambda sub, status, course=None: g.changes.append((sub.id, status))
+    g._fail_uncounted = lambda sub, episodes, message: GraderService._fail_uncounted(
+        g, sub, episodes, message
+    )
     return g
 
 
