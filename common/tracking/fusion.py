@@ -92,8 +92,8 @@ class PoseFusion:
         self._camera_at = at if self._camera_at is None else max(self._camera_at, at)
 
     def seen(self, agent: str, x: float, y: float, heading: float, captured_at: float) -> bool:
-        """The camera saw ``agent`` there at ``captured_at``; False if no odometry covers it yet."""
-        self.camera_alive(captured_at)
+        """The camera saw ``agent`` there at ``captured_at``; False if no odometry covers it yet.
+        Whether the camera is alive is the caller's word (``camera_alive``), by arrival."""
         robot = self._robot(agent)
         odo = self._odometry_at(robot, captured_at)
         if odo is None:

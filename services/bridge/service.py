@@ -340,7 +340,9 @@ class BridgeService(WorldService):
         seen = decode(sample.payload.to_bytes(), TrackedPoses)
         if seen.world != self.ident:
             return
-        self.fusion.camera_alive(seen.captured_at)
+        # Alive by when we heard it, not by its capture stamp: a busy camera host's frames
+        # arrive a second or two late, and another machine's clock may be off by more.
+        self.fusion.camera_alive(time.time())
         with self._lock:
             known = set(self._agents)
         for robot in seen.robots:

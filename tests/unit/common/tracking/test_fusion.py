@@ -27,6 +27,7 @@ def drive(
         odo[1] += step * (1 + slip) * math.sin(odo[2])
         fusion.odometry("k1", *odo, at=t)
         if camera_every is not None and t - last_seen >= camera_every:
+            fusion.camera_alive(t)
             fusion.seen("k1", *true, captured_at=t)
             last_seen = t
         shown = fusion.pose("k1", t)
@@ -45,6 +46,7 @@ def test_sightings_hold_a_slipping_robot_to_its_true_pose() -> None:
 def test_a_robot_the_live_camera_lost_is_not_seen_where_it_was_last_trusted() -> None:
     fusion = PoseFusion(1000, 1000)
     fusion.odometry("k1", 300, 300, 0, at=0.0)
+    fusion.camera_alive(0.0)
     fusion.seen("k1", 310, 305, 0.1, captured_at=0.0)
     fusion.odometry("k1", 300, 300, 0, at=0.1)
     assert fusion.pose("k1", 0.1).source == "tracked"  # type: ignore[union-attr]
