@@ -155,12 +155,18 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
 
     # The server's copy of the text arriving late and a little different (a busy page)
     # changes only what differs: the cursor stays on line 11 (it went to line 1).
+    # Each time the server and the page end up with the same text, even when the page's
+    # own resend of the older text crosses the server's on the way (the server then held
+    # the old text while the page showed the new).
     text = bench.code.value
-    set_value(bench.code, text.rstrip("\n") + "\n# kept by the server\n")
+    kept = text.rstrip("\n") + "\n# kept by the server\n"
+    set_value(bench.code, kept)
     wait_until(lambda: "# kept by the server" in box.inner_text(), what="the server's text")
     assert cursor_line() == 11
+    wait_until(lambda: bench.code.value == kept, what="the server's text kept at the server")
     set_value(bench.code, text)
     wait_until(lambda: "# kept by the server" not in box.inner_text(), what="the text back")
+    wait_until(lambda: bench.code.value == text, what="the text back at the server")
 
     # Ctrl-S saves under the file name: the lab keeps it, the list shows it.
     page.p.keyboard.press("Control+s")

@@ -255,6 +255,10 @@ function poll() {
       entry.written = value;
       const doc = entry.view.state.doc.toString();
       if (doc !== value) entry.view.dispatch({ changes: smallestChange(doc, value) });
+      // Echo it back: a resend of ours that crossed the server's text on the way put our
+      // older text at the server, while this page shows the server's. Without the echo
+      // the two stay apart, and Run would run what the student no longer sees.
+      scheduleResend(entry);
     }
     const holder = document.querySelector(`div.wart-problems[data-for="${CSS.escape(id)}"]`);
     const json = holder ? holder.dataset.problems || "[]" : "[]";
