@@ -312,14 +312,18 @@ def show_still_frame(world: DemoWorld, view: WorldView, timeout: float = 10.0) -
     return frame
 
 
-def wait_until(condition: Callable[[], bool], timeout: float = 10.0, what: str = "") -> None:
-    """Poll a condition (state read from the server or the page), never a fixed sleep."""
+def wait_until(
+    condition: Callable[[], bool], timeout: float = 10.0, what: str | Callable[[], str] = ""
+) -> None:
+    """Poll a condition (state read from the server or the page), never a fixed sleep.
+    ``what`` may be a function: it is asked at the timeout, to say what was there instead."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if condition():
             return
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what or condition}")
+    said = what() if callable(what) else what
+    raise AssertionError(f"timed out waiting for {said or condition}")
 
 
 def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:

@@ -142,16 +142,24 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
     page.p.locator("a[data-wart-line='11']").click()
 
     def cursor_line() -> int:
-        # The editor on the page now: a view React replaced stays listed until the next poll.
+        # The editor in sight: a view React replaced stays listed until the next poll.
         return int(
             page.p.evaluate(
-                "() => { const e = [...window.wartEditor.views.values()]"
-                ".find(e => e.view.dom.isConnected); const v = e.view;"
+                "() => { const v = window.wartEditor.editorFor(null).view;"
                 " return v.state.doc.lineAt(v.state.selection.main.head).number; }"
             )
         )
 
-    wait_until(lambda: cursor_line() == 11, what="the cursor on line 11")
+    def editors() -> str:
+        return str(
+            page.p.evaluate(
+                "() => [...window.wartEditor.views.values()].map(e => ({connected:"
+                " e.view.dom.isConnected, shown: e.view.dom.offsetParent !== null, line:"
+                " e.view.state.doc.lineAt(e.view.state.selection.main.head).number}))"
+            )
+        )
+
+    wait_until(lambda: cursor_line() == 11, what=lambda: f"the cursor on line 11: {editors()}")
 
     # The server's copy of the text arriving late and a little different (a busy page)
     # changes only what differs: the cursor stays on line 11 (it went to line 1).

@@ -75,6 +75,15 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
     wait_until(lambda: "[components.range]" in builder.text.value, 10, what="the range finder")
 
     scout = builder.text.value.replace('name = "epuck"', 'name = "scout"')
+
+    def held(sent: str) -> str:
+        page = ida.input_after_label("Robot file").input_value()
+        return (
+            f"the edit at the server: the page sent {len(sent)} characters and shows "
+            f"{len(page)}{' (the same)' if page == sent else ''}; the server holds "
+            f"{len(builder.text.value)} ending {builder.text.value[-60:]!r}"
+        )
+
     # Bad robot files, each refused in the page with the line and field a user reads.
     for bad, said in (
         (
@@ -93,11 +102,12 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
         (scout + "#" * 70_000, "robot files are limited to 65536"),
     ):
         ida.fill("Robot file", bad)
-        wait_until(lambda b=bad: builder.text.value == b, 10, what="the edit at the server")
+        wait_until(lambda b=bad: builder.text.value == b, 10, what=lambda b=bad: held(b))
         ida.click("Check robot file")
         ida.wait_text(said)
-    ida.fill("Robot file", scout.replace("beams = 1", "beams = 3"))
-    wait_until(lambda: "beams = 3" in builder.text.value, 10, what="the edit at the server")
+    three = scout.replace("beams = 1", "beams = 3")
+    ida.fill("Robot file", three)
+    wait_until(lambda: builder.text.value == three, 10, what=lambda: held(three))
     ida.click("Check robot file")
     ida.wait_text("Check: scout is a valid robot type")
     ida.wait_text("Drawn at the arena's centre")  # its body, rays and beams in the view

@@ -58,7 +58,7 @@ def write_code(page: ViserPage, text: str, wait_for: object) -> None:
     """Put ``text`` in the code editor as a paste does (typing would auto-indent it)."""
     page.p.get_by_role("textbox", name="Controller code", exact=True).wait_for(timeout=15_000)
     page.p.evaluate(
-        "text => { const v = [...window.wartEditor.views.values()][0].view;"
+        "text => { const v = window.wartEditor.editorFor(null).view;"
         " v.dispatch({changes: {from: 0, to: v.state.doc.length, insert: text}}); }",
         text,
     )

@@ -142,17 +142,41 @@ function applyProblems(entry, problems) {
   entry.problemsShown = diagnostics.length;
 }
 
-function goToLine(n) {
-  for (const entry of views.values()) {
-    // A view whose host React just replaced is still listed until the next poll:
-    // moving its cursor would be lost with it.
-    if (!entry.view.dom.isConnected) continue;
-    const doc = entry.view.state.doc;
-    const line = doc.line(Math.max(1, Math.min(n, doc.lines)));
-    entry.view.dispatch({ selection: { anchor: line.from }, scrollIntoView: true });
-    entry.view.focus();
-    return;
+// The editor a problem's link belongs to: the one in the nearest folder around the link
+// (a page holds several: an arena tab's workbench each, kept in the page while hidden).
+// Without a link, the editor in sight. A view whose host React just replaced is still
+// listed until the next poll: moving its cursor would be lost with it.
+function editorFor(link) {
+  for (let node = link; node && node.querySelectorAll; node = node.parentElement) {
+    for (const host of node.querySelectorAll("div.wart-editor[data-for]")) {
+      const entry = views.get(host.dataset.for);
+      if (entry && entry.view.dom.isConnected) return entry;
+    }
   }
+  const live = [...views.values()].filter((e) => e.view.dom.isConnected);
+  return live.find((e) => e.view.dom.offsetParent !== null) || live[0] || null;
+}
+
+function goToLine(n, link) {
+  const entry = editorFor(link || null);
+  if (!entry) return;
+  const view = entry.view;
+  const before = view.state.selection.main.head;
+  const place = (onlyIfBack) => {
+    const head = view.state.selection.main.head;
+    if (onlyIfBack && head !== before) return; // moved since: the user's, keep it
+    const doc = view.state.doc;
+    const line = doc.line(Math.max(1, Math.min(n, doc.lines)));
+    if (doc.lineAt(head).number !== line.number) {
+      view.dispatch({ selection: { anchor: line.from }, scrollIntoView: true });
+    }
+  };
+  // Focus first, then place: focusing an editor that had lost focus to the link reads the
+  // browser's own selection back into it a moment later -- the old cursor (line 1 after
+  // Ctrl-Home, seen on a busy page). If that happens, place it again.
+  view.focus();
+  place(false);
+  for (const ms of [50, 250]) setTimeout(() => place(true), ms);
 }
 
 function mount(host) {
@@ -270,17 +294,29 @@ function poll() {
 }
 
 if (!window.wartEditor) {
-  window.wartEditor = { mount, views, goToLine, poll };
+  window.wartEditor = { mount, views, goToLine, editorFor, poll };
   document.addEventListener("click", holdEarlyPress, true);
   for (const type of ["pointerdown", "keydown", "input", "change", "click"]) {
     document.addEventListener(type, noteActivity, true);
   }
-  // Capture phase: the panel's own handlers cannot stop it on the way down.
-  document.addEventListener("click", (event) => {
-    const link = event.target.closest && event.target.closest("[data-wart-line]");
-    if (!link) return;
+  // A line link acts on the press, not the click: a panel redrawn between press and
+  // release (the server's next message) moved the link from under the pointer, and the
+  // click landed on what took its place (seen on a busy page). Its default prevented,
+  // the press leaves the focus -- and the cursor -- in the editor. Capture phase: the
+  // panel's own handlers cannot stop it on the way down.
+  const lineLink = (event) => event.target.closest && event.target.closest("[data-wart-line]");
+  document.addEventListener("mousedown", (event) => {
+    const link = lineLink(event);
+    if (!link || event.button !== 0) return;
     event.preventDefault();
-    goToLine(parseInt(link.dataset.wartLine, 10));
+    goToLine(parseInt(link.dataset.wartLine, 10), link);
+  }, true);
+  document.addEventListener("click", (event) => {
+    const link = lineLink(event);
+    if (!link) return;
+    event.preventDefault(); // never a jump to "#"
+    // Enter on a focused link clicks without a press (detail 0): act on that one.
+    if (event.detail === 0) goToLine(parseInt(link.dataset.wartLine, 10), link);
   }, true);
   setInterval(poll, 150);
   // A host drawn (or drawn anew) gets its editor at once, not at the next poll: keys typed
