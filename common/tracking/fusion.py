@@ -61,6 +61,27 @@ class _Robot:
     last_shown: tuple[float, float, float] | None = None
 
 
+class CameraClock:
+    """A camera's capture stamps on this machine's clock.
+
+    The camera stamps each frame with its own host's clock; the bridge's
+    odometry is on the bridge's. Two machines' clocks differ (by seconds
+    without NTP), and a stamp from the future or the past would pair a
+    sighting with the wrong odometry pose. Each frame's arrival minus its
+    stamp is the clocks' difference plus the frame's delay; the smallest of
+    the recent ones is the difference plus the least delay (as NTP's filter
+    takes the least-delayed sample): that is added to each stamp.
+    """
+
+    def __init__(self, frames: int = 200) -> None:
+        self._gaps: deque[float] = deque(maxlen=frames)
+
+    def local(self, captured_at: float, arrived_at: float) -> float:
+        """``captured_at`` (the camera's clock) on this clock; ``arrived_at`` is now, here."""
+        self._gaps.append(arrived_at - captured_at)
+        return captured_at + min(self._gaps)
+
+
 class PoseFusion:
     """Odometry and camera sightings of one world's robots, fused per robot."""
 

@@ -63,7 +63,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.tracking.fusion import PoseFusion
+from common.tracking.fusion import CameraClock, PoseFusion
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
@@ -91,6 +91,7 @@ KHEPERA_IR_POSES: tuple[tuple[float, float, float], ...] = tuple(
     )
 )
 FINGERS_CLOSED_ABOVE = 100  # a finger-position reading above this is a closed grip
+MAX_CAMERAS = 16  # cameras over one arena whose clocks are followed (a bad publisher: no more)
 ONLINE_COLOUR, OFFLINE_COLOUR, NOT_SEEN_COLOUR = "#2e86de", "#8a8a8a", "#c8c8c8"
 
 
@@ -162,6 +163,7 @@ class BridgeService(WorldService):
         self._threads: list[threading.Thread] = []
         w, h = settings.arena
         self.fusion = PoseFusion(w, h, radius_mm=KHEPERA_RADIUS_MM)
+        self.camera_clocks: dict[str, CameraClock] = {}  # each camera's host has its clock
         self._pose_from: dict[str, str] = {}  # agent -> where its shown pose comes from
         self._camera_said: bool | None = None
 
@@ -342,12 +344,18 @@ class BridgeService(WorldService):
             return
         # Alive by when we heard it, not by its capture stamp: a busy camera host's frames
         # arrive a second or two late, and another machine's clock may be off by more.
-        self.fusion.camera_alive(time.time())
+        now = time.time()
+        self.fusion.camera_alive(now)
+        clock = self.camera_clocks.pop(seen.camera, None) or CameraClock()
+        self.camera_clocks[seen.camera] = clock  # the newest last: the oldest goes first
+        while len(self.camera_clocks) > MAX_CAMERAS:
+            self.camera_clocks.pop(next(iter(self.camera_clocks)))
+        captured = clock.local(seen.captured_at, now)
         with self._lock:
             known = set(self._agents)
         for robot in seen.robots:
             if robot.agent in known:
-                self.fusion.seen(robot.agent, robot.x, robot.y, robot.heading, seen.captured_at)
+                self.fusion.seen(robot.agent, robot.x, robot.y, robot.heading, captured)
 
     def _shown_poses(self, agents: Sequence[_Agent], states: Sequence[RobotState]) -> list[Pose]:
         """Each robot's pose as the world shows it; a change of where poses come from

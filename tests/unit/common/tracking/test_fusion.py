@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from common.tracking.fusion import PoseFusion
+from common.tracking.fusion import CameraClock, PoseFusion
 
 
 def drive(
@@ -74,3 +74,32 @@ def test_a_camera_that_went_silent_leaves_the_robot_on_odometry() -> None:
     shown = fusion.pose("k1", 5.0)
     assert shown is not None and shown.source == "odometry"
     assert round(shown.x) == 250  # the last correction carries on
+
+
+def test_a_camera_on_a_host_whose_clock_is_off_still_corrects_the_right_pose() -> None:
+    # The camera's host is 5 s behind; frames arrive 20 to 80 ms after their capture.
+    clock, fusion = CameraClock(), PoseFusion(1000, 1000)
+    true_x = lambda t: 100.0 + 50.0 * t  # noqa: E731 (50 mm/s along x; odometry 10 % long)
+    for i in range(100):
+        t = i * 0.1
+        fusion.odometry("k1", 100.0 + 55.0 * t, 500.0, 0.0, at=t)
+        if i >= 1:
+            captured = t - 0.1  # the frame of 0.1 s ago, just arrived
+            delay = 0.02 + 0.06 * ((i * 7) % 10) / 10
+            stamped = captured - 5.0
+            local = clock.local(stamped, captured + delay)
+            assert abs(local - captured) <= 0.08
+            fusion.camera_alive(captured + delay)
+            fusion.seen("k1", true_x(captured), 500.0, 0.0, captured_at=local)
+    shown = fusion.pose("k1", 9.9)
+    assert shown is not None and shown.source == "tracked"
+    # Paired with the odometry of the right moment: within the millimetres of 20 ms.
+    assert abs(shown.x - true_x(9.9)) < 5.0
+    # Taken at its word, the stamp is 5 s old on arrival: a robot in full view "not seen".
+    naive = PoseFusion(1000, 1000)
+    for i in range(100):
+        naive.odometry("k1", 100.0 + 55.0 * i * 0.1, 500.0, 0.0, at=i * 0.1)
+    naive.camera_alive(9.9)
+    naive.seen("k1", true_x(9.8), 500.0, 0.0, captured_at=9.8 - 5.0)
+    off = naive.pose("k1", 9.9)
+    assert off is not None and off.source == "not seen"
