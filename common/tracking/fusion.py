@@ -123,6 +123,10 @@ class PoseFusion:
         robot.seen_at = captured_at if robot.seen_at is None else max(robot.seen_at, captured_at)
         return True
 
+    def camera_gone(self) -> None:
+        """The camera's process is gone (its presence token left): offline at once."""
+        self._camera_at = None
+
     def camera_live(self, now: float) -> bool:
         return self._camera_at is not None and now - self._camera_at <= self.camera_silent_after_s
 

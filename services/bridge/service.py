@@ -48,6 +48,7 @@ import zenoh
 from common import keys
 from common.auth import AuthError, Session, Verifier
 from common.controller.actuators import apply_command
+from common.keys import AliveKind
 from common.messages import (
     AgentCommand,
     AgentInfo,
@@ -63,11 +64,12 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.tracking.fusion import CameraClock, PoseFusion
+from common.tracking.fusion import PoseFusion
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
 from services.bridge import protocol as P
+from services.bridge.cameras import CAMERA_HUNG_S, ArenaCameras
 from services.bridge.detect import candidate_ports, detect
 from services.bridge.odometry import Pose
 from services.bridge.robot import KheperaRobot, RobotOptions, RobotState
@@ -91,7 +93,6 @@ KHEPERA_IR_POSES: tuple[tuple[float, float, float], ...] = tuple(
     )
 )
 FINGERS_CLOSED_ABOVE = 100  # a finger-position reading above this is a closed grip
-MAX_CAMERAS = 16  # cameras over one arena whose clocks are followed (a bad publisher: no more)
 ONLINE_COLOUR, OFFLINE_COLOUR, NOT_SEEN_COLOUR = "#2e86de", "#8a8a8a", "#c8c8c8"
 
 
@@ -162,8 +163,10 @@ class BridgeService(WorldService):
         self._halt = threading.Event()
         self._threads: list[threading.Thread] = []
         w, h = settings.arena
-        self.fusion = PoseFusion(w, h, radius_mm=KHEPERA_RADIUS_MM)
-        self.camera_clocks: dict[str, CameraClock] = {}  # each camera's host has its clock
+        self.fusion = PoseFusion(
+            w, h, radius_mm=KHEPERA_RADIUS_MM, camera_silent_after_s=CAMERA_HUNG_S
+        )
+        self.cameras = ArenaCameras(self.fusion)
         self._pose_from: dict[str, str] = {}  # agent -> where its shown pose comes from
         self._camera_said: bool | None = None
 
@@ -174,6 +177,11 @@ class BridgeService(WorldService):
             self.log.warning("no --registry-key: every command and lease will be refused")
         self.declare_world_interface()
         self.subscribe(keys.world_tracked(self.realm, self.ident), self._on_tracked)
+        self.track(
+            self.session.liveliness().declare_subscriber(
+                keys.alive_of_kind(self.realm, AliveKind.CAMERA), self._on_camera, history=True
+            )
+        )
         n = len(self.settings.robots)
         for i, spec in enumerate(self.settings.robots):
             self.add_robot(spec.port, spec.agent, spec.pose or self._spread(i, n))
@@ -337,6 +345,11 @@ class BridgeService(WorldService):
 
     # -- the network -> robots
 
+    def _on_camera(self, sample: zenoh.Sample) -> None:
+        parsed = keys.parse_alive(self.realm, str(sample.key_expr))
+        if parsed is not None:
+            self.cameras.presence(parsed[1], sample.kind == zenoh.SampleKind.PUT)
+
     def _on_tracked(self, sample: zenoh.Sample) -> None:
         """The arena camera's sightings: each corrects its robot's odometry."""
         seen = decode(sample.payload.to_bytes(), TrackedPoses)
@@ -344,13 +357,9 @@ class BridgeService(WorldService):
             return
         # Alive by when we heard it, not by its capture stamp: a busy camera host's frames
         # arrive a second or two late, and another machine's clock may be off by more.
-        now = time.time()
-        self.fusion.camera_alive(now)
-        clock = self.camera_clocks.pop(seen.camera, None) or CameraClock()
-        self.camera_clocks[seen.camera] = clock  # the newest last: the oldest goes first
-        while len(self.camera_clocks) > MAX_CAMERAS:
-            self.camera_clocks.pop(next(iter(self.camera_clocks)))
-        captured = clock.local(seen.captured_at, now)
+        captured = self.cameras.frame(seen.camera, seen.captured_at, time.time())
+        if captured is None:
+            return
         with self._lock:
             known = set(self._agents)
         for robot in seen.robots:
