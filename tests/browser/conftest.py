@@ -14,6 +14,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
@@ -225,7 +226,10 @@ class ViserPage:
         return self.p.get_by_role("button", name=name, exact=True).last
 
     def click(self, name: str, timeout: float = 10_000) -> None:
-        self.button(name).click(timeout=timeout)
+        button = self.button(name)
+        button.wait_for(state="visible", timeout=timeout)
+        settle(button, timeout / 1000)
+        button.click(timeout=timeout)
 
     def tab(self, name: str):
         return self.p.get_by_role("tab", name=re.compile(re.escape(name)))
@@ -310,6 +314,25 @@ def show_still_frame(world: DemoWorld, view: WorldView, timeout: float = 10.0) -
     wait_until(lambda: view.last_seq == frame.seq, timeout, what="the test's frame in the view")
     wait_for_aimed_camera(view)
     return frame
+
+
+def settle(locator: Any, timeout: float = 10.0, quiet_s: float = 0.15) -> None:
+    """Return once ``locator``'s box has not moved for ``quiet_s`` (or at ``timeout``).
+
+    Playwright's own check (the same box on two animation frames) passes in the middle of
+    a folder's opening on a starved renderer; the panel moved on under the pointer and a
+    click landed on the button above ("Add ball" for "Add robot", seen at load 11).
+    """
+    deadline = time.monotonic() + timeout
+    last, since = None, time.monotonic()
+    while time.monotonic() < deadline:
+        box = locator.bounding_box()
+        now = time.monotonic()
+        if box != last:
+            last, since = box, now
+        elif now - since >= quiet_s:
+            return
+        time.sleep(0.03)
 
 
 def wait_until(

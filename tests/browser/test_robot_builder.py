@@ -125,7 +125,7 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
     wait_until(
         lambda: set(view.robot_names) - before,
         15,
-        what=f"the scout in the arena ({editor.notice.content})",
+        what=lambda: f"the scout in the arena ({editor.notice.content})",
     )
     (added,) = set(view.robot_names) - before
     assert view.feed is not None
