@@ -63,33 +63,13 @@ SLACK_MM = 2.0
 
 
 @njit(cache=_CACHE, inline="always")
-def _arc_kept(x, y, th, v, w, h, trig, a):  # pragma: no cover
-    """Disc ``a``'s pose after ``h`` s on the arc of forward speed ``v`` (mm/s), turn rate ``w``.
-
-    ``trig[a]`` holds a heading with its cos and sin: the last arc's end, where the
-    next arc starts (the next substep's, the next tick's if nothing moved the
-    robot in between; a heading that differs is worked out afresh). One sincos a
-    robot a substep instead of two, the same values: cos and sin are functions.
-    """
-    if trig[a, 0] == th:
-        c0 = trig[a, 1]
-        s0 = trig[a, 2]
-    else:
-        c0 = math.cos(th)
-        s0 = math.sin(th)
+def _arc(x, y, th, v, w, h):  # pragma: no cover
+    """Pose after ``h`` s on the arc of forward speed ``v`` (mm/s) and turn rate ``w``."""
     if abs(w) < 1e-9:
-        trig[a, 0] = th
-        trig[a, 1] = c0
-        trig[a, 2] = s0
-        return x + v * h * c0, y + v * h * s0, th
+        return x + v * h * math.cos(th), y + v * h * math.sin(th), th
     th1 = th + w * h
-    c1 = math.cos(th1)
-    s1 = math.sin(th1)
-    trig[a, 0] = th1
-    trig[a, 1] = c1
-    trig[a, 2] = s1
     k = v / w
-    return x + k * (s1 - s0), y - k * (c1 - c0), th1
+    return x + k * (math.sin(th1) - math.sin(th)), y - k * (math.cos(th1) - math.cos(th)), th1
 
 
 @njit(cache=_CACHE)
@@ -183,7 +163,6 @@ def drive_buffers(robots, k, width, height, radius):  # pragma: no cover
         np.empty((max(16, 4 * n), 2), dtype=np.int64),
         np.empty(k),  # sx, sy: where each object started the substep (pucks.py)
         np.empty(k),
-        np.full((robots, 3), np.nan),  # trig: _arc_kept's headings, none yet
     )
 
 
@@ -227,7 +206,7 @@ def tick_into(
     k = objects[0].shape[0]
     opose, ovel = objects[0], objects[1]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
-    sx, sy, trig = buffers[21], buffers[22], buffers[23]
+    sx, sy = buffers[21], buffers[22]
     top_speed = 0.0
     top_radius = 0.0
     for a in range(n):
@@ -265,7 +244,7 @@ def tick_into(
     pair_buffers = buffers[13:21]
     for _ in range(substeps):
         for a in range(n):
-            px[a], py[a], th[a] = _arc_kept(px[a], py[a], th[a], v[a], w[a], substep_s, trig, a)
+            px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
         if k:
             pucks.start_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s)
         pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)

@@ -46,30 +46,6 @@ from common.sim2d.rays import (
     ambient_gain,
 )
 
-# A sensor's shapes behind its outermost rays are skipped (_sense_range) only when
-# they are behind by more than this, and only when its spread is under this angle
-# (half a turn, less a margin: the rays between are then between those two).
-BEHIND_MM = 1e-3
-_NARROW_RAD = 3.0
-
-
-@njit(cache=_CACHE, inline="always")
-def _behind(sx, sy, ax, ay, bx, by, sg):  # pragma: no cover
-    """Whether both ends of segment ``sg`` are behind both rays from (sx, sy) along a and b.
-
-    A segment's points are between its ends, so then it is wholly behind them.
-    """
-    e0x = sg[0] - sx
-    e0y = sg[1] - sy
-    e1x = sg[2] - sx
-    e1y = sg[3] - sy
-    return (
-        e0x * ax + e0y * ay < -BEHIND_MM
-        and e1x * ax + e1y * ay < -BEHIND_MM
-        and e0x * bx + e0y * by < -BEHIND_MM
-        and e1x * bx + e1y * by < -BEHIND_MM
-    )
-
 
 @njit(cache=_CACHE)
 def _circles(robots, tables, scene, moving):  # pragma: no cover
@@ -295,25 +271,15 @@ def _sense_range(
         # neighbour's 24 ray tests were of sensors facing away from it. A sensor's
         # ray directions are worked out only once something passes that test.
         # (The nearest hit is a minimum over the same hits whatever the order.)
-        #
-        # Then, as the sensor's rays are all within its spread, a shape wholly behind
-        # both of its outermost rays (first and last: the rays between are positive
-        # combinations of them while the spread is under half a turn) is behind every
-        # ray, hit by none: the neighbour behind a sensor that faces away, the wall
-        # along which its rays point. Two dot products instead of the rays' casts.
-        # "Behind" by more than BEHIND_MM, so that rounding cannot turn a ray's miss
-        # into the hit it would not be: the same readings to the bit.
         far = curve_x[g, curve_n[g] - 1] + 1.0
         for s in range(sensors):
             m = np.inf
             if ncand or nseg or nedge:  # nothing near: every ray misses, skip the casting
                 r0 = s * rays_per_sensor
-                r1 = r0 + rays_per_sensor - 1  # the last ray (padding repeats it)
                 lx = ray_local[g, r0, 0]
                 ly = ray_local[g, r0, 1]
                 sx = x + co * lx - si * ly
                 sy = y + si * lx + co * ly
-                narrow = ray_local[g, r1, 2] - ray_local[g, r0, 2] < _NARROW_RAD
                 ready = False  # this sensor's ray directions worked out
                 for q in range(ncand):
                     c = cand[q]
@@ -324,11 +290,6 @@ def _sense_range(
                         continue
                     if not ready:
                         ready = _directions(dx, dy, ray_local, g, r0, rays_per_sensor, co, si)
-                    if narrow:
-                        # (sensor - centre) . ray > radius: the disc is behind the ray
-                        back = cr[c] + BEHIND_MM
-                        if fx * dx[r0] + fy * dy[r0] > back and fx * dx[r1] + fy * dy[r1] > back:
-                            continue
                     for r in range(r0, r0 + rays_per_sensor):
                         t = _ray_circle(sx, sy, dx[r], dy[r], cx[c], cy[c], cr[c])
                         if t < m:
@@ -339,8 +300,6 @@ def _sense_range(
                         continue
                     if not ready:
                         ready = _directions(dx, dy, ray_local, g, r0, rays_per_sensor, co, si)
-                    if narrow and _behind(sx, sy, dx[r0], dy[r0], dx[r1], dy[r1], sg):
-                        continue
                     for r in range(r0, r0 + rays_per_sensor):
                         t = _ray_segment(sx, sy, dx[r], dy[r], sg[0], sg[1], sg[2], sg[3])
                         if t < m:
