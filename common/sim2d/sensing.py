@@ -24,7 +24,8 @@ readings on any number of threads, and no numpy call draws noise per pass.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
@@ -32,9 +33,10 @@ import numba
 import numpy as np
 
 from common.sim2d import kernels as K
+from common.sim2d.entities import Light
 
 if TYPE_CHECKING:
-    from common.sim2d.entities import Agent, Light, MovableObject, Obstacle
+    from common.sim2d.entities import Agent, MovableObject, Obstacle
     from common.sim2d.specs import AgentTypeSpec
 
 _MIN_CELL_MM = 120.0
@@ -329,18 +331,17 @@ class NoiseKeys:
     """
 
     def __init__(self, rng: np.random.Generator, block: int = 256) -> None:
-        self._rng = rng
-        self._block = block
-        self._buf = np.zeros(0, dtype=np.uint64)
-        self._pos = 0
+        # The method is a C iterator's __next__: no Python frame per key (a third of
+        # what indexing the block and counting cost, 0.12 us a pass).
+        self.next: Callable[[], np.uint64] = itertools.chain.from_iterable(
+            _key_blocks(rng, block)
+        ).__next__
 
-    def next(self) -> np.uint64:
-        if self._pos >= len(self._buf):
-            self._buf = self._rng.bit_generator.random_raw(self._block)
-            self._pos = 0
-        key = self._buf[self._pos]  # a numpy uint64 already: no conversion
-        self._pos += 1
-        return key
+
+def _key_blocks(rng: np.random.Generator, block: int) -> Iterator[list[np.uint64]]:
+    """Blocks of the generator's raw words as numpy uint64 scalars (the kernel's key type)."""
+    while True:
+        yield list(rng.bit_generator.random_raw(block))
 
 
 class SensorSuite:
@@ -357,6 +358,9 @@ class SensorSuite:
         self._static: StaticGeometry | None = None
         self._cell: tuple[int, float] | None = None  # (world layout, grid cell)
         self._lights: dict[tuple[tuple[float, float, float, float], ...], np.ndarray] = {}
+        # While no light blinks (lit): (Light.edits, world layout, its list of lights,
+        # their count, their table).
+        self._steady: tuple[int, int, object, int, np.ndarray] = (-1, -1, None, 0, NO_LIGHTS)
 
     def fit(
         self, agents: Sequence[Agent], radius: np.ndarray, arm_lowered_above: np.ndarray
@@ -434,6 +438,23 @@ class SensorSuite:
         """(L, 4) x, y, radius, intensity of the lights on at ``sim_time`` (keyed on values)."""
         if not world.lights:  # the common case in a swarm, every pass: no generator
             return NO_LIGHTS
+        steady = self._steady
+        if (
+            steady[0] == Light.edits
+            and steady[1] == world.layout
+            and steady[2] is world.lights
+            and steady[3] == len(world.lights)
+        ):
+            # No light blinks, none was added or removed, none changed since: the
+            # same table. Working it out was 0.6 us a pass with one lamp, 6 % of a
+            # 10-robot step.
+            return steady[4]
+        table = self._lit(world, sim_time)
+        if not any(light.mode == "blink" for light in world.lights):
+            self._steady = (Light.edits, world.layout, world.lights, len(world.lights), table)
+        return table
+
+    def _lit(self, world: SensedWorld, sim_time: float) -> np.ndarray:
         key = tuple(
             (light.x, light.y, light.radius_mm, light.intensity)
             for light in world.lights

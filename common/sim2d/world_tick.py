@@ -110,17 +110,25 @@ class WorldTick:
         # and at 10 robots the generator alone was 1.5 us of a 25 us step.
         if f is not None:
             k = f.key
+            sensors = self.sensors
+            d = f.discs
             if (
                 k[0] == self.layout
                 and k[1] is self.tables
-                and k[2] is self.sensors.agents
-                and k[3] is self.sensors.current_static()
+                and k[2] is sensors.agents
+                and k[3] is sensors.current_static()
                 and k[4] is self.cmd
                 and k[5] is self.counters
                 and k[6] is self.arm
                 and k[7] == self.tick_s
                 and k[8] == self.substeps
-                and k[9] is world_discs.current(self)  # type: ignore[arg-type]  # the World
+                # k[9] is world_discs.current(self), spelled out: d's key is
+                # world_discs._key (layout, grip version, tables, fingers, arm),
+                # taken with this one, so its layout, tables and arm are k[0], k[1]
+                # and k[6], checked above (the call was 0.15 us a tick).
+                and self._discs is d
+                and d.key[1] == self.grippers.version
+                and d.key[3] is self.fingers
             ):
                 return f
         t = self.tables
