@@ -181,6 +181,9 @@ class WorldChannel:
         self._links: dict[str, ZenohRobotLink] = {}
         self._links_lock = threading.Lock()
         self._pending: list[BundledCommand] = []
+        # MACed command records (link.send under a MAC lease), as MacCommandBundle's
+        # arrays: agents, records, MACs (appended together under _pending_lock)
+        self._pending_items: tuple[list[str], list[bytes], list[bytes]] = ([], [], [])
         self._pending_lock = threading.Lock()
         self._sending = threading.Lock()
         self._held = threading.local()  # burst() depth of the calling thread
@@ -287,21 +290,23 @@ class WorldChannel:
             link._last_send = now
 
     def _put_mac_items(self, agents: list[str], items: list[bytes], macs: list[bytes]) -> None:
-        """Put MACed command records (a swarm tick's) as MacCommandBundles, now."""
+        """Put MACed command records (a swarm tick's, or links') as MacCommandBundles, now."""
         for i in range(0, len(agents), MAX_BUNDLED):
             j = i + MAX_BUNDLED
-            payload = encode(
-                MacCommandBundle(
+            if i == 0 and len(agents) <= MAX_BUNDLED:  # the usual case: no copies
+                bundle = MacCommandBundle(agents=agents, items=b"".join(items), macs=b"".join(macs))
+            else:
+                bundle = MacCommandBundle(
                     agents=agents[i:j], items=b"".join(items[i:j]), macs=b"".join(macs[i:j])
                 )
-            )
+            payload = encode(bundle)
             try:
                 self._publisher.put(payload)
             except Exception as exc:  # a closed session at shutdown
                 log.debug("could not put a command bundle of %s: %s", self.world, exc)
                 return
             self.puts += 1
-            self.commands += len(agents[i:j])
+            self.commands += min(j, len(agents)) - i
 
     def on_tick(self, listener: Callable[[int, list[str]], None]) -> Callable[[], None]:
         """Call ``listener(tick, agents)`` after each bundle that brought ``agents`` a sample.
@@ -359,11 +364,27 @@ class WorldChannel:
         if not getattr(self._held, "count", 0):
             self._flush()
 
+    def submit_item(self, agent: str, record: bytes, mac: bytes) -> None:
+        """Send one MACed command record (``MAC_ITEM_STRUCT``) and its MAC in the next
+        MacCommandBundle: what ``link.send`` makes of speeds or counters under a MAC lease."""
+        with self._pending_lock:
+            agents, records, macs = self._pending_items
+            agents.append(agent)
+            records.append(record)
+            macs.append(mac)
+        if not getattr(self._held, "count", 0):
+            self._flush()
+
     def _flush(self) -> None:
         while self._sending.acquire(blocking=False):
             try:
                 with self._pending_lock:
                     batch, self._pending = self._pending, []
+                    items = self._pending_items
+                    if items[0]:
+                        self._pending_items = ([], [], [])
+                if items[0]:
+                    self._put_mac_items(*items)
                 for i in range(0, len(batch), MAX_BUNDLED):
                     chunk = batch[i : i + MAX_BUNDLED]
                     self._publisher.put(encode(CommandBundle(commands=chunk)))
@@ -372,7 +393,7 @@ class WorldChannel:
             finally:
                 self._sending.release()
             with self._pending_lock:
-                if not self._pending:
+                if not self._pending and not self._pending_items[0]:
                     return
 
     def close(self) -> None:
