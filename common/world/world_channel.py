@@ -228,6 +228,15 @@ class WorldChannel:
             return
         self.bundles += 1
         links = self._links
+        listeners, swarms = self._tick_listeners, self._swarm_listeners
+        if not (listeners or swarms):
+            # Controller threads only (the runner): every woken thread waits for this
+            # one to give up the GIL, so hand the samples out and return.
+            for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
+                link = links.get(agent)
+                if link is not None:
+                    link.deliver(bytes(raw))
+            return
         delivered = []
         raws = []
         for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
@@ -237,8 +246,7 @@ class WorldChannel:
                 link.deliver(data)
                 delivered.append(agent)
                 raws.append(data)
-        listeners, swarms = self._tick_listeners, self._swarm_listeners
-        if not delivered or not (listeners or swarms):
+        if not delivered:
             return
         with self.burst():
             for listener in listeners:
