@@ -24,8 +24,10 @@ burst of 20 robots' samples and commands (docs/BENCHMARKS.md).
 Given a verifier, the link also listens to the agent's lease: when the lease
 names its session and carries the lease key sealed to it (a MAC lease,
 common/world/leasemac.py), commands go out as MacCommands (a keyed BLAKE2b, a few
-µs for the world to check) instead of Ed25519 envelopes. Until such a lease
-arrives (the context republishes it every second), commands are signed.
+µs for the world to check) instead of Ed25519 envelopes; on a channel, speeds
+and counters go as MacCommandBundle items (a record and its MAC, as a swarm
+tick's). Until such a lease arrives (the context republishes it every
+second), commands are signed.
 """
 
 from __future__ import annotations

@@ -162,9 +162,10 @@ class WorldChannel:
     when a controller reads). The world puts a bundle only for agents under
     a lease in force: a link on a channel sees no samples outside its slot.
 
-    Commands: :meth:`submit` queues a sealed command; the first thread that
-    finds no put in flight sends every queued command in one CommandBundle,
-    and commands queued meanwhile leave in its next put. Nothing waits for a
+    Commands: :meth:`submit` queues a sealed command (:meth:`submit_item` a
+    MACed record); the first thread that finds no put in flight sends every
+    queued command in one CommandBundle (the records in one
+    MacCommandBundle), and commands queued meanwhile leave in its next put. Nothing waits for a
     batch to fill: alone, a command leaves at once; in a burst of 20, in a
     few messages instead of 20.
 
