@@ -385,11 +385,15 @@ class WorldChannel:
             self._flush()
 
     def _flush(self) -> None:
-        while self._sending.acquire(blocking=False):
+        # Runs in a controller's thread, once per command when a burst is sparse:
+        # locals and no empty lists swapped, as the others of the burst wait for the GIL.
+        sending, pending_lock = self._sending, self._pending_lock
+        while sending.acquire(False):
             try:
-                with self._pending_lock:
-                    batch, self._pending = self._pending, []
-                    items = self._pending_items
+                with pending_lock:
+                    batch, items = self._pending, self._pending_items
+                    if batch:
+                        self._pending = []
                     if items[0]:
                         self._pending_items = ([], [], [])
                 if items[0]:
@@ -400,8 +404,10 @@ class WorldChannel:
                     self.puts += 1
                     self.commands += len(chunk)
             finally:
-                self._sending.release()
-            with self._pending_lock:
+                sending.release()
+            # Queued while this put was in flight, by threads that found it sending
+            # (they queue before they try, so one of them or this sends it).
+            with pending_lock:
                 if not self._pending and not self._pending_items[0]:
                     return
 
