@@ -426,9 +426,18 @@ class ZenohRobotLink:
                 self._waiting -= 1
 
     def _keep_alive(self) -> None:
-        while not self._closed.wait(self._keepalive_s / 2):
-            if time.monotonic() - self._last_send >= self._keepalive_s:
+        # Asleep until a keep-alive would be due, not woken every half period: the
+        # runner has a link (and this thread) per robot, and a controller that sends
+        # every tick never needs one; every wake-up takes the GIL from the loop.
+        period = self._keepalive_s
+        wait = period
+        while not self._closed.wait(wait):
+            idle = time.monotonic() - self._last_send
+            if idle >= period:
                 self._put(AgentCommand(agent=self.agent))
+                wait = period
+            else:
+                wait = period - idle
 
     def close(self, *, stop: bool = True) -> None:
         """Stop the keep-alive and undeclare; with ``stop``, first tell the robot to stop."""

@@ -476,3 +476,25 @@ def test_several_threads_waiting_on_one_link_all_wake_for_its_new_sample() -> No
     assert got == [1, 1, 1] and k0._waiting == 0
     assert k0.wait_sample(1, 0.01) == 1  # nothing newer: times out (a stale wake-up is no sample)
     k0.close(stop=False)
+
+
+def test_an_idle_link_sends_empty_keep_alive_commands_for_the_watchdog() -> None:
+    zs = FakeSession()
+    channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
+    link = ZenohRobotLink(
+        zs,  # type: ignore[arg-type]
+        REALM,
+        WORLD,
+        "k0",
+        lambda: RUNNER,
+        keepalive=0.05,
+        channel=channel,
+    )
+    puts = zs.publishers[keys.world_commands(REALM, WORLD)].puts
+    deadline = time.monotonic() + 30.0
+    while len(puts) < 2 and time.monotonic() < deadline:  # idle: keep-alives go out
+        time.sleep(0.01)
+    link.close(stop=False)
+    commands = [decode(decode(p, AuthEnvelope).body, AgentCommand) for _, p in sent_commands(zs)]
+    assert len(commands) >= 2
+    assert all(c.agent == "k0" and c.speeds is None and c.counters is None for c in commands)
