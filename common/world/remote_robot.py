@@ -24,12 +24,16 @@ burst of 20 robots' samples and commands (docs/BENCHMARKS.md).
 Given a verifier, the link also listens to the agent's lease: when the lease
 names its session and carries the lease key sealed to it (a MAC lease,
 common/world/leasemac.py), commands go out as MacCommands (a keyed BLAKE2b, a few
-µs for the world to check) instead of Ed25519 envelopes. Until such a lease
-arrives (the context republishes it every second), commands are signed.
+µs for the world to check) instead of Ed25519 envelopes; on a channel, speeds
+and counters go as MacCommandBundle items (a record and its MAC, as a swarm
+tick's). Until such a lease arrives (the context republishes it every
+second), commands are signed.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import logging
 import threading
 import time
@@ -48,6 +52,9 @@ from common.controller import (
     RobotCommand,
 )
 from common.messages import (
+    MAC_ITEM_COUNTERS,
+    MAC_ITEM_SPEEDS,
+    MAC_ITEM_STRUCT,
     AgentCommand,
     Lease,
     MessageError,
@@ -59,6 +66,8 @@ from common.world.world_channel import SwarmTick as SwarmTick  # callers import 
 from common.world.world_channel import WorldChannel
 
 log = logging.getLogger("wart.remote_robot")
+
+_pack_item = MAC_ITEM_STRUCT.pack  # 50 times a second per robot: one lookup less
 
 PRESENCE_THRESHOLD = 128
 """A presence barrier reading at or above this means an object is between the fingers."""
@@ -97,22 +106,41 @@ def state_from_sample(sample: SensorSample) -> KheperaState:
         amb = tuple(ambient)
     else:
         amb = _fit(ambient, LIGHT_SENSORS, 500)
+    # Positional, in _STATE_FIELDS' order (checked at import): 0.3 µs less than by
+    # keyword, 50 times a second per robot in the controller's own thread.
     return KheperaState(
-        time=sample.sim_time,
-        speeds=(
+        sample.sim_time,
+        (
             left if -MAX_SPEED <= left <= MAX_SPEED else _speed(left),
             right if -MAX_SPEED <= right <= MAX_SPEED else _speed(right),
         ),
-        counters=sample.counters,
-        proximity=prox,
-        ambient=amb,
-        leds=(bool(leds[0]) if leds else False, bool(leds[1]) if len(leds) > 1 else False),
-        arm=gripper.arm if gripper else ARM_UP,
-        gripper_closed=bool(gripper and gripper.fingers != "open"),
-        object_present=bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
-        resistivity=gripper.resistivity if gripper else 0,
-        parts={k: tuple(v) for k, v in sample.parts.items()} if sample.parts else {},
+        sample.counters,
+        prox,
+        amb,
+        (bool(leds[0]) if leds else False, bool(leds[1]) if len(leds) > 1 else False),
+        gripper.arm if gripper else ARM_UP,
+        bool(gripper and gripper.fingers != "open"),
+        bool(gripper and gripper.presence >= PRESENCE_THRESHOLD),
+        gripper.resistivity if gripper else 0,
+        {k: tuple(v) for k, v in sample.parts.items()} if sample.parts else {},
     )
+
+
+_STATE_FIELDS = (
+    "time",
+    "speeds",
+    "counters",
+    "proximity",
+    "ambient",
+    "leds",
+    "arm",
+    "gripper_closed",
+    "object_present",
+    "resistivity",
+    "parts",
+)
+if tuple(f.name for f in dataclasses.fields(KheperaState)) != _STATE_FIELDS:
+    raise ImportError("KheperaState's fields changed: update state_from_sample's positional call")
 
 
 def agent_command(agent: str, command: RobotCommand) -> AgentCommand:
@@ -181,8 +209,13 @@ class ZenohRobotLink:
         self._raw_seq = 0
         self._decoded_seq = 0
         self._state = KheperaState()
-        self._fresh = threading.Condition(self._lock)
-        self._waiting = 0  # threads in wait_sample (under _lock)
+        # Released: a sample (or the close) may be new to a waiter. A bare lock, not a
+        # Condition: deliver() then releases it in one C call instead of notifying
+        # under the lock in Python, for each of the bundle's links, while every
+        # woken controller thread waits for the channel's thread to give up the GIL.
+        self._signal = threading.Lock()
+        self._signal.acquire()
+        self._waiting = 0  # threads blocked in wait_sample (under _lock; for tests)
         self._last_send = 0.0
         self._closed = threading.Event()
         self.samples = 0
@@ -223,17 +256,20 @@ class ZenohRobotLink:
 
         One thread delivers to a link (its subscriber's, or its channel's), so
         the sample and its number are set without the lock, the sample first
-        (``latest`` relies on that order). The lock is taken only to wake a
-        waiter: ``wait_sample`` counts itself in ``_waiting`` under the lock
-        before it tests the number, so either it sees the new number or this
-        sees it waiting and notifies (after it released the lock in ``wait``).
+        (``latest`` relies on that order), then the signal released: a waiter
+        tests the number before it blocks on the signal, so either it sees the
+        new number or its acquire returns at once. No lock is taken here.
         """
         self._raw = raw
         self._raw_seq += 1
         self.samples += 1
-        if self._waiting:  # a swarm answering in the channel's thread waits on nothing
-            with self._fresh:
-                self._fresh.notify_all()
+        if self._signal.locked():
+            self._raise_signal()
+
+    def _raise_signal(self) -> None:
+        # Several threads may release it at once (this, close, a waiter passing it on).
+        with contextlib.suppress(RuntimeError):
+            self._signal.release()
 
     def _on_lease(self, sample: zenoh.Sample) -> None:
         assert self._verifier is not None
@@ -286,7 +322,52 @@ class ZenohRobotLink:
     def send(self, command: RobotCommand) -> None:
         if self._closed.is_set():
             return
+        channel, lease = self._channel, self._mac_lease
+        if (
+            channel is not None
+            and lease is not None
+            and command.leds is None
+            and command.arm is None
+            and command.grip is None
+            and self._send_item(channel, lease, command)
+        ):
+            return
         self._put(agent_command(self.agent, command))
+
+    def _send_item(self, channel: WorldChannel, lease: _MacLease, command: RobotCommand) -> bool:
+        """Speeds or counters under the MAC lease, as one MacCommandBundle item; False if
+        the lease is not this session's or not in force (the caller then signs).
+
+        The item is what a swarm tick sends (SwarmTick.send): a 29-byte record and
+        its MAC under the lease key, bound to this agent's key expression and the
+        lease id, checked by the world exactly as a MacCommand (lease in force,
+        fresh, sequence number unseen). It spares the encoded AgentCommand and
+        MacCommand per command here and their two decodes in the world, which
+        checks the items of a bundle in one pass: the runner's 20 controller
+        threads each send one a tick (docs/BENCHMARKS.md, "Control loop").
+        RobotCommand checked the values' types and ranges when it was made.
+        """
+        try:
+            session = self._session()
+            now = time.time()
+            if lease.session_id != session.session_id or now > lease.end:
+                return False
+            flags, left, right, a, b = 0, 0, 0, 0, 0
+            speeds, counters = command.speeds, command.counters
+            if speeds is not None:
+                flags, (left, right) = MAC_ITEM_SPEEDS, speeds
+            if counters is not None:
+                flags |= MAC_ITEM_COUNTERS
+                a, b = counters
+            record = _pack_item(session.next_seq(), now, flags, left, right, a, b)
+            channel.submit_item(self.agent, record, lease.mac.item_tag(record))
+        except Exception as exc:  # a closed session at shutdown, a lost login: as _put
+            log.debug("could not send a command to %s: %s", self.agent, exc)
+            return True
+        self.sent += 1
+        self.mac_sent += 1
+        self._last_send = time.monotonic()
+        return True
 
     def _seal(self, message: AgentCommand, now: float) -> tuple[bytes, bool]:
         """``message`` for this link's key: MACed under its MAC lease if it holds one in
@@ -317,21 +398,46 @@ class ZenohRobotLink:
     # -- extras for relays and tools
 
     def wait_sample(self, after: int, timeout: float) -> int:
-        """Block until a sample newer than number ``after`` arrived; returns the newest number."""
-        with self._fresh:
+        """Block until a sample newer than number ``after`` arrived; returns the newest number.
+
+        Several threads may wait on one link: the one the signal wakes passes
+        it on before it returns, so each of them wakes for the new sample (the
+        signal then stays raised, and a later wait finds it stale: it tests the
+        number again and blocks).
+        """
+        seq = self._raw_seq
+        if seq > after or self._closed.is_set():
+            return seq
+        deadline = time.monotonic() + timeout
+        signal = self._signal
+        with self._lock:
             self._waiting += 1
-            try:
-                self._fresh.wait_for(
-                    lambda: self._raw_seq > after or self._closed.is_set(), timeout
-                )
-            finally:
+        try:
+            while True:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0 or not signal.acquire(True, remaining):
+                    return self._raw_seq
+                seq = self._raw_seq
+                if seq > after or self._closed.is_set():
+                    self._raise_signal()  # for another thread waiting on this link
+                    return seq
+        finally:
+            with self._lock:
                 self._waiting -= 1
-            return self._raw_seq
 
     def _keep_alive(self) -> None:
-        while not self._closed.wait(self._keepalive_s / 2):
-            if time.monotonic() - self._last_send >= self._keepalive_s:
+        # Asleep until a keep-alive would be due, not woken every half period: the
+        # runner has a link (and this thread) per robot, and a controller that sends
+        # every tick never needs one; every wake-up takes the GIL from the loop.
+        period = self._keepalive_s
+        wait = period
+        while not self._closed.wait(wait):
+            idle = time.monotonic() - self._last_send
+            if idle >= period:
                 self._put(AgentCommand(agent=self.agent))
+                wait = period
+            else:
+                wait = period - idle
 
     def close(self, *, stop: bool = True) -> None:
         """Stop the keep-alive and undeclare; with ``stop``, first tell the robot to stop."""
@@ -340,8 +446,7 @@ class ZenohRobotLink:
         if stop:
             self._put(AgentCommand(agent=self.agent, speeds=(0, 0)))
         self._closed.set()
-        with self._fresh:
-            self._fresh.notify_all()
+        self._raise_signal()
         if self._channel is not None:
             self._channel.detach(self)
         for handle in (self._subscriber, self._watch, self._publisher, self._lease_sub):

@@ -162,9 +162,10 @@ class WorldChannel:
     when a controller reads). The world puts a bundle only for agents under
     a lease in force: a link on a channel sees no samples outside its slot.
 
-    Commands: :meth:`submit` queues a sealed command; the first thread that
-    finds no put in flight sends every queued command in one CommandBundle,
-    and commands queued meanwhile leave in its next put. Nothing waits for a
+    Commands: :meth:`submit` queues a sealed command (:meth:`submit_item` a
+    MACed record); the first thread that finds no put in flight sends every
+    queued command in one CommandBundle (the records in one
+    MacCommandBundle), and commands queued meanwhile leave in its next put. Nothing waits for a
     batch to fill: alone, a command leaves at once; in a burst of 20, in a
     few messages instead of 20.
 
@@ -181,6 +182,9 @@ class WorldChannel:
         self._links: dict[str, ZenohRobotLink] = {}
         self._links_lock = threading.Lock()
         self._pending: list[BundledCommand] = []
+        # MACed command records (link.send under a MAC lease), as MacCommandBundle's
+        # arrays: agents, records, MACs (appended together under _pending_lock)
+        self._pending_items: tuple[list[str], list[bytes], list[bytes]] = ([], [], [])
         self._pending_lock = threading.Lock()
         self._sending = threading.Lock()
         self._held = threading.local()  # burst() depth of the calling thread
@@ -225,6 +229,15 @@ class WorldChannel:
             return
         self.bundles += 1
         links = self._links
+        listeners, swarms = self._tick_listeners, self._swarm_listeners
+        if not (listeners or swarms):
+            # Controller threads only (the runner): every woken thread waits for this
+            # one to give up the GIL, so hand the samples out and return.
+            for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
+                link = links.get(agent)
+                if link is not None:
+                    link.deliver(bytes(raw))
+            return
         delivered = []
         raws = []
         for agent, raw in zip(bundle.agents, bundle.samples, strict=True):
@@ -234,8 +247,7 @@ class WorldChannel:
                 link.deliver(data)
                 delivered.append(agent)
                 raws.append(data)
-        listeners, swarms = self._tick_listeners, self._swarm_listeners
-        if not delivered or not (listeners or swarms):
+        if not delivered:
             return
         with self.burst():
             for listener in listeners:
@@ -287,21 +299,23 @@ class WorldChannel:
             link._last_send = now
 
     def _put_mac_items(self, agents: list[str], items: list[bytes], macs: list[bytes]) -> None:
-        """Put MACed command records (a swarm tick's) as MacCommandBundles, now."""
+        """Put MACed command records (a swarm tick's, or links') as MacCommandBundles, now."""
         for i in range(0, len(agents), MAX_BUNDLED):
             j = i + MAX_BUNDLED
-            payload = encode(
-                MacCommandBundle(
+            if i == 0 and len(agents) <= MAX_BUNDLED:  # the usual case: no copies
+                bundle = MacCommandBundle(agents=agents, items=b"".join(items), macs=b"".join(macs))
+            else:
+                bundle = MacCommandBundle(
                     agents=agents[i:j], items=b"".join(items[i:j]), macs=b"".join(macs[i:j])
                 )
-            )
+            payload = encode(bundle)
             try:
                 self._publisher.put(payload)
             except Exception as exc:  # a closed session at shutdown
                 log.debug("could not put a command bundle of %s: %s", self.world, exc)
                 return
             self.puts += 1
-            self.commands += len(agents[i:j])
+            self.commands += min(j, len(agents)) - i
 
     def on_tick(self, listener: Callable[[int, list[str]], None]) -> Callable[[], None]:
         """Call ``listener(tick, agents)`` after each bundle that brought ``agents`` a sample.
@@ -359,20 +373,42 @@ class WorldChannel:
         if not getattr(self._held, "count", 0):
             self._flush()
 
+    def submit_item(self, agent: str, record: bytes, mac: bytes) -> None:
+        """Send one MACed command record (``MAC_ITEM_STRUCT``) and its MAC in the next
+        MacCommandBundle: what ``link.send`` makes of speeds or counters under a MAC lease."""
+        with self._pending_lock:
+            agents, records, macs = self._pending_items
+            agents.append(agent)
+            records.append(record)
+            macs.append(mac)
+        if not getattr(self._held, "count", 0):
+            self._flush()
+
     def _flush(self) -> None:
-        while self._sending.acquire(blocking=False):
+        # Runs in a controller's thread, once per command when a burst is sparse:
+        # locals and no empty lists swapped, as the others of the burst wait for the GIL.
+        sending, pending_lock = self._sending, self._pending_lock
+        while sending.acquire(False):
             try:
-                with self._pending_lock:
-                    batch, self._pending = self._pending, []
+                with pending_lock:
+                    batch, items = self._pending, self._pending_items
+                    if batch:
+                        self._pending = []
+                    if items[0]:
+                        self._pending_items = ([], [], [])
+                if items[0]:
+                    self._put_mac_items(*items)
                 for i in range(0, len(batch), MAX_BUNDLED):
                     chunk = batch[i : i + MAX_BUNDLED]
                     self._publisher.put(encode(CommandBundle(commands=chunk)))
                     self.puts += 1
                     self.commands += len(chunk)
             finally:
-                self._sending.release()
-            with self._pending_lock:
-                if not self._pending:
+                sending.release()
+            # Queued while this put was in flight, by threads that found it sending
+            # (they queue before they try, so one of them or this sends it).
+            with pending_lock:
+                if not self._pending and not self._pending_items[0]:
                     return
 
     def close(self) -> None:

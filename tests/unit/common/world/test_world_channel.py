@@ -353,9 +353,10 @@ def test_a_swarm_listener_cannot_send_bad_values_or_drive_robots_it_has_no_link_
     assert results == []
 
 
-def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts() -> None:
-    """Links holding MAC leases: the tick's commands leave as one MacCommandBundle, each
-    item MACed under its own agent's lease; a link still without one signs, as before."""
+def mac_leased(
+    agents: tuple[str, ...], leased: tuple[str, ...]
+) -> tuple[FakeSession, WorldChannel, list[ZenohRobotLink], LeaseBook]:
+    """Links on one channel, those of ``leased`` holding a MAC lease the world's book has."""
     world = issue_session(IDENTITY, REALM, "engine-w", ["world"])
     context = issue_session(IDENTITY, REALM, "ctx", ["lease"])
     book = LeaseBook(
@@ -374,10 +375,10 @@ def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts(
             verifier=Verifier(IDENTITY.verify_key, REALM),  # the holder's own
             channel=channel,
         )
-        for agent in ("k0", "k1", "k2")
+        for agent in agents
     ]
     now = time.time()
-    for agent in ("k0", "k1"):  # k2's lease has not arrived yet
+    for agent in leased:
         k = new_lease_key()
         lease = Lease(
             lease_id=f"L-{agent}",
@@ -395,6 +396,14 @@ def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts(
         sealed = context.seal(key, lease)
         book.accept_lease(key, sealed)
         zs.callbacks[key](FakeSample(sealed))
+    return zs, channel, links, book
+
+
+def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts() -> None:
+    """Links holding MAC leases: the tick's commands leave as one MacCommandBundle, each
+    item MACed under its own agent's lease; a link still without one signs, as before."""
+    # k2's lease has not arrived yet
+    zs, channel, links, book = mac_leased(("k0", "k1", "k2"), ("k0", "k1"))
 
     def swarm(tick: SwarmTick) -> None:
         for agent, s in zip(tick.agents, tick.samples, strict=True):
@@ -419,3 +428,73 @@ def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts(
     assert len(obeyed) == 2
     for link in links:
         link.close(stop=False)
+
+
+def test_controller_threads_under_mac_leases_send_items_the_world_accepts_once() -> None:
+    """The runner's path: each controller thread's speeds or counters leave as a MACed
+    MacCommandBundle item (what a swarm tick sends); what an item cannot carry (LEDs)
+    still leaves as a MacCommand; the world obeys each once and refuses a replay."""
+    zs, channel, (k0, k1), book = mac_leased(("k0", "k1"), ("k0", "k1"))
+    with channel.burst():  # as a burst of threads would: one message for the items
+        k0.send(RobotCommand(speeds=(3, -3)))
+        k1.send(RobotCommand(counters=(7, 0)))
+        k1.send(RobotCommand(leds=(True, False)))
+    puts = zs.publishers[keys.world_commands(REALM, WORLD)].puts
+    assert len(puts) == 2 and channel.commands == 3
+    assert (k0.sent, k0.mac_sent, k1.sent, k1.mac_sent) == (1, 1, 2, 2)
+    arrays = decode(puts[0], MacCommandBundle)
+    assert arrays.agents == ["k0", "k1"]
+    obeyed: list[tuple[str, AgentCommand]] = []
+    assert book.check_mac_bundle(arrays, lambda a, c: obeyed.append((a, c))) == []
+    (leds,) = decode(puts[1], CommandBundle).commands
+    assert book.check_bundle([leds], lambda a, c: obeyed.append((a, c))) == []
+    assert [(a, c.speeds, c.counters, c.leds) for a, c in obeyed] == [
+        ("k0", (3, -3), None, None),
+        ("k1", None, (7, 0), None),
+        ("k1", None, None, [1, 0]),
+    ]
+    assert len(book.check_mac_bundle(arrays, lambda a, c: obeyed.append((a, c)))) == 2
+    assert len(obeyed) == 3
+    for link in (k0, k1):
+        link.close(stop=False)
+
+
+def test_several_threads_waiting_on_one_link_all_wake_for_its_new_sample() -> None:
+    zs = FakeSession()
+    _channel, (k0,) = make(zs, ["k0"])
+    got: list[int] = []
+    waiters = [
+        threading.Thread(target=lambda: got.append(k0.wait_sample(0, 30.0))) for _ in range(3)
+    ]
+    for waiter in waiters:
+        waiter.start()
+    while k0._waiting < 3:  # all really waiting (a condition, not a sleep)
+        time.sleep(0.001)
+    deliver(zs, bundle(["k0"], tick=5))
+    for waiter in waiters:
+        waiter.join(30.0)
+    assert got == [1, 1, 1] and k0._waiting == 0
+    assert k0.wait_sample(1, 0.01) == 1  # nothing newer: times out (a stale wake-up is no sample)
+    k0.close(stop=False)
+
+
+def test_an_idle_link_sends_empty_keep_alive_commands_for_the_watchdog() -> None:
+    zs = FakeSession()
+    channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
+    link = ZenohRobotLink(
+        zs,  # type: ignore[arg-type]
+        REALM,
+        WORLD,
+        "k0",
+        lambda: RUNNER,
+        keepalive=0.05,
+        channel=channel,
+    )
+    puts = zs.publishers[keys.world_commands(REALM, WORLD)].puts
+    deadline = time.monotonic() + 30.0
+    while len(puts) < 2 and time.monotonic() < deadline:  # idle: keep-alives go out
+        time.sleep(0.01)
+    link.close(stop=False)
+    commands = [decode(decode(p, AuthEnvelope).body, AgentCommand) for _, p in sent_commands(zs)]
+    assert len(commands) >= 2
+    assert all(c.agent == "k0" and c.speeds is None and c.counters is None for c in commands)
