@@ -32,8 +32,18 @@ def test_no_map_handles_on_a_driven_robot(open_page, viewer: WebViewer) -> None:
     # A click selects a robot the view has drawn: its pose comes with the frames (a busy
     # machine's first frame came after this select, and the handles had no pose to go to).
     wait_until(lambda: view.frames_applied > 0, what="the arena's first frame in the view")
+    # ... and the map editor bound to the arena and its frames (on a busy machine it came
+    # after the click, which then went nowhere).
+    wait_until(
+        lambda: editor.feed is not None and editor.feed.latest() is not None,
+        what="the map editor bound to the arena",
+    )
     view.select(names.index(idle))
-    wait_until(lambda: editor.selected == idle, 10, what="handles on the idle robot")
+    wait_until(
+        lambda: editor.selected == idle,
+        10,
+        what=lambda: f"handles on the idle robot (the view selected {view.selected_name})",
+    )
     view.select(names.index(driven))
     wait_until(lambda: editor.selected is None, 10, what="no handles on the driven robot")
     assert editor._gizmo is None

@@ -101,6 +101,8 @@ class MapEditor:
                 names = ()
             if names:
                 self.robot_type.options = names
+        if view.selected is not None:  # a robot clicked before the editor was bound to it
+            self._robot_selected(view.selected)
 
     def offer_type(self, name: str) -> None:
         """A robot type just saved (the builder): offered, and chosen, for "Add robot"."""
