@@ -266,9 +266,15 @@ def test_odometry_follows_the_body(emulator: KheperaEmulator, body: KinematicBod
         rounds = robot.state().rounds
         wait_for(lambda: robot.state().rounds > rounds + 1, 2, "a round after stopping")
         pose = robot.state().pose
-        # The body's pose comes from exact counts, the estimate from whole pulses.
-        assert pose.x == pytest.approx(body.pose.x, abs=1.0)
-        assert pose.y == pytest.approx(body.pose.y, abs=1.0)
+        # The body's pose comes from exact counts, the estimate from whole pulses read now
+        # and then: a reading's heading is off by up to 2 pulses over the wheel base, and
+        # that tilts the arc to the next reading. A busy machine reads seldom, so the arcs
+        # are long: the bound grows with the distance (0.5 %: 1.6 mm off after 400 mm at
+        # load 23, where 1 mm flat had held on a quieter machine).
+        travelled = sum(abs(c) for c in body.counters()) / 2 * body.spec.mm_per_pulse
+        bound = 1.0 + 0.005 * travelled
+        assert pose.x == pytest.approx(body.pose.x, abs=bound)
+        assert pose.y == pytest.approx(body.pose.y, abs=bound)
         assert pose.heading == pytest.approx(body.pose.heading, abs=0.02)
 
 
