@@ -7,6 +7,7 @@ and are kept as artefacts of the run.
 
 from __future__ import annotations
 
+import math
 import re
 import time
 import warnings
@@ -16,10 +17,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.conftest import ARTIFACTS, free_port
+from viewers.web import geometry as geo
 from viewers.web.adapters import SceneFrame
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
@@ -356,8 +359,6 @@ def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
     before the aim can arrive after it, and the server's copy is then viser's default
     camera for a while (a projection from it put a robot at pixel row 2405 of 800).
     """
-    from viewers.web import geometry as geo
-
     snap = view.snapshot  # type: ignore[attr-defined]
     assert snap is not None
     aim = (snap.width * geo.MM / 2, snap.height * geo.MM / 2)
@@ -379,3 +380,35 @@ def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
             return False
 
     wait_until(aimed, timeout, what="the page's camera on the arena, top-down")
+
+
+# True when the page's canvas itself is at a point (no label, panel or notice over it).
+CANVAS_AT_JS = """([x, y]) => {
+  const hit = document.elementFromPoint(x, y);
+  return hit !== null && hit.tagName === 'CANVAS';
+}"""
+
+
+def screen_points(page, view, world_xy_mm: np.ndarray) -> np.ndarray:
+    """World millimetres to page pixels (the top-down camera the view set up; +y is up)."""
+    box = page.p.locator("canvas").first.bounding_box()
+    cam = view.client.camera
+    cx, cy, height = (float(v) for v in cam.position)
+    z = geo.ROBOT_Z * 2  # about the top of a robot
+    px_per_m = (box["height"] / 2) / ((height - z) * math.tan(cam.fov / 2))
+    xy = world_xy_mm * geo.MM
+    sx = box["x"] + box["width"] / 2 + (xy[:, 0] - cx) * px_per_m
+    sy = box["y"] + box["height"] / 2 - (xy[:, 1] - cy) * px_per_m
+    return np.stack([sx, sy], axis=1)
+
+
+def describe_view(view: Any) -> str:
+    """What a world view holds, for a timeout's message (why no frame is drawn)."""
+    feed = getattr(view, "feed", None)
+    latest = feed.latest() if feed is not None else None
+    return (
+        f"a drawn frame: snapshot {'yes' if view.snapshot is not None else 'none'}, "
+        f"robots {'made' if view._robots is not None else 'not made'}, "
+        f"{view.frames_applied} frames applied (last seq {view.last_seq}), "
+        f"feed {'none' if feed is None else 'latest seq ' + str(getattr(latest, 'seq', None))}"
+    )

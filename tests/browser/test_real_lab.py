@@ -15,12 +15,20 @@ import pytest
 
 from common import keys
 from common.keys import AliveKind
-from tests.browser.conftest import wait_until
+from tests.browser.conftest import (
+    CANVAS_AT_JS,
+    describe_view,
+    screen_points,
+    wait_for_aimed_camera,
+    wait_until,
+)
 from tests.browser.reallab import PASSWORD, WORLD, RealLab, real_lab
+from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
 from viewers.web.live_world import UserWorld
 from viewers.web.tabs import tab_label
+from viewers.web.world_view import FLOOR_COLOUR
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -205,27 +213,54 @@ def test_unknown_lab_and_world_listing(open_page, lab: RealLab) -> None:
     assert keys.alive(lab.router.realm, AliveKind.WORLD, WORLD)
 
 
-ROBOT_RGB = np.array([151, 184, 210])  # an idle robot's body as rendered (flat ambient light)
+# A spot with no robot drawn on it yet: the floor, or the blank canvas before the floor
+# (a robot's body renders about 150 from either).
+UNDRAWN = (np.array(FLOOR_COLOUR, np.int16), np.array((255, 255, 255), np.int16))
+
+
+def scene_pixel(page, x: int, y: int) -> np.ndarray:
+    from PIL import Image
+
+    png = page.p.screenshot(clip={"x": x, "y": y, "width": 1, "height": 1})
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), np.int16)[0, 0]
 
 
 def test_clicking_a_robot_selects_it(open_page, lab: RealLab) -> None:
-    """viser 1.1.1 reports the batched mesh's instance index on a click (measured here)."""
+    """A click on a robot's body selects that robot (viser reports the batched mesh's index).
+
+    Where to click is computed, not looked for in a screenshot: the robot's drawn position
+    through the camera the page reports, at a point the DOM says is the canvas itself (not
+    under a notice or the panel).
+    """
     page = open_page("carol")
     log_in(page, lab, "carol")
     page.click(f"Join {WORLD}")
     view = session_of(lab.viewer, "carol").view
-    wait_until(lambda: view.frames_applied > 5, 15, what="frames")
-    page.p.wait_for_timeout(500)  # let the software renderer draw the first frames
-    image = scene(page.p.screenshot())  # cropped at SCENE_BOX: rows from y=170
-    close = np.abs(image - ROBOT_RGB).sum(axis=2) < 30
-    ys, xs = np.nonzero(close)
-    keep = ~((xs < 330) & (ys < 120))  # viser's notifications sit top-left
-    ys, xs = ys[keep], xs[keep]
-    assert len(xs) > 50, "no robot found in the screenshot"
-    near = (np.abs(xs - xs[0]) < 25) & (np.abs(ys - ys[0]) < 25)
-    x, y = float(xs[near].mean()), float(ys[near].mean()) + SCENE_BOX[1]
-    page.p.mouse.click(x, y + 8)  # a little below the centre: the name label sits on it
+    wait_until(lambda: view.drawn is not None, 30, what=lambda: describe_view(view))
+    wait_for_aimed_camera(view)
+    drawn = view.drawn
+    assert drawn is not None
+    target = 0  # no controller runs in this lab: the robots stand still
+    snap = view.snapshot
+    assert snap is not None
+    ends = screen_points(page, view, np.array([[0.0, 0.0], [snap.robot_radius, 0.0]]))
+    radius_px = float(ends[1, 0] - ends[0, 0])
+    centre = screen_points(page, view, drawn.positions[[target], :2] / geo.MM)[0]
+    # Half a radius below the centre: the robot's name label is drawn on the centre.
+    spots = [centre + radius_px * np.array(d) for d in ((0, 0.5), (0.5, 0), (-0.5, 0), (0, -0.5))]
+    spot = next((s for s in spots if page.p.evaluate(CANVAS_AT_JS, [*map(float, s)])), None)
+    assert spot is not None, f"every spot on k{target} is covered: {spots}"
+    # The page draws what it was sent a little later (software WebGL): a user clicks what
+    # they see, so the click waits until something other than floor is drawn at the spot.
+    x, y = (int(v) for v in np.rint(spot))
+    wait_until(
+        lambda: min(np.abs(scene_pixel(page, x, y) - c).sum() for c in UNDRAWN) > 100,
+        15,
+        what=lambda: f"k{target} drawn at {x}, {y} (the pixel: {scene_pixel(page, x, y)})",
+    )
+    page.p.mouse.click(float(spot[0]), float(spot[1]))
     wait_until(lambda: view.selected is not None, 10, what="a robot selected by the click")
+    assert view.selected == target, f"clicked k{target}, selected k{view.selected}"
     page.screenshot("real-clicked")
 
 

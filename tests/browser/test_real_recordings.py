@@ -12,9 +12,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
+from playwright.sync_api import expect
 
 from services.runner.sandbox import sandbox_problem
-from tests.browser.conftest import wait_until
+from tests.browser.conftest import settle, wait_until
 from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_agents import enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
@@ -57,20 +59,27 @@ def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab)
     upload(alice, "ahead.py", TINY)
     alice.wait_text("Your controller on k0 finished", timeout=30_000)  # the slot ran out
 
-    alice.p.get_by_text("Recordings", exact=True).first.click()
+    folder = alice.p.get_by_text("Recordings", exact=True).first
+    settle(folder)
+    folder.click()
 
-    # The context writes the file (and its summary) 1.5 s after the slot's end.
+    # The context writes the file (and its summary) 1.5 s after the slot's end; alice
+    # presses Refresh until her table (markdown, drawn as an HTML table) shows the run.
+    table = alice.p.locator("table").filter(has_text="finished")
+
     def listed() -> bool:
         alice.click("Refresh")
-        return any(e.status for e in recordings.refresh())
+        try:
+            table.first.wait_for(timeout=2_000)
+        except PlaywrightTimeout:
+            return False
+        return True
 
-    wait_until(listed, 30, what="alice's recording, summarised, in her list")
+    wait_until(listed, 30, what=lambda: f"her run in her table; listed: {recordings._entries}")
     entry = recordings._entries[0]
     assert entry.agent == "k0" and entry.status == "finished"
     assert entry.duration_s is not None and entry.duration_s > 1.0
-    # The page's table (markdown, drawn as an HTML table): the robot and how it ended.
-    alice.p.get_by_role("cell", name="k0", exact=True).first.wait_for(timeout=10_000)
-    alice.p.get_by_role("cell", name="finished", exact=False).first.wait_for(timeout=10_000)
+    expect(table.first.get_by_role("cell", name="k0", exact=True)).to_be_visible()
     # Download: the notice's link names the whole file, not cut off.
     alice.click("Download")
     link = alice.p.locator(f'a[download="{entry.name}.mcap"]')

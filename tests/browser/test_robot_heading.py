@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from tests.browser.conftest import join_demo_arena, show_still_frame, wait_until
+from tests.browser.conftest import join_demo_arena, screen_points, show_still_frame, wait_until
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
@@ -34,19 +34,6 @@ def fake_lab() -> Iterator[DemoLab]:
     lab.worlds["arena"].stop()  # frames only when the test makes one: robots hold still
     yield lab
     lab.close()
-
-
-def screen_points(page, view, world_xy_mm: np.ndarray) -> np.ndarray:
-    """World millimetres to page pixels (the top-down camera the view set up; +y is up)."""
-    box = page.p.locator("canvas").first.bounding_box()
-    cam = view.client.camera
-    cx, cy, height = (float(v) for v in cam.position)
-    z = geo.ROBOT_Z * 2  # about the top of a robot
-    px_per_m = (box["height"] / 2) / ((height - z) * math.tan(cam.fov / 2))
-    xy = world_xy_mm * geo.MM
-    sx = box["x"] + box["width"] / 2 + (xy[:, 0] - cx) * px_per_m
-    sy = box["y"] + box["height"] / 2 - (xy[:, 1] - cy) * px_per_m
-    return np.stack([sx, sy], axis=1)
 
 
 def test_heading_arrow_is_drawn_in_its_own_colour(

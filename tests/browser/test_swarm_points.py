@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import viser
 
-from tests.browser.conftest import join_demo_arena, show_still_frame, wait_until
-from tests.browser.test_robot_heading import NOTICES, screen_points
+from tests.browser.conftest import join_demo_arena, screen_points, show_still_frame, wait_until
+from tests.browser.test_robot_heading import NOTICES
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab, DemoWorld
 from viewers.web.world_view import FLOOR_COLOUR, POINTS_FROM

@@ -97,6 +97,9 @@ class RecordingsPanel:
         self._files: dict[str, Path] = {}
         self._tmp = tempfile.TemporaryDirectory(prefix="wart-recordings-")
         self._lock = threading.Lock()
+        # One listing at a time: viser runs each click in its pool, and a slow listing begun
+        # before a run was written, landing after a newer one, drew the older list.
+        self._listing = threading.Lock()
         self._images: list[viser.GuiImageHandle] = []
         self.replay: ReplayControls | None = None
         gui = client.gui
@@ -132,6 +135,10 @@ class RecordingsPanel:
     # -- the list
 
     def refresh(self) -> list[RecordingEntry]:
+        with self._listing:
+            return self._refresh()
+
+    def _refresh(self) -> list[RecordingEntry]:
         try:
             entries = self.connection.recordings(self.ctx)
         except LabError as exc:
