@@ -1,0 +1,69 @@
+"""The map editor's handles follow the view's selection, whenever the editor is bound.
+
+The viser client is a mock (its calls are what is checked); the world is the demo
+world the viewer's own demo lab serves.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from types import SimpleNamespace
+from unittest import mock
+
+import pytest
+
+from viewers.web.demo_world import DemoWorld
+from viewers.web.editor import MapEditor
+
+
+@pytest.fixture
+def world() -> Iterator[DemoWorld]:
+    world = DemoWorld("arena", 3, start=False)
+    world.produce(1.0)  # one frame: the robots' poses
+    yield world
+    world.stop()
+
+
+def a_view(selected: int | None, names: tuple[str, ...]) -> SimpleNamespace:
+    return SimpleNamespace(
+        selected=selected,
+        selected_name=None if selected is None else names[selected],
+        snapshot=None,
+        on_select=[],
+        on_obstacle_click=[],
+    )
+
+
+def handles_on(client: mock.MagicMock) -> list[str]:
+    return [c.args[0] for c in client.scene.add_transform_controls.call_args_list]
+
+
+def test_a_robot_selected_before_the_editor_is_bound_gets_handles(world: DemoWorld) -> None:
+    # A busy page: the student clicked k1 before the arena's editor was bound to the view.
+    client = mock.MagicMock()
+    editor = MapEditor(client, allowed=True)
+    view = a_view(1, world.snapshot().robots)
+    editor.bind(view, world)  # type: ignore[arg-type]
+    assert editor.selected == world.snapshot().robots[1]
+    assert editor.selected_kind == "agent"
+    assert handles_on(client) == ["/editor/gizmo"]
+
+
+def test_a_driven_robot_or_a_watcher_gets_no_handles(world: DemoWorld) -> None:
+    names = world.snapshot().robots
+    watcher = mock.MagicMock()
+    MapEditor(watcher, allowed=False).bind(a_view(0, names), world)  # type: ignore[arg-type]
+    assert handles_on(watcher) == []
+
+    client = mock.MagicMock()
+    editor = MapEditor(client, allowed=True)
+    editor.driven = lambda name: name == names[0]
+    editor.bind(a_view(0, names), world)  # type: ignore[arg-type]
+    assert editor.selected is None and handles_on(client) == []
+
+
+def test_nothing_selected_binds_without_handles(world: DemoWorld) -> None:
+    client = mock.MagicMock()
+    editor = MapEditor(client, allowed=True)
+    editor.bind(a_view(None, world.snapshot().robots), world)  # type: ignore[arg-type]
+    assert editor.selected is None and handles_on(client) == []
