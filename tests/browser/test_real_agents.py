@@ -11,6 +11,7 @@ place in the queue, the robot obey, the output, and the queue advance.
 from __future__ import annotations
 
 import io
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,7 +19,13 @@ import numpy as np
 import pytest
 
 from services.runner.sandbox import sandbox_problem
-from tests.browser.conftest import ViserPage, wait_until
+from tests.browser.conftest import (
+    CANVAS_AT_JS,
+    ViserPage,
+    screen_points,
+    wait_for_aimed_camera,
+    wait_until,
+)
 from tests.browser.reallab import CTX, PASSWORD, WORLD, RealLab, real_lab
 from tests.browser.test_real_lab import session_of
 from tests.conftest import REPO
@@ -209,20 +216,30 @@ def test_mouse_drag_of_the_gizmo_moves_an_obstacle_for_the_other_session(
     snap = ida_view.snapshot
     assert snap is not None and ida_panel.editor is not None
     target = next(o for o in snap.obstacles if not o.ident.startswith("wall"))
-    ida.p.wait_for_timeout(500)
-    before = _rgb(ida.p.screenshot())
+    wait_for_aimed_camera(ida_view)
     ida_panel.editor.select(target.ident)  # what clicking it does (tested in test_real_lab)
-    ida.p.wait_for_timeout(1000)  # software WebGL: let the gizmo be drawn
-    after = _rgb(ida.p.screenshot())
-    scene = np.zeros(after.shape[:2], bool)
-    scene[170:760, :880] = True  # left of the panel, below the WebGL notice
-    changed = np.abs(after - before).sum(axis=2) > 60
-    r, g, b = after[..., 0], after[..., 1], after[..., 2]
-    red = changed & scene & (r > 150) & (g < 110) & (b < 110)  # the x arrow (red)
-    ys, xs = np.nonzero(red)
-    assert len(xs) > 20, "the gizmo's x arrow was not found on screen"
-    # Grab the arrow half-way along it (its pixels right of the gizmo's centre).
-    x, y = float(np.median(xs)), float(np.median(ys))
+    # Where the gizmo's x arrow is, by geometry: from the box's centre along its heading,
+    # as long as the gizmo's scale (0.25 m). The drag grabs the first point of it that the
+    # page has drawn red (software WebGL draws the gizmo a little after it is sent).
+    heading = np.array([math.cos(target.angle), math.sin(target.angle)])
+    along = np.array([target.x, target.y]) + np.outer(np.linspace(0.3, 0.9, 13) * 250.0, heading)
+    grab: list[tuple[float, float]] = []
+
+    def arrow_drawn() -> bool:
+        points = screen_points(ida, ida_view, along)
+        image = _rgb(ida.p.screenshot())
+        for px, py in points:
+            ix, iy = int(np.rint(px)), int(np.rint(py))
+            if not (0 <= iy < image.shape[0] and 0 <= ix < image.shape[1]):
+                continue
+            r, g, b = image[iy, ix]
+            if r > 150 and g < 110 and b < 110 and ida.p.evaluate(CANVAS_AT_JS, [px, py]):
+                grab[:] = [(float(px), float(py))]
+                return True
+        return False
+
+    wait_until(arrow_drawn, 15, what=f"the gizmo's red x arrow drawn along {along.tolist()}")
+    x, y = grab[0]
     mouse = ida.p.mouse
     mouse.move(x, y)
     mouse.down()

@@ -84,6 +84,22 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
             f"{len(builder.text.value)} ending {builder.text.value[-60:]!r}"
         )
 
+    def fill_robot_file(text: str) -> None:
+        """Replace the robot file as a user would, once the page shows what the server holds.
+
+        Playwright's fill selects all, then types: a server value landing in between (the
+        "Add component" text reaching a busy page late) redraws the box and drops the
+        selection, and the typing went after the old text (4,003 characters for 2,002).
+        """
+        box = ida.input_after_label("Robot file")
+        wait_until(
+            lambda: box.input_value() == builder.text.value,
+            10,
+            what=lambda: f"the page to show the server's robot file: {held(builder.text.value)}",
+        )
+        ida.fill("Robot file", text)
+        wait_until(lambda: builder.text.value == text, 10, what=lambda: held(text))
+
     # Bad robot files, each refused in the page with the line and field a user reads.
     for bad, said in (
         (
@@ -101,13 +117,11 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
         (scout.replace("radius_mm = 35.0\n", ""), "components.body.radius_mm: is required"),
         (scout + "#" * 70_000, "robot files are limited to 65536"),
     ):
-        ida.fill("Robot file", bad)
-        wait_until(lambda b=bad: builder.text.value == b, 10, what=lambda b=bad: held(b))
+        fill_robot_file(bad)
         ida.click("Check robot file")
         ida.wait_text(said)
     three = scout.replace("beams = 1", "beams = 3")
-    ida.fill("Robot file", three)
-    wait_until(lambda: builder.text.value == three, 10, what=lambda: held(three))
+    fill_robot_file(three)
     ida.click("Check robot file")
     ida.wait_text("Check: scout is a valid robot type")
     ida.wait_text("Drawn at the arena's centre")  # its body, rays and beams in the view
