@@ -8,7 +8,11 @@ plain Python extension: importing it loads no numba and no LLVM.
 
 A module is named after a hash of the kernels' sources (:data:`SOURCES`), so a
 module built from other sources is never imported: it would run old code on
-new layouts (jitcache.py tells of the one crash of that kind). This module
+new layouts (jitcache.py tells of the one crash of that kind). The hash takes
+in the CPU too (:func:`cpu`): the module is compiled for this machine's, as
+numba compiles (code for a generic x86-64 was up to 5 % slower at 10 robots,
+docs/BENCHMARKS.md), and a checkout moved to another machine must not run
+instructions its CPU lacks. This module
 imports no numba; common/sim2d/compiled.py chooses between this module's
 kernels and numba's.
 
@@ -23,6 +27,7 @@ import hashlib
 import importlib
 import importlib.machinery
 import os
+import platform
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -58,9 +63,29 @@ SOURCES = (
 MODES = ("auto", "jit", "aot")
 
 
+# The lines of /proc/cpuinfo that say which instructions the CPU has (x86, then ARM).
+_CPU_KEYS = (
+    *("vendor_id", "cpu family", "model", "model name", "flags"),
+    *("CPU implementer", "CPU architecture", "CPU variant", "CPU part", "Features"),
+)
+
+
+def cpu() -> str:
+    """This machine's CPU as the module's code depends on it: model and instruction sets."""
+    try:
+        first = Path("/proc/cpuinfo").read_text().split("\n\n")[0]
+    except OSError:
+        return platform.machine()
+    lines = (line.partition(":") for line in first.splitlines())
+    return "\n".join(
+        [platform.machine()]
+        + [f"{k.strip()}:{v.strip()}" for k, _, v in lines if k.strip() in _CPU_KEYS]
+    )
+
+
 def stamp() -> str:
-    """A hash of :data:`SOURCES`' contents: the module built from them is named after it."""
-    digest = hashlib.sha256()
+    """A hash of the CPU and :data:`SOURCES`' contents: the module built from them has it."""
+    digest = hashlib.sha256(cpu().encode())
     for name in SOURCES:
         digest.update(name.encode() + b"\0")
         digest.update((HERE / name).read_bytes())

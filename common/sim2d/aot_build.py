@@ -14,12 +14,12 @@ here new_state returns its address instead (a counted reference, released
 by free_state) and tick takes it back, so the extension's callers hold a
 plain integer (compiled.py wraps it).
 
-Code is compiled for a generic x86-64 (or the machine's architecture's
-baseline), not this machine's CPU: the module can be built on one host and
-run on another of the same architecture. docs/BENCHMARKS.md has the speed
-against numba's host-tuned code.
+Code is compiled for this machine's CPU, as numba's own is (for a generic
+x86-64 the bench's 10-robot world ran up to 5 % slower: docs/BENCHMARKS.md);
+the module's name carries the CPU (aot.cpu), so a checkout moved to another
+machine runs numba's kernels until it is built there.
 
-The module is written to common/sim2d/_aot_<hash of the sources>.<ext> (a
+The module is written to _aot_<hash of the sources>.<ext> in this directory (a
 temporary name first, then renamed: an engine never imports half a file), and
 older modules are removed. Two builds at once wait for each other (a lock).
 """
@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from numba import typeof, types
-from numba.core import cgutils
+from numba.core import cgutils, codegen
 from numba.extending import intrinsic
 from numba.pycc import CC
 
@@ -166,6 +166,20 @@ def _exports() -> list[tuple[str, Any, Callable[..., Any]]]:
     ]
 
 
+def _host_features() -> None:
+    """Compile for the instruction sets this CPU has, as numba's JIT does, not its model's.
+
+    pycc gives LLVM the CPU's name alone, and LLVM then assumes every
+    instruction set of that model: a virtual machine may hide some (numba's
+    JIT passes the ones the CPU reports). numba's internals: without them,
+    the CPU's name alone.
+    """
+    aot_codegen = getattr(codegen, "AOTCPUCodegen", None)
+    host = getattr(codegen, "get_host_cpu_features", None)
+    if aot_codegen is not None and host is not None:
+        aot_codegen._customize_tm_features = lambda self: host()
+
+
 def build(force: bool = False, quiet: bool = False) -> Path:
     """Compile the module for the current sources unless it exists; returns its path."""
     target = aot.module_path()
@@ -178,9 +192,11 @@ def build(force: bool = False, quiet: bool = False) -> Path:
             say(f"aot: {target.name} is up to date")
             return target
         t0 = time.perf_counter()
+        _host_features()
         name = aot.module_name()
         with tempfile.TemporaryDirectory(dir=aot.HERE, prefix=".aot-build-") as tmp:
             cc = CC(name)
+            cc.target_cpu = "host"
             cc.output_dir = tmp
             cc.verbose = False
             for export, signature, func in _exports():
