@@ -32,11 +32,6 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-import numpy as np
-
-from common.sim2d.packs import N_AGENT_F, N_AGENT_I
-from common.sim2d.pucks_tables import objects_table
-
 HERE = Path(__file__).resolve().parent
 PREFIX = "_aot_"
 
@@ -132,6 +127,8 @@ def describe(value: Any) -> object:
     wrongly. Its callers compare what they pass, where they can afford it,
     with what it was compiled for (compiled.py).
     """
+    import numpy as np  # here: ./dev asks whether the module is built without numpy
+
     if isinstance(value, np.ndarray):
         return (value.dtype.name, value.ndim, bool(value.flags.c_contiguous))
     if isinstance(value, tuple):
@@ -153,6 +150,11 @@ def state_sample() -> tuple[Any, ...]:
     The build compiles new_state for these arguments' types and compiled.py
     checks each call's against them: one sample, so the two cannot disagree.
     """
+    import numpy as np
+
+    from common.sim2d.packs import N_AGENT_F, N_AGENT_I
+    from common.sim2d.pucks_tables import objects_table
+
     one = np.ones(1)
     i64 = np.zeros(2, dtype=np.int64)
     return (
@@ -207,4 +209,6 @@ def state_sample() -> tuple[Any, ...]:
 
 def circles_sample() -> tuple[Any, ...]:
     """discs.bin_circles' arguments as world_tick passes them (static geometry's circles)."""
+    import numpy as np
+
     return (np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0)
