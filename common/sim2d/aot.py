@@ -116,7 +116,10 @@ def load() -> ModuleType:
         built = sorted(p.name for p in HERE.glob(PREFIX + "*"))
         why = "not built" if not built else f"stale (built from other sources: {built[0]})"
         raise Unavailable(f"{path.name} {why}: python -m common.sim2d.aot_build builds it")
-    return importlib.import_module(f"common.sim2d.{module_name(hash_)}")
+    try:
+        return importlib.import_module(f"common.sim2d.{module_name(hash_)}")
+    except ImportError as exc:  # a broken build (python -m common.sim2d.aot_build --force)
+        raise Unavailable(f"{path.name} does not load ({exc})") from exc
 
 
 def describe(value: Any) -> object:

@@ -123,6 +123,18 @@ def test_a_module_built_from_other_sources_is_never_loaded(
         aot.load()
 
 
+def test_a_module_that_does_not_load_leaves_numbas_kernels(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A broken build (a file cut short, say) is refused: compiled.py then runs numba's."""
+    monkeypatch.setattr(aot, "stamp", lambda: "0000000000000000")
+    broken = aot.module_path()
+    broken.write_bytes(b"not an extension")
+    try:
+        with pytest.raises(aot.Unavailable, match="does not load"):
+            aot.load()
+    finally:
+        broken.unlink()
+
+
 def test_the_stamp_covers_every_file_with_kernels() -> None:
     """An edit to any kernel's file makes a new module name: the old module is not loaded."""
     here = REPO / "common" / "sim2d"
