@@ -38,6 +38,7 @@ needs_module = pytest.mark.skipif(bool(NOT_BUILT), reason=NOT_BUILT)
 _RUN = """
 import hashlib, json, sys
 import numpy as np
+import services.engine.main  # what an engine imports, zenoh and all
 from bench.bench_enki import CRUISE, WEIGHTS, scenario_world
 from common.sim2d import compiled
 
