@@ -1,8 +1,9 @@
 """A World's tick: arms, drive, physics, counters, carried objects, then sensors.
 
-The per-tick work runs in compiled kernels (common/sim2d/kernels.py), calling
-chipmunk's C functions directly (common/sim2d/chipmunk.py); on the discs drive
-the whole tick is one compiled call (common/sim2d/fused.py).
+The per-tick work runs in compiled kernels (common/sim2d/compiled.py: compiled
+ahead of time, or numba's), calling chipmunk's C functions directly
+(common/sim2d/chipmunk.py); on the discs drive the whole tick is one compiled
+call (common/sim2d/fused.py).
 """
 
 from __future__ import annotations
