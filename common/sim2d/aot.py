@@ -1,10 +1,10 @@
 """The kernels compiled ahead of time: which module, built from which sources, and loading it.
 
 Why: an engine that loads its kernels from numba's on-disk cache carries numba's
-runtime (LLVM and numba itself, about 83 MiB of a 183 MiB engine at 10 robots:
-docs/BENCHMARKS.md, "Memory"), needed only to load the cached machine code. The
-ahead-of-time module (common/sim2d/aot_build.py builds it with numba's pycc) is a
-plain Python extension: importing it loads no numba and no LLVM.
+runtime (LLVM and numba itself), needed only to load the cached machine code:
+185 MiB at 10 robots, against 63 on this module (docs/BENCHMARKS.md, "Memory").
+The ahead-of-time module (common/sim2d/aot_build.py builds it with numba's
+pycc) is a plain Python extension: importing it loads no numba and no LLVM.
 
 A module is named after a hash of the kernels' sources (:data:`SOURCES`), so a
 module built from other sources is never imported: it would run old code on
@@ -12,9 +12,9 @@ new layouts (jitcache.py tells of the one crash of that kind). The hash takes
 in the CPU too (:func:`cpu`): the module is compiled for this machine's, as
 numba compiles (code for a generic x86-64 was up to 5 % slower at 10 robots,
 docs/BENCHMARKS.md), and a checkout moved to another machine must not run
-instructions its CPU lacks. This module
-imports no numba; common/sim2d/compiled.py chooses between this module's
-kernels and numba's.
+instructions its CPU lacks. This module imports no numba (nor numpy, until
+asked to describe or sample arguments); common/sim2d/compiled.py chooses
+between the module's kernels and numba's.
 
 ``WART_KERNELS``: ``auto`` (the default: the module if it is built for these
 sources, else numba's), ``jit`` (numba's always) or ``aot`` (the module, an
