@@ -480,14 +480,14 @@ def sense_on_threads(
     threads: int,
 ) -> None:
     """kernels.sense_parallel on ``threads`` threads: the packs as SensorSuite.packs makes them."""
-    # Both settings are per calling thread (the sim thread's). Chunks handed out
-    # one at a time: on a shared machine a worker may be descheduled, and the
-    # others then take its share instead of waiting for it at the barrier.
     # numba's always (aot_build.py says why): imported at the first pass on threads.
     import numba
 
     from common.sim2d import kernels
 
+    # Both settings are per calling thread (the sim thread's). Chunks handed out
+    # one at a time: on a shared machine a worker may be descheduled, and the
+    # others then take its share instead of waiting for it at the barrier.
     numba.set_num_threads(threads)
     chunk = numba.set_parallel_chunksize(1)
     try:
