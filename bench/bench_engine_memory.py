@@ -1,13 +1,15 @@
 """An engine's resident memory at 10 and 1,000 robots, and where it goes.
 
-Starts a router and the registry, then for each size a real ``wart engine``
-on a generated map of that many Khepera (the default drive), waits until its
-world ticks, and prints its RSS (psutil) after --settle seconds. Then, each in
-a fresh interpreter, what the engine's imports cost on their own (numpy,
-llvmlite, numba, pymunk, zenoh, the engine module), so the table says where
-the memory goes.
+Starts a router and the registry, then for each size and each kernels' path
+(``WART_KERNELS``: ``aot``, the module compiled ahead of time, and ``jit``,
+numba's kernels loaded from its cache: common/sim2d/aot.py) a real ``wart
+engine`` on a generated map of that many Khepera (the default drive), waits
+until its world ticks, and prints its RSS (psutil) after --settle seconds.
+Then, each in a fresh interpreter, what the engine's imports cost on their
+own (numpy, llvmlite, numba, pymunk, zenoh, the engine module, its kernels
+on either path), so the table says where the memory goes.
 
-    python -m bench.bench_engine_memory [--sizes 10 1000] [--settle 5]
+    python -m bench.bench_engine_memory [--sizes 10 1000] [--paths aot jit] [--settle 5]
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 import time
@@ -27,19 +30,22 @@ if __package__ in (None, ""):
 
 from bench.labproc import REPO, BenchLab
 from common.keys import AliveKind
+from common.sim2d import aot
 
+ENGINE = "import services.engine.main; from common.sim2d import compiled"
+# (label, WART_KERNELS ("": a library's, the same either way), code)
 IMPORTS = (
-    ("python alone", "pass"),
-    ("+ numpy", "import numpy"),
-    ("+ llvmlite's LLVM", "import numpy, llvmlite.binding"),
-    ("+ numba", "import numpy, numba"),
-    ("+ pymunk (chipmunk)", "import numpy, numba, pymunk"),
-    ("+ zenoh", "import numpy, numba, pymunk, zenoh"),
-    ("the engine's imports", "import services.engine.main"),
-    (
-        "+ its kernels loaded",
-        "import services.engine.main; from common.sim2d import kernels; kernels.warm_up()",
-    ),
+    ("python alone", "", "pass"),
+    ("+ numpy", "", "import numpy"),
+    ("+ llvmlite's LLVM", "", "import numpy, llvmlite.binding"),
+    ("+ numba", "", "import numpy, numba"),
+    ("+ pymunk (chipmunk)", "", "import numpy, numba, pymunk"),
+    ("+ zenoh", "", "import numpy, numba, pymunk, zenoh"),
+    ("the engine's imports (jit)", "jit", ENGINE),
+    ("+ its kernels loaded (jit)", "jit", f"{ENGINE}; compiled.warm_up()"),
+    ("numpy, pymunk, zenoh", "", "import numpy, pymunk, zenoh"),
+    ("the engine's imports (aot)", "aot", ENGINE),
+    ("+ its kernels loaded (aot)", "aot", f"{ENGINE}; compiled.warm_up()"),
 )
 
 
@@ -65,8 +71,8 @@ def map_of(robots: int, path: Path) -> Path:
     return path
 
 
-def import_rss(code: str) -> float:
-    """MiB resident after ``code`` in a fresh interpreter."""
+def import_rss(code: str, path: str) -> float:
+    """MiB resident after ``code`` in a fresh interpreter on that kernels' path."""
     out = subprocess.run(
         [
             sys.executable,
@@ -75,6 +81,7 @@ def import_rss(code: str) -> float:
             f"{code}\nprint([l for l in open('/proc/self/status') if l.startswith('VmRSS')][0])",
         ],
         cwd=REPO,
+        env={**os.environ, "WART_KERNELS": path},
         capture_output=True,
         text=True,
         check=True,
@@ -86,31 +93,48 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 1000])
     p.add_argument("--settle", type=float, default=5.0, help="seconds of ticking before reading")
+    p.add_argument(
+        "--paths",
+        nargs="+",
+        choices=("aot", "jit"),
+        default=["aot", "jit"],
+        help="the kernels' paths to measure (WART_KERNELS; aot needs the module built: "
+        "python -m common.sim2d.aot_build)",
+    )
     args = p.parse_args()
+    try:
+        aot.load()
+    except aot.Unavailable as exc:
+        if "aot" in args.paths:
+            p.error(f"--paths aot: the ahead-of-time module is {exc}")
     lab = BenchLab([], "bench-password")
     try:
         lab.start()
         for n in args.sizes:
-            world = f"m{n}"
-            path = map_of(n, lab.tmp / f"{world}.json")
-            lab.spawn(
-                ["engine", "--map", str(path), "--world", world, *lab.net()],
-                (AliveKind.WORLD, world),
-            )
-            engine = psutil.Process(lab.procs[-1].pid)
-            time.sleep(args.settle)
-            rss = engine.memory_info().rss / 2**20
-            print(
-                f"engine of {n} robots: {rss:.0f} MiB resident (load {psutil.getloadavg()[0]:.1f})",
-                flush=True,
-            )
-            lab.procs[-1].terminate()
-            lab.procs[-1].wait(10)
+            for kernels in args.paths:
+                world = f"m{n}{kernels}"
+                path = map_of(n, lab.tmp / f"{world}.json")
+                os.environ["WART_KERNELS"] = kernels  # the engine's environment (tests/lab.py)
+                lab.spawn(
+                    ["engine", "--map", str(path), "--world", world, *lab.net()],
+                    (AliveKind.WORLD, world),
+                )
+                engine = psutil.Process(lab.procs[-1].pid)
+                time.sleep(args.settle)
+                rss = engine.memory_info().rss / 2**20
+                print(
+                    f"engine of {n} robots, kernels {kernels}: {rss:.0f} MiB resident "
+                    f"(load {psutil.getloadavg()[0]:.1f})",
+                    flush=True,
+                )
+                lab.procs[-1].terminate()
+                lab.procs[-1].wait(10)
     finally:
         lab.stop()
     print("where it goes (each line a fresh interpreter, resident after it):")
-    for label, code in IMPORTS:
-        print(f"  {label:<24} {import_rss(code):6.0f} MiB", flush=True)
+    for label, kernels, code in IMPORTS:
+        if kernels in args.paths or not kernels:
+            print(f"  {label:<28} {import_rss(code, kernels or 'jit'):6.0f} MiB", flush=True)
     return 0
 
 

@@ -50,7 +50,7 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.engine_bench import build, control
-from common.sim2d import kernels
+from common.sim2d import compiled
 from common.sim2d.wander import CRUISE, WEIGHTS
 from common.sim2d.world import DRIVES, World
 
@@ -185,13 +185,13 @@ def run_enki(binary: Path, scenario: Path, sim_seconds: float) -> EnkiRun:
 
 
 def compiled_control(world: World) -> None:
-    """The same Braitenberg rule as engine_bench.control, compiled (kernels.braitenberg_speeds).
+    """The same Braitenberg rule as engine_bench.control, compiled (compiled.braitenberg_speeds).
 
     Enki's side runs the rule in C++: with ``--rule compiled`` (the default) both
     sides run it compiled, and the comparison is of the simulators, not of
     numpy's per-call cost (about 5 us a tick at 10 robots, a third of Enki's step).
     """
-    kernels.braitenberg_speeds(world.proximity, WEIGHTS, CRUISE, world.tables.max_speed, world.cmd)
+    compiled.braitenberg_speeds(world.proximity, WEIGHTS, CRUISE, world.tables.max_speed, world.cmd)
 
 
 RULES = {"numpy": control, "compiled": compiled_control}
@@ -298,7 +298,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"bench_enki: {e}", file=sys.stderr)
         return 2
     print(f"Enki's program: {binary.relative_to(REPO)}")
-    print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
+    print(f"kernels ready in {compiled.warm_up():.2f} s: {compiled.WHY}")
     kind = "full (grippers, lamp, balls)" if args.full else "as Enki"
     print(f"our rule: {args.rule}; our world {kind}; load average before: {_load()}")
     print(f"{'N':>5} {'round':>5}  {'what':<14} {'sim s / CPU s':>13} {'CPU us a step':>13}  load")

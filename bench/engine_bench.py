@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from common.sim2d import kernels
+from common.sim2d import compiled
 from common.sim2d.agents import agent_type, khepera
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
 from common.sim2d.entities import ShapeSpec
@@ -245,7 +245,7 @@ def main() -> None:
             p.error(f"--{name.replace('_', '-')} must be positive")
     if any(n <= 0 for n in args.sizes):
         p.error("--sizes must be positive")
-    print(f"kernels ready in {kernels.warm_up():.2f} s (compiled, or loaded from the cache)")
+    print(f"kernels ready in {compiled.warm_up():.2f} s: {compiled.WHY}")
     print(
         f"threads: sensing {args.threads}, physics {args.physics_threads}; "
         f"gripper turrets {'off' if args.no_gripper else 'on'}; drive {args.drive}; "

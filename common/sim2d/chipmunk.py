@@ -20,17 +20,16 @@ This reaches one step below pymunk's public API (``Body._body``,
 every function still has the C signature the code generation below assumes;
 tests/unit/common/sim2d/test_chipmunk.py checks values against pymunk's own
 accessors and a whole trajectory against ``Space.step``.
+
+The kernels' side of the calls (numba intrinsics) is in chipmunk_calls.py: this
+module imports no numba, so an engine on the ahead-of-time kernels
+(common/sim2d/aot.py) reads the addresses without loading numba's runtime.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pymunk
-from llvmlite import ir
-from numba import types
-from numba.extending import intrinsic
 from pymunk._chipmunk import ffi, lib
 
 # Indices into FUNCTIONS.
@@ -87,70 +86,6 @@ def space_address(space: pymunk.Space) -> int:
 
 def addresses(bodies: list[pymunk.Body]) -> np.ndarray:
     return np.array([body_address(b) for b in bodies], dtype=np.uint64)
-
-
-# cpVect is a struct of two doubles: returned in two floating-point registers
-# and passed by value as two floating-point arguments on x86-64 (System V) and
-# AArch64, which is how clang lowers it and how it is declared here.
-_DOUBLE = ir.DoubleType()
-_VECT = ir.LiteralStructType([_DOUBLE, _DOUBLE])
-_PTR = ir.IntType(8).as_pointer()
-
-
-def _function(builder: ir.IRBuilder, address: ir.Value, ret: ir.Type, args: list[ir.Type]) -> Any:
-    return builder.inttoptr(address, ir.FunctionType(ret, args).as_pointer())
-
-
-@intrinsic
-def get_vect(typingctx, fn, obj):  # type: ignore[no-untyped-def]
-    """(x, y) = fn(obj) for a ``cpVect fn(cpBody *)``; both arguments are addresses."""
-    sig = types.UniTuple(types.float64, 2)(types.uint64, types.uint64)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        f = _function(builder, args[0], _VECT, [_PTR])
-        out = builder.call(f, [builder.inttoptr(args[1], _PTR)])
-        parts = [builder.extract_value(out, 0), builder.extract_value(out, 1)]
-        return context.make_tuple(builder, signature.return_type, parts)
-
-    return sig, codegen
-
-
-@intrinsic
-def get_double(typingctx, fn, obj):  # type: ignore[no-untyped-def]
-    """fn(obj) for a ``double fn(cpBody *)``."""
-    sig = types.float64(types.uint64, types.uint64)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        f = _function(builder, args[0], _DOUBLE, [_PTR])
-        return builder.call(f, [builder.inttoptr(args[1], _PTR)])
-
-    return sig, codegen
-
-
-@intrinsic
-def set_vect(typingctx, fn, obj, x, y):  # type: ignore[no-untyped-def]
-    """fn(obj, (x, y)) for a ``void fn(cpBody *, cpVect)``."""
-    sig = types.void(types.uint64, types.uint64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        f = _function(builder, args[0], ir.VoidType(), [_PTR, _DOUBLE, _DOUBLE])
-        builder.call(f, [builder.inttoptr(args[1], _PTR), args[2], args[3]])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-@intrinsic
-def set_double(typingctx, fn, obj, value):  # type: ignore[no-untyped-def]
-    """fn(obj, value) for a ``void fn(cpBody *, double)`` or ``void fn(cpSpace *, double)``."""
-    sig = types.void(types.uint64, types.uint64, types.float64)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        f = _function(builder, args[0], ir.VoidType(), [_PTR, _DOUBLE])
-        builder.call(f, [builder.inttoptr(args[1], _PTR), args[2]])
-        return context.get_dummy_value()
-
-    return sig, codegen
 
 
 def space_step_pending(space: pymunk.Space) -> bool:

@@ -14,6 +14,9 @@ sensing pass at 10,000 robots"). Kernels are cached on disk (``cache=True``, in
 ``__pycache__`` or ``NUMBA_CACHE_DIR``): the first start of a fresh checkout
 compiles them (a few seconds), later starts load them. :func:`warm_up` does
 that explicitly and returns the time it took, so the engine can report it.
+The World calls them through common/sim2d/compiled.py, which runs the same
+kernels compiled ahead of time where that module is built (aot.py): then
+numba is not loaded at all.
 
 Grid: one uniform grid over the arena plus one cell of margin on every side,
 cell >= the longest sensor reach + the largest radius. Static obstacle edges

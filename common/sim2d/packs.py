@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 from typing import Any, NamedTuple
 
-import numba
 import numpy as np
 
 # Column indices of the per-agent float table (AgentSensing.agent_f).
@@ -114,5 +113,21 @@ _CACHE = True
 # compile an allocation in such a kernel.
 _UNCOUNTED: dict[str, Any] = {"_nrt": False}
 # Threads a kernel may use: numba's pool, sized at import (NUMBA_NUM_THREADS, default
-# the machine's cores); set_num_threads can only lower it.
-MAX_THREADS = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at import
+# the CPUs this process may run on); set_num_threads can only lower it. Worked out as
+# numba.config does it (numba_threads, tests/unit/common/sim2d/test_aot.py compares),
+# so that an engine on the ahead-of-time kernels knows it without importing numba.
+
+
+def numba_threads() -> int:
+    """numba.config.NUMBA_NUM_THREADS, without importing numba (numba/core/config.py)."""
+    try:
+        default = max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        default = max(1, os.cpu_count() or 1)
+    try:
+        return int(os.environ["NUMBA_NUM_THREADS"])
+    except (KeyError, ValueError):  # unset, or numba would warn and take the default
+        return default
+
+
+MAX_THREADS = numba_threads()

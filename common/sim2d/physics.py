@@ -8,6 +8,7 @@ import numpy as np
 from numba import njit
 
 from common.sim2d import chipmunk as C
+from common.sim2d.chipmunk_calls import get_double, get_vect, set_double, set_vect
 from common.sim2d.packs import _CACHE
 
 
@@ -23,14 +24,14 @@ def read_bodies(fns, agents, objects):  # pragma: no cover
     obj = np.empty((m, 3))
     for a in range(n):
         b = agents[a]
-        pose[a, 0], pose[a, 1] = C.get_vect(fns[C.GET_POSITION], b)
-        pose[a, 2] = C.get_double(fns[C.GET_ANGLE], b)
-        vel[a, 0], vel[a, 1] = C.get_vect(fns[C.GET_VELOCITY], b)
-        vel[a, 2] = C.get_double(fns[C.GET_ANGULAR_VELOCITY], b)
+        pose[a, 0], pose[a, 1] = get_vect(fns[C.GET_POSITION], b)
+        pose[a, 2] = get_double(fns[C.GET_ANGLE], b)
+        vel[a, 0], vel[a, 1] = get_vect(fns[C.GET_VELOCITY], b)
+        vel[a, 2] = get_double(fns[C.GET_ANGULAR_VELOCITY], b)
     for o in range(m):
         b = objects[o]
-        obj[o, 0], obj[o, 1] = C.get_vect(fns[C.GET_POSITION], b)
-        obj[o, 2] = C.get_double(fns[C.GET_ANGLE], b)
+        obj[o, 0], obj[o, 1] = get_vect(fns[C.GET_POSITION], b)
+        obj[o, 2] = get_double(fns[C.GET_ANGLE], b)
     return pose, vel, obj
 
 
@@ -64,14 +65,14 @@ def physics_tick(
         w0 = cmd[a, 0] * mm_s_per_unit[a]
         w1 = cmd[a, 1] * mm_s_per_unit[a]
         v = (w0 + w1) / 2.0
-        theta = C.get_double(fns[C.GET_ANGLE], agents[a])
+        theta = get_double(fns[C.GET_ANGLE], agents[a])
         c = controls[a]
-        C.set_vect(fns[C.SET_VELOCITY], c, v * math.cos(theta), v * math.sin(theta))
-        C.set_double(fns[C.SET_ANGULAR_VELOCITY], c, (w1 - w0) / wheel_base[a])
+        set_vect(fns[C.SET_VELOCITY], c, v * math.cos(theta), v * math.sin(theta))
+        set_double(fns[C.SET_ANGULAR_VELOCITY], c, (w1 - w0) / wheel_base[a])
         counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
         counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
     for _ in range(substeps):
-        C.set_double(space_step, space, substep_s)
+        set_double(space_step, space, substep_s)
     return read_bodies(fns, agents, objects)
 
 
@@ -112,9 +113,9 @@ def servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, h):
         w0 = cmd[a, 0] * mm_s_per_unit[a]
         w1 = cmd[a, 1] * mm_s_per_unit[a]
         v = (w0 + w1) / 2.0
-        theta = C.get_double(fns[C.GET_ANGLE], b)
-        vx, vy = C.get_vect(fns[C.GET_VELOCITY], b)
-        w = C.get_double(fns[C.GET_ANGULAR_VELOCITY], b)
+        theta = get_double(fns[C.GET_ANGLE], b)
+        vx, vy = get_vect(fns[C.GET_VELOCITY], b)
+        w = get_double(fns[C.GET_ANGULAR_VELOCITY], b)
         m = servo[a, S_MASS] / h
         moment = servo[a, S_MOMENT] / h
         fx = (v * math.cos(theta) - vx) * m
@@ -140,8 +141,8 @@ def servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, h):
         memory[a, 3] = fx
         memory[a, 4] = fy
         memory[a, 5] = t
-        C.set_vect(fns[C.SET_FORCE], b, fx, fy)
-        C.set_double(fns[C.SET_TORQUE], b, t)
+        set_vect(fns[C.SET_FORCE], b, fx, fy)
+        set_double(fns[C.SET_TORQUE], b, t)
 
 
 @njit(cache=_CACHE)
@@ -173,7 +174,7 @@ def physics_tick_servo(
         counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
     for _ in range(substeps):
         servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, substep_s)
-        C.set_double(space_step, space, substep_s)
+        set_double(space_step, space, substep_s)
     return read_bodies(fns, agents, objects)
 
 

@@ -29,10 +29,11 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
-import numba
 import numpy as np
 
-from common.sim2d import kernels as K
+# The packs' layouts (packs.py, no numba); the kernels through compiled.py.
+from common.sim2d import compiled
+from common.sim2d import packs as K
 from common.sim2d.entities import Light
 
 if TYPE_CHECKING:
@@ -431,7 +432,7 @@ class SensorSuite:
         if world.threads > 1 and len(world.agent_pose) >= PARALLEL_MIN_AGENTS:
             sense_on_threads(robots, tables, scene, moving, tuple(out), world.threads)
         else:
-            K.sense(robots, tables, scene, moving, tuple(out))
+            compiled.sense(robots, tables, scene, moving, tuple(out))
         return out
 
     def lit(self, world: SensedWorld, sim_time: float) -> np.ndarray:
@@ -479,13 +480,18 @@ def sense_on_threads(
     threads: int,
 ) -> None:
     """kernels.sense_parallel on ``threads`` threads: the packs as SensorSuite.packs makes them."""
+    # numba's always (aot_build.py says why): imported at the first pass on threads.
+    import numba
+
+    from common.sim2d import kernels
+
     # Both settings are per calling thread (the sim thread's). Chunks handed out
     # one at a time: on a shared machine a worker may be descheduled, and the
     # others then take its share instead of waiting for it at the barrier.
     numba.set_num_threads(threads)
     chunk = numba.set_parallel_chunksize(1)
     try:
-        K.sense_parallel(robots, tables, scene, moving, out, threads)
+        kernels.sense_parallel(robots, tables, scene, moving, out, threads)
     finally:
         numba.set_parallel_chunksize(chunk)
 

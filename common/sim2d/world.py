@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
-from common.sim2d import chipmunk, heap, kernels, sensing, world_discs
+from common.sim2d import chipmunk, heap, sensing, world_discs
 from common.sim2d.bodies import id_of
 from common.sim2d.collision import (
     CAT_ALL,
@@ -52,6 +52,7 @@ from common.sim2d.entities import (
 )
 from common.sim2d.floor import FloorLayer
 from common.sim2d.gripper import GripperTurrets
+from common.sim2d.packs import MAX_THREADS
 from common.sim2d.world_actuators import RobotActuators, WorldActuators
 from common.sim2d.world_edits import EditError, WorldEdits
 from common.sim2d.world_tick import WorldTick, _FusedTick
@@ -144,10 +145,10 @@ class World(WorldEdits, WorldActuators, WorldTick):
             raise EditError("the arena's width and height must be positive")
         if not tick_s > 0:
             raise EditError("the tick must be positive")
-        if not 1 <= threads <= kernels.MAX_THREADS:
-            raise EditError(f"threads must be between 1 and {kernels.MAX_THREADS}")
-        if not 1 <= physics_threads <= kernels.MAX_THREADS:
-            raise EditError(f"physics threads must be between 1 and {kernels.MAX_THREADS}")
+        if not 1 <= threads <= MAX_THREADS:
+            raise EditError(f"threads must be between 1 and {MAX_THREADS}")
+        if not 1 <= physics_threads <= MAX_THREADS:
+            raise EditError(f"physics threads must be between 1 and {MAX_THREADS}")
         if drive not in DRIVES:
             raise EditError(f"drive must be one of {', '.join(DRIVES)}, not {drive!r}")
         self.drive = drive

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.controller.actuators import Actuators
-from common.sim2d import kernels
+from common.sim2d import compiled
 from common.sim2d.world_edits import EditError
 
 if TYPE_CHECKING:
@@ -51,7 +51,7 @@ class WorldActuators:
             raise ValueError(
                 f"expected {self.cmd.shape} wheel speeds (one row per agent), got {s.shape}"
             )
-        kernels.clamp_speeds(s, self.tables.max_speed, self.cmd)
+        compiled.clamp_speeds(s, self.tables.max_speed, self.cmd)
 
     def set_counters(self, slot: int, left: float, right: float) -> None:
         self.counters[slot] = (left, right)

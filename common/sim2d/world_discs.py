@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from common.sim2d import pucks
+from common.sim2d import pucks_tables as pucks
 
 if TYPE_CHECKING:
     from common.sim2d.entities import MovableObject

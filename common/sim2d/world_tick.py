@@ -1,8 +1,9 @@
 """A World's tick: arms, drive, physics, counters, carried objects, then sensors.
 
-The per-tick work runs in compiled kernels (common/sim2d/kernels.py), calling
-chipmunk's C functions directly (common/sim2d/chipmunk.py); on the discs drive
-the whole tick is one compiled call (common/sim2d/fused.py).
+The per-tick work runs in compiled kernels (common/sim2d/compiled.py: compiled
+ahead of time, or numba's), calling chipmunk's C functions directly
+(common/sim2d/chipmunk.py); on the discs drive the whole tick is one compiled
+call (common/sim2d/fused.py).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from common.sim2d import chipmunk, discs, fused, kernels, pucks, sensing, world_discs
+from common.sim2d import chipmunk, compiled, pucks_tables, sensing, world_discs
+from common.sim2d.packs import Readings
 
 if TYPE_CHECKING:
     import pymunk
@@ -150,13 +152,15 @@ class WorldTick:
             objs.mass,
         )
         scene = static.scene
-        circles = discs.bin_circles(
+        circles = compiled.bin_circles(
             static.circle_centres, static.circle_radii, scene.grid_nx, scene.grid_ny, scene.cell
         )
         holding = objs.holding
         tables = self.sensors.agents.kernel_tables
-        objects = pucks.scene_buffers(len(objs.objects), objs.edges, len(static.circle_radii))
-        state = fused.new_state(
+        objects = pucks_tables.scene_buffers(
+            len(objs.objects), objs.edges, len(static.circle_radii)
+        )
+        state, call = compiled.new_tick(
             pose,
             vel,
             self.cmd,
@@ -178,7 +182,7 @@ class WorldTick:
         f = self._fused = _FusedTick(
             self._fused_key(),
             state,
-            fused.entry(state),
+            call,
             pose,
             vel,
             *readings,
@@ -216,7 +220,9 @@ class WorldTick:
         if on_threads:
             # The same pass on the world's threads, in the state's own arrays.
             o = f.objects
-            m, e = pucks.scene_into(len(f.pose), f.discs.table, self.arm, f.scene[7], f.scene[8], o)
+            m, e = compiled.scene_into(
+                len(f.pose), f.discs.table, self.arm, f.scene[7], f.scene[8], o
+            )
             sensing.sense_on_threads(
                 (f.pose, self.arm, f.holding),
                 f.tables,
@@ -273,7 +279,7 @@ class WorldTick:
                 scene = static.scene
                 self._disc_circles = (
                     static,
-                    discs.bin_circles(
+                    compiled.bin_circles(
                         static.circle_centres,
                         static.circle_radii,
                         scene.grid_nx,
@@ -281,7 +287,7 @@ class WorldTick:
                         scene.cell,
                     ),
                 )
-            pose, vel = discs.tick(
+            pose, vel = compiled.discs_tick(
                 self.agent_pose,
                 self.cmd,
                 t.mm_s_per_unit,
@@ -302,7 +308,7 @@ class WorldTick:
             obj = objs.table[0].copy()
             self._bodies_placed = False
         elif self.drive == "joints":
-            pose, vel, obj = kernels.physics_tick(
+            pose, vel, obj = compiled.physics_tick(
                 chipmunk.FUNCTIONS,
                 self._step_fn,
                 self._space_address,
@@ -318,7 +324,7 @@ class WorldTick:
                 dt * t.pulses_per_s_per_unit,
             )
         else:
-            pose, vel, obj = kernels.physics_tick_servo(
+            pose, vel, obj = compiled.physics_tick_servo(
                 chipmunk.FUNCTIONS,
                 self._step_fn,
                 self._space_address,
@@ -337,7 +343,7 @@ class WorldTick:
         if via_pymunk:
             for _ in range(self.substeps):
                 if self.drive == "velocity":
-                    kernels.servo_forces(
+                    compiled.servo_forces(
                         chipmunk.FUNCTIONS,
                         self._agent_bodies,
                         self.cmd,
@@ -348,7 +354,7 @@ class WorldTick:
                         sub,
                     )
                 self.space.step(sub)
-            pose, vel, obj = kernels.read_bodies(
+            pose, vel, obj = compiled.read_bodies(
                 chipmunk.FUNCTIONS, self._agent_bodies, self._object_bodies
             )
         self.agent_pose, self.agent_vel, self.object_pose = pose, vel, obj
@@ -370,7 +376,7 @@ class WorldTick:
         n = len(self.agents)
         if n == 0:
             return
-        out = kernels.Readings(
+        out = Readings(
             np.empty((n, self.proximity.shape[1]), dtype=np.int32),
             np.empty((n, self.ambient.shape[1]), dtype=np.int32),
             np.empty(n, dtype=np.int32),
@@ -387,8 +393,8 @@ class _FusedTick:
     """A discs world's fused tick state and the buffers it writes (World._fused_state)."""
 
     key: tuple[object, ...]
-    state: fused.TickState
-    call: Callable[[fused.TickState, bool, np.uint64, np.ndarray], None]  # fused.entry(state)
+    state: object  # fused.TickState, or its address in the ahead-of-time module
+    call: Callable[[Any, bool, np.uint64, np.ndarray], None]  # compiled.new_tick's tick
     pose: np.ndarray
     vel: np.ndarray
     proximity: np.ndarray

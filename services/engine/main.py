@@ -23,9 +23,10 @@ from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.robots import registry as robot_registry
 from common.service import run_service
-from common.sim2d import kernels
+from common.sim2d import compiled
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
 from common.sim2d.maps import MapError, load_map
+from common.sim2d.packs import MAX_THREADS
 from services.engine.service import STREAMS_UP_FRONT, EngineService, EngineSettings
 
 
@@ -59,7 +60,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         type=int,
         default=1,
         help="threads of the sensing pass, used from 256 robots up (default 1; up to "
-        f"{kernels.MAX_THREADS}, this machine's cores); readings are the same with any count. "
+        f"{MAX_THREADS}, this machine's cores); readings are the same with any count. "
         "Measured on 2 cores: no gain at 1,000 robots, slower when the other core is busy",
     )
     p.add_argument(
@@ -115,8 +116,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     if args.streams_up_front < 0:
         p.error("--streams-up-front must be 0 or more")
     for flag, value in (("--threads", args.threads), ("--physics-threads", args.physics_threads)):
-        if not 1 <= value <= kernels.MAX_THREADS:
-            p.error(f"{flag} must be between 1 and {kernels.MAX_THREADS} (numba's thread pool)")
+        if not 1 <= value <= MAX_THREADS:
+            p.error(f"{flag} must be between 1 and {MAX_THREADS} (numba's thread pool)")
     registry_key = None
     if options.registry_key:
         try:
@@ -142,15 +143,19 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         )
     except MapError as exc:
         return cli.fail(str(exc))
-    # Compile the per-tick kernels now (or load them from numba's on-disk cache) rather
-    # than on the first tick. Said first: a checkout's first start compiles for a while.
-    print(
-        "engine: loading the simulation's kernels (a checkout's first start compiles them: "
-        "a minute or more on 2 cores; cached after)",
-        file=sys.stderr,
-        flush=True,
-    )
-    print(f"engine: kernels ready in {kernels.warm_up():.2f} s", file=sys.stderr, flush=True)
+    # Load the per-tick kernels now rather than on the first tick: the ahead-of-time
+    # module (common/sim2d/aot.py) if it is built for these sources, else numba's
+    # (compiled, or loaded from its on-disk cache). Said first: without the module, a
+    # checkout's first start compiles for a while.
+    print(f"engine: kernels: {compiled.WHY}", file=sys.stderr, flush=True)
+    if compiled.PATH == "jit":
+        print(
+            "engine: loading numba's kernels (a checkout's first start compiles them: "
+            "a minute or more on 2 cores; cached after)",
+            file=sys.stderr,
+            flush=True,
+        )
+    print(f"engine: kernels ready in {compiled.warm_up():.2f} s", file=sys.stderr, flush=True)
     settings = EngineSettings(
         tick_s=tick_s,
         speed=args.speed,

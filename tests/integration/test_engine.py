@@ -39,6 +39,7 @@ from common.messages import (
     encode,
 )
 from common.service import close_session, open_session
+from common.sim2d import compiled
 from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
@@ -365,6 +366,10 @@ def test_a_big_world_publishes_a_robots_samples_once_it_is_watched_or_leased(
     assert "k2's sensor samples published from now on (someone watches it)" in engine_log
     assert "k3's sensor samples published from now on (leased)" in engine_log
     assert "ghost" not in engine_log
+    # It says which kernels it runs: the module compiled ahead of time where built
+    # (./dev test builds it), as this process chose (the same environment and checkout).
+    said = {"aot": "engine: kernels: ahead of time", "jit": "engine: kernels: numba's"}
+    assert said[compiled.PATH] in engine_log, engine_log
     for ghost in ghosts:
         ghost.undeclare()
 
