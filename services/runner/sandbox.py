@@ -368,6 +368,12 @@ class Sandbox:
             if self.on_step is not None:
                 self.on_step()
         elif isinstance(message, pipe.Ready):
+            now = time.monotonic()
+            self.timeline["ready"] = now
+            took = now - self.timeline.get("started", now)
+            # A busy host starts a sandbox slowly (its Python, the controller's imports):
+            # the operator's log says how slowly, so a late first print has a cause.
+            log.info("controller %s ready %.1f s after its sandbox began", message.controller, took)
             self._say(f"[runner] controller {message.controller} started")
         elif isinstance(message, pipe.Failed):
             text = message.message

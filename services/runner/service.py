@@ -146,6 +146,13 @@ class Run:
                     silent = True
                     self._say_silent(first=seen == 0)
                 continue
+            if seen == 0:
+                log.info(
+                    "%s on %s: first readings %.1f s after the run's start",
+                    self.request.request_id,
+                    self.request.agent,
+                    now - last,
+                )
             if silent:
                 silent = False
                 back = "again" if seen else "at last"  # a gap, or the slot's first ones

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import (
@@ -101,6 +102,15 @@ def upload(page: ViserPage, name: str, content: bytes) -> None:
     )
 
 
+def said_to(panel: ChatPanel, lab: RealLab) -> str:
+    """What the server put in a panel's output, and what the runner logged: a timeout's cause."""
+    robots = panel.robots
+    shown = list(robots._output)[-4:] if robots is not None else []
+    runner = next((p for p in lab.lab.procs.started if p.name == "runner"), None)
+    logged = runner.output().splitlines()[-8:] if runner is not None else []
+    return f"the panel holds {shown}; the runner's log ends {logged}"
+
+
 def test_upload_queue_obey_output_and_advance(open_page, lab: RealLab) -> None:
     alice, bob = open_page("alice"), open_page("bob")
     alice_panel = enter_arena(alice, lab, "alice")
@@ -141,7 +151,10 @@ def test_upload_queue_obey_output_and_advance(open_page, lab: RealLab) -> None:
     alice.click("Cancel my request")
     alice.wait_text("your controller on k0 was cancelled: cancelled by alice", timeout=15_000)
     alice.wait_text("bob's controller on k0 is running", timeout=15_000)
-    bob.wait_text("hello from a sandbox", timeout=15_000)
+    try:
+        bob.wait_text("hello from a sandbox", timeout=15_000)
+    except PlaywrightTimeout:
+        raise AssertionError(f"bob's print not on his page: {said_to(bob_panel, lab)}") from None
     bob.screenshot("agents-output")
     alice.wait_text("hello from a sandbox", timeout=10_000)  # members see the output too
     bob.click("Cancel my request")
