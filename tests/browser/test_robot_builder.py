@@ -151,9 +151,16 @@ def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, la
         10,
         what="the scout's radius in the view",
     )
-    robots = view._robots
-    assert robots is not None and robots.batched_scales is not None
-    assert sorted(float(s) for s in robots.batched_scales) == pytest.approx([1.0, 35.0 / 27.5])
+
+    # The view takes the new snapshot, then rebuilds its robots' mesh (the pump's thread):
+    # read the mesh once it is rebuilt.
+    def scales() -> list[float]:
+        robots = view._robots
+        held = None if robots is None else robots.batched_scales
+        return [] if held is None else sorted(float(s) for s in held)
+
+    wait_until(lambda: len(scales()) == 2, 10, what=lambda: f"two robots' scales: {scales()}")
+    assert scales() == pytest.approx([1.0, 35.0 / 27.5])
 
     pick_robot(ida, panel, added)
     # The selected robot is drawn as its components draw themselves (rim, rays, beams).

@@ -94,6 +94,9 @@ class Workbench:
         # The context's news of my run counts up: a reply that arrives after the news
         # (a run can start, or end, before the query's answer is back) must not hide it.
         self._news = 0
+        # The check of the count and the words said after a reply, as one step: news landing
+        # between them was overwritten by the older "Stopped: ..." (seen at load 9).
+        self._news_lock = threading.Lock()
         gui = client.gui
         with gui.add_folder("Editor") as self.folder:
             self.start_from = gui.add_dropdown(
@@ -283,8 +286,9 @@ class Workbench:
             if queued.position == 0 or (queued.eta_s is not None and queued.eta_s < 1.0)
             else f"you are #{queued.position} in the queue"
         )
-        if self._news == news:
-            self.say(f"{name} is queued on {agent} ({where}): {when}.")
+        with self._news_lock:
+            if self._news == news:
+                self.say(f"{name} is queued on {agent} ({where}): {when}.")
         self.robots.refresh_agents()
 
     # -- the robot the buttons act on ("Run on")
@@ -463,8 +467,9 @@ class Workbench:
             except LabError as exc:
                 self.say(f"Nothing stopped on {agent}: {exc}", bad=True)
                 return
-        if self._news == news:
-            self.say("Stopped: " + "; ".join(said) + ".")
+        with self._news_lock:
+            if self._news == news:
+                self.say("Stopped: " + "; ".join(said) + ".")
         self.robots.refresh_agents()
 
     def _reset(self) -> None:
@@ -486,6 +491,10 @@ class Workbench:
     def on_request(self, event: RequestEvent) -> None:
         if event.user != self.connection.user or (event.ctx, event.agent) != self._running_on:
             return
+        with self._news_lock:
+            self._on_my_request(event)
+
+    def _on_my_request(self, event: RequestEvent) -> None:
         if event.status != "queued":  # "queued" is what the request's own reply says
             self._news += 1
         if event.status in ("finished", "cancelled", "refused"):
