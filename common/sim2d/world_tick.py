@@ -14,7 +14,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from common.sim2d import chipmunk, discs, fused, kernels, pucks, sensing, world_discs
+from common.sim2d import (
+    chipmunk,
+    discs,
+    discs_split,
+    fused,
+    kernels,
+    pucks,
+    sensing,
+    world_discs,
+)
 
 if TYPE_CHECKING:
     import pymunk
@@ -173,6 +182,37 @@ class WorldTick:
             (self.width, self.height, self.tick_s / self.substeps),
             self.substeps,
         )
+        split = None
+        nd = n + len(objs.objects)
+        if (
+            self.threads > 1
+            and nd >= discs_split.SPLIT_MIN_DISCS
+            and n >= sensing.PARALLEL_MIN_AGENTS
+        ):
+            # The drive on the world's threads (discs_split.py): the state's
+            # arrays, work arrays of its own (the fused tick's are scratch too).
+            split = (
+                pose,
+                self.cmd,
+                t.mm_s_per_unit,
+                t.wheel_base,
+                objs.radius,
+                objs.mass,
+                self.counters,
+                drive[2],
+                static.kernel_scene,
+                circles,
+                self.width,
+                self.height,
+                self.tick_s / self.substeps,
+                self.substeps,
+                pose,
+                vel,
+                discs.drive_buffers(n, len(objs.objects), self.width, self.height, objs.radius),
+                objs.table,
+                self.arm,
+                discs_split.split_buffers(nd),
+            )
         # Keyed on what it was built from after the build: static_geometry may
         # have just made the static scene.
         f = self._fused = _FusedTick(
@@ -188,6 +228,7 @@ class WorldTick:
             objects,
             objs,
             n >= sensing.PARALLEL_MIN_AGENTS,
+            split,
         )
         return f
 
@@ -211,9 +252,12 @@ class WorldTick:
             key = self.noise.next()
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
-        on_threads = sense and f.swarm and self.threads > 1
-        f.call(f.state, sense and not on_threads, key, lights)
-        if on_threads:
+        on_threads = f.swarm and self.threads > 1
+        if on_threads and f.split is not None:
+            discs_split.on_threads(f.split, self.threads)
+        else:
+            f.call(f.state, sense and not on_threads, key, lights)
+        if sense and on_threads:
             # The same pass on the world's threads, in the state's own arrays.
             o = f.objects
             m, e = pucks.scene_into(len(f.pose), f.discs.table, self.arm, f.scene[7], f.scene[8], o)
@@ -281,7 +325,7 @@ class WorldTick:
                         scene.cell,
                     ),
                 )
-            pose, vel = discs.tick(
+            args = (
                 self.agent_pose,
                 self.cmd,
                 t.mm_s_per_unit,
@@ -299,6 +343,15 @@ class WorldTick:
                 objs.table,
                 self.arm,
             )
+            n = len(self.agents)
+            if (
+                self.threads > 1
+                and n >= sensing.PARALLEL_MIN_AGENTS
+                and n + len(objs.objects) >= discs_split.SPLIT_MIN_DISCS
+            ):
+                pose, vel = discs_split.tick(*args, self.threads)
+            else:
+                pose, vel = discs.tick(*args)
             obj = objs.table[0].copy()
             self._bodies_placed = False
         elif self.drive == "joints":
@@ -402,3 +455,6 @@ class _FusedTick:
     objects: tuple[np.ndarray, ...]  # pucks.scene_buffers: the pass's moving scene
     discs: world_discs.DiscObjects  # the objects' arrays the state holds
     swarm: bool  # enough robots for a pass on threads (sensing.PARALLEL_MIN_AGENTS)
+    # discs_split.tick_into_split's arguments, where the drive is split over the
+    # world's threads (discs_split.SPLIT_MIN_DISCS discs or more); else None.
+    split: tuple[object, ...] | None
