@@ -7,8 +7,8 @@ velocities, counters, the objects' poses, the proximity, ambient and presence
 readings. Prints one line per tick (tick, that tick's hash) and the chain of
 them last, so two runs are compared with ``diff`` or by their last line:
 
-    .venv/bin/python bench/drive_hashes.py --robots 10000 --balls 0.5 --threads 1 > one.txt
-    .venv/bin/python bench/drive_hashes.py --robots 10000 --balls 0.5 --threads 2 > two.txt
+    .venv/bin/python -m bench.drive_hashes --robots 10000 --balls 0.5 --threads 1 > one.txt
+    .venv/bin/python -m bench.drive_hashes --robots 10000 --balls 0.5 --threads 2 > two.txt
     diff one.txt two.txt
 
 ``--split-from 1`` splits the drive of a small world too (it starts at

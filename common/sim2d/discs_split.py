@@ -13,16 +13,18 @@ On the threads (chunks of discs, each thread writing only its discs' slots):
   pairs are found, as the serial tick finds them before it pushes;
 - the objects' cells and obstacle phase, after their substep's start
   (pucks.start_substep, serial: a held object rides its holder's new pose);
+- the counting sort of the discs by cell (:func:`_sort_range`): each thread
+  places the discs of its share of the cells;
 - the pair scan (:func:`_scan_range`): each chunk of the sorted discs scans
   its neighbours into its own list, with the gripper's exception
   (pucks.keeps) applied as it goes; the lists are joined in chunk order,
   which is the serial scan's order.
 
 On the calling thread: the fastest wheel and largest disc (the grid's cell),
-the counting sort of the discs by cell, the joining of the pairs and of the
-obstacle phase's list (in slot order, as the serial tick builds it), the
-walls' normals, the layers, the Gauss-Seidel sweeps, the objects' substep
-ends and the poses written out: the calls of discs.tick_into, unchanged.
+the joining of the pairs and of the obstacle phase's list (in slot order, as
+the serial tick builds it), the walls' normals, the layers, the Gauss-Seidel
+sweeps (about 5 % of the serial tick, and an order), the objects' substep
+ends and the poses written out: discs.tick_into's calls, unchanged.
 
 Every disc's arithmetic is the serial tick's, on the same inputs, in the same
 order: the trajectories, contacts and readings are the same bits whatever the
@@ -162,6 +164,43 @@ def _objects_range(lo, hi, radius, buffers, grid, scene, circles, qx, qy):  # pr
 
 
 @njit(cache=_CACHE, **_UNCOUNTED)
+def _sort_range(
+    r, ranges, nd, ncell, px, py, radius, home, start, slot, sk, sx, sy, sr
+):  # pragma: no cover
+    """contacts._pairs' counting sort for the ``r``-th of ``ranges`` shares of the cells.
+
+    The discs before this share (in cells below it) are counted, not placed:
+    each share's runs start where the serial sort starts them, so ``start``,
+    ``slot`` and the sorted copies come out the same whatever the shares.
+    """
+    c0 = ncell * r // ranges
+    c1 = ncell * (r + 1) // ranges
+    for kc in range(c0, c1):
+        start[kc] = 0
+    below = 0
+    for a in range(nd):
+        kc = home[a]
+        if kc < c0:
+            below += 1
+        elif kc < c1:
+            start[kc] += 1
+    end = below
+    for kc in range(c0, c1):
+        end += start[kc]
+        start[kc] = end
+    for a in range(nd - 1, -1, -1):
+        kc = home[a]
+        if c0 <= kc < c1:
+            start[kc] -= 1
+            p = start[kc]
+            slot[p] = a
+            sk[p] = kc
+            sx[p] = px[a]
+            sy[p] = py[a]
+            sr[p] = radius[a]
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
 def _scan_range(
     p0, p1, start, sk, sx, sy, sr, slot, gx, gy, margin, out, n, k, objects, arm, px, py, th
 ):  # pragma: no cover
@@ -235,11 +274,13 @@ def tick_into_split(
     objects,
     arm,
     split,
+    threads,
 ):  # pragma: no cover
     """discs.tick_into with its per-disc loops on numba's threads (the module's docstring).
 
     The same arguments, and ``split``: :func:`split_buffers` for these discs.
-    The caller sets the thread count (:func:`on_threads`).
+    The caller sets numba's thread count to ``threads`` (:func:`on_threads`;
+    numba.get_num_threads in here would keep the kernel out of the cache).
     """
     n = pose.shape[0]
     k = objects[0].shape[0]
@@ -277,6 +318,9 @@ def tick_into_split(
     if start.shape[0] < ncell + 1:
         start = np.empty(ncell + 1, dtype=np.int64)
     grid = (substep_s, margin, width, height, cell, gx, gy)
+    # Shares of the grid's cells for the sort: one a thread (each reads every
+    # disc's cell, so more shares would cost more than they balance).
+    ranges = threads
     for s in range(substeps):
         first = s == 0
         for c in prange(chunks):
@@ -312,23 +356,11 @@ def tick_into_split(
                     qx,
                     qy,
                 )
-        # contacts._pairs' counting sort, on the cells found above.
-        for kc in range(ncell + 1):
-            start[kc] = 0
-        for a in range(nd):
-            start[home[a]] += 1
-        for kc in range(1, ncell):
-            start[kc] += start[kc - 1]
+        # contacts._pairs' counting sort, on the cells found above: each thread
+        # sorts the discs of its share of the cells (_sort_range).
+        for r in prange(ranges):
+            _sort_range(r, ranges, nd, ncell, px, py, radius, home, start, slot, sk, sx, sy, sr)
         start[ncell] = nd
-        for a in range(nd - 1, -1, -1):
-            kc = home[a]
-            start[kc] -= 1
-            p = start[kc]
-            slot[p] = a
-            sk[p] = kc
-            sx[p] = px[a]
-            sy[p] = py[a]
-            sr[p] = radius[a]
         for c in prange(chunks):
             chunk_count[c] = _scan_range(
                 nd * c // chunks,
@@ -428,7 +460,7 @@ def on_threads(args: tuple[object, ...], threads: int) -> None:
     numba.set_num_threads(threads)
     chunk = numba.set_parallel_chunksize(1)
     try:
-        tick_into_split(*args)
+        tick_into_split(*args, threads)  # type: ignore[call-arg]  # numba types it, not mypy
     finally:
         numba.set_parallel_chunksize(chunk)
 
