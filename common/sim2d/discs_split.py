@@ -91,6 +91,11 @@ def split_buffers(discs_: int) -> tuple[np.ndarray, ...]:
         np.empty(discs_),
         np.empty((CHUNKS, cap, 2), dtype=np.int64),  # each chunk's pairs
         np.zeros(CHUNKS, dtype=np.int64),  # and how many
+        # Each chunk's discs by the share of the cells their cell is in, in slot
+        # order, in the chunk's own slots of the row (_robots_range, _sort_range),
+        np.empty((packs.MAX_THREADS, discs_), dtype=np.int64),
+        # and how many: the robots' chunks, then the objects'.
+        np.zeros((2 * CHUNKS, packs.MAX_THREADS), dtype=np.int64),
     )
 
 
@@ -110,17 +115,23 @@ def _robots_range(
     grid,
     scene,
     circles,
-    qx,
-    qy,
+    split,
+    seg,
+    ranges,
 ):  # pragma: no cover
     """Robots ``lo`` to ``hi - 1``: wheels (``first`` substep), arc, pair cell, obstacle test.
 
     ``grid``: (substep s, margin, width, height, cell, gx, gy). As
     discs.tick_into and contacts._pairs and _obstacles_first do it, robot by
-    robot, except that a near robot's push out is written to ``qx``, ``qy``.
+    robot, except that a near robot's push out is written to ``qx``, ``qy``
+    (``split``'s first two), and each robot is listed under the share of the
+    cells its cell is in (``seg``: this chunk's row of counts; ``ranges``
+    shares).
     """
     h = grid[0]
     px, py, th, v, w = buffers[0], buffers[1], buffers[2], buffers[3], buffers[4]
+    for r in range(ranges):
+        split[5][seg, r] = 0
     for a in range(lo, hi):
         if first:
             px[a] = pose[a, 0]
@@ -133,18 +144,26 @@ def _robots_range(
             counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
             counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
         px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], h)
-        _disc_phase(a, radius, buffers, grid, scene, circles, qx, qy)
+        _disc_phase(a, lo, seg, ranges, radius, buffers, grid, scene, circles, split)
 
 
 @njit(cache=_CACHE, inline="always")
-def _disc_phase(a, radius, buffers, grid, scene, circles, qx, qy):  # pragma: no cover
-    """Disc ``a``'s pair cell, flags cleared, obstacle test and push out (into ``qx``, ``qy``)."""
+def _disc_phase(
+    a, lo, seg, ranges, radius, buffers, grid, scene, circles, split
+):  # pragma: no cover
+    """Disc ``a``'s pair cell and share, flags cleared, obstacle test, push out (``qx``, ``qy``)."""
     _, margin, width, height, cell, gx, gy = grid
     circ_start, circ_items = circles
+    qx, qy, rlist, rcount = split[0], split[1], split[4], split[5]
     px, py = buffers[0], buffers[1]
     x = px[a]
     y = py[a]
-    buffers[13][a] = _cell(x, cell, gx) * gy + _cell(y, cell, gy)  # home
+    kc = _cell(x, cell, gx) * gy + _cell(y, cell, gy)
+    buffers[13][a] = kc  # home
+    # The share of the cells kc is in: the largest r with ncell * r // ranges <= kc.
+    r = ((kc + 1) * ranges - 1) // (gx * gy)
+    rlist[r, lo + rcount[seg, r]] = a
+    rcount[seg, r] += 1
     buffers[7][a] = False  # pushed
     buffers[8][a] = False  # moved
     buffers[12][a] = 0  # the walls' normals' count
@@ -157,40 +176,57 @@ def _disc_phase(a, radius, buffers, grid, scene, circles, qx, qy):  # pragma: no
 
 
 @njit(cache=_CACHE, **_UNCOUNTED)
-def _objects_range(lo, hi, radius, buffers, grid, scene, circles, qx, qy):  # pragma: no cover
+def _objects_range(
+    lo, hi, radius, buffers, grid, scene, circles, split, seg, ranges
+):  # pragma: no cover
     """Discs ``lo`` to ``hi - 1`` (objects, after their substep's start): :func:`_disc_phase`."""
+    for r in range(ranges):
+        split[5][seg, r] = 0
     for a in range(lo, hi):
-        _disc_phase(a, radius, buffers, grid, scene, circles, qx, qy)
+        _disc_phase(a, lo, seg, ranges, radius, buffers, grid, scene, circles, split)
+
+
+@njit(cache=_CACHE, inline="always")
+def _segment(s, n, k, chunks):  # pragma: no cover
+    """The first slot of chunk row ``s``: the robots' chunks, then the objects'."""
+    if s < chunks:
+        return n * s // chunks
+    return n + k * (s - chunks) // chunks
 
 
 @njit(cache=_CACHE, **_UNCOUNTED)
-def _sort_range(
-    r, ranges, nd, ncell, px, py, radius, home, start, slot, sk, sx, sy, sr
-):  # pragma: no cover
+def _sort_range(r, ranges, n, k, ncell, radius, buffers, start, split):  # pragma: no cover
     """contacts._pairs' counting sort for the ``r``-th of ``ranges`` shares of the cells.
 
-    The discs before this share (in cells below it) are counted, not placed:
-    each share's runs start where the serial sort starts them, so ``start``,
-    ``slot`` and the sorted copies come out the same whatever the shares.
+    Its discs are the chunks' lists for this share (in slot order); those of
+    the shares below are counted, not placed, so each share's runs start where
+    the serial sort starts them: ``start``, ``slot`` and the sorted copies
+    come out the same whatever the shares.
     """
+    px, py, home, slot, sk = buffers[0], buffers[1], buffers[13], buffers[14], buffers[15]
+    sx, sy, sr = buffers[16], buffers[17], buffers[18]
+    rlist, rcount = split[4], split[5]
     c0 = ncell * r // ranges
     c1 = ncell * (r + 1) // ranges
+    rows = rcount.shape[0]
+    chunks = rows // 2
     for kc in range(c0, c1):
         start[kc] = 0
-    below = 0
-    for a in range(nd):
-        kc = home[a]
-        if kc < c0:
-            below += 1
-        elif kc < c1:
-            start[kc] += 1
-    end = below
+    end = 0
+    for s in range(rows):
+        for below in range(r):
+            end += rcount[s, below]
+        lo = _segment(s, n, k, chunks)
+        for j in range(rcount[s, r]):
+            start[home[rlist[r, lo + j]]] += 1
     for kc in range(c0, c1):
         end += start[kc]
         start[kc] = end
-    for a in range(nd - 1, -1, -1):
-        kc = home[a]
-        if c0 <= kc < c1:
+    for s in range(rows - 1, -1, -1):
+        lo = _segment(s, n, k, chunks)
+        for j in range(rcount[s, r] - 1, -1, -1):
+            a = rlist[r, lo + j]
+            kc = home[a]
             start[kc] -= 1
             p = start[kc]
             slot[p] = a
@@ -202,7 +238,7 @@ def _sort_range(
 
 @njit(cache=_CACHE, **_UNCOUNTED)
 def _scan_range(
-    p0, p1, start, sk, sx, sy, sr, slot, gx, gy, margin, out, n, k, objects, arm, px, py, th
+    p0, p1, start, buffers, gx, gy, margin, out, n, k, objects, arm
 ):  # pragma: no cover
     """contacts._pairs' scan of sorted discs ``p0`` to ``p1 - 1``, into ``out``: returns how many.
 
@@ -211,6 +247,8 @@ def _scan_range(
     then scans serially.
     """
     holder, grip, fingers = objects[3], objects[5], objects[6]
+    px, py, th, slot, sk = buffers[0], buffers[1], buffers[2], buffers[14], buffers[15]
+    sx, sy, sr = buffers[16], buffers[17], buffers[18]
     cap = out.shape[0]
     m = 0
     for p in range(p0, p1):
@@ -287,10 +325,14 @@ def tick_into_split(
     nd = n + k
     opose, ovel = objects[0], objects[1]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
-    home, slot, sk, sx, sy, sr, start, pair_out = buffers[13:21]
+    start, pair_out = buffers[19], buffers[20]  # the rest of _pairs' buffers: the kernels
     start_x, start_y = buffers[21], buffers[22]  # the objects' (discs.tick_into's sx, sy)
-    qx, qy, chunk_pairs, chunk_count = split
+    qx, qy, chunk_pairs, chunk_count, _, rcount = split
     chunks = chunk_count.shape[0]
+    if not k:  # no objects' chunks this tick: their rows list nothing
+        for row in range(chunks, 2 * chunks):
+            for share in range(rcount.shape[1]):
+                rcount[row, share] = 0
     # The fastest wheel and the largest disc, as discs.tick_into finds them
     # (a maximum is the same whatever the order); the objects' start here.
     top_speed = 0.0
@@ -339,8 +381,9 @@ def tick_into_split(
                 grid,
                 scene,
                 circles,
-                qx,
-                qy,
+                split,
+                c,
+                ranges,
             )
         if k:
             pucks.start_substep(n, objects, arm, px, py, th, v, w, start_x, start_y, substep_s)
@@ -353,24 +396,21 @@ def tick_into_split(
                     grid,
                     scene,
                     circles,
-                    qx,
-                    qy,
+                    split,
+                    chunks + c,
+                    ranges,
                 )
         # contacts._pairs' counting sort, on the cells found above: each thread
         # sorts the discs of its share of the cells (_sort_range).
         for r in prange(ranges):
-            _sort_range(r, ranges, nd, ncell, px, py, radius, home, start, slot, sk, sx, sy, sr)
+            _sort_range(r, ranges, n, k, ncell, radius, buffers, start, split)
         start[ncell] = nd
         for c in prange(chunks):
             chunk_count[c] = _scan_range(
                 nd * c // chunks,
                 nd * (c + 1) // chunks,
                 start,
-                sk,
-                sx,
-                sy,
-                sr,
-                slot,
+                buffers,
                 gx,
                 gy,
                 margin,
@@ -379,9 +419,6 @@ def tick_into_split(
                 k,
                 objects,
                 arm,
-                px,
-                py,
-                th,
             )
         total = 0
         overflow = False
@@ -514,6 +551,41 @@ def tick(
     )
     on_threads(args, threads)
     return out, vel
+
+
+def warm_up() -> None:
+    """Compile (or load from the on-disk cache) the split tick: kernels.warm_up calls it."""
+    scene = (
+        np.zeros((0, 4)),
+        np.zeros(2, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        1,
+        1,
+        100.0,
+        np.zeros((0, 4)),
+        np.zeros((0, 2)),
+        np.zeros(0),
+    )
+    one = np.ones(1)
+    tick(
+        np.full((1, 3), 50.0),
+        np.zeros((1, 2)),
+        one,
+        one,
+        one,
+        one,
+        np.zeros((1, 2)),
+        one,
+        scene,
+        contacts.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0),
+        100.0,
+        100.0,
+        0.01,
+        1,
+        pucks.objects_table(0, 1),
+        np.zeros(1),
+        1,
+    )
 
 
 # The split tick calls the drive's and the contacts' kernels: their edits must reach its cache.
