@@ -96,6 +96,7 @@ def split_buffers(discs_: int) -> tuple[np.ndarray, ...]:
         np.empty((packs.MAX_THREADS, discs_), dtype=np.int64),
         # and how many: the robots' chunks, then the objects'.
         np.zeros((2 * CHUNKS, packs.MAX_THREADS), dtype=np.int64),
+        np.zeros(packs.MAX_THREADS + 1, dtype=np.int64),  # each share's first cell
     )
 
 
@@ -154,14 +155,17 @@ def _disc_phase(
     """Disc ``a``'s pair cell and share, flags cleared, obstacle test, push out (``qx``, ``qy``)."""
     _, margin, width, height, cell, gx, gy = grid
     circ_start, circ_items = circles
-    qx, qy, rlist, rcount = split[0], split[1], split[4], split[5]
+    qx, qy, rlist, rcount, bounds = split[0], split[1], split[4], split[5], split[6]
     px, py = buffers[0], buffers[1]
     x = px[a]
     y = py[a]
     kc = _cell(x, cell, gx) * gy + _cell(y, cell, gy)
     buffers[13][a] = kc  # home
-    # The share of the cells kc is in: the largest r with ncell * r // ranges <= kc.
-    r = ((kc + 1) * ranges - 1) // (gx * gy)
+    # The share of the cells kc is in, without a division (a tenth of this
+    # loop's time) or a branch (which share a disc is in is a coin toss).
+    r = 0
+    for b in range(1, ranges):
+        r += int(kc >= bounds[b])
     rlist[r, lo + rcount[seg, r]] = a
     rcount[seg, r] += 1
     buffers[7][a] = False  # pushed
@@ -327,7 +331,7 @@ def tick_into_split(
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     start, pair_out = buffers[19], buffers[20]  # the rest of _pairs' buffers: the kernels
     start_x, start_y = buffers[21], buffers[22]  # the objects' (discs.tick_into's sx, sy)
-    qx, qy, chunk_pairs, chunk_count, _, rcount = split
+    qx, qy, chunk_pairs, chunk_count, _, rcount, bounds = split
     chunks = chunk_count.shape[0]
     if not k:  # no objects' chunks this tick: their rows list nothing
         for row in range(chunks, 2 * chunks):
@@ -360,9 +364,11 @@ def tick_into_split(
     if start.shape[0] < ncell + 1:
         start = np.empty(ncell + 1, dtype=np.int64)
     grid = (substep_s, margin, width, height, cell, gx, gy)
-    # Shares of the grid's cells for the sort: one a thread (each reads every
-    # disc's cell, so more shares would cost more than they balance).
+    # Shares of the grid's cells for the sort, one a thread: each disc is
+    # listed under its share as its cell is found (_disc_phase).
     ranges = threads
+    for b in range(ranges + 1):
+        bounds[b] = ncell * b // ranges  # as _sort_range splits them
     for s in range(substeps):
         first = s == 0
         for c in prange(chunks):
