@@ -77,6 +77,7 @@ class WorldTick:
         _next_sense: float
         _bodies_placed: bool
         _disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]]
+        _split_work: tuple[np.ndarray, ...]
         _fused: _FusedTick | None
         _discs: world_discs.DiscObjects | None
         fingers: np.ndarray
@@ -349,7 +350,10 @@ class WorldTick:
                 and n >= sensing.PARALLEL_MIN_AGENTS
                 and n + len(objs.objects) >= discs_split.SPLIT_MIN_DISCS
             ):
-                pose, vel = discs_split.tick(*args, self.threads)
+                nd = n + len(objs.objects)
+                if len(self._split_work) == 0 or len(self._split_work[0]) != nd:
+                    self._split_work = discs_split.split_buffers(nd)
+                pose, vel = discs_split.tick(*args, self.threads, self._split_work)
             else:
                 pose, vel = discs.tick(*args)
             obj = objs.table[0].copy()
