@@ -14,16 +14,23 @@ them last, so two runs are compared with ``diff`` or by their last line:
 ``--split-from 1`` splits the drive of a small world too (it starts at
 discs_split.SPLIT_MIN_DISCS discs).
 
-With ``PYTHONPATH`` set to another checkout it hashes that one's run
-(issue 35: the drive split over threads against the serial drive before it).
+Another checkout's run: from its directory, ``PYTHONPATH=. python -m
+bench.drive_hashes ...`` with this file copied into its bench/ (issue 35: the
+drive split over threads against the serial drive before it).
 """
 
 from __future__ import annotations
 
 import argparse
 import hashlib
+import sys
+from pathlib import Path
 
 import numpy as np
+
+if __package__ in (None, ""):
+    # Run as `python bench/drive_hashes.py`: the repository on the path, as `-m` puts it.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.engine_bench import build, control
 

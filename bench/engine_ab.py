@@ -114,8 +114,8 @@ def main(argv: list[str] | None = None) -> None:
             cpu[i].append(float(c))
             sim[i].append(float(t))
         print(
-            f"  round {r + 1}: {wall[0][-1]:.0f}, {wall[1][-1]:.0f} ms"
-            f" (load {os.getloadavg()[0]:.1f})",
+            f"  round {r + 1} (load {os.getloadavg()[0]:.1f}): "
+            f"{wall[0][-1]:.0f}, {wall[1][-1]:.0f} ms",
             flush=True,
         )
     for proc in workers:
