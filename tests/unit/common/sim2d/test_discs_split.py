@@ -17,6 +17,7 @@ import pytest
 
 from bench.engine_bench import build, control
 from common.sim2d import discs_split, kernels, sensing
+from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import World
 
 pytestmark = pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
@@ -100,3 +101,32 @@ def test_a_crowd_driven_into_a_corner_runs_the_serial_run(
     pose = worlds[0].agent_pose
     gaps = np.hypot(*(pose[:, None, :2] - pose[None, :, :2]).transpose(2, 0, 1))
     assert (gaps[np.triu_indices(len(pose), 1)] < 56.0).sum() > 30, "a crowd formed"
+
+
+def test_edits_between_split_ticks_are_seen_as_by_the_serial_drive(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A move, new counters, a robot added and one removed, an obstacle: the
+    # split drive's arrays are rebuilt with the fused state's.
+    monkeypatch.setattr(discs_split, "SPLIT_MIN_DISCS", 1)
+    monkeypatch.setattr(sensing, "PARALLEL_MIN_AGENTS", 1)
+    worlds = [build(30, seed=6, drive="discs", balls=0.5, threads=t) for t in (1, 2)]
+    khepera = worlds[0].agents[0].spec
+    for t in range(40):
+        digests = []
+        for world in worlds:
+            if t == 5:
+                world.move("k3", 300.0, 310.0, 1.0)
+            elif t == 9:
+                world.set_counters(5, 1000, -1000)
+            elif t == 14:
+                world.add_agent("extra", khepera, 100.0, 100.0, 0.5)
+            elif t == 20:
+                world.remove("k7")
+            elif t == 26:
+                world.add_obstacle("block", ShapeSpec.box(40, 40), 560.0, 40.0)
+            control(world)
+            world.step()
+            digests.append(_digest(world))
+        assert digests[1] == digests[0], f"tick {t}"
+    assert worlds[1]._fused is not None and worlds[1]._fused.split is not None
