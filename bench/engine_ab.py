@@ -5,8 +5,9 @@ each building ``bench/engine_bench.py``'s world once (N Khepera, discs drive,
 all sensors), then asks them in turn, round after round (the order swapped
 every round), to run ``--ticks`` ticks of rule and step, and prints for each
 tree the wall and CPU milliseconds per simulated second (median and best of
-the rounds), simulated seconds per wall second, and the per-round wall ratio
-of the first tree to the second. Interleaving at the scale of a second is what
+the rounds; the CPU of the process, and of the sim thread alone), simulated
+seconds per wall second, and the per-round wall ratio of the first tree to
+the second. Interleaving at the scale of a second is what
 makes a comparison hold on a machine whose speed drifts by half within
 minutes (docs/BENCHMARKS.md).
 
@@ -14,6 +15,7 @@ minutes (docs/BENCHMARKS.md).
     .venv/bin/python bench/engine_ab.py --trees /tmp/before . --robots 10000 --threads 2
 
 The same tree twice is an A/A run: how far apart two identical runs land.
+``--balls 0.5``: the full scenario's balls (``engine_bench --balls``).
 """
 
 from __future__ import annotations
@@ -27,14 +29,14 @@ import time
 from pathlib import Path
 
 
-def worker(tree: str, robots: int, threads: int) -> None:
+def worker(tree: str, robots: int, threads: int, balls: float) -> None:
     """One tree's side: build the world, then run the ticks each line on stdin asks for."""
     sys.path.insert(0, tree)
     from bench.engine_bench import build, control
     from common.sim2d import kernels
 
     kernels.warm_up()
-    world = build(robots, threads=threads, drive="discs")
+    world = build(robots, threads=threads, drive="discs", balls=balls)
     for _ in range(30):
         control(world)
         world.step()
@@ -42,13 +44,17 @@ def worker(tree: str, robots: int, threads: int) -> None:
     for line in sys.stdin:
         ticks = int(line)
         wall0, cpu0 = time.perf_counter(), time.process_time()
+        sim0 = time.thread_time()
         for _ in range(ticks):
             control(world)
             world.step()
         per_sim_s = 1000.0 / (ticks * world.tick_s)
         wall = (time.perf_counter() - wall0) * per_sim_s
         cpu = (time.process_time() - cpu0) * per_sim_s
-        print(f"{wall:.1f} {cpu:.1f}", flush=True)
+        # The sim thread's own share: on an idle machine the wall is about this
+        # plus its waits for the workers (BENCHMARKS.md, issue 35).
+        sim = (time.thread_time() - sim0) * per_sim_s
+        print(f"{wall:.1f} {cpu:.1f} {sim:.1f}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -56,16 +62,19 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--trees", nargs=2, required=True, metavar="DIR", help="two checkouts")
     p.add_argument("--robots", type=int, default=10000)
     p.add_argument("--threads", type=int, default=2, help="sensing threads (World.threads)")
+    p.add_argument("--balls", type=float, default=0.0, help="movable balls per robot")
     p.add_argument("--rounds", type=int, default=12)
     p.add_argument("--ticks", type=int, default=100, help="ticks a tree runs per round")
     p.add_argument("--worker", metavar="DIR", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
-        worker(args.worker, args.robots, args.threads)
+        worker(args.worker, args.robots, args.threads, args.balls)
         return
     for name in ("robots", "threads", "rounds", "ticks"):
         if getattr(args, name) <= 0:
             p.error(f"--{name} must be positive")
+    if not 0 <= args.balls <= 10:
+        p.error("--balls must be between 0 and 10")
     trees = [str(Path(t).resolve()) for t in args.trees]
     for tree in trees:
         if not (Path(tree) / "common" / "sim2d" / "world.py").is_file():
@@ -76,6 +85,7 @@ def main(argv: list[str] | None = None) -> None:
         env = {**os.environ, "PYTHONPATH": tree}
         command = [sys.executable, this, "--trees", *trees, "--worker", tree]
         command += ["--robots", str(args.robots), "--threads", str(args.threads)]
+        command += ["--balls", str(args.balls)]
         workers.append(
             subprocess.Popen(
                 command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env
@@ -91,6 +101,7 @@ def main(argv: list[str] | None = None) -> None:
     # By position, not by path: an A/A run names the same tree twice.
     wall: list[list[float]] = [[], []]
     cpu: list[list[float]] = [[], []]
+    sim: list[list[float]] = [[], []]
     for r in range(args.rounds):
         order = [0, 1] if r % 2 == 0 else [1, 0]
         for i in order:
@@ -98,10 +109,15 @@ def main(argv: list[str] | None = None) -> None:
             assert proc.stdin is not None and proc.stdout is not None
             proc.stdin.write(f"{args.ticks}\n")
             proc.stdin.flush()
-            w, c = proc.stdout.readline().split()
+            w, c, t = proc.stdout.readline().split()
             wall[i].append(float(w))
             cpu[i].append(float(c))
-        print(f"  round {r + 1}: {wall[0][-1]:.0f}, {wall[1][-1]:.0f} ms", flush=True)
+            sim[i].append(float(t))
+        print(
+            f"  round {r + 1} (load {os.getloadavg()[0]:.1f}): "
+            f"{wall[0][-1]:.0f}, {wall[1][-1]:.0f} ms",
+            flush=True,
+        )
     for proc in workers:
         assert proc.stdin is not None
         proc.stdin.close()
@@ -110,7 +126,9 @@ def main(argv: list[str] | None = None) -> None:
         med = statistics.median(wall[i])
         print(
             f"{tree}: wall ms per simulated s {med:.0f} (best {min(wall[i]):.0f}), "
-            f"CPU {statistics.median(cpu[i]):.0f}; simulated s per wall s {1000 / med:.2f}"
+            f"CPU {statistics.median(cpu[i]):.0f} "
+            f"(the sim thread {statistics.median(sim[i]):.0f}); "
+            f"simulated s per wall s {1000 / med:.2f}"
         )
     ratios = [a / b for a, b in zip(wall[0], wall[1], strict=True)]
     print(f"wall, first tree over second, per round: median {statistics.median(ratios):.3f}")

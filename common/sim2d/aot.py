@@ -44,6 +44,7 @@ SOURCES = (
     "chipmunk_calls.py",
     "contacts.py",
     "discs.py",
+    "discs_split.py",  # not in the module (threads are numba's), but kernels.py warms it up
     "fused.py",
     "kernels.py",
     "noise.py",

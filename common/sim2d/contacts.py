@@ -285,52 +285,85 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
     shock propagation proper, made the sweeps diverge in that crowd: two robots
     ended on top of each other.)
     """
-    free = n + 1
+    # Only the discs in pairs, numbered in the order the pairs name them (``layer``
+    # holds a disc's number meanwhile): a sparse swarm's few hundred pairs, not
+    # its 10,000 discs (allocating and walking per-disc arrays here was 0.1 ms of
+    # a 2 ms tick at 10,000 robots and 5,000 balls).
     count = pairs.shape[0]
-    start = np.zeros(n + 1, dtype=np.int64)
+    free = n + 1
+    disc = np.empty(2 * count, dtype=np.int64)
     for q in range(count):
-        start[pairs[q, 0] + 1] += 1
-        start[pairs[q, 1] + 1] += 1
-    for a in range(n):
-        start[a + 1] += start[a]
+        layer[pairs[q, 0]] = -1
+        layer[pairs[q, 1]] = -1
+    nl = 0
+    for q in range(count):
+        for e in range(2):
+            a = pairs[q, e]
+            if layer[a] == -1:
+                layer[a] = nl
+                disc[nl] = a
+                nl += 1
+    start = np.zeros(nl + 1, dtype=np.int64)
+    for q in range(count):
+        start[layer[pairs[q, 0]] + 1] += 1
+        start[layer[pairs[q, 1]] + 1] += 1
+    for i in range(nl):
+        start[i + 1] += start[i]
     fill = start[:-1].copy()
     adjacent = np.empty(2 * count, dtype=np.int64)
     for q in range(count):
-        a = pairs[q, 0]
-        b = pairs[q, 1]
-        adjacent[fill[a]] = b
-        fill[a] += 1
-        adjacent[fill[b]] = a
-        fill[b] += 1
-    for a in range(n):
-        layer[a] = free
-    queue = np.empty(n, dtype=np.int64)
+        i = layer[pairs[q, 0]]
+        j = layer[pairs[q, 1]]
+        adjacent[fill[i]] = j
+        fill[i] += 1
+        adjacent[fill[j]] = i
+        fill[j] += 1
+    depth = np.full(nl, free, dtype=np.int64)
+    queue = np.empty(nl, dtype=np.int64)
     tail = 0
     for q in range(m):
         if held[q]:
-            a = near[q]
-            layer[a] = 0
-            queue[tail] = a
-            tail += 1
+            i = layer[near[q]]  # a disc in no pair has a stale number, or none
+            if 0 <= i < nl and disc[i] == near[q] and depth[i] != 0:
+                depth[i] = 0
+                queue[tail] = i
+                tail += 1
+    # Breadth first: a disc's layer is its distance in touching pairs from the
+    # nearest held one, whatever the order it is reached in.
     head = 0
+    top = 0
     while head < tail:
-        a = queue[head]
+        i = queue[head]
         head += 1
-        for p in range(start[a], start[a + 1]):
-            b = adjacent[p]
-            if layer[b] != free:
+        a = disc[i]
+        for p in range(start[i], start[i + 1]):
+            j = adjacent[p]
+            if depth[j] != free:
                 continue
+            b = disc[j]
             lim = radius[a] + radius[b] + TOLERANCE_MM
             dx = px[b] - px[a]
             dy = py[b] - py[a]
             if dx * dx + dy * dy < lim * lim:
-                layer[b] = layer[a] + 1
-                queue[tail] = b
+                depth[j] = depth[i] + 1
+                top = depth[j]
+                queue[tail] = j
                 tail += 1
+    # A stable counting sort by the pair's lower layer (no layer last): the
+    # order of a stable sort of the keys.
     key = np.empty(count, dtype=np.int64)
+    runs = np.zeros(top + 3, dtype=np.int64)
     for q in range(count):
-        key[q] = min(layer[pairs[q, 0]], layer[pairs[q, 1]])
-    return np.argsort(key, kind="mergesort")
+        k = min(depth[layer[pairs[q, 0]]], depth[layer[pairs[q, 1]]])
+        key[q] = top + 1 if k == free else k
+        runs[key[q] + 1] += 1
+    for k in range(top + 2):
+        runs[k + 1] += runs[k]
+    order = np.empty(count, dtype=np.int64)
+    for q in range(count):
+        order[runs[key[q]]] = q
+        runs[key[q]] += 1
+    return order
 
 
 @njit(cache=_CACHE, **_UNCOUNTED)

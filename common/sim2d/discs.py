@@ -33,7 +33,8 @@ the farthest a robot can move in a substep and a margin), binned with a
 counting sort each substep, and the obstacles' edges come from the sensing
 grid (common/sim2d/sensing.py StaticGeometry), which lists for each cell every
 edge within one cell of it. Everything is serial and in a fixed order, so a
-run is reproducible bit for bit.
+run is reproducible bit for bit; a swarm with threads runs the per-disc
+loops on them (common/sim2d/discs_split.py), with the same bits.
 """
 
 from __future__ import annotations

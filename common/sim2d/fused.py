@@ -142,8 +142,9 @@ def tick(state, sense, key, lights):  # pragma: no cover
     the parallel pass itself (World._step_fused). (Calling
     kernels.sense_parallel from here compiled, but the on-disk cache of a
     function calling a parallel one loaded broken code in the next process:
-    it crashed. The drive's loops on two threads saved nothing measurable at
-    10,000 robots: docs/BENCHMARKS.md, 2026-11-26.)
+    it crashed. Where the drive runs on threads too, from
+    discs_split.SPLIT_MIN_DISCS discs, the world calls discs_split's tick
+    instead of this one.)
     """
     mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = state.drive
     width, height, substep_s = state.geometry

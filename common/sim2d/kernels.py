@@ -249,7 +249,8 @@ def warm_up() -> float:
     sense_parallel(robots, tables, scene, moving, out, 1)
     discs.warm_up()
     # Imported here: common/sim2d/fused.py builds on this module.
-    from common.sim2d import fused
+    from common.sim2d import discs_split, fused
 
     fused.warm_up()
+    discs_split.warm_up()
     return time.perf_counter() - t0

@@ -76,6 +76,33 @@ def start_substep(n, objects, arm, px, py, th, v, w, sx, sy, h):  # pragma: no c
             py[i] += w[i] * h
 
 
+@njit(cache=_CACHE, inline="always")
+def keeps(a, b, n, holder, grip, fingers, arm, px, py, th):  # pragma: no cover
+    """Whether the pair of discs ``a`` < ``b`` collides (:func:`drop_pairs` says when not).
+
+    Reads only: common/sim2d/discs_split.py applies it to each thread's pairs.
+    """
+    if b >= n:
+        jb = b - n
+        hb = holder[jb]
+        if hb >= 0 and (hb == a or not _lowered(hb, arm, grip)):
+            return False
+        if a >= n:
+            ha = holder[a - n]
+            if ha >= 0 and (ha == hb or not _lowered(ha, arm, grip)):
+                return False
+        elif hb < 0 and fingers[a] == 0 and _lowered(a, arm, grip):
+            c = math.cos(th[a])
+            s = math.sin(th[a])
+            dx = px[b] - px[a]
+            dy = py[b] - py[a]
+            lx = c * dx + s * dy
+            ly = -s * dx + c * dy
+            if grip[a, 0] <= lx <= grip[a, 1] and abs(ly) <= grip[a, 2]:
+                return False
+    return True
+
+
 @njit(cache=_CACHE)
 def drop_pairs(pairs, n, objects, arm, px, py, th):  # pragma: no cover
     """Keep the pairs that collide (compacted in place, order kept); returns how many.
@@ -89,26 +116,7 @@ def drop_pairs(pairs, n, objects, arm, px, py, th):  # pragma: no cover
     for q in range(pairs.shape[0]):
         a = pairs[q, 0]
         b = pairs[q, 1]  # a < b: an object is always b, or both are
-        keep = True
-        if b >= n:
-            jb = b - n
-            hb = holder[jb]
-            if hb >= 0 and (hb == a or not _lowered(hb, arm, grip)):
-                keep = False
-            elif a >= n:
-                ha = holder[a - n]
-                if ha >= 0 and (ha == hb or not _lowered(ha, arm, grip)):
-                    keep = False
-            elif hb < 0 and fingers[a] == 0 and _lowered(a, arm, grip):
-                c = math.cos(th[a])
-                s = math.sin(th[a])
-                dx = px[b] - px[a]
-                dy = py[b] - py[a]
-                lx = c * dx + s * dy
-                ly = -s * dx + c * dy
-                if grip[a, 0] <= lx <= grip[a, 1] and abs(ly) <= grip[a, 2]:
-                    keep = False
-        if keep:
+        if keeps(a, b, n, holder, grip, fingers, arm, px, py, th):
             pairs[m, 0] = a
             pairs[m, 1] = b
             m += 1

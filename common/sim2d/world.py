@@ -242,6 +242,8 @@ class World(WorldEdits, WorldActuators, WorldTick):
             None,
             (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)),
         )
+        # The split drive's work arrays on the general path (discs_split.split_buffers).
+        self._split_work: tuple[np.ndarray, ...] = ()
         self._bodies_placed = True
         # The discs drive's movable objects in its arrays (common/sim2d/world_discs.py).
         self._discs: world_discs.DiscObjects | None = None

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -24,6 +25,20 @@ if TYPE_CHECKING:
     from common.sim2d.entities import Agent, Light, MovableObject, Obstacle
     from common.sim2d.gripper import GripperTurrets
     from common.sim2d.world import Tables
+
+
+def _split_drive(threads: int, robots: int) -> ModuleType | None:
+    """discs_split (the drive on the world's threads) where a world may split its drive.
+
+    Imported only there: it is numba's (a parallel loop the ahead-of-time module
+    cannot hold), and such a world senses on numba's threads already; a world on one
+    thread never loads it. The caller still compares its discs with SPLIT_MIN_DISCS.
+    """
+    if threads <= 1 or robots < sensing.PARALLEL_MIN_AGENTS:
+        return None
+    from common.sim2d import discs_split
+
+    return discs_split
 
 
 class WorldTick:
@@ -70,6 +85,7 @@ class WorldTick:
         _next_sense: float
         _bodies_placed: bool
         _disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]]
+        _split_work: tuple[np.ndarray, ...]
         _fused: _FusedTick | None
         _discs: world_discs.DiscObjects | None
         fingers: np.ndarray
@@ -177,6 +193,36 @@ class WorldTick:
             (self.width, self.height, self.tick_s / self.substeps),
             self.substeps,
         )
+        split = None
+        nd = n + len(objs.objects)
+        discs_split = _split_drive(self.threads, n)
+        if discs_split is not None and nd >= discs_split.SPLIT_MIN_DISCS:
+            from common.sim2d import discs
+
+            # The drive on the world's threads (discs_split.py): the state's
+            # arrays, work arrays of its own (the fused tick's are scratch too).
+            split = (
+                pose,
+                self.cmd,
+                t.mm_s_per_unit,
+                t.wheel_base,
+                objs.radius,
+                objs.mass,
+                self.counters,
+                drive[2],
+                static.kernel_scene,
+                circles,
+                self.width,
+                self.height,
+                self.tick_s / self.substeps,
+                self.substeps,
+                pose,
+                vel,
+                discs.drive_buffers(n, len(objs.objects), self.width, self.height, objs.radius),
+                objs.table,
+                self.arm,
+                discs_split.split_buffers(nd),
+            )
         # Keyed on what it was built from after the build: static_geometry may
         # have just made the static scene.
         f = self._fused = _FusedTick(
@@ -192,6 +238,7 @@ class WorldTick:
             objects,
             objs,
             n >= sensing.PARALLEL_MIN_AGENTS,
+            split,
         )
         return f
 
@@ -215,9 +262,14 @@ class WorldTick:
             key = self.noise.next()
         else:
             lights, key = sensing.NO_LIGHTS, np.uint64(0)
-        on_threads = sense and f.swarm and self.threads > 1
-        f.call(f.state, sense and not on_threads, key, lights)
-        if on_threads:
+        on_threads = f.swarm and self.threads > 1
+        if on_threads and f.split is not None:
+            from common.sim2d import discs_split  # loaded when the split was made
+
+            discs_split.on_threads(f.split, self.threads)
+        else:
+            f.call(f.state, sense and not on_threads, key, lights)
+        if sense and on_threads:
             # The same pass on the world's threads, in the state's own arrays.
             o = f.objects
             m, e = compiled.scene_into(
@@ -287,7 +339,7 @@ class WorldTick:
                         scene.cell,
                     ),
                 )
-            pose, vel = compiled.discs_tick(
+            args = (
                 self.agent_pose,
                 self.cmd,
                 t.mm_s_per_unit,
@@ -305,6 +357,15 @@ class WorldTick:
                 objs.table,
                 self.arm,
             )
+            n = len(self.agents)
+            nd = n + len(objs.objects)
+            discs_split = _split_drive(self.threads, n)
+            if discs_split is not None and nd >= discs_split.SPLIT_MIN_DISCS:
+                if len(self._split_work) == 0 or len(self._split_work[0]) != nd:
+                    self._split_work = discs_split.split_buffers(nd)
+                pose, vel = discs_split.tick(*args, self.threads, self._split_work)
+            else:
+                pose, vel = compiled.discs_tick(*args)
             obj = objs.table[0].copy()
             self._bodies_placed = False
         elif self.drive == "joints":
@@ -408,3 +469,6 @@ class _FusedTick:
     objects: tuple[np.ndarray, ...]  # pucks.scene_buffers: the pass's moving scene
     discs: world_discs.DiscObjects  # the objects' arrays the state holds
     swarm: bool  # enough robots for a pass on threads (sensing.PARALLEL_MIN_AGENTS)
+    # discs_split.tick_into_split's arguments, where the drive is split over the
+    # world's threads (discs_split.SPLIT_MIN_DISCS discs or more); else None.
+    split: tuple[object, ...] | None

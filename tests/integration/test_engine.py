@@ -290,12 +290,19 @@ def test_wander_moves_undriven_robots_and_leaves_driven_ones_to_their_controller
         return bool(moved(first, poses())[0] < 0.5)
 
     wait_for(k0_halted, 30, "k0 standing still for its lease holder")
+    engine = next(p for p in procs.started if p.name == "engine")
+    lapse = "watchdog: no command for k0"
+    lapses = engine.output().count(lapse)
     before = poses()
     for _ in range(20):  # a controller's period, not a wait for a condition
         zsession.put(cmd_key, alice.seal(cmd_key, halt))
         time.sleep(0.05)
     held = moved(before, poses())
-    assert held[0] < 2.0, held
+    # k0 holds while its commands come in time. On a busy machine this loop's 50 ms can
+    # stretch past the 300 ms watchdog (seen at load 10: k0 moved 7.7): the engine then
+    # stops k0 and hands it back to the rule, as designed, and says so in its log.
+    if engine.output().count(lapse) == lapses:
+        assert held[0] < 2.0, held
     assert (held[1:] > 5).all(), held
 
     # Her commands stop: after the watchdog, k0 wanders again.

@@ -1,0 +1,86 @@
+"""Every tick of the engine bench's world, hashed: two runs (threads, checkouts) compared.
+
+Builds ``bench/engine_bench.py``'s world (N Khepera, the discs drive, the full
+scenario with ``--balls 0.5``), runs ``--ticks`` ticks of the avoidance rule and
+a step, and after each hashes everything a tick moves or reads: poses,
+velocities, counters, the objects' poses, the proximity, ambient and presence
+readings. Prints one line per tick (tick, that tick's hash) and the chain of
+them last, so two runs are compared with ``diff`` or by their last line:
+
+    .venv/bin/python -m bench.drive_hashes --robots 10000 --balls 0.5 --threads 1 > one.txt
+    .venv/bin/python -m bench.drive_hashes --robots 10000 --balls 0.5 --threads 2 > two.txt
+    diff one.txt two.txt
+
+``--split-from 1`` splits the drive of a small world too (it starts at
+discs_split.SPLIT_MIN_DISCS discs).
+
+Another checkout's run: from its directory, ``PYTHONPATH=. python -m
+bench.drive_hashes ...`` with this file copied into its bench/ (issue 35: the
+drive split over threads against the serial drive before it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+from pathlib import Path
+
+import numpy as np
+
+if __package__ in (None, ""):
+    # Run as `python bench/drive_hashes.py`: the repository on the path, as `-m` puts it.
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.engine_bench import build, control
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--robots", type=int, default=1000)
+    p.add_argument("--balls", type=float, default=0.5, help="movable balls per robot")
+    p.add_argument("--threads", type=int, default=1, help="World.threads")
+    p.add_argument("--ticks", type=int, default=100)
+    p.add_argument("--profile", action="store_true", help="the general path (World.profile)")
+    p.add_argument(
+        "--split-from",
+        type=int,
+        metavar="DISCS",
+        help="split the drive over the threads from this many discs, sense on them from 1 "
+        "robot (discs_split.SPLIT_MIN_DISCS, sensing.PARALLEL_MIN_AGENTS: small worlds' paths)",
+    )
+    args = p.parse_args(argv)
+    if args.robots <= 0 or args.ticks <= 0 or args.threads <= 0:
+        p.error("--robots, --ticks and --threads must be positive")
+    if not 0 <= args.balls <= 10:
+        p.error("--balls must be between 0 and 10")
+    if args.split_from is not None:
+        from common.sim2d import discs_split, sensing
+
+        discs_split.SPLIT_MIN_DISCS = args.split_from
+        sensing.PARALLEL_MIN_AGENTS = 1
+    world = build(args.robots, threads=args.threads, drive="discs", balls=args.balls)
+    world.profile = args.profile
+    chain = hashlib.sha256()
+    for t in range(args.ticks):
+        control(world)
+        world.step()
+        h = hashlib.sha256()
+        for a in (
+            world.agent_pose,
+            world.agent_vel,
+            world.counters,
+            world.object_pose,
+            world.proximity,
+            world.ambient,
+            world.presence,
+        ):
+            h.update(np.ascontiguousarray(a).tobytes())
+        digest = h.hexdigest()
+        chain.update(digest.encode())
+        print(t + 1, digest[:16], flush=True)
+    print("chain", chain.hexdigest())
+
+
+if __name__ == "__main__":
+    main()
