@@ -7,6 +7,7 @@ and are kept as artefacts of the run.
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 import time
@@ -276,21 +277,56 @@ class ViserPage:
         self.click("Log in")
 
 
+CALL_FAILED = pytest.StashKey[bool]()
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):
+    """Note a test's failure on its item, so its fixtures can keep what the pages showed."""
+    report = yield
+    if report.when == "call" and report.failed:
+        item.stash[CALL_FAILED] = True
+    return report
+
+
+@pytest.fixture(autouse=True, scope="session")
+def viewer_log_at_info() -> Iterator[None]:
+    """The viewer runs in the test's process: its INFO lines (a join asked, answered,
+    failed) go into a failed test's captured log, where they say what the server did."""
+    viewer_log = logging.getLogger("wart.viewer")
+    level = viewer_log.level
+    viewer_log.setLevel(logging.INFO)
+    yield
+    viewer_log.setLevel(level)
+
+
 @pytest.fixture
 def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureRequest):
-    """Open the viewer in a new browser context (its own cookies and storage)."""
+    """Open the viewer in a new browser context (its own cookies and storage).
+
+    A failed test leaves a screenshot of each of its pages (test-artifacts/, named
+    ``...-at-failure.png``): what the student would have seen when it failed.
+    """
     contexts: list[object] = []
+    pages: list[ViserPage] = []
 
     def opener(tag: str = "a") -> ViserPage:
         context = new_test_context(chromium)
         contexts.append(context)
         page = context.new_page()  # type: ignore[attr-defined]
         vp = ViserPage(page, f"{request.node.name}-{tag}")  # before the page opens its socket
+        pages.append(vp)
         page.goto(page_url(viewer.url))
         vp.wait_ready()
         return vp
 
     yield opener
+    if request.node.stash.get(CALL_FAILED, False):
+        for vp in pages:
+            try:
+                vp.screenshot("at-failure")
+            except Exception as exc:  # a page already gone: the others still count
+                warnings.warn(f"no screenshot of {vp.name} at the failure: {exc}", stacklevel=1)
     for context in contexts:
         context.close()  # type: ignore[attr-defined]
 

@@ -186,11 +186,18 @@ class LabTab:
         with self._lock:
             if ctx in self.panels:
                 return self.panels[ctx]
+        # Logged both ways, as hosting is: a page whose joined context never showed its
+        # tab (a busy run) left no trace of whether the join was asked, answered or failed.
+        who = f"{self.connection.user} on {self.label}"
+        log.info("%s: joining %s", who, ctx)
+        started = time.monotonic()
         try:
             joined = self.connection.join(ctx)
         except LabError as exc:
+            log.warning("%s: could not join %s: %s", who, ctx, exc)
             self.say_notice(f"Could not join {ctx}: {exc}")
             return None
+        log.info("%s: joined %s in %.1f s", who, ctx, time.monotonic() - started)
         panel = ChatPanel(
             self.client,
             self.tabs,
