@@ -230,10 +230,41 @@ class ViserPage:
         return self.p.get_by_role("button", name=name, exact=True).last
 
     def click(self, name: str, timeout: float = 10_000) -> None:
+        """Click a button; return once the page has sent the click to its server.
+
+        viser's page sends every GUI message through one 50 ms throttle that keeps
+        only the newest (viser/client/src/WebsocketUtils.ts): a click followed within
+        the window by another message (a typed value, the editor's echo) never leaves
+        the page. A student clicks again when nothing happens; so does this, once,
+        with a warning in the summary and a screenshot, so the case is seen.
+        """
         button = self.button(name)
         button.wait_for(state="visible", timeout=timeout)
         settle(button, timeout / 1000)
+        uuid = (button.get_attribute("id") or "").encode()
+        already = self.sent_count
         button.click(timeout=timeout)
+        if not uuid or not self.sockets or self._sent_since(already, uuid, 5.0):
+            return
+        shot = self.screenshot("click-not-sent")
+        warnings.warn(
+            f"the page did not send the click on {name!r} within 5 s ({shot.name}); clicking again",
+            stacklevel=2,
+        )
+        already = self.sent_count
+        button.click(timeout=timeout)
+        if not self._sent_since(already, uuid, 10.0):
+            raise AssertionError(f"the page did not send a click on {name!r}, twice")
+
+    def _sent_since(self, first: int, needle: bytes, timeout: float) -> bool:
+        """Has a frame numbered ``first`` or later held ``needle``, within ``timeout`` s?"""
+        deadline = time.monotonic() + timeout
+        while not any(n >= first and needle in data for n, data in list(self.sent)):
+            if time.monotonic() > deadline:
+                return False
+            # Playwright's sync API delivers events while it waits, not during a sleep.
+            self.p.wait_for_timeout(20)
+        return True
 
     def tab(self, name: str):
         return self.p.get_by_role("tab", name=re.compile(re.escape(name)))
