@@ -242,6 +242,8 @@ class ViserPage:
         button.wait_for(state="visible", timeout=timeout)
         settle(button, timeout / 1000)
         uuid = (button.get_attribute("id") or "").encode()
+        if uuid and self.p.locator(f"[id='file_upload_{uuid.decode()}']").count():
+            uuid = b""  # an upload button opens a file chooser; its file is what it sends
         already = self.sent_count
         button.click(timeout=timeout)
         if not uuid or not self.sockets or self._sent_since(already, uuid, 5.0):
