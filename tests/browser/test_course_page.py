@@ -34,7 +34,7 @@ from services.registry.accounts_db import RegistryDB
 from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
 from services.runner.sandbox import sandbox_problem
-from tests.browser.conftest import wait_until
+from tests.browser.conftest import CANVAS_AT_JS, wait_until
 from tests.browser.reallab import CTX, RealLab, real_lab
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.integration.agentkit import Motion, agent_user
@@ -172,7 +172,27 @@ def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
         wait_until(lambda: motion.at_rest_since(["k1"], blurred), 20, what="stopped on blur")
         ida.p.keyboard.up("KeyS")
 
-        ida.p.locator("canvas[data-engine]").first.click()  # the world view has focus: keys drive
+        # A click on the world view focuses it, and then keys drive. Clicked where the DOM
+        # says the canvas itself is, and waited until it has the focus (a fresh-clone run's
+        # keys drove nothing after a click at the canvas's centre: no focus, no keys).
+        canvas = ida.p.locator("canvas[data-engine]").first
+        box = canvas.bounding_box()
+        assert box is not None
+        spots = [
+            (box["x"] + box["width"] * fx, box["y"] + box["height"] * fy)
+            for fx, fy in ((0.5, 0.75), (0.75, 0.5), (0.25, 0.75), (0.5, 0.5))
+        ]
+        spot = next((xy for xy in spots if ida.p.evaluate(CANVAS_AT_JS, list(xy))), None)
+        assert spot is not None, f"no point of the world view is uncovered: {spots}"
+        ida.p.mouse.click(*spot)
+        wait_until(
+            lambda: ida.p.evaluate("() => document.activeElement?.tagName") == "CANVAS",
+            10,
+            what=lambda: (
+                "the world view focused; focus is on "
+                + str(ida.p.evaluate("() => document.activeElement?.outerHTML.slice(0, 120)"))
+            ),
+        )
         pressed = time.monotonic()
         ida.p.keyboard.down("ArrowDown")
         wait_until(lambda: motion.moving(["k1"], pressed), 20, what="k1 driven from the view")
