@@ -33,6 +33,26 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.engine_bench import build, control
+from common.sim2d.world import World
+
+
+def tick_digest(world: World) -> str:
+    """Everything a tick moves or reads: poses, velocities, counters, objects, readings.
+
+    tests/unit/common/sim2d/test_discs_split.py compares the split and serial drives by it.
+    """
+    h = hashlib.sha256()
+    for a in (
+        world.agent_pose,
+        world.agent_vel,
+        world.counters,
+        world.object_pose,
+        world.proximity,
+        world.ambient,
+        world.presence,
+    ):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -65,18 +85,7 @@ def main(argv: list[str] | None = None) -> None:
     for t in range(args.ticks):
         control(world)
         world.step()
-        h = hashlib.sha256()
-        for a in (
-            world.agent_pose,
-            world.agent_vel,
-            world.counters,
-            world.object_pose,
-            world.proximity,
-            world.ambient,
-            world.presence,
-        ):
-            h.update(np.ascontiguousarray(a).tobytes())
-        digest = h.hexdigest()
+        digest = tick_digest(world)
         chain.update(digest.encode())
         print(t + 1, digest[:16], flush=True)
     print("chain", chain.hexdigest())

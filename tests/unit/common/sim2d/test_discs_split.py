@@ -10,33 +10,15 @@ threads), so that the tests stay quick.
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 import pytest
 
+from bench.drive_hashes import tick_digest
 from bench.engine_bench import build, control
 from common.sim2d import discs_split, kernels, sensing
 from common.sim2d.entities import ShapeSpec
-from common.sim2d.world import World
 
 pytestmark = pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
-
-
-def _digest(world: World) -> str:
-    """Everything a tick moves or reads: poses, velocities, counters, objects, readings."""
-    h = hashlib.sha256()
-    for a in (
-        world.agent_pose,
-        world.agent_vel,
-        world.counters,
-        world.object_pose,
-        world.proximity,
-        world.ambient,
-        world.presence,
-    ):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
 
 
 def _runs(n: int, ticks: int, balls: float, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -54,7 +36,7 @@ def _runs(n: int, ticks: int, balls: float, monkeypatch: pytest.MonkeyPatch) -> 
         for world in worlds:
             control(world)
             world.step()
-            digests.append(_digest(world))
+            digests.append(tick_digest(world))
         assert digests[1] == digests[0], f"fused, split: tick {t}"
         assert digests[2] == digests[0], f"general, split: tick {t}"
     assert split._fused is not None and split._fused.split is not None, "the split drive ran"
@@ -96,7 +78,7 @@ def test_a_crowd_driven_into_a_corner_runs_the_serial_run(
         for world in worlds:
             world.set_speeds_all(np.full((len(world.agents), 2), 127.0))
             world.step()
-            digests.append(_digest(world))
+            digests.append(tick_digest(world))
         assert digests[1] == digests[0], f"tick {t}"
     pose = worlds[0].agent_pose
     gaps = np.hypot(*(pose[:, None, :2] - pose[None, :, :2]).transpose(2, 0, 1))
@@ -127,6 +109,6 @@ def test_edits_between_split_ticks_are_seen_as_by_the_serial_drive(
                 world.add_obstacle("block", ShapeSpec.box(40, 40), 560.0, 40.0)
             control(world)
             world.step()
-            digests.append(_digest(world))
+            digests.append(tick_digest(world))
         assert digests[1] == digests[0], f"tick {t}"
     assert worlds[1]._fused is not None and worlds[1]._fused.split is not None
