@@ -35,9 +35,13 @@ class Odometry:
         self.pose = Pose()
         self._last: tuple[int, int, float] | None = None
 
-    def rebaseline(self) -> None:
-        """Forget the last reading: the next one only sets the reference (counters were reset)."""
-        self._last = None
+    def rebaseline(self, counters: tuple[int, int] | None = None, now: float = 0.0) -> None:
+        """Take ``counters`` as the reference the next reading is measured from.
+
+        Without counters the reference is forgotten and the next reading only sets
+        it (the counters changed in a way nobody read, e.g. a reboot).
+        """
+        self._last = None if counters is None else (counters[0], counters[1], now)
 
     def set_pose(self, pose: Pose) -> None:
         self.pose = pose

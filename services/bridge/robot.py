@@ -311,12 +311,15 @@ class KheperaRobot(Actuators):
                     self._gripper = False
             # Whatever the robot was doing before we (re)connected is nobody's command.
             link.request(P.set_speed(0, 0))
+            # The pose is measured from here: a command sent the moment the robot is
+            # online moves it before the first sensor round reads the counters.
+            counters = link.request(P.read_counters())
         except P.ProtocolError as exc:
             log.info("%s: opened but no Khepera answered: %s", self.port, exc)
             link.close()
             return False
         self._link, self._failures, self._motors_on = link, 0, False
-        self._odometry.rebaseline()
+        self._odometry.rebaseline((counters.left, counters.right), time.monotonic())
         log.info(
             "%s: Khepera online (BIOS %s, protocol %s, gripper %s)",
             self.port,
@@ -408,7 +411,9 @@ class KheperaRobot(Actuators):
         elif letter == "C":
             self._motors_on = True
         elif letter == "G":
-            self._odometry.rebaseline()  # counters set by hand: not a movement
+            # Counters set by hand are not a movement; the wheels' travel after it is.
+            left, right = (int(f) for f in request.fields)
+            self._odometry.rebaseline((left, right), time.monotonic())
         elif letter == "L":
             led, action = (int(f) for f in request.fields)
             leds = list(self._state.leds)

@@ -278,6 +278,43 @@ def test_odometry_follows_the_body(emulator: KheperaEmulator, body: KinematicBod
         assert pose.heading == pytest.approx(body.pose.heading, abs=0.02)
 
 
+def test_a_command_sent_the_moment_the_robot_is_online_is_in_its_pose(
+    emulator: KheperaEmulator, body: KinematicBody
+) -> None:
+    """The pose is measured from the connection, not from the first sensor round.
+
+    The first round's ambient read (before its counters read) answers 0.3 s late, as
+    a busy host would: the robot drives all that time on a command sent at once.
+    """
+    first_ambient = threading.Event()
+
+    def slow_first_round(
+        port: str, baud: int, options: LinkOptions, on_banner: Any
+    ) -> SerialKheperaLink:
+        link = SerialKheperaLink.open(port, baud, options, on_banner=on_banner)
+        plain = link.request
+
+        def request(req: P.Request[Any]) -> Any:
+            if req.letter == "O" and not first_ambient.is_set():
+                first_ambient.set()
+                time.sleep(0.3)
+            return plain(req)
+
+        link.request = request  # type: ignore[method-assign]
+        return link
+
+    options = RobotOptions(poll_interval=0.01, watchdog=5)
+    with KheperaRobot(emulator.port, options, link_factory=slow_first_round) as robot:
+        assert robot.wait_online(3)
+        robot.command(P.set_speed(20, 20)).result(1)
+        wait_for(lambda: body.pose.x > 60, 5, "the robot to drive 60 mm")
+        robot.command(P.set_speed(0, 0)).result(1)
+        rounds = robot.state().rounds
+        wait_for(lambda: robot.state().rounds > rounds + 1, 2, "a round after stopping")
+        assert first_ambient.is_set()
+        assert robot.state().pose.x == pytest.approx(body.pose.x, abs=0.5)
+
+
 def test_unplugged_robot_goes_offline_and_comes_back(emulator: KheperaEmulator) -> None:
     events: list[bool] = []
     with KheperaRobot(emulator.port, FAST_ROBOT) as robot:

@@ -99,8 +99,9 @@ def test_reset_at_any_request_of_a_round_keeps_the_pose_right(position: str) -> 
         truth = robots[0].seen_pulses * MM_PER_PULSE
         final = robot.state().pose.x
     assert robots[0].reset_at is None, "the reset was not injected"
-    # the step between the reset and the next H read is seen by no one: one step, no more
-    assert truth == pytest.approx(10 * STEP * MM_PER_PULSE)
+    # 12 rounds of travel, counted from the connection's own H read; the step between
+    # the reset and the next H read is seen by no one: one step lost, no more
+    assert truth == pytest.approx(11 * STEP * MM_PER_PULSE)
     assert final == pytest.approx(truth)
     assert all(b >= a - 1e-9 for a, b in itertools.pairwise(xs)), "the pose went backwards"
     assert robot.state().pose.y == pytest.approx(0.0)
