@@ -21,6 +21,7 @@ from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.pump import FramePump
 from viewers.web.saved_login import SavedLogin, parse_cookies, saved_login_html
+from viewers.web.sure_clicks import add_sure_clicks
 from viewers.web.tabs import TabSwitcher, tab_title
 from viewers.web.text import escape_md
 from viewers.web.viser_fast import browser_address, browser_cookies
@@ -69,6 +70,7 @@ class BrowserSession:
 
     def _build(self, gui: viser.GuiApi, default_address: LabAddress) -> None:
         add_label_fixer(gui)  # every labelled input gets its accessible name (labels.py)
+        add_sure_clicks(gui)  # a click viser's page drops is sent again (sure_clicks.py)
         self.address = gui.add_text(
             "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
         )
