@@ -1,13 +1,15 @@
-"""Button clicks that always reach the server, though viser's page may drop them.
+"""Clicks and typed values that reach the server, though viser's page may drop them.
 
 viser 1.1.1's page sends the panel's GUI messages through one 50 ms throttle
 that keeps only the newest (viser/client/src/WebsocketUtils.ts,
 ``makeThrottledMessageSender``, used by ``ControlPanel/Generated.tsx``): a
-click that waits in it behind an earlier message is replaced, silently, by
-any GUI message that comes before the timer fires (a typed value, the code
-editor's resend, a choice in a list). On a busy laptop the timer fires late
-and the window grows; a student's 'Join' or 'Run' then does nothing, and the
-page shows no sign of it (seen in a busy test run: the click never left).
+message that waits in it behind an earlier one is replaced, silently, by any
+GUI message that comes before the timer fires. On a busy laptop the timer
+fires late and the window grows. A student's 'Join' or 'Run' then does
+nothing, and the page shows no sign of it (seen in a busy test run: the click
+never left); or a click replaces the last letters typed just before it, and
+the server acts on the text as it was (Connect to the address before the
+edit).
 
 The throttle is a closure inside React; what can be reached is the page's
 one Web Worker, through which every message goes to the websocket
@@ -16,18 +18,25 @@ a page (an ``<img>`` that cannot load, as labels.py does):
 
 - wraps ``Worker.prototype.postMessage`` to note the time and element of
   each GUI message the page sends (and which worker sends them);
+- notes each edit of a text input or text area and each tick of a checkbox
+  (before React sees it, in the capture phase); when a GUI message of another
+  element is about to leave while such an edit's own message has not, the
+  edit's was replaced: its value, read from the element, is sent first, so
+  the click that replaced it acts on what the student typed;
 - notes each click on a panel button (its element id is the GUI element's
-  uuid; an upload button is left alone, its file is what it sends);
-- once the page has sent another GUI message after the click and none for
-  that button, the click was replaced: it sends the button's message itself,
+  uuid; an upload button is left alone, its file is what it sends); once the
+  page has sent another GUI message after the click and none for that
+  button, the click was replaced: it sends the button's message itself,
   exactly as the button would have (``GuiUpdateMessage``, ``value: true``).
 
-It never sends a click twice: the throttle either sends the click or sends a
+A click is never sent twice: the throttle either sends the click or sends a
 newer message in its place, so "another message left, this one did not" is
 proof the click was dropped; with no other message it only waits (a late
-timer). A click the throttle merely delays is left to it. Values typed or
-chosen are not covered here: the newest value is what counts, and the code
-editor resends its text itself (assets/editor-src/editor.js).
+timer), and a click the throttle merely delays is left to it. A value may
+reach the server twice (harmless: the same value). Not covered: number
+inputs, sliders and dropdowns (their values' types are not in the DOM), and
+the code editor's hidden text area, whose writes the editor resends itself
+(assets/editor-src/editor.js).
 """
 
 from __future__ import annotations
@@ -45,16 +54,33 @@ LOOKS = 100
 SURE_CLICKS_JS = """
 (function () {
   if (window.__wartSureClicks) return;
-  window.__wartSureClicks = {resent: 0};
+  var state = window.__wartSureClicks = {clicks: 0, values: 0};
   var UUID = /^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$/;
   var GUI = /^Gui(Update|ButtonHold|FormSubmit|FormDirty)Message$/;
   var sent = [];
+  var typed = {};
   var worker = null;
   var post = Worker.prototype.postMessage;
+  function update(w, uuid, value) {
+    sent.push([performance.now(), uuid]);
+    var message = {type: 'GuiUpdateMessage', uuid: uuid, updates: {value: value}};
+    post.call(w, {type: 'send', message: message});
+  }
+  function flushTyped(w, leaving) {
+    delete typed[leaving];
+    for (var uuid in typed) {
+      var t = typed[uuid];
+      delete typed[uuid];
+      if (!t[0].isConnected) continue;
+      update(w, uuid, t[1] === 'check' ? t[0].checked : t[0].value);
+      state.values += 1;
+    }
+  }
   Worker.prototype.postMessage = function (data) {
     var m = data && data.type === 'send' ? data.message : null;
     if (m && GUI.test(m.type)) {
       worker = this;
+      flushTyped(this, m.uuid);
       sent.push([performance.now(), m.uuid]);
       if (sent.length > 400) sent.splice(0, 200);
     }
@@ -67,17 +93,40 @@ SURE_CLICKS_JS = """
     }
     if (own) return;
     if (other && worker) {
-      var message = {type: 'GuiUpdateMessage', uuid: uuid, updates: {value: true}};
-      sent.push([performance.now(), uuid]);
-      post.call(worker, {type: 'send', message: message});
-      window.__wartSureClicks.resent += 1;
-      console.warn('wart: a click was dropped by the page\\'s message throttle; sent again');
+      flushTyped(worker, uuid);
+      update(worker, uuid, true);
+      state.clicks += 1;
+      console.warn('wart: a click the message throttle dropped was sent again');
       return;
     }
     if (left > 0) setTimeout(function () { look(uuid, at, left - 1); }, EVERY);
   }
+  function uuidOf(el) {
+    if (UUID.test(el.id)) return el.id;
+    var named = el.getAttribute('aria-labelledby') || '';
+    if (named.indexOf('wart-label-') === 0 && UUID.test(named.slice(11))) return named.slice(11);
+    for (var a = el.parentElement, i = 0; a && i < 6; a = a.parentElement, i++) {
+      var prev = a.previousElementSibling;
+      var label = prev && prev.querySelector('label[for]');
+      if (label) return UUID.test(label.htmlFor) ? label.htmlFor : null;
+    }
+    return null;
+  }
+  document.addEventListener('input', function (e) {
+    var el = e.target;
+    if (!el || el.getAttribute('aria-hidden') === 'true') return;
+    var text = el.tagName === 'TEXTAREA' || (el.tagName === 'INPUT' && !el.readOnly &&
+      !el.inputMode && (el.type === 'text' || el.type === 'password'));
+    var uuid = text && uuidOf(el);
+    if (uuid) typed[uuid] = [el, 'text'];
+  }, true);
   document.addEventListener('click', function (e) {
-    var b = e.target && e.target.closest ? e.target.closest('button') : null;
+    var el = e.target;
+    if (el && el.tagName === 'INPUT' && el.type === 'checkbox' && UUID.test(el.id)) {
+      typed[el.id] = [el, 'check'];
+      return;
+    }
+    var b = el && el.closest ? el.closest('button') : null;
     if (!b || b.disabled || !UUID.test(b.id)) return;
     if (document.getElementById('file_upload_' + b.id)) return;
     var at = performance.now();
@@ -101,5 +150,5 @@ def sure_clicks_html() -> str:
 
 
 def add_sure_clicks(gui: viser.GuiApi) -> viser.GuiHtmlHandle:
-    """Make this page's button clicks reach the server (once per page; more is harmless)."""
+    """Make this page's clicks and typed values reach the server (once a page; more is harmless)."""
     return gui.add_html(sure_clicks_html())
