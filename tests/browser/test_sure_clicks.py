@@ -28,14 +28,19 @@ CLICK_BETWEEN_TWO_EDITS = """([inputId, buttonId]) => {
 }"""
 
 
-def test_a_click_replaced_by_an_edit_still_connects(open_page) -> None:
-    page = open_page()
+def address_and_connect(page) -> tuple[str, str]:
+    """The element ids of the start page's Address input and Connect button."""
     connect = page.button("Connect")
     connect.wait_for()
     button_id = connect.get_attribute("id")
-    assert button_id
     input_id = page.input_after_label("Address").get_attribute("id")
-    assert input_id
+    assert button_id and input_id
+    return input_id, button_id
+
+
+def test_a_click_replaced_by_an_edit_still_connects(open_page) -> None:
+    page = open_page()
+    input_id, button_id = address_and_connect(page)
     already = page.sent_count
 
     page.p.evaluate(CLICK_BETWEEN_TWO_EDITS, [input_id, button_id])
@@ -50,12 +55,7 @@ def test_a_click_replaced_by_an_edit_still_connects(open_page) -> None:
 
 def test_a_click_the_throttle_only_delays_is_not_sent_twice(open_page) -> None:
     page = open_page()
-    connect = page.button("Connect")
-    connect.wait_for()
-    button_id = connect.get_attribute("id")
-    assert button_id
-    input_id = page.input_after_label("Address").get_attribute("id")
-    assert input_id
+    input_id, button_id = address_and_connect(page)
     already = page.sent_count
 
     # An edit, then the click in the same task: the click waits for the throttle's
@@ -94,11 +94,7 @@ EDIT_THEN_CLICK = """([inputId, buttonId, first, last]) => {
 
 def test_a_click_acts_on_the_text_typed_just_before_it(open_page) -> None:
     page = open_page()
-    connect = page.button("Connect")
-    connect.wait_for()
-    button_id = connect.get_attribute("id")
-    input_id = page.input_after_label("Address").get_attribute("id")
-    assert button_id and input_id
+    input_id, button_id = address_and_connect(page)
 
     page.p.evaluate(
         EDIT_THEN_CLICK, [input_id, button_id, "wart://127.0.0.1:7447/other", "no such address"]

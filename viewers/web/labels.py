@@ -61,13 +61,18 @@ LABEL_FIX_JS = """
 """
 
 
-def label_fixer_html() -> str:
-    """The markup: an image that cannot load (an empty data URL) and runs the script."""
-    script = " ".join(line.strip() for line in LABEL_FIX_JS.strip().splitlines())
+def script_image_html(script: str) -> str:
+    """An image that cannot load (an empty data URL) and runs ``script``, fixed text, once."""
+    script = " ".join(line.strip() for line in script.strip().splitlines())
     return (
         '<img src="data:," alt="" style="display:none" '
         f'onerror="{html.escape(script, quote=True)}">'
     )
+
+
+def label_fixer_html() -> str:
+    """The markup: an image that cannot load and runs the script."""
+    return script_image_html(LABEL_FIX_JS)
 
 
 def add_label_fixer(gui: viser.GuiApi) -> viser.GuiHtmlHandle:

@@ -41,9 +41,9 @@ the code editor's hidden text area, whose writes the editor resends itself
 
 from __future__ import annotations
 
-import html
-
 import viser
+
+from viewers.web.labels import script_image_html
 
 # How long after a click to look, and how often, before giving up (ms): the
 # throttle's timer fires 50 ms after the last send, later on a busy machine.
@@ -142,11 +142,7 @@ def sure_clicks_html() -> str:
         .replace("EVERY", str(LOOK_EVERY_MS))
         .replace("LOOKS", str(LOOKS))
     )
-    script = " ".join(line.strip() for line in script.strip().splitlines())
-    return (
-        '<img src="data:," alt="" style="display:none" '
-        f'onerror="{html.escape(script, quote=True)}">'
-    )
+    return script_image_html(script)
 
 
 def add_sure_clicks(gui: viser.GuiApi) -> viser.GuiHtmlHandle:
