@@ -10,7 +10,15 @@ sends the replaced message, in its place in the order.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import pytest
+import viser
+
+from tests.browser.conftest import new_test_context, page_url, wait_until
+from tests.lab import free_port
+from viewers.web.labels import add_label_fixer
+from viewers.web.sure_clicks import add_sure_clicks
 
 pytestmark = pytest.mark.browser
 
@@ -106,3 +114,52 @@ def test_a_click_acts_on_the_text_typed_just_before_it(open_page) -> None:
     assert page.button("Log in").count() == 0
     assert page.p.evaluate("window.__wartSureClicks.values") == 1
     assert page.p.evaluate("window.__wartSureClicks.clicks") == 0
+
+
+# An edit, an option chosen in the open dropdown, and a click on Run, in one task:
+# the edit leaves at once, the choice waits in the throttle and Run replaces it.
+EDIT_CHOOSE_RUN = """([inputId, buttonId]) => {
+  const input = document.getElementById(inputId);
+  const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set;
+  setter.call(input, "alice");
+  input.dispatchEvent(new Event("input", { bubbles: true }));
+  document.querySelector('[role=option][value="k1"]').click();
+  document.getElementById(buttonId).click();
+}"""
+
+
+@pytest.fixture
+def run_on_page(chromium: object) -> Iterator[tuple[object, list[str]]]:
+    """A page with a name, a robot chooser and Run; Run records the robot the server has."""
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    add_label_fixer(server.gui)
+    add_sure_clicks(server.gui)
+    server.gui.add_text("Name", "")
+    robot = server.gui.add_dropdown("Run on", ("k0", "k1", "k2"))
+    ran: list[str] = []
+    server.gui.add_button("Run").on_click(lambda _: ran.append(robot.value))
+    context = new_test_context(chromium)
+    page = context.new_page()  # type: ignore[attr-defined]
+    page.goto(page_url(f"http://127.0.0.1:{server.get_port()}/"))
+    try:
+        yield page, ran
+    finally:
+        context.close()  # type: ignore[attr-defined]
+        server.stop()
+
+
+def test_a_robot_chosen_just_before_run_is_the_one_that_runs(run_on_page) -> None:
+    page, ran = run_on_page
+    chooser = page.get_by_role("combobox")
+    chooser.wait_for()
+    chooser.click()  # opens the list; sends nothing
+    page.locator('[role=option][value="k1"]').wait_for()
+    name_id = page.get_by_label("Name").get_attribute("id")
+    run_id = page.get_by_role("button", name="Run", exact=True).get_attribute("id")
+    assert name_id and run_id
+
+    page.evaluate(EDIT_CHOOSE_RUN, [name_id, run_id])
+
+    wait_until(lambda: len(ran) == 1, 30, "Run to reach the server")
+    assert ran == ["k1"]  # not the k0 it had before the choice
+    assert page.evaluate("window.__wartSureClicks.values") == 1

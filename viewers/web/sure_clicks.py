@@ -18,8 +18,10 @@ a page (an ``<img>`` that cannot load, as labels.py does):
 
 - wraps ``Worker.prototype.postMessage`` to note the time and element of
   each GUI message the page sends (and which worker sends them);
-- notes each edit of a text input or text area and each tick of a checkbox
-  (before React sees it, in the capture phase); when a GUI message of another
+- notes each edit of a text input or text area, each tick of a checkbox and
+  each option clicked in a dropdown (before React sees it, in the capture
+  phase; a dropdown's input carries the element's uuid, its options their
+  values); when a GUI message of another
   element is about to leave while such an edit's own message has not, the
   edit's was replaced: its value, read from the element, is sent first, so
   the click that replaced it acts on what the student typed;
@@ -34,7 +36,8 @@ newer message in its place, so "another message left, this one did not" is
 proof the click was dropped; with no other message it only waits (a late
 timer), and a click the throttle merely delays is left to it. A value may
 reach the server twice (harmless: the same value). Not covered: number
-inputs, sliders and dropdowns (their values' types are not in the DOM), and
+inputs and sliders (their values' types are not in the DOM), a dropdown
+chosen with the keyboard, and
 the code editor's hidden text area, whose writes the editor resends itself
 (assets/editor-src/editor.js).
 """
@@ -72,7 +75,7 @@ SURE_CLICKS_JS = """
       var t = typed[uuid];
       delete typed[uuid];
       if (!t[0].isConnected) continue;
-      update(w, uuid, t[1] === 'check' ? t[0].checked : t[0].value);
+      update(w, uuid, t[1] === 'check' ? t[0].checked : t[1] === 'choice' ? t[2] : t[0].value);
       state.values += 1;
     }
   }
@@ -124,6 +127,12 @@ SURE_CLICKS_JS = """
     var el = e.target;
     if (el && el.tagName === 'INPUT' && el.type === 'checkbox' && UUID.test(el.id)) {
       typed[el.id] = [el, 'check'];
+      return;
+    }
+    var option = el && el.closest ? el.closest('[role=option][value]') : null;
+    if (option) {
+      var box = document.querySelector('input[role=combobox][aria-expanded=true]');
+      if (box && UUID.test(box.id)) typed[box.id] = [box, 'choice', option.getAttribute('value')];
       return;
     }
     var b = el && el.closest ? el.closest('button') : null;
