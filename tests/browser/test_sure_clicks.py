@@ -163,3 +163,53 @@ def test_a_robot_chosen_just_before_run_is_the_one_that_runs(run_on_page) -> Non
     wait_until(lambda: len(ran) == 1, 30, "Run to reach the server")
     assert ran == ["k1"]  # not the k0 it had before the choice
     assert page.evaluate("window.__wartSureClicks.values") == 1
+
+
+# In one task: an edit in the modal (its own throttle: it leaves at once), a click on
+# Go in the modal (it waits for that throttle's timer), an edit in the panel (the
+# panel's throttle: it leaves at once, before Go). The script must not take the
+# panel's message for Go's replacement and send Go a second time.
+MODAL_THEN_PANEL = """([secretId, goId, noteId]) => {
+  const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, "value").set;
+  const type = (id, text) => {
+    const input = document.getElementById(id);
+    setter.call(input, text);
+    input.dispatchEvent(new Event("input", { bubbles: true }));
+  };
+  type(secretId, "s3cret");
+  document.getElementById(goId).click();
+  type(noteId, "a note");
+}"""
+
+
+def test_a_click_in_a_modal_is_not_sent_twice_for_a_message_of_the_panel(chromium) -> None:
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    add_label_fixer(server.gui)
+    add_sure_clicks(server.gui)
+    server.gui.add_text("Note", "")
+    gone: list[str] = []
+    with server.gui.add_modal("Unlock"):
+        secret = server.gui.add_text("Secret", "")
+        server.gui.add_button("Go").on_click(lambda _: gone.append(secret.value))
+    context = new_test_context(chromium)
+    try:
+        page = context.new_page()  # type: ignore[attr-defined]
+        page.goto(page_url(f"http://127.0.0.1:{server.get_port()}/"))
+        go = page.get_by_role("button", name="Go", exact=True)
+        go.wait_for()
+        ids = [
+            page.get_by_label("Secret").get_attribute("id"),
+            go.get_attribute("id"),
+            page.get_by_label("Note").get_attribute("id"),
+        ]
+        assert all(ids)
+
+        page.evaluate(MODAL_THEN_PANEL, ids)
+
+        wait_until(lambda: len(gone) >= 1, 30, "Go to reach the server")
+        page.wait_for_timeout(1_000)  # a wrong resend would have come 100 ms after the click
+        assert gone == ["s3cret"]
+        assert page.evaluate("window.__wartSureClicks.clicks") == 0
+    finally:
+        context.close()  # type: ignore[attr-defined]
+        server.stop()

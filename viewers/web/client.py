@@ -70,7 +70,7 @@ class BrowserSession:
 
     def _build(self, gui: viser.GuiApi, default_address: LabAddress) -> None:
         add_label_fixer(gui)  # every labelled input gets its accessible name (labels.py)
-        add_sure_clicks(gui)  # a click viser's page drops is sent again (sure_clicks.py)
+        add_sure_clicks(gui)  # clicks and values viser's page drops are sent (sure_clicks.py)
         self.address = gui.add_text(
             "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
         )

@@ -33,13 +33,16 @@ a page (an ``<img>`` that cannot load, as labels.py does):
 
 A click is never sent twice: the throttle either sends the click or sends a
 newer message in its place, so "another message left, this one did not" is
-proof the click was dropped; with no other message it only waits (a late
-timer), and a click the throttle merely delays is left to it. A value may
-reach the server twice (harmless: the same value). Not covered: number
-inputs and sliders (their values' types are not in the DOM), a dropdown
-chosen with the keyboard, and
-the code editor's hidden text area, whose writes the editor resends itself
-(assets/editor-src/editor.js).
+proof the click was dropped. (Each GUI container has its own throttle, the
+panel and each modal; a message of another container leaving first proves
+nothing, but the first look comes after the click's own throttle has fired:
+its timer was set before the click, 50 ms long, ours at the click, 100 ms, and
+timers fire in the order they are due, however late.) With no other message
+it only waits (a late timer), and a click the throttle merely delays is left
+to it. A value may reach the server twice (harmless: the same value). Not
+covered: number inputs and sliders (their values' types are not in the DOM),
+a dropdown chosen with the keyboard, and the code editor's hidden text area,
+whose writes the editor resends itself (assets/editor-src/editor.js).
 """
 
 from __future__ import annotations
