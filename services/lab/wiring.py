@@ -174,7 +174,9 @@ def router_spec(
     )
 
 
-def registry_spec(w: Wiring, *, server_name: str | None = None) -> ChildSpec:
+def registry_spec(
+    w: Wiring, *, server_name: str | None = None, login_wait: float | None = None
+) -> ChildSpec:
     argv = [
         "registry",
         "--db",
@@ -185,6 +187,8 @@ def registry_spec(w: Wiring, *, server_name: str | None = None) -> ChildSpec:
     ]
     if server_name:
         argv += ["--name", server_name]
+    if login_wait is not None:
+        argv += ["--login-wait", f"{login_wait:g}"]
     return ChildSpec("registry", argv, keys.alive(w.realm, AliveKind.REGISTRY, "registry"))
 
 

@@ -14,6 +14,7 @@ from common.service import run_service
 from services.registry import service
 from services.registry.accounts_db import RegistryDB
 from services.registry.service import Registry, provision
+from services.registry.throttle import LoginThrottle
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
@@ -26,8 +27,20 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
         help="the registry's Ed25519 key (created if absent; keep it secret)",
     )
     p.add_argument("--name", help="rename the server (shown in the directory)")
+    p.add_argument(
+        "--login-wait",
+        type=float,
+        default=2.0,
+        metavar="SECONDS",
+        help="after a source's free failed logins, how long it waits; each further failure"
+        " doubles it, up to 300 s (default 2)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
+    try:
+        throttle = LoginThrottle(first_wait=args.login_wait)
+    except ValueError as exc:
+        return cli.fail(f"--login-wait: {exc}")
     try:
         identity, password, created = provision(args.db, args.key_file)
     except (ValueError, OSError) as exc:
@@ -53,7 +66,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
         db.set_setting("server_name", args.name)
     try:
         return run_service(
-            "registry", options, lambda session: Registry(session, options.realm, db, identity)
+            "registry",
+            options,
+            lambda session: Registry(session, options.realm, db, identity, throttle=throttle),
         )
     finally:
         db.close()

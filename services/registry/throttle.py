@@ -30,7 +30,8 @@ class LoginThrottle:
     """Slows password guessing without letting anyone lock the owner out.
 
     Three buckets of failed logins, each allowed a few free failures and then an
-    exponential wait (2, 4, 8 ... up to ``cap`` seconds after the last failure):
+    exponential wait (``first_wait``, twice that, four times ... up to ``cap``
+    seconds after the last failure; 2, 4, 8 ... by default):
 
     - the *pair* (account, source): one source guessing one account;
     - the *source*, across accounts: one source spraying many accounts;
@@ -50,8 +51,16 @@ class LoginThrottle:
     """
 
     def __init__(
-        self, free: int = 3, source_free: int = 10, account_free: int = 10, cap: float = 300.0
+        self,
+        free: int = 3,
+        source_free: int = 10,
+        account_free: int = 10,
+        cap: float = 300.0,
+        first_wait: float = 2.0,
     ) -> None:
+        if not 0 < first_wait <= cap:
+            raise ValueError(f"the first wait must be above 0 s and at most {cap:g} s")
+        self.first_wait = first_wait
         self.free = free
         self.source_free = source_free
         self.account_free = account_free
@@ -63,7 +72,7 @@ class LoginThrottle:
         count, last = self._fails.get(bucket, (0, 0.0))
         if count < free:
             return 0.0
-        return max(0.0, last + min(self.cap, 2.0 ** (count - free + 1)) - now)
+        return max(0.0, last + min(self.cap, self.first_wait * 2.0 ** (count - free)) - now)
 
     @staticmethod
     def _buckets(user: str, source: str) -> tuple[str, str, str]:

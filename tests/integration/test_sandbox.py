@@ -11,6 +11,7 @@ import os
 import queue
 import textwrap
 import time
+from collections.abc import Callable
 
 import psutil
 import pytest
@@ -28,9 +29,14 @@ STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))
 
 
 class Run:
-    """A sandbox with its commands and output collected."""
+    """A sandbox with its commands and output collected.
 
-    def __init__(self, body: str, slot: float = 3.0, limits: SandboxLimits | None = None) -> None:
+    A test that needs the controller to have done something uses a long slot and
+    :meth:`stop_when`: on a busy machine a short slot can end before the
+    sandbox's Python has started, and the controller never runs at all.
+    """
+
+    def __init__(self, body: str, slot: float = 60.0, limits: SandboxLimits | None = None) -> None:
         source = textwrap.dedent(body).encode()
         self.commands: queue.Queue[dict] = queue.Queue()
         self.output: list[str] = []
@@ -45,6 +51,12 @@ class Run:
     def finish(self, timeout: float = 15.0) -> str:
         assert self.sandbox.wait(timeout), "the sandbox did not end"
         return self.sandbox.exit_reason
+
+    def stop_when(self, condition: Callable[[], bool], what: str) -> str:
+        """Stop the run once ``condition`` holds; the reason it ended."""
+        wait_for(condition, 30, what)
+        self.sandbox.stop(grace=0.5, reason="stopped by the test")
+        return self.finish()
 
     def text(self) -> str:
         return "\n".join(self.output)
@@ -65,12 +77,12 @@ class Avoid(Controller):
         print("front", front)
         robot.set_speeds(-5 if front > 500 else 10, 5)
 """,
-        slot=1.5,
     )
-    command = run.commands.get(timeout=10)
+    command = run.commands.get(timeout=30)
     assert command == RobotCommand(speeds=(-5, 5))
-    reason = run.finish()
-    assert reason == "stopped at the end of its slot"
+    assert run.stop_when(lambda: "front 900" in run.text(), "the controller's print") == (
+        "stopped by the test"
+    )
     assert "front 900" in run.text()
     assert "[runner] controller Avoid started" in run.text()
 
@@ -103,13 +115,13 @@ class Meminfo(Controller):
         for line in open("/proc/meminfo"):
             if line.split(":")[0] in ("MemTotal", "MemFree", "MemAvailable", "SwapTotal"):
                 print("mem", line.split()[0], line.split()[1])
+        print("read")
     def do_work(self, robot):
         pass
 """,
-        slot=1.5,
         limits=limits,
     )
-    run.finish()
+    run.stop_when(lambda: "read" in run.output, "the controller to read /proc/meminfo")
     seen = dict(line.split()[1:3] for line in run.output if line.startswith("mem "))
     assert seen["MemTotal:"] == str(192 * 1024), run.text()  # the limit, in kB
     available = int(seen["MemAvailable:"])
@@ -130,10 +142,9 @@ class Hog(Controller):
         while True:
             hoard.append(bytearray(50 * 1024 * 1024))
 """,
-        slot=5.0,
         limits=SandboxLimits(memory_bytes=200 * 1024 * 1024),
     )
-    reason = run.finish()
+    reason = run.finish(timeout=60)
     assert "MemoryError" in run.text()
     assert reason == "ended: out of memory (the limit is 200 MB)"
 
@@ -153,13 +164,11 @@ class Bomb(Controller):
                 print("fork refused:", exc.errno)
                 time.sleep(60)
 """,
-        slot=2.0,
         limits=SandboxLimits(processes=8),
     )
     pid = run.sandbox.process.pid
     uid = run.sandbox.uid
-    run.finish()
-    assert "fork refused" in run.text()
+    run.stop_when(lambda: "fork refused" in run.text(), "a fork to be refused")
     assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
     # No live process of the sandbox's uid is left anywhere on the machine (a
     # zombie awaiting the container's init holds nothing). Its uid only: other
@@ -202,9 +211,8 @@ class Snoop(Controller):
     def do_work(self, robot):
         pass
 """,
-        slot=1.5,
     )
-    run.finish()
+    run.stop_when(lambda: "uid " in run.text(), "the controller's snooping")
     text = run.text()
     assert "READ" not in text and "NETWORK OPEN" not in text, text
     assert "no network" in text and "cwd /work []" in text
@@ -226,11 +234,10 @@ class Liar(Controller):
     def do_work(self, robot):
         pass
 """,
-        slot=1.5,
     )
     # Refused with the reason, and the run goes on: the good command after them arrives.
-    assert run.commands.get(timeout=10) == RobotCommand(speeds=(3, 4))
-    run.finish()
+    assert run.commands.get(timeout=30) == RobotCommand(speeds=(3, 4))
+    run.stop_when(lambda: "unknown command fields" in run.text(), "the refusals said")
     assert run.sandbox.rejected_commands >= 3
     assert "refused a message from the controller: not JSON" in run.text()
     assert "cmd: speeds must be two integers" in run.text()

@@ -29,7 +29,7 @@ from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.integration.agentkit import CTX, start_agent_context, start_engine
-from tests.lab import PASSWORD, make_lab
+from tests.lab import LOGIN_WAIT, PASSWORD, make_lab
 from tests.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
@@ -89,8 +89,8 @@ def test_a_session_changing_via_gets_the_checks_of_one_source(lab: Lab) -> None:
     elapsed = time.monotonic() - t0
     print(f"via attack: {checked} checked, {refused} refused in {elapsed:.1f} s")
     # What one source gets in that time: 3 free failures, then one more after each
-    # wait of 2, 4, 8 ... s (before issue 38 each new ``via`` was checked: 50 of 50).
-    allowed, waited, step = 3, 0.0, 2.0
+    # wait of LOGIN_WAIT, twice that ... (before issue 38 each new ``via`` was checked).
+    allowed, waited, step = 3, 0.0, LOGIN_WAIT
     while waited + step <= elapsed:
         waited, step, allowed = waited + step, step * 2, allowed + 1
     assert checked <= allowed + 1 and checked + refused == 50
