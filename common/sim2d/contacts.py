@@ -20,6 +20,7 @@ _CACHE = True
 # Kernels that allocate nothing and return no array: no reference counting
 # (common/sim2d/packs.py, _UNCOUNTED, says why and what it requires).
 _UNCOUNTED: dict[str, Any] = {"_nrt": False}
+_COUNTED: dict[str, Any] = {"_nrt": True}  # packs.py's _COUNTED says why it is spelled out
 
 # Contact sweeps per substep: until no pair overlaps by more than TOLERANCE_MM,
 # at most MAX_SWEEPS. A free swarm needs one or two; a crowd pressed into a
@@ -51,17 +52,38 @@ def _static_cell(v, cell, n):  # pragma: no cover
     return i
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_COUNTED)
 def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
-    """Every pair of discs closer than their radii plus ``margin``: (M, 2) slots.
+    """:func:`_pairs_into`'s pairs, in new arrays where ``buffers`` are too small for them."""
+    start, out = buffers[6], buffers[7]
+    m = _pairs_into(px, py, radius, width, height, cell, margin, buffers)
+    if 0 <= m <= out.shape[0]:
+        return out[:m]
+    ncell = (math.floor(width / cell) + 1) * (math.floor(height / cell) + 1)
+    if start.shape[0] < ncell + 1:
+        start = np.empty(ncell + 1, dtype=np.int64)
+    if m < 0:  # the cells' offsets did not fit: the pairs are not counted yet
+        m = _pairs_into(px, py, radius, width, height, cell, margin, (*buffers[:6], start, out))
+    if m > out.shape[0]:
+        out = np.empty((max(m, 2 * out.shape[0]), 2), dtype=np.int64)
+        _pairs_into(px, py, radius, width, height, cell, margin, (*buffers[:6], start, out))
+    return out[:m]
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _pairs_into(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
+    """How many pairs of discs are closer than their radii plus ``margin``; the first in ``out``.
+
+    ``out`` (buffers' last) gets the pairs as (M, 2) slots, as many as it has
+    rows; the count returned may be more (then :func:`_pairs` makes room and
+    asks again). -1: ``start`` is too short for this grid (nothing counted).
 
     The discs are sorted by cell (a counting sort) and copied in that order, so
     the scan reads neighbours from contiguous memory rather than from random
     slots; each cell is compared with itself and four of its neighbours (the
     other four compare with it), so each pair is found once. The pairs come
     out in cell order, the same for the same poses. ``buffers`` are
-    :func:`drive_buffers`' last eight (a grid larger than its cell offsets
-    gets new ones).
+    discs.drive_buffers' eight for it.
     """
     home, slot, sk, sx, sy, sr, start, out = buffers
     n = px.shape[0]
@@ -69,7 +91,7 @@ def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no 
     gy = (math.floor(height / cell)) + 1
     ncell = gx * gy
     if start.shape[0] < ncell + 1:
-        start = np.empty(ncell + 1, dtype=np.int64)
+        return -1
     for k in range(ncell + 1):
         start[k] = 0
     for a in range(n):
@@ -124,16 +146,13 @@ def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no 
                 dy = sy[q] - y
                 lim = r + sr[q]
                 if dx * dx + dy * dy < lim * lim:
-                    if m == out.shape[0]:
-                        grown = np.empty((2 * m, 2), dtype=np.int64)
-                        grown[:m] = out
-                        out = grown
-                    a = slot[p]
-                    b = slot[q]
-                    out[m, 0] = min(a, b)
-                    out[m, 1] = max(a, b)
+                    if m < out.shape[0]:
+                        a = slot[p]
+                        b = slot[q]
+                        out[m, 0] = min(a, b)
+                        out[m, 1] = max(a, b)
                     m += 1
-    return out[:m]
+    return m
 
 
 @njit(cache=_CACHE, inline="always")
@@ -271,8 +290,26 @@ def _out_of_obstacles(x, y, r, width, height, scene, circ_start, circ_items):  #
     return x, y
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_COUNTED)
 def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
+    """:func:`_layers_into`'s order of the pairs, in arrays made for them."""
+    work = layers_work(pairs.shape[0])
+    _layers_into(pairs, near, held, m, n, px, py, radius, layer, work)
+    return work[LAYER_ORDER, : pairs.shape[0]].copy()
+
+
+# The row of layers_work that _layers_into leaves the order of the pairs in.
+LAYER_ORDER = 8
+
+
+@njit(cache=_CACHE)
+def layers_work(pairs):  # pragma: no cover
+    """The work rows of :func:`_layers_into` for up to ``pairs`` pairs."""
+    return np.empty((9, 2 * pairs + 3), dtype=np.int64)
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _layers_into(pairs, near, held, m, n, px, py, radius, layer, work):  # pragma: no cover
     """The order to solve the pairs in: from the walls outward, layer by layer.
 
     Layer 0: the robots an obstacle has just pushed out (``held``, of the ``m``
@@ -284,6 +321,9 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
     order, 8.9 mm in the cells' order. (Letting the lower layer never give way,
     shock propagation proper, made the sweeps diverge in that crowd: two robots
     ended on top of each other.)
+
+    ``work``: :func:`layers_work` for at least these pairs; the order is left
+    in its row LAYER_ORDER (the first ``len(pairs)``).
     """
     # Only the discs in pairs, numbered in the order the pairs name them (``layer``
     # holds a disc's number meanwhile): a sparse swarm's few hundred pairs, not
@@ -291,7 +331,7 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
     # a 2 ms tick at 10,000 robots and 5,000 balls).
     count = pairs.shape[0]
     free = n + 1
-    disc = np.empty(2 * count, dtype=np.int64)
+    disc = work[0]
     for q in range(count):
         layer[pairs[q, 0]] = -1
         layer[pairs[q, 1]] = -1
@@ -303,14 +343,18 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
                 layer[a] = nl
                 disc[nl] = a
                 nl += 1
-    start = np.zeros(nl + 1, dtype=np.int64)
+    start = work[1]
+    for i in range(nl + 1):
+        start[i] = 0
     for q in range(count):
         start[layer[pairs[q, 0]] + 1] += 1
         start[layer[pairs[q, 1]] + 1] += 1
     for i in range(nl):
         start[i + 1] += start[i]
-    fill = start[:-1].copy()
-    adjacent = np.empty(2 * count, dtype=np.int64)
+    fill = work[2]
+    for i in range(nl):
+        fill[i] = start[i]
+    adjacent = work[3]
     for q in range(count):
         i = layer[pairs[q, 0]]
         j = layer[pairs[q, 1]]
@@ -318,8 +362,10 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
         fill[i] += 1
         adjacent[fill[j]] = i
         fill[j] += 1
-    depth = np.full(nl, free, dtype=np.int64)
-    queue = np.empty(nl, dtype=np.int64)
+    depth = work[4]
+    for i in range(nl):
+        depth[i] = free
+    queue = work[5]
     tail = 0
     for q in range(m):
         if held[q]:
@@ -351,19 +397,20 @@ def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
                 tail += 1
     # A stable counting sort by the pair's lower layer (no layer last): the
     # order of a stable sort of the keys.
-    key = np.empty(count, dtype=np.int64)
-    runs = np.zeros(top + 3, dtype=np.int64)
+    key = work[6]
+    runs = work[7]
+    for k in range(top + 3):
+        runs[k] = 0
     for q in range(count):
         k = min(depth[layer[pairs[q, 0]]], depth[layer[pairs[q, 1]]])
         key[q] = top + 1 if k == free else k
         runs[key[q] + 1] += 1
     for k in range(top + 2):
         runs[k + 1] += runs[k]
-    order = np.empty(count, dtype=np.int64)
+    order = work[LAYER_ORDER]
     for q in range(count):
         order[runs[key[q]]] = q
         runs[key[q]] += 1
-    return order
 
 
 @njit(cache=_CACHE, **_UNCOUNTED)

@@ -46,14 +46,18 @@ from numba import njit
 
 from common.sim2d import contacts, pucks
 from common.sim2d.contacts import (
-    _layers,
+    LAYER_ORDER,
+    _layers_into,
     _obstacles_first,
     _pairs,
+    _pairs_into,
     _solve_contacts,
     _wall_normals,
     bin_circles,
+    layers_work,
 )
 from common.sim2d.jitcache import stamp_with_callees
+from common.sim2d.packs import _COUNTED, _UNCOUNTED
 
 _CACHE = True
 
@@ -164,10 +168,80 @@ def drive_buffers(robots, k, width, height, radius):  # pragma: no cover
         np.empty((max(16, 4 * n), 2), dtype=np.int64),
         np.empty(k),  # sx, sy: where each object started the substep (pucks.py)
         np.empty(k),
+        layers_work(max(16, 4 * n)),  # contacts._layers_into, for as many pairs as out holds
     )
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
+def _contacts(
+    pairs, work, n, k, objects, arm, discs, limits, scene, circles, flags
+):  # pragma: no cover
+    """A substep's contacts once its ``pairs`` are found: :func:`tick_into`'s, in its arrays.
+
+    Held objects' pairs dropped, the obstacles first, then the pairs' sweeps in
+    layers (``work``: contacts.layers_work for at least these pairs).
+    """
+    px, py, th, radius, mass = discs
+    margin, width, height = limits
+    near, is_near, pushed, moved, count, held, layer, normals = flags
+    if k:
+        pairs = pairs[: pucks.drop_pairs(pairs, n, objects, arm, px, py, th)]
+    m = _obstacles_first(
+        px,
+        py,
+        radius,
+        margin,
+        width,
+        height,
+        scene,
+        circles,
+        near,
+        is_near,
+        pushed,
+        moved,
+        count,
+        held,
+    )
+    if pairs.shape[0] != 0:
+        # (No two discs close: the sweeps would move nobody, and the walls'
+        # normals and the layers serve only them: most substeps of a sparse
+        # world, about 0.5 us of a 10-robot tick.)
+        _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
+        _layers_into(pairs, near, held, m, px.shape[0], px, py, radius, layer, work)
+        _solve_contacts(
+            pairs,
+            work[LAYER_ORDER, : pairs.shape[0]],
+            px,
+            py,
+            radius,
+            mass,
+            width,
+            height,
+            scene,
+            circles,
+            near,
+            m,
+            is_near,
+            pushed,
+            moved,
+            normals,
+            count,
+        )
+
+
+@njit(cache=_CACHE, **_COUNTED)
+def _contacts_grown(
+    n, k, objects, arm, discs, limits, cell, scene, circles, pair_buffers, flags
+):  # pragma: no cover
+    """:func:`_contacts` with its pairs and layers in new arrays: more than the buffers hold."""
+    px, py, _, radius, _ = discs
+    margin, width, height = limits
+    pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)
+    work = layers_work(pairs.shape[0])
+    _contacts(pairs, work, n, k, objects, arm, discs, limits, scene, circles, flags)
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
 def tick_into(
     pose,
     cmd,
@@ -248,49 +322,35 @@ def tick_into(
             px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
         if k:
             pucks.start_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s)
-        pairs = _pairs(px, py, radius, width, height, cell, margin, pair_buffers)
-        if k:
-            pairs = pairs[: pucks.drop_pairs(pairs, n, objects, arm, px, py, th)]
-        m = _obstacles_first(
-            px,
-            py,
-            radius,
-            margin,
-            width,
-            height,
-            scene,
-            circles,
-            near,
-            is_near,
-            pushed,
-            moved,
-            count,
-            held,
-        )
-        if pairs.shape[0] != 0:
-            # (No two discs close: the sweeps would move nobody, and the walls'
-            # normals and the layers serve only them: most substeps of a sparse
-            # world, about 0.5 us of a 10-robot tick.)
-            _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
-            order = _layers(pairs, near, held, m, px.shape[0], px, py, radius, layer)
-            _solve_contacts(
-                pairs,
-                order,
-                px,
-                py,
-                radius,
-                mass,
-                width,
-                height,
+        pairs = pair_buffers[7]
+        found = _pairs_into(px, py, radius, width, height, cell, margin, pair_buffers)
+        if 0 <= found <= pairs.shape[0]:
+            _contacts(
+                pairs[:found],
+                buffers[23],
+                n,
+                k,
+                objects,
+                arm,
+                (px, py, th, radius, mass),
+                (margin, width, height),
                 scene,
                 circles,
-                near,
-                m,
-                is_near,
-                pushed,
-                moved,
-                normals,
-                count,
+                (near, is_near, pushed, moved, count, held, layer, normals),
+            )
+        else:  # more pairs than the buffers hold (a crowd): in arrays made for them
+            _contacts_grown(
+                n,
+                k,
+                objects,
+                arm,
+                (px, py, th, radius, mass),
+                (margin, width, height),
+                cell,
+                scene,
+                circles,
+                pair_buffers,
+                (near, is_near, pushed, moved, count, held, layer, normals),
             )
         if k:
             pucks.end_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s, robot_speed)

@@ -34,11 +34,15 @@ from collections.abc import Callable
 
 import numpy as np
 from numba import njit, typeof, types
+from numba.core import cgutils
+from numba.core.runtime.nrtdynmod import _meminfo_struct_type
 from numba.experimental import structref
+from numba.extending import intrinsic
 
 from common.sim2d import contacts, discs, noise, packs, pucks, rays, sense_pass
 from common.sim2d import kernels as K
 from common.sim2d.jitcache import stamp_with_callees
+from common.sim2d.packs import _UNCOUNTED
 
 _CACHE = True
 
@@ -132,7 +136,34 @@ def new_state(
     )
 
 
-@njit(cache=_CACHE)
+@intrinsic
+def _borrowed(typingctx, state):  # pragma: no cover
+    """Every field of a :class:`TickState`, in :data:`FIELDS`' order, with no reference counted.
+
+    For an uncounted caller only (``_nrt=False``): it holds the state, and the
+    state holds the fields. Reading them as attributes would count a reference
+    to each array of each tuple in and out again, about two hundred calls of
+    numba's runtime a tick (a tenth of a 10-robot step, docs/BENCHMARKS.md);
+    and an uncounted function cannot read a structref's attributes at all.
+    """
+    if not isinstance(state, TickStateType):
+        return None
+    data_type = state.get_data_type()
+    fields = types.Tuple([state.field_dict[name] for name in FIELDS])
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        ref = cgutils.create_struct_proxy(state)(context, builder, value=args[0])
+        meminfo = builder.bitcast(ref.meminfo, _meminfo_struct_type.as_pointer())
+        data = builder.load(cgutils.gep(builder, meminfo, 0, 3))  # NRT_MemInfo's data
+        model = context.data_model_manager[data_type]
+        data = builder.bitcast(data, model.get_value_type().as_pointer())
+        payload = cgutils.create_struct_proxy(data_type)(context, builder, ref=data)
+        return context.make_tuple(builder, fields, [getattr(payload, n) for n in FIELDS])
+
+    return fields(state), codegen
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
 def tick(state, sense, key, lights):  # pragma: no cover
     """One tick: the robots move (discs.tick_into); then, if ``sense``, every sensor is read.
 
@@ -144,47 +175,64 @@ def tick(state, sense, key, lights):  # pragma: no cover
     function calling a parallel one loaded broken code in the next process:
     it crashed. Where the drive runs on threads too, from
     discs_split.SPLIT_MIN_DISCS discs, the world calls discs_split's tick
-    instead of this one.)
+    instead of this one.) Uncounted: it reads the state's fields borrowed
+    (:func:`_borrowed`), allocates nothing and returns no array.
     """
-    mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = state.drive
-    width, height, substep_s = state.geometry
-    pose = state.pose
-    arm = state.arm
+    (
+        pose,
+        vel,
+        cmd,
+        counters,
+        arm,
+        holding,
+        drive,
+        circles,
+        tables,
+        scene,
+        pucks_table,
+        objects,
+        readings,
+        geometry,
+        substeps,
+        drive_work,
+        circle_work,
+        sense_work,
+    ) = _borrowed(state)
+    mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = drive
+    width, height, substep_s = geometry
     discs.tick_into(
         pose,
-        state.cmd,
+        cmd,
         mm_s_per_unit,
         wheel_base,
         radius,
         mass,
-        state.counters,
+        counters,
         pulses_per_tick,
-        state.scene,
-        state.circles,
+        scene,
+        circles,
         width,
         height,
         substep_s,
-        state.substeps,
+        substeps,
         pose,
-        state.vel,
-        state.drive_work,
-        state.pucks,
+        vel,
+        drive_work,
+        pucks_table,
         arm,
     )
     if sense:
-        objects = state.objects
-        scene = state.scene
-        m, e = pucks.scene_into(pose.shape[0], state.pucks, arm, scene[7], scene[8], objects)
+        m, e = pucks.scene_into(pose.shape[0], pucks_table, arm, scene[7], scene[8], objects)
         moving = (objects[0][:m], objects[1][:m], objects[2][:m], objects[3][:m], objects[4][:e])
-        K.sense_into(
-            (pose, arm, state.holding),
-            state.tables,
-            state.scene,
-            (*moving, lights, key),
-            state.readings,
-            state.circle_work,
-            state.sense_work,
-        )
+        robots = (pose, arm, holding)
+        if rays.bins_shadows(pose.shape[0], scene):  # a swarm: the bins' allocation is counted
+            K.sense_into(
+                robots, tables, scene, (*moving, lights, key), readings, circle_work, sense_work
+            )
+        else:
+            sense_pass.sense_unbinned(
+                robots, tables, scene, (*moving, lights, key), readings, circle_work, sense_work
+            )
 
 
 # tick and new_state call the drive's and the sensors' kernels, in other files:

@@ -112,6 +112,12 @@ _CACHE = True
 # heap: its caller released a reference it was never given. Numba refuses to
 # compile an allocation in such a kernel.
 _UNCOUNTED: dict[str, Any] = {"_nrt": False}
+# A kernel an uncounted one calls must say it is counted. Numba compiles a
+# callee with its caller's reference counting unless the callee sets its own,
+# so a counted kernel first compiled from an uncounted caller would be built
+# uncounted (numba then refuses its allocations, or, where it allocates none,
+# the uncounted build is cached and later handed to counted callers too).
+_COUNTED: dict[str, Any] = {"_nrt": True}
 # Threads a kernel may use: numba's pool, sized at import (NUMBA_NUM_THREADS, default
 # the CPUs this process may run on); set_num_threads can only lower it. Worked out as
 # numba.config does it (numba_threads, tests/unit/common/sim2d/test_aot.py compares),

@@ -33,6 +33,7 @@ import math
 from numba import njit
 
 # The arrays' builders, in plain numpy (re-exported: the kernels' callers and tests use pucks.X).
+from common.sim2d.packs import _UNCOUNTED
 from common.sim2d.pucks_tables import FLOOR_G_MM_S2 as FLOOR_G_MM_S2
 from common.sim2d.pucks_tables import objects_table as objects_table
 from common.sim2d.pucks_tables import scene_buffers as scene_buffers
@@ -56,7 +57,7 @@ def _held_at(j, holder, offset, px, py, th):  # pragma: no cover
     return px[h] + c * lx - s * ly, py[h] + s * lx + c * ly, th[h] + offset[j, 2]
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def start_substep(n, objects, arm, px, py, th, v, w, sx, sy, h):  # pragma: no cover
     """Objects before the contacts: free ones slide on their velocity, held ones ride.
 
@@ -103,7 +104,7 @@ def keeps(a, b, n, holder, grip, fingers, arm, px, py, th):  # pragma: no cover
     return True
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def drop_pairs(pairs, n, objects, arm, px, py, th):  # pragma: no cover
     """Keep the pairs that collide (compacted in place, order kept); returns how many.
 
@@ -123,7 +124,7 @@ def drop_pairs(pairs, n, objects, arm, px, py, th):  # pragma: no cover
     return m
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def end_substep(n, objects, arm, px, py, th, v, w, sx, sy, h, cap):  # pragma: no cover
     """Objects after the contacts: pushes on held ones move their holders; velocities; friction.
 
@@ -159,7 +160,7 @@ def end_substep(n, objects, arm, px, py, th, v, w, sx, sy, h, cap):  # pragma: n
             w[i] = vy * slower / speed
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_UNCOUNTED)
 def scene_into(n, objects, arm, static_xy, static_r, buffers):  # pragma: no cover
     """The sensing pass's moving scene of objects: returns (circles, edges) counts in ``buffers``.
 

@@ -288,6 +288,12 @@ def _shadow_table(robots, scene, moving):  # pragma: no cover
     """
     lights = moving[5]
     occ_segs, static_xy, static_r = scene[6], scene[7], scene[8]
-    if occ_segs.shape[0] > 64 and robots[0].shape[0] >= SHADOW_MIN_AGENTS:
+    if bins_shadows(robots[0].shape[0], scene):
         return _shadows(lights, occ_segs, static_xy, static_r, SHADOW_BINS)
     return np.full((lights.shape[0], 0), np.inf)
+
+
+@njit(cache=_CACHE, inline="always")
+def bins_shadows(n, scene):  # pragma: no cover
+    """Whether a pass over ``n`` robots in ``scene`` bins the lights' shadows (_shadow_table)."""
+    return scene[6].shape[0] > 64 and n >= SHADOW_MIN_AGENTS

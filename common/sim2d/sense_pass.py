@@ -12,6 +12,7 @@ from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.noise import normal
 from common.sim2d.packs import (
     _CACHE,
+    _COUNTED,
     _UNCOUNTED,
     F_AMB_COS_HALF,
     F_AMB_DARK,
@@ -135,7 +136,10 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
 
 @njit(cache=_CACHE)
 def scratch_buffers(tables, scene, moving, nc):  # pragma: no cover
-    """One worker's scratch arrays: ray directions, nearest hits, candidates."""
+    """One worker's scratch arrays: ray directions, nearest hits, candidates; no shadow bins.
+
+    The last, (0, 0), is the shadow table of a pass that bins none (:func:`sense_unbinned`).
+    """
     nrays = tables[0].shape[1]
     return (
         np.empty(nrays),
@@ -145,6 +149,7 @@ def scratch_buffers(tables, scene, moving, nc):  # pragma: no cover
         np.empty(nc, dtype=np.int64),
         np.empty(moving[4].shape[0], dtype=np.int64),
         np.empty(scene[0].shape[0], dtype=np.int64),
+        np.empty((0, 0)),
     )
 
 
@@ -177,7 +182,7 @@ def _sense_range(
     key = np.uint64(moving[6])  # a plain int key would turn the words' arithmetic to floats
     prox_out, amb_out, presence_out = out
     cx, cy, cr, cown, cobj, count = circles[:6]
-    dx, dy, per_sensor, total, cand, ecand, scand = scratch
+    dx, dy, per_sensor, total, cand, ecand, scand = scratch[:7]
     n_amb = amb_local.shape[1]
     n_prox = prox_out.shape[1]
     # Noise streams per agent: proximity sensor j is stream slot * stride + j,
@@ -333,7 +338,7 @@ def _sense_range(
             ddy = y - lyy
             if not (ddx * ddx + ddy * ddy < (radius + 40.0) ** 2):
                 continue
-            if _in_light(shadows[li], ddx, ddy):
+            if shadows.shape[0] != 0 and _in_light(shadows[li], ddx, ddy):
                 hidden = False
             elif occ_segs.shape[0] > 64:  # many obstacles: only those along the way
                 hidden = _occluded_grid(
@@ -409,7 +414,7 @@ def sense(robots, tables, scene, moving, out):  # pragma: no cover
     )
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, **_COUNTED)
 def sense_into(robots, tables, scene, moving, out, buffers, scratch):  # pragma: no cover
     """:func:`sense` in the caller's ``buffers`` (:func:`circle_buffers`) and ``scratch``.
 
@@ -420,6 +425,19 @@ def sense_into(robots, tables, scene, moving, out, buffers, scratch):  # pragma:
     shadows = _shadow_table(robots, scene, moving)
     n = robots[0].shape[0]
     _sense_range(0, n, robots, tables, scene, moving, out, buffers, shadows, scratch)
+
+
+@njit(cache=_CACHE, **_UNCOUNTED)
+def sense_unbinned(robots, tables, scene, moving, out, buffers, scratch):  # pragma: no cover
+    """:func:`sense_into` for a pass that bins no shadows (not :func:`rays.bins_shadows`).
+
+    Uncounted (it allocates nothing): common/sim2d/fused.py's tick calls it for
+    every small world's pass, where counting each array of these tuples in and
+    out was a tenth of the step. Same readings: with no bins every robot walks.
+    """
+    _circles_into(robots, tables, scene, moving, buffers)
+    n = robots[0].shape[0]
+    _sense_range(0, n, robots, tables, scene, moving, out, buffers, scratch[7], scratch)
 
 
 @njit(cache=_CACHE, parallel=True)

@@ -157,3 +157,45 @@ def test_a_wandering_swarm_stays_in_the_arena_and_out_of_the_pillars() -> None:
         dx = np.maximum(np.abs(pose[:, 0] - p.x) - 30.0, 0.0)
         dy = np.maximum(np.abs(pose[:, 1] - p.y) - 30.0, 0.0)
         assert np.hypot(dx, dy).min() >= R - 1e-6, p.id
+
+
+def test_a_crowd_with_more_contacts_than_the_buffers_hold_moves_as_with_room() -> None:
+    # The drive keeps its pair table and the pair grid's offsets from tick to
+    # tick (four pairs a disc); a crowd that needs more gets them in new arrays,
+    # and must move exactly as if they had been there all along.
+    from common.sim2d import compiled, discs
+
+    world = build(40, seed=4, drive="discs", balls=0.5)
+    for i, (x, y, _) in enumerate(world.agent_pose.copy()):
+        world.move(f"k{i}", float(x), float(y), float(np.arctan2(-y, -x)))
+    for _ in range(150):  # flat out into the corner: pressed together
+        world.set_speeds_all(np.full((len(world.agents), 2), 127.0))
+        world.step()
+    world.profile = True  # the general path: compiled.discs_tick gets the drive's arguments
+    seen: list[tuple] = []
+    real = compiled.discs_tick
+    compiled.discs_tick = lambda *args: seen.append(args) or real(*args)  # type: ignore[assignment]
+    try:
+        world.step()
+    finally:
+        compiled.discs_tick = real  # type: ignore[assignment]
+    (pose, cmd, mm_s, base, radius, mass, counters, pulses, scene, circles, *rest) = seen[0]
+    width, height, substep_s, substeps, objects, arm = rest
+    n, k = len(pose), len(objects[0])
+
+    def tick(buffers: tuple) -> tuple[np.ndarray, ...]:
+        out, vel, c, o = np.empty((n, 3)), np.empty((n, 3)), counters.copy(), objects
+        o = tuple(a.copy() for a in objects)
+        discs.tick_into(pose, cmd, mm_s, base, radius, mass, c, pulses, scene, circles, width,
+                        height, substep_s, substeps, out, vel, buffers, o, arm)  # fmt: skip
+        return (out, vel, c, o[0], o[1])
+
+    roomy = discs.drive_buffers(n, k, width, height, radius)
+    cramped = list(discs.drive_buffers(n, k, width, height, radius))
+    cramped[19] = np.empty(1, dtype=np.int64)  # the grid's offsets: one cell's worth
+    cramped[20] = np.empty((1, 2), dtype=np.int64)  # the pair table: one pair
+    found = discs._pairs(pose[:, 0].copy(), pose[:, 1].copy(), radius, width, height, 56.0,
+                         1.0, roomy[13:21])  # fmt: skip
+    assert len(found) > 40, "a crowd: more pairs than discs"
+    for a, b in zip(tick(roomy), tick(tuple(cramped)), strict=True):
+        assert np.array_equal(a, b)
