@@ -70,20 +70,11 @@ SLACK_MM = 2.0
 @njit(cache=_CACHE, inline="always")
 def _arc(x, y, th, v, w, h):  # pragma: no cover
     """Pose after ``h`` s on the arc of forward speed ``v`` (mm/s) and turn rate ``w``."""
-    x1, y1, th1, _, _ = _arc_turned(x, y, th, math.cos(th), math.sin(th), v, w, h)
-    return x1, y1, th1
-
-
-@njit(cache=_CACHE, inline="always")
-def _arc_turned(x, y, th, co, si, v, w, h):  # pragma: no cover
-    """:func:`_arc` from the heading's cosine ``co`` and sine ``si``: also those of the new one."""
     if abs(w) < 1e-9:
-        return x + v * h * co, y + v * h * si, th, co, si
+        return x + v * h * math.cos(th), y + v * h * math.sin(th), th
     th1 = th + w * h
     k = v / w
-    co1 = math.cos(th1)
-    si1 = math.sin(th1)
-    return x + k * (si1 - si), y - k * (co1 - co), th1, co1, si1
+    return x + k * (math.sin(th1) - math.sin(th)), y - k * (math.cos(th1) - math.cos(th)), th1
 
 
 @njit(cache=_CACHE)
@@ -178,11 +169,6 @@ def drive_buffers(robots, k, width, height, radius):  # pragma: no cover
         np.empty(k),  # sx, sy: where each object started the substep (pucks.py)
         np.empty(k),
         layers_work(max(16, 4 * n)),  # contacts._layers_into, for as many pairs as out holds
-        # turn: each robot's heading at the last substep's end, its cosine and sine
-        # (NaN: none yet). The next substep starts from them, and a sensing pass
-        # after it reads them: two sines and cosines a robot a tick fewer, about
-        # 0.2 us of a 10-robot step.
-        np.full((robots, 3), np.nan),
     )
 
 
@@ -298,7 +284,6 @@ def tick_into(
     opose, ovel = objects[0], objects[1]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     sx, sy = buffers[21], buffers[22]
-    turn = buffers[24]
     top_speed = 0.0
     top_radius = 0.0
     for a in range(n):
@@ -336,20 +321,7 @@ def tick_into(
     pair_buffers = buffers[13:21]
     for _ in range(substeps):
         for a in range(n):
-            t = th[a]
-            if turn[a, 0] == t:  # the heading the last substep ended on: cos and sin known
-                co = turn[a, 1]
-                si = turn[a, 2]
-            else:
-                co = math.cos(t)
-                si = math.sin(t)
-            x, y, t, co, si = _arc_turned(px[a], py[a], t, co, si, v[a], w[a], substep_s)
-            px[a] = x
-            py[a] = y
-            th[a] = t
-            turn[a, 0] = t
-            turn[a, 1] = co
-            turn[a, 2] = si
+            px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
         if k:
             pucks.start_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s)
         pairs = pair_buffers[7]

@@ -225,15 +225,13 @@ def tick(state, sense, key, lights):  # pragma: no cover
         m, e = pucks.scene_into(pose.shape[0], pucks_table, arm, scene[7], scene[8], objects)
         moving = (objects[0][:m], objects[1][:m], objects[2][:m], objects[3][:m], objects[4][:e])
         robots = (pose, arm, holding)
-        # The drive's headings and their cosines and sines (discs.drive_buffers' turn).
-        scratch = (*sense_work[:8], drive_work[24])
         if rays.bins_shadows(pose.shape[0], scene):  # a swarm: the bins' allocation is counted
             K.sense_into(
-                robots, tables, scene, (*moving, lights, key), readings, circle_work, scratch
+                robots, tables, scene, (*moving, lights, key), readings, circle_work, sense_work
             )
         else:
             sense_pass.sense_unbinned(
-                robots, tables, scene, (*moving, lights, key), readings, circle_work, scratch
+                robots, tables, scene, (*moving, lights, key), readings, circle_work, sense_work
             )
 
 

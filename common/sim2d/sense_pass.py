@@ -138,9 +138,7 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
 def scratch_buffers(tables, scene, moving, nc):  # pragma: no cover
     """One worker's scratch arrays: ray directions, nearest hits, candidates; no shadow bins.
 
-    Then, (0, 0), the shadow table of a pass that bins none (:func:`sense_unbinned`),
-    and (0, 3), no robot's heading turned (the fused tick passes the drive's, discs.py's
-    ``turn``: heading, its cosine and sine, where :func:`_sense_range` may take them).
+    The last, (0, 0), is the shadow table of a pass that bins none (:func:`sense_unbinned`).
     """
     nrays = tables[0].shape[1]
     return (
@@ -152,7 +150,6 @@ def scratch_buffers(tables, scene, moving, nc):  # pragma: no cover
         np.empty(moving[4].shape[0], dtype=np.int64),
         np.empty(scene[0].shape[0], dtype=np.int64),
         np.empty((0, 0)),
-        np.empty((0, 3)),
     )
 
 
@@ -186,7 +183,6 @@ def _sense_range(
     prox_out, amb_out, presence_out = out
     cx, cy, cr, cown, cobj, count = circles[:6]
     dx, dy, per_sensor, total, cand, ecand, scand = scratch[:7]
-    turn = scratch[8]
     n_amb = amb_local.shape[1]
     n_prox = prox_out.shape[1]
     # Noise streams per agent: proximity sensor j is stream slot * stride + j,
@@ -197,12 +193,8 @@ def _sense_range(
         x = pose[a, 0]
         y = pose[a, 1]
         th = pose[a, 2]
-        if a < turn.shape[0] and turn[a, 0] == th:  # the drive turned it here: the same values
-            co = turn[a, 1]
-            si = turn[a, 2]
-        else:
-            co = math.cos(th)
-            si = math.sin(th)
+        co = math.cos(th)
+        si = math.sin(th)
         reach = agent_f[a, F_REACH]
         g = agent_i[a, I_TYPE]
 
