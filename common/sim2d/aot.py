@@ -49,6 +49,7 @@ SOURCES = (
     "kernels.py",
     "noise.py",
     "packs.py",
+    "pairs.py",
     "physics.py",
     "pucks.py",
     "pucks_tables.py",

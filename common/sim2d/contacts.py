@@ -1,9 +1,10 @@
 """The discs drive's contacts: pairs found, obstacles pushed out of, sweeps solved.
 
 The kernels common/sim2d/discs.py's tick runs each substep, once the robots
-have moved along their arcs (the model is in that module's docstring): the
-pair grid (:func:`_pairs`), the round obstacles binned in the sensing grid
-(:func:`bin_circles`), the obstacle phase (:func:`_obstacles_first`), the
+have moved along their arcs (the model is in that module's docstring) and
+the pairs that may touch are found (common/sim2d/pairs.py): the round
+obstacles binned in the sensing grid (:func:`bin_circles`), the obstacle
+phase (:func:`_obstacles_first`), the
 walls' normals and the layers from the walls outward, and the Gauss-Seidel
 sweeps (:func:`_solve_contacts`).
 """
@@ -32,16 +33,6 @@ TOLERANCE_MM = 0.25
 
 
 @njit(cache=_CACHE, inline="always")
-def _cell(v, cell, n):  # pragma: no cover
-    i = math.floor(v / cell)
-    if i < 0:
-        return 0
-    if i >= n:
-        return n - 1
-    return i
-
-
-@njit(cache=_CACHE, inline="always")
 def _static_cell(v, cell, n):  # pragma: no cover
     """A cell of the sensing grid (rays._cell: one margin cell below 0), clamped."""
     i = math.floor(v / cell) + 1
@@ -50,109 +41,6 @@ def _static_cell(v, cell, n):  # pragma: no cover
     if i >= n:
         return n - 1
     return i
-
-
-@njit(cache=_CACHE, **_COUNTED)
-def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
-    """:func:`_pairs_into`'s pairs, in new arrays where ``buffers`` are too small for them."""
-    start, out = buffers[6], buffers[7]
-    m = _pairs_into(px, py, radius, width, height, cell, margin, buffers)
-    if 0 <= m <= out.shape[0]:
-        return out[:m]
-    ncell = (math.floor(width / cell) + 1) * (math.floor(height / cell) + 1)
-    if start.shape[0] < ncell + 1:
-        start = np.empty(ncell + 1, dtype=np.int64)
-    if m < 0:  # the cells' offsets did not fit: the pairs are not counted yet
-        m = _pairs_into(px, py, radius, width, height, cell, margin, (*buffers[:6], start, out))
-    if m > out.shape[0]:
-        out = np.empty((max(m, 2 * out.shape[0]), 2), dtype=np.int64)
-        _pairs_into(px, py, radius, width, height, cell, margin, (*buffers[:6], start, out))
-    return out[:m]
-
-
-@njit(cache=_CACHE, **_UNCOUNTED)
-def _pairs_into(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
-    """How many pairs of discs are closer than their radii plus ``margin``; the first in ``out``.
-
-    ``out`` (buffers' last) gets the pairs as (M, 2) slots, as many as it has
-    rows; the count returned may be more (then :func:`_pairs` makes room and
-    asks again). -1: ``start`` is too short for this grid (nothing counted).
-
-    The discs are sorted by cell (a counting sort) and copied in that order, so
-    the scan reads neighbours from contiguous memory rather than from random
-    slots; each cell is compared with itself and four of its neighbours (the
-    other four compare with it), so each pair is found once. The pairs come
-    out in cell order, the same for the same poses. ``buffers`` are
-    discs.drive_buffers' eight for it.
-    """
-    home, slot, sk, sx, sy, sr, start, out = buffers
-    n = px.shape[0]
-    gx = (math.floor(width / cell)) + 1
-    gy = (math.floor(height / cell)) + 1
-    ncell = gx * gy
-    if start.shape[0] < ncell + 1:
-        return -1
-    for k in range(ncell + 1):
-        start[k] = 0
-    for a in range(n):
-        k = _cell(px[a], cell, gx) * gy + _cell(py[a], cell, gy)
-        home[a] = k
-        start[k] += 1
-    # start[k]: the end of cell k's run; walking the discs backwards, each takes
-    # the last free place of its cell's run (so a cell's discs stay in slot
-    # order), and start[k] ends at the run's start.
-    for k in range(1, ncell):
-        start[k] += start[k - 1]
-    start[ncell] = n
-    for a in range(n - 1, -1, -1):
-        k = home[a]
-        start[k] -= 1
-        slot[start[k]] = a
-        sk[start[k]] = k  # each sorted disc's cell, read in order below
-    for p in range(n):
-        a = slot[p]
-        sx[p] = px[a]
-        sy[p] = py[a]
-        sr[p] = radius[a]
-    m = 0
-    # The sorted discs in order are the cells in order with their discs: walking
-    # the discs visits the same (cell, disc) sequence as walking every cell,
-    # without the empty cells (most of them in a small arena; 58,000 cells for
-    # 10,000 robots in the bench's swarm). Measured at 10,000: 1.17 ms against
-    # 1.32 walking the cells (with home[slot[p]] for the cell: 1.30).
-    for p in range(n):
-        k = sk[p]
-        ix = k // gy
-        iy = k - ix * gy
-        x = sx[p]
-        y = sy[p]
-        r = sr[p] + margin
-        # Own cell (later discs only), then four neighbours: (ix, iy + 1)
-        # and the three cells of the next column.
-        for nb in range(5):
-            if nb == 0:
-                lo = p + 1
-                hi = start[k + 1]
-            else:
-                jx = ix + (0 if nb == 1 else 1)
-                jy = iy + (1 if nb == 1 else nb - 3)
-                if jx >= gx or jy < 0 or jy >= gy:
-                    continue
-                j = jx * gy + jy
-                lo = start[j]
-                hi = start[j + 1]
-            for q in range(lo, hi):
-                dx = sx[q] - x
-                dy = sy[q] - y
-                lim = r + sr[q]
-                if dx * dx + dy * dy < lim * lim:
-                    if m < out.shape[0]:
-                        a = slot[p]
-                        b = slot[q]
-                        out[m, 0] = min(a, b)
-                        out[m, 1] = max(a, b)
-                    m += 1
-    return m
 
 
 @njit(cache=_CACHE, inline="always")

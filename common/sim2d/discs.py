@@ -18,7 +18,7 @@ The model, per substep (the world's ``substeps``, at most 10 ms each):
   robot into a wall it touches (the other one takes the whole push); a disc
   overlapping an obstacle's edge, a round obstacle or the arena's border is
   pushed straight out of it. Gauss-Seidel sweeps over the contacts found at
-  the start of the substep, from the walls outward (:func:`_layers`), until
+  the start of the substep, from the walls outward (contacts._layers), until
   no pair overlaps by more than TOLERANCE_MM; the last word always goes to
   the obstacles, so a robot never ends a substep inside a wall or a pillar,
   while two robots pressed together in a crowd may still overlap by a little
@@ -44,13 +44,11 @@ import math
 import numpy as np
 from numba import njit
 
-from common.sim2d import contacts, pucks
+from common.sim2d import contacts, pairs, pucks
 from common.sim2d.contacts import (
     LAYER_ORDER,
     _layers_into,
     _obstacles_first,
-    _pairs,
-    _pairs_into,
     _solve_contacts,
     _wall_normals,
     bin_circles,
@@ -58,6 +56,7 @@ from common.sim2d.contacts import (
 )
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _COUNTED, _UNCOUNTED
+from common.sim2d.pairs import _pairs, _pairs_into
 
 _CACHE = True
 
@@ -411,4 +410,4 @@ def warm_up() -> None:
 
 
 # tick_into calls the contact kernels: their edits must reach its cache too.
-stamp_with_callees(__name__, contacts, pucks)
+stamp_with_callees(__name__, contacts, pairs, pucks)

@@ -48,19 +48,18 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from common.sim2d import contacts, discs, packs, pucks
+from common.sim2d import contacts, discs, packs, pairs, pucks
 from common.sim2d.contacts import (
     _UNCOUNTED,
-    _cell,
     _layers,
     _near_obstacle,
     _out_of_obstacles,
-    _pairs,
     _solve_contacts,
     _wall_normals,
 )
 from common.sim2d.discs import SLACK_MM, _arc
 from common.sim2d.jitcache import stamp_with_callees
+from common.sim2d.pairs import _cell, _pairs
 
 _CACHE = True
 
@@ -123,7 +122,7 @@ def _robots_range(
     """Robots ``lo`` to ``hi - 1``: wheels (``first`` substep), arc, pair cell, obstacle test.
 
     ``grid``: (substep s, margin, width, height, cell, gx, gy). As
-    discs.tick_into and contacts._pairs and _obstacles_first do it, robot by
+    discs.tick_into and pairs._pairs and _obstacles_first do it, robot by
     robot, except that a near robot's push out is written to ``qx``, ``qy``
     (``split``'s first two), and each robot is listed under the share of the
     cells its cell is in (``seg``: this chunk's row of counts; ``ranges``
@@ -200,7 +199,7 @@ def _segment(s, n, k, chunks):  # pragma: no cover
 
 @njit(cache=_CACHE, **_UNCOUNTED)
 def _sort_range(r, ranges, n, k, ncell, radius, buffers, start, split):  # pragma: no cover
-    """contacts._pairs' counting sort for the ``r``-th of ``ranges`` shares of the cells.
+    """pairs._pairs' counting sort for the ``r``-th of ``ranges`` shares of the cells.
 
     Its discs are the chunks' lists for this share (in slot order); those of
     the shares below are counted, not placed, so each share's runs start where
@@ -244,7 +243,7 @@ def _sort_range(r, ranges, n, k, ncell, radius, buffers, start, split):  # pragm
 def _scan_range(
     p0, p1, start, buffers, gx, gy, margin, out, n, k, objects, arm
 ):  # pragma: no cover
-    """contacts._pairs' scan of sorted discs ``p0`` to ``p1 - 1``, into ``out``: returns how many.
+    """pairs._pairs' scan of sorted discs ``p0`` to ``p1 - 1``, into ``out``: returns how many.
 
     The pairs pucks.drop_pairs would drop are left out here (with ``k``
     objects). Past ``out``'s length it counts without writing: the caller
@@ -406,7 +405,7 @@ def tick_into_split(
                     chunks + c,
                     ranges,
                 )
-        # contacts._pairs' counting sort, on the cells found above: each thread
+        # pairs._pairs' counting sort, on the cells found above: each thread
         # sorts the discs of its share of the cells (_sort_range).
         for r in prange(ranges):
             _sort_range(r, ranges, n, k, ncell, radius, buffers, start, split)
@@ -592,4 +591,4 @@ def warm_up() -> None:
 
 
 # The split tick calls the drive's and the contacts' kernels: their edits must reach its cache.
-stamp_with_callees(__name__, discs, contacts, pucks)
+stamp_with_callees(__name__, discs, contacts, pairs, pucks)

@@ -31,6 +31,7 @@ cached function.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numba import njit, typeof, types
@@ -39,7 +40,7 @@ from numba.core.runtime.nrtdynmod import _meminfo_struct_type
 from numba.experimental import structref
 from numba.extending import intrinsic
 
-from common.sim2d import contacts, discs, noise, packs, pucks, rays, sense_pass
+from common.sim2d import contacts, discs, noise, packs, pairs, pucks, rays, sense_pass
 from common.sim2d import kernels as K
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _UNCOUNTED
@@ -151,7 +152,7 @@ def _borrowed(typingctx, state):  # pragma: no cover
     data_type = state.get_data_type()
     fields = types.Tuple([state.field_dict[name] for name in FIELDS])
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context, builder, signature, args):
         ref = cgutils.create_struct_proxy(state)(context, builder, value=args[0])
         meminfo = builder.bitcast(ref.meminfo, _meminfo_struct_type.as_pointer())
         data = builder.load(cgutils.gep(builder, meminfo, 0, 3))  # NRT_MemInfo's data
@@ -178,6 +179,7 @@ def tick(state, sense, key, lights):  # pragma: no cover
     instead of this one.) Uncounted: it reads the state's fields borrowed
     (:func:`_borrowed`), allocates nothing and returns no array.
     """
+    fields: tuple[Any, ...] = _borrowed(state)  # type: ignore[call-arg]  # numba: (context, state)
     (
         pose,
         vel,
@@ -197,7 +199,7 @@ def tick(state, sense, key, lights):  # pragma: no cover
         drive_work,
         circle_work,
         sense_work,
-    ) = _borrowed(state)
+    ) = fields
     mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = drive
     width, height, substep_s = geometry
     discs.tick_into(
@@ -238,7 +240,7 @@ def tick(state, sense, key, lights):  # pragma: no cover
 # tick and new_state call the drive's and the sensors' kernels, in other files:
 # their edits must reach these caches too (it crashed, the one time a cached
 # tick called old code with new layouts).
-stamp_with_callees(__name__, discs, contacts, pucks, packs, noise, rays, sense_pass)
+stamp_with_callees(__name__, discs, contacts, pairs, pucks, packs, noise, rays, sense_pass)
 
 
 # The types of tick's other arguments: a flag, the noise key, the lights' table
@@ -260,7 +262,7 @@ def entry(state: TickState) -> Callable[[TickState, bool, np.uint64, np.ndarray]
     if cres is None:
         tick.compile(sig)
         cres = tick.overloads[sig]
-    return cres.entry_point  # type: ignore[attr-defined]  # numba's internal, untyped
+    return cres.entry_point  # numba's internal, untyped
 
 
 def warm_up() -> None:
