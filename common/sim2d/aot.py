@@ -150,7 +150,7 @@ def describe(value: Any) -> object:
 
 
 def state_sample() -> tuple[Any, ...]:
-    """fused.new_state's arguments as the World passes them (world_tick._fused_state), smallest.
+    """fused.new_state's arguments as the World passes them (world_tick._new_fused_state), smallest.
 
     The build compiles new_state for these arguments' types and compiled.py
     checks each call's against them: one sample, so the two cannot disagree.
