@@ -59,7 +59,7 @@ from common.sim2d.contacts import (
 )
 from common.sim2d.discs import SLACK_MM, _arc
 from common.sim2d.jitcache import stamp_with_callees
-from common.sim2d.pairs import _cell, _pairs
+from common.sim2d.pairs import _cell, _neighbours, _pairs
 
 _CACHE = True
 
@@ -262,17 +262,7 @@ def _scan_range(
         y = sy[p]
         r = sr[p] + margin
         for nb in range(5):
-            if nb == 0:
-                lo = p + 1
-                hi = start[kc + 1]
-            else:
-                jx = ix + (0 if nb == 1 else 1)
-                jy = iy + (1 if nb == 1 else nb - 3)
-                if jx >= gx or jy < 0 or jy >= gy:
-                    continue
-                j = jx * gy + jy
-                lo = start[j]
-                hi = start[j + 1]
+            lo, hi = _neighbours(nb, p, kc, ix, iy, gx, gy, start)
             for q in range(lo, hi):
                 dx = sx[q] - x
                 dy = sy[q] - y

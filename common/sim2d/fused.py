@@ -180,26 +180,9 @@ def tick(state, sense, key, lights):  # pragma: no cover
     (:func:`_borrowed`), allocates nothing and returns no array.
     """
     fields: tuple[Any, ...] = _borrowed(state)  # type: ignore[call-arg]  # numba: (context, state)
-    (
-        pose,
-        vel,
-        cmd,
-        counters,
-        arm,
-        holding,
-        drive,
-        circles,
-        tables,
-        scene,
-        pucks_table,
-        objects,
-        readings,
-        geometry,
-        substeps,
-        drive_work,
-        circle_work,
-        sense_work,
-    ) = fields
+    pose, vel, cmd, counters, arm, holding = fields[:6]  # in FIELDS' order
+    drive, circles, tables, scene, pucks_table, objects = fields[6:12]
+    readings, geometry, substeps, drive_work, circle_work, sense_work = fields[12:]
     mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = drive
     width, height, substep_s = geometry
     discs.tick_into(

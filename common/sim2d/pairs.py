@@ -27,6 +27,24 @@ def _cell(v, cell, n):  # pragma: no cover
     return i
 
 
+@njit(cache=_CACHE, inline="always")
+def _neighbours(nb, p, k, ix, iy, gx, gy, start):  # pragma: no cover
+    """The run of sorted discs that disc ``p`` (in cell ``k`` = (ix, iy)) is compared with.
+
+    ``nb`` 0: its own cell's later discs; 1 to 4: the cells (ix, iy + 1) and
+    the next column's three, an empty run where the cell is off the grid.
+    Each pair of neighbouring cells is so compared once.
+    """
+    if nb == 0:
+        return p + 1, start[k + 1]
+    jx = ix + (0 if nb == 1 else 1)
+    jy = iy + (1 if nb == 1 else nb - 3)
+    if jx >= gx or jy < 0 or jy >= gy:
+        return 0, 0
+    j = jx * gy + jy
+    return start[j], start[j + 1]
+
+
 @njit(cache=_CACHE, **_COUNTED)
 def _pairs(px, py, radius, width, height, cell, margin, buffers):  # pragma: no cover
     """:func:`_pairs_into`'s pairs, in new arrays where ``buffers`` are too small for them."""
@@ -102,20 +120,8 @@ def _pairs_into(px, py, radius, width, height, cell, margin, buffers):  # pragma
         x = sx[p]
         y = sy[p]
         r = sr[p] + margin
-        # Own cell (later discs only), then four neighbours: (ix, iy + 1)
-        # and the three cells of the next column.
         for nb in range(5):
-            if nb == 0:
-                lo = p + 1
-                hi = start[k + 1]
-            else:
-                jx = ix + (0 if nb == 1 else 1)
-                jy = iy + (1 if nb == 1 else nb - 3)
-                if jx >= gx or jy < 0 or jy >= gy:
-                    continue
-                j = jx * gy + jy
-                lo = start[j]
-                hi = start[j + 1]
+            lo, hi = _neighbours(nb, p, k, ix, iy, gx, gy, start)
             for q in range(lo, hi):
                 dx = sx[q] - x
                 dy = sy[q] - y
