@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from common import keys
+from common import keys, qos
 from common.client.lab_client import LabClient, RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
 from common.lab_errors import LabError, NotFound, NotLoggedIn
@@ -516,6 +516,7 @@ class AgentClient:
                 session.seal(
                     key, ControllerOutput(request_id=rid, lines=lines, done=True, reason=reason)
                 ),
+                **qos.WORDS,
             )
         except Exception as exc:  # the session is closing
             log.debug("could not report the end of %s: %s", rid, exc)

@@ -31,7 +31,7 @@ import nacl.signing
 import nacl.utils
 import zenoh
 
-from common import acl, keys
+from common import acl, keys, qos
 from common.auth import (
     LOGIN_FIND_PAUSE_S,
     LOGIN_FIND_S,
@@ -542,7 +542,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
             inbox = keys.user_inbox(self.realm, user)
             for box_key in where.session_box_keys:
                 message = self._encrypt(user, box_key, text)
-                self.z.put(inbox, self.session.seal(inbox, message))
+                self.z.put(inbox, self.session.seal(inbox, message), **qos.WORDS)
             return True
         if where.mailbox_key is None:
             raise NotFound(f"{user} has never logged in: there is no key to encrypt to yet")

@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from common import keys
+from common import keys, qos
 from common.auth import AuthError, Session, Verifier
 from common.keys import AliveKind
 from common.lab_errors import LabError, NotAllowed
@@ -222,7 +222,7 @@ class RoomCalls:
             )
         else:
             key = keys.ctx_in(self.realm, ctx)
-            self.z.put(key, self._seal(key, ChatSay(text=text)))
+            self.z.put(key, self._seal(key, ChatSay(text=text)), **qos.WORDS)
 
     def kick(self, ctx: str, user: str, reason: str = "") -> None:
         """Remove ``user`` from a room (needs the kick permission there)."""

@@ -26,7 +26,7 @@ from pathlib import Path
 import msgspec
 import zenoh
 
-from common import acl, keys
+from common import acl, keys, qos
 from common.audit import AuditReporter
 from common.auth import AuthError, Principal, Verifier
 from common.client.service_login import ServiceLogin
@@ -187,7 +187,7 @@ class ChatRoom(Service):
     # -- lifecycle
 
     def on_start(self) -> None:
-        self._publisher = self.track(self.session.declare_publisher(self._events_key))
+        self._publisher = self.track(self.session.declare_publisher(self._events_key, **qos.WORDS))
         self._feed = RevocationFeed(
             self.session, self.realm, self.registry_key, self.verifier, self._on_revoked
         )

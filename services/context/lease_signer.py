@@ -20,7 +20,7 @@ from collections.abc import Callable
 import msgspec
 import zenoh
 
-from common import keys
+from common import keys, qos
 from common.auth import AuthError, Verifier
 from common.messages import Lease, Message, SessionToken, SignedToken
 from common.world.leasemac import check_world_token, seal_key
@@ -67,7 +67,7 @@ class LeaseSigner:
         key = keys.agent_lease(self.realm, self.world, agent)
         pub = self._pubs.get(agent)
         if pub is None:
-            pub = self._pubs[agent] = self.session.declare_publisher(key)
+            pub = self._pubs[agent] = self.session.declare_publisher(key, **qos.WORDS)
         lease = Lease(
             lease_id=run.lease_id,
             world=self.world,

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import zenoh
 
-from common import acl, keys
+from common import acl, keys, qos
 from common.auth import Principal, Verifier
 from common.controller.upload_gate import PrecheckError, precheck
 from common.messages import (
@@ -286,7 +286,7 @@ class QueueRequests:
                 return
             message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
             try:
-                self.session.put(key, self._seal(key, message))
+                self.session.put(key, self._seal(key, message), **qos.STOP)
             except Exception as exc:  # the session closing at shutdown
                 self.log.warning("could not tell world %s of the stop: %s", self.world, exc)
 

@@ -45,7 +45,7 @@ import time
 
 import zenoh
 
-from common import keys
+from common import keys, qos
 from common.auth import Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
@@ -328,7 +328,7 @@ class RunnerService(Service):
 
     def report(self, key: str, message: ControllerOutput) -> None:
         try:
-            self.session.put(key, self.login.session.seal(key, message))
+            self.session.put(key, self.login.session.seal(key, message), **qos.WORDS)
         except Exception as exc:  # the session closing at shutdown
             self.log.debug("could not report on %s: %s", key, exc)
 
