@@ -11,6 +11,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 import zenoh
@@ -38,7 +39,7 @@ def sessions(router: Router) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
 
 
 def lines_through_a_flood(
-    router: Router, sender: zenoh.Session, receiver: zenoh.Session, line_qos: dict[str, object]
+    router: Router, sender: zenoh.Session, receiver: zenoh.Session, line_qos: dict[str, Any]
 ) -> tuple[list[bytes], list[bytes], int]:
     """Lines put with ``line_qos`` among frames flooding a slow subscriber: (sent, got, frames)."""
     frames_key = keys.world_frame(router.realm, "w1")
