@@ -178,14 +178,6 @@ def _out_of_obstacles(x, y, r, width, height, scene, circ_start, circ_items):  #
     return x, y
 
 
-@njit(cache=_CACHE, **_COUNTED)
-def _layers(pairs, near, held, m, n, px, py, radius, layer):  # pragma: no cover
-    """:func:`_layers_into`'s order of the pairs, in arrays made for them."""
-    work = layers_work(pairs.shape[0])
-    _layers_into(pairs, near, held, m, n, px, py, radius, layer, work)
-    return work[LAYER_ORDER, : pairs.shape[0]].copy()
-
-
 # The row of layers_work that _layers_into leaves the order of the pairs in.
 LAYER_ORDER = 8
 
@@ -299,6 +291,27 @@ def _layers_into(pairs, near, held, m, n, px, py, radius, layer, work):  # pragm
     for q in range(count):
         order[runs[key[q]]] = q
         runs[key[q]] += 1
+
+
+@njit(cache=_CACHE, inline="always")
+def sweeps(pairs, work, m, discs, walls, flags):  # pragma: no cover
+    """A substep's pair sweeps, after its obstacle phase: walls' normals, layers, sweeps.
+
+    ``m``: the obstacle phase's count of discs near an obstacle; ``discs``
+    (px, py, radius, mass); ``walls`` (width, height, scene, circles);
+    ``flags`` (near, is_near, pushed, moved, count, held, layer, normals), the
+    drive's work arrays; ``work``: :func:`layers_work` for at least these pairs.
+    """
+    px, py, radius, mass = discs
+    width, height, scene, circles = walls
+    near, is_near, pushed, moved, count, held, layer, normals = flags
+    _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
+    _layers_into(pairs, near, held, m, px.shape[0], px, py, radius, layer, work)
+    order = work[LAYER_ORDER, : pairs.shape[0]]
+    _solve_contacts(
+        pairs, order, px, py, radius, mass, width, height, scene, circles, near, m, is_near,
+        pushed, moved, normals, count,
+    )  # fmt: skip
 
 
 @njit(cache=_CACHE, **_UNCOUNTED)

@@ -18,7 +18,7 @@ The model, per substep (the world's ``substeps``, at most 10 ms each):
   robot into a wall it touches (the other one takes the whole push); a disc
   overlapping an obstacle's edge, a round obstacle or the arena's border is
   pushed straight out of it. Gauss-Seidel sweeps over the contacts found at
-  the start of the substep, from the walls outward (contacts._layers), until
+  the start of the substep, from the walls outward (contacts._layers_into), until
   no pair overlaps by more than TOLERANCE_MM; the last word always goes to
   the obstacles, so a robot never ends a substep inside a wall or a pillar,
   while two robots pressed together in a crowd may still overlap by a little
@@ -45,15 +45,7 @@ import numpy as np
 from numba import njit
 
 from common.sim2d import contacts, pairs, pucks
-from common.sim2d.contacts import (
-    LAYER_ORDER,
-    _layers_into,
-    _obstacles_first,
-    _solve_contacts,
-    _wall_normals,
-    bin_circles,
-    layers_work,
-)
+from common.sim2d.contacts import _obstacles_first, bin_circles, layers_work, sweeps
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _COUNTED, _UNCOUNTED
 from common.sim2d.pairs import _pairs, _pairs_into
@@ -154,7 +146,7 @@ def drive_buffers(robots, k, width, height, radius):  # pragma: no cover
         np.empty(n, dtype=np.bool_),  # pushed: by a pair, this substep
         np.empty(n, dtype=np.bool_),  # moved: by a pair, this sweep
         np.empty(n, dtype=np.bool_),  # held: pushed out of an obstacle
-        np.empty(n, dtype=np.int64),  # layer (_layers)
+        np.empty(n, dtype=np.int64),  # layer (contacts._layers_into)
         np.empty((n, 2, 2)),  # normals, count (_wall_normals)
         np.zeros(n, dtype=np.int64),
         np.empty(n, dtype=np.int64),  # _pairs: home, slot, sk, sx, sy, sr, start, out
@@ -184,7 +176,7 @@ def _contacts(
     """
     px, py, th, radius, mass = discs
     margin, width, height = limits
-    near, is_near, pushed, moved, count, held, layer, normals = flags
+    near, is_near, pushed, moved, count, held = flags[:6]
     if k:
         pairs = pairs[: pucks.drop_pairs(pairs, n, objects, arm, px, py, th)]
     m = _obstacles_first(
@@ -207,27 +199,7 @@ def _contacts(
         # (No two discs close: the sweeps would move nobody, and the walls'
         # normals and the layers serve only them: most substeps of a sparse
         # world, about 0.5 us of a 10-robot tick.)
-        _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
-        _layers_into(pairs, near, held, m, px.shape[0], px, py, radius, layer, work)
-        _solve_contacts(
-            pairs,
-            work[LAYER_ORDER, : pairs.shape[0]],
-            px,
-            py,
-            radius,
-            mass,
-            width,
-            height,
-            scene,
-            circles,
-            near,
-            m,
-            is_near,
-            pushed,
-            moved,
-            normals,
-            count,
-        )
+        sweeps(pairs, work, m, (px, py, radius, mass), (width, height, scene, circles), flags)
 
 
 @njit(cache=_CACHE, **_COUNTED)

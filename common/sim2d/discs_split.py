@@ -51,11 +51,10 @@ from numba import njit, prange
 from common.sim2d import contacts, discs, packs, pairs, pucks
 from common.sim2d.contacts import (
     _UNCOUNTED,
-    _layers,
     _near_obstacle,
     _out_of_obstacles,
-    _solve_contacts,
-    _wall_normals,
+    layers_work,
+    sweeps,
 )
 from common.sim2d.discs import SLACK_MM, _arc
 from common.sim2d.jitcache import stamp_with_callees
@@ -444,27 +443,9 @@ def tick_into_split(
                 py[a] = qy[a]
                 m += 1
         if pairs.shape[0] != 0:
-            _wall_normals(near, m, px, py, radius, width, height, scene, circles, normals, count)
-            order = _layers(pairs, near, held, m, nd, px, py, radius, layer)
-            _solve_contacts(
-                pairs,
-                order,
-                px,
-                py,
-                radius,
-                mass,
-                width,
-                height,
-                scene,
-                circles,
-                near,
-                m,
-                is_near,
-                pushed,
-                moved,
-                normals,
-                count,
-            )
+            flags = (near, is_near, pushed, moved, count, held, layer, normals)
+            work = layers_work(pairs.shape[0])
+            sweeps(pairs, work, m, (px, py, radius, mass), (width, height, scene, circles), flags)
         if k:
             pucks.end_substep(
                 n, objects, arm, px, py, th, v, w, start_x, start_y, substep_s, robot_speed
