@@ -180,21 +180,9 @@ def _contacts(
     if k:
         pairs = pairs[: pucks.drop_pairs(pairs, n, objects, arm, px, py, th)]
     m = _obstacles_first(
-        px,
-        py,
-        radius,
-        margin,
-        width,
-        height,
-        scene,
-        circles,
-        near,
-        is_near,
-        pushed,
-        moved,
-        count,
-        held,
-    )
+        px, py, radius, margin, width, height, scene, circles, near, is_near, pushed, moved,
+        count, held,
+    )  # fmt: skip
     if pairs.shape[0] != 0:
         # (No two discs close: the sweeps would move nobody, and the walls'
         # normals and the layers serve only them: most substeps of a sparse
@@ -290,6 +278,9 @@ def tick_into(
     # cover it, as its holder's own disc is within the margin of it.)
     cell = 2.0 * top_radius + margin + 1.0
     pair_buffers = buffers[13:21]
+    discs = (px, py, th, radius, mass)  # what _contacts takes, grouped
+    limits = (margin, width, height)
+    flags = (near, is_near, pushed, moved, count, held, layer, normals)
     for _ in range(substeps):
         for a in range(n):
             px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], substep_s)
@@ -299,31 +290,11 @@ def tick_into(
         found = _pairs_into(px, py, radius, width, height, cell, margin, pair_buffers)
         if 0 <= found <= pairs.shape[0]:
             _contacts(
-                pairs[:found],
-                buffers[23],
-                n,
-                k,
-                objects,
-                arm,
-                (px, py, th, radius, mass),
-                (margin, width, height),
-                scene,
-                circles,
-                (near, is_near, pushed, moved, count, held, layer, normals),
+                pairs[:found], buffers[23], n, k, objects, arm, discs, limits, scene, circles, flags
             )
         else:  # more pairs than the buffers hold (a crowd): in arrays made for them
             _contacts_grown(
-                n,
-                k,
-                objects,
-                arm,
-                (px, py, th, radius, mass),
-                (margin, width, height),
-                cell,
-                scene,
-                circles,
-                pair_buffers,
-                (near, is_near, pushed, moved, count, held, layer, normals),
+                n, k, objects, arm, discs, limits, cell, scene, circles, pair_buffers, flags
             )
         if k:
             pucks.end_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s, robot_speed)
