@@ -16,7 +16,7 @@ from contextlib import contextmanager
 
 import zenoh
 
-from common import keys
+from common import keys, qos
 from common.auth import AuthError, Principal
 from common.messages import AuditReport, Message
 
@@ -52,7 +52,7 @@ class AuditReporter:
                 detail=detail[:256],
                 source=source[:256],
             )
-            self.session.put(self.key, self.seal(self.key, message))
+            self.session.put(self.key, self.seal(self.key, message), **qos.WORDS)
         except Exception as exc:  # not logged in yet, session closing: the log keeps it
             log.warning("audit line not reported (%s %s %s): %s", actor, action, target, exc)
 

@@ -20,8 +20,9 @@ from typing import Any
 
 import zenoh
 
-# Chat lines, controller output, request statuses and queue events, private mail,
-# leases: a person reads each one (or a run waits on it).
+# Chat lines, controller output, request statuses and queue events, private mail and
+# kick notices, grading's changes and scores, leases, revocations, audit lines: a
+# person reads each one, or a run or a security check waits on it.
 WORDS: dict[str, Any] = {
     "priority": zenoh.Priority.DATA_HIGH,
     "congestion_control": zenoh.CongestionControl.BLOCK,

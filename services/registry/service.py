@@ -23,7 +23,7 @@ import nacl.public
 import nacl.signing
 import zenoh
 
-from common import acl, keys
+from common import acl, keys, qos
 from common.auth import (
     LOGIN_WAIT_S,
     AuthError,
@@ -126,7 +126,7 @@ class Registry(AdminRequests, Service):
             self.verifier.revoke(rec.session_id, rec.expires_at)
         self._watch = AliveWatch(self.session, keys.alive_all(self.realm))
         self._revocation_pub = self.track(
-            self.session.declare_publisher(keys.registry_revocations(self.realm))
+            self.session.declare_publisher(keys.registry_revocations(self.realm), **qos.WORDS)
         )
         # argon2id releases the GIL: one worker per core checks passwords in parallel.
         self.serve(
