@@ -186,7 +186,11 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
     def steps(sub: str) -> list[str]:
         return [c.status for c in changes if c.submission == sub]
 
-    wait_for(lambda: steps(subs["carol"]) == ["queued", "running", "graded"], 10, "changes")
+    try:
+        wait_for(lambda: steps(subs["carol"]) == ["queued", "running", "graded"], 10, "changes")
+    except AssertionError:
+        seen = steps(subs["carol"])
+        raise AssertionError(f"carol's changes, as the watch saw them: {seen}") from None
     assert {(c.course, c.assignment) for c in changes} == {(COURSE, "reach-goal")}
     (table,) = watcher.class_tables()  # the one course ida teaches
     rows = {r.user: r for r in table.rows}
