@@ -17,6 +17,10 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from common.sim2d import rays
+from common.sim2d.jitcache import stamp_with_callees
+from common.sim2d.rays import _cell  # the sensing grid's cells: the static scene is binned in it
+
 _CACHE = True
 # Kernels that allocate nothing and return no array: no reference counting
 # (common/sim2d/packs.py, _UNCOUNTED, says why and what it requires).
@@ -30,17 +34,6 @@ _COUNTED: dict[str, Any] = {"_nrt": True}  # packs.py's _COUNTED says why it is 
 # order: 27.6 mm of overlap with 4 fixed sweeps, 11 with 10, 4.4 with 20).
 MAX_SWEEPS = 16
 TOLERANCE_MM = 0.25
-
-
-@njit(cache=_CACHE, inline="always")
-def _static_cell(v, cell, n):  # pragma: no cover
-    """A cell of the sensing grid (rays._cell: one margin cell below 0), clamped."""
-    i = math.floor(v / cell) + 1
-    if i < 0:
-        return 0
-    if i >= n:
-        return n - 1
-    return i
 
 
 @njit(cache=_CACHE, inline="always")
@@ -127,7 +120,7 @@ def _near_obstacle(
     reach = r + margin
     if x < reach or y < reach or x > width - reach or y > height - reach:
         return True
-    k = _static_cell(x, grid_cell, grid_nx) * grid_ny + _static_cell(y, grid_cell, grid_ny)
+    k = _cell(x, grid_cell, grid_nx) * grid_ny + _cell(y, grid_cell, grid_ny)
     for p in range(grid_start[k], grid_start[k + 1]):
         s = grid_items[p]
         dx, dy = _from_segment(x, y, segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3])
@@ -155,7 +148,7 @@ def _out_of_obstacles(x, y, r, width, height, scene, circ_start, circ_items):  #
         scene[5],
     )
     static_xy, static_r = scene[7], scene[8]
-    k = _static_cell(x, grid_cell, grid_nx) * grid_ny + _static_cell(y, grid_cell, grid_ny)
+    k = _cell(x, grid_cell, grid_nx) * grid_ny + _cell(y, grid_cell, grid_ny)
     for p in range(grid_start[k], grid_start[k + 1]):
         s = grid_items[p]
         x, y = _out_of_segment(x, y, r, segs[s, 0], segs[s, 1], segs[s, 2], segs[s, 3])
@@ -354,7 +347,7 @@ def _wall_normals(
         elif y >= height - reach:
             normals[a, c, 0], normals[a, c, 1] = 0.0, -1.0
             c += 1
-        k = _static_cell(x, grid_cell, grid_nx) * grid_ny + _static_cell(y, grid_cell, grid_ny)
+        k = _cell(x, grid_cell, grid_nx) * grid_ny + _cell(y, grid_cell, grid_ny)
         for p in range(grid_start[k], grid_start[k + 1]):
             if c == 2:
                 break
@@ -507,3 +500,7 @@ def _solve_contacts(
             px[a], py[a] = _out_of_obstacles(
                 px[a], py[a], radius[a], width, height, scene, circ_start, circ_items
             )
+
+
+# These kernels inline rays.py's helpers: their edits must reach these caches.
+stamp_with_callees(__name__, rays)

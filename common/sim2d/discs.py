@@ -44,7 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
-from common.sim2d import contacts, pairs, pucks
+from common.sim2d import contacts, pairs, pucks, rays
 from common.sim2d.contacts import _obstacles_first, bin_circles, layers_work, sweeps
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _COUNTED, _UNCOUNTED
@@ -353,4 +353,4 @@ def warm_up() -> None:
 
 
 # tick_into calls the contact kernels: their edits must reach its cache too.
-stamp_with_callees(__name__, contacts, pairs, pucks)
+stamp_with_callees(__name__, contacts, pairs, pucks, rays)

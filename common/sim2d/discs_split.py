@@ -48,7 +48,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from common.sim2d import contacts, discs, packs, pairs, pucks
+from common.sim2d import contacts, discs, packs, pairs, pucks, rays
 from common.sim2d.contacts import (
     _UNCOUNTED,
     _near_obstacle,
@@ -562,4 +562,4 @@ def warm_up() -> None:
 
 
 # The split tick calls the drive's and the contacts' kernels: their edits must reach its cache.
-stamp_with_callees(__name__, discs, contacts, pairs, pucks)
+stamp_with_callees(__name__, discs, contacts, pairs, pucks, rays)

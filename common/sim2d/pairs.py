@@ -12,19 +12,18 @@ import math
 import numpy as np
 from numba import njit
 
+from common.sim2d import contacts, rays
 from common.sim2d.contacts import _COUNTED, _UNCOUNTED
+from common.sim2d.jitcache import stamp_with_callees
+from common.sim2d.rays import clamped_cell
 
 _CACHE = True
 
 
 @njit(cache=_CACHE, inline="always")
 def _cell(v, cell, n):  # pragma: no cover
-    i = math.floor(v / cell)
-    if i < 0:
-        return 0
-    if i >= n:
-        return n - 1
-    return i
+    """The pair grid's cell of a coordinate (no margin cell), clamped to the grid."""
+    return clamped_cell(v, cell, n, 0)
 
 
 @njit(cache=_CACHE, inline="always")
@@ -134,3 +133,8 @@ def _pairs_into(px, py, radius, width, height, cell, margin, buffers):  # pragma
                         out[m, 1] = max(a, b)
                     m += 1
     return m
+
+
+# These kernels inline rays.py's helper and take contacts.py's flags: their edits
+# must reach these caches.
+stamp_with_callees(__name__, contacts, rays)

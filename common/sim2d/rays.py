@@ -77,7 +77,17 @@ def _point_segment_d2(px, py, seg):  # pragma: no cover
 @njit(cache=_CACHE, inline="always")
 def _cell(v, cell, n):  # pragma: no cover
     """Grid index of a coordinate (one margin cell below 0), clamped to the grid."""
-    i = math.floor(v / cell) + 1
+    return clamped_cell(v, cell, n, 1)
+
+
+@njit(cache=_CACHE, inline="always")
+def clamped_cell(v, cell, n, below):  # pragma: no cover
+    """The index of the cell of size ``cell`` holding ``v`` in a grid of ``n`` cells, clamped.
+
+    ``below``: how many margin cells the grid has below 0 (the sensing grid's
+    one, rays._cell; none for the drive's pair grid).
+    """
+    i = math.floor(v / cell) + below
     if i < 0:
         return 0
     if i >= n:
