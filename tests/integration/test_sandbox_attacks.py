@@ -188,6 +188,7 @@ class Filler(Controller):
     )
     reason, _ = attack.finish()
     text = attack.text()
+    assert "wrote MB " in text, (reason, text)
     written = int(text.split("wrote MB ")[1].split()[0])
     assert written * MB <= limits.writable_bytes, text
     assert "No space left on device" in text
