@@ -309,8 +309,14 @@ class LiveConnection(LiveAdmin):
                 history=(),
                 world=summary.world,
             )
-        kind = summary.kind if summary is not None else "chat"
-        world = summary.world if summary is not None else None
+        if summary is not None:
+            kind, world = summary.kind, summary.world
+        else:
+            # Not listed yet (on a busy machine the registry may not have seen it come
+            # up): an agent context answers for its queues, a chat room does not.
+            # Taken for a chat room, an arena showed its chat and nothing else.
+            world = self._world_of(ctx, "agent")
+            kind = "agent" if world is not None else "chat"
         if kind == "agent":
             # An agent context: chat and AgentEvents (queues, output) over one join.
 

@@ -1,0 +1,56 @@
+"""The viewer joins an arena as an arena even before the lab's directory lists it.
+
+On a busy machine the registry may not yet have seen an agent context come up
+when a student clicks to join it; the viewer used to take any context it could
+not find in the directory for a chat room, and the student got the arena's chat
+and nothing else (no robots, no editor, no word of why), as a browser test saw
+under load.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from common.service import close_session
+from tests.conftest import Procs, Router
+from tests.integration.agentkit import CTX, WORLD, start_agent_context, start_engine
+from tests.lab import PASSWORD, ProcessLab, make_lab
+from viewers.web.address import LabAddress
+from viewers.web.connector import LiveConnector
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture
+def router(module_router: Router, realm: str) -> Router:
+    return module_router.in_realm(realm)
+
+
+@pytest.fixture
+def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    start_engine(lab)
+    start_agent_context(lab)
+    return lab
+
+
+def test_an_arena_the_directory_does_not_list_yet_is_joined_as_an_arena(
+    lab: ProcessLab, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    session = lab.zsession()
+    address = LabAddress("127.0.0.1", lab.router.port, lab.router.realm)
+    connector = LiveConnector(session, address, lab.key_hex)
+    try:
+        connection = connector.login(address, "bob", PASSWORD)
+        # The registry has not seen the context come up: the directory lists nothing.
+        monkeypatch.setattr(connection, "_kinds", {})
+        monkeypatch.setattr(connection, "directory", lambda: None)
+        joined = connection.join(CTX)
+        assert (joined.kind, joined.world) == ("agent", WORLD)
+        connection.logout()
+    finally:
+        connector.close()
+        close_session(session)
