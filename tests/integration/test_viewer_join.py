@@ -17,6 +17,7 @@ from common.service import close_session
 from tests.conftest import Procs, Router
 from tests.integration.agentkit import CTX, WORLD, start_agent_context, start_engine
 from tests.lab import PASSWORD, ProcessLab, make_lab
+from viewers.web.adapters import ContextSummary
 from viewers.web.address import LabAddress
 from viewers.web.connector import LiveConnector
 
@@ -37,16 +38,19 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     return lab
 
 
-def test_an_arena_the_directory_does_not_list_yet_is_joined_as_an_arena(
-    lab: ProcessLab, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize("listed", ["not at all", "as unknown"])
+def test_an_arena_the_directory_does_not_know_yet_is_joined_as_an_arena(
+    lab: ProcessLab, monkeypatch: pytest.MonkeyPatch, listed: str
 ) -> None:
     session = lab.zsession()
     address = LabAddress("127.0.0.1", lab.router.port, lab.router.realm)
     connector = LiveConnector(session, address, lab.key_hex)
     try:
         connection = connector.login(address, "bob", PASSWORD)
-        # The registry has not seen the context come up: the directory lists nothing.
-        monkeypatch.setattr(connection, "_kinds", {})
+        # The registry has not seen the context come up (nothing listed), or the context
+        # did not answer its question in time (listed with the kind "unknown").
+        kinds = {} if listed == "not at all" else {CTX: ContextSummary(CTX, "unknown", "", "", 0)}
+        monkeypatch.setattr(connection, "_kinds", kinds)
         monkeypatch.setattr(connection, "directory", lambda: None)
         joined = connection.join(CTX)
         assert (joined.kind, joined.world) == ("agent", WORLD)

@@ -309,12 +309,13 @@ class LiveConnection(LiveAdmin):
                 history=(),
                 world=summary.world,
             )
-        if summary is not None:
+        if summary is not None and summary.kind != "unknown":
             kind, world = summary.kind, summary.world
         else:
-            # Not listed yet (on a busy machine the registry may not have seen it come
-            # up): an agent context answers for its queues, a chat room does not.
-            # Taken for a chat room, an arena showed its chat and nothing else.
+            # Not listed yet, or listed as "unknown" (on a busy machine the registry may
+            # not have seen it come up, or it did not answer the registry within 1 s):
+            # an agent context answers for its queues, a chat room does not. Taken for
+            # a chat room, an arena showed its chat and nothing else.
             world = self._world_of(ctx, "agent")
             kind = "agent" if world is not None else "chat"
         if kind == "agent":
