@@ -52,7 +52,7 @@ class AuditReporter:
                 detail=detail[:256],
                 source=source[:256],
             )
-            self.session.put(self.key, self.seal(self.key, message), **qos.WORDS)
+            self.session.put(self.key, self.seal(self.key, message), **qos.of(keys.registry_report))
         except Exception as exc:  # not logged in yet, session closing: the log keeps it
             log.warning("audit line not reported (%s %s %s): %s", actor, action, target, exc)
 

@@ -11,26 +11,41 @@ what stops robots travel above the frames, and wait for room rather than
 vanish (they are a few a second at most, so the wait is short).
 
 Frames, samples and wheel commands keep the default or their own DROP on
-purpose: a stale one is worth nothing once the next exists.
+purpose: a stale one is worth nothing once the next exists. Which key travels how
+is the dataflow table's choice (common/dataflow.py, `Flow.urgency`).
 """
 
 from __future__ import annotations
 
+from functools import cache
 from typing import Any
 
 import zenoh
 
-# Chat lines, controller output, request statuses and queue events, private mail and
-# kick notices, grading's changes and scores, leases, revocations, audit lines: a
-# person reads each one, or a run or a security check waits on it.
-WORDS: dict[str, Any] = {
-    "priority": zenoh.Priority.DATA_HIGH,
-    "congestion_control": zenoh.CongestionControl.BLOCK,
+from common import dataflow
+from common.dataflow import KeyBuilder, Urgency
+
+_OPTIONS: dict[Urgency, dict[str, Any]] = {
+    Urgency.FRAMES: {},
+    # A person reads it, or a run or a security check waits on it.
+    Urgency.WORDS: {
+        "priority": zenoh.Priority.DATA_HIGH,
+        "congestion_control": zenoh.CongestionControl.BLOCK,
+    },
+    # An emergency stop engaged or released: before anything else on the link.
+    Urgency.STOP: {
+        "priority": zenoh.Priority.REAL_TIME,
+        "congestion_control": zenoh.CongestionControl.BLOCK,
+        "express": True,
+    },
 }
 
-# An emergency stop engaged or released: before anything else on the link.
-STOP: dict[str, Any] = {
-    "priority": zenoh.Priority.REAL_TIME,
-    "congestion_control": zenoh.CongestionControl.BLOCK,
-    "express": True,
-}
+
+@cache
+def of(builder: KeyBuilder) -> dict[str, Any]:
+    """The put (or publisher) options for keys built by ``builder``, from its flow's urgency.
+
+    ``session.put(key, payload, **qos.of(keys.ctx_events))``: the choice lives in
+    the dataflow table (common/dataflow.py), not at the call site.
+    """
+    return _OPTIONS[dataflow.urgency_of(builder)]

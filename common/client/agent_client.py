@@ -516,7 +516,7 @@ class AgentClient:
                 session.seal(
                     key, ControllerOutput(request_id=rid, lines=lines, done=True, reason=reason)
                 ),
-                **qos.WORDS,
+                **qos.of(keys.ctx_output),
             )
         except Exception as exc:  # the session is closing
             log.debug("could not report the end of %s: %s", rid, exc)

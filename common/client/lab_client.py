@@ -542,7 +542,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
             inbox = keys.user_inbox(self.realm, user)
             for box_key in where.session_box_keys:
                 message = self._encrypt(user, box_key, text)
-                self.z.put(inbox, self.session.seal(inbox, message), **qos.WORDS)
+                self.z.put(inbox, self.session.seal(inbox, message), **qos.of(keys.user_inbox))
             return True
         if where.mailbox_key is None:
             raise NotFound(f"{user} has never logged in: there is no key to encrypt to yet")

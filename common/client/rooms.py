@@ -222,7 +222,7 @@ class RoomCalls:
             )
         else:
             key = keys.ctx_in(self.realm, ctx)
-            self.z.put(key, self._seal(key, ChatSay(text=text)), **qos.WORDS)
+            self.z.put(key, self._seal(key, ChatSay(text=text)), **qos.of(keys.ctx_in))
 
     def kick(self, ctx: str, user: str, reason: str = "") -> None:
         """Remove ``user`` from a room (needs the kick permission there)."""

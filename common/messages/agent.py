@@ -23,7 +23,7 @@ under the user of the envelope's session, so nobody can name another's.
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -57,8 +57,6 @@ class ControlRequest(Message, frozen=True):
     ``deploy``: ``source`` is uploaded and run by the lab's runner.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
-
     agent: Ident
     mode: RunMode
     source: Upload = b""
@@ -78,15 +76,11 @@ class ControlQueued(Message, frozen=True):
 class CancelControl(Message, frozen=True):
     """Withdraw a request (one's own; anyone's with the manage right)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
-
     request_id: Ident
 
 
 class StopControl(Message, frozen=True):
     """Stop the controller running on an agent (manage right: owner or ``kick``)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
     agent: Ident
     reason: ShortText = ""
@@ -98,8 +92,6 @@ class ContextSettings(Message, frozen=True):
     ``enabled`` applies to ``agent`` if given, else to the whole context.
     Fields left None are unchanged.
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
     slot_seconds: SlotSeconds | None = None
     enabled: bool | None = None
@@ -114,8 +106,6 @@ class EmergencyStop(Message, frozen=True):
     request with ``engaged=False`` releases it. Waiting requests stay queued.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
-
     engaged: bool = True
     reason: ShortText = ""
 
@@ -128,8 +118,6 @@ class TakeOver(Message, frozen=True):
     controller, are obeyed; the student's are refused by the world) until a
     :class:`HandBack`, or the student's slot ends. Answered with :class:`TakenOver`.
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
     agent: Ident
     reason: ShortText = ""
@@ -150,8 +138,6 @@ class HandBack(Message, frozen=True):
     """Give a taken-over robot back: the student's controller drives it again for the rest
     of its slot (manage right; any manager may hand back, not only the one who took it)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
-
     agent: Ident
 
 
@@ -161,8 +147,6 @@ class DryRunRequest(Message, frozen=True):
     Needs ``deploy`` on the agent (the same right as queueing it). Answered
     with a :class:`DryRunReport`; nothing is queued and no robot moves.
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/dryrun",)
 
     agent: Ident
     source: Upload
@@ -202,7 +186,7 @@ class DryRunReport(Message, frozen=True):
 
 
 class QueueStateRequest(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
+    """Ask an agent context for its queues, settings and who drives what."""
 
 
 # --- a user's files in the agent context (the page's editor) ----------------------------
@@ -215,16 +199,12 @@ FileName = Annotated[str, msgspec.Meta(pattern=FILE_NAME_PATTERN, max_length=64)
 class SaveFile(Message, frozen=True):
     """Keep ``source`` as the sender's file ``name`` (replacing one of that name)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
-
     name: FileName
     source: Upload
 
 
 class FileListRequest(Message, frozen=True):
     """The sender's own files, newest first (reply: :class:`FileList`)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
 
 class FileInfo(msgspec.Struct, frozen=True, kw_only=True):
@@ -241,8 +221,6 @@ class FileList(Message, frozen=True):
 
 class ReadFile(Message, frozen=True):
     """One of the sender's own files (reply: :class:`FileContent`; not_found otherwise)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
     name: FileName
 
@@ -313,8 +291,6 @@ class RequestStatusQuery(Message, frozen=True):
     here instead of guessing from the queues. Its owner or the context's managers.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/status",)
-
     request_id: Ident
 
 
@@ -355,8 +331,6 @@ class OutputLines(msgspec.Struct, frozen=True, kw_only=True):
 class AgentEvent(Message, frozen=True):
     """An agent context's news, published on ``ctx/<ctx>/events`` beside RoomEvents."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/events",)
-
     ctx: Ident
     state: AgentContextState | None = None
     request: RequestStatus | None = None
@@ -373,8 +347,6 @@ class ControllerOutput(Message, frozen=True):
     ``wart control``). ``done`` with ``reason`` says the controller has ended.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/output",)
-
     request_id: Ident
     lines: Annotated[list[OutputLine], msgspec.Meta(max_length=100)] = msgspec.field(
         default_factory=list
@@ -388,8 +360,6 @@ class ControllerOutput(Message, frozen=True):
 
 class RunRequest(Message, frozen=True):
     """Run an uploaded controller on an agent until ``end`` (sealed, ``lease`` permission)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
 
     request_id: Ident
     ctx: Ident
@@ -422,8 +392,6 @@ class DryRun(Message, frozen=True):
     threads, so a dry run never delays a slot's start or stop.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/dryrun",)
-
     ctx: Ident
     world: Ident
     agent: Ident
@@ -435,8 +403,6 @@ class DryRun(Message, frozen=True):
 
 class RunStop(Message, frozen=True):
     """Stop a run early (sealed, ``lease`` permission)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
 
     request_id: Ident
     reason: ShortText = "stopped"
@@ -452,8 +418,6 @@ class RunCheck(Message, frozen=True):
     off by a router blip still runs them, one that crashed and came back runs
     none of them (docs/OPERATIONS.md, on a runner that dies).
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/run",)
 
     request_ids: Annotated[list[Ident], msgspec.Meta(max_length=MAX_CHECKED_RUNS)]
 

@@ -8,7 +8,7 @@ admins list and filter the whole trail in one place (docs/SECURITY.md).
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -26,8 +26,6 @@ class AuditReport(Message, frozen=True):
     Sealed by the reporting service's session: the registry records that service as
     the reporter, and takes only reports from sessions with the ``service`` role.
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/report",)
 
     at: float  # when the service did or refused it (its clock)
     actor: Ident  # whose request it was (the user of the envelope the service opened)
@@ -54,8 +52,6 @@ class AuditEntry(Message, frozen=True):
 
 class AuditQuery(Message, frozen=True):
     """List the trail, newest first (admin). Empty filters match everything."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/audit",)
 
     actor: Annotated[str, msgspec.Meta(max_length=64)] = ""
     action: Annotated[str, msgspec.Meta(max_length=40)] = ""

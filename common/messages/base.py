@@ -10,7 +10,7 @@ malformed or hostile payload becomes one :class:`MessageError`.
 from __future__ import annotations
 
 import functools
-from typing import Annotated, Any, ClassVar, Literal, TypeVar, Union, cast, overload
+from typing import Annotated, Any, Literal, TypeVar, Union, cast, overload
 
 import msgspec
 import numpy as np
@@ -51,9 +51,6 @@ class Message(msgspec.Struct, tag=True, tag_field="type", kw_only=True, frozen=T
     """
 
     v: int = 1
-
-    # Documentation of where the type travels; read by the architecture test.
-    KEYS: ClassVar[tuple[str, ...]] = ()
 
 
 M = TypeVar("M", bound=Message)

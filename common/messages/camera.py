@@ -25,8 +25,6 @@ class CameraFrame(Message, frozen=True):
     """One frame of a camera over a world's arena: as it saw it (``.../image``), or the
     floor rectified to the arena, +y up, 2 mm a pixel (``.../floor``)."""
 
-    KEYS = ("world/<w>/camera/<c>/image", "world/<w>/camera/<c>/floor")
-
     world: Ident
     camera: Ident
     seq: NonNegInt
@@ -50,8 +48,6 @@ class TrackedRobot(msgspec.Struct, frozen=True):
 class TrackedPoses(Message, frozen=True):
     """The robots a camera found in one frame (``world/<w>/tracked``)."""
 
-    KEYS = ("world/<w>/tracked",)
-
     world: Ident
     camera: Ident
     seq: NonNegInt
@@ -63,8 +59,6 @@ class TrackedPoses(Message, frozen=True):
 
 class CameraStatus(Message, frozen=True):
     """Whether a camera sees its arena (``world/<w>/camera/<c>/status``)."""
-
-    KEYS = ("world/<w>/camera/<c>/status",)
 
     world: Ident
     camera: Ident

@@ -8,7 +8,7 @@ service session so clients can tell them from forgeries.
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -22,27 +22,21 @@ LineText = Annotated[str, msgspec.Meta(max_length=16 * 1024)]
 
 
 class JoinRoom(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/join",)
-
     history: Annotated[int, msgspec.Meta(ge=0, le=1000)] = 50  # how many recent lines to send
 
 
 class LeaveRoom(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/leave",)
+    """Leave a room (the sender's session says who)."""
 
 
 class ChatSay(Message, frozen=True):
     """A chat line from a member (put on ctx/<ctx>/in, or a query on ctx/<ctx>/request)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/in", "ctx/<ctx>/request")
 
     text: LineText
 
 
 class UserRemovalRequest(Message, frozen=True):
     """Remove a member from the room (thesis 7.4.1); needs ``kick`` there."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
     user: Ident
     reason: ShortText = ""
@@ -67,8 +61,6 @@ class MemberStatus(Message, frozen=True):
 
 class RoomEvent(Message, frozen=True):
     """One event of a room, published on ctx/<ctx>/events."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/events",)
 
     ctx: Ident
     line: ChatLine | None = None

@@ -12,7 +12,7 @@ their submissions (:class:`SubmissionsQuery`) and the leaderboard
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -45,8 +45,6 @@ EpisodeSeconds = Annotated[float, msgspec.Meta(gt=0.0, le=MAX_EPISODE_S)]
 
 class Episode(Message, frozen=True):
     """One seeded episode of a submission, run by a runner in a private world."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/episode",)
 
     submission: Ident
     episode: NonNegInt
@@ -128,8 +126,6 @@ class Heat(Message, frozen=True):
     """Several entries' controllers in one world at once (a competition's heat): each drives
     its own robot, stepped in lockstep together; answered with :class:`HeatReport`."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/heat",)
-
     competition: Ident
     heat: NonNegInt
     map: MapText
@@ -151,8 +147,6 @@ class HeatReport(Message, frozen=True):
 class GradeData(Message, frozen=True):
     """Run an assignment's grader function on an episode's data (a real attempt's: the
     grader built it from the recording; the structure of docs/COURSES.md, as JSON)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("runner/<runner>/grade",)
 
     grader: Upload
     episode: Annotated[bytes, msgspec.Meta(max_length=4 * 1024 * 1024)]
@@ -178,8 +172,6 @@ SubmissionStatus = Literal["queued", "running", "graded", "failed"]
 class Submit(Message, frozen=True):
     """Grade this controller on an assignment (the envelope's user is the student)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
-
     assignment: Ident
     source: Upload
     filename: ShortText = "controller.py"
@@ -196,8 +188,6 @@ class SubmitAccepted(Message, frozen=True):
 
 class SubmissionsQuery(Message, frozen=True):
     """The sender's submissions to an assignment (a teacher: ``user`` names another)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
 
     assignment: Ident
     user: Ident | None = None
@@ -241,8 +231,6 @@ class SubmissionList(Message, frozen=True):
 class MyAssignments(Message, frozen=True):
     """The assignments of the sender's courses (the page's Course folder)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
-
 
 class AssignmentInfo(msgspec.Struct, frozen=True, kw_only=True):
     name: Ident
@@ -270,15 +258,11 @@ class SetPseudonym(Message, frozen=True):
     """The name the sender's scores show under on the leaderboards of the assignment's course
     ("" for their roster name again); unique within the course. Answered with OkReply."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
-
     assignment: Ident
     pseudonym: Annotated[str, msgspec.Meta(max_length=32)] = ""
 
 
 class LeaderboardQuery(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
-
     assignment: Ident
 
 
@@ -325,8 +309,6 @@ class CompetitionRun(Message, frozen=True):
     best) graded submission is its entry, one entry per heat. Answered with the first
     :class:`Standings` (every entry waiting); the rest is published as heats end."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
-
     assignment: Ident
     name: Ident | None = None  # default: the assignment's name and the time
     pick: Literal["latest", "best"] = "latest"
@@ -335,8 +317,6 @@ class CompetitionRun(Message, frozen=True):
 
 class CompetitionQuery(Message, frozen=True):
     """A competition's standings (anyone in its course)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
 
     name: Ident
 
@@ -354,8 +334,6 @@ class StandingEntry(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class Standings(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/competition/<competition>",)
-
     competition: Ident
     assignment: Ident
     course: Ident
@@ -380,8 +358,6 @@ class GradingChanged(Message, frozen=True):
     Deliberately no score and no student: each page asks the grader for what its
     user may see (a hidden-until-deadline leaderboard stays in the grader for students)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/changed/<course>",)
-
     course: Ident
     assignment: Ident
     submission: Ident
@@ -393,8 +369,6 @@ class ClassQuery(Message, frozen=True):
     """The teacher's view: every student of a course with their latest submission (the
     course's teachers; admins). ``course`` None: every course the asker teaches (none for a
     student, who is refused a named course)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/request",)
 
     course: Ident | None = None
 

@@ -10,7 +10,7 @@ with the ``host`` permission.
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -54,8 +54,6 @@ class RoomInfo(msgspec.Struct, frozen=True, kw_only=True):
 class HostLoad(Message, frozen=True):
     """How busy a host is, and what it runs (``host/<host>/load``)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/load",)
-
     host: Ident
     at: float  # wall clock of the host
     cpus: NonNegInt
@@ -77,13 +75,9 @@ class HostLoad(Message, frozen=True):
 class LoadRequest(Message, frozen=True):
     """Ask a host for its latest HostLoad (no authentication: loads are public)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/load",)
-
 
 class SpawnArena(Message, frozen=True):
     """Start an arena on this host (``host`` permission)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
 
     world: Ident
     map: Ident  # a map name from the host's maps directory, never a path
@@ -94,8 +88,6 @@ class SpawnArena(Message, frozen=True):
 class StopArena(Message, frozen=True):
     """Stop an arena this host runs (``host`` permission)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
-
     world: Ident
 
 
@@ -105,8 +97,6 @@ class ArenaReply(Message, frozen=True):
 
 class SpawnRoom(Message, frozen=True):
     """Start a chat room on this host, owned by the requester (``host`` permission)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
 
     name: Ident  # the room's id: one key chunk, unique in the lab
     title: ShortText = ""
@@ -120,8 +110,6 @@ class SpawnRoom(Message, frozen=True):
 
 class StopRoom(Message, frozen=True):
     """Stop a chat room this host started on request (``host`` permission)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("host/<host>/spawn",)
 
     name: Ident
 

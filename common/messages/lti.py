@@ -12,7 +12,7 @@ service posts the score of a launched student's submission to the platform.
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -24,8 +24,6 @@ PlatformText = Annotated[str, msgspec.Meta(min_length=1, max_length=255)]
 
 class LtiAccountRequest(Message, frozen=True):
     """The account of platform user (issuer, subject), made on first launch, in ``course``."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/lti",)
 
     issuer: PlatformText
     subject: PlatformText
@@ -46,8 +44,6 @@ class LtiAccount(Message, frozen=True):
 
 class Graded(Message, frozen=True):
     """A submission graded (published by the grader once, as it is written)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("grader/<grader>/graded",)
 
     submission: Ident
     assignment: Ident

@@ -8,7 +8,7 @@ download it. A download comes in chunks of at most :data:`MAX_CHUNK` bytes
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar
+from typing import Annotated
 
 import msgspec
 
@@ -33,8 +33,6 @@ class RecordingInfo(msgspec.Struct, frozen=True, kw_only=True):
 class RecordingListRequest(Message, frozen=True):
     """List recordings: one's own (``user`` None or oneself); another's needs the manage right."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
-
     user: Ident | None = None
     all_users: bool = False  # every user's (the manage right)
 
@@ -50,8 +48,6 @@ class RecordingGet(Message, frozen=True):
 
     ``summary`` asks for the run's summary (JSON) instead of the MCAP file.
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/request",)
 
     name: Ident
     offset: NonNegInt = 0

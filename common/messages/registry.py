@@ -8,7 +8,7 @@ recipient's key. See docs/SECURITY.md.
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar
+from typing import Annotated
 
 import msgspec
 
@@ -99,8 +99,6 @@ class LoginVouch(Message, frozen=True):
     Bound to that login by its new session key, so it cannot be lifted onto another.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/login",)
-
     address: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
     session_key: Bytes32
 
@@ -108,15 +106,11 @@ class LoginVouch(Message, frozen=True):
 class SealedLogin(Message, frozen=True):
     """The payload of a login query: a LoginRequest in a SealedBox to the registry."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/login",)
-
     sealed: Annotated[bytes, msgspec.Meta(max_length=8192)]
 
 
 class PrivateMessage(Message, frozen=True):
     """A private message, encrypted end to end (nacl Box sender box key -> ``to_key``)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("user/<name>/inbox",)
 
     sender: Ident
     recipient: Ident
@@ -134,8 +128,6 @@ class LoginReply(Message, frozen=True):
 
 
 class LogoutRequest(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/logout",)
-
     # True when a page closes (a reload): its resume token stays good. A person's
     # "Log out" leaves it False, and the session's resume token is revoked too.
     keep_resume: bool = False
@@ -146,8 +138,6 @@ class LogoutRequest(Message, frozen=True):
 
 class ContextInfoRequest(Message, frozen=True):
     """Asked (authenticated) on ctx/<ctx>/state by the registry for its directory."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("ctx/<ctx>/state",)
 
 
 class ContextInfo(Message, frozen=True):
@@ -161,7 +151,7 @@ class ContextInfo(Message, frozen=True):
 
 
 class DirectoryRequest(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
+    """Ask who and what is online."""
 
 
 class DirectoryReply(Message, frozen=True):
@@ -172,8 +162,6 @@ class DirectoryReply(Message, frozen=True):
 
 class UserKeysRequest(Message, frozen=True):
     """Where to send a private message to ``user``."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
 
     user: Ident
 
@@ -188,16 +176,12 @@ class UserKeysReply(Message, frozen=True):
 class MailboxDeposit(Message, frozen=True):
     """Keep a private message for an offline user (still encrypted to their mailbox key)."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
-
     message: PrivateMessage
 
 
 class MailboxClaim(Message, frozen=True):
     """A session's mailbox key, sent after its login (derived off the login's path):
     the registry records it and answers with the messages kept meanwhile."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/directory",)
 
     mailbox_key: Bytes32
 
@@ -225,16 +209,12 @@ class RevocationList(Message, frozen=True):
 class SignedRevocations(Message, frozen=True):
     """A RevocationList signed by the registry; published on registry/revocations and served."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/revocations",)
-
     body: bytes  # an encoded RevocationList
     signature: Bytes64
 
 
 class RevocationsRequest(Message, frozen=True):
     """Ask for every revocation still in force (a service starting up)."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/revocations",)
 
 
 class KickNotice(Message, frozen=True):
@@ -268,7 +248,7 @@ class UserInfo(Message, frozen=True):
 
 
 class ListUsers(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
+    """An admin asks for every account, its rights and bans."""
 
 
 class UserList(Message, frozen=True):
@@ -277,8 +257,6 @@ class UserList(Message, frozen=True):
 
 class AddUser(Message, frozen=True):
     """Create an account. ``sealed_password`` is the password sealed to the registry box key."""
-
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
 
     user: Ident
     roles: list[Ident] = msgspec.field(default_factory=lambda: ["student"])
@@ -289,37 +267,27 @@ class AddUser(Message, frozen=True):
 class SetPassword(Message, frozen=True):
     """Admins set anyone's password; a user may set their own."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
     sealed_password: Annotated[bytes, msgspec.Meta(max_length=4096)]
 
 
 class RemoveUser(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
 
 
 class Grant(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
     grant: GrantName
     scope: Scope = ""
 
 
 class Ungrant(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
     grant: GrantName
     scope: Scope = ""
 
 
 class KickFromServer(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
     reason: ShortText = ""
 
@@ -327,14 +295,10 @@ class KickFromServer(Message, frozen=True):
 class UnlockLogins(Message, frozen=True):
     """Forget the account's failed logins: every source may try again at once."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
 
 
 class RenameServer(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     name: Annotated[str, msgspec.Meta(min_length=1, max_length=80)]
 
 
@@ -342,16 +306,12 @@ class BanUser(Message, frozen=True):
     """Keep an account out: its sessions are revoked now and its logins refused until ``until``
     (wall-clock seconds; None: until lifted), with ``reason`` shown to it."""
 
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
     reason: Annotated[str, msgspec.Meta(min_length=1, max_length=200)]
     until: float | None = None
 
 
 class LiftBan(Message, frozen=True):
-    KEYS: ClassVar[tuple[str, ...]] = ("registry/admin",)
-
     user: Ident
     reason: Annotated[str, msgspec.Meta(max_length=200)] = ""
 

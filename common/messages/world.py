@@ -7,7 +7,7 @@ are the robot type's raw units (Khepera: proximity 0..1023, ambient ~500 dark).
 from __future__ import annotations
 
 import struct
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, Any, Literal
 
 import msgspec
 import numpy as np
@@ -349,8 +349,6 @@ class WorldStop(Message, frozen=True):
     learns it); a world obeys only stops sealed after it started, newer than
     the last one it obeyed, and each envelope once (replay).
     """
-
-    KEYS: ClassVar[tuple[str, ...]] = ("world/<w>/estop",)
 
     engaged: bool
     by: Ident  # who pressed it (the context's own name when it republishes)

@@ -187,7 +187,9 @@ class ChatRoom(Service):
     # -- lifecycle
 
     def on_start(self) -> None:
-        self._publisher = self.track(self.session.declare_publisher(self._events_key, **qos.WORDS))
+        self._publisher = self.track(
+            self.session.declare_publisher(self._events_key, **qos.of(keys.ctx_events))
+        )
         self._feed = RevocationFeed(
             self.session, self.realm, self.registry_key, self.verifier, self._on_revoked
         )

@@ -67,7 +67,9 @@ class LeaseSigner:
         key = keys.agent_lease(self.realm, self.world, agent)
         pub = self._pubs.get(agent)
         if pub is None:
-            pub = self._pubs[agent] = self.session.declare_publisher(key, **qos.WORDS)
+            pub = self._pubs[agent] = self.session.declare_publisher(
+                key, **qos.of(keys.agent_lease)
+            )
         lease = Lease(
             lease_id=run.lease_id,
             world=self.world,

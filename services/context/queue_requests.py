@@ -286,7 +286,7 @@ class QueueRequests:
                 return
             message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
             try:
-                self.session.put(key, self._seal(key, message), **qos.STOP)
+                self.session.put(key, self._seal(key, message), **qos.of(keys.world_estop))
             except Exception as exc:  # the session closing at shutdown
                 self.log.warning("could not tell world %s of the stop: %s", self.world, exc)
 

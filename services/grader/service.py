@@ -292,13 +292,13 @@ class GraderService(Service):
                 status=status,  # type: ignore[arg-type]
                 at=time.time(),
             )
-            self.session.put(key, self.login.session.seal(key, change), **qos.WORDS)
+            self.session.put(key, self.login.session.seal(key, change), **qos.of(grader_changed))
         except Exception as exc:  # a page that misses it catches up at its next refresh
             self.log.warning("could not publish the change of %s: %s", sub.id, exc)
 
     def _publish(self, standings: Standings) -> None:
         key = grader_standings(self.realm, self.ident, standings.competition)
-        self.session.put(key, self.login.session.seal(key, standings), **qos.WORDS)
+        self.session.put(key, self.login.session.seal(key, standings), **qos.of(grader_standings))
 
     def _submit(self, principal: Principal, request: Submit, a: Assignment) -> Message:
         now = time.time()
@@ -540,7 +540,7 @@ class GraderService(Service):
             graded_at=time.time(),
         )
         try:
-            self.session.put(key, self.login.session.seal(key, graded), **qos.WORDS)
+            self.session.put(key, self.login.session.seal(key, graded), **qos.of(grader_graded))
         except Exception as exc:  # a closing session, a lapsed login: the score is kept
             self.log.warning("could not announce submission %s as graded: %s", sub.id, exc)
 

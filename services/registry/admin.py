@@ -291,7 +291,7 @@ class AdminRequests:
         # Tell the user first, while their client still listens on its inbox.
         key = keys.user_inbox(self.realm, user)
         notice = KickNotice(user=user, reason=reason[:256], by=principal.user)
-        self.session.put(key, self.own_session_seal(key, notice), **qos.WORDS)
+        self.session.put(key, self.own_session_seal(key, notice), **qos.of(keys.user_inbox))
         sessions = [s.session_id for s in self.db.active_sessions(user)]
         why = f"kicked from the server by {principal.user}: {reason}"
         count = self._revoke(sessions, why, kicked=True)

@@ -126,7 +126,9 @@ class Registry(AdminRequests, Service):
             self.verifier.revoke(rec.session_id, rec.expires_at)
         self._watch = AliveWatch(self.session, keys.alive_all(self.realm))
         self._revocation_pub = self.track(
-            self.session.declare_publisher(keys.registry_revocations(self.realm), **qos.WORDS)
+            self.session.declare_publisher(
+                keys.registry_revocations(self.realm), **qos.of(keys.registry_revocations)
+            )
         )
         # argon2id releases the GIL: one worker per core checks passwords in parallel.
         self.serve(

@@ -328,7 +328,7 @@ class RunnerService(Service):
 
     def report(self, key: str, message: ControllerOutput) -> None:
         try:
-            self.session.put(key, self.login.session.seal(key, message), **qos.WORDS)
+            self.session.put(key, self.login.session.seal(key, message), **qos.of(keys.ctx_output))
         except Exception as exc:  # the session closing at shutdown
             self.log.debug("could not report on %s: %s", key, exc)
 

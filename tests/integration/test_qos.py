@@ -82,7 +82,7 @@ def test_lines_among_a_flood_of_frames_all_arrive_in_order(
     router: Router, sessions: tuple[zenoh.Session, zenoh.Session]
 ) -> None:
     sender, receiver = sessions
-    sent, got, frames = lines_through_a_flood(router, sender, receiver, qos.WORDS)
+    sent, got, frames = lines_through_a_flood(router, sender, receiver, qos.of(keys.ctx_output))
     assert len(sent) == LINES, f"only {len(sent)} lines sent among {frames} frames"
     wait_for(lambda: len(got) == len(sent), 30, "every line")
     assert got == sent

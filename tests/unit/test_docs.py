@@ -13,6 +13,7 @@ from common.messages import all_message_types
 from services.cli import SUBCOMMANDS
 
 DOC = (Path(__file__).resolve().parents[2] / "docs" / "ARCHITECTURE.md").read_text()
+MODULES = (Path(__file__).resolve().parents[2] / "docs" / "MODULES.md").read_text()
 
 
 @pytest.mark.parametrize("command", sorted(SUBCOMMANDS))
@@ -92,15 +93,12 @@ def test_every_path_the_docs_and_docstrings_cite_exists() -> None:
 
 
 def _module_index() -> dict[str, set[str]]:
-    """The module index of ARCHITECTURE.md §0: package -> the modules its row names."""
-    section = DOC.split("### Module index", 1)[1].split("\n## ", 1)[0]
+    """docs/MODULES.md: package (a ``## `pkg/``` heading) -> the modules its lines name."""
     index = {}
-    for row in section.splitlines():
-        cells = row.split("|")
-        if len(cells) < 3 or not cells[1].strip().startswith("`"):
-            continue
-        package = cells[1].strip().strip("`")
-        index[package] = set(re.findall(r"`([\w]+\.py|[\w]+/)`", cells[2]))
+    for part in MODULES.split("\n## ")[1:]:
+        heading, _, body = part.partition("\n")
+        package = heading.strip().strip("`")
+        index[package] = set(re.findall(r"`([\w]+\.py|[\w]+/)`", body))
     return index
 
 
@@ -135,4 +133,21 @@ def test_the_module_index_names_every_module_and_no_other() -> None:
     }
     if missing_packages := packages - set(index) - {"common/", "viewers/"}:
         wrong.append(f"packages without a row: {sorted(missing_packages)}")
-    assert not wrong, "docs/ARCHITECTURE.md's module index is out of date:\n" + "\n".join(wrong)
+    assert not wrong, "docs/MODULES.md is out of date:\n" + "\n".join(wrong)
+
+
+@pytest.mark.parametrize(
+    ("name", "max_lines", "max_bytes"),
+    [("ARCHITECTURE.md", 700, 40_000), ("BENCHMARKS.md", 400, None), ("MODULES.md", 400, None)],
+)
+def test_the_reference_pages_stay_short(name: str, max_lines: int, max_bytes: int | None) -> None:
+    """References of today, not diaries: history goes to docs/history/ and git."""
+    text = (REPO / "docs" / name).read_text()
+    lines = text.splitlines()
+    assert len(lines) <= max_lines, f"docs/{name}: {len(lines)} lines (at most {max_lines})"
+    if max_bytes is not None:
+        size = len(text.encode())
+        assert size <= max_bytes, f"docs/{name}: {size} bytes (at most {max_bytes})"
+    if name != "BENCHMARKS.md":  # its tables carry whole commands on one row
+        long = [n for n, line in enumerate(lines, 1) if len(line) > 300]
+        assert not long, f"docs/{name}: lines over 300 characters: {long}"
