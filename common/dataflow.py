@@ -375,17 +375,17 @@ FLOWS: tuple[Flow, ...] = (
     _put(
         keys.world_samples,
         WORLDS,
-        ("runner", *PEOPLE),
+        ("agent", "runner", *PEOPLE),
         m.SampleBundle,
         note="the leased agents' samples, each tick while subscribed",
     ),
     _put(
         keys.world_commands,
         ("runner", *PEOPLE),
-        WORLDS,
+        (*WORLDS, "agent"),
         m.CommandBundle,
         m.MacCommandBundle,
-        note="each item checked as if put on its agent's cmd key",
+        note="each item checked as if put on its agent's cmd key; recorded by its context",
     ),
     _put(
         keys.world_estop,
@@ -433,10 +433,15 @@ FLOWS: tuple[Flow, ...] = (
         m.TrackedPoses,
         note="each camera frame",
     ),
-    _put(keys.camera_frame, ("camera",), ("agent",), m.CameraFrame),
+    _put(keys.camera_frame, ("camera",), (), m.CameraFrame),
     _put(keys.camera_floor, ("camera",), (), m.CameraFrame),
     _put(keys.camera_status, ("camera",), (), m.CameraStatus),
-    _put(keys.camera_all, (), PEOPLE, note="every camera's image, floor and status over a world"),
+    _put(
+        keys.camera_all,
+        (),
+        ("agent", *PEOPLE),
+        note="every camera's image, floor and status over a world",
+    ),
     _put(
         keys.agent_sensors,
         WORLDS,
@@ -454,11 +459,11 @@ FLOWS: tuple[Flow, ...] = (
     _put(
         keys.agent_cmd,
         ("runner", *PEOPLE),
-        WORLDS,
+        (*WORLDS, "agent"),
         m.AgentCommand,
         m.MacCommand,
         **SEALED,
-        note="the lease holder's, sealed or MACed",
+        note="the lease holder's, sealed or MACed; recorded by the agent's context",
     ),
     _put(
         keys.agent_lease,

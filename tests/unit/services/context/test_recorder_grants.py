@@ -1,0 +1,66 @@
+"""An agent context may hear everything its recorder records, in a lab with access control.
+
+The routers' rules (services/lab/zsecurity.py, from common/dataflow.py) deny a
+declaration whose key no grant of the role includes: a recorder subscribing to
+a key its role was not granted records nothing from it, silently, on every
+multi-host lab (the one-machine lab runs without access control, so only this
+check sees it).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common import keys
+from common.recording.store import RecordingStore
+from services.context.recorder import SlotRecorder
+from services.lab.zsecurity import ROLE_GRANTS
+
+
+class _Declarations:
+    """A session that only notes the keys subscribed to."""
+
+    def __init__(self) -> None:
+        self.subscribed: list[str] = []
+
+    def declare_subscriber(self, key: str, handler: Any, **_: Any) -> Any:
+        self.subscribed.append(key)
+        return self
+
+    def undeclare(self) -> None:
+        pass
+
+
+def _granted(role: str, verb: str, key: str) -> bool:
+    root = keys.realm_root("lab")
+    declared = zenoh.KeyExpr(key)
+    return any(
+        zenoh.KeyExpr(f"{root}/{pattern}").includes(declared)
+        for grant in ROLE_GRANTS[role]
+        if grant.verb == verb
+        for pattern in grant.keys
+    )
+
+
+def test_the_agent_role_may_subscribe_to_every_key_its_recorder_records(tmp_path: Path) -> None:
+    session = _Declarations()
+    recorder = SlotRecorder(
+        session,  # type: ignore[arg-type]
+        "lab",
+        "arena",
+        "arena1",
+        RecordingStore(tmp_path, keep=3),
+        bytes(32),
+        logging.getLogger("test"),
+    )
+    recorder.start()
+    try:
+        assert len(session.subscribed) >= 5  # frames, samples, commands, bundles, cameras
+        denied = [key for key in session.subscribed if not _granted("agent", "sub", key)]
+        assert not denied, f"the agent role may not subscribe to: {denied}"
+    finally:
+        recorder.close(timeout=2.0)
