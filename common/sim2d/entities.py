@@ -136,6 +136,17 @@ class Zone:
     heading: float
     colour: str
 
+    def contains(self, x: float, y: float) -> bool:
+        """Whether the point (mm) lies in the zone's outline (episodes and real attempts)."""
+        if self.shape.kind == "circle":
+            return math.hypot(x - self.x, y - self.y) <= self.shape.radius_mm
+        pts = self.shape.world_vertices(self.x, self.y, self.heading)
+        inside = False
+        for (ax, ay), (bx, by) in zip(pts, pts[1:] + pts[:1], strict=True):
+            if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
+                inside = not inside
+        return inside
+
 
 @dataclass
 class Agent:

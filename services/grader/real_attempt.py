@@ -246,7 +246,7 @@ def real_episode(
             distance += math.hypot(x - last[0], y - last[1])
         last = (x, y)
         for zone in zones:
-            if zone.id not in reached and _in_zone(zone, x, y):
+            if zone.id not in reached and zone.contains(x, y):
                 reached[zone.id] = at
         if at + 1e-9 >= next_row:
             while ir_at + 1 < len(samples) and samples[ir_at + 1][0] <= t:
@@ -291,12 +291,6 @@ def _with_metrics(
         grader_error=error[:256],
         grader_line=line,
     )
-
-
-def _in_zone(zone: object, x: float, y: float) -> bool:
-    from services.runner.episode import in_zone  # the simulated episodes' test, the same
-
-    return in_zone(zone, x, y)  # type: ignore[arg-type]
 
 
 def episode_json(data: dict[str, object]) -> bytes:

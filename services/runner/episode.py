@@ -72,18 +72,6 @@ def build_episode_world(request: Episode) -> World:
     return world
 
 
-def in_zone(zone: Zone, x: float, y: float) -> bool:
-    """Whether the point (mm) lies in the zone's outline."""
-    if zone.shape.kind == "circle":
-        return math.hypot(x - zone.x, y - zone.y) <= zone.shape.radius_mm
-    pts = zone.shape.world_vertices(zone.x, zone.y, zone.heading)
-    inside = False
-    for (ax, ay), (bx, by) in zip(pts, pts[1:] + pts[:1], strict=True):
-        if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
-            inside = not inside
-    return inside
-
-
 def _cause(sandbox: Sandbox, timed_out: bool, finished_early: bool) -> tuple[str, str]:
     """(cause, detail) of an episode that did not run its whole time."""
     error = sandbox.error_text
@@ -170,7 +158,7 @@ def run_episode(
             distance += math.hypot(x - last[0], y - last[1])
             last = (x, y)
             for zone in world.zones.values():
-                if zone.id not in reached and in_zone(zone, x, y):
+                if zone.id not in reached and zone.contains(x, y):
                     reached[zone.id] = at
             if nests and tick % check_every == 0:
                 _deliveries(world, nests, delivered, at)
@@ -253,7 +241,7 @@ def _deliveries(world: World, nests: list[Zone], delivered: dict[str, float], at
             x, y = float(poses[j][0]), float(poses[j][1])
         else:
             x, y, _ = world.pose_of(obj.id)
-        if any(in_zone(nest, x, y) for nest in nests):
+        if any(nest.contains(x, y) for nest in nests):
             delivered[obj.id] = at
 
 

@@ -39,7 +39,6 @@ from services.runner.episode import (
     _deliveries,
     _rows,
     episode_wall_limit,
-    in_zone,
 )
 from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import SandboxLimits
@@ -158,7 +157,7 @@ def _loop(request: Heat, world: World, entries: list[_Entry], deadline: float) -
             e.distance += math.hypot(x - e.last[0], y - e.last[1])
             e.last = (x, y)
             for zone in world.zones.values():
-                if zone.id not in e.reached and in_zone(zone, x, y):
+                if zone.id not in e.reached and zone.contains(x, y):
                     e.reached[zone.id] = at
             if (tick + 1) % trace_every == 0:
                 heading = round(float(world.agent_pose[e.slot][2]), 4)
