@@ -16,8 +16,8 @@ import pytest
 from common.client.agent_client import FINAL
 from common.messages import WorldSnapshot
 from common.recording import read_recording, summarize
+from common.recording.report import describe
 from common.sim2d import maps
-from services.commands.report import describe
 from services.engine import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem

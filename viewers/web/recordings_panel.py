@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from common.recording import Recording, RecordingError, plots, read_recording, summarize
+from common.recording import Recording, RecordingError, plots, read_recording, report, summarize
 from common.recording.replay import Timeline
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
 from viewers.web.inputs import on_click, set_value
@@ -71,9 +71,7 @@ def format_recordings(entries: list[RecordingEntry]) -> str:
 
 
 def summary_text(rec: Recording) -> str:
-    from services.commands.report import describe as report_lines  # the lines wart report prints
-
-    return "```\n" + "\n".join(report_lines(summarize(rec))).replace("```", "'''") + "\n```"
+    return "```\n" + "\n".join(report.describe(summarize(rec))).replace("```", "'''") + "\n```"
 
 
 class RecordingsPanel:

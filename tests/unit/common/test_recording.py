@@ -104,7 +104,7 @@ def test_the_summary_has_distance_time_moving_and_errors(tmp_path: Path) -> None
     assert summary.status == "finished"
     assert [(e.kind, e.line) for e in summary.errors] == [("ZeroDivisionError", 12)]
     # Its durations are said in the world's own time: simulated here, wall-clock on robots.
-    from services.commands.report import describe
+    from common.recording.report import describe
 
     assert summary.world_kind == "sim"
     assert any(line.endswith("s of simulated time") for line in describe(summary))
