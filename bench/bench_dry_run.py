@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from common.sim2d import maps  # noqa: E402 - after the path set-up
-from services.engine import packing  # noqa: E402
+from common.world import packing  # noqa: E402
 from services.runner.dryrun import dry_run  # noqa: E402
 
 

@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
             CourseStore(db).import_roster("bench-course", rows)
             text = ASSIGNMENT.format(seconds=args.seconds, episodes=args.episodes)
             assignment, map_text = parse_assignment(text.encode(), "bench", REPO / "maps")
-            GradingStore(db).put_assignment(assignment, map_text)
+            GradingStore(db.database).put_assignment(assignment, map_text)
             db.close()
             lab.start_registry()
             lab.account(wiring.service_account("grader", "grader"))

@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         report = CourseStore(db).import_roster("robotics-26", rows)
         text = assignment_toml("board", episodes="1", seeds="[4]", time_limit="2.0", quota="100")
         assignment, map_text = parse_assignment(text.encode(), "a.toml", REPO / "maps")
-        store = GradingStore(db)
+        store = GradingStore(db.database)
         store.put_assignment(assignment, map_text)
         lab.lab.account(wiring.service_account("grader", "grader"))
         lab.lab.start(wiring.grader_spec(lab.lab.wiring()), name="grader")

@@ -37,8 +37,8 @@ from bench.labproc import REPO, BenchLab
 from common import keys
 from common.messages import WorldFrame, decode, encode
 from common.service import close_session, has_subscribers, open_session
+from common.world import packing
 from common.zconfig import NetworkOptions
-from services.engine import packing
 
 WORLD = "bench"
 FRAME_HZ = 50  # the engine publishes a frame each 20 ms tick

@@ -49,8 +49,8 @@ from common.sim2d.agents import agent_type
 from common.sim2d.drives import DRIVES
 from common.sim2d.maps import load_map
 from common.sim2d.world import World
+from common.world import packing
 from common.world.remote_robot import agent_command, state_from_sample
-from services.engine import packing
 from services.runner.lockstep import Touches
 
 REPO = Path(__file__).resolve().parents[1]

@@ -51,8 +51,8 @@ from common.messages import (
 )
 from common.service import close_session, open_session
 from common.sim2d.world import World
+from common.world import packing
 from common.zconfig import NetworkOptions
-from services.engine import packing
 
 PEER_WORLD = "peer"
 

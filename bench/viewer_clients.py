@@ -138,8 +138,8 @@ def _browsers(
     from playwright.sync_api import sync_playwright
 
     from bench.bench_viewer import BENCH_VIEWPORT, WsCounter
+    from common.client.lab_address import parse_address
     from tests.browser.conftest import CHROMIUM_ARGS, ViserPage
-    from viewers.web.address import parse_address
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)

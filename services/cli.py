@@ -93,6 +93,14 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+# Two-word commands whose second word is a tool of its own (the first word's module is
+# another process's: `wart course` edits the lab's database, `wart course competition`
+# asks the grader over the network).
+SUBCOMMAND_TOOLS: dict[tuple[str, str], str] = {
+    ("course", "competition"): "services.commands.competition",
+}
+
+
 def usage() -> str:
     width = max(len(name) for name in SUBCOMMANDS)
     lines = [
@@ -130,7 +138,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if name not in SUBCOMMANDS:
         print(f"wart: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
         return 2
-    module = importlib.import_module(SUBCOMMANDS[name][0])
+    tool = SUBCOMMAND_TOOLS.get((name, rest[0])) if rest else None
+    if tool is not None:
+        name, rest = f"{name} {rest[0]}", rest[1:]
+    module = importlib.import_module(tool or SUBCOMMANDS[name][0])
     try:
         return int(module.main(rest, prog=f"wart {name}") or 0)
     except KeyboardInterrupt:  # a second Ctrl-C: quit at once, as the tool said, no traceback

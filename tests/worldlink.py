@@ -7,8 +7,8 @@ from typing import Any
 from common.controller import Controller, ControllerLoop, Khepera, KheperaState, RobotCommand
 from common.controller.actuators import apply_command
 from common.sim2d.world import World
+from common.world import packing
 from common.world.remote_robot import agent_command, state_from_sample
-from services.engine import packing
 
 
 class WorldLink:

@@ -50,10 +50,10 @@ from common.service import RequestError
 from common.sim2d import wander
 from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.world import EditError, World
+from common.world import packing
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
-from services.engine import packing
 from services.engine.edits import EngineEdits
 from services.engine.pace import PaceWatch
 

@@ -22,9 +22,10 @@ from pathlib import Path
 from common.acl import agent_scope
 from services.grader.assignment import AssignmentError, parse_assignment
 from services.grader.grading_db import GradingStore
+from services.lab.database import DbError
 from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.wiring import service_account
-from services.registry.accounts_db import DbError, RegistryDB
+from services.registry.accounts_db import RegistryDB
 
 
 def _when(t: float) -> str:
@@ -33,10 +34,6 @@ def _when(t: float) -> str:
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] == ["competition"]:  # over the network, as a course member: not the DB
-        from services.commands import competition
-
-        return competition.main(argv[1:], f"{prog} competition")
     p = argparse.ArgumentParser(
         prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -59,7 +56,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
         return 2
     db = RegistryDB(args.db)
     try:
-        store = GradingStore(db)
+        store = GradingStore(db.database)
         if args.command == "assignments":
             for x in store.assignments(args.course):
                 print(

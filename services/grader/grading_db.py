@@ -11,14 +11,13 @@ those runs re-run, the lab's fault, free.
 from __future__ import annotations
 
 import json
-import sqlite3
 import time
 import uuid
 from dataclasses import dataclass
 
 from common.messages import EpisodeResult, SubmissionInfo
 from services.grader.assignment import Assignment
-from services.registry.accounts_db import DbError, RegistryDB
+from services.lab.database import ROSTER_SCHEMA, DbError, LabDatabase
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS assignments (
@@ -78,26 +77,23 @@ class Pending:
 
 
 class GradingStore:
-    def __init__(self, db: RegistryDB) -> None:
+    def __init__(self, db: LabDatabase) -> None:
         self.db = db
-        try:
-            with db._lock:
-                db._db.executescript(SCHEMA)
-                columns = {row[1] for row in db._db.execute("PRAGMA table_info(episodes)")}
-                if "real" not in columns:  # a database of before real-robot attempts
-                    db._db.execute(
-                        "ALTER TABLE episodes ADD COLUMN real INTEGER NOT NULL DEFAULT 0"
-                    )
-        except sqlite3.DatabaseError as exc:
-            raise DbError("internal", f"cannot create the grading tables: {exc}") from None
+        # The roster is the registry's; created here too, so that a grader's tables
+        # can name it whichever process opened the file first.
+        db.create(ROSTER_SCHEMA, "course tables")
+        db.create(SCHEMA, "grading tables")
+        if "real" not in db.columns("episodes"):  # a database of before real-robot attempts
+            with db.transaction() as con:
+                con.execute("ALTER TABLE episodes ADD COLUMN real INTEGER NOT NULL DEFAULT 0")
 
     # -- assignments (the teacher's CLI)
 
     def put_assignment(self, a: Assignment, map_text: str) -> bool:
         """Store (or replace) ``a``; True if it is new."""
-        if not self.db._rows("SELECT 1 FROM courses WHERE name=?", a.course):
+        if not self.db.rows("SELECT 1 FROM courses WHERE name=?", a.course):
             raise DbError("not_found", f"no course named {a.course}: import its roster first")
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             new = not con.execute("SELECT 1 FROM assignments WHERE name=?", (a.name,)).fetchone()
             con.execute(
                 "INSERT OR REPLACE INTO assignments(name, course, spec, map, updated_at) "
@@ -107,20 +103,20 @@ class GradingStore:
         return new
 
     def assignment(self, name: str) -> tuple[Assignment, str]:
-        rows = self.db._rows("SELECT spec, map FROM assignments WHERE name=?", name)
+        rows = self.db.rows("SELECT spec, map FROM assignments WHERE name=?", name)
         if not rows:
             raise DbError("not_found", f"no assignment named {name}")
         return Assignment.from_json(rows[0][0]), str(rows[0][1])
 
     def assignments(self, course: str | None = None) -> list[Assignment]:
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT spec FROM assignments WHERE ?1 IS NULL OR course=?1 ORDER BY name", course
         )
         return [Assignment.from_json(r[0]) for r in rows]
 
     def assignments_of(self, user: str) -> list[Assignment]:
         """The assignments of every course ``user`` is a member of."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT a.spec FROM assignments a JOIN course_members m ON m.course = a.course "
             "WHERE m.user=? ORDER BY a.course, a.name",
             user,
@@ -128,18 +124,18 @@ class GradingStore:
         return [Assignment.from_json(r[0]) for r in rows]
 
     def role_in(self, course: str, user: str) -> str | None:
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT role FROM course_members WHERE course=? AND user=?", course, user
         )
         return str(rows[0][0]) if rows else None
 
     def display_names(self, course: str) -> dict[str, str]:
-        rows = self.db._rows("SELECT user, display_name FROM course_members WHERE course=?", course)
+        rows = self.db.rows("SELECT user, display_name FROM course_members WHERE course=?", course)
         return {str(u): str(n) for u, n in rows}
 
     def set_pseudonym(self, course: str, user: str, pseudonym: str) -> None:
         """``user``'s name on the course's leaderboards ("": none); DbError if taken."""
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             con.execute("DELETE FROM pseudonyms WHERE course=? AND user=?", (course, user))
             if not pseudonym:
                 return
@@ -160,14 +156,14 @@ class GradingStore:
             )
 
     def pseudonyms(self, course: str) -> dict[str, str]:
-        rows = self.db._rows("SELECT user, pseudonym FROM pseudonyms WHERE course=?", course)
+        rows = self.db.rows("SELECT user, pseudonym FROM pseudonyms WHERE course=?", course)
         return {str(u): str(p) for u, p in rows}
 
     # -- submissions
 
     def counted_since(self, assignment: str, user: str, since: float) -> int:
         """Graded runs that count against the quota since ``since`` (lab faults do not)."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT COUNT(*) FROM submissions WHERE assignment=? AND user=? AND submitted_at>=? "
             "AND counted=1 AND status!='failed'",
             assignment,
@@ -177,7 +173,7 @@ class GradingStore:
         return int(rows[0][0])
 
     def oldest_counted_since(self, assignment: str, user: str, since: float) -> float | None:
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT MIN(submitted_at) FROM submissions WHERE assignment=? AND user=? "
             "AND submitted_at>=? AND counted=1 AND status!='failed'",
             assignment,
@@ -197,7 +193,7 @@ class GradingStore:
             source=source,
             submitted_at=time.time(),
         )
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             con.execute(
                 "INSERT INTO submissions(id, assignment, user, submitted_at, filename, source, "
                 "status, late_days) VALUES (?, ?, ?, ?, ?, ?, 'queued', ?)",
@@ -207,7 +203,7 @@ class GradingStore:
 
     def pending(self) -> list[Pending]:
         """Submissions not graded yet (queued, or running when a grader died), oldest first."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT id, assignment, user, filename, source, submitted_at FROM submissions "
             "WHERE status IN ('queued', 'running') ORDER BY submitted_at"
         )
@@ -216,7 +212,7 @@ class GradingStore:
         ]
 
     def set_status(self, sub: str, status: str, message: str = "") -> None:
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             con.execute(
                 "UPDATE submissions SET status=?, message=? WHERE id=?",
                 (status, message[:256], sub),
@@ -234,7 +230,7 @@ class GradingStore:
         penalty: float,
         message: str,
     ) -> None:
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             con.execute("DELETE FROM episodes WHERE submission=?", (sub,))
             for e in episodes:
                 con.execute(
@@ -261,7 +257,7 @@ class GradingStore:
 
     def add_real(self, sub: str, e: EpisodeResult, message: str) -> None:
         """The real-robot attempt's row joined to a graded submission, and its message."""
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             con.execute("DELETE FROM episodes WHERE submission=? AND real=1", (sub,))
             con.execute(
                 "INSERT INTO episodes(submission, episode, seed, cause, detail, error_line, "
@@ -273,7 +269,7 @@ class GradingStore:
 
     def real_pending(self) -> list[Pending]:
         """Graded submissions whose real-robot attempt was queued and has no row yet."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT id, assignment, user, filename, source, submitted_at FROM submissions s "
             "WHERE status='graded' AND message LIKE '%its real-robot attempt is queued on%' "
             "AND NOT EXISTS (SELECT 1 FROM episodes e WHERE e.submission=s.id AND e.real=1) "
@@ -283,11 +279,11 @@ class GradingStore:
                 for i, a, u, f, s, t in rows]  # fmt: skip
 
     def set_message(self, sub: str, message: str) -> None:
-        with self.db._tx() as con:
+        with self.db.transaction() as con:
             con.execute("UPDATE submissions SET message=? WHERE id=?", (message[:256], sub))
 
     def real_score(self, sub: str) -> float | None:
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT score FROM episodes WHERE submission=? AND real=1 AND score IS NOT NULL", sub
         )
         return float(rows[0][0]) if rows else None
@@ -295,7 +291,7 @@ class GradingStore:
     def grader_failures(self, assignment: str) -> tuple[int, str]:
         """How many submissions the teacher's grader function failed, and the latest's message."""
         failed = "assignment=?1 AND message LIKE 'the teacher''s grader failed:%'"
-        rows = self.db._rows(
+        rows = self.db.rows(
             f"SELECT COUNT(*), (SELECT message FROM submissions WHERE {failed} "
             f"ORDER BY graded_at DESC LIMIT 1) FROM submissions WHERE {failed}",
             assignment,
@@ -306,7 +302,7 @@ class GradingStore:
     def submissions(
         self, assignment: str, user: str | None = None, sub: str | None = None
     ) -> list[SubmissionInfo]:
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT id, assignment, user, status, submitted_at, graded_at, mean, min, late_days, "
             "penalty, counted, message FROM submissions WHERE assignment=?1 "
             "AND (?2 IS NULL OR user=?2) AND (?3 IS NULL OR id=?3) ORDER BY submitted_at",
@@ -328,7 +324,7 @@ class GradingStore:
                     lab_reruns=int(reruns),
                     real=bool(real),
                 )
-                for n, seed, cause, detail, line, score, m, reruns, real in self.db._rows(
+                for n, seed, cause, detail, line, score, m, reruns, real in self.db.rows(
                     "SELECT episode, seed, cause, detail, error_line, score, metrics, lab_reruns, "
                     "real FROM episodes WHERE submission=? ORDER BY episode",
                     i,
@@ -356,14 +352,14 @@ class GradingStore:
     def best(self, assignment: str, higher: bool) -> list[tuple[str, float, str, float]]:
         """(user, best mean after penalty, submission, its time), one row per student."""
         agg = "MAX" if higher else "MIN"
-        rows = self.db._rows(
+        rows = self.db.rows(
             f"SELECT user, {agg}(mean - penalty) FROM submissions "
             "WHERE assignment=? AND status='graded' AND mean IS NOT NULL GROUP BY user",
             assignment,
         )
         out = []
         for user, score in rows:
-            sub = self.db._rows(
+            sub = self.db.rows(
                 "SELECT id, submitted_at FROM submissions WHERE assignment=? AND user=? "
                 "AND status='graded' AND mean - penalty = ? ORDER BY submitted_at LIMIT 1",
                 assignment,
@@ -375,7 +371,7 @@ class GradingStore:
 
     def graded(self, assignment: str) -> list[tuple[Pending, float]]:
         """Every graded submission with its score after penalty, oldest first."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT id, assignment, user, filename, source, submitted_at, mean - penalty "
             "FROM submissions WHERE assignment=? AND status='graded' AND mean IS NOT NULL "
             "ORDER BY submitted_at",
@@ -388,7 +384,7 @@ class GradingStore:
 
     def teams(self, course: str) -> dict[str, str]:
         """Each student's team in the course; a student without a team is their own."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT user, team FROM course_members WHERE course=? AND role='student'", course
         )
         return {str(u): str(t) or str(u) for u, t in rows}
@@ -397,7 +393,7 @@ class GradingStore:
 
     def taught_by(self, user: str) -> list[tuple[str, str]]:
         """(course, title) of each course ``user`` teaches."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT c.name, c.title FROM courses c JOIN course_members m ON m.course = c.name "
             "WHERE m.user=? AND m.role='teacher' ORDER BY c.name",
             user,
@@ -405,12 +401,12 @@ class GradingStore:
         return [(str(n), str(t)) for n, t in rows]
 
     def course_title(self, course: str) -> str | None:
-        rows = self.db._rows("SELECT title FROM courses WHERE name=?", course)
+        rows = self.db.rows("SELECT title FROM courses WHERE name=?", course)
         return str(rows[0][0]) if rows else None
 
     def students(self, course: str) -> list[tuple[str, str, str]]:
         """(user, display name, team) of each student of the course, by user."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT user, display_name, team FROM course_members "
             "WHERE course=? AND role='student' ORDER BY user",
             course,
@@ -420,7 +416,7 @@ class GradingStore:
     def course_submissions(self, course: str) -> list[CourseSubmission]:
         """Every submission to the course's assignments, oldest first, with the first
         episode of each that did not end well (its cause and detail)."""
-        rows = self.db._rows(
+        rows = self.db.rows(
             "SELECT s.id, s.assignment, s.user, s.status, s.submitted_at, "
             "CASE WHEN s.mean IS NULL THEN NULL ELSE s.mean - s.penalty END, s.message, "
             "(SELECT e.cause || ': ' || e.detail FROM episodes e WHERE e.submission = s.id "

@@ -15,7 +15,7 @@ from services.grader import service
 from services.grader.episodes import RUNNER_WAIT_S
 from services.grader.grading_db import GradingStore
 from services.grader.service import WORKERS, GraderService
-from services.registry.accounts_db import DbError, RegistryDB
+from services.lab.database import DbError, LabDatabase
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
@@ -64,7 +64,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
     if not args.db.exists():
         return cli.fail(f"{args.db}: no registry database there (start the registry first)")
     try:
-        db = RegistryDB(args.db)
+        db = LabDatabase(args.db)
         store = GradingStore(db)
     except DbError as exc:
         return cli.fail(str(exc))

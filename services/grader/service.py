@@ -72,7 +72,7 @@ from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
 from services.grader.real_attempt import RealAttempt
-from services.registry.accounts_db import DbError
+from services.lab.database import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
 GRADER_TRIES = 3  # the grader's own failures on one submission before it is failed, not counted

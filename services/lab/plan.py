@@ -13,7 +13,6 @@ from pathlib import Path
 
 from common.zconfig import NetworkOptions
 from services.cli import SUBCOMMANDS
-from services.context.main import KINDS as CONTEXT_KINDS
 from services.lab import wiring
 from services.lab.lab_maps import SHIPPED_MAPS, find_map
 from services.lab.labfile import HostEntry, LabFile, LabFileError
@@ -36,12 +35,9 @@ NEEDS: dict[str, tuple[str, ...]] = {
 
 
 def command_available(argv: tuple[str, ...] | list[str]) -> bool:
-    """Whether ``wart ARGV[0] [ARGV[1]]`` exists in this build."""
-    if not argv or argv[0] not in SUBCOMMANDS:
-        return False
-    if argv[0] == "context" and len(argv) > 1:
-        return argv[1] in CONTEXT_KINDS
-    return True
+    """Whether ``wart ARGV[0]`` exists in this build (``wart context`` has every kind a lab
+    file names: chat and agent are its own)."""
+    return bool(argv) and argv[0] in SUBCOMMANDS
 
 
 @dataclass(frozen=True)

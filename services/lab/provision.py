@@ -22,7 +22,7 @@ from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.labfile import LabFileError
 from services.lab.wiring import ACCOUNT_PREFIX
 from services.registry.accounts_db import RegistryDB
-from services.registry.service import provision as provision_registry_db
+from services.registry.accounts_db import provision as provision_registry_db
 
 
 @dataclass(frozen=True)

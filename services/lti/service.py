@@ -11,7 +11,7 @@ course (context) to a lab course (the platforms file, or the context's label);
 its resource link to an assignment (the file, or the custom parameter
 ``assignment=NAME``). The browser then lands on the lab's page logged in: the
 registry's resume token for that account, used once, in the page's saved-login
-cookie (viewers/web/saved_login.py).
+cookie (common/client/resume_cookie.py).
 
 When the grader announces a graded submission (``grader/<g>/graded``) of a
 student who launched that assignment from an LMS offering grade passback, its
@@ -30,6 +30,8 @@ import zenoh
 from common import keys
 from common.auth import AuthError, Verifier
 from common.client.grader_client import GraderClient
+from common.client.lab_address import AddressError, parse_address
+from common.client.resume_cookie import cookie_name, cookie_value
 from common.client.service_login import ServiceLogin
 from common.keys import AliveKind, is_ident
 from common.lab_errors import LabError, RegistryUnreachable
@@ -41,8 +43,6 @@ from services.lti.launch import Launch, Launcher, LaunchError
 from services.lti.store import LaunchLink, LtiStore, Outgoing
 from services.lti.tool_key import ToolKey
 from services.lti.web import Landing, ToolServer
-from viewers.web.address import AddressError, parse_address
-from viewers.web.saved_login import cookie_name, cookie_value
 
 log = logging.getLogger("wart.lti")
 

@@ -15,10 +15,9 @@ from __future__ import annotations
 import logging
 import secrets
 import sqlite3
-import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,8 +25,9 @@ import nacl.exceptions
 import nacl.pwhash
 
 from common import acl
+from common.auth import RegistryIdentity
 from common.keys import check_ident, is_ident
-from common.messages import ErrorCode
+from services.lab.database import DbError, LabDatabase
 
 log = logging.getLogger("wart.registry.db")
 
@@ -76,15 +76,6 @@ MAILBOX_LIMIT = 200
 OPSLIMIT = nacl.pwhash.argon2id.OPSLIMIT_INTERACTIVE
 MEMLIMIT = nacl.pwhash.argon2id.MEMLIMIT_INTERACTIVE
 MIN_PASSWORD = 8
-
-
-class DbError(ValueError):
-    """A request to the database is wrong (unknown user, name taken, bad grant)."""
-
-    def __init__(self, code: ErrorCode, message: str) -> None:
-        super().__init__(message)
-        self.code = code
-        self.message = message
 
 
 def hash_password(password: str) -> bytes:
@@ -136,37 +127,19 @@ class RegistryDB:
     """Thread-safe access to the registry database."""
 
     def __init__(self, path: Path) -> None:
+        self.database = LabDatabase(path)
         self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.created = not path.exists()
-        try:
-            self._db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA foreign_keys=ON")
-            self._db.execute("PRAGMA busy_timeout=5000")
-            self._db.executescript(SCHEMA)
-        except sqlite3.DatabaseError as exc:
-            raise DbError("internal", f"cannot open the registry database {path}: {exc}") from None
-        self._lock = threading.RLock()
+        self.created = self.database.created
+        self.database.create(SCHEMA, "account tables")
 
     def close(self) -> None:
-        with self._lock:
-            self._db.close()
+        self.database.close()
 
-    @contextmanager
-    def _tx(self) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
-                yield self._db
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
-            self._db.execute("COMMIT")
+    def _tx(self) -> AbstractContextManager[sqlite3.Connection]:
+        return self.database.transaction()
 
     def _rows(self, sql: str, *args: object) -> list[tuple]:
-        with self._lock:
-            return list(self._db.execute(sql, args))
+        return self.database.rows(sql, *args)
 
     # -- settings
 
@@ -449,3 +422,18 @@ def _session(row: tuple) -> SessionRecord:
         reason=str(reason or ""),
         kicked=bool(kicked),
     )
+
+
+def provision(db_path: Path, key_path: Path) -> tuple[RegistryIdentity, str | None, bool]:
+    """Create the key and the database if needed; (identity, new admin password, key created)."""
+    identity, created = RegistryIdentity.load_or_create(key_path)
+    db = RegistryDB(db_path)
+    try:
+        password = db.ensure_admin()
+    finally:
+        db.close()
+    if password is not None:
+        secret = db_path.parent / "admin-password.txt"
+        secret.write_text(f"{password}\n")
+        secret.chmod(0o600)
+    return identity, password, created

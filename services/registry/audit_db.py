@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import logging
 import math
-import sqlite3
 import time
 from dataclasses import dataclass
 
@@ -70,11 +69,7 @@ class TermStore:
 
     def __init__(self, db: RegistryDB) -> None:
         self.db = db
-        try:
-            with db._lock:
-                db._db.executescript(SCHEMA)
-        except sqlite3.DatabaseError as exc:
-            raise DbError("internal", f"cannot create the audit tables: {exc}") from None
+        db.database.create(SCHEMA, "ban and audit tables")
 
     # -- bans
 

@@ -22,25 +22,9 @@ from dataclasses import dataclass, field
 
 from common import acl
 from common.keys import check_ident
+from services.lab.database import ROSTER_SCHEMA
 from services.registry.accounts_db import DbError, RegistryDB, hash_password
 from services.registry.roster import RosterRow
-
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS courses (
-    name TEXT PRIMARY KEY,
-    title TEXT NOT NULL,
-    created_at REAL NOT NULL
-);
-CREATE TABLE IF NOT EXISTS course_members (
-    course TEXT NOT NULL REFERENCES courses(name) ON DELETE CASCADE,
-    user TEXT NOT NULL REFERENCES users(name) ON DELETE CASCADE,
-    role TEXT NOT NULL,
-    team TEXT NOT NULL DEFAULT '',
-    display_name TEXT NOT NULL DEFAULT '',
-    email TEXT NOT NULL DEFAULT '',
-    PRIMARY KEY (course, user)
-);
-"""
 
 # Unambiguous when read off paper: no 0/O, 1/l/I.
 _ALPHABET = "abcdefghijkmnpqrstuvwxyzABCDEFGHJKLMNPQRSTUVWXYZ23456789"
@@ -100,11 +84,7 @@ class CourseStore:
 
     def __init__(self, db: RegistryDB) -> None:
         self.db = db
-        try:
-            with db._lock:
-                db._db.executescript(SCHEMA)
-        except sqlite3.DatabaseError as exc:
-            raise DbError("internal", f"cannot create the course tables: {exc}") from None
+        db.database.create(ROSTER_SCHEMA, "course tables")
 
     def courses(self) -> list[tuple[str, str, int]]:
         """(name, title, members) of every course."""

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import hashlib
 import secrets
-import sqlite3
 import time
 
 from common import acl
@@ -55,11 +54,7 @@ class LtiLinks:
         self.db = db
         self.resumes = resumes
         CourseStore(db)  # the course tables exist before a launch joins one
-        try:
-            with db._lock:
-                db._db.executescript(SCHEMA)
-        except sqlite3.DatabaseError as exc:
-            raise DbError("internal", f"cannot create the lti table: {exc}") from None
+        db.database.create(SCHEMA, "LTI link table")
 
     def user_of(self, issuer: str, subject: str) -> str | None:
         rows = self.db._rows(

@@ -12,8 +12,8 @@ from common.auth import (
 )
 from common.service import run_service
 from services.registry import service
-from services.registry.accounts_db import RegistryDB
-from services.registry.service import Registry, provision
+from services.registry.accounts_db import RegistryDB, provision
+from services.registry.service import Registry
 from services.registry.throttle import LoginThrottle
 
 

@@ -20,14 +20,13 @@ and lock as accounts_db.py).
 from __future__ import annotations
 
 import secrets
-import sqlite3
 
 import nacl.exceptions
 
 from common.auth import RegistryIdentity
 from common.messages import MessageError, ResumeGrant, SignedResume, decode, encode
 from common.service import RequestError
-from services.registry.accounts_db import DbError, RegistryDB
+from services.registry.accounts_db import RegistryDB
 
 RESUME_TTL_S = 4 * 3600.0
 """How long a resume token is good: an afternoon's lab, far short of a session's 12 h."""
@@ -47,11 +46,7 @@ CREATE INDEX IF NOT EXISTS resumes_session ON resumes(session_id);
 
 
 def create_table(db: RegistryDB) -> None:
-    try:
-        with db._lock:
-            db._db.executescript(SCHEMA)
-    except sqlite3.DatabaseError as exc:
-        raise DbError("internal", f"cannot create the resume table: {exc}") from None
+    db.database.create(SCHEMA, "resume table")
 
 
 def revoke_user(db: RegistryDB, user: str, reason: str) -> int:

@@ -16,7 +16,6 @@ import logging
 import os
 import threading
 import time
-from pathlib import Path
 
 import nacl.exceptions
 import nacl.public
@@ -500,18 +499,3 @@ def _revocation(rec: SessionRecord) -> Revocation:
 
 
 # --- the process ---------------------------------------------------------------------
-
-
-def provision(db_path: Path, key_path: Path) -> tuple[RegistryIdentity, str | None, bool]:
-    """Create the key and the database if needed; (identity, new admin password, key created)."""
-    identity, created = RegistryIdentity.load_or_create(key_path)
-    db = RegistryDB(db_path)
-    try:
-        password = db.ensure_admin()
-    finally:
-        db.close()
-    if password is not None:
-        secret = db_path.parent / "admin-password.txt"
-        secret.write_text(f"{password}\n")
-        secret.chmod(0o600)
-    return identity, password, created

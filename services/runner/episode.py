@@ -32,7 +32,7 @@ from common.messages import (
 from common.sim2d import maps
 from common.sim2d.entities import Zone
 from common.sim2d.world import EditError, World
-from services.engine import packing
+from common.world import packing
 from services.runner.dryrun import _error_line, _last_line
 from services.runner.grader_run import GraderOutcome, episode_data, run_grader
 from services.runner.lockstep import Lockstep, Touches

@@ -31,7 +31,7 @@ from common.messages import (
 )
 from common.sim2d import maps
 from common.sim2d.world import EditError, World
-from services.engine import packing
+from common.world import packing
 from services.runner.dryrun import _error_line
 from services.runner.episode import (
     MAX_OUTPUT,

@@ -23,6 +23,7 @@ import zenoh
 
 from common import keys
 from common.auth import issue_session
+from common.client.lab_address import LabAddress
 from common.client.lab_client import LabClient
 from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
@@ -35,7 +36,6 @@ from tests.integration.agentkit import (
     together,
 )
 from tests.lab import PASSWORD, ProcessLab, Procs, Router, free_port, make_lab, start_router
-from viewers.web.address import LabAddress
 from viewers.web.app import WebViewer
 from viewers.web.connector import LiveConnector
 

@@ -47,7 +47,7 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
         CourseStore(db).import_roster("robotics-26", rows)
         text = assignment_toml("reach-goal", episodes="1", seeds="[4]")
         assignment, map_text = parse_assignment(text.encode(), "a.toml", REPO / "maps")
-        GradingStore(db).put_assignment(assignment, map_text)
+        GradingStore(db.database).put_assignment(assignment, map_text)
         db.close()
         env.lab.account(wiring.service_account("grader", "grader"))
         env.lab.start(wiring.grader_spec(env.lab.wiring()), name="grader")

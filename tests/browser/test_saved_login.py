@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
+from common.client.resume_cookie import PREFIX
 from tests.browser.conftest import ViserPage, page_url
 from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_lab import log_in, online
 from viewers.web.app import WebViewer
-from viewers.web.saved_login import PREFIX
 from viewers.web.tabs import tab_label
 
 pytestmark = pytest.mark.browser

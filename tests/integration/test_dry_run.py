@@ -18,7 +18,7 @@ from common.messages import WorldSnapshot
 from common.recording import read_recording, summarize
 from common.recording.report import describe
 from common.sim2d import maps
-from services.engine import packing
+from common.world import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for

@@ -30,6 +30,7 @@ import pytest
 from common import keys
 from common.auth import create_identity_key
 from common.client.grader_client import GraderClient
+from common.client.resume_cookie import parse_cookies
 from common.lab_errors import LabError
 from common.messages import LtiAccount, LtiAccountRequest
 from services.lab import wiring
@@ -48,7 +49,6 @@ from tests.integration.lti_platform import (
 )
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
 from tests.lab import REPO, ProcessLab, free_port, make_lab, start_router, wart_env
-from viewers.web.saved_login import parse_cookies
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
 LTI_ACCOUNT = wiring.service_account("lti", "lti")

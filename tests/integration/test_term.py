@@ -143,8 +143,8 @@ def test_a_gateway_vouches_for_each_browser_and_a_forged_vouch_counts_for_nothin
 
 def test_the_viewers_connector_vouches_for_each_browser_address(lab: Lab) -> None:
     """The viewer's own code path: its gateway account, a login per browser address."""
+    from common.client.lab_address import LabAddress
     from viewers.web.adapters import LoginError
-    from viewers.web.address import LabAddress
     from viewers.web.connector import GatewayLogin, LiveConnector
 
     key = create_identity_key(lab.state / "viewer-web.key")

@@ -13,12 +13,12 @@ from pathlib import Path
 
 import pytest
 
+from common.client.lab_address import LabAddress
 from common.service import close_session
 from tests.conftest import Procs, Router
 from tests.integration.agentkit import CTX, WORLD, start_agent_context, start_engine
 from tests.lab import PASSWORD, ProcessLab, make_lab
 from viewers.web.adapters import ContextSummary
-from viewers.web.address import LabAddress
 from viewers.web.connector import LiveConnector
 
 pytestmark = pytest.mark.integration

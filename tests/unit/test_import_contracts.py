@@ -174,3 +174,130 @@ def test_the_contract_check_sees_a_violation() -> None:
     assert "zenoh" in imports_of("common.service")
     assert _reaches("common.service", "zenoh") is not None
     assert "common.keys" in imports_of("common.revocations")
+
+
+# A process's package talks to another process over the wire, never by importing it.
+# The exceptions, each with its reason; the list only shrinks.
+CROSSINGS: dict[tuple[str, str], str] = {
+    ("services.lab.provision", "services.registry.accounts_db"): (
+        "the lab creates the registry's database, admin and service accounts before the "
+        "registry starts"
+    ),
+    ("services.grader.course_cli", "services.registry.accounts_db"): (
+        "`wart course` is an offline tool of the lab's database, as `wart users` is: it grants "
+        "the grader's account deploy on a real arena's robot through RegistryDB's public API"
+    ),
+}
+
+
+def _process_package(module: str) -> str | None:
+    """``services.X`` of a module of a process's package (services/lab/ is the library)."""
+    parts = module.split(".")
+    if parts[0] != "services" or len(parts) < 3 or parts[1] in ("commands",):
+        return None
+    return ".".join(parts[:2])
+
+
+def test_a_process_imports_only_common_the_lab_library_and_itself() -> None:
+    crossings = []
+    for module in _sources():
+        package = _process_package(module)
+        if package is None:
+            continue
+        for name in imports_of(module):
+            if not _project(name) or _inside(name, "common") or _inside(name, package):
+                continue
+            if _inside(name, "services.lab") and package != "services.lab":
+                continue
+            if name == "services.cli" and package == "services.lab":
+                continue  # the dispatcher's table of command names; it imports no process
+            if (module, name) in CROSSINGS:
+                continue
+            crossings.append(f"{module} imports {name}")
+    assert not crossings, "a process imports another's code:\n" + "\n".join(sorted(crossings))
+    stale = [pair for pair in CROSSINGS if pair[1] not in imports_of(pair[0])]
+    assert not stale, f"exceptions no longer needed (remove them): {stale}"
+
+
+def test_the_viewer_imports_no_process() -> None:
+    assert not _violations("viewers", lambda n: not _inside(n, "services"))
+
+
+def _top_level_imports(module: str) -> set[str]:
+    """Project modules ``module`` imports when it is imported (not in functions, not for
+    type checking only): the edges an import loop at run time is made of."""
+    path = _sources()[module]
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    names: set[str] = set()
+
+    def visit(body: list[ast.stmt]) -> None:
+        for node in body:
+            if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+                visit(node.orelse)
+                continue
+            if isinstance(node, ast.If | ast.Try):
+                visit(node.body)
+                visit(getattr(node, "orelse", []))
+                for handler in getattr(node, "handlers", []):
+                    visit(handler.body)
+                visit(getattr(node, "finalbody", []))
+            elif isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join([*anchor, base] if base else anchor)
+                names.update(
+                    f"{base}.{a.name}" if f"{base}.{a.name}" in _sources() else base
+                    for a in node.names
+                )
+
+    visit(ast.parse(path.read_text(), str(path)).body)
+    return {n for n in names if n in _sources()}
+
+
+def _loops(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected groups of more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10_000))
+
+    def connect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for v in sorted(graph):
+        if v not in index:
+            connect(v)
+    return found
+
+
+def test_the_loop_check_sees_a_loop() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": set()}
+    assert _loops(graph) == [["a", "b", "c"]]
+
+
+def test_no_import_loop_at_run_time() -> None:
+    loops = _loops({m: _top_level_imports(m) for m in _sources()})
+    assert not loops, "modules that import each other:\n" + "\n".join(map(str, loops))

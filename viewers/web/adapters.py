@@ -21,6 +21,7 @@ from typing import Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from common.client.lab_address import LabAddress
 from common.client.survey import Survey
 from common.lab_errors import LabError
 from common.messages.agent import MAX_UPLOAD_BYTES
@@ -34,7 +35,6 @@ from common.messages.grading import (
     SubmissionInfo,
 )
 from common.messages.world import RobotTypeReply
-from viewers.web.address import LabAddress
 
 F32 = npt.NDArray[np.float32]
 

@@ -26,12 +26,12 @@ import viser
 import zenoh
 
 from common import cli
+from common.client.lab_address import LabAddress, SavedConnections, parse_address
 from common.client.service_login import ServiceCredentials
 from common.keys import AliveKind, check_ident
 from common.service import Service, run_service
 from common.zconfig import DEFAULT_PORT, NetworkOptions
 from viewers.web.adapters import LabConnector
-from viewers.web.address import LabAddress, SavedConnections, parse_address
 from viewers.web.client import BrowserSession
 from viewers.web.connector import GatewayLogin, LiveConnector
 from viewers.web.login import LoginDesk

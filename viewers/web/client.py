@@ -11,8 +11,15 @@ import threading
 
 import viser
 
+from common.client.lab_address import (
+    AddressError,
+    LabAddress,
+    SavedConnections,
+    complete,
+    parse_address,
+)
+from common.client.resume_cookie import SavedLogin, parse_cookies
 from viewers.web.adapters import LabConnection, LabConnector, LoginError, WorldFeed
-from viewers.web.address import AddressError, LabAddress, SavedConnections, complete, parse_address
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.inputs import set_value
@@ -20,7 +27,7 @@ from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.pump import FramePump
-from viewers.web.saved_login import SavedLogin, parse_cookies, saved_login_html
+from viewers.web.saved_login import saved_login_html
 from viewers.web.sure_clicks import add_sure_clicks
 from viewers.web.tabs import TabSwitcher, tab_title
 from viewers.web.text import escape_md

@@ -20,6 +20,7 @@ import zenoh
 from common import lab_errors
 from common.auth import LOGIN_WAIT_S, parse_public_key
 from common.client import lab_client as lab
+from common.client.lab_address import LabAddress
 from common.client.service_login import ServiceCredentials, ServiceLogin, vouch_for
 from common.lab_errors import LabError
 from common.service import close_session, open_session
@@ -27,7 +28,6 @@ from common.zconfig import NetworkOptions
 from viewers.web.adapters import (
     LoginError,
 )
-from viewers.web.address import LabAddress
 from viewers.web.lab_links import LabRouterLink, load_labs
 from viewers.web.live import LiveConnection, plain_error
 from viewers.web.live_world import QUERY_TIMEOUT

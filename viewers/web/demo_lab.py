@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from common.client.lab_address import LabAddress
 from common.client.survey import RouterView, Survey
 from common.keys import is_ident
 from common.messages.grading import (
@@ -49,7 +50,6 @@ from viewers.web.adapters import (
     RecordingEntry,
     SavedFile,
 )
-from viewers.web.address import LabAddress
 from viewers.web.demo_admin import ADMIN, INSTRUCTOR, STUDENT, DemoAdmin
 from viewers.web.live_agents import check_upload
 

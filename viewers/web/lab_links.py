@@ -15,11 +15,11 @@ from pathlib import Path
 import zenoh
 
 from common.auth import parse_public_key
+from common.client.lab_address import AddressError, LabAddress, parse_address
 from common.service import close_session
 from viewers.web.adapters import (
     LabError,
 )
-from viewers.web.address import AddressError, LabAddress, parse_address
 from viewers.web.live_world import WorldWatch
 
 log = logging.getLogger("wart.viewer.live")

@@ -26,6 +26,7 @@ from common import keys, lab_errors
 from common.client import host_client
 from common.client import lab_client as lab
 from common.client.grader_client import GraderClient, submitted_words
+from common.client.lab_address import LabAddress
 from common.client.survey import Survey, survey
 from common.keys import AliveKind, is_ident
 from common.messages import (
@@ -58,7 +59,6 @@ from viewers.web.adapters import (
     RecordingEntry,
     SavedFile,
 )
-from viewers.web.address import LabAddress
 from viewers.web.fanout import Fanout
 from viewers.web.lab_links import LabRouterLink
 from viewers.web.live_admin import LiveAdmin

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import viser
 
 from common.auth import LOGIN_WAIT_S
+from common.client.lab_address import LabAddress
 from common.keys import is_ident
 from viewers.web.adapters import LabConnection, LabConnector, LabError
-from viewers.web.address import LabAddress
 from viewers.web.inputs import on_click, set_value
 from viewers.web.masked import add_masked_text, add_submit_on_enter
 from viewers.web.viser_fast import browser_address

@@ -23,7 +23,7 @@ import json
 
 import viser
 
-from viewers.web.address import LabAddress
+from common.client.lab_address import LabAddress
 
 SHOW_TAB_JS = """
 (function (label, title, seq) {

@@ -14,7 +14,7 @@ from common.recording import schema as s
 from common.recording.store import RecordingStore
 from common.recording.writer import frame_record, pose_record, sample_record
 from common.sim2d import maps
-from services.engine import packing
+from common.world import packing
 
 REPO = Path(__file__).resolve().parents[3]
 

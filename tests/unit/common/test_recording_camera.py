@@ -17,7 +17,7 @@ from common.recording.compare import compare
 from common.recording.reader import read_recording
 from common.recording.writer import RecordingWriter, pose_record
 from common.sim2d import maps
-from services.engine import packing
+from common.world import packing
 
 AGENT = "k1"  # maps/empty.json's Khepera
 REPO = Path(__file__).resolve().parents[3]

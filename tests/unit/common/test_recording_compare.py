@@ -12,8 +12,8 @@ from common.recording import RecordingError, RecordingWriter, read_recording
 from common.recording import schema as s
 from common.recording.compare import CompareError, compare
 from common.sim2d import maps
+from common.world import packing
 from services.commands import report
-from services.engine import packing
 
 REPO = Path(__file__).resolve().parents[3]
 SECONDS = 2.0

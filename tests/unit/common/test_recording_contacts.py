@@ -13,7 +13,7 @@ from common.recording import contacts
 from common.recording import schema as s
 from common.recording.reader import Recording, Stamped
 from common.sim2d import maps
-from services.engine import packing
+from common.world import packing
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -20,8 +20,8 @@ from common.robots import registry
 from common.robots.describe import robot_api
 from common.robots.robotfile import parse
 from common.sim2d.world import World
+from common.world.packing import samples, snapshot
 from common.world.remote_robot import state_from_sample
-from services.engine.packing import samples, snapshot
 
 REG = registry.build(plugins=False)
 LINE_BOT = parse(

@@ -191,7 +191,7 @@ def test_a_bad_floor_layer_is_refused_with_its_field(change: dict, message: str)
 
 def test_the_floor_layer_travels_in_the_snapshot_and_the_view_draws_it() -> None:
     from common.messages import WorldSnapshot, decode, encode
-    from services.engine.packing import snapshot
+    from common.world.packing import snapshot
     from viewers.web import geometry as geo
     from viewers.web.live_world import convert_snapshot
 
@@ -213,7 +213,7 @@ def test_the_floor_layer_travels_in_the_snapshot_and_the_view_draws_it() -> None
 
 def test_each_robot_type_s_look_travels_once_in_the_snapshot() -> None:
     from common.messages import WorldSnapshot, decode, encode
-    from services.engine.packing import snapshot
+    from common.world.packing import snapshot
     from viewers.web.live_world import convert_snapshot
 
     world = World(600, 400, seed=1)

@@ -25,7 +25,7 @@ from common.sim2d import kernels, maps
 from common.sim2d.agents import agent_type
 from common.sim2d.maps import MapError
 from common.sim2d.world import World
-from services.engine import packing
+from common.world import packing
 from services.engine.main import main
 from tests.conftest import REPO
 

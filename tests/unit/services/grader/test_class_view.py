@@ -33,7 +33,7 @@ def test_every_student_has_a_row_with_latest_status_queue_place_score_and_last_f
         RosterRow(line=6, user="ida", role="teacher"),
     ]
     CourseStore(db).import_roster(COURSE, rows)
-    store = GradingStore(db)
+    store = GradingStore(db.database)
     a, map_text = parse_assignment(GOOD, "a.toml", MAPS)
     store.put_assignment(a, map_text)
     queue: FairQueue[str] = FairQueue()

@@ -104,7 +104,7 @@ def test_a_real_attempt_queued_when_the_grader_stopped_is_found_at_its_start(
     db = RegistryDB(tmp_path / "registry.db")
     try:
         CourseStore(db).import_roster("c", [RosterRow(line=2, user="alice", name="Alice")])
-        store = GradingStore(db)
+        store = GradingStore(db.database)
         a, map_text = parse_assignment(TOML, "r.toml", MAPS)
         store.put_assignment(a, map_text)
         subs = [store.add_submission("r", "alice", "w.py", b"x", 0) for _ in range(3)]

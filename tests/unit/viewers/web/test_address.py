@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from viewers.web.address import (
+from common.client.lab_address import (
     AddressError,
     LabAddress,
     SavedConnections,

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from common.client.lab_address import LabAddress
 from common.messages.agent import MAX_UPLOAD_BYTES
 from tests.conftest import REPO
 from viewers.web import geometry as geo
 from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError, MapEdit
-from viewers.web.address import LabAddress
 from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
 from viewers.web.live_agents import check_upload
 from viewers.web.login import check_login_input

@@ -4,15 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from viewers.web.address import parse_address
+from common.client.lab_address import parse_address
+from common.client.resume_cookie import cookie_name, cookie_value, parse_cookies
 from viewers.web.login import progress_words
-from viewers.web.saved_login import (
-    cookie_name,
-    cookie_script,
-    cookie_value,
-    parse_cookies,
-    saved_login_html,
-)
+from viewers.web.saved_login import cookie_script, saved_login_html
 
 
 def test_a_cookie_round_trips_per_lab_and_damaged_ones_are_skipped() -> None:

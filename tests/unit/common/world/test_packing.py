@@ -1,4 +1,4 @@
-"""The world frame a viewer draws (services/engine/packing.py): each robot's LEDs, arm, grip.
+"""The world frame a viewer draws (common/world/packing.py): each robot's LEDs, arm, grip.
 
 What a user relies on: the frame's agent_state row of a robot says which of
 its LEDs are lit (bit i for LED i), where its arm is, whether its fingers are
@@ -11,7 +11,7 @@ import numpy as np
 
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
-from services.engine import packing
+from common.world import packing
 
 
 def test_a_frame_carries_each_robots_leds_arm_and_grip() -> None:
