@@ -32,7 +32,14 @@ from common.recording.writer import RecordingWriter, pose_record
 from services.grader.assignment import Assignment
 from services.grader.episodes import LAB_RETRIES, EpisodeRunner
 from services.grader.grading_db import GradingStore, Pending
-from services.grader.heats import HeatError, heat_request, heat_robots, record_heat, score_heat
+from services.grader.heats import (
+    HeatError,
+    heat_request,
+    heat_robots,
+    record_heat,
+    score_heat,
+    write_frames,
+)
 from services.grader.score import MissingMetric
 
 log = logging.getLogger("wart.grader")
@@ -328,7 +335,7 @@ class Competitions:
             writer.attach_source(sub.filename, sub.source, began)
             if report.snapshot is not None:
                 writer.write(s.SNAPSHOT, report.snapshot, began)
-                _write_frames(writer, report, began)
+                write_frames(writer, report.snapshot, report.frames, began)
             topic = s.pose_topic(a.robot)
             for t, x, y, heading in report.trace:
                 writer.write(topic, pose_record(x, y, heading, began + t), began + t)
@@ -342,24 +349,3 @@ class Competitions:
             log.warning("heat %d of %s not recorded: %s", heat, name, exc)
             return ""
         return str(path)
-
-
-def _write_frames(writer: RecordingWriter, report: EpisodeReport, began: float) -> None:
-    """The heat's frames (every row's pose each traced step): what a replay draws."""
-    snap = report.snapshot
-    assert snap is not None
-    n_agents = len(snap.agents)
-    for tick, (t, flat) in enumerate(report.frames):
-        n = min(len(snap.rows), len(flat) // 3)
-        record = s.FrameRecord(
-            tick=tick,
-            sim_time=t,
-            layout=snap.layout,
-            agents=min(n_agents, n),
-            rows=list(snap.rows[:n]),
-            x=flat[0 : 3 * n : 3],
-            y=flat[1 : 3 * n : 3],
-            heading=flat[2 : 3 * n : 3],
-            fingers=[0] * min(n_agents, n),
-        )
-        writer.write(s.FRAME, record, began + t)

@@ -17,7 +17,15 @@ from pathlib import Path
 
 import msgspec
 
-from common.messages import STUDENT_CAUSES, Heat, HeatEntry, HeatReport, StandingEntry
+from common.messages import (
+    STUDENT_CAUSES,
+    Heat,
+    HeatEntry,
+    HeatReport,
+    StandingEntry,
+    TraceFrame,
+    WorldSnapshot,
+)
 from common.recording import schema as s
 from common.recording.writer import RecordingWriter, pose_record
 from common.sim2d import maps
@@ -132,9 +140,7 @@ def record_heat(
         writer.attach_source(f"{e.agent}-{e.user}-{e.filename}", e.source, began)
     if report.snapshot is not None:
         writer.write(s.SNAPSHOT, report.snapshot, began)
-        from services.grader.competition import _write_frames
-
-        _write_frames(writer, report, began)  # type: ignore[arg-type]  # snapshot and frames
+        write_frames(writer, report.snapshot, report.frames, began)
     for e, r in zip(request.entries, report.entries, strict=True):
         topic = s.pose_topic(e.agent)
         for t, x, y, heading in r.trace:
@@ -148,3 +154,24 @@ def record_heat(
                                                               strict=True))  # fmt: skip
     writer.finish(s.RunEnd(status="finished", reason=causes[:200], at=end))
     return str(path)
+
+
+def write_frames(
+    writer: RecordingWriter, snap: WorldSnapshot, frames: list[TraceFrame], began: float
+) -> None:
+    """A heat's or an episode's frames (every row's pose each traced step): what a replay draws."""
+    n_agents = len(snap.agents)
+    for tick, (t, flat) in enumerate(frames):
+        n = min(len(snap.rows), len(flat) // 3)
+        record = s.FrameRecord(
+            tick=tick,
+            sim_time=t,
+            layout=snap.layout,
+            agents=min(n_agents, n),
+            rows=list(snap.rows[:n]),
+            x=flat[0 : 3 * n : 3],
+            y=flat[1 : 3 * n : 3],
+            heading=flat[2 : 3 * n : 3],
+            fingers=[0] * min(n_agents, n),
+        )
+        writer.write(s.FRAME, record, began + t)
