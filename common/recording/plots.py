@@ -32,7 +32,7 @@ def available() -> bool:
 
 def write_plots(rec: Recording, out_dir: Path, stem: str) -> list[Path]:
     """``<stem>.trajectory.png`` and ``<stem>.sensors.png`` in ``out_dir``; the paths written."""
-    import matplotlib
+    import matplotlib  # optional (the plots only): a lab without it reports numbers
 
     matplotlib.use("Agg")  # files only: no display, no GUI toolkit
     import matplotlib.pyplot as plt
@@ -101,7 +101,7 @@ def _map(ax: Any, rec: Recording) -> None:
 def _draw_map(ax: Any, snap: WorldSnapshot | None) -> None:
     if snap is None:
         return
-    from matplotlib.patches import Circle, Polygon, Rectangle
+    from matplotlib.patches import Circle, Polygon, Rectangle  # optional, as above
 
     ax.add_patch(Rectangle((0, 0), snap.width, snap.height, fill=False, lw=1.5, color="black"))
     for item in snap.items:
@@ -125,7 +125,7 @@ def write_comparison_plots(
 ) -> list[Path]:
     """``<stem>.trajectories.png`` (both runs on one map) and ``<stem>.sensors.png`` (each IR
     and ambient sensor of both runs over the slot's time, overlaid) in ``out_dir``."""
-    import matplotlib
+    import matplotlib  # optional (the plots only)
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

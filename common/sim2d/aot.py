@@ -155,9 +155,10 @@ def state_sample() -> tuple[Any, ...]:
     The build compiles new_state for these arguments' types and compiled.py
     checks each call's against them: one sample, so the two cannot disagree.
     """
+    # here, not at the top: ./dev asks whether the module is built without numpy
     import numpy as np
 
-    from common.sim2d.packs import N_AGENT_F, N_AGENT_I
+    from common.sim2d.packs import N_AGENT_F, N_AGENT_I  # with numpy, as above
     from common.sim2d.pucks_tables import objects_table
 
     one = np.ones(1)
@@ -214,6 +215,6 @@ def state_sample() -> tuple[Any, ...]:
 
 def circles_sample() -> tuple[Any, ...]:
     """discs.bin_circles' arguments as world_tick passes them (static geometry's circles)."""
-    import numpy as np
+    import numpy as np  # here, not at the top: as state_sample's
 
     return (np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0)

@@ -55,7 +55,7 @@ def _jit() -> ModuleType:
     """numba's kernels (kernels.py), imported at the first call that needs them."""
     if "common.sim2d.kernels" not in sys.modules and PATH == "aot":
         log.info("kernels: loading numba's for what the ahead-of-time module lacks")
-    from common.sim2d import kernels
+    from common.sim2d import kernels  # numba: loaded only when a kernel needs it
 
     return kernels
 
@@ -91,7 +91,7 @@ def new_tick(*args: Any) -> tuple[object, Callable[[Any, bool, np.uint64, np.nda
         if aot.describe(args) == _state_kinds:
             return _Address(_module.new_state(*args)), _module.tick
         log.warning("kernels: a fused state of other types than built for: numba's runs it")
-    from common.sim2d import fused
+    from common.sim2d import fused  # numba: only when the module cannot run this state
 
     state = fused.new_state(*args)
     return state, fused.entry(state)
@@ -108,21 +108,21 @@ def bin_circles(*args: Any) -> tuple[np.ndarray, np.ndarray]:
             _circle_kinds = aot.describe(aot.circles_sample())
         if aot.describe(args) == _circle_kinds:
             return _module.bin_circles(*args)
-    from common.sim2d import discs
+    from common.sim2d import discs  # numba: only when the module cannot bin these
 
     return discs.bin_circles(*args)
 
 
 def discs_tick(*args: Any) -> tuple[np.ndarray, np.ndarray]:
     """discs.tick (the discs drive's general path: a profiled world): numba's."""
-    from common.sim2d import discs
+    from common.sim2d import discs  # numba: a profiled world only
 
     return discs.tick(*args)
 
 
 def scene_into(*args: Any) -> tuple[int, int]:
     """pucks.scene_into (before a sensing pass on threads): numba's."""
-    from common.sim2d import pucks
+    from common.sim2d import pucks  # numba: a pass on threads only
 
     return pucks.scene_into(*args)
 

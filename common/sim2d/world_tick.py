@@ -36,7 +36,7 @@ def _split_drive(threads: int, robots: int) -> ModuleType | None:
     """
     if threads <= 1 or robots < sensing.PARALLEL_MIN_AGENTS:
         return None
-    from common.sim2d import discs_split
+    from common.sim2d import discs_split  # numba's: loaded only by worlds that split
 
     return discs_split
 
@@ -172,7 +172,7 @@ class WorldTick:
         nd = n + len(objs.objects)
         discs_split = _split_drive(self.threads, n)
         if discs_split is not None and nd >= discs_split.SPLIT_MIN_DISCS:
-            from common.sim2d import discs
+            from common.sim2d import discs  # numba's, as discs_split
 
             # The drive on the world's threads (discs_split.py): the state's
             # arrays, work arrays of its own (the fused tick's are scratch too).

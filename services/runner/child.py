@@ -48,6 +48,7 @@ def main() -> int:
     for arg in sys.argv[3:]:
         if arg.startswith("hang="):
             hang_after = float(arg[len("hang=") :])
+    # The sandbox's copy of the controller API (stage.py) is importable only from here on.
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib"))
     from common.controller import (
         ControllerLoop,
@@ -161,7 +162,7 @@ class HangWatch:
 
     def report(self, after: float) -> bool:
         """Tell the runner do_work hangs if it has run ``after`` seconds; True if told."""
-        from common.controller import pipe
+        from common.controller import pipe  # the sandbox's copy: on sys.path once main() ran
 
         since = self.since
         if since is None or self.told:
@@ -182,7 +183,7 @@ class HangWatch:
 
 def run_lockstep(path: str, link: Any, tell: Callable[[Any], None]) -> int:
     """Step the controller once per state read, on the states' simulated clock."""
-    from common.controller import Khepera, load_controller, pipe
+    from common.controller import Khepera, load_controller, pipe  # the sandbox's copy, as above
 
     try:
         controller = load_controller(path)
@@ -225,6 +226,7 @@ def run_lockstep(path: str, link: Any, tell: Callable[[Any], None]) -> int:
 
 def run_grader(path: str, tell: Callable[[Any], None], hang_after: float) -> int:
     """Load the teacher's file, call its grade() once on the episode, send what it returned."""
+    # The sandbox's copy, as above; json only for a teacher's grader run.
     import json
 
     from common.controller import pipe

@@ -301,3 +301,32 @@ def test_the_loop_check_sees_a_loop() -> None:
 def test_no_import_loop_at_run_time() -> None:
     loops = _loops({m: _top_level_imports(m) for m in _sources()})
     assert not loops, "modules that import each other:\n" + "\n".join(map(str, loops))
+
+
+def _unexplained_inner_imports(path: Path) -> list[str]:
+    """Imports inside functions with no comment saying why, on the import's lines or within
+    the three lines above (a comment over a small block of imports covers the block)."""
+    lines = path.read_text().splitlines()
+    found = []
+    for function in ast.walk(ast.parse("\n".join(lines), str(path))):
+        if not isinstance(function, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        for node in ast.walk(function):
+            if not isinstance(node, ast.Import | ast.ImportFrom):
+                continue
+            near = lines[max(0, node.lineno - 4) : node.end_lineno or node.lineno]
+            if not any("#" in line for line in near):
+                found.append(f"{path.relative_to(REPO)}:{node.lineno}")
+    return found
+
+
+def test_imports_inside_functions_say_why() -> None:
+    """An import in a function hides a dependency: only for a reason (an optional package,
+    numba kept off a path, the sandbox's own copy), written beside it."""
+    found = [
+        place
+        for top in ("common", "services", "viewers")
+        for path in sorted((REPO / top).rglob("*.py"))
+        for place in _unexplained_inner_imports(path)
+    ]
+    assert not found, "imports inside functions without a comment saying why:\n" + "\n".join(found)

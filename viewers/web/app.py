@@ -283,7 +283,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
     def build(session: zenoh.Session) -> Service:
         connector: LabConnector
         if args.demo:
-            from viewers.web.demo_lab import DemoConnector, DemoLab
+            from viewers.web.demo_lab import DemoConnector, DemoLab  # --demo only
 
             lab = DemoLab("Demo lab", robots=args.demo_robots)
             connector = DemoConnector((default.realm, lab))

@@ -214,7 +214,7 @@ class RecordingsPanel:
         if not plots.available():
             self.say("Plots need matplotlib on the viewer's machine (pip install matplotlib).")
             return
-        import matplotlib.image
+        import matplotlib.image  # optional: plots only (plots.available() said yes)
 
         out = Path(self._tmp.name) / "plots"
         try:
