@@ -43,6 +43,9 @@ from common.messages.recording import __all__ as _recording_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
 from common.messages.registry import __all__ as _registry_all
 from common.messages.world import (
+    FINGERS_CLOSED,
+    FINGERS_HOLDING,
+    FINGERS_OPEN,
     MAC_ITEM_BYTES,
     MAC_ITEM_COUNTERS,
     MAC_ITEM_DTYPE,
@@ -52,6 +55,7 @@ from common.messages.world import (
     AddItem,
     AgentCommand,
     AgentInfo,
+    AgentStates,
     BundledCommand,
     CommandBundle,
     EditResult,
@@ -84,6 +88,9 @@ from common.messages.world import (
 
 __all__ = [
     "ALL_PERMISSIONS",
+    "FINGERS_CLOSED",
+    "FINGERS_HOLDING",
+    "FINGERS_OPEN",
     "MAC_ITEM_BYTES",
     "MAC_ITEM_COUNTERS",
     "MAC_ITEM_DTYPE",
@@ -94,6 +101,7 @@ __all__ = [
     "AddItem",
     "AgentCommand",
     "AgentInfo",
+    "AgentStates",
     "AuthEnvelope",
     "BundledCommand",
     "CommandBundle",

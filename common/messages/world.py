@@ -7,6 +7,7 @@ are the robot type's raw units (Khepera: proximity 0..1023, ambient ~500 dark).
 from __future__ import annotations
 
 import struct
+from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
 import msgspec
@@ -168,6 +169,7 @@ class WorldFrame(Message, frozen=True):
 
     ``poses`` rows are ``WorldSnapshot.rows`` (agents first, then movable
     objects); when ``layout`` differs from the snapshot's, fetch a new one.
+    ``agent_state`` is :class:`AgentStates`, packed.
     """
 
     world: Ident
@@ -175,8 +177,40 @@ class WorldFrame(Message, frozen=True):
     sim_time: float
     layout: NonNegInt
     poses: PackedArray  # float32 (rows, 3): x mm, y mm, heading rad
-    agent_state: PackedArray  # uint8 (agents, 4): led bits, arm, fingers 0/1/2, presence
+    agent_state: PackedArray  # uint8 (agents, 4): AgentStates.pack
     lights: PackedArray  # uint8 (lights,): 1 lit
+
+
+FINGERS_OPEN, FINGERS_CLOSED, FINGERS_HOLDING = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class AgentStates:
+    """What a frame says of each agent besides its pose: one uint8 column each.
+
+    ``leds``: bit k is LED k lit; ``arm``: the gripper's arm position (0..255; 0
+    without a gripper); ``fingers``: FINGERS_OPEN, FINGERS_CLOSED or
+    FINGERS_HOLDING (closed on an object); ``presence``: the light barrier
+    between the fingers, 0..255 (the simulator's reads 0 or 255, a real robot's
+    its raw reading).
+    """
+
+    leds: np.ndarray
+    arm: np.ndarray
+    fingers: np.ndarray
+    presence: np.ndarray
+
+    def pack(self) -> PackedArray:
+        columns = (self.leds, self.arm, self.fingers, self.presence)
+        return PackedArray.from_numpy(np.stack(columns, axis=1).astype(np.uint8, copy=False))
+
+    @classmethod
+    def unpack(cls, packed: PackedArray, agents: int) -> AgentStates | None:
+        """The columns of a frame's ``agent_state``; None unless it has ``agents`` rows of 4."""
+        table = packed.to_numpy()
+        if table.ndim != 2 or table.shape != (agents, 4):
+            return None
+        return cls(table[:, 0], table[:, 1], table[:, 2], table[:, 3])
 
 
 class ShapeInfo(msgspec.Struct, frozen=True, kw_only=True):

@@ -17,7 +17,7 @@ from typing import IO, Any
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from common.messages import SensorSample, WorldFrame, WorldSnapshot
+from common.messages import AgentStates, SensorSample, WorldFrame, WorldSnapshot
 from common.recording import schema as s
 
 CHUNK_BYTES = 128 * 1024  # a crash loses at most this much (compressed chunks are smaller)
@@ -29,8 +29,8 @@ _encode = msgspec.json.Encoder().encode
 def frame_record(frame: WorldFrame, rows: list[str], agents: int) -> s.FrameRecord:
     """The JSON record of a wire frame (rows named from the world's snapshot)."""
     poses = frame.poses.to_numpy()
-    state = frame.agent_state.to_numpy()
     n = min(len(rows), poses.shape[0])
+    states = AgentStates.unpack(frame.agent_state, agents)
     return s.FrameRecord(
         tick=frame.tick,
         sim_time=frame.sim_time,
@@ -40,7 +40,7 @@ def frame_record(frame: WorldFrame, rows: list[str], agents: int) -> s.FrameReco
         x=[round(float(v), 2) for v in poses[:n, 0]],  # 0.01 mm: what the float32 carries
         y=[round(float(v), 2) for v in poses[:n, 1]],
         heading=[round(float(v), 4) for v in poses[:n, 2]],
-        fingers=[int(v) for v in state[:, 2]] if state.ndim == 2 and state.shape[1] > 2 else [],
+        fingers=[] if states is None else [int(v) for v in states.fingers],
     )
 
 

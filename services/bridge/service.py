@@ -50,8 +50,12 @@ from common.auth import AuthError, Session, Verifier
 from common.controller.actuators import apply_command
 from common.keys import AliveKind
 from common.messages import (
+    FINGERS_CLOSED,
+    FINGERS_HOLDING,
+    FINGERS_OPEN,
     AgentCommand,
     AgentInfo,
+    AgentStates,
     GripperReading,
     Message,
     PackedArray,
@@ -490,21 +494,28 @@ class BridgeService(WorldService):
         poses = np.array(
             [(s.pose.x, s.pose.y, s.pose.heading) for s in states], dtype=np.float32
         ).reshape(n, 3)
-        agent_state = np.zeros((n, 4), dtype=np.uint8)
+        agent_states = AgentStates(
+            leds=np.array([sum(b << k for k, b in enumerate(s.leds)) for s in states], np.uint8),
+            arm=np.zeros(n, np.uint8),
+            fingers=np.zeros(n, np.uint8),
+            presence=np.zeros(n, np.uint8),
+        )
         for i, s in enumerate(states):
-            agent_state[i, 0] = sum(bit << k for k, bit in enumerate(s.leds))
             if s.gripper is not None:
                 closed = s.gripper.fingers > FINGERS_CLOSED_ABOVE
-                agent_state[i, 1] = _byte(s.gripper.arm)
-                agent_state[i, 2] = (2 if s.gripper.object > 0 else 1) if closed else 0
-                agent_state[i, 3] = _byte(s.gripper.object)
+                agent_states.arm[i] = _byte(s.gripper.arm)
+                holding = closed and s.gripper.object > 0
+                agent_states.fingers[i] = (
+                    FINGERS_HOLDING if holding else FINGERS_CLOSED if closed else FINGERS_OPEN
+                )
+                agent_states.presence[i] = _byte(s.gripper.object)
         return WorldFrame(
             world=self.ident,
             tick=self._frames,
             sim_time=round(time.monotonic() - self._t0, 6),
             layout=layout,
             poses=PackedArray.from_numpy(poses),
-            agent_state=PackedArray.from_numpy(agent_state),
+            agent_state=agent_states.pack(),
             lights=PackedArray.from_numpy(np.zeros(0, dtype=np.uint8)),
         )
 

@@ -22,6 +22,7 @@ from common import keys
 from common.keys import is_ident
 from common.messages import (
     AddItem,
+    AgentStates,
     EditResult,
     ErrorReply,
     MapRequest,
@@ -231,10 +232,9 @@ class WorldWatch:
             self._want.set()
             return self._frame
         n = len(snap.robots)
-        state = wire.agent_state.to_numpy()
-        known = state.ndim == 2 and len(state) == n
-        gripper = state[:, 2].astype(np.uint8) if known else None
-        leds = state[:, 0].astype(np.uint8) if known else np.zeros(n, np.uint8)
+        states = AgentStates.unpack(wire.agent_state, n)
+        gripper = None if states is None else states.fingers.astype(np.uint8)
+        leds = np.zeros(n, np.uint8) if states is None else states.leds.astype(np.uint8)
         if snap.offline:
             gripper = np.zeros(n, np.uint8) if gripper is None else gripper.copy()
             gripper[[i for i, a in enumerate(snap.robots) if a in snap.offline]] = OFFLINE
