@@ -141,7 +141,7 @@ def registry_report(realm: str) -> str:
 
 
 def registry_lti(realm: str) -> str:
-    """The lti service asks here for a launched platform user's account (issue 36)."""
+    """The lti service asks here for a launched platform user's account."""
     return f"{realm_root(realm)}/registry/lti"
 
 

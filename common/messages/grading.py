@@ -1,4 +1,4 @@
-"""Wire types of the grader (issue 36): submissions, episodes on a runner, leaderboards.
+"""Wire types of the grader: submissions, episodes on a runner, leaderboards.
 
 A student sends a sealed :class:`Submit` to the grader (``grader/<g>/request``);
 the grader runs the assignment's seeded episodes, each an :class:`Episode` on a

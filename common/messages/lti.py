@@ -1,4 +1,4 @@
-"""Wire types of LTI 1.3 (issue 36): a platform's user made a lab account, a grade passed back.
+"""Wire types of LTI 1.3: a platform's user made a lab account, a grade passed back.
 
 The lti service (services/lti/) verifies a launch from an LMS, then asks the
 registry for the account of the platform's user with a sealed

@@ -16,7 +16,7 @@ CAT_ALL = 0xFFFFFFFF
 # "velocity"), the swarm option): movable objects only, so they still push, and close
 # on, balls and boxes; never robots, other robots' tongs or obstacles. In a crowd robots
 # kept touching each other's tongs: half of chipmunk's step at 10,000 robots
-# (docs/BENCHMARKS.md, issue 22). No sensor sees tongs (IR rays hit the robots' discs),
+# (docs/BENCHMARKS.md). No sensor sees tongs (IR rays hit the robots' discs),
 # and tongs that hit walls held a robot 25 mm short of a wall head-on, where its front
 # IR reads too little for the examples' rules to turn, and wedged it in corners. With
 # the joints drive (the default) tongs collide with everything, as before.

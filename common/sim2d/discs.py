@@ -1,12 +1,12 @@
 """The discs drive's physics: robots as discs, moved by their wheels, contacts solved here.
 
 Why: at 10,000 robots chipmunk's step cost about 1.5 µs a robot a tick, more
-than a swarm's whole budget (docs/BENCHMARKS.md, issue 22), and in a small
+than a swarm's whole budget (docs/BENCHMARKS.md), and in a small
 world its fixed cost alone matched Enki's whole step. A lab's worlds need none
 of what makes a general solver expensive: every robot is a disc, obstacles
 never move, and movable objects are discs too (common/sim2d/pucks.py: after
 the robots in these arrays, moved by their pushes rather than by wheels).
-Since issue 35 this is every world's default drive.
+This is every world's default drive.
 
 The model, per substep (the world's ``substeps``, at most 10 ms each):
 
@@ -128,7 +128,7 @@ def drive_buffers(robots, k, width, height, radius):  # pragma: no cover
 
     Kept by common/sim2d/fused.py from tick to tick: without a tick's
     twenty-odd allocations the drive took about 8 % less at 10 robots
-    (docs/BENCHMARKS.md, issue 22, 2026-11-26). The pair grid's cell offsets
+    (docs/history/). The pair grid's cell offsets
     are sized for its smallest cell (robots standing still); the pairs' table
     for four pairs a robot, a crowd's (it grows if a tick needs more).
     """

@@ -1,7 +1,7 @@
 """The discs drive's tick with its per-disc work split over numba's threads: the same bits.
 
 Why: at 10,000 robots the drive was the serial part of a tick whose sensing
-pass already ran on two threads (docs/BENCHMARKS.md, issue 35): about 2 ms a
+pass already ran on two threads (docs/BENCHMARKS.md): about 2 ms a
 tick with 5,000 balls, most of it work done disc by disc. That work is shared
 here between the threads; what has an order stays on the calling thread.
 
@@ -67,7 +67,7 @@ _CACHE = True
 # objects); a handoff to numba's sleeping workers (OMP_WAIT_POLICY=PASSIVE,
 # packs.py) costs tens of microseconds, and a disc's share of the split work
 # about 0.1 us: below a few thousand discs the serial tick is as fast
-# (docs/BENCHMARKS.md, issue 35, "The drive on two threads").
+# (docs/history/).
 SPLIT_MIN_DISCS = 4000
 
 # Chunks of discs per parallel loop: a few per thread, handed out one at a

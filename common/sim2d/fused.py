@@ -5,8 +5,7 @@ numba. Every array handed to a compiled function is unboxed on every call
 (about 0.14 us each, a NRT wrapper allocated per array) and typed by the
 dispatcher (tuples of arrays about 0.13 us an element more); the discs tick
 and the sensing pass took about 46 arguments between them, plus the Python
-that packed them. At 10 robots that was most of the step (docs/BENCHMARKS.md,
-issue 22, "Small worlds").
+that packed them. At 10 robots that was most of the step (docs/history/).
 
 So a world on the discs drive keeps its per-tick state in one numba
 structref, :class:`TickState`, built when the layout changes: its own pose and

@@ -4,7 +4,7 @@ Why: a swarm's tick allocates and frees arrays of a few hundred kilobytes
 (numpy's temporaries, the sensing pass's grids), and glibc's malloc by default
 serves such blocks with mmap or trims them off the heap's top when they are
 freed. Either way the next tick gets fresh pages from the kernel, each one a
-page fault. Measured at 10,000 robots (docs/BENCHMARKS.md, issue 22,
+page fault. Measured at 10,000 robots (docs/BENCHMARKS.md,
 2026-11-26): 412 page faults and 1.8 ms of a 3.4 ms drive tick; the whole
 simulated second went from 770 to 560 ms of wall time with the two settings
 below. The cost is that a process keeps, as free heap, the most it ever held

@@ -6,7 +6,7 @@ vectorised passes built big temporaries. One loop per job, compiled once,
 does the same arithmetic with none of that overhead (see docs/BENCHMARKS.md).
 
 The geometry was written to match the earlier numpy implementation operation
-for operation (same formulas, same order); since issue 22's swarm work the
+for operation (same formulas, same order), but the
 sensor noise is drawn in the kernel from a per-pass key (same laws, other
 numbers than numpy's draws), the ambient cone needs no trigonometry and
 shortcuts skip work that cannot change a reading (docs/BENCHMARKS.md, "A

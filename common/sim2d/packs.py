@@ -96,7 +96,7 @@ class Readings(NamedTuple):
 
 # OpenMP's workers (numba's threading layer here) spin after each parallel region
 # by default: on the lab's shared 2-core machines that burned 4 to 5x the CPU of the
-# work itself and slowed the other processes (docs/BENCHMARKS.md, issue 22). Passive
+# work itself and slowed the other processes (docs/BENCHMARKS.md). Passive
 # workers sleep instead. Read once, when numba first loads OpenMP; a value the user
 # set wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
@@ -106,7 +106,7 @@ _CACHE = True
 # compiled function receives (tuples of them included) or takes a view of is
 # counted in and out with an atomic operation, and an inlined helper counts its
 # array arguments at each call: at 10 robots that was about 14 % of a step
-# (docs/BENCHMARKS.md, issue 22, 2026-11-26). A kernel that allocates nothing
+# (docs/history/). A kernel that allocates nothing
 # and returns no array needs none of it: its callers hold every array it
 # touches. One that returned an array (a buffer it had filled) corrupted the
 # heap: its caller released a reference it was never given. Numba refuses to

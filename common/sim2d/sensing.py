@@ -44,7 +44,7 @@ _MIN_CELL_MM = 120.0
 # Below this many agents a pass runs on one thread even when more are allowed. A
 # judgement, not a measured crossover: a pass at 10 robots takes ~15 us, less than
 # waking a pool, and on the shared development machine no thread count beat one at
-# any size (docs/BENCHMARKS.md, "Swarms and small worlds (issue 22)").
+# any size (docs/BENCHMARKS.md, "Sim2D engine").
 PARALLEL_MIN_AGENTS = 256
 
 

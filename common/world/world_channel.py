@@ -71,7 +71,7 @@ class SwarmTick:
     The array shape of the controller API, for one process driving many
     robots: no per-robot ``KheperaState`` or ``RobotCommand`` object, whose
     Python cost per robot was what separated our loop from a plain Zenoh one
-    (docs/BENCHMARKS.md, issue 22). Valid for the listener's call only.
+    (docs/BENCHMARKS.md). Valid for the listener's call only.
     """
 
     __slots__ = (

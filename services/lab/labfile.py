@@ -33,7 +33,7 @@ SERVICE_KINDS: dict[str, tuple[str, ...]] = {
     "agent": ("name", "world"),
     "viewer": (),
     "runner": ("name",),
-    # The grader (issue 36): on the registry's host (it shares its database).
+    # The grader: on the registry's host (it shares its database).
     "grader": (),
     # A camera over a real arena (wart camera): its world and what it captures from.
     "camera": ("world", "source"),

@@ -1,4 +1,4 @@
-"""The robot builder (issue 34): compose a robot type from parts in the page, save it to the lab.
+"""The robot builder: compose a robot type from parts in the page, save it to the lab.
 
 Start from a type the world has (its file, as the world gives it), add
 components of any type the lab has (a table with each parameter at its

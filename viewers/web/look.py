@@ -1,4 +1,4 @@
-"""The selected robot drawn as its robot file's components draw themselves (issue 34).
+"""The selected robot drawn as its robot file's components draw themselves.
 
 One line-segments node in the robot's frame (the type's ``RobotLook`` from the
 world's snapshot), moved and turned with the robot each frame: its rim and

@@ -1,4 +1,4 @@
-"""The frame path's two shortcuts through viser 1.1.1, for a class on one arena (issue 22).
+"""The frame path's two shortcuts through viser 1.1.1, for a class on one arena.
 
 Measured with 100 headless sessions on a 35-robot arena (2 cores): the pump
 spent 65 ms of CPU and 154 ms of wall time a tick (25 Hz needs under 40), and

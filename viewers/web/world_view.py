@@ -65,8 +65,8 @@ FULL_BYTES_PER_ROBOT = 2 * 28  # bodies and arrows: positions and orientations e
 # What one browser is sent per second at most for the robots, whatever their number: a
 # frame that would exceed it at the pump's rate goes out every k-th tick instead
 # (10,000 robots at 25 Hz would be 3 MB/s; they get 8.3 frames a second, 1 MB/s). It is
-# about what 1,000 robots cost before issue 22 (0.7 MB/s), so a student's link that
-# showed those shows any swarm.
+# about what 1,000 robots cost when every frame went out (0.7 MB/s), so a student's
+# link that showed those shows any swarm.
 ROBOT_BYTES_PER_S = 1_000_000
 
 
