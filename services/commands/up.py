@@ -268,9 +268,8 @@ class LocalLab(HostDriver):
     host_log = f"host-{HOST_NAME}.log"
 
     def __init__(self, lab: LabSettings) -> None:
+        super().__init__(lab.realm, lab.state_dir)
         self.lab = lab  # provision() pins the registry key in it
-        self.realm = lab.realm
-        self.state_dir = lab.state_dir
 
     def banner(self) -> str:
         return f"wart lab '{self.realm}': state and logs in {self.state_dir}"

@@ -99,9 +99,8 @@ class LabFileHost(HostDriver):
     hosting_first = True  # its load and token are there while its services start
 
     def __init__(self, ctx: HostContext) -> None:
+        super().__init__(ctx.realm, ctx.state_dir)
         self.ctx = ctx
-        self.realm = ctx.realm
-        self.state_dir = ctx.state_dir
         self.host_log = f"host-{ctx.host.name}.log"
 
     def banner(self) -> str:

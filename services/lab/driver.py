@@ -38,13 +38,15 @@ def say(text: str) -> None:
 class HostDriver:
     """The steps of running one host under supervision; subclasses fill in what differs."""
 
-    realm: str
-    state_dir: Path
     # wart host serves hosting (its load, its token) while its services start; wart up
     # opens its front door for contexts on request once its own lab serves.
     hosting_first = False
     # The in-process hosting service's own log (under STATE_DIR/logs, beside its children's).
     host_log = "host.log"
+
+    def __init__(self, realm: str, state_dir: Path) -> None:
+        self.realm = realm
+        self.state_dir = state_dir
 
     # -- what differs (overridden)
 
