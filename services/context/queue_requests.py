@@ -31,12 +31,12 @@ from common.messages import (
     EmergencyStop,
     Message,
     OkReply,
-    RequestStatus,
     StopControl,
     WorldStop,
 )
 from common.service import RequestError
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob, new_request_id
+from services.context.agent_queue import ControlJob, new_request_id
+from services.context.context_state import ContextState, request_status
 from services.context.runner_link import RunnerLink
 
 log = logging.getLogger("wart.chat")  # the context's own logger (chat_room.py)
@@ -55,13 +55,9 @@ class QueueRequests:
     owner: str
     restricted: bool
     log: logging.Logger
-    book: QueueBook
+    state: ContextState
     runner_link: RunnerLink
-    _lock: threading.RLock  # the chat room's: the context's one lock
-    _wake: threading.Condition
     _stop_lock: threading.Lock
-    _dirty: bool
-    _end_reasons: dict[str, tuple[str, str]]
     verifier: Verifier
 
     if TYPE_CHECKING:  # what the context provides (agent_context.py, chat_room.py);
@@ -80,23 +76,10 @@ class QueueRequests:
         def _require_manage(self, principal: Principal, what: str) -> None:
             raise NotImplementedError
 
-        def _require_agent(self, agent: str) -> None:
-            raise NotImplementedError
-
         def _manages(self, principal: Principal) -> bool:
             raise NotImplementedError
 
         def _publish_agent(self, event: AgentEvent) -> None:
-            raise NotImplementedError
-
-        def _status(
-            self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-        ) -> RequestStatus:
-            raise NotImplementedError
-
-        def _ended(
-            self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
-        ) -> RequestStatus:
             raise NotImplementedError
 
     def _queue(self, principal: Principal, request: ControlRequest) -> Message:
@@ -108,7 +91,7 @@ class QueueRequests:
             scope=acl.agent_scope(self.room, request.agent),
             restricted=self.restricted,
         )
-        self._require_agent(request.agent)
+        self.state.require_agent(request.agent)
         if request.mode == "deploy":
             try:
                 precheck(request.source, request.filename)
@@ -127,20 +110,20 @@ class QueueRequests:
             filename=request.filename,
         )
         now = time.time()
-        with self._wake:
-            if not self.book.can_run(request.agent):
+        with self.state.wake:
+            if not self.state.book.can_run(request.agent):
                 raise RequestError(
                     "forbidden",
                     f"remote control of {request.agent} is disabled in {self.room} for now",
                 )
-            mine = [j for j, _ in self.book.jobs_of_session(principal.session_id)]
+            mine = [j for j, _ in self.state.book.jobs_of_session(principal.session_id)]
             if any(j.agent == request.agent for j in mine):
                 raise RequestError(
                     "conflict", f"you already have a request on {request.agent}: cancel it first"
                 )
             waiting = sum(
                 1
-                for line in self.book.lines.values()
+                for line in self.state.book.lines.values()
                 for j in line.waiting
                 if j.user == principal.user
             )
@@ -148,20 +131,20 @@ class QueueRequests:
                 raise RequestError(
                     "rate_limited", f"at most {MAX_WAITING_PER_USER} waiting requests per user"
                 )
-            position = self.book.add(job)
-            eta = self.book.eta(request.agent, position, now)
-            self._dirty = True
-            self._wake.notify_all()
+            position = self.state.book.add(job)
+            eta = self.state.book.eta(request.agent, position, now)
+            self.state.dirty = True
+            self.state.wake.notify_all()
         log.info("%s queued %s (%s) at %d", principal.user, job.request_id, job.mode, position)
         self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(job, "queued")),
+            AgentEvent(ctx=self.room, request=request_status(job, "queued")),
         )
         return ControlQueued(
             request_id=job.request_id,
             agent=job.agent,
             position=position,
             start_eta=eta,
-            slot_seconds=self.book.slot_seconds,
+            slot_seconds=self.state.book.slot_seconds,
         )
 
     def _on_dry_run(self, query: zenoh.Query) -> Message:
@@ -174,7 +157,7 @@ class QueueRequests:
             scope=acl.agent_scope(self.room, request.agent),
             restricted=self.restricted,
         )
-        self._require_agent(request.agent)
+        self.state.require_agent(request.agent)
         try:
             precheck(request.source, request.filename)
         except PrecheckError as exc:
@@ -201,8 +184,8 @@ class QueueRequests:
         return report
 
     def _cancel(self, principal: Principal, request: CancelControl) -> Message:
-        with self._wake:
-            found = self.book.find(request.request_id)
+        with self.state.wake:
+            found = self.state.book.find(request.request_id)
             if found is None:
                 raise RequestError("not_found", f"no request {request.request_id} in {self.room}")
             _, job, running = found
@@ -211,26 +194,26 @@ class QueueRequests:
             why = f"cancelled by {principal.user}"
             final = None
             if not running:
-                self.book.remove_waiting(job.request_id)
-                final = self._ended(job, "cancelled", why)
-                self._dirty = True
+                self.state.book.remove_waiting(job.request_id)
+                final = self.state.ended(job, "cancelled", why)
+                self.state.dirty = True
             else:
-                self._finish_soon(job.request_id, "cancelled", why)
-            self._wake.notify_all()
+                self.state.finish_soon(job.request_id, "cancelled", why)
+            self.state.wake.notify_all()
         if final is not None:
             self._publish_agent(AgentEvent(ctx=self.room, request=final))
         return OkReply(detail=f"request {request.request_id} cancelled")
 
     def _stop_agent(self, principal: Principal, request: StopControl) -> Message:
         self._require_manage(principal, f"stop the controller on {request.agent}")
-        self._require_agent(request.agent)
-        with self._wake:
-            run = self.book.lines[request.agent].running
+        self.state.require_agent(request.agent)
+        with self.state.wake:
+            run = self.state.book.lines[request.agent].running
             if run is None:
                 return OkReply(detail=f"nothing runs on {request.agent}")
             why = f"stopped by {principal.user}" + (f": {request.reason}" if request.reason else "")
-            self._finish_soon(run.job.request_id, "cancelled", why)
-            self._wake.notify_all()
+            self.state.finish_soon(run.job.request_id, "cancelled", why)
+            self.state.wake.notify_all()
         return OkReply(detail=f"stopping {run.job.request_id}")
 
     def _emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
@@ -242,24 +225,24 @@ class QueueRequests:
         """
         what = "stop every robot" if request.engaged else "release the emergency stop"
         self._require_manage(principal, what)
-        with self._wake:
-            if request.engaged == bool(self.book.estop):
-                detail = self.book.estop or "no emergency stop is in force"
+        with self.state.wake:
+            if request.engaged == bool(self.state.book.estop):
+                detail = self.state.book.estop or "no emergency stop is in force"
                 return OkReply(detail=f"nothing changed: {detail}")
             if request.engaged:
                 why = f"emergency stop by {principal.user}" + (
                     f": {request.reason}" if request.reason else ""
                 )
                 why = why[:256]  # a RequestStatus reason's limit
-                self.book.estop = why
-                ended = [ln.running.job.request_id for ln in self.book.lines.values() if ln.running]
+                self.state.book.estop = why
+                ended = [run.job.request_id for run in self.state.running()]
                 for request_id in ended:
-                    self._finish_soon(request_id, "cancelled", why)
+                    self.state.finish_soon(request_id, "cancelled", why)
             else:
-                self.book.estop = ""
+                self.state.book.estop = ""
                 ended = []
-            self._dirty = True
-            self._wake.notify_all()
+            self.state.dirty = True
+            self.state.wake.notify_all()
         self.publish_world_stop(request.engaged, principal.user)
         if request.engaged:
             log.warning("%s: ended %s", why, ", ".join(ended) or "nothing running")
@@ -280,8 +263,8 @@ class QueueRequests:
         """
         key = keys.world_estop(self.realm, self.world)
         with self._stop_lock:
-            with self._lock:
-                why = self.book.estop
+            with self.state.lock:
+                why = self.state.book.estop
             if engaged is None and not why:
                 return
             message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
@@ -293,40 +276,30 @@ class QueueRequests:
     def _settings(self, principal: Principal, request: ContextSettings) -> Message:
         self._require_manage(principal, "change the settings")
         if request.agent is not None:
-            self._require_agent(request.agent)
+            self.state.require_agent(request.agent)
         done: list[str] = []
-        with self._wake:
+        with self.state.wake:
             if request.slot_seconds is not None:
-                self.book.slot_seconds = request.slot_seconds
+                self.state.book.slot_seconds = request.slot_seconds
                 done.append(f"slots of {request.slot_seconds:g} s from the next one")
             if request.enabled is not None:
                 if request.agent is not None:
-                    self.book.lines[request.agent].enabled = request.enabled
-                    lines = [self.book.lines[request.agent]]
+                    self.state.book.lines[request.agent].enabled = request.enabled
+                    lines = [self.state.book.lines[request.agent]]
                 else:
-                    self.book.enabled = request.enabled
-                    lines = list(self.book.lines.values())
+                    self.state.book.enabled = request.enabled
+                    lines = list(self.state.book.lines.values())
                 where = request.agent or "every agent"
                 done.append(f"remote control {'on' if request.enabled else 'off'} for {where}")
                 if not request.enabled:
                     for line in lines:
                         if line.running is not None:
-                            self._finish_soon(
+                            self.state.finish_soon(
                                 line.running.job.request_id,
                                 "cancelled",
                                 f"remote control disabled by {principal.user}",
                             )
-            self._dirty = True
-            self._wake.notify_all()
+            self.state.dirty = True
+            self.state.wake.notify_all()
         log.info("%s changed the settings: %s", principal.user, "; ".join(done))
         return OkReply(detail="; ".join(done) or "nothing changed")
-
-    def _finish_soon(self, request_id: str, status: str, reason: str) -> None:
-        """Make a running request end at the scheduler's next turn (lock held)."""
-        found = self.book.find(request_id)
-        if found is None or not found[2]:
-            return
-        line = found[0]
-        assert line.running is not None
-        self._end_reasons.setdefault(request_id, (status, reason))
-        line.running.end = min(line.running.end, time.time())

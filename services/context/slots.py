@@ -12,7 +12,6 @@ AgentContext`, whose requests and events it shares state with under its lock.
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from typing import Any
 
@@ -20,7 +19,6 @@ import zenoh
 
 from common import keys
 from common.messages import (
-    AgentContextState,
     AgentEvent,
     ErrorReply,
     MessageError,
@@ -31,7 +29,8 @@ from common.messages import (
 )
 from common.service import RequestError
 from common.world.leasemac import new_lease_key
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob
+from services.context.agent_queue import ControlJob, RunningJob
+from services.context.context_state import ContextState, request_status
 from services.context.lease_signer import LeaseSigner
 from services.context.recorder import SlotRecorder
 from services.context.runner_link import RunnerLink
@@ -51,19 +50,12 @@ class SlotScheduler:
     room: str
     world: str
     log: logging.Logger
-    book: QueueBook
+    state: ContextState
     leases: LeaseSigner
     runner_link: RunnerLink
-    _lock: threading.RLock  # the chat room's: the context's one lock
-    _wake: threading.Condition
-    _halt: threading.Event
-    _dirty: bool
     _layout: int | None
     _world_appeared: bool
     _frames: Any
-    _recent: dict[str, RunningJob]
-    _starting: dict[str, ControlJob]
-    _end_reasons: dict[str, tuple[str, str]]
     recorder: SlotRecorder
 
     # What the context provides (agent_context.py, queue_requests.py).
@@ -76,26 +68,13 @@ class SlotScheduler:
     def _publish_agent(self, event: AgentEvent) -> None:
         raise NotImplementedError
 
-    def state_message(self) -> AgentContextState:
-        raise NotImplementedError
-
-    def _status(
-        self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-    ) -> RequestStatus:
-        raise NotImplementedError
-
-    def _ended(
-        self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
-    ) -> RequestStatus:
-        raise NotImplementedError
-
     def _schedule(self) -> None:
         last_snapshot_try = 0.0
         last_republish = 0.0
-        while not self._halt.is_set():
+        while not self.state.halt.is_set():
             try:
                 now = time.time()
-                with self._wake:
+                with self.state.wake:
                     appeared, self._world_appeared = self._world_appeared, False
                 if (
                     appeared
@@ -107,25 +86,24 @@ class SlotScheduler:
                 self._turn()
                 if time.monotonic() - last_republish >= LEASE_REPUBLISH_S:
                     last_republish = time.monotonic()
-                    with self._lock:
-                        running = [ln.running for ln in self.book.lines.values() if ln.running]
-                    for run in running:
+                    for run in self.state.running():
                         self._publish_lease(run, run.end)
                     # A restarted world learns a held stop as it relearns leases.
                     self.publish_world_stop(None, self.room)
-                if self._dirty:
-                    self._dirty = False
+                if self.state.dirty:
+                    self.state.dirty = False
                     self._save_book()
-                    self._publish_agent(AgentEvent(ctx=self.room, state=self.state_message()))
+                    self._publish_agent(AgentEvent(ctx=self.room, state=self.state.state_message()))
             except Exception:
                 self.log.exception("error in the agent scheduler (kept running)")
-            with self._wake:
-                if not self._halt.is_set():
-                    self._wake.wait(self._next_wait())
+            with self.state.wake:
+                if not self.state.halt.is_set():
+                    self.state.wake.wait(self._next_wait())
 
     def _next_wait(self) -> float:
         now = time.time()
-        ends = [ln.running.end - now for ln in self.book.lines.values() if ln.running is not None]
+        lines = self.state.book.lines.values()
+        ends = [ln.running.end - now for ln in lines if ln.running is not None]
         return max(0.01, min([0.25, *ends]))
 
     def _on_world_presence(self, sample: zenoh.Sample) -> None:
@@ -134,9 +112,9 @@ class SlotScheduler:
         # together, a context queried before its world existed and refused
         # queues for up to SNAPSHOT_RETRY_S after the world was up.
         if sample.kind == zenoh.SampleKind.PUT:
-            with self._wake:
+            with self.state.wake:
                 self._world_appeared = True
-                self._wake.notify_all()
+                self.state.wake.notify_all()
 
     def _need_snapshot(self) -> bool:
         if self._layout is None:
@@ -173,14 +151,15 @@ class SlotScheduler:
                 continue
             self.leases.note_world_identity(snap.identity)
             self.recorder.world_snapshot(snap)
-            with self._wake:
+            with self.state.wake:
                 first = self._layout is None
                 self._layout = snap.layout
-                gone = self.book.set_agents({a.id: a.type for a in snap.agents})
+                gone = self.state.book.set_agents({a.id: a.type for a in snap.agents})
                 finals = [
-                    self._ended(job, "cancelled", f"{job.agent} left the world") for job in gone
+                    self.state.ended(job, "cancelled", f"{job.agent} left the world")
+                    for job in gone
                 ]
-                self._dirty = True
+                self.state.dirty = True
             if first:
                 self.log.info(
                     "world %s has agents %s", self.world, ", ".join(a.id for a in snap.agents)
@@ -191,30 +170,26 @@ class SlotScheduler:
 
     def _turn(self) -> None:
         now = time.time()
-        with self._lock:
-            ended = self.book.expired(now)
+        with self.state.lock:
+            ended = self.state.book.expired(now)
             finals = []
             for run in ended:
-                self.book.lines[run.job.agent].running = None
+                self.state.book.lines[run.job.agent].running = None
                 # Recorded as it leaves the queues, under the same lock: a client asking
                 # in between finds it either running or ended, never unknown.
-                status, reason = self._end_reasons.pop(
+                status, reason = self.state.end_reasons.pop(
                     run.job.request_id, ("finished", "its slot ended")
                 )
-                finals.append(self._ended(run.job, status, reason, run))
-                # Only for output lines that trail the end (the last prints, a traceback):
-                # they come within a second or two, so the newest 64 runs are plenty.
-                self._recent[run.job.request_id] = run
-                while len(self._recent) > 64:
-                    self._recent.pop(next(iter(self._recent)))
+                finals.append(self.state.ended(run.job, status, reason, run))
+                self.state.remember_ended_run(run)
             starts = []
-            for agent in list(self.book.lines):
-                job = self.book.next_to_start(agent)
+            for agent in list(self.state.book.lines):
+                job = self.state.book.next_to_start(agent)
                 if job is not None:
                     starts.append(job)
-                    self._starting[job.request_id] = job  # off its queue, not yet running
+                    self.state.starting[job.request_id] = job  # off its queue, not yet running
             if ended or starts:
-                self._dirty = True
+                self.state.dirty = True
         for run, final in zip(ended, finals, strict=True):
             self.runner_link.forget(run.job.request_id)
             self._end_run(run, final)
@@ -222,12 +197,12 @@ class SlotScheduler:
             try:
                 self._start(job)
             finally:
-                with self._lock:
-                    self._starting.pop(job.request_id, None)
+                with self.state.lock:
+                    self.state.starting.pop(job.request_id, None)
 
     def _end_run(self, run: RunningJob, final: RequestStatus) -> None:
         """Tell the world, the runner, the recording and the members that ``run`` ended
-        (``final``: its last status, already recorded with :meth:`_ended`)."""
+        (``final``: its last status, already recorded with :meth:`ContextState.ended`)."""
         # The same lease id, ending now, replaces the lease in the world at once.
         self._publish_lease(run, min(run.end, time.time()))
         if run.job.mode == "deploy":
@@ -238,18 +213,18 @@ class SlotScheduler:
 
     def _start(self, job: ControlJob) -> None:
         start = time.time()
-        end = start + self.book.slot_seconds
+        end = start + self.state.book.slot_seconds
         holder, holder_box = job.session_id, job.box_key
         if job.mode == "deploy":
             try:
                 holder, holder_box = self.runner_link.start(job, self.room, self.world, end)
             except RequestError as exc:
                 log.warning("%s refused: %s", job.request_id, exc.message)
-                with self._wake:
-                    refused = self._ended(job, "refused", exc.message)
-                    self._starting.pop(job.request_id, None)
-                    self._dirty = True
-                    self._wake.notify_all()
+                with self.state.wake:
+                    refused = self.state.ended(job, "refused", exc.message)
+                    self.state.starting.pop(job.request_id, None)
+                    self.state.dirty = True
+                    self.state.wake.notify_all()
                 self._publish_agent(AgentEvent(ctx=self.room, request=refused))
                 return
         run = RunningJob(
@@ -261,18 +236,18 @@ class SlotScheduler:
             holder_box=holder_box,
             lease_key=new_lease_key(),
         )
-        with self._lock:
-            line = self.book.lines.get(job.agent)
+        with self.state.lock:
+            line = self.state.book.lines.get(job.agent)
             final: RequestStatus | None = None
             if line is None:  # the agent left the world while its slot was being set up
-                final = self._ended(job, "cancelled", f"{job.agent} left the world")
+                final = self.state.ended(job, "cancelled", f"{job.agent} left the world")
             elif line.running is not None:  # only this thread starts slots: never seen
                 self.log.error("%s: %s already runs something", job.request_id, job.agent)
-                final = self._ended(job, "cancelled", f"{job.agent} was taken: queue again")
+                final = self.state.ended(job, "cancelled", f"{job.agent} was taken: queue again")
             else:
                 line.running = run
-            self._starting.pop(job.request_id, None)
-            self._dirty = True
+            self.state.starting.pop(job.request_id, None)
+            self.state.dirty = True
         if final is not None:
             if job.mode == "deploy":
                 self.runner_link.stop(job.request_id, final.reason)
@@ -283,7 +258,7 @@ class SlotScheduler:
         self._publish_lease(run, end)
         log.info("%s runs on %s for %s until %.1f", job.request_id, job.agent, job.user, end)
         self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(job, "running", run=run))
+            AgentEvent(ctx=self.room, request=request_status(job, "running", run=run))
         )
 
     def _publish_lease(self, run: RunningJob, end: float) -> None:

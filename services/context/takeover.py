@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import logging
 import secrets
-import threading
 import time
 from typing import TYPE_CHECKING
 
@@ -45,7 +44,8 @@ from common.messages import AgentEvent, HandBack, Message, OkReply, RequestStatu
 from common.messages import TakeOver as TakeOverRequest
 from common.service import RequestError
 from common.world.leasemac import new_lease_key
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob
+from services.context.agent_queue import ControlJob, RunningJob
+from services.context.context_state import ContextState, request_status
 from services.context.lease_signer import LeaseSigner
 
 log = logging.getLogger("wart.chat")  # the context's own logger (chat_room.py)
@@ -60,19 +60,13 @@ class TakeOvers:
 
     room: str
     world: str
-    book: QueueBook
+    state: ContextState
     leases: LeaseSigner
     audit: AuditReporter
-    _lock: threading.RLock
-    _wake: threading.Condition
-    _dirty: bool
 
     if TYPE_CHECKING:  # what the context provides (see queue_requests.py for why here)
 
         def _require_manage(self, principal: Principal, what: str) -> None:
-            raise NotImplementedError
-
-        def _require_agent(self, agent: str) -> None:
             raise NotImplementedError
 
         def _publish_agent(self, event: AgentEvent) -> None:
@@ -81,18 +75,13 @@ class TakeOvers:
         def _publish_lease(self, run: RunningJob, end: float) -> None:
             raise NotImplementedError
 
-        def _status(
-            self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-        ) -> RequestStatus:
-            raise NotImplementedError
-
     def _take_over(self, principal: Principal, request: TakeOverRequest) -> Message:
         agent = request.agent
         self._require_manage(principal, f"take over {agent}")
-        self._require_agent(agent)
+        self.state.require_agent(agent)
         now = time.time()
-        with self._wake:
-            run = self.book.lines[agent].running
+        with self.state.wake:
+            run = self.state.book.lines[agent].running
             if run is None or run.end <= now:
                 raise RequestError(
                     "conflict",
@@ -131,8 +120,8 @@ class TakeOvers:
                 if request.reason:
                     why += f" ({request.reason})"
                 status = self._step(run, "taken", why)
-                self._dirty = True
-                self._wake.notify_all()
+                self.state.dirty = True
+                self.state.wake.notify_all()
             else:
                 status = None  # already the sender's: say so again, change nothing
         if status is not None:
@@ -151,9 +140,9 @@ class TakeOvers:
     def _hand_back(self, principal: Principal, request: HandBack) -> Message:
         agent = request.agent
         self._require_manage(principal, f"hand {agent} back")
-        self._require_agent(agent)
-        with self._wake:
-            run = self.book.lines[agent].running
+        self.state.require_agent(agent)
+        with self.state.wake:
+            run = self.state.book.lines[agent].running
             if run is None or run.taken is None:
                 raise RequestError("conflict", f"{agent} is not taken over: nothing to hand back")
             teacher = run.taken.job.user
@@ -165,8 +154,8 @@ class TakeOvers:
     def _hand_back_session(self, session_id: bytes, why: str) -> None:
         """Hand back every robot a session took over (it left, or was revoked)."""
         handed: list[tuple[RunningJob, RunningJob, RequestStatus]] = []
-        with self._wake:
-            for line in self.book.lines.values():
+        with self.state.wake:
+            for line in self.state.book.lines.values():
                 run = line.running
                 taken = None if run is None else run.taken
                 if run is not None and taken is not None and taken.holder_session == session_id:
@@ -186,8 +175,8 @@ class TakeOvers:
         run.taken = None
         run.lease_start = now
         taken.end = min(taken.end, now)
-        self._dirty = True
-        self._wake.notify_all()
+        self.state.dirty = True
+        self.state.wake.notify_all()
         return taken, self._step(run, "handed_back", f"{said}: your controller drives again")
 
     def _after_hand_back(self, run: RunningJob, taken: RunningJob, status: RequestStatus) -> None:
@@ -198,7 +187,7 @@ class TakeOvers:
         self._publish_agent(AgentEvent(ctx=self.room, request=status))
 
     def _step(self, run: RunningJob, step: str, reason: str) -> RequestStatus:
-        status = self._status(run.job, "running", reason[:256], run)
+        status = request_status(run.job, "running", reason[:256], run)
         taken = run.taken
         return msgspec.structs.replace(
             status,
