@@ -75,7 +75,7 @@ from services.context.agent_queue import (
 from services.context.chat_room import ChatRoom
 from services.context.context_state import ContextState
 from services.context.lease_signer import LeaseSigner
-from services.context.queue_requests import QueueRequests
+from services.context.queue_requests import QueueDesk
 from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
 from services.context.request_status import RequestStatusDesk
@@ -90,7 +90,7 @@ RUNNER_GRACE_S = 1.5  # after a runner's token went, before asking it what it st
 RUNNER_CHECK_S = 15.0  # how long to keep asking before taking its silence for its death
 
 
-class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
+class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -114,11 +114,24 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         self.state = ContextState(name, self.world, self._restore_book(QueueBook(slot_seconds)))
         # The page's editor keeps each member's last files here, beside the queues.
         self.files = UserFiles(None if data_dir is None else data_dir / f"{name}.files")
-        self._stop_lock = threading.Lock()  # orders the world stops this context seals
         self._thread: threading.Thread | None = None
         self.leases = LeaseSigner(session, realm, self.world, self._seal, self.verifier, self.log)
         self.runner_link = RunnerLink(
             session, realm, self.runner, self._seal, self.verifier, self.log
+        )
+        self.queue_desk = QueueDesk(
+            self.state,
+            session=session,
+            realm=realm,
+            restricted=self.restricted,
+            verifier=self.verifier,
+            seal=self._seal,
+            runner_link=self.runner_link,
+            require_member=self._require_member,
+            require_manage=self._require_manage,
+            manages=self._manages,
+            publish=self._publish_agent,
+            log=self.log,
         )
         self._layout: int | None = None
         self._world_appeared = False
@@ -181,7 +194,7 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         # the emergency stop are never behind one.
         self.serve(
             keys.ctx_dryrun(self.realm, self.room),
-            self._on_dry_run,
+            self.queue_desk.on_dry_run,
             workers=DRY_RUN_WORKERS,
             max_waiting=DRY_RUN_WAITING,
         )
@@ -286,13 +299,13 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
             return self.recordings.answer(principal, request, self._manages(principal))
         reply: Message
         if isinstance(request, ControlRequest):
-            reply = self._queue(principal, request)
+            reply = self.queue_desk.queue(principal, request)
         elif isinstance(request, CancelControl):
-            reply = self._cancel(principal, request)
+            reply = self.queue_desk.cancel(principal, request)
         elif isinstance(request, StopControl):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "stop_run", where, request.reason):
-                reply = self._stop_agent(principal, request)
+                reply = self.queue_desk.stop_agent(principal, request)
         elif isinstance(request, TakeOver):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "takeover", where, request.reason):
@@ -304,11 +317,11 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         elif isinstance(request, EmergencyStop):
             action = "estop" if request.engaged else "release"
             with self.audit.action(principal, action, self.scope, request.reason):
-                reply = self._emergency_stop(principal, request)
+                reply = self.queue_desk.emergency_stop(principal, request)
         else:  # the one kind left (open's overloads type a tuple this long as Message)
             settings = cast(ContextSettings, request)
             with self.audit.action(principal, "settings", self.scope, _said(settings)):
-                reply = self._settings(principal, settings)
+                reply = self.queue_desk.change_settings(principal, settings)
         # On disk before the answer: an acknowledged request survives a crash right after.
         self._save_book()
         return reply
@@ -471,6 +484,9 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
 
     def state_message(self) -> AgentContextState:
         return self.state.state_message()
+
+    def publish_world_stop(self, engaged: bool | None, by: str) -> None:
+        self.queue_desk.publish_world_stop(engaged, by)
 
     def _publish(self, *, line: ChatLine | None = None, status: MemberStatus | None = None) -> None:
         super()._publish(line=line, status=status)

@@ -1,10 +1,9 @@
-"""The requests that change an agent context's queues: queue, cancel, stop, settings,
-the host's emergency stop, and the dry run before queueing.
+"""The queue desk of an agent context: queue, cancel, stop, settings, the host's
+emergency stop, and the dry run before queueing.
 
-A base of :class:`~services.context.agent_context.AgentContext` (beside the slot
-scheduler of slots.py and the chat room): each handler checks the sender's rights,
-changes the queue book under the context's lock and wakes the scheduler, which
-starts and ends the slots. The state is the context's, set in its ``__init__``.
+Each request checks the sender's rights, changes the queues (the context's
+:class:`~services.context.context_state.ContextState`) under their lock and
+wakes the scheduler (slots.py), which starts and ends the slots.
 """
 
 from __future__ import annotations
@@ -12,7 +11,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
 
 import zenoh
 
@@ -45,50 +44,49 @@ MAX_WAITING_PER_USER = 4
 DRY_RUN_WAIT_S = 25.0  # the runner's wall-clock limit (20 s) and the sandbox's start
 
 
-class QueueRequests:
-    """Requests on the queues; the state is the context's (set in its ``__init__``)."""
+class QueueDesk:
+    """Requests that change the queues, on the state the context's parts share."""
 
-    session: zenoh.Session
-    realm: str
-    room: str
-    world: str
-    owner: str
-    restricted: bool
-    log: logging.Logger
-    state: ContextState
-    runner_link: RunnerLink
-    _stop_lock: threading.Lock
-    verifier: Verifier
+    def __init__(
+        self,
+        state: ContextState,
+        *,
+        session: zenoh.Session,
+        realm: str,
+        restricted: bool,
+        verifier: Verifier,
+        seal: Callable[[str, Message], bytes],
+        runner_link: RunnerLink,
+        require_member: Callable[[Principal], None],
+        require_manage: Callable[[Principal, str], None],
+        manages: Callable[[Principal], bool],
+        publish: Callable[[AgentEvent], None],
+        log: logging.Logger,
+    ) -> None:
+        """``seal`` seals with the context's current session; ``publish`` tells the
+        members an event (and records it); ``require_member``, ``require_manage`` and
+        ``manages`` are the context's rights (its chat room's members, its managers)."""
+        self.state = state
+        self.session = session
+        self.realm = realm
+        self.restricted = restricted
+        self.verifier = verifier
+        self.seal = seal
+        self.runner_link = runner_link
+        self.require_member = require_member
+        self.require_manage = require_manage
+        self.manages = manages
+        self.publish = publish
+        self.log = log
+        self._stop_lock = threading.Lock()  # orders the world stops this context seals
 
-    if TYPE_CHECKING:  # what the context provides (agent_context.py, chat_room.py);
-        # declared for the type checker only: at run time a stub here would hide
-        # the chat room's method, which comes later in the bases.
-
-        def _seal(self, key: str, message: Message) -> bytes:
-            raise NotImplementedError
-
-        def _save_book(self) -> None:
-            raise NotImplementedError
-
-        def _require_member(self, principal: Principal) -> None:
-            raise NotImplementedError
-
-        def _require_manage(self, principal: Principal, what: str) -> None:
-            raise NotImplementedError
-
-        def _manages(self, principal: Principal) -> bool:
-            raise NotImplementedError
-
-        def _publish_agent(self, event: AgentEvent) -> None:
-            raise NotImplementedError
-
-    def _queue(self, principal: Principal, request: ControlRequest) -> Message:
-        self._require_member(principal)
+    def queue(self, principal: Principal, request: ControlRequest) -> Message:
+        self.require_member(principal)
         permission = "control" if request.mode == "remote" else "deploy"
         principal.require(
             permission,
             f"{'drive' if request.mode == 'remote' else 'deploy a controller on'} {request.agent}",
-            scope=acl.agent_scope(self.room, request.agent),
+            scope=acl.agent_scope(self.state.room, request.agent),
             restricted=self.restricted,
         )
         self.state.require_agent(request.agent)
@@ -114,7 +112,7 @@ class QueueRequests:
             if not self.state.book.can_run(request.agent):
                 raise RequestError(
                     "forbidden",
-                    f"remote control of {request.agent} is disabled in {self.room} for now",
+                    f"remote control of {request.agent} is disabled in {self.state.room} for now",
                 )
             mine = [j for j, _ in self.state.book.jobs_of_session(principal.session_id)]
             if any(j.agent == request.agent for j in mine):
@@ -136,8 +134,8 @@ class QueueRequests:
             self.state.dirty = True
             self.state.wake.notify_all()
         log.info("%s queued %s (%s) at %d", principal.user, job.request_id, job.mode, position)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=request_status(job, "queued")),
+        self.publish(
+            AgentEvent(ctx=self.state.room, request=request_status(job, "queued")),
         )
         return ControlQueued(
             request_id=job.request_id,
@@ -147,14 +145,14 @@ class QueueRequests:
             slot_seconds=self.state.book.slot_seconds,
         )
 
-    def _on_dry_run(self, query: zenoh.Query) -> Message:
+    def on_dry_run(self, query: zenoh.Query) -> Message:
         """A dry run of a controller on an agent: the same rights and check as queueing it."""
         principal, request = self.verifier.open(str(query.key_expr), query.payload, DryRunRequest)
-        self._require_member(principal)
+        self.require_member(principal)
         principal.require(
             "deploy",
             f"dry-run a controller on {request.agent}",
-            scope=acl.agent_scope(self.room, request.agent),
+            scope=acl.agent_scope(self.state.room, request.agent),
             restricted=self.restricted,
         )
         self.state.require_agent(request.agent)
@@ -164,8 +162,8 @@ class QueueRequests:
             raise RequestError("bad_request", str(exc)) from None
         report: DryRunReport = self.runner_link.dry_run(
             DryRun(
-                ctx=self.room,
-                world=self.world,
+                ctx=self.state.room,
+                world=self.state.world,
                 agent=request.agent,
                 user=principal.user,
                 source=request.source,
@@ -183,13 +181,15 @@ class QueueRequests:
         )
         return report
 
-    def _cancel(self, principal: Principal, request: CancelControl) -> Message:
+    def cancel(self, principal: Principal, request: CancelControl) -> Message:
         with self.state.wake:
             found = self.state.book.find(request.request_id)
             if found is None:
-                raise RequestError("not_found", f"no request {request.request_id} in {self.room}")
+                raise RequestError(
+                    "not_found", f"no request {request.request_id} in {self.state.room}"
+                )
             _, job, running = found
-            if job.user != principal.user and not self._manages(principal):
+            if job.user != principal.user and not self.manages(principal):
                 raise RequestError("forbidden", f"request {request.request_id} is not yours")
             why = f"cancelled by {principal.user}"
             final = None
@@ -201,11 +201,11 @@ class QueueRequests:
                 self.state.finish_soon(job.request_id, "cancelled", why)
             self.state.wake.notify_all()
         if final is not None:
-            self._publish_agent(AgentEvent(ctx=self.room, request=final))
+            self.publish(AgentEvent(ctx=self.state.room, request=final))
         return OkReply(detail=f"request {request.request_id} cancelled")
 
-    def _stop_agent(self, principal: Principal, request: StopControl) -> Message:
-        self._require_manage(principal, f"stop the controller on {request.agent}")
+    def stop_agent(self, principal: Principal, request: StopControl) -> Message:
+        self.require_manage(principal, f"stop the controller on {request.agent}")
         self.state.require_agent(request.agent)
         with self.state.wake:
             run = self.state.book.lines[request.agent].running
@@ -216,7 +216,7 @@ class QueueRequests:
             self.state.wake.notify_all()
         return OkReply(detail=f"stopping {run.job.request_id}")
 
-    def _emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
+    def emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
         """Stop (or release) every robot of the arena: the running controllers end now,
         the world stops every robot and refuses commands, no slot starts until released.
 
@@ -224,7 +224,7 @@ class QueueRequests:
         its robots stop whether or not the runner or a student's machine obeys.
         """
         what = "stop every robot" if request.engaged else "release the emergency stop"
-        self._require_manage(principal, what)
+        self.require_manage(principal, what)
         with self.state.wake:
             if request.engaged == bool(self.state.book.estop):
                 detail = self.state.book.estop or "no emergency stop is in force"
@@ -261,7 +261,7 @@ class QueueRequests:
         the newest stop by its send time, so a republication sealed after a release
         would stop the arena again.
         """
-        key = keys.world_estop(self.realm, self.world)
+        key = keys.world_estop(self.realm, self.state.world)
         with self._stop_lock:
             with self.state.lock:
                 why = self.state.book.estop
@@ -269,12 +269,12 @@ class QueueRequests:
                 return
             message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
             try:
-                self.session.put(key, self._seal(key, message), **qos.STOP)
+                self.session.put(key, self.seal(key, message), **qos.STOP)
             except Exception as exc:  # the session closing at shutdown
-                self.log.warning("could not tell world %s of the stop: %s", self.world, exc)
+                self.log.warning("could not tell world %s of the stop: %s", self.state.world, exc)
 
-    def _settings(self, principal: Principal, request: ContextSettings) -> Message:
-        self._require_manage(principal, "change the settings")
+    def change_settings(self, principal: Principal, request: ContextSettings) -> Message:
+        self.require_manage(principal, "change the settings")
         if request.agent is not None:
             self.state.require_agent(request.agent)
         done: list[str] = []
