@@ -69,6 +69,7 @@ from common.messages.chat import ChatLine, MemberStatus
 from common.recording.store import RecordingStore
 from services.context.agent_queue import (
     QueueBook,
+    RunningJob,
     load_book,
     save_book,
 )
@@ -90,7 +91,7 @@ RUNNER_GRACE_S = 1.5  # after a runner's token went, before asking it what it st
 RUNNER_CHECK_S = 15.0  # how long to keep asking before taking its silence for its death
 
 
-class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
+class AgentContext(TakeOvers, ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -114,7 +115,6 @@ class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
         self.state = ContextState(name, self.world, self._restore_book(QueueBook(slot_seconds)))
         # The page's editor keeps each member's last files here, beside the queues.
         self.files = UserFiles(None if data_dir is None else data_dir / f"{name}.files")
-        self._thread: threading.Thread | None = None
         self.leases = LeaseSigner(session, realm, self.world, self._seal, self.verifier, self.log)
         self.runner_link = RunnerLink(
             session, realm, self.runner, self._seal, self.verifier, self.log
@@ -133,9 +133,6 @@ class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
             publish=self._publish_agent,
             log=self.log,
         )
-        self._layout: int | None = None
-        self._world_appeared = False
-        self._frames: Any = None
         self.status_desk = RequestStatusDesk(
             name, self.owner, self.verifier, self.state.look_up, restricted=self.restricted
         )
@@ -143,6 +140,18 @@ class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
             session, realm, name, self.world, recordings, self.registry_key, self.log
         )
         self.recordings = RecordingRequests(recordings, name)
+        self.scheduler = SlotScheduler(
+            self.state,
+            session=session,
+            realm=realm,
+            leases=self.leases,
+            runner_link=self.runner_link,
+            recorder=self.recorder,
+            save=self._save_book,
+            publish=self._publish_agent,
+            publish_world_stop=self.queue_desk.publish_world_stop,
+            log=self.log,
+        )
 
     def _seal(self, key: str, message: Message) -> bytes:
         """Sealed with the context's current session (renewed sessions included)."""
@@ -209,31 +218,20 @@ class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
         )
         self.track(
             self.session.liveliness().declare_subscriber(
-                keys.alive(self.realm, AliveKind.WORLD, self.world), self._on_world_presence
+                keys.alive(self.realm, AliveKind.WORLD, self.world),
+                self.scheduler.on_world_presence,
             )
         )
-        self._frames = self.track(
+        frames = self.track(
             self.session.declare_subscriber(
                 keys.world_frame(self.realm, self.world), zenoh.handlers.RingChannel(1)
             )
         )
         self.recorder.start()
-        self._thread = threading.Thread(target=self._schedule, name="agent-queues", daemon=True)
-        self._thread.start()
+        self.scheduler.start(frames)
 
     def on_stop(self, timeout: float) -> None:
-        self.state.halt.set()
-        with self.state.wake:
-            self.state.wake.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout)
-        # Nobody keeps a robot after the context is gone: end every lease now.
-        for run in self.state.running():
-            final = self.state.ended(run.job, "cancelled", "the agent context stopped", run)
-            self._end_run(run, final)
-        with self.state.lock:
-            for line in self.state.book.lines.values():
-                line.running = None
+        self.scheduler.stop(timeout)
         self._save_book()  # a clean stop ends the slots: they must not come back
         self.recorder.close(timeout)
         self.leases.close()
@@ -487,6 +485,12 @@ class AgentContext(TakeOvers, SlotScheduler, ChatRoom):
 
     def publish_world_stop(self, engaged: bool | None, by: str) -> None:
         self.queue_desk.publish_world_stop(engaged, by)
+
+    def runner_user(self, run: RunningJob) -> str:
+        return self.scheduler.runner_user(run)
+
+    def _publish_lease(self, run: RunningJob, end: float) -> None:
+        self.scheduler.publish_lease(run, end)
 
     def _publish(self, *, line: ChatLine | None = None, status: MemberStatus | None = None) -> None:
         super()._publish(line=line, status=status)
