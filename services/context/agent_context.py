@@ -82,7 +82,7 @@ from services.context.recordings import RecordingRequests
 from services.context.request_status import RequestStatusDesk
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
-from services.context.takeover import TakeOvers
+from services.context.takeover import TakeOverDesk
 from services.context.user_files import UserFiles
 
 DRY_RUN_WORKERS = 2
@@ -91,7 +91,7 @@ RUNNER_GRACE_S = 1.5  # after a runner's token went, before asking it what it st
 RUNNER_CHECK_S = 15.0  # how long to keep asking before taking its silence for its death
 
 
-class AgentContext(TakeOvers, ChatRoom):
+class AgentContext(ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -151,6 +151,14 @@ class AgentContext(TakeOvers, ChatRoom):
             publish=self._publish_agent,
             publish_world_stop=self.queue_desk.publish_world_stop,
             log=self.log,
+        )
+        self.takeovers = TakeOverDesk(
+            self.state,
+            leases=self.leases,
+            audit=self.audit,
+            require_manage=self._require_manage,
+            publish=self._publish_agent,
+            publish_lease=self.scheduler.publish_lease,
         )
 
     def _seal(self, key: str, message: Message) -> bytes:
@@ -307,11 +315,11 @@ class AgentContext(TakeOvers, ChatRoom):
         elif isinstance(request, TakeOver):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "takeover", where, request.reason):
-                reply = self._take_over(principal, request)
+                reply = self.takeovers.take_over(principal, request)
         elif isinstance(request, HandBack):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "handback", where, ""):
-                reply = self._hand_back(principal, request)
+                reply = self.takeovers.hand_back(principal, request)
         elif isinstance(request, EmergencyStop):
             action = "estop" if request.engaged else "release"
             with self.audit.action(principal, action, self.scope, request.reason):
@@ -340,7 +348,7 @@ class AgentContext(TakeOvers, ChatRoom):
 
     def _drop_session_jobs(self, session_id: bytes, reason: str, *, remote_only: bool) -> None:
         # A teacher gone (left, vanished, revoked) gives back what they took over.
-        self._hand_back_session(session_id, f"went away ({reason})")
+        self.takeovers.hand_back_session(session_id, f"went away ({reason})")
         cancelled: list[RequestStatus] = []
         with self.state.wake:
             for job, running in self.state.book.jobs_of_session(session_id):
@@ -488,9 +496,6 @@ class AgentContext(TakeOvers, ChatRoom):
 
     def runner_user(self, run: RunningJob) -> str:
         return self.scheduler.runner_user(run)
-
-    def _publish_lease(self, run: RunningJob, end: float) -> None:
-        self.scheduler.publish_lease(run, end)
 
     def _publish(self, *, line: ChatLine | None = None, status: MemberStatus | None = None) -> None:
         super()._publish(line=line, status=status)
