@@ -22,6 +22,13 @@ Rights (registry ACL, scopes ``ctx/<ctx>`` and ``agent/<ctx>/<agent>``):
 ``join``; ``control`` (remote) or ``deploy`` (upload) on the agent; the
 owner, or ``kick`` in the context, *manages*: slot length, stop, enable or
 disable remote control for the context or one agent, cancel anyone's request.
+
+The queues and the runs in flight are one
+:class:`~services.context.context_state.ContextState`, shared by the parts
+wired here: the queue desk (queue_requests.py: queue, cancel, stop, settings,
+the emergency stop, dry runs), the slot scheduler (slots.py: its thread) and
+the take-over desk (takeover.py). Members, chat and rights are the chat room's;
+this class routes requests, follows presence and output, and saves the queues.
 """
 
 from __future__ import annotations
@@ -119,6 +126,14 @@ class AgentContext(ChatRoom):
         self.runner_link = RunnerLink(
             session, realm, self.runner, self._seal, self.verifier, self.log
         )
+        self.status_desk = RequestStatusDesk(
+            name, self.owner, self.verifier, self.state.look_up, restricted=self.restricted
+        )
+        self.recorder = SlotRecorder(
+            session, realm, name, self.world, recordings, self.registry_key, self.log
+        )
+        self.recordings = RecordingRequests(recordings, name)
+        # Its parts, on the one state they share: each is handed what it uses.
         self.queue_desk = QueueDesk(
             self.state,
             session=session,
@@ -133,13 +148,6 @@ class AgentContext(ChatRoom):
             publish=self._publish_agent,
             log=self.log,
         )
-        self.status_desk = RequestStatusDesk(
-            name, self.owner, self.verifier, self.state.look_up, restricted=self.restricted
-        )
-        self.recorder = SlotRecorder(
-            session, realm, name, self.world, recordings, self.registry_key, self.log
-        )
-        self.recordings = RecordingRequests(recordings, name)
         self.scheduler = SlotScheduler(
             self.state,
             session=session,
