@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import zenoh
 
@@ -43,9 +43,6 @@ from common.sim2d import maps
 from common.sim2d.world import EditError, World
 from common.world.leases import LeaseBook
 
-if TYPE_CHECKING:  # annotations only: the service module imports this one
-    from services.engine.service import EngineSettings
-
 
 class EngineEdits:
     """The engine's edit, reset, robot-type and map requests, and its journal."""
@@ -54,7 +51,8 @@ class EngineEdits:
         self,
         *,
         ident: str,
-        settings: EngineSettings,
+        maps_dir: Path,
+        load_map: Callable[[Path], World],
         verifier: Verifier | None,
         leases: LeaseBook,
         current_world: Callable[[], World],
@@ -62,11 +60,14 @@ class EngineEdits:
         use_world: Callable[[World], None],
         log: logging.Logger,
     ) -> None:
-        """``current_world`` is the world the engine steps now; ``in_sim`` runs a
-        function on its sim thread between ticks and returns its reply; ``use_world``
-        (sim thread) makes a map loaded on request the world the engine steps."""
+        """``maps_dir`` holds the maps and the journal; ``load_map`` makes a map file
+        the engine's world (its name, seed, tick, threads); ``current_world`` is the
+        world the engine steps now; ``in_sim`` runs a function on its sim thread
+        between ticks and returns its reply; ``use_world`` (sim thread) makes a map
+        loaded on request the world the engine steps."""
         self.ident = ident
-        self.settings = settings
+        self.maps_dir = maps_dir
+        self.load_map = load_map
         self.verifier = verifier
         self.leases = leases
         self.current_world = current_world
@@ -92,7 +93,7 @@ class EngineEdits:
         except MessageError:
             self.log.warning("map name %r is not a plain name: live edits are not journalled", base)
             return world
-        journal = Journal(self.settings.maps_dir / f".{self.ident}.edits")
+        journal = Journal(self.maps_dir / f".{self.ident}.edits")
         records = list(journal.records())
         if not records or records[0] != marker:
             journal.restart(marker)  # a journal of another map, or none: start afresh
@@ -112,24 +113,12 @@ class EngineEdits:
         self.journal = journal
         return world
 
-    def _load_map(self, path: Path) -> World:
-        """A map file as this engine's world: its name, seed, tick and thread counts."""
-        return maps.load_map(
-            path,
-            name=self.ident,
-            seed=self.settings.seed,
-            tick_s=self.settings.tick_s,
-            threads=self.settings.threads,
-            physics_threads=self.settings.physics_threads,
-            drive=self.settings.drive,
-        )
-
     def _replay(self, world: World, record: Message) -> World:
         if isinstance(record, WorldEdit):
             self._apply_op(world, record.op)
         elif isinstance(record, MapRequest) and record.action == "load" and record.name:
-            path = maps.map_path(self.settings.maps_dir, record.name)
-            world = self._load_map(path)
+            path = maps.map_path(self.maps_dir, record.name)
+            world = self.load_map(path)
         self.replayed_edits += 1
         return world
 
@@ -239,7 +228,7 @@ class EngineEdits:
     def on_map(self, query: zenoh.Query) -> Message:
         principal, request = self._open(str(query.key_expr), query.payload, MapRequest)
         principal.require("edit_map", "save or load maps")
-        maps_dir = self.settings.maps_dir
+        maps_dir = self.maps_dir
         if request.action == "list":
             return EditResult(layout=self.current_world().layout, maps=maps.list_maps(maps_dir))
         if request.name is None:
@@ -259,7 +248,7 @@ class EngineEdits:
         if not path.is_file():
             raise RequestError("not_found", f"no map named {request.name} in the maps directory")
         try:
-            new_world = self._load_map(path)
+            new_world = self.load_map(path)
         except maps.MapError as exc:
             raise RequestError("bad_request", str(exc)) from None
 

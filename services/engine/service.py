@@ -46,7 +46,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.sim2d import wander
+from common.sim2d import maps, wander
 from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.world import EditError, World
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
@@ -175,7 +175,8 @@ class EngineService(WorldService):
         # Edits, resets, robot types and maps: run on the sim thread, journalled.
         self.edits = EngineEdits(
             ident=self.ident,
-            settings=settings,
+            maps_dir=settings.maps_dir,
+            load_map=self._load_map,
             verifier=self.verifier,
             leases=self.leases,
             current_world=lambda: self.world,
@@ -367,6 +368,19 @@ class EngineService(WorldService):
     @property
     def replayed_edits(self) -> int:
         return self.edits.replayed_edits
+
+    def _load_map(self, path: Path) -> World:
+        """A map file as this engine's world: its name, seed, tick and thread counts."""
+        settings = self.settings
+        return maps.load_map(
+            path,
+            name=self.ident,
+            seed=settings.seed,
+            tick_s=settings.tick_s,
+            threads=settings.threads,
+            physics_threads=settings.physics_threads,
+            drive=settings.drive,
+        )
 
     def _use_world(self, world: World) -> None:
         """Sim thread: a map loaded on request is the world stepped from now on."""
