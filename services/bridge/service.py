@@ -42,7 +42,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
 import zenoh
 
 from common import keys
@@ -50,15 +49,9 @@ from common.auth import AuthError, Session, Verifier
 from common.controller.actuators import apply_command
 from common.keys import AliveKind
 from common.messages import (
-    FINGERS_CLOSED,
-    FINGERS_HOLDING,
-    FINGERS_OPEN,
     AgentCommand,
     AgentInfo,
-    AgentStates,
-    GripperReading,
     Message,
-    PackedArray,
     SensorBatch,
     SensorSample,
     TrackedPoses,
@@ -72,7 +65,7 @@ from common.tracking.fusion import PoseFusion
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
-from services.bridge import protocol as P
+from services.bridge import packing
 from services.bridge.cameras import CAMERA_HUNG_S, ArenaCameras
 from services.bridge.detect import candidate_ports, detect
 from services.bridge.odometry import Pose
@@ -96,7 +89,6 @@ KHEPERA_IR_POSES: tuple[tuple[float, float, float], ...] = tuple(
         (-24, 10, 180),
     )
 )
-FINGERS_CLOSED_ABOVE = 100  # a finger-position reading above this is a closed grip
 ONLINE_COLOUR, OFFLINE_COLOUR, NOT_SEEN_COLOUR = "#2e86de", "#8a8a8a", "#c8c8c8"
 
 
@@ -318,34 +310,7 @@ class BridgeService(WorldService):
             self.publish_sample_bundle(sample.tick, {agent.id: payload})
 
     def _sample(self, agent: str, state: RobotState) -> SensorSample | None:
-        if not state.online or None in (state.proximity, state.ambient, state.counters):
-            return None
-        assert state.proximity is not None and state.ambient is not None
-        assert state.counters is not None
-        speed = state.speed or P.WheelPair(0, 0)
-        gripper = None
-        if state.gripper is not None:
-            g = state.gripper
-            closed = g.fingers > FINGERS_CLOSED_ABOVE
-            fingers = "holding" if closed and g.object > 0 else "closed" if closed else "open"
-            gripper = GripperReading(
-                arm=_byte(g.arm),
-                fingers=fingers,  # type: ignore[arg-type]
-                presence=_byte(g.object),
-                resistivity=_byte(g.resistivity),
-            )
-        return SensorSample(
-            world=self.ident,
-            agent=agent,
-            tick=state.rounds,
-            sim_time=round(state.updated - self._t0, 6) if state.updated else 0.0,
-            proximity=list(state.proximity),
-            ambient=list(state.ambient),
-            counters=(state.counters.left, state.counters.right),
-            speeds=(speed.left, speed.right),
-            leds=list(state.leds),
-            gripper=gripper,
-        )
+        return packing.sample(self.ident, agent, state, self._t0)
 
     # -- the network -> robots
 
@@ -490,56 +455,12 @@ class BridgeService(WorldService):
                 self._batch_pub.put(encode(batch))
 
     def frame(self, states: Sequence[RobotState], layout: int) -> WorldFrame:
-        n = len(states)
-        poses = np.array(
-            [(s.pose.x, s.pose.y, s.pose.heading) for s in states], dtype=np.float32
-        ).reshape(n, 3)
-        agent_states = AgentStates(
-            leds=np.array([sum(b << k for k, b in enumerate(s.leds)) for s in states], np.uint8),
-            arm=np.zeros(n, np.uint8),
-            fingers=np.zeros(n, np.uint8),
-            presence=np.zeros(n, np.uint8),
-        )
-        for i, s in enumerate(states):
-            if s.gripper is not None:
-                closed = s.gripper.fingers > FINGERS_CLOSED_ABOVE
-                agent_states.arm[i] = _byte(s.gripper.arm)
-                holding = closed and s.gripper.object > 0
-                agent_states.fingers[i] = (
-                    FINGERS_HOLDING if holding else FINGERS_CLOSED if closed else FINGERS_OPEN
-                )
-                agent_states.presence[i] = _byte(s.gripper.object)
-        return WorldFrame(
-            world=self.ident,
-            tick=self._frames,
-            sim_time=round(time.monotonic() - self._t0, 6),
-            layout=layout,
-            poses=PackedArray.from_numpy(poses),
-            agent_state=agent_states.pack(),
-            lights=PackedArray.from_numpy(np.zeros(0, dtype=np.uint8)),
-        )
+        t = round(time.monotonic() - self._t0, 6)
+        return packing.frame(self.ident, self._frames, t, states, layout)
 
     def _batch(self, states: Sequence[RobotState], layout: int) -> SensorBatch | None:
-        n = len(states)
-        prox = np.zeros((n, 8), dtype=np.uint16)
-        amb = np.full((n, 8), 500, dtype=np.uint16)  # offline robots read as "dark, nothing"
-        counters = np.zeros((n, 2), dtype=np.int32)
-        for i, s in enumerate(states):
-            if s.proximity is not None:
-                prox[i] = s.proximity[:8]
-            if s.ambient is not None:
-                amb[i] = s.ambient[:8]
-            if s.counters is not None:
-                counters[i] = (s.counters.left, s.counters.right)
-        return SensorBatch(
-            world=self.ident,
-            tick=self._frames,
-            sim_time=round(time.monotonic() - self._t0, 6),
-            layout=layout,
-            proximity=PackedArray.from_numpy(prox),
-            ambient=PackedArray.from_numpy(amb),
-            counters=PackedArray.from_numpy(counters),
-        )
+        t = round(time.monotonic() - self._t0, 6)
+        return packing.batch(self.ident, self._frames, t, states, layout)
 
     # -- queries
 
@@ -604,7 +525,3 @@ class BridgeService(WorldService):
         raise RequestError(
             "bad_request", f"{self.ident} is a real arena (Khepera bridge): it cannot be edited"
         )
-
-
-def _byte(value: int) -> int:
-    return max(0, min(255, int(value)))

@@ -22,6 +22,13 @@ Rights (registry ACL, scopes ``ctx/<ctx>`` and ``agent/<ctx>/<agent>``):
 ``join``; ``control`` (remote) or ``deploy`` (upload) on the agent; the
 owner, or ``kick`` in the context, *manages*: slot length, stop, enable or
 disable remote control for the context or one agent, cancel anyone's request.
+
+The queues and the runs in flight are one
+:class:`~services.context.context_state.ContextState`, shared by the parts
+wired here: the queue desk (queue_requests.py: queue, cancel, stop, settings,
+the emergency stop, dry runs), the slot scheduler (slots.py: its thread) and
+the take-over desk (takeover.py). Members, chat and rights are the chat room's;
+this class routes requests, follows presence and output, and saves the queues.
 """
 
 from __future__ import annotations
@@ -59,7 +66,6 @@ from common.messages import (
     RecordingGet,
     RecordingListRequest,
     RequestStatus,
-    RequestStatusReply,
     Revocation,
     SaveFile,
     StopControl,
@@ -68,23 +74,22 @@ from common.messages import (
 )
 from common.messages.chat import ChatLine, MemberStatus
 from common.recording.store import RecordingStore
-from common.service import RequestError
 from services.context.agent_queue import (
-    ControlJob,
     QueueBook,
     RunningJob,
     load_book,
     save_book,
 )
 from services.context.chat_room import ChatRoom
+from services.context.context_state import ContextState
 from services.context.lease_signer import LeaseSigner
-from services.context.queue_requests import QueueRequests
+from services.context.queue_requests import QueueDesk
 from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
-from services.context.request_status import RequestStatusDesk, look_up
+from services.context.request_status import RequestStatusDesk
 from services.context.runner_link import RunnerLink
 from services.context.slots import SlotScheduler
-from services.context.takeover import TakeOvers
+from services.context.takeover import TakeOverDesk
 from services.context.user_files import UserFiles
 
 DRY_RUN_WORKERS = 2
@@ -93,7 +98,7 @@ RUNNER_GRACE_S = 1.5  # after a runner's token went, before asking it what it st
 RUNNER_CHECK_S = 15.0  # how long to keep asking before taking its silence for its death
 
 
-class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
+class AgentContext(ChatRoom):
     def __init__(
         self,
         session: zenoh.Session,
@@ -109,66 +114,91 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         super().__init__(session, realm, name, **room)
         self.world = keys.check_ident("world", world)
         self.runner = keys.check_ident("runner", runner)
-        self.book = QueueBook(slot_seconds)
         data_dir = room.get("data_dir")
         # Queues, settings and running slots survive a crash of this process: written
         # (atomically, synced) whenever they change, read back here.
         self._book_path: Path | None = None if data_dir is None else data_dir / f"{name}.queues"
         self._save_lock = threading.Lock()
+        self.state = ContextState(name, self.world, self._restore_book(QueueBook(slot_seconds)))
         # The page's editor keeps each member's last files here, beside the queues.
         self.files = UserFiles(None if data_dir is None else data_dir / f"{name}.files")
-        self._stop_lock = threading.Lock()  # orders the world stops this context seals
-        self._restore_book()
-        self._wake = threading.Condition(self._lock)
-        self._thread: threading.Thread | None = None
-        self._halt = threading.Event()
         self.leases = LeaseSigner(session, realm, self.world, self._seal, self.verifier, self.log)
         self.runner_link = RunnerLink(
             session, realm, self.runner, self._seal, self.verifier, self.log
         )
-        self._end_reasons: dict[str, tuple[str, str]] = {}  # request id -> (status, reason)
-        self._dirty = True
-        self._layout: int | None = None
-        self._world_appeared = False
-        self._frames: Any = None
-        self._recent: dict[str, RunningJob] = {}  # runs that ended lately, for trailing output
-        self._starting: dict[str, ControlJob] = {}  # off their queue, their slot being set up
         self.status_desk = RequestStatusDesk(
-            name, self.owner, self.verifier, self._look_up, restricted=self.restricted
+            name, self.owner, self.verifier, self.state.look_up, restricted=self.restricted
         )
         self.recorder = SlotRecorder(
             session, realm, name, self.world, recordings, self.registry_key, self.log
         )
         self.recordings = RecordingRequests(recordings, name)
+        # Its parts, on the one state they share: each is handed what it uses.
+        self.queue_desk = QueueDesk(
+            self.state,
+            session=session,
+            realm=realm,
+            restricted=self.restricted,
+            verifier=self.verifier,
+            seal=self._seal,
+            runner_link=self.runner_link,
+            require_member=self._require_member,
+            require_manage=self._require_manage,
+            manages=self._manages,
+            publish=self._publish_agent,
+            log=self.log,
+        )
+        self.scheduler = SlotScheduler(
+            self.state,
+            session=session,
+            realm=realm,
+            leases=self.leases,
+            runner_link=self.runner_link,
+            recorder=self.recorder,
+            save=self._save_book,
+            publish=self._publish_agent,
+            publish_world_stop=self.queue_desk.publish_world_stop,
+            log=self.log,
+        )
+        self.takeovers = TakeOverDesk(
+            self.state,
+            leases=self.leases,
+            audit=self.audit,
+            require_manage=self._require_manage,
+            publish=self._publish_agent,
+            publish_lease=self.scheduler.publish_lease,
+        )
 
     def _seal(self, key: str, message: Message) -> bytes:
         """Sealed with the context's current session (renewed sessions included)."""
         return self.login.session.seal(key, message)
 
-    def _restore_book(self) -> None:
+    def _restore_book(self, empty: QueueBook) -> QueueBook:
+        """The queues saved before a crash, or ``empty`` if there are none to read."""
         if self._book_path is None or not self._book_path.exists():
-            return
+            return empty
         try:
-            self.book = load_book(self._book_path.read_bytes())
+            book = load_book(self._book_path.read_bytes())
         except (OSError, ValueError) as exc:
             self.log.warning("could not restore the queues from %s: %s", self._book_path, exc)
-            return
-        waiting = sum(len(line.waiting) for line in self.book.lines.values())
-        running = [line.running for line in self.book.lines.values() if line.running]
+            return empty
+        waiting = sum(len(line.waiting) for line in book.lines.values())
+        running = [line.running for line in book.lines.values() if line.running]
         self.log.info(
             "restored %d waiting and %d running requests (slots of %g s) from %s",
             waiting,
             len(running),
-            self.book.slot_seconds,
+            book.slot_seconds,
             self._book_path,
         )
+        return book
 
     def _save_book(self) -> None:
         if self._book_path is None:
             return
         with self._save_lock:  # one writer at a time, the newest state last
-            with self._lock:
-                data = save_book(self.book)
+            with self.state.lock:
+                data = save_book(self.state.book)
             try:
                 write_atomic(self._book_path, data)
                 os.chmod(self._book_path, 0o600)  # running slots carry their lease keys
@@ -189,7 +219,7 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         # the emergency stop are never behind one.
         self.serve(
             keys.ctx_dryrun(self.realm, self.room),
-            self._on_dry_run,
+            self.queue_desk.on_dry_run,
             workers=DRY_RUN_WORKERS,
             max_waiting=DRY_RUN_WAITING,
         )
@@ -204,32 +234,20 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         )
         self.track(
             self.session.liveliness().declare_subscriber(
-                keys.alive(self.realm, AliveKind.WORLD, self.world), self._on_world_presence
+                keys.alive(self.realm, AliveKind.WORLD, self.world),
+                self.scheduler.on_world_presence,
             )
         )
-        self._frames = self.track(
+        frames = self.track(
             self.session.declare_subscriber(
                 keys.world_frame(self.realm, self.world), zenoh.handlers.RingChannel(1)
             )
         )
         self.recorder.start()
-        self._thread = threading.Thread(target=self._schedule, name="agent-queues", daemon=True)
-        self._thread.start()
+        self.scheduler.start(frames)
 
     def on_stop(self, timeout: float) -> None:
-        self._halt.set()
-        with self._wake:
-            self._wake.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout)
-        # Nobody keeps a robot after the context is gone: end every lease now.
-        with self._lock:
-            running = [line.running for line in self.book.lines.values() if line.running]
-        for run in running:
-            self._end_run(run, self._ended(run.job, "cancelled", "the agent context stopped", run))
-        with self._lock:
-            for line in self.book.lines.values():
-                line.running = None
+        self.scheduler.stop(timeout)
         self._save_book()  # a clean stop ends the slots: they must not come back
         self.recorder.close(timeout)
         self.leases.close()
@@ -245,21 +263,6 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
             raise AuthError(
                 "forbidden",
                 f"only the owner of {self.room} or a user with 'kick' there may {what}",
-            )
-
-    def _require_agent(self, agent: str) -> None:
-        with self._lock:
-            known = agent in self.book.lines
-            names = ", ".join(sorted(self.book.lines))
-        if not known and not names:
-            raise RequestError(
-                "not_found",
-                f"world {self.world} has not answered yet (is its engine or bridge running?): "
-                "try again in a moment",
-            )
-        if not known:
-            raise RequestError(
-                "not_found", f"no agent {agent} in world {self.world} (agents: {names})"
             )
 
     # -- requests
@@ -310,29 +313,29 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
             return self.recordings.answer(principal, request, self._manages(principal))
         reply: Message
         if isinstance(request, ControlRequest):
-            reply = self._queue(principal, request)
+            reply = self.queue_desk.queue(principal, request)
         elif isinstance(request, CancelControl):
-            reply = self._cancel(principal, request)
+            reply = self.queue_desk.cancel(principal, request)
         elif isinstance(request, StopControl):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "stop_run", where, request.reason):
-                reply = self._stop_agent(principal, request)
+                reply = self.queue_desk.stop_agent(principal, request)
         elif isinstance(request, TakeOver):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "takeover", where, request.reason):
-                reply = self._take_over(principal, request)
+                reply = self.takeovers.take_over(principal, request)
         elif isinstance(request, HandBack):
             where = f"agent/{self.room}/{request.agent}"
             with self.audit.action(principal, "handback", where, ""):
-                reply = self._hand_back(principal, request)
+                reply = self.takeovers.hand_back(principal, request)
         elif isinstance(request, EmergencyStop):
             action = "estop" if request.engaged else "release"
             with self.audit.action(principal, action, self.scope, request.reason):
-                reply = self._emergency_stop(principal, request)
+                reply = self.queue_desk.emergency_stop(principal, request)
         else:  # the one kind left (open's overloads type a tuple this long as Message)
             settings = cast(ContextSettings, request)
             with self.audit.action(principal, "settings", self.scope, _said(settings)):
-                reply = self._settings(principal, settings)
+                reply = self.queue_desk.change_settings(principal, settings)
         # On disk before the answer: an acknowledged request survives a crash right after.
         self._save_book()
         return reply
@@ -353,19 +356,19 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
 
     def _drop_session_jobs(self, session_id: bytes, reason: str, *, remote_only: bool) -> None:
         # A teacher gone (left, vanished, revoked) gives back what they took over.
-        self._hand_back_session(session_id, f"went away ({reason})")
+        self.takeovers.hand_back_session(session_id, f"went away ({reason})")
         cancelled: list[RequestStatus] = []
-        with self._wake:
-            for job, running in self.book.jobs_of_session(session_id):
+        with self.state.wake:
+            for job, running in self.state.book.jobs_of_session(session_id):
                 if remote_only and job.mode != "remote":
                     continue
                 if running:
-                    self._finish_soon(job.request_id, "cancelled", reason)
+                    self.state.finish_soon(job.request_id, "cancelled", reason)
                 else:
-                    self.book.remove_waiting(job.request_id)
-                    cancelled.append(self._ended(job, "cancelled", reason))
-            self._dirty = True
-            self._wake.notify_all()
+                    self.state.book.remove_waiting(job.request_id)
+                    cancelled.append(self.state.ended(job, "cancelled", reason))
+            self.state.dirty = True
+            self.state.wake.notify_all()
         for final in cancelled:
             self._publish_agent(AgentEvent(ctx=self.room, request=final))
 
@@ -386,10 +389,10 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         ).start()
 
     def _deploys_running(self) -> list[str]:
-        with self._wake:
+        with self.state.wake:
             return [
                 line.running.job.request_id
-                for line in self.book.lines.values()
+                for line in self.state.book.lines.values()
                 if line.running is not None and line.running.job.mode == "deploy"
             ]
 
@@ -403,7 +406,7 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         token alone misled here, when our session reconnected before the runner's
         (a false "runner stopped" in the chaos test, about one run in three).
         """
-        if self._halt.wait(RUNNER_GRACE_S):
+        if self.state.halt.wait(RUNNER_GRACE_S):
             return
         deadline = time.monotonic() + RUNNER_CHECK_S
         while not self.stopped:
@@ -426,19 +429,19 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
                 ended = asked
                 why = f"it has not answered for {RUNNER_CHECK_S:.0f} s"
                 break
-            if self._halt.wait(1.0):
+            if self.state.halt.wait(1.0):
                 return
         else:
             return
-        with self._wake:
+        with self.state.wake:
             for request_id in ended:
-                self._finish_soon(
+                self.state.finish_soon(
                     request_id,
                     "cancelled",
                     f"the lab's runner {self.runner} stopped (crashed or restarted): your "
                     "controller was ended; upload it again",
                 )
-            self._wake.notify_all()
+            self.state.wake.notify_all()
         self.log.warning("runner %s went away (%s): ended %s", self.runner, why, ", ".join(ended))
 
     def _on_presence(self, sample: zenoh.Sample) -> None:
@@ -448,10 +451,10 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         parsed = keys.parse_alive(self.realm, str(sample.key_expr))
         if parsed is None:
             return
-        with self._lock:
+        with self.state.lock:
             sessions = {
                 job.session_id
-                for line in self.book.lines.values()
+                for line in self.state.book.lines.values()
                 for job in ([line.running.job] if line.running else []) + list(line.waiting)
                 if job.user == parsed[1] and job.mode == "remote"
             }
@@ -464,19 +467,19 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
         principal, report = self.verifier.open(
             str(sample.key_expr), sample.payload, ControllerOutput
         )
-        with self._wake:
-            found = self.book.find(report.request_id)
+        with self.state.wake:
+            found = self.state.book.find(report.request_id)
             run = found[0].running if found is not None and found[2] else None
             # Lines can trail the end of a slot (the last prints, a traceback).
-            run = run or self._recent.get(report.request_id)
+            run = run or self.state.recent.get(report.request_id)
             if run is None or run.holder_session != principal.session_id:
                 raise AuthError(
                     "forbidden", f"{principal.user} does not drive request {report.request_id}"
                 )
             if report.done:
                 reason = report.reason or "the controller ended"
-                self._finish_soon(report.request_id, "finished", reason)
-                self._wake.notify_all()
+                self.state.finish_soon(report.request_id, "finished", reason)
+                self.state.wake.notify_all()
         if report.lines:
             self.recorder.output(run.job.request_id, run.job.agent, list(report.lines))
             self._publish_agent(
@@ -494,58 +497,13 @@ class AgentContext(QueueRequests, TakeOvers, SlotScheduler, ChatRoom):
     # -- events and state
 
     def state_message(self) -> AgentContextState:
-        now = time.time()
-        with self._lock:
-            return AgentContextState(
-                ctx=self.room,
-                world=self.world,
-                slot_seconds=self.book.slot_seconds,
-                enabled=self.book.enabled,
-                agents=self.book.agent_queues(now),
-                at=now,
-                estop=self.book.estop,
-            )
+        return self.state.state_message()
 
-    def _status(
-        self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-    ) -> RequestStatus:
-        return RequestStatus(
-            request_id=job.request_id,
-            agent=job.agent,
-            user=job.user,
-            status=status,  # type: ignore[arg-type]
-            reason=reason,
-            start=run.start if run else None,
-            end=run.end if run else None,
-        )
+    def publish_world_stop(self, engaged: bool | None, by: str) -> None:
+        self.queue_desk.publish_world_stop(engaged, by)
 
-    def _ended(
-        self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
-    ) -> RequestStatus:
-        """A request's last status, recorded in the book before anyone is told: a client
-        that misses the event asks (``ctx/<ctx>/status``) and gets the same answer.
-
-        Called where the request leaves the queues, under the same hold of the lock.
-        For a run, ``start`` and ``end`` are its slot's start and its actual end.
-        """
-        now = time.time()
-        final = RequestStatus(
-            request_id=job.request_id,
-            agent=job.agent,
-            user=job.user,
-            status=status,  # type: ignore[arg-type]
-            reason=reason[:256],  # a RequestStatus reason's limit
-            start=run.start if run else None,
-            end=min(run.end, now) if run else None,
-        )
-        with self._lock:
-            self.book.record_end(final, now)
-            self._dirty = True
-        return final
-
-    def _look_up(self, request_id: str) -> RequestStatusReply:
-        with self._lock:
-            return look_up(self.book, self._starting, request_id, time.time())
+    def runner_user(self, run: RunningJob) -> str:
+        return self.scheduler.runner_user(run)
 
     def _publish(self, *, line: ChatLine | None = None, status: MemberStatus | None = None) -> None:
         super()._publish(line=line, status=status)

@@ -1,10 +1,9 @@
-"""The requests that change an agent context's queues: queue, cancel, stop, settings,
-the host's emergency stop, and the dry run before queueing.
+"""The queue desk of an agent context: queue, cancel, stop, settings, the host's
+emergency stop, and the dry run before queueing.
 
-A base of :class:`~services.context.agent_context.AgentContext` (beside the slot
-scheduler of slots.py and the chat room): each handler checks the sender's rights,
-changes the queue book under the context's lock and wakes the scheduler, which
-starts and ends the slots. The state is the context's, set in its ``__init__``.
+Each request checks the sender's rights, changes the queues (the context's
+:class:`~services.context.context_state.ContextState`) under their lock and
+wakes the scheduler (slots.py), which starts and ends the slots.
 """
 
 from __future__ import annotations
@@ -12,7 +11,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
 
 import zenoh
 
@@ -31,12 +30,12 @@ from common.messages import (
     EmergencyStop,
     Message,
     OkReply,
-    RequestStatus,
     StopControl,
     WorldStop,
 )
 from common.service import RequestError
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob, new_request_id
+from services.context.agent_queue import ControlJob, new_request_id
+from services.context.context_state import ContextState, request_status
 from services.context.runner_link import RunnerLink
 
 log = logging.getLogger("wart.chat")  # the context's own logger (chat_room.py)
@@ -45,70 +44,52 @@ MAX_WAITING_PER_USER = 4
 DRY_RUN_WAIT_S = 25.0  # the runner's wall-clock limit (20 s) and the sandbox's start
 
 
-class QueueRequests:
-    """Requests on the queues; the state is the context's (set in its ``__init__``)."""
+class QueueDesk:
+    """Requests that change the queues, on the state the context's parts share."""
 
-    session: zenoh.Session
-    realm: str
-    room: str
-    world: str
-    owner: str
-    restricted: bool
-    log: logging.Logger
-    book: QueueBook
-    runner_link: RunnerLink
-    _lock: threading.RLock  # the chat room's: the context's one lock
-    _wake: threading.Condition
-    _stop_lock: threading.Lock
-    _dirty: bool
-    _end_reasons: dict[str, tuple[str, str]]
-    verifier: Verifier
+    def __init__(
+        self,
+        state: ContextState,
+        *,
+        session: zenoh.Session,
+        realm: str,
+        restricted: bool,
+        verifier: Verifier,
+        seal: Callable[[str, Message], bytes],
+        runner_link: RunnerLink,
+        require_member: Callable[[Principal], None],
+        require_manage: Callable[[Principal, str], None],
+        manages: Callable[[Principal], bool],
+        publish: Callable[[AgentEvent], None],
+        log: logging.Logger,
+    ) -> None:
+        """``seal`` seals with the context's current session; ``publish`` tells the
+        members an event (and records it); ``require_member``, ``require_manage`` and
+        ``manages`` are the context's rights (its chat room's members, its managers)."""
+        self.state = state
+        self.session = session
+        self.realm = realm
+        self.restricted = restricted
+        self.verifier = verifier
+        self.seal = seal
+        self.runner_link = runner_link
+        self.require_member = require_member
+        self.require_manage = require_manage
+        self.manages = manages
+        self.publish = publish
+        self.log = log
+        self._stop_lock = threading.Lock()  # orders the world stops this context seals
 
-    if TYPE_CHECKING:  # what the context provides (agent_context.py, chat_room.py);
-        # declared for the type checker only: at run time a stub here would hide
-        # the chat room's method, which comes later in the bases.
-
-        def _seal(self, key: str, message: Message) -> bytes:
-            raise NotImplementedError
-
-        def _save_book(self) -> None:
-            raise NotImplementedError
-
-        def _require_member(self, principal: Principal) -> None:
-            raise NotImplementedError
-
-        def _require_manage(self, principal: Principal, what: str) -> None:
-            raise NotImplementedError
-
-        def _require_agent(self, agent: str) -> None:
-            raise NotImplementedError
-
-        def _manages(self, principal: Principal) -> bool:
-            raise NotImplementedError
-
-        def _publish_agent(self, event: AgentEvent) -> None:
-            raise NotImplementedError
-
-        def _status(
-            self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-        ) -> RequestStatus:
-            raise NotImplementedError
-
-        def _ended(
-            self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
-        ) -> RequestStatus:
-            raise NotImplementedError
-
-    def _queue(self, principal: Principal, request: ControlRequest) -> Message:
-        self._require_member(principal)
+    def queue(self, principal: Principal, request: ControlRequest) -> Message:
+        self.require_member(principal)
         permission = "control" if request.mode == "remote" else "deploy"
         principal.require(
             permission,
             f"{'drive' if request.mode == 'remote' else 'deploy a controller on'} {request.agent}",
-            scope=acl.agent_scope(self.room, request.agent),
+            scope=acl.agent_scope(self.state.room, request.agent),
             restricted=self.restricted,
         )
-        self._require_agent(request.agent)
+        self.state.require_agent(request.agent)
         if request.mode == "deploy":
             try:
                 precheck(request.source, request.filename)
@@ -127,20 +108,20 @@ class QueueRequests:
             filename=request.filename,
         )
         now = time.time()
-        with self._wake:
-            if not self.book.can_run(request.agent):
+        with self.state.wake:
+            if not self.state.book.can_run(request.agent):
                 raise RequestError(
                     "forbidden",
-                    f"remote control of {request.agent} is disabled in {self.room} for now",
+                    f"remote control of {request.agent} is disabled in {self.state.room} for now",
                 )
-            mine = [j for j, _ in self.book.jobs_of_session(principal.session_id)]
+            mine = [j for j, _ in self.state.book.jobs_of_session(principal.session_id)]
             if any(j.agent == request.agent for j in mine):
                 raise RequestError(
                     "conflict", f"you already have a request on {request.agent}: cancel it first"
                 )
             waiting = sum(
                 1
-                for line in self.book.lines.values()
+                for line in self.state.book.lines.values()
                 for j in line.waiting
                 if j.user == principal.user
             )
@@ -148,41 +129,41 @@ class QueueRequests:
                 raise RequestError(
                     "rate_limited", f"at most {MAX_WAITING_PER_USER} waiting requests per user"
                 )
-            position = self.book.add(job)
-            eta = self.book.eta(request.agent, position, now)
-            self._dirty = True
-            self._wake.notify_all()
+            position = self.state.book.add(job)
+            eta = self.state.book.eta(request.agent, position, now)
+            self.state.dirty = True
+            self.state.wake.notify_all()
         log.info("%s queued %s (%s) at %d", principal.user, job.request_id, job.mode, position)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(job, "queued")),
+        self.publish(
+            AgentEvent(ctx=self.state.room, request=request_status(job, "queued")),
         )
         return ControlQueued(
             request_id=job.request_id,
             agent=job.agent,
             position=position,
             start_eta=eta,
-            slot_seconds=self.book.slot_seconds,
+            slot_seconds=self.state.book.slot_seconds,
         )
 
-    def _on_dry_run(self, query: zenoh.Query) -> Message:
+    def on_dry_run(self, query: zenoh.Query) -> Message:
         """A dry run of a controller on an agent: the same rights and check as queueing it."""
         principal, request = self.verifier.open(str(query.key_expr), query.payload, DryRunRequest)
-        self._require_member(principal)
+        self.require_member(principal)
         principal.require(
             "deploy",
             f"dry-run a controller on {request.agent}",
-            scope=acl.agent_scope(self.room, request.agent),
+            scope=acl.agent_scope(self.state.room, request.agent),
             restricted=self.restricted,
         )
-        self._require_agent(request.agent)
+        self.state.require_agent(request.agent)
         try:
             precheck(request.source, request.filename)
         except PrecheckError as exc:
             raise RequestError("bad_request", str(exc)) from None
         report: DryRunReport = self.runner_link.dry_run(
             DryRun(
-                ctx=self.room,
-                world=self.world,
+                ctx=self.state.room,
+                world=self.state.world,
                 agent=request.agent,
                 user=principal.user,
                 source=request.source,
@@ -200,40 +181,42 @@ class QueueRequests:
         )
         return report
 
-    def _cancel(self, principal: Principal, request: CancelControl) -> Message:
-        with self._wake:
-            found = self.book.find(request.request_id)
+    def cancel(self, principal: Principal, request: CancelControl) -> Message:
+        with self.state.wake:
+            found = self.state.book.find(request.request_id)
             if found is None:
-                raise RequestError("not_found", f"no request {request.request_id} in {self.room}")
+                raise RequestError(
+                    "not_found", f"no request {request.request_id} in {self.state.room}"
+                )
             _, job, running = found
-            if job.user != principal.user and not self._manages(principal):
+            if job.user != principal.user and not self.manages(principal):
                 raise RequestError("forbidden", f"request {request.request_id} is not yours")
             why = f"cancelled by {principal.user}"
             final = None
             if not running:
-                self.book.remove_waiting(job.request_id)
-                final = self._ended(job, "cancelled", why)
-                self._dirty = True
+                self.state.book.remove_waiting(job.request_id)
+                final = self.state.ended(job, "cancelled", why)
+                self.state.dirty = True
             else:
-                self._finish_soon(job.request_id, "cancelled", why)
-            self._wake.notify_all()
+                self.state.finish_soon(job.request_id, "cancelled", why)
+            self.state.wake.notify_all()
         if final is not None:
-            self._publish_agent(AgentEvent(ctx=self.room, request=final))
+            self.publish(AgentEvent(ctx=self.state.room, request=final))
         return OkReply(detail=f"request {request.request_id} cancelled")
 
-    def _stop_agent(self, principal: Principal, request: StopControl) -> Message:
-        self._require_manage(principal, f"stop the controller on {request.agent}")
-        self._require_agent(request.agent)
-        with self._wake:
-            run = self.book.lines[request.agent].running
+    def stop_agent(self, principal: Principal, request: StopControl) -> Message:
+        self.require_manage(principal, f"stop the controller on {request.agent}")
+        self.state.require_agent(request.agent)
+        with self.state.wake:
+            run = self.state.book.lines[request.agent].running
             if run is None:
                 return OkReply(detail=f"nothing runs on {request.agent}")
             why = f"stopped by {principal.user}" + (f": {request.reason}" if request.reason else "")
-            self._finish_soon(run.job.request_id, "cancelled", why)
-            self._wake.notify_all()
+            self.state.finish_soon(run.job.request_id, "cancelled", why)
+            self.state.wake.notify_all()
         return OkReply(detail=f"stopping {run.job.request_id}")
 
-    def _emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
+    def emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
         """Stop (or release) every robot of the arena: the running controllers end now,
         the world stops every robot and refuses commands, no slot starts until released.
 
@@ -241,25 +224,25 @@ class QueueRequests:
         its robots stop whether or not the runner or a student's machine obeys.
         """
         what = "stop every robot" if request.engaged else "release the emergency stop"
-        self._require_manage(principal, what)
-        with self._wake:
-            if request.engaged == bool(self.book.estop):
-                detail = self.book.estop or "no emergency stop is in force"
+        self.require_manage(principal, what)
+        with self.state.wake:
+            if request.engaged == bool(self.state.book.estop):
+                detail = self.state.book.estop or "no emergency stop is in force"
                 return OkReply(detail=f"nothing changed: {detail}")
             if request.engaged:
                 why = f"emergency stop by {principal.user}" + (
                     f": {request.reason}" if request.reason else ""
                 )
                 why = why[:256]  # a RequestStatus reason's limit
-                self.book.estop = why
-                ended = [ln.running.job.request_id for ln in self.book.lines.values() if ln.running]
+                self.state.book.estop = why
+                ended = [run.job.request_id for run in self.state.running()]
                 for request_id in ended:
-                    self._finish_soon(request_id, "cancelled", why)
+                    self.state.finish_soon(request_id, "cancelled", why)
             else:
-                self.book.estop = ""
+                self.state.book.estop = ""
                 ended = []
-            self._dirty = True
-            self._wake.notify_all()
+            self.state.dirty = True
+            self.state.wake.notify_all()
         self.publish_world_stop(request.engaged, principal.user)
         if request.engaged:
             log.warning("%s: ended %s", why, ", ".join(ended) or "nothing running")
@@ -278,55 +261,45 @@ class QueueRequests:
         the newest stop by its send time, so a republication sealed after a release
         would stop the arena again.
         """
-        key = keys.world_estop(self.realm, self.world)
+        key = keys.world_estop(self.realm, self.state.world)
         with self._stop_lock:
-            with self._lock:
-                why = self.book.estop
+            with self.state.lock:
+                why = self.state.book.estop
             if engaged is None and not why:
                 return
             message = WorldStop(engaged=bool(why), by=by, reason=why[:256])
             try:
-                self.session.put(key, self._seal(key, message), **qos.of(keys.world_estop))
+                self.session.put(key, self.seal(key, message), **qos.of(keys.world_estop))
             except Exception as exc:  # the session closing at shutdown
-                self.log.warning("could not tell world %s of the stop: %s", self.world, exc)
+                self.log.warning("could not tell world %s of the stop: %s", self.state.world, exc)
 
-    def _settings(self, principal: Principal, request: ContextSettings) -> Message:
-        self._require_manage(principal, "change the settings")
+    def change_settings(self, principal: Principal, request: ContextSettings) -> Message:
+        self.require_manage(principal, "change the settings")
         if request.agent is not None:
-            self._require_agent(request.agent)
+            self.state.require_agent(request.agent)
         done: list[str] = []
-        with self._wake:
+        with self.state.wake:
             if request.slot_seconds is not None:
-                self.book.slot_seconds = request.slot_seconds
+                self.state.book.slot_seconds = request.slot_seconds
                 done.append(f"slots of {request.slot_seconds:g} s from the next one")
             if request.enabled is not None:
                 if request.agent is not None:
-                    self.book.lines[request.agent].enabled = request.enabled
-                    lines = [self.book.lines[request.agent]]
+                    self.state.book.lines[request.agent].enabled = request.enabled
+                    lines = [self.state.book.lines[request.agent]]
                 else:
-                    self.book.enabled = request.enabled
-                    lines = list(self.book.lines.values())
+                    self.state.book.enabled = request.enabled
+                    lines = list(self.state.book.lines.values())
                 where = request.agent or "every agent"
                 done.append(f"remote control {'on' if request.enabled else 'off'} for {where}")
                 if not request.enabled:
                     for line in lines:
                         if line.running is not None:
-                            self._finish_soon(
+                            self.state.finish_soon(
                                 line.running.job.request_id,
                                 "cancelled",
                                 f"remote control disabled by {principal.user}",
                             )
-            self._dirty = True
-            self._wake.notify_all()
+            self.state.dirty = True
+            self.state.wake.notify_all()
         log.info("%s changed the settings: %s", principal.user, "; ".join(done))
         return OkReply(detail="; ".join(done) or "nothing changed")
-
-    def _finish_soon(self, request_id: str, status: str, reason: str) -> None:
-        """Make a running request end at the scheduler's next turn (lock held)."""
-        found = self.book.find(request_id)
-        if found is None or not found[2]:
-            return
-        line = found[0]
-        assert line.running is not None
-        self._end_reasons.setdefault(request_id, (status, reason))
-        line.running.end = min(line.running.end, time.time())

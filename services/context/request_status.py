@@ -32,7 +32,7 @@ from services.context.chat_room import room_allows
 def look_up(
     book: QueueBook, starting: Mapping[str, ControlJob], request_id: str, now: float
 ) -> RequestStatusReply:
-    """Where ``request_id`` stands in ``book`` (the caller holds the context's lock).
+    """Where ``request_id`` stands in ``book`` (the caller holds ContextState.lock).
 
     ``starting``: requests taken off their queue whose slot is being set up (the
     runner asked for a sandbox): next, not yet running.

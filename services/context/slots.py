@@ -5,8 +5,9 @@ is up, starts the head of each free agent's queue (asking the runner first
 for a deployed controller), republishes the leases in force every second,
 re-reads the world's agents when its layout changes (and its identity every
 few seconds: a restarted world has a new one), and saves the queues when
-anything changed. It is a base of :class:`~services.context.agent_context.
-AgentContext`, whose requests and events it shares state with under its lock.
+anything changed. It shares the context's
+:class:`~services.context.context_state.ContextState` with the queue desk and
+the take-over desk, under its lock.
 """
 
 from __future__ import annotations
@@ -14,13 +15,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import zenoh
 
 from common import keys
 from common.messages import (
-    AgentContextState,
     AgentEvent,
     ErrorReply,
     MessageError,
@@ -31,7 +32,8 @@ from common.messages import (
 )
 from common.service import RequestError
 from common.world.leasemac import new_lease_key
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob
+from services.context.agent_queue import ControlJob, RunningJob
+from services.context.context_state import ContextState, request_status
 from services.context.lease_signer import LeaseSigner
 from services.context.recorder import SlotRecorder
 from services.context.runner_link import RunnerLink
@@ -44,58 +46,66 @@ WORLD_IDENTITY_REFRESH_S = 5.0  # a restarted world has a new identity: reseal l
 
 
 class SlotScheduler:
-    """Slots of one world's agents; the state is the context's (set in its ``__init__``)."""
+    """Slots of one world's agents, on the state the context's parts share."""
 
-    session: zenoh.Session
-    realm: str
-    room: str
-    world: str
-    log: logging.Logger
-    book: QueueBook
-    leases: LeaseSigner
-    runner_link: RunnerLink
-    _lock: threading.RLock  # the chat room's: the context's one lock
-    _wake: threading.Condition
-    _halt: threading.Event
-    _dirty: bool
-    _layout: int | None
-    _world_appeared: bool
-    _frames: Any
-    _recent: dict[str, RunningJob]
-    _starting: dict[str, ControlJob]
-    _end_reasons: dict[str, tuple[str, str]]
-    recorder: SlotRecorder
+    def __init__(
+        self,
+        state: ContextState,
+        *,
+        session: zenoh.Session,
+        realm: str,
+        leases: LeaseSigner,
+        runner_link: RunnerLink,
+        recorder: SlotRecorder,
+        save: Callable[[], None],
+        publish: Callable[[AgentEvent], None],
+        publish_world_stop: Callable[[bool | None, str], None],
+        log: logging.Logger,
+    ) -> None:
+        """``save`` writes the queues to disk; ``publish`` tells the members an event
+        (and records it); ``publish_world_stop`` tells the world the stop in force."""
+        self.state = state
+        self.session = session
+        self.realm = realm
+        self.leases = leases
+        self.runner_link = runner_link
+        self.recorder = recorder
+        self.save = save
+        self.publish = publish
+        self.publish_world_stop = publish_world_stop
+        self.log = log
+        self._layout: int | None = None  # the world's, as last read from its snapshot
+        self._world_appeared = False
+        self._frames: Any = None  # the world's newest frame (its layout)
+        self._thread: threading.Thread | None = None
 
-    # What the context provides (agent_context.py, queue_requests.py).
-    def _save_book(self) -> None:
-        raise NotImplementedError
+    def start(self, frames: Any) -> None:
+        """Run the scheduler thread; ``frames``: a ring channel of the world's frames."""
+        self._frames = frames
+        self._thread = threading.Thread(target=self._schedule, name="agent-queues", daemon=True)
+        self._thread.start()
 
-    def publish_world_stop(self, engaged: bool | None, by: str) -> None:
-        raise NotImplementedError
-
-    def _publish_agent(self, event: AgentEvent) -> None:
-        raise NotImplementedError
-
-    def state_message(self) -> AgentContextState:
-        raise NotImplementedError
-
-    def _status(
-        self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-    ) -> RequestStatus:
-        raise NotImplementedError
-
-    def _ended(
-        self, job: ControlJob, status: str, reason: str, run: RunningJob | None = None
-    ) -> RequestStatus:
-        raise NotImplementedError
+    def stop(self, timeout: float) -> None:
+        """End the thread, then every slot: nobody keeps a robot after the context is gone."""
+        self.state.halt.set()
+        with self.state.wake:
+            self.state.wake.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        for run in self.state.running():
+            final = self.state.ended(run.job, "cancelled", "the agent context stopped", run)
+            self.end_run(run, final)
+        with self.state.lock:
+            for line in self.state.book.lines.values():
+                line.running = None
 
     def _schedule(self) -> None:
         last_snapshot_try = 0.0
         last_republish = 0.0
-        while not self._halt.is_set():
+        while not self.state.halt.is_set():
             try:
                 now = time.time()
-                with self._wake:
+                with self.state.wake:
                     appeared, self._world_appeared = self._world_appeared, False
                 if (
                     appeared
@@ -107,36 +117,35 @@ class SlotScheduler:
                 self._turn()
                 if time.monotonic() - last_republish >= LEASE_REPUBLISH_S:
                     last_republish = time.monotonic()
-                    with self._lock:
-                        running = [ln.running for ln in self.book.lines.values() if ln.running]
-                    for run in running:
-                        self._publish_lease(run, run.end)
+                    for run in self.state.running():
+                        self.publish_lease(run, run.end)
                     # A restarted world learns a held stop as it relearns leases.
-                    self.publish_world_stop(None, self.room)
-                if self._dirty:
-                    self._dirty = False
-                    self._save_book()
-                    self._publish_agent(AgentEvent(ctx=self.room, state=self.state_message()))
+                    self.publish_world_stop(None, self.state.room)
+                if self.state.dirty:
+                    self.state.dirty = False
+                    self.save()
+                    self.publish(AgentEvent(ctx=self.state.room, state=self.state.state_message()))
             except Exception:
                 self.log.exception("error in the agent scheduler (kept running)")
-            with self._wake:
-                if not self._halt.is_set():
-                    self._wake.wait(self._next_wait())
+            with self.state.wake:
+                if not self.state.halt.is_set():
+                    self.state.wake.wait(self._next_wait())
 
     def _next_wait(self) -> float:
         now = time.time()
-        ends = [ln.running.end - now for ln in self.book.lines.values() if ln.running is not None]
+        lines = self.state.book.lines.values()
+        ends = [ln.running.end - now for ln in lines if ln.running is not None]
         return max(0.01, min([0.25, *ends]))
 
-    def _on_world_presence(self, sample: zenoh.Sample) -> None:
+    def on_world_presence(self, sample: zenoh.Sample) -> None:
         # The world came online (first start, a restart, or started after this
         # context): learn its agents now, not at the next retry. Started
         # together, a context queried before its world existed and refused
         # queues for up to SNAPSHOT_RETRY_S after the world was up.
         if sample.kind == zenoh.SampleKind.PUT:
-            with self._wake:
+            with self.state.wake:
                 self._world_appeared = True
-                self._wake.notify_all()
+                self.state.wake.notify_all()
 
     def _need_snapshot(self) -> bool:
         if self._layout is None:
@@ -156,10 +165,10 @@ class SlotScheduler:
     def _refresh_agents(self) -> None:
         try:
             replies = list(
-                self.session.get(keys.world_snapshot(self.realm, self.world), timeout=3.0)
+                self.session.get(keys.world_snapshot(self.realm, self.state.world), timeout=3.0)
             )
         except Exception as exc:
-            self.log.info("world %s snapshot: %s", self.world, exc)
+            self.log.info("world %s snapshot: %s", self.state.world, exc)
             return
         for reply in replies:
             if reply.ok is None:
@@ -167,126 +176,125 @@ class SlotScheduler:
             try:
                 snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
             except MessageError as exc:
-                self.log.warning("unreadable snapshot of %s: %s", self.world, exc)
+                self.log.warning("unreadable snapshot of %s: %s", self.state.world, exc)
                 continue
             if not isinstance(snap, WorldSnapshot):
                 continue
             self.leases.note_world_identity(snap.identity)
             self.recorder.world_snapshot(snap)
-            with self._wake:
+            with self.state.wake:
                 first = self._layout is None
                 self._layout = snap.layout
-                gone = self.book.set_agents({a.id: a.type for a in snap.agents})
+                gone = self.state.book.set_agents({a.id: a.type for a in snap.agents})
                 finals = [
-                    self._ended(job, "cancelled", f"{job.agent} left the world") for job in gone
+                    self.state.ended(job, "cancelled", f"{job.agent} left the world")
+                    for job in gone
                 ]
-                self._dirty = True
+                self.state.dirty = True
             if first:
                 self.log.info(
-                    "world %s has agents %s", self.world, ", ".join(a.id for a in snap.agents)
+                    "world %s has agents %s", self.state.world, ", ".join(a.id for a in snap.agents)
                 )
             for final in finals:
-                self._publish_agent(AgentEvent(ctx=self.room, request=final))
+                self.publish(AgentEvent(ctx=self.state.room, request=final))
             return
 
     def _turn(self) -> None:
         now = time.time()
-        with self._lock:
-            ended = self.book.expired(now)
+        with self.state.lock:
+            ended = self.state.book.expired(now)
             finals = []
             for run in ended:
-                self.book.lines[run.job.agent].running = None
+                self.state.book.lines[run.job.agent].running = None
                 # Recorded as it leaves the queues, under the same lock: a client asking
                 # in between finds it either running or ended, never unknown.
-                status, reason = self._end_reasons.pop(
+                status, reason = self.state.end_reasons.pop(
                     run.job.request_id, ("finished", "its slot ended")
                 )
-                finals.append(self._ended(run.job, status, reason, run))
-                # Only for output lines that trail the end (the last prints, a traceback):
-                # they come within a second or two, so the newest 64 runs are plenty.
-                self._recent[run.job.request_id] = run
-                while len(self._recent) > 64:
-                    self._recent.pop(next(iter(self._recent)))
+                finals.append(self.state.ended(run.job, status, reason, run))
+                self.state.remember_ended_run(run)
             starts = []
-            for agent in list(self.book.lines):
-                job = self.book.next_to_start(agent)
+            for agent in list(self.state.book.lines):
+                job = self.state.book.next_to_start(agent)
                 if job is not None:
                     starts.append(job)
-                    self._starting[job.request_id] = job  # off its queue, not yet running
+                    self.state.starting[job.request_id] = job  # off its queue, not yet running
             if ended or starts:
-                self._dirty = True
+                self.state.dirty = True
         for run, final in zip(ended, finals, strict=True):
             self.runner_link.forget(run.job.request_id)
-            self._end_run(run, final)
+            self.end_run(run, final)
         for job in starts:
             try:
                 self._start(job)
             finally:
-                with self._lock:
-                    self._starting.pop(job.request_id, None)
+                with self.state.lock:
+                    self.state.starting.pop(job.request_id, None)
 
-    def _end_run(self, run: RunningJob, final: RequestStatus) -> None:
+    def end_run(self, run: RunningJob, final: RequestStatus) -> None:
         """Tell the world, the runner, the recording and the members that ``run`` ended
-        (``final``: its last status, already recorded with :meth:`_ended`)."""
+        (``final``: its last status, already recorded with :meth:`ContextState.ended`)."""
         # The same lease id, ending now, replaces the lease in the world at once.
-        self._publish_lease(run, min(run.end, time.time()))
+        self.publish_lease(run, min(run.end, time.time()))
         if run.job.mode == "deploy":
             self.runner_link.stop(run.job.request_id, final.reason)
         log.info("%s %s on %s: %s", run.job.request_id, final.status, run.job.agent, final.reason)
         self.recorder.run_ended(run.job.request_id, final.status, final.reason)
-        self._publish_agent(AgentEvent(ctx=self.room, request=final))
+        self.publish(AgentEvent(ctx=self.state.room, request=final))
 
     def _start(self, job: ControlJob) -> None:
         start = time.time()
-        end = start + self.book.slot_seconds
+        end = start + self.state.book.slot_seconds
         holder, holder_box = job.session_id, job.box_key
         if job.mode == "deploy":
             try:
-                holder, holder_box = self.runner_link.start(job, self.room, self.world, end)
+                holder, holder_box = self.runner_link.start(
+                    job, self.state.room, self.state.world, end
+                )
             except RequestError as exc:
                 log.warning("%s refused: %s", job.request_id, exc.message)
-                with self._wake:
-                    refused = self._ended(job, "refused", exc.message)
-                    self._starting.pop(job.request_id, None)
-                    self._dirty = True
-                    self._wake.notify_all()
-                self._publish_agent(AgentEvent(ctx=self.room, request=refused))
+                with self.state.wake:
+                    refused = self.state.ended(job, "refused", exc.message)
+                    self.state.starting.pop(job.request_id, None)
+                    self.state.dirty = True
+                    self.state.wake.notify_all()
+                self.publish(AgentEvent(ctx=self.state.room, request=refused))
                 return
         run = RunningJob(
             job=job,
-            lease_id=f"{self.room}.{job.request_id}"[:64],
+            lease_id=f"{self.state.room}.{job.request_id}"[:64],
             holder_session=holder,
             start=start,
             end=end,
             holder_box=holder_box,
             lease_key=new_lease_key(),
         )
-        with self._lock:
-            line = self.book.lines.get(job.agent)
+        with self.state.lock:
+            line = self.state.book.lines.get(job.agent)
             final: RequestStatus | None = None
             if line is None:  # the agent left the world while its slot was being set up
-                final = self._ended(job, "cancelled", f"{job.agent} left the world")
+                final = self.state.ended(job, "cancelled", f"{job.agent} left the world")
             elif line.running is not None:  # only this thread starts slots: never seen
                 self.log.error("%s: %s already runs something", job.request_id, job.agent)
-                final = self._ended(job, "cancelled", f"{job.agent} was taken: queue again")
+                final = self.state.ended(job, "cancelled", f"{job.agent} was taken: queue again")
             else:
                 line.running = run
-            self._starting.pop(job.request_id, None)
-            self._dirty = True
+            self.state.starting.pop(job.request_id, None)
+            self.state.dirty = True
         if final is not None:
             if job.mode == "deploy":
                 self.runner_link.stop(job.request_id, final.reason)
-            self._publish_agent(AgentEvent(ctx=self.room, request=final))
+            self.publish(AgentEvent(ctx=self.state.room, request=final))
             return
         driver = job.user if job.mode == "remote" else self.runner_user(run)
         self.recorder.run_started(run, driver)  # before the lease: the first commands count
-        self._publish_lease(run, end)
+        self.publish_lease(run, end)
         log.info("%s runs on %s for %s until %.1f", job.request_id, job.agent, job.user, end)
-        self._publish_agent(
-            AgentEvent(ctx=self.room, request=self._status(job, "running", run=run))
+        self.publish(
+            AgentEvent(ctx=self.state.room, request=request_status(job, "running", run=run))
         )
 
-    def _publish_lease(self, run: RunningJob, end: float) -> None:
+    def publish_lease(self, run: RunningJob, end: float) -> None:
         taken = run.taken
         if taken is not None:  # taken over: the teacher's lease is the one in force
             self.leases.publish(taken, end, taken.job.user)

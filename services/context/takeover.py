@@ -1,7 +1,8 @@
-"""A teacher taking over a student's running robot, and handing it back (issue 36, aseba #307).
+"""The take-over desk: a teacher taking over a student's running robot, and handing it back.
 
-A base of :class:`~services.context.agent_context.AgentContext`, like the queue
-requests. The design uses the lease machinery as it is: a world obeys the
+A part of the agent context, beside the queue desk, on the state they share
+(:class:`~services.context.context_state.ContextState`). The design uses the
+lease machinery as it is: a world obeys the
 commands of the one session its agent's lease names, and of two leases with
 different ids keeps the one with the later start.
 
@@ -33,9 +34,8 @@ from __future__ import annotations
 
 import logging
 import secrets
-import threading
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
 
 import msgspec
 
@@ -45,7 +45,8 @@ from common.messages import AgentEvent, HandBack, Message, OkReply, RequestStatu
 from common.messages import TakeOver as TakeOverRequest
 from common.service import RequestError
 from common.world.leasemac import new_lease_key
-from services.context.agent_queue import ControlJob, QueueBook, RunningJob
+from services.context.agent_queue import ControlJob, RunningJob
+from services.context.context_state import ContextState, request_status
 from services.context.lease_signer import LeaseSigner
 
 log = logging.getLogger("wart.chat")  # the context's own logger (chat_room.py)
@@ -55,44 +56,36 @@ def _clock(at: float) -> str:
     return time.strftime("%H:%M:%S UTC", time.gmtime(at))
 
 
-class TakeOvers:
-    """Take-over and hand-back requests; the state is the context's (its ``__init__``)."""
+class TakeOverDesk:
+    """Take-over and hand-back requests, on the state the context's parts share."""
 
-    room: str
-    world: str
-    book: QueueBook
-    leases: LeaseSigner
-    audit: AuditReporter
-    _lock: threading.RLock
-    _wake: threading.Condition
-    _dirty: bool
+    def __init__(
+        self,
+        state: ContextState,
+        *,
+        leases: LeaseSigner,
+        audit: AuditReporter,
+        require_manage: Callable[[Principal, str], None],
+        publish: Callable[[AgentEvent], None],
+        publish_lease: Callable[[RunningJob, float], None],
+    ) -> None:
+        """``require_manage`` is the context's manage right; ``publish`` tells the
+        members an event (and records it); ``publish_lease`` publishes the lease in
+        force for a run (the scheduler's: the teacher's while taken over)."""
+        self.state = state
+        self.leases = leases
+        self.audit = audit
+        self.require_manage = require_manage
+        self.publish = publish
+        self.publish_lease = publish_lease
 
-    if TYPE_CHECKING:  # what the context provides (see queue_requests.py for why here)
-
-        def _require_manage(self, principal: Principal, what: str) -> None:
-            raise NotImplementedError
-
-        def _require_agent(self, agent: str) -> None:
-            raise NotImplementedError
-
-        def _publish_agent(self, event: AgentEvent) -> None:
-            raise NotImplementedError
-
-        def _publish_lease(self, run: RunningJob, end: float) -> None:
-            raise NotImplementedError
-
-        def _status(
-            self, job: ControlJob, status: str, reason: str = "", run: RunningJob | None = None
-        ) -> RequestStatus:
-            raise NotImplementedError
-
-    def _take_over(self, principal: Principal, request: TakeOverRequest) -> Message:
+    def take_over(self, principal: Principal, request: TakeOverRequest) -> Message:
         agent = request.agent
-        self._require_manage(principal, f"take over {agent}")
-        self._require_agent(agent)
+        self.require_manage(principal, f"take over {agent}")
+        self.state.require_agent(agent)
         now = time.time()
-        with self._wake:
-            run = self.book.lines[agent].running
+        with self.state.wake:
+            run = self.state.book.lines[agent].running
             if run is None or run.end <= now:
                 raise RequestError(
                     "conflict",
@@ -119,7 +112,7 @@ class TakeOvers:
                     job=teacher,
                     # Its own id and key: the student's MAC key opens nothing of it, and
                     # the random part first, so a long context name never cuts it off.
-                    lease_id=f"take-{secrets.token_hex(6)}.{self.room}"[:64],
+                    lease_id=f"take-{secrets.token_hex(6)}.{self.state.room}"[:64],
                     holder_session=principal.session_id,
                     start=now,
                     end=run.end,
@@ -131,29 +124,29 @@ class TakeOvers:
                 if request.reason:
                     why += f" ({request.reason})"
                 status = self._step(run, "taken", why)
-                self._dirty = True
-                self._wake.notify_all()
+                self.state.dirty = True
+                self.state.wake.notify_all()
             else:
                 status = None  # already the sender's: say so again, change nothing
         if status is not None:
-            self._publish_lease(run, run.end)
+            self.publish_lease(run, run.end)
             log.info("%s took %s over from %s (%s)", principal.user, agent, run.job.user, why)
-            self._publish_agent(AgentEvent(ctx=self.room, request=status))
+            self.publish(AgentEvent(ctx=self.state.room, request=status))
         return TakenOver(
             agent=agent,
-            world=self.world,
+            world=self.state.world,
             request_id=run.job.request_id,
             user=run.job.user,
             since=taken.start,
             end=run.end,
         )
 
-    def _hand_back(self, principal: Principal, request: HandBack) -> Message:
+    def hand_back(self, principal: Principal, request: HandBack) -> Message:
         agent = request.agent
-        self._require_manage(principal, f"hand {agent} back")
-        self._require_agent(agent)
-        with self._wake:
-            run = self.book.lines[agent].running
+        self.require_manage(principal, f"hand {agent} back")
+        self.state.require_agent(agent)
+        with self.state.wake:
+            run = self.state.book.lines[agent].running
             if run is None or run.taken is None:
                 raise RequestError("conflict", f"{agent} is not taken over: nothing to hand back")
             teacher = run.taken.job.user
@@ -162,18 +155,18 @@ class TakeOvers:
         self._after_hand_back(run, taken, status)
         return OkReply(detail=f"{agent} handed back to {run.job.user}'s controller")
 
-    def _hand_back_session(self, session_id: bytes, why: str) -> None:
+    def hand_back_session(self, session_id: bytes, why: str) -> None:
         """Hand back every robot a session took over (it left, or was revoked)."""
         handed: list[tuple[RunningJob, RunningJob, RequestStatus]] = []
-        with self._wake:
-            for line in self.book.lines.values():
+        with self.state.wake:
+            for line in self.state.book.lines.values():
                 run = line.running
                 taken = None if run is None else run.taken
                 if run is not None and taken is not None and taken.holder_session == session_id:
                     handed.append((run, *self._give_back(run, f"{taken.job.user} {why}")))
         for run, taken, status in handed:
             # In the audit trail as the context's doing, in the teacher's name.
-            where = f"agent/{self.room}/{run.job.agent}"
+            where = f"agent/{self.state.room}/{run.job.agent}"
             self.audit.report(taken.job.user, "handback", where, "ok", status.reason)
             self._after_hand_back(run, taken, status)
 
@@ -186,19 +179,19 @@ class TakeOvers:
         run.taken = None
         run.lease_start = now
         taken.end = min(taken.end, now)
-        self._dirty = True
-        self._wake.notify_all()
+        self.state.dirty = True
+        self.state.wake.notify_all()
         return taken, self._step(run, "handed_back", f"{said}: your controller drives again")
 
     def _after_hand_back(self, run: RunningJob, taken: RunningJob, status: RequestStatus) -> None:
         # The teacher's lease ended first, then the student's from now (the later start).
         self.leases.publish(taken, taken.end, taken.job.user)
-        self._publish_lease(run, run.end)
+        self.publish_lease(run, run.end)
         log.info("%s: %s", run.job.request_id, status.reason)
-        self._publish_agent(AgentEvent(ctx=self.room, request=status))
+        self.publish(AgentEvent(ctx=self.state.room, request=status))
 
     def _step(self, run: RunningJob, step: str, reason: str) -> RequestStatus:
-        status = self._status(run.job, "running", reason[:256], run)
+        status = request_status(run.job, "running", reason[:256], run)
         taken = run.taken
         return msgspec.structs.replace(
             status,

@@ -2,8 +2,9 @@
 
 An acknowledged edit survives a crash: it is appended (synced) to the
 world's journal before the reply, and replayed on the map it was made on at
-the next start. A mixin of :class:`~services.engine.service.EngineService`
-(its world, settings, log and sim-thread queue).
+the next start. A part of :class:`~services.engine.service.EngineService`,
+which hands it these requests: it runs them on the service's sim thread, and
+a map loaded on request replaces the service's world there.
 """
 
 from __future__ import annotations
@@ -11,11 +12,11 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import zenoh
 
-from common.auth import AuthError, Principal
+from common.auth import AuthError, Principal, Verifier
 from common.files import Journal
 from common.messages import (
     AddItem,
@@ -40,47 +41,66 @@ from common.robots.robotfile import RobotFileError
 from common.service import RequestError
 from common.sim2d import maps
 from common.sim2d.world import EditError, World
-
-if TYPE_CHECKING:
-    from common.world.leases import LeaseBook
-    from services.engine.service import EngineSettings
+from common.world.leases import LeaseBook
 
 
 class EngineEdits:
-    """EngineService's edit, reset and map handlers and its journal."""
+    """The engine's edit, reset, robot-type and map requests, and its journal."""
 
-    if TYPE_CHECKING:  # EngineService's (services/engine/service.py), of which this is part
-        log: logging.Logger
-        ident: str
-        settings: EngineSettings
-        world: World
-        leases: LeaseBook
-        replayed_edits: int
-        _journal: Journal | None
-        _last_cmd: dict[str, float]
+    def __init__(
+        self,
+        *,
+        ident: str,
+        maps_dir: Path,
+        load_map: Callable[[Path], World],
+        verifier: Verifier | None,
+        leases: LeaseBook,
+        current_world: Callable[[], World],
+        in_sim: Callable[[Callable[[World], Message]], Message],
+        use_world: Callable[[World], None],
+        log: logging.Logger,
+    ) -> None:
+        """``maps_dir`` holds the maps and the journal; ``load_map`` makes a map file
+        the engine's world (its name, seed, tick, threads); ``current_world`` is the
+        world the engine steps now; ``in_sim`` runs a function on its sim thread
+        between ticks and returns its reply; ``use_world`` (sim thread) makes a map
+        loaded on request the world the engine steps."""
+        self.ident = ident
+        self.maps_dir = maps_dir
+        self.load_map = load_map
+        self.verifier = verifier
+        self.leases = leases
+        self.current_world = current_world
+        self.in_sim = in_sim
+        self.use_world = use_world
+        self.log = log
+        self.journal: Journal | None = None
+        self.replayed_edits = 0
 
-        def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]: ...
-
-        def _in_sim(self, fn: Callable[[World], Message], timeout: float = 5.0) -> Message: ...
-
-        def _declare_agent_publishers(self) -> None: ...
+    def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]:
+        if self.verifier is None:
+            raise AuthError("unauthenticated", "this engine was started without --registry-key")
+        return self.verifier.open(key, payload, expected)
 
     # -- the journal of live edits (an acknowledged edit survives a crash)
 
-    def _open_journal(self, base: str) -> None:
+    def replay_journal(self, base: str, world: World) -> World:
+        """Open the journal of the edits made since map ``base`` was loaded, replay them
+        on ``world`` (that map's) and return the world they make (before the sim thread
+        starts)."""
         try:
             marker = encode(MapRequest(action="load", name=base))
         except MessageError:
             self.log.warning("map name %r is not a plain name: live edits are not journalled", base)
-            return
-        journal = Journal(self.settings.maps_dir / f".{self.ident}.edits")
+            return world
+        journal = Journal(self.maps_dir / f".{self.ident}.edits")
         records = list(journal.records())
         if not records or records[0] != marker:
             journal.restart(marker)  # a journal of another map, or none: start afresh
         else:
             for raw in records[1:]:
                 try:
-                    self._replay(decode(raw, (WorldEdit, MapRequest)))
+                    world = self._replay(world, decode(raw, (WorldEdit, MapRequest)))
                 except (MessageError, RequestError, maps.MapError, EditError) as exc:
                     self.log.warning("skipped a journalled edit that no longer applies: %s", exc)
             if self.replayed_edits:
@@ -90,35 +110,25 @@ class EngineEdits:
                     base,
                     journal.path,
                 )
-        self._journal = journal
+        self.journal = journal
+        return world
 
-    def _load_map(self, path: Path) -> World:
-        """A map file as this engine's world: its name, seed, tick and thread counts."""
-        return maps.load_map(
-            path,
-            name=self.ident,
-            seed=self.settings.seed,
-            tick_s=self.settings.tick_s,
-            threads=self.settings.threads,
-            physics_threads=self.settings.physics_threads,
-            drive=self.settings.drive,
-        )
-
-    def _replay(self, record: Message) -> None:
+    def _replay(self, world: World, record: Message) -> World:
         if isinstance(record, WorldEdit):
-            self._apply_op(self.world, record.op)
+            self._apply_op(world, record.op)
         elif isinstance(record, MapRequest) and record.action == "load" and record.name:
-            path = maps.map_path(self.settings.maps_dir, record.name)
-            self.world = self._load_map(path)
+            path = maps.map_path(self.maps_dir, record.name)
+            world = self.load_map(path)
         self.replayed_edits += 1
+        return world
 
     def _journal_append(self, record: Message) -> None:
-        if self._journal is not None:
-            self._journal.append(encode(record))
+        if self.journal is not None:
+            self.journal.append(encode(record))
 
     # -- live edits, map save and load (sealed, ``edit_map``; a reset by the lease holder)
 
-    def _on_edit(self, query: zenoh.Query) -> Message:
+    def on_edit(self, query: zenoh.Query) -> Message:
         principal, edit = self._open(str(query.key_expr), query.payload, WorldEdit)
         op = edit.op
         if isinstance(op, ResetAgent):
@@ -134,7 +144,7 @@ class EngineEdits:
             self.log.info("%s edited the world: %s", principal.user, type(op).__name__)
             return EditResult(layout=world.layout, detail=type(op).__name__)
 
-        return self._in_sim(apply)
+        return self.in_sim(apply)
 
     def _reset(self, principal: Principal, op: ResetAgent) -> Message:
         """A robot back at its start pose: its lease's holder or requester, or a map editor.
@@ -154,7 +164,7 @@ class EngineEdits:
             self.log.info("%s reset %s to its start pose", principal.user, op.id)
             return EditResult(layout=world.layout, detail=f"{op.id} is back at ({x:.0f}, {y:.0f})")
 
-        return self._in_sim(apply)
+        return self.in_sim(apply)
 
     @staticmethod
     def _apply_op(world: World, op: Any) -> None:
@@ -171,7 +181,7 @@ class EngineEdits:
         elif isinstance(op, ResizeArena):
             world.resize(op.width, op.height)
 
-    def _on_robots(self, query: zenoh.Query) -> Message:
+    def on_robots(self, query: zenoh.Query) -> Message:
         """The world's robot types: list and get (any user), save (``edit_map``).
 
         A saved file is data: validated against the components this engine has
@@ -213,14 +223,14 @@ class EngineEdits:
             parts = ", ".join(f"{c.name}:{c.type}" for c in spec.components)
             return RobotTypeReply(name=spec.name, detail=f"saved robot type {spec.name}: {parts}")
 
-        return self._in_sim(save)
+        return self.in_sim(save)
 
-    def _on_map(self, query: zenoh.Query) -> Message:
+    def on_map(self, query: zenoh.Query) -> Message:
         principal, request = self._open(str(query.key_expr), query.payload, MapRequest)
         principal.require("edit_map", "save or load maps")
-        maps_dir = self.settings.maps_dir
+        maps_dir = self.maps_dir
         if request.action == "list":
-            return EditResult(layout=self.world.layout, maps=maps.list_maps(maps_dir))
+            return EditResult(layout=self.current_world().layout, maps=maps.list_maps(maps_dir))
         if request.name is None:
             raise RequestError("bad_request", f"{request.action} needs a map name")
         try:
@@ -234,21 +244,19 @@ class EngineEdits:
                 self.log.info("%s saved the world to %s", principal.user, written)
                 return EditResult(layout=world.layout, detail=f"saved {written.name}")
 
-            return self._in_sim(save)
+            return self.in_sim(save)
         if not path.is_file():
             raise RequestError("not_found", f"no map named {request.name} in the maps directory")
         try:
-            new_world = self._load_map(path)
+            new_world = self.load_map(path)
         except maps.MapError as exc:
             raise RequestError("bad_request", str(exc)) from None
 
         def swap(world: World) -> Message:
             new_world.layout = world.layout + 1  # viewers must refetch the snapshot
-            self.world = new_world
-            self._last_cmd.clear()
-            self._declare_agent_publishers()
+            self.use_world(new_world)
             self._journal_append(request)
             self.log.info("%s loaded map %s", principal.user, path.name)
             return EditResult(layout=new_world.layout, detail=f"loaded {path.name}")
 
-        return self._in_sim(swap)
+        return self.in_sim(swap)

@@ -35,9 +35,8 @@ import numpy as np
 import zenoh
 
 from common import keys
-from common.auth import AuthError, Principal, Session, Verifier
+from common.auth import Session, Verifier
 from common.controller.actuators import apply_command
-from common.files import Journal
 from common.messages import (
     AgentCommand,
     ErrorReply,
@@ -47,7 +46,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.sim2d import wander
+from common.sim2d import maps, wander
 from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.world import EditError, World
 from common.world import packing
@@ -134,7 +133,7 @@ class _Command:
     received: float  # monotonic
 
 
-class EngineService(EngineEdits, WorldService):
+class EngineService(WorldService):
     def __init__(
         self,
         session: zenoh.Session,
@@ -173,10 +172,20 @@ class EngineService(EngineEdits, WorldService):
         self.ticks_late = 0
         # Whether the world keeps the asked pace, said in the log when it does not.
         self.pace = PaceWatch(None if settings.fast else settings.speed, self._describe)
-        self._journal: Journal | None = None
-        self.replayed_edits = 0
+        # Edits, resets, robot types and maps: run on the sim thread, journalled.
+        self.edits = EngineEdits(
+            ident=self.ident,
+            maps_dir=settings.maps_dir,
+            load_map=self._load_map,
+            verifier=self.verifier,
+            leases=self.leases,
+            current_world=lambda: self.world,
+            in_sim=self._in_sim,
+            use_world=self._use_world,
+            log=self.log,
+        )
         if settings.base_map:
-            self._open_journal(settings.base_map)
+            self.world = self.edits.replay_journal(settings.base_map, self.world)
 
     # -- lifecycle
 
@@ -300,11 +309,6 @@ class EngineService(EngineEdits, WorldService):
 
     # -- callbacks (Zenoh threads): verify, then queue
 
-    def _open(self, key: str, payload: Any, expected: Any) -> tuple[Principal, Any]:
-        if self.verifier is None:
-            raise AuthError("unauthenticated", "this engine was started without --registry-key")
-        return self.verifier.open(key, payload, expected)
-
     def _on_lease(self, sample: zenoh.Sample) -> None:
         lease = self.leases.accept_lease(str(sample.key_expr), sample.payload)
         # A leased robot gets its sensor publisher, watched or not (_stream).
@@ -351,6 +355,38 @@ class EngineService(EngineEdits, WorldService):
     def _on_snapshot(self, query: zenoh.Query) -> Message:
         snap = self._in_sim(packing.snapshot)
         return snapshot_with_identity(snap, self.box_keys)
+
+    def _on_edit(self, query: zenoh.Query) -> Message:
+        return self.edits.on_edit(query)
+
+    def _on_map(self, query: zenoh.Query) -> Message:
+        return self.edits.on_map(query)
+
+    def _on_robots(self, query: zenoh.Query) -> Message:
+        return self.edits.on_robots(query)
+
+    @property
+    def replayed_edits(self) -> int:
+        return self.edits.replayed_edits
+
+    def _load_map(self, path: Path) -> World:
+        """A map file as this engine's world: its name, seed, tick and thread counts."""
+        settings = self.settings
+        return maps.load_map(
+            path,
+            name=self.ident,
+            seed=settings.seed,
+            tick_s=settings.tick_s,
+            threads=settings.threads,
+            physics_threads=settings.physics_threads,
+            drive=settings.drive,
+        )
+
+    def _use_world(self, world: World) -> None:
+        """Sim thread: a map loaded on request is the world stepped from now on."""
+        self.world = world
+        self._last_cmd.clear()
+        self._declare_agent_publishers()
 
     # -- the sim thread
 
