@@ -1,6 +1,6 @@
 """The registry's administration: accounts, grants, kicks, bans, and the audit trail.
 
-A mixin of :class:`~services.registry.service.Registry`. Every change an admin
+The registry holds one :class:`AdminDesk`. Every change an admin
 asks for, and every refusal of one, is appended to the audit table
 (services/registry/audit_db.py) with who asked, from which source, on what,
 and how it ended; other services' reports arrive on ``registry/report``
@@ -12,7 +12,9 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from datetime import UTC, datetime
+from typing import Protocol
 
 import nacl.exceptions
 import nacl.public
@@ -70,6 +72,19 @@ ACTIONS: dict[type[Message], str] = {
 READS = (ListUsers,)  # looking is not a change: only its refusals are recorded
 
 
+class Revoke(Protocol):
+    """The registry's revocation of sessions (recorded, published); how many it revoked."""
+
+    def __call__(
+        self,
+        session_ids: list[bytes],
+        reason: str,
+        *,
+        kicked: bool = ...,
+        keep_resume: bool = ...,
+    ) -> int: ...
+
+
 def when(at: float | None) -> str:
     """A ban's end in words: a UTC date and time, or until an admin lifts it."""
     if at is None:
@@ -102,33 +117,36 @@ def _target(request: Message) -> tuple[str, str]:
     return user, ""
 
 
-class AdminRequests:
-    """registry/admin, registry/audit and registry/report (the Registry provides the rest)."""
+class AdminDesk:
+    """registry/admin, registry/audit and registry/report, for the Registry that holds it.
 
-    db: RegistryDB
-    term: TermStore
-    verifier: Verifier
-    throttle: LoginThrottle
-    resumes: ResumeStore
-    session: zenoh.Session
-    realm: str
-    _unsealer: nacl.public.SealedBox
+    It shares the registry's database, stores, verifier and throttle, and asks the
+    registry for what only the registry has: who is online, its own session's seal,
+    and revoking sessions (which it also publishes).
+    """
 
-    def online_users(self) -> list[str]:
-        raise NotImplementedError
-
-    def own_session_seal(self, key: str, message: Message) -> bytes:
-        raise NotImplementedError
-
-    def _revoke(
+    def __init__(
         self,
-        session_ids: list[bytes],
-        reason: str,
+        session: zenoh.Session,
+        realm: str,
         *,
-        kicked: bool = False,
-        keep_resume: bool = False,
-    ) -> int:
-        raise NotImplementedError
+        db: RegistryDB,
+        term: TermStore,
+        resumes: ResumeStore,
+        verifier: Verifier,
+        throttle: LoginThrottle,
+        unsealer: nacl.public.SealedBox,
+        online_users: Callable[[], list[str]],
+        own_session_seal: Callable[[str, Message], bytes],
+        revoke: Revoke,
+    ) -> None:
+        self.session, self.realm = session, realm
+        self.db, self.term, self.resumes = db, term, resumes
+        self.verifier, self.throttle = verifier, throttle
+        self._unsealer = unsealer
+        self.online_users = online_users
+        self.own_session_seal = own_session_seal
+        self._revoke = revoke
 
     # -- the audit trail
 

@@ -68,7 +68,7 @@ from common.messages import (
 from common.service import RequestError, Service
 from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
-from services.registry.admin import REGISTRY_USER, AdminRequests, ban_refusal, source_of
+from services.registry.admin import REGISTRY_USER, AdminDesk, ban_refusal, source_of
 from services.registry.audit_db import Action, TermStore
 from services.registry.lti_links import LtiLinks
 from services.registry.resume import ResumeStore
@@ -81,7 +81,7 @@ CLAIM_WITHIN_S = 600.0  # a deferred mailbox key is sent this soon after the log
 DEFAULT_SERVER_NAME = "wart lab"
 
 
-class Registry(AdminRequests, Service):
+class Registry(Service):
     kind = AliveKind.REGISTRY
 
     def __init__(
@@ -117,6 +117,19 @@ class Registry(AdminRequests, Service):
         self._watch: AliveWatch | None = None
         self._thread: threading.Thread | None = None
         self._revocation_pub: zenoh.Publisher | None = None
+        self.admin = AdminDesk(
+            session,
+            realm,
+            db=db,
+            term=self.term,
+            resumes=self.resumes,
+            verifier=self.verifier,
+            throttle=self.throttle,
+            unsealer=self._unsealer,
+            online_users=self.online_users,
+            own_session_seal=self.own_session_seal,
+            revoke=self._revoke,
+        )
 
     # -- lifecycle
 
@@ -138,11 +151,11 @@ class Registry(AdminRequests, Service):
         )
         self.serve(keys.registry_logout(self.realm), self.on_logout)
         self.serve(keys.registry_directory(self.realm), self.on_directory)
-        self.serve(keys.registry_admin(self.realm), self.on_admin)
+        self.serve(keys.registry_admin(self.realm), self.admin.on_admin)
         self.serve(keys.registry_revocations(self.realm), self.on_revocations)
-        self.serve(keys.registry_audit(self.realm), self.on_audit)
+        self.serve(keys.registry_audit(self.realm), self.admin.on_audit)
         self.serve(keys.registry_lti(self.realm), self.on_lti)
-        self.subscribe(keys.registry_report(self.realm), self.on_report)
+        self.subscribe(keys.registry_report(self.realm), self.admin.on_report)
         self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
         self._thread.start()
 
@@ -209,7 +222,7 @@ class Registry(AdminRequests, Service):
         if ban is not None:
             # Told only once the credential is right: a name alone learns nothing.
             refusal = ban_refusal(ban)
-            self.audit(Action(user, "login", user, "refused", refusal.message, source))
+            self.admin.audit(Action(user, "login", user, "refused", refusal.message, source))
             raise refusal
         self.throttle.succeeded(user, source)
         everywhere, scoped, roles = acl.expand(self.db.grants_of(user))
@@ -314,13 +327,13 @@ class Registry(AdminRequests, Service):
         source = f"{source_of(query)} session {principal.session_id.hex()[:8]}"
         what = f"{request.subject} of {request.issuer} as {request.role} in {request.course}"
         if "lti" not in principal.roles:
-            self.audit(Action(principal.user, "lti_account", "lti", "refused", what, source))
+            self.admin.audit(Action(principal.user, "lti_account", "lti", "refused", what, source))
             raise AuthError("forbidden", f"{principal.user} is not the lti service")
         existing = self.lti.user_of(request.issuer, request.subject)
         ban = None if existing is None else self.term.ban_of(existing, time.time())
         if ban is not None:
             refusal = ban_refusal(ban)
-            self.audit(
+            self.admin.audit(
                 Action(
                     principal.user,
                     "lti_account",
@@ -334,10 +347,12 @@ class Registry(AdminRequests, Service):
         try:
             reply = self.lti.launch(request)
         except DbError as exc:
-            self.audit(Action(principal.user, "lti_account", "lti", "refused", exc.message, source))
+            self.admin.audit(
+                Action(principal.user, "lti_account", "lti", "refused", exc.message, source)
+            )
             raise RequestError(exc.code, exc.message) from None
         how = "made" if reply.created else "matched"
-        self.audit(
+        self.admin.audit(
             Action(principal.user, "lti_account", reply.user, "ok", f"{how}: {what}", source)
         )
         log.info("lti launch: %s %s (%s)", how, reply.user, what)
