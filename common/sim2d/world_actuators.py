@@ -17,12 +17,12 @@ import numpy.typing as npt
 
 from common.controller.actuators import Actuators
 from common.sim2d import compiled
-from common.sim2d.world_edits import EditError
+from common.sim2d.world_state import EditError
 
 if TYPE_CHECKING:
     from common.sim2d.entities import Agent
     from common.sim2d.gripper import GripperTurrets
-    from common.sim2d.world import Tables
+    from common.sim2d.world_state import Tables
 
 
 class WorldActuators:

@@ -45,7 +45,7 @@ def _key(world: World) -> tuple[object, ...]:
 
 def current(world: World) -> DiscObjects | None:
     """The arrays as they are, or None if they must be rebuilt (no rebuild)."""
-    d = world._discs
+    d = world.state.discs
     if d is None:
         return None
     k = d.key
@@ -124,7 +124,7 @@ def disc_objects(world: World) -> DiscObjects:
         vstart,
         own_r,
     )
-    d = world._discs = DiscObjects(_key(world), objs, table, radius, mass, holding, len(verts))
+    d = world.state.discs = DiscObjects(_key(world), objs, table, radius, mass, holding, len(verts))
     return d
 
 
@@ -135,13 +135,13 @@ def place_bodies(world: World) -> None:
     put them; an edit that asks the space what a shape overlaps, or the gripper
     asking where an object is, needs them where the things are.
     """
-    if world.drive != "discs" or world._bodies_placed:
+    if world.drive != "discs" or world.state.bodies_placed:
         return
     for slot, agent in enumerate(world.agents):
         x, y, heading = world.agent_pose[slot]
         agent.body.position, agent.body.angle = (float(x), float(y)), float(heading)
         world.space.reindex_shapes_for_body(agent.body)
-    d = world._discs
+    d = world.state.discs
     if d is not None:
         pose, vel = d.table[0], d.table[1]
         for j, obj in enumerate(d.objects):
@@ -151,7 +151,7 @@ def place_bodies(world: World) -> None:
             body.position, body.angle = (float(pose[j, 0]), float(pose[j, 1])), float(pose[j, 2])
             body.velocity = (float(vel[j, 0]), float(vel[j, 1]))
             world.space.reindex_shapes_for_body(body)
-    world._bodies_placed = True
+    world.state.bodies_placed = True
 
 
 def touching(world: World, slot: int, tolerance_mm: float = 0.5) -> set[tuple[str, str]]:

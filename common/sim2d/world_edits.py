@@ -26,22 +26,21 @@ from common.sim2d.entities import (
     Zone,
 )
 from common.sim2d.specs import AgentTypeSpec
+from common.sim2d.world_state import EditError
 
 if TYPE_CHECKING:
     import numpy as np
 
     from common.sim2d.gripper import GripperTurrets
     from common.sim2d.sensing import SensorSuite
-
-
-class EditError(ValueError):
-    """An edit or a map would break the world's rules; the message says which and why."""
+    from common.sim2d.world_state import WorldState
 
 
 class WorldEdits:
     """World's edit methods (a mixin of :class:`~common.sim2d.world.World`)."""
 
     if TYPE_CHECKING:  # the World's state and model these edit (common/sim2d/world.py)
+        state: WorldState
         width: float
         height: float
         drive: str
@@ -57,35 +56,14 @@ class WorldEdits:
         zones: dict[str, Zone]
         homes: dict[str, tuple[float, float, float]]
         agent_pose: np.ndarray
-        _walls: list[pymunk.Shape]
-        _agent_by_body: dict[int, Agent]
-        _object_by_body: dict[int, MovableObject]
-        _bodies_placed: bool
-        _tongs_in: bool
-        _serial: int
 
         def ids(self) -> set[str]: ...
-
-        def _check_new_id(self, ident: str) -> None: ...
 
         def agent_slot(self, agent_id: str) -> int: ...
 
         def find_object(self, ident: str) -> MovableObject | None: ...
 
-        def _append_agent_state(self, pose: tuple[float, float, float], arm: float) -> None: ...
-
-        def _delete_agent_state(self, slot: int) -> None: ...
-
-        def _rebuild_tables(self) -> None: ...
-
     # -- arena -------------------------------------------------------------------
-
-    def _build_walls(self) -> None:
-        for shape in self._walls:
-            self.space.remove(shape)
-        self._walls = bodies.walls(self.space.static_body, self.width, self.height)
-        self.space.add(*self._walls)
-        self.sensors.obstacles_changed()
 
     def resize(self, width_mm: float, height_mm: float) -> None:
         if not (width_mm > 0 and height_mm > 0):
@@ -99,7 +77,7 @@ class WorldEdits:
                 f"the arena {width_mm:.0f} x {height_mm:.0f} mm would leave outside: "
                 + ", ".join(sorted(outside)[:10])
             )
-        self._build_walls()
+        self.state.build_walls()
         self.layout += 1
 
     def _inside(self, pts: Iterable[tuple[float, float]], margin: float = 0.0) -> bool:
@@ -132,7 +110,7 @@ class WorldEdits:
         heading: float = 0.0,
         colour: str = "#808080",
     ) -> Obstacle:
-        self._check_new_id(ident)
+        self.state.check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"obstacle {ident} would stick out of the arena")
         body, shapes = bodies.obstacle(shape, x, y, heading)
@@ -160,7 +138,7 @@ class WorldEdits:
         for shape in shapes:
             for info in self.space.shape_query(shape):
                 body = info.shape.body if info.shape else None  # a shape in the space has one
-                agent = self._agent_by_body.get(id_of(body)) if body is not None else None
+                agent = self.state.agent_by_body.get(id_of(body)) if body is not None else None
                 if agent is not None and info.shape is agent.shape:
                     found.append(agent.id)
         return sorted(set(found))
@@ -181,7 +159,7 @@ class WorldEdits:
         resistivity: int = 128,
         colour: str = "#ff8c00",
     ) -> MovableObject:
-        self._check_new_id(ident)
+        self.state.check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"object {ident} would stick out of the arena")
         if mass_g <= 0:
@@ -195,7 +173,7 @@ class WorldEdits:
         )
         self.space.add(body, *shapes, *obj.floor_joints)
         self.objects.append(obj)
-        self._object_by_body[id_of(body)] = obj
+        self.state.object_by_body[id_of(body)] = obj
         self._sync_tongs()
         self.layout += 1
         return obj
@@ -203,7 +181,7 @@ class WorldEdits:
     def _sync_tongs(self) -> None:
         """Tongs into the space, or out of it, as the objects they could touch come and go."""
         wanted = self.drive == "joints" or bool(self.objects)
-        if wanted == self._tongs_in:
+        if wanted == self.state.tongs_in:
             return
         tongs = [tong for agent in self.agents for tong in agent.tongs]
         if tongs:
@@ -211,7 +189,7 @@ class WorldEdits:
                 self.space.add(*tongs)
             else:
                 self.space.remove(*tongs)
-        self._tongs_in = wanted
+        self.state.tongs_in = wanted
 
     def _blocked(self, shapes: list[pymunk.Shape], mask: int, body: pymunk.Body) -> bool:
         self._place_bodies()
@@ -245,7 +223,7 @@ class WorldEdits:
         period_s: float = 1.0,
         colour: str = "#ffd700",
     ) -> Light:
-        self._check_new_id(ident)
+        self.state.check_new_id(ident)
         if not self._inside([(x, y)]):
             raise EditError(f"light {ident} is outside the arena")
         if period_s <= 0 or radius_mm <= 0 or intensity < 0:
@@ -265,7 +243,7 @@ class WorldEdits:
         heading: float = 0.0,
         colour: str = "#c8e6c9",
     ) -> Zone:
-        self._check_new_id(ident)
+        self.state.check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"zone {ident} would stick out of the arena")
         zone = Zone(ident, kind, shape, x, y, heading, colour)
@@ -288,19 +266,19 @@ class WorldEdits:
         defer_tables: bool = False,
     ) -> Agent:
         """Add a robot. ``defer_tables``: the caller adds many, then calls finish_agents()."""
-        self._check_new_id(ident)
+        self.state.check_new_id(ident)
         r = spec.radius_mm
         if not self._inside([(x, y)], r):
             raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would stick out of the arena")
         hits = self.space.point_query((x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE))
         if hits:
             raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle")
-        self._serial += 1
+        self.state.serial += 1
         fitted = gripper and spec.gripper is not None
         agent = bodies.agent(
             ident,
             spec,
-            self._serial,
+            self.state.serial,
             x,
             y,
             heading,
@@ -309,20 +287,20 @@ class WorldEdits:
             tongs_mask=self.tongs_mask,
         )
         agent.colour = colour or spec.colour
-        self.space.add(*agent.physics(tongs=self._tongs_in))
+        self.space.add(*agent.physics(tongs=self.state.tongs_in))
         self.agents.append(agent)
-        self._agent_by_body[id_of(agent.body)] = agent
+        self.state.agent_by_body[id_of(agent.body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
-        self._append_agent_state((x, y, heading), arm)
+        self.state.append_agent_rows((x, y, heading), arm)
         self.homes[ident] = (float(x), float(y), float(heading))
         if not defer_tables:
-            self._rebuild_tables()
+            self.state.rebuild_tables()
         self.layout += 1
         return agent
 
     def finish_agents(self) -> None:
         """Rebuild the per-agent tables after add_agent(..., defer_tables=True)."""
-        self._rebuild_tables()
+        self.state.rebuild_tables()
 
     # -- generic edits ------------------------------------------------------------------
 
@@ -460,7 +438,7 @@ class WorldEdits:
             assert obj.body is not None  # set when it was added to this world
             self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
             self.objects.remove(obj)
-            self._object_by_body.pop(id_of(obj.body), None)
+            self.state.object_by_body.pop(id_of(obj.body), None)
             self._sync_tongs()
         else:
             try:
@@ -470,10 +448,10 @@ class WorldEdits:
             agent = self.agents[slot]
             if agent.held is not None:
                 self.grippers.release(agent.held)
-            self.space.remove(*agent.physics(tongs=self._tongs_in))
+            self.space.remove(*agent.physics(tongs=self.state.tongs_in))
             del self.agents[slot]
             self.homes.pop(ident, None)
-            self._agent_by_body.pop(id_of(agent.body), None)
-            self._delete_agent_state(slot)
-            self._rebuild_tables()
+            self.state.agent_by_body.pop(id_of(agent.body), None)
+            self.state.delete_agent_rows(slot)
+            self.state.rebuild_tables()
         self.layout += 1

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
     from common.sim2d.entities import Agent, Light, MovableObject, Obstacle
     from common.sim2d.gripper import GripperTurrets
-    from common.sim2d.world import Tables
+    from common.sim2d.world_state import Tables, WorldState
 
 
 def _split_drive(threads: int, robots: int) -> ModuleType | None:
@@ -45,6 +45,7 @@ class WorldTick:
     """World's stepping methods (a mixin of :class:`~common.sim2d.world.World`)."""
 
     if TYPE_CHECKING:  # the World's state the tick reads and writes (common/sim2d/world.py)
+        state: WorldState
         width: float
         height: float
         drive: str
@@ -82,12 +83,9 @@ class WorldTick:
         _space_address: np.uint64
         _step_fn: Any
         _rows_layout: int
-        _next_sense: float
-        _bodies_placed: bool
         _disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]]
         _split_work: tuple[np.ndarray, ...]
         _fused: _FusedTick | None
-        _discs: world_discs.DiscObjects | None
         fingers: np.ndarray
 
         def holding(self) -> np.ndarray: ...
@@ -119,7 +117,7 @@ class WorldTick:
             self.arm,
             self.tick_s,
             self.substeps,
-            self._discs,
+            self.state.discs,
         )
 
     def _new_fused_state(self) -> _FusedTick:
@@ -253,14 +251,14 @@ class WorldTick:
                 # world_discs._key (layout, grip version, tables, fingers, arm),
                 # taken with this one, so its layout, tables and arm are k[0], k[1]
                 # and k[6], checked above (the call was 0.15 us a tick).
-                and self._discs is objs
+                and self.state.discs is objs
                 and objs.key[1] == self.grippers.version
                 and objs.key[3] is self.fingers
             ):
                 f = self._new_fused_state()
         tick = self.tick + 1
         sim_time = tick * dt
-        sense = sim_time + 1e-9 >= self._next_sense
+        sense = sim_time + 1e-9 >= self.state.next_sense
         if sense:
             lights = self.sensors.lit(self, sim_time)
             key = self.noise.next()
@@ -288,18 +286,18 @@ class WorldTick:
                 self.threads,
             )
         # The buffers are handed out as copies at their first read (_CopiedOnRead).
-        d = self.__dict__
+        d = self.state.__dict__
         d["_agent_pose_buffer"] = f.pose
         d["_agent_vel_buffer"] = f.vel
         d["_object_pose_buffer"] = f.discs.table[0]  # (0, 3) once the last object went
-        self._bodies_placed = False
+        self.state.bodies_placed = False
         self.tick = tick
         self.sim_time = sim_time
         if sense:
             d["_proximity_buffer"] = f.proximity
             d["_ambient_buffer"] = f.ambient
             d["_presence_buffer"] = f.presence
-            self._next_sense = sim_time + self.sensor_period_s - 1e-9
+            self.state.next_sense = sim_time + self.sensor_period_s - 1e-9
 
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
@@ -371,7 +369,7 @@ class WorldTick:
             else:
                 pose, vel = compiled.discs_tick(*args)
             obj = objs.table[0].copy()
-            self._bodies_placed = False
+            self.state.bodies_placed = False
         elif self.drive == "joints":
             pose, vel, obj = compiled.physics_tick(
                 chipmunk.FUNCTIONS,
@@ -430,9 +428,9 @@ class WorldTick:
         if profile:
             t1 = time.process_time()
             self.phase_cpu["physics"] += t1 - t0
-        if self.sim_time + 1e-9 >= self._next_sense:
+        if self.sim_time + 1e-9 >= self.state.next_sense:
             self.sense()
-            self._next_sense = self.sim_time + self.sensor_period_s - 1e-9
+            self.state.next_sense = self.sim_time + self.sensor_period_s - 1e-9
             if profile:
                 self.phase_cpu["sensing"] += time.process_time() - t1
 
