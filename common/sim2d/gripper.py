@@ -45,8 +45,6 @@ class GripperTurrets:
         self.world = world
         self.held = 0  # agents holding an object (the per-tick carry loop runs only if > 0)
         self.arms_moving = False  # set by set_arm; the arm update runs only while true
-        # Bumped by every grip and release: the discs drive's arrays are rebuilt then.
-        self.version = 0
 
     # -- commands ---------------------------------------------------------------------
 
@@ -132,7 +130,7 @@ class GripperTurrets:
         agent = w.agents[slot]
         assert obj.body is not None
         w._place_bodies()
-        self.version += 1
+        self.world.state.grip_version += 1
         lx, ly = self._robot_frame(slot, obj.body.position.x, obj.body.position.y)
         obj.held_by = agent
         obj.held_offset = (lx, ly, obj.body.angle - w.agent_pose[slot, 2])
@@ -149,7 +147,7 @@ class GripperTurrets:
         if agent is None or obj.body is None:
             return
         self.world._place_bodies()
-        self.version += 1
+        self.world.state.grip_version += 1
         obj.held_by = None
         agent.held = None
         self.held -= 1

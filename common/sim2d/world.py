@@ -208,7 +208,7 @@ class World(WorldEdits, WorldActuators, WorldTick):
 
     def on_floor(self, obj: MovableObject) -> bool:
         """On the floor, or held by a lowered arm: what IR sensors and the barrier see."""
-        return obj.held_by is None or self.grippers.lowered(self.slot_of(obj.held_by))
+        return self.state.on_floor(obj)
 
     def find_object(self, ident: str) -> MovableObject | None:
         return self.state.find_object(ident)

@@ -130,7 +130,7 @@ class WorldEdits:
 
         Chipmunk is not stepped on that drive (common/sim2d/world_discs.py).
         """
-        world_discs.place_bodies(self)  # type: ignore[arg-type]  # self is the World
+        world_discs.place_bodies(self.state)
 
     def _agents_touching(self, shapes: list[pymunk.Shape]) -> list[str]:
         self._place_bodies()

@@ -215,6 +215,9 @@ class WorldState:
         # (the drive moves them in its arrays, not their bodies).
         self.discs: DiscObjects | None = None
         self.bodies_placed = True
+        # Bumped by every grip and release (the gripper turrets): the discs drive's
+        # arrays are rebuilt then.
+        self.grip_version = 0
 
     # -- arena -------------------------------------------------------------------
 
@@ -326,6 +329,16 @@ class WorldState:
 
     def find_object(self, ident: str) -> MovableObject | None:
         return next((o for o in self.objects if o.id == ident), None)
+
+    # -- arms ------------------------------------------------------------------------
+
+    def arm_lowered(self, slot: int) -> bool:
+        """Whether the agent's arm is down (its tongs reach the floor)."""
+        return bool(self.arm[slot] >= self.tables.arm_lowered_above[slot])
+
+    def on_floor(self, obj: MovableObject) -> bool:
+        """On the floor, or held by a lowered arm: what IR sensors and the barrier see."""
+        return obj.held_by is None or self.arm_lowered(self.slot_of(obj.held_by))
 
     # -- reading ---------------------------------------------------------------------------
 

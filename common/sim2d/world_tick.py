@@ -123,7 +123,7 @@ class WorldTick:
     def _new_fused_state(self) -> _FusedTick:
         """The fused tick's state built afresh (_step_fused checks whether the last one holds)."""
         t = self.tables
-        objs = world_discs.disc_objects(self)  # type: ignore[arg-type]  # the World
+        objs = world_discs.disc_objects(self.state)
         static = self.sensors.static_geometry(self)
         n = len(self.agents)
         pose = np.array(self.agent_pose, dtype=np.float64, order="C")
@@ -252,7 +252,7 @@ class WorldTick:
                 # taken with this one, so its layout, tables and arm are k[0], k[1]
                 # and k[6], checked above (the call was 0.15 us a tick).
                 and self.state.discs is objs
-                and objs.key[1] == self.grippers.version
+                and objs.key[1] == self.state.grip_version
                 and objs.key[3] is self.fingers
             ):
                 f = self._new_fused_state()
@@ -327,7 +327,7 @@ class WorldTick:
             # they were placed, for the edits' overlap queries (_place_bodies);
             # the objects move in the drive's arrays (world_discs.py).
             via_pymunk = False
-            objs = world_discs.disc_objects(self)  # type: ignore[arg-type]  # the World
+            objs = world_discs.disc_objects(self.state)
             static = self.sensors.static_geometry(self)
             if self._disc_circles[0] is not static:
                 scene = static.scene
