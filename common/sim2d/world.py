@@ -34,7 +34,6 @@ import numpy as np
 import pymunk
 
 from common.sim2d import chipmunk, heap
-from common.sim2d.collision import COLL_OBJECT, COLL_ROBOT, COLL_TONGS
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES, OBJECT_DRIVES
 from common.sim2d.entities import Agent, Light, MovableObject, Obstacle, Zone
 from common.sim2d.floor import FloorLayer
@@ -162,13 +161,10 @@ class World(WorldEdits, WorldActuators, WorldTick):
         )
         # A tick's freed arrays stay in the heap for the next tick (common/sim2d/heap.py).
         heap.keep_freed_memory()
-        self.grippers = GripperTurrets(self)
+        self.grippers = GripperTurrets(state)
         self._step_fn = chipmunk.FUNCTIONS[
             chipmunk.HASTY_SPACE_STEP if physics_threads > 1 else chipmunk.SPACE_STEP
         ]
-        exception = self.grippers.collision_exception
-        state.space.on_collision(COLL_ROBOT, COLL_OBJECT, pre_solve=exception)
-        state.space.on_collision(COLL_TONGS, COLL_OBJECT, pre_solve=exception)
         # cpBody addresses for the compiled physics tick (common/sim2d/chipmunk.py),
         # rebuilt at the first tick after any layout change (every add and remove bumps
         # the layout): an address kept past its body's removal would read freed memory.
@@ -227,4 +223,4 @@ class World(WorldEdits, WorldActuators, WorldTick):
 
     def holding(self) -> np.ndarray:
         """(N,) bool: which agents hold an object."""
-        return self.grippers.holding()
+        return self.state.holding()

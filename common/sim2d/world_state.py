@@ -218,6 +218,9 @@ class WorldState:
         # Bumped by every grip and release (the gripper turrets): the discs drive's
         # arrays are rebuilt then.
         self.grip_version = 0
+        # Agents holding an object (the gripper turrets count them): while none do, the
+        # usual case, holding() builds no list and a tick carries nothing.
+        self.holders = 0
 
     # -- arena -------------------------------------------------------------------
 
@@ -339,6 +342,13 @@ class WorldState:
     def on_floor(self, obj: MovableObject) -> bool:
         """On the floor, or held by a lowered arm: what IR sensors and the barrier see."""
         return obj.held_by is None or self.arm_lowered(self.slot_of(obj.held_by))
+
+    def holding(self) -> np.ndarray:
+        """(N,) bool: which agents hold an object."""
+        agents = self.agents
+        if not self.holders:
+            return np.zeros(len(agents), dtype=bool)
+        return np.array([a.held is not None for a in agents], dtype=bool)
 
     # -- reading ---------------------------------------------------------------------------
 
