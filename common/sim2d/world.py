@@ -33,7 +33,6 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar, overload
 import numpy as np
 import pymunk
 
-from common.sim2d import chipmunk, heap
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES, OBJECT_DRIVES
 from common.sim2d.entities import Agent, Light, MovableObject, Obstacle, Zone
 from common.sim2d.floor import FloorLayer
@@ -42,7 +41,7 @@ from common.sim2d.sensing import NoiseKeys, SensorSuite
 from common.sim2d.world_actuators import RobotActuators, WorldActuators
 from common.sim2d.world_edits import WorldEdits
 from common.sim2d.world_state import CopiedOnRead, EditError, Tables, WorldState
-from common.sim2d.world_tick import WorldTick, _FusedTick
+from common.sim2d.world_tick import WorldTicker
 
 # How robots are driven (World(drive=...)): "discs" (the default, DEFAULT_DRIVE), a
 # compiled disc solver for robots and objects alike; "joints", pymunk's tank pattern (a
@@ -80,7 +79,7 @@ class _OfState(property, Generic[T]):
         def __set__(self, world: object, value: T, /) -> None: ...
 
 
-class World(WorldEdits, WorldActuators, WorldTick):
+class World(WorldEdits, WorldActuators):
     """A bounded 2D world: arena, obstacles, movable objects, lights, zones and agents.
 
     Its state is a :class:`~common.sim2d.world_state.WorldState` (``state``);
@@ -159,32 +158,12 @@ class World(WorldEdits, WorldActuators, WorldTick):
             physics_threads=physics_threads,
             drive=drive,
         )
-        # A tick's freed arrays stay in the heap for the next tick (common/sim2d/heap.py).
-        heap.keep_freed_memory()
         self.grippers = GripperTurrets(state)
-        self._step_fn = chipmunk.FUNCTIONS[
-            chipmunk.HASTY_SPACE_STEP if physics_threads > 1 else chipmunk.SPACE_STEP
-        ]
-        # cpBody addresses for the compiled physics tick (common/sim2d/chipmunk.py),
-        # rebuilt at the first tick after any layout change (every add and remove bumps
-        # the layout): an address kept past its body's removal would read freed memory.
-        self._space_address = np.uint64(chipmunk.space_address(state.space))
-        self._agent_bodies = self._control_bodies = self._object_bodies = np.zeros(
-            0, dtype=np.uint64
-        )
-        self._rows_layout = -1
-        self._servo_memory = np.zeros((0, 6))
-        # The discs drive (common/sim2d/discs.py): the sensing grid it last binned
-        # the round obstacles of, with those bins.
-        self._disc_circles: tuple[object, tuple[np.ndarray, np.ndarray]] = (
-            None,
-            (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)),
-        )
-        # The split drive's work arrays on the general path (discs_split.split_buffers).
-        self._split_work: tuple[np.ndarray, ...] = ()
-        # The discs drive's fused tick (common/sim2d/fused.py): its state, built at
-        # the first tick after anything it holds changed (_FusedTick.key).
-        self._fused: _FusedTick | None = None
+        self.ticker = ticker = WorldTicker(state, self.grippers)
+        # The parts' methods, bound once: a call goes straight to the part.
+        self.step = ticker.step
+        self.sense = ticker.sense
+        self.run = ticker.run
 
     # -- ids ---------------------------------------------------------------------
 
