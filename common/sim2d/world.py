@@ -39,7 +39,7 @@ from common.sim2d.floor import FloorLayer
 from common.sim2d.gripper import GripperTurrets
 from common.sim2d.sensing import NoiseKeys, SensorSuite
 from common.sim2d.world_actuators import RobotActuators, WorldActuators
-from common.sim2d.world_edits import WorldEdits
+from common.sim2d.world_edits import WorldEditor
 from common.sim2d.world_state import CopiedOnRead, EditError, Tables, WorldState
 from common.sim2d.world_tick import WorldTicker
 
@@ -79,7 +79,7 @@ class _OfState(property, Generic[T]):
         def __set__(self, world: object, value: T, /) -> None: ...
 
 
-class World(WorldEdits, WorldActuators):
+class World(WorldActuators):
     """A bounded 2D world: arena, obstacles, movable objects, lights, zones and agents.
 
     Its state is a :class:`~common.sim2d.world_state.WorldState` (``state``);
@@ -164,6 +164,21 @@ class World(WorldEdits, WorldActuators):
         self.step = ticker.step
         self.sense = ticker.sense
         self.run = ticker.run
+        self.editor = editor = WorldEditor(state, self.grippers)
+        self.resize = editor.resize
+        self.add_obstacle = editor.add_obstacle
+        self.add_object = editor.add_object
+        self.add_light = editor.add_light
+        self.add_zone = editor.add_zone
+        self.add_agent = editor.add_agent
+        self.finish_agents = editor.finish_agents
+        self.pose_of = editor.pose_of
+        self.shape_of = editor.shape_of
+        self.move = editor.move
+        self.set_home = editor.set_home
+        self.reset_agent = editor.reset_agent
+        self.rotate = editor.rotate
+        self.remove = editor.remove
 
     # -- ids ---------------------------------------------------------------------
 
