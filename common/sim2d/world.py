@@ -17,12 +17,15 @@ follow the thesis; how they are solved is the world's drive
   a push, and the gripper's collision exception area lets an object between
   the open tongs overlap the robot (thesis 6.8.3).
 
-Per-agent state lives in numpy arrays indexed by the agent's slot (its index
-in :attr:`World.agents`), so a tick has no per-robot Python loop. The
-per-tick work runs in compiled kernels (common/sim2d/kernels.py): one sets
-the control bodies' velocities, steps chipmunk and reads the bodies back,
-calling chipmunk's C functions directly (common/sim2d/chipmunk.py); one
-casts every sensor (common/sim2d/sensing.py prepares its tables).
+A World is a state and the parts that work on it, each given what it needs:
+its :class:`~common.sim2d.world_state.WorldState` (``state``: the arena, the
+space, the things, the per-agent arrays indexed by an agent's slot, its index
+in :attr:`World.agents`, and the counters); the gripper turrets (gripper.py);
+the ticker (world_tick.py: the tick, in compiled kernels, so a tick has no
+per-robot Python loop); the editor (world_edits.py: live edits, by the rules);
+the actuators (world_actuators.py: what a command sets). The World's
+attributes are its state's, read and set through, and its methods are the
+parts' own, bound once, so callers see one object.
 """
 
 from __future__ import annotations
@@ -58,9 +61,9 @@ T = TypeVar("T")
 class _OfState(property, Generic[T]):
     """A World attribute that is its state's: read, and set unless ``settable`` is false.
 
-    A property of C getters (attrgetter), not a descriptor written in Python: a
-    read costs about what a plain property's does, a third of a Python
-    ``__get__``'s, and the engine reads these for every robot every tick.
+    A property with a C getter (attrgetter), not a descriptor written in Python:
+    a read costs what a plain property's does, a third of a Python
+    ``__get__``'s (callers such as the engine read these every tick).
     """
 
     def __init__(self, name: str, *, settable: bool = True) -> None:
@@ -79,11 +82,13 @@ class _OfState(property, Generic[T]):
         def __set__(self, world: object, value: T, /) -> None: ...
 
 
-class World(WorldActuators):
+class World:
     """A bounded 2D world: arena, obstacles, movable objects, lights, zones and agents.
 
     Its state is a :class:`~common.sim2d.world_state.WorldState` (``state``);
-    the attributes below are the state's, read and set through.
+    the attributes below are the state's, read and set through. Its parts:
+    ``grippers``, ``ticker``, ``editor`` and ``actuation``, whose methods it
+    binds in ``__init__`` (module docstring).
     """
 
     # The state's per-agent arrays the fused tick writes, copied when read (CopiedOnRead).
@@ -158,13 +163,29 @@ class World(WorldActuators):
             physics_threads=physics_threads,
             drive=drive,
         )
-        self.grippers = GripperTurrets(state)
-        self.ticker = ticker = WorldTicker(state, self.grippers)
-        # The parts' methods, bound once: a call goes straight to the part.
+        self.grippers = grippers = GripperTurrets(state)
+        self.ticker = ticker = WorldTicker(state, grippers)
+        self.editor = editor = WorldEditor(state, grippers)
+        self.actuation = actuation = WorldActuators(state, grippers)
+        # The parts' methods, bound once: a call goes straight to the part (World.step
+        # is the ticker's, with no call of the World's in between).
+        # Ids and slots (the state's).
+        self.ids = state.ids
+        self.agent_slot = state.agent_slot
+        self.slot_of = state.slot_of
+        self.agent_of_body = state.agent_of_body
+        self.find_object = state.find_object
+        # Reading.
+        self.on_floor = state.on_floor
+        self.lights_on = state.lights_on
+        self.holding = state.holding
+        self.gripper_state = grippers.state
+        self.resistivity = grippers.resistivity
+        # Stepping.
         self.step = ticker.step
         self.sense = ticker.sense
         self.run = ticker.run
-        self.editor = editor = WorldEditor(state, self.grippers)
+        # Live edits.
         self.resize = editor.resize
         self.add_obstacle = editor.add_obstacle
         self.add_object = editor.add_object
@@ -179,42 +200,11 @@ class World(WorldActuators):
         self.reset_agent = editor.reset_agent
         self.rotate = editor.rotate
         self.remove = editor.remove
-
-    # -- ids ---------------------------------------------------------------------
-
-    def ids(self) -> set[str]:
-        return self.state.ids()
-
-    def agent_slot(self, agent_id: str) -> int:
-        """The agent's row in the state arrays; KeyError if there is no such agent."""
-        return self.state.agent_slot(agent_id)
-
-    def slot_of(self, agent: Agent) -> int:
-        """The agent's row in the state arrays."""
-        return self.state.slot_of(agent)
-
-    def agent_of_body(self, body: pymunk.Body) -> Agent | None:
-        return self.state.agent_of_body(body)
-
-    def on_floor(self, obj: MovableObject) -> bool:
-        """On the floor, or held by a lowered arm: what IR sensors and the barrier see."""
-        return self.state.on_floor(obj)
-
-    def find_object(self, ident: str) -> MovableObject | None:
-        return self.state.find_object(ident)
-
-    # -- reading ---------------------------------------------------------------------------
-
-    def lights_on(self) -> np.ndarray:
-        return self.state.lights_on()
-
-    def gripper_state(self, slot: int) -> int:
-        """0 open, 1 closed, 2 holding."""
-        return self.grippers.state(slot)
-
-    def resistivity(self, slot: int) -> int:
-        return self.grippers.resistivity(slot)
-
-    def holding(self) -> np.ndarray:
-        """(N,) bool: which agents hold an object."""
-        return self.state.holding()
+        # Commands.
+        self.actuators = actuation.actuators
+        self.set_speeds = actuation.set_speeds
+        self.set_speeds_all = actuation.set_speeds_all
+        self.set_counters = actuation.set_counters
+        self.set_leds = actuation.set_leds
+        self.set_arm = actuation.set_arm
+        self.set_grip = actuation.set_grip
