@@ -312,7 +312,7 @@ class WorldTicker:
         sub = dt / s.substeps
         if s.drive == "discs":
             # Chipmunk is not stepped: the robots' and objects' bodies stay where
-            # they were placed, for the edits' overlap queries (_place_bodies);
+            # they were placed, for the edits' overlap queries (world_discs.place_bodies);
             # the objects move in the drive's arrays (world_discs.py).
             via_pymunk = False
             objs = world_discs.disc_objects(s)
