@@ -92,12 +92,12 @@ class World:
     """
 
     # The state's per-agent arrays the fused tick writes, copied when read (CopiedOnRead).
-    agent_pose = CopiedOnRead("state.")
-    agent_vel = CopiedOnRead("state.")
-    proximity = CopiedOnRead("state.")
-    ambient = CopiedOnRead("state.")
-    presence = CopiedOnRead("state.")
-    object_pose = CopiedOnRead("state.")
+    agent_pose = CopiedOnRead(of_state=True)
+    agent_vel = CopiedOnRead(of_state=True)
+    proximity = CopiedOnRead(of_state=True)
+    ambient = CopiedOnRead(of_state=True)
+    presence = CopiedOnRead(of_state=True)
+    object_pose = CopiedOnRead(of_state=True)
     # The state's other per-agent arrays (one row per slot) and tables.
     cmd = _OfState[np.ndarray]("cmd")
     counters = _OfState[np.ndarray]("counters")
