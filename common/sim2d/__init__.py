@@ -4,10 +4,12 @@ The engine process (services/engine/) serves one World over the network; the
 Khepera emulator (services/bridge/simbody.py) uses a World as the physical
 robot behind the serial protocol. Both import only this package.
 
-- world.py: the World (arena, obstacles, objects, lights, zones, agents: the
-  model and its per-agent state), with one module per job: world_edits.py
-  (live edits, EditError), world_actuators.py (what a command sets; one robot
-  as common.controller.actuators.Actuators), world_tick.py (the tick);
+- world.py: the World, a state and the parts that work on it:
+  world_state.py (the WorldState: arena, obstacles, objects, lights, zones,
+  agents and their per-agent state; EditError), and parts that each take the
+  state: world_edits.py (the editor: live edits), world_actuators.py (what a
+  command sets; one robot as common.controller.actuators.Actuators),
+  world_tick.py (the ticker: the tick), gripper.py (below);
 - bodies.py: how each kind of thing becomes pymunk bodies and joints;
 - gripper.py: the gripper turret's rules (arm, fingers, grip, carry);
 - sensing.py: the sensor components (IR proximity ring, ambient light, the

@@ -14,9 +14,11 @@ light barrier between the tongs (read by the sensing pass). Its rules:
   lowered tongs does not collide with the robot, so it can be driven into the
   grip.
 
-State per agent (arm, arm target, fingers) lives in the world's per-slot arrays
-like every other per-agent value; this class holds the rules and what only it
-needs (how many objects are held, whether an arm is moving).
+State per agent (arm, arm target, fingers) lives in the world's state
+(common/sim2d/world_state.py) like every other per-agent value, as do how many
+agents hold an object and the grip version, which sensing and the discs drive
+read; this class holds the rules and what only it needs (whether an arm is
+moving).
 """
 
 from __future__ import annotations
@@ -27,11 +29,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pymunk
 
-from common.sim2d.collision import CAT_ALL, CAT_OBJECT, CAT_TONGS
+from common.sim2d import world_discs
+from common.sim2d.collision import (
+    CAT_ALL,
+    CAT_OBJECT,
+    CAT_TONGS,
+    COLL_OBJECT,
+    COLL_ROBOT,
+    COLL_TONGS,
+)
 
 if TYPE_CHECKING:
     from common.sim2d.entities import MovableObject
-    from common.sim2d.world import World
+    from common.sim2d.world_state import WorldState
 
 FINGERS_OPEN = 0
 FINGERS_CLOSED = 1
@@ -41,18 +51,19 @@ HOLDING = 2  # gripper state: closed on an object
 class GripperTurrets:
     """The grippers of one world's agents: arm, fingers, grip and carry."""
 
-    def __init__(self, world: World) -> None:
-        self.world = world
-        self.held = 0  # agents holding an object (the per-tick carry loop runs only if > 0)
+    def __init__(self, state: WorldState) -> None:
+        self._state = state
         self.arms_moving = False  # set by set_arm; the arm update runs only while true
-        # Bumped by every grip and release: the discs drive's arrays are rebuilt then.
-        self.version = 0
+        # The collision exception area, for the robots' bodies and their tongs.
+        exception = self.collision_exception
+        state.space.on_collision(COLL_ROBOT, COLL_OBJECT, pre_solve=exception)
+        state.space.on_collision(COLL_TONGS, COLL_OBJECT, pre_solve=exception)
 
     # -- commands ---------------------------------------------------------------------
 
     def set_arm(self, slot: int, position: int) -> bool:
         """Aim the arm; False if the agent has no gripper."""
-        w = self.world
+        w = self._state
         g = w.agents[slot].spec.gripper
         if g is None or not w.agents[slot].has_gripper:
             return False
@@ -62,7 +73,7 @@ class GripperTurrets:
 
     def set_grip(self, slot: int, closed: bool) -> bool:
         """Close (gripping what is between the tongs) or open; False without a gripper."""
-        w = self.world
+        w = self._state
         agent = w.agents[slot]
         if not agent.has_gripper:
             return False
@@ -79,35 +90,25 @@ class GripperTurrets:
 
     def state(self, slot: int) -> int:
         """0 open, 1 closed, 2 holding."""
-        if self.world.agents[slot].held is not None:
+        if self._state.agents[slot].held is not None:
             return HOLDING
-        return int(self.world.fingers[slot])
+        return int(self._state.fingers[slot])
 
     def resistivity(self, slot: int) -> int:
-        agent = self.world.agents[slot]
+        agent = self._state.agents[slot]
         g = agent.spec.gripper
         if agent.held is not None:
             return agent.held.resistivity
         return g.empty_resistivity if g else 0
 
-    def holding(self) -> np.ndarray:
-        """(N,) bool: which agents hold an object."""
-        agents = self.world.agents
-        if not self.held:
-            return np.zeros(len(agents), dtype=bool)
-        return np.array([a.held is not None for a in agents], dtype=bool)
-
-    def lowered(self, slot: int) -> bool:
-        return bool(self.world.arm[slot] >= self.world.tables.arm_lowered_above[slot])
-
     def object_in_grip(self, slot: int) -> MovableObject | None:
         """The free object whose centre is in the barrier's box of a lowered arm."""
-        w = self.world
+        w = self._state
         g = w.agents[slot].spec.gripper
-        if g is None or not self.lowered(slot):
+        if g is None or not w.arm_lowered(slot):
             return None
         best: MovableObject | None = None
-        w._place_bodies()  # the discs drive moves objects in its arrays, not their bodies
+        world_discs.place_bodies(w)  # the discs drive moves objects in its arrays, not bodies
         for obj in w.objects:
             if obj.held_by is not None or obj.body is None:
                 continue
@@ -122,22 +123,22 @@ class GripperTurrets:
     # -- grip and release ------------------------------------------------------------------
 
     def _robot_frame(self, slot: int, x: float, y: float) -> tuple[float, float]:
-        ax, ay, th = self.world.agent_pose[slot]
+        ax, ay, th = self._state.agent_pose[slot]
         dx, dy = x - ax, y - ay
         c, s = math.cos(th), math.sin(th)
         return c * dx + s * dy, -s * dx + c * dy
 
     def _grip(self, slot: int, obj: MovableObject) -> None:
-        w = self.world
+        w = self._state
         agent = w.agents[slot]
         assert obj.body is not None
-        w._place_bodies()
-        self.version += 1
+        world_discs.place_bodies(w)
+        w.grip_version += 1
         lx, ly = self._robot_frame(slot, obj.body.position.x, obj.body.position.y)
         obj.held_by = agent
         obj.held_offset = (lx, ly, obj.body.angle - w.agent_pose[slot, 2])
         agent.held = obj
-        self.held += 1
+        w.holders += 1
         w.space.remove(*obj.floor_joints)
         obj.body.body_type = pymunk.Body.KINEMATIC
         for s in obj.shapes:
@@ -148,11 +149,12 @@ class GripperTurrets:
         agent = obj.held_by
         if agent is None or obj.body is None:
             return
-        self.world._place_bodies()
-        self.version += 1
+        w = self._state
+        world_discs.place_bodies(w)
+        w.grip_version += 1
         obj.held_by = None
         agent.held = None
-        self.held -= 1
+        w.holders -= 1
         obj.body.body_type = pymunk.Body.DYNAMIC
         obj.body.mass = obj.mass_g
         if obj.shape.kind == "circle":
@@ -162,13 +164,13 @@ class GripperTurrets:
         obj.body.velocity, obj.body.angular_velocity = (0, 0), 0.0
         for s in obj.shapes:
             s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
-        self.world.space.add(*obj.floor_joints)
+        w.space.add(*obj.floor_joints)
 
     def collision_exception(
         self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: object
     ) -> None:
         """pymunk pre-solve: an object between the open, lowered tongs does not collide."""
-        w = self.world
+        w = self._state
         robot_shape, object_shape = arbiter.shapes
         if robot_shape.body is None or object_shape.body is None:
             return
@@ -176,7 +178,7 @@ class GripperTurrets:
         if agent is None or not agent.has_gripper or agent.spec.gripper is None:
             return
         slot = w.slot_of(agent)
-        if w.fingers[slot] != FINGERS_OPEN or not self.lowered(slot):
+        if w.fingers[slot] != FINGERS_OPEN or not w.arm_lowered(slot):
             return
         g = agent.spec.gripper
         p = object_shape.body.position
@@ -188,7 +190,7 @@ class GripperTurrets:
 
     def move_arms(self, dt: float) -> None:
         """Arms toward their targets; an arm that crosses 'lowered' changes what it hits."""
-        w = self.world
+        w = self._state
         if not self.arms_moving:
             return
         if not len(w.agents) or not np.any(w.arm != w.arm_target):
@@ -216,9 +218,9 @@ class GripperTurrets:
 
     def carry(self) -> None:
         """Held objects follow their robots (pose and velocity)."""
-        if not self.held:
+        w = self._state
+        if not w.holders:
             return
-        w = self.world
         for slot, agent in enumerate(w.agents):
             obj = agent.held
             if obj is None or obj.body is None:

@@ -21,7 +21,7 @@ from common.sim2d import pucks_tables as pucks
 
 if TYPE_CHECKING:
     from common.sim2d.entities import MovableObject
-    from common.sim2d.world import World
+    from common.sim2d.world_state import WorldState
 
 
 @dataclass(frozen=True)
@@ -39,42 +39,42 @@ class DiscObjects:
     edges: int  # how many edges the objects that are not round have
 
 
-def _key(world: World) -> tuple[object, ...]:
-    return (world.layout, world.grippers.version, world.tables, world.fingers, world.arm)
+def _key(state: WorldState) -> tuple[object, ...]:
+    return (state.layout, state.grip_version, state.tables, state.fingers, state.arm)
 
 
-def current(world: World) -> DiscObjects | None:
+def current(state: WorldState) -> DiscObjects | None:
     """The arrays as they are, or None if they must be rebuilt (no rebuild)."""
-    d = world._discs
+    d = state.discs
     if d is None:
         return None
     k = d.key
     if (
-        k[0] == world.layout
-        and k[1] == world.grippers.version
-        and k[2] is world.tables
-        and k[3] is world.fingers
-        and k[4] is world.arm
+        k[0] == state.layout
+        and k[1] == state.grip_version
+        and k[2] is state.tables
+        and k[3] is state.fingers
+        and k[4] is state.arm
     ):
         return d
     return None
 
 
-def disc_objects(world: World) -> DiscObjects:
+def disc_objects(state: WorldState) -> DiscObjects:
     """The objects' arrays for this tick, rebuilt from the bodies if anything changed."""
-    d = current(world)
+    d = current(state)
     if d is not None:
         return d
-    place_bodies(world)  # the old arrays' state into the bodies first
-    objs = list(world.objects)
-    n, k = len(world.agents), len(objs)
+    place_bodies(state)  # the old arrays' state into the bodies first
+    objs = list(state.objects)
+    n, k = len(state.agents), len(objs)
     (pose, vel, decel, holder, offset, grip, _, is_round, _, vstart, own_r) = pucks.objects_table(
         k, n
     )
-    slot_of = world.slot_of
+    slot_of = state.slot_of
     verts: list[tuple[float, float]] = []
-    radius = np.concatenate([world.tables.radius, np.zeros(k)])
-    mass = np.concatenate([world.tables.mass, np.zeros(k)])
+    radius = np.concatenate([state.tables.radius, np.zeros(k)])
+    mass = np.concatenate([state.tables.mass, np.zeros(k)])
     holding = np.zeros(n, dtype=bool)
     # How hard an object resists a push, in the robots' mass units: its floor
     # friction (mu m g) over what a robot's motors push with (max_force), times a
@@ -82,7 +82,7 @@ def disc_objects(world: World) -> DiscObjects:
     # this, so a light object goes where the robot drives it (the joints drive's
     # motors, 2e6 g mm/s^2, never feel a 20 g box's 1e5 of friction) and a
     # heavy one slows it. The robots' median ratio: one number for the world.
-    t = world.tables
+    t = state.tables
     ratio = float(np.median(t.mass / t.servo[:, 2])) if n else 1.0 / 2.0e6 * 70.0
     for j, obj in enumerate(objs):
         body = obj.body
@@ -103,9 +103,9 @@ def disc_objects(world: World) -> DiscObjects:
             offset[j] = obj.held_offset
             holding[slot] = True
             # Held, it moves with its holder: a push on it is a push on both.
-            mass[n + j] += world.tables.mass[slot]
+            mass[n + j] += state.tables.mass[slot]
             vel[j] = 0.0
-    for slot, agent in enumerate(world.agents):
+    for slot, agent in enumerate(state.agents):
         g = agent.spec.gripper
         if agent.has_gripper and g is not None:
             grip[slot] = (g.grip_x_mm[0], g.grip_x_mm[1], g.gap_mm / 2, g.lowered_above)
@@ -118,43 +118,43 @@ def disc_objects(world: World) -> DiscObjects:
         holder,
         offset,
         grip,
-        world.fingers,
+        state.fingers,
         is_round,
         np.array(verts, dtype=np.float64).reshape(-1, 2),
         vstart,
         own_r,
     )
-    d = world._discs = DiscObjects(_key(world), objs, table, radius, mass, holding, len(verts))
+    d = state.discs = DiscObjects(_key(state), objs, table, radius, mass, holding, len(verts))
     return d
 
 
-def place_bodies(world: World) -> None:
+def place_bodies(state: WorldState) -> None:
     """Put the robots' and the objects' pymunk bodies where the drive's arrays have them.
 
     Chipmunk is not stepped on this drive, so the bodies stay where an edit last
     put them; an edit that asks the space what a shape overlaps, or the gripper
     asking where an object is, needs them where the things are.
     """
-    if world.drive != "discs" or world._bodies_placed:
+    if state.drive != "discs" or state.bodies_placed:
         return
-    for slot, agent in enumerate(world.agents):
-        x, y, heading = world.agent_pose[slot]
+    for slot, agent in enumerate(state.agents):
+        x, y, heading = state.agent_pose[slot]
         agent.body.position, agent.body.angle = (float(x), float(y)), float(heading)
-        world.space.reindex_shapes_for_body(agent.body)
-    d = world._discs
+        state.space.reindex_shapes_for_body(agent.body)
+    d = state.discs
     if d is not None:
         pose, vel = d.table[0], d.table[1]
         for j, obj in enumerate(d.objects):
             body = obj.body
-            if body is None or obj not in world.objects:
+            if body is None or obj not in state.objects:
                 continue  # removed since: nothing to place
             body.position, body.angle = (float(pose[j, 0]), float(pose[j, 1])), float(pose[j, 2])
             body.velocity = (float(vel[j, 0]), float(vel[j, 1]))
-            world.space.reindex_shapes_for_body(body)
-    world._bodies_placed = True
+            state.space.reindex_shapes_for_body(body)
+    state.bodies_placed = True
 
 
-def touching(world: World, slot: int, tolerance_mm: float = 0.5) -> set[tuple[str, str]]:
+def touching(state: WorldState, slot: int, tolerance_mm: float = 0.5) -> set[tuple[str, str]]:
     """What robot ``slot``'s disc touches: ("wall", ""), ("obstacle" | "robot" | "object", id).
 
     Chipmunk's arbiters say it on the other drives (the runner's dry run reads
@@ -162,13 +162,13 @@ def touching(world: World, slot: int, tolerance_mm: float = 0.5) -> set[tuple[st
     the disc. An object counts as its solver disc; one held with a raised arm
     touches nothing, and the robot's own never counts.
     """
-    x, y, _ = (float(v) for v in world.agent_pose[slot])
-    r = float(world.tables.radius[slot])
+    x, y, _ = (float(v) for v in state.agent_pose[slot])
+    r = float(state.tables.radius[slot])
     reach = r + tolerance_mm
     found: set[tuple[str, str]] = set()
-    if min(x, y, world.width - x, world.height - y) <= reach:
+    if min(x, y, state.width - x, state.height - y) <= reach:
         found.add(("wall", ""))
-    for ident, o in world.obstacles.items():
+    for ident, o in state.obstacles.items():
         if o.shape.kind == "circle":
             if math.hypot(x - o.x, y - o.y) <= reach + o.shape.radius_mm:
                 found.add(("obstacle", ident))
@@ -178,16 +178,16 @@ def touching(world: World, slot: int, tolerance_mm: float = 0.5) -> set[tuple[st
             _to_segment(x, y, a, b) <= reach for a, b in zip(pts, pts[1:] + pts[:1], strict=True)
         ):
             found.add(("obstacle", ident))
-    for other, agent in enumerate(world.agents):
+    for other, agent in enumerate(state.agents):
         if other != slot:
-            ox, oy = world.agent_pose[other, :2]
-            if math.hypot(x - ox, y - oy) <= reach + float(world.tables.radius[other]):
+            ox, oy = state.agent_pose[other, :2]
+            if math.hypot(x - ox, y - oy) <= reach + float(state.tables.radius[other]):
                 found.add(("robot", agent.id))
-    me = world.agents[slot]
-    for j, obj in enumerate(world.objects):
-        if obj.held_by is me or not world.on_floor(obj):
+    me = state.agents[slot]
+    for j, obj in enumerate(state.objects):
+        if obj.held_by is me or not state.on_floor(obj):
             continue
-        ox, oy = world.object_pose[j, :2]
+        ox, oy = state.object_pose[j, :2]
         if math.hypot(x - ox, y - oy) <= reach + obj.shape.bounding_radius_mm:
             found.add(("object", obj.id))
     return found

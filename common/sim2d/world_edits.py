@@ -1,4 +1,4 @@
-"""A World's live edits: add, move, rotate, remove anything and resize the arena, by the rules.
+"""A world's editor: add, move, rotate, remove anything and resize the arena, by the rules.
 
 Every edit is validated (inside the arena; no agent or object overlapping an
 obstacle; no obstacle onto an agent) and undone if it breaks a rule, raising
@@ -26,88 +26,45 @@ from common.sim2d.entities import (
     Zone,
 )
 from common.sim2d.specs import AgentTypeSpec
+from common.sim2d.world_state import EditError
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from common.sim2d.gripper import GripperTurrets
-    from common.sim2d.sensing import SensorSuite
+    from common.sim2d.world_state import WorldState
 
 
-class EditError(ValueError):
-    """An edit or a map would break the world's rules; the message says which and why."""
+class WorldEditor:
+    """Edits one world's state by the rules: each edit validated, and undone if it breaks one."""
 
-
-class WorldEdits:
-    """World's edit methods (a mixin of :class:`~common.sim2d.world.World`)."""
-
-    if TYPE_CHECKING:  # the World's state and model these edit (common/sim2d/world.py)
-        width: float
-        height: float
-        drive: str
-        layout: int
-        space: pymunk.Space
-        sensors: SensorSuite
-        grippers: GripperTurrets
-        tongs_mask: int
-        agents: list[Agent]
-        obstacles: dict[str, Obstacle]
-        objects: list[MovableObject]
-        lights: list[Light]
-        zones: dict[str, Zone]
-        homes: dict[str, tuple[float, float, float]]
-        agent_pose: np.ndarray
-        _walls: list[pymunk.Shape]
-        _agent_by_body: dict[int, Agent]
-        _object_by_body: dict[int, MovableObject]
-        _bodies_placed: bool
-        _tongs_in: bool
-        _serial: int
-
-        def ids(self) -> set[str]: ...
-
-        def _check_new_id(self, ident: str) -> None: ...
-
-        def agent_slot(self, agent_id: str) -> int: ...
-
-        def find_object(self, ident: str) -> MovableObject | None: ...
-
-        def _append_agent_state(self, pose: tuple[float, float, float], arm: float) -> None: ...
-
-        def _delete_agent_state(self, slot: int) -> None: ...
-
-        def _rebuild_tables(self) -> None: ...
+    def __init__(self, state: WorldState, grippers: GripperTurrets) -> None:
+        self._state = state
+        self._grippers = grippers  # a moved or removed object is released first
 
     # -- arena -------------------------------------------------------------------
 
-    def _build_walls(self) -> None:
-        for shape in self._walls:
-            self.space.remove(shape)
-        self._walls = bodies.walls(self.space.static_body, self.width, self.height)
-        self.space.add(*self._walls)
-        self.sensors.obstacles_changed()
-
     def resize(self, width_mm: float, height_mm: float) -> None:
+        s = self._state
         if not (width_mm > 0 and height_mm > 0):
             raise EditError("the arena's width and height must be positive")
-        old = (self.width, self.height)
-        self.width, self.height = float(width_mm), float(height_mm)
-        outside = [i for i in self.ids() if not self._inside_arena_id(i)]
+        old = (s.width, s.height)
+        s.width, s.height = float(width_mm), float(height_mm)
+        outside = [i for i in s.ids() if not self._inside_arena_id(i)]
         if outside:
-            self.width, self.height = old
+            s.width, s.height = old
             raise EditError(
                 f"the arena {width_mm:.0f} x {height_mm:.0f} mm would leave outside: "
                 + ", ".join(sorted(outside)[:10])
             )
-        self._build_walls()
-        self.layout += 1
+        s.build_walls()
+        s.layout += 1
 
     def _inside(self, pts: Iterable[tuple[float, float]], margin: float = 0.0) -> bool:
+        s = self._state
         return all(
             x - margin >= -1e-6
-            and x + margin <= self.width + 1e-6
+            and x + margin <= s.width + 1e-6
             and y - margin >= -1e-6
-            and y + margin <= self.height + 1e-6
+            and y + margin <= s.height + 1e-6
             for x, y in pts
         )
 
@@ -132,19 +89,20 @@ class WorldEdits:
         heading: float = 0.0,
         colour: str = "#808080",
     ) -> Obstacle:
-        self._check_new_id(ident)
+        s = self._state
+        s.check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"obstacle {ident} would stick out of the arena")
         body, shapes = bodies.obstacle(shape, x, y, heading)
-        self.space.add(body, *shapes)
+        s.space.add(body, *shapes)
         overlapping = self._agents_touching(shapes)
         if overlapping:
-            self.space.remove(body, *shapes)
+            s.space.remove(body, *shapes)
             raise EditError(f"obstacle {ident} would overlap agent(s) {', '.join(overlapping)}")
         obstacle = Obstacle(ident, shape, x, y, heading, colour, body, shapes)
-        self.obstacles[ident] = obstacle
-        self.sensors.obstacles_changed()
-        self.layout += 1
+        s.obstacles[ident] = obstacle
+        s.sensors.obstacles_changed()
+        s.layout += 1
         return obstacle
 
     def _place_bodies(self) -> None:
@@ -152,15 +110,16 @@ class WorldEdits:
 
         Chipmunk is not stepped on that drive (common/sim2d/world_discs.py).
         """
-        world_discs.place_bodies(self)  # type: ignore[arg-type]  # self is the World
+        world_discs.place_bodies(self._state)
 
     def _agents_touching(self, shapes: list[pymunk.Shape]) -> list[str]:
+        s = self._state
         self._place_bodies()
         found = []
         for shape in shapes:
-            for info in self.space.shape_query(shape):
+            for info in s.space.shape_query(shape):
                 body = info.shape.body if info.shape else None  # a shape in the space has one
-                agent = self._agent_by_body.get(id_of(body)) if body is not None else None
+                agent = s.agent_by_body.get(id_of(body)) if body is not None else None
                 if agent is not None and info.shape is agent.shape:
                     found.append(agent.id)
         return sorted(set(found))
@@ -181,7 +140,8 @@ class WorldEdits:
         resistivity: int = 128,
         colour: str = "#ff8c00",
     ) -> MovableObject:
-        self._check_new_id(ident)
+        s = self._state
+        s.check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"object {ident} would stick out of the arena")
         if mass_g <= 0:
@@ -190,34 +150,34 @@ class WorldEdits:
         if self._blocked(shapes, CAT_OBSTACLE | CAT_ROBOT, body):
             raise EditError(f"object {ident} would overlap an obstacle or an agent")
         obj = MovableObject(ident, kind, shape, mass_g, friction, resistivity, colour, body, shapes)
-        obj.floor_joints = bodies.floor_friction(
-            self.space.static_body, body, mass_g, friction, shape
-        )
-        self.space.add(body, *shapes, *obj.floor_joints)
-        self.objects.append(obj)
-        self._object_by_body[id_of(body)] = obj
+        obj.floor_joints = bodies.floor_friction(s.space.static_body, body, mass_g, friction, shape)
+        s.space.add(body, *shapes, *obj.floor_joints)
+        s.objects.append(obj)
+        s.object_by_body[id_of(body)] = obj
         self._sync_tongs()
-        self.layout += 1
+        s.layout += 1
         return obj
 
     def _sync_tongs(self) -> None:
         """Tongs into the space, or out of it, as the objects they could touch come and go."""
-        wanted = self.drive == "joints" or bool(self.objects)
-        if wanted == self._tongs_in:
+        s = self._state
+        wanted = s.drive == "joints" or bool(s.objects)
+        if wanted == s.tongs_in:
             return
-        tongs = [tong for agent in self.agents for tong in agent.tongs]
+        tongs = [tong for agent in s.agents for tong in agent.tongs]
         if tongs:
             if wanted:
-                self.space.add(*tongs)
+                s.space.add(*tongs)
             else:
-                self.space.remove(*tongs)
-        self._tongs_in = wanted
+                s.space.remove(*tongs)
+        s.tongs_in = wanted
 
     def _blocked(self, shapes: list[pymunk.Shape], mask: int, body: pymunk.Body) -> bool:
+        s = self._state
         self._place_bodies()
         for shape in shapes:
             shape.cache_bb()
-            for info in self.space.shape_query(shape):
+            for info in s.space.shape_query(shape):
                 other = info.shape
                 if other is None or other.body is body:
                     continue
@@ -245,14 +205,15 @@ class WorldEdits:
         period_s: float = 1.0,
         colour: str = "#ffd700",
     ) -> Light:
-        self._check_new_id(ident)
+        s = self._state
+        s.check_new_id(ident)
         if not self._inside([(x, y)]):
             raise EditError(f"light {ident} is outside the arena")
         if period_s <= 0 or radius_mm <= 0 or intensity < 0:
             raise EditError(f"light {ident}: period and radius must be positive, intensity >= 0")
         light = Light(ident, x, y, intensity, radius_mm, mode, period_s, colour)
-        self.lights.append(light)
-        self.layout += 1
+        s.lights.append(light)
+        s.layout += 1
         return light
 
     def add_zone(
@@ -265,12 +226,13 @@ class WorldEdits:
         heading: float = 0.0,
         colour: str = "#c8e6c9",
     ) -> Zone:
-        self._check_new_id(ident)
+        s = self._state
+        s.check_new_id(ident)
         if not self._shape_inside(shape, x, y, heading):
             raise EditError(f"zone {ident} would stick out of the arena")
         zone = Zone(ident, kind, shape, x, y, heading, colour)
-        self.zones[ident] = zone
-        self.layout += 1
+        s.zones[ident] = zone
+        s.layout += 1
         return zone
 
     # -- agents ----------------------------------------------------------------------
@@ -288,79 +250,84 @@ class WorldEdits:
         defer_tables: bool = False,
     ) -> Agent:
         """Add a robot. ``defer_tables``: the caller adds many, then calls finish_agents()."""
-        self._check_new_id(ident)
+        s = self._state
+        s.check_new_id(ident)
         r = spec.radius_mm
         if not self._inside([(x, y)], r):
             raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would stick out of the arena")
-        hits = self.space.point_query((x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE))
+        hits = s.space.point_query((x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE))
         if hits:
             raise EditError(f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle")
-        self._serial += 1
+        s.serial += 1
         fitted = gripper and spec.gripper is not None
         agent = bodies.agent(
             ident,
             spec,
-            self._serial,
+            s.serial,
             x,
             y,
             heading,
             fitted,
-            joints=self.drive == "joints",
-            tongs_mask=self.tongs_mask,
+            joints=s.drive == "joints",
+            tongs_mask=s.tongs_mask,
         )
         agent.colour = colour or spec.colour
-        self.space.add(*agent.physics(tongs=self._tongs_in))
-        self.agents.append(agent)
-        self._agent_by_body[id_of(agent.body)] = agent
+        s.space.add(*agent.physics(tongs=s.tongs_in))
+        s.agents.append(agent)
+        s.agent_by_body[id_of(agent.body)] = agent
         arm = float(spec.gripper.arm_down) if spec.gripper else 0.0
-        self._append_agent_state((x, y, heading), arm)
-        self.homes[ident] = (float(x), float(y), float(heading))
+        s.append_agent_rows((x, y, heading), arm)
+        s.homes[ident] = (float(x), float(y), float(heading))
         if not defer_tables:
-            self._rebuild_tables()
-        self.layout += 1
+            s.rebuild_tables()
+        s.layout += 1
         return agent
 
     def finish_agents(self) -> None:
         """Rebuild the per-agent tables after add_agent(..., defer_tables=True)."""
-        self._rebuild_tables()
+        s = self._state
+        s.rebuild_tables()
 
     # -- generic edits ------------------------------------------------------------------
 
     def pose_of(self, ident: str) -> tuple[float, float, float]:
-        for slot, agent in enumerate(self.agents):
+        s = self._state
+        for slot, agent in enumerate(s.agents):
             if agent.id == ident:
-                x, y, h = self.agent_pose[slot]
+                x, y, h = s.agent_pose[slot]
                 return float(x), float(y), float(h)
-        for obj in self.objects:
+        for obj in s.objects:
             if obj.id == ident and obj.body is not None:
                 self._place_bodies()  # the discs drive moves objects in its arrays
                 return obj.body.position.x, obj.body.position.y, obj.body.angle
-        if ident in self.obstacles:
-            o = self.obstacles[ident]
+        if ident in s.obstacles:
+            o = s.obstacles[ident]
             return o.x, o.y, o.heading
-        if ident in self.zones:
-            z = self.zones[ident]
+        if ident in s.zones:
+            z = s.zones[ident]
             return z.x, z.y, z.heading
-        for light in self.lights:
+        for light in s.lights:
             if light.id == ident:
                 return light.x, light.y, 0.0
         raise EditError(f"no object named {ident!r} in this world")
 
     def shape_of(self, ident: str) -> ShapeSpec | None:
-        for agent in self.agents:
+        s = self._state
+        for agent in s.agents:
             if agent.id == ident:
                 return ShapeSpec.circle(agent.spec.radius_mm)
-        obj = self.find_object(ident)
+        obj = s.find_object(ident)
         if obj is not None:
             return obj.shape
-        if ident in self.obstacles:
-            return self.obstacles[ident].shape
-        if ident in self.zones:
-            return self.zones[ident].shape
+        if ident in s.obstacles:
+            return s.obstacles[ident].shape
+        if ident in s.zones:
+            return s.zones[ident].shape
         return None  # lights are points
 
     def move(self, ident: str, x: float, y: float, heading: float | None = None) -> None:
         """Move (and optionally rotate) anything; validated, undone if it breaks a rule."""
+        s = self._state
         old = self.pose_of(ident)  # an object's places the bodies first (discs drive)
         heading = old[2] if heading is None else heading
         shape = self.shape_of(ident)
@@ -368,36 +335,34 @@ class WorldEdits:
             raise EditError(f"{ident} would stick out of the arena at ({x:.0f}, {y:.0f})")
         if shape is None and not self._inside([(x, y)]):
             raise EditError(f"{ident} would be outside the arena at ({x:.0f}, {y:.0f})")
-        for light in self.lights:
+        for light in s.lights:
             if light.id == ident:
                 light.x, light.y = x, y
-                self.layout += 1
+                s.layout += 1
                 return
-        if ident in self.zones:
-            z = self.zones[ident]
+        if ident in s.zones:
+            z = s.zones[ident]
             z.x, z.y, z.heading = x, y, heading
-            self.layout += 1
+            s.layout += 1
             return
-        if ident in self.obstacles:
-            o = self.obstacles[ident]
+        if ident in s.obstacles:
+            o = s.obstacles[ident]
             assert o.body is not None
             o.body.position, o.body.angle = (x, y), heading
-            self.space.reindex_shapes_for_body(o.body)
+            s.space.reindex_shapes_for_body(o.body)
             overlapping = self._agents_touching(o.shapes)
             if overlapping:
                 o.body.position, o.body.angle = (o.x, o.y), o.heading
-                self.space.reindex_shapes_for_body(o.body)
+                s.space.reindex_shapes_for_body(o.body)
                 raise EditError(f"obstacle {ident} would overlap agent(s) {', '.join(overlapping)}")
             o.x, o.y, o.heading = x, y, heading
-            self.sensors.obstacles_changed()
-            self.layout += 1
+            s.sensors.obstacles_changed()
+            s.layout += 1
             return
-        for slot, agent in enumerate(self.agents):
+        for slot, agent in enumerate(s.agents):
             if agent.id == ident:
                 r = agent.spec.radius_mm
-                hits = self.space.point_query(
-                    (x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE)
-                )
+                hits = s.space.point_query((x, y), r - 0.5, pymunk.ShapeFilter(mask=CAT_OBSTACLE))
                 if hits:
                     raise EditError(
                         f"agent {ident} at ({x:.0f}, {y:.0f}) would overlap an obstacle"
@@ -407,34 +372,36 @@ class WorldEdits:
                         continue
                     b.position, b.angle = (x, y), heading
                     b.velocity, b.angular_velocity = (0, 0), 0.0
-                self.space.reindex_shapes_for_body(agent.body)
-                self.agent_pose[slot] = (x, y, heading)
-                self.layout += 1
+                s.space.reindex_shapes_for_body(agent.body)
+                s.agent_pose[slot] = (x, y, heading)
+                s.layout += 1
                 return
-        obj = self.find_object(ident)
+        obj = s.find_object(ident)
         if obj is not None and obj.body is not None:
             if obj.held_by is not None:
-                self.grippers.release(obj)
+                self._grippers.release(obj)
             old_pos, old_angle = obj.body.position, obj.body.angle
             obj.body.position, obj.body.angle = (x, y), heading
-            self.space.reindex_shapes_for_body(obj.body)
+            s.space.reindex_shapes_for_body(obj.body)
             if self._blocked(obj.shapes, CAT_OBSTACLE, obj.body):
                 obj.body.position, obj.body.angle = old_pos, old_angle
-                self.space.reindex_shapes_for_body(obj.body)
+                s.space.reindex_shapes_for_body(obj.body)
                 raise EditError(f"object {ident} would overlap an obstacle at ({x:.0f}, {y:.0f})")
             obj.body.velocity, obj.body.angular_velocity = (0, 0), 0.0
-            self.layout += 1
+            s.layout += 1
             return
         raise EditError(f"no object named {ident!r} in this world")
 
     def set_home(self, ident: str) -> None:
         """Make an agent's current pose its start pose (a map editor placed it)."""
-        if ident in self.homes:
-            self.homes[ident] = self.pose_of(ident)
+        s = self._state
+        if ident in s.homes:
+            s.homes[ident] = self.pose_of(ident)
 
     def reset_agent(self, ident: str) -> tuple[float, float, float]:
         """Put an agent back at its start pose, at rest; returns the pose."""
-        home = self.homes.get(ident)
+        s = self._state
+        home = s.homes.get(ident)
         if home is None:
             raise EditError(f"no agent named {ident!r} in this world")
         self.move(ident, *home)
@@ -445,35 +412,36 @@ class WorldEdits:
         self.move(ident, x, y, heading)
 
     def remove(self, ident: str) -> None:
-        if ident in self.obstacles:
-            o = self.obstacles.pop(ident)
+        s = self._state
+        if ident in s.obstacles:
+            o = s.obstacles.pop(ident)
             assert o.body is not None  # set when it was added to this world
-            self.space.remove(o.body, *o.shapes)
-            self.sensors.obstacles_changed()
-        elif ident in self.zones:
-            del self.zones[ident]
-        elif any(light.id == ident for light in self.lights):
-            self.lights = [light for light in self.lights if light.id != ident]
-        elif (obj := self.find_object(ident)) is not None:
+            s.space.remove(o.body, *o.shapes)
+            s.sensors.obstacles_changed()
+        elif ident in s.zones:
+            del s.zones[ident]
+        elif any(light.id == ident for light in s.lights):
+            s.lights = [light for light in s.lights if light.id != ident]
+        elif (obj := s.find_object(ident)) is not None:
             if obj.held_by is not None:
-                self.grippers.release(obj)
+                self._grippers.release(obj)
             assert obj.body is not None  # set when it was added to this world
-            self.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
-            self.objects.remove(obj)
-            self._object_by_body.pop(id_of(obj.body), None)
+            s.space.remove(obj.body, *obj.shapes, *obj.floor_joints)
+            s.objects.remove(obj)
+            s.object_by_body.pop(id_of(obj.body), None)
             self._sync_tongs()
         else:
             try:
-                slot = self.agent_slot(ident)
+                slot = s.agent_slot(ident)
             except KeyError:
                 raise EditError(f"no object named {ident!r} in this world") from None
-            agent = self.agents[slot]
+            agent = s.agents[slot]
             if agent.held is not None:
-                self.grippers.release(agent.held)
-            self.space.remove(*agent.physics(tongs=self._tongs_in))
-            del self.agents[slot]
-            self.homes.pop(ident, None)
-            self._agent_by_body.pop(id_of(agent.body), None)
-            self._delete_agent_state(slot)
-            self._rebuild_tables()
-        self.layout += 1
+                self._grippers.release(agent.held)
+            s.space.remove(*agent.physics(tongs=s.tongs_in))
+            del s.agents[slot]
+            s.homes.pop(ident, None)
+            s.agent_by_body.pop(id_of(agent.body), None)
+            s.delete_agent_rows(slot)
+            s.rebuild_tables()
+        s.layout += 1

@@ -208,7 +208,7 @@ class Touches:
     def new_contacts(self) -> list[tuple[str, str]]:
         if self.world.drive == "discs":
             # No chipmunk arbiters on that drive: the contacts are measured.
-            now = world_discs.touching(self.world, self.world.agents.index(self.agent))
+            now = world_discs.touching(self.world.state, self.world.agents.index(self.agent))
             new = sorted(now - self.touching)
             self.touching = now
             return new

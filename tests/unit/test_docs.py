@@ -151,3 +151,15 @@ def test_the_reference_pages_stay_short(name: str, max_lines: int, max_bytes: in
     if name != "BENCHMARKS.md":  # its tables carry whole commands on one row
         long = [n for n, line in enumerate(lines, 1) if len(line) > 300]
         assert not long, f"docs/{name}: lines over 300 characters: {long}"
+
+
+def test_the_source_tells_no_history() -> None:
+    """Docstrings and comments state contracts: which issue asked for a thing is git's."""
+    cited = [
+        f"{path.relative_to(REPO)}:{n}"
+        for folder in ("common", "services", "viewers")
+        for path in sorted((REPO / folder).rglob("*.py"))
+        for n, line in enumerate(path.read_text().splitlines(), 1)
+        if re.search(r"\bissues? \d{2}\b", line)
+    ]
+    assert not cited, "lines that cite an issue (say what holds instead):\n" + "\n".join(cited)

@@ -39,8 +39,10 @@ def _runs(n: int, ticks: int, balls: float, monkeypatch: pytest.MonkeyPatch) -> 
             digests.append(tick_digest(world))
         assert digests[1] == digests[0], f"fused, split: tick {t}"
         assert digests[2] == digests[0], f"general, split: tick {t}"
-    assert split._fused is not None and split._fused.split is not None, "the split drive ran"
-    assert serial._fused is not None and serial._fused.split is None
+    assert split.ticker.fused is not None and split.ticker.fused.split is not None, (
+        "the split drive ran"
+    )
+    assert serial.ticker.fused is not None and serial.ticker.fused.split is None
     assert not np.array_equal(serial.agent_pose, build(n, seed=3).agent_pose), "robots moved"
 
 
@@ -111,4 +113,4 @@ def test_edits_between_split_ticks_are_seen_as_by_the_serial_drive(
             world.step()
             digests.append(tick_digest(world))
         assert digests[1] == digests[0], f"tick {t}"
-    assert worlds[1]._fused is not None and worlds[1]._fused.split is not None
+    assert worlds[1].ticker.fused is not None and worlds[1].ticker.fused.split is not None

@@ -70,7 +70,7 @@ def _run_both(script: list[tuple[int, str]], ticks: int) -> None:
             world.step()
         for a, b in zip(_state(fast), _state(slow), strict=True):
             np.testing.assert_array_equal(a, b, err_msg=f"tick {t}")
-    assert fast._fused is not None, "the fused path ran"
+    assert fast.ticker.fused is not None, "the fused path ran"
 
 
 def test_the_fused_tick_runs_the_general_paths_run_bit_for_bit() -> None:
@@ -115,7 +115,7 @@ def test_a_swarm_on_two_threads_runs_the_one_thread_run_bit_for_bit() -> None:
         for a, b, c in zip(_state(one), _state(two), _state(general), strict=True):
             np.testing.assert_array_equal(a, b, err_msg=f"tick {t}")
             np.testing.assert_array_equal(a, c, err_msg=f"tick {t}")
-    assert one._fused is not None and two._fused is not None
+    assert one.ticker.fused is not None and two.ticker.fused is not None
 
 
 def test_a_world_switching_between_fused_and_general_ticks_runs_the_general_run() -> None:
