@@ -146,14 +146,15 @@ class AdminPanel:
         self.list_button.on_click(lambda _: self.refresh())
         self.add_button.on_click(lambda _: self._add())
         self.password_button.on_click(lambda _: self._set_password())
-        self.remove_button.on_click(lambda _: self._account_call(self.connection.remove_account))
-        self.unlock_button.on_click(lambda _: self._account_call(self.connection.unlock_logins))
-        self.grant_button.on_click(lambda _: self._grant(self.connection.grant))
-        self.ungrant_button.on_click(lambda _: self._grant(self.connection.ungrant))
+        admin = self.connection.admin
+        self.remove_button.on_click(lambda _: self._account_call(admin.remove_account))
+        self.unlock_button.on_click(lambda _: self._account_call(admin.unlock_logins))
+        self.grant_button.on_click(lambda _: self._grant(admin.grant))
+        self.ungrant_button.on_click(lambda _: self._grant(admin.ungrant))
         self.kick_button.on_click(lambda _: self._kick())
         self.rename_button.on_click(lambda _: self._rename())
         self.ban_button.on_click(lambda _: self._ban())
-        self.lift_button.on_click(lambda _: self._account_call(self.connection.lift_ban))
+        self.lift_button.on_click(lambda _: self._account_call(admin.lift_ban))
         self.audit_button.on_click(lambda _: self.show_audit())
 
     def say(self, text: str) -> None:
@@ -162,7 +163,7 @@ class AdminPanel:
 
     def refresh(self) -> None:
         try:
-            accounts = self.connection.list_accounts()
+            accounts = self.connection.admin.list_accounts()
         except LabError as exc:
             self.say(f"Could not list accounts: {exc}")
             return
@@ -200,13 +201,13 @@ class AdminPanel:
         password = self._take_password() if user else None
         if user and password:
             role = self.role.value
-            self._done(lambda: self.connection.add_account(user, password, (role,)))
+            self._done(lambda: self.connection.admin.add_account(user, password, (role,)))
 
     def _set_password(self) -> None:
         user = self._target()
         password = self._take_password() if user else None
         if user and password:
-            self._done(lambda: self.connection.set_password(user, password))
+            self._done(lambda: self.connection.admin.set_password(user, password))
 
     def _account_call(self, call: Callable[[str], str]) -> None:
         user = self._target()
@@ -228,14 +229,14 @@ class AdminPanel:
         user = self._target()
         reason = self.reason.value.strip()[:200]
         if user:
-            self._done(lambda: self.connection.kick_from_server(user, reason))
+            self._done(lambda: self.connection.admin.kick_from_server(user, reason))
 
     def _rename(self) -> None:
         name = self.server_name.value.strip()
         if not name or len(name) > MAX_SERVER_NAME or not name.isprintable():
             self.say(f"A server name is 1 to {MAX_SERVER_NAME} printable characters.")
             return
-        self._done(lambda: self.connection.rename_server(name))
+        self._done(lambda: self.connection.admin.rename_server(name))
 
     def _ban(self) -> None:
         user = self._target()
@@ -249,7 +250,7 @@ class AdminPanel:
         if isinstance(until, str):
             self.say(until)
             return
-        self._done(lambda: self.connection.ban(user, reason, until))
+        self._done(lambda: self.connection.admin.ban(user, reason, until))
 
     def show_audit(self) -> None:
         """The audit trail, filtered as typed (every filter checked before it is sent)."""
@@ -271,7 +272,7 @@ class AdminPanel:
             limit=AUDIT_PAGE,
         )
         try:
-            entries = self.connection.audit_trail(query)
+            entries = self.connection.admin.audit_trail(query)
         except LabError as exc:
             self.say(f"Could not read the audit trail: {exc}")
             return

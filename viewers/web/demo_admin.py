@@ -1,11 +1,12 @@
 """The demo lab's account administration: a user's admin calls on the in-memory lab.
 
-Split from demo_lab.py (a DemoConnection is a DemoAdmin): accounts, grants,
-kicks from the server, bans (none), the audit trail (none), the server's name.
+A part a DemoConnection holds (``connection.admin``): accounts, grants, kicks
+from the server, bans (none), the audit trail (none), the server's name.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from common.messages.audit import AuditEntry, AuditQuery
@@ -20,13 +21,12 @@ ADMIN = INSTRUCTOR | {"admin"}
 
 
 class DemoAdmin:
-    """The admin calls of a DemoConnection (its ``_lab``, ``_user`` and ``_need``)."""
+    """The admin calls of a DemoConnection: its user's, checked by its permission guard."""
 
-    _lab: DemoLab
-    _user: str
-
-    def _need(self, permission: str, doing: str) -> None:
-        raise NotImplementedError
+    def __init__(self, lab: DemoLab, user: str, need: Callable[[str, str], None]) -> None:
+        self._lab = lab
+        self._user = user
+        self._need = need
 
     def list_accounts(self) -> list[Account]:
         self._need("admin", "manage accounts")

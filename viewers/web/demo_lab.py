@@ -176,7 +176,7 @@ class DemoConnector:
         raise LoginError("this lab keeps no saved logins: log in with your password")
 
 
-class DemoConnection(DemoAdmin):
+class DemoConnection:
     """One user's session with a :class:`DemoLab`."""
 
     def __init__(self, lab: DemoLab, address: LabAddress, user: str, perms: frozenset[str]):
@@ -188,6 +188,11 @@ class DemoConnection(DemoAdmin):
         self._joined: set[str] = set()
         self.uploads: list[tuple[str, str, str, int]] = []  # ctx, agent, filename, size
         self.closed = False
+        self._admin = DemoAdmin(lab, user, self._need)
+
+    @property
+    def admin(self) -> DemoAdmin:
+        return self._admin
 
     @property
     def address(self) -> LabAddress:

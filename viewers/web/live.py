@@ -107,7 +107,7 @@ class _Events:
     next_id: int = 1
 
 
-class LiveConnection(LiveAdmin):
+class LiveConnection:
     """One browser user's session with one lab, over a :class:`LabClient`."""
 
     def __init__(
@@ -121,6 +121,7 @@ class LiveConnection(LiveAdmin):
         self.link = link
         self.client = client
         self._address = address
+        self._admin = LiveAdmin(client, self._call)
         session = client.session
         assert session is not None
         self._perms = frozenset(session.token.permissions)
@@ -168,6 +169,10 @@ class LiveConnection(LiveAdmin):
 
     def _may(self, permission: str, ctx: str) -> bool:
         return permission in self._perms or permission in self._grants.get(f"ctx/{ctx}", ())
+
+    @property
+    def admin(self) -> LiveAdmin:
+        return self._admin
 
     def _call(self, fn: Callable[[], Any]) -> Any:
         if self._closed.is_set():

@@ -1,7 +1,7 @@
 """A live connection's administration calls: accounts, grants, kicks, bans, the audit trail.
 
-Split from live.py (a LiveConnection is a LiveAdmin): each call goes to the
-registry through the user's LabClient, and its refusal comes back as a LabError.
+A part a LiveConnection holds (``connection.admin``): each call goes to the registry
+through the user's LabClient, and its refusal comes back as a LabError.
 """
 
 from __future__ import annotations
@@ -16,12 +16,11 @@ from viewers.web.adapters import Account
 
 
 class LiveAdmin:
-    """The admin calls of a LiveConnection (its ``client`` and ``_call``)."""
+    """The admin calls of a LiveConnection, through its client and its call guard."""
 
-    client: lab.LabClient
-
-    def _call(self, fn: Callable[[], Any]) -> Any:
-        raise NotImplementedError
+    def __init__(self, client: lab.LabClient, call: Callable[[Callable[[], Any]], Any]) -> None:
+        self.client = client
+        self._call = call
 
     def list_accounts(self) -> list[Account]:
         users = self._call(self.client.list_users)

@@ -122,7 +122,7 @@ class LabTab:
             self.my_password_said.content = "_Type your new password first._"
             return
         try:
-            self.connection.set_password(self.connection.user, password)
+            self.connection.admin.set_password(self.connection.user, password)
         except LabError as exc:
             self.my_password_said.content = f"_Refused: {escape_md(str(exc))}_"
             return
