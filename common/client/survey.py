@@ -17,8 +17,9 @@ from typing import Any
 import zenoh
 
 from common import keys
+from common.client.host_client import host_loads
 from common.keys import AliveKind
-from common.messages import HostLoad, LoadRequest, MessageError, decode, encode
+from common.messages import HostLoad
 
 
 @dataclass
@@ -87,20 +88,6 @@ def alive_by_kind(session: zenoh.Session, realm: str, timeout: float = 3.0) -> d
         if parsed is not None:
             alive.setdefault(parsed[0].value, []).append(parsed[1])
     return {kind: sorted(set(ids)) for kind, ids in sorted(alive.items())}
-
-
-def host_loads(session: zenoh.Session, realm: str, timeout: float = 3.0) -> list[HostLoad]:
-    loads = []
-    for reply in session.get(
-        keys.host_load_all(realm), payload=encode(LoadRequest()), timeout=timeout
-    ):
-        if reply.ok is None:
-            continue
-        try:
-            loads.append(decode(reply.ok.payload, HostLoad))
-        except MessageError:
-            continue
-    return sorted(loads, key=lambda load: load.host)
 
 
 @dataclass
