@@ -17,7 +17,7 @@ says what was asked for:
 A caller that tells its user something more precise ("is the registry
 running?") catches the one it words differently; the decoding and the mapping
 stay here. :func:`ask_all` is the companion for a key that many answer (every
-host's load).
+host's load), :func:`alive_keys` for the liveliness tokens alive under a key.
 """
 
 from __future__ import annotations
@@ -140,6 +140,16 @@ def ask_all(
         except MessageError:
             continue
     return found
+
+
+def alive_keys(session: zenoh.Session, key_expr: str, *, what: str, timeout: float) -> list[str]:
+    """The key expressions of the liveliness tokens alive now under ``key_expr`` (each
+    token answers for itself); QueryFailed if the query cannot be made."""
+    try:
+        replies = session.liveliness().get(key_expr, timeout=timeout)
+        return [str(reply.ok.key_expr) for reply in replies if reply.ok is not None]
+    except zenoh.ZError as exc:
+        raise QueryFailed(what, str(exc)) from None
 
 
 def _query(

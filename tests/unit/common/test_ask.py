@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 import pytest
 import zenoh
 
-from common.ask import NoReply, QueryFailed, WrongReply, ask, ask_all
+from common.ask import NoReply, QueryFailed, WrongReply, alive_keys, ask, ask_all
 from common.auth import AuthError, RegistryIdentity, Verifier, issue_session
 from common.lab_errors import LabError, NotAllowed, RequestFailed
 from common.messages import DirectoryRequest, ErrorReply, OkReply, decode, encode
@@ -173,3 +173,22 @@ def test_ask_all_gathers_every_repliers_answer(
         zsession, f"{realm}/host/*/load", DirectoryRequest(), OkReply, what="loads", timeout=3.0
     )
     assert sorted(r.detail for r in found) == ["h1", "h2"]
+
+
+def test_alive_keys_lists_the_live_tokens_and_a_closed_session_fails(
+    router: Router, zsession: zenoh.Session, replier: zenoh.Session, realm: str
+) -> None:
+    tokens = [replier.liveliness().declare_token(f"{realm}/alive/runner/{n}") for n in "ab"]
+    key = f"{realm}/alive/runner/*"
+
+    def alive() -> list[str]:
+        return sorted(alive_keys(zsession, key, what="runners", timeout=2.0))
+
+    wait_for(lambda: len(alive()) == 2, what="both tokens")
+    assert alive() == [f"{realm}/alive/runner/a", f"{realm}/alive/runner/b"]
+    for token in tokens:
+        token.undeclare()
+    closed = open_session(router.options(), wait=10.0)
+    close_session(closed)
+    with pytest.raises(QueryFailed, match=r"^runners: "):
+        alive_keys(closed, key, what="runners", timeout=1.0)
