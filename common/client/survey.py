@@ -17,6 +17,7 @@ from typing import Any
 import zenoh
 
 from common import keys
+from common.ask import alive_keys
 from common.client.host_client import host_loads
 from common.keys import AliveKind
 from common.messages import HostLoad
@@ -81,10 +82,8 @@ def router_views(raw: list[tuple[dict[str, Any], float]]) -> list[RouterView]:
 def alive_by_kind(session: zenoh.Session, realm: str, timeout: float = 3.0) -> dict[str, list[str]]:
     """Every live token of the realm, grouped by kind (``{"world": ["arena1"], ...}``)."""
     alive: dict[str, list[str]] = {}
-    for reply in session.liveliness().get(keys.alive_all(realm), timeout=timeout):
-        if reply.ok is None:
-            continue
-        parsed = keys.parse_alive(realm, str(reply.ok.key_expr))
+    for key in alive_keys(session, keys.alive_all(realm), what="live services", timeout=timeout):
+        parsed = keys.parse_alive(realm, key)
         if parsed is not None:
             alive.setdefault(parsed[0].value, []).append(parsed[1])
     return {kind: sorted(set(ids)) for kind, ids in sorted(alive.items())}
