@@ -22,7 +22,7 @@ from typing import TypeVar
 import zenoh
 
 from common import keys
-from common.ask import NoReply, QueryFailed, Seal, WrongReply, ask
+from common.ask import NoReply, QueryFailed, Seal, WrongReply, alive_keys, ask
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import (
@@ -83,15 +83,13 @@ class EpisodeRunner:
 
     def runners(self) -> list[str]:
         """The runners alive now (their liveliness tokens)."""
+        runners = keys.alive_of_kind(self.realm, AliveKind.RUNNER)
         try:
-            replies = self.session.liveliness().get(
-                keys.alive_of_kind(self.realm, AliveKind.RUNNER), timeout=2.0
-            )
-            names = sorted({str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok})
-        except Exception as exc:  # the session closing
+            found = alive_keys(self.session, runners, what="runners", timeout=2.0)
+        except LabError as exc:  # the session closing
             log.debug("no runner list: %s", exc)
             return []
-        return names
+        return sorted({key.rsplit("/", 1)[-1] for key in found})
 
     def _pick(self) -> str | None:
         deadline = time.monotonic() + self.runner_wait
