@@ -17,11 +17,13 @@ says what was asked for:
 A caller that tells its user something more precise ("is the registry
 running?") catches the one it words differently; the decoding and the mapping
 stay here. :func:`ask_all` is the companion for a key that many answer (every
-host's load), :func:`alive_keys` for the liveliness tokens alive under a key.
+host's load), :func:`admin_space` for the routers' admin space (JSON), and
+:func:`alive_keys` for the liveliness tokens alive under a key.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, TypeVar, overload
 
@@ -138,6 +140,22 @@ def ask_all(
         try:
             found.append(decode(answer, expected))
         except MessageError:
+            continue
+    return found
+
+
+def admin_space(
+    session: zenoh.Session, key: str, *, what: str, timeout: float
+) -> list[dict[str, Any]]:
+    """Every answer of the routers' admin space under ``key`` (JSON, not a lab message),
+    decoded; an answer that is not JSON is passed over. QueryFailed if the query cannot
+    be made."""
+    found = []
+    options = {"target": zenoh.QueryTarget.ALL, "consolidation": zenoh.ConsolidationMode.NONE}
+    for answer in _query(session, key, None, what, timeout, None, None, **options):
+        try:
+            found.append(json.loads(answer.to_bytes()))
+        except ValueError:
             continue
     return found
 

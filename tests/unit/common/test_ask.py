@@ -8,7 +8,8 @@ from collections.abc import Callable, Iterator
 import pytest
 import zenoh
 
-from common.ask import NoReply, QueryFailed, WrongReply, alive_keys, ask, ask_all
+from common import keys
+from common.ask import NoReply, QueryFailed, WrongReply, admin_space, alive_keys, ask, ask_all
 from common.auth import AuthError, RegistryIdentity, Verifier, issue_session
 from common.lab_errors import LabError, NotAllowed, RequestFailed
 from common.messages import DirectoryRequest, ErrorReply, OkReply, decode, encode
@@ -192,3 +193,10 @@ def test_alive_keys_lists_the_live_tokens_and_a_closed_session_fails(
     close_session(closed)
     with pytest.raises(QueryFailed, match=r"^runners: "):
         alive_keys(closed, key, what="runners", timeout=1.0)
+
+
+def test_admin_space_gives_the_routers_views(zsession: zenoh.Session) -> None:
+    views = admin_space(zsession, keys.routers_admin_all(), what="routers", timeout=3.0)
+    assert len(views) == 1 and views[0]["zid"]  # the test's one router
+    own = admin_space(zsession, keys.router_admin(views[0]["zid"]), what="router", timeout=3.0)
+    assert own and own[0]["locators"]
