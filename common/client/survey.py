@@ -8,7 +8,6 @@ access control may hide), liveliness tokens and the hosts' load reports.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -17,7 +16,7 @@ from typing import Any
 import zenoh
 
 from common import keys
-from common.ask import alive_keys
+from common.ask import admin_space, alive_keys
 from common.client.host_client import host_loads
 from common.keys import AliveKind
 from common.messages import HostLoad
@@ -34,25 +33,13 @@ class RouterView:
 
 def routers(session: zenoh.Session, timeout: float = 3.0) -> list[tuple[dict[str, Any], float]]:
     """The admin view of every router reachable from this session, with each one's RTT."""
-    found: list[dict[str, Any]] = []
-    for reply in session.get(
-        keys.routers_admin_all(),
-        timeout=timeout,
-        target=zenoh.QueryTarget.ALL,
-        consolidation=zenoh.ConsolidationMode.NONE,
-    ):
-        if reply.ok is None:
-            continue
-        try:
-            found.append(json.loads(reply.ok.payload.to_bytes()))
-        except ValueError:
-            continue
+    found = admin_space(session, keys.routers_admin_all(), what="routers", timeout=timeout)
     out = []
     for info in found:
         zid = str(info.get("zid", ""))
         started = time.monotonic()
-        answered = any(
-            r.ok is not None for r in session.get(keys.router_admin(zid), timeout=timeout)
+        answered = bool(
+            admin_space(session, keys.router_admin(zid), what=f"router {zid}", timeout=timeout)
         )
         rtt = (time.monotonic() - started) * 1000 if answered else float("nan")
         out.append((info, rtt))
