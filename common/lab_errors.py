@@ -86,8 +86,3 @@ def refusal(
         error = RequestFailed(text)
     error.reply = reply
     return error
-
-
-def raise_for(reply: ErrorReply, what: str) -> None:
-    """The LabError an ErrorReply stands for, raised, with ``what`` was asked for."""
-    raise refusal(reply, what)
