@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any, TypeVar, overload
+from typing import Any, TypeVar, cast
 
 import zenoh
 
@@ -59,44 +59,18 @@ class WrongReply(LabError):
     """An answer that is not of the type asked for (another message, or not a message)."""
 
 
-@overload
 def ask(
     session: zenoh.Session,
     key: str,
     request: Message | None,
-    expected: type[M],
+    expected: type[M] | tuple[type[M], ...],
     *,
     what: str,
     timeout: float,
     seal: Seal | None = None,
     source_info: zenoh.SourceInfo | None = None,
     kinds: Mapping[ErrorCode, type[LabError]] | None = None,
-) -> M: ...
-@overload
-def ask(
-    session: zenoh.Session,
-    key: str,
-    request: Message | None,
-    expected: tuple[type[Message], ...],
-    *,
-    what: str,
-    timeout: float,
-    seal: Seal | None = None,
-    source_info: zenoh.SourceInfo | None = None,
-    kinds: Mapping[ErrorCode, type[LabError]] | None = None,
-) -> Message: ...
-def ask(
-    session: zenoh.Session,
-    key: str,
-    request: Message | None,
-    expected: type[Message] | tuple[type[Message], ...],
-    *,
-    what: str,
-    timeout: float,
-    seal: Seal | None = None,
-    source_info: zenoh.SourceInfo | None = None,
-    kinds: Mapping[ErrorCode, type[LabError]] | None = None,
-) -> Message:
+) -> M:
     """Send ``request`` (None: an empty query) to ``key``; the answer, of an ``expected`` type.
 
     ``what`` names the request in the user's words ("join lobby"), for every
@@ -116,7 +90,7 @@ def ask(
             continue
         if isinstance(reply, ErrorReply):
             raise refusal(reply, what, kinds)
-        return reply
+        return cast("M", reply)  # the decoder allowed only ``expected`` besides ErrorReply
     if wrong is not None:
         raise WrongReply(f"{what}: the answer on {key} is not usable: {wrong}")
     raise NoReply(what, key, timeout)
