@@ -202,20 +202,6 @@ class LabClient(RoomCalls, RegistryAdminCalls):
 
     # -- queries
 
-    def _get(
-        self,
-        key: str,
-        payload: bytes,
-        what: str,
-        timeout: float | None = None,
-        *,
-        declare_source: bool = False,
-    ) -> list[Any]:
-        source_info = self._source_info(key) if declare_source else None
-        wait = timeout or self.timeout
-        replies = list(self.z.get(key, payload=payload, timeout=wait, source_info=source_info))
-        return [r.ok.payload for r in replies if r.ok is not None]
-
     def _source_info(self, key: str) -> zenoh.SourceInfo:
         """This session as the source of a query (the registry throttles failed logins by it).
 
@@ -425,7 +411,11 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         give_up = first + min(LOGIN_FIND_S, wait / 2)
         while True:
             started = time.monotonic()
-            answers = self._get(key, payload, "login", deadline - started, declare_source=True)
+            # Every answer, raw: _login_reply reads each to find the registry it trusts.
+            replies = self.z.get(
+                key, payload=payload, timeout=deadline - started, source_info=self._source_info(key)
+            )
+            answers = [r.ok.payload for r in replies if r.ok is not None]
             ended = time.monotonic()
             # Ended long before its time: routed to no registry, not unanswered by one.
             routed_nowhere = ended - started < (deadline - started) / 2
