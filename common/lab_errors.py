@@ -6,11 +6,17 @@ not found, registry unreachable, registry key mismatch).
 
 from __future__ import annotations
 
-from common.messages import ErrorReply
+from collections.abc import Mapping
+
+from common.messages import ErrorCode, ErrorReply
 
 
 class LabError(Exception):
     """Something the user should be told; ``str()`` is the message."""
+
+    # The service's refusal this error stands for, when it is one (see refusal()):
+    # a caller that words a refusal its own way reads the service's words here.
+    reply: ErrorReply | None = None
 
 
 class RegistryUnreachable(LabError):
@@ -55,15 +61,28 @@ class RequestFailed(LabError):
     pass
 
 
-def raise_for(reply: ErrorReply, what: str) -> None:
-    """The LabError an ErrorReply stands for, raised, with ``what`` was asked for."""
+def refusal(
+    reply: ErrorReply, what: str, kinds: Mapping[ErrorCode, type[LabError]] | None = None
+) -> LabError:
+    """The LabError an ErrorReply stands for, saying ``what`` was asked for.
+
+    ``kinds``: a caller's own error class for some codes (a host's "conflict" is
+    a name already taken), built from the same text.
+    """
     text = f"{what}: {reply.message}"
-    if reply.code == "forbidden":
-        raise NotAllowed(text)
-    if reply.code == "not_found":
-        raise NotFound(text)
-    if reply.code == "rate_limited":
-        raise RateLimited(text, reply.retry_after)
-    if reply.code == "unauthenticated":
-        raise NotLoggedIn(text)
-    raise RequestFailed(text)
+    error: LabError
+    kind = (kinds or {}).get(reply.code)
+    if kind is not None:
+        error = kind(text)
+    elif reply.code == "forbidden":
+        error = NotAllowed(text)
+    elif reply.code == "not_found":
+        error = NotFound(text)
+    elif reply.code == "rate_limited":
+        error = RateLimited(text, reply.retry_after)
+    elif reply.code == "unauthenticated":
+        error = NotLoggedIn(text)
+    else:
+        error = RequestFailed(text)
+    error.reply = reply
+    return error

@@ -18,7 +18,9 @@ import nacl.signing
 import zenoh
 
 from common import keys
+from common.ask import WrongReply, ask
 from common.auth import Verifier
+from common.lab_errors import LabError
 from common.messages import (
     MessageError,
     Revocation,
@@ -26,7 +28,6 @@ from common.messages import (
     RevocationsRequest,
     SignedRevocations,
     decode,
-    encode,
 )
 
 log = logging.getLogger("wart.revocations")
@@ -34,7 +35,11 @@ log = logging.getLogger("wart.revocations")
 
 def open_revocations(registry_key: bytes, payload: object) -> RevocationList:
     """The RevocationList in ``payload`` if the registry signed it; MessageError otherwise."""
-    signed = decode(payload, SignedRevocations)
+    return verified_revocations(registry_key, decode(payload, SignedRevocations))
+
+
+def verified_revocations(registry_key: bytes, signed: SignedRevocations) -> RevocationList:
+    """The RevocationList ``signed`` holds if the registry signed it; MessageError otherwise."""
     try:
         nacl.signing.VerifyKey(registry_key).verify(signed.body, signed.signature)
     except nacl.exceptions.BadSignatureError:
@@ -83,20 +88,20 @@ class RevocationFeed:
         delay = 0.2
         while not self._stop.is_set():
             try:
-                replies = self._session.get(
-                    self._key, payload=encode(RevocationsRequest()), timeout=3.0
+                signed = ask(
+                    self._session,
+                    self._key,
+                    RevocationsRequest(),
+                    SignedRevocations,
+                    what="revocations",
+                    timeout=3.0,
                 )
-                for reply in replies:
-                    if reply.ok is None:
-                        continue
-                    try:
-                        self._apply(open_revocations(self._registry_key, reply.ok.payload))
-                    except MessageError as exc:
-                        log.warning("ignored a revocation list: %s", exc)
-                        continue
-                    self.loaded.set()
-                    return
-            except Exception as exc:  # the session may be closing
+                self._apply(verified_revocations(self._registry_key, signed))
+                self.loaded.set()
+                return
+            except (MessageError, WrongReply) as exc:  # not the registry's, or not signed
+                log.warning("ignored a revocation list: %s", exc)
+            except LabError as exc:  # no registry yet, or the session closing
                 log.debug("revocation query failed: %s", exc)
             self._stop.wait(delay)
             delay = min(delay * 2, 5.0)

@@ -25,9 +25,10 @@ from typing import Literal
 import zenoh
 
 from common import keys
+from common.ask import NoReply, ask, ask_all
 from common.client.lab_client import LabClient
-from common.lab_errors import LabError, NotFound, RequestFailed, raise_for
-from common.messages import ErrorReply, MessageError, OkReply, decode, encode
+from common.lab_errors import LabError, NotFound, RequestFailed
+from common.messages import Message, OkReply
 from common.messages.host import (
     ArenaInfo,
     ArenaReply,
@@ -58,22 +59,10 @@ class NameTaken(RequestFailed):
 
 def host_loads(session: zenoh.Session, realm: str, timeout: float = 3.0) -> list[HostLoad]:
     """Every live host's current load (each host answers on its own load key)."""
-    loads: dict[str, HostLoad] = {}
-    replies = session.get(
-        keys.host_load_all(realm),
-        payload=encode(LoadRequest()),
-        timeout=timeout,
-        target=zenoh.QueryTarget.ALL,
-        consolidation=zenoh.ConsolidationMode.NONE,
+    answers = ask_all(
+        session, keys.host_load_all(realm), LoadRequest(), HostLoad, what="loads", timeout=timeout
     )
-    for reply in replies:
-        if reply.ok is None:
-            continue
-        try:
-            load = decode(reply.ok.payload, HostLoad)
-        except MessageError:
-            continue
-        loads[load.host] = load
+    loads = {load.host: load for load in answers}
     return sorted(loads.values(), key=lambda h: h.host)
 
 
@@ -121,24 +110,24 @@ def choose_room_host(loads: Sequence[HostLoad], wanted: str | None = None) -> Ho
     return min(ready, key=lambda h: (len(h.rooms) / h.max_rooms, h.cpu_percent, h.host))
 
 
-def _ask(client: LabClient, host: str, message: object, timeout: float) -> object:
+def _ask(client: LabClient, host: str, message: Message, timeout: float) -> Message:
     if client.session is None:
         raise HostError("log in first")
-    key = keys.host_spawn(client.realm, host)
-    payload = client.session.seal(key, message)  # type: ignore[arg-type]
-    replies = [r for r in client.z.get(key, payload=payload, timeout=timeout) if r.ok is not None]
-    if not replies:
-        raise HostError(f"host {host} did not answer: it went away or the network dropped it")
-    first = replies[0].ok
-    assert first is not None  # kept only replies with a sample
-    reply = decode(first.payload, (ArenaReply, RoomReply, OkReply, ErrorReply))
-    if isinstance(reply, ErrorReply):
-        if reply.code == "conflict":
-            raise NameTaken(f"host {host}: {reply.message}")
-        if reply.code == "unavailable":
-            raise HostError(f"host {host}: {reply.message}")
-        raise_for(reply, f"host {host}")
-    return reply
+    try:
+        return ask(
+            client.z,
+            keys.host_spawn(client.realm, host),
+            message,
+            (ArenaReply, RoomReply, OkReply),
+            what=f"host {host}",
+            timeout=timeout,
+            seal=client.session.seal,
+            kinds={"conflict": NameTaken, "unavailable": HostError},
+        )
+    except NoReply:
+        raise HostError(
+            f"host {host} did not answer: it went away or the network dropped it"
+        ) from None
 
 
 def host_arena(

@@ -32,6 +32,7 @@ import nacl.utils
 import zenoh
 
 from common import acl, keys, qos
+from common.ask import NoReply, ask
 from common.auth import (
     LOGIN_FIND_PAUSE_S,
     LOGIN_FIND_S,
@@ -64,7 +65,6 @@ from common.lab_errors import (
     RegistryUnreachable,
     RequestFailed,
     WrongCredentials,
-    raise_for,
 )
 from common.messages import (
     DirectoryReply,
@@ -202,20 +202,6 @@ class LabClient(RoomCalls, RegistryAdminCalls):
 
     # -- queries
 
-    def _get(
-        self,
-        key: str,
-        payload: bytes,
-        what: str,
-        timeout: float | None = None,
-        *,
-        declare_source: bool = False,
-    ) -> list[Any]:
-        source_info = self._source_info(key) if declare_source else None
-        wait = timeout or self.timeout
-        replies = list(self.z.get(key, payload=payload, timeout=wait, source_info=source_info))
-        return [r.ok.payload for r in replies if r.ok is not None]
-
     def _source_info(self, key: str) -> zenoh.SourceInfo:
         """This session as the source of a query (the registry throttles failed logins by it).
 
@@ -238,18 +224,23 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         not_found: str | None = None,
         timeout: float | None = None,
     ) -> M:
-        payload = self._seal(key, message) if signed else encode(message)
         # The registry records where admin requests come from (the audit trail).
         to_registry = key.startswith(keys.registry_all(self.realm)[:-2])
-        answers = self._get(key, payload, what, timeout, declare_source=to_registry)
-        if not answers:
+        try:
+            return ask(
+                self.z,
+                key,
+                message,
+                expected,
+                what=what,
+                timeout=timeout or self.timeout,
+                seal=self._seal if signed else None,
+                source_info=self._source_info(key) if to_registry else None,
+            )
+        except NoReply:
             if not_found is not None:
-                raise NotFound(not_found)
-            raise RegistryUnreachable(f"{what}: no answer (is the registry running?)")
-        reply = decode(answers[0], (expected, ErrorReply))
-        if isinstance(reply, ErrorReply):
-            raise_for(reply, what)
-        return reply  # type: ignore[return-value]
+                raise NotFound(not_found) from None
+            raise RegistryUnreachable(f"{what}: no answer (is the registry running?)") from None
 
     def request(
         self,
@@ -420,7 +411,11 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         give_up = first + min(LOGIN_FIND_S, wait / 2)
         while True:
             started = time.monotonic()
-            answers = self._get(key, payload, "login", deadline - started, declare_source=True)
+            # Every answer, raw: _login_reply reads each to find the registry it trusts.
+            replies = self.z.get(
+                key, payload=payload, timeout=deadline - started, source_info=self._source_info(key)
+            )
+            answers = [r.ok.payload for r in replies if r.ok is not None]
             ended = time.monotonic()
             # Ended long before its time: routed to no registry, not unanswered by one.
             routed_nowhere = ended - started < (deadline - started) / 2

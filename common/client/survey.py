@@ -8,7 +8,6 @@ access control may hide), liveliness tokens and the hosts' load reports.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -17,8 +16,10 @@ from typing import Any
 import zenoh
 
 from common import keys
+from common.ask import admin_space, alive_keys
+from common.client.host_client import host_loads
 from common.keys import AliveKind
-from common.messages import HostLoad, LoadRequest, MessageError, decode, encode
+from common.messages import HostLoad
 
 
 @dataclass
@@ -32,25 +33,13 @@ class RouterView:
 
 def routers(session: zenoh.Session, timeout: float = 3.0) -> list[tuple[dict[str, Any], float]]:
     """The admin view of every router reachable from this session, with each one's RTT."""
-    found: list[dict[str, Any]] = []
-    for reply in session.get(
-        keys.routers_admin_all(),
-        timeout=timeout,
-        target=zenoh.QueryTarget.ALL,
-        consolidation=zenoh.ConsolidationMode.NONE,
-    ):
-        if reply.ok is None:
-            continue
-        try:
-            found.append(json.loads(reply.ok.payload.to_bytes()))
-        except ValueError:
-            continue
+    found = admin_space(session, keys.routers_admin_all(), what="routers", timeout=timeout)
     out = []
     for info in found:
         zid = str(info.get("zid", ""))
         started = time.monotonic()
-        answered = any(
-            r.ok is not None for r in session.get(keys.router_admin(zid), timeout=timeout)
+        answered = bool(
+            admin_space(session, keys.router_admin(zid), what=f"router {zid}", timeout=timeout)
         )
         rtt = (time.monotonic() - started) * 1000 if answered else float("nan")
         out.append((info, rtt))
@@ -80,27 +69,11 @@ def router_views(raw: list[tuple[dict[str, Any], float]]) -> list[RouterView]:
 def alive_by_kind(session: zenoh.Session, realm: str, timeout: float = 3.0) -> dict[str, list[str]]:
     """Every live token of the realm, grouped by kind (``{"world": ["arena1"], ...}``)."""
     alive: dict[str, list[str]] = {}
-    for reply in session.liveliness().get(keys.alive_all(realm), timeout=timeout):
-        if reply.ok is None:
-            continue
-        parsed = keys.parse_alive(realm, str(reply.ok.key_expr))
+    for key in alive_keys(session, keys.alive_all(realm), what="live services", timeout=timeout):
+        parsed = keys.parse_alive(realm, key)
         if parsed is not None:
             alive.setdefault(parsed[0].value, []).append(parsed[1])
     return {kind: sorted(set(ids)) for kind, ids in sorted(alive.items())}
-
-
-def host_loads(session: zenoh.Session, realm: str, timeout: float = 3.0) -> list[HostLoad]:
-    loads = []
-    for reply in session.get(
-        keys.host_load_all(realm), payload=encode(LoadRequest()), timeout=timeout
-    ):
-        if reply.ok is None:
-            continue
-        try:
-            loads.append(decode(reply.ok.payload, HostLoad))
-        except MessageError:
-            continue
-    return sorted(loads, key=lambda load: load.host)
 
 
 @dataclass

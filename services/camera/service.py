@@ -25,16 +25,15 @@ import numpy as np
 import zenoh
 
 from common import keys
+from common.ask import ask
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import (
     CameraFrame,
     CameraStatus,
-    ErrorReply,
-    MessageError,
     TrackedPoses,
     TrackedRobot,
     WorldSnapshot,
-    decode,
     encode,
 )
 from common.messages.camera import MAX_FRAME_BYTES
@@ -368,19 +367,16 @@ class CameraService(Service):
 def world_snapshot(session: zenoh.Session, realm: str, world: str) -> WorldSnapshot | None:
     """The world's snapshot, or None when it does not answer within 2 s."""
     try:
-        replies = list(session.get(keys.world_snapshot(realm, world), timeout=2.0))
-    except Exception:
+        return ask(
+            session,
+            keys.world_snapshot(realm, world),
+            None,
+            WorldSnapshot,
+            what=f"world {world}",
+            timeout=2.0,
+        )
+    except LabError:
         return None
-    for reply in replies:
-        if reply.ok is None:
-            continue
-        try:
-            snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
-        except MessageError:
-            continue
-        if isinstance(snap, WorldSnapshot):
-            return snap
-    return None
 
 
 def _fit(frame: np.ndarray, max_width: int, max_height: int) -> np.ndarray:

@@ -33,6 +33,7 @@ from pathlib import Path
 import zenoh
 
 from common import cli, keys
+from common.ask import alive_keys
 from common.client.survey import router_views, routers, survey
 from common.keys import AliveKind
 from common.robots import registry
@@ -182,11 +183,7 @@ def diagnose(lab: LabFile, cert: str, say: Callable[[str], None] = print) -> Rep
                         f"{lab.host(other).endpoint}): check {host.name}'s router log"
                     )
         report.head("services (liveliness)")
-        live = {
-            str(r.ok.key_expr)
-            for r in session.liveliness().get(keys.alive_all(lab.realm), timeout=3.0)
-            if r.ok is not None
-        }
+        live = set(alive_keys(session, keys.alive_all(lab.realm), what="services", timeout=3.0))
         expected: set[str] = set()
         for host in lab.hosts:
             try:
@@ -272,11 +269,8 @@ def survey_main(options: NetworkOptions) -> int:
         lines = result.lines()
         problems = list(result.problems)
         if any(load_.host == up.HOST_NAME for load_ in result.hosts):
-            live = {
-                str(r.ok.key_expr)
-                for r in session.liveliness().get(keys.alive_all(options.realm), timeout=3.0)
-                if r.ok is not None
-            }
+            alive_all = keys.alive_all(options.realm)
+            live = set(alive_keys(session, alive_all, what="services", timeout=3.0))
             lines.append(f"services of the `wart up` lab (host {up.HOST_NAME}):")
             for what, key in up_plan(options):
                 if key in live:

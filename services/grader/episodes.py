@@ -16,26 +16,25 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import zenoh
 
 from common import keys
+from common.ask import NoReply, QueryFailed, Seal, WrongReply, alive_keys, ask
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import (
     STUDENT_CAUSES,
     Episode,
     EpisodeReport,
     EpisodeResult,
-    ErrorReply,
     GradeData,
     GradeResult,
     Heat,
     HeatReport,
     Message,
-    MessageError,
-    decode,
 )
 from services.grader.assignment import Assignment
 from services.grader.grading_db import Pending
@@ -45,7 +44,18 @@ log = logging.getLogger("wart.grader")
 
 LAB_RETRIES = 4
 RUNNER_WAIT_S = 30.0  # how long an episode waits for a runner to be alive
-Seal = Callable[[str, Message], bytes]
+M = TypeVar("M", bound=Message)
+
+
+def _in_words(runner: str, exc: LabError) -> str:
+    """Why a runner gave no report, as the lab's reports say it."""
+    if isinstance(exc, NoReply | WrongReply):
+        return f"runner {runner} did not answer (it stopped or died)"
+    if exc.reply is not None:
+        return f"runner {runner}: {exc.reply.message}"
+    if isinstance(exc, QueryFailed):
+        return f"runner {runner}: {exc.reason}"
+    return f"runner {runner}: {exc}"  # the grader's own session could not seal the request
 
 
 @dataclass(frozen=True)
@@ -73,15 +83,13 @@ class EpisodeRunner:
 
     def runners(self) -> list[str]:
         """The runners alive now (their liveliness tokens)."""
+        runners = keys.alive_of_kind(self.realm, AliveKind.RUNNER)
         try:
-            replies = self.session.liveliness().get(
-                keys.alive_of_kind(self.realm, AliveKind.RUNNER), timeout=2.0
-            )
-            names = sorted({str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok})
-        except Exception as exc:  # the session closing
+            found = alive_keys(self.session, runners, what="runners", timeout=2.0)
+        except LabError as exc:  # the session closing
             log.debug("no runner list: %s", exc)
             return []
-        return names
+        return sorted({key.rsplit("/", 1)[-1] for key in found})
 
     def _pick(self) -> str | None:
         deadline = time.monotonic() + self.runner_wait
@@ -104,21 +112,19 @@ class EpisodeRunner:
         if request.grader is not None:
             timeout += request.grader_seconds + 10.0
         try:
-            replies = list(self.session.get(key, payload=self.seal(key, request), timeout=timeout))
-        except Exception as exc:
-            return EpisodeReport(cause="lab", detail=f"runner {runner}: {exc}"[:256])
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                answer = decode(reply.ok.payload, (EpisodeReport, ErrorReply))
-            except MessageError:
-                continue
-            if isinstance(answer, ErrorReply):
-                return EpisodeReport(cause="lab", detail=f"runner {runner}: {answer.message}"[:256])
-            return answer
-        return EpisodeReport(
-            cause="lab", detail=f"runner {runner} did not answer (it stopped or died)"
+            return self._ask(runner, key, request, EpisodeReport, timeout)
+        except LabError as exc:
+            return EpisodeReport(cause="lab", detail=_in_words(runner, exc)[:256])
+
+    def _ask(self, runner: str, key: str, request: Message, expected: type[M], timeout: float) -> M:
+        return ask(
+            self.session,
+            key,
+            request,
+            expected,
+            what=f"runner {runner}",
+            timeout=timeout,
+            seal=self.seal,
         )
 
     def heat(self, request: Heat) -> HeatReport:
@@ -134,26 +140,13 @@ class EpisodeRunner:
             key = keys.runner_heat(self.realm, runner)
             timeout = 15.0 + 1.5 * request.seconds + 10.0 + 3.0 * len(request.entries)
             try:
-                replies = list(
-                    self.session.get(key, payload=self.seal(key, request), timeout=timeout)
-                )
-            except Exception as exc:
-                detail = f"runner {runner}: {exc}"
+                answer = self._ask(runner, key, request, HeatReport, timeout)
+            except LabError as exc:
+                detail = _in_words(runner, exc)
                 continue
-            detail = f"runner {runner} did not answer (it stopped or died)"
-            for reply in replies:
-                if reply.ok is None:
-                    continue
-                try:
-                    answer = decode(reply.ok.payload, (HeatReport, ErrorReply))
-                except MessageError:
-                    continue
-                if isinstance(answer, ErrorReply):
-                    detail = f"runner {runner}: {answer.message}"
-                elif all(r.cause != "lab" for r in answer.entries):
-                    return answer
-                else:
-                    detail = answer.entries[0].detail
+            if all(r.cause != "lab" for r in answer.entries):
+                return answer
+            detail = answer.entries[0].detail
             if self._stop.is_set():
                 break
         lab = EpisodeReport(cause="lab", detail=detail[:256])
@@ -175,24 +168,15 @@ class EpisodeRunner:
                 break
             key = keys.runner_grade(self.realm, runner)
             try:
-                replies = list(
-                    self.session.get(
-                        key, payload=self.seal(key, request), timeout=a.grader_seconds + 30.0
-                    )
-                )
-            except Exception as exc:
-                problem = f"runner {runner}: {exc}"
-                continue
-            for reply in replies:
-                if reply.ok is None:
-                    continue
-                try:
-                    answer = decode(reply.ok.payload, (GradeResult, ErrorReply))
-                except MessageError:
-                    continue
-                if isinstance(answer, GradeResult):
-                    return answer.metrics, answer.error, answer.line
-                problem = f"runner {runner}: {answer.message}"
+                answer = self._ask(runner, key, request, GradeResult, a.grader_seconds + 30.0)
+                return answer.metrics, answer.error, answer.line
+            except (NoReply, WrongReply):
+                pass  # the problem said stays the last one known
+            except QueryFailed as exc:
+                problem = _in_words(runner, exc)
+                continue  # asked again at once
+            except LabError as exc:
+                problem = _in_words(runner, exc)
             self._stop.wait(1.0)
         raise RuntimeError(f"the grader function could not run: {problem}")
 

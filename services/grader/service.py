@@ -30,6 +30,7 @@ from typing import cast
 import zenoh
 
 from common import keys, qos
+from common.ask import alive_keys
 from common.auth import Principal, Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
@@ -40,6 +41,7 @@ from common.keys import (
     grader_request,
     grader_standings,
 )
+from common.lab_errors import LabError
 from common.messages import (
     PSEUDONYM_PATTERN,
     AssignmentInfo,
@@ -353,12 +355,10 @@ class GraderService(Service):
         )
 
     def _arena_alive(self, arena: str) -> bool:
+        key = keys.alive(self.realm, AliveKind.CONTEXT, arena)
         try:
-            replies = self.session.liveliness().get(
-                keys.alive(self.realm, AliveKind.CONTEXT, arena), timeout=2.0
-            )
-            return any(r.ok is not None for r in replies)
-        except Exception as exc:  # the session closing
+            return bool(alive_keys(self.session, key, what=f"arena {arena}", timeout=2.0))
+        except LabError as exc:  # the session closing
             self.log.debug("no arena list: %s", exc)
             return False
 

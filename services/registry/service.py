@@ -23,6 +23,7 @@ import nacl.signing
 import zenoh
 
 from common import acl, keys, qos
+from common.ask import ask
 from common.auth import (
     LOGIN_WAIT_S,
     AuthError,
@@ -35,6 +36,7 @@ from common.auth import (
     new_session_id,
 )
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import (
     ContextInfo,
     ContextInfoRequest,
@@ -437,14 +439,16 @@ class Registry(Service):
     def _ask_context(self, ctx: str) -> ContextInfo | None:
         key = keys.ctx_state(self.realm, ctx)
         try:
-            payload = self.own_session().seal(key, ContextInfoRequest())
-            for reply in self.session.get(key, payload=payload, timeout=1.0):
-                if reply.ok is not None:
-                    try:
-                        return decode(reply.ok.payload, ContextInfo)
-                    except MessageError:
-                        continue
-        except Exception as exc:  # the session may be closing
+            return ask(
+                self.session,
+                key,
+                ContextInfoRequest(),
+                ContextInfo,
+                what=f"context {ctx}",
+                timeout=1.0,
+                seal=self.own_session().seal,
+            )
+        except LabError as exc:  # not answering, refusing, or the session closing
             log.debug("context %s did not answer: %s", ctx, exc)
         return None
 

@@ -8,10 +8,10 @@ interfaces: ``wart router --listen tcp/0.0.0.0:7447``.
 
 from __future__ import annotations
 
-import json
 import socket
 
 from common import keys
+from common.ask import admin_space
 from common.keys import AliveKind, is_ident
 from common.service import Service
 
@@ -24,10 +24,8 @@ class Router(Service):
     def locators(self) -> list[str]:
         """The endpoints this router actually listens on (port 0 resolved)."""
         zid = str(self.session.zid())
-        for reply in self.session.get(keys.router_admin(zid), timeout=2.0):
-            if reply.ok is not None:
-                info = json.loads(reply.ok.payload.to_bytes())
-                return [str(loc) for loc in info.get("locators", [])]
+        for info in admin_space(self.session, keys.router_admin(zid), what="router", timeout=2.0):
+            return [str(loc) for loc in info.get("locators", [])]
         return []
 
 

@@ -46,23 +46,23 @@ import time
 import zenoh
 
 from common import keys, qos
+from common.ask import QueryFailed, ask
 from common.auth import Verifier
 from common.client.service_login import ServiceLogin
 from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import (
     MAX_OUTPUT_LINE,
     ControllerOutput,
     DryRun,
     Episode,
     EpisodeReport,
-    ErrorReply,
     GradeData,
     GradeResult,
     Heat,
     HeatReport,
     Message,
-    MessageError,
     OkReply,
     RunAccepted,
     RunCheck,
@@ -71,7 +71,6 @@ from common.messages import (
     RunRequest,
     RunStop,
     WorldSnapshot,
-    decode,
 )
 from common.service import RequestError, Service
 from common.sim2d.maps import MapError
@@ -459,19 +458,22 @@ class RunnerService(Service):
     def _snapshot(self, world: str) -> WorldSnapshot:
         """The world's public snapshot: the arena a dry run copies."""
         try:
-            replies = list(self.session.get(keys.world_snapshot(self.realm, world), timeout=3.0))
-        except Exception as exc:
-            raise RequestError("unavailable", f"world {world} did not answer: {exc}") from None
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
-            except MessageError:
-                continue
-            if isinstance(snap, WorldSnapshot):
-                return snap
-        raise RequestError("unavailable", f"world {world} did not answer with its snapshot")
+            return ask(
+                self.session,
+                keys.world_snapshot(self.realm, world),
+                None,
+                WorldSnapshot,
+                what=f"world {world}",
+                timeout=3.0,
+            )
+        except QueryFailed as exc:
+            raise RequestError(
+                "unavailable", f"world {world} did not answer: {exc.reason}"
+            ) from None
+        except LabError:  # silent, refused, or not a snapshot
+            raise RequestError(
+                "unavailable", f"world {world} did not answer with its snapshot"
+            ) from None
 
     def _start(self, request: RunRequest) -> Message:
         now = time.time()

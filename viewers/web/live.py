@@ -20,9 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-import zenoh
-
 from common import keys, lab_errors
+from common.ask import alive_keys
 from common.client import host_client
 from common.client import lab_client as lab
 from common.client.grader_client import GraderClient, submitted_words
@@ -283,17 +282,19 @@ class LiveConnection:
         worlds: set[str] = set()
         realm = self._address.realm
         try:
-            replies = self.link.session.liveliness().get(
-                keys.alive_of_kind(realm, AliveKind.WORLD), timeout=2.0
+            found = alive_keys(
+                self.link.session,
+                keys.alive_of_kind(realm, AliveKind.WORLD),
+                what="worlds",
+                timeout=2.0,
             )
-            for reply in replies:
-                if reply.ok is None:
-                    continue
-                parsed = keys.parse_alive(realm, str(reply.ok.key_expr))
-                if parsed is not None:
-                    worlds.add(parsed[1])
-        except zenoh.ZError as exc:
+        except LabError as exc:
             log.debug("listing worlds: %s", exc)
+            return worlds
+        for key in found:
+            parsed = keys.parse_alive(realm, key)
+            if parsed is not None:
+                worlds.add(parsed[1])
         return worlds
 
     def join(self, ctx: str) -> JoinedContext:

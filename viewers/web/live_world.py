@@ -13,18 +13,18 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 import zenoh
 
 from common import keys
+from common.ask import ask
 from common.keys import is_ident
 from common.messages import (
     AddItem,
     AgentStates,
     EditResult,
-    ErrorReply,
     MapRequest,
     Message,
     MessageError,
@@ -61,6 +61,8 @@ if TYPE_CHECKING:  # the connection makes a UserWorld; only its type is needed h
 log = logging.getLogger("wart.viewer.live")
 
 QUERY_TIMEOUT = 5.0
+DOES_NOT_ANSWER = "the world {world} does not answer (is its engine running?)"
+M = TypeVar("M", bound=Message)
 SENSOR_IDLE_S = 5.0  # a robot's sensor subscription ends when nobody asked for it this long
 
 
@@ -179,18 +181,19 @@ class WorldWatch:
                 time.sleep(0.5)  # a world restarting: do not hammer it
 
     def refetch(self) -> None:
-        reply = None
-        for answer in self.session.get(
-            keys.world_snapshot(self.realm, self.world), timeout=QUERY_TIMEOUT
-        ):
-            if answer.ok is not None:
-                reply = _decode(answer.ok.payload, (WorldSnapshot, ErrorReply))
-                break
-        if reply is None:
-            raise LabError(f"the world {self.world} does not answer (is its engine running?)")
-        if isinstance(reply, ErrorReply):
-            raise LabError(f"the world {self.world}: {reply.message}")
-        assert isinstance(reply, WorldSnapshot)
+        try:
+            reply = ask(
+                self.session,
+                keys.world_snapshot(self.realm, self.world),
+                None,
+                WorldSnapshot,
+                what=f"the world {self.world}",
+                timeout=QUERY_TIMEOUT,
+            )
+        except LabError as exc:
+            if exc.reply is None:
+                raise LabError(DOES_NOT_ANSWER.format(world=self.world)) from None
+            raise LabError(str(exc)) from None  # "the world w: its words"
         view, object_rows = convert_snapshot(reply)
         with self._lock:
             self._snapshot = view
@@ -347,28 +350,42 @@ class UserWorld:
     def _ask(
         self, key: str, message: Message, what: str, *, needs_edit_map: bool = True
     ) -> EditResult:
-        client = self._connection.client
         if needs_edit_map and "edit_map" not in self._connection.permissions:
             raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
-        session = client.session
-        if session is None:
-            raise LabError("you are logged out of this lab")
-        reply = None
-        for answer in self.source.session.get(
-            key, payload=session.seal(key, message), timeout=QUERY_TIMEOUT
-        ):
-            if answer.ok is not None:
-                reply = _decode(answer.ok.payload, (EditResult, ErrorReply))
-                break
-        if reply is None:
-            raise LabError(f"the world {self.world} does not answer (is its engine running?)")
-        if isinstance(reply, ErrorReply):
-            if reply.code == "forbidden" and needs_edit_map:
-                raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
-            raise LabError(reply.message)
-        assert isinstance(reply, EditResult)
+        reply = self._ask_world(key, message, EditResult, what, edit_map_refusal=needs_edit_map)
         self.source._want.set()  # show the result at once, not at the next frame
         return reply
+
+    def _ask_world(
+        self,
+        key: str,
+        message: Message,
+        expected: type[M],
+        what: str,
+        *,
+        edit_map_refusal: bool = True,
+    ) -> M:
+        """The world's answer to ``message`` sealed with my session, or a LabError in my
+        words; ``edit_map_refusal``: a refusal means I lack 'edit_map'."""
+        session = self._connection.client.session
+        if session is None:
+            raise LabError("you are logged out of this lab")
+        try:
+            return ask(
+                self.source.session,
+                key,
+                message,
+                expected,
+                what=what,
+                timeout=QUERY_TIMEOUT,
+                seal=session.seal,
+            )
+        except LabError as exc:
+            if exc.reply is None:
+                raise LabError(DOES_NOT_ANSWER.format(world=self.world)) from None
+            if exc.reply.code == "forbidden" and edit_map_refusal:
+                raise LabError(f"you may not {what}: it needs the 'edit_map' permission") from None
+            raise LabError(exc.reply.message) from None
 
     def edit(self, edit: MapEdit) -> None:
         self._ask(
@@ -406,22 +423,8 @@ class UserWorld:
     # -- robot types (the robot builder; docs/ROBOTS.md)
 
     def _robots(self, request: RobotTypeRequest, what: str) -> RobotTypeReply:
-        session = self._connection.client.session
-        if session is None:
-            raise LabError("you are logged out of this lab")
         key = keys.world_robots(self.source.realm, self.world)
-        for answer in self.source.session.get(
-            key, payload=session.seal(key, request), timeout=QUERY_TIMEOUT
-        ):
-            if answer.ok is not None:
-                reply = _decode(answer.ok.payload, (RobotTypeReply, ErrorReply))
-                if isinstance(reply, ErrorReply):
-                    if reply.code == "forbidden":
-                        raise LabError(f"you may not {what}: it needs the 'edit_map' permission")
-                    raise LabError(reply.message)
-                assert isinstance(reply, RobotTypeReply)
-                return reply
-        raise LabError(f"the world {self.world} does not answer (is its engine running?)")
+        return self._ask_world(key, request, RobotTypeReply, what)
 
     def robot_types(self) -> RobotTypeReply:
         return self._robots(RobotTypeRequest(action="list"), "list robot types")
