@@ -24,10 +24,10 @@ from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.conftest import ARTIFACTS, free_port
 from viewers.web import geometry as geo
-from viewers.web.adapters import SceneFrame
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
 from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
+from viewers.web.world_feed import SceneFrame
 from viewers.web.world_view import WorldView
 
 CHROMIUM = Path("/usr/bin/chromium")

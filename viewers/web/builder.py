@@ -22,9 +22,10 @@ from common.robots.robotfile import RobotFileError, parse
 from common.robots.schema import show_value
 from common.sim2d.specs import AgentTypeSpec
 from viewers.web import geometry as geo
-from viewers.web.adapters import LabError, WorldFeed
+from viewers.web.adapters import LabError
 from viewers.web.inputs import set_value
 from viewers.web.text import escape_md
+from viewers.web.world_feed import WorldFeed
 
 REFUSED = "Building robot types needs the 'edit_map' permission."
 # The drawing's colours by component role: the body dark, IR rays red, light sensors

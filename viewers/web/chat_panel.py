@@ -19,7 +19,6 @@ from viewers.web.adapters import (
     LabConnection,
     LabError,
     MemberEvent,
-    WorldFeed,
 )
 from viewers.web.builder import RobotBuilder
 from viewers.web.class_panel import ClassPanel
@@ -32,6 +31,7 @@ from viewers.web.robot_panel import RobotPanel
 from viewers.web.tabs import tab_title
 from viewers.web.text import check_line, clock, escape_md
 from viewers.web.workbench import Workbench
+from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.chat")

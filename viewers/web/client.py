@@ -19,7 +19,7 @@ from common.client.lab_address import (
     parse_address,
 )
 from common.client.resume_cookie import SavedLogin, parse_cookies
-from viewers.web.adapters import LabConnection, LabConnector, LoginError, WorldFeed
+from viewers.web.adapters import LabConnection, LabConnector, LoginError
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.inputs import set_value
@@ -32,6 +32,7 @@ from viewers.web.sure_clicks import add_sure_clicks
 from viewers.web.tabs import TabSwitcher, tab_title
 from viewers.web.text import escape_md
 from viewers.web.viser_fast import browser_address, browser_cookies
+from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.client")

@@ -17,9 +17,9 @@ import numpy as np
 from common.keys import is_ident
 from common.messages import RobotTypeInfo, RobotTypeReply
 from common.robots import registry
-from viewers.web.adapters import (
+from viewers.web.adapters import LabError
+from viewers.web.world_feed import (
     Ball,
-    LabError,
     Light,
     MapEdit,
     Obstacle,

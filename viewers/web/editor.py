@@ -22,9 +22,10 @@ import viser
 
 from common.keys import is_ident
 from viewers.web import geometry as geo
-from viewers.web.adapters import LabError, MapEdit, WorldFeed
+from viewers.web.adapters import LabError
 from viewers.web.inputs import set_value
 from viewers.web.text import escape_md
+from viewers.web.world_feed import MapEdit, WorldFeed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.editor")

@@ -42,9 +42,10 @@ from common.messages import (
 )
 from common.messages.world import MAX_ROBOT_FILE_BYTES
 from viewers.web import geometry as geo
-from viewers.web.adapters import (
+from viewers.web.adapters import LabError
+from viewers.web.arena_video import CameraFeed
+from viewers.web.world_feed import (
     Ball,
-    LabError,
     Light,
     MapEdit,
     Obstacle,
@@ -52,7 +53,6 @@ from viewers.web.adapters import (
     SceneFrame,
     SceneLayout,
 )
-from viewers.web.arena_video import CameraFeed
 from viewers.web.world_view import OFFLINE
 
 if TYPE_CHECKING:  # the connection makes a UserWorld; only its type is needed here

@@ -28,7 +28,6 @@ from viewers.web.adapters import (
     OutputEvent,
     PrivateEvent,
     RequestEvent,
-    WorldFeed,
 )
 from viewers.web.admin_panel import AdminPanel
 from viewers.web.chat_panel import ChatPanel
@@ -39,6 +38,7 @@ from viewers.web.network_panel import NetworkPanel
 from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
 from viewers.web.workbench import Workbench
+from viewers.web.world_feed import WorldFeed
 
 log = logging.getLogger("wart.viewer.lobby")
 

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
-from viewers.web.adapters import SceneLayout
+from viewers.web.world_feed import SceneLayout
 
 
 class SelectedLook:

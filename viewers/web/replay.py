@@ -28,12 +28,13 @@ from common.messages import RobotTypeReply, WorldSnapshot
 from common.recording import RecordingError, read_recording
 from common.recording.reader import Recording
 from common.recording.replay import SPEEDS, Player, Timeline
-from viewers.web.adapters import LabError, MapEdit, RobotReadings, SceneFrame, SceneLayout
+from viewers.web.adapters import LabError
 from viewers.web.arena_video import ArenaVideo, RecordedCamera
 from viewers.web.inputs import set_value
 from viewers.web.live_world import convert_snapshot
 from viewers.web.pump import FramePump
 from viewers.web.text import escape_md, output_html, printed
+from viewers.web.world_feed import MapEdit, RobotReadings, SceneFrame, SceneLayout
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.replay")

@@ -32,11 +32,11 @@ from viewers.web.adapters import (
     LabError,
     OutputEvent,
     RequestEvent,
-    WorldFeed,
 )
 from viewers.web.inputs import set_value
 from viewers.web.live_agents import check_upload
 from viewers.web.text import escape_md, output_html, printed
+from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.robots")

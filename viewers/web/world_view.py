@@ -27,9 +27,9 @@ import numpy.typing as npt
 import viser
 
 from viewers.web import geometry as geo
-from viewers.web.adapters import SceneFrame, SceneLayout, WorldFeed
 from viewers.web.look import SelectedLook
 from viewers.web.viser_fast import set_shared_arrays
+from viewers.web.world_feed import SceneFrame, SceneLayout, WorldFeed
 
 log = logging.getLogger("wart.viewer.world")
 

@@ -23,11 +23,12 @@ from common.messages import (
     ShapeInfo,
     WorldSnapshot,
 )
-from viewers.web.adapters import AgentStatus, ArenaSettings, LabError, MapEdit
+from viewers.web.adapters import AgentStatus, ArenaSettings, LabError
 from viewers.web.lab_links import load_labs
 from viewers.web.live_agents import agent_rows
 from viewers.web.live_world import convert_snapshot, to_wire_edit
 from viewers.web.robot_panel import format_agents
+from viewers.web.world_feed import MapEdit
 
 KEY = "11" * 32
 

@@ -11,12 +11,13 @@ from common.client.lab_address import LabAddress
 from common.messages.agent import MAX_UPLOAD_BYTES
 from tests.conftest import REPO
 from viewers.web import geometry as geo
-from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError, MapEdit
+from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError
 from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
 from viewers.web.live_agents import check_upload
 from viewers.web.login import check_login_input
 from viewers.web.robot_panel import check_controller, format_agents
 from viewers.web.text import check_line, escape_md
+from viewers.web.world_feed import MapEdit
 from viewers.web.world_view import PreparedFrame
 
 

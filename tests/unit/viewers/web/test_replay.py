@@ -11,8 +11,9 @@ from common.recording import read_recording
 from common.recording.replay import Player, Timeline
 from tests.conftest import free_port
 from tests.unit.common.test_recording import _record
-from viewers.web.adapters import LabError, MapEdit
+from viewers.web.adapters import LabError
 from viewers.web.replay import ReplayFeed, ReplayServer, main
+from viewers.web.world_feed import MapEdit
 
 
 def test_help_and_a_bad_file_say_what_is_wrong(
