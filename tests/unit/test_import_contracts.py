@@ -330,3 +330,67 @@ def test_imports_inside_functions_say_why() -> None:
         for place in _unexplained_inner_imports(path)
     ]
     assert not found, "imports inside functions without a comment saying why:\n" + "\n".join(found)
+
+
+def _declared_elsewhere(path: Path, root: Path = REPO) -> list[str]:
+    """Fields a mixin (a class of no base and no constructor) declares but never sets:
+    another class's state, read through ``self`` (bare annotations, or ``if TYPE_CHECKING:``
+    ones). A dataclass declares fields its decorator sets: not flagged."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(node, ast.ClassDef) or node.decorator_list:
+            continue
+        if node.bases or node.keywords:
+            continue  # a subclass: what it declares and leaves is its base's contract
+        if any(isinstance(s, ast.FunctionDef) and s.name == "__init__" for s in node.body):
+            continue  # a class with a constructor: what it declares and leaves is its contract
+        body = list(node.body)
+        for statement in node.body:
+            if isinstance(statement, ast.If) and "TYPE_CHECKING" in ast.unparse(statement.test):
+                body += statement.body
+        declared = {
+            ast.unparse(s.target) for s in body if isinstance(s, ast.AnnAssign) and s.value is None
+        }
+        assigned = {
+            target.attr
+            for sub in ast.walk(node)
+            if isinstance(sub, ast.Assign | ast.AnnAssign | ast.AugAssign)
+            for target in (sub.targets if isinstance(sub, ast.Assign) else [sub.target])
+            if isinstance(target, ast.Attribute) and ast.unparse(target.value) == "self"
+        }
+        if foreign := sorted(declared - assigned):
+            found.append(f"{path.relative_to(root)}: {node.name} declares {foreign}")
+    return found
+
+
+# Mixins still to be made parts of their class (LabClient's rooms and admin calls; its
+# public methods stay, so the parts need LabClient room for their delegations first).
+# A ratchet: the list only shrinks.
+STILL_MIXED = {
+    "common/client/rooms.py: RoomCalls",
+    "common/client/registry_admin.py: RegistryAdminCalls",
+}
+
+
+def test_a_class_declares_no_state_of_another_class() -> None:
+    """A class owns its state: no mixin declares the fields of the class it is mixed into."""
+    found = [
+        place
+        for top in PROJECT
+        for path in sorted((REPO / top).rglob("*.py"))
+        for place in _declared_elsewhere(path)
+    ]
+    new = [f for f in found if f.split(" declares ")[0] not in STILL_MIXED]
+    assert not new, "state declared away from its class:\n" + "\n".join(new)
+    gone = STILL_MIXED - {f.split(" declares ")[0] for f in found}
+    assert not gone, f"no longer mixins: remove them from STILL_MIXED: {sorted(gone)}"
+
+
+def test_the_mixin_check_sees_a_mixin(tmp_path: Path) -> None:
+    source = tmp_path / "m.py"
+    source.write_text(
+        "class Part:\n    world: object\n    def f(self):\n        return self.world\n"
+        "class Owned:\n    n: int\n    def set(self):\n        self.n = 1\n"
+    )
+    found = [line.split(": ", 1)[1] for line in _declared_elsewhere(source, tmp_path)]
+    assert found == ["Part declares ['world']"]
