@@ -32,7 +32,7 @@ import nacl.utils
 import zenoh
 
 from common import acl, keys, qos
-from common.ask import NoReply, ask
+from common.ask import NoReply, QueryFailed, ask
 from common.auth import (
     LOGIN_FIND_PAUSE_S,
     LOGIN_FIND_S,
@@ -227,6 +227,10 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         # The registry records where admin requests come from (the audit trail).
         to_registry = key.startswith(keys.registry_all(self.realm)[:-2])
         try:
+            source = self._source_info(key) if to_registry else None
+        except zenoh.ZError as exc:  # the session closed under a caller's thread
+            raise QueryFailed(what, str(exc)) from None
+        try:
             return ask(
                 self.z,
                 key,
@@ -235,7 +239,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
                 what=what,
                 timeout=timeout or self.timeout,
                 seal=self._seal if signed else None,
-                source_info=self._source_info(key) if to_registry else None,
+                source_info=source,
             )
         except NoReply:
             if not_found is not None:
