@@ -34,7 +34,9 @@ from typing import Any
 import zenoh
 
 from common import keys
+from common.ask import ask
 from common.auth import AuthError, Verifier
+from common.lab_errors import LabError
 from common.messages import (
     MAC_ITEM_BYTES,
     MAC_ITEM_COUNTERS,
@@ -46,7 +48,6 @@ from common.messages import (
     AuthEnvelope,
     ChatLine,
     CommandBundle,
-    ErrorReply,
     MacCommand,
     MacCommandBundle,
     MemberStatus,
@@ -276,22 +277,15 @@ class SlotRecorder:
         if now - self._snapshot_tried < SNAPSHOT_RETRY_S:
             return self._snapshot
         self._snapshot_tried = now
+        key = keys.world_snapshot(self.realm, self.world)
         try:
-            replies = list(
-                self.session.get(keys.world_snapshot(self.realm, self.world), timeout=3.0)
+            snap = ask(
+                self.session, key, None, WorldSnapshot, what=f"world {self.world}", timeout=3.0
             )
-        except Exception as exc:
+        except LabError as exc:
             self.log.info("recorder: snapshot of %s: %s", self.world, exc)
             return self._snapshot
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
-            except MessageError:
-                continue
-            if isinstance(snap, WorldSnapshot):
-                self._note_snapshot(snap)
+        self._note_snapshot(snap)
         return self._snapshot
 
     def _start(self, run: RunningJob, driver: str) -> None:

@@ -14,11 +14,12 @@ from collections.abc import Callable
 import zenoh
 
 from common import keys
+from common.ask import NoReply, QueryFailed, WrongReply, ask
 from common.auth import AuthError, Verifier
+from common.lab_errors import LabError
 from common.messages import (
     DryRun,
     DryRunReport,
-    ErrorReply,
     Message,
     MessageError,
     OkReply,
@@ -28,7 +29,6 @@ from common.messages import (
     RunClaim,
     RunRequest,
     RunStop,
-    decode,
 )
 from common.service import RequestError
 from services.context.agent_queue import ControlJob
@@ -56,45 +56,30 @@ class RunnerLink:
         self.log = log
         self._drivers: dict[str, str] = {}  # request id -> the runner account driving it
 
-    def ask(self, message: Message, timeout: float) -> Message | None:
-        """The runner's reply, or None when none answered (or it was unreadable)."""
-        key = keys.runner_run(self.realm, self.runner)
-        try:
-            replies = list(self.session.get(key, payload=self.seal(key, message), timeout=timeout))
-        except Exception as exc:
-            self.log.warning("runner %s: %s", self.runner, exc)
-            return None
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                return decode(reply.ok.payload, (RunAccepted, OkReply, RunCheckReply, ErrorReply))
-            except MessageError as exc:
-                self.log.warning("unreadable runner reply: %s", exc)
-        return None
-
     def start(self, job: ControlJob, ctx: str, world: str, end: float) -> tuple[bytes, bytes]:
         """The runner's session id and box key, once it accepted to run ``job`` until ``end``."""
         key = keys.runner_run(self.realm, self.runner)
-        reply = self.ask(
-            RunRequest(
-                request_id=job.request_id,
-                ctx=ctx,
-                world=world,
-                agent=job.agent,
-                user=job.user,
-                source=job.source,
-                end=end,
-                filename=job.filename,
-            ),
-            timeout=10.0,
+        request = RunRequest(
+            request_id=job.request_id,
+            ctx=ctx,
+            world=world,
+            agent=job.agent,
+            user=job.user,
+            source=job.source,
+            end=end,
+            filename=job.filename,
         )
-        if reply is None:
-            raise RequestError("unavailable", f"no runner {self.runner} answered")
-        if isinstance(reply, ErrorReply):
-            raise RequestError("unavailable", f"runner: {reply.message}")
-        if not isinstance(reply, RunAccepted):
-            raise RequestError("unavailable", "runner gave an unexpected reply")
+        try:
+            reply = ask(
+                self.session, key, request, RunAccepted, what="runner", timeout=10.0, seal=self.seal
+            )
+        except (NoReply, QueryFailed) as exc:
+            self.log.warning("runner %s: %s", self.runner, exc)
+            raise RequestError("unavailable", f"no runner {self.runner} answered") from None
+        except WrongReply:
+            raise RequestError("unavailable", "runner gave an unexpected reply") from None
+        except LabError as exc:  # its refusal: "runner: why"
+            raise RequestError("unavailable", str(exc)) from None
         try:
             principal, claim = self.verifier.open(key, reply.claim, RunClaim)
         except (AuthError, MessageError) as exc:
@@ -112,37 +97,51 @@ class RunnerLink:
         """
         key = keys.runner_dryrun(self.realm, self.runner)
         try:
-            replies = list(self.session.get(key, payload=self.seal(key, request), timeout=timeout))
-        except Exception as exc:
-            raise RequestError("unavailable", f"runner {self.runner}: {exc}") from None
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                answer = decode(reply.ok.payload, (DryRunReport, ErrorReply))
-            except MessageError as exc:
-                self.log.warning("unreadable dry-run reply: %s", exc)
-                continue
-            if isinstance(answer, ErrorReply):
-                if answer.code == "bad_request":
-                    raise RequestError("bad_request", f"runner: {answer.message}")
-                raise RequestError("unavailable", f"runner: {answer.message}", answer.retry_after)
-            assert isinstance(answer, DryRunReport)  # the decoder allowed only these two
-            return answer
-        raise RequestError("unavailable", f"no runner {self.runner} answered the dry run")
+            return ask(
+                self.session, key, request, DryRunReport, what="runner", timeout=timeout,
+                seal=self.seal,
+            )  # fmt: skip
+        except NoReply:
+            raise RequestError(
+                "unavailable", f"no runner {self.runner} answered the dry run"
+            ) from None
+        except QueryFailed as exc:
+            raise RequestError("unavailable", f"runner {self.runner}: {exc.reason}") from None
+        except WrongReply as exc:
+            self.log.warning("unreadable dry-run reply: %s", exc)
+            raise RequestError(
+                "unavailable", f"no runner {self.runner} answered the dry run"
+            ) from None
+        except LabError as exc:  # its refusal: "runner: why"
+            reply = exc.reply
+            if reply is not None and reply.code == "bad_request":
+                raise RequestError("bad_request", str(exc)) from None
+            retry = 0.0 if reply is None else reply.retry_after
+            raise RequestError("unavailable", str(exc), retry) from None
 
     def stop(self, request_id: str, reason: str) -> None:
         """Tell the runner to end the request's sandbox (best effort: the lease ends anyway)."""
-        self.ask(RunStop(request_id=request_id, reason=reason), timeout=2.0)
+        key = keys.runner_run(self.realm, self.runner)
+        request = RunStop(request_id=request_id, reason=reason)
+        try:
+            ask(self.session, key, request, OkReply, what="runner", timeout=2.0, seal=self.seal)
+        except LabError as exc:
+            self.log.warning("runner %s: %s", self.runner, exc)
 
     def still_running(self, request_ids: list[str], timeout: float) -> set[str] | None:
         """Those of ``request_ids`` the runner runs now; None when no runner answered."""
-        reply = self.ask(RunCheck(request_ids=request_ids), timeout=timeout)
-        if isinstance(reply, RunCheckReply):
-            return set(reply.running)
-        if isinstance(reply, ErrorReply):
-            self.log.warning("runner %s could not say what it runs: %s", self.runner, reply.message)
-        return None
+        key = keys.runner_run(self.realm, self.runner)
+        request = RunCheck(request_ids=request_ids)
+        try:
+            reply = ask(
+                self.session, key, request, RunCheckReply, what="runner", timeout=timeout,
+                seal=self.seal,
+            )  # fmt: skip
+        except LabError as exc:
+            if getattr(exc, "reply", None) is not None:
+                self.log.warning("runner %s could not say what it runs: %s", self.runner, exc)
+            return None
+        return set(reply.running)
 
     def driver(self, request_id: str, default: str) -> str:
         """The runner account driving ``request_id`` (``default`` before it accepted)."""

@@ -21,9 +21,10 @@ from typing import Any
 import zenoh
 
 from common import keys
+from common.ask import WrongReply, ask
+from common.lab_errors import LabError
 from common.messages import (
     AgentEvent,
-    ErrorReply,
     MessageError,
     RequestStatus,
     WorldFrame,
@@ -163,41 +164,30 @@ class SlotScheduler:
         return frame.layout != self._layout
 
     def _refresh_agents(self) -> None:
+        world = self.state.world
+        key = keys.world_snapshot(self.realm, world)
         try:
-            replies = list(
-                self.session.get(keys.world_snapshot(self.realm, self.state.world), timeout=3.0)
-            )
-        except Exception as exc:
-            self.log.info("world %s snapshot: %s", self.state.world, exc)
+            snap = ask(self.session, key, None, WorldSnapshot, what=f"world {world}", timeout=3.0)
+        except WrongReply as exc:
+            self.log.warning("unreadable snapshot of %s: %s", world, exc)
             return
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
-            except MessageError as exc:
-                self.log.warning("unreadable snapshot of %s: %s", self.state.world, exc)
-                continue
-            if not isinstance(snap, WorldSnapshot):
-                continue
-            self.leases.note_world_identity(snap.identity)
-            self.recorder.world_snapshot(snap)
-            with self.state.wake:
-                first = self._layout is None
-                self._layout = snap.layout
-                gone = self.state.book.set_agents({a.id: a.type for a in snap.agents})
-                finals = [
-                    self.state.ended(job, "cancelled", f"{job.agent} left the world")
-                    for job in gone
-                ]
-                self.state.dirty = True
-            if first:
-                self.log.info(
-                    "world %s has agents %s", self.state.world, ", ".join(a.id for a in snap.agents)
-                )
-            for final in finals:
-                self.publish(AgentEvent(ctx=self.state.room, request=final))
+        except LabError as exc:
+            self.log.info("world %s snapshot: %s", world, exc)
             return
+        self.leases.note_world_identity(snap.identity)
+        self.recorder.world_snapshot(snap)
+        with self.state.wake:
+            first = self._layout is None
+            self._layout = snap.layout
+            gone = self.state.book.set_agents({a.id: a.type for a in snap.agents})
+            finals = [
+                self.state.ended(job, "cancelled", f"{job.agent} left the world") for job in gone
+            ]
+            self.state.dirty = True
+        if first:
+            self.log.info("world %s has agents %s", world, ", ".join(a.id for a in snap.agents))
+        for final in finals:
+            self.publish(AgentEvent(ctx=self.state.room, request=final))
 
     def _turn(self) -> None:
         now = time.time()
