@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         page_url,
     )
     from tests.browser.reallab import real_lab
-    from tests.lab import PASSWORD
+    from tests.kit.lab import PASSWORD
 
     with tempfile.TemporaryDirectory(prefix="wart-bench-arena-") as tmp, real_lab(
         Path(tmp), real_arena=REAL

@@ -41,7 +41,7 @@ from common import keys
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.lab.supervisor import AliveWatch
-from tests.lab import REPO, UpLab, wart_env
+from tests.kit.lab import REPO, UpLab, wart_env
 
 # The children of a default `wart up`, named by their subcommand and --name (or --world).
 SERVICES = (
@@ -57,7 +57,7 @@ SERVICES = (
 
 
 def lab_env() -> dict[str, str]:
-    """A person's tool's environment: the lab's (tests/lab.py), no credentials of this shell."""
+    """A person's tool's environment: the lab's (tests/kit/lab.py), no credentials of this shell."""
     return wart_env()
 
 
@@ -92,7 +92,7 @@ class Lines:
 
 class ChaosLab(UpLab):
     """``wart up`` in a subprocess on free ports with its own realm and state directory
-    (tests/lab.py's UpLab, the one starter), and what the chaos run asks of it."""
+    (tests/kit/lab.py's UpLab, the one starter), and what the chaos run asks of it."""
 
     def __init__(self, state_dir: Path) -> None:
         super().__init__(realm=f"chaos{os.getpid()}", state_dir=state_dir)

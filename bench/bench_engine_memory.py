@@ -114,7 +114,7 @@ def main() -> int:
             for kernels in args.paths:
                 world = f"m{n}{kernels}"
                 path = map_of(n, lab.tmp / f"{world}.json")
-                os.environ["WART_KERNELS"] = kernels  # the engine's environment (tests/lab.py)
+                os.environ["WART_KERNELS"] = kernels  # the engine's environment (tests/kit/lab.py)
                 lab.spawn(
                     ["engine", "--map", str(path), "--world", world, *lab.net()],
                     (AliveKind.WORLD, world),

@@ -32,7 +32,6 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from common.client.agent_client import FINAL  # noqa: E402 - after the path set-up
-from tests.conftest import wait_for  # noqa: E402
 from tests.integration.agentkit import (  # noqa: E402
     Motion,
     agent_user,
@@ -40,7 +39,8 @@ from tests.integration.agentkit import (  # noqa: E402
     start_engine,
     start_runner,
 )
-from tests.lab import Procs, make_lab, start_router  # noqa: E402
+from tests.kit.lab import Procs, make_lab, start_router  # noqa: E402
+from tests.kit.waits import wait_for  # noqa: E402
 
 FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")

@@ -1,6 +1,6 @@
 """Grading a class: N students submit to one assignment within a window, E episodes each.
 
-A real lab as processes (router, registry, one runner, the grader; tests/lab.py
+A real lab as processes (router, registry, one runner, the grader; tests/kit/lab.py
 starts them with the lab's own command lines), a course of ``--students``
 imported, and an assignment on the empty map (a goal zone, ``--seconds``
 simulated s per episode, ``--episodes`` seeded episodes). Each student logs in
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     from services.registry.accounts_db import RegistryDB
     from services.registry.courses_db import CourseStore
     from services.registry.roster import RosterRow
-    from tests.lab import PASSWORD, Procs, make_lab, start_router
+    from tests.kit.lab import PASSWORD, Procs, make_lab, start_router
 
     students = [f"s{i:03d}" for i in range(args.students)]
     source = (REPO / "tests" / "integration" / "grading" / "works.py").read_bytes()

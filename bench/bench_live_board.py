@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     from tests.browser.reallab import CTX, real_lab
     from tests.integration.test_grading import assignment_toml
-    from tests.lab import PASSWORD
+    from tests.kit.lab import PASSWORD
 
     students = [f"s{i:03d}" for i in range(args.students)]
     names = {s: f"Student {i:03d}" for i, s in enumerate(students)}

@@ -33,7 +33,7 @@ if __package__ in (None, ""):
 
 from tests.integration.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
 from tests.integration.test_lti import start_lti, wart
-from tests.lab import Procs, make_lab, start_router
+from tests.kit.lab import Procs, make_lab, start_router
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

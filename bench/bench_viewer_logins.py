@@ -31,7 +31,7 @@ if __package__ in (None, ""):
 
 from bench.labproc import BenchLab
 from common.keys import AliveKind
-from tests.conftest import free_port
+from tests.kit.lab import free_port
 from tests.viser_client import ViserClient
 
 PASSWORD = "class-of-2026"

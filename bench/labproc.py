@@ -1,6 +1,6 @@
 """A router, a registry and a chat room as real processes for the benchmarks.
 
-The processes are started by tests/lab.py, the one lab starter of the tests and
+The processes are started by tests/kit/lab.py, the one lab starter of the tests and
 the benchmarks (with the lab's own command lines, from services/lab/wiring.py);
 this is its shape for benchmarks that start and stop a lab by hand, with the
 children's logs kept quiet (``WART_BENCH_LOG_LEVEL``, default WARNING).
@@ -22,7 +22,7 @@ if __package__ in (None, ""):
 from common import keys
 from common.keys import AliveKind
 from common.zconfig import NetworkOptions
-from tests.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
+from tests.kit.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def run_arena(args: argparse.Namespace, robots: int) -> None:
-    from tests.conftest import free_port
+    from tests.kit.lab import free_port
     from viewers.web.app import WebViewer
     from viewers.web.demo_lab import DemoConnector, DemoLab
 
@@ -118,7 +118,7 @@ def run_real(args: argparse.Namespace, robots: int) -> None:
     (a student's address can name any of them)."""
     from bench.labproc import BenchLab
     from common.keys import AliveKind
-    from tests.conftest import free_port
+    from tests.kit.lab import free_port
 
     users = [("ana", REAL_PASSWORD), ("ben", REAL_PASSWORD)]
     load0 = os.getloadavg()

@@ -19,7 +19,7 @@ from common.messages import (
 )
 from tests.conftest import Procs, Router
 from tests.integration.agentkit import WORLD, start_engine
-from tests.lab import make_lab
+from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
 

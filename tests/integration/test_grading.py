@@ -25,7 +25,7 @@ from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import start_runner, together
-from tests.lab import PASSWORD, REPO, ProcessLab, make_lab, wart_env
+from tests.kit.lab import PASSWORD, REPO, ProcessLab, make_lab, wart_env
 
 pytestmark = [
     pytest.mark.integration,

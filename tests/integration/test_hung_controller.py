@@ -26,7 +26,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 

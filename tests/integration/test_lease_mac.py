@@ -32,7 +32,7 @@ from tests.integration.agentkit import (
     start_agent_context,
     start_engine,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 # One worker starts the module's lab once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("lease_mac")]

@@ -11,7 +11,7 @@ from common import keys
 from common.messages import WorldSnapshot, decode
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.agentkit import WORLD, start_engine
-from tests.lab import make_lab
+from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
 

@@ -48,7 +48,7 @@ from tests.integration.lti_platform import (
     new_key,
 )
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
-from tests.lab import REPO, ProcessLab, free_port, make_lab, start_router, wart_env
+from tests.kit.lab import REPO, ProcessLab, free_port, make_lab, start_router, wart_env
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
 LTI_ACCOUNT = wiring.service_account("lti", "lti")

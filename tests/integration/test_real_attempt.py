@@ -33,7 +33,7 @@ from tests.conftest import REPO, Procs, Router, wait_for
 from tests.integration.agentkit import WORLD, start_agent_context, start_runner
 from tests.integration.test_grader_function import course
 from tests.integration.test_grading import COURSE, source, wart
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

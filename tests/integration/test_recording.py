@@ -22,7 +22,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, USERS, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, USERS, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

@@ -34,7 +34,7 @@ from tests.integration.agentkit import (
     start_engine,
     start_runner,
 )
-from tests.lab import ProcessLab, make_lab, start_router
+from tests.kit.lab import ProcessLab, make_lab, start_router
 
 pytestmark = [
     pytest.mark.integration,

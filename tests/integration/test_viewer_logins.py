@@ -29,7 +29,7 @@ import zenoh
 from common.client.lab_address import LabAddress
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router, free_port
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 from tests.viser_client import ViserClient, run_in_thread
 from viewers.web.app import WebViewer
 from viewers.web.connector import LiveConnector
