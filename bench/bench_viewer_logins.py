@@ -1,7 +1,7 @@
 """A class logging in through one real `wart viewer`: is every "Log in" click answered?
 
 A router, the registry (real argon2id checks; users ana and ben) and one viewer, as
-``wart`` processes; ``--sessions`` headless clients (tests/viser_client.py) in this
+``wart`` processes; ``--sessions`` headless clients (tests/kit/viser_client.py) in this
 process connect and log in through the page's own form, ``--at-once`` at a time,
 each clicking "Log in" the moment it shows. A client refused with a message tries
 once more, as a student would. Printed: how many were let in, refused (and with
@@ -32,7 +32,7 @@ if __package__ in (None, ""):
 from bench.labproc import BenchLab
 from common.keys import AliveKind
 from tests.kit.lab import free_port
-from tests.viser_client import ViserClient
+from tests.kit.viser_client import ViserClient
 
 PASSWORD = "class-of-2026"
 

@@ -6,7 +6,7 @@ time is the viewer's (plus the fake world's thread: measured alone first,
 with no session, and subtracted). Two child processes stand for the class:
 
 - ``--as-clients``: --sessions headless websocket clients speaking viser's
-  protocol (tests/viser_client.py): each connects, logs in through the GUI
+  protocol (tests/kit/viser_client.py): each connects, logs in through the GUI
   (Connect, User, Password, Log in), joins the arena, then counts the robot
   frames and bytes it receives;
 - ``--as-browsers``: --browsers real Chromium pages (Playwright, software

@@ -1,7 +1,7 @@
 """bench_viewer_sessions' class, in its child processes: headless sessions and Chromium pages.
 
 ``_clients`` runs in ``--as-clients``: headless websocket clients speaking
-viser's protocol (tests/viser_client.py), each logging in, joining the arena
+viser's protocol (tests/kit/viser_client.py), each logging in, joining the arena
 and counting the frames and bytes it receives; ``_browsers`` in
 ``--as-browsers``: real Chromium pages (Playwright) doing the same. Both say
 READY, wait for GO, measure, and print one RESULT line of JSON.
@@ -33,7 +33,7 @@ async def _clients(
     users: list[tuple[str, str]],
     arena: str,
 ) -> None:
-    from tests.viser_client import ViserClient
+    from tests.kit.viser_client import ViserClient
 
     # A student's address may name any viewer: sessions are dealt round the viewers.
     clients = [ViserClient(urls[i % len(urls)], f"s{i}") for i in range(sessions)]
