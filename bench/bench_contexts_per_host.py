@@ -219,7 +219,7 @@ def main() -> int:
     if not args.skip_single:
         results.append(run_host("one host, 2 cores", [([], "tcp/127.0.0.1:17911")], map_path, args))
     if not args.skip_netns:
-        from tests import netns
+        from tests.kit import netns
 
         reason = netns.available()
         if reason:
