@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from common.client.agent_client import FINAL  # noqa: E402 - after the path set-up
-from tests.integration.agentkit import (  # noqa: E402
+from tests.kit.agentkit import (  # noqa: E402
     Motion,
     agent_user,
     start_agent_context,

@@ -28,7 +28,7 @@ from common.client.lab_client import LabClient
 from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
 from services.lab.real_arenas import bridge_specs
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     start_agent_context,
     start_engine,

@@ -15,7 +15,7 @@ from common.controller import Controller, Khepera
 from common.lab_errors import NotFound
 from common.messages import ControlQueued
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     Poses,
     agent_user,
     start_agent_context,

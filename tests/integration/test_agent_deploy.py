@@ -16,7 +16,7 @@ from common.lab_errors import LabError
 from common.messages import OutputLines
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     Poses,
     agent_user,
     start_agent_context,

@@ -22,7 +22,7 @@ from common.world import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
     start_engine,

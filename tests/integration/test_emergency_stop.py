@@ -22,7 +22,7 @@ from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     WORLD,
     Motion,

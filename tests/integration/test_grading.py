@@ -24,7 +24,7 @@ from common.messages import GradingChanged
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import start_runner, together
+from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import PASSWORD, REPO, ProcessLab, make_lab, wart_env
 
 pytestmark = [

@@ -18,7 +18,7 @@ from common.controller import KheperaState
 from common.recording import read_recording, summarize
 from services.runner.sandbox import Sandbox, SandboxLimits, sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     agent_user,
     start_agent_context,

@@ -25,7 +25,7 @@ from common.messages import (
 )
 from common.world.leasemac import mac_command, new_lease_key
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     WORLD,
     Poses,
     agent_user,

@@ -10,7 +10,7 @@ import zenoh
 from common import keys
 from common.messages import WorldSnapshot, decode
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import WORLD, start_engine
+from tests.kit.agentkit import WORLD, start_engine
 from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration

@@ -37,7 +37,6 @@ from services.lab import wiring
 from services.registry.accounts_db import RegistryDB
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import start_runner, together
 from tests.integration.lti_platform import (
     CLIENT_ID,
     DEPLOYMENT,
@@ -48,6 +47,7 @@ from tests.integration.lti_platform import (
     new_key,
 )
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
+from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import REPO, ProcessLab, free_port, make_lab, start_router, wart_env
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]

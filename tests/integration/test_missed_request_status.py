@@ -22,7 +22,7 @@ from services.commands import deploy
 from services.context.agent_context import RUNNER_CHECK_S
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Proc, Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
     start_engine,

@@ -39,7 +39,7 @@ from common.messages import (
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import start_agent_context, start_deploy, together
+from tests.kit.agentkit import start_agent_context, start_deploy, together
 from tests.kit.lab import REPO, ProcessLab, make_lab
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]

@@ -20,7 +20,7 @@ from common.client.private_mail import PrivateText
 from common.controller import Controller, Khepera
 from common.messages import EditResult, ErrorReply, MoveItem, WorldEdit, decode
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     WORLD,
     Poses,
     agent_user,

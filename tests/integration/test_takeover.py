@@ -21,7 +21,7 @@ from common.messages import AuditQuery, RequestStatus
 from common.recording import read_recording
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     WORLD,
     Motion,

@@ -23,8 +23,8 @@ from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
 from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session
-from tests.conftest import wait_for
 from tests.kit.lab import PASSWORD, Proc, ProcessLab
+from tests.kit.waits import wait_for
 
 WORLD = "w1"
 CTX = "arena"
