@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         page_url,
     )
     from tests.browser.reallab import CTX, real_lab
-    from tests.integration.test_grading import assignment_toml
+    from tests.kit.courses import assignment_toml
     from tests.kit.lab import PASSWORD
 
     students = [f"s{i:03d}" for i in range(args.students)]
