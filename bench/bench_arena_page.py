@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from playwright.sync_api import sync_playwright
 
-    from tests.browser.conftest import (
+    from tests.kit.pages import (
         CHROMIUM,
         CHROMIUM_ARGS,
         ViserPage,

@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     from services.registry.accounts_db import RegistryDB
     from services.registry.courses_db import CourseStore
     from services.registry.roster import RosterRow
-    from tests.browser.conftest import (
+    from tests.kit.pages import (
         CHROMIUM,
         CHROMIUM_ARGS,
         ViserPage,

@@ -139,7 +139,7 @@ def _browsers(
 
     from bench.bench_viewer import BENCH_VIEWPORT, WsCounter
     from common.client.lab_address import parse_address
-    from tests.browser.conftest import CHROMIUM_ARGS, ViserPage
+    from tests.kit.pages import CHROMIUM_ARGS, ViserPage
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)

@@ -21,8 +21,6 @@ from services.lab.supervisor import AliveWatch
 from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
 
-ARTIFACTS = REPO / "test-artifacts"
-
 
 def pytest_itemcollected(item: pytest.Item) -> None:
     # Under xdist (./dev test), the browser tests run one at a time on one
