@@ -50,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from playwright.sync_api import sync_playwright
 
+    from tests.kit.lab import PASSWORD
     from tests.kit.pages import (
         CHROMIUM,
         CHROMIUM_ARGS,
@@ -57,8 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         new_test_context,
         page_url,
     )
-    from tests.browser.reallab import real_lab
-    from tests.kit.lab import PASSWORD
+    from tests.kit.reallab import real_lab
 
     with tempfile.TemporaryDirectory(prefix="wart-bench-arena-") as tmp, real_lab(
         Path(tmp), real_arena=REAL

@@ -70,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     from services.registry.accounts_db import RegistryDB
     from services.registry.courses_db import CourseStore
     from services.registry.roster import RosterRow
+    from tests.kit.courses import assignment_toml
+    from tests.kit.lab import PASSWORD
     from tests.kit.pages import (
         CHROMIUM,
         CHROMIUM_ARGS,
@@ -77,9 +79,7 @@ def main(argv: list[str] | None = None) -> int:
         new_test_context,
         page_url,
     )
-    from tests.browser.reallab import CTX, real_lab
-    from tests.kit.courses import assignment_toml
-    from tests.kit.lab import PASSWORD
+    from tests.kit.reallab import CTX, real_lab
 
     students = [f"s{i:03d}" for i in range(args.students)]
     names = {s: f"Student {i:03d}" for i, s in enumerate(students)}

@@ -34,8 +34,8 @@ import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tests.kit.pages import CHROMIUM_ARGS, ViserPage
 from tests.kit.lab import free_port
+from tests.kit.pages import CHROMIUM_ARGS, ViserPage
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 
@@ -89,7 +89,7 @@ def main() -> int:
         import tempfile
         from contextlib import ExitStack
 
-        from tests.browser.reallab import PASSWORD, WORLD, real_lab
+        from tests.kit.reallab import PASSWORD, WORLD, real_lab
 
         with ExitStack() as stack:
             env = stack.enter_context(real_lab(Path(tempfile.mkdtemp()), "swarm", wander=True))
