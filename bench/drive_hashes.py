@@ -26,33 +26,11 @@ import hashlib
 import sys
 from pathlib import Path
 
-import numpy as np
-
 if __package__ in (None, ""):
     # Run as `python bench/drive_hashes.py`: the repository on the path, as `-m` puts it.
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.engine_bench import build, control
-from common.sim2d.world import World
-
-
-def tick_digest(world: World) -> str:
-    """Everything a tick moves or reads: poses, velocities, counters, objects, readings.
-
-    tests/unit/common/sim2d/test_discs_split.py compares the split and serial drives by it.
-    """
-    h = hashlib.sha256()
-    for a in (
-        world.agent_pose,
-        world.agent_vel,
-        world.counters,
-        world.object_pose,
-        world.proximity,
-        world.ambient,
-        world.presence,
-    ):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+from tests.kit.worlds import build, control, tick_digest
 
 
 def main(argv: list[str] | None = None) -> None:
