@@ -25,9 +25,6 @@ from pathlib import Path
 
 import psutil
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench.labproc import REPO, BenchLab
 from common.keys import AliveKind
 from common.sim2d import aot

@@ -17,7 +17,7 @@ listed in docs/BENCHMARKS.md beside the figures: each simulator's own physics,
 IR model and noise; no gripper turret and no light (Enki's Khepera has neither),
 while our ambient sensors still run (500 in the dark).
 
-    PYTHONPATH=. .venv/bin/python -m bench.bench_enki [--sizes 10 35 100 1000 3000]
+    .venv/bin/python -m bench.bench_enki [--sizes 10 35 100 1000 3000]
         [--sim-seconds 2] [--swarm-seconds 0.5] [--repeats 3] [--drives joints discs]
         [--rule compiled] [--full]
 
@@ -43,11 +43,6 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common.sim2d import compiled
 from common.sim2d.wander import CRUISE, WEIGHTS

@@ -23,9 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench.labproc import REPO
 from tests.kit.lab import free_port
 

@@ -7,7 +7,7 @@ page -> the signed launch posted to the tool -> the page's address with its
 cookie), released by one barrier: first launches (each account made, put in the
 course, a resume token minted), then the same students again (accounts matched).
 
-    PYTHONPATH=. python -m bench.bench_lti [--students 60]
+    python -m bench.bench_lti [--students 60]
 """
 
 from __future__ import annotations
@@ -27,9 +27,6 @@ from pathlib import Path
 from urllib.parse import urlencode
 
 import psutil
-
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tests.kit.lab import Procs, make_lab, start_router
 from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields

@@ -8,7 +8,7 @@ once more, as a student would. Printed: how many were let in, refused (and with
 which words), or never answered within ``--bound`` seconds; the time from the click
 to the answer. No engine: this is the login path alone (issue 22).
 
-    PYTHONPATH=. python -m bench.bench_viewer_logins --sessions 100 --at-once 10
+    python -m bench.bench_viewer_logins --sessions 100 --at-once 10
 
 To load the machine as a busy class does, start a few ``yes > /dev/null`` beside it.
 """
@@ -19,15 +19,8 @@ import argparse
 import asyncio
 import contextlib
 import os
-import sys
 import time
 from collections import Counter
-from pathlib import Path
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.keys import AliveKind

@@ -20,7 +20,7 @@ same seed. Printed per example and drive:
 Then a probe of one robot driven straight at a wall (arm down, then arm up):
 where it stops and what its two front sensors read there. Run:
 
-    PYTHONPATH=. .venv/bin/python bench/drive_compare.py [--seconds 60] [--seed 1]
+    .venv/bin/python -m bench.drive_compare [--seconds 60] [--seed 1]
         [--drives joints discs]
 
 Figures: docs/BENCHMARKS.md, "The discs drive for every world (issue 35)".
@@ -38,9 +38,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common.controller import Controller, Khepera, load_controller
 from common.sim2d import kernels

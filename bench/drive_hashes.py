@@ -23,13 +23,8 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import sys
-from pathlib import Path
 
-if __package__ in (None, ""):
-    # Run as `python bench/drive_hashes.py`: the repository on the path, as `-m` puts it.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
+from common.sim2d import discs_split, sensing
 from tests.kit.worlds import build, control, tick_digest
 
 
@@ -53,8 +48,6 @@ def main(argv: list[str] | None = None) -> None:
     if not 0 <= args.balls <= 10:
         p.error("--balls must be between 0 and 10")
     if args.split_from is not None:
-        from common.sim2d import discs_split, sensing
-
         discs_split.SPLIT_MIN_DISCS = args.split_from
         sensing.PARALLEL_MIN_AGENTS = 1
     world = build(args.robots, threads=args.threads, drive="discs", balls=args.balls)

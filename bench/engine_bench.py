@@ -8,7 +8,7 @@ sensing (IR, ambient, presence: every 20 ms of simulated time), control (the
 obstacle-avoidance rule and ``set_speeds_all``). Publishing is not included
 (no network). Figures are recorded in docs/BENCHMARKS.md. Run:
 
-    .venv/bin/python bench/engine_bench.py [--sim-seconds 5] [--sizes 10 35 100 1000] [--repeats 3]
+    .venv/bin/python -m bench.engine_bench [--sim-seconds 5] [--sizes 10 35 100 1000] [--repeats 3]
 
 Swarms (issue 22): ``--sizes 10000 --sim-seconds 1 --repeats 1 --threads 2
 --physics-threads 2`` (sensing on 2 threads, chipmunk's threaded space). Worlds
