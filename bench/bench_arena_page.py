@@ -30,11 +30,9 @@ from typing import Any
 
 import numpy as np
 
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`: the repository, not bench/, goes on the path.
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
 from common.tracking.truth import TruthError, read_truth
+from tests.kit.lab import PASSWORD
+from tests.kit.reallab import real_lab
 
 REAL = "real1"
 
@@ -48,17 +46,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=30.0, help="driving time measured (default 30)")
     args = p.parse_args(argv)
 
+    # playwright is optional: only the page benchmarks drive a browser (the kit's
+    # page helpers import it at their top)
     from playwright.sync_api import sync_playwright
 
-    from tests.browser.conftest import (
+    from tests.kit.pages import (
         CHROMIUM,
         CHROMIUM_ARGS,
         ViserPage,
         new_test_context,
         page_url,
     )
-    from tests.browser.reallab import real_lab
-    from tests.lab import PASSWORD
 
     with tempfile.TemporaryDirectory(prefix="wart-bench-arena-") as tmp, real_lab(
         Path(tmp), real_arena=REAL

@@ -6,7 +6,7 @@ the robot's own processing time (unknown; ``--reply-delay`` adds one). Beside
 each figure: what the baud rate alone allows (bytes of the command and its
 reply at baud/11 bytes/s).
 
-    .venv/bin/python bench/bench_bridge_serial.py [--seconds 3] [--bauds 38400 9600]
+    .venv/bin/python -m bench.bench_bridge_serial [--seconds 3] [--bauds 38400 9600]
 """
 
 from __future__ import annotations
@@ -16,10 +16,7 @@ import statistics
 import sys
 import threading
 import time
-from pathlib import Path
 from typing import Any
-
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from services.bridge import protocol as P
 from services.bridge.body import KinematicBody

@@ -29,23 +29,25 @@ import time
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
+import psutil
+import zenoh
 
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`: the repository, not bench/, goes on the path.
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from common import keys
+from common.messages import CameraFrame, decode
+from common.service import close_session, open_session
+from common.tracking.calibration import calibrate
+from common.tracking.markers import default_layout
+from common.tracking.synthetic import CameraModel, SyntheticCamera
+from common.tracking.tracker import Tracker
+from common.tracking.truth import now_truth, write_truth
+from common.zconfig import NetworkOptions
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def tracking_error(frames: int, robots: int, width: int, height: int, seed: int) -> None:
-    import cv2
-
-    from common.tracking.calibration import calibrate
-    from common.tracking.markers import default_layout
-    from common.tracking.synthetic import CameraModel, SyntheticCamera
-    from common.tracking.tracker import Tracker
-
     agents = [f"k{i}" for i in range(robots)]
     layout = default_layout(1000, 1000, agents)
     model = CameraModel(width=width, height=height)
@@ -98,11 +100,6 @@ def tracking_error(frames: int, robots: int, width: int, height: int, seed: int)
 
 def subscribe(connect: str, realm: str, key: str, sessions: int, seconds: float) -> None:
     """A subscriber process: ``sessions`` sessions on ``key``; prints one JSON line each."""
-    import zenoh
-
-    from common.messages import CameraFrame, decode
-    from common.service import close_session, open_session
-    from common.zconfig import NetworkOptions
 
     # Counted from 1 s after every session is open to 1 s before the end.
     stats: list[dict[str, Any]] = [{"frames": 0, "bytes": 0, "delays": []} for _ in range(sessions)]
@@ -131,11 +128,6 @@ def subscribe(connect: str, realm: str, key: str, sessions: int, seconds: float)
 
 
 def delivery(viewers: list[int], seconds: float, fps: float) -> None:
-    import psutil
-
-    from common import keys
-    from common.tracking.truth import now_truth, write_truth
-
     tmp = Path(tempfile.mkdtemp(prefix="wart-bench-camera-"))
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))

@@ -1,6 +1,6 @@
 """How many simulated arenas of 10 Khepera a host keeps at real time (issue 8).
 
-    .venv/bin/python bench/bench_contexts_per_host.py [--max 12] [--window 6]
+    .venv/bin/python -m bench.bench_contexts_per_host [--max 12] [--window 6]
 
 Part 1, one host with both cores: a router and engines (``wart engine`` on a
 copy of maps/foraging.json with 10 Khepera, the arena's processes as ``wart
@@ -34,14 +34,14 @@ from pathlib import Path
 
 import psutil
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
+from common import keys
+from common.messages import WorldFrame, decode
+from common.service import close_session, open_session
+from common.zconfig import NetworkOptions
+from services.lab.lab_maps import map_with_robots
+from tests.kit import netns
 
-from common import keys  # noqa: E402
-from common.messages import WorldFrame, decode  # noqa: E402
-from common.service import close_session, open_session  # noqa: E402
-from common.zconfig import NetworkOptions  # noqa: E402
-from services.lab.lab_maps import map_with_robots  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
 
 REALM = "benchhost"
 REAL_TIME = 0.95
@@ -187,8 +187,9 @@ def measure_in(
     if not netns_prefix:
         return measure(endpoint, worlds, window, sensors)
     out = subprocess.run(
-        [*netns_prefix, sys.executable, __file__, "--measure", endpoint,
-         "--window", str(window), *(["--sensors"] if sensors else []), *worlds],
+        [*netns_prefix, sys.executable, "-m", "bench.bench_contexts_per_host",
+         "--measure", endpoint, "--window", str(window),
+         *(["--sensors"] if sensors else []), *worlds],
         cwd=REPO, capture_output=True, text=True, timeout=window + 60,
     )  # fmt: skip
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -219,8 +220,6 @@ def main() -> int:
     if not args.skip_single:
         results.append(run_host("one host, 2 cores", [([], "tcp/127.0.0.1:17911")], map_path, args))
     if not args.skip_netns:
-        from tests import netns
-
         reason = netns.available()
         if reason:
             print(f"two-host part skipped: {reason}")

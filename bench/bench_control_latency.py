@@ -62,11 +62,6 @@ import tempfile
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench.control_child import child, grant
 from bench.control_costs import command_costs, wake_storm
 from bench.control_rounds import Round, measure, measure_against_peer

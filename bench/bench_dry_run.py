@@ -5,7 +5,7 @@ robot k3, with examples/01_braitenberg.py (period 50 ms, one state a 20 ms
 tick): sandbox start, 250 lockstep ticks, the sandbox's end. The first run
 also builds the seccomp filter and the CPU cgroup.
 
-    .venv/bin/python bench/bench_dry_run.py --runs 7
+    .venv/bin/python -m bench.bench_dry_run --runs 7
 """
 
 from __future__ import annotations
@@ -15,12 +15,11 @@ import statistics
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
+from common.sim2d import maps
+from common.world import packing
+from services.runner.dryrun import dry_run
 
-from common.sim2d import maps  # noqa: E402 - after the path set-up
-from common.world import packing  # noqa: E402
-from services.runner.dryrun import dry_run  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:

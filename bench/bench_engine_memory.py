@@ -25,9 +25,6 @@ from pathlib import Path
 
 import psutil
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench.labproc import REPO, BenchLab
 from common.keys import AliveKind
 from common.sim2d import aot
@@ -114,7 +111,7 @@ def main() -> int:
             for kernels in args.paths:
                 world = f"m{n}{kernels}"
                 path = map_of(n, lab.tmp / f"{world}.json")
-                os.environ["WART_KERNELS"] = kernels  # the engine's environment (tests/lab.py)
+                os.environ["WART_KERNELS"] = kernels  # the engine's environment (tests/kit/lab.py)
                 lab.spawn(
                     ["engine", "--map", str(path), "--world", world, *lab.net()],
                     (AliveKind.WORLD, world),

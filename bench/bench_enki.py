@@ -17,7 +17,7 @@ listed in docs/BENCHMARKS.md beside the figures: each simulator's own physics,
 IR model and noise; no gripper turret and no light (Enki's Khepera has neither),
 while our ambient sensors still run (500 in the dark).
 
-    PYTHONPATH=. .venv/bin/python -m bench.bench_enki [--sizes 10 35 100 1000 3000]
+    .venv/bin/python -m bench.bench_enki [--sizes 10 35 100 1000 3000]
         [--sim-seconds 2] [--swarm-seconds 0.5] [--repeats 3] [--drives joints discs]
         [--rule compiled] [--full]
 
@@ -44,15 +44,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench.engine_bench import build, control
 from common.sim2d import compiled
 from common.sim2d.wander import CRUISE, WEIGHTS
 from common.sim2d.world import DRIVES, World
+from tests.kit.worlds import control, scenario_world
 
 REPO = Path(__file__).resolve().parents[1]
 ENKI_SOURCE = REPO / "bench" / "enki" / "khepera_world.cpp"
@@ -61,10 +56,8 @@ ENKI_HEADER = Path("/usr/include/enki/robots/khepera/Khepera.h")
 CXX_FLAGS = ("-O2", "-std=c++17")
 INSTALL_HINT = "install them with: apt-get install -y g++ libenki-dev (Debian 12: libenki2 1.6.99)"
 TICK_S = 0.01  # Enki's program steps 10 ms too (its kDt)
-SENSOR_PERIOD_S = 0.01  # Enki refreshes IR every step: ours every tick as well
 WARM_UP_TICKS = 20  # as engine_bench.run and Enki's program
 SWARM_N = 1000  # from this size on, --swarm-seconds applies
-FULL_BALLS = 0.5  # --full: movable balls per robot in our world
 
 MAX_N = 20_000
 MAX_SIM_SECONDS = 600.0
@@ -144,18 +137,6 @@ def compile_enki(build_dir: Path = BUILD_DIR) -> Path:
         raise EnkiUnavailable(f"{' '.join(cmd)} failed:\n{done.stderr.strip()}")
     os.replace(tmp, binary)
     return binary
-
-
-def scenario_world(n: int, drive: str = "joints", full: bool = False) -> World:
-    """engine_bench's world without what Enki lacks: no gripper turret, no lamp; IR every tick.
-
-    ``full``: our world as a lab's is, with what Enki's cannot have: gripper
-    turrets, the lamp and a movable ball for every two robots (FULL_BALLS). The
-    robots and pillars are the same either way (the balls are placed after them).
-    """
-    if full:
-        return build(n, sensor_period_s=SENSOR_PERIOD_S, drive=drive, balls=FULL_BALLS)
-    return build(n, gripper=False, lamp=False, sensor_period_s=SENSOR_PERIOD_S, drive=drive)
 
 
 def write_scenario(world: World, path: Path) -> None:

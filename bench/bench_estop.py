@@ -15,7 +15,7 @@ sends the emergency stop; then, from this process:
 
 Then the host releases the stop and the next round starts.
 
-    .venv/bin/python bench/bench_estop.py --rounds 7
+    .venv/bin/python -m bench.bench_estop --rounds 7
 """
 
 from __future__ import annotations
@@ -28,19 +28,18 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
-from common.client.agent_client import FINAL  # noqa: E402 - after the path set-up
-from tests.conftest import wait_for  # noqa: E402
-from tests.integration.agentkit import (  # noqa: E402
+from common.client.agent_client import FINAL
+from tests.kit.agentkit import (
     Motion,
     agent_user,
     start_agent_context,
     start_engine,
     start_runner,
 )
-from tests.lab import Procs, make_lab, start_router  # noqa: E402
+from tests.kit.lab import Procs, make_lab, start_router
+from tests.kit.waits import wait_for
+
+REPO = Path(__file__).resolve().parent.parent
 
 FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")

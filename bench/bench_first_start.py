@@ -23,11 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench.labproc import REPO
-from tests.lab import free_port
+from tests.kit.lab import free_port
 
 
 def one_start(repo: Path, state: Path, timeout: float) -> tuple[float | None, float | None, str]:

@@ -1,6 +1,6 @@
 """What a teacher's grader function costs per episode (issue 36, item 2).
 
-    .venv/bin/python bench/bench_grader_function.py --runs 5
+    .venv/bin/python -m bench.bench_grader_function --runs 5
 
 The same graded episode (tests/integration/grading/works.py on the empty map, a goal
 zone) run by services/runner/episode.py without and with the wobble grader

@@ -1,6 +1,6 @@
 """Grading a class: N students submit to one assignment within a window, E episodes each.
 
-A real lab as processes (router, registry, one runner, the grader; tests/lab.py
+A real lab as processes (router, registry, one runner, the grader; tests/kit/lab.py
 starts them with the lab's own command lines), a course of ``--students``
 imported, and an assignment on the empty map (a goal zone, ``--seconds``
 simulated s per episode, ``--episodes`` seeded episodes). Each student logs in
@@ -9,7 +9,7 @@ and submits tests/integration/grading/works.py at an even spread over
 to the last score), the wait from submit to score (p50, p99, max: the grader's
 own clock at both ends), and fairness (the longest wait over the median).
 
-    .venv/bin/python bench/bench_grading.py --students 60 --episodes 3 --window 60
+    .venv/bin/python -m bench.bench_grading --students 60 --episodes 3 --window 60
 """
 
 from __future__ import annotations
@@ -21,8 +21,19 @@ import tempfile
 import time
 from pathlib import Path
 
+from common.client.grader_client import GraderClient
+from common.client.lab_client import LabClient
+from common.messages import SubmissionInfo
+from common.service import close_session
+from services.grader.assignment import parse_assignment
+from services.grader.grading_db import GradingStore
+from services.lab import wiring
+from services.registry.accounts_db import RegistryDB
+from services.registry.courses_db import CourseStore
+from services.registry.roster import RosterRow
+from tests.kit.lab import PASSWORD, Procs, make_lab, start_router
+
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
 
 ASSIGNMENT = """
 name = "bench"
@@ -66,18 +77,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=5.0, help="simulated s per episode")
     p.add_argument("--window", type=float, default=60.0, help="submissions spread over (s)")
     args = p.parse_args(argv)
-
-    from common.client.grader_client import GraderClient
-    from common.client.lab_client import LabClient
-    from common.messages import SubmissionInfo
-    from common.service import close_session
-    from services.grader.assignment import parse_assignment
-    from services.grader.grading_db import GradingStore
-    from services.lab import wiring
-    from services.registry.accounts_db import RegistryDB
-    from services.registry.courses_db import CourseStore
-    from services.registry.roster import RosterRow
-    from tests.lab import PASSWORD, Procs, make_lab, start_router
 
     students = [f"s{i:03d}" for i in range(args.students)]
     source = (REPO / "tests" / "integration" / "grading" / "works.py").read_bytes()

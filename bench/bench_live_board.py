@@ -11,7 +11,7 @@ each, the delay is the score stored (the submission's ``graded_at``, written by
 the grader) to the moment the student's name appears in a leaderboard cell of
 alice's page (a MutationObserver's ``Date.now()``; one machine, one clock).
 
-    .venv/bin/python bench/bench_live_board.py --students 12 --gap 4
+    .venv/bin/python -m bench.bench_live_board --students 12 --gap 4
 """
 
 from __future__ import annotations
@@ -24,8 +24,19 @@ import time
 from pathlib import Path
 from typing import Any
 
+from common.client.grader_client import GraderClient
+from common.client.lab_client import LabClient
+from services.grader.assignment import parse_assignment
+from services.grader.grading_db import GradingStore
+from services.lab import wiring
+from services.registry.accounts_db import RegistryDB
+from services.registry.courses_db import CourseStore
+from services.registry.roster import RosterRow
+from tests.kit.courses import assignment_toml
+from tests.kit.lab import PASSWORD
+from tests.kit.reallab import CTX, real_lab
+
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
 
 # Every cell's text seen for the first time, with the browser's clock (ms since the epoch).
 OBSERVER_JS = """
@@ -60,26 +71,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--gap", type=float, default=4.0, help="s between two submissions")
     args = p.parse_args(argv)
 
+    # playwright is optional: only the page benchmarks drive a browser (the kit's
+    # page helpers import it at their top)
     from playwright.sync_api import sync_playwright
 
-    from common.client.grader_client import GraderClient
-    from common.client.lab_client import LabClient
-    from services.grader.assignment import parse_assignment
-    from services.grader.grading_db import GradingStore
-    from services.lab import wiring
-    from services.registry.accounts_db import RegistryDB
-    from services.registry.courses_db import CourseStore
-    from services.registry.roster import RosterRow
-    from tests.browser.conftest import (
+    from tests.kit.pages import (
         CHROMIUM,
         CHROMIUM_ARGS,
         ViserPage,
         new_test_context,
         page_url,
     )
-    from tests.browser.reallab import CTX, real_lab
-    from tests.integration.test_grading import assignment_toml
-    from tests.lab import PASSWORD
 
     students = [f"s{i:03d}" for i in range(args.students)]
     names = {s: f"Student {i:03d}" for i, s in enumerate(students)}

@@ -18,7 +18,7 @@ costly as the registry's check). ``--derive``:
 - ``after``: on this machine, after the login, at the lowest CPU priority (the page now:
   viewers/web/connector.py); the login's time stops at the registry's answer.
 
-    PYTHONPATH=. python -m bench.bench_login_burst [--clients 60] [--derive after]
+    python -m bench.bench_login_burst [--clients 60] [--derive after]
 """
 
 from __future__ import annotations
@@ -28,18 +28,13 @@ import functools
 import os
 import queue
 import statistics
-import sys
 import threading
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import psutil
 import zenoh
-
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.client import lab_client as client_module

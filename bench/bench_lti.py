@@ -1,13 +1,13 @@
 """A class launching the lab from its LMS at one instant (issue 36): LTI launches, p50 / p99.
 
 A router, the registry and ``wart lti`` as processes, a fake LMS in this process
-(tests/integration/lti_platform.py: its keys, JWKS, OIDC auth endpoint); ``--students``
+(tests/kit/lti_platform.py: its keys, JWKS, OIDC auth endpoint); ``--students``
 launches, each as a browser makes it (the tool's login URL -> the platform's auth
 page -> the signed launch posted to the tool -> the page's address with its
 cookie), released by one barrier: first launches (each account made, put in the
 course, a resume token minted), then the same students again (accounts matched).
 
-    PYTHONPATH=. python -m bench.bench_lti [--students 60]
+    python -m bench.bench_lti [--students 60]
 """
 
 from __future__ import annotations
@@ -28,12 +28,9 @@ from urllib.parse import urlencode
 
 import psutil
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from tests.integration.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
-from tests.integration.test_lti import start_lti, wart
-from tests.lab import Procs, make_lab, start_router
+from tests.kit.lab import Procs, make_lab, start_router
+from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
+from tests.kit.lti_tool import start_lti, wart
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

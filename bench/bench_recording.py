@@ -11,7 +11,7 @@ the engine's 50 frames a second. The recorder runs in its own process (as
 in the lab: the context is another process), on the same machine, so the
 figure includes its competition for the CPU. Figures go to docs/BENCHMARKS.md.
 
-    .venv/bin/python bench/bench_recording.py [--sizes 10 1000] [--ticks 500]
+    .venv/bin/python -m bench.bench_recording [--sizes 10 1000] [--ticks 500]
 """
 
 from __future__ import annotations
@@ -27,15 +27,12 @@ from pathlib import Path
 
 import zenoh
 
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench.engine_bench import build, control
 from bench.labproc import REPO, BenchLab
 from common import keys
 from common.messages import WorldFrame, decode, encode
+from common.recording import schema as s
+from common.recording.writer import RecordingWriter, frame_record
 from common.service import close_session, has_subscribers, open_session
 from common.world import packing
 from common.zconfig import NetworkOptions
@@ -46,8 +43,6 @@ FRAME_HZ = 50  # the engine publishes a frame each 20 ms tick
 
 def record(connect: str, n: int, out: Path) -> int:
     """The recorder process: every frame of WORLD into ``out`` until SIGTERM."""
-    from common.recording import schema as s
-    from common.recording.writer import RecordingWriter, frame_record
 
     rows = [f"k{i}" for i in range(n)]
     now = time.time()

@@ -29,8 +29,8 @@ best of 5 calls in a round, the passes' the mean of ``--passes``; the table
 prints the median of the rounds' figures (and their best). Keep it short: the
 machine is shared.
 
-    PYTHONPATH=. .venv/bin/python -m bench.bench_sensing --sizes 1000 10000 --rounds 3
-    PYTHONPATH=. .venv/bin/python -m bench.bench_sensing --sizes 10000 --tree /tmp/before --tree .
+    .venv/bin/python -m bench.bench_sensing --sizes 1000 10000 --rounds 3
+    .venv/bin/python -m bench.bench_sensing --sizes 10000 --tree /tmp/before --tree .
 """
 
 from __future__ import annotations
@@ -128,6 +128,7 @@ class _Subject:
     """One world of one tree, and the parts of its sensing pass as callables."""
 
     def __init__(self, n: int) -> None:
+        # The worker's tree's own modules (its PYTHONPATH): another checkout's, in an A/B.
         from bench import engine_bench
         from common.sim2d import kernels as K
 
@@ -173,6 +174,7 @@ class _Subject:
 
     def _after_step(self, passes: int) -> float:
         """A pass right after a physics tick, as the engine runs it (caches as the tick left)."""
+        # The worker's tree's own modules (its PYTHONPATH): another checkout's, in an A/B.
         from bench import engine_bench
 
         w = self.world
@@ -216,6 +218,7 @@ class _Subject:
 
 def worker() -> None:
     """Answers one JSON request a line: {"n": N, "passes": P, "threads": bool}."""
+    # The worker's tree's own kernels (its PYTHONPATH): another checkout's, in an A/B.
     from common.sim2d import kernels
 
     kernels.warm_up()
@@ -238,6 +241,7 @@ class _Worker:
         env = dict(os.environ, PYTHONPATH=str(tree))
         script = Path(__file__).resolve()
         # The worker imports the tree's packages; this file's own code is only the harness.
+        # Its sys.path line puts that tree first: loading another checkout is the job.
         code = (
             "import sys, runpy; sys.path.insert(0, sys.argv[1]); "
             "sys.argv = [sys.argv[2], '--worker']; runpy.run_path(sys.argv[0], run_name='__main__')"

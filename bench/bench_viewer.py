@@ -11,8 +11,8 @@ Playwright), logs each one in and joins the arena, then for --seconds counts:
 - the viewer's CPU: this process's CPU time minus Chromium's (Chromium runs
   in child processes, measured separately), via psutil.
 
-    .venv/bin/python bench/bench_viewer.py --browsers 10 --robots 1000
-    .venv/bin/python bench/bench_viewer.py --real --browsers 4   # real engine, maps/swarm.json
+    .venv/bin/python -m bench.bench_viewer --browsers 10 --robots 1000
+    .venv/bin/python -m bench.bench_viewer --real --browsers 4   # real engine, maps/swarm.json
 
 With ``--real`` the lab is real processes (router, registry, lobby room and
 a Sim2D engine on maps/swarm.json: 1,000 Khepera wandering with ``--wander``,
@@ -25,17 +25,19 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import psutil
+from playwright.sync_api import sync_playwright
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from tests.browser.conftest import CHROMIUM_ARGS, ViserPage
-from tests.conftest import free_port
+from tests.kit.lab import free_port
+from tests.kit.pages import CHROMIUM_ARGS, ViserPage
+from tests.kit.reallab import PASSWORD, WORLD, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 
@@ -86,11 +88,6 @@ def main() -> int:
     ap.add_argument("--real", action="store_true", help="real lab processes, maps/swarm.json")
     args = ap.parse_args()
     if args.real:
-        import tempfile
-        from contextlib import ExitStack
-
-        from tests.browser.reallab import PASSWORD, WORLD, real_lab
-
         with ExitStack() as stack:
             env = stack.enter_context(real_lab(Path(tempfile.mkdtemp()), "swarm", wander=True))
             users = [(u, PASSWORD) for u in ("alice", "bob", "carol", "ida")]
@@ -114,8 +111,6 @@ def run(
     users: list[tuple[str, str]],
     lab: DemoLab | None,
 ) -> int:
-    from playwright.sync_api import sync_playwright
-
     me = psutil.Process()
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)

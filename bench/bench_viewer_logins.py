@@ -1,14 +1,14 @@
 """A class logging in through one real `wart viewer`: is every "Log in" click answered?
 
 A router, the registry (real argon2id checks; users ana and ben) and one viewer, as
-``wart`` processes; ``--sessions`` headless clients (tests/viser_client.py) in this
+``wart`` processes; ``--sessions`` headless clients (tests/kit/viser_client.py) in this
 process connect and log in through the page's own form, ``--at-once`` at a time,
 each clicking "Log in" the moment it shows. A client refused with a message tries
 once more, as a student would. Printed: how many were let in, refused (and with
 which words), or never answered within ``--bound`` seconds; the time from the click
 to the answer. No engine: this is the login path alone (issue 22).
 
-    PYTHONPATH=. python -m bench.bench_viewer_logins --sessions 100 --at-once 10
+    python -m bench.bench_viewer_logins --sessions 100 --at-once 10
 
 To load the machine as a busy class does, start a few ``yes > /dev/null`` beside it.
 """
@@ -19,20 +19,13 @@ import argparse
 import asyncio
 import contextlib
 import os
-import sys
 import time
 from collections import Counter
-from pathlib import Path
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.keys import AliveKind
-from tests.conftest import free_port
-from tests.viser_client import ViserClient
+from tests.kit.lab import free_port
+from tests.kit.viser_client import ViserClient
 
 PASSWORD = "class-of-2026"
 

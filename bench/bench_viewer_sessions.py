@@ -6,7 +6,7 @@ time is the viewer's (plus the fake world's thread: measured alone first,
 with no session, and subtracted). Two child processes stand for the class:
 
 - ``--as-clients``: --sessions headless websocket clients speaking viser's
-  protocol (tests/viser_client.py): each connects, logs in through the GUI
+  protocol (tests/kit/viser_client.py): each connects, logs in through the GUI
   (Connect, User, Password, Log in), joins the arena, then counts the robot
   frames and bytes it receives;
 - ``--as-browsers``: --browsers real Chromium pages (Playwright, software
@@ -19,8 +19,8 @@ and Chromium apart), server CPU per session (the viewer's process CPU time
 with sessions minus without, over the number of sessions), bytes/s per
 session, the pump's busy share, and the machine's load average.
 
-    PYTHONPATH=. .venv/bin/python -m bench.bench_viewer_sessions --robots 35 1000
-    PYTHONPATH=. .venv/bin/python -m bench.bench_viewer_sessions --robots 10000 --sessions 10
+    .venv/bin/python -m bench.bench_viewer_sessions --robots 35 1000
+    .venv/bin/python -m bench.bench_viewer_sessions --robots 10000 --sessions 10
 
 With --slow K, K of the headless clients read their socket only every
 --slow-every seconds (a saturated link, a frozen tab): they should get fewer
@@ -35,12 +35,11 @@ import json
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
+from bench.viewer_class import ARENA, USERS
+from bench.viewer_clients import _browsers, _clients
+from bench.viewer_runs import run_arena, run_real
 
-from bench.viewer_class import ARENA, USERS  # noqa: E402
-from bench.viewer_clients import _browsers, _clients  # noqa: E402
-from bench.viewer_runs import run_arena, run_real  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """Chat throughput through one room: M members, S senders, every line to every member.
 
-    .venv/bin/python bench/chat_throughput.py [MEMBERS] [LINES_PER_SENDER] [SENDERS]
+    .venv/bin/python -m bench.chat_throughput [MEMBERS] [LINES_PER_SENDER] [SENDERS]
 
 Members are LabClients in this process, spread over several Zenoh sessions;
 they verify every event (the room seals each one) as a real client does.
@@ -10,15 +10,8 @@ from __future__ import annotations
 
 import argparse
 import functools
-import sys
 import threading
 import time
-from pathlib import Path
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.client.lab_client import LabClient

@@ -27,6 +27,7 @@ from common.controller import RobotCommand
 from common.messages import Lease
 from common.service import close_session, open_session
 from common.world.leasemac import new_lease_key, seal_key
+from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from common.zconfig import NetworkOptions
 
 T = TypeVar("T")
@@ -38,7 +39,6 @@ def _same(value: T) -> T:
 
 def child(args: argparse.Namespace) -> int:
     """The controllers' process: one ZenohRobotLink per agent, answering every sample."""
-    from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 
     identity, _ = RegistryIdentity.load_or_create(Path(args.identity))
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))

@@ -20,6 +20,7 @@ from common.controller import RobotCommand
 from common.messages import AgentCommand, Lease, SensorSample, decode, encode
 from common.world.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
 from common.world.leases import LeaseBook
+from common.world.remote_robot import agent_command, state_from_sample
 
 
 def _past(counts: list[int], i: int, seen: int) -> bool:
@@ -86,7 +87,6 @@ def wake_storm(n: int, rounds: int = 200) -> None:
     reaction, minus the put). Printed: when the median and the last thread
     are done, after the hand-out began.
     """
-    from common.world.remote_robot import agent_command, state_from_sample
 
     raw = encode(
         SensorSample(

@@ -20,7 +20,7 @@ same seed. Printed per example and drive:
 Then a probe of one robot driven straight at a wall (arm down, then arm up):
 where it stops and what its two front sensors read there. Run:
 
-    PYTHONPATH=. .venv/bin/python bench/drive_compare.py [--seconds 60] [--seed 1]
+    .venv/bin/python -m bench.drive_compare [--seconds 60] [--seed 1]
         [--drives joints discs]
 
 Figures: docs/BENCHMARKS.md, "The discs drive for every world (issue 35)".
@@ -39,19 +39,14 @@ from pathlib import Path
 
 import numpy as np
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from common.controller import Controller, Khepera, KheperaState, RobotCommand, load_controller
-from common.controller.actuators import apply_command
+from common.controller import Controller, Khepera, load_controller
 from common.sim2d import kernels
 from common.sim2d.agents import agent_type
 from common.sim2d.drives import DRIVES
 from common.sim2d.maps import load_map
 from common.sim2d.world import World
-from common.world import packing
-from common.world.remote_robot import agent_command, state_from_sample
 from services.runner.lockstep import Touches
+from tests.kit.worldlink import WorldLink
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = {  # example -> the map it suits (its docstring's "Suits:")
@@ -61,20 +56,6 @@ EXAMPLES = {  # example -> the map it suits (its docstring's "Suits:")
     "04_foraging": "foraging",
 }
 NEST = (250.0, 600.0, 150.0)  # maps/foraging.json's nest: x, y, radius
-
-
-class _Link:
-    """A RobotLink on one agent of an in-process World (tests/worldlink.py's, for bench/)."""
-
-    def __init__(self, world: World, agent: str) -> None:
-        self.world, self.agent = world, agent
-
-    def latest(self) -> KheperaState:
-        return state_from_sample(packing.sample(self.world, self.world.agent_slot(self.agent)))
-
-    def send(self, command: RobotCommand) -> None:
-        cmd = agent_command(self.agent, command)
-        apply_command(cmd, self.world.actuators(self.world.agent_slot(self.agent)))
 
 
 @dataclass
@@ -95,7 +76,7 @@ def run_example(name: str, drive: str, seconds: float, seed: int) -> Result:
         if agent.spec.name != "khepera":
             continue
         controller = load_controller(path)
-        robot = Khepera(_Link(world, agent.id))
+        robot = Khepera(WorldLink(world, agent.id))
         robots.append((controller, robot, world.agent_slot(agent.id)))
     # Through pose_of: a world's object_pose is filled by its first tick.
     start_objects = np.array([world.pose_of(o.id) for o in world.objects]).reshape(-1, 3)

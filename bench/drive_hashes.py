@@ -23,36 +23,9 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import sys
-from pathlib import Path
 
-import numpy as np
-
-if __package__ in (None, ""):
-    # Run as `python bench/drive_hashes.py`: the repository on the path, as `-m` puts it.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench.engine_bench import build, control
-from common.sim2d.world import World
-
-
-def tick_digest(world: World) -> str:
-    """Everything a tick moves or reads: poses, velocities, counters, objects, readings.
-
-    tests/unit/common/sim2d/test_discs_split.py compares the split and serial drives by it.
-    """
-    h = hashlib.sha256()
-    for a in (
-        world.agent_pose,
-        world.agent_vel,
-        world.counters,
-        world.object_pose,
-        world.proximity,
-        world.ambient,
-        world.presence,
-    ):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+from common.sim2d import discs_split, sensing
+from tests.kit.worlds import build, control, tick_digest
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -75,8 +48,6 @@ def main(argv: list[str] | None = None) -> None:
     if not 0 <= args.balls <= 10:
         p.error("--balls must be between 0 and 10")
     if args.split_from is not None:
-        from common.sim2d import discs_split, sensing
-
         discs_split.SPLIT_MIN_DISCS = args.split_from
         sensing.PARALLEL_MIN_AGENTS = 1
     world = build(args.robots, threads=args.threads, drive="discs", balls=args.balls)

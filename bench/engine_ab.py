@@ -12,7 +12,7 @@ makes a comparison hold on a machine whose speed drifts by half within
 minutes (docs/BENCHMARKS.md).
 
     git archive OLD | tar -x -C /tmp/before
-    .venv/bin/python bench/engine_ab.py --trees /tmp/before . --robots 10000 --threads 2
+    .venv/bin/python -m bench.engine_ab --trees /tmp/before . --robots 10000 --threads 2
 
 The same tree twice is an A/A run: how far apart two identical runs land.
 ``--balls 0.5``: the full scenario's balls (``engine_bench --balls``).
@@ -31,6 +31,8 @@ from pathlib import Path
 
 def worker(tree: str, robots: int, threads: int, balls: float) -> None:
     """One tree's side: build the world, then run the ticks each line on stdin asks for."""
+    # Loading another checkout is the job: its path goes first, then its own modules
+    # (its engine_bench's world and rule, its kernels) are imported.
     sys.path.insert(0, tree)
     from bench.engine_bench import build, control
     from common.sim2d import kernels

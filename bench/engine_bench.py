@@ -8,7 +8,7 @@ sensing (IR, ambient, presence: every 20 ms of simulated time), control (the
 obstacle-avoidance rule and ``set_speeds_all``). Publishing is not included
 (no network). Figures are recorded in docs/BENCHMARKS.md. Run:
 
-    .venv/bin/python bench/engine_bench.py [--sim-seconds 5] [--sizes 10 35 100 1000] [--repeats 3]
+    .venv/bin/python -m bench.engine_bench [--sim-seconds 5] [--sizes 10 35 100 1000] [--repeats 3]
 
 Swarms (issue 22): ``--sizes 10000 --sim-seconds 1 --repeats 1 --threads 2
 --physics-threads 2`` (sensing on 2 threads, chipmunk's threaded space). Worlds
@@ -31,105 +31,15 @@ went on pushing overlapping robots apart.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import time
 
-import numpy as np
-
 from common.sim2d import compiled
 from common.sim2d.agents import agent_type, khepera
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
-from common.sim2d.entities import ShapeSpec
 from common.sim2d.specs import AgentTypeSpec
-from common.sim2d.wander import braitenberg
-from common.sim2d.world import World
-
-
-def build(
-    n: int,
-    seed: int = 1,
-    *,
-    threads: int = 1,
-    physics_threads: int = 1,
-    gripper: bool = True,
-    drive: str = DEFAULT_DRIVE,
-    sensor_period_s: float = 0.02,
-    lamp: bool = True,
-    balls: float = 0.0,
-    spec: AgentTypeSpec | None = None,
-) -> World:
-    """A square arena sized so robots cover about 10 % of the floor, with a few pillars.
-
-    ``sensor_period_s`` and ``lamp`` are for bench/bench_enki.py: Enki refreshes
-    its IR sensors every step and has no lights, so its scenario is this one with
-    10 ms sensing and no lamp. ``balls``: movable balls per robot (the full
-    scenario: objects to push and grip), placed after the robots, so the
-    robots' poses do not depend on it.
-    """
-    side = max(600.0, math.sqrt(n * math.pi * 27.5**2 / 0.10))
-    world = World(
-        side,
-        side,
-        seed=seed,
-        tick_s=0.01,
-        sensor_period_s=sensor_period_s,
-        threads=threads,
-        physics_threads=physics_threads,
-        drive=drive,
-    )
-    rng = np.random.default_rng(seed)
-    for i in range(max(1, n // 50)):
-        x, y = rng.uniform(100, side - 100, 2)
-        world.add_obstacle(f"pillar{i}", ShapeSpec.box(60, 60), float(x), float(y))
-    spec = spec or agent_type("khepera")
-    apart = 2 * spec.radius_mm + 2.0
-    taken: dict[tuple[int, int], list[tuple[float, float]]] = {}
-    placed = 0
-    while placed < n:
-        x, y = rng.uniform(40, side - 40, 2)
-        ix, iy = int(x // apart), int(y // apart)
-        near = (
-            p
-            for gx in range(ix - 1, ix + 2)
-            for gy in range(iy - 1, iy + 2)
-            for p in taken.get((gx, gy), ())
-        )
-        if any((px - x) ** 2 + (py - y) ** 2 < apart**2 for px, py in near):
-            continue
-        try:
-            world.add_agent(
-                f"k{placed}",
-                spec,
-                float(x),
-                float(y),
-                float(rng.uniform(-3, 3)),
-                gripper=gripper,
-                defer_tables=True,
-            )
-        except ValueError:
-            continue
-        taken.setdefault((ix, iy), []).append((float(x), float(y)))
-        placed += 1
-    world.finish_agents()
-    placed = 0
-    while placed < round(balls * n):
-        x, y = rng.uniform(40, side - 40, 2)
-        try:
-            world.add_object(
-                f"ball{placed}", "ball", ShapeSpec.circle(10.0), float(x), float(y), mass_g=5.0
-            )
-        except ValueError:
-            continue
-        placed += 1
-    if lamp:
-        world.add_light("lamp", side / 2, side / 2, radius_mm=side / 3)
-    return world
-
-
-def control(world: World) -> None:
-    world.set_speeds_all(braitenberg(world.proximity))
+from tests.kit.worlds import build, control
 
 
 def run(

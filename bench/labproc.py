@@ -1,6 +1,6 @@
 """A router, a registry and a chat room as real processes for the benchmarks.
 
-The processes are started by tests/lab.py, the one lab starter of the tests and
+The processes are started by tests/kit/lab.py, the one lab starter of the tests and
 the benchmarks (with the lab's own command lines, from services/lab/wiring.py);
 this is its shape for benchmarks that start and stop a lab by hand, with the
 children's logs kept quiet (``WART_BENCH_LOG_LEVEL``, default WARNING).
@@ -10,19 +10,13 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of tests.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import keys
 from common.keys import AliveKind
 from common.zconfig import NetworkOptions
-from tests.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
+from tests.kit.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
 
 REPO = Path(__file__).resolve().parent.parent
 

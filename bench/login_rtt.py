@@ -10,33 +10,25 @@ from __future__ import annotations
 import argparse
 import functools
 import statistics
-import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import nacl.pwhash
 import zenoh
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.labproc import BenchLab
 from common.auth import create_identity_key
 from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
 from common.service import close_session, open_session
-from services.registry.accounts_db import RegistryDB
+from services.registry.accounts_db import MEMLIMIT, OPSLIMIT, RegistryDB
 
 PASSWORD = "benchmark password"
 
 
 def argon2id_cost(n: int = 10) -> float:
     """Seconds of one argon2id check at the registry's parameters, on this machine."""
-    from services.registry.accounts_db import MEMLIMIT, OPSLIMIT
 
     stored = nacl.pwhash.argon2id.str(b"x" * 12, opslimit=OPSLIMIT, memlimit=MEMLIMIT)
     t0 = time.perf_counter()

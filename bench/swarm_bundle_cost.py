@@ -24,7 +24,7 @@ over the batches are printed:
   (bench/plain_peer.py's inline callback: decode, ``answer`` each sample,
   one CommandBundle put).
 
-    PYTHONPATH=. .venv/bin/python -m bench.swarm_bundle_cost [--robots 20] [--batches 15]
+    .venv/bin/python -m bench.swarm_bundle_cost [--robots 20] [--batches 15]
 """
 
 from __future__ import annotations
@@ -35,15 +35,9 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import msgspec
-
-if __package__ in (None, ""):
-    # Run as `python bench/NAME.py`, Python puts bench/ on the path, not the repository
-    # `python -m bench.NAME` puts there; the imports of bench.* below need the latter.
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.plain_peer import answer
 from common import keys

@@ -1,6 +1,6 @@
 """Cost of Verifier.open per authenticated message (signature, freshness, replay, decode).
 
-.venv/bin/python bench/verify_cost.py [N]
+.venv/bin/python -m bench.verify_cost [N]
 """
 
 from __future__ import annotations

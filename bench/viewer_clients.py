@@ -1,7 +1,7 @@
 """bench_viewer_sessions' class, in its child processes: headless sessions and Chromium pages.
 
 ``_clients`` runs in ``--as-clients``: headless websocket clients speaking
-viser's protocol (tests/viser_client.py), each logging in, joining the arena
+viser's protocol (tests/kit/viser_client.py), each logging in, joining the arena
 and counting the frames and bytes it receives; ``_browsers`` in
 ``--as-browsers``: real Chromium pages (Playwright) doing the same. Both say
 READY, wait for GO, measure, and print one RESULT line of JSON.
@@ -13,6 +13,9 @@ import asyncio
 import json
 import sys
 import time
+
+from common.client.lab_address import parse_address
+from tests.kit.viser_client import ViserClient
 
 
 def _stats(values: list[float]) -> dict[str, float]:
@@ -33,8 +36,6 @@ async def _clients(
     users: list[tuple[str, str]],
     arena: str,
 ) -> None:
-    from tests.viser_client import ViserClient
-
     # A student's address may name any viewer: sessions are dealt round the viewers.
     clients = [ViserClient(urls[i % len(urls)], f"s{i}") for i in range(sessions)]
     gate = asyncio.Semaphore(10)  # a class logging in within a minute, ten at a time
@@ -135,11 +136,12 @@ async def _clients(
 def _browsers(
     url: str, count: int, seconds: float, users: list[tuple[str, str]], address: str, arena: str
 ) -> None:
+    # playwright is optional: only the browser clients need it, and these modules
+    # import it at their top (the token clients' process runs without it).
     from playwright.sync_api import sync_playwright
 
     from bench.bench_viewer import BENCH_VIEWPORT, WsCounter
-    from common.client.lab_address import parse_address
-    from tests.browser.conftest import CHROMIUM_ARGS, ViserPage
+    from tests.kit.pages import CHROMIUM_ARGS, ViserPage  # imports playwright too
 
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)

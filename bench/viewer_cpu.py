@@ -5,10 +5,11 @@ from __future__ import annotations
 import threading
 import time
 
+import psutil
+
 
 def _thread_cpu() -> dict[str, float]:
     """CPU seconds so far of each of this process's threads, by thread name."""
-    import psutil
 
     names = {t.native_id: t.name for t in threading.enumerate()}
     out: dict[str, float] = {}
@@ -32,7 +33,6 @@ def _cpu_over(seconds: float) -> tuple[float, dict[str, float]]:
 
 def _proc_cpu(pids: dict[str, int], seconds: float) -> dict[str, float]:
     """Each named process's CPU over ``seconds`` of wall time, as a share of one core."""
-    import psutil
 
     procs = {name: psutil.Process(pid) for name, pid in pids.items()}
     t0 = time.monotonic()

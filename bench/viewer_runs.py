@@ -14,17 +14,18 @@ import math
 import os
 from pathlib import Path
 
+from bench.labproc import BenchLab
 from bench.viewer_class import ARENA, USERS, Child, _class_children, _merge, _print_sessions
 from bench.viewer_cpu import _cpu_over, _proc_cpu
+from common.keys import AliveKind
+from tests.kit.lab import free_port
+from viewers.web.app import WebViewer
+from viewers.web.demo_lab import DemoConnector, DemoLab
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def run_arena(args: argparse.Namespace, robots: int) -> None:
-    from tests.conftest import free_port
-    from viewers.web.app import WebViewer
-    from viewers.web.demo_lab import DemoConnector, DemoLab
-
     load0 = os.getloadavg()
     print(
         f"arena of {robots} robots: {args.sessions} headless sessions, "
@@ -116,9 +117,6 @@ def run_real(args: argparse.Namespace, robots: int) -> None:
     """The class on a real lab: router, registry and engine as ``wart`` processes, and
     ``--viewers`` viewer processes on the same lab, each serving its share of the class
     (a student's address can name any of them)."""
-    from bench.labproc import BenchLab
-    from common.keys import AliveKind
-    from tests.conftest import free_port
 
     users = [("ana", REAL_PASSWORD), ("ben", REAL_PASSWORD)]
     load0 = os.getloadavg()

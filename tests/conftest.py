@@ -2,15 +2,14 @@
 
 Every process a test starts runs on 127.0.0.1 with multicast scouting off, and
 is stopped (then killed, if it must be) when the test ends. The processes are
-started by tests/lab.py, the one lab starter (its helpers are re-exported here
-for the tests that import them from this file).
+started by tests/kit/lab.py, the one lab starter; its helpers and the kit's
+wait_for are re-exported here for the tests that import them from this file.
 """
 
 from __future__ import annotations
 
-import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,9 +18,8 @@ import zenoh
 from common import keys
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
-from tests.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
-
-ARTIFACTS = REPO / "test-artifacts"
+from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
+from tests.kit.waits import wait_for
 
 
 def pytest_itemcollected(item: pytest.Item) -> None:
@@ -46,20 +44,6 @@ def procs(tmp_path: Path) -> Iterator[Procs]:
 @pytest.fixture
 def realm() -> str:
     return f"t{uuid.uuid4().hex[:10]}"
-
-
-def wait_for(
-    condition: Callable[[], object], timeout: float = 10.0, what: str = "condition"
-) -> object:
-    """Poll ``condition`` until it returns something truthy; fail with ``what`` on timeout."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
-        time.sleep(0.02)
 
 
 @pytest.fixture

@@ -1,6 +1,6 @@
 """The admin page's bans and audit trail, in Chromium, against a real lab (issue 38).
 
-Registry, room and engine are real processes (tests/browser/reallab.py); the
+Registry, room and engine are real processes (tests/kit/reallab.py); the
 admin bans a student from the page, the student's login is refused with the
 reason, and the audit list on the page shows the ban, a kick and a grant.
 """
@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from common.lab_errors import Banned
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_lab import log_in
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.viser_fast import browser_address
 

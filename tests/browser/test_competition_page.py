@@ -22,9 +22,9 @@ from services.registry.accounts_db import RegistryDB
 from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
 from services.runner.sandbox import sandbox_problem
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_agents import enter_arena
-from tests.integration.test_grading import assignment_toml
+from tests.kit.courses import assignment_toml
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]

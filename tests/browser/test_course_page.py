@@ -35,10 +35,10 @@ from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import CANVAS_AT_JS, wait_until
-from tests.browser.reallab import CTX, RealLab, real_lab
 from tests.browser.test_real_agents import choose, enter_arena
-from tests.integration.agentkit import Motion, agent_user
-from tests.integration.test_grading import assignment_toml
+from tests.kit.agentkit import Motion, agent_user
+from tests.kit.courses import assignment_toml
+from tests.kit.reallab import CTX, RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value

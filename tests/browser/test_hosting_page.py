@@ -10,7 +10,7 @@ import pytest
 from playwright.sync_api import expect
 
 from tests.browser.conftest import ViserPage, new_test_context, page_url
-from tests.lab import UpLab
+from tests.kit.lab import UpLab
 
 pytestmark = [pytest.mark.browser, pytest.mark.smoke]
 

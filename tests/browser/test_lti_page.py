@@ -15,11 +15,11 @@ from urllib.parse import urlencode
 import pytest
 
 from tests.browser.conftest import ViserPage, new_test_context, page_url
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_lab import online
-from tests.integration.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, Launcher
-from tests.integration.test_grading import COURSE
-from tests.integration.test_lti import start_lti, wart
+from tests.kit.courses import COURSE
+from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, Launcher
+from tests.kit.lti_tool import start_lti, wart
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.tabs import tab_label
 
 pytestmark = pytest.mark.browser

@@ -27,9 +27,9 @@ from tests.browser.conftest import (
     wait_for_aimed_camera,
     wait_until,
 )
-from tests.browser.reallab import CTX, PASSWORD, WORLD, RealLab, real_lab
 from tests.browser.test_real_lab import session_of
 from tests.conftest import REPO
+from tests.kit.reallab import CTX, PASSWORD, WORLD, RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.tabs import tab_label

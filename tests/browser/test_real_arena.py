@@ -18,8 +18,8 @@ import pytest
 
 from common.tracking.truth import read_truth
 from tests.browser.conftest import wait_until
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_lab import log_in, session_of
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.world_view import WorldView
 

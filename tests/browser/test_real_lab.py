@@ -22,7 +22,7 @@ from tests.browser.conftest import (
     wait_for_aimed_camera,
     wait_until,
 )
-from tests.browser.reallab import PASSWORD, WORLD, RealLab, real_lab
+from tests.kit.reallab import PASSWORD, WORLD, RealLab, real_lab
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession

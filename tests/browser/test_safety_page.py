@@ -17,9 +17,9 @@ import pytest
 from common.client.agent_client import FINAL
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_agents import enter_arena, pick_robot
-from tests.integration.agentkit import Motion, agent_user
+from tests.kit.agentkit import Motion, agent_user
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]

@@ -11,8 +11,8 @@ import pytest
 
 from common.client.resume_cookie import PREFIX
 from tests.browser.conftest import ViserPage, page_url
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_lab import log_in, online
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.tabs import tab_label
 

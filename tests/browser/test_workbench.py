@@ -15,9 +15,9 @@ import pytest
 
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
-from tests.browser.reallab import RealLab, real_lab
 from tests.browser.test_real_agents import choose, enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
+from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.robot_panel import NONE
 

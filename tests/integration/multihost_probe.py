@@ -79,7 +79,7 @@ VIEWER_PORT = 8080  # the lab file's default
 
 async def _two_viewers(at_a: str, at_b: str) -> dict[str, object]:
     """stu1 on A's viewer, stu2 on B's: log in, chat both ways in the lobby, watch arena1."""
-    from tests.viser_client import ViserClient
+    from tests.kit.viser_client import ViserClient
 
     on_a = ViserClient(f"ws://{at_a}:{VIEWER_PORT}", "viewer-A")
     on_b = ViserClient(f"ws://{at_b}:{VIEWER_PORT}", "viewer-B")
@@ -180,7 +180,7 @@ def main() -> int:
                         admin.add_user(user, STUDENT_PASSWORD)
         finally:
             close_session(s)
-        from tests.viser_client import run_in_thread
+        from tests.kit.viser_client import run_in_thread
 
         return result(**run_in_thread(_two_viewers(at_a, at_b)))
 

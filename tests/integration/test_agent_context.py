@@ -15,7 +15,7 @@ from common.controller import Controller, Khepera
 from common.lab_errors import NotFound
 from common.messages import ControlQueued
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     Poses,
     agent_user,
     start_agent_context,
@@ -23,7 +23,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 # One worker starts the module's lab once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("agent_context")]

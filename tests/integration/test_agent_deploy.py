@@ -16,7 +16,7 @@ from common.lab_errors import LabError
 from common.messages import OutputLines
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     Poses,
     agent_user,
     start_agent_context,
@@ -24,7 +24,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

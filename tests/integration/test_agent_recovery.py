@@ -12,8 +12,8 @@ import pytest
 from common.client.agent_client import DriveResult
 from common.controller import Controller, Khepera
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import Poses, agent_user, start_agent_context, start_engine
-from tests.lab import make_lab
+from tests.kit.agentkit import Poses, agent_user, start_agent_context, start_engine
+from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import Procs, Router
-from tests.integration.agentkit import CTX, agent_user, start_agent_context, start_engine
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.agentkit import CTX, agent_user, start_agent_context, start_engine
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 

@@ -22,8 +22,8 @@ from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import WORLD, agent_user, start_agent_context, start_runner
-from tests.lab import ProcessLab, make_lab
+from tests.kit.agentkit import WORLD, agent_user, start_agent_context, start_runner
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

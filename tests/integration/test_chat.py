@@ -12,7 +12,7 @@ from common.auth import issue_session
 from common.lab_errors import NotAllowed, NotFound, RateLimited, RequestFailed
 from common.messages import ChatSay, RoomEvent
 from tests.conftest import Procs, Router, wait_for
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 
 class Events:

@@ -27,9 +27,9 @@ from common.recording.replay import Timeline
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router
-from tests.integration.agentkit import start_runner, together
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
-from tests.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab, wart_env
+from tests.kit.agentkit import start_runner, together
+from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab, wart_env
 
 pytestmark = [
     pytest.mark.integration,

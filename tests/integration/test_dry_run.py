@@ -22,14 +22,14 @@ from common.world import packing
 from services.runner.dryrun import dry_run, wall_limit
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
     start_engine,
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

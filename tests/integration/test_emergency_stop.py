@@ -22,7 +22,7 @@ from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     WORLD,
     Motion,
@@ -32,7 +32,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

@@ -18,8 +18,8 @@ from common.messages import (
     decode,
 )
 from tests.conftest import Procs, Router
-from tests.integration.agentkit import WORLD, start_engine
-from tests.lab import make_lab
+from tests.kit.agentkit import WORLD, start_engine
+from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
 

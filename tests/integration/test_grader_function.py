@@ -20,7 +20,7 @@ import pytest
 from common.client.grader_client import GraderClient
 from services.grader import course_cli
 from tests.integration.test_grading import assignment_toml, lab, source, wart  # noqa: F401
-from tests.lab import ProcessLab
+from tests.kit.lab import ProcessLab
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 GRADERS = Path(__file__).parent / "grading" / "graders"

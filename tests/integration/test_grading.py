@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import subprocess
 import sys
-import textwrap
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,8 +23,9 @@ from common.messages import GradingChanged
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import start_runner, together
-from tests.lab import PASSWORD, REPO, ProcessLab, make_lab, wart_env
+from tests.kit.agentkit import start_runner, together
+from tests.kit.courses import COURSE, assignment_toml
+from tests.kit.lab import PASSWORD, REPO, ProcessLab, make_lab, wart_env
 
 pytestmark = [
     pytest.mark.integration,
@@ -33,46 +33,6 @@ pytestmark = [
     pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
 ]
 CONTROLLERS = Path(__file__).parent / "grading"
-COURSE = "robotics-26"
-
-
-def assignment_toml(name: str, **fields: str) -> str:
-    """The reach-the-goal assignment; ``fields`` replace its top-level lines."""
-    values = {
-        "name": f'"{name}"',
-        "course": f'"{COURSE}"',
-        "map": '"empty"',
-        "robot": '"k1"',
-        "time_limit": "3.0",
-        "episodes": "2",
-        "opens": "2026-01-01T00:00:00Z",
-        "deadline": "2099-01-01T00:00:00Z",
-        "quota": "5",
-        **fields,
-    }
-    head = "\n".join(f"{k} = {v}" for k, v in values.items())
-    return head + textwrap.dedent(
-        """
-
-        [[start]]
-        x = 300
-        y = 500
-        heading_deg = 0
-
-        [[zones]]
-        id = "goal"
-        shape = "circle"
-        x = 420
-        y = 500
-        radius = 60
-
-        [score]
-        name = "points"
-        unit = "pts"
-        order = "higher"
-        rule = '100 * reached("goal") - 5 * collisions() - time_to("goal")'
-        """
-    )
 
 
 def wart(lab: ProcessLab, *args: str) -> subprocess.CompletedProcess[str]:

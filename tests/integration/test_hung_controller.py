@@ -18,7 +18,7 @@ from common.controller import KheperaState
 from common.recording import read_recording, summarize
 from services.runner.sandbox import Sandbox, SandboxLimits, sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     agent_user,
     start_agent_context,
@@ -26,7 +26,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 

@@ -25,14 +25,14 @@ from common.messages import (
 )
 from common.world.leasemac import mac_command, new_lease_key
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     WORLD,
     Poses,
     agent_user,
     start_agent_context,
     start_engine,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 # One worker starts the module's lab once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("lease_mac")]

@@ -10,8 +10,8 @@ import zenoh
 from common import keys
 from common.messages import WorldSnapshot, decode
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import WORLD, start_engine
-from tests.lab import make_lab
+from tests.kit.agentkit import WORLD, start_engine
+from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
 

@@ -1,6 +1,6 @@
 """LTI 1.3 (issue 36, items 8 and 9), with real processes: router, registry, lti, runner, grader.
 
-A fake LMS (tests/integration/lti_platform.py: its own keys, JWKS, OIDC auth,
+A fake LMS (tests/kit/lti_platform.py: its own keys, JWKS, OIDC auth,
 token and score endpoints on 127.0.0.1) launches people into the lab through
 the real ``wart lti``: a Learner gets an account in the course and a page
 cookie that logs them in; an Instructor becomes a teacher; the student's
@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import html
 import sqlite3
-import subprocess
-import sys
 import time
 import urllib.error
 import urllib.request
@@ -34,11 +32,12 @@ from common.client.resume_cookie import parse_cookies
 from common.lab_errors import LabError
 from common.messages import LtiAccount, LtiAccountRequest
 from services.lab import wiring
-from services.registry.accounts_db import RegistryDB
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import start_runner, together
-from tests.integration.lti_platform import (
+from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
+from tests.kit.agentkit import start_runner, together
+from tests.kit.lab import ProcessLab, make_lab, start_router
+from tests.kit.lti_platform import (
     CLIENT_ID,
     DEPLOYMENT,
     INSTRUCTOR,
@@ -47,12 +46,9 @@ from tests.integration.lti_platform import (
     form_fields,
     new_key,
 )
-from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
-from tests.lab import REPO, ProcessLab, free_port, make_lab, start_router, wart_env
+from tests.kit.lti_tool import PAGE, start_lti, wart
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
-LTI_ACCOUNT = wiring.service_account("lti", "lti")
-PAGE = "http://127.0.0.1:8080/"
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):
@@ -124,40 +120,6 @@ class LtiLab:
             return list(con.execute(sql, args))
         finally:
             con.close()
-
-
-def wart(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
-        cwd=REPO,
-        env=wart_env(),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
-def start_lti(
-    lab: ProcessLab, tmp: Path, platform: FakePlatform, page: str = PAGE, lab_address: str = ""
-) -> str:
-    """The lti service's account (role lti), its platforms file, the process; its URL."""
-    key = create_identity_key(lab.wiring().identity(LTI_ACCOUNT))
-    db = RegistryDB(lab.db_path)
-    db.add_user(LTI_ACCOUNT, ["lti"], public_key=bytes(key.verify_key))
-    db.close()
-    port = free_port()
-    tool = f"http://127.0.0.1:{port}"
-    platform.tool_jwks_url = f"{tool}/lti/jwks"
-    config = tmp / "lti.toml"
-    config.write_text(
-        "[tool]\n"
-        f'url = "{tool}"\n'
-        f'page = "{page}"\n'
-        f'lab_address = "{lab_address or f"wart://127.0.0.1:{lab.router.port}/{lab.realm}"}"\n\n'
-        + platform.toml({"link-1": "reach-goal"})
-    )
-    lab.start(wiring.lti_spec(lab.wiring(), config, http_port=port), name="lti")
-    return tool
 
 
 @contextmanager

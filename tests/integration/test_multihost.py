@@ -25,7 +25,7 @@ import pytest
 from services.lab.certs import init_ca, issue
 from services.lab.labfile import load
 from services.lab.pki import issue_lab
-from tests import netns
+from tests.kit import netns
 
 # One worker builds the three-host network once for the module (two built it twice: 20 s).
 pytestmark = [pytest.mark.integration, pytest.mark.netns, pytest.mark.xdist_group("multihost")]

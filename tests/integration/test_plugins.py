@@ -39,8 +39,8 @@ from common.messages import (
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import start_agent_context, start_deploy, together
-from tests.lab import REPO, ProcessLab, make_lab
+from tests.kit.agentkit import start_agent_context, start_deploy, together
+from tests.kit.lab import REPO, ProcessLab, make_lab
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"

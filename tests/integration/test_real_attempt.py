@@ -30,10 +30,10 @@ from services.bridge.simbody import SimBody
 from services.lab import wiring
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import WORLD, start_agent_context, start_runner
 from tests.integration.test_grader_function import course
 from tests.integration.test_grading import COURSE, source, wart
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.agentkit import WORLD, start_agent_context, start_runner
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

@@ -14,7 +14,7 @@ from common.recording import read_recording, summarize
 from common.recording import schema as s
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     agent_user,
     start_agent_context,
@@ -22,7 +22,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, USERS, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, USERS, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

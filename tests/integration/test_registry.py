@@ -23,7 +23,7 @@ from common.lab_errors import (
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import Procs, Router, wait_for
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 # One worker starts the module's router once.
 pytestmark = pytest.mark.xdist_group("registry")

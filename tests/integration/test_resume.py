@@ -17,7 +17,7 @@ from common.lab_errors import NotAllowed, WrongCredentials
 from common.messages import ResumeGrant, SignedResume, decode, encode
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 

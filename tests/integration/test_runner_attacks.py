@@ -24,14 +24,14 @@ from common.service import RequestError, close_session, open_session
 from services.runner.sandbox import sandbox_problem
 from services.runner.service import MAX_RUNS_PER_USER, RunnerService
 from tests.conftest import Procs, Router
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
     start_engine,
     start_runner,
     together,
 )
-from tests.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

@@ -27,14 +27,14 @@ import pytest
 from common.keys import AliveKind
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Proc, Procs, Router, free_port, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     WORLD,
     start_agent_context,
     start_deploy,
     start_engine,
     start_runner,
 )
-from tests.lab import ProcessLab, make_lab, start_router
+from tests.kit.lab import ProcessLab, make_lab, start_router
 
 pytestmark = [
     pytest.mark.integration,

@@ -29,8 +29,8 @@ from services.bridge.simbody import SimBody
 from services.lab.lab_maps import map_pose
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import REPO, Procs, Router, wait_for
-from tests.integration.agentkit import agent_user, start_agent_context, start_engine, start_runner
-from tests.lab import ProcessLab, make_lab
+from tests.kit.agentkit import agent_user, start_agent_context, start_engine, start_runner
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

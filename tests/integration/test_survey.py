@@ -11,7 +11,7 @@ import pytest
 from common.client.survey import survey
 from common.service import close_session, open_session
 from tests.conftest import REPO, Procs, Router, wart_env
-from tests.lab import make_lab
+from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
 

@@ -21,7 +21,7 @@ from common.messages import AuditQuery, RequestStatus
 from common.recording import read_recording
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     WORLD,
     Motion,
@@ -32,7 +32,7 @@ from tests.integration.agentkit import (
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, Proc, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, Proc, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,

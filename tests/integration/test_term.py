@@ -28,9 +28,9 @@ from common.messages import AuditEntry, AuditQuery
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
-from tests.integration.agentkit import CTX, start_agent_context, start_engine
-from tests.lab import LOGIN_WAIT, PASSWORD, make_lab
-from tests.lab import ProcessLab as Lab
+from tests.kit.agentkit import CTX, start_agent_context, start_engine
+from tests.kit.lab import LOGIN_WAIT, PASSWORD, make_lab
+from tests.kit.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("term")]

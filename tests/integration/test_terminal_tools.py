@@ -22,7 +22,7 @@ from common.messages import AuditQuery
 from services.registry.accounts_db import RegistryDB
 from services.registry.audit_db import TermStore
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 # One worker starts the module's router once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("terminal_tools")]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from tests import netns
+from tests.kit import netns
 
 pytestmark = [pytest.mark.integration, pytest.mark.netns]
 

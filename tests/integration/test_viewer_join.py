@@ -16,8 +16,8 @@ import pytest
 from common.client.lab_address import LabAddress
 from common.service import close_session
 from tests.conftest import Procs, Router
-from tests.integration.agentkit import CTX, WORLD, start_agent_context, start_engine
-from tests.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.agentkit import CTX, WORLD, start_agent_context, start_engine
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 from viewers.web.adapters import ContextSummary
 from viewers.web.connector import LiveConnector
 

@@ -3,7 +3,7 @@
 A real router and registry (argon2id password checks on a real SQLite file) as
 ``wart`` processes; the web viewer in this process on a real Zenoh session with
 :class:`~viewers.web.connector.LiveConnector`; headless clients speaking viser's
-protocol (tests/viser_client.py) that log in through the page's own form, clicking
+protocol (tests/kit/viser_client.py) that log in through the page's own form, clicking
 "Log in" the moment it shows, as a quick browser can.
 
 What a student sees is asserted, never how long it took: each wait below is the
@@ -29,8 +29,8 @@ import zenoh
 from common.client.lab_address import LabAddress
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router, free_port
-from tests.lab import PASSWORD, ProcessLab, make_lab
-from tests.viser_client import ViserClient, run_in_thread
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.viser_client import ViserClient, run_in_thread
 from viewers.web.app import WebViewer
 from viewers.web.connector import LiveConnector
 from viewers.web.demo_lab import DemoConnector, DemoLab

@@ -2,7 +2,7 @@
 
 A real WebViewer (viser server, frame pump) on the in-memory lab's 1,000-robot
 arena, and real websocket clients speaking viser's protocol
-(tests/viser_client.py): each logs in through the GUI and joins the arena.
+(tests/kit/viser_client.py): each logs in through the GUI and joins the arena.
 One of them then stops reading its socket. The world's source does not matter
 here (the demo lab's frames stand for the engine's); what is under test is the
 viewer's sending side.
@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import free_port
-from tests.viser_client import RobotFrame, ViserClient, run_in_thread
+from tests.kit.viser_client import RobotFrame, ViserClient, run_in_thread
 from viewers.web.app import NOTSENT_LOWAT, WRITE_HIGH, WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 

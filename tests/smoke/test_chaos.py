@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.bench_chaos import Chaos, DeployProbe, running_lab
+from tests.kit.chaos import Chaos, DeployProbe, running_lab
 
 # A whole lab, every service killed in turn and waited back: its hang guard is longer.
 pytestmark = [pytest.mark.smoke, pytest.mark.timeout(300)]

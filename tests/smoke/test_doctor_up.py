@@ -11,7 +11,7 @@ import pytest
 from common.zconfig import NetworkOptions
 from services.commands.doctor import up_plan
 from tests.conftest import REPO, wart_env
-from tests.lab import UpLab
+from tests.kit.lab import UpLab
 
 pytestmark = pytest.mark.smoke
 

@@ -16,7 +16,7 @@ from common.zconfig import NetworkOptions
 from services.commands.up import REAL_AGENT, REAL_WORLD, lab_plan, router_spec, settings_from_args
 from services.lab.supervisor import AliveWatch
 from tests.conftest import wait_for
-from tests.lab import UpLab
+from tests.kit.lab import UpLab
 
 pytestmark = pytest.mark.smoke
 

@@ -26,7 +26,7 @@ from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, wait_for, wart_env
-from tests.lab import UpLab
+from tests.kit.lab import UpLab
 
 # One worker starts the module's lab once (split between workers, each started its own).
 pytestmark = [pytest.mark.smoke, pytest.mark.xdist_group("up_hosting")]

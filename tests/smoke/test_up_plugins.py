@@ -21,7 +21,7 @@ from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.registry.accounts_db import RegistryDB
 from tests.integration.test_plugins import race_plugin  # noqa: F401 - the fixture
-from tests.lab import UpLab
+from tests.kit.lab import UpLab
 
 pytestmark = [pytest.mark.smoke, pytest.mark.timeout(400)]
 TEACHER, PASSWORD = "teacher", "a long test password"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.lab import UpLab
+from tests.kit.lab import UpLab
 
 pytestmark = pytest.mark.smoke
 

@@ -10,6 +10,7 @@ library ends up starting a lab.
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from functools import cache
 from pathlib import Path
@@ -17,7 +18,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-PROJECT = ("common", "services", "viewers", "bench")
+PROJECT = ("common", "services", "viewers", "bench", "tests")
 
 
 def _module_name(path: Path) -> str:
@@ -325,7 +326,7 @@ def test_imports_inside_functions_say_why() -> None:
     numba kept off a path, the sandbox's own copy), written beside it."""
     found = [
         place
-        for top in ("common", "services", "viewers")
+        for top in ("common", "services", "viewers", "bench")
         for path in sorted((REPO / top).rglob("*.py"))
         for place in _unexplained_inner_imports(path)
     ]
@@ -394,3 +395,54 @@ def test_the_mixin_check_sees_a_mixin(tmp_path: Path) -> None:
     )
     found = [line.split(": ", 1)[1] for line in _declared_elsewhere(source, tmp_path)]
     assert found == ["Part declares ['world']"]
+
+
+# bench/ and tests/ share one kit (tests/kit/: the lab starters, waits, page and client
+# helpers, the worlds the benchmarks measure); neither imports the other's own modules.
+KIT = "tests.kit"
+BENCH_TESTS = "tests.unit.bench"  # the tests of the benchmarks' own code
+
+
+def test_bench_imports_from_tests_only_the_kit() -> None:
+    assert not _violations("bench", lambda n: not _inside(n, "tests") or _inside(n, KIT))
+
+
+def test_only_the_benchmarks_tests_import_bench() -> None:
+    bad = sorted(
+        f"{module} imports {name}"
+        for module in _modules_in("tests")
+        if not _inside(module, BENCH_TESTS)
+        for name in imports_of(module)
+        if _inside(name, "bench")
+    )
+    assert not bad
+
+
+def test_the_kit_imports_no_benchmark_no_test_and_no_pytest() -> None:
+    """Plain modules both sides load: fixtures stay in the conftest.py files."""
+    assert _modules_in(KIT), "tests/kit/ is missing"
+    assert not list((REPO / "tests" / "kit").rglob("conftest.py"))
+
+    def allowed(name: str) -> bool:
+        top = name.split(".")[0]
+        return top not in ("bench", "pytest") and (top != "tests" or _inside(name, KIT))
+
+    assert not _violations(KIT, allowed)
+
+
+# Loading another checkout is these files' job: each says so beside its path line.
+PATH_EDITS_ALLOWED = frozenset({"bench/engine_ab.py", "bench/bench_sensing.py"})
+PATH_EDIT = re.compile(r"sys\.path\.(insert|append)\b")
+
+
+def test_no_sys_path_edits_in_bench_or_tests() -> None:
+    """Benchmarks run as `python -m bench.NAME` from the repository's root, tests under
+    pytest: both find the project on the path without editing it."""
+    found = sorted(
+        str(path.relative_to(REPO))
+        for top in ("bench", "tests")
+        for path in (REPO / top).rglob("*.py")
+        if PATH_EDIT.search(path.read_text())
+        and str(path.relative_to(REPO)) not in PATH_EDITS_ALLOWED
+    )
+    assert not found, "sys.path edited in:\n" + "\n".join(found)

@@ -1,11 +1,11 @@
 """Every module of bench/ imports, and each runnable one answers --help both ways.
 
-Benchmarks run rarely, so a name that moved or a path set-up that only works
-under ``python -m`` went unnoticed until someone wanted a figure. Importing
-each module catches the first; ``python bench/NAME.py --help`` (each in its own
-process, as a user types it, from another directory) and ``python -m
-bench.NAME --help`` (in this process: the module's code run as __main__) the
-second, without running any benchmark.
+Benchmarks run rarely, so a name that moved or an import that only works in
+this process went unnoticed until someone wanted a figure. Importing each
+module catches the first; ``python -m bench.NAME --help`` run in this process
+(the module's code run as __main__) and in a process of its own (as a user
+types it at the repository's root, with no PYTHONPATH) the second, without
+running any benchmark.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ import os
 import runpy
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -49,13 +48,13 @@ def test_help_as_a_module(module: str, monkeypatch: pytest.MonkeyPatch) -> None:
     assert "usage:" in out.getvalue()
 
 
-def test_help_as_a_script_for_every_runnable_module(tmp_path: Path) -> None:
+def test_help_as_a_command_for_every_runnable_module() -> None:
     """All at once (one process each, started together): a few seconds, not a minute."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     procs = {
         module: subprocess.Popen(
-            [sys.executable, str(REPO / "bench" / f"{module}.py"), "--help"],
-            cwd=tmp_path,
+            [sys.executable, "-m", f"bench.{module}", "--help"],
+            cwd=REPO,
             env=env,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,

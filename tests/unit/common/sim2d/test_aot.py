@@ -39,7 +39,7 @@ _RUN = """
 import hashlib, json, sys
 import numpy as np
 import services.engine.main  # what an engine imports, zenoh and all
-from bench.bench_enki import CRUISE, WEIGHTS, scenario_world
+from tests.kit.worlds import CRUISE, WEIGHTS, scenario_world
 from common.sim2d import compiled
 
 n, ticks = int(sys.argv[1]), int(sys.argv[2])

@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 
-from bench.engine_bench import build, control
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import EditError, World
+from tests.kit.worlds import build, control
 
 KHEPERA = agent_type("khepera")
 R = KHEPERA.radius_mm

@@ -13,10 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.drive_hashes import tick_digest
-from bench.engine_bench import build, control
 from common.sim2d import discs_split, kernels, sensing
 from common.sim2d.entities import ShapeSpec
+from tests.kit.worlds import build, control, tick_digest
 
 pytestmark = pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
 

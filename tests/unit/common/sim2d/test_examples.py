@@ -17,7 +17,7 @@ from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.maps import load_map
 from common.sim2d.world import DRIVES, World
 from tests.conftest import REPO
-from tests.worldlink import run_in_world
+from tests.kit.worldlink import run_in_world
 
 EXAMPLES = sorted((REPO / "examples").glob("[0-9][0-9]_*.py"))
 

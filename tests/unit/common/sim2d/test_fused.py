@@ -14,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.engine_bench import build, control
 from common.sim2d import kernels, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import EditError, World
+from tests.kit.worlds import build, control
 
 KHEPERA = agent_type("khepera")
 

@@ -195,7 +195,7 @@ def test_edits_between_ticks_are_seen_and_the_fused_tick_is_the_general_path() -
 
 
 def test_a_swarm_with_balls_sensed_on_two_threads_is_the_one_thread_run() -> None:
-    from bench.engine_bench import build, control
+    from tests.kit.worlds import build, control
 
     runs = []
     for threads in (1, 2):

@@ -1,6 +1,6 @@
 """Agent labs for integration tests: what they watch and drive (poses, motion, a user).
 
-The processes (engine, runner, agent context) are started by tests/lab.py, the one
+The processes (engine, runner, agent context) are started by tests/kit/lab.py, the one
 lab starter; the start_* functions here are its shorthands for the agent tests.
 """
 
@@ -23,15 +23,15 @@ from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
 from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session
-from tests.conftest import wait_for
-from tests.lab import PASSWORD, Proc, ProcessLab
+from tests.kit.lab import PASSWORD, Proc, ProcessLab
+from tests.kit.waits import wait_for
 
 WORLD = "w1"
 CTX = "arena"
 
 
 def service_account(lab: ProcessLab, account: str) -> Path:
-    """A service account and its identity key (tests/lab.py makes them)."""
+    """A service account and its identity key (tests/kit/lab.py makes them)."""
     return lab.account(account)
 
 

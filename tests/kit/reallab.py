@@ -1,7 +1,7 @@
 """One real lab per test module for browser tests: router, registry, lobby room, engine, viewer.
 
 Everything but the viewer is a real ``wart`` process on 127.0.0.1 (multicast
-scouting off), started by tests/lab.py; the viewer runs in the test process over
+scouting off), started by tests/kit/lab.py; the viewer runs in the test process over
 a real Zenoh session with :class:`~viewers.web.live.LiveConnector`, so tests can read its state
 (views, frames) as well as the page. With ``agents`` the lab also runs a
 runner (sandboxed uploads) and the agent context ``arena`` on the world
@@ -28,14 +28,14 @@ from common.client.lab_client import LabClient
 from common.messages import AgentCommand, Lease
 from common.service import close_session, open_session
 from services.lab.real_arenas import bridge_specs
-from tests.integration.agentkit import (
+from tests.kit.agentkit import (
     CTX,
     start_agent_context,
     start_engine,
     start_runner,
     together,
 )
-from tests.lab import PASSWORD, ProcessLab, Procs, Router, free_port, make_lab, start_router
+from tests.kit.lab import PASSWORD, ProcessLab, Procs, Router, free_port, make_lab, start_router
 from viewers.web.app import WebViewer
 from viewers.web.connector import LiveConnector
 

@@ -46,7 +46,7 @@ from services.lab.wiring import Wiring, up_args
 from services.registry import accounts_db
 from services.registry.accounts_db import RegistryDB, hash_password
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 PASSWORD = "correct horse"
 USERS = {"alice": "student", "bob": "student", "carol": "student", "ida": "instructor"}
