@@ -35,7 +35,8 @@ import argparse
 import math
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
@@ -127,6 +128,32 @@ def lab_session(
     return open_session(options, wait=10.0), options.realm, options.registry_key
 
 
+@contextmanager
+def lab_login(args: argparse.Namespace, options: NetworkOptions) -> Iterator[LabClient]:
+    """A client of the lab logged in as --user; the session is closed after."""
+    session, realm, registry_key = lab_session(args, options)
+    try:
+        with LabClient(session, realm, registry_key, presence=False) as client:
+            client.login(args.user, password_from(args))
+            yield client
+    finally:
+        close_session(session)
+
+
+def run_lab_command(
+    p: argparse.ArgumentParser,
+    argv: Sequence[str] | None,
+    run: Callable[[argparse.Namespace, NetworkOptions], int],
+) -> int:
+    """Parse the command line and ``run`` it; what the lab or the lab file refuses exits 1."""
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    try:
+        return run(args, options)
+    except (LabFileError, LabError, ValueError, OSError) as exc:
+        return cli.fail(str(exc), 1)
+
+
 def _password(args: argparse.Namespace) -> str:
 
     return password_from(args)
@@ -164,12 +191,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart arena") -> int:
     for s in (s_new, s_stop, s_estop, s_release, s_settings, *takeover):
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        return _run(args, options)
-    except (LabFileError, LabError, ValueError, OSError) as exc:
-        return cli.fail(str(exc), 1)
+    return run_lab_command(p, argv, _run)
 
 
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:

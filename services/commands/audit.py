@@ -24,14 +24,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from common import cli, keys
-from common.client.lab_client import LabClient
-from common.lab_errors import LabError
 from common.messages import MAX_AUDIT_PAGE, AuditEntry, AuditQuery
-from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.commands.arena import add_lab_arguments, lab_session
-from services.commands.terminal import password_from
-from services.lab.labfile import LabFileError
+from services.commands.arena import add_lab_arguments, lab_login, run_lab_command
 
 COLUMNS = ("id", "at", "actor", "action", "target", "outcome", "detail", "source", "reporter")
 
@@ -113,23 +108,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart audit") -> int:
     p.add_argument("--limit", type=int, default=50, help=f"at most this many (≤ {MAX_AUDIT_PAGE})")
     p.add_argument("--format", choices=("table", "csv", "json"), default="table")
     p.add_argument("--out", type=Path, help="write to this file instead of the terminal")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        return _run(args, options)
-    except (LabFileError, LabError, ValueError, OSError) as exc:
-        return cli.fail(str(exc), 1)
+    return run_lab_command(p, argv, _run)
 
 
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
     query = query_from(args)  # refused before any network
-    session, realm, registry_key = lab_session(args, options)
-    try:
-        with LabClient(session, realm, registry_key, presence=False) as client:
-            client.login(args.user, password_from(args))
-            entries, more = client.audit_trail(query)
-    finally:
-        close_session(session)
+    with lab_login(args, options) as client:
+        entries, more = client.audit_trail(query)
     text = render(entries, args.format)
     if args.out is not None:
         args.out.write_text(text)

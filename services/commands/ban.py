@@ -22,14 +22,9 @@ import time
 from collections.abc import Sequence
 
 from common import cli, keys
-from common.client.lab_client import LabClient
-from common.lab_errors import LabError
-from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.commands.arena import add_lab_arguments, lab_session
+from services.commands.arena import add_lab_arguments, lab_login, run_lab_command
 from services.commands.audit import iso, parse_time
-from services.commands.terminal import password_from
-from services.lab.labfile import LabFileError
 
 _UNITS = {"m": 60.0, "h": 3600.0, "d": 86400.0, "w": 7 * 86400.0}
 
@@ -55,12 +50,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart ban") -> int:
     verb = p.add_mutually_exclusive_group()
     verb.add_argument("--lift", action="store_true", help="lift the account's ban")
     verb.add_argument("--list", action="store_true", help="the bans in force")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        return _run(args, options)
-    except (LabFileError, LabError, ValueError, OSError) as exc:
-        return cli.fail(str(exc), 1)
+    return run_lab_command(p, argv, _run)
 
 
 def _until(args: argparse.Namespace) -> float | None:
@@ -82,24 +72,19 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
     if not (args.list or args.lift) and not args.reason.strip():
         raise ValueError("--reason is required: the banned user is told it at each login")
     until = None if args.list or args.lift else _until(args)
-    session, realm, registry_key = lab_session(args, options)
-    try:
-        with LabClient(session, realm, registry_key, presence=False) as client:
-            client.login(args.user, password_from(args))
-            if args.list:
-                banned = [u for u in client.list_users() if u.ban is not None]
-                for u in banned:
-                    assert u.ban is not None
-                    end = iso(u.ban.until) if u.ban.until else "until lifted"
-                    print(f"{u.name:<16} {end:<22} by {u.ban.by}: {u.ban.reason}")
-                if not banned:
-                    print("nobody is banned")
-            elif args.lift:
-                print(client.lift_ban(args.account, args.reason.strip()))
-            else:
-                print(client.ban(args.account, args.reason.strip(), until))
-    finally:
-        close_session(session)
+    with lab_login(args, options) as client:
+        if args.list:
+            banned = [u for u in client.list_users() if u.ban is not None]
+            for u in banned:
+                assert u.ban is not None
+                end = iso(u.ban.until) if u.ban.until else "until lifted"
+                print(f"{u.name:<16} {end:<22} by {u.ban.by}: {u.ban.reason}")
+            if not banned:
+                print("nobody is banned")
+        elif args.lift:
+            print(client.lift_ban(args.account, args.reason.strip()))
+        else:
+            print(client.ban(args.account, args.reason.strip(), until))
     return 0
 
 

@@ -22,13 +22,8 @@ from collections.abc import Sequence
 
 from common import cli
 from common.client.host_client import host_room, stop_hosted
-from common.client.lab_client import LabClient
-from common.lab_errors import LabError
-from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.commands.arena import add_lab_arguments, lab_session
-from services.commands.terminal import password_from
-from services.lab.labfile import LabFileError
+from services.commands.arena import add_lab_arguments, lab_login, run_lab_command
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
@@ -51,32 +46,21 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart room") -> int:
         s.add_argument("room", help="the room's name: letters, digits, _ - .")
         s.add_argument("--user", required=True)
         s.add_argument("--password-file", help="read the password from this file")
-    args, options = cli.parse(p, argv)
-    assert options is not None
-    try:
-        return _run(args, options)
-    except (LabFileError, LabError, ValueError, OSError) as exc:
-        return cli.fail(str(exc), 1)
+    return run_lab_command(p, argv, _run)
 
 
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
-
-    session, realm, registry_key = lab_session(args, options)
-    try:
-        with LabClient(session, realm, registry_key, presence=False) as client:
-            client.login(args.user, password_from(args))
-            if args.verb == "new":
-                params = dict(_pair(text) for text in args.param)
-                room = host_room(
-                    client, args.room, args.title, host=args.host, kind=args.kind, params=params
-                )
-                what = "chat room" if room.kind == "chat" else room.kind
-                print(f"{what} {room.name} ({room.title}) is open on {room.host}")
-            else:
-                print(stop_hosted(client, args.room, "room"))
-        return 0
-    finally:
-        close_session(session)
+    with lab_login(args, options) as client:
+        if args.verb == "new":
+            params = dict(_pair(text) for text in args.param)
+            room = host_room(
+                client, args.room, args.title, host=args.host, kind=args.kind, params=params
+            )
+            what = "chat room" if room.kind == "chat" else room.kind
+            print(f"{what} {room.name} ({room.title}) is open on {room.host}")
+        else:
+            print(stop_hosted(client, args.room, "room"))
+    return 0
 
 
 def _pair(text: str) -> tuple[str, str]:
