@@ -24,11 +24,9 @@ from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
 from common.controller import load_controller
 from common.controller.upload_gate import PrecheckError, precheck
-from common.lab_errors import LabError
 from common.messages import OutputLines, RequestStatus
-from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.commands.terminal import connect, password_from, say
+from services.commands.terminal import run_logged_in, say
 
 
 def tool_parser(prog: str, doc: str) -> argparse.ArgumentParser:
@@ -78,23 +76,11 @@ def session_for(
         keys.check_ident("user", args.user)
     except ValueError as exc:
         return cli.fail(str(exc))
-    if not options.registry_key:
-        return cli.fail(
-            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
-        )
-    try:
-        zsession = connect(options)
-    except LabError as exc:
-        return cli.fail(str(exc))
-    try:
-        with LabClient(zsession, options.realm, options.registry_key) as client:
-            client.login(args.user, password_from(args))
-            agents = AgentClient(client, args.context).join()
-            return body(agents)
-    except LabError as exc:
-        return cli.fail(str(exc), 1)
-    finally:
-        close_session(zsession)
+
+    def joined(client: LabClient) -> int:
+        return body(AgentClient(client, args.context).join())
+
+    return run_logged_in(args, options, joined)
 
 
 def interrupt_event() -> threading.Event:

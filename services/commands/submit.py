@@ -18,12 +18,9 @@ from pathlib import Path
 
 from common import cli, keys
 from common.client.grader_client import GraderClient, submitted_words
-from common.client.lab_client import LabClient
-from common.lab_errors import LabError
 from common.messages import SubmissionInfo
-from common.service import close_session
 from common.zconfig import NetworkOptions
-from services.commands.terminal import connect, password_from, say
+from services.commands.terminal import run_logged_in, say
 
 
 def grader_session(
@@ -35,22 +32,7 @@ def grader_session(
         keys.check_ident("assignment", args.assignment)
     except ValueError as exc:
         return cli.fail(str(exc))
-    if not options.registry_key:
-        return cli.fail(
-            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
-        )
-    try:
-        zsession = connect(options)
-    except LabError as exc:
-        return cli.fail(str(exc))
-    try:
-        with LabClient(zsession, options.realm, options.registry_key) as client:
-            client.login(args.user, password_from(args))
-            return body(GraderClient(client, args.grader))
-    except LabError as exc:
-        return cli.fail(str(exc), 1)
-    finally:
-        close_session(zsession)
+    return run_logged_in(args, options, lambda client: body(GraderClient(client, args.grader)))
 
 
 def show(sub: SubmissionInfo) -> None:

@@ -1,4 +1,5 @@
-"""What the terminal commands share: one lock for printing, the password prompt, connecting."""
+"""What the terminal commands share: one lock for printing, the password prompt, connecting
+and logging in."""
 
 from __future__ import annotations
 
@@ -6,12 +7,15 @@ import argparse
 import getpass
 import os
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
 
-from common.lab_errors import RegistryUnreachable
-from common.service import open_session
+from common import cli
+from common.client.lab_client import LabClient
+from common.lab_errors import LabError, RegistryUnreachable
+from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 
 _print_lock = threading.Lock()
@@ -36,3 +40,25 @@ def connect(options: NetworkOptions, *, wait: float = 10.0) -> zenoh.Session:
         return open_session(options, wait=wait)
     except ConnectionError as exc:
         raise RegistryUnreachable(str(exc)) from None
+
+
+def run_logged_in(
+    args: argparse.Namespace, options: NetworkOptions, body: Callable[[LabClient], int]
+) -> int:
+    """Connect, log in as --user and run ``body``; errors become clear messages."""
+    if not options.registry_key:
+        return cli.fail(
+            "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"
+        )
+    try:
+        zsession = connect(options)
+    except LabError as exc:
+        return cli.fail(str(exc))
+    try:
+        with LabClient(zsession, options.realm, options.registry_key) as client:
+            client.login(args.user, password_from(args))
+            return body(client)
+    except LabError as exc:
+        return cli.fail(str(exc), 1)
+    finally:
+        close_session(zsession)
