@@ -237,6 +237,14 @@ class Run:
         ).start()
 
 
+def _precheck(source: bytes, filename: str, whose: str = "") -> None:
+    """An upload the sandbox would refuse is a bad request, said before any sandbox starts."""
+    try:
+        precheck(source, filename)
+    except PrecheckError as exc:
+        raise RequestError("bad_request", f"{whose}{exc}") from None
+
+
 class RunnerService(Service):
     kind = AliveKind.RUNNER
 
@@ -353,10 +361,7 @@ class RunnerService(Service):
     def _on_dry_run(self, query: zenoh.Query) -> Message:
         principal, request = self.verifier.open(str(query.key_expr), query.payload, DryRun)
         principal.require("lease", "ask a runner for dry runs")
-        try:
-            precheck(request.source, request.filename)
-        except PrecheckError as exc:
-            raise RequestError("bad_request", str(exc)) from None
+        _precheck(request.source, request.filename)
         snap = self._snapshot(request.world)
         try:
             report = dry_run(
@@ -388,10 +393,7 @@ class RunnerService(Service):
         principal, request = self.verifier.open(str(query.key_expr), query.payload, Heat)
         principal.require("lease", "ask a runner for a competition's heat")
         for e in request.entries:
-            try:
-                precheck(e.source, e.filename)
-            except PrecheckError as exc:
-                raise RequestError("bad_request", f"{e.submission}: {exc}") from None
+            _precheck(e.source, e.filename, f"{e.submission}: ")
         try:
             report = run_heat(request, limits=self.limits)
         except (ValueError, MapError) as exc:
@@ -433,10 +435,7 @@ class RunnerService(Service):
     def _on_episode(self, query: zenoh.Query) -> Message:
         principal, request = self.verifier.open(str(query.key_expr), query.payload, Episode)
         principal.require("lease", "ask a runner for graded episodes")
-        try:
-            precheck(request.source, request.filename)
-        except PrecheckError as exc:
-            raise RequestError("bad_request", str(exc)) from None
+        _precheck(request.source, request.filename)
         try:
             report = run_episode(request, limits=self.limits)
         except (ValueError, MapError) as exc:
@@ -479,10 +478,7 @@ class RunnerService(Service):
         now = time.time()
         if not now < request.end <= now + MAX_SLOT_S:
             raise RequestError("bad_request", "the run's end must be within the next hour")
-        try:
-            precheck(request.source, request.filename)
-        except PrecheckError as exc:
-            raise RequestError("bad_request", str(exc)) from None
+        _precheck(request.source, request.filename)
         with self._lock:
             if request.request_id in self._runs:
                 raise RequestError("conflict", f"{request.request_id} already runs")
