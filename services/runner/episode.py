@@ -49,26 +49,39 @@ def episode_wall_limit(seconds: float) -> float:
     return 10.0 + 1.5 * seconds
 
 
-def build_episode_world(request: Episode) -> World:
-    """The episode's World: its map with its seed, the robot at its start pose (ValueError)."""
+def assignment_world(map_json: str, name: str, seed: int) -> World:
+    """The World of an assignment's map (JSON) with ``seed``; ValueError for a bad map."""
     try:
-        data = json.loads(request.map)
+        data = json.loads(map_json)
     except ValueError as exc:
-        raise ValueError(f"the episode's map is not JSON: {exc}") from None
-    world = maps.build_world(
+        raise ValueError(f"the {name}'s map is not JSON: {exc}") from None
+    return maps.build_world(
         maps.parse_map(json.dumps(data), source="assignment map"),
-        name="episode",
-        seed=request.seed,
+        name=name,
+        seed=seed,
         source="assignment map",
     )
+
+
+def place_robot(
+    world: World, agent: str, x: float, y: float, heading: float, pose: str = "start pose"
+) -> int:
+    """The robot's slot, the robot moved to its start pose (ValueError if it cannot be)."""
     try:
-        world.agent_slot(request.agent)
+        slot = world.agent_slot(agent)
     except KeyError:
-        raise ValueError(f"the map has no robot {request.agent}") from None
+        raise ValueError(f"the map has no robot {agent}") from None
     try:
-        world.move(request.agent, request.x, request.y, request.heading)
+        world.move(agent, x, y, heading)
     except EditError as exc:
-        raise ValueError(f"start pose: {exc}") from None
+        raise ValueError(f"{pose}: {exc}") from None
+    return slot
+
+
+def build_episode_world(request: Episode) -> World:
+    """The episode's World: its map with its seed, the robot at its start pose (ValueError)."""
+    world = assignment_world(request.map, "episode", request.seed)
+    place_robot(world, request.agent, request.x, request.y, request.heading)
     return world
 
 

@@ -14,7 +14,6 @@ with the world's frames for the heat's recording.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -29,7 +28,6 @@ from common.messages import (
     TraceFrame,
     TracePoint,
 )
-from common.sim2d import maps
 from common.sim2d.world import EditError, World
 from common.world import packing
 from services.runner.dryrun import _error_line
@@ -38,7 +36,9 @@ from services.runner.episode import (
     _cause,
     _deliveries,
     _rows,
+    assignment_world,
     episode_wall_limit,
+    place_robot,
 )
 from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import SandboxLimits
@@ -66,26 +66,11 @@ class _Entry:
 
 def build_heat_world(request: Heat) -> tuple[World, list[int]]:
     """The heat's World and each entry's robot slot (ValueError for a bad map or pose)."""
-    try:
-        data = json.loads(request.map)
-    except ValueError as exc:
-        raise ValueError(f"the heat's map is not JSON: {exc}") from None
-    world = maps.build_world(
-        maps.parse_map(json.dumps(data), source="assignment map"),
-        name="heat",
-        seed=request.seed,
-        source="assignment map",
-    )
-    slots = []
-    for e in request.entries:
-        try:
-            slots.append(world.agent_slot(e.agent))
-        except KeyError:
-            raise ValueError(f"the map has no robot {e.agent}") from None
-        try:
-            world.move(e.agent, e.x, e.y, e.heading)
-        except EditError as exc:
-            raise ValueError(f"start pose of {e.agent}: {exc}") from None
+    world = assignment_world(request.map, "heat", request.seed)
+    slots = [
+        place_robot(world, e.agent, e.x, e.y, e.heading, f"start pose of {e.agent}")
+        for e in request.entries
+    ]
     if len(set(slots)) != len(slots):
         raise ValueError("two entries on one robot")
     return world, slots
