@@ -8,7 +8,7 @@ in, the arena's emergency stop, snapshot, edit and map queries.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 import zenoh
@@ -22,6 +22,8 @@ from common.messages import (
     MacCommandBundle,
     Message,
     Revocation,
+    RobotTypeInfo,
+    RobotTypeReply,
     SampleBundle,
     decode,
     encode,
@@ -29,6 +31,24 @@ from common.messages import (
 from common.revocations import RevocationFeed
 from common.service import Service
 from common.world.leases import LeaseBook
+
+if TYPE_CHECKING:  # the registry is handed in; only its type is needed here
+    from common.robots.registry import Registry
+
+
+def robot_types(reg: Registry) -> RobotTypeReply:
+    """A world's answer to "which robot types are there": each with its origin and parts."""
+    return RobotTypeReply(
+        types=[
+            RobotTypeInfo(
+                name=name,
+                origin=reg.describe_origin("wart.agents", name)[-256:],
+                components=[(c.name, c.type) for c in spec.components],
+            )
+            for name, spec in sorted(reg.robots.items())
+        ],
+        component_types=sorted(reg.components),
+    )
 
 
 class WorldService(Service):

@@ -28,7 +28,6 @@ from common.messages import (
     RemoveItem,
     ResetAgent,
     ResizeArena,
-    RobotTypeInfo,
     RobotTypeReply,
     RobotTypeRequest,
     RotateItem,
@@ -42,6 +41,7 @@ from common.service import RequestError
 from common.sim2d import maps
 from common.sim2d.world import EditError, World
 from common.world.leases import LeaseBook
+from common.world.world_service import robot_types
 
 
 class EngineEdits:
@@ -191,17 +191,7 @@ class EngineEdits:
         principal, request = self._open(str(query.key_expr), query.payload, RobotTypeRequest)
         reg = robot_registry.default()
         if request.action == "list":
-            return RobotTypeReply(
-                types=[
-                    RobotTypeInfo(
-                        name=name,
-                        origin=reg.describe_origin("wart.agents", name)[-256:],
-                        components=[(c.name, c.type) for c in spec.components],
-                    )
-                    for name, spec in sorted(reg.robots.items())
-                ],
-                component_types=sorted(reg.components),
-            )
+            return robot_types(reg)
         if request.action == "get":
             if request.name not in reg.texts:
                 raise RequestError("not_found", f"no robot type {request.name!r} in this world")

@@ -15,8 +15,9 @@ from dataclasses import replace
 import numpy as np
 
 from common.keys import is_ident
-from common.messages import RobotTypeInfo, RobotTypeReply
+from common.messages import RobotTypeReply
 from common.robots import registry
+from common.world import world_service
 from viewers.web.adapters import LabError
 from viewers.web.world_feed import (
     Ball,
@@ -201,18 +202,7 @@ class DemoWorld:
         return f"saved {name}.json"
 
     def robot_types(self) -> RobotTypeReply:
-        reg = registry.default()
-        return RobotTypeReply(
-            types=[
-                RobotTypeInfo(
-                    name=name,
-                    origin=reg.describe_origin("wart.agents", name)[-256:],
-                    components=[(c.name, c.type) for c in spec.components],
-                )
-                for name, spec in sorted(reg.robots.items())
-            ],
-            component_types=sorted(reg.components),
-        )
+        return world_service.robot_types(registry.default())
 
     def robot_file(self, name: str) -> str:
         text = registry.default().texts.get(name)
