@@ -313,6 +313,14 @@ def close_session(session: zenoh.Session, timeout: float = 5.0) -> bool:
     return done.wait(timeout)
 
 
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT (Ctrl-C) or SIGTERM: a process's cue to stop cleanly."""
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    return stop
+
+
 def run_service(
     name: str,
     options: NetworkOptions,

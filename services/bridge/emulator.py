@@ -34,6 +34,7 @@ from types import FrameType, TracebackType
 from typing import TYPE_CHECKING
 
 from common.cli import parse, parser
+from common.service import stop_on_signals
 from services.bridge.body import KinematicBody, RobotBody
 from services.bridge.firmware import BANNER, Firmware
 from services.bridge.link import BAUD_RATES
@@ -427,17 +428,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
             return 2
         body = sim.start()
     emulator = KheperaEmulator(body, options=options)
-    stop = threading.Event()
+    stop = stop_on_signals()
     toggle = threading.Event()
-
-    def on_stop(signum: int, frame: FrameType | None) -> None:
-        stop.set()
 
     def on_toggle(signum: int, frame: FrameType | None) -> None:
         toggle.set()
 
-    signal.signal(signal.SIGINT, on_stop)
-    signal.signal(signal.SIGTERM, on_stop)
     signal.signal(signal.SIGUSR1, on_toggle)
     try:
         emulator.start()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 from collections.abc import Sequence
@@ -22,6 +21,7 @@ import zenoh
 
 from common import cli
 from common.auth import key_fingerprint
+from common.service import stop_on_signals
 from common.zconfig import DEFAULT_PORT, DEFAULT_REALM, DEFAULT_ROUTER, NetworkOptions
 from services.lab import wiring
 from services.lab.driver import HostDriver, say
@@ -358,14 +358,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart up") -> int:
             p.error(f"{what} {port} is not a TCP port (1 to 65535)")
     lab = settings_from_args(args, options)
 
-    stop = threading.Event()
-
-    def on_signal(signum: int, _frame: object) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    return run_lab(lab, stop)
+    return run_lab(lab, stop_on_signals())
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ on one more machine.
 
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 from collections.abc import Sequence
@@ -22,6 +21,7 @@ import zenoh
 
 from common import cli, keys
 from common.keys import AliveKind
+from common.service import stop_on_signals
 from common.zconfig import NetworkOptions
 from services.lab import provision
 from services.lab.driver import HostDriver
@@ -175,14 +175,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart host") -> int:
             return 0
     except (LabFileError, FileNotFoundError, OSError, ValueError) as exc:
         return cli.fail(str(exc))
-    stop = threading.Event()
-
-    def on_signal(_signum: int, _frame: object) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    return run_host(ctx, stop)
+    return run_host(ctx, stop_on_signals())
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -28,6 +27,7 @@ from common.messages import RobotTypeReply, WorldSnapshot
 from common.recording import RecordingError, read_recording
 from common.recording.reader import Recording
 from common.recording.replay import SPEEDS, Player, Timeline
+from common.service import stop_on_signals
 from viewers.web.adapters import LabError
 from viewers.web.arena_video import ArenaVideo, RecordedCamera
 from viewers.web.inputs import set_value
@@ -432,9 +432,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart replay") -> int:
     if recording.truncated:
         print(f"{prog}: warning: {recording.truncated}; replaying what it holds", file=sys.stderr)
     print(f"replay: {app.url}", flush=True)
-    done = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: done.set())
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    done = stop_on_signals()
     try:
         done.wait()
     finally:
