@@ -40,7 +40,7 @@ from services.grader.heats import (
     score_heat,
     write_frames,
 )
-from services.grader.score import MissingMetric
+from services.grader.score import judge
 
 log = logging.getLogger("wart.grader")
 
@@ -285,13 +285,7 @@ class Competitions:
                 base, cause="lab", detail=f"the lab could not run it: {report.detail}"[:256],
                 recording=recorded,
             )  # fmt: skip
-        teacher = report.grader_error
-        score = 0.0
-        if not teacher:
-            try:
-                score = a.score.evaluate(report, a.time_limit)
-            except MissingMetric as exc:
-                teacher = f"{a.grader_file}: {exc}"
+        score, teacher = judge(a.score, report, a.time_limit, a.grader_file)
         if teacher:
             return msgspec.structs.replace(
                 base, cause="grader", detail=f"the teacher's grader failed: {teacher}"[:256],

@@ -36,7 +36,7 @@ from common.recording.reader import Recording, read_recording
 from common.sim2d import maps
 from services.grader.assignment import Assignment
 from services.grader.grading_db import Pending
-from services.grader.score import MissingMetric, metrics
+from services.grader.score import judge, metrics
 
 log = logging.getLogger("wart.grader.real")
 
@@ -126,13 +126,7 @@ class RealAttempt:
             except RuntimeError as exc:
                 return lab(str(exc))
             report = _with_metrics(report, values, error, line)
-        teacher = report.grader_error
-        score = 0.0
-        if not teacher:
-            try:
-                score = a.score.evaluate(report, a.real_time_limit)
-            except MissingMetric as exc:
-                teacher = f"{a.grader_file}: {exc}"
+        score, teacher = judge(a.score, report, a.real_time_limit, a.grader_file)
         shown = metrics(report, sorted(a.score.zones), a.real_time_limit)
         if teacher:
             detail = f"the teacher's grader failed: {teacher}"

@@ -71,6 +71,19 @@ class Rule:
         return value if math.isfinite(value) else 0.0
 
 
+def judge(
+    rule: Rule, report: EpisodeReport, time_limit: float, grader_file: str
+) -> tuple[float, str]:
+    """The rule's score of an episode and the teacher's error ("" if none, else the score is
+    0): their grader function's, or a metric the rule reads that it did not give."""
+    if report.grader_error:
+        return 0.0, report.grader_error
+    try:
+        return rule.evaluate(report, time_limit), ""
+    except MissingMetric as exc:
+        return 0.0, f"{grader_file}: {exc}"
+
+
 def parse_rule(text: str) -> Rule:
     if not isinstance(text, str) or not text.strip():
         raise RuleError("the rule is empty")
