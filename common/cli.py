@@ -7,6 +7,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from common.auth import parse_public_key
 from common.log import setup_logging
 from common.zconfig import ConfigError, NetworkOptions, add_network_arguments, options_from_args
 
@@ -42,6 +43,17 @@ def parse(
         return args, options_from_args(args)
     except ConfigError as exc:
         p.error(str(exc))
+        raise  # unreachable: error() exits
+
+
+def registry_key(p: argparse.ArgumentParser, options: NetworkOptions) -> bytes | None:
+    """The registry's public key from --registry-key (None without it); a bad one exits."""
+    if not options.registry_key:
+        return None
+    try:
+        return parse_public_key(options.registry_key)
+    except ValueError as exc:
+        p.error(f"--registry-key: {exc}")
         raise  # unreachable: error() exits
 
 

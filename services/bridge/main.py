@@ -24,7 +24,6 @@ from collections.abc import Sequence
 import zenoh
 
 from common import cli
-from common.auth import parse_public_key
 from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.service import run_service
@@ -136,12 +135,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart bridge") -> int:
             robots.append(parse_port(text, [r.agent for r in robots]))
         except ValueError as exc:
             p.error(str(exc))
-    registry_key = None
-    if options.registry_key:
-        try:
-            registry_key = parse_public_key(options.registry_key)
-        except ValueError as exc:
-            p.error(f"--registry-key: {exc}")
+    registry_key = cli.registry_key(p, options)
     baud = args.baud or 38400
     settings = BridgeSettings(
         robots=tuple(robots),

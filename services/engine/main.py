@@ -18,7 +18,6 @@ from pathlib import Path
 import zenoh
 
 from common import cli
-from common.auth import parse_public_key
 from common.client.service_login import add_world_identity_args, world_login
 from common.keys import is_ident
 from common.robots import registry as robot_registry
@@ -118,12 +117,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     for flag, value in (("--threads", args.threads), ("--physics-threads", args.physics_threads)):
         if not 1 <= value <= MAX_THREADS:
             p.error(f"{flag} must be between 1 and {MAX_THREADS} (numba's thread pool)")
-    registry_key = None
-    if options.registry_key:
-        try:
-            registry_key = parse_public_key(options.registry_key)
-        except ValueError as exc:
-            p.error(f"--registry-key: {exc}")
+    registry_key = cli.registry_key(p, options)
     tick_s = args.tick_ms / 1000.0
     if args.robots_dir is not None:
         try:
