@@ -62,14 +62,25 @@ def fail(message: str, code: int = 2) -> int:
     return code
 
 
+IDENTITY_HELP = "the service account's Ed25519 key file"
+
+
+def add_account_arguments(
+    p: argparse.ArgumentParser, name: str, name_help: str, user_help: str
+) -> None:
+    """--name (default ``name``), --user and --identity: a service that logs in with a
+    service account."""
+    p.add_argument("--name", default=name, help=name_help)
+    p.add_argument("--user", required=True, help=user_help)
+    p.add_argument("--identity", type=Path, required=True, help=IDENTITY_HELP)
+
+
 def add_context_arguments(p: argparse.ArgumentParser, what: str, example: str) -> None:
     """The options every context process shares (chat rooms, agent contexts)."""
     p.add_argument("--name", required=True, help=f"the {what}'s id (one key chunk, e.g. {example})")
     p.add_argument("--title", default="", help=f"the {what}'s title shown to users")
     p.add_argument("--user", required=True, help=f"the {what}'s service account")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
-    )
+    p.add_argument("--identity", type=Path, required=True, help=IDENTITY_HELP)
     p.add_argument("--owner", help=f"the user who owns the {what} (default: the service account)")
     p.add_argument(
         "--data-dir",

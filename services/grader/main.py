@@ -20,10 +20,11 @@ from services.lab.database import DbError, LabDatabase
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
     p = cli.parser(prog, service.__doc__ or "")
-    p.add_argument("--name", default="grader", help="the grader's id (default grader)")
-    p.add_argument("--user", required=True, help="the grader's service account (with 'lease')")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    cli.add_account_arguments(
+        p,
+        "grader",
+        "the grader's id (default grader)",
+        "the grader's service account (with 'lease')",
     )
     p.add_argument(
         "--db",

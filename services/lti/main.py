@@ -46,10 +46,8 @@ sets the page's saved-login cookie and sends the browser to [tool] page.
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart lti") -> int:
     p = cli.parser(prog, (service.__doc__ or "") + REGISTER)
-    p.add_argument("--name", default="lti", help="the service's id (default lti)")
-    p.add_argument("--user", required=True, help="its service account (role 'lti')")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    cli.add_account_arguments(
+        p, "lti", "the service's id (default lti)", "its service account (role 'lti')"
     )
     p.add_argument(
         "--platforms",

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 import zenoh
 
@@ -18,10 +17,8 @@ from services.runner.service import RunnerService
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
     p = cli.parser(prog, service.__doc__ or "")
-    p.add_argument("--name", default="runner", help="the runner's id (default runner)")
-    p.add_argument("--user", required=True, help="the runner's service account (with 'run')")
-    p.add_argument(
-        "--identity", type=Path, required=True, help="the service account's Ed25519 key file"
+    cli.add_account_arguments(
+        p, "runner", "the runner's id (default runner)", "the runner's service account (with 'run')"
     )
     p.add_argument("--cpu-seconds", type=int, default=120, help="CPU time per controller")
     p.add_argument(
