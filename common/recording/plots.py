@@ -59,10 +59,7 @@ def write_plots(rec: Recording, out_dir: Path, stem: str) -> list[Path]:
     ax.set_ylabel("y (mm)")
     ax.set_title(f"{rec.info.request_id}: {agent} on {rec.info.world}")
     ax.legend(loc="upper right", fontsize=8)
-    path = out_dir / f"{stem}.trajectory.png"
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    written.append(path)
+    written.append(_save(fig, out_dir / f"{stem}.trajectory.png"))
 
     fig, (ir, wheels) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     if rec.samples:
@@ -80,11 +77,17 @@ def write_plots(rec: Recording, out_dir: Path, stem: str) -> list[Path]:
     wheels.set_ylabel("wheel speed")
     wheels.set_xlabel("time (s)")
     ir.set_title(f"{rec.info.request_id}: sensors and wheels of {agent}")
-    path = out_dir / f"{stem}.sensors.png"
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    written.append(path)
+    written.append(_save(fig, out_dir / f"{stem}.sensors.png"))
     return written
+
+
+def _save(fig: Any, path: Path, dpi: int = 110) -> Path:
+    """Write the figure, then close it (pyplot holds every open figure until closed)."""
+    import matplotlib.pyplot as plt  # optional: already loaded by the caller that drew ``fig``
+
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def _row(rows: list[str], agent: str) -> int | None:
@@ -158,10 +161,7 @@ def write_comparison_plots(
         "(o start, \u25a0 end)"
     )
     ax.legend(loc="upper right", fontsize=8)
-    path = out_dir / f"{stem}.trajectories.png"
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    written.append(path)
+    written.append(_save(fig, out_dir / f"{stem}.trajectories.png"))
 
     fig, axes = plt.subplots(SENSORS, 2, figsize=(11, 12), sharex=True)
     for col, (kind, first) in enumerate((("IR", 0), ("ambient", SENSORS))):
@@ -190,8 +190,5 @@ def write_comparison_plots(
             )
     axes[0, 0].legend(fontsize=7, loc="upper left")
     fig.suptitle(f"sensors overlaid ({len(t)} time-aligned samples)")
-    path = out_dir / f"{stem}.sensors.png"
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    written.append(path)
+    written.append(_save(fig, out_dir / f"{stem}.sensors.png", dpi=100))
     return written
