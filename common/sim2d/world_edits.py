@@ -73,6 +73,14 @@ class WorldEditor:
             return self._inside([(x, y)], shape.radius_mm)
         return self._inside(shape.world_vertices(x, y, heading))
 
+    def _check_new_shape(
+        self, what: str, ident: str, shape: ShapeSpec, x: float, y: float, heading: float
+    ) -> None:
+        """An item may be added: its id is new and its shape stays inside the arena."""
+        self._state.check_new_id(ident)
+        if not self._shape_inside(shape, x, y, heading):
+            raise EditError(f"{what} {ident} would stick out of the arena")
+
     def _inside_arena_id(self, ident: str) -> bool:
         x, y, heading = self.pose_of(ident)
         shape = self.shape_of(ident)
@@ -90,9 +98,7 @@ class WorldEditor:
         colour: str = "#808080",
     ) -> Obstacle:
         s = self._state
-        s.check_new_id(ident)
-        if not self._shape_inside(shape, x, y, heading):
-            raise EditError(f"obstacle {ident} would stick out of the arena")
+        self._check_new_shape("obstacle", ident, shape, x, y, heading)
         body, shapes = bodies.obstacle(shape, x, y, heading)
         s.space.add(body, *shapes)
         overlapping = self._agents_touching(shapes)
@@ -141,9 +147,7 @@ class WorldEditor:
         colour: str = "#ff8c00",
     ) -> MovableObject:
         s = self._state
-        s.check_new_id(ident)
-        if not self._shape_inside(shape, x, y, heading):
-            raise EditError(f"object {ident} would stick out of the arena")
+        self._check_new_shape("object", ident, shape, x, y, heading)
         if mass_g <= 0:
             raise EditError(f"object {ident}: mass must be positive")
         body, shapes = bodies.movable_object(shape, x, y, heading, mass_g)
@@ -227,9 +231,7 @@ class WorldEditor:
         colour: str = "#c8e6c9",
     ) -> Zone:
         s = self._state
-        s.check_new_id(ident)
-        if not self._shape_inside(shape, x, y, heading):
-            raise EditError(f"zone {ident} would stick out of the arena")
+        self._check_new_shape("zone", ident, shape, x, y, heading)
         zone = Zone(ident, kind, shape, x, y, heading, colour)
         s.zones[ident] = zone
         s.layout += 1
