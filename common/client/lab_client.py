@@ -12,8 +12,9 @@ threads: keep them short (queue the work).
 
 Services log in with an Ed25519 identity key (``login_with_key``) and keep
 their session renewed (common/client/service_login.py). The errors are in
-common/lab_errors.py, private messages' crypto in common/client/private_mail.py, the
-rooms in common/client/rooms.py, the admin calls in common/client/registry_admin.py.
+common/lab_errors.py, private messages' crypto in common/client/private_mail.py. The
+client holds two parts and binds their calls as its own: its rooms (``client.rooms``,
+common/client/rooms.py) and the admin calls (``client.admin``, registry_admin.py).
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ _EARLY_INBOX_MAX = 64
 M = TypeVar("M", bound=Message)
 
 
-class LabClient(RegistryAdminCalls):
+class LabClient:
     """A user's (or service's) connection to the lab over one Zenoh session."""
 
     def __init__(
@@ -158,6 +159,19 @@ class LabClient(RegistryAdminCalls):
         self.say = rooms.say
         self.kick = rooms.kick
         self.request = rooms.request
+        self.admin = admin = RegistryAdminCalls(realm, registry_key, self._ask)
+        self.list_users = admin.list_users
+        self.add_user = admin.add_user
+        self.set_password = admin.set_password
+        self.remove_user = admin.remove_user
+        self.grant = admin.grant
+        self.ungrant = admin.ungrant
+        self.kick_from_server = admin.kick_from_server
+        self.rename_server = admin.rename_server
+        self.unlock_logins = admin.unlock_logins
+        self.ban = admin.ban
+        self.lift_ban = admin.lift_ban
+        self.audit_trail = admin.audit_trail
 
     # -- context manager
 
