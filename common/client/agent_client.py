@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common import keys, qos
-from common.client.lab_client import LabClient, RoomHandle
+from common.client.lab_client import LabClient
+from common.client.rooms import RoomHandle
 from common.controller import Controller, ControllerLoop, Khepera
 from common.lab_errors import LabError, NotFound, NotLoggedIn
 from common.messages import (

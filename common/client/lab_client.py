@@ -12,8 +12,9 @@ threads: keep them short (queue the work).
 
 Services log in with an Ed25519 identity key (``login_with_key``) and keep
 their session renewed (common/client/service_login.py). The errors are in
-common/lab_errors.py, private messages' crypto in common/client/private_mail.py, the
-rooms in common/client/rooms.py, the admin calls in common/client/registry_admin.py.
+common/lab_errors.py, private messages' crypto in common/client/private_mail.py. The
+client holds two parts and binds their calls as its own: its rooms (``client.rooms``,
+common/client/rooms.py) and the admin calls (``client.admin``, registry_admin.py).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from common.client.private_mail import (
     seal_private,
 )
 from common.client.registry_admin import RegistryAdminCalls
-from common.client.rooms import RoomCalls, RoomHandle
+from common.client.rooms import RoomCalls
 from common.keys import AliveKind
 from common.lab_errors import (
     Banned,
@@ -101,7 +102,7 @@ _EARLY_INBOX_MAX = 64
 M = TypeVar("M", bound=Message)
 
 
-class LabClient(RoomCalls, RegistryAdminCalls):
+class LabClient:
     """A user's (or service's) connection to the lab over one Zenoh session."""
 
     def __init__(
@@ -135,8 +136,6 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         self._inbox_user = ""  # whose inbox and presence token are declared
         self._early: list[zenoh.Sample] = []  # inbox samples from before the login reply
         self._inbox_lock = threading.Lock()
-        self._rooms: dict[str, RoomHandle] = {}
-        self._lock = threading.Lock()
         self.on_private: Callable[[PrivateText], None] = lambda _m: None
         self.on_kicked: Callable[[KickNotice], None] = lambda _k: None
         self.pending: list[PrivateText] = []  # kept messages received at login
@@ -149,6 +148,30 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         self._querier: Any = None
         self._source_sn = 0
         self._revocations: RevocationFeed | None = None
+        # Its parts, and their calls bound once as its own: callers see one client.
+        self.rooms = rooms = RoomCalls(
+            zsession, realm, self.verifier, lambda: self.session, self._ask, self._seal
+        )
+        self.join = rooms.join
+        self.rejoin = rooms.rejoin
+        self.room = rooms.room
+        self.leave = rooms.leave
+        self.say = rooms.say
+        self.kick = rooms.kick
+        self.request = rooms.request
+        self.admin = admin = RegistryAdminCalls(realm, registry_key, self._ask)
+        self.list_users = admin.list_users
+        self.add_user = admin.add_user
+        self.set_password = admin.set_password
+        self.remove_user = admin.remove_user
+        self.grant = admin.grant
+        self.ungrant = admin.ungrant
+        self.kick_from_server = admin.kick_from_server
+        self.rename_server = admin.rename_server
+        self.unlock_logins = admin.unlock_logins
+        self.ban = admin.ban
+        self.lift_ban = admin.lift_ban
+        self.audit_trail = admin.audit_trail
 
     # -- context manager
 
@@ -161,7 +184,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
     def close(self) -> None:
         """Leave rooms, log out (best effort) and undeclare everything."""
         if self.session is not None:
-            for ctx in list(self._rooms):
+            for ctx in self.rooms.joined():
                 try:
                     self.leave(ctx)
                 except LabError as exc:
@@ -192,13 +215,7 @@ class LabClient(RoomCalls, RegistryAdminCalls):
         self._inbox_user = ""
         with self._inbox_lock:
             self._early.clear()
-        for room in self._rooms.values():
-            if room.subscriber is not None:
-                try:
-                    room.subscriber.undeclare()
-                except Exception as exc:
-                    log.debug("undeclare: %s", exc)
-        self._rooms.clear()
+        self.rooms.forget()
 
     # -- queries
 
@@ -245,30 +262,6 @@ class LabClient(RoomCalls, RegistryAdminCalls):
             if not_found is not None:
                 raise NotFound(not_found) from None
             raise RegistryUnreachable(f"{what}: no answer (is the registry running?)") from None
-
-    def request(
-        self,
-        ctx: str,
-        message: Message,
-        expected: type[M],
-        what: str,
-        *,
-        key: str | None = None,
-        timeout: float | None = None,
-    ) -> M:
-        """Send ``message`` to a context's request queryable (or ``key``, another of the
-        context's queryables); its reply, or a LabError."""
-        return self._member_call(
-            ctx,
-            lambda: self._ask(
-                key or keys.ctx_request(self.realm, ctx),
-                message,
-                expected,
-                what,
-                not_found=f"context {ctx} not found (no context of that name is running)",
-                timeout=timeout,
-            ),
-        )
 
     def _seal(self, key: str, message: Message) -> bytes:
         if self.session is None:

@@ -1,7 +1,8 @@
-"""The registry's administration calls (the ``admin`` permission), as LabClient methods.
+"""The registry's administration calls (the ``admin`` permission): a LabClient's part.
 
-Kept apart from the client's session, rooms and messages; a LabClient is a
-RegistryAdminCalls, so ``client.add_user(...)`` reads as it always did.
+The client holds it (``client.admin``), given the realm, the registry's key and
+the client's ask, and binds its calls as its own, so ``client.add_user(...)``
+reads as it always did.
 Passwords travel sealed to the registry's key, never in clear on the network.
 """
 
@@ -13,6 +14,7 @@ import nacl.public
 
 from common import keys
 from common.auth import registry_box_key
+from common.client.client_ask import ClientAsk
 from common.messages import (
     AddUser,
     AuditEntry,
@@ -40,20 +42,10 @@ M = TypeVar("M", bound=Message)
 class RegistryAdminCalls:
     """Account and server administration; each call raises a LabError in the user's words."""
 
-    realm: str
-    registry_key: bytes
-
-    def _ask(
-        self,
-        key: str,
-        message: Message,
-        expected: type[M],
-        what: str,
-        *,
-        signed: bool = True,
-        not_found: str | None = None,
-    ) -> M:
-        raise NotImplementedError  # the LabClient's: a sealed query, its reply or a LabError
+    def __init__(self, realm: str, registry_key: bytes, ask: ClientAsk) -> None:
+        self.realm = realm
+        self.registry_key = registry_key
+        self._ask = ask
 
     def _admin(self, message: Message, what: str, expected: type[M] = OkReply) -> M:  # type: ignore[assignment]
         return self._ask(keys.registry_admin(self.realm), message, expected, what)

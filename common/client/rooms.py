@@ -1,7 +1,9 @@
-"""Rooms, as LabClient methods: join, leave, say, kick, and the rooms' events.
+"""A LabClient's rooms: join, leave, say, kick, a context's requests, the rooms' events.
 
-Kept apart from the client's session, login and private messages; a
-LabClient is a RoomCalls, so ``client.join(...)`` reads as it always did.
+A part the client holds (``client.rooms``), given what it needs: the Zenoh
+session, the realm, the registry's verifier, the client's current session
+(it changes at login and logout), its ask and its seal. The client binds the
+part's calls as its own, so ``client.join(...)`` reads as it always did.
 A client joins a room again by itself when the room forgot it (a restart,
 a router blip): the room's liveliness token coming back, or a refusal that
 says "join first".
@@ -19,6 +21,7 @@ import zenoh
 
 from common import keys, qos
 from common.auth import AuthError, Session, Verifier
+from common.client.client_ask import ClientAsk
 from common.keys import AliveKind
 from common.lab_errors import LabError, NotAllowed
 from common.messages import (
@@ -59,28 +62,23 @@ class RoomHandle:
 class RoomCalls:
     """A LabClient's rooms; each call raises a LabError in the user's words."""
 
-    z: zenoh.Session
-    realm: str
-    session: Session | None
-    verifier: Verifier
-    _rooms: dict[str, RoomHandle]
-    _lock: threading.Lock
-
-    def _ask(
+    def __init__(
         self,
-        key: str,
-        message: Message,
-        expected: type[M],
-        what: str,
-        *,
-        signed: bool = True,
-        not_found: str | None = None,
-        timeout: float | None = None,
-    ) -> M:
-        raise NotImplementedError  # the LabClient's: a sealed query, its reply or a LabError
-
-    def _seal(self, key: str, message: Message) -> bytes:
-        raise NotImplementedError  # the LabClient's: the message sealed with its session
+        zsession: zenoh.Session,
+        realm: str,
+        verifier: Verifier,
+        session: Callable[[], Session | None],
+        ask: ClientAsk,
+        seal: Callable[[str, Message], bytes],
+    ) -> None:
+        self.z = zsession
+        self.realm = realm
+        self.verifier = verifier
+        self._session = session
+        self._ask = ask
+        self._seal = seal
+        self._rooms: dict[str, RoomHandle] = {}
+        self._lock = threading.Lock()
 
     def join(
         self,
@@ -139,7 +137,7 @@ class RoomCalls:
     def rejoin(self, ctx: str) -> bool:
         """Join a room this client is in again (the room forgot it); False if that failed."""
         room = self._rooms.get(ctx)
-        if room is None or self.session is None:
+        if room is None or self._session() is None:
             return False
         try:
             reply = self._ask(
@@ -190,6 +188,20 @@ class RoomCalls:
     def room(self, ctx: str) -> RoomHandle | None:
         return self._rooms.get(ctx)
 
+    def joined(self) -> list[str]:
+        """The rooms this client is in."""
+        return list(self._rooms)
+
+    def forget(self) -> None:
+        """Stop hearing every room and forget them (the client logs out or closes)."""
+        for room in self._rooms.values():
+            if room.subscriber is not None:
+                try:
+                    room.subscriber.undeclare()
+                except Exception as exc:
+                    log.debug("undeclare: %s", exc)
+        self._rooms.clear()
+
     def leave(self, ctx: str) -> None:
         with self._lock:
             room = self._rooms.pop(ctx, None)
@@ -232,4 +244,28 @@ class RoomCalls:
             OkReply,
             f"kick {user} from {ctx}",
             not_found=f"room {ctx} not found",
+        )
+
+    def request(
+        self,
+        ctx: str,
+        message: Message,
+        expected: type[M],
+        what: str,
+        *,
+        key: str | None = None,
+        timeout: float | None = None,
+    ) -> M:
+        """Send ``message`` to a context's request queryable (or ``key``, another of the
+        context's queryables); its reply, or a LabError."""
+        return self._member_call(
+            ctx,
+            lambda: self._ask(
+                key or keys.ctx_request(self.realm, ctx),
+                message,
+                expected,
+                what,
+                not_found=f"context {ctx} not found (no context of that name is running)",
+                timeout=timeout,
+            ),
         )

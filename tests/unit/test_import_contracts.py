@@ -364,13 +364,8 @@ def _declared_elsewhere(path: Path, root: Path = REPO) -> list[str]:
     return found
 
 
-# Mixins still to be made parts of their class (LabClient's rooms and admin calls; its
-# public methods stay, so the parts need LabClient room for their delegations first).
-# A ratchet: the list only shrinks.
-STILL_MIXED = {
-    "common/client/rooms.py: RoomCalls",
-    "common/client/registry_admin.py: RegistryAdminCalls",
-}
+# Mixins still to be made parts of their class: none left. A ratchet: the list only shrinks.
+STILL_MIXED: set[str] = set()
 
 
 def test_a_class_declares_no_state_of_another_class() -> None:

@@ -22,6 +22,7 @@ from typing import TypeVar
 from common import lab_errors
 from common.client import lab_client as lab
 from common.client.agent_client import AgentClient
+from common.client.rooms import RoomHandle
 from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import is_ident
 from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
@@ -142,7 +143,7 @@ class AgentContextLink:
         )
         self.driver = KeyDriver(self.agents)
 
-    def join(self, history: int) -> lab.RoomHandle:
+    def join(self, history: int) -> RoomHandle:
         """Join the context (chat and agent events) and read its queues once."""
         try:
             self._call(lambda: self.agents.join(history))
