@@ -28,9 +28,9 @@ from urllib.parse import urlencode
 
 import psutil
 
-from tests.kit.lab import Procs, make_lab, start_router
+from tests.kit.lab import Procs, make_lab, start_router, wart
 from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
-from tests.kit.lti_tool import start_lti, wart
+from tests.kit.lti_tool import start_lti
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

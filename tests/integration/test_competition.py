@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import queue
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -29,7 +28,8 @@ from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.kit.agentkit import start_runner, together
-from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab, wart_env
+from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab
+from tests.kit.lab import wart as lab_wart
 
 pytestmark = [
     pytest.mark.integration,
@@ -39,14 +39,7 @@ pytestmark = [
 
 
 def wart(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
-        cwd=REPO,
-        env=wart_env(),
-        capture_output=True,
-        text=True,
-        timeout=400,
-    )
+    return lab_wart(*args, timeout=400)
 
 
 @pytest.fixture

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,7 +24,8 @@ from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
 from tests.kit.agentkit import start_runner, together
 from tests.kit.courses import COURSE, assignment_toml
-from tests.kit.lab import PASSWORD, REPO, ProcessLab, make_lab, wart_env
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import wart as lab_wart
 
 pytestmark = [
     pytest.mark.integration,
@@ -36,14 +36,7 @@ CONTROLLERS = Path(__file__).parent / "grading"
 
 
 def wart(lab: ProcessLab, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
-        cwd=REPO,
-        env=wart_env(),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    return lab_wart(*args)
 
 
 def add_assignment(lab: ProcessLab, tmp: Path, name: str, **fields: str) -> None:

@@ -36,7 +36,7 @@ from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
 from tests.kit.agentkit import start_runner, together
-from tests.kit.lab import ProcessLab, make_lab, start_router
+from tests.kit.lab import ProcessLab, make_lab, start_router, wart
 from tests.kit.lti_platform import (
     CLIENT_ID,
     DEPLOYMENT,
@@ -46,7 +46,7 @@ from tests.kit.lti_platform import (
     form_fields,
     new_key,
 )
-from tests.kit.lti_tool import PAGE, start_lti, wart
+from tests.kit.lti_tool import PAGE, start_lti
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
 

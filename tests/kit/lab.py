@@ -74,6 +74,18 @@ def wart_env(extra: dict[str, str] | None = None) -> dict[str, str]:
 # --- processes -----------------------------------------------------------------------
 
 
+def wart(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """``wart ARGS`` as a person runs it, from the repository, output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "services.cli", *args],
+        cwd=REPO,
+        env=wart_env(),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
 @dataclass
 class Proc:
     """A ``wart`` subprocess started by a test, with its output in a file."""

@@ -1,30 +1,17 @@
-"""The lab's LTI tool (``wart lti``) on a test lab, facing a FakePlatform; ``wart`` commands."""
+"""The lab's LTI tool (``wart lti``) on a test lab, facing a FakePlatform."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 from common.auth import create_identity_key
 from services.lab import wiring
 from services.registry.accounts_db import RegistryDB
-from tests.kit.lab import REPO, ProcessLab, free_port, wart_env
+from tests.kit.lab import ProcessLab, free_port
 from tests.kit.lti_platform import FakePlatform
 
 LTI_ACCOUNT = wiring.service_account("lti", "lti")
 PAGE = "http://127.0.0.1:8080/"
-
-
-def wart(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
-        cwd=REPO,
-        env=wart_env(),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
 
 
 def start_lti(
