@@ -95,7 +95,7 @@ def vlab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ViewerLab]:
 
 def answer(client: ViserClient) -> str:
     """What the login form says now: "in", an error's words, or "" (still waiting)."""
-    if any(n.startswith("Logged in to") for n in client.notifications):
+    if client.logged_in():
         return "in"
     problem = client.markdown_containing("Could not")
     if problem is not None and problem.props.get("visible", True):

@@ -344,6 +344,12 @@ class ViserClient:
 
     # -- what a student does
 
+    def logged_in(self) -> bool:
+        """What a person sees once in: the "Logged in to" notice, or the lobby's Log out."""
+        return any(n.startswith("Logged in to") for n in self.notifications) or (
+            self.find("Log out") is not None
+        )
+
     async def log_in(self, user: str, password: str, timeout: float = 120.0) -> None:
         """Connect to the address bar's lab (the viewer's own), as the page's login form does."""
         await self.click_until("Connect", lambda: self.find("User", "GuiTextMessage"), timeout)
@@ -357,11 +363,7 @@ class ViserClient:
                 element.props["_markdown"] = ""
         await self.click("Log in", timeout)
         await self.wait_for(
-            lambda: (
-                any(n.startswith("Logged in to") for n in self.notifications)
-                or self.markdown_containing("Could not")
-            ),
-            timeout,
+            lambda: self.logged_in() or self.markdown_containing("Could not"), timeout
         )
         problem = self.markdown_containing("Could not")
         if problem is not None and problem.props.get("visible", True):
