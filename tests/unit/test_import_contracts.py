@@ -37,6 +37,15 @@ def _sources() -> dict[str, Path]:
     return found
 
 
+def _from_base(node: ast.ImportFrom, package: str) -> str:
+    """The module a ``from X import ...`` names, relative imports resolved against ``package``."""
+    base = node.module or ""
+    if node.level:
+        anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+        base = ".".join([*anchor, base] if base else anchor)
+    return base
+
+
 @cache
 def imports_of(module: str) -> frozenset[str]:
     """Every module name ``module`` imports, at any depth of its code (functions too)."""
@@ -47,10 +56,7 @@ def imports_of(module: str) -> frozenset[str]:
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join([*anchor, base] if base else anchor)
+            base = _from_base(node, package)
             names.add(base)
             # `from common import keys` imports the module common.keys
             names.update(
@@ -245,10 +251,7 @@ def _top_level_imports(module: str) -> set[str]:
             elif isinstance(node, ast.Import):
                 names.update(a.name for a in node.names)
             elif isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                if node.level:
-                    anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
-                    base = ".".join([*anchor, base] if base else anchor)
+                base = _from_base(node, package)
                 names.update(
                     f"{base}.{a.name}" if f"{base}.{a.name}" in _sources() else base
                     for a in node.names
