@@ -107,9 +107,11 @@ def test_a_reload_mid_run_keeps_the_run_the_editor_and_the_output(open_page, lab
     assert back.robots is not None and back.robots.driven("k0")
     alice.screenshot("reload-kept-the-run")
 
-    # And the restored page still drives it: Stop ends the run.
+    # And the restored page still drives it: Stop ends the run; Reset then puts k0 back.
     alice.click("Stop")
     alice.wait_text("Your controller on k0 cancelled", timeout=15_000)
+    alice.click("Reset")
+    alice.wait_text("Reset: k0 is back at", timeout=15_000)
 
 
 def test_a_page_gone_longer_than_the_grace_ends_the_run_and_says_why(
