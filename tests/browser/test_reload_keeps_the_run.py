@@ -79,6 +79,9 @@ def start_ticking(page: ViserPage, panel: ChatPanel, agent: str) -> None:
 def test_a_reload_mid_run_keeps_the_run_the_editor_and_the_output(open_page, lab: RealLab) -> None:
     alice = open_page("alice")
     panel = enter_arena(alice, lab, "alice")
+    lab_tab = next(iter(session_of(lab.viewer, "alice").labs.values())).tab_name
+    # The browser's tab names the lab (viser's own page says "Viser").
+    wait_until(lambda: alice.p.title() == f"{lab_tab} · WART lab", 10, what="the page's title")
     start_ticking(alice, panel, "k0")
     bench = panel.workbench
     assert bench is not None

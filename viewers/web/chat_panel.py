@@ -7,12 +7,15 @@ with edit_map, the map editor, and a button that shows its world in the view.
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import viser
 
+from common.lab_errors import NotAnswering
 from viewers.web.adapters import (
     ChatEntry,
     ChatEvent,
@@ -39,6 +42,7 @@ log = logging.getLogger("wart.viewer.chat")
 
 ARENA_KINDS = ("agent", "world")  # an agent context, or a world no context announces yet
 SHOWN_LINES = 100  # older lines scroll away; the context keeps the full history
+WORLD_RETRY_S = 3.0  # asking again for a world that does not answer yet
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,9 @@ class ChatPanel:
         self._on_close = on_close
         self._on_watch = on_watch
         self._lines: deque[str] = deque(maxlen=SHOWN_LINES)
+        self.closed = False
+        self._retry_lock = threading.Lock()
+        self._retrying = False
         if kept is None:
             self._lines.extend(self._format(line) for line in joined.history)
         else:
@@ -214,10 +221,44 @@ class ChatPanel:
             return
         try:
             feed = self.connection.world(self.world)
+        except NotAnswering as exc:
+            # Not up yet (an engine compiling on a busy machine's first start): said so,
+            # and shown by itself once it answers, so the words never go stale.
+            self.say_notice(f"Cannot show the arena yet: {exc}. It is shown once it answers.")
+            self._retry_world()
+            return
         except LabError as exc:
             self.say_notice(f"Cannot show the arena: {exc}")
             return
+        self.notice.visible = False
         self._on_watch(feed, self)
+
+    def _retry_world(self) -> None:
+        with self._retry_lock:
+            if self._retrying:
+                return
+            self._retrying = True
+
+        def retry() -> None:
+            try:
+                while not self.closed:
+                    time.sleep(WORLD_RETRY_S)
+                    try:
+                        feed = self.connection.world(self.world or "")
+                    except NotAnswering:
+                        continue
+                    except LabError as exc:
+                        self.say_notice(f"Cannot show the arena: {exc}")
+                        return
+                    if not self.closed and self._on_watch is not None:
+                        self.notice.visible = False
+                        self._on_watch(feed, self)
+                    return
+            finally:
+                with self._retry_lock:
+                    self._retrying = False
+
+        threading.Thread(target=retry, name=f"world-{self.ctx}", daemon=True).start()
 
     def _show_replay(self, feed: ReplayFeed) -> None:
         """A recording of this arena in the view: the panels follow the replay's cursor."""
@@ -225,6 +266,7 @@ class ChatPanel:
             self._on_watch(feed, self)
 
     def close(self, *, leave: bool) -> None:
+        self.closed = True
         self.release()
         if leave:
             try:
@@ -236,6 +278,7 @@ class ChatPanel:
 
     def release(self) -> None:
         """Stop the parts that watch the lab for this page; the context stays joined."""
+        self.closed = True
         if self.recordings is not None:
             self.recordings.close()
         if self.course is not None:

@@ -30,7 +30,7 @@ from viewers.web.parking import ParkedLab, ParkingLot
 from viewers.web.pump import FramePump
 from viewers.web.saved_login import saved_login_html
 from viewers.web.sure_clicks import add_sure_clicks
-from viewers.web.tabs import TabSwitcher, tab_title
+from viewers.web.tabs import PageTitle, TabSwitcher, tab_title
 from viewers.web.text import escape_md
 from viewers.web.viser_fast import browser_address, browser_cookies
 from viewers.web.world_feed import WorldFeed
@@ -39,6 +39,7 @@ from viewers.web.world_view import WorldView
 log = logging.getLogger("wart.viewer.client")
 
 NO_SAVED = "(saved and recent addresses)"
+TITLE = "WART lab"  # the browser tab's title, after the lab's name once logged in
 HELP = """### Welcome to the WART lab
 Type a lab's address above and press **Connect**, e.g.
 `wart://you@lab.example.org/lab` or just `lab.example.org`.
@@ -98,6 +99,7 @@ class BrowserSession:
         with self.home:
             gui.add_markdown(HELP)
         self.switcher = TabSwitcher(gui)  # takes the page to a new lab's or arena's tab
+        self.title = PageTitle(gui, TITLE)
         self.connect_button.on_click(lambda _: self.connect(self.address.value))
         self.save_button.on_click(lambda _: self.save_address())
         self.recent.on_update(lambda _: self._recent_chosen())
@@ -252,6 +254,7 @@ class BrowserSession:
         self._refresh_recent()
         # The lab's tab is where the person goes next: the page shows it (tabs.py).
         self.switcher.show(tab.tab_name, tab_title(address))
+        self.title.set(f"{tab.tab_name} · {TITLE}")
         # Also said in words (headless clients and the benchmark wait for these words).
         self.client.add_notification(
             title=f"Logged in to {address.label}",

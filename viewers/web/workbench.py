@@ -445,7 +445,9 @@ class Workbench:
             return
         finally:
             self.dry.disabled = False
-        verdict = "will run" if result.will_run else "will NOT run"
+        verdict = "will NOT run"
+        if result.will_run:
+            verdict = "will run, with a warning" if "warning" in result.verdict else "will run"
         self.say(f"Dry run of {name} on {agent} done: it {verdict}, see below.")
         heading = f"Dry run on {agent}: {result.verdict}"
         self.problems.content = format_dry_run(self.code.value, result, heading)
