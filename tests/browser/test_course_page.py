@@ -21,6 +21,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from common.client.agent_client import FINAL
@@ -36,6 +37,7 @@ from services.registry.roster import RosterRow
 from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import CANVAS_AT_JS, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
+from tests.browser.test_real_lab import session_of
 from tests.kit.agentkit import Motion, agent_user
 from tests.kit.courses import assignment_toml
 from tests.kit.reallab import CTX, RealLab, real_lab
@@ -193,10 +195,19 @@ def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
                 + str(ida.p.evaluate("() => document.activeElement?.outerHTML.slice(0, 120)"))
             ),
         )
+        # Keys held for driving never fly the view's camera (viser's own WASD and arrows):
+        # its orientation, as the browser reports it to the server, stays as it was.
+        camera = session_of(lab.viewer, "ida").client.camera
+        facing = np.array(camera.wxyz)
         pressed = time.monotonic()
         ida.p.keyboard.down("ArrowDown")
         wait_until(lambda: motion.moving(["k1"], pressed), 20, what="k1 driven from the view")
+        ida.p.keyboard.down("KeyA")
+        ida.p.wait_for_timeout(1000)  # a second of viser's 50 deg/s would tip it 50 degrees
+        ida.p.keyboard.up("KeyA")
         ida.p.keyboard.up("ArrowDown")
+        turned = 2 * np.degrees(np.arccos(min(1.0, abs(float(np.dot(facing, camera.wxyz))))))
+        assert turned < 1.0, f"the camera turned {turned:.1f} degrees while ida drove"
         ida.screenshot("class-driving")
 
         ida.click("Hand their robot back")
