@@ -22,6 +22,7 @@ from common.client.resume_cookie import SavedLogin, parse_cookies
 from viewers.web.adapters import LabConnection, LabConnector, LoginError
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
+from viewers.web.front_tab import FrontTab
 from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
@@ -100,6 +101,8 @@ class BrowserSession:
             gui.add_markdown(HELP)
         self.switcher = TabSwitcher(gui)  # takes the page to a new lab's or arena's tab
         self.title = PageTitle(gui, TITLE)
+        # The world view follows the arena tab in front (front_tab.py).
+        self.front = FrontTab(gui, self._front_changed)
         self.connect_button.on_click(lambda _: self.connect(self.address.value))
         self.save_button.on_click(lambda _: self.save_address())
         self.recent.on_update(lambda _: self._recent_chosen())
@@ -289,6 +292,17 @@ class BrowserSession:
         self.switcher.show(panel.tab_name, panel.tab_title)
         if panel.kind in ARENA_KINDS:
             panel.show_world()
+
+    def _front_changed(self, labels: tuple[str, ...]) -> None:
+        """A tab came to the front: if it is an arena's, the view shows that arena."""
+        with self._lock:
+            panels = [p for tab in self.labs.values() for p in list(tab.panels.values())]
+        for label in labels:
+            panel = next((p for p in panels if p.tab_name == label), None)
+            if panel is not None and panel.kind in ARENA_KINDS:
+                if panel is not self.watching:
+                    panel.show_world()
+                return
 
     def _context_closed(self, panel: ChatPanel) -> None:
         if self.watching is panel:
