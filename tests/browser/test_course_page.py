@@ -48,6 +48,7 @@ from viewers.web.inputs import set_value
 pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(300)]
 REPO = Path(__file__).resolve().parents[2]
 WORKS = (REPO / "tests" / "integration" / "grading" / "works.py").read_text()
+RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
 FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_bytes()
 COURSE = "robotics-26"
 
@@ -125,6 +126,17 @@ def test_scores_reach_the_students_page_and_the_class_table_without_a_click(
     assert ida_row.get_by_role("cell", name="graded", exact=True).count() == 1
     cell(ida, "Alice A (alice)").scroll_into_view_if_needed()
     ida.screenshot("class-table")
+    # Her episodes one by one: the score term by term, the rule as written (not escaped).
+    alice.wait_text("episode by episode", timeout=10_000)
+    alice.p.get_by_text('100 * reached("goal")', exact=True).first.wait_for(timeout=10_000)
+
+    # A submission that raises: she reads the error and its line, as the teacher does.
+    set_value(workbench.name, "raises.py")
+    set_value(workbench.code, RAISES)
+    alice.click("Submit the editor's code")
+    alice.wait_text("ZeroDivisionError: division by zero on purpose", timeout=120_000)
+    alice.wait_text("your controller: line 13:", timeout=10_000)
+    alice.screenshot("course-episode-error")
 
 
 def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
