@@ -28,7 +28,7 @@ from viewers.web.chat_panel import ChatPanel
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]
 
 TICKING = """\
 from common.controller import Controller, Khepera
