@@ -213,17 +213,19 @@ class WorldView:
             if index == self.selected:
                 return
             self.selected = index
-            self._trail.clear()
-            if self._trail_handle is not None:
-                self._trail_handle.remove()
-                self._trail_handle = None
-            if self._rays is not None:
-                self._rays.remove()
-                self._rays = None
-            self._drop_look()
+            self._drop_extras()
             self._sync_labels()
         for callback in list(self.on_select):
             callback(index)
+
+    def _drop_extras(self) -> None:
+        """The selected robot's trail, rays and look: another robot, or none, is selected."""
+        self._trail.clear()
+        for extra in (self._trail_handle, self._rays):
+            if extra is not None:
+                extra.remove()
+        self._trail_handle = self._rays = None
+        self._drop_look()
 
     # -- drawing
 
@@ -240,8 +242,19 @@ class WorldView:
         self._light_state = b""
 
     def redraw(self, snap: SceneLayout) -> None:
-        """Draw (or redraw after an edit) everything that comes from the snapshot."""
+        """Draw (or redraw after an edit) everything that comes from the snapshot.
+
+        The selected robot stays selected by its name (its index moves when a robot
+        before it is removed); once it is removed nothing is, and listeners are told.
+        """
         with self._lock:
+            name = self.selected_name
+            now = snap.robots.index(name) if name in snap.robots else None
+            reselected = now != self.selected
+            if reselected:
+                self.selected = now
+                if now is None:
+                    self._drop_extras()
             old = self.snapshot
             robots_changed = old is None or (old.robots, old.offline, old.robot_radii) != (
                 snap.robots,
@@ -330,6 +343,9 @@ class WorldView:
                     label.remove()
                 self._labels.clear()
                 self._draw_robots(snap)
+        if reselected:
+            for callback in list(self.on_select):
+                callback(now)
 
     def _obstacle_clicked(self, ident: str) -> Callable[[object], None]:
         def clicked(_event: object) -> None:
