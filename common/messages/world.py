@@ -415,10 +415,16 @@ class MacCommand(Message, frozen=True):
 
 
 class AddItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
-    """Add an entry, written as in a map file's section (see docs/MAPS.md)."""
+    """Add an entry, written as in a map file's section (see docs/MAPS.md).
+
+    ``nearest_free`` (agents): the entry's x, y is where the user asked for the robot
+    (the arena's centre, or a click); the world puts it at the nearest spot there
+    where it touches nothing, and refuses only when the arena has none.
+    """
 
     section: Literal["obstacles", "objects", "lights", "zones", "agents"]
     entry: dict[str, Any]
+    nearest_free: bool = False
 
 
 class MoveItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):

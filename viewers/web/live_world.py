@@ -489,4 +489,6 @@ def to_wire_edit(edit: MapEdit, snap: SceneLayout) -> Any:
         }
     else:
         raise LabError(f"cannot add a {edit.kind}")
-    return AddItem(section=_SECTIONS[edit.kind], entry=entry)  # type: ignore[arg-type]
+    # A robot goes to the free spot nearest where it was asked for (the world finds it).
+    near = edit.kind == "agent"
+    return AddItem(section=_SECTIONS[edit.kind], entry=entry, nearest_free=near)  # type: ignore[arg-type]
