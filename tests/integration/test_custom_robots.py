@@ -12,6 +12,7 @@ robot ends that. "Add robot" asked for an occupied spot puts the robot beside it
 
 from __future__ import annotations
 
+import json
 import math
 import textwrap
 from collections.abc import Iterator
@@ -25,6 +26,7 @@ from common.lab_errors import RequestFailed
 from common.messages import (
     AddItem,
     EditResult,
+    Episode,
     ErrorReply,
     Message,
     RemoveItem,
@@ -34,6 +36,9 @@ from common.messages import (
     WorldSnapshot,
     decode,
 )
+from common.sim2d import maps
+from services.grader.assignment import parse_assignment
+from services.runner.episode import run_episode
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
 from tests.kit.agentkit import agent_user, start_agent_context, start_runner, together
@@ -207,3 +212,59 @@ def test_a_type_the_runner_cannot_simulate_fails_only_that_arena_s_dry_runs_in_w
     assert teacher.snapshot().agents == []
     for proc in lab.procs.started:
         assert "Traceback" not in proc.output(), (proc.name, proc.output()[-2000:])
+
+
+ASSIGNMENT = b"""
+name = "look-around"
+course = "robotics-26"
+map = "class"
+robot = "e1"
+time_limit = 2
+episodes = 1
+opens = 2026-11-01T08:00:00Z
+deadline = 2026-12-01T18:00:00Z
+[[start]]
+x = 300
+y = 500
+[[zones]]
+id = "goal"
+shape = "circle"
+x = 800
+y = 500
+radius = 80
+[score]
+name = "points"
+unit = "pts"
+order = "higher"
+rule = '100 * reached("goal")'
+"""
+
+
+def test_a_graded_episode_runs_on_a_map_saved_with_a_custom_robot(tmp_path: Path) -> None:
+    """The teacher saves the arena with the robot built in the lab as a map and sets an
+    assignment on it: the grader checks it and the runner grades on it, neither of them
+    having the lab's robot files (the saved map carries the type's)."""
+    room = json.loads((REPO / "maps" / "empty.json").read_text())
+    room["robot_types"] = {"epuck_ranger": SCOUT}
+    room["agents"].append({"id": "e1", "type": "epuck_ranger", "x": 300, "y": 500})
+    maps.save_map(maps.build_world(room, name="w1"), tmp_path, "class")
+    assignment, map_text = parse_assignment(ASSIGNMENT, "look.toml", tmp_path)
+    assert assignment.robot == "e1" and '"epuck_ranger"' in map_text
+    start = assignment.starts[0]
+    episode = Episode(
+        submission="s1",
+        episode=0,
+        user="alice",
+        map=map_text,
+        agent="e1",
+        seed=1,
+        x=start.x,
+        y=start.y,
+        heading=math.radians(start.heading_deg),
+        seconds=1.0,
+        source=LOOK,
+        filename="look.py",
+    )
+    report = run_episode(episode)
+    assert report.cause in ("ok", "finished"), report
+    assert report.output and report.output[0].startswith("eye ("), report
