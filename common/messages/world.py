@@ -417,9 +417,9 @@ class MacCommand(Message, frozen=True):
 class AddItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
     """Add an entry, written as in a map file's section (see docs/MAPS.md).
 
-    ``nearest_free`` (agents): the entry's x, y is where the user asked for the robot
-    (the arena's centre, or a click); the world puts it at the nearest spot there
-    where it touches nothing, and refuses only when the arena has none.
+    ``nearest_free`` (agents, round objects): the entry's x, y is where the user asked
+    for it (the arena's centre, or a click); the world puts it at the nearest spot
+    there where it touches nothing, and refuses only when the arena has none.
     """
 
     section: Literal["obstacles", "objects", "lights", "zones", "agents"]

@@ -175,7 +175,7 @@ class EngineEdits:
     def _apply_op(world: World, op: Any) -> Any:
         """Apply an edit op; the op as applied (an AddItem placed at a free spot: where)."""
         if isinstance(op, AddItem):
-            if op.nearest_free and op.section == "agents":
+            if op.nearest_free and op.section in ("agents", "objects"):
                 op = _placed(world, op)
             maps.add_entry(world, op.section, op.entry, op.section)
         elif isinstance(op, MoveItem):
@@ -262,22 +262,31 @@ class EngineEdits:
 
 
 def _placed(world: World, op: AddItem) -> AddItem:
-    """The robot of ``op`` at the free spot nearest to where it was asked for (EditError
-    if the arena has none); an entry add_entry will refuse anyway is left as it is."""
+    """The robot (or round object) of ``op`` at the free spot nearest to where it was asked
+    for (EditError if the arena has none); an entry add_entry will refuse anyway, or of
+    another shape, is left as it is."""
     entry = dict(op.entry)
-    name = entry.get("type", "khepera")
-    spec = AGENT_TYPES.get(name) if isinstance(name, str) else None
     asked = [
         float(v)
         for v in (entry.get("x"), entry.get("y"))
         if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
     ]
-    if spec is None or len(asked) != 2:
+    if op.section == "agents":
+        name = entry.get("type", "khepera")
+        spec = AGENT_TYPES.get(name) if isinstance(name, str) else None
+        what, radius = f"a {name}", spec.radius_mm if spec is not None else None
+    else:
+        size: Any = entry.get("radius") if entry.get("shape") == "circle" else None
+        number = isinstance(size, int | float) and not isinstance(size, bool)
+        kind = entry.get("kind", "ball")
+        what = f"a {kind}" if isinstance(kind, str) else "it"
+        radius = float(size) if number and size > 0 else None
+    if radius is None or len(asked) != 2:
         return op
-    spot = free_spot(world, spec.radius_mm, *asked)
+    spot = free_spot(world, radius, *asked)
     if spot is None:
         raise EditError(
-            f"no free spot for a {name} ({2 * spec.radius_mm:.0f} mm across) in this arena: "
+            f"no free spot for {what} ({2 * radius:.0f} mm across) in this arena: "
             "move or remove something first"
         )
     entry["x"], entry["y"] = round(spot[0], 1), round(spot[1], 1)

@@ -65,9 +65,11 @@ class Engine:
 
     def add_robot(self, ident: str, x: float, y: float, kind: str = "khepera") -> Message:
         entry = {"id": ident, "type": kind, "x": x, "y": y, "heading_deg": 0.0}
+        return self.edit(AddItem(section="agents", entry=entry, nearest_free=True))
+
+    def edit(self, op: AddItem) -> Message:
         key = keys.world_edit(REALM, "w1")
-        edit = WorldEdit(op=AddItem(section="agents", entry=entry, nearest_free=True))
-        query = Query(key, self.teacher.seal(key, edit))
+        query = Query(key, self.teacher.seal(key, WorldEdit(op=op)))
         answer: list[Any] = []
 
         def ask() -> None:
@@ -136,5 +138,17 @@ def test_the_page_s_add_robot_asks_for_the_nearest_free_spot() -> None:
     robot = to_wire_edit(MapEdit("add", "agent", x=400, y=300, robot_type="scout"), snap)
     assert isinstance(robot, AddItem) and robot.nearest_free
     assert robot.entry["type"] == "scout" and (robot.entry["x"], robot.entry["y"]) == (400, 300)
+    ball = to_wire_edit(MapEdit("add", "ball", x=400, y=300), snap)
+    assert isinstance(ball, AddItem) and ball.nearest_free
     box = to_wire_edit(MapEdit("add", "obstacle", x=400, y=300, w=100, h=100), snap)
     assert isinstance(box, AddItem) and not box.nearest_free  # a box goes where it is put
+
+
+def test_a_ball_asked_for_on_a_robot_lies_beside_it(tmp_path: Path) -> None:
+    lab = Engine(tmp_path)
+    entry = {"id": "ball2", "shape": "circle", "radius": 20.0, "x": 300.0, "y": 300.0}
+    done = lab.edit(AddItem(section="objects", entry=entry, nearest_free=True))
+    assert isinstance(done, EditResult), done
+    x, y, _ = lab.engine.world.pose_of("ball2")
+    assert math.hypot(x - 300, y - 300) >= 27.5 + 20  # clear of k0, where it was asked for
+    assert math.hypot(x - 400, y - 300) >= 60 + 20  # and of the rock
