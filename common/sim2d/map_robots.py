@@ -79,9 +79,10 @@ class MapRobotTypes:
 
 def carried_files(specs: Iterable[AgentTypeSpec]) -> dict[str, str]:
     """The robot files a world's robots of these types need sent along: every type's the
-    lab does not ship, by name."""
+    lab does not ship, by name; at most MAX_TYPES (a reader refuses more: past them, a
+    robot's type is unknown where the world is rebuilt, and only that fails)."""
     out: dict[str, str] = {}
     for spec in specs:
-        if spec.name not in out and travels(spec):
+        if spec.name not in out and len(out) < MAX_TYPES and travels(spec):
             out[spec.name] = spec.text
     return out

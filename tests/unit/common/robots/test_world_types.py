@@ -6,12 +6,14 @@ that world alone, or says which robot's type cannot be simulated and why."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Any
 
 import pytest
 
 from common.robots import registry
 from common.sim2d import maps
+from common.sim2d.map_robots import MAX_TYPES, carried_files
 from common.world import packing
 from services.runner.dryrun import world_from_snapshot
 from services.runner.episode import assignment_world
@@ -126,3 +128,11 @@ def test_a_type_no_robot_uses_is_never_compiled() -> None:
     data = a_map(scout=SCOUT, broken="not toml at all [")
     world = maps.build_world(data, name="w1")
     assert len(world.agents) == 2
+
+
+def test_a_world_carries_at_most_as_many_files_as_a_reader_takes() -> None:
+    khepera = registry.default().robots["khepera"]
+    many = [replace(khepera, name=f"type{i}", text=f"# type{i}") for i in range(40)]
+    files = carried_files([khepera, *many, many[0]])
+    assert len(files) == MAX_TYPES and "khepera" not in files  # shipped: never sent
+    assert list(files)[:2] == ["type0", "type1"]
