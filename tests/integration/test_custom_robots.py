@@ -22,6 +22,7 @@ import pytest
 
 from common import keys
 from common.auth import Session, issue_session
+from common.client.grader_client import GraderClient
 from common.lab_errors import RequestFailed
 from common.messages import (
     AddItem,
@@ -38,11 +39,13 @@ from common.messages import (
 )
 from common.sim2d import maps
 from services.grader.assignment import parse_assignment
+from services.lab import wiring
 from services.runner.episode import run_episode
 from services.runner.sandbox import sandbox_problem
 from tests.conftest import Procs, Router, wait_for
 from tests.kit.agentkit import agent_user, start_agent_context, start_runner, together
-from tests.kit.lab import REPO, ProcessLab, make_lab
+from tests.kit.courses import COURSE, assignment_toml
+from tests.kit.lab import REPO, ProcessLab, make_lab, wart
 
 pytestmark = [
     pytest.mark.integration,
@@ -244,10 +247,7 @@ def test_a_graded_episode_runs_on_a_map_saved_with_a_custom_robot(tmp_path: Path
     """The teacher saves the arena with the robot built in the lab as a map and sets an
     assignment on it: the grader checks it and the runner grades on it, neither of them
     having the lab's robot files (the saved map carries the type's)."""
-    room = json.loads((REPO / "maps" / "empty.json").read_text())
-    room["robot_types"] = {"epuck_ranger": SCOUT}
-    room["agents"].append({"id": "e1", "type": "epuck_ranger", "x": 300, "y": 500})
-    maps.save_map(maps.build_world(room, name="w1"), tmp_path, "class")
+    saved_class_map(tmp_path)
     assignment, map_text = parse_assignment(ASSIGNMENT, "look.toml", tmp_path)
     assert assignment.robot == "e1" and '"epuck_ranger"' in map_text
     start = assignment.starts[0]
@@ -268,3 +268,48 @@ def test_a_graded_episode_runs_on_a_map_saved_with_a_custom_robot(tmp_path: Path
     report = run_episode(episode)
     assert report.cause in ("ok", "finished"), report
     assert report.output and report.output[0].startswith("eye ("), report
+
+
+def saved_class_map(directory: Path) -> Path:
+    """The empty arena with a robot of the lab's own type beside its Khepera, saved as a
+    map (as the page's Save map does): it carries the type's robot file."""
+    room = json.loads((REPO / "maps" / "empty.json").read_text())
+    room["robot_types"] = {"epuck_ranger": SCOUT}
+    room["agents"].append({"id": "e1", "type": "epuck_ranger", "x": 300, "y": 500})
+    return maps.save_map(maps.build_world(room, name="w1"), directory, "class")
+
+
+@pytest.fixture
+def grading_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
+    """Registry, runner and grader (as tests/integration/test_grading.py), no engine."""
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    roster = tmp_path / "class.csv"
+    roster.write_text("user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n")
+    done = wart("users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
+    assert done.returncode == 0, done.stderr
+    lab.account(wiring.service_account("grader", "grader"))
+    together(
+        lambda: start_runner(lab),
+        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
+    )
+    yield lab
+
+
+def test_the_grader_grades_on_a_map_saved_with_a_custom_robot(
+    grading_lab: ProcessLab, tmp_path: Path
+) -> None:
+    """The whole graded path with processes: `wart course assignment add` on the saved map,
+    a student's submission, the grader's episodes on the runner, each ran its time."""
+    saved_class_map(tmp_path)
+    path = tmp_path / "look.toml"
+    path.write_text(assignment_toml("look-around", map='"class.json"', robot='"e1"', episodes="1"))
+    db = str(grading_lab.db_path)
+    done = wart("course", "--db", db, "assignment", "add", str(path))
+    assert done.returncode == 0, done.stderr
+    with grading_lab.client("alice") as client:
+        grader = GraderClient(client)
+        accepted = grader.submit("look-around", LOOK, "look.py")
+        graded = grader.wait_graded("look-around", accepted.submission, 180)
+    assert graded.status == "graded", graded
+    assert [e.cause for e in graded.episodes] == ["ok"], graded.episodes
