@@ -1,8 +1,8 @@
 """Deleting anything from the arena in the page logs no traceback (against a real lab).
 
 ida (edit_map) adds two robots and a ball with the map editor, selects the robot added
-last (the last row of the world's frames: deleting it used to leave the view's selection
-past the end, and the frame pump logged an IndexError), deletes it, the ball, and then
+last (the last row of the world's frames: the view's selection must not outlive it, or
+the frame pump meets an index past the robots' end), deletes it, the ball, and then
 every robot down to none. The viewer runs in this process: caplog sees its log.
 """
 

@@ -180,7 +180,7 @@ def test_a_custom_robot_leaves_everyone_s_dry_run_working(lab: ProcessLab) -> No
 
     with agent_user(lab, "alice") as alice:
         report = alice.dry_run("k2", BRAITENBERG, filename="01_braitenberg.py", seconds=2.0)
-        assert report.will_run, report  # was: "agents[4].type: must be one of epuck, khepera"
+        assert report.will_run, report  # the runner rebuilt e1 and e2 from the type's file
     with agent_user(lab, "bob") as bob:  # the custom robot itself, its range finder read
         wait_for(
             lambda: "e1" in {a.agent for a in bob.state().agents}, 30, "e1 in the context's list"
