@@ -54,6 +54,15 @@ class MapRobotTypes:
                 )
         return cls(value)
 
+    @classmethod
+    def of(cls, specs: Iterable[AgentTypeSpec]) -> MapRobotTypes:
+        """The types a running world carries (its robots'), each as the very spec its
+        robots have: a robot added live shares its type's spec with them."""
+        held = list(specs)
+        types = cls(carried_files(held))
+        types._compiled = {s.name: s for s in held if s.name in types.files}
+        return types
+
     def names(self) -> tuple[str, ...]:
         return tuple(sorted(set(AGENT_TYPES) | set(self.files)))
 

@@ -40,7 +40,7 @@ from common.robots import registry as robot_registry
 from common.robots.robotfile import RobotFileError
 from common.service import RequestError
 from common.sim2d import maps
-from common.sim2d.agents import AGENT_TYPES
+from common.sim2d.map_robots import MapRobotTypes
 from common.sim2d.placement import free_spot
 from common.sim2d.world import EditError, World
 from common.world.leases import LeaseBook
@@ -175,9 +175,11 @@ class EngineEdits:
     def _apply_op(world: World, op: Any) -> Any:
         """Apply an edit op; the op as applied (an AddItem placed at a free spot: where)."""
         if isinstance(op, AddItem):
+            # The lab's types and those the world's map brought: a robot of either is added.
+            types = MapRobotTypes.of(a.spec for a in world.agents)
             if op.nearest_free and op.section in ("agents", "objects"):
-                op = _placed(world, op)
-            maps.add_entry(world, op.section, op.entry, op.section)
+                op = _placed(world, op, types)
+            maps.add_entry(world, op.section, op.entry, op.section, types=types)
         elif isinstance(op, MoveItem):
             world.move(op.id, op.x, op.y, op.heading)
             world.set_home(op.id)  # a robot a map editor placed starts there from now on
@@ -261,7 +263,7 @@ class EngineEdits:
         return self.in_sim(swap)
 
 
-def _placed(world: World, op: AddItem) -> AddItem:
+def _placed(world: World, op: AddItem, types: MapRobotTypes) -> AddItem:
     """The robot (or round object) of ``op`` at the free spot nearest to where it was asked
     for (EditError if the arena has none); an entry add_entry will refuse anyway, or of
     another shape, is left as it is."""
@@ -273,7 +275,8 @@ def _placed(world: World, op: AddItem) -> AddItem:
     ]
     if op.section == "agents":
         name = entry.get("type", "khepera")
-        spec = AGENT_TYPES.get(name) if isinstance(name, str) else None
+        # A type the world carries is compiled already (its robots'): nothing can fail here.
+        spec = types.spec(name, "") if isinstance(name, str) and name in types else None
         what, radius = f"a {name}", spec.radius_mm if spec is not None else None
     else:
         size: Any = entry.get("radius") if entry.get("shape") == "circle" else None

@@ -20,9 +20,11 @@ import pytest
 from common import keys
 from common.auth import RegistryIdentity, issue_session
 from common.messages import AddItem, EditResult, ErrorReply, Message, WorldEdit
+from common.robots import registry
 from common.sim2d import maps
 from common.sim2d.world import World
 from services.engine.service import EngineService, EngineSettings
+from tests.unit.common.robots.test_world_types import SCOUT
 from viewers.web.live_world import to_wire_edit
 from viewers.web.world_feed import MapEdit, SceneLayout
 
@@ -152,3 +154,18 @@ def test_a_ball_asked_for_on_a_robot_lies_beside_it(tmp_path: Path) -> None:
     x, y, _ = lab.engine.world.pose_of("ball2")
     assert math.hypot(x - 300, y - 300) >= 27.5 + 20  # clear of k0, where it was asked for
     assert math.hypot(x - 400, y - 300) >= 60 + 20  # and of the rock
+
+
+def test_a_robot_of_a_type_the_world_s_map_brought_can_be_added_live(tmp_path: Path) -> None:
+    """A map from another lab carries its robot type; this engine never had it, yet the
+    map editor adds another robot of it, sharing its spec, and a restart replays it."""
+    room = dict(ROOM, robot_types={"scout": SCOUT})
+    room["agents"] = [*ROOM["agents"], {"id": "s0", "type": "scout", "x": 150, "y": 150}]  # type: ignore[misc]
+    lab = Engine(tmp_path, room)
+    assert "scout" not in registry.default().robots
+    assert isinstance(lab.add_robot("s1", 650, 450, kind="scout"), EditResult)
+    world = lab.engine.world
+    s0, s1 = (next(a for a in world.agents if a.id == i) for i in ("s0", "s1"))
+    assert s1.spec is s0.spec and s1.spec.name == "scout"
+    again = lab.restart()
+    assert again.pose_of("s1")[:2] == pytest.approx(world.pose_of("s1")[:2])
