@@ -79,10 +79,10 @@ fov_deg = 40.0
 max_range_mm = 300.0
 """
 
-# Only the engine's host has the race_compass plugin: the runner cannot simulate this.
+# Only the engine's host has the lab_compass plugin: the runner cannot simulate this.
 COMPASS_BOT = (
     SCOUT.replace('"epuck_ranger"', '"compass_bot"')
-    + '\n[components.compass]\ntype = "race_compass"\n'
+    + '\n[components.compass]\ntype = "lab_compass"\n'
 )
 
 BRAITENBERG = (REPO / "examples" / "01_braitenberg.py").read_bytes()
@@ -102,14 +102,19 @@ LOOK = textwrap.dedent(
 
 
 def plugin_site(tmp_path: Path) -> Path:
-    """A directory on the engine's path declaring wart-race's compass as an installed
-    plugin's component (entry points are found on the path, as pip would install them)."""
+    """A directory on the engine's path declaring a compass component as an installed
+    plugin's (entry points are found on the path, as pip would install them). Named
+    lab_compass: no plugin another test installs in this environment gives it."""
     site = tmp_path / "engine-site"
     dist = site / "compass_only-0.1.dist-info"
     dist.mkdir(parents=True)
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: compass-only\nVersion: 0.1\n")
     (dist / "entry_points.txt").write_text(
-        "[wart.components]\nrace_compass = wart_race.sensors:RaceCompass\n"
+        "[wart.components]\nlab_compass = compass_only:LabCompass\n"
+    )
+    (site / "compass_only.py").write_text(
+        "from wart_race.sensors import RaceCompass\n\n\n"
+        "class LabCompass(RaceCompass):\n    name = 'lab_compass'\n"
     )
     return site
 
@@ -157,8 +162,8 @@ class Teacher:
         with self.lab.zsession() as z:
             for reply in z.get(keys.world_snapshot(self.realm, "w1"), timeout=10.0):
                 assert reply.ok is not None
-                snap = decode(reply.ok.payload, WorldSnapshot)
-                assert isinstance(snap, WorldSnapshot)
+                snap = decode(reply.ok.payload, (WorldSnapshot, ErrorReply))
+                assert isinstance(snap, WorldSnapshot), snap
                 return snap
         raise AssertionError("no snapshot")
 
@@ -204,7 +209,7 @@ def test_a_type_the_runner_cannot_simulate_fails_only_that_arena_s_dry_runs_in_w
         said = str(refused.value)
         assert (
             "robot type 'compass_bot' (c1) is not valid here: compass_bot.toml:25: "
-            "components.compass.type: unknown component type 'race_compass'"
+            "components.compass.type: unknown component type 'lab_compass'"
         ) in said, said
         assert isinstance(teacher.delete("c1"), EditResult)
         report = alice.dry_run("k2", BRAITENBERG, filename="01_braitenberg.py", seconds=1.0)
