@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import random
@@ -78,6 +79,7 @@ class Student:
     lost: list[str] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
     runs: int = 0
+    dropped: bool = False
     status: GuiElement | None = None
 
     @property
@@ -116,6 +118,14 @@ async def enter(student: Student, gate: asyncio.Semaphore) -> None:
 
 
 async def work(student: Student, until: float, pace: tuple[float, float]) -> None:
+    try:
+        await _work(student, until, pace)
+    except ConnectionError as exc:  # the viewer dropped this page: said, the class goes on
+        student.errors.append(f"connection lost: {exc}")
+        student.dropped = True
+
+
+async def _work(student: Student, until: float, pace: tuple[float, float]) -> None:
     c = student.client
     step = 0
     running = False
@@ -172,7 +182,8 @@ async def run_class(
     await asyncio.gather(*(work(s, until, pace) for s in class_))
     progress.cancel()
     for s in class_:
-        await s.client.close()
+        with contextlib.suppress(ConnectionError, OSError):
+            await s.client.close()
     return class_
 
 
@@ -201,7 +212,11 @@ def report(args: argparse.Namespace, class_: list[Student], load0: float) -> Non
     runs = sum(s.runs for s in class_)
     lost = [f"{s.user}: {x[:120]}" for s in class_ for x in s.lost]
     errors = [f"{s.user}: {x}" for s in class_ for x in s.errors]
-    print(f"  runs started {runs}, lost {len(lost)}; unanswered or refused actions {len(errors)}")
+    dropped = sum(s.dropped for s in class_)
+    print(
+        f"  runs started {runs}, lost {len(lost)}; unanswered or refused actions "
+        f"{len(errors)}; pages dropped by the viewer {dropped}"
+    )
     for line in (lost + errors)[:10]:
         print(f"    {line}")
 

@@ -1,10 +1,11 @@
 """A class in a room, in Chromium against a real lab: a teacher and three students at once.
 
-The students write, Check, dry-run and run in their own pages; one reloads mid-run
-and keeps the run; the teacher takes over a student's robot by keyboard (the view's
-camera unchanged) and hands it back; a graded submission fails and its student reads
-the error. Every assertion is what a person sees in the DOM or what the lab's
-services say, never pixels.
+The students write, Check, dry-run and run in their own pages while the teacher
+builds and places a robot of a new type; one student reloads mid-run and keeps the
+run; the teacher takes over a student's robot by keyboard (the view's camera
+unchanged) and hands it back; a graded submission fails and its student reads the
+error. Every assertion is what a person sees in the DOM or what the lab's services
+say, never pixels.
 """
 
 from __future__ import annotations
@@ -96,14 +97,43 @@ def test_a_class_drill(open_page, lab: RealLab) -> None:
     for page, _, _, _ in plans:
         page.wait_text("Check: no problems found", timeout=15_000)
 
-    # At once: alice runs; bob and carol dry-run.
+    # The teacher builds a robot type of the lab's own (an e-puck with a range finder)...
+    builder, editor = panels["ida"].builder, panels["ida"].editor
+    assert builder is not None and editor is not None
+    ida.p.get_by_text("Robot builder").first.click()
+    ida.click("List types")
+    ida.wait_text("This world has")
+    choose(ida, "Start from", "epuck")
+    ida.click("Open type")
+    wait_until(lambda: 'name = "epuck"' in builder.text.value, 15, what="epuck's file")
+    choose(ida, "Component", "range_finder")
+    ida.click("Add component")
+    wait_until(lambda: "[components.range]" in builder.text.value, 15, what="a range finder")
+    set_value(builder.text, builder.text.value.replace('name = "epuck"', 'name = "scout"'))
+    ida.click("Check robot file")
+    ida.wait_text("Check: scout is a valid robot type", timeout=15_000)
+    ida.click("Save type to the lab")
+    ida.wait_text("Saved robot type scout", timeout=15_000)
+    view = session_of(lab.viewer, "ida").view
+    before = set(view.robot_names)
+
+    # ...and places it while alice runs and bob and carol dry-run, all at once.
+    ida.p.get_by_text("Map editor").first.click()
     alice.click("Run in simulation")
     bob.click("Dry run")
     carol.click("Dry run")
+    ida.click("Add robot")
     alice.wait_text("Your controller runs on k0", timeout=60_000)
     bob.wait_text("on k3: will run, with a warning: 1 collision", timeout=60_000)
     carol.wait_text("Dry run of my_controller.py on k2 done: it will run,", timeout=60_000)
+    wait_until(lambda: set(view.robot_names) - before, 30, what="the scout in the arena")
+    (scout,) = set(view.robot_names) - before
+    assert view.feed is not None and view.feed.snapshot().robot_types[scout][0] == "scout"
     wait_until(lambda: ticks(alice), 30, what="alice's first print under her editor")
+    # Beside the custom robot, everyone's dry runs still work.
+    choose(carol, "Run on", "k1")
+    carol.click("Dry run")
+    carol.wait_text("Dry run of my_controller.py on k1 done: it will run,", timeout=60_000)
 
     # Alice reloads mid-run: the run goes on, her page comes back as it was.
     before = max(ticks(alice))
