@@ -37,6 +37,17 @@ ARENA, WORLD = "arena", "w1"
 PASSWORD = "class-of-2026"
 ACTIONS = ("Check", "Dry run", "Run in simulation", "Stop")
 INTERIM = "a few simulated seconds"  # the dry run's own "working on it", not its answer
+# What each action's answer says (Run and Dry run first say Check's verdict: not theirs).
+ANSWERS = {
+    "Check": lambda said: "Check" in said,
+    "Dry run": lambda said: "Dry run of" in said and INTERIM not in said,
+    "Run in simulation": lambda said: any(
+        words in said for words in ("queued on", "runs on", "Not queued")
+    ),
+    "Stop": lambda said: any(
+        words in said for words in ("Stopped", "cancelled", "Nothing of yours", "Not done")
+    ),
+}
 CONTROLLER = """\
 from common.controller import Controller, Khepera
 
@@ -140,9 +151,9 @@ async def _work(student: Student, until: float, pace: tuple[float, float]) -> No
         clicked = time.monotonic()
         await c.click(action)
 
-        def answered(before: str = before) -> bool:
+        def answered(before: str = before, action: str = action) -> bool:
             now = student.said()
-            return now != before and INTERIM not in now
+            return now != before and ANSWERS[action](now)
 
         try:
             await c.wait_for(answered, 120)
@@ -152,11 +163,11 @@ async def _work(student: Student, until: float, pace: tuple[float, float]) -> No
         student.latencies[action].append(time.monotonic() - clicked)
         said = student.said()
         if action == "Run in simulation":
-            running = "queued" in said or "runs on" in said
+            running = "queued on" in said or "runs on" in said
             student.runs += running
         elif action == "Stop":
             running = False
-        if "Not done" in said and action != "Stop":
+        if "Not done" in said:
             student.errors.append(f"{action}: {said[:160]}")
 
 

@@ -9,6 +9,7 @@ wait_for are re-exported here for the tests that import them from this file.
 from __future__ import annotations
 
 import uuid
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -23,15 +24,18 @@ from tests.kit.waits import wait_for
 
 
 def pytest_itemcollected(item: pytest.Item) -> None:
-    # Under xdist (./dev test), the browser tests run one at a time on one
-    # worker: each drives a Chromium rendering WebGL in software, and two at
-    # once on two cores made each page slow for nothing. The other tests,
-    # which mostly wait on their processes, share the other workers.
+    # Under xdist (./dev test), the browser tests run in two groups, each one test at
+    # a time on its own worker: each drives a Chromium rendering WebGL in software,
+    # and all at once on two cores made each page slow for nothing; but as one group
+    # they were the suite's critical path (9 of its 9.5 minutes). A module stays in
+    # one group (its lab, a module fixture, is started once). The other tests, which
+    # mostly wait on their processes, share the other workers.
     # Marked as each item is collected: xdist reads the groups into the node ids
     # in its own collection_modifyitems, and marked there (after it) they were
     # ignored and the browser tests spread over every worker.
     if "browser" in item.keywords or item.path.parent.name == "browser":
-        item.add_marker(pytest.mark.xdist_group("browser"))
+        half = zlib.crc32(item.path.name.encode()) % 2
+        item.add_marker(pytest.mark.xdist_group(f"browser-{half}"))
 
 
 @pytest.fixture
