@@ -18,8 +18,15 @@ import zenoh
 from common import keys
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
+from services.runner.sandbox import sandbox_problem
 from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
+
+_SANDBOX_PROBLEM = sandbox_problem()
+# For the tests that run controllers in the runner's real sandbox.
+needs_sandbox = pytest.mark.skipif(
+    _SANDBOX_PROBLEM is not None, reason=f"no sandbox: {_SANDBOX_PROBLEM}"
+)
 
 
 def pytest_itemcollected(item: pytest.Item) -> None:

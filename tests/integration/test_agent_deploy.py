@@ -14,8 +14,7 @@ from common.client.agent_client import FINAL
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import OutputLines
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     Poses,
     agent_user,
@@ -29,7 +28,7 @@ from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("agent_deploy"),  # one worker starts the module's lab once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"

@@ -20,14 +20,13 @@ from common.controller import load_controller
 from common.keys import AliveKind
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import WORLD, agent_user, start_agent_context, start_runner
 from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 

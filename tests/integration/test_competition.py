@@ -24,8 +24,7 @@ from common.messages import Standings
 from common.recording.reader import read_recording
 from common.recording.replay import Timeline
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router
+from tests.conftest import Procs, Router, needs_sandbox
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab
@@ -34,7 +33,7 @@ from tests.kit.lab import wart as lab_wart
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.timeout(600),
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 
 

@@ -20,8 +20,7 @@ from common.recording.report import describe
 from common.sim2d import maps
 from common.world import packing
 from services.runner.dryrun import dry_run, wall_limit
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
@@ -34,7 +33,7 @@ from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("dry_run"),  # one worker starts the module's lab once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 HEADER = "from common.controller import Controller, Khepera\n"
 INTO_THE_WALL = HEADER + textwrap.dedent(

@@ -20,8 +20,7 @@ from common.lab_errors import LabError
 from common.messages import EmergencyStop, ErrorReply, OkReply, decode
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     WORLD,
@@ -37,7 +36,7 @@ from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("emergency_stop"),  # one worker starts the module's router once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")

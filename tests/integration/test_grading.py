@@ -20,8 +20,7 @@ from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.messages import GradingChanged
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_runner, together
 from tests.kit.courses import COURSE, assignment_toml
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
@@ -30,7 +29,7 @@ from tests.kit.lab import wart as lab_wart
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.timeout(600),
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).parent / "grading"
 

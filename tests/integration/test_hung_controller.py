@@ -16,8 +16,8 @@ import pytest
 from common.client.agent_client import FINAL
 from common.controller import KheperaState
 from common.recording import read_recording, summarize
-from services.runner.sandbox import Sandbox, SandboxLimits, sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from services.runner.sandbox import Sandbox, SandboxLimits
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     agent_user,
@@ -30,8 +30,6 @@ from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 
-_problem = sandbox_problem()
-needs_sandbox = pytest.mark.skipif(_problem is not None, reason=f"no sandbox here: {_problem}")
 
 # Line 8 is the loop: what the student is told.
 SPIN = b"""from common.controller import Controller, Khepera

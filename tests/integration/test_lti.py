@@ -32,8 +32,7 @@ from common.client.resume_cookie import parse_cookies
 from common.lab_errors import LabError
 from common.messages import LtiAccount, LtiAccountRequest
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
 from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import ProcessLab, make_lab, start_router, wart
@@ -304,7 +303,7 @@ def test_a_replayed_launch_is_refused(lti: LtiLab) -> None:
     assert "you are banned until an admin lifts it: copied a classmate's controller" in banned.text
 
 
-@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+@needs_sandbox
 def test_a_launched_students_score_reaches_the_platform(lti: LtiLab, tmp_path: Path) -> None:
     lab = lti.lab
     add_assignment(lab, tmp_path, "reach-goal", episodes="1", seeds="[7]")

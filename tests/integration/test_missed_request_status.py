@@ -20,8 +20,7 @@ from common.lab_errors import NotAllowed
 from common.messages import AgentEvent
 from services.commands import deploy
 from services.context.agent_context import RUNNER_CHECK_S
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Proc, Procs, Router, wait_for
+from tests.conftest import Proc, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
@@ -34,7 +33,7 @@ from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("missed_request_status"),  # one worker starts the module's router once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 FORWARD = Path(__file__).with_name("controllers") / "forward.py"
 RUNNER_STOPPED = "the lab's runner runner stopped"

@@ -37,8 +37,7 @@ from common.messages import (
     decode,
 )
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_agent_context, start_deploy, together
 from tests.kit.lab import REPO, ProcessLab, make_lab
 
@@ -125,7 +124,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path, race_plugin: None) -> Iter
     yield lab
 
 
-@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+@needs_sandbox
 def test_the_plugin_s_robot_sensor_and_race_run_in_a_real_lab(
     lab: ProcessLab, procs: Procs, tmp_path: Path
 ) -> None:
@@ -292,7 +291,7 @@ SCOUT_READER = textwrap.dedent(
 )
 
 
-@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+@needs_sandbox
 def test_a_robot_type_saved_to_the_lab_drives_in_its_arena(
     router: Router, procs: Procs, tmp_path: Path
 ) -> None:

@@ -12,8 +12,7 @@ from common.client.agent_client import FINAL
 from common.lab_errors import LabError
 from common.recording import read_recording, summarize
 from common.recording import schema as s
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     agent_user,
@@ -27,7 +26,7 @@ from tests.kit.lab import PASSWORD, USERS, ProcessLab, make_lab
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("recording"),  # one worker starts the module's lab once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
 RAISER = textwrap.dedent(

@@ -21,9 +21,8 @@ import pytest
 from common.client.agent_client import FINAL
 from common.messages import RunAccepted, RunRequest
 from common.service import RequestError, close_session, open_session
-from services.runner.sandbox import sandbox_problem
 from services.runner.service import MAX_RUNS_PER_USER, RunnerService
-from tests.conftest import Procs, Router
+from tests.conftest import Procs, Router, needs_sandbox
 from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
@@ -35,7 +34,7 @@ from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"

@@ -27,14 +27,13 @@ from common.recording.compare import compare
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.lab.lab_maps import map_pose
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, start_agent_context, start_engine, start_runner
 from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 MAP = REPO / "maps" / "maze.json"

@@ -19,8 +19,7 @@ from common.controller import Khepera
 from common.lab_errors import LabError
 from common.messages import AuditQuery, RequestStatus
 from common.recording import read_recording
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     WORLD,
@@ -36,7 +35,7 @@ from tests.kit.lab import PASSWORD, Proc, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 FORWARD = (CONTROLLERS / "forward.py").read_bytes()
