@@ -18,12 +18,9 @@ from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     Poses,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, module_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -38,16 +35,9 @@ HEADER = "from common.controller import Controller, Khepera\n"
 def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
     """One lab for the module: each test's requests have ended when it returns, so the
     next finds every queue empty (the hostile test queues on all four robots at once)."""
-    tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp)
-    try:
-        lab.start_registry()
-        together(lambda: start_engine(lab), lambda: start_runner(lab))
-        start_agent_context(lab)
+    with module_lab(module_router, tmp_path_factory.mktemp("lab")) as lab:
+        start_agent_lab(lab)
         yield lab
-    finally:
-        procs.stop_all()
 
 
 def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab, procs: Procs) -> None:

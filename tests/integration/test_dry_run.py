@@ -23,10 +23,7 @@ from services.runner.dryrun import dry_run, wall_limit
 from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
@@ -137,9 +134,7 @@ def test_a_hostile_controller_ends_within_its_limit(
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab)
+    start_agent_lab(lab)
     yield lab
 
 

@@ -21,10 +21,7 @@ from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
 from tests.kit.lab import ProcessLab, make_lab
 
@@ -105,9 +102,7 @@ HUNG = re.compile(
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab, slot=4.0)
+    start_agent_lab(lab, slot=4.0)
     yield lab
 
 

@@ -24,9 +24,7 @@ from tests.conftest import Proc, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
@@ -48,9 +46,7 @@ def router(module_router: Router, realm: str) -> Router:
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[ProcessLab, Proc, Proc]]:
     """A lab whose slots outlast the test (30 s): a request ends only when made to."""
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    _, runner = together(lambda: start_engine(lab), lambda: start_runner(lab))
-    context = start_agent_context(lab, slot=30.0)
+    _, runner, context = start_agent_lab(lab, slot=30.0)
     yield lab, runner, context
 
 

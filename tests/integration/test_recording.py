@@ -16,12 +16,9 @@ from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
-from tests.kit.lab import PASSWORD, USERS, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, USERS, ProcessLab, module_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -49,15 +46,9 @@ def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iter
     user (dave, bob, carol), so another's runs count neither in its listings nor its
     retention, and alice records nothing (the test of bob's runs checks she sees none)."""
     tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp, users={**USERS, "dave": "student"})
-    try:
-        lab.start_registry()
-        together(lambda: start_engine(lab, "maze"), lambda: start_runner(lab))
-        start_agent_context(lab, "--keep-recordings", "2", slot=3.0)
+    with module_lab(module_router, tmp, users={**USERS, "dave": "student"}) as lab:
+        start_agent_lab(lab, "--keep-recordings", "2", map_name="maze", slot=3.0)
         yield lab
-    finally:
-        procs.stop_all()
 
 
 def _recordings_dir(lab: ProcessLab) -> Path:

@@ -25,11 +25,8 @@ from tests.kit.agentkit import (
     WORLD,
     Motion,
     agent_user,
-    start_agent_context,
+    start_agent_lab,
     start_deploy,
-    start_engine,
-    start_runner,
-    together,
 )
 from tests.kit.lab import PASSWORD, Proc, ProcessLab, make_lab
 
@@ -52,9 +49,7 @@ class Reverse(Controller):
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab, identity=True), lambda: start_runner(lab))
-    start_agent_context(lab, slot=120.0)
+    start_agent_lab(lab, identity=True, slot=120.0)
     yield lab
 
 

@@ -63,6 +63,23 @@ def start_runner(lab: ProcessLab, name: str = "runner") -> Proc:
     return lab.start_runner(name)
 
 
+def start_agent_lab(
+    lab: ProcessLab,
+    *context_args: str,
+    map_name: str = "foraging",
+    identity: bool = False,
+    slot: float = 2.5,
+) -> tuple[Proc, Proc, Proc]:
+    """The services an agent test drives: the registry, then the engine and the runner
+    (together), then the agent context; returns (engine, runner, agent context)."""
+    lab.start_registry()
+    engine, runner = together(
+        lambda: start_engine(lab, map_name, identity=identity), lambda: start_runner(lab)
+    )
+    context = start_agent_context(lab, *context_args, slot=slot)
+    return engine, runner, context
+
+
 def start_deploy(lab: ProcessLab, controller: Path, agent: str, user: str, ctx: str = CTX) -> Proc:
     """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the test password)."""
     return lab.procs.start(

@@ -396,6 +396,17 @@ def make_lab(
     return ProcessLab(router=router, procs=procs, state=state, identity=identity)
 
 
+@contextmanager
+def module_lab(router: Router, tmp: Path, *, users: dict[str, str] = USERS) -> Iterator[ProcessLab]:
+    """A lab (see make_lab) whose processes are all stopped when the block ends: one
+    lab for a whole test module, its state and logs under ``tmp``."""
+    procs = Procs(tmp)
+    try:
+        yield make_lab(router, procs, tmp, users=users)
+    finally:
+        procs.stop_all()
+
+
 # --- a whole `wart up` ---------------------------------------------------------------------
 
 
