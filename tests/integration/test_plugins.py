@@ -40,6 +40,7 @@ from services.lab import wiring
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_agent_context, start_deploy, together
 from tests.kit.lab import REPO, ProcessLab, make_lab
+from tests.kit.robots import wheeled_robot
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"
@@ -164,23 +165,7 @@ def test_the_plugin_s_robot_sensor_and_race_run_in_a_real_lab(
     assert {"agent": "k0", "laps": 0, "finished_at": None} in standings["standings"]
 
 
-GOOD = """\
-format = "wart-robot"
-version = 1
-name = "scout"
-
-[components.body]
-type = "body"
-radius_mm = 30.0
-mass_g = 80.0
-
-[components.drive]
-type = "differential_drive"
-wheel_base_mm = 50.0
-mm_per_pulse = 0.1
-unit_time_s = 0.01
-max_speed = 100
-"""
+GOOD = wheeled_robot("scout")
 
 
 @pytest.mark.parametrize(
