@@ -8,6 +8,7 @@ wait_for are re-exported here for the tests that import them from this file.
 
 from __future__ import annotations
 
+import functools
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,6 +17,7 @@ import pytest
 import zenoh
 
 from common import keys
+from common.client import lab_client
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
@@ -89,3 +91,19 @@ def alive_watch(zsession: zenoh.Session, router: Router) -> Iterator[AliveWatch]
     watch = AliveWatch(zsession, keys.alive_all(router.realm))
     yield watch
     watch.close()
+
+
+@pytest.fixture
+def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each client derives its mailbox key from the password (argon2id) before it asks:
+    derive each once, for the tests of the registry's side.
+
+    On a student's machine that is their own CPU; here it is the test's, and on a busy
+    machine it can outlast the 2 s a slowed source must wait after its third failure,
+    so the throttle would have lapsed before the next try arrives.
+    """
+    monkeypatch.setattr(
+        lab_client,
+        "mailbox_key_from_password",
+        functools.cache(lab_client.mailbox_key_from_password),
+    )
