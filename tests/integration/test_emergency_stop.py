@@ -15,17 +15,15 @@ import pytest
 
 from common import keys
 from common.client.agent_client import FINAL
-from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import EmergencyStop, ErrorReply, OkReply, decode
-from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
-    WORLD,
     Motion,
     agent_user,
+    bridged_robot,
     start_agent_context,
     start_agent_lab,
     start_runner,
@@ -136,24 +134,13 @@ def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Pro
     """A real-robot arena: the Khepera bridge on an emulated robot (a real pty)."""
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    with SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body:
-        emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
-        with emulator:
-            bridge = procs.start(
-                "bridge",
-                [
-                    "bridge",
-                    "--world",
-                    WORLD,
-                    "--port",
-                    f"{tmp_path / 'khepera0'}=k1@500,500,0",
-                    *lab.net_args(),
-                ],
-            )
-            lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
-            start_runner(lab)
-            start_agent_context(lab, slot=120.0)
-            yield lab, body
+    with (
+        SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body,
+        bridged_robot(lab, body, tmp_path / "khepera0", "500,500,0"),
+    ):
+        start_runner(lab)
+        start_agent_context(lab, slot=120.0)
+        yield lab, body
 
 
 def test_the_emergency_stop_halts_a_real_robot_through_the_bridge(
