@@ -23,7 +23,6 @@ from common.lab_errors import LabError
 from common.messages import Standings
 from common.recording.reader import read_recording
 from common.recording.replay import Timeline
-from services.lab import wiring
 from tests.conftest import Procs, Router, needs_sandbox
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.kit.agentkit import start_runner, together
@@ -53,11 +52,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     )
     done = wart("users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
     assert done.returncode == 0, done.stderr
-    lab.account(wiring.service_account("grader", "grader"))
-    together(
-        lambda: start_runner(lab),
-        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
-    )
+    together(lambda: start_runner(lab), lab.start_grader)
     yield lab
 
 

@@ -307,11 +307,7 @@ def test_a_replayed_launch_is_refused(lti: LtiLab) -> None:
 def test_a_launched_students_score_reaches_the_platform(lti: LtiLab, tmp_path: Path) -> None:
     lab = lti.lab
     add_assignment(lab, tmp_path, "reach-goal", episodes="1", seeds="[7]")
-    lab.account(wiring.service_account("grader", "grader"))
-    together(
-        lambda: start_runner(lab),
-        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
-    )
+    together(lambda: start_runner(lab), lab.start_grader)
     answer = lti.launch(Launcher(sub="u-2002", name="Sam Student", assignment="reach-goal"))
     assert answer.status == 303, answer.text
     saved = parse_cookies(answer.cookies[0].split(";")[0], lab.realm)[0]

@@ -118,7 +118,7 @@ def real(router: Router, procs: Procs, tmp_path: Path) -> Iterator[RealLab]:
             lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
             start_runner(lab)
             start_agent_context(lab, slot=3.0)
-            lab.start(wiring.grader_spec(lab.wiring()), name="grader")
+            lab.start_grader()
             yield RealLab(lab, body, args)
 
 

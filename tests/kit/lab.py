@@ -320,6 +320,11 @@ class ProcessLab:
         self.account(account)
         return self.start(wiring.runner_spec(self.wiring(), name, account=account), name="runner")
 
+    def start_grader(self, *extra: str, name: str = "grader") -> Proc:
+        """The grader (its service account made first, once)."""
+        self.account(wiring.service_account("grader", "grader"))
+        return self.start(wiring.grader_spec(self.wiring()), name=name, extra=extra)
+
     def start_agent_context(
         self,
         *extra: str,
