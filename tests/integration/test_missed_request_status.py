@@ -50,6 +50,28 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[ProcessL
     yield lab, runner, context
 
 
+def _bobs_deploy_killing_mid_slot(lab: ProcessLab, victim: Proc) -> tuple[int, list[BaseException]]:
+    """Bob's ``wart deploy`` of FORWARD on k3, in this process, with ``victim`` killed once
+    bob's slot starts: deploy's exit code, and what failed in the killing thread."""
+    failures: list[BaseException] = []
+
+    with agent_user(lab, "ida") as ida:
+
+        def kill_mid_slot() -> None:
+            try:
+                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
+                victim.kill9()
+            except BaseException as exc:  # seen by the test, not lost in the thread
+                failures.append(exc)
+
+        killer = threading.Thread(target=kill_mid_slot, daemon=True)
+        killer.start()
+        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
+        code = deploy.main([*argv, *lab.net_args()])
+        killer.join(5)
+    return code, failures
+
+
 def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
     lab: tuple[ProcessLab, Proc, Proc],
     monkeypatch: pytest.MonkeyPatch,
@@ -68,22 +90,7 @@ def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
     monkeypatch.setattr(AgentClient, "_on_event", drop_bobs_ends)
     monkeypatch.setattr(deploy, "interrupt_event", threading.Event)  # pytest keeps its signals
     monkeypatch.setenv("WART_PASSWORD", PASSWORD)
-    failures: list[BaseException] = []
-
-    with agent_user(the_lab, "ida") as ida:
-
-        def kill_the_runner_mid_slot() -> None:
-            try:
-                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
-                runner.kill9()
-            except BaseException as exc:  # seen by the test, not lost in the thread
-                failures.append(exc)
-
-        killer = threading.Thread(target=kill_the_runner_mid_slot, daemon=True)
-        killer.start()
-        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
-        code = deploy.main([*argv, *the_lab.net_args()])
-        killer.join(5)
+    code, failures = _bobs_deploy_killing_mid_slot(the_lab, runner)
     out = capsys.readouterr().out
     assert not failures, failures
     assert code == 1, out
@@ -152,22 +159,7 @@ def test_wart_deploy_says_the_context_is_down_rather_than_lost(
     monkeypatch.setattr(deploy, "CONTEXT_DOWN_GIVE_UP_S", 3.0)
     monkeypatch.setattr(deploy, "interrupt_event", threading.Event)
     monkeypatch.setenv("WART_PASSWORD", PASSWORD)
-    failures: list[BaseException] = []
-
-    with agent_user(the_lab, "ida") as ida:
-
-        def kill_the_context_mid_slot() -> None:
-            try:
-                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
-                context.kill9()
-            except BaseException as exc:
-                failures.append(exc)
-
-        killer = threading.Thread(target=kill_the_context_mid_slot, daemon=True)
-        killer.start()
-        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
-        code = deploy.main([*argv, *the_lab.net_args()])
-        killer.join(5)
+    code, failures = _bobs_deploy_killing_mid_slot(the_lab, context)
     out = capsys.readouterr().out
     assert not failures, failures
     assert code == 1, out
