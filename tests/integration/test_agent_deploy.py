@@ -14,13 +14,14 @@ from common.client.agent_client import FINAL
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import OutputLines
-from tests.conftest import Procs, Router, needs_sandbox, wait_for
+from tests.conftest import Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     Poses,
     agent_user,
     start_agent_lab,
+    start_deploy,
 )
-from tests.kit.lab import PASSWORD, ProcessLab, module_lab
+from tests.kit.lab import ProcessLab, module_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -40,25 +41,11 @@ def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iter
         yield lab
 
 
-def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab, procs: Procs) -> None:
+def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab) -> None:
     with lab.zsession() as z:
         poses = Poses(z, lab.router.realm)
         start = poses.xy("k3")
-        proc = procs.start(
-            "deploy",
-            [
-                "deploy",
-                str(CONTROLLERS / "talker.py"),
-                "--context",
-                "arena",
-                "--agent",
-                "k3",
-                "--user",
-                "bob",
-                *lab.net_args(),
-            ],
-            env={"WART_PASSWORD": PASSWORD},
-        )
+        proc = start_deploy(lab, CONTROLLERS / "talker.py", "k3", "bob")
         assert proc.popen.wait(30) == 0, proc.output()
         out = proc.output()
         assert "uploaded talker.py" in out

@@ -24,8 +24,9 @@ from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
     start_agent_lab,
+    start_deploy,
 )
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
@@ -138,25 +139,10 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     yield lab
 
 
-def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, procs: Procs, tmp_path: Path) -> None:
+def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, tmp_path: Path) -> None:
     charge = tmp_path / "charge.py"
     charge.write_text(INTO_THE_WALL)
-    proc = procs.start(
-        "dry-run",
-        [
-            "deploy",
-            str(charge),
-            "--dry-run",
-            "--context",
-            "arena",
-            "--agent",
-            "k3",
-            "--user",
-            "bob",
-            *lab.net_args(),
-        ],
-        env={"WART_PASSWORD": PASSWORD},
-    )
+    proc = start_deploy(lab, charge, "k3", "bob", "--dry-run")
     assert proc.popen.wait(60) == 1, proc.output()
     out = proc.output()
     assert "will NOT run: " in out and "collision at " in out

@@ -99,13 +99,17 @@ def bridged_robot(
         yield bridge
 
 
-def start_deploy(lab: ProcessLab, controller: Path, agent: str, user: str, ctx: str = CTX) -> Proc:
-    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the test password)."""
+def start_deploy(
+    lab: ProcessLab, controller: Path, agent: str, user: str, *extra: str, ctx: str = CTX
+) -> Proc:
+    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the test password);
+    ``extra``: more of its options (``--dry-run``)."""
     return lab.procs.start(
         "deploy",
         [
             "deploy",
             str(controller),
+            *extra,
             "--context",
             ctx,
             "--agent",
