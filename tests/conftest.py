@@ -56,8 +56,13 @@ def realm() -> str:
 
 
 @pytest.fixture
-def router(procs: Procs, realm: str) -> Iterator[Router]:
-    """A real ``wart router`` process on a free 127.0.0.1 port, multicast scouting off."""
+def router(request: pytest.FixtureRequest, procs: Procs, realm: str) -> Iterator[Router]:
+    """A real ``wart router`` process on a free 127.0.0.1 port, multicast scouting off; in a
+    module marked ``shared_router``, this test's own realm on the module's router instead."""
+    if request.node.get_closest_marker("shared_router") is not None:
+        module_router: Router = request.getfixturevalue("module_router")
+        yield module_router.in_realm(realm)
+        return
     r = start_router(procs, realm)
     yield r
     r.proc.stop()
@@ -68,7 +73,7 @@ def module_router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Router]:
     """One ``wart router`` for a whole module. A router routes any realm and every key a
     test uses is under its realm, so a module whose tests neither stop nor restart their
     router may give each test its own realm on this one (about 2 s a test on a busy
-    machine), by overriding ``router`` with ``module_router.in_realm(realm)``."""
+    machine), marked ``shared_router``."""
     procs = Procs(tmp_path_factory.mktemp("router"))
     r = start_router(procs, f"t{uuid.uuid4().hex[:10]}")
     yield r

@@ -25,7 +25,11 @@ from tests.kit.agentkit import (
 from tests.kit.lab import ProcessLab, make_lab, module_lab
 
 # One worker starts the module's lab once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("agent_context")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("agent_context"),
+    pytest.mark.shared_router,
+]
 CONTROLLERS = Path(__file__).with_name("controllers")
 
 
@@ -34,11 +38,6 @@ class Forward(Controller):
 
     def do_work(self, robot: Khepera) -> None:
         robot.set_speeds(12, 12)
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture(scope="module")

@@ -42,14 +42,13 @@ from tests.conftest import REPO, Proc, Procs, Router, wait_for
 from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("bridge_world")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("bridge_world"),
+    pytest.mark.shared_router,
+]
 WORLD = "real1"
 AGENT = "k1"
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

@@ -22,7 +22,7 @@ from tests.conftest import REPO, Procs, Router, wait_for
 from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera")]
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera"), pytest.mark.shared_router]
 WORLD = "w1"
 CAMERA = "w1-cam"
 
@@ -46,11 +46,6 @@ class Truth:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(2)
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

@@ -34,14 +34,10 @@ pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("emergency_stop"),  # one worker starts the module's router once
     needs_sandbox,
+    pytest.mark.shared_router,
 ]
 FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

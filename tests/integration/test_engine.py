@@ -47,13 +47,8 @@ from tests.kit.waits import Latest
 from viewers.web.live_world import WorldWatch
 
 # One worker starts the module's router and shared engine once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine")]
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine"), pytest.mark.shared_router]
 WORLD = "w1"
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

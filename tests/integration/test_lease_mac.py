@@ -35,7 +35,11 @@ from tests.kit.agentkit import (
 from tests.kit.lab import ProcessLab, make_lab, module_lab
 
 # One worker starts the module's lab once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("lease_mac")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("lease_mac"),
+    pytest.mark.shared_router,
+]
 
 
 class Forward(Controller):
@@ -50,11 +54,6 @@ class Still(Controller):
 
     def do_work(self, robot: Khepera) -> None:
         robot.set_speeds(0, 0)
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture(scope="module")

@@ -32,14 +32,10 @@ pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("missed_request_status"),  # one worker starts the module's router once
     needs_sandbox,
+    pytest.mark.shared_router,
 ]
 FORWARD = Path(__file__).with_name("controllers") / "forward.py"
 RUNNER_STOPPED = "the lab's runner runner stopped"
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

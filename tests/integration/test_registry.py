@@ -24,12 +24,11 @@ from tests.conftest import Procs, Router, wait_for
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.xdist_group("registry"), pytest.mark.usefixtures("quick_mailbox_keys")]
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
+pytestmark = [
+    pytest.mark.xdist_group("registry"),
+    pytest.mark.usefixtures("quick_mailbox_keys"),
+    pytest.mark.shared_router,
+]
 
 
 @pytest.fixture

@@ -35,12 +35,8 @@ pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("term"),
     pytest.mark.usefixtures("quick_mailbox_keys"),
+    pytest.mark.shared_router,
 ]
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture
