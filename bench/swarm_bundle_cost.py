@@ -46,17 +46,17 @@ from common.messages import (
     AgentCommand,
     BundledCommand,
     CommandBundle,
-    Lease,
     MacCommandBundle,
     SampleBundle,
     SensorSample,
     decode,
     encode,
 )
-from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakePublisher, FakeSample, FakeSession
+from tests.kit.leases import mac_lease
 
 REALM, WORLD = "bench", "swarm"
 
@@ -85,17 +85,15 @@ def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, F
             channel=channel,
         )
         k = new_lease_key()
-        lease = Lease(
+        lease = mac_lease(
+            k,
+            runner,
+            world,
             lease_id=f"L{i}",
-            world=WORLD,
+            world_name=WORLD,
             agent=agent,
-            holder_user="runner",
-            holder_session=runner.session_id,
             start=now - 1,
             end=now + 3600,
-            holder_key=seal_key(k, runner.keys.box_public_key),
-            world_key=seal_key(k, world.keys.box_public_key),
-            world_box=world.keys.box_public_key,
         )
         key = keys.agent_lease(REALM, WORLD, agent)
         sealed = context.seal(key, lease)

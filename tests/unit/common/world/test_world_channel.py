@@ -19,17 +19,17 @@ from common.messages import (
     AgentCommand,
     AuthEnvelope,
     CommandBundle,
-    Lease,
     MacCommandBundle,
     SampleBundle,
     SensorSample,
     decode,
     encode,
 )
-from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakeSample, FakeSession
+from tests.kit.leases import mac_lease
 
 REALM, WORLD = "r", "w"
 
@@ -334,17 +334,15 @@ def mac_leased(
     now = time.time()
     for agent in leased:
         k = new_lease_key()
-        lease = Lease(
+        lease = mac_lease(
+            k,
+            RUNNER,
+            world,
             lease_id=f"L-{agent}",
-            world=WORLD,
+            world_name=WORLD,
             agent=agent,
-            holder_user="runner",
-            holder_session=RUNNER.session_id,
             start=now - 1,
             end=now + 60,
-            holder_key=seal_key(k, RUNNER.keys.box_public_key),
-            world_key=seal_key(k, world.keys.box_public_key),
-            world_box=world.keys.box_public_key,
         )
         key = keys.agent_lease(REALM, WORLD, agent)
         sealed = context.seal(key, lease)
