@@ -56,7 +56,7 @@ from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakePublisher, FakeSample, FakeSession
-from tests.kit.leases import mac_lease
+from tests.kit.leases import grant_on, mac_lease
 
 REALM, WORLD = "bench", "swarm"
 
@@ -95,10 +95,7 @@ def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, F
             start=now - 1,
             end=now + 3600,
         )
-        key = keys.agent_lease(REALM, WORLD, agent)
-        sealed = context.seal(key, lease)
-        book.accept_lease(key, sealed)
-        zs.callbacks[key](FakeSample(sealed))  # the link opens its copy of K
+        grant_on(zs, book, context, REALM, lease)  # the link opens its copy of K
         assert links[agent]._mac_lease is not None
     return channel, links, book, zs
 

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from common import keys
 from common.auth import Session
 from common.messages import Lease
 from common.world.leasemac import seal_key
+from common.world.leases import LeaseBook
+from tests.kit.fakezenoh import FakeSample, FakeSession
 
 
 def mac_lease(
@@ -32,3 +35,12 @@ def mac_lease(
         world_key=seal_key(k, world.keys.box_public_key),
         world_box=world.keys.box_public_key,
     )
+
+
+def grant_on(zs: FakeSession, book: LeaseBook, context: Session, realm: str, lease: Lease) -> None:
+    """``lease`` as its agent context publishes it: sealed by ``context``, accepted by the
+    world's ``book``, and handed to the link of its agent subscribed on ``zs``."""
+    key = keys.agent_lease(realm, lease.world, lease.agent)
+    sealed = context.seal(key, lease)
+    book.accept_lease(key, sealed)
+    zs.callbacks[key](FakeSample(sealed))

@@ -29,7 +29,7 @@ from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakeSample, FakeSession
-from tests.kit.leases import mac_lease
+from tests.kit.leases import grant_on, mac_lease
 
 REALM, WORLD = "r", "w"
 
@@ -344,10 +344,7 @@ def mac_leased(
             start=now - 1,
             end=now + 60,
         )
-        key = keys.agent_lease(REALM, WORLD, agent)
-        sealed = context.seal(key, lease)
-        book.accept_lease(key, sealed)
-        zs.callbacks[key](FakeSample(sealed))
+        grant_on(zs, book, context, REALM, lease)
     return zs, channel, links, book
 
 
