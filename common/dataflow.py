@@ -174,6 +174,7 @@ FLOWS: tuple[Flow, ...] = (
         _ask(m.UserKeysRequest, m.UserKeysReply),
         *_ok(m.MailboxDeposit),
         _ask(m.MailboxClaim, m.MailboxContents),
+        *_ok(m.ResumeCheck),
         **SEALED,
     ),
     _query(

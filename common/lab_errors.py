@@ -61,6 +61,10 @@ class RequestFailed(LabError):
     pass
 
 
+class NotAnswering(LabError):
+    """A service that does not answer: not up yet (an engine compiling), or stopped."""
+
+
 def refusal(
     reply: ErrorReply, what: str, kinds: Mapping[ErrorCode, type[LabError]] | None = None
 ) -> LabError:

@@ -84,6 +84,7 @@ from common.messages import (
     OkReply,
     PasswordCredential,
     PrivateMessage,
+    ResumeCheck,
     ResumeCredential,
     SealedLogin,
     SessionToken,
@@ -181,12 +182,15 @@ class LabClient:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def close(self) -> None:
-        """Leave rooms, log out (best effort) and undeclare everything."""
+    def close(self, reason: str = "") -> None:
+        """Leave rooms, log out (best effort) and undeclare everything.
+
+        ``reason`` tells each room why, in words its members see with what ends (a run).
+        """
         if self.session is not None:
             for ctx in self.rooms.joined():
                 try:
-                    self.leave(ctx)
+                    self.leave(ctx, reason)
                 except LabError as exc:
                     log.debug("leaving %s: %s", ctx, exc)
             try:
@@ -319,6 +323,19 @@ class LabClient:
         for text in kept:
             self.on_private(text)
         return kept
+
+    def check_resume(self) -> None:
+        """Ask whether this session's resume token is still good; LabError in words if not."""
+        if self.session is None:
+            raise NotLoggedIn("log in first")
+        if self.resume_token is None:
+            raise NotLoggedIn("this session has no saved login")
+        self._ask(
+            keys.registry_directory(self.realm),
+            ResumeCheck(token=self.resume_token),
+            OkReply,
+            "saved login",
+        )
 
     def resume(
         self, token: bytes, *, ttl: float = 12 * 3600.0, wait: float | None = None

@@ -202,7 +202,7 @@ class RoomCalls:
                     log.debug("undeclare: %s", exc)
         self._rooms.clear()
 
-    def leave(self, ctx: str) -> None:
+    def leave(self, ctx: str, reason: str = "") -> None:
         with self._lock:
             room = self._rooms.pop(ctx, None)
         if room is not None and room.watch is not None:
@@ -210,7 +210,7 @@ class RoomCalls:
         try:
             self._ask(
                 keys.ctx_leave(self.realm, ctx),
-                LeaveRoom(),
+                LeaveRoom(reason=reason[:256]),
                 OkReply,
                 f"leave {ctx}",
                 not_found=f"room {ctx} not found",

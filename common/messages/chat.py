@@ -28,6 +28,10 @@ class JoinRoom(Message, frozen=True):
 class LeaveRoom(Message, frozen=True):
     """Leave a room (the sender's session says who)."""
 
+    # Why, in the member's words, for what the room ends with the session (its runs):
+    # "the page was closed for more than 2 min". Empty: the member left.
+    reason: ShortText = ""
+
 
 class ChatSay(Message, frozen=True):
     """A chat line from a member (put on ctx/<ctx>/in, or a query on ctx/<ctx>/request)."""

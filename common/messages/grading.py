@@ -194,6 +194,11 @@ class SubmissionsQuery(Message, frozen=True):
     submission: Ident | None = None
 
 
+MAX_TERMS = 16
+# A term of the rule as written ("- 5 * collisions()"), and its value in the episode.
+ScoreTerm = tuple[ShortText, float]
+
+
 class EpisodeResult(msgspec.Struct, frozen=True, kw_only=True):
     episode: NonNegInt
     seed: int
@@ -204,6 +209,14 @@ class EpisodeResult(msgspec.Struct, frozen=True, kw_only=True):
     metrics: dict[str, float] = msgspec.field(default_factory=dict)
     lab_reruns: NonNegInt = 0  # how often a lab fault made it run again, free
     real: bool = False  # the real-robot attempt's row (an arena's agent context ran it)
+    # The score term by term, as the rule adds them up (the student sees where points went).
+    terms: Annotated[list[ScoreTerm], msgspec.Meta(max_length=MAX_TERMS)] = msgspec.field(
+        default_factory=list
+    )
+    # The controller's last printed lines (a failed episode's traceback among them).
+    output: Annotated[list[ShortText], msgspec.Meta(max_length=20)] = msgspec.field(
+        default_factory=list
+    )
 
 
 class SubmissionInfo(msgspec.Struct, frozen=True, kw_only=True):

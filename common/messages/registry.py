@@ -186,6 +186,16 @@ class MailboxClaim(Message, frozen=True):
     mailbox_key: Bytes32
 
 
+class ResumeCheck(Message, frozen=True):
+    """Is my session's resume token still good? (not used up by asking; a refusal says why)
+
+    A web viewer keeps a closed page's session for a reload (viewers/web/parking.py)
+    and hands it back only to a page whose saved login the registry still honours.
+    """
+
+    token: Annotated[bytes, msgspec.Meta(max_length=1024)]  # an encoded SignedResume
+
+
 class MailboxContents(Message, frozen=True):
     pending: list[PrivateMessage] = msgspec.field(default_factory=list)
 
@@ -356,6 +366,7 @@ __all__ = [
     "PrivateMessage",
     "RemoveUser",
     "RenameServer",
+    "ResumeCheck",
     "ResumeCredential",
     "ResumeGrant",
     "Revocation",

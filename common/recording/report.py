@@ -21,6 +21,18 @@ def _with(collided: dict[str, int]) -> str:
     )
 
 
+def _collisions(summary: Summary) -> str:
+    counted = (
+        f"{summary.collisions}{_with(summary.collided_with)} ({summary.contact_s:.1f} s in contact)"
+    )
+    if summary.world_kind != "real":
+        return f"collisions:  {counted}"
+    # A real robot has no contact sensor: the count is the tracked poses against the map.
+    if summary.frames == 0:
+        return "collisions:  not measured (real robots, and no tracked poses recorded)"
+    return f"collisions:  {counted}, estimated from the tracked poses (not measured)"
+
+
 def describe(summary: Summary) -> list[str]:
     when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(summary.start))
     file = f" ({summary.filename})" if summary.filename else ""
@@ -32,8 +44,7 @@ def describe(summary: Summary) -> list[str]:
         + ("real time" if summary.world_kind == "real" else "simulated time"),
         f"distance:    {summary.distance_mm / 1000:.3f} m",
         f"moving:      {summary.moving_s:.1f} s",
-        f"collisions:  {summary.collisions}{_with(summary.collided_with)} "
-        f"({summary.contact_s:.1f} s in contact)",
+        _collisions(summary),
         f"objects:     {summary.gripped} gripped, {summary.delivered} delivered to a nest",
         f"recorded:    {summary.frames} frames, {summary.samples} sensor samples, "
         f"{summary.commands} commands, {summary.output_lines} output lines",

@@ -51,6 +51,8 @@ from common.world.leasemac import (
 )
 
 log = logging.getLogger("wart.leases")
+# Stop, then Reset: the last holder may still reset a robot nobody holds this long after.
+RESET_AFTER_STOP_S = 60.0
 
 
 class LeaseBook:
@@ -233,13 +235,26 @@ class LeaseBook:
         A map editor may; otherwise only the holder of the agent's lease in
         force, or the session that lease serves (the student whose uploaded
         controller the runner drives): a reset is a jump of the robot, and
-        only whoever holds it now may make it jump.
+        only whoever holds it now may make it jump. Stop, then Reset is what a
+        student does: the last lease's sessions may still reset a robot nobody
+        holds for RESET_AFTER_STOP_S after their lease ended.
         """
         if principal.has("edit_map"):
             return None
-        lease = self.in_force(agent, now)
+        t = time.time() if now is None else now
+        lease = self.in_force(agent, t)
         if lease is None:
-            return f"{agent} is not yours now: reset it while your controller holds it"
+            last = self.lease_of(agent)
+            mine = last is not None and principal.session_id in (
+                last.holder_session,
+                last.requester_session,
+            )
+            if last is not None and mine and 0 <= t - last.end <= RESET_AFTER_STOP_S:
+                return None
+            return (
+                f"{agent} is not yours now: reset it while your controller holds it, or within "
+                f"{RESET_AFTER_STOP_S:.0f} s after it stops"
+            )
         if principal.session_id in (lease.holder_session, lease.requester_session):
             return None
         return (

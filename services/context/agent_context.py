@@ -351,8 +351,10 @@ class AgentContext(ChatRoom):
             rev.session_id, f"{why}: {rev.reason}" if rev.reason else why, remote_only=False
         )
 
-    def on_session_left(self, principal: Principal) -> None:
-        self._drop_session_jobs(principal.session_id, "left the context", remote_only=False)
+    def on_session_left(self, principal: Principal, reason: str = "") -> None:
+        self._drop_session_jobs(
+            principal.session_id, reason or "left the context", remote_only=False
+        )
 
     def _drop_session_jobs(self, session_id: bytes, reason: str, *, remote_only: bool) -> None:
         # A teacher gone (left, vanished, revoked) gives back what they took over.

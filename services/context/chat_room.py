@@ -272,8 +272,8 @@ class ChatRoom(Service):
         )
 
     def on_leave(self, query: zenoh.Query) -> Message:
-        principal, _ = self.verifier.open(str(query.key_expr), query.payload, LeaveRoom)
-        self.on_session_left(principal)
+        principal, request = self.verifier.open(str(query.key_expr), query.payload, LeaveRoom)
+        self.on_session_left(principal, request.reason)
         with self._lock:
             sessions = self._members.get(principal.user)
             if sessions is None or principal.session_id not in sessions:
@@ -286,8 +286,8 @@ class ChatRoom(Service):
             self._publish(status=MemberStatus(user=principal.user, status="left"))
         return OkReply(detail=f"left {self.room}")
 
-    def on_session_left(self, principal: Principal) -> None:
-        """A member's session asked to leave (subclasses drop what it held)."""
+    def on_session_left(self, principal: Principal, reason: str = "") -> None:
+        """A member's session asked to leave, for ``reason`` (subclasses drop what it held)."""
 
     def on_state(self, query: zenoh.Query) -> Message:
         self.verifier.open(str(query.key_expr), query.payload, ContextInfoRequest)

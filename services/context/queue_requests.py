@@ -202,7 +202,9 @@ class QueueDesk:
             self.state.wake.notify_all()
         if final is not None:
             self.publish(AgentEvent(ctx=self.state.room, request=final))
-        return OkReply(detail=f"request {request.request_id} cancelled")
+        whose = "your" if job.user == principal.user else f"{job.user}'s"
+        what = "run" if running else "waiting request"
+        return OkReply(detail=f"{whose} {what} on {job.agent} cancelled")
 
     def stop_agent(self, principal: Principal, request: StopControl) -> Message:
         self.require_manage(principal, f"stop the controller on {request.agent}")

@@ -264,6 +264,8 @@ class EpisodeRunner:
                     score=round(score, 4),
                     metrics=metrics(report, zones, a.time_limit),
                     lab_reruns=reruns,
+                    terms=[(t, round(v, 4)) for t, v in rule.terms(report, a.time_limit)],
+                    output=report.output[-20:],
                 )
             )
         scores = [r.score for r in results if r.score is not None]

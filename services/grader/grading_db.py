@@ -83,9 +83,15 @@ class GradingStore:
         # can name it whichever process opened the file first.
         db.create(ROSTER_SCHEMA, "course tables")
         db.create(SCHEMA, "grading tables")
-        if "real" not in db.columns("episodes"):  # a database of before real-robot attempts
-            with db.transaction() as con:
+        columns = db.columns("episodes")
+        with db.transaction() as con:  # a database from before these columns
+            if "real" not in columns:
                 con.execute("ALTER TABLE episodes ADD COLUMN real INTEGER NOT NULL DEFAULT 0")
+            for added in ("terms", "output"):  # JSON lists: the score by term, printed lines
+                if added not in columns:
+                    con.execute(
+                        f"ALTER TABLE episodes ADD COLUMN {added} TEXT NOT NULL DEFAULT '[]'"
+                    )
 
     # -- assignments (the teacher's CLI)
 
@@ -235,7 +241,8 @@ class GradingStore:
             for e in episodes:
                 con.execute(
                     "INSERT INTO episodes(submission, episode, seed, cause, detail, error_line, "
-                    "score, metrics, lab_reruns, real) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "score, metrics, lab_reruns, real, terms, output) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (
                         sub,
                         e.episode,
@@ -247,6 +254,8 @@ class GradingStore:
                         json.dumps(e.metrics),
                         e.lab_reruns,
                         int(e.real),
+                        json.dumps(e.terms),
+                        json.dumps(e.output),
                     ),
                 )
             con.execute(
@@ -323,11 +332,16 @@ class GradingStore:
                     metrics=json.loads(m),
                     lab_reruns=int(reruns),
                     real=bool(real),
+                    terms=[(str(t), float(v)) for t, v in json.loads(terms)],
+                    output=[str(line) for line in json.loads(printed)],
                 )
-                for n, seed, cause, detail, line, score, m, reruns, real in self.db.rows(
-                    "SELECT episode, seed, cause, detail, error_line, score, metrics, lab_reruns, "
-                    "real FROM episodes WHERE submission=? ORDER BY episode",
-                    i,
+                for n, seed, cause, detail, line, score, m, reruns, real, terms, printed in (
+                    self.db.rows(
+                        "SELECT episode, seed, cause, detail, error_line, score, metrics, "
+                        "lab_reruns, real, terms, output FROM episodes WHERE submission=? "
+                        "ORDER BY episode",
+                        i,
+                    )
                 )
             ]
             out.append(

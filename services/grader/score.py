@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from common.messages import EpisodeReport
+from common.messages.grading import MAX_TERMS
 
 MAX_RULE_CHARS = 500
 MAX_NODES = 200
@@ -69,6 +70,16 @@ class Rule:
     def evaluate(self, report: EpisodeReport, time_limit: float) -> float:
         value = _eval(self.tree, report, time_limit)
         return value if math.isfinite(value) else 0.0
+
+    def terms(self, report: EpisodeReport, time_limit: float) -> list[tuple[str, float]]:
+        """The rule's top-level terms as written, each with its signed value; they add up to
+        :meth:`evaluate` (``100 * reached("goal") - 5 * collisions()``: two terms)."""
+        found: list[tuple[str, float]] = []
+        _split(self.text, self.tree, 1.0, found, report, time_limit)
+        if len(found) > MAX_TERMS:  # a long sum: the first ones, then the rest as one
+            rest = sum(v for _, v in found[MAX_TERMS - 1 :])
+            found = [*found[: MAX_TERMS - 1], ("the other terms", rest)]
+        return [(text[:256], v if math.isfinite(v) else 0.0) for text, v in found]
 
 
 def judge(
@@ -183,6 +194,24 @@ def event(name: str, arg: str | None, report: EpisodeReport, time_limit: float) 
             raise MissingMetric(f"grade() returned no metric {arg!r} (it returned: {have})")
         return float(report.grader_metrics[arg])
     raise RuleError(f"unknown event {name}")
+
+
+def _split(
+    text: str,
+    node: ast.expr,
+    sign: float,
+    out: list[tuple[str, float]],
+    report: EpisodeReport,
+    limit: float,
+) -> None:
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add | ast.Sub):
+        _split(text, node.left, sign, out, report, limit)
+        _split(
+            text, node.right, sign if isinstance(node.op, ast.Add) else -sign, out, report, limit
+        )
+        return
+    written = ast.get_source_segment(text, node) or ast.unparse(node)
+    out.append((("- " if sign < 0 else "") + written, sign * _eval(node, report, limit)))
 
 
 def _eval(node: ast.expr, report: EpisodeReport, limit: float) -> float:

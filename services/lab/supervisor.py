@@ -108,6 +108,7 @@ def describe_exit(code: int) -> str:
 
 
 STILL_STARTING_S = 8.0  # a child not up by then is said to be still starting
+STARTING_EVERY_S = 30.0  # and said again this often, with how long so far
 
 
 def tail(path: Path, lines: int = 6) -> str:
@@ -240,7 +241,7 @@ class Supervisor:
         ready = [False] * len(children)
 
         def wait(index: int) -> None:
-            ready[index] = self.wait_ready(children[index])
+            ready[index] = self.wait_ready(children[index], on_late_up=on_up)
             if ready[index] and on_up is not None:
                 on_up(children[index])
 
@@ -254,7 +255,12 @@ class Supervisor:
             waiter.join()
         return list(zip(children, ready, strict=True))
 
-    def wait_ready(self, child: Child) -> bool:
+    def wait_ready(self, child: Child, on_late_up: Callable[[Child], None] | None = None) -> bool:
+        """Wait until ``child`` is alive; False if not within its ready time.
+
+        A child still running then is watched on: it is said (and ``on_late_up``
+        called) when it comes up.
+        """
         spec = child.spec
         proc = child.process
         if spec.alive_key is None or self.watch is None:
@@ -267,28 +273,77 @@ class Supervisor:
             return self._stopping.is_set() or proc is None or proc.poll() is not None
 
         # A child slow to start (an engine compiling its kernels on a checkout's first
-        # start) is said to be starting, with its log's last line, so nobody wonders.
-        first = min(STILL_STARTING_S, spec.ready_timeout)
-        ok = self.watch.wait(spec.alive_key, first, abort=died)
-        if not ok and not died() and spec.ready_timeout > first:
-            last = tail(child.log_path, lines=1).strip().removeprefix("| ")
-            self.say(f"  … {spec.name:<22} still starting{': ' + last if last else ''}")
-            ok = self.watch.wait(spec.alive_key, spec.ready_timeout - first, abort=died)
-        pid = proc.pid if proc else "-"
+        # start, on a busy machine for minutes) is said to be starting, with how long so
+        # far and its log's last line, so nobody wonders.
+        started = time.monotonic()
+        alive_key = spec.alive_key
+        ok = self.watch.wait(alive_key, min(STILL_STARTING_S, spec.ready_timeout), abort=died)
+        while not ok and not died():
+            so_far = time.monotonic() - started
+            if so_far >= spec.ready_timeout:
+                break
+            self._say_starting(child, so_far)
+            step = min(STARTING_EVERY_S, spec.ready_timeout - so_far)
+            ok = self.watch.wait(alive_key, step, abort=died)
         if ok:
-            detail = f"  {spec.detail}" if spec.detail else ""
-            self.say(f"  ✓ {spec.name:<22} up{detail}  (pid {pid})")
-        elif not self._stopping.is_set():
-            why = (
-                describe_exit(proc.returncode)
-                if proc is not None and proc.poll() is not None
-                else f"no liveliness token after {spec.ready_timeout:.0f} s"
+            self._say_up(child, started)
+        elif self._stopping.is_set():
+            pass
+        elif proc is not None and proc.poll() is None:
+            # Alive but not up yet: not a failure, which would turn out false minutes later.
+            so_far = time.monotonic() - started
+            self.say(
+                f"  … {spec.name:<22} not up after {so_far:.0f} s but still starting: the rest "
+                f"of the lab goes on, and it is said here when it is up (log {child.log_path})"
             )
+            threading.Thread(
+                target=self._wait_late,
+                args=(child, started, on_late_up),
+                name=f"late {spec.name}",
+                daemon=True,
+            ).start()
+        else:
+            why = describe_exit(proc.returncode) if proc is not None else "it did not start"
             self.say(f"  ✗ {spec.name:<22} did not come up: {why}; log {child.log_path}")
             text = tail(child.log_path)
             if text:
                 self.say(text)
         return ok
+
+    def _say_starting(self, child: Child, so_far: float) -> None:
+        last = tail(child.log_path, lines=1).strip().removeprefix("| ")
+        self.say(
+            f"  … {child.spec.name:<22} still starting ({so_far:.0f} s so far)"
+            + (f": {last}" if last else "")
+        )
+
+    def _say_up(self, child: Child, started: float) -> None:
+        spec, proc = child.spec, child.process
+        detail = f"  {spec.detail}" if spec.detail else ""
+        took = time.monotonic() - started
+        after = f", after {took:.0f} s" if took >= STILL_STARTING_S else ""
+        self.say(f"  ✓ {spec.name:<22} up{detail}  (pid {proc.pid if proc else '-'}{after})")
+
+    def _wait_late(
+        self, child: Child, started: float, on_up: Callable[[Child], None] | None
+    ) -> None:
+        """A child past its ready time but alive: say when it comes up, or that it died."""
+        proc = child.process
+        assert self.watch is not None and child.spec.alive_key is not None
+
+        def died() -> bool:
+            return self._stopping.is_set() or proc is None or proc.poll() is not None
+
+        while not died():
+            if self.watch.wait(child.spec.alive_key, STARTING_EVERY_S, abort=died):
+                self._say_up(child, started)
+                if on_up is not None:
+                    on_up(child)
+                return
+            self._say_starting(child, time.monotonic() - started)
+        if not self._stopping.is_set() and proc is not None:
+            why = describe_exit(proc.returncode)
+            self.say(f"  ✗ {child.spec.name:<22} stopped before it was up: {why}")
 
     # -- watching
 

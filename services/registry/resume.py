@@ -97,6 +97,19 @@ class ResumeStore:
 
     def use(self, user: str, token: bytes, now: float) -> ResumeGrant:
         """Check a presented token and use it up; RequestError in words if it is no good."""
+        return self._check(user, token, now, use_up=True)
+
+    def check(self, user: str, session_id: bytes, token: bytes, now: float) -> None:
+        """Is ``token``, the one issued to ``session_id``, still good? Not used up by asking."""
+        grant = self._check(user, token, now, use_up=False)
+        with self.db._tx() as db:
+            row = db.execute(
+                "SELECT session_id FROM resumes WHERE resume_id=?", (grant.resume_id,)
+            ).fetchone()
+        if row is None or bytes(row[0]) != session_id:
+            raise _refused("belongs to another session")
+
+    def _check(self, user: str, token: bytes, now: float, *, use_up: bool) -> ResumeGrant:
         try:
             signed = decode(token, SignedResume)
             self.identity.signing_key.verify_key.verify(signed.grant, signed.signature)
@@ -116,6 +129,8 @@ class ResumeStore:
                 raise _refused("is not known here any more")
             if row[0] is not None:
                 raise _refused(f"was revoked ({row[0]})")
+            if not use_up:
+                return grant
             db.execute(
                 "UPDATE resumes SET revoked='used: a resume gives a new one' WHERE resume_id=?",
                 (grant.resume_id,),

@@ -56,6 +56,7 @@ from common.messages import (
     OkReply,
     PasswordCredential,
     PrivateMessage,
+    ResumeCheck,
     ResumeCredential,
     Revocation,
     RevocationList,
@@ -456,10 +457,13 @@ class Registry(Service):
         principal, request = self.verifier.open(
             str(query.key_expr),
             query.payload,
-            (DirectoryRequest, UserKeysRequest, MailboxDeposit, MailboxClaim),
+            (DirectoryRequest, UserKeysRequest, MailboxDeposit, MailboxClaim, ResumeCheck),
         )
         if isinstance(request, UserKeysRequest):
             return self._user_keys(request.user)
+        if isinstance(request, ResumeCheck):
+            self.resumes.check(principal.user, principal.session_id, request.token, time.time())
+            return OkReply(detail="your saved login is good")
         if isinstance(request, MailboxClaim):
             with self._claims_lock:
                 at = self._claims.pop(principal.session_id, None)

@@ -11,10 +11,12 @@ answers, until ``seconds`` of simulated time or :data:`DRY_RUN_WALL_S` of
 wall-clock time, whichever comes first.
 
 Grading (docs/CONTROLLERS.md): "will NOT run" if the controller does not load,
-raises (with the line of the controller file), does not answer in time, or
-hits a wall, an obstacle or another robot; pushing movable objects is fine
-(foraging does it). Saturated wheels (commands at the robot's top speed) are
-reported, not failed: the robot only clamps them.
+raises (with the line of the controller file) or does not answer in time. A
+collision with a wall, an obstacle or another robot is a warning ("will run,
+with a warning: 1 collision, ..."): the controller runs, and a bump is what a
+student tunes next, not a failure; pushing movable objects is fine (foraging
+does it). Saturated wheels (commands at the robot's top speed) are reported,
+not failed: the robot only clamps them.
 """
 
 from __future__ import annotations
@@ -210,7 +212,7 @@ def dry_run(
             first = hits[0]
             what = first.what + (f" {first.ident}" if first.ident else "")
             verdict = (
-                f"will NOT run: {len(hits)} collision{'s' * (len(hits) != 1)}, "
+                f"will run, with a warning: {len(hits)} collision{'s' * (len(hits) != 1)}, "
                 f"the first with {_article(first.what)} {what} at {first.at:.2f} s"
             )
         else:

@@ -21,6 +21,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from common.client.agent_client import FINAL
@@ -30,6 +31,7 @@ from common.recording import read_recording
 from services.registry.roster import RosterRow
 from tests.browser.conftest import CANVAS_AT_JS, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
+from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.agentkit import Motion, agent_user
 from tests.kit.courses import COURSE, add_course, assignment_toml
@@ -41,6 +43,7 @@ from viewers.web.inputs import set_value
 pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(300), needs_sandbox]
 REPO = Path(__file__).resolve().parents[2]
 WORKS = (REPO / "tests" / "integration" / "grading" / "works.py").read_text()
+RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
 FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_bytes()
 
 
@@ -108,6 +111,17 @@ def test_scores_reach_the_students_page_and_the_class_table_without_a_click(
     assert ida_row.get_by_role("cell", name="graded", exact=True).count() == 1
     cell(ida, "Alice A (alice)").scroll_into_view_if_needed()
     ida.screenshot("class-table")
+    # Her episodes one by one: the score term by term, the rule as written (not escaped).
+    alice.wait_text("episode by episode", timeout=10_000)
+    alice.p.get_by_text('100 * reached("goal")', exact=True).first.wait_for(timeout=10_000)
+
+    # A submission that raises: she reads the error and its line, as the teacher does.
+    set_value(workbench.name, "raises.py")
+    set_value(workbench.code, RAISES)
+    alice.click("Submit the editor's code")
+    alice.wait_text("ZeroDivisionError: division by zero on purpose", timeout=120_000)
+    alice.wait_text("your controller: line 13:", timeout=10_000)
+    alice.screenshot("course-episode-error")
 
 
 def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
@@ -178,10 +192,19 @@ def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
                 + str(ida.p.evaluate("() => document.activeElement?.outerHTML.slice(0, 120)"))
             ),
         )
+        # Keys held for driving never fly the view's camera (viser's own WASD and arrows):
+        # its orientation, as the browser reports it to the server, stays as it was.
+        camera = session_of(lab.viewer, "ida").client.camera
+        facing = np.array(camera.wxyz)
         pressed = time.monotonic()
         ida.p.keyboard.down("ArrowDown")
         wait_until(lambda: motion.moving(["k1"], pressed), 20, what="k1 driven from the view")
+        ida.p.keyboard.down("KeyA")
+        ida.p.wait_for_timeout(1000)  # a second of viser's 50 deg/s would tip it 50 degrees
+        ida.p.keyboard.up("KeyA")
         ida.p.keyboard.up("ArrowDown")
+        turned = 2 * np.degrees(np.arccos(min(1.0, abs(float(np.dot(facing, camera.wxyz))))))
+        assert turned < 1.0, f"the camera turned {turned:.1f} degrees while ida drove"
         ida.screenshot("class-driving")
 
         ida.click("Hand their robot back")

@@ -19,8 +19,9 @@ import pytest
 from common.tracking.truth import read_truth
 from tests.browser.conftest import wait_until
 from tests.browser.test_real_lab import log_in, session_of
-from tests.kit.reallab import RealLab, real_lab
+from tests.kit.reallab import WORLD, RealLab, real_lab
 from viewers.web.app import WebViewer
+from viewers.web.tabs import tab_label
 from viewers.web.world_view import WorldView
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
@@ -92,3 +93,36 @@ def test_a_camera_that_stops_is_said_on_the_page(open_page, lab: RealLab) -> Non
     wait_until(lambda: "stopped answering" in video.said, 30, what="the viewer to notice")
     page.wait_text("camera offline: it has stopped answering", timeout=30_000)
     page.screenshot("real-arena-camera-offline")
+
+
+def test_the_view_follows_the_arena_tab_in_front(open_page, lab: RealLab) -> None:
+    """Two arenas joined: clicking one's tab shows its world, with nothing of the other
+    (its selected robot's rays and trail) left drawn."""
+    page = open_page("bob")
+    log_in(page, lab, "bob")
+    page.click(f"Join {REAL}")
+    browser = session_of(lab.viewer, "bob")
+    view = browser.view
+
+    def showing() -> str | None:
+        snap, feed = view.snapshot, view.feed
+        if snap is None or feed is None:
+            return None
+        return REAL if snap.real else "sim"
+
+    wait_until(lambda: showing() == REAL, 30, what="the real arena shown on joining it")
+    # The simulated world has no context of its own: opened as the address bar opens one.
+    browser.connect(f"{lab.address.with_user('bob').url()}/{WORLD}")
+    wait_until(lambda: showing() == "sim", 30, what="the simulated world shown on joining it")
+    view.select(0)  # a robot of the simulated world selected: its trail drawn
+    wait_until(lambda: view._trail_handle is not None, 15, what="the selected robot's trail")
+    page.tab(f"{REAL} (arena)").last.click()
+    wait_until(lambda: showing() == REAL, 30, what="the real arena back when its tab is clicked")
+    assert view.selected is None and view._rays is None and view._trail_handle is None
+    page.tab(f"{WORLD} (arena)").last.click()
+    wait_until(lambda: showing() == "sim", 30, what="the simulated world when its tab is clicked")
+    # A tab that is not an arena's (the lab's lobby) leaves the view where it was.
+    page.tab(tab_label(lab.address)).first.click()
+    lobby = tab_label(lab.address)
+    wait_until(lambda: lobby in browser.front.labels, 15, what="the lobby tab in front")
+    assert showing() == "sim"

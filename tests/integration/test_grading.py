@@ -122,6 +122,14 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
             e.detail == "your controller: line 13: ZeroDivisionError: division by zero on purpose"
         )
         assert e.score == pytest.approx(-3.0)  # never reached the goal: time_to is the limit
+        # The student reads where the points went, and what their controller printed.
+        assert [t for t, _ in e.terms] == [
+            '100 * reached("goal")',
+            "- 5 * collisions()",
+            '- time_to("goal")',
+        ]
+        assert sum(v for _, v in e.terms) == pytest.approx(e.score)
+        assert any("ZeroDivisionError" in line for line in e.output), e.output
     for e in looped.episodes:
         assert e.cause == "timeout" and e.score == pytest.approx(-3.0)
         assert e.detail.startswith("your controller: it did not answer in time")

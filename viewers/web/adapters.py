@@ -298,6 +298,10 @@ class LabConnection(Protocol):
 
     def directory(self) -> Directory: ...
 
+    def check_resume(self) -> None:
+        """LabError in the lab's words if this session's saved login is no longer good."""
+        ...
+
     def join(self, ctx: str) -> JoinedContext: ...
 
     def leave(self, ctx: str) -> None: ...
@@ -415,8 +419,11 @@ class LabConnection(Protocol):
         """The teacher's view of each course I teach (none for a student)."""
         ...
 
-    def logout(self, keep_resume: bool = False) -> None:
-        """Log out; ``keep_resume`` (the page closed, not "Log out") keeps its saved login."""
+    def logout(self, keep_resume: bool = False, reason: str = "") -> None:
+        """Log out; ``keep_resume`` (the page closed, not "Log out") keeps its saved login.
+
+        ``reason``: why, as the rooms left tell those whose runs end with it.
+        """
         ...
 
     @property

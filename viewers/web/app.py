@@ -35,6 +35,7 @@ from viewers.web.adapters import LabConnector
 from viewers.web.client import BrowserSession
 from viewers.web.connector import GatewayLogin, LiveConnector
 from viewers.web.login import LoginDesk
+from viewers.web.parking import DEFAULT_GRACE_S, ParkingLot
 from viewers.web.pump import DEFAULT_RATE, FramePump
 from viewers.web.viser_fast import make_loop_safe
 
@@ -70,8 +71,11 @@ class WebViewer:
         rate: float = DEFAULT_RATE,
         label: str = "WART lab",
         logins: LoginDesk | None = None,
+        reload_grace_s: float = DEFAULT_GRACE_S,
     ) -> None:
         self.connector = connector
+        # A page that goes keeps its lab sessions this long for a reload (parking.py).
+        self.parking = ParkingLot(reload_grace_s)
         self.default_address = default_address or LabAddress("127.0.0.1")
         self.saved = SavedConnections(data_dir / "connections.json" if data_dir else None)
         self.pump = FramePump(rate)
@@ -113,7 +117,13 @@ class WebViewer:
                 client.client_id,
             )
         session = BrowserSession(
-            client, self.connector, self.saved, self.pump, self.default_address, self.logins
+            client,
+            self.connector,
+            self.saved,
+            self.pump,
+            self.default_address,
+            self.logins,
+            self.parking,
         )
         with self._lock:
             self.sessions[client.client_id] = session
@@ -137,6 +147,7 @@ class WebViewer:
         return len(state.message_buffer.message_from_id), conn.transport.get_write_buffer_size()
 
     def stop(self) -> None:
+        self.parking.close()  # first: the pages closed below log out instead of parking
         self.pump.stop()
         self.logins.close()
         with self._lock:
@@ -234,6 +245,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
         help="world frames per second to each browser (default 25)",
     )
     p.add_argument(
+        "--reload-grace",
+        type=float,
+        default=DEFAULT_GRACE_S,
+        metavar="SECONDS",
+        help="how long a closed or reloading page's lab session (its runs, joined arenas, "
+        f"editor) is kept for it to come back (default {DEFAULT_GRACE_S:g}; 0: off)",
+    )
+    p.add_argument(
         "--demo",
         action="store_true",
         help="serve an in-memory demo lab (users ana/ana-pw, ben/ben-pw)",
@@ -253,6 +272,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
         p.error(f"--http-port {args.http_port} is not a TCP port (1 to 65535)")
     if not 0 < args.rate <= 60:
         p.error(f"--rate {args.rate} must be between 0 and 60")
+    if not 0 <= args.reload_grace <= 86400:
+        p.error(f"--reload-grace {args.reload_grace:g}: give 0 (off) to 86400 seconds (a day)")
     try:
         check_ident("viewer id", args.id)
         router = options.effective_connect[0] if options.effective_connect else ""
@@ -306,6 +327,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
             default_address=default,
             data_dir=data_dir,
             rate=args.rate,
+            reload_grace_s=args.reload_grace,
         )
         service.url_file = args.url_file
         return service

@@ -7,11 +7,15 @@ with edit_map, the map editor, and a button that shows its world in the view.
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import viser
 
+from common.lab_errors import NotAnswering
 from viewers.web.adapters import (
     ChatEntry,
     ChatEvent,
@@ -27,10 +31,10 @@ from viewers.web.editor import MapEditor
 from viewers.web.inputs import set_value
 from viewers.web.recordings_panel import RecordingsPanel
 from viewers.web.replay import ReplayFeed
-from viewers.web.robot_panel import RobotPanel
+from viewers.web.robot_panel import RobotPanel, RobotPanelMemory
 from viewers.web.tabs import tab_title
 from viewers.web.text import check_line, clock, escape_md
-from viewers.web.workbench import Workbench
+from viewers.web.workbench import BenchMemory, Workbench
 from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
@@ -38,6 +42,17 @@ log = logging.getLogger("wart.viewer.chat")
 
 ARENA_KINDS = ("agent", "world")  # an agent context, or a world no context announces yet
 SHOWN_LINES = 100  # older lines scroll away; the context keeps the full history
+WORLD_RETRY_S = 3.0  # asking again for a world that does not answer yet
+
+
+@dataclass(frozen=True)
+class PanelMemory:
+    """A joined context's tab as the page left it (a reload): the lab session stays joined."""
+
+    joined: JoinedContext  # as joined, with today's members
+    lines: tuple[str, ...]  # the chat lines shown
+    robots: RobotPanelMemory | None
+    bench: BenchMemory | None
 
 
 class ChatPanel:
@@ -50,7 +65,9 @@ class ChatPanel:
         *,
         on_close: Callable[[ChatPanel], None],
         on_watch: Callable[[WorldFeed, ChatPanel], None] | None = None,
+        kept: PanelMemory | None = None,
     ) -> None:
+        self.joined = joined
         self.client = client
         self.connection = connection
         self.ctx = joined.ctx
@@ -60,8 +77,13 @@ class ChatPanel:
         self._on_close = on_close
         self._on_watch = on_watch
         self._lines: deque[str] = deque(maxlen=SHOWN_LINES)
-        for line in joined.history:
-            self._lines.append(self._format(line))
+        self.closed = False
+        self._retry_lock = threading.Lock()
+        self._retrying = False
+        if kept is None:
+            self._lines.extend(self._format(line) for line in joined.history)
+        else:
+            self._lines.extend(kept.lines)
         gui = client.gui
         label = f"{self.ctx}" if self.kind not in ARENA_KINDS else f"{self.ctx} (arena)"
         self.tab_name = label
@@ -94,7 +116,11 @@ class ChatPanel:
                 self.watch = gui.add_button("Show this arena", color="teal")
                 self.watch.on_click(lambda _: self.show_world())
                 self.robots = RobotPanel(client, connection, self.ctx)
-                self.workbench = Workbench(client, connection, self.ctx, self.robots)
+                if kept is not None and kept.robots is not None:
+                    self.robots.put_back(kept.robots)
+                self.workbench = Workbench(
+                    client, connection, self.ctx, self.robots, kept.bench if kept else None
+                )
                 # Assignments are handed in from here: the file open in the editor above.
                 self.course = CoursePanel(client, connection, source=self.workbench.current_file)
                 # A course's teachers only: every student, live; watch and take over.
@@ -195,10 +221,44 @@ class ChatPanel:
             return
         try:
             feed = self.connection.world(self.world)
+        except NotAnswering as exc:
+            # Not up yet (an engine compiling on a busy machine's first start): said so,
+            # and shown by itself once it answers, so the words never go stale.
+            self.say_notice(f"Cannot show the arena yet: {exc}. It is shown once it answers.")
+            self._retry_world()
+            return
         except LabError as exc:
             self.say_notice(f"Cannot show the arena: {exc}")
             return
+        self.notice.visible = False
         self._on_watch(feed, self)
+
+    def _retry_world(self) -> None:
+        with self._retry_lock:
+            if self._retrying:
+                return
+            self._retrying = True
+
+        def retry() -> None:
+            try:
+                while not self.closed:
+                    time.sleep(WORLD_RETRY_S)
+                    try:
+                        feed = self.connection.world(self.world or "")
+                    except NotAnswering:
+                        continue
+                    except LabError as exc:
+                        self.say_notice(f"Cannot show the arena: {exc}")
+                        return
+                    if not self.closed and self._on_watch is not None:
+                        self.notice.visible = False
+                        self._on_watch(feed, self)
+                    return
+            finally:
+                with self._retry_lock:
+                    self._retrying = False
+
+        threading.Thread(target=retry, name=f"world-{self.ctx}", daemon=True).start()
 
     def _show_replay(self, feed: ReplayFeed) -> None:
         """A recording of this arena in the view: the panels follow the replay's cursor."""
@@ -206,20 +266,35 @@ class ChatPanel:
             self._on_watch(feed, self)
 
     def close(self, *, leave: bool) -> None:
+        self.closed = True
+        self.release()
+        if leave:
+            try:
+                self.connection.leave(self.ctx)
+            except LabError as exc:
+                log.info("leaving %s: %s", self.ctx, exc)
+        self.tab.remove()
+        self._on_close(self)
+
+    def release(self) -> None:
+        """Stop the parts that watch the lab for this page; the context stays joined."""
+        self.closed = True
         if self.recordings is not None:
             self.recordings.close()
         if self.course is not None:
             self.course.close()
         if self.klass is not None:
             self.klass.close()
-        if leave:
-            try:
-                self.connection.leave(self.ctx)
-            except LabError as exc:
-                log.info("leaving %s: %s", self.ctx, exc)
         self.unbind()
-        self.tab.remove()
-        self._on_close(self)
+
+    def memory(self) -> PanelMemory:
+        """What a new page needs to draw this tab again as it was (see viewers/web/parking.py)."""
+        return PanelMemory(
+            joined=replace(self.joined, members=self.members),
+            lines=tuple(self._lines),
+            robots=self.robots.memory() if self.robots is not None else None,
+            bench=self.workbench.memory() if self.workbench is not None else None,
+        )
 
     def bind(self, view: WorldView, feed: WorldFeed) -> None:
         """This arena is now the one in the view: wire its robot panel and editor to it."""

@@ -22,14 +22,16 @@ from common.client.resume_cookie import SavedLogin, parse_cookies
 from viewers.web.adapters import LabConnection, LabConnector, LoginError
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
+from viewers.web.front_tab import FrontTab
 from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
+from viewers.web.parking import ParkedLab, ParkingLot
 from viewers.web.pump import FramePump
 from viewers.web.saved_login import saved_login_html
 from viewers.web.sure_clicks import add_sure_clicks
-from viewers.web.tabs import TabSwitcher, tab_title
+from viewers.web.tabs import PageTitle, TabSwitcher, tab_title
 from viewers.web.text import escape_md
 from viewers.web.viser_fast import browser_address, browser_cookies
 from viewers.web.world_feed import WorldFeed
@@ -38,6 +40,7 @@ from viewers.web.world_view import WorldView
 log = logging.getLogger("wart.viewer.client")
 
 NO_SAVED = "(saved and recent addresses)"
+TITLE = "WART lab"  # the browser tab's title, after the lab's name once logged in
 HELP = """### Welcome to the WART lab
 Type a lab's address above and press **Connect**, e.g.
 `wart://you@lab.example.org/lab` or just `lab.example.org`.
@@ -53,8 +56,11 @@ class BrowserSession:
         pump: FramePump,
         default_address: LabAddress,
         logins: LoginDesk,
+        parking: ParkingLot | None = None,
     ) -> None:
         self.client = client
+        # (not `parking or ...`: an empty lot has no length, and is falsy)
+        self.parking = parking if parking is not None else ParkingLot(grace_s=0)
         self.logins = logins
         self.connector = connector
         self.saved = saved
@@ -94,6 +100,9 @@ class BrowserSession:
         with self.home:
             gui.add_markdown(HELP)
         self.switcher = TabSwitcher(gui)  # takes the page to a new lab's or arena's tab
+        self.title = PageTitle(gui, TITLE)
+        # The world view follows the arena tab in front (front_tab.py).
+        self.front = FrontTab(gui, self._front_changed)
         self.connect_button.on_click(lambda _: self.connect(self.address.value))
         self.save_button.on_click(lambda _: self.save_address())
         self.recent.on_update(lambda _: self._recent_chosen())
@@ -175,6 +184,12 @@ class BrowserSession:
         self.say_notice(f"Logging in again to {address.label} as {address.user} (saved login)...")
 
         def run() -> None:
+            parked = self.parking.claim(address.lab_key, address.user or "", saved.token)
+            if parked is not None and self.parking.still_good(parked):
+                # A reload within the grace: the same session, its runs and tabs, no login.
+                self.notice.visible = False
+                self._logged_in(parked.connection, address, kept=parked)
+                return
             try:
                 connection = self.connector.resume(
                     address,
@@ -213,9 +228,13 @@ class BrowserSession:
         self._cookies_set += 1
         self._cookie.content = saved_login_html(address, token, self._cookies_set)
 
-    def _logged_in(self, connection: LabConnection, address: LabAddress) -> None:
+    def _logged_in(
+        self, connection: LabConnection, address: LabAddress, kept: ParkedLab | None = None
+    ) -> None:
         self.login = None
         if self.closed:  # the page closed while the login was on its way
+            if kept is not None and self.parking.park(connection, kept.memory, kept.events):
+                return
             connection.logout(keep_resume=connection.resume_token is not None)
             return
         if connection.resume_token is not None:
@@ -229,24 +248,37 @@ class BrowserSession:
             on_watch=self.watch,
             on_context=self._context_opened,
             on_context_closed=self._context_closed,
+            kept=kept,
         )
         with self._lock:
             self.labs[address.lab_key] = tab
+        self.parking.attach(connection)
         set_value(self.address, address.with_user(connection.user).url())
         self._refresh_recent()
         # The lab's tab is where the person goes next: the page shows it (tabs.py).
         self.switcher.show(tab.tab_name, tab_title(address))
+        self.title.set(f"{tab.tab_name} · {TITLE}")
         # Also said in words (headless clients and the benchmark wait for these words).
         self.client.add_notification(
             title=f"Logged in to {address.label}",
-            body=f"as {connection.user}: its lobby is the tab '{tab.tab_name}'.",
+            body=f"as {connection.user}: "
+            + (
+                "your session was kept while the page was away; nothing was lost."
+                if kept is not None
+                else f"its lobby is the tab '{tab.tab_name}'."
+            ),
             auto_close_seconds=5.0,
         )
+        shown = tab.panels.get(kept.memory.watching or "") if kept is not None else None
+        if shown is not None:  # the arena the page showed, in front again
+            self.switcher.show(shown.tab_name, shown.tab_title)
+            shown.show_world()
         if address.context:
             tab.join(address.context)
 
     def _logged_out(self, tab: LabTab) -> None:
         self._save_login(tab.connection.address, None)  # "Log out" forgets the saved login
+        self.parking.detach(tab.connection)
         with self._lock:
             for key, value in list(self.labs.items()):
                 if value is tab:
@@ -260,6 +292,17 @@ class BrowserSession:
         self.switcher.show(panel.tab_name, panel.tab_title)
         if panel.kind in ARENA_KINDS:
             panel.show_world()
+
+    def _front_changed(self, labels: tuple[str, ...]) -> None:
+        """A tab came to the front: if it is an arena's, the view shows that arena."""
+        with self._lock:
+            panels = [p for tab in self.labs.values() for p in list(tab.panels.values())]
+        for label in labels:
+            panel = next((p for p in panels if p.tab_name == label), None)
+            if panel is not None and panel.kind in ARENA_KINDS:
+                if panel is not self.watching:
+                    panel.show_world()
+                return
 
     def _context_closed(self, panel: ChatPanel) -> None:
         if self.watching is panel:
@@ -277,20 +320,31 @@ class BrowserSession:
     # -- the browser went away
 
     def close(self) -> None:
-        """The browser went away: stop drawing, then log out of every lab.
+        """The browser went away: stop drawing, then park or log out of every lab.
 
-        Nothing here touches the page: its connection is closed, and a GUI
-        update queued now would only be dropped with a warning. The lab must
-        still be told (rooms left, presence gone, subscriptions undeclared).
+        A lab with a saved login is parked (parking.py): a reload within the grace
+        takes its session back. Nothing here touches the page: its connection is
+        closed, and a GUI update queued now would only be dropped with a warning.
+        Otherwise the lab must still be told (rooms left, presence gone,
+        subscriptions undeclared).
         """
         self.closed = True
         self.pump.detach(self.view)
         self.view.feed = None
+        watching = self.watching
         with self._lock:
             tabs = list(self.labs.values())
             self.labs.clear()
         for tab in tabs:
             try:
+                if self.parking.enabled and tab.connection.resume_token is not None:
+                    shown = [p.ctx for p in tab.panels.values() if p is watching]
+                    memory, events = tab.park(shown[0] if shown else None)
+                    if self.parking.park(tab.connection, memory, events):
+                        continue  # kept for a reload (parking.py)
+                    events.close()
+                else:
+                    self.parking.detach(tab.connection)
                 tab.shutdown()
             except Exception:
                 log.exception("while closing %s for a departed browser", tab.label)

@@ -26,7 +26,7 @@ import viser
 from common.messages import AssignmentInfo, GradingChanged, Leaderboard, Standings, SubmissionInfo
 from viewers.web.adapters import LabConnection, LabError
 from viewers.web.inputs import on_click, set_value
-from viewers.web.text import escape_md
+from viewers.web.text import code_md, escape_md
 
 NONE = "(no assignment)"
 MAX_SHOWN = 10  # the latest submissions in the table
@@ -49,7 +49,7 @@ def format_assignment(a: AssignmentInfo) -> str:
     return (
         f"**{escape_md(a.title)}** ({escape_md(a.course)}): {a.episodes} episodes of "
         f"{a.time_limit:g} simulated s; due {_when(a.deadline)}; {a.quota} graded runs a day. "
-        f"Score: {escape_md(a.score_name)}{unit}, {better} is better: `{escape_md(a.rule)}`"
+        f"Score: {escape_md(a.score_name)}{unit}, {better} is better: {code_md(a.rule)}"
     )
 
 
@@ -69,6 +69,26 @@ def format_submissions(subs: list[SubmissionInfo]) -> str:
         status = s.status if s.status != "failed" else f"failed ({whose}; not counted)"
         when = time.strftime("%H:%M:%S", time.localtime(s.submitted_at))
         lines.append(f"| {when} | {status} | {_num(s.mean)} | {episodes or '-'} |")
+    return "\n".join(lines)
+
+
+def format_episodes(sub: SubmissionInfo) -> str:
+    """One submission episode by episode: its score term by term, how it ended, what it said."""
+    when = time.strftime("%H:%M:%S", time.localtime(sub.submitted_at))
+    lines = [f"**Submission of {when}, episode by episode** ({sub.status})"]
+    for e in sub.episodes:
+        name = "real robot" if e.real else f"episode {e.episode} (seed {e.seed})"
+        score = f"**{_num(e.score)}**"
+        if e.terms:
+            score += " = " + " ".join(f"{code_md(text)} → {value:g}" for text, value in e.terms)
+        lines.append(f"- {name}: {score}; ended: {escape_md(e.cause)}")
+        if e.detail:
+            lines.append(f"  - {escape_md(e.detail)}")
+        if e.output:
+            shown = "  \n".join(escape_md(line) for line in e.output[-8:])
+            lines.append(f"  - printed (last lines):  \n{shown}")
+    if not sub.episodes:
+        lines.append("_No episode has run yet._")
     return "\n".join(lines)
 
 
@@ -140,6 +160,7 @@ class CoursePanel:
             self.status = gui.add_markdown("")
             self.scores_button = gui.add_button("My scores", icon=viser.Icon.LIST_NUMBERS)
             self.scores = gui.add_markdown("")
+            self.latest = gui.add_markdown("")  # the newest submission, episode by episode
             self.board_button = gui.add_button("Leaderboard", icon=viser.Icon.TROPHY)
             self.board = gui.add_markdown("")
             self.competitions = gui.add_markdown("")
@@ -274,6 +295,7 @@ class CoursePanel:
         with self._lock:
             self._mine.update(s.submission for s in subs)
         self.scores.content = format_submissions(subs)
+        self.latest.content = format_episodes(subs[-1]) if subs else ""
         return subs
 
     def show_board(self) -> Leaderboard | None:

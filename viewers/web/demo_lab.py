@@ -215,6 +215,9 @@ class DemoConnection:
     def directory(self) -> Directory:
         return self._lab.directory()
 
+    def check_resume(self) -> None:
+        raise LabError("a demo lab keeps no saved logins")
+
     def join(self, ctx: str) -> JoinedContext:
         self._need("join", "join contexts")
         lab = self._lab
@@ -521,7 +524,7 @@ class DemoConnection:
 
     resume_token: bytes | None = None  # a demo lab keeps no saved logins
 
-    def logout(self, keep_resume: bool = False) -> None:
+    def logout(self, keep_resume: bool = False, reason: str = "") -> None:
         if self.closed:
             return
         for ctx in list(self._joined):

@@ -6,7 +6,9 @@ viser has no keyboard events, so, as in masked.py and labels.py, an
 runs a fixed script (nothing from users in it; the ids go in as JSON). The
 script listens for keys only while the driving box (a focusable element of its
 own) or the world view's canvas (made focusable, so a click on it focuses it)
-has focus, and writes the held directions with a sequence number, ``"fl 17"``,
+has focus, and keeps them from viser's own keyboard camera (which listens on the
+document after this capturing listener: WASD and the arrows would also fly and
+tip the view), and writes the held directions with a sequence number, ``"fl 17"``,
 into a text input the panel hides, with the setter React watches (as the code
 editor does): the text reaches the viewer over the page's websocket like any
 input. It writes again on every change and every 200 ms while keys are held
@@ -68,12 +70,14 @@ DRIVE_JS = """
     var d = MAP[e.code];
     if (!d || !ours(document.activeElement)) return;
     e.preventDefault();
+    e.stopPropagation();
     if (!held[d]) { held[d] = 1; send(); }
     if (!timer) timer = setInterval(beat, BEAT);
   }, true);
   document.addEventListener('keyup', function (e) {
     var d = MAP[e.code];
     if (!d || !held[d]) return;
+    e.stopPropagation();
     delete held[d];
     send();
   }, true);

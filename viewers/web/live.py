@@ -240,6 +240,9 @@ class LiveConnection:
 
     # -- directory, contexts, chat
 
+    def check_resume(self) -> None:
+        self._call(self.client.check_resume)
+
     def directory(self) -> Directory:
         reply = self._call(self.client.directory)
         contexts = [
@@ -548,7 +551,7 @@ class LiveConnection:
     def resume_token(self) -> bytes | None:
         return self.client.resume_token
 
-    def logout(self, keep_resume: bool = False) -> None:
+    def logout(self, keep_resume: bool = False, reason: str = "") -> None:
         """Leave every room, log out (presence goes), release worlds; safe to call twice."""
         if self._closed.is_set():
             return
@@ -564,7 +567,7 @@ class LiveConnection:
         self._standings.close()
         self._grading.close()
         try:
-            self.client.close()  # leaves rooms, logs out, undeclares the presence token
+            self.client.close(reason)  # leaves rooms, logs out, undeclares the presence token
         except Exception:
             log.exception("logging %s out of %s", self.user, self._address.label)
         self.connector._closed(self)

@@ -21,6 +21,7 @@ import zenoh
 from common import keys
 from common.ask import ask
 from common.keys import is_ident
+from common.lab_errors import NotAnswering
 from common.messages import (
     AddItem,
     AgentStates,
@@ -61,7 +62,9 @@ if TYPE_CHECKING:  # the connection makes a UserWorld; only its type is needed h
 log = logging.getLogger("wart.viewer.live")
 
 QUERY_TIMEOUT = 5.0
-DOES_NOT_ANSWER = "the world {world} does not answer (is its engine running?)"
+DOES_NOT_ANSWER = (
+    "the world {world} does not answer yet (its engine may still be starting, or be stopped)"
+)
 M = TypeVar("M", bound=Message)
 SENSOR_IDLE_S = 5.0  # a robot's sensor subscription ends when nobody asked for it this long
 
@@ -147,7 +150,7 @@ class WorldWatch:
         self._rows = 0
         self._want = threading.Event()
         self._first = threading.Event()
-        self._error = ""
+        self._error: LabError | None = None  # why the last snapshot could not be had
         self._sensors: dict[str, _SensorSub] = {}
         self._camera: CameraFeed | None = None  # a real world's cameras, once asked for
         self._sub = session.declare_subscriber(keys.world_frame(realm, world), self._on_frame)
@@ -163,7 +166,7 @@ class WorldWatch:
     def ready(self, timeout: float = QUERY_TIMEOUT + 1.0) -> None:
         """Wait for the first snapshot; :class:`LabError` when the world does not answer."""
         if not self._first.wait(timeout) or self._snapshot is None:
-            raise LabError(self._error or f"the world {self.world} does not answer (not running?)")
+            raise self._error or NotAnswering(DOES_NOT_ANSWER.format(world=self.world))
 
     def _refetcher(self) -> None:
         while not self.closed:
@@ -174,7 +177,7 @@ class WorldWatch:
             try:
                 self.refetch()
             except LabError as exc:
-                self._error = str(exc)
+                self._error = exc
                 log.info("snapshot of %s: %s", self.world, exc)
                 if not self._first.is_set():
                     self._first.set()
@@ -192,7 +195,7 @@ class WorldWatch:
             )
         except LabError as exc:
             if exc.reply is None:
-                raise LabError(DOES_NOT_ANSWER.format(world=self.world)) from None
+                raise NotAnswering(DOES_NOT_ANSWER.format(world=self.world)) from None
             raise LabError(str(exc)) from None  # "the world w: its words"
         view, object_rows = convert_snapshot(reply)
         with self._lock:
@@ -382,7 +385,7 @@ class UserWorld:
             )
         except LabError as exc:
             if exc.reply is None:
-                raise LabError(DOES_NOT_ANSWER.format(world=self.world)) from None
+                raise NotAnswering(DOES_NOT_ANSWER.format(world=self.world)) from None
             if exc.reply.code == "forbidden" and edit_map_refusal:
                 raise LabError(f"you may not {what}: it needs the 'edit_map' permission") from None
             raise LabError(exc.reply.message) from None

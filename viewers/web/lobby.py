@@ -21,6 +21,7 @@ from viewers.web.adapters import (
     Directory,
     DirectoryEvent,
     DisconnectedEvent,
+    JoinedContext,
     LabConnection,
     LabError,
     LabEvent,
@@ -30,11 +31,12 @@ from viewers.web.adapters import (
     RequestEvent,
 )
 from viewers.web.admin_panel import AdminPanel
-from viewers.web.chat_panel import ChatPanel
+from viewers.web.chat_panel import ChatPanel, PanelMemory
 from viewers.web.inputs import on_click, set_value
 from viewers.web.login import MAX_PASSWORD
 from viewers.web.masked import add_masked_text
 from viewers.web.network_panel import NetworkPanel
+from viewers.web.parking import EventKeeper, LabMemory, ParkedLab
 from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
 from viewers.web.workbench import Workbench
@@ -56,7 +58,9 @@ class LabTab:
         on_watch: Callable[[WorldFeed, ChatPanel], None],
         on_context: Callable[[ChatPanel], None] | None = None,
         on_context_closed: Callable[[ChatPanel], None] | None = None,
+        kept: ParkedLab | None = None,
     ) -> None:
+        """``kept``: a session parked by a page that went away, drawn again as it was."""
         self.client = client
         self.tabs = tabs
         self.connection = connection
@@ -108,7 +112,16 @@ class LabTab:
         self.host_arena.on_click(lambda _: self.host("agent"))
         self.pm_send.on_click(lambda _: self.send_private())
         self.logout_button.on_click(lambda _: self.logout())
-        self._unsubscribe = connection.subscribe(self.on_event)
+        if kept is None:
+            self._unsubscribe = connection.subscribe(self.on_event)
+        else:
+            for memory in kept.memory.panels:
+                self._add_panel(memory.joined, memory)
+            self._private = list(kept.memory.private)
+            if self._private:
+                self.pm_log.content = "  \n".join(self._private)
+            # The events of the time away, then the live ones: in order, none twice.
+            self._unsubscribe = kept.events.hand_to(self.on_event)
         self.refresh()
 
     @property
@@ -198,16 +211,7 @@ class LabTab:
             self.say_notice(f"Could not join {ctx}: {exc}")
             return None
         log.info("%s: joined %s in %.1f s", who, ctx, time.monotonic() - started)
-        panel = ChatPanel(
-            self.client,
-            self.tabs,
-            self.connection,
-            joined,
-            on_close=self._panel_closed,
-            on_watch=self._on_watch,
-        )
-        with self._lock:
-            self.panels[ctx] = panel
+        panel = self._add_panel(joined)
         self._directory = None  # the Join button's state changed
         self.refresh()
         for bench in self._workbenches():  # a real arena joined: its robots join the lists
@@ -215,6 +219,20 @@ class LabTab:
                 bench.refresh_targets()
         if self._on_context is not None:
             self._on_context(panel)
+        return panel
+
+    def _add_panel(self, joined: JoinedContext, kept: PanelMemory | None = None) -> ChatPanel:
+        panel = ChatPanel(
+            self.client,
+            self.tabs,
+            self.connection,
+            joined,
+            on_close=self._panel_closed,
+            on_watch=self._on_watch,
+            kept=kept,
+        )
+        with self._lock:
+            self.panels[joined.ctx] = panel
         return panel
 
     def _workbenches(self) -> list[Workbench]:
@@ -275,6 +293,26 @@ class LabTab:
     def _add_private(self, line: str) -> None:
         self._private = [*self._private[-19:], line]
         self.pm_log.content = "  \n".join(self._private)
+
+    def park(self, watching: str | None) -> tuple[LabMemory, EventKeeper]:
+        """The browser went away: keep the lab session, its tabs' state and its events.
+
+        ``watching``: the context whose world the page showed. The keeper listens
+        before this tab stops, so no event falls between them.
+        """
+        events = EventKeeper(self.connection)
+        self.closed = True
+        self._unsubscribe()
+        with self._lock:
+            panels = list(self.panels.values())
+        memory = LabMemory(
+            panels=tuple(panel.memory() for panel in panels),
+            private=tuple(self._private),
+            watching=watching,
+        )
+        for panel in panels:
+            panel.release()
+        return memory, events
 
     def shutdown(self) -> None:
         """The browser went away: end the lab session without touching its (closed) page."""

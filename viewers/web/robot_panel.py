@@ -20,6 +20,7 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import viser
@@ -106,6 +107,16 @@ def format_agents(rows: list[AgentStatus], settings: ArenaSettings | None = None
     if len(rows) > MAX_ROWS:
         lines.append(f"\n_and {len(rows) - MAX_ROWS} more: click a robot in the view._")
     return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class RobotPanelMemory:
+    """The panel's choices and the output so far, kept while the page reloads."""
+
+    robot: str
+    output: tuple[str, ...]
+    rays: bool
+    follow: bool
 
 
 class RobotPanel:
@@ -197,6 +208,24 @@ class RobotPanel:
     def say_notice(self, text: str) -> None:
         self.notice.content = f"**{escape_md(text)}**"
         self.notice.visible = True
+
+    # -- surviving a reload
+
+    def memory(self) -> RobotPanelMemory:
+        return RobotPanelMemory(
+            robot=self.robot.value,
+            output=tuple(self._output),
+            rays=self.rays.value,
+            follow=self.follow.value,
+        )
+
+    def put_back(self, kept: RobotPanelMemory) -> None:
+        self._output.extend(kept.output)
+        self.output_md.content = output_html(self._output, NOTHING_PRINTED)
+        set_value(self.rays, kept.rays)
+        set_value(self.follow, kept.follow)
+        if kept.robot in self.robot.options:
+            set_value(self.robot, kept.robot)
 
     def refresh_agents(self) -> None:
         """Re-read the queues (cheap: the connection keeps the context's newest state)."""

@@ -91,3 +91,23 @@ class TabSwitcher:
 
     def show(self, label: str, title: str = "") -> None:
         self._element.content = show_tab_html(label, title, next(self._seq))
+
+
+def page_title_html(title: str, seq: int) -> str:
+    """An element that names the browser's tab (viser's page is titled "Viser")."""
+    script = f"document.title={json.dumps(title)}"
+    return (
+        f'<img src="data:," alt="" data-seq="{seq}" style="display:none" '
+        f'onerror="{html.escape(script, quote=True)}">'
+    )
+
+
+class PageTitle:
+    """The browser tab's title: the lab logged in to last, or the viewer's name."""
+
+    def __init__(self, gui: viser.GuiApi, title: str) -> None:
+        self._seq = itertools.count(1)
+        self._element = gui.add_html(page_title_html(title, 0))
+
+    def set(self, title: str) -> None:
+        self._element.content = page_title_html(title, next(self._seq))

@@ -17,6 +17,15 @@ def escape_md(text: str) -> str:
     return _MD_SPECIAL.sub(r"\\\1", text)
 
 
+def code_md(text: str) -> str:
+    """Text as an inline code span: shown as written (a rule, a file's line), no escapes."""
+    text = " ".join(text.splitlines())
+    longest = max((len(run) for run in re.findall(r"`+", text)), default=0)
+    fence = "`" * (longest + 1)
+    pad = " " if text.startswith("`") or text.endswith("`") else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
+
+
 # Inline (not a class): output is shown in panels that may not have the editor's styles.
 OUTPUT_STYLE = (
     "font-family: ui-monospace, Menlo, Consolas, monospace; font-size: 12px; margin: 0; "

@@ -34,6 +34,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 import viser
@@ -74,6 +75,19 @@ def examples() -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(EXAMPLES.glob("*.py"))}
 
 
+@dataclass(frozen=True)
+class BenchMemory:
+    """What a student had in the editor when the page went away (a reload): put back."""
+
+    file_name: str
+    code: str
+    target: str
+    running_on: tuple[str, str] | None
+    status: str
+    errors: tuple[Problem, ...]  # the run's exceptions so far
+    shown: tuple[tuple[Problem, ...], str]  # the problems under the editor, and their heading
+
+
 class Workbench:
     def __init__(
         self,
@@ -81,6 +95,7 @@ class Workbench:
         connection: LabConnection,
         ctx: str,
         robots: RobotPanel,
+        kept: BenchMemory | None = None,
     ) -> None:
         self.client = client
         self.connection = connection
@@ -91,6 +106,7 @@ class Workbench:
         # (context, robot) my editor's run is queued on: a real one may be in another arena.
         self._running_on: tuple[str, str] | None = None
         self._errors: list[Problem] = []
+        self._shown: tuple[tuple[Problem, ...], str] = ((), "")
         # The context's news of my run counts up: a reply that arrives after the news
         # (a run can start, or end, before the query's answer is back) must not hide it.
         self._news = 0
@@ -141,8 +157,38 @@ class Workbench:
         robots.robot.on_update(lambda _: self._panel_chosen())
         robots.on_rows.append(self.refresh_targets)
         self.refresh_targets()
+        if kept is not None:
+            self._put_back(kept)
         # My files come from the lab: read them off the page's thread (a query can take 2 s).
-        threading.Thread(target=self._load_mine, name=f"files-{ctx}", daemon=True).start()
+        # After a reload the editor keeps the unsaved buffer put back above, not the newest file.
+        threading.Thread(
+            target=self._load_mine, args=(kept is None,), name=f"files-{ctx}", daemon=True
+        ).start()
+
+    # -- surviving a reload
+
+    def memory(self) -> BenchMemory:
+        return BenchMemory(
+            file_name=self.name.value,
+            code=self.code.value,
+            target=self.target.value,
+            running_on=self._running_on,
+            status=self.status.content,
+            errors=tuple(self._errors),
+            shown=self._shown,
+        )
+
+    def _put_back(self, kept: BenchMemory) -> None:
+        set_value(self.name, kept.file_name)
+        set_value(self.code, kept.code)
+        self._running_on = kept.running_on
+        self._errors = list(kept.errors)
+        self.status.content = kept.status
+        if kept.target in self.target.options:
+            set_value(self.target, kept.target)
+        problems, heading = kept.shown
+        if problems:
+            self._show(list(problems), heading)
 
     # -- what the student sees
 
@@ -150,12 +196,14 @@ class Workbench:
         self.status.content = ("**Not done:** " if bad else "") + escape_md(text)
 
     def _show(self, problems: list[Problem], heading: str) -> None:
+        self._shown = (tuple(problems), heading)
         self.problems.content = (
             format_problems(self.code.value, problems, heading) if problems else ""
         )
         self.editor.mark(problems)
 
     def _clear(self) -> None:
+        self._shown = ((), "")
         self.problems.content = ""
         self.editor.mark([])
 
@@ -182,7 +230,7 @@ class Workbench:
         name = self._filename()
         return None if name is None else (name, self._source())
 
-    def _load_mine(self) -> None:
+    def _load_mine(self, open_newest: bool = True) -> None:
         """Fill the list with my files and open my newest one (the editor's 'last file')."""
         try:
             mine = self.connection.list_files(self.ctx)
@@ -194,7 +242,7 @@ class Workbench:
         )
         if options:
             self.start_from.options = options
-        if mine:
+        if mine and open_newest:
             set_value(self.start_from, MINE_PREFIX + mine[0].name)
             self._open()
 
@@ -397,7 +445,9 @@ class Workbench:
             return
         finally:
             self.dry.disabled = False
-        verdict = "will run" if result.will_run else "will NOT run"
+        verdict = "will NOT run"
+        if result.will_run:
+            verdict = "will run, with a warning" if "warning" in result.verdict else "will run"
         self.say(f"Dry run of {name} on {agent} done: it {verdict}, see below.")
         heading = f"Dry run on {agent}: {result.verdict}"
         self.problems.content = format_dry_run(self.code.value, result, heading)

@@ -182,10 +182,11 @@ class WorldView:
         """Watch ``feed``: draw its snapshot, aim the camera; frames follow from the pump."""
         with self._lock:
             self.feed = feed
-            self.selected = None
             self.last_seq = -1
             self.drawn = None
-            self._trail.clear()
+            # Nothing of the world shown before stays drawn: its selected robot's
+            # trail, rays and look (a replay's trail, another arena's robot).
+            self._drop_selected()
             self.redraw(feed.snapshot())
             snap = self.snapshot
             assert snap is not None
@@ -212,20 +213,25 @@ class WorldView:
                 index = None
             if index == self.selected:
                 return
+            self._drop_selected()
             self.selected = index
-            self._trail.clear()
-            if self._trail_handle is not None:
-                self._trail_handle.remove()
-                self._trail_handle = None
-            if self._rays is not None:
-                self._rays.remove()
-                self._rays = None
-            self._drop_look()
             self._sync_labels()
         for callback in list(self.on_select):
             callback(index)
 
     # -- drawing
+
+    def _drop_selected(self) -> None:
+        """No robot selected, and nothing drawn for the one that was."""
+        self.selected = None
+        self._trail.clear()
+        if self._trail_handle is not None:
+            self._trail_handle.remove()
+            self._trail_handle = None
+        if self._rays is not None:
+            self._rays.remove()
+            self._rays = None
+        self._drop_look()
 
     def _clear_all(self) -> None:
         for handle in [*self._static, *self._balls, *self._lights, *self._labels.values()]:

@@ -110,6 +110,13 @@ def test_the_summary_has_distance_time_moving_and_errors(tmp_path: Path) -> None
     assert any(line.endswith("s of simulated time") for line in describe(summary))
     real = msgspec.structs.replace(summary, world_kind="real")
     assert any(line.endswith("s of real time") for line in describe(real))
+    # Real robots have no contact sensor: the count says it was estimated, or not measured.
+    assert any(line.startswith("collisions:  0 (") for line in describe(summary))
+    said = [line for line in describe(real) if line.startswith("collisions:")]
+    assert said and said[0].endswith("estimated from the tracked poses (not measured)")
+    unseen = msgspec.structs.replace(real, frames=0)
+    said = [line for line in describe(unseen) if line.startswith("collisions:")]
+    assert said == ["collisions:  not measured (real robots, and no tracked poses recorded)"]
 
 
 def test_a_truncated_recording_is_salvaged_and_garbage_is_a_clear_error(tmp_path: Path) -> None:

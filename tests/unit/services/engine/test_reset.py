@@ -18,6 +18,7 @@ from common import keys
 from common.auth import AuthError, RegistryIdentity, Session, issue_session
 from common.messages import EditResult, Lease, Message, ResetAgent, WorldEdit
 from common.sim2d import maps
+from common.world.leases import RESET_AFTER_STOP_S
 from services.engine.service import EngineService, EngineSettings
 
 REALM, AGENT = "lab", "k0"
@@ -128,5 +129,30 @@ def test_an_expired_lease_no_longer_lets_its_student_reset(lab: Lab) -> None:
     assert lab.engine.verifier is not None
     principal, _ = lab.engine.verifier.open(key, sealed, WorldEdit)
     assert lab.engine.leases.may_reset(principal, lab.agent) is None
-    refused = lab.engine.leases.may_reset(principal, lab.agent, now=time.time() + 120)
+    past_the_window = time.time() + 60 + RESET_AFTER_STOP_S + 5
+    refused = lab.engine.leases.may_reset(principal, lab.agent, now=past_the_window)
     assert refused is not None and "not yours now" in refused
+
+
+def test_stop_then_reset_the_student_may_put_back_the_robot_just_stopped(lab: Lab) -> None:
+    lab.lease_for_alice_run_by_the_runner()
+    lab.push_robot()
+    # Stop: the context republishes the lease, ended now (same id, earlier end).
+    now = time.time()
+    ended = Lease(
+        lease_id="L1",
+        world=lab.world_name,
+        agent=lab.agent,
+        holder_user="runner",
+        holder_session=lab.runner.session_id,
+        start=now - 10,
+        end=now - 0.5,
+        requester_session=lab.alice.session_id,
+    )
+    key = keys.agent_lease(REALM, lab.world_name, lab.agent)
+    lab.engine.leases.accept_lease(key, lab.context.seal(key, ended))
+    refused = lab.reset(lab.bob)  # not bob's run: still refused
+    assert isinstance(refused, AuthError) and "not yours now" in refused.message
+    reply = lab.reset(lab.alice)
+    assert isinstance(reply, EditResult), reply
+    assert lab.engine.world.pose_of(lab.agent) == pytest.approx(lab.home, abs=1e-6)

@@ -57,6 +57,32 @@ def test_a_rule_scores_an_episodes_events() -> None:
     assert metrics(hit, ["goal"], 10.0)["time_to_goal"] == 4.5
 
 
+def test_a_score_is_shown_term_by_term_as_the_rule_is_written() -> None:
+    rule = parse_rule('100 * reached("goal") - 5 * collisions() - time_to("goal")')
+    hit = report(reached={"goal": 4.5}, collisions={"wall": 1})
+    terms = rule.terms(hit, 10.0)
+    assert terms == [
+        ('100 * reached("goal")', 100.0),
+        ("- 5 * collisions()", -5.0),
+        ('- time_to("goal")', -4.5),
+    ]
+    assert sum(v for _, v in terms) == pytest.approx(rule.evaluate(hit, 10.0))
+    # A subtraction of a sum flips its terms' signs; a product stays one term.
+    nested = parse_rule('10 - (reached("goal") + 2 * collisions()) + max(1, 2) * 3')
+    terms = nested.terms(hit, 10.0)
+    assert [t for t, _ in terms] == [
+        "10",
+        '- reached("goal")',
+        "- 2 * collisions()",
+        "max(1, 2) * 3",
+    ]
+    assert sum(v for _, v in terms) == pytest.approx(nested.evaluate(hit, 10.0))
+    long = parse_rule(" + ".join(["time()"] * 40))
+    terms = long.terms(hit, 10.0)
+    assert len(terms) == 16 and terms[-1][0] == "the other terms"
+    assert sum(v for _, v in terms) == pytest.approx(long.evaluate(hit, 10.0))
+
+
 @pytest.mark.parametrize(
     ("text", "problem"),
     [

@@ -88,3 +88,22 @@ def test_logout_kick_and_password_change_revoke_with_their_reason(store: ResumeS
 
 def _fields(grant: ResumeGrant) -> dict[str, object]:
     return {f: getattr(grant, f) for f in grant.__struct_fields__}
+
+
+def test_asking_whether_a_token_is_good_does_not_use_it_and_sees_revocations(
+    store: ResumeStore,
+) -> None:
+    now = time.time()
+    token = store.issue("bob", SID, now + 3600, now)
+    store.check("bob", SID, token, now + 1)
+    store.check("bob", SID, token, now + 2)  # asking twice: still good
+    with pytest.raises(RequestError, match="belongs to another session"):
+        store.check("bob", b"\x08" * 16, token, now + 3)  # a session asking of another's
+    with pytest.raises(RequestError, match="is for another account"):
+        store.check("eve", SID, token, now + 3)
+    store.revoke_user("bob", "the password was changed")
+    with pytest.raises(RequestError, match=r"was revoked \(the password was changed\)"):
+        store.check("bob", SID, token, now + 4)
+    fresh = store.issue("bob", SID, now + 3600, now)
+    store.check("bob", SID, fresh, now + 5)
+    store.use("bob", fresh, now + 6)  # the check left it good for one resume

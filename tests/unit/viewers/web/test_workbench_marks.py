@@ -47,8 +47,8 @@ def test_a_dry_runs_exception_is_marked_at_its_line_and_said_once() -> None:
 
 
 def test_a_dry_runs_collision_has_no_line_to_mark() -> None:
-    verdict = "will NOT run: 1 collision, the first with a wall at 0.84 s"
-    result = DryRunResult(False, verdict, ("collision at 0.84 s: wall",))
+    verdict = "will run, with a warning: 1 collision, the first with a wall at 0.84 s"
+    result = DryRunResult(True, verdict, ("collision at 0.84 s: wall",))
     text = format_dry_run("x = 1\n", result, f"Dry run on k3: {verdict}")
     assert "&gt;&gt;" not in text and "the first with a wall" in text
     assert "collision at 0.84 s: wall" in text  # as said, not escaped for markdown

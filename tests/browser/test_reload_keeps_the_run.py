@@ -1,0 +1,140 @@
+"""A reload mid-run in Chromium against a real lab: the run and its slot go on, and the page
+comes back with its arena tab, the editor's unsaved buffer, the chosen robot and the output;
+a page gone for longer than the grace ends the run in words that say so.
+
+Router, registry, engine, runner (bubblewrap sandboxes) and the agent context ``arena``,
+as in test_workbench; slots long enough that only Stop or the grace ends a run.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from services.runner.sandbox import sandbox_problem
+from tests.browser.conftest import ViserPage, wait_until
+from tests.browser.test_real_agents import choose, enter_arena
+from tests.browser.test_real_lab import session_of
+from tests.browser.test_workbench import write_code
+from tests.kit.reallab import RealLab, real_lab
+from viewers.web.app import WebViewer
+from viewers.web.chat_panel import ChatPanel
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+CTX = "arena"
+TICKING = """\
+from common.controller import Controller, Khepera
+
+
+class Ticking(Controller):
+    period = 0.05
+
+    def initialize(self, robot: Khepera) -> None:
+        self.ticks = 0
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(2, 2)
+        self.ticks += 1
+        if self.ticks % 20 == 0:
+            print(f"tick {self.ticks // 20}")
+"""
+UNSAVED = TICKING + "# typed after Run, never saved\n"
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    with real_lab(Path(tmp_path_factory.mktemp("reload")), agents=True, slot=600.0) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def ticks_shown(page: ViserPage) -> list[int]:
+    """The tick numbers the page's output shows (what the student reads)."""
+    text = " ".join(page.p.locator("pre.wart-output").all_inner_texts())
+    return [int(n) for n in re.findall(r"tick (\d+)", text)]
+
+
+def start_ticking(page: ViserPage, panel: ChatPanel, agent: str) -> None:
+    bench = panel.workbench
+    assert bench is not None
+    write_code(page, TICKING, lambda: bench.code.value == TICKING)
+    choose(page, "Run on", agent)
+    wait_until(lambda: bench.target.value == agent, 10, what=f"{agent} chosen to run on")
+    page.click("Run in simulation")
+    page.wait_text(f"Your controller runs on {agent}", timeout=30_000)
+    wait_until(lambda: ticks_shown(page), 30, what="the controller's first print on the page")
+
+
+def test_a_reload_mid_run_keeps_the_run_the_editor_and_the_output(open_page, lab: RealLab) -> None:
+    alice = open_page("alice")
+    panel = enter_arena(alice, lab, "alice")
+    lab_tab = next(iter(session_of(lab.viewer, "alice").labs.values())).tab_name
+    # The browser's tab names the lab (viser's own page says "Viser").
+    wait_until(lambda: alice.p.title() == f"{lab_tab} · WART lab", 10, what="the page's title")
+    start_ticking(alice, panel, "k0")
+    bench = panel.workbench
+    assert bench is not None
+    write_code(alice, UNSAVED, lambda: bench.code.value == UNSAVED)
+    before = max(ticks_shown(alice))
+    old_connection = panel.connection
+
+    alice.p.reload()
+    alice.wait_ready()
+    # No password, no Join: the arena's tab is in front again, on the same lab session.
+    alice.wait_text("Your controller runs on k0", timeout=30_000)
+    session = session_of(lab.viewer, "alice")
+    tab = next(iter(session.labs.values()))
+    assert tab.connection is old_connection  # the session was kept, not logged in again
+    back = tab.panels[CTX]
+    assert back is not panel and back.workbench is not None
+    # The unsaved buffer, on the server and in the browser's editor.
+    assert back.workbench.code.value == UNSAVED
+    shown = alice.p.evaluate("() => window.wartEditor.editorFor(null).view.state.doc.toString()")
+    assert shown == UNSAVED
+    assert back.workbench.target.value == "k0"
+    # The output so far is there, and the run prints on: it was never stopped.
+    assert before in ticks_shown(alice)
+    wait_until(lambda: max(ticks_shown(alice)) > before + 2, 30, what="new prints after reload")
+    assert "cancelled" not in " ".join(alice.p.locator("pre.wart-output").all_inner_texts())
+    assert back.robots is not None and back.robots.driven("k0")
+    alice.screenshot("reload-kept-the-run")
+
+    # And the restored page still drives it: Stop ends the run; Reset then puts k0 back.
+    alice.click("Stop")
+    alice.wait_text("Your controller on k0 cancelled", timeout=15_000)
+    alice.click("Reset")
+    alice.wait_text("Reset: k0 is back at", timeout=15_000)
+
+
+def test_a_page_gone_longer_than_the_grace_ends_the_run_and_says_why(
+    open_page, lab: RealLab
+) -> None:
+    grace = lab.viewer.parking.grace_s
+    lab.viewer.parking.grace_s = 3.0
+    try:
+        bob = open_page("bob")
+        bob_panel = enter_arena(bob, lab, "bob")
+        alice = open_page("alice")
+        panel = enter_arena(alice, lab, "alice")
+        start_ticking(alice, panel, "k1")
+        alice.p.close()  # the lid shut; nobody comes back within the grace
+        # Bob, in the same arena, reads why alice's run ended.
+        bob.wait_text(
+            "alice's controller on k1 was cancelled: the page was closed for more than 3 s",
+            timeout=30_000,
+        )
+        assert bob_panel.robots is not None
+        wait_until(lambda: not bob_panel.robots.driven("k1"), 15, what="k1 free again")
+    finally:
+        lab.viewer.parking.grace_s = grace

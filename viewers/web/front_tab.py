@@ -1,0 +1,82 @@
+"""Which tab is in front in the browser, told to the viewer: the world view follows it.
+
+viser 1.1.1 tells the server nothing about tab clicks: a tab group keeps the
+tab its user last pressed, in the page only. As in drive_keys.py, an
+``add_html`` image that cannot load runs a fixed script (the input's id goes in
+as JSON; nothing from users): a MutationObserver watches the tabs'
+``aria-selected`` and writes the labels of the selected tabs, one per line, into
+a text input the panel hides, with the setter React watches, so the text
+reaches the viewer over the page's websocket like any input. The viewer then
+shows the world of the arena whose tab is in front (client.py).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from collections.abc import Callable
+
+import viser
+
+from viewers.web.masked import element_id
+
+FRONT_TAB_JS = """
+(function (id) {
+  window.__wartFront = window.__wartFront || {};
+  if (window.__wartFront[id]) return;
+  window.__wartFront[id] = true;
+  var setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
+  var last = null, pending = false;
+  function input() {
+    var label = document.querySelector('label[for="' + id + '"]');
+    var own = label && label.parentElement && label.parentElement.parentElement;
+    var box = own && own.nextElementSibling;
+    return (box && box.querySelector('input')) || document.getElementById(id);
+  }
+  function check() {
+    pending = false;
+    var names = Array.prototype.map.call(
+      document.querySelectorAll('[role=tab][aria-selected=true]'),
+      function (t) { return t.textContent.trim(); }).join('\\n');
+    if (names === last) return;
+    var el = input();
+    if (!el) return;
+    last = names;
+    setter.call(el, names);
+    el.dispatchEvent(new Event('input', { bubbles: true }));
+  }
+  function soon() { if (!pending) { pending = true; setTimeout(check, 50); } }
+  new MutationObserver(soon).observe(document.body, {
+    subtree: true, childList: true, attributes: true, attributeFilter: ['aria-selected'] });
+  soon();
+})(ID);
+"""
+
+
+def front_tab_html(front: viser.GuiTextHandle) -> str:
+    ident = element_id(front)
+    script = FRONT_TAB_JS.replace("ID", json.dumps(ident))
+    script = " ".join(line.strip() for line in script.strip().splitlines())
+    hide = f'div:has(> * > * > label[for="{ident}"]) {{ display: none !important; }}'
+    return (
+        f"<style>{hide}</style>"
+        f'<img src="data:," alt="" style="display:none" onerror="{html.escape(script)}">'
+    )
+
+
+class FrontTab:
+    """The labels of the tabs in front in this browser; ``on_change`` is called with them."""
+
+    def __init__(self, gui: viser.GuiApi, on_change: Callable[[tuple[str, ...]], None]) -> None:
+        self.labels: tuple[str, ...] = ()
+        self._input = gui.add_text("Tab in front", "")
+        gui.add_html(front_tab_html(self._input))
+        self._on_change = on_change
+        self._input.on_update(lambda _: self._changed())
+
+    def _changed(self) -> None:
+        # Bounded: the page's tabs' labels, never more than a few short lines.
+        labels = tuple(line[:200] for line in self._input.value.splitlines()[:20] if line)
+        if labels != self.labels:
+            self.labels = labels
+            self._on_change(labels)
