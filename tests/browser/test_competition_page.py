@@ -20,9 +20,14 @@ from tests.browser.test_real_agents import enter_arena
 from tests.conftest import needs_sandbox
 from tests.kit.courses import add_course, assignment_toml
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400), needs_sandbox]
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.integration,
+    pytest.mark.timeout(400),
+    needs_sandbox,
+    pytest.mark.real_lab,
+]
 REPO = Path(__file__).resolve().parents[2]
 GRADING = REPO / "tests" / "integration" / "grading"
 
@@ -38,11 +43,6 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
         add_course(env.lab.db_path, rows, assignment_toml("reach-goal", episodes="1", seeds="[4]"))
         env.lab.start_grader()
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def test_a_student_sees_the_ranking_change_as_heats_end(open_page, lab: RealLab) -> None:

@@ -36,11 +36,16 @@ from tests.conftest import needs_sandbox
 from tests.kit.agentkit import Motion, agent_user
 from tests.kit.courses import COURSE, add_course, assignment_toml
 from tests.kit.reallab import CTX, RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(300), needs_sandbox]
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.integration,
+    pytest.mark.timeout(300),
+    needs_sandbox,
+    pytest.mark.real_lab,
+]
 REPO = Path(__file__).resolve().parents[2]
 WORKS = (REPO / "tests" / "integration" / "grading" / "works.py").read_text()
 RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
@@ -59,11 +64,6 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
         add_course(env.lab.db_path, rows, assignment_toml("reach-goal", episodes="1", seeds="[4]"))
         env.lab.start_grader()
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def cell(page, name: str):  # type: ignore[no-untyped-def]

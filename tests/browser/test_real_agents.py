@@ -29,11 +29,10 @@ from tests.browser.conftest import (
 from tests.browser.test_real_lab import session_of
 from tests.conftest import REPO, needs_sandbox
 from tests.kit.reallab import CTX, PASSWORD, WORLD, RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.tabs import tab_label
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 SLOT = 30.0
 BRAITENBERG = REPO / "examples" / "01_braitenberg.py"
@@ -57,11 +56,6 @@ class Hello(Controller):
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("agentlab")), agents=True, slot=SLOT) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer  # open_page (conftest) opens this viewer
 
 
 def enter_arena(page: ViserPage, lab: RealLab, user: str) -> ChatPanel:

@@ -20,10 +20,9 @@ from tests.browser.test_real_agents import enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.replay import ReplayFeed
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 SLOT = 2.0
 TINY = b"""\
@@ -40,11 +39,6 @@ class Ahead(Controller):
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("reclab")), agents=True, slot=SLOT) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab) -> None:

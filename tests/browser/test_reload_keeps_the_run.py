@@ -20,10 +20,9 @@ from tests.browser.test_real_lab import session_of
 from tests.browser.test_workbench import write_code
 from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 CTX = "arena"
 TICKING = """\
@@ -49,11 +48,6 @@ UNSAVED = TICKING + "# typed after Run, never saved\n"
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("reload")), agents=True, slot=600.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def ticks_shown(page: ViserPage) -> list[int]:

@@ -20,9 +20,8 @@ from tests.browser.test_real_agents import choose, enter_arena, pick_robot, uplo
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 READER = b'''"""Reads the range finder the builder added."""
 
@@ -44,11 +43,6 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     tmp = Path(tmp_path_factory.mktemp("builderlab"))
     with real_lab(tmp, "empty", agents=True, slot=30.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, lab: RealLab) -> None:

@@ -18,10 +18,9 @@ from tests.browser.test_real_agents import choose, enter_arena, pick_robot, uplo
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.robot_panel import NONE
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 GOOD = """\
 from common.controller import Controller, Khepera
@@ -44,11 +43,6 @@ PLANTED = GOOD.replace("robot.set_speeds(8, 4)", "robot.set_speed(8, 4)")  # lin
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("workbench")), agents=True, slot=600.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def write_code(page: ViserPage, text: str, wait_for: object) -> None:
