@@ -82,7 +82,8 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
     assert hidden.evaluate("e => e.offsetParent === null")  # drawn nowhere
     lines = page.p.locator(".cm-gutter.cm-lineNumbers .cm-gutterElement")
 
-    # At least 30 lines visible at 1280x800: the editor is 30 lines tall or more.
+    # At 1280x800 the editor is at least 12 lines tall, leaving the run's output below it in
+    # view (test_layout.py); a student drags its corner for more.
     # Measured once laid out: right after the tab shows, the editor can still be 0 tall
     # (seen in a CI run); what the DOM says then is "not laid out yet", not "too small".
     def lines_tall() -> float:
@@ -90,7 +91,8 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
         line = box.evaluate("el => el.querySelector('.cm-line').getBoundingClientRect().height")
         return float(height) / float(line) if line else 0.0
 
-    wait_until(lambda: lines_tall() >= 30, 10, what="the editor laid out 30 lines tall or more")
+    wait_until(lambda: lines_tall() >= 12, 10, what="the editor laid out 12 lines tall or more")
+    assert box.evaluate("el => getComputedStyle(el.closest('.cm-editor')).resize") == "vertical"
 
     box.click()
     page.p.keyboard.press("Control+a")

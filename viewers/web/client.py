@@ -27,6 +27,7 @@ from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
 from viewers.web.login import LoginDesk, LoginForm
+from viewers.web.page_style import add_page_style
 from viewers.web.parking import ParkedLab, ParkingLot
 from viewers.web.pump import FramePump
 from viewers.web.saved_login import saved_login_html
@@ -85,6 +86,7 @@ class BrowserSession:
     def _build(self, gui: viser.GuiApi, default_address: LabAddress) -> None:
         add_label_fixer(gui)  # every labelled input gets its accessible name (labels.py)
         add_sure_clicks(gui)  # clicks and values viser's page drops are sent (sure_clicks.py)
+        add_page_style(gui)  # wide tables scroll; the panel's edge shows its grip
         self.address = gui.add_text(
             "Address", default_address.url(), hint="wart://user@host:port/realm[/context]"
         )

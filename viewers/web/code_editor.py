@@ -57,10 +57,12 @@ LOADER_JS = (
     "if(t){(0,eval)(t.textContent+'\\n//# sourceURL=wart-editor.js');}}"
 )
 
-# At least 30 lines (1.45em each), more as the window grows; the panel scrolls.
+# Tall enough to work in, short enough that the run's output below it stays in view on a
+# 1280x800 laptop (12 to 40 lines as the window grows); its corner drags it taller.
 EDITOR_CSS = """
 .wart-editor .cm-editor { font-size: 13px; border: 1px solid #ced4da; border-radius: 4px;
-  height: max(calc(30 * 1.45em + 12px), calc(100vh - 260px)); background: #fff; }
+  height: clamp(calc(12 * 1.45em + 12px), calc(100vh - 470px), calc(40 * 1.45em + 12px));
+  resize: vertical; overflow: hidden; min-height: calc(8 * 1.45em + 12px); background: #fff; }
 .wart-editor .cm-editor.cm-focused { outline: 2px solid #228be6; }
 .wart-editor .cm-scroller { font-family: ui-monospace, Menlo, Consolas, monospace;
   line-height: 1.45; }

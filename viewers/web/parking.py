@@ -237,7 +237,8 @@ class ParkingLot:
             self._wake.clear()
 
     def _end(self, lab: ParkedLab, reason: str) -> None:
-        log.info("%s on %s: %s; the lab session ends", lab.user, lab.connection.address, reason)
+        where = lab.connection.address.label
+        log.info("%s on %s: %s; the lab session ends", lab.user, where, reason)
         lab.events.close()
         try:
             lab.connection.logout(keep_resume=True, reason=reason)

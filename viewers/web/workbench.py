@@ -34,6 +34,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,11 +61,12 @@ from viewers.web.marks import (
     format_problems,
 )
 from viewers.web.robot_panel import NONE, RobotPanel
-from viewers.web.text import escape_md
+from viewers.web.text import escape_md, output_html, printed
 
 log = logging.getLogger("wart.viewer.workbench")
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+RUN_OUTPUT_LINES = 200  # my run's printed lines kept under the editor
 EXAMPLE_PREFIX = "example: "
 MINE_PREFIX = "mine: "
 _FILE_NAME = re.compile(FILE_NAME_PATTERN)
@@ -86,6 +88,7 @@ class BenchMemory:
     status: str
     errors: tuple[Problem, ...]  # the run's exceptions so far
     shown: tuple[tuple[Problem, ...], str]  # the problems under the editor, and their heading
+    printed: tuple[str, ...]  # the run's output under the editor (HTML, escaped)
 
 
 class Workbench:
@@ -107,6 +110,7 @@ class Workbench:
         self._running_on: tuple[str, str] | None = None
         self._errors: list[Problem] = []
         self._shown: tuple[tuple[Problem, ...], str] = ((), "")
+        self._printed: deque[str] = deque(maxlen=RUN_OUTPUT_LINES)  # HTML, escaped
         # The context's news of my run counts up: a reply that arrives after the news
         # (a run can start, or end, before the query's answer is back) must not hide it.
         self._news = 0
@@ -126,6 +130,8 @@ class Workbench:
             self.code = gui.add_text("Code", first.decode("utf-8", "replace"), multiline=True)
             # CodeMirror over the text area above; it hides it and writes into it.
             self.editor = CodeEditor(client, self.code)
+            # My run's output right under the code: both in view at once on a laptop.
+            self.output = gui.add_html(self._output_html())
             # The robot the buttons below act on: this arena's robots and those of the
             # real arenas joined, beside the buttons (the robot panel's list follows it).
             self.target = gui.add_dropdown("Run on", (NONE,))
@@ -176,6 +182,7 @@ class Workbench:
             status=self.status.content,
             errors=tuple(self._errors),
             shown=self._shown,
+            printed=tuple(self._printed),
         )
 
     def _put_back(self, kept: BenchMemory) -> None:
@@ -186,6 +193,8 @@ class Workbench:
         self.status.content = kept.status
         if kept.target in self.target.options:
             set_value(self.target, kept.target)
+        self._printed.extend(kept.printed)
+        self.output.content = self._output_html()
         problems, heading = kept.shown
         if problems:
             self._show(list(problems), heading)
@@ -322,6 +331,8 @@ class Workbench:
             return
         name, source = ready
         self._running_on = (ctx, agent)
+        self._printed.clear()  # a new run: its output only (before its first line can come)
+        self.output.content = self._output_html()
         news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
@@ -550,15 +561,30 @@ class Workbench:
         if event.status in ("finished", "cancelled", "refused"):
             why = f": {event.reason}" if event.reason else ""
             self.say(f"Your controller on {event.agent} {event.status}{why}.")
+            self._print(f"<i>{printed(f'{event.status}{why}')}</i>")
             if event.status == "refused":
                 self._show([Problem(None, event.reason or "refused")], "The lab refused it")
         elif event.status == "running":
             self.say(f"Your controller runs on {event.agent}.")
+            self._print(f"<i>{printed(f'running on {event.agent}')}</i>")
+
+    def _output_html(self) -> str:
+        # Newest at the bottom and kept in view: a column drawn in reverse scrolls there.
+        body = output_html(self._printed, "Your run's output shows here.")
+        return (
+            '<div class="wart-run-output" style="max-height: 12em; overflow-y: auto; '
+            f'display: flex; flex-direction: column-reverse">{body}</div>'
+        )
+
+    def _print(self, line: str) -> None:
+        self._printed.append(line)
+        self.output.content = self._output_html()
 
     def on_output(self, event: OutputEvent) -> None:
         if event.user != self.connection.user or (event.ctx, event.agent) != self._running_on:
             return
         for text in event.lines:
+            self._print(printed(text))
             found = self._traceback.feed(text)
             if found is not None:
                 self._errors.append(found)

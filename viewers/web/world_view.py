@@ -129,6 +129,8 @@ class WorldView:
         self._labels: dict[int, viser.LabelHandle] = {}
         self._floor_clicks: Callable[[viser.SceneClickEvent], None] | None = None
         self._trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_POINTS)
+        # Where the camera was aimed to fit the arena, and for which canvas aspect.
+        self._fitted: tuple[tuple[float, float, float], float] | None = None
         self._trail_handle: viser.LineSegmentsHandle | None = None
         self._rays: viser.LineSegmentsHandle | None = None
         # The selected robot's look (its robot file's components), moved with it.
@@ -198,8 +200,39 @@ class WorldView:
                 aspect = geo.fit_aspect(float(cam.aspect))
             except AssertionError:  # not reported yet
                 aspect = geo.ASSUMED_ASPECT
-            cam.position = (cx, cy, geo.camera_height(snap.width, snap.height, aspect))
-            cam.look_at = (cx, cy, 0.0)
+            self._aim(cx, cy, aspect)
+
+    def _aim(self, cx: float, cy: float, aspect: float) -> None:
+        snap = self.snapshot
+        assert snap is not None
+        position = (cx, cy, geo.camera_height(snap.width, snap.height, aspect))
+        cam = self.client.camera
+        cam.position = position
+        cam.look_at = (cx, cy, 0.0)
+        self._fitted = (position, aspect)
+
+    def refit(self) -> bool:
+        """Aim again for a canvas the panel's width changed (dragged wider or narrower), as
+        long as the person has not moved the camera since it was aimed; True if it was."""
+        with self._lock:
+            fitted, snap = self._fitted, self.snapshot
+            if fitted is None or snap is None or self.follow:
+                return False
+            cam = self.client.camera
+            try:
+                aspect = geo.fit_aspect(float(cam.aspect))
+                position = tuple(float(v) for v in cam.position)
+            except AssertionError:  # not reported yet
+                return False
+            where, aimed = fitted
+            if max(abs(a - b) for a, b in zip(position, where, strict=True)) > 1e-3:
+                # Moved by hand (theirs, left alone), or a report from before the aim that
+                # a busy machine delivered late (the next one says where it is).
+                return False
+            if abs(aspect - aimed) <= 0.02 * aimed:
+                return False
+            self._aim(where[0], where[1], aspect)
+            return True
 
     def hide(self) -> None:
         with self._lock:
@@ -586,5 +619,6 @@ class WorldView:
 
     def slow_tick(self) -> None:
         self.follow_selected()
+        self.refit()
         for hook in list(self.slow_hooks):
             hook()

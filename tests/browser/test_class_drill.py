@@ -1,0 +1,153 @@
+"""A class in a room, in Chromium against a real lab: a teacher and three students at once.
+
+The students write, Check, dry-run and run in their own pages; one reloads mid-run
+and keeps the run; the teacher takes over a student's robot by keyboard (the view's
+camera unchanged) and hands it back; a graded submission fails and its student reads
+the error. Every assertion is what a person sees in the DOM or what the lab's
+services say, never pixels.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.runner.sandbox import sandbox_problem
+from tests.browser.conftest import ViserPage, wait_until
+from tests.browser.test_real_agents import choose, enter_arena
+from tests.browser.test_real_lab import session_of
+from tests.browser.test_workbench import INTO_THE_WALL, write_code
+from tests.kit.classroom import ASSIGNMENT, REPO, course_lab
+from tests.kit.reallab import RealLab
+from viewers.web.app import WebViewer
+from viewers.web.chat_panel import ChatPanel
+from viewers.web.drive_keys import BOX_LABEL
+from viewers.web.inputs import set_value
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]
+
+TICKING = """\
+from common.controller import Controller, Khepera
+
+
+class Ticking(Controller):
+    period = 0.05
+
+    def initialize(self, robot: Khepera) -> None:
+        self.ticks = 0
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(2, 2)
+        self.ticks += 1
+        if self.ticks % 20 == 0:
+            print(f"tick {self.ticks // 20}")
+"""
+GENTLE = TICKING.replace("Ticking", "Gentle").replace("set_speeds(2, 2)", "set_speeds(1, -1)")
+RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
+    problem = sandbox_problem()
+    if problem:
+        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
+    with course_lab(Path(tmp_path_factory.mktemp("classdrill")), slot=600.0) as env:
+        yield env
+
+
+@pytest.fixture
+def viewer(lab: RealLab) -> WebViewer:
+    return lab.viewer
+
+
+def ticks(page: ViserPage) -> list[int]:
+    text = " ".join(page.p.locator(".wart-run-output pre").all_inner_texts())
+    return [int(n) for n in re.findall(r"tick (\d+)", text)]
+
+
+def bench_of(panel: ChatPanel):  # type: ignore[no-untyped-def]
+    assert panel.workbench is not None
+    return panel.workbench
+
+
+def test_a_class_drill(open_page, lab: RealLab) -> None:
+    ida = open_page("ida")
+    alice, bob, carol = open_page("alice"), open_page("bob"), open_page("carol")
+    panels = {who: enter_arena(page, lab, who) for who, page in
+              (("ida", ida), ("alice", alice), ("bob", bob), ("carol", carol))}  # fmt: skip
+    klass = panels["ida"].klass
+    assert klass is not None
+    wait_until(lambda: klass.folder.visible, 15, what="ida's Class folder")
+
+    # Each student writes their controller and checks it.
+    plans = ((alice, "alice", TICKING, "k0"), (bob, "bob", INTO_THE_WALL, "k3"),
+             (carol, "carol", GENTLE, "k2"))  # fmt: skip
+    for page, who, code, robot in plans:
+        bench = bench_of(panels[who])
+        write_code(page, code, lambda b=bench, c=code: b.code.value == c)
+        choose(page, "Run on", robot)
+        wait_until(lambda b=bench, r=robot: b.target.value == r, 10, what=f"{who} on {robot}")
+    for page, _, _, _ in plans:
+        page.click("Check")
+    for page, _, _, _ in plans:
+        page.wait_text("Check: no problems found", timeout=15_000)
+
+    # At once: alice runs; bob and carol dry-run.
+    alice.click("Run in simulation")
+    bob.click("Dry run")
+    carol.click("Dry run")
+    alice.wait_text("Your controller runs on k0", timeout=60_000)
+    bob.wait_text("on k3: will run, with a warning: 1 collision", timeout=60_000)
+    carol.wait_text("Dry run of my_controller.py on k2 done: it will run,", timeout=60_000)
+    wait_until(lambda: ticks(alice), 30, what="alice's first print under her editor")
+
+    # Alice reloads mid-run: the run goes on, her page comes back as it was.
+    before = max(ticks(alice))
+    alice.p.reload()
+    alice.wait_ready()
+    alice.wait_text("Your controller runs on k0", timeout=30_000)
+    back = next(iter(session_of(lab.viewer, "alice").labs.values())).panels["arena"]
+    assert bench_of(back).code.value == TICKING
+    wait_until(lambda: ticks(alice) and max(ticks(alice)) > before, 30, what="prints go on")
+
+    # The teacher takes over alice's robot by keyboard, the view's camera unchanged.
+    ida.wait_text("k0, ", timeout=30_000)  # her live run in the class table
+    choose(ida, "Student", "alice")
+    wait_until(lambda: klass.student.value == "alice", 10, what="alice chosen")
+    ida.click("Take over their robot")
+    ida.wait_text("k0 taken over from alice: their controller is paused", timeout=15_000)
+    alice.wait_text("your robot is driven by ida since", timeout=15_000)
+    camera = session_of(lab.viewer, "ida").client.camera
+    facing = np.array(camera.wxyz)
+    ida.p.get_by_role("application", name=BOX_LABEL).click()
+    ida.p.keyboard.down("ArrowUp")
+    ida.p.keyboard.down("KeyD")
+    ida.p.wait_for_timeout(800)  # held as a person holds them; viser's keys would turn it
+    ida.p.keyboard.up("KeyD")
+    ida.p.keyboard.up("ArrowUp")
+    turned = 2 * np.degrees(np.arccos(min(1.0, abs(float(np.dot(facing, camera.wxyz))))))
+    assert turned < 1.0, f"the teacher's camera turned {turned:.1f} degrees while driving"
+    ida.click("Hand their robot back")
+    ida.wait_text("k0 handed back to alice's controller", timeout=15_000)
+    alice.wait_text("ida handed your robot back: your controller drives again", timeout=15_000)
+
+    # Carol hands in a controller that raises: she reads the error and its line.
+    set_value(bench_of(panels["carol"]).code, RAISES)
+    carol.p.get_by_text("Course", exact=True).first.click()
+    carol.click("Refresh assignments")
+    carol.wait_text("1 assignment(s) in your courses.")
+    choose(carol, "Assignment", ASSIGNMENT)
+    carol.click("Submit the editor's code")
+    carol.wait_text("ZeroDivisionError: division by zero on purpose", timeout=120_000)
+    carol.wait_text("your controller: line 13:", timeout=10_000)
+
+    # No run was lost: alice's is still hers, and Stop ends it.
+    assert back.robots is not None and back.robots.driven("k0")
+    alice.click("Stop")
+    alice.wait_text("Your controller on k0 cancelled", timeout=15_000)
+    for page in (ida, alice, bob, carol):
+        page.screenshot("class-drill-end")
