@@ -16,19 +16,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.browser.test_workbench import INTO_THE_WALL, write_code
+from tests.conftest import needs_sandbox
 from tests.kit.classroom import ASSIGNMENT, REPO, course_lab
 from tests.kit.reallab import RealLab
-from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.integration,
+    pytest.mark.timeout(400),
+    needs_sandbox,
+    pytest.mark.real_lab,
+]
 
 TICKING = """\
 from common.controller import Controller, Khepera
@@ -52,16 +57,8 @@ RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with course_lab(Path(tmp_path_factory.mktemp("classdrill")), slot=600.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def ticks(page: ViserPage) -> list[int]:

@@ -28,14 +28,14 @@ from common.client.agent_client import FINAL
 from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.recording import read_recording
-from services.registry.roster import RosterRow
 from tests.browser.conftest import CANVAS_AT_JS, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.agentkit import Motion, agent_user
-from tests.kit.courses import COURSE, add_course, assignment_toml
-from tests.kit.reallab import CTX, RealLab, real_lab
+from tests.kit.classroom import course_lab
+from tests.kit.courses import COURSE
+from tests.kit.reallab import CTX, RealLab
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
@@ -54,15 +54,7 @@ FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_b
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    with real_lab(Path(tmp_path_factory.mktemp("courselab")), agents=True, slot=300.0) as env:
-        rows = [
-            RosterRow(line=2, user="alice", name="Alice A"),
-            RosterRow(line=3, user="bob"),
-            RosterRow(line=4, user="carol"),
-            RosterRow(line=5, user="ida", role="teacher"),
-        ]
-        add_course(env.lab.db_path, rows, assignment_toml("reach-goal", episodes="1", seeds="[4]"))
-        env.lab.start_grader()
+    with course_lab(Path(tmp_path_factory.mktemp("courselab"))) as env:
         yield env
 
 
