@@ -19,6 +19,7 @@ import pytest
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
+from tests.browser.test_reload_keeps_the_run import TICKING
 from tests.browser.test_workbench import INTO_THE_WALL, write_code
 from tests.conftest import needs_sandbox
 from tests.kit.classroom import ASSIGNMENT, REPO, course_lab
@@ -35,22 +36,6 @@ pytestmark = [
     pytest.mark.real_lab,
 ]
 
-TICKING = """\
-from common.controller import Controller, Khepera
-
-
-class Ticking(Controller):
-    period = 0.05
-
-    def initialize(self, robot: Khepera) -> None:
-        self.ticks = 0
-
-    def do_work(self, robot: Khepera) -> None:
-        robot.set_speeds(2, 2)
-        self.ticks += 1
-        if self.ticks % 20 == 0:
-            print(f"tick {self.ticks // 20}")
-"""
 GENTLE = TICKING.replace("Ticking", "Gentle").replace("set_speeds(2, 2)", "set_speeds(1, -1)")
 RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
 
