@@ -297,6 +297,10 @@ class RobotLook(msgspec.Struct, frozen=True, kw_only=True):
     roles: Annotated[list[PartName], msgspec.Meta(max_length=2048)]
 
 
+MAX_ROBOT_FILE_BYTES = 64 * 1024  # common.robots.robotfile.MAX_BYTES
+RobotFileText = Annotated[str, msgspec.Meta(max_length=MAX_ROBOT_FILE_BYTES)]
+
+
 class WorldSnapshot(Message, frozen=True):
     """The whole world for a late joiner (reply of ``world/<world>/snapshot``)."""
 
@@ -325,6 +329,12 @@ class WorldSnapshot(Message, frozen=True):
     # Each robot type's look (types from robot files; none for a type written in Python).
     looks: Annotated[list[RobotLook], msgspec.Meta(max_length=64)] = msgspec.field(
         default_factory=list
+    )
+    # The robot file of each type its robots use that the lab does not ship (a type
+    # saved in the builder, a plugin's), by type name: a runner rebuilding this world
+    # for a dry run simulates them from these (common/sim2d/map_robots.py).
+    robot_files: Annotated[dict[Ident, RobotFileText], msgspec.Meta(max_length=32)] = msgspec.field(
+        default_factory=dict
     )
 
 
@@ -405,10 +415,16 @@ class MacCommand(Message, frozen=True):
 
 
 class AddItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
-    """Add an entry, written as in a map file's section (see docs/MAPS.md)."""
+    """Add an entry, written as in a map file's section (see docs/MAPS.md).
+
+    ``nearest_free`` (agents, round objects): the entry's x, y is where the user asked
+    for it (the arena's centre, or a click); the world puts it at the nearest spot
+    there where it touches nothing, and refuses only when the arena has none.
+    """
 
     section: Literal["obstacles", "objects", "lights", "zones", "agents"]
     entry: dict[str, Any]
+    nearest_free: bool = False
 
 
 class MoveItem(msgspec.Struct, frozen=True, tag=True, kw_only=True):
@@ -460,7 +476,6 @@ class EditResult(Message, frozen=True):
 
 
 RobotTypeName = Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_-]{0,31}$")]
-MAX_ROBOT_FILE_BYTES = 64 * 1024  # common.robots.robotfile.MAX_BYTES
 
 
 class RobotTypeRequest(Message, frozen=True):
@@ -474,7 +489,7 @@ class RobotTypeRequest(Message, frozen=True):
 
     action: Literal["list", "get", "save"]
     name: RobotTypeName | None = None  # get
-    text: Annotated[str, msgspec.Meta(max_length=MAX_ROBOT_FILE_BYTES)] | None = None  # save
+    text: RobotFileText | None = None  # save
 
 
 class RobotTypeInfo(msgspec.Struct, frozen=True, kw_only=True):

@@ -203,6 +203,30 @@ class Registry:
             return
         self.add_robot(data, source, origin)
 
+    def world_type(self, name: str, text: str) -> AgentTypeSpec:
+        """The type of a robot file a world carries (a map's ``robot_types``), for that
+        world alone: compiled against this process's components and never registered
+        here, so one lab's file cannot change another's type of the same name.
+
+        ValueError, in a user's words, if it cannot be: a refused file (every problem,
+        with its line), a file of another name, or a built-in type redefined.
+        """
+        origin = self.origins.get(("wart.agents", name))
+        if origin == BUILT_IN and text != self.texts.get(name):
+            raise ValueError(f"{name!r} is a type the lab ships; a world may not redefine it")
+        try:
+            spec = parse(text.encode("utf-8"), f"{name}.toml", self.components)
+        except RobotFileError as exc:
+            raise ValueError("; ".join(str(exc).splitlines())) from None
+        if spec.name != name:
+            raise ValueError(f"its robot file names it {spec.name!r}")
+        return spec
+
+    def travels(self, spec: AgentTypeSpec) -> bool:
+        """Must a world send this type's robot file along with its robots? Yes, unless the
+        lab ships it (every process has those); a type written in Python has no file."""
+        return bool(spec.text) and self.origins.get(("wart.agents", spec.name)) != BUILT_IN
+
     def describe_origin(self, group: str, name: str) -> str:
         return self.origins.get((group, name), "?")
 

@@ -156,7 +156,7 @@ def parse(
     checked = _validate(doc, _Lines(text), components)
     if isinstance(checked, list):
         raise RobotFileError(source, checked)
-    return _compile(*checked, source=source)
+    return _compile(*checked, source=source, text=text)
 
 
 def _validate(
@@ -281,7 +281,10 @@ def _validate(
 
 
 def _compile(
-    name: str, parts: list[tuple[str, type[ComponentType], dict[str, Any]]], source: str
+    name: str,
+    parts: list[tuple[str, type[ComponentType], dict[str, Any]]],
+    source: str,
+    text: str = "",
 ) -> AgentTypeSpec:
     by_role = {c.role: v for _, c, v in parts if c.role != "sensor"}
     body, drive = by_role["body"], by_role["drive"]
@@ -355,6 +358,7 @@ def _compile(
         ),
         components=tuple(ComponentInfo(n, c.name, c.role, v) for n, c, v in parts),
         source=source,
+        text=text,
     )
 
 

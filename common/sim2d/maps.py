@@ -15,10 +15,10 @@ from typing import Any
 
 from common.files import write_atomic
 from common.keys import is_ident
-from common.sim2d.agents import AGENT_TYPES
 from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.floor import FloorLayer, FloorLine
+from common.sim2d.map_robots import MapRobotTypes, RobotTypeError, carried_files
 from common.sim2d.world import EditError, World
 
 FORMAT = "wart-map"
@@ -177,9 +177,20 @@ def _shape(f: _Fields, allowed: tuple[str, ...]) -> tuple[ShapeSpec, float, floa
     return shape, x, y, heading
 
 
-def add_entry(world: World, section: str, entry: Any, path: str, text: str | None = None) -> None:
-    """Validate one map entry and add it to the world (edits use this too)."""
+def add_entry(
+    world: World,
+    section: str,
+    entry: Any,
+    path: str,
+    text: str | None = None,
+    types: MapRobotTypes | None = None,
+) -> None:
+    """Validate one map entry and add it to the world (edits use this too).
+
+    ``types``: the robot types the map carries besides the lab's (none: the lab's only).
+    """
     f = _Fields(entry, path, text)
+    types = types or MapRobotTypes()
     try:
         if section == "obstacles":
             ident = f.ident()
@@ -236,14 +247,15 @@ def add_entry(world: World, section: str, entry: Any, path: str, text: str | Non
             world.add_zone(ident, kind, shape, x, y, h, colour)
         elif section == "agents":
             ident = f.ident()
-            type_name = f.text_field("type", "khepera", tuple(sorted(AGENT_TYPES)))
+            type_name = f.text_field("type", "khepera", types.names())
+            spec = types.spec(type_name, ident)
             x, y, h = f.number("x"), f.number("y"), f.heading()
             gripper = f.boolean("gripper", True)
-            colour = f.colour(AGENT_TYPES[type_name].colour)
+            colour = f.colour(spec.colour)
             f.check_unknown()
-            world.add_agent(ident, AGENT_TYPES[type_name], x, y, h, gripper=gripper, colour=colour)
+            world.add_agent(ident, spec, x, y, h, gripper=gripper, colour=colour)
         elif section == "agent_groups":
-            _add_group(world, f)
+            _add_group(world, f, types)
         else:
             raise MapError(f"{path}: unknown section {section!r} (known: {', '.join(SECTIONS)})")
     except EditError as exc:
@@ -253,11 +265,13 @@ def add_entry(world: World, section: str, entry: Any, path: str, text: str | Non
             else ""
         )
         raise MapError(f"{where}{path}: {exc}") from None
+    except RobotTypeError as exc:  # it names the robot and its type: the user's words
+        raise MapError(str(exc)) from None
 
 
-def _add_group(world: World, f: _Fields) -> None:
+def _add_group(world: World, f: _Fields, types: MapRobotTypes) -> None:
     """Many agents on a grid: ``count`` of ``type`` named ``prefix0..`` inside ``area``."""
-    type_name = f.text_field("type", "khepera", tuple(sorted(AGENT_TYPES)))
+    type_name = f.text_field("type", "khepera", types.names())
     count = int(f.number("count", lo=1, hi=10_000))
     prefix = f.text_field("prefix", "k")
     f.used.add("area")
@@ -273,7 +287,7 @@ def _add_group(world: World, f: _Fields) -> None:
     f.check_unknown()
     cols = int((x1 - x0) // spacing)
     rows = int((y1 - y0) // spacing)
-    spec = AGENT_TYPES[type_name]
+    spec = types.spec(type_name, f"{prefix}0")
     placed = 0
     try:
         for cell in range(cols * rows):
@@ -334,8 +348,12 @@ def build_world(
         top = _Fields(data, "", text)
         for key in ("format", "version", "name", "description", *SECTIONS):
             top.used.add(key)
-        top.used.update(("arena", "floor"))
+        top.used.update(("arena", "floor", "robot_types"))
         top.check_unknown()
+        try:
+            types = MapRobotTypes.read(data.get("robot_types", {}))
+        except RobotTypeError as exc:
+            raise MapError(str(exc)) from None
         arena = _Fields(data.get("arena"), "arena", text)
         world = World(
             arena.number("width", positive=True),
@@ -356,7 +374,7 @@ def build_world(
             if not isinstance(entries, list):
                 raise MapError(f"{section}: must be a list [...]")
             for i, entry in enumerate(entries):
-                add_entry(world, section, entry, f"{section}[{i}]", text)
+                add_entry(world, section, entry, f"{section}[{i}]", text, types)
     except MapError as exc:
         raise MapError(f"{source}: {exc}") from None
     return world
@@ -502,6 +520,9 @@ def world_to_map(world: World, name: str) -> dict[str, Any]:
             for a in world.agents
         ],
     }
+    files = carried_files(a.spec for a in world.agents)
+    if files:  # the lab's own types need no file: every process has them
+        out["robot_types"] = files
     if world.floor is not None:
         out["floor"] = {
             "colour": world.floor.colour,

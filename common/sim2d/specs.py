@@ -175,6 +175,9 @@ class AgentTypeSpec:
     parts: tuple[PartSpec, ...] = ()
     components: tuple[ComponentInfo, ...] = ()  # empty: a spec written in Python
     source: str = ""  # the robot file it was compiled from
+    # That file's text: what a world sends along with its robots of this type, so a
+    # process without the file (a runner, the grader) can simulate them.
+    text: str = field(default="", compare=False, repr=False)
 
     @property
     def sensor_reach_mm(self) -> float:

@@ -293,8 +293,10 @@ class WorldTicker:
         # The discs drive in one compiled call, its sensing pass too where it runs
         # on one thread (fused.tick says why). Not while profiling: the profile times physics
         # and sensing apart, which the general path below does with the same
-        # results.
-        if s.drive == "discs" and not profile and s.agents:
+        # results. A world with no robots (all deleted) takes it too: the general path is
+        # numba's, loaded or compiled at its first use, seconds in which the world answers
+        # no snapshot or edit.
+        if s.drive == "discs" and not profile:
             self._step_fused(s)
             return
         # The fused state's buffers would fall behind this tick: built afresh if needed.

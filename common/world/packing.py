@@ -26,6 +26,7 @@ from common.messages import (
 from common.robots import registry as robot_registry
 from common.sim2d.collision import CAT_ROBOT
 from common.sim2d.entities import Agent, ShapeSpec
+from common.sim2d.map_robots import carried_files
 from common.sim2d.parts import parts_of
 from common.sim2d.world import World
 
@@ -273,6 +274,7 @@ def snapshot(world: World) -> WorldSnapshot:
         agents=agents,
         rows=rows(world),
         looks=looks(world),
+        robot_files=carried_files(a.spec for a in world.agents),
         floor_lines=[
             FloorLineInfo(points=list(line.points), width=line.width_mm, colour=line.colour)
             for line in (world.floor.lines if world.floor is not None else ())

@@ -10,6 +10,7 @@ a map loaded on request replaces the service's world there.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,8 @@ from common.robots import registry as robot_registry
 from common.robots.robotfile import RobotFileError
 from common.service import RequestError
 from common.sim2d import maps
+from common.sim2d.map_robots import MapRobotTypes
+from common.sim2d.placement import free_spot
 from common.sim2d.world import EditError, World
 from common.world.leases import LeaseBook
 from common.world.world_service import robot_types
@@ -137,10 +140,12 @@ class EngineEdits:
 
         def apply(world: World) -> Message:
             try:
-                self._apply_op(world, op)
+                done = self._apply_op(world, op)
             except (EditError, maps.MapError) as exc:
                 raise RequestError("conflict", str(exc)) from None
-            self._journal_append(edit)  # synced before the edit is acknowledged
+            # Synced before the edit is acknowledged; a robot placed at a free spot is
+            # journalled where it went, so a replay puts it there again.
+            self._journal_append(edit if done is op else WorldEdit(op=done))
             self.log.info("%s edited the world: %s", principal.user, type(op).__name__)
             return EditResult(layout=world.layout, detail=type(op).__name__)
 
@@ -167,9 +172,14 @@ class EngineEdits:
         return self.in_sim(apply)
 
     @staticmethod
-    def _apply_op(world: World, op: Any) -> None:
+    def _apply_op(world: World, op: Any) -> Any:
+        """Apply an edit op; the op as applied (an AddItem placed at a free spot: where)."""
         if isinstance(op, AddItem):
-            maps.add_entry(world, op.section, op.entry, op.section)
+            # The lab's types and those the world's map brought: a robot of either is added.
+            types = MapRobotTypes.of(a.spec for a in world.agents)
+            if op.nearest_free and op.section in ("agents", "objects"):
+                op = _placed(world, op, types)
+            maps.add_entry(world, op.section, op.entry, op.section, types=types)
         elif isinstance(op, MoveItem):
             world.move(op.id, op.x, op.y, op.heading)
             world.set_home(op.id)  # a robot a map editor placed starts there from now on
@@ -180,6 +190,7 @@ class EngineEdits:
             world.remove(op.id)
         elif isinstance(op, ResizeArena):
             world.resize(op.width, op.height)
+        return op
 
     def on_robots(self, query: zenoh.Query) -> Message:
         """The world's robot types: list and get (any user), save (``edit_map``).
@@ -250,3 +261,36 @@ class EngineEdits:
             return EditResult(layout=new_world.layout, detail=f"loaded {path.name}")
 
         return self.in_sim(swap)
+
+
+def _placed(world: World, op: AddItem, types: MapRobotTypes) -> AddItem:
+    """The robot (or round object) of ``op`` at the free spot nearest to where it was asked
+    for (EditError if the arena has none); an entry add_entry will refuse anyway, or of
+    another shape, is left as it is."""
+    entry = dict(op.entry)
+    asked = [
+        float(v)
+        for v in (entry.get("x"), entry.get("y"))
+        if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+    ]
+    if op.section == "agents":
+        name = entry.get("type", "khepera")
+        # A type the world carries is compiled already (its robots'): nothing can fail here.
+        spec = types.spec(name, "") if isinstance(name, str) and name in types else None
+        what, radius = f"a {name}", spec.radius_mm if spec is not None else None
+    else:
+        size: Any = entry.get("radius") if entry.get("shape") == "circle" else None
+        number = isinstance(size, int | float) and not isinstance(size, bool)
+        kind = entry.get("kind", "ball")
+        what = f"a {kind}" if isinstance(kind, str) else "it"
+        radius = float(size) if number and size > 0 else None
+    if radius is None or len(asked) != 2:
+        return op
+    spot = free_spot(world, radius, *asked)
+    if spot is None:
+        raise EditError(
+            f"no free spot for {what} ({2 * radius:.0f} mm across) in this arena: "
+            "move or remove something first"
+        )
+    entry["x"], entry["y"] = round(spot[0], 1), round(spot[1], 1)
+    return AddItem(section=op.section, entry=entry)

@@ -101,6 +101,8 @@ def snapshot_to_map(snap: WorldSnapshot) -> dict[str, Any]:
                 "period": light.period,
             }
         )
+    if snap.robot_files:  # types the lab does not ship: simulated from their files
+        out["robot_types"] = dict(snap.robot_files)
     for agent in snap.agents:
         out["agents"].append(
             {

@@ -7,6 +7,9 @@ world's new snapshot then reaches every view (the pump redraws on a version
 change), so the edit appears live for everyone. The gizmo is in this
 browser's scene only.
 
+"Add robot" asks for the arena's centre; a shift-click in the arena asks for that
+point. Either way the world puts the robot at the free spot nearest to it.
+
 Everyone in an arena gets the editor's folder; without edit_map its buttons
 are disabled and trying anyway (clicking an item) says why, in plain words.
 The engine re-checks edit_map on every edit: the page is only a convenience.
@@ -48,12 +51,13 @@ class MapEditor:
         self._gizmo: viser.TransformControlsHandle | None = None
         # Is this robot driven by someone's controller now? (set by the arena's panel)
         self.driven: Callable[[str], bool] = lambda _name: False
+        self._click: Callable[[viser.SceneClickEvent], None] | None = None  # shift-click
         gui = client.gui
         off = not allowed
         with gui.add_folder("Map editor", expand_by_default=False):
             self.info = gui.add_markdown(
                 "_Click an obstacle, ball, light or robot in the view to move, rotate or "
-                "delete it._"
+                "delete it; shift-click in the arena to add a robot there._"
                 if allowed
                 else f"**{escape_md(REFUSED)}**"
             )
@@ -102,6 +106,9 @@ class MapEditor:
                 names = ()
             if names:
                 self.robot_type.options = names
+        if self.allowed and self._click is None:
+            self._click = self._add_at_click
+            self.client.scene.on_click(modifier="shift")(self._click)
         if view.selected is not None:  # a robot clicked before the editor was bound to it
             self._robot_selected(view.selected)
 
@@ -119,6 +126,9 @@ class MapEditor:
                 view.on_obstacle_click.remove(self.select)
             if self._robot_selected in view.on_select:
                 view.on_select.remove(self._robot_selected)
+        if self._click is not None:
+            self.client.scene.remove_click_callback(self._click)
+            self._click = None
         self._drop_gizmo()
         self.view = self.feed = None
 
@@ -214,6 +224,15 @@ class MapEditor:
         edit = MapEdit("add", kind, x=x, y=y, w=NEW_BOX_MM, h=NEW_BOX_MM, robot_type=robot_type)
         self._send(feed, edit)
 
+    def _add_at_click(self, event: viser.SceneClickEvent) -> None:
+        """A shift-click in the arena: a robot of the chosen type asked for there."""
+        feed = self._ready()
+        at = _floor_point(event.ray_origin, event.ray_direction)
+        if feed is None or at is None:
+            return
+        robot_type = str(self.robot_type.value)
+        self._send(feed, MapEdit("add", "agent", x=at[0], y=at[1], robot_type=robot_type))
+
     def _delete(self) -> None:
         feed = self._ready()
         if feed is None or self.selected is None:
@@ -280,3 +299,15 @@ class MapEditor:
             return False
         self.notice.visible = False
         return True
+
+
+def _floor_point(
+    origin: tuple[float, float, float], direction: tuple[float, float, float]
+) -> tuple[float, float] | None:
+    """Where a click's ray meets the arena's floor (mm), or None if it never does."""
+    ox, oy, oz = origin
+    dx, dy, dz = direction
+    if abs(dz) < 1e-9 or -oz / dz < 0:
+        return None
+    t = -oz / dz
+    return geo.viser_to_world(ox + t * dx, oy + t * dy)

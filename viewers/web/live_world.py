@@ -492,4 +492,7 @@ def to_wire_edit(edit: MapEdit, snap: SceneLayout) -> Any:
         }
     else:
         raise LabError(f"cannot add a {edit.kind}")
-    return AddItem(section=_SECTIONS[edit.kind], entry=entry)  # type: ignore[arg-type]
+    # A robot or a ball goes to the free spot nearest where it was asked for (the world
+    # finds it); a box goes where it is put.
+    near = edit.kind in ("agent", "ball")
+    return AddItem(section=_SECTIONS[edit.kind], entry=entry, nearest_free=near)  # type: ignore[arg-type]

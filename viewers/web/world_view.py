@@ -28,6 +28,7 @@ import viser
 
 from viewers.web import geometry as geo
 from viewers.web.look import SelectedLook
+from viewers.web.view_camera import ArenaCamera
 from viewers.web.viser_fast import set_shared_arrays
 from viewers.web.world_feed import SceneFrame, SceneLayout, WorldFeed
 
@@ -129,12 +130,11 @@ class WorldView:
         self._labels: dict[int, viser.LabelHandle] = {}
         self._floor_clicks: Callable[[viser.SceneClickEvent], None] | None = None
         self._trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_POINTS)
-        # Where the camera was aimed to fit the arena, and for which canvas aspect.
-        self._fitted: tuple[tuple[float, float, float], float] | None = None
         self._trail_handle: viser.LineSegmentsHandle | None = None
         self._rays: viser.LineSegmentsHandle | None = None
         # The selected robot's look (its robot file's components), moved with it.
         self._look = SelectedLook(client)
+        self.camera = ArenaCamera(client)  # where this browser's camera looks
         self._static: list[viser.SceneNodeHandle] = []
         self._balls: list[viser.SceneNodeHandle] = []
         self._lights: list[viser.CylinderHandle] = []
@@ -192,47 +192,15 @@ class WorldView:
             self.redraw(feed.snapshot())
             snap = self.snapshot
             assert snap is not None
-            cx, cy = snap.width * geo.MM / 2, snap.height * geo.MM / 2
-            cam = self.client.camera
-            cam.fov = geo.CAMERA_FOV
-            cam.up_direction = (0.0, 1.0, 0.0)  # screen-up is world +y
-            try:  # the canvas the browser reported (the panel docked beside it takes the rest)
-                aspect = geo.fit_aspect(float(cam.aspect))
-            except AssertionError:  # not reported yet
-                aspect = geo.ASSUMED_ASPECT
-            self._aim(cx, cy, aspect)
-
-    def _aim(self, cx: float, cy: float, aspect: float) -> None:
-        snap = self.snapshot
-        assert snap is not None
-        position = (cx, cy, geo.camera_height(snap.width, snap.height, aspect))
-        cam = self.client.camera
-        cam.position = position
-        cam.look_at = (cx, cy, 0.0)
-        self._fitted = (position, aspect)
+            self.camera.aim(snap)
 
     def refit(self) -> bool:
-        """Aim again for a canvas the panel's width changed (dragged wider or narrower), as
-        long as the person has not moved the camera since it was aimed; True if it was."""
+        """Fit the arena again to a canvas that changed shape (see ArenaCamera.refit)."""
         with self._lock:
-            fitted, snap = self._fitted, self.snapshot
-            if fitted is None or snap is None or self.follow:
+            snap = self.snapshot
+            if snap is None or self.follow:
                 return False
-            cam = self.client.camera
-            try:
-                aspect = geo.fit_aspect(float(cam.aspect))
-                position = tuple(float(v) for v in cam.position)
-            except AssertionError:  # not reported yet
-                return False
-            where, aimed = fitted
-            if max(abs(a - b) for a, b in zip(position, where, strict=True)) > 1e-3:
-                # Moved by hand (theirs, left alone), or a report from before the aim that
-                # a busy machine delivered late (the next one says where it is).
-                return False
-            if abs(aspect - aimed) <= 0.02 * aimed:
-                return False
-            self._aim(where[0], where[1], aspect)
-            return True
+            return self.camera.refit(snap)
 
     def hide(self) -> None:
         with self._lock:
@@ -252,19 +220,21 @@ class WorldView:
         for callback in list(self.on_select):
             callback(index)
 
+    def _drop_extras(self) -> None:
+        """The selected robot's trail, rays and look: another robot, or none, is selected."""
+        self._trail.clear()
+        for extra in (self._trail_handle, self._rays):
+            if extra is not None:
+                extra.remove()
+        self._trail_handle = self._rays = None
+        self._drop_look()
+
     # -- drawing
 
     def _drop_selected(self) -> None:
         """No robot selected, and nothing drawn for the one that was."""
         self.selected = None
-        self._trail.clear()
-        if self._trail_handle is not None:
-            self._trail_handle.remove()
-            self._trail_handle = None
-        if self._rays is not None:
-            self._rays.remove()
-            self._rays = None
-        self._drop_look()
+        self._drop_extras()
 
     def _clear_all(self) -> None:
         for handle in [*self._static, *self._balls, *self._lights, *self._labels.values()]:
@@ -279,8 +249,19 @@ class WorldView:
         self._light_state = b""
 
     def redraw(self, snap: SceneLayout) -> None:
-        """Draw (or redraw after an edit) everything that comes from the snapshot."""
+        """Draw (or redraw after an edit) everything that comes from the snapshot.
+
+        The selected robot stays selected by its name (its index moves when a robot
+        before it is removed); once it is removed nothing is, and listeners are told.
+        """
         with self._lock:
+            name = self.selected_name
+            now = snap.robots.index(name) if name in snap.robots else None
+            reselected = now != self.selected
+            if reselected:
+                self.selected = now
+                if now is None:
+                    self._drop_extras()
             old = self.snapshot
             robots_changed = old is None or (old.robots, old.offline, old.robot_radii) != (
                 snap.robots,
@@ -369,6 +350,9 @@ class WorldView:
                     label.remove()
                 self._labels.clear()
                 self._draw_robots(snap)
+        if reselected:
+            for callback in list(self.on_select):
+                callback(now)
 
     def _obstacle_clicked(self, ident: str) -> Callable[[object], None]:
         def clicked(_event: object) -> None:
@@ -606,16 +590,8 @@ class WorldView:
                 return False
             if index >= len(drawn.positions):
                 return False
-            cam = self.client.camera
-            try:
-                moved = geo.follow_camera(cam.position, cam.look_at, drawn.positions[index, :2])
-            except AssertionError:  # the browser has not reported its camera yet
-                return False
-            if moved is None:
-                return False
-            with self.client.atomic():
-                cam.position, cam.look_at = moved
-            return True
+            x, y = drawn.positions[index, :2]
+            return self.camera.follow(float(x), float(y))
 
     def slow_tick(self) -> None:
         self.follow_selected()

@@ -42,3 +42,17 @@ def agent_type(name: str) -> AgentTypeSpec:
     except KeyError:
         known = ", ".join(sorted(AGENT_TYPES))
         raise ValueError(f"unknown agent type {name!r} (known: {known})") from None
+
+
+def world_type(name: str, text: str) -> AgentTypeSpec:
+    """A robot file a world carries, compiled for that world alone (ValueError: why not)."""
+    from common.robots import registry  # the registry imports sim2d: import when asked
+
+    return registry.default().world_type(name, text)
+
+
+def travels(spec: AgentTypeSpec) -> bool:
+    """Must a world send this type's robot file with its robots (not a type the lab ships)?"""
+    from common.robots import registry  # the registry imports sim2d: import when asked
+
+    return registry.default().travels(spec)
