@@ -47,6 +47,7 @@ from common.auth import (
     registry_box_key,
     resume_user,
 )
+from common.client.directory_calls import DirectoryCalls
 from common.client.private_mail import (
     PrivateText,
     mailbox_key_from_password,
@@ -68,8 +69,6 @@ from common.lab_errors import (
     WrongCredentials,
 )
 from common.messages import (
-    DirectoryReply,
-    DirectoryRequest,
     ErrorReply,
     KeyCredential,
     KickNotice,
@@ -84,7 +83,6 @@ from common.messages import (
     OkReply,
     PasswordCredential,
     PrivateMessage,
-    ResumeCheck,
     ResumeCredential,
     SealedLogin,
     SessionToken,
@@ -160,6 +158,9 @@ class LabClient:
         self.say = rooms.say
         self.kick = rooms.kick
         self.request = rooms.request
+        self.lobby = lobby = DirectoryCalls(realm, self._ask, lambda: self.resume_token)
+        self.directory = lobby.directory
+        self.check_resume = lobby.check_resume
         self.admin = admin = RegistryAdminCalls(realm, registry_key, self._ask)
         self.list_users = admin.list_users
         self.add_user = admin.add_user
@@ -323,19 +324,6 @@ class LabClient:
         for text in kept:
             self.on_private(text)
         return kept
-
-    def check_resume(self) -> None:
-        """Ask whether this session's resume token is still good; LabError in words if not."""
-        if self.session is None:
-            raise NotLoggedIn("log in first")
-        if self.resume_token is None:
-            raise NotLoggedIn("this session has no saved login")
-        self._ask(
-            keys.registry_directory(self.realm),
-            ResumeCheck(token=self.resume_token),
-            OkReply,
-            "saved login",
-        )
 
     def resume(
         self, token: bytes, *, ttl: float = 12 * 3600.0, wait: float | None = None
@@ -527,13 +515,6 @@ class LabClient:
         finally:
             self.session = None
             self._undeclare()
-
-    # -- directory
-
-    def directory(self) -> DirectoryReply:
-        return self._ask(
-            keys.registry_directory(self.realm), DirectoryRequest(), DirectoryReply, "directory"
-        )
 
     # -- private messages
 
