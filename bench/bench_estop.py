@@ -32,9 +32,7 @@ from common.client.agent_client import FINAL
 from tests.kit.agentkit import (
     Motion,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
+    start_agent_lab,
 )
 from tests.kit.lab import Procs, make_lab, start_router
 from tests.kit.waits import wait_for
@@ -57,10 +55,7 @@ def main() -> int:
     try:
         router = start_router(procs, f"bench{int(time.time()) % 100000}")
         lab = make_lab(router, procs, tmp)
-        lab.start_registry()
-        start_engine(lab, identity=True)
-        start_runner(lab)
-        start_agent_context(lab, slot=300.0)
+        start_agent_lab(lab, identity=True, slot=300.0)
         with (
             lab.zsession() as z,
             agent_user(lab, "alice") as alice,

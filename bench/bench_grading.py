@@ -27,7 +27,6 @@ from common.messages import SubmissionInfo
 from common.service import close_session
 from services.grader.assignment import parse_assignment
 from services.grader.grading_db import GradingStore
-from services.lab import wiring
 from services.registry.accounts_db import RegistryDB
 from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
@@ -95,9 +94,8 @@ def main(argv: list[str] | None = None) -> int:
             GradingStore(db.database).put_assignment(assignment, map_text)
             db.close()
             lab.start_registry()
-            lab.account(wiring.service_account("grader", "grader"))
             lab.start_runner()
-            lab.start(wiring.grader_spec(lab.wiring()), name="grader")
+            lab.start_grader()
             session = lab.zsession()
             clients = []
             for s in students:  # logins first: the window measures grading, not argon2id

@@ -28,7 +28,6 @@ from common.client.grader_client import GraderClient
 from common.client.lab_client import LabClient
 from services.grader.assignment import parse_assignment
 from services.grader.grading_db import GradingStore
-from services.lab import wiring
 from services.registry.accounts_db import RegistryDB
 from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
@@ -97,8 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         assignment, map_text = parse_assignment(text.encode(), "a.toml", REPO / "maps")
         store = GradingStore(db.database)
         store.put_assignment(assignment, map_text)
-        lab.lab.account(wiring.service_account("grader", "grader"))
-        lab.lab.start(wiring.grader_spec(lab.lab.wiring()), name="grader")
+        lab.lab.start_grader()
 
         browser = pw.chromium.launch(
             executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True

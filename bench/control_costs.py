@@ -17,10 +17,11 @@ from bench.control_timing import WORLD
 from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.controller import RobotCommand
-from common.messages import AgentCommand, Lease, SensorSample, decode, encode
-from common.world.leasemac import WorldBoxKeys, mac_command, new_lease_key, seal_key
+from common.messages import AgentCommand, SensorSample, decode, encode
+from common.world.leasemac import WorldBoxKeys, mac_command, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import agent_command, state_from_sample
+from tests.kit.leases import mac_lease
 
 
 def _past(counts: list[int], i: int, seen: int) -> bool:
@@ -40,17 +41,8 @@ def command_costs(n: int = 5000) -> None:
     )
     k = new_lease_key()
     now = time.time()
-    lease = Lease(
-        lease_id="L0",
-        world=WORLD,
-        agent="k0",
-        holder_user="c0",
-        holder_session=holder.session_id,
-        start=now,
-        end=now + 600,
-        holder_key=seal_key(k, holder.keys.box_public_key),
-        world_key=seal_key(k, world.keys.box_public_key),
-        world_box=world.keys.box_public_key,
+    lease = mac_lease(
+        k, holder, world, lease_id="L0", world_name=WORLD, agent="k0", start=now, end=now + 600
     )
     lkey = keys.agent_lease(realm, WORLD, "k0")
     book.accept_lease(lkey, context.seal(lkey, lease))

@@ -46,67 +46,29 @@ from common.messages import (
     AgentCommand,
     BundledCommand,
     CommandBundle,
-    Lease,
     MacCommandBundle,
     SampleBundle,
     SensorSample,
     decode,
     encode,
 )
-from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
+from tests.kit.fakezenoh import FakePublisher, FakeSample, FakeSession
+from tests.kit.leases import grant_on, mac_lease
 
 REALM, WORLD = "bench", "swarm"
 
 
-class _Payload:
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-
-    def to_bytes(self) -> bytes:
-        return self.data
-
-
-class _Sample:
-    def __init__(self, data: bytes) -> None:
-        self.payload = _Payload(data)
-
-
-class _Publisher:
-    def __init__(self) -> None:
-        self.puts: list[bytes] = []
-
-    def put(self, payload: bytes) -> None:
-        self.puts.append(payload)
-
-    def undeclare(self) -> None:
-        pass
-
-
-class _Session:
-    """Just enough of a zenoh.Session: puts are kept, callbacks called by hand."""
-
-    def __init__(self) -> None:
-        self.publishers: dict[str, _Publisher] = {}
-        self.callbacks: dict[str, Callable[[Any], None]] = {}
-
-    def declare_publisher(self, key: str, **_: Any) -> _Publisher:
-        return self.publishers.setdefault(key, _Publisher())
-
-    def declare_subscriber(self, key: str, callback: Callable[[Any], None]) -> _Publisher:
-        self.callbacks[key] = callback
-        return _Publisher()
-
-
-def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, _Session]:
+def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, FakeSession]:
     identity = RegistryIdentity.generate()
     runner = issue_session(identity, REALM, "runner", ["control"])
     world = issue_session(identity, REALM, "engine-swarm", ["world"])
     context = issue_session(identity, REALM, "ctx", ["lease"])
     verifier = Verifier(identity.verify_key, REALM)
     book = LeaseBook(REALM, WORLD, verifier, WorldBoxKeys(lambda: world))
-    zs = _Session()
+    zs = FakeSession()
     channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
     links = {}
     now = time.time()
@@ -123,22 +85,17 @@ def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, _
             channel=channel,
         )
         k = new_lease_key()
-        lease = Lease(
+        lease = mac_lease(
+            k,
+            runner,
+            world,
             lease_id=f"L{i}",
-            world=WORLD,
+            world_name=WORLD,
             agent=agent,
-            holder_user="runner",
-            holder_session=runner.session_id,
             start=now - 1,
             end=now + 3600,
-            holder_key=seal_key(k, runner.keys.box_public_key),
-            world_key=seal_key(k, world.keys.box_public_key),
-            world_box=world.keys.box_public_key,
         )
-        key = keys.agent_lease(REALM, WORLD, agent)
-        sealed = context.seal(key, lease)
-        book.accept_lease(key, sealed)
-        zs.callbacks[key](_Sample(sealed))  # the link opens its copy of K
+        grant_on(zs, book, context, REALM, lease)  # the link opens its copy of K
         assert links[agent]._mac_lease is not None
     return channel, links, book, zs
 
@@ -229,11 +186,11 @@ def main() -> int:
 
     channel.on_swarm(react)
     mine = set(agents)
-    peer_pub = _Publisher()
+    peer_pub = FakePublisher()
 
     def client_ours() -> None:
         for _ in range(ticks):
-            on_samples(_Sample(samples_in))
+            on_samples(FakeSample(samples_in))
         pub.puts.clear()
 
     def client_peer() -> None:  # plain_peer.controllers' on_bundle, --inline

@@ -8,6 +8,7 @@ wait_for are re-exported here for the tests that import them from this file.
 
 from __future__ import annotations
 
+import functools
 import uuid
 import zlib
 from collections.abc import Iterator
@@ -17,10 +18,18 @@ import pytest
 import zenoh
 
 from common import keys
+from common.client import lab_client
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
+from services.runner.sandbox import sandbox_problem
 from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
+
+_SANDBOX_PROBLEM = sandbox_problem()
+# For the tests that run controllers in the runner's real sandbox.
+needs_sandbox = pytest.mark.skipif(
+    _SANDBOX_PROBLEM is not None, reason=f"no sandbox: {_SANDBOX_PROBLEM}"
+)
 
 
 def pytest_itemcollected(item: pytest.Item) -> None:
@@ -51,8 +60,13 @@ def realm() -> str:
 
 
 @pytest.fixture
-def router(procs: Procs, realm: str) -> Iterator[Router]:
-    """A real ``wart router`` process on a free 127.0.0.1 port, multicast scouting off."""
+def router(request: pytest.FixtureRequest, procs: Procs, realm: str) -> Iterator[Router]:
+    """A real ``wart router`` process on a free 127.0.0.1 port, multicast scouting off; in a
+    module marked ``shared_router``, this test's own realm on the module's router instead."""
+    if request.node.get_closest_marker("shared_router") is not None:
+        module_router: Router = request.getfixturevalue("module_router")
+        yield module_router.in_realm(realm)
+        return
     r = start_router(procs, realm)
     yield r
     r.proc.stop()
@@ -63,7 +77,7 @@ def module_router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Router]:
     """One ``wart router`` for a whole module. A router routes any realm and every key a
     test uses is under its realm, so a module whose tests neither stop nor restart their
     router may give each test its own realm on this one (about 2 s a test on a busy
-    machine), by overriding ``router`` with ``module_router.in_realm(realm)``."""
+    machine), marked ``shared_router``."""
     procs = Procs(tmp_path_factory.mktemp("router"))
     r = start_router(procs, f"t{uuid.uuid4().hex[:10]}")
     yield r
@@ -86,3 +100,19 @@ def alive_watch(zsession: zenoh.Session, router: Router) -> Iterator[AliveWatch]
     watch = AliveWatch(zsession, keys.alive_all(router.realm))
     yield watch
     watch.close()
+
+
+@pytest.fixture
+def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each client derives its mailbox key from the password (argon2id) before it asks:
+    derive each once, for the tests of the registry's side.
+
+    On a student's machine that is their own CPU; here it is the test's, and on a busy
+    machine it can outlast the 2 s a slowed source must wait after its third failure,
+    so the throttle would have lapsed before the next try arrives.
+    """
+    monkeypatch.setattr(
+        lab_client,
+        "mailbox_key_from_password",
+        functools.cache(lab_client.mailbox_key_from_password),
+    )

@@ -6,6 +6,7 @@ Services log in with an Ed25519 identity key registered for their account
 
 from __future__ import annotations
 
+import argparse
 import logging
 import threading
 import time
@@ -22,6 +23,7 @@ from common.auth import Session, load_identity_key, parse_public_key
 from common.client.lab_client import LabClient
 from common.lab_errors import LabError, NotLoggedIn, RateLimited, RegistryUnreachable
 from common.messages import LoginVouch
+from common.zconfig import NetworkOptions
 
 log = logging.getLogger("wart.client")
 
@@ -137,6 +139,15 @@ class ServiceCredentials:
         if not registry_key_hex:
             raise ValueError(f"--registry-key is required: the {what} must know whom to trust")
         return cls(parse_public_key(registry_key_hex), user, load_identity_key(identity_file))
+
+    @classmethod
+    def of_service(
+        cls, kind: str, args: argparse.Namespace, options: NetworkOptions
+    ) -> ServiceCredentials:
+        """A service's ``--name`` checked as a ``kind`` id, then its account's credentials
+        from the flags cli.add_account_arguments adds (ValueError as from_options)."""
+        keys.check_ident(kind, args.name)
+        return cls.from_options(options.registry_key, args.user, args.identity, kind)
 
     def login(
         self, session: zenoh.Session, realm: str, what: str, wait: float = 120.0

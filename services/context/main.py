@@ -7,6 +7,7 @@ world (agent_queue.py), and grants each controller its time slot.
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -19,10 +20,24 @@ from common.messages import MAX_LINE_CHARS
 from common.recording.store import RecordingStore
 from common.robots import registry
 from common.service import run_service
+from common.zconfig import NetworkOptions
 from services.context import agent_context, chat_room
 from services.context.agent_context import AgentContext
 from services.context.chat_room import ChatRoom, log
 from services.context.recordings import recordings_dir
+
+
+def _checked_credentials(
+    kind: str, args: argparse.Namespace, options: NetworkOptions, *idents: tuple[str, str]
+) -> ServiceCredentials:
+    """A context's --name (a ``kind`` id), then ``idents`` (what, value) and --owner checked,
+    then its service account's credentials (ValueError saying what is wrong)."""
+    keys.check_ident(kind, args.name)
+    for what, value in idents:
+        keys.check_ident(what, value)
+    if args.owner:
+        keys.check_ident("owner", args.owner)
+    return ServiceCredentials.from_options(options.registry_key, args.user, args.identity, kind)
 
 
 def chat_main(argv: Sequence[str] | None = None, prog: str = "wart context chat") -> int:
@@ -34,12 +49,7 @@ def chat_main(argv: Sequence[str] | None = None, prog: str = "wart context chat"
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
-        keys.check_ident("room", args.name)
-        if args.owner:
-            keys.check_ident("owner", args.owner)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "room"
-        )
+        credentials = _checked_credentials("room", args, options)
     except ValueError as exc:
         return cli.fail(str(exc))
     if not (1 <= args.history <= 100_000 and 1 <= args.max_line <= 16_000):
@@ -97,13 +107,8 @@ def agent_main(argv: Sequence[str] | None = None, prog: str = "wart context agen
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
-        keys.check_ident("context", args.name)
-        keys.check_ident("world", args.world)
-        keys.check_ident("runner", args.runner)
-        if args.owner:
-            keys.check_ident("owner", args.owner)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "context"
+        credentials = _checked_credentials(
+            "context", args, options, ("world", args.world), ("runner", args.runner)
         )
     except ValueError as exc:
         return cli.fail(str(exc))

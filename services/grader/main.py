@@ -8,7 +8,7 @@ from pathlib import Path
 
 import zenoh
 
-from common import cli, keys
+from common import cli
 from common.client.service_login import ServiceCredentials
 from common.service import run_service
 from services.grader import service
@@ -52,10 +52,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
-        keys.check_ident("grader", args.name)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "grader"
-        )
+        credentials = ServiceCredentials.of_service("grader", args, options)
     except ValueError as exc:
         return cli.fail(str(exc))
     if not 1 <= args.workers <= 64:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import zenoh
 
-from common import cli, keys
+from common import cli
 from common.client.service_login import ServiceCredentials
 from common.service import run_service
 from services.lti import service
@@ -66,10 +66,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart lti") -> int:
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
-        keys.check_ident("lti", args.name)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "lti"
-        )
+        credentials = ServiceCredentials.of_service("lti", args, options)
         config = load(args.platforms)
         key, made = load_or_create(args.state_dir / "lti-tool-key.pem")
     except (ValueError, ConfigError) as exc:

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import zenoh
 
-from common import cli, keys
+from common import cli
 from common.client.service_login import ServiceCredentials
 from common.service import run_service
 from services.runner import service
@@ -43,10 +43,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
-        keys.check_ident("runner", args.name)
-        credentials = ServiceCredentials.from_options(
-            options.registry_key, args.user, args.identity, "runner"
-        )
+        credentials = ServiceCredentials.of_service("runner", args, options)
     except ValueError as exc:
         return cli.fail(str(exc))
     if not (1 <= args.cpu_seconds <= 3600 and 64 <= args.memory_mb <= 8192):

@@ -76,7 +76,13 @@ def fake_lab() -> Iterator[DemoLab]:
 
 
 @pytest.fixture
-def viewer(fake_lab: DemoLab, tmp_path: Path) -> Iterator[WebViewer]:
+def viewer(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[WebViewer]:
+    """The viewer open_page opens: the demo lab's; in a module marked ``real_lab``, the
+    viewer of the module's ``lab`` fixture (a RealLab, tests/kit/reallab.py)."""
+    if request.node.get_closest_marker("real_lab") is not None:
+        yield request.getfixturevalue("lab").viewer
+        return
+    fake_lab: DemoLab = request.getfixturevalue("fake_lab")
     app = WebViewer(
         DemoConnector(("lab", fake_lab)),
         port=free_port(),

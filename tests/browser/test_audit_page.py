@@ -15,19 +15,15 @@ import pytest
 from common.lab_errors import Banned
 from tests.browser.test_real_lab import log_in
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.viser_fast import browser_address
+
+pytestmark = pytest.mark.real_lab
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("auditlab"))) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer  # open_page (conftest) opens this viewer
 
 
 def test_an_admin_bans_from_the_page_and_reads_the_audit_trail(open_page, lab: RealLab) -> None:

@@ -17,52 +17,34 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
+from tests.browser.test_reload_keeps_the_run import TICKING
 from tests.browser.test_workbench import INTO_THE_WALL, write_code
+from tests.conftest import needs_sandbox
 from tests.kit.classroom import ASSIGNMENT, REPO, course_lab
 from tests.kit.reallab import RealLab
-from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.integration,
+    pytest.mark.timeout(400),
+    needs_sandbox,
+    pytest.mark.real_lab,
+]
 
-TICKING = """\
-from common.controller import Controller, Khepera
-
-
-class Ticking(Controller):
-    period = 0.05
-
-    def initialize(self, robot: Khepera) -> None:
-        self.ticks = 0
-
-    def do_work(self, robot: Khepera) -> None:
-        robot.set_speeds(2, 2)
-        self.ticks += 1
-        if self.ticks % 20 == 0:
-            print(f"tick {self.ticks // 20}")
-"""
 GENTLE = TICKING.replace("Ticking", "Gentle").replace("set_speeds(2, 2)", "set_speeds(1, -1)")
 RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with course_lab(Path(tmp_path_factory.mktemp("classdrill")), slot=600.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def ticks(page: ViserPage) -> list[int]:

@@ -15,48 +15,34 @@ from pathlib import Path
 import pytest
 
 from common.client.grader_client import GraderClient
-from services.grader.assignment import parse_assignment
-from services.grader.grading_db import GradingStore
-from services.lab import wiring
-from services.registry.accounts_db import RegistryDB
-from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
-from services.runner.sandbox import sandbox_problem
 from tests.browser.test_real_agents import enter_arena
-from tests.kit.courses import assignment_toml
+from tests.conftest import needs_sandbox
+from tests.kit.courses import add_course, assignment_toml
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(400)]
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.integration,
+    pytest.mark.timeout(400),
+    needs_sandbox,
+    pytest.mark.real_lab,
+]
 REPO = Path(__file__).resolve().parents[2]
 GRADING = REPO / "tests" / "integration" / "grading"
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with real_lab(Path(tmp_path_factory.mktemp("competelab")), agents=True) as env:
-        db = RegistryDB(env.lab.db_path)
         rows = [
             RosterRow(line=2, user="alice", name="Alice A", team="ants"),
             RosterRow(line=3, user="bob", name="Bob B", team="zebras"),
             RosterRow(line=4, user="ida", name="Ida I", role="teacher"),
         ]
-        CourseStore(db).import_roster("robotics-26", rows)
-        text = assignment_toml("reach-goal", episodes="1", seeds="[4]")
-        assignment, map_text = parse_assignment(text.encode(), "a.toml", REPO / "maps")
-        GradingStore(db.database).put_assignment(assignment, map_text)
-        db.close()
-        env.lab.account(wiring.service_account("grader", "grader"))
-        env.lab.start(wiring.grader_spec(env.lab.wiring()), name="grader")
+        add_course(env.lab.db_path, rows, assignment_toml("reach-goal", episodes="1", seeds="[4]"))
+        env.lab.start_grader()
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def test_a_student_sees_the_ranking_change_as_heats_end(open_page, lab: RealLab) -> None:

@@ -28,57 +28,34 @@ from common.client.agent_client import FINAL
 from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.recording import read_recording
-from services.grader.assignment import parse_assignment
-from services.grader.grading_db import GradingStore
-from services.lab import wiring
-from services.registry.accounts_db import RegistryDB
-from services.registry.courses_db import CourseStore
-from services.registry.roster import RosterRow
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import CANVAS_AT_JS, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
+from tests.conftest import needs_sandbox
 from tests.kit.agentkit import Motion, agent_user
-from tests.kit.courses import assignment_toml
-from tests.kit.reallab import CTX, RealLab, real_lab
-from viewers.web.app import WebViewer
+from tests.kit.classroom import course_lab
+from tests.kit.courses import COURSE
+from tests.kit.reallab import CTX, RealLab
 from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.timeout(300)]
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.integration,
+    pytest.mark.timeout(300),
+    needs_sandbox,
+    pytest.mark.real_lab,
+]
 REPO = Path(__file__).resolve().parents[2]
 WORKS = (REPO / "tests" / "integration" / "grading" / "works.py").read_text()
 RAISES = (REPO / "tests" / "integration" / "grading" / "raises.py").read_text()
 FORWARD = (REPO / "tests" / "integration" / "controllers" / "forward.py").read_bytes()
-COURSE = "robotics-26"
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
-    with real_lab(Path(tmp_path_factory.mktemp("courselab")), agents=True, slot=300.0) as env:
-        db = RegistryDB(env.lab.db_path)
-        rows = [
-            RosterRow(line=2, user="alice", name="Alice A"),
-            RosterRow(line=3, user="bob"),
-            RosterRow(line=4, user="carol"),
-            RosterRow(line=5, user="ida", role="teacher"),
-        ]
-        CourseStore(db).import_roster(COURSE, rows)
-        text = assignment_toml("reach-goal", episodes="1", seeds="[4]")
-        assignment, map_text = parse_assignment(text.encode(), "a.toml", REPO / "maps")
-        GradingStore(db.database).put_assignment(assignment, map_text)
-        db.close()
-        env.lab.account(wiring.service_account("grader", "grader"))
-        env.lab.start(wiring.grader_spec(env.lab.wiring()), name="grader")
+    with course_lab(Path(tmp_path_factory.mktemp("courselab"))) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def cell(page, name: str):  # type: ignore[no-untyped-def]

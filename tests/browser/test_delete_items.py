@@ -18,9 +18,8 @@ from tests.browser.conftest import wait_until
 from tests.browser.test_real_agents import enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
 
 
 @pytest.fixture(scope="module")
@@ -28,11 +27,6 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     tmp = Path(tmp_path_factory.mktemp("deletelab"))
     with real_lab(tmp, "empty", agents=True) as env:  # one Khepera, k1, at the centre
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer  # the page under test is this lab's
 
 
 def test_deleting_robots_and_a_ball_logs_nothing(

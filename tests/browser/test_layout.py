@@ -9,6 +9,8 @@ the docked panel nor off the window.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 from playwright.sync_api import expect
@@ -22,6 +24,7 @@ from tests.browser.conftest import (
 )
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
+from viewers.web.client import BrowserSession
 from viewers.web.demo_lab import DemoLab
 from viewers.web.demo_world import DemoWorld
 
@@ -62,6 +65,28 @@ def misplaced(page: object, cam: object, arena: tuple[float, float]) -> list[str
     return wrong
 
 
+@contextmanager
+def _in_the_arena(
+    chromium: object, viewer: WebViewer, request: pytest.FixtureRequest, size: tuple[int, int]
+) -> Iterator[tuple[ViserPage, BrowserSession]]:
+    """ana's page in a window of ``size``, logged in and joined to the arena, its camera
+    aimed; the browser context is closed after."""
+    context = new_test_context(chromium, {"width": size[0], "height": size[1]})
+    try:
+        page = context.new_page()  # type: ignore[attr-defined]
+        vp = ViserPage(page, f"{request.node.name}")
+        page.goto(page_url(viewer.url))
+        vp.wait_ready()
+        vp.log_in("127.0.0.1", "ana", "ana-pw")
+        vp.click("Join arena")
+        session = next(iter(viewer.sessions.values()))
+        wait_until(lambda: session.view.snapshot is not None, what="the arena in the view")
+        wait_for_aimed_camera(session.view)
+        yield vp, session
+    finally:
+        context.close()  # type: ignore[attr-defined]
+
+
 @pytest.mark.parametrize("size", [(1280, 800), (1920, 1080)])
 @pytest.mark.parametrize("arena", [(2000.0, 2000.0), (3000.0, 1200.0)])
 def test_the_whole_arena_is_on_the_canvas_beside_the_panel(
@@ -75,17 +100,8 @@ def test_the_whole_arena_is_on_the_canvas_beside_the_panel(
     old = fake_lab.worlds["arena"]
     fake_lab.worlds["arena"] = DemoWorld("arena", 4, width=arena[0], height=arena[1])
     old.stop()
-    context = new_test_context(chromium, {"width": size[0], "height": size[1]})
-    try:
-        page = context.new_page()  # type: ignore[attr-defined]
-        vp = ViserPage(page, f"{request.node.name}")
-        page.goto(page_url(viewer.url))
-        vp.wait_ready()
-        vp.log_in("127.0.0.1", "ana", "ana-pw")
-        vp.click("Join arena")
-        session = next(iter(viewer.sessions.values()))
-        wait_until(lambda: session.view.snapshot is not None, what="the arena in the view")
-        wait_for_aimed_camera(session.view)
+    with _in_the_arena(chromium, viewer, request, size) as (vp, session):
+        page = vp.p
         left, _top, width, height = page.evaluate(CANVAS_JS)
         assert left + width <= size[0] and height > 0
         wait_until(
@@ -97,8 +113,6 @@ def test_the_whole_arena_is_on_the_canvas_beside_the_panel(
             "aria-selected", "true", timeout=15_000
         )
         vp.screenshot(f"arena-{arena[0]:.0f}x{arena[1]:.0f}-at-{size[0]}x{size[1]}")
-    finally:
-        context.close()  # type: ignore[attr-defined]
 
 
 GRIP_JS = """() => getComputedStyle(
@@ -110,17 +124,8 @@ def test_on_a_laptop_code_and_output_are_in_view_together_and_the_panel_widens(
 ) -> None:
     """1280x800: the editor and its run's output fit the window at once; the panel's edge
     shows a grip, dragging it widens the panel, and the arena is fitted again beside it."""
-    context = new_test_context(chromium, {"width": 1280, "height": 800})
-    try:
-        page = context.new_page()  # type: ignore[attr-defined]
-        vp = ViserPage(page, f"{request.node.name}")
-        page.goto(page_url(viewer.url))
-        vp.wait_ready()
-        vp.log_in("127.0.0.1", "ana", "ana-pw")
-        vp.click("Join arena")
-        session = next(iter(viewer.sessions.values()))
-        wait_until(lambda: session.view.snapshot is not None, what="the arena in the view")
-        wait_for_aimed_camera(session.view)
+    with _in_the_arena(chromium, viewer, request, (1280, 800)) as (vp, session):
+        page = vp.p
         arena = (session.view.snapshot.width, session.view.snapshot.height)  # type: ignore[union-attr]
 
         editor = page.locator(".wart-editor .cm-editor").first
@@ -148,5 +153,3 @@ def test_on_a_laptop_code_and_output_are_in_view_together_and_the_panel_widens(
             what="the arena fitted again beside the wider panel",
         )
         vp.screenshot("panel-widened")  # for a person (the camera may still be gliding)
-    finally:
-        context.close()  # type: ignore[attr-defined]

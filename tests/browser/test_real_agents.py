@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import (
     CANVAS_AT_JS,
     ViserPage,
@@ -28,13 +27,12 @@ from tests.browser.conftest import (
     wait_until,
 )
 from tests.browser.test_real_lab import session_of
-from tests.conftest import REPO
+from tests.conftest import REPO, needs_sandbox
 from tests.kit.reallab import CTX, PASSWORD, WORLD, RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.tabs import tab_label
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 SLOT = 30.0
 BRAITENBERG = REPO / "examples" / "01_braitenberg.py"
@@ -56,16 +54,8 @@ class Hello(Controller):
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with real_lab(Path(tmp_path_factory.mktemp("agentlab")), agents=True, slot=SLOT) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer  # open_page (conftest) opens this viewer
 
 
 def enter_arena(page: ViserPage, lab: RealLab, user: str) -> ChatPanel:

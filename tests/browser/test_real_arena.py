@@ -20,11 +20,10 @@ from common.tracking.truth import read_truth
 from tests.browser.conftest import wait_until
 from tests.browser.test_real_lab import log_in, session_of
 from tests.kit.reallab import WORLD, RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.tabs import tab_label
 from viewers.web.world_view import WorldView
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
 REAL = "real1"
 
 
@@ -32,11 +31,6 @@ REAL = "real1"
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("realarena")), real_arena=REAL) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def truth_of(lab: RealLab) -> tuple[float, float, float]:

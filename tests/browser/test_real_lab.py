@@ -30,7 +30,7 @@ from viewers.web.live_world import UserWorld
 from viewers.web.tabs import tab_label
 from viewers.web.world_view import FLOOR_COLOUR
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
 
 SCENE_BOX = (0, 170, 860, 800)  # left of the docked panel, below viser's WebGL notice
 
@@ -39,11 +39,6 @@ SCENE_BOX = (0, 170, 860, 800)  # left of the docked panel, below viser's WebGL 
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("reallab"))) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer  # open_page (conftest) opens this viewer
 
 
 def session_of(viewer: WebViewer, user: str) -> BrowserSession:

@@ -15,15 +15,14 @@ import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import expect
 
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import settle, wait_until
 from tests.browser.test_real_agents import enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
+from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.replay import ReplayFeed
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 SLOT = 2.0
 TINY = b"""\
@@ -38,16 +37,8 @@ class Ahead(Controller):
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with real_lab(Path(tmp_path_factory.mktemp("reclab")), agents=True, slot=SLOT) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab) -> None:

@@ -14,16 +14,15 @@ from pathlib import Path
 
 import pytest
 
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.browser.test_workbench import write_code
+from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 CTX = "arena"
 TICKING = """\
@@ -47,16 +46,8 @@ UNSAVED = TICKING + "# typed after Run, never saved\n"
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with real_lab(Path(tmp_path_factory.mktemp("reload")), agents=True, slot=600.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def ticks_shown(page: ViserPage) -> list[int]:

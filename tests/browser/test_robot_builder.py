@@ -15,14 +15,13 @@ from pathlib import Path
 
 import pytest
 
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import wait_until
 from tests.browser.test_real_agents import choose, enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
+from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 READER = b'''"""Reads the range finder the builder added."""
 
@@ -40,18 +39,10 @@ class Look(Controller):
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     # the empty map: "Add robot" puts the new robot at the arena's centre, free there
     tmp = Path(tmp_path_factory.mktemp("builderlab"))
     with real_lab(tmp, "empty", agents=True, slot=30.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def test_build_a_robot_with_a_range_finder_save_place_and_drive_it(open_page, lab: RealLab) -> None:

@@ -15,14 +15,13 @@ from pathlib import Path
 import pytest
 
 from common.client.agent_client import FINAL
-from services.runner.sandbox import sandbox_problem
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import enter_arena, pick_robot
+from tests.conftest import needs_sandbox
 from tests.kit.agentkit import Motion, agent_user
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration]
+pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 FORWARD = (Path(__file__).parents[1] / "integration" / "controllers" / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")
@@ -40,16 +39,8 @@ INTO_THE_WALL = textwrap.dedent(
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
-    problem = sandbox_problem()
-    if problem:
-        pytest.skip(f"the runner cannot sandbox uploads here: {problem}")
     with real_lab(Path(tmp_path_factory.mktemp("safety")), agents=True, slot=300.0) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer  # open_page (conftest) opens this viewer
 
 
 def dry_run_file(page: ViserPage, name: str, content: bytes) -> None:

@@ -13,21 +13,15 @@ from common.client.resume_cookie import PREFIX
 from tests.browser.conftest import ViserPage, page_url
 from tests.browser.test_real_lab import log_in, online
 from tests.kit.reallab import RealLab, real_lab
-from viewers.web.app import WebViewer
 from viewers.web.tabs import tab_label
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.real_lab]
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RealLab]:
     with real_lab(Path(tmp_path_factory.mktemp("savedlab"))) as env:
         yield env
-
-
-@pytest.fixture
-def viewer(lab: RealLab) -> WebViewer:
-    return lab.viewer
 
 
 def _saved(page) -> list[str]:

@@ -19,14 +19,17 @@ from tests.kit.agentkit import (
     Poses,
     agent_user,
     start_agent_context,
+    start_agent_lab,
     start_engine,
-    start_runner,
-    together,
 )
-from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab, module_lab
 
 # One worker starts the module's lab once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("agent_context")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("agent_context"),
+    pytest.mark.shared_router,
+]
 CONTROLLERS = Path(__file__).with_name("controllers")
 
 
@@ -37,25 +40,13 @@ class Forward(Controller):
         robot.set_speeds(12, 12)
 
 
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
-
-
 @pytest.fixture(scope="module")
 def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
     """One lab for the module's tests: each drives its own robots (k0, k1 or k2), and
     each leaves their queues empty and the context's settings as it found them."""
-    tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp)
-    try:
-        lab.start_registry()
-        together(lambda: start_engine(lab), lambda: start_runner(lab))
-        start_agent_context(lab)
+    with module_lab(module_router, tmp_path_factory.mktemp("lab")) as lab:
+        start_agent_lab(lab)
         yield lab
-    finally:
-        procs.stop_all()
 
 
 def drives_away(poses: Poses, agent: str, mm: float, timeout: float, what: str) -> None:

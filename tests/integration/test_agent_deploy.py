@@ -14,22 +14,19 @@ from common.client.agent_client import FINAL
 from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import OutputLines
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     Poses,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
+    start_deploy,
 )
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, module_lab
 
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("agent_deploy"),  # one worker starts the module's lab once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
@@ -39,37 +36,16 @@ HEADER = "from common.controller import Controller, Khepera\n"
 def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
     """One lab for the module: each test's requests have ended when it returns, so the
     next finds every queue empty (the hostile test queues on all four robots at once)."""
-    tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp)
-    try:
-        lab.start_registry()
-        together(lambda: start_engine(lab), lambda: start_runner(lab))
-        start_agent_context(lab)
+    with module_lab(module_router, tmp_path_factory.mktemp("lab")) as lab:
+        start_agent_lab(lab)
         yield lab
-    finally:
-        procs.stop_all()
 
 
-def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab, procs: Procs) -> None:
+def test_wart_deploy_runs_the_upload_and_shows_its_output(lab: ProcessLab) -> None:
     with lab.zsession() as z:
         poses = Poses(z, lab.router.realm)
         start = poses.xy("k3")
-        proc = procs.start(
-            "deploy",
-            [
-                "deploy",
-                str(CONTROLLERS / "talker.py"),
-                "--context",
-                "arena",
-                "--agent",
-                "k3",
-                "--user",
-                "bob",
-                *lab.net_args(),
-            ],
-            env={"WART_PASSWORD": PASSWORD},
-        )
+        proc = start_deploy(lab, CONTROLLERS / "talker.py", "k3", "bob")
         assert proc.popen.wait(30) == 0, proc.output()
         out = proc.output()
         assert "uploaded talker.py" in out

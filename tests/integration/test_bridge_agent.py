@@ -17,17 +17,14 @@ import pytest
 
 from common.client.agent_client import FINAL
 from common.controller import load_controller
-from common.keys import AliveKind
-from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
-from tests.kit.agentkit import WORLD, agent_user, start_agent_context, start_runner
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
+from tests.kit.agentkit import agent_user, bridged_robot, start_agent_context, start_runner
 from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 
@@ -42,20 +39,7 @@ def body() -> Iterator[SimBody]:
 def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
-    with emulator:
-        bridge = procs.start(
-            "bridge",
-            [
-                "bridge",
-                "--world",
-                WORLD,
-                "--port",
-                f"{tmp_path / 'khepera0'}=k1@500,500,0",
-                *lab.net_args(),
-            ],
-        )
-        lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
+    with bridged_robot(lab, body, tmp_path / "khepera0", "500,500,0"):
         start_runner(lab)
         start_agent_context(lab, slot=3.0)
         yield lab

@@ -26,7 +26,8 @@ from services.bridge.odometry import Odometry
 from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
-from tests.integration.test_camera import Newest, Truth
+from tests.integration.test_camera import Truth
+from tests.kit.waits import Latest
 
 pytestmark = pytest.mark.integration
 WORLD = "real1"
@@ -50,7 +51,7 @@ def emulator(body: SimBody, tmp_path: Path) -> Iterator[KheperaEmulator]:
         yield emu
 
 
-def frame_pose(frames: Newest) -> tuple[float, float, float] | None:
+def frame_pose(frames: Latest) -> tuple[float, float, float] | None:
     frame = frames.get()
     if not isinstance(frame, WorldFrame):
         return None
@@ -92,8 +93,8 @@ def test_the_camera_holds_a_slipping_robot_to_its_true_pose(
     bridge, camera = start_bridge_and_camera(
         router, procs, alive_watch, emulator.port, f"synthetic:{truth}", "--fps", "15"
     )
-    frames = Newest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
-    tracked = Newest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    tracked = Latest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
     wait_for(lambda: tracked.count > 5, 90.0, f"the camera tracking:\n{camera.output()}")
     wait_for(lambda: pose_from(zsession, realm) == "tracked", 20.0, "poses from the camera")
 
@@ -150,7 +151,7 @@ def test_a_robot_the_camera_loses_is_not_seen_and_the_world_says_so(
     assert "poses from odometry" in bridge.output()
     # A live camera that does not see the robot (a hand over its marker): "not seen",
     # where it was last trusted, while its odometry runs off.
-    frames = Newest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
+    frames = Latest(zsession, keys.world_frame(realm, WORLD), WorldFrame)
     wait_for(lambda: frame_pose(frames) is not None, 10.0, "a frame")
     last = frame_pose(frames)
     assert last is not None

@@ -28,7 +28,6 @@ from common.messages import (
     AgentCommand,
     ErrorReply,
     Lease,
-    Message,
     SensorSample,
     WorldFrame,
     WorldSnapshot,
@@ -40,37 +39,16 @@ from services.bridge.link import SerialKheperaLink
 from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
+from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("bridge_world")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("bridge_world"),
+    pytest.mark.shared_router,
+]
 WORLD = "real1"
 AGENT = "k1"
-
-
-class Latest:
-    """The newest decoded message on a key, and how many arrived (callback kept short)."""
-
-    def __init__(self, session: zenoh.Session, key: str, kind: type[Message]) -> None:
-        self.value: object = None
-        self.count = 0
-        self._lock = threading.Lock()
-
-        def on(sample: zenoh.Sample) -> None:
-            message = decode(sample.payload, kind)
-            with self._lock:
-                self.value = message
-                self.count += 1
-
-        self.sub = session.declare_subscriber(key, on)
-
-    def get(self) -> object:
-        with self._lock:
-            return self.value
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

@@ -15,35 +15,16 @@ import zenoh
 
 from common import keys
 from common.keys import AliveKind
-from common.messages import CameraFrame, CameraStatus, Message, TrackedPoses, decode
+from common.messages import CameraFrame, CameraStatus, TrackedPoses
 from common.tracking.truth import now_truth, write_truth
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera")]
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera"), pytest.mark.shared_router]
 WORLD = "w1"
 CAMERA = "w1-cam"
-
-
-class Newest:
-    """The newest decoded message on a key, and how many came."""
-
-    def __init__(self, session: zenoh.Session, key: str, kind: type[Message]) -> None:
-        self.value: object = None
-        self.count = 0
-        self._lock = threading.Lock()
-
-        def on(sample: zenoh.Sample) -> None:
-            message = decode(sample.payload, kind)
-            with self._lock:
-                self.value, self.count = message, self.count + 1
-
-        self.sub = session.declare_subscriber(key, on)
-
-    def get(self) -> object:
-        with self._lock:
-            return self.value
 
 
 class Truth:
@@ -65,11 +46,6 @@ class Truth:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(2)
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture
@@ -112,10 +88,10 @@ def test_the_camera_tracks_the_robot_and_publishes_its_video(
     tmp_path: Path,
 ) -> None:
     realm = router.realm
-    tracked = Newest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
-    image = Newest(zsession, keys.camera_frame(realm, WORLD, CAMERA), CameraFrame)
-    floor = Newest(zsession, keys.camera_floor(realm, WORLD, CAMERA), CameraFrame)
-    status = Newest(zsession, keys.camera_status(realm, WORLD, CAMERA), CameraStatus)
+    tracked = Latest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
+    image = Latest(zsession, keys.camera_frame(realm, WORLD, CAMERA), CameraFrame)
+    floor = Latest(zsession, keys.camera_floor(realm, WORLD, CAMERA), CameraFrame)
+    status = Latest(zsession, keys.camera_status(realm, WORLD, CAMERA), CameraStatus)
     cal = tmp_path / "arena.json"
     proc = start_camera(
         procs,
@@ -166,7 +142,7 @@ def test_a_camera_that_loses_its_picture_says_so_and_comes_back(
     zsession: zenoh.Session,
     alive_watch: AliveWatch,
 ) -> None:
-    status = Newest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+    status = Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
     proc = start_camera(procs, router, "--source", f"synthetic:{truth.path}")
     assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
 
@@ -198,7 +174,7 @@ def test_a_video_file_that_ends_leaves_the_camera_offline_not_dead(
     for i in range(10):
         writer.write(np.full((240, 320, 3), 20 * i, np.uint8))
     writer.release()
-    status = Newest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+    status = Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
     proc = start_camera(procs, router, "--source", str(video))
     assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
 
@@ -235,7 +211,7 @@ def test_markers_of_no_robot_are_said_once(
 ) -> None:
     stray = Truth(tmp_path / "truth.json", {"k1": (300.0, 300.0, 0.0), "k7": (700.0, 700.0, 1.0)})
     try:
-        tracked = Newest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+        tracked = Latest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
         proc = start_camera(
             procs, router, "--source", f"synthetic:{stray.path}", "--auto-calibrate"
         )
@@ -262,7 +238,7 @@ def test_wart_camera_calibrate_saves_a_calibration_the_camera_then_uses(
     calibrate = procs.start("calibrate", [*argv, *router.net_args()])
     assert calibrate.popen.wait(60) == 0, calibrate.output()
     assert "calibrated 640x480 from the reference markers" in calibrate.output()
-    tracked = Newest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+    tracked = Latest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
     camera = start_camera(
         procs, router, "--source", f"synthetic:{truth.path}", "--calibration", str(out)
     )

@@ -36,12 +36,7 @@ class Events:
 
 
 # One worker starts the module's router once.
-pytestmark = pytest.mark.xdist_group("chat")
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
+pytestmark = [pytest.mark.xdist_group("chat"), pytest.mark.shared_router]
 
 
 @pytest.fixture

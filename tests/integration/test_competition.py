@@ -23,9 +23,7 @@ from common.lab_errors import LabError
 from common.messages import Standings
 from common.recording.reader import read_recording
 from common.recording.replay import Timeline
-from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router
+from tests.conftest import Procs, Router, needs_sandbox
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab
@@ -34,7 +32,7 @@ from tests.kit.lab import wart as lab_wart
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.timeout(600),
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 
 
@@ -54,11 +52,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     )
     done = wart("users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
     assert done.returncode == 0, done.stderr
-    lab.account(wiring.service_account("grader", "grader"))
-    together(
-        lambda: start_runner(lab),
-        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
-    )
+    together(lambda: start_runner(lab), lab.start_grader)
     yield lab
 
 

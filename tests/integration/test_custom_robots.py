@@ -39,10 +39,8 @@ from common.messages import (
 )
 from common.sim2d import maps
 from services.grader.assignment import parse_assignment
-from services.lab import wiring
 from services.runner.episode import run_episode
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, start_agent_context, start_runner, together
 from tests.kit.courses import COURSE, assignment_toml
 from tests.kit.lab import REPO, ProcessLab, make_lab, wart
@@ -50,7 +48,7 @@ from tests.kit.lab import REPO, ProcessLab, make_lab, wart
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.timeout(400),
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"
 
@@ -293,11 +291,7 @@ def grading_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[Proces
     roster.write_text("user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n")
     done = wart("users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
     assert done.returncode == 0, done.stderr
-    lab.account(wiring.service_account("grader", "grader"))
-    together(
-        lambda: start_runner(lab),
-        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
-    )
+    together(lambda: start_runner(lab), lab.start_grader)
     yield lab
 
 

@@ -20,21 +20,18 @@ from common.recording.report import describe
 from common.sim2d import maps
 from common.world import packing
 from services.runner.dryrun import dry_run, wall_limit
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
+    start_deploy,
 )
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("dry_run"),  # one worker starts the module's lab once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 HEADER = "from common.controller import Controller, Khepera\n"
 INTO_THE_WALL = HEADER + textwrap.dedent(
@@ -138,31 +135,14 @@ def test_a_hostile_controller_ends_within_its_limit(
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab)
+    start_agent_lab(lab)
     yield lab
 
 
-def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, procs: Procs, tmp_path: Path) -> None:
+def test_wart_deploy_dry_run_through_the_lab(lab: ProcessLab, tmp_path: Path) -> None:
     charge = tmp_path / "charge.py"
     charge.write_text(INTO_THE_WALL)
-    proc = procs.start(
-        "dry-run",
-        [
-            "deploy",
-            str(charge),
-            "--dry-run",
-            "--context",
-            "arena",
-            "--agent",
-            "k3",
-            "--user",
-            "bob",
-            *lab.net_args(),
-        ],
-        env={"WART_PASSWORD": PASSWORD},
-    )
+    proc = start_deploy(lab, charge, "k3", "bob", "--dry-run")
     assert proc.popen.wait(60) == 0, proc.output()  # a collision warns; it does not fail
     out = proc.output()
     assert "will run, with a warning: " in out and "collision at " in out

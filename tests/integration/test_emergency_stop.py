@@ -15,45 +15,35 @@ import pytest
 
 from common import keys
 from common.client.agent_client import FINAL
-from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.messages import EmergencyStop, ErrorReply, OkReply, decode
-from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
-    WORLD,
     Motion,
     agent_user,
+    bridged_robot,
     start_agent_context,
-    start_engine,
+    start_agent_lab,
     start_runner,
-    together,
 )
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("emergency_stop"),  # one worker starts the module's router once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
+    pytest.mark.shared_router,
 ]
 FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")
 
 
 @pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
-
-
-@pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab, identity=True), lambda: start_runner(lab))
-    start_agent_context(lab, slot=120.0)
+    start_agent_lab(lab, identity=True, slot=120.0)
     yield lab
 
 
@@ -140,24 +130,13 @@ def real_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[Pro
     """A real-robot arena: the Khepera bridge on an emulated robot (a real pty)."""
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    with SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body:
-        emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
-        with emulator:
-            bridge = procs.start(
-                "bridge",
-                [
-                    "bridge",
-                    "--world",
-                    WORLD,
-                    "--port",
-                    f"{tmp_path / 'khepera0'}=k1@500,500,0",
-                    *lab.net_args(),
-                ],
-            )
-            lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
-            start_runner(lab)
-            start_agent_context(lab, slot=120.0)
-            yield lab, body
+    with (
+        SimBody.from_map(REPO / "maps" / "empty.json", seed=5) as body,
+        bridged_robot(lab, body, tmp_path / "khepera0", "500,500,0"),
+    ):
+        start_runner(lab)
+        start_agent_context(lab, slot=120.0)
+        yield lab, body
 
 
 def test_the_emergency_stop_halts_a_real_robot_through_the_bridge(

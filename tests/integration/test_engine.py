@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -44,36 +43,12 @@ from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from tests.kit.waits import Latest
 from viewers.web.live_world import WorldWatch
 
 # One worker starts the module's router and shared engine once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine")]
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine"), pytest.mark.shared_router]
 WORLD = "w1"
-
-
-class Latest:
-    """The newest decoded message on a key (callback kept short)."""
-
-    def __init__(self, session: zenoh.Session, key: str, kind: type[Message]) -> None:
-        self.value: object = None
-        self.count = 0
-        self._lock = threading.Lock()
-
-        def on(sample: zenoh.Sample) -> None:
-            with self._lock:
-                self.value = decode(sample.payload, kind)
-                self.count += 1
-
-        self.sub = session.declare_subscriber(key, on)
-
-    def get(self) -> object:
-        with self._lock:
-            return self.value
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

@@ -19,9 +19,7 @@ import pytest
 from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.messages import GradingChanged
-from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_runner, together
 from tests.kit.courses import COURSE, assignment_toml
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
@@ -30,7 +28,7 @@ from tests.kit.lab import wart as lab_wart
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.timeout(600),
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).parent / "grading"
 
@@ -58,11 +56,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     )
     done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
     assert done.returncode == 0, done.stderr
-    lab.account(wiring.service_account("grader", "grader"))
-    together(
-        lambda: start_runner(lab),
-        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
-    )
+    together(lambda: start_runner(lab), lab.start_grader)
     yield lab
 
 
@@ -245,8 +239,7 @@ def test_a_submission_the_lab_cannot_grade_is_not_counted(
     done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
     assert done.returncode == 0, done.stderr
     add_assignment(lab, tmp_path, "once", episodes="1", seeds="[1]", quota="1")
-    lab.account(wiring.service_account("grader", "grader"))
-    lab.start(wiring.grader_spec(lab.wiring()), name="grader", extra=["--runner-wait", "0.5"])
+    lab.start_grader("--runner-wait", "0.5")
     with lab.client("alice") as client:
         grader = GraderClient(client)
         sub = grader.submit("once", source("works"), "works.py").submission
@@ -273,7 +266,7 @@ def test_a_grader_killed_mid_grading_grades_it_at_its_next_start(
             lambda: grader.submissions("long", submission=sub)[0].status == "running", 60, "running"
         )
         grader_proc.kill9()
-        lab.start(wiring.grader_spec(lab.wiring()), name="grader-again")
+        lab.start_grader(name="grader-again")
         graded = grader.wait_graded("long", sub, 180)
         assert graded.status == "graded" and graded.counted
         assert [e.cause for e in graded.episodes] == ["ok"]

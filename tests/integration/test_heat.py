@@ -11,12 +11,11 @@ import pytest
 
 from common.messages import Heat, HeatEntry
 from services.runner.heat import run_heat
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO
+from tests.conftest import REPO, needs_sandbox
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 GRADING = Path(__file__).parent / "grading"
 

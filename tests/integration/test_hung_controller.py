@@ -16,22 +16,17 @@ import pytest
 from common.client.agent_client import FINAL
 from common.controller import KheperaState
 from common.recording import read_recording, summarize
-from services.runner.sandbox import Sandbox, SandboxLimits, sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from services.runner.sandbox import Sandbox, SandboxLimits
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
 from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = pytest.mark.integration
 
-_problem = sandbox_problem()
-needs_sandbox = pytest.mark.skipif(_problem is not None, reason=f"no sandbox here: {_problem}")
 
 # Line 8 is the loop: what the student is told.
 SPIN = b"""from common.controller import Controller, Khepera
@@ -107,9 +102,7 @@ HUNG = re.compile(
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab, slot=4.0)
+    start_agent_lab(lab, slot=4.0)
     yield lab
 
 

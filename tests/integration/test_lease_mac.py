@@ -32,10 +32,14 @@ from tests.kit.agentkit import (
     start_agent_context,
     start_engine,
 )
-from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab, module_lab
 
 # One worker starts the module's lab once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("lease_mac")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("lease_mac"),
+    pytest.mark.shared_router,
+]
 
 
 class Forward(Controller):
@@ -52,25 +56,15 @@ class Still(Controller):
         robot.set_speeds(0, 0)
 
 
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
-
-
 @pytest.fixture(scope="module")
 def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
     """The lab of the tests that only read it or drive k0 to the end of their requests
     (the world-restart test starts its own)."""
-    tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp)
-    try:
+    with module_lab(module_router, tmp_path_factory.mktemp("lab")) as lab:
         lab.start_registry()
         start_engine(lab, identity=True)
         start_agent_context(lab, slot=5.0)
         yield lab
-    finally:
-        procs.stop_all()
 
 
 class Wire:

@@ -32,8 +32,7 @@ from common.client.resume_cookie import parse_cookies
 from common.lab_errors import LabError
 from common.messages import LtiAccount, LtiAccountRequest
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
 from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import ProcessLab, make_lab, start_router, wart
@@ -304,15 +303,11 @@ def test_a_replayed_launch_is_refused(lti: LtiLab) -> None:
     assert "you are banned until an admin lifts it: copied a classmate's controller" in banned.text
 
 
-@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+@needs_sandbox
 def test_a_launched_students_score_reaches_the_platform(lti: LtiLab, tmp_path: Path) -> None:
     lab = lti.lab
     add_assignment(lab, tmp_path, "reach-goal", episodes="1", seeds="[7]")
-    lab.account(wiring.service_account("grader", "grader"))
-    together(
-        lambda: start_runner(lab),
-        lambda: lab.start(wiring.grader_spec(lab.wiring()), name="grader"),
-    )
+    together(lambda: start_runner(lab), lab.start_grader)
     answer = lti.launch(Launcher(sub="u-2002", name="Sam Student", assignment="reach-goal"))
     assert answer.status == 303, answer.text
     saved = parse_cookies(answer.cookies[0].split(";")[0], lab.realm)[0]

@@ -20,39 +20,52 @@ from common.lab_errors import NotAllowed
 from common.messages import AgentEvent
 from services.commands import deploy
 from services.context.agent_context import RUNNER_CHECK_S
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Proc, Procs, Router, wait_for
+from tests.conftest import Proc, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     agent_user,
     start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("missed_request_status"),  # one worker starts the module's router once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
+    pytest.mark.shared_router,
 ]
 FORWARD = Path(__file__).with_name("controllers") / "forward.py"
 RUNNER_STOPPED = "the lab's runner runner stopped"
 
 
 @pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
-
-
-@pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[tuple[ProcessLab, Proc, Proc]]:
     """A lab whose slots outlast the test (30 s): a request ends only when made to."""
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    _, runner = together(lambda: start_engine(lab), lambda: start_runner(lab))
-    context = start_agent_context(lab, slot=30.0)
+    _, runner, context = start_agent_lab(lab, slot=30.0)
     yield lab, runner, context
+
+
+def _bobs_deploy_killing_mid_slot(lab: ProcessLab, victim: Proc) -> tuple[int, list[BaseException]]:
+    """Bob's ``wart deploy`` of FORWARD on k3, in this process, with ``victim`` killed once
+    bob's slot starts: deploy's exit code, and what failed in the killing thread."""
+    failures: list[BaseException] = []
+
+    with agent_user(lab, "ida") as ida:
+
+        def kill_mid_slot() -> None:
+            try:
+                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
+                victim.kill9()
+            except BaseException as exc:  # seen by the test, not lost in the thread
+                failures.append(exc)
+
+        killer = threading.Thread(target=kill_mid_slot, daemon=True)
+        killer.start()
+        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
+        code = deploy.main([*argv, *lab.net_args()])
+        killer.join(5)
+    return code, failures
 
 
 def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
@@ -73,22 +86,7 @@ def test_wart_deploy_that_misses_the_end_still_prints_the_real_reason(
     monkeypatch.setattr(AgentClient, "_on_event", drop_bobs_ends)
     monkeypatch.setattr(deploy, "interrupt_event", threading.Event)  # pytest keeps its signals
     monkeypatch.setenv("WART_PASSWORD", PASSWORD)
-    failures: list[BaseException] = []
-
-    with agent_user(the_lab, "ida") as ida:
-
-        def kill_the_runner_mid_slot() -> None:
-            try:
-                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
-                runner.kill9()
-            except BaseException as exc:  # seen by the test, not lost in the thread
-                failures.append(exc)
-
-        killer = threading.Thread(target=kill_the_runner_mid_slot, daemon=True)
-        killer.start()
-        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
-        code = deploy.main([*argv, *the_lab.net_args()])
-        killer.join(5)
+    code, failures = _bobs_deploy_killing_mid_slot(the_lab, runner)
     out = capsys.readouterr().out
     assert not failures, failures
     assert code == 1, out
@@ -157,22 +155,7 @@ def test_wart_deploy_says_the_context_is_down_rather_than_lost(
     monkeypatch.setattr(deploy, "CONTEXT_DOWN_GIVE_UP_S", 3.0)
     monkeypatch.setattr(deploy, "interrupt_event", threading.Event)
     monkeypatch.setenv("WART_PASSWORD", PASSWORD)
-    failures: list[BaseException] = []
-
-    with agent_user(the_lab, "ida") as ida:
-
-        def kill_the_context_mid_slot() -> None:
-            try:
-                wait_for(lambda: ida.position_of_user("bob", "k3") == 0, 60, "bob's slot")
-                context.kill9()
-            except BaseException as exc:
-                failures.append(exc)
-
-        killer = threading.Thread(target=kill_the_context_mid_slot, daemon=True)
-        killer.start()
-        argv = [str(FORWARD), "--context", "arena", "--agent", "k3", "--user", "bob"]
-        code = deploy.main([*argv, *the_lab.net_args()])
-        killer.join(5)
+    code, failures = _bobs_deploy_killing_mid_slot(the_lab, context)
     out = capsys.readouterr().out
     assert not failures, failures
     assert code == 1, out

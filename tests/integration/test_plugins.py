@@ -37,10 +37,10 @@ from common.messages import (
     decode,
 )
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_agent_context, start_deploy, together
 from tests.kit.lab import REPO, ProcessLab, make_lab
+from tests.kit.robots import wheeled_robot
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"
@@ -125,7 +125,7 @@ def lab(router: Router, procs: Procs, tmp_path: Path, race_plugin: None) -> Iter
     yield lab
 
 
-@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+@needs_sandbox
 def test_the_plugin_s_robot_sensor_and_race_run_in_a_real_lab(
     lab: ProcessLab, procs: Procs, tmp_path: Path
 ) -> None:
@@ -165,23 +165,7 @@ def test_the_plugin_s_robot_sensor_and_race_run_in_a_real_lab(
     assert {"agent": "k0", "laps": 0, "finished_at": None} in standings["standings"]
 
 
-GOOD = """\
-format = "wart-robot"
-version = 1
-name = "scout"
-
-[components.body]
-type = "body"
-radius_mm = 30.0
-mass_g = 80.0
-
-[components.drive]
-type = "differential_drive"
-wheel_base_mm = 50.0
-mm_per_pulse = 0.1
-unit_time_s = 0.01
-max_speed = 100
-"""
+GOOD = wheeled_robot("scout")
 
 
 @pytest.mark.parametrize(
@@ -292,7 +276,7 @@ SCOUT_READER = textwrap.dedent(
 )
 
 
-@pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}")
+@needs_sandbox
 def test_a_robot_type_saved_to_the_lab_drives_in_its_arena(
     router: Router, procs: Procs, tmp_path: Path
 ) -> None:

@@ -28,8 +28,7 @@ from common.messages import EpisodeResult, SubmissionInfo
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.lab import wiring
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grader_function import course
 from tests.integration.test_grading import COURSE, source, wart
 from tests.kit.agentkit import WORLD, start_agent_context, start_runner
@@ -38,7 +37,7 @@ from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.timeout(300),
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 GRADERS = Path(__file__).parent / "grading" / "graders"
 
@@ -119,7 +118,7 @@ def real(router: Router, procs: Procs, tmp_path: Path) -> Iterator[RealLab]:
             lab.wait_alive(AliveKind.WORLD, WORLD, bridge)
             start_runner(lab)
             start_agent_context(lab, slot=3.0)
-            lab.start(wiring.grader_spec(lab.wiring()), name="grader")
+            lab.start_grader()
             yield RealLab(lab, body, args)
 
 

@@ -12,22 +12,18 @@ from common.client.agent_client import FINAL
 from common.lab_errors import LabError
 from common.recording import read_recording, summarize
 from common.recording import schema as s
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
-from tests.kit.lab import PASSWORD, USERS, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, USERS, ProcessLab, module_lab
 
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.xdist_group("recording"),  # one worker starts the module's lab once
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
 RAISER = textwrap.dedent(
@@ -50,15 +46,9 @@ def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iter
     user (dave, bob, carol), so another's runs count neither in its listings nor its
     retention, and alice records nothing (the test of bob's runs checks she sees none)."""
     tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp, users={**USERS, "dave": "student"})
-    try:
-        lab.start_registry()
-        together(lambda: start_engine(lab, "maze"), lambda: start_runner(lab))
-        start_agent_context(lab, "--keep-recordings", "2", slot=3.0)
+    with module_lab(module_router, tmp, users={**USERS, "dave": "student"}) as lab:
+        start_agent_lab(lab, "--keep-recordings", "2", map_name="maze", slot=3.0)
         yield lab
-    finally:
-        procs.stop_all()
 
 
 def _recordings_dir(lab: ProcessLab) -> Path:

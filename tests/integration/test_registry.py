@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from pathlib import Path
 
@@ -10,7 +9,6 @@ import pytest
 import zenoh
 
 from common.auth import RegistryIdentity, create_identity_key
-from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
 from common.client.service_login import vouch_for
 from common.lab_errors import (
@@ -26,12 +24,11 @@ from tests.conftest import Procs, Router, wait_for
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 # One worker starts the module's router once.
-pytestmark = pytest.mark.xdist_group("registry")
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
+pytestmark = [
+    pytest.mark.xdist_group("registry"),
+    pytest.mark.usefixtures("quick_mailbox_keys"),
+    pytest.mark.shared_router,
+]
 
 
 @pytest.fixture
@@ -39,22 +36,6 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     return lab
-
-
-@pytest.fixture(autouse=True)
-def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Each client derives its mailbox key from the password (argon2id) before it asks.
-
-    On a student's machine that is their own CPU; here it is the test's, and on a busy
-    machine it can outlast the 2 s a slowed source must wait after its third failure,
-    so the throttle would have lapsed before the next try arrives. Derive each once
-    (every test here: the registry's side is what they test).
-    """
-    monkeypatch.setattr(
-        client_module,
-        "mailbox_key_from_password",
-        functools.cache(client_module.mailbox_key_from_password),
-    )
 
 
 def test_wrong_passwords_are_slowed_down(lab: ProcessLab) -> None:

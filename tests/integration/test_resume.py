@@ -3,7 +3,6 @@ and logout, kick, ban and a password change each end it, in words."""
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -11,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
 from common.lab_errors import NotAllowed, WrongCredentials
 from common.messages import ResumeGrant, SignedResume, decode, encode
@@ -19,7 +17,7 @@ from common.service import close_session, open_session
 from tests.conftest import Procs, Router
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
 
 
 @pytest.fixture
@@ -27,16 +25,6 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     return lab
-
-
-@pytest.fixture(autouse=True)
-def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Each password login derives its mailbox key (argon2id): once per user is enough here.
-    monkeypatch.setattr(
-        client_module,
-        "mailbox_key_from_password",
-        functools.cache(client_module.mailbox_key_from_password),
-    )
 
 
 @contextmanager

@@ -19,7 +19,7 @@ from common.client.agent_client import DriveResult
 from common.client.private_mail import PrivateText
 from common.controller import Controller, Khepera
 from common.messages import EditResult, ErrorReply, MoveItem, WorldEdit, decode
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Router, wait_for
 from tests.kit.agentkit import (
     WORLD,
     Poses,
@@ -27,7 +27,7 @@ from tests.kit.agentkit import (
     start_agent_context,
     start_engine,
 )
-from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, module_lab
 
 # One worker starts the module's lab once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("revocation")]
@@ -43,16 +43,11 @@ class Forward(Controller):
 @pytest.fixture(scope="module")
 def lab(module_router: Router, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ProcessLab]:
     """One lab for both tests: each kicks another user (alice, ida) and ends its requests."""
-    tmp = tmp_path_factory.mktemp("lab")
-    procs = Procs(tmp)
-    lab = make_lab(module_router, procs, tmp)
-    try:
+    with module_lab(module_router, tmp_path_factory.mktemp("lab")) as lab:
         lab.start_registry()
         start_engine(lab, identity=True)
         start_agent_context(lab, slot=30.0)
         yield lab
-    finally:
-        procs.stop_all()
 
 
 def _still_for(poses: Poses, agent: str, seconds: float) -> float:

@@ -21,21 +21,17 @@ import pytest
 from common.client.agent_client import FINAL
 from common.messages import RunAccepted, RunRequest
 from common.service import RequestError, close_session, open_session
-from services.runner.sandbox import sandbox_problem
 from services.runner.service import MAX_RUNS_PER_USER, RunnerService
-from tests.conftest import Procs, Router
+from tests.conftest import Procs, Router, needs_sandbox
 from tests.kit.agentkit import (
     agent_user,
-    start_agent_context,
-    start_engine,
-    start_runner,
-    together,
+    start_agent_lab,
 )
 from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
@@ -74,9 +70,7 @@ class Filler(Controller):
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    _, lab.runner = together(lambda: start_engine(lab), lambda: start_runner(lab))
-    start_agent_context(lab, slot=SLOT)
+    _, lab.runner, _ = start_agent_lab(lab, slot=SLOT)
     yield lab
 
 

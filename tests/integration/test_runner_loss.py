@@ -25,8 +25,7 @@ from pathlib import Path
 import pytest
 
 from common.keys import AliveKind
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Proc, Procs, Router, free_port, wait_for
+from tests.conftest import Proc, Procs, Router, free_port, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     WORLD,
     start_agent_context,
@@ -38,7 +37,7 @@ from tests.kit.lab import ProcessLab, make_lab, start_router
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 RUNNER_END = "the lab's runner runner stopped"

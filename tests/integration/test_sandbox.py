@@ -17,13 +17,11 @@ import psutil
 import pytest
 
 from common.controller import KheperaState, RobotCommand
-from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck, sandbox_problem
-from tests.conftest import wait_for
+from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck
+from tests.conftest import needs_sandbox, wait_for
 
 pytestmark = pytest.mark.integration
 
-_problem = sandbox_problem()
-needs_sandbox = pytest.mark.skipif(_problem is not None, reason=f"no sandbox here: {_problem}")
 
 STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))
 

@@ -21,12 +21,12 @@ import pytest
 
 from common.controller import KheperaState, RobotCommand
 from services.runner.cpushare import NICE_ONLY
-from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, sandbox_problem
-from tests.conftest import wait_for
+from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share
+from tests.conftest import needs_sandbox, wait_for
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 
 HEADER = "from common.controller import Controller, Khepera\n"

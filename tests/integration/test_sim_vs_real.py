@@ -20,21 +20,24 @@ from pathlib import Path
 import pytest
 
 from common.client.agent_client import FINAL, AgentClient
-from common.keys import AliveKind
 from common.lab_errors import LabError
 from common.recording import plots, read_recording
 from common.recording.compare import compare
-from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
 from services.lab.lab_maps import map_pose
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import REPO, Procs, Router, wait_for
-from tests.kit.agentkit import agent_user, start_agent_context, start_engine, start_runner
+from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
+from tests.kit.agentkit import (
+    agent_user,
+    bridged_robot,
+    start_agent_context,
+    start_engine,
+    start_runner,
+)
 from tests.kit.lab import ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 MAP = REPO / "maps" / "maze.json"
@@ -54,23 +57,8 @@ def lab(router: Router, procs: Procs, tmp_path: Path, body: SimBody) -> Iterator
     lab.start_registry()
     start_engine(lab, MAP.stem, world=SIM)
     x, y, deg = map_pose(MAP)  # where the map puts k1: the body is there, so is the odometry
-    emulator = KheperaEmulator(body, EmulatorOptions(link_path=str(tmp_path / "khepera0")))
-    with emulator:
-        bridge = procs.start(
-            "bridge",
-            [
-                "bridge",
-                "--world",
-                REAL,
-                "--port",
-                f"{tmp_path / 'khepera0'}=k1@{x},{y},{deg}",
-                "--arena-mm",
-                "1500",
-                "1000",
-                *lab.net_args(),
-            ],
-        )
-        lab.wait_alive(AliveKind.WORLD, REAL, bridge)
+    link = tmp_path / "khepera0"
+    with bridged_robot(lab, body, link, f"{x},{y},{deg}", "--arena-mm", "1500", "1000", world=REAL):
         start_runner(lab)
         start_agent_context(lab, slot=3.0, ctx=SIM_CTX, world=SIM)
         start_agent_context(lab, slot=3.0, ctx=REAL_CTX, world=REAL, account="ctx-lab")

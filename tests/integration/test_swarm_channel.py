@@ -32,10 +32,11 @@ from common.messages import (
 from common.service import close_session, open_session
 from common.sim2d.agents import agent_type
 from common.sim2d.world import World
-from common.world.leasemac import CommandMac, mac_command, new_lease_key, seal_key
+from common.world.leasemac import CommandMac, mac_command, new_lease_key
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from services.engine.service import EngineService, EngineSettings
 from tests.conftest import Router, wait_for
+from tests.kit.leases import mac_lease
 
 pytestmark = pytest.mark.integration
 
@@ -67,17 +68,15 @@ class Arena:
         """A MAC lease on ``agent`` to ``holder``, as the agent context grants it; its key."""
         k = new_lease_key()
         now = time.time()
-        lease = Lease(
+        lease = mac_lease(
+            k,
+            holder,
+            self.world_session,
             lease_id=f"L-{agent}",
-            world=WORLD,
+            world_name=WORLD,
             agent=agent,
-            holder_user=holder.user,
-            holder_session=holder.session_id,
             start=now,
             end=now + 120,
-            holder_key=seal_key(k, holder.keys.box_public_key),
-            world_key=seal_key(k, self.world_session.keys.box_public_key),
-            world_box=self.world_session.keys.box_public_key,
         )
         self.leases[agent] = (lease, k)
         self.republish()

@@ -19,24 +19,20 @@ from common.controller import Khepera
 from common.lab_errors import LabError
 from common.messages import AuditQuery, RequestStatus
 from common.recording import read_recording
-from services.runner.sandbox import sandbox_problem
-from tests.conftest import Procs, Router, wait_for
+from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     CTX,
     WORLD,
     Motion,
     agent_user,
-    start_agent_context,
+    start_agent_lab,
     start_deploy,
-    start_engine,
-    start_runner,
-    together,
 )
 from tests.kit.lab import PASSWORD, Proc, ProcessLab, make_lab
 
 pytestmark = [
     pytest.mark.integration,
-    pytest.mark.skipif(sandbox_problem() is not None, reason=f"no sandbox: {sandbox_problem()}"),
+    needs_sandbox,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
 FORWARD = (CONTROLLERS / "forward.py").read_bytes()
@@ -53,9 +49,7 @@ class Reverse(Controller):
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
     lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    together(lambda: start_engine(lab, identity=True), lambda: start_runner(lab))
-    start_agent_context(lab, slot=120.0)
+    start_agent_lab(lab, identity=True, slot=120.0)
     yield lab
 
 

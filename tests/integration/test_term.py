@@ -7,7 +7,6 @@ emergency stop a real engine and agent context; people are LabClients here.
 from __future__ import annotations
 
 import csv
-import functools
 import json
 import sqlite3
 import subprocess
@@ -19,7 +18,6 @@ from pathlib import Path
 import pytest
 
 from common.auth import create_identity_key
-from common.client import lab_client as client_module
 from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
 from common.client.service_login import ServiceCredentials, vouch_for
@@ -33,12 +31,12 @@ from tests.kit.lab import LOGIN_WAIT, PASSWORD, make_lab
 from tests.kit.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("term")]
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("term"),
+    pytest.mark.usefixtures("quick_mailbox_keys"),
+    pytest.mark.shared_router,
+]
 
 
 @pytest.fixture
@@ -46,16 +44,6 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     return lab
-
-
-@pytest.fixture(autouse=True)
-def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The client's own argon2id (its mailbox key) once per password: the registry is tested."""
-    monkeypatch.setattr(
-        client_module,
-        "mailbox_key_from_password",
-        functools.cache(client_module.mailbox_key_from_password),
-    )
 
 
 def _trail(admin: LabClient, **filters: object) -> list[AuditEntry]:

@@ -25,12 +25,11 @@ from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("terminal_tools")]
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("terminal_tools"),
+    pytest.mark.shared_router,
+]
 
 
 @pytest.fixture

@@ -37,7 +37,11 @@ from viewers.web.demo_lab import DemoConnector, DemoLab
 from viewers.web.login import LoginDesk
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("viewer_logins")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("viewer_logins"),
+    pytest.mark.shared_router,
+]
 
 USERS = ("alice", "bob", "carol", "ida")
 CLASS = 24  # browsers logging in at the same instant through one viewer
@@ -62,11 +66,6 @@ class ViewerLab:
     @property
     def url(self) -> str:
         return f"ws://127.0.0.1:{self.viewer.port}"
-
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
 
 
 @pytest.fixture

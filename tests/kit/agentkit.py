@@ -21,8 +21,11 @@ import zenoh
 from common import keys
 from common.client.agent_client import AgentClient
 from common.client.lab_client import LabClient
+from common.keys import AliveKind
 from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session
+from services.bridge.emulator import EmulatorOptions, KheperaEmulator
+from services.bridge.simbody import SimBody
 from tests.kit.lab import PASSWORD, Proc, ProcessLab
 from tests.kit.waits import wait_for
 
@@ -63,13 +66,50 @@ def start_runner(lab: ProcessLab, name: str = "runner") -> Proc:
     return lab.start_runner(name)
 
 
-def start_deploy(lab: ProcessLab, controller: Path, agent: str, user: str, ctx: str = CTX) -> Proc:
-    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the test password)."""
+def start_agent_lab(
+    lab: ProcessLab,
+    *context_args: str,
+    map_name: str = "foraging",
+    identity: bool = False,
+    slot: float = 2.5,
+) -> tuple[Proc, Proc, Proc]:
+    """The services an agent test drives: the registry, then the engine and the runner
+    (together), then the agent context; returns (engine, runner, agent context)."""
+    lab.start_registry()
+    engine, runner = together(
+        lambda: start_engine(lab, map_name, identity=identity), lambda: start_runner(lab)
+    )
+    context = start_agent_context(lab, *context_args, slot=slot)
+    return engine, runner, context
+
+
+@contextmanager
+def bridged_robot(
+    lab: ProcessLab, body: SimBody, link: Path, at: str, *extra: str, world: str = WORLD
+) -> Iterator[Proc]:
+    """A real arena of one robot, k1: an emulated Khepera moving ``body``, on the pty
+    ``link``, behind ``wart bridge`` for ``world`` (k1 starts ``at``, "x,y,degrees");
+    ``extra`` goes to the bridge. Yields the bridge once its world is alive."""
+    with KheperaEmulator(body, EmulatorOptions(link_path=str(link))):
+        bridge = lab.procs.start(
+            "bridge",
+            ["bridge", "--world", world, "--port", f"{link}=k1@{at}", *extra, *lab.net_args()],
+        )
+        lab.wait_alive(AliveKind.WORLD, world, bridge)
+        yield bridge
+
+
+def start_deploy(
+    lab: ProcessLab, controller: Path, agent: str, user: str, *extra: str, ctx: str = CTX
+) -> Proc:
+    """``wart deploy`` of ``controller`` on ``agent`` as ``user`` (the test password);
+    ``extra``: more of its options (``--dry-run``)."""
     return lab.procs.start(
         "deploy",
         [
             "deploy",
             str(controller),
+            *extra,
             "--context",
             ctx,
             "--agent",

@@ -1,8 +1,18 @@
-"""A course for the grading runs: its name and the reach-the-goal assignment's file."""
+"""A course for the grading runs: its name, the reach-the-goal assignment's file, and the
+course put straight into a registry's database."""
 
 from __future__ import annotations
 
 import textwrap
+from collections.abc import Sequence
+from pathlib import Path
+
+from services.grader.assignment import parse_assignment
+from services.grader.grading_db import GradingStore
+from services.registry.accounts_db import RegistryDB
+from services.registry.courses_db import CourseStore
+from services.registry.roster import RosterRow
+from tests.kit.lab import REPO
 
 COURSE = "robotics-26"
 
@@ -44,3 +54,13 @@ def assignment_toml(name: str, **fields: str) -> str:
         rule = '100 * reached("goal") - 5 * collisions() - time_to("goal")'
         """
     )
+
+
+def add_course(db_path: Path, rows: Sequence[RosterRow], assignment: str) -> None:
+    """COURSE in the registry's database ``db_path``: its roster ``rows`` and the assignment
+    whose TOML is ``assignment`` (its map one of maps/)."""
+    db = RegistryDB(db_path)
+    CourseStore(db).import_roster(COURSE, list(rows))
+    parsed, map_text = parse_assignment(assignment.encode(), "a.toml", REPO / "maps")
+    GradingStore(db.database).put_assignment(parsed, map_text)
+    db.close()

@@ -320,6 +320,11 @@ class ProcessLab:
         self.account(account)
         return self.start(wiring.runner_spec(self.wiring(), name, account=account), name="runner")
 
+    def start_grader(self, *extra: str, name: str = "grader") -> Proc:
+        """The grader (its service account made first, once)."""
+        self.account(wiring.service_account("grader", "grader"))
+        return self.start(wiring.grader_spec(self.wiring()), name=name, extra=extra)
+
     def start_agent_context(
         self,
         *extra: str,
@@ -394,6 +399,17 @@ def make_lab(
     state = tmp / "state"
     identity = lab_state(state, users=users, password=password)
     return ProcessLab(router=router, procs=procs, state=state, identity=identity)
+
+
+@contextmanager
+def module_lab(router: Router, tmp: Path, *, users: dict[str, str] = USERS) -> Iterator[ProcessLab]:
+    """A lab (see make_lab) whose processes are all stopped when the block ends: one
+    lab for a whole test module, its state and logs under ``tmp``."""
+    procs = Procs(tmp)
+    try:
+        yield make_lab(router, procs, tmp, users=users)
+    finally:
+        procs.stop_all()
 
 
 # --- a whole `wart up` ---------------------------------------------------------------------

@@ -16,10 +16,7 @@ from common.messages import DirectoryRequest, ErrorReply, OkReply, decode, encod
 from common.service import close_session, open_session
 from tests.conftest import Router, wait_for
 
-
-@pytest.fixture
-def router(module_router: Router, realm: str) -> Router:
-    return module_router.in_realm(realm)  # this test's own realm on the module's router
+pytestmark = pytest.mark.shared_router
 
 
 @pytest.fixture

@@ -22,28 +22,19 @@ from common.robots.robotfile import parse
 from common.sim2d.world import World
 from common.world.packing import samples, snapshot
 from common.world.remote_robot import state_from_sample
+from tests.kit.robots import wheeled_robot
 
 REG = registry.build(plugins=False)
 LINE_BOT = parse(
-    """
-format = "wart-robot"
-version = 1
-name = "liner"
-[components.body]
-type = "body"
-radius_mm = 30.0
-mass_g = 80.0
-[components.drive]
-type = "differential_drive"
-wheel_base_mm = 50.0
-mm_per_pulse = 0.1
-unit_time_s = 0.01
-max_speed = 100
+    wheeled_robot(
+        "liner",
+        """
 [components.line]
 type = "floor_sensor"
 points = [[20.0, -8.0], [20.0, 8.0]]
 noise = 0.0
 """,
+    ),
     "liner.toml",
     REG.components,
 )

@@ -14,31 +14,19 @@ import pytest
 from common.robots import registry
 from common.robots.robotfile import MAX_BYTES, RobotFileError, parse
 from common.robots.schema import ComponentType, Param
+from tests.kit.robots import wheeled_robot
 
 COMPONENTS = registry.build(plugins=False).components
 
-GOOD = """\
-format = "wart-robot"
-version = 1
-name = "scout"
-
-[components.body]
-type = "body"
-radius_mm = 30.0
-mass_g = 80.0
-
-[components.drive]
-type = "differential_drive"
-wheel_base_mm = 50.0
-mm_per_pulse = 0.1
-unit_time_s = 0.01
-max_speed = 100
-
+GOOD = wheeled_robot(
+    "scout",
+    """
 [components.eye]
 type = "range_finder"
 beams = 5
 fov_deg = 60.0
-"""
+""",
+)
 
 
 def _refused(text: str) -> str:

@@ -14,26 +14,13 @@ from common.sim2d.floor import FloorLayer, FloorLine
 from common.sim2d.maps import MapError, build_world, world_to_map
 from common.sim2d.parts import parts_of, read_parts
 from common.sim2d.world import World
+from tests.kit.robots import wheeled_robot
 
 COMPONENTS = registry.build(plugins=False).components
 
-ROBOT = """\
-format = "wart-robot"
-version = 1
-name = "probe"
-
-[components.body]
-type = "body"
-radius_mm = 30.0
-mass_g = 80.0
-
-[components.drive]
-type = "differential_drive"
-wheel_base_mm = 50.0
-mm_per_pulse = 0.1
-unit_time_s = 0.01
-max_speed = 100
-
+ROBOT = wheeled_robot(
+    "probe",
+    """
 [components.line]
 type = "floor_sensor"
 points = [[20.0, 0.0], [20.0, 30.0]]
@@ -50,7 +37,8 @@ max_range_mm = 300.0
 type = "bumper"
 count = 4
 reach_mm = 2.0
-"""
+""",
+)
 PROBE = parse(ROBOT, "probe.toml", COMPONENTS)
 
 

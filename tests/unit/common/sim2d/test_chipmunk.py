@@ -142,30 +142,38 @@ def _edited_trajectory(seed: int, ticks: int, drive: str = "joints") -> list[np.
     rows: list[np.ndarray] = []
     for serial in range(ticks):
         world.set_speeds_all(braitenberg(world.proximity))
-        op = rng.integers(0, 12)
-        x, y = (float(v) for v in rng.uniform(60, 640, 2))
-        try:
-            if op == 0:
-                world.add_agent(f"n{serial}", KHEPERA, x, y, 0.0)
-            elif op == 1 and len(world.agents) > 1:
-                world.remove(world.agents[int(rng.integers(len(world.agents)))].id)
-            elif op == 2:
-                world.add_object(f"b{serial}", "ball", ShapeSpec.circle(20), x, y)
-            elif op == 3 and world.objects:
-                world.remove(world.objects[int(rng.integers(len(world.objects)))].id)
-            elif op == 4 and world.agents:
-                world.move(world.agents[int(rng.integers(len(world.agents)))].id, x, y)
-            elif op == 5 and world.objects:
-                world.move(world.objects[int(rng.integers(len(world.objects)))].id, x, y)
-            elif op == 6 and world.agents:
-                slot = int(rng.integers(len(world.agents)))
-                world.set_grip(slot, bool(rng.integers(2)))
-        except ValueError:
-            pass  # an edit the world refused (overlap, outside): the world is unchanged
+        _random_edit(world, rng, serial)
         world.step()
         _assert_arrays_are_the_bodies(world)
         rows.append(np.concatenate([world.agent_pose.ravel(), world.object_pose.ravel()]))
     return rows
+
+
+def _random_edit(world: World, rng: np.random.Generator, serial: int, arms: bool = False) -> None:
+    """One draw of 12 for a live edit: an agent or object comes, goes or moves, a gripper
+    opens or shuts (with ``arms``, an arm lifts); the other draws edit nothing."""
+    op = rng.integers(0, 12)
+    x, y = (float(v) for v in rng.uniform(60, 640, 2))
+    try:
+        if op == 0:
+            world.add_agent(f"n{serial}", KHEPERA, x, y, 0.0)
+        elif op == 1 and len(world.agents) > 1:
+            world.remove(world.agents[int(rng.integers(len(world.agents)))].id)
+        elif op == 2:
+            world.add_object(f"b{serial}", "ball", ShapeSpec.circle(20), x, y)
+        elif op == 3 and world.objects:
+            world.remove(world.objects[int(rng.integers(len(world.objects)))].id)
+        elif op == 4 and world.agents:
+            world.move(world.agents[int(rng.integers(len(world.agents)))].id, x, y)
+        elif op == 5 and world.objects:
+            world.move(world.objects[int(rng.integers(len(world.objects)))].id, x, y)
+        elif op == 6 and world.agents:
+            slot = int(rng.integers(len(world.agents)))
+            world.set_grip(slot, bool(rng.integers(2)))
+        elif op == 7 and arms and world.agents:
+            world.set_arm(int(rng.integers(len(world.agents))), int(rng.integers(165, 256)))
+    except ValueError:
+        pass  # an edit the world refused (overlap, outside): the world is unchanged
 
 
 def _assert_arrays_are_the_bodies(world: World) -> None:

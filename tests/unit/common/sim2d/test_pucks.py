@@ -214,7 +214,7 @@ def test_a_swarm_with_balls_sensed_on_two_threads_is_the_one_thread_run() -> Non
 def _edited_discs_run(seed: int, ticks: int, profile: bool) -> list[np.ndarray]:
     """Random live edits between ticks (test_chipmunk's), on the discs drive."""
     from common.sim2d.wander import braitenberg
-    from tests.unit.common.sim2d.test_chipmunk import _busy_world
+    from tests.unit.common.sim2d.test_chipmunk import _busy_world, _random_edit
 
     world = _busy_world(seed, "discs")
     world.profile = profile  # profiled: the general path, not the fused call
@@ -222,28 +222,7 @@ def _edited_discs_run(seed: int, ticks: int, profile: bool) -> list[np.ndarray]:
     rows: list[np.ndarray] = []
     for serial in range(ticks):
         world.set_speeds_all(braitenberg(world.proximity))
-        op = rng.integers(0, 12)
-        x, y = (float(v) for v in rng.uniform(60, 640, 2))
-        try:
-            if op == 0:
-                world.add_agent(f"n{serial}", KHEPERA, x, y, 0.0)
-            elif op == 1 and len(world.agents) > 1:
-                world.remove(world.agents[int(rng.integers(len(world.agents)))].id)
-            elif op == 2:
-                world.add_object(f"b{serial}", "ball", ShapeSpec.circle(20), x, y)
-            elif op == 3 and world.objects:
-                world.remove(world.objects[int(rng.integers(len(world.objects)))].id)
-            elif op == 4 and world.agents:
-                world.move(world.agents[int(rng.integers(len(world.agents)))].id, x, y)
-            elif op == 5 and world.objects:
-                world.move(world.objects[int(rng.integers(len(world.objects)))].id, x, y)
-            elif op == 6 and world.agents:
-                slot = int(rng.integers(len(world.agents)))
-                world.set_grip(slot, bool(rng.integers(2)))
-            elif op == 7 and world.agents:
-                world.set_arm(int(rng.integers(len(world.agents))), int(rng.integers(165, 256)))
-        except ValueError:
-            pass  # an edit the world refused (overlap, outside): the world is unchanged
+        _random_edit(world, rng, serial, arms=True)
         world.step()
         # Every object's pose as the edits see it (the bodies, placed) is the drive's.
         placed = np.array([world.pose_of(o.id) for o in world.objects]).reshape(-1, 3)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numba
 import numpy as np
 import pytest
@@ -9,6 +11,7 @@ import pytest
 from common.sim2d import kernels, rays, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
+from common.sim2d.packs import StaticScene
 from common.sim2d.wander import braitenberg
 from common.sim2d.world import EditError, World
 
@@ -150,6 +153,23 @@ def test_threaded_space_drives_grips_and_pushes_like_the_serial_one() -> None:
         assert world.object_pose[0, 0] > world.agent_pose[0, 0] + 27.0
 
 
+def _occluded_both_ways(scene: StaticScene, seg: Iterable[float]) -> tuple[bool, bool]:
+    """Whether an obstacle hides the segment, testing every edge and walking the grid."""
+    full = rays._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
+    along = rays._occluded_grid(
+        *seg,
+        scene.segs,
+        scene.grid_start,
+        scene.grid_items,
+        scene.grid_nx,
+        scene.grid_ny,
+        scene.cell,
+        scene.static_xy,
+        scene.static_r,
+    )
+    return full, along
+
+
 def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
     # 40 boxes (160 edges) and 3 round obstacles; a robot-to-light segment is hidden
     # or not the same whether every edge is tested or only those binned along it.
@@ -164,18 +184,7 @@ def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
     scene = world.sensors.static_geometry(world).scene
     hidden = 0
     for p in rng.uniform([0, 0, 0, 0], [3000, 2000, 3000, 2000], size=(3000, 4)):
-        full = rays._occluded(*p, scene.occ_segs, scene.static_xy, scene.static_r)
-        along = rays._occluded_grid(
-            *p,
-            scene.segs,
-            scene.grid_start,
-            scene.grid_items,
-            scene.grid_nx,
-            scene.grid_ny,
-            scene.cell,
-            scene.static_xy,
-            scene.static_r,
-        )
+        full, along = _occluded_both_ways(scene, p)
         assert full == along, p
         hidden += full
     assert 300 < hidden < 2700, "too few or too many hidden segments: a weak test"
@@ -212,18 +221,7 @@ def test_occlusion_along_the_grid_holds_on_grid_lines_and_corners() -> None:
         else:  # short, near a corner
             q = p + rng.uniform(-cell, cell, 2)
         seg = (float(p[0]), float(p[1]), float(q[0]), float(q[1]))
-        full = rays._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
-        along = rays._occluded_grid(
-            *seg,
-            scene.segs,
-            scene.grid_start,
-            scene.grid_items,
-            scene.grid_nx,
-            scene.grid_ny,
-            scene.cell,
-            scene.static_xy,
-            scene.static_r,
-        )
+        full, along = _occluded_both_ways(scene, seg)
         assert full == along, seg
         hidden += full
     assert hidden > 100, "too few hidden segments: a weak test"

@@ -39,6 +39,7 @@ from common.world.leasemac import (
     seal_key,
 )
 from common.world.leases import LeaseBook
+from tests.kit.leases import mac_lease
 
 REALM, WORLD, AGENT = "lab", "w1", "k1"
 CMD = keys.agent_cmd(REALM, WORLD, AGENT)
@@ -59,17 +60,15 @@ class Setup:
         self, *, lease_id: str = "L1", start: float | None = None, end: float | None = None
     ) -> Lease:
         now = time.time()
-        return Lease(
+        return mac_lease(
+            self.k,
+            self.holder,
+            self.world,
             lease_id=lease_id,
-            world=WORLD,
+            world_name=WORLD,
             agent=AGENT,
-            holder_user="alice",
-            holder_session=self.holder.session_id,
             start=now - 1 if start is None else start,
             end=now + 60 if end is None else end,
-            holder_key=seal_key(self.k, self.holder.keys.box_public_key),
-            world_key=seal_key(self.k, self.world.keys.box_public_key),
-            world_box=self.world.keys.box_public_key,
         )
 
     def grant(self, lease: Lease | None = None) -> Lease:
@@ -387,17 +386,8 @@ def two_holders(s: Setup) -> tuple[CommandMac, CommandMac, Session]:
     bob = issue_session(s.registry, REALM, "bob", ["control"])
     k2 = new_lease_key()
     now = time.time()
-    lease = Lease(
-        lease_id="L2",
-        world=WORLD,
-        agent="k2",
-        holder_user="bob",
-        holder_session=bob.session_id,
-        start=now - 1,
-        end=now + 60,
-        holder_key=seal_key(k2, bob.keys.box_public_key),
-        world_key=seal_key(k2, s.world.keys.box_public_key),
-        world_box=s.world.keys.box_public_key,
+    lease = mac_lease(
+        k2, bob, s.world, lease_id="L2", world_name=WORLD, agent="k2", start=now - 1, end=now + 60
     )
     s.book.accept_lease(K2_LEASE, s.context.seal(K2_LEASE, lease))
     return CommandMac(s.k, CMD, "L1"), CommandMac(k2, K2_CMD, "L2"), bob

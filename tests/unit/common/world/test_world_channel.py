@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
-from typing import Any
 
 import msgspec
 import pytest
@@ -21,63 +19,19 @@ from common.messages import (
     AgentCommand,
     AuthEnvelope,
     CommandBundle,
-    Lease,
     MacCommandBundle,
     SampleBundle,
     SensorSample,
     decode,
     encode,
 )
-from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
+from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
+from tests.kit.fakezenoh import FakeSample, FakeSession
+from tests.kit.leases import grant_on, mac_lease
 
 REALM, WORLD = "r", "w"
-
-
-class FakePayload:
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-
-    def to_bytes(self) -> bytes:
-        return self.data
-
-
-class FakeSample:
-    def __init__(self, data: bytes) -> None:
-        self.payload = FakePayload(data)
-
-
-class FakePublisher:
-    def __init__(self, key: str, hold_s: float) -> None:
-        self.key, self.hold_s = key, hold_s
-        self.puts: list[bytes] = []
-        self._lock = threading.Lock()
-
-    def put(self, payload: bytes) -> None:
-        time.sleep(self.hold_s)  # a put in flight: others queue behind it meanwhile
-        with self._lock:
-            self.puts.append(payload)
-
-    def undeclare(self) -> None:
-        pass
-
-
-class FakeSession:
-    """Records publishers and subscribers by key expression."""
-
-    def __init__(self, hold_s: float = 0.0) -> None:
-        self.hold_s = hold_s
-        self.publishers: dict[str, FakePublisher] = {}
-        self.callbacks: dict[str, Callable[[Any], None]] = {}
-
-    def declare_publisher(self, key: str, **_: Any) -> FakePublisher:
-        self.publishers[key] = FakePublisher(key, self.hold_s)
-        return self.publishers[key]
-
-    def declare_subscriber(self, key: str, callback: Callable[[Any], None]) -> Any:
-        self.callbacks[key] = callback
-        return FakePublisher(key, 0.0)  # only undeclare() is used
 
 
 def sample(agent: str, tick: int) -> SensorSample:
@@ -380,22 +334,17 @@ def mac_leased(
     now = time.time()
     for agent in leased:
         k = new_lease_key()
-        lease = Lease(
+        lease = mac_lease(
+            k,
+            RUNNER,
+            world,
             lease_id=f"L-{agent}",
-            world=WORLD,
+            world_name=WORLD,
             agent=agent,
-            holder_user="runner",
-            holder_session=RUNNER.session_id,
             start=now - 1,
             end=now + 60,
-            holder_key=seal_key(k, RUNNER.keys.box_public_key),
-            world_key=seal_key(k, world.keys.box_public_key),
-            world_box=world.keys.box_public_key,
         )
-        key = keys.agent_lease(REALM, WORLD, agent)
-        sealed = context.seal(key, lease)
-        book.accept_lease(key, sealed)
-        zs.callbacks[key](FakeSample(sealed))
+        grant_on(zs, book, context, REALM, lease)
     return zs, channel, links, book
 
 
