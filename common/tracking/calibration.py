@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from common.files import write_atomic
+from common.tracking.intrinsics import Intrinsics, IntrinsicsError
 from common.tracking.markers import MarkerLayout, corners_mm, dictionary
 
 FORMAT = "wart-arena-calibration"
@@ -51,6 +52,8 @@ class ArenaCalibration:
     dist_coeffs: np.ndarray | None = None
     # The floor point under the camera; None: under the image's centre (straight down).
     camera_xy_mm: tuple[float, float] | None = None
+    # Where camera_matrix and dist_coeffs came from (`wart camera calibrate --intrinsics`).
+    lens: Intrinsics | None = None
 
     def __post_init__(self) -> None:
         h = np.asarray(self.homography, dtype=np.float64)
@@ -127,6 +130,7 @@ class ArenaCalibration:
             "camera_matrix": listed(self.camera_matrix),
             "dist_coeffs": listed(self.dist_coeffs),
             "camera_xy_mm": None if self.camera_xy_mm is None else list(self.camera_xy_mm),
+            **({} if self.lens is None else {"intrinsics": self.lens.report()}),
         }
 
     def save(self, path: Path) -> None:
@@ -134,18 +138,7 @@ class ArenaCalibration:
 
     @classmethod
     def load(cls, path: Path) -> ArenaCalibration:
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise CalibrationError(
-                f"{path}: no calibration file there; make one with `wart camera calibrate`"
-            ) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise CalibrationError(f"{path}: cannot be read ({exc})") from None
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise CalibrationError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from None
+        data = _read(path)
         try:
             return cls.from_json(data)
         except CalibrationError as exc:
@@ -153,29 +146,14 @@ class ArenaCalibration:
 
     @classmethod
     def from_json(cls, data: Any) -> ArenaCalibration:
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise CalibrationError(f'not an arena calibration (needs "format": "{FORMAT}")')
-        if data.get("version") != VERSION:
-            raise CalibrationError(f"version {data.get('version')!r} is not {VERSION}")
-
-        def matrix(name: str, shape: tuple[int, ...], optional: bool = False) -> np.ndarray | None:
-            value = data.get(name)
-            if value is None and optional:
-                return None
-            try:
-                arr = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise CalibrationError(f"{name}: must be numbers") from None
-            if arr.shape != shape and not (
-                name == "dist_coeffs" and arr.ndim == 1 and 4 <= arr.size <= 14
-            ):
-                raise CalibrationError(
-                    f"{name}: must have shape {list(shape)}, got {list(arr.shape)}"
-                )
-            if not np.all(np.isfinite(arr)):
-                raise CalibrationError(f"{name}: must be finite numbers")
-            return arr
-
+        _check_format(data)
+        if data.get("homography") is None and data.get("camera_matrix") is not None:
+            raise CalibrationError(
+                "holds the camera's intrinsics but not the arena's floor yet: run "
+                "`wart camera calibrate --world W --source S --out FILE` (it keeps the "
+                "intrinsics), or start the camera with --auto-calibrate"
+            )
+        lens = _lens(data)
         size = data.get("image_size")
         if not (
             isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) for v in size)
@@ -187,7 +165,7 @@ class ArenaCalibration:
         rms = data.get("rms_mm", 0.0)
         if not isinstance(rms, int | float) or not math.isfinite(rms):
             raise CalibrationError("rms_mm: must be a number")
-        homography = matrix("homography", (3, 3))
+        homography = _matrix(data, "homography", (3, 3))
         assert homography is not None
         xy = data.get("camera_xy_mm")
         if xy is not None and not (
@@ -199,10 +177,105 @@ class ArenaCalibration:
             homography=homography,
             camera_height_mm=float(height),
             rms_mm=float(rms),
-            camera_matrix=matrix("camera_matrix", (3, 3), optional=True),
-            dist_coeffs=matrix("dist_coeffs", (5,), optional=True),
+            camera_matrix=_matrix(data, "camera_matrix", (3, 3), optional=True),
+            dist_coeffs=_matrix(data, "dist_coeffs", (5,), optional=True),
             camera_xy_mm=None if xy is None else (float(xy[0]), float(xy[1])),
+            lens=lens,
         )
+
+
+def _read(path: Path) -> Any:
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CalibrationError(
+            f"{path}: no calibration file there; make one with `wart camera calibrate`"
+        ) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{path}: cannot be read ({exc})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CalibrationError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from None
+
+
+def _check_format(data: Any) -> None:
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise CalibrationError(f'not an arena calibration (needs "format": "{FORMAT}")')
+    if data.get("version") != VERSION:
+        raise CalibrationError(f"version {data.get('version')!r} is not {VERSION}")
+
+
+def _matrix(
+    data: dict[str, Any], name: str, shape: tuple[int, ...], optional: bool = False
+) -> np.ndarray | None:
+    value = data.get(name)
+    if value is None and optional:
+        return None
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{name}: must be numbers") from None
+    if arr.shape != shape and not (name == "dist_coeffs" and arr.ndim == 1 and 4 <= arr.size <= 14):
+        raise CalibrationError(f"{name}: must have shape {list(shape)}, got {list(arr.shape)}")
+    if not np.all(np.isfinite(arr)):
+        raise CalibrationError(f"{name}: must be finite numbers")
+    return arr
+
+
+def _lens(data: dict[str, Any]) -> Intrinsics | None:
+    """The intrinsics' report of a calibration file (None for a file from before it)."""
+    report = data.get("intrinsics")
+    if report is None:
+        return None
+    camera_matrix = _matrix(data, "camera_matrix", (3, 3))
+    dist_coeffs = _matrix(data, "dist_coeffs", (5,))
+    assert camera_matrix is not None and dist_coeffs is not None
+    try:
+        return Intrinsics.from_report(report, camera_matrix, dist_coeffs)
+    except IntrinsicsError as exc:
+        raise CalibrationError(str(exc)) from None
+
+
+def read_intrinsics(path: Path) -> Intrinsics | None:
+    """The camera's intrinsics a calibration file holds (with or without the arena's floor);
+    None when it holds none. A missing or wrong file is a CalibrationError."""
+    data = _read(path)
+    try:
+        _check_format(data)
+        if data.get("camera_matrix") is None:
+            return None
+        lens = _lens(data)
+        if lens is not None:
+            return lens
+        camera_matrix = _matrix(data, "camera_matrix", (3, 3))
+        dist_coeffs = _matrix(data, "dist_coeffs", (5,), optional=True)
+        assert camera_matrix is not None
+        size = data.get("image_size")
+        if not (isinstance(size, list) and len(size) == 2):
+            raise CalibrationError("image_size: must be [width, height] in whole pixels")
+        return Intrinsics(
+            (int(size[0]), int(size[1])),
+            camera_matrix,
+            np.zeros(5) if dist_coeffs is None else dist_coeffs,
+        )
+    except CalibrationError as exc:
+        raise CalibrationError(f"{path}: {exc}") from None
+
+
+def save_intrinsics(path: Path, lens: Intrinsics) -> None:
+    """A calibration file with the camera's intrinsics only: the arena's floor is
+    calibrated next, with them (`wart camera calibrate --world ... --out` the same file)."""
+    document = {
+        "format": FORMAT,
+        "version": VERSION,
+        "image_size": list(lens.image_size),
+        "homography": None,
+        "camera_matrix": lens.camera_matrix.tolist(),
+        "dist_coeffs": np.asarray(lens.dist_coeffs).ravel().tolist(),
+        "intrinsics": lens.report(),
+    }
+    write_atomic(path, (json.dumps(document, indent=1) + "\n").encode())
 
 
 def detect(gray: np.ndarray) -> dict[int, np.ndarray]:
@@ -229,6 +302,7 @@ def calibrate(
     camera_height_mm: float | None = None,
     camera_matrix: np.ndarray | None = None,
     dist_coeffs: np.ndarray | None = None,
+    lens: Intrinsics | None = None,
 ) -> ArenaCalibration:
     """The floor's homography from the reference markers visible in one frame.
 
@@ -282,6 +356,7 @@ def calibrate(
         camera_matrix=camera_matrix,
         dist_coeffs=dist_coeffs,
         camera_xy_mm=camera_xy,
+        lens=lens,
     )
     residual = cal.to_arena(image_pts) - arena_pts
     rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))

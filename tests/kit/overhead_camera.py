@@ -516,13 +516,13 @@ class BoardCamera:
         rng = np.random.default_rng(seed)
         out = []
         for _ in range(count):
-            u = rng.uniform(0.25, 0.75) * self.lens.width
-            v = rng.uniform(0.25, 0.75) * self.lens.height
+            u = rng.uniform(0.12, 0.88) * self.lens.width
+            v = rng.uniform(0.15, 0.85) * self.lens.height
             out.append(
                 self.pose_toward(
                     float(u),
                     float(v),
-                    float(rng.uniform(650, 1300)),
+                    float(rng.uniform(520, 1400)),
                     float(rng.uniform(-40, 40)),
                     float(rng.uniform(-40, 40)),
                     float(rng.uniform(-20, 20)),
