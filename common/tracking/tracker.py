@@ -76,8 +76,9 @@ class Tracker:
 
     def detect_poses(self, frame: np.ndarray, captured_at: float) -> list[TrackedPose]:
         """Every robot marker in ``frame`` as a pose, unchecked against earlier frames."""
-        ideal = self.calibration.undistort_frame(frame)
-        gray = ideal if ideal.ndim == 2 else cv2.cvtColor(ideal, cv2.COLOR_BGR2GRAY)
+        # Markers are found in the frame as recorded, their corners then undistorted (the
+        # whole frame is not: a 1280x720 remap cost more than the detection).
+        gray = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         poses = []
         self._unknown: list[int] = []
         for marker, px in detect(gray).items():
@@ -86,7 +87,8 @@ class Tracker:
                 if marker not in self.layout.reference:
                     self._unknown.append(marker)
                 continue
-            mm = self.calibration.to_arena(px, self.layout.robot_marker_height_mm)
+            ideal = self.calibration.undistort_points(px)
+            mm = self.calibration.to_arena(ideal, self.layout.robot_marker_height_mm)
             centre = mm.mean(axis=0)
             # The heading from both of the marker's axes: its up edge pair and its
             # side pair turned a quarter (halves the error of one pair's corners).

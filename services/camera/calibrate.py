@@ -112,6 +112,9 @@ def calibrate_main(argv: Sequence[str], prog: str) -> int:
         f"calibrated {frame.shape[1]}x{frame.shape[0]} from the reference markers: "
         f"{cal.rms_mm:.1f} mm rms; saved to {args.out}"
     )
+    print(cal.report())
+    for warning in cal.warnings():
+        print(f"warning: {warning}")
     return 0
 
 

@@ -14,7 +14,12 @@ import zenoh
 
 from common import cli, keys
 from common.service import run_service
-from common.tracking.calibration import ArenaCalibration, CalibrationError
+from common.tracking.calibration import (
+    ArenaCalibration,
+    CalibrationError,
+    floor_calibrated,
+    read_intrinsics,
+)
 from services.camera import service
 from services.camera.arguments import positive, source_arguments
 from services.camera.calibrate import calibrate_main
@@ -77,7 +82,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
         p.error(str(exc))
     if args.calibration is not None and args.calibration.exists():
         try:
-            ArenaCalibration.load(args.calibration)
+            if floor_calibrated(args.calibration):
+                ArenaCalibration.load(args.calibration)
+            elif not args.auto_calibrate:
+                return cli.fail(
+                    f"{args.calibration} holds the lens only: add --auto-calibrate to calibrate "
+                    "the arena's floor with it (or run `wart camera calibrate --world ...`)"
+                )
+            read_intrinsics(args.calibration)
         except CalibrationError as exc:
             return cli.fail(str(exc))
     camera_options = CameraOptions(

@@ -38,7 +38,14 @@ from common.messages import (
 )
 from common.messages.camera import MAX_FRAME_BYTES
 from common.service import Service
-from common.tracking.calibration import ArenaCalibration, CalibrationError, calibrate
+from common.tracking.calibration import (
+    ArenaCalibration,
+    CalibrationError,
+    calibrate,
+    floor_calibrated,
+    read_intrinsics,
+)
+from common.tracking.intrinsics import Intrinsics
 from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
 from services.camera.sources import FrameSource, SourceError
@@ -78,6 +85,7 @@ class CameraService(Service):
         self.source = source
         self.options = options or CameraOptions()
         self.calibration: ArenaCalibration | None = None
+        self.lens: Intrinsics | None = None
         self.layout: MarkerLayout | None = None
         self.tracker: Tracker | None = None
         self.online = False
@@ -96,14 +104,24 @@ class CameraService(Service):
     # -- lifecycle
 
     def on_start(self) -> None:
-        if self.options.calibration is not None and self.options.calibration.exists():
-            self.calibration = ArenaCalibration.load(self.options.calibration)  # errors: main says
+        path = self.options.calibration
+        if path is not None and path.exists():
+            # A file with the lens only: the floor is calibrated here (main checked that
+            # --auto-calibrate is on), with that lens. Errors: main said them already.
+            self.lens = read_intrinsics(path)
+            if floor_calibrated(path):
+                self.calibration = ArenaCalibration.load(path)
+            elif self.lens is not None:
+                self.log.info("lens from %s: %s", path, self.lens.summary())
+        if self.calibration is not None and path is not None:
             self.log.info(
-                "calibration %s: made at %dx%d, %.1f mm rms",
-                self.options.calibration,
+                "calibration %s: made at %dx%d; %s",
+                path,
                 *self.calibration.image_size,
-                self.calibration.rms_mm,
+                self.calibration.report(),
             )
+            for warning in self.calibration.warnings():
+                self.log.warning("%s", warning)
         drop = zenoh.CongestionControl.DROP
         self._image_pub = self.track(
             self.session.declare_publisher(
@@ -308,13 +326,22 @@ class CameraService(Service):
         if time.monotonic() < self._next_calibration:
             return
         self._next_calibration = time.monotonic() + 5.0
+        lens = self.lens
+        if lens is not None and lens.image_size != self.size:
+            self._say_once(
+                "lens-size",
+                "the lens was calibrated at {}x{} but the camera gives {}x{}: calibrating "
+                "without it".format(*lens.image_size, *self.size),
+            )
+            lens = None
         try:
             cal = calibrate(
                 frame,
                 self.layout,
                 camera_height_mm=self.options.camera_height_mm,
-                camera_matrix=self.source.camera_matrix,
-                dist_coeffs=self.source.dist_coeffs,
+                camera_matrix=lens.camera_matrix if lens else self.source.camera_matrix,
+                dist_coeffs=lens.dist_coeffs if lens else self.source.dist_coeffs,
+                lens=lens,
             )
         except CalibrationError as exc:
             self._say_once("calibrate", f"cannot calibrate yet: {exc}")
@@ -324,7 +351,9 @@ class CameraService(Service):
         if self.options.calibration is not None:
             cal.save(self.options.calibration)
             where = f", saved to {self.options.calibration}"
-        self.log.info("calibrated from the reference markers: %.1f mm rms%s", cal.rms_mm, where)
+        self.log.info("calibrated from the reference markers%s: %s", where, cal.report())
+        for warning in cal.warnings():
+            self.log.warning("%s", warning)
         self._make_tracker()
 
     # -- status
