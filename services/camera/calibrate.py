@@ -30,7 +30,7 @@ from common.tracking.calibration import (
 )
 from common.tracking.intrinsics import BoardSpec, IntrinsicsCollector, IntrinsicsError
 from common.tracking.markers import default_layout
-from services.camera.arguments import positive, source_arguments
+from services.camera.arguments import DEFAULT_HEIGHT_MM, positive, source_arguments
 from services.camera.service import world_snapshot
 from services.camera.sources import SourceError, check_spec, open_source
 
@@ -99,7 +99,11 @@ def calibrate_main(argv: Sequence[str], prog: str) -> int:
         cal = calibrate(
             frame,
             default_layout(width, height, []),
-            camera_height_mm=args.camera_height,
+            camera_height_mm=args.camera_height
+            if args.camera_height is not None
+            or lens is not None
+            or source.camera_matrix is not None
+            else DEFAULT_HEIGHT_MM,
             camera_matrix=source.camera_matrix if lens is None else lens.camera_matrix,
             dist_coeffs=source.dist_coeffs if lens is None else lens.dist_coeffs,
             lens=lens,

@@ -48,6 +48,7 @@ from common.tracking.calibration import (
 from common.tracking.intrinsics import Intrinsics
 from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
+from services.camera.arguments import DEFAULT_HEIGHT_MM
 from services.camera.sources import FrameSource, SourceError
 
 STATUS_PERIOD_S = 2.0
@@ -63,7 +64,7 @@ class CameraOptions:
     jpeg_quality: int = 70
     calibration: Path | None = None
     auto_calibrate: bool = False
-    camera_height_mm: float = 1500.0
+    camera_height_mm: float | None = None  # None: solved with a lens, else 1500 said
 
 
 class CameraService(Service):
@@ -338,7 +339,7 @@ class CameraService(Service):
             cal = calibrate(
                 frame,
                 self.layout,
-                camera_height_mm=self.options.camera_height_mm,
+                camera_height_mm=self._height(lens),
                 camera_matrix=lens.camera_matrix if lens else self.source.camera_matrix,
                 dist_coeffs=lens.dist_coeffs if lens else self.source.dist_coeffs,
                 lens=lens,
@@ -355,6 +356,19 @@ class CameraService(Service):
         for warning in cal.warnings():
             self.log.warning("%s", warning)
         self._make_tracker()
+
+    def _height(self, lens: Intrinsics | None) -> float | None:
+        """The height to calibrate with: the one given, else none with a lens (solved),
+        else the default, said once."""
+        given = self.options.camera_height_mm
+        if given is not None or lens is not None or self.source.camera_matrix is not None:
+            return given
+        self._say_once(
+            "height",
+            f"--camera-height not given: {DEFAULT_HEIGHT_MM:g} mm assumed (without the lens's "
+            "intrinsics the height is needed; measure it)",
+        )
+        return DEFAULT_HEIGHT_MM
 
     # -- status
 

@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from common.tracking.calibration import ArenaCalibration, calibrate
+from common.tracking.calibration import CHECK_WARN_MM, ArenaCalibration, calibrate
 from common.tracking.intrinsics import BoardSpec, Intrinsics, IntrinsicsCollector
 from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
+from services.camera.main import main
 from tests.kit.overhead_camera import (
     Board,
     BoardCamera,
@@ -84,6 +85,9 @@ def test_with_the_lens_calibrated_a_tilted_camera_tracks_without_bias(
     assert cal.tilt_deg == pytest.approx(MOUNT.tilt_deg, abs=0.5)
     assert cal.camera_xy_mm is not None
     assert math.dist(cal.camera_xy_mm, camera.centre[:2]) < 15.0
+    # Honest error: each reference marker predicted from the other three.
+    assert cal.check_mm is not None and cal.check_mm < CHECK_WARN_MM
+    assert "mm rms predicting each reference marker from the others" in cal.report()
     assert cal.warnings() == []
     off = errors(camera, layout, cal)
     distance = np.linalg.norm(off, axis=1)
@@ -97,7 +101,9 @@ def test_without_the_lens_the_camera_says_its_error_grows_with_its_tilt(
 ) -> None:
     cal = calibrate(camera.render({}), layout, camera_height_mm=MOUNT.height_mm)
     assert cal.tilt_deg == pytest.approx(MOUNT.tilt_deg, abs=2.0)
-    [warning] = cal.warnings()
+    off_check, warning = cal.warnings()
+    assert cal.check_mm is not None and cal.check_mm > CHECK_WARN_MM
+    assert f"the calibration is {cal.check_mm:.1f} mm off on reference markers" in off_check
     assert "error grows with the camera's tilt (about 1" in warning
     assert "wart camera calibrate --intrinsics" in warning
     assert "estimated from the floor's homography" in cal.report()
@@ -105,3 +111,35 @@ def test_without_the_lens_the_camera_says_its_error_grows_with_its_tilt(
     # under the image's centre: no longer a bias of a centimetre along the tilt.
     off = errors(camera, layout, cal, frames=4)
     assert abs(float(off[:, 1].mean())) < 3.0
+
+
+def test_a_camera_height_that_disagrees_with_the_markers_is_said_with_both_numbers(
+    camera: OverheadCamera, layout: MarkerLayout, lens: Intrinsics
+) -> None:
+    frame = camera.render({})
+    solved = calibrate(
+        frame,
+        layout,
+        camera_height_mm=1000.0,
+        camera_matrix=lens.camera_matrix,
+        dist_coeffs=lens.dist_coeffs,
+    )
+    assert solved.camera_height_mm == pytest.approx(1660.0, rel=0.01)
+    assert any(
+        w.startswith("--camera-height 1000 mm disagrees with the 16") and "mm the reference" in w
+        for w in solved.warnings()
+    ), solved.warnings()
+    guessed = calibrate(frame, layout, camera_height_mm=9000.0)
+    assert "no camera 9000 mm up sees the floor as this one does" in guessed.warnings()[0]
+
+
+@pytest.mark.parametrize("height", ["50", "20000", "nan", "high"])
+def test_an_absurd_camera_height_is_refused_by_the_command(
+    height: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as refused:
+        main(["--world", "w1", "--source", "0", "--camera-height", height])
+    assert refused.value.code == 2
+    said = capsys.readouterr().err
+    assert "argument --camera-height: the camera's height above the floor, mm:" in said
+    assert "must be 300 to 10000" in said or "not a number" in said
