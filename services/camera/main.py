@@ -37,8 +37,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
     p.add_argument(
         "--fps",
         type=positive(float, 1, 30),
-        default=10.0,
-        help="frames a second (1 to 30, default 10)",
+        help="frames a second, 1 to 30 (default: 10 from a live camera; a video file at its "
+        "own rate, or sampled at this rate from its own timeline)",
     )
     p.add_argument(
         "--max-width",
@@ -70,7 +70,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
         help="without a calibration file, calibrate from the reference markers once they are in "
         "view (and save it to --calibration FILE when given)",
     )
-    p.add_argument("--loop", action="store_true", help="a video file starts again at its end")
+    p.add_argument(
+        "--loop",
+        action="store_true",
+        help="a video file starts again at its end (without: the camera goes offline there "
+        "and stays offline)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -103,7 +108,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
     )
 
     def build(session: zenoh.Session) -> CameraService:
-        source = open_source(args.source, loop=args.loop)
+        source = open_source(args.source, loop=args.loop, sample_fps=args.fps)
         return CameraService(
             session, options.realm, name, world=args.world, source=source, options=camera_options
         )

@@ -49,16 +49,17 @@ from common.tracking.intrinsics import Intrinsics
 from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
 from services.camera.arguments import DEFAULT_HEIGHT_MM
-from services.camera.sources import FrameSource, SourceError
+from services.camera.sources import FrameSource, SourceEnded, SourceError
 
 STATUS_PERIOD_S = 2.0
 RETRY_S = 2.0
+LIVE_FPS = 10.0
 FLOOR_MM_PER_PX = 2.0  # the floor view's resolution: a 1 m arena is 500 px
 
 
 @dataclass(frozen=True)
 class CameraOptions:
-    fps: float = 10.0
+    fps: float | None = None  # None: a live source at LIVE_FPS, a recording at its own
     max_width: int = 640
     max_height: int = 480
     jpeg_quality: int = 70
@@ -153,10 +154,11 @@ class CameraService(Service):
     # -- the capture loop
 
     def _run(self) -> None:
-        period = 1.0 / self.options.fps
+        period = 1.0 / (self.options.fps or LIVE_FPS)
         opened = False
         started, count = time.monotonic(), 0
         next_at = time.monotonic()
+        loops = 0
         while not self.stopped:
             now = time.monotonic()
             if now >= self._next_layout:
@@ -167,6 +169,13 @@ class CameraService(Service):
                     opened = True
                     self._say_once("open", f"capturing from the {self.source.description}")
                 frame = self.source.read()
+            except SourceEnded as exc:
+                # A recording that ended stays ended: offline until the camera is stopped.
+                self.source.close()
+                self._set_offline(str(exc))
+                while not self._stopped.wait(STATUS_PERIOD_S):
+                    self._publish_status()
+                return
             except SourceError as exc:
                 if opened:
                     self.source.close()
@@ -174,12 +183,25 @@ class CameraService(Service):
                 self._set_offline(str(exc))
                 self._stopped.wait(RETRY_S)
                 continue
-            captured_at = time.time()
+            for note in self.source.notes():
+                self.log.warning("%s", note)
+            if self.source.loops != loops:
+                loops = self.source.loops
+                self._say_once(
+                    "loop",
+                    f"the {self.source.description} ended: playing it again from its start "
+                    "(--loop); its timeline carries on and each robot is tracked afresh, "
+                    "never as a jump",
+                )
+                self._make_tracker()
+            captured_at = self.source.captured_at or time.time()
             self._publish(frame, captured_at)
             count += 1
             if time.monotonic() - started >= 2.0:
                 self._fps = count / (time.monotonic() - started)
                 started, count = time.monotonic(), 0
+            if self.source.paces_itself:  # a recording: its own rate (or --fps samples it)
+                continue
             next_at = max(next_at + period, time.monotonic() - period)
             self._stopped.wait(max(0.0, next_at - time.monotonic()))
 

@@ -19,6 +19,7 @@ from common.messages import CameraFrame, CameraStatus, Message, TrackedPoses, de
 from common.tracking.truth import now_truth, write_truth
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from tests.kit.videos import write_video
 
 # One worker starts the module's router once.
 pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera")]
@@ -209,6 +210,58 @@ def test_a_video_file_that_ends_leaves_the_camera_offline_not_dead(
     wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
     assert "not calibrated: video only" in proc.output()
     assert proc.popen.poll() is None
+
+
+def test_a_recording_says_its_corrupt_frames_and_stays_offline_at_its_end(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    video = write_video(tmp_path / "arena.avi", 40, 20.0, corrupt=range(12, 15))
+    status = Newest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+    proc = start_camera(procs, router, "--source", str(video))
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+
+    def ended() -> bool:
+        s = status.get()
+        return isinstance(s, CameraStatus) and not s.online and "ended after 40 frames" in s.reason
+
+    wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
+    said = proc.output()
+    assert f"frames 12 to 14 of the video file {video} are corrupt (do not decode)" in said
+    assert "give --loop to play it again" in said
+    heard = status.count
+    wait_for(lambda: status.count >= heard + 2, 15.0, "two more statuses")
+    still = status.get()
+    assert isinstance(still, CameraStatus) and not still.online, "it stays offline"
+    assert proc.output().count("camera online") == 1, proc.output()
+
+
+def test_a_looping_recording_says_so_and_carries_its_timeline_on(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    video = write_video(tmp_path / "arena.avi", 10, 20.0)
+    frames = Newest(zsession, keys.camera_frame(router.realm, WORLD, CAMERA), CameraFrame)
+    stamps: list[float] = []
+    sub = zsession.declare_subscriber(
+        keys.camera_frame(router.realm, WORLD, CAMERA),
+        lambda sample: stamps.append(decode(sample.payload, CameraFrame).captured_at),
+    )
+    proc = start_camera(procs, router, "--source", str(video), "--loop")
+    wait_for(lambda: frames.count >= 25, 60.0, f"25 frames:\n{proc.output()}")
+    sub.undeclare()
+    assert "playing it again from its start (--loop)" in proc.output()
+    steps = np.diff(stamps[:20])
+    assert np.all(steps > 0), "the timeline never goes back at the loop"
+    assert np.allclose(steps[steps < 0.2], 0.05, atol=1e-3), "the file's own 20 fps"
 
 
 def test_a_bad_calibration_file_is_refused_with_its_field(
