@@ -3,9 +3,10 @@ tracker does on a tilted, distorting lens with blur, noise, light changes, JPEG 
 
 Each scene: the lens calibrated from rendered ChArUco views (``wart camera calibrate
 --intrinsics``'s own code, not hand-written numbers), the arena calibrated from its
-reference markers with and without those intrinsics, then robots at random poses
-and speeds; the tracker's error against the truth at mid-exposure, its detection
-by speed, and its CPU a frame.
+reference markers with and without those intrinsics, then robots driving at
+several speeds (a hand over one of them every third frame); the tracker's error
+against the truth at mid-exposure, its detection by speed over the frames where
+the robot is not covered, and its CPU a frame.
 """
 
 from __future__ import annotations
@@ -104,23 +105,35 @@ def arena_calibrations(
     }
 
 
-def robots_at_speeds(
-    rng: np.random.Generator, agents: Sequence[str], speeds: Sequence[float]
-) -> dict[str, Robot]:
-    robots: dict[str, Robot] = {}
-    while len(robots) < len(agents):
-        x, y = rng.uniform(110, 890, 2)
-        if all(math.hypot(x - r.x, y - r.y) > 80 for r in robots.values()):
-            speed = speeds[len(robots) % len(speeds)]
-            way = rng.uniform(-math.pi, math.pi)
-            robots[agents[len(robots)]] = Robot(
-                float(x),
-                float(y),
-                float(rng.uniform(-math.pi, math.pi)),
-                vx=speed * math.cos(way),
-                vy=speed * math.sin(way),
-            )
-    return robots
+@dataclass
+class Drive:
+    """A robot driving straight at a constant speed, turning back at the arena's walls."""
+
+    robot: Robot
+
+    def step(self, dt: float, rng: np.random.Generator) -> Robot:
+        r = self.robot
+        x, y, vx, vy = r.x + r.vx * dt, r.y + r.vy * dt, r.vx, r.vy
+        if not 110 < x < 890:
+            vx = -vx
+        if not 110 < y < 890:
+            vy = -vy
+        heading = r.heading + float(rng.normal(0, 0.05))
+        self.robot = Robot(min(max(x, 110), 890), min(max(y, 110), 890), heading, vx, vy)
+        return self.robot
+
+
+def drives(rng: np.random.Generator, agents: Sequence[str], speeds: Sequence[float]) -> list[Drive]:
+    out: list[Drive] = []
+    for k in range(len(agents)):
+        speed = speeds[k % len(speeds)]
+        way = float(rng.uniform(-math.pi, math.pi))
+        x, y = rng.uniform(150, 850, 2)
+        heading = float(rng.uniform(-math.pi, math.pi))
+        out.append(
+            Drive(Robot(float(x), float(y), heading, speed * math.cos(way), speed * math.sin(way)))
+        )
+    return out
 
 
 def effects_for(rng: np.random.Generator) -> Effects:
@@ -133,30 +146,39 @@ def effects_for(rng: np.random.Generator) -> Effects:
     return Effects(exposure_s=1 / 25, defocus_px=0.6, noise_grey=3.0, jpeg_quality=85, light=light)
 
 
-def run_scene(scene: Scene, frames: int, seed: int, *, hands: bool = True) -> dict[str, Figures]:
+def run_scene(
+    scene: Scene, frames: int, seed: int, *, fps: float = 15.0, hands: bool = True
+) -> dict[str, Figures]:
+    """Robots driving for ``frames`` frames at ``fps``, tracked as the camera service
+    tracks them (one Tracker a calibration, its history kept); every third frame a hand
+    covers one robot, and robots drive through each other (the renderer has no
+    collisions): covered robots are left out of the figures."""
     agents = [f"k{i}" for i in range(1, 1 + 2 * len(SPEEDS_MM_S))]
     layout = default_layout(1000, 1000, agents)
     camera = OverheadCamera(1000, 1000, layout, scene.lens, scene.mount, seed=seed)
     lens = calibrated_lens(scene.lens, seed=seed + 3)
     cals = arena_calibrations(camera, layout, lens, scene.mount.height_mm)
+    trackers = {name: Tracker(layout, cal, say=lambda _: None) for name, cal in cals.items()}
     out = {name: Figures() for name in cals}
     rng = np.random.default_rng(seed)
+    fleet = drives(rng, agents, SPEEDS_MM_S)
     for i in range(frames):
-        robots = robots_at_speeds(rng, agents, SPEEDS_MM_S)
-        hidden = agents[i % len(agents)] if hands and i % 3 == 0 else None
+        robots = {agent: d.step(1.0 / fps, rng) for agent, d in zip(agents, fleet, strict=True)}
+        hidden = agents[(i // 3) % len(agents)] if hands and i % 3 == 0 else None
         over = [Hand(robots[hidden].x, robots[hidden].y)] if hidden else []
         frame = camera.render(robots, hands=over, effects=effects_for(rng))
-        for name, cal in cals.items():
+        for name, tracker in trackers.items():
             figures = out[name]
             t0 = time.process_time()
-            poses = Tracker(layout, cal).detect_poses(frame, float(i))
+            found = {p.agent: p for p in tracker.track(frame, i / fps).poses}
             figures.cpu_ms.append(1000 * (time.process_time() - t0))
-            found = {p.agent: p for p in poses}
             for agent, robot in robots.items():
-                speed = round(math.hypot(robot.vx, robot.vy))
-                tally = figures.seen.setdefault(speed, [0, 0])
-                if agent == hidden:
-                    continue
+                if agent == hidden or any(
+                    other != agent and math.hypot(o.x - robot.x, o.y - robot.y) < 75
+                    for other, o in robots.items()
+                ):
+                    continue  # covered: by a hand, or by a robot driving over it
+                tally = figures.seen.setdefault(round(math.hypot(robot.vx, robot.vy)), [0, 0])
                 tally[1] += 1
                 pose = found.get(agent)
                 if pose is None:

@@ -16,6 +16,7 @@ JSON file; a missing or wrong file is refused with the field named.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from collections.abc import Mapping
@@ -61,6 +62,7 @@ __all__ = [
     "CalibrationError",
     "calibrate",
     "detect",
+    "detect_all",
     "floor_calibrated",
     "read_intrinsics",
     "reference_points",
@@ -168,6 +170,36 @@ class ArenaCalibration:
         return (
             ground + (floor - ground) * (self.camera_height_mm - height_mm) / self.camera_height_mm
         )
+
+    def to_frame(self, arena_mm: np.ndarray, height_mm: float = 0.0) -> np.ndarray:
+        """Pixels in the frame as recorded (distorted) of arena points ``height_mm`` up:
+        where to look for a marker the tracker expects there."""
+        pts = np.asarray(arena_mm, dtype=np.float64).reshape(-1, 2)
+        pose: CameraPose | None = self.pose  # type: ignore[attr-defined]
+        if pose is not None and self.camera_matrix is not None:
+            world = np.column_stack([pts, np.full(len(pts), height_mm)])
+            rvec, _ = cv2.Rodrigues(pose.rotation)
+            tvec = -pose.rotation @ pose.centre
+            dist = np.zeros(5) if self.dist_coeffs is None else self.dist_coeffs
+            frame, _ = cv2.projectPoints(world, rvec, tvec, self.camera_matrix, dist)
+            return np.asarray(frame, dtype=np.float64).reshape(-1, 2)
+        # The inverse of to_arena's parallax: the floor point the ray reaches.
+        ground: np.ndarray = self._ground  # type: ignore[attr-defined]
+        h = self.camera_height_mm
+        floor = ground + (pts - ground) * h / (h - height_mm)
+        ideal = self.to_image(floor)
+        if self.camera_matrix is None or self.dist_coeffs is None:
+            return ideal
+        k = self.camera_matrix
+        normalised = np.column_stack(
+            [
+                (ideal[:, 0] - k[0, 2]) / k[0, 0],
+                (ideal[:, 1] - k[1, 2]) / k[1, 1],
+                np.ones(len(ideal)),
+            ]
+        )
+        frame, _ = cv2.projectPoints(normalised, np.zeros(3), np.zeros(3), k, self.dist_coeffs)
+        return np.asarray(frame, dtype=np.float64).reshape(-1, 2)
 
     def to_image(self, arena_mm: np.ndarray) -> np.ndarray:
         """Image pixels (undistorted) of floor points; for drawing over the video."""
@@ -293,8 +325,9 @@ class ArenaCalibration:
         )
 
 
-def detect(gray: np.ndarray) -> dict[int, np.ndarray]:
-    """Every marker of the lab's dictionary in a grey frame: id -> 4x2 corners (px).
+@functools.cache
+def detector() -> cv2.aruco.ArucoDetector:
+    """The lab's marker detector (one per process: it holds no frame's state).
 
     Corners are refined along the marker's contour: a 40 mm marker is about 17 px at
     640x480 over a 1 m arena, and this refinement took the heading's error from 0.9
@@ -302,17 +335,41 @@ def detect(gray: np.ndarray) -> dict[int, np.ndarray]:
     corner about 0.8 px inward (measured on tests/kit/overhead_camera.py), which
     cancels in a marker's centre; the floor's fit over 16 reference corners follows
     their centres too (sub-pixel search there did worse on the synthetic camera).
+
+    The bits are read for a blurred marker too: each cell sampled at its middle only
+    (a third of its margin ignored), 8 px a cell, every correctable bit corrected
+    (4x4_50's ids lie far apart) and a looser outline. On 1280x720 frames at 18
+    degrees of tilt with 1/25 s exposure this read 100 % at 200 mm/s (94 % before)
+    and half the markers at 320 mm/s (none before); the tracker reads the rest
+    through their blur (common/tracking/deblur.py).
     """
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR
-    detector = cv2.aruco.ArucoDetector(dictionary(), params)
-    corners, ids, _ = detector.detectMarkers(gray)
+    params.errorCorrectionRate = 1.0
+    params.polygonalApproxAccuracyRate = 0.06
+    params.perspectiveRemovePixelPerCell = 8
+    params.perspectiveRemoveIgnoredMarginPerCell = 0.3
+    params.maxErroneousBitsInBorderRate = 0.6
+    return cv2.aruco.ArucoDetector(dictionary(), params)
+
+
+def detect(gray: np.ndarray) -> dict[int, np.ndarray]:
+    """Every marker of the lab's dictionary in a grey frame: id -> 4x2 corners (px)."""
+    return detect_all(gray)[0]
+
+
+def detect_all(gray: np.ndarray) -> tuple[dict[int, np.ndarray], list[np.ndarray]]:
+    """The markers read (id -> 4x2 corners, px), and the centres (px) of the outlines
+    found whose bits could not be read (a blurred marker among them)."""
+    corners, ids, rejected = detector().detectMarkers(gray)
+    unread = [np.asarray(c, dtype=np.float64).reshape(4, 2).mean(axis=0) for c in rejected]
     if ids is None:
-        return {}
-    return {
+        return {}, unread
+    found = {
         int(i): np.asarray(c, dtype=np.float64).reshape(4, 2)
         for i, c in zip(ids.ravel(), corners, strict=True)
     }
+    return found, unread
 
 
 def calibrate(
