@@ -1,7 +1,8 @@
 """``wart camera``: one camera over a world's arena (what the service does: service.py).
 
 wart camera --world real1 --source /dev/video0 --calibration arena.json
-wart camera calibrate --world real1 --source /dev/video0 --out arena.json
+wart camera calibrate --intrinsics --source board.mp4 --out arena.json   (the lens)
+wart camera calibrate --world real1 --source /dev/video0 --out arena.json (the arena)
 """
 
 from __future__ import annotations

@@ -7,7 +7,9 @@ and publishes, newest only (congestion control: drop), each frame as a JPEG
 when calibrated (``.../floor``: what the page lays under its world view), and
 the tracked poses (``world/<w>/tracked``, for the bridge, the page and the
 recorder). ``world/<w>/camera/<c>/status`` says whether it sees its arena and,
-if not, why: unplugged, the file ended, not calibrated.
+if not, why: unplugged, the file ended, not calibrated. A video file plays as a
+recording (services/camera/sources.py's Recording): its frames stamped with its
+own timeline, its end final unless it loops.
 
 The markers' layout comes from the world's own snapshot (its arena's size and
 its robots' names: robot kN wears marker N), so nothing is configured twice.
