@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -18,6 +19,7 @@ from common.tracking.calibration import (
 )
 from common.tracking.intrinsics import BoardSpec, Intrinsics, IntrinsicsCollector, IntrinsicsError
 from services.camera.calibrate import intrinsics_main
+from services.camera.main import main
 from tests.kit.overhead_camera import Board, BoardCamera, Effects, Lens
 
 LENS = Lens()  # 1280x720, barrel distortion
@@ -114,8 +116,6 @@ def test_intrinsics_are_saved_with_their_report_and_old_files_still_load(
 def test_wart_camera_calibrate_intrinsics_over_a_folder_of_photos(
     board_camera: BoardCamera, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import cv2  # only this test writes photos
-
     photos = tmp_path / "board"
     photos.mkdir()
     for i, (rotation, translation) in enumerate(board_camera.views(24, seed=11)):
@@ -127,3 +127,13 @@ def test_wart_camera_calibrate_intrinsics_over_a_folder_of_photos(
     assert "24 frames" in said and "reprojection" in said and f"saved to {out}" in said
     lens = read_intrinsics(out)
     assert lens is not None and abs(lens.camera_matrix[0, 0] - LENS.fx) < 3.0
+
+
+def test_a_camera_given_the_lens_only_is_told_to_calibrate_the_floor(
+    collected: IntrinsicsCollector, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "arena.json"
+    save_intrinsics(path, collected.calibrate())
+    argv = ["--world", "w1", "--source", "0", "--calibration", str(path)]
+    assert main(argv) == 2
+    assert "holds the lens only: add --auto-calibrate" in capsys.readouterr().err
