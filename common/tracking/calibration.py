@@ -20,7 +20,7 @@ import functools
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -96,6 +96,8 @@ class ArenaCalibration:
     check_mm: float | None = None
     # What the calibration found doubtful when it was made (said again on every start).
     notes: tuple[str, ...] = ()
+    # The camera's pose when solved with the intrinsics (made from the fields above).
+    pose: CameraPose | None = field(init=False, default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         h = np.asarray(self.homography, dtype=np.float64)
@@ -160,7 +162,7 @@ class ArenaCalibration:
 
     def to_arena(self, pixels: np.ndarray, height_mm: float = 0.0) -> np.ndarray:
         """Arena mm of (undistorted) image points lying ``height_mm`` above the floor."""
-        pose: CameraPose | None = self.pose  # type: ignore[attr-defined]
+        pose = self.pose
         if pose is not None and self.camera_matrix is not None:
             return pose.to_plane(self.camera_matrix, pixels, height_mm)
         floor = self._floor(pixels)
@@ -175,7 +177,7 @@ class ArenaCalibration:
         """Pixels in the frame as recorded (distorted) of arena points ``height_mm`` up:
         where to look for a marker the tracker expects there."""
         pts = np.asarray(arena_mm, dtype=np.float64).reshape(-1, 2)
-        pose: CameraPose | None = self.pose  # type: ignore[attr-defined]
+        pose = self.pose
         if pose is not None and self.camera_matrix is not None:
             world = np.column_stack([pts, np.full(len(pts), height_mm)])
             rvec, _ = cv2.Rodrigues(pose.rotation)
@@ -293,7 +295,7 @@ class ArenaCalibration:
                 f"fitted to (more than {CHECK_WARN_MM:g} mm): poses near the arena's edges will "
                 "be off by about as much"
             )
-        if self.pose is None:  # type: ignore[attr-defined]
+        if self.pose is None:
             tilt = "" if self.tilt_deg is None else f" (about {self.tilt_deg:.0f} deg here)"
             said.append(
                 "no lens intrinsics: the error grows with the camera's tilt"
@@ -311,7 +313,7 @@ class ArenaCalibration:
         tilt = "" if self.tilt_deg is None else f", tilted {self.tilt_deg:.1f} deg"
         how = (
             "solved from the reference markers with the lens's intrinsics"
-            if self.pose is not None  # type: ignore[attr-defined]
+            if self.pose is not None
             else "estimated from the floor's homography and the height given (no intrinsics)"
         )
         check = (
@@ -453,7 +455,7 @@ def _height_notes(cal: ArenaCalibration, given_mm: float | None) -> list[str]:
     """A --camera-height that disagrees with what the markers imply, in both numbers."""
     if given_mm is None:
         return []
-    if cal.pose is not None:  # type: ignore[attr-defined]
+    if cal.pose is not None:
         solved = cal.camera_height_mm
         if abs(solved - given_mm) > HEIGHT_TOLERANCE * solved:
             return [
