@@ -1,5 +1,10 @@
 """The arena camera: how well it tracks, what each frame costs, what its subscribers get.
 
+Part 0, a camera that is not ours (bench/camera_scenes.py): tilted 10 to 25 degrees,
+barrel and pincushion lenses, 1280x720, robots driving at up to 320 mm/s with
+motion blur, light changes, noise, JPEG and a hand; with the lens calibrated from
+a ChArUco board by `wart camera calibrate --intrinsics`'s code, and without it.
+
 Part 1, no network: a synthetic camera (640x480 by default, straight down from
 1.5 m over a 1 m arena, blur and sensor noise) renders N robots at random poses;
 the tracker's error against the true poses (p50, p99 in mm and degrees) and the
@@ -11,7 +16,8 @@ sessions (in a few processes) on the camera's image key: frames a second and
 bytes a second each got, the delay from capture to arrival (p50, p99; one clock),
 and the camera process's CPU per frame.
 
-    python -m bench.bench_camera [--frames 200] [--viewers 1 10 30] [--seconds 10]
+    python -m bench.bench_camera [--scene-frames 90] [--frames 200] [--viewers 1 10 30]
+        [--seconds 10]
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import numpy as np
 import psutil
 import zenoh
 
+from bench import camera_scenes
 from common import keys
 from common.messages import CameraFrame, decode
 from common.service import close_session, open_session
@@ -257,9 +264,17 @@ def main(argv: list[str] | None = None) -> int:
         "--seconds", type=float, default=10.0, help="seconds per subscriber count (default 10)"
     )
     p.add_argument("--fps", type=float, default=10.0, help="the camera's rate (default 10)")
+    p.add_argument(
+        "--scene-frames",
+        type=int,
+        default=90,
+        help="frames of each tilted, distorting scene (default 90; 0 skips them)",
+    )
     p.add_argument("--seed", type=int, default=1)
     args = p.parse_args(argv)
     width, height = (int(v) for v in args.size.lower().split("x"))
+    if args.scene_frames:
+        camera_scenes.report(args.scene_frames, args.seed)
     tracking_error(args.frames, args.robots, width, height, args.seed)
     if args.viewers:
         delivery(args.viewers, args.seconds, args.fps)

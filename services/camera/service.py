@@ -7,7 +7,9 @@ and publishes, newest only (congestion control: drop), each frame as a JPEG
 when calibrated (``.../floor``: what the page lays under its world view), and
 the tracked poses (``world/<w>/tracked``, for the bridge, the page and the
 recorder). ``world/<w>/camera/<c>/status`` says whether it sees its arena and,
-if not, why: unplugged, the file ended, not calibrated.
+if not, why: unplugged, the file ended, not calibrated. A video file plays as a
+recording (services/camera/sources.py's Recording): its frames stamped with its
+own timeline, its end final unless it loops.
 
 The markers' layout comes from the world's own snapshot (its arena's size and
 its robots' names: robot kN wears marker N), so nothing is configured twice.
@@ -38,25 +40,34 @@ from common.messages import (
 )
 from common.messages.camera import MAX_FRAME_BYTES
 from common.service import Service
-from common.tracking.calibration import ArenaCalibration, CalibrationError, calibrate
+from common.tracking.calibration import (
+    ArenaCalibration,
+    CalibrationError,
+    calibrate,
+    floor_calibrated,
+    read_intrinsics,
+)
+from common.tracking.intrinsics import Intrinsics
 from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
-from services.camera.sources import FrameSource, SourceError
+from services.camera.arguments import DEFAULT_HEIGHT_MM
+from services.camera.sources import FrameSource, SourceEnded, SourceError
 
 STATUS_PERIOD_S = 2.0
 RETRY_S = 2.0
+LIVE_FPS = 10.0
 FLOOR_MM_PER_PX = 2.0  # the floor view's resolution: a 1 m arena is 500 px
 
 
 @dataclass(frozen=True)
 class CameraOptions:
-    fps: float = 10.0
+    fps: float | None = None  # None: a live source at LIVE_FPS, a recording at its own
     max_width: int = 640
     max_height: int = 480
     jpeg_quality: int = 70
     calibration: Path | None = None
     auto_calibrate: bool = False
-    camera_height_mm: float = 1500.0
+    camera_height_mm: float | None = None  # None: solved with a lens, else 1500 said
 
 
 class CameraService(Service):
@@ -78,6 +89,7 @@ class CameraService(Service):
         self.source = source
         self.options = options or CameraOptions()
         self.calibration: ArenaCalibration | None = None
+        self.lens: Intrinsics | None = None
         self.layout: MarkerLayout | None = None
         self.tracker: Tracker | None = None
         self.online = False
@@ -96,14 +108,24 @@ class CameraService(Service):
     # -- lifecycle
 
     def on_start(self) -> None:
-        if self.options.calibration is not None and self.options.calibration.exists():
-            self.calibration = ArenaCalibration.load(self.options.calibration)  # errors: main says
+        path = self.options.calibration
+        if path is not None and path.exists():
+            # A file with the lens only: the floor is calibrated here (main checked that
+            # --auto-calibrate is on), with that lens. Errors: main said them already.
+            self.lens = read_intrinsics(path)
+            if floor_calibrated(path):
+                self.calibration = ArenaCalibration.load(path)
+            elif self.lens is not None:
+                self.log.info("lens from %s: %s", path, self.lens.summary())
+        if self.calibration is not None and path is not None:
             self.log.info(
-                "calibration %s: made at %dx%d, %.1f mm rms",
-                self.options.calibration,
+                "calibration %s: made at %dx%d; %s",
+                path,
                 *self.calibration.image_size,
-                self.calibration.rms_mm,
+                self.calibration.report(),
             )
+            for warning in self.calibration.warnings():
+                self.log.warning("%s", warning)
         drop = zenoh.CongestionControl.DROP
         self._image_pub = self.track(
             self.session.declare_publisher(
@@ -134,10 +156,11 @@ class CameraService(Service):
     # -- the capture loop
 
     def _run(self) -> None:
-        period = 1.0 / self.options.fps
+        period = 1.0 / (self.options.fps or LIVE_FPS)
         opened = False
         started, count = time.monotonic(), 0
         next_at = time.monotonic()
+        loops = 0
         while not self.stopped:
             now = time.monotonic()
             if now >= self._next_layout:
@@ -148,6 +171,13 @@ class CameraService(Service):
                     opened = True
                     self._say_once("open", f"capturing from the {self.source.description}")
                 frame = self.source.read()
+            except SourceEnded as exc:
+                # A recording that ended stays ended: offline until the camera is stopped.
+                self.source.close()
+                self._set_offline(str(exc))
+                while not self._stopped.wait(STATUS_PERIOD_S):
+                    self._publish_status()
+                return
             except SourceError as exc:
                 if opened:
                     self.source.close()
@@ -155,12 +185,25 @@ class CameraService(Service):
                 self._set_offline(str(exc))
                 self._stopped.wait(RETRY_S)
                 continue
-            captured_at = time.time()
+            for note in self.source.notes():
+                self.log.warning("%s", note)
+            if self.source.loops != loops:
+                loops = self.source.loops
+                self._say_once(
+                    "loop",
+                    f"the {self.source.description} ended: playing it again from its start "
+                    "(--loop); its timeline carries on and each robot is tracked afresh, "
+                    "never as a jump",
+                )
+                self._make_tracker()
+            captured_at = self.source.captured_at or time.time()
             self._publish(frame, captured_at)
             count += 1
             if time.monotonic() - started >= 2.0:
                 self._fps = count / (time.monotonic() - started)
                 started, count = time.monotonic(), 0
+            if self.source.paces_itself:  # a recording: its own rate (or --fps samples it)
+                continue
             next_at = max(next_at + period, time.monotonic() - period)
             self._stopped.wait(max(0.0, next_at - time.monotonic()))
 
@@ -308,13 +351,22 @@ class CameraService(Service):
         if time.monotonic() < self._next_calibration:
             return
         self._next_calibration = time.monotonic() + 5.0
+        lens = self.lens
+        if lens is not None and lens.image_size != self.size:
+            self._say_once(
+                "lens-size",
+                "the lens was calibrated at {}x{} but the camera gives {}x{}: calibrating "
+                "without it".format(*lens.image_size, *self.size),
+            )
+            lens = None
         try:
             cal = calibrate(
                 frame,
                 self.layout,
-                camera_height_mm=self.options.camera_height_mm,
-                camera_matrix=self.source.camera_matrix,
-                dist_coeffs=self.source.dist_coeffs,
+                camera_height_mm=self._height(lens),
+                camera_matrix=lens.camera_matrix if lens else self.source.camera_matrix,
+                dist_coeffs=lens.dist_coeffs if lens else self.source.dist_coeffs,
+                lens=lens,
             )
         except CalibrationError as exc:
             self._say_once("calibrate", f"cannot calibrate yet: {exc}")
@@ -324,8 +376,23 @@ class CameraService(Service):
         if self.options.calibration is not None:
             cal.save(self.options.calibration)
             where = f", saved to {self.options.calibration}"
-        self.log.info("calibrated from the reference markers: %.1f mm rms%s", cal.rms_mm, where)
+        self.log.info("calibrated from the reference markers%s: %s", where, cal.report())
+        for warning in cal.warnings():
+            self.log.warning("%s", warning)
         self._make_tracker()
+
+    def _height(self, lens: Intrinsics | None) -> float | None:
+        """The height to calibrate with: the one given, else none with a lens (solved),
+        else the default, said once."""
+        given = self.options.camera_height_mm
+        if given is not None or lens is not None or self.source.camera_matrix is not None:
+            return given
+        self._say_once(
+            "height",
+            f"--camera-height not given: {DEFAULT_HEIGHT_MM:g} mm assumed (without the lens's "
+            "intrinsics the height is needed; measure it)",
+        )
+        return DEFAULT_HEIGHT_MM
 
     # -- status
 

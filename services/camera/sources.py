@@ -12,7 +12,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import cv2
 import numpy as np
@@ -30,6 +30,10 @@ class SourceError(Exception):
     """A source that cannot give a frame now; the message is for the page and the log."""
 
 
+class SourceEnded(SourceError):
+    """A recording that has ended: it will give no more frames, so it is not tried again."""
+
+
 class FrameSource(Protocol):
     @property
     def description(self) -> str: ...
@@ -41,9 +45,26 @@ class FrameSource(Protocol):
     @property
     def dist_coeffs(self) -> np.ndarray | None: ...
 
+    # When the last frame read was true (wall clock, s): a recording's own timeline;
+    # None for a live source (the service stamps it on arrival).
+    @property
+    def captured_at(self) -> float | None: ...
+
+    # A recording plays at its own rate; a live source is read at the service's.
+    @property
+    def paces_itself(self) -> bool: ...
+
+    # How many times a looping recording has started again.
+    @property
+    def loops(self) -> int: ...
+
     def open(self) -> None: ...
 
     def read(self) -> np.ndarray: ...
+
+    def notes(self) -> list[str]:
+        """What happened since the last call that the log should say (corrupt frames)."""
+        ...
 
     def close(self) -> None: ...
 
@@ -71,31 +92,41 @@ def check_spec(spec: str) -> str:
     return spec
 
 
-def open_source(spec: str, *, loop: bool = False, seed: int = 0) -> FrameSource:
+def open_source(
+    spec: str, *, loop: bool = False, seed: int = 0, sample_fps: float | None = None
+) -> FrameSource:
+    """The source ``spec`` names. ``loop`` and ``sample_fps`` are for a video file: play it
+    again at its end, and take frames at that rate from its timeline (default: all)."""
     check_spec(spec)
     if spec.startswith(SYNTHETIC):
         return SyntheticSource(Path(spec[len(SYNTHETIC) :]), seed=seed)
-    return OpenCvSource(spec, loop=loop)
+    if _DEVICE.match(spec) or _URL.match(spec):
+        return OpenCvSource(spec)
+    return Recording(Path(spec), loop=loop, sample_fps=sample_fps)
+
+
+def _bgr(frame: np.ndarray) -> np.ndarray:
+    if frame.ndim == 2:
+        frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    return np.asarray(frame)
 
 
 class OpenCvSource:
-    """A device, file or stream through OpenCV's VideoCapture (V4L2 or FFmpeg)."""
+    """A device or stream through OpenCV's VideoCapture (V4L2 or FFmpeg): live frames,
+    stamped by the service when they arrive."""
 
     camera_matrix: np.ndarray | None = None
     dist_coeffs: np.ndarray | None = None
+    captured_at: float | None = None  # live: the service stamps the frame on arrival
+    paces_itself = False
+    loops = 0
 
-    def __init__(self, spec: str, *, loop: bool = False) -> None:
+    def __init__(self, spec: str) -> None:
         self.spec = spec
         self.description = describe_spec(spec)
-        self.loop = loop
-        self.is_file = not (_DEVICE.match(spec) or _URL.match(spec))
         self._capture: cv2.VideoCapture | None = None
-        self._period = 0.0
-        self._next = 0.0
 
     def open(self) -> None:
-        if self.is_file and not Path(self.spec).is_file():
-            raise SourceError(f"no video file at {self.spec}")
         if _DEVICE.match(self.spec):
             index = self.spec if not self.spec.isdigit() else int(self.spec)
             capture = cv2.VideoCapture(index, cv2.CAP_V4L2)
@@ -106,29 +137,18 @@ class OpenCvSource:
             raise SourceError(f"cannot open the {self.description} (unplugged, or in use?)")
         # A live camera keeps one frame in its buffer: the newest, not a backlog.
         capture.set(cv2.CAP_PROP_BUFFERSIZE, 1)
-        fps = capture.get(cv2.CAP_PROP_FPS) if self.is_file else 0.0
-        self._period = 1.0 / fps if 0 < fps <= 240 else 0.0
-        self._next = time.monotonic()
         self._capture = capture
 
     def read(self) -> np.ndarray:
         if self._capture is None:
             raise SourceError("not open")
-        if self._period:  # a file plays at its own rate, not as fast as it decodes
-            delay = self._next - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            self._next = max(self._next + self._period, time.monotonic() - self._period)
         ok, frame = self._capture.read()
-        if not ok and self.is_file and self.loop:
-            self._capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
-            ok, frame = self._capture.read()
         if not ok or frame is None:
-            what = "the video file ended" if self.is_file else "it stopped giving frames"
-            raise SourceError(f"the {self.description}: {what}")
-        if frame.ndim == 2:
-            frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
-        return np.asarray(frame)
+            raise SourceError(f"the {self.description}: it stopped giving frames")
+        return _bgr(frame)
+
+    def notes(self) -> list[str]:
+        return []
 
     def close(self) -> None:
         if self._capture is not None:
@@ -159,6 +179,13 @@ class SyntheticSource:
     @property
     def dist_coeffs(self) -> np.ndarray | None:
         return None if self._camera is None else self._camera.dist_coeffs
+
+    captured_at: float | None = None
+    paces_itself = False
+    loops = 0
+
+    def notes(self) -> list[str]:
+        return []
 
     def open(self) -> None:
         self.read()
@@ -191,3 +218,114 @@ class SyntheticSource:
 
     def close(self) -> None:
         self._camera = None
+
+
+class Recording:
+    """A video file played as the recording it is: at its own frame rate, each frame
+    stamped with the file's own timeline (from when it started playing), corrupt
+    stretches skipped and said with their frame numbers, and an end that is final
+    (``SourceEnded``) unless it loops; a loop carries the timeline on, never back."""
+
+    camera_matrix: np.ndarray | None = None
+    dist_coeffs: np.ndarray | None = None
+    paces_itself: ClassVar[bool] = True
+
+    def __init__(self, path: Path, *, loop: bool = False, sample_fps: float | None = None) -> None:
+        self.path = path
+        self.description = describe_spec(str(path))
+        self.loop = loop
+        self.sample_fps = sample_fps
+        self.captured_at: float | None = None
+        self.loops = 0
+        self.frames = 0  # the file's frames (from its header)
+        self.fps = 0.0
+        self._capture: cv2.VideoCapture | None = None
+        self._notes: list[str] = []
+        self._index = -1  # the last frame read, in the file's numbering
+        self._offset_s = 0.0  # the timeline's length before this pass (loops)
+        self._start_wall = 0.0
+        self._start_mono = 0.0
+        self._next_sample = 0.0
+        self._ended = False
+
+    def open(self) -> None:
+        if self._ended:
+            raise SourceEnded(f"the {self.description} ended; give --loop to play it again")
+        if not self.path.is_file():
+            raise SourceError(f"no video file at {self.path}")
+        capture = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
+        if not capture.isOpened():
+            capture.release()
+            raise SourceError(f"cannot open the {self.description} (not a video OpenCV reads?)")
+        fps = capture.get(cv2.CAP_PROP_FPS)
+        self.fps = fps if 0 < fps <= 240 else 10.0
+        self.frames = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        self._capture = capture
+        self._index = -1
+        self._start_wall, self._start_mono = time.time(), time.monotonic()
+        self._next_sample = 0.0
+
+    def read(self) -> np.ndarray:
+        if self._capture is None:
+            raise SourceError("not open")
+        while True:
+            index, position_s = self._grab()
+            if index is None:
+                if not self.loop:
+                    self._ended = True
+                    raise SourceEnded(
+                        f"the {self.description} ended after {self._index + 1} frames "
+                        f"({(self._index + 1) / self.fps:.1f} s); give --loop to play it again"
+                    )
+                self._offset_s += (self._index + 1) / self.fps
+                self.loops += 1
+                self._capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                self._index = -1
+                continue
+            timeline = self._offset_s + position_s
+            if self.sample_fps is not None and timeline + 1e-6 < self._next_sample:
+                continue  # between the samples asked for: decoded, not used
+            self._next_sample = timeline + 1.0 / self.sample_fps if self.sample_fps else 0.0
+            ok, frame = self._capture.retrieve()
+            if not ok or frame is None:
+                self._corrupt(index, index)
+                continue
+            delay = self._start_mono + timeline - time.monotonic()
+            if delay > 0:  # a file plays at its own rate, not as fast as it decodes
+                time.sleep(delay)
+            self.captured_at = self._start_wall + timeline
+            return _bgr(frame)
+
+    def _grab(self) -> tuple[int | None, float]:
+        """The next frame that decodes: its number and time in the file; (None, 0) at the
+        end. Frames that do not decode before it are said as corrupt."""
+        assert self._capture is not None
+        expected = self._index + 1
+        # A corrupt frame fails one grab each; past the file's end every grab fails.
+        for _ in range(max(self.frames - expected, 0) + 2):
+            if self._capture.grab():
+                position_s = max(self._capture.get(cv2.CAP_PROP_POS_MSEC), 0.0) / 1000.0
+                index = max(round(position_s * self.fps), expected)
+                if index > expected:
+                    self._corrupt(expected, index - 1)
+                self._index = index
+                return index, index / self.fps
+        if expected < self.frames:
+            self._corrupt(expected, self.frames - 1)
+        return None, 0.0
+
+    def _corrupt(self, first: int, last: int) -> None:
+        frames = f"frame {first}" if first == last else f"frames {first} to {last}"
+        verb = "is" if first == last else "are"
+        self._notes.append(
+            f"{frames} of the {self.description} {verb} corrupt (do not decode): skipped"
+        )
+
+    def notes(self) -> list[str]:
+        said, self._notes = self._notes, []
+        return said
+
+    def close(self) -> None:
+        if self._capture is not None:
+            self._capture.release()
+            self._capture = None

@@ -15,10 +15,15 @@ import zenoh
 
 from common import keys
 from common.keys import AliveKind
-from common.messages import CameraFrame, CameraStatus, TrackedPoses
+from common.messages import CameraFrame, CameraStatus, TrackedPoses, decode
+from common.tracking.calibration import save_intrinsics
+from common.tracking.intrinsics import BoardSpec, IntrinsicsCollector
+from common.tracking.markers import default_layout
 from common.tracking.truth import now_truth, write_truth
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from tests.kit.overhead_camera import Board, BoardCamera, Lens, Mount, OverheadCamera, Robot
+from tests.kit.videos import write_video
 from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
@@ -187,6 +192,58 @@ def test_a_video_file_that_ends_leaves_the_camera_offline_not_dead(
     assert proc.popen.poll() is None
 
 
+def test_a_recording_says_its_corrupt_frames_and_stays_offline_at_its_end(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    video = write_video(tmp_path / "arena.avi", 40, 20.0, corrupt=range(12, 15))
+    status = Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+    proc = start_camera(procs, router, "--source", str(video))
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+
+    def ended() -> bool:
+        s = status.get()
+        return isinstance(s, CameraStatus) and not s.online and "ended after 40 frames" in s.reason
+
+    wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
+    said = proc.output()
+    assert f"frames 12 to 14 of the video file {video} are corrupt (do not decode)" in said
+    assert "give --loop to play it again" in said
+    heard = status.count
+    wait_for(lambda: status.count >= heard + 2, 15.0, "two more statuses")
+    still = status.get()
+    assert isinstance(still, CameraStatus) and not still.online, "it stays offline"
+    assert proc.output().count("camera online") == 1, proc.output()
+
+
+def test_a_looping_recording_says_so_and_carries_its_timeline_on(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    video = write_video(tmp_path / "arena.avi", 10, 20.0)
+    frames = Latest(zsession, keys.camera_frame(router.realm, WORLD, CAMERA), CameraFrame)
+    stamps: list[float] = []
+    sub = zsession.declare_subscriber(
+        keys.camera_frame(router.realm, WORLD, CAMERA),
+        lambda sample: stamps.append(decode(sample.payload, CameraFrame).captured_at),
+    )
+    proc = start_camera(procs, router, "--source", str(video), "--loop")
+    wait_for(lambda: frames.count >= 25, 60.0, f"25 frames:\n{proc.output()}")
+    sub.undeclare()
+    assert "playing it again from its start (--loop)" in proc.output()
+    steps = np.diff(stamps[:20])
+    assert np.all(steps > 0), "the timeline never goes back at the loop"
+    assert np.allclose(steps[steps < 0.2], 0.05, atol=1e-3), "the file's own 20 fps"
+
+
 def test_a_bad_calibration_file_is_refused_with_its_field(
     procs: Procs, router: Router, tmp_path: Path
 ) -> None:
@@ -199,6 +256,60 @@ def test_a_bad_calibration_file_is_refused_with_its_field(
     assert proc.popen.wait(30) == 2
     assert "homography: must have shape [3, 3]" in proc.output()
     assert str(bad) in proc.output()
+
+
+def tilted_recording(path: Path, robot: Robot) -> Path:
+    """A 1280x720 video of maps/empty.json's arena from a camera 1.66 m up, tilted 18
+    degrees, through a barrel lens (tests/kit/overhead_camera.py), k1 standing still."""
+    camera = OverheadCamera(1000, 1000, default_layout(1000, 1000, ["k1"]), Lens(), Mount())
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 15.0, (1280, 720))
+    for _ in range(15):
+        writer.write(camera.render({"k1": robot}))
+    writer.release()
+    return path
+
+
+def test_a_tilted_camera_warns_without_its_lens_and_is_exact_with_it(
+    router: Router,
+    procs: Procs,
+    engine: str,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    tmp_path: Path,
+) -> None:
+    robot = Robot(300.0, 650.0, 0.7)
+    video = tilted_recording(tmp_path / "arena.avi", robot)
+    tracked = Latest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+    bare = start_camera(procs, router, "--source", str(video), "--loop", "--auto-calibrate")
+    wait_for(lambda: tracked.count >= 3, 60.0, f"tracking without the lens:\n{bare.output()}")
+    assert "no lens intrinsics: the error grows with the camera's tilt (about 1" in bare.output()
+    assert "--camera-height not given: 1500 mm assumed" in bare.output()
+    bare.stop()
+
+    board = BoardCamera(Lens(), Board(), seed=2)  # the lens, as a lab calibrates it
+    collector = IntrinsicsCollector(BoardSpec())
+    for rotation, translation in board.views(40, seed=2):
+        collector.offer(board.render(rotation, translation), consecutive=False)
+    cal = tmp_path / "arena.json"
+    save_intrinsics(cal, collector.calibrate())
+    seen = Latest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+    lens = procs.start(
+        "camera-lens",
+        ["camera", "--world", WORLD, "--source", str(video), "--loop", "--auto-calibrate",
+         "--calibration", str(cal), *router.net_args()],
+    )  # fmt: skip
+
+    def exact() -> bool:
+        poses = seen.get()
+        if not isinstance(poses, TrackedPoses) or not poses.robots:
+            return False
+        r = poses.robots[0]
+        return math.hypot(r.x - robot.x, r.y - robot.y) < 1.0
+
+    wait_for(exact, 60.0, f"k1 within 1 mm with the lens:\n{lens.output()}")
+    said = lens.output()
+    assert "solved from the reference markers with the lens's intrinsics" in said
+    assert "no lens intrinsics" not in said
 
 
 def test_markers_of_no_robot_are_said_once(

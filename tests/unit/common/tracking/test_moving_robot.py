@@ -1,0 +1,73 @@
+"""A robot at a Khepera's top speed, smeared over about 7 px by a 1/25 s exposure, stays
+tracked: the tracker reads it through its blur where its last fixes say it went. A robot
+that is lost anyway is said once, with the reason."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from common.tracking.calibration import ArenaCalibration, calibrate
+from common.tracking.markers import MarkerLayout, default_layout
+from common.tracking.tracker import Tracker
+from tests.kit.overhead_camera import Effects, Hand, Lens, Mount, OverheadCamera, Robot
+
+FPS = 15.0
+LENS = Lens()
+
+
+@pytest.fixture(scope="module")
+def layout() -> MarkerLayout:
+    return default_layout(1000, 1000, ["k1", "k2"])
+
+
+@pytest.fixture(scope="module")
+def camera(layout: MarkerLayout) -> OverheadCamera:
+    return OverheadCamera(1000, 1000, layout, LENS, Mount(tilt_deg=18.0), seed=3)
+
+
+@pytest.fixture(scope="module")
+def calibration(camera: OverheadCamera, layout: MarkerLayout) -> ArenaCalibration:
+    # The true lens here: the lens's calibration has tests of its own (test_intrinsics.py).
+    return calibrate(
+        camera.render({}), layout, camera_matrix=LENS.matrix, dist_coeffs=LENS.coefficients
+    )
+
+
+def test_a_robot_at_top_speed_stays_tracked(
+    camera: OverheadCamera, layout: MarkerLayout, calibration: ArenaCalibration
+) -> None:
+    tracker = Tracker(layout, calibration, say=lambda _: None)
+    speed, way = 320.0, math.radians(35)
+    vx, vy = speed * math.cos(way), speed * math.sin(way)
+    seen, errors = 0, []
+    frames = 24
+    for i in range(frames):
+        t = i / FPS
+        robot = Robot(250 + vx * t, 250 + vy * t, way + 0.3, vx, vy)
+        effects = Effects(exposure_s=1 / 25, noise_grey=3.0, jpeg_quality=85)
+        poses = tracker.track(camera.render({"k1": robot}, effects=effects), t).poses
+        for pose in poses:
+            seen += 1
+            errors.append(math.hypot(pose.x - robot.x, pose.y - robot.y))
+    assert seen >= frames - 1, f"{seen} of {frames} frames"
+    assert max(errors) < 3.0
+
+
+def test_a_covered_robot_is_said_lost_once_with_the_reason(
+    camera: OverheadCamera, layout: MarkerLayout, calibration: ArenaCalibration
+) -> None:
+    said: list[str] = []
+    tracker = Tracker(layout, calibration, say=said.append)
+    robot = {"k2": Robot(600.0, 400.0, 1.0)}
+    tracker.track(camera.render(robot), 0.0)
+    for i in range(1, 20):  # a hand held over it for 1.3 s
+        tracker.track(camera.render(robot, hands=[Hand(600.0, 400.0)]), i / FPS)
+    tracker.track(camera.render(robot), 20 / FPS)
+    lost = [s for s in said if "lost" in s]
+    assert lost == [
+        "k2 lost: not seen for 1.0 s since (600, 400) mm; it stood still: its marker is "
+        "covered, or it was lifted"
+    ]
+    assert said[-1] == "k2 is seen again"
