@@ -71,9 +71,15 @@ def test_login_wrong_password_and_presence(open_page, lab: RealLab) -> None:
     page.wait_text("Online:")
     wait_until(lambda: "bob" in online(lab), what="bob online in the registry")
     page.screenshot("real-lobby")
-    # Closing the page logs him out of the registry: his presence goes.
-    page.p.context.close()
-    wait_until(lambda: "bob" not in online(lab), 15, what="bob's presence to go")
+    # Closing the page keeps his session for a reload (the viewer's grace, 1 s here),
+    # then logs him out of the registry: his presence goes.
+    grace = lab.viewer.parking.grace_s
+    lab.viewer.parking.grace_s = 1.0
+    try:
+        page.p.context.close()
+        wait_until(lambda: "bob" not in online(lab), 15, what="bob's presence to go")
+    finally:
+        lab.viewer.parking.grace_s = grace
 
 
 def test_two_sessions_chat_through_the_real_room(open_page, lab: RealLab) -> None:
