@@ -138,7 +138,12 @@ def test_a_recording_replayed_in_the_page_moves_the_robot_with_the_cursor(
     assert not controls.player.playing
     page.wait_text("ZeroDivisionError")  # the output up to the cursor, at the end
     page.screenshot("replay")
-    # Play at the end starts again from the start, as a media player does.
+    # Play at the end starts again from the start, as a media player does; at half speed
+    # the 3 s recording plays 6 s, time enough to Pause it on a busy machine (at 4x it
+    # could end, and Pause be disabled, before the click landed).
+    page.input_after_label("Speed").click()
+    page.p.get_by_role("option", name="0.5x", exact=True).click()
+    wait_until(lambda: controls.player.speed == 0.5, what="0.5x chosen")
     page.click("Play")
     wait_until(
         lambda: controls.player.playing and controls.player.cursor < timeline.duration,

@@ -4,6 +4,7 @@ what the tracker holds back (unknown markers, occlusions, jumps), said once."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -115,7 +116,10 @@ def test_a_jump_is_held_back_until_it_holds(
     moved = tracker.track(there, 0.12)
     assert [round(p.x, -1) for p in moved.poses] == [800.0]
     assert len([s for s in said if "jumped" in s]) == 1
-    assert any("was moved to (800, 800)" in s for s in said)
+    # Said where it is now, to the millimetre the tracker reads (the frame's noise moves it).
+    where = [re.search(r"was moved to \((\d+), (\d+)\) mm", s) for s in said]
+    (x, y) = next((float(m[1]), float(m[2])) for m in where if m)
+    assert abs(x - 800) <= 3 and abs(y - 800) <= 3, said
 
 
 def test_calibration_needs_the_reference_markers(layout: MarkerLayout) -> None:
