@@ -25,7 +25,7 @@ import json
 
 import viser
 
-from viewers.web.masked import element_id
+from viewers.web.masked import INPUT_OF_JS, element_id
 
 HEARTBEAT_MS = 200
 DEADMAN_S = 0.6  # no word from the page for this long with keys held: the robot stops
@@ -40,12 +40,7 @@ DRIVE_JS = """
               ArrowLeft: 'l', KeyA: 'l', ArrowRight: 'r', KeyD: 'r' };
   var held = {}, seq = 0, timer = null;
   var setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
-  function input() {
-    var label = document.querySelector('label[for="' + id + '"]');
-    var own = label && label.parentElement && label.parentElement.parentElement;
-    var box = own && own.nextElementSibling;
-    return (box && box.querySelector('input')) || document.getElementById(id);
-  }
+  INPUT_OF
   function ours(el) {
     return !!el && (el.id === boxId || el.tagName === 'CANVAS');
   }
@@ -104,7 +99,8 @@ def drive_html(keys_input: viser.GuiTextHandle) -> str:
     ident = element_id(keys_input)
     box = box_id(keys_input)
     script = (
-        DRIVE_JS.replace("ID", json.dumps(ident))
+        DRIVE_JS.replace("INPUT_OF", INPUT_OF_JS)
+        .replace("ID", json.dumps(ident))
         .replace("BOX", json.dumps(box))
         .replace("BEAT", str(HEARTBEAT_MS))
     )

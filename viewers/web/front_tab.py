@@ -18,8 +18,11 @@ from collections.abc import Callable
 
 import viser
 
-from viewers.web.masked import element_id
+from viewers.web.masked import INPUT_OF_JS, element_id
 
+# The tabs as the page opens are not news: only a change is sent (a write at load time fell
+# in viser's throttle beside the person's first click, and sure_clicks.py resent the click).
+# No // comments inside: the script is joined into one line.
 FRONT_TAB_JS = """
 (function (id) {
   window.__wartFront = window.__wartFront || {};
@@ -27,17 +30,15 @@ FRONT_TAB_JS = """
   window.__wartFront[id] = true;
   var setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
   var last = null, pending = false;
-  function input() {
-    var label = document.querySelector('label[for="' + id + '"]');
-    var own = label && label.parentElement && label.parentElement.parentElement;
-    var box = own && own.nextElementSibling;
-    return (box && box.querySelector('input')) || document.getElementById(id);
+  INPUT_OF
+  function selected() {
+    return Array.prototype.map.call(
+      document.querySelectorAll('[role=tab][aria-selected=true]'),
+      function (t) { return t.textContent.trim(); }).join('\\n');
   }
   function check() {
     pending = false;
-    var names = Array.prototype.map.call(
-      document.querySelectorAll('[role=tab][aria-selected=true]'),
-      function (t) { return t.textContent.trim(); }).join('\\n');
+    var names = selected();
     if (names === last) return;
     var el = input();
     if (!el) return;
@@ -46,16 +47,16 @@ FRONT_TAB_JS = """
     el.dispatchEvent(new Event('input', { bubbles: true }));
   }
   function soon() { if (!pending) { pending = true; setTimeout(check, 50); } }
+  last = selected();
   new MutationObserver(soon).observe(document.body, {
     subtree: true, childList: true, attributes: true, attributeFilter: ['aria-selected'] });
-  soon();
 })(ID);
 """
 
 
 def front_tab_html(front: viser.GuiTextHandle) -> str:
     ident = element_id(front)
-    script = FRONT_TAB_JS.replace("ID", json.dumps(ident))
+    script = FRONT_TAB_JS.replace("INPUT_OF", INPUT_OF_JS).replace("ID", json.dumps(ident))
     script = " ".join(line.strip() for line in script.strip().splitlines())
     hide = f'div:has(> * > * > label[for="{ident}"]) {{ display: none !important; }}'
     return (

@@ -35,15 +35,19 @@ import viser
 MASK = "-webkit-text-security: disc !important;"
 SUBMIT_DELAY_MS = 120
 
-# Fixed text; the element id and the button's label go in as JSON.
-PASSWORD_JS = """
-(function (id, submit, password) {
-  function input() {
+# viser's <input> of the GUI element with id ``id`` (its label's ``for``), for the page's
+# scripts that read or write an input (here, drive_keys.py, front_tab.py): put in for INPUT_OF.
+INPUT_OF_JS = """function input() {
     var label = document.querySelector('label[for="' + id + '"]');
     var own = label && label.parentElement && label.parentElement.parentElement;
     var box = own && own.nextElementSibling;
     return (box && box.querySelector('input')) || document.getElementById(id);
-  }
+  }"""
+
+# Fixed text; the element id and the button's label go in as JSON.
+PASSWORD_JS = """
+(function (id, submit, password) {
+  INPUT_OF
   function fix() {
     var el = input();
     if (!el || el.dataset.wartPassword) return;
@@ -96,7 +100,8 @@ def mask_rule(element_id: str) -> str:
 
 def _script_html(element_id: str, submit: str | None, password: bool) -> str:
     script = (
-        PASSWORD_JS.replace("ID", json.dumps(_check_id(element_id)))
+        PASSWORD_JS.replace("INPUT_OF", INPUT_OF_JS)
+        .replace("ID", json.dumps(_check_id(element_id)))
         .replace("SUBMIT", json.dumps(submit))
         .replace("PASSWORD", json.dumps(password))
         .replace("DELAY", str(SUBMIT_DELAY_MS))

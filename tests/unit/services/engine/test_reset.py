@@ -46,7 +46,9 @@ class Lab:
         self.agent = world.agents[0].id
         self.home = world.homes[self.agent]
 
-    def lease_for_alice_run_by_the_runner(self) -> None:
+    def lease_for_alice_run_by_the_runner(self, start: float = -1, end: float = 60) -> None:
+        """Alice's run's lease, from ``start`` to ``end`` seconds from now (the context
+        republishes it with an earlier end when the run stops)."""
         now = time.time()
         lease = Lease(
             lease_id="L1",
@@ -54,8 +56,8 @@ class Lab:
             agent=self.agent,
             holder_user="runner",
             holder_session=self.runner.session_id,
-            start=now - 1,
-            end=now + 60,
+            start=now + start,
+            end=now + end,
             requester_session=self.alice.session_id,
         )
         key = keys.agent_lease(REALM, self.world_name, self.agent)
@@ -137,20 +139,7 @@ def test_an_expired_lease_no_longer_lets_its_student_reset(lab: Lab) -> None:
 def test_stop_then_reset_the_student_may_put_back_the_robot_just_stopped(lab: Lab) -> None:
     lab.lease_for_alice_run_by_the_runner()
     lab.push_robot()
-    # Stop: the context republishes the lease, ended now (same id, earlier end).
-    now = time.time()
-    ended = Lease(
-        lease_id="L1",
-        world=lab.world_name,
-        agent=lab.agent,
-        holder_user="runner",
-        holder_session=lab.runner.session_id,
-        start=now - 10,
-        end=now - 0.5,
-        requester_session=lab.alice.session_id,
-    )
-    key = keys.agent_lease(REALM, lab.world_name, lab.agent)
-    lab.engine.leases.accept_lease(key, lab.context.seal(key, ended))
+    lab.lease_for_alice_run_by_the_runner(start=-10, end=-0.5)  # Stop: ended just now
     refused = lab.reset(lab.bob)  # not bob's run: still refused
     assert isinstance(refused, AuthError) and "not yours now" in refused.message
     reply = lab.reset(lab.alice)
