@@ -18,31 +18,19 @@ from common.world import packing
 from services.runner.dryrun import world_from_snapshot
 from services.runner.episode import assignment_world
 from tests.conftest import REPO
+from tests.kit.robots import wheeled_robot
 
-SCOUT = """\
-format = "wart-robot"
-version = 1
-name = "scout"
-
-[components.body]
-type = "body"
-radius_mm = 30.0
-mass_g = 80.0
-
-[components.drive]
-type = "differential_drive"
-wheel_base_mm = 50.0
-mm_per_pulse = 0.1
-unit_time_s = 0.01
-max_speed = 100
-
+SCOUT = wheeled_robot(
+    "scout",
+    """
 [components.eye]
 type = "range_finder"
 pose = [30.0, 0.0, 0.0]
 beams = 3
 fov_deg = 40.0
 max_range_mm = 300.0
-"""
+""",
+)
 
 
 def a_map(**types: str) -> dict[str, Any]:
