@@ -343,6 +343,7 @@ FLOWS: tuple[Flow, ...] = (
         _ask(m.CompetitionRun, m.Standings),
         _ask(m.CompetitionQuery, m.Standings),
         _ask(m.ClassQuery, m.ClassTables),
+        _ask(m.EpisodeReplayGet, m.RecordingChunk),
         **SEALED,
         note="course members; 2 worker threads",
     ),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TypeVar
 
 import zenoh
@@ -12,6 +13,7 @@ import zenoh
 from common import keys
 from common.auth import AuthError
 from common.client.lab_client import LabClient
+from common.lab_errors import LabError
 from common.messages import (
     AssignmentInfo,
     AssignmentList,
@@ -20,6 +22,7 @@ from common.messages import (
     ClassTables,
     CompetitionQuery,
     CompetitionRun,
+    EpisodeReplayGet,
     GradingChanged,
     Leaderboard,
     LeaderboardQuery,
@@ -27,6 +30,7 @@ from common.messages import (
     MessageError,
     MyAssignments,
     OkReply,
+    RecordingChunk,
     SetPseudonym,
     Standings,
     SubmissionInfo,
@@ -79,6 +83,27 @@ class GraderClient:
             if time.monotonic() >= deadline:
                 raise TimeoutError(f"{submission} not graded within {timeout:g} s")
             time.sleep(0.5)
+
+    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
+        """One graded episode's recording (one's own; a teacher: anyone's) into ``dest``.
+
+        Written to ``dest.part`` first: an interrupted download leaves no file that looks whole.
+        """
+        part = dest.with_name(dest.name + ".part")
+        offset, total = 0, None
+        with part.open("wb") as out:
+            while total is None or offset < total:
+                ask = EpisodeReplayGet(
+                    assignment=assignment, submission=submission, episode=episode, offset=offset
+                )
+                chunk = self._ask(ask, RecordingChunk, f"episode {episode} of {submission}")
+                total = chunk.total
+                if not chunk.data and offset < total:
+                    raise LabError(f"episode {episode} of {submission} shrank: try again")
+                out.write(chunk.data)
+                offset += len(chunk.data)
+        part.replace(dest)
+        return dest
 
     def assignments(self) -> list[AssignmentInfo]:
         """The assignments of my courses."""

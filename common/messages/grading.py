@@ -194,6 +194,18 @@ class SubmissionsQuery(Message, frozen=True):
     submission: Ident | None = None
 
 
+class EpisodeReplayGet(Message, frozen=True):
+    """A chunk of one graded episode's recording (its student, or the course's teachers).
+
+    Answered with a :class:`RecordingChunk`; ask again from ``offset`` until ``total``.
+    """
+
+    assignment: Ident
+    submission: Ident
+    episode: NonNegInt
+    offset: NonNegInt = 0
+
+
 MAX_TERMS = 16
 # A term of the rule as written ("- 5 * collisions()"), and its value in the episode.
 ScoreTerm = tuple[ShortText, float]
@@ -217,6 +229,7 @@ class EpisodeResult(msgspec.Struct, frozen=True, kw_only=True):
     output: Annotated[list[ShortText], msgspec.Meta(max_length=20)] = msgspec.field(
         default_factory=list
     )
+    replay: bool = False  # its recording is kept: EpisodeReplayGet fetches it
 
 
 class SubmissionInfo(msgspec.Struct, frozen=True, kw_only=True):
@@ -435,6 +448,7 @@ __all__ = [
     "EntryCause",
     "Episode",
     "EpisodeCause",
+    "EpisodeReplayGet",
     "EpisodeReport",
     "EpisodeResult",
     "GradeData",

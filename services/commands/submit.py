@@ -2,11 +2,14 @@
 
     wart submit --assignment reach-goal --user alice my_controller.py [--wait]
     wart submit --assignment reach-goal --user alice --list
+    wart submit --assignment reach-goal --user alice --episode SUBMISSION N [-o FILE]
 
 The grader runs the assignment's seeded episodes in simulation and scores
 them; ``--wait`` waits for the score and prints the per-episode table (how
 each episode ended: your code's fault, with the line, or the lab's, re-run
-free). ``--list`` shows your submissions and their scores. docs/COURSES.md.
+free). ``--list`` shows your submissions and their scores. ``--episode``
+downloads one graded episode's recording (an MCAP file: ``wart report`` reads
+it, the page replays it). docs/COURSES.md.
 """
 
 from __future__ import annotations
@@ -43,7 +46,8 @@ def show(sub: SubmissionInfo) -> None:
     for e in sub.episodes:
         value = "-" if e.score is None else f"{e.score:g}"
         which = "real robot" if e.real else f"episode {e.episode} (seed {e.seed})"
-        say(f"  {which}: {value:>8}  {e.cause}: {e.detail}")
+        replay = "  (replay kept)" if e.replay else ""
+        say(f"  {which}: {value:>8}  {e.cause}: {e.detail}{replay}")
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:
@@ -56,10 +60,26 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:
     p.add_argument("--wait", type=float, nargs="?", const=600.0, metavar="S",
                    help="wait for the score (at most S s, default 600)")  # fmt: skip
     p.add_argument("--list", action="store_true", help="your submissions and their scores")
+    p.add_argument("--episode", nargs=2, metavar=("SUBMISSION", "N"),
+                   help="download graded episode N of SUBMISSION's recording")  # fmt: skip
+    p.add_argument("-o", "--out", type=Path, metavar="FILE",
+                   help="where --episode writes (default SUBMISSION-episode-N.mcap)")  # fmt: skip
     args, options = cli.parse(p, argv)
     assert options is not None
-    if not args.list and args.file is None:
-        return cli.fail("name the controller file to submit (or --list)")
+    episode: tuple[str, int] | None = None
+    if args.episode is not None:
+        sub_id, n = args.episode
+        try:
+            keys.check_ident("submission", sub_id)
+        except ValueError as exc:
+            return cli.fail(f"--episode SUBMISSION N: {exc}")
+        if not n.isdigit():
+            return cli.fail(
+                f"--episode SUBMISSION N: N is an episode's number (0, 1, ...), not {n!r}"
+            )
+        episode = (sub_id, int(n))
+    elif not args.list and args.file is None:
+        return cli.fail("name the controller file to submit (or --list, or --episode)")
     source = b""
     if args.file is not None:
         try:
@@ -68,6 +88,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:
             return cli.fail(f"cannot read {args.file}: {exc.strerror or exc}")
 
     def body(grader: GraderClient) -> int:
+        if episode is not None:
+            out = args.out or Path(f"{episode[0]}-episode-{episode[1]}.mcap")
+            grader.fetch_episode(args.assignment, episode[0], episode[1], out)
+            say(f"episode {episode[1]} of {episode[0]} written to {out} (wart report {out})")
+            return 0
         if args.list:
             for sub in grader.submissions(args.assignment):
                 show(sub)

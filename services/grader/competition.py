@@ -16,7 +16,6 @@ recording beside it (common/recording/writer.py), readable by ``read_recording``
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
 import threading
@@ -27,9 +26,8 @@ from pathlib import Path
 import msgspec
 
 from common.messages import STUDENT_CAUSES, Episode, EpisodeReport, StandingEntry, Standings
-from common.recording import schema as s
-from common.recording.writer import RecordingWriter, pose_record
 from services.grader.assignment import Assignment
+from services.grader.episode_recordings import EpisodeRun, record_episode
 from services.grader.episodes import LAB_RETRIES, EpisodeRunner
 from services.grader.grading_db import GradingStore, Pending
 from services.grader.heats import (
@@ -38,7 +36,6 @@ from services.grader.heats import (
     heat_robots,
     record_heat,
     score_heat,
-    write_frames,
 )
 from services.grader.score import judge
 
@@ -310,35 +307,19 @@ class Competitions:
         began: float,
     ) -> str:
         """The heat's MCAP recording; its path ("" if it could not be written)."""
+        run = EpisodeRun(
+            ctx=name,
+            request_id=f"{name}-heat-{heat}",
+            mode="competition",
+            user=sub.user,
+            world=a.map_name,
+            agent=a.robot,
+            filename=sub.filename,
+            source=sub.source,
+            time_limit=a.time_limit,
+        )
         try:
-            writer = RecordingWriter(
-                path,
-                s.RunInfo(
-                    ctx=name,
-                    world=a.map_name,
-                    agent=a.robot,
-                    user=sub.user,
-                    request_id=f"{name}-heat-{heat}",
-                    mode="competition",
-                    filename=sub.filename,
-                    start=began,
-                    planned_end=began + a.time_limit,
-                    source_sha256=hashlib.sha256(sub.source).hexdigest(),
-                ),
-            )
-            writer.attach_source(sub.filename, sub.source, began)
-            if report.snapshot is not None:
-                writer.write(s.SNAPSHOT, report.snapshot, began)
-                write_frames(writer, report.snapshot, report.frames, began)
-            topic = s.pose_topic(a.robot)
-            for t, x, y, heading in report.trace:
-                writer.write(topic, pose_record(x, y, heading, began + t), began + t)
-            for line in report.output:
-                log_line = s.LogLine(s.stamp(began), 2, line, "controller", sub.filename, 0)
-                writer.write(s.OUTPUT, log_line, began)
-            end = began + max(report.sim_seconds, 0.0)
-            reason = f"{report.cause}: {report.detail}"
-            writer.finish(s.RunEnd(status="finished", reason=reason, at=end))
+            record_episode(path, run, report, began)
         except (OSError, ValueError) as exc:
             log.warning("heat %d of %s not recorded: %s", heat, name, exc)
             return ""

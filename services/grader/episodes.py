@@ -16,6 +16,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -37,6 +38,7 @@ from common.messages import (
     Message,
 )
 from services.grader.assignment import Assignment
+from services.grader.episode_recordings import EpisodeRecordings, EpisodeRun
 from services.grader.grading_db import Pending
 from services.grader.score import MissingMetric, metrics
 
@@ -180,11 +182,40 @@ class EpisodeRunner:
             self._stop.wait(1.0)
         raise RuntimeError(f"the grader function could not run: {problem}")
 
-    def grade(self, sub: Pending, a: Assignment, map_text: str) -> Graded:
+    def grade(
+        self,
+        sub: Pending,
+        a: Assignment,
+        map_text: str,
+        recordings: EpisodeRecordings | None = None,
+        *,
+        already: Sequence[EpisodeResult] = (),
+        done: Callable[[EpisodeResult], None] = lambda _e: None,
+    ) -> Graded:
+        """Run and score each episode; with ``recordings``, each is traced and kept to replay.
+
+        ``already``: the episodes a previous grading of this submission scored before it
+        stopped (kept, not run again); ``done`` is called with each episode as it is scored.
+        """
+        kept = {e.episode: e for e in already if not e.real and e.score is not None}
         rule = a.score
+        run = EpisodeRun(
+            ctx=a.name,
+            request_id=sub.id,
+            mode="graded",
+            user=sub.user,
+            world=a.map_name,
+            agent=a.robot,
+            filename=sub.filename,
+            source=sub.source,
+            time_limit=a.time_limit,
+        )
         zones = sorted(rule.zones)
         results: list[EpisodeResult] = []
         for n in range(a.episodes):
+            if n in kept:
+                results.append(kept[n])
+                continue
             start = a.start(n)
             request = Episode(
                 submission=sub.id,
@@ -199,11 +230,13 @@ class EpisodeRunner:
                 seconds=a.time_limit,
                 source=sub.source,
                 filename=sub.filename,
+                trace=recordings is not None,
                 grader=a.grader_source.encode() if a.grader_file else None,
                 grader_filename=a.grader_file or "grader.py",
                 grader_seconds=a.grader_seconds,
             )
             reruns = 0
+            began = time.time()
             report = self.once(request)
             while report.cause == "lab" and reruns < LAB_RETRIES and not self._stop.is_set():
                 reruns += 1
@@ -215,7 +248,11 @@ class EpisodeRunner:
                     reruns,
                 )
                 self._stop.wait(min(2.0, 0.5 * reruns))
+                began = time.time()
                 report = self.once(request)
+            replay = False
+            if report.cause != "lab" and recordings is not None:
+                replay = recordings.record(run, sub.id, n, report, began)
             if report.cause == "lab":
                 results.append(
                     EpisodeResult(
@@ -246,6 +283,8 @@ class EpisodeRunner:
                         error_line=report.grader_line,
                         metrics=metrics(report, zones, a.time_limit),
                         lab_reruns=reruns,
+                        output=report.output[-20:],
+                        replay=replay,
                     )
                 )
                 return Graded(results, None, None, "", teacher)
@@ -266,8 +305,10 @@ class EpisodeRunner:
                     lab_reruns=reruns,
                     terms=[(t, round(v, 4)) for t, v in rule.terms(report, a.time_limit)],
                     output=report.output[-20:],
+                    replay=replay,
                 )
             )
+            done(results[-1])
         scores = [r.score for r in results if r.score is not None]
         mean = round(sum(scores) / len(scores), 4) if scores else None
         return Graded(results, mean, min(scores) if scores else None, "")

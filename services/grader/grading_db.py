@@ -11,6 +11,7 @@ those runs re-run, the lab's fault, free.
 from __future__ import annotations
 
 import json
+import sqlite3
 import time
 import uuid
 from dataclasses import dataclass
@@ -239,30 +240,21 @@ class GradingStore:
         with self.db.transaction() as con:
             con.execute("DELETE FROM episodes WHERE submission=?", (sub,))
             for e in episodes:
-                con.execute(
-                    "INSERT INTO episodes(submission, episode, seed, cause, detail, error_line, "
-                    "score, metrics, lab_reruns, real, terms, output) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (
-                        sub,
-                        e.episode,
-                        e.seed,
-                        e.cause,
-                        e.detail,
-                        e.error_line,
-                        e.score,
-                        json.dumps(e.metrics),
-                        e.lab_reruns,
-                        int(e.real),
-                        json.dumps(e.terms),
-                        json.dumps(e.output),
-                    ),
-                )
+                _insert_episode(con, sub, e)
             con.execute(
                 "UPDATE submissions SET status=?, counted=?, mean=?, min=?, penalty=?, "
                 "graded_at=?, message=? WHERE id=?",
                 (status, int(counted), mean, low, penalty, time.time(), message[:256], sub),
             )
+
+    def add_episode(self, sub: str, e: EpisodeResult) -> None:
+        """One episode as it is graded: a grader that dies mid-submission leaves what it had
+        (the student reads it; the next start goes on from the next episode)."""
+        with self.db.transaction() as con:
+            con.execute(
+                "DELETE FROM episodes WHERE submission=? AND episode=? AND real=0", (sub, e.episode)
+            )
+            _insert_episode(con, sub, e)
 
     def add_real(self, sub: str, e: EpisodeResult, message: str) -> None:
         """The real-robot attempt's row joined to a graded submission, and its message."""
@@ -443,6 +435,28 @@ class GradingStore:
             CourseSubmission(str(i), str(a), str(u), str(st), float(at), sc, str(msg), fail or "")
             for i, a, u, st, at, sc, msg, fail in rows
         ]
+
+
+def _insert_episode(con: sqlite3.Connection, sub: str, e: EpisodeResult) -> None:
+    con.execute(
+        "INSERT INTO episodes(submission, episode, seed, cause, detail, error_line, "
+        "score, metrics, lab_reruns, real, terms, output) "
+        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+        (
+            sub,
+            e.episode,
+            e.seed,
+            e.cause,
+            e.detail,
+            e.error_line,
+            e.score,
+            json.dumps(e.metrics),
+            e.lab_reruns,
+            int(e.real),
+            json.dumps(e.terms),
+            json.dumps(e.output),
+        ),
+    )
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
         metavar="DIR",
         help="competitions' standings and heat recordings (default: competitions/ beside --db)",
     )
+    p.add_argument(
+        "--episode-recordings",
+        type=Path,
+        metavar="DIR",
+        help="each graded episode's recording, which its student replays "
+        "(default: graded/ beside --db)",
+    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -79,6 +86,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
             workers=args.workers,
             runner_wait=args.runner_wait,
             competitions=args.competitions or args.db.parent / "competitions",
+            graded=args.episode_recordings or args.db.parent / "graded",
         )
 
     try:

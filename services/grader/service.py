@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 from typing import cast
 
+import msgspec
 import zenoh
 
 from common import keys, qos
@@ -50,17 +51,19 @@ from common.messages import (
     ClassTables,
     CompetitionQuery,
     CompetitionRun,
+    EpisodeReplayGet,
     EpisodeResult,
     Graded,
     GradingChanged,
     Leaderboard,
     LeaderboardQuery,
-    LeaderEntry,
     Message,
     MyAssignments,
     OkReply,
+    RecordingChunk,
     SetPseudonym,
     Standings,
+    SubmissionInfo,
     SubmissionList,
     SubmissionsQuery,
     Submit,
@@ -70,9 +73,11 @@ from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
 from services.grader.class_view import class_table
 from services.grader.competition import CompetitionError, Competitions
+from services.grader.episode_recordings import EpisodeRecordings
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
+from services.grader.leaderboard import leaderboard
 from services.grader.real_attempt import RealAttempt
 from services.lab.database import DbError
 
@@ -99,13 +104,6 @@ def info(a: Assignment) -> AssignmentInfo:
     )
 
 
-def _shown(name: str, pseudonym: str | None, teacher: bool) -> str:
-    """A student's name on a leaderboard: their pseudonym, which teachers see beside the name."""
-    if not pseudonym:
-        return name
-    return f"{name} (as {pseudonym})" if teacher else pseudonym
-
-
 def _when(t: float) -> str:
     return time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(t))
 
@@ -125,6 +123,7 @@ class GraderService(Service):
         workers: int = WORKERS,
         runner_wait: float = RUNNER_WAIT_S,
         competitions: Path | None = None,
+        graded: Path | None = None,
     ) -> None:
         super().__init__(session, realm, name)
         self.verifier = Verifier(registry_key, realm)
@@ -138,6 +137,7 @@ class GraderService(Service):
         self.competitions = Competitions(
             store, self.episodes, competitions or Path("competitions"), self._publish
         )
+        self.recordings = EpisodeRecordings(graded or Path("graded"))
         self._threads: list[threading.Thread] = []
         # Real-robot attempts, one at a time (services/grader/real_attempt.py).
         self._real_stop = threading.Event()
@@ -192,6 +192,7 @@ class GraderService(Service):
                 CompetitionRun,
                 CompetitionQuery,
                 ClassQuery,
+                EpisodeReplayGet,
             ),
         )
         if isinstance(request, ClassQuery):
@@ -203,7 +204,13 @@ class GraderService(Service):
         if isinstance(request, CompetitionQuery):
             return self._standings(principal, request.name)
         named = cast(
-            Submit | SubmissionsQuery | LeaderboardQuery | SetPseudonym | CompetitionRun, request
+            Submit
+            | SubmissionsQuery
+            | LeaderboardQuery
+            | SetPseudonym
+            | CompetitionRun
+            | EpisodeReplayGet,
+            request,
         )
         try:
             assignment, _map = self.store.assignment(named.assignment)
@@ -236,14 +243,50 @@ class GraderService(Service):
             return self._submit(principal, request, assignment)
         if isinstance(request, SetPseudonym):
             return self._pseudonym(principal.user, assignment, request.pseudonym.strip())
+        if isinstance(request, EpisodeReplayGet):
+            return self._replay(principal.user, teacher, assignment, request)
         if isinstance(request, SubmissionsQuery):
             # A teacher names a submission by its id alone; anyone else sees only their own.
             user = request.user or (None if teacher and request.submission else principal.user)
             if user != principal.user and not teacher:
                 raise RequestError("forbidden", "only the course's teachers see others' runs")
             found = self.store.submissions(assignment.name, user, request.submission)
-            return SubmissionList(submissions=found[-500:])
+            return SubmissionList(submissions=[self._replays(s) for s in found[-500:]])
         return self.leaderboard(assignment, teacher)
+
+    def _replays(self, sub: SubmissionInfo) -> SubmissionInfo:
+        """``sub`` with each episode saying whether its recording is still kept to replay."""
+        episodes = [
+            msgspec.structs.replace(
+                e,
+                replay=not e.real
+                and self.recordings.has(sub.assignment, sub.user, sub.submission, e.episode),
+            )
+            for e in sub.episodes
+        ]
+        return msgspec.structs.replace(sub, episodes=episodes)
+
+    def _replay(
+        self, user: str, teacher: bool, a: Assignment, request: EpisodeReplayGet
+    ) -> RecordingChunk:
+        """A chunk of a graded episode's recording: the submission's student, or a teacher."""
+        found = self.store.submissions(a.name, None, request.submission)
+        if not found or (found[0].user != user and not teacher):
+            # Another student's submission is answered as if it did not exist.
+            raise RequestError("not_found", f"you have no submission {request.submission}")
+        owner = found[0].user
+        if not self.recordings.has(a.name, owner, request.submission, request.episode):
+            raise RequestError(
+                "not_found",
+                f"episode {request.episode} of {request.submission} has no replay kept (the "
+                f"newest {self.recordings.keep} submissions of each student keep theirs)",
+            )
+        try:
+            return self.recordings.chunk(
+                a.name, owner, request.submission, request.episode, request.offset
+            )
+        except OSError as exc:
+            raise RequestError("not_found", f"the replay could not be read: {exc}") from None
 
     def _standings(self, principal: Principal, name: str) -> Standings:
         found = self.competitions.standings(name)
@@ -376,36 +419,7 @@ class GraderService(Service):
         return OkReply(detail=f"you show as {pseudonym} on {a.course}'s leaderboards")
 
     def leaderboard(self, a: Assignment, teacher: bool) -> Leaderboard:
-        hidden = a.hidden and time.time() < a.deadline
-        entries: list[LeaderEntry] = []
-        if teacher or not hidden:
-            names = self.store.display_names(a.course)
-            chosen = self.store.pseudonyms(a.course)
-            best = self.store.best(a.name, higher=a.order == "higher")
-            best.sort(key=lambda row: (-row[1] if a.order == "higher" else row[1], row[3]))
-            rank, previous = 0, None
-            for i, (user, score, sub, at) in enumerate(best):
-                if score != previous:
-                    rank, previous = i + 1, score
-                entries.append(
-                    LeaderEntry(
-                        rank=rank,
-                        name=_shown(names.get(user) or user, chosen.get(user), teacher),
-                        score=round(score, 4),
-                        submission=sub,
-                        at=at,
-                        real=self.store.real_score(sub) if a.real_arena else None,
-                    )
-                )
-        return Leaderboard(
-            assignment=a.name,
-            score_name=a.score_name,
-            unit=a.unit,
-            order=a.order,  # type: ignore[arg-type]
-            hidden=hidden,
-            deadline=a.deadline,
-            entries=entries,
-        )
+        return leaderboard(self.store, a, teacher)
 
     # -- grading
 
@@ -463,7 +477,15 @@ class GraderService(Service):
         a, map_text = self.store.assignment(sub.assignment)
         self.store.set_status(sub.id, "running")
         self._changed(sub, "running", a.course)
-        graded = self.episodes.grade(sub, a, map_text)
+        before = self.store.submissions(sub.assignment, sub.user, sub.id)
+        graded = self.episodes.grade(
+            sub,
+            a,
+            map_text,
+            self.recordings,
+            already=before[0].episodes if before else (),
+            done=lambda e: self.store.add_episode(sub.id, e),
+        )
         if self.stopped and graded.lab_failed:
             return  # the grader is stopping: left queued, graded at the next start
         if graded.lab_failed:

@@ -4,8 +4,8 @@ The students write, Check, dry-run and run in their own pages while the teacher
 builds and places a robot of a new type; one student reloads mid-run and keeps the
 run; the teacher takes over a student's robot by keyboard (the view's camera
 unchanged) and hands it back; a graded submission fails and its student reads the
-error. Every assertion is what a person sees in the DOM or what the lab's services
-say, never pixels.
+error and replays the episode. Every assertion is what a person sees in the DOM or
+what the lab's services say, never pixels.
 """
 
 from __future__ import annotations
@@ -156,6 +156,17 @@ def test_a_class_drill(open_page, lab: RealLab) -> None:
     carol.click("Submit the editor's code")
     carol.wait_text("ZeroDivisionError: division by zero on purpose", timeout=120_000)
     carol.wait_text("your controller: line 13:", timeout=10_000)
+    # ...and replays that episode in her world view, then goes back to the live arena.
+    course = panels["carol"].course
+    assert course is not None
+    carol.click("Replay the episode")
+    carol.wait_text("Replaying episode 0 of ", timeout=30_000)
+    replay = course.spot.replay
+    assert replay is not None and replay.player.timeline.duration > 0
+    assert carol.p.get_by_text("Back to live").count() == 1
+    carol.screenshot("class-drill-replay")
+    carol.click("Back to live")
+    wait_until(lambda: course.spot.replay is None, what="carol back to the live arena")
 
     # No run was lost: alice's is still hers, and Stop ends it.
     assert back.robots is not None and back.robots.driven("k0")

@@ -19,6 +19,7 @@ import pytest
 from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.messages import GradingChanged
+from common.recording import read_recording
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_runner, together
 from tests.kit.courses import COURSE, assignment_toml
@@ -155,8 +156,28 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
     assert rows["alice"].score == pytest.approx(99.6, abs=0.1) and not rows["alice"].failure
     assert {r.status for r in rows.values()} == {"graded"}
 
+    # Each graded episode is replayable: its student (and a teacher) fetch its recording.
+    with lab.client("carol") as client:
+        grader = GraderClient(client)
+        [mine] = grader.submissions("reach-goal")
+        assert [e.replay for e in mine.episodes] == [True] * len(mine.episodes)
+        got = grader.fetch_episode("reach-goal", subs["carol"], 1, tmp_path / "carol-1.mcap")
+    rec = read_recording(got)
+    assert rec.info is not None and (rec.info.user, rec.info.mode) == ("carol", "graded")
+    assert rec.snapshot is not None and rec.frames, "a replay draws the world's frames"
+    assert rec.source == source("raises")
+    assert rec.end is not None and "ZeroDivisionError" in rec.end.reason
+    assert any("ZeroDivisionError" in o.record.message for o in rec.output)
+    with lab.client("ida") as client:  # a teacher replays any student's
+        GraderClient(client).fetch_episode("reach-goal", subs["carol"], 0, tmp_path / "c0.mcap")
+
     with lab.client("bob") as client:
         grader = GraderClient(client)
+        with pytest.raises(LabError, match=f"you have no submission {subs['carol']}"):
+            grader.fetch_episode("reach-goal", subs["carol"], 0, tmp_path / "stolen.mcap")
+        assert not (tmp_path / "stolen.mcap").exists()
+        with pytest.raises(LabError, match=r"episode 9 of \S+ has no replay kept"):
+            grader.fetch_episode("reach-goal", subs["bob"], 9, tmp_path / "none.mcap")
         assert grader.leaderboard("reach-goal").entries == []  # hidden for a student
         with pytest.raises(LabError, match="only the course's teachers see others' runs"):
             grader.submissions("reach-goal", user="alice")
@@ -193,6 +214,17 @@ def test_three_students_graded_with_causes_refusals_and_a_leaderboard(
     )  # fmt: skip
     assert board_cli.returncode == 0, board_cli.stderr
     assert "you see it as a teacher" in board_cli.stdout
+    fetched = wart(
+        lab, "submit", "--assignment", "reach-goal", "--user", "carol", "--password-file", str(pw),
+        "--episode", subs["carol"], "0", "-o", str(tmp_path / "cli.mcap"), *lab.net_args(),
+    )  # fmt: skip
+    assert fetched.returncode == 0, fetched.stderr
+    assert f"episode 0 of {subs['carol']} written to" in fetched.stdout
+    assert read_recording(tmp_path / "cli.mcap").source == source("raises")
+    typo = wart(lab, "submit", "--assignment", "reach-goal", "--user", "carol", "--episode",
+                subs["carol"], "first")  # fmt: skip
+    assert typo.returncode != 0
+    assert "N is an episode's number (0, 1, ...), not 'first'" in typo.stderr
     assert "1. Alice A" in board_cli.stdout
     assert "Bob B (as Loopy)" in board_cli.stdout  # the teacher sees who is behind a pseudonym
     # one-a-day is not hidden: a student sees it, under the pseudonym alice chooses here.
@@ -257,17 +289,25 @@ def test_a_submission_the_lab_cannot_grade_is_not_counted(
 def test_a_grader_killed_mid_grading_grades_it_at_its_next_start(
     lab: ProcessLab, tmp_path: Path
 ) -> None:
-    add_assignment(lab, tmp_path, "long", time_limit="8.0", episodes="1", seeds="[1]")
+    add_assignment(lab, tmp_path, "long", time_limit="4.0", episodes="2", seeds="[1, 2]")
     grader_proc = next(p for p in lab.procs.started if p.name == "grader")
     with lab.client("carol") as client:
         grader = GraderClient(client)
         sub = grader.submit("long", source("slow"), "slow.py").submission
-        wait_for(
-            lambda: grader.submissions("long", submission=sub)[0].status == "running", 60, "running"
-        )
+
+        def partial() -> list[int]:
+            [now] = grader.submissions("long", submission=sub)
+            return [e.episode for e in now.episodes]
+
+        # The first episode's result is readable while the second runs: a partial result.
+        wait_for(lambda: partial() == [0], 120, "the first episode's result")
+        first = lab.db_path.parent / "graded" / "long" / "carol" / sub / "episode-00.mcap"
+        kept_at = first.stat().st_mtime_ns
         grader_proc.kill9()
         lab.start_grader(name="grader-again")
         graded = grader.wait_graded("long", sub, 180)
         assert graded.status == "graded" and graded.counted
-        assert [e.cause for e in graded.episodes] == ["ok"]
+        assert [e.cause for e in graded.episodes] == ["ok", "ok"]
         assert len(grader.submissions("long")) == 1  # the same submission, not a second one
+        # The episode scored before the kill is kept, not run again: its recording is the same.
+        assert first.stat().st_mtime_ns == kept_at

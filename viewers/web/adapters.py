@@ -407,6 +407,10 @@ class LabConnection(Protocol):
 
     def leaderboard(self, assignment: str) -> Leaderboard: ...
 
+    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
+        """Download a graded episode's recording of mine into ``dest``; returns ``dest``."""
+        ...
+
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         """Competitions' standings as the grader publishes them; returns: stop watching."""
         ...

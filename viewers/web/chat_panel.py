@@ -122,7 +122,14 @@ class ChatPanel:
                     client, connection, self.ctx, self.robots, kept.bench if kept else None
                 )
                 # Assignments are handed in from here: the file open in the editor above.
-                self.course = CoursePanel(client, connection, source=self.workbench.current_file)
+                self.course = CoursePanel(
+                    client,
+                    connection,
+                    source=self.workbench.current_file,
+                    view=lambda: self.view,
+                    show=self._show_replay,
+                    back_to_live=self.show_world,
+                )
                 # A course's teachers only: every student, live; watch and take over.
                 self.klass = ClassPanel(
                     client, connection, self.ctx, self.robots, show_arena=self.show_world

@@ -12,23 +12,33 @@ hidden until the deadline stays hidden: the grader answers a student with no
 entries). The buttons still read both at once. A competition's standings
 come as the grader publishes them (each heat's start and end): whoever has the
 folder open sees the ranking change when a heat ends, with the heat in progress.
+
+Each graded episode of a recent submission can be replayed in the world view
+(the grader keeps its recording: services/grader/episode_recordings.py), with
+the same timeline as a recorded run.
 """
 
 from __future__ import annotations
 
 import re
+import tempfile
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import viser
 
 from common.messages import AssignmentInfo, GradingChanged, Leaderboard, Standings, SubmissionInfo
+from common.recording import RecordingError, read_recording
 from viewers.web.adapters import LabConnection, LabError
 from viewers.web.inputs import on_click, set_value
+from viewers.web.replay import ReplayFeed, ReplaySpot
 from viewers.web.text import code_md, escape_md
+from viewers.web.world_view import WorldView
 
 NONE = "(no assignment)"
+NO_REPLAY = "(no graded episode kept)"
 MAX_SHOWN = 10  # the latest submissions in the table
 MAX_COMPETITIONS = 3  # the latest competitions shown
 COALESCE_S = 0.1  # changes that come together are read once
@@ -92,6 +102,19 @@ def format_episodes(sub: SubmissionInfo) -> str:
     return "\n".join(lines)
 
 
+def replayable(subs: list[SubmissionInfo]) -> dict[str, tuple[str, int]]:
+    """The episodes of my recent submissions that can be replayed, newest first, by label."""
+    found: dict[str, tuple[str, int]] = {}
+    for sub in subs[-MAX_SHOWN:][::-1]:
+        when = time.strftime("%H:%M:%S", time.localtime(sub.submitted_at))
+        for e in sub.episodes:
+            if e.replay:
+                ended = "" if e.score is None else f", score {e.score:g}"
+                label = f"{when} · episode {e.episode} ({e.cause}{ended})"
+                found[label] = (sub.submission, e.episode)
+    return found
+
+
 def format_board(board: Leaderboard) -> str:
     if board.hidden and not board.entries:
         return f"_Hidden until the deadline, {_when(board.deadline)}._"
@@ -137,8 +160,12 @@ class CoursePanel:
         connection: LabConnection,
         *,
         source: Callable[[], tuple[str, bytes] | None],
+        view: Callable[[], WorldView | None] = lambda: None,
+        show: Callable[[ReplayFeed], None] = lambda _feed: None,
+        back_to_live: Callable[[], None] = lambda: None,
     ) -> None:
-        """``source``: the editor's file name and code (None: the name is not a file name)."""
+        """``source``: the editor's file name and code (None: the name is not a file name);
+        ``view``, ``show``, ``back_to_live``: where a graded episode is replayed."""
         self.connection = connection
         self._source = source
         self._assignments: dict[str, AssignmentInfo] = {}
@@ -149,6 +176,8 @@ class CoursePanel:
         self._want_scores = self._want_board = False
         self._dirty = threading.Event()
         self._closed = threading.Event()
+        self._replayable: dict[str, tuple[str, int]] = {}
+        self._tmp = tempfile.TemporaryDirectory(prefix="wart-episodes-")
         gui = client.gui
         with gui.add_folder("Course", expand_by_default=False) as self.folder:
             self.refresh_button = gui.add_button("Refresh assignments", icon=viser.Icon.REFRESH)
@@ -161,6 +190,12 @@ class CoursePanel:
             self.scores_button = gui.add_button("My scores", icon=viser.Icon.LIST_NUMBERS)
             self.scores = gui.add_markdown("")
             self.latest = gui.add_markdown("")  # the newest submission, episode by episode
+            self.episode = gui.add_dropdown("Graded episode", (NO_REPLAY,))
+            self.replay_button = gui.add_button(
+                "Replay the episode", color="grape", icon=viser.Icon.PLAYER_PLAY
+            )
+            self.replay_said = gui.add_markdown("")
+            self.spot = ReplaySpot(client, view=view, show=show, back_to_live=back_to_live)
             self.board_button = gui.add_button("Leaderboard", icon=viser.Icon.TROPHY)
             self.board = gui.add_markdown("")
             self.competitions = gui.add_markdown("")
@@ -168,6 +203,7 @@ class CoursePanel:
         on_click(self.submit_button, self.submit)
         on_click(self.scores_button, self.show_scores)
         on_click(self.board_button, self.show_board)
+        on_click(self.replay_button, self.replay_episode)
         self.chosen.on_update(lambda _: self._describe())
         try:
             self._unwatch = connection.watch_standings(self.on_standings)
@@ -186,6 +222,8 @@ class CoursePanel:
         self._dirty.set()
         self._unwatch()
         self._unwatch_grading()
+        self.spot.close()
+        self._tmp.cleanup()
 
     def on_change(self, change: GradingChanged) -> None:
         """A submission changed (a Zenoh thread): read again what it changes here, soon."""
@@ -296,7 +334,41 @@ class CoursePanel:
             self._mine.update(s.submission for s in subs)
         self.scores.content = format_submissions(subs)
         self.latest.content = format_episodes(subs[-1]) if subs else ""
+        found = replayable(subs)
+        with self._lock:
+            self._replayable = found
+        keep = self.episode.value
+        options = tuple(found) or (NO_REPLAY,)
+        self.episode.options = options
+        set_value(self.episode, keep if keep in options else options[0])
         return subs
+
+    def replay_episode(self) -> str:
+        """Replay the chosen graded episode in the world view; what the student is told."""
+        name = self._assignment()
+        with self._lock:
+            chosen = self._replayable.get(self.episode.value)
+        if name is None:
+            return ""
+        if chosen is None:
+            said = "No graded episode to replay yet: press My scores once a submission is graded."
+            self.replay_said.content = "**Not done:** " + escape_md(said)
+            return said
+        sub, n = chosen
+        dest = Path(self._tmp.name) / f"{sub}-{n}.mcap"
+        try:
+            if not dest.exists():
+                self.connection.fetch_episode(name, sub, n, dest)
+            problem = self.spot.start(read_recording(dest))
+        except (LabError, RecordingError, OSError) as exc:
+            problem = str(exc)
+        if problem:
+            said = f"Episode {n} of {sub} is not replayed: {problem}"
+            self.replay_said.content = "**Not done:** " + escape_md(said)
+            return said
+        said = f"Replaying episode {n} of {sub} in the view: scrub the timeline, or press Play."
+        self.replay_said.content = escape_md(said)
+        return said
 
     def show_board(self) -> Leaderboard | None:
         name = self._assignment()

@@ -475,6 +475,9 @@ class DemoConnection:
     def leaderboard(self, assignment: str) -> Leaderboard:
         raise LabError("the demo lab has no leaderboards: no grader runs here")
 
+    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
+        raise LabError("the demo lab grades nothing: no episode to replay")
+
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         return lambda: None  # no grader: no competition
 

@@ -536,6 +536,10 @@ class LiveConnection:
     def leaderboard(self, assignment: str) -> Leaderboard:
         return self._call(lambda: GraderClient(self.client).leaderboard(assignment))
 
+    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
+        grader = GraderClient(self.client)
+        return self._call(lambda: grader.fetch_episode(assignment, submission, episode, dest))
+
     def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
         return self._call(lambda: self._standings.add(on_standings))
 

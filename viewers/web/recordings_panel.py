@@ -32,10 +32,9 @@ import numpy as np
 import viser
 
 from common.recording import Recording, RecordingError, plots, read_recording, report, summarize
-from common.recording.replay import Timeline
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
 from viewers.web.inputs import on_click, set_value
-from viewers.web.replay import ReplayControls, ReplayFeed
+from viewers.web.replay import ReplayControls, ReplayFeed, ReplaySpot
 from viewers.web.text import escape_md
 from viewers.web.world_view import WorldView
 
@@ -88,9 +87,6 @@ class RecordingsPanel:
         self.client = client
         self.connection = connection
         self.ctx = ctx
-        self._view = view
-        self._show = show
-        self._back_to_live = back_to_live
         self._entries: list[RecordingEntry] = []
         self._files: dict[str, Path] = {}
         self._tmp = tempfile.TemporaryDirectory(prefix="wart-recordings-")
@@ -99,7 +95,6 @@ class RecordingsPanel:
         # before a run was written, landing after a newer one, drew the older list.
         self._listing = threading.Lock()
         self._images: list[viser.GuiImageHandle] = []
-        self.replay: ReplayControls | None = None
         gui = client.gui
         with gui.add_folder("Recordings", expand_by_default=False) as self.folder:
             self.table = gui.add_markdown("_Press Refresh to list your recordings._")
@@ -119,7 +114,9 @@ class RecordingsPanel:
             self.status = gui.add_markdown("")
             self.details = gui.add_markdown("")
             self.pictures = gui.add_folder("Plots of the run", visible=False)
-            self.controls_at = gui.add_folder("Replay controls", visible=False)
+            self.spot = ReplaySpot(
+                client, view=view, show=show, back_to_live=self._back_to_live(back_to_live)
+            )
         on_click(self.refresh_button, self.refresh)
         self.download.on_click(lambda _: self._download())
         self.summary.on_click(lambda _: self._summary())
@@ -233,34 +230,27 @@ class RecordingsPanel:
         self.pictures.visible = True
         self.say(f"Plots of {entry.name}: below.")
 
+    @property
+    def replay(self) -> ReplayControls | None:
+        return self.spot.replay
+
+    def _back_to_live(self, back: Callable[[], None]) -> Callable[[], None]:
+        def left() -> None:
+            self.say("Back to the live arena.")
+            back()
+
+        return left
+
     def _replay(self) -> None:
         entry = self._entry()
         rec = self._read(entry) if entry is not None else None
         if entry is None or rec is None:
             return
-        view = self._view()
-        if view is None:
-            self.say("The page has no world view to replay in.", bad=True)
+        problem = self.spot.start(rec)
+        if problem:
+            self.say(f"{entry.name}: {problem}", bad=True)
             return
-        if self.replay is not None:
-            self.replay.close()
-        try:
-            Timeline(rec)
-        except RecordingError as exc:
-            self.say(f"{entry.name} cannot be replayed: {exc}", bad=True)
-            return
-        with self.controls_at:
-            self.replay = ReplayControls(
-                self.client, view, rec, on_leave=self._left, show=self._show
-            )
-        self.controls_at.visible = True
         self.say(f"Replaying {entry.name} in the view: scrub the timeline, or press Play.")
-
-    def _left(self, _controls: ReplayControls) -> None:
-        self.replay = None
-        self.controls_at.visible = False
-        self.say("Back to the live arena.")
-        self._back_to_live()
 
     def _promote(self) -> None:
         entry = self._entry()
@@ -289,7 +279,5 @@ class RecordingsPanel:
         )
 
     def close(self) -> None:
-        if self.replay is not None:
-            self.replay.close()
-            self.replay = None
+        self.spot.close()
         self._tmp.cleanup()

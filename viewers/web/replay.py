@@ -357,6 +357,59 @@ class ReplayControls:
         self.folder.remove()
 
 
+class ReplaySpot:
+    """Where a panel's replay sits: one replay at a time, in its own folder of the panel.
+
+    Made inside the panel's current GUI container (the arena tab's Recordings or
+    Course folder). ``view`` gives the page's world view (None: not shown yet),
+    ``show`` puts a replay's feed in it (the arena's panels follow the cursor) and
+    ``back_to_live`` returns the view to the arena when the student leaves.
+    """
+
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        *,
+        view: Callable[[], WorldView | None],
+        show: Callable[[ReplayFeed], None],
+        back_to_live: Callable[[], None],
+    ) -> None:
+        self.client = client
+        self._view = view
+        self._show = show
+        self._back_to_live = back_to_live
+        self.replay: ReplayControls | None = None
+        self.folder = client.gui.add_folder("Replay controls", visible=False)
+
+    def start(self, recording: Recording) -> str:
+        """Replay ``recording`` in the view; "" or why it cannot be (in the student's words)."""
+        view = self._view()
+        if view is None:
+            return "the page has no world view to replay in: press Show this arena first"
+        try:
+            Timeline(recording)
+        except RecordingError as exc:
+            return f"it cannot be replayed: {exc}"
+        self.close()
+        with self.folder:
+            self.replay = ReplayControls(
+                self.client, view, recording, on_leave=self._left, show=self._show
+            )
+        self.folder.visible = True
+        return ""
+
+    def _left(self, _controls: ReplayControls) -> None:
+        self.replay = None
+        self.folder.visible = False
+        self._back_to_live()
+
+    def close(self) -> None:
+        if self.replay is not None:
+            self.replay.close()
+            self.replay = None
+        self.folder.visible = False
+
+
 def _colour(i: int) -> str:
     return ["#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#bfef45"][
         i % 8
