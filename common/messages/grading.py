@@ -34,6 +34,7 @@ EpisodeCause = Literal[
     "ended",  # student: the controller process ended otherwise
     "lab",  # the lab: runner died, sandbox could not start, no runner answered
     "grader",  # the teacher: the assignment's grader function failed (the run is not charged)
+    "hidden",  # not shown to its student yet (the assignment's visibility; ``detail`` says when)
 ]
 STUDENT_CAUSES: frozenset[str] = frozenset(
     {"exception", "timeout", "memory", "output", "cpu", "ended"}
@@ -308,6 +309,7 @@ class Leaderboard(Message, frozen=True):
     order: Literal["higher", "lower"]
     hidden: bool  # hidden from students until the deadline (a teacher still sees)
     deadline: float
+    hidden_until: ShortText = ""  # when a hidden board is shown ("" with hidden: the deadline)
     entries: Annotated[list[LeaderEntry], msgspec.Meta(max_length=5000)] = msgspec.field(
         default_factory=list
     )

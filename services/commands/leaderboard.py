@@ -43,12 +43,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart leaderboard") -> i
         better = "higher" if board.order == "higher" else "lower"
         unit = f" ({board.unit})" if board.unit else ""
         say(f"{board.assignment}: {board.score_name}{unit}, {better} is better")
+        when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(board.deadline))
+        until = board.hidden_until or f"until the deadline, {when}"
         if board.hidden and not board.entries:
-            when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(board.deadline))
-            say(f"  hidden until the deadline, {when}")
+            say(f"  hidden: {until}")
             return 0
         if board.hidden:
-            say("  (hidden from students until the deadline: you see it as a teacher)")
+            say(f"  (hidden from students: {until}; you see it as a teacher)")
         for e in board.entries:
             real = f"  real {e.real:g}" if e.real is not None else ""
             say(f"  {e.rank:>3}. {e.name:<24} {e.score:>10g}  {e.submission}{real}")

@@ -12,6 +12,7 @@ import ast
 import datetime as dt
 import json
 import math
+import time
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -29,6 +30,9 @@ MAX_FILE_BYTES = 64 * 1024
 MAX_EPISODES = 20
 MAX_QUOTA = 1000
 DAY_S = 86400.0
+# When a student sees an episode's result: at once, after the deadline, once the teacher
+# releases the results (`wart course release`), as Gradescope's tests are.
+VISIBILITIES = ("now", "after_deadline", "after_release")
 
 
 class AssignmentError(ValueError):
@@ -77,6 +81,8 @@ class Assignment:
     real_robot: str = ""
     real_time_limit: float = 0.0
     real_after: str = "simulation-passed"  # or "always"
+    # Each episode's visibility to its student (VISIBILITIES); empty: every episode "now".
+    visibility: list[str] = field(default_factory=list)
 
     @property
     def score(self) -> Rule:
@@ -93,6 +99,16 @@ class Assignment:
 
     def start(self, episode: int) -> StartPose:
         return self.starts[episode % len(self.starts)]
+
+    def shown_after(self, episode: int, now: float, released_at: float | None) -> str:
+        """ "" if the student sees ``episode``'s result now, else when they will (their words)."""
+        when = self.visibility[episode] if episode < len(self.visibility) else "now"
+        if when == "after_deadline" and now < self.deadline:
+            due = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(self.deadline))
+            return f"shown after the deadline, {due}"
+        if when == "after_release" and released_at is None:
+            return "shown when your teacher releases the results"
+        return ""
 
     def better(self, a: float, b: float) -> bool:
         return a > b if self.order == "higher" else a < b
@@ -127,7 +143,7 @@ def parse_assignment(
     known = {
         "name", "course", "title", "map", "robot", "time_limit", "episodes", "seeds",
         "start", "opens", "deadline", "late", "quota", "hide_until_deadline", "zones",
-        "score", "grader", "grader_time_limit", "real",
+        "score", "grader", "grader_time_limit", "real", "visibility",
     }  # fmt: skip
     for key in sorted(set(data) - known):
         problems.append(f"{key}: unknown field (one of {', '.join(sorted(known))})")
@@ -183,6 +199,7 @@ def parse_assignment(
             problems.append("late.penalty_per_day: a number ≥ 0 (score points taken per day)")
     elif late_value != "refuse":
         problems.append('late: "refuse", or { penalty_per_day = N }')
+    visibility = _visibility(data.get("visibility", "now"), episodes, problems)
     hidden = data.get("hide_until_deadline", False)
     if not isinstance(hidden, bool):
         problems.append("hide_until_deadline: true or false")
@@ -254,8 +271,22 @@ def parse_assignment(
         real_robot=real[1],
         real_time_limit=real[2],
         real_after=real[3],
+        visibility=visibility,
     )
     return assignment, map_text
+
+
+def _visibility(value: Any, episodes: int, problems: list[str]) -> list[str]:
+    """Each episode's visibility: one for all ("after_release"), or a list, one per episode."""
+    said = f"visibility: one of {', '.join(VISIBILITIES)}, or a list of them, one per episode"
+    values = [value] * episodes if isinstance(value, str) else value
+    if not isinstance(values, list) or any(v not in VISIBILITIES for v in values):
+        problems.append(said)
+        return []
+    if len(values) != episodes:
+        problems.append(f"visibility: {len(values)} value(s) for {episodes} episode(s)")
+        return []
+    return [] if all(v == "now" for v in values) else [str(v) for v in values]
 
 
 def _real(value: Any, problems: list[str]) -> tuple[str, str, float, str]:

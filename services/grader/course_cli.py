@@ -3,6 +3,7 @@
   wart course --db DB assignment add reach-goal.toml [--maps DIR]
   wart course --db DB assignment check reach-goal.toml [--maps DIR]
   wart course --db DB assignments [COURSE]
+  wart course --db DB release ASSIGNMENT      (its "after_release" results shown to students)
   wart course competition run ASSIGNMENT --user TEACHER [--wait S]   (over the lab)
   wart course competition show NAME --user USER
 
@@ -50,6 +51,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
     )
     ls = sub.add_parser("assignments", help="list the assignments (of a course)")
     ls.add_argument("course", nargs="?")
+    rel = sub.add_parser(
+        "release",
+        help='show an assignment\'s "after_release" results (and its leaderboard) to students',
+    )
+    rel.add_argument("assignment")
     args = p.parse_args(argv)
     if not args.db.exists():
         print(f"{prog}: {args.db}: no registry database there", file=sys.stderr)
@@ -57,6 +63,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course") -> int:
     db = RegistryDB(args.db)
     try:
         store = GradingStore(db.database)
+        if args.command == "release":
+            try:
+                at = store.release(args.assignment)
+            except DbError as exc:
+                print(f"{prog}: {exc}", file=sys.stderr)
+                return 1
+            print(f"{args.assignment}: results released to its students ({_when(at)})")
+            return 0
         if args.command == "assignments":
             for x in store.assignments(args.course):
                 print(

@@ -85,7 +85,10 @@ class GradingStore:
         db.create(ROSTER_SCHEMA, "course tables")
         db.create(SCHEMA, "grading tables")
         columns = db.columns("episodes")
+        assignment_columns = db.columns("assignments")
         with db.transaction() as con:  # a database from before these columns
+            if "released_at" not in assignment_columns:  # `wart course release`: NULL until then
+                con.execute("ALTER TABLE assignments ADD COLUMN released_at REAL")
             if "real" not in columns:
                 con.execute("ALTER TABLE episodes ADD COLUMN real INTEGER NOT NULL DEFAULT 0")
             for added in ("terms", "output"):  # JSON lists: the score by term, printed lines
@@ -102,12 +105,32 @@ class GradingStore:
             raise DbError("not_found", f"no course named {a.course}: import its roster first")
         with self.db.transaction() as con:
             new = not con.execute("SELECT 1 FROM assignments WHERE name=?", (a.name,)).fetchone()
+            # An update keeps its release: a fixed typo does not hide released results again.
             con.execute(
-                "INSERT OR REPLACE INTO assignments(name, course, spec, map, updated_at) "
-                "VALUES (?, ?, ?, ?, ?)",
+                "INSERT INTO assignments(name, course, spec, map, updated_at) "
+                "VALUES (?, ?, ?, ?, ?) ON CONFLICT(name) DO UPDATE SET course=excluded.course, "
+                "spec=excluded.spec, map=excluded.map, updated_at=excluded.updated_at",
                 (a.name, a.course, a.to_json(), map_text, time.time()),
             )
         return new
+
+    def release(self, name: str) -> float:
+        """Show the assignment's "after_release" results to its students; when (first) released."""
+        with self.db.transaction() as con:
+            con.execute(
+                "UPDATE assignments SET released_at=COALESCE(released_at, ?) WHERE name=?",
+                (time.time(), name),
+            )
+            row = con.execute(
+                "SELECT released_at FROM assignments WHERE name=?", (name,)
+            ).fetchone()
+        if row is None:
+            raise DbError("not_found", f"no assignment named {name}")
+        return float(row[0])
+
+    def released_at(self, name: str) -> float | None:
+        rows = self.db.rows("SELECT released_at FROM assignments WHERE name=?", name)
+        return None if not rows or rows[0][0] is None else float(rows[0][0])
 
     def assignment(self, name: str) -> tuple[Assignment, str]:
         rows = self.db.rows("SELECT spec, map FROM assignments WHERE name=?", name)

@@ -7,6 +7,7 @@ import time
 from common.messages import Leaderboard, LeaderEntry
 from services.grader.assignment import Assignment
 from services.grader.grading_db import GradingStore
+from services.grader.visibility import board_hidden_until
 
 
 def _shown(name: str, pseudonym: str | None, teacher: bool) -> str:
@@ -18,8 +19,11 @@ def _shown(name: str, pseudonym: str | None, teacher: bool) -> str:
 
 def leaderboard(store: GradingStore, a: Assignment, teacher: bool) -> Leaderboard:
     """Best per student in the assignment's order; hidden from students until the deadline
-    where the assignment says so (a teacher always sees it, names beside pseudonyms)."""
-    hidden = a.hidden and time.time() < a.deadline
+    where the assignment says so, and while an episode's result is not shown to its student
+    (a teacher always sees it, names beside pseudonyms)."""
+    now = time.time()
+    until = board_hidden_until(a, now, store.released_at(a.name))
+    hidden = bool(until) or (a.hidden and now < a.deadline)
     entries: list[LeaderEntry] = []
     if teacher or not hidden:
         names = store.display_names(a.course)
@@ -47,5 +51,6 @@ def leaderboard(store: GradingStore, a: Assignment, teacher: bool) -> Leaderboar
         order=a.order,  # type: ignore[arg-type]
         hidden=hidden,
         deadline=a.deadline,
+        hidden_until=until,
         entries=entries,
     )

@@ -79,6 +79,7 @@ from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
 from services.grader.leaderboard import leaderboard
 from services.grader.real_attempt import RealAttempt
+from services.grader.visibility import as_student_sees
 from services.lab.database import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
@@ -250,8 +251,13 @@ class GraderService(Service):
             user = request.user or (None if teacher and request.submission else principal.user)
             if user != principal.user and not teacher:
                 raise RequestError("forbidden", "only the course's teachers see others' runs")
-            found = self.store.submissions(assignment.name, user, request.submission)
-            return SubmissionList(submissions=[self._replays(s) for s in found[-500:]])
+            found = [self._replays(s) for s in self.store.submissions(
+                assignment.name, user, request.submission
+            )[-500:]]  # fmt: skip
+            if not teacher:
+                now, released = time.time(), self.store.released_at(assignment.name)
+                found = [as_student_sees(s, assignment, now, released) for s in found]
+            return SubmissionList(submissions=found)
         return self.leaderboard(assignment, teacher)
 
     def _replays(self, sub: SubmissionInfo) -> SubmissionInfo:
@@ -275,6 +281,9 @@ class GraderService(Service):
             # Another student's submission is answered as if it did not exist.
             raise RequestError("not_found", f"you have no submission {request.submission}")
         owner = found[0].user
+        when = a.shown_after(request.episode, time.time(), self.store.released_at(a.name))
+        if when and not teacher:
+            raise RequestError("forbidden", f"episode {request.episode} is {when}")
         if not self.recordings.has(a.name, owner, request.submission, request.episode):
             raise RequestError(
                 "not_found",

@@ -311,3 +311,45 @@ def test_a_grader_killed_mid_grading_grades_it_at_its_next_start(
         assert len(grader.submissions("long")) == 1  # the same submission, not a second one
         # The episode scored before the kill is kept, not run again: its recording is the same.
         assert first.stat().st_mtime_ns == kept_at
+
+
+def test_a_held_out_episode_is_shown_to_its_student_once_released(
+    lab: ProcessLab, tmp_path: Path
+) -> None:
+    """Gradescope's hidden tests: the second episode's result waits for the teacher's release."""
+    add_assignment(
+        lab, tmp_path, "held-out", episodes="2", seeds="[1, 2]",
+        visibility='["now", "after_release"]',
+    )  # fmt: skip
+    with lab.client("alice") as client:
+        grader = GraderClient(client)
+        sub = grader.submit("held-out", source("works"), "works.py").submission
+        graded = grader.wait_graded("held-out", sub, 180)
+        shown, held = graded.episodes
+        assert shown.cause == "ok" and shown.score is not None and shown.replay
+        assert (held.cause, held.score, held.output, held.terms, held.replay) == (
+            "hidden", None, [], [], False,
+        )  # fmt: skip
+        assert held.detail == "shown when your teacher releases the results"
+        assert graded.mean is None and graded.min is None  # the mean would give it away
+        assert "score" not in graded.message and "mean is shown when" in graded.message
+        board = grader.leaderboard("held-out")
+        assert board.hidden and board.entries == []
+        assert board.hidden_until == "shown when your teacher releases the results"
+        with pytest.raises(LabError, match="episode 1 is shown when your teacher releases"):
+            grader.fetch_episode("held-out", sub, 1, tmp_path / "early.mcap")
+    with lab.client("ida") as client:  # the teacher sees it all before the release
+        [seen] = GraderClient(client).submissions("held-out", user="alice")
+        assert [e.cause for e in seen.episodes] == ["ok", "ok"] and seen.mean is not None
+
+    released = wart(lab, "course", "--db", str(lab.db_path), "release", "held-out")
+    assert released.returncode == 0, released.stderr
+    assert "held-out: results released to its students" in released.stdout
+    with lab.client("alice") as client:
+        grader = GraderClient(client)
+        [after] = grader.submissions("held-out")
+        assert [e.cause for e in after.episodes] == ["ok", "ok"]
+        assert after.mean == seen.mean and all(e.replay for e in after.episodes)
+        assert not grader.leaderboard("held-out").hidden
+    nope = wart(lab, "course", "--db", str(lab.db_path), "release", "no-such")
+    assert nope.returncode == 1 and "no assignment named no-such" in nope.stderr

@@ -88,6 +88,9 @@ def format_episodes(sub: SubmissionInfo) -> str:
     lines = [f"**Submission of {when}, episode by episode** ({sub.status})"]
     for e in sub.episodes:
         name = "real robot" if e.real else f"episode {e.episode} (seed {e.seed})"
+        if e.cause == "hidden":
+            lines.append(f"- {name}: {escape_md(e.detail)}")
+            continue
         score = f"**{_num(e.score)}**"
         if e.terms:
             score += " = " + " ".join(f"{code_md(text)} → {value:g}" for text, value in e.terms)
@@ -117,6 +120,8 @@ def replayable(subs: list[SubmissionInfo]) -> dict[str, tuple[str, int]]:
 
 def format_board(board: Leaderboard) -> str:
     if board.hidden and not board.entries:
+        if board.hidden_until:
+            return f"_Hidden: {escape_md(board.hidden_until)}._"
         return f"_Hidden until the deadline, {_when(board.deadline)}._"
     if not board.entries:
         return "_No graded submission yet._"

@@ -190,3 +190,33 @@ def test_what_a_grader_returns_is_checked(value: object, problem: str) -> None:
     with pytest.raises(PipeError, match=re.escape(problem)):
         check_metrics(value)
     assert check_metrics({"wobble": 1, "ir.peak-2": 3.5}) == {"wobble": 1.0, "ir.peak-2": 3.5}
+
+
+@pytest.mark.parametrize(
+    ("line", "problem"),
+    [
+        (b'visibility = "later"', "visibility: one of now, after_deadline, after_release"),
+        (b'visibility = ["now", "now"]', "visibility: 2 value(s) for 3 episode(s)"),
+        (b"visibility = 3", "visibility: one of now, after_deadline, after_release"),
+    ],
+)
+def test_a_visibility_that_is_not_one_per_episode_is_refused(line: bytes, problem: str) -> None:
+    with pytest.raises(AssignmentError, match=re.escape(problem)):
+        parse_assignment(line + b"\n" + GOOD, "a.toml", MAPS)
+
+
+def test_each_episode_is_shown_when_its_visibility_says() -> None:
+    text = b'visibility = ["now", "after_deadline", "after_release"]\n' + GOOD
+    a, _ = parse_assignment(text, "a.toml", MAPS)
+    before, after = a.deadline - 1, a.deadline + 1
+    assert [a.shown_after(n, before, None) for n in range(3)] == [
+        "",
+        "shown after the deadline, 2026-12-01 18:00 UTC",
+        "shown when your teacher releases the results",
+    ]
+    assert [a.shown_after(n, after, None) == "" for n in range(3)] == [True, True, False]
+    assert [a.shown_after(n, before, released_at=before) == "" for n in range(3)] == [
+        True, False, True,
+    ]  # fmt: skip
+    everything, _ = parse_assignment(GOOD, "a.toml", MAPS)
+    assert everything.visibility == [] and everything.shown_after(2, before, None) == ""
