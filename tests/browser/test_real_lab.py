@@ -197,7 +197,20 @@ def test_admin_adds_a_user_who_can_then_log_in(open_page, lab: RealLab) -> None:
     admin.fill("Account", "zoe")
     admin.fill("New password", "zoe-secret-1")
     admin.click("Add account")
-    admin.wait_text("zoe")
+    admin.wait_text("user zoe added")
+    # The confirmation sits right under the button pressed, in view where the click was made
+    # (not at the foot of the form, off-screen on a laptop).
+    said = admin.p.get_by_text("user zoe added").first.bounding_box()
+    add = admin.p.get_by_role("button", name="Add account").bounding_box()
+    set_password = admin.p.get_by_role("button", name="Set password").bounding_box()
+    viewport = admin.p.viewport_size
+    assert said and add and set_password and viewport
+    assert add["y"] < said["y"] < set_password["y"], (add, said, set_password)
+    assert 0 <= said["y"] and said["y"] + said["height"] <= viewport["height"], said
+    admin.fill("Server name", "")
+    admin.click("Rename server")  # another group's answer shows under that group instead
+    admin.wait_text("A server name is 1 to")
+    assert not admin.p.get_by_text("user zoe added").first.is_visible()
     admin.screenshot("real-admin")
     zoe = open_page("zoe")
     log_in(zoe, lab, "zoe", "zoe-secret-1")

@@ -19,8 +19,10 @@ from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.browser.test_workbench import write_code
 from tests.conftest import needs_sandbox
+from tests.kit.lab import PASSWORD
 from tests.kit.reallab import RealLab, real_lab
 from viewers.web.chat_panel import ChatPanel
+from viewers.web.tabs import tab_label
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
@@ -129,3 +131,33 @@ def test_a_page_gone_longer_than_the_grace_ends_the_run_and_says_why(
         wait_until(lambda: not bob_panel.robots.driven("k1"), 15, what="k1 free again")
     finally:
         lab.viewer.parking.grace_s = grace
+
+
+def test_two_tabs_of_one_student_show_the_same_run_and_either_stops_it(
+    open_page, lab: RealLab
+) -> None:
+    """A second tab (a second window, a phone) follows the run the first started; Stop there
+    ends it, and both tabs say so."""
+    first = open_page("first")
+    panel = enter_arena(first, lab, "carol")
+    start_ticking(first, panel, "k2")
+    second = open_page("second")
+    second.log_in(lab.url, "carol", PASSWORD)
+    second.tab(tab_label(lab.address)).first.click()
+    second.wait_text("Logged in as")
+    second.click(f"Join {CTX}", timeout=15_000)
+    second.tab(f"{CTX} (arena)").last.click()
+    second.wait_text("Your controller runs on k2 (started in another tab or tool)", timeout=30_000)
+
+    def run_output(page: ViserPage) -> str:
+        return " ".join(page.p.locator(".wart-run-output").all_inner_texts())
+
+    # The second tab's editor shows the run's prints as they come, not only the first tab's.
+    wait_until(lambda: "following your run on k2" in run_output(second), 15, "the note")
+    wait_until(lambda: "tick" in run_output(second), 30, "prints in tab two")
+    second.click("Stop")
+    second.wait_text("Your controller on k2 cancelled", timeout=15_000)
+    first.wait_text("Your controller on k2 cancelled", timeout=15_000)
+    robots = panel.robots
+    assert robots is not None
+    wait_until(lambda: not robots.driven("k2"), 15, what="k2 free in the first tab")

@@ -211,7 +211,8 @@ def test_the_editors_stop_ends_a_run_started_by_queue_with_no_robot_chosen(
     choose(bob, "Run on", NONE)
     wait_until(lambda: bench.target.value == NONE, 10, what="Run on emptied")
     bob.click("Stop")
-    bob.wait_text("Stopped:")
+    # The editor follows a run of bob's queued elsewhere (here, the robot panel): its end shows.
+    bob.wait_text("Your controller on k2 cancelled", timeout=15_000)
     wait_until(lambda: mine() == [], 15, what="bob's run on k2 ended by Stop")
 
     # "Cancel my request" with one request and no robot chosen cancels it too.

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from typing import Literal
 
 import viser
 
@@ -113,49 +114,77 @@ class AdminPanel:
         self.client = client
         self.connection = connection
         gui = client.gui
+        admin = connection.admin
+        # Each button's answer shows right under it, where the eye already is (one notice at
+        # the foot of the form was off-screen on a laptop); another button's answer hides it.
+        self._notices: list[viser.GuiMarkdownHandle] = []
         with gui.add_folder("Administration", expand_by_default=False):
-            self.accounts_md = gui.add_markdown("_Press 'List accounts'._")
-            self.list_button = gui.add_button("List accounts")
             self.user = gui.add_text("Account", "")
             # Shown as dots, and emptied as soon as it is used.
             self.password = add_masked_text(gui, "New password")
             self.role = gui.add_dropdown("Role", ROLES, initial_value="student")
-            self.add_button = gui.add_button("Add account", color="green")
-            self.password_button = gui.add_button("Set password")
-            self.remove_button = gui.add_button("Remove account", color="red")
-            self.unlock_button = gui.add_button("Unlock logins")
+            self.add_button = self._button(gui, "Add account", self._add, color="green")
+            self.password_button = self._button(gui, "Set password", self._set_password)
+            self.remove_button = self._button(
+                gui,
+                "Remove account",
+                lambda: self._account_call(admin.remove_account),
+                color="red",
+            )
+            self.unlock_button = self._button(
+                gui, "Unlock logins", lambda: self._account_call(admin.unlock_logins)
+            )
+            # Below the buttons: a longer list after a change does not push them down.
+            self.list_button = self._button(gui, "List accounts", self.refresh)
+            self.accounts_md = gui.add_markdown("_Press 'List accounts'._")
             self.grant = gui.add_dropdown("Permission or role", GRANTS, initial_value="edit_map")
             self.scope = gui.add_text("In context (empty: everywhere)", "")
-            self.grant_button = gui.add_button("Grant")
-            self.ungrant_button = gui.add_button("Revoke")
+            self.grant_button = self._button(gui, "Grant", lambda: self._grant(admin.grant))
+            self.ungrant_button = self._button(gui, "Revoke", lambda: self._grant(admin.ungrant))
             self.reason = gui.add_text("Reason", "")
-            self.kick_button = gui.add_button("Kick from server", color="red")
+            self.kick_button = self._button(gui, "Kick from server", self._kick, color="red")
             self.ban_hours = gui.add_text("Ban for (hours; empty: until lifted)", "")
-            self.ban_button = gui.add_button("Ban", color="red")
-            self.lift_button = gui.add_button("Lift ban")
+            self.ban_button = self._button(gui, "Ban", self._ban, color="red")
+            self.lift_button = self._button(
+                gui, "Lift ban", lambda: self._account_call(admin.lift_ban)
+            )
             self.server_name = gui.add_text("Server name", "")
-            self.rename_button = gui.add_button("Rename server")
-            self.notice = gui.add_markdown("", visible=False)
+            self.rename_button = self._button(gui, "Rename server", self._rename)
             with gui.add_folder("Audit trail", expand_by_default=False):
                 self.audit_actor = gui.add_text("Who (account)", "")
                 self.audit_action = gui.add_text("Action (kick, ban, grant, estop...)", "")
                 self.audit_target = gui.add_text("On (contains)", "")
                 self.audit_outcome = gui.add_dropdown("Outcome", OUTCOMES, initial_value="any")
-                self.audit_button = gui.add_button("Show audit trail")
+                self.audit_button = self._button(gui, "Show audit trail", self.show_audit)
                 self.audit_md = gui.add_markdown("_Press 'Show audit trail'._")
-        self.list_button.on_click(lambda _: self.refresh())
-        self.add_button.on_click(lambda _: self._add())
-        self.password_button.on_click(lambda _: self._set_password())
-        admin = self.connection.admin
-        self.remove_button.on_click(lambda _: self._account_call(admin.remove_account))
-        self.unlock_button.on_click(lambda _: self._account_call(admin.unlock_logins))
-        self.grant_button.on_click(lambda _: self._grant(admin.grant))
-        self.ungrant_button.on_click(lambda _: self._grant(admin.ungrant))
-        self.kick_button.on_click(lambda _: self._kick())
-        self.rename_button.on_click(lambda _: self._rename())
-        self.ban_button.on_click(lambda _: self._ban())
-        self.lift_button.on_click(lambda _: self._account_call(admin.lift_ban))
-        self.audit_button.on_click(lambda _: self.show_audit())
+        self.notice = self._notices[0]  # where say() writes: under the button last pressed
+
+    def _button(
+        self,
+        gui: viser.GuiApi,
+        label: str,
+        act: Callable[[], object],
+        color: Literal["green", "red"] | None = None,
+    ) -> viser.GuiButtonHandle:
+        """A button and, right under it, where its answer shows."""
+        button = gui.add_button(label, color=color)
+        notice = gui.add_markdown("", visible=False)
+        self._notices.append(notice)
+        button.on_click(self._on_press(notice, act))
+        return button
+
+    def _on_press(
+        self, notice: viser.GuiMarkdownHandle, act: Callable[[], object]
+    ) -> Callable[[viser.GuiEvent], None]:
+        """The pressed button's answer goes under it; the one shown before is cleared."""
+
+        def pressed(_event: viser.GuiEvent) -> None:
+            if self.notice is not notice:
+                self.notice.visible = False
+            self.notice = notice
+            act()
+
+        return pressed
 
     def say(self, text: str) -> None:
         self.notice.content = f"**{escape_md(text)}**"

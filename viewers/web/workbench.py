@@ -34,14 +34,12 @@ from __future__ import annotations
 import logging
 import re
 import threading
-from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
 import viser
 
 from common.controller.advice import Problem, check_source
-from common.controller.robot import RobotApi
 from common.messages.agent import FILE_NAME_PATTERN
 from viewers.web.adapters import (
     AgentStatus,
@@ -56,17 +54,17 @@ from viewers.web.live_agents import check_upload
 from viewers.web.marks import (
     DEFAULT_NAME,
     MAX_MARKED,
-    TracebackReader,
     format_dry_run,
     format_problems,
 )
-from viewers.web.robot_panel import NONE, RobotPanel
-from viewers.web.text import escape_md, output_html, printed
+from viewers.web.robot_panel import RobotPanel
+from viewers.web.run_on import RunOn
+from viewers.web.run_output import RunOutput
+from viewers.web.text import escape_md
 
 log = logging.getLogger("wart.viewer.workbench")
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
-RUN_OUTPUT_LINES = 200  # my run's printed lines kept under the editor
 EXAMPLE_PREFIX = "example: "
 MINE_PREFIX = "mine: "
 _FILE_NAME = re.compile(FILE_NAME_PATTERN)
@@ -105,12 +103,12 @@ class Workbench:
         self.ctx = ctx
         self.robots = robots
         self._examples = examples()
-        self._traceback = TracebackReader()
         # (context, robot) my editor's run is queued on: a real one may be in another arena.
         self._running_on: tuple[str, str] | None = None
-        self._errors: list[Problem] = []
+        # Whether that run is queued or running still: a run of mine started elsewhere (my
+        # other tab, `wart control`) is followed here when this editor's own run is over.
+        self._run_live = False
         self._shown: tuple[tuple[Problem, ...], str] = ((), "")
-        self._printed: deque[str] = deque(maxlen=RUN_OUTPUT_LINES)  # HTML, escaped
         # The context's news of my run counts up: a reply that arrives after the news
         # (a run can start, or end, before the query's answer is back) must not hide it.
         self._news = 0
@@ -131,10 +129,11 @@ class Workbench:
             # CodeMirror over the text area above; it hides it and writes into it.
             self.editor = CodeEditor(client, self.code)
             # My run's output right under the code: both in view at once on a laptop.
-            self.output = gui.add_html(self._output_html())
+            self.run_output = RunOutput(gui)
             # The robot the buttons below act on: this arena's robots and those of the
             # real arenas joined, beside the buttons (the robot panel's list follows it).
-            self.target = gui.add_dropdown("Run on", (NONE,))
+            self.run_on = RunOn(gui, connection, ctx, robots)
+            self.target = self.run_on.dropdown
             self.check = gui.add_button("Check", icon=viser.Icon.CHECKLIST)
             self.save = gui.add_button("Save", icon=viser.Icon.DEVICE_FLOPPY)
             self.run = gui.add_button(
@@ -159,9 +158,6 @@ class Workbench:
         self.dry.on_click(lambda _: self._dry_run())
         self.stop.on_click(lambda _: self._stop())
         self.reset.on_click(lambda _: self._reset())
-        self.target.on_update(lambda _: self._target_chosen())
-        robots.robot.on_update(lambda _: self._panel_chosen())
-        robots.on_rows.append(self.refresh_targets)
         self.refresh_targets()
         if kept is not None:
             self._put_back(kept)
@@ -170,6 +166,8 @@ class Workbench:
         threading.Thread(
             target=self._load_mine, args=(kept is None,), name=f"files-{ctx}", daemon=True
         ).start()
+        if kept is None or kept.running_on is None:
+            threading.Thread(target=self._follow_mine, name=f"mine-{ctx}", daemon=True).start()
 
     # -- surviving a reload
 
@@ -180,21 +178,20 @@ class Workbench:
             target=self.target.value,
             running_on=self._running_on,
             status=self.status.content,
-            errors=tuple(self._errors),
+            errors=tuple(self.run_output.errors),
             shown=self._shown,
-            printed=tuple(self._printed),
+            printed=tuple(self.run_output.printed),
         )
 
     def _put_back(self, kept: BenchMemory) -> None:
         set_value(self.name, kept.file_name)
         set_value(self.code, kept.code)
         self._running_on = kept.running_on
-        self._errors = list(kept.errors)
+        self._run_live = kept.running_on is not None
         self.status.content = kept.status
         if kept.target in self.target.options:
             set_value(self.target, kept.target)
-        self._printed.extend(kept.printed)
-        self.output.content = self._output_html()
+        self.run_output.put_back(kept.printed, kept.errors)
         problems, heading = kept.shown
         if problems:
             self._show(list(problems), heading)
@@ -228,7 +225,7 @@ class Workbench:
                 bad=True,
             )
             return None
-        self._traceback.filename = name
+        self.run_output.traceback.filename = name
         return name
 
     def _source(self) -> bytes:
@@ -253,9 +250,9 @@ class Workbench:
             self.start_from.options = options
         if mine and open_newest:
             set_value(self.start_from, MINE_PREFIX + mine[0].name)
-            self._open()
+            self._open(tell=False)  # the status line may say how my run goes: it stays
 
-    def _open(self) -> None:
+    def _open(self, tell: bool = True) -> None:
         choice = self.start_from.value
         if choice.startswith(EXAMPLE_PREFIX):
             name = choice[len(EXAMPLE_PREFIX) :]
@@ -276,7 +273,8 @@ class Workbench:
             return
         set_value(self.code, source.decode("utf-8", "replace"))
         self._clear()
-        self.say(f"Opened {name}.")
+        if tell:
+            self.say(f"Opened {name}.")
 
     def _save(self) -> str | None:
         name = self._filename()
@@ -297,7 +295,7 @@ class Workbench:
 
     def check_now(self) -> list[Problem]:
         name = self._filename() or DEFAULT_NAME
-        problems = check_source(self._source(), name, self._robot_api())
+        problems = check_source(self._source(), name, self.run_on.robot_api())
         if problems:
             count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
             self._show(problems, f"Check: {count}")
@@ -331,15 +329,14 @@ class Workbench:
             return
         name, source = ready
         self._running_on = (ctx, agent)
-        self._printed.clear()  # a new run: its output only (before its first line can come)
-        self.output.content = self._output_html()
+        self._run_live = True
+        self.run_output.clear()  # a new run: its output only (before its first line can come)
         news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
         except LabError as exc:
             self.say(f"Not queued on {agent}: {exc}", bad=True)
             return
-        self._errors = []
         when = (
             "it starts now"
             if queued.position == 0 or (queued.eta_s is not None and queued.eta_s < 1.0)
@@ -352,90 +349,22 @@ class Workbench:
 
     # -- the robot the buttons act on ("Run on")
 
-    def _targets(self) -> list[tuple[str, str]]:
-        """(context, robot) the editor can run on: this arena's, then the real arenas'."""
-        here = [(self.ctx, a) for a in self.robots.robot.options if a != NONE]
-        try:
-            real = [r for r in self.connection.real_robots() if r[0] != self.ctx]
-        except LabError:
-            real = []
-        return here + real
-
-    def _label(self, ctx: str, agent: str) -> str:
-        return agent if ctx == self.ctx else f"{ctx}/{agent}"
-
     def refresh_targets(self) -> None:
         """The list follows this arena's robots and the real arenas joined (or left)."""
-        options = (NONE, *(self._label(*t) for t in self._targets()))
-        if tuple(self.target.options) != options:
-            keep = self.target.value
-            self.target.options = options
-            set_value(self.target, keep if keep in options else NONE)
-
-    def _target_chosen(self) -> None:
-        value = self.target.value
-        if value in self.robots.robot.options and self.robots.robot.value != value:
-            set_value(self.robots.robot, value)  # the view selects it, the panel shows it
-
-    def _panel_chosen(self) -> None:
-        value = self.robots.robot.value  # chosen in the robot panel, or clicked in the view
-        if value != NONE and value in self.target.options and self.target.value != value:
-            set_value(self.target, value)
-
-    def _target(self) -> tuple[str, str] | None:
-        value = self.target.value
-        return next((t for t in self._targets() if self._label(*t) == value), None)
-
-    def _chosen(self) -> str | None:
-        """The chosen robot of this arena, or None with what to do said."""
-        target = self._target()
-        panel = self.robots.robot.value
-        if target is None and panel != NONE and panel in self.robots.robot.options:
-            target = (self.ctx, panel)
-        if target is None:
-            self.say("Choose a robot first in 'Run on' (or click one in the view).", bad=True)
-            return None
-        ctx, agent = target
-        if ctx != self.ctx:
-            self.say(f"{agent} is a real robot in {ctx}: use 'Queue on the real robot'.", bad=True)
-            return None
-        return agent
-
-    def _robot_api(self) -> RobotApi | None:
-        """The chosen robot's components, when its world says them (else the Khepera's API)."""
-        target = self._target()
-        panel = self.robots.robot.value
-        agent = target[1] if target else (panel if panel in self.robots.robot.options else None)
-        feed = self.robots.feed
-        if agent is None or feed is None:
-            return None
-        try:
-            known = feed.snapshot().robot_types.get(agent)
-        except LabError:
-            return None
-        if not known or not known[1]:
-            return None
-        return RobotApi.of(known[0], known[1])
-
-    def _this_arena_is_real(self) -> bool:
-        feed = self.robots.feed
-        try:
-            return feed is not None and feed.snapshot().real
-        except LabError:
-            return False
+        self.run_on.refresh()
 
     def _run_sim(self) -> None:
-        agent = self._chosen()
+        agent = self.run_on.here(self.say)
         if agent is None:
             return
-        if self._this_arena_is_real():
+        if self.run_on.arena_is_real():
             self.say("This arena's robots are real: use 'Queue on the real robot'.", bad=True)
             return
         self._queue(self.ctx, agent, "simulation")
 
     def _dry_run(self) -> None:
         """The editor's text, dry-run on the chosen robot; the verdict under the code."""
-        agent = self._chosen()
+        agent = self.run_on.here(self.say)
         if agent is None:
             return
         if self.check_now():
@@ -478,13 +407,13 @@ class Workbench:
                 bad=True,
             )
             return
-        target = self._target()
+        target = self.run_on.target()
         chosen = target if target in robots else robots[0]
         self._queue(chosen[0], chosen[1], f"real robot in {chosen[0]}")
 
     def _mine(self) -> list[tuple[str, AgentStatus]]:
         """My requests (running or waiting) in this arena and the real arenas joined."""
-        contexts = [self.ctx, *sorted({c for c, _ in self._targets() if c != self.ctx})]
+        contexts = [self.ctx, *sorted({c for c, _ in self.run_on.targets() if c != self.ctx})]
         found: list[tuple[str, AgentStatus]] = []
         for ctx in contexts:
             try:
@@ -501,7 +430,7 @@ class Workbench:
         """
         mine = self._mine()
         held = [(ctx, row.agent) for ctx, row in mine]
-        target = self._target()
+        target = self.run_on.target()
         if self._running_on in held:
             picks = [self._running_on]
         elif target in held:
@@ -534,10 +463,10 @@ class Workbench:
         self.robots.refresh_agents()
 
     def _reset(self) -> None:
-        agent = self._chosen()
+        agent = self.run_on.here(self.say)
         if agent is None:
             return
-        if self._this_arena_is_real():
+        if self.run_on.arena_is_real():
             self.say("This arena's robots are real: put the robot back by hand.", bad=True)
             return
         try:
@@ -549,43 +478,59 @@ class Workbench:
 
     # -- the lab's news about my run (the connection's thread)
 
+    def _follow_mine(self) -> None:
+        """A run of mine already going in this arena when the tab opened: shown here."""
+        try:
+            rows = self.connection.agents(self.ctx)
+        except LabError as exc:
+            log.info("my runs in %s: %s", self.ctx, exc)
+            return
+        running = [r.agent for r in rows if r.my_request and r.my_position == 0]
+        if running:
+            with self._news_lock:
+                self._adopt(self.ctx, running[0], "running")
+
+    def _adopt(self, ctx: str, agent: str, status: str) -> bool:
+        """Follow my run on ``agent`` (started in another tab) if this editor has none going."""
+        if (ctx, agent) == self._running_on or (self._run_live and self._running_on):
+            return False
+        if ctx != self.ctx or status not in ("queued", "running"):
+            return False
+        self._running_on, self._run_live = (ctx, agent), True
+        self.run_output.clear()
+        self.say(f"Your controller runs on {agent} (started in another tab or tool).")
+        self.run_output.note(f"following your run on {agent}, started elsewhere")
+        return True
+
     def on_request(self, event: RequestEvent) -> None:
-        if event.user != self.connection.user or (event.ctx, event.agent) != self._running_on:
+        if event.user != self.connection.user:
             return
         with self._news_lock:
-            self._on_my_request(event)
+            self._adopt(event.ctx, event.agent, event.status)
+            if (event.ctx, event.agent) == self._running_on:
+                self._on_my_request(event)
 
     def _on_my_request(self, event: RequestEvent) -> None:
         if event.status != "queued":  # "queued" is what the request's own reply says
             self._news += 1
         if event.status in ("finished", "cancelled", "refused"):
+            self._run_live = False
             why = f": {event.reason}" if event.reason else ""
             self.say(f"Your controller on {event.agent} {event.status}{why}.")
-            self._print(f"<i>{printed(f'{event.status}{why}')}</i>")
+            self.run_output.note(f"{event.status}{why}")
             if event.status == "refused":
                 self._show([Problem(None, event.reason or "refused")], "The lab refused it")
         elif event.status == "running":
             self.say(f"Your controller runs on {event.agent}.")
-            self._print(f"<i>{printed(f'running on {event.agent}')}</i>")
-
-    def _output_html(self) -> str:
-        # Newest at the bottom and kept in view: a column drawn in reverse scrolls there.
-        body = output_html(self._printed, "Your run's output shows here.")
-        return (
-            '<div class="wart-run-output" style="max-height: 12em; overflow-y: auto; '
-            f'display: flex; flex-direction: column-reverse">{body}</div>'
-        )
-
-    def _print(self, line: str) -> None:
-        self._printed.append(line)
-        self.output.content = self._output_html()
+            self.run_output.note(f"running on {event.agent}")
 
     def on_output(self, event: OutputEvent) -> None:
-        if event.user != self.connection.user or (event.ctx, event.agent) != self._running_on:
+        if event.user != self.connection.user:
             return
-        for text in event.lines:
-            self._print(printed(text))
-            found = self._traceback.feed(text)
-            if found is not None:
-                self._errors.append(found)
-                self._show(self._errors[-MAX_MARKED:], "Your controller raised an exception")
+        with self._news_lock:
+            self._adopt(event.ctx, event.agent, "running")
+        if (event.ctx, event.agent) != self._running_on:
+            return
+        if self.run_output.lines(event.lines):
+            errors = self.run_output.errors[-MAX_MARKED:]
+            self._show(errors, "Your controller raised an exception")

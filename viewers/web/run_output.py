@@ -1,0 +1,62 @@
+"""My run's output under the editor: what the controller printed, and the exceptions in it."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import viser
+
+from common.controller.advice import Problem
+from viewers.web.marks import TracebackReader
+from viewers.web.text import output_html, printed
+
+RUN_OUTPUT_LINES = 200  # the run's last printed lines under the editor
+
+
+class RunOutput:
+    """My run's printed lines under the editor, newest at the bottom, and the exceptions in them
+    (the runner relays a traceback as output lines: the innermost line of my file is marked)."""
+
+    def __init__(self, gui: viser.GuiApi) -> None:
+        self.traceback = TracebackReader()
+        self.errors: list[Problem] = []
+        self.printed: deque[str] = deque(maxlen=RUN_OUTPUT_LINES)  # HTML, escaped
+        self.html = gui.add_html(self._html())
+
+    def _html(self) -> str:
+        # Newest at the bottom and kept in view: a column drawn in reverse scrolls there.
+        body = output_html(self.printed, "Your run's output shows here.")
+        return (
+            '<div class="wart-run-output" style="max-height: 12em; overflow-y: auto; '
+            f'display: flex; flex-direction: column-reverse">{body}</div>'
+        )
+
+    def clear(self) -> None:
+        """A new run: its output only."""
+        self.errors = []
+        self.printed.clear()
+        self.html.content = self._html()
+
+    def put_back(self, printed: tuple[str, ...], errors: tuple[Problem, ...]) -> None:
+        self.errors = list(errors)
+        self.printed.extend(printed)
+        self.html.content = self._html()
+
+    def note(self, text: str) -> None:
+        """A line of the lab's about the run (queued, running, ended), in italics."""
+        self.add(f"<i>{printed(text)}</i>")
+
+    def add(self, line: str) -> None:
+        self.printed.append(line)
+        self.html.content = self._html()
+
+    def lines(self, texts: list[str] | tuple[str, ...]) -> bool:
+        """The controller's printed ``texts``; True if an exception was among them."""
+        raised = False
+        for text in texts:
+            self.add(printed(text))
+            found = self.traceback.feed(text)
+            if found is not None:
+                self.errors.append(found)
+                raised = True
+        return raised
