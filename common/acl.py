@@ -48,6 +48,42 @@ class AclError(ValueError):
     """A grant, role or scope is malformed; the message says which."""
 
 
+# The registry account of each service kind that logs in, named after its ident
+# (services/lab/wiring.py makes them). Engines and bridges log in only when asked.
+SERVICE_ACCOUNT_PREFIX = {
+    "chat": "chat-",
+    "agent": "ctx-",
+    "runner": "runner-",
+    "grader": "grader-",
+    # The LTI tool's account has the lti role only: it asks the registry for launched users.
+    "lti": "lti-",
+    "engine": "engine-",
+    "bridge": "bridge-",
+    # The viewer's account has the gateway role only: it vouches for browsers' addresses.
+    "viewer": "viewer-",
+}
+_SERVICE_WORDS = {
+    "chat": "chat room",
+    "agent": "context",
+    "runner": "runner",
+    "grader": "grader",
+    "lti": "LTI tool",
+    "engine": "engine",
+    "bridge": "Khepera bridge",
+    "viewer": "web viewer",
+}
+
+
+def account_in_words(account: str) -> str:
+    """A service's account as people say it ("runner-runner": "the runner"); a person's as is."""
+    for kind, prefix in SERVICE_ACCOUNT_PREFIX.items():
+        if account.startswith(prefix) and len(account) > len(prefix):
+            ident = account[len(prefix) :]
+            words = _SERVICE_WORDS[kind]
+            return f"the {words}" if ident == kind else f"the {words} {ident}"
+    return account
+
+
 def context_scope(ctx: str) -> str:
     return f"ctx/{check_ident('context', ctx)}"
 

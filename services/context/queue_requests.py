@@ -216,7 +216,7 @@ class QueueDesk:
             why = f"stopped by {principal.user}" + (f": {request.reason}" if request.reason else "")
             self.state.finish_soon(run.job.request_id, "cancelled", why)
             self.state.wake.notify_all()
-        return OkReply(detail=f"stopping {run.job.request_id}")
+        return OkReply(detail=f"stopping {run.job.user}'s controller on {request.agent}")
 
     def emergency_stop(self, principal: Principal, request: EmergencyStop) -> Message:
         """Stop (or release) every robot of the arena: the running controllers end now,

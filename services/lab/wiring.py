@@ -18,27 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from common import keys
+from common.acl import SERVICE_ACCOUNT_PREFIX as ACCOUNT_PREFIX
 from common.keys import AliveKind
 from services.lab.lab_maps import find_map, map_with_robots
 from services.lab.labfile import ArenaSettings, LabFileError, ServiceEntry
 from services.lab.supervisor import ChildSpec
 
 # --- account names ----------------------------------------------------------------------
-
-# The registry account of each service kind that logs in, named after its ident.
-# Engines and bridges log in only when asked (``login = true``).
-ACCOUNT_PREFIX = {
-    "chat": "chat-",
-    "agent": "ctx-",
-    "runner": "runner-",
-    "grader": "grader-",
-    # The LTI tool's account has the lti role only: it asks the registry for launched users.
-    "lti": "lti-",
-    "engine": "engine-",
-    "bridge": "bridge-",
-    # The viewer's account has the gateway role only: it vouches for browsers' addresses.
-    "viewer": "viewer-",
-}
 
 
 def service_account(kind: str, ident: str) -> str:

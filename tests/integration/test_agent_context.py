@@ -212,7 +212,8 @@ def test_only_the_host_or_an_instructor_manages_the_context(lab: ProcessLab) -> 
             t = threading.Thread(target=lambda: done.append(alice.drive("k1", Forward())))
             t.start()
             wait_for(lambda: alice.position_of_user("alice", "k1") == 0, 10, "alice's slot")
-            ida.stop_agent("k1", "demo over")
+            # Said in names, not the request's id.
+            assert ida.stop_agent("k1", "demo over") == "stopping alice's controller on k1"
             t.join(10)
             assert done and done[0].status == "cancelled" and "demo over" in done[0].reason
         finally:  # the module's lab is shared: k1 enabled, the slot as the lab started it

@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 import viser
 
+from common.acl import account_in_words
 from common.keys import is_ident
 from viewers.web.adapters import (
     AgentsEvent,
@@ -162,7 +163,7 @@ class LabTab:
                 f"Logged in as **{escape_md(self.connection.user)}**"
             )
             self.online.content = "Online: " + (
-                ", ".join(escape_md(u) for u in directory.users) or "nobody"
+                ", ".join(escape_md(account_in_words(u)) for u in directory.users) or "nobody"
             )
             # Rows are updated in place, added and removed one by one: rebuilding them all
             # made the page log "Tried to update non-existent component" for the clicked

@@ -26,6 +26,7 @@ import numpy as np
 import viser
 import viser.uplot
 
+from common.acl import account_in_words
 from viewers.web.adapters import (
     AgentStatus,
     ArenaSettings,
@@ -89,7 +90,7 @@ def format_agents(rows: list[AgentStatus], settings: ArenaSettings | None = None
             "-" if r.my_position is None else ("now" if r.my_position == 0 else f"#{r.my_position}")
         )
         eta = "-" if r.eta_s is None else f"{r.eta_s:.0f} s"
-        holder = escape_md(r.holder) if r.holder else "-"
+        holder = escape_md(account_in_words(r.holder)) if r.holder else "-"
         if r.holder and r.slot_left_s is not None:
             holder += f" ({r.slot_left_s:.0f} s left)"
         if r.taken_by:

@@ -78,3 +78,18 @@ def test_first_start_creates_one_admin(tmp_path: Path) -> None:
     password = db.ensure_admin()
     assert password and db.check_credential("admin", "password", password)
     assert db.ensure_admin() is None
+
+
+def test_a_services_account_is_said_in_words_a_persons_as_is() -> None:
+    from common.acl import account_in_words
+    from viewers.web.adapters import AgentStatus
+    from viewers.web.robot_panel import format_agents
+
+    assert account_in_words("runner-runner") == "the runner"
+    assert account_in_words("grader-grader") == "the grader"
+    assert account_in_words("runner-r2") == "the runner r2"
+    assert account_in_words("ctx-arena") == "the context arena"
+    assert account_in_words("alice") == "alice" and account_in_words("runner-") == "runner-"
+    # The grader's real-robot attempt holds a robot: the table says who in words.
+    table = format_agents([AgentStatus("k1", holder="grader-grader", queue=0, slot_left_s=8.0)])
+    assert "the grader (8 s left)" in table and "grader-grader" not in table
