@@ -206,7 +206,7 @@ def test_admin_adds_a_user_who_can_then_log_in(open_page, lab: RealLab) -> None:
     viewport = admin.p.viewport_size
     assert said and add and set_password and viewport
     assert add["y"] < said["y"] < set_password["y"], (add, said, set_password)
-    assert 0 <= said["y"] and said["y"] + said["height"] <= viewport["height"], said
+    assert said["y"] >= 0 and said["y"] + said["height"] <= viewport["height"], said
     admin.fill("Server name", "")
     admin.click("Rename server")  # another group's answer shows under that group instead
     admin.wait_text("A server name is 1 to")
@@ -288,3 +288,60 @@ def test_a_student_kicked_from_the_server_is_told_on_the_page(open_page, lab: Re
     page.wait_text("cheating in the exam", timeout=15_000)  # the page says why, at once
     page.screenshot("real-kicked")
     wait_until(lambda: "kim" not in online(lab), 15, what="kim's session to end")
+
+
+def test_a_shift_click_in_the_arena_adds_a_robot_where_clicked(open_page, lab: RealLab) -> None:
+    """A map editor shift-clicks a free spot of the floor: a robot is added there (the world
+    takes the free spot nearest the click). Where to click is computed from the camera."""
+    page = open_page("ida")
+    log_in(page, lab, "ida")
+    page.click(f"Join {WORLD}")
+    session = session_of(lab.viewer, "ida")
+    view = session.view
+    wait_until(lambda: view.snapshot is not None, 30, what=lambda: describe_view(view))
+    wait_for_aimed_camera(view)
+    snap = view.snapshot
+    assert snap is not None
+    editor = next(iter(session.labs.values())).panels[WORLD].editor
+    assert editor is not None and editor.allowed
+    wait_until(lambda: editor._click is not None, 15, what="the editor bound to the view")
+    wait_until(lambda: view.drawn is not None, 30, what=lambda: describe_view(view))
+
+    def robots() -> dict[str, tuple[float, float]]:
+        layout, drawn = view.snapshot, view.drawn
+        if layout is None or drawn is None or len(drawn.positions) != len(layout.robots):
+            return {}
+        xy = drawn.positions[:, :2] / geo.MM
+        return {name: (float(xy[i, 0]), float(xy[i, 1])) for i, name in enumerate(layout.robots)}
+
+    taken = [*robots().values(), *((o.x, o.y) for o in snap.obstacles),
+             *((b.x, b.y) for b in snap.balls)]  # fmt: skip
+
+    def free(x: float, y: float) -> bool:
+        return all(np.hypot(x - px, y - py) > 160.0 for px, py in taken)
+
+    spots = [(x, y) for x in np.linspace(120, snap.width - 120, 15)
+             for y in np.linspace(120, snap.height - 120, 15) if free(x, y)]  # fmt: skip
+    target, at = None, None
+    for x, y in spots:
+        point = screen_points(page, view, np.array([[x, y]]))[0]
+        if page.p.evaluate(CANVAS_AT_JS, [*map(float, point)]):
+            target, at = (x, y), point
+            break
+    assert target is not None and at is not None, f"no free floor spot in view: {spots}"
+    before = set(robots())
+    page.p.keyboard.down("Shift")
+    page.p.mouse.click(float(at[0]), float(at[1]))
+    page.p.keyboard.up("Shift")
+
+    def added() -> list[tuple[str, float, float]]:
+        return [(name, x, y) for name, (x, y) in robots().items() if name not in before]
+
+    wait_until(lambda: bool(added()), 20, what="a robot added by the shift-click")
+    [(ident, x, y)] = added()
+    assert np.hypot(x - target[0], y - target[1]) < 60.0, ((x, y), target)
+    page.p.wait_for_timeout(1500)  # for the picture only: software WebGL draws late
+    page.screenshot("real-shift-click-added")
+    editor.select(ident)
+    editor._delete()  # the module's lab is shared: the robot goes again
+    wait_until(lambda: not added(), 20, what=f"{ident} deleted")
