@@ -22,6 +22,7 @@ import pytest
 
 from common import keys
 from common.auth import Session, issue_session
+from common.client.agent_client import FINAL
 from common.client.grader_client import GraderClient
 from common.lab_errors import RequestFailed
 from common.messages import (
@@ -37,6 +38,7 @@ from common.messages import (
     WorldSnapshot,
     decode,
 )
+from common.recording import read_recording
 from common.sim2d import maps
 from services.grader.assignment import parse_assignment
 from services.runner.episode import run_episode
@@ -192,6 +194,20 @@ def test_a_custom_robot_leaves_everyone_s_dry_run_working(lab: ProcessLab) -> No
         assert report.will_run and report.output, report
         eye = report.output[0]
         assert eye.startswith("eye (") and min(int(v) for v in eye[5:-1].split(",")) < 300, eye
+
+    # A run recorded beside the custom robots is read back and promoted as any other.
+    with agent_user(lab, "alice") as alice:
+        queued = alice.queue("k2", "deploy", source=BRAITENBERG, filename="01_braitenberg.py")
+        final = alice.wait_status(queued.request_id, FINAL, timeout=40)
+        assert final is not None and final.status == "finished", final
+        summary = lab.state / "rooms" / "recordings" / "arena" / "alice"
+        done = summary / f"{queued.request_id}.summary.json"
+        wait_for(done.exists, 20, "the run's recording")
+        rec = read_recording(alice.download(queued.request_id, lab.state / "run.mcap"))
+        assert rec.snapshot is not None and set(rec.snapshot.robot_files) == {"epuck_ranger"}
+        promoted = alice.promote(rec, "k1")
+        again = alice.wait_status(promoted.request_id, FINAL, timeout=40)
+        assert again is not None and again.status == "finished", again
 
 
 def test_a_type_the_runner_cannot_simulate_fails_only_that_arena_s_dry_runs_in_words(
