@@ -388,11 +388,21 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         help="with --map: write the robots' true poses to FILE ~30 times a second, for "
         "`wart camera --source synthetic:FILE`",
     )
+    p.add_argument(
+        "--body",
+        type=Path,
+        metavar="FILE",
+        help="with --map: the robot's true parameters (TOML: wheel_scale, wheel_base_mm, "
+        "latency_s, ir_gain, ir_noise_counts, seed; services/bridge/body_truth.py), what "
+        "`wart calibrate` is tested against; replaces --slip",
+    )
     args, _ = parse(p, argv)
     if args.agent is not None and args.map is None:
         p.error("--agent needs --map")
-    if (args.slip or args.truth is not None) and args.map is None:
-        p.error("--slip and --truth need --map (a simulated body)")
+    if (args.slip or args.truth is not None or args.body is not None) and args.map is None:
+        p.error("--slip, --truth and --body need --map (a simulated body)")
+    if args.slip and args.body is not None:
+        p.error("--slip or --body, not both (a body file says each wheel's grip)")
     if not 0.0 <= args.slip < 0.5:
         p.error(f"--slip must be 0 to 0.5 (a fraction of the wheels' motion); got {args.slip}")
     if not 1 <= args.split <= 64:
@@ -417,11 +427,18 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart khepera-emulator")
         # Sim2D (pymunk, numba's compiled kernels) loads only for a simulated body:
         # a scripted emulator starts in a fraction of the time without it.
         from common.sim2d.maps import MapError
+        from services.bridge.body_truth import BodyTruth
         from services.bridge.simbody import SimBody
 
         try:
+            truth_of_body = None if args.body is None else BodyTruth.read(args.body)
             sim = SimBody.from_map(
-                args.map, args.agent, seed=args.seed, slip=args.slip, truth=args.truth
+                args.map,
+                args.agent,
+                seed=args.seed,
+                slip=args.slip,
+                truth=args.truth,
+                body=truth_of_body,
             )
         except (MapError, ValueError) as exc:
             print(f"error: {exc}", file=sys.stderr, flush=True)

@@ -10,7 +10,10 @@ balls can be gripped.
 Wheels may slip (``slip``): the robot then moves less than its wheels turn,
 as a real Khepera's does on a smooth floor, so the counters the host reads
 overstate the motion and its odometry drifts: the left wheel by ``slip``, the
-right by half of it, so the drift turns as well as stretches. Given a truth
+right by half of it, so the drift turns as well as stretches. A body file
+(services/bridge/body_truth.py) sets each wheel's grip, the wheel base, the delay
+before a command moves the wheels, and each IR sensor's gain and noise: the
+ground truth ``wart calibrate`` is tested against. Given a truth
 file, the thread writes the robots' true poses there about 30 times a second
 for the synthetic camera (common/tracking/truth.py), which then corrects that
 drift as a real overhead camera does.
@@ -27,13 +30,17 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
+
+import numpy as np
 
 from common.sim2d.maps import load_map
 from common.sim2d.world import EditError, World
 from common.tracking.truth import now_truth, write_truth
 from services.bridge.body import KinematicSpec
+from services.bridge.body_truth import BodyTruth
 
 log = logging.getLogger("wart.bridge.simbody")
 
@@ -50,6 +57,7 @@ class SimBody:
         speed: float = 1.0,
         slip: float = 0.0,
         truth: Path | None = None,
+        body: BodyTruth | None = None,
     ) -> None:
         if not 0.0 <= slip < 0.5:
             raise ValueError(
@@ -75,8 +83,14 @@ class SimBody:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.ticks = 0
+        self.body = body or BodyTruth.slipping(slip)
         # What the floor gives of each wheel's turn (1: no slip).
-        self._grip = (1.0 - slip, 1.0 - slip / 2)
+        self._grip = self.body.wheel_scale
+        if self.body.wheel_base_mm is not None:
+            world.tables.wheel_base[self.slot] = self.body.wheel_base_mm
+        # Speed commands wait out the body's latency here: (due on the monotonic clock, l, r).
+        self._pending: deque[tuple[float, float, float]] = deque()
+        self._noise = np.random.default_rng(self.body.seed)
         self.truth = truth
         self._truth_at = 0.0
 
@@ -90,10 +104,11 @@ class SimBody:
         tick_s: float = 0.01,
         slip: float = 0.0,
         truth: Path | None = None,
+        body: BodyTruth | None = None,
     ) -> SimBody:
         """Load a map (MapError names the field) and take ``agent`` (default: the first one)."""
         world = load_map(path, name="emulator", seed=seed, tick_s=tick_s)
-        return cls(world, agent, slip=slip, truth=truth)
+        return cls(world, agent, slip=slip, truth=truth, body=body)
 
     # ------------------------------------------------------------ the stepping thread
 
@@ -124,6 +139,7 @@ class SimBody:
         while not self._stop.is_set():
             with self._lock:
                 try:
+                    self._obey_due()
                     self._position_control()
                     self.world.step()
                     # Again after the step, so a wheel that just reached its target
@@ -165,6 +181,13 @@ class SimBody:
     def _drive(self, left: float, right: float) -> None:
         self.world.set_speeds(self.slot, left * self._grip[0], right * self._grip[1])
 
+    def _obey_due(self) -> None:
+        """The speed commands whose latency has passed move the wheels now."""
+        now = time.monotonic()
+        while self._pending and self._pending[0][0] <= now:
+            _, left, right = self._pending.popleft()
+            self._drive(left, right)
+
     def _position_control(self) -> None:
         """C: each wheel at up to its profile speed toward its counter target, stopping on it."""
         if self._mode != "position":
@@ -185,7 +208,10 @@ class SimBody:
     def set_speeds(self, left: int, right: int) -> None:
         with self._lock:
             self._mode = "speed"
-            self._drive(left, right)
+            if self.body.latency_s <= 0.0:
+                self._drive(left, right)
+                return
+            self._pending.append((time.monotonic() + self.body.latency_s / self.rate, left, right))
 
     def set_pwm(self, left: int, right: int) -> None:
         k = self.spec.pwm_to_speed
@@ -224,7 +250,11 @@ class SimBody:
 
     def proximity(self) -> tuple[int, ...]:
         with self._lock:
-            return tuple(_sensor(v) for v in self.world.proximity[self.slot, :8])
+            raw = np.asarray(self.world.proximity[self.slot, :8], dtype=float)
+            read = raw * np.asarray(self.body.ir_gain)
+            if self.body.ir_noise_counts > 0.0:
+                read = read + self._noise.normal(0.0, self.body.ir_noise_counts, read.shape)
+            return tuple(_sensor(float(v)) for v in read)
 
     def ambient(self) -> tuple[int, ...]:
         with self._lock:
@@ -272,6 +302,7 @@ class SimBody:
     def reset(self) -> None:
         with self._lock:
             self._mode = "speed"
+            self._pending.clear()
             self.world.set_speeds(self.slot, 0, 0)
             self.world.set_counters(self.slot, 0, 0)
 
