@@ -11,12 +11,17 @@ context's managers anyone's::
     wart report k1-3-9f2a1c.mcap                                 # the run's summary
 
 Open the file in Foxglove (or any MCAP tool) to see poses and plot sensors.
+For ROS 2 tools (``ros2 bag``, rviz2, PlotJuggler), get it as a ROS 2 bag (a
+directory; the ``ros`` extra: ``pip install 'wart-lab[ros]'``, docs/ROS2.md)::
+
+    wart record get --context arena --user alice k1-3-9f2a1c --format rosbag2
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -24,6 +29,7 @@ from pathlib import Path
 from common import cli, keys
 from common.client.agent_client import AgentClient
 from common.messages import RecordingList
+from common.recording import RecordingError, read_recording, ros2bag
 from common.zconfig import NetworkOptions
 from services.commands.control import session_for
 from services.commands.terminal import say
@@ -38,8 +44,19 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--password-file", help="read the password from this file")
     p.add_argument("--of", metavar="USER", help="list: another user's (the manage right)")
     p.add_argument("--all", action="store_true", help="list: every user's (the manage right)")
-    p.add_argument("-o", "--output", type=Path, help="get: where to write (default NAME.mcap)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        help="get: where to write (default NAME.mcap; a rosbag2's directory: NAME)",
+    )
     p.add_argument("--summary", action="store_true", help="get: the run's summary (JSON) instead")
+    p.add_argument(
+        "--format",
+        choices=("mcap", "rosbag2"),
+        default="mcap",
+        help="get: the lab's recording (mcap) or a ROS 2 bag (rosbag2: ROS 2 messages, MCAP)",
+    )
     return p
 
 
@@ -86,6 +103,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
         return cli.fail(str(exc))
     if args.action == "get" and not args.name:
         return cli.fail("get needs the recording's name (see: wart record list)")
+    if args.format == "rosbag2":
+        if args.summary:
+            return cli.fail("--summary is JSON: it has no rosbag2 format")
+        if not ros2bag.available():  # said before logging in, not after the download
+            return cli.fail(f"--format rosbag2 needs the rosbags library: {ros2bag.ROS_INSTALL}")
+        bag = args.output or Path(args.name)
+        if bag.exists():
+            return cli.fail(f"{bag} exists: a bag is written to a new directory (-o DIR)")
     return _with_context(args, options)
 
 
@@ -94,6 +119,8 @@ def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
         if args.action == "list":
             show_list(agents.recordings(args.of, all_users=args.all))
             return 0
+        if args.format == "rosbag2":
+            return _get_rosbag2(agents, args.name, args.output or Path(args.name))
         suffix = ".summary.json" if args.summary else ".mcap"
         dest = args.output or Path(f"{args.name}{suffix}")
         try:
@@ -104,6 +131,24 @@ def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
         return 0
 
     return session_for(args, options, body)
+
+
+def _get_rosbag2(agents: AgentClient, name: str, bag: Path) -> int:
+    """Download the recording (to a temporary file) and write it as a ROS 2 bag in ``bag``."""
+    with tempfile.TemporaryDirectory(prefix="wart-record-") as tmp:
+        try:
+            path = agents.download(name, Path(tmp) / f"{name}.mcap", progress=_progress())
+            recording = read_recording(path)
+            export = ros2bag.write_bag(recording, bag)
+        except (OSError, RecordingError, ros2bag.RosbagsMissing) as exc:
+            return cli.fail(f"cannot write the bag: {exc}", 1)
+    topics = ", ".join(f"{topic} {n}" for topic, n in sorted(export.counts.items()))
+    say(f"wrote {bag}/ (ROS 2 bag, MCAP storage): {topics}")
+    for note in export.notes:
+        say(f"  note: {note}")
+    if recording.truncated:
+        say(f"  note: the recording {recording.truncated}: the bag holds what it had")
+    return 0
 
 
 if __name__ == "__main__":

@@ -91,6 +91,10 @@ def test_wart_control_from_the_client_install_drives_a_simulated_robot(
     recording = read_recording(run)
     assert recording.info is not None and recording.info.user == "alice"
     assert len(recording.commands) > 10
+    # a ROS 2 bag needs the ros extra: said before logging in
+    bag = client.wart("record", "get", names[0], "--format", "rosbag2", *account)
+    assert bag.returncode == 2
+    assert "needs the rosbags library: pip install 'wart-lab[ros]'" in bag.stderr
     report = client.wart("report", str(run))
     assert report.returncode == 0 and "distance:" in report.stdout, report.stderr
     assert client.lab_imports() == [], "the client imported the lab's modules"
