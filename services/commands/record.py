@@ -15,6 +15,7 @@ For ROS 2 tools (``ros2 bag``, rviz2, PlotJuggler), get it as a ROS 2 bag (a
 directory; the ``ros`` extra: ``pip install 'wart-lab[ros]'``, docs/ROS2.md)::
 
     wart record get --context arena --user alice k1-3-9f2a1c --format rosbag2
+    wart record export k1-3-9f2a1c.mcap                 # a file you have: -> k1-3-9f2a1c/
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from pathlib import Path
 from common import cli, keys
 from common.client.agent_client import AgentClient
 from common.messages import RecordingList
-from common.recording import RecordingError, read_recording, ros2bag
+from common.recording import Recording, RecordingError, read_recording, ros2bag
 from common.zconfig import NetworkOptions
 from services.commands.control import session_for
 from services.commands.terminal import say
@@ -37,10 +38,16 @@ from services.commands.terminal import say
 
 def _parser(prog: str) -> argparse.ArgumentParser:
     p = cli.parser(prog, __doc__ or "")
-    p.add_argument("action", choices=("list", "get"), help="list your recordings, or get one")
-    p.add_argument("name", nargs="?", help="get: the recording's name (as listed)")
-    p.add_argument("--context", required=True, help="the agent context, e.g. arena")
-    p.add_argument("--user", required=True)
+    p.add_argument(
+        "action",
+        choices=("list", "get", "export"),
+        help="list your recordings, get one, or export a recording file as a ROS 2 bag",
+    )
+    p.add_argument(
+        "name", nargs="?", help="get: the recording's name (as listed); export: its .mcap file"
+    )
+    p.add_argument("--context", help="list, get: the agent context, e.g. arena")
+    p.add_argument("--user", help="list, get: your account")
     p.add_argument("--password-file", help="read the password from this file")
     p.add_argument("--of", metavar="USER", help="list: another user's (the manage right)")
     p.add_argument("--all", action="store_true", help="list: every user's (the manage right)")
@@ -48,14 +55,15 @@ def _parser(prog: str) -> argparse.ArgumentParser:
         "-o",
         "--output",
         type=Path,
-        help="get: where to write (default NAME.mcap; a rosbag2's directory: NAME)",
+        help="get, export: where to write (default NAME.mcap; a ROS 2 bag's directory: NAME)",
     )
     p.add_argument("--summary", action="store_true", help="get: the run's summary (JSON) instead")
     p.add_argument(
         "--format",
         choices=("mcap", "rosbag2"),
         default="mcap",
-        help="get: the lab's recording (mcap) or a ROS 2 bag (rosbag2: ROS 2 messages, MCAP)",
+        help="get: the lab's recording (mcap) or a ROS 2 bag (rosbag2: ROS 2 messages, MCAP); "
+        "export writes rosbag2",
     )
     return p
 
@@ -93,6 +101,10 @@ def _progress() -> Callable[[int, int], None]:
 def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
     args, options = cli.parse(_parser(prog), argv)
     assert options is not None
+    if args.action == "export":
+        return _export(args.name, args.output)
+    if not args.context or not args.user:
+        return cli.fail(f"{args.action} needs --context and --user")
     try:
         keys.check_ident("context", args.context)
         keys.check_ident("user", args.user)
@@ -133,6 +145,34 @@ def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
     return session_for(args, options, body)
 
 
+def _export(file: str | None, output: Path | None) -> int:
+    """A recording file on this machine as a ROS 2 bag (no lab needed)."""
+    if not file:
+        return cli.fail("export needs the recording's file (wart record export RUN.mcap)")
+    if not ros2bag.available():
+        return cli.fail(f"export needs the rosbags library: {ros2bag.ROS_INSTALL}")
+    source = Path(file)
+    bag = output or source.with_suffix("")
+    if bag.exists():
+        return cli.fail(f"{bag} exists: a bag is written to a new directory (-o DIR)")
+    try:
+        recording = read_recording(source)
+        export = ros2bag.write_bag(recording, bag)
+    except (OSError, RecordingError, ros2bag.RosbagsMissing) as exc:
+        return cli.fail(f"cannot write the bag: {exc}", 1)
+    _said_bag(export, recording)
+    return 0
+
+
+def _said_bag(export: ros2bag.Export, recording: Recording) -> None:
+    topics = ", ".join(f"{topic} {n}" for topic, n in sorted(export.counts.items()))
+    say(f"wrote {export.path}/ (ROS 2 bag, MCAP storage): {topics}")
+    for note in export.notes:
+        say(f"  note: {note}")
+    if recording.truncated:
+        say(f"  note: the recording {recording.truncated}: the bag holds what it had")
+
+
 def _get_rosbag2(agents: AgentClient, name: str, bag: Path) -> int:
     """Download the recording (to a temporary file) and write it as a ROS 2 bag in ``bag``."""
     with tempfile.TemporaryDirectory(prefix="wart-record-") as tmp:
@@ -142,12 +182,7 @@ def _get_rosbag2(agents: AgentClient, name: str, bag: Path) -> int:
             export = ros2bag.write_bag(recording, bag)
         except (OSError, RecordingError, ros2bag.RosbagsMissing) as exc:
             return cli.fail(f"cannot write the bag: {exc}", 1)
-    topics = ", ".join(f"{topic} {n}" for topic, n in sorted(export.counts.items()))
-    say(f"wrote {bag}/ (ROS 2 bag, MCAP storage): {topics}")
-    for note in export.notes:
-        say(f"  note: {note}")
-    if recording.truncated:
-        say(f"  note: the recording {recording.truncated}: the bag holds what it had")
+    _said_bag(export, recording)
     return 0
 
 

@@ -135,3 +135,29 @@ def test_the_wheel_speeds_are_the_bodys_speeds_of_the_runs_robot_type(tmp_path: 
     forward, turning = body_speeds(drive, -10, 10)
     assert forward == 0.0
     assert math.isclose(turning, 2 * 0.08 / 0.053)
+
+
+def test_wart_record_export_writes_the_bag_of_a_file_and_says_what_is_wrong(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from services.commands import record
+
+    path = tmp_path / "run.mcap"
+    write_run(path)
+    assert record.main(["export", str(path)]) == 0
+    said = capsys.readouterr().out
+    assert f"wrote {tmp_path / 'run'}/ (ROS 2 bag, MCAP storage): /camera/" in said
+    assert "/k1/odom 20" in said
+    with AnyReader([tmp_path / "run"], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
+        # 20 each of /tf, odom, cmd_vel and the three sensor topics; 4 tracked, 4 images, 1 log
+        assert r.message_count == 6 * 20 + 4 + 4 + 1
+    # again: the bag is never written over; a file that is not a recording is said so
+    assert record.main(["export", str(path)]) == 2
+    (tmp_path / "notes.mcap").write_text("not a recording")
+    assert record.main(["export", str(tmp_path / "notes.mcap"), "-o", str(tmp_path / "b")]) == 1
+    err = capsys.readouterr().err
+    assert "exists: a bag is written to a new directory" in err
+    assert "cannot write the bag: " in err and "is not an MCAP recording" in err
+    assert not (tmp_path / "b").exists()
+    assert record.main(["list"]) == 2
+    assert "list needs --context and --user" in capsys.readouterr().err
