@@ -12,6 +12,7 @@ the notebook's kernel and drives the robot over Zenoh during its slot)::
     k1.sensors().proximity                      # one reading, no slot needed
     run = k1.run(Braitenberg)                   # waits for the slot, drives, plots
     run.proximity                               # every IR reading of the run (numpy)
+    lab.recording(run.result.request_id)        # the run as the lab recorded it
 
 Where the lab is: ``connect``, ``realm`` and ``registry_key``, else the variables
 every ``wart`` command reads (WART_CONNECT, WART_REALM, WART_REGISTRY_KEY); the
@@ -29,6 +30,7 @@ import time
 from argparse import Namespace
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -39,7 +41,8 @@ from common.client.lab_client import LabClient
 from common.client.notebook_plots import LivePlot, plots_available
 from common.controller import Controller
 from common.lab_errors import LabError, NotFound, RegistryUnreachable
-from common.messages import MessageError, RequestStatus, SensorSample, decode
+from common.messages import MessageError, RecordingInfo, RequestStatus, SensorSample, decode
+from common.recording import Recording, read_recording
 from common.service import close_session, open_session
 from common.zconfig import ConfigError, NetworkOptions, options_from_args
 
@@ -315,6 +318,17 @@ class Lab:
                 raise NotFound(f"{self.context} has no robot {agent!r} (it has: {listed})")
             self._robots[agent] = Robot(self, agent, state.world)
         return self._robots[agent]
+
+    def recordings(self) -> list[RecordingInfo]:
+        """Your recorded runs in the context, as ``wart record list`` lists them."""
+        return list(self.agents.recordings().recordings)
+
+    def recording(self, name: str, dest: Path | None = None) -> Recording:
+        """Download run ``name`` (to ``dest``, default NAME.mcap here) and read it: its
+        poses, samples, commands and output, with their times (common/recording/)."""
+        keys.check_ident("name", name)
+        path = self.agents.download(name, dest or Path(f"{name}.mcap"))
+        return read_recording(path)
 
     def close(self) -> None:
         """Log out and disconnect (also when the kernel stops)."""

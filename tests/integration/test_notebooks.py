@@ -11,8 +11,8 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-from tests.conftest import Router
-from tests.kit.agentkit import start_agent_lab
+from tests.conftest import Router, wait_for
+from tests.kit.agentkit import CTX, start_agent_lab
 from tests.kit.lab import PASSWORD, REPO, ProcessLab, module_lab, wart_env
 
 pytestmark = [
@@ -70,7 +70,8 @@ def plotted_frames(nb: nbformat.NotebookNode) -> int:
     )
 
 
-def test_the_first_notebook_logs_in_reads_drives_and_plots(lab: ProcessLab, tmp_path: Path) -> None:
+def test_the_notebooks_drive_plot_and_read_back_the_run(lab: ProcessLab, tmp_path: Path) -> None:
+    # 01: log in, read, drive a controller class of a cell for one slot, plot live
     nb = execute(NOTEBOOKS / "01_drive_a_robot.ipynb", lab, tmp_path)
     text = printed(nb)
     assert f"logged in as alice to arena ({lab.router.realm})" in text, text
@@ -82,3 +83,17 @@ def test_the_first_notebook_logs_in_reads_drives_and_plots(lab: ProcessLab, tmp_
     assert samples > 20, text  # a 3 s slot at the engine's rate
     assert "strongest IR reading per sensor: [" in text, text
     assert plotted_frames(nb) >= 1
+    # 02: that run, as the lab recorded it: listed, summarised, plotted, a ROS 2 bag
+    recorded = lab.state / "rooms" / "recordings" / CTX / "alice"
+    wait_for(lambda: any(recorded.glob("*.summary.json")), 20, "alice's run recorded")
+    nb = execute(NOTEBOOKS / "02_a_recorded_run.ipynb", lab, tmp_path)
+    text = printed(nb)
+    assert "1 recorded run(s)" in text and "  k1-" in text, text
+    assert ": finished" in text and "distance: " in text, text
+    poses = int(text.split("poses: ")[1].split(",")[0])
+    assert poses > 20, text
+    assert f"plotted {poses} poses" in text, text
+    assert any(
+        "image/png" in out.get("data", {}) for cell in nb.cells for out in cell.get("outputs", [])
+    )
+    assert "ROS 2 bag k1-" in text and "/k1/odom  nav_msgs/msg/Odometry" in text, text
