@@ -36,6 +36,7 @@ import numpy as np
 
 from common.recording import schema as s
 from common.recording.reader import Recording, Stamped
+from common.robots import registry
 from common.robots.robotfile import DriveSpec
 
 BAG_VERSION: Final = 8  # rosbag2's metadata version of ROS 2 Jazzy
@@ -97,8 +98,6 @@ def body_speeds(drive: DriveSpec, left: int, right: int) -> tuple[float, float]:
 def drive_of(recording: Recording) -> DriveSpec | None:
     """The drive of the run's robot's type: a type the lab ships, or the robot file the
     world carried; None when neither is known here (a plugin's type)."""
-    from common.robots import registry  # the robot types: only a cmd_vel conversion needs them
-
     snapshot = recording.snapshot
     if recording.info is None or snapshot is None:
         return None
