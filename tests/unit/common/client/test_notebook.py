@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import pytest
 
+from common.client import notebook
 from common.client.agent_client import DriveResult
 from common.client.notebook import Lab, Run
-from common.lab_errors import LabError
+from common.lab_errors import LabError, RegistryUnreachable
 from common.messages import SensorSample
 
 
@@ -18,6 +19,27 @@ def test_a_login_without_the_registry_key_says_where_it_comes_from(
     monkeypatch.delenv("WART_REGISTRY_KEY", raising=False)
     with pytest.raises(LabError, match=r"registry key is needed: .* WART_REGISTRY_KEY"):
         Lab.login("alice", connect="tcp/127.0.0.1:1", password="x")
+
+
+def test_the_password_is_asked_hidden_unless_wart_password_gives_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    asked: list[str] = []
+    monkeypatch.setattr(notebook.getpass, "getpass", lambda prompt: asked.append(prompt) or "pw")
+
+    def unreachable(*_args: object, **_kw: object) -> None:
+        raise ConnectionError("no router at tcp/127.0.0.1:1")
+
+    monkeypatch.setattr(notebook, "open_session", unreachable)
+    monkeypatch.delenv("WART_PASSWORD", raising=False)
+    login = {"connect": "tcp/127.0.0.1:1", "registry_key": "00" * 32}
+    with pytest.raises(RegistryUnreachable, match="no router"):
+        Lab.login("alice", **login)
+    assert asked == ["password for alice: "]
+    monkeypatch.setenv("WART_PASSWORD", "from the environment")
+    with pytest.raises(RegistryUnreachable):
+        Lab.login("alice", **login)
+    assert asked == ["password for alice: "]  # not asked again
 
 
 @pytest.mark.parametrize(
