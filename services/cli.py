@@ -178,7 +178,12 @@ def usage() -> str:
         "",
         "commands:",
     ]
-    lines += [f"  {name:<{width}}  {text}" for name, (_, text) in SUBCOMMANDS.items()]
+    client = bool(missing_lab_packages())
+    for name, (_, text) in SUBCOMMANDS.items():
+        mark = "*" if client and name not in CLIENT_COMMANDS else " "
+        lines.append(f" {mark}{name:<{width}}  {text}")
+    if client:
+        lines += ["", f"* needs the lab's services, not in this client install: {LAB_INSTALL}"]
     return "\n".join(lines)
 
 

@@ -46,6 +46,10 @@ def test_the_client_install_has_none_of_the_lab_extra(client: ClientInstall) -> 
     assert engine.returncode == 2
     assert "this command needs the lab's services: pip install 'wart-lab[lab]'" in engine.stderr
     assert "Traceback" not in engine.stderr + engine.stdout
+    # its help marks the commands it has not
+    usage = client.wart("--help").stdout
+    assert " *engine " in usage and "  control " in usage and " *control" not in usage
+    assert "* needs the lab's services, not in this client install: pip install" in usage
     # the import audit sees a guarded import of a module that is not there
     log = client.root / "audit-check.log"
     guarded = "try:\n    import cv2\nexcept ImportError:\n    pass"

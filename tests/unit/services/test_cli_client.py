@@ -82,6 +82,7 @@ def test_a_lab_command_on_a_client_install_says_how_to_install_the_lab(
     err = capsys.readouterr().err
     assert "wart engine: this command needs the lab's services: pip install 'wart-lab[lab]'" in err
     assert "without numba, pymunk" in err and "Traceback" not in err
+    assert " *engine " in cli.usage() and " *record " not in cli.usage()
     # a client command runs as before
     with pytest.raises(SystemExit) as done:
         cli.main(["record", "--help"])
