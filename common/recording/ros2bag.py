@@ -39,7 +39,9 @@ from common.recording.reader import Recording, Stamped
 from common.robots import registry
 from common.robots.robotfile import DriveSpec
 
-BAG_VERSION: Final = 8  # rosbag2's metadata version of ROS 2 Jazzy
+# rosbag2's metadata version: the older of the two rosbags writes (8 added ros_distro;
+# 9 changed how QoS profiles are written), for the older ROS 2 tools that read it.
+BAG_VERSION: Final = 8
 WORLD_FRAME = "arena"
 ROS_INSTALL = "pip install 'wart-lab[ros]'"
 
