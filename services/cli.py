@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import ctypes
 import importlib
+import importlib.util
 import os
 import signal
 import sys
 from collections.abc import Sequence
+from types import ModuleType
 
 # name: (module, one-line description). Kept in the order of the help text.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
@@ -101,6 +103,72 @@ SUBCOMMAND_TOOLS: dict[tuple[str, str], str] = {
 }
 
 
+# The commands a client install runs (`pip install wart-lab`: a student's laptop). Every
+# other command is one of the lab's services or its operators' tools and needs the `lab`
+# extra; tests/unit/services/test_cli_client.py checks that these import none of it.
+CLIENT_COMMANDS = frozenset(
+    {
+        "chat",
+        "control",
+        "deploy",
+        "submit",
+        "leaderboard",
+        "record",
+        "report",
+        "robots",
+        "course competition",
+    }
+)
+
+# The `lab` extra's packages (pyproject.toml) by their top-level module, in its order;
+# setuptools (the ahead-of-time build only) and matplotlib (plots, optional) are not needed
+# to start a service.
+LAB_MODULES = {
+    "pymunk": "pymunk",
+    "serial": "pyserial",
+    "viser": "viser",
+    "numba": "numba",
+    "psutil": "psutil",
+    "cryptography": "cryptography",
+    "cv2": "opencv-python-headless",
+    "jwt": "PyJWT",
+}
+
+LAB_INSTALL = "pip install 'wart-lab[lab]'"
+
+
+def missing_lab_packages() -> list[str]:
+    """The lab extra's packages this install lacks (looked up, not imported: no cost)."""
+    return [
+        package
+        for module, package in LAB_MODULES.items()
+        if importlib.util.find_spec(module) is None
+    ]
+
+
+def needs_the_lab(command: str, missing: Sequence[str]) -> str:
+    return (
+        f"wart {command}: this command needs the lab's services: {LAB_INSTALL}\n"
+        f"  (this is a client install, without {', '.join(missing)}; a client runs "
+        f"{', '.join(sorted(CLIENT_COMMANDS))})"
+    )
+
+
+def _import_command(command: str, module_name: str) -> ModuleType | None:
+    """The command's module, or None (said on stderr) on a client install of a lab command."""
+    if command not in CLIENT_COMMANDS and (missing := missing_lab_packages()):
+        print(needs_the_lab(command, missing), file=sys.stderr)
+        return None
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        top = (error.name or "").partition(".")[0]
+        if top not in LAB_MODULES:
+            raise
+        print(needs_the_lab(command, [LAB_MODULES[top]]), file=sys.stderr)
+        return None
+
+
 def usage() -> str:
     width = max(len(name) for name in SUBCOMMANDS)
     lines = [
@@ -110,7 +178,12 @@ def usage() -> str:
         "",
         "commands:",
     ]
-    lines += [f"  {name:<{width}}  {text}" for name, (_, text) in SUBCOMMANDS.items()]
+    client = bool(missing_lab_packages())
+    for name, (_, text) in SUBCOMMANDS.items():
+        mark = "*" if client and name not in CLIENT_COMMANDS else " "
+        lines.append(f" {mark}{name:<{width}}  {text}")
+    if client:
+        lines += ["", f"* needs the lab's services, not in this client install: {LAB_INSTALL}"]
     return "\n".join(lines)
 
 
@@ -141,7 +214,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     tool = SUBCOMMAND_TOOLS.get((name, rest[0])) if rest else None
     if tool is not None:
         name, rest = f"{name} {rest[0]}", rest[1:]
-    module = importlib.import_module(tool or SUBCOMMANDS[name][0])
+    module = _import_command(name, tool or SUBCOMMANDS[name][0])
+    if module is None:
+        return 2
     try:
         return int(module.main(rest, prog=f"wart {name}") or 0)
     except KeyboardInterrupt:  # a second Ctrl-C: quit at once, as the tool said, no traceback

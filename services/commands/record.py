@@ -11,12 +11,18 @@ context's managers anyone's::
     wart report k1-3-9f2a1c.mcap                                 # the run's summary
 
 Open the file in Foxglove (or any MCAP tool) to see poses and plot sensors.
+For ROS 2 tools (``ros2 bag``, rviz2, PlotJuggler), get it as a ROS 2 bag (a
+directory; the ``ros`` extra: ``pip install 'wart-lab[ros]'``, docs/ROS2.md)::
+
+    wart record get --context arena --user alice k1-3-9f2a1c --format rosbag2
+    wart record export k1-3-9f2a1c.mcap                 # a file you have: -> k1-3-9f2a1c/
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -24,6 +30,7 @@ from pathlib import Path
 from common import cli, keys
 from common.client.agent_client import AgentClient
 from common.messages import RecordingList
+from common.recording import Recording, RecordingError, read_recording, ros2bag
 from common.zconfig import NetworkOptions
 from services.commands.control import session_for
 from services.commands.terminal import say
@@ -31,15 +38,33 @@ from services.commands.terminal import say
 
 def _parser(prog: str) -> argparse.ArgumentParser:
     p = cli.parser(prog, __doc__ or "")
-    p.add_argument("action", choices=("list", "get"), help="list your recordings, or get one")
-    p.add_argument("name", nargs="?", help="get: the recording's name (as listed)")
-    p.add_argument("--context", required=True, help="the agent context, e.g. arena")
-    p.add_argument("--user", required=True)
+    p.add_argument(
+        "action",
+        choices=("list", "get", "export"),
+        help="list your recordings, get one, or export a recording file as a ROS 2 bag",
+    )
+    p.add_argument(
+        "name", nargs="?", help="get: the recording's name (as listed); export: its .mcap file"
+    )
+    p.add_argument("--context", help="list, get: the agent context, e.g. arena")
+    p.add_argument("--user", help="list, get: your account")
     p.add_argument("--password-file", help="read the password from this file")
     p.add_argument("--of", metavar="USER", help="list: another user's (the manage right)")
     p.add_argument("--all", action="store_true", help="list: every user's (the manage right)")
-    p.add_argument("-o", "--output", type=Path, help="get: where to write (default NAME.mcap)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        help="get, export: where to write (default NAME.mcap; a ROS 2 bag's directory: NAME)",
+    )
     p.add_argument("--summary", action="store_true", help="get: the run's summary (JSON) instead")
+    p.add_argument(
+        "--format",
+        choices=("mcap", "rosbag2"),
+        default="mcap",
+        help="get: the lab's recording (mcap) or a ROS 2 bag (rosbag2: ROS 2 messages, MCAP); "
+        "export writes rosbag2",
+    )
     return p
 
 
@@ -76,6 +101,10 @@ def _progress() -> Callable[[int, int], None]:
 def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
     args, options = cli.parse(_parser(prog), argv)
     assert options is not None
+    if args.action == "export":
+        return _export(args.name, args.output)
+    if not args.context or not args.user:
+        return cli.fail(f"{args.action} needs --context and --user")
     try:
         keys.check_ident("context", args.context)
         keys.check_ident("user", args.user)
@@ -86,6 +115,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
         return cli.fail(str(exc))
     if args.action == "get" and not args.name:
         return cli.fail("get needs the recording's name (see: wart record list)")
+    if args.format == "rosbag2":
+        if args.summary:
+            return cli.fail("--summary is JSON: it has no rosbag2 format")
+        if not ros2bag.available():  # said before logging in, not after the download
+            return cli.fail(f"--format rosbag2 needs the rosbags library: {ros2bag.ROS_INSTALL}")
+        bag = args.output or Path(args.name)
+        if bag.exists():
+            return cli.fail(f"{bag} exists: a bag is written to a new directory (-o DIR)")
     return _with_context(args, options)
 
 
@@ -94,6 +131,8 @@ def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
         if args.action == "list":
             show_list(agents.recordings(args.of, all_users=args.all))
             return 0
+        if args.format == "rosbag2":
+            return _get_rosbag2(agents, args.name, args.output or Path(args.name))
         suffix = ".summary.json" if args.summary else ".mcap"
         dest = args.output or Path(f"{args.name}{suffix}")
         try:
@@ -104,6 +143,47 @@ def _with_context(args: argparse.Namespace, options: NetworkOptions) -> int:
         return 0
 
     return session_for(args, options, body)
+
+
+def _export(file: str | None, output: Path | None) -> int:
+    """A recording file on this machine as a ROS 2 bag (no lab needed)."""
+    if not file:
+        return cli.fail("export needs the recording's file (wart record export RUN.mcap)")
+    if not ros2bag.available():
+        return cli.fail(f"export needs the rosbags library: {ros2bag.ROS_INSTALL}")
+    source = Path(file)
+    bag = output or source.with_suffix("")
+    if bag.exists():
+        return cli.fail(f"{bag} exists: a bag is written to a new directory (-o DIR)")
+    try:
+        recording = read_recording(source)
+        export = ros2bag.write_bag(recording, bag)
+    except (OSError, RecordingError, ros2bag.RosbagsMissing) as exc:
+        return cli.fail(f"cannot write the bag: {exc}", 1)
+    _said_bag(export, recording)
+    return 0
+
+
+def _said_bag(export: ros2bag.Export, recording: Recording) -> None:
+    topics = ", ".join(f"{topic} {n}" for topic, n in sorted(export.counts.items()))
+    say(f"wrote {export.path}/ (ROS 2 bag, MCAP storage): {topics}")
+    for note in export.notes:
+        say(f"  note: {note}")
+    if recording.truncated:
+        say(f"  note: the recording {recording.truncated}: the bag holds what it had")
+
+
+def _get_rosbag2(agents: AgentClient, name: str, bag: Path) -> int:
+    """Download the recording (to a temporary file) and write it as a ROS 2 bag in ``bag``."""
+    with tempfile.TemporaryDirectory(prefix="wart-record-") as tmp:
+        try:
+            path = agents.download(name, Path(tmp) / f"{name}.mcap", progress=_progress())
+            recording = read_recording(path)
+            export = ros2bag.write_bag(recording, bag)
+        except (OSError, RecordingError, ros2bag.RosbagsMissing) as exc:
+            return cli.fail(f"cannot write the bag: {exc}", 1)
+    _said_bag(export, recording)
+    return 0
 
 
 if __name__ == "__main__":

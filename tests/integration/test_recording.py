@@ -6,11 +6,14 @@ import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
 
 from common.client.agent_client import FINAL
 from common.lab_errors import LabError
-from common.recording import read_recording, summarize
+from common.recording import Recording, read_recording, summarize
 from common.recording import schema as s
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
@@ -25,6 +28,7 @@ pytestmark = [
     pytest.mark.xdist_group("recording"),  # one worker starts the module's lab once
     needs_sandbox,
 ]
+FLOATS = "std_msgs/msg/Float32MultiArray"
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
 RAISER = textwrap.dedent(
     """
@@ -134,6 +138,32 @@ def test_a_killed_run_says_how_it_ended_and_retention_keeps_two(
         assert alice.recordings().recordings == []
 
 
+def _check_the_bag(bag: Path, recording: Recording) -> None:
+    """The ROS 2 bag of a real run, read back with rosbags: its robot's topics and types,
+    as many messages as the recording has, at the recording's times."""
+    assert recording.info is not None
+    agent = recording.info.agent
+    commands = [c.t for c in recording.commands if c.record.speeds is not None]
+    expected = {
+        "/tf": ("tf2_msgs/msg/TFMessage", [r.t for r in recording.frames]),
+        f"/{agent}/odom": ("nav_msgs/msg/Odometry", [r.t for r in recording.poses]),
+        f"/{agent}/ir/proximity": (FLOATS, [r.t for r in recording.samples]),
+        f"/{agent}/ir/ambient": (FLOATS, [r.t for r in recording.samples]),
+        f"/{agent}/joint_states": ("sensor_msgs/msg/JointState", [r.t for r in recording.samples]),
+        f"/{agent}/cmd_vel": ("geometry_msgs/msg/Twist", commands),
+        "/rosout": ("rcl_interfaces/msg/Log", [r.t for r in recording.output]),
+    }
+    times: dict[str, list[float]] = {}
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        for connection, timestamp, _raw in reader.messages():
+            times.setdefault(connection.topic, []).append(timestamp / 1e9)
+    assert types == {topic: kind for topic, (kind, moments) in expected.items() if moments}
+    assert len(recording.frames) > 50 and len(commands) > 20
+    for topic, (_, moments) in expected.items():
+        assert np.allclose(times.get(topic, []), moments, rtol=0, atol=1e-6), topic
+
+
 def test_wart_record_and_report_from_the_command_line(
     lab: ProcessLab, procs: Procs, tmp_path: Path
 ) -> None:
@@ -149,9 +179,14 @@ def test_wart_record_and_report_from_the_command_line(
     got = procs.start(
         "record-get", ["record", "get", q.request_id, "-o", str(out), *common], env=env
     )
+    bag = tmp_path / "carol-bag"
+    as_bag = ["record", "get", q.request_id, "--format", "rosbag2", "-o", str(bag), *common]
+    got_bag = procs.start("record-get-rosbag2", as_bag, env=env)
     assert listed.popen.wait(30) == 0, listed.output()
     assert q.request_id in listed.output()
     assert got.popen.wait(30) == 0, got.output()
+    assert got_bag.popen.wait(30) == 0, got_bag.output()
+    _check_the_bag(bag, read_recording(out))
     report = procs.start("report", ["report", str(out)])
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(out.read_bytes()[:100])
