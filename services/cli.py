@@ -65,6 +65,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "deploy": ("services.commands.deploy", "upload a controller to run on a robot in the lab"),
     "record": ("services.commands.record", "list and download your recorded runs (MCAP)"),
     "report": ("services.commands.report", "the summary (and plots) of a recorded run"),
+    "calibrate": (
+        "services.commands.calibrate",
+        "a real robot's twin (slip, wheel base, latency, IR gains) fitted from its recordings",
+    ),
     "replay": (
         "viewers.web.replay",
         "replay a recorded run in a web viewer: timeline, play, speed (no lab needed)",

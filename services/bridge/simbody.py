@@ -31,7 +31,7 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +58,7 @@ class SimBody:
         slip: float = 0.0,
         truth: Path | None = None,
         body: BodyTruth | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not 0.0 <= slip < 0.5:
             raise ValueError(
@@ -91,6 +92,7 @@ class SimBody:
         # Speed commands wait out the body's latency here: (due on the monotonic clock, l, r).
         self._pending: deque[tuple[float, float, float]] = deque()
         self._noise = np.random.default_rng(self.body.seed)
+        self._clock = clock  # a rehearsal (services/bridge/rehearse.py) keeps simulated time
         self.truth = truth
         self._truth_at = 0.0
 
@@ -139,13 +141,7 @@ class SimBody:
         while not self._stop.is_set():
             with self._lock:
                 try:
-                    self._obey_due()
-                    self._position_control()
-                    self.world.step()
-                    # Again after the step, so a wheel that just reached its target
-                    # reads speed 0 now, not one tick later.
-                    self._position_control()
-                    self.ticks += 1
+                    self._tick()
                     truth = self._true_poses()
                 except Exception:  # one bad tick must not freeze the robot for good
                     log.exception("sim body: error in tick %d (kept running)", self.world.tick)
@@ -181,9 +177,24 @@ class SimBody:
     def _drive(self, left: float, right: float) -> None:
         self.world.set_speeds(self.slot, left * self._grip[0], right * self._grip[1])
 
+    def _tick(self) -> None:
+        self._obey_due()
+        self._position_control()
+        self.world.step()
+        # Again after the step, so a wheel that just reached its target
+        # reads speed 0 now, not one tick later.
+        self._position_control()
+        self.ticks += 1
+
+    def tick(self) -> None:
+        """One tick of the world, as the stepping thread does: for a driver that keeps
+        its own clock instead of starting the thread."""
+        with self._lock:
+            self._tick()
+
     def _obey_due(self) -> None:
         """The speed commands whose latency has passed move the wheels now."""
-        now = time.monotonic()
+        now = self._clock()
         while self._pending and self._pending[0][0] <= now:
             _, left, right = self._pending.popleft()
             self._drive(left, right)
@@ -211,7 +222,7 @@ class SimBody:
             if self.body.latency_s <= 0.0:
                 self._drive(left, right)
                 return
-            self._pending.append((time.monotonic() + self.body.latency_s / self.rate, left, right))
+            self._pending.append((self._clock() + self.body.latency_s / self.rate, left, right))
 
     def set_pwm(self, left: int, right: int) -> None:
         k = self.spec.pwm_to_speed

@@ -115,7 +115,8 @@ def test_the_controller_package_needs_only_the_standard_library() -> None:
 
 
 @pytest.mark.parametrize(
-    "library", ["common.sim2d", "common.recording", "common.tracking", "common.robots"]
+    "library",
+    ["common.sim2d", "common.recording", "common.tracking", "common.robots", "common.twin"],
 )
 def test_the_libraries_never_reach_zenoh(library: str) -> None:
     chains = [c for m in _modules_in(library) if (c := _reaches(m, "zenoh"))]
@@ -123,6 +124,7 @@ def test_the_libraries_never_reach_zenoh(library: str) -> None:
 
 
 ROOT_SUBPACKAGES = (
+    "common.twin",
     "common.world",
     "common.client",
     "common.controller",
