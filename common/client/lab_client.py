@@ -506,11 +506,12 @@ class LabClient:
             )
         self._inbox_user = user
 
-    def logout(self) -> None:
+    def logout(self, *, everywhere: bool = False) -> None:
+        """End this session (``everywhere``: every session and saved login of the account)."""
         if self.session is None:
             return
         try:
-            logout = LogoutRequest(keep_resume=self.keep_resume)
+            logout = LogoutRequest(keep_resume=self.keep_resume, everywhere=everywhere)
             self._ask(keys.registry_logout(self.realm), logout, OkReply, "logout")
         finally:
             self.session = None

@@ -71,9 +71,15 @@ class RegistryAdminCalls:
             f"add user {user}",
         ).detail
 
-    def set_password(self, user: str, password: str) -> str:
+    def set_password(self, user: str, password: str, current: str | None = None) -> str:
+        """``current``: one's own password now (needed unless an admin, or just logged in)."""
+        sealed_current = self._seal_secret(current) if current else None
         return self._admin(
-            SetPassword(user=user, sealed_password=self._seal_secret(password)),
+            SetPassword(
+                user=user,
+                sealed_password=self._seal_secret(password),
+                sealed_current=sealed_current,
+            ),
             f"set the password of {user}",
         ).detail
 

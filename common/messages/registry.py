@@ -129,8 +129,11 @@ class LoginReply(Message, frozen=True):
 
 class LogoutRequest(Message, frozen=True):
     # True when a page closes (a reload): its resume token stays good. A person's
-    # "Log out" leaves it False, and the session's resume token is revoked too.
+    # "Log out" leaves it False: every session resumed from the same password
+    # login ends too, with its resume token.
     keep_resume: bool = False
+    # End every session and resume token of the account (a lost or stolen device).
+    everywhere: bool = False
 
 
 # --- directory ----------------------------------------------------------------------
@@ -275,10 +278,13 @@ class AddUser(Message, frozen=True):
 
 
 class SetPassword(Message, frozen=True):
-    """Admins set anyone's password; a user may set their own."""
+    """Admins set anyone's password; a user may set their own with the current one
+    (``sealed_current``, sealed like the new one), or without it from a session that
+    logged in with the password minutes ago (never from a resumed one)."""
 
     user: Ident
     sealed_password: Annotated[bytes, msgspec.Meta(max_length=4096)]
+    sealed_current: Annotated[bytes, msgspec.Meta(max_length=4096)] | None = None
 
 
 class RemoveUser(Message, frozen=True):

@@ -162,7 +162,8 @@ class LtiService(Service):
         address = self.address.with_user(account.user)
         cookie = (
             f"{cookie_name(address)}={cookie_value(address, account.resume)}; Path=/; "
-            f"Max-Age={LAUNCH_COOKIE_S}; SameSite=Lax"
+            f"Max-Age={LAUNCH_COOKIE_S}; SameSite=Lax; HttpOnly"
+            + ("; Secure" if self.config.page.startswith("https://") else "")
         )
         return Landing(self.config.page, [cookie])
 

@@ -344,13 +344,14 @@ class RegistryDB:
     def revoke(
         self, session_id: bytes, reason: str, *, kicked: bool = False
     ) -> SessionRecord | None:
+        """The session, revoked now; None if unknown or revoked before."""
         with self._tx() as db:
-            db.execute(
+            cur = db.execute(
                 "UPDATE sessions SET revoked_at=?, reason=?, kicked=? "
                 "WHERE session_id=? AND revoked_at IS NULL",
                 (time.time(), reason, int(kicked), session_id),
             )
-        return self.session(session_id)
+        return self.session(session_id) if cur.rowcount else None
 
     def active_sessions(self, user: str, now: float | None = None) -> list[SessionRecord]:
         now = time.time() if now is None else now

@@ -48,6 +48,7 @@ from common.messages import (
 from common.service import RequestError
 from services.registry.accounts_db import DbError, RegistryDB
 from services.registry.audit_db import Action, TermStore
+from services.registry.fresh import FreshLogins
 from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, query_source
 
@@ -136,6 +137,7 @@ class AdminDesk:
         verifier: Verifier,
         throttle: LoginThrottle,
         unsealer: nacl.public.SealedBox,
+        fresh: FreshLogins,
         online_users: Callable[[], list[str]],
         own_session_seal: Callable[[str, Message], bytes],
         revoke: Revoke,
@@ -144,6 +146,7 @@ class AdminDesk:
         self.db, self.term, self.resumes = db, term, resumes
         self.verifier, self.throttle = verifier, throttle
         self._unsealer = unsealer
+        self.fresh = fresh
         self.online_users = online_users
         self.own_session_seal = own_session_seal
         self._revoke = revoke
@@ -208,7 +211,9 @@ class AdminDesk:
         target, detail = _target(request)
         source = f"{source_of(query)} session {principal.session_id.hex()[:8]}"
         try:
-            if not (isinstance(request, SetPassword) and request.user == principal.user):
+            if isinstance(request, SetPassword) and request.user == principal.user:
+                self._may_set_own_password(principal, request)
+            else:
                 principal.require("admin", f"do {type(request).__name__}")
             try:
                 reply = self._admin(principal, request)
@@ -221,6 +226,39 @@ class AdminDesk:
         if not isinstance(request, READS):
             self.audit(Action(principal.user, action, target, "ok", detail, source))
         return reply
+
+    def _may_set_own_password(self, principal: Principal, request: SetPassword) -> None:
+        """A person sets their own password with the current one, or from a fresh password
+        login: a stolen saved login (a resumed session) cannot lock the owner out."""
+        if principal.has("admin"):
+            return
+        now = time.time()
+        if request.sealed_current is None:
+            if self.fresh.holds(principal.session_id, now):
+                return
+            raise AuthError(
+                "forbidden",
+                "type your current password to set a new one (this session did not just "
+                "log in with it)",
+            )
+        # Guessing the current password here is a password guess like a login's.
+        source = f"session:{principal.session_id.hex()}"
+        self.throttle.check(principal.user, source, now)
+        current = self._password(request.sealed_current)
+        if not self.db.check_credential(principal.user, "password", current):
+            self.throttle.failed(principal.user, source, now)
+            raise RequestError("forbidden", "your current password is wrong")
+        self.throttle.succeeded(principal.user, source)
+
+    def end_sessions(
+        self, user: str, reason: str, *, keep: bytes | None = None, kicked: bool = False
+    ) -> int:
+        """Every live session and resume token of ``user`` ends (but ``keep``): how many."""
+        sessions = [s.session_id for s in self.db.active_sessions(user) if s.session_id != keep]
+        self.fresh.forget(sessions)
+        count = self._revoke(sessions, reason, kicked=kicked)
+        self.resumes.revoke_user(user, reason)
+        return count
 
     def _admin(self, principal: Principal, request: Message) -> Message:
         if isinstance(request, ListUsers):
@@ -235,14 +273,16 @@ class AdminDesk:
             return OkReply(detail=f"user {request.user} added")
         if isinstance(request, SetPassword):
             self.db.set_password(request.user, self._password(request.sealed_password))
-            # A saved login outlives no password: every resume token of the account goes.
-            self.resumes.revoke_user(request.user, "the password was changed")
-            return OkReply(detail=f"password of {request.user} changed")
+            # A session or saved login outlives no password: all go, but the one that
+            # set it (it knows the new password, or is an admin's).
+            count = self.end_sessions(
+                request.user, "the password was changed", keep=principal.session_id
+            )
+            return OkReply(detail=f"password of {request.user} changed ({count} sessions ended)")
         if isinstance(request, RemoveUser):
             if request.user == principal.user:
                 raise RequestError("conflict", "you cannot remove your own account")
-            sessions = [s.session_id for s in self.db.active_sessions(request.user)]
-            self._revoke(sessions, "account removed", kicked=True)
+            self.end_sessions(request.user, "account removed", kicked=True)
             self.db.remove_user(request.user)
             return OkReply(detail=f"user {request.user} removed")
         if isinstance(request, Grant):
@@ -310,10 +350,9 @@ class AdminDesk:
         key = keys.user_inbox(self.realm, user)
         notice = KickNotice(user=user, reason=reason[:256], by=principal.user)
         self.session.put(key, self.own_session_seal(key, notice), **qos.of(keys.user_inbox))
-        sessions = [s.session_id for s in self.db.active_sessions(user)]
         why = f"kicked from the server by {principal.user}: {reason}"
-        count = self._revoke(sessions, why, kicked=True)
-        self.resumes.revoke_user(user, why)  # a page's token too, whichever session it came from
+        # A page's token too, whichever session it came from.
+        count = self.end_sessions(user, why, kicked=True)
         log.info("%s kicked %s from the server (%d sessions)", principal.user, user, count)
         return OkReply(detail=f"{user} kicked ({count} sessions revoked)")
 
