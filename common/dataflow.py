@@ -143,7 +143,7 @@ _ALIVE: tuple[tuple[AliveKind, tuple[str, ...]], ...] = (
 )
 _ADMIN_CHANGES: tuple[type[Message], ...] = (
     *(m.AddUser, m.SetPassword, m.RemoveUser, m.Grant, m.Ungrant, m.KickFromServer),
-    *(m.RenameServer, m.UnlockLogins, m.BanUser, m.LiftBan),
+    *(m.RenameServer, m.UnlockLogins, m.BanUser, m.LiftBan, m.ClearThrottle),
 )
 _QUEUE_CHANGES = (m.CancelControl, m.StopControl, m.ContextSettings, m.EmergencyStop, m.HandBack)
 
@@ -182,6 +182,7 @@ FLOWS: tuple[Flow, ...] = (
         ("registry",),
         PEOPLE,
         _ask(m.ListUsers, m.UserList),
+        _ask(m.ListThrottles, m.ThrottleList),
         *_ok(*_ADMIN_CHANGES),
         **SEALED,
         note="each change and each refusal appended to the audit trail",

@@ -171,6 +171,8 @@ class LabClient:
         self.kick_from_server = admin.kick_from_server
         self.rename_server = admin.rename_server
         self.unlock_logins = admin.unlock_logins
+        self.throttles = admin.throttles
+        self.clear_throttle = admin.clear_throttle
         self.ban = admin.ban
         self.lift_ban = admin.lift_ban
         self.audit_trail = admin.audit_trail

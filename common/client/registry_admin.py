@@ -21,15 +21,19 @@ from common.messages import (
     AuditList,
     AuditQuery,
     BanUser,
+    ClearThrottle,
     Grant,
     KickFromServer,
     LiftBan,
+    ListThrottles,
     ListUsers,
     Message,
     OkReply,
     RemoveUser,
     RenameServer,
     SetPassword,
+    ThrottleInfo,
+    ThrottleList,
     Ungrant,
     UnlockLogins,
     UserInfo,
@@ -101,6 +105,14 @@ class RegistryAdminCalls:
 
     def rename_server(self, name: str) -> str:
         return self._admin(RenameServer(name=name), "rename the server").detail
+
+    def throttles(self) -> list[ThrottleInfo]:
+        """Every login throttle with a failure: (kind, key, failures, the wait now)."""
+        return self._admin(ListThrottles(), "list login throttles", ThrottleList).throttles
+
+    def clear_throttle(self, source: str) -> str:
+        """Forget the failed logins of one source or network (a key ``throttles`` names)."""
+        return self._admin(ClearThrottle(source=source), f"clear the throttle of {source}").detail
 
     def unlock_logins(self, user: str) -> str:
         """Forget the account's failed logins (admin): every source may try again at once."""

@@ -8,7 +8,7 @@ recipient's key. See docs/SECURITY.md.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -314,6 +314,27 @@ class UnlockLogins(Message, frozen=True):
     user: Ident
 
 
+class ListThrottles(Message, frozen=True):
+    """An admin asks for every login throttle with a failure (services/registry/throttle.py)."""
+
+
+class ThrottleInfo(Message, frozen=True):
+    kind: Literal["pair", "source", "network", "account"]
+    key: ShortText  # "alice|zenoh:ab12", "zenoh:ab12", "viewer-web:10.0.0.0/24", "alice"
+    failures: int
+    wait_s: float  # how long a throttled attempt is told to wait now (0: not throttled)
+
+
+class ThrottleList(Message, frozen=True):
+    throttles: list[ThrottleInfo]
+
+
+class ClearThrottle(Message, frozen=True):
+    """Forget the failures of one source or network (as ``ThrottleInfo.key`` names it)."""
+
+    source: Annotated[str, msgspec.Meta(min_length=1, max_length=256)]
+
+
 class RenameServer(Message, frozen=True):
     name: Annotated[str, msgspec.Meta(min_length=1, max_length=80)]
 
@@ -344,6 +365,8 @@ ADMIN_REQUESTS = (
     UnlockLogins,
     BanUser,
     LiftBan,
+    ListThrottles,
+    ClearThrottle,
 )
 
 __all__ = [
@@ -351,6 +374,7 @@ __all__ = [
     "AddUser",
     "BanInfo",
     "BanUser",
+    "ClearThrottle",
     "ContextInfo",
     "ContextInfoRequest",
     "DirectoryReply",
@@ -360,6 +384,7 @@ __all__ = [
     "KickFromServer",
     "KickNotice",
     "LiftBan",
+    "ListThrottles",
     "ListUsers",
     "LoginReply",
     "LoginRequest",
@@ -382,6 +407,8 @@ __all__ = [
     "SetPassword",
     "SignedResume",
     "SignedRevocations",
+    "ThrottleInfo",
+    "ThrottleList",
     "Ungrant",
     "UnlockLogins",
     "UserInfo",

@@ -30,16 +30,20 @@ from common.messages import (
     AuditReport,
     BanInfo,
     BanUser,
+    ClearThrottle,
     Grant,
     KickFromServer,
     KickNotice,
     LiftBan,
+    ListThrottles,
     ListUsers,
     Message,
     OkReply,
     RemoveUser,
     RenameServer,
     SetPassword,
+    ThrottleInfo,
+    ThrottleList,
     Ungrant,
     UnlockLogins,
     UserInfo,
@@ -69,8 +73,10 @@ ACTIONS: dict[type[Message], str] = {
     UnlockLogins: "unlock_logins",
     BanUser: "ban",
     LiftBan: "lift_ban",
+    ListThrottles: "list_throttles",
+    ClearThrottle: "clear_throttle",
 }
-READS = (ListUsers,)  # looking is not a change: only its refusals are recorded
+READS = (ListUsers, ListThrottles)  # looking is not a change: only its refusals are recorded
 
 
 class Revoke(Protocol):
@@ -115,6 +121,8 @@ def _target(request: Message) -> tuple[str, str]:
         return user, "roles " + ", ".join(request.roles)
     if isinstance(request, RenameServer):
         return "server", request.name
+    if isinstance(request, ClearThrottle):
+        return request.source, ""
     return user, ""
 
 
@@ -248,7 +256,7 @@ class AdminDesk:
         if not self.db.check_credential(principal.user, "password", current):
             self.throttle.failed(principal.user, source, now)
             raise RequestError("forbidden", "your current password is wrong")
-        self.throttle.succeeded(principal.user, source)
+        self.throttle.succeeded(principal.user, source, now, own=False)
 
     def end_sessions(
         self, user: str, reason: str, *, keep: bytes | None = None, kicked: bool = False
@@ -306,6 +314,16 @@ class AdminDesk:
             self.throttle.unlock(request.user)
             log.info("%s unlocked the logins of %s", principal.user, request.user)
             return OkReply(detail=f"failed logins of {request.user} forgotten: they may log in now")
+        if isinstance(request, ListThrottles):
+            buckets = self.throttle.buckets(time.time())
+            return ThrottleList(
+                throttles=[ThrottleInfo(b.kind, b.key[:256], b.failures, b.wait_s) for b in buckets]
+            )
+        if isinstance(request, ClearThrottle):
+            if not self.throttle.clear_source(request.source):
+                raise RequestError("not_found", f"no failed logins from {request.source}")
+            log.info("%s cleared the login throttle of %s", principal.user, request.source)
+            return OkReply(detail=f"failed logins from {request.source} forgotten")
         if isinstance(request, RenameServer):
             self.db.set_setting("server_name", request.name)
             return OkReply(detail=f"server renamed to {request.name}")

@@ -233,7 +233,7 @@ class Registry(Service):
             refusal = ban_refusal(ban)
             self.admin.audit(Action(user, "login", user, "refused", refusal.message, source))
             raise refusal
-        self.throttle.succeeded(user, source)
+        self.throttle.succeeded(user, source, now, own=resumed is None)
         everywhere, scoped, roles = acl.expand(self.db.grants_of(user))
         ends = now + min(request.ttl, MAX_TTL)
         if resumed is not None:
