@@ -28,6 +28,7 @@ from common.messages import (
     AuditList,
     AuditQuery,
     AuditReport,
+    AuthEnvelope,
     BanInfo,
     BanUser,
     ClearThrottle,
@@ -38,6 +39,7 @@ from common.messages import (
     ListThrottles,
     ListUsers,
     Message,
+    MessageError,
     OkReply,
     RemoveUser,
     RenameServer,
@@ -48,6 +50,7 @@ from common.messages import (
     UnlockLogins,
     UserInfo,
     UserList,
+    decode,
 )
 from common.service import RequestError
 from services.registry.accounts_db import DbError, RegistryDB
@@ -99,8 +102,8 @@ def when(at: float | None) -> str:
     return "until " + datetime.fromtimestamp(at, UTC).strftime("%Y-%m-%d %H:%M UTC")
 
 
-def source_of(query: zenoh.Query) -> str:
-    """Where a query came from, as the network says: the querier's Zenoh session."""
+def source_of(query: zenoh.Query | zenoh.Sample) -> str:
+    """Where a query (or put) came from, as the network says: the sender's Zenoh session."""
     info = query.source_info
     zid = None if info is None or info.source_id is None else str(info.source_id.zid)
     return query_source(zid)
@@ -183,12 +186,40 @@ class AdminDesk:
         return AuditList(entries=entries, more=more)
 
     def on_report(self, sample: zenoh.Sample) -> None:
-        """A service's privileged action: only a session with the service role may report."""
-        principal, report = self.verifier.open(str(sample.key_expr), sample.payload, AuditReport)
+        """A service's privileged action: only a session with the service role may report.
+
+        Anything else put here is a forged report: it is recorded as one (``forged_report``,
+        refused, in words), so `wart audit` shows it; a report seen before (a replay, also
+        past a registry restart) is dropped.
+        """
+        key = str(sample.key_expr)
+        try:
+            principal, report = self.verifier.open(key, sample.payload, AuditReport)
+        except (AuthError, MessageError) as exc:
+            words = getattr(exc, "message", None) or str(exc)
+            if "replayed message" not in words:
+                self.audit(
+                    Action("unknown", "forged_report", "audit", "refused", words, source_of(sample))
+                )
+            raise
         if "service" not in principal.roles:
+            claim = f"{report.actor} {report.action} {report.target} {report.outcome}"
+            self.audit(
+                Action(
+                    principal.user,
+                    "forged_report",
+                    report.target,
+                    "refused",
+                    f"{principal.user} is not a service; the report claimed: {claim}",
+                    source_of(sample),
+                )
+            )
             raise AuthError("forbidden", f"{principal.user} is not a service: it reports nothing")
-        # The service's clock says when; one far from ours (or not a time) is not trusted.
         now = time.time()
+        if not self.term.first_report(decode(sample.payload, AuthEnvelope).signature, now):
+            log.info("dropped a report of %s seen before (a replay)", principal.user)
+            return
+        # The service's clock says when; one far from ours (or not a time) is not trusted.
         at = report.at if math.isfinite(report.at) and abs(report.at - now) < 300 else now
         self.audit(
             Action(

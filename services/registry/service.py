@@ -174,6 +174,7 @@ class Registry(Service):
             self._thread.join(timeout)
         if self._watch is not None:
             self._watch.close()
+        self.term.flush()  # the refusals counted this minute get their line
 
     @property
     def server_name(self) -> str:
