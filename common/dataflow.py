@@ -351,9 +351,9 @@ FLOWS: tuple[Flow, ...] = (
         keys.grader_standings,
         ("grader",),
         PEOPLE,
-        m.Standings,
+        m.CompetitionChanged,
         **WORDS,
-        note="as each heat starts and ends",
+        note="as each heat starts and ends; no entry: each reader asks",
     ),
     _put(
         keys.grader_changed,
@@ -369,7 +369,7 @@ FLOWS: tuple[Flow, ...] = (
         ("lti",),
         m.Graded,
         **WORDS,
-        note="the lti service passes grades back",
+        note="no student, no score: the lti service asks, passes grades back",
     ),
     # -- worlds (engines and bridges)
     _put(keys.world_frame, WORLDS, ("agent", "runner", *PEOPLE), m.WorldFrame, note="each tick"),

@@ -48,6 +48,7 @@ from common.messages import (
     AssignmentList,
     ClassQuery,
     ClassTables,
+    CompetitionChanged,
     CompetitionQuery,
     CompetitionRun,
     EpisodeResult,
@@ -69,7 +70,7 @@ from common.messages import (
 from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
 from services.grader.class_view import class_table
-from services.grader.competition import CompetitionError, Competitions
+from services.grader.competition import CompetitionError, Competitions, own_entries
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
@@ -252,7 +253,17 @@ class GraderService(Service):
         role = self.store.role_in(found.course, principal.user)
         if role is None and not principal.has("admin"):
             raise RequestError("forbidden", f"{principal.user} is not in the course {found.course}")
-        return found
+        if role in TEACHERS or principal.has("admin"):
+            return found
+        try:
+            a, _map = self.store.assignment(found.assignment)
+            hidden = a.hidden and time.time() < a.deadline
+        except DbError:  # its assignment is gone: nothing says the standings are public
+            hidden = True
+        if not hidden:
+            return found
+        team = self.store.teams(found.course).get(principal.user, principal.user)
+        return own_entries(found, principal.user, team)
 
     def _class(self, principal: Principal, course: str | None) -> ClassTables:
         """The teacher's view of ``course`` (None: of each course the asker teaches)."""
@@ -299,8 +310,17 @@ class GraderService(Service):
             self.log.warning("could not publish the change of %s: %s", sub.id, exc)
 
     def _publish(self, standings: Standings) -> None:
+        """Say the standings changed: anyone may read a put, so it carries no entry."""
         key = grader_standings(self.realm, self.ident, standings.competition)
-        self.session.put(key, self.login.session.seal(key, standings), **qos.of(grader_standings))
+        changed = CompetitionChanged(
+            competition=standings.competition,
+            assignment=standings.assignment,
+            course=standings.course,
+            status=standings.status,
+            heat=standings.heat,
+            at=standings.at,
+        )
+        self.session.put(key, self.login.session.seal(key, changed), **qos.of(grader_standings))
 
     def _submit(self, principal: Principal, request: Submit, a: Assignment) -> Message:
         now = time.time()
@@ -521,23 +541,18 @@ class GraderService(Service):
                     sub.id, f"{message}; no real-robot attempt: an episode did not pass"
                 )
         self._changed(sub, "graded", a.course)
-        self._announce(sub, a, (graded.mean or 0.0) - penalty)
+        self._announce(sub, a)
 
-    def _announce(self, sub: Pending, a: Assignment, score: float) -> None:
+    def _announce(self, sub: Pending, a: Assignment) -> None:
         """Say a submission is graded (the lti service passes scores back to an LMS).
 
-        Published once, after the score is written: a listener that misses it (down,
-        unreachable) can still read the score from the submissions like anyone.
+        Published once, after the score is written, with no student and no score
+        (anyone may read a put): the lti service asks for them, as a listener that
+        missed this (down, unreachable) does at its next catch-up.
         """
         key = grader_graded(self.realm, self.ident)
         graded = Graded(
-            submission=sub.id,
-            assignment=a.name,
-            course=a.course,
-            user=sub.user,
-            score=score,
-            order=a.order,  # type: ignore[arg-type]
-            graded_at=time.time(),
+            submission=sub.id, assignment=a.name, course=a.course, graded_at=time.time()
         )
         try:
             self.session.put(key, self.login.session.seal(key, graded), **qos.of(grader_graded))
