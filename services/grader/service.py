@@ -69,6 +69,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
+from services.grader.bans import BANNED, BanWatch
 from services.grader.class_view import class_table
 from services.grader.competition import CompetitionError, Competitions, own_entries
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
@@ -129,6 +130,8 @@ class GraderService(Service):
     ) -> None:
         super().__init__(session, realm, name)
         self.verifier = Verifier(registry_key, realm)
+        self._registry_key = registry_key
+        self._bans: BanWatch | None = None
         self.login = login
         self.store = store
         self.workers = workers
@@ -159,6 +162,9 @@ class GraderService(Service):
             self._reals.put(sub)
         for name in self.competitions.recover():
             self.log.warning("competition %s was running when the grader stopped: stopped", name)
+        self._bans = BanWatch(
+            self.session, self.realm, self._registry_key, self.verifier, self._banned
+        )
         self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)
         for i in range(self.workers):
             thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)
@@ -169,6 +175,8 @@ class GraderService(Service):
         self._threads.append(thread)
 
     def on_stop(self, timeout: float) -> None:
+        if self._bans is not None:
+            self._bans.close()
         self.queue.close()
         self._real_stop.set()
         self._reals.put(None)
@@ -429,12 +437,24 @@ class GraderService(Service):
 
     # -- grading
 
+    def _banned(self, user: str) -> None:
+        for sub in self.queue.remove_user(user):
+            self._not_graded_banned(sub)
+
+    def _not_graded_banned(self, sub: Pending) -> None:
+        self.log.info("submission %s of %s not graded: the account is banned", sub.id, sub.user)
+        self._fail_uncounted(sub, [], BANNED)
+        self._changed(sub, "failed")
+
     def _work(self) -> None:
         while True:
             item = self.queue.get()
             if item is None:
                 return
             _user, sub = item
+            if self._bans is not None and self._bans.before_ban(sub.user, sub.submitted_at):
+                self._not_graded_banned(sub)  # taken from the queue as the ban came
+                continue
             try:
                 self._grade(sub)
                 self._grader_failures.pop(sub.id, None)

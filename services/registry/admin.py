@@ -152,6 +152,7 @@ class AdminDesk:
         online_users: Callable[[], list[str]],
         own_session_seal: Callable[[str, Message], bytes],
         revoke: Revoke,
+        announce_ban: Callable[[str, str], None] = lambda _user, _reason: None,
     ) -> None:
         self.session, self.realm = session, realm
         self.db, self.term, self.resumes = db, term, resumes
@@ -161,6 +162,7 @@ class AdminDesk:
         self.online_users = online_users
         self.own_session_seal = own_session_seal
         self._revoke = revoke
+        self.announce_ban = announce_ban
 
     # -- the audit trail
 
@@ -388,7 +390,9 @@ class AdminDesk:
             raise RequestError("conflict", f"{REGISTRY_USER} is the registry itself")
         ban = self.term.ban(request.user, request.reason, principal.user, request.until)
         # A ban is a kick that lasts: the live sessions go the same way.
-        kicked = self._kick(principal, request.user, f"banned {when(ban.until)}: {ban.reason}")
+        reason = f"banned {when(ban.until)}: {ban.reason}"
+        kicked = self._kick(principal, request.user, reason)
+        self.announce_ban(request.user, f"kicked from the server by {principal.user}: {reason}")
         log.info("%s banned %s %s: %s", principal.user, request.user, when(ban.until), ban.reason)
         return OkReply(detail=f"{request.user} banned {when(ban.until)}; {kicked.detail}")
 

@@ -137,6 +137,7 @@ class Registry(Service):
             online_users=self.online_users,
             own_session_seal=self.own_session_seal,
             revoke=self._revoke,
+            announce_ban=self.announce_ban,
         )
 
     # -- lifecycle
@@ -400,6 +401,20 @@ class Registry(Service):
         if revoked and self._revocation_pub is not None:
             self._revocation_pub.put(self._signed_revocations(revoked))
         return len(revoked)
+
+    def announce_ban(self, user: str, reason: str) -> None:
+        """A ban reaches every service as a revocation even when the account has no live
+        session (the grader drops its queued submissions): one naming a session of none."""
+        if self._revocation_pub is None:
+            return
+        gone = Revocation(
+            session_id=new_session_id(),
+            user=user,
+            expires_at=time.time() + 3600,
+            reason=reason[:256],
+            kicked=True,
+        )
+        self._revocation_pub.put(self._signed_revocations([gone]))
 
     def _signed_revocations(self, revoked: list[Revocation]) -> bytes:
         body = encode(RevocationList(revoked=revoked, issued_at=time.time()))
