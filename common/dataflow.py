@@ -143,7 +143,7 @@ _ALIVE: tuple[tuple[AliveKind, tuple[str, ...]], ...] = (
 )
 _ADMIN_CHANGES: tuple[type[Message], ...] = (
     *(m.AddUser, m.SetPassword, m.RemoveUser, m.Grant, m.Ungrant, m.KickFromServer),
-    *(m.RenameServer, m.UnlockLogins, m.BanUser, m.LiftBan),
+    *(m.RenameServer, m.UnlockLogins, m.BanUser, m.LiftBan, m.ClearThrottle),
 )
 _QUEUE_CHANGES = (m.CancelControl, m.StopControl, m.ContextSettings, m.EmergencyStop, m.HandBack)
 
@@ -182,6 +182,7 @@ FLOWS: tuple[Flow, ...] = (
         ("registry",),
         PEOPLE,
         _ask(m.ListUsers, m.UserList),
+        _ask(m.ListThrottles, m.ThrottleList),
         *_ok(*_ADMIN_CHANGES),
         **SEALED,
         note="each change and each refusal appended to the audit trail",
@@ -351,9 +352,9 @@ FLOWS: tuple[Flow, ...] = (
         keys.grader_standings,
         ("grader",),
         PEOPLE,
-        m.Standings,
+        m.CompetitionChanged,
         **WORDS,
-        note="as each heat starts and ends",
+        note="as each heat starts and ends; no entry: each reader asks",
     ),
     _put(
         keys.grader_changed,
@@ -369,7 +370,7 @@ FLOWS: tuple[Flow, ...] = (
         ("lti",),
         m.Graded,
         **WORDS,
-        note="the lti service passes grades back",
+        note="no student, no score: the lti service asks, passes grades back",
     ),
     # -- worlds (engines and bridges)
     _put(keys.world_frame, WORLDS, ("agent", "runner", *PEOPLE), m.WorldFrame, note="each tick"),

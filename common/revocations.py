@@ -47,6 +47,12 @@ def verified_revocations(registry_key: bytes, signed: SignedRevocations) -> Revo
     return decode(signed.body, RevocationList)
 
 
+def is_ban(revocation: Revocation) -> bool:
+    """Whether a revocation bans its user: the registry kicks each session of a banned
+    account "... by <admin>: banned until <end>: <reason>" (services/registry/admin.py)."""
+    return revocation.kicked and ": banned until " in revocation.reason
+
+
 class RevocationFeed:
     """Keeps a Verifier's revocations in step with the registry."""
 

@@ -45,6 +45,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "services.commands.ban",
         "keep an account out for a while or for good, with a reason (admins)",
     ),
+    "throttles": (
+        "services.commands.throttles",
+        "the registry's login throttles: list them, unlock an account, clear a source (admins)",
+    ),
     "audit": (
         "services.commands.audit",
         "who did what, when, from where: the audit trail, filtered, CSV/JSON (admins)",
@@ -136,6 +140,7 @@ LAB_MODULES = {
     "cryptography": "cryptography",
     "cv2": "opencv-python-headless",
     "jwt": "PyJWT",
+    "scipy": "scipy",
 }
 
 LAB_INSTALL = "pip install 'wart-lab[lab]'"

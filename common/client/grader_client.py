@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import queue
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -20,6 +22,7 @@ from common.messages import (
     ClassQuery,
     ClassTable,
     ClassTables,
+    CompetitionChanged,
     CompetitionQuery,
     CompetitionRun,
     EpisodeReplayGet,
@@ -135,14 +138,34 @@ class GraderClient:
     def watch_standings(
         self, name: str | None, on_standings: Callable[[Standings], None]
     ) -> Callable[[], None]:
-        """Call ``on_standings`` with each sealed standings the grader publishes (one
-        competition, or all with None); the returned function stops watching."""
+        """Call ``on_standings`` with the standings of each competition the grader says
+        changed (one, or all with None), as the grader gives them to this user (the
+        announcement carries no entry); the returned function stops watching."""
         if name is None:
             key = keys.grader_standings_all(self.client.realm, self.grader)
         else:
             key = keys.grader_standings(self.client.realm, self.grader, name)
+        # Asked on a thread of its own, in order: a query inside the Zenoh callback
+        # would hold the session's thread until its answer.
+        changed: queue.Queue[str | None] = queue.Queue()
 
-        return self._watch(key, Standings, on_standings)
+        def ask() -> None:
+            while (competition := changed.get()) is not None:
+                try:
+                    found = self.standings(competition)
+                except LabError as exc:
+                    log.info("the standings of %s: %s", competition, exc)
+                    continue
+                on_standings(found)
+
+        threading.Thread(target=ask, name="standings", daemon=True).start()
+        unwatch = self._watch(key, CompetitionChanged, lambda c: changed.put(c.competition))
+
+        def stop() -> None:
+            unwatch()
+            changed.put(None)
+
+        return stop
 
     def class_tables(self, course: str | None = None) -> list[ClassTable]:
         """The teacher's view of ``course`` (None: of every course I teach; none for a

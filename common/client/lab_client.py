@@ -171,6 +171,8 @@ class LabClient:
         self.kick_from_server = admin.kick_from_server
         self.rename_server = admin.rename_server
         self.unlock_logins = admin.unlock_logins
+        self.throttles = admin.throttles
+        self.clear_throttle = admin.clear_throttle
         self.ban = admin.ban
         self.lift_ban = admin.lift_ban
         self.audit_trail = admin.audit_trail
@@ -506,11 +508,12 @@ class LabClient:
             )
         self._inbox_user = user
 
-    def logout(self) -> None:
+    def logout(self, *, everywhere: bool = False) -> None:
+        """End this session (``everywhere``: every session and saved login of the account)."""
         if self.session is None:
             return
         try:
-            logout = LogoutRequest(keep_resume=self.keep_resume)
+            logout = LogoutRequest(keep_resume=self.keep_resume, everywhere=everywhere)
             self._ask(keys.registry_logout(self.realm), logout, OkReply, "logout")
         finally:
             self.session = None

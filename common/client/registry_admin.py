@@ -21,15 +21,19 @@ from common.messages import (
     AuditList,
     AuditQuery,
     BanUser,
+    ClearThrottle,
     Grant,
     KickFromServer,
     LiftBan,
+    ListThrottles,
     ListUsers,
     Message,
     OkReply,
     RemoveUser,
     RenameServer,
     SetPassword,
+    ThrottleInfo,
+    ThrottleList,
     Ungrant,
     UnlockLogins,
     UserInfo,
@@ -71,9 +75,15 @@ class RegistryAdminCalls:
             f"add user {user}",
         ).detail
 
-    def set_password(self, user: str, password: str) -> str:
+    def set_password(self, user: str, password: str, current: str | None = None) -> str:
+        """``current``: one's own password now (needed unless an admin, or just logged in)."""
+        sealed_current = self._seal_secret(current) if current else None
         return self._admin(
-            SetPassword(user=user, sealed_password=self._seal_secret(password)),
+            SetPassword(
+                user=user,
+                sealed_password=self._seal_secret(password),
+                sealed_current=sealed_current,
+            ),
             f"set the password of {user}",
         ).detail
 
@@ -95,6 +105,14 @@ class RegistryAdminCalls:
 
     def rename_server(self, name: str) -> str:
         return self._admin(RenameServer(name=name), "rename the server").detail
+
+    def throttles(self) -> list[ThrottleInfo]:
+        """Every login throttle with a failure: (kind, key, failures, the wait now)."""
+        return self._admin(ListThrottles(), "list login throttles", ThrottleList).throttles
+
+    def clear_throttle(self, source: str) -> str:
+        """Forget the failed logins of one source or network (a key ``throttles`` names)."""
+        return self._admin(ClearThrottle(source=source), f"clear the throttle of {source}").detail
 
     def unlock_logins(self, user: str) -> str:
         """Forget the account's failed logins (admin): every source may try again at once."""

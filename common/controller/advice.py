@@ -67,7 +67,8 @@ FORBIDDEN: dict[str, str] = {
     "ctypes": "native code is refused in the sandbox",
     "importlib": "a controller imports its modules by name, at the top",
 }
-# Of the lab's own package only the controller API is copied into the sandbox.
+# Of the lab's own package only the controller package is copied into the sandbox (whole:
+# services/runner/stage.py), so its modules import there too.
 ALLOWED_LAB_MODULES = frozenset({"common", "common.controller"})
 
 
@@ -126,7 +127,7 @@ def _module_problem(name: str, line: int) -> Problem | None:
     if top in FORBIDDEN:
         return Problem(line, f"import {name} is not allowed: {FORBIDDEN[top]}")
     if top == "common":
-        if name not in ALLOWED_LAB_MODULES:
+        if name not in ALLOWED_LAB_MODULES and not name.startswith("common.controller."):
             return Problem(
                 line,
                 f"import {name} is not available in the sandbox: of the lab's code only "

@@ -380,6 +380,18 @@ class Standings(Message, frozen=True):
 # --- live changes, and the teacher's view of a class ----------------------------------------
 
 
+class CompetitionChanged(Message, frozen=True):
+    """A competition's standings changed (a heat began or ended, it finished): no entry,
+    no score; each page asks the grader (CompetitionQuery) for what its user may see."""
+
+    competition: Ident
+    assignment: Ident
+    course: Ident
+    status: Literal["running", "finished", "stopped"]
+    heat: NonNegInt = 0
+    at: float = 0.0
+
+
 class GradingChanged(Message, frozen=True):
     """A submission of the course changed state: pages showing that assignment ask again.
 
@@ -445,6 +457,7 @@ __all__ = [
     "ClassRow",
     "ClassTable",
     "ClassTables",
+    "CompetitionChanged",
     "CompetitionQuery",
     "CompetitionRun",
     "EntryCause",

@@ -6,8 +6,9 @@ registry for the account of the platform's user with a sealed
 with the ``lti`` role may ask); the registry makes or matches the account, puts
 it in the course and answers an :class:`LtiAccount` with a resume token the
 page logs in with. The grader publishes a :class:`Graded` (sealed with its
-service session) on ``grader/<g>/graded`` as each submission is graded; the lti
-service posts the score of a launched student's submission to the platform.
+service session) on ``grader/<g>/graded`` as each submission is graded, naming
+neither the student nor the score (anyone may read a put); the lti service asks
+the grader for them and posts a launched student's score to the platform.
 """
 
 from __future__ import annotations
@@ -43,14 +44,12 @@ class LtiAccount(Message, frozen=True):
 
 
 class Graded(Message, frozen=True):
-    """A submission graded (published by the grader once, as it is written)."""
+    """A submission graded (published by the grader once, as it is written): no student,
+    no score; the lti service asks the grader for them (SubmissionsQuery, its lti role)."""
 
     submission: Ident
     assignment: Ident
     course: Ident
-    user: Ident
-    score: float  # the mean with any late penalty taken off: what the leaderboard shows
-    order: Literal["higher", "lower"]
     graded_at: float  # wall-clock seconds
 
 

@@ -8,7 +8,7 @@ recipient's key. See docs/SECURITY.md.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -129,8 +129,11 @@ class LoginReply(Message, frozen=True):
 
 class LogoutRequest(Message, frozen=True):
     # True when a page closes (a reload): its resume token stays good. A person's
-    # "Log out" leaves it False, and the session's resume token is revoked too.
+    # "Log out" leaves it False: every session resumed from the same password
+    # login ends too, with its resume token.
     keep_resume: bool = False
+    # End every session and resume token of the account (a lost or stolen device).
+    everywhere: bool = False
 
 
 # --- directory ----------------------------------------------------------------------
@@ -275,10 +278,13 @@ class AddUser(Message, frozen=True):
 
 
 class SetPassword(Message, frozen=True):
-    """Admins set anyone's password; a user may set their own."""
+    """Admins set anyone's password; a user may set their own with the current one
+    (``sealed_current``, sealed like the new one), or without it from a session that
+    logged in with the password minutes ago (never from a resumed one)."""
 
     user: Ident
     sealed_password: Annotated[bytes, msgspec.Meta(max_length=4096)]
+    sealed_current: Annotated[bytes, msgspec.Meta(max_length=4096)] | None = None
 
 
 class RemoveUser(Message, frozen=True):
@@ -306,6 +312,27 @@ class UnlockLogins(Message, frozen=True):
     """Forget the account's failed logins: every source may try again at once."""
 
     user: Ident
+
+
+class ListThrottles(Message, frozen=True):
+    """An admin asks for every login throttle with a failure (services/registry/throttle.py)."""
+
+
+class ThrottleInfo(Message, frozen=True):
+    kind: Literal["pair", "source", "network", "account"]
+    key: ShortText  # "alice|zenoh:ab12", "zenoh:ab12", "viewer-web:10.0.0.0/24", "alice"
+    failures: int
+    wait_s: float  # how long a throttled attempt is told to wait now (0: not throttled)
+
+
+class ThrottleList(Message, frozen=True):
+    throttles: list[ThrottleInfo]
+
+
+class ClearThrottle(Message, frozen=True):
+    """Forget the failures of one source or network (as ``ThrottleInfo.key`` names it)."""
+
+    source: Annotated[str, msgspec.Meta(min_length=1, max_length=256)]
 
 
 class RenameServer(Message, frozen=True):
@@ -338,6 +365,8 @@ ADMIN_REQUESTS = (
     UnlockLogins,
     BanUser,
     LiftBan,
+    ListThrottles,
+    ClearThrottle,
 )
 
 __all__ = [
@@ -345,6 +374,7 @@ __all__ = [
     "AddUser",
     "BanInfo",
     "BanUser",
+    "ClearThrottle",
     "ContextInfo",
     "ContextInfoRequest",
     "DirectoryReply",
@@ -354,6 +384,7 @@ __all__ = [
     "KickFromServer",
     "KickNotice",
     "LiftBan",
+    "ListThrottles",
     "ListUsers",
     "LoginReply",
     "LoginRequest",
@@ -376,6 +407,8 @@ __all__ = [
     "SetPassword",
     "SignedResume",
     "SignedRevocations",
+    "ThrottleInfo",
+    "ThrottleList",
     "Ungrant",
     "UnlockLogins",
     "UserInfo",

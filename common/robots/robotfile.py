@@ -35,6 +35,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from common.handed_in import load_toml
 from common.robots.schema import UNIQUE_ROLES, ComponentType
 from common.sim2d.specs import (
     AgentTypeSpec,
@@ -148,7 +149,7 @@ def parse(
             source, [Problem(None, "file", f"is not UTF-8 text (byte {exc.start})")]
         ) from None
     try:
-        doc = tomllib.loads(text)
+        doc = load_toml(text)
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+)", str(exc))
         line = int(m.group(1)) if m else None

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 
 from common import keys
+from common.images import ImageRefused, check_image
 from common.messages import CameraFrame, MessageError, TrackedPoses, decode
 from common.recording import schema as s
 from common.recording.writer import pose_record
@@ -73,9 +74,10 @@ class CameraTap:
         return list(self.recorder._runs.values())
 
     def _image(self, payload: bytes, view: str = "image") -> None:
-        try:
+        try:  # a replay decodes what is kept here: only an image of the size it says
             frame = decode(payload, CameraFrame)
-        except MessageError:
+            check_image(frame.data, claimed=(frame.width, frame.height))
+        except (MessageError, ImageRefused):
             return
         topic = s.camera_topic(frame.camera, view)
         record = s.CompressedImage(

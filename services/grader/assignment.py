@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from common.handed_in import load_toml
 from common.keys import is_ident
 from common.messages import MAX_EPISODE_S, MAX_MAP_BYTES
 from common.sim2d import maps
@@ -134,7 +135,7 @@ def parse_assignment(
     if len(raw) > MAX_FILE_BYTES:
         raise AssignmentError(source, [f"the file is over {MAX_FILE_BYTES // 1024} KiB"])
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        data = load_toml(raw.decode("utf-8"))
     except UnicodeDecodeError:
         raise AssignmentError(source, ["the file is not UTF-8 text"]) from None
     except tomllib.TOMLDecodeError as exc:

@@ -324,3 +324,10 @@ class Competitions:
             log.warning("heat %d of %s not recorded: %s", heat, name, exc)
             return ""
         return str(path)
+
+
+def own_entries(standings: Standings, user: str, team: str) -> Standings:
+    """The standings as a student sees them while the assignment's leaderboard is hidden:
+    their own team's entry alone (the others' ranks, names and scores stay here)."""
+    mine = [e for e in standings.entries if e.team == team or e.user == user]
+    return msgspec.structs.replace(standings, entries=mine)

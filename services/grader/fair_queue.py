@@ -76,6 +76,15 @@ class FairQueue(Generic[T]):
                 self._by_user[user] = jobs  # to the end of the rotation
             return user, job
 
+    def remove_user(self, user: str) -> list[T]:
+        """Take every queued job of ``user`` out (a banned account's): those jobs."""
+        with self._cond:
+            gone = list(self._by_user.pop(user, deque()))
+            kept = deque((u, job) for u, job in self._head if u != user)
+            gone += [job for u, job in self._head if u == user]
+            self._head = kept
+            return gone
+
     def __len__(self) -> int:
         with self._cond:
             return len(self._head) + sum(len(j) for j in self._by_user.values())

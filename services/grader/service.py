@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 from typing import cast
 
-import msgspec
 import zenoh
 
 from common import keys, qos
@@ -49,6 +48,7 @@ from common.messages import (
     AssignmentList,
     ClassQuery,
     ClassTables,
+    CompetitionChanged,
     CompetitionQuery,
     CompetitionRun,
     EpisodeReplayGet,
@@ -60,10 +60,8 @@ from common.messages import (
     Message,
     MyAssignments,
     OkReply,
-    RecordingChunk,
     SetPseudonym,
     Standings,
-    SubmissionInfo,
     SubmissionList,
     SubmissionsQuery,
     Submit,
@@ -71,15 +69,16 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from services.grader.assignment import DAY_S, Assignment
+from services.grader.bans import BANNED, BanWatch
 from services.grader.class_view import class_table
-from services.grader.competition import CompetitionError, Competitions
+from services.grader.competition import CompetitionError, Competitions, own_entries
 from services.grader.episode_recordings import EpisodeRecordings
 from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
 from services.grader.leaderboard import leaderboard
 from services.grader.real_attempt import RealAttempt
-from services.grader.visibility import as_student_sees
+from services.grader.results_desk import ResultsDesk
 from services.lab.database import DbError
 
 WORKERS = 2  # submissions graded at once (a runner serves 2 episodes at once)
@@ -128,6 +127,8 @@ class GraderService(Service):
     ) -> None:
         super().__init__(session, realm, name)
         self.verifier = Verifier(registry_key, realm)
+        self._registry_key = registry_key
+        self._bans: BanWatch | None = None
         self.login = login
         self.store = store
         self.workers = workers
@@ -139,6 +140,7 @@ class GraderService(Service):
             store, self.episodes, competitions or Path("competitions"), self._publish
         )
         self.recordings = EpisodeRecordings(graded or Path("graded"))
+        self.results = ResultsDesk(store, self.recordings)
         self._threads: list[threading.Thread] = []
         # Real-robot attempts, one at a time (services/grader/real_attempt.py).
         self._real_stop = threading.Event()
@@ -159,6 +161,9 @@ class GraderService(Service):
             self._reals.put(sub)
         for name in self.competitions.recover():
             self.log.warning("competition %s was running when the grader stopped: stopped", name)
+        self._bans = BanWatch(
+            self.session, self.realm, self._registry_key, self.verifier, self._banned
+        )
         self.serve(grader_request(self.realm, self.ident), self._on_request, workers=2)
         for i in range(self.workers):
             thread = threading.Thread(target=self._work, name=f"grade-{i}", daemon=True)
@@ -169,6 +174,8 @@ class GraderService(Service):
         self._threads.append(thread)
 
     def on_stop(self, timeout: float) -> None:
+        if self._bans is not None:
+            self._bans.close()
         self.queue.close()
         self._real_stop.set()
         self._reals.put(None)
@@ -245,57 +252,14 @@ class GraderService(Service):
         if isinstance(request, SetPseudonym):
             return self._pseudonym(principal.user, assignment, request.pseudonym.strip())
         if isinstance(request, EpisodeReplayGet):
-            return self._replay(principal.user, teacher, assignment, request)
+            return self.results.episode(principal.user, teacher, assignment, request)
         if isinstance(request, SubmissionsQuery):
             # A teacher names a submission by its id alone; anyone else sees only their own.
             user = request.user or (None if teacher and request.submission else principal.user)
             if user != principal.user and not teacher:
                 raise RequestError("forbidden", "only the course's teachers see others' runs")
-            found = [self._replays(s) for s in self.store.submissions(
-                assignment.name, user, request.submission
-            )[-500:]]  # fmt: skip
-            if not teacher:
-                now, released = time.time(), self.store.released_at(assignment.name)
-                found = [as_student_sees(s, assignment, now, released) for s in found]
-            return SubmissionList(submissions=found)
+            return self.results.submissions(assignment, user, request.submission, teacher)
         return self.leaderboard(assignment, teacher)
-
-    def _replays(self, sub: SubmissionInfo) -> SubmissionInfo:
-        """``sub`` with each episode saying whether its recording is still kept to replay."""
-        episodes = [
-            msgspec.structs.replace(
-                e,
-                replay=not e.real
-                and self.recordings.has(sub.assignment, sub.user, sub.submission, e.episode),
-            )
-            for e in sub.episodes
-        ]
-        return msgspec.structs.replace(sub, episodes=episodes)
-
-    def _replay(
-        self, user: str, teacher: bool, a: Assignment, request: EpisodeReplayGet
-    ) -> RecordingChunk:
-        """A chunk of a graded episode's recording: the submission's student, or a teacher."""
-        found = self.store.submissions(a.name, None, request.submission)
-        if not found or (found[0].user != user and not teacher):
-            # Another student's submission is answered as if it did not exist.
-            raise RequestError("not_found", f"you have no submission {request.submission}")
-        owner = found[0].user
-        when = a.shown_after(request.episode, time.time(), self.store.released_at(a.name))
-        if when and not teacher:
-            raise RequestError("forbidden", f"episode {request.episode} is {when}")
-        if not self.recordings.has(a.name, owner, request.submission, request.episode):
-            raise RequestError(
-                "not_found",
-                f"episode {request.episode} of {request.submission} has no replay kept (the "
-                f"newest {self.recordings.keep} submissions of each student keep theirs)",
-            )
-        try:
-            return self.recordings.chunk(
-                a.name, owner, request.submission, request.episode, request.offset
-            )
-        except OSError as exc:
-            raise RequestError("not_found", f"the replay could not be read: {exc}") from None
 
     def _standings(self, principal: Principal, name: str) -> Standings:
         found = self.competitions.standings(name)
@@ -304,7 +268,17 @@ class GraderService(Service):
         role = self.store.role_in(found.course, principal.user)
         if role is None and not principal.has("admin"):
             raise RequestError("forbidden", f"{principal.user} is not in the course {found.course}")
-        return found
+        if role in TEACHERS or principal.has("admin"):
+            return found
+        try:
+            a, _map = self.store.assignment(found.assignment)
+            hidden = a.hidden and time.time() < a.deadline
+        except DbError:  # its assignment is gone: nothing says the standings are public
+            hidden = True
+        if not hidden:
+            return found
+        team = self.store.teams(found.course).get(principal.user, principal.user)
+        return own_entries(found, principal.user, team)
 
     def _class(self, principal: Principal, course: str | None) -> ClassTables:
         """The teacher's view of ``course`` (None: of each course the asker teaches)."""
@@ -351,8 +325,17 @@ class GraderService(Service):
             self.log.warning("could not publish the change of %s: %s", sub.id, exc)
 
     def _publish(self, standings: Standings) -> None:
+        """Say the standings changed: anyone may read a put, so it carries no entry."""
         key = grader_standings(self.realm, self.ident, standings.competition)
-        self.session.put(key, self.login.session.seal(key, standings), **qos.of(grader_standings))
+        changed = CompetitionChanged(
+            competition=standings.competition,
+            assignment=standings.assignment,
+            course=standings.course,
+            status=standings.status,
+            heat=standings.heat,
+            at=standings.at,
+        )
+        self.session.put(key, self.login.session.seal(key, changed), **qos.of(grader_standings))
 
     def _submit(self, principal: Principal, request: Submit, a: Assignment) -> Message:
         now = time.time()
@@ -432,12 +415,24 @@ class GraderService(Service):
 
     # -- grading
 
+    def _banned(self, user: str) -> None:
+        for sub in self.queue.remove_user(user):
+            self._not_graded_banned(sub)
+
+    def _not_graded_banned(self, sub: Pending) -> None:
+        self.log.info("submission %s of %s not graded: the account is banned", sub.id, sub.user)
+        self._fail_uncounted(sub, [], BANNED)
+        self._changed(sub, "failed")
+
     def _work(self) -> None:
         while True:
             item = self.queue.get()
             if item is None:
                 return
             _user, sub = item
+            if self._bans is not None and self._bans.before_ban(sub.user, sub.submitted_at):
+                self._not_graded_banned(sub)  # taken from the queue as the ban came
+                continue
             try:
                 self._grade(sub)
                 self._grader_failures.pop(sub.id, None)
@@ -552,23 +547,18 @@ class GraderService(Service):
                     sub.id, f"{message}; no real-robot attempt: an episode did not pass"
                 )
         self._changed(sub, "graded", a.course)
-        self._announce(sub, a, (graded.mean or 0.0) - penalty)
+        self._announce(sub, a)
 
-    def _announce(self, sub: Pending, a: Assignment, score: float) -> None:
+    def _announce(self, sub: Pending, a: Assignment) -> None:
         """Say a submission is graded (the lti service passes scores back to an LMS).
 
-        Published once, after the score is written: a listener that misses it (down,
-        unreachable) can still read the score from the submissions like anyone.
+        Published once, after the score is written, with no student and no score
+        (anyone may read a put): the lti service asks for them, as a listener that
+        missed this (down, unreachable) does at its next catch-up.
         """
         key = grader_graded(self.realm, self.ident)
         graded = Graded(
-            submission=sub.id,
-            assignment=a.name,
-            course=a.course,
-            user=sub.user,
-            score=score,
-            order=a.order,  # type: ignore[arg-type]
-            graded_at=time.time(),
+            submission=sub.id, assignment=a.name, course=a.course, graded_at=time.time()
         )
         try:
             self.session.put(key, self.login.session.seal(key, graded), **qos.of(grader_graded))

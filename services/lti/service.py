@@ -78,6 +78,7 @@ class LtiService(Service):
         self.passback = Passback(config, store, key)
         self.http = ToolServer(http_host, http_port, self.launcher, self.on_launch, key.jwks())
         self._stop = threading.Event()
+        self._graded = threading.Event()  # a submission was announced graded: ask now
         self._catch_up_wait = CATCH_UP_FIRST_S
         self._catch_up = threading.Thread(target=self._catch_up_loop, name="catch-up", daemon=True)
         try:
@@ -94,6 +95,7 @@ class LtiService(Service):
 
     def on_stop(self, timeout: float) -> None:
         self._stop.set()
+        self._graded.set()
         self.http.stop(timeout / 3)
         self.passback.stop(timeout / 3)
         self._catch_up.join(timeout / 3)
@@ -162,19 +164,21 @@ class LtiService(Service):
         address = self.address.with_user(account.user)
         cookie = (
             f"{cookie_name(address)}={cookie_value(address, account.resume)}; Path=/; "
-            f"Max-Age={LAUNCH_COOKIE_S}; SameSite=Lax"
+            f"Max-Age={LAUNCH_COOKIE_S}; SameSite=Lax; HttpOnly"
+            + ("; Secure" if self.config.page.startswith("https://") else "")
         )
         return Landing(self.config.page, [cookie])
 
     # -- grade passback
 
     def on_graded(self, sample: zenoh.Sample) -> None:
+        """A submission is graded: the announcement names no one and no score (anyone may
+        read it), so the catch-up asks the grader now, off this Zenoh callback."""
         principal, graded = self.verifier.open(str(sample.key_expr), sample.payload, Graded)
         if "service" not in principal.roles:
             raise AuthError("forbidden", f"{principal.user} is not a service: no grades from it")
-        self._pass_back(
-            graded.submission, graded.user, graded.assignment, graded.score, graded.graded_at
-        )
+        self.log.debug("%s graded: asking the grader for its score", graded.submission)
+        self._graded.set()
 
     def _pass_back(
         self, submission: str, user: str, assignment: str, score: float, graded_at: float
@@ -209,20 +213,24 @@ class LtiService(Service):
         return True
 
     def _catch_up_loop(self) -> None:
-        """At start and every CATCH_UP_S: scores graded while no announcement reached us.
-
-        The grader announces each graded submission once; a tool that was down or cut
-        off then asks the grader (its lti role may read submissions) for those of the
-        launched students since their first launch, and keeps the ones it never had.
+        """At start, at each graded announcement and every CATCH_UP_S: ask the grader
+        (its lti role may read submissions) for the scores of the launched students
+        since their first launch, and keep the ones it never had (a tool that was down
+        or cut off catches up the same way).
         """
-        while not self._stop.wait(self._catch_up_wait):
+        while True:
+            announced = self._graded.wait(self._catch_up_wait)
+            self._graded.clear()
+            if self._stop.is_set():
+                return
             self._catch_up_wait = CATCH_UP_S
             try:
-                self.catch_up()
+                self.catch_up(announced)
             except Exception:  # a lapsed login, the session closing: next time
                 self.log.exception("catching up on missed scores failed")
 
-    def catch_up(self) -> int:
+    def catch_up(self, announced: bool = False) -> int:
+        """Keep the scores not kept yet; ``announced``: the grader said one is graded."""
         grader = GraderClient(self.login.client, self.config.grader)
         kept = 0
         for user, assignment, since in self.store.launches():
@@ -238,7 +246,8 @@ class LtiService(Service):
                     continue
                 if s.graded_at < since or self.store.known(s.submission):
                     continue
-                self.log.info("score of %s was not announced to us: catching up", s.submission)
+                if not announced:
+                    self.log.info("score of %s was not announced to us: catching up", s.submission)
                 kept += self._pass_back(
                     s.submission, user, assignment, s.mean - s.penalty, s.graded_at
                 )

@@ -31,6 +31,7 @@ MAX_BODY = 64 * 1024
 
 
 MAX_IN_FLIGHT = 64  # connections served at once; beyond, a 503 at once
+MAX_PER_ADDRESS = 16  # of them from one address: one client's idle flood leaves the rest
 
 
 class _Server(ThreadingHTTPServer):
@@ -44,12 +45,24 @@ class _Server(ThreadingHTTPServer):
         # One thread per connection, and a slow client holds its thread (15 s a read):
         # a flood of idle connections must not grow threads without bound.
         self._slots = threading.BoundedSemaphore(MAX_IN_FLIGHT)
+        self._by_address: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    def _take(self, address: str) -> str:
+        """ "" if a slot is taken for ``address``; else why not."""
+        with self._lock:
+            if self._by_address.get(address, 0) >= MAX_PER_ADDRESS:
+                return f"{MAX_PER_ADDRESS} connections from {address} at once"
+            if not self._slots.acquire(blocking=False):
+                return f"{MAX_IN_FLIGHT} connections at once"
+            self._by_address[address] = self._by_address.get(address, 0) + 1
+            return ""
 
     def process_request(self, request: Any, client_address: Any) -> None:
-        if not self._slots.acquire(blocking=False):
-            log.warning(
-                "busy: %d connections at once; %s refused", MAX_IN_FLIGHT, client_address[0]
-            )
+        address = str(client_address[0])
+        why = self._take(address)
+        if why:
+            log.warning("busy: %s; %s refused", why, address)
             with contextlib.suppress(OSError):
                 request.sendall(
                     b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\n"
@@ -63,6 +76,13 @@ class _Server(ThreadingHTTPServer):
         try:
             super().process_request_thread(request, client_address)
         finally:
+            address = str(client_address[0])
+            with self._lock:
+                left = self._by_address.get(address, 1) - 1
+                if left > 0:
+                    self._by_address[address] = left
+                else:
+                    self._by_address.pop(address, None)
             self._slots.release()
 
 

@@ -76,6 +76,9 @@ MAILBOX_LIMIT = 200
 OPSLIMIT = nacl.pwhash.argon2id.OPSLIMIT_INTERACTIVE
 MEMLIMIT = nacl.pwhash.argon2id.MEMLIMIT_INTERACTIVE
 MIN_PASSWORD = 8
+RESERVED_NAMES = frozenset({"registry", "local", "unknown"})
+"""The registry's own session, and who the audit trail names for the database file's
+tools and for what does not verify: never an account's name."""
 
 
 def hash_password(password: str) -> bytes:
@@ -168,6 +171,8 @@ class RegistryDB:
             check_ident("user", name)
         except ValueError as exc:
             raise DbError("bad_request", str(exc)) from None
+        if name.lower() in RESERVED_NAMES:
+            raise DbError("conflict", f"the name {name} is reserved")
         for role in roles:
             self._valid_grant(acl.ROLE_PREFIX + role, "")
         hashed = hash_password(password) if password is not None else None
@@ -176,6 +181,10 @@ class RegistryDB:
         with self._tx() as db:
             if db.execute("SELECT 1 FROM users WHERE name=?", (name,)).fetchone():
                 raise DbError("conflict", f"user {name} already exists")
+            # alice and ALICE would be two accounts one person cannot tell apart.
+            same = db.execute("SELECT name FROM users WHERE lower(name)=lower(?)", (name,))
+            if (other := same.fetchone()) is not None:
+                raise DbError("conflict", f"user {other[0]} already exists (the same but for case)")
             db.execute("INSERT INTO users(name, created_at) VALUES (?, ?)", (name, time.time()))
             for role in roles:
                 db.execute(
@@ -344,13 +353,14 @@ class RegistryDB:
     def revoke(
         self, session_id: bytes, reason: str, *, kicked: bool = False
     ) -> SessionRecord | None:
+        """The session, revoked now; None if unknown or revoked before."""
         with self._tx() as db:
-            db.execute(
+            cur = db.execute(
                 "UPDATE sessions SET revoked_at=?, reason=?, kicked=? "
                 "WHERE session_id=? AND revoked_at IS NULL",
                 (time.time(), reason, int(kicked), session_id),
             )
-        return self.session(session_id)
+        return self.session(session_id) if cur.rowcount else None
 
     def active_sessions(self, user: str, now: float | None = None) -> list[SessionRecord]:
         now = time.time() if now is None else now

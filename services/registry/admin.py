@@ -28,26 +28,34 @@ from common.messages import (
     AuditList,
     AuditQuery,
     AuditReport,
+    AuthEnvelope,
     BanInfo,
     BanUser,
+    ClearThrottle,
     Grant,
     KickFromServer,
     KickNotice,
     LiftBan,
+    ListThrottles,
     ListUsers,
     Message,
+    MessageError,
     OkReply,
     RemoveUser,
     RenameServer,
     SetPassword,
+    ThrottleInfo,
+    ThrottleList,
     Ungrant,
     UnlockLogins,
     UserInfo,
     UserList,
+    decode,
 )
 from common.service import RequestError
 from services.registry.accounts_db import DbError, RegistryDB
 from services.registry.audit_db import Action, TermStore
+from services.registry.fresh import FreshLogins
 from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, query_source
 
@@ -68,8 +76,10 @@ ACTIONS: dict[type[Message], str] = {
     UnlockLogins: "unlock_logins",
     BanUser: "ban",
     LiftBan: "lift_ban",
+    ListThrottles: "list_throttles",
+    ClearThrottle: "clear_throttle",
 }
-READS = (ListUsers,)  # looking is not a change: only its refusals are recorded
+READS = (ListUsers, ListThrottles)  # looking is not a change: only its refusals are recorded
 
 
 class Revoke(Protocol):
@@ -92,8 +102,8 @@ def when(at: float | None) -> str:
     return "until " + datetime.fromtimestamp(at, UTC).strftime("%Y-%m-%d %H:%M UTC")
 
 
-def source_of(query: zenoh.Query) -> str:
-    """Where a query came from, as the network says: the querier's Zenoh session."""
+def source_of(query: zenoh.Query | zenoh.Sample) -> str:
+    """Where a query (or put) came from, as the network says: the sender's Zenoh session."""
     info = query.source_info
     zid = None if info is None or info.source_id is None else str(info.source_id.zid)
     return query_source(zid)
@@ -114,6 +124,8 @@ def _target(request: Message) -> tuple[str, str]:
         return user, "roles " + ", ".join(request.roles)
     if isinstance(request, RenameServer):
         return "server", request.name
+    if isinstance(request, ClearThrottle):
+        return request.source, ""
     return user, ""
 
 
@@ -136,17 +148,21 @@ class AdminDesk:
         verifier: Verifier,
         throttle: LoginThrottle,
         unsealer: nacl.public.SealedBox,
+        fresh: FreshLogins,
         online_users: Callable[[], list[str]],
         own_session_seal: Callable[[str, Message], bytes],
         revoke: Revoke,
+        announce_ban: Callable[[str, str], None] = lambda _user, _reason: None,
     ) -> None:
         self.session, self.realm = session, realm
         self.db, self.term, self.resumes = db, term, resumes
         self.verifier, self.throttle = verifier, throttle
         self._unsealer = unsealer
+        self.fresh = fresh
         self.online_users = online_users
         self.own_session_seal = own_session_seal
         self._revoke = revoke
+        self.announce_ban = announce_ban
 
     # -- the audit trail
 
@@ -172,12 +188,40 @@ class AdminDesk:
         return AuditList(entries=entries, more=more)
 
     def on_report(self, sample: zenoh.Sample) -> None:
-        """A service's privileged action: only a session with the service role may report."""
-        principal, report = self.verifier.open(str(sample.key_expr), sample.payload, AuditReport)
+        """A service's privileged action: only a session with the service role may report.
+
+        Anything else put here is a forged report: it is recorded as one (``forged_report``,
+        refused, in words), so `wart audit` shows it; a report seen before (a replay, also
+        past a registry restart) is dropped.
+        """
+        key = str(sample.key_expr)
+        try:
+            principal, report = self.verifier.open(key, sample.payload, AuditReport)
+        except (AuthError, MessageError) as exc:
+            words = getattr(exc, "message", None) or str(exc)
+            if "replayed message" not in words:
+                self.audit(
+                    Action("unknown", "forged_report", "audit", "refused", words, source_of(sample))
+                )
+            raise
         if "service" not in principal.roles:
+            claim = f"{report.actor} {report.action} {report.target} {report.outcome}"
+            self.audit(
+                Action(
+                    principal.user,
+                    "forged_report",
+                    report.target,
+                    "refused",
+                    f"{principal.user} is not a service; the report claimed: {claim}",
+                    source_of(sample),
+                )
+            )
             raise AuthError("forbidden", f"{principal.user} is not a service: it reports nothing")
-        # The service's clock says when; one far from ours (or not a time) is not trusted.
         now = time.time()
+        if not self.term.first_report(decode(sample.payload, AuthEnvelope).signature, now):
+            log.info("dropped a report of %s seen before (a replay)", principal.user)
+            return
+        # The service's clock says when; one far from ours (or not a time) is not trusted.
         at = report.at if math.isfinite(report.at) and abs(report.at - now) < 300 else now
         self.audit(
             Action(
@@ -208,7 +252,9 @@ class AdminDesk:
         target, detail = _target(request)
         source = f"{source_of(query)} session {principal.session_id.hex()[:8]}"
         try:
-            if not (isinstance(request, SetPassword) and request.user == principal.user):
+            if isinstance(request, SetPassword) and request.user == principal.user:
+                self._may_set_own_password(principal, request)
+            else:
                 principal.require("admin", f"do {type(request).__name__}")
             try:
                 reply = self._admin(principal, request)
@@ -221,6 +267,39 @@ class AdminDesk:
         if not isinstance(request, READS):
             self.audit(Action(principal.user, action, target, "ok", detail, source))
         return reply
+
+    def _may_set_own_password(self, principal: Principal, request: SetPassword) -> None:
+        """A person sets their own password with the current one, or from a fresh password
+        login: a stolen saved login (a resumed session) cannot lock the owner out."""
+        if principal.has("admin"):
+            return
+        now = time.time()
+        if request.sealed_current is None:
+            if self.fresh.holds(principal.session_id, now):
+                return
+            raise AuthError(
+                "forbidden",
+                "type your current password to set a new one (this session did not just "
+                "log in with it)",
+            )
+        # Guessing the current password here is a password guess like a login's.
+        source = f"session:{principal.session_id.hex()}"
+        self.throttle.check(principal.user, source, now)
+        current = self._password(request.sealed_current)
+        if not self.db.check_credential(principal.user, "password", current):
+            self.throttle.failed(principal.user, source, now)
+            raise RequestError("forbidden", "your current password is wrong")
+        self.throttle.succeeded(principal.user, source, now, own=False)
+
+    def end_sessions(
+        self, user: str, reason: str, *, keep: bytes | None = None, kicked: bool = False
+    ) -> int:
+        """Every live session and resume token of ``user`` ends (but ``keep``): how many."""
+        sessions = [s.session_id for s in self.db.active_sessions(user) if s.session_id != keep]
+        self.fresh.forget(sessions)
+        count = self._revoke(sessions, reason, kicked=kicked)
+        self.resumes.revoke_user(user, reason)
+        return count
 
     def _admin(self, principal: Principal, request: Message) -> Message:
         if isinstance(request, ListUsers):
@@ -235,14 +314,16 @@ class AdminDesk:
             return OkReply(detail=f"user {request.user} added")
         if isinstance(request, SetPassword):
             self.db.set_password(request.user, self._password(request.sealed_password))
-            # A saved login outlives no password: every resume token of the account goes.
-            self.resumes.revoke_user(request.user, "the password was changed")
-            return OkReply(detail=f"password of {request.user} changed")
+            # A session or saved login outlives no password: all go, but the one that
+            # set it (it knows the new password, or is an admin's).
+            count = self.end_sessions(
+                request.user, "the password was changed", keep=principal.session_id
+            )
+            return OkReply(detail=f"password of {request.user} changed ({count} sessions ended)")
         if isinstance(request, RemoveUser):
             if request.user == principal.user:
                 raise RequestError("conflict", "you cannot remove your own account")
-            sessions = [s.session_id for s in self.db.active_sessions(request.user)]
-            self._revoke(sessions, "account removed", kicked=True)
+            self.end_sessions(request.user, "account removed", kicked=True)
             self.db.remove_user(request.user)
             return OkReply(detail=f"user {request.user} removed")
         if isinstance(request, Grant):
@@ -266,6 +347,16 @@ class AdminDesk:
             self.throttle.unlock(request.user)
             log.info("%s unlocked the logins of %s", principal.user, request.user)
             return OkReply(detail=f"failed logins of {request.user} forgotten: they may log in now")
+        if isinstance(request, ListThrottles):
+            buckets = self.throttle.buckets(time.time())
+            return ThrottleList(
+                throttles=[ThrottleInfo(b.kind, b.key[:256], b.failures, b.wait_s) for b in buckets]
+            )
+        if isinstance(request, ClearThrottle):
+            if not self.throttle.clear_source(request.source):
+                raise RequestError("not_found", f"no failed logins from {request.source}")
+            log.info("%s cleared the login throttle of %s", principal.user, request.source)
+            return OkReply(detail=f"failed logins from {request.source} forgotten")
         if isinstance(request, RenameServer):
             self.db.set_setting("server_name", request.name)
             return OkReply(detail=f"server renamed to {request.name}")
@@ -299,7 +390,9 @@ class AdminDesk:
             raise RequestError("conflict", f"{REGISTRY_USER} is the registry itself")
         ban = self.term.ban(request.user, request.reason, principal.user, request.until)
         # A ban is a kick that lasts: the live sessions go the same way.
-        kicked = self._kick(principal, request.user, f"banned {when(ban.until)}: {ban.reason}")
+        reason = f"banned {when(ban.until)}: {ban.reason}"
+        kicked = self._kick(principal, request.user, reason)
+        self.announce_ban(request.user, f"kicked from the server by {principal.user}: {reason}")
         log.info("%s banned %s %s: %s", principal.user, request.user, when(ban.until), ban.reason)
         return OkReply(detail=f"{request.user} banned {when(ban.until)}; {kicked.detail}")
 
@@ -310,10 +403,9 @@ class AdminDesk:
         key = keys.user_inbox(self.realm, user)
         notice = KickNotice(user=user, reason=reason[:256], by=principal.user)
         self.session.put(key, self.own_session_seal(key, notice), **qos.of(keys.user_inbox))
-        sessions = [s.session_id for s in self.db.active_sessions(user)]
         why = f"kicked from the server by {principal.user}: {reason}"
-        count = self._revoke(sessions, why, kicked=True)
-        self.resumes.revoke_user(user, why)  # a page's token too, whichever session it came from
+        # A page's token too, whichever session it came from.
+        count = self.end_sessions(user, why, kicked=True)
         log.info("%s kicked %s from the server (%d sessions)", principal.user, user, count)
         return OkReply(detail=f"{user} kicked ({count} sessions revoked)")
 

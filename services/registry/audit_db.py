@@ -4,14 +4,25 @@ Kept beside accounts_db.py (same SQLite file, same connection and lock). The
 audit table is append-only: triggers refuse every UPDATE and DELETE on it, so
 neither a bug here nor a later tool can rewrite what happened. A ban row goes
 when the ban is lifted; the lifting itself is an audit line.
+
+Refusals cannot bury the trail: the first refusal of one kind (reporter, actor,
+action) in a minute is a line at once, and the rest of that minute are counted
+and written as one line, "N more refused in the minute from 10:42 UTC (the last:
+...)", when the minute is over, the trail is read or the registry stops (a
+registry killed meanwhile loses that count, never the first line). A service's
+report is appended once: its signature's digest is kept (``audit_reports``, past a
+restart) for REPORT_MEMORY_S, longer than a sealed message stays fresh.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
+import threading
 import time
 from dataclasses import dataclass
+from datetime import UTC, datetime
 
 import msgspec
 
@@ -41,6 +52,7 @@ CREATE TABLE IF NOT EXISTS audit (
     reporter TEXT NOT NULL
 );
 CREATE INDEX IF NOT EXISTS audit_at ON audit(at);
+CREATE TABLE IF NOT EXISTS audit_reports (digest BLOB PRIMARY KEY, until REAL NOT NULL);
 CREATE TRIGGER IF NOT EXISTS audit_append_only_update BEFORE UPDATE ON audit
 BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
 CREATE TRIGGER IF NOT EXISTS audit_append_only_delete BEFORE DELETE ON audit
@@ -48,6 +60,7 @@ BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
 """
 
 TEXT_MAX = 256  # AuditEntry's ShortText: longer words are cut, never refused
+REPORT_MEMORY_S = 600.0  # a report's digest is kept this long (sealed ones are fresh ±30 s)
 
 
 @dataclass(frozen=True)
@@ -64,12 +77,23 @@ class Action:
     at: float | None = None
 
 
+@dataclass
+class _Tally:
+    """Refusals of one kind in one minute after its first line: how many, the last."""
+
+    last: Action
+    more: int = 0
+    minute: int = 0
+
+
 class TermStore:
     """Bans and the audit trail in the registry's database."""
 
     def __init__(self, db: RegistryDB) -> None:
         self.db = db
         db.database.create(SCHEMA, "ban and audit tables")
+        self._tally: dict[tuple[str, str, str, int], _Tally] = {}
+        self._tally_lock = threading.Lock()
 
     # -- bans
 
@@ -117,8 +141,54 @@ class TermStore:
     # -- the audit trail
 
     def record(self, entry: Action) -> int:
-        """Append one line; its id."""
+        """Append one line; its id (0: a refusal counted into its minute's line)."""
         at = time.time() if entry.at is None else entry.at
+        self.flush(before=time.time())
+        if entry.outcome == "refused":
+            minute = int(at // 60)
+            key = (entry.reporter, entry.actor, entry.action, minute)
+            with self._tally_lock:
+                tally = self._tally.get(key)
+                if tally is not None:
+                    tally.more += 1
+                    tally.last = entry
+                    return 0
+                self._tally[key] = _Tally(entry, 0, minute)
+        return self._append(entry, at)
+
+    def flush(self, before: float | None = None) -> int:
+        """Write the refusals counted in minutes ended by ``before`` (None: all); how many."""
+        due: list[tuple[_Tally, int]] = []
+        with self._tally_lock:
+            for key, tally in list(self._tally.items()):
+                ended = before is None or tally.minute < int(before // 60)
+                if tally.more and (before is None or ended):
+                    due.append((tally, tally.more))
+                    tally.more = 0
+                if ended and before is not None:
+                    del self._tally[key]
+        for tally, more in due:
+            last = tally.last
+            start = datetime.fromtimestamp(tally.minute * 60, UTC).strftime("%H:%M")
+            words = f"{more} more refused in the minute from {start} UTC (the last: {last.detail})"
+            summary = Action(
+                last.actor, last.action, last.target, "refused", words, last.source, last.reporter
+            )
+            self._append(summary, time.time())
+        return len(due)
+
+    def first_report(self, signature: bytes, now: float) -> bool:
+        """Whether a service's report with this signature is new (then remembered)."""
+        digest = hashlib.blake2b(signature, digest_size=16).digest()
+        with self.db._tx() as con:
+            con.execute("DELETE FROM audit_reports WHERE until < ?", (now,))
+            cur = con.execute(
+                "INSERT OR IGNORE INTO audit_reports(digest, until) VALUES (?, ?)",
+                (digest, now + REPORT_MEMORY_S),
+            )
+            return bool(cur.rowcount)
+
+    def _append(self, entry: Action, at: float) -> int:
         row = (
             at,
             entry.actor[:64],
@@ -139,6 +209,7 @@ class TermStore:
 
     def entries(self, query: AuditQuery) -> tuple[list[AuditEntry], bool]:
         """The lines matching ``query``, newest first, and whether older ones match too."""
+        self.flush()  # what was counted so far shows
         where: list[str] = ["1=1"]
         args: list[object] = []
         for column, value in (

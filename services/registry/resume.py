@@ -8,10 +8,13 @@ id, an end); checking it costs ~0.1 ms. It is:
 - **short-lived**: RESUME_TTL_S (a lab session), never past the session it came from;
 - **good once**: a resume uses it up and the new session gets a new one, so a copied
   token is worth one login, and the owner's next resume then says it was used;
-- **revocable**: its row here is marked revoked by the session's logout (a person's
-  "Log out", not a page closing), a kick, a ban, a password change or the account's
-  removal; the registry alone checks it (it never leaves the registry's hands as a
-  session), so no revocation list needs to travel.
+- **no more than it says**: a resumed session ends when its token would have, so a
+  chain of resumes never outlives the password login it started from;
+- **revocable**: its row here is marked revoked by a person's "Log out" (not a page
+  closing) in any session of its *chain* (the sessions resumed, one from another,
+  since one password login), a kick, a ban, a password change, a logout everywhere
+  or the account's removal; the registry alone checks it (it never leaves the
+  registry's hands as a session), so no revocation list needs to travel.
 
 The rows live in the registry's database beside the sessions (same file, connection
 and lock as accounts_db.py).
@@ -20,6 +23,7 @@ and lock as accounts_db.py).
 from __future__ import annotations
 
 import secrets
+from dataclasses import dataclass
 
 import nacl.exceptions
 
@@ -42,6 +46,12 @@ CREATE TABLE IF NOT EXISTS resumes (
 );
 CREATE INDEX IF NOT EXISTS resumes_user ON resumes(user);
 CREATE INDEX IF NOT EXISTS resumes_session ON resumes(session_id);
+CREATE TABLE IF NOT EXISTS resume_chains (
+    session_id BLOB PRIMARY KEY,
+    chain BLOB NOT NULL,
+    expires_at REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS resume_chains_chain ON resume_chains(chain);
 """
 
 
@@ -64,6 +74,14 @@ AGAIN = "log in with your password"
 
 def _refused(why: str) -> RequestError:
     return RequestError("unauthenticated", f"your saved login {why}: {AGAIN}")
+
+
+@dataclass(frozen=True)
+class Resumed:
+    """A token used up by a resume: what it allowed, and the chain its session joins."""
+
+    grant: ResumeGrant
+    chain: bytes  # the session id of the password login the chain started from
 
 
 class ResumeStore:
@@ -95,9 +113,40 @@ class ResumeStore:
         signature = self.identity.signing_key.sign(body).signature
         return encode(SignedResume(grant=body, signature=signature))
 
-    def use(self, user: str, token: bytes, now: float) -> ResumeGrant:
+    def use(self, user: str, token: bytes, now: float) -> Resumed:
         """Check a presented token and use it up; RequestError in words if it is no good."""
-        return self._check(user, token, now, use_up=True)
+        grant = self._check(user, token, now, use_up=True)
+        with self.db._tx() as db:
+            row = db.execute(
+                "SELECT COALESCE(c.chain, r.session_id) FROM resumes r "
+                "LEFT JOIN resume_chains c ON c.session_id = r.session_id WHERE r.resume_id=?",
+                (grant.resume_id,),
+            ).fetchone()
+        return Resumed(grant, bytes(row[0]) if row else grant.resume_id)
+
+    def link(self, session_id: bytes, chain: bytes, session_end: float, now: float) -> None:
+        """Record that ``session_id`` was resumed within ``chain`` (its logout ends them all)."""
+        with self.db._tx() as db:
+            db.execute(
+                "INSERT OR REPLACE INTO resume_chains(session_id, chain, expires_at) "
+                "VALUES (?, ?, ?)",
+                (session_id, chain, session_end),
+            )
+            db.execute("DELETE FROM resume_chains WHERE expires_at < ?", (now - 60,))
+
+    def chain_of(self, session_id: bytes) -> list[bytes]:
+        """Every session of ``session_id``'s chain, itself and the password login included."""
+        with self.db._tx() as db:
+            row = db.execute(
+                "SELECT chain FROM resume_chains WHERE session_id=?", (session_id,)
+            ).fetchone()
+            chain = bytes(row[0]) if row else session_id
+            rows = db.execute(
+                "SELECT session_id FROM resume_chains WHERE chain=?", (chain,)
+            ).fetchall()
+        found = [session_id, chain]
+        found += [bytes(r[0]) for r in rows]
+        return list(dict.fromkeys(found))
 
     def check(self, user: str, session_id: bytes, token: bytes, now: float) -> None:
         """Is ``token``, the one issued to ``session_id``, still good? Not used up by asking."""
@@ -158,4 +207,4 @@ def _ago(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
-__all__ = ["RESUME_TTL_S", "ResumeStore", "revoke_user"]
+__all__ = ["RESUME_TTL_S", "ResumeStore", "Resumed", "revoke_user"]

@@ -15,6 +15,7 @@ import io
 from dataclasses import dataclass
 
 from common.keys import check_ident
+from services.registry.accounts_db import RESERVED_NAMES
 
 COLUMNS = ("user", "name", "email", "role", "team")
 ROLES = ("student", "teacher")
@@ -101,12 +102,11 @@ def parse_roster(raw: bytes) -> list[RosterRow]:
             row = _row(line, dict(zip(names, (c.strip() for c in cells), strict=True)), problems)
             if row is None:
                 continue
-            if row.user in first_line:
-                problems.append(
-                    f"line {line}: user {row.user} again (first on line {first_line[row.user]})"
-                )
+            if row.user.lower() in first_line:
+                first = first_line[row.user.lower()]
+                problems.append(f"line {line}: user {row.user} again (first on line {first})")
                 continue
-            first_line[row.user] = line
+            first_line[row.user.lower()] = line
             rows.append(row)
             if len(problems) >= MAX_PROBLEMS:
                 break
@@ -125,6 +125,9 @@ def _row(line: int, cells: dict[str, str], problems: list[str]) -> RosterRow | N
         check_ident("user", user)
     except ValueError as exc:
         problems.append(f"line {line}: {exc}")
+        return None
+    if user.lower() in RESERVED_NAMES:
+        problems.append(f"line {line}: the name {user} is reserved")
         return None
     role = (cells.get("role") or "student").lower()
     if role not in ROLES:

@@ -73,6 +73,7 @@ from services.lab.supervisor import AliveWatch
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 from services.registry.admin import REGISTRY_USER, AdminDesk, ban_refusal, source_of
 from services.registry.audit_db import Action, TermStore
+from services.registry.fresh import FreshLogins
 from services.registry.lti_links import LtiLinks
 from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, vouched_source
@@ -81,6 +82,7 @@ log = logging.getLogger("wart.registry")
 
 MAX_TTL = 7 * 24 * 3600.0
 CLAIM_WITHIN_S = 600.0  # a deferred mailbox key is sent this soon after the login, or never
+FRESH_LOGIN_S = 600.0  # a password login may set the password without the current one this long
 DEFAULT_SERVER_NAME = "wart lab"
 
 
@@ -106,8 +108,10 @@ class Registry(Service):
         # Sessions of a password login that left its mailbox key for later: each may
         # send it once (MailboxClaim). Anyone else (a resumed session, a stolen token)
         # must never choose the key the account's offline mail is sealed to.
-        self._claims: dict[bytes, float] = {}
-        self._claims_lock = threading.Lock()
+        self._claims = FreshLogins(CLAIM_WITHIN_S)
+        # Password logins of the last minutes: they may set the password without the
+        # current one; a resumed session (a stolen cookie) must type it.
+        self.fresh = FreshLogins(FRESH_LOGIN_S)
         self.throttle = throttle or LoginThrottle()
         self.verifier = Verifier(identity.verify_key, realm)
         self._unsealer = nacl.public.SealedBox(identity.box_private_key)
@@ -129,9 +133,11 @@ class Registry(Service):
             verifier=self.verifier,
             throttle=self.throttle,
             unsealer=self._unsealer,
+            fresh=self.fresh,
             online_users=self.online_users,
             own_session_seal=self.own_session_seal,
             revoke=self._revoke,
+            announce_ban=self.announce_ban,
         )
 
     # -- lifecycle
@@ -169,6 +175,7 @@ class Registry(Service):
             self._thread.join(timeout)
         if self._watch is not None:
             self._watch.close()
+        self.term.flush()  # the refusals counted this minute get their line
 
     @property
     def server_name(self) -> str:
@@ -208,9 +215,10 @@ class Registry(Service):
         source = self._login_source(query, request)
         now = time.time()
         self.throttle.check(user, source, now, key_login=isinstance(cred, KeyCredential))
+        resumed = None
         if isinstance(cred, ResumeCredential):
             try:
-                self.resumes.use(user, cred.token, now)
+                resumed = self.resumes.use(user, cred.token, now)
             except RequestError:
                 # A bad token counts as a failed login: guessing tokens is throttled too.
                 self.throttle.failed(user, source, now)
@@ -227,9 +235,13 @@ class Registry(Service):
             refusal = ban_refusal(ban)
             self.admin.audit(Action(user, "login", user, "refused", refusal.message, source))
             raise refusal
-        self.throttle.succeeded(user, source)
+        self.throttle.succeeded(user, source, now, own=resumed is None)
         everywhere, scoped, roles = acl.expand(self.db.grants_of(user))
-        ttl = min(request.ttl, MAX_TTL)
+        ends = now + min(request.ttl, MAX_TTL)
+        if resumed is not None:
+            # No longer than the token allowed: a chain of resumes never outlives the
+            # password login it started from, and cannot mint a longer token.
+            ends = min(ends, resumed.grant.expires_at)
         token = SessionToken(
             realm=self.realm,
             user=user,
@@ -239,7 +251,7 @@ class Registry(Service):
             permissions=sorted(everywhere),  # type: ignore[arg-type]
             roles=roles,
             issued_at=now,
-            expires_at=now + ttl,
+            expires_at=ends,
             grants=scoped,  # type: ignore[arg-type]
         )
         self.db.record_session(token.session_id, user, request.box_key, now, token.expires_at)
@@ -249,10 +261,11 @@ class Registry(Service):
         if request.mailbox_key is not None:
             pending = self._mailbox(user, request.mailbox_key)
         elif isinstance(cred, PasswordCredential):
-            with self._claims_lock:
-                for old in [s for s, t in self._claims.items() if now - t > CLAIM_WITHIN_S]:
-                    del self._claims[old]
-                self._claims[token.session_id] = now
+            self._claims.add(token.session_id, now)
+        if isinstance(cred, PasswordCredential):
+            self.fresh.add(token.session_id, now)
+        if resumed is not None:
+            self.resumes.link(token.session_id, resumed.chain, token.expires_at, now)
         resume = None
         if request.resume and not isinstance(cred, KeyCredential):
             resume = self.resumes.issue(user, token.session_id, token.expires_at, now)
@@ -317,7 +330,13 @@ class Registry(Service):
 
     def on_logout(self, query: zenoh.Query) -> Message:
         principal, request = self.verifier.open(str(query.key_expr), query.payload, LogoutRequest)
-        self._revoke([principal.session_id], "logged out", keep_resume=request.keep_resume)
+        if request.everywhere:
+            count = self.admin.end_sessions(principal.user, "logged out everywhere")
+            return OkReply(detail=f"logged out everywhere ({count} sessions ended)")
+        if request.keep_resume:  # a page closing: its saved login stays for the reload
+            self._revoke([principal.session_id], "logged out", keep_resume=True)
+        else:  # a person's "Log out": every session resumed from the same login goes too
+            self._revoke(self.resumes.chain_of(principal.session_id), "logged out")
         return OkReply(detail="logged out")
 
     # -- LTI launches
@@ -382,6 +401,20 @@ class Registry(Service):
         if revoked and self._revocation_pub is not None:
             self._revocation_pub.put(self._signed_revocations(revoked))
         return len(revoked)
+
+    def announce_ban(self, user: str, reason: str) -> None:
+        """A ban reaches every service as a revocation even when the account has no live
+        session (the grader drops its queued submissions): one naming a session of none."""
+        if self._revocation_pub is None:
+            return
+        gone = Revocation(
+            session_id=new_session_id(),
+            user=user,
+            expires_at=time.time() + 3600,
+            reason=reason[:256],
+            kicked=True,
+        )
+        self._revocation_pub.put(self._signed_revocations([gone]))
 
     def _signed_revocations(self, revoked: list[Revocation]) -> bytes:
         body = encode(RevocationList(revoked=revoked, issued_at=time.time()))
@@ -465,9 +498,7 @@ class Registry(Service):
             self.resumes.check(principal.user, principal.session_id, request.token, time.time())
             return OkReply(detail="your saved login is good")
         if isinstance(request, MailboxClaim):
-            with self._claims_lock:
-                at = self._claims.pop(principal.session_id, None)
-            if at is None or time.time() - at > CLAIM_WITHIN_S:
+            if not self._claims.take(principal.session_id, time.time()):
                 raise AuthError(
                     "forbidden",
                     "only a session that logged in with the password may set the mailbox key, "

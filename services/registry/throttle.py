@@ -10,10 +10,17 @@ more: it may narrow a source in the logs, never make a new one.
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import threading
+from dataclasses import dataclass
+from typing import Literal, cast
 
 from common.service import RequestError
+
+Kind = Literal["pair", "source", "network", "account"]
+KNOWN_FOR_S = 30 * 86400.0  # a source the account logged in from stays its own this long
+MAX_BUCKETS = 100_000  # past this (a flood of names), the oldest half is forgotten
 
 
 def query_source(zid: str | None) -> str:
@@ -26,67 +33,118 @@ def vouched_source(gateway: str, address: str) -> str:
     return f"{gateway}:{address}"
 
 
+def network_of(source: str) -> str | None:
+    """The network a vouched address is in (IPv4 /24, IPv6 /56); None for a Zenoh session.
+
+    One guesser with many addresses usually has them in one network: this bucket
+    counts them together.
+    """
+    if source.startswith("zenoh:"):
+        return None
+    gateway, _, address = source.partition(":")
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        return None
+    bits = 24 if ip.version == 4 else 56
+    return f"{gateway}:{ipaddress.ip_network(f'{ip}/{bits}', strict=False)}"
+
+
+@dataclass(frozen=True)
+class Bucket:
+    """One throttle as the admin sees it."""
+
+    kind: Kind
+    key: str  # "alice|zenoh:ab12", "zenoh:ab12", "viewer:10.0.0.0/24", "alice"
+    failures: int
+    wait_s: float  # how long a throttled attempt waits now (0: not throttled)
+
+
 class LoginThrottle:
     """Slows password guessing without letting anyone lock the owner out.
 
-    Three buckets of failed logins, each allowed a few free failures and then an
-    exponential wait (``first_wait``, twice that, four times ... up to ``cap``
-    seconds after the last failure; 2, 4, 8 ... by default):
+    Four kinds of bucket count failed logins, each allowing a few free failures
+    and then an exponential wait (``first_wait``, twice that, four times ... up to
+    ``cap`` s after its last failure; 2, 4, 8 ... by default):
 
     - the *pair* (account, source): one source guessing one account;
     - the *source*, across accounts: one source spraying many accounts;
-    - the *account*, across sources: distributed guessing. This one applies only
-      to sources that already failed on the account ("suspect" sources). A
-      source with no failure on the account is still checked, so the owner's
-      correct password gets through while others guess; a wrong one makes that
-      source suspect, and every later try from it waits the account's time too.
+    - the *network* of a vouched address (:func:`network_of`), across its addresses;
+    - the *account*, across every source: many sessions or addresses guessing one
+      account get a handful of checks a minute between them, however many they are.
 
-    Key logins are exempt from the account bucket (a signature cannot be
-    guessed). The admin's unlock clears every bucket of an account.
+    What keeps an owner in: a source the account logged in from with its password or
+    key (its *own* source, for KNOWN_FOR_S: the classroom's address the page vouches
+    for) answers to its pair alone, with ``own_free`` free failures (a classmate's
+    few guesses leave alice's next login alone) and a short cap (``own_cap``). A
+    classmate guessing on from that shared address gets a check every ``own_cap`` s
+    at most, and alice, with the right password, waits no longer than that: a
+    growing delay, never a lock a third party can hold. Every other source answers
+    to all four buckets. Key logins skip the account bucket (a signature cannot be
+    guessed). A throttled attempt is refused
+    before any password check and is not counted.
 
-    The source is :func:`query_source` or :func:`vouched_source` (module
-    docstring). A client that opens a fresh Zenoh session for every attempt is a
-    new source each time, slowed only by the session's setup, the argon2id cost
-    of each check and the router's access control (docs/SECURITY.md says so).
+    The admin lists every bucket (:meth:`buckets`) and clears an account's
+    (:meth:`unlock`: its pair, account, and the sources and networks that failed
+    on it) or a source's (:meth:`clear_source`).
     """
 
     def __init__(
         self,
         free: int = 3,
         source_free: int = 10,
-        account_free: int = 10,
+        network_free: int = 30,
+        account_free: int = 5,
+        own_free: int = 5,
         cap: float = 300.0,
+        own_cap: float = 60.0,
         first_wait: float = 2.0,
     ) -> None:
         if not 0 < first_wait <= cap:
             raise ValueError(f"the first wait must be above 0 s and at most {cap:g} s")
         self.first_wait = first_wait
-        self.free = free
-        self.source_free = source_free
-        self.account_free = account_free
+        self.free = {"pair": free, "source": source_free, "network": network_free}
+        self.free["account"] = account_free
+        self.own_free = own_free
         self.cap = cap
+        self.own_cap = max(own_cap, first_wait)
         self._lock = threading.Lock()
-        self._fails: dict[str, tuple[int, float]] = {}  # bucket -> (failures, last failure)
+        self._fails: dict[tuple[str, str], tuple[int, float]] = {}  # bucket -> (n, last)
+        self._own: dict[tuple[str, str], float] = {}  # (account, source) -> last success
 
-    def _wait(self, bucket: str, free: int, now: float) -> float:
+    def _wait(
+        self, bucket: tuple[str, str], now: float, cap: float, free: int | None = None
+    ) -> float:
         count, last = self._fails.get(bucket, (0, 0.0))
+        free = self.free[bucket[0]] if free is None else free
         if count < free:
             return 0.0
-        return max(0.0, last + min(self.cap, self.first_wait * 2.0 ** (count - free)) - now)
+        return max(0.0, last + min(cap, self.first_wait * 2.0 ** (count - free)) - now)
 
     @staticmethod
-    def _buckets(user: str, source: str) -> tuple[str, str, str]:
-        return f"pair:{user}|{source}", f"source:{source}", f"user:{user}"
+    def _buckets(user: str, source: str) -> list[tuple[str, str]]:
+        found = [("pair", f"{user}|{source}"), ("source", source), ("account", user)]
+        network = network_of(source)
+        if network is not None:
+            found.append(("network", network))
+        return found
+
+    def is_own(self, user: str, source: str, now: float) -> bool:
+        with self._lock:
+            at = self._own.get((user, source))
+        return at is not None and now - at < KNOWN_FOR_S
 
     def check(self, user: str, source: str, now: float, *, key_login: bool = False) -> None:
-        pair, by_source, account = self._buckets(user, source)
+        own = self.is_own(user, source, now)
         with self._lock:
-            wait = max(
-                self._wait(pair, self.free, now), self._wait(by_source, self.source_free, now)
-            )
-            suspect = pair in self._fails
-            if suspect and not key_login:
-                wait = max(wait, self._wait(account, self.account_free, now))
+            if own:
+                wait = self._wait(("pair", f"{user}|{source}"), now, self.own_cap, self.own_free)
+            else:
+                wait = max(
+                    self._wait(b, now, self.cap)
+                    for b in self._buckets(user, source)
+                    if not (key_login and b[0] == "account")
+                )
         if wait > 0:
             raise RequestError(
                 "rate_limited",
@@ -99,24 +157,62 @@ class LoginThrottle:
             for bucket in self._buckets(user, source):
                 count, _ = self._fails.get(bucket, (0, 0.0))
                 self._fails[bucket] = (count + 1, now)
-            if len(self._fails) > 100_000:  # a flood of names: forget the oldest half
-                for bucket in sorted(self._fails, key=lambda b: self._fails[b][1])[:50_000]:
+            if len(self._fails) > MAX_BUCKETS:
+                for bucket in sorted(self._fails, key=lambda b: self._fails[b][1])[
+                    : MAX_BUCKETS // 2
+                ]:
                     del self._fails[bucket]
 
-    def succeeded(self, user: str, source: str) -> None:
-        """The right credential from this source: its pair is clean again."""
+    def succeeded(self, user: str, source: str, now: float, *, own: bool = True) -> None:
+        """The right credential from this source: its pair is clean, and (``own``: a
+        password or key, not a saved login that may be a copy) it is the account's."""
         with self._lock:
-            self._fails.pop(self._buckets(user, source)[0], None)
+            self._fails.pop(("pair", f"{user}|{source}"), None)
+            if not own:
+                return
+            if len(self._own) > MAX_BUCKETS:
+                self._own = {k: t for k, t in self._own.items() if now - t < KNOWN_FOR_S}
+            self._own[(user, source)] = now
 
     def failures(self, user: str) -> int:
         """Failed logins on the account since its last unlock (for the admin's list)."""
         with self._lock:
-            return self._fails.get(f"user:{user}", (0, 0.0))[0]
+            return self._fails.get(("account", user), (0, 0.0))[0]
+
+    def buckets(self, now: float) -> list[Bucket]:
+        """Every bucket with a failure, most failures first."""
+        with self._lock:
+            found = [
+                Bucket(cast(Kind, kind), key, count, self._wait((kind, key), now, self.cap))
+                for (kind, key), (count, _) in self._fails.items()
+            ]
+        return sorted(found, key=lambda b: (-b.failures, b.kind, b.key))
 
     def unlock(self, user: str) -> int:
-        """Forget every failure on the account (admin): how many buckets were cleared."""
+        """Forget the failures on the account (admin), and of the sources that made them.
+
+        A shared address (a classroom's) whose guesses at alice also slowed its other
+        logins is clear again too. How many buckets were cleared.
+        """
         with self._lock:
-            gone = [b for b in self._fails if b == f"user:{user}" or b.startswith(f"pair:{user}|")]
+            pairs = [b for b in self._fails if b[0] == "pair" and b[1].startswith(f"{user}|")]
+            sources = {b[1].partition("|")[2] for b in pairs}
+            gone = [*pairs, ("account", user)]
+            for source in sources:
+                gone.append(("source", source))
+                network = network_of(source)
+                if network is not None:
+                    gone.append(("network", network))
+            return sum(self._fails.pop(b, None) is not None for b in gone)
+
+    def clear_source(self, source: str) -> int:
+        """Forget every failure from this source or network (admin): how many buckets."""
+        with self._lock:
+            gone = [
+                b
+                for b in self._fails
+                if b[1] == source or (b[0] == "pair" and b[1].endswith(f"|{source}"))
+            ]
             for bucket in gone:
                 del self._fails[bucket]
             return len(gone)

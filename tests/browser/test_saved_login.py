@@ -1,6 +1,6 @@
 """A saved login in Chromium against a real lab (issue 38): reloading the page logs the
-browser in again without the password; "Log out" ends it; a revoked one is refused
-in words and the password form comes back."""
+browser in again without the password; the cookie is HttpOnly and SameSite=Strict;
+"Log out" ends it; a revoked one is refused in words and the password form comes back."""
 
 from __future__ import annotations
 
@@ -41,6 +41,10 @@ def test_a_reload_resumes_without_the_password_and_log_out_forgets(open_page, la
     page = open_page("alice")
     log_in(page, lab, "alice")
     _wait_saved(page, True)
+    # No script in the page can read it (an injected one included), nor another site send it.
+    (saved,) = [c for c in page.p.context.cookies() if c["name"].startswith(PREFIX)]
+    assert saved["httpOnly"] and saved["sameSite"] == "Strict" and not saved["secure"]
+    assert PREFIX not in page.p.evaluate("document.cookie")
     page.p.reload()
     page.wait_ready()
     # No password typed: the lab's tab comes back by itself, as alice.

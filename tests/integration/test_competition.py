@@ -18,11 +18,13 @@ from pathlib import Path
 
 import pytest
 
+from common import keys
 from common.client.grader_client import GraderClient
 from common.lab_errors import LabError
 from common.messages import Standings
 from common.recording.reader import read_recording
 from common.recording.replay import Timeline
+from common.service import close_session
 from tests.conftest import Procs, Router, needs_sandbox
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.kit.agentkit import start_runner, together
@@ -57,6 +59,13 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
 
 
 def test_a_competition_of_two_teams_and_a_solo_student(lab: ProcessLab, tmp_path: Path) -> None:
+    # Someone who never logged in listens to everything the grader puts: no student's
+    # name (nor so their scores) may be in it; each page asks for what it may see.
+    spy = lab.zsession()
+    heard: list[bytes] = []
+    spy.declare_subscriber(
+        f"{keys.realm_root(lab.realm)}/grader/**", lambda s: heard.append(s.payload.to_bytes())
+    )
     add_assignment(lab, tmp_path, "reach-goal", episodes="1", seeds="[3]")
     add_assignment(lab, tmp_path, "empty-one", episodes="1", seeds="[3]")
     pw = tmp_path / "pw"
@@ -133,6 +142,10 @@ def test_a_competition_of_two_teams_and_a_solo_student(lab: ProcessLab, tmp_path
         assert recording.end is not None and recording.end.reason.startswith(e.cause)
         assert recording.poses, "the heat's path is recorded"
         assert recording.source is not None and not recording.truncated
+    assert heard  # the grader's announcements of gradings, heats, the end
+    for student in (b"alice", b"bob", b"carol", b"dan"):
+        assert not [p for p in heard if student in p], f"{student!r} in a put anyone reads"
+    close_session(spy)
     red = read_recording(by_team["red"].recording)
     path = red.poses
     assert path[-1].record.pose.position.x > path[0].record.pose.position.x  # it drove forward

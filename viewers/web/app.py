@@ -37,6 +37,7 @@ from viewers.web.connector import GatewayLogin, LiveConnector
 from viewers.web.login import LoginDesk
 from viewers.web.parking import DEFAULT_GRACE_S, ParkingLot
 from viewers.web.pump import DEFAULT_RATE, FramePump
+from viewers.web.saved_login import CookieDesk
 from viewers.web.viser_fast import make_loop_safe
 
 log = logging.getLogger("wart.viewer")
@@ -76,6 +77,7 @@ class WebViewer:
         self.connector = connector
         # A page that goes keeps its lab sessions this long for a reload (parking.py).
         self.parking = ParkingLot(reload_grace_s)
+        self.cookies = CookieDesk()  # saved logins' HttpOnly cookies (saved_login.py)
         self.default_address = default_address or LabAddress("127.0.0.1")
         self.saved = SavedConnections(data_dir / "connections.json" if data_dir else None)
         self.pump = FramePump(rate)
@@ -124,10 +126,21 @@ class WebViewer:
             self.default_address,
             self.logins,
             self.parking,
+            self.cookies if self._cookies_served(client) else None,
         )
         with self._lock:
             self.sessions[client.client_id] = session
         log.info("browser %d connected (%d open)", client.client_id, len(self.sessions))
+
+    def _cookies_served(self, client: viser.ClientHandle) -> bool:
+        if self.cookies.install(self.server, client.client_id):
+            return True
+        log.warning(
+            "viser's web server is not the one we know: browser %d gets no saved login "
+            "(viewers/web/saved_login.py)",
+            client.client_id,
+        )
+        return False
 
     def _disconnected(self, client: viser.ClientHandle) -> None:
         with self._lock:

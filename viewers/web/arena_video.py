@@ -27,6 +27,7 @@ import viser
 import zenoh
 
 from common import keys
+from common.images import ImageRefused, check_image
 from common.messages import CameraFrame, CameraStatus, MessageError, decode
 from viewers.web import geometry as geo
 from viewers.web.world_view import WorldView
@@ -46,6 +47,8 @@ class CameraFeed:
         self.status: CameraStatus | None = None
         self.heard_at: float | None = None  # the last message of any kind (wall clock)
         self.frames = 0
+        self.refused = 0  # frames not decoded: not a PNG or JPEG of the size they say
+        self._refused_at = -1
         self._sub = session.declare_subscriber(keys.camera_all(realm, world), self._on)
 
     def _on(self, sample: zenoh.Sample) -> None:
@@ -69,9 +72,14 @@ class CameraFeed:
                 return None
             if self._decoded is not None and self._decoded[0] == count:
                 return self._decoded
+            if count == self._refused_at:
+                return self._decoded
             try:
                 frame = decode(raw, CameraFrame)
-            except MessageError:
+                check_image(frame.data, claimed=(frame.width, frame.height))
+            except (MessageError, ImageRefused):  # never decoded: the last frame stays
+                self._refused_at = count
+                self.refused += 1
                 return self._decoded
             image = cv2.imdecode(np.frombuffer(frame.data, np.uint8), cv2.IMREAD_COLOR)
             if image is None:  # a frame that fails to decode: keep showing the last
@@ -194,6 +202,10 @@ class RecordedCamera:
         if i < 0:
             return None
         if self._decoded is None or self._decoded[0] != i:
+            try:  # a recording is a file from anywhere: its frames are checked too
+                check_image(self._jpegs[i])
+            except ImageRefused:
+                return self._decoded
             image = cv2.imdecode(np.frombuffer(self._jpegs[i], np.uint8), cv2.IMREAD_COLOR)
             if image is None:
                 return self._decoded

@@ -30,11 +30,11 @@ from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.page_style import add_page_style
 from viewers.web.parking import ParkedLab, ParkingLot
 from viewers.web.pump import FramePump
-from viewers.web.saved_login import saved_login_html
+from viewers.web.saved_login import CookieDesk, saved_login_cookie
 from viewers.web.sure_clicks import add_sure_clicks
 from viewers.web.tabs import PageTitle, TabSwitcher, tab_title
 from viewers.web.text import escape_md
-from viewers.web.viser_fast import browser_address, browser_cookies
+from viewers.web.viser_fast import browser_address, browser_cookies, browser_origin
 from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
@@ -58,8 +58,11 @@ class BrowserSession:
         default_address: LabAddress,
         logins: LoginDesk,
         parking: ParkingLot | None = None,
+        cookies: CookieDesk | None = None,
     ) -> None:
         self.client = client
+        # Sets and deletes saved logins (saved_login.py); None: this viewer saves none.
+        self.cookies = cookies
         # (not `parking or ...`: an empty lot has no length, and is falsy)
         self.parking = parking if parking is not None else ParkingLot(grace_s=0)
         self.logins = logins
@@ -95,7 +98,7 @@ class BrowserSession:
             self.connect_button = gui.add_button("Connect", color="green", icon=viser.Icon.PLUG)
             self.save_button = gui.add_button("Save address", icon=viser.Icon.STAR)
         self.notice = gui.add_markdown("", visible=False)
-        self._cookie = gui.add_html("")  # sets and deletes saved logins (saved_login.py)
+        self._cookie = gui.add_html("")  # fetches the cookie's ticket (saved_login.py)
         self._cookies_set = 0
         self.tabs = gui.add_tab_group()
         self.home = self.tabs.add_tab("Start", icon=viser.Icon.INFO_CIRCLE)
@@ -227,8 +230,12 @@ class BrowserSession:
 
     def _save_login(self, address: LabAddress, token: bytes | None) -> None:
         """Keep (or with None, forget) this lab's saved login in the browser's cookie."""
+        if self.cookies is None:
+            return
         self._cookies_set += 1
-        self._cookie.content = saved_login_html(address, token, self._cookies_set)
+        secure = browser_origin(self.client).startswith("https://")
+        cookie = saved_login_cookie(address, token, secure=secure)
+        self._cookie.content = self.cookies.html(cookie, self._cookies_set)
 
     def _logged_in(
         self, connection: LabConnection, address: LabAddress, kept: ParkedLab | None = None

@@ -45,9 +45,11 @@ class DemoAdmin:
             self._lab.accounts[user] = (password, perms)
         return f"added {user}"
 
-    def set_password(self, user: str, password: str) -> str:
+    def set_password(self, user: str, password: str, current: str | None = None) -> str:
         if user != self._user:  # one's own password needs no permission, as in a lab
             self._need("admin", "manage accounts")
+        elif current is not None and current != self._lab.accounts.get(user, ("",))[0]:
+            raise LabError("your current password is wrong")
         if len(password) < 8:
             raise LabError("a password needs at least 8 characters")
         with self._lab._lock:

@@ -39,8 +39,8 @@ class LiveAdmin:
     def add_account(self, user: str, password: str, roles: tuple[str, ...]) -> str:
         return str(self._call(lambda: self.client.add_user(user, password, roles)))
 
-    def set_password(self, user: str, password: str) -> str:
-        return str(self._call(lambda: self.client.set_password(user, password)))
+    def set_password(self, user: str, password: str, current: str | None = None) -> str:
+        return str(self._call(lambda: self.client.set_password(user, password, current)))
 
     def remove_account(self, user: str) -> str:
         return str(self._call(lambda: self.client.remove_user(user)))

@@ -100,6 +100,9 @@ class LabTab:
             with gui.add_folder("My account", expand_by_default=False):
                 # A class's first passwords come on paper (wart users import): each
                 # student sets their own here.
+                # The current one too, unless this page just logged in with it: a saved
+                # login (a cookie) alone never sets the password.
+                self.my_current = add_masked_text(gui, "My current password")
                 self.my_password = add_masked_text(gui, "My new password", submit="Set my password")
                 self.my_password_button = gui.add_button("Set my password")
                 self.my_password_said = gui.add_markdown("")
@@ -130,13 +133,15 @@ class LabTab:
         return self.connection.address.label
 
     def set_my_password(self) -> None:
-        password = self.my_password.value
+        password, current = self.my_password.value, self.my_current.value
         set_value(self.my_password, "")  # never left on screen
+        set_value(self.my_current, "")
         if not password or len(password) > MAX_PASSWORD:  # the registry says the minimum
             self.my_password_said.content = "_Type your new password first._"
             return
         try:
-            self.connection.admin.set_password(self.connection.user, password)
+            admin = self.connection.admin
+            admin.set_password(self.connection.user, password, current[:MAX_PASSWORD] or None)
         except LabError as exc:
             self.my_password_said.content = f"_Refused: {escape_md(str(exc))}_"
             return

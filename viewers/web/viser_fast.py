@@ -204,9 +204,26 @@ def browser_address(client: viser.ClientHandle) -> str:
 def browser_cookies(client: viser.ClientHandle) -> str:
     """The Cookie header of the browser's websocket handshake ("" if none or unknown).
 
+    A browser sends the page's cookies with it (same origin; SameSite=Strict ones
+    never from another site's page).
+    """
+    return handshake_header(client, "Cookie")
+
+
+def browser_origin(client: viser.ClientHandle) -> str:
+    """The Origin of the browser's websocket handshake: where the page came from.
+
+    Written by the browser, never by a script: ``https://...`` means the page was
+    served over HTTPS (behind a TLS proxy), so its cookies may be Secure.
+    """
+    return handshake_header(client, "Origin")
+
+
+def handshake_header(client: viser.ClientHandle, name: str) -> str:
+    """A header of the browser's websocket handshake ("" if none or unknown).
+
     Read where browser_address reads (viser 1.1.1 keeps the websockets connection,
-    whose ``request`` is the handshake). A browser sends the page's cookies with it
-    (same origin; SameSite=Strict ones never from another site's page).
+    whose ``request`` is the handshake).
     """
     server = getattr(getattr(client, "_viser_server", None), "_websock_server", None)
     connections = getattr(server, "_live_connections", None)
@@ -216,6 +233,6 @@ def browser_cookies(client: viser.ClientHandle) -> str:
     if headers is None:
         return ""
     try:
-        return str(headers.get("Cookie", ""))[:8192]
+        return str(headers.get(name, ""))[:8192]
     except Exception:  # a headers object we do not know
         return ""

@@ -23,6 +23,7 @@ NESTED = {
     "AuthEnvelope": "wraps every sealed message",
     "AuditEntry": "rows of AuditList",
     "BanInfo": "rows of UserList",
+    "ThrottleInfo": "rows of ThrottleList",
     "ChatLine": "inside RoomEvent and JoinReply",
     "ClassTable": "inside ClassTables",
     "KeyCredential": "inside LoginRequest",

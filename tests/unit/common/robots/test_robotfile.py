@@ -94,6 +94,13 @@ def test_broken_toml_says_the_line() -> None:
     assert message.startswith("scout.toml:8: file: is not valid TOML")
 
 
+def test_a_file_nested_thousands_deep_is_refused_in_words_not_a_traceback() -> None:
+    message = _refused(GOOD + "deep = " + "[" * 5000 + "]" * 5000 + "\n")
+    assert message == (
+        "scout.toml: file: is not valid TOML: arrays or tables nested more than 64 deep"
+    )
+
+
 def test_a_robot_needs_a_body_and_a_drive_and_one_of_each_ring() -> None:
     no_drive = GOOD.split("[components.drive]")[0]
     assert "a robot needs a drive component" in _refused(no_drive)

@@ -9,7 +9,13 @@ import pytest
 
 from common.messages import StandingEntry, Standings
 from services.grader.assignment import parse_assignment
-from services.grader.competition import CompetitionError, Competitions, pick_entries, ranked
+from services.grader.competition import (
+    CompetitionError,
+    Competitions,
+    own_entries,
+    pick_entries,
+    ranked,
+)
 from services.grader.grading_db import GradingStore, Pending
 from tests.unit.services.grader.test_grading_rules import GOOD, MAPS
 
@@ -107,3 +113,13 @@ def test_a_competition_the_grader_stopped_mid_way_is_marked_stopped(tmp_path: Pa
         "not run: the grader stopped during the competition"
     ] * 2
     assert again.recover() == []  # once
+
+
+def test_a_hidden_leaderboards_standings_show_a_student_their_own_teams_entry_alone() -> None:
+    st = Standings(
+        competition="final", assignment="reach-goal", course="c", score_name="score", unit="",
+        order="higher", status="running", heats=3,
+        entries=[entry("red", 1, 90.0), entry("blue", 2, 5.0), entry("carol", 3, None)],
+    )  # fmt: skip
+    assert [e.team for e in own_entries(st, "dan", "red").entries] == ["red"]
+    assert own_entries(st, "eve", "eve").entries == []  # no entry of hers: nothing

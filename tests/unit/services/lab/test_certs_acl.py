@@ -42,6 +42,10 @@ def test_only_engines_and_bridges_publish_frames_and_only_agents_publish_leases(
     assert publishers("world/*/frame") == {"engine", "bridge"}
     assert publishers("world/*/agent/*/sensors") == {"engine", "bridge"}
     assert publishers("world/*/agent/*/lease") == {"agent"}
+    # Tracked poses and a camera's words come from the camera's certificate alone.
+    assert publishers("world/*/tracked") == {"camera"}
+    assert publishers("world/*/camera/*/status") == {"camera"}
+    assert publishers("world/*/camera/*/floor") == {"camera"}
     assert "student" not in {r for r, gs in ROLE_GRANTS.items() for g in gs if g.verb == "serve"}
 
 

@@ -44,3 +44,26 @@ def test_idle_connections_beyond_the_cap_are_refused_and_service_resumes(
     else:
         raise AssertionError("the tool never served again after the idle connections closed")
     server.stop(5)
+
+
+def test_sixty_four_idle_connections_from_one_address_leave_the_tool_to_everyone_else() -> None:
+    launcher: Any = object()
+    server = web.ToolServer("127.0.0.1", 0, launcher, lambda launch: None, {"keys": []})  # type: ignore[arg-type,return-value]
+    server.start()
+    idle = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(64)]
+    try:
+        # Another browser (another loopback address) is served at once...
+        with socket.create_connection(
+            ("127.0.0.1", server.port), timeout=5, source_address=("127.0.0.2", 0)
+        ) as other:
+            other.sendall(b"GET /lti/jwks HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            status = other.recv(200).split(b"\r\n")[0]
+            assert b" 200 " in status, status
+        # ...while the flooding address gets the 503 beyond its share.
+        with socket.create_connection(("127.0.0.1", server.port), timeout=5) as more:
+            more.sendall(b"GET /lti/jwks HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert more.recv(200).startswith(b"HTTP/1.1 503 Service Unavailable")
+    finally:
+        for s in idle:
+            s.close()
+        server.stop(5)

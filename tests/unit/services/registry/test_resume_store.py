@@ -31,7 +31,7 @@ def test_a_token_names_its_user_is_good_once_and_lasts_no_longer_than_its_sessio
     now = time.time()
     token = store.issue("bob", SID, now + 12 * 3600, now)
     assert resume_user(token) == "bob"
-    grant = store.use("bob", token, now + 1)
+    grant = store.use("bob", token, now + 1).grant
     assert grant.expires_at == pytest.approx(now + RESUME_TTL_S)
     with pytest.raises(RequestError, match=r"was revoked .used") as info:
         store.use("bob", token, now + 2)
@@ -79,7 +79,7 @@ def test_logout_kick_and_password_change_revoke_with_their_reason(store: ResumeS
     store.revoke_sessions([SID], "logged out")
     with pytest.raises(RequestError, match=r"was revoked \(logged out\)"):
         store.use("bob", mine, now)
-    assert store.use("bob", elsewhere, now).user == "bob"  # another session's stays good
+    assert store.use("bob", elsewhere, now).grant.user == "bob"  # another session's stays good
     again = store.issue("bob", other_sid, now + 3600, now)
     assert resume.revoke_user(store.db, "bob", "the password was changed") == 1
     with pytest.raises(RequestError, match="the password was changed"):

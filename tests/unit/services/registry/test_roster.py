@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -39,6 +40,8 @@ def test_a_roster_is_read_in_any_column_order_case_and_separator() -> None:
         (b"user,user\nana,ana\n", "line 1: column user twice"),
         (b"user,role\nana,professor\n", "line 2: role 'professor' for ana: one of student"),
         (b"user\nana\nbob\nana\n", "line 4: user ana again (first on line 2)"),
+        (b"user\nana\nANA\n", "line 3: user ANA again (first on line 2)"),
+        (b"user\nregistry\n", "line 2: the name registry is reserved"),
         (b"user\nAna Maria\n", "line 2: user 'Ana Maria' is not a valid name"),
         (b"user,team\nana\n", "line 2: 1 cells for 2 columns"),
         (b"user\nana\nb\xe9a\n", "line 3: not UTF-8 text"),
@@ -107,3 +110,12 @@ def test_an_import_that_fails_halfway_writes_nothing(
     assert made == ["ana", "bob"]  # it got that far ...
     assert not store.db.user_exists("bob")  # ... and none of it stayed
     assert store.courses() == []
+
+
+def test_an_account_beside_one_that_differs_only_by_case_or_a_reserved_name_is_refused(
+    store: CourseStore,
+) -> None:
+    for name, said in (("ANA", "user ana already exists (the same but for case)"),
+                       ("Registry", "the name Registry is reserved")):  # fmt: skip
+        with pytest.raises(accounts_db.DbError, match=re.escape(said)):
+            store.db.add_user(name, ["student"], password="a long password")

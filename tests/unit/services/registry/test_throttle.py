@@ -8,7 +8,7 @@ import pytest
 
 from common.service import RequestError
 from services.registry.main import main as registry_main
-from services.registry.throttle import LoginThrottle, query_source
+from services.registry.throttle import LoginThrottle, network_of, query_source, vouched_source
 
 SOURCE = query_source("abc")
 
@@ -70,3 +70,43 @@ def test_the_registry_refuses_a_login_wait_that_is_not_a_number(
     with pytest.raises(SystemExit):
         registry_main(_registry_argv(tmp_path, "soon"))
     assert "--login-wait: invalid float value: 'soon'" in capsys.readouterr().err
+
+
+def test_the_owners_place_answers_to_its_pair_alone_and_the_account_holds_new_places() -> None:
+    throttle = LoginThrottle(first_wait=60.0)
+    classroom = vouched_source("viewer", "203.0.113.7")
+    throttle.succeeded("alice", classroom, 0.0)  # she logged in from there
+    for i in range(5):  # five guesses from five new places put the account under attack
+        throttle.failed("alice", query_source(f"s{i}"), 1.0)
+    with pytest.raises(RequestError, match="try again in 60 s"):
+        throttle.check("alice", query_source("new"), 1.0)
+    throttle.check("alice", classroom, 1.0)  # her own place: checked
+    for _ in range(5):  # a classmate guessing from the shared address
+        throttle.failed("alice", classroom, 2.0)
+    with pytest.raises(RequestError) as info:
+        throttle.check("alice", classroom, 2.0)
+    assert info.value.retry_after <= 60.0  # a short wait, never a lock
+
+
+def test_addresses_of_one_network_count_together_and_the_admin_clears_them() -> None:
+    throttle = LoginThrottle(network_free=30)
+    assert network_of(vouched_source("viewer", "198.51.100.9")) == "viewer:198.51.100.0/24"
+    assert network_of(vouched_source("viewer", "2001:db8::1")) == "viewer:2001:db8::/56"
+    assert network_of(query_source("abc")) is None
+    for i in range(30):  # thirty accounts, thirty addresses, one network
+        throttle.failed(f"user{i}", vouched_source("viewer", f"198.51.100.{i}"), 0.0)
+    with pytest.raises(RequestError):
+        throttle.check("bob", vouched_source("viewer", "198.51.100.200"), 0.0)
+    throttle.check("bob", vouched_source("viewer", "192.0.2.1"), 0.0)  # another network
+    kinds = {b.kind for b in throttle.buckets(0.0)}
+    assert kinds == {"pair", "source", "network", "account"}
+    assert throttle.clear_source("viewer:198.51.100.0/24") == 1
+    throttle.check("bob", vouched_source("viewer", "198.51.100.200"), 0.0)
+    # Unlocking an account clears the sources that failed on it too (a shared address).
+    shared = vouched_source("viewer", "192.0.2.50")
+    for i in range(10):
+        throttle.failed("carol" if i < 3 else f"x{i}", shared, 0.0)
+    with pytest.raises(RequestError):
+        throttle.check("dave", shared, 0.0)
+    throttle.unlock("carol")
+    throttle.check("dave", shared, 0.0)

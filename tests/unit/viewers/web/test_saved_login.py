@@ -7,7 +7,7 @@ import pytest
 from common.client.lab_address import parse_address
 from common.client.resume_cookie import cookie_name, cookie_value, parse_cookies
 from viewers.web.login import progress_words
-from viewers.web.saved_login import cookie_script, saved_login_html
+from viewers.web.saved_login import CookieDesk, saved_login_cookie, set_cookie
 
 
 def test_a_cookie_round_trips_per_lab_and_damaged_ones_are_skipped() -> None:
@@ -31,17 +31,27 @@ def test_a_cookie_round_trips_per_lab_and_damaged_ones_are_skipped() -> None:
     assert parse_cookies("", "lab") == []
 
 
-def test_the_script_sets_only_base64url_text_and_a_forgetting_one_expires() -> None:
+def test_the_cookie_is_httponly_strict_and_set_only_by_a_one_time_ticket() -> None:
     here = parse_address("wart://alice@lab.example.org:7447/lab")
-    html = cookie_script(cookie_name(here), cookie_value(here, b"\x01" * 40), 600)
-    assert "max-age=600" in html and "SameSite=Strict" in html and "path=/" in html
+    cookie = set_cookie(cookie_name(here), cookie_value(here, b"\x01" * 40), 600, secure=False)
+    assert "Max-Age=600" in cookie and "SameSite=Strict" in cookie and "Path=/" in cookie
+    assert "HttpOnly" in cookie and "Secure" not in cookie
+    assert set_cookie(cookie_name(here), "abc", 600, secure=True).endswith("; Secure")
     with pytest.raises(ValueError):
-        cookie_script(cookie_name(here), "x'; alert(1); '", 600)
+        set_cookie(cookie_name(here), "x; Domain=evil.example", 600, secure=False)
     with pytest.raises(ValueError):
-        cookie_script("session", "abc", 600)
-    forget = saved_login_html(here, None, 3)
-    assert "max-age=0" in forget and "<!-- 3 -->" in forget
-    assert saved_login_html(here, None, 4) != forget  # each call re-runs in the page
+        set_cookie("session", "abc", 600, secure=False)
+    assert "Max-Age=0" in saved_login_cookie(here, None, secure=False)
+    desk = CookieDesk()
+    html = desk.html(cookie, 3)
+    assert "<!-- 3 -->" in html and "wart_resume" not in html  # the page never sees it
+    path = "/" + html.split('src="')[1].split('"')[0]
+    answer = desk.answer(path)
+    assert answer is not None and answer.status_code == 204
+    assert answer.headers["Set-Cookie"] == cookie
+    again = desk.answer(path)  # good once
+    assert again is not None and again.status_code == 404 and "Set-Cookie" not in again.headers
+    assert desk.answer("/index.html") is None  # viser's own pages are viser's
 
 
 def test_a_slow_login_says_how_long_and_why() -> None:
