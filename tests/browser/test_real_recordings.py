@@ -85,3 +85,7 @@ def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab)
     alice.screenshot("real-recording-replay")
     alice.click("Back to live")
     wait_until(lambda: not isinstance(view.feed, ReplayFeed), 15, what="the live arena again")
+    # A simulated run has no camera: calibrating from it is refused, in words that say why.
+    alice.click("Calibrate the robot (twin)")
+    alice.wait_text(f"{entry.name} cannot calibrate k0", timeout=15_000)
+    alice.wait_text("calibrating needs the arena camera's view of the robot")

@@ -32,6 +32,7 @@ import numpy as np
 import viser
 
 from common.recording import Recording, RecordingError, plots, read_recording, report, summarize
+from common.twin.fit import TwinError, calibrate
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
 from viewers.web.inputs import on_click, set_value
 from viewers.web.replay import ReplayControls, ReplayFeed, ReplaySpot
@@ -105,6 +106,12 @@ class RecordingsPanel:
             # name off: let its label wrap (a style rule; takes no room in the panel).
             gui.add_html(f"<style>{DOWNLOAD_NOTICE_CSS}</style>")
             self.summary = gui.add_button("Summary", icon=viser.Icon.LIST_NUMBERS)
+            self.twin = gui.add_button(
+                "Calibrate the robot (twin)",
+                icon=viser.Icon.ADJUSTMENTS,
+                hint="A real robot's run under the arena camera: fit its wheels' slip, wheel "
+                "base, latency and IR gains (wart calibrate; docs/CALIBRATION.md)",
+            )
             self.plots = gui.add_button("Plots", icon=viser.Icon.CHART_LINE)
             self.replay_button = gui.add_button(
                 "Replay", color="grape", icon=viser.Icon.PLAYER_PLAY
@@ -120,6 +127,7 @@ class RecordingsPanel:
         on_click(self.refresh_button, self.refresh)
         self.download.on_click(lambda _: self._download())
         self.summary.on_click(lambda _: self._summary())
+        self.twin.on_click(lambda _: self._calibrate())
         self.plots.on_click(lambda _: self._plots())
         self.replay_button.on_click(lambda _: self._replay())
         self.promote.on_click(lambda _: self._promote())
@@ -202,6 +210,23 @@ class RecordingsPanel:
             return
         self.details.content = summary_text(rec)
         self.say(f"Summary of {entry.name}." if entry else "")
+
+    def _calibrate(self) -> None:
+        """The run's robot calibrated from this run (nothing is kept in the lab: shown here)."""
+        entry = self._entry()
+        rec = self._read(entry) if entry is not None else None
+        if entry is None or rec is None:
+            return
+        try:
+            twin = calibrate(entry.agent, [(entry.name, rec)])
+        except TwinError as exc:
+            self.say(f"{entry.name} cannot calibrate {entry.agent}: {exc}", bad=True)
+            return
+        lines = "\n".join(f"- {escape_md(line)}" for line in twin.lines())
+        self.details.content = f"**{escape_md(entry.agent)}'s twin from {entry.name}**\n\n{lines}"
+        self.say(
+            f"{entry.agent} calibrated from {entry.name}: below (wart calibrate --out keeps it)."
+        )
 
     def _plots(self) -> None:
         entry = self._entry()
