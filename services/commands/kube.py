@@ -3,7 +3,7 @@
     wart kube render --lab lab.toml --name K > lab.yaml     # kubectl apply -f lab.yaml
     wart kube render --lab lab.toml --name K --out k8s/     # a file per object, kustomization
     wart kube render --lab lab.toml --name K --mode podman > pods.yaml  # podman kube play
-    wart kube provision ...     # the registry pod's init container (database, accounts)
+    wart kube provision ... -- registry ...   # the registry pod: its database, then it
 
 The cluster plays one host of the lab file (its router, its services): run
 ``wart certs lab`` first (the host's ``names`` list ``wart-router``, the name
@@ -13,6 +13,7 @@ pods reach the router by). docs/DEPLOY.md, "On Kubernetes", says the rest.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -75,7 +76,11 @@ def _provision(args: argparse.Namespace) -> int:
         )
     else:
         print(f"registry database in {args.state_dir} is ready", flush=True)
-    return 0
+    then = [a for a in args.then if a != "--"]
+    if not then:
+        return 0
+    # This process becomes the command (the registry): its signals, its exit status.
+    os.execv(sys.executable, [sys.executable, "-m", "services.cli", *then])
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart kube") -> int:
@@ -109,6 +114,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart kube") -> int:
     v.add_argument("--accounts", type=Path, required=True, help="accounts.json of wart certs lab")
     v.add_argument(
         "--registry-pub-file", type=Path, required=True, help="registry.pub of wart certs lab"
+    )
+    v.add_argument(
+        "then",
+        nargs=argparse.REMAINDER,
+        metavar="-- COMMAND",
+        help="then become `wart COMMAND ...` (wart kube provision ... -- registry ...)",
     )
     args, _ = cli.parse(p, argv)
     if args.verb == "render":

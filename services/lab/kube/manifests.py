@@ -16,7 +16,7 @@ What each service becomes (docs/DEPLOY.md, "On Kubernetes"):
   since clients check the router's certificate name), TLS from a Secret, the
   access rules in its Zenoh config (a Secret too: it names the key files);
 - registry: a StatefulSet of one with a volume for its SQLite database,
-  provisioned by an init container (admin, service accounts); the grader, who
+  provisioned first in its container (admin, service accounts); the grader, who
   writes the same database, is a second container of that pod (one writer's
   volume, never shared across pods);
 - chat rooms, agent contexts, arenas (engine + agent context, one pod), the
@@ -47,7 +47,6 @@ from services.lab.kube.objects import (
     STATE,
     KubeOptions,
     Objects,
-    secret_volume,
 )
 from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.labfile import HostEntry, LabFile, LabFileError, ServiceEntry
@@ -64,6 +63,7 @@ ZENOH = PurePosixPath("/etc/wart/zenoh")
 IDENTITIES = PurePosixPath("/etc/wart/identities")
 REGISTRY_KEY = PurePosixPath("/etc/wart/registry")
 LAB_FILES = PurePosixPath("/etc/wart/lab")
+MAP_CONFIG = PurePosixPath("/etc/wart/arena-map")  # an arena's own map (arenas.py)
 IMAGE_MAPS = PurePosixPath("/opt/wart/maps")  # the image's shipped maps (deploy/container)
 
 # Requests and limits per process kind, from `wart up` measured on the project's 2-core
@@ -82,7 +82,6 @@ RESOURCES: dict[str, tuple[str, str, str, str]] = {
     "viewer": ("50m", "128Mi", "2", "1Gi"),  # 93 MiB, 0.3 % with no page open
     "camera": ("250m", "192Mi", "1", "512Mi"),  # 118 MiB, 17.5 % (a synthetic camera)
     "lti": ("20m", "96Mi", "500m", "256Mi"),
-    "provision": ("50m", "64Mi", "1", "256Mi"),
 }
 
 
@@ -205,10 +204,13 @@ class Renderer:
         return arg
 
     def volumes(self, role: str, accounts: list[str]) -> list[dict[str, Any]]:
-        vols = [secret_volume("tls", f"wart-tls-{role}"), secret_volume("zenoh", "wart-zenoh")]
+        vols = [
+            self.k.secret_volume("tls", f"wart-tls-{role}"),
+            self.k.secret_volume("zenoh", "wart-zenoh"),
+        ]
         if accounts:
             files = [f"{account}.key" for account in accounts]
-            vols.append(secret_volume("identities", "wart-identities", files))
+            vols.append(self.k.secret_volume("identities", "wart-identities", files))
         return vols
 
     # --- the lab's services ------------------------------------------------------------
@@ -250,49 +252,34 @@ class Renderer:
     def registry(self, svc: ServiceEntry, grader: ServiceEntry | None) -> list[dict[str, Any]]:
         w = self.wiring
         spec = wiring.service_specs(w, svc)[0]
+        # Its database first (admin, the lab's service accounts), then the registry in the
+        # same process: an init container would do, but podman 4.3 restarts init
+        # containers under the pod's restart policy and then fails to remove them.
+        provision = [
+            *("kube", "provision", "--state-dir", str(STATE)),
+            *("--registry-key-file", str(REGISTRY_KEY / "registry.key")),
+            *("--accounts", str(LAB_FILES / ACCOUNTS)),
+            *("--registry-pub-file", str(LAB_FILES / REGISTRY_PUB), "--"),
+        ]
+        spec = replace(spec, argv=[*provision, *spec.argv])
         containers = [self.container("registry", "registry", spec, "registry")]
-        containers[0]["volumeMounts"].append(
-            {"name": "registry-key", "mountPath": str(REGISTRY_KEY), "readOnly": True}
-        )
+        containers[0]["volumeMounts"] += [
+            {"name": "registry-key", "mountPath": str(REGISTRY_KEY), "readOnly": True},
+            {"name": "lab", "mountPath": str(LAB_FILES), "readOnly": True},
+        ]
         accounts: list[str] = []
         if grader is not None:
             g = wiring.service_specs(w, grader)[0]
             containers.append(self.container("grader", "grader", g, "grader"))
             accounts.append(wiring.service_account("grader", grader.ident))
-        provision = {
-            "name": "provision",
-            "image": self.o.image,
-            "args": [
-                "kube",
-                "provision",
-                "--state-dir",
-                str(STATE),
-                "--registry-key-file",
-                str(REGISTRY_KEY / "registry.key"),
-                "--accounts",
-                str(LAB_FILES / ACCOUNTS),
-                "--registry-pub-file",
-                str(LAB_FILES / REGISTRY_PUB),
-            ],
-            "resources": {
-                "requests": {"cpu": RESOURCES["provision"][0], "memory": RESOURCES["provision"][1]},
-                "limits": {"cpu": RESOURCES["provision"][2], "memory": RESOURCES["provision"][3]},
-            },
-            "volumeMounts": [
-                {"name": "registry-key", "mountPath": str(REGISTRY_KEY), "readOnly": True},
-                {"name": "lab", "mountPath": str(LAB_FILES), "readOnly": True},
-            ],
-        }
         volumes = self.volumes("registry", accounts)
-        volumes.append(secret_volume("registry-key", "wart-registry-key"))
+        volumes.append(self.k.secret_volume("registry-key", "wart-registry-key"))
         volumes.append({"name": "lab", "configMap": {"name": "wart-lab"}})
         # The grader's certificate is its own role's: a second TLS volume for its container.
         if grader is not None:
-            volumes.append(secret_volume("tls-grader", "wart-tls-grader"))
+            volumes.append(self.k.secret_volume("tls-grader", "wart-tls-grader"))
             containers[1]["volumeMounts"][0]["name"] = "tls-grader"
-        return self.k.workload(
-            "registry", "registry", containers, volumes, stateful=True, init=[provision]
-        )
+        return self.k.workload("registry", "registry", containers, volumes, stateful=True)
 
     def one_pod(self, svc: ServiceEntry) -> list[dict[str, Any]]:
         """A chat room, an agent context, a runner, a camera, the LTI tool: one container."""
@@ -315,8 +302,16 @@ class Renderer:
         return self.k.workload(svc.kind, svc.ident, [c], volumes, stateful=stateful)
 
     def arena(self, svc: ServiceEntry) -> list[dict[str, Any]]:
-        """An engine and its agent context in one pod: they come and go together."""
-        specs = wiring.service_specs(self.wiring, svc)
+        return self.arena_workload(str(svc.params["world"]), wiring.service_specs(self.wiring, svc))
+
+    def arena_workload(
+        self, world: str, specs: list[ChildSpec], *, map_config: str | None = None
+    ) -> list[dict[str, Any]]:
+        """An engine and its agent context in one pod: they come and go together.
+
+        ``map_config``: a ConfigMap holding the engine's map (an arena made on request
+        with a number of robots: its map is written for it), mounted at MAP_CONFIG.
+        """
         containers = [self.container("engine", "engine", specs[0], "engine")]
         accounts = [a for s in specs for i, a in enumerate(s.argv) if s.argv[i - 1] == "--user"]
         volumes = self.volumes("engine", accounts)
@@ -324,8 +319,11 @@ class Renderer:
             agent = self.container("agent", "agent", specs[1], "agent")
             agent["volumeMounts"][0]["name"] = "tls-agent"
             containers.append(agent)
-            volumes.append(secret_volume("tls-agent", "wart-tls-agent"))
-        world = str(svc.params["world"])
+            volumes.append(self.k.secret_volume("tls-agent", "wart-tls-agent"))
+        if map_config is not None:
+            volumes.append({"name": "map", "configMap": {"name": map_config}})
+            mount = {"name": "map", "mountPath": str(MAP_CONFIG), "readOnly": True}
+            containers[0]["volumeMounts"].append(mount)
         return self.k.workload("arena", world, containers, volumes, stateful=True)
 
     def viewer(self, svc: ServiceEntry) -> list[dict[str, Any]]:

@@ -52,16 +52,6 @@ def object_name(kind: str, ident: str) -> str:
     return clean
 
 
-def secret_volume(name: str, secret: str, files: list[str] | None = None) -> dict[str, Any]:
-    """A Secret as files readable by the pod's group (fsGroup: the image's user)."""
-    # optional: false, as Kubernetes takes it when unsaid: podman 4.3's kube play
-    # dereferences the field without a check (a crash when it is missing).
-    source: dict[str, Any] = {"secretName": secret, "defaultMode": 0o440, "optional": False}
-    if files:
-        source["items"] = [{"key": f, "path": f} for f in files]
-    return {"name": name, "secret": source}
-
-
 def _object(api: str, kind: str, meta: dict[str, Any], spec: dict[str, Any]) -> dict[str, Any]:
     return {"apiVersion": api, "kind": kind, "metadata": meta, "spec": spec}
 
@@ -108,15 +98,12 @@ class Objects:
         volumes: list[dict[str, Any]],
         *,
         stateful: bool,
-        init: list[dict[str, Any]] | None = None,
     ) -> list[dict[str, Any]]:
         """A StatefulSet of one with its volume at STATE (state that outlives the pod),
         or a Deployment; podman mode: a Deployment with a claim of the same name."""
         name = object_name(component, ident)
         meta = self.meta(name, component, ident)
         pod = self.pod_spec(containers, volumes)
-        if init:
-            pod["initContainers"] = init
         template = {"metadata": {"labels": meta["labels"]}, "spec": pod}
         selector = {"matchLabels": meta["labels"]}
         claim: dict[str, Any] = {
@@ -126,7 +113,7 @@ class Objects:
         if self.o.storage_class:
             claim["storageClassName"] = self.o.storage_class
         mount = {"name": "state", "mountPath": str(STATE)}
-        for c in [*containers, *(init or [])]:
+        for c in containers:
             c["volumeMounts"].append(mount)
         if stateful and not self.podman:
             spec = {
@@ -179,12 +166,29 @@ class Objects:
     def secret(
         self, name: str, component: str, ident: str, data: Mapping[str, str]
     ) -> dict[str, Any]:
-        """A Secret of text files, as stringData: podman 4.3's kube play mounts a
-        Secret's ``data`` still base64-encoded, its ``stringData`` as written."""
+        """A Secret of text files (stringData). For podman, a ConfigMap: podman 4.3's kube
+        play mounts a Secret's ``data`` still base64-encoded and ignores ``stringData``."""
+        meta = self.meta(name, component, ident)
+        if self.podman:
+            return {"apiVersion": "v1", "kind": "ConfigMap", "metadata": meta, "data": dict(data)}
         return {
             "apiVersion": "v1",
             "kind": "Secret",
-            "metadata": self.meta(name, component, ident),
+            "metadata": meta,
             "type": "Opaque",
             "stringData": dict(data),
         }
+
+    def secret_volume(self, name: str, secret: str, files: list[str] | None = None) -> dict:
+        """A Secret as files readable by the pod's group (fsGroup: the image's user)."""
+        items = [{"key": f, "path": f} for f in files or ()]
+        if self.podman:  # the ConfigMap that stands for it (secret above); podman gives
+            # the files to root whatever fsGroup says: readable by all, in a test's pods
+            source: dict[str, Any] = {"name": secret, "defaultMode": 0o444}
+            return {"name": name, "configMap": {**source, **({"items": items} if items else {})}}
+        # optional: false, as Kubernetes takes it when unsaid: podman 4.3's kube play
+        # dereferences the field without a check (a crash when it is missing).
+        source = {"secretName": secret, "defaultMode": 0o440, "optional": False}
+        if items:
+            source["items"] = items
+        return {"name": name, "secret": source}
