@@ -4,6 +4,7 @@
     wart kube render --lab lab.toml --name K --out k8s/     # a file per object, kustomization
     wart kube render --lab lab.toml --name K --mode podman > pods.yaml  # podman kube play
     wart kube provision ... -- registry ...   # the registry pod: its database, then it
+    wart kube host --lab lab.toml --name K    # the cluster's host: arenas on request as pods
 
 The cluster plays one host of the lab file (its router, its services): run
 ``wart certs lab`` first (the host's ``names`` list ``wart-router``, the name
@@ -18,11 +19,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from common import cli
+from common import cli, keys
+from common.service import close_session, open_session, stop_on_signals
+from common.zconfig import ConfigError, NetworkOptions, add_network_arguments, options_from_args
 from services.lab import provision
-from services.lab.kube.manifests import MODES, PARTS, KubeOptions, render
+from services.lab.kube.manifests import MODES, PARTS, KubeOptions, Renderer, render
 from services.lab.kube.yamlout import dump, dump_all
 from services.lab.labfile import LabFileError, load
+from services.lab.supervisor import AliveWatch, Supervisor
 
 
 def _render(args: argparse.Namespace) -> int:
@@ -83,6 +87,68 @@ def _provision(args: argparse.Namespace) -> int:
     os.execv(sys.executable, [sys.executable, "-m", "services.cli", *then])
 
 
+def _host(args: argparse.Namespace, options: NetworkOptions) -> int:
+    # Here, not at the top: the kubernetes package is an optional dependency (the
+    # `kubernetes` extra, in the image), needed only by a lab in a cluster.
+    try:
+        from kubernetes import client as k8s
+        from kubernetes import config as k8s_config
+
+        # it imports kubernetes too (the same reason)
+        from services.lab.kube.arenas import ArenaWorkloads, ClusterHosting, ClusterPlan
+    except ImportError:
+        return cli.fail(
+            "wart kube host needs the kubernetes package: pip install 'wart-lab[kubernetes]'"
+        )
+    if not options.registry_key:
+        return cli.fail("the registry's public key is needed: --registry-key or WART_REGISTRY_KEY")
+    try:
+        lab = load(args.lab)
+        host = lab.host(args.name)
+        renderer = Renderer(lab, host, KubeOptions(image=args.image, namespace=args.namespace))
+    except (LabFileError, OSError, ValueError) as exc:
+        return cli.fail(str(exc))
+    if args.api_server:
+        conf = k8s.Configuration()
+        conf.host = args.api_server
+        api = k8s.ApiClient(conf)
+    else:
+        try:
+            k8s_config.load_incluster_config()  # the pod's service account
+        except k8s_config.ConfigException:
+            k8s_config.load_kube_config()  # an operator's machine
+        api = k8s.ApiClient()
+    stop = stop_on_signals()
+    try:
+        session = open_session(options, stop=stop)
+    except ConnectionError as exc:
+        return cli.fail(str(exc), code=1)
+    supervisor = Supervisor(args.state_dir / "logs")
+    supervisor.watch = AliveWatch(session, keys.alive_all(lab.realm))
+    plan = ClusterPlan(
+        wiring=renderer.wiring,
+        registry_key=options.registry_key,
+        limits=lab.limits,
+        no_arenas_reason="" if host.arenas else "this host takes no arenas (arenas = false)",
+        local_dir=args.state_dir,
+    )
+    hosting = ClusterHosting(session, plan, supervisor, ArenaWorkloads(renderer, api)).start()
+    for svc in host.services:  # the lab file's own arenas: listed, never stopped on request
+        if svc.kind == "engine":
+            world, robots = str(svc.params["world"]), int(svc.params.get("robots", 0))
+            hosting.adopt(world, str(svc.params["map"]), [], robots)
+    print(
+        f"host {host.name} of lab '{lab.realm}': arenas on request are workloads in "
+        f"namespace {args.namespace} ({api.configuration.host})",
+        flush=True,
+    )
+    stop.wait()
+    hosting.stop()
+    supervisor.watch.close()
+    close_session(session)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None, prog: str = "wart kube") -> int:
     p = cli.parser(prog, __doc__ or "", network=False)
     sub = p.add_subparsers(dest="verb", required=True)
@@ -121,7 +187,27 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart kube") -> int:
         metavar="-- COMMAND",
         help="then become `wart COMMAND ...` (wart kube provision ... -- registry ...)",
     )
+    h = sub.add_parser("host", help="arenas on request as workloads (the cluster's host pod)")
+    h.add_argument("--lab", type=Path, required=True, help="the lab file")
+    h.add_argument("--name", required=True, help="the host of the lab file the cluster plays")
+    h.add_argument("--image", default="localhost/wart:latest", help="the arenas' image")
+    h.add_argument("--namespace", default="wart", help="where arenas are made (default wart)")
+    h.add_argument(
+        "--api-server",
+        metavar="URL",
+        help="the Kubernetes API's address (default: the pod's service account, else kubeconfig)",
+    )
+    h.add_argument(
+        "--state-dir", type=Path, default=Path("/var/lib/wart"), help="its own files (maps made)"
+    )
+    add_network_arguments(h)
     args, _ = cli.parse(p, argv)
     if args.verb == "render":
         return _render(args)
+    if args.verb == "host":
+        try:
+            options = options_from_args(args)
+        except ConfigError as exc:
+            return cli.fail(str(exc))
+        return _host(args, options)
     return _provision(args)

@@ -40,6 +40,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from common import keys
+from common.keys import AliveKind
 from services.lab import wiring
 from services.lab.kube.objects import (
     MODES,
@@ -55,7 +56,7 @@ from services.lab.supervisor import ChildSpec
 from services.lab.wiring import Wiring
 from services.lab.zsecurity import TlsFiles, acl_config, host_tls, zenoh_security
 
-__all__ = ["MODES", "PARTS", "KubeOptions", "Rendered", "render"]
+__all__ = ["MODES", "PARTS", "KubeOptions", "Rendered", "Renderer", "render"]
 
 ROUTER = "wart-router"
 TLS = PurePosixPath("/etc/wart/tls")
@@ -63,6 +64,7 @@ ZENOH = PurePosixPath("/etc/wart/zenoh")
 IDENTITIES = PurePosixPath("/etc/wart/identities")
 REGISTRY_KEY = PurePosixPath("/etc/wart/registry")
 LAB_FILES = PurePosixPath("/etc/wart/lab")
+RBAC = "rbac.authorization.k8s.io"
 MAP_CONFIG = PurePosixPath("/etc/wart/arena-map")  # an arena's own map (arenas.py)
 IMAGE_MAPS = PurePosixPath("/opt/wart/maps")  # the image's shipped maps (deploy/container)
 
@@ -82,6 +84,7 @@ RESOURCES: dict[str, tuple[str, str, str, str]] = {
     "viewer": ("50m", "128Mi", "2", "1Gi"),  # 93 MiB, 0.3 % with no page open
     "camera": ("250m", "192Mi", "1", "512Mi"),  # 118 MiB, 17.5 % (a synthetic camera)
     "lti": ("20m", "96Mi", "500m", "256Mi"),
+    "host": ("20m", "128Mi", "500m", "384Mi"),  # not measured: an agent context's figures
 }
 
 
@@ -199,9 +202,12 @@ class Renderer:
     def pod_path(self, arg: str) -> str:
         """A map resolved on this machine, as the pod sees it: the image's shipped maps."""
         path = Path(arg)
-        if path.suffix == ".json" and path.parent == SHIPPED_MAPS:
-            return str(IMAGE_MAPS / path.name)
-        return arg
+        return str(IMAGE_MAPS / path.name) if self.is_shipped(path) else arg
+
+    @staticmethod
+    def is_shipped(path: Path) -> bool:
+        """A map of the repository's maps/ (in the image: /opt/wart/maps)."""
+        return path.suffix == ".json" and path.parent == SHIPPED_MAPS
 
     def volumes(self, role: str, accounts: list[str]) -> list[dict[str, Any]]:
         vols = [
@@ -326,6 +332,52 @@ class Renderer:
             containers[0]["volumeMounts"].append(mount)
         return self.k.workload("arena", world, containers, volumes, stateful=True)
 
+    def hosting(self) -> list[dict[str, Any]]:
+        """The cluster's host: ``wart arena new`` makes arenas as workloads (arenas.py),
+        with the rights to make and delete them in this namespace and nothing else."""
+        host = self.host.name
+        argv = ["kube", "host", "--lab", str(LAB_FILES / "lab.toml"), "--name", host]
+        argv += ["--image", self.o.image, "--namespace", self.o.namespace]
+        spec = ChildSpec("host", argv, keys.alive(self.lab.realm, AliveKind.HOST, host))
+        c = self.container("host", "host", spec, "host")
+        c["volumeMounts"].append({"name": "lab", "mountPath": str(LAB_FILES), "readOnly": True})
+        volumes = [*self.volumes("host", []), {"name": "lab", "configMap": {"name": "wart-lab"}}]
+        objects = self.k.workload("host", host, [c], volumes, stateful=False)
+        objects[-1]["spec"]["template"]["spec"]["serviceAccountName"] = "wart-host"
+        meta = self.k.meta("wart-host", "host", host)
+        rules = [
+            {
+                "apiGroups": ["apps"],
+                "resources": ["statefulsets"],
+                "verbs": ["create", "delete", "get", "list"],
+            },
+            {"apiGroups": [""], "resources": ["configmaps"], "verbs": ["create", "delete", "get"]},
+        ]
+        binding = {
+            "apiVersion": f"{RBAC}/v1",
+            "kind": "RoleBinding",
+            "metadata": meta,
+            "roleRef": {
+                "apiGroup": "rbac.authorization.k8s.io",
+                "kind": "Role",
+                "name": "wart-host",
+            },
+            "subjects": [
+                {"kind": "ServiceAccount", "name": "wart-host", "namespace": self.o.namespace}
+            ],
+        }
+        return [
+            {"apiVersion": "v1", "kind": "ServiceAccount", "metadata": meta},
+            {
+                "apiVersion": "rbac.authorization.k8s.io/v1",
+                "kind": "Role",
+                "metadata": meta,
+                "rules": rules,
+            },
+            binding,
+            *objects,
+        ]
+
     def viewer(self, svc: ServiceEntry) -> list[dict[str, Any]]:
         port = int(svc.params.get("http_port", 8080))
         svc = replace(svc, params={**svc.params, "http_host": "0.0.0.0"})
@@ -389,6 +441,8 @@ class Renderer:
                 "data": {
                     REGISTRY_PUB: public[REGISTRY_PUB].strip(),
                     ACCOUNTS: public[ACCOUNTS],
+                    # The host pod reads it (wart kube host): the lab's limits and arenas.
+                    "lab.toml": lab.path.read_text(),
                 },
             },
         ]
@@ -441,6 +495,10 @@ class Renderer:
                     f"{svc.kind} {svc.ident}: a bridge drives robots on this machine's serial "
                     "ports: run it with `wart host` on the machine they are plugged into"
                 )
+        if self.host.arenas and not self.podman:
+            out.objects += self.hosting()
+        elif self.host.arenas:
+            out.skipped.append("arenas on request: they need a Kubernetes API (wart kube host)")
         return out
 
 
