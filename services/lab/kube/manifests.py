@@ -466,7 +466,7 @@ class Renderer:
         services = list(self.host.services)
         grader = next((s for s in services if s.kind == "grader"), None)
         roles = host_roles(self.lab, self.host.name)
-        if not self.podman and self.o.part != "pki":
+        if not self.podman:  # in both parts: either may be applied first
             namespace = {"name": self.o.namespace, "labels": {"app.kubernetes.io/name": "wart"}}
             out.objects.append({"apiVersion": "v1", "kind": "Namespace", "metadata": namespace})
         if self.o.part != "workloads":
