@@ -8,6 +8,7 @@ ConfigMaps and Secrets, but no StatefulSet and no Service).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import PurePosixPath
@@ -16,6 +17,10 @@ from typing import Any
 from services.lab.labfile import LabFileError
 
 MODES = ("kubernetes", "podman")
+_DNS_LABEL = re.compile(r"[a-z0-9]([-a-z0-9]{0,61}[a-z0-9])?")
+_DNS_NAME = re.compile(r"[a-z0-9]([-a-z0-9.]{0,251}[a-z0-9])?")
+_QUANTITY = re.compile(r"[1-9][0-9]{0,5}(Ki|Mi|Gi|Ti)")
+_IMAGE = re.compile(r"[a-z0-9][a-z0-9._/:-]{0,254}(@sha256:[0-9a-f]{64})?")
 PARTS = ("all", "workloads", "pki")
 STATE = PurePosixPath("/var/lib/wart")  # every process's state directory
 UID = 10001  # the image's user wart (deploy/container)
@@ -64,6 +69,16 @@ class Objects:
             raise LabFileError(f"mode {options.mode!r}: expected one of {', '.join(MODES)}")
         if options.part not in PARTS:
             raise LabFileError(f"part {options.part!r}: expected one of {', '.join(PARTS)}")
+        checks: list[tuple[str, str, re.Pattern[str], str]] = [
+            ("namespace", options.namespace, _DNS_LABEL, "a DNS label: a-z, 0-9, '-'"),
+            ("state size", options.state_size, _QUANTITY, "a quantity such as 1Gi or 500Mi"),
+            ("image", options.image, _IMAGE, "an image reference such as localhost/wart:1.0"),
+        ]
+        if options.storage_class is not None:
+            checks.append(("storage class", options.storage_class, _DNS_NAME, "a DNS name"))
+        for what, value, pattern, expected in checks:
+            if not pattern.fullmatch(value):
+                raise LabFileError(f"{what} {value!r}: expected {expected}")
         self.o = options
         self.podman = options.mode == "podman"
 

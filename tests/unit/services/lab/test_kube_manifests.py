@@ -151,3 +151,19 @@ def test_a_router_certificate_without_the_service_name_is_refused(tmp_path: Path
     (tmp_path / "lab.toml").write_text(text)
     with pytest.raises(LabFileError, match=r"hosts\[0\].names must list 'wart-router'"):
         render(load(tmp_path / "lab.toml"), "cluster")
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "said"),
+    [
+        ("--namespace", "Lab_1", "namespace 'Lab_1': expected a DNS label"),
+        ("--state-size", "lots", "state size 'lots': expected a quantity"),
+        ("--image", "wart image", "image 'wart image': expected an image reference"),
+    ],
+)
+def test_a_wrong_option_is_refused_with_what_was_expected(flag: str, value: str, said: str) -> None:
+    done = wart(
+        "kube", "render", "--lab", str(EXAMPLE), "--name", "cluster", "--part", "workloads",
+        flag, value,
+    )  # fmt: skip
+    assert done.returncode == 2 and said in done.stderr and not done.stdout
