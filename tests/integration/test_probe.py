@@ -36,4 +36,4 @@ def test_no_router_is_unready_but_alive() -> None:
     alive = wart("probe", "registry", "registry", "--liveness", *nowhere)
     assert alive.returncode == 0 and "not this service's fault" in alive.stdout
     bad = wart("probe", "world", "no/such", *nowhere)
-    assert bad.returncode == 2 and "error:" in bad.stderr
+    assert bad.returncode == 2 and "error:" in bad.stderr and "no/such" in bad.stderr

@@ -54,7 +54,7 @@ from services.lab.labfile import HostEntry, LabFile, LabFileError, ServiceEntry
 from services.lab.pki import ACCOUNTS, REGISTRY_PUB, host_roles, identity_path, registry_key_path
 from services.lab.supervisor import ChildSpec
 from services.lab.wiring import Wiring
-from services.lab.zsecurity import TlsFiles, acl_config, host_tls, zenoh_security
+from services.lab.zsecurity import ROLE_GRANTS, TlsFiles, acl_config, host_tls, zenoh_security
 
 __all__ = ["MODES", "PARTS", "KubeOptions", "Rendered", "Renderer", "render"]
 
@@ -155,9 +155,11 @@ class Renderer:
         conf["metadata"] = {"name": self.host.name, "role": role, "realm": self.lab.realm}
         return conf
 
-    def probes(self, spec: ChildSpec) -> dict[str, Any]:
+    def probes(self, spec: ChildSpec, role: str) -> dict[str, Any]:
+        """``wart probe`` on the service's token, asked with the pod's certificate: none for
+        a role the routers do not let watch tokens (a camera), whose probe would fail."""
         parsed = keys.parse_alive(self.lab.realm, spec.alive_key or "")
-        if parsed is None:
+        if parsed is None or not any(g.verb == "watch" for g in ROLE_GRANTS.get(role, ())):
             return {}
         kind, ident = parsed
         probe = ["wart", "probe", kind.value, ident]
@@ -190,7 +192,7 @@ class Renderer:
                 {"name": "tls", "mountPath": str(TLS), "readOnly": True},
                 {"name": "zenoh", "mountPath": str(ZENOH), "readOnly": True},
             ],
-            **self.probes(spec),
+            **self.probes(spec, role),
         }
         accounts = [spec.argv[i + 1] for i, a in enumerate(spec.argv) if a == "--user"]
         if accounts:
@@ -240,15 +242,14 @@ class Renderer:
         c["livenessProbe"] = {**tcp, "failureThreshold": 3}
         c["ports"] = [{"name": "zenoh-tls", "containerPort": host.port}]
         volumes = self.volumes("router", [])
-        objects = self.k.workload("router", host.name, [c], volumes, stateful=True)
+        # A StatefulSet (stable names for a mesh of several), but nothing of its own to keep.
+        objects = self.k.workload("router", host.name, [c], volumes, stateful=not self.podman)
         if self.podman:
             return objects
-        name = objects[0]["metadata"]["name"]
         objects[0]["metadata"]["name"] = ROUTER
         objects[0]["spec"]["serviceName"] = f"{ROUTER}-pods"
         del objects[0]["spec"]["volumeClaimTemplates"]  # the router keeps nothing
         objects[0]["spec"]["template"]["spec"]["volumes"].append({"name": "state", "emptyDir": {}})
-        del name
         labels = objects[0]["metadata"]["labels"]
         ident = labels["wart.lab/service"]
         main = self.k.service(ROUTER, "router", ident, host.port, type=self.o.router_service_type)

@@ -113,6 +113,9 @@ def test_each_service_is_its_own_workload_with_probes_resources_and_its_state(
     viewer = objects[("Deployment", "wart-viewer-viewer")]
     assert "0.0.0.0" in containers(viewer)["viewer"]["args"]
     assert ("Ingress", "wart-viewer-viewer") in objects
+    # The routers' rules do not let a camera watch tokens: its probe could only fail.
+    camera = containers(objects[("Deployment", "wart-camera-arena1")])["camera"]
+    assert "readinessProbe" not in camera and "livenessProbe" not in camera
     runner = containers(objects[("Deployment", "wart-runner-runner")])["runner"]
     assert runner["securityContext"]["seccompProfile"]["type"] == "Unconfined"
     # Every container: the image's user, requests and limits.
