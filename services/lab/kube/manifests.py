@@ -297,16 +297,22 @@ class Renderer:
         volumes = self.volumes(role, accounts)
         stateful = svc.kind in ("chat", "agent", "lti")
         if svc.kind == "runner":
-            # bubblewrap makes user, PID and mount namespaces for each sandbox: the
-            # container runtime's default seccomp and AppArmor profiles forbid that.
-            # The trade-off (docs/DEPLOY.md): the runner's container is unconfined by
-            # them; each controller still runs under the sandbox's own seccomp filter.
+            # bubblewrap makes user, PID and mount namespaces for each sandbox and mounts
+            # a /proc in it: the container runtime's default seccomp and AppArmor
+            # profiles forbid the first, its masked /proc the second (an unmasked /proc
+            # needs the pod in a user namespace of its own). The trade-off
+            # (docs/DEPLOY.md): the runner's container is unconfined by them; each
+            # controller still runs under the sandbox's own seccomp filter.
             c["securityContext"] = {
                 "seccompProfile": {"type": "Unconfined"},
                 "appArmorProfile": {"type": "Unconfined"},
+                "procMount": "Unmasked",
                 "allowPrivilegeEscalation": False,
             }
-        return self.k.workload(svc.kind, svc.ident, [c], volumes, stateful=stateful)
+        objects = self.k.workload(svc.kind, svc.ident, [c], volumes, stateful=stateful)
+        if svc.kind == "runner" and not self.podman:
+            objects[-1]["spec"]["template"]["spec"]["hostUsers"] = False
+        return objects
 
     def arena(self, svc: ServiceEntry) -> list[dict[str, Any]]:
         return self.arena_workload(str(svc.params["world"]), wiring.service_specs(self.wiring, svc))
