@@ -397,6 +397,9 @@ class Renderer:
         if self.podman:
             return objects
         name = objects[-1]["metadata"]["name"]
+        # The page's public name: the host's first name that is not the router's Service's.
+        outside = [n for n in self.host.names if not n.startswith(ROUTER) and "." in n]
+        public = outside[0] if outside else "lab.example.org"
         ingress = {
             "apiVersion": "networking.k8s.io/v1",
             "kind": "Ingress",
@@ -408,7 +411,7 @@ class Renderer:
             "spec": {
                 "rules": [
                     {
-                        "host": f"{self.host.names[0] if self.host.names else 'lab.example.org'}",
+                        "host": public,
                         "http": {
                             "paths": [
                                 {

@@ -112,7 +112,8 @@ def test_each_service_is_its_own_workload_with_probes_resources_and_its_state(
     assert objects[("StatefulSet", "wart-chat-lobby")]["spec"]["volumeClaimTemplates"]
     viewer = objects[("Deployment", "wart-viewer-viewer")]
     assert "0.0.0.0" in containers(viewer)["viewer"]["args"]
-    assert ("Ingress", "wart-viewer-viewer") in objects
+    (rule,) = objects[("Ingress", "wart-viewer-viewer")]["spec"]["rules"]
+    assert rule["host"] == "lab.example.org"  # the host's public name, not the router's
     # The routers' rules do not let a camera watch tokens: its probe could only fail.
     camera = containers(objects[("Deployment", "wart-camera-arena1")])["camera"]
     assert "readinessProbe" not in camera and "livenessProbe" not in camera
