@@ -21,9 +21,10 @@ import pytest
 import zenoh
 
 from common import keys
+from common.client.host_client import host_loads
 from common.keys import AliveKind
 from common.lab_errors import LabError
-from services.commands.arena import new_arena, stop_arena
+from services.commands.arena import format_loads, new_arena, stop_arena
 from tests.kit.lab import ProcessLab, Procs, Router, make_lab
 
 pytestmark = pytest.mark.integration
@@ -95,8 +96,9 @@ class FakeCluster:
         threading.Thread(target=self.server.serve_forever, daemon=True).start()
 
     def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()
+        if self.server.socket.fileno() != -1:  # not closed already
+            self.server.shutdown()
+            self.server.server_close()
 
 
 @pytest.fixture
@@ -187,3 +189,9 @@ def test_an_arena_asked_for_is_a_statefulset_made_through_the_api_and_deleted_on
     with lab.client("alice") as alice, pytest.raises(LabError, match="host"):
         new_arena(alice, map_name="foraging", robots=None, world="a3", host=None)  # a student
     assert len(cluster.requests) == 4
+    # No API server: the request is refused in words, and the host keeps serving.
+    cluster.close()
+    with lab.client("ida") as ida:
+        with pytest.raises(LabError, match="the Kubernetes API did not answer"):
+            new_arena(ida, map_name="foraging", robots=None, world="a4", host=None)
+        assert "cluster" in format_loads(host_loads(ida.z, ida.realm))

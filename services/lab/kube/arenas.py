@@ -14,6 +14,7 @@ here only, when a lab runs in a cluster.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from typing import Any
 import zenoh
 from kubernetes import client as k8s
 from kubernetes.client.exceptions import ApiException
+from urllib3.exceptions import HTTPError
 
 from common.service import RequestError
 from services.lab.hosting import Hosted, HostingPlan, HostingService
@@ -52,6 +54,7 @@ class ArenaWorkloads:
         self.namespace = renderer.o.namespace
         self.apps = k8s.AppsV1Api(api)
         self.core = k8s.CoreV1Api(api)
+        self._calls = ThreadPoolExecutor(max_workers=1, thread_name_prefix="kube-api")
 
     def objects(self, world: str, specs: list[ChildSpec], owner: str) -> list[dict[str, Any]]:
         """The arena's StatefulSet, and the ConfigMap of its map when it was written for
@@ -82,17 +85,37 @@ class ArenaWorkloads:
         }
         return [config, workload] if config else [workload]
 
-    def create(self, world: str, specs: list[ChildSpec], owner: str) -> None:
-        for obj in self.objects(world, specs, owner):
-            # The client sends a dict as it is (as kubectl would the YAML): the same
-            # objects as `wart kube render`'s, not the client's model classes.
-            body: Any = obj
-            if obj["kind"] == "ConfigMap":
-                self.core.create_namespaced_config_map(self.namespace, body)
-            else:
-                self.apps.create_namespaced_stateful_set(self.namespace, body)
+    def create(self, world: str, specs: list[ChildSpec], owner: str) -> str:
+        """Make the arena's objects; "" when done, else why not (in words)."""
+        objects = self.objects(world, specs, owner)
+        return self._calls.submit(self._create, world, objects).result()
 
-    def delete(self, world: str) -> None:
+    def delete(self, world: str) -> str:
+        """Delete the arena's objects (gone already is fine); "" when done, else why not."""
+        return self._calls.submit(self._delete, world).result()
+
+    # The API is called on a thread of its own, its errors turned into words there: a
+    # client error keeps its frames, and through them its callers' (frames hold their
+    # caller): the spawn request's query, held open past its reply, kept the asking
+    # client waiting for its whole timeout (measured: 90 s).
+
+    def _create(self, world: str, objects: list[dict[str, Any]]) -> str:
+        try:
+            for obj in objects:
+                # The client sends a dict as it is (as kubectl would the YAML): the same
+                # objects as `wart kube render`'s, not the client's model classes.
+                body: Any = obj
+                if obj["kind"] == "ConfigMap":
+                    self.core.create_namespaced_config_map(self.namespace, body)
+                else:
+                    self.apps.create_namespaced_stateful_set(self.namespace, body)
+        except ApiException as exc:
+            return f"the cluster refused arena {world}: {exc.status} {exc.reason}"
+        except (HTTPError, OSError) as exc:  # no API server answered
+            return f"the Kubernetes API did not answer ({type(exc).__name__})"
+        return ""
+
+    def _delete(self, world: str) -> str:
         name = object_name("arena", world)
         for delete, what in (
             (self.apps.delete_namespaced_stateful_set, name),
@@ -102,7 +125,10 @@ class ArenaWorkloads:
                 delete(what, self.namespace, propagation_policy="Foreground")
             except ApiException as exc:
                 if exc.status != 404:  # gone already (or never made: no map of its own)
-                    raise
+                    return f"the cluster did not delete arena {world}: {exc.status} {exc.reason}"
+            except (HTTPError, OSError) as exc:
+                return f"the Kubernetes API did not answer ({type(exc).__name__})"
+        return ""
 
 
 class ClusterHosting(HostingService):
@@ -128,15 +154,12 @@ class ClusterHosting(HostingService):
     ) -> None:
         with self._lock:
             table[name] = hosted
-        try:
-            self.workloads.create(name, specs, hosted.info.owner)
-        except ApiException as exc:
+        refused = self.workloads.create(name, specs, hosted.info.owner)
+        if refused:
             with self._lock:
                 table.pop(name, None)
-            self.log.warning("the cluster refused arena %s: %s %s", name, exc.status, exc.reason)
-            raise RequestError(
-                "unavailable", f"the cluster refused arena {name}: {exc.status} {exc.reason}"
-            ) from None
+            self.log.warning("arena %s: %s", name, refused)
+            raise RequestError("unavailable", refused)
         watch = self.supervisor.watch
         for spec in specs:
             if watch is None or spec.alive_key is None:
@@ -153,10 +176,7 @@ class ClusterHosting(HostingService):
     def _discard(self, table: dict[str, Hosted], name: str) -> None:
         with self._lock:
             table.pop(name, None)
-        try:
-            self.workloads.delete(name)
-        except ApiException as exc:
-            self.log.warning("could not delete arena %s: %s %s", name, exc.status, exc.reason)
-            raise RequestError(
-                "internal", f"the cluster did not delete arena {name}: {exc.reason}"
-            ) from None
+        failed = self.workloads.delete(name)
+        if failed:
+            self.log.warning("%s", failed)
+            raise RequestError("internal", failed)
