@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
 
 from common import keys
 from common.client.agent_client import AgentClient
@@ -116,11 +117,12 @@ class PodLab:
         return "\n".join(out)
 
     def down(self) -> None:
-        """The pods and their volumes, left by this run or a crashed one."""
+        """The pods and their volumes (claims, and the ConfigMaps podman keeps as volumes),
+        left by this run or a crashed one."""
         self.podman("kube", "down", str(self.pods))
-        names = re.findall(r'^  name: "(wart-[a-z0-9-]+-state)"', self.pods.read_text(), re.M)
-        for volume in names:
-            self.podman("volume", "rm", "-f", volume)
+        for obj in yaml.safe_load_all(self.pods.read_text()):
+            if obj["kind"] in ("PersistentVolumeClaim", "ConfigMap"):
+                self.podman("volume", "rm", "-f", obj["metadata"]["name"])
 
 
 @pytest.fixture(scope="module")
