@@ -19,6 +19,7 @@ key pins both.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import secrets
@@ -115,9 +116,17 @@ class RegistryIdentity:
 
     @classmethod
     def load_or_create(cls, path: Path) -> tuple[RegistryIdentity, bool]:
-        """Load the key file, or create it (mode 0600). Returns (identity, created)."""
+        """Load the key file, or create it (mode 0600). Returns (identity, created).
+
+        The file holds the 32-byte seed, or the same as 64 hex digits (a key handed
+        over as text: a Kubernetes Secret's stringData, podman's secrets).
+        """
         if path.exists():
             seed = path.read_bytes()
+            if len(seed.strip()) == 64:
+                # not hex (64 raw bytes): refused as damaged below
+                with contextlib.suppress(UnicodeDecodeError, ValueError):
+                    seed = bytes.fromhex(seed.strip().decode("ascii"))
             if len(seed) != 32:
                 raise ValueError(f"registry key file {path} is damaged ({len(seed)} bytes, not 32)")
             return cls(nacl.signing.SigningKey(seed)), False

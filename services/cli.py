@@ -100,6 +100,14 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "services.commands.doctor",
         "check a lab's hosts, routers, links and services; say what is wrong",
     ),
+    "probe": (
+        "services.commands.probe",
+        "is a service's liveliness token in the lab? (Kubernetes' probes)",
+    ),
+    "kube": (
+        "services.commands.kube",
+        "a lab file's host as Kubernetes manifests (or pods podman can play)",
+    ),
 }
 
 

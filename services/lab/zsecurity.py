@@ -177,14 +177,17 @@ def zenoh_security(
     *,
     lease_ms: int,
     acl: Mapping[str, Any] | None = None,
+    check_files: bool = True,
 ) -> dict[str, Any]:
     """The security part of a process's Zenoh config (a JSON5 document).
 
     Lists its certificate for both listening and connecting (a router does
     both), requires the peer's certificate (mutual TLS) and checks names
     on connect. ``lease_ms`` is how long a silent link stays up.
+    ``check_files``: whether the files must exist here (not for a config
+    written for another machine or a container, where they are mounted).
     """
-    missing = tls.missing()
+    missing = tls.missing() if check_files else []
     if missing:
         raise FileNotFoundError(
             f"missing {', '.join(str(p) for p in missing)}: run `wart certs lab --lab FILE` "
