@@ -121,7 +121,7 @@ class Service:
                 handler(sample)
             except (AuthError, MessageError) as exc:
                 self.dropped += 1
-                self.log.warning("dropped a message on %s: %s", sample.key_expr, exc)
+                self.log.warning("dropped a message on %s: %s", sample.key_expr, str(exc))
             except Exception:
                 self.dropped += 1
                 self.log.error(
@@ -161,7 +161,9 @@ class Service:
                 self.log.info("refused a request on %s: %s", query.key_expr, exc.message)
                 reply = ErrorReply(code=exc.code, message=exc.message)
             except MessageError as exc:
-                self.log.info("bad request on %s: %s", query.key_expr, exc)
+                # Words, never the exception: the log keeps its last record, and the
+                # exception's frames hold the query, whose end would wait for the GC.
+                self.log.info("bad request on %s: %s", query.key_expr, str(exc))
                 reply = ErrorReply(code="bad_request", message=str(exc))
             except RequestError as exc:
                 reply = ErrorReply(code=exc.code, message=exc.message, retry_after=exc.retry_after)

@@ -82,6 +82,7 @@ log = logging.getLogger("wart.registry")
 
 MAX_TTL = 7 * 24 * 3600.0
 CLAIM_WITHIN_S = 600.0  # a deferred mailbox key is sent this soon after the login, or never
+REVOCATIONS_SYNC_S = 5.0  # sessions `wart users` revoked in the file are enforced this soon
 FRESH_LOGIN_S = 600.0  # a password login may set the password without the current one this long
 DEFAULT_SERVER_NAME = "wart lab"
 
@@ -123,6 +124,7 @@ class Registry(Service):
         self._stop = threading.Event()
         self._watch: AliveWatch | None = None
         self._thread: threading.Thread | None = None
+        self._sync: threading.Thread | None = None
         self._revocation_pub: zenoh.Publisher | None = None
         self.admin = AdminDesk(
             session,
@@ -167,12 +169,16 @@ class Registry(Service):
         self.subscribe(keys.registry_report(self.realm), self.admin.on_report)
         self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
         self._thread.start()
+        self._sync = threading.Thread(target=self._sync_revocations, name="revoked", daemon=True)
+        self._sync.start()
 
     def on_stop(self, timeout: float) -> None:
         self._stop.set()
         self._refresh.set()
         if self._thread is not None:
             self._thread.join(timeout)
+        if self._sync is not None:
+            self._sync.join(timeout)
         if self._watch is not None:
             self._watch.close()
         self.term.flush()  # the refusals counted this minute get their line
@@ -415,6 +421,23 @@ class Registry(Service):
             kicked=True,
         )
         self._revocation_pub.put(self._signed_revocations([gone]))
+
+    def _sync_revocations(self) -> None:
+        """Sessions revoked in the database by another hand (`wart users passwd` and
+        `remove` on the file, registry running): enforced here and published to every
+        service within REVOCATIONS_SYNC_S."""
+        while not self._stop.wait(REVOCATIONS_SYNC_S):
+            try:
+                found = [
+                    r for r in self.db.revocations() if not self.verifier.is_revoked(r.session_id)
+                ]
+            except Exception as exc:  # a locked or damaged file: next time
+                log.warning("could not read the revoked sessions: %s", exc)
+                continue
+            for rec in found:
+                self.verifier.revoke(rec.session_id, rec.expires_at)
+            if found and self._revocation_pub is not None:
+                self._revocation_pub.put(self._signed_revocations([_revocation(r) for r in found]))
 
     def _signed_revocations(self, revoked: list[Revocation]) -> bytes:
         body = encode(RevocationList(revoked=revoked, issued_at=time.time()))

@@ -150,6 +150,15 @@ def _audit(args: argparse.Namespace, db: RegistryDB) -> None:
     TermStore(db).record(Action("local", action, target, "ok", detail, where, "wart-users"))
 
 
+def _end_sessions(db: RegistryDB, user: str, reason: str, *, kicked: bool) -> int:
+    """Every live session and saved login of ``user`` revoked in the file: a running
+    registry enforces and publishes them within seconds, a stopped one at its start."""
+    resume.revoke_user(db, user, reason)
+    return sum(
+        db.revoke(s.session_id, reason, kicked=kicked) is not None for s in db.active_sessions(user)
+    )
+
+
 def _run(args: argparse.Namespace, db: RegistryDB) -> int:
     if args.command == "add":
         public_key = None
@@ -164,13 +173,12 @@ def _run(args: argparse.Namespace, db: RegistryDB) -> int:
         print(f"user {args.user} added")
     elif args.command == "passwd":
         db.set_password(args.user, read_password(args, f"new password for {args.user}: "))
-        resume.revoke_user(db, args.user, "the password was changed")
-        print(f"password of {args.user} changed")
+        ended = _end_sessions(db, args.user, "the password was changed", kicked=False)
+        print(f"password of {args.user} changed ({ended} sessions ended)")
     elif args.command == "remove":
+        ended = _end_sessions(db, args.user, "account removed", kicked=True)
         db.remove_user(args.user)
-        print(
-            f"user {args.user} removed (a running session ends at its expiry; kick to end it now)"
-        )
+        print(f"user {args.user} removed ({ended} sessions ended)")
     elif args.command == "grant":
         db.grant(args.user, args.grant, args.scope)
         print(f"granted {args.grant} to {args.user}" + (f" in {args.scope}" if args.scope else ""))
