@@ -187,7 +187,7 @@ def test_cancel_and_owner_controls(open_page, lab: RealLab) -> None:
     # The owner stops carol's running controller, then turns remote control off and on.
     pick_robot(ida, ida_panel, "k1")
     ida.click("Stop the running controller")
-    ida.wait_text("stopping k1")  # the context's answer: it ends the slot at once
+    ida.wait_text("stopping carol's controller on k1")  # the context's answer, in names
     carol.wait_text("your controller on k1 was cancelled: stopped by ida", timeout=15_000)
     ida.click("Disable remote control")
     ida.wait_text("remote control is off")
