@@ -23,7 +23,7 @@ import nacl.signing
 import zenoh
 
 from common import acl, keys, qos
-from common.ask import ask
+from common.ask import alive_keys, ask
 from common.auth import (
     LOGIN_WAIT_S,
     AuthError,
@@ -161,7 +161,9 @@ class Registry(Service):
             stale_after=LOGIN_WAIT_S,
         )
         self.serve(keys.registry_logout(self.realm), self.on_logout)
-        self.serve(keys.registry_directory(self.realm), self.on_directory)
+        # Workers: a user-keys answer may ask the router for a presence token (below), which
+        # must not happen on Zenoh's own callback thread.
+        self.serve(keys.registry_directory(self.realm), self.on_directory, workers=2)
         self.serve(keys.registry_admin(self.realm), self.admin.on_admin)
         self.serve(keys.registry_revocations(self.realm), self.on_revocations)
         self.serve(keys.registry_audit(self.realm), self.admin.on_audit)
@@ -544,13 +546,23 @@ class Registry(Service):
         if not self.db.user_exists(user):
             raise RequestError("not_found", f"no user named {user}")
         sessions = self.db.active_sessions(user)
-        online = bool(sessions) and user in self._alive(AliveKind.USER)
+        online = bool(sessions) and (user in self._alive(AliveKind.USER) or self._present_now(user))
         return UserKeysReply(
             user=user,
             online=online,
             session_box_keys=[s.box_key for s in sessions] if online else [],
             mailbox_key=self.db.mailbox_key(user),
         )
+
+    def _present_now(self, user: str) -> bool:
+        """Whether ``user``'s presence token is alive, asked of the router: a login's token
+        reaches this registry's watch a little after the login itself on a loaded machine,
+        and a message sent then must be delivered live, not kept for the next login."""
+        key = keys.alive(self.realm, AliveKind.USER, user)
+        try:
+            return bool(alive_keys(self.session, key, what=f"{user}'s presence", timeout=1.0))
+        except LabError:
+            return False
 
     def _deposit(self, principal: Principal, message: PrivateMessage) -> Message:
         if message.sender != principal.user:
