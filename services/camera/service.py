@@ -48,7 +48,7 @@ from common.tracking.calibration import (
     read_intrinsics,
 )
 from common.tracking.intrinsics import Intrinsics
-from common.tracking.markers import MarkerLayout, default_layout
+from common.tracking.markers import MarkerLayout, default_layout, grid_description
 from common.tracking.tracker import Tracker
 from services.camera.arguments import DEFAULT_HEIGHT_MM
 from services.camera.sources import FrameSource, SourceEnded, SourceError
@@ -68,6 +68,7 @@ class CameraOptions:
     calibration: Path | None = None
     auto_calibrate: bool = False
     camera_height_mm: float | None = None  # None: solved with a lens, else 1500 said
+    reference_grid: tuple[int, int] = (2, 2)  # the reference markers: the corners
 
 
 class CameraService(Service):
@@ -306,13 +307,14 @@ class CameraService(Service):
         ):
             return
         self._arena = arena
-        self.layout = default_layout(arena[0], arena[1], agents)
+        self.layout = default_layout(arena[0], arena[1], agents, grid=self.options.reference_grid)
         self.log.info(
-            "world %s: arena %.0f x %.0f mm, markers %s",
+            "world %s: arena %.0f x %.0f mm, markers %s; reference markers %s",
             self.world,
             arena[0],
             arena[1],
             ", ".join(f"{a}={i}" for a, i in sorted(self.layout.robots.items())) or "none",
+            grid_description(self.layout.reference),
         )
         self._make_tracker()
 
