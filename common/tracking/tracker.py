@@ -18,7 +18,13 @@ import cv2
 import numpy as np
 
 from common.tracking.calibration import ArenaCalibration, detect_all, detector
-from common.tracking.deblur import OUTLINE_WINDOW_PX, WINDOW_PX, find_blurred
+from common.tracking.deblur import (
+    AXES,
+    OUTLINE_WINDOW_PX,
+    WIDE_WINDOW_PX,
+    WINDOW_PX,
+    find_blurred,
+)
 from common.tracking.markers import MarkerLayout, corners_mm
 
 log = logging.getLogger("wart.tracking")
@@ -52,7 +58,8 @@ class _Track:
     pending: list[TrackedPose] = field(default_factory=list)
     velocity: tuple[float, float] = (0.0, 0.0)  # mm/s, from the last two fixes
     lost_told: bool = False
-    fixes: int = 1  # one fix: where it goes is not known yet
+    fixes: int = 1  # fixes in a row: one, and where it goes is not known yet
+    blur_px: float | None = None  # the smear's length that read it last
 
     def trust(self, pose: TrackedPose) -> None:
         self.fixes += 1
@@ -60,7 +67,7 @@ class _Track:
         if 0.0 < dt <= PREDICT_S:
             self.velocity = ((pose.x - self.pose.x) / dt, (pose.y - self.pose.y) / dt)
         elif dt > PREDICT_S:
-            self.velocity = (0.0, 0.0)
+            self.velocity, self.fixes = (0.0, 0.0), 1
         self.pose, self.pending = pose, []
 
 
@@ -199,8 +206,25 @@ class Tracker:
             for px, size in places:
                 read = find_blurred(self._gray, detector(), {track.pose.marker}, px, angle, size)
                 if read is not None:
-                    found.append(self._pose_of(agent, read[0], read[1], captured_at))
                     break
+            else:
+                read = None
+                if math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S:  # it turned: around where it was
+                    b = track.blur_px or 6.0
+                    at = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
+                    read = find_blurred(
+                        self._gray,
+                        detector(),
+                        {track.pose.marker},
+                        at[0],
+                        None,
+                        WIDE_WINDOW_PX,
+                        (b, b - 0.5, b + 0.5),
+                        AXES,
+                    )
+            if read is not None:
+                track.blur_px = read[2]
+                found.append(self._pose_of(agent, read[0], read[1], captured_at))
         untracked = {
             i: a for a, i in self.layout.robots.items() if a not in self._tracks and a not in seen
         }
