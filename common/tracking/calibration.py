@@ -362,10 +362,10 @@ def detect(gray: np.ndarray) -> dict[int, np.ndarray]:
 
 
 def detect_all(gray: np.ndarray) -> tuple[dict[int, np.ndarray], list[np.ndarray]]:
-    """The markers read (id -> 4x2 corners, px), and the centres (px) of the outlines
+    """The markers read (id -> 4x2 corners, px), and the 4x2 corners (px) of the outlines
     found whose bits could not be read (a blurred marker among them)."""
     corners, ids, rejected = detector().detectMarkers(gray)
-    unread = [np.asarray(c, dtype=np.float64).reshape(4, 2).mean(axis=0) for c in rejected]
+    unread = [np.asarray(c, dtype=np.float64).reshape(4, 2) for c in rejected]
     if ids is None:
         return {}, unread
     found = {

@@ -17,13 +17,25 @@ lost robot). docs/BENCHMARKS.md has the tracker's figures, which predict.
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 
 import cv2
 import numpy as np
 
 WINDOW_PX = 64  # the window deconvolved: a 40 mm marker is about 25 px at 1.66 m
-BLUR_LENGTHS_PX = (5.0, 7.0, 9.0, 11.0)
+# Around an outline the detector found but could not read: its centre may lie 20 px off
+# the marker's (the outline of a marker and the robot's dark side together, seen tilted).
+OUTLINE_WINDOW_PX = 96
+# The smear's length is not known (the exposure is not): the usual 5 to 7 px first, in
+# half-pixel steps (a deconvolution a pixel off the true length often does not read:
+# at 25 degrees of tilt, 320 mm/s, 5, 7, 9 and 11 px read 27 of 34 markers, these 33).
+BLUR_LENGTHS_PX = (6.0, 5.0, 7.0, 5.5, 6.5, 4.0, 4.5, 7.5, 8.0, 9.0, 11.0)
+# Around where a fast robot was, when the way its fixes predicted is wrong (it turned):
+# the robot is within this window for about half a second; read at the smear lengths
+# near the one that read it last (a wide window costs four narrow ones a length), along
+# four axes too: a wide window's own smear is the floor's and walls', not the robot's.
+WIDE_WINDOW_PX = 160
+AXES = (0.0, math.pi / 4, math.pi / 2, 3 * math.pi / 4)
 NOISE_TO_SIGNAL = 0.02
 
 
@@ -71,30 +83,40 @@ def find_blurred(
     markers: Collection[int],
     at_px: np.ndarray,
     motion_angle: float | None,
-) -> tuple[int, np.ndarray] | None:
-    """One of ``markers`` and its 4 corners (frame px) in the window around ``at_px``
-    once deblurred along ``motion_angle`` (image radians; None: unknown) or along the
-    way the window itself looks smeared; None if none is read there."""
-    half = WINDOW_PX // 2
-    x0, y0 = round(float(at_px[0])) - half, round(float(at_px[1])) - half
+    window_px: int = WINDOW_PX,
+    lengths: Sequence[float] = BLUR_LENGTHS_PX,
+    other_angles: Sequence[float] = (),
+) -> tuple[int, np.ndarray, float] | None:
+    """One of ``markers``, its 4 corners (frame px) and the smear's length that read it,
+    in the window around ``at_px`` once deblurred along ``motion_angle`` (image radians;
+    None: unknown) or along the way the window itself looks smeared, then along
+    ``other_angles``; None if none is read there."""
+    half = window_px // 2
     h, w = gray.shape
-    if x0 < 0 or y0 < 0 or x0 + WINDOW_PX > w or y0 + WINDOW_PX > h:
+    # A window that would cross the frame's edge is moved inside it.
+    x0 = min(max(round(float(at_px[0])) - half, 0), w - window_px)
+    y0 = min(max(round(float(at_px[1])) - half, 0), h - window_px)
+    if x0 < 0 or y0 < 0:
         return None
-    window = gray[y0 : y0 + WINDOW_PX, x0 : x0 + WINDOW_PX].astype(np.float32)
+    window = gray[y0 : y0 + window_px, x0 : x0 + window_px].astype(np.float32)
     angles = [smear_angle(window)]
     if motion_angle is not None and abs(math.sin(motion_angle - angles[0])) > 0.25:
         angles.append(motion_angle)
-    for angle in angles:
-        read = _read(window, detector, markers, angle)
+    for angle in [*angles, *other_angles]:
+        read = _read(window, detector, markers, angle, lengths)
         if read is not None:
-            return read[0], read[1] + np.array([x0, y0])
+            return read[0], read[1] + np.array([x0, y0]), read[2]
     return None
 
 
 def _read(
-    window: np.ndarray, detector: cv2.aruco.ArucoDetector, markers: Collection[int], angle: float
-) -> tuple[int, np.ndarray] | None:
-    for length in BLUR_LENGTHS_PX:
+    window: np.ndarray,
+    detector: cv2.aruco.ArucoDetector,
+    markers: Collection[int],
+    angle: float,
+    lengths: Sequence[float],
+) -> tuple[int, np.ndarray, float] | None:
+    for length in lengths:
         sharp = np.clip(wiener(window, line_blur(length, angle)), 0, 255).astype(np.uint8)
         # Read at twice the size: the bits are then over 6 px wide.
         big = cv2.resize(sharp, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
@@ -107,5 +129,6 @@ def _read(
         for found, i in zip(corners, ids.ravel(), strict=True):
             if int(i) in markers:
                 # A pixel centre X of the doubled window is (X + 0.5) / 2 - 0.5 of the window.
-                return int(i), np.asarray(found, dtype=np.float64).reshape(4, 2) / 2.0 - 0.25
+                corners = np.asarray(found, dtype=np.float64).reshape(4, 2) / 2.0 - 0.25
+                return int(i), corners, length
     return None

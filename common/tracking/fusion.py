@@ -8,11 +8,19 @@ onto the seen pose (as a localiser's map-to-odometry transform does). The
 robot's pose is that correction applied to its current odometry pose, so it
 moves smoothly between frames and snaps back to the truth at each one.
 
+Several cameras may share one arena (one per half, overlapping at the seam).
+Each keeps its own latest correction per robot; the robot's is the mean of the
+corrections of the cameras that saw it within ``fresh_s`` of the newest
+sighting, so a robot in the overlap has one pose (not one per camera, taken in
+turns), and leaving one camera's view for the other's shifts it by half the
+two cameras' disagreement at most, never to "not seen".
+
 What is shown is honest about its source: ``tracked`` (seen within
-``fresh_s``), ``odometry`` (no camera over this arena, or the camera is
-offline: the world says so), or ``not seen`` (a live camera has not seen
-this robot for ``unseen_after_s``): then the last trusted pose is kept,
-never a guess, and every pose is kept inside the arena.
+``fresh_s``), ``odometry`` (no camera over this arena, the camera is
+offline, or the camera that saw it last has gone and no other has seen it
+since: the world says so), or ``not seen`` (a live camera has not seen this
+robot for ``unseen_after_s``): then the last trusted pose is kept, never a
+guess, and every pose is kept inside the arena.
 """
 
 from __future__ import annotations
@@ -58,7 +66,28 @@ class _Robot:
     )  # (wall time, odometry pose)
     correction: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seen_at: float | None = None
+    seen_by: str = ""  # the camera of the newest sighting
     last_shown: tuple[float, float, float] | None = None
+    # Each camera's newest sighting: (capture time, its correction).
+    sightings: dict[str, tuple[float, tuple[float, float, float]]] = field(default_factory=dict)
+
+    def blend(self, fresh_s: float) -> tuple[float, float, float]:
+        """The mean of the corrections seen within ``fresh_s`` of the newest (headings on
+        the circle): one pose where several cameras see the robot."""
+        newest = max(at for at, _ in self.sightings.values())
+        recent = [c for at, c in self.sightings.values() if newest - at <= fresh_s]
+        if len(recent) == 1:
+            return recent[0]
+        heading = math.atan2(
+            sum(math.sin(c[2]) for c in recent), sum(math.cos(c[2]) for c in recent)
+        )
+        # Corrections differ by a few mm and a fraction of a degree: their mean applied to
+        # the odometry pose is the mean of the poses each gives, to first order.
+        return (
+            sum(c[0] for c in recent) / len(recent),
+            sum(c[1] for c in recent) / len(recent),
+            heading,
+        )
 
 
 class CameraClock:
@@ -100,6 +129,7 @@ class PoseFusion:
         self.camera_silent_after_s = camera_silent_after_s
         self._robots: dict[str, _Robot] = {}
         self._camera_at: float | None = None  # the last camera message of any kind
+        self._left: set[str] = set()  # cameras whose process has gone (others live on)
 
     def _robot(self, agent: str) -> _Robot:
         return self._robots.setdefault(agent, _Robot())
@@ -112,20 +142,48 @@ class PoseFusion:
         """The camera spoke (a frame of tracked poses, even an empty one)."""
         self._camera_at = at if self._camera_at is None else max(self._camera_at, at)
 
-    def seen(self, agent: str, x: float, y: float, heading: float, captured_at: float) -> bool:
-        """The camera saw ``agent`` there at ``captured_at``; False if no odometry covers it yet.
-        Whether the camera is alive is the caller's word (``camera_alive``), by arrival."""
+    def seen(
+        self,
+        agent: str,
+        x: float,
+        y: float,
+        heading: float,
+        captured_at: float,
+        camera: str = "",
+    ) -> bool:
+        """``camera`` saw ``agent`` there at ``captured_at``; False if no odometry covers it
+        yet. Whether the camera is alive is the caller's word (``camera_alive``), by arrival."""
         robot = self._robot(agent)
         odo = self._odometry_at(robot, captured_at)
         if odo is None:
             return False
-        robot.correction = _compose((x, y, heading), _inverse(odo))
-        robot.seen_at = captured_at if robot.seen_at is None else max(robot.seen_at, captured_at)
+        robot.sightings[camera] = (captured_at, _compose((x, y, heading), _inverse(odo)))
+        robot.correction = robot.blend(self.fresh_s)
+        if robot.seen_at is None or captured_at >= robot.seen_at:
+            robot.seen_at, robot.seen_by = captured_at, camera
         return True
 
     def camera_gone(self) -> None:
-        """The camera's process is gone (its presence token left): offline at once."""
+        """The last camera's process is gone (its presence token left): offline at once."""
         self._camera_at = None
+
+    def camera_left(self, camera: str) -> None:
+        """One camera's process is gone while others live: the robots it saw last, and no
+        other since, are on odometry (their camera is offline), not "not seen"."""
+        self._left.add(camera)
+        for robot in self._robots.values():
+            if robot.sightings.pop(camera, None) is None or not robot.sightings:
+                continue
+            other = max(robot.sightings, key=lambda c: robot.sightings[c][0])
+            at = robot.sightings[other][0]
+            if robot.seen_at is not None and robot.seen_at - at <= self.fresh_s:
+                # Another camera saw it as recently (the overlap): that one holds it.
+                robot.correction = robot.blend(self.fresh_s)
+                robot.seen_by, robot.seen_at = other, at
+            # Else another camera saw it long ago: its old correction is not taken back.
+
+    def camera_back(self, camera: str) -> None:
+        self._left.discard(camera)
 
     def camera_live(self, now: float) -> bool:
         return self._camera_at is not None and now - self._camera_at <= self.camera_silent_after_s
@@ -135,7 +193,7 @@ class PoseFusion:
         if robot is None or not robot.history:
             return None
         odo = robot.history[-1][1]
-        camera = self.camera_live(now)
+        camera = self.camera_live(now) and robot.seen_by not in self._left
         if camera and (robot.seen_at is None or now - robot.seen_at > self.unseen_after_s):
             if robot.last_shown is not None:  # kept where it was last trusted
                 return FusedPose(*robot.last_shown, source="not seen")

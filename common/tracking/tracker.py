@@ -18,8 +18,14 @@ import cv2
 import numpy as np
 
 from common.tracking.calibration import ArenaCalibration, detect_all, detector
-from common.tracking.deblur import find_blurred
-from common.tracking.markers import MarkerLayout
+from common.tracking.deblur import (
+    AXES,
+    OUTLINE_WINDOW_PX,
+    WIDE_WINDOW_PX,
+    WINDOW_PX,
+    find_blurred,
+)
+from common.tracking.markers import MarkerLayout, corners_mm
 
 log = logging.getLogger("wart.tracking")
 
@@ -27,6 +33,12 @@ PREDICT_S = 0.5  # a robot is looked for where its last fixes say it went this l
 SEARCH_S = 5.0  # and at unread outlines within its reach this long after its last fix
 MIN_BLUR_SPEED_MM_S = 60.0  # slower, a marker is not blurred out of reading: covered
 MAX_PLACES = 3  # unread outlines tried for one robot, the nearest to its prediction first
+# An unread outline is a marker's when its side is this fraction of a marker's there
+# (blur lengthens it, the robot's dark side merges with it; clutter is far off).
+MARKER_LIKE = (0.6, 2.2)
+# A fast robot read nowhere is looked for around where it was this long after its fix
+# (two frames at 15 fps): the wide window costs about 120 ms of CPU when it does not read.
+WIDE_S = 0.15
 LOST_S = 1.0  # unseen this long, a robot is said to be lost (once, with the reason)
 
 
@@ -49,13 +61,16 @@ class _Track:
     pending: list[TrackedPose] = field(default_factory=list)
     velocity: tuple[float, float] = (0.0, 0.0)  # mm/s, from the last two fixes
     lost_told: bool = False
+    fixes: int = 1  # fixes in a row: one, and where it goes is not known yet
+    blur_px: float | None = None  # the smear's length that read it last
 
     def trust(self, pose: TrackedPose) -> None:
+        self.fixes += 1
         dt = pose.at - self.pose.at
         if 0.0 < dt <= PREDICT_S:
             self.velocity = ((pose.x - self.pose.x) / dt, (pose.y - self.pose.y) / dt)
         elif dt > PREDICT_S:
-            self.velocity = (0.0, 0.0)
+            self.velocity, self.fixes = (0.0, 0.0), 1
         self.pose, self.pending = pose, []
 
 
@@ -90,6 +105,7 @@ class Tracker:
         self._tracks: dict[str, _Track] = {}
         self._told_unknown: set[int] = set()
         self._told_jump: set[str] = set()
+        self._scan = 0  # where the search for robots never fixed goes on, among outlines
 
     def detect_poses(self, frame: np.ndarray, captured_at: float) -> list[TrackedPose]:
         """Every robot marker in ``frame`` as a pose, unchecked against earlier frames."""
@@ -129,18 +145,42 @@ class Tracker:
             side_px=side,
         )
 
+    def _outlines(self) -> tuple[np.ndarray, np.ndarray]:
+        """The unread outlines that could be a robot's marker: their centres in arena mm
+        (at a marker's height) and in frame px, the likeliest first (their side nearest
+        a marker's side there)."""
+        h = self.layout.robot_marker_height_mm
+        if not self._unread:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        corners = np.array(self._unread)
+        centres_px = corners.mean(axis=1)
+        centres = self.calibration.to_arena(self.calibration.undistort_points(centres_px), h)
+        sides = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).mean(axis=1)
+        side_mm = self.layout.robot_marker_mm
+        expected = np.array(
+            [
+                np.linalg.norm(
+                    np.diff(
+                        self.calibration.to_frame(corners_mm(x, y, 0.0, side_mm)[:2], h), axis=0
+                    )
+                )
+                for x, y in centres
+            ]
+        )
+        ratio = sides / np.maximum(expected, 1e-6)
+        like = (ratio >= MARKER_LIKE[0]) & (ratio <= MARKER_LIKE[1])
+        order = np.argsort(np.abs(np.log(np.maximum(ratio[like], 1e-6))))
+        return centres[like][order], centres_px[like][order]
+
     def _through_blur(self, seen: set[str], captured_at: float) -> list[TrackedPose]:
         """Robots not read in this frame, looked for through their motion blur: where
         they should be now if they were driving and where they were (fixed less than
-        PREDICT_S ago), and at each outline the detector could not read within their
-        reach (SEARCH_S). A robot never fixed yet is looked for at the unread outlines."""
+        PREDICT_S ago), and at each marker-like outline the detector could not read
+        within their reach (SEARCH_S). A robot never fixed yet is looked for at the
+        marker-like unread outlines, a few a frame, in turn."""
         found: list[TrackedPose] = []
         h = self.layout.robot_marker_height_mm
-        unread = (
-            self.calibration.to_arena(self.calibration.undistort_points(np.array(self._unread)), h)
-            if self._unread
-            else np.zeros((0, 2))
-        )
+        unread, unread_px = self._outlines()
         for agent, track in self._tracks.items():
             dt = captured_at - track.pose.at
             if agent in seen or not 0.0 < dt <= SEARCH_S:
@@ -148,28 +188,62 @@ class Tracker:
             vx, vy = track.velocity if dt <= PREDICT_S else (0.0, 0.0)
             x, y = track.pose.x + vx * dt, track.pose.y + vy * dt
             reach = self.max_speed_mm_s * dt + self.jump_margin_mm
-            places = []
+            places: list[tuple[np.ndarray, int]] = []
             if math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S:
-                places = [(x, y), (track.pose.x, track.pose.y)]
-            near = np.hypot(unread[:, 0] - track.pose.x, unread[:, 1] - track.pose.y) <= reach
-            places += sorted(
-                (tuple(p) for p in unread[near]), key=lambda p: math.hypot(p[0] - x, p[1] - y)
-            )[:MAX_PLACES]
+                predicted = self.calibration.to_frame(
+                    np.array([(x, y), (track.pose.x, track.pose.y)]), h
+                )
+                places = [(px, WINDOW_PX) for px in predicted]
+            elif track.fixes == 1 and dt <= PREDICT_S:
+                # Found once (through its blur, maybe): not yet known to stand still.
+                last = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
+                places = [(last[0], OUTLINE_WINDOW_PX)]
+            near = np.flatnonzero(
+                np.hypot(unread[:, 0] - track.pose.x, unread[:, 1] - track.pose.y) <= reach
+            )
+            nearest = sorted(near, key=lambda k: math.hypot(unread[k, 0] - x, unread[k, 1] - y))
+            places += [(unread_px[k], OUTLINE_WINDOW_PX) for k in nearest[:MAX_PLACES]]
             ahead = np.array([(x, y), (x + vx * 0.01, y + vy * 0.01)])
             way = np.diff(self.calibration.to_frame(ahead, h), axis=0)[0]
             angle = math.atan2(way[1], way[0]) if math.hypot(vx, vy) else None
-            for px in self.calibration.to_frame(np.array(places), h) if places else []:
-                read = find_blurred(self._gray, detector(), {track.pose.marker}, px, angle)
+            for px, size in places:
+                read = find_blurred(self._gray, detector(), {track.pose.marker}, px, angle, size)
                 if read is not None:
-                    found.append(self._pose_of(agent, read[0], read[1], captured_at))
                     break
+            else:
+                read = None
+                if math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S and dt <= WIDE_S:
+                    # It turned: around where it was, just after (a window costs 120 ms).
+                    b = track.blur_px or 6.0
+                    at = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
+                    read = find_blurred(
+                        self._gray,
+                        detector(),
+                        {track.pose.marker},
+                        at[0],
+                        None,
+                        WIDE_WINDOW_PX,
+                        (b, b - 0.5, b + 0.5),
+                        AXES,
+                    )
+            if read is not None:
+                track.blur_px = read[2]
+                found.append(self._pose_of(agent, read[0], read[1], captured_at))
         untracked = {
             i: a for a, i in self.layout.robots.items() if a not in self._tracks and a not in seen
         }
-        for px in self._unread[:MAX_PLACES] if untracked else []:
-            read = find_blurred(self._gray, detector(), untracked, px, None)
-            if read is not None and read[0] in untracked:
-                found.append(self._pose_of(untracked.pop(read[0]), read[0], read[1], captured_at))
+        if untracked and len(unread_px):
+            # In turn over the frames: a robot that is not in the arena costs a few windows
+            # a frame, not one for every outline.
+            start = self._scan % len(unread_px)
+            self._scan += MAX_PLACES
+            for k in range(start, start + min(MAX_PLACES, len(unread_px))):
+                px = unread_px[k % len(unread_px)]
+                read = find_blurred(self._gray, detector(), untracked, px, None, OUTLINE_WINDOW_PX)
+                if read is not None and read[0] in untracked:
+                    found.append(
+                        self._pose_of(untracked.pop(read[0]), read[0], read[1], captured_at)
+                    )
         return found
 
     def _say_lost(self, seen: set[str], captured_at: float) -> None:

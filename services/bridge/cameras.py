@@ -1,11 +1,13 @@
 """The cameras over a real arena, as the bridge follows them: present or gone, and their clocks.
 
-A camera is offline when its process is gone (its presence token leaves: at
-once, not after a silence), or when it has said nothing for CAMERA_HUNG_S (a
-hung capture). Not after a short silence: a busy camera host's frames stall
-for seconds, and a robot the camera does not see must stay "not seen", never
-wander off on odometry. Each camera's stamps are put on this host's clock
-(CameraClock).
+The arena's cameras are offline when the last one's process is gone (its
+presence token leaves: at once, not after a silence), or when none has said
+anything for CAMERA_HUNG_S (a hung capture). Not after a short silence: a busy
+camera host's frames stall for seconds, and a robot the camera does not see
+must stay "not seen", never wander off on odometry. Each camera's stamps are
+put on this host's clock (CameraClock). Several cameras may share the arena
+(one per half): their sightings are fused (common/tracking/fusion.py), and one
+gone while others live puts only the robots it alone saw on odometry.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ class ArenaCameras:
             if present:
                 self._alive.add(camera)
                 self._left.discard(camera)
+                self.fusion.camera_back(camera)
                 return
             self._alive.discard(camera)
             self._left.add(camera)
@@ -41,6 +44,8 @@ class ArenaCameras:
                 self._left.pop()
             ours = set(self._clocks)
             gone = camera in ours and not ours & self._alive
+        if camera in ours:
+            self.fusion.camera_left(camera)
         if gone:
             self.fusion.camera_gone()
 

@@ -333,7 +333,9 @@ class BridgeService(WorldService):
             known = set(self._agents)
         for robot in seen.robots:
             if robot.agent in known:
-                self.fusion.seen(robot.agent, robot.x, robot.y, robot.heading, captured)
+                self.fusion.seen(
+                    robot.agent, robot.x, robot.y, robot.heading, captured, seen.camera
+                )
 
     def _shown_poses(self, agents: Sequence[_Agent], states: Sequence[RobotState]) -> list[Pose]:
         """Each robot's pose as the world shows it; a change of where poses come from
@@ -356,6 +358,12 @@ class BridgeService(WorldService):
                 if source == "not seen":
                     self.log.warning(
                         "%s is not seen by the camera: shown where it was last seen", agent.id
+                    )
+                elif source == "odometry" and camera:
+                    self.log.warning(
+                        "%s: the camera that saw it has gone and no other sees it: poses "
+                        "from odometry",
+                        agent.id,
                     )
                 elif self._pose_from.get(agent.id) == "not seen":
                     self.log.info("%s is seen by the camera again", agent.id)

@@ -42,7 +42,8 @@ def calibrate_main(argv: Sequence[str], prog: str) -> int:
         return intrinsics_main([a for a in argv if a != "--intrinsics"], f"{prog} --intrinsics")
     p = cli.parser(
         prog,
-        "Calibrate a camera over its arena: find the four reference markers in one frame and "
+        "Calibrate a camera over its arena: find the reference markers it sees in one frame "
+        "(at least 3; one of several cameras over a big arena: --reference-grid) and "
         "save the floor's homography.\nThe arena's size comes from the world's snapshot "
         "(--world, on the lab's network), or from --arena WIDTHxHEIGHT (mm) offline.\n"
         "When --out already holds the camera's intrinsics (--intrinsics), they are used and "
@@ -81,7 +82,7 @@ def calibrate_main(argv: Sequence[str], prog: str) -> int:
         if snap is None:
             return cli.fail(f"world {args.world} did not answer; is it running? (or give --arena)")
         width, height = float(snap.width), float(snap.height)
-    source = open_source(args.source)
+    source = open_source(args.source, grid=args.reference_grid, over=args.synthetic_over)
     try:
         source.open()
         frame = source.read()
@@ -98,7 +99,7 @@ def calibrate_main(argv: Sequence[str], prog: str) -> int:
     try:
         cal = calibrate(
             frame,
-            default_layout(width, height, []),
+            default_layout(width, height, [], grid=args.reference_grid),
             camera_height_mm=args.camera_height
             if args.camera_height is not None
             or lens is not None

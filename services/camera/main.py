@@ -106,10 +106,17 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
         calibration=args.calibration,
         auto_calibrate=args.auto_calibrate,
         camera_height_mm=args.camera_height,
+        reference_grid=args.reference_grid,
     )
 
     def build(session: zenoh.Session) -> CameraService:
-        source = open_source(args.source, loop=args.loop, sample_fps=args.fps)
+        source = open_source(
+            args.source,
+            loop=args.loop,
+            sample_fps=args.fps,
+            grid=args.reference_grid,
+            over=args.synthetic_over,
+        )
         return CameraService(
             session, options.realm, name, world=args.world, source=source, options=camera_options
         )

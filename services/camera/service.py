@@ -48,7 +48,12 @@ from common.tracking.calibration import (
     read_intrinsics,
 )
 from common.tracking.intrinsics import Intrinsics
-from common.tracking.markers import MarkerLayout, default_layout
+from common.tracking.markers import (
+    MarkerError,
+    MarkerLayout,
+    default_layout,
+    grid_description,
+)
 from common.tracking.tracker import Tracker
 from services.camera.arguments import DEFAULT_HEIGHT_MM
 from services.camera.sources import FrameSource, SourceEnded, SourceError
@@ -68,6 +73,7 @@ class CameraOptions:
     calibration: Path | None = None
     auto_calibrate: bool = False
     camera_height_mm: float | None = None  # None: solved with a lens, else 1500 said
+    reference_grid: tuple[int, int] = (2, 2)  # the reference markers: the corners
 
 
 class CameraService(Service):
@@ -305,14 +311,19 @@ class CameraService(Service):
             and sorted(self.layout.robots) == sorted(agents)
         ):
             return
-        self._arena = arena
-        self.layout = default_layout(arena[0], arena[1], agents)
+        try:
+            layout = default_layout(arena[0], arena[1], agents, grid=self.options.reference_grid)
+        except MarkerError as exc:  # more robots than ids, or an arena too small for markers
+            self._say_once("layout", f"world {self.world}: no marker layout: {exc}")
+            return
+        self._arena, self.layout = arena, layout
         self.log.info(
-            "world %s: arena %.0f x %.0f mm, markers %s",
+            "world %s: arena %.0f x %.0f mm, markers %s; reference markers %s",
             self.world,
             arena[0],
             arena[1],
             ", ".join(f"{a}={i}" for a, i in sorted(self.layout.robots.items())) or "none",
+            grid_description(self.layout.reference),
         )
         self._make_tracker()
 

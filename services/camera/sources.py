@@ -8,6 +8,7 @@ turns that into "camera offline: ..." on the page and tries again.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import time
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ from common.tracking.synthetic import CameraModel, SyntheticCamera
 from common.tracking.truth import TruthError, read_truth
 
 SYNTHETIC = "synthetic:"
+Rectangle = tuple[float, float, float, float]  # x0, y0, x1, y1 in arena mm
 _DEVICE = re.compile(r"^(/dev/video\d+|\d+)$")
 _URL = re.compile(r"^(rtsp|rtsps|http|https|tcp|udp)://", re.IGNORECASE)
 
@@ -93,13 +95,21 @@ def check_spec(spec: str) -> str:
 
 
 def open_source(
-    spec: str, *, loop: bool = False, seed: int = 0, sample_fps: float | None = None
+    spec: str,
+    *,
+    loop: bool = False,
+    seed: int = 0,
+    sample_fps: float | None = None,
+    grid: tuple[int, int] = (2, 2),
+    over: Rectangle | None = None,
 ) -> FrameSource:
     """The source ``spec`` names. ``loop`` and ``sample_fps`` are for a video file: play it
-    again at its end, and take frames at that rate from its timeline (default: all)."""
+    again at its end, and take frames at that rate from its timeline (default: all);
+    ``grid`` and ``over`` for a synthetic camera: the reference markers it renders, and
+    the part of the arena it hangs over."""
     check_spec(spec)
     if spec.startswith(SYNTHETIC):
-        return SyntheticSource(Path(spec[len(SYNTHETIC) :]), seed=seed)
+        return SyntheticSource(Path(spec[len(SYNTHETIC) :]), seed=seed, grid=grid, over=over)
     if _DEVICE.match(spec) or _URL.match(spec):
         return OpenCvSource(spec)
     return Recording(Path(spec), loop=loop, sample_fps=sample_fps)
@@ -165,6 +175,8 @@ class SyntheticSource:
     model: CameraModel = field(default_factory=CameraModel)
     blur_sigma_px: float = 0.6
     noise_sigma: float = 2.0
+    grid: tuple[int, int] = (2, 2)  # the reference markers on its floor
+    over: Rectangle | None = None  # the part of the arena it sees; None: all of it
 
     def __post_init__(self) -> None:
         self.description = describe_spec(SYNTHETIC + str(self.truth))
@@ -203,18 +215,31 @@ class SyntheticSource:
         agents = tuple(sorted(truth.robots))
         arena = (truth.width_mm, truth.height_mm)
         if self._camera is None or arena != self._arena or agents != self._agents:
-            layout = default_layout(arena[0], arena[1], agents)
+            layout = default_layout(arena[0], arena[1], agents, grid=self.grid)
             self._camera = SyntheticCamera(
                 arena[0],
                 arena[1],
                 layout,
-                self.model,
+                self._placed(arena),
                 blur_sigma_px=self.blur_sigma_px,
                 noise_sigma=self.noise_sigma,
                 seed=self.seed,
             )
             self._arena, self._agents = arena, agents
         return self._camera.render(truth.robots)
+
+    def _placed(self, arena: tuple[float, float]) -> CameraModel:
+        """The model hung straight down over the centre of ``over``, its view fitting
+        that rectangle as the whole camera's fits the whole arena."""
+        m = self.model
+        if self.over is None:
+            return m
+        x0, y0, x1, y1 = self.over
+        whole = max(arena[0] / m.width, arena[1] / m.height)
+        part = max((x1 - x0) / m.width, (y1 - y0) / m.height)
+        return dataclasses.replace(
+            m, x_mm=(x0 + x1) / 2.0, y_mm=(y0 + y1) / 2.0, margin=m.margin * part / whole
+        )
 
     def close(self) -> None:
         self._camera = None

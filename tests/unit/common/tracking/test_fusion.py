@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 from common.tracking.fusion import CameraClock, PoseFusion
@@ -103,3 +104,72 @@ def test_a_camera_on_a_host_whose_clock_is_off_still_corrects_the_right_pose() -
     naive.seen("k1", true_x(9.8), 500.0, 0.0, captured_at=9.8 - 5.0)
     off = naive.pose("k1", 9.9)
     assert off is not None and off.source == "not seen"
+
+
+def test_two_cameras_over_the_seam_give_one_pose_and_hand_over_without_a_jump() -> None:
+    """A robot driving from the left camera's half to the right's: in the overlap both
+    see it, 1 mm apart (each camera's own small error); its pose is their mean, not the
+    two in turns, and when the left loses it the right holds it: tracked throughout."""
+    fusion = PoseFusion(2000, 1000)
+    shown_x: list[float] = []
+    for i in range(200):  # 20 ms polls, 10 Hz cameras each, out of step
+        t = i * 0.02
+        x = 800.0 + 2.0 * i  # 100 mm/s from 800 to 1200
+        fusion.odometry("k1", x, 500.0, 0.0, at=t)
+        if i % 5 == 0 and x < 1100:  # the left camera sees up to 1100
+            fusion.camera_alive(t)
+            fusion.seen("k1", x - 0.5, 500.0, 0.0, captured_at=t, camera="left")
+        if i % 5 == 2 and x > 900:  # the right from 900
+            fusion.camera_alive(t)
+            fusion.seen("k1", x + 0.5, 500.0, 0.0, captured_at=t, camera="right")
+        shown = fusion.pose("k1", t)
+        assert shown is not None and shown.source == "tracked"
+        shown_x.append(shown.x - x)
+    overlap = shown_x[70:130]  # x 940 to 1060: both see it
+    assert max(abs(e) for e in overlap) < 0.01  # one pose: the mean, not +-0.5 in turns
+    steps = [abs(b - a) for a, b in itertools.pairwise(shown_x)]
+    assert max(steps) <= 0.5 + 1e-9  # the hand-overs: half the disagreement at most
+
+
+def test_a_camera_gone_leaves_the_robots_it_alone_saw_on_odometry_and_others_tracked() -> None:
+    fusion = PoseFusion(2000, 1000)
+    fusion.odometry("k1", 300, 500, 0, at=0.0)  # under the left camera only
+    fusion.odometry("k2", 1700, 500, 0, at=0.0)  # under the right camera only
+    fusion.odometry("k3", 1000, 500, 0, at=0.0)  # on the seam: both
+    fusion.camera_alive(0.0)
+    fusion.seen("k1", 300, 500, 0, captured_at=0.0, camera="left")
+    fusion.seen("k3", 1000, 500, 0, captured_at=0.0, camera="left")
+    fusion.seen("k2", 1700, 500, 0, captured_at=0.0, camera="right")
+    fusion.seen("k3", 1000, 500, 0, captured_at=0.0, camera="right")
+    fusion.camera_left("left")
+    for t in (0.1, 0.2, 1.5):  # the right camera carries on, seeing k2 and k3
+        fusion.odometry("k1", 300 + 10 * t, 500, 0, at=t)
+        fusion.odometry("k2", 1700, 500, 0, at=t)
+        fusion.odometry("k3", 1000, 500, 0, at=t)
+        fusion.camera_alive(t)
+        fusion.seen("k2", 1700, 500, 0, captured_at=t, camera="right")
+        fusion.seen("k3", 1000, 500, 0, captured_at=t, camera="right")
+    k1, k2, k3 = (fusion.pose(a, 1.5) for a in ("k1", "k2", "k3"))
+    assert k1 is not None and k1.source == "odometry"  # its camera is offline: said so
+    assert round(k1.x) == 315  # the last correction carries its odometry on
+    assert k2 is not None and k2.source == "tracked"
+    assert k3 is not None and k3.source == "tracked"
+    # The left camera back, still not seeing k1 (covered): not seen, as with one camera.
+    fusion.camera_back("left")
+    shown = fusion.pose("k1", 1.6)
+    assert shown is not None and shown.source == "not seen"
+
+
+def test_a_camera_gone_does_not_give_its_robot_back_to_one_that_saw_it_long_ago() -> None:
+    fusion = PoseFusion(2000, 1000)
+    fusion.odometry("k1", 1200, 500, 0, at=0.0)
+    fusion.camera_alive(0.0)
+    fusion.seen("k1", 1205, 500, 0, captured_at=0.0, camera="left")  # leaving its view
+    for t in (1.0, 2.0):  # only the right camera sees it now; odometry slips 5 mm
+        fusion.odometry("k1", 1200 + 100 * t, 500, 0, at=t)
+        fusion.camera_alive(t)
+        fusion.seen("k1", 1200 + 100 * t + 5 * t, 500, 0, captured_at=t, camera="right")
+    fusion.camera_left("right")
+    shown = fusion.pose("k1", 2.1)
+    assert shown is not None and shown.source == "odometry"  # not "not seen" by the left
+    assert round(shown.x) == 1410  # the right camera's correction, not the left's old one

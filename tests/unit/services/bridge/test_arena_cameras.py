@@ -59,3 +59,18 @@ def test_many_camera_names_do_not_grow_the_bridge() -> None:
         cameras.frame(f"c{i}", captured_at=0.0, now=0.0)
         cameras.presence(f"x{i}", False)
     assert len(cameras._clocks) <= 16 and len(cameras._left) <= 16
+
+
+def test_one_of_two_cameras_gone_keeps_the_arena_tracked_by_the_other() -> None:
+    fusion = fusion_with_k1()
+    cameras = ArenaCameras(fusion)
+    for camera in ("left", "right"):
+        cameras.presence(camera, True)
+        cameras.frame(camera, captured_at=0.0, now=0.0)
+    fusion.seen("k1", 300, 300, 0, captured_at=0.0, camera="left")
+    cameras.presence("left", False)
+    assert fusion.camera_live(0.1)  # the right one lives: the arena has a camera
+    shown = fusion.pose("k1", 0.1)
+    assert shown is not None and shown.source == "odometry"  # k1's own camera is gone
+    cameras.presence("right", False)
+    assert not fusion.camera_live(0.1)

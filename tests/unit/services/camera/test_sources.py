@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 from pathlib import Path
@@ -9,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from common.tracking.truth import TruthError, now_truth, read_truth, write_truth
+from services.camera.arguments import source_arguments
 from services.camera.sources import SourceError, check_spec, describe_spec, open_source
 
 
@@ -94,3 +96,35 @@ def test_a_wrong_truth_file_is_refused(tmp_path: Path, document: dict[str, objec
     path.write_text(json.dumps(document))
     with pytest.raises(TruthError, match=str(path)):
         read_truth(path)
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["--reference-grid", "3"], "COLUMNSxROWS, e.g. 3x2"),
+        (["--reference-grid", "9x2"], "2 to 5 columns by 2 to 5 rows"),
+        (["--synthetic-over", "0,0,1100"], "X0,Y0,X1,Y1 in mm"),
+        (["--synthetic-over", "500,0,100,1000"], "at least 100 mm each way"),
+        (["--synthetic-over", "0,0,nan,1000"], "finite mm"),
+    ],
+)
+def test_a_bad_grid_or_view_is_refused_in_words(
+    argv: list[str], said: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    parser = argparse.ArgumentParser()
+    source_arguments(parser)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--world", "w", "--source", "synthetic:t.json", *argv])
+    assert said in capsys.readouterr().err
+
+
+def test_a_synthetic_camera_over_one_half_sees_that_half(tmp_path: Path) -> None:
+    truth = tmp_path / "truth.json"
+    write_truth(truth, now_truth(2000.0, 1000.0, {"k1": (500.0, 500.0, 0.0)}))
+    source = open_source(f"synthetic:{truth}", grid=(3, 2), over=(0.0, 0.0, 1100.0, 1000.0))
+    source.open()
+    assert source.read().shape == (480, 640, 3)
+    # Straight down over the half's centre, 1.12 times the half's height in view.
+    matrix = source.camera_matrix
+    assert matrix is not None
+    assert matrix[0, 0] == pytest.approx(1500.0 * 480 / (1000.0 * 1.12))
