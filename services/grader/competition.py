@@ -307,17 +307,7 @@ class Competitions:
         began: float,
     ) -> str:
         """The heat's MCAP recording; its path ("" if it could not be written)."""
-        run = EpisodeRun(
-            ctx=name,
-            request_id=f"{name}-heat-{heat}",
-            mode="competition",
-            user=sub.user,
-            world=a.map_name,
-            agent=a.robot,
-            filename=sub.filename,
-            source=sub.source,
-            time_limit=a.time_limit,
-        )
+        run = EpisodeRun.of(sub, a, name, f"{name}-heat-{heat}", "competition")
         try:
             record_episode(path, run, report, began)
         except (OSError, ValueError) as exc:

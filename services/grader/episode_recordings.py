@@ -23,6 +23,8 @@ from common.messages import EpisodeReport, RecordingChunk
 from common.messages.recording import MAX_CHUNK
 from common.recording import schema as s
 from common.recording.writer import RecordingWriter, pose_record
+from services.grader.assignment import Assignment
+from services.grader.grading_db import Pending
 from services.grader.heats import write_frames
 
 log = logging.getLogger("wart.grader")
@@ -43,6 +45,12 @@ class EpisodeRun:
     filename: str
     source: bytes
     time_limit: float
+
+    @classmethod
+    def of(cls, sub: Pending, a: Assignment, ctx: str, request_id: str, mode: str) -> EpisodeRun:
+        """A submission's run on an assignment's robot and map."""
+        return cls(ctx, request_id, mode, sub.user, a.map_name, a.robot, sub.filename,
+                   sub.source, a.time_limit)  # fmt: skip
 
 
 def record_episode(path: Path, run: EpisodeRun, report: EpisodeReport, began: float) -> None:

@@ -199,17 +199,7 @@ class EpisodeRunner:
         """
         kept = {e.episode: e for e in already if not e.real and e.score is not None}
         rule = a.score
-        run = EpisodeRun(
-            ctx=a.name,
-            request_id=sub.id,
-            mode="graded",
-            user=sub.user,
-            world=a.map_name,
-            agent=a.robot,
-            filename=sub.filename,
-            source=sub.source,
-            time_limit=a.time_limit,
-        )
+        run = EpisodeRun.of(sub, a, a.name, sub.id, "graded")
         zones = sorted(rule.zones)
         results: list[EpisodeResult] = []
         for n in range(a.episodes):
