@@ -330,18 +330,28 @@ def test_a_shift_click_in_the_arena_adds_a_robot_where_clicked(open_page, lab: R
             break
     assert target is not None and at is not None, f"no free floor spot in view: {spots}"
     before = set(robots())
-    page.p.keyboard.down("Shift")
-    page.p.mouse.click(float(at[0]), float(at[1]))
-    page.p.keyboard.up("Shift")
 
     def added() -> list[tuple[str, float, float]]:
         return [(name, x, y) for name, (x, y) in robots().items() if name not in before]
 
-    wait_until(lambda: bool(added()), 20, what="a robot added by the shift-click")
-    [(ident, x, y)] = added()
+    # The page learns that shift-clicks are wanted from a message of the server's: on a
+    # loaded machine a click right after the tab opened can come before it, and is a plain
+    # click. A student clicks again; so does this test, until a robot is added.
+    for _ in range(4):
+        page.p.keyboard.down("Shift")
+        page.p.mouse.click(float(at[0]), float(at[1]))
+        page.p.keyboard.up("Shift")
+        try:
+            wait_until(lambda: bool(added()), 8, what="a robot added by the shift-click")
+            break
+        except AssertionError:
+            continue
+    wait_until(lambda: bool(added()), 10, what="a robot added by the shift-click")
+    _ident, x, y = added()[0]
     assert np.hypot(x - target[0], y - target[1]) < 60.0, ((x, y), target)
     page.p.wait_for_timeout(1500)  # for the picture only: software WebGL draws late
     page.screenshot("real-shift-click-added")
-    editor.select(ident)
-    editor._delete()  # the module's lab is shared: the robot goes again
-    wait_until(lambda: not added(), 20, what=f"{ident} deleted")
+    for name, _x, _y in added():  # the module's lab is shared: the robots go again
+        editor.select(name)
+        editor._delete()
+    wait_until(lambda: not added(), 20, what="the added robots deleted")
