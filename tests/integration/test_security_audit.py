@@ -16,11 +16,11 @@ from common import keys
 from common.auth import create_identity_key
 from common.client.lab_client import LabClient
 from common.lab_errors import NotAllowed
-from common.messages import AuditEntry, AuditQuery, AuditReport
+from common.messages import AuditEntry, AuditReport
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, make_lab
 
 pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
 
@@ -30,11 +30,6 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     return lab
-
-
-def _trail(admin: LabClient, **filters: object) -> list[AuditEntry]:
-    entries, _ = admin.audit_trail(AuditQuery(**filters))  # type: ignore[arg-type]
-    return entries
 
 
 def _counted(entries: list[AuditEntry]) -> int:
@@ -54,7 +49,7 @@ def test_a_thousand_refusals_are_a_few_counted_lines(lab: ProcessLab) -> None:
                 bob.list_users()
     print(f"1000 refused requests in {time.monotonic() - t0:.1f} s")
     with lab.client("admin") as admin:
-        lines = _trail(admin, actor="bob", action="list_users")
+        lines = audit_trail(admin, actor="bob", action="list_users")
         assert len(lines) <= 4  # a first line and a count, per minute the flood spanned
         assert _counted(lines) == 1000
         assert all(line.outcome == "refused" for line in lines)
@@ -79,7 +74,7 @@ def test_a_replayed_report_is_kept_once_and_forged_ones_are_shown(lab: ProcessLa
         session.put(where, captured)
         session.put(where, captured)  # a replay, to the same registry
         with lab.client("admin") as admin:
-            wait_for(lambda: _trail(admin, action="estop"), 10, "the report kept")
+            wait_for(lambda: audit_trail(admin, action="estop"), 10, "the report kept")
         assert lab.registry is not None
         lab.registry.kill9()  # the replay window in its memory goes with it
         lab.start_registry()
@@ -93,15 +88,15 @@ def test_a_replayed_report_is_kept_once_and_forged_ones_are_shown(lab: ProcessLa
         session.put(where, b"not a report at all")
         with lab.client("admin") as admin:
             forged = wait_for(
-                lambda: len(_trail(admin, action="forged_report")) >= 2 or None,
+                lambda: len(audit_trail(admin, action="forged_report")) >= 2 or None,
                 10,
                 "the forged reports recorded",
             )
             assert forged
-            assert len(_trail(admin, action="estop")) == 1  # kept once, past the restart
-            lines = {(e.actor, e.target) for e in _trail(admin, action="forged_report")}
+            assert len(audit_trail(admin, action="estop")) == 1  # kept once, past the restart
+            lines = {(e.actor, e.target) for e in audit_trail(admin, action="forged_report")}
             assert ("bob", "carol") in lines and ("unknown", "audit") in lines
-            assert not _trail(admin, action="ban")  # the lie is not a ban line
+            assert not audit_trail(admin, action="ban")  # the lie is not a ban line
     finally:
         close_session(session)
     admin_args = ["--user", "admin", *lab.net_args()]

@@ -27,7 +27,7 @@ from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.agentkit import CTX, start_agent_context, start_engine
-from tests.kit.lab import LOGIN_WAIT, PASSWORD, make_lab
+from tests.kit.lab import LOGIN_WAIT, PASSWORD, audit_trail, make_lab
 from tests.kit.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
@@ -44,11 +44,6 @@ def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     return lab
-
-
-def _trail(admin: LabClient, **filters: object) -> list[AuditEntry]:
-    entries, _ = admin.audit_trail(AuditQuery(**filters))  # type: ignore[arg-type]
-    return entries
 
 
 # --- 1. login sources from the transport ------------------------------------------------
@@ -192,14 +187,14 @@ def test_a_ban_ends_the_session_refuses_login_with_reason_and_end_and_is_lifted(
         assert "lifted" in admin.lift_ban("bob", "apologised")
         with lab.client("bob") as back:
             assert back.user == "bob"
-        trail = _trail(admin, actor="admin")
+        trail = audit_trail(admin, actor="admin")
         actions = [(e.action, e.target, e.outcome) for e in trail]
         assert ("ban", "bob", "ok") in actions and ("lift_ban", "bob", "ok") in actions
         lift = next(e for e in trail if e.action == "lift_ban")
         assert lift.detail == "apologised" and lift.source.startswith("zenoh:")
-        refusals = _trail(admin, action="login", outcome="refused")
+        refusals = audit_trail(admin, action="login", outcome="refused")
         assert refusals and "spamming the lobby" in refusals[0].detail
-        assert _trail(admin, actor="bob", action="ban", outcome="refused")
+        assert audit_trail(admin, actor="bob", action="ban", outcome="refused")
 
 
 def test_a_ban_without_end_lasts_until_lifted(lab: Lab) -> None:
@@ -225,7 +220,7 @@ def test_kicks_grants_and_accounts_are_in_the_trail_which_is_never_edited(lab: L
         with lab.client("carol") as carol, pytest.raises(NotAllowed):
             carol.audit_trail()
         assert alice.session is not None
-        entries = _trail(admin)
+        entries = audit_trail(admin)
         seen = [(e.actor, e.action, e.target, e.outcome) for e in entries]
         assert ("admin", "grant", "alice", "ok") in seen
         assert ("admin", "kick", "alice", "ok") in seen
@@ -238,9 +233,9 @@ def test_kicks_grants_and_accounts_are_in_the_trail_which_is_never_edited(lab: L
         kick = next(e for e in entries if e.action == "kick")
         assert kick.detail == "cheating at quiz 3" and time.time() - kick.at < 60
         # Filters: by actor, by target substring, by time.
-        assert {e.actor for e in _trail(admin, actor="bob")} == {"bob"}
-        assert {e.target for e in _trail(admin, target="zed")} == {"zed"}
-        assert not _trail(admin, since=time.time() + 60)
+        assert {e.actor for e in audit_trail(admin, actor="bob")} == {"bob"}
+        assert {e.target for e in audit_trail(admin, target="zed")} == {"zed"}
+        assert not audit_trail(admin, since=time.time() + 60)
         page, more = admin.audit_trail(AuditQuery(limit=2))
         assert len(page) == 2 and more and page[0].id > page[1].id
     # Never edited in place: the database itself refuses.
@@ -272,7 +267,7 @@ def test_who_stopped_the_arena_and_changed_the_slot_is_in_the_registrys_trail(ar
         ida.kick(CTX, "bob", "driving into others")
 
         def reported() -> list[AuditEntry]:
-            return [e for e in _trail(admin) if e.reporter == "ctx-arena"]
+            return [e for e in audit_trail(admin) if e.reporter == "ctx-arena"]
 
         wait_for(lambda: len(reported()) >= 5, 10, "the context's reports in the trail")
         seen = {(e.actor, e.action, e.target, e.outcome) for e in reported()}
@@ -335,7 +330,7 @@ def test_wart_ban_and_wart_audit_from_the_command_line(lab: Lab, tmp_path: Path)
     )
     assert on_file.returncode == 0, on_file.stderr
     with lab.client("admin") as admin:
-        line = _trail(admin, action="grant", target="alice")[0]
+        line = audit_trail(admin, action="grant", target="alice")[0]
     assert (line.actor, line.reporter, line.detail) == (
         "local",
         "wart-users",

@@ -36,6 +36,7 @@ from common import keys
 from common.auth import RegistryIdentity, create_identity_key
 from common.client.lab_client import LabClient
 from common.keys import AliveKind
+from common.messages import AuditEntry, AuditQuery
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.lab import wiring
@@ -529,3 +530,9 @@ __all__ = [
     "wait_alive",
     "wart_env",
 ]
+
+
+def audit_trail(admin: LabClient, **filters: object) -> list[AuditEntry]:
+    """The registry's audit entries an admin reads, filtered as ``AuditQuery`` takes them."""
+    entries, _ = admin.audit_trail(AuditQuery(**filters))  # type: ignore[arg-type]
+    return entries
