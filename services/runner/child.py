@@ -120,9 +120,14 @@ def main() -> int:
     loop = ControllerLoop(controller, Khepera(link), stop=stop)
     try:
         loop.run()
-    except BaseException:
-        traceback.print_exc()
-        tell(pipe.Failed(traceback.format_exc(limit=5)))
+    except BaseException as exc:
+        if isinstance(exc, MemoryError):
+            # The traceback keeps the controller's frames, and with them all it hoarded:
+            # let that go first, or saying why could itself run out of memory.
+            traceback.clear_frames(exc.__traceback__)
+        text = traceback.format_exc(limit=5)
+        sys.stderr.write(text)
+        tell(pipe.Failed(text))
         return 4
     tell(pipe.Done(loop.iterations))
     return 0

@@ -13,7 +13,7 @@ from common import keys
 from common.client.agent_client import FINAL
 from common.keys import AliveKind
 from common.lab_errors import LabError
-from common.messages import OutputLines
+from common.messages import OutputLines, RequestStatus
 from tests.conftest import Router, needs_sandbox, wait_for
 from tests.kit.agentkit import (
     Poses,
@@ -135,17 +135,23 @@ def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: Process
             source = textwrap.dedent(HEADER + body).encode()
             requests[name] = client.queue(agent, "deploy", source=source).request_id
         try:
+            ended: dict[str, RequestStatus] = {}
             for name, rid in requests.items():
                 status = watcher.wait_status(rid, FINAL, timeout=30)
                 assert status is not None, f"{name} never ended"
                 assert status.status == "finished", (name, status)
+                ended[name] = status
 
             def printed(name: str) -> str:
                 return "\n".join(outputs.get(requests[name], []))
 
             # The printed lines travel on their own key: the last of them may land after the
             # run's final status on a loaded machine.
-            wait_for(lambda: "MemoryError" in printed("memory"), 15, "the hog's MemoryError")
+            assert "out of memory" in ended["memory"].reason, ended["memory"]
+            try:
+                wait_for(lambda: "MemoryError" in printed("memory"), 15, "the hog's MemoryError")
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; its lines: {printed('memory')!r}") from None
             wait_for(lambda: "socket refused" in printed("socket"), 15, "'socket refused'")
             text = {name: printed(name) for name in requests}
             assert "read" not in text["files"].replace("refused", ""), text["files"]

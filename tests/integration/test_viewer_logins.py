@@ -142,6 +142,7 @@ async def _class_at_once(url: str) -> tuple[dict[str, str], dict[str, str]]:
         await asyncio.gather(*(c.close() for c in clients))
 
 
+@pytest.mark.timeout(2 * ANSWER_BOUND + 60)  # two rounds of clicks, each within its bound
 def test_a_class_logging_in_at_once_each_gets_an_answer(vlab: ViewerLab) -> None:
     first, again = run_in_thread(_class_at_once(vlab.url))
 

@@ -194,6 +194,10 @@ class LoginForm:
         self.on_success = on_success
         self.closed = False
         self._done = threading.Event()  # set when the login under way is answered
+        # The progress thread and the answer both write the form's message: under one
+        # lock, so "Logging in... 5 s" can never land after the answer and hide it for
+        # good (seen under load: three wrong passwords left on "Logging in...").
+        self._message = threading.Lock()
         # Held back until the handlers below are registered: viser sends each button
         # as it is made, and a click that reaches the viewer before its handler is
         # dropped without a trace. On a loaded viewer the thread building the form can
@@ -250,9 +254,10 @@ class LoginForm:
     def _progress(self, clicked: float, done: threading.Event) -> None:
         """Past PROGRESS_AFTER_S, the form says how long the login has waited, until answered."""
         while not done.wait(0.5):
-            waited = time.monotonic() - clicked
-            if waited >= PROGRESS_AFTER_S and not self.closed:
-                self.error.content = progress_words(waited, self.desk.waiting)
+            with self._message:
+                waited = time.monotonic() - clicked
+                if waited >= PROGRESS_AFTER_S and not self.closed and not done.is_set():
+                    self.error.content = progress_words(waited, self.desk.waiting)
 
     def _log_in(self, user: str, password: str, clicked: float) -> None:
         """On a login thread: ask the lab, then show the answer (or the lab's tab)."""
@@ -279,7 +284,8 @@ class LoginForm:
             log.exception("login of %s to %s", user, self.address.label)
             self._answered(BROKEN, clicked)
             return
-        self._done.set()
+        with self._message:
+            self._done.set()
         log.info(
             "browser %d: %s logged in to %s after %.1f s",
             self.client.client_id,
@@ -303,7 +309,8 @@ class LoginForm:
             )
 
     def _answered(self, text: str, clicked: float) -> None:
-        self._done.set()
+        with self._message:
+            self._done.set()
         log.info(
             "browser %d: login to %s ended after %.1f s: %s",
             self.client.client_id,

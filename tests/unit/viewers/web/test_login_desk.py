@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
-from viewers.web.login import LoginDesk
+from viewers.web import login
+from viewers.web.login import LoginDesk, LoginForm
 
 WAIT = 10.0  # how long a test waits for a condition that should hold at once
 
@@ -87,3 +89,53 @@ def test_a_failing_callback_does_not_stop_the_desk() -> None:
 def test_a_desk_needs_a_worker_and_a_wait(workers: int, wait: float) -> None:
     with pytest.raises(ValueError):
         LoginDesk(workers=workers, queue_wait=wait)
+
+
+class _Shown:
+    """What the form's message and button hold: all the page would show."""
+
+    content = ""
+    visible = False
+    disabled = True
+
+
+def test_the_answer_is_never_overwritten_by_a_late_progress_message(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A loaded machine preempts the progress thread between its check and its write;
+    # the answer shown in between must still be what the student reads at the end.
+    form = object.__new__(LoginForm)
+    form.error, form.submit, form.closed = _Shown(), _Shown(), False
+    form.desk = LoginDesk(workers=1, queue_wait=60.0)
+    form._busy, form._message = threading.Lock(), threading.Lock()
+    form._done = threading.Event()
+    form.client = type("Client", (), {"client_id": 7})()
+    form.address = type("Address", (), {"label": "the lab"})()
+    writing, answered = threading.Event(), threading.Event()
+
+    def preempted(waited: float, queued_here: int) -> str:
+        writing.set()
+        answered.wait(1.0)  # the answer lands here when nothing orders the two writes
+        return "Logging in... 5 s"
+
+    monkeypatch.setattr(login, "progress_words", preempted)
+    form._busy.acquire()
+    clicked = time.monotonic() - 5.0
+    progress = threading.Thread(target=form._progress, args=(clicked, form._done))
+    progress.start()
+    try:
+        assert writing.wait(WAIT)
+
+        def answer_now() -> None:
+            form._answered("Could not log in: wrong password", clicked)
+            answered.set()
+
+        answer = threading.Thread(target=answer_now)
+        answer.start()
+        answer.join(WAIT)
+        progress.join(WAIT)
+        assert form.error.content == "**Could not log in: wrong password**"
+        assert form.submit.disabled is False
+    finally:
+        form._done.set()
+        form.desk.close()
