@@ -24,12 +24,19 @@ from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
 from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
+from tests.time_spent import TimeSpent
 
 _SANDBOX_PROBLEM = sandbox_problem()
 # For the tests that run controllers in the runner's real sandbox.
 needs_sandbox = pytest.mark.skipif(
     _SANDBOX_PROBLEM is not None, reason=f"no sandbox: {_SANDBOX_PROBLEM}"
 )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # On the controller only: workers' reports reach it, and it prints the summary.
+    if not hasattr(config, "workerinput"):
+        config.pluginmanager.register(TimeSpent(), "time_spent")
 
 
 def pytest_itemcollected(item: pytest.Item) -> None:
