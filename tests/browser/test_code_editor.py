@@ -14,7 +14,7 @@ import pytest
 from tests.browser.conftest import ViserPage, join_demo_arena, wait_until
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
-from viewers.web.inputs import set_value
+from viewers.web.code_editor import show_text
 from viewers.web.workbench import Workbench
 
 pytestmark = pytest.mark.browser
@@ -170,11 +170,11 @@ def test_type_check_mark_save_open_and_jump(open_page, viewer: WebViewer) -> Non
     # the old text while the page showed the new).
     text = bench.code.value
     kept = text.rstrip("\n") + "\n# kept by the server\n"
-    set_value(bench.code, kept)
+    show_text(bench.code, kept)
     wait_until(lambda: "# kept by the server" in box.inner_text(), what="the server's text")
     assert cursor_line() == 11
     wait_until(lambda: bench.code.value == kept, what="the server's text kept at the server")
-    set_value(bench.code, text)
+    show_text(bench.code, text)
     wait_until(lambda: "# kept by the server" not in box.inner_text(), what="the text back")
     wait_until(lambda: bench.code.value == text, what="the text back at the server")
 

@@ -40,8 +40,10 @@ from functools import cache
 from pathlib import Path
 
 import viser
+from viser._messages import GuiUpdateMessage
 
 from common.controller.advice import Problem
+from viewers.web.inputs import set_value
 from viewers.web.masked import element_id
 
 ASSETS = Path(__file__).resolve().parent / "assets"
@@ -102,6 +104,22 @@ def problems_html(code: viser.GuiTextHandle, problems: Iterable[Problem]) -> str
     return (
         f'<div class="wart-problems" data-for="{html.escape(element_id(code))}" '
         f'data-problems="{html.escape(json.dumps(data))}"></div>'
+    )
+
+
+def show_text(code: viser.GuiTextHandle, text: str) -> None:
+    """Put ``text`` in the editor on every page, even where the server holds it already.
+
+    viser sends a value only when it changes at the server. But a page's resend that
+    crossed the server's last text on the way can leave the server holding ``text``
+    while that page shows another: a file opened then would never reach the page, and
+    the page's next resend would put its own text back over the file.
+    """
+    if code.value != text:
+        set_value(code, text)
+        return
+    code._impl.gui_api._websock_interface.queue_message(
+        GuiUpdateMessage(code._impl.uuid, {"value": text})
     )
 
 

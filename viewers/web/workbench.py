@@ -48,7 +48,7 @@ from viewers.web.adapters import (
     OutputEvent,
     RequestEvent,
 )
-from viewers.web.code_editor import CodeEditor
+from viewers.web.code_editor import CodeEditor, show_text
 from viewers.web.inputs import on_click, set_value
 from viewers.web.live_agents import check_upload
 from viewers.web.marks import (
@@ -185,7 +185,7 @@ class Workbench:
 
     def _put_back(self, kept: BenchMemory) -> None:
         set_value(self.name, kept.file_name)
-        set_value(self.code, kept.code)
+        show_text(self.code, kept.code)
         self._running_on = kept.running_on
         self._run_live = kept.running_on is not None
         self.status.content = kept.status
@@ -271,7 +271,7 @@ class Workbench:
             set_value(self.name, name)
         else:
             return
-        set_value(self.code, source.decode("utf-8", "replace"))
+        show_text(self.code, source.decode("utf-8", "replace"))
         self._clear()
         if tell:
             self.say(f"Opened {name}.")
