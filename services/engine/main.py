@@ -12,6 +12,7 @@ save/load (maps are saved only in --maps-dir).
 from __future__ import annotations
 
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,6 +27,7 @@ from common.sim2d import compiled
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
 from common.sim2d.maps import MapError, load_map
 from common.sim2d.packs import MAX_THREADS
+from common.sim2d.world import World
 from services.engine.service import STREAMS_UP_FRONT, EngineService, EngineSettings
 
 
@@ -125,8 +127,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         except OSError as exc:
             p.error(f"--robots-dir {args.robots_dir}: {exc.strerror or exc}")
         robot_registry.use(robots_dir=args.robots_dir)
-    try:
-        world = load_map(
+
+    def load() -> World:
+        return load_map(
             args.map,
             name=world_name,
             seed=args.seed,
@@ -135,6 +138,9 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
             physics_threads=args.physics_threads,
             drive=args.drive,
         )
+
+    try:
+        world = load()
     except MapError as exc:
         return cli.fail(str(exc))
     # Load the per-tick kernels now rather than on the first tick: the ahead-of-time
@@ -150,6 +156,15 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
             flush=True,
         )
     print(f"engine: kernels ready in {compiled.warm_up():.2f} s", file=sys.stderr, flush=True)
+    # A few ticks of a throwaway copy of this world before its token is declared: a drive
+    # or an object with no ahead-of-time kernel loads numba's at its first tick, and
+    # under load that first tick took seconds in a world that said it was up.
+    t0 = time.perf_counter()
+    rehearsal = load()
+    for _ in range(3):
+        rehearsal.step()
+    del rehearsal
+    print(f"engine: first ticks in {time.perf_counter() - t0:.2f} s", file=sys.stderr, flush=True)
     settings = EngineSettings(
         tick_s=tick_s,
         speed=args.speed,

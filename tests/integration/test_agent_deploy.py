@@ -147,11 +147,15 @@ def test_hostile_uploads_are_contained_and_everything_keeps_serving(lab: Process
 
             # The printed lines travel on their own key: the last of them may land after the
             # run's final status on a loaded machine.
-            assert "out of memory" in ended["memory"].reason, ended["memory"]
-            try:
-                wait_for(lambda: "MemoryError" in printed("memory"), 15, "the hog's MemoryError")
-            except AssertionError as exc:
-                raise AssertionError(f"{exc}; its lines: {printed('memory')!r}") from None
+            # The hog is stopped either way: out of memory, or, on a machine so busy that
+            # filling its memory takes longer than a step may, as hung.
+            hog = ended["memory"].reason
+            assert "out of memory" in hog or hog.startswith("hung: do_work"), hog
+            if "out of memory" in hog:
+                try:
+                    wait_for(lambda: "MemoryError" in printed("memory"), 15, "its MemoryError")
+                except AssertionError as exc:
+                    raise AssertionError(f"{exc}; its lines: {printed('memory')!r}") from None
             wait_for(lambda: "socket refused" in printed("socket"), 15, "'socket refused'")
             text = {name: printed(name) for name in requests}
             assert "read" not in text["files"].replace("refused", ""), text["files"]
