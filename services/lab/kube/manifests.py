@@ -309,6 +309,11 @@ class Renderer:
                 "procMount": "Unmasked",
                 "allowPrivilegeEscalation": False,
             }
+            if self.podman:
+                # podman kube play 4.3 ignores procMount, and without it no sandbox
+                # can mount its /proc; privileged is the one setting it honours that
+                # unmasks it. On the lab's own host, not on a shared cluster.
+                c["securityContext"] = {"privileged": True}
         objects = self.k.workload(svc.kind, svc.ident, [c], volumes, stateful=stateful)
         if svc.kind == "runner" and not self.podman:
             objects[-1]["spec"]["template"]["spec"]["hostUsers"] = False

@@ -117,8 +117,13 @@ def test_each_service_is_its_own_workload_with_probes_resources_and_its_state(
     # The routers' rules do not let a camera watch tokens: its probe could only fail.
     camera = containers(objects[("Deployment", "wart-camera-arena1")])["camera"]
     assert "readinessProbe" not in camera and "livenessProbe" not in camera
-    runner = containers(objects[("Deployment", "wart-runner-runner")])["runner"]
+    runner_pod = objects[("Deployment", "wart-runner-runner")]
+    runner = containers(runner_pod)["runner"]
+    # Each sandbox mounts a /proc of its own: an unmasked one, in a user namespace.
     assert runner["securityContext"]["seccompProfile"]["type"] == "Unconfined"
+    assert runner["securityContext"]["procMount"] == "Unmasked"
+    assert runner_pod["spec"]["template"]["spec"]["hostUsers"] is False
+    assert "privileged" not in runner["securityContext"]
     # Every container: the image's user, requests and limits.
     for obj in rendered.objects:
         if obj["kind"] in ("StatefulSet", "Deployment"):
@@ -148,6 +153,11 @@ def test_podman_gets_only_what_it_plays_on_the_host_network(lab_with_pki: Path) 
                 assert "ports" not in c
     claims = {o["metadata"]["name"] for o in objects if o["kind"] == "PersistentVolumeClaim"}
     assert "wart-registry-registry-state" in claims
+    # podman 4.3 ignores procMount: the runner's container is privileged instead.
+    (runner,) = (o for o in objects if o["metadata"]["name"] == "wart-runner-runner")
+    assert runner["spec"]["template"]["spec"]["containers"][0]["securityContext"] == {
+        "privileged": True
+    }
 
 
 def test_a_router_certificate_without_the_service_name_is_refused(tmp_path: Path) -> None:
