@@ -62,6 +62,10 @@ class TwinStore:
 
     @classmethod
     def open(cls, path: Path) -> TwinStore:
+        """The lab's database at ``path``; one that is not there is refused, never made
+        (a mistyped path would keep a twin where no runner looks)."""
+        if not path.is_file():
+            raise DbError("not_found", f"no lab database at {path} (the registry's --db)")
         return cls(LabDatabase(path, "lab"))
 
     def close(self) -> None:

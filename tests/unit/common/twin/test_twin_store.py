@@ -22,7 +22,7 @@ from common.robots.robotfile import RobotFileError, parse
 from common.twin.fit import Calibration, Estimate
 from common.twin.twinfile import TwinFileError, parse_twin
 from services.commands import twin as twin_cli
-from services.lab.database import DbError
+from services.lab.database import DbError, LabDatabase
 from services.lab.twins_db import TwinStore
 
 FITTED_AT = time.time() - 3 * 86400  # a file "not in the future" whatever the clock says
@@ -98,8 +98,15 @@ def test_every_problem_of_a_twin_file_is_named_together() -> None:
             parse_twin(junk)
 
 
-def test_the_lab_keeps_every_version_and_the_newest_is_in_force(tmp_path: Path) -> None:
+def lab_database(tmp_path: Path) -> Path:
+    """The lab's database as the registry makes it at its first start (a file, WAL)."""
     db = tmp_path / "registry.db"
+    LabDatabase(db).close()
+    return db
+
+
+def test_the_lab_keeps_every_version_and_the_newest_is_in_force(tmp_path: Path) -> None:
+    db = lab_database(tmp_path)
     store = TwinStore.open(db)
     assert store.current("k1") is None
     first = parse_twin(calibration(scale_left=0.96).to_json("carol", FITTED_AT))
@@ -126,9 +133,14 @@ def test_the_lab_keeps_every_version_and_the_newest_is_in_force(tmp_path: Path) 
 def test_wart_twin_saves_lists_and_shows(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db, good, bad = tmp_path / "registry.db", tmp_path / "k1.json", tmp_path / "bad.json"
+    good, bad = tmp_path / "k1.json", tmp_path / "bad.json"
     good.write_text(calibration().to_json("carol", FITTED_AT))
     bad.write_text(json.dumps(document(robot="")))
+    # A mistyped database is refused, never made: a twin kept there no runner would find.
+    assert twin_cli.main(["--db", str(tmp_path / "regsitry.db"), "save", str(good)]) == 1
+    assert "no lab database at" in capsys.readouterr().err
+    assert not (tmp_path / "regsitry.db").exists()
+    db = lab_database(tmp_path)
     assert twin_cli.main(["--db", str(db), "save", str(bad)]) == 1
     assert "refused, nothing kept" in capsys.readouterr().err
     assert twin_cli.main(["--db", str(db), "list"]) == 0
