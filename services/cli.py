@@ -73,6 +73,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "services.commands.calibrate",
         "a real robot's twin (slip, wheel base, latency, IR gains) fitted from its recordings",
     ),
+    "twin": (
+        "services.commands.twin",
+        "real robots' twins kept in the lab's database: list, show, save (versioned)",
+    ),
     "replay": (
         "viewers.web.replay",
         "replay a recorded run in a web viewer: timeline, play, speed (no lab needed)",

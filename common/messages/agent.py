@@ -183,6 +183,9 @@ class DryRunReport(Message, frozen=True):
     output: Annotated[list[OutputLine], msgspec.Meta(max_length=50)] = msgspec.field(
         default_factory=list
     )
+    # Which robot model the run simulated: "simulated with k1's twin fitted 2026-12-05 by
+    # carol" (a real robot's twin, common/twin/) or "the datasheet Khepera".
+    model: ShortText = ""
 
 
 class QueueStateRequest(Message, frozen=True):

@@ -109,6 +109,26 @@ class Drive(ComponentType):
             lo=1.0,
             hi=1e14,
         ),
+        Param(
+            "wheel_scale",
+            "numbers",
+            "the share of each wheel's commanded motion the robot makes [left, right] "
+            "(slip; a real robot's twin: wart calibrate)",
+            "",
+            [1.0, 1.0],
+            lo=0.5,
+            hi=1.5,
+            max_items=2,
+        ),
+        Param(
+            "latency_s",
+            "number",
+            "how long after a command the wheels obey it (a real robot's twin)",
+            "s",
+            0.0,
+            lo=0.0,
+            hi=0.5,
+        ),
     )
     api = (
         ApiCall(
@@ -121,6 +141,12 @@ class Drive(ComponentType):
         ApiCall("position()", "Reading of 2 counters (pulses)", "the wheels' position counters"),
         ApiCall("set_position(left, right)", "pulses", "set the position counters"),
     )
+
+    @classmethod
+    def cross_check(cls, values: Mapping[str, Any]) -> list[tuple[str, str]]:
+        if len(values["wheel_scale"]) != 2:
+            return [("wheel_scale", "must be two numbers [left, right]")]
+        return []
 
 
 class IrProximity(ComponentType):

@@ -349,6 +349,8 @@ def _compile(
             max_speed=drive["max_speed"],
             max_force=float(drive["max_force"]),
             max_torque=float(drive["max_torque"]),
+            wheel_scale=_pair(drive["wheel_scale"]),
+            latency_s=float(drive["latency_s"]),
         ),
         proximity=proximity,
         ambient=ambient,

@@ -70,6 +70,16 @@ class DriveSpec:
     max_speed: int  # commands are clamped to +-max_speed units
     max_force: float = 2.0e6  # g*mm/s^2 the motors can push with (tank pattern pivot)
     max_torque: float = 5.0e8  # g*mm^2/s^2 (tank pattern gear)
+    # A real robot's drive as its twin fitted it (common/twin/): the share of each
+    # wheel's commanded motion the floor gives (slip), and how long after a command the
+    # wheels obey it. The datasheet's robot: (1, 1) and 0, and the world skips them
+    # (common/sim2d/real_wheels.py).
+    wheel_scale: tuple[float, float] = (1.0, 1.0)
+    latency_s: float = 0.0
+
+    @property
+    def imperfect(self) -> bool:
+        return self.wheel_scale != (1.0, 1.0) or self.latency_s > 0.0
 
     def mm_per_s(self, speed_units: np.ndarray) -> np.ndarray:
         return speed_units * (self.mm_per_pulse / self.unit_time_s)

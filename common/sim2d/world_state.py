@@ -85,6 +85,9 @@ class Tables:
     arm_lowered_above: np.ndarray  # (N,) arm position at and above which the tongs are down
     servo: np.ndarray  # (N, 4) the velocity drive's mass, moment, max force, max torque
     mass: np.ndarray  # (N,) g: how the discs drive shares a push between two robots
+    # The slots of robots whose wheels slip or obey late (common/sim2d/real_wheels.py);
+    # empty for datasheet robots.
+    imperfect: tuple[int, ...] = ()
 
 
 # The per-agent arrays, one row per slot: grown and shrunk together as agents come and go.
@@ -290,6 +293,7 @@ class WorldState:
                 dtype=float,
             ).reshape(-1, 4),
             mass=np.array([a.body.mass for a in self.agents], dtype=float),
+            imperfect=tuple(i for i, s in enumerate(specs) if s.drive.imperfect),
         )
         self._slot_of = {a.serial: slot for slot, a in enumerate(self.agents)}
         self._slot_by_id = {a.id: slot for slot, a in enumerate(self.agents)}

@@ -18,6 +18,7 @@ import numpy as np
 
 from common.sim2d import chipmunk, compiled, heap, pucks_tables, sensing, world_discs
 from common.sim2d.packs import Readings
+from common.sim2d.real_wheels import RealWheels
 
 if TYPE_CHECKING:
     from common.sim2d.gripper import GripperTurrets
@@ -79,6 +80,7 @@ class WorldTicker:
         # The discs drive's fused tick (common/sim2d/fused.py): its state, built at
         # the first tick after anything it holds changed (FusedTick.key).
         self.fused: FusedTick | None = None
+        self._wheels = RealWheels(state)
 
     def _refresh_rows(self) -> None:
         s = self._state
@@ -289,6 +291,9 @@ class WorldTicker:
     def step(self) -> None:
         """Advance one tick: arms, drive, physics, counters, carried objects, sensors."""
         s = self._state
+        imperfect = s.tables.imperfect
+        if imperfect:  # robots whose wheels slip or obey late (a real robot's twin)
+            self._wheels.before(imperfect)
         profile = s.profile
         # The discs drive in one compiled call, its sensing pass too where it runs
         # on one thread (fused.tick says why). Not while profiling: the profile times physics
@@ -298,6 +303,8 @@ class WorldTicker:
         # no snapshot or edit.
         if s.drive == "discs" and not profile:
             self._step_fused(s)
+            if imperfect:
+                self._wheels.after(imperfect)
             return
         # The fused state's buffers would fall behind this tick: built afresh if needed.
         self.fused = None
@@ -423,6 +430,8 @@ class WorldTicker:
             s.next_sense = s.sim_time + s.sensor_period_s - 1e-9
             if profile:
                 s.phase_cpu["sensing"] += time.process_time() - t1
+        if imperfect:
+            self._wheels.after(imperfect)
 
     def sense(self) -> None:
         """Recompute every agent's proximity, ambient and gripper presence readings."""

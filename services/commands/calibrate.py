@@ -10,9 +10,11 @@ at the datasheet's. Then the gap: the datasheet model and the fitted twin, each
 run open-loop on the recorded commands from every camera pose, against where the
 camera saw the robot 1, 5 and 10 s later (median mm; the same runs as the fit,
 so an optimistic figure). ``--out FILE`` writes the twin (JSON: values, errors,
-runs, who fitted and when). docs/CALIBRATION.md.
+runs, who fitted and when); ``--save --db DB`` keeps it in the lab's database as
+the robot's newest version (``wart twin``). docs/CALIBRATION.md.
 
     wart calibrate k1 --recordings dance.mcap other-run.mcap --out k1-twin.json
+    wart calibrate k1 --recordings dance.mcap --save --db ~/.local/state/wart/lab/registry.db
 """
 
 from __future__ import annotations
@@ -25,10 +27,12 @@ from pathlib import Path
 
 from common import cli
 from common.recording import RecordingError, read_recording
-from common.twin.fit import TwinError, calibrate, open_loop_error, run_data
+from common.twin import gap
+from common.twin.fit import TwinError, calibrate, run_data
 from common.twin.motion import Drive
-
-HORIZONS_S = (1.0, 5.0, 10.0)
+from common.twin.twinfile import TwinFileError, parse_twin
+from services.lab.database import DbError
+from services.lab.twins_db import TwinStore
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int:
@@ -39,7 +43,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int
         help="recorded runs of the robot (.mcap), with the arena camera's poses of it",
     )  # fmt: skip
     p.add_argument("--out", type=Path, metavar="FILE", help="write the twin there (JSON)")
+    p.add_argument(
+        "--save", action="store_true",
+        help="keep the twin in the lab's database (--db) as the robot's newest version",
+    )  # fmt: skip
+    p.add_argument("--db", type=Path, metavar="DB", help="the lab's database (registry.db)")
     args, _ = cli.parse(p, argv)
+    if args.save and args.db is None:
+        p.error("--save needs --db (the lab's database: wart twin)")
     loaded = []
     for path in args.recordings:
         try:
@@ -55,23 +66,30 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int
     print(f"{args.robot}'s twin from {len(runs)} run(s), {seconds:.0f} s with camera poses:")
     for line in twin.lines():
         print(f"  {line}")
-    fitted = twin.fitted_drive()
-    after = " / ".join(f"{h:g}" for h in HORIZONS_S)
-    print(f"open-loop error after {after} s (median mm; of several runs, the worst run's):")
-    for name, drive in (("datasheet", Drive()), ("twin", fitted)):
-        figures = []
-        for horizon in HORIZONS_S:
-            errors = [open_loop_error(drive, r, horizon) for r in runs]
-            known = [e for e in errors if e == e]  # NaN: a run shorter than the horizon
-            figures.append(f"{max(known):.1f}" if known else "-")
-        print(f"  {name}: {' / '.join(figures)}")
+    print(f"{gap.heading()}; of several runs, the worst run's:")
+    for name, drive in (("datasheet", Drive()), ("twin", twin.fitted_drive())):
+        print(f"  {gap.gap(name, drive, runs).line()}")
     print("  (on the runs it was fitted to: record another run to check it on new data)")
+    text = twin.to_json(getpass.getuser(), time.time()) + "\n"
     if args.out is not None:
         try:
-            args.out.write_text(twin.to_json(getpass.getuser(), time.time()) + "\n")
+            args.out.write_text(text)
         except OSError as exc:
             return cli.fail(f"cannot write {args.out}: {exc.strerror or exc}", 1)
         print(f"wrote {args.out}")
+    if args.save:
+        try:
+            kept = parse_twin(text, f"{args.robot}'s twin")
+            store = TwinStore.open(args.db)
+        except (TwinFileError, DbError) as exc:
+            return cli.fail(f"not kept: {exc}", 1)
+        try:
+            version = store.save(kept, getpass.getuser())
+        except DbError as exc:
+            return cli.fail(f"not kept: {exc.message}", 1)
+        finally:
+            store.close()
+        print(f"kept as {args.robot}'s twin v{version} in {args.db} (in force: wart twin)")
     return 0
 
 

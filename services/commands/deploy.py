@@ -47,7 +47,7 @@ CONTEXT_DOWN_GIVE_UP_S = 60.0  # the context not answering this long: stop waiti
 def show_report(report: DryRunReport) -> None:
     say(
         f"dry run: {report.sim_seconds:g} simulated s in {report.wall_seconds:.1f} s, "
-        f"{report.steps} steps"
+        f"{report.steps} steps" + (f", {report.model}" if report.model else "")
     )
     for hit in report.collisions[:10]:
         named = f"{hit.what} {hit.ident}" if hit.ident else hit.what

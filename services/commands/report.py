@@ -15,6 +15,13 @@ start pose): final pose error, path length ratio, collisions of each on one
 map, and per-sensor mean differences of IR and ambient over time-aligned
 samples (REAL minus SIM). With ``--plots DIR``: both trajectories on one map
 and every IR and ambient sensor of both runs overlaid.
+
+The gap, for a real run (REAL, or FILE alone) watched by the arena camera: with
+``--twin FILE`` (a twin file, ``wart calibrate --out``) or ``--db DB`` (the robot's
+twin in force in the lab's database, ``wart twin``), the datasheet model and the
+twin, each run open-loop on the run's recorded commands from every camera pose,
+against where the camera saw the robot 1, 5 and 10 s later (median mm), side by
+side (needs the lab's packages: scipy and the simulator).
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from pathlib import Path
 import msgspec
 
 from common import cli
-from common.recording import RecordingError, Summary, plots, read_recording, summarize
+from common.recording import Recording, RecordingError, Summary, plots, read_recording, summarize
 from common.recording.compare import Comparison, compare
 from common.recording.report import describe, describe_comparison
 
@@ -34,6 +41,31 @@ from common.recording.report import describe, describe_comparison
 def _write_plots(paths: list[Path] | None) -> None:
     for path in paths or []:
         print(f"wrote {path}")
+
+
+def _gap(real: Recording, name: str, twin_file: Path | None, db: Path | None) -> list[str]:
+    """The datasheet model's and the twin's open-loop gap on the real run, as lines."""
+    # The lab's packages (scipy, the simulator; the database's for --db), imported here:
+    # a client install (pip install wart-lab) reports runs without them, and no gap.
+    from common.twin.gap import side_by_side
+    from common.twin.twinfile import parse_twin
+    from services.lab.twins_db import TwinStore
+
+    if twin_file is not None:
+        try:
+            return side_by_side(real, name, parse_twin(twin_file.read_bytes(), str(twin_file)))
+        except OSError as exc:
+            raise ValueError(f"cannot read {twin_file}: {exc.strerror or exc}") from None
+    assert db is not None
+    agent = real.info.agent if real.info is not None else ""
+    store = TwinStore.open(db)
+    try:
+        stored = store.current(agent)
+    finally:
+        store.close()
+    if stored is None:
+        raise ValueError(f"no twin of {agent or 'its robot'} is kept in {db} (wart twin)")
+    return side_by_side(real, name, stored.twin)
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart report") -> int:
@@ -47,6 +79,15 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart report") -> int:
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--plots", type=Path, metavar="DIR", help="also write plots (PNG) there")
+    twin = p.add_mutually_exclusive_group()
+    twin.add_argument(
+        "--twin", type=Path, metavar="FILE",
+        help="the real robot's twin file: its gap beside the datasheet's",
+    )  # fmt: skip
+    twin.add_argument(
+        "--db", type=Path, metavar="DB",
+        help="the lab's database: the real robot's twin in force there",
+    )  # fmt: skip
     args, _ = cli.parse(p, argv)
     if args.plots is not None and not plots.available():
         # Said before any work: the numbers alone are one flag away.
@@ -58,12 +99,22 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart report") -> int:
         result = summarize(recording) if other is None else compare(recording, other)
     except RecordingError as exc:
         return cli.fail(str(exc), 1)
+    gap_lines: list[str] = []
+    if args.twin is not None or args.db is not None:
+        real, real_path = (recording, args.file) if other is None else (other, args.against)
+        try:
+            gap_lines = _gap(real, real_path.stem, args.twin, args.db)
+        except ValueError as exc:  # TwinError, TwinFileError, DbError: said in words
+            return cli.fail(str(exc), 1)
     if args.json:
-        print(msgspec.json.format(msgspec.json.encode(result).decode()))
+        text = msgspec.json.encode(result).decode()
+        if gap_lines:
+            text = f'{{"report": {text}, "gap": {msgspec.json.encode(gap_lines).decode()}}}'
+        print(msgspec.json.format(text))
     elif isinstance(result, Comparison):
-        print("\n".join(describe_comparison(result)))
+        print("\n".join([*describe_comparison(result), *gap_lines]))
     else:
-        print("\n".join(describe(result)))
+        print("\n".join([*describe(result), *gap_lines]))
     if args.plots is not None:
         try:
             if other is None:

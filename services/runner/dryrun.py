@@ -31,6 +31,7 @@ from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
 from common.sim2d import maps
 from common.sim2d.world import EditError, World
+from common.twin.twinfile import Twin
 from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import SandboxLimits
 
@@ -115,10 +116,17 @@ def snapshot_to_map(snap: WorldSnapshot) -> dict[str, Any]:
     return out
 
 
-def world_from_snapshot(snap: WorldSnapshot) -> World:
-    """A private World like the snapshot's (MapError if it cannot be rebuilt)."""
+def world_from_snapshot(snap: WorldSnapshot, twin: Twin | None = None) -> World:
+    """A private World like the snapshot's (MapError if it cannot be rebuilt); ``twin``'s
+    robot simulated by its twin's robot file (the Khepera with the fitted drive)."""
+    room = snapshot_to_map(snap)
+    if twin is not None:
+        room.setdefault("robot_types", {})[twin.type_name] = twin.robot_file()
+        for agent in room["agents"]:
+            if agent["id"] == twin.robot:
+                agent["type"] = twin.type_name
     return maps.build_world(
-        snapshot_to_map(snap),
+        room,
         name=snap.world,
         seed=snap.seed,
         tick_s=snap.tick_s,
@@ -149,19 +157,31 @@ def dry_run(
     seconds: float = 5.0,
     limits: SandboxLimits | None = None,
     wall_s: float | None = None,
+    twin: Twin | None = None,
 ) -> DryRunReport:
     """Run ``source`` on ``agent`` of a private copy of ``snap``'s world; what it saw.
 
-    Raises ValueError if the world cannot be rebuilt or has no such robot,
-    RuntimeError if no sandbox can run here.
+    ``twin``: the real robot's twin (common/twin/), simulated instead of the datasheet's
+    Khepera when it is ``agent``'s and the agent is a Khepera; the report's ``model``
+    says which was used. Raises ValueError if the world cannot be rebuilt or has no
+    such robot, RuntimeError if no sandbox can run here.
     """
     started = time.monotonic()
     wall_s = wall_limit(seconds) if wall_s is None else wall_s
-    world = world_from_snapshot(snap)
+    kinds = {a.id: a.type for a in snap.agents}
+    if twin is not None and (twin.robot != agent or kinds.get(agent) != "khepera"):
+        twin = None  # a twin is a Khepera's: another robot keeps its own model
+    world = world_from_snapshot(snap, twin)
     try:
         slot = world.agent_slot(agent)
     except KeyError:
         raise ValueError(f"no robot {agent} in world {snap.world}") from None
+    kind = kinds.get(agent, "")
+    model = (
+        f"simulated with {twin.model()}"
+        if twin is not None
+        else ("the datasheet Khepera" if kind == "khepera" else f"the {kind} robot type")
+    )
     top = float(world.tables.max_speed[slot])
     run = Lockstep(
         source, filename, world, slot, wall_s=wall_s, limits=limits, max_output=MAX_OUTPUT
@@ -233,4 +253,5 @@ def dry_run(
         error_line=line,
         error=error[-256:] if error else "",
         output=output,
+        model=model[:256],
     )

@@ -42,6 +42,7 @@ import json
 import logging
 import threading
 import time
+from pathlib import Path
 
 import zenoh
 
@@ -74,7 +75,10 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from common.sim2d.maps import MapError
+from common.twin.twinfile import Twin
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
+from services.lab.database import DbError
+from services.lab.twins_db import TwinStore
 from services.runner.dryrun import dry_run
 from services.runner.episode import run_episode
 from services.runner.grader_run import run_grader
@@ -257,8 +261,10 @@ class RunnerService(Service):
         registry_key: bytes,
         login: ServiceLogin,
         limits: SandboxLimits | None = None,
+        twins: Path | None = None,
     ) -> None:
         super().__init__(session, realm, name)
+        self.twins = twins  # the lab's database, for real robots' twins (dry runs)
         self.verifier = Verifier(registry_key, realm)
         self.login = login
         self.limits = limits or SandboxLimits()
@@ -363,6 +369,7 @@ class RunnerService(Service):
         principal.require("lease", "ask a runner for dry runs")
         _precheck(request.source, request.filename)
         snap = self._snapshot(request.world)
+        twin = self._twin(snap, request.agent)
         try:
             report = dry_run(
                 snap,
@@ -371,6 +378,7 @@ class RunnerService(Service):
                 filename=request.filename,
                 seconds=request.seconds,
                 limits=self.limits,
+                twin=twin,
             )
         except (ValueError, MapError) as exc:
             raise RequestError("bad_request", str(exc)) from None
@@ -387,6 +395,28 @@ class RunnerService(Service):
             report.wall_seconds,
         )
         return report
+
+    def _twin(self, snap: WorldSnapshot, agent: str) -> Twin | None:
+        """A real arena's robot's twin in force, if the lab's database keeps one.
+
+        Read at each dry run (a twin saved a minute ago is used at once). A database
+        that cannot be read leaves the datasheet's model, which the report names.
+        """
+        if snap.kind != "real" or self.twins is None or not self.twins.exists():
+            return None
+        try:
+            store = TwinStore.open(self.twins)
+        except DbError as exc:
+            self.log.warning("cannot read twins from %s: %s", self.twins, exc.message)
+            return None
+        try:
+            stored = store.current(agent)
+        except DbError as exc:
+            self.log.warning("%s's twin refused: %s", agent, exc.message)
+            return None
+        finally:
+            store.close()
+        return stored.twin if stored is not None else None
 
     def _on_heat(self, query: zenoh.Query) -> Message:
         """A competition's heat: several entries in one world (services/runner/heat.py)."""

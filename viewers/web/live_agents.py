@@ -253,7 +253,8 @@ class AgentContextLink:
         if problem:
             raise LabError(problem)
         report = self._call(lambda: self.agents.dry_run(agent, source, filename=name))
-        details = [
+        details = [f"robot model: {report.model}"] if report.model else []
+        details += [
             f"collision at {c.at:.2f} s: {c.what}{' ' + c.ident if c.ident else ''}"
             for c in report.collisions[:5]
         ]

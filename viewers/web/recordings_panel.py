@@ -32,7 +32,9 @@ import numpy as np
 import viser
 
 from common.recording import Recording, RecordingError, plots, read_recording, report, summarize
-from common.twin.fit import TwinError, calibrate
+from common.twin import gap
+from common.twin.fit import TwinError, calibrate, run_data
+from common.twin.motion import Drive
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
 from viewers.web.inputs import on_click, set_value
 from viewers.web.replay import ReplayControls, ReplayFeed, ReplaySpot
@@ -212,20 +214,27 @@ class RecordingsPanel:
         self.say(f"Summary of {entry.name}." if entry else "")
 
     def _calibrate(self) -> None:
-        """The run's robot calibrated from this run (nothing is kept in the lab: shown here)."""
+        """The run's robot calibrated from this run, with the gap of the datasheet model and
+        the twin on it (shown here; ``wart calibrate --save`` keeps a twin in the lab)."""
         entry = self._entry()
         rec = self._read(entry) if entry is not None else None
         if entry is None or rec is None:
             return
         try:
             twin = calibrate(entry.agent, [(entry.name, rec)])
+            runs = [run_data(rec, entry.name)]
         except TwinError as exc:
             self.say(f"{entry.name} cannot calibrate {entry.agent}: {exc}", bad=True)
             return
+        gaps = [gap.gap(name, drive, runs).line() for name, drive in
+                (("datasheet", Drive()), ("twin", twin.fitted_drive()))]  # fmt: skip
         lines = "\n".join(f"- {escape_md(line)}" for line in twin.lines())
+        lines += f"\n\n{escape_md(gap.heading())}:\n\n"
+        lines += "\n".join(f"- {escape_md(line)}" for line in gaps)
         self.details.content = f"**{escape_md(entry.agent)}'s twin from {entry.name}**\n\n{lines}"
         self.say(
-            f"{entry.agent} calibrated from {entry.name}: below (wart calibrate --out keeps it)."
+            f"{entry.agent} calibrated from {entry.name}: below (wart calibrate --save keeps "
+            "it in the lab)."
         )
 
     def _plots(self) -> None:

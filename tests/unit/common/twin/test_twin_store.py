@@ -1,0 +1,176 @@
+"""A real robot's twin kept in the lab's database: checked on the way in, versioned, shown.
+
+A twin file from a user (``wart twin save``) or from ``wart calibrate --save`` is
+checked field by field; the lab's database (real SQLite) keeps every version, the
+newest in force; ``wart twin`` lists and shows them; the twin's robot file compiles
+to a Khepera with the fitted drive.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from common.robots import registry
+from common.robots.robotfile import RobotFileError, parse
+from common.twin.fit import Calibration, Estimate
+from common.twin.twinfile import TwinFileError, parse_twin
+from services.commands import twin as twin_cli
+from services.lab.database import DbError, LabDatabase
+from services.lab.twins_db import TwinStore
+
+FITTED_AT = time.time() - 3 * 86400  # a file "not in the future" whatever the clock says
+DAY = time.strftime("%Y-%m-%d", time.gmtime(FITTED_AT))
+
+
+def calibration(robot: str = "k1", scale_left: float = 0.96) -> Calibration:
+    def fitted(name: str, value: float, datasheet: float, unit: str = "") -> Estimate:
+        return Estimate(name, value, 0.002, datasheet, unit, ["dance"])
+
+    drive = [
+        fitted("scale_left", scale_left, 1.0),
+        fitted("scale_right", 0.99, 1.0),
+        fitted("wheel_base_mm", 55.0, 53.0, "mm"),
+        Estimate("latency_s", 0.0, None, 0.0, "s", [], "the commands changed 1 time(s)"),
+    ]
+    proximity = [fitted("ir2_gain", 1.1, 1.0), fitted("ir2_noise", 3.0, 4.0, "counts")]
+    return Calibration(robot, ["dance"], drive, proximity)
+
+
+def document(**changes: Any) -> dict[str, Any]:
+    doc = json.loads(calibration().to_json("carol", FITTED_AT))
+    doc.update(changes)
+    return doc
+
+
+def test_a_twin_file_is_read_back_as_fitted() -> None:
+    twin = parse_twin(calibration().to_json("carol", FITTED_AT))
+    assert (twin.robot, twin.fitted_by, twin.runs) == ("k1", "carol", ("dance",))
+    assert (twin.drive.scale_left, twin.drive.wheel_base_mm, twin.drive.latency_s) == (
+        0.96, 55.0, 0.0,
+    )  # fmt: skip
+    assert twin.fitted == ("scale_left", "scale_right", "wheel_base_mm")  # latency refused
+    assert twin.model() == f"k1's twin fitted {DAY} by carol"
+
+
+@pytest.mark.parametrize(
+    ("doc", "said"),
+    [
+        (document(format="wart-map"), 'format: must be "wart-twin"'),
+        (document(robot="../etc"), "robot: a robot's name"),
+        (document(fitted_by=""), "fitted_by: who fitted it"),
+        (document(fitted_at=time.time() + 10 * 86400), "fitted_at: when it was fitted"),
+        (document(runs=[]), "runs: the names of 1 to 100"),
+        (document(colour="red"), "colour: unknown field"),
+    ],
+)
+def test_a_bad_twin_file_is_refused_with_its_field(doc: dict[str, Any], said: str) -> None:
+    with pytest.raises(TwinFileError, match=said.replace("(", r"\(").replace(".", r"\.")):
+        parse_twin(json.dumps(doc))
+
+
+def test_every_problem_of_a_twin_file_is_named_together() -> None:
+    doc = document()
+    doc["parameters"]["scale_left"]["value"] = 7.0  # no Khepera slips so
+    doc["parameters"]["wheel_base_mm"]["value"] = float("nan")  # JSON's NaN: not a number
+    doc["parameters"]["ir2_gain"]["sigma"] = -1
+    doc["parameters"]["warp"] = {"value": 1.0}
+    del doc["parameters"]["latency_s"]
+    with pytest.raises(TwinFileError) as caught:
+        parse_twin(json.dumps(doc), "k1.json")
+    said = str(caught.value)
+    for part in (
+        "k1.json: parameters.scale_left.value: a number from 0.5 to 1.5, got 7.0",
+        "parameters.wheel_base_mm.value: a number from 30 to 80, got nan",
+        "parameters.ir2_gain.sigma: null or a number at least 0, got -1",
+        "parameters.warp: unknown parameter",
+        "parameters.latency_s: required",
+    ):
+        assert part in said, said
+    for junk in (b"\xff\xfe", b"[1, 2]", b"{", b" " * (64 * 1024 + 1)):
+        with pytest.raises(TwinFileError):
+            parse_twin(junk)
+
+
+def lab_database(tmp_path: Path) -> Path:
+    """The lab's database as the registry makes it at its first start (a file, WAL)."""
+    db = tmp_path / "registry.db"
+    LabDatabase(db).close()
+    return db
+
+
+def test_the_lab_keeps_every_version_and_the_newest_is_in_force(tmp_path: Path) -> None:
+    db = lab_database(tmp_path)
+    store = TwinStore.open(db)
+    assert store.current("k1") is None
+    first = parse_twin(calibration(scale_left=0.96).to_json("carol", FITTED_AT))
+    second = parse_twin(calibration(scale_left=0.95).to_json("dave", FITTED_AT + 86400))
+    assert store.save(first, "carol", now=FITTED_AT) == 1
+    assert store.save(second, "admin", now=FITTED_AT + 86400) == 2
+    store.save(parse_twin(calibration("k2").to_json("carol", FITTED_AT)), "carol")
+    store.close()
+    store = TwinStore.open(db)  # kept on disk, read by another process's connection
+    current = store.current("k1")
+    assert current is not None and current.version == 2
+    assert current.twin.drive.scale_left == 0.95 and current.saved_by == "admin"
+    assert [v.twin.fitted_by for v in store.versions("k1")] == ["carol", "dave"]
+    assert store.robots() == [("k1", 2), ("k2", 1)]
+    assert f"v1: fitted {DAY} by carol from dance; saved {DAY}" in (store.versions("k1")[0].line())
+    # A row written into the database by hand is checked as a file from a user is.
+    with sqlite3.connect(db) as raw:
+        raw.execute("UPDATE twins SET document = '{\"format\": 1}' WHERE robot = 'k2'")
+    with pytest.raises(DbError, match="k2's twin v1 in the lab's database"):
+        store.current("k2")
+    store.close()
+
+
+def test_wart_twin_saves_lists_and_shows(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good, bad = tmp_path / "k1.json", tmp_path / "bad.json"
+    good.write_text(calibration().to_json("carol", FITTED_AT))
+    bad.write_text(json.dumps(document(robot="")))
+    # A mistyped database is refused, never made: a twin kept there no runner would find.
+    assert twin_cli.main(["--db", str(tmp_path / "regsitry.db"), "save", str(good)]) == 1
+    assert "no lab database at" in capsys.readouterr().err
+    assert not (tmp_path / "regsitry.db").exists()
+    db = lab_database(tmp_path)
+    assert twin_cli.main(["--db", str(db), "save", str(bad)]) == 1
+    assert "refused, nothing kept" in capsys.readouterr().err
+    assert twin_cli.main(["--db", str(db), "list"]) == 0
+    assert "no twin is kept" in capsys.readouterr().out
+    assert twin_cli.main(["--db", str(db), "save", str(good)]) == 0
+    assert "as k1's twin v1 (in force)" in capsys.readouterr().out
+    assert twin_cli.main(["--db", str(db), "show", "k2"]) == 1
+    assert "no twin of k2" in capsys.readouterr().err
+    robot_file = tmp_path / "twin-k1.toml"
+    assert twin_cli.main(["--db", str(db), "show", "k1", "--robot-file", str(robot_file)]) == 0
+    out = capsys.readouterr().out
+    assert "in force (v1): scale_left 0.96, scale_right 0.99, wheel_base_mm 55" in out, out
+    assert "fitted: scale_left, scale_right, wheel_base_mm" in out
+    # The robot file a lab loads: the shipped Khepera with the fitted drive.
+    spec = parse(robot_file.read_bytes(), robot_file.name, registry.build().components)
+    assert spec.name == "twin-k1"
+    assert (spec.drive.wheel_scale, spec.drive.wheel_base_mm, spec.drive.latency_s) == (
+        (0.96, 0.99), 55.0, 0.0,
+    )  # fmt: skip
+    assert spec.proximity == registry.build().robots["khepera"].proximity
+
+
+def test_a_robot_file_refuses_an_impossible_drive() -> None:
+    text = (Path(registry.__file__).parent / "shipped" / "khepera.toml").read_text()
+    components = registry.build().components
+    for extra, said in (
+        ("latency_s = 2.0", "components.drive.latency_s: must be at most 0.5 s, got 2.0"),
+        ("wheel_scale = [0.9]", "components.drive.wheel_scale: must be two numbers [left, right]"),
+        ("wheel_scale = [0.9, 0.2]", "components.drive.wheel_scale: item 1: must be at least 0.5"),
+    ):
+        bad = text.replace("wheel_base_mm = 53.0", f"wheel_base_mm = 53.0\n{extra}")
+        with pytest.raises(RobotFileError, match=re.escape(said)):
+            parse(bad, "k.toml", components)
