@@ -27,7 +27,7 @@ from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.agentkit import CTX, start_agent_context, start_engine
-from tests.kit.lab import LOGIN_WAIT, PASSWORD, audit_trail, make_lab
+from tests.kit.lab import LOGIN_WAIT, PASSWORD, audit_trail, registry_lab
 from tests.kit.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
@@ -41,9 +41,7 @@ pytestmark = [
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 # --- 1. login sources from the transport ------------------------------------------------

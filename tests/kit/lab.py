@@ -402,6 +402,13 @@ def make_lab(
     return ProcessLab(router=router, procs=procs, state=state, identity=identity)
 
 
+def registry_lab(router: Router, procs: Procs, tmp: Path) -> ProcessLab:
+    """A lab (see make_lab) with its registry started."""
+    lab = make_lab(router, procs, tmp)
+    lab.start_registry()
+    return lab
+
+
 @contextmanager
 def module_lab(router: Router, tmp: Path, *, users: dict[str, str] = USERS) -> Iterator[ProcessLab]:
     """A lab (see make_lab) whose processes are all stopped when the block ends: one
