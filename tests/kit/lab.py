@@ -75,12 +75,15 @@ def wart_env(extra: dict[str, str] | None = None) -> dict[str, str]:
 # --- processes -----------------------------------------------------------------------
 
 
-def wart(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """``wart ARGS`` as a person runs it, from the repository, output captured."""
+def wart(
+    *args: str, timeout: float = 120.0, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``wart ARGS`` as a person runs it, from the repository, output captured; ``env``
+    adds to the test environment (see wart_env)."""
     return subprocess.run(
         [sys.executable, "-m", "services.cli", *args],
         cwd=REPO,
-        env=wart_env(),
+        env=wart_env(env),
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -359,6 +362,11 @@ class ProcessLab:
 
     def zsession(self) -> zenoh.Session:
         return open_session(self.router.options(), wait=10.0)
+
+    def admin_wart(self, *args: str) -> subprocess.CompletedProcess[str]:
+        """``wart ARGS`` as this lab's admin on its network (the password in WART_PASSWORD)."""
+        net = ["--user", "admin", *self.net_args()]
+        return wart(*args, *net, timeout=60.0, env={"WART_PASSWORD": PASSWORD})
 
 
 @functools.cache
