@@ -36,6 +36,7 @@ from common import keys
 from common.auth import RegistryIdentity, create_identity_key
 from common.client.lab_client import LabClient
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import AuditEntry, AuditQuery
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
@@ -551,3 +552,13 @@ def audit_trail(admin: LabClient, **filters: object) -> list[AuditEntry]:
     """The registry's audit entries an admin reads, filtered as ``AuditQuery`` takes them."""
     entries, _ = admin.audit_trail(AuditQuery(**filters))  # type: ignore[arg-type]
     return entries
+
+
+def session_revoked(client: LabClient) -> bool:
+    """Whether the registry refuses ``client``'s session as revoked (asked with a request
+    that needs one)."""
+    try:
+        client.directory()
+    except LabError as exc:
+        return "revoked" in str(exc)
+    return False
