@@ -39,7 +39,7 @@ from typing import Any
 
 import msgspec
 
-from bench.plain_peer import answer
+from bench.plain_peer import answers
 from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.messages import (
@@ -198,11 +198,7 @@ def main() -> int:
             bundle = decode(samples_in, SampleBundle)
             if bundle.world != WORLD or len(bundle.agents) != len(bundle.samples):
                 continue
-            items = [
-                item
-                for agent, raw in zip(bundle.agents, bundle.samples, strict=True)
-                if agent in mine and (item := answer(agent, bytes(raw))) is not None
-            ]
+            items = answers(bundle, mine)
             if items:
                 peer_pub.put(encode(CommandBundle(commands=items)))
         peer_pub.puts.clear()
