@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import time
+from collections.abc import Sequence
+
 import msgspec
 
 from common import keys
-from common.auth import Session
+from common.auth import RegistryIdentity, Session, Verifier, issue_session
 from common.messages import Lease
-from common.world.leasemac import seal_key
+from common.world.leasemac import WorldBoxKeys, new_lease_key, seal_key
 from common.world.leases import LeaseBook
+from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakeSample, FakeSession
 
 
@@ -58,3 +62,50 @@ def grant_on(zs: FakeSession, book: LeaseBook, context: Session, realm: str, lea
     sealed = context.seal(key, lease)
     book.accept_lease(key, sealed)
     zs.callbacks[key](FakeSample(sealed))
+
+
+def mac_leased_swarm(
+    identity: RegistryIdentity,
+    holder: Session,
+    realm: str,
+    world_name: str,
+    agents: Sequence[str],
+    leased: Sequence[str],
+    lease_s: float,
+) -> tuple[FakeSession, WorldChannel, list[ZenohRobotLink], LeaseBook]:
+    """``holder``'s links of ``agents`` on one WorldChannel (a FakeSession's); those of
+    ``leased`` hold a MAC lease for ``lease_s`` that the world's LeaseBook has too."""
+    world = issue_session(identity, realm, f"engine-{world_name}", ["world"])
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    book = LeaseBook(
+        realm, world_name, Verifier(identity.verify_key, realm), WorldBoxKeys(lambda: world)
+    )
+    zs = FakeSession()
+    channel = WorldChannel(zs, realm, world_name)  # type: ignore[arg-type]
+    links = [
+        ZenohRobotLink(
+            zs,  # type: ignore[arg-type]
+            realm,
+            world_name,
+            agent,
+            lambda: holder,
+            keepalive=3600.0,
+            verifier=Verifier(identity.verify_key, realm),  # the holder's own
+            channel=channel,
+        )
+        for agent in agents
+    ]
+    now = time.time()
+    for i, agent in enumerate(leased):
+        lease = mac_lease(
+            new_lease_key(),
+            holder,
+            world,
+            lease_id=f"L{i}",
+            world_name=world_name,
+            agent=agent,
+            start=now - 1,
+            end=now + lease_s,
+        )
+        grant_on(zs, book, context, realm, lease)  # the link opens its copy of the key
+    return zs, channel, links, book
