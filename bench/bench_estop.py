@@ -32,6 +32,7 @@ from common.client.agent_client import FINAL
 from tests.kit.agentkit import (
     Motion,
     agent_user,
+    deploy_running,
     start_agent_lab,
 )
 from tests.kit.lab import Procs, make_lab, start_router
@@ -66,12 +67,7 @@ def main() -> int:
             motion = Motion(z, router.realm)
             owners = {"k0": alice, "k1": bob, "k2": carol, "k3": alice}
             for n in range(args.rounds):
-                rids = {
-                    agent: who.queue(agent, "deploy", source=FORWARD).request_id
-                    for agent, who in owners.items()
-                }
-                for agent, who in owners.items():
-                    assert who.wait_status(rids[agent], {"running"}, timeout=60), agent
+                rids = deploy_running(owners, FORWARD, filename="controller.py")
                 since = time.monotonic()
                 wait_for(functools.partial(motion.moving, ROBOTS, since), 30, "robots moving")
                 t0 = time.monotonic()

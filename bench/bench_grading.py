@@ -61,6 +61,7 @@ rule = '100 * reached("goal") - time_to("goal")'
 
 
 def pct(values: list[float], q: float) -> float:
+    """The ``q`` quantile (0 to 1) of ``values``: the nearest of their sorted ranks."""
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
 

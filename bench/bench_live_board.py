@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench.bench_grading import pct
 from common.client.grader_client import GraderClient
 from common.client.lab_client import LabClient
 from services.grader.assignment import parse_assignment
@@ -53,11 +54,6 @@ OBSERVER_JS = """
   look();
 }
 """
-
-
-def pct(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
 
 
 def main(argv: list[str] | None = None) -> int:

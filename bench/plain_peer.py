@@ -195,6 +195,15 @@ def answer(agent: str, raw: bytes) -> BundledCommand | None:
     return BundledCommand(agent, encode(command))
 
 
+def answers(bundle: SampleBundle, mine: set[str]) -> list[BundledCommand]:
+    """The controllers' commands for ``bundle``'s samples of the agents in ``mine``."""
+    return [
+        item
+        for agent, raw in zip(bundle.agents, bundle.samples, strict=True)
+        if agent in mine and (item := answer(agent, bytes(raw))) is not None
+    ]
+
+
 def controllers(args: argparse.Namespace) -> int:
     """The peer's controllers' process: answer every sample of agents k0..k<n-1>."""
     options = NetworkOptions(realm=args.realm, connect=(args.connect,))
@@ -219,11 +228,7 @@ def controllers(args: argparse.Namespace) -> int:
         if bundle.world != PEER_WORLD or len(bundle.agents) != len(bundle.samples):
             return
         if args.inline:
-            items = [
-                item
-                for agent, raw in zip(bundle.agents, bundle.samples, strict=True)
-                if agent in mine and (item := answer(agent, bytes(raw))) is not None
-            ]
+            items = answers(bundle, mine)
             if items:
                 pub.put(encode(CommandBundle(commands=items)))
             return

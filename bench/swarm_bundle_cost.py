@@ -39,9 +39,9 @@ from typing import Any
 
 import msgspec
 
-from bench.plain_peer import answer
+from bench.plain_peer import answers
 from common import keys
-from common.auth import RegistryIdentity, Verifier, issue_session
+from common.auth import RegistryIdentity, issue_session
 from common.messages import (
     AgentCommand,
     BundledCommand,
@@ -52,11 +52,10 @@ from common.messages import (
     decode,
     encode,
 )
-from common.world.leasemac import WorldBoxKeys, new_lease_key
 from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakePublisher, FakeSample, FakeSession
-from tests.kit.leases import grant_on, mac_lease
+from tests.kit.leases import mac_leased_swarm
 
 REALM, WORLD = "bench", "swarm"
 
@@ -64,40 +63,13 @@ REALM, WORLD = "bench", "swarm"
 def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, FakeSession]:
     identity = RegistryIdentity.generate()
     runner = issue_session(identity, REALM, "runner", ["control"])
-    world = issue_session(identity, REALM, "engine-swarm", ["world"])
-    context = issue_session(identity, REALM, "ctx", ["lease"])
-    verifier = Verifier(identity.verify_key, REALM)
-    book = LeaseBook(REALM, WORLD, verifier, WorldBoxKeys(lambda: world))
-    zs = FakeSession()
-    channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
-    links = {}
-    now = time.time()
-    for i in range(n):
-        agent = f"k{i}"
-        links[agent] = ZenohRobotLink(
-            zs,  # type: ignore[arg-type]
-            REALM,
-            WORLD,
-            agent,
-            lambda: runner,
-            keepalive=3600.0,
-            verifier=Verifier(identity.verify_key, REALM),  # the holder's own
-            channel=channel,
-        )
-        k = new_lease_key()
-        lease = mac_lease(
-            k,
-            runner,
-            world,
-            lease_id=f"L{i}",
-            world_name=WORLD,
-            agent=agent,
-            start=now - 1,
-            end=now + 3600,
-        )
-        grant_on(zs, book, context, REALM, lease)  # the link opens its copy of K
-        assert links[agent]._mac_lease is not None
-    return channel, links, book, zs
+    agents = [f"k{i}" for i in range(n)]
+    zs, channel, links, book = mac_leased_swarm(
+        identity, runner, REALM, WORLD, agents, agents, 3600.0
+    )
+    for link in links:
+        assert link._mac_lease is not None
+    return channel, {link.agent: link for link in links}, book, zs
 
 
 def sample(agent: str) -> SensorSample:
@@ -198,11 +170,7 @@ def main() -> int:
             bundle = decode(samples_in, SampleBundle)
             if bundle.world != WORLD or len(bundle.agents) != len(bundle.samples):
                 continue
-            items = [
-                item
-                for agent, raw in zip(bundle.agents, bundle.samples, strict=True)
-                if agent in mine and (item := answer(agent, bytes(raw))) is not None
-            ]
+            items = answers(bundle, mine)
             if items:
                 peer_pub.put(encode(CommandBundle(commands=items)))
         peer_pub.puts.clear()

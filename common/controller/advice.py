@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 from common.controller import Khepera
 from common.controller.robot import RobotApi
-from common.controller.upload_gate import PrecheckError, precheck
+from common.controller.upload_gate import PrecheckError, controller_classes, precheck
 
 # The public names of the robot's API: what a controller may call on it.
 ROBOT_API = frozenset(name for name in dir(Khepera) if not name.startswith("_"))
@@ -106,20 +106,9 @@ def check_source(
         # Syntax is done above, with the line: what is left (size, no Controller) is the file's.
         problems.append(Problem(None, str(exc)))
     problems += _imports(tree)
-    for cls in _controller_classes(tree):
+    for cls in controller_classes(tree):
         problems += _check_class(cls, robot)
     return sorted(set(problems), key=lambda p: (p.line or 0, p.message))
-
-
-def _controller_classes(tree: ast.Module) -> list[ast.ClassDef]:
-    found = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ClassDef):
-            for base in node.bases:
-                name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
-                if name.endswith("Controller"):
-                    found.append(node)
-    return found
 
 
 def _module_problem(name: str, line: int) -> Problem | None:

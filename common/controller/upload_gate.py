@@ -39,16 +39,22 @@ def precheck(source: bytes, filename: str = "controller.py") -> str:
         tree = ast.parse(text, filename=filename)
     except SyntaxError as exc:
         raise PrecheckError(f"{filename}, line {exc.lineno}: syntax error: {exc.msg}") from None
-    classes = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ClassDef):
-            for base in node.bases:
-                name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
-                if name.endswith("Controller"):
-                    classes.append(node.name)
+    classes = controller_classes(tree)
     if not classes:
         raise PrecheckError(
             f"{filename} defines no controller: write a class deriving from "
             "common.controller.Controller with a do_work(self, robot) method"
         )
-    return classes[0]
+    return classes[0].name
+
+
+def controller_classes(tree: ast.Module) -> list[ast.ClassDef]:
+    """The file's classes with a base whose name ends in ``Controller``, in walk order."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ClassDef):
+            for base in node.bases:
+                name = base.attr if isinstance(base, ast.Attribute) else getattr(base, "id", "")
+                if name.endswith("Controller"):
+                    found.append(node)
+    return found

@@ -155,6 +155,11 @@ def _export(file: str | None, output: Path | None) -> int:
     bag = output or source.with_suffix("")
     if bag.exists():
         return cli.fail(f"{bag} exists: a bag is written to a new directory (-o DIR)")
+    return _write_bag(source, bag)
+
+
+def _write_bag(source: Path, bag: Path) -> int:
+    """The recording file ``source`` written as a ROS 2 bag in ``bag``, and said."""
     try:
         recording = read_recording(source)
         export = ros2bag.write_bag(recording, bag)
@@ -178,12 +183,9 @@ def _get_rosbag2(agents: AgentClient, name: str, bag: Path) -> int:
     with tempfile.TemporaryDirectory(prefix="wart-record-") as tmp:
         try:
             path = agents.download(name, Path(tmp) / f"{name}.mcap", progress=_progress())
-            recording = read_recording(path)
-            export = ros2bag.write_bag(recording, bag)
         except (OSError, RecordingError, ros2bag.RosbagsMissing) as exc:
             return cli.fail(f"cannot write the bag: {exc}", 1)
-    _said_bag(export, recording)
-    return 0
+        return _write_bag(path, bag)
 
 
 if __name__ == "__main__":

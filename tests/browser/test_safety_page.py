@@ -18,7 +18,7 @@ from common.client.agent_client import FINAL
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import enter_arena, pick_robot
 from tests.conftest import needs_sandbox
-from tests.kit.agentkit import Motion, agent_user
+from tests.kit.agentkit import Motion, agent_user, deploy_running
 from tests.kit.reallab import RealLab, real_lab
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
@@ -84,12 +84,7 @@ def test_the_host_clicks_the_emergency_stop_and_four_robots_stop(open_page, lab:
         agent_user(lab.lab, "alice") as al,
     ):
         owners = {"k0": bob, "k1": carol, "k2": al, "k3": bob}
-        rids = {
-            agent: who.queue(agent, "deploy", source=FORWARD, filename="forward.py").request_id
-            for agent, who in owners.items()
-        }
-        for agent, who in owners.items():
-            assert who.wait_status(rids[agent], {"running"}, timeout=60), f"{agent} never ran"
+        rids = deploy_running(owners, FORWARD)
         wait_until(lambda: motion.moving(ROBOTS, 0.0), 30, what="four robots driving")
         ida.screenshot("estop-before")
 

@@ -15,6 +15,7 @@ from common.controller import Controller, Khepera
 from common.lab_errors import NotFound
 from common.messages import ControlQueued
 from tests.conftest import Procs, Router, wait_for
+from tests.integration.controllers.forward import Forward
 from tests.kit.agentkit import (
     Poses,
     agent_user,
@@ -31,13 +32,6 @@ pytestmark = [
     pytest.mark.shared_router,
 ]
 CONTROLLERS = Path(__file__).with_name("controllers")
-
-
-class Forward(Controller):
-    period = 0.05
-
-    def do_work(self, robot: Khepera) -> None:
-        robot.set_speeds(12, 12)
 
 
 @pytest.fixture(scope="module")

@@ -39,6 +39,7 @@ from services.bridge.link import SerialKheperaLink
 from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Proc, Procs, Router, wait_for
+from tests.kit.leases import holder_lease
 from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
@@ -101,15 +102,7 @@ def online(session: zenoh.Session, realm: str, agent: str = AGENT) -> bool | Non
 
 
 def lease(holder: Session, *, start: float, end: float, lid: str = "L1") -> Lease:
-    return Lease(
-        lease_id=lid,
-        world=WORLD,
-        agent=AGENT,
-        holder_user=holder.user,
-        holder_session=holder.session_id,
-        start=start,
-        end=end,
-    )
+    return holder_lease(holder, lease_id=lid, world_name=WORLD, agent=AGENT, start=start, end=end)
 
 
 def moved(body: SimBody, since: tuple[float, float, float]) -> float:

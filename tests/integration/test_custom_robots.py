@@ -44,7 +44,7 @@ from services.grader.assignment import parse_assignment
 from services.runner.episode import run_episode
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, start_agent_context, start_runner, together
-from tests.kit.courses import COURSE, assignment_toml
+from tests.kit.courses import assignment_toml, start_grading_lab
 from tests.kit.lab import REPO, ProcessLab, make_lab, wart
 
 pytestmark = [
@@ -299,16 +299,9 @@ def saved_class_map(directory: Path) -> Path:
 
 
 @pytest.fixture
-def grading_lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    """Registry, runner and grader (as tests/integration/test_grading.py), no engine."""
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    roster = tmp_path / "class.csv"
-    roster.write_text("user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n")
-    done = wart("users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
-    assert done.returncode == 0, done.stderr
-    together(lambda: start_runner(lab), lab.start_grader)
-    yield lab
+def grading_lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
+    """Registry (alice and ida in COURSE), runner and grader; no engine."""
+    return start_grading_lab(router, procs, tmp_path)
 
 
 def test_the_grader_grades_on_a_map_saved_with_a_custom_robot(

@@ -24,6 +24,7 @@ from tests.kit.agentkit import (
     Motion,
     agent_user,
     bridged_robot,
+    deploy_running,
     start_agent_context,
     start_agent_lab,
     start_runner,
@@ -59,12 +60,7 @@ def test_the_host_stops_four_running_controllers_and_holds_the_arena(
     ):
         motion = Motion(z, lab.router.realm)
         owners = {"k0": alice, "k1": bob, "k2": carol, "k3": alice}
-        rids = {
-            agent: who.queue(agent, "deploy", source=FORWARD, filename="forward.py").request_id
-            for agent, who in owners.items()
-        }
-        for agent, who in owners.items():
-            assert who.wait_status(rids[agent], {"running"}, timeout=60), f"{agent} never ran"
+        rids = deploy_running(owners, FORWARD)
         wait_for(lambda: motion.moving(ROBOTS, 0.0), 30, "the four robots to drive")
 
         # A student without the right is refused, and nothing stops.

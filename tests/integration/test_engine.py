@@ -43,6 +43,7 @@ from common.sim2d.world import DRIVES, OBJECT_DRIVES
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
 from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, Procs, Router, wait_for
+from tests.kit.leases import holder_lease
 from tests.kit.waits import Latest
 from viewers.web.live_world import WorldWatch
 
@@ -165,15 +166,7 @@ def ask(session: zenoh.Session, key: str, payload: bytes | None = None) -> Messa
 def lease_for(
     realm: str, holder: Session, *, start: float, end: float, lid: str = "L1", agent: str = "k0"
 ) -> Lease:
-    return Lease(
-        lease_id=lid,
-        world=WORLD,
-        agent=agent,
-        holder_user=holder.user,
-        holder_session=holder.session_id,
-        start=start,
-        end=end,
-    )
+    return holder_lease(holder, lease_id=lid, world_name=WORLD, agent=agent, start=start, end=end)
 
 
 def x_of(frame: object, row: int = 0) -> float:

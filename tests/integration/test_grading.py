@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import subprocess
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -21,8 +20,8 @@ from common.lab_errors import LabError
 from common.messages import GradingChanged
 from common.recording import read_recording
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
-from tests.kit.agentkit import start_runner, together
-from tests.kit.courses import COURSE, assignment_toml
+from tests.kit.agentkit import start_runner
+from tests.kit.courses import COURSE, assignment_toml, import_roster, start_grading_lab
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 from tests.kit.lab import wart as lab_wart
 
@@ -47,18 +46,12 @@ def add_assignment(lab: ProcessLab, tmp: Path, name: str, **fields: str) -> None
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    roster = tmp_path / "class.csv"
-    roster.write_text(
+def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
+    roster = (
         "user,name,role\nalice,Alice A,student\nbob,Bob B,student\ncarol,Carol C,student\n"
         "ida,Ida I,teacher\n"
     )
-    done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
-    assert done.returncode == 0, done.stderr
-    together(lambda: start_runner(lab), lab.start_grader)
-    yield lab
+    return start_grading_lab(router, procs, tmp_path, roster)
 
 
 def source(name: str) -> bytes:
@@ -266,10 +259,7 @@ def test_a_submission_the_lab_cannot_grade_is_not_counted(
     """No runner at all: every try is the lab's fault; the student is told, the quota kept."""
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    roster = tmp_path / "class.csv"
-    roster.write_text("user,name\nalice,Alice A\n")
-    done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
-    assert done.returncode == 0, done.stderr
+    import_roster(lab, "user,name\nalice,Alice A\n")
     add_assignment(lab, tmp_path, "once", episodes="1", seeds="[1]", quota="1")
     lab.start_grader("--runner-wait", "0.5")
     with lab.client("alice") as client:

@@ -25,6 +25,7 @@ from common.messages import (
 )
 from common.world.leasemac import mac_command, new_lease_key
 from tests.conftest import Procs, Router, wait_for
+from tests.integration.controllers.forward import Forward
 from tests.kit.agentkit import (
     WORLD,
     Poses,
@@ -40,13 +41,6 @@ pytestmark = [
     pytest.mark.xdist_group("lease_mac"),
     pytest.mark.shared_router,
 ]
-
-
-class Forward(Controller):
-    period = 0.05
-
-    def do_work(self, robot: Khepera) -> None:
-        robot.set_speeds(12, 12)
 
 
 class Still(Controller):

@@ -35,6 +35,7 @@ from services.lab import wiring
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
 from tests.kit.agentkit import start_runner, together
+from tests.kit.courses import import_roster
 from tests.kit.lab import ProcessLab, make_lab, start_router, wart
 from tests.kit.lti_platform import (
     CLIENT_ID,
@@ -125,10 +126,7 @@ class LtiLab:
 def lti_lab(router: Router, procs: Procs, tmp: Path) -> Iterator[LtiLab]:
     lab = make_lab(router, procs, tmp)
     lab.start_registry()
-    roster = tmp / "class.csv"
-    roster.write_text("user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n")
-    done = wart("users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
-    assert done.returncode == 0, done.stderr
+    import_roster(lab)
     platform = FakePlatform()
     try:
         tool = start_lti(lab, tmp, platform)

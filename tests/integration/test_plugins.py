@@ -40,7 +40,7 @@ from services.lab import wiring
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_agent_context, start_deploy, together
 from tests.kit.lab import REPO, ProcessLab, make_lab
-from tests.kit.robots import wheeled_robot
+from tests.kit.robots import SCOUT, wheeled_robot
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"
@@ -248,18 +248,6 @@ def test_a_broken_plugin_is_reported_by_doctor_and_the_lab_runs_without_it(
     assert listed.popen.wait(60) == 0
     assert re.search(r"khepera +built-in", listed.output())
 
-
-SCOUT = (
-    GOOD
-    + """
-[components.eye]
-type = "range_finder"
-pose = [30.0, 0.0, 0.0]
-beams = 3
-fov_deg = 40.0
-max_range_mm = 300.0
-"""
-)
 
 SCOUT_READER = textwrap.dedent(
     """\

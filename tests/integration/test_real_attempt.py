@@ -32,6 +32,7 @@ from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grader_function import course
 from tests.integration.test_grading import COURSE, source, wart
 from tests.kit.agentkit import WORLD, start_agent_context, start_runner
+from tests.kit.courses import import_roster
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [
@@ -98,10 +99,7 @@ class RealLab:
 def real(router: Router, procs: Procs, tmp_path: Path) -> Iterator[RealLab]:
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
-    roster = tmp_path / "class.csv"
-    roster.write_text("user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n")
-    done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
-    assert done.returncode == 0, done.stderr
+    import_roster(lab)
     lab.account(wiring.service_account("grader", "grader"))
     (tmp_path / "wobble.py").write_bytes((GRADERS / "wobble.py").read_bytes())
     for name, arena in (("real-goal", "arena"), ("nowhere", "nowhere")):

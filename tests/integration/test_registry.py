@@ -21,7 +21,7 @@ from common.lab_errors import (
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import Procs, Router, wait_for
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, registry_lab
 
 # One worker starts the module's router once.
 pytestmark = [
@@ -33,9 +33,7 @@ pytestmark = [
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 def test_wrong_passwords_are_slowed_down(lab: ProcessLab) -> None:

@@ -15,16 +15,14 @@ from common.lab_errors import NotAllowed, WrongCredentials
 from common.messages import ResumeGrant, SignedResume, decode, encode
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, registry_lab
 
 pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
 
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 @contextmanager

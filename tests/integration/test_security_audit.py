@@ -20,16 +20,14 @@ from common.messages import AuditEntry, AuditReport
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
-from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, registry_lab
 
 pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
 
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 def _counted(entries: list[AuditEntry]) -> int:

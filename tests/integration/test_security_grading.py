@@ -3,7 +3,6 @@ real processes: router, registry, runner, grader."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -12,24 +11,17 @@ from common.client.grader_client import GraderClient
 from services.grader.bans import BANNED
 from services.grader.service import WORKERS
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
-from tests.integration.test_grading import add_assignment, source, wart
-from tests.kit.agentkit import start_runner, together
-from tests.kit.courses import COURSE
-from tests.kit.lab import ProcessLab, make_lab
+from tests.integration.test_grading import add_assignment, source
+from tests.kit.courses import start_grading_lab
+from tests.kit.lab import ProcessLab
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300), needs_sandbox]
 
 
 @pytest.fixture
-def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    roster = tmp_path / "class.csv"
-    roster.write_text("user,name,role\nbob,Bob B,student\nida,Ida I,teacher\n")
-    done = wart(lab, "users", "--db", str(lab.db_path), "import", str(roster), "--course", COURSE)
-    assert done.returncode == 0, done.stderr
-    together(lambda: start_runner(lab), lab.start_grader)
-    yield lab
+def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
+    roster = "user,name,role\nbob,Bob B,student\nida,Ida I,teacher\n"
+    return start_grading_lab(router, procs, tmp_path, roster)
 
 
 def test_a_banned_students_queued_submissions_are_not_graded(

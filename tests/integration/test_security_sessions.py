@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 
 from common.client.lab_client import LabClient
-from common.lab_errors import LabError, NotAllowed, WrongCredentials
+from common.lab_errors import NotAllowed, WrongCredentials
 from common.messages import ResumeGrant, SignedResume, decode
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, registry_lab, session_revoked
 
 pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
 
@@ -24,9 +24,7 @@ WEEK = 7 * 24 * 3600.0
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 @contextmanager
@@ -41,14 +39,6 @@ def _client(lab: ProcessLab) -> Iterator[LabClient]:
 
 def _ends(token: bytes) -> float:
     return decode(decode(token, SignedResume).grant, ResumeGrant).expires_at
-
-
-def _revoked(client: LabClient) -> bool:
-    try:
-        client.directory()
-    except LabError as exc:
-        return "revoked" in str(exc)
-    return False
 
 
 def test_a_stolen_saved_login_cannot_lock_the_owner_out_nor_outlive_her_logout(
@@ -70,7 +60,7 @@ def test_a_stolen_saved_login_cannot_lock_the_owner_out_nor_outlive_her_logout(
             thief.set_password("alice", "the thief's password", current="a guess at it")
         # ... and the owner's "Log out" ends the session resumed from her login, and its token.
         owner.logout()
-        assert _revoked(thief)
+        assert session_revoked(thief)
         with _client(lab) as again, pytest.raises(WrongCredentials, match="revoked"):
             again.resume(thief.resume_token)
     with _client(lab) as owner:
@@ -89,8 +79,8 @@ def test_a_new_password_a_logout_everywhere_and_a_ban_end_every_session(
         thief.resume(page.resume_token)
         # bob sets a new one from his laptop with the current one: every other session ends.
         laptop.set_password("bob", "bob's new password", current=PASSWORD)
-        assert _revoked(page) and _revoked(thief)
-        assert not _revoked(laptop)  # the one that set it knows it
+        assert session_revoked(page) and session_revoked(thief)
+        assert not session_revoked(laptop)  # the one that set it knows it
         assert thief.resume_token is not None
         with _client(lab) as again, pytest.raises(WrongCredentials, match="password was changed"):
             again.resume(thief.resume_token)
@@ -101,7 +91,7 @@ def test_a_new_password_a_logout_everywhere_and_a_ban_end_every_session(
         with _client(lab) as phone:
             phone.login("carol", PASSWORD)
             phone.logout(everywhere=True)  # "my laptop was stolen"
-        assert _revoked(page) and _revoked(thief)
+        assert session_revoked(page) and session_revoked(thief)
         assert thief.resume_token is not None
         with _client(lab) as again, pytest.raises(WrongCredentials, match="everywhere"):
             again.resume(thief.resume_token)
@@ -109,8 +99,8 @@ def test_a_new_password_a_logout_everywhere_and_a_ban_end_every_session(
         admin.login("admin", PASSWORD)
         ida.login("ida", PASSWORD, resume=True)
         admin.set_password("ida", "set by the admin")  # an admin's change ends them too
-        assert _revoked(ida)
+        assert session_revoked(ida)
         with _client(lab) as again:
             again.login("ida", "set by the admin")
             admin.ban("ida", "cheating")
-            assert _revoked(again)
+            assert session_revoked(again)

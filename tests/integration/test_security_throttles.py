@@ -5,8 +5,6 @@ and clears the throttles (`wart throttles`)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -20,8 +18,8 @@ from common.client.service_login import vouch_for
 from common.lab_errors import RateLimited, WrongCredentials
 from common.service import close_session
 from services.registry.accounts_db import RegistryDB
-from tests.conftest import REPO, Procs, Router, wart_env
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.conftest import Procs, Router
+from tests.kit.lab import PASSWORD, ProcessLab, registry_lab
 
 pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
 
@@ -30,9 +28,7 @@ CLASSROOM = "203.0.113.7"  # a classroom's NAT: every page of the class has this
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 @contextmanager
@@ -102,21 +98,10 @@ def test_a_guesser_with_fresh_sessions_and_addresses_gets_a_handful_of_checks(
             assert seen["account", "alice"].failures >= 5 and seen["account", "alice"].wait_s > 0
             assert seen["network", "viewer-web:203.0.113.0/24"].failures == 4
             assert "forgotten" in admin.clear_throttle("viewer-web:203.0.113.0/24")
-            listed = _wart(lab, "throttles")
+            listed = lab.admin_wart("throttles")
             assert listed.returncode == 0, listed.stderr
             assert "alice" in listed.stdout and "203.0.113.0/24" not in listed.stdout
-            unlocked = _wart(lab, "throttles", "--unlock", "alice")
+            unlocked = lab.admin_wart("throttles", "--unlock", "alice")
             assert "forgotten" in unlocked.stdout, unlocked.stderr
         with lab.client() as elsewhere:
             assert elsewhere.login("alice", PASSWORD).user == "alice"
-
-
-def _wart(lab: ProcessLab, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args, "--user", "admin", *lab.net_args()],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        env=wart_env({"WART_PASSWORD": PASSWORD}),
-        timeout=60,
-    )

@@ -90,6 +90,15 @@ class Arena:
     def xs(self) -> np.ndarray:
         return np.array([self.engine.world.pose_of(agent)[0] for agent in AGENTS])
 
+    def put_refused(self, z: zenoh.Session, bundles: list[bytes], each: int, what: str) -> None:
+        """Put ``bundles`` on the world's commands key, wait until the engine has refused
+        ``each`` commands of every one, then a few ticks (where an obeyed one would move)."""
+        refused = self.engine.commands_refused
+        for payload in bundles:
+            z.put(keys.world_commands(self.realm, WORLD), payload)
+        wait_for(lambda: self.engine.commands_refused >= refused + each * len(bundles), 10, what)
+        time.sleep(0.2)  # a few ticks in which a wrongly obeyed command would move them
+
     def close(self) -> None:
         self.engine.stop()
         close_session(self.world_z)
@@ -194,15 +203,7 @@ def test_a_swarm_drives_its_leased_robots_with_macs_and_forged_or_replayed_bundl
             )
         wait_for(lambda: arena.engine.commands_refused >= refused + 25, 10, "forgeries refused")
         # Replayed: the swarm's own valid bundles, captured on the wire, put again.
-        refused = arena.engine.commands_refused
-        for payload in replay:
-            spy_z.put(keys.world_commands(realm, WORLD), payload)
-        wait_for(
-            lambda: arena.engine.commands_refused >= refused + 2 * len(replay),
-            10,
-            "replays refused",
-        )
-        time.sleep(0.2)  # a few ticks in which a wrongly obeyed command would move them
+        arena.put_refused(spy_z, replay, 2, "replays refused")
         assert float(np.abs(arena.xs() - still).max()) < 1.0, "forged or replayed: nothing moved"
     finally:
         for link in links.values():
@@ -279,16 +280,8 @@ def test_one_array_bundle_moves_the_robot_of_its_good_item_and_none_of_its_bad_o
         )
         # The watchdog stops k1; the same bundles put again move nothing.
         wait_for(lambda: not arena.engine.world.cmd[1:].any(), 5, "the watchdog stopping k1")
-        refused = arena.engine.commands_refused
         still = arena.xs()
-        for payload in sent:
-            put_z.put(keys.world_commands(realm, WORLD), payload)
-        wait_for(
-            lambda: arena.engine.commands_refused >= refused + 4 * len(sent),
-            10,
-            "the replayed bundles refused",
-        )
-        time.sleep(0.2)  # a few ticks in which a wrongly obeyed command would move them
+        arena.put_refused(put_z, sent, 4, "the replayed bundles refused")
         assert float(np.abs(arena.xs() - still).max()) < 1.0, "replayed: nothing moved"
     finally:
         close_session(put_z)

@@ -27,7 +27,7 @@ from common.service import close_session
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.agentkit import CTX, start_agent_context, start_engine
-from tests.kit.lab import LOGIN_WAIT, PASSWORD, audit_trail, make_lab
+from tests.kit.lab import LOGIN_WAIT, PASSWORD, audit_trail, registry_lab
 from tests.kit.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
@@ -41,9 +41,7 @@ pytestmark = [
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Lab:
-    lab = make_lab(router, procs, tmp_path)
-    lab.start_registry()
-    return lab
+    return registry_lab(router, procs, tmp_path)
 
 
 # --- 1. login sources from the transport ------------------------------------------------
@@ -282,41 +280,30 @@ def test_who_stopped_the_arena_and_changed_the_slot_is_in_the_registrys_trail(ar
         assert slot.detail == "slot 45 s"
 
 
-def _wart(lab: Lab, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args, "--user", "admin", *lab.net_args()],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        env=wart_env({"WART_PASSWORD": PASSWORD}),
-        timeout=60,
-    )
-
-
 def test_wart_ban_and_wart_audit_from_the_command_line(lab: Lab, tmp_path: Path) -> None:
-    banned = _wart(lab, "ban", "carol", "--reason", "shared her password", "--for", "2h")
+    banned = lab.admin_wart("ban", "carol", "--reason", "shared her password", "--for", "2h")
     assert banned.returncode == 0, banned.stderr
     assert "carol banned until" in banned.stdout
-    listed = _wart(lab, "ban", "--list")
+    listed = lab.admin_wart("ban", "--list")
     assert "carol" in listed.stdout and "shared her password" in listed.stdout
     with lab.client() as carol, pytest.raises(Banned, match="shared her password"):
         carol.login("carol", PASSWORD)
-    lifted = _wart(lab, "ban", "--lift", "carol", "--reason", "new password set")
+    lifted = lab.admin_wart("ban", "--lift", "carol", "--reason", "new password set")
     assert lifted.returncode == 0 and "lifted" in lifted.stdout, lifted.stderr
-    bad = _wart(lab, "ban", "carol", "--reason", "x", "--for", "forever")
+    bad = lab.admin_wart("ban", "carol", "--reason", "x", "--for", "forever")
     assert bad.returncode != 0 and "30m, 12h, 1d or 2w" in bad.stderr
-    table = _wart(lab, "audit", "--target", "carol")
+    table = lab.admin_wart("audit", "--target", "carol")
     assert table.returncode == 0, table.stderr
     assert "ban" in table.stdout and "lift_ban" in table.stdout and "admin" in table.stdout
     out = tmp_path / "trail.csv"
-    exported = _wart(lab, "audit", "--action", "ban", "--format", "csv", "--out", str(out))
+    exported = lab.admin_wart("audit", "--action", "ban", "--format", "csv", "--out", str(out))
     assert exported.returncode == 0, exported.stderr
     rows = list(csv.DictReader(out.open()))
     assert rows[0]["actor"] == "admin" and rows[0]["target"] == "carol"
     assert rows[0]["detail"].startswith("shared her password")
-    as_json = json.loads(_wart(lab, "audit", "--actor", "admin", "--format", "json").stdout)
+    as_json = json.loads(lab.admin_wart("audit", "--actor", "admin", "--format", "json").stdout)
     assert {r["action"] for r in as_json} >= {"ban", "lift_ban"}
-    wrong = _wart(lab, "audit", "--since", "yesterday")
+    wrong = lab.admin_wart("audit", "--since", "yesterday")
     assert wrong.returncode != 0 and "is not a time" in wrong.stderr
     # A grant made on the database file, past the registry, is in the trail too.
     users = [sys.executable, "-m", "services.cli", "users", "--db", str(lab.db_path)]

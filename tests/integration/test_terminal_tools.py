@@ -18,12 +18,11 @@ from pathlib import Path
 import pytest
 
 from common.client.lab_client import LabClient
-from common.lab_errors import LabError
 from common.messages import AuditQuery
 from services.registry.accounts_db import RegistryDB
 from services.registry.audit_db import TermStore
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab, session_revoked
 
 # One worker starts the module's router once.
 pytestmark = [
@@ -141,7 +140,7 @@ def test_wart_users_manages_accounts_and_explains_mistakes(lab: ProcessLab) -> N
         changed = run_users(db, "passwd", "zoe", stdin="zoe-second-pw\n")
         assert changed.returncode == 0 and "(1 sessions ended)" in changed.stdout
         # The running registry enforces what the tool wrote in its file, within seconds.
-        wait_for(lambda: _refused(before), 15, "zoe's old session ended")
+        wait_for(lambda: session_revoked(before), 15, "zoe's old session ended")
     with lab.client() as client:
         client.login("zoe", "zoe-second-pw")  # the new password works on the running registry
     # Mistakes get a clear message and a non-zero exit, nothing half-done.
@@ -196,11 +195,3 @@ def test_a_teacher_imports_a_class_and_a_student_logs_in_with_the_sheet(
         store.close()
     assert [a.target for a in imports] == ["course/rob26", "course/rob26"]
     assert not any(p in a.detail for a in imports for p in found.values())
-
-
-def _refused(client: LabClient) -> bool:
-    try:
-        client.directory()
-    except LabError as exc:
-        return "revoked" in str(exc)
-    return False

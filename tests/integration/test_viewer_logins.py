@@ -30,10 +30,10 @@ from common.client.lab_address import LabAddress
 from common.service import close_session, open_session
 from tests.conftest import Procs, Router, free_port
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
-from tests.kit.viser_client import ViserClient, run_in_thread
+from tests.kit.viser_client import ViserClient, demo_lab_viewer, run_in_thread
 from viewers.web.app import WebViewer
 from viewers.web.connector import LiveConnector
-from viewers.web.demo_lab import DemoConnector, DemoLab
+from viewers.web.demo_lab import DemoLab
 from viewers.web.login import LoginDesk
 
 # One worker starts the module's router once.
@@ -211,13 +211,8 @@ HOLD_S = 3.0  # how long the form's thread is held, unless the click comes first
 
 @pytest.fixture
 def demo_viewer(tmp_path: Path) -> Iterator[WebViewer]:
-    lab = DemoLab("Test lab", robots=3)
-    viewer = WebViewer(DemoConnector(("lab", lab)), port=free_port(), data_dir=tmp_path / "viewer")
-    try:
+    with demo_lab_viewer(DemoLab("Test lab", robots=3), tmp_path / "viewer") as viewer:
         yield viewer
-    finally:
-        viewer.stop()
-        lab.close()
 
 
 def test_a_click_the_moment_log_in_shows_is_answered(

@@ -16,10 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import free_port
-from tests.kit.viser_client import RobotFrame, ViserClient, run_in_thread
+from tests.kit.viser_client import RobotFrame, ViserClient, demo_lab_viewer, run_in_thread
 from viewers.web.app import NOTSENT_LOWAT, WRITE_HIGH, WebViewer
-from viewers.web.demo_lab import DemoConnector, DemoLab
+from viewers.web.demo_lab import DemoLab
 
 pytestmark = pytest.mark.integration
 
@@ -35,13 +34,8 @@ CLIENT_READ_CHUNK = 256 * 1024
 
 @pytest.fixture
 def viewer(tmp_path: Path) -> Iterator[WebViewer]:
-    lab = DemoLab("Test lab", robots=ROBOTS, rate=50.0)
-    app = WebViewer(DemoConnector(("lab", lab)), port=free_port(), data_dir=tmp_path / "viewer")
-    try:
+    with demo_lab_viewer(DemoLab("Test lab", robots=ROBOTS, rate=50.0), tmp_path / "viewer") as app:
         yield app
-    finally:
-        app.stop()
-        lab.close()
 
 
 @dataclass

@@ -236,3 +236,17 @@ def agent_user(lab: ProcessLab, user: str, ctx: str = CTX) -> Iterator[AgentClie
             yield AgentClient(client, ctx).join()
     finally:
         close_session(session)
+
+
+def deploy_running(
+    owners: dict[str, AgentClient], source: bytes, filename: str = "forward.py"
+) -> dict[str, str]:
+    """Each robot's owner queues ``source`` on it as a deployed controller; once every one
+    runs, their request ids by robot."""
+    rids = {
+        agent: who.queue(agent, "deploy", source=source, filename=filename).request_id
+        for agent, who in owners.items()
+    }
+    for agent, who in owners.items():
+        assert who.wait_status(rids[agent], {"running"}, timeout=60), f"{agent} never ran"
+    return rids

@@ -1,5 +1,5 @@
-"""A course for the grading runs: its name, the reach-the-goal assignment's file, and the
-course put straight into a registry's database."""
+"""A course for the grading runs: its name, the reach-the-goal assignment's file, the
+course put straight into a registry's database, and a grading lab with its roster."""
 
 from __future__ import annotations
 
@@ -12,9 +12,12 @@ from services.grader.grading_db import GradingStore
 from services.registry.accounts_db import RegistryDB
 from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
-from tests.kit.lab import REPO
+from tests.kit.agentkit import start_runner, together
+from tests.kit.lab import REPO, ProcessLab, Procs, Router, make_lab, wart
 
 COURSE = "robotics-26"
+# A class of one student and its teacher, as `wart users import` reads it.
+ROSTER = "user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n"
 
 
 def assignment_toml(name: str, **fields: str) -> str:
@@ -64,3 +67,22 @@ def add_course(db_path: Path, rows: Sequence[RosterRow], assignment: str) -> Non
     parsed, map_text = parse_assignment(assignment.encode(), "a.toml", REPO / "maps")
     GradingStore(db.database).put_assignment(parsed, map_text)
     db.close()
+
+
+def import_roster(lab: ProcessLab, roster: str = ROSTER) -> None:
+    """``roster`` (CSV, its header first) imported into COURSE in ``lab``'s database by
+    ``wart users import``, as a teacher does."""
+    path = lab.state.parent / "class.csv"
+    path.write_text(roster)
+    done = wart("users", "--db", str(lab.db_path), "import", str(path), "--course", COURSE)
+    assert done.returncode == 0, done.stderr
+
+
+def start_grading_lab(router: Router, procs: Procs, tmp: Path, roster: str = ROSTER) -> ProcessLab:
+    """A lab on ``router`` that grades: the registry with COURSE's ``roster`` imported, then
+    the runner and the grader (together); no engine."""
+    lab = make_lab(router, procs, tmp)
+    lab.start_registry()
+    import_roster(lab, roster)
+    together(lambda: start_runner(lab), lab.start_grader)
+    return lab

@@ -36,6 +36,7 @@ from common import keys
 from common.auth import RegistryIdentity, create_identity_key
 from common.client.lab_client import LabClient
 from common.keys import AliveKind
+from common.lab_errors import LabError
 from common.messages import AuditEntry, AuditQuery
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
@@ -75,12 +76,15 @@ def wart_env(extra: dict[str, str] | None = None) -> dict[str, str]:
 # --- processes -----------------------------------------------------------------------
 
 
-def wart(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """``wart ARGS`` as a person runs it, from the repository, output captured."""
+def wart(
+    *args: str, timeout: float = 120.0, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``wart ARGS`` as a person runs it, from the repository, output captured; ``env``
+    adds to the test environment (see wart_env)."""
     return subprocess.run(
         [sys.executable, "-m", "services.cli", *args],
         cwd=REPO,
-        env=wart_env(),
+        env=wart_env(env),
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -360,6 +364,11 @@ class ProcessLab:
     def zsession(self) -> zenoh.Session:
         return open_session(self.router.options(), wait=10.0)
 
+    def admin_wart(self, *args: str) -> subprocess.CompletedProcess[str]:
+        """``wart ARGS`` as this lab's admin on its network (the password in WART_PASSWORD)."""
+        net = ["--user", "admin", *self.net_args()]
+        return wart(*args, *net, timeout=60.0, env={"WART_PASSWORD": PASSWORD})
+
 
 @functools.cache
 def _password_hash(password: str) -> bytes:
@@ -400,6 +409,13 @@ def make_lab(
     state = tmp / "state"
     identity = lab_state(state, users=users, password=password)
     return ProcessLab(router=router, procs=procs, state=state, identity=identity)
+
+
+def registry_lab(router: Router, procs: Procs, tmp: Path) -> ProcessLab:
+    """A lab (see make_lab) with its registry started."""
+    lab = make_lab(router, procs, tmp)
+    lab.start_registry()
+    return lab
 
 
 @contextmanager
@@ -536,3 +552,13 @@ def audit_trail(admin: LabClient, **filters: object) -> list[AuditEntry]:
     """The registry's audit entries an admin reads, filtered as ``AuditQuery`` takes them."""
     entries, _ = admin.audit_trail(AuditQuery(**filters))  # type: ignore[arg-type]
     return entries
+
+
+def session_revoked(client: LabClient) -> bool:
+    """Whether the registry refuses ``client``'s session as revoked (asked with a request
+    that needs one)."""
+    try:
+        client.directory()
+    except LabError as exc:
+        return "revoked" in str(exc)
+    return False

@@ -1,4 +1,5 @@
-"""Robot files for the tests: the wheeled robot most of them start from."""
+"""Robot files for the tests: the wheeled robot most of them start from, and the scout
+(that robot with a range finder)."""
 
 from __future__ import annotations
 
@@ -27,3 +28,17 @@ max_speed = 100
 """
         + components
     )
+
+
+# The scout: the wheeled robot with a three-beam range finder, ``eye``, at its front.
+SCOUT = wheeled_robot(
+    "scout",
+    """
+[components.eye]
+type = "range_finder"
+pose = [30.0, 0.0, 0.0]
+beams = 3
+fov_deg = 40.0
+max_range_mm = 300.0
+""",
+)

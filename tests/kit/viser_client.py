@@ -26,8 +26,9 @@ import contextlib
 import socket
 import threading
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TypeVar
 
 import msgspec
@@ -37,6 +38,10 @@ import viser
 import websockets
 import websockets.asyncio.client
 import zstandard
+
+from tests.kit.lab import free_port
+from viewers.web.app import WebViewer
+from viewers.web.demo_lab import DemoConnector, DemoLab
 
 T = TypeVar("T")
 ROBOTS_NODE = "/world/robots"
@@ -387,3 +392,15 @@ class ViserClient:
     async def join(self, context: str, timeout: float = 120.0) -> None:
         """Press "Join CONTEXT" in the lobby, then wait for the first robots frame."""
         await self.click_until(f"Join {context}", lambda: self.frames > 0, timeout, every=5.0)
+
+
+@contextlib.contextmanager
+def demo_lab_viewer(lab: DemoLab, data_dir: Path) -> Iterator[WebViewer]:
+    """A real WebViewer (its data in ``data_dir``) serving the in-memory ``lab``; both
+    stopped after."""
+    viewer = WebViewer(DemoConnector(("lab", lab)), port=free_port(), data_dir=data_dir)
+    try:
+        yield viewer
+    finally:
+        viewer.stop()
+        lab.close()

@@ -10,7 +10,6 @@ registry DB while it runs (logins read the DB).
 from __future__ import annotations
 
 import subprocess
-import sys
 import uuid
 from collections.abc import Callable, Iterator
 
@@ -25,8 +24,9 @@ from common.messages import ContextInfo
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.registry.accounts_db import RegistryDB
-from tests.conftest import REPO, wait_for, wart_env
+from tests.conftest import wait_for
 from tests.kit.lab import UpLab
+from tests.kit.lab import wart as lab_wart
 
 # One worker starts the module's lab once (split between workers, each started its own).
 pytestmark = [pytest.mark.smoke, pytest.mark.xdist_group("up_hosting")]
@@ -156,17 +156,9 @@ def test_refusals_say_why(client_of: Callable[[str], LabClient], lab: tuple[UpLa
 def test_wart_room_in_a_terminal(lab: tuple[UpLab, str]) -> None:
     the_lab, key = lab
     flags = ["--realm", the_lab.realm, "--connect", the_lab.endpoint, "--registry-key", key]
-    env = wart_env({"WART_PASSWORD": PASSWORD})
 
     def wart(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "services.cli", *args],
-            cwd=REPO,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
+        return lab_wart(*args, timeout=60.0, env={"WART_PASSWORD": PASSWORD})
 
     made = wart("room", *flags, "new", "--user", TEACHER, "club", "--title", "Robot club")
     assert made.returncode == 0, made.stderr

@@ -66,22 +66,21 @@ class DemoAdmin:
         return f"removed {user}"
 
     def grant(self, user: str, grant: str, scope: str = "") -> str:
-        self._need("admin", "manage accounts")
-        with self._lab._lock:
-            if user not in self._lab.accounts:
-                raise LabError(f"there is no user {user}")
-            pw, perms = self._lab.accounts[user]
-            self._lab.accounts[user] = (pw, perms | {grant})
+        self._change_perms(user, lambda perms: perms | {grant})
         return f"granted {grant} to {user}"
 
     def ungrant(self, user: str, grant: str, scope: str = "") -> str:
+        self._change_perms(user, lambda perms: perms - {grant})
+        return f"revoked {grant} from {user}"
+
+    def _change_perms(self, user: str, change: Callable[[frozenset[str]], frozenset[str]]) -> None:
+        """``user``'s permissions replaced by ``change`` of them (an admin's call)."""
         self._need("admin", "manage accounts")
         with self._lab._lock:
             if user not in self._lab.accounts:
                 raise LabError(f"there is no user {user}")
             pw, perms = self._lab.accounts[user]
-            self._lab.accounts[user] = (pw, perms - {grant})
-        return f"revoked {grant} from {user}"
+            self._lab.accounts[user] = (pw, change(perms))
 
     def kick_from_server(self, user: str, reason: str = "") -> str:
         self._need("admin", "kick people from the server")

@@ -25,7 +25,13 @@ from common.client.agent_client import AgentClient
 from common.client.rooms import RoomHandle
 from common.controller.upload_gate import PrecheckError, precheck
 from common.keys import is_ident
-from common.messages import AgentContextState, OutputLines, RequestStatus, RoomEvent
+from common.messages import (
+    AgentContextState,
+    ControlQueued,
+    OutputLines,
+    RequestStatus,
+    RoomEvent,
+)
 from common.recording import RecordingError, read_recording
 from viewers.web.adapters import (
     CONTROLLER_SUFFIXES,
@@ -73,6 +79,17 @@ def check_upload(filename: str, content: bytes) -> tuple[str, str | None]:
     except PrecheckError as exc:
         return name, str(exc)
     return name, None
+
+
+def _checked_upload(agent: str, filename: str, content: bytes) -> str:
+    """The file's plain name, once ``agent`` is a robot's id and the file passes
+    check_upload; else LabError with why."""
+    if not is_ident(agent):
+        raise LabError("choose a robot first")
+    name, problem = check_upload(filename, content)
+    if problem:
+        raise LabError(problem)
+    return name
 
 
 def agent_rows(
@@ -205,18 +222,11 @@ class AgentContextLink:
         return agent_rows(self.state(), self.user, time.time(), offline)
 
     def request(self, agent: str, filename: str, source: bytes) -> Queued:
-        if not is_ident(agent):
-            raise LabError("choose a robot first")
-        name, problem = check_upload(filename, source)
-        if problem:
-            raise LabError(problem)
+        name = _checked_upload(agent, filename, source)
         queued = self._call(
             lambda: self.agents.queue(agent, "deploy", source=source, filename=name)
         )
-        now = time.time()
-        eta = None if queued.start_eta is None else max(0.0, queued.start_eta - now)
-        self._refresh()
-        return Queued(queued.request_id, queued.agent, queued.position, eta, queued.slot_seconds)
+        return self._queued(queued)
 
     def cancel(self, agent: str) -> str:
         if not is_ident(agent):
@@ -247,11 +257,7 @@ class AgentContextLink:
         return detail
 
     def dry_run(self, agent: str, filename: str, source: bytes) -> DryRunResult:
-        if not is_ident(agent):
-            raise LabError("choose a robot first")
-        name, problem = check_upload(filename, source)
-        if problem:
-            raise LabError(problem)
+        name = _checked_upload(agent, filename, source)
         report = self._call(lambda: self.agents.dry_run(agent, source, filename=name))
         details = [f"robot model: {report.model}"] if report.model else []
         details += [
@@ -347,7 +353,10 @@ class AgentContextLink:
             rec = read_recording(recording)
         except RecordingError as exc:
             raise LabError(str(exc)) from None
-        queued = self._call(lambda: self.agents.promote(rec, agent))
+        return self._queued(self._call(lambda: self.agents.promote(rec, agent)))
+
+    def _queued(self, queued: ControlQueued) -> Queued:
+        """A request the context queued, as the page shows it (the queues read again)."""
         now = time.time()
         eta = None if queued.start_eta is None else max(0.0, queued.start_eta - now)
         self._refresh()

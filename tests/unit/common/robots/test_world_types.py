@@ -18,19 +18,7 @@ from common.world import packing
 from services.runner.dryrun import world_from_snapshot
 from services.runner.episode import assignment_world
 from tests.conftest import REPO
-from tests.kit.robots import wheeled_robot
-
-SCOUT = wheeled_robot(
-    "scout",
-    """
-[components.eye]
-type = "range_finder"
-pose = [30.0, 0.0, 0.0]
-beams = 3
-fov_deg = 40.0
-max_range_mm = 300.0
-""",
-)
+from tests.kit.robots import SCOUT
 
 
 def a_map(**types: str) -> dict[str, Any]:

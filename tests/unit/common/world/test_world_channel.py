@@ -25,11 +25,9 @@ from common.messages import (
     decode,
     encode,
 )
-from common.world.leasemac import WorldBoxKeys, new_lease_key
-from common.world.leases import LeaseBook
 from common.world.remote_robot import SwarmTick, WorldChannel, ZenohRobotLink
 from tests.kit.fakezenoh import FakeSample, FakeSession
-from tests.kit.leases import grant_on, mac_lease
+from tests.kit.leases import mac_leased_swarm
 
 REALM, WORLD = "r", "w"
 
@@ -307,52 +305,13 @@ def test_a_swarm_listener_cannot_send_bad_values_or_drive_robots_it_has_no_link_
     assert results == []
 
 
-def mac_leased(
-    agents: tuple[str, ...], leased: tuple[str, ...]
-) -> tuple[FakeSession, WorldChannel, list[ZenohRobotLink], LeaseBook]:
-    """Links on one channel, those of ``leased`` holding a MAC lease the world's book has."""
-    world = issue_session(IDENTITY, REALM, "engine-w", ["world"])
-    context = issue_session(IDENTITY, REALM, "ctx", ["lease"])
-    book = LeaseBook(
-        REALM, WORLD, Verifier(IDENTITY.verify_key, REALM), WorldBoxKeys(lambda: world)
-    )
-    zs = FakeSession()
-    channel = WorldChannel(zs, REALM, WORLD)  # type: ignore[arg-type]
-    links = [
-        ZenohRobotLink(
-            zs,  # type: ignore[arg-type]
-            REALM,
-            WORLD,
-            agent,
-            lambda: RUNNER,
-            keepalive=3600.0,
-            verifier=Verifier(IDENTITY.verify_key, REALM),  # the holder's own
-            channel=channel,
-        )
-        for agent in agents
-    ]
-    now = time.time()
-    for agent in leased:
-        k = new_lease_key()
-        lease = mac_lease(
-            k,
-            RUNNER,
-            world,
-            lease_id=f"L-{agent}",
-            world_name=WORLD,
-            agent=agent,
-            start=now - 1,
-            end=now + 60,
-        )
-        grant_on(zs, book, context, REALM, lease)
-    return zs, channel, links, book
-
-
 def test_a_swarm_under_mac_leases_sends_one_array_bundle_that_the_world_accepts() -> None:
     """Links holding MAC leases: the tick's commands leave as one MacCommandBundle, each
     item MACed under its own agent's lease; a link still without one signs, as before."""
     # k2's lease has not arrived yet
-    zs, channel, links, book = mac_leased(("k0", "k1", "k2"), ("k0", "k1"))
+    zs, channel, links, book = mac_leased_swarm(
+        IDENTITY, RUNNER, REALM, WORLD, ("k0", "k1", "k2"), ("k0", "k1"), 60
+    )
 
     def swarm(tick: SwarmTick) -> None:
         for agent, s in zip(tick.agents, tick.samples, strict=True):
@@ -383,7 +342,9 @@ def test_controller_threads_under_mac_leases_send_items_the_world_accepts_once()
     """The runner's path: each controller thread's speeds or counters leave as a MACed
     MacCommandBundle item (what a swarm tick sends); what an item cannot carry (LEDs)
     still leaves as a MacCommand; the world obeys each once and refuses a replay."""
-    zs, channel, (k0, k1), book = mac_leased(("k0", "k1"), ("k0", "k1"))
+    zs, channel, (k0, k1), book = mac_leased_swarm(
+        IDENTITY, RUNNER, REALM, WORLD, ("k0", "k1"), ("k0", "k1"), 60
+    )
     with channel.burst():  # as a burst of threads would: one message for the items
         k0.send(RobotCommand(speeds=(3, -3)))
         k1.send(RobotCommand(counters=(7, 0)))

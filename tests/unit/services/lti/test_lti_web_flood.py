@@ -13,18 +13,29 @@ import pytest
 from services.lti import web
 
 
+def _tool_server() -> web.ToolServer:
+    """The tool's HTTP server on a free port, started: only its JWKS path is asked."""
+    launcher: Any = object()  # the JWKS path asks nothing of it
+    server = web.ToolServer("127.0.0.1", 0, launcher, lambda launch: None, {"keys": []})  # type: ignore[arg-type,return-value]
+    server.start()
+    return server
+
+
+def _refused_with_503(server: web.ToolServer) -> bool:
+    """Whether one more connection from 127.0.0.1 asking for the JWKS gets the 503."""
+    with socket.create_connection(("127.0.0.1", server.port), timeout=5) as more:
+        more.sendall(b"GET /lti/jwks HTTP/1.1\r\nHost: x\r\n\r\n")
+        return more.recv(200).startswith(b"HTTP/1.1 503 Service Unavailable")
+
+
 def test_idle_connections_beyond_the_cap_are_refused_and_service_resumes(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setattr(web, "MAX_IN_FLIGHT", 2)
-    launcher: Any = object()  # the JWKS path asks nothing of it
-    server = web.ToolServer("127.0.0.1", 0, launcher, lambda launch: None, {"keys": []})  # type: ignore[arg-type,return-value]
-    server.start()
+    server = _tool_server()
     idle = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(2)]
     try:
-        with socket.create_connection(("127.0.0.1", server.port), timeout=5) as third:
-            third.sendall(b"GET /lti/jwks HTTP/1.1\r\nHost: x\r\n\r\n")
-            assert third.recv(200).startswith(b"HTTP/1.1 503 Service Unavailable")
+        assert _refused_with_503(server)
     finally:
         for s in idle:
             s.close()
@@ -47,9 +58,7 @@ def test_idle_connections_beyond_the_cap_are_refused_and_service_resumes(
 
 
 def test_sixty_four_idle_connections_from_one_address_leave_the_tool_to_everyone_else() -> None:
-    launcher: Any = object()
-    server = web.ToolServer("127.0.0.1", 0, launcher, lambda launch: None, {"keys": []})  # type: ignore[arg-type,return-value]
-    server.start()
+    server = _tool_server()
     idle = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(64)]
     try:
         # Another browser (another loopback address) is served at once...
@@ -60,9 +69,7 @@ def test_sixty_four_idle_connections_from_one_address_leave_the_tool_to_everyone
             status = other.recv(200).split(b"\r\n")[0]
             assert b" 200 " in status, status
         # ...while the flooding address gets the 503 beyond its share.
-        with socket.create_connection(("127.0.0.1", server.port), timeout=5) as more:
-            more.sendall(b"GET /lti/jwks HTTP/1.1\r\nHost: x\r\n\r\n")
-            assert more.recv(200).startswith(b"HTTP/1.1 503 Service Unavailable")
+        assert _refused_with_503(server)
     finally:
         for s in idle:
             s.close()
