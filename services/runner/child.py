@@ -7,8 +7,11 @@ its first argument, one line each way, the messages of
 common/controller/pipe.py. The student's prints and tracebacks go to
 stdout/stderr, which the parent shows as the controller's output.
 
-    python3 -I -S child.py CMD_FD CONTROLLER_FILE [lockstep | hang=SECONDS]
-    python3 -I -S child.py CMD_FD GRADER_FILE grade hang=SECONDS
+    python3 -I -S child.py CMD_FD CONTROLLER_FILE [lockstep | hang=SECONDS] [nproc=N]
+    python3 -I -S child.py CMD_FD GRADER_FILE grade hang=SECONDS [nproc=N]
+
+``nproc=N``: the sandbox's process limit, set here first thing (a runner that is not
+root cannot set it from outside: services/runner/sandbox.py says why).
 
 ``grade`` (a teacher's grader, docs/COURSES.md): the file is not a controller
 but defines ``grade(episode)``; it is called once with the episode's data
@@ -31,6 +34,7 @@ controller's own file it was in. The parent then ends the run and says so.
 from __future__ import annotations
 
 import os
+import resource
 import sys
 import threading
 import time
@@ -42,12 +46,15 @@ from typing import Any
 def main() -> int:
     cmd_fd = int(sys.argv[1])
     path = sys.argv[2]
-    lockstep = sys.argv[3:] == ["lockstep"]
+    lockstep = "lockstep" in sys.argv[3:]
     grading = "grade" in sys.argv[3:]
     hang_after = 0.0
     for arg in sys.argv[3:]:
         if arg.startswith("hang="):
             hang_after = float(arg[len("hang=") :])
+        elif arg.startswith("nproc="):  # before any thread or the controller starts
+            most = int(arg[len("nproc=") :])
+            resource.setrlimit(resource.RLIMIT_NPROC, (most, most))
     # The sandbox's copy of the controller API (stage.py) is importable only from here on.
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "lib"))
     from common.controller import (

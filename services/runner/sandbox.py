@@ -160,7 +160,14 @@ class Sandbox:
         lim = self.limits
         self._cgroup = stage.name
         argv = self._cpu.prefix(self._cgroup)
-        if os.geteuid() == 0:
+        # RLIMIT_NPROC counts every process of a uid. A root runner gives each sandbox a
+        # uid of its own and limits it from outside; a runner that is not root (a
+        # container's user) shares its uid with itself and, in a pod, with the lab's
+        # other services, and the same limit there refused the sandbox its namespaces
+        # ("Creating new namespace failed"). The child then sets it inside, where the
+        # kernel counts the processes of the sandbox's own user namespace.
+        own_uid = os.geteuid() == 0
+        if own_uid:
             self._uid = self.uid = _take_uid()
             argv += ["setpriv", f"--reuid={self._uid}", f"--regid={self._uid}", "--clear-groups"]
         # /work gets half of the writable space, /tmp and /dev/shm a quarter
@@ -172,7 +179,7 @@ class Sandbox:
             # SIGXCPU at the soft limit says why; SIGKILL a second later if caught
             f"--cpu={lim.cpu_seconds}:{lim.cpu_seconds + 1}",
             f"--as={lim.address_space_bytes}",
-            f"--nproc={lim.processes}",
+            *([f"--nproc={lim.processes}"] if own_uid else []),
             f"--nofile={lim.open_files}",
             f"--fsize={lim.file_size_bytes}",
             "--",
@@ -250,6 +257,8 @@ class Sandbox:
             argv.append("lockstep")
         elif lim.hang_seconds > 0:
             argv.append(f"hang={lim.hang_seconds:g}")
+        if not own_uid:
+            argv.append(f"nproc={lim.processes}")
         return argv
 
     def start(self, slot_seconds: float) -> None:

@@ -1,11 +1,18 @@
-"""Two sandboxes never share a uid, even when two runners of one host start them."""
+"""Two sandboxes never share a uid, even when two runners of one host start them; a runner
+that is not root limits a sandbox's processes from inside it."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+from pathlib import Path
 
+import pytest
+
+from services.runner.sandbox import Sandbox
 from services.runner.sandbox_host import _give_uid, _take_uid
+from services.runner.stage import SandboxLimits
 from tests.conftest import REPO
 
 HOLDER = """
@@ -45,3 +52,20 @@ def test_a_uid_claimed_by_another_runner_is_not_handed_out_until_that_runner_die
     finally:
         for uid in again:
             _give_uid(uid)
+
+
+def test_a_runner_that_is_not_root_limits_processes_inside_the_sandbox(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # Not root (a container's user): the uid is shared with the runner and the pod's
+    # other services, so a per-uid limit set outside refused the sandbox its namespaces.
+    # The child sets it inside, where only the sandbox's own processes count (the fork
+    # bomb then stops at the limit: tests/containers/test_podman_lab.py runs one so).
+    limits = SandboxLimits()
+    source = b"from common.controller import Controller\nclass C(Controller):\n    def do_work(self, robot): pass\n"
+    sandbox = Sandbox(source, limits=limits, on_command=lambda _c: None, on_output=lambda _l: None)
+    monkeypatch.setattr(os, "geteuid", lambda: 10001)
+    argv = sandbox.command_line(tmp_path, 5, 6)
+    assert not any(a.startswith("--nproc") for a in argv)
+    assert argv[-1] == f"nproc={limits.processes}"
+    assert argv.index("prlimit") < argv.index("bwrap") < argv.index(f"nproc={limits.processes}")
