@@ -6,7 +6,8 @@ with ``podman kube play`` from ``wart kube render --mode podman``: the router,
 the registry (its database on a volume) and arena1 (engine and agent
 context), TLS with the lab's certificates and access rules, on the host's
 network. A client with the student certificate logs in, joins arena1 and
-runs the Braitenberg example on a robot; the router's container is killed
+runs the Braitenberg example on a robot, then uploads it to run in the runner's
+sandbox inside its container; the router's container is killed
 and started again: the services rejoin, and the same client, still logged
 in, drives again.
 
@@ -14,8 +15,9 @@ What this does not cover (podman does not do it): StatefulSets and Services
 (the render's podman mode makes the same pods Deployments on the host's
 network), readiness probes and restarts of unhealthy containers (the probe
 command is run here by hand, inside a pod), Secrets (podman 4.3 mounts them
-still encoded: ConfigMaps here), the Ingress, and the runner's sandbox in a
-container.
+still encoded: ConfigMaps here), the Ingress, and a cluster's own
+container runtime (podman ignores procMount: the runner's container is privileged
+here, where a cluster gets an unmasked /proc in a user namespace of the pod's own).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import pytest
 import yaml
 
 from common import keys
-from common.client.agent_client import AgentClient
+from common.client.agent_client import FINAL, AgentClient
 from common.client.lab_client import LabClient
 from common.controller import load_controller
 from common.keys import AliveKind
@@ -46,6 +48,7 @@ from services.lab.supervisor import AliveWatch
 from services.lab.zsecurity import client_tls
 from tests.integration.multihost_probe import Poses, moved, session_for
 from tests.kit.lab import REPO, free_port
+from tests.kit.waits import wait_for
 
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 IMAGE = "localhost/wart:latest"
@@ -69,10 +72,32 @@ kind = "registry"
 kind = "engine"
 world = "arena1"
 map = "foraging"
+[[hosts.services]]
+kind = "runner"
+name = "runner"
 """
 ROUTER = "wart-router-k-pod-0-router"
 REGISTRY = "wart-registry-registry-pod-0-registry"
 ENGINE = "wart-arena-arena1-pod-0-engine"
+RUNNER = "wart-runner-runner-pod-0-runner"
+FORK_BOMB = """
+import os
+from common.controller import Controller
+class Forker(Controller):
+    def do_work(self, robot):
+        robot.set_speeds(0, 0)
+        forks = 0
+        while True:
+            try:
+                if os.fork() == 0:
+                    os.sched_yield()
+                    while True:
+                        pass
+            except OSError as exc:
+                print("fork refused after", forks, "forks:", exc)
+                raise SystemExit(0)
+            forks += 1
+"""
 
 
 def _unavailable() -> str | None:
@@ -200,6 +225,24 @@ def test_a_client_drives_in_the_pods_lab_and_recovers_when_the_router_is_replace
             driven = agents.drive(agent, controller)
             assert driven.status == "finished", driven
             assert moved(start, poses.xy(agent)) > 50  # Braitenberg: ~80 mm/s for 4 s
+            # Uploaded, it runs in the runner's container, in a sandbox of its own.
+            assert watch.wait(keys.alive(lab.realm, AliveKind.RUNNER, "runner"), 60)
+            start = poses.xy(agent)
+            queued = agents.queue(agent, "deploy", source=EXAMPLE.read_bytes())
+            deployed = agents.wait_status(queued.request_id, FINAL, timeout=60)
+            assert deployed is not None and deployed.status == "finished", (
+                deployed,
+                pod_lab.podman("logs", RUNNER).stderr[-3000:],
+            )
+            assert moved(start, poses.xy(agent)) > 50
+            # The runner is not root here: its sandbox limits processes from inside,
+            # and a fork bomb stops at that limit whatever else the uid runs.
+            printed: list[str] = []
+            agents.on_output = lambda out: printed.extend(out.lines)
+            queued = agents.queue(agent, "deploy", source=FORK_BOMB.encode())
+            bombed = agents.wait_status(queued.request_id, FINAL, timeout=60)
+            assert bombed is not None and bombed.status == "finished", bombed
+            wait_for(lambda: any("fork refused" in line for line in printed), 15, "the refusal")
             # The router's container killed and started again: every link drops, the
             # services reconnect and their tokens come back, this client too.
             assert pod_lab.podman("kill", ROUTER).returncode == 0
