@@ -103,6 +103,11 @@ class TwinStore:
         )
         return self._stored(robot, *rows[0]) if rows else None
 
+    def count(self, robot: str) -> int:
+        """How many versions of ``robot``'s twin are kept (none read)."""
+        rows = self.database.rows("SELECT COUNT(*) FROM twins WHERE robot = ?", robot)
+        return int(rows[0][0]) if rows else 0
+
     def robots(self) -> list[tuple[str, int]]:
         """Each robot with a twin, and how many versions it has."""
         rows = self.database.rows("SELECT robot, COUNT(*) FROM twins GROUP BY robot ORDER BY robot")

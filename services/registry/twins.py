@@ -102,7 +102,7 @@ class TwinDesk:
             robot=request.robot,
             current=None if current is None else _wire(current),
             history=[v.line()[:256] for v in versions[-MAX_HISTORY:]],
-            versions=len(versions) if request.history else int(current is not None),
+            versions=len(versions) if request.history else self.store.count(request.robot),
         )
 
     def _list(self) -> TwinList:

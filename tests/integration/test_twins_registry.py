@@ -102,6 +102,8 @@ def test_a_runner_reads_the_twin_in_force_and_says_when_the_registry_is_gone(
         admin.twins.save(calibration(scale_left=0.95).to_json("dave", FITTED_AT), "k1")
         got = fresh.twin_of("k1").twin
         assert got is not None and got.drive.scale_left == 0.95  # the newest is in force
+        reply = admin.twins.of("k1")
+        assert reply.versions == 2 and reply.history == []  # no lines unless asked
         lab.registry.stop()
         gone = fresh.twin_of("k1")
     assert gone.twin is None and gone.why_not == "the registry did not give k1's twin"

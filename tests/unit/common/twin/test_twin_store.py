@@ -120,6 +120,7 @@ def test_the_lab_keeps_every_version_and_the_newest_is_in_force(tmp_path: Path) 
     assert current.twin.drive.scale_left == 0.95 and current.saved_by == "admin"
     assert [v.twin.fitted_by for v in store.versions("k1")] == ["carol", "dave"]
     assert store.robots() == [("k1", 2), ("k2", 1)]
+    assert (store.count("k1"), store.count("k9")) == (2, 0)
     assert f"v1: fitted {DAY} by carol from dance; saved {DAY}" in (store.versions("k1")[0].line())
     # A row written into the database by hand is checked as a file from a user is.
     with sqlite3.connect(db) as raw:
