@@ -212,6 +212,16 @@ FLOWS: tuple[Flow, ...] = (
         note="the lti role only",
     ),
     _query(
+        keys.registry_twins,
+        ("registry",),
+        ("runner", *PEOPLE),
+        _ask(m.TwinQuery, m.TwinReply),
+        _ask(m.TwinListQuery, m.TwinList),
+        _ask(m.TwinSave, m.TwinSaved),
+        **SEALED,
+        note="runners, teachers, owners read; owners, admins save",
+    ),
+    _query(
         keys.registry_revocations,
         ("registry",),
         _REGISTRY_CLIENTS,

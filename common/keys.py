@@ -145,6 +145,11 @@ def registry_lti(realm: str) -> str:
     return f"{realm_root(realm)}/registry/lti"
 
 
+def registry_twins(realm: str) -> str:
+    """Real robots' twins, kept by the registry: runners, teachers and owners ask here."""
+    return f"{realm_root(realm)}/registry/twins"
+
+
 # --- presence ---------------------------------------------------------------
 
 

@@ -56,6 +56,7 @@ from common.client.private_mail import (
 )
 from common.client.registry_admin import RegistryAdminCalls
 from common.client.rooms import RoomCalls
+from common.client.twins import TwinCalls
 from common.keys import AliveKind
 from common.lab_errors import (
     Banned,
@@ -176,6 +177,7 @@ class LabClient:
         self.ban = admin.ban
         self.lift_ban = admin.lift_ban
         self.audit_trail = admin.audit_trail
+        self.twins = TwinCalls(realm, self._ask)
 
     # -- context manager
 

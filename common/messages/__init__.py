@@ -42,6 +42,8 @@ from common.messages.recording import *  # noqa: F403 - every recording wire typ
 from common.messages.recording import __all__ as _recording_all
 from common.messages.registry import *  # noqa: F403 - every registry wire type
 from common.messages.registry import __all__ as _registry_all
+from common.messages.twin import *  # noqa: F403 - every twin wire type
+from common.messages.twin import __all__ as _twin_all
 from common.messages.world import (
     FINGERS_CLOSED,
     FINGERS_HOLDING,
@@ -153,4 +155,5 @@ __all__ = [
     *_lti_all,
     *_recording_all,
     *_registry_all,
+    *_twin_all,
 ]

@@ -10,33 +10,38 @@ at the datasheet's. Then the gap: the datasheet model and the fitted twin, each
 run open-loop on the recorded commands from every camera pose, against where the
 camera saw the robot 1, 5 and 10 s later (median mm; the same runs as the fit,
 so an optimistic figure). ``--out FILE`` writes the twin (JSON: values, errors,
-runs, who fitted and when); ``--save --db DB`` keeps it in the lab's database as
-the robot's newest version (``wart twin``). docs/CALIBRATION.md.
+runs, who fitted and when); ``--save --user U`` has the registry keep it as the
+robot's newest version (``wart twin``; the owner of the arena named with
+``--arena``, or a lab admin). docs/CALIBRATION.md.
 
     wart calibrate k1 --recordings dance.mcap other-run.mcap --out k1-twin.json
-    wart calibrate k1 --recordings dance.mcap --save --db ~/.local/state/wart/lab/registry.db
+    wart calibrate k1 --recordings dance.mcap --save --user carol --arena real
 """
 
 from __future__ import annotations
 
+import argparse
 import getpass
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from common import cli
+from common import cli, keys
+from common.lab_errors import LabError
 from common.recording import RecordingError, read_recording
 from common.twin import gap
 from common.twin.fit import TwinError, calibrate, run_data
 from common.twin.motion import Drive
 from common.twin.twinfile import TwinFileError, parse_twin
-from services.lab.database import DbError
-from services.lab.twins_db import TwinStore
+from common.zconfig import NetworkOptions
+from services.commands.arena import lab_login
+from services.commands.twin import add_login_arguments, save_twin
+from services.lab.labfile import LabFileError
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int:
-    p = cli.parser(prog, __doc__ or "", network=False)
+    p = cli.parser(prog, __doc__ or "")
     p.add_argument("robot", help="the real robot's name in its arena (k1)")
     p.add_argument(
         "--recordings", type=Path, nargs="+", required=True, metavar="FILE",
@@ -45,12 +50,19 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int
     p.add_argument("--out", type=Path, metavar="FILE", help="write the twin there (JSON)")
     p.add_argument(
         "--save", action="store_true",
-        help="keep the twin in the lab's database (--db) as the robot's newest version",
+        help="have the registry keep the twin as the robot's newest version (--user)",
     )  # fmt: skip
-    p.add_argument("--db", type=Path, metavar="DB", help="the lab's database (registry.db)")
-    args, _ = cli.parse(p, argv)
-    if args.save and args.db is None:
-        p.error("--save needs --db (the lab's database: wart twin)")
+    p.add_argument("--arena", help="with --save: the arena you own (lab admins: none)")
+    add_login_arguments(p, required=False)
+    args, options = cli.parse(p, argv)
+    assert options is not None
+    if args.save and args.user is None:
+        p.error("--save needs --user (an arena's owner or a lab admin: wart twin)")
+    if args.arena is not None:
+        try:
+            keys.check_ident("--arena", args.arena)
+        except ValueError as exc:
+            p.error(str(exc))
     loaded = []
     for path in args.recordings:
         try:
@@ -77,20 +89,16 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int
         except OSError as exc:
             return cli.fail(f"cannot write {args.out}: {exc.strerror or exc}", 1)
         print(f"wrote {args.out}")
-    if args.save:
-        try:
-            kept = parse_twin(text, f"{args.robot}'s twin")
-            store = TwinStore.open(args.db)
-        except (TwinFileError, DbError) as exc:
-            return cli.fail(f"not kept: {exc}", 1)
-        try:
-            version = store.save(kept, getpass.getuser())
-        except DbError as exc:
-            return cli.fail(f"not kept: {exc.message}", 1)
-        finally:
-            store.close()
-        print(f"kept as {args.robot}'s twin v{version} in {args.db} (in force: wart twin)")
-    return 0
+    return _save(args, options, text) if args.save else 0
+
+
+def _save(args: argparse.Namespace, options: NetworkOptions, text: str) -> int:
+    try:
+        kept = parse_twin(text, f"{args.robot}'s twin")
+        with lab_login(args, options) as client:
+            return save_twin(client, kept, args.arena)
+    except (TwinFileError, LabError, LabFileError, ValueError, OSError) as exc:
+        return cli.fail(f"not kept: {exc}", 1)
 
 
 if __name__ == "__main__":

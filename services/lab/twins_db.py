@@ -4,9 +4,9 @@ A twin (common/twin/twinfile.py) is kept with who saved it and when, beside who
 fitted it, when and from which runs; saving a robot's twin again adds a version
 and keeps the older ones (a teacher compares, or goes back with ``wart twin
 save`` of an older file). The lab's database (services/lab/database.py) is where
-the lab keeps its accounts and courses: ``wart calibrate --save`` and ``wart twin``
-write here with ``--db`` as ``wart users`` does, and a runner with the database
-(``--twins-db``) simulates a real arena's robot by its newest twin in dry runs.
+the lab keeps its accounts and courses; the registry alone opens it for twins and
+serves them (services/registry/twins.py): ``wart calibrate --save``, ``wart twin``
+and the runners' dry runs ask the registry. ``wart report --db`` reads it offline.
 
 Every row read back is checked again as a twin file: a row written by hand into
 the database is refused as a file from a user would be.
@@ -102,6 +102,11 @@ class TwinStore:
             robot,
         )
         return self._stored(robot, *rows[0]) if rows else None
+
+    def count(self, robot: str) -> int:
+        """How many versions of ``robot``'s twin are kept (none read)."""
+        rows = self.database.rows("SELECT COUNT(*) FROM twins WHERE robot = ?", robot)
+        return int(rows[0][0]) if rows else 0
 
     def robots(self) -> list[tuple[str, int]]:
         """Each robot with a twin, and how many versions it has."""

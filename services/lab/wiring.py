@@ -371,9 +371,6 @@ def arena_specs(
 def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpec:
     """A runner; its account is ``runner-NAME`` unless given."""
     argv = ["runner", "--name", name, *w.login(account or service_account("runner", name))]
-    # Real robots' twins, where this host keeps the lab's database (a runner elsewhere
-    # simulates the datasheet's robot, and its dry runs say so).
-    argv += ["--twins-db", str(w.state_dir / "registry.db")]
     return ChildSpec(
         f"runner {name}",
         [*argv, *w.net_args("runner")],

@@ -70,6 +70,7 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from services.lab.supervisor import AliveWatch
+from services.lab.twins_db import TwinStore
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
 from services.registry.admin import REGISTRY_USER, AdminDesk, ban_refusal, source_of
 from services.registry.audit_db import Action, TermStore
@@ -77,6 +78,7 @@ from services.registry.fresh import FreshLogins
 from services.registry.lti_links import LtiLinks
 from services.registry.resume import ResumeStore
 from services.registry.throttle import LoginThrottle, vouched_source
+from services.registry.twins import TwinDesk
 
 log = logging.getLogger("wart.registry")
 
@@ -141,6 +143,10 @@ class Registry(Service):
             revoke=self._revoke,
             announce_ban=self.announce_ban,
         )
+        # The directory's contexts, replaced whole by _watch_contexts: read without the lock.
+        self.twins = TwinDesk(
+            TwinStore(db.database), self.verifier, lambda: self._contexts, self.admin.audit
+        )
 
     # -- lifecycle
 
@@ -168,6 +174,7 @@ class Registry(Service):
         self.serve(keys.registry_revocations(self.realm), self.on_revocations)
         self.serve(keys.registry_audit(self.realm), self.admin.on_audit)
         self.serve(keys.registry_lti(self.realm), self.on_lti)
+        self.serve(keys.registry_twins(self.realm), self.twins.on_twins)
         self.subscribe(keys.registry_report(self.realm), self.admin.on_report)
         self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
         self._thread.start()

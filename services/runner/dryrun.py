@@ -158,13 +158,15 @@ def dry_run(
     limits: SandboxLimits | None = None,
     wall_s: float | None = None,
     twin: Twin | None = None,
+    why_not_twin: str = "",
 ) -> DryRunReport:
     """Run ``source`` on ``agent`` of a private copy of ``snap``'s world; what it saw.
 
     ``twin``: the real robot's twin (common/twin/), simulated instead of the datasheet's
     Khepera when it is ``agent``'s and the agent is a Khepera; the report's ``model``
-    says which was used. Raises ValueError if the world cannot be rebuilt or has no
-    such robot, RuntimeError if no sandbox can run here.
+    says which was used, and ``why_not_twin`` why a real robot's twin could not be had.
+    Raises ValueError if the world cannot be rebuilt or has no such robot,
+    RuntimeError if no sandbox can run here.
     """
     started = time.monotonic()
     wall_s = wall_limit(seconds) if wall_s is None else wall_s
@@ -182,6 +184,8 @@ def dry_run(
         if twin is not None
         else ("the datasheet Khepera" if kind == "khepera" else f"the {kind} robot type")
     )
+    if twin is None and why_not_twin and kind == "khepera":
+        model += f" ({why_not_twin})"
     top = float(world.tables.max_speed[slot])
     run = Lockstep(
         source, filename, world, slot, wall_s=wall_s, limits=limits, max_output=MAX_OUTPUT

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 import zenoh
 
@@ -41,13 +40,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
         help="end a run whose do_work has not returned for this long, saying where it was "
         "(default 0: only near the slot's end)",
     )
-    p.add_argument(
-        "--twins-db",
-        type=Path,
-        metavar="DB",
-        help="the lab's database (registry.db): dry runs on a real arena simulate each robot "
-        "by its twin kept there (wart twin), else the datasheet's",
-    )
     args, options = cli.parse(p, argv)
     assert options is not None
     try:
@@ -79,7 +71,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
             registry_key=credentials.registry_key,
             login=login,
             limits=limits,
-            twins=args.twins_db,
         )
 
     return run_service(f"runner {args.name}", options, build)

@@ -42,7 +42,6 @@ import json
 import logging
 import threading
 import time
-from pathlib import Path
 
 import zenoh
 
@@ -75,15 +74,13 @@ from common.messages import (
 )
 from common.service import RequestError, Service
 from common.sim2d.maps import MapError
-from common.twin.twinfile import Twin
 from common.world.remote_robot import WorldChannel, ZenohRobotLink
-from services.lab.database import DbError
-from services.lab.twins_db import TwinStore
 from services.runner.dryrun import dry_run
 from services.runner.episode import run_episode
 from services.runner.grader_run import run_grader
 from services.runner.heat import run_heat
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share, release_cpu_share
+from services.runner.twins import TwinChoice, TwinLookup
 
 log = logging.getLogger("wart.runner")
 
@@ -261,10 +258,10 @@ class RunnerService(Service):
         registry_key: bytes,
         login: ServiceLogin,
         limits: SandboxLimits | None = None,
-        twins: Path | None = None,
     ) -> None:
         super().__init__(session, realm, name)
-        self.twins = twins  # the lab's database, for real robots' twins (dry runs)
+        # Real robots' twins for dry runs, asked of the registry with this runner's session.
+        self.twins = TwinLookup(session, realm, lambda key, m: login.session.seal(key, m))
         self.verifier = Verifier(registry_key, realm)
         self.login = login
         self.limits = limits or SandboxLimits()
@@ -378,7 +375,8 @@ class RunnerService(Service):
                 filename=request.filename,
                 seconds=request.seconds,
                 limits=self.limits,
-                twin=twin,
+                twin=twin.twin,
+                why_not_twin=twin.why_not,
             )
         except (ValueError, MapError) as exc:
             raise RequestError("bad_request", str(exc)) from None
@@ -396,27 +394,12 @@ class RunnerService(Service):
         )
         return report
 
-    def _twin(self, snap: WorldSnapshot, agent: str) -> Twin | None:
-        """A real arena's robot's twin in force, if the lab's database keeps one.
-
-        Read at each dry run (a twin saved a minute ago is used at once). A database
-        that cannot be read leaves the datasheet's model, which the report names.
-        """
-        if snap.kind != "real" or self.twins is None or not self.twins.exists():
-            return None
-        try:
-            store = TwinStore.open(self.twins)
-        except DbError as exc:
-            self.log.warning("cannot read twins from %s: %s", self.twins, exc.message)
-            return None
-        try:
-            stored = store.current(agent)
-        except DbError as exc:
-            self.log.warning("%s's twin refused: %s", agent, exc.message)
-            return None
-        finally:
-            store.close()
-        return stored.twin if stored is not None else None
+    def _twin(self, snap: WorldSnapshot, agent: str) -> TwinChoice:
+        """A real arena's robot's twin in force, as the registry keeps it (a simulated
+        arena's robots are the map's: no twin)."""
+        if snap.kind != "real":
+            return TwinChoice(None)
+        return self.twins.twin_of(agent)
 
     def _on_heat(self, query: zenoh.Query) -> Message:
         """A competition's heat: several entries in one world (services/runner/heat.py)."""

@@ -3,7 +3,8 @@
 Router, registry, engine, runner and the agent context ``arena`` (2 s slots, its
 data dir keeps recordings). alice runs a tiny controller from the page; when the
 slot ends her Recordings folder lists the run (robot, how it ended, duration)
-and Replay draws it in her view.
+and Replay draws it in her view. The arena's owner (ida), and she alone, is offered to
+keep a fitted twin; the registry's answer shows under the button.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from tests.browser.test_real_agents import enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
+from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration
 from viewers.web.replay import ReplayFeed
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
@@ -89,3 +91,23 @@ def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab)
     alice.click("Calibrate the robot (twin)")
     alice.wait_text(f"{entry.name} cannot calibrate k0", timeout=15_000)
     alice.wait_text("calibrating needs the arena camera's view of the robot")
+    # Keeping a fitted twin is the arena's owner's (ida's): alice is never offered it. This
+    # lab's robots are simulated (no camera, no fit), so the fit is handed to each panel as
+    # a real run's would be; the keeping goes through the page and the real registry.
+    fitted = ("k0", calibration("k0").to_json("ida", FITTED_AT))
+    recordings._offer(fitted)
+    assert not recordings.keep.visible
+    expect(alice.p.get_by_role("button", name="Keep as k0's twin")).to_have_count(0)
+    ida = open_page("ida")
+    owned = enter_arena(ida, lab, "ida").recordings
+    assert owned is not None and owned.owner
+    folder = ida.p.get_by_text("Recordings", exact=True).first
+    settle(folder)
+    folder.click()
+    owned._offer(fitted)
+    ida.click("Keep as k0's twin")
+    ida.wait_text(f"Kept k0's twin fitted {DAY} by ida as k0's twin v1 (in force).")
+    ida.screenshot("real-recording-keep-twin")
+    with lab.lab.client("ida") as client:
+        kept = client.twins.of("k0").current
+    assert kept is not None and kept.version == 1 and kept.saved_by == "ida"

@@ -71,7 +71,10 @@ def test_an_exception_names_its_line(snap: WorldSnapshot) -> None:
         """
     )
     line = source.splitlines().index("            robot.set_speeds(1 // 0, 0)") + 1
-    report = dry_run(snap, "k1", source.encode())
+    # As a runner whose registry did not answer would run it: the model line says so.
+    why = "the registry did not give k1's twin"
+    report = dry_run(snap, "k1", source.encode(), why_not_twin=why)
+    assert report.model == f"the datasheet Khepera ({why})", report.model
     assert not report.will_run
     assert report.error_line == line
     assert report.verdict.startswith(f"will NOT run: line {line}: ZeroDivisionError")

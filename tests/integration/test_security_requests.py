@@ -24,7 +24,12 @@ def test_a_sealed_request_of_the_wrong_type_is_refused_at_once(
     lab = make_lab(router, procs, tmp_path)
     lab.start_registry()
     r = lab.realm
-    served = (keys.registry_logout, keys.registry_directory, keys.registry_admin)
+    served = (
+        keys.registry_logout,
+        keys.registry_directory,
+        keys.registry_admin,
+        keys.registry_twins,
+    )
     with lab.client("alice") as alice:
         assert alice.session is not None
         for key in (*(k(r) for k in served), keys.registry_audit(r), keys.registry_lti(r)):

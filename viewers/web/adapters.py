@@ -391,6 +391,11 @@ class LabConnection(Protocol):
         """Queue the controller file of a recorded (deploy) run on ``agent`` of ``ctx``."""
         ...
 
+    def save_twin(self, ctx: str, robot: str, document: str) -> str:
+        """Have the registry keep a twin file's text as ``robot``'s twin, for the arena
+        ``ctx`` the user owns; the answer in words (LabError: refused, and why)."""
+        ...
+
     # -- my courses (the grader: docs/COURSES.md)
 
     def assignments(self) -> list[AssignmentInfo]:

@@ -147,6 +147,7 @@ class ChatPanel:
                     view=lambda: self.view,
                     show=self._show_replay,
                     back_to_live=self.show_world,
+                    owner=joined.owner == connection.user,
                 )
             self.leave = gui.add_button("Leave")
         self.send.on_click(lambda _: self.submit())

@@ -525,6 +525,9 @@ class DemoConnection:
             raise LabError("this run's recording holds no controller file to promote")
         return self.request_control(ctx, agent, info.filename or "controller.py", rec.source)
 
+    def save_twin(self, ctx: str, robot: str, document: str) -> str:
+        raise LabError("the demo lab has no real robots: it keeps no twins")
+
     resume_token: bytes | None = None  # a demo lab keeps no saved logins
 
     def logout(self, keep_resume: bool = False, reason: str = "") -> None:

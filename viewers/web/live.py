@@ -496,6 +496,10 @@ class LiveConnection:
     def promote(self, ctx: str, agent: str, recording: Path) -> Queued:
         return self._arena(ctx).promote(agent, recording)
 
+    def save_twin(self, ctx: str, robot: str, document: str) -> str:
+        saved = self._call(lambda: self.client.twins.save(document, robot, ctx))
+        return f"Kept {saved.model} as {saved.robot}'s twin v{saved.version} (in force)."
+
     def _is_real(self, world: str) -> bool:
         """Whether ``world`` is a Khepera bridge (asked once: a world does not change kind)."""
         known = self._real_worlds.get(world)

@@ -10,6 +10,10 @@ when, how it ended, duration), and for the chosen one:
   same lines ``wart report`` prints);
 - **Plots**: the trajectory over the map and IR and wheel speeds over time,
   drawn by common/recording/plots.py (matplotlib) and shown as images;
+- **Calibrate the robot (twin)**: the run's robot fitted from it, with the gap of the
+  datasheet model and the twin; the arena's owner (no one else sees it) then has
+  **Keep as k1's twin**: the registry keeps it as the robot's twin in force, and its
+  answer shows under the button;
 - **Replay**: the run in the world view with a timeline (viewers/web/replay.py);
   "Back to live" returns to the arena;
 - **Promote to real**: the run's controller file queued on a robot of a real
@@ -86,10 +90,13 @@ class RecordingsPanel:
         view: Callable[[], WorldView | None],
         show: Callable[[ReplayFeed], None],
         back_to_live: Callable[[], None],
+        owner: bool = False,
     ) -> None:
         self.client = client
         self.connection = connection
         self.ctx = ctx
+        self.owner = owner  # this user owns the arena: may keep a fitted twin in the lab
+        self.fitted: tuple[str, str] | None = None  # (robot, twin file) of the last fit
         self._entries: list[RecordingEntry] = []
         self._files: dict[str, Path] = {}
         self._tmp = tempfile.TemporaryDirectory(prefix="wart-recordings-")
@@ -114,6 +121,14 @@ class RecordingsPanel:
                 hint="A real robot's run under the arena camera: fit its wheels' slip, wheel "
                 "base, latency and IR gains (wart calibrate; docs/CALIBRATION.md)",
             )
+            self.keep = gui.add_button(
+                "Keep as the robot's twin",
+                icon=viser.Icon.DEVICE_FLOPPY,
+                visible=False,
+                hint="The registry keeps it as the robot's twin in force: dry runs on the "
+                "robot simulate it (the arena's owner only)",
+            )
+            self.keep_answer = gui.add_markdown("", visible=False)
             self.plots = gui.add_button("Plots", icon=viser.Icon.CHART_LINE)
             self.replay_button = gui.add_button(
                 "Replay", color="grape", icon=viser.Icon.PLAYER_PLAY
@@ -130,6 +145,7 @@ class RecordingsPanel:
         self.download.on_click(lambda _: self._download())
         self.summary.on_click(lambda _: self._summary())
         self.twin.on_click(lambda _: self._calibrate())
+        self.keep.on_click(lambda _: self._keep())
         self.plots.on_click(lambda _: self._plots())
         self.replay_button.on_click(lambda _: self._replay())
         self.promote.on_click(lambda _: self._promote())
@@ -220,6 +236,7 @@ class RecordingsPanel:
         rec = self._read(entry) if entry is not None else None
         if entry is None or rec is None:
             return
+        self._offer(None)
         try:
             twin = calibrate(entry.agent, [(entry.name, rec)])
             runs = [run_data(rec, entry.name)]
@@ -232,10 +249,30 @@ class RecordingsPanel:
         lines += f"\n\n{escape_md(gap.heading())}:\n\n"
         lines += "\n".join(f"- {escape_md(line)}" for line in gaps)
         self.details.content = f"**{escape_md(entry.agent)}'s twin from {entry.name}**\n\n{lines}"
-        self.say(
-            f"{entry.agent} calibrated from {entry.name}: below (wart calibrate --save keeps "
-            "it in the lab)."
-        )
+        self.say(f"{entry.agent} calibrated from {entry.name}: below.")
+        self._offer((entry.agent, twin.to_json(self.connection.user, time.time())))
+
+    def _offer(self, fitted: tuple[str, str] | None) -> None:
+        """Offer the arena's owner to keep a fitted twin (robot, twin file); None: nothing."""
+        self.fitted = fitted
+        self.keep_answer.visible = False
+        if fitted is not None and self.owner:
+            self.keep.label = f"Keep as {fitted[0]}'s twin"
+        self.keep.visible = fitted is not None and self.owner
+
+    def _keep(self) -> None:
+        """The last fit kept by the registry as its robot's twin; its answer under the button."""
+        if self.fitted is None or not self.owner:
+            return
+        robot, document = self.fitted
+        try:
+            said = self.connection.save_twin(self.ctx, robot, document)
+        except LabError as exc:
+            said = f"**Not kept:** {escape_md(str(exc))}"
+        else:
+            said = escape_md(said)
+        self.keep_answer.content = said
+        self.keep_answer.visible = True
 
     def _plots(self) -> None:
         entry = self._entry()

@@ -1,0 +1,151 @@
+"""The registry's twin desk: real robots' twins served over ``registry/twins``, sealed.
+
+The twins are kept in the registry's own database (services/lab/twins_db.py), so
+a runner on another machine, or in its own pod, asks here instead of opening a
+file it does not have.
+
+Who may read a twin: the runners' service accounts (a dry run simulates the robot
+by it), teachers (``edit_map``: they calibrate the lab's robots), lab admins, and
+whoever owns a live arena (an agent context in the directory). Who may save one:
+the owner of the arena the request names, or a lab admin; each save, and each
+refused save, is a line of the audit trail. A document is checked field by field
+before it is kept (a refusal names every problem), and every row read back is
+checked again as a twin file.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+
+import zenoh
+
+from common.acl import SERVICE_ACCOUNT_PREFIX
+from common.auth import AuthError, Principal, Verifier
+from common.messages import (
+    MAX_HISTORY,
+    ContextInfo,
+    Message,
+    TwinList,
+    TwinListed,
+    TwinListQuery,
+    TwinQuery,
+    TwinReply,
+    TwinSave,
+    TwinSaved,
+    TwinVersion,
+)
+from common.service import RequestError
+from common.twin.twinfile import TwinFileError, parse_twin
+from services.lab.database import DbError
+from services.lab.twins_db import StoredTwin, TwinStore
+from services.registry.admin import source_of
+from services.registry.audit_db import Action
+
+log = logging.getLogger("wart.registry.twins")
+
+# The directory's live contexts by name (the registry's own, kept current).
+Contexts = Callable[[], Mapping[str, ContextInfo]]
+
+
+class TwinDesk:
+    """Answers TwinQuery, TwinListQuery and TwinSave from the twins table."""
+
+    def __init__(
+        self,
+        store: TwinStore,
+        verifier: Verifier,
+        contexts: Contexts,
+        audit: Callable[[Action], None],
+    ) -> None:
+        self.store = store
+        self.verifier = verifier
+        self.contexts = contexts
+        self.audit = audit
+
+    def on_twins(self, query: zenoh.Query) -> Message:
+        principal, request = self.verifier.open(
+            str(query.key_expr), query.payload, (TwinQuery, TwinListQuery, TwinSave)
+        )
+        try:
+            if isinstance(request, TwinSave):
+                return self._save(principal, request, source_of(query))
+            if not self.may_read(principal):
+                raise AuthError(
+                    "forbidden",
+                    f"{principal.user} may not read the robots' twins (runners, teachers, "
+                    "lab admins and arena owners may)",
+                )
+            if isinstance(request, TwinListQuery):
+                return self._list()
+            return self._query(request)
+        except DbError as exc:
+            raise RequestError(exc.code, exc.message) from None
+
+    def arena_owners(self) -> dict[str, str]:
+        """The owner of each live agent context (a real or simulated arena), by name."""
+        return {c.ctx: c.owner for c in self.contexts().values() if c.kind == "agent"}
+
+    def may_read(self, principal: Principal) -> bool:
+        runner = principal.user.startswith(SERVICE_ACCOUNT_PREFIX["runner"])
+        return (
+            (runner and principal.has("lease"))
+            or principal.has("edit_map")
+            or principal.has("admin")
+            or principal.user in self.arena_owners().values()
+        )
+
+    def _query(self, request: TwinQuery) -> TwinReply:
+        versions = self.store.versions(request.robot) if request.history else []
+        current = versions[-1] if versions else self.store.current(request.robot)
+        return TwinReply(
+            robot=request.robot,
+            current=None if current is None else _wire(current),
+            history=[v.line()[:256] for v in versions[-MAX_HISTORY:]],
+            versions=len(versions) if request.history else self.store.count(request.robot),
+        )
+
+    def _list(self) -> TwinList:
+        listed = []
+        for robot, count in self.store.robots():
+            current = self.store.current(robot)
+            if current is not None:
+                listed.append(TwinListed(robot=robot, versions=count, current=current.line()[:256]))
+        return TwinList(robots=listed)
+
+    def _save(self, principal: Principal, request: TwinSave, source: str) -> TwinSaved:
+        try:
+            twin = parse_twin(request.document, "the twin sent")
+        except TwinFileError as exc:
+            raise RequestError("bad_request", f"refused, nothing kept:\n{exc}") from None
+        target = f"twin/{twin.robot}"
+        if not principal.has("admin"):
+            owner = self.arena_owners().get(request.arena or "")
+            if request.arena is None or owner != principal.user:
+                where = (
+                    "name the arena you own"
+                    if request.arena is None
+                    else f"arena {request.arena} is not yours (or not running)"
+                )
+                self.audit(Action(principal.user, "twin_save", target, "refused", where, source))
+                raise AuthError(
+                    "forbidden",
+                    f"{principal.user} may not keep {twin.robot}'s twin: {where} "
+                    "(the arena's owner or a lab admin keeps a twin)",
+                )
+        version = self.store.save(twin, principal.user)
+        model = twin.model()
+        self.audit(
+            Action(principal.user, "twin_save", target, "ok", f"v{version}: {model}", source)
+        )
+        log.info("%s kept %s as v%d", principal.user, model, version)
+        return TwinSaved(robot=twin.robot, version=version, model=model[:256])
+
+
+def _wire(stored: StoredTwin) -> TwinVersion:
+    return TwinVersion(
+        version=stored.version,
+        saved_by=stored.saved_by,
+        saved_at=stored.saved_at,
+        document=stored.twin.text,
+    )

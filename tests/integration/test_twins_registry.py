@@ -1,0 +1,109 @@
+"""Real robots' twins travel as messages: the registry (a real process, real SQLite) serves
+them on ``registry/twins`` to whoever may read them, keeps what an owner or admin saves.
+
+``wart twin`` saves, lists and shows through the registry; a student who owns no arena
+reads nothing and saves nothing (the refusal is in the audit trail); a twin file is
+checked by the registry as well as by the tool; a runner's account reads the twin in
+force (kept a few seconds), and a registry that does not answer leaves the datasheet's
+model with the reason, for the dry run's model line.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from common.auth import load_identity_key
+from common.lab_errors import LabError
+from common.robots import registry
+from common.robots.robotfile import parse
+from services.commands import twin as twin_cli
+from services.runner.twins import TwinLookup
+from tests.conftest import Procs, Router
+from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, make_lab
+from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration, document
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.xdist_group("registry"),
+    pytest.mark.shared_router,
+]
+
+
+@pytest.fixture
+def lab(
+    router: Router, procs: Procs, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> ProcessLab:
+    monkeypatch.setenv("WART_PASSWORD", PASSWORD)
+    lab = make_lab(router, procs, tmp_path)
+    lab.start_registry()
+    return lab
+
+
+def test_wart_twin_saves_lists_and_shows_through_the_registry(
+    lab: ProcessLab, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def twin(user: str, *args: str) -> int:
+        return twin_cli.main([*lab.net_args(), "--user", user, *args])
+
+    good, bad = tmp_path / "k1.json", tmp_path / "bad.json"
+    good.write_text(calibration().to_json("carol", FITTED_AT))
+    bad.write_text(json.dumps(document(robot="")))
+    assert twin("admin", "save", str(bad)) == 1  # refused by the tool, before any login
+    assert "refused, nothing kept" in capsys.readouterr().err
+    assert twin("ida", "list") == 0  # a teacher reads
+    assert "no twin is kept" in capsys.readouterr().out
+    # A student who owns no arena reads nothing and keeps nothing.
+    assert twin("alice", "list") == 1
+    assert "alice may not read the robots' twins" in capsys.readouterr().err
+    assert twin("alice", "save", str(good), "--arena", "lab") == 1
+    assert "arena lab is not yours (or not running)" in capsys.readouterr().err
+    assert twin("admin", "save", str(good)) == 0  # a lab admin needs no arena
+    assert f"kept k1's twin fitted {DAY} by carol as k1's twin v1 (in force)" in (
+        capsys.readouterr().out
+    )
+    assert twin("ida", "show", "k2") == 1
+    assert "no twin of k2" in capsys.readouterr().err
+    robot_file = tmp_path / "twin-k1.toml"
+    assert twin("ida", "show", "k1", "--robot-file", str(robot_file)) == 0
+    out = capsys.readouterr().out
+    assert "v1: fitted" in out and "saved" in out and "by admin" in out, out
+    assert "in force (v1): scale_left 0.96, scale_right 0.99, wheel_base_mm 55" in out, out
+    # The robot file a lab loads: the shipped Khepera with the fitted drive.
+    spec = parse(robot_file.read_bytes(), robot_file.name, registry.build().components)
+    assert spec.name == "twin-k1" and spec.drive.wheel_scale == (0.96, 0.99)
+    with lab.client("admin") as admin:
+        # The registry checks a document itself: a client that skips the check gains nothing.
+        with pytest.raises(LabError, match="refused, nothing kept"):
+            admin.twins.save(json.dumps(document(robot="k1", fitted_by="")), "k1")
+        lines = audit_trail(admin, action="twin_save")
+    assert [(e.actor, e.outcome, e.target) for e in lines] == [
+        ("admin", "ok", "twin/k1"),
+        ("alice", "refused", "twin/k1"),
+    ]
+
+
+def test_a_runner_reads_the_twin_in_force_and_says_when_the_registry_is_gone(
+    lab: ProcessLab,
+) -> None:
+    key = load_identity_key(lab.account("runner-svc"))
+    with lab.client() as runner, lab.client("admin") as admin:
+        runner.login_with_key("runner-svc", key)
+        seal = runner._seal  # the runner seals with its service session, as a LabClient does
+        lookup = TwinLookup(runner.z, lab.realm, seal)
+        assert lookup.twin_of("k1").twin is None and lookup.twin_of("k1").why_not == ""
+        admin.twins.save(calibration(scale_left=0.96).to_json("carol", FITTED_AT), "k1")
+        assert lookup.twin_of("k1").twin is None  # the answer kept a few seconds
+        fresh = TwinLookup(runner.z, lab.realm, seal, cache_s=0.0)
+        got = fresh.twin_of("k1").twin
+        assert got is not None and got.drive.scale_left == 0.96 and got.fitted_by == "carol"
+        admin.twins.save(calibration(scale_left=0.95).to_json("dave", FITTED_AT), "k1")
+        got = fresh.twin_of("k1").twin
+        assert got is not None and got.drive.scale_left == 0.95  # the newest is in force
+        reply = admin.twins.of("k1")
+        assert reply.versions == 2 and reply.history == []  # no lines unless asked
+        lab.registry.stop()
+        gone = fresh.twin_of("k1")
+    assert gone.twin is None and gone.why_not == "the registry did not give k1's twin"
