@@ -62,7 +62,11 @@ def test_a_runner_that_is_not_root_limits_processes_inside_the_sandbox(
     # The child sets it inside, where only the sandbox's own processes count (the fork
     # bomb then stops at the limit: tests/containers/test_podman_lab.py runs one so).
     limits = SandboxLimits()
-    source = b"from common.controller import Controller\nclass C(Controller):\n    def do_work(self, robot): pass\n"
+    source = (
+        b"from common.controller import Controller\n"
+        b"class C(Controller):\n"
+        b"    def do_work(self, robot): pass\n"
+    )
     sandbox = Sandbox(source, limits=limits, on_command=lambda _c: None, on_output=lambda _l: None)
     monkeypatch.setattr(os, "geteuid", lambda: 10001)
     argv = sandbox.command_line(tmp_path, 5, 6)
