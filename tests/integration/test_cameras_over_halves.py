@@ -30,6 +30,7 @@ from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.test_bridge_camera import pose_from
+from tests.kit.lab import Proc
 
 pytestmark = pytest.mark.integration
 WORLD, AGENT = "real1", "k1"
@@ -47,15 +48,21 @@ def truth(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
-def body(truth: Path, tmp_path: Path) -> Iterator[SimBody]:
-    arena = tmp_path / "two-halves.json"
+def width() -> int:
+    """The arena's length, mm (a test parametrized by ``width`` has a longer one)."""
+    return WIDTH
+
+
+@pytest.fixture
+def body(truth: Path, tmp_path: Path, width: int) -> Iterator[SimBody]:
+    arena = tmp_path / "long-arena.json"
     arena.write_text(
         json.dumps(
             {
                 "format": "wart-map",
                 "version": 1,
-                "name": "two-halves",
-                "arena": {"width": WIDTH, "height": HEIGHT},
+                "name": "long-arena",
+                "arena": {"width": width, "height": HEIGHT},
                 "agents": [
                     {"id": AGENT, "type": "khepera", "x": START[0], "y": START[1], "heading_deg": 0}
                 ],
@@ -155,65 +162,68 @@ def _to_segment(p: tuple[float, float], a: tuple[float, float], b: tuple[float, 
     return math.hypot(p[0] - (a[0] + f * dx), p[1] - (a[1] + f * dy))
 
 
-def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
+def start_lab(
     router: Router,
     procs: Procs,
     zsession: zenoh.Session,
     alive_watch: AliveWatch,
     emulator: KheperaEmulator,
     body: SimBody,
-) -> None:
+    parts: dict[str, str],
+    grid: str,
+    width: int,
+) -> tuple[Proc, dict[str, Proc], Follow]:
+    """The bridge over the emulated robot and one synthetic camera over each of ``parts``
+    (name -> the rectangle it hangs over), each calibrated from the ``grid``'s reference
+    markers it sees; returned once the world's pose of the robot is tracked."""
     net = router.net_args()
     realm_name = router.realm
     robot = f"{emulator.port}={AGENT}@{START[0]:g},{START[1]:g},0"
-    arena = ["--arena-mm", str(WIDTH), str(HEIGHT)]
+    arena = ["--arena-mm", str(width), str(HEIGHT)]
     bridge = procs.start("bridge", ["bridge", "--world", WORLD, "--port", robot, *arena, *net])
     assert alive_watch.wait(keys.alive(realm_name, AliveKind.WORLD, WORLD), 30.0), bridge.output()
     cameras = {
-        side: procs.start(
-            f"camera-{side}",
+        part: procs.start(
+            f"camera-{part}",
             [
                 "camera",
                 "--world",
                 WORLD,
                 "--name",
-                f"{WORLD}-{side}",
+                f"{WORLD}-{part}",
                 "--source",
                 f"synthetic:{body.truth}",
                 "--synthetic-over",
                 over,
                 "--reference-grid",
-                "3x2",
+                grid,
                 "--auto-calibrate",
                 *net,
             ],
         )
-        for side, over in HALVES.items()
+        for part, over in parts.items()
     }
     follow = Follow(zsession, realm_name, body)
-    for side, camera in cameras.items():
+    for part, camera in cameras.items():
         wait_for(
             lambda proc=camera: "calibrated from the reference markers" in proc.output(),
             90.0,
-            f"the {side} camera calibrated:\n{camera.output()}",
+            f"the {part} camera calibrated:\n{camera.output()}",
         )
-        assert "reference markers 44 at (1000, 955), 45 at (1000, 45)" in camera.output()
     wait_for(lambda: pose_from(zsession, realm_name) == "tracked", 30.0, "poses from the cameras")
+    return bridge, cameras, follow
 
-    # Across the seam at 160 mm/s: from x 500 (the left camera's) to 1500 (the right's).
-    # (Before, the right camera may have calibrated first: k1 not seen, rightly.)
-    said_before = bridge.output().count(" is not seen")
+
+def crossing(follow: Follow, body: SimBody, to_x: float) -> None:
+    """Drive at 160 mm/s from where the robot stands to ``to_x``; the world's pose all the
+    way within a few mm of the true path, and never going back."""
     started = time.monotonic()
     body.set_speeds(20, 20)
-    follow.drive_until(lambda x: x >= 1500.0)
+    follow.drive_until(lambda x: x >= to_x)
     body.set_speeds(0, 0)
     follow.sample_truth(0.5)
     crossing = follow.errors(started)
     assert len(crossing) > 50, len(crossing)
-    left, right = follow.sightings[f"{WORLD}-left"], follow.sightings[f"{WORLD}-right"]
-    assert max(left) > 1150 and min(right) < 850  # both saw it over the overlap
-    assert body.pose()[0] > 1450 and max(left) < 1350  # ... and the left one lost it
-    # Within a few mm of the true path through the hand-over.
     errors = sorted(e for _, e in crossing)
     median, p90, worst = errors[len(errors) // 2], errors[len(errors) * 9 // 10], errors[-1]
     back = follow.largest_step_back(started)
@@ -226,6 +236,30 @@ def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
     # the slipping wheels' overshoot between two frames (a late frame or odometry reading
     # paired with the other's wrong time stepped it back 13 to 58 mm).
     assert back < STEP_BACK_MM, (back, follow.shown)
+
+
+def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
+    router: Router,
+    procs: Procs,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    emulator: KheperaEmulator,
+    body: SimBody,
+) -> None:
+    realm_name = router.realm
+    bridge, cameras, follow = start_lab(
+        router, procs, zsession, alive_watch, emulator, body, HALVES, "3x2", WIDTH
+    )
+    for camera in cameras.values():
+        assert "reference markers 44 at (1000, 955), 45 at (1000, 45)" in camera.output()
+
+    # Across the seam at 160 mm/s: from x 500 (the left camera's) to 1500 (the right's).
+    # (Before, the right camera may have calibrated first: k1 not seen, rightly.)
+    said_before = bridge.output().count(" is not seen")
+    crossing(follow, body, 1500.0)
+    left, right = follow.sightings[f"{WORLD}-left"], follow.sightings[f"{WORLD}-right"]
+    assert max(left) > 1150 and min(right) < 850  # both saw it over the overlap
+    assert body.pose()[0] > 1450 and max(left) < 1350  # ... and the left one lost it
     assert pose_from(zsession, realm_name) == "tracked"
     assert bridge.output().count(" is not seen") == said_before, bridge.output()
 
@@ -246,4 +280,30 @@ def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
     follow.sample_truth(0.5)
     returned = [e for x, e in follow.errors(back) if x < 1050]
     assert returned and max(returned[-5:]) < 5.0, returned
+    assert bridge.output().count(" is not seen") == said_before, bridge.output()
+
+
+@pytest.mark.parametrize("width", [3000])
+def test_three_cameras_over_the_thirds_hand_the_robot_on_twice(
+    router: Router,
+    procs: Procs,
+    zsession: zenoh.Session,
+    alive_watch: AliveWatch,
+    emulator: KheperaEmulator,
+    body: SimBody,
+    width: int,
+) -> None:
+    # A 3 m arena, one camera over each third and 100 mm past each seam; a 4x2 grid of
+    # reference markers puts two columns in each camera's view (x 45, 1015, 1985, 2955).
+    thirds = {"a": "0,0,1100,1000", "b": "950,0,2050,1000", "c": "1900,0,3000,1000"}
+    bridge, _, follow = start_lab(
+        router, procs, zsession, alive_watch, emulator, body, thirds, "4x2", width
+    )
+    said_before = bridge.output().count(" is not seen")
+    crossing(follow, body, 2500.0)
+    seen = {part: follow.sightings[f"{WORLD}-{part}"] for part in thirds}
+    assert max(seen["a"]) > 1150 and min(seen["b"]) < 850  # the first seam, seen by both
+    assert max(seen["b"]) > 2100 and min(seen["c"]) < 1800  # ... and the second
+    assert max(seen["a"]) < 1400 and max(seen["b"]) < 2350 < body.pose()[0]
+    assert pose_from(zsession, router.realm) == "tracked"
     assert bridge.output().count(" is not seen") == said_before, bridge.output()
