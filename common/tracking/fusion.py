@@ -37,6 +37,7 @@ from __future__ import annotations
 import bisect
 import math
 import struct
+import threading
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -166,7 +167,11 @@ def read_sent_stamp(attachment: bytes | None) -> float | None:
 
 
 class PoseFusion:
-    """Odometry and camera sightings of one world's robots, fused per robot."""
+    """Odometry and camera sightings of one world's robots, fused per robot.
+
+    Thread-safe: the robots' I/O threads give odometry, the network's thread sightings,
+    the frame thread asks for poses (a sighting's correction is worked out again from
+    the odometry kept, which must not grow while it is read)."""
 
     def __init__(
         self,
@@ -184,6 +189,7 @@ class PoseFusion:
         self._robots: dict[str, _Robot] = {}
         self._camera_at: float | None = None  # the last camera message of any kind
         self._left: set[str] = set()  # cameras whose process has gone (others live on)
+        self._lock = threading.Lock()
 
     def _robot(self, agent: str) -> _Robot:
         return self._robots.setdefault(agent, _Robot())
@@ -193,14 +199,15 @@ class PoseFusion:
         the robot was there (its counters read), not when the bridge heard of it. The same
         reading given again (the robot's other news: online, LEDs) is not a new one: it
         would say the robot stood still since."""
-        history = self._robot(agent).history
-        if history and history[-1][0] == at:
-            return
-        history.append((at, (x, y, heading)))
+        with self._lock:
+            history = self._robot(agent).history
+            if not history or history[-1][0] != at:
+                history.append((at, (x, y, heading)))
 
     def camera_alive(self, at: float) -> None:
         """The camera spoke (a frame of tracked poses, even an empty one)."""
-        self._camera_at = at if self._camera_at is None else max(self._camera_at, at)
+        with self._lock:
+            self._camera_at = at if self._camera_at is None else max(self._camera_at, at)
 
     def seen(
         self,
@@ -213,21 +220,27 @@ class PoseFusion:
     ) -> bool:
         """``camera`` saw ``agent`` there at ``captured_at``; False if no odometry covers it
         yet. Whether the camera is alive is the caller's word (``camera_alive``), by arrival."""
-        robot = self._robot(agent)
-        if odometry_at(robot.history, captured_at) is None:
-            return False
-        robot.sightings[camera] = (captured_at, (x, y, heading))
-        if robot.seen_at is None or captured_at >= robot.seen_at:
-            robot.seen_at, robot.seen_by = captured_at, camera
-        return True
+        with self._lock:
+            robot = self._robot(agent)
+            if odometry_at(robot.history, captured_at) is None:
+                return False
+            robot.sightings[camera] = (captured_at, (x, y, heading))
+            if robot.seen_at is None or captured_at >= robot.seen_at:
+                robot.seen_at, robot.seen_by = captured_at, camera
+            return True
 
     def camera_gone(self) -> None:
         """The last camera's process is gone (its presence token left): offline at once."""
-        self._camera_at = None
+        with self._lock:
+            self._camera_at = None
 
     def camera_left(self, camera: str) -> None:
         """One camera's process is gone while others live: the robots it saw last, and no
         other since, are on odometry (their camera is offline), not "not seen"."""
+        with self._lock:
+            self._camera_left(camera)
+
+    def _camera_left(self, camera: str) -> None:
         self._left.add(camera)
         for robot in self._robots.values():
             if camera not in robot.sightings:
@@ -246,12 +259,18 @@ class PoseFusion:
                 robot.sightings.clear()
 
     def camera_back(self, camera: str) -> None:
-        self._left.discard(camera)
+        with self._lock:
+            self._left.discard(camera)
 
     def camera_live(self, now: float) -> bool:
-        return self._camera_at is not None and now - self._camera_at <= self.camera_silent_after_s
+        camera_at = self._camera_at
+        return camera_at is not None and now - camera_at <= self.camera_silent_after_s
 
     def pose(self, agent: str, now: float) -> FusedPose | None:
+        with self._lock:
+            return self._pose(agent, now)
+
+    def _pose(self, agent: str, now: float) -> FusedPose | None:
         robot = self._robots.get(agent)
         if robot is None or not robot.history:
             return None
