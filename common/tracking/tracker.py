@@ -26,6 +26,7 @@ from common.tracking.deblur import (
     find_blurred,
 )
 from common.tracking.markers import MarkerLayout, corners_mm
+from common.tracking.refine import refine_corners
 
 log = logging.getLogger("wart.tracking")
 
@@ -126,6 +127,9 @@ class Tracker:
         return poses
 
     def _pose_of(self, agent: str, marker: int, px: np.ndarray, captured_at: float) -> TrackedPose:
+        # The outline's corners, refined by the marker's whole pattern (common/tracking/
+        # refine.py): a heading from the outline alone was up to a degree off.
+        px = refine_corners(self._gray, marker, px)
         ideal = self.calibration.undistort_points(px)
         mm = self.calibration.to_arena(ideal, self.layout.robot_marker_height_mm)
         centre = mm.mean(axis=0)

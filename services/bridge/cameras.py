@@ -49,9 +49,12 @@ class ArenaCameras:
         if gone:
             self.fusion.camera_gone()
 
-    def frame(self, camera: str, captured_at: float, now: float) -> float | None:
-        """A frame from ``camera`` arrived ``now``: its capture time on this clock, or None
-        for a frame still on its way from a camera whose process is gone."""
+    def frame(
+        self, camera: str, captured_at: float, now: float, sent_at: float | None = None
+    ) -> float | None:
+        """A frame from ``camera`` arrived ``now`` (sent at ``sent_at`` by its clock, if it
+        says): its capture time on this clock, or None for a frame still on its way from a
+        camera whose process is gone."""
         with self._lock:
             if camera in self._left:
                 return None
@@ -60,4 +63,4 @@ class ArenaCameras:
             while len(self._clocks) > MAX_CAMERAS:
                 self._clocks.pop(next(iter(self._clocks)))
         self.fusion.camera_alive(now)
-        return clock.local(captured_at, now)
+        return clock.local(captured_at, now, sent_at)

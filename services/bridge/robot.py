@@ -98,6 +98,10 @@ class RobotState:
     pose: Pose = field(default_factory=Pose)  # frozen: the same as one shared default
     rounds: int = 0  # completed sensor rounds since start
     updated: float = 0.0  # time.monotonic() of the last completed round
+    # time.time() when the robot was where ``pose`` says: the middle of the counters'
+    # request and its answer (0: never read). Not the round's end: a loaded host reads the
+    # rest of the round for tens of ms while the robot drives on.
+    pose_at: float = 0.0
     watchdog_stops: int = 0
     errors: int = 0  # requests that failed after all their tries
 
@@ -143,6 +147,7 @@ class KheperaRobot(Actuators):
         self._thread: threading.Thread | None = None
         self._listeners: list[Callable[[RobotState], None]] = []
         self._odometry = Odometry(self.options.mm_per_pulse, self.options.wheel_base_mm)
+        self._pose_at = 0.0  # time.time() of the counter reading behind the odometry's pose
         self._last_command = 0.0
         self._motors_on = False
         self._halt_requested = False
@@ -275,7 +280,8 @@ class KheperaRobot(Actuators):
     def set_pose(self, pose: Pose) -> None:
         """Place the odometry estimate (e.g. where the robot was put in the arena)."""
         self._odometry.set_pose(pose)
-        self._update(pose=pose)
+        self._pose_at = time.time()
+        self._update(pose=pose, pose_at=self._pose_at)
 
     # ------------------------------------------------------------ the I/O thread
 
@@ -478,7 +484,7 @@ class KheperaRobot(Actuators):
                 raise
             except P.ProtocolError as exc:
                 log.warning("%s: %s read failed: %s", self.port, name, exc)
-        changes["pose"] = self._odometry.pose
+        changes["pose"], changes["pose_at"] = self._odometry.pose, self._pose_at
         self._update(rounds=rounds + 1, updated=time.monotonic(), **changes)
 
     def _read_counters(self) -> P.WheelPair:
@@ -486,8 +492,10 @@ class KheperaRobot(Actuators):
         # round: a reset banner seen by a later read of the same round (E, the gripper)
         # must rebaseline after this reading, or the round would end by taking the
         # pre-reset counters as the new reference and the next delta would run backwards.
+        asked = time.time()
         counters = self._request(P.read_counters())
         self._odometry.update(counters.left, counters.right, time.monotonic())
+        self._pose_at = (asked + time.time()) / 2
         return counters
 
     def _read_gripper(self) -> GripperState:

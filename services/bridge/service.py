@@ -61,7 +61,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.tracking.fusion import PoseFusion
+from common.tracking.fusion import PoseFusion, read_sent_stamp
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
@@ -293,7 +293,8 @@ class BridgeService(WorldService):
     def _on_state(self, agent: _Agent, state: RobotState) -> None:
         """Called by the robot's I/O thread after each sensor round and on online changes."""
         pose = state.pose
-        self.fusion.odometry(agent.id, pose.x, pose.y, pose.heading, at=time.time())
+        at = state.pose_at or time.time()
+        self.fusion.odometry(agent.id, pose.x, pose.y, pose.heading, at=at)
         if state.online != agent.online:
             with self._lock:
                 agent.online = state.online
@@ -326,7 +327,9 @@ class BridgeService(WorldService):
             return
         # Alive by when we heard it, not by its capture stamp: a busy camera host's frames
         # arrive a second or two late, and another machine's clock may be off by more.
-        captured = self.cameras.frame(seen.camera, seen.captured_at, time.time())
+        attachment = sample.attachment
+        sent_at = read_sent_stamp(None if attachment is None else attachment.to_bytes())
+        captured = self.cameras.frame(seen.camera, seen.captured_at, time.time(), sent_at)
         if captured is None:
             return
         with self._lock:

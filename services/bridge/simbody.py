@@ -22,7 +22,9 @@ Threads: pymunk is not thread-safe, so the world is touched only under
 ``self._lock``. Our own thread steps it at ``tick_s``, paced to the wall
 clock (the robot keeps moving whether or not the host asks anything); the
 emulator's I/O thread calls the RobotBody methods, which take the same lock
-for a read or a command between two ticks.
+for a read or a command between two ticks, after running the ticks already
+due: a loaded host starves the stepping thread, and the robot must still be
+where the wall clock says when it is read, as a real one is.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from services.bridge.body import KinematicSpec
 from services.bridge.body_truth import BodyTruth
 
 log = logging.getLogger("wart.bridge.simbody")
+STALL_S = 0.5  # a stepping thread this late loses the time instead of making it up
 
 
 class SimBody:
@@ -95,6 +98,7 @@ class SimBody:
         self._clock = clock  # a rehearsal (services/bridge/rehearse.py) keeps simulated time
         self.truth = truth
         self._truth_at = 0.0
+        self._due: float | None = None  # the next tick, while our thread steps the world
 
     @classmethod
     def from_map(
@@ -128,6 +132,8 @@ class SimBody:
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None
+        with self._lock:
+            self._due = None
 
     def __enter__(self) -> SimBody:
         return self.start()
@@ -136,27 +142,39 @@ class SimBody:
         self.stop()
 
     def _run(self) -> None:
-        period = self.world.tick_s / self.rate
-        next_tick = time.monotonic()
+        with self._lock:
+            self._due = time.monotonic()
         while not self._stop.is_set():
             with self._lock:
-                try:
-                    self._tick()
-                    truth = self._true_poses()
-                except Exception:  # one bad tick must not freeze the robot for good
-                    log.exception("sim body: error in tick %d (kept running)", self.world.tick)
-                    truth = None
+                self._catch_up()
+                truth = self._true_poses()
+                due = self._due
             if truth is not None and self.truth is not None:
                 try:
                     write_truth(self.truth, now_truth(self.world.width, self.world.height, truth))
                 except OSError as exc:
                     log.warning("cannot write the truth file %s: %s", self.truth, exc)
-            next_tick += period
-            delay = next_tick - time.monotonic()
-            if delay > 0:
-                self._stop.wait(delay)
-            elif delay < -0.5:  # stalled (a loaded machine): do not catch up in a burst
-                next_tick = time.monotonic()
+            if due is not None:
+                self._stop.wait(max(0.0, due - time.monotonic()))
+
+    def _catch_up(self) -> None:
+        """Under the lock: the ticks due by now, so whatever is read or commanded finds
+        the robot where the wall clock says, not where a starved stepping thread left it
+        (a loaded host's thread ran late, then caught up in a burst: a reading meanwhile
+        was of a robot up to half a second behind its time, stamped with the time).
+        After a longer stall the time is lost, not made up (a robot does not leap)."""
+        if self._due is None:
+            return  # no stepping thread: a driver with its own clock ticks the world
+        now = time.monotonic()
+        if now - self._due > STALL_S:
+            self._due = now
+        period = self.world.tick_s / self.rate
+        while self._due <= now:
+            try:
+                self._tick(self._due)
+            except Exception:  # one bad tick must not freeze the robot for good
+                log.exception("sim body: error in tick %d (kept running)", self.world.tick)
+            self._due += period
 
     def _true_poses(self) -> dict[str, tuple[float, float, float]] | None:
         """Every robot's pose when a truth file is due (about 30 a second), else None."""
@@ -177,8 +195,9 @@ class SimBody:
     def _drive(self, left: float, right: float) -> None:
         self.world.set_speeds(self.slot, left * self._grip[0], right * self._grip[1])
 
-    def _tick(self) -> None:
-        self._obey_due()
+    def _tick(self, at: float | None = None) -> None:
+        """One tick; ``at``: when it is due on the body's clock (None: now)."""
+        self._obey_due(self._clock() if at is None else at)
         self._position_control()
         self.world.step()
         # Again after the step, so a wheel that just reached its target
@@ -192,9 +211,8 @@ class SimBody:
         with self._lock:
             self._tick()
 
-    def _obey_due(self) -> None:
-        """The speed commands whose latency has passed move the wheels now."""
-        now = self._clock()
+    def _obey_due(self, now: float) -> None:
+        """The speed commands whose latency has passed by ``now`` move the wheels."""
         while self._pending and self._pending[0][0] <= now:
             _, left, right = self._pending.popleft()
             self._drive(left, right)
@@ -218,6 +236,7 @@ class SimBody:
 
     def set_speeds(self, left: int, right: int) -> None:
         with self._lock:
+            self._catch_up()
             self._mode = "speed"
             if self.body.latency_s <= 0.0:
                 self._drive(left, right)
@@ -230,26 +249,31 @@ class SimBody:
 
     def move_to(self, left: int, right: int, vmax: tuple[int, int], acc: tuple[int, int]) -> None:
         with self._lock:
+            self._catch_up()
             self._mode, self._target = "position", (left, right)
             self._vmax = (max(1, vmax[0]), max(1, vmax[1]))
 
     def speed(self) -> tuple[int, int]:
         with self._lock:
+            self._catch_up()
             cmd = self.world.cmd[self.slot]
             return round(float(cmd[0]) / self._grip[0]), round(float(cmd[1]) / self._grip[1])
 
     def counters(self) -> tuple[int, int]:
         with self._lock:
+            self._catch_up()
             return _wrap32(round(self._counted(0))), _wrap32(round(self._counted(1)))
 
     def set_counters(self, left: int, right: int) -> None:
         with self._lock:
+            self._catch_up()
             self.world.set_counters(self.slot, left * self._grip[0], right * self._grip[1])
             if self._mode == "position":
                 self._target = (left, right)
 
     def motion_status(self) -> tuple[int, int, int, int, int, int]:
         with self._lock:
+            self._catch_up()
             out: list[int] = []
             for i in (0, 1):
                 if self._mode == "position":
@@ -261,6 +285,7 @@ class SimBody:
 
     def proximity(self) -> tuple[int, ...]:
         with self._lock:
+            self._catch_up()
             raw = np.asarray(self.world.proximity[self.slot, :8], dtype=float)
             read = raw * np.asarray(self.body.ir_gain)
             if self.body.ir_noise_counts > 0.0:
@@ -312,6 +337,7 @@ class SimBody:
 
     def reset(self) -> None:
         with self._lock:
+            self._catch_up()
             self._mode = "speed"
             self._pending.clear()
             self.world.set_speeds(self.slot, 0, 0)
@@ -322,6 +348,7 @@ class SimBody:
     def pose(self) -> tuple[float, float, float]:
         """Where the simulated robot is: x mm, y mm, heading rad (world frame)."""
         with self._lock:
+            self._catch_up()
             x, y, h = self.world.agent_pose[self.slot]
             return float(x), float(y), float(h)
 

@@ -47,6 +47,7 @@ from common.tracking.calibration import (
     floor_calibrated,
     read_intrinsics,
 )
+from common.tracking.fusion import sent_stamp
 from common.tracking.intrinsics import Intrinsics
 from common.tracking.markers import (
     MarkerError,
@@ -239,7 +240,10 @@ class CameraService(Service):
                         captured_at=captured_at,
                         robots=robots,
                     )
-                )
+                ),
+                # When it left, on this clock: the bridge tells the clocks' difference from
+                # the network's delay alone, not from the frame's processing too.
+                attachment=sent_stamp(time.time()),
             )
             floor = self._floor_view(frame)
             if floor is not None:

@@ -226,6 +226,9 @@ class SyntheticSource:
                 seed=self.seed,
             )
             self._arena, self._agents = arena, agents
+        # The frame shows the robots where they were when the emulator wrote them, not
+        # when it is rendered: a loaded host reads a truth file 0.1 to 1.5 s old.
+        self.captured_at = truth.at
         return self._camera.render(truth.robots)
 
     def _placed(self, arena: tuple[float, float]) -> CameraModel:

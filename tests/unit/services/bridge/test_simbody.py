@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -91,6 +92,30 @@ def test_calls_from_another_thread_while_it_steps(sim: SimBody) -> None:
     for t in threads:
         t.join(30)
     assert not errors and sim.ticks > 0
+
+
+def test_a_starved_stepping_thread_leaves_the_robot_where_the_wall_clock_says(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A loaded host's stepping thread stalls (here: its truth file takes 0.4 s to write);
+    # the robot is read meanwhile. It must have driven on as a real one does, not wait
+    # for the thread and then leap (readings of a robot up to 0.5 s behind, stamped now,
+    # stepped the fused pose back by tens of mm).
+    stalled = threading.Event()
+
+    def slow_write(path: Path, truth: object) -> None:
+        if not stalled.is_set():
+            stalled.set()
+            time.sleep(0.4)
+
+    monkeypatch.setattr("services.bridge.simbody.write_truth", slow_write)
+    with SimBody.from_map(EMPTY, seed=1, truth=tmp_path / "truth.json") as body:
+        body.set_speeds(20, 20)  # 160 mm/s
+        assert stalled.wait(5.0)
+        x0, started = body.pose()[0], time.monotonic()
+        time.sleep(0.2)
+        x1, took = body.pose()[0], time.monotonic() - started
+    assert x1 - x0 > 0.6 * 160.0 * took, (x0, x1, took)
 
 
 def test_bad_maps_and_agents_are_clear_errors(tmp_path: object) -> None:

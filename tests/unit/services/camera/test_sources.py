@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from common.tracking.truth import TruthError, now_truth, read_truth, write_truth
+from common.tracking.truth import ArenaTruth, TruthError, now_truth, read_truth, write_truth
 from services.camera.arguments import source_arguments
 from services.camera.sources import SourceError, check_spec, describe_spec, open_source
 
@@ -52,6 +52,19 @@ def test_a_stale_truth_is_an_offline_camera(tmp_path: Path) -> None:
     write_truth(path, truth.__class__(1000, 1000, truth.robots, time.time() - 10))
     with pytest.raises(SourceError, match="stopped writing"):
         open_source(f"synthetic:{path}").read()
+
+
+def test_a_synthetic_frame_is_stamped_when_its_poses_were_true_not_when_rendered(
+    tmp_path: Path,
+) -> None:
+    # A loaded host reads a truth file written 0.1 to 1.5 s before; stamped with the time
+    # it was rendered, the frame paired the robot's old place with its odometry of now.
+    path = tmp_path / "truth.json"
+    written = time.time() - 0.7
+    write_truth(path, ArenaTruth(1000, 800, {"k1": (500.0, 400.0, 0.0)}, written))
+    source = open_source(f"synthetic:{path}")
+    source.read()
+    assert source.captured_at == written
 
 
 def test_a_fresh_truth_renders_a_frame(tmp_path: Path) -> None:
