@@ -55,6 +55,9 @@ class TrackedPoses(Message, frozen=True):
     robots: Annotated[list[TrackedRobot], msgspec.Meta(max_length=MAX_TRACKED)] = msgspec.field(
         default_factory=list
     )
+    # When the camera sent it, on its clock: the bridge tells the clocks' difference from
+    # the network's delay alone, not from the frame's processing too. None: an older camera.
+    sent_at: Annotated[float, msgspec.Meta(gt=0.0)] | None = None
 
 
 class CameraStatus(Message, frozen=True):

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import bisect
 import math
-import struct
 import threading
 from collections import deque
 from collections.abc import Sequence
@@ -48,7 +47,6 @@ Pose3 = tuple[float, float, float]  # x mm, y mm, heading rad
 # Odometry is carried on past its newest reading this long at most (a few of the bridge's
 # serial rounds): a robot that stopped meanwhile is not carried further than that.
 EXTRAPOLATE_S = 0.2
-SENT_AT = struct.Struct("<d")  # a camera's send time, seconds since the epoch (its clock)
 
 
 @dataclass(frozen=True)
@@ -151,19 +149,6 @@ class CameraClock:
             self._by_sent = by_sent
         self._gaps.append(arrived_at - (captured_at if sent_at is None else sent_at))
         return captured_at + min(self._gaps)
-
-
-def sent_stamp(at: float) -> bytes:
-    """A camera's message's attachment: when it was sent, on the camera's clock."""
-    return SENT_AT.pack(at)
-
-
-def read_sent_stamp(attachment: bytes | None) -> float | None:
-    """The send time of ``attachment`` (``sent_stamp``), or None if it is not one."""
-    if attachment is None or len(attachment) != SENT_AT.size:
-        return None
-    (at,) = SENT_AT.unpack(attachment)
-    return at if math.isfinite(at) and at > 0 else None
 
 
 class PoseFusion:

@@ -61,7 +61,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError
-from common.tracking.fusion import PoseFusion, read_sent_stamp
+from common.tracking.fusion import PoseFusion
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
 from common.world.world_service import WorldService
@@ -327,9 +327,7 @@ class BridgeService(WorldService):
             return
         # Alive by when we heard it, not by its capture stamp: a busy camera host's frames
         # arrive a second or two late, and another machine's clock may be off by more.
-        attachment = sample.attachment
-        sent_at = read_sent_stamp(None if attachment is None else attachment.to_bytes())
-        captured = self.cameras.frame(seen.camera, seen.captured_at, time.time(), sent_at)
+        captured = self.cameras.frame(seen.camera, seen.captured_at, time.time(), seen.sent_at)
         if captured is None:
             return
         with self._lock:

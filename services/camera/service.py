@@ -47,7 +47,6 @@ from common.tracking.calibration import (
     floor_calibrated,
     read_intrinsics,
 )
-from common.tracking.fusion import sent_stamp
 from common.tracking.intrinsics import Intrinsics
 from common.tracking.markers import (
     MarkerError,
@@ -239,11 +238,9 @@ class CameraService(Service):
                         seq=self.frames,
                         captured_at=captured_at,
                         robots=robots,
+                        sent_at=time.time(),
                     )
                 ),
-                # When it left, on this clock: the bridge tells the clocks' difference from
-                # the network's delay alone, not from the frame's processing too.
-                attachment=sent_stamp(time.time()),
             )
             floor = self._floor_view(frame)
             if floor is not None:

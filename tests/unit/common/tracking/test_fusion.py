@@ -5,7 +5,11 @@ from __future__ import annotations
 import itertools
 import math
 
-from common.tracking.fusion import CameraClock, PoseFusion, read_sent_stamp, sent_stamp
+import msgspec
+import pytest
+
+from common.messages import MessageError, TrackedPoses, decode, encode
+from common.tracking.fusion import CameraClock, PoseFusion
 
 
 def drive(
@@ -190,10 +194,12 @@ def test_a_frames_processing_time_is_not_taken_for_the_clocks_difference() -> No
         assert by_capture.local(captured - 5.0, arrived) - captured >= 0.06
 
 
-def test_a_sent_stamp_reads_back_and_anything_else_is_none() -> None:
-    assert read_sent_stamp(sent_stamp(1733390000.25)) == 1733390000.25
-    for bad in (None, b"", b"12345678x", sent_stamp(math.nan), sent_stamp(-1.0)):
-        assert read_sent_stamp(bad) is None
+def test_a_send_time_that_is_not_a_time_is_refused_on_the_wire() -> None:
+    poses = TrackedPoses(world="w", camera="c", seq=1, captured_at=10.0, sent_at=1733390000.25)
+    assert decode(encode(poses), TrackedPoses).sent_at == 1733390000.25
+    for bad in (math.nan, -1.0, 0.0):
+        with pytest.raises(MessageError, match="sent_at"):
+            decode(encode(msgspec.structs.replace(poses, sent_at=bad)), TrackedPoses)
 
 
 def test_late_odometry_and_late_frames_never_step_a_robot_driving_forward_back() -> None:
