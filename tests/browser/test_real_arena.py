@@ -21,6 +21,7 @@ from tests.browser.conftest import wait_until
 from tests.browser.test_real_lab import log_in, session_of
 from tests.kit.reallab import WORLD, RealLab, real_lab
 from viewers.web.tabs import tab_label
+from viewers.web.world_feed import RobotReadings
 from viewers.web.world_view import WorldView
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
@@ -54,6 +55,11 @@ def test_the_real_arena_shows_its_video_and_the_robot_where_it_is(open_page, lab
         # Driving for 20 s: the camera's frames keep coming to this browser.
         wait_until(lambda: video.shown >= first + 20, 60, what="20 new video frames")
         start = truth_of(lab)
+        # The wheels' speeds the robot's odometry reads reach the page (what the twin's
+        # ghost predicts from) through the viewer's own grant on k1's sensor sample.
+        feed = view.feed
+        assert feed is not None
+        wait_until(lambda: wheels(feed.sensors("k1")) == (8, 12), 30, what="k1's wheel speeds")
         wait_until(
             lambda: math.dist(truth_of(lab)[:2], start[:2]) > 100, 60, what="k1 to drive 100 mm"
         )
@@ -62,6 +68,10 @@ def test_the_real_arena_shows_its_video_and_the_robot_where_it_is(open_page, lab
     )
     assert video.said == "", f"the page says: {video.said}"
     page.screenshot("real-arena-video")
+
+
+def wheels(readings: RobotReadings | None) -> tuple[int, ...]:
+    return () if readings is None else tuple(int(v) for v in readings.speeds)
 
 
 def drawn_mm(view: WorldView) -> tuple[float, float]:
