@@ -81,3 +81,23 @@ def predict(drive: Drive, commands: F64, start: F64, t0: F64, t1: F64) -> F64:
 
 def wrap(angle: F64) -> F64:
     return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def ahead(drive: Drive, pose: F64, speeds: tuple[float, float], times: F64) -> F64:
+    """Poses (T, 3) at ``times`` (seconds from now) of a robot at ``pose`` whose wheels keep
+    turning at ``speeds`` (the type's unit, as its odometry reads them): the ghost the page
+    draws ahead of a live robot. The wheels already turn at those speeds, so no latency;
+    each wheel's slip and the wheel base are the drive's. Exact for constant speeds (an
+    arc): :func:`predict` given one constant command agrees to its integration step."""
+    vl = MM_S_PER_UNIT * drive.scale_left * float(speeds[0])
+    vr = MM_S_PER_UNIT * drive.scale_right * float(speeds[1])
+    v, w = (vl + vr) / 2.0, (vr - vl) / drive.wheel_base_mm
+    x0, y0, h0 = (float(value) for value in pose[:3])
+    t = np.asarray(times, np.float64)
+    h = h0 + w * t
+    if abs(w) < 1e-9:  # straight on
+        x, y = x0 + v * t * math.cos(h0), y0 + v * t * math.sin(h0)
+    else:
+        r = v / w
+        x, y = x0 + r * (np.sin(h) - math.sin(h0)), y0 - r * (np.cos(h) - math.cos(h0))
+    return np.stack([np.broadcast_to(x, t.shape), np.broadcast_to(y, t.shape), h], axis=1)

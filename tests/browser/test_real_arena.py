@@ -19,12 +19,17 @@ import pytest
 from common.tracking.truth import read_truth
 from tests.browser.conftest import wait_until
 from tests.browser.test_real_lab import log_in, session_of
+from tests.conftest import needs_sandbox
+from tests.kit.agentkit import start_agent_context, start_runner
 from tests.kit.reallab import WORLD, RealLab, real_lab
+from viewers.web.ghost import GHOST_NODE
 from viewers.web.tabs import tab_label
+from viewers.web.world_feed import RobotReadings
 from viewers.web.world_view import WorldView
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
 REAL = "real1"
+RUNS = "realruns"  # the real arena's agent context
 
 
 @pytest.fixture(scope="module")
@@ -54,6 +59,11 @@ def test_the_real_arena_shows_its_video_and_the_robot_where_it_is(open_page, lab
         # Driving for 20 s: the camera's frames keep coming to this browser.
         wait_until(lambda: video.shown >= first + 20, 60, what="20 new video frames")
         start = truth_of(lab)
+        # The wheels' speeds the robot's odometry reads reach the page (what the twin's
+        # ghost predicts from) through the viewer's own grant on k1's sensor sample.
+        feed = view.feed
+        assert feed is not None
+        wait_until(lambda: wheels(feed.sensors("k1")) == (8, 12), 30, what="k1's wheel speeds")
         wait_until(
             lambda: math.dist(truth_of(lab)[:2], start[:2]) > 100, 60, what="k1 to drive 100 mm"
         )
@@ -62,6 +72,10 @@ def test_the_real_arena_shows_its_video_and_the_robot_where_it_is(open_page, lab
     )
     assert video.said == "", f"the page says: {video.said}"
     page.screenshot("real-arena-video")
+
+
+def wheels(readings: RobotReadings | None) -> tuple[int, ...]:
+    return () if readings is None else tuple(int(v) for v in readings.speeds)
 
 
 def drawn_mm(view: WorldView) -> tuple[float, float]:
@@ -120,3 +134,59 @@ def test_the_view_follows_the_arena_tab_in_front(open_page, lab: RealLab) -> Non
     lobby = tab_label(lab.address)
     wait_until(lambda: lobby in browser.front.labels, 15, what="the lobby tab in front")
     assert showing() == "sim"
+
+
+STEADY = b'''"""Drives on a steady curve."""
+
+from common.controller import Controller, Khepera
+
+
+class Steady(Controller):
+    period = 0.1
+
+    def do_work(self, robot: Khepera) -> None:
+        robot.set_speeds(8, 12)
+'''
+
+
+@pytest.fixture(scope="module")
+def run_desk(lab: RealLab) -> str:
+    """The real arena's agent context (owner ida) and a runner: where runs on k1 are asked
+    for from the page. Started for the last test only: once the arena has a context, the
+    lobby joins real1 through it (no "Join real1" button for the tests above)."""
+    start_runner(lab.lab)
+    start_agent_context(lab.lab, slot=60.0, ctx=RUNS, world=REAL, account=f"ctx-{RUNS}")
+    return RUNS
+
+
+@needs_sandbox
+@pytest.mark.timeout(240)  # the runner and agent context start in its setup
+def test_the_twins_ghost_is_drawn_ahead_of_a_live_run(
+    open_page, lab: RealLab, run_desk: str
+) -> None:
+    page = open_page("ida")
+    log_in(page, lab, "ida")
+    page.click(f"Join {run_desk}", timeout=30_000)  # once the new context is in the lobby
+    page.tab(f"{run_desk} (arena)").last.click()
+    page.wait_text("Upload controller")
+    panels = next(iter(session_of(lab.viewer, "ida").labs.values())).panels
+    wait_until(lambda: run_desk in panels, 10, what="ida's panel of the real arena")
+    robots = panels[run_desk].robots
+    assert robots is not None
+    page.input_after_label("Robot").click()
+    page.p.get_by_role("option", name="k1", exact=True).click()
+    wait_until(lambda: robots.robot.value == "k1", 10, what="k1 chosen")
+    page.p.locator("input[type=file]").last.set_input_files(
+        {"name": "steady.py", "mimeType": "text/x-python", "buffer": STEADY}
+    )
+    ghost = robots.ghost
+    wait_until(lambda: ghost.body is not None, 60, what="the ghost drawn while k1 runs")
+    assert ghost.body is not None and ghost.body.name == GHOST_NODE
+    # ida owns the arena, so the registry answers her: no twin of k1 is kept.
+    page.wait_text("prediction: the datasheet Khepera")
+    assert ghost.legend.content == "prediction: the datasheet Khepera"
+    first = ghost.anchored
+    wait_until(lambda: ghost.anchored > first, 15, what="the ghost re-anchored on a new pose")
+    page.p.get_by_label("Show the twin's prediction").uncheck()
+    wait_until(lambda: ghost.body is None, 15, what="the ghost hidden by its checkbox")
+    page.click("Cancel my request", timeout=30_000)

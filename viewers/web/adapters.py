@@ -27,6 +27,7 @@ from common.messages.grading import (
     Standings,
     SubmissionInfo,
 )
+from common.twin.twinfile import Twin
 from viewers.web.world_feed import WorldFeed
 
 # --- errors ---------------------------------------------------------------------
@@ -394,6 +395,11 @@ class LabConnection(Protocol):
     def save_twin(self, ctx: str, robot: str, document: str) -> str:
         """Have the registry keep a twin file's text as ``robot``'s twin, for the arena
         ``ctx`` the user owns; the answer in words (LabError: refused, and why)."""
+        ...
+
+    def twin(self, robot: str) -> Twin | None:
+        """``robot``'s twin in force, read with my session (None: none kept); LabError when
+        the registry refuses me (students read no twins) or does not answer."""
         ...
 
     # -- my courses (the grader: docs/COURSES.md)

@@ -29,6 +29,7 @@ from common.messages.grading import (
     SubmissionInfo,
 )
 from common.recording import RecordingError, read_recording, summarize
+from common.twin.twinfile import Twin
 from viewers.web import demo_world
 from viewers.web.adapters import (
     AgentsEvent,
@@ -527,6 +528,9 @@ class DemoConnection:
 
     def save_twin(self, ctx: str, robot: str, document: str) -> str:
         raise LabError("the demo lab has no real robots: it keeps no twins")
+
+    def twin(self, robot: str) -> Twin | None:
+        return None  # no real robots, no twins
 
     resume_token: bytes | None = None  # a demo lab keeps no saved logins
 

@@ -39,6 +39,7 @@ from common.messages import (
     Standings,
     SubmissionInfo,
 )
+from common.twin.twinfile import Twin, TwinFileError, parse_twin
 from viewers.web.adapters import (
     AgentStatus,
     ArenaSettings,
@@ -499,6 +500,15 @@ class LiveConnection:
     def save_twin(self, ctx: str, robot: str, document: str) -> str:
         saved = self._call(lambda: self.client.twins.save(document, robot, ctx))
         return f"Kept {saved.model} as {saved.robot}'s twin v{saved.version} (in force)."
+
+    def twin(self, robot: str) -> Twin | None:
+        reply = self._call(lambda: self.client.twins.of(robot))
+        if reply.current is None:
+            return None
+        try:  # checked again by whoever reads it: the registry's row is outside input
+            return parse_twin(reply.current.document, f"{robot}'s twin")
+        except TwinFileError as exc:
+            raise LabError(str(exc)) from None
 
     def _is_real(self, world: str) -> bool:
         """Whether ``world`` is a Khepera bridge (asked once: a world does not change kind)."""

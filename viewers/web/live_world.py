@@ -313,7 +313,8 @@ class _SensorSub:
         ambient = np.zeros(8, np.float32)
         ir[: min(8, len(wire.proximity))] = wire.proximity[:8]
         ambient[: min(8, len(wire.ambient))] = wire.ambient[:8]
-        return RobotReadings(agent, wire.sim_time, ir, ambient)
+        speeds = np.asarray(wire.speeds, np.float32)  # a real robot's: its odometry's
+        return RobotReadings(agent, wire.sim_time, ir, ambient, speeds)
 
     def close(self) -> None:
         for handle in (self._sub, self._watch):

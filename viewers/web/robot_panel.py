@@ -35,6 +35,7 @@ from viewers.web.adapters import (
     OutputEvent,
     RequestEvent,
 )
+from viewers.web.ghost import Ghost
 from viewers.web.inputs import set_value
 from viewers.web.live_agents import check_upload
 from viewers.web.text import escape_md, output_html, printed
@@ -181,6 +182,8 @@ class RobotPanel:
                 False,
                 hint="Keep the selected robot in the middle of the view (zoom stays yours)",
             )
+            # The twin's prediction over a live real run (its checkbox and legend).
+            self.ghost = Ghost(gui, connection.twin, self.driven)
             empty = (np.zeros(0), *[np.zeros(0)] * 8)
             series = (
                 viser.uplot.Series(label="t"),
@@ -304,6 +307,7 @@ class RobotPanel:
         view.slow_hooks.append(self._sample)
         view.show_rays = self.rays.value
         view.follow = self.follow.value
+        self.ghost.bind(view)
         self.refresh_agents()  # an arena's robots are known once its world is shown
         # A robot selected before this panel was bound (a click while a busy page still
         # built it) is shown as selected, not lost until the next click.
@@ -317,6 +321,7 @@ class RobotPanel:
             if self._sample in view.slow_hooks:
                 view.slow_hooks.remove(self._sample)
             view.follow = False  # the next panel bound says whether it follows
+        self.ghost.unbind()
         self.view = self.feed = None
 
     def _selected(self, index: int | None) -> None:

@@ -96,12 +96,14 @@ class SceneFrame:
 
 @dataclass(frozen=True)
 class RobotReadings:
-    """The selected robot's sensors: 8 IR proximity and 8 ambient readings (0..1023)."""
+    """The selected robot's sensors: 8 IR proximity and 8 ambient readings (0..1023), and
+    its wheels' speeds as it reads them (left, right in its type's unit; empty: unknown)."""
 
     agent: str
     t: float
     ir: F32
     ambient: F32
+    speeds: F32 = field(default_factory=lambda: np.zeros(0, np.float32))
 
 
 @dataclass(frozen=True)
