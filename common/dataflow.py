@@ -382,6 +382,13 @@ FLOWS: tuple[Flow, ...] = (
         **WORDS,
         note="no student, no score: the lti service asks, passes grades back",
     ),
+    _put(
+        keys.grader_queue,
+        ("grader",),
+        ("host",),
+        m.GraderQueue,
+        note="every 5 s; runners scaled on it",
+    ),
     # -- worlds (engines and bridges)
     _put(keys.world_frame, WORLDS, ("agent", "runner", *PEOPLE), m.WorldFrame, note="each tick"),
     _put(keys.world_sensors, WORLDS, PEOPLE, m.SensorBatch, note="each tick while subscribed"),

@@ -434,6 +434,15 @@ def grader_changed_all(realm: str, grader: str) -> str:
     return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/changed/*"
 
 
+def grader_queue(realm: str, grader: str) -> str:
+    """The grader's queue depth, put every few seconds (a cluster's host scales runners on it)."""
+    return f"{realm_root(realm)}/grader/{check_ident('grader', grader)}/queue"
+
+
+def grader_queue_all(realm: str) -> str:
+    return f"{realm_root(realm)}/grader/*/queue"
+
+
 def host_spawn(realm: str, host: str) -> str:
     return f"{realm_root(realm)}/host/{check_ident('host', host)}/spawn"
 

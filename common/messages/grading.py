@@ -405,6 +405,16 @@ class GradingChanged(Message, frozen=True):
     at: float
 
 
+class GraderQueue(Message, frozen=True):
+    """How much grading waits (``grader/<name>/queue``, put every few seconds): the
+    submissions queued and those being graded. What a cluster scales its runners on."""
+
+    grader: Ident
+    queued: NonNegInt
+    running: NonNegInt
+    at: float  # wall clock of the grader
+
+
 class ClassQuery(Message, frozen=True):
     """The teacher's view: every student of a course with their latest submission (the
     course's teachers; admins). ``course`` None: every course the asker teaches (none for a
@@ -468,6 +478,7 @@ __all__ = [
     "EpisodeResult",
     "GradeData",
     "GradeResult",
+    "GraderQueue",
     "GradingChanged",
     "Heat",
     "HeatEntry",

@@ -24,6 +24,7 @@ from common.service import close_session, open_session, stop_on_signals
 from common.zconfig import ConfigError, NetworkOptions, add_network_arguments, options_from_args
 from services.lab import provision
 from services.lab.kube.manifests import MODES, PARTS, KubeOptions, Renderer, render
+from services.lab.kube.objects import object_name
 from services.lab.kube.yamlout import dump, dump_all
 from services.lab.labfile import LabFileError, load
 from services.lab.supervisor import AliveWatch, Supervisor
@@ -96,6 +97,7 @@ def _host(args: argparse.Namespace, options: NetworkOptions) -> int:
 
         # it imports kubernetes too (the same reason)
         from services.lab.kube.arenas import ArenaWorkloads, ClusterHosting, ClusterPlan
+        from services.lab.kube.runner_scale import RunnerScaler
     except ImportError:
         return cli.fail(
             "wart kube host needs the kubernetes package: pip install 'wart-lab[kubernetes]'"
@@ -137,12 +139,21 @@ def _host(args: argparse.Namespace, options: NetworkOptions) -> int:
         if svc.kind == "engine":
             world, robots = str(svc.params["world"]), int(svc.params.get("robots", 0))
             hosting.adopt(world, str(svc.params["map"]), [], robots)
+    scaled = {object_name("runner", s.ident): sc for s in host.services if (sc := s.scale)}
+    scaler = None
+    if scaled:
+        scaler = RunnerScaler(
+            session, lab.realm, api, args.namespace, scaled, period=args.scale_period
+        ).start()
     print(
         f"host {host.name} of lab '{lab.realm}': arenas on request are workloads in "
-        f"namespace {args.namespace} ({api.configuration.host})",
+        f"namespace {args.namespace} ({api.configuration.host})"
+        + (f"; runners scaled on the grader's queue: {', '.join(scaled)}" if scaled else ""),
         flush=True,
     )
     stop.wait()
+    if scaler is not None:
+        scaler.stop()
     hosting.stop()
     supervisor.watch.close()
     close_session(session)
@@ -200,6 +211,12 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart kube") -> int:
     h.add_argument(
         "--state-dir", type=Path, default=Path("/var/lib/wart"), help="its own files (maps made)"
     )
+    h.add_argument(
+        "--scale-period",
+        type=float,
+        default=5.0,
+        help="seconds between two looks at the grader's queue (scaled runners; default 5)",
+    )
     add_network_arguments(h)
     args, _ = cli.parse(p, argv)
     if args.verb == "render":
@@ -209,5 +226,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart kube") -> int:
             options = options_from_args(args)
         except ConfigError as exc:
             return cli.fail(str(exc))
+        if not 0.1 <= args.scale_period <= 3600:
+            return cli.fail(f"--scale-period: {args.scale_period} is out of range (0.1 to 3600)")
         return _host(args, options)
     return _provision(args)

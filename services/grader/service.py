@@ -77,6 +77,7 @@ from services.grader.episodes import RUNNER_WAIT_S, EpisodeRunner
 from services.grader.fair_queue import FairQueue
 from services.grader.grading_db import GradingStore, Pending
 from services.grader.leaderboard import leaderboard
+from services.grader.queue_depth import QueueDepth
 from services.grader.real_attempt import RealAttempt
 from services.grader.results_desk import ResultsDesk
 from services.lab.database import DbError
@@ -133,6 +134,7 @@ class GraderService(Service):
         self.store = store
         self.workers = workers
         self.queue: FairQueue[Pending] = FairQueue()
+        self.depth = QueueDepth(session, realm, name, self.queue.__len__)
         self.episodes = EpisodeRunner(
             session, realm, lambda k, m: login.session.seal(k, m), runner_wait
         )
@@ -172,12 +174,14 @@ class GraderService(Service):
         thread = threading.Thread(target=self._work_real, name="real", daemon=True)
         thread.start()
         self._threads.append(thread)
+        self.depth.start()
 
     def on_stop(self, timeout: float) -> None:
         if self._bans is not None:
             self._bans.close()
         self.queue.close()
         self._real_stop.set()
+        self.depth.stop()
         self._reals.put(None)
         self.episodes.stop()
         deadline = time.monotonic() + timeout
@@ -434,7 +438,8 @@ class GraderService(Service):
                 self._not_graded_banned(sub)  # taken from the queue as the ban came
                 continue
             try:
-                self._grade(sub)
+                with self.depth.grading():
+                    self._grade(sub)
                 self._grader_failures.pop(sub.id, None)
             except Exception as exc:
                 self._grader_failed(sub, exc)

@@ -56,7 +56,10 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     "agent": ("title", "runner", "slot_seconds", "owner"),
     # name: the viewer's id in the lab (default: its host's name).
     "viewer": ("name", "http_port", "http_host"),
-    "runner": (),
+    # min_replicas, max_replicas: a runner in a cluster scaled on the grader's queue
+    # (services/lab/kube/runner_scale.py): per_replica submissions waiting per pod,
+    # cooldown_s before it scales down.
+    "runner": ("min_replicas", "max_replicas", "per_replica", "cooldown_s"),
     "grader": ("name",),
     # calibration: a file made by `wart camera calibrate` (default: the state dir's,
     # made from the reference markers once they are in view).
@@ -72,6 +75,16 @@ class LabFileError(ValueError):
 
 
 @dataclass(frozen=True)
+class RunnerScale:
+    """How a runner's Deployment is scaled on the grader's queue depth."""
+
+    min_replicas: int
+    max_replicas: int
+    per_replica: int = 2  # submissions graded at once by one runner pod
+    cooldown_s: float = 300.0  # the depth low this long before replicas are taken away
+
+
+@dataclass(frozen=True)
 class ServiceEntry:
     kind: str
     params: Mapping[str, Any]
@@ -80,6 +93,12 @@ class ServiceEntry:
     def ident(self) -> str:
         """The name that tells this service apart on its host (a room, a world...)."""
         return str(self.params.get("name") or self.params.get("world") or self.kind)
+
+    @property
+    def scale(self) -> RunnerScale | None:
+        """A runner's scaling on the grader's queue (None: one replica, scaled by hand)."""
+        found = self.params.get("scale")
+        return found if isinstance(found, RunnerScale) else None
 
 
 @dataclass(frozen=True)
@@ -163,7 +182,10 @@ class LabFile:
     def runner_for(self, host: str) -> str:
         """The runner an agent context on ``host`` uses by default: its host's, else the lab's."""
         runners = [
-            (h.name != host, s.ident) for h in self.hosts for s in h.services if s.kind == "runner"
+            (h.name != host, s.ident)
+            for h in self.hosts
+            for s in h.services
+            if s.kind == "runner" and s.scale is None  # a scaled runner's pods have own names
         ]
         return min(runners)[1] if runners else DEFAULT_RUNNER
 
@@ -289,9 +311,27 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
         params["drive"] = drive
     if "slot_seconds" in table:
         params["slot_seconds"] = _number(f"{where}.slot_seconds", table["slot_seconds"], 1, 3600)
+    if kind == "runner" and ("min_replicas" in table or "max_replicas" in table):
+        params["scale"] = _runner_scale(where, table)
     if kind == "bridge" and not (params.get("ports") or params.get("emulate")):
         raise LabFileError(f"{where}: a bridge needs 'ports' (its robots) or 'emulate' (a map)")
     return ServiceEntry(kind=kind, params=params)
+
+
+def _runner_scale(where: str, table: Mapping[str, Any]) -> RunnerScale:
+    for name in ("min_replicas", "max_replicas"):
+        if name not in table:
+            raise LabFileError(f"{where}: a scaled runner needs both min_replicas and max_replicas")
+    low = _int(f"{where}.min_replicas", table["min_replicas"], 0, 100)
+    high = _int(f"{where}.max_replicas", table["max_replicas"], 1, 100)
+    if low > high:
+        raise LabFileError(f"{where}: min_replicas ({low}) is above max_replicas ({high})")
+    return RunnerScale(
+        low,
+        high,
+        _int(f"{where}.per_replica", table.get("per_replica", 2), 1, 100),
+        _number(f"{where}.cooldown_s", table.get("cooldown_s", 300.0), 0, 86400),
+    )
 
 
 def parse(data: Mapping[str, Any], path: Path) -> LabFile:
@@ -480,6 +520,7 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
                     f"{world!r} from [arena].agent, and a context on {rooms[world]} has that name"
                 )
     known_runners = set(runners)
+    scaled = {s.ident for h in hosts for s in h.services if s.scale is not None}
     for i, host in enumerate(hosts):
         for j, svc in enumerate(host.services):
             runner = svc.params.get("runner")
@@ -487,6 +528,12 @@ def parse(data: Mapping[str, Any], path: Path) -> LabFile:
                 raise LabFileError(
                     f"hosts[{i}].services[{j}].runner: no runner named {runner!r} in the lab "
                     f"({', '.join(sorted(known_runners)) or 'none'})"
+                )
+            if runner is not None and runner in scaled:
+                raise LabFileError(
+                    f"hosts[{i}].services[{j}].runner: runner {runner!r} is scaled on the "
+                    "grader's queue (its pods take names of their own): name a runner without "
+                    "min_replicas and max_replicas"
                 )
     return LabFile(
         path=path,

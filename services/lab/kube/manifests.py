@@ -48,6 +48,7 @@ from services.lab.kube.objects import (
     STATE,
     KubeOptions,
     Objects,
+    object_name,
 )
 from services.lab.lab_maps import SHIPPED_MAPS
 from services.lab.labfile import HostEntry, LabFile, LabFileError, ServiceEntry
@@ -314,10 +315,36 @@ class Renderer:
                 # can mount its /proc; privileged is the one setting it honours that
                 # unmasks it. On the lab's own host, not on a shared cluster.
                 c["securityContext"] = {"privileged": True}
+        if svc.scale is not None and not self.podman:
+            self.named_by_pod(svc, c)
         objects = self.k.workload(svc.kind, svc.ident, [c], volumes, stateful=stateful)
         if svc.kind == "runner" and not self.podman:
             objects[-1]["spec"]["template"]["spec"]["hostUsers"] = False
+        if svc.scale is not None and not self.podman:
+            # The host pod sets the replicas (runner_scale.py): an apply of these
+            # objects again leaves them as they are (a new Deployment starts with one).
+            del objects[-1]["spec"]["replicas"]
         return objects
+
+    def named_by_pod(self, svc: ServiceEntry, c: dict[str, Any]) -> None:
+        """A scaled runner's pods each serve under their pod's name (the grader takes any
+        runner alive; one name for all would be one queryable and one token)."""
+        name = object_name(svc.kind, svc.ident)
+        if len(name) > 47:  # its pods' names: NAME-HASH(10)-XXXXX, a name of the lab: <= 64
+            raise LabFileError(
+                f"runner {svc.ident!r}: the name {name!r} is too long for a scaled runner "
+                "(47 characters at most)"
+            )
+        args = c["args"]
+        args[args.index("--name") + 1] = "$(POD_NAME)"  # Kubernetes expands it from env
+        c["env"].insert(
+            0, {"name": "POD_NAME", "valueFrom": {"fieldRef": {"fieldPath": "metadata.name"}}}
+        )
+        for probe in ("startupProbe", "readinessProbe", "livenessProbe"):
+            if probe in c:  # an exec probe's command is not expanded: a shell does it
+                command = c[probe]["exec"]["command"]
+                said = " ".join([*command[:3], '"$POD_NAME"', *command[4:]])
+                c[probe]["exec"]["command"] = ["sh", "-c", f"exec {said}"]
 
     def arena(self, svc: ServiceEntry) -> list[dict[str, Any]]:
         return self.arena_workload(str(svc.params["world"]), wiring.service_specs(self.wiring, svc))
@@ -344,6 +371,14 @@ class Renderer:
             containers[0]["volumeMounts"].append(mount)
         return self.k.workload("arena", world, containers, volumes, stateful=True)
 
+    def scaled_runners(self) -> list[str]:
+        """The Deployments of this host's runners scaled on the grader's queue."""
+        return [
+            object_name("runner", s.ident)
+            for s in self.host.services
+            if s.kind == "runner" and s.scale is not None
+        ]
+
     def hosting(self) -> list[dict[str, Any]]:
         """The cluster's host: ``wart arena new`` makes arenas as workloads (arenas.py),
         with the rights to make and delete them in this namespace and nothing else."""
@@ -357,14 +392,30 @@ class Renderer:
         objects = self.k.workload("host", host, [c], volumes, stateful=False)
         objects[-1]["spec"]["template"]["spec"]["serviceAccountName"] = "wart-host"
         meta = self.k.meta("wart-host", "host", host)
-        rules = [
-            {
-                "apiGroups": ["apps"],
-                "resources": ["statefulsets"],
-                "verbs": ["create", "delete", "get", "list"],
-            },
-            {"apiGroups": [""], "resources": ["configmaps"], "verbs": ["create", "delete", "get"]},
-        ]
+        rules: list[dict[str, Any]] = []
+        if self.host.arenas:
+            rules += [
+                {
+                    "apiGroups": ["apps"],
+                    "resources": ["statefulsets"],
+                    "verbs": ["create", "delete", "get", "list"],
+                },
+                {
+                    "apiGroups": [""],
+                    "resources": ["configmaps"],
+                    "verbs": ["create", "delete", "get"],
+                },
+            ]
+        scaled = self.scaled_runners()
+        if scaled:  # runners scaled on the grader's queue (runner_scale.py): those only
+            rules.append(
+                {
+                    "apiGroups": ["apps"],
+                    "resources": ["deployments/scale"],
+                    "resourceNames": scaled,
+                    "verbs": ["get", "patch"],
+                }
+            )
         binding = {
             "apiVersion": f"{RBAC}/v1",
             "kind": "RoleBinding",
@@ -510,7 +561,7 @@ class Renderer:
                     f"{svc.kind} {svc.ident}: a bridge drives robots on this machine's serial "
                     "ports: run it with `wart host` on the machine they are plugged into"
                 )
-        if self.host.arenas and not self.podman:
+        if (self.host.arenas or self.scaled_runners()) and not self.podman:
             out.objects += self.hosting()
         elif self.host.arenas:
             out.skipped.append("arenas on request: they need a Kubernetes API (wart kube host)")

@@ -124,6 +124,21 @@ def test_each_service_is_its_own_workload_with_probes_resources_and_its_state(
     assert runner["securityContext"]["procMount"] == "Unmasked"
     assert runner_pod["spec"]["template"]["spec"]["hostUsers"] is False
     assert "privileged" not in runner["securityContext"]
+    # The runner scaled on the grader's queue: its pods named apart, its replicas the host's.
+    grading_pod = objects[("Deployment", "wart-runner-grading")]
+    grading = containers(grading_pod)["runner"]
+    assert "replicas" not in grading_pod["spec"] and runner_pod["spec"]["replicas"] == 1
+    assert grading["args"][:3] == ["runner", "--name", "$(POD_NAME)"]
+    assert grading["env"][0]["valueFrom"]["fieldRef"]["fieldPath"] == "metadata.name"
+    probe = grading["readinessProbe"]["exec"]["command"]
+    assert probe == ["sh", "-c", 'exec wart probe runner "$POD_NAME"']
+    *_, scale = objects[("Role", "wart-host")]["rules"]
+    assert scale == {
+        "apiGroups": ["apps"],
+        "resources": ["deployments/scale"],
+        "resourceNames": ["wart-runner-grading"],
+        "verbs": ["get", "patch"],
+    }
     # Every container: the image's user, requests and limits.
     for obj in rendered.objects:
         if obj["kind"] in ("StatefulSet", "Deployment"):
