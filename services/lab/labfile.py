@@ -60,7 +60,9 @@ OPTIONAL_FIELDS: dict[str, tuple[str, ...]] = {
     # (services/lab/kube/runner_scale.py): per_replica submissions waiting per pod,
     # cooldown_s before it scales down.
     "runner": ("min_replicas", "max_replicas", "per_replica", "cooldown_s"),
-    "grader": ("name",),
+    # workers: submissions graded at once (wart grader --workers); with a scaled runner,
+    # raise it with max_replicas, or the pods beyond it get no work.
+    "grader": ("name", "workers"),
     # calibration: a file made by `wart camera calibrate` (default: the state dir's,
     # made from the reference markers once they are in view).
     "camera": ("name", "calibration", "fps"),
@@ -311,6 +313,8 @@ def service_entry(where: str, raw: Any) -> ServiceEntry:
         params["drive"] = drive
     if "slot_seconds" in table:
         params["slot_seconds"] = _number(f"{where}.slot_seconds", table["slot_seconds"], 1, 3600)
+    if "workers" in table:
+        params["workers"] = _int(f"{where}.workers", table["workers"], 1, 64)
     if kind == "runner" and ("min_replicas" in table or "max_replicas" in table):
         params["scale"] = _runner_scale(where, table)
     if kind == "bridge" and not (params.get("ports") or params.get("emulate")):

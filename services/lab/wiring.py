@@ -379,10 +379,14 @@ def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpe
     )
 
 
-def grader_spec(w: Wiring, name: str = "grader", *, account: str | None = None) -> ChildSpec:
+def grader_spec(
+    w: Wiring, name: str = "grader", *, account: str | None = None, workers: int | None = None
+) -> ChildSpec:
     """The grader; it reads and writes the registry's database, so it runs on its host."""
     argv = ["grader", "--name", name, *w.login(account or service_account("grader", name))]
     argv += ["--db", str(w.state_dir / "registry.db")]
+    if workers is not None:
+        argv += ["--workers", str(workers)]
     return ChildSpec(
         f"grader {name}",
         [*argv, *w.net_args("grader")],
@@ -521,7 +525,8 @@ def service_specs(w: Wiring, svc: ServiceEntry) -> list[ChildSpec]:
     if svc.kind == "runner":
         return [runner_spec(w, svc.ident)]
     if svc.kind == "grader":
-        return [grader_spec(w, svc.ident)]
+        workers = p.get("workers")
+        return [grader_spec(w, svc.ident, workers=None if workers is None else int(workers))]
     if svc.kind == "lti":
         port, host = int(p.get("http_port", 8090)), str(p.get("http_host") or "127.0.0.1")
         return [lti_spec(w, Path(p["platforms"]), svc.ident, http_port=port, http_host=host)]

@@ -8,8 +8,15 @@ from pathlib import Path
 import pytest
 
 from common.zconfig import NetworkOptions
-from services.commands.up import LabSettings, lab_plan, service_accounts, settings_from_args
+from services.commands.up import (
+    LabSettings,
+    lab_plan,
+    local_wiring,
+    service_accounts,
+    settings_from_args,
+)
 from services.lab.labfile import LabFileError, service_entry
+from services.lab.wiring import service_specs
 
 
 def settings(tmp_path: Path) -> LabSettings:
@@ -80,3 +87,16 @@ def test_a_lab_file_service_says_who_owns_it_and_whether_it_logs_in() -> None:
         service_entry("s", {"kind": "bridge", "world": "w", "emulate": "m", "login": "yes"})
     with pytest.raises(LabFileError, match=r"s.owner"):
         service_entry("s", {"kind": "chat", "name": "r", "owner": "no such/user"})
+
+
+def test_a_grader_grades_as_many_at_once_as_its_lab_file_says(tmp_path: Path) -> None:
+    # A scaled runner's pods get work only if the grader hands out that much at once.
+    grader = service_entry("g", {"kind": "grader", "workers": 6})
+    wiring = local_wiring(settings(tmp_path))
+    (spec,) = service_specs(wiring, grader)
+    assert spec.argv[spec.argv.index("--workers") + 1] == "6"
+    (default,) = service_specs(wiring, service_entry("g", {"kind": "grader"}))
+    assert "--workers" not in default.argv
+    for bad in (0, 65, "six", True):
+        with pytest.raises(LabFileError, match=r"g.workers"):
+            service_entry("g", {"kind": "grader", "workers": bad})
