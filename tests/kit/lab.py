@@ -17,7 +17,6 @@ from __future__ import annotations
 import functools
 import os
 import queue
-import shutil
 import signal
 import socket
 import subprocess
@@ -118,12 +117,6 @@ class Proc:
         self.popen.wait(5)
 
 
-# A test process killed outright (a CI job's time-out, `kill -9`, a helper's `timeout`)
-# runs no teardown: each process it started is told to stop by the kernel instead
-# (setpriv sets the parent-death signal, then execs), never left serving for good.
-DIE_WITH_TEST = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
-
-
 @dataclass
 class Procs:
     """Starts ``wart`` subprocesses and stops them all at teardown.
@@ -139,7 +132,7 @@ class Procs:
         log_path = self.tmp / f"{name}.log"
         out = open(log_path, "wb")  # noqa: SIM115 - the child writes to it for its lifetime
         popen = subprocess.Popen(
-            [*DIE_WITH_TEST, sys.executable, "-m", "services.cli", *args],
+            [sys.executable, "-m", "services.cli", *args],
             cwd=REPO,
             stdin=subprocess.DEVNULL,
             stdout=out,
