@@ -122,6 +122,9 @@ def test_the_view_follows_the_arena_tab_in_front(open_page, lab: RealLab) -> Non
     # The simulated world has no context of its own: opened as the address bar opens one.
     browser.connect(f"{lab.address.with_user('bob').url()}/{WORLD}")
     wait_until(lambda: showing() == "sim", 30, what="the simulated world shown on joining it")
+    # Its robots drawn first: a click selects only a robot the page shows (under load the
+    # snapshot came before the robots' names, and a select then chose nothing).
+    wait_until(lambda: len(view.robot_names) > 0, 30, what="the simulated world's robots")
     view.select(0)  # a robot of the simulated world selected: its trail drawn
     wait_until(lambda: view._trail_handle is not None, 15, what="the selected robot's trail")
     page.tab(f"{REAL} (arena)").last.click()
