@@ -127,11 +127,15 @@ def test_controller_under_a_mac_lease_drives_and_a_non_holder_does_not(lab: Proc
         # Now alice holds k0 with a controller that keeps it still; bob knows the
         # lease id (anyone can read a lease) but not its key.
         done.clear()
+        # Read before the request goes out: on a busy machine the second lease can
+        # arrive before this thread runs again.
+        first = wire.lease.lease_id if wire.lease is not None else None
         t = threading.Thread(target=lambda: done.append(alice.drive("k0", Still())))
         t.start()
-        first = wire.lease
         wait_for(
-            lambda: wire.lease is not None and wire.lease != first and wire.lease.holder_key,
+            lambda: wire.lease is not None
+            and wire.lease.lease_id != first
+            and wire.lease.holder_key,
             10,
             "alice's second lease",
         )
