@@ -133,9 +133,9 @@ def test_controller_under_a_mac_lease_drives_and_a_non_holder_does_not(lab: Proc
         t = threading.Thread(target=lambda: done.append(alice.drive("k0", Still())))
         t.start()
         wait_for(
-            lambda: wire.lease is not None
-            and wire.lease.lease_id != first
-            and wire.lease.holder_key,
+            lambda: (
+                wire.lease is not None and wire.lease.lease_id != first and wire.lease.holder_key
+            ),
             10,
             "alice's second lease",
         )
