@@ -61,6 +61,11 @@ than given up after the usual request timeout. A registry that is not running
 costs nothing extra: with no queryable to route to, the router ends the query at once.
 """
 
+LOGIN_STALE_S = 20.0
+"""How long a login may wait at the registry for a password-check worker before the
+registry answers "busy: try again" instead of checking it: shorter than LOGIN_WAIT_S,
+so a swamped registry's answer reaches an asker who is still listening."""
+
 LOGIN_FIND_S = 2.0
 """How long a login keeps asking while no registry is routed to (the query ends at once).
 

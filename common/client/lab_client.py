@@ -405,8 +405,9 @@ class LabClient:
                 self._undeclare()
             raise
 
-    def _find_registry(self, key: str, payload: bytes, wait: float) -> list[Any]:
-        """The login query's answers, asked again for LOGIN_FIND_S while none is routed to.
+    def _find_registry(self, key: str, payload: bytes, wait: float) -> tuple[list[Any], bool]:
+        """The login query's answers, asked again for LOGIN_FIND_S while none is routed to,
+        and whether a registry took the query (False: none was routed to).
 
         A query with no queryable to reach ends at once, empty; one the registry
         took but has not answered (frozen, swamped) ends only at ``wait``, and
@@ -426,7 +427,7 @@ class LabClient:
             # Ended long before its time: routed to no registry, not unanswered by one.
             routed_nowhere = ended - started < (deadline - started) / 2
             if answers or not routed_nowhere or ended + LOGIN_FIND_PAUSE_S >= give_up:
-                return answers
+                return answers, bool(answers) or not routed_nowhere
             time.sleep(LOGIN_FIND_PAUSE_S)
 
     def _login_reply(
@@ -437,11 +438,13 @@ class LabClient:
         mailbox: nacl.public.PrivateKey | None,
         wait: float | None,
     ) -> SessionToken:
-        answers = self._find_registry(
-            key,
-            encode(SealedLogin(sealed=sealed)),
-            wait if wait is not None else max(self.timeout, LOGIN_WAIT_S),
-        )
+        waited = wait if wait is not None else max(self.timeout, LOGIN_WAIT_S)
+        answers, taken = self._find_registry(key, encode(SealedLogin(sealed=sealed)), waited)
+        if not answers and taken:
+            raise RegistryUnreachable(
+                f"the registry on realm {self.realm} took the login but did not answer in "
+                f"{waited:.0f} s: it is swamped or stuck; try again in a minute"
+            )
         if not answers:
             raise RegistryUnreachable(
                 f"no registry answered on realm {self.realm}: is it running, and is the router "

@@ -25,7 +25,7 @@ import zenoh
 from common import acl, keys, qos
 from common.ask import alive_keys, ask
 from common.auth import (
-    LOGIN_WAIT_S,
+    LOGIN_STALE_S,
     AuthError,
     Principal,
     RegistryIdentity,
@@ -164,7 +164,7 @@ class Registry(Service):
             keys.registry_login(self.realm),
             self.on_login,
             workers=os.cpu_count() or 2,
-            stale_after=LOGIN_WAIT_S,
+            stale_after=LOGIN_STALE_S,
         )
         self.serve(keys.registry_logout(self.realm), self.on_logout)
         # Workers: a user-keys answer may ask the router for a presence token (below), which
