@@ -12,6 +12,7 @@ that checks a presented credential against it.
 
 from __future__ import annotations
 
+import functools
 import logging
 import secrets
 import sqlite3
@@ -104,8 +105,13 @@ CHECKS: dict[str, Callable[[bytes, object], bool]] = {
     "password": _check_password,  # data: the argon2id hash string
     "ed25519": _check_ed25519,  # data: the 32-byte public key (the signature is checked first)
 }
-# A hash to check against when the user does not exist, so timing does not tell.
-_DUMMY_HASH = nacl.pwhash.argon2id.str(b"not a password", opslimit=OPSLIMIT, memlimit=MEMLIMIT)
+
+
+@functools.cache
+def _dummy_hash() -> bytes:
+    """A hash to check against when the user does not exist, so timing does not tell (made on
+    first use: every process importing this module would otherwise pay one argon2id)."""
+    return nacl.pwhash.argon2id.str(b"not a password", opslimit=OPSLIMIT, memlimit=MEMLIMIT)
 
 
 @dataclass(frozen=True)
@@ -312,7 +318,7 @@ class RegistryDB:
             return False
         rows = self._rows("SELECT data FROM credentials WHERE user=? AND kind=?", name, kind)
         if not rows and kind == "password":
-            _check_password(_DUMMY_HASH, presented)  # same cost as a real check
+            _check_password(_dummy_hash(), presented)  # same cost as a real check
             return False
         return any(isinstance(r[0], bytes) and check(r[0], presented) for r in rows)
 

@@ -95,7 +95,9 @@ def test_a_guesser_with_fresh_sessions_and_addresses_gets_a_handful_of_checks(
             elsewhere.login("alice", PASSWORD)
         with lab.client("admin") as admin:
             seen = {(t.kind, t.key): t for t in admin.throttles()}
-            assert seen["account", "alice"].failures >= 5 and seen["account", "alice"].wait_s > 0
+            # Its wait (2 s after the last failure) was in force at the refusal above; a busy
+            # machine can take longer than that to list it, so the count is what is asserted.
+            assert seen["account", "alice"].failures >= 5
             assert seen["network", "viewer-web:203.0.113.0/24"].failures == 4
             assert "forgotten" in admin.clear_throttle("viewer-web:203.0.113.0/24")
             listed = lab.admin_wart("throttles")
