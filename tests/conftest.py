@@ -24,7 +24,7 @@ from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
 from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
-from tests.time_spent import TimeSpent
+from tests.time_spent import PhaseCpu, TimeSpent
 
 _SANDBOX_PROBLEM = sandbox_problem()
 # For the tests that run controllers in the runner's real sandbox.
@@ -34,7 +34,9 @@ needs_sandbox = pytest.mark.skipif(
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    # On the controller only: workers' reports reach it, and it prints the summary.
+    # Where tests run (each worker, or the only process), each phase's CPU is measured;
+    # on the controller only, the summary: workers' reports reach it.
+    config.pluginmanager.register(PhaseCpu(), "phase_cpu")
     if not hasattr(config, "workerinput"):
         config.pluginmanager.register(TimeSpent(), "time_spent")
 
