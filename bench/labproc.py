@@ -9,13 +9,13 @@ children's logs kept quiet (``WART_BENCH_LOG_LEVEL``, default WARNING).
 from __future__ import annotations
 
 import os
-import subprocess
 import tempfile
 from pathlib import Path
 
 from common import keys
 from common.keys import AliveKind
 from common.zconfig import NetworkOptions
+from tests.kit.forkserver import Running
 from tests.kit.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
 
 REPO = Path(__file__).resolve().parent.parent
@@ -49,7 +49,7 @@ class BenchLab:
         return self._lab().router.options()
 
     @property
-    def procs(self) -> list[subprocess.Popen[bytes]]:
+    def procs(self) -> list[Running]:
         """The processes started, in order (the router first)."""
         return [proc.popen for proc in self._procs.started]
 

@@ -9,6 +9,7 @@ wait_for are re-exported here for the tests that import them from this file.
 from __future__ import annotations
 
 import functools
+import os
 import uuid
 import zlib
 from collections.abc import Iterator
@@ -22,9 +23,14 @@ from common.client import lab_client
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
+from tests.kit import forkserver
 from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
 from tests.time_spent import PhaseCpu, TimeSpent
+
+# The kit's `wart` processes are forked from one that has imported what they import
+# (tests/kit/forkserver.py): hundreds of service starts, each without 0.4-0.7 s of imports.
+os.environ.setdefault(forkserver.ENABLED_ENV, "1")
 
 _SANDBOX_PROBLEM = sandbox_problem()
 # For the tests that run controllers in the runner's real sandbox.

@@ -20,14 +20,18 @@ from collections.abc import Iterator
 
 import pytest
 
+from tests.kit.forkserver import forked_cpu
+
 SHOWN = 12  # the busiest groups listed
 # Set to a file name to get every test phase's seconds as JSON lines (for profiling the suite).
 DUMP_ENV = "WART_TIME_SPENT_FILE"
 
 
 def _children_cpu() -> float:
+    """Of the processes ended so far: those this process started, and those the kit's fork
+    server forked for it."""
     used = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return used.ru_utime + used.ru_stime
+    return used.ru_utime + used.ru_stime + forked_cpu()
 
 
 class PhaseCpu:

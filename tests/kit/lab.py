@@ -14,6 +14,7 @@ and is stopped (then killed, if it must be) when its owner stops the lab.
 
 from __future__ import annotations
 
+import atexit
 import functools
 import os
 import queue
@@ -21,12 +22,14 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 from unittest import mock
 
 import psutil
@@ -47,8 +50,14 @@ from services.lab.supervisor import AliveWatch, ChildSpec, start_wart
 from services.lab.wiring import Wiring, up_args
 from services.registry import accounts_db
 from services.registry.accounts_db import RegistryDB, hash_password
+from tests.kit import forkserver
+from tests.kit.forkserver import ForkServer, Running
+from tests.kit.waits import wait_for
 
 REPO = Path(__file__).resolve().parents[2]
+# Where this process's `wart` processes are forked from (tests/kit/forkserver.py).
+FORK_SERVER = ForkServer(REPO)
+atexit.register(FORK_SERVER.stop)
 
 PASSWORD = "correct horse"
 USERS = {"alice": "student", "bob": "student", "carol": "student", "ida": "instructor"}
@@ -81,6 +90,8 @@ def wart(
 ) -> subprocess.CompletedProcess[str]:
     """``wart ARGS`` as a person runs it, from the repository, output captured; ``env``
     adds to the test environment (see wart_env)."""
+    if forkserver.enabled():
+        return _forked_wart(list(args), timeout, wart_env(env))
     return subprocess.run(
         [sys.executable, "-m", "services.cli", *args],
         cwd=REPO,
@@ -91,12 +102,43 @@ def wart(
     )
 
 
+def _forked_wart(
+    args: list[str], timeout: float, env: dict[str, str]
+) -> subprocess.CompletedProcess[str]:
+    command = [sys.executable, "-m", "services.cli", *args]
+    with (
+        tempfile.TemporaryFile() as out,
+        tempfile.TemporaryFile() as err,
+        open(os.devnull, "rb") as nothing,
+    ):
+        proc = FORK_SERVER.spawn(
+            args,
+            cwd=REPO,
+            env=env,
+            stdin=nothing.fileno(),
+            stdout=out.fileno(),
+            stderr=err.fileno(),
+        )
+
+        def read(stream: IO[bytes]) -> str:
+            stream.seek(0)
+            return stream.read().decode(errors="replace")
+
+        try:
+            code = proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+            raise subprocess.TimeoutExpired(command, timeout, read(out), read(err)) from None
+        return subprocess.CompletedProcess(command, code, read(out), read(err))
+
+
 @dataclass
 class Proc:
     """A ``wart`` subprocess started by a test, with its output in a file."""
 
     name: str
-    popen: subprocess.Popen[bytes]
+    popen: Running  # a subprocess.Popen, or a ForkedProcess from the kit's fork server
     log_path: Path
 
     def output(self) -> str:
@@ -131,15 +173,28 @@ class Procs:
     def start(self, name: str, args: Sequence[str], env: dict[str, str] | None = None) -> Proc:
         log_path = self.tmp / f"{name}.log"
         out = open(log_path, "wb")  # noqa: SIM115 - the child writes to it for its lifetime
-        popen = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", *args],
-            cwd=REPO,
-            stdin=subprocess.DEVNULL,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env=wart_env({**self.env, **(env or {})}),
-            start_new_session=True,
-        )
+        environment = wart_env({**self.env, **(env or {})})
+        popen: Running
+        if forkserver.enabled():
+            with open(os.devnull, "rb") as nothing:
+                popen = FORK_SERVER.spawn(
+                    args,
+                    cwd=REPO,
+                    env=environment,
+                    stdin=nothing.fileno(),
+                    stdout=out.fileno(),
+                    stderr=out.fileno(),
+                )
+        else:
+            popen = subprocess.Popen(
+                [sys.executable, "-m", "services.cli", *args],
+                cwd=REPO,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=environment,
+                start_new_session=True,
+            )
         out.close()
         proc = Proc(name, popen, log_path)
         self.started.append(proc)
@@ -202,8 +257,21 @@ def start_router(
     proc = procs.start(log_name, [*spec.argv, "--no-multicast-scouting"])
     router = Router(realm=realm, port=port, proc=proc)
     assert spec.alive_key is not None
+    # Its port first, polled often: a session opened before the router listens backs off
+    # for up to 2 s, which every test starting a router paid for nothing.
+    wait_for(
+        lambda: proc.popen.poll() is not None or _accepts(port),
+        20.0,
+        f"the router to listen on port {port}",
+    )
     wait_alive(router.options(), spec.alive_key, proc, timeout=20.0)
     return router
+
+
+def _accepts(port: int) -> bool:
+    with socket.socket() as sock:
+        sock.settimeout(1.0)
+        return sock.connect_ex(("127.0.0.1", port)) == 0
 
 
 # --- a lab started process by process --------------------------------------------------
