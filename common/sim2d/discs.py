@@ -44,7 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
-from common.sim2d import contacts, pairs, pucks, rays
+from common.sim2d import aot, contacts, pairs, pucks, rays
 from common.sim2d.contacts import _obstacles_first, bin_circles, layers_work, sweeps
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _COUNTED, _UNCOUNTED
@@ -360,18 +360,6 @@ def tick_into(
 
 def warm_up() -> None:
     """Compile (or load from the on-disk cache) this drive's kernels: kernels.warm_up calls it."""
-    scene = (
-        np.zeros((0, 4)),
-        np.zeros(2, dtype=np.int64),
-        np.zeros(0, dtype=np.int64),
-        1,
-        1,
-        100.0,
-        np.zeros((0, 4)),
-        np.zeros((0, 2)),
-        np.zeros(0),
-    )
-    circles = bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0)
     one = np.ones(1)
     tick(
         np.zeros((1, 3)),
@@ -382,8 +370,8 @@ def warm_up() -> None:
         one,
         np.zeros((1, 2)),
         one,
-        scene,
-        circles,
+        aot.scene_sample(),
+        bin_circles(*aot.circles_sample()),
         100.0,
         100.0,
         0.01,

@@ -48,7 +48,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from common.sim2d import contacts, discs, packs, pairs, pucks, rays
+from common.sim2d import aot, contacts, discs, packs, pairs, pucks, rays
 from common.sim2d.contacts import (
     _UNCOUNTED,
     _near_obstacle,
@@ -505,8 +505,6 @@ def tick(
 
 def warm_up() -> None:
     """Compile (or load from the on-disk cache) the split tick: kernels.warm_up calls it."""
-    z4, zi = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
-    scene = (z4, np.zeros(2, dtype=np.int64), zi, 1, 1, 100.0, z4, np.zeros((0, 2)), np.zeros(0))
     one = np.ones(1)
     tick(
         np.full((1, 3), 50.0),
@@ -517,8 +515,8 @@ def warm_up() -> None:
         one,
         np.zeros((1, 2)),
         one,
-        scene,
-        contacts.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0),
+        aot.scene_sample(),
+        contacts.bin_circles(*aot.circles_sample()),
         100.0,
         100.0,
         0.01,
