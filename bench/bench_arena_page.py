@@ -50,24 +50,15 @@ def main(argv: list[str] | None = None) -> int:
     # page helpers import it at their top)
     from playwright.sync_api import sync_playwright
 
-    from tests.kit.pages import (
-        CHROMIUM,
-        CHROMIUM_ARGS,
-        ViserPage,
-        new_test_context,
-        page_url,
-    )
+    from tests.kit.pages import ViserPage, launch_chromium, new_test_context
 
     with tempfile.TemporaryDirectory(prefix="wart-bench-arena-") as tmp, real_lab(
         Path(tmp), real_arena=REAL
     ) as lab, sync_playwright() as pw:  # fmt: skip
-        browser = pw.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
-        )
+        browser = launch_chromium(pw)
         context: Any = new_test_context(browser)
         page = ViserPage(context.new_page(), "bench")
-        page.p.goto(page_url(lab.viewer.url))
-        page.wait_ready()
+        page.open(lab.viewer.url)
         page.log_in(lab.url, "ida", PASSWORD)
         page.tab(lab.address.label).first.click()
         page.wait_text("Logged in as")

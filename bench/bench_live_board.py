@@ -70,13 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     # page helpers import it at their top)
     from playwright.sync_api import sync_playwright
 
-    from tests.kit.pages import (
-        CHROMIUM,
-        CHROMIUM_ARGS,
-        ViserPage,
-        new_test_context,
-        page_url,
-    )
+    from tests.kit.pages import ViserPage, launch_chromium, new_test_context
 
     students = [f"s{i:03d}" for i in range(args.students)]
     names = {s: f"Student {i:03d}" for i, s in enumerate(students)}
@@ -94,13 +88,10 @@ def main(argv: list[str] | None = None) -> int:
         store.put_assignment(assignment, map_text)
         lab.lab.start_grader()
 
-        browser = pw.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
-        )
+        browser = launch_chromium(pw)
         context: Any = new_test_context(browser)
         page = ViserPage(context.new_page(), "bench")
-        page.p.goto(page_url(lab.viewer.url))
-        page.wait_ready()
+        page.open(lab.viewer.url)
         page.log_in(lab.url, "alice", PASSWORD)  # into the arena, as tests/browser do
         page.tab(lab.address.label).first.click()
         page.click(f"Join {CTX}", timeout=15_000)

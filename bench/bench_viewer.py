@@ -36,7 +36,7 @@ import psutil
 from playwright.sync_api import sync_playwright
 
 from tests.kit.lab import free_port
-from tests.kit.pages import CHROMIUM_ARGS, ViserPage
+from tests.kit.pages import ViserPage, launch_chromium
 from tests.kit.reallab import PASSWORD, WORLD, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
@@ -113,7 +113,7 @@ def run(
 ) -> int:
     me = psutil.Process()
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+        browser = launch_chromium(pw)
         pages: list[ViserPage] = []
         counters: list[WsCounter] = []
         for i in range(args.browsers):

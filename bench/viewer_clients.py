@@ -141,10 +141,10 @@ def _browsers(
     from playwright.sync_api import sync_playwright
 
     from bench.bench_viewer import BENCH_VIEWPORT, WsCounter
-    from tests.kit.pages import CHROMIUM_ARGS, ViserPage  # imports playwright too
+    from tests.kit.pages import ViserPage, launch_chromium  # imports playwright too
 
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+        browser = launch_chromium(pw)
         pages, counters = [], []
         for i in range(count):
             page = browser.new_context(viewport=BENCH_VIEWPORT).new_page()

@@ -184,17 +184,7 @@ def state_sample() -> tuple[Any, ...]:
             np.zeros((1, 1, 5)),
             np.ones((1, 1), dtype=np.bool_),
         ),
-        (  # scene
-            np.zeros((0, 4)),
-            np.zeros(2, dtype=np.int64),
-            np.zeros(0, dtype=np.int64),
-            1,
-            1,
-            100.0,
-            np.zeros((0, 4)),
-            np.zeros((0, 2)),
-            np.zeros(0),
-        ),
+        scene_sample(),  # scene
         objects_table(0, 1),  # pucks
         (  # objects (pucks_tables.scene_buffers)
             np.zeros((0, 2)),
@@ -210,6 +200,24 @@ def state_sample() -> tuple[Any, ...]:
         ),
         (100.0, 100.0, 0.01),  # geometry
         1,  # substeps
+    )
+
+
+def scene_sample() -> tuple[Any, ...]:
+    """A static scene (kernels.StaticScene's layout, a plain tuple): a 100 mm arena of one cell
+    without obstacles, the smallest the kernels take."""
+    import numpy as np  # here, not at the top: as state_sample's
+
+    return (
+        np.zeros((0, 4)),
+        np.zeros(2, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        1,
+        1,
+        100.0,
+        np.zeros((0, 4)),
+        np.zeros((0, 2)),
+        np.zeros(0),
     )
 
 

@@ -44,7 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
-from common.sim2d import contacts, pairs, pucks, rays
+from common.sim2d import aot, contacts, pairs, pucks, rays
 from common.sim2d.contacts import _obstacles_first, bin_circles, layers_work, sweeps
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _COUNTED, _UNCOUNTED
@@ -66,6 +66,87 @@ def _arc(x, y, th, v, w, h):  # pragma: no cover
     th1 = th + w * h
     k = v / w
     return x + k * (math.sin(th1) - math.sin(th)), y - k * (math.cos(th1) - math.cos(th)), th1
+
+
+@njit(cache=_CACHE, inline="always")
+def _wheels(
+    a, pose, cmd, mm_s_per_unit, wheel_base, counters, pulses_per_tick, px, py, th, v, w
+):  # pragma: no cover
+    """Robot ``a`` at a tick's start: its pose, speed and turn rate, counters advanced.
+
+    Returns its wheels' speeds (mm/s), whose fastest sets the tick's contact margin.
+    """
+    px[a] = pose[a, 0]
+    py[a] = pose[a, 1]
+    th[a] = pose[a, 2]
+    w0 = cmd[a, 0] * mm_s_per_unit[a]
+    w1 = cmd[a, 1] * mm_s_per_unit[a]
+    v[a] = (w0 + w1) / 2.0
+    w[a] = (w1 - w0) / wheel_base[a]
+    counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
+    counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
+    return w0, w1
+
+
+@njit(cache=_CACHE, inline="always")
+def _objects_in(n, objects, radius, px, py, th, v, w, top_speed, top_radius):  # pragma: no cover
+    """The objects into the discs' slots after the ``n`` robots; returns the top speed and radius.
+
+    ``top_speed`` and ``top_radius``: the robots'; the objects' raise them.
+
+    An object's v, w are its vx, vy (pucks.py); a held one rides as fast as its holder.
+    """
+    opose, ovel = objects[0], objects[1]
+    for j in range(opose.shape[0]):
+        i = n + j
+        px[i] = opose[j, 0]
+        py[i] = opose[j, 1]
+        th[i] = opose[j, 2]
+        v[i] = ovel[j, 0]
+        w[i] = ovel[j, 1]
+        top_speed = max(top_speed, math.sqrt(v[i] * v[i] + w[i] * w[i]))
+        top_radius = max(top_radius, radius[i])
+    return top_speed, top_radius
+
+
+@njit(cache=_CACHE, inline="always")
+def _reach(top_speed, top_radius, substep_s):  # pragma: no cover
+    """(margin, cell) of a tick's contacts for its fastest disc and its largest one.
+
+    How far a contact can push a robot in one substep: two robots meeting head
+    on at top speed overlap by up to both their moves. Pairs and obstacles this
+    close at the start of a substep are its candidate contacts. Robots found in
+    non-neighbouring cells are at least a cell apart, farther than the largest
+    pair plus the margin: they cannot touch within the substep. (A held object
+    is a gripper's length ahead of a robot: both top radii cover it, as its
+    holder's own disc is within the margin of it.)
+    """
+    margin = 2.0 * top_speed * substep_s + SLACK_MM
+    return margin, 2.0 * top_radius + margin + 1.0
+
+
+@njit(cache=_CACHE, inline="always")
+def _poses_out(pose, h, px, py, th, v, w, out, vel, objects):  # pragma: no cover
+    """A tick's end: the robots' poses into ``out``, their mean velocities over ``h`` s into
+    ``vel``; the objects' poses and velocities into their table."""
+    for a in range(pose.shape[0]):
+        # The velocity before the pose: ``out`` may be ``pose`` itself.
+        vel[a, 0] = (px[a] - pose[a, 0]) / h
+        vel[a, 1] = (py[a] - pose[a, 1]) / h
+        vel[a, 2] = w[a]
+        out[a, 0] = px[a]
+        out[a, 1] = py[a]
+        out[a, 2] = th[a]
+    opose, ovel = objects[0], objects[1]
+    n = pose.shape[0]
+    for j in range(opose.shape[0]):
+        i = n + j
+        opose[j, 0] = px[i]
+        opose[j, 1] = py[i]
+        opose[j, 2] = th[i]
+        ovel[j, 0] = v[i]
+        ovel[j, 1] = w[i]
+        ovel[j, 2] = 0.0
 
 
 @njit(cache=_CACHE)
@@ -240,43 +321,19 @@ def tick_into(
     """
     n = pose.shape[0]
     k = objects[0].shape[0]
-    opose, ovel = objects[0], objects[1]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     sx, sy = buffers[21], buffers[22]
     top_speed = 0.0
     top_radius = 0.0
     for a in range(n):
-        px[a] = pose[a, 0]
-        py[a] = pose[a, 1]
-        th[a] = pose[a, 2]
-        w0 = cmd[a, 0] * mm_s_per_unit[a]
-        w1 = cmd[a, 1] * mm_s_per_unit[a]
-        v[a] = (w0 + w1) / 2.0
-        w[a] = (w1 - w0) / wheel_base[a]
+        w0, w1 = _wheels(
+            a, pose, cmd, mm_s_per_unit, wheel_base, counters, pulses_per_tick, px, py, th, v, w
+        )
         top_speed = max(top_speed, max(abs(w0), abs(w1)))
         top_radius = max(top_radius, radius[a])
-        counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
-        counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
     robot_speed = top_speed  # the objects' speed limit (pucks.end_substep)
-    for j in range(k):
-        # An object's v, w are its vx, vy (pucks.py); a held one rides as fast as its holder.
-        i = n + j
-        px[i] = opose[j, 0]
-        py[i] = opose[j, 1]
-        th[i] = opose[j, 2]
-        v[i] = ovel[j, 0]
-        w[i] = ovel[j, 1]
-        top_speed = max(top_speed, math.sqrt(v[i] * v[i] + w[i] * w[i]))
-        top_radius = max(top_radius, radius[i])
-    # How far a contact can push a robot in one substep: two robots meeting head
-    # on at top speed overlap by up to both their moves. Pairs and obstacles this
-    # close at the start of a substep are its candidate contacts.
-    margin = 2.0 * top_speed * substep_s + SLACK_MM
-    # Robots found in non-neighbouring cells are at least a cell apart, farther
-    # than the largest pair plus the margin: they cannot touch within the substep.
-    # (A held object is a gripper's length ahead of a robot: both top radii
-    # cover it, as its holder's own disc is within the margin of it.)
-    cell = 2.0 * top_radius + margin + 1.0
+    top_speed, top_radius = _objects_in(n, objects, radius, px, py, th, v, w, top_speed, top_radius)
+    margin, cell = _reach(top_speed, top_radius, substep_s)
     pair_buffers = buffers[13:21]
     discs = (px, py, th, radius, mass)  # what _contacts takes, grouped
     limits = (margin, width, height)
@@ -298,39 +355,11 @@ def tick_into(
             )
         if k:
             pucks.end_substep(n, objects, arm, px, py, th, v, w, sx, sy, substep_s, robot_speed)
-    h = substep_s * substeps
-    for a in range(n):
-        # The velocity before the pose: ``out`` may be ``pose`` itself.
-        vel[a, 0] = (px[a] - pose[a, 0]) / h
-        vel[a, 1] = (py[a] - pose[a, 1]) / h
-        vel[a, 2] = w[a]
-        out[a, 0] = px[a]
-        out[a, 1] = py[a]
-        out[a, 2] = th[a]
-    for j in range(k):
-        i = n + j
-        opose[j, 0] = px[i]
-        opose[j, 1] = py[i]
-        opose[j, 2] = th[i]
-        ovel[j, 0] = v[i]
-        ovel[j, 1] = w[i]
-        ovel[j, 2] = 0.0
+    _poses_out(pose, substep_s * substeps, px, py, th, v, w, out, vel, objects)
 
 
 def warm_up() -> None:
     """Compile (or load from the on-disk cache) this drive's kernels: kernels.warm_up calls it."""
-    scene = (
-        np.zeros((0, 4)),
-        np.zeros(2, dtype=np.int64),
-        np.zeros(0, dtype=np.int64),
-        1,
-        1,
-        100.0,
-        np.zeros((0, 4)),
-        np.zeros((0, 2)),
-        np.zeros(0),
-    )
-    circles = bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0)
     one = np.ones(1)
     tick(
         np.zeros((1, 3)),
@@ -341,8 +370,8 @@ def warm_up() -> None:
         one,
         np.zeros((1, 2)),
         one,
-        scene,
-        circles,
+        aot.scene_sample(),
+        bin_circles(*aot.circles_sample()),
         100.0,
         100.0,
         0.01,

@@ -48,7 +48,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from common.sim2d import contacts, discs, packs, pairs, pucks, rays
+from common.sim2d import aot, contacts, discs, packs, pairs, pucks, rays
 from common.sim2d.contacts import (
     _UNCOUNTED,
     _near_obstacle,
@@ -56,7 +56,7 @@ from common.sim2d.contacts import (
     layers_work,
     sweeps,
 )
-from common.sim2d.discs import SLACK_MM, _arc
+from common.sim2d.discs import _arc, _objects_in, _poses_out, _reach, _wheels
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.pairs import _cell, _neighbours, _pairs
 
@@ -133,15 +133,9 @@ def _robots_range(
         split[5][seg, r] = 0
     for a in range(lo, hi):
         if first:
-            px[a] = pose[a, 0]
-            py[a] = pose[a, 1]
-            th[a] = pose[a, 2]
-            w0 = cmd[a, 0] * mm_s_per_unit[a]
-            w1 = cmd[a, 1] * mm_s_per_unit[a]
-            v[a] = (w0 + w1) / 2.0
-            w[a] = (w1 - w0) / wheel_base[a]
-            counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
-            counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
+            _wheels(
+                a, pose, cmd, mm_s_per_unit, wheel_base, counters, pulses_per_tick, px, py, th, v, w
+            )
         px[a], py[a], th[a] = _arc(px[a], py[a], th[a], v[a], w[a], h)
         _disc_phase(a, lo, seg, ranges, radius, buffers, grid, scene, circles, split)
 
@@ -315,7 +309,6 @@ def tick_into_split(
     n = pose.shape[0]
     k = objects[0].shape[0]
     nd = n + k
-    opose, ovel = objects[0], objects[1]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
     start, pair_out = buffers[19], buffers[20]  # the rest of _pairs' buffers: the kernels
     start_x, start_y = buffers[21], buffers[22]  # the objects' (discs.tick_into's sx, sy)
@@ -335,17 +328,8 @@ def tick_into_split(
         top_speed = max(top_speed, max(abs(w0), abs(w1)))
         top_radius = max(top_radius, radius[a])
     robot_speed = top_speed
-    for j in range(k):
-        i = n + j
-        px[i] = opose[j, 0]
-        py[i] = opose[j, 1]
-        th[i] = opose[j, 2]
-        v[i] = ovel[j, 0]
-        w[i] = ovel[j, 1]
-        top_speed = max(top_speed, math.sqrt(v[i] * v[i] + w[i] * w[i]))
-        top_radius = max(top_radius, radius[i])
-    margin = 2.0 * top_speed * substep_s + SLACK_MM
-    cell = 2.0 * top_radius + margin + 1.0
+    top_speed, top_radius = _objects_in(n, objects, radius, px, py, th, v, w, top_speed, top_radius)
+    margin, cell = _reach(top_speed, top_radius, substep_s)
     gx = (math.floor(width / cell)) + 1
     gy = (math.floor(height / cell)) + 1
     ncell = gx * gy
@@ -450,22 +434,7 @@ def tick_into_split(
             pucks.end_substep(
                 n, objects, arm, px, py, th, v, w, start_x, start_y, substep_s, robot_speed
             )
-    h = substep_s * substeps
-    for a in range(n):
-        vel[a, 0] = (px[a] - pose[a, 0]) / h
-        vel[a, 1] = (py[a] - pose[a, 1]) / h
-        vel[a, 2] = w[a]
-        out[a, 0] = px[a]
-        out[a, 1] = py[a]
-        out[a, 2] = th[a]
-    for j in range(k):
-        i = n + j
-        opose[j, 0] = px[i]
-        opose[j, 1] = py[i]
-        opose[j, 2] = th[i]
-        ovel[j, 0] = v[i]
-        ovel[j, 1] = w[i]
-        ovel[j, 2] = 0.0
+    _poses_out(pose, substep_s * substeps, px, py, th, v, w, out, vel, objects)
 
 
 def on_threads(args: tuple[object, ...], threads: int) -> None:
@@ -536,8 +505,6 @@ def tick(
 
 def warm_up() -> None:
     """Compile (or load from the on-disk cache) the split tick: kernels.warm_up calls it."""
-    z4, zi = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
-    scene = (z4, np.zeros(2, dtype=np.int64), zi, 1, 1, 100.0, z4, np.zeros((0, 2)), np.zeros(0))
     one = np.ones(1)
     tick(
         np.full((1, 3), 50.0),
@@ -548,8 +515,8 @@ def warm_up() -> None:
         one,
         np.zeros((1, 2)),
         one,
-        scene,
-        contacts.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0),
+        aot.scene_sample(),
+        contacts.bin_circles(*aot.circles_sample()),
         100.0,
         100.0,
         0.01,

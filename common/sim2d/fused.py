@@ -39,7 +39,7 @@ from numba.core.runtime.nrtdynmod import _meminfo_struct_type
 from numba.experimental import structref
 from numba.extending import intrinsic
 
-from common.sim2d import contacts, discs, noise, packs, pairs, pucks, rays, sense_pass
+from common.sim2d import aot, contacts, discs, noise, packs, pairs, pucks, rays, sense_pass
 from common.sim2d import kernels as K
 from common.sim2d.jitcache import stamp_with_callees
 from common.sim2d.packs import _UNCOUNTED
@@ -248,52 +248,9 @@ def entry(state: TickState) -> Callable[[TickState, bool, np.uint64, np.ndarray]
 
 
 def warm_up() -> None:
-    """Compile (or load from the on-disk cache) the fused tick: kernels.warm_up calls it."""
-    one = np.ones(1)
-    tables = (
-        np.zeros((1, 1, 5)),
-        1,
-        1,
-        np.zeros((1, K.N_AGENT_F)),
-        np.zeros((1, K.N_AGENT_I), dtype=np.int64),
-        np.array([[0.0, 1.0]]),
-        np.array([[1.0, 0.0]]),
-        np.array([2], dtype=np.int64),
-        np.zeros((1, 1, 5)),
-        np.ones((1, 1), dtype=np.bool_),
-    )
-    scene = (
-        np.zeros((0, 4)),
-        np.zeros(2, dtype=np.int64),
-        np.zeros(0, dtype=np.int64),
-        1,
-        1,
-        100.0,
-        np.zeros((0, 4)),
-        np.zeros((0, 2)),
-        np.zeros(0),
-    )
-    objects = pucks.scene_buffers(0, 0, 0)
-    readings = (
-        np.zeros((1, 1), dtype=np.int32),
-        np.zeros((1, 1), dtype=np.int32),
-        np.zeros(1, dtype=np.int32),
-    )
-    state = new_state(
-        np.full((1, 3), 50.0),
-        np.zeros((1, 3)),
-        np.zeros((1, 2)),
-        np.zeros((1, 2)),
-        np.zeros(1),
-        np.zeros(1, dtype=np.bool_),
-        (one, one, one, one, one),
-        discs.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, 100.0),
-        tables,
-        scene,
-        pucks.objects_table(0, 1),
-        objects,
-        readings,
-        (100.0, 100.0, 0.01),
-        1,
-    )
+    """Compile (or load from the on-disk cache) the fused tick: kernels.warm_up calls it.
+
+    For the arguments' types the World passes (aot.state_sample), as compiled.py's warm-up.
+    """
+    state = new_state(*aot.state_sample())
     entry(state)(state, False, np.uint64(1), np.zeros((0, 4)))

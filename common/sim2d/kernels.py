@@ -42,8 +42,8 @@ import time
 
 import numpy as np
 
+from common.sim2d import aot, discs
 from common.sim2d import chipmunk as C
-from common.sim2d import discs
 from common.sim2d.noise import normal, normals
 from common.sim2d.packs import (
     F_AMB_COS_HALF,
@@ -217,17 +217,7 @@ def warm_up() -> float:
             np.zeros((1, 1, 5)),
             np.ones((1, 1), dtype=np.bool_),
         ),
-        StaticScene(
-            np.zeros((0, 4)),
-            np.zeros(2, dtype=np.int64),
-            np.zeros(0, dtype=np.int64),
-            1,
-            1,
-            100.0,
-            np.zeros((0, 4)),
-            np.zeros((0, 2)),
-            np.zeros(0),
-        ),
+        StaticScene(*aot.scene_sample()),
         MovingScene(
             np.zeros((0, 2)),
             np.zeros(0),

@@ -25,6 +25,7 @@ from tests.kit.pages import (
     ViserPage,
     describe_view,
     join_demo_arena,
+    launch_chromium,
     new_test_context,
     page_url,
     screen_points,
@@ -57,11 +58,7 @@ def chromium() -> Iterator[object]:
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
-        # A plain launch gets a fresh temporary profile (user-data-dir) from
-        # Playwright, deleted on close; Playwright refuses --user-data-dir here.
-        browser = pw.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
-        )
+        browser = launch_chromium(pw)
         try:
             yield browser
         finally:
@@ -131,8 +128,7 @@ def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureReques
         page = context.new_page()  # type: ignore[attr-defined]
         vp = ViserPage(page, f"{request.node.name}-{tag}")  # before the page opens its socket
         pages.append(vp)
-        page.goto(page_url(viewer.url))
-        vp.wait_ready()
+        vp.open(viewer.url)
         return vp
 
     yield opener

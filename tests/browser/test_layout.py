@@ -18,7 +18,6 @@ from playwright.sync_api import expect
 from tests.browser.conftest import (
     ViserPage,
     new_test_context,
-    page_url,
     wait_for_aimed_camera,
     wait_until,
 )
@@ -75,8 +74,7 @@ def _in_the_arena(
     try:
         page = context.new_page()  # type: ignore[attr-defined]
         vp = ViserPage(page, f"{request.node.name}")
-        page.goto(page_url(viewer.url))
-        vp.wait_ready()
+        vp.open(viewer.url)
         vp.log_in("127.0.0.1", "ana", "ana-pw")
         vp.click("Join arena")
         session = next(iter(viewer.sessions.values()))

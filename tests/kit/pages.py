@@ -90,6 +90,17 @@ def page_url(url: str) -> str:
     return f"{url}{'&' if '?' in url else '?'}fixedDpr={TEST_PAGE_DPR}"
 
 
+def launch_chromium(playwright: Any) -> Any:
+    """The test browser (CHROMIUM, headless, CHROMIUM_ARGS) from a started Playwright.
+
+    A plain launch gets a fresh temporary profile (user-data-dir) from
+    Playwright, deleted on close; Playwright refuses --user-data-dir here.
+    """
+    return playwright.chromium.launch(
+        executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+    )
+
+
 def new_test_context(chromium: object, viewport: dict[str, int] | None = None) -> object:
     """A browser context (own cookies and storage) whose pages draw at most FRAME_CAP_HZ."""
     context = chromium.new_context(viewport=viewport or VIEWPORT)  # type: ignore[attr-defined]
@@ -127,6 +138,11 @@ class ViserPage:
     @property
     def p(self):
         return self.page
+
+    def open(self, url: str) -> None:
+        """The viewer at ``url`` opened as the test browser opens it (page_url), its GUI up."""
+        self.page.goto(page_url(url))  # type: ignore[attr-defined]
+        self.wait_ready()
 
     def wait_ready(self, timeout: float = 15_000) -> None:
         # viser's GUI arrives over its websocket once the page is up (the page has

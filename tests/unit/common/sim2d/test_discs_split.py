@@ -20,11 +20,15 @@ from tests.kit.worlds import build, control, tick_digest
 pytestmark = pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
 
 
-def _runs(n: int, ticks: int, balls: float, monkeypatch: pytest.MonkeyPatch) -> None:
-    # Split from the first disc, sensing on threads from the first robot: the
-    # swarm's paths on a small world.
+@pytest.fixture(autouse=True)
+def _split_from_the_first_disc(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Every test here: split from the first disc, sensing on threads from the
+    # first robot: the swarm's paths on a small world.
     monkeypatch.setattr(discs_split, "SPLIT_MIN_DISCS", 1)
     monkeypatch.setattr(sensing, "PARALLEL_MIN_AGENTS", 1)
+
+
+def _runs(n: int, ticks: int, balls: float) -> None:
     serial = build(n, seed=3, drive="discs", balls=balls)
     split = build(n, seed=3, drive="discs", balls=balls, threads=2)
     general = build(n, seed=3, drive="discs", balls=balls, threads=2)
@@ -46,10 +50,8 @@ def _runs(n: int, ticks: int, balls: float, monkeypatch: pytest.MonkeyPatch) -> 
 
 
 @pytest.mark.parametrize(("n", "balls"), [(10, 0.5), (300, 0.0), (300, 0.5)])
-def test_the_split_drive_runs_the_serial_run_bit_for_bit(
-    n: int, balls: float, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    _runs(n, 40, balls, monkeypatch)
+def test_the_split_drive_runs_the_serial_run_bit_for_bit(n: int, balls: float) -> None:
+    _runs(n, 40, balls)
 
 
 def test_a_crowd_past_the_threads_pair_lists_runs_the_serial_run(
@@ -59,17 +61,13 @@ def test_a_crowd_past_the_threads_pair_lists_runs_the_serial_run(
     # back to the serial scan (the same pairs).
     monkeypatch.setattr(discs_split, "PAIRS_PER_DISC", 0)
     assert discs_split.split_buffers(450)[2].shape[1] == 0
-    _runs(300, 20, 0.5, monkeypatch)
+    _runs(300, 20, 0.5)
 
 
-def test_a_crowd_driven_into_a_corner_runs_the_serial_run(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+def test_a_crowd_driven_into_a_corner_runs_the_serial_run() -> None:
     # Robots flat out into a corner, pressed together against the walls: the
     # layers and the sweeps (serial in both) get the split's pairs and pushes
     # in the serial order.
-    monkeypatch.setattr(discs_split, "SPLIT_MIN_DISCS", 1)
-    monkeypatch.setattr(sensing, "PARALLEL_MIN_AGENTS", 1)
     worlds = [build(40, seed=4, drive="discs", balls=0.5, threads=t) for t in (1, 2)]
     for world in worlds:
         for i, (x, y, _) in enumerate(world.agent_pose.copy()):
@@ -86,13 +84,9 @@ def test_a_crowd_driven_into_a_corner_runs_the_serial_run(
     assert (gaps[np.triu_indices(len(pose), 1)] < 56.0).sum() > 30, "a crowd formed"
 
 
-def test_edits_between_split_ticks_are_seen_as_by_the_serial_drive(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+def test_edits_between_split_ticks_are_seen_as_by_the_serial_drive() -> None:
     # A move, new counters, a robot added and one removed, an obstacle: the
     # split drive's arrays are rebuilt with the fused state's.
-    monkeypatch.setattr(discs_split, "SPLIT_MIN_DISCS", 1)
-    monkeypatch.setattr(sensing, "PARALLEL_MIN_AGENTS", 1)
     worlds = [build(30, seed=6, drive="discs", balls=0.5, threads=t) for t in (1, 2)]
     khepera = worlds[0].agents[0].spec
     for t in range(40):
