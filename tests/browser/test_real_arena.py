@@ -21,6 +21,7 @@ from tests.browser.conftest import wait_until
 from tests.browser.test_real_lab import log_in, session_of
 from tests.conftest import needs_sandbox
 from tests.kit.agentkit import start_agent_context, start_runner
+from tests.kit.pages import describe_view
 from tests.kit.reallab import WORLD, RealLab, real_lab
 from viewers.web.ghost import GHOST_NODE
 from viewers.web.tabs import tab_label
@@ -122,11 +123,20 @@ def test_the_view_follows_the_arena_tab_in_front(open_page, lab: RealLab) -> Non
     # The simulated world has no context of its own: opened as the address bar opens one.
     browser.connect(f"{lab.address.with_user('bob').url()}/{WORLD}")
     wait_until(lambda: showing() == "sim", 30, what="the simulated world shown on joining it")
-    # Its robots drawn first: a click selects only a robot the page shows (under load the
-    # snapshot came before the robots' names, and a select then chose nothing).
-    wait_until(lambda: len(view.robot_names) > 0, 30, what="the simulated world's robots")
+    # Its robots and frames drawn first: a click selects only a robot the page shows
+    # (under load the snapshot came before the robots' names, and a select then chose
+    # nothing), and a trail grows from the frames drawn after the selection (every fifth).
+    wait_until(
+        lambda: len(view.robot_names) > 0 and view.drawn is not None,
+        30,
+        what=lambda: f"the simulated world's robots and a frame drawn ({describe_view(view)})",
+    )
     view.select(0)  # a robot of the simulated world selected: its trail drawn
-    wait_until(lambda: view._trail_handle is not None, 15, what="the selected robot's trail")
+    wait_until(
+        lambda: view._trail_handle is not None,
+        30,
+        what=lambda: f"the selected robot's trail ({describe_view(view)})",
+    )
     page.tab(f"{REAL} (arena)").last.click()
     wait_until(lambda: showing() == REAL, 30, what="the real arena back when its tab is clicked")
     assert view.selected is None and view._rays is None and view._trail_handle is None
