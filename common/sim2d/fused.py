@@ -261,6 +261,8 @@ def warm_up() -> None:
         np.array([2], dtype=np.int64),
         np.zeros((1, 1, 5)),
         np.ones((1, 1), dtype=np.bool_),
+        np.ones((1, 1)),
+        np.zeros((1, 1)),
     )
     scene = (
         np.zeros((0, 4)),
