@@ -21,7 +21,10 @@ The gap, for a real run (REAL, or FILE alone) watched by the arena camera: with
 twin in force in the lab's database, ``wart twin``), the datasheet model and the
 twin, each run open-loop on the run's recorded commands from every camera pose,
 against where the camera saw the robot 1, 5 and 10 s later (median mm), side by
-side (needs the lab's packages: scipy and the simulator).
+side; then each IR sensor's error: what each model's sensors read along the run's
+tracked path, in its arena rebuilt from the recording, against what the robot read
+(median counts), and the ambient sensors' (needs the lab's packages: scipy and the
+simulator).
 """
 
 from __future__ import annotations

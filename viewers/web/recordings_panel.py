@@ -11,9 +11,9 @@ when, how it ended, duration), and for the chosen one:
 - **Plots**: the trajectory over the map and IR and wheel speeds over time,
   drawn by common/recording/plots.py (matplotlib) and shown as images;
 - **Calibrate the robot (twin)**: the run's robot fitted from it, with the gap of the
-  datasheet model and the twin; the arena's owner (no one else sees it) then has
-  **Keep as k1's twin**: the registry keeps it as the robot's twin in force, and its
-  answer shows under the button;
+  datasheet model and the twin, open-loop and sensor by sensor; the arena's owner (no
+  one else sees it) then has **Keep as k1's twin**: the registry keeps it as the
+  robot's twin in force, and its answer shows under the button;
 - **Replay**: the run in the world view with a timeline (viewers/web/replay.py);
   "Back to live" returns to the arena;
 - **Promote to real**: the run's controller file queued on a robot of a real
@@ -39,6 +39,7 @@ from common.recording import Recording, RecordingError, plots, read_recording, r
 from common.twin import gap
 from common.twin.fit import TwinError, calibrate, run_data
 from common.twin.motion import Drive
+from common.twin.twinfile import parse_twin
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
 from viewers.web.inputs import on_click, set_value
 from viewers.web.replay import ReplayControls, ReplayFeed, ReplaySpot
@@ -248,9 +249,13 @@ class RecordingsPanel:
         lines = "\n".join(f"- {escape_md(line)}" for line in twin.lines())
         lines += f"\n\n{escape_md(gap.heading())}:\n\n"
         lines += "\n".join(f"- {escape_md(line)}" for line in gaps)
+        document = twin.to_json(self.connection.user, time.time())
+        sensors = gap.sensor_lines(runs[0], parse_twin(document, f"{entry.agent}'s twin"))
+        lines += f"\n\n{escape_md(sensors[0])}\n\n"
+        lines += "\n".join(f"- {escape_md(line.strip())}" for line in sensors[1:])
         self.details.content = f"**{escape_md(entry.agent)}'s twin from {entry.name}**\n\n{lines}"
         self.say(f"{entry.agent} calibrated from {entry.name}: below.")
-        self._offer((entry.agent, twin.to_json(self.connection.user, time.time())))
+        self._offer((entry.agent, document))
 
     def _offer(self, fitted: tuple[str, str] | None) -> None:
         """Offer the arena's owner to keep a fitted twin (robot, twin file); None: nothing."""
