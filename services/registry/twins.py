@@ -38,7 +38,7 @@ from common.messages import (
 from common.service import RequestError
 from common.twin.twinfile import TwinFileError, parse_twin
 from services.lab.database import DbError
-from services.lab.twins_db import StoredTwin, TwinStore
+from services.lab.twins_db import LAB_WIDE, StoredTwin, TwinStore
 from services.registry.admin import source_of
 from services.registry.audit_db import Action
 
@@ -96,21 +96,29 @@ class TwinDesk:
         )
 
     def _query(self, request: TwinQuery) -> TwinReply:
-        versions = self.store.versions(request.robot) if request.history else []
-        current = versions[-1] if versions else self.store.current(request.robot)
+        robot = request.robot
+        where = self.store.in_force(request.arena or LAB_WIDE, robot)
+        if where is None:
+            return TwinReply(robot=robot, arena=request.arena)
+        versions = self.store.versions(where, robot) if request.history else []
+        current = versions[-1] if versions else self.store.current(where, robot)
         return TwinReply(
-            robot=request.robot,
+            robot=robot,
+            arena=where or None,
             current=None if current is None else _wire(current),
             history=[v.line()[:256] for v in versions[-MAX_HISTORY:]],
-            versions=len(versions) if request.history else self.store.count(request.robot),
+            versions=len(versions) if request.history else self.store.count(where, robot),
         )
 
     def _list(self) -> TwinList:
         listed = []
-        for robot, count in self.store.robots():
-            current = self.store.current(robot)
+        for arena, robot, count in self.store.robots():
+            current = self.store.current(arena, robot)
             if current is not None:
-                listed.append(TwinListed(robot=robot, versions=count, current=current.line()[:256]))
+                line = current.line()[:256]
+                listed.append(
+                    TwinListed(robot=robot, versions=count, current=line, arena=arena or None)
+                )
         return TwinList(robots=listed)
 
     def _save(self, principal: Principal, request: TwinSave, source: str) -> TwinSaved:
@@ -118,7 +126,7 @@ class TwinDesk:
             twin = parse_twin(request.document, "the twin sent")
         except TwinFileError as exc:
             raise RequestError("bad_request", f"refused, nothing kept:\n{exc}") from None
-        target = f"twin/{twin.robot}"
+        target = f"twin/{request.arena}/{twin.robot}" if request.arena else f"twin/{twin.robot}"
         if not principal.has("admin"):
             owner = self.arena_owners().get(request.arena or "")
             if request.arena is None or owner != principal.user:
@@ -133,13 +141,13 @@ class TwinDesk:
                     f"{principal.user} may not keep {twin.robot}'s twin: {where} "
                     "(the arena's owner or a lab admin keeps a twin)",
                 )
-        version = self.store.save(twin, principal.user)
+        version = self.store.save(request.arena or LAB_WIDE, twin, principal.user)
         model = twin.model()
         self.audit(
             Action(principal.user, "twin_save", target, "ok", f"v{version}: {model}", source)
         )
-        log.info("%s kept %s as v%d", principal.user, model, version)
-        return TwinSaved(robot=twin.robot, version=version, model=model[:256])
+        log.info("%s kept %s as v%d for %s", principal.user, model, version, target)
+        return TwinSaved(robot=twin.robot, version=version, model=model[:256], arena=request.arena)
 
 
 def _wire(stored: StoredTwin) -> TwinVersion:

@@ -20,7 +20,7 @@ from tests.browser.conftest import settle, wait_until
 from tests.browser.test_real_agents import enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
-from tests.kit.reallab import RealLab, real_lab
+from tests.kit.reallab import CTX, RealLab, real_lab
 from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration
 from viewers.web.replay import ReplayFeed
 
@@ -106,8 +106,9 @@ def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab)
     folder.click()
     owned._offer(fitted)
     ida.click("Keep as k0's twin")
-    ida.wait_text(f"Kept k0's twin fitted {DAY} by ida as k0's twin v1 (in force).")
+    # Kept for this arena's k0 (another arena's k0 is another robot).
+    ida.wait_text(f"Kept k0's twin fitted {DAY} by ida as k0's twin in {CTX} v1 (in force).")
     ida.screenshot("real-recording-keep-twin")
     with lab.lab.client("ida") as client:
-        kept = client.twins.of("k0").current
+        kept = client.twins.of("k0", CTX).current
     assert kept is not None and kept.version == 1 and kept.saved_by == "ida"

@@ -61,9 +61,8 @@ def test_wart_twin_saves_lists_and_shows_through_the_registry(
     assert twin("alice", "save", str(good), "--arena", "lab") == 1
     assert "arena lab is not yours (or not running)" in capsys.readouterr().err
     assert twin("admin", "save", str(good)) == 0  # a lab admin needs no arena
-    assert f"kept k1's twin fitted {DAY} by carol as k1's twin v1 (in force)" in (
-        capsys.readouterr().out
-    )
+    kept = "as k1's twin (for no arena in particular) v1 (in force)"
+    assert f"kept k1's twin fitted {DAY} by carol {kept}" in capsys.readouterr().out
     assert twin("ida", "show", "k2") == 1
     assert "no twin of k2" in capsys.readouterr().err
     robot_file = tmp_path / "twin-k1.toml"
@@ -81,7 +80,7 @@ def test_wart_twin_saves_lists_and_shows_through_the_registry(
         lines = audit_trail(admin, action="twin_save")
     assert [(e.actor, e.outcome, e.target) for e in lines] == [
         ("admin", "ok", "twin/k1"),
-        ("alice", "refused", "twin/k1"),
+        ("alice", "refused", "twin/lab/k1"),
     ]
 
 
@@ -93,17 +92,26 @@ def test_a_runner_reads_the_twin_in_force_and_says_when_the_registry_is_gone(
         runner.login_with_key("runner-svc", key)
         seal = runner._seal  # the runner seals with its service session, as a LabClient does
         lookup = TwinLookup(runner.z, lab.realm, seal)
-        assert lookup.twin_of("k1").twin is None and lookup.twin_of("k1").why_not == ""
-        admin.twins.save(calibration(scale_left=0.96).to_json("carol", FITTED_AT), "k1")
-        assert lookup.twin_of("k1").twin is None  # the answer kept a few seconds
+        assert lookup.twin_of("east", "k1").twin is None
+        assert lookup.twin_of("east", "k1").why_not == ""
+        admin.twins.save(calibration(scale_left=0.96).to_json("carol", FITTED_AT), "k1", "east")
+        assert lookup.twin_of("east", "k1").twin is None  # the answer kept a few seconds
         fresh = TwinLookup(runner.z, lab.realm, seal, cache_s=0.0)
-        got = fresh.twin_of("k1").twin
+        got = fresh.twin_of("east", "k1").twin
         assert got is not None and got.drive.scale_left == 0.96 and got.fitted_by == "carol"
-        admin.twins.save(calibration(scale_left=0.95).to_json("dave", FITTED_AT), "k1")
-        got = fresh.twin_of("k1").twin
+        admin.twins.save(calibration(scale_left=0.95).to_json("dave", FITTED_AT), "k1", "east")
+        got = fresh.twin_of("east", "k1").twin
         assert got is not None and got.drive.scale_left == 0.95  # the newest is in force
-        reply = admin.twins.of("k1")
-        assert reply.versions == 2 and reply.history == []  # no lines unless asked
+        reply = admin.twins.of("k1", "east")
+        assert reply.versions == 2 and reply.history == [] and reply.arena == "east"
+        # Another arena's k1 is another robot: east's twin is not its.
+        assert fresh.twin_of("west", "k1").twin is None
+        admin.twins.save(calibration(scale_left=1.04).to_json("joe", FITTED_AT), "k1", "west")
+        got = fresh.twin_of("west", "k1").twin
+        assert got is not None and got.fitted_by == "joe"
+        assert [(t.arena, t.robot, t.versions) for t in admin.twins.robots()] == [
+            ("east", "k1", 2), ("west", "k1", 1),
+        ]  # fmt: skip
         lab.registry.stop()
-        gone = fresh.twin_of("k1")
+        gone = fresh.twin_of("east", "k1")
     assert gone.twin is None and gone.why_not == "the registry did not give k1's twin"
