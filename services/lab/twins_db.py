@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.twin.twinfile import Twin, TwinFileError, parse_twin
-from services.lab.database import DbError, LabDatabase
+from services.lab.database import ROSTER_SCHEMA, DbError, LabDatabase
 
 # Keyed by arena (the real arena's agent context) and robot: two arenas' k1 are two
 # robots. Arena '': a twin kept before twins were per arena (or a lab admin's for no
@@ -85,6 +85,8 @@ class TwinStore:
                 )
                 c.execute("DROP TABLE twins_by_robot")
         database.create(SCHEMA, "twin table")
+        # The roster is the registry's (courses_db); created here too, for teaching().
+        database.create(ROSTER_SCHEMA, "course tables")
 
     @classmethod
     def open(cls, path: Path) -> TwinStore:
@@ -156,6 +158,14 @@ class TwinStore:
             "SELECT COUNT(*) FROM twins WHERE arena = ? AND robot = ?", arena, robot
         )
         return int(rows[0][0]) if rows else 0
+
+    def teaching(self, user: str) -> frozenset[str]:
+        """The courses ``user`` is a teacher of (the course roles a roster gives): a course's
+        teachers read the twins of its arenas."""
+        rows = self.database.rows(
+            "SELECT course FROM course_members WHERE user = ? AND role = 'teacher'", user
+        )
+        return frozenset(str(r[0]) for r in rows)
 
     def robots(self) -> list[tuple[str, str, int]]:
         """Each (arena, robot) with a twin, and how many versions it has."""

@@ -20,8 +20,12 @@ from common.lab_errors import LabError
 from common.robots import registry
 from common.robots.robotfile import parse
 from services.commands import twin as twin_cli
+from services.registry.accounts_db import RegistryDB
+from services.registry.courses_db import CourseStore
+from services.registry.roster import RosterRow
 from services.runner.twins import TwinLookup
-from tests.conftest import Procs, Router
+from tests.conftest import Procs, Router, wait_for
+from tests.kit.agentkit import start_agent_context, start_engine
 from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, make_lab
 from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration, document
 
@@ -115,3 +119,59 @@ def test_a_runner_reads_the_twin_in_force_and_says_when_the_registry_is_gone(
         lab.registry.stop()
         gone = fresh.twin_of("east", "k1")
     assert gone.twin is None and gone.why_not == "the registry did not give k1's twin"
+
+
+def test_an_owner_keeps_only_their_arenas_robots_and_a_course_teacher_reads_its_arenas(
+    lab: ProcessLab,
+) -> None:
+    """ida owns the arena ``arena`` (k0..k3) and teaches the course robotics with carol, a
+    student account made a teacher of it; bob teaches another course."""
+    db = RegistryDB(lab.db_path)
+    courses = CourseStore(db)
+    courses.import_roster("robotics", [RosterRow(1, "ida", role="teacher"),
+                                       RosterRow(2, "carol", role="teacher")])  # fmt: skip
+    courses.import_roster("other", [RosterRow(1, "bob", role="teacher")])
+    db.close()
+    start_engine(lab, "foraging")
+    start_agent_context(lab, ctx="arena")
+    k1 = calibration("k1").to_json("ida", FITTED_AT)
+    k9 = calibration("k9").to_json("ida", FITTED_AT)
+    with lab.client("ida") as ida, lab.client("carol") as carol, lab.client("bob") as bob:
+        # The registry learns the arena's robots from the context (within a few seconds).
+        def robots_known() -> bool:
+            try:
+                ida.twins.save(k9, "k9", "arena")
+            except LabError as exc:
+                return "has no robot k9" in str(exc)
+            raise AssertionError("k9's twin was kept for an arena without k9")
+
+        wait_for(robots_known, 30, "the registry knowing the arena's robots")
+        with pytest.raises(LabError) as refused:
+            ida.twins.save(k9, "k9", "arena")
+        assert "ida may not keep k9's twin: arena arena has no robot k9 (its robots: k0, k1, " in (
+            str(refused.value)
+        )
+        assert ida.twins.save(k1, "k1", "arena").version == 1  # a robot of her arena
+        with lab.client("admin") as admin:
+            admin.twins.save(calibration("k2").to_json("admin", FITTED_AT), "k2")  # no arena
+            trail = audit_trail(admin, action="twin_save")
+        assert ("ida", "refused", "twin/arena/k9") in [
+            (e.actor, e.outcome, e.target) for e in trail
+        ]
+        # carol teaches the arena's course: she reads its twins, and only those.
+        reply = carol.twins.of("k1", "arena")
+        assert reply.current is not None and reply.arena == "arena"
+        assert [(t.arena, t.robot) for t in carol.twins.robots()] == [("arena", "k1")]
+        with pytest.raises(
+            LabError,
+            match="carol may not read the twins of arena east: it is "
+            r"not an arena of a course carol teaches \(those running now: arena\)",
+        ):
+            carol.twins.of("k1", "east")  # fmt: skip
+        with pytest.raises(
+            LabError, match="carol may not keep k1's twin: arena arena is not yours"
+        ):
+            carol.twins.save(k1, "k1", "arena")  # fmt: skip
+        # bob teaches another course: none of the arena's twins.
+        with pytest.raises(LabError, match="bob may not read the robots' twins"):
+            bob.twins.of("k1", "arena")
