@@ -26,6 +26,7 @@ from common.twin.motion import F64, wrap
 
 SENSORS = 8
 NEAR_READING = 30.0  # an IR reading this high: the sensor sees something
+PLACES = 10  # camera poses tried to place the robot in the rebuilt arena
 # The robot file's keys of its sensors' noise: set to 0, or left out (each sensor's own).
 _NOISE_OFF = ("noise_fraction", "noise_counts")
 _NOISE_EACH = "sensor_noise_counts"
@@ -69,15 +70,23 @@ def model_readings(
     """(P, 8) IR and (P, 8) ambient readings of the robot type ``robot`` (name, robot
     file; its noise is turned off here) at each of ``times`` along the camera's
     ``poses``; NaN rows where there is no pose, or it touches a wall or obstacle (the
-    camera's pose is off by a millimetre or two), or there is no snapshot of the arena."""
+    camera's pose is off by a millimetre or two), or there is no snapshot of the arena
+    (or none of the arena the robot could be placed in)."""
     ir = np.full((len(times), SENSORS), np.nan)
     ambient = np.full((len(times), SENSORS), np.nan)
     if snap is None or snap.width <= 0 or snap.height <= 0 or not len(times) or not len(poses):
         return ir, ambient
     at = poses_at(poses, times)
-    try:
-        world = sensing_world(snap, agent, robot[0], quiet(robot[1]), tuple(poses[0, 1:4]))
-    except (MapError, EditError):  # where the camera first saw it, it touches something
+    world = None
+    # Built with the robot where the camera saw it (so where it fits), the first of a few
+    # such poses that touches nothing (the camera's pose is off by a millimetre or two).
+    for start in poses[:: max(1, len(poses) // PLACES)][:PLACES]:
+        try:
+            world = sensing_world(snap, agent, robot[0], quiet(robot[1]), tuple(start[1:4]))
+            break
+        except (MapError, EditError):
+            continue
+    if world is None:
         return ir, ambient
     for k in np.nonzero(np.isfinite(at[:, 0]))[0]:
         x, y, h = at[k]

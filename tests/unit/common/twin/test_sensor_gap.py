@@ -80,9 +80,10 @@ def test_the_models_readings_are_in_the_runs_arena_obstacles_included() -> None:
         height=1000.0, items=[box], lights=[], agents=[], rows=[], kind="real",
     )  # fmt: skip
     khepera = ("khepera_clean", SHIPPED_KHEPERA.read_text().replace('"khepera"', '"khepera_clean"'))
-    # The robot 15 mm short of the box's face, facing it; then the camera loses it.
-    poses = np.array([[0.0, 520.0, 500.0, 0.0], [0.2, 520.0, 500.0, 0.0]])
-    times = np.array([0.1, 2.0])
+    # The robot 2.5 mm short of the box's face, facing it; then the camera loses it. The
+    # first pose the camera gave puts it inside the box (a bad pose): it is placed by the next.
+    poses = np.array([[0.0, 560.0, 500.0, 0.0], [0.1, 520.0, 500.0, 0.0], [0.3, 520.0, 500.0, 0.0]])
+    times = np.array([0.2, 2.0])
     ir, ambient = model_readings(arena, "k1", khepera, poses, times)
     assert ir[0, 2] > 300 and ir[0, 3] > 300, ir  # the front pair sees the box
     assert ir[0, 6] == 0 and ir[0, 7] == 0, ir  # nothing behind
