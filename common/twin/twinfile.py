@@ -5,7 +5,8 @@ comes in from outside (a file a teacher hands ``wart twin save``, a row of the
 lab's database), so every field is checked here, with its range, and a file that
 fails is refused whole with every problem named. A checked twin makes the robot
 file of a simulated copy of its robot: the shipped Khepera with the fitted drive
-(each wheel's scale, the wheel base, the command latency; common/sim2d/specs.py).
+(each wheel's scale, the wheel base, the command latency; common/sim2d/specs.py) and
+each IR sensor's fitted gain and noise (``sensor_gains``, ``sensor_noise_counts``).
 """
 
 from __future__ import annotations
