@@ -122,8 +122,8 @@ def _show(client: LabClient, robot: str, arena: str | None, robot_file: Path | N
         twin = parse_twin(reply.current.document, f"{robot}'s twin from the registry")
     except TwinFileError as exc:
         return cli.fail(str(exc), 1)
-    whose = f"{reply.arena}'s" if reply.arena else "kept for no arena,"
-    print(f"{robot}'s twin{where} ({whose} {reply.versions} version(s)), the newest in force:")
+    whose = "" if reply.arena else ": the one kept for no arena"
+    print(f"{robot}'s twin{where}{whose}, {reply.versions} version(s), the newest in force:")
     for line in reply.history:
         print(f"  {line}")
     d = twin.drive

@@ -74,6 +74,10 @@ def test_wart_twin_saves_lists_and_shows_through_the_registry(
     out = capsys.readouterr().out
     assert "v1: fitted" in out and "saved" in out and "by admin" in out, out
     assert "in force (v1): scale_left 0.96, scale_right 0.99, wheel_base_mm 55" in out, out
+    # An arena without a twin of its own for k1 uses the one kept for no arena.
+    assert twin("ida", "show", "k1", "--arena", "lab") == 0
+    out = capsys.readouterr().out
+    assert "k1's twin in lab: the one kept for no arena, 1 version(s)" in out, out
     # The robot file a lab loads: the shipped Khepera with the fitted drive.
     spec = parse(robot_file.read_bytes(), robot_file.name, registry.build().components)
     assert spec.name == "twin-k1" and spec.drive.wheel_scale == (0.96, 0.99)
