@@ -219,7 +219,7 @@ FLOWS: tuple[Flow, ...] = (
         _ask(m.TwinListQuery, m.TwinList),
         _ask(m.TwinSave, m.TwinSaved),
         **SEALED,
-        note="runners, teachers, owners read; owners, admins save",
+        note="by arena and robot; who may: docs/CALIBRATION.md",
     ),
     _query(
         keys.registry_revocations,

@@ -33,14 +33,16 @@ class TwinCalls:
         """Each robot with a kept twin, its versions and the line of the one in force."""
         return self._ask(self.key, TwinListQuery(), TwinList, "list the robots' twins").robots
 
-    def of(self, robot: str, *, history: bool = False) -> TwinReply:
-        """``robot``'s twin in force (``current`` None: none kept); ``history``: a line
-        for every version too."""
-        request = TwinQuery(robot=robot, history=history)
-        return self._ask(self.key, request, TwinReply, f"read {robot}'s twin")
+    def of(self, robot: str, arena: str | None = None, *, history: bool = False) -> TwinReply:
+        """The twin in force of ``arena``'s ``robot`` (its own, else one kept for no arena;
+        ``current`` None: none kept); ``history``: a line for every version of it too."""
+        request = TwinQuery(robot=robot, history=history, arena=arena)
+        where = f" in {arena}" if arena else ""
+        return self._ask(self.key, request, TwinReply, f"read {robot}'s twin{where}")
 
     def save(self, document: str, robot: str, arena: str | None = None) -> TwinSaved:
-        """Keep a twin file's text as its robot's newest version, in force at once;
-        ``arena``: the arena the saver owns (a lab admin needs none)."""
+        """Keep a twin file's text as the newest version of ``arena``'s robot's twin, in
+        force at once; ``arena``: the arena the saver owns, the robot's (a lab admin may
+        name none: a twin for no arena)."""
         request = TwinSave(document=document, arena=arena)
         return self._ask(self.key, request, TwinSaved, f"keep {robot}'s twin")

@@ -151,6 +151,10 @@ class ContextInfo(Message, frozen=True):
     owner: Ident
     title: ShortText = ""
     members: list[Ident] = msgspec.field(default_factory=list)
+    # An agent context's robots (its world's agents): whose twins its owner may keep.
+    robots: Annotated[list[Ident], msgspec.Meta(max_length=1024)] = msgspec.field(
+        default_factory=list
+    )
 
 
 class DirectoryRequest(Message, frozen=True):

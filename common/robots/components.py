@@ -155,8 +155,9 @@ class IrProximity(ComponentType):
     doc = (
         "A ring of infrared proximity sensors. Each casts rays_per_sensor rays over spread_deg; "
         "the nearest hit goes through the response table (distance -> value, linear between "
-        "rows, the last value beyond), then Gaussian noise of noise_fraction of the value plus "
-        "noise_counts, clipped to 0..max_value."
+        "rows, the last value beyond), times the sensor's gain (sensor_gains), then Gaussian "
+        "noise of noise_fraction of the value plus noise_counts (or the sensor's "
+        "sensor_noise_counts), clipped to 0..max_value."
     )
     params = (
         Param(
@@ -198,6 +199,28 @@ class IrProximity(ComponentType):
             hi=1.0,
         ),
         Param("noise_counts", "number", "additive noise σ", "counts", 2.0, lo=0.0, hi=1000.0),
+        Param(
+            "sensor_gains",
+            "numbers",
+            "each sensor's reading as a share of the response table's, in the order of poses "
+            "(a real robot's twin: wart calibrate); none: 1 each",
+            "",
+            [],
+            lo=0.05,
+            hi=10.0,
+            max_items=16,
+        ),
+        Param(
+            "sensor_noise_counts",
+            "numbers",
+            "each sensor's additive noise σ in place of noise_counts, in the order of poses "
+            "(a real robot's twin); none: noise_counts each",
+            "counts",
+            [],
+            lo=0.0,
+            hi=1000.0,
+            max_items=16,
+        ),
     )
     api = (
         ApiCall(
@@ -228,6 +251,11 @@ class IrProximity(ComponentType):
             out.append(("table_mm", "a response table needs at least two rows"))
         elif any(b <= a for a, b in itertools.pairwise(xs)):
             out.append(("table_mm", "distances must increase"))
+        sensors = len(values["poses"])
+        for key in ("sensor_gains", "sensor_noise_counts"):
+            given = len(values[key])
+            if given and given != sensors:
+                out.append((key, f"must hold one number per sensor ({sensors}), got {given}"))
         return out
 
 

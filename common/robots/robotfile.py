@@ -304,6 +304,8 @@ def _compile(
             spread_rad=math.radians(float(prox["spread_deg"])),
             noise_fraction=float(prox["noise_fraction"]),
             noise_counts=float(prox["noise_counts"]),
+            gains=tuple(float(v) for v in prox["sensor_gains"]),
+            noise_counts_each=tuple(float(v) for v in prox["sensor_noise_counts"]),
         )
         if prox
         else ProximitySpec(poses=(), curve=ResponseCurve((0.0, 1.0), (0.0, 0.0)))

@@ -80,7 +80,8 @@ class Param:
                 return None
             return f"must be one of {', '.join(self.choices)}, got {_show(value)}"
         if kind == "numbers":
-            if not isinstance(value, list) or not value:
+            # Empty only where that is the default (a list "none" means nothing but 1 each).
+            if not isinstance(value, list) or (not value and self.default != []):
                 return f"must be a list of numbers, got {_show(value)}"
             if len(value) > self.max_items:
                 return f"must hold at most {self.max_items} numbers, got {len(value)}"

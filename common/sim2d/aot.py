@@ -183,6 +183,8 @@ def state_sample() -> tuple[Any, ...]:
             np.array([2], dtype=np.int64),
             np.zeros((1, 1, 5)),
             np.ones((1, 1), dtype=np.bool_),
+            np.ones((1, 1)),  # each IR sensor's gain
+            np.zeros((1, 1)),  # each IR sensor's additive noise
         ),
         scene_sample(),  # scene
         objects_table(0, 1),  # pucks

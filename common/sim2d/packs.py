@@ -14,21 +14,20 @@ import numpy as np
 # Column indices of the per-agent float table (AgentSensing.agent_f).
 F_REACH = 0
 F_RADIUS = 1
-F_PROX_NOISE_FRACTION = 2
-F_PROX_NOISE_COUNTS = 3
-F_PROX_MAX = 4
-F_AMB_HALF_ANGLE = 5
-F_AMB_DROP = 6
-F_AMB_DARK = 7
-F_AMB_FLOOR = 8
-F_AMB_NOISE_FRACTION = 9
-F_GRIP_X0 = 10
-F_GRIP_X1 = 11
-F_GRIP_HALF_WIDTH = 12
-F_HAS_GRIP = 13
-F_ARM_LOWERED_ABOVE = 14
-F_AMB_COS_HALF = 15  # cos(F_AMB_HALF_ANGLE): the cone test without an angle
-N_AGENT_F = 16
+F_PROX_NOISE_FRACTION = 2  # the additive noise is per sensor (SensorTables.prox_counts)
+F_PROX_MAX = 3
+F_AMB_HALF_ANGLE = 4
+F_AMB_DROP = 5
+F_AMB_DARK = 6
+F_AMB_FLOOR = 7
+F_AMB_NOISE_FRACTION = 8
+F_GRIP_X0 = 9
+F_GRIP_X1 = 10
+F_GRIP_HALF_WIDTH = 11
+F_HAS_GRIP = 12
+F_ARM_LOWERED_ABOVE = 13
+F_AMB_COS_HALF = 14  # cos(F_AMB_HALF_ANGLE): the cone test without an angle
+N_AGENT_F = 15
 
 # Column indices of the per-agent int table (AgentSensing.agent_i).
 I_PROX_SENSORS = 0  # real (unpadded) proximity sensors
@@ -60,6 +59,10 @@ class SensorTables(NamedTuple):
     curve_n: np.ndarray  # (G,) points used
     amb_local: np.ndarray  # (types, A, 5) ambient sensors, robot frame: x, y, angle, cos, sin
     amb_valid: np.ndarray  # (types, A) bool
+    # (types, S) each IR sensor's gain on the response curve and its additive noise σ
+    # (counts): 1 and the type's noise_counts, unless a twin's robot file gives its own.
+    prox_gain: np.ndarray
+    prox_counts: np.ndarray
 
 
 class StaticScene(NamedTuple):

@@ -25,7 +25,6 @@ from common.sim2d.packs import (
     F_GRIP_X1,
     F_HAS_GRIP,
     F_PROX_MAX,
-    F_PROX_NOISE_COUNTS,
     F_PROX_NOISE_FRACTION,
     F_RADIUS,
     F_REACH,
@@ -176,6 +175,8 @@ def _sense_range(
         curve_n,
         amb_local,
         amb_valid,
+        prox_gain,
+        prox_counts,
     ) = tables
     segs, grid_start, grid_items, grid_nx, grid_ny, cell, occ_segs, static_xy, static_r = scene
     edges, lights = moving[4], moving[5]
@@ -312,13 +313,14 @@ def _sense_range(
             per_sensor[s] = m
         ng = curve_n[g]
         nf = agent_f[a, F_PROX_NOISE_FRACTION]
-        ncounts = agent_f[a, F_PROX_NOISE_COUNTS]
         top = agent_f[a, F_PROX_MAX]
         for j in range(n_prox):
             if j >= agent_i[a, I_PROX_SENSORS]:
                 prox_out[a, j] = 0
                 continue
-            v = _interp(per_sensor[j], curve_x[g], curve_y[g], ng)
+            # The sensor's gain: 1 on a datasheet robot (the same bits: v * 1.0 is v).
+            v = _interp(per_sensor[j], curve_x[g], curve_y[g], ng) * prox_gain[g, j]
+            ncounts = prox_counts[g, j]
             # v * (1 + nf * z1) + ncounts * z2, with z1 and z2 independent standard
             # normals, is normal with mean v and this standard deviation: one draw.
             sd = math.sqrt((v * nf) ** 2 + ncounts * ncounts)

@@ -11,7 +11,8 @@ obstacles or the arena change); a sensing pass only gathers what moves.
 
 Readings (see the "Sensor models" part of docs/WORLDS.md):
 - proximity: each sensor casts ``rays_per_sensor`` rays across its spread; the
-  nearest hit distance goes through the type's response curve; seeded noise.
+  nearest hit distance goes through the type's response curve, times the sensor's
+  gain (1 but on a real robot's twin); seeded noise.
 - ambient: each lit light within a sensor's cone and radius, not hidden by an
   obstacle (a ray from the robot's centre), lowers the reading.
 - presence: the gripper's light barrier sees a round object between the fingers.
@@ -100,6 +101,8 @@ class ProximitySensors:
     curve_x: np.ndarray  # (types, points) response curves, padded
     curve_y: np.ndarray
     curve_n: np.ndarray  # (types,) points used
+    gain: np.ndarray  # (types, S) each sensor's gain on its type's curve
+    counts: np.ndarray  # (types, S) each sensor's additive noise σ (counts)
 
     @classmethod
     def build(
@@ -140,6 +143,8 @@ class ProximitySensors:
         curve_x = np.zeros((len(types), points))
         curve_y = np.zeros((len(types), points))
         curve_n = np.zeros(len(types), dtype=np.int64)
+        gain = np.ones((len(types), s_max))
+        counts = np.zeros((len(types), s_max))
         for g, (spec, slots) in enumerate(types):
             p = spec.proximity
             c = p.curve
@@ -147,12 +152,13 @@ class ProximitySensors:
             curve_x[g, : curve_n[g]] = c.distances_mm
             curve_y[g, : curve_n[g]] = c.values
             k = len(p.poses)
+            gain[g, :k] = [p.gain(i) for i in range(k)]
+            counts[g, :k] = [p.counts(i) for i in range(k)]
             f[slots, K.F_PROX_NOISE_FRACTION] = p.noise_fraction
-            f[slots, K.F_PROX_NOISE_COUNTS] = p.noise_counts
             f[slots, K.F_PROX_MAX] = float(p.max_value)
             i_tab[slots, K.I_PROX_SENSORS] = k
             i_tab[slots, K.I_TYPE] = g
-        return cls(s_max, k_max, ray_local, reach, curve_x, curve_y, curve_n)
+        return cls(s_max, k_max, ray_local, reach, curve_x, curve_y, curve_n, gain, counts)
 
 
 @dataclass(frozen=True)
@@ -238,6 +244,8 @@ class AgentSensing:
             ring.curve_n,
             ambient.local,
             ambient.valid,
+            ring.gain,
+            ring.counts,
         )
         return cls(ring, ambient, tables, tuple(tables))
 

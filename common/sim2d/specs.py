@@ -89,9 +89,9 @@ class DriveSpec:
 class ProximitySpec:
     """An IR proximity ring: each sensor casts ``rays_per_sensor`` rays over ``spread_rad``.
 
-    The reading is ``curve(nearest hit distance)`` with multiplicative noise of
-    ``noise_fraction`` (standard deviation) plus additive ``noise_counts``,
-    clipped to ``0..max_value``.
+    The reading is ``gain * curve(nearest hit distance)`` with multiplicative noise of
+    ``noise_fraction`` (standard deviation) plus additive ``noise_counts`` (each
+    sensor's own where ``noise_counts_each`` gives them), clipped to ``0..max_value``.
     """
 
     poses: tuple[SensorPose, ...]
@@ -101,6 +101,17 @@ class ProximitySpec:
     spread_rad: float = math.radians(30.0)  # total angle covered by the rays of one sensor
     noise_fraction: float = 0.03
     noise_counts: float = 2.0
+    # A real robot's sensors as its twin fitted them (common/twin/): each sensor's reading
+    # as a share of the curve's, and each one's additive noise in place of noise_counts.
+    # Empty: 1 each, noise_counts each (the datasheet's robot).
+    gains: tuple[float, ...] = ()
+    noise_counts_each: tuple[float, ...] = ()
+
+    def gain(self, sensor: int) -> float:
+        return self.gains[sensor] if self.gains else 1.0
+
+    def counts(self, sensor: int) -> float:
+        return self.noise_counts_each[sensor] if self.noise_counts_each else self.noise_counts
 
 
 @dataclass(frozen=True)

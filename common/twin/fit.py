@@ -8,8 +8,9 @@ the robot obeyed, the arena camera's poses of it, its IR readings. From those:
   on the recorded commands for ``WINDOW_S`` and compared with the camera's pose
   then; scipy's ``least_squares`` finds the parameters that make those gaps least;
 - **each IR sensor's gain and noise**: the datasheet's sensor model (the simulator's,
-  noise off) read at each recorded pose in an empty arena of the recording's size
-  says what a datasheet Khepera would have read; each sensor's gain is the least-
+  noise off) read at each recorded pose in the run's arena (its walls and obstacles,
+  from the recording's snapshot: common/twin/readings.py) says what a datasheet
+  Khepera would have read; each sensor's gain is the least-
   squares ratio of what it read to that (numpy's ``lstsq``), its noise what is left.
 
 Each value comes with its standard error (from the fit's Jacobian, inflated for the
@@ -30,10 +31,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
+from common.messages import WorldSnapshot
 from common.recording.reader import Recording
-from common.sim2d import maps
-from common.sim2d.world import EditError
 from common.twin.motion import F64, Drive, predict, wrap
+from common.twin.readings import NEAR_READING, model_readings
 
 WINDOW_S = 1.0  # how far each open-loop prediction runs before it is compared
 HEADING_MM = 30.0  # a radian of heading weighs as this many mm of position
@@ -44,7 +45,6 @@ MIN_TURN_RAD = math.pi / 2  # the wheel base needs this much turning...
 MIN_APART_S = 1.0  # ...while the wheels are commanded apart this long
 MIN_CHANGES = 4  # the latency needs this many changes of command while moving
 MIN_NEAR = 15  # an IR sensor's gain needs this many readings near a wall
-NEAR_READING = 30.0  # a datasheet reading this high: the sensor sees a wall
 SENSORS = 8
 # The datasheet model's IR noise (common/robots/shipped/khepera.toml): a fraction of the
 # reading plus a few counts.
@@ -86,7 +86,14 @@ class RunData:
     commands: F64  # (K, 3): t, left, right (speed units)
     poses: F64  # (M, 4): t, x mm, y mm, heading rad (the camera's)
     samples: F64  # (P, 9): t, the 8 IR readings
-    arena: tuple[float, float]
+    ambient: F64  # (P, 8): the 8 ambient readings of the same samples (NaN: not recorded)
+    snapshot: WorldSnapshot | None  # the arena, as the run's recording saw it at its start
+
+    @property
+    def arena(self) -> tuple[float, float]:
+        """The arena's width and height (mm); 0, 0 without a snapshot of it."""
+        snap = self.snapshot
+        return (snap.width, snap.height) if snap is not None else (0.0, 0.0)
 
     @property
     def path_mm(self) -> float:
@@ -118,8 +125,12 @@ def run_data(rec: Recording, name: str) -> RunData:
     poses = [
         (s.t, r.x, r.y, r.heading) for s in rec.tracked for r in s.record.robots if r.agent == agent
     ]
-    samples = [(s.t, *s.record.proximity[:SENSORS]) for s in rec.samples
-               if s.record.agent == agent and len(s.record.proximity) >= SENSORS]  # fmt: skip
+    rows = sorted(((s.t, s.record) for s in rec.samples
+                   if s.record.agent == agent and len(s.record.proximity) >= SENSORS),
+                  key=lambda row: row[0])  # fmt: skip
+    samples = [(t, *r.proximity[:SENSORS]) for t, r in rows]
+    ambient = [r.ambient[:SENSORS] if len(r.ambient) >= SENSORS else [math.nan] * SENSORS
+               for _, r in rows]  # fmt: skip
     if len(poses) < 10:
         raise TwinError(
             f"{name} has {len(poses)} camera pose(s) of {agent}: calibrating needs the arena "
@@ -127,15 +138,14 @@ def run_data(rec: Recording, name: str) -> RunData:
         )
     if not cmds:
         raise TwinError(f"{name} has no command of {agent}: nothing drove it")
-    snap = rec.snapshot
-    arena = (snap.width, snap.height) if snap is not None else (0.0, 0.0)
     return RunData(
         name,
         agent,
         np.array(sorted(cmds), dtype=float),
         np.array(sorted(poses), dtype=float),
-        np.array(sorted(samples), dtype=float).reshape(-1, 1 + SENSORS),
-        arena,
+        np.array(samples, dtype=float).reshape(-1, 1 + SENSORS),
+        np.array(ambient, dtype=float).reshape(-1, SENSORS),
+        rec.snapshot,
     )
 
 
@@ -267,47 +277,14 @@ def fit_drive(runs: list[RunData]) -> list[Estimate]:
     ]
 
 
-def _clean_khepera() -> str:
-    """The shipped Khepera's robot file with its sensor noise off: the datasheet's readings."""
-    text = SHIPPED_KHEPERA.read_text().replace('name = "khepera"', 'name = "khepera_clean"')
-    for key in ("noise_fraction", "noise_counts"):
-        text = "\n".join(
-            f"{key} = 0.0" if line.split("=")[0].strip() == key else line
-            for line in text.splitlines()
-        )
-    return text + "\n"
-
-
 def datasheet_readings(run: RunData) -> F64:
-    """(P, 8): what a datasheet Khepera reads at each sample's camera pose (NaN: no pose)."""
-    width, height = run.arena
-    out = np.full((len(run.samples), SENSORS), np.nan)
-    if width <= 0 or height <= 0 or not len(run.samples):
-        return out
-    room = {
-        "format": "wart-map",
-        "version": 1,
-        "name": "twin",
-        "arena": {"width": width, "height": height},
-        "robot_types": {"khepera_clean": _clean_khepera()},
-        "agents": [{"id": "r", "type": "khepera_clean", "x": width / 2, "y": height / 2}],
-    }
-    world = maps.build_world(maps.parse_map(json.dumps(room), source="twin"), name="twin")
-    t = run.poses[:, 0]
-    for k, at in enumerate(run.samples[:, 0]):
-        j = int(np.searchsorted(t, at))
-        if j <= 0 or j >= len(t) or t[j] - t[j - 1] > 0.5:
-            continue  # no camera pose on both sides of the sample
-        f = (at - t[j - 1]) / (t[j] - t[j - 1])
-        x, y = (1 - f) * run.poses[j - 1, 1:3] + f * run.poses[j, 1:3]
-        h = run.poses[j - 1, 3] + f * wrap(np.array(run.poses[j, 3] - run.poses[j - 1, 3]))
-        try:
-            world.move("r", float(x), float(y), float(h))
-        except EditError:
-            continue  # touching a wall: the camera's pose is off by a millimetre or two
-        world.sense()
-        out[k] = world.proximity[0, :SENSORS]
-    return out
+    """(P, 8): what a datasheet Khepera reads at each sample's camera pose, in the run's
+    arena (NaN: no pose; common/twin/readings.py)."""
+    khepera = SHIPPED_KHEPERA.read_text().replace('name = "khepera"', 'name = "khepera_clean"')
+    ir, _ = model_readings(
+        run.snapshot, run.agent, ("khepera_clean", khepera), run.poses, run.samples[:, 0]
+    )
+    return ir
 
 
 def fit_proximity(runs: list[RunData]) -> list[Estimate]:

@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from common.recording.reader import Recording
-from common.twin.fit import RunData, open_loop_error, run_data
+from common.twin.fit import SHIPPED_KHEPERA, RunData, open_loop_error, run_data
 from common.twin.motion import Drive
+from common.twin.readings import NEAR_READING, SensorError, model_readings, sensor_errors
 from common.twin.twinfile import Twin
 
 HORIZONS_S = (1.0, 5.0, 10.0)
@@ -54,4 +55,42 @@ def side_by_side(real: Recording, name: str, twin: Twin) -> list[str]:
         f"gap on {name} ({run.agent}), {heading()}:",
         f"  {gap('datasheet', Drive(), [run]).line()}",
         f"  {gap(twin.model(), twin.drive, [run]).line()}",
+        *sensor_lines(run, twin, name),
     ]
+
+
+def sensor_gap(run: RunData, twin: Twin | None) -> list[SensorError]:
+    """The datasheet Khepera's sensor error on ``run`` and, given one, ``twin``'s: each
+    model's readings along the run's tracked path against the recorded ones."""
+    khepera = SHIPPED_KHEPERA.read_text().replace('name = "khepera"', 'name = "khepera_clean"')
+    robots = [("datasheet", ("khepera_clean", khepera))]
+    if twin is not None:
+        robots.append((twin.model(), (twin.type_name, twin.robot_file())))
+    times = run.samples[:, 0]
+    models = [
+        (model, *model_readings(run.snapshot, run.agent, robot, run.poses, times))
+        for model, robot in robots
+    ]
+    return sensor_errors(models, run.samples[:, 1:], run.ambient)
+
+
+def sensor_lines(run: RunData, twin: Twin | None, name: str = "") -> list[str]:
+    """The sensor gap as the report and the page print it."""
+    errors = sensor_gap(run, twin)
+    if all(e is None for e in errors[0].ir):
+        return [
+            f"sensor error: no IR reading of {run.agent} to compare (no sample with a "
+            "camera pose near it, or no snapshot of the arena in the recording)"
+        ]
+    where = f" on {name}" if name else ""
+    out = [
+        f"sensor error{where}, median |model - recorded| (counts), IR 0..7 where the robot "
+        f"or a model read {NEAR_READING:g} or more:",
+        *(f"  {e.ir_line()}" for e in errors),
+    ]
+    if all(e is None for e in errors[0].ambient):
+        out.append("  ambient: not recorded")
+    else:
+        out.append("  ambient 0..7, every sample (the twin's is the datasheet's: not fitted):")
+        out.append(f"  {errors[0].ambient_line()}")
+    return out

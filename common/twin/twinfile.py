@@ -5,7 +5,8 @@ comes in from outside (a file a teacher hands ``wart twin save``, a row of the
 lab's database), so every field is checked here, with its range, and a file that
 fails is refused whole with every problem named. A checked twin makes the robot
 file of a simulated copy of its robot: the shipped Khepera with the fitted drive
-(each wheel's scale, the wheel base, the command latency; common/sim2d/specs.py).
+(each wheel's scale, the wheel base, the command latency; common/sim2d/specs.py) and
+each IR sensor's fitted gain and noise (``sensor_gains``, ``sensor_noise_counts``).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ RANGES: dict[str, tuple[float, float]] = {
     **{f"ir{i}_noise": (0.0, 1023.0) for i in range(SENSORS)},
 }
 DRIVE = ("scale_left", "scale_right", "wheel_base_mm", "latency_s")
+DATASHEET_NOISE_COUNTS = 2.0  # the shipped Khepera's additive IR noise (its noise_counts)
 TOP_KEYS = ("format", "version", "robot", "fitted_by", "fitted_at", "runs", "parameters",
             "ambient")  # fmt: skip
 ENTRY_KEYS = ("value", "sigma", "datasheet", "unit", "runs", "refused")
@@ -62,6 +64,10 @@ class Twin:
     drive: Drive
     fitted: tuple[str, ...]  # the drive parameters fitted (the others: the datasheet's)
     text: str  # the file, as checked
+    # Each IR sensor's gain and additive noise (counts) as its simulated copy reads; empty:
+    # no sensor's gain was fitted, the copy reads the datasheet's curve.
+    ir_gains: tuple[float, ...] = ()
+    ir_noise_counts: tuple[float, ...] = ()
 
     @property
     def day(self) -> str:
@@ -77,7 +83,8 @@ class Twin:
         return "twin-" + re.sub(r"[^a-z0-9_-]", "-", self.robot.lower())
 
     def robot_file(self) -> str:
-        """The shipped Khepera's robot file with this twin's drive: its simulated copy."""
+        """The shipped Khepera's robot file with this twin's drive and, where fitted, each IR
+        sensor's gain and noise: its simulated copy."""
         d = self.drive
         text = SHIPPED_KHEPERA.read_text()
         drive = (
@@ -85,9 +92,17 @@ class Twin:
             f"wheel_scale = [{d.scale_left!r}, {d.scale_right!r}]\n"
             f"latency_s = {d.latency_s!r}"
         )
+        sensors = (
+            f"noise_counts = {DATASHEET_NOISE_COUNTS!r}\n"
+            f"sensor_gains = [{', '.join(repr(g) for g in self.ir_gains)}]\n"
+            f"sensor_noise_counts = [{', '.join(repr(n) for n in self.ir_noise_counts)}]"
+            if self.ir_gains
+            else f"noise_counts = {DATASHEET_NOISE_COUNTS!r}"
+        )
         for old, new in (
             ('name = "khepera"', f'name = "{self.type_name}"'),
             ("wheel_base_mm = 53.0", drive),
+            (f"noise_counts = {DATASHEET_NOISE_COUNTS!r}", sensors),
         ):
             if old not in text:  # the shipped file changed shape: say so, never half-edit it
                 raise RuntimeError(f"{SHIPPED_KHEPERA} has no line {old!r}")
@@ -198,5 +213,37 @@ def parse_twin(data: bytes | str, source: str = "twin file", now: float | None =
     if problems:
         raise TwinFileError(source, problems)
     drive = Drive(*(values[name] for name in DRIVE))
+    gains, noise = _sensors(params, values)
     return Twin(str(robot), str(who), float(when), tuple(runs), drive, tuple(fitted),  # type: ignore[arg-type]
-                raw.decode("utf-8"))  # fmt: skip
+                raw.decode("utf-8"), gains, noise)  # fmt: skip
+
+
+def _sensors(
+    params: dict[str, Any], values: dict[str, float]
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Each IR sensor's gain and additive noise for the simulated copy (empty: none fitted).
+
+    A sensor whose gain was refused keeps the datasheet's (1, noise_counts). The fitted
+    noise is the spread of a sensor's readings about its fitted curve, which the
+    simulator draws as a share of the reading plus an additive part: the additive part is
+    what makes the two agree at the readings the fit saw (the entry's ``datasheet`` is the
+    datasheet model's spread there, its own additive part included)."""
+
+    def fitted(name: str) -> bool:
+        entry = params.get(name)
+        return isinstance(entry, dict) and not entry.get("refused") and name in values
+
+    sensors = range(SENSORS)
+    if not any(fitted(f"ir{i}_gain") for i in sensors):
+        return (), ()
+    gains, noise = [], []
+    for i in sensors:
+        gain = values[f"ir{i}_gain"] if fitted(f"ir{i}_gain") else 1.0
+        counts = DATASHEET_NOISE_COUNTS
+        if fitted(f"ir{i}_noise"):
+            spread, model = values[f"ir{i}_noise"], float(params[f"ir{i}_noise"]["datasheet"])
+            proportional = max(0.0, model**2 - DATASHEET_NOISE_COUNTS**2)
+            counts = min(1000.0, math.sqrt(max(0.0, spread**2 - proportional)))
+        gains.append(gain)
+        noise.append(round(counts, 3))
+    return tuple(gains), tuple(noise)

@@ -9,10 +9,12 @@ constrained it; one the runs cannot constrain is refused with the reason and kep
 at the datasheet's. Then the gap: the datasheet model and the fitted twin, each
 run open-loop on the recorded commands from every camera pose, against where the
 camera saw the robot 1, 5 and 10 s later (median mm; the same runs as the fit,
-so an optimistic figure). ``--out FILE`` writes the twin (JSON: values, errors,
-runs, who fitted and when); ``--save --user U`` has the registry keep it as the
-robot's newest version (``wart twin``; the owner of the arena named with
-``--arena``, or a lab admin). docs/CALIBRATION.md.
+so an optimistic figure), and each sensor's error: what each model's sensors read
+along the run's tracked path against what the robot read (median counts).
+``--out FILE`` writes the twin (JSON: values, errors, runs, who fitted and when);
+``--save --user U`` has the registry keep it as the robot's newest version (``wart
+twin``; the owner of the arena named with ``--arena``, or a lab admin).
+docs/CALIBRATION.md.
 
     wart calibrate k1 --recordings dance.mcap other-run.mcap --out k1-twin.json
     wart calibrate k1 --recordings dance.mcap --save --user carol --arena real
@@ -81,8 +83,11 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int
     print(f"{gap.heading()}; of several runs, the worst run's:")
     for name, drive in (("datasheet", Drive()), ("twin", twin.fitted_drive())):
         print(f"  {gap.gap(name, drive, runs).line()}")
-    print("  (on the runs it was fitted to: record another run to check it on new data)")
     text = twin.to_json(getpass.getuser(), time.time()) + "\n"
+    fitted = parse_twin(text, f"{args.robot}'s twin")
+    for run in runs:
+        print("\n".join(gap.sensor_lines(run, fitted, run.name)))
+    print("  (on the runs it was fitted to: record another run to check it on new data)")
     if args.out is not None:
         try:
             args.out.write_text(text)

@@ -21,7 +21,10 @@ The gap, for a real run (REAL, or FILE alone) watched by the arena camera: with
 twin in force in the lab's database, ``wart twin``), the datasheet model and the
 twin, each run open-loop on the run's recorded commands from every camera pose,
 against where the camera saw the robot 1, 5 and 10 s later (median mm), side by
-side (needs the lab's packages: scipy and the simulator).
+side; then each IR sensor's error: what each model's sensors read along the run's
+tracked path, in its arena rebuilt from the recording, against what the robot read
+(median counts), and the ambient sensors' (needs the lab's packages: scipy and the
+simulator).
 """
 
 from __future__ import annotations
@@ -57,14 +60,17 @@ def _gap(real: Recording, name: str, twin_file: Path | None, db: Path | None) ->
         except OSError as exc:
             raise ValueError(f"cannot read {twin_file}: {exc.strerror or exc}") from None
     assert db is not None
-    agent = real.info.agent if real.info is not None else ""
+    # The twin in force in the run's arena (its agent context): the arena's own, else one
+    # kept for no arena.
+    agent, arena = (real.info.agent, real.info.ctx) if real.info is not None else ("", "")
     store = TwinStore.open(db)
     try:
-        stored = store.current(agent)
+        stored = store.current(arena, agent)
     finally:
         store.close()
     if stored is None:
-        raise ValueError(f"no twin of {agent or 'its robot'} is kept in {db} (wart twin)")
+        robot = f"{agent} in {arena}" if agent and arena else (agent or "its robot")
+        raise ValueError(f"no twin of {robot} is kept in {db} (wart twin)")
     return side_by_side(real, name, stored.twin)
 
 

@@ -1,13 +1,21 @@
 """``wart twin``: the real robots' twins the lab keeps (the registry serves them), versioned.
 
-- ``wart twin --user U list``: each robot with a twin, its versions, the one in force;
-- ``wart twin --user U show ROBOT``: every version of ROBOT's twin (who fitted it, when,
-  from which runs, who saved it) and the drive of the one in force; ``--robot-file
-  FILE`` writes its simulated copy as a robot file (the Khepera with the fitted drive:
-  ``wart engine --robots-dir``, a map's ``robot_types``);
+- ``wart twin --user U list``: each arena's robot with a twin, its versions, the one
+  in force;
+- ``wart twin --user U show ROBOT [--arena CTX]``: every version of the twin in force
+  for the arena's ROBOT (who fitted it, when, from which runs, who saved it) and its
+  drive; ``--robot-file FILE`` writes its simulated copy as a robot file (the Khepera
+  with the fitted drive and IR gains: ``wart engine --robots-dir``, a map's
+  ``robot_types``);
 - ``wart twin --user U save FILE [--arena CTX]``: keep a twin file (``wart calibrate
-  --out``) as its robot's newest version, after checking every field here and in the
-  registry (a file refused is named with each problem; nothing is kept).
+  --out``) as the newest version of the arena's robot's twin, after checking every
+  field here and in the registry (a file refused is named with each problem; nothing
+  is kept).
+
+Twins are kept by arena (the real arena's agent context) and robot: two arenas' k1
+are two robots. A twin kept for no arena (a lab admin's save without ``--arena``, or
+one kept before twins were per arena) is in force for a robot of that name in an
+arena without its own.
 
 The registry keeps the twins in the lab's database and says who may read them (the
 runners, teachers, lab admins, arena owners) and who may save one (the owner of the
@@ -46,6 +54,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart twin") -> int:
     sub.add_parser("list", help="each robot with a twin, its versions")
     show = sub.add_parser("show", help="every version of a robot's twin, the newest in force")
     show.add_argument("robot")
+    show.add_argument("--arena", help="the robot's arena (none: the twin kept for no arena)")
     show.add_argument(
         "--robot-file", type=Path, metavar="FILE",
         help="write the simulated copy of the robot as a robot file (TOML)",
@@ -57,9 +66,10 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart twin") -> int:
 
 
 def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
+    arena = getattr(args, "arena", None)  # show and save name one
+    if arena is not None:
+        keys.check_ident("--arena", arena)
     if args.action == "save":  # checked before any network: a bad file costs no login
-        if args.arena is not None:
-            keys.check_ident("--arena", args.arena)
         try:
             twin = read_twin_file(args.file)
         except ValueError as exc:
@@ -68,7 +78,7 @@ def _run(args: argparse.Namespace, options: NetworkOptions) -> int:
         if args.action == "list":
             return _list(client)
         if args.action == "show":
-            return _show(client, args.robot, args.robot_file)
+            return _show(client, args.robot, args.arena, args.robot_file)
         return save_twin(client, twin, args.arena)
 
 
@@ -88,7 +98,8 @@ def read_twin_file(path: Path) -> Twin:
 
 def save_twin(client: LabClient, twin: Twin, arena: str | None) -> int:
     saved = client.twins.save(twin.text, twin.robot, arena)
-    print(f"kept {saved.model} as {saved.robot}'s twin v{saved.version} (in force)")
+    where = f" in {saved.arena}" if saved.arena else " (for no arena in particular)"
+    print(f"kept {saved.model} as {saved.robot}'s twin{where} v{saved.version} (in force)")
     return 0
 
 
@@ -97,19 +108,22 @@ def _list(client: LabClient) -> int:
     if not robots:
         print("no twin is kept: wart calibrate ROBOT --recordings RUN.mcap --save --user U")
     for listed in robots:
-        print(f"{listed.robot}: {listed.versions} version(s); in force {listed.current}")
+        name = f"{listed.arena}/{listed.robot}" if listed.arena else f"{listed.robot} (no arena)"
+        print(f"{name}: {listed.versions} version(s); in force {listed.current}")
     return 0
 
 
-def _show(client: LabClient, robot: str, robot_file: Path | None) -> int:
-    reply = client.twins.of(robot, history=True)
+def _show(client: LabClient, robot: str, arena: str | None, robot_file: Path | None) -> int:
+    reply = client.twins.of(robot, arena, history=True)
+    where = f" in {arena}" if arena else ""
     if reply.current is None:
-        return cli.fail(f"no twin of {robot} is kept (wart twin list)", 1)
+        return cli.fail(f"no twin of {robot}{where} is kept (wart twin list)", 1)
     try:
         twin = parse_twin(reply.current.document, f"{robot}'s twin from the registry")
     except TwinFileError as exc:
         return cli.fail(str(exc), 1)
-    print(f"{robot}'s twin, {reply.versions} version(s), the newest in force:")
+    whose = "" if reply.arena else ": the one kept for no arena"
+    print(f"{robot}'s twin{where}{whose}, {reply.versions} version(s), the newest in force:")
     for line in reply.history:
         print(f"  {line}")
     d = twin.drive

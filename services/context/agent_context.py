@@ -269,8 +269,15 @@ class AgentContext(ChatRoom):
 
     def on_state(self, query: zenoh.Query) -> Message:
         self.verifier.open(str(query.key_expr), query.payload, ContextInfoRequest)
+        with self.state.lock:
+            robots = sorted(self.state.book.lines)
         return ContextInfo(
-            ctx=self.room, kind="agent", owner=self.owner, title=self.title, members=self.members()
+            ctx=self.room,
+            kind="agent",
+            owner=self.owner,
+            title=self.title,
+            members=self.members(),
+            robots=robots,
         )
 
     def on_request(self, query: zenoh.Query) -> Message:

@@ -22,15 +22,13 @@ not failed: the robot only clamps them.
 from __future__ import annotations
 
 import contextlib
-import math
 import re
 import time
-from typing import Any
 
 from common.controller.actuators import apply_command
 from common.messages import DryRunCollision, DryRunReport, WorldSnapshot
-from common.sim2d import maps
-from common.sim2d.world import EditError, World
+from common.sim2d.world import EditError
+from common.twin.arena import world_from_snapshot
 from common.twin.twinfile import Twin
 from services.runner.lockstep import Lockstep, Touches
 from services.runner.sandbox import SandboxLimits
@@ -51,87 +49,6 @@ def wall_limit(seconds: float) -> float:
 MAX_COLLISIONS = 100
 MAX_OUTPUT = 50
 _LINE = re.compile(r'File "/ctl/user/controller\.py", line (\d+)')
-
-
-def snapshot_to_map(snap: WorldSnapshot) -> dict[str, Any]:
-    """The arena of a snapshot as a map (common/sim2d/maps.py format), robots where they are."""
-
-    def shape(info: Any) -> dict[str, Any]:
-        if info.shape.kind == "circle":
-            return {"shape": "circle", "radius": max(info.shape.radius, 0.1)}
-        return {"shape": "polygon", "points": [list(p) for p in info.shape.points]}
-
-    def pose(x: float, y: float, heading: float) -> dict[str, float]:
-        return {"x": x, "y": y, "heading_deg": math.degrees(heading)}
-
-    out: dict[str, Any] = {
-        "format": maps.FORMAT,
-        "version": maps.VERSION,
-        "name": snap.world,
-        "arena": {"width": snap.width, "height": snap.height},
-        "obstacles": [],
-        "objects": [],
-        "lights": [],
-        "agents": [],
-    }
-    for item in snap.items:
-        if item.category == "obstacle":
-            out["obstacles"].append(
-                {"id": item.id, **shape(item), **pose(item.x, item.y, item.heading)}
-            )
-        elif item.category == "object":
-            out["objects"].append(
-                {
-                    "id": item.id,
-                    "kind": item.kind,
-                    **shape(item),
-                    **pose(item.x, item.y, item.heading),
-                    "mass": max(item.mass, 1.0),
-                    "resistivity": item.resistivity,
-                }
-            )
-    for light in snap.lights:
-        out["lights"].append(
-            {
-                "id": light.id,
-                "x": light.x,
-                "y": light.y,
-                "intensity": light.intensity,
-                "radius": light.radius,
-                "mode": light.mode,
-                "period": light.period,
-            }
-        )
-    if snap.robot_files:  # types the lab does not ship: simulated from their files
-        out["robot_types"] = dict(snap.robot_files)
-    for agent in snap.agents:
-        out["agents"].append(
-            {
-                "id": agent.id,
-                "type": agent.type,
-                **pose(agent.x, agent.y, agent.heading),
-                "gripper": agent.gripper,
-            }
-        )
-    return out
-
-
-def world_from_snapshot(snap: WorldSnapshot, twin: Twin | None = None) -> World:
-    """A private World like the snapshot's (MapError if it cannot be rebuilt); ``twin``'s
-    robot simulated by its twin's robot file (the Khepera with the fitted drive)."""
-    room = snapshot_to_map(snap)
-    if twin is not None:
-        room.setdefault("robot_types", {})[twin.type_name] = twin.robot_file()
-        for agent in room["agents"]:
-            if agent["id"] == twin.robot:
-                agent["type"] = twin.type_name
-    return maps.build_world(
-        room,
-        name=snap.world,
-        seed=snap.seed,
-        tick_s=snap.tick_s,
-        source=f"world {snap.world}",
-    )
 
 
 def _article(what: str) -> str:

@@ -366,7 +366,7 @@ class RunnerService(Service):
         principal.require("lease", "ask a runner for dry runs")
         _precheck(request.source, request.filename)
         snap = self._snapshot(request.world)
-        twin = self._twin(snap, request.agent)
+        twin = self._twin(snap, request.ctx, request.agent)
         try:
             report = dry_run(
                 snap,
@@ -394,12 +394,12 @@ class RunnerService(Service):
         )
         return report
 
-    def _twin(self, snap: WorldSnapshot, agent: str) -> TwinChoice:
-        """A real arena's robot's twin in force, as the registry keeps it (a simulated
-        arena's robots are the map's: no twin)."""
+    def _twin(self, snap: WorldSnapshot, arena: str, agent: str) -> TwinChoice:
+        """A real arena's robot's twin in force, as the registry keeps it for the arena (its
+        agent context); a simulated arena's robots are the map's: no twin."""
         if snap.kind != "real":
             return TwinChoice(None)
-        return self.twins.twin_of(agent)
+        return self.twins.twin_of(arena, agent)
 
     def _on_heat(self, query: zenoh.Query) -> Message:
         """A competition's heat: several entries in one world (services/runner/heat.py)."""

@@ -54,26 +54,27 @@ class TwinLookup:
         self.seal = seal
         self.cache_s = cache_s
         self.timeout = timeout
-        self._known: dict[str, tuple[float, TwinChoice]] = {}
+        self._known: dict[tuple[str, str], tuple[float, TwinChoice]] = {}
         self._lock = threading.Lock()
 
-    def twin_of(self, robot: str) -> TwinChoice:
+    def twin_of(self, arena: str, robot: str) -> TwinChoice:
+        """The twin in force for ``arena``'s ``robot`` (the arena's agent context)."""
         now = time.monotonic()
         with self._lock:
-            kept = self._known.get(robot)
+            kept = self._known.get((arena, robot))
         if kept is not None and now - kept[0] < self.cache_s:
             return kept[1]
-        choice = self._ask(robot)
+        choice = self._ask(arena, robot)
         with self._lock:
-            self._known[robot] = (now, choice)
+            self._known[(arena, robot)] = (now, choice)
         return choice
 
-    def _ask(self, robot: str) -> TwinChoice:
+    def _ask(self, arena: str, robot: str) -> TwinChoice:
         try:
             reply = ask(
                 self.session,
                 self.key,
-                TwinQuery(robot=robot),
+                TwinQuery(robot=robot, arena=arena),
                 TwinReply,
                 what=f"{robot}'s twin",
                 timeout=self.timeout,

@@ -9,6 +9,7 @@ keep a fitted twin; the registry's answer shows under the button.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,11 +17,13 @@ import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import expect
 
+from services.bridge.rehearse import rehearse
 from tests.browser.conftest import settle, wait_until
 from tests.browser.test_real_agents import enter_arena, pick_robot, upload
 from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
-from tests.kit.reallab import RealLab, real_lab
+from tests.kit.reallab import CTX, RealLab, real_lab
+from tests.unit.common.twin.test_sensor_gap import HIDDEN
 from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration
 from viewers.web.replay import ReplayFeed
 
@@ -104,10 +107,20 @@ def test_my_slot_is_listed_in_my_recordings_and_replays(open_page, lab: RealLab)
     folder = ida.p.get_by_text("Recordings", exact=True).first
     settle(folder)
     folder.click()
+    # A real run's fit, as the page shows it: here a rehearsal of the dance on the emulated
+    # body, whose sensor 3 reads 1.3 times the datasheet's curve (a real arena's recording).
+    owned.show_calibration("dance", "k1", rehearse(HIDDEN, seed=3))
+    ida.wait_text("k1's twin from dance")
+    ida.wait_text("sensor error on dance, median |model - recorded| (counts)")
+    shown = owned.details.content.replace("\\", "")  # the markdown's escapes
+    ir = re.search(r"- datasheet: ([-0-9 /]+)\n- k1's twin fitted [^:]+: ([-0-9 /]+)", shown)
+    assert ir is not None, shown
+    assert float(ir.group(1).split(" / ")[3]) > 3 * float(ir.group(2).split(" / ")[3]), shown
     owned._offer(fitted)
     ida.click("Keep as k0's twin")
-    ida.wait_text(f"Kept k0's twin fitted {DAY} by ida as k0's twin v1 (in force).")
+    # Kept for this arena's k0 (another arena's k0 is another robot).
+    ida.wait_text(f"Kept k0's twin fitted {DAY} by ida as k0's twin in {CTX} v1 (in force).")
     ida.screenshot("real-recording-keep-twin")
     with lab.lab.client("ida") as client:
-        kept = client.twins.of("k0").current
+        kept = client.twins.of("k0", CTX).current
     assert kept is not None and kept.version == 1 and kept.saved_by == "ida"

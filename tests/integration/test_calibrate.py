@@ -143,14 +143,14 @@ def test_the_dance_on_the_real_arena_gives_the_robots_twin(
         assert done.returncode == 0, done.stderr
         day = time.strftime("%Y-%m-%d", time.gmtime())
         model = f"k1's twin fitted {day} by {getpass.getuser()}"
-        assert f"kept {model} as k1's twin v1 (in force)" in done.stdout
+        assert f"kept {model} as k1's twin in {CTX} v1 (in force)" in done.stdout
         # Kept in the lab: a dry run of a student who will run on k1 simulates k1's twin
         # (once the runner's answer about k1 has aged out: it keeps one a few seconds).
         time.sleep(max(0.0, TWIN_CACHE_S - (time.monotonic() - asked)))
         after = alice.dry_run("k1", DANCE.read_bytes(), filename=DANCE.name, seconds=1.0)
     assert after.model == f"simulated with {model}", after
     assert after.will_run, after
-    shown = wart("twin", *login, "show", "k1")
+    shown = wart("twin", *login, "show", "k1", "--arena", CTX)
     assert shown.returncode == 0 and "v1: fitted" in shown.stdout, shown
     db = str(lab.db_path)  # wart report reads the database where it lies (offline)
     out = done.stdout

@@ -7,10 +7,12 @@ processes: ``wart deploy --dry-run`` -> agent context -> runner -> report.
 
 from __future__ import annotations
 
+import json
 import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from common.client.agent_client import FINAL
@@ -18,6 +20,7 @@ from common.messages import WorldSnapshot
 from common.recording import read_recording, summarize
 from common.recording.report import describe
 from common.sim2d import maps
+from common.twin.twinfile import parse_twin
 from common.world import packing
 from services.runner.dryrun import dry_run, wall_limit
 from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
@@ -27,6 +30,7 @@ from tests.kit.agentkit import (
     start_deploy,
 )
 from tests.kit.lab import ProcessLab, make_lab
+from tests.unit.common.twin.test_twin_store import FITTED_AT, calibration
 
 pytestmark = [
     pytest.mark.integration,
@@ -133,6 +137,45 @@ def test_a_hostile_controller_ends_within_its_limit(
     assert f"did not answer within {wall_limit(seconds):g} s" in report.verdict, report.verdict
     # It returned: the wall-clock limit ended it (the bound is loose: a loaded machine).
     assert report.wall_seconds < wall_limit(seconds) + 15
+
+
+LOOK = HEADER + textwrap.dedent(
+    """
+    class Look(Controller):
+        period = 0.1
+
+        def do_work(self, robot: Khepera) -> None:
+            print("ir", *robot.proximity().values)
+            robot.stop()
+    """
+)
+
+
+def test_a_twins_sensor_at_half_gain_reads_half_in_a_dry_run() -> None:
+    """k1 faces a wall 20 mm off its front sensors; its twin's sensor 3 has gain 0.5."""
+    room = {
+        "format": "wart-map", "version": 1, "name": "real", "arena": {"width": 1000,
+        "height": 1000}, "agents": [{"id": "k1", "type": "khepera", "x": 955, "y": 500}],
+    }  # fmt: skip
+    snap = packing.snapshot(maps.build_world(room, name="real", seed=2))
+    doc = json.loads(calibration().to_json("carol", FITTED_AT))
+    doc["parameters"]["ir3_gain"] = {"value": 0.5, "sigma": 0.01, "datasheet": 1.0, "unit": "",
+                                     "runs": ["dance"], "refused": ""}  # fmt: skip
+    twin = parse_twin(json.dumps(doc))
+
+    def readings(with_twin: bool) -> np.ndarray:
+        report = dry_run(snap, "k1", LOOK.encode(), seconds=1.5, twin=twin if with_twin else None)
+        assert report.will_run, report
+        rows = [line.split()[1:] for line in report.output if line.startswith("ir ")]
+        assert len(rows) >= 8, report.output
+        return np.array(rows[2:], dtype=float)  # after the first readings have come
+
+    datasheet, copy = readings(False), readings(True)
+    assert 150 < datasheet[:, 3].mean() < 350, datasheet  # the wall is where the test wants
+    assert copy[:, 3].mean() / datasheet[:, 3].mean() == pytest.approx(0.5, abs=0.05)
+    # Sensor 2 (gain 1.1 in this twin) and sensor 1 (not fitted: 1) read as the datasheet's.
+    assert copy[:, 2].mean() / datasheet[:, 2].mean() == pytest.approx(1.1, abs=0.06)
+    assert copy[:, 1].mean() / datasheet[:, 1].mean() == pytest.approx(1.0, abs=0.06)
 
 
 @pytest.fixture

@@ -397,9 +397,10 @@ class LabConnection(Protocol):
         ``ctx`` the user owns; the answer in words (LabError: refused, and why)."""
         ...
 
-    def twin(self, robot: str) -> Twin | None:
-        """``robot``'s twin in force, read with my session (None: none kept); LabError when
-        the registry refuses me (students read no twins) or does not answer."""
+    def twin(self, ctx: str, robot: str) -> Twin | None:
+        """The twin in force of arena ``ctx``'s ``robot``, read with my session (None: none
+        kept); LabError when the registry refuses me (students read no twins) or does not
+        answer."""
         ...
 
     # -- my courses (the grader: docs/COURSES.md)

@@ -529,7 +529,7 @@ class DemoConnection:
     def save_twin(self, ctx: str, robot: str, document: str) -> str:
         raise LabError("the demo lab has no real robots: it keeps no twins")
 
-    def twin(self, robot: str) -> Twin | None:
+    def twin(self, ctx: str, robot: str) -> Twin | None:
         return None  # no real robots, no twins
 
     resume_token: bytes | None = None  # a demo lab keeps no saved logins

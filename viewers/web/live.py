@@ -499,10 +499,11 @@ class LiveConnection:
 
     def save_twin(self, ctx: str, robot: str, document: str) -> str:
         saved = self._call(lambda: self.client.twins.save(document, robot, ctx))
-        return f"Kept {saved.model} as {saved.robot}'s twin v{saved.version} (in force)."
+        where = f" in {saved.arena}" if saved.arena else ""
+        return f"Kept {saved.model} as {saved.robot}'s twin{where} v{saved.version} (in force)."
 
-    def twin(self, robot: str) -> Twin | None:
-        reply = self._call(lambda: self.client.twins.of(robot))
+    def twin(self, ctx: str, robot: str) -> Twin | None:
+        reply = self._call(lambda: self.client.twins.of(robot, ctx))
         if reply.current is None:
             return None
         try:  # checked again by whoever reads it: the registry's row is outside input

@@ -11,9 +11,9 @@ when, how it ended, duration), and for the chosen one:
 - **Plots**: the trajectory over the map and IR and wheel speeds over time,
   drawn by common/recording/plots.py (matplotlib) and shown as images;
 - **Calibrate the robot (twin)**: the run's robot fitted from it, with the gap of the
-  datasheet model and the twin; the arena's owner (no one else sees it) then has
-  **Keep as k1's twin**: the registry keeps it as the robot's twin in force, and its
-  answer shows under the button;
+  datasheet model and the twin, open-loop and sensor by sensor; the arena's owner (no
+  one else sees it) then has **Keep as k1's twin**: the registry keeps it as the
+  robot's twin in force, and its answer shows under the button;
 - **Replay**: the run in the world view with a timeline (viewers/web/replay.py);
   "Back to live" returns to the arena;
 - **Promote to real**: the run's controller file queued on a robot of a real
@@ -39,6 +39,7 @@ from common.recording import Recording, RecordingError, plots, read_recording, r
 from common.twin import gap
 from common.twin.fit import TwinError, calibrate, run_data
 from common.twin.motion import Drive
+from common.twin.twinfile import parse_twin
 from viewers.web.adapters import LabConnection, LabError, RecordingEntry
 from viewers.web.inputs import on_click, set_value
 from viewers.web.replay import ReplayControls, ReplayFeed, ReplaySpot
@@ -234,23 +235,31 @@ class RecordingsPanel:
         the twin on it (shown here; ``wart calibrate --save`` keeps a twin in the lab)."""
         entry = self._entry()
         rec = self._read(entry) if entry is not None else None
-        if entry is None or rec is None:
-            return
+        if entry is not None and rec is not None:
+            self.show_calibration(entry.name, entry.agent, rec)
+
+    def show_calibration(self, name: str, agent: str, rec: Recording) -> None:
+        """``agent`` fitted from the run ``name`` (``rec``): the values, the open-loop gap
+        and each sensor's error of the datasheet model and the twin, under the buttons."""
         self._offer(None)
         try:
-            twin = calibrate(entry.agent, [(entry.name, rec)])
-            runs = [run_data(rec, entry.name)]
+            twin = calibrate(agent, [(name, rec)])
+            runs = [run_data(rec, name)]
         except TwinError as exc:
-            self.say(f"{entry.name} cannot calibrate {entry.agent}: {exc}", bad=True)
+            self.say(f"{name} cannot calibrate {agent}: {exc}", bad=True)
             return
-        gaps = [gap.gap(name, drive, runs).line() for name, drive in
+        gaps = [gap.gap(model, drive, runs).line() for model, drive in
                 (("datasheet", Drive()), ("twin", twin.fitted_drive()))]  # fmt: skip
         lines = "\n".join(f"- {escape_md(line)}" for line in twin.lines())
         lines += f"\n\n{escape_md(gap.heading())}:\n\n"
         lines += "\n".join(f"- {escape_md(line)}" for line in gaps)
-        self.details.content = f"**{escape_md(entry.agent)}'s twin from {entry.name}**\n\n{lines}"
-        self.say(f"{entry.agent} calibrated from {entry.name}: below.")
-        self._offer((entry.agent, twin.to_json(self.connection.user, time.time())))
+        document = twin.to_json(self.connection.user, time.time())
+        sensors = gap.sensor_lines(runs[0], parse_twin(document, f"{agent}'s twin"), name)
+        lines += f"\n\n{escape_md(sensors[0])}\n\n"
+        lines += "\n".join(f"- {escape_md(line.strip())}" for line in sensors[1:])
+        self.details.content = f"**{escape_md(agent)}'s twin from {name}**\n\n{lines}"
+        self.say(f"{agent} calibrated from {name}: below.")
+        self._offer((agent, document))
 
     def _offer(self, fitted: tuple[str, str] | None) -> None:
         """Offer the arena's owner to keep a fitted twin (robot, twin file); None: nothing."""

@@ -183,7 +183,7 @@ class RobotPanel:
                 hint="Keep the selected robot in the middle of the view (zoom stays yours)",
             )
             # The twin's prediction over a live real run (its checkbox and legend).
-            self.ghost = Ghost(gui, connection.twin, self.driven)
+            self.ghost = Ghost(gui, lambda robot: connection.twin(ctx, robot), self.driven)
             empty = (np.zeros(0), *[np.zeros(0)] * 8)
             series = (
                 viser.uplot.Series(label="t"),

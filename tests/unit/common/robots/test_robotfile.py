@@ -14,6 +14,7 @@ import pytest
 from common.robots import registry
 from common.robots.robotfile import MAX_BYTES, RobotFileError, parse
 from common.robots.schema import ComponentType, Param
+from tests.conftest import REPO
 from tests.kit.robots import wheeled_robot
 
 COMPONENTS = registry.build(plugins=False).components
@@ -168,3 +169,22 @@ def test_a_refused_robot_file_in_the_lab_directory_leaves_the_others(tmp_path) -
         "broken.toml:4: speed: unknown field "
         "(a robot file has format, version, name, description, components)"
     )
+
+
+def test_each_ir_sensors_gain_and_noise_is_checked_against_the_ring() -> None:
+    khepera = (REPO / "common/robots/shipped/khepera.toml").read_text()
+    each = "noise_counts = 2.0\nsensor_gains = [1, 1, 1, 0.5, 1, 1, 1, 1]\n"
+    spec = parse(khepera.replace("noise_counts = 2.0\n", each), "k.toml", COMPONENTS)
+    assert spec.proximity.gains == (1.0, 1.0, 1.0, 0.5, 1.0, 1.0, 1.0, 1.0)
+    assert spec.proximity.counts(3) == 2.0  # no sensor's own: the ring's noise_counts
+    short = _refused(khepera.replace("noise_counts = 2.0\n", "sensor_gains = [1, 0.5]\n"))
+    assert short.endswith(
+        "components.proximity.sensor_gains: must hold one number per sensor (8), got 2"
+    ), short
+    negative = "sensor_noise_counts = [3, 3, -1, 3, 3, 3, 3, 3]\n"
+    message = _refused(khepera.replace("noise_counts = 2.0\n", negative))
+    assert message.endswith(
+        "components.proximity.sensor_noise_counts: item 2: must be at least 0 counts, got -1"
+    ), message
+    # The datasheet's Khepera has none: each sensor reads the curve as it is.
+    assert parse(khepera, "k.toml", COMPONENTS).proximity.gains == ()

@@ -91,9 +91,10 @@ def _noiseless(world: World) -> tuple[np.ndarray, np.ndarray]:
     packed, scene, moving = world.sensors.packs(world, world.sim_time)
     tables: list[object] = list(packed)
     f = np.array(tables[3], copy=True)
-    f[:, [kernels.F_PROX_NOISE_FRACTION, kernels.F_PROX_NOISE_COUNTS]] = 0.0
+    f[:, kernels.F_PROX_NOISE_FRACTION] = 0.0
     f[:, kernels.F_AMB_NOISE_FRACTION] = 0.0
     tables[3] = f
+    tables[11] = np.zeros_like(tables[11])  # each IR sensor's additive noise
     out = (
         np.zeros_like(world.proximity),
         np.zeros_like(world.ambient),

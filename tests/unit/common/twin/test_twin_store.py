@@ -107,26 +107,58 @@ def lab_database(tmp_path: Path) -> Path:
 def test_the_lab_keeps_every_version_and_the_newest_is_in_force(tmp_path: Path) -> None:
     db = lab_database(tmp_path)
     store = TwinStore.open(db)
-    assert store.current("k1") is None
+    assert store.current("lab", "k1") is None
     first = parse_twin(calibration(scale_left=0.96).to_json("carol", FITTED_AT))
     second = parse_twin(calibration(scale_left=0.95).to_json("dave", FITTED_AT + 86400))
-    assert store.save(first, "carol", now=FITTED_AT) == 1
-    assert store.save(second, "admin", now=FITTED_AT + 86400) == 2
-    store.save(parse_twin(calibration("k2").to_json("carol", FITTED_AT)), "carol")
+    assert store.save("lab", first, "carol", now=FITTED_AT) == 1
+    assert store.save("lab", second, "admin", now=FITTED_AT + 86400) == 2
+    store.save("lab", parse_twin(calibration("k2").to_json("carol", FITTED_AT)), "carol")
     store.close()
     store = TwinStore.open(db)  # kept on disk, read by another process's connection
-    current = store.current("k1")
-    assert current is not None and current.version == 2
+    current = store.current("lab", "k1")
+    assert current is not None and current.version == 2 and current.arena == "lab"
     assert current.twin.drive.scale_left == 0.95 and current.saved_by == "admin"
-    assert [v.twin.fitted_by for v in store.versions("k1")] == ["carol", "dave"]
-    assert store.robots() == [("k1", 2), ("k2", 1)]
-    assert (store.count("k1"), store.count("k9")) == (2, 0)
-    assert f"v1: fitted {DAY} by carol from dance; saved {DAY}" in (store.versions("k1")[0].line())
+    assert [v.twin.fitted_by for v in store.versions("lab", "k1")] == ["carol", "dave"]
+    assert store.robots() == [("lab", "k1", 2), ("lab", "k2", 1)]
+    assert (store.count("lab", "k1"), store.count("lab", "k9")) == (2, 0)
+    first_line = store.versions("lab", "k1")[0].line()
+    assert f"v1: fitted {DAY} by carol from dance; saved {DAY}" in first_line
     # A row written into the database by hand is checked as a file from a user is.
     with sqlite3.connect(db) as raw:
         raw.execute("UPDATE twins SET document = '{\"format\": 1}' WHERE robot = 'k2'")
-    with pytest.raises(DbError, match="k2's twin v1 in the lab's database"):
-        store.current("k2")
+    with pytest.raises(DbError, match="k2's twin of arena lab v1 in the lab's database"):
+        store.current("lab", "k2")
+    store.close()
+
+
+def test_two_arenas_k1_are_two_robots_and_old_rows_are_kept_for_any_arena(
+    tmp_path: Path,
+) -> None:
+    db = lab_database(tmp_path)
+    # A database from before twins were kept per arena: rows keyed by robot alone.
+    with sqlite3.connect(db) as raw:
+        raw.execute(
+            "CREATE TABLE twins (robot TEXT NOT NULL, version INTEGER NOT NULL, saved_by TEXT "
+            "NOT NULL, saved_at REAL NOT NULL, fitted_by TEXT NOT NULL, fitted_at REAL NOT "
+            "NULL, document TEXT NOT NULL, PRIMARY KEY (robot, version))"
+        )
+        old = calibration(scale_left=0.97).to_json("carol", FITTED_AT)
+        raw.execute(
+            "INSERT INTO twins VALUES ('k1', 1, 'carol', ?, 'carol', ?, ?)",
+            (FITTED_AT, FITTED_AT, old),
+        )
+    store = TwinStore.open(db)
+    kept = store.current("east", "k1")  # the old twin, in force in any arena without its own
+    assert kept is not None and kept.arena == "" and kept.twin.drive.scale_left == 0.97
+    assert store.robots() == [("", "k1", 1)]
+    east = parse_twin(calibration(scale_left=0.95).to_json("ida", FITTED_AT))
+    west = parse_twin(calibration(scale_left=1.04).to_json("joe", FITTED_AT))
+    assert store.save("east", east, "ida") == 1 and store.save("west", west, "joe") == 1
+    got = {a: store.current(a, "k1") for a in ("east", "west", "north")}
+    assert {a: (t.arena, t.twin.fitted_by) for a, t in got.items() if t} == {
+        "east": ("east", "ida"), "west": ("west", "joe"), "north": ("", "carol"),
+    }  # fmt: skip
+    assert store.robots() == [("", "k1", 1), ("east", "k1", 1), ("west", "k1", 1)]
     store.close()
 
 

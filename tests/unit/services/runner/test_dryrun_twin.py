@@ -29,7 +29,10 @@ def test_the_copy_of_a_real_arena_drives_the_twins_robot_by_its_fitted_drive() -
     k1, k2 = (world.agents[world.agent_slot(a)].spec for a in ("k1", "k2"))
     assert k1.name == "twin-k1" and k2.name == "khepera"
     assert (k1.drive.wheel_scale, k1.drive.wheel_base_mm) == ((0.96, 0.99), 55.0)
-    assert k1.proximity == k2.proximity  # the IR curve stays the datasheet's
+    # The same IR curve, read through each sensor's fitted gain (the datasheet's: 1 each).
+    assert k1.proximity.curve == k2.proximity.curve
+    assert k1.proximity.gains == twin.ir_gains and twin.ir_gains[2] == 1.1
+    assert k2.proximity.gains == ()
     assert world.tables.imperfect == (world.agent_slot("k1"),)
     # Without a twin the copy is the snapshot's, as before.
     plain = world_from_snapshot(snap)
