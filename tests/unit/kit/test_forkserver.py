@@ -91,8 +91,7 @@ def test_processes_do_not_outlive_the_test_process_that_started_them(tmp_path: P
     script = tmp_path / "killed_test.py"
     script.write_text(
         textwrap.dedent(f"""
-        import os, sys, time
-        sys.path.insert(0, {str(REPO)!r})
+        import os, time
         from tests.kit.forkserver import ForkServer
         from tests.kit.lab import REPO, free_port, wart_env
         server = ForkServer(REPO)
@@ -108,7 +107,7 @@ def test_processes_do_not_outlive_the_test_process_that_started_them(tmp_path: P
     """)
     )
     test_process = subprocess.Popen(
-        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, cwd=REPO
+        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=wart_env()
     )
     try:
         assert test_process.stdout is not None
