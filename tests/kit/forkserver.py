@@ -90,6 +90,7 @@ class _Child:
             env.setdefault(name, value)
         os.environ.clear()
         os.environ.update(env)
+        _path_as_at_start(str(self.request["cwd"]), env.get("PYTHONPATH", ""))
         args = [str(a) for a in self.request["args"]]  # type: ignore[attr-defined]
         _name_process(" ".join(args[:2]))
         import runpy
@@ -99,6 +100,22 @@ class _Child:
         sys.argv = ["services.cli", *args]
         runpy.run_module("services.cli", run_name="__main__", alter_sys=True)
         sys.exit(0)
+
+
+def _path_as_at_start(cwd: str, pythonpath: str) -> None:
+    """sys.path as a fresh ``python -m`` in ``cwd`` with this PYTHONPATH would have it, and
+    what was installed since the server started: a test's own plugin directory on its
+    PYTHONPATH, a package pip installed (its .pth file), its entry points."""
+    import importlib
+    import site
+
+    sys.path[0] = cwd
+    for position, entry in enumerate(e for e in pythonpath.split(os.pathsep) if e):
+        if entry not in sys.path:
+            sys.path.insert(1 + position, entry)
+    for directory in site.getsitepackages():
+        site.addsitedir(directory)  # reads .pth files again; paths already there stay once
+    importlib.invalidate_caches()
 
 
 def _name_process(name: str) -> None:
