@@ -39,6 +39,11 @@ MAX_PLACES = 3  # unread outlines tried for one robot, the nearest to its predic
 # An unread outline is a marker's when its side is this fraction of a marker's there
 # (blur lengthens it, the robot's dark side merges with it; clutter is far off).
 MARKER_LIKE = (0.6, 2.2)
+# A marker smeared along its way and half merged with its robot's dark side is often
+# outlined by its core alone, 0.4 to 0.5 of its side (the robot lost at 320 mm/s after
+# turning at a wall, seeds 2 and 3): such outlines are looked at for a robot that was
+# tracked, within its reach, not in the search for robots never fixed.
+SMEARED_LIKE = 0.4
 # A fast robot read nowhere is looked for around where it was this long after its fix
 # (two frames at 15 fps): the wide window costs about 120 ms of CPU when it does not read.
 WIDE_S = 0.15
@@ -168,13 +173,13 @@ class Tracker:
             side_px=side,
         )
 
-    def _outlines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The unread outlines that could be a robot's marker: their centres in arena mm
-        (at a marker's height) and in frame px, and a marker's side there (px), the
-        likeliest first (their side nearest a marker's side there)."""
+    def _outlines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The unread outlines that could be a robot's marker, smeared or not: their
+        centres in arena mm (at a marker's height) and in frame px, a marker's side there
+        (px) and their side's part of it, the likeliest first (nearest a marker's side)."""
         h = self.layout.robot_marker_height_mm
         if not self._unread:
-            return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
+            return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0)
         corners = np.array(self._unread)
         centres_px = corners.mean(axis=1)
         centres = self.calibration.to_arena(self.calibration.undistort_points(centres_px), h)
@@ -191,9 +196,14 @@ class Tracker:
             ]
         )
         ratio = sides / np.maximum(expected, 1e-6)
-        like = (ratio >= MARKER_LIKE[0]) & (ratio <= MARKER_LIKE[1])
+        like = (ratio >= SMEARED_LIKE) & (ratio <= MARKER_LIKE[1])
         order = np.argsort(np.abs(np.log(np.maximum(ratio[like], 1e-6))))
-        return centres[like][order], centres_px[like][order], expected[like][order]
+        return (
+            centres[like][order],
+            centres_px[like][order],
+            expected[like][order],
+            ratio[like][order],
+        )
 
     def _through_blur(self, seen: set[str], captured_at: float) -> list[TrackedPose]:
         """Robots not read in this frame, looked for through their motion blur: where
@@ -203,7 +213,7 @@ class Tracker:
         marker-like unread outlines, a few a frame, in turn."""
         found: list[TrackedPose] = []
         h = self.layout.robot_marker_height_mm
-        unread, unread_px, unread_side = self._outlines()
+        unread, unread_px, unread_side, unread_part = self._outlines()
         for agent, track in self._tracks.items():
             dt = captured_at - track.pose.at
             if agent in seen or not 0.0 < dt <= SEARCH_S:
@@ -220,10 +230,11 @@ class Tracker:
             driving = math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S
             speed = math.hypot(vx, vy)
             speed_px = math.hypot(*way) / 0.01 * track.top_speed() / speed if driving else 0.0
-            lengths = self._blur_lengths(speed_px, track.blur_px)
-            if lengths is None:
-                continue  # driving too slowly to be smeared beyond reading: covered
-            if driving:
+            lengths, smeared = self._blur_lengths(speed_px, track.blur_px)
+            if driving and smeared:
+                # Where it went, and where it was. A robot smeared too little to need this
+                # is read by the detector where it is in view (unread: covered, or its bits
+                # misread, when the outline there is looked at).
                 predicted = self.calibration.to_frame(
                     np.array([(x, y), (track.pose.x, track.pose.y)]), h
                 )
@@ -244,7 +255,7 @@ class Tracker:
                     break
             else:
                 read = None
-                if driving and dt <= WIDE_S:
+                if driving and smeared and dt <= WIDE_S:
                     # It turned: around where it was, just after (a window costs 120 ms).
                     b = track.blur_px or 6.0
                     at = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
@@ -266,6 +277,8 @@ class Tracker:
         untracked = {
             i: a for a, i in self.layout.robots.items() if a not in self._tracks and a not in seen
         }
+        whole = unread_part >= MARKER_LIKE[0]
+        unread_px, unread_side = unread_px[whole], unread_side[whole]
         if untracked and len(unread_px):
             # In turn over the frames: a robot that is not in the arena costs a few windows
             # a frame, not one for every outline.
@@ -280,20 +293,20 @@ class Tracker:
                     )
         return found
 
-    def _blur_lengths(self, speed_px: float, last: float | None) -> Sequence[float] | None:
+    def _blur_lengths(self, speed_px: float, last: float | None) -> tuple[Sequence[float], bool]:
         """The smear lengths to deblur a robot driving at ``speed_px`` (px/s; 0: not known)
-        at, the one that read it ``last`` first; None when the exposure seen so far says
-        it is smeared too little to need it. Every length while the exposure is not known."""
+        at, the one that read it ``last`` first, and whether it may be smeared beyond the
+        detector's reading, by the exposure seen so far (every length, and yes, while the
+        exposure or the speed is not known)."""
         if not self._exposures or speed_px <= 0.0:
-            return BLUR_LENGTHS_PX
+            return BLUR_LENGTHS_PX, True
         expected = float(np.median(self._exposures)) * speed_px
-        if expected < READABLE_BLUR_PX:
-            return None
-        near = [b for b in BLUR_LENGTHS_PX if abs(b - expected) <= BLUR_SPREAD_PX]
-        lengths = sorted(near or BLUR_LENGTHS_PX, key=lambda b: abs(b - expected))
+        by_nearness = sorted(BLUR_LENGTHS_PX, key=lambda b: abs(b - expected))
+        near = [b for b in by_nearness if abs(b - expected) <= BLUR_SPREAD_PX]
+        lengths = near or by_nearness[:3]
         if last is not None:
             lengths = [last, *(b for b in lengths if b != last)]
-        return lengths
+        return lengths, expected >= READABLE_BLUR_PX
 
     def _say_lost(self, seen: set[str], captured_at: float) -> None:
         for agent, track in self._tracks.items():
