@@ -249,7 +249,13 @@ class Tracker:
             nearest = sorted(near, key=lambda k: math.hypot(unread[k, 0] - x, unread[k, 1] - y))
             places += [(unread_px[k], OUTLINE_WINDOW_PX) for k in nearest[:MAX_PLACES]]
             side = track.pose.side_px
+            done: list[tuple[np.ndarray, int]] = []
             for px, size in places:
+                # A marker there lies wholly in a window read already (a robot lost for a
+                # frame is a few px from its last place): not read twice.
+                if any(np.max(np.abs(px - c)) + side / 2 <= w / 2 for c, w in done):
+                    continue
+                done.append((px, size))
                 read = find_blurred(self._gray, {track.pose.marker}, px, angle, side, size, lengths)
                 if read is not None:
                     break
