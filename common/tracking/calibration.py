@@ -346,6 +346,11 @@ def detector() -> cv2.aruco.ArucoDetector:
     and half the markers at 320 mm/s (none before); the tracker reads the rest
     through their blur (common/tracking/deblur.py).
     """
+    return cv2.aruco.ArucoDetector(dictionary(), detector_parameters())
+
+
+def detector_parameters() -> cv2.aruco.DetectorParameters:
+    """The parameters of the lab's detector (see ``detector``), a fresh copy."""
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR
     params.errorCorrectionRate = 0.8
@@ -353,7 +358,7 @@ def detector() -> cv2.aruco.ArucoDetector:
     params.perspectiveRemovePixelPerCell = 8
     params.perspectiveRemoveIgnoredMarginPerCell = 0.3
     params.maxErroneousBitsInBorderRate = 0.6
-    return cv2.aruco.ArucoDetector(dictionary(), params)
+    return params
 
 
 def detect(gray: np.ndarray) -> dict[int, np.ndarray]:

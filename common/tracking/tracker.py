@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from common.tracking.calibration import ArenaCalibration, detect_all, detector
+from common.tracking.calibration import ArenaCalibration, detect_all
 from common.tracking.deblur import (
     AXES,
+    BLUR_LENGTHS_PX,
     OUTLINE_WINDOW_PX,
     WIDE_WINDOW_PX,
     WINDOW_PX,
@@ -37,10 +39,19 @@ MAX_PLACES = 3  # unread outlines tried for one robot, the nearest to its predic
 # An unread outline is a marker's when its side is this fraction of a marker's there
 # (blur lengthens it, the robot's dark side merges with it; clutter is far off).
 MARKER_LIKE = (0.6, 2.2)
+# A marker smeared along its way and half merged with its robot's dark side is often
+# outlined by its core alone, 0.4 to 0.5 of its side (the robot lost at 320 mm/s after
+# turning at a wall, seeds 2 and 3): such outlines are looked at for a robot that was
+# tracked, within its reach, not in the search for robots never fixed.
+SMEARED_LIKE = 0.4
 # A fast robot read nowhere is looked for around where it was this long after its fix
 # (two frames at 15 fps): the wide window costs about 120 ms of CPU when it does not read.
 WIDE_S = 0.15
 LOST_S = 1.0  # unseen this long, a robot is said to be lost (once, with the reason)
+# Smeared less than this, a marker in view is read by the detector itself (200 mm/s, 4.4 px
+# on the bench's 1/25 s: 100 %): such a robot unread is covered, not blurred.
+READABLE_BLUR_PX = 3.0
+BLUR_SPREAD_PX = 1.5  # deblurred at lengths this near the smear its speed predicts
 
 
 @dataclass(frozen=True)
@@ -65,14 +76,23 @@ class _Track:
     fixes: int = 1  # fixes in a row: one, and where it goes is not known yet
     blur_px: float | None = None  # the smear's length that read it last
 
+    # Its speeds (when, mm/s) over the last second: a robot that slowed at a wall, or
+    # for a turn, may drive on as fast as it did.
+    speeds: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=32))
+
     def trust(self, pose: TrackedPose) -> None:
         self.fixes += 1
         dt = pose.at - self.pose.at
         if 0.0 < dt <= PREDICT_S:
             self.velocity = ((pose.x - self.pose.x) / dt, (pose.y - self.pose.y) / dt)
+            self.speeds.append((pose.at, math.hypot(*self.velocity)))
         elif dt > PREDICT_S:
             self.velocity, self.fixes = (0.0, 0.0), 1
         self.pose, self.pending = pose, []
+
+    def top_speed(self) -> float:
+        """The fastest it drove (mm/s) in the second before its last fix."""
+        return max((v for at, v in self.speeds if self.pose.at - at <= 1.0), default=0.0)
 
 
 @dataclass(frozen=True)
@@ -107,6 +127,10 @@ class Tracker:
         self._told_unknown: set[int] = set()
         self._told_jump: set[str] = set()
         self._scan = 0  # where the search for robots never fixed goes on, among outlines
+        # The camera's exposure as the smears read show it: each robot read through its
+        # blur gives its smear's length over its speed (px over px/s); the median of the
+        # last few tells how far any robot is smeared, from its speed.
+        self._exposures: deque[float] = deque(maxlen=15)
 
     def detect_poses(self, frame: np.ndarray, captured_at: float) -> list[TrackedPose]:
         """Every robot marker in ``frame`` as a pose, unchecked against earlier frames."""
@@ -149,13 +173,13 @@ class Tracker:
             side_px=side,
         )
 
-    def _outlines(self) -> tuple[np.ndarray, np.ndarray]:
-        """The unread outlines that could be a robot's marker: their centres in arena mm
-        (at a marker's height) and in frame px, the likeliest first (their side nearest
-        a marker's side there)."""
+    def _outlines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The unread outlines that could be a robot's marker, smeared or not: their
+        centres in arena mm (at a marker's height) and in frame px, a marker's side there
+        (px) and their side's part of it, the likeliest first (nearest a marker's side)."""
         h = self.layout.robot_marker_height_mm
         if not self._unread:
-            return np.zeros((0, 2)), np.zeros((0, 2))
+            return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0)
         corners = np.array(self._unread)
         centres_px = corners.mean(axis=1)
         centres = self.calibration.to_arena(self.calibration.undistort_points(centres_px), h)
@@ -172,9 +196,14 @@ class Tracker:
             ]
         )
         ratio = sides / np.maximum(expected, 1e-6)
-        like = (ratio >= MARKER_LIKE[0]) & (ratio <= MARKER_LIKE[1])
+        like = (ratio >= SMEARED_LIKE) & (ratio <= MARKER_LIKE[1])
         order = np.argsort(np.abs(np.log(np.maximum(ratio[like], 1e-6))))
-        return centres[like][order], centres_px[like][order]
+        return (
+            centres[like][order],
+            centres_px[like][order],
+            expected[like][order],
+            ratio[like][order],
+        )
 
     def _through_blur(self, seen: set[str], captured_at: float) -> list[TrackedPose]:
         """Robots not read in this frame, looked for through their motion blur: where
@@ -184,7 +213,7 @@ class Tracker:
         marker-like unread outlines, a few a frame, in turn."""
         found: list[TrackedPose] = []
         h = self.layout.robot_marker_height_mm
-        unread, unread_px = self._outlines()
+        unread, unread_px, unread_side, unread_part = self._outlines()
         for agent, track in self._tracks.items():
             dt = captured_at - track.pose.at
             if agent in seen or not 0.0 < dt <= SEARCH_S:
@@ -193,7 +222,19 @@ class Tracker:
             x, y = track.pose.x + vx * dt, track.pose.y + vy * dt
             reach = self.max_speed_mm_s * dt + self.jump_margin_mm
             places: list[tuple[np.ndarray, int]] = []
-            if math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S:
+            ahead = np.array([(x, y), (x + vx * 0.01, y + vy * 0.01)])
+            way = np.diff(self.calibration.to_frame(ahead, h), axis=0)[0]
+            angle = math.atan2(way[1], way[0]) if math.hypot(vx, vy) else None
+            # Its speed in px/s, when it drives (a robot standing, or unseen long, is looked
+            # for at every length: it may have started since).
+            driving = math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S
+            speed = math.hypot(vx, vy)
+            speed_px = math.hypot(*way) / 0.01 * track.top_speed() / speed if driving else 0.0
+            lengths, smeared = self._blur_lengths(speed_px, track.blur_px)
+            if driving and smeared:
+                # Where it went, and where it was. A robot smeared too little to need this
+                # is read by the detector where it is in view (unread: covered, or its bits
+                # misread, when the outline there is looked at).
                 predicted = self.calibration.to_frame(
                     np.array([(x, y), (track.pose.x, track.pose.y)]), h
                 )
@@ -207,48 +248,71 @@ class Tracker:
             )
             nearest = sorted(near, key=lambda k: math.hypot(unread[k, 0] - x, unread[k, 1] - y))
             places += [(unread_px[k], OUTLINE_WINDOW_PX) for k in nearest[:MAX_PLACES]]
-            ahead = np.array([(x, y), (x + vx * 0.01, y + vy * 0.01)])
-            way = np.diff(self.calibration.to_frame(ahead, h), axis=0)[0]
-            angle = math.atan2(way[1], way[0]) if math.hypot(vx, vy) else None
+            side = track.pose.side_px
+            done: list[tuple[np.ndarray, int]] = []
             for px, size in places:
-                read = find_blurred(self._gray, detector(), {track.pose.marker}, px, angle, size)
+                # A marker there lies wholly in a window read already (a robot lost for a
+                # frame is a few px from its last place): not read twice.
+                if any(np.max(np.abs(px - c)) + side / 2 <= w / 2 for c, w in done):
+                    continue
+                done.append((px, size))
+                read = find_blurred(self._gray, {track.pose.marker}, px, angle, side, size, lengths)
                 if read is not None:
                     break
             else:
                 read = None
-                if math.hypot(vx, vy) >= MIN_BLUR_SPEED_MM_S and dt <= WIDE_S:
+                if driving and smeared and dt <= WIDE_S:
                     # It turned: around where it was, just after (a window costs 120 ms).
                     b = track.blur_px or 6.0
                     at = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
                     read = find_blurred(
                         self._gray,
-                        detector(),
                         {track.pose.marker},
                         at[0],
                         None,
+                        side,
                         WIDE_WINDOW_PX,
                         (b, b - 0.5, b + 0.5),
                         AXES,
                     )
+            if read is not None and driving:
+                self._exposures.append(read[2] / (math.hypot(*way) / 0.01))
             if read is not None:
                 track.blur_px = read[2]
                 found.append(self._pose_of(agent, read[0], read[1], captured_at))
         untracked = {
             i: a for a, i in self.layout.robots.items() if a not in self._tracks and a not in seen
         }
+        whole = unread_part >= MARKER_LIKE[0]
+        unread_px, unread_side = unread_px[whole], unread_side[whole]
         if untracked and len(unread_px):
             # In turn over the frames: a robot that is not in the arena costs a few windows
             # a frame, not one for every outline.
             start = self._scan % len(unread_px)
             self._scan += MAX_PLACES
             for k in range(start, start + min(MAX_PLACES, len(unread_px))):
-                px = unread_px[k % len(unread_px)]
-                read = find_blurred(self._gray, detector(), untracked, px, None, OUTLINE_WINDOW_PX)
+                px, side = unread_px[k % len(unread_px)], unread_side[k % len(unread_px)]
+                read = find_blurred(self._gray, untracked, px, None, side, OUTLINE_WINDOW_PX)
                 if read is not None and read[0] in untracked:
                     found.append(
                         self._pose_of(untracked.pop(read[0]), read[0], read[1], captured_at)
                     )
         return found
+
+    def _blur_lengths(self, speed_px: float, last: float | None) -> tuple[Sequence[float], bool]:
+        """The smear lengths to deblur a robot driving at ``speed_px`` (px/s; 0: not known)
+        at, the one that read it ``last`` first, and whether it may be smeared beyond the
+        detector's reading, by the exposure seen so far (every length, and yes, while the
+        exposure or the speed is not known)."""
+        if not self._exposures or speed_px <= 0.0:
+            return BLUR_LENGTHS_PX, True
+        expected = float(np.median(self._exposures)) * speed_px
+        by_nearness = sorted(BLUR_LENGTHS_PX, key=lambda b: abs(b - expected))
+        near = [b for b in by_nearness if abs(b - expected) <= BLUR_SPREAD_PX]
+        lengths = near or by_nearness[:3]
+        if last is not None:
+            lengths = [last, *(b for b in lengths if b != last)]
+        return lengths, expected >= READABLE_BLUR_PX
 
     def _say_lost(self, seen: set[str], captured_at: float) -> None:
         for agent, track in self._tracks.items():
