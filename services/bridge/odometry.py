@@ -29,6 +29,10 @@ class Odometry:
     # Faster than any wheel can turn (127 pulses/10 ms) with a wide margin: a
     # jump this large means the counters were reset, not that the robot moved.
     MAX_PULSES_PER_S = 127 * 100 * 2
+    # The readings' times are the host's, when each answer came: on a busy host one answer
+    # comes late and the next on time, so two readings 0.1 s apart by the host's clock can
+    # hold 0.5 s of the robot's travel (a fresh-clone run at load 14 lost an arc so).
+    READ_DELAY_S = 1.0
 
     def __init__(self, mm_per_pulse: float, wheel_base_mm: float) -> None:
         self.mm_per_pulse, self.wheel_base_mm = mm_per_pulse, wheel_base_mm
@@ -51,7 +55,7 @@ class Odometry:
         if last is None:
             return self.pose
         dl_p, dr_p = _delta32(left, last[0]), _delta32(right, last[1])
-        limit = self.MAX_PULSES_PER_S * max(now - last[2], 0.05)
+        limit = self.MAX_PULSES_PER_S * (max(now - last[2], 0.0) + self.READ_DELAY_S)
         if abs(dl_p) > limit or abs(dr_p) > limit:
             log.warning("counters jumped by (%d, %d): taken as a reset, pose kept", dl_p, dr_p)
             return self.pose

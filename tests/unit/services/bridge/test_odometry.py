@@ -39,3 +39,22 @@ def test_straight_ahead_is_straight() -> None:
     odometry.update(0, 0, 0.0)
     pose = odometry.update(1000, 1000, 1.0)
     assert (pose.x, pose.y, pose.heading) == (pytest.approx(80.0), 0.0, 0.0)
+
+
+def test_readings_bunched_by_a_busy_host_still_count_the_travel() -> None:
+    # 0.52 s of an arc at 40/60 pulses read twice 0.1 s apart by the host's clock (the
+    # first answer came late): the robot moved, its counters were not reset.
+    odometry = Odometry(MM_PER_PULSE, WHEEL_BASE)
+    odometry.update(0, 0, 0.0)
+    pose = odometry.update(2099, 3148, 0.1)
+    assert math.hypot(pose.x, pose.y) > 150
+
+
+def test_a_jump_no_wheel_can_make_is_a_reset_and_keeps_the_pose() -> None:
+    odometry = Odometry(MM_PER_PULSE, WHEEL_BASE)
+    odometry.update(0, 0, 0.0)
+    driven = odometry.update(60000, 60000, 10.0)  # 4.8 m in 10 s: a fast robot
+    # Back to zero 0.1 s later: 60,000 pulses no wheel turns within the read delay.
+    kept = odometry.update(0, 0, 10.1)
+    assert driven.x == pytest.approx(4800.0)
+    assert kept == driven
