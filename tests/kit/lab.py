@@ -51,7 +51,7 @@ from services.lab.wiring import Wiring, up_args
 from services.registry import accounts_db
 from services.registry.accounts_db import RegistryDB, hash_password
 from tests.kit import forkserver
-from tests.kit.forkserver import ForkServer, Running
+from tests.kit.forkserver import ForkedProcess, ForkServer, Running
 from tests.kit.waits import wait_for
 
 REPO = Path(__file__).resolve().parents[2]
@@ -102,23 +102,20 @@ def wart(
     )
 
 
+def _fork(args: Sequence[str], env: dict[str, str], stdout: int, stderr: int) -> ForkedProcess:
+    """``wart ARGS`` forked from the kit's server, in the repository, reading nothing."""
+    with open(os.devnull, "rb") as nothing:
+        return FORK_SERVER.spawn(
+            args, cwd=REPO, env=env, stdin=nothing.fileno(), stdout=stdout, stderr=stderr
+        )
+
+
 def _forked_wart(
     args: list[str], timeout: float, env: dict[str, str]
 ) -> subprocess.CompletedProcess[str]:
     command = [sys.executable, "-m", "services.cli", *args]
-    with (
-        tempfile.TemporaryFile() as out,
-        tempfile.TemporaryFile() as err,
-        open(os.devnull, "rb") as nothing,
-    ):
-        proc = FORK_SERVER.spawn(
-            args,
-            cwd=REPO,
-            env=env,
-            stdin=nothing.fileno(),
-            stdout=out.fileno(),
-            stderr=err.fileno(),
-        )
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        proc = _fork(args, env, out.fileno(), err.fileno())
 
         def read(stream: IO[bytes]) -> str:
             stream.seek(0)
@@ -176,15 +173,7 @@ class Procs:
         environment = wart_env({**self.env, **(env or {})})
         popen: Running
         if forkserver.enabled():
-            with open(os.devnull, "rb") as nothing:
-                popen = FORK_SERVER.spawn(
-                    args,
-                    cwd=REPO,
-                    env=environment,
-                    stdin=nothing.fileno(),
-                    stdout=out.fileno(),
-                    stderr=out.fileno(),
-                )
+            popen = _fork(args, environment, out.fileno(), out.fileno())
         else:
             popen = subprocess.Popen(
                 [sys.executable, "-m", "services.cli", *args],
