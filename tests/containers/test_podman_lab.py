@@ -7,7 +7,7 @@ the registry (its database on a volume) and arena1 (engine and agent
 context), TLS with the lab's certificates and access rules, on the host's
 network. A client with the student certificate logs in, joins arena1 and
 runs the Braitenberg example on a robot, then uploads it to run in the runner's
-sandbox inside its container; the router's container is killed
+sandbox inside its container; the router's pod is killed
 and started again: the services rejoin, and the same client, still logged
 in, drives again.
 
@@ -76,7 +76,8 @@ map = "foraging"
 kind = "runner"
 name = "runner"
 """
-ROUTER = "wart-router-k-pod-0-router"
+ROUTER_POD = "wart-router-k-pod-0"
+ROUTER = f"{ROUTER_POD}-router"
 REGISTRY = "wart-registry-registry-pod-0-registry"
 ENGINE = "wart-arena-arena1-pod-0-engine"
 RUNNER = "wart-runner-runner-pod-0-runner"
@@ -133,6 +134,9 @@ class PodLab:
             text=True,
             timeout=timeout,
         )
+
+    def pod_state(self, pod: str) -> str:
+        return self.podman("pod", "inspect", "--format", "{{.State}}", pod).stdout.strip()
 
     def logs(self) -> str:
         out = []
@@ -243,15 +247,21 @@ def test_a_client_drives_in_the_pods_lab_and_recovers_when_the_router_is_replace
             bombed = agents.wait_status(queued.request_id, FINAL, timeout=60)
             assert bombed is not None and bombed.status == "finished", bombed
             wait_for(lambda: any("fork refused" in line for line in printed), 15, "the refusal")
-            # The router's container killed and started again: every link drops, the
+            # The router's pod killed and started again: every link drops, the
             # services reconnect and their tokens come back, this client too.
-            assert pod_lab.podman("kill", ROUTER).returncode == 0
+            killed = pod_lab.podman("pod", "kill", ROUTER_POD)
+            assert killed.returncode == 0, killed.stderr
             t0 = time.monotonic()
             deadline = t0 + 10
             while watch.present(world) and time.monotonic() < deadline:
                 time.sleep(0.1)
             assert not watch.present(world), "the world stayed while its router was down"
-            assert pod_lab.podman("start", ROUTER).returncode == 0
+            # Started again only once podman has finished with the pod it killed: a start
+            # while its infra container is still being stopped fails in podman 4.3
+            # ("starting some containers: internal libpod error").
+            wait_for(lambda: pod_lab.pod_state(ROUTER_POD) == "Exited", 60, "the pod stopped")
+            started = pod_lab.podman("pod", "start", ROUTER_POD)
+            assert started.returncode == 0, started.stderr
             assert watch.wait(world, 60) and watch.wait(context, 60), pod_lab.logs()
             print(f"arena1 back {time.monotonic() - t0:.1f} s after the router was killed")
             start = poses.xy(agent)
