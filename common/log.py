@@ -96,6 +96,26 @@ class RepeatSummary(logging.Filter):
         )
 
 
+class StderrHandler(logging.StreamHandler):
+    """Writes to ``sys.stderr`` as it is when a record comes, not as it was at set-up.
+
+    A command run inside another program (a test calls a CLI's ``main``) sets up
+    logging while that program has put its own stream in ``sys.stderr``; a thread
+    that logs after the stream was given back and closed must not fail on it.
+    """
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self) -> object:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value: object) -> None:
+        pass
+
+
 _summary: RepeatSummary | None = None
 
 
@@ -111,7 +131,7 @@ def setup_logging(level: str | None = None) -> RepeatSummary:
         level=getattr(logging, chosen, logging.INFO),
         format="%(asctime)s %(levelname)-7s %(name)s: %(message)s",
         datefmt="%H:%M:%S",
-        stream=sys.stderr,
+        handlers=[StderrHandler()],
         force=True,
     )
     if _summary is None:

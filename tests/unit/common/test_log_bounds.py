@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import io
 import logging
 import os
+import sys
 import threading
 from pathlib import Path
 
 import pytest
 
-from common.log import SUMMARY_WINDOW_S, RepeatSummary, RotatingFile, _summary_window, pump
+from common.log import (
+    SUMMARY_WINDOW_S,
+    RepeatSummary,
+    RotatingFile,
+    _summary_window,
+    pump,
+    setup_logging,
+)
 from services.lab.supervisor import BACKOFF_FIRST, BACKOFF_MAX, next_backoff
 
 
@@ -104,3 +113,27 @@ def test_first_restart_is_immediate_and_a_crash_loop_backs_off() -> None:
         waits.append(next_backoff(waits[-1]))
     assert waits[:6] == [0.1, 0.5, 1.0, 2.0, 4.0, 8.0]
     assert waits[-1] == BACKOFF_MAX
+
+
+def test_a_log_line_after_the_stderr_it_was_set_up_with_was_closed_still_comes_out(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A command run inside another program (a test calling a CLI's main) sets up logging
+    while sys.stderr is that program's stream; a thread of it logs after the stream is
+    closed: the line goes to the stderr of now, not into "--- Logging error ---"."""
+    root = logging.getLogger()
+    saved = (root.handlers[:], root.level)
+    borrowed, now = io.StringIO(), io.StringIO()
+    try:
+        monkeypatch.setattr(sys, "stderr", borrowed)
+        setup_logging("INFO")
+        logging.getLogger("wart.test").info("while borrowed")
+        borrowed.close()
+        monkeypatch.setattr(sys, "stderr", now)
+        monkeypatch.setattr(logging, "raiseExceptions", True)
+        logging.getLogger("wart.test").info("after it was closed")
+    finally:
+        root.handlers[:] = saved[0]
+        root.setLevel(saved[1])
+    assert "wart.test: after it was closed" in now.getvalue()
+    assert "Logging error" not in now.getvalue()
