@@ -214,9 +214,16 @@ def test_an_unlock_lets_a_slowed_source_try_again(lab: ProcessLab) -> None:
 
 
 def test_fifty_concurrent_logins_are_all_answered_right(lab: ProcessLab) -> None:
+    """Each login is answered for what it is: bob's get in, carol's wrong ones are refused.
+
+    Password checks are slow on purpose; on a busy machine a class at one instant may
+    outwait the registry's workers, and those logins are told "busy: try again" (never
+    "wrong password"), as the page tells the student: the one try again then gets in.
+    """
     from concurrent.futures import ThreadPoolExecutor
 
     session = lab.zsession()
+    busy: list[int] = []
     try:
         browser = _gateway(lab, session)  # a class behind the viewer: one address each
 
@@ -226,10 +233,18 @@ def test_fifty_concurrent_logins_are_all_answered_right(lab: ProcessLab) -> None
                 # The wrong ones on another account: ten places guessing one account
                 # in a second put it under attack (its throttle), which is not this test.
                 user, password = ("bob", PASSWORD) if i % 5 else ("carol", "wrong password")
-                try:
-                    return client.login(user, password).user
-                except (WrongCredentials, RateLimited):
-                    return "refused"
+                for attempt in range(2):
+                    try:
+                        return client.login(user, password).user
+                    except WrongCredentials:
+                        return "refused"
+                    except RateLimited as exc:  # slowed, or told busy
+                        if "busy" not in str(exc):
+                            return "refused"
+                        if attempt:
+                            return f"busy twice: {exc}"
+                        busy.append(i)
+                return "unreachable"
             finally:
                 client.close()
 
@@ -237,4 +252,6 @@ def test_fifty_concurrent_logins_are_all_answered_right(lab: ProcessLab) -> None
             results = list(pool.map(one, range(50)))
     finally:
         close_session(session)
-    assert results.count("bob") == 40 and results.count("refused") == 10
+    print(f"{len(busy)} of 50 told busy at first")
+    assert [r for i, r in enumerate(results) if i % 5] == ["bob"] * 40, results
+    assert [r for i, r in enumerate(results) if not i % 5] == ["refused"] * 10, results
