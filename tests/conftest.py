@@ -9,6 +9,7 @@ wait_for are re-exported here for the tests that import them from this file.
 from __future__ import annotations
 
 import functools
+import logging
 import os
 import uuid
 import zlib
@@ -20,6 +21,7 @@ import zenoh
 
 from common import keys
 from common.client import lab_client
+from common.log import StderrHandler
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
@@ -60,6 +62,20 @@ def pytest_itemcollected(item: pytest.Item) -> None:
     if "browser" in item.keywords or item.path.parent.name == "browser":
         half = zlib.crc32(item.path.name.encode()) % 2
         item.add_marker(pytest.mark.xdist_group(f"browser-{half}"))
+
+
+@pytest.fixture(autouse=True)
+def _logging_as_found() -> Iterator[None]:
+    """A test that runs a command's main in this process (its setup_logging) leaves the
+    root logger as it found it: otherwise every later test's in-process viewer and
+    services log to the worker's own stderr, between the dots of the run's output."""
+    root = logging.getLogger()
+    before, level = set(root.handlers), root.level
+    yield
+    for handler in root.handlers[:]:
+        if handler not in before and isinstance(handler, StderrHandler):
+            root.removeHandler(handler)
+    root.setLevel(level)
 
 
 @pytest.fixture
