@@ -9,16 +9,18 @@ process never hangs at exit.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import re
 import signal
+import sys
 import threading
 import time
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar, NoReturn, TypeVar
 
 import zenoh
 
@@ -303,16 +305,43 @@ def has_subscribers(publisher: zenoh.Publisher) -> bool:
     return bool(status.matching)
 
 
+# Closes that outlived close_session's wait, their threads still inside Zenoh.
+_late_closes: list[threading.Thread] = []
+
+
 def close_session(session: zenoh.Session, timeout: float = 5.0) -> bool:
-    """Close a session within ``timeout``; False if Zenoh did not finish in time."""
+    """Close a session within ``timeout``; False if Zenoh did not finish in time (the
+    process must then end by :func:`exit_process`)."""
     done = threading.Event()
 
     def closer() -> None:
         _quietly(session.close)
         done.set()
 
-    threading.Thread(target=closer, name="zenoh-close", daemon=True).start()
-    return done.wait(timeout)
+    thread = threading.Thread(target=closer, name="zenoh-close", daemon=True)
+    thread.start()
+    if done.wait(timeout):
+        return True
+    _late_closes.append(thread)
+    return False
+
+
+def exit_process(code: int) -> NoReturn:
+    """End this process with ``code``, also while a session is still closing.
+
+    A thread that comes back from Zenoh's Rust code after the interpreter began
+    to shut down aborts the process ("FATAL: exception not rethrown", exit 134):
+    a command whose session took longer to close than close_session waited (a
+    busy machine) printed its result and then failed. Such a process ends here
+    without the interpreter's shutdown, its output flushed.
+    """
+    if any(thread.is_alive() for thread in _late_closes):
+        logging.shutdown()
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 def stop_on_signals() -> threading.Event:

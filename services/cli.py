@@ -14,6 +14,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import NoReturn
 
 # name: (module, one-line description). Kept in the order of the help text.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
@@ -245,5 +246,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
+def run() -> NoReturn:
+    """The ``wart`` command: :func:`main` in a process of its own, ended by its exit code."""
+    code = main()
+    # Here, after the command: a command that never opened a session (--help, the
+    # pods' probe) loads no Zenoh for it.
+    from common.service import exit_process
+
+    exit_process(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
