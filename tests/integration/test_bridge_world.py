@@ -105,6 +105,24 @@ def lease(holder: Session, *, start: float, end: float, lid: str = "L1") -> Leas
     return holder_lease(holder, lease_id=lid, world_name=WORLD, agent=AGENT, start=start, end=end)
 
 
+def centred_robot(
+    start_bridge: BridgeFactory,
+    zsession: zenoh.Session,
+    realm: str,
+    emulator: KheperaEmulator,
+    identity: RegistryIdentity,
+    watchdog_ms: int,
+) -> tuple[Latest, Session, Session]:
+    """The bridge driving the robot from the arena's centre with this watchdog, once its first
+    sample is in: its samples, the agent context's session (to lease) and alice's (to drive)."""
+    start_bridge("--port", f"{emulator.port}={AGENT}@500,500,0", "--watchdog-ms", str(watchdog_ms))
+    samples = Latest(zsession, keys.agent_sensors(realm, WORLD, AGENT), SensorSample)
+    wait_for(lambda: samples.count > 0, 20, "a sensor sample")
+    context = issue_session(identity, realm, "ctx", ["lease"])
+    alice = issue_session(identity, realm, "alice", ["control"])
+    return samples, context, alice
+
+
 def moved(body: SimBody, since: tuple[float, float, float]) -> float:
     x, y, _ = body.pose()
     return math.hypot(x - since[0], y - since[1])
@@ -158,11 +176,7 @@ def test_only_the_lease_holder_drives_and_the_watchdog_stops(
     identity: RegistryIdentity,
 ) -> None:
     realm = router.realm
-    start_bridge("--port", f"{emulator.port}={AGENT}@500,500,0", "--watchdog-ms", "300")
-    samples = Latest(zsession, keys.agent_sensors(realm, WORLD, AGENT), SensorSample)
-    wait_for(lambda: samples.count > 0, 20, "a sensor sample")
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
+    samples, context, alice = centred_robot(start_bridge, zsession, realm, emulator, identity, 300)
     mallory = issue_session(identity, realm, "mallory", ["control"])
     lease_key = keys.agent_lease(realm, WORLD, AGENT)
     cmd_key = keys.agent_cmd(realm, WORLD, AGENT)
@@ -209,11 +223,7 @@ def test_lease_end_halts_the_robot(
 ) -> None:
     realm = router.realm
     # A long watchdog, so only the lease's end can be what stops the robot.
-    start_bridge("--port", f"{emulator.port}={AGENT}@500,500,0", "--watchdog-ms", "60000")
-    samples = Latest(zsession, keys.agent_sensors(realm, WORLD, AGENT), SensorSample)
-    wait_for(lambda: samples.count > 0, 20, "a sensor sample")
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
+    _, context, alice = centred_robot(start_bridge, zsession, realm, emulator, identity, 60000)
     lease_key, cmd_key = keys.agent_lease(realm, WORLD, AGENT), keys.agent_cmd(realm, WORLD, AGENT)
     now = time.time()
     zsession.put(lease_key, context.seal(lease_key, lease(alice, start=now, end=now + 120)))
