@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bench.labproc import BenchLab
+from bench.quantiles import percentile
 from common.keys import AliveKind
 from services.lab import wiring
 from tests.kit.lab import free_port
@@ -169,13 +170,6 @@ async def _work(student: Student, until: float, pace: tuple[float, float]) -> No
             running = False
         if "Not done" in said:
             student.errors.append(f"{action}: {said[:160]}")
-
-
-def percentile(values: list[float], q: float) -> float:
-    if not values:
-        return float("nan")
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 async def run_class(

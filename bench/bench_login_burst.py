@@ -37,16 +37,12 @@ import psutil
 import zenoh
 
 from bench.labproc import BenchLab
+from bench.quantiles import percentile
 from common.client import lab_client as client_module
 from common.client.lab_client import LabClient
 from common.service import close_session, open_session
 
 PASSWORD = "class-of-2026"
-
-
-def _pct(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def _claim_low(clients: Iterator[LabClient]) -> None:
@@ -142,7 +138,8 @@ def main() -> int:
             waits, failed = _burst(clients, how, resumes, args.derive)
             wall, cpu = time.perf_counter() - t0, _cpu(registry) - cpu0
             print(
-                f"  {how:8s}: p50 {statistics.median(waits):.2f} s, p99 {_pct(waits, 0.99):.2f} s,"
+                f"  {how:8s}: p50 {statistics.median(waits):.2f} s,"
+                f" p99 {percentile(waits, 0.99):.2f} s,"
                 f" max {max(waits):.2f} s, {failed} failed; registry CPU {cpu:.2f} s in"
                 f" {wall:.2f} s ({cpu / n * 1e3:.0f} ms a login); load {load0:.1f}",
                 flush=True,

@@ -28,6 +28,7 @@ from urllib.parse import urlencode
 
 import psutil
 
+from bench.quantiles import percentile
 from tests.kit.lab import Procs, make_lab, start_router, wart
 from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
 from tests.kit.lti_tool import start_lti
@@ -81,11 +82,6 @@ def burst(tool: str, platform: str, subs: list[str]) -> list[float]:
         return list(pool.map(one, subs))
 
 
-def _pct(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
-
-
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--students", type=int, default=60)
@@ -111,7 +107,8 @@ def main() -> int:
             t0 = time.perf_counter()
             times = burst(tool, platform.url, subs)
             wall = time.perf_counter() - t0
-            print(f"  {what:28} p50 {_pct(times, 0.5):.2f} s  p99 {_pct(times, 0.99):.2f} s  "
+            print(f"  {what:28} p50 {percentile(times, 0.5):.2f} s  "
+                  f"p99 {percentile(times, 0.99):.2f} s  "
                   f"max {max(times):.2f} s  (all in {wall:.2f} s)")  # fmt: skip
         return 0
     finally:

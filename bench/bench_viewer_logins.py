@@ -23,6 +23,7 @@ import time
 from collections import Counter
 
 from bench.labproc import BenchLab
+from bench.quantiles import percentile
 from common.keys import AliveKind
 from tests.kit.lab import free_port
 from tests.kit.viser_client import ViserClient
@@ -44,11 +45,6 @@ async def _attempt(client: ViserClient, user: str, bound: float) -> tuple[str, f
     with contextlib.suppress(ConnectionError, TimeoutError):
         await client.log_in(user, PASSWORD, timeout=bound)
     return _answer(client), time.monotonic() - started
-
-
-def _pct(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else float("nan")
 
 
 async def _class(url: str, sessions: int, at_once: int, bound: float) -> None:
@@ -80,7 +76,8 @@ async def _class(url: str, sessions: int, at_once: int, bound: float) -> None:
         print(f"  refused ({count}): {text}")
     print(f"  never answered within {bound:.0f} s: {len(never)} {never[:5]}")
     print(
-        f"  click to answer: p50 {_pct(answered, 0.5):.1f} s, p90 {_pct(answered, 0.9):.1f} s, "
+        f"  click to answer: p50 {percentile(answered, 0.5):.1f} s, "
+        f"p90 {percentile(answered, 0.9):.1f} s, "
         f"max {max(answered, default=float('nan')):.1f} s"
     )
     if second:

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from bench.control_timing import WORLD
+from bench.swarm_bundle_cost import sample
 from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.controller import RobotCommand
@@ -80,19 +81,7 @@ def wake_storm(n: int, rounds: int = 200) -> None:
     are done, after the hand-out began.
     """
 
-    raw = encode(
-        SensorSample(
-            world=WORLD,
-            agent="k0",
-            tick=1,
-            sim_time=0.02,
-            proximity=[0] * 8,
-            ambient=[500] * 8,
-            counters=(0, 0),
-            speeds=(0, 0),
-            leds=[0, 0],
-        )
-    )
+    raw = encode(sample("k0", WORLD))
     key, cmd_key = new_lease_key(), keys.agent_cmd("bench", WORLD, "k0")
     fresh = [threading.Condition() for _ in range(n)]
     handed = [0] * n

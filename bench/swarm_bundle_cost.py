@@ -72,9 +72,10 @@ def setup(n: int) -> tuple[WorldChannel, dict[str, ZenohRobotLink], LeaseBook, F
     return channel, {link.agent: link for link in links}, book, zs
 
 
-def sample(agent: str) -> SensorSample:
+def sample(agent: str, world: str = WORLD) -> SensorSample:
+    """A Khepera's sample at rest: nothing near it, the room's light, its wheels still."""
     return SensorSample(
-        world=WORLD,
+        world=world,
         agent=agent,
         tick=1,
         sim_time=0.02,

@@ -75,6 +75,17 @@ class Registry:
         self.problems.append(problem)
         log.warning("plugin refused: %s; the lab runs without it", problem)
 
+    def _first(self, group: str, what: str, name: str, label: str, origin: str) -> bool:
+        """Whether ``name`` is new in ``group``: its origin is noted. Else it is refused
+        (``label``: as the problem names it), saying where the ``what`` of that name came from.
+        """
+        first = self.origins.get((group, name))
+        if first is not None:
+            self.refuse(group, label, origin, f"a {what} {name!r} exists already (from {first})")
+            return False
+        self.origins[(group, name)] = origin
+        return True
+
     def add_component(self, component: Any, origin: str, name: str = "") -> bool:
         label = getattr(component, "name", "") or name or repr(component)
         try:
@@ -82,17 +93,9 @@ class Registry:
         except SchemaError as exc:
             self.refuse("wart.components", label, origin, f"bad schema: {exc}")
             return False
-        if component.name in self.components:
-            self.refuse(
-                "wart.components",
-                label,
-                origin,
-                f"a component type {component.name!r} exists already "
-                f"(from {self.origins[('wart.components', component.name)]})",
-            )
+        if not self._first("wart.components", "component type", component.name, label, origin):
             return False
         self.components[component.name] = component
-        self.origins[("wart.components", component.name)] = origin
         return True
 
     def add_robot(self, data: bytes, source: str, origin: str) -> AgentTypeSpec | None:
@@ -102,17 +105,9 @@ class Registry:
         except RobotFileError as exc:
             self.refuse("wart.agents", source, origin, str(exc))
             return None
-        if spec.name in self.robots:
-            self.refuse(
-                "wart.agents",
-                source,
-                origin,
-                f"a robot type {spec.name!r} exists already "
-                f"(from {self.origins[('wart.agents', spec.name)]})",
-            )
+        if not self._first("wart.agents", "robot type", spec.name, source, origin):
             return None
         self.robots[spec.name] = spec
-        self.origins[("wart.agents", spec.name)] = origin
         self.texts[spec.name] = data.decode("utf-8")
         return spec
 

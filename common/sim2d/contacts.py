@@ -108,14 +108,7 @@ def _near_obstacle(
     x, y, r, margin, width, height, scene, circ_start, circ_items
 ):  # pragma: no cover
     """Whether a robot at (x, y) is within ``margin`` of touching an obstacle or the border."""
-    segs, grid_start, grid_items, grid_nx, grid_ny, grid_cell = (
-        scene[0],
-        scene[1],
-        scene[2],
-        scene[3],
-        scene[4],
-        scene[5],
-    )
+    segs, grid_start, grid_items, grid_nx, grid_ny, grid_cell = scene[:6]
     static_xy, static_r = scene[7], scene[8]
     reach = r + margin
     if x < reach or y < reach or x > width - reach or y > height - reach:
@@ -139,14 +132,7 @@ def _near_obstacle(
 @njit(cache=_CACHE, inline="always")
 def _out_of_obstacles(x, y, r, width, height, scene, circ_start, circ_items):  # pragma: no cover
     """(x, y) pushed out of every obstacle edge and round obstacle near it, then the border."""
-    segs, grid_start, grid_items, grid_nx, grid_ny, grid_cell = (
-        scene[0],
-        scene[1],
-        scene[2],
-        scene[3],
-        scene[4],
-        scene[5],
-    )
+    segs, grid_start, grid_items, grid_nx, grid_ny, grid_cell = scene[:6]
     static_xy, static_r = scene[7], scene[8]
     k = _cell(x, grid_cell, grid_nx) * grid_ny + _cell(y, grid_cell, grid_ny)
     for p in range(grid_start[k], grid_start[k + 1]):
@@ -319,14 +305,7 @@ def _wall_normals(
     other robot of the pair (:func:`_blocked`).
     """
     circ_start, circ_items = circles
-    segs, grid_start, grid_items, grid_nx, grid_ny, grid_cell = (
-        scene[0],
-        scene[1],
-        scene[2],
-        scene[3],
-        scene[4],
-        scene[5],
-    )
+    segs, grid_start, grid_items, grid_nx, grid_ny, grid_cell = scene[:6]
     static_xy, static_r = scene[7], scene[8]
     for q in range(m):
         a = near[q]

@@ -246,17 +246,7 @@ def _sense_range(
         lim = reach + 1.0
         for p in range(grid_start[k], grid_start[k + 1]):
             sg = grid_items[p]
-            ax = segs[sg, 0]
-            ay = segs[sg, 1]
-            ex = segs[sg, 2] - ax
-            ey = segs[sg, 3] - ay
-            length2 = ex * ex + ey * ey
-            u = 0.0
-            if length2 > 0.0:
-                u = min(max(((x - ax) * ex + (y - ay) * ey) / length2, 0.0), 1.0)
-            qx = ax + u * ex - x
-            qy = ay + u * ey - y
-            if qx * qx + qy * qy < lim * lim:
+            if _point_segment_d2(x, y, segs[sg]) < lim * lim:
                 scand[nseg] = sg
                 nseg += 1
         # Edges of movable polygons (few): every one whose midpoint is within reach.

@@ -5,6 +5,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from common.messages import (
@@ -25,7 +27,7 @@ from common.messages import (
 )
 from common.robots import registry as robot_registry
 from common.sim2d.collision import CAT_ROBOT
-from common.sim2d.entities import Agent, ShapeSpec
+from common.sim2d.entities import Agent, Obstacle, ShapeSpec, Zone
 from common.sim2d.map_robots import carried_files
 from common.sim2d.parts import parts_of
 from common.sim2d.world import World
@@ -175,22 +177,27 @@ def looks(world: World) -> list[RobotLook]:
     return list(out.values())
 
 
+def _fixed_item(
+    item: Obstacle | Zone, category: Literal["obstacle", "zone"], kind: str
+) -> ItemInfo:
+    """An obstacle's or a zone's entry: it stays where the map or an edit put it."""
+    return ItemInfo(
+        id=item.id,
+        category=category,
+        kind=kind,
+        shape=_shape(item.shape),
+        x=item.x,
+        y=item.y,
+        heading=item.heading,
+        colour=item.colour,
+    )
+
+
 def snapshot(world: World) -> WorldSnapshot:
     items: list[ItemInfo] = []
     for o in world.obstacles.values():
         kind = "wall" if o.shape.kind == "box" else o.shape.kind
-        items.append(
-            ItemInfo(
-                id=o.id,
-                category="obstacle",
-                kind=kind,
-                shape=_shape(o.shape),
-                x=o.x,
-                y=o.y,
-                heading=o.heading,
-                colour=o.colour,
-            )
-        )
+        items.append(_fixed_item(o, "obstacle", kind))
     for i, obj in enumerate(world.objects):
         x, y, h = world.object_pose[i] if i < len(world.object_pose) else world.pose_of(obj.id)
         items.append(
@@ -208,18 +215,7 @@ def snapshot(world: World) -> WorldSnapshot:
             )
         )
     for z in world.zones.values():
-        items.append(
-            ItemInfo(
-                id=z.id,
-                category="zone",
-                kind=z.kind,
-                shape=_shape(z.shape),
-                x=z.x,
-                y=z.y,
-                heading=z.heading,
-                colour=z.colour,
-            )
-        )
+        items.append(_fixed_item(z, "zone", z.kind))
     on = world.lights_on()
     lights = [
         LightInfo(

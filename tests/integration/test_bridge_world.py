@@ -87,6 +87,34 @@ def start_bridge(
     return start
 
 
+CentredRobot = Callable[[int], tuple[Latest, Session, Session]]
+
+
+@pytest.fixture
+def centred_robot(
+    router: Router,
+    zsession: zenoh.Session,
+    start_bridge: BridgeFactory,
+    emulator: KheperaEmulator,
+    identity: RegistryIdentity,
+) -> CentredRobot:
+    """The bridge driving the robot from the arena's centre with a watchdog of so many ms,
+    once its first sample is in: its samples, the agent context's session (to lease) and
+    alice's (to drive)."""
+    realm = router.realm
+
+    def start(watchdog_ms: int) -> tuple[Latest, Session, Session]:
+        port = f"{emulator.port}={AGENT}@500,500,0"
+        start_bridge("--port", port, "--watchdog-ms", str(watchdog_ms))
+        samples = Latest(zsession, keys.agent_sensors(realm, WORLD, AGENT), SensorSample)
+        wait_for(lambda: samples.count > 0, 20, "a sensor sample")
+        context = issue_session(identity, realm, "ctx", ["lease"])
+        alice = issue_session(identity, realm, "alice", ["control"])
+        return samples, context, alice
+
+    return start
+
+
 def snapshot(session: zenoh.Session, realm: str) -> WorldSnapshot:
     for reply in session.get(keys.world_snapshot(realm, WORLD), timeout=10.0):
         assert reply.ok is not None, reply.err
@@ -152,17 +180,12 @@ def test_samples_frames_and_snapshot_carry_the_robot(
 def test_only_the_lease_holder_drives_and_the_watchdog_stops(
     router: Router,
     zsession: zenoh.Session,
-    start_bridge: BridgeFactory,
-    emulator: KheperaEmulator,
     body: SimBody,
     identity: RegistryIdentity,
+    centred_robot: CentredRobot,
 ) -> None:
     realm = router.realm
-    start_bridge("--port", f"{emulator.port}={AGENT}@500,500,0", "--watchdog-ms", "300")
-    samples = Latest(zsession, keys.agent_sensors(realm, WORLD, AGENT), SensorSample)
-    wait_for(lambda: samples.count > 0, 20, "a sensor sample")
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
+    samples, context, alice = centred_robot(300)
     mallory = issue_session(identity, realm, "mallory", ["control"])
     lease_key = keys.agent_lease(realm, WORLD, AGENT)
     cmd_key = keys.agent_cmd(realm, WORLD, AGENT)
@@ -200,20 +223,11 @@ def test_only_the_lease_holder_drives_and_the_watchdog_stops(
 
 
 def test_lease_end_halts_the_robot(
-    router: Router,
-    zsession: zenoh.Session,
-    start_bridge: BridgeFactory,
-    emulator: KheperaEmulator,
-    body: SimBody,
-    identity: RegistryIdentity,
+    router: Router, zsession: zenoh.Session, body: SimBody, centred_robot: CentredRobot
 ) -> None:
     realm = router.realm
     # A long watchdog, so only the lease's end can be what stops the robot.
-    start_bridge("--port", f"{emulator.port}={AGENT}@500,500,0", "--watchdog-ms", "60000")
-    samples = Latest(zsession, keys.agent_sensors(realm, WORLD, AGENT), SensorSample)
-    wait_for(lambda: samples.count > 0, 20, "a sensor sample")
-    context = issue_session(identity, realm, "ctx", ["lease"])
-    alice = issue_session(identity, realm, "alice", ["control"])
+    _, context, alice = centred_robot(60000)
     lease_key, cmd_key = keys.agent_lease(realm, WORLD, AGENT), keys.agent_cmd(realm, WORLD, AGENT)
     now = time.time()
     zsession.put(lease_key, context.seal(lease_key, lease(alice, start=now, end=now + 120)))

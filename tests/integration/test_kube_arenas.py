@@ -29,6 +29,7 @@ from common.keys import AliveKind
 from common.lab_errors import LabError
 from services.commands.arena import format_loads, new_arena, stop_arena
 from tests.kit.courses import assignment_toml, import_roster
+from tests.kit.json_http import send_json
 from tests.kit.lab import Proc, ProcessLab, Procs, Router, make_lab, wait_alive, wart
 from tests.kit.waits import wait_for
 
@@ -67,14 +68,6 @@ class FakeCluster:
             def log_message(self, *args: object) -> None:
                 pass
 
-            def reply(self, status: int, body: dict[str, Any]) -> None:
-                data = json.dumps(body).encode()
-                self.send_response(status)
-                self.send_header("Content-Type", "application/json")
-                self.send_header("Content-Length", str(len(data)))
-                self.end_headers()
-                self.wfile.write(data)
-
             def scale(self, name: str) -> dict[str, Any]:
                 n = cluster.replicas[name]
                 meta = {"name": name, "namespace": NS}
@@ -93,23 +86,23 @@ class FakeCluster:
             def do_GET(self) -> None:
                 name = self.scale_of()
                 if name is None:
-                    self.reply(404, {"kind": "Status", "status": "Failure", "code": 404})
+                    send_json(self, 404, {"kind": "Status", "status": "Failure", "code": 404})
                     return
-                self.reply(200, self.scale(name))
+                send_json(self, 200, self.scale(name))
 
             def do_PATCH(self) -> None:
                 body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
                 name = self.scale_of()
                 if name is None:
-                    self.reply(404, {"kind": "Status", "status": "Failure", "code": 404})
+                    send_json(self, 404, {"kind": "Status", "status": "Failure", "code": 404})
                     return
                 kind = self.headers["Content-Type"]
                 cluster.patches.append((name, kind, body["spec"]["replicas"]))
                 if kind != "application/merge-patch+json":  # what the body is
-                    self.reply(415, {"kind": "Status", "status": "Failure", "code": 415})
+                    send_json(self, 415, {"kind": "Status", "status": "Failure", "code": 415})
                     return
                 cluster.replicas[name] = body["spec"]["replicas"]
-                self.reply(200, self.scale(name))
+                send_json(self, 200, self.scale(name))
 
             def do_POST(self) -> None:
                 body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
@@ -121,19 +114,19 @@ class FakeCluster:
                         session.liveliness().declare_token(keys.alive(realm, kind, world))
                         for kind in (AliveKind.WORLD, AliveKind.CONTEXT)
                     ]
-                self.reply(201, body)
+                send_json(self, 201, body)
 
             def do_DELETE(self) -> None:
                 path, _, query = self.path.partition("?")
                 cluster.requests.append(("DELETE", path, dict(parse_qsl(query))))
                 if cluster.objects.pop(path, None) is None:
-                    self.reply(404, {"kind": "Status", "status": "Failure", "code": 404})
+                    send_json(self, 404, {"kind": "Status", "status": "Failure", "code": 404})
                     return
                 if "/statefulsets/" in path:
                     world = path.rsplit("/", 1)[1].removeprefix("wart-arena-")
                     for token in cluster.tokens.pop(world, []):
                         token.undeclare()
-                self.reply(200, {"kind": "Status", "status": "Success"})
+                send_json(self, 200, {"kind": "Status", "status": "Success"})
 
         self.handler = Handler
         self.port = 0

@@ -25,6 +25,8 @@ import jwt
 from cryptography.hazmat.primitives.asymmetric import rsa
 from jwt.algorithms import RSAAlgorithm
 
+from tests.kit.json_http import send_json
+
 LTI = "https://purl.imsglobal.org/spec/lti/claim/"
 AGS = "https://purl.imsglobal.org/spec/lti-ags/claim/endpoint"
 CLIENT_ID = "wart-tool-1"
@@ -166,7 +168,7 @@ class FakePlatform:
             with self.lock:
                 self.jwks_fetches += 1
             jwk = json.loads(RSAAlgorithm.to_jwk(self.key.public_key()))
-            self._send(h, 200, {"keys": [{**jwk, "kid": self.kid, "alg": "RS256", "use": "sig"}]})
+            send_json(h, 200, {"keys": [{**jwk, "kid": self.kid, "alg": "RS256", "use": "sig"}]})
         elif parts.path == "/auth":
             self._auth(h, params)
         elif parts.path == "/token" and method == "POST":
@@ -177,14 +179,14 @@ class FakePlatform:
                 self.score_auth.append(h.headers.get("Authorization", ""))
                 kind = h.headers.get("Content-Type", "")
             assert kind == "application/vnd.ims.lis.v1.score+json", kind
-            self._send(h, 200, {})
+            send_json(h, 200, {})
         else:
-            self._send(h, 404, {"error": "not found"})
+            send_json(h, 404, {"error": "not found"})
 
     def _auth(self, h: BaseHTTPRequestHandler, p: dict[str, str]) -> None:
         """The OIDC auth endpoint: an auto-submitting form to the tool's launch URL."""
         if p.get("client_id") != CLIENT_ID or p.get("response_mode") != "form_post":
-            self._send(h, 400, {"error": "bad auth request"})
+            send_json(h, 400, {"error": "bad auth request"})
             return
         claims = self.claims(p["nonce"], p.get("login_hint", ""))
         header: dict[str, Any] = {"kid": self.kid}
@@ -215,7 +217,7 @@ class FakePlatform:
         with self.lock:
             if self.token_failures > 0:
                 self.token_failures -= 1
-                self._send(h, 503, {"error": "temporarily_unavailable"})
+                send_json(h, 503, {"error": "temporarily_unavailable"})
                 return
         # The client assertion must be signed by the tool's key, found at its JWKS URL.
         assertion = form.get("client_assertion", "")
@@ -229,16 +231,7 @@ class FakePlatform:
         with self.lock:
             self.assertions.append(claims)
             self.tokens_issued += 1
-        self._send(h, 200, {"access_token": f"tok-{uuid.uuid4().hex}", "expires_in": 3600})
-
-    @staticmethod
-    def _send(h: BaseHTTPRequestHandler, status: int, data: Any) -> None:
-        raw = json.dumps(data).encode()
-        h.send_response(status)
-        h.send_header("Content-Type", "application/json")
-        h.send_header("Content-Length", str(len(raw)))
-        h.end_headers()
-        h.wfile.write(raw)
+        send_json(h, 200, {"access_token": f"tok-{uuid.uuid4().hex}", "expires_in": 3600})
 
 
 def form_fields(page: str) -> dict[str, str]:

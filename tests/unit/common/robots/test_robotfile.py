@@ -188,3 +188,15 @@ def test_each_ir_sensors_gain_and_noise_is_checked_against_the_ring() -> None:
     ), message
     # The datasheet's Khepera has none: each sensor reads the curve as it is.
     assert parse(khepera, "k.toml", COMPONENTS).proximity.gains == ()
+
+
+def test_a_second_type_of_a_taken_name_is_refused_saying_where_the_first_came_from() -> None:
+    reg = registry.build(plugins=False)
+    assert not reg.add_component(reg.components["body"], "someplugin")
+    assert reg.add_robot(reg.texts["khepera"].encode(), "khepera.toml", "otherdir") is None
+    assert [str(p) for p in reg.problems] == [
+        "wart.components body (from someplugin): "
+        "a component type 'body' exists already (from built-in)",
+        "wart.agents khepera.toml (from otherdir): "
+        "a robot type 'khepera' exists already (from built-in)",
+    ]

@@ -87,6 +87,12 @@ class Lab:
         x, y, h = self.home
         self.engine.world.move(self.agent, x + 100, y, h + 1.0)
 
+    def assert_refused(self, reply: object, words: str) -> None:
+        """The reset was refused as forbidden, saying ``words``; the robot stayed pushed."""
+        assert isinstance(reply, AuthError) and reply.code == "forbidden"
+        assert words in reply.message
+        assert self.engine.world.pose_of(self.agent)[0] == pytest.approx(self.home[0] + 100)
+
 
 @pytest.fixture
 def lab() -> Lab:
@@ -95,19 +101,13 @@ def lab() -> Lab:
 
 def test_nobody_may_reset_a_robot_nobody_holds(lab: Lab) -> None:
     lab.push_robot()
-    refused = lab.reset(lab.alice)
-    assert isinstance(refused, AuthError) and refused.code == "forbidden"
-    assert "reset it while your controller holds it" in refused.message
-    assert lab.engine.world.pose_of(lab.agent)[0] == pytest.approx(lab.home[0] + 100)
+    lab.assert_refused(lab.reset(lab.alice), "reset it while your controller holds it")
 
 
 def test_another_student_may_not_reset_a_robot_someone_holds(lab: Lab) -> None:
     lab.lease_for_alice_run_by_the_runner()
     lab.push_robot()
-    refused = lab.reset(lab.bob)
-    assert isinstance(refused, AuthError) and refused.code == "forbidden"
-    assert "someone else's controller" in refused.message
-    assert lab.engine.world.pose_of(lab.agent)[0] == pytest.approx(lab.home[0] + 100)
+    lab.assert_refused(lab.reset(lab.bob), "someone else's controller")
 
 
 def test_the_student_whose_upload_holds_it_resets_it_to_the_start_pose(lab: Lab) -> None:
