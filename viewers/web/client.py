@@ -320,6 +320,8 @@ class BrowserSession:
 
     def watch(self, feed: WorldFeed, panel: ChatPanel) -> None:
         """Show ``feed`` (an arena live, or one of its recordings) bound to ``panel``."""
+        if self.watching is panel and self.view.feed is feed:
+            return  # shown and bound already: the selection and the panels stay
         if self.watching is not None:  # the same panel too: it rebinds to the new feed
             self.watching.unbind()
         self.view.show(feed)

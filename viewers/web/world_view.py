@@ -181,8 +181,14 @@ class WorldView:
             return np.array(robots.batched_positions, np.float32)
 
     def show(self, feed: WorldFeed) -> None:
-        """Watch ``feed``: draw its snapshot, aim the camera; frames follow from the pump."""
+        """Watch ``feed``: draw its snapshot, aim the camera; frames follow from the pump.
+
+        The world shown already (the page said again which tab is in front, or a
+        late answer opened it again) stays as the student left it: the selected
+        robot, its trail and the camera."""
         with self._lock:
+            if feed is self.feed and self.snapshot is not None:
+                return
             self.feed = feed
             self.last_seq = -1
             self.drawn = None

@@ -104,3 +104,21 @@ def test_removing_every_robot_and_an_object_logs_nothing(
         pump.tick()
     assert not caplog.records, caplog.text
     assert view.robot_names == () and view.selected is None
+
+
+def test_showing_the_world_shown_already_keeps_the_selection_and_its_trail(
+    watched: tuple[FramePump, WorldView, Feed, list[int | None]],
+) -> None:
+    """The page says again which tab is in front (a late event on a busy machine): the
+    robot the student selected stays selected, its trail drawn; another world drops it."""
+    pump, view, feed, told = watched
+    view.select(1)
+    for _ in range(10):
+        pump.tick()
+    trail = view._trail_handle
+    assert trail is not None
+    view.show(feed)  # type: ignore[arg-type]
+    pump.tick()
+    assert (view.selected, view._trail_handle, told) == (1, trail, [1])
+    view.show(Feed(ROBOTS))  # type: ignore[arg-type]
+    assert (view.selected, view._trail_handle) == (None, None)
