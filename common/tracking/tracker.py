@@ -25,6 +25,7 @@ from common.tracking.deblur import (
     OUTLINE_WINDOW_PX,
     WIDE_WINDOW_PX,
     WINDOW_PX,
+    Readings,
     find_blurred,
 )
 from common.tracking.markers import MarkerLayout, corners_mm
@@ -173,6 +174,12 @@ class Tracker:
             side_px=side,
         )
 
+    def _marker_side_px(self, x: float, y: float) -> float:
+        """A robot marker's side (px) in the frame at arena point (x, y) mm."""
+        h = self.layout.robot_marker_height_mm
+        edge = corners_mm(x, y, 0.0, self.layout.robot_marker_mm)[:2]
+        return float(np.linalg.norm(np.diff(self.calibration.to_frame(edge, h), axis=0)))
+
     def _outlines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The unread outlines that could be a robot's marker, smeared or not: their
         centres in arena mm (at a marker's height) and in frame px, a marker's side there
@@ -184,17 +191,7 @@ class Tracker:
         centres_px = corners.mean(axis=1)
         centres = self.calibration.to_arena(self.calibration.undistort_points(centres_px), h)
         sides = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).mean(axis=1)
-        side_mm = self.layout.robot_marker_mm
-        expected = np.array(
-            [
-                np.linalg.norm(
-                    np.diff(
-                        self.calibration.to_frame(corners_mm(x, y, 0.0, side_mm)[:2], h), axis=0
-                    )
-                )
-                for x, y in centres
-            ]
-        )
+        expected = np.array([self._marker_side_px(x, y) for x, y in centres])
         ratio = sides / np.maximum(expected, 1e-6)
         like = (ratio >= SMEARED_LIKE) & (ratio <= MARKER_LIKE[1])
         order = np.argsort(np.abs(np.log(np.maximum(ratio[like], 1e-6))))
@@ -214,6 +211,7 @@ class Tracker:
         found: list[TrackedPose] = []
         h = self.layout.robot_marker_height_mm
         unread, unread_px, unread_side, unread_part = self._outlines()
+        readings: Readings = {}
         for agent, track in self._tracks.items():
             dt = captured_at - track.pose.at
             if agent in seen or not 0.0 < dt <= SEARCH_S:
@@ -256,24 +254,31 @@ class Tracker:
                 if any(np.max(np.abs(px - c)) + side / 2 <= w / 2 for c, w in done):
                     continue
                 done.append((px, size))
-                read = find_blurred(self._gray, {track.pose.marker}, px, angle, side, size, lengths)
+                read = find_blurred(
+                    self._gray, {track.pose.marker}, px, angle, side, size, lengths, (), readings
+                )
                 if read is not None:
                     break
             else:
                 read = None
                 if driving and smeared and dt <= WIDE_S:
-                    # It turned: around where it was, just after (a window costs 120 ms).
+                    # It turned: around where it was, just after, as far as it can have gone
+                    # (its marker wholly inside; a window costs 120 ms at its widest).
                     b = track.blur_px or 6.0
                     at = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
+                    marker_px = self._marker_side_px(track.pose.x, track.pose.y)
+                    reach_px = reach * marker_px / self.layout.robot_marker_mm
+                    wide = min(WIDE_WINDOW_PX, 2 * math.ceil(reach_px + marker_px))
                     read = find_blurred(
                         self._gray,
                         {track.pose.marker},
                         at[0],
                         None,
                         side,
-                        WIDE_WINDOW_PX,
+                        wide,
                         (b, b - 0.5, b + 0.5),
                         AXES,
+                        readings,
                     )
             if read is not None and driving:
                 self._exposures.append(read[2] / (math.hypot(*way) / 0.01))
@@ -292,7 +297,9 @@ class Tracker:
             self._scan += MAX_PLACES
             for k in range(start, start + min(MAX_PLACES, len(unread_px))):
                 px, side = unread_px[k % len(unread_px)], unread_side[k % len(unread_px)]
-                read = find_blurred(self._gray, untracked, px, None, side, OUTLINE_WINDOW_PX)
+                read = find_blurred(
+                    self._gray, untracked, px, None, side, OUTLINE_WINDOW_PX, readings=readings
+                )
                 if read is not None and read[0] in untracked:
                     found.append(
                         self._pose_of(untracked.pop(read[0]), read[0], read[1], captured_at)
