@@ -58,18 +58,27 @@ def window_detector(min_perimeter_rate: float) -> cv2.aruco.ArucoDetector:
 
 def line_blur(length_px: float, angle: float, size: int = 15) -> np.ndarray:
     """The blur of a straight motion: a line ``length_px`` long at ``angle``, summing to 1."""
-    kernel = np.zeros((size, size), np.float32)
+    return _line(length_px, angle, size, size, size // 2)
+
+
+def _line(length_px: float, angle: float, size: int, out: int, centre: int) -> np.ndarray:
+    """A ``size`` square line blur put in an ``out`` square, its middle at pixel ``centre``
+    (0: the origin, wrapped round the edges as a spectrum's kernel is)."""
     c = size // 2
     t = np.linspace(-length_px / 2, length_px / 2, max(2, int(length_px * 4)))
     x, y = c + t * math.cos(angle), c + t * math.sin(angle)
     x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
     fx, fy = x - x0, y - y0
+    cells, weights = [], []
     for dx, dy, w in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
                       (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):  # fmt: skip
         xs, ys = x0 + dx, y0 + dy
         inside = (xs >= 0) & (xs < size) & (ys >= 0) & (ys < size)
-        np.add.at(kernel, (ys[inside], xs[inside]), w[inside])
-    return kernel / kernel.sum()
+        shift = centre - c
+        cells.append(((ys[inside] + shift) % out) * out + (xs[inside] + shift) % out)
+        weights.append(w[inside])
+    kernel = np.bincount(np.concatenate(cells), np.concatenate(weights), out * out)
+    return (kernel / kernel.sum()).reshape(out, out).astype(np.float32)
 
 
 def wiener(image: np.ndarray, kernel: np.ndarray, nsr: float = NOISE_TO_SIGNAL) -> np.ndarray:
@@ -96,8 +105,8 @@ def _filter(spectrum: np.ndarray, nsr: float) -> np.ndarray:
 def _line_filter(length_px: float, angle_deg: int, size: int) -> np.ndarray:
     """Wiener's filter for a line blur over a ``size`` square window, its angle to the degree
     (a 7 px line a degree off moves its ends by 0.06 px): windows of one robot's way reuse it."""
-    kernel = line_blur(length_px, math.radians(angle_deg))
-    return _filter(_spectrum(kernel, (size, size)), NOISE_TO_SIGNAL)
+    kernel = _line(length_px, math.radians(angle_deg), 15, size, 0)
+    return _filter(np.fft.rfft2(kernel), NOISE_TO_SIGNAL)
 
 
 def _restore(
