@@ -262,20 +262,16 @@ class Tracker:
             else:
                 read = None
                 if driving and smeared and dt <= WIDE_S:
-                    # It turned: around where it was, just after, as far as it can have gone
-                    # (its marker wholly inside; a window costs 120 ms at its widest).
+                    # It turned: around where it was, just after (a window costs 120 ms).
                     b = track.blur_px or 6.0
                     at = self.calibration.to_frame(np.array([(track.pose.x, track.pose.y)]), h)
-                    marker_px = self._marker_side_px(track.pose.x, track.pose.y)
-                    reach_px = reach * marker_px / self.layout.robot_marker_mm
-                    wide = min(WIDE_WINDOW_PX, 2 * math.ceil(reach_px + marker_px))
                     read = find_blurred(
                         self._gray,
                         {track.pose.marker},
                         at[0],
                         None,
                         side,
-                        wide,
+                        WIDE_WINDOW_PX,
                         (b, b - 0.5, b + 0.5),
                         AXES,
                         readings,
