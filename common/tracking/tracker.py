@@ -132,6 +132,7 @@ class Tracker:
         # blur gives its smear's length over its speed (px over px/s); the median of the
         # last few tells how far any robot is smeared, from its speed.
         self._exposures: deque[float] = deque(maxlen=15)
+        self._exposure: float | None = None  # their median, worked out once a change
 
     def detect_poses(self, frame: np.ndarray, captured_at: float) -> list[TrackedPose]:
         """Every robot marker in ``frame`` as a pose, unchecked against earlier frames."""
@@ -174,11 +175,16 @@ class Tracker:
             side_px=side,
         )
 
-    def _marker_side_px(self, x: float, y: float) -> float:
-        """A robot marker's side (px) in the frame at arena point (x, y) mm."""
-        h = self.layout.robot_marker_height_mm
-        edge = corners_mm(x, y, 0.0, self.layout.robot_marker_mm)[:2]
-        return float(np.linalg.norm(np.diff(self.calibration.to_frame(edge, h), axis=0)))
+    def _marker_sides_px(self, centres: np.ndarray) -> np.ndarray:
+        """A robot marker's side (px) in the frame at each arena point (x, y) mm (one
+        projection for them all)."""
+        side = self.layout.robot_marker_mm
+        if not len(centres):
+            return np.zeros(0)
+        edges = np.vstack([corners_mm(x, y, 0.0, side)[:2] for x, y in centres])
+        px = self.calibration.to_frame(edges, self.layout.robot_marker_height_mm)
+        ends = px.reshape(-1, 2, 2)
+        return np.asarray(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1))
 
     def _outlines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The unread outlines that could be a robot's marker, smeared or not: their
@@ -191,7 +197,7 @@ class Tracker:
         centres_px = corners.mean(axis=1)
         centres = self.calibration.to_arena(self.calibration.undistort_points(centres_px), h)
         sides = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).mean(axis=1)
-        expected = np.array([self._marker_side_px(x, y) for x, y in centres])
+        expected = self._marker_sides_px(centres)
         ratio = sides / np.maximum(expected, 1e-6)
         like = (ratio >= SMEARED_LIKE) & (ratio <= MARKER_LIKE[1])
         order = np.argsort(np.abs(np.log(np.maximum(ratio[like], 1e-6))))
@@ -278,6 +284,7 @@ class Tracker:
                     )
             if read is not None and driving:
                 self._exposures.append(read[2] / (math.hypot(*way) / 0.01))
+                self._exposure = None
             if read is not None:
                 track.blur_px = read[2]
                 found.append(self._pose_of(agent, read[0], read[1], captured_at))
@@ -309,7 +316,9 @@ class Tracker:
         exposure or the speed is not known)."""
         if not self._exposures or speed_px <= 0.0:
             return BLUR_LENGTHS_PX, True
-        expected = float(np.median(self._exposures)) * speed_px
+        if self._exposure is None:
+            self._exposure = float(np.median(self._exposures))
+        expected = self._exposure * speed_px
         by_nearness = sorted(BLUR_LENGTHS_PX, key=lambda b: abs(b - expected))
         near = [b for b in by_nearness if abs(b - expected) <= BLUR_SPREAD_PX]
         lengths = near or by_nearness[:3]
