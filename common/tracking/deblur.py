@@ -53,6 +53,9 @@ def window_detector(min_perimeter_rate: float) -> cv2.aruco.ArucoDetector:
     window's size round (the rate rounded by the caller: a few detectors a process)."""
     params = detector_parameters()
     params.minMarkerPerimeterRate = min_perimeter_rate
+    # Read at twice the size, a marker's cells are over 6 px wide: thresholded over 13 and 23
+    # px neighbourhoods, not 3 (tracker.threshold_window_px says why).
+    params.adaptiveThreshWinSizeMin = 13
     return cv2.aruco.ArucoDetector(dictionary(), params)
 
 
