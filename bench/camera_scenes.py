@@ -12,6 +12,7 @@ the robot is not covered, and its CPU a frame.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -75,7 +76,8 @@ class Figures:
             f"position p50 {np.percentile(mm, 50):.2f} p99 {np.percentile(mm, 99):.2f} mm "
             f"(mean x {bias[0]:+.2f} y {bias[1]:+.2f}); heading p99 "
             f"{np.percentile(deg, 99):.2f} deg; detection {seen}; "
-            f"CPU {np.median(self.cpu_ms):.1f} ms a frame"
+            f"CPU {np.median(self.cpu_ms):.1f} ms a frame "
+            f"(p95 {np.percentile(self.cpu_ms, 95):.0f}; load {os.getloadavg()[0]:.1f})"
         )
 
 

@@ -328,8 +328,9 @@ class ArenaCalibration:
 
 
 @functools.cache
-def detector() -> cv2.aruco.ArucoDetector:
-    """The lab's marker detector (one per process: it holds no frame's state).
+def detector(threshold_window_px: int = 3) -> cv2.aruco.ArucoDetector:
+    """The lab's marker detector (one per process and smallest thresholding window
+    ``threshold_window_px``: it holds no frame's state).
 
     Corners are refined along the marker's contour: a 40 mm marker is about 17 px at
     640x480 over a 1 m arena, and this refinement took the heading's error from 0.9
@@ -346,7 +347,9 @@ def detector() -> cv2.aruco.ArucoDetector:
     and half the markers at 320 mm/s (none before); the tracker reads the rest
     through their blur (common/tracking/deblur.py).
     """
-    return cv2.aruco.ArucoDetector(dictionary(), detector_parameters())
+    params = detector_parameters()
+    params.adaptiveThreshWinSizeMin = threshold_window_px  # then 10 px wider, up to 23
+    return cv2.aruco.ArucoDetector(dictionary(), params)
 
 
 def detector_parameters() -> cv2.aruco.DetectorParameters:
@@ -366,10 +369,13 @@ def detect(gray: np.ndarray) -> dict[int, np.ndarray]:
     return detect_all(gray)[0]
 
 
-def detect_all(gray: np.ndarray) -> tuple[dict[int, np.ndarray], list[np.ndarray]]:
+def detect_all(
+    gray: np.ndarray, threshold_window_px: int = 3
+) -> tuple[dict[int, np.ndarray], list[np.ndarray]]:
     """The markers read (id -> 4x2 corners, px), and the 4x2 corners (px) of the outlines
-    found whose bits could not be read (a blurred marker among them)."""
-    corners, ids, rejected = detector().detectMarkers(gray)
+    found whose bits could not be read (a blurred marker among them); the frame thresholded
+    over neighbourhoods from ``threshold_window_px`` wide."""
+    corners, ids, rejected = detector(threshold_window_px).detectMarkers(gray)
     unread = [np.asarray(c, dtype=np.float64).reshape(4, 2) for c in rejected]
     if ids is None:
         return {}, unread

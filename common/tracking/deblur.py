@@ -53,48 +53,70 @@ def window_detector(min_perimeter_rate: float) -> cv2.aruco.ArucoDetector:
     window's size round (the rate rounded by the caller: a few detectors a process)."""
     params = detector_parameters()
     params.minMarkerPerimeterRate = min_perimeter_rate
+    # Read at twice the size, a marker's cells are over 6 px wide: thresholded over 13 and 23
+    # px neighbourhoods, not 3 (tracker.threshold_window_px says why).
+    params.adaptiveThreshWinSizeMin = 13
     return cv2.aruco.ArucoDetector(dictionary(), params)
 
 
 def line_blur(length_px: float, angle: float, size: int = 15) -> np.ndarray:
     """The blur of a straight motion: a line ``length_px`` long at ``angle``, summing to 1."""
-    kernel = np.zeros((size, size), np.float32)
+    return _line(length_px, angle, size, size, size // 2)
+
+
+def _line(length_px: float, angle: float, size: int, out: int, centre: int) -> np.ndarray:
+    """A ``size`` square line blur put in an ``out`` square, its middle at pixel ``centre``
+    (0: the origin, wrapped round the edges as a spectrum's kernel is)."""
     c = size // 2
-    for t in np.linspace(-length_px / 2, length_px / 2, max(2, int(length_px * 4))):
-        x, y = c + t * math.cos(angle), c + t * math.sin(angle)
-        x0, y0 = math.floor(x), math.floor(y)
-        fx, fy = x - x0, y - y0
-        for dx, dy, w in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
-                          (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):  # fmt: skip
-            if 0 <= x0 + dx < size and 0 <= y0 + dy < size:
-                kernel[y0 + dy, x0 + dx] += w
-    return kernel / kernel.sum()
+    t = np.linspace(-length_px / 2, length_px / 2, max(2, int(length_px * 4)))
+    x, y = c + t * math.cos(angle), c + t * math.sin(angle)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    cells, weights = [], []
+    for dx, dy, w in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                      (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):  # fmt: skip
+        xs, ys = x0 + dx, y0 + dy
+        inside = (xs >= 0) & (xs < size) & (ys >= 0) & (ys < size)
+        shift = centre - c
+        cells.append(((ys[inside] + shift) % out) * out + (xs[inside] + shift) % out)
+        weights.append(w[inside])
+    kernel = np.bincount(np.concatenate(cells), np.concatenate(weights), out * out)
+    return (kernel / kernel.sum()).reshape(out, out).astype(np.float32)
 
 
 def wiener(image: np.ndarray, kernel: np.ndarray, nsr: float = NOISE_TO_SIGNAL) -> np.ndarray:
     """``image`` deconvolved by ``kernel`` (centred), regularised by the noise-to-signal."""
-    return _wiener(np.fft.fft2(image), _spectrum(kernel, image.shape), nsr)
+    return _restore(np.fft.rfft2(image), _filter(_spectrum(kernel, image.shape), nsr), image.shape)
 
 
 def _spectrum(kernel: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """The kernel's spectrum over an image of ``shape``, the kernel centred at the origin."""
+    """The kernel's spectrum over an image of ``shape``, the kernel centred at the origin
+    (the half a real image's spectrum keeps)."""
     padded = np.zeros(shape[:2], np.float32)
     k = kernel.shape[0]
     padded[:k, :k] = kernel
     padded = np.roll(padded, (-(k // 2), -(k // 2)), (0, 1))
-    return np.fft.fft2(padded)
+    return np.fft.rfft2(padded)
 
 
-@functools.lru_cache(maxsize=4096)
-def _line_spectrum(length_px: float, angle_deg: int, size: int) -> np.ndarray:
-    """A line blur's spectrum over a ``size`` square window, its angle to the degree (a
-    7 px line a degree off moves its ends by 0.06 px): windows of one robot's way reuse it."""
-    return _spectrum(line_blur(length_px, math.radians(angle_deg)), (size, size))
+def _filter(spectrum: np.ndarray, nsr: float) -> np.ndarray:
+    """Wiener's filter for a blur of this spectrum: what the image's spectrum is multiplied by."""
+    return np.asarray(np.conj(spectrum) / (np.abs(spectrum) ** 2 + nsr))
 
 
-def _wiener(image_spectrum: np.ndarray, spectrum: np.ndarray, nsr: float) -> np.ndarray:
-    restored = np.fft.ifft2(image_spectrum * np.conj(spectrum) / (np.abs(spectrum) ** 2 + nsr))
-    return np.asarray(np.real(restored))
+@functools.lru_cache(maxsize=1024)
+def _line_filter(length_px: float, angle_deg: int, size: int) -> np.ndarray:
+    """Wiener's filter for a line blur over a ``size`` square window, its angle to the degree
+    (a 7 px line a degree off moves its ends by 0.06 px): windows of one robot's way reuse it."""
+    kernel = _line(length_px, math.radians(angle_deg), 15, size, 0)
+    return _filter(np.fft.rfft2(kernel), NOISE_TO_SIGNAL)
+
+
+def _restore(
+    image_spectrum: np.ndarray, wiener_filter: np.ndarray, shape: tuple[int, ...]
+) -> np.ndarray:
+    # Image and kernel are real: the half spectrum holds everything and comes back real.
+    return np.fft.irfft2(image_spectrum * wiener_filter, s=shape[:2])
 
 
 def smear_angle(window: np.ndarray) -> float:
@@ -108,6 +130,12 @@ def smear_angle(window: np.ndarray) -> float:
     return strongest + math.pi / 2.0
 
 
+# What the deblurred windows of one frame read: (window's corner x and y, its size, the
+# detector's outline rate, the smear's angle to the degree and its length) -> the markers read
+# there (id, corners in the window). Robots lost near each other look at the same outlines.
+Readings = dict[tuple[int, int, int, float, int, float], list[tuple[int, np.ndarray]]]
+
+
 def find_blurred(
     gray: np.ndarray,
     markers: Collection[int],
@@ -117,14 +145,16 @@ def find_blurred(
     window_px: int = WINDOW_PX,
     lengths: Sequence[float] = BLUR_LENGTHS_PX,
     other_angles: Sequence[float] = (),
+    readings: Readings | None = None,
 ) -> tuple[int, np.ndarray, float] | None:
     """One of ``markers`` (about ``side_px`` a side in the frame), its 4 corners (frame px)
     and the smear's length that read it, in the window around ``at_px`` once deblurred
     along ``motion_angle`` (image radians; None: unknown) or along the way the window
-    itself looks smeared, then along ``other_angles``; None if none is read there."""
+    itself looks smeared, then along ``other_angles``; None if none is read there.
+    ``readings`` (one frame's) keeps what each deblurred window read, for the next asker."""
     # At twice the size, an outline of MIN_SIDE_PART of the side, as a part of the window.
-    rate = 4 * 2 * MIN_SIDE_PART * side_px / (2 * window_px)
-    detector = window_detector(round(min(max(rate, 0.03), 1.0), 2))
+    rate = round(min(max(4 * 2 * MIN_SIDE_PART * side_px / (2 * window_px), 0.03), 1.0), 2)
+    detector = window_detector(rate)
     half = window_px // 2
     h, w = gray.shape
     # A window that would cross the frame's edge is moved inside it.
@@ -136,38 +166,45 @@ def find_blurred(
     angles = [smear_angle(window)]
     if motion_angle is not None and abs(math.sin(motion_angle - angles[0])) > 0.25:
         angles.append(motion_angle)
+    spectrum: np.ndarray | None = None  # the window's, once for every angle and length
     for angle in [*angles, *other_angles]:
-        read = _read(window, detector, markers, angle, lengths)
-        if read is not None:
-            return read[0], read[1] + np.array([x0, y0]), read[2]
+        degrees = round(math.degrees(angle)) % 180  # a line blur is the same turned half round
+        for length in lengths:
+            key = (x0, y0, window_px, rate, degrees, length)
+            found = None if readings is None else readings.get(key)
+            if found is None:
+                if spectrum is None:
+                    spectrum = np.fft.rfft2(window)
+                found = _read(window, spectrum, detector, degrees, length)
+                if readings is not None:
+                    readings[key] = found
+            for marker, corners in found:
+                if marker in markers:
+                    return marker, corners + np.array([x0, y0]), length
     return None
 
 
 def _read(
     window: np.ndarray,
+    spectrum: np.ndarray,
     detector: cv2.aruco.ArucoDetector,
-    markers: Collection[int],
-    angle: float,
-    lengths: Sequence[float],
-) -> tuple[int, np.ndarray, float] | None:
-    # The window's spectrum once for every length; the line's cached by length and angle.
-    image_spectrum = np.fft.fft2(window)
-    degrees = round(math.degrees(angle)) % 180  # a line blur is the same turned half round
-    for length in lengths:
-        spectrum = _line_spectrum(length, degrees, window.shape[0])
-        restored = _wiener(image_spectrum, spectrum, NOISE_TO_SIGNAL)
-        sharp = np.clip(restored, 0, 255).astype(np.uint8)
-        # Read at twice the size: the bits are then over 6 px wide.
-        big = cv2.resize(sharp, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
-        try:
-            corners, ids, _ = detector.detectMarkers(big)
-        except cv2.error:  # the contour refinement gives up on some restored outlines
-            continue
-        if ids is None:
-            continue
-        for found, i in zip(corners, ids.ravel(), strict=True):
-            if int(i) in markers:
-                # A pixel centre X of the doubled window is (X + 0.5) / 2 - 0.5 of the window.
-                corners = np.asarray(found, dtype=np.float64).reshape(4, 2) / 2.0 - 0.25
-                return int(i), corners, length
-    return None
+    degrees: int,
+    length: float,
+) -> list[tuple[int, np.ndarray]]:
+    """The markers read in ``window`` (its ``spectrum`` given) deblurred at this smear: ids
+    and corners (window px)."""
+    restored = _restore(spectrum, _line_filter(length, degrees, window.shape[0]), window.shape)
+    sharp = np.clip(restored, 0, 255).astype(np.uint8)
+    # Read at twice the size: the bits are then over 6 px wide.
+    big = cv2.resize(sharp, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
+    try:
+        corners, ids, _ = detector.detectMarkers(big)
+    except cv2.error:  # the contour refinement gives up on some restored outlines
+        return []
+    if ids is None:
+        return []
+    # A pixel centre X of the doubled window is (X + 0.5) / 2 - 0.5 of the window.
+    return [
+        (int(i), np.asarray(found, dtype=np.float64).reshape(4, 2) / 2.0 - 0.25)
+        for found, i in zip(corners, ids.ravel(), strict=True)
+    ]

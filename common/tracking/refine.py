@@ -43,6 +43,13 @@ def _pattern(marker: int) -> np.ndarray:
     return np.asarray(framed, dtype=np.float32)
 
 
+@functools.cache
+def _start_solver() -> np.ndarray:
+    """The least-squares solver (pseudo-inverse) of the affine warp taking the pattern's
+    corners to four found ones: the pattern's corners never change, so it is worked out once."""
+    return np.linalg.pinv(np.c_[_pattern_corners(), np.ones(4)])
+
+
 def _pattern_corners() -> np.ndarray:
     """The marker's corners in the pattern's pixels (OpenCV's order: from its top left,
     clockwise; pixel centres at integers, so an edge lies half a pixel before the first)."""
@@ -64,7 +71,7 @@ def refine_corners(gray: np.ndarray, marker: int, corners: np.ndarray) -> np.nda
     origin = np.array([x0, y0], dtype=np.float64)
     ideal = _pattern_corners()
     # The affine warp (pattern -> patch) that best takes the ideal corners to the found.
-    start, *_ = np.linalg.lstsq(np.c_[ideal, np.ones(4)], corners - origin, rcond=None)
+    start = _start_solver() @ (corners - origin)
     warp = np.ascontiguousarray(start.T, dtype=np.float32)
     try:
         # Both images smoothed by a 3 px Gaussian first (OpenCV's stubs type that argument

@@ -25,6 +25,7 @@ from common.tracking.deblur import (
     OUTLINE_WINDOW_PX,
     WIDE_WINDOW_PX,
     WINDOW_PX,
+    Readings,
     find_blurred,
 )
 from common.tracking.markers import MarkerLayout, corners_mm
@@ -52,6 +53,17 @@ LOST_S = 1.0  # unseen this long, a robot is said to be lost (once, with the rea
 # on the bench's 1/25 s: 100 %): such a robot unread is covered, not blurred.
 READABLE_BLUR_PX = 3.0
 BLUR_SPREAD_PX = 1.5  # deblurred at lengths this near the smear its speed predicts
+
+
+def threshold_window_px(cell_px: float) -> int:
+    """The smallest neighbourhood (px) a frame is thresholded over, for marker cells of
+    ``cell_px`` at the narrowest: 13 (then 23) for cells of 2.5 px or more, else 3 (then 13
+    and 23). A 3 px neighbourhood inside a wider cell sets the cell's pixels against the cell
+    itself: it outlines noise and bit edges, not markers. Without it, detection, position and
+    heading held on bench seeds 1, 2 and 3 at 18 degrees (3.1 px cells), 1 and 2 at 25 (2.7
+    px), 2 at 10, and on the synthetic camera at 640x480 (2.9 px), for 1 to 4 ms less a frame;
+    smaller cells were not measured."""
+    return 13 if cell_px >= 2.5 else 3
 
 
 @dataclass(frozen=True)
@@ -131,6 +143,8 @@ class Tracker:
         # blur gives its smear's length over its speed (px over px/s); the median of the
         # last few tells how far any robot is smeared, from its speed.
         self._exposures: deque[float] = deque(maxlen=15)
+        self._exposure: float | None = None  # their median, worked out once a change
+        self._threshold_window_px = threshold_window_px(self._smallest_cell_px())
 
     def detect_poses(self, frame: np.ndarray, captured_at: float) -> list[TrackedPose]:
         """Every robot marker in ``frame`` as a pose, unchecked against earlier frames."""
@@ -140,7 +154,7 @@ class Tracker:
         self._gray = gray
         poses = []
         self._unknown: list[int] = []
-        read, self._unread = detect_all(gray)
+        read, self._unread = detect_all(gray, self._threshold_window_px)
         for marker, px in read.items():
             agent = self.layout.agent_of.get(marker)
             if agent is None:
@@ -173,6 +187,23 @@ class Tracker:
             side_px=side,
         )
 
+    def _smallest_cell_px(self) -> float:
+        """The narrowest a robot marker's cell (a sixth of its side, border included) is
+        in the frame: at the reference markers, the arena's corners."""
+        corners = np.array(list(self.layout.reference.values()), dtype=np.float64)
+        return float(self._marker_sides_px(corners).min()) / 6.0
+
+    def _marker_sides_px(self, centres: np.ndarray) -> np.ndarray:
+        """A robot marker's side (px) in the frame at each arena point (x, y) mm (one
+        projection for them all)."""
+        side = self.layout.robot_marker_mm
+        if not len(centres):
+            return np.zeros(0)
+        edges = np.vstack([corners_mm(x, y, 0.0, side)[:2] for x, y in centres])
+        px = self.calibration.to_frame(edges, self.layout.robot_marker_height_mm)
+        ends = px.reshape(-1, 2, 2)
+        return np.asarray(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1))
+
     def _outlines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The unread outlines that could be a robot's marker, smeared or not: their
         centres in arena mm (at a marker's height) and in frame px, a marker's side there
@@ -184,17 +215,7 @@ class Tracker:
         centres_px = corners.mean(axis=1)
         centres = self.calibration.to_arena(self.calibration.undistort_points(centres_px), h)
         sides = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).mean(axis=1)
-        side_mm = self.layout.robot_marker_mm
-        expected = np.array(
-            [
-                np.linalg.norm(
-                    np.diff(
-                        self.calibration.to_frame(corners_mm(x, y, 0.0, side_mm)[:2], h), axis=0
-                    )
-                )
-                for x, y in centres
-            ]
-        )
+        expected = self._marker_sides_px(centres)
         ratio = sides / np.maximum(expected, 1e-6)
         like = (ratio >= SMEARED_LIKE) & (ratio <= MARKER_LIKE[1])
         order = np.argsort(np.abs(np.log(np.maximum(ratio[like], 1e-6))))
@@ -214,6 +235,7 @@ class Tracker:
         found: list[TrackedPose] = []
         h = self.layout.robot_marker_height_mm
         unread, unread_px, unread_side, unread_part = self._outlines()
+        readings: Readings = {}
         for agent, track in self._tracks.items():
             dt = captured_at - track.pose.at
             if agent in seen or not 0.0 < dt <= SEARCH_S:
@@ -256,7 +278,9 @@ class Tracker:
                 if any(np.max(np.abs(px - c)) + side / 2 <= w / 2 for c, w in done):
                     continue
                 done.append((px, size))
-                read = find_blurred(self._gray, {track.pose.marker}, px, angle, side, size, lengths)
+                read = find_blurred(
+                    self._gray, {track.pose.marker}, px, angle, side, size, lengths, (), readings
+                )
                 if read is not None:
                     break
             else:
@@ -274,9 +298,11 @@ class Tracker:
                         WIDE_WINDOW_PX,
                         (b, b - 0.5, b + 0.5),
                         AXES,
+                        readings,
                     )
             if read is not None and driving:
                 self._exposures.append(read[2] / (math.hypot(*way) / 0.01))
+                self._exposure = None
             if read is not None:
                 track.blur_px = read[2]
                 found.append(self._pose_of(agent, read[0], read[1], captured_at))
@@ -292,7 +318,9 @@ class Tracker:
             self._scan += MAX_PLACES
             for k in range(start, start + min(MAX_PLACES, len(unread_px))):
                 px, side = unread_px[k % len(unread_px)], unread_side[k % len(unread_px)]
-                read = find_blurred(self._gray, untracked, px, None, side, OUTLINE_WINDOW_PX)
+                read = find_blurred(
+                    self._gray, untracked, px, None, side, OUTLINE_WINDOW_PX, readings=readings
+                )
                 if read is not None and read[0] in untracked:
                     found.append(
                         self._pose_of(untracked.pop(read[0]), read[0], read[1], captured_at)
@@ -306,7 +334,9 @@ class Tracker:
         exposure or the speed is not known)."""
         if not self._exposures or speed_px <= 0.0:
             return BLUR_LENGTHS_PX, True
-        expected = float(np.median(self._exposures)) * speed_px
+        if self._exposure is None:
+            self._exposure = float(np.median(self._exposures))
+        expected = self._exposure * speed_px
         by_nearness = sorted(BLUR_LENGTHS_PX, key=lambda b: abs(b - expected))
         near = [b for b in by_nearness if abs(b - expected) <= BLUR_SPREAD_PX]
         lengths = near or by_nearness[:3]
