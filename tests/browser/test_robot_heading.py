@@ -20,7 +20,7 @@ from tests.browser.conftest import join_demo_arena, screen_points, show_still_fr
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
-from viewers.web.world_view import HEADING_DARK, HEADING_LIT
+from viewers.web.prepared_frame import HEADING_DARK, HEADING_LIT
 
 pytestmark = pytest.mark.browser
 

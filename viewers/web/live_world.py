@@ -45,6 +45,7 @@ from common.messages.world import MAX_ROBOT_FILE_BYTES
 from viewers.web import geometry as geo
 from viewers.web.adapters import LabError
 from viewers.web.arena_video import CameraFeed
+from viewers.web.prepared_frame import OFFLINE
 from viewers.web.world_feed import (
     Ball,
     Light,
@@ -54,7 +55,6 @@ from viewers.web.world_feed import (
     SceneFrame,
     SceneLayout,
 )
-from viewers.web.world_view import OFFLINE
 
 if TYPE_CHECKING:  # the connection makes a UserWorld; only its type is needed here
     from viewers.web.live import LiveConnection

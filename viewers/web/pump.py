@@ -15,8 +15,9 @@ import logging
 import threading
 import time
 
+from viewers.web.prepared_frame import PreparedFrame
 from viewers.web.viser_fast import HeldBuffers
-from viewers.web.world_view import PreparedFrame, WorldView
+from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.pump")
 
@@ -100,7 +101,7 @@ class FramePump:
                 ready = prepared[key]
                 held.hold(view.client)
                 # A swarm too big for a browser's byte budget is drawn every k-th tick
-                # (world_view.ROBOT_BYTES_PER_S); every view of it on the same ticks.
+                # (prepared_frame.ROBOT_BYTES_PER_S); every view of it on the same ticks.
                 if ready is not None and self.ticks % ready.every(self.rate) == 0:
                     view.apply(ready)
                 for hook in view.tick_hooks:  # every tick: a real arena's video

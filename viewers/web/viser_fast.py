@@ -11,7 +11,7 @@ each session got 8.3 frames a second. Two costs were per view and avoidable:
   whole tick and wakes the loop once, for all of them.
 - **Array assignment.** ``handle.batched_positions = a`` casts, compares and
   copies ``a`` twice per browser (viser cannot know the caller will not mutate
-  it). A :class:`~viewers.web.world_view.PreparedFrame`'s arrays are made once
+  it). A :class:`~viewers.web.prepared_frame.PreparedFrame`'s arrays are made once
   per frame and never written again, so :func:`set_shared_array` hands the
   same array to every browser's message.
 

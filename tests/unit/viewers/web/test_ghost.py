@@ -18,8 +18,9 @@ from common.lab_errors import LabError
 from common.twin.motion import MM_S_PER_UNIT, Drive, ahead, predict
 from common.twin.twinfile import Twin
 from viewers.web.ghost import DATASHEET, HORIZON_S, Ghost, ghost_path
+from viewers.web.prepared_frame import PreparedFrame
 from viewers.web.world_feed import RobotReadings, SceneFrame, SceneLayout
-from viewers.web.world_view import PreparedFrame, WorldView
+from viewers.web.world_view import WorldView
 
 TWIN = Drive(scale_left=0.97, scale_right=1.02, wheel_base_mm=55.0, latency_s=0.0)
 

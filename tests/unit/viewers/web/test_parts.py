@@ -15,10 +15,10 @@ from viewers.web.adapters import MAX_CONTROLLER_BYTES, LabError, LoginError
 from viewers.web.demo_lab import DemoConnector, DemoLab, DemoWorld
 from viewers.web.live_agents import check_upload
 from viewers.web.login import check_login_input
+from viewers.web.prepared_frame import PreparedFrame
 from viewers.web.robot_panel import check_controller, format_agents
 from viewers.web.text import check_line, escape_md
 from viewers.web.world_feed import MapEdit
-from viewers.web.world_view import PreparedFrame
 
 
 def test_poses_to_viser_units_and_heading() -> None:
