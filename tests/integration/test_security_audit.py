@@ -83,6 +83,18 @@ def test_a_replayed_report_is_kept_once_and_forged_ones_are_shown(lab: ProcessLa
                 at=time.time(), actor="admin", action="ban", target="carol", outcome="ok"
             )
             session.put(where, bob.session.seal(where, lie))
+            # Bob stays logged in until his lie is judged: his logout (another session, so
+            # no order between the two) could revoke the session first, and the lie would be
+            # refused as a revoked session's, unnamed.
+            with lab.client("admin") as admin:
+                wait_for(
+                    lambda: (
+                        [e for e in audit_trail(admin, action="forged_report") if e.actor == "bob"]
+                        or None
+                    ),
+                    10,
+                    "bob's report judged",
+                )
         session.put(where, b"not a report at all")
         with lab.client("admin") as admin:
             forged = wait_for(
