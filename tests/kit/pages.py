@@ -316,8 +316,8 @@ def wait_until(
     raise AssertionError(f"timed out waiting for {said or condition}")
 
 
-def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
-    """Wait until the page reports the top-down camera its world view aimed at the arena.
+def camera_is_aimed(view: object) -> bool:
+    """Whether the page's last camera report is the top-down camera its world view aimed.
 
     The page reports its camera back to the server; on a busy machine a report from
     before the aim can arrive after it, and the server's copy is then viser's default
@@ -329,21 +329,25 @@ def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
     # At least this high: the aim for the widest canvas aimed for (a report with the aim's
     # x and y but an older height was seen under load, the arena cut off at both sides).
     lowest = geo.camera_height(snap.width, snap.height)
+    try:
+        cam = view.client.camera  # type: ignore[attr-defined]
+        x, y, z = cam.position
+        return (
+            abs(x - aim[0]) < 1e-3
+            and abs(y - aim[1]) < 1e-3
+            and z >= lowest - 1e-3
+            and abs(cam.fov - geo.CAMERA_FOV) < 1e-3
+        )
+    except AssertionError:  # the page has not reported its camera yet
+        return False
 
-    def aimed() -> bool:
-        try:
-            cam = view.client.camera  # type: ignore[attr-defined]
-            x, y, z = cam.position
-            return (
-                abs(x - aim[0]) < 1e-3
-                and abs(y - aim[1]) < 1e-3
-                and z >= lowest - 1e-3
-                and abs(cam.fov - geo.CAMERA_FOV) < 1e-3
-            )
-        except AssertionError:  # the page has not reported its camera yet
-            return False
 
-    wait_until(aimed, timeout, what="the page's camera on the arena, top-down")
+def wait_for_aimed_camera(view: object, timeout: float = 30.0) -> None:
+    """Wait until the page reports the top-down camera its world view aimed at the arena
+    (:func:`camera_is_aimed`)."""
+    wait_until(
+        lambda: camera_is_aimed(view), timeout, what="the page's camera on the arena, top-down"
+    )
 
 
 # True when the page's canvas itself is at a point (no label, panel or notice over it).
