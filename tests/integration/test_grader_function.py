@@ -95,17 +95,27 @@ def test_a_teachers_grader_scores_and_its_failures_are_the_teachers(
         assert episode.metrics["samples"] == 11  # 1 simulated s: a pose each 0.1 s, and t=0
         assert episode.score == pytest.approx(100 - wobble, abs=1e-3)
         # Each failure is the teacher's: said with the grader's file and line; not charged.
+        # The loop is caught by the hang watchdog after 1 s, which says where it was; on a
+        # starved machine (load 13 on 2 cores, seen) the sandbox's start can eat the 2 s
+        # before the watchdog looks, and the wall-clock limit says so instead.
         for name, said in (
-            ("g-raises", "raises.py, line 3: ZeroDivisionError: division by zero"),
-            ("g-loops", "loops.py: hung: grade() did not return for 1 s; it was at loops.py:"),
-            ("g-floods", "floods.py: killed: output flood"),
+            ("g-raises", ("raises.py, line 3: ZeroDivisionError: division by zero",)),
+            (
+                "g-loops",
+                (
+                    "loops.py: hung: grade() did not return for 1 s; it was at loops.py:",
+                    "loops.py: grade() did not return in 2 s",
+                ),
+            ),
+            ("g-floods", ("floods.py: killed: output flood",)),
         ):
             sub = done_[name]
             assert sub.status == "failed" and not sub.counted and sub.mean is None, sub
-            assert sub.message.startswith(f"the teacher's grader failed: {said}"), sub.message
+            told = [s for s in said if sub.message.startswith(f"the teacher's grader failed: {s}")]
+            assert told, sub.message
             assert sub.message.endswith("not counted against your quota; your teacher is told")
             [episode] = sub.episodes
-            assert episode.cause == "grader" and said in episode.detail
+            assert episode.cause == "grader" and told[0] in episode.detail
         assert done_["g-raises"].episodes[0].error_line == 3
         # A quota of one, and the failed run did not use it.
         again = grader.submit("g-raises", source("works"), "works.py")
