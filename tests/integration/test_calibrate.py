@@ -88,6 +88,9 @@ def near(out: str, name: str, truth: float, floor: float) -> bool:
     return abs(value - truth) <= floor + 3 * sigma
 
 
+WALL_MARGIN_MM = 35.0  # a Khepera's radius (27.5 mm) and the camera's error
+
+
 def sim2d_error(run: RunData, twin: Twin | None, seconds: float = 5.0) -> float:
     """Median distance (mm) between a Sim2D Khepera (the datasheet's, or the twin's robot
     file: what a dry run simulates) driven open-loop by the run's recorded commands for
@@ -97,6 +100,10 @@ def sim2d_error(run: RunData, twin: Twin | None, seconds: float = 5.0) -> float:
     kind = "khepera" if twin is None else twin.type_name
     for a, b in list(zip(windows.a, windows.b, strict=True))[::15]:  # the camera's 15 fps
         t0, x, y, heading = run.poses[a]
+        # Not from against a wall (a loaded run's dance drifted there, seen at x = 973 of
+        # 1000): the map refuses a robot put there, and a wall's contact is no model's test.
+        if min(x, y, run.arena[0] - x, run.arena[1] - y) < WALL_MARGIN_MM:
+            continue
         room = {
             "format": "wart-map", "version": 1, "name": "copy",
             "arena": {"width": run.arena[0], "height": run.arena[1]},
@@ -115,6 +122,7 @@ def sim2d_error(run: RunData, twin: Twin | None, seconds: float = 5.0) -> float:
             world.set_speeds(0, *(run.commands[k, 1:3] if k >= 0 else (0.0, 0.0)))
             world.step()
         errors.append(float(np.hypot(*(world.agent_pose[0, :2] - run.poses[b, 1:3]))))
+    assert errors, "every window of the run starts against a wall"
     return float(np.median(errors))
 
 
