@@ -117,17 +117,28 @@ def test_arena_robots_move_when_driven(open_page, lab: RealLab) -> None:
     assert feed is not None
     start = feed.latest()
     assert start is not None
+    start_m = start.poses[0, :2] * geo.MM
     with lab.driving("k0"):
-        first = page.p.screenshot()
+        first = scene(page.p.screenshot())
+        # Sent to the page: the frame the view drew k0 at has it 40 mm (0.04 m) from its start.
         wait_until(
-            lambda: np.hypot(*(feed.latest().poses[0, :2] - start.poses[0, :2])) > 40,  # type: ignore[union-attr]
+            lambda: (
+                view.drawn is not None and np.hypot(*(view.drawn.positions[0, :2] - start_m)) > 0.04
+            ),
             15,
-            what="k0 to move 40 mm",
+            what="k0 drawn 40 mm from its start",
         )
-        second = page.p.screenshot()
+        # And drawn by it: the page renders what it was sent a little later (software
+        # WebGL, 5 frames a second; a screenshot taken at once was the same as before).
+        changed = np.zeros((1, 1), bool)
+
+        def scene_changed() -> bool:
+            nonlocal changed
+            changed = np.abs(first - scene(page.p.screenshot())).sum(axis=2) > 30
+            return int(changed.sum()) > 20
+
+        wait_until(scene_changed, 15, what=lambda: f"the page redrawn ({changed.sum()} px changed)")
     page.screenshot("real-arena")
-    changed = np.abs(scene(first) - scene(second)).sum(axis=2) > 30
-    assert changed.sum() > 20, f"only {changed.sum()} pixels changed"
     # The selected robot's plots take real sensor samples.
     view.select(0)
     page.tab(WORLD).last.click()
