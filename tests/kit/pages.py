@@ -358,12 +358,20 @@ CANVAS_AT_JS = """([x, y]) => {
 
 
 def screen_points(page, view, world_xy_mm: np.ndarray) -> np.ndarray:
-    """World millimetres to page pixels (the top-down camera the view set up; +y is up)."""
+    """World millimetres to page pixels (the top-down camera the view set up; +y is up).
+
+    Through the camera where the view last aimed it, once it has: the server's copy of
+    the page's camera report can go stale after the aim (a late report of viser's default
+    camera put every robot near pixel (-1600, 2390) while the page's screenshot showed the
+    arena aimed; the page reports only when its camera moves, so nothing corrected it).
+    """
     box = page.p.locator("canvas").first.bounding_box()
+    fitted = view.camera._fitted  # (position, aspect) of the last aim, or None
     cam = view.client.camera
-    cx, cy, height = (float(v) for v in cam.position)
+    cx, cy, height = (float(v) for v in (fitted[0] if fitted else cam.position))
+    fov = geo.CAMERA_FOV if fitted else cam.fov
     z = geo.ROBOT_Z * 2  # about the top of a robot
-    px_per_m = (box["height"] / 2) / ((height - z) * math.tan(cam.fov / 2))
+    px_per_m = (box["height"] / 2) / ((height - z) * math.tan(fov / 2))
     xy = world_xy_mm * geo.MM
     sx = box["x"] + box["width"] / 2 + (xy[:, 0] - cx) * px_per_m
     sy = box["y"] + box["height"] / 2 - (xy[:, 1] - cy) * px_per_m
