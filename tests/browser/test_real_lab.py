@@ -17,7 +17,6 @@ from common import keys
 from common.keys import AliveKind
 from tests.browser.conftest import (
     CANVAS_AT_JS,
-    camera_is_aimed,
     describe_view,
     screen_points,
     wait_for_aimed_camera,
@@ -263,16 +262,17 @@ def test_clicking_a_robot_selects_it(open_page, lab: RealLab) -> None:
     page.click(f"Join {WORLD}")
     view = session_of(lab.viewer, "carol").view
     wait_until(lambda: view.drawn is not None, 30, what=lambda: describe_view(view))
+    wait_for_aimed_camera(view)
     target = 0  # no controller runs in this lab: the robots stand still
     spots: list[np.ndarray] = []
     spot: np.ndarray | None = None
 
     def spot_on_the_robot() -> bool:
-        # Projected through the camera the page reported last, once it is the aimed one: a
-        # late report of viser's default camera was seen to replace it after the aim.
+        # Projected through the camera where the view aimed it (screen_points), polled until
+        # a spot is the canvas itself: a notice or the panel may still cover one.
         nonlocal spots, spot
         drawn, snap = view.drawn, view.snapshot
-        if drawn is None or snap is None or not camera_is_aimed(view):
+        if drawn is None or snap is None:
             return False
         ends = screen_points(page, view, np.array([[0.0, 0.0], [snap.robot_radius, 0.0]]))
         radius_px = float(ends[1, 0] - ends[0, 0])
