@@ -382,9 +382,12 @@ def describe_view(view: Any) -> str:
     """What a world view holds, for a timeout's message (why no frame is drawn)."""
     feed = getattr(view, "feed", None)
     latest = feed.latest() if feed is not None else None
+    real = view.snapshot is not None and view.snapshot.real
     return (
         f"a drawn frame: snapshot {'yes' if view.snapshot is not None else 'none'}, "
         f"robots {'made' if view._robots is not None else 'not made'}, "
         f"{view.frames_applied} frames applied (last seq {view.last_seq}), "
-        f"feed {'none' if feed is None else 'latest seq ' + str(getattr(latest, 'seq', None))}"
+        f"feed {'none' if feed is None else 'latest seq ' + str(getattr(latest, 'seq', None))}, "
+        f"selected {view.selected!r} of {len(view.robot_names)} robots, "
+        f"{'a real arena' if real else 'a simulated world'}"
     )

@@ -78,6 +78,10 @@ class ChatPanel:
         self._on_watch = on_watch
         self._lines: deque[str] = deque(maxlen=SHOWN_LINES)
         self.closed = False
+        # Whether this panel's tab is in front in the page (the client keeps it from the
+        # page's reports; a panel opens in front). An arena that answers late is shown
+        # only then: the student who moved on to another arena meanwhile stays there.
+        self.in_front = True
         self._retry_lock = threading.Lock()
         self._retrying = False
         if kept is None:
@@ -258,9 +262,12 @@ class ChatPanel:
                     except LabError as exc:
                         self.say_notice(f"Cannot show the arena: {exc}")
                         return
-                    if not self.closed and self._on_watch is not None:
-                        self.notice.visible = False
+                    if self.closed or self._on_watch is None:
+                        return
+                    self.notice.visible = False
+                    if self.in_front:
                         self._on_watch(feed, self)
+                    # Else shown when its tab comes to the front again (the client asks).
                     return
             finally:
                 with self._retry_lock:

@@ -296,20 +296,30 @@ class BrowserSession:
 
     # -- the world view
 
+    def _panels(self) -> list[ChatPanel]:
+        """Every context's panel, in every lab this page is logged in to."""
+        with self._lock:
+            return [p for tab in self.labs.values() for p in list(tab.panels.values())]
+
     def _context_opened(self, panel: ChatPanel) -> None:
         # Joining is asking to go there: the page shows the new tab, and an arena's world.
+        panels = self._panels()
+        for other in panels:
+            other.in_front = other is panel
         self.switcher.show(panel.tab_name, panel.tab_title)
         if panel.kind in ARENA_KINDS:
             panel.show_world()
 
     def _front_changed(self, labels: tuple[str, ...]) -> None:
         """A tab came to the front: if it is an arena's, the view shows that arena."""
-        with self._lock:
-            panels = [p for tab in self.labs.values() for p in list(tab.panels.values())]
+        panels = self._panels()
+        for panel in panels:
+            panel.in_front = panel.tab_name in labels
         for label in labels:
             panel = next((p for p in panels if p.tab_name == label), None)
             if panel is not None and panel.kind in ARENA_KINDS:
                 if panel is not self.watching:
+                    log.info("the page put %s in front: its arena is shown", label)
                     panel.show_world()
                 return
 
