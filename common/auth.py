@@ -509,6 +509,24 @@ class Verifier:
             raise
         return self.principal(token), decode(envelope.body, expected)
 
+    def signer_of(self, key_expr: str, payload: object) -> str | None:
+        """Who signed a message :meth:`open` refused, when that is certain: the user a
+        token of this lab's registry names, whose session key signed these bytes for
+        ``key_expr``, expired or revoked as the session may be. None for anything else:
+        a token copied off the wire without its session key names nobody. For the
+        audit trail's refusals, never for granting anything."""
+        try:
+            envelope = decode(payload, AuthEnvelope)
+            self._registry_key.verify(envelope.token.token, envelope.token.signature)
+            token = decode(envelope.token.token, SessionToken)
+            nacl.signing.VerifyKey(token.session_key).verify(
+                _signed_bytes(key_expr, envelope.seq, envelope.sent_at, envelope.body),
+                envelope.signature,
+            )
+        except (MessageError, nacl.exceptions.BadSignatureError, ValueError, TypeError):
+            return None
+        return token.user if token.realm == self.realm else None
+
     def check_fresh(self, sent_at: float, who: str) -> None:
         """AuthError unless ``sent_at`` is within the freshness window of this service's clock."""
         now = self.clock()

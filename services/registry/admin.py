@@ -200,8 +200,10 @@ class AdminDesk:
         except (AuthError, MessageError) as exc:
             words = getattr(exc, "message", None) or str(exc)
             if "replayed message" not in words:
+                # A revoked or expired session's report is its user's (its key signed it).
+                actor = self.verifier.signer_of(key, sample.payload) or "unknown"
                 self.audit(
-                    Action("unknown", "forged_report", "audit", "refused", words, source_of(sample))
+                    Action(actor, "forged_report", "audit", "refused", words, source_of(sample))
                 )
             raise
         if "service" not in principal.roles:

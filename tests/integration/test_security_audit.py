@@ -95,17 +95,25 @@ def test_a_replayed_report_is_kept_once_and_forged_ones_are_shown(lab: ProcessLa
                     10,
                     "bob's report judged",
                 )
+            bob_session = bob.session
+        # Logged out (his session revoked), bob reports again with its key: refused, and
+        # still his name on the line, as his key signed it.
+        lie = AuditReport(at=time.time(), actor="admin", action="ban", target="dan", outcome="ok")
+        session.put(where, bob_session.seal(where, lie))
         session.put(where, b"not a report at all")
         with lab.client("admin") as admin:
             forged = wait_for(
-                lambda: len(audit_trail(admin, action="forged_report")) >= 2 or None,
+                lambda: len(audit_trail(admin, action="forged_report")) >= 3 or None,
                 10,
                 "the forged reports recorded",
             )
             assert forged
             assert len(audit_trail(admin, action="estop")) == 1  # kept once, past the restart
-            lines = {(e.actor, e.target) for e in audit_trail(admin, action="forged_report")}
+            trail = audit_trail(admin, action="forged_report")
+            lines = {(e.actor, e.target) for e in trail}
             assert ("bob", "carol") in lines and ("unknown", "audit") in lines
+            revoked = [e for e in trail if e.actor == "bob" and e.target == "audit"]
+            assert len(revoked) == 1 and "revoked" in revoked[0].detail
             assert not audit_trail(admin, action="ban")  # the lie is not a ban line
     finally:
         close_session(session)

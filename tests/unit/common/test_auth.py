@@ -85,6 +85,31 @@ def test_expired_and_revoked_sessions_are_refused(identity: RegistryIdentity) ->
         verifier.open(KEY, other.seal(KEY, OkReply(), now=1061.0), OkReply)
 
 
+def test_a_refused_message_names_its_signer_only_when_its_session_key_signed_it(
+    identity: RegistryIdentity,
+) -> None:
+    import msgspec
+
+    from common.messages import decode
+
+    verifier = Verifier(identity.verify_key, REALM)
+    bob = issue_session(identity, REALM, "bob", ["chat"])
+    verifier.revoke(bob.session_id)
+    sealed = bob.seal(KEY, OkReply(detail="after logout"))
+    with pytest.raises(AuthError, match="revoked"):
+        verifier.open(KEY, sealed, OkReply)
+    assert verifier.signer_of(KEY, sealed) == "bob"
+    # His token copied under a body he did not sign, moved to another key, or a token
+    # of another registry, or no envelope at all: nobody is named.
+    envelope = decode(sealed, AuthEnvelope)
+    forged = encode(msgspec.structs.replace(envelope, body=encode(OkReply(detail="lie"))))
+    assert verifier.signer_of(KEY, forged) is None
+    assert verifier.signer_of("wart/lab/ctx/other/in", sealed) is None
+    impostor = issue_session(RegistryIdentity.generate(), REALM, "admin", ["admin"])
+    assert verifier.signer_of(KEY, impostor.seal(KEY, OkReply())) is None
+    assert verifier.signer_of(KEY, b"\x93\x01\x02") is None
+
+
 def test_stale_message_is_refused(identity: RegistryIdentity) -> None:
     verifier = Verifier(identity.verify_key, REALM, clock=lambda: 2000.0)
     session = issue_session(identity, REALM, "alice", ["chat"], now=1990.0)
