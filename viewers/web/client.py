@@ -313,8 +313,8 @@ class BrowserSession:
     def _front_changed(self, labels: tuple[str, ...]) -> None:
         """A tab came to the front: if it is an arena's, the view shows that arena."""
         panels = self._panels()
-        for panel in panels:
-            panel.in_front = panel.tab_name in labels
+        for each in panels:
+            each.in_front = each.tab_name in labels
         for label in labels:
             panel = next((p for p in panels if p.tab_name == label), None)
             if panel is not None and panel.kind in ARENA_KINDS:
