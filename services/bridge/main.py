@@ -110,8 +110,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart bridge") -> int:
         help="stop a robot whose commands stop for this long (default 300)",
     )
     add_world_identity_args(p)
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if args.user and (args.identity is None or not options.registry_key):
         p.error("--user needs --identity and --registry-key")
     if not is_ident(args.world):

@@ -101,8 +101,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         "refused file is logged and left out (docs/ROBOTS.md)",
     )
     add_world_identity_args(p)
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if args.user and (args.identity is None or not options.registry_key):
         p.error("--user needs --identity and --registry-key")
     world_name = args.world or args.map.stem
