@@ -31,7 +31,7 @@ from pathlib import Path
 from common.client.agent_client import FINAL
 from tests.kit.agentkit import (
     Motion,
-    agent_user,
+    agent_users,
     deploy_running,
     start_agent_lab,
 )
@@ -59,10 +59,7 @@ def main() -> int:
         start_agent_lab(lab, identity=True, slot=300.0)
         with (
             lab.zsession() as z,
-            agent_user(lab, "alice") as alice,
-            agent_user(lab, "bob") as bob,
-            agent_user(lab, "carol") as carol,
-            agent_user(lab, "ida") as ida,
+            agent_users(lab, "alice", "bob", "carol", "ida") as (alice, bob, carol, ida),
         ):
             motion = Motion(z, router.realm)
             owners = {"k0": alice, "k1": bob, "k2": carol, "k3": alice}

@@ -25,18 +25,15 @@ from common.client.grader_client import GraderClient
 from common.client.lab_client import LabClient
 from common.messages import SubmissionInfo
 from common.service import close_session
-from services.grader.assignment import parse_assignment
-from services.grader.grading_db import GradingStore
-from services.registry.accounts_db import RegistryDB
-from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
+from tests.kit.courses import COURSE, add_course
 from tests.kit.lab import PASSWORD, Procs, make_lab, start_router
 
 REPO = Path(__file__).resolve().parent.parent
 
 ASSIGNMENT = """
 name = "bench"
-course = "bench-course"
+course = "{course}"
 map = "empty"
 robot = "k1"
 time_limit = {seconds}
@@ -86,14 +83,10 @@ def main(argv: list[str] | None = None) -> int:
             router = start_router(procs, f"bg{int(time.time()) % 100000}")
             users = {**dict.fromkeys(students, "student"), "ida": "instructor"}
             lab = make_lab(router, procs, Path(tmp), users=users)
-            db = RegistryDB(lab.db_path)
             rows = [RosterRow(line=n + 2, user=s, name=s) for n, s in enumerate(students)]
             rows.append(RosterRow(line=len(rows) + 2, user="ida", name="Ida", role="teacher"))
-            CourseStore(db).import_roster("bench-course", rows)
-            text = ASSIGNMENT.format(seconds=args.seconds, episodes=args.episodes)
-            assignment, map_text = parse_assignment(text.encode(), "bench", REPO / "maps")
-            GradingStore(db.database).put_assignment(assignment, map_text)
-            db.close()
+            text = ASSIGNMENT.format(course=COURSE, seconds=args.seconds, episodes=args.episodes)
+            add_course(lab.db_path, rows, text)
             lab.start_registry()
             lab.start_runner()
             lab.start_grader()

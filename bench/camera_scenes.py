@@ -24,7 +24,6 @@ from common.tracking.intrinsics import BoardSpec, Intrinsics, IntrinsicsCollecto
 from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
 from tests.kit.overhead_camera import (
-    Board,
     BoardCamera,
     Effects,
     Hand,
@@ -83,7 +82,7 @@ class Figures:
 
 def calibrated_lens(lens: Lens, views: int = 50, seed: int = 3) -> Intrinsics:
     """The lens as `wart camera calibrate --intrinsics` finds it from rendered board views."""
-    camera = BoardCamera(lens, Board(), seed=seed)
+    camera = BoardCamera(lens, BoardSpec(), seed=seed)
     collector = IntrinsicsCollector(BoardSpec())
     for rotation, translation in camera.views(views, seed=seed):
         collector.offer(camera.render(rotation, translation), consecutive=False)

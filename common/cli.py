@@ -46,6 +46,17 @@ def parse(
         raise  # unreachable: error() exits
 
 
+def parse_networked(
+    p: argparse.ArgumentParser, argv: Sequence[str] | None
+) -> tuple[argparse.Namespace, NetworkOptions]:
+    """:func:`parse` for a command that joins a lab: its parser has the network options
+    (``parser(network=True)``, the default), so they are always there."""
+    args, options = parse(p, argv)
+    if options is None:
+        raise TypeError(f"{p.prog}: a parser without network options (made with network=False)")
+    return args, options
+
+
 def registry_key(p: argparse.ArgumentParser, options: NetworkOptions) -> bytes | None:
     """The registry's public key from --registry-key (None without it); a bad one exits."""
     if not options.registry_key:

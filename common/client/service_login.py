@@ -90,13 +90,20 @@ class ServiceLogin:
         self.client.close()
 
 
-def add_world_identity_args(p: Any) -> None:
-    """``--user/--identity`` of a world (engine, bridge): optional, unlike other services'.
+def add_world_args(p: Any) -> None:
+    """What every world process (engine, bridge) takes: ``--watchdog-ms``, and
+    ``--user/--identity``, optional unlike other services'.
 
     With them the world logs in as a service account with the ``world``
     permission and advertises its token, so contexts can grant MAC leases;
     without them it keeps working, every command an Ed25519 envelope.
     """
+    p.add_argument(
+        "--watchdog-ms",
+        type=float,
+        default=300.0,
+        help="stop a robot whose commands stop for this long (default 300)",
+    )
     p.add_argument("--user", help="the world's service account (optional; enables MAC leases)")
     p.add_argument("--identity", type=Path, help="the service account's Ed25519 key file")
 

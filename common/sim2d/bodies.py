@@ -55,15 +55,24 @@ def walls(static: pymunk.Body, width: float, height: float) -> list[pymunk.Shape
     return out
 
 
-def obstacle(
-    shape: ShapeSpec, x: float, y: float, heading: float
-) -> tuple[pymunk.Body, list[pymunk.Shape]]:
-    body = pymunk.Body(body_type=pymunk.Body.STATIC)
+def _placed(
+    body: pymunk.Body, shape: ShapeSpec, x: float, y: float, heading: float, category: int
+) -> list[pymunk.Shape]:
+    """``body`` put at (x, y, heading); ``shape``'s pymunk shapes on it, in ``category``."""
     body.position = (x, y)
     body.angle = heading
     shapes = shapes_of(body, shape)
     for s in shapes:
-        s.filter = pymunk.ShapeFilter(categories=CAT_OBSTACLE)
+        s.filter = pymunk.ShapeFilter(categories=category)
+    return shapes
+
+
+def obstacle(
+    shape: ShapeSpec, x: float, y: float, heading: float
+) -> tuple[pymunk.Body, list[pymunk.Shape]]:
+    body = pymunk.Body(body_type=pymunk.Body.STATIC)
+    shapes = _placed(body, shape, x, y, heading, CAT_OBSTACLE)
+    for s in shapes:
         s.friction = FRICTION
     return body, shapes
 
@@ -76,11 +85,8 @@ def movable_object(
     else:
         moment = pymunk.moment_for_poly(mass_g, shape.vertices())
     body = pymunk.Body(mass_g, moment)
-    body.position = (x, y)
-    body.angle = heading
-    shapes = shapes_of(body, shape)
+    shapes = _placed(body, shape, x, y, heading, CAT_OBJECT)
     for s in shapes:
-        s.filter = pymunk.ShapeFilter(categories=CAT_OBJECT)
         s.collision_type = COLL_OBJECT
         s.friction = 0.4
     return body, shapes

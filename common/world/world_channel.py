@@ -16,7 +16,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 import zenoh
 
@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # the links this channel carries; remote_robot imports this m
     from common.world.remote_robot import ZenohRobotLink
 
 log = logging.getLogger("wart.remote_robot")
+L = TypeVar("L", bound=Callable[..., None])
 
 _pack_item = MAC_ITEM_STRUCT.pack  # 50 times a second per robot: one lookup less
 
@@ -154,6 +155,26 @@ class SwarmTick:
         return True
 
 
+class _Listeners(Generic[L]):
+    """Callbacks held in a tuple that is replaced whole under ``lock``: the channel's
+    thread reads ``now`` without taking the lock."""
+
+    def __init__(self, lock: threading.Lock) -> None:
+        self._lock = lock
+        self.now: tuple[L, ...] = ()
+
+    def add(self, listener: L) -> Callable[[], None]:
+        """Add ``listener``; returns the function that removes it."""
+        with self._lock:
+            self.now = (*self.now, listener)
+
+        def remove() -> None:
+            with self._lock:
+                self.now = tuple(x for x in self.now if x is not listener)
+
+        return remove
+
+
 class WorldChannel:
     """One world's sample bundles in and command bundles out, shared by a process's links.
 
@@ -188,8 +209,8 @@ class WorldChannel:
         self._pending_lock = threading.Lock()
         self._sending = threading.Lock()
         self._held = threading.local()  # burst() depth of the calling thread
-        self._tick_listeners: tuple[Callable[[int, list[str]], None], ...] = ()
-        self._swarm_listeners: tuple[Callable[[SwarmTick], None], ...] = ()
+        self._tick_listeners = _Listeners[Callable[[int, list[str]], None]](self._links_lock)
+        self._swarm_listeners = _Listeners[Callable[[SwarmTick], None]](self._links_lock)
         self.bundles = 0  # sample bundles received
         self.puts = 0  # command bundles sent
         self.commands = 0  # commands sent in them
@@ -229,7 +250,7 @@ class WorldChannel:
             return
         self.bundles += 1
         links = self._links
-        listeners, swarms = self._tick_listeners, self._swarm_listeners
+        listeners, swarms = self._tick_listeners.now, self._swarm_listeners.now
         if not (listeners or swarms):
             # Controller threads only (the runner): every woken thread waits for this
             # one to give up the GIL, so hand the samples out and return.
@@ -325,14 +346,7 @@ class WorldChannel:
         that tick's; the commands it sends leave together when it returns.
         Returns the function that removes it.
         """
-        with self._links_lock:
-            self._tick_listeners = (*self._tick_listeners, listener)
-
-        def remove() -> None:
-            with self._links_lock:
-                self._tick_listeners = tuple(x for x in self._tick_listeners if x is not listener)
-
-        return remove
+        return self._tick_listeners.add(listener)
 
     def on_swarm(self, listener: Callable[[SwarmTick], None]) -> Callable[[], None]:
         """Call ``listener(tick)`` with each bundle's decoded samples of this channel's agents.
@@ -342,14 +356,7 @@ class WorldChannel:
         ``tick.samples`` and answers with ``tick.send(agent, speeds=...)``.
         Returns the function that removes it.
         """
-        with self._links_lock:
-            self._swarm_listeners = (*self._swarm_listeners, listener)
-
-        def remove() -> None:
-            with self._links_lock:
-                self._swarm_listeners = tuple(x for x in self._swarm_listeners if x is not listener)
-
-        return remove
+        return self._swarm_listeners.add(listener)
 
     @contextlib.contextmanager
     def burst(self) -> Iterator[None]:

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import zenoh
 
 from common import cli
-from common.client.service_login import add_world_identity_args, world_login
+from common.client.service_login import add_world_args, world_login
 from common.keys import is_ident
 from common.service import run_service
 from services.bridge.link import BAUD_RATES
@@ -103,15 +103,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart bridge") -> int:
     p.add_argument(
         "--poll-ms", type=float, default=50.0, help="ms between sensor rounds (default 50)"
     )
-    p.add_argument(
-        "--watchdog-ms",
-        type=float,
-        default=300.0,
-        help="stop a robot whose commands stop for this long (default 300)",
-    )
-    add_world_identity_args(p)
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    add_world_args(p)
+    args, options = cli.parse_networked(p, argv)
     if args.user and (args.identity is None or not options.registry_key):
         p.error("--user needs --identity and --registry-key")
     if not is_ident(args.world):

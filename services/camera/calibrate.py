@@ -56,8 +56,7 @@ def calibrate_main(argv: Sequence[str], prog: str) -> int:
     p.add_argument(
         "--arena", metavar="WxH", help="the arena's size in mm, without asking the world"
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         check_spec(args.source)
     except ValueError as exc:

@@ -77,8 +77,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
         help="a video file starts again at its end (without: the camera goes offline there "
         "and stays offline)",
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         check_spec(args.source)
         keys.check_ident("world", args.world)

@@ -146,8 +146,7 @@ def run_lab_command(
     run: Callable[[argparse.Namespace, NetworkOptions], int],
 ) -> int:
     """Parse the command line and ``run`` it; what the lab or the lab file refuses exits 1."""
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         return run(args, options)
     except (LabFileError, LabError, ValueError, OSError) as exc:

@@ -56,8 +56,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart calibrate") -> int
     )  # fmt: skip
     p.add_argument("--arena", help="with --save: the arena you own (lab admins: none)")
     add_login_arguments(p, required=False)
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if args.save and args.user is None:
         p.error("--save needs --user (an arena's owner or a lab admin: wart twin)")
     if args.arena is not None:

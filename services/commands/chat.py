@@ -43,8 +43,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart chat") -> int:
     p.add_argument("room", help="the room to join, e.g. lobby")
     p.add_argument("--user", required=True)
     p.add_argument("--password-file", help="read the password from this file")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if not options.registry_key:
         return cli.fail(
             "--registry-key (or WART_REGISTRY_KEY) is required: the key wart up printed"

@@ -61,8 +61,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart course competition
         help="entries in one world at once, each on its own robot (default 1)",
     )
     p.add_argument("--wait", type=float, metavar="S", help="run: print standings until done")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         keys.check_ident("competition", args.target)
         if args.name is not None:

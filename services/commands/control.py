@@ -100,8 +100,7 @@ def interrupt_event() -> threading.Event:
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart control") -> int:
     p = tool_parser(prog, __doc__ or "")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         read_checked(args.controller)
         controller = load_controller(args.controller)

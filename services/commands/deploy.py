@@ -141,8 +141,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart deploy") -> int:
     p.add_argument(
         "--seconds", type=float, default=5.0, help="simulated seconds of a dry run (0-30)"
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if not 0 < args.seconds <= 30:
         return cli.fail("--seconds must be more than 0 and at most 30")
     try:

@@ -311,7 +311,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart doctor") -> int:
     p.add_argument("--lab", type=Path, help="the lab file (several hosts, TLS)")
     p.add_argument("--cert", default="admin", help="client certificate name (default admin)")
     p.add_argument("--plugins", action="store_true", help="check this machine's plugins only")
-    args, options = cli.parse(p, argv)
+    args, options = cli.parse_networked(p, argv)
     lines, problems = plugin_report()
     print("\n".join(lines))
     if args.plugins:
@@ -323,7 +323,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart doctor") -> int:
         return 0
     print()
     if args.lab is None:
-        assert options is not None
         code = survey_main(options)
         if problems:  # said again at the end, where the eye looks
             print("\n".join(f"  - {text}" for text in problems))

@@ -33,8 +33,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart leaderboard") -> i
         metavar="NAME",
         help="first show under NAME on the course's leaderboards ('' for your roster name)",
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
 
     def body(grader: GraderClient) -> int:
         if args.pseudonym is not None:

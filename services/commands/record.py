@@ -99,8 +99,7 @@ def _progress() -> Callable[[int, int], None]:
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "wart record") -> int:
-    args, options = cli.parse(_parser(prog), argv)
-    assert options is not None
+    args, options = cli.parse_networked(_parser(prog), argv)
     if args.action == "export":
         return _export(args.name, args.output)
     if not args.context or not args.user:

@@ -64,8 +64,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart submit") -> int:
                    help="download graded episode N of SUBMISSION's recording")  # fmt: skip
     p.add_argument("-o", "--out", type=Path, metavar="FILE",
                    help="where --episode writes (default SUBMISSION-episode-N.mcap)")  # fmt: skip
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     episode: tuple[str, int] | None = None
     if args.episode is not None:
         sub_id, n = args.episode

@@ -348,8 +348,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart up") -> int:
     p.add_argument(
         "--lti-port", type=int, default=8090, help="the LTI tool's HTTP port (default 8090)"
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if args.lti is not None and not args.lti.is_file():
         p.error(f"--lti {args.lti}: no such file")
     checks = ((args.port, "--port"), (args.http_port, "--http-port"), (args.lti_port, "--lti-port"))

@@ -46,8 +46,7 @@ def chat_main(argv: Sequence[str] | None = None, prog: str = "wart context chat"
     p.add_argument("--max-line", type=int, default=MAX_LINE_CHARS, help="longest line accepted")
     p.add_argument("--rate", type=float, default=2.0, help="lines per second per user (default 2)")
     p.add_argument("--burst", type=float, default=10.0, help="lines a user may send at once")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         credentials = _checked_credentials("room", args, options)
     except ValueError as exc:
@@ -104,8 +103,7 @@ def agent_main(argv: Sequence[str] | None = None, prog: str = "wart context agen
         help="where slots are recorded (default DATA_DIR/recordings/NAME; "
         "without --data-dir nor this, nothing is recorded)",
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         credentials = _checked_credentials(
             "context", args, options, ("world", args.world), ("runner", args.runner)

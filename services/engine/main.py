@@ -19,7 +19,7 @@ from pathlib import Path
 import zenoh
 
 from common import cli
-from common.client.service_login import add_world_identity_args, world_login
+from common.client.service_login import add_world_args, world_login
 from common.keys import is_ident
 from common.robots import registry as robot_registry
 from common.service import run_service
@@ -40,12 +40,6 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
     pace.add_argument("--speed", type=float, default=1.0, help="times real time (default 1)")
     pace.add_argument("--fast", action="store_true", help="as fast as possible (headless runs)")
     p.add_argument("--tick-ms", type=float, default=20.0, help="simulated ms a tick (default 20)")
-    p.add_argument(
-        "--watchdog-ms",
-        type=float,
-        default=300.0,
-        help="stop a robot whose commands stop for this long (default 300)",
-    )
     p.add_argument(
         "--wander",
         action="store_true",
@@ -100,9 +94,8 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart engine") -> int:
         "plugins' (default: WART_ROBOTS_DIR), and where robot types users save go; a "
         "refused file is logged and left out (docs/ROBOTS.md)",
     )
-    add_world_identity_args(p)
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    add_world_args(p)
+    args, options = cli.parse_networked(p, argv)
     if args.user and (args.identity is None or not options.registry_key):
         p.error("--user needs --identity and --registry-key")
     world_name = args.world or args.map.stem

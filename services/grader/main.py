@@ -56,8 +56,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart grader") -> int:
         help="each graded episode's recording, which its student replays "
         "(default: graded/ beside --db)",
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         credentials = ServiceCredentials.of_service("grader", args, options)
     except ValueError as exc:

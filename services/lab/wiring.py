@@ -368,14 +368,29 @@ def arena_specs(
     return specs
 
 
+def _own_account_spec(
+    w: Wiring,
+    kind: str,
+    name: str,
+    alive: AliveKind,
+    account: str | None,
+    extra: list[str],
+    detail: str,
+) -> ChildSpec:
+    """``wart KIND --name NAME EXTRA``, logged in as ``account`` (default ``KIND-NAME``)."""
+    argv = [kind, "--name", name, *w.login(account or service_account(kind, name)), *extra]
+    return ChildSpec(
+        f"{kind} {name}",
+        [*argv, *w.net_args(kind)],
+        keys.alive(w.realm, alive, name),
+        detail=detail,
+    )
+
+
 def runner_spec(w: Wiring, name: str, *, account: str | None = None) -> ChildSpec:
     """A runner; its account is ``runner-NAME`` unless given."""
-    argv = ["runner", "--name", name, *w.login(account or service_account("runner", name))]
-    return ChildSpec(
-        f"runner {name}",
-        [*argv, *w.net_args("runner")],
-        keys.alive(w.realm, AliveKind.RUNNER, name),
-        detail="sandboxed uploaded controllers",
+    return _own_account_spec(
+        w, "runner", name, AliveKind.RUNNER, account, [], "sandboxed uploaded controllers"
     )
 
 
@@ -383,15 +398,11 @@ def grader_spec(
     w: Wiring, name: str = "grader", *, account: str | None = None, workers: int | None = None
 ) -> ChildSpec:
     """The grader; it reads and writes the registry's database, so it runs on its host."""
-    argv = ["grader", "--name", name, *w.login(account or service_account("grader", name))]
-    argv += ["--db", str(w.state_dir / "registry.db")]
+    extra = ["--db", str(w.state_dir / "registry.db")]
     if workers is not None:
-        argv += ["--workers", str(workers)]
-    return ChildSpec(
-        f"grader {name}",
-        [*argv, *w.net_args("grader")],
-        keys.alive(w.realm, AliveKind.GRADER, name),
-        detail="submissions graded in simulation",
+        extra += ["--workers", str(workers)]
+    return _own_account_spec(
+        w, "grader", name, AliveKind.GRADER, account, extra, "submissions graded in simulation"
     )
 
 
@@ -405,15 +416,10 @@ def lti_spec(
     account: str | None = None,
 ) -> ChildSpec:
     """The LTI 1.3 tool (services/lti/): its key and outbox in the state directory."""
-    argv = ["lti", "--name", name, *w.login(account or service_account("lti", name))]
-    argv += ["--platforms", str(platforms), "--state-dir", str(w.state_dir / "lti")]
-    argv += ["--http-host", http_host, "--http-port", str(http_port)]
-    return ChildSpec(
-        f"lti {name}",
-        [*argv, *w.net_args("lti")],
-        keys.alive(w.realm, AliveKind.LTI, name),
-        detail=f"LTI 1.3 tool on {http_host}:{http_port}",
-    )
+    extra = ["--platforms", str(platforms), "--state-dir", str(w.state_dir / "lti")]
+    extra += ["--http-host", http_host, "--http-port", str(http_port)]
+    detail = f"LTI 1.3 tool on {http_host}:{http_port}"
+    return _own_account_spec(w, "lti", name, AliveKind.LTI, account, extra, detail)
 
 
 def viewer_spec(

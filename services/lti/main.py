@@ -63,8 +63,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart lti") -> int:
     )
     p.add_argument("--http-host", default="127.0.0.1", help="address to serve on (127.0.0.1)")
     p.add_argument("--http-port", type=int, default=8090, help="port to serve on (8090)")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         credentials = ServiceCredentials.of_service("lti", args, options)
         config = load(args.platforms)

@@ -35,8 +35,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart registry") -> int:
         help="after a source's free failed logins, how long it waits; each further failure"
         " doubles it, up to 300 s (default 2)",
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         throttle = LoginThrottle(first_wait=args.login_wait)
     except ValueError as exc:

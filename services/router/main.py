@@ -16,8 +16,7 @@ from services.router.service import Router, default_name
 def main(argv: Sequence[str] | None = None, prog: str = "wart router") -> int:
     p = cli.parser(prog, service.__doc__ or "", default_mode="router")
     p.add_argument("--name", default=default_name(), help="this router's name (default: host name)")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     if options.mode != "router":
         p.error("a router runs in router mode; drop --mode")
     if not options.listen:

@@ -40,8 +40,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart runner") -> int:
         help="end a run whose do_work has not returned for this long, saying where it was "
         "(default 0: only near the slot's end)",
     )
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         credentials = ServiceCredentials.of_service("runner", args, options)
     except ValueError as exc:

@@ -494,14 +494,21 @@ class Sandbox:
     def _slot_over(self) -> None:
         self.stop(grace=0.5, reason="stopped at the end of its slot")
 
-    def _end_now(self, reason: str) -> None:
-        """Kill at once for ``reason`` (called on a reader thread: the kill runs on its own)."""
+    def _first_stop(self, reason: str, how: str) -> bool:
+        """Whether this is the run's first stop (``how``: "kill" or "stop", timed); a later
+        one finds the run already ending, and its reason is not kept."""
         with self._lock:
             if self._stopping:
-                return
+                return False
             self._stopping = True
             self._stop_reason = reason
-        self.timeline["kill"] = time.monotonic()
+        self.timeline[how] = time.monotonic()
+        return True
+
+    def _end_now(self, reason: str) -> None:
+        """Kill at once for ``reason`` (called on a reader thread: the kill runs on its own)."""
+        if not self._first_stop(reason, "kill"):
+            return
         proc = self.process
         if proc is not None:
             threading.Thread(target=_kill_sandbox, args=(proc,), daemon=True).start()
@@ -513,12 +520,8 @@ class Sandbox:
         without blocking (lost if its pipe is full), the kill follows ``grace``
         seconds later whatever the child does.
         """
-        with self._lock:
-            if self._stopping:
-                return
-            self._stopping = True
-            self._stop_reason = reason
-        self.timeline["stop"] = time.monotonic()
+        if not self._first_stop(reason, "stop"):
+            return
         proc = self.process
         if proc is None:
             return

@@ -15,15 +15,12 @@ def test_two_sessions_chat(open_page, viewer: WebViewer) -> None:
     for page, user in ((ana, "ana"), (ben, "ben")):
         page.log_in("127.0.0.1/lab", user, f"{user}-pw")
         page.tab("lab@127.0.0.1").first.click()
-        page.click("Join lobby")
-        page.tab("lobby").last.click()
+        page.join_lobby()
     ana.wait_text("Members: ana, ben")
 
-    ana.fill("Message", "hello ben, can you see the arena?")
-    ana.click("Send")
+    ana.say("hello ben, can you see the arena?")
     ben.wait_text("hello ben, can you see the arena?")
-    ben.fill("Message", "yes <b>clearly</b>")
-    ben.click("Send")
+    ben.say("yes <b>clearly</b>")
     ana.wait_text("yes <b>clearly</b>")  # shown literally: no HTML from other people
     ana.screenshot("chat")
     ben.screenshot("chat")

@@ -12,7 +12,7 @@ import pytest
 from common.client.agent_client import DriveResult
 from common.controller import Controller, Khepera
 from tests.conftest import Procs, Router, wait_for
-from tests.kit.agentkit import Poses, agent_user, start_agent_context, start_engine
+from tests.kit.agentkit import Poses, agent_users, start_agent_context, start_engine
 from tests.kit.lab import make_lab
 
 pytestmark = pytest.mark.integration
@@ -36,9 +36,7 @@ def test_queues_settings_and_the_running_slot_survive_a_kill(
     up_s = time.monotonic() - started
     with (
         lab.zsession() as z,
-        agent_user(lab, "alice") as alice,
-        agent_user(lab, "bob") as bob,
-        agent_user(lab, "ida") as ida,
+        agent_users(lab, "alice", "bob", "ida") as (alice, bob, ida),
     ):
         poses = Poses(z, lab.router.realm)
         # alice's slot must outlast a kill and a restart (Python, numpy and Zenoh

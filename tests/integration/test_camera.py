@@ -21,8 +21,8 @@ from common.tracking.intrinsics import BoardSpec, IntrinsicsCollector
 from common.tracking.markers import default_layout
 from common.tracking.truth import now_truth, write_truth
 from services.lab.supervisor import AliveWatch
-from tests.conftest import REPO, Procs, Router, wait_for
-from tests.kit.overhead_camera import Board, BoardCamera, Lens, Mount, OverheadCamera, Robot
+from tests.conftest import REPO, Proc, Procs, Router, wait_for
+from tests.kit.overhead_camera import BoardCamera, Lens, Mount, OverheadCamera, Robot
 from tests.kit.videos import write_video
 from tests.kit.waits import Latest
 
@@ -79,8 +79,29 @@ def truth(tmp_path: Path) -> Iterator[Truth]:
     t.close()
 
 
-def start_camera(procs: Procs, router: Router, *extra: str) -> object:
+def start_camera(procs: Procs, router: Router, *extra: str) -> Proc:
     return procs.start("camera", ["camera", "--world", WORLD, *extra, *router.net_args()])
+
+
+def camera_up(procs: Procs, router: Router, alive_watch: AliveWatch, *extra: str) -> Proc:
+    """The camera started with ``extra``, once its liveliness token is up."""
+    proc = start_camera(procs, router, *extra)
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+    return proc
+
+
+def camera_status(zsession: zenoh.Session, router: Router) -> Latest:
+    return Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
+
+
+def wait_until_the_file_ended(status: Latest, proc: Proc, reason: str) -> None:
+    """Until the camera's status is offline with ``reason`` in its words."""
+
+    def ended() -> bool:
+        s = status.get()
+        return isinstance(s, CameraStatus) and not s.online and reason in s.reason
+
+    wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
 
 
 def test_the_camera_tracks_the_robot_and_publishes_its_video(
@@ -96,18 +117,18 @@ def test_the_camera_tracks_the_robot_and_publishes_its_video(
     tracked = Latest(zsession, keys.world_tracked(realm, WORLD), TrackedPoses)
     image = Latest(zsession, keys.camera_frame(realm, WORLD, CAMERA), CameraFrame)
     floor = Latest(zsession, keys.camera_floor(realm, WORLD, CAMERA), CameraFrame)
-    status = Latest(zsession, keys.camera_status(realm, WORLD, CAMERA), CameraStatus)
+    status = camera_status(zsession, router)
     cal = tmp_path / "arena.json"
-    proc = start_camera(
+    proc = camera_up(
         procs,
         router,
+        alive_watch,
         "--source",
         f"synthetic:{truth.path}",
         "--auto-calibrate",
         "--calibration",
         str(cal),
     )
-    assert alive_watch.wait(keys.alive(realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
 
     def robot_at(x: float, y: float, heading: float) -> bool:
         poses = tracked.get()
@@ -147,9 +168,8 @@ def test_a_camera_that_loses_its_picture_says_so_and_comes_back(
     zsession: zenoh.Session,
     alive_watch: AliveWatch,
 ) -> None:
-    status = Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
-    proc = start_camera(procs, router, "--source", f"synthetic:{truth.path}")
-    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
+    status = camera_status(zsession, router)
+    proc = camera_up(procs, router, alive_watch, "--source", f"synthetic:{truth.path}")
 
     def online(state: bool) -> bool:
         s = status.get()
@@ -174,20 +194,10 @@ def test_a_video_file_that_ends_leaves_the_camera_offline_not_dead(
     alive_watch: AliveWatch,
     tmp_path: Path,
 ) -> None:
-    video = tmp_path / "arena.avi"
-    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 20.0, (320, 240))
-    for i in range(10):
-        writer.write(np.full((240, 320, 3), 20 * i, np.uint8))
-    writer.release()
-    status = Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
-    proc = start_camera(procs, router, "--source", str(video))
-    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
-
-    def ended() -> bool:
-        s = status.get()
-        return isinstance(s, CameraStatus) and not s.online and "ended" in s.reason
-
-    wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
+    video = write_video(tmp_path / "arena.avi", 10, 20.0, size=(320, 240))
+    status = camera_status(zsession, router)
+    proc = camera_up(procs, router, alive_watch, "--source", str(video))
+    wait_until_the_file_ended(status, proc, "ended")
     assert "not calibrated: video only" in proc.output()
     assert proc.popen.poll() is None
 
@@ -201,15 +211,9 @@ def test_a_recording_says_its_corrupt_frames_and_stays_offline_at_its_end(
     tmp_path: Path,
 ) -> None:
     video = write_video(tmp_path / "arena.avi", 40, 20.0, corrupt=range(12, 15))
-    status = Latest(zsession, keys.camera_status(router.realm, WORLD, CAMERA), CameraStatus)
-    proc = start_camera(procs, router, "--source", str(video))
-    assert alive_watch.wait(keys.alive(router.realm, AliveKind.CAMERA, CAMERA), 60.0), proc.output()
-
-    def ended() -> bool:
-        s = status.get()
-        return isinstance(s, CameraStatus) and not s.online and "ended after 40 frames" in s.reason
-
-    wait_for(ended, 30.0, f"the camera to say its file ended:\n{proc.output()}")
+    status = camera_status(zsession, router)
+    proc = camera_up(procs, router, alive_watch, "--source", str(video))
+    wait_until_the_file_ended(status, proc, "ended after 40 frames")
     said = proc.output()
     assert f"frames 12 to 14 of the video file {video} are corrupt (do not decode)" in said
     assert "give --loop to play it again" in said
@@ -286,7 +290,7 @@ def test_a_tilted_camera_warns_without_its_lens_and_is_exact_with_it(
     assert "--camera-height not given: 1500 mm assumed" in bare.output()
     bare.stop()
 
-    board = BoardCamera(Lens(), Board(), seed=2)  # the lens, as a lab calibrates it
+    board = BoardCamera(Lens(), BoardSpec(), seed=2)  # the lens, as a lab calibrates it
     collector = IntrinsicsCollector(BoardSpec())
     for rotation, translation in board.views(40, seed=2):
         collector.offer(board.render(rotation, translation), consecutive=False)

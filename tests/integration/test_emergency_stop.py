@@ -23,6 +23,7 @@ from tests.kit.agentkit import (
     CTX,
     Motion,
     agent_user,
+    agent_users,
     bridged_robot,
     deploy_running,
     start_agent_context,
@@ -53,10 +54,7 @@ def test_the_host_stops_four_running_controllers_and_holds_the_arena(
 ) -> None:
     with (
         lab.zsession() as z,
-        agent_user(lab, "alice") as alice,
-        agent_user(lab, "bob") as bob,
-        agent_user(lab, "carol") as carol,
-        agent_user(lab, "ida") as ida,
+        agent_users(lab, "alice", "bob", "carol", "ida") as (alice, bob, carol, ida),
     ):
         motion = Motion(z, lab.router.realm)
         owners = {"k0": alice, "k1": bob, "k2": carol, "k3": alice}

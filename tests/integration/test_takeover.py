@@ -25,6 +25,7 @@ from tests.kit.agentkit import (
     WORLD,
     Motion,
     agent_user,
+    agent_users,
     start_agent_lab,
     start_deploy,
 )
@@ -62,9 +63,7 @@ def test_a_teacher_takes_over_a_running_robot_drives_it_and_hands_it_back(
 ) -> None:
     with (
         lab.zsession() as z,
-        agent_user(lab, "alice") as alice,
-        agent_user(lab, "bob") as bob,
-        agent_user(lab, "ida") as ida,
+        agent_users(lab, "alice", "bob", "ida") as (alice, bob, ida),
     ):
         seen: list[RequestStatus] = []
         alice.on_status = seen.append

@@ -12,7 +12,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -236,6 +236,13 @@ def agent_user(lab: ProcessLab, user: str, ctx: str = CTX) -> Iterator[AgentClie
             yield AgentClient(client, ctx).join()
     finally:
         close_session(session)
+
+
+@contextmanager
+def agent_users(lab: ProcessLab, *users: str) -> Iterator[list[AgentClient]]:
+    """:func:`agent_user` for each of ``users``, in that order, all joined at once."""
+    with ExitStack() as stack:
+        yield [stack.enter_context(agent_user(lab, user)) for user in users]
 
 
 def deploy_running(

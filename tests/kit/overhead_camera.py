@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from common.tracking.intrinsics import BoardSpec
 from common.tracking.markers import MarkerLayout, marker_image
 
 FLOOR_GREY = 200.0
@@ -34,7 +35,6 @@ BOARD_BACKGROUND_GREY = 110.0
 QUIET_CELLS = 1  # white cells around each marker
 TEXTURE_PX_PER_MM = 2.0
 TEXTURE_MARGIN_MM = 150.0  # the table beyond the arena's walls
-BOARD_DICTIONARY = cv2.aruco.DICT_5X5_100  # a board's markers are never taken for the arena's
 
 
 @dataclass(frozen=True)
@@ -414,43 +414,27 @@ def finish(
 # -- a ChArUco board held in front of the lens, for intrinsic calibration
 
 
-@dataclass(frozen=True)
-class Board:
-    """A printed ChArUco board: ``columns`` x ``rows`` squares of ``square_mm``."""
-
-    columns: int = 9
-    rows: int = 6
-    square_mm: float = 50.0
-    marker_mm: float = 37.0
-    dictionary: int = BOARD_DICTIONARY
-
-    def charuco(self) -> cv2.aruco.CharucoBoard:
-        return cv2.aruco.CharucoBoard(
-            (self.columns, self.rows),
-            self.square_mm,
-            self.marker_mm,
-            cv2.aruco.getPredefinedDictionary(self.dictionary),
-        )
-
-    def image(self, px_per_mm: float = 4.0) -> np.ndarray:
-        """The board as printed, with a white margin of half a square each side."""
-        size = (
-            round(self.columns * self.square_mm * px_per_mm),
-            round(self.rows * self.square_mm * px_per_mm),
-        )
-        board = self.charuco().generateImage(size, marginSize=0, borderBits=1)
-        pad = round(self.square_mm * px_per_mm / 2)
-        return cv2.copyMakeBorder(board, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
+def printed(board: BoardSpec, px_per_mm: float = 4.0) -> np.ndarray:
+    """The board as printed, with a white margin of half a square each side."""
+    size = (
+        round(board.columns * board.square_mm * px_per_mm),
+        round(board.rows * board.square_mm * px_per_mm),
+    )
+    image = board.charuco().generateImage(size, marginSize=0, borderBits=1)
+    pad = round(board.square_mm * px_per_mm / 2)
+    return cv2.copyMakeBorder(image, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
 
 
 class BoardCamera:
     """The same lens photographing a ChArUco board held at a pose (board -> camera)."""
 
-    def __init__(self, lens: Lens, board: Board, *, supersample: int = 2, seed: int = 0) -> None:
+    def __init__(
+        self, lens: Lens, board: BoardSpec, *, supersample: int = 2, seed: int = 0
+    ) -> None:
         self.lens, self.board, self.supersample = lens, board, supersample
         self._rng = np.random.default_rng(seed)
         self._px_per_mm = 4.0
-        self._image = board.image(self._px_per_mm).astype(np.float32)
+        self._image = printed(board, self._px_per_mm).astype(np.float32)
         s = supersample
         u = (np.arange(lens.width * s, dtype=np.float64) + 0.5) / s - 0.5
         v = (np.arange(lens.height * s, dtype=np.float64) + 0.5) / s - 0.5

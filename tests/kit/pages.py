@@ -232,6 +232,16 @@ class ViserPage:
     def wait_text(self, text: str, timeout: float = 10_000) -> None:
         self.p.get_by_text(text, exact=False).first.wait_for(timeout=timeout)
 
+    def join_lobby(self) -> None:
+        """Join the lab's lobby from the lab's tab and open the lobby's tab."""
+        self.click("Join lobby")
+        self.tab("lobby").last.click()
+
+    def say(self, line: str) -> None:
+        """Send ``line`` to the chat room whose tab is open."""
+        self.fill("Message", line)
+        self.click("Send")
+
     def screenshot(self, label: str) -> Path:
         ARTIFACTS.mkdir(exist_ok=True)
         path = ARTIFACTS / f"{self.name}-{label}.png"

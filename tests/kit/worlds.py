@@ -108,6 +108,14 @@ def control(world: World) -> None:
     world.set_speeds_all(braitenberg(world.proximity))
 
 
+def advance(world: World, ticks: int) -> World:
+    """``world`` after ``ticks`` more ticks, its robots steered by :func:`control` before each."""
+    for _ in range(ticks):
+        control(world)
+        world.step()
+    return world
+
+
 def scenario_world(n: int, drive: str = "joints", full: bool = False) -> World:
     """engine_bench's world without what Enki lacks: no gripper turret, no lamp; IR every tick.
 
@@ -145,6 +153,7 @@ __all__ = [
     "FULL_BALLS",
     "SENSOR_PERIOD_S",
     "WEIGHTS",
+    "advance",
     "build",
     "control",
     "scenario_world",

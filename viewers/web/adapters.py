@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Protocol
 
+from common import lab_errors
 from common.client.lab_address import LabAddress
 from common.client.survey import Survey
 from common.lab_errors import LabError
@@ -39,6 +40,20 @@ from viewers.web.world_feed import WorldFeed
 
 class LoginError(LabError):
     """Wrong user or password, no such lab, registry not answering."""
+
+
+def plain_error(exc: LabError, address: LabAddress | None = None) -> LabError:
+    """A lab client's error in the words the page shows; ``address``, the lab whose
+    registry was asked, is named when that registry does not answer."""
+    if isinstance(exc, lab_errors.RegistryUnreachable) and address is not None:
+        return LabError(f"the lab at {address.label} does not answer (is its registry running?)")
+    if isinstance(exc, lab_errors.NotAllowed):
+        return LabError(f"not allowed: {exc}")
+    if isinstance(exc, lab_errors.NotLoggedIn):
+        return LabError("your session with this lab has ended: log in again")
+    if isinstance(exc, lab_errors.RateLimited):
+        return LabError(f"too many requests: try again in {exc.retry_after:.0f} s")
+    return LabError(str(exc))
 
 
 # --- lab: directory, contexts, chat ------------------------------------------------

@@ -30,7 +30,7 @@ from common.client.lab_address import LabAddress, SavedConnections, parse_addres
 from common.client.service_login import ServiceCredentials
 from common.keys import AliveKind, check_ident
 from common.service import Service, run_service
-from common.zconfig import DEFAULT_PORT, NetworkOptions
+from common.zconfig import DEFAULT_PORT
 from viewers.web.adapters import LabConnector
 from viewers.web.client import BrowserSession
 from viewers.web.connector import GatewayLogin, LiveConnector
@@ -279,8 +279,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart viewer") -> int:
         "browser's address at login, so the registry slows failed logins per browser",
     )
     p.add_argument("--identity", type=Path, help="that account's Ed25519 key file")
-    args, options = cli.parse(p, argv)
-    assert isinstance(options, NetworkOptions)
+    args, options = cli.parse_networked(p, argv)
     if not 0 < args.http_port < 65536:
         p.error(f"--http-port {args.http_port} is not a TCP port (1 to 65535)")
     if not 0 < args.rate <= 60:

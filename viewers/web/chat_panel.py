@@ -294,12 +294,9 @@ class ChatPanel:
     def release(self) -> None:
         """Stop the parts that watch the lab for this page; the context stays joined."""
         self.closed = True
-        if self.recordings is not None:
-            self.recordings.close()
-        if self.course is not None:
-            self.course.close()
-        if self.klass is not None:
-            self.klass.close()
+        for part in (self.recordings, self.course, self.klass):
+            if part is not None:
+                part.close()
         self.unbind()
 
     def memory(self) -> PanelMemory:
@@ -322,9 +319,6 @@ class ChatPanel:
             self.builder.bind(feed)
 
     def unbind(self) -> None:
-        if self.robots is not None:
-            self.robots.unbind()
-        if self.editor is not None:
-            self.editor.unbind()
-        if self.builder is not None:
-            self.builder.unbind()
+        for part in (self.robots, self.editor, self.builder):
+            if part is not None:
+                part.unbind()

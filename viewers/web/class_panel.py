@@ -182,13 +182,9 @@ class ClassPanel:
         if found is None:
             return None
         _user, agent = found
-        try:
-            said = self.connection.take_over(self.ctx, agent, True)
-        except LabError as exc:
-            self.say(f"Could not take {agent} over: {exc}", bad=True)
+        said = self._take_or_hand_back(agent, True, f"Could not take {agent} over")
+        if said is None:
             return None
-        self._driving = agent
-        self.robots.refresh_agents()
         self.say(f"{said}. Drive with the arrow keys or WASD in the driving box or the view.")
         return agent
 
@@ -200,14 +196,21 @@ class ClassPanel:
                 return None
             agent = found[1]
         self._stop_driving()
+        said = self._take_or_hand_back(agent, False, f"Could not hand {agent} back")
+        if said is not None:
+            self.say(said)
+        return said
+
+    def _take_or_hand_back(self, agent: str, engaged: bool, failed: str) -> str | None:
+        """Take ``agent`` over (``engaged``) or hand it back: what the context said, or None
+        once ``failed`` and the reason are said."""
         try:
-            said = self.connection.take_over(self.ctx, agent, False)
+            said = self.connection.take_over(self.ctx, agent, engaged)
         except LabError as exc:
-            self.say(f"Could not hand {agent} back: {exc}", bad=True)
+            self.say(f"{failed}: {exc}", bad=True)
             return None
-        self._driving = None
+        self._driving = agent if engaged else None
         self.robots.refresh_agents()
-        self.say(said)
         return said
 
     # -- driving by keyboard

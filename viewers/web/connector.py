@@ -25,11 +25,9 @@ from common.client.service_login import ServiceCredentials, ServiceLogin, vouch_
 from common.lab_errors import LabError
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
-from viewers.web.adapters import (
-    LoginError,
-)
+from viewers.web.adapters import LoginError, plain_error
 from viewers.web.lab_links import LabRouterLink, load_labs
-from viewers.web.live import LiveConnection, plain_error
+from viewers.web.live import LiveConnection
 from viewers.web.live_world import QUERY_TIMEOUT
 
 log = logging.getLogger("wart.viewer.live")

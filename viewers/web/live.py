@@ -58,6 +58,7 @@ from viewers.web.adapters import (
     Queued,
     RecordingEntry,
     SavedFile,
+    plain_error,
 )
 from viewers.web.fanout import Fanout
 from viewers.web.lab_links import LabRouterLink
@@ -76,19 +77,6 @@ NOT_AN_ARENA = (
     "this is a world without an agent context: robots are queued and driven through an "
     "agent context (join one from the lobby)"
 )
-
-
-def plain_error(exc: lab_errors.LabError, address: LabAddress) -> LabError:
-    """The registry client's errors, in the words the page shows."""
-    if isinstance(exc, lab_errors.RegistryUnreachable):
-        return LabError(f"the lab at {address.label} does not answer (is its registry running?)")
-    if isinstance(exc, lab_errors.NotAllowed):
-        return LabError(f"not allowed: {exc}")
-    if isinstance(exc, lab_errors.NotLoggedIn):
-        return LabError("your session with this lab has ended: log in again")
-    if isinstance(exc, lab_errors.RateLimited):
-        return LabError(f"too many requests: try again in {exc.retry_after:.0f} s")
-    return LabError(str(exc))
 
 
 # --- one user's connection ----------------------------------------------------------------

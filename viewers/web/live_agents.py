@@ -47,6 +47,7 @@ from viewers.web.adapters import (
     RecordingEntry,
     RequestEvent,
     SavedFile,
+    plain_error,
 )
 from viewers.web.key_driver import KeyDriver
 
@@ -127,16 +128,6 @@ def agent_rows(
     return rows
 
 
-def _plain(exc: lab_errors.LabError) -> LabError:
-    if isinstance(exc, lab_errors.NotAllowed):
-        return LabError(f"not allowed: {exc}")
-    if isinstance(exc, lab_errors.NotLoggedIn):
-        return LabError("your session with this lab has ended: log in again")
-    if isinstance(exc, lab_errors.RateLimited):
-        return LabError(f"too many requests: {exc}")
-    return LabError(str(exc))
-
-
 class AgentContextLink:
     """One user in one agent context: the AgentClient, and its events for the page."""
 
@@ -205,7 +196,7 @@ class AgentContextLink:
         try:
             return fn()
         except lab_errors.LabError as exc:
-            raise _plain(exc) from None
+            raise plain_error(exc) from None
 
     def state(self, *, fresh: bool = False) -> AgentContextState:
         state = self.agents.latest_state

@@ -354,13 +354,19 @@ class Workbench:
         self.run_on.refresh()
 
     def _run_sim(self) -> None:
-        agent = self.run_on.here(self.say)
+        agent = self._simulated_robot("use 'Queue on the real robot'")
         if agent is None:
             return
-        if self.run_on.arena_is_real():
-            self.say("This arena's robots are real: use 'Queue on the real robot'.", bad=True)
-            return
         self._queue(self.ctx, agent, "simulation")
+
+    def _simulated_robot(self, if_real: str) -> str | None:
+        """The robot chosen to run on, if its arena is simulated; else None, having said
+        why (``if_real``: what to do instead on a real arena)."""
+        agent = self.run_on.here(self.say)
+        if agent is not None and self.run_on.arena_is_real():
+            self.say(f"This arena's robots are real: {if_real}.", bad=True)
+            return None
+        return agent
 
     def _dry_run(self) -> None:
         """The editor's text, dry-run on the chosen robot; the verdict under the code."""
@@ -463,11 +469,8 @@ class Workbench:
         self.robots.refresh_agents()
 
     def _reset(self) -> None:
-        agent = self.run_on.here(self.say)
+        agent = self._simulated_robot("put the robot back by hand")
         if agent is None:
-            return
-        if self.run_on.arena_is_real():
-            self.say("This arena's robots are real: put the robot back by hand.", bad=True)
             return
         try:
             detail = self.connection.reset_robot(self.ctx, agent)

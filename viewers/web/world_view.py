@@ -54,6 +54,28 @@ LIGHT_ON, LIGHT_OFF = (255, 220, 40), (150, 150, 150)
 POINTS_FROM = 2_000
 
 
+def _disc(
+    scene: viser.SceneApi,
+    name: str,
+    radius_mm: float,
+    height: float,
+    colour: tuple[int, int, int],
+    at_mm: tuple[float, float],
+    z: float,
+) -> viser.CylinderHandle:
+    """A flat cylinder on the floor (a pillar, a ball, a light), casting and taking no
+    shadow: its radius and place in arena mm, its height and ``z`` in scene metres."""
+    return scene.add_cylinder(
+        name,
+        radius=radius_mm * geo.MM,
+        height=height,
+        color=colour,
+        position=(at_mm[0] * geo.MM, at_mm[1] * geo.MM, z),
+        cast_shadow=False,
+        receive_shadow=False,
+    )
+
+
 class WorldView:
     """The arena in one client's 3D canvas; selection and extras are this client's own."""
 
@@ -250,15 +272,10 @@ class WorldView:
             for ob in snap.obstacles[:shown]:
                 node: viser.SceneNodeHandle
                 if ob.round:  # pillars: discs from above
-                    node = scene.add_cylinder(
-                        f"/world/obstacles/{ob.ident}",
-                        radius=ob.w * geo.MM / 2,
-                        height=0.03,
-                        color=OBSTACLE_COLOUR,
-                        position=(ob.x * geo.MM, ob.y * geo.MM, 0.015),
-                        cast_shadow=False,
-                        receive_shadow=False,
-                    )
+                    node = _disc(
+                        scene, f"/world/obstacles/{ob.ident}", ob.w / 2, 0.03, OBSTACLE_COLOUR,
+                        (ob.x, ob.y), 0.015,
+                    )  # fmt: skip
                 else:
                     node = scene.add_box(
                         f"/world/obstacles/{ob.ident}",
@@ -272,27 +289,17 @@ class WorldView:
                 node.on_click(self._obstacle_clicked(ob.ident))
                 self._static.append(node)
             for ball in snap.balls[:shown]:
-                node = scene.add_cylinder(
-                    f"/world/balls/{ball.ident}",
-                    radius=ball.r * geo.MM,
-                    height=0.02,
-                    color=BALL_COLOUR,
-                    position=(ball.x * geo.MM, ball.y * geo.MM, 0.01),
-                    cast_shadow=False,
-                    receive_shadow=False,
-                )
+                node = _disc(
+                    scene, f"/world/balls/{ball.ident}", ball.r, 0.02, BALL_COLOUR,
+                    (ball.x, ball.y), 0.01,
+                )  # fmt: skip
                 node.on_click(self._obstacle_clicked(ball.ident))
                 self._balls.append(node)
             for light in snap.lights[:shown]:
-                node = scene.add_cylinder(
-                    f"/world/lights/{light.ident}",
-                    radius=0.03,
-                    height=0.005,
-                    color=LIGHT_ON if light.on else LIGHT_OFF,
-                    position=(light.x * geo.MM, light.y * geo.MM, 0.003),
-                    cast_shadow=False,
-                    receive_shadow=False,
-                )
+                node = _disc(
+                    scene, f"/world/lights/{light.ident}", 30.0, 0.005,
+                    LIGHT_ON if light.on else LIGHT_OFF, (light.x, light.y), 0.003,
+                )  # fmt: skip
                 node.on_click(self._obstacle_clicked(light.ident))
                 self._lights.append(node)
             if robots_changed or self._robots is None:

@@ -61,8 +61,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart context race") -> 
     p.add_argument("--result", type=Path, help="where to write the standings")
     p.add_argument("--exit-when-done", action="store_true", help="exit when the race is over")
     p.add_argument("--seconds", type=float, default=600.0, help="with --exit-when-done: give up")
-    args, options = cli.parse(p, argv)
-    assert options is not None
+    args, options = cli.parse_networked(p, argv)
     try:
         keys.check_ident("world", args.world)
         keys.check_ident("name", args.name)

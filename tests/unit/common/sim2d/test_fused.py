@@ -18,7 +18,7 @@ from common.sim2d import kernels, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import EditError, World
-from tests.kit.worlds import build, control
+from tests.kit.worlds import advance, build, control
 
 KHEPERA = agent_type("khepera")
 
@@ -83,15 +83,10 @@ def test_edits_between_ticks_are_seen_by_the_next_fused_tick() -> None:
 
 
 def test_arrays_taken_from_the_world_keep_their_values() -> None:
-    world = build(10, drive="discs", sensor_period_s=0.01)
-    for _ in range(3):
-        control(world)
-        world.step()
+    world = advance(build(10, drive="discs", sensor_period_s=0.01), 3)
     held = [world.agent_pose, world.agent_vel, world.proximity, world.ambient, world.presence]
     copies = [a.copy() for a in held]
-    for _ in range(20):
-        control(world)
-        world.step()
+    advance(world, 20)
     for a, b in zip(held, copies, strict=True):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(world.agent_pose, copies[0]), "the robots did move"

@@ -153,6 +153,16 @@ def test_threaded_space_drives_grips_and_pushes_like_the_serial_one() -> None:
         assert world.object_pose[0, 0] > world.agent_pose[0, 0] + 27.0
 
 
+def _scatter_boxes(
+    world: World, rng: np.random.Generator, count: int, box: ShapeSpec, turn: float
+) -> None:
+    """``count`` boxes box0.. anywhere 100 mm or more inside the walls, each turned by a
+    random angle below ``turn`` radians."""
+    for i in range(count):
+        x, y = rng.uniform(100, world.width - 100), rng.uniform(100, world.height - 100)
+        world.add_obstacle(f"box{i}", box, x, y, float(rng.uniform(0, turn)))
+
+
 def _occluded_both_ways(scene: StaticScene, seg: Iterable[float]) -> tuple[bool, bool]:
     """Whether an obstacle hides the segment, testing every edge and walking the grid."""
     full = rays._occluded(*seg, scene.occ_segs, scene.static_xy, scene.static_r)
@@ -175,9 +185,7 @@ def test_occlusion_along_the_grid_answers_as_testing_every_obstacle() -> None:
     # or not the same whether every edge is tested or only those binned along it.
     world = World(3000.0, 2000.0, seed=1)
     rng = np.random.default_rng(8)
-    for i in range(40):
-        x, y = rng.uniform(100, 2900), rng.uniform(100, 1900)
-        world.add_obstacle(f"box{i}", ShapeSpec.box(60, 30), x, y, float(rng.uniform(0, 3)))
+    _scatter_boxes(world, rng, 40, ShapeSpec.box(60, 30), 3.0)
     for i in range(3):
         world.add_obstacle(f"post{i}", ShapeSpec.circle(25), 700.0 + 800 * i, 1000.0)
     world.add_agent("k", KHEPERA, 50.0, 50.0)
@@ -234,9 +242,7 @@ def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
     # points just beside the obstacles, seen from the lights.
     world = World(3000.0, 2000.0, seed=1)
     rng = np.random.default_rng(5)
-    for i in range(50):
-        x, y = rng.uniform(100, 2900), rng.uniform(100, 1900)
-        world.add_obstacle(f"box{i}", ShapeSpec.box(60, 20), x, y, float(rng.uniform(0, 3.2)))
+    _scatter_boxes(world, rng, 50, ShapeSpec.box(60, 20), 3.2)
     for i in range(6):
         world.add_obstacle(f"post{i}", ShapeSpec.circle(20), *rng.uniform([100, 100], [2900, 1900]))
     world.add_agent("k", KHEPERA, 30.0, 30.0)

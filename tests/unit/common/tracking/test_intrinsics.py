@@ -20,14 +20,14 @@ from common.tracking.calibration import (
 from common.tracking.intrinsics import BoardSpec, Intrinsics, IntrinsicsCollector, IntrinsicsError
 from services.camera.calibrate import intrinsics_main
 from services.camera.main import main
-from tests.kit.overhead_camera import Board, BoardCamera, Effects, Lens
+from tests.kit.overhead_camera import BoardCamera, Effects, Lens
 
 LENS = Lens()  # 1280x720, barrel distortion
 
 
 @pytest.fixture(scope="module")
 def board_camera() -> BoardCamera:
-    return BoardCamera(LENS, Board(), seed=4)
+    return BoardCamera(LENS, BoardSpec(), seed=4)
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,6 @@ from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
 from services.camera.main import main
 from tests.kit.overhead_camera import (
-    Board,
     BoardCamera,
     Effects,
     Lens,
@@ -41,7 +40,7 @@ def camera(layout: MarkerLayout) -> OverheadCamera:
 
 @pytest.fixture(scope="module")
 def lens() -> Intrinsics:
-    board = BoardCamera(LENS, Board(), seed=6)
+    board = BoardCamera(LENS, BoardSpec(), seed=6)
     collector = IntrinsicsCollector(BoardSpec())
     for rotation, translation in board.views(50, seed=6):
         collector.offer(board.render(rotation, translation), consecutive=False)
