@@ -155,13 +155,15 @@ def test_the_teacher_watches_takes_over_drives_by_keyboard_and_hands_back(
         ida.p.keyboard.up("ArrowDown")
         wait_until(lambda: motion.at_rest_since(["k1"], released), 20, what="stopped on release")
 
+        # WASD too, forward: backing up three times drove k1 into the wall on a busy
+        # machine (each key held until the robot was seen moving), and then nothing moved.
         pressed = time.monotonic()
-        ida.p.keyboard.down("KeyS")  # WASD too; then the box loses focus with the key held
-        wait_until(lambda: motion.moving(["k1"], pressed), 20, what="k1 driven by S")
+        ida.p.keyboard.down("KeyW")  # then the box loses focus with the key held
+        wait_until(lambda: motion.moving(["k1"], pressed), 20, what="k1 driven by W")
         blurred = time.monotonic()
         ida.p.get_by_text("Drive with the arrow keys or WASD", exact=False).first.click()
         wait_until(lambda: motion.at_rest_since(["k1"], blurred), 20, what="stopped on blur")
-        ida.p.keyboard.up("KeyS")
+        ida.p.keyboard.up("KeyW")
 
         # A click on the world view focuses it, and then keys drive. Clicked where the DOM
         # says the canvas itself is, and waited until it has the focus (a fresh-clone run's
