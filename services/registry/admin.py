@@ -200,10 +200,20 @@ class AdminDesk:
         except (AuthError, MessageError) as exc:
             words = getattr(exc, "message", None) or str(exc)
             if "replayed message" not in words:
-                # A revoked or expired session's report is its user's (its key signed it).
-                actor = self.verifier.signer_of(key, sample.payload) or "unknown"
+                # A revoked or expired session's report is its user's (its key signed it),
+                # though a captured one may be replayed by another: the words say both.
+                actor = self.verifier.signer_of(key, sample.payload)
+                if actor is not None:
+                    words = f"{words} (signed with that session's key: sent late, or replayed)"
                 self.audit(
-                    Action(actor, "forged_report", "audit", "refused", words, source_of(sample))
+                    Action(
+                        actor or "unknown",
+                        "forged_report",
+                        "audit",
+                        "refused",
+                        words,
+                        source_of(sample),
+                    )
                 )
             raise
         if "service" not in principal.roles:

@@ -114,6 +114,7 @@ def test_a_replayed_report_is_kept_once_and_forged_ones_are_shown(lab: ProcessLa
             assert ("bob", "carol") in lines and ("unknown", "audit") in lines
             revoked = [e for e in trail if e.actor == "bob" and e.target == "audit"]
             assert len(revoked) == 1 and "revoked" in revoked[0].detail
+            assert "replayed" in revoked[0].detail  # a capture replayed would read the same
             assert not audit_trail(admin, action="ban")  # the lie is not a ban line
     finally:
         close_session(session)
