@@ -18,6 +18,7 @@ The engine re-checks edit_map on every edit: the page is only a convenience.
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable
 from typing import Literal
 
@@ -49,6 +50,10 @@ class MapEditor:
         self.selected: str | None = None
         self.selected_kind: Kind = "obstacle"
         self._gizmo: viser.TransformControlsHandle | None = None
+        # The handles are made and dropped from the page's clicks, the view's selection and
+        # the bind, on their own threads: two made at once under one name, viser removed one
+        # while it was being made (a busy machine's follow-camera test).
+        self._gizmo_lock = threading.RLock()
         # Is this robot driven by someone's controller now? (set by the arena's panel)
         self.driven: Callable[[str], bool] = lambda _name: False
         self._click: Callable[[viser.SceneClickEvent], None] | None = None  # shift-click
@@ -133,11 +138,12 @@ class MapEditor:
         self.view = self.feed = None
 
     def _drop_gizmo(self) -> None:
-        if self._gizmo is not None:
-            self._gizmo.remove()
-            self._gizmo = None
-        self.selected = None
-        self.delete.disabled = True
+        with self._gizmo_lock:
+            if self._gizmo is not None:
+                self._gizmo.remove()
+                self._gizmo = None
+            self.selected = None
+            self.delete.disabled = True
 
     def _find(self, ident: str) -> tuple[Kind, float, float, float] | None:
         feed = self.feed
@@ -168,8 +174,10 @@ class MapEditor:
         name = view.selected_name if view is not None else None
         if name is not None and self.allowed and not self.driven(name):
             self.select(name)
-        elif self._gizmo is not None and self.selected_kind == "agent":
-            self._drop_gizmo()  # selecting another robot (or none) takes the handles away
+            return
+        with self._gizmo_lock:
+            if self._gizmo is not None and self.selected_kind == "agent":
+                self._drop_gizmo()  # selecting another robot (or none) takes the handles away
 
     def select(self, ident: str) -> None:
         if not self.allowed:
@@ -179,22 +187,23 @@ class MapEditor:
         if found is None:
             return
         kind, x, y, angle = found
-        self._drop_gizmo()
-        self.selected, self.selected_kind = ident, kind
-        self.delete.disabled = False
-        self.info.content = (
-            f"Selected **{escape_md(ident)}** ({kind}): drag the arrows or the ring."
-        )
-        gizmo = self.client.scene.add_transform_controls(
-            "/editor/gizmo",
-            scale=0.25,
-            active_axes=(True, True, False),  # x/y moves, rotation about z only
-            disable_sliders=True,
-            position=(x * geo.MM, y * geo.MM, 0.04),
-            wxyz=tuple(geo.yaw_to_wxyz(angle)),
-        )
-        gizmo.on_update(self._moved)
-        self._gizmo = gizmo
+        with self._gizmo_lock:
+            self._drop_gizmo()
+            self.selected, self.selected_kind = ident, kind
+            self.delete.disabled = False
+            self.info.content = (
+                f"Selected **{escape_md(ident)}** ({kind}): drag the arrows or the ring."
+            )
+            gizmo = self.client.scene.add_transform_controls(
+                "/editor/gizmo",
+                scale=0.25,
+                active_axes=(True, True, False),  # x/y moves, rotation about z only
+                disable_sliders=True,
+                position=(x * geo.MM, y * geo.MM, 0.04),
+                wxyz=tuple(geo.yaw_to_wxyz(angle)),
+            )
+            gizmo.on_update(self._moved)
+            self._gizmo = gizmo
 
     def _moved(self, event: viser.TransformControlsEvent) -> None:
         if getattr(event, "phase", "end") != "end":

@@ -6,6 +6,8 @@ world the viewer's own demo lab serves.
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Iterator
 from types import SimpleNamespace
 from unittest import mock
@@ -67,3 +69,37 @@ def test_nothing_selected_binds_without_handles(world: DemoWorld) -> None:
     editor = MapEditor(client, allowed=True)
     editor.bind(a_view(None, world.snapshot().robots), world)  # type: ignore[arg-type]
     assert editor.selected is None and handles_on(client) == []
+
+
+def test_handles_made_from_two_threads_at_once_are_made_one_after_the_other(
+    world: DemoWorld,
+) -> None:
+    # The bind's own selection and a click's (the view's thread) at once: viser removed one
+    # handle of a name while another of that name was being made (a busy machine's run).
+    client = mock.MagicMock()
+    inside, overlaps = [0], []
+    guard = threading.Lock()
+
+    def make(*args: object, **kwargs: object) -> mock.MagicMock:
+        with guard:
+            inside[0] += 1
+            overlaps.append(inside[0])
+        time.sleep(0.005)
+        with guard:
+            inside[0] -= 1
+        return mock.MagicMock()
+
+    client.scene.add_transform_controls.side_effect = make
+    editor = MapEditor(client, allowed=True)
+    names = world.snapshot().robots
+    editor.bind(a_view(None, names), world)  # type: ignore[arg-type]
+    threads = [
+        threading.Thread(target=lambda n=name: [editor.select(n) for _ in range(20)])
+        for name in names
+    ]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert len(overlaps) == 20 * len(names) and max(overlaps) == 1
+    assert editor.selected in names and editor._gizmo is not None
