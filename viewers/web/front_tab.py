@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import html
 import json
+import threading
+import time
 from collections.abc import Callable
 
 import viser
@@ -65,19 +67,60 @@ def front_tab_html(front: viser.GuiTextHandle) -> str:
     )
 
 
+EXPECT_S = 10.0  # how long a tab the server brought to the front may take to be reported
+
+
 class FrontTab:
-    """The labels of the tabs in front in this browser; ``on_change`` is called with them."""
+    """The labels of the tabs in front in this browser; ``on_change`` is called with them.
+
+    After :meth:`expect` (the server brought a tab to the front), a report without that
+    tab is one the page sent before it got there: it is kept, not acted on, until the
+    page reports the tab or EXPECT_S passes (a late report of the arena left behind
+    showed it again and dropped the student's selection in the one just joined).
+    """
 
     def __init__(self, gui: viser.GuiApi, on_change: Callable[[tuple[str, ...]], None]) -> None:
         self.labels: tuple[str, ...] = ()
         self._input = gui.add_text("Tab in front", "")
         gui.add_html(front_tab_html(self._input))
         self._on_change = on_change
+        self._lock = threading.Lock()
+        self._expected: tuple[str, float] | None = None  # the label, and until when
+        self._held = False  # a report kept back while a tab is expected
         self._input.on_update(lambda _: self._changed())
+
+    def expect(self, label: str) -> None:
+        """The server is bringing ``label``'s tab to the front: earlier reports are stale."""
+        with self._lock:
+            self._expected = (label, time.monotonic() + EXPECT_S)
+        timer = threading.Timer(EXPECT_S + 0.1, self._expired)
+        timer.daemon = True
+        timer.start()
 
     def _changed(self) -> None:
         # Bounded: the page's tabs' labels, never more than a few short lines.
         labels = tuple(line[:200] for line in self._input.value.splitlines()[:20] if line)
-        if labels != self.labels:
+        with self._lock:
+            if labels == self.labels:
+                return
             self.labels = labels
+            expected = self._expected
+            if expected is not None:
+                label, until = expected
+                if label not in labels and time.monotonic() < until:
+                    self._held = True
+                    return
+                self._expected, self._held = None, False
+        self._on_change(labels)
+
+    def _expired(self) -> None:
+        """The expected tab never came: the page's last report stands."""
+        with self._lock:
+            expected = self._expected
+            if expected is None or time.monotonic() < expected[1]:
+                return
+            self._expected = None
+            held, self._held = self._held, False
+            labels = self.labels
+        if held:
             self._on_change(labels)
