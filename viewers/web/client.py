@@ -265,8 +265,7 @@ class BrowserSession:
         set_value(self.address, address.with_user(connection.user).url())
         self._refresh_recent()
         # The lab's tab is where the person goes next: the page shows it (tabs.py).
-        self.front.expect(tab.tab_name)
-        self.switcher.show(tab.tab_name, tab_title(address))
+        self._bring_to_front(tab.tab_name, tab_title(address))
         self.title.set(f"{tab.tab_name} · {TITLE}")
         # Also said in words (headless clients and the benchmark wait for these words).
         self.client.add_notification(
@@ -281,8 +280,7 @@ class BrowserSession:
         )
         shown = tab.panels.get(kept.memory.watching or "") if kept is not None else None
         if shown is not None:  # the arena the page showed, in front again
-            self.front.expect(shown.tab_name)
-            self.switcher.show(shown.tab_name, shown.tab_title)
+            self._bring_to_front(shown.tab_name, shown.tab_title)
             shown.show_world()
         if address.context:
             tab.join(address.context)
@@ -298,6 +296,11 @@ class BrowserSession:
 
     # -- the world view
 
+    def _bring_to_front(self, label: str, title: str) -> None:
+        """The page goes to that tab; its reports from before it got there are stale."""
+        self.front.expect(label)
+        self.switcher.show(label, title)
+
     def _panels(self) -> list[ChatPanel]:
         """Every context's panel, in every lab this page is logged in to."""
         with self._lock:
@@ -308,8 +311,7 @@ class BrowserSession:
         panels = self._panels()
         for other in panels:
             other.in_front = other is panel
-        self.front.expect(panel.tab_name)
-        self.switcher.show(panel.tab_name, panel.tab_title)
+        self._bring_to_front(panel.tab_name, panel.tab_title)
         if panel.kind in ARENA_KINDS:
             panel.show_world()
 
