@@ -13,6 +13,7 @@ Extra Chromium switches (``--chromium-arg``) are added to the tests' own.
     python -m bench.page_load_cost --pages 6
     python -m bench.page_load_cost --pages 4 --join
     python -m bench.page_load_cost --pages 6 --chromium-arg=--js-flags=--no-opt
+    python -m bench.page_load_cost --pages 2 --join --hold 15 --draws
 """
 
 from __future__ import annotations
@@ -86,6 +87,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--chromium-arg", action="append", default=[], help="an extra Chromium switch (repeat)"
     )
+    p.add_argument(
+        "--draws",
+        action="store_true",
+        help="let WebGL draw (the test pages skip its draw calls except for screenshots)",
+    )
     args = p.parse_args(argv)
     if not 1 <= args.pages <= 100:
         p.error("--pages: give 1 to 100")
@@ -106,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{pages.CHROMIUM} is missing (apt-get install chromium)", file=sys.stderr)
         return 2
     pages.CHROMIUM_ARGS.extend(args.chromium_arg)
+    if args.draws:
+        pages.DRAW_SWITCH_SCRIPT = pages.DRAW_SWITCH_SCRIPT.replace(
+            "window.__wartDraws = false", "window.__wartDraws = true"
+        )
     lab = DemoLab("Test lab", robots=12)
     viewer = WebViewer(
         DemoConnector(("lab", lab)), port=free_port(), data_dir=Path(tempfile.mkdtemp())
@@ -129,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     spent = cpu.by_kind()
     total = sum(spent.values())
     what = "an empty page" if args.blank else "joined to the arena" if args.join else "opened"
-    extra = f" (with {' '.join(args.chromium_arg)})" if args.chromium_arg else ""
+    switches = [*args.chromium_arg, *(["drawing"] if args.draws else [])]
+    extra = f" (with {' '.join(switches)})" if switches else ""
     print(
         f"{args.pages} pages {what}{extra}, {wall:.1f} s: Chromium {total:.1f} s of CPU, "
         f"{total / args.pages:.2f} s a page"

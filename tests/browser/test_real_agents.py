@@ -220,6 +220,7 @@ def test_mouse_drag_of_the_gizmo_moves_an_obstacle_for_the_other_session(
     assert snap is not None and ida_panel.editor is not None
     target = next(o for o in snap.obstacles if not o.ident.startswith("wall"))
     wait_for_aimed_camera(ida_view)
+    ida.draw()  # the grab is found on the drawn gizmo's pixels
     ida_panel.editor.select(target.ident)  # what clicking it does (tested in test_real_lab)
     # Where the gizmo's x arrow is, by geometry: from the box's centre along its heading,
     # as long as the gizmo's scale (0.25 m). The drag grabs the first point of it that the

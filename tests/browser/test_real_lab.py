@@ -114,6 +114,7 @@ def test_arena_robots_move_when_driven(open_page, lab: RealLab) -> None:
     start = feed.latest()
     assert start is not None
     start_m = start.poses[0, :2] * geo.MM
+    page.draw()  # this test reads the drawn pixels
     with lab.driving("k0"):
         first = scene(page.p.screenshot())
         # Sent to the page: the frame the view drew k0 at has it 40 mm (0.04 m) from its start.
@@ -290,6 +291,7 @@ def test_clicking_a_robot_selects_it(open_page, lab: RealLab) -> None:
     # The page draws what it was sent a little later (software WebGL): a user clicks what
     # they see, so the click waits until something other than floor is drawn at the spot.
     x, y = (int(v) for v in np.rint(spot))
+    page.draw()
     wait_until(
         lambda: min(np.abs(scene_pixel(page, x, y) - c).sum() for c in UNDRAWN) > 100,
         15,

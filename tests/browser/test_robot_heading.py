@@ -42,6 +42,7 @@ def test_heading_arrow_is_drawn_in_its_own_colour(
     from PIL import Image
 
     page, session = join_demo_arena(open_page, viewer, "ana")
+    page.draw()  # this test reads the drawn pixels
     view = session.view
     frame = show_still_frame(fake_lab.worlds["arena"], view)
 

@@ -52,6 +52,7 @@ def test_a_swarm_is_drawn_as_points_and_a_click_selects_a_robot(
     )
 
     # The page draws the robots where the frame puts them, and floor between them.
+    page.draw()
     floor = np.array(FLOOR_COLOUR, np.int16)
     looks: dict[str, np.ndarray] = {}
 

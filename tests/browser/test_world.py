@@ -30,6 +30,7 @@ def test_arena_robots_move(open_page, viewer: WebViewer) -> None:
     wait_until(lambda: view.frames_applied > 10, what="frames to reach the view")
 
     # Frames reach the page: the robots' pixels differ between two screenshots.
+    page.draw()
     first = page.p.screenshot()
     n0 = view.frames_applied
     wait_until(lambda: view.frames_applied > n0 + 12, what="more frames")

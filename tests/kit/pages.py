@@ -8,7 +8,9 @@ both open their pages through these.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import re
 import time
 from collections import deque
@@ -84,6 +86,34 @@ FRAME_CAP_SCRIPT = """(() => {
 })()""".replace("HZ", str(FRAME_CAP_HZ))
 
 
+# The test pages skip WebGL's draw calls unless asked to draw: SwiftShader's drawing, in
+# Chromium's GPU process, was a quarter of Chromium's CPU in the suite (161 of 602 s in a
+# CI run; a joined page held 15 s cost 8.0 s of CPU drawing and 5.8 s not). The page
+# itself runs as it does for a student (messages, scene graph, React, raycast clicks);
+# only the pixels are not made. A screenshot draws first (ViserPage.screenshot), and a
+# test that reads pixels turns drawing on for its page (ViserPage.draw). WART_TEST_DRAWS=1
+# draws always, for watching a run.
+DRAWS = os.environ.get("WART_TEST_DRAWS", "") == "1"
+DRAW_SWITCH_SCRIPT = """(() => {
+  let drawn = 0;
+  window.__wartDraws = DRAWS;
+  Object.defineProperty(window, "__wartDrawn", { get: () => drawn });
+  const calls = ["clear", "drawArrays", "drawElements", "drawArraysInstanced",
+                 "drawElementsInstanced", "drawRangeElements"];
+  for (const gl of [window.WebGLRenderingContext, window.WebGL2RenderingContext]) {
+    for (const name of calls) {
+      const real = gl && gl.prototype[name];
+      if (!real) continue;
+      gl.prototype[name] = function (...args) {
+        if (!window.__wartDraws) return undefined;
+        drawn += 1;
+        return real.apply(this, args);
+      };
+    }
+  }
+})()""".replace("DRAWS", "true" if DRAWS else "false")
+
+
 def page_url(url: str) -> str:
     """The viewer's address as the test browser opens it (127.0.0.1, half-density canvas)."""
     url = url.replace("localhost", "127.0.0.1")
@@ -102,9 +132,11 @@ def launch_chromium(playwright: Any) -> Any:
 
 
 def new_test_context(chromium: object, viewport: dict[str, int] | None = None) -> object:
-    """A browser context (own cookies and storage) whose pages draw at most FRAME_CAP_HZ."""
+    """A browser context (own cookies and storage) whose pages run at most FRAME_CAP_HZ
+    frames a second and skip WebGL's draw calls until asked (DRAW_SWITCH_SCRIPT)."""
     context = chromium.new_context(viewport=viewport or VIEWPORT)  # type: ignore[attr-defined]
     context.add_init_script(FRAME_CAP_SCRIPT)
+    context.add_init_script(DRAW_SWITCH_SCRIPT)
     return context
 
 
@@ -243,10 +275,33 @@ class ViserPage:
         self.click("Send")
 
     def screenshot(self, label: str) -> Path:
+        """test-artifacts/<page>-<label>.png, the arena drawn (see DRAW_SWITCH_SCRIPT)."""
         ARTIFACTS.mkdir(exist_ok=True)
         path = ARTIFACTS / f"{self.name}-{label}.png"
-        self.p.screenshot(path=str(path))
+        drawing = self.p.evaluate("() => window.__wartDraws")
+        if not drawing:
+            self.draw()
+        try:
+            self.p.screenshot(path=str(path))
+        finally:
+            if not drawing:
+                self.draw(False)
         return path
+
+    def draw(self, on: bool = True) -> None:
+        """Let the page's WebGL draw (on) until a reload, or skip its draw calls again.
+
+        Turned on, returns once a frame has drawn since (viser draws on demand, and at
+        least once a second): a test that reads pixels then reads the scene as it is.
+        """
+        drawn = self.p.evaluate("on => { window.__wartDraws = on; return window.__wartDrawn; }", on)
+        if on:
+            # No frame within 5 s: no canvas drew (a page without the scene); the
+            # screenshot shows what there is.
+            with contextlib.suppress(PlaywrightTimeout):
+                self.p.wait_for_function(
+                    "n => window.__wartDrawn > n", arg=drawn, polling=100, timeout=5_000
+                )
 
     def open_login(self) -> None:
         """Click Connect and wait for the login form, as a student would.
