@@ -22,12 +22,20 @@ machine runs numba's kernels until it is built there.
 The module is written to _aot_<hash of the sources>.<ext> in this directory (a
 temporary name first, then renamed: an engine never imports half a file), and
 older modules are removed. Two builds at once wait for each other (a lock).
+
+A copy goes to a cache of the user's (``$WART_AOT_CACHE``, default
+``~/.cache/wart/aot/<numba>-<numpy>/``; keyed like the module by sources and CPU,
+and by the versions it was compiled with), and a build that finds its module
+there copies it instead of compiling: a fresh clone or a second worktree of the
+same sources costs a copy, not half a minute of a core per core.
 """
 
 from __future__ import annotations
 
 import argparse
 import fcntl
+import os
+import shutil
 import sys
 import tempfile
 import time
@@ -35,6 +43,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numba
+import numpy
 from numba import typeof, types
 from numba.core import cgutils, codegen
 from numba.extending import intrinsic
@@ -191,6 +201,11 @@ def build(force: bool = False, quiet: bool = False) -> Path:
         if target.exists() and not force:
             say(f"aot: {target.name} is up to date")
             return target
+        cached = cache_dir() / target.name
+        if cached.exists() and not force:
+            _copy_in(cached, target)
+            say(f"aot: {target.name} from the cache ({cached.parent})")
+            return target
         t0 = time.perf_counter()
         _host_features()
         name = aot.module_name()
@@ -208,7 +223,41 @@ def build(force: bool = False, quiet: bool = False) -> Path:
             if old != target:
                 old.unlink(missing_ok=True)
         say(f"aot: built {target.name} in {time.perf_counter() - t0:.0f} s")
+        _keep(target)
         return target
+
+
+def cache_dir() -> Path:
+    """Where built modules are kept for other checkouts (WART_AOT_CACHE, else ~/.cache)."""
+    given = os.environ.get("WART_AOT_CACHE")
+    base = Path(given) if given else Path.home() / ".cache" / "wart" / "aot"
+    return base / f"numba{numba.__version__}-numpy{numpy.__version__}"
+
+
+def _copy_in(source: Path, target: Path) -> None:
+    """Copy to a temporary name, then rename: an engine never imports half a file."""
+    partial = target.with_name(f".{target.name}.{os.getpid()}")
+    shutil.copyfile(source, partial)
+    partial.replace(target)
+    for old in aot.HERE.glob(aot.PREFIX + "*"):
+        if old != target:
+            old.unlink(missing_ok=True)
+
+
+def _keep(built: Path, most: int = 4) -> None:
+    """A copy in the cache, the ``most`` newest kept; a cache that cannot be written is
+    skipped (a read-only home: the build itself succeeded)."""
+    try:
+        where = cache_dir()
+        where.mkdir(parents=True, exist_ok=True)
+        partial = where / f".{built.name}.{os.getpid()}"
+        shutil.copyfile(built, partial)
+        partial.replace(where / built.name)
+        kept = sorted(where.glob(aot.PREFIX + "*"), key=lambda p: p.stat().st_mtime)
+        for old in kept[:-most]:
+            old.unlink(missing_ok=True)
+    except OSError as exc:
+        print(f"aot: not kept in the cache ({exc})", file=sys.stderr)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
