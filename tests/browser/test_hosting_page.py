@@ -49,6 +49,9 @@ def test_admin_hosts_a_room_and_an_arena_and_surveys_the_network(
         vp.click("Host chat room")
         try:
             vp.tab("seminar").wait_for(timeout=60_000)  # hosted, then joined
+            # ...and the page goes to its tab: the tab shows before the page is taken to
+            # it, and a click on the lab's tab in between was undone by it (a CI run).
+            expect(vp.tab("seminar").first).to_have_attribute("aria-selected", "true")
         except Exception:
             vp.screenshot("seminar-missing")  # what the page said instead
             raise
