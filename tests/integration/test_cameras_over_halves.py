@@ -328,7 +328,10 @@ def test_three_cameras_over_the_thirds_hand_the_robot_on_twice(
     crossing(follow, body, 2500.0)
     seen = {part: follow.sightings[f"{WORLD}-{part}"] for part in thirds}
     assert max(seen["a"]) > 1150 and min(seen["b"]) < 850  # the first seam, seen by both
-    assert max(seen["b"]) > 2100 and min(seen["c"]) < 1800  # ... and the second
+    # ... and the second: each camera sees past its own rectangle (b's ends at 2050, c's
+    # starts at 1900). Not "c by 1800": c's view starts near 1700, but a CPU-starved
+    # camera reads fewer frames (a CI run: c's first sighting at 1803).
+    assert max(seen["b"]) > 2100 and min(seen["c"]) < 1850
     assert max(seen["a"]) < 1400 and max(seen["b"]) < 2350 < body.pose()[0]
     assert pose_from(zsession, router.realm) == "tracked"
     assert bridge.output().count(" is not seen") == said_before, bridge.output()
