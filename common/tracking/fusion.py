@@ -247,6 +247,15 @@ class PoseFusion:
         with self._lock:
             self._left.discard(camera)
 
+    def sighting_age(self, agent: str, now: float) -> float | None:
+        """How old the last sighting of ``agent`` is, if the camera that made it still runs
+        (None: never seen, or that camera's process has gone)."""
+        with self._lock:
+            robot = self._robots.get(agent)
+            if robot is None or robot.seen_at is None or robot.seen_by in self._left:
+                return None
+            return now - robot.seen_at
+
     def camera_live(self, now: float) -> bool:
         camera_at = self._camera_at
         return camera_at is not None and now - camera_at <= self.camera_silent_after_s

@@ -361,11 +361,20 @@ class BridgeService(WorldService):
                         "%s is not seen by the camera: shown where it was last seen", agent.id
                     )
                 elif source == "odometry" and camera:
-                    self.log.warning(
-                        "%s: the camera that saw it has gone and no other sees it: poses "
-                        "from odometry",
-                        agent.id,
-                    )
+                    age = self.fusion.sighting_age(agent.id, now)
+                    if age is None:
+                        self.log.warning(
+                            "%s: the camera that saw it has gone and no other sees it: poses "
+                            "from odometry",
+                            agent.id,
+                        )
+                    else:  # its camera runs, but its frames come late (a loaded host)
+                        self.log.warning(
+                            "%s: its last sighting is %.1f s old (the camera's frames are "
+                            "late): poses from odometry until a fresh one",
+                            agent.id,
+                            age,
+                        )
                 elif self._pose_from.get(agent.id) == "not seen":
                     self.log.info("%s is seen by the camera again", agent.id)
                 self._pose_from[agent.id] = source

