@@ -203,7 +203,8 @@ def build(force: bool = False, quiet: bool = False) -> Path:
             return target
         cached = cache_dir() / target.name
         if cached.exists() and not force:
-            _copy_in(cached, target)
+            _copy_then_rename(cached, target)
+            _drop_others(target)
             say(f"aot: {target.name} from the cache ({cached.parent})")
             return target
         t0 = time.perf_counter()
@@ -219,9 +220,7 @@ def build(force: bool = False, quiet: bool = False) -> Path:
             cc.compile()
             (built,) = Path(tmp).glob(name + "*")
             built.replace(target)
-        for old in aot.HERE.glob(aot.PREFIX + "*"):
-            if old != target:
-                old.unlink(missing_ok=True)
+        _drop_others(target)
         say(f"aot: built {target.name} in {time.perf_counter() - t0:.0f} s")
         _keep(target)
         return target
@@ -234,11 +233,16 @@ def cache_dir() -> Path:
     return base / f"numba{numba.__version__}-numpy{numpy.__version__}"
 
 
-def _copy_in(source: Path, target: Path) -> None:
-    """Copy to a temporary name, then rename: an engine never imports half a file."""
+def _copy_then_rename(source: Path, target: Path) -> None:
+    """Copy to a temporary name beside ``target``, then rename: no reader (an engine, a
+    build in another checkout) ever finds half a file."""
     partial = target.with_name(f".{target.name}.{os.getpid()}")
     shutil.copyfile(source, partial)
     partial.replace(target)
+
+
+def _drop_others(target: Path) -> None:
+    """Remove the modules of other sources from this directory: only ``target`` loads."""
     for old in aot.HERE.glob(aot.PREFIX + "*"):
         if old != target:
             old.unlink(missing_ok=True)
@@ -250,9 +254,7 @@ def _keep(built: Path, most: int = 4) -> None:
     try:
         where = cache_dir()
         where.mkdir(parents=True, exist_ok=True)
-        partial = where / f".{built.name}.{os.getpid()}"
-        shutil.copyfile(built, partial)
-        partial.replace(where / built.name)
+        _copy_then_rename(built, where / built.name)
         kept = sorted(where.glob(aot.PREFIX + "*"), key=lambda p: p.stat().st_mtime)
         for old in kept[:-most]:
             old.unlink(missing_ok=True)
