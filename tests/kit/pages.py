@@ -89,10 +89,10 @@ FRAME_CAP_SCRIPT = """(() => {
 # The test pages skip WebGL's draw calls unless asked to draw: SwiftShader's drawing, in
 # Chromium's GPU process, was a quarter of Chromium's CPU in the suite (161 of 602 s in a
 # CI run; a joined page held 15 s: 8.1 s of CPU drawing, 5.2 s not, by
-# bench.page_load_cost). The page itself runs as it does for a student (messages, scene graph, React, raycast clicks);
-# only the pixels are not made. A screenshot draws first (ViserPage.screenshot), and a
-# test that reads pixels turns drawing on for its page (ViserPage.draw). WART_TEST_DRAWS=1
-# draws always, for watching a run.
+# bench.page_load_cost). The page itself runs as it does for a student (messages, scene
+# graph, React, raycast clicks); only the pixels are not made. A screenshot draws first
+# (ViserPage.screenshot), and a test that reads pixels turns drawing on for its page
+# (ViserPage.draw). WART_TEST_DRAWS=1 draws always, for watching a run.
 DRAWS = os.environ.get("WART_TEST_DRAWS", "") == "1"
 DRAW_SWITCH_SCRIPT = """(() => {
   let drawn = 0;
