@@ -252,10 +252,12 @@ def test_a_student_on_a_queues_and_drives_robots_on_b_and_c(lab: MultiLab) -> No
     assert seen["arena1_deploy"] == "finished", seen
     assert seen["real1_deploy"] == "finished", seen
     assert seen["real1_remote"] == "finished", seen
-    # Braitenberg cruises at about 80 mm/s: a 3 s slot covers well over 50 mm.
-    assert seen["arena1_deploy_mm"] > 50, seen
-    assert seen["real1_deploy_mm"] > 50, seen
-    assert seen["real1_remote_mm"] > 50, seen
+    # Braitenberg cruises at about 80 mm/s: a 3 s slot covers well over 50 mm on a quiet
+    # machine. A busy one starts the sandbox late in the slot (38 mm in a CI run), so the
+    # bound is motion against the forged commands' none below (under 10 mm).
+    assert seen["arena1_deploy_mm"] > 20, seen
+    assert seen["real1_deploy_mm"] > 20, seen
+    assert seen["real1_remote_mm"] > 20, seen
     # Then the same student, logged in but holding no lease, sends well-formed
     # sealed commands for 1.5 s at a speed that would cover over 200 mm: neither
     # the engine nor the bridge obeys them.
