@@ -113,9 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     pages.CHROMIUM_ARGS.extend(args.chromium_arg)
     if args.draws:
-        pages.DRAW_SWITCH_SCRIPT = pages.DRAW_SWITCH_SCRIPT.replace(
-            "window.__wartDraws = false", "window.__wartDraws = true"
-        )
+        pages.DRAW_SWITCH_SCRIPT = pages.draw_switch_script(True)
     lab = DemoLab("Test lab", robots=12)
     viewer = WebViewer(
         DemoConnector(("lab", lab)), port=free_port(), data_dir=Path(tempfile.mkdtemp())

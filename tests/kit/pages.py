@@ -94,7 +94,7 @@ FRAME_CAP_SCRIPT = """(() => {
 # (ViserPage.screenshot), and a test that reads pixels turns drawing on for its page
 # (ViserPage.draw). WART_TEST_DRAWS=1 draws always, for watching a run.
 DRAWS = os.environ.get("WART_TEST_DRAWS", "") == "1"
-DRAW_SWITCH_SCRIPT = """(() => {
+_DRAW_SWITCH = """(() => {
   let drawn = 0;
   window.__wartDraws = DRAWS;
   Object.defineProperty(window, "__wartDrawn", { get: () => drawn });
@@ -111,7 +111,15 @@ DRAW_SWITCH_SCRIPT = """(() => {
       };
     }
   }
-})()""".replace("DRAWS", "true" if DRAWS else "false")
+})()"""
+
+
+def draw_switch_script(draws: bool) -> str:
+    """The init script that skips WebGL's draw calls (``draws`` False) until a page asks."""
+    return _DRAW_SWITCH.replace("DRAWS", "true" if draws else "false")
+
+
+DRAW_SWITCH_SCRIPT = draw_switch_script(DRAWS)
 
 
 def page_url(url: str) -> str:
