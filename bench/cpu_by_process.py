@@ -23,6 +23,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 _CHROMIUM_TYPE = re.compile(r"--type=(\S+)")
@@ -58,6 +59,8 @@ def kind_of(pid: int) -> str | None:
         if "-m" in rest:
             at = rest.index("-m")
             words = rest[at + 1 : at + 3]
+            if words[:1] == ["tests.kit.forkserver"]:
+                return _forked_kind(pid)
             if words[:1] == ["pytest"]:
                 words = words[:1]
             return "python -m " + " ".join(words)
@@ -69,6 +72,19 @@ def kind_of(pid: int) -> str | None:
         scripts = [a for a in rest if not a.startswith("-")]
         return "python " + (os.path.basename(scripts[0]) if scripts else "")
     return program
+
+
+FORKSERVER = "python -m tests.kit.forkserver"
+
+
+def _forked_kind(pid: int) -> str:
+    """A test forkserver's child names itself (its comm, "wart engine"): that, not the server's."""
+    try:
+        comm = Path(f"/proc/{pid}/comm").read_text().strip()
+    except OSError:
+        comm = ""
+    words = comm.split()[:2]  # "wart engine --m": the command, not its cut arguments
+    return "forked " + " ".join(words) if words[:1] == ["wart"] else FORKSERVER
 
 
 class Sampler:
@@ -116,6 +132,8 @@ class Sampler:
                     self._seen[pid] = (kind, ticks)
                 continue
             kind, last = seen
+            if kind == FORKSERVER:  # a child just forked may have named itself since
+                kind = kind_of(pid) or kind
             self.by_kind[kind] += ticks - last
             self._seen[pid] = (kind, ticks)
 

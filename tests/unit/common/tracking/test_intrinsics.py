@@ -22,6 +22,10 @@ from services.camera.calibrate import intrinsics_main
 from services.camera.main import main
 from tests.kit.overhead_camera import BoardCamera, Effects, Lens
 
+# Rendering the module's 50 board views costs seconds of CPU: its tests share one
+# worker (xdist group), which renders them once.
+pytestmark = pytest.mark.xdist_group("tracking-intrinsics")
+
 LENS = Lens()  # 1280x720, barrel distortion
 
 

@@ -13,6 +13,10 @@ from common.tracking.markers import MarkerLayout, default_layout
 from common.tracking.tracker import Tracker
 from tests.kit.overhead_camera import Effects, Hand, Lens, Mount, OverheadCamera, Robot
 
+# Making the module's camera costs seconds of CPU: its tests share one
+# worker (xdist group), which makes it once.
+pytestmark = pytest.mark.xdist_group("tracking-moving_robot")
+
 FPS = 15.0
 LENS = Lens()
 

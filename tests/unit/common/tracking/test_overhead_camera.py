@@ -10,6 +10,10 @@ import pytest
 from common.tracking.markers import MarkerLayout, corners_mm, default_layout, dictionary
 from tests.kit.overhead_camera import Lens, Mount, OverheadCamera, Robot
 
+# Making the module's camera costs seconds of CPU: its tests share one
+# worker (xdist group), which makes it once.
+pytestmark = pytest.mark.xdist_group("tracking-overhead_camera")
+
 
 @pytest.fixture(scope="module")
 def layout() -> MarkerLayout:
