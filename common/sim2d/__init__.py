@@ -17,10 +17,10 @@ robot behind the serial protocol. Both import only this package.
 - kernels.py, chipmunk.py: the compiled per-tick kernels (numba), gathered
   from one module per job (packs.py, physics.py, noise.py, rays.py,
   sense_pass.py; discs.py and contacts.py for the discs drive; jitcache.py
-  keeps their on-disk cache true), and the chipmunk functions they call
-  (chipmunk_calls.py); compiled.py, what the World calls: the same kernels
-  compiled ahead of time where built (aot.py, aot_build.py: no numba in the
-  process), numba's otherwise;
+  keeps their on-disk cache true, and shared by the machine's checkouts), and
+  the chipmunk functions they call (chipmunk_calls.py); compiled.py, what the
+  World calls: the same kernels compiled ahead of time where built (aot.py,
+  aot_build.py: no numba in the process), numba's otherwise;
 - specs.py, agents/: robot types as frozen specs (Khepera, e-puck);
 - entities.py, geometry.py, collision.py: the things of a world and their shapes;
 - maps.py: the map file format (load, save); wander.py: a built-in wander rule.

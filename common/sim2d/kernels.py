@@ -11,8 +11,8 @@ sensor noise is drawn in the kernel from a per-pass key (same laws, other
 numbers than numpy's draws), the ambient cone needs no trigonometry and
 shortcuts skip work that cannot change a reading (docs/BENCHMARKS.md, "A
 sensing pass at 10,000 robots"). Kernels are cached on disk (``cache=True``, in
-``__pycache__`` or ``NUMBA_CACHE_DIR``): the first start of a fresh checkout
-compiles them (a few seconds), later starts load them. :func:`warm_up` does
+``~/.cache/wart/numba`` for every checkout of the same sources: jitcache.py): the
+first start after their sources change compiles them, later starts load them. :func:`warm_up` does
 that explicitly and returns the time it took, so the engine can report it.
 The World calls them through common/sim2d/compiled.py, which runs the same
 kernels compiled ahead of time where that module is built (aot.py): then

@@ -7,6 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
+from common.sim2d import jitcache  # noqa: F401 (where numba caches the kernels below)
 from common.sim2d.packs import _CACHE
 
 # --- Gaussian noise, counter-based -----------------------------------------------------

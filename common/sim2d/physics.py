@@ -8,6 +8,7 @@ import numpy as np
 from numba import njit
 
 from common.sim2d import chipmunk as C
+from common.sim2d import jitcache  # noqa: F401 (where numba caches the kernels below)
 from common.sim2d.chipmunk_calls import get_double, get_vect, set_double, set_vect
 from common.sim2d.packs import _CACHE
 

@@ -33,6 +33,7 @@ import math
 from numba import njit
 
 # The arrays' builders, in plain numpy (re-exported: the kernels' callers and tests use pucks.X).
+from common.sim2d import jitcache  # noqa: F401 (where numba caches the kernels below)
 from common.sim2d.packs import _UNCOUNTED
 from common.sim2d.pucks_tables import FLOOR_G_MM_S2 as FLOOR_G_MM_S2
 from common.sim2d.pucks_tables import objects_table as objects_table
