@@ -39,7 +39,7 @@ from common.messages import (
     encode,
 )
 from common.messages.camera import MAX_FRAME_BYTES
-from common.service import Service
+from common.service import Service, has_subscribers
 from common.tracking.calibration import (
     ArenaCalibration,
     CalibrationError,
@@ -242,11 +242,14 @@ class CameraService(Service):
                     )
                 ),
             )
-            floor = self._floor_view(frame)
+            # The videos are encoded only while someone watches them (a page, a slot's
+            # recording): tracking needs none of it (docs/BENCHMARKS.md, the camera).
+            floor = self._floor_view(frame) if has_subscribers(self._floor_pub) else None
             if floor is not None:
                 self._put_frame(self._floor_pub, floor, captured_at)
-        shown = _fit(frame, self.options.max_width, self.options.max_height)
-        self._put_frame(self._image_pub, shown, captured_at)
+        if has_subscribers(self._image_pub):
+            shown = _fit(frame, self.options.max_width, self.options.max_height)
+            self._put_frame(self._image_pub, shown, captured_at)
         self._publish_status()
 
     def _put_frame(self, publisher: zenoh.Publisher, image: np.ndarray, captured_at: float) -> None:

@@ -8,10 +8,15 @@ calibrated (what a replay lays under its world view), else the frame as seen;
 every tracked pose goes in, stamped with the frame's capture time, so the
 video, the tracked poses and the robot's own telemetry replay on one clock. A
 simulated world has no camera: nothing is subscribed to there that ever speaks.
+
+The cameras' videos are subscribed to only while a slot is recorded: a camera
+encodes its videos only while someone watches (services/camera/service.py).
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -35,13 +40,26 @@ class CameraTap:
         self.recorder = recorder
         self._last_image: dict[str, float] = {}  # key -> when the last kept frame came
         self._floor_at: dict[str, float] = {}  # camera key -> its last floor view
+        self._videos: Any = None  # the cameras' subscriber, while a slot is recorded
+        self._videos_lock = threading.Lock()
 
     def subscriptions(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
-        r, w = self.recorder.realm, self.recorder.world
-        return [
-            (keys.camera_all(r, w), self._on_camera),
-            (keys.world_tracked(r, w), self._on_tracked),
-        ]
+        """What the recorder subscribes to for its whole life (the videos: :meth:`watch`)."""
+        return [(keys.world_tracked(self.recorder.realm, self.recorder.world), self._on_tracked)]
+
+    def watch(self, wanted: bool = True) -> None:
+        """Subscribe to the cameras' videos while a slot is recorded (and ``wanted``), else not.
+
+        Called after each change to the recorder's runs: the last call sees them all."""
+        with self._videos_lock:
+            recording = wanted and self.recorder._any()
+            if recording and self._videos is None:
+                key = keys.camera_all(self.recorder.realm, self.recorder.world)
+                self._videos = self.recorder.session.declare_subscriber(key, self._on_camera)
+            elif not recording and self._videos is not None:
+                with contextlib.suppress(zenoh.ZError):  # the session closing first
+                    self._videos.undeclare()
+                self._videos = None
 
     def handlers(self) -> dict[str, Callable[..., None]]:
         return {"camera": self._image, "tracked": self._tracked}

@@ -147,6 +147,7 @@ class SlotRecorder:
             except Exception as exc:  # the session closing first
                 self.log.debug("recorder undeclare: %s", exc)
         self._subs.clear()
+        self.camera.watch(False)
         self._halt.set()
         if self._thread is not None:
             self._thread.join(timeout)
@@ -158,6 +159,7 @@ class SlotRecorder:
             return
         with self._lock:
             self._agents[run.job.agent] = run.job.request_id
+        self.camera.watch()
         self._put(("start", run, driver))
 
     def run_ended(self, request_id: str, status: str, reason: str) -> None:
@@ -310,6 +312,7 @@ class SlotRecorder:
             self.log.error("cannot record %s: %s", job.request_id, exc)
             with self._lock:
                 self._agents.pop(job.agent, None)
+            self.camera.watch()
             return
         if uploaded:
             writer.attach_source(job.filename, job.source, run.start)
@@ -347,6 +350,7 @@ class SlotRecorder:
             with self._lock:
                 if self._agents.get(rec.run.job.agent) == request_id:
                     del self._agents[rec.run.job.agent]
+            self.camera.watch()
             self._finish(rec)
 
     def _finish(self, rec: _Run) -> None:

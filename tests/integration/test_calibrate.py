@@ -179,7 +179,11 @@ def test_the_dance_on_the_real_arena_gives_the_robots_twin(
     # The simulated copy (the twin's robot file in Sim2D, as the dry run builds it) follows
     # the real robot far more closely than the datasheet's Khepera.
     kept_twin = parse_twin((tmp_path / "k1.json").read_text())
-    real = run_data(read_recording(run), "dance")
+    recorded = read_recording(run)
+    # The camera's video is in the slot's recording (the context subscribes to the
+    # cameras while it records a slot, and a camera encodes its video only while watched).
+    assert len(recorded.images) >= 3, [i.t for i in recorded.images]
+    real = run_data(recorded, "dance")
     by_datasheet, by_copy = sim2d_error(real, None), sim2d_error(real, kept_twin)
     assert by_copy < by_datasheet / 3, (by_copy, by_datasheet)
     # The gap in the report of the real run: the datasheet's and the twin's side by side.

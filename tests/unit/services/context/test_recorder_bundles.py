@@ -119,6 +119,9 @@ def test_a_run_records_the_snapshot_the_slot_engine_handed_over(tmp_path) -> Non
         def get(self, *_a: Any, **_k: Any) -> list[Any]:
             raise AssertionError("the recorder asked the world for its snapshot")
 
+        def declare_subscriber(self, *_a: Any, **_k: Any) -> Any:  # the cameras' videos
+            return type("Subscriber", (), {"undeclare": lambda self: None})()
+
     recorder = SlotRecorder(
         NoWorld(),  # type: ignore[arg-type]
         REALM,
