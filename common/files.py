@@ -26,17 +26,23 @@ def fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Replace ``path`` with ``data``: written to a temporary file, synced, renamed, synced."""
+def write_atomic(path: Path, data: bytes, *, durable: bool = True) -> None:
+    """Replace ``path`` with ``data``: written to a temporary file, synced, renamed, synced.
+
+    ``durable=False`` skips both syncs, for a file rewritten many times a second
+    whose readers need it whole, never that it outlives a crash.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     # a name of its own per writer: two threads saving at once must not share a temp file
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     with open(tmp, "wb") as out:
         out.write(data)
-        out.flush()
-        os.fsync(out.fileno())
+        if durable:
+            out.flush()
+            os.fsync(out.fileno())
     os.replace(tmp, path)
-    fsync_dir(path.parent)
+    if durable:
+        fsync_dir(path.parent)
 
 
 class Journal:

@@ -46,7 +46,10 @@ class ArenaTruth:
 
 
 def write_truth(path: Path, truth: ArenaTruth) -> None:
-    write_atomic(path, json.dumps(truth.to_json()).encode())
+    # Rewritten every tick of the emulator (a live feed, not a record): whole for its
+    # readers, never synced to disk (worthless after a crash; two syncs a tick load the
+    # disk for nothing: 0.6 ms a write against 0.25 here).
+    write_atomic(path, json.dumps(truth.to_json()).encode(), durable=False)
 
 
 def read_truth(path: Path) -> ArenaTruth:

@@ -37,3 +37,18 @@ def test_a_journal_gives_back_every_whole_record_and_skips_a_torn_tail(tmp_path:
     assert list(journal.records()) == [b"base"]
     assert not list(Journal(tmp_path / "none").records())
     assert os.path.getsize(journal.path) == 8
+
+
+def test_a_live_file_is_replaced_whole_without_syncing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "truth.json"
+    write_atomic(path, b"old poses")
+
+    def no_sync(fd: int) -> None:
+        raise AssertionError("a live file is never synced")
+
+    monkeypatch.setattr(files.os, "fsync", no_sync)
+    write_atomic(path, b"new poses", durable=False)
+    assert path.read_bytes() == b"new poses"
+    assert [p.name for p in tmp_path.iterdir()] == ["truth.json"], "no temporary file left"
