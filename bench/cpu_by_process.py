@@ -2,8 +2,9 @@
 
 Runs COMMAND, reads every process's CPU time from /proc once a second while it
 runs, and prints the CPU seconds of each kind of process (Chromium's renderer,
-an xdist worker, a forkserver, `wart engine`, ...) beside the machine's busy
-seconds from /proc/stat. What a test suite's own accounting cannot see: the
+an xdist worker, `python -m services.cli engine`, and a test forkserver's child
+by the command it names itself: `forked wart engine`, ...) beside the machine's
+busy seconds from /proc/stat. What a test suite's own accounting cannot see: the
 CPU of processes it did not reap (a browser, the services a forkserver made).
 
     .venv/bin/python -m bench.cpu_by_process -- ./dev test -q
