@@ -15,8 +15,6 @@ encodes its videos only while someone watches (services/camera/service.py).
 
 from __future__ import annotations
 
-import contextlib
-import threading
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -40,26 +38,14 @@ class CameraTap:
         self.recorder = recorder
         self._last_image: dict[str, float] = {}  # key -> when the last kept frame came
         self._floor_at: dict[str, float] = {}  # camera key -> its last floor view
-        self._videos: Any = None  # the cameras' subscriber, while a slot is recorded
-        self._videos_lock = threading.Lock()
 
     def subscriptions(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
-        """What the recorder subscribes to for its whole life (the videos: :meth:`watch`)."""
+        """What the recorder subscribes to for its whole life."""
         return [(keys.world_tracked(self.recorder.realm, self.recorder.world), self._on_tracked)]
 
-    def watch(self, wanted: bool = True) -> None:
-        """Subscribe to the cameras' videos while a slot is recorded (and ``wanted``), else not.
-
-        Called after each change to the recorder's runs: the last call sees them all."""
-        with self._videos_lock:
-            recording = wanted and self.recorder._any()
-            if recording and self._videos is None:
-                key = keys.camera_all(self.recorder.realm, self.recorder.world)
-                self._videos = self.recorder.session.declare_subscriber(key, self._on_camera)
-            elif not recording and self._videos is not None:
-                with contextlib.suppress(zenoh.ZError):  # the session closing first
-                    self._videos.undeclare()
-                self._videos = None
+    def while_recording(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
+        """What it subscribes to only while a slot is recorded: the cameras' videos."""
+        return [(keys.camera_all(self.recorder.realm, self.recorder.world), self._on_camera)]
 
     def handlers(self) -> dict[str, Callable[..., None]]:
         return {"camera": self._image, "tracked": self._tracked}

@@ -7,7 +7,9 @@ the world publish anyway), ``world/<w>/agent/*/cmd`` and ``world/<w>/cmds``
 (the commands, checked as the world checks them: the lease holder's, MACed
 with the run's lease key or signed by the holder's session, sent within the
 slot; a refused command is counted, not recorded). The context hands it the
-output lines, its events and the chat.
+output lines, its events and the chat. A real arena's camera videos are
+subscribed to only while a slot is recorded: a camera encodes no video that no
+one watches.
 
 Zenoh callbacks only look whether a run of that robot is being recorded and
 queue the payload; one thread decodes, checks and writes (common/recording/),
@@ -22,6 +24,7 @@ limit are removed.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import queue
@@ -110,6 +113,8 @@ class SlotRecorder:
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
         self._subs: list[Any] = []
+        self._recording_subs: list[Any] = []  # declared while a slot is recorded (_watch)
+        self._watch_lock = threading.Lock()
         self._snapshot: WorldSnapshot | None = None
         self._snapshot_tried = 0.0
         self.dropped = 0
@@ -147,8 +152,8 @@ class SlotRecorder:
             except Exception as exc:  # the session closing first
                 self.log.debug("recorder undeclare: %s", exc)
         self._subs.clear()
-        self.camera.watch(False)
         self._halt.set()
+        self._watch()
         if self._thread is not None:
             self._thread.join(timeout)
 
@@ -159,7 +164,7 @@ class SlotRecorder:
             return
         with self._lock:
             self._agents[run.job.agent] = run.job.request_id
-        self.camera.watch()
+        self._watch()
         self._put(("start", run, driver))
 
     def run_ended(self, request_id: str, status: str, reason: str) -> None:
@@ -189,6 +194,22 @@ class SlotRecorder:
     def chat(self, line: ChatLine | None, status: MemberStatus | None) -> None:
         if self.store is not None and (line is not None or status is not None):
             self._put(("chat", line, status, time.time()))
+
+    def _watch(self) -> None:
+        """Subscribe to the cameras' videos while a slot is recorded, and not otherwise: a
+        camera encodes its videos only while watched. (The world's frames are heard always:
+        the context's slot scheduler subscribes to them anyway.) Called after each change
+        to the runs: the last call sees them all."""
+        with self._watch_lock:
+            recording = self._any() and not self._halt.is_set()
+            if recording and not self._recording_subs:
+                for key, handler in self.camera.while_recording():
+                    self._recording_subs.append(self.session.declare_subscriber(key, handler))
+            elif not recording and self._recording_subs:
+                for sub in self._recording_subs:
+                    with contextlib.suppress(zenoh.ZError):  # the session closing first
+                        sub.undeclare()
+                self._recording_subs.clear()
 
     # -- Zenoh callbacks: a look and a queue put, nothing more
 
@@ -312,7 +333,7 @@ class SlotRecorder:
             self.log.error("cannot record %s: %s", job.request_id, exc)
             with self._lock:
                 self._agents.pop(job.agent, None)
-            self.camera.watch()
+            self._watch()
             return
         if uploaded:
             writer.attach_source(job.filename, job.source, run.start)
@@ -350,7 +371,7 @@ class SlotRecorder:
             with self._lock:
                 if self._agents.get(rec.run.job.agent) == request_id:
                     del self._agents[rec.run.job.agent]
-            self.camera.watch()
+            self._watch()
             self._finish(rec)
 
     def _finish(self, rec: _Run) -> None:

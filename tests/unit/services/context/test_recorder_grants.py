@@ -10,6 +10,7 @@ check sees it).
 from __future__ import annotations
 
 import logging
+import time
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,7 @@ import zenoh
 
 from common import keys
 from common.recording.store import RecordingStore
+from services.context.agent_queue import ControlJob, RunningJob
 from services.context.recorder import SlotRecorder
 from services.lab.zsecurity import ROLE_GRANTS
 
@@ -27,12 +29,14 @@ class _Declarations:
     def __init__(self) -> None:
         self.subscribed: list[str] = []
 
+        self.undeclared = 0
+
     def declare_subscriber(self, key: str, handler: Any, **_: Any) -> Any:
         self.subscribed.append(key)
         return self
 
     def undeclare(self) -> None:
-        pass
+        self.undeclared += 1
 
 
 def _granted(role: str, verb: str, key: str) -> bool:
@@ -59,8 +63,17 @@ def test_the_agent_role_may_subscribe_to_every_key_its_recorder_records(tmp_path
     )
     recorder.start()
     try:
-        assert len(session.subscribed) >= 5  # frames, samples, commands, bundles, cameras
+        always = len(session.subscribed)
+        # The cameras' videos only while a slot is recorded.
+        job = ControlJob("r1", "k0", "alice", b"\x01" * 16, "remote")
+        recorder.run_started(
+            RunningJob(job, "L1", b"\x01" * 16, time.time(), time.time() + 60), "alice"
+        )
+        assert len(session.subscribed) == always + 1
+        assert keys.camera_all("lab", "arena1") == session.subscribed[-1]
+        assert len(session.subscribed) >= 6  # frames, samples, commands, bundles, cameras, poses
         denied = [key for key in session.subscribed if not _granted("agent", "sub", key)]
         assert not denied, f"the agent role may not subscribe to: {denied}"
     finally:
         recorder.close(timeout=2.0)
+    assert session.undeclared == len(session.subscribed), "every subscription undeclared"
