@@ -17,7 +17,28 @@ from common.sim2d import discs_split, kernels, sensing
 from common.sim2d.entities import ShapeSpec
 from tests.kit.worlds import build, control, tick_digest
 
-pytestmark = pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
+pytestmark = [
+    pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here"),
+    # The hang guard times each test alone, not _compiled (numba's first compile of the
+    # split drive took over 120 s on a fresh cache beside a CI run).
+    pytest.mark.timeout(func_only=True),
+]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _compiled() -> None:
+    """numba compiles the split drive and the sensing on threads at their first tick: a
+    minute or more of a core on a fresh cache (jitcache.py), longer on a busy machine.
+    One tick of each kind of world here compiles what the tests run, or loads it."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(discs_split, "SPLIT_MIN_DISCS", 1)
+        patch.setattr(sensing, "PARALLEL_MIN_AGENTS", 1)
+        for balls in (0.5, 0.0):
+            for threads, profile in ((1, False), (2, False), (2, True)):
+                world = build(4, seed=3, drive="discs", balls=balls, threads=threads)
+                world.profile = profile
+                control(world)
+                world.step()
 
 
 @pytest.fixture(autouse=True)
