@@ -24,7 +24,6 @@ limit are removed.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import logging
 import queue
@@ -69,6 +68,7 @@ from common.recording.writer import RecordingWriter, frame_record, pose_record, 
 from common.world.leasemac import MAC_BYTES, command_mac, item_mac, mac_matches
 from services.context.agent_queue import RunningJob
 from services.context.camera_tap import CameraTap
+from services.context.recorder_feeds import RecorderFeeds
 
 TRAIL_S = 1.5  # how long a file stays open after its slot: the stop and the last lines
 QUEUE_MAX = 20_000  # items waiting for the writer thread (~7 min of one robot at 50 Hz)
@@ -112,9 +112,7 @@ class SlotRecorder:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
-        self._subs: list[Any] = []
-        self._recording_subs: list[Any] = []  # declared while a slot is recorded (_watch)
-        self._watch_lock = threading.Lock()
+        self.feeds = RecorderFeeds(session, log)
         self._snapshot: WorldSnapshot | None = None
         self._snapshot_tried = 0.0
         self.dropped = 0
@@ -133,27 +131,22 @@ class SlotRecorder:
         for path in self.store.salvage_parts():
             self.log.warning("recording %s was cut short by a crash: kept as it is", path.name)
         w, r = self.world, self.realm
-        for key, handler in (
-            (keys.world_frame(r, w), self._on_frame),
-            (keys.world_samples(r, w), self._on_samples),
-            (keys.agent_cmd_all(r, w), self._on_cmd),
-            (keys.world_commands(r, w), self._on_bundle),
-            *self.camera.subscriptions(),
-        ):
-            self._subs.append(self.session.declare_subscriber(key, handler))
+        self.feeds.hear(
+            [
+                (keys.world_frame(r, w), self._on_frame),
+                (keys.world_samples(r, w), self._on_samples),
+                (keys.agent_cmd_all(r, w), self._on_cmd),
+                (keys.world_commands(r, w), self._on_bundle),
+                *self.camera.subscriptions(),
+            ]
+        )
         self._thread = threading.Thread(target=self._work, name="recorder", daemon=True)
         self._thread.start()
 
     def close(self, timeout: float) -> None:
         """Finish every open recording now (no trail) and stop the thread."""
-        for sub in self._subs:
-            try:
-                sub.undeclare()
-            except Exception as exc:  # the session closing first
-                self.log.debug("recorder undeclare: %s", exc)
-        self._subs.clear()
         self._halt.set()
-        self._watch()
+        self.feeds.close()
         if self._thread is not None:
             self._thread.join(timeout)
 
@@ -196,20 +189,10 @@ class SlotRecorder:
             self._put(("chat", line, status, time.time()))
 
     def _watch(self) -> None:
-        """Subscribe to the cameras' videos while a slot is recorded, and not otherwise: a
-        camera encodes its videos only while watched. (The world's frames are heard always:
-        the context's slot scheduler subscribes to them anyway.) Called after each change
-        to the runs: the last call sees them all."""
-        with self._watch_lock:
-            recording = self._any() and not self._halt.is_set()
-            if recording and not self._recording_subs:
-                for key, handler in self.camera.while_recording():
-                    self._recording_subs.append(self.session.declare_subscriber(key, handler))
-            elif not recording and self._recording_subs:
-                for sub in self._recording_subs:
-                    with contextlib.suppress(zenoh.ZError):  # the session closing first
-                        sub.undeclare()
-                self._recording_subs.clear()
+        """The cameras' videos heard while a slot is recorded (after each change to the runs)."""
+        self.feeds.hear_while(
+            lambda: self._any() and not self._halt.is_set(), self.camera.while_recording
+        )
 
     # -- Zenoh callbacks: a look and a queue put, nothing more
 
