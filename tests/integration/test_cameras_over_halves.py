@@ -241,10 +241,10 @@ def start_lab(
 LATE = "the camera's frames are late"
 
 
-def crossing(follow: Follow, body: SimBody, bridge: Proc, to_x: float) -> None:
+def crossing(follow: Follow, body: SimBody, bridge: Proc, to_x: float) -> bool:
     """Drive at 160 mm/s from where the robot stands to ``to_x``; the world's pose all the
     way within a few mm of the true path (while the cameras' sightings come in time), and
-    never going back."""
+    never going back. True if the bridge said the cameras' frames came late meanwhile."""
     late_before = bridge.output().count(LATE)
     started = time.monotonic()
     body.set_speeds(20, 20)
@@ -265,12 +265,14 @@ def crossing(follow: Follow, body: SimBody, bridge: Proc, to_x: float) -> None:
     # The worst pose within 15 mm, unless the bridge said the cameras fell behind: a
     # CPU-starved host's cameras sent sightings 0.5 to 1 s late, and the bridge showed
     # the slipping wheels' odometry meanwhile (69 mm off at worst, in a CI run) and said so.
-    if bridge.output().count(LATE) == late_before:
+    starved = bridge.output().count(LATE) > late_before
+    if not starved:
         assert worst < 15.0, (median, p90, worst, late, crossing)
     # Driving forward, it is never shown going back further than the cameras' noise and
     # the slipping wheels' overshoot between two frames (a late frame or odometry reading
     # paired with the other's wrong time stepped it back 13 to 58 mm).
     assert back < STEP_BACK_MM, (back, follow.shown)
+    return starved
 
 
 def test_two_cameras_over_the_halves_hand_the_robot_over_at_the_seam(
@@ -335,7 +337,7 @@ def test_three_cameras_over_the_thirds_hand_the_robot_on_twice(
         router, procs, zsession, alive_watch, emulator, body, thirds, "4x2", width
     )
     said_before = bridge.output().count(" is not seen")
-    crossing(follow, body, bridge, 2500.0)
+    starved = crossing(follow, body, bridge, 2500.0)
     seen = {part: follow.sightings[f"{WORLD}-{part}"] for part in thirds}
     assert max(seen["a"]) > 1150 and min(seen["b"]) < 850  # the first seam, seen by both
     # ... and the second: each camera sees past its own rectangle (b's ends at 2050, c's
@@ -344,4 +346,7 @@ def test_three_cameras_over_the_thirds_hand_the_robot_on_twice(
     assert max(seen["b"]) > 2100 and min(seen["c"]) < 1850
     assert max(seen["a"]) < 1400 and max(seen["b"]) < 2350 < body.pose()[0]
     assert pose_from(zsession, router.realm) == "tracked"
-    assert bridge.output().count(" is not seen") == said_before, bridge.output()
+    # Never "not seen" on the way, unless the cameras were starved: frames 0.5 s late,
+    # then none for a second, and the bridge said both, truly (a CI run beside a full suite).
+    if not starved:
+        assert bridge.output().count(" is not seen") == said_before, bridge.output()
