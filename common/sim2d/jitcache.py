@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import logging
 import os
 import shutil
 import sys
@@ -27,13 +28,15 @@ from numba.core.caching import NullCache, UserProvidedCacheLocator
 from numba.core.dispatcher import Dispatcher
 
 HERE = Path(__file__).resolve().parent
+log = logging.getLogger("wart.kernels")
+_WARNED: list[bool] = []  # the relative WART_NUMBA_CACHE said once a process
 KEPT = 4  # folders kept per source file: the newest, by when they were last used
 
 
 def shared_root() -> Path:
     """Where the kernels' caches are kept for every checkout (WART_NUMBA_CACHE, else ~/.cache)."""
     given = os.environ.get("WART_NUMBA_CACHE")
-    base = Path(given) if given else Path.home() / ".cache" / "wart" / "numba"
+    base = Path(given).expanduser() if given else Path.home() / ".cache" / "wart" / "numba"
     python = f"py{sys.version_info.major}{sys.version_info.minor}"
     return base / f"numba{numba.__version__}-{python}"
 
@@ -54,8 +57,15 @@ class SharedCacheLocator(UserProvidedCacheLocator):
     def from_function(cls, py_func: object, py_file: str) -> SharedCacheLocator | None:
         if getattr(config, "CACHE_DIR", "") or Path(py_file).resolve().parent != HERE:
             return None  # NUMBA_CACHE_DIR's (numba's own locator), or not a kernel of ours
-        if not shared_root().is_absolute():
-            return None  # no home directory (a sandbox): numba's next locator
+        if not shared_root().is_absolute():  # no home directory (a sandbox), or a relative path
+            if os.environ.get("WART_NUMBA_CACHE") and not _WARNED:
+                _WARNED.append(True)
+                log.warning(
+                    "WART_NUMBA_CACHE=%s is not an absolute path: ignored, numba caches the "
+                    "kernels beside their sources",
+                    os.environ["WART_NUMBA_CACHE"],
+                )
+            return None
         try:
             self = cls(py_func, py_file)
             self.ensure_cache_path()

@@ -75,3 +75,16 @@ def test_numba_cache_dir_where_set_wins(tmp_path: Path) -> None:
     assert out.returncode == 0, out.stderr
     assert str(tmp_path / "numbas") in out.stdout.splitlines()[1]
     assert not (tmp_path / "ours").exists()
+
+
+def test_a_relative_cache_path_is_said_and_ignored(tmp_path: Path) -> None:
+    root = checkout(tmp_path / "c")
+    env = {**os.environ, "PYTHONPATH": str(root), "WART_NUMBA_CACHE": "cache-here"}
+    env.pop("NUMBA_CACHE_DIR", None)
+    out = subprocess.run(
+        [sys.executable, "-c", RUN], cwd=root, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0, out.stderr
+    assert "WART_NUMBA_CACHE=cache-here is not an absolute path: ignored" in out.stderr
+    assert out.stderr.count("WART_NUMBA_CACHE") == 1, "said once"
+    assert not (root / "cache-here").exists()
