@@ -10,8 +10,11 @@ CPU of processes it did not reap (a browser, the services a forkserver made).
     .venv/bin/python -m bench.cpu_by_process -- ./dev test -q
     .venv/bin/python -m bench.cpu_by_process --top 40 -- .venv/bin/python -m pytest tests/browser
 
-A process is counted from its first sample on: one that lives less than a
-second is missed, and the machine's busy seconds say how much that was.
+A process started while COMMAND runs is counted from its start (its first
+second included: a service's imports, a renderer's first page); one that was
+already running, from the first sample. What a process spends after the last
+sample before it ends, and one that lives less than a sample, is missed: the
+machine's busy seconds say how much that was.
 """
 
 from __future__ import annotations
@@ -29,6 +32,12 @@ from pathlib import Path
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 _CHROMIUM_TYPE = re.compile(r"--type=(\S+)")
 _UTILITY = re.compile(r"--utility-sub-type=(\S+)")
+
+
+def uptime_ticks() -> int:
+    """Clock ticks since boot: the unit of a process's start time in /proc/<pid>/stat."""
+    with open("/proc/uptime") as uptime:
+        return int(float(uptime.read().split()[0]) * TICKS_PER_S)
 
 
 def machine_busy_ticks() -> int:
@@ -94,10 +103,11 @@ class Sampler:
     def __init__(self, period_s: float = 1.0) -> None:
         self.period_s = period_s
         self.by_kind: collections.Counter[str] = collections.Counter()
-        self._seen: dict[int, tuple[str, int]] = {}
+        self._seen: dict[int, tuple[str, int, int]] = {}  # pid: kind, ticks, start
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self.busy_start = machine_busy_ticks()
+        self.started_at = uptime_ticks()
         self.busy_ticks = 0
 
     def start(self) -> None:
@@ -124,19 +134,20 @@ class Sampler:
             except OSError:
                 continue
             ticks = int(fields[11]) + int(fields[12])  # utime, stime
+            started = int(fields[19])  # starttime, ticks since boot
             seen = self._seen.get(pid)
-            if seen is None:
+            if seen is None or seen[2] != started:  # new, or a new process on an old pid
                 kind = kind_of(pid)
-                if kind is not None:
-                    # Its CPU before this sample belongs to before the command (or is
-                    # a second's worth at most of a new process).
-                    self._seen[pid] = (kind, ticks)
-                continue
-            kind, last = seen
+                if kind is None:
+                    continue
+                # A process started since the sampler: all its CPU is the command's.
+                # One already running: only what it spends from now on.
+                seen = (kind, 0 if started >= self.started_at else ticks, started)
+            kind, last, _ = seen
             if kind == FORKSERVER:  # a child just forked may have named itself since
                 kind = kind_of(pid) or kind
             self.by_kind[kind] += ticks - last
-            self._seen[pid] = (kind, ticks)
+            self._seen[pid] = (kind, ticks, started)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,9 +26,50 @@ def test_a_busy_child_is_counted_under_its_kind() -> None:
         child.kill()
         sampler.stop()
     burned = sampler.by_kind["python -c import time while time.process"] / 100
-    # Counted from its first sample on: at most a sample's worth (0.1 s) before it is lost.
-    assert 0.6 <= burned <= 1.3, sampler.by_kind
+    # Counted from its start; what it spent after the last sample (0.1 s) is lost.
+    assert 0.85 <= burned <= 1.3, sampler.by_kind
     assert sampler.busy_ticks > 0
+
+
+# Burns one second, then lives on idle long enough to be sampled.
+BURN_THEN_IDLE = BURN + "time.sleep(3.0)\n"
+
+
+def test_a_process_started_after_the_sampler_is_counted_from_its_start() -> None:
+    # A sample every 2 s: the child's burst is over by the first sample that sees it,
+    # and it was all spent while the command ran (a service's imports, a page's load).
+    sampler = Sampler(period_s=2.0)
+    sampler.start()
+    child = subprocess.Popen([sys.executable, "-c", BURN_THEN_IDLE])
+    try:
+        assert child.wait(timeout=120) == 0
+    finally:
+        child.kill()
+        sampler.stop()
+    burned = sum(v for k, v in sampler.by_kind.items() if "time.process" in k) / 100
+    assert 0.9 <= burned <= 1.3, sampler.by_kind
+
+
+def test_a_process_running_before_the_sampler_is_counted_from_then() -> None:
+    child = subprocess.Popen([sys.executable, "-c", BURN_THEN_IDLE])
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # until its burst is (about) over
+            with open(f"/proc/{child.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            if int(fields[11]) + int(fields[12]) >= 95:
+                break
+            time.sleep(0.02)
+        else:
+            raise AssertionError("the child never burned its second")
+        sampler = Sampler(period_s=0.1)
+        sampler.start()
+        assert child.wait(timeout=120) == 0
+    finally:
+        child.kill()
+    sampler.stop()
+    burned = sum(v for k, v in sampler.by_kind.items() if "time.process" in k) / 100
+    assert burned <= 0.2, sampler.by_kind
 
 
 def test_a_process_gone_has_no_kind() -> None:
