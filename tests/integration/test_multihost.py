@@ -137,9 +137,15 @@ class MultiLab:
         raise AssertionError(f"probe {verb} failed:\n{text}\n{self.logs()}")
 
     def logs(self) -> str:
+        """Each host's log, then the last lines of its viewer's and chat room's own logs
+        (what a failed probe of the page or the chat needs to be read)."""
         out = []
         for path in sorted((self.tmp).glob("host-*.log")):
             out.append(f"--- {path.name}\n{path.read_text(errors='replace')[-3000:]}")
+        for path in sorted((self.tmp / "state").glob("*/**/*.log")):
+            if "viewer" in path.name or "lobby" in path.name:
+                tail = path.read_text(errors="replace").splitlines()[-30:]
+                out.append(f"--- {path.relative_to(self.tmp)}\n" + "\n".join(tail))
         return "\n".join(out)
 
 
