@@ -391,6 +391,14 @@ FLOWS: tuple[Flow, ...] = (
     ),
     # -- worlds (engines and bridges)
     _put(keys.world_frame, WORLDS, ("agent", "runner", *PEOPLE), m.WorldFrame, note="each tick"),
+    _put(
+        keys.world_layout,
+        WORLDS,
+        ("agent",),
+        m.WorldLayout,
+        urgency=Urgency.WORDS,
+        note="once per change of the world's rows",
+    ),
     _put(keys.world_sensors, WORLDS, PEOPLE, m.SensorBatch, note="each tick while subscribed"),
     _put(
         keys.world_samples,

@@ -275,6 +275,12 @@ def world_frame(realm: str, world: str) -> str:
     return f"{_world(realm, world)}/frame"
 
 
+def world_layout(realm: str, world: str) -> str:
+    """The world's layout number, put when its rows change (WorldLayout): a frame says it
+    each tick, but only to those who watch; this says it to those who do not."""
+    return f"{_world(realm, world)}/layout"
+
+
 def world_sensors(realm: str, world: str) -> str:
     """Every agent's sensor readings in one message per tick (SensorBatch)."""
     return f"{_world(realm, world)}/sensors"

@@ -84,6 +84,7 @@ from common.messages.world import (
     ShapeInfo,
     WorldEdit,
     WorldFrame,
+    WorldLayout,
     WorldSnapshot,
     WorldStop,
 )
@@ -141,6 +142,7 @@ __all__ = [
     "SignedToken",
     "WorldEdit",
     "WorldFrame",
+    "WorldLayout",
     "WorldSnapshot",
     "WorldStop",
     "all_message_types",

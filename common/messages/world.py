@@ -181,6 +181,15 @@ class WorldFrame(Message, frozen=True):
     lights: PackedArray  # uint8 (lights,): 1 lit
 
 
+class WorldLayout(Message, frozen=True):
+    """The world's rows changed (``world/<world>/layout``): a robot added, removed, or
+    come online or gone. Put once per change; fetch a new snapshot if ``layout`` differs
+    from the one held (the same number a frame carries)."""
+
+    world: Ident
+    layout: NonNegInt
+
+
 FINGERS_OPEN, FINGERS_CLOSED, FINGERS_HOLDING = 0, 1, 2
 
 

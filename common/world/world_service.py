@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import msgspec
 import zenoh
 
-from common import keys
+from common import keys, qos
 from common.auth import Verifier
 from common.keys import AliveKind
 from common.messages import (
@@ -25,6 +25,7 @@ from common.messages import (
     RobotTypeInfo,
     RobotTypeReply,
     SampleBundle,
+    WorldLayout,
     decode,
     encode,
 )
@@ -56,6 +57,7 @@ class WorldService(Service):
 
     kind = AliveKind.WORLD
     _frame_pub: Any
+    _layout_pub: Any
     _batch_pub: Any
     _samples_pub: Any
     _revocations: RevocationFeed | None = None
@@ -67,6 +69,11 @@ class WorldService(Service):
         """Declare the world's keys (call from on_start, before the service's own threads)."""
         realm, name = self.realm, self.ident
         self._frame_pub = self.track(self.session.declare_publisher(keys.world_frame(realm, name)))
+        self._layout_pub = self.track(
+            self.session.declare_publisher(
+                keys.world_layout(realm, name), **qos.of(keys.world_layout)
+            )
+        )
         self._batch_pub = self.track(
             self.session.declare_publisher(keys.world_sensors(realm, name))
         )
@@ -116,6 +123,11 @@ class WorldService(Service):
             self.log.warning("%s: every robot stopped, commands refused", self.leases.stopped)
         else:
             self.log.warning("emergency stop released by %s", stop.by)
+
+    def announce_layout(self, layout: int) -> None:
+        """Say the world's rows changed (robots added, removed, come online or gone): an
+        agent context that reads no frames refetches the snapshot on this."""
+        self._layout_pub.put(encode(WorldLayout(world=self.ident, layout=layout)))
 
     def publish_sample_bundle(self, tick: int, samples: dict[str, bytes]) -> None:
         """Put ``samples`` (agent -> its encoded SensorSample) as one SampleBundle."""

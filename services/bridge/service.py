@@ -4,9 +4,10 @@ Same keys and messages as the Sim2D engine (docs/ARCHITECTURE.md), so the
 agent context, the viewer and controllers cannot tell the two apart:
 
 Publishes ``world/<w>/frame`` (WorldFrame: every robot's pose) every
-``frame_interval``; ``agent/<a>/sensors`` (SensorSample) after every sensor
-round of that robot, and then ``world/<w>/samples`` (a SampleBundle of that
-one sample) if the robot is leased and someone subscribes;
+``frame_interval``, and ``world/<w>/layout`` (WorldLayout) when its rows
+change; ``agent/<a>/sensors`` (SensorSample) after every sensor round of
+that robot, and then ``world/<w>/samples`` (a SampleBundle of that one
+sample) if the robot is leased and someone subscribes;
 ``world/<w>/sensors`` (SensorBatch) while someone subscribes. Subscribes
 ``agent/*/cmd`` and ``world/<w>/cmds`` (AgentCommand, sealed or MACed, alone
 or in a CommandBundle, or a swarm's MacCommandBundle, from the current lease
@@ -154,6 +155,7 @@ class BridgeService(WorldService):
         self._agents: dict[str, _Agent] = {}  # insertion order = frame row order
         self._lock = threading.Lock()  # the agent table and layout
         self.layout = 0
+        self._announced_layout = 0  # the layout the last WorldLayout said (publish thread)
         self._frames = 0
         self._t0 = time.monotonic()
         self._halt = threading.Event()
@@ -467,6 +469,9 @@ class BridgeService(WorldService):
         states = [replace(s, pose=p) for s, p in zip(states, poses, strict=True)]
         self._frames += 1
         self._frame_pub.put(encode(self.frame(states, layout)))
+        if layout != self._announced_layout:
+            self._announced_layout = layout
+            self.announce_layout(layout)
         if agents and self._batch_pub.matching_status.matching:
             batch = self._batch(states, layout)
             if batch is not None:

@@ -238,13 +238,15 @@ class AgentContext(ChatRoom):
                 self.scheduler.on_world_presence,
             )
         )
-        frames = self.track(
+        # The world's layout news, not its frames: a world whose frames nobody reads
+        # (no page watching, no slot recorded) builds none.
+        self.track(
             self.session.declare_subscriber(
-                keys.world_frame(self.realm, self.world), zenoh.handlers.RingChannel(1)
+                keys.world_layout(self.realm, self.world), self.scheduler.on_world_layout
             )
         )
         self.recorder.start()
-        self.scheduler.start(frames)
+        self.scheduler.start()
 
     def on_stop(self, timeout: float) -> None:
         self.scheduler.stop(timeout)

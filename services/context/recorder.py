@@ -1,15 +1,14 @@
 """Every slot of an agent context, recorded: the robot, what it sensed, was commanded, printed.
 
 The recorder subscribes like any other client (the engine's tick never waits
-for it): ``world/<w>/frame`` (the poses of everything), ``world/<w>/samples``
-(the sensor samples of leased robots, which the runner's subscription makes
-the world publish anyway), ``world/<w>/agent/*/cmd`` and ``world/<w>/cmds``
-(the commands, checked as the world checks them: the lease holder's, MACed
-with the run's lease key or signed by the holder's session, sent within the
-slot; a refused command is counted, not recorded). The context hands it the
-output lines, its events and the chat. A real arena's camera videos are
-subscribed to only while a slot is recorded: a camera encodes no video that no
-one watches.
+for it): ``world/<w>/agent/*/cmd`` and ``world/<w>/cmds`` (the commands,
+checked as the world checks them: the lease holder's, MACed with the run's
+lease key or signed by the holder's session, sent within the slot; a refused
+command is counted, not recorded). While a slot is recorded (its trail
+included) also ``world/<w>/frame`` (the poses of everything),
+``world/<w>/samples`` (the sensor samples of leased robots) and a real arena's
+camera videos: a world builds no frame, and a camera encodes no video, that
+no one reads. The context hands it the output lines, its events and the chat.
 
 Zenoh callbacks only look whether a run of that robot is being recorded and
 queue the payload; one thread decodes, checks and writes (common/recording/),
@@ -37,21 +36,12 @@ import zenoh
 
 from common import keys
 from common.ask import ask
-from common.auth import AuthError, Verifier
+from common.auth import Verifier
 from common.lab_errors import LabError
 from common.messages import (
-    MAC_ITEM_BYTES,
-    MAC_ITEM_COUNTERS,
-    MAC_ITEM_SPEEDS,
-    MAC_ITEM_STRUCT,
-    AgentCommand,
     AgentContextState,
     AgentEvent,
-    AuthEnvelope,
     ChatLine,
-    CommandBundle,
-    MacCommand,
-    MacCommandBundle,
     MemberStatus,
     MessageError,
     SampleBundle,
@@ -65,9 +55,9 @@ from common.recording import schema as s
 from common.recording.reader import RecordingError
 from common.recording.store import RecordingStore
 from common.recording.writer import RecordingWriter, frame_record, pose_record, sample_record
-from common.world.leasemac import MAC_BYTES, command_mac, item_mac, mac_matches
 from services.context.agent_queue import RunningJob
 from services.context.camera_tap import CameraTap
+from services.context.command_tap import CommandTap
 from services.context.recorder_feeds import RecorderFeeds
 
 TRAIL_S = 1.5  # how long a file stays open after its slot: the stop and the last lines
@@ -118,6 +108,7 @@ class SlotRecorder:
         self.dropped = 0
         self.recorded = 0  # finished recordings
         self.camera = CameraTap(self)  # a real arena's video and tracked poses
+        self.commands = CommandTap(self)  # the commands, checked as the world checks them
 
     @property
     def enabled(self) -> bool:
@@ -133,8 +124,6 @@ class SlotRecorder:
         w, r = self.world, self.realm
         self.feeds.hear(
             [
-                (keys.world_frame(r, w), self._on_frame),
-                (keys.world_samples(r, w), self._on_samples),
                 (keys.agent_cmd_all(r, w), self._on_cmd),
                 (keys.world_commands(r, w), self._on_bundle),
                 *self.camera.subscriptions(),
@@ -189,10 +178,18 @@ class SlotRecorder:
             self._put(("chat", line, status, time.time()))
 
     def _watch(self) -> None:
-        """The cameras' videos heard while a slot is recorded (after each change to the runs)."""
-        self.feeds.hear_while(
-            lambda: self._any() and not self._halt.is_set(), self.camera.while_recording
-        )
+        """The world's frames and samples and the cameras' videos, heard while a slot is
+        recorded (after each change to the runs): a world builds no frame, a camera
+        encodes no video, that no one reads."""
+        self.feeds.hear_while(lambda: self._any() and not self._halt.is_set(), self._while)
+
+    def _while(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
+        w, r = self.world, self.realm
+        return [
+            (keys.world_frame(r, w), self._on_frame),
+            (keys.world_samples(r, w), self._on_samples),
+            *self.camera.while_recording(),
+        ]
 
     # -- Zenoh callbacks: a look and a queue put, nothing more
 
@@ -239,8 +236,8 @@ class SlotRecorder:
             "chat": self._chat,
             "frame": self._frame,
             "samples": self._samples,
-            "cmd": self._cmd,
-            "bundle": self._bundle,
+            "cmd": self.commands.command,
+            "bundle": self.commands.bundle,
             "snapshot": self._note_snapshot,
             **self.camera.handlers(),
         }
@@ -427,110 +424,6 @@ class SlotRecorder:
             except MessageError:
                 continue
             rec.writer.write(s.sensors_topic(agent), sample_record(sample), t)
-
-    def _bundle(self, payload: bytes, t: float) -> None:
-        try:
-            bundle = decode(payload, (CommandBundle, MacCommandBundle))
-        except MessageError:
-            return
-        if isinstance(bundle, MacCommandBundle):
-            self._mac_items(bundle, t)
-            return
-        assert isinstance(bundle, CommandBundle)  # the decoder allowed only these two
-        for item in bundle.commands:
-            if self._recording(item.agent):
-                key = keys.agent_cmd(self.realm, self.world, item.agent)
-                self._cmd(key, item.agent, item.payload, t)
-
-    def _mac_items(self, bundle: MacCommandBundle, t: float) -> None:
-        """A swarm's MacCommandBundle: each item of a recorded agent, if MACed with its run's
-        lease key (over the agent's own key expression) and sent within the run's slot."""
-        n = len(bundle.agents)
-        if len(bundle.items) != n * MAC_ITEM_BYTES or len(bundle.macs) != n * MAC_BYTES:
-            return  # the world refuses it whole, too
-        for i, agent in enumerate(bundle.agents):
-            rec = self._active(agent)
-            if rec is None:
-                continue
-            run = rec.run.taken or rec.run  # taken over: the teacher's lease is in force
-            if not run.lease_key:  # not a MAC lease: a keyless BLAKE2b proves nothing
-                rec.refused += 1
-                continue
-            record = bundle.items[i * MAC_ITEM_BYTES : (i + 1) * MAC_ITEM_BYTES]
-            key = keys.agent_cmd(self.realm, self.world, agent)
-            expected = item_mac(run.lease_key, key, run.lease_id, record)
-            _seq, sent_at, flags, left, right, a, b = MAC_ITEM_STRUCT.unpack(record)
-            if (
-                not mac_matches(expected, bundle.macs[i * MAC_BYTES : (i + 1) * MAC_BYTES])
-                or not run.start - 1.0 <= sent_at <= run.end + 1.0
-                or flags & ~(MAC_ITEM_SPEEDS | MAC_ITEM_COUNTERS)
-            ):
-                rec.refused += 1
-                continue
-            command = AgentCommand(
-                agent=agent,
-                speeds=(left, right) if flags & MAC_ITEM_SPEEDS else None,
-                counters=(a, b) if flags & MAC_ITEM_COUNTERS else None,
-            )
-            driver = rec.driver if run is rec.run else run.job.user
-            self._write_command(rec, agent, driver, "mac", command, t)
-
-    def _write_command(
-        self, rec: _Run, agent: str, sender: str, auth: str, command: AgentCommand, t: float
-    ) -> None:
-        leds: list[bool | int] | None = None if command.leds is None else [*command.leds]
-        record = s.CommandRecord(
-            agent=agent,
-            sender=sender,
-            auth=auth,
-            speeds=command.speeds,
-            counters=command.counters,
-            leds=leds,
-            arm=command.arm,
-            grip=command.grip,
-        )
-        rec.writer.write(s.commands_topic(agent), record, t)
-
-    def _cmd(self, key: str, agent: str, payload: bytes, t: float) -> None:
-        rec = self._active(agent)
-        if rec is None:
-            return
-        run = rec.run.taken or rec.run  # taken over: the teacher's lease is in force
-        try:
-            envelope = decode(payload, (AuthEnvelope, MacCommand))
-            if isinstance(envelope, MacCommand):
-                expected = command_mac(
-                    run.lease_key,
-                    key,
-                    envelope.lease_id,
-                    envelope.seq,
-                    envelope.sent_at,
-                    envelope.body,
-                )
-                if (
-                    not run.lease_key  # not a MAC lease: a keyless BLAKE2b proves nothing
-                    or envelope.lease_id != run.lease_id
-                    or not mac_matches(expected, envelope.mac)
-                ):
-                    raise AuthError("forbidden", "not MACed with this run's lease key")
-                command, sender, auth, sent_at = (
-                    decode(envelope.body, AgentCommand),
-                    rec.driver if run is rec.run else run.job.user,
-                    "mac",
-                    envelope.sent_at,
-                )
-            else:
-                assert isinstance(envelope, AuthEnvelope)
-                principal, command = self.verifier.open_envelope(key, envelope, AgentCommand)
-                if principal.session_id != run.holder_session:
-                    raise AuthError("forbidden", f"{principal.user} does not hold the lease")
-                sender, auth, sent_at = principal.user, "signed", envelope.sent_at
-            if command.agent != agent or not run.start - 1.0 <= sent_at <= run.end + 1.0:
-                raise AuthError("forbidden", "another agent's, or outside the slot")
-        except (AuthError, MessageError):
-            rec.refused += 1
-            return
-        self._write_command(rec, agent, sender, auth, command, t)
 
     def _output(self, request_id: str, agent: str, lines: list[str], t: float) -> None:
         rec = self._runs.get(request_id)

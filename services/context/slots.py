@@ -3,7 +3,7 @@
 Every quarter second (sooner when a slot ends) it ends the slots whose time
 is up, starts the head of each free agent's queue (asking the runner first
 for a deployed controller), republishes the leases in force every second,
-re-reads the world's agents when its layout changes (and its identity every
+re-reads the world's agents when the world says its layout changed (and its identity every
 few seconds: a restarted world has a new one), and saves the queues when
 anything changed. It shares the context's
 :class:`~services.context.context_state.ContextState` with the queue desk and
@@ -16,7 +16,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
 
 import zenoh
 
@@ -27,7 +26,7 @@ from common.messages import (
     AgentEvent,
     MessageError,
     RequestStatus,
-    WorldFrame,
+    WorldLayout,
     WorldSnapshot,
     decode,
 )
@@ -76,13 +75,12 @@ class SlotScheduler:
         self.publish_world_stop = publish_world_stop
         self.log = log
         self._layout: int | None = None  # the world's, as last read from its snapshot
+        self._announced: int | None = None  # the world's, as its last WorldLayout said
         self._world_appeared = False
-        self._frames: Any = None  # the world's newest frame (its layout)
         self._thread: threading.Thread | None = None
 
-    def start(self, frames: Any) -> None:
-        """Run the scheduler thread; ``frames``: a ring channel of the world's frames."""
-        self._frames = frames
+    def start(self) -> None:
+        """Run the scheduler thread."""
         self._thread = threading.Thread(target=self._schedule, name="agent-queues", daemon=True)
         self._thread.start()
 
@@ -148,23 +146,28 @@ class SlotScheduler:
                 self._world_appeared = True
                 self.state.wake.notify_all()
 
+    def on_world_layout(self, sample: zenoh.Sample) -> None:
+        """The world's rows changed (``world/<w>/layout``): learn them at the next turn."""
+        try:
+            news = decode(sample.payload, WorldLayout)
+        except MessageError as exc:
+            self.log.debug("unreadable layout news of %s: %s", self.state.world, exc)
+            return
+        if news.world != self.state.world:
+            return
+        with self.state.wake:
+            self._announced = news.layout
+            self.state.wake.notify_all()
+
     def _need_snapshot(self) -> bool:
-        if self._layout is None:
-            return True
-        try:
-            sample = self._frames.try_recv() if self._frames is not None else None
-        except Exception:
-            return False
-        if sample is None:
-            return False
-        try:
-            frame = decode(sample.payload, WorldFrame)
-        except MessageError:
-            return False
-        return frame.layout != self._layout
+        with self.state.wake:
+            announced = self._announced
+        return self._layout is None or (announced is not None and announced != self._layout)
 
     def _refresh_agents(self) -> None:
         world = self.state.world
+        with self.state.wake:
+            self._announced = None  # news from now on is newer than the snapshot asked
         key = keys.world_snapshot(self.realm, world)
         try:
             snap = ask(self.session, key, None, WorldSnapshot, what=f"world {world}", timeout=3.0)

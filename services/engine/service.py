@@ -5,7 +5,8 @@ commands) and hand the work to the sim thread through a queue; requests that
 need an answer (snapshot, edit, map) wait for the sim thread's result, at most
 one tick. Only the sim thread touches the world (pymunk is not thread-safe).
 
-Publishes: ``world/<w>/frame`` (WorldFrame) each tick; ``agent/<a>/sensors``
+Publishes: ``world/<w>/frame`` (WorldFrame) each tick while subscribed;
+``world/<w>/layout`` (WorldLayout) when its rows change; ``agent/<a>/sensors``
 (SensorSample) for agents someone subscribes to; ``world/<w>/samples``
 (SampleBundle: every leased agent's sample) and ``world/<w>/sensors``
 (SensorBatch) when someone subscribes. Subscribes: ``agent/*/cmd`` and
@@ -517,6 +518,7 @@ class EngineService(WorldService):
                 if self.world.layout != layout:
                     layout = self.world.layout
                     self._declare_agent_publishers()
+                    self.announce_layout(layout)
                 now = time.monotonic()
                 if not settings.fast or now - last_publish >= _FAST_PUBLISH_S:
                     last_publish = now

@@ -33,6 +33,7 @@ from common.messages import (
     SensorSample,
     WorldEdit,
     WorldFrame,
+    WorldLayout,
     WorldSnapshot,
     decode,
     encode,
@@ -471,10 +472,18 @@ def test_edits_need_edit_map_and_are_validated(zsession: zenoh.Session, engine: 
     onto_wall = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1250, "y": 300}))
     bad = ask(zsession, edit_key, editor.seal(edit_key, onto_wall))
     assert isinstance(bad, ErrorReply) and "overlap an obstacle" in bad.message
+    # Who reads no frames (an agent context between slots) hears of new rows all the same.
+    news: list[WorldLayout] = []
+    told = zsession.declare_subscriber(
+        keys.world_layout(realm, WORLD), lambda s: news.append(decode(s.payload, WorldLayout))
+    )
     add = WorldEdit(op=AddItem(section="agents", entry={"id": "k9", "x": 1400, "y": 150}))
     assert isinstance(ask(zsession, edit_key, editor.seal(edit_key, add)), EditResult)
     after = ask(zsession, keys.world_snapshot(realm, WORLD))
     assert isinstance(after, WorldSnapshot) and "k9" in after.rows
+    wait_for(lambda: any(n.layout == after.layout for n in news), 10, "the new layout said")
+    assert {n.world for n in news} == {WORLD}
+    told.undeclare()
     rock = next(i for i in after.items if i.id == "rock1")
     assert (rock.x, rock.y) == (800.0, 900.0)
     # Save under a plain name; paths are refused; then load it back.

@@ -95,17 +95,17 @@ def test_the_runs_macd_items_are_recorded_and_forged_or_foreign_ones_are_not() -
         item(mine, "k2", 4),  # another agent: not recorded here
         item(mine, "k1", 5, speeds=None, counters=(7, 8)),
     ]
-    recorder._bundle(payload(items), time.time())
+    recorder.commands.bundle(payload(items), time.time())
     assert commands(rec) == [("mac", (4, 5), None), ("mac", None, (7, 8))]
     assert rec.refused == 2
-    recorder._bundle(b"\xc1garbage", time.time())  # malformed: ignored, nothing recorded
+    recorder.commands.bundle(b"\xc1garbage", time.time())  # malformed: ignored, nothing recorded
     assert len(commands(rec)) == 2
 
 
 def test_items_under_a_lease_without_a_key_are_never_recorded() -> None:
     recorder, rec = recorder_of("k1", b"")  # a signed-only lease
     unkeyed = CommandMac(b"", keys.agent_cmd(REALM, WORLD, "k1"), "L1")  # anyone can make it
-    recorder._bundle(payload([item(unkeyed, "k1", 1)]), time.time())
+    recorder.commands.bundle(payload([item(unkeyed, "k1", 1)]), time.time())
     assert commands(rec) == [] and rec.refused == 1
 
 

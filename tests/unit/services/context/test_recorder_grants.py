@@ -63,15 +63,19 @@ def test_the_agent_role_may_subscribe_to_every_key_its_recorder_records(tmp_path
     )
     recorder.start()
     try:
-        always = len(session.subscribed)
-        # The cameras' videos only while a slot is recorded.
+        always = list(session.subscribed)
+        # The world's frames and samples and the cameras' videos only while a slot is
+        # recorded: a world builds no frame, a camera encodes no video, no one reads.
+        assert keys.world_frame("lab", "arena1") not in always
         job = ControlJob("r1", "k0", "alice", b"\x01" * 16, "remote")
         recorder.run_started(
             RunningJob(job, "L1", b"\x01" * 16, time.time(), time.time() + 60), "alice"
         )
-        assert len(session.subscribed) == always + 1
-        assert keys.camera_all("lab", "arena1") == session.subscribed[-1]
-        assert len(session.subscribed) >= 6  # frames, samples, commands, bundles, cameras, poses
+        assert session.subscribed[len(always) :] == [
+            keys.world_frame("lab", "arena1"),
+            keys.world_samples("lab", "arena1"),
+            keys.camera_all("lab", "arena1"),
+        ]
         denied = [key for key in session.subscribed if not _granted("agent", "sub", key)]
         assert not denied, f"the agent role may not subscribe to: {denied}"
     finally:
