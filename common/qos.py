@@ -1,9 +1,9 @@
 """How urgent each kind of message is on the wire: Zenoh's priority and congestion control.
 
 Zenoh's default for a put is priority DATA and congestion control DROP: when
-a link's queue is full the message is dropped. A context, a viewer and a
-recorder all subscribe to their world's frames and samples, so on a busy
-machine the router's queue to them fills with frames and a put at the same
+a link's queue is full the message is dropped. A viewer, and a context's
+recorder while it records a slot, subscribe to their world's frames and samples,
+so on a busy machine the router's queue to them fills with frames and a put at the same
 priority is lost with them: a student's print that never reached the page was
 seen so (tests/integration/test_qos.py makes it happen). Each priority has its
 own queue on a link, and higher ones are sent first; so what people read and
