@@ -85,6 +85,10 @@ def kind_of(pid: int) -> str | None:
 
 
 FORKSERVER = "python -m tests.kit.forkserver"
+ZYGOTE = "chromium zygote"
+# Kinds a process leaves by renaming itself: a forkserver's child (its comm), a renderer
+# Chromium's zygote forked (its title). Asked again at each sample while they hold.
+TRANSIENT = (FORKSERVER, ZYGOTE)
 
 
 def _forked_kind(pid: int) -> str:
@@ -144,7 +148,7 @@ class Sampler:
                 # One already running: only what it spends from now on.
                 seen = (kind, 0 if started >= self.started_at else ticks, started)
             kind, last, _ = seen
-            if kind == FORKSERVER:  # a child just forked may have named itself since
+            if kind in TRANSIENT:  # a child just forked may have named itself since
                 kind = kind_of(pid) or kind
             self.by_kind[kind] += ticks - last
             self._seen[pid] = (kind, ticks, started)

@@ -6,6 +6,9 @@ import subprocess
 import sys
 import time
 
+import pytest
+
+from bench import cpu_by_process
 from bench.cpu_by_process import Sampler, kind_of
 
 # Burns one second of its own CPU time, however busy the machine is.
@@ -70,6 +73,33 @@ def test_a_process_running_before_the_sampler_is_counted_from_then() -> None:
     sampler.stop()
     burned = sum(v for k, v in sampler.by_kind.items() if "time.process" in k) / 100
     assert burned <= 0.2, sampler.by_kind
+
+
+def test_a_forked_child_is_counted_under_the_kind_it_renames_itself_to(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Chromium's renderers are forked by its zygote and keep its command line until they
+    # retitle themselves: their CPU is the renderer's, not the zygote's.
+    child = subprocess.Popen([sys.executable, "-c", BURN_THEN_IDLE])
+    sampled = {"n": 0}
+
+    def kind_of_renamed(pid: int) -> str | None:
+        if pid != child.pid:
+            return None
+        sampled["n"] += 1
+        return "chromium zygote" if sampled["n"] == 1 else "chromium renderer"
+
+    monkeypatch.setattr(cpu_by_process, "kind_of", kind_of_renamed)
+    sampler = Sampler(period_s=0.1)
+    sampler.start()
+    try:
+        assert child.wait(timeout=120) == 0
+    finally:
+        child.kill()
+        sampler.stop()
+    assert sampled["n"] >= 2
+    assert sampler.by_kind["chromium renderer"] >= 90, sampler.by_kind
+    assert sampler.by_kind["chromium zygote"] <= 20, sampler.by_kind
 
 
 def test_a_process_gone_has_no_kind() -> None:
