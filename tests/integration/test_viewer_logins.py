@@ -246,3 +246,31 @@ def test_a_click_the_moment_log_in_shows_is_answered(
             await client.close()
 
     assert run_in_thread(quick_student()) == "in"
+
+
+async def _join_clicked_twice(url: str) -> tuple[int, bool]:
+    client = ViserClient(url, "alice")
+    try:
+        await client.connect()
+        assert await log_in(client, "alice", PASSWORD) == "in"
+        # Clicked again before the lab answered the first (a busy lab, an impatient
+        # student): both clicks reach the viewer, each in a thread of its own.
+        join = await client.element("Join lobby", "GuiButtonMessage")
+        click = {"type": "GuiUpdateMessage", "uuid": join.uuid, "updates": {"value": True}}
+        await client.send(click)
+        await client.send(click)
+        await client.element("Message", "GuiTextMessage")
+        # A line through the room and back: by then a second join would have ended too.
+        await client.say("one join")
+        await client.wait_for(lambda: client.markdown_containing("one join"), 30)
+        inputs = [e for e in client.gui.values() if e.label == "Message"]
+        return len(inputs), client.markdown_containing("one join") is not None
+    finally:
+        await client.close()
+
+
+def test_join_clicked_twice_joins_the_room_once(vlab: ViewerLab) -> None:
+    vlab.lab.start_room("lobby")
+    inputs, said = run_in_thread(_join_clicked_twice(vlab.url))
+    assert said
+    assert inputs == 1, f"{inputs} chat panels for one room"

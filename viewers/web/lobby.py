@@ -66,6 +66,7 @@ class LabTab:
         self.tabs = tabs
         self.connection = connection
         self.panels: dict[str, ChatPanel] = {}
+        self._joining: set[str] = set()  # contexts whose join is under way
         self._on_logout = on_logout
         self._on_watch = on_watch
         self._on_context = on_context
@@ -202,12 +203,25 @@ class LabTab:
     # -- actions
 
     def join(self, ctx: str) -> ChatPanel | None:
+        who = f"{self.connection.user} on {self.label}"
         with self._lock:
             if ctx in self.panels:
                 return self.panels[ctx]
+            if ctx in self._joining:
+                # Clicked again while the first join waits on a busy lab: one join, one tab
+                # (two made two subscriptions, two tabs, and the room's lines in only one).
+                log.info("%s: already joining %s", who, ctx)
+                return None
+            self._joining.add(ctx)
+        try:
+            return self._join(ctx, who)
+        finally:
+            with self._lock:
+                self._joining.discard(ctx)
+
+    def _join(self, ctx: str, who: str) -> ChatPanel | None:
         # Logged both ways, as hosting is: a page whose joined context never showed its
         # tab (a busy run) left no trace of whether the join was asked, answered or failed.
-        who = f"{self.connection.user} on {self.label}"
         log.info("%s: joining %s", who, ctx)
         started = time.monotonic()
         try:
