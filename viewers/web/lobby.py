@@ -209,7 +209,7 @@ class LabTab:
                 return self.panels[ctx]
             if ctx in self._joining:
                 # Clicked again while the first join waits on a busy lab: one join, one tab
-                # (two made two subscriptions, two tabs, and the room's lines in only one).
+                # (two made two subscriptions to the room and two chat panels for it).
                 log.info("%s: already joining %s", who, ctx)
                 return None
             self._joining.add(ctx)
