@@ -55,7 +55,7 @@ class CameraTap:
     def _on_camera(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         view = key.rsplit("/", 1)[-1]
-        if view not in ("image", "floor") or not self.recorder._any():
+        if view not in ("image", "floor") or not self.recorder.any_recorded():
             return
         camera = key.rsplit("/", 1)[0]
         now = time.monotonic()
@@ -69,7 +69,7 @@ class CameraTap:
         self.recorder._put(("camera", sample.payload.to_bytes(), view))
 
     def _on_tracked(self, sample: zenoh.Sample) -> None:
-        if self.recorder._any():
+        if self.recorder.any_recorded():
             self.recorder._put(("tracked", sample.payload.to_bytes()))
 
     # -- the writer thread

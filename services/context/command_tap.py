@@ -48,7 +48,7 @@ class CommandTap:
             return
         assert isinstance(bundle, CommandBundle)  # the decoder allowed only these two
         for item in bundle.commands:
-            if self.recorder._recording(item.agent):
+            if self.recorder.is_recording(item.agent):
                 key = keys.agent_cmd(self.recorder.realm, self.recorder.world, item.agent)
                 self.command(key, item.agent, item.payload, t)
 
@@ -59,7 +59,7 @@ class CommandTap:
         if len(bundle.items) != n * MAC_ITEM_BYTES or len(bundle.macs) != n * MAC_BYTES:
             return  # the world refuses it whole, too
         for i, agent in enumerate(bundle.agents):
-            rec = self.recorder._active(agent)
+            rec = self.recorder.active_run(agent)
             if rec is None:
                 continue
             run = rec.run.taken or rec.run  # taken over: the teacher's lease is in force
@@ -102,7 +102,7 @@ class CommandTap:
         rec.writer.write(s.commands_topic(agent), record, t)
 
     def command(self, key: str, agent: str, payload: bytes, t: float) -> None:
-        rec = self.recorder._active(agent)
+        rec = self.recorder.active_run(agent)
         if rec is None:
             return
         run = rec.run.taken or rec.run  # taken over: the teacher's lease is in force

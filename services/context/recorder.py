@@ -181,7 +181,7 @@ class SlotRecorder:
         """The world's frames and samples and the cameras' videos, heard while a slot is
         recorded (after each change to the runs): a world builds no frame, a camera
         encodes no video, that no one reads."""
-        self.feeds.hear_while(lambda: self._any() and not self._halt.is_set(), self._while)
+        self.feeds.hear_while(lambda: self.any_recorded() and not self._halt.is_set(), self._while)
 
     def _while(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
         w, r = self.world, self.realm
@@ -193,11 +193,13 @@ class SlotRecorder:
 
     # -- Zenoh callbacks: a look and a queue put, nothing more
 
-    def _recording(self, agent: str) -> bool:
+    def is_recording(self, agent: str) -> bool:
+        """Whether a slot of ``agent`` is being recorded (its trail included); any thread."""
         with self._lock:
             return agent in self._agents
 
-    def _any(self) -> bool:
+    def any_recorded(self) -> bool:
+        """Whether any slot is being recorded; any thread."""
         with self._lock:
             return bool(self._agents)
 
@@ -208,21 +210,21 @@ class SlotRecorder:
             self.dropped += 1
 
     def _on_frame(self, sample: zenoh.Sample) -> None:
-        if self._any():
+        if self.any_recorded():
             self._put(("frame", sample.payload.to_bytes(), time.time()))
 
     def _on_samples(self, sample: zenoh.Sample) -> None:
-        if self._any():
+        if self.any_recorded():
             self._put(("samples", sample.payload.to_bytes(), time.time()))
 
     def _on_cmd(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         agent = keys.parse_agent_key(self.realm, self.world, key)
-        if agent is not None and self._recording(agent):
+        if agent is not None and self.is_recording(agent):
             self._put(("cmd", key, agent, sample.payload.to_bytes(), time.time()))
 
     def _on_bundle(self, sample: zenoh.Sample) -> None:
-        if self._any():
+        if self.any_recorded():
             self._put(("bundle", sample.payload.to_bytes(), time.time()))
 
     # -- the writer thread
@@ -384,7 +386,8 @@ class SlotRecorder:
         self.store.prune(user)
         self.log.info("recorded %s (%d messages) for %s", path.name, rec.writer.messages, user)
 
-    def _active(self, agent: str) -> _Run | None:
+    def active_run(self, agent: str) -> _Run | None:
+        """The run of ``agent`` being recorded, if any (the writer thread's, with its file)."""
         with self._lock:
             request_id = self._agents.get(agent)
         return self._runs.get(request_id) if request_id else None
@@ -416,7 +419,7 @@ class SlotRecorder:
         except MessageError:
             return
         for agent, raw in zip(bundle.agents, bundle.samples, strict=False):
-            rec = self._active(agent)
+            rec = self.active_run(agent)
             if rec is None:
                 continue
             try:
