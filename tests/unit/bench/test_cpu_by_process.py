@@ -11,6 +11,9 @@ import pytest
 from bench import cpu_by_process
 from bench.cpu_by_process import Sampler, kind_of
 
+# One worker: the sampler counts by kind of process, and these tests' children share one.
+pytestmark = pytest.mark.xdist_group("cpu_by_process")
+
 # Burns one second of its own CPU time, however busy the machine is.
 BURN = "import time\nwhile time.process_time() < 1.0:\n    pass\n"
 
