@@ -49,7 +49,22 @@ def pytest_configure(config: pytest.Config) -> None:
         config.pluginmanager.register(TimeSpent(), "time_spent")
 
 
+# A test directory's kind is its marker (`-m "not browser"`), so no module forgets it.
+_DIRECTORY_MARKS = {
+    "integration": "integration",
+    "containers": "integration",
+    "browser": "browser",
+    "smoke": "smoke",
+}
+
+
 def pytest_itemcollected(item: pytest.Item) -> None:
+    kind = _DIRECTORY_MARKS.get(item.path.parent.name)
+    if kind is not None:
+        item.add_marker(kind)
+    if item.get_closest_marker("one_worker") is not None:
+        # The module's lab or router is a module fixture: on one worker it starts once.
+        item.add_marker(pytest.mark.xdist_group(f"{item.path.parent.name}-{item.path.stem}"))
     # Under xdist (./dev test), the browser tests run in two groups, each one test at
     # a time on its own worker: each drives a Chromium rendering WebGL in software,
     # and all at once on two cores made each page slow for nothing; but as one group

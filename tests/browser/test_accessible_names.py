@@ -8,12 +8,8 @@ login form by keyboard (Tab from User to Password).
 
 from __future__ import annotations
 
-import pytest
-
 from tests.browser.conftest import wait_until
 from viewers.web.app import WebViewer
-
-pytestmark = pytest.mark.browser
 
 
 def test_inputs_are_found_by_their_labels(open_page, viewer: WebViewer) -> None:

@@ -2,12 +2,8 @@
 
 from __future__ import annotations
 
-import pytest
-
 from tests.browser.conftest import wait_until
 from viewers.web.app import WebViewer
-
-pytestmark = pytest.mark.browser
 
 
 def test_two_sessions_chat(open_page, viewer: WebViewer) -> None:

@@ -30,7 +30,6 @@ from viewers.web.drive_keys import BOX_LABEL
 from viewers.web.inputs import set_value
 
 pytestmark = [
-    pytest.mark.browser,
     pytest.mark.integration,
     pytest.mark.timeout(400),
     needs_sandbox,

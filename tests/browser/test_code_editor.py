@@ -9,15 +9,11 @@ cursor there. Every assertion reads the DOM or the server, never pixels.
 
 from __future__ import annotations
 
-import pytest
-
 from tests.browser.conftest import ViserPage, join_demo_arena, wait_until
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession
 from viewers.web.code_editor import show_text
 from viewers.web.workbench import Workbench
-
-pytestmark = pytest.mark.browser
 
 TYPED = """\
 from common.controller import Controller, Khepera

@@ -22,7 +22,6 @@ from tests.kit.courses import add_course, assignment_toml
 from tests.kit.reallab import RealLab, real_lab
 
 pytestmark = [
-    pytest.mark.browser,
     pytest.mark.integration,
     pytest.mark.timeout(400),
     needs_sandbox,

@@ -19,7 +19,7 @@ from tests.browser.test_real_agents import enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.kit.reallab import RealLab, real_lab
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, pytest.mark.real_lab]
 
 
 @pytest.fixture(scope="module")

@@ -21,8 +21,6 @@ from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
 
-pytestmark = pytest.mark.browser
-
 
 @pytest.fixture
 def fake_lab() -> Iterator[DemoLab]:

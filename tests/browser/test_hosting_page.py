@@ -12,7 +12,7 @@ from playwright.sync_api import expect
 from tests.browser.conftest import ViserPage, new_test_context, page_url
 from tests.kit.lab import UpLab
 
-pytestmark = [pytest.mark.browser, pytest.mark.smoke]
+pytestmark = pytest.mark.smoke
 
 
 @pytest.fixture

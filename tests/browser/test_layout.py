@@ -27,8 +27,6 @@ from viewers.web.client import BrowserSession
 from viewers.web.demo_lab import DemoLab
 from viewers.web.demo_world import DemoWorld
 
-pytestmark = pytest.mark.browser
-
 CANVAS_JS = """() => {
   const all = [...document.querySelectorAll('canvas')];
   const c = all.sort((a, b) => b.clientWidth * b.clientHeight - a.clientWidth * a.clientHeight)[0];

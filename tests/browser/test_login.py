@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import pytest
 from playwright.sync_api import expect
 
 from tests.browser.conftest import wait_until
 from viewers.web.app import WebViewer
-
-pytestmark = pytest.mark.browser
 
 
 def test_login_and_wrong_password(open_page, viewer: WebViewer) -> None:

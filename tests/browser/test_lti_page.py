@@ -23,8 +23,6 @@ from tests.kit.lti_tool import start_lti
 from tests.kit.reallab import RealLab, real_lab
 from viewers.web.tabs import tab_label
 
-pytestmark = pytest.mark.browser
-
 
 @pytest.fixture(scope="module")
 def lti_lab(

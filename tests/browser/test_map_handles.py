@@ -7,12 +7,8 @@ Decided by the server's state (the editor's gizmo), not by pixels.
 
 from __future__ import annotations
 
-import pytest
-
 from tests.browser.conftest import join_demo_arena, wait_until
 from viewers.web.app import WebViewer
-
-pytestmark = pytest.mark.browser
 
 
 def test_no_map_handles_on_a_driven_robot(open_page, viewer: WebViewer) -> None:

@@ -32,7 +32,7 @@ from tests.kit.reallab import CTX, PASSWORD, WORLD, RealLab, real_lab
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.tabs import tab_label
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 SLOT = 30.0
 BRAITENBERG = REPO / "examples" / "01_braitenberg.py"

@@ -28,7 +28,7 @@ from viewers.web.tabs import tab_label
 from viewers.web.world_feed import RobotReadings
 from viewers.web.world_view import WorldView
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, pytest.mark.real_lab]
 REAL = "real1"
 RUNS = "realruns"  # the real arena's agent context
 

@@ -30,7 +30,7 @@ from viewers.web.live_world import UserWorld
 from viewers.web.tabs import tab_label
 from viewers.web.world_view import FLOOR_COLOUR
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, pytest.mark.real_lab]
 
 SCENE_BOX = (0, 170, 860, 800)  # left of the docked panel, below viser's WebGL notice
 

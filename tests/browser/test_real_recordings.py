@@ -27,7 +27,7 @@ from tests.unit.common.twin.test_sensor_gap import HIDDEN
 from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration
 from viewers.web.replay import ReplayFeed
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 SLOT = 2.0
 TINY = b"""\

@@ -24,7 +24,7 @@ from tests.kit.reallab import RealLab, real_lab
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.tabs import tab_label
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 CTX = "arena"
 TICKING = """\

@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from common.recording import read_recording
 from tests.browser.conftest import ViserPage, join_demo_arena, wait_until
@@ -23,8 +22,6 @@ from viewers.web.demo_lab import DemoLab
 from viewers.web.recordings_panel import RecordingsPanel
 from viewers.web.replay import ReplayControls, ReplayFeed
 from viewers.web.world_view import WorldView
-
-pytestmark = pytest.mark.browser
 
 
 def drawn_xy_mm(view: WorldView, agent: str) -> np.ndarray:

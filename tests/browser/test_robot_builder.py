@@ -21,7 +21,7 @@ from tests.browser.test_real_lab import session_of
 from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 READER = b'''"""Reads the range finder the builder added."""
 

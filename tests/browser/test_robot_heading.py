@@ -22,8 +22,6 @@ from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab
 from viewers.web.prepared_frame import HEADING_DARK, HEADING_LIT
 
-pytestmark = pytest.mark.browser
-
 ROBOTS = 16  # more than LABEL_ALL_UP_TO: no name labels over the robots
 NOTICES = (330, 300)  # viser's notifications cover the page's top-left corner up to (x, y)
 

@@ -21,7 +21,7 @@ from tests.conftest import needs_sandbox
 from tests.kit.agentkit import Motion, agent_user, deploy_running
 from tests.kit.reallab import RealLab, real_lab
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 FORWARD = (Path(__file__).parents[1] / "integration" / "controllers" / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")

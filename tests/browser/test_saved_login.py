@@ -15,7 +15,7 @@ from tests.browser.test_real_lab import log_in, online
 from tests.kit.reallab import RealLab, real_lab
 from viewers.web.tabs import tab_label
 
-pytestmark = [pytest.mark.browser, pytest.mark.real_lab]
+pytestmark = pytest.mark.real_lab
 
 
 @pytest.fixture(scope="module")

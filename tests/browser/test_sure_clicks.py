@@ -20,8 +20,6 @@ from tests.kit.lab import free_port
 from viewers.web.labels import add_label_fixer
 from viewers.web.sure_clicks import add_sure_clicks
 
-pytestmark = pytest.mark.browser
-
 # An edit of the Address field, a click on Connect, and another edit, in one task:
 # the throttle cannot fire in between, so the click is the replaced message.
 CLICK_BETWEEN_TWO_EDITS = """([inputId, buttonId]) => {

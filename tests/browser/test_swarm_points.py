@@ -22,8 +22,6 @@ from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoLab, DemoWorld
 from viewers.web.world_view import FLOOR_COLOUR, POINTS_FROM
 
-pytestmark = pytest.mark.browser
-
 ROBOTS = POINTS_FROM + 500
 SIDE_MM = 6000.0  # 120 mm between homes: a robot (55 mm) with floor around it
 

@@ -20,7 +20,7 @@ from tests.conftest import needs_sandbox
 from tests.kit.reallab import RealLab, real_lab
 from viewers.web.robot_panel import NONE
 
-pytestmark = [pytest.mark.browser, pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
+pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
 
 GOOD = """\
 from common.controller import Controller, Khepera

@@ -5,12 +5,9 @@ from __future__ import annotations
 import io
 
 import numpy as np
-import pytest
 
 from tests.browser.conftest import join_demo_arena, wait_until
 from viewers.web.app import WebViewer
-
-pytestmark = pytest.mark.browser
 
 # The scene part of the page, left of the docked panel and below viser's
 # "Software WebGL rendering detected" notice (top-left), which is masked out.

@@ -113,7 +113,6 @@ def _unavailable() -> str | None:
 
 _why = _unavailable()
 pytestmark = [
-    pytest.mark.integration,
     pytest.mark.xdist_group("podman"),
     # The image's build (minutes on a fresh machine) and the pods' start and removal.
     pytest.mark.timeout(1200),

@@ -26,11 +26,7 @@ from tests.kit.agentkit import (
 from tests.kit.lab import ProcessLab, make_lab, module_lab
 
 # One worker starts the module's lab once.
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("agent_context"),
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 CONTROLLERS = Path(__file__).with_name("controllers")
 
 

@@ -23,11 +23,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import ProcessLab, module_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("agent_deploy"),  # one worker starts the module's lab once
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.one_worker, needs_sandbox]
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
 

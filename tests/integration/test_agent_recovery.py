@@ -7,15 +7,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from common.client.agent_client import DriveResult
 from common.controller import Controller, Khepera
 from tests.conftest import Procs, Router, wait_for
 from tests.kit.agentkit import Poses, agent_users, start_agent_context, start_engine
 from tests.kit.lab import make_lab
-
-pytestmark = pytest.mark.integration
 
 
 class Forward(Controller):

@@ -12,8 +12,6 @@ from tests.conftest import Procs, Router
 from tests.kit.agentkit import CTX, agent_user, start_agent_context, start_engine
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
-pytestmark = pytest.mark.integration
-
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> Iterator[ProcessLab]:

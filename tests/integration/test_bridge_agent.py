@@ -22,10 +22,7 @@ from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, bridged_robot, start_agent_context, start_runner
 from tests.kit.lab import ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 
 

@@ -29,7 +29,6 @@ from tests.conftest import REPO, Proc, Procs, Router, wait_for
 from tests.integration.test_camera import Truth
 from tests.kit.waits import Latest
 
-pytestmark = pytest.mark.integration
 WORLD = "real1"
 AGENT = "k1"
 

@@ -43,11 +43,7 @@ from tests.kit.leases import holder_lease
 from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("bridge_world"),
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 WORLD = "real1"
 AGENT = "k1"
 

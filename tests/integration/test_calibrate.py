@@ -38,7 +38,7 @@ from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, bridged_robot, start_agent_context, start_runner
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab, wart
 
-pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.timeout(300)]
+pytestmark = [needs_sandbox, pytest.mark.timeout(300)]
 DANCE = REPO / "examples" / "calibration_dance.py"
 REAL, CTX = "real", "lab"
 TRUTH = BodyTruth(

@@ -27,7 +27,7 @@ from tests.kit.videos import write_video
 from tests.kit.waits import Latest
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("camera"), pytest.mark.shared_router]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 WORLD = "w1"
 CAMERA = "w1-cam"
 

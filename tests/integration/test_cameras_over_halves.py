@@ -32,7 +32,6 @@ from tests.conftest import Procs, Router, wait_for
 from tests.integration.test_bridge_camera import pose_from
 from tests.kit.lab import Proc
 
-pytestmark = pytest.mark.integration
 WORLD, AGENT = "real1", "k1"
 WIDTH, HEIGHT = 2000, 1000
 START = (500.0, 500.0, 0.0)

@@ -36,7 +36,7 @@ class Events:
 
 
 # One worker starts the module's router once.
-pytestmark = [pytest.mark.xdist_group("chat"), pytest.mark.shared_router]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 
 
 @pytest.fixture

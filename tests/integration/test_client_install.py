@@ -17,8 +17,7 @@ from tests.kit.client_install import ClientInstall, make_client_install, uv
 from tests.kit.lab import PASSWORD, ProcessLab, module_lab
 
 pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("client_install"),  # one worker starts the module's lab once
+    pytest.mark.one_worker,
     pytest.mark.skipif(uv() is None, reason="uv makes the client's virtualenv (./dev has it)"),
 ]
 FORWARD = Path(__file__).with_name("controllers") / "forward.py"

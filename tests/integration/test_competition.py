@@ -31,11 +31,7 @@ from tests.kit.agentkit import start_runner, together
 from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab
 from tests.kit.lab import wart as lab_wart
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.timeout(600),
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.timeout(600), needs_sandbox]
 
 
 def wart(*args: str) -> subprocess.CompletedProcess[str]:

@@ -47,11 +47,7 @@ from tests.kit.agentkit import agent_user, start_agent_context, start_runner, to
 from tests.kit.courses import assignment_toml, start_grading_lab
 from tests.kit.lab import REPO, ProcessLab, make_lab, wart
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.timeout(400),
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.timeout(400), needs_sandbox]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"
 
 SCOUT = """\

@@ -32,11 +32,7 @@ from tests.kit.agentkit import (
 from tests.kit.lab import ProcessLab, make_lab
 from tests.unit.common.twin.test_twin_store import FITTED_AT, calibration
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("dry_run"),  # one worker starts the module's lab once
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.one_worker, needs_sandbox]
 HEADER = "from common.controller import Controller, Khepera\n"
 INTO_THE_WALL = HEADER + textwrap.dedent(
     """

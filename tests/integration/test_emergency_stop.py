@@ -32,12 +32,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("emergency_stop"),  # one worker starts the module's router once
-    needs_sandbox,
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, needs_sandbox, pytest.mark.shared_router]
 FORWARD = (Path(__file__).with_name("controllers") / "forward.py").read_bytes()
 ROBOTS = ("k0", "k1", "k2", "k3")
 

@@ -49,7 +49,7 @@ from tests.kit.waits import Latest
 from viewers.web.live_world import WorldWatch
 
 # One worker starts the module's router and shared engine once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("engine"), pytest.mark.shared_router]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 WORLD = "w1"
 
 

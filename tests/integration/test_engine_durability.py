@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
-
 from common import keys
 from common.auth import issue_session
 from common.messages import (
@@ -20,8 +18,6 @@ from common.messages import (
 from tests.conftest import Procs, Router
 from tests.kit.agentkit import WORLD, start_engine
 from tests.kit.lab import make_lab
-
-pytestmark = pytest.mark.integration
 
 
 def _ask(z, key: str, payload: bytes | None = None):  # type: ignore[no-untyped-def]

@@ -22,7 +22,7 @@ from services.grader import course_cli
 from tests.integration.test_grading import assignment_toml, lab, source, wart  # noqa: F401
 from tests.kit.lab import ProcessLab
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
+pytestmark = pytest.mark.timeout(300)
 GRADERS = Path(__file__).parent / "grading" / "graders"
 RULE = """rule = '100 * reached("goal") - 5 * collisions() - time_to("goal")'"""
 WOBBLE = """rule = '100 * reached("goal") - metric("wobble")'"""

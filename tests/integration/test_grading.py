@@ -25,11 +25,7 @@ from tests.kit.courses import COURSE, assignment_toml, import_roster, start_grad
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 from tests.kit.lab import wart as lab_wart
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.timeout(600),
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.timeout(600), needs_sandbox]
 CONTROLLERS = Path(__file__).parent / "grading"
 
 

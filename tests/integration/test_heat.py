@@ -13,10 +13,7 @@ from common.messages import Heat, HeatEntry
 from services.runner.heat import run_heat
 from tests.conftest import REPO, needs_sandbox
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 GRADING = Path(__file__).parent / "grading"
 
 

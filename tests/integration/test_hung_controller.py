@@ -25,9 +25,6 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import ProcessLab, make_lab
 
-pytestmark = pytest.mark.integration
-
-
 # Line 8 is the loop: what the student is told.
 SPIN = b"""from common.controller import Controller, Khepera
 

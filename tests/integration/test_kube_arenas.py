@@ -33,8 +33,6 @@ from tests.kit.json_http import send_json
 from tests.kit.lab import Proc, ProcessLab, Procs, Router, make_lab, wait_alive, wart
 from tests.kit.waits import wait_for
 
-pytestmark = pytest.mark.integration
-
 NS = "labns"
 WORKS = Path(__file__).parent / "grading" / "works.py"  # reaches the goal
 LAB = """

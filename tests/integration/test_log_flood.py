@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
 import zenoh
 
 from common import keys
@@ -12,8 +11,6 @@ from common.messages import WorldSnapshot, decode
 from tests.conftest import Procs, Router, wait_for
 from tests.kit.agentkit import WORLD, start_engine
 from tests.kit.lab import make_lab
-
-pytestmark = pytest.mark.integration
 
 
 def test_twenty_thousand_junk_commands_leave_a_short_log_and_a_count(

@@ -48,7 +48,7 @@ from tests.kit.lti_platform import (
 )
 from tests.kit.lti_tool import PAGE, start_lti
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
+pytestmark = pytest.mark.timeout(600)
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

@@ -28,12 +28,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("missed_request_status"),  # one worker starts the module's router once
-    needs_sandbox,
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, needs_sandbox, pytest.mark.shared_router]
 FORWARD = Path(__file__).with_name("controllers") / "forward.py"
 RUNNER_STOPPED = "the lab's runner runner stopped"
 

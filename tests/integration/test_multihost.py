@@ -28,7 +28,7 @@ from services.lab.pki import issue_lab
 from tests.kit import netns
 
 # One worker builds the three-host network once for the module (two built it twice: 20 s).
-pytestmark = [pytest.mark.integration, pytest.mark.netns, pytest.mark.xdist_group("multihost")]
+pytestmark = [pytest.mark.netns, pytest.mark.one_worker]
 
 _reason = netns.available()
 if _reason is not None:

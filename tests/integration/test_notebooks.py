@@ -15,10 +15,7 @@ from tests.conftest import Router, wait_for
 from tests.kit.agentkit import CTX, start_agent_lab
 from tests.kit.lab import PASSWORD, REPO, ProcessLab, module_lab, wart_env
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("notebooks"),  # one worker starts the module's lab once
-]
+pytestmark = pytest.mark.one_worker
 NOTEBOOKS = REPO / "examples" / "notebooks"
 
 

@@ -42,7 +42,7 @@ from tests.kit.agentkit import start_agent_context, start_deploy, together
 from tests.kit.lab import REPO, ProcessLab, make_lab
 from tests.kit.robots import SCOUT, wheeled_robot
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+pytestmark = pytest.mark.timeout(400)
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"
 
 RACE_MAP = {

@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import pytest
 import zenoh
 
 from common import keys
 from common.keys import AliveKind
 from tests.kit.lab import Router, free_port, wart
-
-pytestmark = pytest.mark.integration
 
 
 def test_probe_passes_while_the_token_is_there_and_says_why_not_when_it_goes(

@@ -20,8 +20,6 @@ from common import keys, qos
 from common.service import close_session, open_session
 from tests.conftest import Router, wait_for
 
-pytestmark = pytest.mark.integration
-
 FLOOD_S = 3.0
 FRAME = bytes(32_000)  # a big world's frame
 LINES = 60

@@ -35,11 +35,7 @@ from tests.kit.agentkit import WORLD, start_agent_context, start_runner
 from tests.kit.courses import import_roster
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.timeout(300),
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.timeout(300), needs_sandbox]
 GRADERS = Path(__file__).parent / "grading" / "graders"
 
 

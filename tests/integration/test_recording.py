@@ -23,11 +23,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import PASSWORD, USERS, ProcessLab, module_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("recording"),  # one worker starts the module's lab once
-    needs_sandbox,
-]
+pytestmark = [pytest.mark.one_worker, needs_sandbox]
 FLOATS = "std_msgs/msg/Float32MultiArray"
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "01_braitenberg.py"
 RAISER = textwrap.dedent(

@@ -30,7 +30,7 @@ from tests.kit.agentkit import (
 from tests.kit.lab import ProcessLab, module_lab
 
 # One worker starts the module's lab once.
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("revocation")]
+pytestmark = pytest.mark.one_worker
 
 
 class Forward(Controller):

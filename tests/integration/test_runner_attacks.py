@@ -29,10 +29,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 CONTROLLERS = Path(__file__).with_name("controllers")
 HEADER = "from common.controller import Controller, Khepera\n"
 # Long enough for the filler to reach the disk limit inside its slot on a busy machine

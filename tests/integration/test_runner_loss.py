@@ -35,10 +35,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import ProcessLab, make_lab, start_router
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 CONTROLLERS = Path(__file__).with_name("controllers")
 RUNNER_END = "the lab's runner runner stopped"
 

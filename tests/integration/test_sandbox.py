@@ -20,9 +20,6 @@ from common.controller import KheperaState, RobotCommand
 from services.runner.sandbox import PrecheckError, Sandbox, SandboxLimits, precheck
 from tests.conftest import needs_sandbox, wait_for
 
-pytestmark = pytest.mark.integration
-
-
 STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))
 
 

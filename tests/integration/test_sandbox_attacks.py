@@ -24,10 +24,7 @@ from services.runner.cpushare import NICE_ONLY
 from services.runner.sandbox import Sandbox, SandboxLimits, cpu_share
 from tests.conftest import needs_sandbox, wait_for
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 
 HEADER = "from common.controller import Controller, Khepera\n"
 STATE = KheperaState(time=1.0, proximity=(0, 0, 900, 0, 0, 0, 0, 0))

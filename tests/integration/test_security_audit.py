@@ -22,7 +22,7 @@ from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, registry_lab
 
-pytestmark = [pytest.mark.integration, pytest.mark.usefixtures("quick_mailbox_keys")]
+pytestmark = pytest.mark.usefixtures("quick_mailbox_keys")
 
 
 @pytest.fixture

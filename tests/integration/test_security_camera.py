@@ -8,15 +8,12 @@ import zlib
 
 import cv2
 import numpy as np
-import pytest
 
 from common import keys
 from common.messages import CameraFrame, encode
 from common.service import close_session, open_session
 from tests.conftest import Router, wait_for
 from viewers.web.arena_video import CameraFeed
-
-pytestmark = [pytest.mark.integration]
 
 
 def _png_bomb(width: int, height: int) -> bytes:

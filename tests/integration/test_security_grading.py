@@ -15,7 +15,7 @@ from tests.integration.test_grading import add_assignment, source
 from tests.kit.courses import start_grading_lab
 from tests.kit.lab import ProcessLab
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(300), needs_sandbox]
+pytestmark = [pytest.mark.timeout(300), needs_sandbox]
 
 
 @pytest.fixture

@@ -15,8 +15,6 @@ from common.messages import ChatSay, OkReply
 from tests.conftest import Procs, Router
 from tests.kit.lab import make_lab
 
-pytestmark = [pytest.mark.integration]
-
 
 def test_a_sealed_request_of_the_wrong_type_is_refused_at_once(
     router: Router, procs: Procs, tmp_path: Path

@@ -14,8 +14,6 @@ from common.messages import ErrorReply, Message, OkReply, decode
 from common.service import Service
 from tests.conftest import Router, wait_for
 
-pytestmark = pytest.mark.integration
-
 
 class SlowService(Service):
     """One worker whose handler blocks until the test lets it go."""

@@ -35,10 +35,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"
 MAP = REPO / "maps" / "maze.json"
 SIM, REAL = "sim", "real"  # the worlds

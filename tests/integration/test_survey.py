@@ -6,14 +6,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from common.client.survey import survey
 from common.service import close_session, open_session
 from tests.conftest import REPO, Procs, Router, wart_env
 from tests.kit.lab import make_lab
-
-pytestmark = pytest.mark.integration
 
 
 def doctor(router: Router) -> subprocess.CompletedProcess[str]:

@@ -38,8 +38,6 @@ from services.engine.service import EngineService, EngineSettings
 from tests.conftest import Router, wait_for
 from tests.kit.leases import mac_lease
 
-pytestmark = pytest.mark.integration
-
 WORLD = "swarm"
 AGENTS = ("k0", "k1", "k2")
 

@@ -31,10 +31,7 @@ from tests.kit.agentkit import (
 )
 from tests.kit.lab import PASSWORD, Proc, ProcessLab, make_lab
 
-pytestmark = [
-    pytest.mark.integration,
-    needs_sandbox,
-]
+pytestmark = needs_sandbox
 CONTROLLERS = Path(__file__).with_name("controllers")
 FORWARD = (CONTROLLERS / "forward.py").read_bytes()
 REVERSE = """\

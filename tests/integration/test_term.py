@@ -32,8 +32,7 @@ from tests.kit.lab import ProcessLab as Lab
 
 # One worker starts the module's router once.
 pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("term"),
+    pytest.mark.one_worker,
     pytest.mark.usefixtures("quick_mailbox_keys"),
     pytest.mark.shared_router,
 ]

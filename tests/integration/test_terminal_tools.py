@@ -25,11 +25,7 @@ from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab, session_revoked
 
 # One worker starts the module's router once.
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("terminal_tools"),
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 
 
 @pytest.fixture

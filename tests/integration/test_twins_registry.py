@@ -29,11 +29,7 @@ from tests.kit.agentkit import start_agent_context, start_engine
 from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, make_lab
 from tests.unit.common.twin.test_twin_store import DAY, FITTED_AT, calibration, document
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("registry"),
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ import pytest
 
 from tests.kit import netns
 
-pytestmark = [pytest.mark.integration, pytest.mark.netns]
+pytestmark = pytest.mark.netns
 
 _reason = netns.available()
 

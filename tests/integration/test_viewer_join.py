@@ -21,7 +21,7 @@ from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 from viewers.web.adapters import ContextSummary
 from viewers.web.connector import LiveConnector
 
-pytestmark = [pytest.mark.integration, pytest.mark.shared_router]
+pytestmark = pytest.mark.shared_router
 
 
 @pytest.fixture

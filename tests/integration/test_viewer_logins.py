@@ -37,11 +37,7 @@ from viewers.web.demo_lab import DemoLab
 from viewers.web.login import LoginDesk
 
 # One worker starts the module's router once.
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.xdist_group("viewer_logins"),
-    pytest.mark.shared_router,
-]
+pytestmark = [pytest.mark.one_worker, pytest.mark.shared_router]
 
 USERS = ("alice", "bob", "carol", "ida")
 CLASS = 24  # browsers logging in at the same instant through one viewer

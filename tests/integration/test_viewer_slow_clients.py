@@ -20,8 +20,6 @@ from tests.kit.viser_client import RobotFrame, ViserClient, demo_lab_viewer, run
 from viewers.web.app import NOTSENT_LOWAT, WRITE_HIGH, WebViewer
 from viewers.web.demo_lab import DemoLab
 
-pytestmark = pytest.mark.integration
-
 ROBOTS = 1000
 STALLED_FRAMES = 100  # frames the others receive while one client reads nothing
 # The stalled client's own kernel receive buffer: a browser behind a slow link, where

@@ -17,8 +17,6 @@ import pytest
 from common import keys
 from tests.conftest import Router
 
-pytestmark = pytest.mark.integration
-
 
 def zenoh_cli() -> str | None:
     beside = Path(sys.executable).with_name("zenoh")

@@ -30,7 +30,7 @@ from services.lab.supervisor import AliveWatch
 from tests.conftest import REPO, wait_for, wart_env
 from tests.kit.lab import UpLab
 
-pytestmark = [pytest.mark.smoke, pytest.mark.xdist_group("up")]
+pytestmark = pytest.mark.one_worker
 
 
 @pytest.fixture(scope="module")

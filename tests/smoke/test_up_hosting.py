@@ -29,7 +29,7 @@ from tests.kit.lab import UpLab
 from tests.kit.lab import wart as lab_wart
 
 # One worker starts the module's lab once (split between workers, each started its own).
-pytestmark = [pytest.mark.smoke, pytest.mark.xdist_group("up_hosting")]
+pytestmark = pytest.mark.one_worker
 
 TEACHER, STUDENT, PASSWORD = "teacher", "pupil", "a long test password"
 

@@ -23,7 +23,7 @@ from services.registry.accounts_db import RegistryDB
 from tests.integration.test_plugins import race_plugin  # noqa: F401 - the fixture
 from tests.kit.lab import UpLab
 
-pytestmark = [pytest.mark.smoke, pytest.mark.timeout(400)]
+pytestmark = pytest.mark.timeout(400)
 TEACHER, PASSWORD = "teacher", "a long test password"
 
 

@@ -12,7 +12,7 @@ from bench import cpu_by_process
 from bench.cpu_by_process import Sampler, kind_of
 
 # One worker: the sampler counts by kind of process, and these tests' children share one.
-pytestmark = pytest.mark.xdist_group("cpu_by_process")
+pytestmark = pytest.mark.one_worker
 
 # Burns one second of its own CPU time, however busy the machine is.
 BURN = "import time\nwhile time.process_time() < 1.0:\n    pass\n"

@@ -24,7 +24,7 @@ from tests.kit.overhead_camera import BoardCamera, Effects, Lens
 
 # Rendering the module's 50 board views costs seconds of CPU: its tests share one
 # worker (xdist group), which renders them once.
-pytestmark = pytest.mark.xdist_group("tracking-intrinsics")
+pytestmark = pytest.mark.one_worker
 
 LENS = Lens()  # 1280x720, barrel distortion
 

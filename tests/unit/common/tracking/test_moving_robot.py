@@ -15,7 +15,7 @@ from tests.kit.overhead_camera import Effects, Hand, Lens, Mount, OverheadCamera
 
 # Making the module's camera costs seconds of CPU: its tests share one
 # worker (xdist group), which makes it once.
-pytestmark = pytest.mark.xdist_group("tracking-moving_robot")
+pytestmark = pytest.mark.one_worker
 
 FPS = 15.0
 LENS = Lens()

@@ -12,7 +12,7 @@ from tests.kit.overhead_camera import Lens, Mount, OverheadCamera, Robot
 
 # Making the module's camera costs seconds of CPU: its tests share one
 # worker (xdist group), which makes it once.
-pytestmark = pytest.mark.xdist_group("tracking-overhead_camera")
+pytestmark = pytest.mark.one_worker
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,7 @@ from tests.kit.overhead_camera import (
 
 # Making the module's camera and its lens calibration costs seconds of CPU: its tests
 # share one worker (xdist group), which makes them once.
-pytestmark = pytest.mark.xdist_group("tracking-tilted_camera")
+pytestmark = pytest.mark.one_worker
 
 AGENTS = ["k1", "k2", "k3", "k4"]
 LENS = Lens()  # 1280x720, barrel distortion of 7 to 12 px at the arena's corners
