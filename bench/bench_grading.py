@@ -26,35 +26,10 @@ from common.client.lab_client import LabClient
 from common.messages import SubmissionInfo
 from common.service import close_session
 from services.registry.roster import RosterRow
-from tests.kit.courses import COURSE, add_course
+from tests.kit.courses import add_course, assignment_toml
 from tests.kit.lab import PASSWORD, Procs, make_lab, start_router
 
 REPO = Path(__file__).resolve().parent.parent
-
-ASSIGNMENT = """
-name = "bench"
-course = "{course}"
-map = "empty"
-robot = "k1"
-time_limit = {seconds}
-episodes = {episodes}
-opens = 2026-01-01T00:00:00Z
-deadline = 2099-01-01T00:00:00Z
-quota = 100
-[[start]]
-x = 300
-y = 500
-[[zones]]
-id = "goal"
-shape = "circle"
-x = 700
-y = 500
-radius = 80
-[score]
-name = "points"
-order = "higher"
-rule = '100 * reached("goal") - time_to("goal")'
-"""
 
 
 def pct(values: list[float], q: float) -> float:
@@ -85,7 +60,15 @@ def main(argv: list[str] | None = None) -> int:
             lab = make_lab(router, procs, Path(tmp), users=users)
             rows = [RosterRow(line=n + 2, user=s, name=s) for n, s in enumerate(students)]
             rows.append(RosterRow(line=len(rows) + 2, user="ida", name="Ida", role="teacher"))
-            text = ASSIGNMENT.format(course=COURSE, seconds=args.seconds, episodes=args.episodes)
+            text = assignment_toml(
+                "bench",
+                time_limit=f"{args.seconds:g}",
+                episodes=str(args.episodes),
+                quota="100",
+                goal_x=700,
+                goal_radius=80,
+                rule='100 * reached("goal") - time_to("goal")',
+            )
             add_course(lab.db_path, rows, text)
             lab.start_registry()
             lab.start_runner()

@@ -232,30 +232,17 @@ def test_a_type_the_runner_cannot_simulate_fails_only_that_arena_s_dry_runs_in_w
         assert "Traceback" not in proc.output(), (proc.name, proc.output()[-2000:])
 
 
-ASSIGNMENT = b"""
-name = "look-around"
-course = "robotics-26"
-map = "class"
-robot = "e1"
-time_limit = 2
-episodes = 1
-opens = 2026-11-01T08:00:00Z
-deadline = 2026-12-01T18:00:00Z
-[[start]]
-x = 300
-y = 500
-[[zones]]
-id = "goal"
-shape = "circle"
-x = 800
-y = 500
-radius = 80
-[score]
-name = "points"
-unit = "pts"
-order = "higher"
-rule = '100 * reached("goal")'
-"""
+# Graded on the saved arena, from where the lab's robot stands (300, 500).
+ASSIGNMENT = assignment_toml(
+    "look-around",
+    map='"class"',
+    robot='"e1"',
+    time_limit="2",
+    episodes="1",
+    goal_x=800,
+    goal_radius=80,
+    rule='100 * reached("goal")',
+).encode()
 
 
 def test_a_graded_episode_runs_on_a_map_saved_with_a_custom_robot(tmp_path: Path) -> None:

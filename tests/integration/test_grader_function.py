@@ -24,8 +24,7 @@ from tests.kit.lab import ProcessLab
 
 pytestmark = pytest.mark.timeout(300)
 GRADERS = Path(__file__).parent / "grading" / "graders"
-RULE = """rule = '100 * reached("goal") - 5 * collisions() - time_to("goal")'"""
-WOBBLE = """rule = '100 * reached("goal") - metric("wobble")'"""
+WOBBLE = '100 * reached("goal") - metric("wobble")'
 
 
 def course(*args: str) -> subprocess.CompletedProcess[str]:
@@ -43,9 +42,15 @@ def add(on: ProcessLab, tmp: Path, name: str, grader: str, **fields: str) -> Non
     (tmp / grader).write_bytes((GRADERS / grader).read_bytes())
     path = tmp / f"{name}.toml"
     text = assignment_toml(
-        name, grader=f'"{grader}"', episodes="1", seeds="[1]", time_limit="1.0", **fields
+        name,
+        rule=WOBBLE,
+        grader=f'"{grader}"',
+        episodes="1",
+        seeds="[1]",
+        time_limit="1.0",
+        **fields,
     )
-    path.write_text(text.replace(RULE, WOBBLE))
+    path.write_text(text)
     done = course("--db", str(on.db_path), "assignment", "add", str(path))
     assert done.returncode == 0, done.stderr
     assert f"grader {grader} stored with it" in done.stdout
@@ -65,11 +70,11 @@ def test_a_teachers_grader_scores_and_its_failures_are_the_teachers(
         ("nograde.py", "grader: nograde.py defines no grade(episode) function at its top level"),
         ("missing.py", "grader: cannot read missing.py (No such file or directory)"),
     ):
-        bad.write_text(assignment_toml("bad", grader=f'"{grader}"').replace(RULE, WOBBLE))
+        bad.write_text(assignment_toml("bad", rule=WOBBLE, grader=f'"{grader}"'))
         done = course("--db", db, "assignment", "add", str(bad))
         assert done.returncode == 1 and problem in done.stderr, done.stderr
         assert "refused (nothing written)" in done.stderr
-    bad.write_text(assignment_toml("bad").replace(RULE, WOBBLE))  # metric() with no grader
+    bad.write_text(assignment_toml("bad", rule=WOBBLE))  # metric() with no grader
     done = course("--db", db, "assignment", "add", str(bad))
     assert "reads metric('wobble'), but the assignment names no grader" in done.stderr
     assert " bad " not in course("--db", db, "assignments").stdout

@@ -12,7 +12,6 @@ the lab is refused at submission, nothing written.
 
 from __future__ import annotations
 
-import textwrap
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -30,9 +29,9 @@ from services.bridge.simbody import SimBody
 from services.lab import wiring
 from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grader_function import course
-from tests.integration.test_grading import COURSE, source, wart
+from tests.integration.test_grading import source, wart
 from tests.kit.agentkit import WORLD, start_agent_context, start_runner
-from tests.kit.courses import import_roster
+from tests.kit.courses import assignment_toml, import_roster
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
 
 pytestmark = [pytest.mark.timeout(300), needs_sandbox]
@@ -40,39 +39,21 @@ GRADERS = Path(__file__).parent / "grading" / "graders"
 
 
 def assignment(name: str, arena: str) -> str:
-    return textwrap.dedent(
-        f"""
-        name = "{name}"
-        course = "{COURSE}"
-        map = "empty"
-        robot = "k1"
-        time_limit = 2.0
-        episodes = 1
-        opens = 2026-01-01T00:00:00Z
-        deadline = 2099-01-01T00:00:00Z
-        grader = "wobble.py"
-
-        [[start]]
-        x = 300
-        y = 500
-
-        [[zones]]
-        id = "goal"
-        shape = "circle"
-        x = 560
-        y = 500
-        radius = 80
-
-        [score]
-        name = "points"
-        rule = '100 * reached("goal") - metric("wobble")'
-
-        [real]
-        arena = "{arena}"
-        robot = "k1"
-        time_limit = 3.0
-        after = "simulation-passed"
-        """
+    return assignment_toml(
+        name,
+        time_limit="2.0",
+        episodes="1",
+        grader='"wobble.py"',
+        goal_x=560,
+        goal_radius=80,
+        rule='100 * reached("goal") - metric("wobble")',
+        sections=f"""
+            [real]
+            arena = "{arena}"
+            robot = "k1"
+            time_limit = 3.0
+            after = "simulation-passed"
+            """,
     )
 
 

@@ -20,8 +20,21 @@ COURSE = "robotics-26"
 ROSTER = "user,name,role\nalice,Alice A,student\nida,Ida I,teacher\n"
 
 
-def assignment_toml(name: str, **fields: str) -> str:
-    """The reach-the-goal assignment; ``fields`` replace its top-level lines."""
+RULE = '100 * reached("goal") - 5 * collisions() - time_to("goal")'
+
+
+def assignment_toml(
+    name: str,
+    *,
+    start_x: float = 300,
+    goal_x: float = 420,
+    goal_radius: float = 60,
+    rule: str = RULE,
+    sections: str = "",
+    **fields: str,
+) -> str:
+    """The reach-the-goal assignment: from (``start_x``, 500) to a circle at (``goal_x``,
+    500); ``fields`` replace its top-level lines and ``sections`` (TOML) follow it."""
     values = {
         "name": f'"{name}"',
         "course": f'"{COURSE}"',
@@ -35,27 +48,13 @@ def assignment_toml(name: str, **fields: str) -> str:
         **fields,
     }
     head = "\n".join(f"{k} = {v}" for k, v in values.items())
-    return head + textwrap.dedent(
-        """
-
-        [[start]]
-        x = 300
-        y = 500
-        heading_deg = 0
-
-        [[zones]]
-        id = "goal"
-        shape = "circle"
-        x = 420
-        y = 500
-        radius = 60
-
-        [score]
-        name = "points"
-        unit = "pts"
-        order = "higher"
-        rule = '100 * reached("goal") - 5 * collisions() - time_to("goal")'
-        """
+    return (
+        f"{head}\n\n"
+        f"[[start]]\nx = {start_x:g}\ny = 500\nheading_deg = 0\n\n"
+        f'[[zones]]\nid = "goal"\nshape = "circle"\n'
+        f"x = {goal_x:g}\ny = 500\nradius = {goal_radius:g}\n\n"
+        f'[score]\nname = "points"\nunit = "pts"\norder = "higher"\nrule = \'{rule}\'\n'
+        + (f"\n{textwrap.dedent(sections).strip()}\n" if sections else "")
     )
 
 
