@@ -41,6 +41,7 @@ import numpy as np
 from common.sim2d.maps import load_map
 from common.sim2d.world import EditError, World
 from common.tracking.truth import now_truth, write_truth
+from common.worker import Worker
 from services.bridge.body import KinematicSpec
 from services.bridge.body_truth import BodyTruth
 
@@ -84,8 +85,7 @@ class SimBody:
         self._mode = "speed"  # "speed" | "position" (C: counter targets)
         self._target = (0, 0)
         self._vmax = (20, 20)
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker(self._run, "sim-body")
         self.ticks = 0
         self.body = body or BodyTruth.slipping(slip)
         # What the floor gives of each wheel's turn (1: no slip).
@@ -119,19 +119,14 @@ class SimBody:
     # ------------------------------------------------------------ the stepping thread
 
     def start(self) -> SimBody:
-        if self._thread is None:
-            self._stop.clear()
+        if not self._worker.running:
             with self._lock:
                 self.world.sense()  # readings valid before the first tick
-            self._thread = threading.Thread(target=self._run, name="sim-body", daemon=True)
-            self._thread.start()
+            self._worker.start()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
+        self._worker.stop(timeout)
         with self._lock:
             self._due = None
 
@@ -144,7 +139,7 @@ class SimBody:
     def _run(self) -> None:
         with self._lock:
             self._due = time.monotonic()
-        while not self._stop.is_set():
+        while not self._worker.stopping.is_set():
             with self._lock:
                 self._catch_up()
                 truth = self._true_poses()
@@ -155,7 +150,7 @@ class SimBody:
                 except OSError as exc:
                     log.warning("cannot write the truth file %s: %s", self.truth, exc)
             if due is not None:
-                self._stop.wait(max(0.0, due - time.monotonic()))
+                self._worker.wait(max(0.0, due - time.monotonic()))
 
     def _catch_up(self) -> None:
         """Under the lock: the ticks due by now, so whatever is read or commanded finds

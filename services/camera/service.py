@@ -17,7 +17,6 @@ its robots' names: robot kN wears marker N), so nothing is configured twice.
 
 from __future__ import annotations
 
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,6 +54,7 @@ from common.tracking.markers import (
     grid_description,
 )
 from common.tracking.tracker import Tracker
+from common.worker import Worker
 from services.camera.arguments import DEFAULT_HEIGHT_MM
 from services.camera.sources import FrameSource, SourceEnded, SourceError
 
@@ -103,7 +103,7 @@ class CameraService(Service):
         self.frames = 0
         self.size = (0, 0)
         self._fps = 0.0
-        self._thread: threading.Thread | None = None
+        self._worker = Worker(self._run, f"camera-{self.ident}")
         self._told: set[str] = set()
         self._status_at = 0.0
         self._next_layout = 0.0
@@ -151,12 +151,10 @@ class CameraService(Service):
         self._status_pub = self.track(
             self.session.declare_publisher(keys.camera_status(self.realm, self.world, self.ident))
         )
-        self._thread = threading.Thread(target=self._run, name=f"camera-{self.ident}", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def on_stop(self, timeout: float) -> None:
-        if self._thread is not None:
-            self._thread.join(timeout)
+        self._worker.stop(timeout)  # the loop ends on the service's stop (self.stopped)
         self.source.close()
 
     # -- the capture loop

@@ -55,6 +55,7 @@ from common.recording import schema as s
 from common.recording.reader import RecordingError
 from common.recording.store import RecordingStore
 from common.recording.writer import RecordingWriter, frame_record, pose_record, sample_record
+from common.worker import Worker
 from services.context.agent_queue import RunningJob
 from services.context.camera_tap import CameraTap
 from services.context.command_tap import CommandTap
@@ -100,8 +101,7 @@ class SlotRecorder:
         self._runs: dict[str, _Run] = {}  # request id -> run (writer thread only)
         self._agents: dict[str, str] = {}  # agent -> request id being recorded (any thread)
         self._lock = threading.Lock()
-        self._thread: threading.Thread | None = None
-        self._halt = threading.Event()
+        self._worker = Worker(self._work, "recorder")
         self.feeds = RecorderFeeds(session, log)
         self._snapshot: WorldSnapshot | None = None
         self._snapshot_tried = 0.0
@@ -129,15 +129,13 @@ class SlotRecorder:
                 *self.camera.subscriptions(),
             ]
         )
-        self._thread = threading.Thread(target=self._work, name="recorder", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def close(self, timeout: float) -> None:
         """Finish every open recording now (no trail) and stop the thread."""
-        self._halt.set()
+        self._worker.stopping.set()  # first: no feed is heard again while it closes
         self.feeds.close()
-        if self._thread is not None:
-            self._thread.join(timeout)
+        self._worker.stop(timeout)
 
     # -- what the context tells it (any thread)
 
@@ -181,7 +179,9 @@ class SlotRecorder:
         """The world's frames and samples and the cameras' videos, heard while a slot is
         recorded (after each change to the runs): a world builds no frame, a camera
         encodes no video, that no one reads."""
-        self.feeds.hear_while(lambda: self.any_recorded() and not self._halt.is_set(), self._while)
+        self.feeds.hear_while(
+            lambda: self.any_recorded() and not self._worker.stopping.is_set(), self._while
+        )
 
     def _while(self) -> list[tuple[str, Callable[[zenoh.Sample], None]]]:
         w, r = self.world, self.realm
@@ -243,7 +243,7 @@ class SlotRecorder:
             "snapshot": self._note_snapshot,
             **self.camera.handlers(),
         }
-        while not self._halt.is_set():
+        while not self._worker.stopping.is_set():
             try:
                 item = self._queue.get(timeout=0.2)
             except queue.Empty:

@@ -50,6 +50,7 @@ from common.service import RequestError
 from common.sim2d import maps, wander
 from common.sim2d.drives import DEFAULT_DRIVE
 from common.sim2d.world import EditError, World
+from common.worker import Worker
 from common.world import packing
 from common.world.leasemac import WorldBoxKeys, snapshot_with_identity
 from common.world.leases import LeaseBook
@@ -157,8 +158,7 @@ class EngineService(WorldService):
         self._estopped = False  # the arena's emergency stop: robots do not even wander
         self._wander_layout = -1
         self._wanderers = np.zeros(0, bool)
-        self._thread: threading.Thread | None = None
-        self._halt = threading.Event()
+        self._worker = Worker(self._run, f"sim-{self.ident}")
         self._agent_pubs: dict[str, Any] = {}
         self._matched: set[str] = set()
         # Agents whose sensors someone watches (their agent/<a>/watch tokens) or
@@ -201,14 +201,11 @@ class EngineService(WorldService):
             )
         )
         self._declare_agent_publishers()
-        self._thread = threading.Thread(target=self._run, name=f"sim-{self.ident}", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def on_stop(self, timeout: float) -> None:
         self.close_world_interface()
-        self._halt.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
+        self._worker.stop(timeout)
         for pub in self._agent_pubs.values():
             pub.undeclare()
         self._agent_pubs.clear()
@@ -508,7 +505,7 @@ class EngineService(WorldService):
         next_tick = time.monotonic()
         last_publish = 0.0
         layout = self.world.layout
-        while not self._halt.is_set():
+        while not self._worker.stopping.is_set():
             try:
                 self._drain()
                 self._watchdog()
@@ -535,7 +532,7 @@ class EngineService(WorldService):
             next_tick += period
             delay = next_tick - time.monotonic()
             if delay > 0:
-                self._halt.wait(delay)
+                self._worker.wait(delay)
             elif delay < -0.5:  # far behind (a stall): do not try to catch up in a burst
                 self.ticks_late += 1
                 next_tick = time.monotonic()

@@ -17,6 +17,7 @@ import zenoh
 
 from common import keys
 from common.messages import GraderQueue, encode
+from common.worker import Worker
 
 QUEUE_PERIOD_S = 5.0  # how often the depth is put
 
@@ -40,8 +41,7 @@ class QueueDepth:
         self.log = logging.getLogger(f"grader.{grader}.queue")
         self._running = 0
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._say, name="queue-depth", daemon=True)
+        self._worker = Worker(self._say, "queue-depth")
 
     @contextmanager
     def grading(self) -> Iterator[None]:
@@ -62,17 +62,15 @@ class QueueDepth:
         )
 
     def start(self) -> None:
-        self._thread.start()
+        self._worker.start()
 
     def stop(self, timeout: float = 2.0) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout)
+        self._worker.stop(timeout)
 
     def _say(self) -> None:
-        while not self._stop.is_set():
+        while not self._worker.stopping.is_set():
             try:
                 self.session.put(self.key, encode(self.now()))
             except Exception as exc:  # the session closing: the stop comes next
                 self.log.warning("could not put the queue's depth: %s", exc)
-            self._stop.wait(self.period)
+            self._worker.wait(self.period)

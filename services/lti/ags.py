@@ -25,6 +25,7 @@ from urllib.parse import urlencode, urlsplit, urlunsplit
 
 import jwt
 
+from common.worker import Worker
 from services.lti.config import LtiConfig, Platform
 from services.lti.store import LtiStore, Outgoing
 from services.lti.tool_key import ToolKey
@@ -144,26 +145,21 @@ class Passback:
         self.store = store
         self.tokens = TokenSource(key)
         self._wake = threading.Event()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker(self._run, "passback", wake=self._wake.set)
 
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="passback", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def stop(self, timeout: float) -> None:
-        self._stop.set()
-        self._wake.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
+        self._worker.stop(timeout)
 
     def wake(self) -> None:
         self._wake.set()
 
     def _run(self) -> None:
-        while not self._stop.is_set():
+        while not self._worker.stopping.is_set():
             for out in self.store.due(time.time()):
-                if self._stop.is_set():
+                if self._worker.stopping.is_set():
                     return
                 self._post_one(out)
             following = self.store.next_due()

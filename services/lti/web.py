@@ -23,6 +23,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
+from common.worker import Worker
 from services.lti.launch import Launch, Launcher, LaunchError
 
 log = logging.getLogger("wart.lti")
@@ -131,21 +132,18 @@ class ToolServer:
                 tool.handle(self, "POST")
 
         self.httpd = _Server((host, port), Handler)
-        self._thread: threading.Thread | None = None
+        self._worker = Worker(self.httpd.serve_forever, "http", wake=self.httpd.shutdown)
 
     @property
     def port(self) -> int:
         return int(self.httpd.server_address[1])
 
     def start(self) -> None:
-        self._thread = threading.Thread(target=self.httpd.serve_forever, name="http", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def stop(self, timeout: float) -> None:
-        self.httpd.shutdown()
+        self._worker.stop(timeout)
         self.httpd.server_close()
-        if self._thread is not None:
-            self._thread.join(timeout)
 
     # -- requests
 

@@ -69,6 +69,7 @@ from common.messages import (
     encode,
 )
 from common.service import RequestError, Service
+from common.worker import Worker
 from services.lab.supervisor import AliveWatch
 from services.lab.twins_db import TwinStore
 from services.registry.accounts_db import DbError, RegistryDB, SessionRecord
@@ -123,10 +124,9 @@ class Registry(Service):
         self._contexts: dict[str, ContextInfo] = {}
         self._contexts_lock = threading.Lock()
         self._refresh = threading.Event()
-        self._stop = threading.Event()
         self._watch: AliveWatch | None = None
-        self._thread: threading.Thread | None = None
-        self._sync: threading.Thread | None = None
+        self._contexts_worker = Worker(self._watch_contexts, "contexts", wake=self._refresh.set)
+        self._revocations_worker = Worker(self._sync_revocations, "revoked")
         self._revocation_pub: zenoh.Publisher | None = None
         self.admin = AdminDesk(
             session,
@@ -176,18 +176,13 @@ class Registry(Service):
         self.serve(keys.registry_lti(self.realm), self.on_lti)
         self.serve(keys.registry_twins(self.realm), self.twins.on_twins)
         self.subscribe(keys.registry_report(self.realm), self.admin.on_report)
-        self._thread = threading.Thread(target=self._watch_contexts, name="contexts", daemon=True)
-        self._thread.start()
-        self._sync = threading.Thread(target=self._sync_revocations, name="revoked", daemon=True)
-        self._sync.start()
+        self._contexts_worker.start()
+        self._revocations_worker.start()
 
     def on_stop(self, timeout: float) -> None:
-        self._stop.set()
-        self._refresh.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
-        if self._sync is not None:
-            self._sync.join(timeout)
+        self._revocations_worker.stopping.set()  # both end together, then each is joined
+        self._contexts_worker.stop(timeout)
+        self._revocations_worker.stop(timeout)
         if self._watch is not None:
             self._watch.close()
         self.term.flush()  # the refusals counted this minute get their line
@@ -435,7 +430,7 @@ class Registry(Service):
         """Sessions revoked in the database by another hand (`wart users passwd` and
         `remove` on the file, registry running): enforced here and published to every
         service within REVOCATIONS_SYNC_S."""
-        while not self._stop.wait(REVOCATIONS_SYNC_S):
+        while not self._revocations_worker.wait(REVOCATIONS_SYNC_S):
             try:
                 found = [
                     r for r in self.db.revocations() if not self.verifier.is_revoked(r.session_id)
@@ -488,7 +483,7 @@ class Registry(Service):
         """
         known: set[str] = set()
         last = 0.0
-        while not self._stop.is_set():
+        while not self._contexts_worker.stopping.is_set():
             self._refresh.wait(0.3)
             self._refresh.clear()
             live = set(self._alive(AliveKind.CONTEXT))

@@ -15,6 +15,7 @@ import logging
 import threading
 import time
 
+from common.worker import Worker
 from viewers.web.prepared_frame import PreparedFrame
 from viewers.web.viser_fast import HeldBuffers
 from viewers.web.world_view import WorldView
@@ -33,8 +34,7 @@ class FramePump:
         self.period = 1.0 / rate
         self._views: dict[int, WorldView] = {}
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker(self._run, "frame-pump")
         self.ticks = 0
         self.busy_s = 0.0  # time spent working, for the benchmark and the log
 
@@ -47,19 +47,15 @@ class FramePump:
             self._views.pop(id(view), None)
 
     def start(self) -> FramePump:
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="frame-pump", daemon=True)
-            self._thread.start()
+        self._worker.start()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
+        self._worker.stop(timeout)
 
     def _run(self) -> None:
         next_at = time.monotonic()
-        while not self._stop.is_set():
+        while not self._worker.stopping.is_set():
             started = time.monotonic()
             self.tick()
             self.busy_s += time.monotonic() - started
@@ -68,7 +64,7 @@ class FramePump:
             if delay < -self.period:  # overloaded: drop the backlog, never burst
                 next_at = time.monotonic()
                 delay = 0.0
-            self._stop.wait(max(0.001, delay))  # always yield the GIL a little
+            self._worker.wait(max(0.001, delay))  # always yield the GIL a little
 
     def tick(self) -> None:
         self.ticks += 1

@@ -33,6 +33,7 @@ from urllib3.exceptions import HTTPError
 
 from common import keys
 from common.messages import GraderQueue, MessageError, decode
+from common.worker import Worker
 from services.lab.labfile import RunnerScale
 
 PERIOD_S = 5.0  # how often the depth is weighed (the grader puts it every 5 s)
@@ -97,21 +98,19 @@ class RunnerScaler:
         self.log = logging.getLogger("kube.runners")
         self._heard: dict[str, tuple[float, GraderQueue]] = {}
         self._lock = threading.Lock()
-        self._stop = threading.Event()
         self._api_down = False
         self._silent = False
         self._sub = session.declare_subscriber(keys.grader_queue_all(realm), self._on_depth)
-        self._thread = threading.Thread(target=self._run, name="runner-scale", daemon=True)
+        self._worker = Worker(self._run, "runner-scale")
 
     def start(self) -> RunnerScaler:
-        self._thread.start()
+        self._worker.start()
         return self
 
     def stop(self) -> None:
-        self._stop.set()
+        self._worker.stopping.set()
         self._sub.undeclare()
-        if self._thread.is_alive():
-            self._thread.join(10.0)
+        self._worker.stop(10.0)
 
     def _on_depth(self, sample: zenoh.Sample) -> None:
         try:
@@ -130,7 +129,7 @@ class RunnerScaler:
         return sum(d.queued + d.running for d in fresh) if fresh else None
 
     def _run(self) -> None:
-        while not self._stop.wait(self.period):
+        while not self._worker.wait(self.period):
             self.step()
 
     def step(self) -> None:
