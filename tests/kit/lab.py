@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import IO
 from unittest import mock
 
+import nacl.pwhash
 import psutil
 import zenoh
 
@@ -428,24 +429,46 @@ class ProcessLab:
 
 
 @functools.cache
-def _password_hash(password: str) -> bytes:
-    """One argon2id hash of ``password`` per test session (about 0.2 s each on a busy machine).
+def _password_hash(password: str, quick: bool) -> bytes:
+    """One argon2id hash of ``password`` per test session.
 
     A salted hash string verifies whichever account holds it, so every lab's
     accounts can share it; make_lab otherwise hashed six passwords per test.
+    ``quick``: at libsodium's least cost. The registry checks a hash at the cost
+    written in it, through the same argon2id call, so a test's login is the
+    production path at about 0.1 ms instead of 65 (a suite's hundreds of logins
+    cost its registries a minute of CPU), as Django's tests swap in a fast hasher;
+    the benchmarks that time logins keep the registry's cost (bench/labproc.py).
     """
-    return hash_password(password)
+    if not quick:
+        return hash_password(password)
+    if len(password) < accounts_db.MIN_PASSWORD:
+        return hash_password(password)  # refused, as the registry's own would be
+    return bytes(
+        nacl.pwhash.argon2id.str(
+            password.encode(),
+            opslimit=nacl.pwhash.argon2id.OPSLIMIT_MIN,
+            memlimit=nacl.pwhash.argon2id.MEMLIMIT_MIN,
+        )
+    )
 
 
 def lab_state(
-    state: Path, *, users: dict[str, str] = USERS, password: str = PASSWORD
+    state: Path,
+    *,
+    users: dict[str, str] = USERS,
+    password: str = PASSWORD,
+    quick_passwords: bool = True,
 ) -> RegistryIdentity:
     """A lab's state before any process: the registry's key, and a DB with ``admin``
-    (password PASSWORD) and ``users`` (a role each, password ``password``)."""
+    (password PASSWORD) and ``users`` (a role each, password ``password``), their
+    password hashes quick unless ``quick_passwords`` is False (see _password_hash)."""
     state.mkdir(parents=True, exist_ok=True)
     identity, _ = RegistryIdentity.load_or_create(state / "registry.key")
     db = RegistryDB(state / "registry.db")
-    with mock.patch.object(accounts_db, "hash_password", _password_hash):
+    with mock.patch.object(
+        accounts_db, "hash_password", functools.partial(_password_hash, quick=quick_passwords)
+    ):
         # the admin ensure_admin would make, with a known password rather than a random one
         db.add_user("admin", ["admin"], password=PASSWORD)
         for name, role in users.items():
