@@ -4,8 +4,9 @@
 # deploy/container/build makes it once per set of wheels (its tag is a hash of them,
 # of this file and of the base), and the image (Containerfile) starts from it: a build
 # after a change to the project's sources installs the project and compiles its
-# kernels, not its 60 dependencies again. It is never shipped: the image copies only
-# /opt/wart out of it, onto the base.
+# kernels, not its 60 dependencies again. It is never shipped: the runtime
+# (Containerfile.runtime) copies its venv out of it onto the base, and the image the
+# project's files and install.
 
 ARG BASE=localhost/wart-base:bookworm
 FROM ${BASE}
