@@ -109,7 +109,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     if not pages.CHROMIUM.exists():
-        print(f"{pages.CHROMIUM} is missing (apt-get install chromium)", file=sys.stderr)
+        print(
+            f"{pages.CHROMIUM} is missing (apt-get install chromium-headless-shell)",
+            file=sys.stderr,
+        )
         return 2
     pages.CHROMIUM_ARGS.extend(args.chromium_arg)
     if args.draws:

@@ -42,7 +42,7 @@ pytestmark = pytest.mark.browser
 
 def _skip_reason() -> str | None:
     if not CHROMIUM.exists():
-        return f"{CHROMIUM} is missing (apt-get install chromium)"
+        return f"{CHROMIUM} is missing (apt-get install chromium-headless-shell)"
     try:
         import playwright.sync_api  # noqa: F401
     except ImportError:

@@ -1,9 +1,10 @@
 """Debian's Chromium driven by Playwright: the test browser's settings and a viser page's helpers.
 
-The browser is never downloaded: Playwright launches /usr/bin/chromium with
-the usual headless flags (software WebGL). Screenshots go to test-artifacts/.
-The browser tests' fixtures (tests/browser/conftest.py) and the page benchmarks
-both open their pages through these.
+The browser is never downloaded: Playwright launches Debian's Chromium headless
+shell (/usr/bin/chromium-headless-shell) with the usual flags (software WebGL).
+Screenshots go to test-artifacts/. The browser tests' fixtures
+(tests/browser/conftest.py) and the page benchmarks both open their pages
+through these.
 """
 
 from __future__ import annotations
@@ -31,7 +32,12 @@ from viewers.web.world_feed import SceneFrame
 from viewers.web.world_view import WorldView
 
 ARTIFACTS = REPO / "test-artifacts"
-CHROMIUM = Path("/usr/bin/chromium")
+# Debian's chromium-headless-shell, not the whole browser run headless: it is the
+# browser Playwright itself picks for headless pages, and the same Chromium build
+# without a window system's parts. A joined page cost 2.71-2.80 s of Chromium's CPU
+# in it against 3.12-3.43 s in /usr/bin/chromium --headless (browser process 0.21
+# against 0.47 s), interleaved runs of bench.page_load_cost --pages 6 --join --hold 3.
+CHROMIUM = Path("/usr/bin/chromium-headless-shell")
 # Why the test pages are cheaper to draw than a student's: Debian's Chromium on CI
 # renders WebGL in software (SwiftShader, in its GPU process). Measured with three
 # pages on a 12-robot arena at 1280x800 (2 cores): the GPU process took 1.4 cores,
@@ -58,11 +64,6 @@ CHROMIUM_ARGS = [
     "--disable-background-networking",
     "--disable-component-update",
     "--disable-sync",
-    # Chromium's headless shell still builds the omnibox's popups (WebUI pages of
-    # its own, in a renderer of their own) for every browser context: about 0.8 s
-    # of CPU per test page opened, a fifth of a joined viser page's cost
-    # (python -m bench.page_load_cost --pages 4 --join, with and without).
-    "--disable-features=WebUIOmniboxPopup,WebUIOmniboxAimPopup",
 ]
 VIEWPORT = {"width": 1280, "height": 800}  # a laptop screen
 
