@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from common.messages import WorldSnapshot
 from common.recording.reader import Recording
@@ -231,6 +230,11 @@ def fit_drive(runs: list[RunData]) -> list[Estimate]:
         # hand) is not the drive's doing, and must not pull the fit.
         start = base.copy()
         start[3] = START_LATENCY_S  # inside its bounds: from the bound itself the fit stayed there
+        # scipy.optimize is imported at the fit, not with the module: it is about 0.8 s
+        # of a process's start, and the web viewer imports this module with its
+        # recordings panel, where few sessions ever calibrate.
+        from scipy.optimize import least_squares
+
         fitted = least_squares(
             residuals,
             start[free],
