@@ -70,6 +70,9 @@ class PhaseCpu:
         if spent is not None:
             report = outcome.get_result()
             report.user_properties.append(("cpu_s", round(spent[0] + spent[1], 3)))
+            # The worker's own share apart: a child's CPU counts when it is reaped,
+            # which may be in a later test than the one that started it.
+            report.user_properties.append(("own_cpu_s", round(spent[0], 3)))
 
 
 class TimeSpent:
@@ -87,12 +90,14 @@ class TimeSpent:
         group = group or "(no group)"
         self.by_worker[worker] += report.duration
         self.by_group[group] += report.duration
-        cpu = dict(report.user_properties).get("cpu_s", 0.0)
+        properties = dict(report.user_properties)
+        cpu = properties.get("cpu_s", 0.0)
         self.cpu_by_group[group] += float(cpu)  # type: ignore[arg-type]
         self.tests_in_group[group].add(nodeid)
         if self.dump_path is not None:
             line = {"test": nodeid, "group": group, "worker": worker}
             line |= {"phase": report.when, "seconds": round(report.duration, 3), "cpu_s": cpu}
+            line["own_cpu_s"] = properties.get("own_cpu_s", 0.0)
             with open(self.dump_path, "a") as out:
                 out.write(json.dumps(line) + "\n")
 
