@@ -30,6 +30,14 @@ from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wa
 from tests.kit.waits import wait_for
 from tests.time_spent import PhaseCpu, TimeSpent
 
+# Each client derives its mailbox key from the password (argon2id, about 77 ms of CPU)
+# before it asks the registry. On a student's machine that is their own CPU; the tests
+# log the same users of the same lab in again and again in one process, and on a busy
+# machine a derivation can outlast the 2 s a slowed source must wait after its third
+# failure. The key is a pure function of (realm, user, password): each is derived once
+# per test process, and the registry's side is untouched.
+lab_client.mailbox_key_from_password = functools.cache(lab_client.mailbox_key_from_password)
+
 # The kit's `wart` processes are forked from one that has imported what they import
 # (tests/kit/forkserver.py): hundreds of service starts, each without 0.4-0.7 s of imports.
 os.environ.setdefault(forkserver.ENABLED_ENV, "1")
@@ -146,19 +154,3 @@ def alive_watch(zsession: zenoh.Session, router: Router) -> Iterator[AliveWatch]
     watch = AliveWatch(zsession, keys.alive_all(router.realm))
     yield watch
     watch.close()
-
-
-@pytest.fixture
-def quick_mailbox_keys(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Each client derives its mailbox key from the password (argon2id) before it asks:
-    derive each once, for the tests of the registry's side.
-
-    On a student's machine that is their own CPU; here it is the test's, and on a busy
-    machine it can outlast the 2 s a slowed source must wait after its third failure,
-    so the throttle would have lapsed before the next try arrives.
-    """
-    monkeypatch.setattr(
-        lab_client,
-        "mailbox_key_from_password",
-        functools.cache(lab_client.mailbox_key_from_password),
-    )

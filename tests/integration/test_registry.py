@@ -26,7 +26,6 @@ from tests.kit.lab import PASSWORD, ProcessLab, registry_lab
 # One worker starts the module's router once.
 pytestmark = [
     pytest.mark.one_worker,
-    pytest.mark.usefixtures("quick_mailbox_keys"),
     pytest.mark.shared_router,
 ]
 

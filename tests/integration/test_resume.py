@@ -17,8 +17,6 @@ from common.service import close_session, open_session
 from tests.conftest import Procs, Router
 from tests.kit.lab import PASSWORD, ProcessLab, registry_lab
 
-pytestmark = pytest.mark.usefixtures("quick_mailbox_keys")
-
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:

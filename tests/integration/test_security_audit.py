@@ -22,8 +22,6 @@ from services.registry.accounts_db import RegistryDB
 from tests.conftest import REPO, Procs, Router, wait_for, wart_env
 from tests.kit.lab import PASSWORD, ProcessLab, audit_trail, registry_lab
 
-pytestmark = pytest.mark.usefixtures("quick_mailbox_keys")
-
 
 @pytest.fixture
 def lab(router: Router, procs: Procs, tmp_path: Path) -> ProcessLab:

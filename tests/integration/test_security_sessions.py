@@ -17,8 +17,6 @@ from common.service import close_session, open_session
 from tests.conftest import Procs, Router
 from tests.kit.lab import PASSWORD, ProcessLab, registry_lab, session_revoked
 
-pytestmark = pytest.mark.usefixtures("quick_mailbox_keys")
-
 WEEK = 7 * 24 * 3600.0
 
 

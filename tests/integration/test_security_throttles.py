@@ -21,8 +21,6 @@ from services.registry.accounts_db import RegistryDB
 from tests.conftest import Procs, Router
 from tests.kit.lab import PASSWORD, ProcessLab, registry_lab
 
-pytestmark = pytest.mark.usefixtures("quick_mailbox_keys")
-
 CLASSROOM = "203.0.113.7"  # a classroom's NAT: every page of the class has this address
 
 
