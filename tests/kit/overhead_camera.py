@@ -75,15 +75,23 @@ class Lens:
         return np.stack([xd, yd], axis=-1)
 
     def undistort(self, xy_d: np.ndarray, iterations: int = 30) -> np.ndarray:
-        """Distorted normalised coordinates -> ideal ones (the model has no closed inverse)."""
+        """Distorted normalised coordinates -> ideal ones (the model has no closed inverse).
+
+        Fixed-point iterations until a step moves no point by more than 1e-13 (1e-10
+        pixels): for these lenses 11 to 14 of the ``iterations`` at most (over a whole
+        supersampled frame, 8 million points, each iteration is a fifth of a second)."""
         x, y = xy_d[..., 0].copy(), xy_d[..., 1].copy()
         for _ in range(iterations):
             r2 = x * x + y * y
             radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
             dx = 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x)
             dy = self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y
-            x = (xy_d[..., 0] - dx) / radial
-            y = (xy_d[..., 1] - dy) / radial
+            x_next = (xy_d[..., 0] - dx) / radial
+            y_next = (xy_d[..., 1] - dy) / radial
+            step = max(float(np.abs(x_next - x).max()), float(np.abs(y_next - y).max()))
+            x, y = x_next, y_next
+            if step <= 1e-13:
+                break
         return np.stack([x, y], axis=-1)
 
     def to_pixels(self, xy_d: np.ndarray) -> np.ndarray:
@@ -439,9 +447,9 @@ class BoardCamera:
         u = (np.arange(lens.width * s, dtype=np.float64) + 0.5) / s - 0.5
         v = (np.arange(lens.height * s, dtype=np.float64) + 0.5) / s - 0.5
         uu, vv = np.meshgrid(u, v)
-        self._ideal = lens.undistort(lens.from_pixels(np.stack([uu, vv], axis=-1))).astype(
-            np.float32
-        )
+        ideal = lens.undistort(lens.from_pixels(np.stack([uu, vv], axis=-1))).astype(np.float32)
+        # Each supersampled pixel's ray (x/z, y/z, 1) in the camera's axes, made once.
+        self._rays = np.concatenate([ideal, np.ones((*ideal.shape[:2], 1), np.float32)], -1)
 
     def pose_toward(
         self,
@@ -476,11 +484,16 @@ class BoardCamera:
         fx = effects or Effects(exposure_s=0.0)
         normal = rotation[:, 2]
         origin = np.asarray(translation, dtype=np.float64).ravel()
-        rays = np.concatenate([self._ideal, np.ones((*self._ideal.shape[:2], 1), np.float32)], -1)
+        rays = self._rays
         depth = float(normal @ origin) / (rays @ normal.astype(np.float32))
-        hit = rays * depth[..., None] - origin.astype(np.float32)
-        bx = hit @ rotation[:, 0].astype(np.float32)
-        by = hit @ rotation[:, 1].astype(np.float32)
+        # The ray's hit on the board (rays * depth - origin) in the board's x and y axes,
+        # without making the hit points themselves.
+        bx = depth * (rays @ rotation[:, 0].astype(np.float32)) - np.float32(
+            origin @ rotation[:, 0]
+        )
+        by = depth * (rays @ rotation[:, 1].astype(np.float32)) - np.float32(
+            origin @ rotation[:, 1]
+        )
         k = self._px_per_mm
         pad = round(self.board.square_mm * k / 2)
         canvas = cv2.remap(
