@@ -116,8 +116,31 @@ class ClientInstall:
         return {line.split("==")[0].lower() for line in done.stdout.splitlines() if line}
 
 
+def source_copy(into: Path) -> Path:
+    """The checkout's files as git sees them (tracked, and new ones not ignored), copied
+    to ``into``: a build writes build/ and an egg-info into the tree it builds, and the
+    checkout is shared with the rest of the suite and the image build. Outside a git
+    checkout, the checkout itself."""
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=REPO,
+        capture_output=True,
+        check=False,
+    )
+    if listed.returncode != 0:
+        return REPO
+    for name in filter(None, listed.stdout.decode().split("\0")):
+        source = REPO / name
+        if source.is_file():  # a tracked file deleted in the working tree is not copied
+            target = into / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(source, target)
+    return into
+
+
 def make_client_install(root: Path, extras: Sequence[str] = ()) -> ClientInstall:
-    """A fresh virtualenv at ROOT with the project (not editable) and ``extras`` installed."""
+    """A fresh virtualenv at ROOT with the project (not editable, built from a copy of
+    the checkout: :func:`source_copy`) and ``extras`` installed."""
     tool = uv()
     if tool is None:
         raise RuntimeError("uv is needed to make a client virtualenv (./dev installs it)")
@@ -127,7 +150,8 @@ def make_client_install(root: Path, extras: Sequence[str] = ()) -> ClientInstall
         check=True,
         capture_output=True,
     )
-    wanted = f"{REPO}[{','.join(extras)}]" if extras else str(REPO)
+    project = source_copy(root.with_name(root.name + "-source"))
+    wanted = f"{project}[{','.join(extras)}]" if extras else str(project)
     done = subprocess.run(
         [tool, "pip", "install", "-q", "--python", str(root / "bin" / "python"), wanted],
         capture_output=True,
