@@ -37,8 +37,17 @@ def test_a_session_still_closing_at_the_end_does_not_abort_the_command() -> None
 
 
 def test_without_it_the_interpreters_shutdown_aborts() -> None:
-    """What exit_process is for: Zenoh's thread comes back during the shutdown."""
-    ended = _run("sys.exit")
-    if "closed in time" in ended.stdout:  # the close beat the wait: nothing to show
-        return
-    assert ended.returncode == -6 and "exception not rethrown" in ended.stderr, ended
+    """What exit_process is for: Zenoh's thread comes back during the shutdown.
+
+    A race: the close may still end before the wait, or before the shutdown reaches
+    what it breaks (a clean exit 3). Tried up to five times, the abort must show at
+    least once; if it never does, this Zenoh may no longer need exit_process."""
+    outcomes = []
+    for _ in range(5):
+        ended = _run("sys.exit")
+        if ended.returncode == -6:
+            assert "exception not rethrown" in ended.stderr, ended
+            return
+        assert (ended.returncode, ended.stderr) == (3, ""), ended  # nothing else may happen
+        outcomes.append(ended.stdout.splitlines()[-1])
+    raise AssertionError(f"the shutdown never aborted in 5 tries: {outcomes}")
