@@ -1,8 +1,8 @@
 """Web viewer benchmark: N browsers watching a 1,000-robot world fed at 50 Hz.
 
 Starts a WebViewer on an in-memory lab (fake world at --world-rate Hz), opens
---browsers headless Chromium pages (Debian's /usr/bin/chromium via
-Playwright), logs each one in and joins the arena, then for --seconds counts:
+--browsers headless Chromium pages (Debian's chromium-headless-shell via
+Playwright, tests/kit/pages.py), logs each one in and joins the arena, then for --seconds counts:
 
 - in each page: websocket messages received and bytes, via a WebSocket
   wrapper injected before viser's code runs (each paced frame is one atomic
