@@ -166,10 +166,17 @@ class ViserPage:
     name: str
     sent: deque[tuple[int, bytes]] = field(default_factory=lambda: deque(maxlen=400))
     sent_count: int = 0  # frames sent so far: their numbers in ``sent``
+    received_count: int = 0  # frames the server sent the page
     sockets: int = 0
+    console: deque[str] = field(default_factory=lambda: deque(maxlen=20))
 
     def __post_init__(self) -> None:
         self.page.on("websocket", self._watch)  # type: ignore[attr-defined]
+        self.page.on("console", self._note_console)  # type: ignore[attr-defined]
+
+    def _note_console(self, message: Any) -> None:
+        if "GL Driver Message" not in message.text:  # software WebGL's, on every page
+            self.console.append(f"{message.type}: {message.text}"[:300])
 
     def _watch(self, ws: object) -> None:
         self.sockets += 1
@@ -179,7 +186,11 @@ class ViserPage:
             self.sent.append((self.sent_count, data))
             self.sent_count += 1
 
+        def on_received(_payload: bytes | str) -> None:
+            self.received_count += 1
+
         ws.on("framesent", on_sent)  # type: ignore[attr-defined]
+        ws.on("framereceived", on_received)  # type: ignore[attr-defined]
 
     @property
     def p(self):
@@ -256,11 +267,37 @@ class ViserPage:
         if uuid and self.p.locator(f"[id='file_upload_{uuid.decode()}']").count():
             uuid = b""  # an upload button opens a file chooser; its file is what it sends
         already = self.sent_count
+        if uuid:  # marks this element: was the clicked button's node still the page's after?
+            button.evaluate("b => { b.dataset.wartClicked = '1'; }")
+        received = self.received_count
         button.click(timeout=timeout)
         if not uuid or not self.sockets or self.sent_since(already, uuid, 15.0):
             return
         shot = self.screenshot("click-not-sent")
-        raise AssertionError(f"the page did not send the click on {name!r} in 15 s ({shot.name})")
+        raise AssertionError(
+            f"the page did not send the click on {name!r} in 15 s ({shot.name}); "
+            + self._click_report(uuid.decode(), received)
+        )
+
+    def _click_report(self, uuid: str, received: int) -> str:
+        """What the page can say of a click that never left: for the next such failure."""
+        state = self.p.evaluate(
+            """uuid => {
+                const b = document.getElementById(uuid);
+                return {
+                    node: b === null ? 'gone' : b.dataset.wartClicked ? 'same' : 'replaced',
+                    disabled: b !== null && b.disabled,
+                    sure: window.__wartSureClicks || null,
+                };
+            }""",
+            uuid,
+        )
+        return (
+            f"the button's node after: {state['node']}, disabled {state['disabled']}; "
+            f"sure-clicks {state['sure']}; frames received since the click "
+            f"{self.received_count - received}, sockets {self.sockets}; "
+            f"console: {list(self.console)[-8:]}"
+        )
 
     def sent_since(self, first: int, needle: bytes, timeout: float) -> bool:
         """Has a frame numbered ``first`` or later held ``needle``, within ``timeout`` s?"""
