@@ -28,6 +28,7 @@ reachable by Tab beside their visible labels.
 from __future__ import annotations
 
 import html
+import re
 
 import viser
 
@@ -62,8 +63,15 @@ LABEL_FIX_JS = """
 
 
 def script_image_html(script: str) -> str:
-    """An image that cannot load (an empty data URL) and runs ``script``, fixed text, once."""
-    script = " ".join(line.strip() for line in script.strip().splitlines())
+    """An image that cannot load (an empty data URL) and runs ``script``, fixed text, once.
+
+    The script goes in as one line: a ``//`` comment would end it there, so it is refused.
+    """
+    lines = [line.strip() for line in script.strip().splitlines()]
+    commented = [line for line in lines if re.search(r"(^|\s)//", line)]
+    if commented:
+        raise ValueError(f"a // comment in a one-line script (use /* */): {commented[0]!r}")
+    script = " ".join(lines)
     return (
         '<img src="data:," alt="" style="display:none" '
         f'onerror="{html.escape(script, quote=True)}">'

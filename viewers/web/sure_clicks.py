@@ -37,9 +37,14 @@ proof the click was dropped. (Each GUI container has its own throttle, the
 panel and each modal; a message of another container leaving first proves
 nothing, but the first look comes after the click's own throttle has fired:
 its timer was set before the click, 50 ms long, ours at the click, 100 ms, and
-timers fire in the order they are due, however late.) With no other message
-it only waits (a late timer), and a click the throttle merely delays is left
-to it. A value may reach the server twice (harmless: the same value). Not
+timers fire in the order they are due, however late.) By the same order, a
+click after which nothing at all has left, looks after its throttle fired,
+never reached the throttle or was thrown away with it: the button missed the
+click, or the container holding the throttle was remounted, which cancels its
+pending message (viser's ``useThrottledMessageSender``). That click is sent
+after SILENT_LOOKS looks, unless its button is gone or disabled by then (a
+busy fresh-clone run once lost 'Add account' so, for 15 s, with no message
+after it). A value may reach the server twice (harmless: the same value). Not
 covered: number inputs and sliders (their values' types are not in the DOM),
 a dropdown chosen with the keyboard, and the code editor's hidden text area,
 whose writes the editor resends itself (assets/editor-src/editor.js).
@@ -56,11 +61,13 @@ from viewers.web.labels import script_image_html
 FIRST_LOOK_MS = 100
 LOOK_EVERY_MS = 100
 LOOKS = 100
+# Looks with nothing at all sent since the click before it counts as lost (see above).
+SILENT_LOOKS = 5
 
 SURE_CLICKS_JS = """
 (function () {
   if (window.__wartSureClicks) return;
-  var state = window.__wartSureClicks = {clicks: 0, values: 0};
+  var state = window.__wartSureClicks = {clicks: 0, values: 0, lost: 0};
   var UUID = /^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$/;
   var GUI = /^Gui(Update|ButtonHold|FormSubmit|FormDirty)Message$/;
   var sent = [];
@@ -84,8 +91,8 @@ SURE_CLICKS_JS = """
   }
   Worker.prototype.postMessage = function (data) {
     var m = data && data.type === 'send' ? data.message : null;
+    if (m) worker = this;  /* the page's camera reports name it before any GUI message */
     if (m && GUI.test(m.type)) {
-      worker = this;
       flushTyped(this, m.uuid);
       sent.push([performance.now(), m.uuid]);
       if (sent.length > 400) sent.splice(0, 200);
@@ -103,6 +110,14 @@ SURE_CLICKS_JS = """
       update(worker, uuid, true);
       state.clicks += 1;
       console.warn('wart: a click the message throttle dropped was sent again');
+      return;
+    }
+    var button = document.getElementById(uuid);
+    if (!other && worker && LOOKS - left >= SILENT && button && !button.disabled) {
+      flushTyped(worker, uuid);
+      update(worker, uuid, true);
+      state.lost += 1;
+      console.warn('wart: a click that never reached the message throttle was sent');
       return;
     }
     if (left > 0) setTimeout(function () { look(uuid, at, left - 1); }, EVERY);
@@ -153,6 +168,7 @@ def sure_clicks_html() -> str:
         SURE_CLICKS_JS.replace("FIRST", str(FIRST_LOOK_MS))
         .replace("EVERY", str(LOOK_EVERY_MS))
         .replace("LOOKS", str(LOOKS))
+        .replace("SILENT", str(SILENT_LOOKS))
     )
     return script_image_html(script)
 

@@ -5,7 +5,10 @@ from __future__ import annotations
 import html
 import re
 
-from viewers.web.labels import LABEL_FIX_JS, label_fixer_html
+import pytest
+
+from viewers.web.labels import LABEL_FIX_JS, label_fixer_html, script_image_html
+from viewers.web.sure_clicks import sure_clicks_html
 
 
 def test_the_script_is_one_escaped_attribute_of_a_hidden_image() -> None:
@@ -18,3 +21,12 @@ def test_the_script_is_one_escaped_attribute_of_a_hidden_image() -> None:
     assert "window.__wartLabels" in script  # once per page, however often it is added
     assert "<" not in match.group(1) and ">" not in match.group(1)
     assert script.split() == LABEL_FIX_JS.split()  # the same code, on one line
+
+
+def test_a_line_comment_is_refused_not_left_to_swallow_the_rest_of_the_line() -> None:
+    # The script goes in as one line: "// note" would silently comment out all after it.
+    with pytest.raises(ValueError, match="// comment"):
+        script_image_html("var a = 1;  // note\nwindow.__ran = a;")
+    assert "http://x" in html.unescape(script_image_html("var u = 'http://x';"))
+    sure_clicks_html()  # the page scripts the viewer adds build
+    label_fixer_html()
