@@ -1,8 +1,8 @@
 """The lab as containers: the image built here, the pods played by podman, a real client.
 
 One module, one image build per run (deploy/container/build, with overlay
-storage: about 3 minutes on 2 cores from the base, 13 s after a change to the
-sources, 7-10 s when the image is up to date), one lab played
+storage: about 90 s on 2 cores from nothing, the checkout's kernels' module
+taken; a few seconds when the image is up to date), one lab played
 with ``podman kube play`` from ``wart kube render --mode podman``: the router,
 the registry (its database on a volume) and arena1 (engine and agent
 context), TLS with the lab's certificates and access rules, on the host's
