@@ -150,9 +150,9 @@ def describe(value: Any) -> object:
 
 
 def state_sample() -> tuple[Any, ...]:
-    """fused.new_state's arguments as the World passes them (world_tick._new_fused_state), smallest.
+    """fused.new_state's argument as the World passes it (world_tick._new_fused_state), smallest.
 
-    The build compiles new_state for these arguments' types and compiled.py
+    The build compiles new_state for its types and compiled.py
     checks each call's against them: one sample, so the two cannot disagree.
     """
     # here, not at the top: ./dev asks whether the module is built without numpy

@@ -100,54 +100,20 @@ def _release(typingctx, address, typ):
 
 
 def state_type() -> types.Type:
-    """fused.TickState's numba type for aot.state_sample's argument types."""
+    """fused.TickState's numba type for aot.state_sample's types."""
     global _STATE
     if _STATE is None:
-        _STATE = typeof(fused.new_state(*aot.state_sample()))
+        _STATE = typeof(fused.new_state(aot.state_sample()))
     return _STATE
 
 
 def _exports() -> list[tuple[str, Any, Callable[..., Any]]]:
     """(name, signature, Python function compiled under that name) for every export."""
     state = state_type()
-    new_state_args = tuple(typeof(a) for a in aot.state_sample())
+    given_type = typeof(aot.state_sample())
 
-    def new_state(
-        pose,
-        vel,
-        cmd,
-        counters,
-        arm,
-        holding,
-        drive,
-        circles,
-        tables,
-        scene,
-        pucks_table,
-        objects,
-        readings,
-        geometry,
-        substeps,
-    ):  # pragma: no cover (compiled)
-        return _to_address(  # type: ignore[call-arg]  # numba's typing: (context, ...)
-            fused.new_state(
-                pose,
-                vel,
-                cmd,
-                counters,
-                arm,
-                holding,
-                drive,
-                circles,
-                tables,
-                scene,
-                pucks_table,
-                objects,
-                readings,
-                geometry,
-                substeps,
-            )
-        )
+    def new_state(given):  # pragma: no cover (compiled)
+        return _to_address(fused.new_state(given))  # type: ignore[call-arg]  # numba's typing: (context, ...)
 
     def tick(address, sense, key, lights):  # pragma: no cover
         fused.tick(_from_address(address, state), sense, key, lights)  # type: ignore[call-arg]
@@ -162,7 +128,7 @@ def _exports() -> list[tuple[str, Any, Callable[..., Any]]]:
     c1 = types.Array(types.float64, 1, "C")
     c2 = types.Array(types.float64, 2, "C")
     return [
-        ("new_state", types.uint64(*new_state_args), new_state),
+        ("new_state", types.uint64(given_type), new_state),
         ("tick", types.void(types.uint64, *fused._REST), tick),
         ("free_state", types.void(types.uint64), free_state),
         ("bin_circles", circles, discs.bin_circles.py_func),

@@ -74,8 +74,10 @@ class _Address(int):
 _state_kinds: object = None
 
 
-def new_tick(*args: Any) -> tuple[object, Callable[[Any, bool, np.uint64, np.ndarray], None]]:
-    """(state, tick) for fused.new_state's arguments: ``tick(state, sense, key, lights)``.
+def new_tick(
+    given: tuple[Any, ...],
+) -> tuple[object, Callable[[Any, bool, np.uint64, np.ndarray], None]]:
+    """(state, tick) for fused.new_state's ``given``: ``tick(state, sense, key, lights)``.
 
     ``lights`` must be a C-contiguous (L, 4) float64 array (SensorSuite.lit's):
     the ahead-of-time tick does not check it. The other arguments are checked
@@ -84,16 +86,16 @@ def new_tick(*args: Any) -> tuple[object, Callable[[Any, bool, np.uint64, np.nda
     """
     global _state_kinds
     if _module is not None:
-        *rest, geometry, substeps = args
-        args = (*rest, tuple(float(g) for g in geometry), int(substeps))
+        *rest, geometry, substeps = given
+        given = (*rest, tuple(float(g) for g in geometry), int(substeps))
         if _state_kinds is None:
             _state_kinds = aot.describe(aot.state_sample())
-        if aot.describe(args) == _state_kinds:
-            return _Address(_module.new_state(*args)), _module.tick
+        if aot.describe(given) == _state_kinds:
+            return _Address(_module.new_state(given)), _module.tick
         log.warning("kernels: a fused state of other types than built for: numba's runs it")
     from common.sim2d import fused  # numba: only when the module cannot run this state
 
-    state = fused.new_state(*args)
+    state = fused.new_state(given)
     return state, fused.entry(state)
 
 
@@ -132,7 +134,7 @@ def warm_up() -> float:
     if _module is None:
         return _jit().warm_up()
     t0 = time.perf_counter()
-    state, tick = new_tick(*aot.state_sample())
+    state, tick = new_tick(aot.state_sample())
     tick(state, False, np.uint64(1), np.zeros((0, 4)))
     return time.perf_counter() - t0
 

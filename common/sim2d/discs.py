@@ -150,54 +150,18 @@ def _poses_out(pose, h, px, py, th, v, w, out, vel, objects):  # pragma: no cove
 
 
 @njit(cache=_CACHE)
-def tick(
-    pose,
-    cmd,
-    mm_s_per_unit,
-    wheel_base,
-    radius,
-    mass,
-    counters,
-    pulses_per_tick,
-    scene,
-    circles,
-    width,
-    height,
-    substep_s,
-    substeps,
-    objects,
-    arm,
-):  # pragma: no cover
+def tick(robots, drive, scene, circles, geometry, substeps, objects):  # pragma: no cover
     """One tick of the discs drive: returns (pose, vel) of every robot, new arrays.
 
     See :func:`tick_into`, which this calls with fresh output arrays (the
     objects move in place).
     """
-    n = pose.shape[0]
+    n = robots[0].shape[0]
+    width, height, _ = geometry
     out = np.empty((n, 3))
     vel = np.empty((n, 3))
-    buffers = drive_buffers(n, objects[0].shape[0], width, height, radius)
-    tick_into(
-        pose,
-        cmd,
-        mm_s_per_unit,
-        wheel_base,
-        radius,
-        mass,
-        counters,
-        pulses_per_tick,
-        scene,
-        circles,
-        width,
-        height,
-        substep_s,
-        substeps,
-        out,
-        vel,
-        buffers,
-        objects,
-        arm,
-    )
+    buffers = drive_buffers(n, objects[0].shape[0], width, height, drive[3])
+    tick_into(robots, drive, scene, circles, geometry, substeps, objects, (out, vel), buffers)
     return out, vel
 
 
@@ -285,40 +249,33 @@ def _contacts_grown(
 
 @njit(cache=_CACHE, inline="always", **_UNCOUNTED)  # inlined as _contacts is
 def tick_into(
-    pose,
-    cmd,
-    mm_s_per_unit,
-    wheel_base,
-    radius,
-    mass,
-    counters,
-    pulses_per_tick,
-    scene,
-    circles,
-    width,
-    height,
-    substep_s,
-    substeps,
-    out,
-    vel,
-    buffers,
-    objects,
-    arm,
+    robots, drive, scene, circles, geometry, substeps, objects, into, buffers
 ):  # pragma: no cover
-    """One tick of the discs drive: every robot's new pose into ``out``, velocity into ``vel``.
+    """One tick of the discs drive: every robot's new pose and velocity into ``into``.
 
-    ``pose`` (N, 3) is where the robots are (read only, unless it is ``out``:
-    common/sim2d/fused.py moves its own buffer in place); ``cmd`` (N, 2) their
-    wheel speeds in the type's units, ``mm_s_per_unit``, ``wheel_base`` per
-    robot; ``radius`` and ``mass`` per disc (the N robots, then the objects);
-    ``counters`` advance in place by ``pulses_per_tick`` per unit of speed.
-    ``scene`` is the sensing grid's static scene as a plain tuple
-    (kernels.StaticScene's layout), ``circles`` its round obstacles binned by
-    :func:`bin_circles`. ``vel`` is the tick's mean velocity: x, y (mm/s) and
-    turn rate (rad/s). ``buffers``: its work arrays, :func:`drive_buffers` for
-    these discs and this arena. ``objects``: the movable objects
-    (pucks.objects_table's layout), moved in place; ``arm`` World.arm.
+    The arguments are grouped as common/sim2d/fused.py's TickState holds them:
+
+    - ``robots``: (pose, cmd, counters, arm). ``pose`` (N, 3) is where the
+      robots are (read only, unless it is ``into``'s pose: fused.py moves its
+      own buffer in place); ``cmd`` (N, 2) their wheel speeds in the type's
+      units; ``counters`` advance in place; ``arm`` is World.arm.
+    - ``drive``: (mm_s_per_unit, wheel_base, pulses_per_tick) per robot, then
+      (radius, mass) per disc (the N robots, then the objects); the counters
+      advance by ``pulses_per_tick`` per unit of speed.
+    - ``scene``: the sensing grid's static scene as a plain tuple
+      (kernels.StaticScene's layout); ``circles`` its round obstacles binned by
+      :func:`bin_circles`.
+    - ``geometry``: (width, height, substep s) of the arena and the tick, in
+      ``substeps`` substeps.
+    - ``objects``: the movable objects (pucks.objects_table's layout), moved in place.
+    - ``into``: (pose, vel): the tick's poses and its mean velocities, x, y
+      (mm/s) and turn rate (rad/s).
+    - ``buffers``: the work arrays, :func:`drive_buffers` for these discs and this arena.
     """
+    pose, cmd, counters, arm = robots
+    mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = drive
+    width, height, substep_s = geometry
+    out, vel = into
     n = pose.shape[0]
     k = objects[0].shape[0]
     px, py, th, v, w, near, is_near, pushed, moved, held, layer, normals, count = buffers[:13]
@@ -361,23 +318,17 @@ def tick_into(
 def warm_up() -> None:
     """Compile (or load from the on-disk cache) this drive's kernels: kernels.warm_up calls it."""
     one = np.ones(1)
+    robots = (np.zeros((1, 3)), np.zeros((1, 2)), np.zeros((1, 2)), np.zeros(1))
+    circles = bin_circles(*aot.circles_sample())
+    objects = pucks.objects_table(0, 1)
     tick(
-        np.zeros((1, 3)),
-        np.zeros((1, 2)),
-        one,
-        one,
-        one,
-        one,
-        np.zeros((1, 2)),
-        one,
+        robots,
+        (one, one, one, one, one),
         aot.scene_sample(),
-        bin_circles(*aot.circles_sample()),
-        100.0,
-        100.0,
-        0.01,
+        circles,
+        (100.0, 100.0, 0.01),
         1,
-        pucks.objects_table(0, 1),
-        np.zeros(1),
+        objects,
     )
 
 

@@ -100,27 +100,12 @@ def split_buffers(discs_: int) -> tuple[np.ndarray, ...]:
 
 @njit(cache=_CACHE, **_UNCOUNTED)
 def _robots_range(
-    lo,
-    hi,
-    first,
-    pose,
-    cmd,
-    mm_s_per_unit,
-    wheel_base,
-    counters,
-    pulses_per_tick,
-    radius,
-    buffers,
-    grid,
-    scene,
-    circles,
-    split,
-    seg,
-    ranges,
+    lo, hi, first, robots, drive, buffers, grid, scene, circles, split, seg, ranges
 ):  # pragma: no cover
     """Robots ``lo`` to ``hi - 1``: wheels (``first`` substep), arc, pair cell, obstacle test.
 
-    ``grid``: (substep s, margin, width, height, cell, gx, gy). As
+    ``robots``, ``drive``: discs.tick_into's. ``grid``: (substep s, margin,
+    width, height, cell, gx, gy). As
     discs.tick_into and pairs._pairs and _obstacles_first do it, robot by
     robot, except that a near robot's push out is written to ``qx``, ``qy``
     (``split``'s first two), and each robot is listed under the share of the
@@ -128,6 +113,8 @@ def _robots_range(
     shares).
     """
     h = grid[0]
+    pose, cmd, counters, _ = robots
+    mm_s_per_unit, wheel_base, pulses_per_tick, radius, _ = drive
     px, py, th, v, w = buffers[0], buffers[1], buffers[2], buffers[3], buffers[4]
     for r in range(ranges):
         split[5][seg, r] = 0
@@ -278,27 +265,7 @@ def _scan_range(
 
 @njit(cache=_CACHE, parallel=True)
 def tick_into_split(
-    pose,
-    cmd,
-    mm_s_per_unit,
-    wheel_base,
-    radius,
-    mass,
-    counters,
-    pulses_per_tick,
-    scene,
-    circles,
-    width,
-    height,
-    substep_s,
-    substeps,
-    out,
-    vel,
-    buffers,
-    objects,
-    arm,
-    split,
-    threads,
+    robots, drive, scene, circles, geometry, substeps, objects, into, buffers, split, threads
 ):  # pragma: no cover
     """discs.tick_into with its per-disc loops on numba's threads (the module's docstring).
 
@@ -306,6 +273,10 @@ def tick_into_split(
     The caller sets numba's thread count to ``threads`` (:func:`on_threads`;
     numba.get_num_threads in here would keep the kernel out of the cache).
     """
+    pose, cmd, _, arm = robots
+    mm_s_per_unit, _, _, radius, mass = drive
+    width, height, substep_s = geometry
+    out, vel = into
     n = pose.shape[0]
     k = objects[0].shape[0]
     nd = n + k
@@ -344,24 +315,9 @@ def tick_into_split(
     for s in range(substeps):
         first = s == 0
         for c in prange(chunks):
+            lo, hi = n * c // chunks, n * (c + 1) // chunks
             _robots_range(
-                n * c // chunks,
-                n * (c + 1) // chunks,
-                first,
-                pose,
-                cmd,
-                mm_s_per_unit,
-                wheel_base,
-                counters,
-                pulses_per_tick,
-                radius,
-                buffers,
-                grid,
-                scene,
-                circles,
-                split,
-                c,
-                ranges,
+                lo, hi, first, robots, drive, buffers, grid, scene, circles, split, c, ranges
             )
         if k:
             pucks.start_substep(n, objects, arm, px, py, th, v, w, start_x, start_y, substep_s)
@@ -448,22 +404,13 @@ def on_threads(args: tuple[object, ...], threads: int) -> None:
 
 
 def tick(
-    pose: np.ndarray,
-    cmd: np.ndarray,
-    mm_s_per_unit: np.ndarray,
-    wheel_base: np.ndarray,
-    radius: np.ndarray,
-    mass: np.ndarray,
-    counters: np.ndarray,
-    pulses_per_tick: np.ndarray,
+    robots: tuple[np.ndarray, ...],
+    drive: tuple[np.ndarray, ...],
     scene: tuple[object, ...],
     circles: tuple[np.ndarray, np.ndarray],
-    width: float,
-    height: float,
-    substep_s: float,
+    geometry: tuple[float, float, float],
     substeps: int,
     objects: tuple[np.ndarray, ...],
-    arm: np.ndarray,
     threads: int,
     split: tuple[np.ndarray, ...],
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -472,60 +419,25 @@ def tick(
     Kept by the caller: allocated each tick, their 2 MB (10,000 robots and
     5,000 balls) cost a seventh of the tick's CPU.
     """
-    n = pose.shape[0]
-    k = objects[0].shape[0]
-    out = np.empty((n, 3))
-    vel = np.empty((n, 3))
-    buffers = discs.drive_buffers(n, k, width, height, radius)
-    args = (
-        pose,
-        cmd,
-        mm_s_per_unit,
-        wheel_base,
-        radius,
-        mass,
-        counters,
-        pulses_per_tick,
-        scene,
-        circles,
-        width,
-        height,
-        substep_s,
-        substeps,
-        out,
-        vel,
-        buffers,
-        objects,
-        arm,
-        split,
+    n = robots[0].shape[0]
+    width, height, _ = geometry
+    into = (np.empty((n, 3)), np.empty((n, 3)))
+    buffers = discs.drive_buffers(n, objects[0].shape[0], width, height, drive[3])
+    on_threads(
+        (robots, drive, scene, circles, geometry, substeps, objects, into, buffers, split), threads
     )
-    on_threads(args, threads)
-    return out, vel
+    return into
 
 
 def warm_up() -> None:
     """Compile (or load from the on-disk cache) the split tick: kernels.warm_up calls it."""
     one = np.ones(1)
-    tick(
-        np.full((1, 3), 50.0),
-        np.zeros((1, 2)),
-        one,
-        one,
-        one,
-        one,
-        np.zeros((1, 2)),
-        one,
-        aot.scene_sample(),
-        contacts.bin_circles(*aot.circles_sample()),
-        100.0,
-        100.0,
-        0.01,
-        1,
-        pucks.objects_table(0, 1),
-        np.zeros(1),
-        1,
-        split_buffers(1),
-    )
+    robots = (np.full((1, 3), 50.0), np.zeros((1, 2)), np.zeros((1, 2)), np.zeros(1))
+    circles = contacts.bin_circles(*aot.circles_sample())
+    geometry = (100.0, 100.0, 0.01)
+    objects = pucks.objects_table(0, 1)
+    drive = (one, one, one, one, one)
+    tick(robots, drive, aot.scene_sample(), circles, geometry, 1, objects, 1, split_buffers(1))
 
 
 # The split tick calls the drive's and the contacts' kernels: their edits must reach its cache.

@@ -89,46 +89,19 @@ structref.define_proxy(TickState, TickStateType, list(FIELDS))
 
 
 @njit(cache=_CACHE)
-def new_state(
-    pose,
-    vel,
-    cmd,
-    counters,
-    arm,
-    holding,
-    drive,
-    circles,
-    tables,
-    scene,
-    pucks_table,
-    objects,
-    readings,
-    geometry,
-    substeps,
-):  # pragma: no cover
-    """A :class:`TickState` holding these (arrays by reference, not copied) and its work arrays.
+def new_state(given):  # pragma: no cover
+    """A :class:`TickState` of ``given``, the world's part (:data:`FIELDS`' first fifteen, arrays
+    by reference, not copied), and its work arrays.
 
-    ``objects``: pucks.scene_buffers for these objects and round obstacles.
+    ``given``'s ``objects``: pucks.scene_buffers for these objects and round obstacles.
     """
+    pose = given[0]  # in FIELDS' order
+    drive, _, tables, scene, pucks_table, objects, _, geometry, _ = given[6:]
     n = pose.shape[0]
     width, height, _ = geometry
     nc = n + objects[1].shape[0]
     return TickState(
-        pose,
-        vel,
-        cmd,
-        counters,
-        arm,
-        holding,
-        drive,
-        circles,
-        tables,
-        scene,
-        pucks_table,
-        objects,
-        readings,
-        geometry,
-        substeps,
+        *given,
         discs.drive_buffers(n, pucks_table[0].shape[0], width, height, drive[3]),
         K.circle_buffers(nc, scene[3] * scene[4]),
         # objects[4] is the movable edges, where a MovingScene has them
@@ -182,28 +155,9 @@ def tick(state, sense, key, lights):  # pragma: no cover
     pose, vel, cmd, counters, arm, holding = fields[:6]  # in FIELDS' order
     drive, circles, tables, scene, pucks_table, objects = fields[6:12]
     readings, geometry, substeps, drive_work, circle_work, sense_work = fields[12:]
-    mm_s_per_unit, wheel_base, pulses_per_tick, radius, mass = drive
-    width, height, substep_s = geometry
+    robots = (pose, cmd, counters, arm)
     discs.tick_into(
-        pose,
-        cmd,
-        mm_s_per_unit,
-        wheel_base,
-        radius,
-        mass,
-        counters,
-        pulses_per_tick,
-        scene,
-        circles,
-        width,
-        height,
-        substep_s,
-        substeps,
-        pose,
-        vel,
-        drive_work,
-        pucks_table,
-        arm,
+        robots, drive, scene, circles, geometry, substeps, pucks_table, (pose, vel), drive_work
     )
     if sense:
         m, e = pucks.scene_into(pose.shape[0], pucks_table, arm, scene[7], scene[8], objects)
@@ -252,5 +206,5 @@ def warm_up() -> None:
 
     For the arguments' types the World passes (aot.state_sample), as compiled.py's warm-up.
     """
-    state = new_state(*aot.state_sample())
+    state = new_state(aot.state_sample())
     entry(state)(state, False, np.uint64(1), np.zeros((0, 4)))

@@ -151,47 +151,13 @@ def warm_up() -> float:
     """Compile (or load from the on-disk cache) every kernel; returns the seconds it took."""
     t0 = time.perf_counter()
     none = np.zeros(0, dtype=np.uint64)  # no bodies: compiles without touching chipmunk
-    physics_tick(
-        C.FUNCTIONS,
-        C.FUNCTIONS[C.SPACE_STEP],
-        np.uint64(0),
-        0.01,
-        0,
-        none,
-        none,
-        none,
-        np.zeros((0, 2)),
-        np.ones(0),
-        np.ones(0),
-        np.zeros((0, 2)),
-        np.ones(0),
-    )
-    physics_tick_servo(
-        C.FUNCTIONS,
-        C.FUNCTIONS[C.SPACE_STEP],
-        np.uint64(0),
-        0.01,
-        0,
-        none,
-        none,
-        np.zeros((0, 2)),
-        np.ones(0),
-        np.ones(0),
-        np.zeros((0, 2)),
-        np.ones(0),
-        np.ones((0, 4)),
-        np.zeros((0, 6)),
-    )
-    servo_forces(
-        C.FUNCTIONS,
-        none,
-        np.zeros((0, 2)),
-        np.ones(0),
-        np.ones(0),
-        np.ones((0, 4)),
-        np.zeros((0, 6)),
-        0.01,
-    )
+    step = (C.FUNCTIONS, C.FUNCTIONS[C.SPACE_STEP], np.uint64(0), 0.01, 0)
+    cmd, counters = np.zeros((0, 2)), np.zeros((0, 2))
+    rates = (np.ones(0), np.ones(0), np.ones(0))
+    servo, memory = np.ones((0, 4)), np.zeros((0, 6))
+    physics_tick(*step, none, none, none, cmd, counters, rates)
+    physics_tick_servo(*step, none, none, cmd, counters, rates, servo, memory)
+    servo_forces(C.FUNCTIONS, none, cmd, rates, servo, memory, 0.01)
     read_bodies(C.FUNCTIONS, none, none)
     clamp_speeds(np.zeros((1, 2)), np.ones(1), np.zeros((1, 2)))
     braitenberg_speeds(

@@ -47,10 +47,8 @@ def physics_tick(
     agents,
     objects,
     cmd,
-    mm_s_per_unit,
-    wheel_base,
     counters,
-    pulses_per_tick,
+    rates,
 ):  # pragma: no cover
     """Drive, step chipmunk ``substeps`` times, and read the bodies back.
 
@@ -60,8 +58,11 @@ def physics_tick(
     Returns :func:`read_bodies` of the result. With ``substeps`` 0 it only
     drives: the caller steps the space through pymunk and reads it after.
     ``space_step`` is the address of chipmunk's step for this kind of space
-    (cpSpaceStep, or cpHastySpaceStep for a threaded space).
+    (cpSpaceStep, or cpHastySpaceStep for a threaded space). ``rates``: each
+    robot's (mm/s per unit of speed, wheel base, pulses per unit a tick), the
+    discs drive's ``drive`` without its discs (discs.tick_into).
     """
+    mm_s_per_unit, wheel_base, pulses_per_tick = rates
     for a in range(len(controls)):
         w0 = cmd[a, 0] * mm_s_per_unit[a]
         w1 = cmd[a, 1] * mm_s_per_unit[a]
@@ -85,7 +86,7 @@ S_MAX_TORQUE = 3
 
 
 @njit(cache=_CACHE)
-def servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, h):  # pragma: no cover
+def servo_forces(fns, agents, cmd, rates, servo, memory, h):  # pragma: no cover
     """The velocity drive: each robot's force and torque for the next step of ``h`` s.
 
     The force that brings the body's velocity to what its wheel speeds give (along
@@ -107,8 +108,10 @@ def servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, h):
     velocity the servo's own force does not explain) into this one's force: held
     back, a robot's push grows to the limit within a few steps, as a stalled
     motor's does; free, that term is zero. A row whose first value is NaN has
-    no history (a new, moved or removed robot): its term is zero.
+    no history (a new, moved or removed robot): its term is zero. ``rates``: as
+    :func:`physics_tick`'s.
     """
+    mm_s_per_unit, wheel_base, _ = rates
     for a in range(len(agents)):
         b = agents[a]
         w0 = cmd[a, 0] * mm_s_per_unit[a]
@@ -156,10 +159,8 @@ def physics_tick_servo(
     agents,
     objects,
     cmd,
-    mm_s_per_unit,
-    wheel_base,
     counters,
-    pulses_per_tick,
+    rates,
     servo,
     memory,
 ):  # pragma: no cover
@@ -170,11 +171,12 @@ def physics_tick_servo(
     pulses. With ``substeps`` 0 it only counts: the caller sets the forces and
     steps the space through pymunk, one step at a time.
     """
+    pulses_per_tick = rates[2]
     for a in range(len(agents)):
         counters[a, 0] += cmd[a, 0] * pulses_per_tick[a]
         counters[a, 1] += cmd[a, 1] * pulses_per_tick[a]
     for _ in range(substeps):
-        servo_forces(fns, agents, cmd, mm_s_per_unit, wheel_base, servo, memory, substep_s)
+        servo_forces(fns, agents, cmd, rates, servo, memory, substep_s)
         set_double(space_step, space, substep_s)
     return read_bodies(fns, agents, objects)
 

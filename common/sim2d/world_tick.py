@@ -94,6 +94,17 @@ class WorldTicker:
         self._object_bodies = chipmunk.addresses([o.body for o in s.objects if o.body])
         self._rows_layout = s.layout
 
+    def _rates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each robot's (mm/s per unit of speed, wheel base, pulses per unit a tick)."""
+        s = self._state
+        t = s.tables
+        return (t.mm_s_per_unit, t.wheel_base, s.tick_s * t.pulses_per_s_per_unit)
+
+    def _drive(self, objs: world_discs.DiscObjects) -> tuple[np.ndarray, ...]:
+        """The discs drive's table (discs.tick_into's ``drive``): the robots' rates, then
+        every disc's radius and mass."""
+        return (*self._rates(), objs.radius, objs.mass)
+
     def _fused_key(self) -> tuple[object, ...]:
         """What a fused tick's state was built from: a new one is built when any differs."""
         s = self._state
@@ -113,7 +124,6 @@ class WorldTicker:
     def _new_fused_state(self) -> FusedTick:
         """The fused tick's state built afresh (_step_fused checks whether the last one holds)."""
         s = self._state
-        t = s.tables
         objs = world_discs.disc_objects(s)
         static = self._sensors.static_geometry(s)
         n = len(s.agents)
@@ -124,13 +134,7 @@ class WorldTicker:
             np.zeros((n, s.ambient.shape[1]), dtype=np.int32),
             np.zeros(n, dtype=np.int32),
         )
-        drive = (
-            t.mm_s_per_unit,
-            t.wheel_base,
-            s.tick_s * t.pulses_per_s_per_unit,
-            objs.radius,
-            objs.mass,
-        )
+        drive = self._drive(objs)
         scene = static.scene
         circles = compiled.bin_circles(
             static.circle_centres, static.circle_radii, scene.grid_nx, scene.grid_ny, scene.cell
@@ -140,22 +144,25 @@ class WorldTicker:
         objects = pucks_tables.scene_buffers(
             len(objs.objects), objs.edges, len(static.circle_radii)
         )
+        geometry = (s.width, s.height, s.tick_s / s.substeps)
         state, call = compiled.new_tick(
-            pose,
-            vel,
-            s.cmd,
-            s.counters,
-            s.arm,
-            holding,
-            drive,
-            circles,
-            tables,
-            static.kernel_scene,
-            objs.table,
-            objects,
-            readings,
-            (s.width, s.height, s.tick_s / s.substeps),
-            s.substeps,
+            (
+                pose,
+                vel,
+                s.cmd,
+                s.counters,
+                s.arm,
+                holding,
+                drive,
+                circles,
+                tables,
+                static.kernel_scene,
+                objs.table,
+                objects,
+                readings,
+                geometry,
+                s.substeps,
+            )
         )
         split = None
         nd = n + len(objs.objects)
@@ -166,25 +173,15 @@ class WorldTicker:
             # The drive on the world's threads (discs_split.py): the state's
             # arrays, work arrays of its own (the fused tick's are scratch too).
             split = (
-                pose,
-                s.cmd,
-                t.mm_s_per_unit,
-                t.wheel_base,
-                objs.radius,
-                objs.mass,
-                s.counters,
-                drive[2],
+                (pose, s.cmd, s.counters, s.arm),
+                drive,
                 static.kernel_scene,
                 circles,
-                s.width,
-                s.height,
-                s.tick_s / s.substeps,
+                geometry,
                 s.substeps,
-                pose,
-                vel,
-                discs.drive_buffers(n, len(objs.objects), s.width, s.height, objs.radius),
                 objs.table,
-                s.arm,
+                (pose, vel),
+                discs.drive_buffers(n, len(objs.objects), s.width, s.height, objs.radius),
                 discs_split.split_buffers(nd),
             )
         # Keyed on what it was built from after the build: static_geometry may
@@ -319,6 +316,7 @@ class WorldTicker:
         # (bodies or shapes just added or removed): then drive only, and step via pymunk.
         via_pymunk = chipmunk.space_step_pending(s.space)
         sub = dt / s.substeps
+        rates = self._rates()
         if s.drive == "discs":
             # Chipmunk is not stepped: the robots' and objects' bodies stay where
             # they were placed, for the edits' overlap queries (world_discs.place_bodies);
@@ -339,22 +337,13 @@ class WorldTicker:
                     ),
                 )
             args = (
-                s.agent_pose,
-                s.cmd,
-                t.mm_s_per_unit,
-                t.wheel_base,
-                objs.radius,
-                objs.mass,
-                s.counters,
-                dt * t.pulses_per_s_per_unit,
+                (s.agent_pose, s.cmd, s.counters, s.arm),
+                self._drive(objs),
                 static.kernel_scene,
                 self._disc_circles[1],
-                s.width,
-                s.height,
-                sub,
+                (s.width, s.height, sub),
                 s.substeps,
                 objs.table,
-                s.arm,
             )
             n = len(s.agents)
             nd = n + len(objs.objects)
@@ -378,10 +367,8 @@ class WorldTicker:
                 self._agent_bodies,
                 self._object_bodies,
                 s.cmd,
-                t.mm_s_per_unit,
-                t.wheel_base,
                 s.counters,
-                dt * t.pulses_per_s_per_unit,
+                rates,
             )
         else:
             pose, vel, obj = compiled.physics_tick_servo(
@@ -393,10 +380,8 @@ class WorldTicker:
                 self._agent_bodies,
                 self._object_bodies,
                 s.cmd,
-                t.mm_s_per_unit,
-                t.wheel_base,
                 s.counters,
-                dt * t.pulses_per_s_per_unit,
+                rates,
                 t.servo,
                 self._servo_memory,
             )
@@ -407,8 +392,7 @@ class WorldTicker:
                         chipmunk.FUNCTIONS,
                         self._agent_bodies,
                         s.cmd,
-                        t.mm_s_per_unit,
-                        t.wheel_base,
+                        rates,
                         t.servo,
                         self._servo_memory,
                         sub,

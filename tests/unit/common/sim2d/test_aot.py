@@ -99,15 +99,15 @@ def test_a_state_of_other_types_goes_to_numba_rather_than_read_wrongly(
 
     if compiled.PATH != "aot":
         pytest.skip(f"this process runs {compiled.WHY}")
-    args = list(aot.state_sample())
-    state, _ = compiled.new_tick(*args)
+    given = list(aot.state_sample())
+    state, _ = compiled.new_tick(tuple(given))
     assert isinstance(state, int)  # the module's state: its address
     # numba's kernels stand in (compiling them for a new type takes a minute).
-    monkeypatch.setattr(fused, "new_state", lambda *a: ("numba's", a[0]))
+    monkeypatch.setattr(fused, "new_state", lambda given: ("numba's", given[0]))
     monkeypatch.setattr(fused, "entry", lambda state: None)
-    args[0] = np.full((1, 6), 50.0)[:, ::2]  # a pose that is a strided view
-    state, _ = compiled.new_tick(*args)
-    assert state == ("numba's", args[0])
+    given[0] = np.full((1, 6), 50.0)[:, ::2]  # a pose that is a strided view
+    state, _ = compiled.new_tick(tuple(given))
+    assert state == ("numba's", given[0])
 
 
 def test_a_module_built_from_other_sources_is_never_loaded(

@@ -52,10 +52,9 @@ def test_physics_tick_drives_control_bodies_and_counts_pulses() -> None:
         chipmunk.addresses([robot]),
         np.zeros(0, dtype=np.uint64),
         np.array([[10.0, 20.0]]),  # wheel speeds
-        np.array([8.0]),  # mm/s per unit
-        np.array([53.0]),  # wheel base
         counters,
-        np.array([0.5]),  # pulses per unit this tick
+        # mm/s per unit, wheel base, pulses per unit this tick
+        (np.array([8.0]), np.array([53.0]), np.array([0.5])),
     )
     # 80 and 160 mm/s wheels: 120 mm/s forward along the heading (+y), turning left.
     assert control.velocity.x == pytest.approx(0.0, abs=1e-9)

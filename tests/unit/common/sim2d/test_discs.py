@@ -169,15 +169,17 @@ def test_a_crowd_with_more_contacts_than_the_buffers_hold_moves_as_with_room() -
         world.step()
     finally:
         compiled.discs_tick = real  # type: ignore[assignment]
-    (pose, cmd, mm_s, base, radius, mass, counters, pulses, scene, circles, *rest) = seen[0]
-    width, height, substep_s, substeps, objects, arm = rest
+    robots, drive, scene, circles, geometry, substeps, objects = seen[0]
+    pose, cmd, counters, arm = robots
+    radius = drive[3]
+    width, height, _ = geometry
     n, k = len(pose), len(objects[0])
 
     def tick(buffers: tuple) -> tuple[np.ndarray, ...]:
         out, vel, c, o = np.empty((n, 3)), np.empty((n, 3)), counters.copy(), objects
         o = tuple(a.copy() for a in objects)
-        discs.tick_into(pose, cmd, mm_s, base, radius, mass, c, pulses, scene, circles, width,
-                        height, substep_s, substeps, out, vel, buffers, o, arm)  # fmt: skip
+        robots = (pose, cmd, c, arm)
+        discs.tick_into(robots, drive, scene, circles, geometry, substeps, o, (out, vel), buffers)
         return (out, vel, c, o[0], o[1])
 
     roomy = discs.drive_buffers(n, k, width, height, radius)

@@ -35,13 +35,14 @@ one = np.ones(n)
 scene = (np.zeros((0, 4)), np.zeros(2, dtype=np.int64), np.zeros(0, dtype=np.int64), 1, 1,
          side, np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0))
 circles = discs.bin_circles(np.zeros((0, 2)), np.zeros(0), 1, 1, side)
-args = (cmd, 8.0 * one, 53.0 * one, 27.5 * one, 80.0 * one, np.zeros((n, 2)), one, scene,
-        circles, side, side, 0.01, 1, pucks.objects_table(0, n), np.zeros(n))
+drive = (8.0 * one, 53.0 * one, one, 27.5 * one, 80.0 * one)
+counters, arm = np.zeros((n, 2)), np.zeros(n)
+args = (drive, scene, circles, (side, side, 0.01), 1, pucks.objects_table(0, n))
 for _ in range(5):
-    pose, _vel = discs.tick(pose, *args)
+    pose, _vel = discs.tick((pose, cmd, counters, arm), *args)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
 for _ in range(40):
-    pose, _vel = discs.tick(pose, *args)
+    pose, _vel = discs.tick((pose, cmd, counters, arm), *args)
 faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 40
 print(json.dumps({"set": heap.keep_freed_memory(), "faults_per_tick": faults}))
 """
