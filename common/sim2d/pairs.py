@@ -15,7 +15,7 @@ from numba import njit
 from common.sim2d import contacts, rays
 from common.sim2d.contacts import _COUNTED, _UNCOUNTED
 from common.sim2d.jitcache import stamp_with_callees
-from common.sim2d.rays import clamped_cell
+from common.sim2d.rays import clamped_cell, place_by_cell
 
 _CACHE = True
 
@@ -90,19 +90,10 @@ def _pairs_into(px, py, radius, width, height, cell, margin, buffers):  # pragma
         k = _cell(px[a], cell, gx) * gy + _cell(py[a], cell, gy)
         home[a] = k
         start[k] += 1
-    # start[k]: the end of cell k's run; walking the discs backwards, each takes
-    # the last free place of its cell's run (so a cell's discs stay in slot
-    # order), and start[k] ends at the run's start.
-    for k in range(1, ncell):
-        start[k] += start[k - 1]
-    start[ncell] = n
-    for a in range(n - 1, -1, -1):
-        k = home[a]
-        start[k] -= 1
-        slot[start[k]] = a
-        sk[start[k]] = k  # each sorted disc's cell, read in order below
+    place_by_cell(home, n, ncell, start, slot)  # a cell's discs in slot order
     for p in range(n):
         a = slot[p]
+        sk[p] = home[a]  # each sorted disc's cell, read in order below
         sx[p] = px[a]
         sy[p] = py[a]
         sr[p] = radius[a]

@@ -82,6 +82,26 @@ def _cell(v, cell, n):  # pragma: no cover
 
 
 @njit(cache=_CACHE, inline="always")
+def place_by_cell(cell_of, n, ncell, start, order):  # pragma: no cover
+    """A counting sort's second half: items 0 to ``n - 1`` into ``order``, cell after cell.
+
+    ``start[k]`` holds how many items are in cell k (``cell_of[i]``: item i's
+    cell); afterwards it is where cell k's run starts in ``order``, and
+    ``start[ncell]`` is ``n``. Walking the items backwards, each takes the last
+    free place of its cell's run, so a cell's items keep their order and the
+    offsets need no copy. The pair grid (pairs._pairs_into) and the sensing
+    grid (sense_pass._circles_into) sort their discs so.
+    """
+    for k in range(1, ncell):
+        start[k] += start[k - 1]
+    start[ncell] = n
+    for i in range(n - 1, -1, -1):
+        k = cell_of[i]
+        start[k] -= 1
+        order[start[k]] = i
+
+
+@njit(cache=_CACHE, inline="always")
 def clamped_cell(v, cell, n, below):  # pragma: no cover
     """The index of the cell of size ``cell`` holding ``v`` in a grid of ``n`` cells, clamped.
 

@@ -44,6 +44,7 @@ from common.sim2d.rays import (
     _ray_segment,
     _shadow_table,
     ambient_gain,
+    place_by_cell,
 )
 
 
@@ -85,8 +86,7 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
     each circle's cell. Within a cell the circles keep their order (agents
     first, by slot). Serial: O(circles + cells), a small share of a pass.
     Buffers rather than new arrays, so that common/sim2d/fused.py can keep
-    them from tick to tick. The runs are filled backwards, which needs no
-    copy of the offsets.
+    them from tick to tick (rays.place_by_cell places them).
     """
     pose = robots[0]
     agent_f = tables[3]
@@ -108,17 +108,9 @@ def _circles_into(robots, tables, scene, moving, buffers):  # pragma: no cover
         k = _cell(x, cell, grid_nx) * grid_ny + _cell(y, cell, grid_ny)
         ccell[c] = k
         count[k] += 1
-    # count[k]: the end of cell k's run; walking the circles backwards, each
-    # takes the last free place of its cell's run, so the circles of a cell come
-    # out in increasing order, and count[k] ends at the run's start.
-    for k in range(1, ncell):
-        count[k] += count[k - 1]
-    count[ncell] = nc
-    for c in range(nc - 1, -1, -1):
-        k = ccell[c]
-        count[k] -= 1
-        p = count[k]
-        citems[p] = c
+    place_by_cell(ccell, nc, ncell, count, citems)  # a cell's circles in increasing order
+    for p in range(nc):
+        c = citems[p]
         if c < n:
             cx[p] = pose[c, 0]
             cy[p] = pose[c, 1]
