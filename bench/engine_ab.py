@@ -56,7 +56,7 @@ def worker(tree: str, robots: int, threads: int, balls: float) -> None:
         # The sim thread's own share: on an idle machine the wall is about this
         # plus its waits for the workers (BENCHMARKS.md, issue 35).
         sim = (time.thread_time() - sim0) * per_sim_s
-        print(f"{wall:.1f} {cpu:.1f} {sim:.1f}", flush=True)
+        print(f"{wall:.5g} {cpu:.5g} {sim:.5g}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> None:
             sim[i].append(float(t))
         print(
             f"  round {r + 1} (load {os.getloadavg()[0]:.1f}): "
-            f"{wall[0][-1]:.0f}, {wall[1][-1]:.0f} ms",
+            f"{wall[0][-1]:.3g}, {wall[1][-1]:.3g} ms",
             flush=True,
         )
     for proc in workers:
@@ -127,10 +127,11 @@ def main(argv: list[str] | None = None) -> None:
     for i, tree in enumerate(trees):
         med = statistics.median(wall[i])
         print(
-            f"{tree}: wall ms per simulated s {med:.0f} (best {min(wall[i]):.0f}), "
-            f"CPU {statistics.median(cpu[i]):.0f} "
-            f"(the sim thread {statistics.median(sim[i]):.0f}); "
-            f"simulated s per wall s {1000 / med:.2f}"
+            # Three figures: a small world's step is under a millisecond a simulated second.
+            f"{tree}: wall ms per simulated s {med:.3g} (best {min(wall[i]):.3g}), "
+            f"CPU {statistics.median(cpu[i]):.3g} "
+            f"(the sim thread {statistics.median(sim[i]):.3g}); "
+            f"simulated s per wall s {1000 / med:.4g}"
         )
     ratios = [a / b for a, b in zip(wall[0], wall[1], strict=True)]
     print(f"wall, first tree over second, per round: median {statistics.median(ratios):.3f}")
