@@ -133,13 +133,16 @@ class _Subject:
         from common.sim2d import kernels as K
 
         self.K = K
-        # The circle binning: in kernels.py in trees before it was split by job.
+        # The circle binning and the packs' layouts: in kernels.py in trees before
+        # it was split by job.
         try:
-            from common.sim2d import sense_pass
+            from common.sim2d import packs, sense_pass
 
             self.circles = sense_pass._circles
+            self.layout: Any = packs
         except ImportError:
             self.circles = K._circles  # type: ignore[attr-defined]  # an older tree's
+            self.layout = K
         self.world = engine_bench.build(n, drive="velocity")
         for _ in range(6):  # a few ticks: neighbours in reach, readings to steer by
             engine_bench.control(self.world)
@@ -147,14 +150,14 @@ class _Subject:
         w = self.world
         self.robots = (w.agent_pose, w.arm, w.holding())
         self.tables, self.scene, self.moving = w.sensors.packs(w, w.sim_time)
-        mf = K.MovingScene._fields
-        tf = K.SensorTables._fields
+        mf = self.layout.MovingScene._fields
+        tf = self.layout.SensorTables._fields
         moving: list[Any] = list(self.moving)
         moving[mf.index("lights")] = moving[mf.index("lights")][:0]
         self.moving_dark = tuple(moving)
         tables: list[Any] = list(self.tables)
         f = tables[tf.index("agent_f")].copy()
-        f[:, K.F_REACH] = 0.0
+        f[:, self.layout.F_REACH] = 0.0
         tables[tf.index("agent_f")] = f
         self.tables_blind = tuple(tables)
         self.total = int(getattr(w.sensors.agents, "noise_total", 0))
@@ -188,7 +191,7 @@ class _Subject:
         return total / passes * 1e3
 
     def measure(self, passes: int, threads: bool) -> dict[str, float]:
-        w, K = self.world, self.K
+        w = self.world
         stream = getattr(w, "noise", None)
         res: dict[str, float] = {}
         take = getattr(stream, "take", None)
@@ -207,7 +210,7 @@ class _Subject:
         res["pass"] = _mean(w.sense, passes, time.process_time)
         res["wall"] = (time.perf_counter() - t0) / passes * 1e3
         res["after step"] = self._after_step(passes)
-        if threads and K.MAX_THREADS >= 2:
+        if threads and self.layout.MAX_THREADS >= 2:
             w.threads = 2
             t0 = time.perf_counter()
             res["pass x2"] = _mean(w.sense, passes, time.process_time)

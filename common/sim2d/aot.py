@@ -206,7 +206,7 @@ def state_sample() -> tuple[Any, ...]:
 
 
 def scene_sample() -> tuple[Any, ...]:
-    """A static scene (kernels.StaticScene's layout, a plain tuple): a 100 mm arena of one cell
+    """A static scene (packs.StaticScene's layout, a plain tuple): a 100 mm arena of one cell
     without obstacles, the smallest the kernels take."""
     import numpy as np  # here, not at the top: as state_sample's
 

@@ -263,7 +263,7 @@ def tick_into(
       (radius, mass) per disc (the N robots, then the objects); the counters
       advance by ``pulses_per_tick`` per unit of speed.
     - ``scene``: the sensing grid's static scene as a plain tuple
-      (kernels.StaticScene's layout); ``circles`` its round obstacles binned by
+      (packs.StaticScene's layout); ``circles`` its round obstacles binned by
       :func:`bin_circles`.
     - ``geometry``: (width, height, substep s) of the arena and the tick, in
       ``substeps`` substeps.

@@ -72,8 +72,8 @@ FIELDS = (
     # the robots', then the objects' discs (common/sim2d/pucks.py)
     "drive",
     "circles",  # the round obstacles binned in the sensing grid (discs.bin_circles)
-    "tables",  # kernels.SensorTables as a plain tuple
-    "scene",  # kernels.StaticScene as a plain tuple
+    "tables",  # packs.SensorTables as a plain tuple
+    "scene",  # packs.StaticScene as a plain tuple
     "pucks",  # the movable objects: pucks.objects_table's layout, moved in place
     "objects",  # MovingScene's circles and edges: pucks.scene_into fills them per pass
     "readings",  # (proximity, ambient, presence) written by a sensing pass

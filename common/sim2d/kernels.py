@@ -27,12 +27,13 @@ the circles of its 3x3 cells and the edges of its own cell. Cells outside the
 grid are clamped to its border: that only adds far candidates, and a hit
 beyond the sensor's range reads the same as no hit.
 
-The kernels live in one module per job, and this one gathers what callers
-use as ``kernels.NAME`` and warms them all up: common/sim2d/packs.py (the
-packs' layouts, shared settings), physics.py (drive, chipmunk's step, body
-state), noise.py (the sensors' Gaussian noise), rays.py (rays, occlusion,
-the lights' shadows), sense_pass.py (the sensing pass itself); discs.py and
-contacts.py hold the discs drive. A kernel calling one in another file has
+The kernels live in one module per job, and this one gathers the kernels
+callers use as ``kernels.NAME`` and warms them all up: physics.py (drive,
+chipmunk's step, body state), noise.py (the sensors' Gaussian noise),
+rays.py (rays, occlusion, the lights' shadows), sense_pass.py (the sensing
+pass itself); discs.py and contacts.py hold the discs drive. The packs'
+layouts and shared settings (columns, MAX_THREADS) are common/sim2d/packs.py's,
+imported from there. A kernel calling one in another file has
 that file's contents in its cache's stamp (common/sim2d/jitcache.py).
 """
 
@@ -46,25 +47,8 @@ from common.sim2d import aot, discs
 from common.sim2d import chipmunk as C
 from common.sim2d.noise import normal, normals
 from common.sim2d.packs import (
-    F_AMB_COS_HALF,
-    F_AMB_DARK,
-    F_AMB_DROP,
-    F_AMB_FLOOR,
-    F_AMB_HALF_ANGLE,
-    F_AMB_NOISE_FRACTION,
-    F_ARM_LOWERED_ABOVE,
-    F_GRIP_HALF_WIDTH,
-    F_GRIP_X0,
-    F_GRIP_X1,
-    F_HAS_GRIP,
-    F_PROX_MAX,
-    F_PROX_NOISE_FRACTION,
-    F_RADIUS,
-    F_REACH,
     I_AMB_SENSORS,
     I_PROX_SENSORS,
-    I_TYPE,
-    MAX_THREADS,
     N_AGENT_F,
     N_AGENT_I,
     MovingScene,
@@ -74,10 +58,6 @@ from common.sim2d.packs import (
     StaticScene,
 )
 from common.sim2d.physics import (
-    S_MASS,
-    S_MAX_FORCE,
-    S_MAX_TORQUE,
-    S_MOMENT,
     braitenberg_speeds,
     clamp_speeds,
     physics_tick,
@@ -85,7 +65,7 @@ from common.sim2d.physics import (
     read_bodies,
     servo_forces,
 )
-from common.sim2d.rays import SHADOW_BINS, SHADOW_MIN_AGENTS, ambient_gain
+from common.sim2d.rays import ambient_gain
 from common.sim2d.sense_pass import (
     circle_buffers,
     scratch_buffers,
@@ -94,41 +74,9 @@ from common.sim2d.sense_pass import (
     sense_parallel,
 )
 
-# The names callers use as kernels.NAME (the engine, sensing.py, fused.py, the
-# benches); the kernels' helpers stay in their modules (rays._occluded, sense_pass._circles...).
+# The kernels callers use as kernels.NAME (the engine, sensing.py, the benches); the
+# kernels' helpers stay in their modules (rays._occluded, sense_pass._circles...).
 __all__ = [
-    "F_AMB_COS_HALF",
-    "F_AMB_DARK",
-    "F_AMB_DROP",
-    "F_AMB_FLOOR",
-    "F_AMB_HALF_ANGLE",
-    "F_AMB_NOISE_FRACTION",
-    "F_ARM_LOWERED_ABOVE",
-    "F_GRIP_HALF_WIDTH",
-    "F_GRIP_X0",
-    "F_GRIP_X1",
-    "F_HAS_GRIP",
-    "F_PROX_MAX",
-    "F_PROX_NOISE_FRACTION",
-    "F_RADIUS",
-    "F_REACH",
-    "I_AMB_SENSORS",
-    "I_PROX_SENSORS",
-    "I_TYPE",
-    "MAX_THREADS",
-    "N_AGENT_F",
-    "N_AGENT_I",
-    "SHADOW_BINS",
-    "SHADOW_MIN_AGENTS",
-    "S_MASS",
-    "S_MAX_FORCE",
-    "S_MAX_TORQUE",
-    "S_MOMENT",
-    "MovingScene",
-    "Readings",
-    "Robots",
-    "SensorTables",
-    "StaticScene",
     "ambient_gain",
     "braitenberg_speeds",
     "circle_buffers",

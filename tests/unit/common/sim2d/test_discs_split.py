@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from common.sim2d import discs_split, kernels, sensing
+from common.sim2d import discs_split, packs, sensing
 from common.sim2d.entities import ShapeSpec
 from tests.kit.worlds import build, control, tick_digest
 
 pytestmark = [
-    pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here"),
+    pytest.mark.skipif(packs.MAX_THREADS < 2, reason="numba has one thread here"),
     # The hang guard times each test alone, not _compiled (numba's first compile of the
     # split drive took over 120 s on a fresh cache beside a CI run).
     pytest.mark.timeout(func_only=True),

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from common.sim2d import kernels, sensing
+from common.sim2d import packs, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import EditError, World
@@ -92,7 +92,7 @@ def test_arrays_taken_from_the_world_keep_their_values() -> None:
     assert not np.array_equal(world.agent_pose, copies[0]), "the robots did move"
 
 
-@pytest.mark.skipif(kernels.MAX_THREADS < 2, reason="numba has one thread here")
+@pytest.mark.skipif(packs.MAX_THREADS < 2, reason="numba has one thread here")
 def test_a_swarm_on_two_threads_runs_the_one_thread_run_bit_for_bit() -> None:
     # Past sensing.PARALLEL_MIN_AGENTS a world with two threads runs its drive
     # in the fused call and its sensing pass on numba's threads, in the fused

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from common.sim2d import kernels, noise
+from common.sim2d import kernels, noise, packs
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.world import World
@@ -91,8 +91,8 @@ def _noiseless(world: World) -> tuple[np.ndarray, np.ndarray]:
     packed, scene, moving = world.sensors.packs(world, world.sim_time)
     tables: list[object] = list(packed)
     f = np.array(tables[3], copy=True)
-    f[:, kernels.F_PROX_NOISE_FRACTION] = 0.0
-    f[:, kernels.F_AMB_NOISE_FRACTION] = 0.0
+    f[:, packs.F_PROX_NOISE_FRACTION] = 0.0
+    f[:, packs.F_AMB_NOISE_FRACTION] = 0.0
     tables[3] = f
     tables[11] = np.zeros_like(tables[11])  # each IR sensor's additive noise
     out = (

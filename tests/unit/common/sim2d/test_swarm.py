@@ -8,7 +8,7 @@ import numba
 import numpy as np
 import pytest
 
-from common.sim2d import kernels, rays, sensing
+from common.sim2d import kernels, packs, rays, sensing
 from common.sim2d.agents import agent_type
 from common.sim2d.entities import ShapeSpec
 from common.sim2d.packs import StaticScene
@@ -16,9 +16,9 @@ from common.sim2d.wander import braitenberg
 from common.sim2d.world import EditError, World
 
 KHEPERA = agent_type("khepera")
-TWO = min(2, kernels.MAX_THREADS)
+TWO = min(2, packs.MAX_THREADS)
 needs_two_cores = pytest.mark.skipif(
-    kernels.MAX_THREADS < 2, reason="numba's pool has one thread on this machine"
+    packs.MAX_THREADS < 2, reason="numba's pool has one thread on this machine"
 )
 
 
@@ -111,7 +111,7 @@ def test_the_parallel_kernel_alone_matches_the_serial_one(threads: int) -> None:
 
 
 def test_thread_counts_are_checked() -> None:
-    for bad in (0, -1, kernels.MAX_THREADS + 1):
+    for bad in (0, -1, packs.MAX_THREADS + 1):
         with pytest.raises(EditError, match="threads"):
             World(500.0, 500.0, threads=bad)
         with pytest.raises(EditError, match="threads"):
@@ -264,7 +264,7 @@ def test_shadow_bins_clear_only_segments_no_obstacle_crosses() -> None:
             [*(scene.static_xy[1] + (230.0, 0.0)), 1500.0, 1.0],  # a post just beyond 200 mm
         ]
     )
-    shadows = rays._shadows(lights, occ, scene.static_xy, scene.static_r, kernels.SHADOW_BINS)
+    shadows = rays._shadows(lights, occ, scene.static_xy, scene.static_r, rays.SHADOW_BINS)
     clear = walked = 0
     for li, (lx, ly, _, _) in enumerate(lights):
         points = rng.uniform([0, 0], [3000, 2000], size=(1500, 2))

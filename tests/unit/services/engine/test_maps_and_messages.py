@@ -21,7 +21,7 @@ from common.messages import (
     decode,
     encode,
 )
-from common.sim2d import kernels, maps
+from common.sim2d import maps, packs
 from common.sim2d.agents import agent_type
 from common.sim2d.maps import MapError
 from common.sim2d.world import World
@@ -137,7 +137,7 @@ def test_samples_report_each_agents_own_readings() -> None:
 
 
 def test_a_map_loads_with_the_thread_counts_asked_for() -> None:
-    two = min(2, kernels.MAX_THREADS)
+    two = min(2, packs.MAX_THREADS)
     world = maps.load_map(REPO / "maps" / "swarm.json", name="w", threads=two, physics_threads=two)
     assert (world.threads, world.physics_threads) == (two, two)
     assert world.space.threaded == (two > 1)
@@ -145,7 +145,7 @@ def test_a_map_loads_with_the_thread_counts_asked_for() -> None:
 
 @pytest.mark.parametrize("flag", ["--threads", "--physics-threads"])
 def test_wart_engine_refuses_thread_counts_outside_numbas_pool(flag: str, capsys) -> None:
-    for bad in ("0", str(kernels.MAX_THREADS + 1)):
+    for bad in ("0", str(packs.MAX_THREADS + 1)):
         with pytest.raises(SystemExit) as exc:
             main(["--map", str(REPO / "maps" / "empty.json"), flag, bad])
         assert exc.value.code == 2
