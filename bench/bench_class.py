@@ -31,7 +31,7 @@ from bench.labproc import BenchLab
 from bench.quantiles import percentile
 from common.keys import AliveKind
 from services.lab import wiring
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from tests.kit.viser_client import GuiElement, ViserClient
 
 ARENA, WORLD = "arena", "w1"

@@ -35,7 +35,8 @@ from tests.kit.agentkit import (
     deploy_running,
     start_agent_lab,
 )
-from tests.kit.lab import Procs, make_lab, start_router
+from tests.kit.lab import make_lab
+from tests.kit.procs import Procs, start_router
 from tests.kit.waits import wait_for
 
 REPO = Path(__file__).resolve().parent.parent

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from bench.labproc import REPO
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 
 
 def one_start(repo: Path, state: Path, timeout: float) -> tuple[float | None, float | None, str]:

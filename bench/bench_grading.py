@@ -27,7 +27,8 @@ from common.messages import SubmissionInfo
 from common.service import close_session
 from services.registry.roster import RosterRow
 from tests.kit.courses import add_course, assignment_toml
-from tests.kit.lab import PASSWORD, Procs, make_lab, start_router
+from tests.kit.lab import PASSWORD, make_lab
+from tests.kit.procs import Procs, start_router
 
 REPO = Path(__file__).resolve().parent.parent
 

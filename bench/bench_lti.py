@@ -29,9 +29,10 @@ from urllib.parse import urlencode
 import psutil
 
 from bench.quantiles import percentile
-from tests.kit.lab import Procs, make_lab, start_router, wart
+from tests.kit.lab import make_lab
 from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
 from tests.kit.lti_tool import start_lti
+from tests.kit.procs import Procs, start_router, wart
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

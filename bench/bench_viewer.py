@@ -35,8 +35,8 @@ from typing import TYPE_CHECKING
 import psutil
 from playwright.sync_api import sync_playwright
 
-from tests.kit.lab import free_port
 from tests.kit.pages import ViserPage, launch_chromium
+from tests.kit.procs import free_port
 from tests.kit.reallab import PASSWORD, WORLD, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab

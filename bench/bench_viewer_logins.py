@@ -25,7 +25,7 @@ from collections import Counter
 from bench.labproc import BenchLab
 from bench.quantiles import percentile
 from common.keys import AliveKind
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from tests.kit.viser_client import ViserClient
 
 PASSWORD = "class-of-2026"

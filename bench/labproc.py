@@ -16,7 +16,8 @@ from common import keys
 from common.keys import AliveKind
 from common.zconfig import NetworkOptions
 from tests.kit.forkserver import Running
-from tests.kit.lab import ProcessLab, Procs, lab_state, start_router, wait_alive
+from tests.kit.lab import ProcessLab, lab_state
+from tests.kit.procs import Procs, start_router, wait_alive
 
 REPO = Path(__file__).resolve().parent.parent
 

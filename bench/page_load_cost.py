@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.cpu_by_process import TICKS_PER_S, kind_of
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 

@@ -18,7 +18,7 @@ from bench.labproc import BenchLab
 from bench.viewer_class import ARENA, USERS, Child, _class_children, _merge, _print_sessions
 from bench.viewer_cpu import _cpu_over, _proc_cpu
 from common.keys import AliveKind
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 

@@ -26,7 +26,7 @@ from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
 from tests.kit import forkserver
-from tests.kit.lab import REPO, Proc, Procs, Router, free_port, start_router, wart_env
+from tests.kit.procs import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
 from tests.time_spent import PhaseCpu, TimeSpent
 

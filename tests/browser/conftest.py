@@ -14,7 +14,6 @@ from pathlib import Path
 
 import pytest
 
-from tests.kit.lab import free_port
 from tests.kit.pages import (
     CANVAS_AT_JS,
     CHROMIUM,
@@ -34,6 +33,7 @@ from tests.kit.pages import (
     wait_for_aimed_camera,
     wait_until,
 )
+from tests.kit.procs import free_port
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 

@@ -17,9 +17,9 @@ import pytest
 from tests.browser.conftest import ViserPage, new_test_context, page_url
 from tests.browser.test_real_lab import online
 from tests.kit.courses import COURSE
-from tests.kit.lab import wart
 from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, Launcher
 from tests.kit.lti_tool import start_lti
+from tests.kit.procs import wart
 from tests.kit.reallab import RealLab, real_lab
 from viewers.web.tabs import tab_label
 

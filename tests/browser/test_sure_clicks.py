@@ -16,7 +16,7 @@ import pytest
 import viser
 
 from tests.browser.conftest import new_test_context, page_url, wait_until
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from viewers.web.labels import add_label_fixer
 from viewers.web.sure_clicks import add_sure_clicks
 

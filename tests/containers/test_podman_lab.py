@@ -48,7 +48,7 @@ from services.lab.plan import read_registry_key
 from services.lab.supervisor import AliveWatch
 from services.lab.zsecurity import client_tls
 from tests.integration.multihost_probe import Poses, moved, session_for
-from tests.kit.lab import REPO, free_port
+from tests.kit.procs import REPO, free_port
 from tests.kit.waits import wait_for
 
 EXAMPLE = REPO / "examples" / "01_braitenberg.py"

@@ -36,7 +36,8 @@ from services.commands import report as report_cli
 from services.runner.twins import CACHE_S as TWIN_CACHE_S
 from tests.conftest import REPO, Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, bridged_robot, start_agent_context, start_runner
-from tests.kit.lab import PASSWORD, ProcessLab, make_lab, wart
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.procs import wart
 
 pytestmark = [needs_sandbox, pytest.mark.timeout(300)]
 DANCE = REPO / "examples" / "calibration_dance.py"

@@ -30,7 +30,7 @@ from services.bridge.simbody import SimBody
 from services.lab.supervisor import AliveWatch
 from tests.conftest import Procs, Router, wait_for
 from tests.integration.test_bridge_camera import pose_from
-from tests.kit.lab import Proc
+from tests.kit.procs import Proc
 
 WORLD, AGENT = "real1", "k1"
 WIDTH, HEIGHT = 2000, 1000

@@ -28,8 +28,9 @@ from common.service import close_session
 from tests.conftest import Procs, Router, needs_sandbox
 from tests.integration.test_grading import COURSE, add_assignment, assignment_toml, source
 from tests.kit.agentkit import start_runner, together
-from tests.kit.lab import PASSWORD, REPO, USERS, ProcessLab, make_lab
-from tests.kit.lab import wart as lab_wart
+from tests.kit.lab import PASSWORD, USERS, ProcessLab, make_lab
+from tests.kit.procs import REPO
+from tests.kit.procs import wart as lab_wart
 
 pytestmark = [pytest.mark.timeout(600), needs_sandbox]
 

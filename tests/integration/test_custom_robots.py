@@ -45,7 +45,8 @@ from services.runner.episode import run_episode
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import agent_user, start_agent_context, start_runner, together
 from tests.kit.courses import assignment_toml, start_grading_lab
-from tests.kit.lab import REPO, ProcessLab, make_lab, wart
+from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.procs import REPO, wart
 
 pytestmark = [pytest.mark.timeout(400), needs_sandbox]
 PLUGIN = REPO / "examples" / "plugins" / "wart-race"

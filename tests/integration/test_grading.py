@@ -23,7 +23,7 @@ from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_runner
 from tests.kit.courses import COURSE, assignment_toml, import_roster, start_grading_lab
 from tests.kit.lab import PASSWORD, ProcessLab, make_lab
-from tests.kit.lab import wart as lab_wart
+from tests.kit.procs import wart as lab_wart
 
 pytestmark = [pytest.mark.timeout(600), needs_sandbox]
 CONTROLLERS = Path(__file__).parent / "grading"

@@ -30,7 +30,8 @@ from common.lab_errors import LabError
 from services.commands.arena import format_loads, new_arena, stop_arena
 from tests.kit.courses import assignment_toml, import_roster
 from tests.kit.json_http import send_json
-from tests.kit.lab import Proc, ProcessLab, Procs, Router, make_lab, wait_alive, wart
+from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.procs import Proc, Procs, Router, wait_alive, wart
 from tests.kit.waits import wait_for
 
 NS = "labns"

@@ -36,7 +36,7 @@ from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.integration.test_grading import CONTROLLERS, COURSE, add_assignment
 from tests.kit.agentkit import start_runner, together
 from tests.kit.courses import import_roster
-from tests.kit.lab import ProcessLab, make_lab, start_router, wart
+from tests.kit.lab import ProcessLab, make_lab
 from tests.kit.lti_platform import (
     CLIENT_ID,
     DEPLOYMENT,
@@ -47,6 +47,7 @@ from tests.kit.lti_platform import (
     new_key,
 )
 from tests.kit.lti_tool import PAGE, start_lti
+from tests.kit.procs import start_router, wart
 
 pytestmark = pytest.mark.timeout(600)
 

@@ -13,7 +13,8 @@ from nbclient import NotebookClient
 
 from tests.conftest import Router, wait_for
 from tests.kit.agentkit import CTX, start_agent_lab
-from tests.kit.lab import PASSWORD, REPO, ProcessLab, module_lab, wart_env
+from tests.kit.lab import PASSWORD, ProcessLab, module_lab
+from tests.kit.procs import REPO, wart_env
 
 pytestmark = pytest.mark.one_worker
 NOTEBOOKS = REPO / "examples" / "notebooks"

@@ -39,7 +39,8 @@ from common.messages import (
 from services.lab import wiring
 from tests.conftest import Procs, Router, needs_sandbox, wait_for
 from tests.kit.agentkit import start_agent_context, start_deploy, together
-from tests.kit.lab import REPO, ProcessLab, make_lab
+from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.procs import REPO
 from tests.kit.robots import SCOUT, wheeled_robot
 
 pytestmark = pytest.mark.timeout(400)

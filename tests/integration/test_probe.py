@@ -6,7 +6,7 @@ import zenoh
 
 from common import keys
 from common.keys import AliveKind
-from tests.kit.lab import Router, free_port, wart
+from tests.kit.procs import Router, free_port, wart
 
 
 def test_probe_passes_while_the_token_is_there_and_says_why_not_when_it_goes(

@@ -33,7 +33,8 @@ from tests.kit.agentkit import (
     start_engine,
     start_runner,
 )
-from tests.kit.lab import ProcessLab, make_lab, start_router
+from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.procs import start_router
 
 pytestmark = needs_sandbox
 CONTROLLERS = Path(__file__).with_name("controllers")

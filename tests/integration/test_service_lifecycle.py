@@ -10,7 +10,7 @@ from common.messages import ErrorReply, OkReply, decode
 from common.service import RequestError, Service, close_session, open_session
 from services.lab.supervisor import AliveWatch
 from tests.conftest import Router, wait_for
-from tests.kit.lab import start_router
+from tests.kit.procs import start_router
 
 
 class Echo(Service):

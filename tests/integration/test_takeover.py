@@ -29,7 +29,8 @@ from tests.kit.agentkit import (
     start_agent_lab,
     start_deploy,
 )
-from tests.kit.lab import PASSWORD, Proc, ProcessLab, make_lab
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.procs import Proc
 
 pytestmark = needs_sandbox
 CONTROLLERS = Path(__file__).with_name("controllers")

@@ -26,7 +26,8 @@ from common.messages import WorldFrame, WorldSnapshot, decode
 from common.service import close_session, open_session
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
 from services.bridge.simbody import SimBody
-from tests.kit.lab import PASSWORD, Proc, ProcessLab
+from tests.kit.lab import PASSWORD, ProcessLab
+from tests.kit.procs import Proc
 from tests.kit.waits import wait_for
 
 WORLD = "w1"

@@ -29,7 +29,8 @@ from common import keys
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
 from services.lab.supervisor import AliveWatch
-from tests.kit.lab import REPO, UpLab, wart_env
+from tests.kit.lab import UpLab
+from tests.kit.procs import REPO, wart_env
 
 # The children of a default `wart up`, named by their subcommand and --name (or --world).
 SERVICES = (

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.cli import LAB_MODULES
-from tests.kit.lab import REPO, Proc, wart_env
+from tests.kit.procs import REPO, Proc, wart_env
 
 # The lab-only modules the audit hook reports: the lab extra's, matplotlib (plots, the
 # lab's and the notebook extra's) and the engine's compiled kernels' compiler.

@@ -13,7 +13,8 @@ from services.registry.accounts_db import RegistryDB
 from services.registry.courses_db import CourseStore
 from services.registry.roster import RosterRow
 from tests.kit.agentkit import start_runner, together
-from tests.kit.lab import REPO, ProcessLab, Procs, Router, make_lab, wart
+from tests.kit.lab import ProcessLab, make_lab
+from tests.kit.procs import REPO, Procs, Router, wart
 
 COURSE = "robotics-26"
 # A class of one student and its teacher, as `wart users import` reads it.

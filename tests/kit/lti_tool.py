@@ -7,8 +7,9 @@ from pathlib import Path
 from common.auth import create_identity_key
 from services.lab import wiring
 from services.registry.accounts_db import RegistryDB
-from tests.kit.lab import ProcessLab, free_port
+from tests.kit.lab import ProcessLab
 from tests.kit.lti_platform import FakePlatform
+from tests.kit.procs import free_port
 
 LTI_ACCOUNT = wiring.service_account("lti", "lti")
 PAGE = "http://127.0.0.1:8080/"

@@ -17,7 +17,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from tests.kit.lab import REPO, wart_env
+from tests.kit.procs import REPO, wart_env
 
 SUBNET = "169.254.77"
 

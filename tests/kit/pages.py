@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-from tests.kit.lab import REPO
+from tests.kit.procs import REPO
 from viewers.web import geometry as geo
 from viewers.web.app import WebViewer
 from viewers.web.client import BrowserSession

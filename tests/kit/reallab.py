@@ -35,7 +35,8 @@ from tests.kit.agentkit import (
     start_runner,
     together,
 )
-from tests.kit.lab import PASSWORD, ProcessLab, Procs, Router, free_port, make_lab, start_router
+from tests.kit.lab import PASSWORD, ProcessLab, make_lab
+from tests.kit.procs import Procs, Router, free_port, start_router
 from viewers.web.app import WebViewer
 from viewers.web.connector import LiveConnector
 

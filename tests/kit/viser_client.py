@@ -39,7 +39,7 @@ import websockets
 import websockets.asyncio.client
 import zstandard
 
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from viewers.web.app import WebViewer
 from viewers.web.demo_lab import DemoConnector, DemoLab
 

@@ -26,7 +26,7 @@ from common.zconfig import NetworkOptions
 from services.registry.accounts_db import RegistryDB
 from tests.conftest import wait_for
 from tests.kit.lab import UpLab
-from tests.kit.lab import wart as lab_wart
+from tests.kit.procs import wart as lab_wart
 
 # One worker starts the module's lab once (split between workers, each started its own).
 pytestmark = pytest.mark.one_worker

@@ -5,7 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from tests.kit.lab import REPO
+from tests.kit.procs import REPO
 
 COMMAND = """
 import sys, zenoh

@@ -14,7 +14,7 @@ from pathlib import Path
 import psutil
 
 from tests.kit.forkserver import ForkServer
-from tests.kit.lab import REPO, free_port, wart_env
+from tests.kit.procs import REPO, free_port, wart_env
 from tests.kit.waits import wait_for
 
 

@@ -14,7 +14,7 @@ from services.lab.kube.manifests import KubeOptions, render
 from services.lab.kube.yamlout import dump_all
 from services.lab.labfile import LabFileError, load
 from services.lab.pki import issue_lab
-from tests.kit.lab import REPO, wart
+from tests.kit.procs import REPO, wart
 
 EXAMPLE = REPO / "deploy" / "kubernetes" / "lab.toml"
 SHIPPED = REPO / "deploy" / "kubernetes" / "example"

@@ -12,7 +12,7 @@ import time
 
 import viser
 
-from tests.kit.lab import free_port
+from tests.kit.procs import free_port
 from tests.kit.viser_client import ViserClient, run_in_thread
 from viewers.web.code_editor import show_text
 
