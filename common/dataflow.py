@@ -394,7 +394,7 @@ FLOWS: tuple[Flow, ...] = (
     _put(
         keys.world_layout,
         WORLDS,
-        ("agent",),
+        ("agent", "camera"),
         m.WorldLayout,
         urgency=Urgency.WORDS,
         note="once per change of the world's rows",

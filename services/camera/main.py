@@ -72,6 +72,14 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
         "view (and save it to --calibration FILE when given)",
     )
     p.add_argument(
+        "--layout-check",
+        type=positive(float, 1, 3600),
+        default=30.0,
+        metavar="SECONDS",
+        help="read the world's robots again this often besides when it says they changed, "
+        "1 to 3600 (default 30)",
+    )
+    p.add_argument(
         "--loop",
         action="store_true",
         help="a video file starts again at its end (without: the camera goes offline there "
@@ -106,6 +114,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "wart camera") -> int:
         auto_calibrate=args.auto_calibrate,
         camera_height_mm=args.camera_height,
         reference_grid=args.reference_grid,
+        layout_check_s=args.layout_check,
     )
 
     def build(session: zenoh.Session) -> CameraService:

@@ -12,7 +12,11 @@ recording (services/camera/sources.py's Recording): its frames stamped with its
 own timeline, its end final unless it loops.
 
 The markers' layout comes from the world's own snapshot (its arena's size and
-its robots' names: robot kN wears marker N), so nothing is configured twice.
+its robots' names: robot kN wears marker N), so nothing is configured twice. The
+snapshot is read again when the world says its rows changed
+(``world/<w>/layout``: a robot added, plugged in or gone), and every
+``layout_check_s`` besides, in case that news was lost: a robot added after the
+camera started is tracked from the world's next frame, not half a minute later.
 """
 
 from __future__ import annotations
@@ -34,7 +38,9 @@ from common.messages import (
     CameraStatus,
     TrackedPoses,
     TrackedRobot,
+    WorldLayout,
     WorldSnapshot,
+    decode,
     encode,
 )
 from common.messages.camera import MAX_FRAME_BYTES
@@ -74,6 +80,7 @@ class CameraOptions:
     auto_calibrate: bool = False
     camera_height_mm: float | None = None  # None: solved with a lens, else 1500 said
     reference_grid: tuple[int, int] = (2, 2)  # the reference markers: the corners
+    layout_check_s: float = 30.0  # the world's robots read again without its news
 
 
 class CameraService(Service):
@@ -143,6 +150,7 @@ class CameraService(Service):
                 keys.camera_floor(self.realm, self.world, self.ident), congestion_control=drop
             )
         )
+        self.subscribe(keys.world_layout(self.realm, self.world), self.on_world_layout)
         self._tracked_pub = self.track(
             self.session.declare_publisher(
                 keys.world_tracked(self.realm, self.world), congestion_control=drop, express=True
@@ -295,6 +303,12 @@ class CameraService(Service):
 
     # -- layout and calibration
 
+    def on_world_layout(self, sample: zenoh.Sample) -> None:
+        """The world's rows changed: read its snapshot again at the next frame."""
+        news = decode(sample.payload, WorldLayout)  # unreadable: logged by subscribe
+        if news.world == self.world:
+            self._next_layout = 0.0
+
     def _refresh_layout(self) -> None:
         """The arena's size and robots from the world's snapshot (asked again now and then:
         robots may be added to a real world's serial ports)."""
@@ -304,7 +318,7 @@ class CameraService(Service):
             if self.layout is None:
                 self._say_once("no-world", f"waiting for world {self.world} to answer its snapshot")
             return
-        self._next_layout = time.monotonic() + 30.0
+        self._next_layout = time.monotonic() + self.options.layout_check_s
         agents = [a.id for a in snapshot.agents]
         arena = (float(snapshot.width), float(snapshot.height))
         if (

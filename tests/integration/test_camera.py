@@ -4,6 +4,7 @@ user is told when the camera goes away or is set up wrong."""
 from __future__ import annotations
 
 import math
+import shutil
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,8 +15,18 @@ import pytest
 import zenoh
 
 from common import keys
+from common.ask import ask
+from common.auth import RegistryIdentity, issue_session
 from common.keys import AliveKind
-from common.messages import CameraFrame, CameraStatus, TrackedPoses, decode
+from common.messages import (
+    AddItem,
+    CameraFrame,
+    CameraStatus,
+    EditResult,
+    TrackedPoses,
+    WorldEdit,
+    decode,
+)
 from common.tracking.calibration import save_intrinsics
 from common.tracking.intrinsics import BoardSpec, IntrinsicsCollector
 from common.tracking.markers import default_layout
@@ -53,19 +64,18 @@ class Truth:
         self._thread.join(2)
 
 
+def empty_map(tmp_path: Path) -> str:
+    """A copy of maps/empty.json (k1, 1 m square) for an engine: it journals its live edits
+    beside its map, in the test's directory and not the checkout's."""
+    (tmp_path / "maps").mkdir(exist_ok=True)
+    return str(shutil.copy(REPO / "maps" / "empty.json", tmp_path / "maps"))
+
+
 @pytest.fixture
-def engine(router: Router, procs: Procs, alive_watch: AliveWatch) -> str:
+def engine(router: Router, procs: Procs, alive_watch: AliveWatch, tmp_path: Path) -> str:
     """A world to take the camera's marker layout from: maps/empty.json (k1, 1 m square)."""
     proc = procs.start(
-        "engine",
-        [
-            "engine",
-            "--map",
-            str(REPO / "maps" / "empty.json"),
-            "--world",
-            WORLD,
-            *router.net_args(),
-        ],
+        "engine", ["engine", "--map", empty_map(tmp_path), "--world", WORLD, *router.net_args()]
     )
     key = keys.alive(router.realm, AliveKind.WORLD, WORLD)
     assert alive_watch.wait(key, 60.0), proc.output()
@@ -336,6 +346,49 @@ def test_markers_of_no_robot_are_said_once(
         assert proc.output().count("marker 7 belongs to no robot of this arena: ignored") == 1
     finally:
         stray.close()
+
+
+def test_a_robot_added_after_the_camera_started_is_tracked_on_the_worlds_news(
+    router: Router,
+    procs: Procs,
+    tmp_path: Path,
+    alive_watch: AliveWatch,
+    zsession: zenoh.Session,
+) -> None:
+    """The camera reads the world's robots from its snapshot. A robot added later (a
+    Khepera plugged in, a teacher's edit) is announced on ``world/<w>/layout``, and the
+    camera reads them again then: its own periodic check is an hour away here, so only
+    the news can bring k2 in. (Before the camera listened, a robot added just after it
+    started went untracked for 30 s: a multi-host run's real robot moved 0 mm.)"""
+    identity = RegistryIdentity.generate()
+    net = router.options(registry_key=identity.verify_key.hex()).as_args()
+    world = ["engine", "--map", empty_map(tmp_path), "--world", WORLD, *net]
+    engine = procs.start("engine", world)
+    assert alive_watch.wait(keys.alive(router.realm, AliveKind.WORLD, WORLD), 60.0), engine.output()
+    both = Truth(tmp_path / "truth.json", {"k1": (300.0, 300.0, 0.0), "k2": (700.0, 650.0, 1.0)})
+    try:
+        tracked = Latest(zsession, keys.world_tracked(router.realm, WORLD), TrackedPoses)
+        source = f"synthetic:{both.path}"
+        argv = ["--source", source, "--auto-calibrate", "--layout-check", "3600"]
+        camera = start_camera(procs, router, *argv)
+
+        def agents() -> list[str]:
+            poses = tracked.get()
+            return sorted(r.agent for r in poses.robots) if isinstance(poses, TrackedPoses) else []
+
+        stray = "marker 2 belongs to no robot of this arena: ignored"
+        wait_for(lambda: stray in camera.output(), 60.0, f"k2's marker seen:\n{camera.output()}")
+        assert agents() == ["k1"]
+        teacher = issue_session(identity, router.realm, "teacher", ["edit_map"])
+        edit_key = keys.world_edit(router.realm, WORLD)
+        add = WorldEdit(op=AddItem(section="agents", entry={"id": "k2", "x": 700, "y": 650}))
+        ask(zsession, edit_key, add, EditResult, what="add k2", timeout=10.0, seal=teacher.seal)
+        wait_for(
+            lambda: agents() == ["k1", "k2"], 30.0, f"k2 tracked once added:\n{camera.output()}"
+        )
+        assert "markers k1=1, k2=2" in camera.output()
+    finally:
+        both.close()
 
 
 def test_wart_camera_calibrate_saves_a_calibration_the_camera_then_uses(

@@ -262,8 +262,10 @@ def test_a_student_on_a_queues_and_drives_robots_on_b_and_c(lab: MultiLab) -> No
     # Braitenberg cruises at about 80 mm/s: a 3 s slot covers well over 50 mm on a quiet
     # machine. A busy one starts the sandbox late in the slot (38 mm in a CI run), so the
     # bound is motion against the forged commands' none below (under 10 mm). real1's slots
-    # are 6 s: its deploy starts a sandbox on B that drives C's bridge across two links,
-    # and a busy CI run once used the whole 3 s slot before its first command (0 mm).
+    # are 6 s: its deploy starts a sandbox on B that drives C's bridge across two links.
+    # real1's poses come from C's camera: 0 mm there (twice in CI) was the camera not
+    # knowing k1 (it read the world just before the bridge added it, and read it again
+    # only 30 s later); it now reads the world again on its layout news (test_camera).
     why = f"{seen}\n{lab.logs('run1', 'real1', 'robots')}"
     assert seen["arena1_deploy_mm"] > 20, why
     assert seen["real1_deploy_mm"] > 20, why
