@@ -26,6 +26,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -174,9 +175,9 @@ def delivery(viewers: list[int], seconds: float, fps: float) -> None:
 
     procs = [start("router", "--realm", realm, "--listen", endpoint, "--no-multicast-scouting")]
     time.sleep(1.0)
-    procs.append(
-        start("engine", "--map", str(REPO / "maps" / "empty.json"), "--world", world, *net)
-    )
+    # A copy: an engine journals its live edits beside its map, here not in the checkout.
+    empty = shutil.copy(REPO / "maps" / "empty.json", tmp / "empty.json")
+    procs.append(start("engine", "--map", str(empty), "--world", world, *net))
     camera = start(
         "camera",
         "--world",

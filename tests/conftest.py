@@ -25,6 +25,7 @@ from common.log import StderrHandler
 from common.service import close_session, open_session
 from services.lab.supervisor import AliveWatch
 from services.runner.sandbox import sandbox_problem
+from tests.checkout_guard import CheckoutGuard
 from tests.kit import forkserver
 from tests.kit.procs import REPO, Proc, Procs, Router, free_port, start_router, wart_env
 from tests.kit.waits import wait_for
@@ -55,6 +56,7 @@ def pytest_configure(config: pytest.Config) -> None:
     config.pluginmanager.register(PhaseCpu(), "phase_cpu")
     if not hasattr(config, "workerinput"):
         config.pluginmanager.register(TimeSpent(), "time_spent")
+        config.pluginmanager.register(CheckoutGuard(), "checkout_guard")
 
 
 # A test directory's kind is its marker (`-m "not browser"`), so no module forgets it.
