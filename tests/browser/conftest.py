@@ -122,8 +122,11 @@ def open_page(chromium: object, viewer: WebViewer, request: pytest.FixtureReques
     contexts: list[object] = []
     pages: list[ViserPage] = []
 
-    def opener(tag: str = "a") -> ViserPage:
+    def opener(tag: str = "a", init: str | None = None) -> ViserPage:
+        """``init``: a script every page of the context runs before the page's own."""
         context = new_test_context(chromium)
+        if init is not None:
+            context.add_init_script(init)  # type: ignore[attr-defined]
         contexts.append(context)
         page = context.new_page()  # type: ignore[attr-defined]
         vp = ViserPage(page, f"{request.node.name}-{tag}")  # before the page opens its socket

@@ -35,9 +35,11 @@ CLICK_BETWEEN_TWO_EDITS = """([inputId, buttonId]) => {
 
 
 def address_and_connect(page) -> tuple[str, str]:
-    """The element ids of the start page's Address input and Connect button."""
+    """The element ids of the start page's Address input and Connect button, once the
+    page's script (an image's error handler) runs: a click before it is not its to see."""
     connect = page.button("Connect")
     connect.wait_for()
+    wait_until(lambda: page.p.evaluate("!!window.__wartSureClicks"), 30, "the sure-clicks script")
     button_id = connect.get_attribute("id")
     input_id = page.input_after_label("Address").get_attribute("id")
     assert button_id and input_id
@@ -98,6 +100,35 @@ CLICK_THE_HANDLER_MISSES = """buttonId => {
 
 def test_a_click_that_never_reached_the_throttle_is_sent_once(open_page) -> None:
     page = open_page()
+    _, button_id = address_and_connect(page)
+    already = page.sent_count
+
+    page.p.evaluate(CLICK_THE_HANDLER_MISSES, button_id)
+
+    page.button("Log in").wait_for(timeout=30_000)
+    page.p.wait_for_timeout(500)  # a second send would follow within the next looks
+    clicks = [data for n, data in list(page.sent) if n >= already and button_id.encode() in data]
+    assert len(clicks) == 1
+    assert page.p.evaluate("window.__wartSureClicks") == {"clicks": 0, "values": 0, "lost": 1}
+
+
+# Each Worker gets its own postMessage, so the page's messages pass by the prototype the
+# script wraps: the script never learns the worker, as on a page whose first messages
+# left before the script came and which has sent none since.
+WORKER_UNSEEN = """(() => {
+  const Original = window.Worker;
+  window.Worker = function (...args) {
+    const worker = new Original(...args);
+    const post = Original.prototype.postMessage;
+    worker.postMessage = function (...a) { return post.apply(worker, a); };
+    return worker;
+  };
+  window.Worker.prototype = Original.prototype;
+})();"""
+
+
+def test_a_lost_click_on_a_page_whose_worker_is_unseen_is_clicked_again(open_page) -> None:
+    page = open_page(init=WORKER_UNSEEN)
     _, button_id = address_and_connect(page)
     already = page.sent_count
 

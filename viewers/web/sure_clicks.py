@@ -44,7 +44,10 @@ click, or the container holding the throttle was remounted, which cancels its
 pending message (viser's ``useThrottledMessageSender``). That click is sent
 after SILENT_LOOKS looks, unless its button is gone or disabled by then (a
 busy fresh-clone run once lost 'Add account' so, for 15 s, with no message
-after it). A value may reach the server twice (harmless: the same value). Not
+after it). The worker is known from the first message the page sends after
+this script runs; a page that has sent none since (its first messages left
+before the script came) gets the click once more instead, through React's
+handler and the throttle. A value may reach the server twice (harmless: the same value). Not
 covered: number inputs and sliders (their values' types are not in the DOM),
 a dropdown chosen with the keyboard, and the code editor's hidden text area,
 whose writes the editor resends itself (assets/editor-src/editor.js).
@@ -73,6 +76,7 @@ SURE_CLICKS_JS = """
   var sent = [];
   var typed = {};
   var worker = null;
+  var replaying = false;
   var post = Worker.prototype.postMessage;
   function update(w, uuid, value) {
     sent.push([performance.now(), uuid]);
@@ -113,10 +117,17 @@ SURE_CLICKS_JS = """
       return;
     }
     var button = document.getElementById(uuid);
-    if (!other && worker && LOOKS - left >= SILENT && button && !button.disabled) {
-      flushTyped(worker, uuid);
-      update(worker, uuid, true);
+    if (!other && LOOKS - left >= SILENT && button && !button.disabled) {
       state.lost += 1;
+      if (worker) {
+        flushTyped(worker, uuid);
+        update(worker, uuid, true);
+      } else {
+        /* Nothing has left the page since this script came: click it once more,
+           through React's handler and the throttle (ignored by the listener below). */
+        replaying = true;
+        try { button.click(); } finally { replaying = false; }
+      }
       console.warn('wart: a click that never reached the message throttle was sent');
       return;
     }
@@ -154,7 +165,7 @@ SURE_CLICKS_JS = """
       return;
     }
     var b = el && el.closest ? el.closest('button') : null;
-    if (!b || b.disabled || !UUID.test(b.id)) return;
+    if (replaying || !b || b.disabled || !UUID.test(b.id)) return;
     if (document.getElementById('file_upload_' + b.id)) return;
     var at = performance.now();
     setTimeout(function () { look(b.id, at, LOOKS); }, FIRST);
