@@ -244,6 +244,42 @@ def test_a_click_the_moment_log_in_shows_is_answered(
     assert run_in_thread(quick_student()) == "in"
 
 
+def test_a_line_sent_the_moment_send_shows_is_said(
+    demo_viewer: WebViewer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same race in a chat panel: its Send button went out before its handler, and an
+    arena's panel builds its robots, workbench and editors in between. Here the panel's
+    thread is held between the two, until the viewer has handled a click on Send (or
+    HOLD_S). Before the fix the line was dropped: a fresh-clone run's student said "one
+    join" and never saw it."""
+    register = viser.GuiButtonHandle.on_click
+
+    def late_on_click(handle: Any, func: Any) -> Any:
+        if handle.label == "Send":
+            clicked_before = handle.update_timestamp
+            deadline = time.monotonic() + HOLD_S
+            while handle.update_timestamp == clicked_before and time.monotonic() < deadline:
+                time.sleep(0.01)  # the builder starved of the GIL, as under load
+        return register(handle, func)
+
+    monkeypatch.setattr(viser.GuiButtonHandle, "on_click", late_on_click)
+
+    async def quick_student() -> bool:
+        client = ViserClient(f"ws://127.0.0.1:{demo_viewer.port}", "quick")
+        try:
+            await client.connect()
+            await client.log_in("ana", "ana-pw")
+            await client.click("Join lobby")
+            await client.say("said at once")
+            with contextlib.suppress(TimeoutError):
+                await client.wait_for(lambda: client.markdown_containing("said at once"), 20)
+            return client.markdown_containing("said at once") is not None
+        finally:
+            await client.close()
+
+    assert run_in_thread(quick_student()), "the line never showed: its click was dropped"
+
+
 async def _join_clicked_twice(url: str) -> tuple[int, bool]:
     client = ViserClient(url, "alice")
     try:

@@ -92,71 +92,78 @@ class ChatPanel:
         label = f"{self.ctx}" if self.kind not in ARENA_KINDS else f"{self.ctx} (arena)"
         self.tab_name = label
         self.tab_title = f"{label} in {tab_title(connection.address)}"
-        self.tab = tabs.add_tab(label, icon=viser.Icon.MESSAGE if self.kind == "chat" else None)
-        with self.tab:
-            title = escape_md(joined.title or self.ctx)
-            gui.add_markdown(
-                f"**{title}** · {escape_md(connection.address.label)} · owner "
-                f"{escape_md(joined.owner)}"
-            )
-            self.members_md = gui.add_markdown("")
-            self.log_md = gui.add_markdown("")
-            self.message = gui.add_text("Message", "")
-            self.send = gui.add_button("Send", color="blue")
-            self.notice = gui.add_markdown("", visible=False)
-            self.kick_who = gui.add_dropdown(
-                "Member", self._others() or ("(nobody)",), visible=joined.can_kick
-            )
-            self.kick = gui.add_button("Kick", color="red", visible=joined.can_kick)
-            self.robots: RobotPanel | None = None
-            self.workbench: Workbench | None = None
-            self.editor: MapEditor | None = None
-            self.builder: RobotBuilder | None = None
-            self.recordings: RecordingsPanel | None = None
-            self.course: CoursePanel | None = None
-            self.klass: ClassPanel | None = None
-            self.view: WorldView | None = None  # the page's view, once this arena was shown
-            if self.kind in ARENA_KINDS and self.world and on_watch is not None:
-                self.watch = gui.add_button("Show this arena", color="teal")
-                self.watch.on_click(lambda _: self.show_world())
-                self.robots = RobotPanel(client, connection, self.ctx)
-                if kept is not None and kept.robots is not None:
-                    self.robots.put_back(kept.robots)
-                self.workbench = Workbench(
-                    client, connection, self.ctx, self.robots, kept.bench if kept else None
+        # The panel reaches the page with its handlers: a click that comes before its
+        # handler is dropped without a trace (login.py says how that was seen), and an
+        # arena's panel builds its robots, workbench and editors between its first
+        # button and the last handler. Nothing here waits on the lab.
+        with client.atomic():
+            self.tab = tabs.add_tab(label, icon=viser.Icon.MESSAGE if self.kind == "chat" else None)
+            with self.tab:
+                title = escape_md(joined.title or self.ctx)
+                gui.add_markdown(
+                    f"**{title}** · {escape_md(connection.address.label)} · owner "
+                    f"{escape_md(joined.owner)}"
                 )
-                # Assignments are handed in from here: the file open in the editor above.
-                self.course = CoursePanel(
-                    client,
-                    connection,
-                    source=self.workbench.current_file,
-                    view=lambda: self.view,
-                    show=self._show_replay,
-                    back_to_live=self.show_world,
+                self.members_md = gui.add_markdown("")
+                self.log_md = gui.add_markdown("")
+                self.message = gui.add_text("Message", "")
+                self.send = gui.add_button("Send", color="blue")
+                self.notice = gui.add_markdown("", visible=False)
+                self.kick_who = gui.add_dropdown(
+                    "Member", self._others() or ("(nobody)",), visible=joined.can_kick
                 )
-                # A course's teachers only: every student, live; watch and take over.
-                self.klass = ClassPanel(
-                    client, connection, self.ctx, self.robots, show_arena=self.show_world
-                )
-                # Everyone sees the editor; without edit_map it is disabled and says why.
-                self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
-                # A robot someone's controller drives is theirs: no map-editing handles on it.
-                self.editor.driven = self.robots.driven
-                self.builder = RobotBuilder(client, allowed="edit_map" in connection.permissions)
-                self.builder.on_saved.append(self.editor.offer_type)
-                self.recordings = RecordingsPanel(
-                    client,
-                    connection,
-                    self.ctx,
-                    view=lambda: self.view,
-                    show=self._show_replay,
-                    back_to_live=self.show_world,
-                    owner=joined.owner == connection.user,
-                )
-            self.leave = gui.add_button("Leave")
-        self.send.on_click(lambda _: self.submit())
-        self.kick.on_click(lambda _: self.kick_selected())
-        self.leave.on_click(lambda _: self.close(leave=True))
+                self.kick = gui.add_button("Kick", color="red", visible=joined.can_kick)
+                self.robots: RobotPanel | None = None
+                self.workbench: Workbench | None = None
+                self.editor: MapEditor | None = None
+                self.builder: RobotBuilder | None = None
+                self.recordings: RecordingsPanel | None = None
+                self.course: CoursePanel | None = None
+                self.klass: ClassPanel | None = None
+                self.view: WorldView | None = None  # the page's view, once this arena was shown
+                if self.kind in ARENA_KINDS and self.world and on_watch is not None:
+                    self.watch = gui.add_button("Show this arena", color="teal")
+                    self.watch.on_click(lambda _: self.show_world())
+                    self.robots = RobotPanel(client, connection, self.ctx)
+                    if kept is not None and kept.robots is not None:
+                        self.robots.put_back(kept.robots)
+                    self.workbench = Workbench(
+                        client, connection, self.ctx, self.robots, kept.bench if kept else None
+                    )
+                    # Assignments are handed in from here: the file open in the editor above.
+                    self.course = CoursePanel(
+                        client,
+                        connection,
+                        source=self.workbench.current_file,
+                        view=lambda: self.view,
+                        show=self._show_replay,
+                        back_to_live=self.show_world,
+                    )
+                    # A course's teachers only: every student, live; watch and take over.
+                    self.klass = ClassPanel(
+                        client, connection, self.ctx, self.robots, show_arena=self.show_world
+                    )
+                    # Everyone sees the editor; without edit_map it is disabled and says why.
+                    self.editor = MapEditor(client, allowed="edit_map" in connection.permissions)
+                    # A robot someone's controller drives is theirs: no map-editing handles on it.
+                    self.editor.driven = self.robots.driven
+                    self.builder = RobotBuilder(
+                        client, allowed="edit_map" in connection.permissions
+                    )
+                    self.builder.on_saved.append(self.editor.offer_type)
+                    self.recordings = RecordingsPanel(
+                        client,
+                        connection,
+                        self.ctx,
+                        view=lambda: self.view,
+                        show=self._show_replay,
+                        back_to_live=self.show_world,
+                        owner=joined.owner == connection.user,
+                    )
+                self.leave = gui.add_button("Leave")
+            self.send.on_click(lambda _: self.submit())
+            self.kick.on_click(lambda _: self.kick_selected())
+            self.leave.on_click(lambda _: self.close(leave=True))
         self._render()
 
     # -- rendering

@@ -80,43 +80,49 @@ class LabTab:
         gui = client.gui
         # Short enough to read in a tab; the full address is its hover title (tabs.py).
         self.tab_name = tab_label(connection.address)
-        self.tab = tabs.add_tab(self.tab_name, icon=viser.Icon.HOME)
-        with self.tab:
-            self.header = gui.add_markdown("")
-            self.online = gui.add_markdown("")
-            self.contexts = gui.add_folder("Contexts")
-            can_host = "host" in connection.permissions
-            with gui.add_folder("Host a new context", visible=can_host, expand_by_default=False):
-                self.host_name = gui.add_text("Name", "")
-                # A map of the lab (STATE_DIR/maps, then the shipped ones): empty, maze,
-                # foraging, phototaxis, swarm.
-                self.host_map = gui.add_text("Map (arena)", "foraging")
-                self.host_chat = gui.add_button("Host chat room")
-                self.host_arena = gui.add_button("Host arena")
-            with gui.add_folder("Private messages", expand_by_default=False):
-                self.pm_log = gui.add_markdown("_None yet._")
-                self.pm_to = gui.add_text("To", "")
-                self.pm_text = gui.add_text("Private message", "")
-                self.pm_send = gui.add_button("Send privately")
-            with gui.add_folder("My account", expand_by_default=False):
-                # A class's first passwords come on paper (wart users import): each
-                # student sets their own here.
-                # The current one too, unless this page just logged in with it: a saved
-                # login (a cookie) alone never sets the password.
-                self.my_current = add_masked_text(gui, "My current password")
-                self.my_password = add_masked_text(gui, "My new password", submit="Set my password")
-                self.my_password_button = gui.add_button("Set my password")
-                self.my_password_said = gui.add_markdown("")
-            is_admin = "admin" in connection.permissions
-            self.admin = AdminPanel(client, connection) if is_admin else None
-            self.network = NetworkPanel(client, connection) if is_admin else None
-            self.notice = gui.add_markdown("", visible=False)
-            self.logout_button = gui.add_button("Log out", color="gray")
-        self.my_password_button.on_click(lambda _: self.set_my_password())
-        self.host_chat.on_click(lambda _: self.host("chat"))
-        self.host_arena.on_click(lambda _: self.host("agent"))
-        self.pm_send.on_click(lambda _: self.send_private())
-        self.logout_button.on_click(lambda _: self.logout())
+        # Held back until its handlers are registered, as the chat panels are (chat_panel.py).
+        with client.atomic():
+            self.tab = tabs.add_tab(self.tab_name, icon=viser.Icon.HOME)
+            with self.tab:
+                self.header = gui.add_markdown("")
+                self.online = gui.add_markdown("")
+                self.contexts = gui.add_folder("Contexts")
+                can_host = "host" in connection.permissions
+                with gui.add_folder(
+                    "Host a new context", visible=can_host, expand_by_default=False
+                ):
+                    self.host_name = gui.add_text("Name", "")
+                    # A map of the lab (STATE_DIR/maps, then the shipped ones): empty, maze,
+                    # foraging, phototaxis, swarm.
+                    self.host_map = gui.add_text("Map (arena)", "foraging")
+                    self.host_chat = gui.add_button("Host chat room")
+                    self.host_arena = gui.add_button("Host arena")
+                with gui.add_folder("Private messages", expand_by_default=False):
+                    self.pm_log = gui.add_markdown("_None yet._")
+                    self.pm_to = gui.add_text("To", "")
+                    self.pm_text = gui.add_text("Private message", "")
+                    self.pm_send = gui.add_button("Send privately")
+                with gui.add_folder("My account", expand_by_default=False):
+                    # A class's first passwords come on paper (wart users import): each
+                    # student sets their own here.
+                    # The current one too, unless this page just logged in with it: a saved
+                    # login (a cookie) alone never sets the password.
+                    self.my_current = add_masked_text(gui, "My current password")
+                    self.my_password = add_masked_text(
+                        gui, "My new password", submit="Set my password"
+                    )
+                    self.my_password_button = gui.add_button("Set my password")
+                    self.my_password_said = gui.add_markdown("")
+                is_admin = "admin" in connection.permissions
+                self.admin = AdminPanel(client, connection) if is_admin else None
+                self.network = NetworkPanel(client, connection) if is_admin else None
+                self.notice = gui.add_markdown("", visible=False)
+                self.logout_button = gui.add_button("Log out", color="gray")
+            self.my_password_button.on_click(lambda _: self.set_my_password())
+            self.host_chat.on_click(lambda _: self.host("chat"))
+            self.host_arena.on_click(lambda _: self.host("agent"))
+            self.pm_send.on_click(lambda _: self.send_private())
+            self.logout_button.on_click(lambda _: self.logout())
         if kept is None:
             self._unsubscribe = connection.subscribe(self.on_event)
         else:
