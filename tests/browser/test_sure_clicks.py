@@ -98,20 +98,6 @@ CLICK_THE_HANDLER_MISSES = """buttonId => {
 }"""
 
 
-def test_a_click_that_never_reached_the_throttle_is_sent_once(open_page) -> None:
-    page = open_page()
-    _, button_id = address_and_connect(page)
-    already = page.sent_count
-
-    page.p.evaluate(CLICK_THE_HANDLER_MISSES, button_id)
-
-    page.button("Log in").wait_for(timeout=30_000)
-    page.p.wait_for_timeout(500)  # a second send would follow within the next looks
-    clicks = [data for n, data in list(page.sent) if n >= already and button_id.encode() in data]
-    assert len(clicks) == 1
-    assert page.p.evaluate("window.__wartSureClicks") == {"clicks": 0, "values": 0, "lost": 1}
-
-
 # Each Worker gets its own postMessage, so the page's messages pass by the prototype the
 # script wraps: the script never learns the worker, as on a page whose first messages
 # left before the script came and which has sent none since.
@@ -127,8 +113,9 @@ WORKER_UNSEEN = """(() => {
 })();"""
 
 
-def test_a_lost_click_on_a_page_whose_worker_is_unseen_is_clicked_again(open_page) -> None:
-    page = open_page(init=WORKER_UNSEEN)
+@pytest.mark.parametrize("init", [None, WORKER_UNSEEN], ids=["worker-seen", "worker-unseen"])
+def test_a_click_that_never_reached_the_throttle_is_sent_once(open_page, init) -> None:
+    page = open_page(init=init)
     _, button_id = address_and_connect(page)
     already = page.sent_count
 

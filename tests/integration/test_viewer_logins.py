@@ -211,6 +211,23 @@ def demo_viewer(tmp_path: Path) -> Iterator[WebViewer]:
         yield viewer
 
 
+def hold_handler(monkeypatch: pytest.MonkeyPatch, label: str) -> None:
+    """Hold the thread that registers the ``label`` button's handler until the viewer has
+    handled a click on that button, or HOLD_S: the builder starved of the GIL, as under
+    load, while a quick browser clicks."""
+    register = viser.GuiButtonHandle.on_click
+
+    def late_on_click(handle: Any, func: Any) -> Any:
+        if handle.label == label:
+            clicked_before = handle.update_timestamp
+            deadline = time.monotonic() + HOLD_S
+            while handle.update_timestamp == clicked_before and time.monotonic() < deadline:
+                time.sleep(0.01)
+        return register(handle, func)
+
+    monkeypatch.setattr(viser.GuiButtonHandle, "on_click", late_on_click)
+
+
 def test_a_click_the_moment_log_in_shows_is_answered(
     demo_viewer: WebViewer, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -219,17 +236,7 @@ def test_a_click_the_moment_log_in_shows_is_answered(
     between. Here that thread is held there on purpose, until the viewer has handled a
     click on the button (or HOLD_S, if the browser cannot see the button yet). Before
     the fix the click was dropped and the form stayed with no answer."""
-    register = viser.GuiButtonHandle.on_click
-
-    def late_on_click(handle: Any, func: Any) -> Any:
-        if handle.label == "Log in":
-            clicked_before = handle.update_timestamp
-            deadline = time.monotonic() + HOLD_S
-            while handle.update_timestamp == clicked_before and time.monotonic() < deadline:
-                time.sleep(0.01)  # the builder starved of the GIL, as under load
-        return register(handle, func)
-
-    monkeypatch.setattr(viser.GuiButtonHandle, "on_click", late_on_click)
+    hold_handler(monkeypatch, "Log in")
 
     async def quick_student() -> str:
         client = ViserClient(f"ws://127.0.0.1:{demo_viewer.port}", "quick")
@@ -252,17 +259,7 @@ def test_a_line_sent_the_moment_send_shows_is_said(
     thread is held between the two, until the viewer has handled a click on Send (or
     HOLD_S). Before the fix the line was dropped: a fresh-clone run's student said "one
     join" and never saw it."""
-    register = viser.GuiButtonHandle.on_click
-
-    def late_on_click(handle: Any, func: Any) -> Any:
-        if handle.label == "Send":
-            clicked_before = handle.update_timestamp
-            deadline = time.monotonic() + HOLD_S
-            while handle.update_timestamp == clicked_before and time.monotonic() < deadline:
-                time.sleep(0.01)  # the builder starved of the GIL, as under load
-        return register(handle, func)
-
-    monkeypatch.setattr(viser.GuiButtonHandle, "on_click", late_on_click)
+    hold_handler(monkeypatch, "Send")
 
     async def quick_student() -> bool:
         client = ViserClient(f"ws://127.0.0.1:{demo_viewer.port}", "quick")
