@@ -230,36 +230,41 @@ class ReplayControls:
         self._was_playing = False  # the last refresh saw it playing: the end must reach the slider
         duration = max(self.player.timeline.duration, SLIDER_STEP)
         gui = client.gui
-        with gui.add_folder("Replay") as self.folder:
-            gui.add_markdown(f"**Replay:** {describe_run(recording)}")
-            self.slider = gui.add_slider(
-                "Time (s)", min=0.0, max=round(duration, 2), step=SLIDER_STEP, initial_value=0.0
-            )
-            self.play = gui.add_button("Play", color="green", icon=viser.Icon.PLAYER_PLAY)
-            self.pause = gui.add_button("Pause", icon=viser.Icon.PLAYER_PAUSE)
-            self.speed = gui.add_dropdown(
-                "Speed", tuple(f"{s:g}x" for s in SPEEDS), initial_value="1x"
-            )
-            self.back = (
-                gui.add_button("Back to live", color="teal", icon=viser.Icon.ARROW_BACK_UP)
-                if on_leave is not None
-                else None
-            )
-            self.readings = gui.add_markdown("")
-            series = (
-                viser.uplot.Series(label="t"),
-                *[viser.uplot.Series(label=f"IR{i}", stroke=_colour(i), width=1) for i in range(8)],
-            )
-            empty = (np.zeros(0), *[np.zeros(0)] * 8)
-            self.ir_plot = gui.add_uplot(empty, series, title="IR up to the cursor", aspect=2.0)
-            with gui.add_folder("Output up to the cursor"):
-                self.output = gui.add_html("")
-        self.slider.on_update(self._scrubbed)
-        self.play.on_click(lambda _: self._play())
-        self.pause.on_click(lambda _: self._pause())
-        self.speed.on_update(lambda _: self._speed())
-        if self.back is not None:
-            self.back.on_click(lambda _: self.leave())
+        # With its handlers, as a chat panel is (chat_panel.py says why).
+        with client.atomic():
+            with gui.add_folder("Replay") as self.folder:
+                gui.add_markdown(f"**Replay:** {describe_run(recording)}")
+                self.slider = gui.add_slider(
+                    "Time (s)", min=0.0, max=round(duration, 2), step=SLIDER_STEP, initial_value=0.0
+                )
+                self.play = gui.add_button("Play", color="green", icon=viser.Icon.PLAYER_PLAY)
+                self.pause = gui.add_button("Pause", icon=viser.Icon.PLAYER_PAUSE)
+                self.speed = gui.add_dropdown(
+                    "Speed", tuple(f"{s:g}x" for s in SPEEDS), initial_value="1x"
+                )
+                self.back = (
+                    gui.add_button("Back to live", color="teal", icon=viser.Icon.ARROW_BACK_UP)
+                    if on_leave is not None
+                    else None
+                )
+                self.readings = gui.add_markdown("")
+                series = (
+                    viser.uplot.Series(label="t"),
+                    *[
+                        viser.uplot.Series(label=f"IR{i}", stroke=_colour(i), width=1)
+                        for i in range(8)
+                    ],
+                )
+                empty = (np.zeros(0), *[np.zeros(0)] * 8)
+                self.ir_plot = gui.add_uplot(empty, series, title="IR up to the cursor", aspect=2.0)
+                with gui.add_folder("Output up to the cursor"):
+                    self.output = gui.add_html("")
+            self.slider.on_update(self._scrubbed)
+            self.play.on_click(lambda _: self._play())
+            self.pause.on_click(lambda _: self._pause())
+            self.speed.on_update(lambda _: self._speed())
+            if self.back is not None:
+                self.back.on_click(lambda _: self.leave())
         if show is not None:
             show(self.feed)
         else:
