@@ -39,8 +39,10 @@ def _status() -> dict[str, str] | None:
         code, path = entry[:2], entry[3:]
         if code[0] in "RC":  # a rename or copy: its source path follows
             next(entries, None)
-        file = REPO / path
-        digest = hashlib.sha256(file.read_bytes()).hexdigest() if file.is_file() else "-"
+        try:
+            digest = hashlib.sha256((REPO / path).read_bytes()).hexdigest()
+        except OSError:  # a directory, or gone since git listed it
+            digest = "-"
         found[path] = f"{code} {digest}"
     return found
 
