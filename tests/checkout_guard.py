@@ -50,6 +50,7 @@ def _status() -> dict[str, str] | None:
 class CheckoutGuard:
     def __init__(self) -> None:
         self.before = _status()
+        self.changed: list[str] = []  # what the run created, changed or removed
 
     def pytest_sessionfinish(self, session: pytest.Session, exitstatus: int) -> None:
         if self.before is None:
@@ -68,11 +69,10 @@ class CheckoutGuard:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
     def pytest_terminal_summary(self, terminalreporter: pytest.TerminalReporter) -> None:
-        changed = getattr(self, "changed", None)
-        if changed:
+        if self.changed:
             terminalreporter.section("the checkout was changed by the run", red=True)
             terminalreporter.write_line(
                 "A test wrote outside its tmp_path (or the checkout was edited meanwhile):"
             )
-            for path in changed:
+            for path in self.changed:
                 terminalreporter.write_line(f"  {path}")

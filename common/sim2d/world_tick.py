@@ -100,10 +100,12 @@ class WorldTicker:
         t = s.tables
         return (t.mm_s_per_unit, t.wheel_base, s.tick_s * t.pulses_per_s_per_unit)
 
-    def _drive(self, objs: world_discs.DiscObjects) -> tuple[np.ndarray, ...]:
-        """The discs drive's table (discs.tick_into's ``drive``): the robots' rates, then
-        every disc's radius and mass."""
-        return (*self._rates(), objs.radius, objs.mass)
+    def _drive(
+        self, objs: world_discs.DiscObjects, rates: tuple[np.ndarray, ...] | None = None
+    ) -> tuple[np.ndarray, ...]:
+        """The discs drive's table (discs.tick_into's ``drive``): the robots' rates (these,
+        or :meth:`_rates`), then every disc's radius and mass."""
+        return (*(rates or self._rates()), objs.radius, objs.mass)
 
     def _fused_key(self) -> tuple[object, ...]:
         """What a fused tick's state was built from: a new one is built when any differs."""
@@ -338,7 +340,7 @@ class WorldTicker:
                 )
             args = (
                 (s.agent_pose, s.cmd, s.counters, s.arm),
-                self._drive(objs),
+                self._drive(objs, rates),
                 static.kernel_scene,
                 self._disc_circles[1],
                 (s.width, s.height, sub),

@@ -312,13 +312,15 @@ class CameraService(Service):
     def _refresh_layout(self) -> None:
         """The arena's size and robots from the world's snapshot (asked again now and then:
         robots may be added to a real world's serial ports)."""
+        # The next check is set before asking: news of a change that comes while the
+        # snapshot is on its way (on_world_layout) makes it due again, not overwritten.
+        self._next_layout = time.monotonic() + self.options.layout_check_s
         snapshot = self._snapshot()
         if snapshot is None:
-            self._next_layout = time.monotonic() + RETRY_S
+            self._next_layout = min(self._next_layout, time.monotonic() + RETRY_S)
             if self.layout is None:
                 self._say_once("no-world", f"waiting for world {self.world} to answer its snapshot")
             return
-        self._next_layout = time.monotonic() + self.options.layout_check_s
         agents = [a.id for a in snapshot.agents]
         arena = (float(snapshot.width), float(snapshot.height))
         if (

@@ -47,8 +47,9 @@ busy fresh-clone run once lost 'Add account' so, for 15 s, with no message
 after it). The worker is known from the first message the page sends after
 this script runs; a page that has sent none since (its first messages left
 before the script came) gets the click once more instead, through React's
-handler and the throttle. A value may reach the server twice (harmless: the same value). Not
-covered: number inputs and sliders (their values' types are not in the DOM),
+handler and the throttle. A value may reach the server twice (harmless: the
+same value). Not covered: number inputs and sliders (their values' types are
+not in the DOM),
 a dropdown chosen with the keyboard, and the code editor's hidden text area,
 whose writes the editor resends itself (assets/editor-src/editor.js).
 """
