@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 
 import viser
 
@@ -195,6 +196,7 @@ class BrowserSession:
                 self.notice.visible = False
                 self._logged_in(parked.connection, address, kept=parked)
                 return
+            began = time.monotonic()
             try:
                 connection = self.connector.resume(
                     address,
@@ -205,6 +207,13 @@ class BrowserSession:
             except (LoginError, OSError, TimeoutError) as exc:
                 self._resume_failed(address, str(exc))
                 return
+            log.info(
+                "browser %d: %s logged in again to %s with a saved login after %.1f s",
+                self.client.client_id,
+                connection.user,
+                address.label,
+                time.monotonic() - began,
+            )
             self.notice.visible = False
             self._logged_in(connection, address)
 

@@ -112,7 +112,14 @@ class CookieDesk:
         headers["Cache-Control"] = "no-store"
         headers["Content-Length"] = "0"
         if found is None:
+            log.info(
+                "a page fetched a saved-login ticket that is used or older than %.0f s: "
+                "that browser keeps the login it had",
+                self.ticket_s,
+            )
             return Response(http.HTTPStatus.NOT_FOUND, "Not Found", headers, b"")
+        forgets = "Max-Age=0;" in found
+        log.debug("a page's saved login %s", "deleted" if forgets else "stored in its cookie")
         headers["Set-Cookie"] = found
         return Response(http.HTTPStatus.NO_CONTENT, "No Content", headers, b"")
 
@@ -137,4 +144,17 @@ class CookieDesk:
             return served(conn, request) if served is not None else None
 
         http_server.process_request = process_request
+        # websockets logs every HTTP answer but 101 as "connection rejected (...)": for a
+        # ticket that reads like a failure to an operator, and answer() has said it in words.
+        logging.getLogger("websockets.server").addFilter(_TICKET_ANSWERS_UNLOGGED)
         return True
+
+
+class _TicketAnswersUnlogged(logging.Filter):
+    """Drops websockets' "connection rejected" line for a ticket's cookie (only they get 204)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "connection rejected (204 No Content)"
+
+
+_TICKET_ANSWERS_UNLOGGED = _TicketAnswersUnlogged()

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 
 from common.client.lab_address import parse_address
 from common.client.resume_cookie import cookie_name, cookie_value, parse_cookies
 from viewers.web.login import progress_words
-from viewers.web.saved_login import CookieDesk, saved_login_cookie, set_cookie
+from viewers.web.saved_login import (
+    _TICKET_ANSWERS_UNLOGGED,
+    CookieDesk,
+    saved_login_cookie,
+    set_cookie,
+)
 
 
 def test_a_cookie_round_trips_per_lab_and_damaged_ones_are_skipped() -> None:
@@ -57,3 +64,26 @@ def test_the_cookie_is_httponly_strict_and_set_only_by_a_one_time_ticket() -> No
 def test_a_slow_login_says_how_long_and_why() -> None:
     assert progress_words(2.4, 0).startswith("Logging in... 2 s: the lab is checking")
     assert "7 more logins wait here" in progress_words(5.0, 7)
+
+
+def test_a_tickets_answer_is_logged_in_words_not_as_a_rejected_connection(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    desk = CookieDesk()
+    path = "/" + desk.html("wart_resume_x=abc; Path=/", 1).split('src="')[1].split('"')[0]
+    with caplog.at_level(logging.DEBUG, logger="wart.viewer.saved_login"):
+        desk.answer(path)
+        desk.answer(path)
+    words = [r.getMessage() for r in caplog.records if r.name == "wart.viewer.saved_login"]
+    assert words[0] == "a page's saved login stored in its cookie"
+    assert "that browser keeps the login it had" in words[1]
+    # websockets calls every answer but 101 "connection rejected": not so for a ticket's.
+    drop = _TICKET_ANSWERS_UNLOGGED.filter
+    record = logging.LogRecord(
+        "websockets.server", logging.INFO, "", 0, "connection %s", None, None
+    )
+    assert not drop(
+        logging.makeLogRecord({**record.__dict__, "args": ("rejected (204 No Content)",)})
+    )
+    assert drop(logging.makeLogRecord({**record.__dict__, "args": ("rejected (404 Not Found)",)}))
+    assert drop(logging.makeLogRecord({**record.__dict__, "args": ("open",)}))
