@@ -187,12 +187,15 @@ class LabClient:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def close(self, reason: str = "") -> None:
+    def close(self, reason: str = "", *, logout: bool = True) -> None:
         """Leave rooms, log out (best effort) and undeclare everything.
 
         ``reason`` tells each room why, in words its members see with what ends (a run).
+        ``logout=False`` leaves no room and keeps the session, as a crash would: only
+        the presence token and the subscriptions go, so the rooms see the client go
+        away and what runs in simulation goes on (a restarting viewer's hand-over).
         """
-        if self.session is not None:
+        if self.session is not None and logout:
             for ctx in self.rooms.joined():
                 try:
                     self.leave(ctx, reason)

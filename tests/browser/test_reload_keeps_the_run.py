@@ -3,7 +3,8 @@ comes back with its arena tab, the editor's unsaved buffer, the chosen robot and
 a page gone for longer than the grace ends the run in words that say so.
 
 Router, registry, engine, runner (bubblewrap sandboxes) and the agent context ``arena``,
-as in test_workbench; slots long enough that only Stop or the grace ends a run.
+as in test_workbench; slots long enough that only Stop or the grace ends a run. The last
+test restarts the viewer, as an upgrade does.
 """
 
 from __future__ import annotations
@@ -21,7 +22,9 @@ from tests.browser.test_workbench import write_code
 from tests.conftest import needs_sandbox
 from tests.kit.lab import PASSWORD
 from tests.kit.reallab import RealLab, real_lab
+from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
+from viewers.web.connector import LiveConnector
 from viewers.web.tabs import tab_label
 
 pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
@@ -161,3 +164,35 @@ def test_two_tabs_of_one_student_show_the_same_run_and_either_stops_it(
     robots = panel.robots
     assert robots is not None
     wait_until(lambda: not robots.driven("k2"), 15, what="k2 free in the first tab")
+
+
+def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its_arena(
+    open_page, lab: RealLab
+) -> None:
+    """An upgrade or a supervisor's restart of the viewer: the session is handed over, not
+    logged out. The run goes on, and the page, reconnecting by itself to the new viewer at
+    the same address, logs in again by its saved login and opens its arena again."""
+    bob = open_page("bob-restart")
+    panel = enter_arena(bob, lab, "bob")
+    start_ticking(bob, panel, "k3")
+    before = max(ticks_shown(bob))
+    old, port = lab.viewer, lab.viewer.port
+    data_dir = old.handovers.path.parent if old.handovers.path is not None else None
+    assert data_dir is not None
+    old.stop()  # as SIGTERM does (ViewerService.on_stop)
+    lab.connector.close()
+    # The next viewer: a new process would have a new connector on its own session.
+    lab.connector = LiveConnector(lab.session, lab.address, lab.lab.key_hex, data_dir=data_dir)
+    lab.viewer = WebViewer(lab.connector, port=port, default_address=lab.address, data_dir=data_dir)
+    # No click: viser's page reconnects, the cookie logs it in, the arena opens in front.
+    bob.wait_text("the web viewer restarted; your runs went on", timeout=60_000)
+    bob.wait_text("Your controller runs on k3", timeout=30_000)
+    back = next(iter(session_of(lab.viewer, "bob").labs.values())).panels[CTX]
+    assert back.workbench is not None and back.robots is not None
+    wait_until(lambda: back.robots is not None and back.robots.driven("k3"), 15, "k3 driven")
+    # It was never stopped: the prints go on past those from before the restart.
+    wait_until(lambda: max(ticks_shown(bob), default=0) > before + 2, 30, "prints go on")
+    assert "cancelled" not in " ".join(bob.p.locator("pre.wart-output").all_inner_texts())
+    bob.screenshot("viewer-restart-kept-the-run")
+    bob.click("Stop")
+    bob.wait_text("Your controller on k3 cancelled", timeout=15_000)

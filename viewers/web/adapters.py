@@ -457,6 +457,14 @@ class LabConnection(Protocol):
         """
         ...
 
+    def hand_over(self) -> None:
+        """The viewer stops: let the session go as a crash would, not logged out.
+
+        No room is left and the session and its saved login stay good: its page logs
+        in again on the next viewer, and its runs in simulation go on meanwhile.
+        """
+        ...
+
     @property
     def resume_token(self) -> bytes | None:
         """The registry's token to come back without a password (None: none was given)."""

@@ -34,6 +34,7 @@ from common.zconfig import DEFAULT_PORT
 from viewers.web.adapters import LabConnector
 from viewers.web.client import BrowserSession
 from viewers.web.connector import GatewayLogin, LiveConnector
+from viewers.web.handover import HANDOVER_FILE, HandOverBook
 from viewers.web.login import LoginDesk
 from viewers.web.parking import DEFAULT_GRACE_S, ParkingLot
 from viewers.web.pump import DEFAULT_RATE, FramePump
@@ -80,6 +81,8 @@ class WebViewer:
         self.cookies = CookieDesk()  # saved logins' HttpOnly cookies (saved_login.py)
         self.default_address = default_address or LabAddress("127.0.0.1")
         self.saved = SavedConnections(data_dir / "connections.json" if data_dir else None)
+        # What the pages had open when the last viewer here stopped (handover.py).
+        self.handovers = HandOverBook(data_dir / HANDOVER_FILE if data_dir else None)
         self.pump = FramePump(rate)
         # Logins run on these threads, never on viser's callback threads (login.py).
         self.logins = logins or LoginDesk()
@@ -127,6 +130,7 @@ class WebViewer:
             self.logins,
             self.parking,
             self.cookies if self._cookies_served(client) else None,
+            self.handovers,
         )
         with self._lock:
             self.sessions[client.client_id] = session
@@ -160,14 +164,27 @@ class WebViewer:
         return len(state.message_buffer.message_from_id), conn.transport.get_write_buffer_size()
 
     def stop(self) -> None:
-        self.parking.close()  # first: the pages closed below log out instead of parking
+        """Stop serving. Lab sessions with a saved login are handed over, not logged out
+        (a restart or an upgrade must not end students' runs): their pages log in again
+        on the next viewer at this address; the others are logged out."""
+        handed_over = self.parking.close()  # first: the pages closed below do not park
         self.pump.stop()
         self.logins.close()
         with self._lock:
             sessions = list(self.sessions.values())
             self.sessions.clear()
         for session in sessions:
-            session.close()
+            handed_over += session.close(viewer_stops=True)
+        for token, page in handed_over:
+            self.handovers.keep(token, page)
+        if handed_over:
+            self.handovers.save()
+            log.info(
+                "viewer stopping: %d lab session(s) with a saved login left running, not "
+                "logged out; their pages log in again on the next viewer at this address, "
+                "back in the contexts they had open, and their runs go on",
+                len(handed_over),
+            )
         self.server.stop()
 
 
@@ -211,7 +228,7 @@ class ViewerService(Service):
 
     def on_stop(self, timeout: float) -> None:
         if self.viewer is not None:
-            self.viewer.stop()  # every browser's users are logged out first
+            self.viewer.stop()  # saved logins handed over, the others logged out
         closer = getattr(self._viewer_args.get("connector"), "close", None)
         if callable(closer):
             closer()  # the other labs' sessions

@@ -24,6 +24,7 @@ from viewers.web.adapters import LabConnection, LabConnector, LoginError
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.front_tab import FrontTab
+from viewers.web.handover import HandedOver, HandOverBook
 from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
@@ -60,8 +61,10 @@ class BrowserSession:
         logins: LoginDesk,
         parking: ParkingLot | None = None,
         cookies: CookieDesk | None = None,
+        handovers: HandOverBook | None = None,
     ) -> None:
         self.client = client
+        self.handovers = handovers
         # Sets and deletes saved logins (saved_login.py); None: this viewer saves none.
         self.cookies = cookies
         # (not `parking or ...`: an empty lot has no length, and is falsy)
@@ -215,7 +218,9 @@ class BrowserSession:
                 time.monotonic() - began,
             )
             self.notice.visible = False
-            self._logged_in(connection, address)
+            books = self.handovers
+            reopen = books.take(saved.token, connection.user) if books is not None else None
+            self._logged_in(connection, address, reopen=reopen)
 
         def too_late() -> None:
             self._resume_failed(address, "the lab is busy, many people are logging in at once")
@@ -247,8 +252,14 @@ class BrowserSession:
         self._cookie.content = self.cookies.html(cookie, self._cookies_set)
 
     def _logged_in(
-        self, connection: LabConnection, address: LabAddress, kept: ParkedLab | None = None
+        self,
+        connection: LabConnection,
+        address: LabAddress,
+        kept: ParkedLab | None = None,
+        reopen: HandedOver | None = None,
     ) -> None:
+        """``kept``: the session this page left for a reload; ``reopen``: what the page had
+        open when the viewer before this one stopped (its session was handed over)."""
         self.login = None
         if self.closed:  # the page closed while the login was on its way
             if kept is not None and self.parking.park(connection, kept.memory, kept.events):
@@ -283,6 +294,8 @@ class BrowserSession:
             + (
                 "your session was kept while the page was away; nothing was lost."
                 if kept is not None
+                else "the web viewer restarted; your runs went on, and your tabs are back."
+                if reopen is not None
                 else f"its lobby is the tab '{tab.tab_name}'."
             ),
             auto_close_seconds=5.0,
@@ -291,6 +304,11 @@ class BrowserSession:
         if shown is not None:  # the arena the page showed, in front again
             self._bring_to_front(shown.tab_name, shown.tab_title)
             shown.show_world()
+        if reopen is not None:
+            # The one in view last: joining brings a context's tab to the front.
+            shown_last = [reopen.watching] if reopen.watching else []
+            for ctx in [c for c in reopen.contexts if c != reopen.watching] + shown_last:
+                tab.join(ctx)
         if address.context:
             tab.join(address.context)
 
@@ -354,15 +372,19 @@ class BrowserSession:
 
     # -- the browser went away
 
-    def close(self) -> None:
+    def close(self, *, viewer_stops: bool = False) -> list[tuple[bytes, HandedOver]]:
         """The browser went away: stop drawing, then park or log out of every lab.
 
         A lab with a saved login is parked (parking.py): a reload within the grace
         takes its session back. Nothing here touches the page: its connection is
         closed, and a GUI update queued now would only be dropped with a warning.
         Otherwise the lab must still be told (rooms left, presence gone,
-        subscriptions undeclared).
+        subscriptions undeclared). ``viewer_stops``: the page stays and the viewer
+        goes; a lab with a saved login is handed over instead (LabConnection.hand_over),
+        for the page to log in again on the next viewer. Returns each one's saved login
+        and what the page had open there.
         """
+        handed_over: list[tuple[bytes, HandedOver]] = []
         self.closed = True
         self.pump.detach(self.view)
         self.view.feed = None
@@ -372,9 +394,16 @@ class BrowserSession:
             self.labs.clear()
         for tab in tabs:
             try:
-                if self.parking.enabled and tab.connection.resume_token is not None:
-                    shown = [p.ctx for p in tab.panels.values() if p is watching]
-                    memory, events = tab.park(shown[0] if shown else None)
+                token = tab.connection.resume_token if self.parking.enabled else None
+                shown = next((c for c, p in tab.panels.items() if p is watching), None)
+                if token is not None and viewer_stops:
+                    opened = tuple(tab.panels)
+                    tab.hand_over()
+                    page = HandedOver(tab.connection.user, opened, shown, time.time())
+                    handed_over.append((token, page))
+                    continue
+                if token is not None:
+                    memory, events = tab.park(shown)
                     if self.parking.park(tab.connection, memory, events):
                         continue  # kept for a reload (parking.py)
                     events.close()
@@ -383,3 +412,4 @@ class BrowserSession:
                 tab.shutdown()
             except Exception:
                 log.exception("while closing %s for a departed browser", tab.label)
+        return handed_over

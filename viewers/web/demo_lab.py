@@ -550,3 +550,6 @@ class DemoConnection:
                 lab._online[self._user] = left
         self.closed = True
         lab._broadcast(DirectoryEvent())
+
+    def hand_over(self) -> None:
+        self.logout()  # nothing outlives the demo lab's viewer: it is in the same process

@@ -560,6 +560,12 @@ class LiveConnection:
 
     def logout(self, keep_resume: bool = False, reason: str = "") -> None:
         """Leave every room, log out (presence goes), release worlds; safe to call twice."""
+        self._end(logout=True, keep_resume=keep_resume, reason=reason)
+
+    def hand_over(self) -> None:
+        self._end(logout=False, keep_resume=True, reason="")
+
+    def _end(self, *, logout: bool, keep_resume: bool, reason: str) -> None:
         if self._closed.is_set():
             return
         self._closed.set()
@@ -574,7 +580,8 @@ class LiveConnection:
         self._standings.close()
         self._grading.close()
         try:
-            self.client.close(reason)  # leaves rooms, logs out, undeclares the presence token
+            # leaves rooms, logs out (unless handed over), undeclares the presence token
+            self.client.close(reason, logout=logout)
         except Exception:
             log.exception("logging %s out of %s", self.user, self._address.label)
         self.connector._closed(self)

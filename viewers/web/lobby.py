@@ -350,6 +350,12 @@ class LabTab:
         except LabError as exc:
             log.info("logout from %s: %s", self.label, exc)
 
+    def hand_over(self) -> None:
+        """The viewer stops: the lab session goes on without it (see LabConnection)."""
+        self.closed = True
+        self._unsubscribe()
+        self.connection.hand_over()
+
     def logout(self) -> None:
         self.closed = True
         self._unsubscribe()

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 from viewers.web.adapters import LabConnection, LabError, LabEvent
 from viewers.web.chat_panel import PanelMemory
+from viewers.web.handover import HandedOver
 
 log = logging.getLogger("wart.viewer.parking")
 
@@ -247,12 +248,25 @@ class ParkingLot:
         except Exception:  # one lab's failure must not keep the others' sessions alive
             log.exception("while ending %s's parked session", lab.user)
 
-    def close(self) -> None:
-        """The viewer stops: every parked session ends now."""
+    def close(self) -> list[tuple[bytes, HandedOver]]:
+        """The viewer stops: every parked session is handed over (LabConnection.hand_over),
+        as an open page's is: a page that comes back to the next viewer logs in again
+        by its saved login. Returns each one's saved login and what its page had open."""
         self._stopped = True
         with self._changed:
             parked, self._parked = self._parked, []
             self._changed.notify_all()
         self._wake.set()
+        handed: list[tuple[bytes, HandedOver]] = []
         for lab in parked:
-            self._end(lab, "the web viewer stopped")
+            lab.events.close()
+            try:
+                lab.connection.hand_over()
+            except Exception:  # one lab's failure must not keep the others
+                log.exception("while handing over %s's parked session", lab.user)
+                continue
+            contexts = tuple(panel.joined.ctx for panel in lab.memory.panels)
+            watching = lab.memory.watching if lab.memory.watching in contexts else None
+            page = HandedOver(lab.user, contexts, watching, time.time())
+            handed.append((lab.token, page))
+        return handed

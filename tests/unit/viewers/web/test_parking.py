@@ -44,6 +44,9 @@ class FakeConnection:
     def logout(self, keep_resume: bool = False, reason: str = "") -> None:
         self.logouts.append((keep_resume, reason))
 
+    def hand_over(self) -> None:
+        self.logouts.append((True, "handed over"))
+
 
 def chat(n: int) -> ChatEvent:
     return ChatEvent("arena", ChatEntry(seq=n, sender="bob", text=f"line {n}", at=float(n)))
@@ -174,10 +177,13 @@ def test_without_a_saved_login_or_with_parking_off_nothing_is_kept() -> None:
     lot.close()
 
 
-def test_the_viewer_stopping_ends_every_parked_session() -> None:
+def test_the_viewer_stopping_hands_every_parked_session_over_with_what_its_page_had() -> None:
+    """Not logged out: the runs go on, and the page comes back to the next viewer."""
     lot = ParkingLot(grace_s=60)
     conn = FakeConnection()
     park(lot, conn)
-    lot.close()
-    assert conn.logouts == [(True, "the web viewer stopped")]
+    [(token, page)] = lot.close()
+    assert conn.logouts == [(True, "handed over")]
+    assert token == conn.resume_token and page.user == "alice"
+    assert page.contexts == () and page.watching is None  # MEMORY has no panel to show
     assert not lot.park(conn, MEMORY, EventKeeper(conn))  # type: ignore[arg-type]

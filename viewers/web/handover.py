@@ -1,0 +1,124 @@
+"""What a stopping viewer's pages had open, for the next viewer to open again.
+
+A viewer that stops (an upgrade, a restart by its supervisor, a pod moved) hands
+its lab sessions over instead of logging them out (LabConnection.hand_over): their
+runs go on, and each page, reconnecting to the next viewer at the same address,
+logs in again by its saved login. What the page had open lived in the old
+process's memory; this book keeps the part the next viewer can use, in the
+viewer's data directory: per saved login, the contexts that were joined and the
+one whose world was in view. The page comes back to them, not to the lobby.
+
+A saved login is named here by the SHA-256 of its resume token, never the token:
+the file lets no one log in. An entry is good once and for ``MAX_AGE_S``; a file
+that cannot be read is set aside with a warning and an empty book is started.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import threading
+import time
+from pathlib import Path
+
+import msgspec
+
+from common.files import write_atomic
+from common.keys import is_ident
+
+log = logging.getLogger("wart.viewer.handover")
+
+HANDOVER_FILE = "handed-over.json"
+MAX_AGE_S = 3600.0  # a page back later than this starts in the lobby
+MAX_ENTRIES = 10_000
+MAX_CONTEXTS = 64  # per page: more than anyone opens
+
+
+class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One page's lab, as the viewer that stopped left it."""
+
+    user: str
+    contexts: tuple[str, ...]  # joined, in the order they were opened
+    watching: str | None  # the context whose world was in view
+    at: float  # wall-clock time of the hand-over
+
+
+class HandOverBook:
+    def __init__(self, path: Path | None, max_age_s: float = MAX_AGE_S) -> None:
+        self.path = path
+        self.max_age_s = max_age_s
+        self._lock = threading.Lock()
+        self._entries: dict[str, HandedOver] = self._read()
+
+    @staticmethod
+    def name(token: bytes) -> str:
+        return hashlib.sha256(token).hexdigest()
+
+    def _read(self) -> dict[str, HandedOver]:
+        if self.path is None or not self.path.exists():
+            return {}
+        try:
+            raw = msgspec.json.decode(self.path.read_bytes(), type=dict[str, HandedOver])
+        except (OSError, msgspec.ValidationError, msgspec.DecodeError) as exc:
+            aside = self.path.with_name(self.path.name + ".unreadable")
+            log.warning(
+                "the pages handed over by the last viewer (%s) could not be read (%s): "
+                "set aside as %s; those pages come back to their lab's lobby",
+                self.path,
+                exc,
+                aside.name,
+            )
+            with contextlib.suppress(OSError):  # a read-only directory: read it again
+                self.path.replace(aside)
+            return {}
+        now = time.time()
+        return {
+            name: entry
+            for name, entry in raw.items()
+            if self._sound(name, entry) and now - entry.at <= self.max_age_s
+        }
+
+    @staticmethod
+    def _sound(name: str, entry: HandedOver) -> bool:
+        # Names are read back into the page's joins: only what a context can be called.
+        return (
+            len(name) == 64
+            and all(c in "0123456789abcdef" for c in name)
+            and is_ident(entry.user)
+            and len(entry.contexts) <= MAX_CONTEXTS
+            and all(is_ident(ctx) for ctx in entry.contexts)
+            and (entry.watching is None or entry.watching in entry.contexts)
+        )
+
+    def keep(self, token: bytes, entry: HandedOver) -> None:
+        """Note one page's lab (written by :meth:`save`)."""
+        if not self._sound(self.name(token), entry):
+            log.warning("a handed-over page of %r was not noted: unexpected names", entry.user)
+            return
+        with self._lock:
+            self._entries[self.name(token)] = entry
+            while len(self._entries) > MAX_ENTRIES:
+                del self._entries[next(iter(self._entries))]
+
+    def save(self) -> None:
+        if self.path is None:
+            return
+        with self._lock:
+            data = msgspec.json.encode(self._entries)
+        try:
+            write_atomic(self.path, data)
+            self.path.chmod(0o600)
+        except OSError as exc:
+            log.warning("could not keep the handed-over pages in %s: %s", self.path, exc)
+
+    def take(self, token: bytes, user: str) -> HandedOver | None:
+        """What the page of this saved login had open, once; None if nothing (or too old)."""
+        with self._lock:
+            entry = self._entries.pop(self.name(token), None)
+            if entry is None:
+                return None
+        self.save()
+        if entry.user != user or time.time() - entry.at > self.max_age_s:
+            return None
+        return entry
