@@ -171,10 +171,14 @@ def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its
 ) -> None:
     """An upgrade or a supervisor's restart of the viewer: the session is handed over, not
     logged out. The run goes on, and the page, reconnecting by itself to the new viewer at
-    the same address, logs in again by its saved login and opens its arena again."""
+    the same address, logs in again by its saved login and opens its arena again, with the
+    editor's unsaved text."""
     bob = open_page("bob-restart")
     panel = enter_arena(bob, lab, "bob")
     start_ticking(bob, panel, "k3")
+    bench = panel.workbench
+    assert bench is not None
+    write_code(bob, UNSAVED, lambda: bench.code.value == UNSAVED)
     before = max(ticks_shown(bob))
     old, port = lab.viewer, lab.viewer.port
     data_dir = old.handovers.path.parent if old.handovers.path is not None else None
@@ -189,6 +193,10 @@ def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its
     bob.wait_text("Your controller runs on k3", timeout=30_000)
     back = next(iter(session_of(lab.viewer, "bob").labs.values())).panels[CTX]
     assert back.workbench is not None and back.robots is not None
+    # The editor's text typed after Run and never saved, on the server and in the browser.
+    assert back.workbench.code.value == UNSAVED and back.workbench.target.value == "k3"
+    shown = bob.p.evaluate("() => window.wartEditor.editorFor(null).view.state.doc.toString()")
+    assert shown == UNSAVED
     wait_until(lambda: back.robots is not None and back.robots.driven("k3"), 15, "k3 driven")
     # It was never stopped: the prints go on past those from before the restart.
     wait_until(lambda: max(ticks_shown(bob), default=0) > before + 2, 30, "prints go on")

@@ -66,7 +66,10 @@ class ChatPanel:
         on_close: Callable[[ChatPanel], None],
         on_watch: Callable[[WorldFeed, ChatPanel], None] | None = None,
         kept: PanelMemory | None = None,
+        editor: BenchMemory | None = None,
     ) -> None:
+        """``kept``: the panel as a reloaded page left it; ``editor``: only the editor's
+        text, put back in a panel joined anew (a restarted viewer's, handover.py)."""
         self.joined = joined
         self.client = client
         self.connection = connection
@@ -128,7 +131,7 @@ class ChatPanel:
                     if kept is not None and kept.robots is not None:
                         self.robots.put_back(kept.robots)
                     self.workbench = Workbench(
-                        client, connection, self.ctx, self.robots, kept.bench if kept else None
+                        client, connection, self.ctx, self.robots, kept.bench if kept else editor
                     )
                     # Assignments are handed in from here: the file open in the editor above.
                     self.course = CoursePanel(

@@ -24,7 +24,7 @@ from viewers.web.adapters import LabConnection, LabConnector, LoginError
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.front_tab import FrontTab
-from viewers.web.handover import HandedOver, HandOverBook
+from viewers.web.handover import EditorText, HandedOver, HandOverBook
 from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
@@ -37,6 +37,7 @@ from viewers.web.sure_clicks import add_sure_clicks
 from viewers.web.tabs import PageTitle, TabSwitcher, tab_title
 from viewers.web.text import escape_md
 from viewers.web.viser_fast import browser_address, browser_cookies, browser_origin
+from viewers.web.workbench import BenchMemory
 from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
@@ -308,7 +309,11 @@ class BrowserSession:
             # The one in view last: joining brings a context's tab to the front.
             shown_last = [reopen.watching] if reopen.watching else []
             for ctx in [c for c in reopen.contexts if c != reopen.watching] + shown_last:
-                tab.join(ctx)
+                text = reopen.editor(ctx)
+                put_back = None
+                if text is not None:  # the editor's text, saved or not, and its robot
+                    put_back = BenchMemory.of_text(text.file_name, text.code, text.target)
+                tab.join(ctx, editor=put_back)
         if address.context:
             tab.join(address.context)
 
@@ -398,8 +403,15 @@ class BrowserSession:
                 shown = next((c for c, p in tab.panels.items() if p is watching), None)
                 if token is not None and viewer_stops:
                     opened = tuple(tab.panels)
+                    editors = tuple(
+                        EditorText(ctx, bench.file_name, bench.code, bench.target)
+                        for ctx, panel in tab.panels.items()
+                        if panel.workbench is not None
+                        for bench in [panel.workbench.memory()]
+                    )
                     tab.hand_over()
-                    page = HandedOver(tab.connection.user, opened, shown, time.time())
+                    at = time.time()
+                    page = HandedOver(tab.connection.user, opened, shown, at, editors)
                     handed_over.append((token, page))
                     continue
                 if token is not None:

@@ -5,8 +5,9 @@ its lab sessions over instead of logging them out (LabConnection.hand_over): the
 runs go on, and each page, reconnecting to the next viewer at the same address,
 logs in again by its saved login. What the page had open lived in the old
 process's memory; this book keeps the part the next viewer can use, in the
-viewer's data directory: per saved login, the contexts that were joined and the
-one whose world was in view. The page comes back to them, not to the lobby.
+viewer's data directory: per saved login, the contexts that were joined, the
+one whose world was in view, and each arena's editor (its file name, its text,
+saved or not, and the robot chosen). The page comes back to them, not to the lobby.
 
 A saved login is named here by the SHA-256 of its resume token, never the token:
 the file lets no one log in. An entry is good once and for ``MAX_AGE_S``; a file
@@ -33,6 +34,17 @@ HANDOVER_FILE = "handed-over.json"
 MAX_AGE_S = 3600.0  # a page back later than this starts in the lobby
 MAX_ENTRIES = 10_000
 MAX_CONTEXTS = 64  # per page: more than anyone opens
+MAX_EDITOR_CHARS = 256 * 1024  # four times what a controller may be (upload_gate.py)
+MAX_NAME_CHARS = 200
+
+
+class EditorText(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """An arena's editor as the page left it: unsaved text is a student's work."""
+
+    ctx: str
+    file_name: str
+    code: str
+    target: str  # the robot chosen to run on
 
 
 class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -42,6 +54,10 @@ class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     contexts: tuple[str, ...]  # joined, in the order they were opened
     watching: str | None  # the context whose world was in view
     at: float  # wall-clock time of the hand-over
+    editors: tuple[EditorText, ...] = ()
+
+    def editor(self, ctx: str) -> EditorText | None:
+        return next((e for e in self.editors if e.ctx == ctx), None)
 
 
 class HandOverBook:
@@ -49,15 +65,19 @@ class HandOverBook:
         self.path = path
         self.max_age_s = max_age_s
         self._lock = threading.Lock()
-        self._entries: dict[str, HandedOver] = self._read()
+        self._entries: dict[str, HandedOver] = {}
+        self._entries, dropped = self._read()
+        if dropped:  # out of date, or not sound: no student's text stays for nothing
+            self.save()
 
     @staticmethod
     def name(token: bytes) -> str:
         return hashlib.sha256(token).hexdigest()
 
-    def _read(self) -> dict[str, HandedOver]:
+    def _read(self) -> tuple[dict[str, HandedOver], int]:
+        """The entries still good, and how many were dropped."""
         if self.path is None or not self.path.exists():
-            return {}
+            return {}, 0
         try:
             raw = msgspec.json.decode(self.path.read_bytes(), type=dict[str, HandedOver])
         except (OSError, msgspec.ValidationError, msgspec.DecodeError) as exc:
@@ -71,13 +91,14 @@ class HandOverBook:
             )
             with contextlib.suppress(OSError):  # a read-only directory: read it again
                 self.path.replace(aside)
-            return {}
+            return {}, 0
         now = time.time()
-        return {
+        good = {
             name: entry
             for name, entry in raw.items()
             if self._sound(name, entry) and now - entry.at <= self.max_age_s
         }
+        return good, len(raw) - len(good)
 
     @staticmethod
     def _sound(name: str, entry: HandedOver) -> bool:
@@ -89,6 +110,7 @@ class HandOverBook:
             and len(entry.contexts) <= MAX_CONTEXTS
             and all(is_ident(ctx) for ctx in entry.contexts)
             and (entry.watching is None or entry.watching in entry.contexts)
+            and all(_sound_editor(e, entry.contexts) for e in entry.editors)
         )
 
     def keep(self, token: bytes, entry: HandedOver) -> None:
@@ -122,3 +144,13 @@ class HandOverBook:
         if entry.user != user or time.time() - entry.at > self.max_age_s:
             return None
         return entry
+
+
+def _sound_editor(editor: EditorText, contexts: tuple[str, ...]) -> bool:
+    # Shown in the editor, never run from here: bounded text, names without controls.
+    names = (editor.file_name, editor.target)
+    return (
+        editor.ctx in contexts
+        and len(editor.code) <= MAX_EDITOR_CHARS
+        and all(len(n) <= MAX_NAME_CHARS and n.isprintable() for n in names)
+    )

@@ -40,7 +40,7 @@ from viewers.web.network_panel import NetworkPanel
 from viewers.web.parking import EventKeeper, LabMemory, ParkedLab
 from viewers.web.tabs import tab_label
 from viewers.web.text import check_line, clock, escape_md
-from viewers.web.workbench import Workbench
+from viewers.web.workbench import BenchMemory, Workbench
 from viewers.web.world_feed import WorldFeed
 
 log = logging.getLogger("wart.viewer.lobby")
@@ -208,7 +208,8 @@ class LabTab:
 
     # -- actions
 
-    def join(self, ctx: str) -> ChatPanel | None:
+    def join(self, ctx: str, editor: BenchMemory | None = None) -> ChatPanel | None:
+        """Join ``ctx`` and open its tab; ``editor``: its editor's text, put back."""
         who = f"{self.connection.user} on {self.label}"
         with self._lock:
             if ctx in self.panels:
@@ -220,12 +221,12 @@ class LabTab:
                 return None
             self._joining.add(ctx)
         try:
-            return self._join(ctx, who)
+            return self._join(ctx, who, editor)
         finally:
             with self._lock:
                 self._joining.discard(ctx)
 
-    def _join(self, ctx: str, who: str) -> ChatPanel | None:
+    def _join(self, ctx: str, who: str, editor: BenchMemory | None) -> ChatPanel | None:
         # Logged both ways, as hosting is: a page whose joined context never showed its
         # tab (a busy run) left no trace of whether the join was asked, answered or failed.
         log.info("%s: joining %s", who, ctx)
@@ -237,7 +238,7 @@ class LabTab:
             self.say_notice(f"Could not join {ctx}: {exc}")
             return None
         log.info("%s: joined %s in %.1f s", who, ctx, time.monotonic() - started)
-        panel = self._add_panel(joined)
+        panel = self._add_panel(joined, editor=editor)
         self._directory = None  # the Join button's state changed
         self.refresh()
         for bench in self._workbenches():  # a real arena joined: its robots join the lists
@@ -247,7 +248,12 @@ class LabTab:
             self._on_context(panel)
         return panel
 
-    def _add_panel(self, joined: JoinedContext, kept: PanelMemory | None = None) -> ChatPanel:
+    def _add_panel(
+        self,
+        joined: JoinedContext,
+        kept: PanelMemory | None = None,
+        editor: BenchMemory | None = None,
+    ) -> ChatPanel:
         panel = ChatPanel(
             self.client,
             self.tabs,
@@ -256,6 +262,7 @@ class LabTab:
             on_close=self._panel_closed,
             on_watch=self._on_watch,
             kept=kept,
+            editor=editor,
         )
         with self._lock:
             self.panels[joined.ctx] = panel

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from viewers.web.adapters import LabConnection, LabError, LabEvent
 from viewers.web.chat_panel import PanelMemory
-from viewers.web.handover import HandedOver
+from viewers.web.handover import EditorText, HandedOver
 
 log = logging.getLogger("wart.viewer.parking")
 
@@ -267,6 +267,11 @@ class ParkingLot:
                 continue
             contexts = tuple(panel.joined.ctx for panel in lab.memory.panels)
             watching = lab.memory.watching if lab.memory.watching in contexts else None
-            page = HandedOver(lab.user, contexts, watching, time.time())
+            editors = tuple(
+                EditorText(p.joined.ctx, p.bench.file_name, p.bench.code, p.bench.target)
+                for p in lab.memory.panels
+                if p.bench is not None
+            )
+            page = HandedOver(lab.user, contexts, watching, time.time(), editors)
             handed.append((lab.token, page))
         return handed

@@ -88,6 +88,11 @@ class BenchMemory:
     shown: tuple[tuple[Problem, ...], str]  # the problems under the editor, and their heading
     printed: tuple[str, ...]  # the run's output under the editor (HTML, escaped)
 
+    @classmethod
+    def of_text(cls, file_name: str, code: str, target: str) -> BenchMemory:
+        """The editor alone (a viewer restarted): the run, if any, is found again."""
+        return cls(file_name, code, target, None, "", (), ((), ""), ())
+
 
 class Workbench:
     def __init__(

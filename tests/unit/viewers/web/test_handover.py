@@ -9,7 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from viewers.web.handover import HANDOVER_FILE, HandedOver, HandOverBook
+from viewers.web.handover import (
+    HANDOVER_FILE,
+    MAX_EDITOR_CHARS,
+    EditorText,
+    HandedOver,
+    HandOverBook,
+)
 
 TOKEN = b"\x07" * 48
 
@@ -41,6 +47,7 @@ def test_a_page_back_too_late_starts_in_the_lobby(tmp_path: Path) -> None:
     book.keep(TOKEN, HandedOver("alice", ("arena",), None, time.time() - 7200))
     book.save()
     assert HandOverBook(path, max_age_s=3600).take(TOKEN, "alice") is None
+    assert HandOverBook.name(TOKEN) not in path.read_text()  # gone from the file at start
 
 
 @pytest.mark.parametrize(
@@ -69,3 +76,22 @@ def test_names_that_are_not_contexts_never_reach_a_join(tmp_path: Path) -> None:
     book = HandOverBook(path)
     book.keep(TOKEN, page("alice", "x y"))  # and not noted from a page either
     assert book.take(TOKEN, "alice") is None
+
+
+def test_an_arenas_unsaved_editor_text_comes_back_bounded_and_as_text(tmp_path: Path) -> None:
+    path = tmp_path / HANDOVER_FILE
+    code = "class Mine(Controller):\n    pass  # not saved yet\n"
+    editor = EditorText("arena", "mine.py", code, "k3")
+    book = HandOverBook(path)
+    book.keep(TOKEN, HandedOver("alice", ("lobby", "arena"), "arena", time.time(), (editor,)))
+    book.save()
+    back = HandOverBook(path).take(TOKEN, "alice")
+    assert back is not None and back.editor("arena") == editor and back.editor("lobby") is None
+    for bad in (
+        EditorText("other", "mine.py", code, "k3"),  # a context the page had not joined
+        EditorText("arena", "mine.py", "x" * (MAX_EDITOR_CHARS + 1), "k3"),
+        EditorText("arena", "mine\x1b[2J.py", code, "k3"),
+    ):
+        fresh = HandOverBook(tmp_path / "another.json")
+        fresh.keep(TOKEN, HandedOver("alice", ("arena",), None, time.time(), (bad,)))
+        assert fresh.take(TOKEN, "alice") is None

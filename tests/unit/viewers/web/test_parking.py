@@ -11,8 +11,11 @@ import pytest
 
 from common.client.lab_address import LabAddress
 from tests.kit.waits import wait_for
-from viewers.web.adapters import ChatEntry, ChatEvent, LabError, LabEvent
+from viewers.web.adapters import ChatEntry, ChatEvent, JoinedContext, LabError, LabEvent
+from viewers.web.chat_panel import PanelMemory
+from viewers.web.handover import EditorText
 from viewers.web.parking import EventKeeper, LabMemory, ParkingLot
+from viewers.web.workbench import BenchMemory
 
 ADDRESS = LabAddress("lab.example.org", user="alice")
 MEMORY = LabMemory(panels=(), private=("from bob: hi",), watching="arena")
@@ -187,3 +190,16 @@ def test_the_viewer_stopping_hands_every_parked_session_over_with_what_its_page_
     assert token == conn.resume_token and page.user == "alice"
     assert page.contexts == () and page.watching is None  # MEMORY has no panel to show
     assert not lot.park(conn, MEMORY, EventKeeper(conn))  # type: ignore[arg-type]
+
+
+def test_a_page_reloading_as_the_viewer_stops_keeps_its_arena_and_unsaved_editor() -> None:
+    lot = ParkingLot(grace_s=60)
+    conn = FakeConnection()
+    arena = JoinedContext("arena", "agent", "", "ida", ("alice",), (), world="arena1")
+    bench = BenchMemory.of_text("mine.py", "# typed, never saved\n", "k2")
+    memory = LabMemory((PanelMemory(arena, (), None, bench),), (), watching="arena")
+    lot.attach(conn)  # type: ignore[arg-type]
+    assert lot.park(conn, memory, EventKeeper(conn))  # type: ignore[arg-type]
+    [(_, page)] = lot.close()
+    assert page.contexts == ("arena",) and page.watching == "arena"
+    assert page.editors == (EditorText("arena", "mine.py", "# typed, never saved\n", "k2"),)
