@@ -4,6 +4,9 @@ browser in again without the password; the cookie is HttpOnly and SameSite=Stric
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,6 +16,7 @@ from common.client.resume_cookie import PREFIX
 from tests.browser.conftest import ViserPage, page_url
 from tests.browser.test_real_lab import log_in, online
 from tests.kit.reallab import RealLab, real_lab
+from viewers.web.login import LoginDesk
 from viewers.web.tabs import tab_label
 
 pytestmark = pytest.mark.real_lab
@@ -56,6 +60,9 @@ def test_a_reload_resumes_without_the_password_and_log_out_forgets(open_page, la
     # A second reload resumes again (each resume gives the page a new token).
     page.p.reload()
     page.wait_ready()
+    # The session parked when the page closed was not ended for a question not answered:
+    # the page takes it back, as any reload within the grace does.
+    page.wait_text("your session was kept while the page was away", timeout=30_000)
     page.tab(tab_label(lab.address)).first.click(timeout=30_000)
     page.wait_text("Logged in as", timeout=30_000)
     # "Log out" revokes it and deletes the cookie: the next load asks for the password.
@@ -82,3 +89,74 @@ def test_a_saved_login_revoked_meanwhile_is_refused_in_words(open_page, lab: Rea
     page.wait_text("the password was changed", timeout=10_000)
     page.button("Log in").wait_for(timeout=10_000)  # the password form, for bob
     page.screenshot("saved-login-refused")
+
+
+def test_a_saved_login_that_could_not_be_tried_now_is_kept_for_the_next_load(
+    open_page, lab: RealLab
+) -> None:
+    """A busy viewer (a class reconnecting after a restart) or a registry that does not
+    answer refuses nothing: the page says so and offers the password, and the cookie
+    stays, so the next load logs in by it without the password."""
+    page = open_page("carol")
+    log_in(page, lab, "carol")
+    _wait_saved(page, True)
+    context = page.p.context
+    page.p.close()
+    # Every login thread of the viewer held, and a wait of half a second for one.
+    busy = LoginDesk(workers=1, queue_wait=0.5)
+    held = threading.Event()
+    busy.submit(held.wait, lambda: None)
+    usual, lab.viewer.logins = lab.viewer.logins, busy
+    try:
+        page = ViserPage(context.new_page(), "carol-busy")
+        page.p.goto(page_url(lab.viewer.url))
+        page.wait_ready()
+        page.wait_text("this viewer is busy, many people are logging in at once", timeout=30_000)
+        page.wait_text("It is kept: reload the page in a minute", timeout=10_000)
+        page.p.wait_for_timeout(1000)  # a deletion would have come with the form
+        assert _saved(page), "the saved login was deleted though nothing refused it"
+    finally:
+        lab.viewer.logins = usual
+        held.set()
+        busy.close()
+    page.p.reload()
+    page.wait_ready()
+    # The session parked when the page closed was not ended for a question not answered:
+    # the page takes it back, as any reload within the grace does.
+    page.wait_text("your session was kept while the page was away", timeout=30_000)
+    page.tab(tab_label(lab.address)).first.click(timeout=30_000)
+    page.wait_text("Logged in as", timeout=30_000)
+    assert page.button("Log in").count() == 0
+
+
+def test_a_saved_login_tried_while_the_registry_is_frozen_is_kept(open_page, lab: RealLab) -> None:
+    """The registry restarting or hung (SIGSTOP here: no answer, no error) refuses
+    nothing either: the words say it does not answer, the cookie stays, and the session
+    the closed page left parked is not ended for it."""
+    page = open_page("alice")
+    log_in(page, lab, "alice")
+    _wait_saved(page, True)
+    context = page.p.context
+    page.p.close()
+    registry = lab.lab.registry
+    assert registry is not None
+    wait, lab.connector.login_wait = lab.connector.login_wait, 2.0
+    os.kill(registry.popen.pid, signal.SIGSTOP)
+    try:
+        page = ViserPage(context.new_page(), "alice-frozen")
+        page.p.goto(page_url(lab.viewer.url))
+        page.wait_ready()
+        page.wait_text("does not answer", timeout=30_000)
+        page.wait_text("It is kept: reload the page in a minute", timeout=10_000)
+        page.p.wait_for_timeout(1000)
+        assert _saved(page), "the saved login was deleted though nothing refused it"
+    finally:
+        os.kill(registry.popen.pid, signal.SIGCONT)
+        lab.connector.login_wait = wait
+    page.p.reload()
+    page.wait_ready()
+    # The session parked when the page closed was not ended for a question not answered:
+    # the page takes it back, as any reload within the grace does.
+    page.wait_text("your session was kept while the page was away", timeout=30_000)
+    page.tab(tab_label(lab.address)).first.click(timeout=30_000)
+    page.wait_text("Logged in as", timeout=30_000)

@@ -42,6 +42,11 @@ class LoginError(LabError):
     """Wrong user or password, no such lab, registry not answering."""
 
 
+class LoginUnavailable(LoginError):
+    """The lab could not take the login now (its registry down or busy): nothing was
+    refused, and a saved login stays good for the next try."""
+
+
 def plain_error(exc: LabError, address: LabAddress | None = None) -> LabError:
     """A lab client's error in the words the page shows; ``address``, the lab whose
     registry was asked, is named when that registry does not answer."""
@@ -315,7 +320,8 @@ class LabConnection(Protocol):
     def directory(self) -> Directory: ...
 
     def check_resume(self) -> None:
-        """LabError in the lab's words if this session's saved login is no longer good."""
+        """LabError in the lab's words if this session's saved login is no longer good;
+        LoginUnavailable if the lab could not say now (its registry down or busy)."""
         ...
 
     def join(self, ctx: str) -> JoinedContext: ...

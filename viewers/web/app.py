@@ -88,6 +88,7 @@ class WebViewer:
         self.logins = logins or LoginDesk()
         self.sessions: dict[int, BrowserSession] = {}
         self._lock = threading.Lock()
+        self._stopping = False
         self.server = viser.ViserServer(host=host, port=port, label=label, verbose=False)
         self.host = host
         self.server.gui.configure_theme(
@@ -114,6 +115,14 @@ class WebViewer:
         return f"http://{host}:{self.port}"
 
     def _connected(self, client: viser.ClientHandle) -> None:
+        if self._stopping:
+            # A page reloaded during the stop: a session begun here would be cut at once,
+            # and its saved login tried on a closed desk. The page finds the next viewer.
+            log.info(
+                "browser %d connected while the viewer stops: left for the next one",
+                client.client_id,
+            )
+            return
         limit_send_queue(self.server, client.client_id)
         if not make_loop_safe(client):
             log.warning(
@@ -167,6 +176,7 @@ class WebViewer:
         """Stop serving. Lab sessions with a saved login are handed over, not logged out
         (a restart or an upgrade must not end students' runs): their pages log in again
         on the next viewer at this address; the others are logged out."""
+        self._stopping = True
         handed_over = self.parking.close()  # first: the pages closed below do not park
         self.pump.stop()
         self.logins.close()

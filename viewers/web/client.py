@@ -20,7 +20,7 @@ from common.client.lab_address import (
     parse_address,
 )
 from common.client.resume_cookie import SavedLogin, parse_cookies
-from viewers.web.adapters import LabConnection, LabConnector, LoginError
+from viewers.web.adapters import LabConnection, LabConnector, LoginError, LoginUnavailable
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.front_tab import FrontTab
@@ -195,7 +195,12 @@ class BrowserSession:
 
         def run() -> None:
             parked = self.parking.claim(address.lab_key, address.user or "", saved.token)
-            if parked is not None and self.parking.still_good(parked):
+            try:
+                kept = parked is not None and self.parking.still_good(parked)
+            except LoginUnavailable as exc:  # still parked: the next load may take it
+                self._resume_failed(address, str(exc), refused=False)
+                return
+            if parked is not None and kept:
                 # A reload within the grace: the same session, its runs and tabs, no login.
                 self.notice.visible = False
                 self._logged_in(parked.connection, address, kept=parked)
@@ -208,7 +213,10 @@ class BrowserSession:
                     via=f"browser-{self.client.client_id}",
                     seen_from=browser_address(self.client),
                 )
-            except (LoginError, OSError, TimeoutError) as exc:
+            except (LoginUnavailable, OSError, TimeoutError) as exc:
+                self._resume_failed(address, str(exc), refused=False)
+                return
+            except LoginError as exc:
                 self._resume_failed(address, str(exc))
                 return
             log.info(
@@ -224,13 +232,20 @@ class BrowserSession:
             self._logged_in(connection, address, reopen=reopen)
 
         def too_late() -> None:
-            self._resume_failed(address, "the lab is busy, many people are logging in at once")
+            why = "this viewer is busy, many people are logging in at once"
+            self._resume_failed(address, why, refused=False)
 
         self.logins.submit(run, too_late)
 
-    def _resume_failed(self, address: LabAddress, why: str) -> None:
-        log.info("browser %d: saved login to %s refused: %s", self.client.client_id, address, why)
-        if "(used" not in why:
+    def _resume_failed(self, address: LabAddress, why: str, *, refused: bool = True) -> None:
+        """The password form, with why. ``refused=False``: the lab could not answer now (down,
+        busy); the saved login was not refused and stays for the next load."""
+        client_id = self.client.client_id
+        if refused:
+            log.info("browser %d: saved login to %s refused: %s", client_id, address, why)
+        else:
+            log.info("browser %d: saved login to %s not tried now: %s", client_id, address, why)
+        if refused and "(used" not in why:
             # A used token: another tab of this browser resumed with it first and saved
             # its new one under the same name, which a deletion would take away.
             self._save_login(address, None)
@@ -238,6 +253,8 @@ class BrowserSession:
             return
         self.connect(address.url())  # the password form, for that lab and user
         words = f"Could not log in again with your saved login: {why}"
+        if not refused:
+            words += ". It is kept: reload the page in a minute, or log in with your password"
         if self.login is not None:
             self.login.show_error(words)
         else:

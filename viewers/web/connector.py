@@ -25,7 +25,7 @@ from common.client.service_login import ServiceCredentials, ServiceLogin, vouch_
 from common.lab_errors import LabError
 from common.service import close_session, open_session
 from common.zconfig import NetworkOptions
-from viewers.web.adapters import LoginError, plain_error
+from viewers.web.adapters import LoginError, LoginUnavailable, plain_error
 from viewers.web.lab_links import LabRouterLink, load_labs
 from viewers.web.live import LiveConnection
 from viewers.web.live_world import QUERY_TIMEOUT
@@ -182,7 +182,7 @@ class LiveConnector:
             try:
                 session = open_session(options, wait=3.0, quiet=True)
             except ConnectionError:
-                raise LoginError(
+                raise LoginUnavailable(
                     f"no lab router answers at {address.host}:{address.port}"
                 ) from None
             link = LabRouterLink(address, session, known.registry_key, own=False)
@@ -271,7 +271,7 @@ class LiveConnector:
             ) from None
         except lab_errors.RegistryUnreachable:
             self._unlink(link)
-            raise LoginError(
+            raise LoginUnavailable(
                 f"the lab's registry at {address.label} does not answer: it is down or "
                 "overloaded. Try again in a minute; if it keeps failing, tell the lab's staff."
             ) from None
@@ -279,7 +279,7 @@ class LiveConnector:
             self._unlink(link)
             # The registry's own words: busy (a queue full of logins) or slowing
             # repeated failures ("try again in 8 s"); both say what to do.
-            raise LoginError(f"the lab's registry says: {exc}") from None
+            raise LoginUnavailable(f"the lab's registry says: {exc}") from None
         except lab_errors.LabError as exc:
             self._unlink(link)
             raise LoginError(str(plain_error(exc, address))) from None

@@ -53,6 +53,7 @@ from viewers.web.adapters import (
     JoinedContext,
     LabError,
     LabEvent,
+    LoginUnavailable,
     MemberEvent,
     PrivateEvent,
     Queued,
@@ -230,7 +231,15 @@ class LiveConnection:
     # -- directory, contexts, chat
 
     def check_resume(self) -> None:
-        self._call(self.client.check_resume)
+        if self._closed.is_set():
+            raise LabError("you are logged out of this lab")
+        try:
+            self.client.check_resume()
+        except (lab_errors.RegistryUnreachable, lab_errors.RateLimited) as exc:
+            # Not asked is not refused: the parked session must not end for it.
+            raise LoginUnavailable(str(plain_error(exc, self._address))) from None
+        except lab_errors.LabError as exc:
+            raise plain_error(exc, self._address) from None
 
     def directory(self) -> Directory:
         reply = self._call(self.client.directory)

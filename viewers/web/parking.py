@@ -25,7 +25,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from viewers.web.adapters import LabConnection, LabError, LabEvent
+from viewers.web.adapters import LabConnection, LabError, LabEvent, LoginUnavailable
 from viewers.web.chat_panel import PanelMemory
 from viewers.web.handover import EditorText, HandedOver
 
@@ -213,13 +213,29 @@ class ParkingLot:
 
         The lab may have revoked it meanwhile (a password changed, an admin's kick):
         the page must then log in as if nothing had been kept, and be refused in words.
+        A registry that cannot say now (restarting, swamped) refuses nothing: the session
+        goes back in the lot, its grace running on, and LoginUnavailable is raised.
         """
         try:
             lab.connection.check_resume()
+        except LoginUnavailable:
+            self._put_back(lab)
+            raise
         except LabError as exc:
             self._end(lab, f"the saved login was refused when the page came back ({exc})")
             return False
         return True
+
+    def _put_back(self, lab: ParkedLab) -> None:
+        with self._changed:
+            if not self._stopped:
+                self._parked.append(lab)
+                self._changed.notify_all()
+                self._wake.set()
+                return
+        # The viewer stopped meanwhile: as the lot's others were, it is handed over.
+        lab.events.close()
+        lab.connection.hand_over()
 
     def __len__(self) -> int:
         with self._lock:

@@ -11,7 +11,14 @@ import pytest
 
 from common.client.lab_address import LabAddress
 from tests.kit.waits import wait_for
-from viewers.web.adapters import ChatEntry, ChatEvent, JoinedContext, LabError, LabEvent
+from viewers.web.adapters import (
+    ChatEntry,
+    ChatEvent,
+    JoinedContext,
+    LabError,
+    LabEvent,
+    LoginUnavailable,
+)
 from viewers.web.chat_panel import PanelMemory
 from viewers.web.handover import EditorText
 from viewers.web.parking import EventKeeper, LabMemory, ParkingLot
@@ -31,6 +38,7 @@ class FakeConnection:
         self.subscribers: list[Callable[[LabEvent], None]] = []
         self.logouts: list[tuple[bool, str]] = []
         self.revoked = False
+        self.registry_down = False
 
     def subscribe(self, callback: Callable[[LabEvent], None]) -> Callable[[], None]:
         self.subscribers.append(callback)
@@ -41,6 +49,8 @@ class FakeConnection:
             callback(event)
 
     def check_resume(self) -> None:
+        if self.registry_down:
+            raise LoginUnavailable("the lab at lab.example.org does not answer")
         if self.revoked:
             raise LabError("your saved login was revoked (the password was changed)")
 
@@ -146,6 +156,22 @@ def test_a_second_tab_beside_an_open_one_does_not_take_its_session() -> None:
     assert lot.claim(ADDRESS.lab_key, "alice", b"token-of-alice", wait_s=0.2) is None
     assert time.monotonic() - started >= 0.2
     assert conn.logouts == []
+    lot.close()
+
+
+def test_a_check_the_registry_could_not_answer_ends_nothing_and_keeps_it_parked() -> None:
+    lot = ParkingLot(grace_s=60)
+    conn = FakeConnection()
+    park(lot, conn)
+    conn.registry_down = True  # restarting, or hung
+    back = lot.claim(ADDRESS.lab_key, "alice", b"token-of-alice", wait_s=0)
+    assert back is not None
+    with pytest.raises(LoginUnavailable, match="does not answer"):
+        lot.still_good(back)
+    assert conn.logouts == [] and len(lot) == 1
+    conn.registry_down = False  # the next reload, the registry back: the same session
+    again = lot.claim(ADDRESS.lab_key, "alice", b"token-of-alice", wait_s=0)
+    assert again is back and lot.still_good(again)
     lot.close()
 
 
