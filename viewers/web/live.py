@@ -585,6 +585,9 @@ class LiveConnection:
         for feed in list(self._worlds.values()):
             self.link.release(feed.source)
         self._worlds.clear()
+        if not logout:  # a logout hands them back in the context itself (revocation)
+            for arena in list(self._arenas.values()):
+                arena.hand_back_all("the web viewer stopped")
         self._arenas.clear()
         self._standings.close()
         self._grading.close()

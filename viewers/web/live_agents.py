@@ -13,6 +13,7 @@ without a lab.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Callable
@@ -150,6 +151,7 @@ class AgentContextLink:
             on_room=on_room,
         )
         self.driver = KeyDriver(self.agents)
+        self.taken: set[str] = set()  # robots this session took over and holds
 
     def join(self, history: int) -> RoomHandle:
         """Join the context (chat and agent events) and read its queues once."""
@@ -278,12 +280,28 @@ class AgentContextLink:
             raise LabError("choose a robot first")
         if take:
             taken = self._call(lambda: self.agents.take_over(agent, "from the web page"))
+            self.taken.add(agent)
             self._refresh()
             return f"{agent} taken over from {taken.user}: their controller is paused"
         self.driver.stop()
         detail = self._call(lambda: self.agents.hand_back(agent))
+        self.taken.discard(agent)
         self._refresh()
         return detail
+
+    def hand_back_all(self, why: str) -> None:
+        """Hand back every robot this session holds: nobody can drive them from it any more
+        (the viewer that held it stops), and their students' controllers should drive again."""
+        self.driver.stop()
+        for agent in sorted(self.taken):
+            try:
+                self._call(functools.partial(self.agents.hand_back, agent))
+                log.info(
+                    "%s's take-over of %s in %s handed back: %s", self.user, agent, self.ctx, why
+                )
+            except LabError as exc:
+                log.info("handing %s back in %s: %s", agent, self.ctx, exc)
+        self.taken.clear()
 
     def drive(self, agent: str, left: int, right: int) -> None:
         if not self.agents.is_taken_by(agent, self.user):
