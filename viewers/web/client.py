@@ -24,7 +24,7 @@ from viewers.web.adapters import LabConnection, LabConnector, LoginError, LoginU
 from viewers.web.arena_video import ArenaVideo
 from viewers.web.chat_panel import ARENA_KINDS, ChatPanel
 from viewers.web.front_tab import FrontTab
-from viewers.web.handover import EditorText, HandedOver, HandOverBook
+from viewers.web.handover import HandedOver, HandOverBook
 from viewers.web.inputs import set_value
 from viewers.web.labels import add_label_fixer
 from viewers.web.lobby import LabTab
@@ -419,17 +419,12 @@ class BrowserSession:
                 token = tab.connection.resume_token if self.parking.enabled else None
                 shown = next((c for c, p in tab.panels.items() if p is watching), None)
                 if token is not None and viewer_stops:
-                    opened = tuple(tab.panels)
-                    editors = tuple(
-                        EditorText(ctx, bench.file_name, bench.code, bench.target)
+                    opened = [
+                        (ctx, panel.workbench.memory() if panel.workbench else None)
                         for ctx, panel in tab.panels.items()
-                        if panel.workbench is not None
-                        for bench in [panel.workbench.memory()]
-                    )
+                    ]
                     tab.hand_over()
-                    at = time.time()
-                    page = HandedOver(tab.connection.user, opened, shown, at, editors)
-                    handed_over.append((token, page))
+                    handed_over.append((token, HandedOver.of(tab.connection.user, opened, shown)))
                     continue
                 if token is not None:
                     memory, events = tab.park(shown)

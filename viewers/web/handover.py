@@ -21,12 +21,14 @@ import hashlib
 import logging
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import msgspec
 
 from common.files import write_atomic
 from common.keys import is_ident
+from viewers.web.workbench import BenchMemory
 
 log = logging.getLogger("wart.viewer.handover")
 
@@ -58,6 +60,21 @@ class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     def editor(self, ctx: str) -> EditorText | None:
         return next((e for e in self.editors if e.ctx == ctx), None)
+
+    @classmethod
+    def of(
+        cls, user: str, opened: Sequence[tuple[str, BenchMemory | None]], watching: str | None
+    ) -> HandedOver:
+        """A page's lab as it is now: each joined context in order, with its editor if an
+        arena's; ``watching``, the one in view (kept only if among them)."""
+        contexts = tuple(ctx for ctx, _ in opened)
+        editors = tuple(
+            EditorText(ctx, bench.file_name, bench.code, bench.target)
+            for ctx, bench in opened
+            if bench is not None
+        )
+        shown = watching if watching in contexts else None
+        return cls(user, contexts, shown, time.time(), editors)
 
 
 class HandOverBook:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from viewers.web.adapters import LabConnection, LabError, LabEvent, LoginUnavailable
 from viewers.web.chat_panel import PanelMemory
-from viewers.web.handover import EditorText, HandedOver
+from viewers.web.handover import HandedOver
 
 log = logging.getLogger("wart.viewer.parking")
 
@@ -281,13 +281,6 @@ class ParkingLot:
             except Exception:  # one lab's failure must not keep the others
                 log.exception("while handing over %s's parked session", lab.user)
                 continue
-            contexts = tuple(panel.joined.ctx for panel in lab.memory.panels)
-            watching = lab.memory.watching if lab.memory.watching in contexts else None
-            editors = tuple(
-                EditorText(p.joined.ctx, p.bench.file_name, p.bench.code, p.bench.target)
-                for p in lab.memory.panels
-                if p.bench is not None
-            )
-            page = HandedOver(lab.user, contexts, watching, time.time(), editors)
-            handed.append((lab.token, page))
+            opened = [(panel.joined.ctx, panel.bench) for panel in lab.memory.panels]
+            handed.append((lab.token, HandedOver.of(lab.user, opened, lab.memory.watching)))
         return handed
