@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import logging
+import math
 import threading
 import time
 from collections.abc import Sequence
@@ -38,6 +39,7 @@ MAX_ENTRIES = 10_000
 MAX_CONTEXTS = 64  # per page: more than anyone opens
 MAX_EDITOR_CHARS = 256 * 1024  # four times what a controller may be (upload_gate.py)
 MAX_NAME_CHARS = 200
+CLOCK_SKEW_S = 60.0  # an entry stamped later than this ahead of now was not written here
 
 
 class EditorText(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -113,7 +115,7 @@ class HandOverBook:
         good = {
             name: entry
             for name, entry in raw.items()
-            if self._sound(name, entry) and now - entry.at <= self.max_age_s
+            if self._sound(name, entry) and -CLOCK_SKEW_S <= now - entry.at <= self.max_age_s
         }
         return good, len(raw) - len(good)
 
@@ -122,6 +124,7 @@ class HandOverBook:
         # Names are read back into the page's joins: only what a context can be called.
         return (
             len(name) == 64
+            and math.isfinite(entry.at)  # JSON has no inf: it would make the file unreadable
             and all(c in "0123456789abcdef" for c in name)
             and is_ident(entry.user)
             and len(entry.contexts) <= MAX_CONTEXTS
@@ -158,7 +161,7 @@ class HandOverBook:
             if entry is None:
                 return None
         self.save()
-        if entry.user != user or time.time() - entry.at > self.max_age_s:
+        if entry.user != user or not -CLOCK_SKEW_S <= time.time() - entry.at <= self.max_age_s:
             return None
         return entry
 

@@ -47,6 +47,11 @@ def test_a_page_back_too_late_starts_in_the_lobby(tmp_path: Path) -> None:
     book.keep(TOKEN, HandedOver("alice", ("arena",), None, time.time() - 7200))
     book.save()
     assert HandOverBook(path, max_age_s=3600).take(TOKEN, "alice") is None
+    # Nor one stamped in the future (a hand-written file): it would never grow old.
+    for at in (time.time() + 86400, float("inf"), float("nan")):
+        book.keep(TOKEN, HandedOver("alice", ("arena",), None, at))
+        book.save()
+        assert HandOverBook(path).take(TOKEN, "alice") is None
     assert HandOverBook.name(TOKEN) not in path.read_text()  # gone from the file at start
 
 
