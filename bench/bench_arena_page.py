@@ -19,7 +19,6 @@ circles. Printed, over ``--seconds``:
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import tempfile
@@ -30,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from bench import cli as bench_cli
 from common.tracking.truth import TruthError, read_truth
 from tests.kit.lab import PASSWORD
 from tests.kit.reallab import real_lab
@@ -38,11 +38,7 @@ REAL = "real1"
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="bench_arena_page",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = bench_cli.parser("bench_arena_page", __doc__)
     p.add_argument("--seconds", type=float, default=30.0, help="driving time measured (default 30)")
     args = p.parse_args(argv)
 

@@ -11,13 +11,13 @@ reply at baud/11 bytes/s).
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import threading
 import time
 from typing import Any
 
+from bench import cli as bench_cli
 from services.bridge import protocol as P
 from services.bridge.body import KinematicBody
 from services.bridge.emulator import EmulatorOptions, KheperaEmulator
@@ -119,7 +119,7 @@ def refresh(
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = bench_cli.parser("bench_bridge_serial", __doc__)
     ap.add_argument("--seconds", type=float, default=3.0, help="polling time per configuration")
     ap.add_argument("--requests", type=int, default=100, help="requests per latency figure")
     ap.add_argument("--bauds", type=int, nargs="+", default=[38400, 9600])

@@ -22,7 +22,6 @@ and the camera process's CPU per frame.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -42,6 +41,7 @@ import psutil
 import zenoh
 
 from bench import camera_scenes
+from bench import cli as bench_cli
 from common import keys
 from common.messages import CameraFrame, decode
 from common.service import close_session, open_session
@@ -242,11 +242,7 @@ def main(argv: list[str] | None = None) -> int:
         connect, realm, key, sessions, seconds = argv[1:6]
         subscribe(connect, realm, key, int(sessions), float(seconds))
         return 0
-    p = argparse.ArgumentParser(
-        prog="bench_camera",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = bench_cli.parser("bench_camera", __doc__)
     p.add_argument(
         "--frames", type=int, default=200, help="frames for the tracking error (default 200)"
     )

@@ -16,10 +16,10 @@ the figures that docs/BENCHMARKS.md records.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Sequence
 
+from bench import cli as bench_cli
 from tests.kit.chaos import SERVICES, Chaos, DeployProbe, running_lab
 
 
@@ -28,7 +28,7 @@ def _fmt(value: float | None) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.bench_chaos", description=__doc__)
+    p = bench_cli.parser("bench_chaos", __doc__)
     p.add_argument(
         "--only", action="append", choices=SERVICES, help="kill only this service (repeatable)"
     )

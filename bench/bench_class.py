@@ -27,6 +27,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from bench import cli as bench_cli
 from bench.labproc import BenchLab
 from bench.quantiles import percentile
 from common.keys import AliveKind
@@ -247,7 +248,7 @@ def start_lab(lab: BenchLab, students: int, slot: float) -> str:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n", 1)[0])
+    p = bench_cli.parser("bench_class", __doc__)
     p.add_argument("--students", type=int, default=30, help="headless students (default 30)")
     p.add_argument("--seconds", type=float, default=240.0, help="working time (default 240)")
     p.add_argument(

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import psutil
 
+from bench import cli as bench_cli
 from common import keys
 from common.messages import WorldFrame, decode
 from common.service import close_session, open_session
@@ -196,9 +197,7 @@ def measure_in(
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    p = bench_cli.parser("bench_contexts_per_host", __doc__)
     p.add_argument("--max", type=int, default=12, help="most arenas to try")
     p.add_argument("--window", type=float, default=6.0, help="seconds measured after each arena")
     p.add_argument("--robots", type=int, default=10)

@@ -62,6 +62,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
 from bench.control_child import child, grant
 from bench.control_costs import command_costs, wake_storm
 from bench.control_rounds import Round, measure, measure_against_peer
@@ -96,7 +97,7 @@ def _start_child(module: str, lab: BenchLab, inline: bool, *extra: str) -> subpr
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_control_latency", __doc__)
     p.add_argument("--controllers", type=int, default=20)
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument(

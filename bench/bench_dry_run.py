@@ -10,11 +10,11 @@ also builds the seccomp filter and the CPU cgroup.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 from pathlib import Path
 
+from bench import cli as bench_cli
 from common.sim2d import maps
 from common.world import packing
 from services.runner.dryrun import dry_run
@@ -23,7 +23,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = bench_cli.parser("bench_dry_run", __doc__)
     p.add_argument("--runs", type=int, default=7)
     p.add_argument("--seconds", type=float, default=5.0)
     args = p.parse_args()

@@ -14,7 +14,6 @@ on either path), so the table says where the memory goes.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import psutil
 
+from bench import cli as bench_cli
 from bench.labproc import REPO, BenchLab
 from common.keys import AliveKind
 from common.sim2d import aot
@@ -87,7 +87,7 @@ def import_rss(code: str, path: str) -> float:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_engine_memory", __doc__)
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 1000])
     p.add_argument("--settle", type=float, default=5.0, help="seconds of ticking before reading")
     p.add_argument(

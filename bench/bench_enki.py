@@ -44,6 +44,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench import cli as bench_cli
 from common.sim2d import compiled
 from common.sim2d.wander import CRUISE, WEIGHTS
 from common.sim2d.world import DRIVES, World
@@ -217,9 +218,7 @@ def rounds(text: str) -> int:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
-        prog="bench.bench_enki", description=__doc__, formatter_class=argparse.RawTextHelpFormatter
-    )
+    p = bench_cli.parser("bench_enki", __doc__)
     # The converters' names appear in argparse's messages ("invalid robot_count value").
     p.add_argument(
         "--sizes",

@@ -20,7 +20,6 @@ Then the host releases the stop and the next round starts.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import statistics
 import sys
@@ -28,6 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
 from common.client.agent_client import FINAL
 from tests.kit.agentkit import (
     Motion,
@@ -46,7 +46,7 @@ ROBOTS = ("k0", "k1", "k2", "k3")
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = bench_cli.parser("bench_estop", __doc__)
     p.add_argument("--rounds", type=int, default=7)
     args = p.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="wart-bench-estop-"))

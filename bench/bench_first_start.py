@@ -13,7 +13,6 @@ while the engine compiles its kernels. Prints the load average beside each.
 
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import signal
@@ -23,6 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
 from bench.labproc import REPO
 from tests.kit.procs import free_port
 
@@ -73,7 +73,7 @@ def one_start(repo: Path, state: Path, timeout: float) -> tuple[float | None, fl
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_first_start", __doc__)
     p.add_argument("--runs-second", type=int, default=3, help="second starts to time")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds a start may take")
     p.add_argument("--keep", action="store_true", help="keep the clone (its logs)")

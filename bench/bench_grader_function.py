@@ -11,12 +11,12 @@ time of each (no lab: the sandbox and the world only).
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
 from common.messages import Episode
 from services.runner.episode import run_episode
 from services.runner.grader_run import episode_data, run_grader
@@ -49,7 +49,7 @@ def say(what: str, times: list[float]) -> None:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
+    p = bench_cli.parser("bench_grader_function", __doc__)
     p.add_argument("--runs", type=int, default=5)
     args = p.parse_args()
     wobble = (GRADING / "graders" / "wobble.py").read_bytes()

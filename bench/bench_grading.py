@@ -14,13 +14,13 @@ own clock at both ends), and fairness (the longest wait over the median).
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
 from common.client.grader_client import GraderClient
 from common.client.lab_client import LabClient
 from common.messages import SubmissionInfo
@@ -40,11 +40,7 @@ def pct(values: list[float], q: float) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="bench_grading",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = bench_cli.parser("bench_grading", __doc__)
     p.add_argument("--students", type=int, default=60)
     p.add_argument("--episodes", type=int, default=3)
     p.add_argument("--seconds", type=float, default=5.0, help="simulated s per episode")

@@ -12,7 +12,6 @@ student without uv installs. docs/FROM_YOUR_LAPTOP.md holds today's figures.
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import subprocess
 import sys
@@ -20,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
 from tests.kit.client_install import uv
 
 REPO = Path(__file__).resolve().parent.parent
@@ -64,7 +64,7 @@ def with_pip(spec: str, tmp: Path) -> tuple[float, float]:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p = bench_cli.parser("bench_install", __doc__)
     p.add_argument("--only", nargs="+", choices=sorted(INSTALLS), help="these installs only")
     p.add_argument("--pip", action="store_true", help="pip too (slower: no cache, bytecode)")
     args = p.parse_args()

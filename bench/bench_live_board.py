@@ -16,7 +16,6 @@ alice's page (a MutationObserver's ``Date.now()``; one machine, one clock).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
@@ -24,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench import cli as bench_cli
 from bench.bench_grading import pct
 from common.client.grader_client import GraderClient
 from common.client.lab_client import LabClient
@@ -57,11 +57,7 @@ OBSERVER_JS = """
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="bench_live_board",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = bench_cli.parser("bench_live_board", __doc__)
     p.add_argument("--students", type=int, default=12)
     p.add_argument("--gap", type=float, default=4.0, help="s between two submissions")
     args = p.parse_args(argv)

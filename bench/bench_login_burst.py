@@ -23,7 +23,6 @@ costly as the registry's check). ``--derive``:
 
 from __future__ import annotations
 
-import argparse
 import functools
 import os
 import queue
@@ -36,6 +35,7 @@ from concurrent.futures import ThreadPoolExecutor
 import psutil
 import zenoh
 
+from bench import cli as bench_cli
 from bench.labproc import BenchLab
 from bench.quantiles import percentile
 from common.client import lab_client as client_module
@@ -98,9 +98,7 @@ def _cpu(proc: psutil.Process) -> float:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = bench_cli.parser("bench_login_burst", __doc__)
     ap.add_argument("--clients", type=int, default=60)
     ap.add_argument("--derive", choices=("elsewhere", "before", "after"), default="elsewhere")
     args = ap.parse_args()

@@ -12,7 +12,6 @@ course, a resume token minted), then the same students again (accounts matched).
 
 from __future__ import annotations
 
-import argparse
 import os
 import re
 import sys
@@ -28,6 +27,7 @@ from urllib.parse import urlencode
 
 import psutil
 
+from bench import cli as bench_cli
 from bench.quantiles import percentile
 from tests.kit.lab import make_lab
 from tests.kit.lti_platform import CLIENT_ID, DEPLOYMENT, FakePlatform, form_fields
@@ -84,7 +84,7 @@ def burst(tool: str, platform: str, subs: list[str]) -> list[float]:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_lti", __doc__)
     p.add_argument("--students", type=int, default=60)
     args = p.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="wart-bench-lti-"))

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import zenoh
 
+from bench import cli as bench_cli
 from bench.engine_bench import build, control
 from bench.labproc import REPO, BenchLab
 from common import keys
@@ -99,7 +100,7 @@ def _p95(xs: list[float]) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_recording", __doc__)
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 1000])
     p.add_argument("--ticks", type=int, default=500)
     p.add_argument("--record", nargs=3, metavar=("CONNECT", "N", "OUT"), help=argparse.SUPPRESS)

@@ -47,6 +47,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from bench import cli as bench_cli
+
 PARTS = (
     "noise",
     "circles",
@@ -83,7 +85,7 @@ def _tree(text: str) -> Path:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_sensing", __doc__)
     p.add_argument(
         "--sizes", type=_positive_int(_MAX_SIZE), nargs="+", default=[1000, 10000], help="robots"
     )

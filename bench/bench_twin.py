@@ -16,11 +16,11 @@ which the drive's four values are within 0.5 % (scales), 0.5 mm (wheel base) and
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
+from bench import cli as bench_cli
 from common.twin.fit import calibrate, open_loop_error, run_data
 from common.twin.motion import Drive
 from services.bridge.body_truth import BodyTruth
@@ -68,7 +68,7 @@ def seconds_needed(body: BodyTruth, seed: int) -> float | None:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("bench_twin", __doc__)
     p.add_argument("--sets", type=int, default=5, help="hidden parameter sets (default 5)")
     p.add_argument("--seed", type=int, default=1)
     args = p.parse_args()

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 import psutil
 from playwright.sync_api import sync_playwright
 
+from bench import cli as bench_cli
 from tests.kit.pages import ViserPage, launch_chromium
 from tests.kit.procs import free_port
 from tests.kit.reallab import PASSWORD, WORLD, real_lab
@@ -77,9 +78,7 @@ class WsCounter:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = bench_cli.parser("bench_viewer", __doc__)
     ap.add_argument("--browsers", type=int, default=10)
     ap.add_argument("--robots", type=int, default=1000)
     ap.add_argument("--world-rate", type=float, default=50.0)

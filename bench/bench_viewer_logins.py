@@ -15,13 +15,13 @@ To load the machine as a busy class does, start a few ``yes > /dev/null`` beside
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import os
 import time
 from collections import Counter
 
+from bench import cli as bench_cli
 from bench.labproc import BenchLab
 from bench.quantiles import percentile
 from common.keys import AliveKind
@@ -86,9 +86,7 @@ async def _class(url: str, sessions: int, at_once: int, bound: float) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = bench_cli.parser("bench_viewer_logins", __doc__)
     ap.add_argument("--sessions", type=int, default=100)
     ap.add_argument("--at-once", type=int, default=10, help="logins under way at a time")
     ap.add_argument("--bound", type=float, default=120.0, help="seconds a click may wait")

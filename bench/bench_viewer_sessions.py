@@ -35,6 +35,7 @@ import json
 import sys
 from pathlib import Path
 
+from bench import cli as bench_cli
 from bench.viewer_class import ARENA, USERS
 from bench.viewer_clients import _browsers, _clients
 from bench.viewer_runs import run_arena, run_real
@@ -43,9 +44,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = bench_cli.parser("bench_viewer_sessions", __doc__)
     ap.add_argument("--robots", type=int, nargs="+", default=[35, 1000])
     ap.add_argument("--sessions", type=int, default=100)
     ap.add_argument("--browsers", type=int, default=2, help="real Chromium pages beside them")

@@ -8,11 +8,11 @@ they verify every event (the room seals each one) as a real client does.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import threading
 import time
 
+from bench import cli as bench_cli
 from bench.labproc import BenchLab
 from common.client.lab_client import LabClient
 from common.messages import RoomEvent
@@ -22,7 +22,7 @@ PASSWORD = "benchmark password"
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p = bench_cli.parser("chat_throughput", __doc__)
     p.add_argument("members", type=int, nargs="?", default=50, help="room members (default 50)")
     p.add_argument("per_sender", type=int, nargs="?", default=200, help="lines each (default 200)")
     p.add_argument("senders", type=int, nargs="?", default=5, help="members who send (default 5)")

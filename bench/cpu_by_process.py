@@ -29,6 +29,8 @@ import threading
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
+
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 _CHROMIUM_TYPE = re.compile(r"--type=(\S+)")
 _UTILITY = re.compile(r"--utility-sub-type=(\S+)")
@@ -155,9 +157,7 @@ class Sampler:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = bench_cli.parser("cpu_by_process", __doc__)
     parser.add_argument("--top", type=int, default=25, help="kinds of process printed (25)")
     parser.add_argument("--period", type=float, default=1.0, help="seconds between samples")
     parser.add_argument("command", nargs=argparse.REMAINDER, help="the command, after --")

@@ -28,7 +28,6 @@ Figures: docs/BENCHMARKS.md, "The discs drive for every world (issue 35)".
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
 import math
@@ -39,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import cli as bench_cli
 from common.controller import Controller, Khepera, load_controller
 from common.sim2d import kernels
 from common.sim2d.agents import agent_type
@@ -133,7 +133,7 @@ def wall_probe(drive: str, arm: int) -> tuple[float, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("drive_compare", __doc__)
     p.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per example")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--drives", nargs=2, choices=DRIVES, default=["joints", "discs"])

@@ -21,15 +21,15 @@ drive split over threads against the serial drive before it).
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 
+from bench import cli as bench_cli
 from common.sim2d import discs_split, sensing
 from tests.kit.worlds import build, control, tick_digest
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("drive_hashes", __doc__)
     p.add_argument("--robots", type=int, default=1000)
     p.add_argument("--balls", type=float, default=0.5, help="movable balls per robot")
     p.add_argument("--threads", type=int, default=1, help="World.threads")

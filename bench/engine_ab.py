@@ -28,6 +28,8 @@ import sys
 import time
 from pathlib import Path
 
+from bench import cli as bench_cli
+
 
 def worker(tree: str, robots: int, threads: int, balls: float) -> None:
     """One tree's side: build the world, then run the ticks each line on stdin asks for."""
@@ -60,7 +62,7 @@ def worker(tree: str, robots: int, threads: int, balls: float) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("engine_ab", __doc__)
     p.add_argument("--trees", nargs=2, required=True, metavar="DIR", help="two checkouts")
     p.add_argument("--robots", type=int, default=10000)
     p.add_argument("--threads", type=int, default=2, help="sensing threads (World.threads)")

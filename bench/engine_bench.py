@@ -35,6 +35,7 @@ import os
 import statistics
 import time
 
+from bench import cli as bench_cli
 from common.sim2d import compiled
 from common.sim2d.agents import agent_type, khepera
 from common.sim2d.drives import DEFAULT_DRIVE, DRIVES
@@ -97,7 +98,7 @@ def run(
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("engine_bench", __doc__)
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 35, 100, 1000])
     p.add_argument("--sim-seconds", type=float, default=5.0)
     p.add_argument("--repeats", type=int, default=3)

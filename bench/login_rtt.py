@@ -7,7 +7,6 @@ instant and spread over 10 s, with p50 / p99 per client.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import statistics
 import threading
@@ -17,6 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 import nacl.pwhash
 import zenoh
 
+from bench import cli as bench_cli
 from bench.labproc import BenchLab
 from common.auth import create_identity_key
 from common.client import lab_client as client_module
@@ -64,7 +64,7 @@ def class_at_once(
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p = bench_cli.parser("login_rtt", __doc__)
     p.add_argument("n", type=int, nargs="?", default=30, help="logins of each kind (default 30)")
     n = p.parse_args().n
     lab = BenchLab(["alice"], PASSWORD)

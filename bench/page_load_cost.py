@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench import cli as bench_cli
 from bench.cpu_by_process import TICKS_PER_S, kind_of
 from tests.kit.procs import free_port
 from viewers.web.app import WebViewer
@@ -74,11 +75,7 @@ class ChromiumCpu:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="page_load_cost",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = bench_cli.parser("page_load_cost", __doc__)
     p.add_argument("--pages", type=int, default=6, help="pages opened one after another (6)")
     p.add_argument("--hold", type=float, default=1.0, help="seconds each stays open (1)")
     kind = p.add_mutually_exclusive_group()

@@ -29,7 +29,6 @@ over the batches are printed:
 
 from __future__ import annotations
 
-import argparse
 import functools
 import statistics
 import sys
@@ -39,6 +38,7 @@ from typing import Any
 
 import msgspec
 
+from bench import cli as bench_cli
 from bench.plain_peer import answers
 from common import keys
 from common.auth import RegistryIdentity, issue_session
@@ -88,7 +88,7 @@ def sample(agent: str, world: str = WORLD) -> SensorSample:
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p = bench_cli.parser("swarm_bundle_cost", __doc__)
     p.add_argument("--robots", type=int, default=20)
     p.add_argument("--batches", type=int, default=15)
     p.add_argument("--ticks", type=int, default=200, help="ticks per batch")

@@ -5,9 +5,9 @@
 
 from __future__ import annotations
 
-import argparse
 import time
 
+from bench import cli as bench_cli
 from common import keys
 from common.auth import RegistryIdentity, Verifier, issue_session
 from common.messages import ChatSay
@@ -16,7 +16,7 @@ KEY = keys.ctx_in("lab", "lobby")
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p = bench_cli.parser("verify_cost", __doc__)
     p.add_argument("n", type=int, nargs="?", default=20_000, help="messages (default 20000)")
     n = p.parse_args().n
     identity = RegistryIdentity.generate()

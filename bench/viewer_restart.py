@@ -17,13 +17,13 @@ it, and a new one starts on the same port and data directory. Printed:
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
+from bench import cli as bench_cli
 from tests.kit.lab import PASSWORD, USERS
 from tests.kit.reallab import CTX, RealLab, real_lab
 from tests.kit.waits import wait_for
@@ -85,11 +85,7 @@ def start_run(page: Any, panel: ChatPanel, robot: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="viewer_restart",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = bench_cli.parser("viewer_restart", __doc__)
     p.add_argument("--pages", type=int, default=8, help="browser pages, 1 to 40 (default 8)")
     args = p.parse_args(argv)
     if not 1 <= args.pages <= 40:
