@@ -4,27 +4,31 @@ a page gone for longer than the grace ends the run in words that say so.
 
 Router, registry, engine, runner (bubblewrap sandboxes) and the agent context ``arena``,
 as in test_workbench; slots long enough that only Stop or the grace ends a run. The last
-test restarts the viewer, as an upgrade does.
+two restart the viewer: stopped, as an upgrade does, and killed, as a crash does.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from services.lab.wiring import viewer_spec
 from tests.browser.conftest import ViserPage, wait_until
 from tests.browser.test_real_agents import choose, enter_arena
 from tests.browser.test_real_lab import session_of
 from tests.browser.test_workbench import write_code
 from tests.conftest import needs_sandbox
 from tests.kit.lab import PASSWORD
+from tests.kit.procs import free_port
 from tests.kit.reallab import RealLab, real_lab
 from viewers.web.app import WebViewer
 from viewers.web.chat_panel import ChatPanel
 from viewers.web.connector import LiveConnector
+from viewers.web.handover import HANDOVER_FILE
 from viewers.web.tabs import tab_label
 
 pytestmark = [pytest.mark.integration, needs_sandbox, pytest.mark.real_lab]
@@ -204,3 +208,56 @@ def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its
     bob.screenshot("viewer-restart-kept-the-run")
     bob.click("Stop")
     bob.wait_text("Your controller on k3 cancelled", timeout=15_000)
+
+
+def editor_text(page: ViserPage) -> str:
+    return page.p.evaluate("() => window.wartEditor.editorFor(null).view.state.doc.toString()")
+
+
+def test_a_viewer_killed_mid_run_brings_the_page_back_to_its_arena_as_last_noted(
+    open_page, lab: RealLab, tmp_path: Path
+) -> None:
+    """A crash (kill -9, the OOM killer, a node lost) writes nothing at its end. The viewer
+    notes what its pages have open as they go (viewers/web/handover.py), so the next
+    viewer process brings the page back to its arena, its run going on, and its editor
+    as last noted."""
+    spec = viewer_spec(lab.lab.wiring(), "crashing", http_port=free_port())
+    argv = list(spec.argv)
+    data_dir = tmp_path / "viewer"  # not the module viewer's: each keeps its own book
+    argv[argv.index("--data-dir") + 1] = str(data_dir)
+    spec = dataclasses.replace(spec, argv=argv)
+    first = lab.lab.start(spec, name="viewer-first")
+    url = f"http://127.0.0.1:{argv[argv.index('--http-port') + 1]}"
+    carol = open_page("carol-crash")
+    carol.open(url)
+    carol.log_in(lab.url, "carol", PASSWORD)
+    carol.tab(tab_label(lab.address)).first.click()
+    carol.click(f"Join {CTX}", timeout=15_000)
+    carol.tab(f"{CTX} (arena)").last.click()
+    carol.wait_text("Upload controller")
+    write_code(carol, TICKING, lambda: editor_text(carol) == TICKING)
+    choose(carol, "Run on", "k1")
+    carol.click("Run in simulation")
+    carol.wait_text("Your controller runs on k1", timeout=30_000)
+    wait_until(lambda: ticks_shown(carol), 30, what="the controller's first print on the page")
+    noted = TICKING + "# typed after Run, never saved: noted by the viewer\n"
+    write_code(carol, noted, lambda: editor_text(carol) == noted)
+    book = data_dir / HANDOVER_FILE
+    wait_until(
+        lambda: book.exists() and "noted by the viewer" in book.read_text(),
+        30,
+        what="the page's editor noted in the viewer's book",
+    )
+    before = max(ticks_shown(carol))
+    first.popen.kill()  # SIGKILL: no stop, no hand-over, nothing written
+    first.popen.wait(10)
+    lab.lab.start(spec, name="viewer-after-crash")
+    # No click: the page reconnects, its cookie logs it in, its arena opens in front.
+    carol.wait_text("the web viewer restarted; your runs went on", timeout=60_000)
+    carol.wait_text("Your controller runs on k1", timeout=30_000)
+    wait_until(lambda: editor_text(carol) == noted, 15, what="the editor's noted text back")
+    # It was never stopped: the prints go on past those from before the crash.
+    wait_until(lambda: max(ticks_shown(carol), default=0) > before + 2, 30, "prints go on")
+    carol.screenshot("viewer-crash-kept-the-run")
+    carol.click("Stop")
+    carol.wait_text("Your controller on k1 cancelled", timeout=15_000)

@@ -34,7 +34,7 @@ from common.zconfig import DEFAULT_PORT
 from viewers.web.adapters import LabConnector
 from viewers.web.client import BrowserSession
 from viewers.web.connector import GatewayLogin, LiveConnector
-from viewers.web.handover import HANDOVER_FILE, HandOverBook
+from viewers.web.handover import HANDOVER_FILE, HandedOver, HandOverBook, PageJournal
 from viewers.web.login import LoginDesk
 from viewers.web.parking import DEFAULT_GRACE_S, ParkingLot
 from viewers.web.pump import DEFAULT_RATE, FramePump
@@ -102,6 +102,9 @@ class WebViewer:
         self.server.on_client_connect(self._connected)
         self.server.on_client_disconnect(self._disconnected)
         self.pump.start()
+        # The book noted as the pages go, so that a crash leaves it too (handover.py).
+        self.journal = PageJournal(self.handovers, self.open_pages)
+        self.journal.start()
 
     @property
     def port(self) -> int:
@@ -172,11 +175,21 @@ class WebViewer:
             return None
         return len(state.message_buffer.message_from_id), conn.transport.get_write_buffer_size()
 
+    def open_pages(self) -> list[tuple[bytes, HandedOver]]:
+        """What every page with a saved login has open, parked ones included."""
+        with self._lock:
+            sessions = list(self.sessions.values())
+        pages = self.parking.pages()
+        for session in sessions:
+            pages += session.open_pages()
+        return pages
+
     def stop(self) -> None:
         """Stop serving. Lab sessions with a saved login are handed over, not logged out
         (a restart or an upgrade must not end students' runs): their pages log in again
         on the next viewer at this address; the others are logged out."""
         self._stopping = True
+        self.journal.stop()  # the hand-over below writes the book's last note
         handed_over = self.parking.close()  # first: the pages closed below do not park
         self.pump.stop()
         self.logins.close()
@@ -185,10 +198,8 @@ class WebViewer:
             self.sessions.clear()
         for session in sessions:
             handed_over += session.close(viewer_stops=True)
-        for token, page in handed_over:
-            self.handovers.keep(token, page)
+        self.handovers.note_open(handed_over)
         if handed_over:
-            self.handovers.save()
             log.info(
                 "viewer stopping: %d lab session(s) with a saved login left running, not "
                 "logged out; their pages log in again on the next viewer at this address, "

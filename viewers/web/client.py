@@ -394,6 +394,29 @@ class BrowserSession:
 
     # -- the browser went away
 
+    def open_pages(self) -> list[tuple[bytes, HandedOver]]:
+        """What this page has open in each lab it has a saved login to (none if parking is
+        off: such a session is logged out when the viewer stops), for the next viewer."""
+        if self.closed or not self.parking.enabled:
+            return []
+        watching = self.watching
+        with self._lock:
+            tabs = list(self.labs.values())
+        return [
+            (token, self._page_of(tab, watching))
+            for tab in tabs
+            if (token := tab.connection.resume_token) is not None
+        ]
+
+    @staticmethod
+    def _page_of(tab: LabTab, watching: object) -> HandedOver:
+        panels = list(tab.panels.items())  # one copy: the page's own thread adds to it
+        opened = [
+            (ctx, panel.workbench.memory() if panel.workbench else None) for ctx, panel in panels
+        ]
+        shown = next((ctx for ctx, panel in panels if panel is watching), None)
+        return HandedOver.of(tab.connection.user, opened, shown)
+
     def close(self, *, viewer_stops: bool = False) -> list[tuple[bytes, HandedOver]]:
         """The browser went away: stop drawing, then park or log out of every lab.
 
@@ -419,12 +442,9 @@ class BrowserSession:
                 token = tab.connection.resume_token if self.parking.enabled else None
                 shown = next((c for c, p in tab.panels.items() if p is watching), None)
                 if token is not None and viewer_stops:
-                    opened = [
-                        (ctx, panel.workbench.memory() if panel.workbench else None)
-                        for ctx, panel in tab.panels.items()
-                    ]
+                    page = self._page_of(tab, watching)
                     tab.hand_over()
-                    handed_over.append((token, HandedOver.of(tab.connection.user, opened, shown)))
+                    handed_over.append((token, page))
                     continue
                 if token is not None:
                     memory, events = tab.park(shown)

@@ -1,4 +1,4 @@
-"""What a stopping viewer's pages had open, for the next viewer to open again.
+"""What the viewer's pages have open, for the next viewer to open again.
 
 A viewer that stops (an upgrade, a restart by its supervisor, a pod moved) hands
 its lab sessions over instead of logging them out (LabConnection.hand_over): their
@@ -8,6 +8,11 @@ process's memory; this book keeps the part the next viewer can use, in the
 viewer's data directory: per saved login, the contexts that were joined, the
 one whose world was in view, and each arena's editor (its file name, its text,
 saved or not, and the robot chosen). The page comes back to them, not to the lobby.
+
+A viewer that crashes writes nothing at its end, so the book is also a journal:
+:class:`PageJournal` notes every open and parked page every ``JOURNAL_PERIOD_S``
+and writes the file when what they have open changed. After a crash the page
+comes back as the last note left it (its editor as it was at most a period before).
 
 A saved login is named here by the SHA-256 of its resume token, never the token:
 the file lets no one log in. An entry is good once and for ``MAX_AGE_S``; a file
@@ -22,7 +27,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import msgspec
@@ -40,6 +45,10 @@ MAX_CONTEXTS = 64  # per page: more than anyone opens
 MAX_EDITOR_CHARS = 256 * 1024  # four times what a controller may be (upload_gate.py)
 MAX_NAME_CHARS = 200
 CLOCK_SKEW_S = 60.0  # an entry stamped later than this ahead of now was not written here
+JOURNAL_PERIOD_S = 5.0  # what a crash can lose of a page's editor
+# An unchanged journal is written again this often: its entries' age is the time since
+# the last note, and a page still open at a crash is then not taken for an old one.
+JOURNAL_REFRESH_S = 600.0
 
 
 class EditorText(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -59,6 +68,15 @@ class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     watching: str | None  # the context whose world was in view
     at: float  # wall-clock time of the hand-over
     editors: tuple[EditorText, ...] = ()
+
+    def same_page(self, other: HandedOver) -> bool:
+        """The same user, contexts, view and editors (whenever each was noted)."""
+        return (self.user, self.contexts, self.watching, self.editors) == (
+            other.user,
+            other.contexts,
+            other.watching,
+            other.editors,
+        )
 
     def editor(self, ctx: str) -> EditorText | None:
         return next((e for e in self.editors if e.ctx == ctx), None)
@@ -84,7 +102,9 @@ class HandOverBook:
         self.path = path
         self.max_age_s = max_age_s
         self._lock = threading.Lock()
-        self._entries: dict[str, HandedOver] = {}
+        self._entries: dict[str, HandedOver] = {}  # the last viewer's, each taken once
+        self._open: dict[str, HandedOver] = {}  # this viewer's pages, as last noted
+        self._written_at = 0.0
         self._entries, dropped = self._read()
         if dropped:  # out of date, or not sound: no student's text stays for nothing
             self.save()
@@ -133,21 +153,33 @@ class HandOverBook:
             and all(_sound_editor(e, entry.contexts) for e in entry.editors)
         )
 
-    def keep(self, token: bytes, entry: HandedOver) -> None:
-        """Note one page's lab (written by :meth:`save`)."""
-        if not self._sound(self.name(token), entry):
-            log.warning("a handed-over page of %r was not noted: unexpected names", entry.user)
-            return
+    def note_open(self, pages: Sequence[tuple[bytes, HandedOver]]) -> bool:
+        """What this viewer's pages have open now, by saved login: the file is written
+        if that changed (or was last written ``JOURNAL_REFRESH_S`` ago). True if written."""
+        noted: dict[str, HandedOver] = {}
+        for token, page in pages:
+            if self._sound(self.name(token), page):
+                noted[self.name(token)] = page
+            else:
+                log.warning(
+                    "a page of %r was not noted for the next viewer: unexpected names", page.user
+                )
         with self._lock:
-            self._entries[self.name(token)] = entry
-            while len(self._entries) > MAX_ENTRIES:
-                del self._entries[next(iter(self._entries))]
+            same = noted.keys() == self._open.keys() and all(
+                page.same_page(self._open[name]) for name, page in noted.items()
+            )
+            if same and time.monotonic() - self._written_at < JOURNAL_REFRESH_S:
+                return False
+            self._open = noted
+        self.save()
+        return True
 
     def save(self) -> None:
         if self.path is None:
             return
         with self._lock:
-            data = msgspec.json.encode(self._entries)
+            data = msgspec.json.encode({**self._entries, **self._open})
+            self._written_at = time.monotonic()
         try:
             write_atomic(self.path, data)
             self.path.chmod(0o600)
@@ -174,3 +206,39 @@ def _sound_editor(editor: EditorText, contexts: tuple[str, ...]) -> bool:
         and len(editor.code) <= MAX_EDITOR_CHARS
         and all(len(n) <= MAX_NAME_CHARS and n.isprintable() for n in names)
     )
+
+
+class PageJournal:
+    """Notes what the viewer's pages have open in the book every ``period_s`` (a thread),
+    so that a viewer that crashes leaves it too; ``pages`` says it, by saved login."""
+
+    def __init__(
+        self,
+        book: HandOverBook,
+        pages: Callable[[], Sequence[tuple[bytes, HandedOver]]],
+        period_s: float = JOURNAL_PERIOD_S,
+    ) -> None:
+        self.book = book
+        self._pages = pages
+        self._period_s = period_s
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        if self.book.path is None:
+            return  # no data directory: nothing to keep, and no next viewer reads it
+        self._thread = threading.Thread(target=self._run, name="page-journal", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._period_s):
+            try:
+                self.book.note_open(self._pages())
+            except Exception:  # the next note tries again; the pages are not touched
+                log.exception("could not note the open pages for the next viewer")
+
+    def stop(self) -> None:
+        """No more notes (the viewer's stop writes the last, from its hand-over)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)

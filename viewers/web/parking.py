@@ -93,6 +93,11 @@ class ParkedLab:
     user: str
     until: float  # time.monotonic() past which the session ends
 
+    def page(self) -> HandedOver:
+        """What its page had open when it went (for the next viewer)."""
+        opened = [(panel.joined.ctx, panel.bench) for panel in self.memory.panels]
+        return HandedOver.of(self.user, opened, self.memory.watching)
+
 
 class ParkingLot:
     """The viewer's parked lab sessions; one thread ends those whose grace has run out."""
@@ -281,6 +286,11 @@ class ParkingLot:
             except Exception:  # one lab's failure must not keep the others
                 log.exception("while handing over %s's parked session", lab.user)
                 continue
-            opened = [(panel.joined.ctx, panel.bench) for panel in lab.memory.panels]
-            handed.append((lab.token, HandedOver.of(lab.user, opened, lab.memory.watching)))
+            handed.append((lab.token, lab.page()))
         return handed
+
+    def pages(self) -> list[tuple[bytes, HandedOver]]:
+        """What each parked session's page had open, by saved login (for the next viewer)."""
+        with self._changed:
+            parked = list(self._parked)
+        return [(lab.token, lab.page()) for lab in parked]

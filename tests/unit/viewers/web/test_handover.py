@@ -1,4 +1,5 @@
-"""The book of pages a stopping viewer handed over (viewers/web/handover.py)."""
+"""The book of what the viewer's pages have open, for the next viewer (viewers/web/handover.py):
+written as they change, so that a crash leaves it as well as a stop."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ from pathlib import Path
 
 import pytest
 
+from tests.kit.waits import wait_for
 from viewers.web.handover import (
     HANDOVER_FILE,
     MAX_EDITOR_CHARS,
     EditorText,
     HandedOver,
     HandOverBook,
+    PageJournal,
 )
 
 TOKEN = b"\x07" * 48
@@ -26,16 +29,13 @@ def page(user: str = "alice", *contexts: str, watching: str | None = None) -> Ha
 
 def test_the_next_viewer_reopens_a_page_once_and_the_file_holds_no_token(tmp_path: Path) -> None:
     path = tmp_path / HANDOVER_FILE
-    book = HandOverBook(path)
-    book.keep(TOKEN, page(watching="arena"))
-    book.save()
+    assert HandOverBook(path).note_open([(TOKEN, page(watching="arena"))])
     assert path.stat().st_mode & 0o777 == 0o600
     assert TOKEN.hex() not in path.read_text()  # a name for the login, not the login
     after = HandOverBook(path)  # the next process
     assert after.take(TOKEN, "bob") is None  # someone else's saved login: nothing
     assert HandOverBook(path).take(TOKEN, "alice") is None  # taken (and dropped) just above
-    book.keep(TOKEN, page(watching="arena"))
-    book.save()
+    assert HandOverBook(path).note_open([(TOKEN, page(watching="arena"))])
     back = HandOverBook(path).take(TOKEN, "alice")
     assert back is not None and back.contexts == ("lobby", "arena") and back.watching == "arena"
     assert HandOverBook(path).take(TOKEN, "alice") is None  # good once
@@ -44,13 +44,12 @@ def test_the_next_viewer_reopens_a_page_once_and_the_file_holds_no_token(tmp_pat
 def test_a_page_back_too_late_starts_in_the_lobby(tmp_path: Path) -> None:
     path = tmp_path / HANDOVER_FILE
     book = HandOverBook(path)
-    book.keep(TOKEN, HandedOver("alice", ("arena",), None, time.time() - 7200))
-    book.save()
+    book.note_open([(TOKEN, HandedOver("alice", ("arena",), None, time.time() - 7200))])
+    assert HandOverBook.name(TOKEN) in path.read_text()
     assert HandOverBook(path, max_age_s=3600).take(TOKEN, "alice") is None
     # Nor one stamped in the future (a hand-written file): it would never grow old.
     for at in (time.time() + 86400, float("inf"), float("nan")):
-        book.keep(TOKEN, HandedOver("alice", ("arena",), None, at))
-        book.save()
+        book.note_open([(TOKEN, HandedOver("alice", ("arena",), None, at))])
         assert HandOverBook(path).take(TOKEN, "alice") is None
     assert HandOverBook.name(TOKEN) not in path.read_text()  # gone from the file at start
 
@@ -79,8 +78,9 @@ def test_names_that_are_not_contexts_never_reach_a_join(tmp_path: Path) -> None:
     path.write_text(json.dumps({name: entry}))
     assert HandOverBook(path).take(TOKEN, "alice") is None
     book = HandOverBook(path)
-    book.keep(TOKEN, page("alice", "x y"))  # and not noted from a page either
-    assert book.take(TOKEN, "alice") is None
+    book.note_open([(TOKEN, page("alice", "x y"))])  # and not noted from a page either
+    assert HandOverBook(path).take(TOKEN, "alice") is None
+    assert "x y" not in path.read_text()
 
 
 def test_an_arenas_unsaved_editor_text_comes_back_bounded_and_as_text(tmp_path: Path) -> None:
@@ -88,8 +88,9 @@ def test_an_arenas_unsaved_editor_text_comes_back_bounded_and_as_text(tmp_path: 
     code = "class Mine(Controller):\n    pass  # not saved yet\n"
     editor = EditorText("arena", "mine.py", code, "k3")
     book = HandOverBook(path)
-    book.keep(TOKEN, HandedOver("alice", ("lobby", "arena"), "arena", time.time(), (editor,)))
-    book.save()
+    book.note_open(
+        [(TOKEN, HandedOver("alice", ("lobby", "arena"), "arena", time.time(), (editor,)))]
+    )
     back = HandOverBook(path).take(TOKEN, "alice")
     assert back is not None and back.editor("arena") == editor and back.editor("lobby") is None
     for bad in (
@@ -97,6 +98,63 @@ def test_an_arenas_unsaved_editor_text_comes_back_bounded_and_as_text(tmp_path: 
         EditorText("arena", "mine.py", "x" * (MAX_EDITOR_CHARS + 1), "k3"),
         EditorText("arena", "mine\x1b[2J.py", code, "k3"),
     ):
-        fresh = HandOverBook(tmp_path / "another.json")
-        fresh.keep(TOKEN, HandedOver("alice", ("arena",), None, time.time(), (bad,)))
-        assert fresh.take(TOKEN, "alice") is None
+        another = tmp_path / "another.json"
+        HandOverBook(another).note_open(
+            [(TOKEN, HandedOver("alice", ("arena",), None, time.time(), (bad,)))]
+        )
+        assert HandOverBook(another).take(TOKEN, "alice") is None
+
+
+def editing(code: str, user: str = "alice") -> HandedOver:
+    """A page in its arena, its editor holding ``code``."""
+    editor = EditorText("arena", "mine.py", code, "k3")
+    return HandedOver(user, ("lobby", "arena"), "arena", time.time(), (editor,))
+
+
+def test_a_viewer_that_crashes_leaves_its_pages_as_last_noted(tmp_path: Path) -> None:
+    """Nothing is written at a crash: the next viewer reads the journal's last note."""
+    path = tmp_path / HANDOVER_FILE
+    open_now = [(TOKEN, editing("v1"))]
+    journal = PageJournal(HandOverBook(path), lambda: open_now, period_s=0.02)
+    journal.start()
+    wait_for(lambda: path.exists() and '"v1"' in path.read_text(), 10, "the first note")
+    open_now = [(TOKEN, editing("v2: typed since"))]
+    wait_for(lambda: "v2: typed since" in path.read_text(), 10, "the editor's change noted")
+    journal.stop()  # the process is gone: what it noted last is all there is
+    open_now = [(TOKEN, editing("v3: never noted"))]
+    time.sleep(0.1)
+    back = HandOverBook(path).take(TOKEN, "alice")
+    assert back is not None and back.watching == "arena"
+    assert back.editor("arena") == EditorText("arena", "mine.py", "v2: typed since", "k3")
+
+
+def test_the_journal_writes_when_a_page_changes_and_forgets_a_page_that_went(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / HANDOVER_FILE
+    book = HandOverBook(path)
+    assert book.note_open([(TOKEN, editing("x = 1"))])
+    written = path.read_bytes()
+    assert not book.note_open([(TOKEN, editing("x = 1"))])  # the same page, later: not again
+    assert path.read_bytes() == written
+    assert book.note_open([(TOKEN, editing("x = 2"))])
+    assert book.note_open([])  # logged out (or its session ended): not for the next viewer
+    assert HandOverBook.name(TOKEN) not in path.read_text()
+    assert HandOverBook(path).take(TOKEN, "alice") is None
+
+
+def test_the_last_viewers_pages_not_yet_back_stay_beside_this_ones(tmp_path: Path) -> None:
+    """After a restart the pages come back one by one: the ones still away keep their
+    entry while the journal notes those already back, until each takes its own."""
+    path = tmp_path / HANDOVER_FILE
+    away, back = b"\x01" * 48, b"\x02" * 48
+    HandOverBook(path).note_open([(away, editing("alice's")), (back, editing("bob's", "bob"))])
+    book = HandOverBook(path)  # the next viewer
+    assert book.take(back, "bob") is not None
+    book.note_open([(b"\x03" * 48, editing("bob's, on the new viewer", "bob"))])
+    again = HandOverBook(path)  # and the one after it (a second restart)
+    alice = again.take(away, "alice")
+    assert alice is not None and alice.editor("arena") is not None
+    assert again.take(back, "bob") is None  # taken once already
+    bob = again.take(b"\x03" * 48, "bob")
+    assert bob is not None and bob.editors[0].code == "bob's, on the new viewer"
