@@ -39,7 +39,7 @@ from viewers.web.login import LoginDesk
 from viewers.web.parking import DEFAULT_GRACE_S, ParkingLot
 from viewers.web.pump import DEFAULT_RATE, FramePump
 from viewers.web.saved_login import CookieDesk
-from viewers.web.viser_fast import drop_every_page, make_loop_safe
+from viewers.web.viser_fast import make_loop_safe, stop_dropping_pages
 
 log = logging.getLogger("wart.viewer")
 
@@ -206,8 +206,7 @@ class WebViewer:
                 "back in the contexts they had open, and their runs go on",
                 len(handed_over),
             )
-        drop_every_page(self.server)  # they go to the next viewer now, not in 6 s
-        self.server.stop()
+        stop_dropping_pages(self.server)  # they go to the next viewer now, not in 6 s
 
 
 def limit_send_queue(server: viser.ViserServer, client_id: int) -> bool:
