@@ -201,6 +201,9 @@ def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its
     assert back.workbench.code.value == UNSAVED and back.workbench.target.value == "k3"
     shown = bob.p.evaluate("() => window.wartEditor.editorFor(null).view.state.doc.toString()")
     assert shown == UNSAVED
+    # The output from before the restart is still under the editor, and says what happened.
+    assert before in ticks_shown(bob)
+    bob.wait_text("the web viewer restarted here; your run went on")
     wait_until(lambda: back.robots is not None and back.robots.driven("k3"), 15, "k3 driven")
     # It was never stopped: the prints go on past those from before the restart.
     wait_until(lambda: max(ticks_shown(bob), default=0) > before + 2, 30, "prints go on")
@@ -256,6 +259,7 @@ def test_a_viewer_killed_mid_run_brings_the_page_back_to_its_arena_as_last_noted
     carol.wait_text("the web viewer restarted; your runs went on", timeout=60_000)
     carol.wait_text("Your controller runs on k1", timeout=30_000)
     wait_until(lambda: editor_text(carol) == noted, 15, what="the editor's noted text back")
+    assert 1 in ticks_shown(carol), "the output printed before the crash, as noted"
     # It was never stopped: the prints go on past those from before the crash.
     wait_until(lambda: max(ticks_shown(carol), default=0) > before + 2, 30, "prints go on")
     carol.screenshot("viewer-crash-kept-the-run")

@@ -32,6 +32,7 @@ from viewers.web.login import LoginDesk, LoginForm
 from viewers.web.page_style import add_page_style
 from viewers.web.parking import ParkedLab, ParkingLot
 from viewers.web.pump import FramePump
+from viewers.web.run_output import as_html
 from viewers.web.saved_login import CookieDesk, saved_login_cookie
 from viewers.web.sure_clicks import add_sure_clicks
 from viewers.web.tabs import PageTitle, TabSwitcher, tab_title
@@ -328,8 +329,14 @@ class BrowserSession:
             for ctx in [c for c in reopen.contexts if c != reopen.watching] + shown_last:
                 text = reopen.editor(ctx)
                 put_back = None
-                if text is not None:  # the editor's text, saved or not, and its robot
-                    put_back = BenchMemory.of_text(text.file_name, text.code, text.target)
+                if text is not None:  # the editor's text, saved or not, its robot, its output
+                    put_back = BenchMemory.of_text(
+                        text.file_name,
+                        text.code,
+                        text.target,
+                        as_html(text.printed),
+                        text.printed_on,
+                    )
                 tab.join(ctx, editor=put_back)
         if address.context:
             tab.join(address.context)

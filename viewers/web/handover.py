@@ -34,6 +34,8 @@ import msgspec
 
 from common.files import write_atomic
 from common.keys import is_ident
+from common.messages.agent import MAX_OUTPUT_LINE
+from viewers.web.run_output import RUN_OUTPUT_LINES, as_text
 from viewers.web.workbench import BenchMemory
 
 log = logging.getLogger("wart.viewer.handover")
@@ -44,6 +46,7 @@ MAX_ENTRIES = 10_000
 MAX_CONTEXTS = 64  # per page: more than anyone opens
 MAX_EDITOR_CHARS = 256 * 1024  # four times what a controller may be (upload_gate.py)
 MAX_NAME_CHARS = 200
+MAX_PRINTED_CHARS = 2 * MAX_OUTPUT_LINE  # a printed line, or the lab's note about the run
 CLOCK_SKEW_S = 60.0  # an entry stamped later than this ahead of now was not written here
 JOURNAL_PERIOD_S = 5.0  # what a crash can lose of a page's editor
 # An unchanged journal is written again this often: its entries' age is the time since
@@ -52,12 +55,16 @@ JOURNAL_REFRESH_S = 600.0
 
 
 class EditorText(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """An arena's editor as the page left it: unsaved text is a student's work."""
+    """An arena's editor as the page left it: unsaved text is a student's work, and the
+    run's output so far under it (plain text, each line with whether it is the lab's note;
+    escaped again when shown: run_output.as_text / as_html)."""
 
     ctx: str
     file_name: str
     code: str
     target: str  # the robot chosen to run on
+    printed: tuple[tuple[str, bool], ...] = ()
+    printed_on: str | None = None  # the robot whose run printed it (in ``ctx``)
 
 
 class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -89,7 +96,14 @@ class HandedOver(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         arena's; ``watching``, the one in view (kept only if among them)."""
         contexts = tuple(ctx for ctx, _ in opened)
         editors = tuple(
-            EditorText(ctx, bench.file_name, bench.code, bench.target)
+            EditorText(
+                ctx,
+                bench.file_name,
+                bench.code,
+                bench.target,
+                as_text(bench.printed),
+                _printed_on(ctx, bench),
+            )
             for ctx, bench in opened
             if bench is not None
         )
@@ -198,6 +212,13 @@ class HandOverBook:
         return entry
 
 
+def _printed_on(ctx: str, bench: BenchMemory) -> str | None:
+    """The robot whose run printed the editor's output: followed there, or found again."""
+    if bench.running_on is not None:
+        return bench.running_on[1] if bench.running_on[0] == ctx else None
+    return bench.output_of
+
+
 def _sound_editor(editor: EditorText, contexts: tuple[str, ...]) -> bool:
     # Shown in the editor, never run from here: bounded text, names without controls.
     names = (editor.file_name, editor.target)
@@ -205,6 +226,9 @@ def _sound_editor(editor: EditorText, contexts: tuple[str, ...]) -> bool:
         editor.ctx in contexts
         and len(editor.code) <= MAX_EDITOR_CHARS
         and all(len(n) <= MAX_NAME_CHARS and n.isprintable() for n in names)
+        and len(editor.printed) <= RUN_OUTPUT_LINES
+        and all(len(text) <= MAX_PRINTED_CHARS for text, _ in editor.printed)
+        and (editor.printed_on is None or is_ident(editor.printed_on))
     )
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import html
 from collections import deque
+from collections.abc import Iterable
 
 import viser
 
@@ -11,6 +13,26 @@ from viewers.web.marks import TracebackReader
 from viewers.web.text import output_html, printed
 
 RUN_OUTPUT_LINES = 200  # the run's last printed lines under the editor
+_NOTE_OPEN, _NOTE_CLOSE = "<i>", "</i>"
+
+
+def as_text(lines: Iterable[str]) -> tuple[tuple[str, bool], ...]:
+    """The lines under the editor as plain text, each with whether it is the lab's note
+    (for a file the next viewer reads: no HTML is kept, it is made again on the way in)."""
+    texts = []
+    for line in lines:
+        note = line.startswith(_NOTE_OPEN) and line.endswith(_NOTE_CLOSE)
+        inner = line[len(_NOTE_OPEN) : -len(_NOTE_CLOSE)] if note else line
+        texts.append((html.unescape(inner), note))
+    return tuple(texts)
+
+
+def as_html(texts: Iterable[tuple[str, bool]]) -> tuple[str, ...]:
+    """:func:`as_text`'s lines as the editor shows them again, escaped."""
+    return tuple(
+        f"{_NOTE_OPEN}{printed(text)}{_NOTE_CLOSE}" if note else printed(text)
+        for text, note in texts
+    )
 
 
 class RunOutput:
@@ -44,7 +66,7 @@ class RunOutput:
 
     def note(self, text: str) -> None:
         """A line of the lab's about the run (queued, running, ended), in italics."""
-        self.add(f"<i>{printed(text)}</i>")
+        self.add(f"{_NOTE_OPEN}{printed(text)}{_NOTE_CLOSE}")
 
     def add(self, line: str) -> None:
         self.printed.append(line)

@@ -87,11 +87,21 @@ class BenchMemory:
     errors: tuple[Problem, ...]  # the run's exceptions so far
     shown: tuple[tuple[Problem, ...], str]  # the problems under the editor, and their heading
     printed: tuple[str, ...]  # the run's output under the editor (HTML, escaped)
+    # The robot whose run printed ``printed``, when that run is not followed from here but
+    # found again (a restarted viewer's): following it then keeps these lines.
+    output_of: str | None = None
 
     @classmethod
-    def of_text(cls, file_name: str, code: str, target: str) -> BenchMemory:
-        """The editor alone (a viewer restarted): the run, if any, is found again."""
-        return cls(file_name, code, target, None, "", (), ((), ""), ())
+    def of_text(
+        cls,
+        file_name: str,
+        code: str,
+        target: str,
+        printed: tuple[str, ...] = (),
+        output_of: str | None = None,
+    ) -> BenchMemory:
+        """The editor and its output (a viewer restarted): the run, if any, is found again."""
+        return cls(file_name, code, target, None, "", (), ((), ""), printed, output_of)
 
 
 class Workbench:
@@ -114,6 +124,7 @@ class Workbench:
         # other tab, `wart control`) is followed here when this editor's own run is over.
         self._run_live = False
         self._shown: tuple[tuple[Problem, ...], str] = ((), "")
+        self._output_of: str | None = None  # BenchMemory.output_of, until the run is found
         # The context's news of my run counts up: a reply that arrives after the news
         # (a run can start, or end, before the query's answer is back) must not hide it.
         self._news = 0
@@ -197,6 +208,7 @@ class Workbench:
         if kept.target in self.target.options:
             set_value(self.target, kept.target)
         self.run_output.put_back(kept.printed, kept.errors)
+        self._output_of = kept.output_of
         problems, heading = kept.shown
         if problems:
             self._show(list(problems), heading)
@@ -505,6 +517,11 @@ class Workbench:
         if ctx != self.ctx or status not in ("queued", "running"):
             return False
         self._running_on, self._run_live = (ctx, agent), True
+        resumed, self._output_of = agent == self._output_of, None
+        if resumed:  # the run this output came from, across a viewer's restart
+            self.say(f"Your controller runs on {agent}.")
+            self.run_output.note("the web viewer restarted here; your run went on")
+            return True
         self.run_output.clear()
         self.say(f"Your controller runs on {agent} (started in another tab or tool).")
         self.run_output.note(f"following your run on {agent}, started elsewhere")

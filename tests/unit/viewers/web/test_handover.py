@@ -14,11 +14,14 @@ from tests.kit.waits import wait_for
 from viewers.web.handover import (
     HANDOVER_FILE,
     MAX_EDITOR_CHARS,
+    MAX_PRINTED_CHARS,
     EditorText,
     HandedOver,
     HandOverBook,
     PageJournal,
 )
+from viewers.web.run_output import RUN_OUTPUT_LINES, RunOutput, as_html, as_text
+from viewers.web.workbench import BenchMemory
 
 TOKEN = b"\x07" * 48
 
@@ -158,3 +161,56 @@ def test_the_last_viewers_pages_not_yet_back_stay_beside_this_ones(tmp_path: Pat
     assert again.take(back, "bob") is None  # taken once already
     bob = again.take(b"\x03" * 48, "bob")
     assert bob is not None and bob.editors[0].code == "bob's, on the new viewer"
+
+
+class FakeHtml:
+    content = ""
+
+
+class FakeGui:
+    def add_html(self, content: str) -> FakeHtml:
+        return FakeHtml()
+
+
+def test_the_runs_output_comes_back_as_text_escaped_again(tmp_path: Path) -> None:
+    """What the controller printed, markup and all, is shown as printed after the restart:
+    the file keeps plain text, never HTML the page would take as its own."""
+    output = RunOutput(FakeGui())  # type: ignore[arg-type]
+    output.note("running on k3")
+    output.lines(["tick 1", "<i>not a note</i> & <script>alert(1)</script>"])
+    bench = BenchMemory(
+        "mine.py", "code", "k3", ("arena", "k3"), "", (), ((), ""), tuple(output.printed)
+    )
+    path = tmp_path / HANDOVER_FILE
+    HandOverBook(path).note_open([(TOKEN, HandedOver.of("alice", [("arena", bench)], "arena"))])
+    assert "<script>" in path.read_text() and "&lt;" not in path.read_text()  # plain text
+    back = HandOverBook(path).take(TOKEN, "alice")
+    assert back is not None
+    editor = back.editor("arena")
+    assert editor is not None and editor.printed_on == "k3"
+    assert editor.printed == (
+        ("running on k3", True),
+        ("tick 1", False),
+        ("<i>not a note</i> & <script>alert(1)</script>", False),
+    )
+    assert as_html(editor.printed) == tuple(output.printed)  # shown exactly as before
+    assert as_text(as_html(editor.printed)) == editor.printed
+
+
+@pytest.mark.parametrize(
+    "printed, printed_on",
+    [
+        ((("x", False),) * (RUN_OUTPUT_LINES + 1), "k3"),
+        ((("x" * (MAX_PRINTED_CHARS + 1), False),), "k3"),
+        ((("tick 1", False),), "k3/**"),
+    ],
+)
+def test_an_output_out_of_bounds_is_not_kept(
+    tmp_path: Path, printed: tuple[tuple[str, bool], ...], printed_on: str
+) -> None:
+    path = tmp_path / HANDOVER_FILE
+    editor = EditorText("arena", "mine.py", "code", "k3", printed, printed_on)
+    HandOverBook(path).note_open(
+        [(TOKEN, HandedOver("alice", ("arena",), None, time.time(), (editor,)))]
+    )
+    assert HandOverBook(path).take(TOKEN, "alice") is None
