@@ -26,16 +26,24 @@ def fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def write_atomic(path: Path, data: bytes, *, durable: bool = True) -> None:
+def write_atomic(
+    path: Path, data: bytes, *, durable: bool = True, mode: int | None = None
+) -> None:
     """Replace ``path`` with ``data``: written to a temporary file, synced, renamed, synced.
 
     ``durable=False`` skips both syncs, for a file rewritten many times a second
-    whose readers need it whole, never that it outlives a crash.
+    whose readers need it whole, never that it outlives a crash. ``mode`` (0o600
+    for keys and students' code): the file's permissions from its first byte, so
+    that no other account can read it between its writing and a chmod after.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
     # a name of its own per writer: two threads saving at once must not share a temp file
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    with open(tmp, "wb") as out:
+    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
+    fd = os.open(tmp, flags, 0o666 if mode is None else mode)
+    with open(fd, "wb") as out:
+        if mode is not None:
+            os.fchmod(out.fileno(), mode)  # a temp file left by a crash had its own mode
         out.write(data)
         if durable:
             out.flush()

@@ -65,8 +65,7 @@ class RecordingStore:
 
     def save_summary(self, path: Path, summary: Summary) -> None:
         target = self.summary_path(path)
-        write_atomic(target, msgspec.json.encode(summary))
-        os.chmod(target, 0o600)
+        write_atomic(target, msgspec.json.encode(summary), mode=0o600)
 
     def summary(self, path: Path) -> Summary | None:
         try:

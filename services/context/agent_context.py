@@ -33,7 +33,6 @@ this class routes requests, follows presence and output, and saves the queues.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from pathlib import Path
@@ -200,8 +199,8 @@ class AgentContext(ChatRoom):
             with self.state.lock:
                 data = save_book(self.state.book)
             try:
-                write_atomic(self._book_path, data)
-                os.chmod(self._book_path, 0o600)  # running slots carry their lease keys
+                # running slots carry their lease keys: never readable by another account
+                write_atomic(self._book_path, data, mode=0o600)
             except OSError as exc:
                 self.log.error("could not save the queues to %s: %s", self._book_path, exc)
 

@@ -106,8 +106,8 @@ class UserFiles:
                     del files[old]
             else:
                 path = self._folder(user) / name
-                write_atomic(path, source)
-                os.chmod(path, 0o600)  # a student's code is theirs: not for other accounts here
+                # a student's code is theirs: never readable by other accounts here
+                write_atomic(path, source, mode=0o600)
                 # The file system's clock ticks coarsely (ms): order by our own, strictly rising.
                 os.utime(path, ns=(self._last_ns, self._last_ns))
                 for stale in self.listing(user)[self.max_files :]:

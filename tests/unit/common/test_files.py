@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import stat
+import threading
 from pathlib import Path
 
 import pytest
@@ -50,3 +52,31 @@ def test_a_live_file_is_replaced_whole_without_syncing(
     assert path.read_bytes() == b"new poses"
     assert synced == [], "a live file is never synced"
     assert [p.name for p in tmp_path.iterdir()] == ["truth.json"], "no temporary file left"
+
+
+def test_a_private_file_is_never_readable_by_others_even_while_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Lease keys and students' code: 0600 from the temporary file's first byte, not
+    from a chmod after the rename (another account could open it in between)."""
+    path = tmp_path / "book.json"
+    # A temporary file a crash left behind, readable by all: it is reused, not trusted.
+    stale = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    stale.write_bytes(b"old")
+    stale.chmod(0o644)
+    modes: list[int] = []
+    real_replace = os.replace
+
+    def replace(src: Path, dst: Path) -> None:
+        modes.append(stat.S_IMODE(os.stat(src).st_mode))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    old_umask = os.umask(0o022)
+    try:
+        write_atomic(path, b"secret", mode=0o600)
+        write_atomic(tmp_path / "map.json", b"public")
+    finally:
+        os.umask(old_umask)
+    assert modes == [0o600, 0o644]
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and path.read_bytes() == b"secret"
