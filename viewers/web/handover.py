@@ -119,6 +119,7 @@ class HandOverBook:
         self._entries: dict[str, HandedOver] = {}  # the last viewer's, each taken once
         self._open: dict[str, HandedOver] = {}  # this viewer's pages, as last noted
         self._written_at = 0.0
+        self._failing = False  # the last write failed (said once)
         self._entries, dropped = self._read()
         if dropped:  # out of date, or not sound: no student's text stays for nothing
             self.save()
@@ -197,7 +198,18 @@ class HandOverBook:
         try:
             write_atomic(self.path, data, mode=0o600)  # students' code: theirs alone
         except OSError as exc:
-            log.warning("could not keep the handed-over pages in %s: %s", self.path, exc)
+            if not self._failing:  # once, not at every note while the disk stays full
+                log.warning(
+                    "could not keep the pages' tabs for the next viewer in %s: %s; after a "
+                    "restart the pages come back to their lab's lobby (their runs go on)",
+                    self.path,
+                    exc,
+                )
+            self._failing = True
+            return
+        if self._failing:
+            log.info("the pages' tabs are kept for the next viewer in %s again", self.path)
+            self._failing = False
 
     def take(self, token: bytes, user: str) -> HandedOver | None:
         """What the page of this saved login had open, once; None if nothing (or too old)."""

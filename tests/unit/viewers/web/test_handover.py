@@ -3,6 +3,7 @@ written as they change, so that a crash leaves it as well as a stop."""
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import time
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.kit.waits import wait_for
+from viewers.web import handover
 from viewers.web.handover import (
     HANDOVER_FILE,
     MAX_EDITOR_CHARS,
@@ -214,3 +216,27 @@ def test_an_output_out_of_bounds_is_not_kept(
         [(TOKEN, HandedOver("alice", ("arena",), None, time.time(), (editor,)))]
     )
     assert HandOverBook(path).take(TOKEN, "alice") is None
+
+
+def test_a_book_that_cannot_be_written_says_so_once_and_again_when_it_can(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / HANDOVER_FILE
+    book = HandOverBook(path)
+
+    def disk_full(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(handover, "write_atomic", disk_full)
+    with caplog.at_level(logging.INFO, logger="wart.viewer.handover"):
+        for n in range(3):
+            book.note_open([(TOKEN, editing(f"x = {n}"))])
+    assert caplog.text.count("could not keep the pages' tabs") == 1
+    assert "No space left" in caplog.text
+    assert "come back to their lab's lobby (their runs go on)" in caplog.text
+    monkeypatch.undo()
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="wart.viewer.handover"):
+        book.note_open([(TOKEN, editing("x = 3"))])
+    assert "kept for the next viewer" in caplog.text
+    assert "x = 3" in path.read_text()
