@@ -21,8 +21,9 @@ What each service becomes (docs/DEPLOY.md, "On Kubernetes"):
   volume, never shared across pods);
 - chat rooms, agent contexts, arenas (engine + agent context, one pod), the
   LTI tool: StatefulSets of one with a volume for their history and queues;
-- runners, viewers, cameras: Deployments (nothing of theirs outlives a pod);
-  a viewer gets a Service and an Ingress example.
+- runners and cameras: Deployments (nothing of theirs outlives a pod);
+- a viewer: a StatefulSet of one (its pages' tabs outlive an upgrade), a Service and an
+  Ingress example.
 
 Every container has a readiness and a startup probe ``wart probe KIND ID``
 (its liveliness token is in the lab) and a liveness probe ``--liveness``
@@ -449,7 +450,9 @@ class Renderer:
         c["ports"] = [{"name": "http", "containerPort": port}]
         accounts = [spec.argv[i + 1] for i, a in enumerate(spec.argv) if a == "--user"]
         volumes = self.volumes("viewer", accounts)
-        objects = self.k.workload("viewer", svc.ident, [c], volumes, stateful=False)
+        # Its data directory outlives the pod: what the pages have open (handover.py) is
+        # found again by the next pod of an upgrade, and their tabs come back with them.
+        objects = self.k.workload("viewer", svc.ident, [c], volumes, stateful=True)
         if self.podman:
             return objects
         name = objects[-1]["metadata"]["name"]

@@ -108,10 +108,13 @@ def test_each_service_is_its_own_workload_with_probes_resources_and_its_state(
     assert env["WART_ZENOH_CONFIG"]["value"] == "/etc/wart/zenoh/engine.json5"
     assert env["WART_NO_MULTICAST"]["value"] == "1"
     assert env["WART_REGISTRY_KEY"]["valueFrom"]["configMapKeyRef"]["name"] == "wart-lab"
-    # A chat room keeps its history on a volume; the viewer has a Service and an Ingress.
+    # A chat room keeps its history on a volume; so does the viewer keep its pages' tabs
+    # (the next pod of an upgrade opens them again); it has a Service and an Ingress.
     assert objects[("StatefulSet", "wart-chat-lobby")]["spec"]["volumeClaimTemplates"]
-    viewer = objects[("Deployment", "wart-viewer-viewer")]
-    assert "0.0.0.0" in containers(viewer)["viewer"]["args"]
+    viewer = objects[("StatefulSet", "wart-viewer-viewer")]
+    assert viewer["spec"]["volumeClaimTemplates"][0]["metadata"]["name"] == "state"
+    args = containers(viewer)["viewer"]["args"]
+    assert "0.0.0.0" in args and args[args.index("--data-dir") + 1].startswith("/var/lib/wart")
     (rule,) = objects[("Ingress", "wart-viewer-viewer")]["spec"]["rules"]
     assert rule["host"] == "lab.example.org"  # the host's public name, not the router's
     # The routers' rules do not let a camera watch tokens: its probe could only fail.
