@@ -123,6 +123,14 @@ class HandOverBook:
         self._entries, dropped = self._read()
         if dropped:  # out of date, or not sound: no student's text stays for nothing
             self.save()
+        if self._entries:
+            newest = max(entry.at for entry in self._entries.values())
+            log.info(
+                "the tabs of %d page(s) kept by the last viewer here (noted up to %.0f s "
+                "ago): each reopens as its page comes back with its saved login",
+                len(self._entries),
+                max(0.0, time.time() - newest),
+            )
 
     @staticmethod
     def name(token: bytes) -> str:

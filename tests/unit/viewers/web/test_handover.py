@@ -116,7 +116,9 @@ def editing(code: str, user: str = "alice") -> HandedOver:
     return HandedOver(user, ("lobby", "arena"), "arena", time.time(), (editor,))
 
 
-def test_a_viewer_that_crashes_leaves_its_pages_as_last_noted(tmp_path: Path) -> None:
+def test_a_viewer_that_crashes_leaves_its_pages_as_last_noted(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     """Nothing is written at a crash: the next viewer reads the journal's last note."""
     path = tmp_path / HANDOVER_FILE
     open_now = [(TOKEN, editing("v1"))]
@@ -128,7 +130,10 @@ def test_a_viewer_that_crashes_leaves_its_pages_as_last_noted(tmp_path: Path) ->
     journal.stop()  # the process is gone: what it noted last is all there is
     open_now = [(TOKEN, editing("v3: never noted"))]
     time.sleep(0.1)
-    back = HandOverBook(path).take(TOKEN, "alice")
+    with caplog.at_level(logging.INFO, logger="wart.viewer.handover"):
+        book = HandOverBook(path)  # the next viewer says what it found
+    assert "the tabs of 1 page(s) kept by the last viewer here" in caplog.text
+    back = book.take(TOKEN, "alice")
     assert back is not None and back.watching == "arena"
     assert back.editor("arena") == EditorText("arena", "mine.py", "v2: typed since", "k3")
 
