@@ -26,9 +26,7 @@ def fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def write_atomic(
-    path: Path, data: bytes, *, durable: bool = True, mode: int | None = None
-) -> None:
+def write_atomic(path: Path, data: bytes, *, durable: bool = True, mode: int | None = None) -> None:
     """Replace ``path`` with ``data``: written to a temporary file, synced, renamed, synced.
 
     ``durable=False`` skips both syncs, for a file rewritten many times a second
