@@ -116,6 +116,9 @@ class HandOverBook:
         self.path = path
         self.max_age_s = max_age_s
         self._lock = threading.Lock()
+        # One write at a time, each of the state it read: an older state written last
+        # would bring back an entry already taken.
+        self._writing = threading.Lock()
         self._entries: dict[str, HandedOver] = {}  # the last viewer's, each taken once
         self._open: dict[str, HandedOver] = {}  # this viewer's pages, as last noted
         self._written_at = 0.0
@@ -160,6 +163,9 @@ class HandOverBook:
             for name, entry in raw.items()
             if self._sound(name, entry) and -CLOCK_SKEW_S <= now - entry.at <= self.max_age_s
         }
+        if len(good) > MAX_ENTRIES:  # not one viewer's: the newest are the ones coming back
+            newest = sorted(good.items(), key=lambda item: item[1].at)[-MAX_ENTRIES:]
+            good = dict(newest)
         return good, len(raw) - len(good)
 
     @staticmethod
@@ -180,7 +186,7 @@ class HandOverBook:
         """What this viewer's pages have open now, by saved login: the file is written
         if that changed (or was last written ``JOURNAL_REFRESH_S`` ago). True if written."""
         noted: dict[str, HandedOver] = {}
-        for token, page in pages:
+        for token, page in pages[:MAX_ENTRIES]:
             if self._sound(self.name(token), page):
                 noted[self.name(token)] = page
             else:
@@ -191,7 +197,8 @@ class HandOverBook:
             same = noted.keys() == self._open.keys() and all(
                 page.same_page(self._open[name]) for name, page in noted.items()
             )
-            if same and time.monotonic() - self._written_at < JOURNAL_REFRESH_S:
+            recent = time.monotonic() - self._written_at < JOURNAL_REFRESH_S
+            if same and recent and not self._failing:
                 return False
             self._open = noted
         self.save()
@@ -200,23 +207,27 @@ class HandOverBook:
     def save(self) -> None:
         if self.path is None:
             return
+        with self._writing:
+            self._write(self.path)
+
+    def _write(self, path: Path) -> None:
         with self._lock:
             data = msgspec.json.encode({**self._entries, **self._open})
-            self._written_at = time.monotonic()
         try:
-            write_atomic(self.path, data, mode=0o600)  # students' code: theirs alone
+            write_atomic(path, data, mode=0o600)  # students' code: theirs alone
+            self._written_at = time.monotonic()
         except OSError as exc:
             if not self._failing:  # once, not at every note while the disk stays full
                 log.warning(
                     "could not keep the pages' tabs for the next viewer in %s: %s; after a "
                     "restart the pages come back to their lab's lobby (their runs go on)",
-                    self.path,
+                    path,
                     exc,
                 )
             self._failing = True
             return
         if self._failing:
-            log.info("the pages' tabs are kept for the next viewer in %s again", self.path)
+            log.info("the pages' tabs are kept for the next viewer in %s again", path)
             self._failing = False
 
     def take(self, token: bytes, user: str) -> HandedOver | None:

@@ -348,6 +348,7 @@ class Workbench:
         self._running_on = (ctx, agent)
         self._run_live = True
         self.run_output.clear()  # a new run: its output only (before its first line can come)
+        self._output_of = None  # the output put back was of another run
         news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
