@@ -170,6 +170,18 @@ def test_two_tabs_of_one_student_show_the_same_run_and_either_stops_it(
     wait_until(lambda: not robots.driven("k2"), 15, what="k2 free in the first tab")
 
 
+def restart_viewer(lab: RealLab) -> None:
+    """The viewer stopped as SIGTERM stops it (ViewerService.on_stop), and the next one
+    started on its port and data directory, with a new connector as a new process has."""
+    old, port = lab.viewer, lab.viewer.port
+    data_dir = old.handovers.path.parent if old.handovers.path is not None else None
+    assert data_dir is not None
+    old.stop()
+    lab.connector.close()
+    lab.connector = LiveConnector(lab.session, lab.address, lab.lab.key_hex, data_dir=data_dir)
+    lab.viewer = WebViewer(lab.connector, port=port, default_address=lab.address, data_dir=data_dir)
+
+
 def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its_arena(
     open_page, lab: RealLab
 ) -> None:
@@ -184,14 +196,7 @@ def test_a_viewer_restarted_mid_run_keeps_the_run_and_the_page_comes_back_to_its
     assert bench is not None
     write_code(bob, UNSAVED, lambda: bench.code.value == UNSAVED)
     before = max(ticks_shown(bob))
-    old, port = lab.viewer, lab.viewer.port
-    data_dir = old.handovers.path.parent if old.handovers.path is not None else None
-    assert data_dir is not None
-    old.stop()  # as SIGTERM does (ViewerService.on_stop)
-    lab.connector.close()
-    # The next viewer: a new process would have a new connector on its own session.
-    lab.connector = LiveConnector(lab.session, lab.address, lab.lab.key_hex, data_dir=data_dir)
-    lab.viewer = WebViewer(lab.connector, port=port, default_address=lab.address, data_dir=data_dir)
+    restart_viewer(lab)
     # No click: viser's page reconnects, the cookie logs it in, the arena opens in front.
     bob.wait_text("the web viewer restarted; your runs went on", timeout=60_000)
     bob.wait_text("Your controller runs on k3", timeout=30_000)
@@ -265,3 +270,36 @@ def test_a_viewer_killed_mid_run_brings_the_page_back_to_its_arena_as_last_noted
     carol.screenshot("viewer-crash-kept-the-run")
     carol.click("Stop")
     carol.wait_text("Your controller on k1 cancelled", timeout=15_000)
+
+
+def test_two_tabs_of_one_browser_both_come_back_to_the_arena_after_a_viewer_restart(
+    open_page, lab: RealLab
+) -> None:
+    """Two tabs share the browser's cookie, so both come back with the one saved login it
+    holds: the first to arrive uses it, and the second, refused as used, reloads to send
+    the login the first was given, and opens its arena too (not the password form)."""
+    one = open_page("ida-tab-one")
+    enter_arena(one, lab, "ida")
+    two = ViserPage(one.p.context.new_page(), "ida-tab-two")  # the same browser: one cookie
+    two.open(lab.viewer.url)
+    two.tab(tab_label(lab.address)).first.click()  # logged in by the cookie
+    two.wait_text("Logged in as")
+    two.click(f"Join {CTX}", timeout=15_000)
+    two.tab(f"{CTX} (arena)").last.click()
+    two.wait_text("Upload controller")
+    restart_viewer(lab)
+    # Each page says so for 5 s, each at its own time: both are watched at once.
+    back: set[str] = set()
+
+    def both_back() -> bool:
+        for page in (one, two):
+            text = page.p.inner_text("body")
+            if (
+                "the web viewer restarted; your runs went on" in text
+                and "Upload controller" in text
+            ):
+                back.add(page.name)
+        return len(back) == 2
+
+    wait_until(both_back, 60, what="both tabs back in their arena")
+    assert len([s for s in lab.viewer.sessions.values() if s.labs]) == 2

@@ -6,6 +6,7 @@ instructor buttons never show in another's page.
 
 from __future__ import annotations
 
+import html
 import logging
 import threading
 import time
@@ -43,6 +44,21 @@ from viewers.web.world_feed import WorldFeed
 from viewers.web.world_view import WorldView
 
 log = logging.getLogger("wart.viewer.client")
+
+# Reloads the page: the other tab's new login reaches the shared cookie once that tab has
+# fetched its ticket, which a busy page can take seconds to do; so up to 3 times, 2, 4
+# and 8 s apart, within a minute (a loop of reloads would hide the password form).
+RELOAD_ONCE_JS = (
+    "(() => { const key = 'wart-reloaded-for-saved-login';"
+    " let seen = JSON.parse(sessionStorage.getItem(key) || '[]');"
+    " seen = seen.filter(t => Date.now() - t < 60000);"
+    " if (seen.length >= 3) return;"
+    " seen.push(Date.now()); sessionStorage.setItem(key, JSON.stringify(seen));"
+    " setTimeout(() => location.reload(), 2000 * 2 ** (seen.length - 1)); })()"
+)
+RELOAD_ONCE_HTML = (
+    f'<img src="data:," alt="" style="display:none" onerror="{html.escape(RELOAD_ONCE_JS)}">'
+)
 
 NO_SAVED = "(saved and recent addresses)"
 TITLE = "WART lab"  # the browser tab's title, after the lab's name once logged in
@@ -243,9 +259,11 @@ class BrowserSession:
         busy); the saved login was not refused and stays for the next load."""
         client_id = self.client.client_id
         if refused:
-            log.info("browser %d: saved login to %s refused: %s", client_id, address, why)
+            log.info("browser %d: saved login to %s refused: %s", client_id, address.label, why)
         else:
-            log.info("browser %d: saved login to %s not tried now: %s", client_id, address, why)
+            log.info(
+                "browser %d: saved login to %s not tried now: %s", client_id, address.label, why
+            )
         if refused and "(used" not in why:
             # A used token: another tab of this browser resumed with it first and saved
             # its new one under the same name, which a deletion would take away.
@@ -256,6 +274,15 @@ class BrowserSession:
         words = f"Could not log in again with your saved login: {why}"
         if not refused:
             words += ". It is kept: reload the page in a minute, or log in with your password"
+        elif "(used" in why:
+            # Another tab of this browser came back first with the same cookie and stored
+            # the login it was given: a reload sends that one (once: then the form stays).
+            words = (
+                "Another tab of this browser logged in again first with this saved login: "
+                "this tab reloads to use the one it was given. If it does not, log in with "
+                "your password"
+            )
+            self._cookie.content = RELOAD_ONCE_HTML
         if self.login is not None:
             self.login.show_error(words)
         else:
@@ -287,6 +314,8 @@ class BrowserSession:
             return
         if connection.resume_token is not None:
             self._save_login(address.with_user(connection.user), connection.resume_token)
+            if self.handovers is not None:  # another tab of this browser may bring it back
+                self.handovers.issued(connection.resume_token)
         self.saved.add_recent(connection.user, address.with_user(connection.user))
         tab = LabTab(
             self.client,

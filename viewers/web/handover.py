@@ -49,6 +49,7 @@ MAX_NAME_CHARS = 200
 MAX_PRINTED_CHARS = 2 * MAX_OUTPUT_LINE  # a printed line, or the lab's note about the run
 CLOCK_SKEW_S = 60.0  # an entry stamped later than this ahead of now was not written here
 JOURNAL_PERIOD_S = 5.0  # what a crash can lose of a page's editor
+SIBLING_WINDOW_S = 120.0  # after a start, the tabs of one browser coming back (take())
 # An unchanged journal is written again this often: its entries' age is the time since
 # the last note, and a page still open at a crash is then not taken for an old one.
 JOURNAL_REFRESH_S = 600.0
@@ -123,6 +124,8 @@ class HandOverBook:
         self._open: dict[str, HandedOver] = {}  # this viewer's pages, as last noted
         self._written_at = 0.0
         self._failing = False  # the last write failed (said once)
+        self._issued: set[str] = set()  # saved logins this viewer gave pages
+        self._started = time.monotonic()
         self._entries, dropped = self._read()
         if dropped:  # out of date, or not sound: no student's text stays for nothing
             self.save()
@@ -230,10 +233,31 @@ class HandOverBook:
             log.info("the pages' tabs are kept for the next viewer in %s again", path)
             self._failing = False
 
-    def take(self, token: bytes, user: str) -> HandedOver | None:
-        """What the page of this saved login had open, once; None if nothing (or too old)."""
+    def issued(self, token: bytes) -> None:
+        """A saved login this viewer gave a page (at a login or a resume)."""
         with self._lock:
-            entry = self._entries.pop(self.name(token), None)
+            self._issued.add(self.name(token))
+
+    def take(self, token: bytes, user: str) -> HandedOver | None:
+        """What the page of this saved login had open, once; None if nothing (or too old).
+
+        Two tabs of one browser share its cookie, so both come back with the one saved
+        login it holds: the first takes that one's page, and the second brings the login
+        this viewer just gave the first (read from the cookie, or after a reload when it
+        was refused as used: client.py), under which nothing was left. Such a login,
+        within ``SIBLING_WINDOW_S`` of this viewer's start, takes another page its user
+        left here, the newest: each tab gets one. Any other takes only its own.
+        """
+        with self._lock:
+            name = self.name(token)
+            entry = self._entries.pop(name, None)
+            sibling = time.monotonic() - self._started < SIBLING_WINDOW_S
+            if entry is None and sibling and name in self._issued:
+                mine = [name for name, e in self._entries.items() if e.user == user]
+                if not mine:
+                    return None
+                newest = max(mine, key=lambda name: self._entries[name].at)
+                entry = self._entries.pop(newest)
             if entry is None:
                 return None
         self.save()

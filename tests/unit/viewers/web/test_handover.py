@@ -165,9 +165,48 @@ def test_the_last_viewers_pages_not_yet_back_stay_beside_this_ones(tmp_path: Pat
     again = HandOverBook(path)  # and the one after it (a second restart)
     alice = again.take(away, "alice")
     assert alice is not None and alice.editor("arena") is not None
-    assert again.take(back, "bob") is None  # taken once already
     bob = again.take(b"\x03" * 48, "bob")
     assert bob is not None and bob.editors[0].code == "bob's, on the new viewer"
+    assert again.take(back, "bob") is None  # taken once already, and bob has no other
+
+
+def test_two_tabs_sharing_one_cookie_each_get_one_of_their_pages(tmp_path: Path) -> None:
+    """Both tabs come back with the saved login the last of them stored: one takes its
+    page by that name, the other (reloaded for the login the first was given) the other."""
+    path = tmp_path / HANDOVER_FILE
+    first_tab, cookie = b"\x01" * 48, b"\x02" * 48  # the cookie: the second tab's login
+    HandOverBook(path).note_open(
+        [
+            (first_tab, editing("tab one")),
+            (cookie, editing("tab two")),
+            (b"\x05" * 48, editing("bob's", "bob")),
+        ]
+    )
+    book = HandOverBook(path)
+    one = book.take(cookie, "alice")
+    # A page bringing a login this viewer did not give takes nothing that is not its own...
+    assert book.take(b"\x03" * 48, "alice") is None
+    # ...but one bringing the login this viewer just gave the first tab takes the other.
+    book.issued(b"\x03" * 48)
+    other = book.take(b"\x03" * 48, "alice")
+    assert one is not None and other is not None
+    assert {one.editors[0].code, other.editors[0].code} == {"tab one", "tab two"}
+    book.issued(b"\x04" * 48)
+    assert book.take(b"\x04" * 48, "alice") is None  # no third page, and never bob's
+    book.issued(b"\x06" * 48)
+    assert book.take(b"\x06" * 48, "bob") is not None
+
+
+def test_long_after_the_start_a_new_tab_opens_only_its_own(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A tab opened an hour into the class is not given a page left at the restart."""
+    path = tmp_path / HANDOVER_FILE
+    HandOverBook(path).note_open([(b"\x01" * 48, editing("left at the restart"))])
+    book = HandOverBook(path)
+    book.issued(b"\x02" * 48)
+    monkeypatch.setattr(handover, "SIBLING_WINDOW_S", -1.0)
+    assert book.take(b"\x02" * 48, "alice") is None
 
 
 class FakeHtml:
