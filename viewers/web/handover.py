@@ -234,7 +234,10 @@ class HandOverBook:
             self._failing = False
 
     def issued(self, token: bytes) -> None:
-        """A saved login this viewer gave a page (at a login or a resume)."""
+        """A saved login this viewer gave a page (at a login or a resume); only those of its
+        first ``SIBLING_WINDOW_S`` count (take()), so only those are kept."""
+        if time.monotonic() - self._started >= SIBLING_WINDOW_S:
+            return
         with self._lock:
             self._issued.add(self.name(token))
 
