@@ -276,7 +276,7 @@ class BrowserSession:
             words += ". It is kept: reload the page in a minute, or log in with your password"
         elif "(used" in why:
             # Another tab of this browser came back first with the same cookie and stored
-            # the login it was given: a reload sends that one (once: then the form stays).
+            # the login it was given: a reload sends that one (RELOAD_ONCE_JS: up to 3 times).
             words = (
                 "Another tab of this browser logged in again first with this saved login: "
                 "this tab reloads to use the one it was given. If it does not, log in with "
