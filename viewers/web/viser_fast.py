@@ -292,9 +292,9 @@ def stop_dropping_pages(server: viser.ViserServer, every_s: float = 0.05) -> Non
 
     def cut_until_stopped() -> None:
         while True:
-            drop_every_page(server)
-            if loop is not None:
-                with contextlib.suppress(RuntimeError):  # the loop has closed: all done
+            with contextlib.suppress(RuntimeError):  # the loop has closed: all done
+                drop_every_page(server)
+                if loop is not None:
                     loop.call_soon_threadsafe(_cut_opening_sockets, loop)
             if stopped.wait(every_s):
                 return
