@@ -123,9 +123,10 @@ def router(request: pytest.FixtureRequest, procs: Procs, realm: str) -> Iterator
         module_router: Router = request.getfixturevalue("module_router")
         yield module_router.in_realm(realm)
         return
-    r = start_router(procs, realm)
-    yield r
-    r.proc.stop()
+    # Stopped with the other processes at ``procs``' teardown, after every service this
+    # test started on it (the reverse of their starts): a service stops as it does in a
+    # lab, its goodbyes answered, not each waiting out a timeout with its router gone.
+    yield start_router(procs, realm)
 
 
 @pytest.fixture(scope="module")
