@@ -264,6 +264,7 @@ FLOWS: tuple[Flow, ...] = (
         *_ok(*_QUEUE_CHANGES),
         _ask(m.TakeOver, m.TakenOver),
         _ask(m.QueueStateRequest, m.AgentContextState),
+        _ask(m.OutputSoFarRequest, m.OutputSoFar),
         _ask(m.RecordingListRequest, m.RecordingList),
         _ask(m.RecordingGet, m.RecordingChunk),
         *_ok(m.SaveFile),

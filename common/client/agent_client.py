@@ -47,6 +47,8 @@ from common.messages import (
     HandBack,
     OkReply,
     OutputLines,
+    OutputSoFar,
+    OutputSoFarRequest,
     QueueStateRequest,
     ReadFile,
     RecordingChunk,
@@ -136,6 +138,15 @@ class AgentClient:
             if self.latest_state is None or state.at >= self.latest_state.at:
                 self.latest_state = state
         return state
+
+    def output_so_far(self, request_id: str) -> OutputSoFar:
+        """A run's last output lines as the context kept them (NotFound: no such request)."""
+        return self.client.request(
+            self.ctx,
+            OutputSoFarRequest(request_id=request_id),
+            OutputSoFar,
+            f"output of request {request_id}",
+        )
 
     def queue(
         self, agent: str, mode: RunMode, *, source: bytes = b"", filename: str = "controller.py"

@@ -33,6 +33,8 @@ MAX_UPLOAD_BYTES = 64 * 1024
 """An uploaded controller's largest size (the sandbox's pre-check uses the same figure)."""
 
 MAX_OUTPUT_LINE = 1000
+OUTPUT_KEPT_LINES = 200
+"""A run's last output lines an agent context keeps for whoever comes to it late."""
 RunMode = Literal["remote", "deploy"]
 """remote: the student's own machine drives (wart control); deploy: the lab's runner does."""
 
@@ -256,6 +258,26 @@ class AgentQueue(msgspec.Struct, frozen=True, kw_only=True):
     entries: list[QueueEntry]  # running first (position 0), then the waiting ones in order
 
 
+class OutputSoFarRequest(Message, frozen=True):
+    """Ask an agent context for a run's output so far: a page that comes to the run late
+    (a second tab, a reload, a viewer restarted) shows what it missed."""
+
+    request_id: Ident
+
+
+class OutputSoFar(Message, frozen=True):
+    """A run's last output lines (at most OUTPUT_KEPT_LINES); ``first`` counts the lines it
+    printed before ``lines[0]``, in the numbering of the OutputLines events' ``first``."""
+
+    request_id: Ident
+    agent: Ident
+    user: Ident
+    first: NonNegInt = 0
+    lines: Annotated[list[OutputLine], msgspec.Meta(max_length=OUTPUT_KEPT_LINES)] = msgspec.field(
+        default_factory=list
+    )
+
+
 class AgentContextState(Message, frozen=True):
     """Every agent of the context and its queue (reply of QueueStateRequest, and in events)."""
 
@@ -329,6 +351,7 @@ class OutputLines(msgspec.Struct, frozen=True, kw_only=True):
     agent: Ident
     user: Ident
     lines: list[OutputLine]
+    first: NonNegInt = 0  # how many lines the run printed before these (the context counts)
 
 
 class AgentEvent(Message, frozen=True):
@@ -435,6 +458,7 @@ __all__ = [
     "ENDED",
     "MAX_OUTPUT_LINE",
     "MAX_UPLOAD_BYTES",
+    "OUTPUT_KEPT_LINES",
     "AgentContextState",
     "AgentEvent",
     "AgentQueue",
@@ -455,6 +479,8 @@ __all__ = [
     "FileListRequest",
     "HandBack",
     "OutputLines",
+    "OutputSoFar",
+    "OutputSoFarRequest",
     "QueueEntry",
     "QueueStateRequest",
     "ReadFile",

@@ -60,6 +60,8 @@ from common.messages import (
     Message,
     OkReply,
     OutputLines,
+    OutputSoFar,
+    OutputSoFarRequest,
     QueueStateRequest,
     ReadFile,
     RecordingGet,
@@ -73,6 +75,7 @@ from common.messages import (
 )
 from common.messages.chat import ChatLine, MemberStatus
 from common.recording.store import RecordingStore
+from common.service import RequestError
 from services.context.agent_queue import (
     QueueBook,
     RunningJob,
@@ -82,6 +85,7 @@ from services.context.agent_queue import (
 from services.context.chat_room import ChatRoom
 from services.context.context_state import ContextState
 from services.context.lease_signer import LeaseSigner
+from services.context.output_tail import OutputTails
 from services.context.queue_requests import QueueDesk
 from services.context.recorder import SlotRecorder
 from services.context.recordings import RecordingRequests
@@ -121,6 +125,7 @@ class AgentContext(ChatRoom):
         self.state = ContextState(name, self.world, self._restore_book(QueueBook(slot_seconds)))
         # The page's editor keeps each member's last files here, beside the queues.
         self.files = UserFiles(None if data_dir is None else data_dir / f"{name}.files")
+        self.outputs = OutputTails()  # each run's last lines, for a page that comes late
         self.leases = LeaseSigner(session, realm, self.world, self._seal, self.verifier, self.log)
         self.runner_link = RunnerLink(
             session, realm, self.runner, self._seal, self.verifier, self.log
@@ -293,6 +298,7 @@ class AgentContext(ChatRoom):
                 StopControl,
                 ContextSettings,
                 QueueStateRequest,
+                OutputSoFarRequest,
                 RecordingListRequest,
                 RecordingGet,
                 SaveFile,
@@ -316,6 +322,10 @@ class AgentContext(ChatRoom):
         if isinstance(request, QueueStateRequest):
             self._require(principal, "join", "see the queues")
             return self.state_message()
+        if isinstance(request, OutputSoFarRequest):
+            # Whoever may join sees every run's output in the events already.
+            self._require(principal, "join", "see a run's output")
+            return self._output_so_far(request.request_id)
         if isinstance(request, RecordingListRequest | RecordingGet):
             self._require(principal, "join", "see recordings")
             return self.recordings.answer(principal, request, self._manages(principal))
@@ -491,18 +501,32 @@ class AgentContext(ChatRoom):
                 self.state.finish_soon(report.request_id, "finished", reason)
                 self.state.wake.notify_all()
         if report.lines:
-            self.recorder.output(run.job.request_id, run.job.agent, list(report.lines))
+            job = run.job
+            self.recorder.output(job.request_id, job.agent, list(report.lines))
+            first = self.outputs.add(job.request_id, job.agent, job.user, report.lines)
             self._publish_agent(
                 AgentEvent(
                     ctx=self.room,
                     output=OutputLines(
-                        request_id=run.job.request_id,
-                        agent=run.job.agent,
-                        user=run.job.user,
+                        request_id=job.request_id,
+                        agent=job.agent,
+                        user=job.user,
                         lines=list(report.lines),
+                        first=first,
                     ),
                 )
             )
+
+    def _output_so_far(self, request_id: str) -> OutputSoFar:
+        kept = self.outputs.so_far(request_id)
+        if kept is not None:
+            return kept
+        known = self.state.look_up(request_id).status
+        if known is None:
+            raise RequestError(
+                "not_found", f"no request {request_id} here (never queued, or long ago)"
+            )
+        return OutputSoFar(request_id=request_id, agent=known.agent, user=known.user)
 
     # -- events and state
 

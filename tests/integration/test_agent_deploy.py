@@ -203,3 +203,47 @@ def test_one_example_drives_unchanged_in_both_run_modes(lab: ProcessLab) -> None
         assert final is not None and final.status == "finished", final
         deployed = float(np.linalg.norm(poses.xy("k1") - start))
         assert remote > 50 and deployed > 50, (remote, deployed)
+
+
+COUNTER = HEADER + textwrap.dedent(
+    """
+    class Counter(Controller):
+        period = 0.1  # 4 lines a step: under the sandbox's 50 lines a second
+        printed = 0
+
+        def do_work(self, robot: Khepera) -> None:
+            for _ in range(4 if self.printed < 60 else 0):
+                print("line", self.printed)
+                self.printed += 1
+    """
+)
+
+
+def test_a_page_that_comes_late_reads_the_runs_output_so_far_in_the_events_count(
+    lab: ProcessLab,
+) -> None:
+    events: list[OutputLines] = []
+    with agent_user(lab, "alice") as alice:
+        alice.on_output = events.append
+        rid = alice.queue("k2", "deploy", source=COUNTER.encode()).request_id
+
+        def printed() -> list[str]:
+            return [line for e in list(events) if e.request_id == rid for line in e.lines]
+
+        wait_for(lambda: "line 59" in printed(), 30, "its 60 lines in the events")
+        mine, lines = [e for e in events if e.request_id == rid], printed()
+        # The context numbers the lines: each event says how many came before it.
+        assert [e.first for e in mine] == [sum(len(m.lines) for m in mine[:i]) for i in
+                                           range(len(mine))]  # fmt: skip
+        # Another session of hers (a second tab) asks what it missed: all of it, in order.
+        with agent_user(lab, "alice") as tab:
+            so_far = tab.output_so_far(rid)
+            assert (so_far.agent, so_far.user, so_far.first) == ("k2", "alice", 0)
+            assert so_far.lines == lines and lines[-1] == "line 59"
+            with pytest.raises(LabError, match="no request k2-9-000000 here"):
+                tab.output_so_far("k2-9-000000")
+        final = alice.wait_status(rid, FINAL, timeout=15)
+        assert final is not None and final.status == "finished"
+        # After its end too, and for whoever may join the arena (its events showed them all).
+        with agent_user(lab, "bob") as bob:
+            assert bob.output_so_far(rid).lines[: len(lines)] == lines
