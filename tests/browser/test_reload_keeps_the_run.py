@@ -65,6 +65,11 @@ def ticks_shown(page: ViserPage) -> list[int]:
     return [int(n) for n in re.findall(r"tick (\d+)", text)]
 
 
+def run_output(page: ViserPage) -> str:
+    """The run's output under the editor, as the page shows it."""
+    return " ".join(page.p.locator(".wart-run-output").all_inner_texts())
+
+
 def start_ticking(page: ViserPage, panel: ChatPanel, agent: str) -> None:
     bench = panel.workbench
     assert bench is not None
@@ -143,11 +148,12 @@ def test_a_page_gone_longer_than_the_grace_ends_the_run_and_says_why(
 def test_two_tabs_of_one_student_show_the_same_run_and_either_stops_it(
     open_page, lab: RealLab
 ) -> None:
-    """A second tab (a second window, a phone) follows the run the first started; Stop there
-    ends it, and both tabs say so."""
+    """A second tab (a second window, a phone) follows the run the first started, with what
+    it printed before that tab opened; Stop there ends it, and both tabs say so."""
     first = open_page("first")
     panel = enter_arena(first, lab, "carol")
     start_ticking(first, panel, "k2")
+    wait_until(lambda: "tick 1" in run_output(first), 30, "the first print in tab one")
     second = open_page("second")
     second.log_in(lab.url, "carol", PASSWORD)
     second.tab(tab_label(lab.address)).first.click()
@@ -155,13 +161,13 @@ def test_two_tabs_of_one_student_show_the_same_run_and_either_stops_it(
     second.click(f"Join {CTX}", timeout=15_000)
     second.tab(f"{CTX} (arena)").last.click()
     second.wait_text("Your controller runs on k2 (started in another tab or tool)", timeout=30_000)
-
-    def run_output(page: ViserPage) -> str:
-        return " ".join(page.p.locator(".wart-run-output").all_inner_texts())
-
-    # The second tab's editor shows the run's prints as they come, not only the first tab's.
+    # The second tab's editor shows what the run printed before it opened (the context
+    # keeps it), then the prints as they come, each once.
     wait_until(lambda: "following your run on k2" in run_output(second), 15, "the note")
-    wait_until(lambda: "tick" in run_output(second), 30, "prints in tab two")
+    wait_until(lambda: "tick 1" in run_output(second), 30, "a print from before tab two")
+    wait_until(lambda: "tick 3" in run_output(second), 30, "a print since")
+    ticks = [int(n) for n in re.findall(r"\btick (\d+)\b", run_output(second))]
+    assert ticks == list(range(1, len(ticks) + 1)), ticks  # from the first, none twice
     second.click("Stop")
     second.wait_text("Your controller on k2 cancelled", timeout=15_000)
     first.wait_text("Your controller on k2 cancelled", timeout=15_000)

@@ -173,6 +173,15 @@ class OutputEvent:
     agent: str
     user: str
     lines: tuple[str, ...]
+    first: int = 0  # how many lines the run printed before these (the context's count)
+
+
+@dataclass(frozen=True)
+class OutputSoFar:
+    """A run's last output lines as its context kept them; ``first`` counts those before."""
+
+    first: int
+    lines: tuple[str, ...]
 
 
 LabEvent = (
@@ -275,6 +284,40 @@ class Account:
     online: bool = False
     failed_logins: int = 0  # since the registry started or the last unlock
     banned: str = ""  # the ban in force, in words ("" if none)
+
+
+class CourseCalls(Protocol):
+    """A connection's courses: the grader's calls and feeds (docs/COURSES.md)."""
+
+    def assignments(self) -> list[AssignmentInfo]:
+        """The assignments of my courses."""
+        ...
+
+    def submit(self, assignment: str, filename: str, source: bytes) -> str:
+        """Hand the file in to ``assignment``; what the grader said, in words."""
+        ...
+
+    def submissions(self, assignment: str) -> list[SubmissionInfo]:
+        """My submissions to ``assignment``, oldest first, with their scores."""
+        ...
+
+    def leaderboard(self, assignment: str) -> Leaderboard: ...
+
+    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
+        """Download a graded episode's recording of mine into ``dest``; returns ``dest``."""
+        ...
+
+    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
+        """Competitions' standings as the grader publishes them; returns: stop watching."""
+        ...
+
+    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        """Submissions changing state (any course; no score in it); returns: stop watching."""
+        ...
+
+    def class_tables(self) -> list[ClassTable]:
+        """The teacher's view of each course I teach (none for a student)."""
+        ...
 
 
 class AdminCalls(Protocol):
@@ -401,6 +444,10 @@ class LabConnection(Protocol):
 
     # -- my recordings (every slot an agent context runs is recorded: common/recording/)
 
+    def output_so_far(self, ctx: str, request_id: str) -> OutputSoFar:
+        """The run's last output lines, for a page that comes to it late (LabError: none)."""
+        ...
+
     def recordings(self, ctx: str) -> list[RecordingEntry]:
         """My recorded runs in ``ctx``, newest first."""
         ...
@@ -424,36 +471,9 @@ class LabConnection(Protocol):
         answer."""
         ...
 
-    # -- my courses (the grader: docs/COURSES.md)
-
-    def assignments(self) -> list[AssignmentInfo]:
-        """The assignments of my courses."""
-        ...
-
-    def submit(self, assignment: str, filename: str, source: bytes) -> str:
-        """Hand the file in to ``assignment``; what the grader said, in words."""
-        ...
-
-    def submissions(self, assignment: str) -> list[SubmissionInfo]:
-        """My submissions to ``assignment``, oldest first, with their scores."""
-        ...
-
-    def leaderboard(self, assignment: str) -> Leaderboard: ...
-
-    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
-        """Download a graded episode's recording of mine into ``dest``; returns ``dest``."""
-        ...
-
-    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
-        """Competitions' standings as the grader publishes them; returns: stop watching."""
-        ...
-
-    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
-        """Submissions changing state (any course; no score in it); returns: stop watching."""
-        ...
-
-    def class_tables(self) -> list[ClassTable]:
-        """The teacher's view of each course I teach (none for a student)."""
+    @property
+    def courses(self) -> CourseCalls:
+        """My courses (the grader: docs/COURSES.md) through this connection."""
         ...
 
     def logout(self, keep_resume: bool = False, reason: str = "") -> None:

@@ -81,7 +81,7 @@ class ClassPanel:
         self.keys.on_update(lambda _: self._keys_changed(self.keys.value))
         robots.on_rows.append(self.render)
         try:
-            self._unwatch = connection.watch_grading(self.on_change)
+            self._unwatch = connection.courses.watch_grading(self.on_change)
         except LabError as exc:
             self._unwatch = lambda: None
             log.info("the class is not updated live: %s", exc)
@@ -121,7 +121,7 @@ class ClassPanel:
 
     def refresh(self) -> list[ClassTable]:
         try:
-            tables = self.connection.class_tables()
+            tables = self.connection.courses.class_tables()
         except LabError as exc:
             log.debug("class of %s: %s", self.connection.user, exc)  # asked again later
             self._retry_at = time.monotonic() + RETRY_S

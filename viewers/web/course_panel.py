@@ -211,12 +211,12 @@ class CoursePanel:
         on_click(self.replay_button, self.replay_episode)
         self.chosen.on_update(lambda _: self._describe())
         try:
-            self._unwatch = connection.watch_standings(self.on_standings)
+            self._unwatch = connection.courses.watch_standings(self.on_standings)
         except LabError as exc:
             self._unwatch = lambda: None
             self.competitions.content = f"_Competitions are not shown live: {escape_md(str(exc))}_"
         try:
-            self._unwatch_grading = connection.watch_grading(self.on_change)
+            self._unwatch_grading = connection.courses.watch_grading(self.on_change)
         except LabError:
             self._unwatch_grading = lambda: None  # the buttons still read them
         self._thread = threading.Thread(target=self._loop, name="course-live", daemon=True)
@@ -291,7 +291,7 @@ class CoursePanel:
 
     def refresh(self) -> list[str]:
         try:
-            found = self.connection.assignments()
+            found = self.connection.courses.assignments()
         except LabError as exc:
             self.say(f"Could not list your assignments: {exc}", bad=True)
             return []
@@ -314,7 +314,7 @@ class CoursePanel:
             return None
         filename, code = file
         try:
-            said = self.connection.submit(name, filename, code)
+            said = self.connection.courses.submit(name, filename, code)
         except LabError as exc:
             self.say(str(exc), bad=True)
             return None
@@ -331,7 +331,7 @@ class CoursePanel:
         if name is None:
             return []
         try:
-            subs = self.connection.submissions(name)
+            subs = self.connection.courses.submissions(name)
         except LabError as exc:
             self.say(f"Could not read your scores: {exc}", bad=True)
             return []
@@ -363,7 +363,7 @@ class CoursePanel:
         dest = Path(self._tmp.name) / f"{sub}-{n}.mcap"
         try:
             if not dest.exists():
-                self.connection.fetch_episode(name, sub, n, dest)
+                self.connection.courses.fetch_episode(name, sub, n, dest)
             problem = self.spot.start(read_recording(dest))
         except (LabError, RecordingError, OSError) as exc:
             problem = str(exc)
@@ -380,7 +380,7 @@ class CoursePanel:
         if name is None:
             return None
         try:
-            board = self.connection.leaderboard(name)
+            board = self.connection.courses.leaderboard(name)
         except LabError as exc:
             self.say(f"Could not read the leaderboard: {exc}", bad=True)
             return None

@@ -46,6 +46,7 @@ from viewers.web.adapters import (
     LabEvent,
     LoginError,
     MemberEvent,
+    OutputSoFar,
     PrivateEvent,
     Queued,
     RecordingEntry,
@@ -177,6 +178,34 @@ class DemoConnector:
         raise LoginError("this lab keeps no saved logins: log in with your password")
 
 
+class DemoCourses:
+    """The demo lab's courses: none, for it has no grader (a real lab's is `wart grader`)."""
+
+    def assignments(self) -> list[AssignmentInfo]:
+        return []
+
+    def submit(self, assignment: str, filename: str, source: bytes) -> str:
+        raise LabError("the demo lab grades nothing: no grader runs here")
+
+    def submissions(self, assignment: str) -> list[SubmissionInfo]:
+        return []
+
+    def leaderboard(self, assignment: str) -> Leaderboard:
+        raise LabError("the demo lab has no leaderboards: no grader runs here")
+
+    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
+        raise LabError("the demo lab grades nothing: no episode to replay")
+
+    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
+        return lambda: None  # no grader: no competition
+
+    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
+        return lambda: None  # no grader: nothing changes
+
+    def class_tables(self) -> list[ClassTable]:
+        return []  # no grader: no class
+
+
 class DemoConnection:
     """One user's session with a :class:`DemoLab`."""
 
@@ -194,6 +223,10 @@ class DemoConnection:
     @property
     def admin(self) -> DemoAdmin:
         return self._admin
+
+    @property
+    def courses(self) -> DemoCourses:
+        return DemoCourses()
 
     @property
     def address(self) -> LabAddress:
@@ -462,32 +495,6 @@ class DemoConnection:
             return f"emergency stop: every robot stopped, {ended} controller{plural} ended"
         return "emergency stop released"
 
-    # -- courses: the demo lab has no grader (a real lab's is `wart grader`)
-
-    def assignments(self) -> list[AssignmentInfo]:
-        return []
-
-    def submit(self, assignment: str, filename: str, source: bytes) -> str:
-        raise LabError("the demo lab grades nothing: no grader runs here")
-
-    def submissions(self, assignment: str) -> list[SubmissionInfo]:
-        return []
-
-    def leaderboard(self, assignment: str) -> Leaderboard:
-        raise LabError("the demo lab has no leaderboards: no grader runs here")
-
-    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
-        raise LabError("the demo lab grades nothing: no episode to replay")
-
-    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
-        return lambda: None  # no grader: no competition
-
-    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
-        return lambda: None  # no grader: nothing changes
-
-    def class_tables(self) -> list[ClassTable]:
-        return []  # no grader: no class
-
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         self._need("deploy", "dry-run controllers")
         problem = check_upload(filename, source)[1]
@@ -498,6 +505,9 @@ class DemoConnection:
                 raise LabError(f"there is no robot {agent!r} in {ctx}")
         # The fake lab has no sandbox: it runs nothing and says so.
         return DryRunResult(True, "will run (demo lab: the file was checked, not run)")
+
+    def output_so_far(self, ctx: str, request_id: str) -> OutputSoFar:
+        return OutputSoFar(0, ())  # the demo's runs print nothing
 
     # -- recordings
 

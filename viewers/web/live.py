@@ -24,20 +24,13 @@ from common import keys, lab_errors
 from common.ask import alive_keys
 from common.client import host_client
 from common.client import lab_client as lab
-from common.client.grader_client import GraderClient, submitted_words
 from common.client.lab_address import LabAddress
 from common.client.survey import Survey, survey
 from common.keys import AliveKind, is_ident
 from common.messages import (
     AgentContextState,
-    AssignmentInfo,
-    ClassTable,
-    GradingChanged,
-    Leaderboard,
     QueueStateRequest,
     RoomEvent,
-    Standings,
-    SubmissionInfo,
 )
 from common.twin.twinfile import Twin, TwinFileError, parse_twin
 from viewers.web.adapters import (
@@ -55,16 +48,17 @@ from viewers.web.adapters import (
     LabEvent,
     LoginUnavailable,
     MemberEvent,
+    OutputSoFar,
     PrivateEvent,
     Queued,
     RecordingEntry,
     SavedFile,
     plain_error,
 )
-from viewers.web.fanout import Fanout
 from viewers.web.lab_links import LabRouterLink
 from viewers.web.live_admin import LiveAdmin
 from viewers.web.live_agents import AgentContextLink
+from viewers.web.live_courses import LiveCourses
 from viewers.web.live_world import UserWorld
 
 if TYPE_CHECKING:  # the connector makes connections; only its type is needed here
@@ -126,10 +120,7 @@ class LiveConnection:
         self._arenas: dict[str, AgentContextLink] = {}  # joined agent contexts
         self._real_worlds: dict[str, bool] = {}  # world -> a Khepera bridge (asked once)
         self._ctx_worlds: dict[str, str] = {}  # agent context -> its world (never changes)
-        # The grader's feeds, one subscription each for all panels (fanout.py: why).
-        grader = GraderClient(client)
-        self._standings: Fanout[Standings] = Fanout(lambda f: grader.watch_standings(None, f))
-        self._grading: Fanout[GradingChanged] = Fanout(grader.watch_changes)
+        self._courses = LiveCourses(client, self._call)
         client.on_private = lambda m: self._queue.put(PrivateEvent(m.sender, m.text, m.sent_at))
         client.on_kicked = lambda k: self._queue.put(
             DisconnectedEvent(
@@ -162,6 +153,10 @@ class LiveConnection:
     @property
     def admin(self) -> LiveAdmin:
         return self._admin
+
+    @property
+    def courses(self) -> LiveCourses:
+        return self._courses
 
     def _call(self, fn: Callable[[], Any]) -> Any:
         if self._closed.is_set():
@@ -485,6 +480,9 @@ class LiveConnection:
             raise LabError(f"{ctx} has not said which world it drives yet: try again")
         return self.world(world).reset(agent)
 
+    def output_so_far(self, ctx: str, request_id: str) -> OutputSoFar:
+        return self._arena(ctx).output_so_far(request_id)
+
     def recordings(self, ctx: str) -> list[RecordingEntry]:
         return self._arena(ctx).recordings()
 
@@ -535,32 +533,6 @@ class LiveConnection:
     def dry_run(self, ctx: str, agent: str, filename: str, source: bytes) -> DryRunResult:
         return self._arena(ctx).dry_run(agent, filename, source)
 
-    def assignments(self) -> list[AssignmentInfo]:
-        return list(self._call(GraderClient(self.client).assignments))
-
-    def submit(self, assignment: str, filename: str, source: bytes) -> str:
-        ok = self._call(lambda: GraderClient(self.client).submit(assignment, source, filename))
-        return submitted_words(ok)
-
-    def submissions(self, assignment: str) -> list[SubmissionInfo]:
-        return list(self._call(lambda: GraderClient(self.client).submissions(assignment)))
-
-    def leaderboard(self, assignment: str) -> Leaderboard:
-        return self._call(lambda: GraderClient(self.client).leaderboard(assignment))
-
-    def fetch_episode(self, assignment: str, submission: str, episode: int, dest: Path) -> Path:
-        grader = GraderClient(self.client)
-        return self._call(lambda: grader.fetch_episode(assignment, submission, episode, dest))
-
-    def watch_standings(self, on_standings: Callable[[Standings], None]) -> Callable[[], None]:
-        return self._call(lambda: self._standings.add(on_standings))
-
-    def watch_grading(self, on_change: Callable[[GradingChanged], None]) -> Callable[[], None]:
-        return self._call(lambda: self._grading.add(on_change))
-
-    def class_tables(self) -> list[ClassTable]:
-        return list(self._call(GraderClient(self.client).class_tables))
-
     # -- the end
 
     @property
@@ -589,8 +561,7 @@ class LiveConnection:
             for arena in list(self._arenas.values()):
                 arena.hand_back_all("the web viewer stopped")
         self._arenas.clear()
-        self._standings.close()
-        self._grading.close()
+        self._courses.close()
         try:
             # leaves rooms, logs out (unless handed over), undeclares the presence token
             self.client.close(reason, logout=logout)

@@ -44,6 +44,7 @@ from viewers.web.adapters import (
     LabError,
     LabEvent,
     OutputEvent,
+    OutputSoFar,
     Queued,
     RecordingEntry,
     RequestEvent,
@@ -176,7 +177,9 @@ class AgentContextLink:
 
     # Zenoh threads: translate and queue, nothing more.
     def _on_output(self, out: OutputLines) -> None:
-        self._emit(OutputEvent(self.ctx, out.request_id, out.agent, out.user, tuple(out.lines)))
+        self._emit(
+            OutputEvent(self.ctx, out.request_id, out.agent, out.user, tuple(out.lines), out.first)
+        )
 
     def _on_status(self, status: RequestStatus) -> None:
         self._emit(
@@ -330,6 +333,10 @@ class AgentContextLink:
         return self._call(lambda: self.agents.save_file(name, source))
 
     # -- my recordings (the context lists and serves only my own without the manage right)
+
+    def output_so_far(self, request_id: str) -> OutputSoFar:
+        kept = self._call(lambda: self.agents.output_so_far(request_id))
+        return OutputSoFar(kept.first, tuple(kept.lines))
 
     def recordings(self) -> list[RecordingEntry]:
         listing = self._call(self.agents.recordings)

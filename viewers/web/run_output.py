@@ -43,6 +43,9 @@ class RunOutput:
         self.traceback = TracebackReader()
         self.errors: list[Problem] = []
         self.printed: deque[str] = deque(maxlen=RUN_OUTPUT_LINES)  # HTML, escaped
+        # The run's next line this pane expects, in its context's count (OutputLines.first):
+        # None until known (a run found late, before its output so far came).
+        self.next_line: int | None = None
         self.html = gui.add_html(self._html())
 
     def _html(self) -> str:
@@ -53,15 +56,19 @@ class RunOutput:
             f'display: flex; flex-direction: column-reverse">{body}</div>'
         )
 
-    def clear(self) -> None:
-        """A new run: its output only."""
+    def clear(self, next_line: int | None = None) -> None:
+        """A new run: its output only (from its line ``next_line``, if known)."""
         self.errors = []
         self.printed.clear()
+        self.next_line = next_line
         self.html.content = self._html()
 
-    def put_back(self, printed: tuple[str, ...], errors: tuple[Problem, ...]) -> None:
+    def put_back(
+        self, printed: tuple[str, ...], errors: tuple[Problem, ...], next_line: int | None = None
+    ) -> None:
         self.errors = list(errors)
         self.printed.extend(printed)
+        self.next_line = next_line
         self.html.content = self._html()
 
     def note(self, text: str) -> None:
@@ -71,6 +78,19 @@ class RunOutput:
     def add(self, line: str) -> None:
         self.printed.append(line)
         self.html.content = self._html()
+
+    def numbered(self, first: int, texts: tuple[str, ...]) -> bool:
+        """Of ``texts``, numbered from ``first`` in the run's count, those not shown yet
+        (none twice; a gap is said); True if an exception was among them."""
+        if self.next_line is not None:
+            if first + len(texts) <= self.next_line:
+                return False
+            if first < self.next_line:
+                texts, first = texts[self.next_line - first :], self.next_line
+            elif first > self.next_line:
+                self.note(f"{first - self.next_line} line(s) not received here")
+        self.next_line = first + len(texts)
+        return self.lines(texts)
 
     def lines(self, texts: list[str] | tuple[str, ...]) -> bool:
         """The controller's printed ``texts``; True if an exception was among them."""

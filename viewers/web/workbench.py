@@ -49,6 +49,7 @@ from viewers.web.adapters import (
     RequestEvent,
 )
 from viewers.web.code_editor import CodeEditor, show_text
+from viewers.web.followed_run import RESUMED_NOTE, FollowedRun
 from viewers.web.inputs import on_click, set_value
 from viewers.web.live_agents import check_upload
 from viewers.web.marks import (
@@ -90,6 +91,10 @@ class BenchMemory:
     # The robot whose run printed ``printed``, when that run is not followed from here but
     # found again (a restarted viewer's): following it then keeps these lines.
     output_of: str | None = None
+    # The followed run and, in the context's count, its next line the page did not get:
+    # what it printed while the page was away comes from the context (a reload).
+    run_request: str | None = None
+    next_line: int | None = None
 
     @classmethod
     def of_text(
@@ -146,6 +151,7 @@ class Workbench:
             self.editor = CodeEditor(client, self.code)
             # My run's output right under the code: both in view at once on a laptop.
             self.run_output = RunOutput(gui)
+            self.followed = FollowedRun(connection, self.run_output, self._news_lock, self._raised)
             # The robot the buttons below act on: this arena's robots and those of the
             # real arenas joined, beside the buttons (the robot panel's list follows it).
             self.run_on = RunOn(gui, connection, ctx, robots)
@@ -197,6 +203,8 @@ class Workbench:
             errors=tuple(self.run_output.errors),
             shown=self._shown,
             printed=tuple(self.run_output.printed),
+            run_request=self.followed.request,
+            next_line=self.run_output.next_line,
         )
 
     def _put_back(self, kept: BenchMemory) -> None:
@@ -207,8 +215,11 @@ class Workbench:
         self.status.content = kept.status
         if kept.target in self.target.options:
             set_value(self.target, kept.target)
-        self.run_output.put_back(kept.printed, kept.errors)
+        self.run_output.put_back(kept.printed, kept.errors, kept.next_line)
         self._output_of = kept.output_of
+        self.followed.follow(kept.run_request)
+        if kept.running_on is not None and kept.run_request is not None:
+            self.followed.catch_up(*kept.running_on, kept.run_request, replace=False)
         problems, heading = kept.shown
         if problems:
             self._show(list(problems), heading)
@@ -347,8 +358,9 @@ class Workbench:
         name, source = ready
         self._running_on = (ctx, agent)
         self._run_live = True
-        self.run_output.clear()  # a new run: its output only (before its first line can come)
+        self.run_output.clear(next_line=0)  # a new run: its output only, from its first line
         self._output_of = None  # the output put back was of another run
+        self.followed.follow(None)
         news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
@@ -363,6 +375,8 @@ class Workbench:
         with self._news_lock:
             if self._news == news:
                 self.say(f"{name} is queued on {agent} ({where}): {when}.")
+            if self._running_on == (ctx, agent) and self.followed.request is None:
+                self.followed.follow(queued.request_id)
         self.robots.refresh_agents()
 
     # -- the robot the buttons act on ("Run on")
@@ -506,33 +520,37 @@ class Workbench:
         except LabError as exc:
             log.info("my runs in %s: %s", self.ctx, exc)
             return
-        running = [r.agent for r in rows if r.my_request and r.my_position == 0]
+        running = [(r.agent, r.my_request) for r in rows if r.my_request and r.my_position == 0]
         if running:
             with self._news_lock:
-                self._adopt(self.ctx, running[0], "running")
+                self._adopt(self.ctx, running[0][0], "running", running[0][1])
 
-    def _adopt(self, ctx: str, agent: str, status: str) -> bool:
+    def _adopt(self, ctx: str, agent: str, status: str, request_id: str | None) -> bool:
         """Follow my run on ``agent`` (started in another tab) if this editor has none going."""
         if (ctx, agent) == self._running_on or (self._run_live and self._running_on):
             return False
         if ctx != self.ctx or status not in ("queued", "running"):
             return False
         self._running_on, self._run_live = (ctx, agent), True
+        self.followed.follow(request_id)
         resumed, self._output_of = agent == self._output_of, None
         if resumed:  # the run this output came from, across a viewer's restart
             self.say(f"Your controller runs on {agent}.")
-            self.run_output.note("the web viewer restarted here; your run went on")
-            return True
-        self.run_output.clear()
-        self.say(f"Your controller runs on {agent} (started in another tab or tool).")
-        self.run_output.note(f"following your run on {agent}, started elsewhere")
+            self.run_output.note(RESUMED_NOTE)
+            self.run_output.next_line = None  # a copy's lines carry no count
+        else:
+            self.run_output.clear()
+            self.say(f"Your controller runs on {agent} (started in another tab or tool).")
+            self.run_output.note(f"following your run on {agent}, started elsewhere")
+        if request_id is not None:  # what it printed before this page came to it
+            self.followed.catch_up(ctx, agent, request_id, replace=resumed)
         return True
 
     def on_request(self, event: RequestEvent) -> None:
         if event.user != self.connection.user:
             return
         with self._news_lock:
-            self._adopt(event.ctx, event.agent, event.status)
+            self._adopt(event.ctx, event.agent, event.status, event.request_id)
             if (event.ctx, event.agent) == self._running_on:
                 self._on_my_request(event)
 
@@ -554,9 +572,10 @@ class Workbench:
         if event.user != self.connection.user:
             return
         with self._news_lock:
-            self._adopt(event.ctx, event.agent, "running")
-        if (event.ctx, event.agent) != self._running_on:
-            return
-        if self.run_output.lines(event.lines):
-            errors = self.run_output.errors[-MAX_MARKED:]
-            self._show(errors, "Your controller raised an exception")
+            self._adopt(event.ctx, event.agent, "running", event.request_id)
+            if (event.ctx, event.agent) != self._running_on:
+                return
+            self.followed.show(event)
+
+    def _raised(self) -> None:
+        self._show(self.run_output.errors[-MAX_MARKED:], "Your controller raised an exception")
