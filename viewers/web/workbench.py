@@ -356,12 +356,13 @@ class Workbench:
         if ready is None:
             return
         name, source = ready
-        self._running_on = (ctx, agent)
-        self._run_live = True
-        self.run_output.clear(next_line=0)  # a new run: its output only, from its first line
-        self._output_of = None  # the output put back was of another run
-        self.followed.follow(None)
-        news = self._news
+        with self._news_lock:  # the event thread shows lines under it
+            self._running_on = (ctx, agent)
+            self._run_live = True
+            self.run_output.clear(next_line=0)  # a new run: its output only, from its first
+            self._output_of = None  # the output put back was of another run
+            self.followed.follow(None)
+            news = self._news
         try:
             queued = self.connection.request_control(ctx, agent, name, source)
         except LabError as exc:
