@@ -111,6 +111,9 @@ def test_a_reload_mid_run_keeps_the_run_the_editor_and_the_output(open_page, lab
     # The output so far is there, and the run prints on: it was never stopped.
     assert before in ticks_shown(alice)
     wait_until(lambda: max(ticks_shown(alice)) > before + 2, 30, what="new prints after reload")
+    # What it printed while the page was away is there too (the context's count), once each.
+    ticks = [int(n) for n in re.findall(r"\btick (\d+)\b", run_output(alice))]
+    assert ticks == list(range(1, len(ticks) + 1)), ticks
     assert "cancelled" not in " ".join(alice.p.locator("pre.wart-output").all_inner_texts())
     assert back.robots is not None and back.robots.driven("k0")
     alice.screenshot("reload-kept-the-run")
